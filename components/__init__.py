@@ -1,0 +1,1 @@
+"""Data-only ECS components (installed as ``ecs_anim.components``)."""

@@ -1,0 +1,1 @@
+"""ecs_anim: morphology-independent motion for many characters."""

@@ -1,0 +1,419 @@
+"""BVH reading (any channel order, 3 or 6 channels on any joint, End Sites) and writing.
+
+Reading gives a :class:`BvhSkeleton` (hierarchy, offsets, channels) and the motion as a
+(n_frames, n_channels) array; :func:`forward_kinematics` turns both into global joint positions
+and orientations for all frames at once (the only Python loop is over joints, in topological
+order). Positions stay in the file's own axes and units here; :mod:`ecs_anim.importing` converts
+them to metres, Z up.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import InputError
+from .rotations import euler_to_matrix
+
+F64 = NDArray[np.float64]
+
+_ROTATION_CHANNELS = {"xrotation": "X", "yrotation": "Y", "zrotation": "Z"}
+_POSITION_CHANNELS = {"xposition": 0, "yposition": 1, "zposition": 2}
+
+
+@dataclass
+class BvhJoint:
+    """One BVH joint or End Site.
+
+    ``offset`` is in file units and axes, shape (3,). ``channels`` are the names as written.
+    End Sites are stored as joints named ``<parent>.end`` with no channels.
+    """
+
+    name: str
+    parent: int
+    offset: F64
+    channels: list[str] = field(default_factory=list)
+    is_end_site: bool = False
+    line: int = 0
+
+
+@dataclass
+class BvhSkeleton:
+    """A parsed BVH hierarchy; joints in file (topological) order."""
+
+    joints: list[BvhJoint]
+    path: str = "<bvh>"
+
+    @property
+    def names(self) -> list[str]:
+        return [j.name for j in self.joints]
+
+    def index(self, name: str) -> int:
+        return self.names.index(name)
+
+    def children(self, index: int) -> list[int]:
+        return [i for i, j in enumerate(self.joints) if j.parent == index]
+
+    @property
+    def n_channels(self) -> int:
+        return sum(len(j.channels) for j in self.joints)
+
+
+@dataclass
+class BvhMotion:
+    """A BVH file's content: skeleton, per-frame channel values (file units, degrees), timing."""
+
+    skeleton: BvhSkeleton
+    channels: F64  # (n_frames, n_channels)
+    frame_time_s: float
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.channels.shape[0])
+
+    @property
+    def fps(self) -> float:
+        return 1.0 / self.frame_time_s
+
+
+class _Lines:
+    """Token reader over a text, keeping 1-based line numbers for error messages."""
+
+    def __init__(self, text: str, path: str):
+        self.lines = text.splitlines()
+        self.path = path
+        self.row = 0  # index of the next line to read
+
+    def next_tokens(self, expected: str) -> tuple[list[str], int]:
+        while self.row < len(self.lines):
+            tokens = self.lines[self.row].split()
+            self.row += 1
+            if tokens:
+                return tokens, self.row
+        raise InputError(self.path, f"unexpected end of file: expected {expected}",
+                         len(self.lines) or 1)
+
+
+def _floats(tokens: list[str], count: int, path: str, line: int, what: str) -> F64:
+    if len(tokens) != count:
+        raise InputError(path, f"{what}: expected {count} numbers, found {len(tokens)}", line)
+    try:
+        values = np.array([float(t) for t in tokens])
+    except ValueError:
+        bad = next(t for t in tokens if not _is_number(t))
+        raise InputError(path, f"{what}: expected a number, found {bad!r}", line) from None
+    if not np.all(np.isfinite(values)):
+        raise InputError(path, f"{what}: values must be finite, found {' '.join(tokens)}", line)
+    return values
+
+
+def _is_number(token: str) -> bool:
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
+
+
+def read_bvh(path: str | Path) -> BvhMotion:
+    """Read a BVH file. Raises :class:`InputError` (with file and line) on any malformation."""
+    path = str(path)
+    try:
+        with open(path, encoding="utf-8", errors="replace") as f:
+            text = f.read()
+    except OSError as exc:
+        raise InputError(path, f"cannot read file: {exc.strerror or exc}") from None
+    return parse_bvh(text, path)
+
+
+def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
+    """Parse BVH text; see :func:`read_bvh`."""
+    reader = _Lines(text, path)
+    tokens, line = reader.next_tokens("HIERARCHY")
+    if tokens[0].upper() != "HIERARCHY":
+        raise InputError(path, f"expected 'HIERARCHY' at the start of a BVH file, found {tokens[0]!r}",
+                         line)
+    joints: list[BvhJoint] = []
+    tokens, line = reader.next_tokens("ROOT")
+    if tokens[0].upper() != "ROOT" or len(tokens) < 2:
+        raise InputError(path, "expected 'ROOT <name>'", line)
+    _parse_joint(reader, joints, " ".join(tokens[1:]), -1, line, is_end=False)
+
+    tokens, line = reader.next_tokens("MOTION")
+    if tokens[0].upper() != "MOTION":
+        raise InputError(path, f"expected 'MOTION' after the hierarchy, found {' '.join(tokens)!r}",
+                         line)
+    tokens, line = reader.next_tokens("'Frames: N'")
+    if tokens[0].lower() != "frames:" or len(tokens) != 2 or not tokens[1].isdigit():
+        raise InputError(path, f"expected 'Frames: <count>', found {' '.join(tokens)!r}", line)
+    n_frames = int(tokens[1])
+    tokens, line = reader.next_tokens("'Frame Time: T'")
+    if [t.lower() for t in tokens[:2]] != ["frame", "time:"] or len(tokens) != 3:
+        raise InputError(path, f"expected 'Frame Time: <seconds>', found {' '.join(tokens)!r}", line)
+    try:
+        frame_time = float(tokens[2])
+    except ValueError:
+        raise InputError(path, f"Frame Time must be a number, found {tokens[2]!r}", line) from None
+    if not (math.isfinite(frame_time) and frame_time > 0):
+        raise InputError(path, f"Frame Time must be a positive number of seconds, found {tokens[2]}",
+                         line)
+    if n_frames == 0:
+        raise InputError(path, "the MOTION section has no frames (Frames: 0)", line)
+
+    skeleton = BvhSkeleton(joints, path)
+    n_channels = skeleton.n_channels
+    first_data_row = reader.row
+    rows = [(i, ln) for i, ln in enumerate(reader.lines[first_data_row:], start=first_data_row + 1)
+            if ln.strip()]
+    if len(rows) < n_frames:
+        last = rows[-1][0] if rows else first_data_row
+        raise InputError(path, f"file ends after {len(rows)} of {n_frames} frames "
+                               "(truncated? 'Frames:' promises more)", last)
+    if len(rows) > n_frames:
+        raise InputError(path, f"found {len(rows)} frame lines but 'Frames:' says {n_frames}",
+                         rows[n_frames][0])
+    flat = " ".join(ln for _, ln in rows).split()
+    if len(flat) != n_frames * n_channels:
+        for line_no, ln in rows:
+            count = len(ln.split())
+            if count != n_channels:
+                raise InputError(path, f"frame line has {count} values, expected {n_channels} "
+                                       "(one per channel of the hierarchy)", line_no)
+    try:
+        values = np.array(flat, dtype=np.float64).reshape(n_frames, n_channels)
+    except ValueError:
+        for line_no, ln in rows:
+            for tok in ln.split():
+                if not _is_number(tok):
+                    raise InputError(path, f"expected a number, found {tok!r}", line_no) from None
+        raise
+    bad = ~np.isfinite(values)
+    if bad.any():
+        frame = int(np.argmax(bad.any(axis=1)))
+        col = int(np.argmax(bad[frame]))
+        name, channel = _channel_owner(skeleton, col)
+        raise InputError(path, f"non-finite value {values[frame, col]} in channel {channel} of "
+                               f"joint {name!r} (frame {frame})", rows[frame][0])
+    return BvhMotion(skeleton, values, frame_time)
+
+
+def _channel_owner(skeleton: BvhSkeleton, column: int) -> tuple[str, str]:
+    for j in skeleton.joints:
+        if column < len(j.channels):
+            return j.name, j.channels[column]
+        column -= len(j.channels)
+    return "?", "?"
+
+
+def _parse_joint(reader: _Lines, joints: list[BvhJoint], name: str, parent: int, line: int,
+                 is_end: bool) -> None:
+    path = reader.path
+    tokens, brace_line = reader.next_tokens("'{'")
+    if tokens != ["{"]:
+        raise InputError(path, f"expected '{{' after {name!r}, found {' '.join(tokens)!r}",
+                         brace_line)
+    tokens, off_line = reader.next_tokens("OFFSET")
+    if tokens[0].upper() != "OFFSET":
+        raise InputError(path, f"expected 'OFFSET x y z' in {name!r}, found {tokens[0]!r}", off_line)
+    offset = _floats(tokens[1:], 3, path, off_line, f"OFFSET of {name!r}")
+    index = len(joints)
+    joint = BvhJoint(name=name, parent=parent, offset=offset, is_end_site=is_end, line=line)
+    joints.append(joint)
+    if is_end:
+        tokens, close_line = reader.next_tokens("'}'")
+        if tokens != ["}"]:
+            raise InputError(path, f"expected '}}' closing End Site of {joints[parent].name!r}",
+                             close_line)
+        return
+    tokens, ch_line = reader.next_tokens("CHANNELS")
+    if tokens[0].upper() == "CHANNELS":
+        if len(tokens) < 2 or not tokens[1].isdigit():
+            raise InputError(path, f"expected 'CHANNELS <count> <names...>' in {name!r}", ch_line)
+        count = int(tokens[1])
+        names = tokens[2:]
+        if len(names) != count:
+            raise InputError(path, f"CHANNELS of {name!r} announces {count} channels but lists "
+                                   f"{len(names)}", ch_line)
+        seen: set[str] = set()
+        for ch in names:
+            key = ch.lower()
+            if key not in _ROTATION_CHANNELS and key not in _POSITION_CHANNELS:
+                raise InputError(path, f"unknown channel {ch!r} in {name!r} (expected X/Y/Z "
+                                       "position or rotation)", ch_line)
+            if key in seen:
+                raise InputError(path, f"channel {ch!r} appears twice in {name!r}", ch_line)
+            seen.add(key)
+        joint.channels = names
+        tokens, ch_line = reader.next_tokens("JOINT, End Site or '}'")
+    while True:
+        head = tokens[0].upper()
+        if head == "JOINT" and len(tokens) >= 2:
+            _parse_joint(reader, joints, " ".join(tokens[1:]), index, ch_line, is_end=False)
+        elif head == "END" and len(tokens) >= 2 and tokens[1].upper() == "SITE":
+            _parse_joint(reader, joints, f"{name}.end", index, ch_line, is_end=True)
+        elif tokens == ["}"]:
+            return
+        elif head == "MOTION":
+            raise InputError(path, f"joint {name!r} is not closed with '}}' before MOTION", ch_line)
+        else:
+            raise InputError(path, f"expected JOINT, End Site or '}}' in {name!r}, found "
+                                   f"{' '.join(tokens)!r}", ch_line)
+        tokens, ch_line = reader.next_tokens(f"'}}' closing {name!r}")
+
+
+def joint_local_transforms(motion: BvhMotion) -> tuple[F64, F64]:
+    """Per-joint local rotations and translations for every frame.
+
+    Returns ``rotations`` (n_frames, n_joints, 3, 3) and ``translations`` (n_frames, n_joints, 3)
+    in file units. Position channels *replace* the OFFSET component they name (the common
+    convention: Bandai's every-joint position channels equal the OFFSET, and a root's position
+    channels give its absolute position).
+    """
+    skeleton = motion.skeleton
+    n_frames = motion.n_frames
+    n_joints = len(skeleton.joints)
+    rotations = np.broadcast_to(np.eye(3), (n_frames, n_joints, 3, 3)).copy()
+    translations = np.empty((n_frames, n_joints, 3))
+    column = 0
+    for j, joint in enumerate(skeleton.joints):
+        translations[:, j] = joint.offset
+        rot_cols: list[int] = []
+        order = ""
+        for ch in joint.channels:
+            key = ch.lower()
+            if key in _POSITION_CHANNELS:
+                translations[:, j, _POSITION_CHANNELS[key]] = motion.channels[:, column]
+            else:
+                rot_cols.append(column)
+                order += _ROTATION_CHANNELS[key]
+            column += 1
+        if rot_cols:
+            # Axes without a channel rotate by zero; append them so the order names all three.
+            missing = [a for a in "XYZ" if a not in order]
+            angles = np.zeros((n_frames, 3))
+            angles[:, : len(rot_cols)] = motion.channels[:, rot_cols]
+            rotations[:, j] = euler_to_matrix(angles, order + "".join(missing))
+    return rotations, translations
+
+
+def forward_kinematics(motion: BvhMotion) -> tuple[F64, F64]:
+    """Global joint orientations and positions of every joint for all frames (file axes/units).
+
+    Returns ``joint2file`` (n_frames, n_joints, 3, 3) and ``positions`` (n_frames, n_joints, 3).
+    End Sites get their parent's orientation.
+    """
+    local_rot, local_pos = joint_local_transforms(motion)
+    n_frames, n_joints = local_pos.shape[:2]
+    joint2file = np.empty((n_frames, n_joints, 3, 3))
+    positions = np.empty((n_frames, n_joints, 3))
+    for j, joint in enumerate(motion.skeleton.joints):
+        p = joint.parent
+        if p < 0:
+            joint2file[:, j] = local_rot[:, j]
+            positions[:, j] = local_pos[:, j]
+        else:
+            joint2file[:, j] = joint2file[:, p] @ local_rot[:, j]
+            positions[:, j] = positions[:, p] + np.einsum("fab,fb->fa", joint2file[:, p],
+                                                          local_pos[:, j])
+    return joint2file, positions
+
+
+def rest_positions(skeleton: BvhSkeleton) -> F64:
+    """Joint positions with every rotation zero and translations equal to OFFSETs. (n_joints, 3)."""
+    out = np.zeros((len(skeleton.joints), 3))
+    for j, joint in enumerate(skeleton.joints):
+        out[j] = joint.offset if joint.parent < 0 else out[joint.parent] + joint.offset
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Writing
+
+@dataclass
+class BvhWriteJoint:
+    """A joint to write: name, parent index (-1 root), OFFSET (3,), End Site offset or None."""
+
+    name: str
+    parent: int
+    offset: F64
+    end_site: F64 | None = None
+
+
+_NAME_OK = re.compile(r"^\S+$")
+
+
+def format_bvh(joints: list[BvhWriteJoint], root_positions: F64, euler_deg: F64,
+               frame_time_s: float, order: str = "ZXY", decimals: int = 6) -> str:
+    """BVH text: root with 6 channels, every other joint 3 rotation channels in ``order``.
+
+    ``root_positions`` (n_frames, 3) and offsets are in output units, already in BVH axes;
+    ``euler_deg`` (n_frames, n_joints, 3) holds each joint's angles in ``order``.
+    """
+    for j in joints:
+        if not _NAME_OK.match(j.name):
+            raise ValueError(f"BVH joint names cannot contain spaces: {j.name!r}")
+    rot_names = " ".join(f"{a}rotation" for a in order)
+    out: list[str] = ["HIERARCHY"]
+    children: dict[int, list[int]] = {}
+    for i, j in enumerate(joints):
+        children.setdefault(j.parent, []).append(i)
+    fmt = f"{{:.{decimals}f}}"
+
+    def vec(v: F64) -> str:
+        return " ".join(fmt.format(float(x) + 0.0) for x in v)
+
+    def emit(i: int, depth: int) -> None:
+        pad = "\t" * depth
+        j = joints[i]
+        out.append(f"{pad}{'ROOT' if j.parent < 0 else 'JOINT'} {j.name}")
+        out.append(f"{pad}{{")
+        out.append(f"{pad}\tOFFSET {vec(j.offset)}")
+        if j.parent < 0:
+            out.append(f"{pad}\tCHANNELS 6 Xposition Yposition Zposition {rot_names}")
+        else:
+            out.append(f"{pad}\tCHANNELS 3 {rot_names}")
+        for c in children.get(i, []):
+            emit(c, depth + 1)
+        if j.end_site is not None:
+            out.append(f"{pad}\tEnd Site")
+            out.append(f"{pad}\t{{")
+            out.append(f"{pad}\t\tOFFSET {vec(j.end_site)}")
+            out.append(f"{pad}\t}}")
+        out.append(f"{pad}}}")
+
+    emit(0, 0)
+    n_frames = root_positions.shape[0]
+    out.append("MOTION")
+    out.append(f"Frames: {n_frames}")
+    out.append(f"Frame Time: {frame_time_s:.8f}")
+    values = np.concatenate([root_positions, euler_deg.reshape(n_frames, -1)], axis=1)
+    values = np.where(np.abs(values) < 0.5 * 10.0 ** (-decimals), 0.0, values)  # no "-0.000000"
+    line_fmt = " ".join([fmt] * values.shape[1])
+    out.extend(line_fmt.format(*row) for row in values.tolist())
+    return "\n".join(out) + "\n"
+
+
+def write_text_atomic(path: str | Path, text: str, force: bool) -> None:
+    """Write ``text`` to ``path`` through a temporary file, so no half-written file is left.
+
+    Refuses to replace an existing file unless ``force``.
+    """
+    path = Path(path)
+    if path.exists() and not force:
+        raise FileExistsError(f"{path}: already exists (use --force to overwrite)")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise

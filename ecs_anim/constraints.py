@@ -1,0 +1,92 @@
+"""Constraint specifications stored with a motion (paper §5, DESIGN §5).
+
+``C = {point, type, chain, priority, activation}``. This module holds the data and the activation
+ramp; solving them is the solver's job. Only foot contacts are produced at import for now.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+KINDS = ("foot_contact", "position", "orientation", "distance", "area")
+
+
+@dataclass(frozen=True)
+class Activation:
+    """When a constraint acts: weight 0 before ``start_s``, ramps linearly to 1 over
+    ``ease_in_s``, stays 1, ramps back to 0 over ``ease_out_s`` ending at ``stop_s`` (seconds
+    in motion time)."""
+
+    start_s: float
+    stop_s: float
+    ease_in_s: float = 0.0
+    ease_out_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        values = (self.start_s, self.stop_s, self.ease_in_s, self.ease_out_s)
+        if not all(np.isfinite(v) for v in values):
+            raise ValueError(f"activation times must be finite, got {values}")
+        if self.stop_s < self.start_s:
+            raise ValueError(f"activation stop_s {self.stop_s} is before start_s {self.start_s}")
+        if self.ease_in_s < 0 or self.ease_out_s < 0:
+            raise ValueError("activation ease_in_s and ease_out_s must be >= 0")
+        if self.ease_in_s + self.ease_out_s > self.stop_s - self.start_s + 1e-9:
+            raise ValueError("activation ease_in_s + ease_out_s is longer than stop_s - start_s")
+
+    def weight(self, time_s: NDArray[np.float64] | float) -> NDArray[np.float64]:
+        """Weight in [0, 1] at the given times (any shape)."""
+        t = np.asarray(time_s, dtype=np.float64)
+        up = np.where(self.ease_in_s > 0, (t - self.start_s) / max(self.ease_in_s, 1e-12),
+                      np.where(t >= self.start_s, 1.0, 0.0))
+        down = np.where(self.ease_out_s > 0, (self.stop_s - t) / max(self.ease_out_s, 1e-12),
+                        np.where(t <= self.stop_s, 1.0, 0.0))
+        return np.clip(np.minimum(up, down), 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class ConstraintSpec:
+    """One constraint of a motion.
+
+    Attributes
+    ----------
+    name : unique within the motion, e.g. ``"contact_l_3"``.
+    kind : one of :data:`KINDS`.
+    segment : canonical bone the constrained point belongs to, named by its proximal joint
+        (``"ankle_l"`` is the foot); ``fraction`` along the bone (0 = proximal joint) and
+        ``offset_m`` (3,) in the bone's frame locate the point.
+    chain : body groups allowed to move (``leg_l``, ``leg_r``, ``arm_l``, ``arm_r``, ``head``,
+        ``trunk``, ``root``).
+    priority : higher is solved first.
+    activation : see :class:`Activation`.
+    params : kind-specific values (target, distance, area), JSON-compatible.
+    """
+
+    name: str
+    kind: str
+    segment: str
+    activation: Activation
+    chain: tuple[str, ...]
+    priority: int = 0
+    fraction: float = 0.0
+    offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    params: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["chain"] = list(self.chain)
+        d["offset_m"] = list(self.offset_m)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> ConstraintSpec:
+        return cls(
+            name=str(d["name"]), kind=str(d["kind"]), segment=str(d["segment"]),
+            activation=Activation(**d["activation"]), chain=tuple(d["chain"]),
+            priority=int(d.get("priority", 0)), fraction=float(d.get("fraction", 0.0)),
+            offset_m=tuple(float(x) for x in d.get("offset_m", (0, 0, 0))),  # type: ignore[arg-type]
+            params=dict(d.get("params", {})),
+        )

@@ -1,0 +1,229 @@
+"""From a captured BVH clip to a :class:`~ecs_anim.motion.NormalizedMotion` (the off-line step).
+
+parse -> map joints -> detect units -> forward kinematics (all frames at once) -> Y-up to Z-up
+-> canonical joint positions and part orientations -> source morphology -> encode -> contacts.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .bvh import BvhMotion, BvhSkeleton, forward_kinematics, read_bvh, rest_positions
+from .contacts import ContactThresholds, contact_constraints, detect_contacts
+from .errors import EcsAnimError, InputError
+from .joint_map import JointMap, map_skeleton
+from .morphology import ADULT_PROPORTIONS, Morphology, bone_lengths_of
+from .motion import NormalizedMotion
+from .normalized import encode
+from .rotations import frame_from_axes, normalize
+from .skeleton import JOINT_INDEX as J, JOINTS, LENGTH_INDEX, N_JOINTS
+
+F64 = NDArray[np.float64]
+
+#: DESIGN §2: a Y-up source becomes Z-up by +90° about X: (x, y, z) -> (x, -z, y).
+YUP_TO_ZUP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
+#: Length units a BVH may be written in, as metres per unit.
+UNITS: dict[str, float] = {
+    "m": 1.0,
+    "cm": 0.01,
+    "mm": 0.001,
+    "inch": 0.0254,
+    "cmu": 0.0254 / 0.45,  # CMU ASF length unit: 1/0.45 inch
+}
+#: Thigh + shank of an adult, the yardstick for telling units apart (m).
+TYPICAL_LEG_M = 0.80
+PLAUSIBLE_LEG_M = (0.25, 1.4)
+
+# Lengths of parts a skeleton may lack, as fractions of its thigh + shank.
+_LEG = ADULT_PROPORTIONS["thigh"] + ADULT_PROPORTIONS["shank"]
+FILL_FRACTION = {
+    "toe": ADULT_PROPORTIONS["foot"] / _LEG,
+    "hand": ADULT_PROPORTIONS["hand"] / _LEG,
+    "head_top": ADULT_PROPORTIONS["head"] / _LEG,
+    "ankle_height": ADULT_PROPORTIONS["ankle_height"] / _LEG,
+}
+
+
+@dataclass
+class CanonicalClip:
+    """A source clip resampled onto the canonical skeleton, in metres, world Z up.
+
+    positions : (n_frames, N_JOINTS, 3).
+    pelvis2world, thorax2world, head2world : (n_frames, 3, 3).
+    measured : (N_JOINTS,) bool, True where the joint comes straight from the source (False where
+        it was filled in: interpolated spine joints, toes/hands/head top from orientations).
+    """
+
+    positions: F64
+    pelvis2world: F64
+    thorax2world: F64
+    head2world: F64
+    measured: NDArray[np.bool_]
+    fps: float
+    unit: str
+    unit_reason: str
+    joint_map: JointMap
+
+
+def detect_unit(leg_in_file_units: float) -> tuple[str, str]:
+    """Pick the unit that gives a human leg (thigh + shank) closest to 0.8 m.
+
+    Returns (unit name, a sentence saying why). Raises :class:`EcsAnimError` if no unit fits.
+    """
+    if not (math.isfinite(leg_in_file_units) and leg_in_file_units > 0):
+        raise EcsAnimError("cannot tell the length unit: the legs have zero length in the rest pose")
+    scored = []
+    for name, scale in UNITS.items():
+        leg_m = leg_in_file_units * scale
+        if PLAUSIBLE_LEG_M[0] <= leg_m <= PLAUSIBLE_LEG_M[1]:
+            scored.append((abs(math.log(leg_m / TYPICAL_LEG_M)), name, leg_m))
+    if not scored:
+        raise EcsAnimError(
+            f"cannot tell the length unit: thigh + shank is {leg_in_file_units:g} file units, "
+            f"which is no human leg in {', '.join(UNITS)}; give --unit")
+    _, name, leg_m = min(scored)
+    return name, f"thigh + shank = {leg_in_file_units:.4g} units = {leg_m:.3f} m in {name}"
+
+
+def _leg_rest_length(skeleton: BvhSkeleton, jmap: JointMap) -> float:
+    rest = rest_positions(skeleton)
+    total = 0.0
+    for s in "lr":
+        hip, knee, ankle = (jmap.source[f"{p}_{s}"] for p in ("hip", "knee", "ankle"))
+        total += float(np.linalg.norm(rest[knee] - rest[hip]) + np.linalg.norm(rest[ankle] - rest[knee]))  # type: ignore[index]
+    return 0.5 * total
+
+
+def canonical_clip(motion: BvhMotion, map_spec: str | None = None,
+                   unit: str | None = None) -> CanonicalClip:
+    """Map, scale and rotate a BVH clip onto the canonical skeleton (see module docstring)."""
+    skeleton = motion.skeleton
+    jmap = map_skeleton(skeleton, map_spec)
+    leg_units = _leg_rest_length(skeleton, jmap)
+    if unit is None:
+        unit, reason = detect_unit(leg_units)
+    else:
+        if unit not in UNITS:
+            raise EcsAnimError(f"--unit {unit}: unknown unit; choose one of {', '.join(UNITS)}")
+        reason = f"given with --unit (thigh + shank = {leg_units * UNITS[unit]:.3f} m)"
+    scale = UNITS[unit]
+    joint2file, pos_file = forward_kinematics(motion)
+    rest = rest_positions(skeleton)
+    src = jmap.source
+    # Body axes of the rest (all-zero-rotation) pose, in file axes: forward, left, up as columns.
+    # A joint's orientation in the rest pose is the identity, so these are also the body axes in
+    # each joint's local frame; joint2file @ rest_body gives a part's frame in any frame.
+    left0 = rest[src["hip_l"]] - rest[src["hip_r"]]  # type: ignore[index]
+    up0 = rest[src["neck"]] - rest[src["pelvis"]]  # type: ignore[index]
+    rest_body = frame_from_axes(left0, up0, 1, 2)
+
+    to_world = YUP_TO_ZUP
+    n_frames = motion.n_frames
+    positions = np.empty((n_frames, N_JOINTS, 3))
+    measured = np.zeros(N_JOINTS, dtype=bool)
+    for name, i in src.items():
+        if i is not None:
+            positions[:, J[name]] = pos_file[:, i] @ to_world.T * scale
+            measured[J[name]] = True
+    leg_m = leg_units * scale
+
+    def world_frame(i: int) -> F64:
+        return to_world @ joint2file[:, i] @ rest_body
+
+    # Spine joints a skeleton lacks: evenly between their neighbours on the pelvis-neck line.
+    chain = ["pelvis", "spine_1", "spine_2", "neck"]
+    known = [k for k, name in enumerate(chain) if measured[J[name]]]
+    for k, name in enumerate(chain):
+        if not measured[J[name]]:
+            lo = max(a for a in known if a < k)
+            hi = min(b for b in known if b > k)
+            w = (k - lo) / (hi - lo)
+            positions[:, J[name]] = (1 - w) * positions[:, J[chain[lo]]] + w * positions[:, J[chain[hi]]]
+    # End parts a skeleton lacks: from the orientation of the joint they hang from.
+    forward0 = rest_body[:, 0]
+    for side in "lr":
+        fills = (
+            (f"toe_{side}", f"ankle_{side}", forward0, FILL_FRACTION["toe"]),
+            (f"hand_{side}", f"wrist_{side}",
+             normalize(rest[src[f"wrist_{side}"]] - rest[src[f"elbow_{side}"]]),  # type: ignore[index]
+             FILL_FRACTION["hand"]),
+        )
+        for name, parent, dir_rest, frac in fills:
+            if not measured[J[name]]:
+                i = src[parent]
+                d = (to_world @ joint2file[:, i] @ dir_rest)  # type: ignore[index]
+                positions[:, J[name]] = positions[:, J[parent]] + d * frac * leg_m
+    if not measured[J["head_top"]]:
+        up_head = normalize(rest[src["head"]] - rest[src["neck"]])  # type: ignore[index]
+        if np.linalg.norm(up_head) < 0.5:
+            up_head = up0 / np.linalg.norm(up0)
+        d = to_world @ joint2file[:, src["head"]] @ up_head  # type: ignore[index]
+        positions[:, J["head_top"]] = positions[:, J["head"]] + d * FILL_FRACTION["head_top"] * leg_m
+    return CanonicalClip(
+        positions=positions,
+        pelvis2world=world_frame(src["pelvis"]),  # type: ignore[arg-type]
+        thorax2world=world_frame(jmap.thorax),
+        head2world=world_frame(src["head"]),  # type: ignore[arg-type]
+        measured=measured, fps=motion.fps, unit=unit, unit_reason=reason, joint_map=jmap,
+    )
+
+
+def source_morphology(positions: F64, name: str) -> Morphology:
+    """The captured subject's body: mean bone lengths over the clip, ankle height from the
+    lowest ankle positions, mass from stature at a body-mass index of 22.
+
+    ``positions`` (n_frames, N_JOINTS, 3) in metres, Z up, ground near z = 0.
+    """
+    lengths = np.nanmean(bone_lengths_of(positions), axis=0)
+    leg = 0.5 * (lengths[LENGTH_INDEX["thigh_l"]] + lengths[LENGTH_INDEX["shank_l"]]
+                 + lengths[LENGTH_INDEX["thigh_r"]] + lengths[LENGTH_INDEX["shank_r"]])
+    typical = FILL_FRACTION["ankle_height"] * leg
+    for side in "lr":
+        z = positions[:, J[f"ankle_{side}"], 2]
+        low = float(np.percentile(z, 5))
+        # Captures whose floor is not at z = 0 (or that never stand) fall back to proportions.
+        lengths[LENGTH_INDEX[f"ankle_height_{side}"]] = low if 0.4 * typical <= low <= 2.5 * typical \
+            else typical
+    morph = Morphology(lengths, 1.0, "male", name)
+    stature = morph.stature
+    return Morphology(lengths, 22.0 * stature**2, "male", name)
+
+
+def import_bvh(path: str | Path, map_spec: str | None = None, unit: str | None = None,
+               thresholds: ContactThresholds = ContactThresholds()) -> NormalizedMotion:
+    """Read a BVH file and normalize it. Raises :class:`EcsAnimError` subclasses on bad input."""
+    path = Path(path)
+    motion = read_bvh(path)
+    try:
+        clip = canonical_clip(motion, map_spec, unit)
+    except InputError:
+        raise
+    except EcsAnimError as exc:
+        raise InputError(path, str(exc)) from None
+    return normalize_clip(clip, path.stem, str(path), thresholds)
+
+
+def normalize_clip(clip: CanonicalClip, name: str, source: str,
+                   thresholds: ContactThresholds = ContactThresholds()) -> NormalizedMotion:
+    """Encode a canonical clip, detect its foot contacts, and gather its provenance."""
+    morph = source_morphology(clip.positions, f"{name} (source)")
+    poses = encode(clip.positions, clip.pelvis2world, clip.thorax2world, clip.head2world,
+                   morph.lengths)
+    contact = detect_contacts(clip.positions, clip.fps, thresholds)
+    constraints = contact_constraints(contact, clip.fps, thresholds)
+    info = {
+        "source": source,
+        "joint_map": clip.joint_map.how,
+        "joints": {j: clip.joint_map.names.get(j) for j in JOINTS},
+        "filled_in": [j for j, m in zip(JOINTS, clip.measured) if not m],
+        "unit": clip.unit,
+        "unit_reason": clip.unit_reason,
+        "max_stretch": float(np.max(np.abs(poses.stretch - 1.0))),
+    }
+    return NormalizedMotion(poses, clip.fps, morph, constraints, info)

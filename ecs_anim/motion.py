@@ -1,0 +1,142 @@
+"""A normalized motion: poses, timing, source body, constraints; and the ``.nmo`` file.
+
+The ``.nmo`` container is documented in ``docs/format.md``: a zip of numpy arrays (``np.savez``)
+with a JSON header. It is written through a temporary file and renamed, so an interrupted write
+never leaves a damaged file behind.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .constraints import ConstraintSpec
+from .contacts import contacts_from_constraints
+from .errors import InputError
+from .morphology import Morphology
+from .normalized import QUATERNION_FIELDS, TRAILING_SHAPES, NormalizedPoses
+
+FORMAT_NAME = "ecs_anim.nmo"
+FORMAT_VERSION = 1
+HEADER_KEY = "header_json"
+
+
+@dataclass
+class NormalizedMotion:
+    """A clip in normalized form.
+
+    poses : per-frame :class:`NormalizedPoses` (leading axis = frames).
+    fps : frames per second.
+    source_morphology : the captured subject's body (decoding on it gives the source back).
+    constraints : foot contacts and user constraints, times in seconds from the first frame.
+    info : provenance (source file, joint map, unit assumed, joints filled in, ...).
+    """
+
+    poses: NormalizedPoses
+    fps: float
+    source_morphology: Morphology
+    constraints: list[ConstraintSpec] = field(default_factory=list)
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.poses.root_heading.shape[0])
+
+    @property
+    def duration_s(self) -> float:
+        return (self.n_frames - 1) / self.fps
+
+    def contacts(self) -> np.ndarray:
+        """Bool (n_frames, 2): left/right foot in full contact."""
+        return contacts_from_constraints(self.constraints, self.n_frames, self.fps)
+
+
+def save_nmo(motion: NormalizedMotion, path: str | Path, force: bool = False) -> None:
+    """Write ``motion`` to ``path``; refuses to overwrite unless ``force``."""
+    path = Path(path)
+    if path.exists() and not force:
+        raise FileExistsError(f"{path}: already exists (use --force to overwrite)")
+    header = {
+        "format": FORMAT_NAME,
+        "version": FORMAT_VERSION,
+        "fps": motion.fps,
+        "n_frames": motion.n_frames,
+        "source_morphology": motion.source_morphology.to_dict(),
+        "constraints": [c.to_dict() for c in motion.constraints],
+        "info": motion.info,
+    }
+    arrays = {f"poses/{k}": np.ascontiguousarray(v, dtype=np.float64)
+              for k, v in motion.poses.arrays().items()}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        with open(tmp, "wb") as f:
+            np.savez_compressed(f, **{HEADER_KEY: np.array(json.dumps(header))}, **arrays)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def load_nmo(path: str | Path) -> NormalizedMotion:
+    """Read a ``.nmo`` file; a damaged file or an unknown version gives :class:`InputError`."""
+    path = str(path)
+    if not Path(path).exists():
+        raise InputError(path, "no such file")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            if HEADER_KEY not in data.files:
+                raise InputError(path, f"not an .nmo file (no {HEADER_KEY} entry)")
+            header = json.loads(str(data[HEADER_KEY]))
+            _check_header(path, header)
+            arrays = {}
+            for name in TRAILING_SHAPES:
+                key = f"poses/{name}"
+                if key not in data.files:
+                    raise InputError(path, f"damaged .nmo file: array {name!r} is missing")
+                arrays[name] = np.asarray(data[key], dtype=np.float64)
+    except InputError:
+        raise
+    except (zipfile.BadZipFile, ValueError, OSError, EOFError, KeyError) as exc:
+        raise InputError(path, f"not a readable .nmo file (damaged or truncated?): {exc}") from None
+    n = int(header["n_frames"])
+    for name, trailing in TRAILING_SHAPES.items():
+        if arrays[name].shape != (n,) + trailing:
+            raise InputError(path, f"damaged .nmo file: {name} has shape {arrays[name].shape}, "
+                                   f"expected {(n,) + trailing}")
+        if not np.all(np.isfinite(arrays[name])):
+            raise InputError(path, f"damaged .nmo file: {name} holds non-finite values")
+    for name in QUATERNION_FIELDS:
+        if np.any(np.abs(np.linalg.norm(arrays[name], axis=-1) - 1.0) > 1e-6):
+            raise InputError(path, f"damaged .nmo file: {name} holds non-unit quaternions")
+    try:
+        morph = Morphology.from_dict(header["source_morphology"])
+        constraints = [ConstraintSpec.from_dict(c) for c in header.get("constraints", [])]
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(path, f"damaged .nmo header: {exc}") from None
+    return NormalizedMotion(NormalizedPoses(**arrays), float(header["fps"]), morph, constraints,
+                            dict(header.get("info", {})))
+
+
+def _check_header(path: str, header: Any) -> None:
+    if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:
+        raise InputError(path, "not an .nmo file (wrong format name in header)")
+    version = header.get("version")
+    if version != FORMAT_VERSION:
+        raise InputError(path, f".nmo format version {version!r} is not supported by this "
+                               f"ecs_anim (reads version {FORMAT_VERSION}); re-import the source "
+                               "clip or upgrade ecs_anim")
+    for key in ("fps", "n_frames", "source_morphology"):
+        if key not in header:
+            raise InputError(path, f"damaged .nmo header: {key!r} is missing")
+    fps, n = header["fps"], header["n_frames"]
+    if not (isinstance(fps, (int, float)) and fps > 0 and isinstance(n, int) and n > 0):
+        raise InputError(path, f"damaged .nmo header: fps={fps!r}, n_frames={n!r}")
