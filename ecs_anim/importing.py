@@ -180,7 +180,10 @@ def source_morphology(positions: F64, name: str) -> Morphology:
 
     ``positions`` (n_frames, N_JOINTS, 3) in metres, Z up, ground near z = 0.
     """
-    lengths = np.nanmean(bone_lengths_of(positions), axis=0)
+    per_frame = bone_lengths_of(positions)
+    lengths = np.ones(per_frame.shape[-1])
+    is_bone = ~np.isnan(per_frame[0])
+    lengths[is_bone] = per_frame[:, is_bone].mean(axis=0)
     leg = 0.5 * (lengths[LENGTH_INDEX["thigh_l"]] + lengths[LENGTH_INDEX["shank_l"]]
                  + lengths[LENGTH_INDEX["thigh_r"]] + lengths[LENGTH_INDEX["shank_r"]])
     typical = FILL_FRACTION["ankle_height"] * leg

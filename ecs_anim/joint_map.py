@@ -256,12 +256,6 @@ def detect_preset(skeleton: BvhSkeleton) -> Preset | None:
 
 # --- structural matching ---------------------------------------------------------------------
 
-_SIDE_PATTERNS = {
-    "l": re.compile(r"(^|[^a-z])(l|left)([^a-z]|$)|^left|^l(?=[A-Z])|left|_l$|\.l$"),
-    "r": re.compile(r"(^|[^a-z])(r|right)([^a-z]|$)|^right|^r(?=[A-Z])|right|_r$|\.r$"),
-}
-
-
 def _side_of(name: str) -> str | None:
     raw = re.split(r"[:|]", name)[-1]
     low = raw.lower()
@@ -370,10 +364,29 @@ def structural_map(skeleton: BvhSkeleton) -> dict[str, int | None]:
             found["spine_2"] = distinct[(2 * len(distinct)) // 3] if len(distinct) >= 2 else None
             if found["spine_1"] == found["spine_2"]:
                 found["spine_2"] = None
+    # Ends: the End Site below the head and each wrist's farthest descendant, if any.
+    if head is not None:
+        found["head_top"] = _farthest_descendant(skeleton, rest, head)
+    for side in "lr":
+        wrist = found.get(f"wrist_{side}")
+        found[f"hand_{side}"] = None if wrist is None else _farthest_descendant(skeleton, rest, wrist)
     missing = [j for j in REQUIRED if found.get(j) is None]
     if missing:
         raise MappingError(_missing_message(skeleton, missing, problems))
     return found
+
+
+def _farthest_descendant(skeleton: BvhSkeleton, rest: np.ndarray, j: int) -> int | None:
+    """The descendant of ``j`` farthest from it in the rest pose (None if all coincide)."""
+    best, best_d = None, 1e-9
+    stack = skeleton.children(j)
+    while stack:
+        c = stack.pop()
+        d = float(np.linalg.norm(rest[c] - rest[j]))
+        if d > best_d:
+            best, best_d = c, d
+        stack.extend(skeleton.children(c))
+    return best
 
 
 def _missing_message(skeleton: BvhSkeleton, missing: list[str], problems: list[str]) -> str:
@@ -495,13 +508,11 @@ def map_skeleton(skeleton: BvhSkeleton, map_spec: str | None = None) -> JointMap
         raise MappingError(_missing_message(skeleton, missing, [f"using {how}"]))
     source = {j: found.get(j) for j in JOINTS}
     # Zero-length End Sites (Bandai) carry no information: fill those parts in instead.
-    rest = rest_positions(skeleton)
     for j in OPTIONAL:
         i = source[j]
         if i is not None and skeleton.joints[i].is_end_site and \
                 np.linalg.norm(skeleton.joints[i].offset) < 1e-9:
             source[j] = None
-    del rest
     thorax = _lca(skeleton, [source["shoulder_l"], source["shoulder_r"], source["head"]])  # type: ignore[list-item]
     names = {j: (None if i is None else skeleton.names[i]) for j, i in source.items()}
     return JointMap(source=source, thorax=thorax, how=how, names=names)

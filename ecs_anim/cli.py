@@ -1,0 +1,268 @@
+"""The ``ecs-anim`` command line.
+
+Every user error ends as one line on stderr and a non-zero exit status, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .contacts import ContactThresholds
+from .errors import EcsAnimError
+from .joint_map import preset_summary
+from .morphology import PRESET_SPECS
+
+EXIT_FAILED = 1
+EXIT_USAGE = 2
+
+
+def _progress(done: int, total: int, label: str) -> None:
+    """A one-line progress bar on stderr (only drawn when several files are processed)."""
+    width = 30
+    filled = int(width * done / max(total, 1))
+    sys.stderr.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} {label[:40]:40s}")
+    if done == total:
+        sys.stderr.write("\n")
+    sys.stderr.flush()
+
+
+def cmd_import(args: argparse.Namespace) -> int:
+    from .importing import import_bvh
+    from .motion import save_nmo
+
+    outdir = Path(args.output)
+    thresholds = ContactThresholds(
+        height_m=args.contact_height, speed_mps=args.contact_speed,
+        min_duration_s=args.contact_min_duration,
+    )
+    sources = [Path(s) for s in args.sources]
+    failed = 0
+    show_bar = len(sources) > 1 and sys.stderr.isatty()
+    stems: dict[str, Path] = {}
+    for k, src in enumerate(sources, start=1):
+        target = outdir / f"{src.stem}.nmo"
+        try:
+            if src.stem in stems:
+                raise EcsAnimError(f"{src}: has the same name as {stems[src.stem]}; both would be "
+                                   f"written to {target}")
+            stems[src.stem] = src
+            if target.exists() and not args.force:
+                raise EcsAnimError(f"{target}: already exists (use --force to overwrite)")
+            if src.suffix.lower() != ".bvh":
+                raise EcsAnimError(f"{src}: unsupported file type {src.suffix!r} (expected .bvh)")
+            motion = import_bvh(src, args.map, args.unit, thresholds)
+            if args.constraints:
+                raise EcsAnimError("--constraints is not supported yet (the solver issue adds it)")
+            save_nmo(motion, target, force=args.force)
+            contacts = motion.contacts()
+            message = (f"{src} -> {target}: {motion.n_frames} frames at {motion.fps:g} fps, "
+                       f"{motion.info['joint_map']}, unit {motion.info['unit']} "
+                       f"({motion.info['unit_reason']}), contacts L {contacts[:, 0].mean():.0%} "
+                       f"R {contacts[:, 1].mean():.0%}")
+            if motion.info["filled_in"]:
+                message += f", filled in: {', '.join(motion.info['filled_in'])}"
+            if show_bar:
+                sys.stderr.write("\r" + " " * 80 + "\r")
+            print(message)
+        except (EcsAnimError, FileExistsError) as exc:
+            failed += 1
+            if show_bar:
+                sys.stderr.write("\r" + " " * 80 + "\r")
+            print(f"error: {exc}", file=sys.stderr)
+        if show_bar:
+            _progress(k, len(sources), src.name)
+    if failed:
+        print(f"{failed} of {len(sources)} file(s) failed; the others were imported", file=sys.stderr)
+        return EXIT_FAILED
+    return 0
+
+
+def motion_summary(path: str) -> dict[str, object]:
+    from .motion import load_nmo
+
+    motion = load_nmo(path)
+    contacts = motion.contacts()
+    return {
+        "file": path,
+        "frames": motion.n_frames,
+        "fps": motion.fps,
+        "duration_s": round(motion.duration_s, 4),
+        "source_morphology": motion.source_morphology.to_dict()
+        | {"stature_m": round(motion.source_morphology.stature, 4)},
+        "contacts": {
+            "left_fraction": float(contacts[:, 0].mean()),
+            "right_fraction": float(contacts[:, 1].mean()),
+            "constraints": [
+                {"name": c.name, "start_s": round(c.activation.start_s, 4),
+                 "stop_s": round(c.activation.stop_s, 4)}
+                for c in motion.constraints if c.kind == "foot_contact"
+            ],
+        },
+        "other_constraints": [c.to_dict() for c in motion.constraints if c.kind != "foot_contact"],
+        "info": motion.info,
+    }
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    summary = motion_summary(args.file)
+    if args.json:
+        print(json.dumps(summary, indent=2))
+        return 0
+    m = summary["source_morphology"]
+    c = summary["contacts"]
+    info = summary["info"]
+    assert isinstance(m, dict) and isinstance(c, dict) and isinstance(info, dict)
+    print(f"{args.file}")
+    print(f"  frames     {summary['frames']} at {summary['fps']:g} fps ({summary['duration_s']} s)")
+    print(f"  source     {info.get('source', '?')} ({info.get('joint_map', '?')}, unit "
+          f"{info.get('unit', '?')})")
+    print(f"  body       stature {m['stature_m']:.3f} m, mass {m['mass_kg']:.1f} kg, "
+          f"leg (thigh+shank) {0.5 * (m['lengths_m']['thigh_l'] + m['lengths_m']['shank_l'] + m['lengths_m']['thigh_r'] + m['lengths_m']['shank_r']):.3f} m")
+    print(f"  contacts   left {c['left_fraction']:.0%} right {c['right_fraction']:.0%} of frames, "
+          f"{len(c['constraints'])} contact intervals")
+    if info.get("filled_in"):
+        print(f"  filled in  {', '.join(info['filled_in'])}")
+    return 0
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from .exporting import export_motion
+    from .motion import load_nmo
+
+    motion = load_nmo(args.file)
+    morph, pose = export_motion(motion, args.morphology, args.output, force=args.force)
+    print(f"{args.file} on {morph.name} (stature {morph.stature:.3f} m) -> {args.output}: "
+          f"{motion.n_frames} frames")
+    return 0
+
+
+def default_bench_files() -> list[Path]:
+    from .library import shipped_motion_paths
+
+    for candidate in (Path("../shared/mocap"), Path(__file__).resolve().parents[2] / "shared" / "mocap"):
+        files = sorted(candidate.glob("*.bvh"))
+        if files:
+            return files
+    return shipped_motion_paths()
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    if args.what != "import":
+        raise EcsAnimError(f"bench {args.what}: only 'import' exists so far")
+    from .bvh import forward_kinematics, read_bvh
+    from .importing import canonical_clip, normalize_clip
+
+    files = [Path(f) for f in args.files] or default_bench_files()
+    biggest = max(files, key=lambda p: p.stat().st_size)
+    timings = {"parse": [], "fk": [], "map_encode": []}
+    n_frames = 0
+    for _ in range(args.repeat):
+        t0 = time.perf_counter()
+        motion = read_bvh(biggest)
+        t1 = time.perf_counter()
+        forward_kinematics(motion)
+        t2 = time.perf_counter()
+        normalize_clip(canonical_clip(motion), biggest.stem, str(biggest))
+        t3 = time.perf_counter()
+        timings["parse"].append(t1 - t0)
+        timings["fk"].append(t2 - t1)
+        timings["map_encode"].append(t3 - t2)
+        n_frames = motion.n_frames
+    best = {k: min(v) for k, v in timings.items()}
+    # canonical_clip runs FK again internally; count the pipeline once: parse + (map + FK + encode).
+    total = best["parse"] + best["map_encode"]
+    result = {
+        "file": str(biggest),
+        "frames": n_frames,
+        "seconds": {k: round(v, 5) for k, v in best.items()} | {"total": round(total, 5)},
+        "frames_per_second": round(n_frames / total, 1),
+    }
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        print(f"bench import: {biggest.name}, {n_frames} frames, best of {args.repeat}")
+        print(f"  parse {best['parse'] * 1e3:8.1f} ms")
+        print(f"  FK    {best['fk'] * 1e3:8.1f} ms")
+        print(f"  map + FK + encode + contacts {best['map_encode'] * 1e3:8.1f} ms")
+        print(f"  total {total * 1e3:8.1f} ms -> {result['frames_per_second']:.0f} frames/s")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="ecs-anim",
+        description="Morphology-independent motions for many characters (Kulpa et al. 2005).",
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("import", help="normalize captured clips (BVH) into .nmo files",
+                       formatter_class=argparse.RawDescriptionHelpFormatter,
+                       epilog="joint-name presets:\n" + preset_summary())
+    p.add_argument("sources", nargs="+", metavar="SRC", help="BVH files")
+    p.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="folder for .nmo files")
+    p.add_argument("--map", metavar="PRESET|FILE.yaml", help="joint-name preset or YAML map "
+                   "(default: detect)")
+    p.add_argument("--unit", choices=["m", "cm", "mm", "inch", "cmu"],
+                   help="length unit of the file (default: detected from the proportions)")
+    p.add_argument("--constraints", metavar="FILE.yaml", help=argparse.SUPPRESS)
+    p.add_argument("--contact-height", type=float, default=ContactThresholds.height_m,
+                   metavar="M", help="foot-contact height threshold, m (default %(default)s)")
+    p.add_argument("--contact-speed", type=float, default=ContactThresholds.speed_mps,
+                   metavar="M/S", help="foot-contact speed threshold, m/s (default %(default)s)")
+    p.add_argument("--contact-min-duration", type=float, default=ContactThresholds.min_duration_s,
+                   metavar="S", help="shortest contact kept, s (default %(default)s)")
+    p.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    p.set_defaults(func=cmd_import)
+
+    p = sub.add_parser("info", help="describe a .nmo file")
+    p.add_argument("file", metavar="FILE.nmo")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=cmd_info)
+
+    p = sub.add_parser("export", help="play a .nmo on a body and write BVH or joint positions")
+    p.add_argument("file", metavar="FILE.nmo")
+    p.add_argument("--morphology", default="source",
+                   help=f"source | {' | '.join(PRESET_SPECS)} | FILE.yaml | SKELETON.bvh "
+                        "(default: source)")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.bvh|OUT.npz")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.set_defaults(func=cmd_export)
+
+    p = sub.add_parser("bench", help="print performance figures")
+    p.add_argument("what", choices=["import"], help="what to measure")
+    p.add_argument("files", nargs="*", help="clips (default: ../shared/mocap, else the shipped "
+                   "motions); the largest is measured")
+    p.add_argument("--repeat", type=int, default=3)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_bench)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args))
+    except (EcsAnimError, FileExistsError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_FAILED
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    except FileNotFoundError as exc:
+        print(f"error: {exc.filename}: no such file", file=sys.stderr)
+        return EXIT_FAILED
+
+
+if __name__ == "__main__":
+    sys.exit(main())
+
+
+__all__ = ["main", "build_parser", "np"]

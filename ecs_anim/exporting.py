@@ -1,0 +1,215 @@
+"""A normalized motion played on a body, written as BVH or as joint positions (``.npz``).
+
+BVH files follow the format's own convention (DESIGN §8): Y up, the character facing +Z with its
+left along +X in the rest pose (a T-pose), metres, one frame per line, three rotation channels
+(ZXY) per joint and six on the root. Besides the canonical joints the hierarchy has zero-length
+joints where one joint has several children that move independently (``pelvis_l``,
+``pelvis_r``, ``lumbar``, ``cervical``, ``clavicle_l``, ``clavicle_r``), so every exported
+position is exact, not a best fit.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .bvh import BvhWriteJoint, format_bvh, write_text_atomic
+from .errors import EcsAnimError, InputError
+from .importing import YUP_TO_ZUP, canonical_clip, source_morphology
+from .morphology import PRESET_SPECS, Morphology, load_morphology_yaml
+from .motion import NormalizedMotion
+from .normalized import DecodedPose, decode
+from .rotations import frame_from_axes, matrix_to_euler, normalize, rotation_between
+from .skeleton import JOINT_INDEX as J, JOINTS
+from .bvh import read_bvh
+
+F64 = NDArray[np.float64]
+
+#: Rest body axes (x forward, y left, z up) -> BVH axes (forward +Z, left +X, up +Y).
+BODY_TO_BVH_REST = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+EULER_ORDER = "ZXY"
+TOE_TIP_FRACTION = 0.4  # toe End Site length as a fraction of the foot (cosmetic only)
+
+
+def resolve_morphology(spec: str, motion: NormalizedMotion) -> tuple[Morphology, bool]:
+    """``source``, a preset name, a morphology YAML or a BVH skeleton -> (body, is_source)."""
+    if spec == "source":
+        return motion.source_morphology, True
+    if spec in PRESET_SPECS:
+        return Morphology.preset(spec), False
+    path = Path(spec)
+    if path.suffix.lower() in (".yaml", ".yml"):
+        if not path.exists():
+            raise InputError(path, "no such morphology file")
+        return load_morphology_yaml(path), False
+    if path.suffix.lower() == ".bvh":
+        clip = canonical_clip(read_bvh(path))
+        return source_morphology(clip.positions, path.stem), False
+    import difflib
+    close = difflib.get_close_matches(spec, list(PRESET_SPECS) + ["source"], n=1)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    raise EcsAnimError(f"--morphology {spec}: not 'source', a preset{hint}, a .yaml or a .bvh file; "
+                       f"presets: {', '.join(PRESET_SPECS)}")
+
+
+def play_on(motion: NormalizedMotion, morph: Morphology, is_source: bool) -> DecodedPose:
+    """Decode every frame on ``morph`` (with the source's stretch when it is the source body)."""
+    return decode(motion.poses, morph.lengths, use_stretch=is_source)
+
+
+@dataclass(frozen=True)
+class _ExportJoint:
+    name: str
+    parent: str | None
+    rest_offset: tuple[str, int, float]  # (length name or "", body axis, sign)
+    end_site: tuple[str, int, float] | None = None
+
+
+def _side(s: str) -> float:
+    return 1.0 if s == "l" else -1.0
+
+
+EXPORT_JOINTS: tuple[_ExportJoint, ...] = (
+    _ExportJoint("pelvis", None, ("", 2, 0.0)),
+    *[j for s in "lr" for j in (
+        _ExportJoint(f"pelvis_{s}", "pelvis", ("", 1, 0.0)),
+        _ExportJoint(f"hip_{s}", f"pelvis_{s}", (f"pelvis_{s}", 1, _side(s))),
+        _ExportJoint(f"knee_{s}", f"hip_{s}", (f"thigh_{s}", 2, -1.0)),
+        _ExportJoint(f"ankle_{s}", f"knee_{s}", (f"shank_{s}", 2, -1.0)),
+        _ExportJoint(f"toe_{s}", f"ankle_{s}", (f"foot_{s}", 0, 1.0),
+                     end_site=(f"foot_{s}", 0, TOE_TIP_FRACTION)),
+    )],
+    _ExportJoint("lumbar", "pelvis", ("", 2, 0.0)),
+    _ExportJoint("spine_1", "lumbar", ("spine_lower", 2, 1.0)),
+    _ExportJoint("spine_2", "spine_1", ("spine_middle", 2, 1.0)),
+    _ExportJoint("neck", "spine_2", ("spine_upper", 2, 1.0)),
+    _ExportJoint("cervical", "neck", ("", 2, 0.0)),
+    _ExportJoint("head", "cervical", ("neck", 2, 1.0), end_site=("head", 2, 1.0)),
+    *[j for s in "lr" for j in (
+        _ExportJoint(f"clavicle_{s}", "neck", ("", 1, 0.0)),
+        _ExportJoint(f"shoulder_{s}", f"clavicle_{s}", (f"clavicle_{s}", 1, _side(s))),
+        _ExportJoint(f"elbow_{s}", f"shoulder_{s}", (f"upper_arm_{s}", 1, _side(s))),
+        _ExportJoint(f"wrist_{s}", f"elbow_{s}", (f"forearm_{s}", 1, _side(s)),
+                     end_site=(f"hand_{s}", 1, _side(s))),
+    )],
+)
+EXPORT_NAMES = tuple(j.name for j in EXPORT_JOINTS)
+
+
+def _offset(spec: tuple[str, int, float], morph: Morphology) -> F64:
+    name, axis, sign = spec
+    v = np.zeros(3)
+    if name:
+        v[axis] = sign * morph[name]
+    return v
+
+
+def _swing_from(parent_frame: F64, rest_axis: F64, direction: F64) -> F64:
+    """The parent's frame turned by the smallest rotation taking its ``rest_axis`` onto
+    ``direction``: a bone's orientation with no twist of its own. (..., 3, 3)."""
+    current = parent_frame @ rest_axis
+    return rotation_between(current, direction) @ parent_frame
+
+
+def export_rotations(pose: DecodedPose) -> dict[str, F64]:
+    """World orientation of every export joint, mapping its rest (body-axes) offsets onto the
+    posed bones. Each value (n_frames, 3, 3)."""
+    p = pose.positions
+    e = np.eye(3)
+    R: dict[str, F64] = {"pelvis": pose.pelvis2world}
+    for k, s in enumerate("lr"):
+        sign = _side(s)
+        leg_normal = pose.leg2world[..., k, :, 0]  # half-plane normal = knee hinge axis
+        hip, knee, ankle, toe = (p[..., J[f"{n}_{s}"], :] for n in ("hip", "knee", "ankle", "toe"))
+        R[f"pelvis_{s}"] = _swing_from(pose.pelvis2world, sign * e[1], hip - p[..., J["pelvis"], :])
+        R[f"hip_{s}"] = frame_from_axes(hip - knee, leg_normal, 2, 1)
+        R[f"knee_{s}"] = frame_from_axes(knee - ankle, leg_normal, 2, 1)
+        R[f"ankle_{s}"] = frame_from_axes(toe - ankle, leg_normal, 0, 1,
+                                          fallback_secondary=pose.pelvis2world[..., :, 1])
+        R[f"toe_{s}"] = R[f"ankle_{s}"]
+        arm_normal = pose.arm2world[..., k, :, 0]  # elbow hinge axis
+        sh, el, wr, hd = (p[..., J[f"{n}_{s}"], :] for n in ("shoulder", "elbow", "wrist", "hand"))
+        R[f"clavicle_{s}"] = _swing_from(pose.thorax2world, sign * e[1], sh - p[..., J["neck"], :])
+        R[f"shoulder_{s}"] = frame_from_axes(sign * (el - sh), -sign * arm_normal, 1, 2)
+        R[f"elbow_{s}"] = frame_from_axes(sign * (wr - el), -sign * arm_normal, 1, 2)
+        R[f"wrist_{s}"] = frame_from_axes(sign * (hd - wr), -sign * arm_normal, 1, 2,
+                                          fallback_secondary=pose.thorax2world[..., :, 0])
+    R["lumbar"] = _swing_from(pose.pelvis2world, e[2], p[..., J["spine_1"], :] - p[..., J["pelvis"], :])
+    R["spine_1"] = _swing_from(R["lumbar"], e[2], p[..., J["spine_2"], :] - p[..., J["spine_1"], :])
+    R["spine_2"] = _swing_from(R["spine_1"], e[2], p[..., J["neck"], :] - p[..., J["spine_2"], :])
+    R["neck"] = pose.thorax2world
+    R["cervical"] = _swing_from(pose.thorax2world, e[2], p[..., J["head"], :] - p[..., J["neck"], :])
+    R["head"] = _swing_from(pose.head2world, e[2], p[..., J["head_top"], :] - p[..., J["head"], :])
+    return R
+
+
+def bvh_text(pose: DecodedPose, morph: Morphology, fps: float) -> str:
+    """BVH text of decoded poses on ``morph`` (see module docstring)."""
+    world_to_bvh = YUP_TO_ZUP.T
+    index = {n: i for i, n in enumerate(EXPORT_NAMES)}
+    joints = [
+        BvhWriteJoint(
+            j.name, -1 if j.parent is None else index[j.parent],
+            BODY_TO_BVH_REST @ _offset(j.rest_offset, morph),
+            None if j.end_site is None else BODY_TO_BVH_REST @ _offset(j.end_site, morph),
+        )
+        for j in EXPORT_JOINTS
+    ]
+    R = export_rotations(pose)
+    # joint2bvh = world_to_bvh @ joint2world @ bvh_rest2body
+    glob = {n: world_to_bvh @ R[n] @ BODY_TO_BVH_REST.T for n in EXPORT_NAMES}
+    local = []
+    for j in EXPORT_JOINTS:
+        g = glob[j.name]
+        local.append(g if j.parent is None else np.swapaxes(glob[j.parent], -1, -2) @ g)
+    euler = matrix_to_euler(np.stack(local, axis=1), EULER_ORDER)
+    root = pose.positions[:, J["pelvis"]] @ world_to_bvh.T
+    return format_bvh(joints, root, euler, 1.0 / fps, EULER_ORDER)
+
+
+def write_npz(path: str | Path, pose: DecodedPose, motion: NormalizedMotion, force: bool) -> None:
+    """Joint positions for analysis: ``positions`` (frames, joints, 3) metres world Z up,
+    ``joints`` names, ``fps``, ``contacts`` (frames, 2) bool [left, right]."""
+    path = Path(path)
+    if path.exists() and not force:
+        raise FileExistsError(f"{path}: already exists (use --force to overwrite)")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        with open(tmp, "wb") as f:
+            np.savez_compressed(f, positions=pose.positions, joints=np.array(JOINTS),
+                                fps=np.float64(motion.fps), contacts=motion.contacts())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def export_motion(motion: NormalizedMotion, morphology_spec: str, out: str | Path,
+                  force: bool = False) -> tuple[Morphology, DecodedPose]:
+    """Play ``motion`` on a body and write ``out`` (.bvh or .npz)."""
+    out = Path(out)
+    suffix = out.suffix.lower()
+    if suffix not in (".bvh", ".npz"):
+        raise EcsAnimError(f"-o {out}: the output must end in .bvh or .npz")
+    if out.exists() and not force:
+        raise FileExistsError(f"{out}: already exists (use --force to overwrite)")
+    morph, is_source = resolve_morphology(morphology_spec, motion)
+    pose = play_on(motion, morph, is_source)
+    if not np.all(np.isfinite(pose.positions)):
+        raise EcsAnimError(f"{out}: the decoded motion holds non-finite positions (bug); nothing written")
+    if suffix == ".bvh":
+        write_text_atomic(out, bvh_text(pose, morph, motion.fps), force)
+    else:
+        write_npz(out, pose, motion, force)
+    return morph, pose
+
+
+__all__ = ["export_motion", "bvh_text", "resolve_morphology", "play_on", "write_npz",
+           "EXPORT_NAMES", "normalize"]

@@ -1,0 +1,234 @@
+"""The project's own small motion library, authored procedurally (no captured data).
+
+``python -m ecs_anim.library [--check]`` writes (or checks) ``scenarios/motions/*.bvh``; the
+shipped files are exactly what these generators produce, and a test keeps it so.
+
+Each generator builds canonical joint positions for a body frame by frame as arrays: footprints
+that stay put for the whole stance, swing feet on smooth arcs, the pelvis lowered where a leg
+could not reach (the paper's ``min(h1, h2, h3)`` rule), knees and elbows by the two-sphere
+construction, then the clip goes through the same encoder and BVH writer as captured data.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .morphology import Morphology
+from .normalized import (
+    NormalizedPoses,
+    decode,
+    encode,
+    frames_from_positions,
+    limb_frames,
+    two_bone_middle,
+)
+from .rotations import normalize, rot_axis
+from .skeleton import JOINT_INDEX as J, N_JOINTS
+
+F64 = NDArray[np.float64]
+
+MOTIONS_DIR = Path(__file__).resolve().parent.parent / "scenarios" / "motions"
+FPS = 30.0
+
+
+def shipped_motion_paths() -> list[Path]:
+    return sorted(MOTIONS_DIR.glob("*.bvh"))
+
+
+def _smoothstep(u: F64) -> F64:
+    """0 -> 1 with zero velocity at both ends (cycloid)."""
+    return u - np.sin(2 * np.pi * u) / (2 * np.pi)
+
+
+def _body(morph: Morphology, pelvis: F64, pelvis2world: F64, ankles: F64, toes: F64,
+          lean_rad: F64, thorax_yaw: F64, arm_swing: F64, elbow_bend: F64,
+          head_pitch: F64) -> F64:
+    """Assemble joint positions (F, N_JOINTS, 3) from pelvis, feet and a few trunk/arm angles.
+
+    ``ankles``/``toes`` (F, 2, 3); angles (F,) radians, ``arm_swing`` and ``elbow_bend`` (F, 2).
+    """
+    m = morph
+    n = pelvis.shape[0]
+    out = np.zeros((n, N_JOINTS, 3))
+    out[:, J["pelvis"]] = pelvis
+    for k, s in enumerate("lr"):
+        sign = 1.0 if s == "l" else -1.0
+        hip_dir = normalize(np.array([0.0, 0.87 * sign, -0.5]))
+        hip = pelvis + (pelvis2world @ hip_dir) * m[f"pelvis_{s}"]
+        thigh, shank = m[f"thigh_{s}"], m[f"shank_{s}"]
+        leg = limb_frames(hip, hip + pelvis2world[:, :, 0], ankles[:, k], pelvis2world[:, :, 0])
+        knee, ankle = two_bone_middle(leg, hip, np.full(n, thigh), np.full(n, shank),
+                                      np.linalg.norm(ankles[:, k] - hip, axis=-1))
+        out[:, J[f"hip_{s}"]], out[:, J[f"knee_{s}"]], out[:, J[f"ankle_{s}"]] = hip, knee, ankle
+        out[:, J[f"toe_{s}"]] = ankle + normalize(toes[:, k] - ankles[:, k]) * m[f"foot_{s}"]
+    # Trunk: pelvis frame, leaned forward about its left axis, thorax turned against the pelvis.
+    trunk = pelvis2world @ rot_axis(1, lean_rad)
+    up = trunk[:, :, 2]
+    s1 = pelvis + up * m["spine_lower"]
+    bend = trunk @ rot_axis(1, 0.5 * lean_rad)
+    s2 = s1 + bend[:, :, 2] * m["spine_middle"]
+    thorax = bend @ rot_axis(2, thorax_yaw) @ rot_axis(1, 0.5 * lean_rad)
+    neck = s2 + thorax[:, :, 2] * m["spine_upper"]
+    out[:, J["spine_1"]], out[:, J["spine_2"]], out[:, J["neck"]] = s1, s2, neck
+    head_frame = thorax @ rot_axis(1, head_pitch)
+    head = neck + head_frame[:, :, 2] * m["neck"]
+    out[:, J["head"]] = head
+    out[:, J["head_top"]] = head + (head_frame @ rot_axis(1, 0.5 * head_pitch))[:, :, 2] * m["head"]
+    for k, s in enumerate("lr"):
+        sign = 1.0 if s == "l" else -1.0
+        clav = normalize(np.array([-0.15, 0.97 * sign, -0.12]))
+        shoulder = neck + (thorax @ clav) * m[f"clavicle_{s}"]
+        # Arms hang slightly outwards and swing about the thorax' left axis.
+        hang = thorax @ rot_axis(0, np.full(n, -0.08 * sign))
+        upper_frame = hang @ rot_axis(1, -arm_swing[:, k])
+        elbow = shoulder - upper_frame[:, :, 2] * m[f"upper_arm_{s}"]
+        fore_frame = upper_frame @ rot_axis(1, -elbow_bend[:, k])
+        wrist = elbow - fore_frame[:, :, 2] * m[f"forearm_{s}"]
+        hand = wrist - fore_frame[:, :, 2] * m[f"hand_{s}"]
+        out[:, J[f"shoulder_{s}"]], out[:, J[f"elbow_{s}"]] = shoulder, elbow
+        out[:, J[f"wrist_{s}"]], out[:, J[f"hand_{s}"]] = wrist, hand
+    return out
+
+
+def _lower_pelvis_to_reach(pelvis: F64, pelvis2world: F64, ankles: F64, morph: Morphology,
+                           max_extension: float = 0.985) -> F64:
+    """Pelvis heights lowered where a leg could not reach its ankle (paper §7's min rule)."""
+    heights = [pelvis[:, 2]]
+    for k, s in enumerate("lr"):
+        sign = 1.0 if s == "l" else -1.0
+        hip_offset = (pelvis2world @ normalize(np.array([0.0, 0.87 * sign, -0.5]))) * morph[f"pelvis_{s}"]
+        reach = max_extension * (morph[f"thigh_{s}"] + morph[f"shank_{s}"])
+        horiz = pelvis[:, :2] + hip_offset[:, :2] - ankles[:, k, :2]
+        dz = np.sqrt(np.maximum(reach**2 - np.sum(horiz**2, axis=-1), 0.0))
+        heights.append(ankles[:, k, 2] + dz - hip_offset[:, 2])
+    out = pelvis.copy()
+    out[:, 2] = np.min(np.stack(heights), axis=0)
+    return out
+
+
+def generate_walk(morph: Morphology, cycles: int = 4, period_s: float = 1.1,
+                  stride_m: float | None = None) -> F64:
+    """A straight walk along +x: ``cycles`` gait cycles (two steps each), loopable.
+
+    Returns joint positions (frames, N_JOINTS, 3), metres, Z up.
+    """
+    stride = 1.62 * morph.leg_length if stride_m is None else stride_m
+    n = int(round(cycles * period_s * FPS))
+    t = np.arange(n) / FPS
+    phase = t / period_s
+    speed = stride / period_s
+    ah = 0.5 * (morph["ankle_height_l"] + morph["ankle_height_r"])
+    foot = 0.5 * (morph["foot_l"] + morph["foot_r"])
+    ball_height = 0.025 * morph.leg_length / 0.86
+    flat_pitch = np.arcsin(np.clip((ah - ball_height) / foot, -1, 1))
+    stance = 0.6
+    ankles = np.zeros((n, 2, 3))
+    toes = np.zeros((n, 2, 3))
+    for k, offset in enumerate((0.0, 0.5)):
+        cycle = np.floor(phase - offset)
+        psi = phase - offset - cycle
+        land_x = (cycle + offset + 0.3) * stride
+        swing_u = np.clip((psi - stance) / (1 - stance), 0.0, 1.0)
+        in_swing = psi >= stance
+        x = land_x + np.where(in_swing, _smoothstep(swing_u) * stride, 0.0)
+        lift = 0.11 * morph.leg_length * np.sin(np.pi * swing_u) ** 1.5
+        ankles[:, k, 0] = x
+        ankles[:, k, 1] = (0.11 if k == 0 else -0.11) * morph.leg_length
+        ankles[:, k, 2] = ah + np.where(in_swing, lift, 0.0)
+        pitch = flat_pitch + np.where(in_swing, 0.35 * np.sin(np.pi * swing_u) *
+                                      np.cos(np.pi * swing_u), 0.0)
+        toes[:, k] = ankles[:, k] + np.stack([np.cos(pitch), np.zeros(n), -np.sin(pitch)], -1) * foot
+    pelvis = np.zeros((n, 3))
+    pelvis[:, 0] = speed * t
+    pelvis[:, 1] = 0.025 * morph.leg_length * np.cos(2 * np.pi * (phase - 0.3))
+    standing = ah + 0.5 * (morph["thigh_l"] + morph["shank_l"] + morph["thigh_r"] + morph["shank_r"])
+    pelvis[:, 2] = standing * 0.985 + 0.012 * np.cos(4 * np.pi * (phase - 0.3))
+    yaw = 0.07 * np.sin(2 * np.pi * (phase - 0.05))
+    roll = 0.04 * np.sin(2 * np.pi * (phase - 0.3) + np.pi / 2)
+    pelvis2world = rot_axis(2, yaw) @ rot_axis(0, roll)
+    pelvis = _lower_pelvis_to_reach(pelvis, pelvis2world, ankles, morph)
+    swing = np.stack([-0.3 * np.cos(2 * np.pi * (phase - 0.25)),
+                      0.3 * np.cos(2 * np.pi * (phase - 0.25))], axis=-1)
+    elbow = 0.3 + 0.2 * np.maximum(swing, 0.0)
+    return _body(morph, pelvis, pelvis2world, ankles, toes,
+                 lean_rad=np.full(n, 0.06), thorax_yaw=-1.5 * yaw, arm_swing=swing,
+                 elbow_bend=elbow, head_pitch=np.full(n, -0.05))
+
+
+def generate_idle(morph: Morphology, seconds: float = 8.0) -> F64:
+    """Standing at rest: weight shifts, breathing, a slow look around; feet planted; loopable."""
+    n = int(round(seconds * FPS))
+    t = np.arange(n) / FPS
+    w = 2 * np.pi / seconds
+    ah = 0.5 * (morph["ankle_height_l"] + morph["ankle_height_r"])
+    foot = 0.5 * (morph["foot_l"] + morph["foot_r"])
+    ball_height = 0.025 * morph.leg_length / 0.86
+    pitch = np.arcsin(np.clip((ah - ball_height) / foot, -1, 1))
+    ankles = np.zeros((n, 2, 3))
+    ankles[:, 0] = [0.0, 0.12 * morph.leg_length, ah]
+    ankles[:, 1] = [0.02, -0.12 * morph.leg_length, ah]
+    toes = ankles + np.array([np.cos(pitch) * np.cos(0.15), 0.0, -np.sin(pitch)]) * foot
+    toes[:, 0, 1] += np.sin(0.15) * foot
+    toes[:, 1, 1] -= np.sin(0.15) * foot
+    pelvis = np.zeros((n, 3))
+    pelvis[:, 0] = 0.01 + 0.008 * np.sin(w * t)
+    pelvis[:, 1] = 0.03 * morph.leg_length * np.sin(w * t)
+    standing = ah + 0.5 * (morph["thigh_l"] + morph["shank_l"] + morph["thigh_r"] + morph["shank_r"])
+    pelvis[:, 2] = standing * 0.975 - 0.005 * np.cos(2 * w * t)
+    yaw = 0.04 * np.sin(w * t + 0.5)
+    pelvis2world = rot_axis(2, yaw) @ rot_axis(0, -0.03 * np.sin(w * t))
+    pelvis = _lower_pelvis_to_reach(pelvis, pelvis2world, ankles, morph)
+    breathe = 0.015 * np.sin(4 * w * t)
+    swing = np.stack([0.05 * np.sin(w * t), -0.05 * np.sin(w * t + 0.7)], axis=-1)
+    elbow = np.full((n, 2), 0.25) + 0.05 * np.sin(4 * w * t)[:, None]
+    return _body(morph, pelvis, pelvis2world, ankles, toes,
+                 lean_rad=0.02 + breathe, thorax_yaw=0.15 * np.sin(2 * w * t) - yaw,
+                 arm_swing=swing, elbow_bend=elbow, head_pitch=0.05 * np.sin(w * t + 1.0))
+
+
+GENERATORS = {"walk": generate_walk, "idle": generate_idle}
+
+
+def authored_poses(name: str, morph: Morphology) -> NormalizedPoses:
+    positions = GENERATORS[name](morph)
+    return encode(positions, *frames_from_positions(positions), morph.lengths)
+
+
+def authored_bvh_text(name: str) -> str:
+    """The shipped BVH of an authored motion, played on the ``adult_male`` body."""
+    from .exporting import bvh_text
+
+    morph = Morphology.preset("adult_male")
+    poses = authored_poses(name, morph)
+    return bvh_text(decode(poses, morph.lengths), morph, FPS)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m ecs_anim.library",
+                                     description="write or check the authored motion library")
+    parser.add_argument("--check", action="store_true", help="only compare with the shipped files")
+    args = parser.parse_args(argv)
+    stale = []
+    for name in GENERATORS:
+        path = MOTIONS_DIR / f"{name}.bvh"
+        text = authored_bvh_text(name)
+        if args.check:
+            if not path.exists() or path.read_text() != text:
+                stale.append(str(path))
+        else:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(text)
+            print(f"wrote {path}")
+    if stale:
+        print(f"out of date: {', '.join(stale)} (run python -m ecs_anim.library)", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
