@@ -513,6 +513,13 @@ def map_skeleton(skeleton: BvhSkeleton, map_spec: str | None = None) -> JointMap
         if i is not None and skeleton.joints[i].is_end_site and \
                 np.linalg.norm(skeleton.joints[i].offset) < 1e-9:
             source[j] = None
+    # Hand ends and the head top a preset does not name: the End Site below wrist / head.
+    for end, parent in (("hand_l", "wrist_l"), ("hand_r", "wrist_r"), ("head_top", "head")):
+        if source[end] is None:
+            ends = [c for c in skeleton.children(source[parent])  # type: ignore[arg-type]
+                    if skeleton.joints[c].is_end_site
+                    and np.linalg.norm(skeleton.joints[c].offset) > 1e-9]
+            source[end] = ends[0] if len(ends) == 1 else None
     thorax = _lca(skeleton, [source["shoulder_l"], source["shoulder_r"], source["head"]])  # type: ignore[list-item]
     names = {j: (None if i is None else skeleton.names[i]) for j, i in source.items()}
     return JointMap(source=source, thorax=thorax, how=how, names=names)
