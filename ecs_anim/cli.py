@@ -12,8 +12,6 @@ import time
 from pathlib import Path
 from typing import Sequence
 
-import numpy as np
-
 from .contacts import ContactThresholds
 from .errors import EcsAnimError
 from .joint_map import preset_summary
@@ -71,7 +69,7 @@ def cmd_import(args: argparse.Namespace) -> int:
             if show_bar:
                 sys.stderr.write("\r" + " " * 80 + "\r")
             print(message)
-        except (EcsAnimError, FileExistsError) as exc:
+        except (EcsAnimError, OSError) as exc:  # one bad file must not stop the others
             failed += 1
             if show_bar:
                 sys.stderr.write("\r" + " " * 80 + "\r")
@@ -256,8 +254,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
-    except FileNotFoundError as exc:
-        print(f"error: {exc.filename}: no such file", file=sys.stderr)
+    except OSError as exc:  # unwritable folder, full disk, ...: say which file
+        print(f"error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
         return EXIT_FAILED
 
 
@@ -265,4 +263,4 @@ if __name__ == "__main__":
     sys.exit(main())
 
 
-__all__ = ["main", "build_parser", "np"]
+__all__ = ["main", "build_parser"]

@@ -205,11 +205,18 @@ def import_bvh(path: str | Path, map_spec: str | None = None, unit: str | None =
     motion = read_bvh(path)
     try:
         clip = canonical_clip(motion, map_spec, unit)
+        normalized = normalize_clip(clip, path.stem, str(path), thresholds)
     except InputError:
         raise
     except EcsAnimError as exc:
         raise InputError(path, str(exc)) from None
-    return normalize_clip(clip, path.stem, str(path), thresholds)
+    except ValueError as exc:  # e.g. a mapped bone of zero length
+        raise InputError(path, f"cannot normalize this skeleton: {exc}") from None
+    bad = [k for k, v in normalized.poses.arrays().items() if not np.all(np.isfinite(v))]
+    if bad:
+        raise InputError(path, f"normalizing gave non-finite values in {', '.join(bad)} "
+                               "(degenerate skeleton or motion?); nothing written")
+    return normalized
 
 
 def normalize_clip(clip: CanonicalClip, name: str, source: str,
