@@ -80,7 +80,11 @@ class BvhMotion:
 
     @property
     def fps(self) -> float:
-        return 1.0 / self.frame_time_s
+        """Frames per second. Writers round the frame time (``0.008333`` for 120 Hz,
+        ``0.03333333`` for 30 Hz), so a rate within 0.05 % of a whole number is taken as it."""
+        rate = 1.0 / self.frame_time_s
+        whole = round(rate)
+        return float(whole) if whole > 0 and abs(rate - whole) <= 5e-4 * whole else rate
 
 
 class _Lines:
@@ -392,7 +396,7 @@ def format_bvh(joints: list[BvhWriteJoint], root_positions: F64, euler_deg: F64,
     n_frames = root_positions.shape[0]
     out.append("MOTION")
     out.append(f"Frames: {n_frames}")
-    out.append(f"Frame Time: {frame_time_s:.8f}")
+    out.append(f"Frame Time: {frame_time_s:.12g}")
     values = np.concatenate([root_positions, euler_deg.reshape(n_frames, -1)], axis=1)
     values = np.where(np.abs(values) < 0.5 * 10.0 ** (-decimals), 0.0, values)  # no "-0.000000"
     line_fmt = " ".join([fmt] * values.shape[1])

@@ -97,7 +97,8 @@ def _body(morph: Morphology, pelvis: F64, pelvis2world: F64, ankles: F64, toes: 
 
 def _lower_pelvis_to_reach(pelvis: F64, pelvis2world: F64, ankles: F64, morph: Morphology,
                            max_extension: float = 0.985) -> F64:
-    """Pelvis heights lowered where a leg could not reach its ankle (paper §7's min rule)."""
+    """Pelvis heights lowered where a leg could not reach its ankle (paper §7's min rule),
+    smoothly; the clip is treated as periodic (our generators make whole cycles)."""
     heights = [pelvis[:, 2]]
     for k, s in enumerate("lr"):
         sign = 1.0 if s == "l" else -1.0
@@ -106,8 +107,15 @@ def _lower_pelvis_to_reach(pelvis: F64, pelvis2world: F64, ankles: F64, morph: M
         horiz = pelvis[:, :2] + hip_offset[:, :2] - ankles[:, k, :2]
         dz = np.sqrt(np.maximum(reach**2 - np.sum(horiz**2, axis=-1), 0.0))
         heights.append(ankles[:, k, 2] + dz - hip_offset[:, 2])
+    # Lower by the deficit, dilated then blurred over the same circular window: the result is
+    # smooth (no kink where a leg becomes the limiting one) and never less than the deficit.
+    deficit = np.maximum(pelvis[:, 2] - np.min(np.stack(heights), axis=0), 0.0)
+    half = int(round(0.12 * FPS))
+    shifts = range(-half, half + 1)
+    dilated = np.max(np.stack([np.roll(deficit, k) for k in shifts]), axis=0)
+    smooth = np.mean(np.stack([np.roll(dilated, k) for k in shifts]), axis=0)
     out = pelvis.copy()
-    out[:, 2] = np.min(np.stack(heights), axis=0)
+    out[:, 2] -= smooth
     return out
 
 

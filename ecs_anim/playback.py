@@ -1,0 +1,149 @@
+"""Sampling normalized motions at any time, for many characters at once.
+
+All clips live in one :class:`ClipBank` (their frames concatenated), so one call samples every
+character whatever clip it plays: interpolation happens in normalized space (slerp for
+orientations, normalized lerp for directions, lerp for fractions and normalized positions), and a
+looping clip carries its root motion across loops (each loop starts where the previous one ended,
+turned by the heading the clip gained).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .motion import NormalizedMotion
+from .normalized import DIRECTION_FIELDS, QUATERNION_FIELDS, NormalizedPoses
+from .rotations import normalize, slerp
+
+F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
+
+
+def _wrap(angle: F64) -> F64:
+    return (angle + np.pi) % (2 * np.pi) - np.pi
+
+
+@dataclass
+class ClipBank:
+    """Every clip's frames, concatenated.
+
+    poses : NormalizedPoses with leading shape (total_frames,).
+    start : (n_clips,) first frame of each clip in ``poses``; n_frames : (n_clips,) frame count.
+    fps : (n_clips,).
+    loop_yaw : (n_clips,) heading gained over one loop (radians).
+    loop_shift : (n_clips, 2) root displacement over one loop, normalized units, expressed in the
+        clip's first-frame position frame (world xy of the clip).
+    names : clip names.
+    """
+
+    poses: NormalizedPoses
+    start: I64
+    n_frames: I64
+    fps: F64
+    loop_yaw: F64
+    loop_shift: F64
+    names: list[str]
+
+    @classmethod
+    def from_motions(cls, motions: dict[str, NormalizedMotion]) -> ClipBank:
+        names = list(motions)
+        fields = {k: np.concatenate([getattr(motions[n].poses, k) for n in names])
+                  for k in motions[names[0]].poses.arrays()}
+        counts = np.array([motions[n].n_frames for n in names], dtype=np.int64)
+        start = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+        yaw, shift = [], []
+        for n in names:
+            p = motions[n].poses
+            if p.root_heading.shape[0] >= 2:
+                # The frame after the last one, extrapolated, is where the next loop starts.
+                h_next = p.root_heading[-1] + _wrap(p.root_heading[-1] - p.root_heading[-2])
+                xy_next = 2 * p.root_position[-1, :2] - p.root_position[-2, :2]
+            else:
+                h_next, xy_next = p.root_heading[0], p.root_position[0, :2]
+            yaw.append(_wrap(h_next - p.root_heading[0]))
+            shift.append(xy_next - p.root_position[0, :2])
+        return cls(NormalizedPoses(**fields), start, counts,
+                   np.array([motions[n].fps for n in names], dtype=np.float64),
+                   np.array(yaw), np.array(shift), names)
+
+    def index(self, name: str) -> int:
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise KeyError(f"unknown clip {name!r}; loaded clips: {', '.join(self.names)}") from None
+
+    def duration_s(self, clip: I64) -> F64:
+        """Loop period of each clip: n_frames / fps (the last frame leads back to the first)."""
+        return self.n_frames[clip] / self.fps[clip]
+
+
+def _loop_transform(bank: ClipBank, clip: I64, loops: F64) -> tuple[F64, F64]:
+    """Heading offset and xy offset after ``loops`` whole loops (closed form, any count).
+
+    After k loops a root at ``p`` (xy, normalized) moves to ``R(k·yaw)(p - p0) + p0 + s·Σ_i R(i·yaw)``
+    with ``s`` the per-loop shift. Returns (yaw_offset (n,), a function's pieces: rotation angle
+    and translation (n, 2)) packed as (angle, translation) where translation already includes
+    ``p0`` handling via the caller.
+    """
+    yaw = bank.loop_yaw[clip]
+    shift = bank.loop_shift[clip, 0] + 1j * bank.loop_shift[clip, 1]
+    step = np.exp(1j * yaw)
+    small = np.abs(yaw) < 1e-9
+    # Σ_{i<k} e^{i·yaw·i}: geometric series, k where yaw is ~0.
+    series = np.where(small, loops, (1 - step**loops) / np.where(small, 1.0, 1 - step))
+    moved = shift * series
+    return loops * yaw, np.stack([moved.real, moved.imag], axis=-1)
+
+
+def _frame(bank: ClipBank, clip: I64, local: I64, loops: F64) -> NormalizedPoses:
+    """Stored frames ``local`` of ``clip`` after ``loops`` whole loops of root motion."""
+    rows = bank.start[clip] + local
+    out = bank.poses.take(rows)
+    angle, moved = _loop_transform(bank, clip, loops)
+    p0 = bank.poses.root_position[bank.start[clip], :2]
+    rel = out.root_position[:, :2] - p0
+    c, s = np.cos(angle), np.sin(angle)
+    rotated = np.stack([c * rel[:, 0] - s * rel[:, 1], s * rel[:, 0] + c * rel[:, 1]], axis=-1)
+    out.root_position = out.root_position.copy()
+    out.root_position[:, :2] = p0 + moved + rotated
+    out.root_heading = out.root_heading + angle
+    return out
+
+
+def blend(a: NormalizedPoses, b: NormalizedPoses, w: F64) -> NormalizedPoses:
+    """Interpolate two batches of poses with weights ``w`` (n,) in [0, 1] (0 -> a, 1 -> b)."""
+    out: dict[str, F64] = {}
+    for name, va in a.arrays().items():
+        vb = getattr(b, name)
+        ww = w.reshape(w.shape + (1,) * (va.ndim - 1))
+        if name in QUATERNION_FIELDS:
+            out[name] = slerp(va, vb, np.broadcast_to(ww[..., 0], va.shape[:-1]))
+        elif name in DIRECTION_FIELDS:
+            out[name] = normalize((1 - ww) * va + ww * vb)
+        elif name == "root_heading":
+            out[name] = va + w * _wrap(vb - va)
+        else:
+            out[name] = (1 - ww) * va + ww * vb
+    return NormalizedPoses(**out)
+
+
+def sample(bank: ClipBank, clip: I64, time_s: F64, loop: NDArray[np.bool_]) -> NormalizedPoses:
+    """Poses of ``clip`` (n,) at ``time_s`` (n,) seconds from each clip's start.
+
+    Looping clips wrap with root motion carried over; others hold their first/last pose outside
+    their duration. Returns NormalizedPoses with leading shape (n,).
+    """
+    n_frames = bank.n_frames[clip]
+    f = np.asarray(time_s, dtype=np.float64) * bank.fps[clip]
+    loops = np.where(loop, np.floor(f / n_frames), 0.0)
+    local = np.where(loop, f - loops * n_frames, np.clip(f, 0.0, n_frames - 1.0))
+    i0 = np.minimum(np.floor(local).astype(np.int64), n_frames - 1)
+    w = local - i0
+    wraps = loop & (i0 + 1 >= n_frames)
+    i1 = np.where(wraps, 0, np.minimum(i0 + 1, n_frames - 1))
+    a = _frame(bank, clip, i0, loops)
+    b = _frame(bank, clip, i1, loops + wraps)
+    return blend(a, b, w)
