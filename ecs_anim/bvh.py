@@ -91,7 +91,11 @@ class _Lines:
     """Token reader over a text, keeping 1-based line numbers for error messages."""
 
     def __init__(self, text: str, path: str):
-        self.lines = text.splitlines()
+        # Split on newlines only (str.splitlines also breaks at form feeds and other controls,
+        # which would shift line numbers); tolerate a byte-order mark and CRLF.
+        self.lines = text.lstrip("\ufeff").replace("\r\n", "\n").replace("\r", "\n").split("\n")
+        if self.lines and self.lines[-1] == "":
+            self.lines.pop()  # the final newline ends the last line; it starts no new one
         self.path = path
         self.row = 0  # index of the next line to read
 
@@ -118,6 +122,15 @@ def _floats(tokens: list[str], count: int, path: str, line: int, what: str) -> F
     return values
 
 
+_ASCII_INT = re.compile(r"[0-9]+")
+
+
+def _shown(tokens: list[str], limit: int = 60) -> str:
+    """Tokens joined for an error message, shortened so the message stays readable."""
+    text = " ".join(tokens)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 def _is_number(token: str) -> bool:
     try:
         float(token)
@@ -142,8 +155,8 @@ def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
     reader = _Lines(text, path)
     tokens, line = reader.next_tokens("HIERARCHY")
     if tokens[0].upper() != "HIERARCHY":
-        raise InputError(path, f"expected 'HIERARCHY' at the start of a BVH file, found {tokens[0]!r}",
-                         line)
+        raise InputError(path, "expected 'HIERARCHY' at the start of a BVH file, found "
+                               f"{_shown(tokens[:1], 30)!r}", line)
     joints: list[BvhJoint] = []
     tokens, line = reader.next_tokens("ROOT")
     if tokens[0].upper() != "ROOT" or len(tokens) < 2:
@@ -152,15 +165,15 @@ def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
 
     tokens, line = reader.next_tokens("MOTION")
     if tokens[0].upper() != "MOTION":
-        raise InputError(path, f"expected 'MOTION' after the hierarchy, found {' '.join(tokens)!r}",
+        raise InputError(path, f"expected 'MOTION' after the hierarchy, found {_shown(tokens)!r}",
                          line)
-    tokens, line = reader.next_tokens("'Frames: N'")
-    if tokens[0].lower() != "frames:" or len(tokens) != 2 or not tokens[1].isdigit():
-        raise InputError(path, f"expected 'Frames: <count>', found {' '.join(tokens)!r}", line)
+    tokens, frames_line = reader.next_tokens("'Frames: N'")
+    if tokens[0].lower() != "frames:" or len(tokens) != 2 or not _ASCII_INT.fullmatch(tokens[1]):
+        raise InputError(path, f"expected 'Frames: <count>', found {_shown(tokens)!r}", frames_line)
     n_frames = int(tokens[1])
     tokens, line = reader.next_tokens("'Frame Time: T'")
     if [t.lower() for t in tokens[:2]] != ["frame", "time:"] or len(tokens) != 3:
-        raise InputError(path, f"expected 'Frame Time: <seconds>', found {' '.join(tokens)!r}", line)
+        raise InputError(path, f"expected 'Frame Time: <seconds>', found {_shown(tokens)!r}", line)
     try:
         frame_time = float(tokens[2])
     except ValueError:
@@ -169,7 +182,7 @@ def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
         raise InputError(path, f"Frame Time must be a positive number of seconds, found {tokens[2]}",
                          line)
     if n_frames == 0:
-        raise InputError(path, "the MOTION section has no frames (Frames: 0)", line)
+        raise InputError(path, "the MOTION section has no frames (Frames: 0)", frames_line)
 
     skeleton = BvhSkeleton(joints, path)
     n_channels = skeleton.n_channels
@@ -183,13 +196,12 @@ def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
     if len(rows) > n_frames:
         raise InputError(path, f"found {len(rows)} frame lines but 'Frames:' says {n_frames}",
                          rows[n_frames][0])
-    flat = " ".join(ln for _, ln in rows).split()
-    if len(flat) != n_frames * n_channels:
-        for line_no, ln in rows:
-            count = len(ln.split())
-            if count != n_channels:
-                raise InputError(path, f"frame line has {count} values, expected {n_channels} "
-                                       "(one per channel of the hierarchy)", line_no)
+    split_rows = [ln.split() for _, ln in rows]
+    for (line_no, _), tokens in zip(rows, split_rows):
+        if len(tokens) != n_channels:
+            raise InputError(path, f"frame line has {len(tokens)} values, expected {n_channels} "
+                                   "(one per channel of the hierarchy)", line_no)
+    flat = [tok for tokens in split_rows for tok in tokens]
     try:
         values = np.array(flat, dtype=np.float64).reshape(n_frames, n_channels)
     except ValueError:
@@ -204,7 +216,7 @@ def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
         col = int(np.argmax(bad[frame]))
         name, channel = _channel_owner(skeleton, col)
         raise InputError(path, f"non-finite value {values[frame, col]} in channel {channel} of "
-                               f"joint {name!r} (frame {frame})", rows[frame][0])
+                               f"joint {name!r} (frame {frame + 1} of {n_frames})", rows[frame][0])
     return BvhMotion(skeleton, values, frame_time)
 
 
@@ -221,7 +233,7 @@ def _parse_joint(reader: _Lines, joints: list[BvhJoint], name: str, parent: int,
     path = reader.path
     tokens, brace_line = reader.next_tokens("'{'")
     if tokens != ["{"]:
-        raise InputError(path, f"expected '{{' after {name!r}, found {' '.join(tokens)!r}",
+        raise InputError(path, f"expected '{{' after {name!r}, found {_shown(tokens)!r}",
                          brace_line)
     tokens, off_line = reader.next_tokens("OFFSET")
     if tokens[0].upper() != "OFFSET":
@@ -238,7 +250,7 @@ def _parse_joint(reader: _Lines, joints: list[BvhJoint], name: str, parent: int,
         return
     tokens, ch_line = reader.next_tokens("CHANNELS")
     if tokens[0].upper() == "CHANNELS":
-        if len(tokens) < 2 or not tokens[1].isdigit():
+        if len(tokens) < 2 or not _ASCII_INT.fullmatch(tokens[1]):
             raise InputError(path, f"expected 'CHANNELS <count> <names...>' in {name!r}", ch_line)
         count = int(tokens[1])
         names = tokens[2:]
@@ -268,7 +280,7 @@ def _parse_joint(reader: _Lines, joints: list[BvhJoint], name: str, parent: int,
             raise InputError(path, f"joint {name!r} is not closed with '}}' before MOTION", ch_line)
         else:
             raise InputError(path, f"expected JOINT, End Site or '}}' in {name!r}, found "
-                                   f"{' '.join(tokens)!r}", ch_line)
+                                   f"{_shown(tokens)!r}", ch_line)
         tokens, ch_line = reader.next_tokens(f"'}}' closing {name!r}")
 
 

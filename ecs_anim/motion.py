@@ -10,7 +10,6 @@ from __future__ import annotations
 import json
 import os
 import tempfile
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -92,7 +91,10 @@ def load_nmo(path: str | Path) -> NormalizedMotion:
     if not Path(path).exists():
         raise InputError(path, "no such file")
     try:
-        with np.load(path, allow_pickle=False) as data:
+        loaded = np.load(path, allow_pickle=False)
+        if not isinstance(loaded, np.lib.npyio.NpzFile):
+            raise InputError(path, "not a readable .nmo file (a single numpy array, not an .nmo archive)")
+        with loaded as data:
             if HEADER_KEY not in data.files:
                 raise InputError(path, f"not an .nmo file (no {HEADER_KEY} entry)")
             header = json.loads(str(data[HEADER_KEY]))
@@ -105,8 +107,9 @@ def load_nmo(path: str | Path) -> NormalizedMotion:
                 arrays[name] = np.asarray(data[key], dtype=np.float64)
     except InputError:
         raise
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError, KeyError) as exc:
-        raise InputError(path, f"not a readable .nmo file (damaged or truncated?): {exc}") from None
+    except Exception as exc:  # zip, zlib, json, numpy: any failure to read means a damaged file
+        reason = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+        raise InputError(path, f"not a readable .nmo file (damaged or truncated?): {reason}") from None
     n = int(header["n_frames"])
     for name, trailing in TRAILING_SHAPES.items():
         if arrays[name].shape != (n,) + trailing:
