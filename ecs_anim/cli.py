@@ -77,7 +77,8 @@ def cmd_import(args: argparse.Namespace) -> int:
         if show_bar:
             _progress(k, len(sources), src.name)
     if failed:
-        print(f"{failed} of {len(sources)} file(s) failed; the others were imported", file=sys.stderr)
+        rest = "; the others were imported" if failed < len(sources) else ""
+        print(f"{failed} of {len(sources)} file(s) failed{rest}", file=sys.stderr)
         return EXIT_FAILED
     return 0
 

@@ -1,0 +1,56 @@
+"""Paper §7 on stairs: ankles land on their footprints, the pelvis only drops as needed."""
+
+import numpy as np
+
+from conftest import MOTIONS_DIR
+from ecs_anim.ground import Stairs
+from ecs_anim.ground_adapt import MAX_LEG_EXTENSION, adapt_to_ground
+from ecs_anim.importing import import_bvh
+from ecs_anim.morphology import Morphology, bone_lengths_of
+from ecs_anim.normalized import decode
+from ecs_anim.skeleton import BONE_JOINTS
+
+
+def test_feet_land_on_stairs_and_pelvis_obeys_the_min_rule():
+    walk = import_bvh(MOTIONS_DIR / "walk.bvh")
+    morph = Morphology.preset("child")
+    n = walk.n_frames
+    lengths = np.broadcast_to(morph.lengths, (n, morph.lengths.size)).copy()
+    before = decode(walk.poses, lengths)
+    ground = Stairs(rise_m=0.12, run_m=0.35, steps=6, start_m=0.5)
+    ankles = before.positions[:, [3, 7]]
+    targets = ankles.copy()
+    targets[..., 2] = ground.height(ankles[..., :2]) + morph["ankle_height_l"]
+    weights = walk.contacts().astype(float)
+    h1 = before.positions[:, 0, 2] + ground.height(before.positions[:, 0, :2])
+    adapted = adapt_to_ground(walk.poses, lengths, targets, weights, h1)
+    after = decode(adapted, lengths).positions
+    assert np.all(np.isfinite(after))
+    assert np.all(after[:, 0, 2] <= h1 + 1e-12)
+    reach = MAX_LEG_EXTENSION * (morph["thigh_l"] + morph["shank_l"])
+    hips = after[:, [1, 5]]
+    reachable = np.linalg.norm(targets - hips, axis=-1) <= reach + 1e-9
+    err = np.linalg.norm(after[:, [3, 7]] - targets, axis=-1)
+    in_contact = weights == 1.0
+    assert in_contact.any() and err[in_contact & reachable].max() < 1e-9
+    lengths_after = bone_lengths_of(after)
+    for k, (a, b) in enumerate(BONE_JOINTS):
+        if a >= 0:
+            assert np.abs(lengths_after[:, k] - morph.lengths[k]).max() < 1e-9
+
+
+def test_unreachable_target_stretches_the_leg_towards_it():
+    walk = import_bvh(MOTIONS_DIR / "idle.bvh")
+    morph = Morphology.preset("adult_male")
+    poses = walk.poses.take(slice(0, 1))
+    lengths = morph.lengths[None]
+    before = decode(poses, lengths).positions
+    target = before[:, [3, 7]].copy()
+    target[0, 0, :2] += [3.0, 0.0]  # 3 m ahead: no pelvis height reaches it
+    after = decode(adapt_to_ground(poses, lengths, target, np.ones((1, 2)),
+                                   before[:, 0, 2]), lengths).positions
+    hip, ankle = after[0, 1], after[0, 3]
+    leg = morph["thigh_l"] + morph["shank_l"]
+    assert abs(np.linalg.norm(ankle - hip) - MAX_LEG_EXTENSION * leg) < 1e-9
+    direction = (target[0, 0] - hip) / np.linalg.norm(target[0, 0] - hip)
+    assert np.dot((ankle - hip) / np.linalg.norm(ankle - hip), direction) > 1 - 1e-9
