@@ -10,9 +10,7 @@ them to metres, Z up.
 from __future__ import annotations
 
 import math
-import os
 import re
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -20,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import InputError
+from .files import atomic_output
 from .rotations import euler_to_matrix
 
 F64 = NDArray[np.float64]
@@ -417,19 +416,6 @@ def format_bvh(joints: list[BvhWriteJoint], root_positions: F64, euler_deg: F64,
 
 
 def write_text_atomic(path: str | Path, text: str, force: bool) -> None:
-    """Write ``text`` to ``path`` through a temporary file, so no half-written file is left.
-
-    Refuses to replace an existing file unless ``force``.
-    """
-    path = Path(path)
-    if path.exists() and not force:
-        raise FileExistsError(f"{path}: already exists (use --force to overwrite)")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    """Write UTF-8 ``text`` to ``path`` atomically; refuses an existing file unless ``force``."""
+    with atomic_output(path, force) as f:
+        f.write(text.encode("utf-8"))

@@ -10,8 +10,6 @@ position is exact, not a best fit.
 
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,6 +18,7 @@ from numpy.typing import NDArray
 
 from .bvh import BvhWriteJoint, format_bvh, write_text_atomic
 from .errors import EcsAnimError, InputError
+from .files import atomic_output
 from .importing import YUP_TO_ZUP, canonical_clip, source_morphology
 from .morphology import PRESET_SPECS, Morphology, load_morphology_yaml
 from .motion import NormalizedMotion
@@ -175,20 +174,9 @@ def bvh_text(pose: DecodedPose, morph: Morphology, fps: float) -> str:
 def write_npz(path: str | Path, pose: DecodedPose, motion: NormalizedMotion, force: bool) -> None:
     """Joint positions for analysis: ``positions`` (frames, joints, 3) metres world Z up,
     ``joints`` names, ``fps``, ``contacts`` (frames, 2) bool [left, right]."""
-    path = Path(path)
-    if path.exists() and not force:
-        raise FileExistsError(f"{path}: already exists (use --force to overwrite)")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        with open(tmp, "wb") as f:
-            np.savez_compressed(f, positions=pose.positions, joints=np.array(JOINTS),
-                                fps=np.float64(motion.fps), contacts=motion.contacts())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_output(path, force) as f:
+        np.savez_compressed(f, positions=pose.positions, joints=np.array(JOINTS),
+                            fps=np.float64(motion.fps), contacts=motion.contacts())
 
 
 def export_motion(motion: NormalizedMotion, morphology_spec: str, out: str | Path,

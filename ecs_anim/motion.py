@@ -8,8 +8,6 @@ never leaves a damaged file behind.
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -19,6 +17,7 @@ import numpy as np
 from .constraints import ConstraintSpec
 from .contacts import contacts_from_constraints
 from .errors import InputError
+from .files import atomic_output
 from .morphology import Morphology
 from .normalized import QUATERNION_FIELDS, TRAILING_SHAPES, NormalizedPoses
 
@@ -59,9 +58,8 @@ class NormalizedMotion:
 
 def save_nmo(motion: NormalizedMotion, path: str | Path, force: bool = False) -> None:
     """Write ``motion`` to ``path``; refuses to overwrite unless ``force``."""
-    path = Path(path)
-    if path.exists() and not force:
-        raise FileExistsError(f"{path}: already exists (use --force to overwrite)")
+    arrays = {f"poses/{k}": np.ascontiguousarray(v, dtype=np.float64)
+              for k, v in motion.poses.arrays().items()}
     header = {
         "format": FORMAT_NAME,
         "version": FORMAT_VERSION,
@@ -71,18 +69,8 @@ def save_nmo(motion: NormalizedMotion, path: str | Path, force: bool = False) ->
         "constraints": [c.to_dict() for c in motion.constraints],
         "info": motion.info,
     }
-    arrays = {f"poses/{k}": np.ascontiguousarray(v, dtype=np.float64)
-              for k, v in motion.poses.arrays().items()}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        with open(tmp, "wb") as f:
-            np.savez_compressed(f, **{HEADER_KEY: np.array(json.dumps(header))}, **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_output(path, force) as f:
+        np.savez_compressed(f, **{HEADER_KEY: np.array(json.dumps(header))}, **arrays)
 
 
 def load_nmo(path: str | Path) -> NormalizedMotion:
