@@ -20,7 +20,6 @@ import difflib
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import yaml
@@ -222,9 +221,6 @@ class JointMap:
     how: str
     names: dict[str, str | None] = field(default_factory=dict)
 
-    def describe(self) -> str:
-        return self.how
-
 
 def _resolve_preset(preset: Preset, skeleton: BvhSkeleton) -> dict[str, int | None]:
     index = {_key(n): i for i, n in enumerate(skeleton.names)}
@@ -308,8 +304,15 @@ def _by_keyword(skeleton: BvhSkeleton, side: str, words: tuple[str, ...],
     return out
 
 
-def structural_map(skeleton: BvhSkeleton) -> dict[str, int | None]:
-    """Match by structure plus a few unambiguous name cues; raises :class:`MappingError`."""
+def structural_map(skeleton: BvhSkeleton, given: dict[str, int] | None = None,
+                   partial: bool = False) -> dict[str, int | None]:
+    """Match by structure plus a few unambiguous name cues.
+
+    ``given`` joints (from a user map) are taken as decided and the rest is derived from them
+    (a given wrist finds its elbow and shoulder). Raises :class:`MappingError` naming what is
+    missing, unless ``partial`` (then the parts it could not find are None).
+    """
+    given = given or {}
     rest = rest_positions(skeleton)
     found: dict[str, int | None] = {}
     problems: list[str] = []
@@ -323,17 +326,19 @@ def structural_map(skeleton: BvhSkeleton) -> dict[str, int | None]:
         return tops[0] if len(tops) == 1 else None
 
     for side in ("l", "r"):
-        ankle = topmost(_by_keyword(skeleton, side, ("foot", "ankle")))
-        wrist = topmost(_by_keyword(skeleton, side, ("hand", "wrist")))
+        ankle = given.get(f"ankle_{side}", topmost(_by_keyword(skeleton, side, ("foot", "ankle"))))
+        wrist = given.get(f"wrist_{side}", topmost(_by_keyword(skeleton, side, ("hand", "wrist"))))
         if ankle is None:
-            problems.append(f"ankle_{side} (no single joint named like a {side}eft/right foot or ankle)")
+            problems.append(f"ankle_{side}: no single joint named like a {_SIDE_WORD[side]} foot or ankle")
         if wrist is None:
-            problems.append(f"wrist_{side} (no single joint named like a left/right hand or wrist)")
+            problems.append(f"wrist_{side}: no single joint named like a {_SIDE_WORD[side]} hand or wrist")
         found[f"ankle_{side}"], found[f"wrist_{side}"] = ankle, wrist
         for distal, mid, prox in (("ankle", "knee", "hip"), ("wrist", "elbow", "shoulder")):
             d = found[f"{distal}_{side}"]
-            m = None if d is None else _nearest_distinct_ancestor(skeleton, rest, d)
-            p = None if m is None else _nearest_distinct_ancestor(skeleton, rest, m)
+            m = given.get(f"{mid}_{side}",
+                          None if d is None else _nearest_distinct_ancestor(skeleton, rest, d))
+            p = given.get(f"{prox}_{side}",
+                          None if m is None else _nearest_distinct_ancestor(skeleton, rest, m))
             found[f"{mid}_{side}"], found[f"{prox}_{side}"] = m, p
         toe_cands = [] if ankle is None else [
             c for c in _by_keyword(skeleton, side, ("toe", "ball")) if ankle in _ancestors(skeleton, c)
@@ -342,9 +347,9 @@ def structural_map(skeleton: BvhSkeleton) -> dict[str, int | None]:
     heads = [i for i, j in enumerate(skeleton.joints)
              if not j.is_end_site and "head" in _key(j.name) and "top" not in _key(j.name)
              and _side_of(j.name) is None]
-    head = topmost(heads)
+    head = given.get("head", topmost(heads))
     if head is None:
-        problems.append("head (no single joint named like a head)")
+        problems.append("head: no single joint named like a head")
     found["head"] = head
     if found.get("hip_l") is not None and found.get("hip_r") is not None and head is not None:
         pelvis = _lca(skeleton, [found["hip_l"], found["hip_r"], head])  # type: ignore[list-item]
@@ -364,6 +369,7 @@ def structural_map(skeleton: BvhSkeleton) -> dict[str, int | None]:
             found["spine_2"] = distinct[(2 * len(distinct)) // 3] if len(distinct) >= 2 else None
             if found["spine_1"] == found["spine_2"]:
                 found["spine_2"] = None
+    found.update(given)
     # Ends: the End Site below the head and each wrist's farthest descendant, if any.
     if head is not None:
         found["head_top"] = _farthest_descendant(skeleton, rest, head)
@@ -371,7 +377,7 @@ def structural_map(skeleton: BvhSkeleton) -> dict[str, int | None]:
         wrist = found.get(f"wrist_{side}")
         found[f"hand_{side}"] = None if wrist is None else _farthest_descendant(skeleton, rest, wrist)
     missing = [j for j in REQUIRED if found.get(j) is None]
-    if missing:
+    if missing and not partial:
         raise MappingError(_missing_message(skeleton, missing, problems))
     return found
 
@@ -389,17 +395,27 @@ def _farthest_descendant(skeleton: BvhSkeleton, rest: np.ndarray, j: int) -> int
     return best
 
 
+_SIDE_WORD = {"l": "left", "r": "right"}
+_PART_WORDS = {"pelvis": "hips pelvis root", "hip": "upleg thigh hip", "knee": "leg knee shin calf",
+               "ankle": "foot ankle", "neck": "neck", "head": "head", "shoulder": "arm shoulder",
+               "elbow": "forearm elbow", "wrist": "hand wrist"}
+
+
 def _missing_message(skeleton: BvhSkeleton, missing: list[str], problems: list[str]) -> str:
     names = [j.name for j in skeleton.joints if not j.is_end_site]
     parts = []
     for m in missing:
-        probe = m.replace("_l", " left").replace("_r", " right").split()[0]
-        close = difflib.get_close_matches(probe, names, n=3, cutoff=0.3)
-        parts.append(f"{m} (closest: {', '.join(close) if close else 'none'})")
-    msg = (f"cannot find these body parts in the skeleton: {'; '.join(parts)}. "
-           f"No preset matches ({', '.join(PRESETS)}); give a map with --map FILE.yaml "
-           f"(joints: {{canonical: source_name}}). Joints in the file: {', '.join(names)}")
-    return msg
+        base, _, side = m.partition("_")
+        # Closest names: similarity to the part's usual words, the right side slightly preferred.
+        words = [base] + _PART_WORDS.get(base, "").split()
+        scored = sorted(names, key=lambda n: -(max(
+            difflib.SequenceMatcher(None, w, _key(n)).ratio() for w in words)
+            + (0.1 if side and _side_of(n) == side else 0.0)))
+        parts.append(f"{m} (closest: {', '.join(scored[:3]) if scored else 'none'})")
+    why = f" ({'; '.join(problems)})" if problems else ""
+    return (f"cannot find these body parts in the skeleton: {'; '.join(parts)}{why}. "
+            f"Give a map with --map FILE.yaml (joints: {{canonical: source_name}}) or a preset "
+            f"({', '.join(PRESETS)}). Joints in the file: {', '.join(names)}")
 
 
 # --- user maps --------------------------------------------------------------------------------
@@ -455,6 +471,15 @@ def load_user_map(path: str | Path) -> tuple[str | None, dict[str, str], dict[st
     return base, joints, lines
 
 
+def _find(skeleton: BvhSkeleton, name: str) -> int | None:
+    """Index of a joint by exact name, else by case- and namespace-insensitive name."""
+    names = skeleton.names
+    if name in names:
+        return names.index(name)
+    keys = [_key(n) for n in names]
+    return keys.index(_key(name)) if _key(name) in keys else None
+
+
 def map_skeleton(skeleton: BvhSkeleton, map_spec: str | None = None) -> JointMap:
     """Match ``skeleton`` to the canonical joints. ``map_spec``: None (detect), a preset name,
     or a path to a user YAML map. Raises :class:`MappingError` / :class:`InputError`."""
@@ -483,20 +508,15 @@ def map_skeleton(skeleton: BvhSkeleton, map_spec: str | None = None) -> JointMap
             found = _resolve_preset(detected, skeleton)
             how = f"preset {detected.name} (detected)"
         else:
-            try:
-                found = structural_map(skeleton)
-                how = "structure and names (no preset matched)"
-            except MappingError:
-                if not user:
-                    raise
-                found = {}
-                how = "user map"
+            # With a user map, a partial structural match is completed by the user's entries.
+            given = {k: _find(skeleton, v) for k, v in user.items()}
+            found = structural_map(skeleton, {k: i for k, i in given.items() if i is not None},
+                                   partial=bool(user))
+            how = "structure and names (no preset matched)"
         if user_path is not None:
             how += f" + {user_path}"
-    index = {n: i for i, n in enumerate(skeleton.names)}
-    index_ci = {_key(n): i for i, n in enumerate(skeleton.names)}
     for canonical, source_name in user.items():
-        i = index.get(source_name, index_ci.get(_key(source_name)))
+        i = _find(skeleton, source_name)
         if i is None:
             close = difflib.get_close_matches(source_name, skeleton.names, n=3)
             raise InputError(user_path, f"joints.{canonical}: no joint {source_name!r} in "
@@ -528,9 +548,3 @@ def map_skeleton(skeleton: BvhSkeleton, map_spec: str | None = None) -> JointMap
 def preset_summary() -> str:
     """One line per preset, for ``--help`` and error messages."""
     return "\n".join(f"  {p.name:18s} {p.description}" for p in PRESETS.values())
-
-
-def as_yaml(jmap: JointMap) -> str:
-    """A user map reproducing ``jmap`` (a starting point for overrides)."""
-    data: dict[str, Any] = {"joints": {k: v for k, v in jmap.names.items() if v is not None}}
-    return yaml.safe_dump(data, sort_keys=False)
