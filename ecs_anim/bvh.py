@@ -23,6 +23,10 @@ from .rotations import euler_to_matrix
 
 F64 = NDArray[np.float64]
 
+MIN_FRAME_TIME_S = 1e-4
+MAX_FRAME_TIME_S = 10.0
+MAX_DEPTH = 200  # deeper hierarchies are refused rather than overflowing the parser's recursion
+
 _ROTATION_CHANNELS = {"xrotation": "X", "yrotation": "Y", "zrotation": "Z"}
 _POSITION_CHANNELS = {"xposition": 0, "yposition": 1, "zposition": 2}
 
@@ -180,6 +184,9 @@ def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
     if not (math.isfinite(frame_time) and frame_time > 0):
         raise InputError(path, f"Frame Time must be a positive number of seconds, found {tokens[2]}",
                          line)
+    if not MIN_FRAME_TIME_S <= frame_time <= MAX_FRAME_TIME_S:
+        raise InputError(path, f"Frame Time {tokens[2]} s is outside {MIN_FRAME_TIME_S:g}.."
+                               f"{MAX_FRAME_TIME_S:g} s (0.1 Hz to 10 kHz)", line)
     if n_frames == 0:
         raise InputError(path, "the MOTION section has no frames (Frames: 0)", frames_line)
 
@@ -239,6 +246,13 @@ def _parse_joint(reader: _Lines, joints: list[BvhJoint], name: str, parent: int,
         raise InputError(path, f"expected 'OFFSET x y z' in {name!r}, found {tokens[0]!r}", off_line)
     offset = _floats(tokens[1:], 3, path, off_line, f"OFFSET of {name!r}")
     index = len(joints)
+    depth = 0
+    p = parent
+    while p >= 0:
+        depth, p = depth + 1, joints[p].parent
+    if depth > MAX_DEPTH:
+        raise InputError(path, f"hierarchy nested more than {MAX_DEPTH} joints deep at {name!r}",
+                         line)
     joint = BvhJoint(name=name, parent=parent, offset=offset, is_end_site=is_end, line=line)
     joints.append(joint)
     if is_end:

@@ -18,7 +18,24 @@ from .joint_map import preset_summary
 from .morphology import PRESET_SPECS
 
 EXIT_FAILED = 1
-EXIT_USAGE = 2
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (value > 0 and value < float("inf")):
+        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text}")
+    return value
+
+
+def positive_int(text: str) -> int:
+    """argparse type: a whole number >= 1."""
+    if not text.isascii() or not text.isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
+    return int(text)
 
 
 def _progress(done: int, total: int, label: str) -> None:
@@ -126,8 +143,9 @@ def cmd_info(args: argparse.Namespace) -> int:
           f"leg (thigh+shank) {0.5 * (m['lengths_m']['thigh_l'] + m['lengths_m']['shank_l'] + m['lengths_m']['thigh_r'] + m['lengths_m']['shank_r']):.3f} m")
     print(f"  contacts   left {c['left_fraction']:.0%} right {c['right_fraction']:.0%} of frames, "
           f"{len(c['constraints'])} contact intervals")
-    if info.get("filled_in"):
-        print(f"  filled in  {', '.join(info['filled_in'])}")
+    filled = info.get("filled_in")
+    if filled:
+        print(f"  filled in  {', '.join(map(str, filled)) if isinstance(filled, list) else filled}")
     return 0
 
 
@@ -159,6 +177,12 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from .importing import canonical_clip, normalize_clip
 
     files = [Path(f) for f in args.files] or default_bench_files()
+    if not files:
+        raise EcsAnimError("bench import: no clips found (give BVH files, or run from the "
+                           "repository next to ../shared/mocap)")
+    missing = [str(f) for f in files if not f.is_file()]
+    if missing:
+        raise EcsAnimError(f"bench import: no such file: {', '.join(missing)}")
     biggest = max(files, key=lambda p: p.stat().st_size)
     timings = {"parse": [], "fk": [], "map_encode": []}
     n_frames = 0
@@ -211,11 +235,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--unit", choices=["m", "cm", "mm", "inch", "cmu"],
                    help="length unit of the file (default: detected from the proportions)")
     p.add_argument("--constraints", metavar="FILE.yaml", help=argparse.SUPPRESS)
-    p.add_argument("--contact-height", type=float, default=ContactThresholds.height_m,
+    p.add_argument("--contact-height", type=positive_float, default=ContactThresholds.height_m,
                    metavar="M", help="foot-contact height threshold, m (default %(default)s)")
-    p.add_argument("--contact-speed", type=float, default=ContactThresholds.speed_mps,
+    p.add_argument("--contact-speed", type=positive_float, default=ContactThresholds.speed_mps,
                    metavar="M/S", help="foot-contact speed threshold, m/s (default %(default)s)")
-    p.add_argument("--contact-min-duration", type=float, default=ContactThresholds.min_duration_s,
+    p.add_argument("--contact-min-duration", type=positive_float, default=ContactThresholds.min_duration_s,
                    metavar="S", help="shortest contact kept, s (default %(default)s)")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
     p.set_defaults(func=cmd_import)
@@ -238,7 +262,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("what", choices=["import"], help="what to measure")
     p.add_argument("files", nargs="*", help="clips (default: ../shared/mocap, else the shipped "
                    "motions); the largest is measured")
-    p.add_argument("--repeat", type=int, default=3)
+    p.add_argument("--repeat", type=positive_int, default=3, help="runs; the best is kept")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_bench)
     return parser

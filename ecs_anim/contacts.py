@@ -38,6 +38,14 @@ class ContactThresholds:
     min_gap_s: float = 0.06
     ease_s: float = 0.05
 
+    def __post_init__(self) -> None:
+        for name in ("height_m", "speed_mps", "min_duration_s", "min_gap_s", "ease_s"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"contact threshold {name} must be a finite number >= 0, got {value}")
+        if not (np.isfinite(self.release) and self.release >= 1):
+            raise ValueError(f"contact threshold release must be >= 1, got {self.release}")
+
 
 def _box_filter(x: F64, width: int) -> F64:
     """Centred moving average along axis 0 (edges use the available samples)."""

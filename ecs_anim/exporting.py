@@ -47,8 +47,13 @@ def resolve_morphology(spec: str, motion: NormalizedMotion) -> tuple[Morphology,
             raise InputError(path, "no such morphology file")
         return load_morphology_yaml(path), False
     if path.suffix.lower() == ".bvh":
-        clip = canonical_clip(read_bvh(path))
-        return source_morphology(clip.positions, path.stem), False
+        try:
+            clip = canonical_clip(read_bvh(path))
+            return source_morphology(clip.positions, path.stem), False
+        except InputError:
+            raise
+        except (EcsAnimError, ValueError) as exc:  # unmappable, unknown unit, zero-length bone
+            raise InputError(path, f"cannot take a morphology from this skeleton: {exc}") from None
     import difflib
     close = difflib.get_close_matches(spec, list(PRESET_SPECS) + ["source"], n=1)
     hint = f" (did you mean {close[0]!r}?)" if close else ""

@@ -15,7 +15,7 @@ centres placed as our canonical skeleton defines them (see :func:`Morphology.fro
 from __future__ import annotations
 
 import difflib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -117,7 +117,6 @@ class Morphology:
     mass_kg: float = 70.0
     sex: str = "male"
     name: str = "custom"
-    extra: dict[str, Any] = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
         lengths = np.asarray(self.lengths, dtype=np.float64)
@@ -276,7 +275,11 @@ def load_morphology_yaml(path: str | Path) -> Morphology:
             raise InputError(path, f"{key}: unknown key{hint}; expected one of "
                                    f"{', '.join(sorted(allowed))}", line)
         lines[key] = line
-        top[key] = yaml.safe_load(yaml.serialize(v_node))
+        try:
+            top[key] = yaml.safe_load(yaml.serialize(v_node))
+        except yaml.YAMLError as exc:  # e.g. a !!python tag: not plain data
+            raise InputError(path, f"{key}: not plain YAML data ({getattr(exc, 'problem', exc)})",
+                             line) from None
         if key == "lengths_m":
             if not isinstance(v_node, yaml.MappingNode):
                 raise InputError(path, "lengths_m: expected a mapping segment: metres", line)
@@ -290,12 +293,16 @@ def load_morphology_yaml(path: str | Path) -> Morphology:
                                    f"{value!r}", lines[key.split('.')[0] if key not in lines else key])
         return float(value)
 
+    proportions = str(top.get("proportions", "adult"))
+    if proportions not in ("adult", "child"):
+        raise InputError(path, f"proportions: expected 'adult' or 'child', found {proportions!r}",
+                         lines["proportions"])
     sex = str(top.get("sex", "male"))
     if sex not in DE_LEVA_1996:
         raise InputError(path, f"sex: expected 'male' or 'female', found {sex!r}", lines["sex"])
     stature = number("stature_m", 0.3, 3.0) if "stature_m" in top else 1.75
     base = Morphology.from_stature(
-        stature, sex=sex, proportions=str(top.get("proportions", "adult")),
+        stature, sex=sex, proportions=proportions,
         leg_scale=number("leg_scale", 0.5, 1.5) if "leg_scale" in top else 1.0,
         mass_kg=number("mass_kg", 5.0, 400.0) if "mass_kg" in top else None,
         name=str(top.get("name", Path(path).stem)))
@@ -314,4 +321,8 @@ def load_morphology_yaml(path: str | Path) -> Morphology:
                                    f"found {value!r}", lines[key])
         for n in names:
             lengths[LENGTH_INDEX[n]] = float(value)
-    return base.with_lengths(lengths)
+    body = base.with_lengths(lengths)
+    if not 0.3 <= body.stature <= 3.0:
+        raise InputError(path, f"these lengths make a body {body.stature:.2f} m tall; expected "
+                               "0.3 to 3 m", lines.get("lengths_m", 1))
+    return body

@@ -19,7 +19,7 @@ from .contacts import contacts_from_constraints
 from .errors import InputError
 from .files import atomic_output
 from .morphology import Morphology
-from .normalized import QUATERNION_FIELDS, TRAILING_SHAPES, NormalizedPoses
+from .normalized import DIRECTION_FIELDS, QUATERNION_FIELDS, TRAILING_SHAPES, NormalizedPoses
 
 FORMAT_NAME = "ecs_anim.nmo"
 FORMAT_VERSION = 1
@@ -105,9 +105,10 @@ def load_nmo(path: str | Path) -> NormalizedMotion:
                                    f"expected {(n,) + trailing}")
         if not np.all(np.isfinite(arrays[name])):
             raise InputError(path, f"damaged .nmo file: {name} holds non-finite values")
-    for name in QUATERNION_FIELDS:
+    for name in QUATERNION_FIELDS + DIRECTION_FIELDS:
         if np.any(np.abs(np.linalg.norm(arrays[name], axis=-1) - 1.0) > 1e-6):
-            raise InputError(path, f"damaged .nmo file: {name} holds non-unit quaternions")
+            what = "quaternions" if name in QUATERNION_FIELDS else "directions"
+            raise InputError(path, f"damaged .nmo file: {name} holds non-unit {what}")
     try:
         morph = Morphology.from_dict(header["source_morphology"])
         constraints = [ConstraintSpec.from_dict(c) for c in header.get("constraints", [])]
@@ -129,5 +130,8 @@ def _check_header(path: str, header: Any) -> None:
         if key not in header:
             raise InputError(path, f"damaged .nmo header: {key!r} is missing")
     fps, n = header["fps"], header["n_frames"]
-    if not (isinstance(fps, (int, float)) and fps > 0 and isinstance(n, int) and n > 0):
+    if isinstance(fps, bool) or not isinstance(fps, (int, float)) or not 0.1 <= fps <= 10000 \
+            or isinstance(n, bool) or not isinstance(n, int) or n <= 0:
         raise InputError(path, f"damaged .nmo header: fps={fps!r}, n_frames={n!r}")
+    if not isinstance(header.get("info", {}), dict) or not isinstance(header.get("constraints", []), list):
+        raise InputError(path, "damaged .nmo header: 'info' must be an object and 'constraints' a list")
