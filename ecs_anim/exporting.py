@@ -23,8 +23,8 @@ from .importing import YUP_TO_ZUP, canonical_clip, source_morphology
 from .morphology import PRESET_SPECS, Morphology, load_morphology_yaml
 from .motion import NormalizedMotion
 from .normalized import DecodedPose, decode
-from .rotations import frame_from_axes, matrix_to_euler, normalize, rotation_between
-from .skeleton import JOINT_INDEX as J, JOINTS
+from .rotations import frame_from_axes, matrix_to_euler, rotation_between
+from .skeleton import JOINT_INDEX as J, JOINTS, REST_HIP_DIR_LEFT
 from .bvh import read_bvh
 
 F64 = NDArray[np.float64]
@@ -66,51 +66,65 @@ def play_on(motion: NormalizedMotion, morph: Morphology, is_source: bool) -> Dec
     return decode(motion.poses, morph.lengths, use_stretch=is_source)
 
 
+Vec3 = tuple[float, float, float]
+
+
 @dataclass(frozen=True)
 class _ExportJoint:
+    """A joint of the exported hierarchy; offsets are (length name or "", rest direction in
+    body axes, scale)."""
+
     name: str
     parent: str | None
-    rest_offset: tuple[str, int, float]  # (length name or "", body axis, sign)
-    end_site: tuple[str, int, float] | None = None
+    rest_offset: tuple[str, Vec3, float]
+    end_site: tuple[str, Vec3, float] | None = None
 
 
 def _side(s: str) -> float:
     return 1.0 if s == "l" else -1.0
 
 
+def _axis(axis: int, sign: float = 1.0) -> Vec3:
+    v = [0.0, 0.0, 0.0]
+    v[axis] = sign
+    return (v[0], v[1], v[2])
+
+
+def _rest_hip(s: str) -> Vec3:
+    x, y, z = REST_HIP_DIR_LEFT
+    return (x, _side(s) * y, z)
+
+
 EXPORT_JOINTS: tuple[_ExportJoint, ...] = (
-    _ExportJoint("pelvis", None, ("", 2, 0.0)),
+    _ExportJoint("pelvis", None, ("", _axis(2), 0.0)),
     *[j for s in "lr" for j in (
-        _ExportJoint(f"pelvis_{s}", "pelvis", ("", 1, 0.0)),
-        _ExportJoint(f"hip_{s}", f"pelvis_{s}", (f"pelvis_{s}", 1, _side(s))),
-        _ExportJoint(f"knee_{s}", f"hip_{s}", (f"thigh_{s}", 2, -1.0)),
-        _ExportJoint(f"ankle_{s}", f"knee_{s}", (f"shank_{s}", 2, -1.0)),
-        _ExportJoint(f"toe_{s}", f"ankle_{s}", (f"foot_{s}", 0, 1.0),
-                     end_site=(f"foot_{s}", 0, TOE_TIP_FRACTION)),
+        _ExportJoint(f"pelvis_{s}", "pelvis", ("", _axis(2), 0.0)),
+        _ExportJoint(f"hip_{s}", f"pelvis_{s}", (f"pelvis_{s}", _rest_hip(s), 1.0)),
+        _ExportJoint(f"knee_{s}", f"hip_{s}", (f"thigh_{s}", _axis(2, -1.0), 1.0)),
+        _ExportJoint(f"ankle_{s}", f"knee_{s}", (f"shank_{s}", _axis(2, -1.0), 1.0)),
+        _ExportJoint(f"toe_{s}", f"ankle_{s}", (f"foot_{s}", _axis(0), 1.0),
+                     end_site=(f"foot_{s}", _axis(0), TOE_TIP_FRACTION)),
     )],
-    _ExportJoint("lumbar", "pelvis", ("", 2, 0.0)),
-    _ExportJoint("spine_1", "lumbar", ("spine_lower", 2, 1.0)),
-    _ExportJoint("spine_2", "spine_1", ("spine_middle", 2, 1.0)),
-    _ExportJoint("neck", "spine_2", ("spine_upper", 2, 1.0)),
-    _ExportJoint("cervical", "neck", ("", 2, 0.0)),
-    _ExportJoint("head", "cervical", ("neck", 2, 1.0), end_site=("head", 2, 1.0)),
+    _ExportJoint("lumbar", "pelvis", ("", _axis(2), 0.0)),
+    _ExportJoint("spine_1", "lumbar", ("spine_lower", _axis(2), 1.0)),
+    _ExportJoint("spine_2", "spine_1", ("spine_middle", _axis(2), 1.0)),
+    _ExportJoint("neck", "spine_2", ("spine_upper", _axis(2), 1.0)),
+    _ExportJoint("cervical", "neck", ("", _axis(2), 0.0)),
+    _ExportJoint("head", "cervical", ("neck", _axis(2), 1.0), end_site=("head", _axis(2), 1.0)),
     *[j for s in "lr" for j in (
-        _ExportJoint(f"clavicle_{s}", "neck", ("", 1, 0.0)),
-        _ExportJoint(f"shoulder_{s}", f"clavicle_{s}", (f"clavicle_{s}", 1, _side(s))),
-        _ExportJoint(f"elbow_{s}", f"shoulder_{s}", (f"upper_arm_{s}", 1, _side(s))),
-        _ExportJoint(f"wrist_{s}", f"elbow_{s}", (f"forearm_{s}", 1, _side(s)),
-                     end_site=(f"hand_{s}", 1, _side(s))),
+        _ExportJoint(f"clavicle_{s}", "neck", ("", _axis(1), 0.0)),
+        _ExportJoint(f"shoulder_{s}", f"clavicle_{s}", (f"clavicle_{s}", _axis(1, _side(s)), 1.0)),
+        _ExportJoint(f"elbow_{s}", f"shoulder_{s}", (f"upper_arm_{s}", _axis(1, _side(s)), 1.0)),
+        _ExportJoint(f"wrist_{s}", f"elbow_{s}", (f"forearm_{s}", _axis(1, _side(s)), 1.0),
+                     end_site=(f"hand_{s}", _axis(1, _side(s)), 1.0)),
     )],
 )
 EXPORT_NAMES = tuple(j.name for j in EXPORT_JOINTS)
 
 
-def _offset(spec: tuple[str, int, float], morph: Morphology) -> F64:
-    name, axis, sign = spec
-    v = np.zeros(3)
-    if name:
-        v[axis] = sign * morph[name]
-    return v
+def _offset(spec: tuple[str, Vec3, float], morph: Morphology) -> F64:
+    name, direction, scale = spec
+    return np.array(direction) * (scale * morph[name] if name else 0.0)
 
 
 def _swing_from(parent_frame: F64, rest_axis: F64, direction: F64) -> F64:
@@ -130,7 +144,8 @@ def export_rotations(pose: DecodedPose) -> dict[str, F64]:
         sign = _side(s)
         leg_normal = pose.leg2world[..., k, :, 0]  # half-plane normal = knee hinge axis
         hip, knee, ankle, toe = (p[..., J[f"{n}_{s}"], :] for n in ("hip", "knee", "ankle", "toe"))
-        R[f"pelvis_{s}"] = _swing_from(pose.pelvis2world, sign * e[1], hip - p[..., J["pelvis"], :])
+        R[f"pelvis_{s}"] = _swing_from(pose.pelvis2world, np.array(_rest_hip(s)),
+                                       hip - p[..., J["pelvis"], :])
         R[f"hip_{s}"] = frame_from_axes(hip - knee, leg_normal, 2, 1)
         R[f"knee_{s}"] = frame_from_axes(knee - ankle, leg_normal, 2, 1)
         R[f"ankle_{s}"] = frame_from_axes(toe - ankle, leg_normal, 0, 1,
@@ -203,6 +218,3 @@ def export_motion(motion: NormalizedMotion, morphology_spec: str, out: str | Pat
         write_npz(out, pose, motion, force)
     return morph, pose
 
-
-__all__ = ["export_motion", "bvh_text", "resolve_morphology", "play_on", "write_npz",
-           "EXPORT_NAMES", "normalize"]

@@ -28,7 +28,7 @@ from .normalized import (
     two_bone_middle,
 )
 from .rotations import normalize, rot_axis
-from .skeleton import JOINT_INDEX as J, N_JOINTS
+from .skeleton import JOINT_INDEX as J, N_JOINTS, REST_HIP_DIR_LEFT
 
 F64 = NDArray[np.float64]
 
@@ -58,7 +58,7 @@ def _body(morph: Morphology, pelvis: F64, pelvis2world: F64, ankles: F64, toes: 
     out[:, J["pelvis"]] = pelvis
     for k, s in enumerate("lr"):
         sign = 1.0 if s == "l" else -1.0
-        hip_dir = normalize(np.array([0.0, 0.87 * sign, -0.5]))
+        hip_dir = np.array(REST_HIP_DIR_LEFT) * [1.0, sign, 1.0]
         hip = pelvis + (pelvis2world @ hip_dir) * m[f"pelvis_{s}"]
         thigh, shank = m[f"thigh_{s}"], m[f"shank_{s}"]
         leg = limb_frames(hip, hip + pelvis2world[:, :, 0], ankles[:, k], pelvis2world[:, :, 0])
@@ -102,7 +102,7 @@ def _lower_pelvis_to_reach(pelvis: F64, pelvis2world: F64, ankles: F64, morph: M
     heights = [pelvis[:, 2]]
     for k, s in enumerate("lr"):
         sign = 1.0 if s == "l" else -1.0
-        hip_offset = (pelvis2world @ normalize(np.array([0.0, 0.87 * sign, -0.5]))) * morph[f"pelvis_{s}"]
+        hip_offset = (pelvis2world @ (np.array(REST_HIP_DIR_LEFT) * [1.0, sign, 1.0])) * morph[f"pelvis_{s}"]
         reach = max_extension * (morph[f"thigh_{s}"] + morph[f"shank_{s}"])
         horiz = pelvis[:, :2] + hip_offset[:, :2] - ankles[:, k, :2]
         dz = np.sqrt(np.maximum(reach**2 - np.sum(horiz**2, axis=-1), 0.0))

@@ -24,7 +24,7 @@ import yaml
 from numpy.typing import NDArray
 
 from .errors import InputError
-from .skeleton import BONE_JOINTS, JOINT_INDEX, LENGTH_INDEX, LENGTHS, N_LENGTHS
+from .skeleton import BONE_JOINTS, JOINT_INDEX, LENGTH_INDEX, LENGTHS, N_LENGTHS, REST_HIP_DIR_LEFT
 
 F64 = NDArray[np.float64]
 
@@ -32,8 +32,10 @@ F64 = NDArray[np.float64]
 #: Segments are de Leva's; :data:`MASS_SEGMENTS` says which canonical joints bound each one.
 DE_LEVA_1996: dict[str, dict[str, tuple[float, float]]] = {
     "male": {
-        "head_neck": (0.0694, 0.5002),  # from C7 (our neck base) towards the vertex: 1-0.4998
-        "trunk": (0.4346, 0.5514),  # from hip-joint centres midpoint (our pelvis) to C7: 1-0.4486
+        # Head (vertex-C7 row) and trunk (C7-hip midpoint row) are given from C7 in the table;
+        # ours run from the neck base (C7) and from the pelvis (hip midpoint): hence 1 - value.
+        "head_neck": (0.0694, 1 - 0.5002),
+        "trunk": (0.4346, 1 - 0.5138),
         "upper_arm": (0.0271, 0.5772),
         "forearm": (0.0162, 0.4574),
         "hand": (0.0061, 0.7900),
@@ -42,8 +44,8 @@ DE_LEVA_1996: dict[str, dict[str, tuple[float, float]]] = {
         "foot": (0.0137, 0.4415),
     },
     "female": {
-        "head_neck": (0.0668, 0.4841),
-        "trunk": (0.4257, 0.5849),
+        "head_neck": (0.0668, 1 - 0.4841),
+        "trunk": (0.4257, 1 - 0.4964),
         "upper_arm": (0.0255, 0.5754),
         "forearm": (0.0138, 0.4559),
         "hand": (0.0056, 0.7474),
@@ -145,7 +147,8 @@ class Morphology:
         m = self
         side = 0.5 * (m["ankle_height_l"] + m["ankle_height_r"] + m["shank_l"] + m["shank_r"]
                       + m["thigh_l"] + m["thigh_r"])
-        hip_drop = 0.25 * (m["pelvis_l"] + m["pelvis_r"])  # pelvis origin sits above the hips
+        # The pelvis origin sits above the hips by the rest hip direction's drop.
+        hip_drop = -REST_HIP_DIR_LEFT[2] * 0.5 * (m["pelvis_l"] + m["pelvis_r"])
         return side + hip_drop + m["spine_lower"] + m["spine_middle"] + m["spine_upper"] \
             + m["neck"] + m["head"]
 

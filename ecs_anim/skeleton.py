@@ -79,6 +79,11 @@ BONE_JOINTS: Final[tuple[tuple[int, int], ...]] = tuple(
 
 SIDES: Final[tuple[str, str]] = ("l", "r")
 
+#: Pelvis origin -> left hip joint in the pelvis frame at rest: 30 degrees below the side axis,
+#: so the hips sit half a pelvis length below the pelvis origin (mirror y for the right hip).
+#: Used by the rest pose of exported BVH, by authored motions and by ``Morphology.stature``.
+REST_HIP_DIR_LEFT: Final[tuple[float, float, float]] = (0.0, 0.8660254037844386, -0.5)
+
 
 def joint(name: str) -> int:
     """Index of a canonical joint, with a clear error for an unknown name."""

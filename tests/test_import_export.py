@@ -138,6 +138,11 @@ def test_exported_bvh_reads_back_and_has_the_morphology_lengths(tmp_path, preset
     assert offsets["ankle_r"] == pytest.approx(morph["shank_r"], abs=1e-6)
     assert offsets["elbow_l"] == pytest.approx(morph["upper_arm_l"], abs=1e-6)
     assert offsets["wrist_l.end"] == pytest.approx(morph["hand_l"], abs=1e-6)
+    # Its T-pose stands exactly the morphology's stature tall (sole to vertex, Y up).
+    from ecs_anim.bvh import rest_positions
+    rest = rest_positions(skeleton)
+    tpose_height = rest[skeleton.names.index("head.end"), 1] - rest[skeleton.names.index("ankle_l"), 1]
+    assert tpose_height + morph["ankle_height_l"] == pytest.approx(stature, abs=1e-6)
     # The exported file stands upright in its own Y-up axes: head above the pelvis.
     _, ref = reference_positions(bvh)
     names = skeleton.names
