@@ -58,9 +58,6 @@ class BvhSkeleton:
     def names(self) -> list[str]:
         return [j.name for j in self.joints]
 
-    def index(self, name: str) -> int:
-        return self.names.index(name)
-
     def children(self, index: int) -> list[int]:
         return [i for i, j in enumerate(self.joints) if j.parent == index]
 

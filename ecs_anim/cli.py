@@ -57,6 +57,8 @@ def cmd_import(args: argparse.Namespace) -> int:
         height_m=args.contact_height, speed_mps=args.contact_speed,
         min_duration_s=args.contact_min_duration,
     )
+    if args.constraints:
+        raise EcsAnimError("--constraints is not supported yet (the solver issue adds it)")
     sources = [Path(s) for s in args.sources]
     failed = 0
     show_bar = len(sources) > 1 and sys.stderr.isatty()
@@ -72,14 +74,13 @@ def cmd_import(args: argparse.Namespace) -> int:
                 raise EcsAnimError(f"{target}: already exists (use --force to overwrite)")
             if src.suffix.lower() != ".bvh":
                 raise EcsAnimError(f"{src}: unsupported file type {src.suffix!r} (expected .bvh)")
-            motion = import_bvh(src, args.map, args.unit, thresholds)
-            if args.constraints:
-                raise EcsAnimError("--constraints is not supported yet (the solver issue adds it)")
+            motion = import_bvh(src, args.map, args.unit, thresholds, args.up)
             save_nmo(motion, target, force=args.force)
             contacts = motion.contacts()
             message = (f"{src} -> {target}: {motion.n_frames} frames at {motion.fps:g} fps, "
-                       f"{motion.info['joint_map']}, unit {motion.info['unit']} "
-                       f"({motion.info['unit_reason']}), contacts L {contacts[:, 0].mean():.0%} "
+                       f"{motion.info['joint_map']}, {motion.info['up_axis'].upper()} up, unit "
+                       f"{motion.info['unit']} ({motion.info['unit_reason']}), "
+                       f"contacts L {contacts[:, 0].mean():.0%} "
                        f"R {contacts[:, 1].mean():.0%}")
             if motion.info["filled_in"]:
                 message += f", filled in: {', '.join(motion.info['filled_in'])}"
@@ -234,6 +235,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "(default: detect)")
     p.add_argument("--unit", choices=["m", "cm", "mm", "inch", "cmu"],
                    help="length unit of the file (default: detected from the proportions)")
+    p.add_argument("--up", choices=["y", "z"], default="y",
+                   help="the file's up axis (default y, the BVH convention)")
     p.add_argument("--constraints", metavar="FILE.yaml", help=argparse.SUPPRESS)
     p.add_argument("--contact-height", type=positive_float, default=ContactThresholds.height_m,
                    metavar="M", help="foot-contact height threshold, m (default %(default)s)")

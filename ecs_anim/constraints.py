@@ -75,6 +75,11 @@ class ConstraintSpec:
     offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     params: dict[str, Any] = field(default_factory=dict)
 
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ValueError(f"constraint {self.name!r}: unknown kind {self.kind!r}; kinds: "
+                             f"{', '.join(KINDS)}")
+
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d["chain"] = list(self.chain)

@@ -209,7 +209,9 @@ def export_motion(motion: NormalizedMotion, morphology_spec: str, out: str | Pat
     if out.exists() and not force:
         raise FileExistsError(f"{out}: already exists (use --force to overwrite)")
     morph, is_source = resolve_morphology(morphology_spec, motion)
-    pose = play_on(motion, morph, is_source)
+    # BVH bones are rigid, so a BVH gets the rigid body even on the source morphology; the .npz
+    # on the source carries the measured stretch and reproduces the source exactly.
+    pose = play_on(motion, morph, is_source and suffix == ".npz")
     if not np.all(np.isfinite(pose.positions)):
         raise EcsAnimError(f"{out}: the decoded motion holds non-finite positions (bug); nothing written")
     if suffix == ".bvh":

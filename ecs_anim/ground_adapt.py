@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .morphology import leg_length
-from .normalized import SIDE_LENGTHS, NormalizedPoses, decode
+from .normalized import SIDE_JOINTS, SIDE_LENGTHS, NormalizedPoses, decode
 from .rotations import quat_from_matrix, rotation_between
 
 F64 = NDArray[np.float64]
@@ -25,18 +25,18 @@ F64 = NDArray[np.float64]
 MAX_LEG_EXTENSION = 0.995
 
 
-def pelvis_height_for_reach(hips: F64, pelvis_z: F64, ankle_targets: F64, reach: F64) -> F64:
-    """Highest pelvis height at which a hip can still reach its ankle target.
+def vertical_slack_for_reach(hips: F64, ankle_targets: F64, reach: F64) -> F64:
+    """How far each hip may move vertically and still reach its ankle target.
 
-    ``hips`` (n, 2, 3) hip positions for the current pelvis height ``pelvis_z`` (n,);
-    ``ankle_targets`` (n, 2, 3); ``reach`` (n, 2) metres. Returns (n, 2): for each leg, the pelvis
-    height putting the hip exactly ``reach`` above-and-beside its target (or straight above it
-    when the target is horizontally out of reach).
+    ``hips`` (n, 2, 3) and ``ankle_targets`` (n, 2, 3) in metres, ``reach`` (n, 2) the longest
+    allowed hip-ankle distance. Returns (n, 2) metres: negative where the hip must come down by
+    that much; a target horizontally out of reach asks for the hip straight above it at ``0``
+    vertical distance (the leg then stretches towards it). The pelvis moves vertically with the
+    hips, so this is also how much the pelvis may move (paper §7's ``h2``, ``h3`` minus ``h1``).
     """
     horizontal = np.linalg.norm(hips[..., :2] - ankle_targets[..., :2], axis=-1)
     vertical = np.sqrt(np.maximum(reach**2 - horizontal**2, 0.0))
-    hip_below_pelvis = pelvis_z[:, None] - hips[..., 2]
-    return ankle_targets[..., 2] + vertical + hip_below_pelvis
+    return ankle_targets[..., 2] + vertical - hips[..., 2]
 
 
 def adapt_to_ground(poses: NormalizedPoses, lengths: F64, ankle_targets: F64,
@@ -55,19 +55,24 @@ def adapt_to_ground(poses: NormalizedPoses, lengths: F64, ankle_targets: F64,
     """
     decoded = decode(poses, lengths)
     p = decoded.positions
-    hips = p[:, [1, 5]]
-    ankles = p[:, [3, 7]]
-    w = np.clip(weights, 0.0, 1.0)[..., None]
-    targets = ankles + w * (ankle_targets - ankles)
-    # Move the pelvis to the wanted height first, then lower it where a leg cannot reach.
-    dz = root_height - p[:, 0, 2]
-    hips_at_h1 = hips + np.stack([np.zeros_like(dz), np.zeros_like(dz), dz], -1)[:, None, :]
+    hips = p[:, list(SIDE_JOINTS["hip"])]
+    ankles = p[:, list(SIDE_JOINTS["ankle"])]
+    w = np.clip(weights, 0.0, 1.0)
     thigh, shank = lengths[:, SIDE_LENGTHS["thigh"]], lengths[:, SIDE_LENGTHS["shank"]]
     reach = MAX_LEG_EXTENSION * (thigh + shank)
-    limits = pelvis_height_for_reach(hips_at_h1, root_height, targets, reach)
-    pelvis_z = np.min(np.concatenate([root_height[:, None], limits], axis=1), axis=1)
-    new_hips = hips_at_h1.copy()
-    new_hips[..., 2] += (pelvis_z - root_height)[:, None]
+    # Put the pelvis at h1 first; a leg lowers it in proportion to its contact weight.
+    up = np.zeros_like(p[:, 0])
+    up[:, 2] = root_height - p[:, 0, 2]
+    # How much each leg needs the hips (hence the pelvis) lowered from h1 (negative = down).
+    needed = vertical_slack_for_reach(hips + up[:, None], ankle_targets, reach)
+    lowering = np.min(w * np.minimum(needed, 0.0), axis=1)
+    pelvis_z = root_height + lowering
+    shift = np.zeros_like(up)
+    shift[:, 2] = pelvis_z - p[:, 0, 2]
+    new_hips = hips + shift[:, None]
+    # A free leg moves with the pelvis; a weighted one goes (that much) to its footprint.
+    moved_ankles = ankles + shift[:, None]
+    targets = moved_ankles + w[..., None] * (ankle_targets - moved_ankles)
     # Re-aim each leg: turn its half-plane frame so z points at the target, set the fraction.
     pelvis2world = decoded.pelvis2world
     old_leg2world = decoded.leg2world
@@ -75,7 +80,8 @@ def adapt_to_ground(poses: NormalizedPoses, lengths: F64, ankle_targets: F64,
     turn = rotation_between(old_leg2world[..., :, 2], to_target)
     new_leg2world = turn @ old_leg2world
     new_leg2pelvis = np.swapaxes(pelvis2world, -1, -2)[:, None] @ new_leg2world
-    distance = np.minimum(np.linalg.norm(to_target, axis=-1), reach)
+    longest = np.where(w > 0.0, reach, thigh + shank)  # free legs keep the motion's own length
+    distance = np.minimum(np.linalg.norm(to_target, axis=-1), longest)
     root_position = poses.root_position.copy()
     root_position[:, 2] = pelvis_z / leg_length(lengths)
     return replace(poses, root_position=root_position,
@@ -83,4 +89,4 @@ def adapt_to_ground(poses: NormalizedPoses, lengths: F64, ankle_targets: F64,
                    leg_fraction=distance / (thigh + shank))
 
 
-__all__ = ["adapt_to_ground", "pelvis_height_for_reach"]
+__all__ = ["adapt_to_ground", "vertical_slack_for_reach"]

@@ -69,12 +69,15 @@ class CanonicalClip:
     unit: str
     unit_reason: str
     joint_map: JointMap
+    up_axis: str = "y"
 
 
 def detect_unit(leg_in_file_units: float) -> tuple[str, str]:
     """Pick the unit that gives a human leg (thigh + shank) closest to 0.8 m.
 
-    Returns (unit name, a sentence saying why). Raises :class:`EcsAnimError` if no unit fits.
+    Returns (unit name, a sentence saying why, naming a close runner-up so a child in
+    centimetres read as an adult in inches is caught). Raises :class:`EcsAnimError` if no unit
+    fits.
     """
     if not (math.isfinite(leg_in_file_units) and leg_in_file_units > 0):
         raise EcsAnimError("cannot tell the length unit: the legs have zero length in the rest pose")
@@ -87,8 +90,13 @@ def detect_unit(leg_in_file_units: float) -> tuple[str, str]:
         raise EcsAnimError(
             f"cannot tell the length unit: thigh + shank is {leg_in_file_units:g} file units, "
             f"which is no human leg in {', '.join(UNITS)}; give --unit")
-    _, name, leg_m = min(scored)
-    return name, f"thigh + shank = {leg_in_file_units:.4g} units = {leg_m:.3f} m in {name}"
+    scored.sort()
+    _, name, leg_m = scored[0]
+    reason = f"thigh + shank = {leg_in_file_units:.4g} units = {leg_m:.3f} m in {name}"
+    if len(scored) > 1 and scored[1][0] - scored[0][0] < 0.5:
+        _, other, other_m = scored[1]
+        reason += f"; {other} ({other_m:.3f} m) is also plausible: give --unit {other} if so"
+    return name, reason
 
 
 def _leg_rest_length(skeleton: BvhSkeleton, jmap: JointMap) -> float:
@@ -100,9 +108,17 @@ def _leg_rest_length(skeleton: BvhSkeleton, jmap: JointMap) -> float:
     return 0.5 * total
 
 
+UP_AXES = {"y": YUP_TO_ZUP, "z": np.eye(3)}
+
+
 def canonical_clip(motion: BvhMotion, map_spec: str | None = None,
-                   unit: str | None = None) -> CanonicalClip:
-    """Map, scale and rotate a BVH clip onto the canonical skeleton (see module docstring)."""
+                   unit: str | None = None, up: str = "y") -> CanonicalClip:
+    """Map, scale and rotate a BVH clip onto the canonical skeleton (see module docstring).
+
+    ``up`` is the file's up axis: ``"y"`` (the BVH convention, the default) or ``"z"``.
+    """
+    if up not in UP_AXES:
+        raise EcsAnimError(f"--up {up}: expected 'y' or 'z'")
     skeleton = motion.skeleton
     jmap = map_skeleton(skeleton, map_spec)
     leg_units = _leg_rest_length(skeleton, jmap)
@@ -123,7 +139,7 @@ def canonical_clip(motion: BvhMotion, map_spec: str | None = None,
     up0 = rest[src["neck"]] - rest[src["pelvis"]]  # type: ignore[index]
     rest_body = frame_from_axes(left0, up0, 1, 2)
 
-    to_world = YUP_TO_ZUP
+    to_world = UP_AXES[up]
     n_frames = motion.n_frames
     positions = np.empty((n_frames, N_JOINTS, 3))
     measured = np.zeros(N_JOINTS, dtype=bool)
@@ -171,6 +187,7 @@ def canonical_clip(motion: BvhMotion, map_spec: str | None = None,
         thorax2world=world_frame(jmap.thorax),
         head2world=world_frame(src["head"]),  # type: ignore[arg-type]
         measured=measured, fps=motion.fps, unit=unit, unit_reason=reason, joint_map=jmap,
+        up_axis=up,
     )
 
 
@@ -199,12 +216,13 @@ def source_morphology(positions: F64, name: str) -> Morphology:
 
 
 def import_bvh(path: str | Path, map_spec: str | None = None, unit: str | None = None,
-               thresholds: ContactThresholds = ContactThresholds()) -> NormalizedMotion:
+               thresholds: ContactThresholds = ContactThresholds(),
+               up: str = "y") -> NormalizedMotion:
     """Read a BVH file and normalize it. Raises :class:`EcsAnimError` subclasses on bad input."""
     path = Path(path)
     motion = read_bvh(path)
     try:
-        clip = canonical_clip(motion, map_spec, unit)
+        clip = canonical_clip(motion, map_spec, unit, up)
         normalized = normalize_clip(clip, path.stem, str(path), thresholds)
     except InputError:
         raise
@@ -234,6 +252,7 @@ def normalize_clip(clip: CanonicalClip, name: str, source: str,
         "filled_in": [j for j, m in zip(JOINTS, clip.measured) if not m],
         "unit": clip.unit,
         "unit_reason": clip.unit_reason,
+        "up_axis": clip.up_axis,
         "max_stretch": float(np.max(np.abs(poses.stretch - 1.0))),
     }
     return NormalizedMotion(poses, clip.fps, morph, constraints, info)

@@ -81,12 +81,11 @@ class ClipBank:
 
 
 def _loop_transform(bank: ClipBank, clip: I64, loops: F64) -> tuple[F64, F64]:
-    """Heading offset and xy offset after ``loops`` whole loops (closed form, any count).
+    """The rigid motion of the root after ``loops`` whole loops, in closed form (any count).
 
-    After k loops a root at ``p`` (xy, normalized) moves to ``R(k·yaw)(p - p0) + p0 + s·Σ_i R(i·yaw)``
-    with ``s`` the per-loop shift. Returns (yaw_offset (n,), a function's pieces: rotation angle
-    and translation (n, 2)) packed as (angle, translation) where translation already includes
-    ``p0`` handling via the caller.
+    After k loops a root at ``p`` (xy, normalized) is at ``p0 + moved + R(angle) (p - p0)``,
+    with ``angle = k·yaw`` and ``moved = s · Σ_{i<k} R(i·yaw)`` (``s`` the per-loop shift,
+    ``p0`` the clip's first root position). Returns (angle (n,), moved (n, 2)).
     """
     yaw = bank.loop_yaw[clip]
     shift = bank.loop_shift[clip, 0] + 1j * bank.loop_shift[clip, 1]

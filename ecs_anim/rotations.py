@@ -16,7 +16,8 @@ TINY = 1e-12
 
 
 def normalize(v: F64) -> F64:
-    """Unit vectors along the last axis; zero vectors stay zero. Shape (..., 3) -> (..., 3)."""
+    """Unit vectors (or quaternions) along the last axis; zero ones stay zero.
+    Shape (..., k) -> (..., k)."""
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.maximum(n, TINY)
 
@@ -196,9 +197,4 @@ def slerp(q0: F64, q1: F64, t: F64) -> F64:
     near = sin_theta < 1e-6
     w0 = np.where(near, 1.0 - t, np.sin((1.0 - t) * theta) / np.where(near, 1.0, sin_theta))
     w1 = np.where(near, t, np.sin(t * theta) / np.where(near, 1.0, sin_theta))
-    return normalize4(w0 * q0 + w1 * q1)
-
-
-def normalize4(q: F64) -> F64:
-    """Unit quaternions along the last axis. (..., 4) -> (..., 4)."""
-    return q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), TINY)
+    return normalize(w0 * q0 + w1 * q1)
