@@ -1,0 +1,51 @@
+"""Command-line details: unit hints, up axis, argument checks, info output."""
+
+import json
+
+import numpy as np
+import pytest
+
+from conftest import MOTIONS_DIR
+from ecs_anim.bvh import read_bvh
+from ecs_anim.cli import main
+from ecs_anim.importing import canonical_clip, detect_unit
+
+
+def test_unit_detection_names_a_close_runner_up():
+    unit, reason = detect_unit(48.0)  # a small child in cm, or an adult in inches
+    assert unit in ("cm", "inch") and "--unit" in reason
+    unit, reason = detect_unit(80.0)
+    assert unit == "cm" and "--unit" not in reason
+
+
+def test_up_axis_z_reads_a_z_up_file_as_is():
+    motion = read_bvh(MOTIONS_DIR / "walk.bvh")
+    y_up = canonical_clip(motion).positions
+    z_up = canonical_clip(motion, up="z").positions
+    np.testing.assert_allclose(z_up[..., [0, 2]], y_up[..., [0, 1]] * [1, -1], atol=1e-12)
+
+
+@pytest.mark.parametrize("args", [["--contact-min-duration", "inf"], ["--contact-height", "-1"],
+                                  ["--contact-speed", "nan"]])
+def test_bad_thresholds_are_usage_errors(args, tmp_path, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["import", str(MOTIONS_DIR / "walk.bvh"), "-o", str(tmp_path), *args])
+    assert exit_info.value.code == 2
+    assert "expected a finite number > 0" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())
+
+
+def test_info_json_and_text(tmp_path, capsys):
+    assert main(["import", str(MOTIONS_DIR / "walk.bvh"), "-o", str(tmp_path)]) == 0
+    capsys.readouterr()
+    assert main(["info", str(tmp_path / "walk.nmo"), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["frames"] == 132 and info["fps"] == 30.0
+    assert 0.4 < info["contacts"]["left_fraction"] < 0.8
+    assert main(["info", str(tmp_path / "walk.nmo")]) == 0
+    assert "contacts   left" in capsys.readouterr().out
+
+
+def test_bench_rejects_missing_files(capsys):
+    assert main(["bench", "import", "nope.bvh"]) == 1
+    assert "no such file: nope.bvh" in capsys.readouterr().err
