@@ -296,52 +296,62 @@ def catmull_rom(control: F64, t: F64) -> F64:
     return np.where(beyond, extension, curve)
 
 
-_SPINE_GRID = np.linspace(0.0, 6.0, 193)  # 32 samples per span, then three spans of extension
+def _span_coefficients(control: F64) -> F64:
+    """Polynomial coefficients of the three spans of :func:`catmull_rom`, plus the straight
+    extension as a fourth span: (..., 4 spans, 4 powers, 3) with point = Σ c_k u^k."""
+    q = control
+    padded = np.concatenate([2 * q[..., :1, :] - q[..., 1:2, :], q,
+                             2 * q[..., 3:, :] - q[..., 2:3, :]], axis=-2)  # (..., 6, 3)
+    p0, p1, p2, p3 = padded[..., 0:3, :], padded[..., 1:4, :], padded[..., 2:5, :], padded[..., 3:6, :]
+    spans = np.stack([p1, 0.5 * (p2 - p0), 0.5 * (2 * p0 - 5 * p1 + 4 * p2 - p3),
+                      0.5 * (3 * p1 - p0 - 3 * p2 + p3)], axis=-2)  # (..., 3, 4, 3)
+    end = q[..., 3, :]
+    extension = np.stack([end, end - q[..., 2, :], np.zeros_like(end), np.zeros_like(end)], axis=-2)
+    return np.concatenate([spans, extension[..., None, :, :]], axis=-3)
 
 
-def spine_joints(control: F64, segment_lengths: F64) -> F64:
+def _curve_at(coefficients: F64, t: F64) -> tuple[F64, F64]:
+    """Point and tangent (d/dt) at one parameter per batch element; t >= 3 is the extension.
+
+    ``coefficients`` from :func:`_span_coefficients`, ``t`` (...) -> two (..., 3) arrays.
+    """
+    span = np.minimum(np.floor(np.maximum(t, 0.0)), 3.0).astype(np.int64)
+    u = (t - np.minimum(span, 3))[..., None]
+    c = np.take_along_axis(coefficients, span[..., None, None, None], axis=-3)[..., 0, :, :]
+    point = c[..., 0, :] + u * (c[..., 1, :] + u * (c[..., 2, :] + u * c[..., 3, :]))
+    tangent = c[..., 1, :] + u * (2 * c[..., 2, :] + 3 * u * c[..., 3, :])
+    return point, tangent
+
+
+def spine_joints(control: F64, segment_lengths: F64, iterations: int = 6) -> F64:
     """Vertebra joints along the spine spline at the given chord lengths (paper §8).
 
-    Walks from the first control point: each joint is the first point along the curve at exactly
-    its segment's distance from the previous joint, so bone lengths are exact; with the encoding
+    Walks from the first control point: each joint is the point along the curve at exactly its
+    segment's distance from the previous joint (Newton's method on the curve parameter, started
+    where the lengths' proportions put it), so bone lengths are exact; with the encoding
     morphology the joints land on the control points.
 
     control : (..., 4, 3) spline control points (first = pelvis origin).
     segment_lengths : (..., n) chord lengths, metres. Returns (..., n, 3).
     """
     batch = control.shape[:-2]
-    grid = np.broadcast_to(_SPINE_GRID, batch + _SPINE_GRID.shape)
-    samples = catmull_rom(control, grid)  # (..., G, 3)
+    coefficients = _span_coefficients(control)
+    chords = np.linalg.norm(np.diff(control, axis=-2), axis=-1)  # (..., 3)
     prev_t = np.zeros(batch)
     prev_p = control[..., 0, :]
     out = []
     for k in range(segment_lengths.shape[-1]):
         length = segment_lengths[..., k]
-        dist = np.linalg.norm(samples - prev_p[..., None, :], axis=-1)
-        ok = (grid > prev_t[..., None]) & (dist >= length[..., None])
-        hi_i = np.where(ok.any(axis=-1), np.argmax(ok, axis=-1), _SPINE_GRID.size - 1)
-        lo_t = np.maximum(_SPINE_GRID[np.maximum(hi_i - 1, 0)], prev_t)
-        hi_t = _SPINE_GRID[hi_i]
-
-        def f(t: F64) -> F64:
-            point = catmull_rom(control, t[..., None])[..., 0, :]
-            return np.linalg.norm(point - prev_p, axis=-1) - length
-
-        f_lo, f_hi = f(lo_t), f(hi_t)
-        # Illinois regula falsi: superlinear inside the fine bracket, never leaves it.
-        for _ in range(12):
-            denom = f_hi - f_lo
-            t_new = np.where(np.abs(denom) > 1e-300, hi_t - f_hi * (hi_t - lo_t) / np.where(
-                np.abs(denom) > 1e-300, denom, 1.0), 0.5 * (lo_t + hi_t))
-            t_new = np.clip(t_new, np.minimum(lo_t, hi_t), np.maximum(lo_t, hi_t))
-            f_new = f(t_new)
-            same_side_as_hi = np.sign(f_new) == np.sign(f_hi)
-            lo_t, f_lo, hi_t, f_hi = (
-                np.where(same_side_as_hi, lo_t, hi_t), np.where(same_side_as_hi, f_lo * 0.5, f_hi),
-                t_new, f_new,
-            )
-        prev_t = hi_t
-        prev_p = catmull_rom(control, hi_t[..., None])[..., 0, :]
+        t = prev_t + length / np.maximum(chords[..., min(k, 2)], 1e-9)  # exact if they match
+        for _ in range(iterations):
+            point, tangent = _curve_at(coefficients, t)
+            d = point - prev_p
+            g = np.sum(d * d, axis=-1) - length**2
+            slope = 2.0 * np.sum(d * tangent, axis=-1)
+            safe = np.abs(slope) > 1e-12
+            t = np.clip(t - np.where(safe, g / np.where(safe, slope, 1.0), 0.0), prev_t + 1e-6, 9.0)
+        prev_t = t
+        prev_p = _curve_at(coefficients, t)[0]
         out.append(prev_p)
     return np.stack(out, axis=-2)
 
