@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .morphology import leg_length
-from .normalized import SIDE_JOINTS, SIDE_LENGTHS, NormalizedPoses, decode
+from .normalized import SIDE_JOINTS, SIDE_LENGTHS, DecodedPose, NormalizedPoses, decode
 from .rotations import quat_from_matrix, rotation_between
 
 F64 = NDArray[np.float64]
@@ -40,48 +40,43 @@ def vertical_slack_for_reach(hips: F64, ankle_targets: F64, reach: F64) -> F64:
 
 
 def adapt_to_ground(poses: NormalizedPoses, lengths: F64, ankle_targets: F64,
-                    weights: F64, root_height: F64) -> NormalizedPoses:
-    """Put the ankles on their targets, lowering the pelvis only as much as needed.
+                    weights: F64, root_height: F64,
+                    decoded: DecodedPose | None = None) -> NormalizedPoses:
+    """Put the ankles on their targets, lowering the pelvis only as much as the legs in contact
+    need (paper §7: ``h = min(h1, h2, h3)``).
 
     Parameters
     ----------
-    poses : (n,) normalized poses (already sampled for this tick).
+    poses : (n,) normalized poses (already sampled and placed for this tick).
     lengths : (n, N_LENGTHS) each character's segment lengths.
-    ankle_targets : (n, 2, 3) where each ankle should be (world, metres), e.g. its footprint.
-    weights : (n, 2) contact activation in [0, 1]; 0 leaves a leg as the motion has it.
-    root_height : (n,) the pelvis height the motion wants here (``h1`` of the paper), metres.
+    ankle_targets : (n, 2, 3) where each ankle should go (world, metres): a footprint for a foot
+        in contact, wherever the caller wants a free foot (e.g. lifted clear of the ground).
+    weights : (n, 2) contact activation in [0, 1]: how much each leg's reach may lower the pelvis.
+    root_height : (n,) the pelvis height the motion wants here (``h1``), metres.
+    decoded : ``decode(poses, lengths)`` if the caller has it already.
 
-    Returns new poses (root height, leg frames and fractions changed; all else shared).
+    Returns new poses (root height, leg frames and fractions changed; all else shared). A target
+    out of reach leaves the leg stretched (to :data:`MAX_LEG_EXTENSION`) towards it.
     """
-    decoded = decode(poses, lengths)
+    decoded = decode(poses, lengths) if decoded is None else decoded
     p = decoded.positions
     hips = p[:, list(SIDE_JOINTS["hip"])]
-    ankles = p[:, list(SIDE_JOINTS["ankle"])]
     w = np.clip(weights, 0.0, 1.0)
     thigh, shank = lengths[:, SIDE_LENGTHS["thigh"]], lengths[:, SIDE_LENGTHS["shank"]]
     reach = MAX_LEG_EXTENSION * (thigh + shank)
     # Put the pelvis at h1 first; a leg lowers it in proportion to its contact weight.
     up = np.zeros_like(p[:, 0])
     up[:, 2] = root_height - p[:, 0, 2]
-    # How much each leg needs the hips (hence the pelvis) lowered from h1 (negative = down).
     needed = vertical_slack_for_reach(hips + up[:, None], ankle_targets, reach)
-    lowering = np.min(w * np.minimum(needed, 0.0), axis=1)
-    pelvis_z = root_height + lowering
+    pelvis_z = root_height + np.min(w * np.minimum(needed, 0.0), axis=1)
     shift = np.zeros_like(up)
     shift[:, 2] = pelvis_z - p[:, 0, 2]
     new_hips = hips + shift[:, None]
-    # A free leg moves with the pelvis; a weighted one goes (that much) to its footprint.
-    moved_ankles = ankles + shift[:, None]
-    targets = moved_ankles + w[..., None] * (ankle_targets - moved_ankles)
     # Re-aim each leg: turn its half-plane frame so z points at the target, set the fraction.
-    pelvis2world = decoded.pelvis2world
-    old_leg2world = decoded.leg2world
-    to_target = targets - new_hips
-    turn = rotation_between(old_leg2world[..., :, 2], to_target)
-    new_leg2world = turn @ old_leg2world
-    new_leg2pelvis = np.swapaxes(pelvis2world, -1, -2)[:, None] @ new_leg2world
-    longest = np.where(w > 0.0, reach, thigh + shank)  # free legs keep the motion's own length
-    distance = np.minimum(np.linalg.norm(to_target, axis=-1), longest)
+    to_target = ankle_targets - new_hips
+    turn = rotation_between(decoded.leg2world[..., :, 2], to_target)
+    new_leg2pelvis = np.swapaxes(decoded.pelvis2world, -1, -2)[:, None] @ (turn @ decoded.leg2world)
+    distance = np.minimum(np.linalg.norm(to_target, axis=-1), reach)
     root_position = poses.root_position.copy()
     root_position[:, 2] = pelvis_z / leg_length(lengths)
     return replace(poses, root_position=root_position,
