@@ -167,6 +167,20 @@ def export_rotations(pose: DecodedPose) -> dict[str, F64]:
     return R
 
 
+def local_rotations(pose: DecodedPose) -> F64:
+    """Local rotation of every export joint relative to its parent, in BVH axes (Y up), as in
+    the exported file's channels. Returns (*B, len(EXPORT_NAMES), 3, 3)."""
+    world_to_bvh = YUP_TO_ZUP.T
+    R = export_rotations(pose)
+    # joint2bvh = world_to_bvh @ joint2world @ bvh_rest2body
+    glob = {n: world_to_bvh @ R[n] @ BODY_TO_BVH_REST.T for n in EXPORT_NAMES}
+    local = []
+    for j in EXPORT_JOINTS:
+        g = glob[j.name]
+        local.append(g if j.parent is None else np.swapaxes(glob[j.parent], -1, -2) @ g)
+    return np.stack(local, axis=-3)
+
+
 def bvh_text(pose: DecodedPose, morph: Morphology, fps: float) -> str:
     """BVH text of decoded poses on ``morph`` (see module docstring)."""
     world_to_bvh = YUP_TO_ZUP.T
@@ -179,14 +193,7 @@ def bvh_text(pose: DecodedPose, morph: Morphology, fps: float) -> str:
         )
         for j in EXPORT_JOINTS
     ]
-    R = export_rotations(pose)
-    # joint2bvh = world_to_bvh @ joint2world @ bvh_rest2body
-    glob = {n: world_to_bvh @ R[n] @ BODY_TO_BVH_REST.T for n in EXPORT_NAMES}
-    local = []
-    for j in EXPORT_JOINTS:
-        g = glob[j.name]
-        local.append(g if j.parent is None else np.swapaxes(glob[j.parent], -1, -2) @ g)
-    euler = matrix_to_euler(np.stack(local, axis=1), EULER_ORDER)
+    euler = matrix_to_euler(local_rotations(pose), EULER_ORDER)
     root = pose.positions[:, J["pelvis"]] @ world_to_bvh.T
     return format_bvh(joints, root, euler, 1.0 / fps, EULER_ORDER)
 

@@ -46,6 +46,8 @@ class ClipBank:
     loop_yaw: F64
     loop_shift: F64
     names: list[str]
+    contact_weight: F64 | None = None
+    source_ankle_height: F64 | None = None
 
     @classmethod
     def from_motions(cls, motions: dict[str, NormalizedMotion]) -> ClipBank:
@@ -65,9 +67,23 @@ class ClipBank:
                 h_next, xy_next = p.root_heading[0], p.root_position[0, :2]
             yaw.append(_wrap(h_next - p.root_heading[0]))
             shift.append(xy_next - p.root_position[0, :2])
+        # Foot-contact weights per frame, and each source's ankle height in leg lengths.
+        weights = []
+        for n in names:
+            m = motions[n]
+            t = np.arange(m.n_frames) / m.fps
+            w = np.zeros((m.n_frames, 2))
+            for c in m.constraints:
+                if c.kind == "foot_contact":
+                    side = 0 if c.segment.endswith("_l") else 1
+                    w[:, side] = np.maximum(w[:, side], c.activation.weight(t))
+            weights.append(w)
+        ankle = np.array([[motions[n].source_morphology["ankle_height_l"],
+                           motions[n].source_morphology["ankle_height_r"]]
+                          / np.float64(motions[n].source_morphology.leg_length) for n in names])
         return cls(NormalizedPoses(**fields), start, counts,
                    np.array([motions[n].fps for n in names], dtype=np.float64),
-                   np.array(yaw), np.array(shift), names)
+                   np.array(yaw), np.array(shift), names, np.concatenate(weights), ankle)
 
     def index(self, name: str) -> int:
         try:
@@ -129,20 +145,35 @@ def blend(a: NormalizedPoses, b: NormalizedPoses, w: F64) -> NormalizedPoses:
     return NormalizedPoses(**out)
 
 
+def frame_position(bank: ClipBank, clip: I64, time_s: F64,
+                   loop: NDArray[np.bool_]) -> tuple[I64, I64, F64, F64, NDArray[np.bool_]]:
+    """Where ``time_s`` falls in each clip: (frame i0, frame i1, weight of i1, whole loops done,
+    whether i1 wraps into the next loop). Looping clips wrap; others clamp to their ends."""
+    n_frames = bank.n_frames[clip]
+    f = np.asarray(time_s, dtype=np.float64) * bank.fps[clip]
+    loops = np.where(loop, np.floor(f / n_frames), 0.0)
+    local = np.where(loop, f - loops * n_frames, np.clip(f, 0.0, n_frames - 1.0))
+    i0 = np.minimum(np.floor(local).astype(np.int64), n_frames - 1)
+    wraps = loop & (i0 + 1 >= n_frames)
+    i1 = np.where(wraps, 0, np.minimum(i0 + 1, n_frames - 1))
+    return i0, i1, local - i0, loops, wraps
+
+
+def sample_table(bank: ClipBank, table: F64, clip: I64, time_s: F64,
+                 loop: NDArray[np.bool_]) -> F64:
+    """Linear interpolation of a per-frame table aligned with the bank (total_frames, ...)."""
+    i0, i1, w, _, _ = frame_position(bank, clip, time_s, loop)
+    a, b = table[bank.start[clip] + i0], table[bank.start[clip] + i1]
+    return a + w.reshape(w.shape + (1,) * (a.ndim - 1)) * (b - a)
+
+
 def sample(bank: ClipBank, clip: I64, time_s: F64, loop: NDArray[np.bool_]) -> NormalizedPoses:
     """Poses of ``clip`` (n,) at ``time_s`` (n,) seconds from each clip's start.
 
     Looping clips wrap with root motion carried over; others hold their first/last pose outside
     their duration. Returns NormalizedPoses with leading shape (n,).
     """
-    n_frames = bank.n_frames[clip]
-    f = np.asarray(time_s, dtype=np.float64) * bank.fps[clip]
-    loops = np.where(loop, np.floor(f / n_frames), 0.0)
-    local = np.where(loop, f - loops * n_frames, np.clip(f, 0.0, n_frames - 1.0))
-    i0 = np.minimum(np.floor(local).astype(np.int64), n_frames - 1)
-    w = local - i0
-    wraps = loop & (i0 + 1 >= n_frames)
-    i1 = np.where(wraps, 0, np.minimum(i0 + 1, n_frames - 1))
+    i0, i1, w, loops, wraps = frame_position(bank, clip, time_s, loop)
     a = _frame(bank, clip, i0, loops)
     b = _frame(bank, clip, i1, loops + wraps)
     return blend(a, b, w)

@@ -1,0 +1,107 @@
+"""Per-character quality figures of a run, recorded after every tick (all characters at once).
+
+* foot sliding: how far a fully planted ankle moves from one tick to the next (mm per frame);
+* ground penetration: how far the heel (the sole under the ankle) or the sole under the ball of
+  the foot goes below the ground (mm);
+* bone-length error: the largest difference between a bone and the morphology (m);
+* stride: distance between successive footprints of the same foot, also per leg length;
+* time per system per tick.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .morphology import bone_lengths_of
+from .normalized import SIDE_JOINTS, SIDE_LENGTHS
+from .simulation import Simulation
+from .skeleton import BONE_JOINTS
+
+ANKLES, TOES = list(SIDE_JOINTS["ankle"]), list(SIDE_JOINTS["toe"])
+IS_BONE = np.array([a >= 0 for a, _ in BONE_JOINTS])
+
+
+class MetricsRecorder:
+    """Call :meth:`record` after each :meth:`Simulation.step`; :meth:`report` at the end."""
+
+    def __init__(self, sim: Simulation):
+
+        self.sim = sim
+        n = sim.store.n
+        self.prev_ankles: np.ndarray | None = None
+        self.prev_planted = np.zeros((n, 2), bool)
+        self.slide_max = np.zeros(n)
+        self.slide_sum = np.zeros(n)
+        self.slide_count = np.zeros(n)
+        self.penetration_max = np.zeros(n)
+        self.bone_error_max = np.zeros(n)
+        self.prev_locked = np.zeros((n, 2), bool)
+        self.strides: list[list[float]] = [[] for _ in range(n)]
+        self.last_print: list[list[np.ndarray | None]] = [[None, None] for _ in range(n)]
+        self.ticks = 0
+
+    def record(self) -> None:
+        from ecs_anim.systems.ground_adapt import BALL_HEIGHT_PER_LEG
+
+        sim, st = self.sim, self.sim.store
+        p = st.positions
+        ankles, toes = p[:, ANKLES], p[:, TOES]
+        planted = st.contact_weight >= 1.0
+        if self.prev_ankles is not None:
+            both = planted & self.prev_planted
+            move_mm = np.linalg.norm(ankles - self.prev_ankles, axis=-1) * 1e3
+            move_mm = np.where(both, move_mm, 0.0)
+            self.slide_max = np.maximum(self.slide_max, move_mm.max(axis=1))
+            self.slide_sum += move_mm.sum(axis=1)
+            self.slide_count += both.sum(axis=1)
+        self.prev_ankles, self.prev_planted = ankles.copy(), planted
+        ankle_height = st.lengths[:, SIDE_LENGTHS["ankle_height"]]
+        ball = BALL_HEIGHT_PER_LEG * sim.leg_length()[:, None]
+        heel_depth = sim.ground.height(ankles[..., :2]) - (ankles[..., 2] - ankle_height)
+        toe_depth = sim.ground.height(toes[..., :2]) - (toes[..., 2] - ball)
+        depth_mm = np.maximum(heel_depth, toe_depth).max(axis=1) * 1e3
+        self.penetration_max = np.maximum(self.penetration_max, depth_mm)
+        error = np.abs(bone_lengths_of(p)[:, IS_BONE] - st.lengths[:, IS_BONE]).max(axis=1)
+        self.bone_error_max = np.maximum(self.bone_error_max, error)
+        # Strides: a new footprint is laid (an event; only those feet are visited).
+        new = st.locked & ~self.prev_locked
+        for row, side in zip(*np.nonzero(new)):
+            here = st.footprint[row, side, :2].copy()
+            last = self.last_print[row][side]
+            if last is not None:
+                self.strides[row].append(float(np.linalg.norm(here - last)))
+            self.last_print[row][side] = here
+        self.prev_locked = st.locked.copy()
+        self.ticks += 1
+
+    def report(self) -> dict[str, Any]:
+        sim = self.sim
+        names = sim.names()
+        legs = sim.leg_length()
+        characters = []
+        for i, name in enumerate(names):
+            strides = np.array(self.strides[i])
+            characters.append({
+                "name": name,
+                "leg_length_m": round(float(legs[i]), 4),
+                "foot_sliding_mm_per_frame": {
+                    "max": round(float(self.slide_max[i]), 4),
+                    "mean": round(float(self.slide_sum[i] / max(self.slide_count[i], 1)), 4)},
+                "ground_penetration_mm_max": round(float(max(self.penetration_max[i], 0.0)), 4),
+                "bone_length_error_m_max": float(self.bone_error_max[i]),
+                "stride_m_median": None if strides.size == 0 else round(float(np.median(strides)), 4),
+                "stride_per_leg_length": None if strides.size == 0
+                else round(float(np.median(strides) / legs[i]), 4),
+                "frozen": bool(sim.store.frozen[i]),
+            })
+        ticks = max(self.ticks, 1)
+        return {
+            "seconds": round(sim.time_s, 4),
+            "ticks": self.ticks,
+            "fps": sim.fps,
+            "characters": characters,
+            "ms_per_tick": {k: round(v / ticks * 1e3, 4) for k, v in sim.system_seconds().items()},
+            "messages": list(sim.messages),
+        }

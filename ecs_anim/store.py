@@ -1,0 +1,93 @@
+"""The structure-of-arrays store every system works on: one row per character.
+
+Gathering and scattering go through here only (STYLE 12): rows are added when characters spawn
+(load time, not in the tick), specification changes write one row, and each system reads and
+writes whole arrays. Field writers are declared in each system's docstring.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .normalized import TRAILING_SHAPES, DecodedPose, NormalizedPoses
+from .skeleton import N_JOINTS, N_LENGTHS
+
+F64 = NDArray[np.float64]
+
+
+def _empty_poses(n: int) -> NormalizedPoses:
+    arrays = {}
+    for name, trailing in TRAILING_SHAPES.items():
+        a = np.zeros((n,) + trailing)
+        if trailing and trailing[-1] == 4:
+            a[..., 3] = 1.0
+        arrays[name] = a
+    return NormalizedPoses(**arrays)
+
+
+@dataclass
+class CharacterStore:
+    """Per-character arrays; ``n`` rows. Units: metres, seconds, radians; world Z up.
+
+    entity (n,) esper entity ids; lengths (n, N_LENGTHS) segment lengths;
+    clip (n,) clip index in the bank; clip_time_s (n,); speed (n,); loop (n,) bool;
+    fade_clip, fade_time_s, fade_loop (n,) the clip being faded out, fade_s (n,) its crossfade
+    duration (0: none), fade_elapsed_s (n,); queue: per row, clips still to play;
+    placement_xy (n, 2) metres and placement_heading (n,) of each motion origin;
+    poses: this tick's normalized poses (n,); contact_weight (n, 2) foot-contact activation;
+    scaled: the pose decoded on each body before ground adaptation;
+    footprint (n, 2, 3) locked ankle positions, locked (n, 2) bool; ground_ref (n,) metres the
+    motion's floor is raised to under the character (smoothed);
+    positions (n, N_JOINTS, 3) and local_rotations (n, n_export, 4): the output posture;
+    frozen (n,) bool: characters whose pose went bad, held at their last good posture.
+    """
+
+    entity: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    lengths: F64 = field(default_factory=lambda: np.zeros((0, N_LENGTHS)))
+    clip: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    clip_time_s: F64 = field(default_factory=lambda: np.zeros(0))
+    speed: F64 = field(default_factory=lambda: np.zeros(0))
+    loop: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
+    fade_clip: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    fade_time_s: F64 = field(default_factory=lambda: np.zeros(0))
+    fade_loop: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
+    fade_s: F64 = field(default_factory=lambda: np.zeros(0))
+    fade_elapsed_s: F64 = field(default_factory=lambda: np.zeros(0))
+    placement_xy: F64 = field(default_factory=lambda: np.zeros((0, 2)))
+    placement_heading: F64 = field(default_factory=lambda: np.zeros(0))
+    contact_weight: F64 = field(default_factory=lambda: np.zeros((0, 2)))
+    footprint: F64 = field(default_factory=lambda: np.zeros((0, 2, 3)))
+    locked: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, 2), bool))
+    ground_ref: F64 = field(default_factory=lambda: np.zeros(0))
+    positions: F64 = field(default_factory=lambda: np.zeros((0, N_JOINTS, 3)))
+    local_rotations: F64 = field(default_factory=lambda: np.zeros((0, 0, 4)))
+    frozen: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
+    queue_len: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    next_fade_s: F64 = field(default_factory=lambda: np.zeros(0))
+    queue: list[list[object]] = field(default_factory=list)
+    poses: NormalizedPoses = field(default_factory=lambda: _empty_poses(0))
+    scaled: DecodedPose | None = None
+
+    @property
+    def n(self) -> int:
+        return int(self.entity.shape[0])
+
+    def add_row(self, **values: object) -> int:
+        """Append one character; ``values`` give its row for any array field. Load time only."""
+        row = self.n
+        for f in fields(self):
+            if f.name in ("queue", "poses", "scaled"):
+                continue
+            current = getattr(self, f.name)
+            fill = np.zeros((1,) + current.shape[1:], dtype=current.dtype)
+            if f.name in values:
+                fill[0] = values[f.name]
+            setattr(self, f.name, np.concatenate([current, fill]))
+        self.queue.append(list(values.get("queue", [])))  # type: ignore[call-overload]
+        self.poses = NormalizedPoses(**{
+            k: np.concatenate([v, getattr(_empty_poses(1), k)])
+            for k, v in self.poses.arrays().items()})
+        return row

@@ -1,0 +1,96 @@
+"""GroundAdapt: feet on the ground under each character (paper §7).
+
+A foot entering contact gets a footprint: where the motion puts its ankle, on the ground under
+it. The footprint stays locked in the world for the whole contact (no sliding), the pelvis is
+lowered only as far as the legs in contact need (``min(h1, h2, h3)``), legs are re-aimed
+analytically, free feet ride on the ground level of the supporting feet and are lifted clear of
+steps, and a planted foot whose toe would go into a step is pitched up onto it.
+
+Reads: store.poses, scaled, contact_weight, lengths, clip; the ground; the bank's ankle heights.
+Writes: store.poses (root height, leg frames and fractions, foot directions), footprint, locked,
+ground_ref.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ecs_anim.ground_adapt import adapt_to_ground
+from ecs_anim.normalized import SIDE_JOINTS, SIDE_LENGTHS, decode, distal_frames
+from ecs_anim.system_base import System
+
+#: Time constant (s) with which the motion's floor follows the ground under the supporting feet.
+GROUND_SMOOTHING_S = 0.15
+#: Height of the ball-of-foot joint above the sole, as a fraction of the leg (thigh + shank).
+BALL_HEIGHT_PER_LEG = 0.025 / 0.86
+
+HIPS, ANKLES, TOES = list(SIDE_JOINTS["hip"]), list(SIDE_JOINTS["ankle"]), list(SIDE_JOINTS["toe"])
+
+
+class GroundAdapt(System):
+    def run(self, dt: float) -> None:
+        sim, st = self.sim, self.sim.store
+        ground = sim.ground
+        scaled = st.scaled
+        assert scaled is not None, "MorphologyAdapt runs before GroundAdapt"
+        leg = sim.leg_length()
+        ankle_height = st.lengths[:, SIDE_LENGTHS["ankle_height"]]  # (n, 2)
+        motion_ankle_height = sim.bank.source_ankle_height[st.clip] * leg[:, None]
+        ball = BALL_HEIGHT_PER_LEG * leg[:, None]
+        ankles, toes = scaled.positions[:, ANKLES], scaled.positions[:, TOES]
+        w = st.contact_weight
+        # Footprints: where the motion's ankle is, standing on the ground under it.
+        ground_at_ankle = ground.height(ankles[..., :2])
+        landing = ankles.copy()
+        landing[..., 2] = ground_at_ankle + ankle_height + np.maximum(
+            ankles[..., 2] - motion_ankle_height, 0.0)
+        starting = (w > 0.0) & ~st.locked
+        st.footprint = np.where(starting[..., None], landing, st.footprint)
+        st.locked = w > 0.0
+        # The motion's floor follows the ground under the supporting feet, smoothly.
+        support = w.sum(axis=1)
+        under_feet = np.sum(w * (st.footprint[..., 2] - ankle_height), axis=1) / np.maximum(support, 1e-9)
+        under_pelvis = ground.height(scaled.positions[:, 0, :2])
+        target = np.where(support > 0.0, under_feet, under_pelvis)
+        st.ground_ref += (1.0 - np.exp(-dt / GROUND_SMOOTHING_S)) * (target - st.ground_ref)
+        # Free feet ride on that floor, lifted where heel or toe would go under the ground.
+        free = ankles.copy()
+        free[..., 2] += st.ground_ref[:, None]
+        need_heel = ground_at_ankle + ankle_height - free[..., 2]
+        need_toe = ground.height(toes[..., :2]) + ball - (toes[..., 2] + st.ground_ref[:, None])
+        free[..., 2] += np.maximum(0.0, np.maximum(need_heel, need_toe))
+        targets = free + w[..., None] * (st.footprint - free)
+        # While a contact ramps in, the blend can cross a step edge: keep the heel above ground.
+        targets[..., 2] = np.maximum(targets[..., 2], ground.height(targets[..., :2]) + ankle_height)
+        root_height = scaled.positions[:, 0, 2] + st.ground_ref
+        poses = adapt_to_ground(st.poses, st.lengths, targets, w, root_height, decoded=scaled)
+        st.poses = self._toes_onto_ground(poses, ball)
+
+    def _toes_onto_ground(self, poses, ball, passes: int = 4):  # type: ignore[no-untyped-def]
+        """Pitch a foot up about its ankle where its toe joint would be under the ground.
+
+        Raising the toe moves it horizontally too (onto the next step, say), so the ground is
+        asked again at the new place, a few passes.
+        """
+        st, ground = self.sim.store, self.sim.ground
+        after = decode(poses, st.lengths)
+        ankles, toes = after.positions[:, ANKLES], after.positions[:, TOES]
+        deficit = ground.height(toes[..., :2]) + ball - toes[..., 2]
+        if not np.any(deficit > 0.0):
+            return poses
+        foot = np.maximum(np.linalg.norm(toes - ankles, axis=-1), 1e-9)
+        d = (toes - ankles) / foot[..., None]
+        horizontal = d[..., :2] / np.maximum(np.linalg.norm(d[..., :2], axis=-1), 1e-9)[..., None]
+        dz = d[..., 2]
+        for _ in range(passes):
+            dz = np.clip(dz + np.maximum(deficit, 0.0) / foot, -1.0, 1.0)
+            toe = ankles + foot[..., None] * np.concatenate(
+                [horizontal * np.sqrt(1.0 - dz**2)[..., None], dz[..., None]], -1)
+            deficit = ground.height(toe[..., :2]) + ball - toe[..., 2]
+        new_d = (toe - ankles) / foot[..., None]
+        changed = np.abs(new_d - d).max(axis=-1) > 0.0
+        knees = after.positions[:, list(SIDE_JOINTS["knee"])]
+        shank2world = distal_frames(after.leg2world, knees, ankles)
+        in_shank = np.einsum("...ji,...j->...i", shank2world, new_d)
+        poses.foot_dir = np.where(changed[..., None], in_shank, poses.foot_dir)
+        return poses
