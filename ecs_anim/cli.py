@@ -10,6 +10,8 @@ import json
 import sys
 import time
 from pathlib import Path
+
+import numpy as np
 from typing import Sequence
 
 from .contacts import ContactThresholds
@@ -219,6 +221,67 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_run(args: argparse.Namespace) -> int:
+    from .exporting import bvh_from_rotations, write_npz
+    from .files import write_atomic
+    from .metrics import MetricsRecorder
+    from .rotations import matrix_from_quat
+    from .scenario import build_simulation, load_scenario
+
+    scenario = load_scenario(args.scenario)
+    seconds = scenario.duration_s if args.seconds is None else args.seconds
+    names = [c.name for c in scenario.characters]
+    outputs: list[Path] = []
+    if args.export:
+        outdir = Path(args.export)
+        outputs = [outdir / f"{n}.{ext}" for n in names for ext in ("bvh", "npz")]
+    if args.report:
+        outputs.append(Path(args.report))
+    existing = [str(p) for p in outputs if p.exists()]
+    if existing and not args.force:
+        raise EcsAnimError(f"{', '.join(existing)}: already exist(s) (use --force to overwrite)")
+    sim = build_simulation(scenario)
+    metrics = MetricsRecorder(sim)
+    ticks = int(round(seconds * scenario.fps))
+    record = bool(args.export)
+    positions, rotations, contacts = [], [], []
+    for _ in range(ticks):
+        sim.step()
+        metrics.record()
+        if record:
+            positions.append(sim.store.positions.copy())
+            rotations.append(sim.store.local_rotations.copy())
+            contacts.append(sim.store.contact_weight >= 1.0)
+    report = metrics.report() | {"scenario": str(args.scenario)}
+    if record and ticks:
+        pos = np.stack(positions, axis=1)  # (n, frames, joints, 3)
+        rot = np.stack(rotations, axis=1)
+        con = np.stack(contacts, axis=1)
+        for i, c in enumerate(scenario.characters):
+            text = bvh_from_rotations(c.morphology, pos[i, :, 0], matrix_from_quat(rot[i]), scenario.fps)
+            write_atomic(outdir / f"{c.name}.bvh", args.force, lambda f: f.write(text.encode()))
+            write_npz(outdir / f"{c.name}.npz", pos[i], scenario.fps, con[i], args.force)
+    if args.report:
+        write_atomic(args.report, args.force,
+                     lambda f: f.write(json.dumps(report, indent=2).encode()))
+    print(f"{args.scenario}: {ticks} ticks ({seconds:g} s at {scenario.fps:g} Hz), "
+          f"{len(names)} characters")
+    print(f"  {'character':14s} {'slide max mm/fr':>15s} {'penetr. mm':>10s} {'bone err m':>10s} "
+          f"{'stride/leg':>10s}")
+    for c in report["characters"]:
+        stride = "-" if c["stride_per_leg_length"] is None else f"{c['stride_per_leg_length']:.3f}"
+        print(f"  {c['name'][:14]:14s} {c['foot_sliding_mm_per_frame']['max']:15.3f} "
+              f"{c['ground_penetration_mm_max']:10.3f} {c['bone_length_error_m_max']:10.1e} {stride:>10s}")
+    total = sum(report["ms_per_tick"].values())
+    print(f"  time per tick {total:.2f} ms: " + ", ".join(
+        f"{k} {v:.2f}" for k, v in report["ms_per_tick"].items()))
+    if args.export:
+        print(f"  wrote {len(names)} x (.bvh, .npz) to {args.export}")
+    if args.report:
+        print(f"  wrote report {args.report}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="ecs-anim",
@@ -260,6 +323,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, metavar="OUT.bvh|OUT.npz")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     p.set_defaults(func=cmd_export)
+
+    p = sub.add_parser("run", help="run a scenario headless; print metrics, optionally export")
+    p.add_argument("scenario", metavar="SCENARIO.yaml")
+    p.add_argument("--seconds", type=positive_float, help="run this long instead of duration_s")
+    p.add_argument("--export", metavar="DIR", help="write <character>.bvh and .npz per character")
+    p.add_argument("--report", metavar="FILE.json", help="write the metrics as JSON")
+    p.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("bench", help="print performance figures")
     p.add_argument("what", choices=["import"], help="what to measure")

@@ -181,9 +181,9 @@ def local_rotations(pose: DecodedPose) -> F64:
     return np.stack(local, axis=-3)
 
 
-def bvh_text(pose: DecodedPose, morph: Morphology, fps: float) -> str:
-    """BVH text of decoded poses on ``morph`` (see module docstring)."""
-    world_to_bvh = YUP_TO_ZUP.T
+def bvh_from_rotations(morph: Morphology, pelvis_in_world: F64, local: F64, fps: float) -> str:
+    """BVH text from the pelvis path (frames, 3) in world metres and the export skeleton's local
+    rotations (frames, len(EXPORT_NAMES), 3, 3) as given by :func:`local_rotations`."""
     index = {n: i for i, n in enumerate(EXPORT_NAMES)}
     joints = [
         BvhWriteJoint(
@@ -193,17 +193,22 @@ def bvh_text(pose: DecodedPose, morph: Morphology, fps: float) -> str:
         )
         for j in EXPORT_JOINTS
     ]
-    euler = matrix_to_euler(local_rotations(pose), EULER_ORDER)
-    root = pose.positions[:, J["pelvis"]] @ world_to_bvh.T
-    return format_bvh(joints, root, euler, 1.0 / fps, EULER_ORDER)
+    euler = matrix_to_euler(local, EULER_ORDER)
+    return format_bvh(joints, pelvis_in_world @ YUP_TO_ZUP, euler, 1.0 / fps, EULER_ORDER)
 
 
-def write_npz(path: str | Path, pose: DecodedPose, motion: NormalizedMotion, force: bool) -> None:
+def bvh_text(pose: DecodedPose, morph: Morphology, fps: float) -> str:
+    """BVH text of decoded poses on ``morph`` (see module docstring)."""
+    return bvh_from_rotations(morph, pose.positions[:, J["pelvis"]], local_rotations(pose), fps)
+
+
+def write_npz(path: str | Path, positions: F64, fps: float, contacts: np.ndarray,
+              force: bool) -> None:
     """Joint positions for analysis: ``positions`` (frames, joints, 3) metres world Z up,
     ``joints`` names, ``fps``, ``contacts`` (frames, 2) bool [left, right]."""
     with atomic_output(path, force) as f:
-        np.savez_compressed(f, positions=pose.positions, joints=np.array(JOINTS),
-                            fps=np.float64(motion.fps), contacts=motion.contacts())
+        np.savez_compressed(f, positions=positions, joints=np.array(JOINTS),
+                            fps=np.float64(fps), contacts=contacts)
 
 
 def export_motion(motion: NormalizedMotion, morphology_spec: str, out: str | Path,
@@ -224,6 +229,6 @@ def export_motion(motion: NormalizedMotion, morphology_spec: str, out: str | Pat
     if suffix == ".bvh":
         write_text_atomic(out, bvh_text(pose, morph, motion.fps), force)
     else:
-        write_npz(out, pose, motion, force)
+        write_npz(out, pose.positions, motion.fps, motion.contacts(), force)
     return morph, pose
 

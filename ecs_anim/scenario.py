@@ -1,0 +1,343 @@
+"""Scenario files (YAML): who plays what, on which ground, for how long.
+
+Every field is validated at load time; an error reads ``file:line: path.to.key: what was
+expected, what was found`` and suggests the closest key on a typo. Nothing is checked in the
+tick. The schema is documented in ``docs/scenarios.md``.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from .components import MotionPlayer, Placement, QueuedClip
+from .errors import EcsAnimError, InputError
+from .ground import Bumps, Combined, Ground, HeightGrid, Plane, Slope, Stairs
+from .morphology import PRESET_SPECS, Morphology
+from .motion import NormalizedMotion, load_nmo
+
+Node = yaml.Node
+
+
+@dataclass
+class CharacterSpec:
+    name: str
+    morphology: Morphology
+    player: MotionPlayer
+    placement: Placement
+    team: str = ""
+
+
+@dataclass
+class Scenario:
+    path: str
+    duration_s: float
+    fps: float
+    motions: dict[str, NormalizedMotion]
+    ground: Ground
+    characters: list[CharacterSpec] = field(default_factory=list)
+
+
+class _Reader:
+    """Typed access to a composed YAML tree with ``file:line: path: message`` errors."""
+
+    def __init__(self, path: str):
+        self.path = path
+
+    def fail(self, node: Node | None, where: str, message: str) -> InputError:
+        line = None if node is None else node.start_mark.line + 1
+        return InputError(self.path, f"{where}: {message}" if where else message, line)
+
+    def mapping(self, node: Node, where: str, allowed: dict[str, bool]) -> dict[str, Node]:
+        """Keys -> value nodes; ``allowed`` maps each key to whether it is required."""
+        if not isinstance(node, yaml.MappingNode):
+            raise self.fail(node, where, f"expected a mapping, found {self._kind(node)}")
+        out: dict[str, Node] = {}
+        for key_node, value in node.value:
+            key = str(key_node.value)
+            here = f"{where}.{key}" if where else key
+            if key not in allowed:
+                close = difflib.get_close_matches(key, list(allowed), n=1, cutoff=0.6)
+                hint = f"; did you mean {close[0]!r}?" if close else ""
+                raise self.fail(key_node, here, f"unknown key{hint} (expected one of "
+                                               f"{', '.join(allowed)})")
+            if key in out:
+                raise self.fail(key_node, here, "given twice")
+            out[key] = value
+        for key, required in allowed.items():
+            if required and key not in out:
+                raise self.fail(node, where or "top level", f"missing required key {key!r}")
+        return out
+
+    @staticmethod
+    def _kind(node: Node) -> str:
+        if isinstance(node, yaml.MappingNode):
+            return "a mapping"
+        if isinstance(node, yaml.SequenceNode):
+            return "a list"
+        return repr(node.value)
+
+    def scalar(self, node: Node, where: str) -> Any:
+        if not isinstance(node, yaml.ScalarNode):
+            raise self.fail(node, where, f"expected a single value, found {self._kind(node)}")
+        try:
+            return yaml.safe_load(yaml.serialize(node))
+        except yaml.YAMLError as exc:
+            raise self.fail(node, where, f"not plain YAML data ({getattr(exc, 'problem', exc)})") from None
+
+    def number(self, node: Node, where: str, lo: float = -math.inf, hi: float = math.inf,
+               unit: str = "") -> float:
+        value = self.scalar(node, where)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise self.fail(node, where, f"expected a number{' in ' + unit if unit else ''}, "
+                                         f"found {value!r}")
+        if not lo <= value <= hi:
+            raise self.fail(node, where, f"expected a number between {lo:g} and {hi:g}"
+                                         f"{' ' + unit if unit else ''}, found {value!r}")
+        return float(value)
+
+    def integer(self, node: Node, where: str, lo: int, hi: int) -> int:
+        value = self.scalar(node, where)
+        if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+            raise self.fail(node, where, f"expected a whole number from {lo} to {hi}, found {value!r}")
+        return value
+
+    def string(self, node: Node, where: str) -> str:
+        value = self.scalar(node, where)
+        if not isinstance(value, str) or not value:
+            raise self.fail(node, where, f"expected a name, found {value!r}")
+        return value
+
+    def boolean(self, node: Node, where: str) -> bool:
+        value = self.scalar(node, where)
+        if not isinstance(value, bool):
+            raise self.fail(node, where, f"expected true or false, found {value!r}")
+        return value
+
+    def sequence(self, node: Node, where: str) -> list[Node]:
+        if not isinstance(node, yaml.SequenceNode):
+            raise self.fail(node, where, f"expected a list, found {self._kind(node)}")
+        return list(node.value)
+
+    def vector(self, node: Node, where: str, size: int, unit: str) -> tuple[float, ...]:
+        items = self.sequence(node, where)
+        if len(items) != size:
+            raise self.fail(node, where, f"expected a list of {size} numbers ({unit}), found "
+                                         f"{len(items)}")
+        return tuple(self.number(v, f"{where}[{i}]", unit=unit) for i, v in enumerate(items))
+
+
+GROUND_KEYS: dict[str, dict[str, bool]] = {
+    "plane": {"type": True, "z_m": False},
+    "slope": {"type": True, "grade_x": False, "grade_y": False, "z_m": False},
+    "stairs": {"type": True, "rise_m": False, "run_m": False, "steps": False, "start_m": False,
+               "heading_deg": False, "z_m": False},
+    "bumps": {"type": True, "amplitude_m": False, "wavelength_x_m": False,
+              "wavelength_y_m": False, "z_m": False},
+    "grid": {"type": True, "cell_m": True, "origin_m": False, "heights_m": True},
+    "combined": {"type": True, "parts": True},
+}
+
+
+def _ground(r: _Reader, node: Node, where: str) -> Ground:
+    if not isinstance(node, yaml.MappingNode):
+        raise r.fail(node, where, "expected a mapping with 'type:' (plane, slope, stairs, bumps, "
+                                  "grid, combined)")
+    type_node = next((v for k, v in node.value if k.value == "type"), None)
+    if type_node is None:
+        raise r.fail(node, where, "missing required key 'type' (plane, slope, stairs, bumps, grid, "
+                                  "combined)")
+    kind = r.string(type_node, f"{where}.type")
+    if kind not in GROUND_KEYS:
+        close = difflib.get_close_matches(kind, list(GROUND_KEYS), n=1)
+        hint = f"; did you mean {close[0]!r}?" if close else ""
+        raise r.fail(type_node, f"{where}.type", f"unknown ground {kind!r}{hint} (expected one of "
+                                                 f"{', '.join(GROUND_KEYS)})")
+    keys = r.mapping(node, where, GROUND_KEYS[kind])
+
+    def num(key: str, default: float, lo: float = -1e3, hi: float = 1e3, unit: str = "") -> float:
+        return r.number(keys[key], f"{where}.{key}", lo, hi, unit) if key in keys else default
+
+    if kind == "plane":
+        return Plane(num("z_m", 0.0, unit="m"))
+    if kind == "slope":
+        return Slope(num("grade_x", 0.0, -2, 2), num("grade_y", 0.0, -2, 2), num("z_m", 0.0, unit="m"))
+    if kind == "stairs":
+        steps = r.integer(keys["steps"], f"{where}.steps", 0, 10000) if "steps" in keys else 8
+        return Stairs(num("rise_m", 0.15, -1, 1, "m"), num("run_m", 0.3, 0.05, 10, "m"), steps,
+                      num("start_m", 1.0, unit="m"), num("heading_deg", 0.0, -360, 360, "degrees"),
+                      num("z_m", 0.0, unit="m"))
+    if kind == "bumps":
+        return Bumps(num("amplitude_m", 0.05, 0, 5, "m"), num("wavelength_x_m", 2.0, 0.05, 1e3, "m"),
+                     num("wavelength_y_m", 2.0, 0.05, 1e3, "m"), num("z_m", 0.0, unit="m"))
+    if kind == "grid":
+        rows = r.sequence(keys["heights_m"], f"{where}.heights_m")
+        values = [[r.number(v, f"{where}.heights_m[{i}][{j}]", unit="m")
+                   for j, v in enumerate(r.sequence(row, f"{where}.heights_m[{i}]"))]
+                  for i, row in enumerate(rows)]
+        widths = {len(v) for v in values}
+        if len(values) < 2 or len(widths) != 1 or widths.pop() < 2:
+            raise r.fail(keys["heights_m"], f"{where}.heights_m", "expected a rectangular grid of at "
+                         f"least 2 x 2 heights (rows along y), found row lengths {[len(v) for v in values]}")
+        origin = r.vector(keys["origin_m"], f"{where}.origin_m", 2, "m") if "origin_m" in keys else (0.0, 0.0)
+        return HeightGrid(np.array(values), r.number(keys["cell_m"], f"{where}.cell_m", 1e-3, 1e3, "m"),
+                          origin[0], origin[1])
+    parts = r.sequence(keys["parts"], f"{where}.parts")
+    if not parts:
+        raise r.fail(keys["parts"], f"{where}.parts", "expected at least one ground")
+    return Combined(tuple(_ground(r, p, f"{where}.parts[{i}]") for i, p in enumerate(parts)))
+
+
+def _morphology(r: _Reader, node: Node, where: str) -> Morphology:
+    if isinstance(node, yaml.ScalarNode):
+        name = r.string(node, where)
+        if name not in PRESET_SPECS:
+            close = difflib.get_close_matches(name, list(PRESET_SPECS), n=1)
+            hint = f"; did you mean {close[0]!r}?" if close else ""
+            raise r.fail(node, where, f"unknown morphology preset {name!r}{hint} (presets: "
+                                      f"{', '.join(PRESET_SPECS)}, or a mapping with stature_m / "
+                                      "lengths_m)")
+        return Morphology.preset(name)
+    keys = r.mapping(node, where, {"stature_m": False, "sex": False, "proportions": False,
+                                   "leg_scale": False, "mass_kg": False, "lengths_m": False,
+                                   "preset": False})
+    if "preset" in keys:
+        base = _morphology(r, keys["preset"], f"{where}.preset")
+    else:
+        sex = r.string(keys["sex"], f"{where}.sex") if "sex" in keys else "male"
+        if sex not in ("male", "female"):
+            raise r.fail(keys["sex"], f"{where}.sex", f"expected 'male' or 'female', found {sex!r}")
+        proportions = r.string(keys["proportions"], f"{where}.proportions") if "proportions" in keys else "adult"
+        if proportions not in ("adult", "child"):
+            raise r.fail(keys["proportions"], f"{where}.proportions",
+                         f"expected 'adult' or 'child', found {proportions!r}")
+        base = Morphology.from_stature(
+            r.number(keys["stature_m"], f"{where}.stature_m", 0.5, 2.6, "m") if "stature_m" in keys else 1.75,
+            sex=sex, proportions=proportions,
+            leg_scale=r.number(keys["leg_scale"], f"{where}.leg_scale", 0.6, 1.4) if "leg_scale" in keys else 1.0,
+            mass_kg=r.number(keys["mass_kg"], f"{where}.mass_kg", 5, 400, "kg") if "mass_kg" in keys else None,
+            name=where)
+    if "lengths_m" not in keys:
+        return base
+    from .skeleton import LENGTH_INDEX, LENGTHS
+
+    lengths = base.lengths.copy()
+    bases = sorted({n[:-2] if n.endswith(("_l", "_r")) else n for n in LENGTHS})
+    seg_nodes = r.mapping(keys["lengths_m"], f"{where}.lengths_m",
+                          {k: False for k in list(LENGTHS) + bases})
+    for seg, value_node in seg_nodes.items():
+        value = r.number(value_node, f"{where}.lengths_m.{seg}", 0.001, 2.0, "m")
+        for n in ([seg] if seg in LENGTH_INDEX else [f"{seg}_l", f"{seg}_r"]):
+            lengths[LENGTH_INDEX[n]] = value
+    return base.with_lengths(lengths)
+
+
+def _load_motion(r: _Reader, node: Node, where: str, base_dir: Path) -> NormalizedMotion:
+    from .importing import import_bvh
+
+    rel = r.string(node, where)
+    path = (base_dir / rel) if not Path(rel).is_absolute() else Path(rel)
+    if not path.is_file():
+        raise r.fail(node, where, f"motion file {rel!r} not found (looked at {path})")
+    try:
+        if path.suffix.lower() == ".nmo":
+            return load_nmo(path)
+        if path.suffix.lower() == ".bvh":
+            return import_bvh(path)
+    except EcsAnimError as exc:
+        raise r.fail(node, where, f"cannot load motion: {exc}") from None
+    raise r.fail(node, where, f"expected a .bvh or .nmo file, found {rel!r}")
+
+
+CHARACTER_KEYS = {"name": True, "morphology": True, "motion": True, "position_m": False,
+                  "heading_deg": False, "speed": False, "loop": False, "start_s": False,
+                  "then": False, "team": False}
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario; motions are loaded (BVH imported) here, once."""
+    path = Path(path)
+    r = _Reader(str(path))
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise InputError(path, f"cannot read scenario: {exc.strerror or exc}") from None
+    try:
+        root = yaml.compose(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        raise InputError(path, f"not valid YAML: {getattr(exc, 'problem', exc)}",
+                         None if mark is None else mark.line + 1) from None
+    if root is None:
+        raise InputError(path, "the scenario is empty", 1)
+    top = r.mapping(root, "", {"duration_s": True, "fps": False, "motions": True,
+                               "ground": False, "characters": True, "description": False})
+    duration = r.number(top["duration_s"], "duration_s", 0.0, 86400.0, "s")
+    fps = r.number(top["fps"], "fps", 1.0, 1000.0, "Hz") if "fps" in top else 30.0
+    motion_nodes = top["motions"]
+    if not isinstance(motion_nodes, yaml.MappingNode) or not motion_nodes.value:
+        raise r.fail(motion_nodes, "motions", "expected a mapping name: file (.bvh or .nmo)")
+    motions: dict[str, NormalizedMotion] = {}
+    for key_node, value in motion_nodes.value:
+        name = str(key_node.value)
+        motions[name] = _load_motion(r, value, f"motions.{name}", path.parent)
+    ground = _ground(r, top["ground"], "ground") if "ground" in top else Plane()
+    characters: list[CharacterSpec] = []
+    names: set[str] = set()
+    for i, node in enumerate(r.sequence(top["characters"], "characters")):
+        where = f"characters[{i}]"
+        keys = r.mapping(node, where, CHARACTER_KEYS)
+        name = r.string(keys["name"], f"{where}.name")
+        if name in names:
+            raise r.fail(keys["name"], f"{where}.name", f"another character is already named {name!r}")
+        names.add(name)
+
+        def clip(n: Node, w: str) -> str:
+            c = r.string(n, w)
+            if c not in motions:
+                close = difflib.get_close_matches(c, list(motions), n=1)
+                hint = f"; did you mean {close[0]!r}?" if close else ""
+                raise r.fail(n, w, f"unknown motion {c!r}{hint} (motions: {', '.join(motions)})")
+            return c
+
+        queue = []
+        if "then" in keys:
+            for j, q in enumerate(r.sequence(keys["then"], f"{where}.then")):
+                qw = f"{where}.then[{j}]"
+                qk = r.mapping(q, qw, {"motion": True, "crossfade_s": False, "loop": False})
+                queue.append(QueuedClip(
+                    clip(qk["motion"], f"{qw}.motion"),
+                    r.number(qk["crossfade_s"], f"{qw}.crossfade_s", 0.0, 10.0, "s") if "crossfade_s" in qk else 0.3,
+                    r.boolean(qk["loop"], f"{qw}.loop") if "loop" in qk else False))
+        player = MotionPlayer(
+            clip(keys["motion"], f"{where}.motion"),
+            speed=r.number(keys["speed"], f"{where}.speed", 0.0, 10.0) if "speed" in keys else 1.0,
+            loop=r.boolean(keys["loop"], f"{where}.loop") if "loop" in keys else True,
+            start_s=r.number(keys["start_s"], f"{where}.start_s", 0.0, 1e6, "s") if "start_s" in keys else 0.0,
+            queue=tuple(queue))
+        position = r.vector(keys["position_m"], f"{where}.position_m", 2, "m") if "position_m" in keys else (0.0, 0.0)
+        heading = r.number(keys["heading_deg"], f"{where}.heading_deg", -360, 360, "degrees") \
+            if "heading_deg" in keys else 0.0
+        characters.append(CharacterSpec(
+            name, _morphology(r, keys["morphology"], f"{where}.morphology"), player,
+            Placement((position[0], position[1]), math.radians(heading)),
+            r.string(keys["team"], f"{where}.team") if "team" in keys else ""))
+    if not characters:
+        raise r.fail(top["characters"], "characters", "expected at least one character")
+    return Scenario(str(path), duration, fps, motions, ground, characters)
+
+
+def build_simulation(scenario: Scenario, window: bool = False):  # type: ignore[no-untyped-def]
+    """A :class:`~ecs_anim.simulation.Simulation` with the scenario's characters spawned."""
+    from .simulation import Simulation
+
+    sim = Simulation(scenario.motions, scenario.ground, scenario.fps, window=window)
+    for c in scenario.characters:
+        sim.spawn(c.name, c.morphology, c.player, c.placement, c.team)
+    return sim
