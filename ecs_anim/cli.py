@@ -173,9 +173,70 @@ def default_bench_files() -> list[Path]:
     return shipped_motion_paths()
 
 
+def _pipeline_timing(n: int, seconds: float) -> dict[str, float]:
+    """ms per tick per system for ``n`` characters walking on bumps, after a warm-up."""
+    from .components import MotionPlayer, Placement
+    from .ground import Bumps
+    from .importing import import_bvh
+    from .library import MOTIONS_DIR
+    from .morphology import PRESET_SPECS, Morphology
+    from .simulation import Simulation
+
+    walk = import_bvh(MOTIONS_DIR / "walk.bvh")
+    sim = Simulation({"walk": walk}, Bumps(0.04, 2.5, 3.0), fps=30.0)
+    rng = np.random.default_rng(0)
+    presets = list(PRESET_SPECS)
+    side = int(np.ceil(np.sqrt(n)))
+    for i in range(n):
+        body = Morphology.preset(presets[i % len(presets)]) if i % 2 == 0 else \
+            Morphology.from_stature(float(rng.uniform(1.1, 2.05)))
+        sim.spawn(f"c{i}", body, MotionPlayer("walk", start_s=float(rng.uniform(0, 4))),
+                  Placement((1.5 * (i // side), 1.5 * (i % side)), float(rng.uniform(-0.3, 0.3))))
+    for _ in range(10):
+        sim.step()
+    before = sim.system_seconds()
+    ticks = max(1, int(round(seconds * 30.0)))
+    for _ in range(ticks):
+        sim.step()
+    after = sim.system_seconds()
+    sim.close()
+    return {k: (after[k] - before[k]) / ticks * 1e3 for k in after}
+
+
+def cmd_bench_pipeline(args: argparse.Namespace) -> int:
+    n = args.characters
+    small = max(1, n // 4)
+    timing_small = _pipeline_timing(small, args.seconds)
+    timing = _pipeline_timing(n, args.seconds)
+    total, total_small = sum(timing.values()), sum(timing_small.values())
+    # Linear model t(N) = fixed + per_character * N from the two runs.
+    per_char = max((total - total_small) / max(n - small, 1), 1e-9)
+    fixed = max(total - per_char * n, 0.0)
+    budget = 1000.0 / 30.0
+    max_chars = int(max((budget - fixed) / per_char, 0))
+    result = {
+        "characters": n,
+        "ms_per_tick": {k: round(v, 3) for k, v in timing.items()},
+        "ms_per_tick_total": round(total, 3),
+        "ms_per_character": round(per_char, 5),
+        "ms_fixed_per_tick": round(fixed, 3),
+        "max_characters_at_30hz": max_chars,
+    }
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    print(f"bench: {n} characters walking on bumps, {args.seconds:g} s simulated at 30 Hz, one core")
+    for k, v in timing.items():
+        print(f"  {k:16s} {v:8.2f} ms/tick")
+    print(f"  {'total':16s} {total:8.2f} ms/tick  ({total_small:.2f} ms with {small})")
+    print(f"  => about {max_chars} characters hold 30 Hz (33.3 ms/tick): "
+          f"{per_char * 1e3:.1f} us per character + {fixed:.2f} ms per tick")
+    return 0
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
-    if args.what != "import":
-        raise EcsAnimError(f"bench {args.what}: only 'import' exists so far")
+    if args.what == "pipeline":
+        return cmd_bench_pipeline(args)
     from .bvh import forward_kinematics, read_bvh
     from .importing import canonical_clip, normalize_clip
 
@@ -332,10 +393,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
     p.set_defaults(func=cmd_run)
 
-    p = sub.add_parser("bench", help="print performance figures")
-    p.add_argument("what", choices=["import"], help="what to measure")
-    p.add_argument("files", nargs="*", help="clips (default: ../shared/mocap, else the shipped "
-                   "motions); the largest is measured")
+    p = sub.add_parser("bench", help="print performance figures (default: the pipeline)")
+    p.add_argument("what", nargs="?", choices=["pipeline", "import"], default="pipeline",
+                   help="pipeline: characters per tick; import: parse+FK+encode frames/s")
+    p.add_argument("files", nargs="*", help="import: clips (default: ../shared/mocap, else the "
+                   "shipped motions); the largest is measured")
+    p.add_argument("--characters", type=positive_int, default=400, metavar="N",
+                   help="pipeline: characters (default %(default)s)")
+    p.add_argument("--seconds", type=positive_float, default=3.0, metavar="S",
+                   help="pipeline: simulated seconds to time (default %(default)s)")
     p.add_argument("--repeat", type=positive_int, default=3, help="runs; the best is kept")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_bench)

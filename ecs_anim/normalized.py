@@ -316,8 +316,9 @@ def _curve_at(coefficients: F64, t: F64) -> tuple[F64, F64]:
     ``coefficients`` from :func:`_span_coefficients`, ``t`` (...) -> two (..., 3) arrays.
     """
     span = np.minimum(np.floor(np.maximum(t, 0.0)), 3.0).astype(np.int64)
-    u = (t - np.minimum(span, 3))[..., None]
-    c = np.take_along_axis(coefficients, span[..., None, None, None], axis=-3)[..., 0, :, :]
+    u = (t - span)[..., None]
+    flat = coefficients.reshape((-1,) + coefficients.shape[-3:])
+    c = flat[np.arange(flat.shape[0]), span.reshape(-1)].reshape(t.shape + (4, 3))
     point = c[..., 0, :] + u * (c[..., 1, :] + u * (c[..., 2, :] + u * c[..., 3, :]))
     tangent = c[..., 1, :] + u * (2 * c[..., 2, :] + 3 * u * c[..., 3, :])
     return point, tangent
@@ -343,15 +344,18 @@ def spine_joints(control: F64, segment_lengths: F64, iterations: int = 6) -> F64
     for k in range(segment_lengths.shape[-1]):
         length = segment_lengths[..., k]
         t = prev_t + length / np.maximum(chords[..., min(k, 2)], 1e-9)  # exact if they match
+        point, tangent = _curve_at(coefficients, t)
         for _ in range(iterations):
-            point, tangent = _curve_at(coefficients, t)
             d = point - prev_p
             g = np.sum(d * d, axis=-1) - length**2
+            if np.all(np.abs(g) <= 1e-13 * length**2):  # converged (quadratically) everywhere
+                break
             slope = 2.0 * np.sum(d * tangent, axis=-1)
             safe = np.abs(slope) > 1e-12
             t = np.clip(t - np.where(safe, g / np.where(safe, slope, 1.0), 0.0), prev_t + 1e-6, 9.0)
+            point, tangent = _curve_at(coefficients, t)
         prev_t = t
-        prev_p = _curve_at(coefficients, t)[0]
+        prev_p = point
         out.append(prev_p)
     return np.stack(out, axis=-2)
 
