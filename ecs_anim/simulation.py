@@ -160,6 +160,8 @@ class Simulation:
         old_xy = np.array([[c, -s], [s, c]]) @ (old.root_position[0, :2] * leg) + st.placement_xy[row]
         new_heading = _wrap(old.root_heading[0] + heading - new.root_heading[0])
         c, s = np.cos(new_heading), np.sin(new_heading)
+        st.fade_placement_xy[row] = st.placement_xy[row]
+        st.fade_placement_heading[row] = st.placement_heading[row]
         st.placement_heading[row] = new_heading
         st.placement_xy[row] = old_xy - np.array([[c, -s], [s, c]]) @ (new.root_position[0, :2] * leg)
         st.fade_clip[row], st.fade_time_s[row], st.fade_loop[row] = st.clip[row], st.clip_time_s[row], st.loop[row]

@@ -36,7 +36,8 @@ class CharacterStore:
     clip (n,) clip index in the bank; clip_time_s (n,); speed (n,); loop (n,) bool;
     fade_clip, fade_time_s, fade_loop (n,) the clip being faded out, fade_s (n,) its crossfade
     duration (0: none), fade_elapsed_s (n,); queue: per row, clips still to play;
-    placement_xy (n, 2) metres and placement_heading (n,) of each motion origin;
+    placement_xy (n, 2) metres and placement_heading (n,) of each motion origin (fade_placement_*
+    the same for the clip being faded out);
     poses: this tick's normalized poses (n,); contact_weight (n, 2) foot-contact activation;
     scaled: the pose decoded on each body before ground adaptation;
     footprint (n, 2, 3) locked ankle positions, locked (n, 2) bool; ground_ref (n,) metres the
@@ -58,6 +59,8 @@ class CharacterStore:
     fade_elapsed_s: F64 = field(default_factory=lambda: np.zeros(0))
     placement_xy: F64 = field(default_factory=lambda: np.zeros((0, 2)))
     placement_heading: F64 = field(default_factory=lambda: np.zeros(0))
+    fade_placement_xy: F64 = field(default_factory=lambda: np.zeros((0, 2)))
+    fade_placement_heading: F64 = field(default_factory=lambda: np.zeros(0))
     contact_weight: F64 = field(default_factory=lambda: np.zeros((0, 2)))
     footprint: F64 = field(default_factory=lambda: np.zeros((0, 2, 3)))
     locked: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, 2), bool))

@@ -1,0 +1,175 @@
+"""The real-time pipeline: schedule, isolation, terrain walks on every body, changes while playing,
+scenario errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import esper
+import numpy as np
+import pytest
+
+from conftest import MOCAP_DIR, MOTIONS_DIR, require_mocap
+from ecs_anim.cli import main
+from ecs_anim.components import Body, MotionPlayer, Placement, QueuedClip
+from ecs_anim.errors import InputError
+from ecs_anim.ground import Bumps, Combined, Stairs
+from ecs_anim.importing import import_bvh
+from ecs_anim.metrics import MetricsRecorder
+from ecs_anim.morphology import Morphology, bone_lengths_of
+from ecs_anim.scenario import build_simulation, load_scenario
+from ecs_anim.simulation import Simulation
+from ecs_anim.skeleton import BONE_JOINTS
+from ecs_anim.systems import SCHEDULE
+
+REPO = Path(__file__).resolve().parents[1]
+IS_BONE = np.array([a >= 0 for a, _ in BONE_JOINTS])
+
+
+@pytest.fixture(scope="module")
+def walk():
+    return import_bvh(MOTIONS_DIR / "walk.bvh")
+
+
+def test_schedule_is_declared_once_in_paper_order(walk):
+    assert [c.__name__ for c in SCHEDULE] == [
+        "MotionPlayback", "MorphologyAdapt", "GroundAdapt", "ConstraintSolve", "COMControl",
+        "PostureConvert", "Render"]
+    sim = Simulation({"walk": walk}, window=True)
+    with sim._active():
+        order = [type(p).__name__ for p in esper._processors]  # esper keeps them sorted
+    assert order == [c.__name__ for c in SCHEDULE]
+    sim.close()
+
+
+def test_two_simulations_do_not_see_each_other(walk):
+    a = Simulation({"walk": walk})
+    b = Simulation({"walk": walk})
+    for i in range(2):
+        a.spawn(f"a{i}", Morphology.preset("child"), MotionPlayer("walk"))
+    for i in range(3):
+        b.spawn(f"b{i}", Morphology.preset("tall"), MotionPlayer("walk"))
+    a.step()
+    with a._active():
+        assert len(esper.get_component(Body)) == 2
+    with b._active():
+        assert len(esper.get_component(Body)) == 3
+    assert b.tick == 0 and not np.any(b.store.positions)  # stepping a did not touch b
+    assert a.names() == ["a0", "a1"] and b.names() == ["b0", "b1", "b2"]
+    a.close()
+    b.close()
+    assert a.world not in esper.list_worlds()
+
+
+def _run(sim: Simulation, seconds: float) -> dict:
+    metrics = MetricsRecorder(sim)
+    for _ in range(int(round(seconds * sim.fps))):
+        sim.step()
+        metrics.record()
+    return metrics.report()
+
+
+def test_terrain_walk_scenario_holds_feet_ground_and_bones():
+    scenario = load_scenario(REPO / "scenarios" / "terrain_walk.yaml")
+    statures = sorted(round(c.morphology.stature, 2) for c in scenario.characters)
+    assert {1.2, 1.75, 2.0} <= set(statures)
+    report = _run(build_simulation(scenario), scenario.duration_s)
+    walkers = [c for c in report["characters"] if c["stride_per_leg_length"] is not None]
+    assert len(walkers) >= 3
+    for c in report["characters"]:
+        assert c["foot_sliding_mm_per_frame"]["max"] < 1.0, c
+        assert c["ground_penetration_mm_max"] < 1.0, c
+        assert c["bone_length_error_m_max"] < 1e-6, c
+        assert not c["frozen"]
+    ratios = np.array([c["stride_per_leg_length"] for c in walkers])
+    assert ratios.max() / ratios.min() < 1.05  # step length scales with leg length
+    strides = np.array([c["stride_m_median"] for c in walkers])
+    assert strides.max() / strides.min() > 1.5  # ... and so differs between the bodies
+
+
+def test_real_captured_walk_on_stairs():
+    require_mocap()
+    motion = import_bvh(MOCAP_DIR / "bandai_walk.bvh")
+    path = motion.poses.root_position[-1, :2] - motion.poses.root_position[0, :2]
+    heading_deg = float(np.degrees(np.arctan2(path[1], path[0])))  # stairs across the walk
+    ground = Combined((Stairs(rise_m=0.14, run_m=0.32, steps=8, start_m=1.5,
+                              heading_deg=heading_deg), Bumps(0.02, 2.0, 2.5)))
+    sim = Simulation({"walk": motion}, ground)
+    for i, preset in enumerate(["child", "adult_female", "tall"]):
+        across = np.radians(heading_deg + 90.0)
+        sim.spawn(preset, Morphology.preset(preset), MotionPlayer("walk", loop=False),
+                  Placement((1.2 * i * np.cos(across), 1.2 * i * np.sin(across))))
+    report = _run(sim, motion.duration_s + 0.5)  # past the end: holds the last pose
+    for c in report["characters"]:
+        assert c["foot_sliding_mm_per_frame"]["max"] < 1.0, c
+        assert c["ground_penetration_mm_max"] < 1.0, c
+        assert c["bone_length_error_m_max"] < 1e-6, c
+    pelvis = sim.store.positions[:, 0]
+    under = ground.height(pelvis[:, :2])
+    assert np.all(under > 2 * 0.14)  # everyone ended up at least two steps up
+    standing = sim.leg_length() + sim.store.lengths[:, 8]
+    assert np.all((pelvis[:, 2] - under > 0.8 * standing) & (pelvis[:, 2] - under < 1.1 * standing))
+
+
+def test_body_replaced_while_playing(walk):
+    sim = Simulation({"walk": walk})
+    e = sim.spawn("grows", Morphology.preset("child"), MotionPlayer("walk"))
+    for _ in range(10):
+        sim.step()
+    sim.set_body(e, Morphology.preset("tall"))
+    sim.step()
+    lengths = bone_lengths_of(sim.store.positions)[0]
+    np.testing.assert_allclose(lengths[IS_BONE], Morphology.preset("tall").lengths[IS_BONE], atol=1e-9)
+
+
+def test_queued_clip_crossfades_without_a_jump(walk):
+    idle = import_bvh(MOTIONS_DIR / "idle.bvh")
+    sim = Simulation({"walk": walk, "idle": idle})
+    sim.spawn("a", Morphology.preset("adult_male"),
+              MotionPlayer("walk", loop=False, queue=(QueuedClip("idle", 0.5, loop=True),)))
+    pelvis = []
+    for _ in range(int(7 * 30)):
+        sim.step()
+        pelvis.append(sim.store.positions[0, 0].copy())
+    step = np.linalg.norm(np.diff(np.array(pelvis), axis=0), axis=-1) * 30
+    assert sim.store.clip[0] == sim.bank.index("idle")
+    assert step.max() < 2.0  # m/s: never a teleport at the switch
+    assert step[-30:].max() < 0.3  # standing at rest at the end
+
+
+BAD = Path(__file__).parent / "data" / "bad_scenarios"
+BAD_CASES = [
+    ("unknown_preset.yaml", 6, "characters[0].morphology: unknown morphology preset 'chld'; did you mean 'child'?"),
+    ("missing_motion.yaml", 3, "motions.walk: motion file '../../../scenarios/motions/nope.bvh' not found"),
+    ("grid_wrong_shape.yaml", 8, "ground.heights_m: expected a rectangular grid"),
+    ("nan_placement.yaml", 7, "characters[0].position_m[1]: expected a number in m, found nan"),
+    ("typo_key.yaml", 7, "characters[0].motoin: unknown key; did you mean 'motion'?"),
+    ("unknown_motion.yaml", 7, "characters[0].motion: unknown motion 'wlak'; did you mean 'walk'?"),
+    ("unknown_ground.yaml", 4, "ground.type: unknown ground 'stair'; did you mean 'stairs'?"),
+    ("bad_yaml.yaml", 3, "not valid YAML"),
+]
+
+
+@pytest.mark.parametrize("name,line,fragment", BAD_CASES, ids=[c[0] for c in BAD_CASES])
+def test_bad_scenarios_give_file_line_and_key(name, line, fragment, capsys):
+    path = BAD / name
+    with pytest.raises(InputError) as err:
+        load_scenario(path)
+    message = str(err.value)
+    assert message.startswith(f"{path}:{line}: "), message
+    assert fragment in message and "\n" not in message
+    assert main(["run", str(path)]) == 1
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def test_run_exports_and_refuses_to_overwrite(tmp_path, capsys):
+    scenario = REPO / "scenarios" / "terrain_walk.yaml"
+    out = tmp_path / "out"
+    assert main(["run", str(scenario), "--seconds", "1", "--export", str(out),
+                 "--report", str(tmp_path / "r.json")]) == 0
+    child = np.load(out / "child.npz")
+    assert child["positions"].shape == (30, 22, 3) and child["contacts"].shape == (30, 2)
+    before = (out / "child.bvh").read_bytes()
+    assert main(["run", str(scenario), "--seconds", "1", "--export", str(out)]) == 1
+    assert "--force" in capsys.readouterr().err
+    assert (out / "child.bvh").read_bytes() == before
