@@ -78,8 +78,8 @@ class NormalizedPose:
 @dataclass(frozen=True)
 class Posture:
     """This tick's world posture: ``Simulation.store.positions[row]`` (N_JOINTS, 3) metres,
-    world Z up, and ``Simulation.store.local_rotations[row]`` (n_export_joints, 4) quaternions of
-    the BVH export skeleton (:data:`ecs_anim.exporting.EXPORT_NAMES`)."""
+    world Z up, and ``Simulation.store.local_rotations[row]`` (n_export_joints, 3, 3) local
+    rotation matrices (BVH axes) of the export skeleton (:data:`ecs_anim.exporting.EXPORT_NAMES`)."""
 
     row: int
 

@@ -286,7 +286,6 @@ def cmd_run(args: argparse.Namespace) -> int:
     from .exporting import bvh_from_rotations, write_npz
     from .files import write_atomic
     from .metrics import MetricsRecorder
-    from .rotations import matrix_from_quat
     from .scenario import build_simulation, load_scenario
 
     scenario = load_scenario(args.scenario)
@@ -319,7 +318,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         rot = np.stack(rotations, axis=1)
         con = np.stack(contacts, axis=1)
         for i, c in enumerate(scenario.characters):
-            text = bvh_from_rotations(c.morphology, pos[i, :, 0], matrix_from_quat(rot[i]), scenario.fps)
+            text = bvh_from_rotations(c.morphology, pos[i, :, 0], rot[i], scenario.fps)
             write_atomic(outdir / f"{c.name}.bvh", args.force, lambda f: f.write(text.encode()))
             write_npz(outdir / f"{c.name}.npz", pos[i], scenario.fps, con[i], args.force)
     if args.report:

@@ -130,55 +130,86 @@ def _offset(spec: tuple[str, Vec3, float], morph: Morphology) -> F64:
 def _swing_from(parent_frame: F64, rest_axis: F64, direction: F64) -> F64:
     """The parent's frame turned by the smallest rotation taking its ``rest_axis`` onto
     ``direction``: a bone's orientation with no twist of its own. (..., 3, 3)."""
-    current = parent_frame @ rest_axis
+    current = np.einsum("...ij,...j->...i", parent_frame, rest_axis)
     return rotation_between(current, direction) @ parent_frame
 
 
-def export_rotations(pose: DecodedPose) -> dict[str, F64]:
+_SIDE_SIGN = np.array([[1.0], [-1.0]])  # (2, 1): left, right
+_REST_HIPS = np.array([_rest_hip("l"), _rest_hip("r")])  # (2, 3)
+_E = {n: i for i, n in enumerate(EXPORT_NAMES)}
+
+
+def _sided(name: str) -> list[int]:
+    return [_E[f"{name}_l"], _E[f"{name}_r"]]
+
+
+def export_rotations(pose: DecodedPose) -> F64:
     """World orientation of every export joint, mapping its rest (body-axes) offsets onto the
-    posed bones. Each value (n_frames, 3, 3)."""
+    posed bones; both sides of each limb are done in one batched call.
+
+    Returns (*B, len(EXPORT_NAMES), 3, 3) joint2world, in :data:`EXPORT_NAMES` order.
+    """
     p = pose.positions
     e = np.eye(3)
-    R: dict[str, F64] = {"pelvis": pose.pelvis2world}
-    for k, s in enumerate("lr"):
-        sign = _side(s)
-        leg_normal = pose.leg2world[..., k, :, 0]  # half-plane normal = knee hinge axis
-        hip, knee, ankle, toe = (p[..., J[f"{n}_{s}"], :] for n in ("hip", "knee", "ankle", "toe"))
-        R[f"pelvis_{s}"] = _swing_from(pose.pelvis2world, np.array(_rest_hip(s)),
-                                       hip - p[..., J["pelvis"], :])
-        R[f"hip_{s}"] = frame_from_axes(hip - knee, leg_normal, 2, 1)
-        R[f"knee_{s}"] = frame_from_axes(knee - ankle, leg_normal, 2, 1)
-        R[f"ankle_{s}"] = frame_from_axes(toe - ankle, leg_normal, 0, 1,
-                                          fallback_secondary=pose.pelvis2world[..., :, 1])
-        R[f"toe_{s}"] = R[f"ankle_{s}"]
-        arm_normal = pose.arm2world[..., k, :, 0]  # elbow hinge axis
-        sh, el, wr, hd = (p[..., J[f"{n}_{s}"], :] for n in ("shoulder", "elbow", "wrist", "hand"))
-        R[f"clavicle_{s}"] = _swing_from(pose.thorax2world, sign * e[1], sh - p[..., J["neck"], :])
-        R[f"shoulder_{s}"] = frame_from_axes(sign * (el - sh), -sign * arm_normal, 1, 2)
-        R[f"elbow_{s}"] = frame_from_axes(sign * (wr - el), -sign * arm_normal, 1, 2)
-        R[f"wrist_{s}"] = frame_from_axes(sign * (hd - wr), -sign * arm_normal, 1, 2,
-                                          fallback_secondary=pose.thorax2world[..., :, 0])
-    R["lumbar"] = _swing_from(pose.pelvis2world, e[2], p[..., J["spine_1"], :] - p[..., J["pelvis"], :])
-    R["spine_1"] = _swing_from(R["lumbar"], e[2], p[..., J["spine_2"], :] - p[..., J["spine_1"], :])
-    R["spine_2"] = _swing_from(R["spine_1"], e[2], p[..., J["neck"], :] - p[..., J["spine_2"], :])
-    R["neck"] = pose.thorax2world
-    R["cervical"] = _swing_from(pose.thorax2world, e[2], p[..., J["head"], :] - p[..., J["neck"], :])
-    R["head"] = _swing_from(pose.head2world, e[2], p[..., J["head_top"], :] - p[..., J["head"], :])
-    return R
+    out = np.empty(p.shape[:-2] + (len(EXPORT_NAMES), 3, 3))
+
+    def both(*names: str) -> F64:
+        return p[..., [J[f"{n}_{s}"] for n in names for s in "lr"], :].reshape(
+            p.shape[:-2] + (len(names), 2, 3))
+
+    hip, knee, ankle, toe = np.moveaxis(both("hip", "knee", "ankle", "toe"), -3, 0)
+    sh, el, wr, hd = np.moveaxis(both("shoulder", "elbow", "wrist", "hand"), -3, 0)
+    pelvis2world = pose.pelvis2world[..., None, :, :]
+    thorax2world = pose.thorax2world[..., None, :, :]
+    leg_normal = pose.leg2world[..., :, :, 0]  # half-plane normal = knee hinge axis, (*B, 2, 3)
+    arm_normal = pose.arm2world[..., :, :, 0]  # elbow hinge axis
+    side_y = np.broadcast_to(pose.pelvis2world[..., None, :, 1], leg_normal.shape)
+    side_x = np.broadcast_to(pose.thorax2world[..., None, :, 0], arm_normal.shape)
+    out[..., _E["pelvis"], :, :] = pose.pelvis2world
+    out[..., _sided("pelvis"), :, :] = _swing_from(pelvis2world, _REST_HIPS,
+                                                   hip - p[..., None, J["pelvis"], :])
+    out[..., _sided("hip"), :, :] = frame_from_axes(hip - knee, leg_normal, 2, 1)
+    out[..., _sided("knee"), :, :] = frame_from_axes(knee - ankle, leg_normal, 2, 1)
+    foot = frame_from_axes(toe - ankle, leg_normal, 0, 1, fallback_secondary=side_y)
+    out[..., _sided("ankle"), :, :] = foot
+    out[..., _sided("toe"), :, :] = foot
+    out[..., _sided("clavicle"), :, :] = _swing_from(thorax2world, _SIDE_SIGN * e[1],
+                                                     sh - p[..., None, J["neck"], :])
+    out[..., _sided("shoulder"), :, :] = frame_from_axes(_SIDE_SIGN * (el - sh),
+                                                         -_SIDE_SIGN * arm_normal, 1, 2)
+    out[..., _sided("elbow"), :, :] = frame_from_axes(_SIDE_SIGN * (wr - el),
+                                                      -_SIDE_SIGN * arm_normal, 1, 2)
+    out[..., _sided("wrist"), :, :] = frame_from_axes(_SIDE_SIGN * (hd - wr),
+                                                      -_SIDE_SIGN * arm_normal, 1, 2,
+                                                      fallback_secondary=side_x)
+    lumbar = _swing_from(pose.pelvis2world, e[2], p[..., J["spine_1"], :] - p[..., J["pelvis"], :])
+    spine_1 = _swing_from(lumbar, e[2], p[..., J["spine_2"], :] - p[..., J["spine_1"], :])
+    out[..., _E["lumbar"], :, :] = lumbar
+    out[..., _E["spine_1"], :, :] = spine_1
+    out[..., _E["spine_2"], :, :] = _swing_from(spine_1, e[2],
+                                                p[..., J["neck"], :] - p[..., J["spine_2"], :])
+    out[..., _E["neck"], :, :] = pose.thorax2world
+    out[..., _E["cervical"], :, :] = _swing_from(pose.thorax2world, e[2],
+                                                 p[..., J["head"], :] - p[..., J["neck"], :])
+    out[..., _E["head"], :, :] = _swing_from(pose.head2world, e[2],
+                                             p[..., J["head_top"], :] - p[..., J["head"], :])
+    return out
+
+
+EXPORT_PARENTS = np.array([-1 if j.parent is None else EXPORT_NAMES.index(j.parent)
+                           for j in EXPORT_JOINTS])
 
 
 def local_rotations(pose: DecodedPose) -> F64:
     """Local rotation of every export joint relative to its parent, in BVH axes (Y up), as in
     the exported file's channels. Returns (*B, len(EXPORT_NAMES), 3, 3)."""
-    world_to_bvh = YUP_TO_ZUP.T
-    R = export_rotations(pose)
-    # joint2bvh = world_to_bvh @ joint2world @ bvh_rest2body
-    glob = {n: world_to_bvh @ R[n] @ BODY_TO_BVH_REST.T for n in EXPORT_NAMES}
-    local = []
-    for j in EXPORT_JOINTS:
-        g = glob[j.name]
-        local.append(g if j.parent is None else np.swapaxes(glob[j.parent], -1, -2) @ g)
-    return np.stack(local, axis=-3)
+    world = export_rotations(pose)  # (*B, E, 3, 3) joint2world
+    # joint2bvh = world_to_bvh @ joint2world @ bvh_rest2body, for all joints in one product.
+    glob = YUP_TO_ZUP.T @ world @ BODY_TO_BVH_REST.T
+    parent = glob[..., np.maximum(EXPORT_PARENTS, 0), :, :]
+    local = np.swapaxes(parent, -1, -2) @ glob
+    local[..., EXPORT_PARENTS < 0, :, :] = glob[..., EXPORT_PARENTS < 0, :, :]
+    return local
 
 
 def bvh_from_rotations(morph: Morphology, pelvis_in_world: F64, local: F64, fps: float) -> str:

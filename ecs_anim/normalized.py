@@ -360,6 +360,27 @@ def spine_joints(control: F64, segment_lengths: F64, iterations: int = 6) -> F64
     return np.stack(out, axis=-2)
 
 
+def vertebrae(poses: NormalizedPoses, lengths: F64, count: int) -> F64:
+    """``count`` evenly spaced vertebra joints along each spine (paper §8: the spline "could be
+    subdivided into as many segments as wished"), from the pelvis origin to the neck.
+
+    Each of the ``count`` segments has the same chord length, a ``count``-th of the body's spine
+    length. Returns (*B, count, 3) world positions (the last one is the neck base when the
+    body's spine proportions match the motion's, and close to it otherwise).
+    """
+    if count < 1:
+        raise ValueError(f"count must be >= 1, got {count}")
+    batch = poses.batch_shape
+    base = np.broadcast_to(lengths, batch + (N_LENGTHS,))
+    spine_len = base[..., SPINE_LENGTHS].sum(axis=-1)
+    control = np.concatenate([np.zeros(batch + (1, 3)),
+                              poses.spine_points * spine_len[..., None, None]], axis=-2)
+    local = spine_joints(control, np.repeat((spine_len / count)[..., None], count, axis=-1))
+    pelvis2world = rot_axis(2, poses.root_heading) @ matrix_from_quat(poses.pelvis_local)
+    pelvis = poses.root_position * leg_length(base)[..., None]
+    return pelvis[..., None, :] + _to_world(pelvis2world[..., None, :, :], local)
+
+
 def decode(poses: NormalizedPoses, lengths: F64, use_stretch: bool = False) -> DecodedPose:
     """Joint positions of normalized poses on a body (paper eq. 2 and §8).
 

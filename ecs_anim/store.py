@@ -42,7 +42,7 @@ class CharacterStore:
     scaled: the pose decoded on each body before ground adaptation;
     footprint (n, 2, 3) locked ankle positions, locked (n, 2) bool; ground_ref (n,) metres the
     motion's floor is raised to under the character (smoothed);
-    positions (n, N_JOINTS, 3) and local_rotations (n, n_export, 4): the output posture;
+    positions (n, N_JOINTS, 3) and local_rotations (n, n_export, 3, 3): the output posture;
     frozen (n,) bool: characters whose pose went bad, held at their last good posture.
     """
 
@@ -66,7 +66,7 @@ class CharacterStore:
     locked: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, 2), bool))
     ground_ref: F64 = field(default_factory=lambda: np.zeros(0))
     positions: F64 = field(default_factory=lambda: np.zeros((0, N_JOINTS, 3)))
-    local_rotations: F64 = field(default_factory=lambda: np.zeros((0, 0, 4)))
+    local_rotations: F64 = field(default_factory=lambda: np.zeros((0, 0, 3, 3)))
     frozen: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
     queue_len: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     next_fade_s: F64 = field(default_factory=lambda: np.zeros(0))

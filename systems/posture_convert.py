@@ -1,7 +1,7 @@
 """PostureConvert: rebuild knees, elbows and vertebrae and give the world posture (paper §8).
 
 Reads: store.poses, store.lengths. Writes: store.positions (world joint positions), store.
-local_rotations (the BVH export skeleton's local joint rotations), store.frozen (a character
+local_rotations (the BVH export skeleton's local joint rotation matrices), store.frozen (a character
 whose pose went non-finite keeps its last good posture and is reported once).
 """
 
@@ -11,7 +11,6 @@ import numpy as np
 
 from ecs_anim.exporting import local_rotations
 from ecs_anim.normalized import decode
-from ecs_anim.rotations import quat_from_matrix
 from ecs_anim.system_base import System
 
 
@@ -19,15 +18,14 @@ class PostureConvert(System):
     def run(self, dt: float) -> None:
         st = self.sim.store
         final = decode(st.poses, st.lengths)
-        local = quat_from_matrix(local_rotations(final))
-        good = np.all(np.isfinite(final.positions), axis=(1, 2)) & np.all(np.isfinite(local), axis=(1, 2))
+        local = local_rotations(final)
+        good = np.all(np.isfinite(final.positions), axis=(1, 2)) & np.all(np.isfinite(local), axis=(1, 2, 3))
         newly_bad = ~good & ~st.frozen
         if newly_bad.any():
             self.sim.report_frozen(np.flatnonzero(newly_bad))
         st.frozen |= ~good
         if st.local_rotations.shape != local.shape:
-            st.local_rotations = np.zeros_like(local)
-            st.local_rotations[..., 3] = 1.0
+            st.local_rotations = np.broadcast_to(np.eye(3), local.shape).copy()
         keep = st.frozen[:, None, None]
         st.positions = np.where(keep, st.positions, final.positions)
-        st.local_rotations = np.where(keep, st.local_rotations, local)
+        st.local_rotations = np.where(keep[..., None], st.local_rotations, local)

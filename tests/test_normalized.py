@@ -130,3 +130,19 @@ def test_morphology_yaml(tmp_path):
     path.write_text("stature_m: 1.68\nsex: female\nlengths_m:\n  thigh: 0.43\n  forearm_l: 0.25\n")
     m = load_morphology_yaml(path)
     assert m["thigh_l"] == m["thigh_r"] == 0.43 and m["forearm_l"] == 0.25 and m.sex == "female"
+
+
+def test_any_number_of_vertebrae_along_the_spine(walk):
+    from ecs_anim.normalized import vertebrae
+
+    m = Morphology.preset("adult_male")
+    pos = decode(walk.poses, m.lengths).positions
+    for count in (1, 3, 12):
+        v = vertebrae(walk.poses, m.lengths, count)
+        assert v.shape == (walk.n_frames, count, 3)
+        chain = np.concatenate([pos[:, None, JOINT_INDEX["pelvis"]], v], axis=1)
+        seg = np.linalg.norm(np.diff(chain, axis=1), axis=-1)
+        total = m["spine_lower"] + m["spine_middle"] + m["spine_upper"]
+        np.testing.assert_allclose(seg, total / count, atol=1e-9)
+        # The curve ends near the neck base (within 1 cm: chords of a curve vs the spline's).
+        assert np.linalg.norm(v[:, -1] - pos[:, JOINT_INDEX["neck"]], axis=-1).max() < 0.01
