@@ -173,3 +173,21 @@ def test_run_exports_and_refuses_to_overwrite(tmp_path, capsys):
     assert main(["run", str(scenario), "--seconds", "1", "--export", str(out)]) == 1
     assert "--force" in capsys.readouterr().err
     assert (out / "child.bvh").read_bytes() == before
+
+
+def test_one_broken_character_does_not_stop_the_others(walk, capsys):
+    sim = Simulation({"walk": walk})
+    for i in range(3):
+        sim.spawn(f"c{i}", Morphology.preset("adult_male"), MotionPlayer("walk"), Placement((0.0, i)))
+    for _ in range(5):
+        sim.step()
+    good = sim.store.positions[1].copy()
+    sim.store.lengths[1, 2] = np.nan  # corrupt one body behind the API's back
+    for _ in range(5):
+        sim.step()
+    assert sim.store.frozen.tolist() == [False, True, False]
+    np.testing.assert_array_equal(sim.store.positions[1], good)  # holds its last good posture
+    assert np.all(np.isfinite(sim.store.positions))
+    assert not np.array_equal(sim.store.positions[0], sim.store.positions[0] * 0)
+    assert "character 'c1' got a non-finite pose" in capsys.readouterr().err
+    assert len(sim.messages) == 1
