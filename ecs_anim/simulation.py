@@ -48,10 +48,12 @@ class Simulation:
     ground : the ground (default: the plane z = 0).
     fps : simulation ticks per second.
     window : also schedule Render (a viewer sets ``renderer``).
+    vertebrae : if > 0, PostureConvert also resamples each spine into this many vertebra joints
+        (``store.vertebrae``, (n, vertebrae, 3)) for output skeletons with more spine joints.
     """
 
     def __init__(self, motions: dict[str, NormalizedMotion], ground: Ground | None = None,
-                 fps: float = 30.0, window: bool = False):
+                 fps: float = 30.0, window: bool = False, vertebrae: int = 0):
         from .systems import HEADLESS, SCHEDULE
 
         if not motions:
@@ -59,6 +61,9 @@ class Simulation:
         if not (np.isfinite(fps) and fps > 0):
             raise EcsAnimError(f"fps must be a positive number, got {fps}")
         self.world = f"ecs_anim-{next(_counter)}-{id(self):x}"
+        if vertebrae < 0:
+            raise EcsAnimError(f"vertebrae must be >= 0, got {vertebrae}")
+        self.vertebrae = int(vertebrae)
         self.dt = 1.0 / fps
         self.fps = fps
         self.tick = 0

@@ -43,6 +43,7 @@ class CharacterStore:
     footprint (n, 2, 3) locked ankle positions, locked (n, 2) bool; ground_ref (n,) metres the
     motion's floor is raised to under the character (smoothed);
     positions (n, N_JOINTS, 3) and local_rotations (n, n_export, 3, 3): the output posture;
+    vertebrae (n, k, 3) a finer spine when the simulation asks for one;
     frozen (n,) bool: characters whose pose went bad, held at their last good posture.
     """
 
@@ -73,6 +74,7 @@ class CharacterStore:
     queue: list[list[object]] = field(default_factory=list)
     poses: NormalizedPoses = field(default_factory=lambda: _empty_poses(0))
     scaled: DecodedPose | None = None
+    vertebrae: F64 | None = None
 
     @property
     def n(self) -> int:
@@ -82,7 +84,7 @@ class CharacterStore:
         """Append one character; ``values`` give its row for any array field. Load time only."""
         row = self.n
         for f in fields(self):
-            if f.name in ("queue", "poses", "scaled"):
+            if f.name in ("queue", "poses", "scaled", "vertebrae"):
                 continue
             current = getattr(self, f.name)
             fill = np.zeros((1,) + current.shape[1:], dtype=current.dtype)

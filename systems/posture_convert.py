@@ -1,7 +1,8 @@
 """PostureConvert: rebuild knees, elbows and vertebrae and give the world posture (paper §8).
 
 Reads: store.poses, store.lengths. Writes: store.positions (world joint positions), store.
-local_rotations (the BVH export skeleton's local joint rotation matrices), store.frozen (a character
+local_rotations (the BVH export skeleton's local joint rotation matrices), store.vertebrae (if
+the simulation asks for a finer spine), store.frozen (a character
 whose pose went non-finite keeps its last good posture and is reported once).
 """
 
@@ -10,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ecs_anim.exporting import local_rotations
-from ecs_anim.normalized import decode
+from ecs_anim.normalized import decode, vertebrae
 from ecs_anim.system_base import System
 
 
@@ -29,3 +30,7 @@ class PostureConvert(System):
         keep = st.frozen[:, None, None]
         st.positions = np.where(keep, st.positions, final.positions)
         st.local_rotations = np.where(keep[..., None], st.local_rotations, local)
+        if self.sim.vertebrae:
+            spine = vertebrae(st.poses, st.lengths, self.sim.vertebrae)
+            previous = st.vertebrae if st.vertebrae is not None else spine
+            st.vertebrae = np.where(keep, previous, spine)

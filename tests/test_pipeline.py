@@ -191,3 +191,13 @@ def test_one_broken_character_does_not_stop_the_others(walk, capsys):
     assert not np.array_equal(sim.store.positions[0], sim.store.positions[0] * 0)
     assert "character 'c1' got a non-finite pose" in capsys.readouterr().err
     assert len(sim.messages) == 1
+
+
+def test_posture_with_a_finer_spine(walk):
+    sim = Simulation({"walk": walk}, vertebrae=7)
+    sim.spawn("a", Morphology.preset("tall"), MotionPlayer("walk"))
+    sim.step()
+    spine = np.concatenate([sim.store.positions[:, :1], sim.store.vertebrae], axis=1)
+    m = Morphology.preset("tall")
+    total = m["spine_lower"] + m["spine_middle"] + m["spine_upper"]
+    np.testing.assert_allclose(np.linalg.norm(np.diff(spine, axis=1), axis=-1), total / 7, atol=1e-9)
