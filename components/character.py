@@ -1,11 +1,10 @@
 """Per-character components. Data only; each field says its shape, frame and unit.
 
-Specification components (Body, MotionPlayer, Placement, Constraints) are replaced, never
-mutated: go through :class:`ecs_anim.simulation.Simulation` (``set_body``, ``play``, ...), which
-also writes the character's row of the structure-of-arrays store the systems work on. State
-components (NormalizedPose, Posture) name that row: their arrays live in the store
-(``Simulation.store``), written in place every tick, so a thousand characters are one array
-operation rather than a thousand (STYLE 12).
+Body, MotionPlayer, Placement and Constraints are specifications: what a character was given
+when it was spawned (Body is replaced by ``Simulation.set_body``). The live state the systems
+work on, every tick and for all characters at once, is the simulation's structure-of-arrays
+store (``Simulation.store``, STYLE 12): NormalizedPose and Posture name a character's row in it,
+and MotionPlayback advances clips and queues there, not in these components.
 """
 
 from __future__ import annotations

@@ -46,6 +46,9 @@ class MetricsRecorder:
         from ecs_anim.systems.ground_adapt import BALL_HEIGHT_PER_LEG
 
         sim, st = self.sim, self.sim.store
+        if st.n != self.slide_max.shape[0]:
+            raise RuntimeError("MetricsRecorder: characters were spawned after it was made; "
+                               "make the recorder after spawning")
         p = st.positions
         ankles, toes = p[:, ANKLES], p[:, TOES]
         planted = st.contact_weight >= 1.0

@@ -26,6 +26,12 @@ def _wrap(angle: F64) -> F64:
     return (angle + np.pi) % (2 * np.pi) - np.pi
 
 
+def rotate_xy(xy: F64, angle: F64) -> F64:
+    """Rotate points ``xy`` (..., 2) anticlockwise by ``angle`` (...) radians."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.stack([c * xy[..., 0] - s * xy[..., 1], s * xy[..., 0] + c * xy[..., 1]], axis=-1)
+
+
 @dataclass
 class ClipBank:
     """Every clip's frames, concatenated.

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,8 @@ from .morphology import PRESET_SPECS, Morphology
 from .motion import NormalizedMotion, load_nmo
 
 Node = yaml.Node
+#: Names of characters and motions: they name files, so no path separators or leading dot.
+_NAME = re.compile(r"[A-Za-z0-9_\-][A-Za-z0-9_.\-]*")
 
 
 @dataclass
@@ -125,12 +128,14 @@ class _Reader:
             raise self.fail(node, where, f"expected a list, found {self._kind(node)}")
         return list(node.value)
 
-    def vector(self, node: Node, where: str, size: int, unit: str) -> tuple[float, ...]:
+    def vector(self, node: Node, where: str, size: int, unit: str,
+               bound: float = math.inf) -> tuple[float, ...]:
         items = self.sequence(node, where)
         if len(items) != size:
             raise self.fail(node, where, f"expected a list of {size} numbers ({unit}), found "
                                          f"{len(items)}")
-        return tuple(self.number(v, f"{where}[{i}]", unit=unit) for i, v in enumerate(items))
+        return tuple(self.number(v, f"{where}[{i}]", -bound, bound, unit=unit)
+                     for i, v in enumerate(items))
 
 
 GROUND_KEYS: dict[str, dict[str, bool]] = {
@@ -208,6 +213,10 @@ def _morphology(r: _Reader, node: Node, where: str) -> Morphology:
                                    "leg_scale": False, "mass_kg": False, "lengths_m": False,
                                    "preset": False})
     if "preset" in keys:
+        extra = [k for k in keys if k not in ("preset", "lengths_m")]
+        if extra:
+            raise r.fail(keys[extra[0]], f"{where}.{extra[0]}", "cannot be combined with 'preset' "
+                         "(a preset fixes stature, sex and proportions; adjust it with lengths_m)")
         base = _morphology(r, keys["preset"], f"{where}.preset")
     else:
         sex = r.string(keys["sex"], f"{where}.sex") if "sex" in keys else "male"
@@ -218,9 +227,9 @@ def _morphology(r: _Reader, node: Node, where: str) -> Morphology:
             raise r.fail(keys["proportions"], f"{where}.proportions",
                          f"expected 'adult' or 'child', found {proportions!r}")
         base = Morphology.from_stature(
-            r.number(keys["stature_m"], f"{where}.stature_m", 0.5, 2.6, "m") if "stature_m" in keys else 1.75,
+            r.number(keys["stature_m"], f"{where}.stature_m", 0.3, 3.0, "m") if "stature_m" in keys else 1.75,
             sex=sex, proportions=proportions,
-            leg_scale=r.number(keys["leg_scale"], f"{where}.leg_scale", 0.6, 1.4) if "leg_scale" in keys else 1.0,
+            leg_scale=r.number(keys["leg_scale"], f"{where}.leg_scale", 0.5, 1.5) if "leg_scale" in keys else 1.0,
             mass_kg=r.number(keys["mass_kg"], f"{where}.mass_kg", 5, 400, "kg") if "mass_kg" in keys else None,
             name=where)
     if "lengths_m" not in keys:
@@ -235,7 +244,11 @@ def _morphology(r: _Reader, node: Node, where: str) -> Morphology:
         value = r.number(value_node, f"{where}.lengths_m.{seg}", 0.001, 2.0, "m")
         for n in ([seg] if seg in LENGTH_INDEX else [f"{seg}_l", f"{seg}_r"]):
             lengths[LENGTH_INDEX[n]] = value
-    return base.with_lengths(lengths)
+    body = base.with_lengths(lengths)
+    if not 0.3 <= body.stature <= 3.0:
+        raise r.fail(keys["lengths_m"], f"{where}.lengths_m", f"these lengths make a body "
+                     f"{body.stature:.2f} m tall; expected 0.3 to 3 m")
+    return body
 
 
 def _load_motion(r: _Reader, node: Node, where: str, base_dir: Path) -> NormalizedMotion:
@@ -278,14 +291,19 @@ def load_scenario(path: str | Path) -> Scenario:
         raise InputError(path, "the scenario is empty", 1)
     top = r.mapping(root, "", {"duration_s": True, "fps": False, "motions": True,
                                "ground": False, "characters": True, "description": False})
-    duration = r.number(top["duration_s"], "duration_s", 0.0, 86400.0, "s")
     fps = r.number(top["fps"], "fps", 1.0, 1000.0, "Hz") if "fps" in top else 30.0
+    duration = r.number(top["duration_s"], "duration_s", 1.0 / fps, 86400.0, "s")
     motion_nodes = top["motions"]
     if not isinstance(motion_nodes, yaml.MappingNode) or not motion_nodes.value:
         raise r.fail(motion_nodes, "motions", "expected a mapping name: file (.bvh or .nmo)")
     motions: dict[str, NormalizedMotion] = {}
     for key_node, value in motion_nodes.value:
+        if not isinstance(key_node, yaml.ScalarNode) or not _NAME.fullmatch(str(key_node.value)):
+            raise r.fail(key_node, "motions", "motion names must be plain names (letters, digits, "
+                                              "_ . -)")
         name = str(key_node.value)
+        if name in motions:
+            raise r.fail(key_node, f"motions.{name}", "given twice")
         motions[name] = _load_motion(r, value, f"motions.{name}", path.parent)
     ground = _ground(r, top["ground"], "ground") if "ground" in top else Plane()
     characters: list[CharacterSpec] = []
@@ -294,6 +312,9 @@ def load_scenario(path: str | Path) -> Scenario:
         where = f"characters[{i}]"
         keys = r.mapping(node, where, CHARACTER_KEYS)
         name = r.string(keys["name"], f"{where}.name")
+        if not _NAME.fullmatch(name):
+            raise r.fail(keys["name"], f"{where}.name", f"{name!r}: a character name names its "
+                         "exported files, so it must be letters, digits, _ . - (not starting with .)")
         if name in names:
             raise r.fail(keys["name"], f"{where}.name", f"another character is already named {name!r}")
         names.add(name)
@@ -321,7 +342,8 @@ def load_scenario(path: str | Path) -> Scenario:
             loop=r.boolean(keys["loop"], f"{where}.loop") if "loop" in keys else True,
             start_s=r.number(keys["start_s"], f"{where}.start_s", 0.0, 1e6, "s") if "start_s" in keys else 0.0,
             queue=tuple(queue))
-        position = r.vector(keys["position_m"], f"{where}.position_m", 2, "m") if "position_m" in keys else (0.0, 0.0)
+        position = r.vector(keys["position_m"], f"{where}.position_m", 2, "m", 1e5) \
+            if "position_m" in keys else (0.0, 0.0)
         heading = r.number(keys["heading_deg"], f"{where}.heading_deg", -360, 360, "degrees") \
             if "heading_deg" in keys else 0.0
         characters.append(CharacterSpec(

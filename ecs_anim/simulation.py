@@ -11,7 +11,6 @@ import itertools
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import replace
 
 import esper
 import numpy as np
@@ -20,23 +19,24 @@ from numpy.typing import NDArray
 from .components import (
     Body,
     CharacterRow,
+    GroundQuery,
     MotionPlayer,
     Name,
     NormalizedPose,
     Placement,
     Posture,
-    QueuedClip,
 )
-from .components import GroundQuery
 from .errors import EcsAnimError
 from .ground import Ground, Plane
 from .morphology import Morphology, leg_length
 from .motion import NormalizedMotion
-from .playback import ClipBank, _wrap
-from .store import CharacterStore
+from .playback import ClipBank, _wrap, rotate_xy, sample
+from .store import MAX_QUEUE, CharacterStore
 from .system_base import System
 
 _counter = itertools.count()
+#: Placements, speeds and start times beyond this are refused (metres / seconds).
+MAX_COORDINATE_M = 1e5
 
 
 class Simulation:
@@ -68,14 +68,13 @@ class Simulation:
         self.fps = fps
         self.tick = 0
         self.bank = ClipBank.from_motions(motions)
-        self.ground: Ground = ground or Plane()
         self.store = CharacterStore()
         self.renderer: object | None = None
         self.messages: list[str] = []
         schedule = SCHEDULE if window else HEADLESS
         self.systems: list[System] = []
         with self._active():
-            esper.create_entity(GroundQuery(self.ground))
+            self._environment = esper.create_entity(GroundQuery(ground or Plane()))
             for order, cls in enumerate(schedule):
                 system = cls(self)
                 # esper runs higher priorities first: derive them from the declared order.
@@ -84,7 +83,20 @@ class Simulation:
 
     @property
     def time_s(self) -> float:
+        """Simulated time of the posture the next :meth:`step` produces (s)."""
         return self.tick * self.dt
+
+    @property
+    def ground(self) -> Ground:
+        """The ground, from the environment entity's GroundQuery component."""
+        with self._active():
+            return esper.component_for_entity(self._environment, GroundQuery).ground
+
+    def __enter__(self) -> Simulation:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
     @contextmanager
     def _active(self) -> Iterator[None]:
@@ -107,20 +119,28 @@ class Simulation:
     def spawn(self, name: str, body: Morphology, player: MotionPlayer,
               placement: Placement = Placement(), team: str = "") -> int:
         """Add a character; returns its entity. Validates at the boundary (not in the tick)."""
-        clip = self.bank.index(player.clip)
-        for q in player.queue:
-            self.bank.index(q.clip)
-        if not all(np.isfinite(v) for v in (*placement.position_m, placement.heading_rad,
-                                             player.speed, player.start_s)):
-            raise EcsAnimError(f"character {name!r}: placement, speed and start must be finite")
+        try:
+            clip = self.bank.index(player.clip)
+            queue = [self.bank.index(q.clip) for q in player.queue]
+        except KeyError as exc:
+            raise EcsAnimError(f"character {name!r}: {exc.args[0]}") from None
+        if len(queue) > MAX_QUEUE:
+            raise EcsAnimError(f"character {name!r}: at most {MAX_QUEUE} queued clips, got {len(queue)}")
+        values = (*placement.position_m, placement.heading_rad, player.speed, player.start_s)
+        if not all(np.isfinite(v) and abs(v) <= MAX_COORDINATE_M for v in values):
+            raise EcsAnimError(f"character {name!r}: placement, speed and start must be finite "
+                               f"and within {MAX_COORDINATE_M:g}")
+        padded = np.zeros(MAX_QUEUE)
+        queue_clip, queue_fade, queue_loop = padded.astype(np.int64), padded.copy(), padded.astype(bool)
+        for k, q in enumerate(player.queue):
+            queue_clip[k], queue_fade[k], queue_loop[k] = queue[k], max(q.crossfade_s, 0.0), q.loop
         with self._active():
             entity = esper.create_entity()
             row = self.store.add_row(
                 entity=entity, lengths=body.lengths, clip=clip, clip_time_s=player.start_s,
                 speed=player.speed, loop=player.loop, placement_xy=placement.position_m,
-                placement_heading=placement.heading_rad, queue=list(player.queue),
-                queue_len=len(player.queue),
-                next_fade_s=player.queue[0].crossfade_s if player.queue else 0.0,
+                placement_heading=placement.heading_rad, queue_clip=queue_clip,
+                queue_fade_s=queue_fade, queue_loop=queue_loop, queue_len=len(queue),
                 ground_ref=float(self.ground.height(np.array(placement.position_m, float))),
             )
             for component in (Name(name, team), Body(body), player, placement, CharacterRow(row),
@@ -133,10 +153,24 @@ class Simulation:
             return esper.component_for_entity(entity, CharacterRow).row
 
     def set_body(self, entity: int, body: Morphology) -> None:
-        """Replace a character's morphology while it plays (paper §6)."""
+        """Replace a character's morphology while it plays (paper §6).
+
+        The root path is stored in leg lengths, so a new leg length would move the character
+        along its path; the placement is shifted so it stays where it is, and its feet re-plant.
+        """
+        st = self.store
         with self._active():
+            row = esper.component_for_entity(entity, CharacterRow).row
             esper.add_component(entity, Body(body))
-            self.store.lengths[esper.component_for_entity(entity, CharacterRow).row] = body.lengths
+        old_leg, new_leg = leg_length(st.lengths[row]), body.leg_length
+        if st.poses.root_position.shape[0] == st.n and self.tick > 0:
+            for xy, heading in ((st.placement_xy, st.placement_heading),
+                                (st.fade_placement_xy, st.fade_placement_heading)):
+                world = st.poses.root_position[row, :2] * old_leg
+                unplaced = rotate_xy(world - xy[row], -heading[row]) / old_leg
+                xy[row] += world - (rotate_xy(unplaced * new_leg, heading[row]) + xy[row])
+        st.lengths[row] = body.lengths
+        st.locked[row] = False
 
     def names(self) -> list[str]:
         with self._active():
@@ -147,39 +181,30 @@ class Simulation:
         """(n,) each character's leg length (mean thigh + shank), metres."""
         return leg_length(self.store.lengths)
 
-    def start_next_clip(self, row: int) -> None:
-        """Begin the next queued clip of one character, crossfading from the current one and
-        continuing its root path (called by MotionPlayback when a clip is about to end)."""
+    def start_next_clips(self, rows: NDArray[np.int64]) -> None:
+        """Begin the next queued clip of these characters (all at once), cross-fading from the
+        current one and continuing its root path, heading included. Footprints are released so
+        the incoming motion's steps lay new ones."""
         st, bank = self.store, self.bank
-        queued: QueuedClip = st.queue[row].pop(0)  # type: ignore[assignment]
-        new_clip = bank.index(queued.clip)
-        # Where the old clip has the root now, in the world, and where the new one starts.
-        from .playback import sample
-
-        idx = np.array([row])
-        old = sample(bank, st.clip[idx], st.clip_time_s[idx], st.loop[idx])
-        new = sample(bank, np.array([new_clip]), np.zeros(1), np.array([queued.loop]))
-        leg = self.leg_length()[row]
-        heading = st.placement_heading[row]
-        c, s = np.cos(heading), np.sin(heading)
-        old_xy = np.array([[c, -s], [s, c]]) @ (old.root_position[0, :2] * leg) + st.placement_xy[row]
-        new_heading = _wrap(old.root_heading[0] + heading - new.root_heading[0])
-        c, s = np.cos(new_heading), np.sin(new_heading)
-        st.fade_placement_xy[row] = st.placement_xy[row]
-        st.fade_placement_heading[row] = st.placement_heading[row]
-        st.placement_heading[row] = new_heading
-        st.placement_xy[row] = old_xy - np.array([[c, -s], [s, c]]) @ (new.root_position[0, :2] * leg)
-        st.fade_clip[row], st.fade_time_s[row], st.fade_loop[row] = st.clip[row], st.clip_time_s[row], st.loop[row]
-        st.fade_s[row], st.fade_elapsed_s[row] = max(queued.crossfade_s, 0.0), 0.0
-        st.clip[row], st.clip_time_s[row], st.loop[row] = new_clip, 0.0, queued.loop
-        st.queue_len[row] = len(st.queue[row])
-        st.next_fade_s[row] = st.queue[row][0].crossfade_s if st.queue[row] else 0.0  # type: ignore[attr-defined]
-        with self._active():
-            entity = int(st.entity[row])
-            player = esper.component_for_entity(entity, MotionPlayer)
-            esper.add_component(entity, replace(player, clip=queued.clip, loop=queued.loop,
-                                                queue=tuple(st.queue[row])))  # type: ignore[arg-type]
-            esper.add_component(entity, Placement(tuple(st.placement_xy[row]), float(new_heading)))  # type: ignore[arg-type]
+        head = st.queue_head[rows]
+        new_clip, fade = st.queue_clip[rows, head], st.queue_fade_s[rows, head]
+        new_loop = st.queue_loop[rows, head]
+        old = sample(bank, st.clip[rows], st.clip_time_s[rows], st.loop[rows])
+        new = sample(bank, new_clip, np.zeros(rows.size), new_loop)
+        leg = leg_length(st.lengths[rows])[:, None]
+        heading = st.placement_heading[rows]
+        old_xy = rotate_xy(old.root_position[:, :2] * leg, heading) + st.placement_xy[rows]
+        new_heading = _wrap(old.root_heading + heading - new.root_heading)
+        st.fade_placement_xy[rows] = st.placement_xy[rows]
+        st.fade_placement_heading[rows] = heading
+        st.placement_heading[rows] = new_heading
+        st.placement_xy[rows] = old_xy - rotate_xy(new.root_position[:, :2] * leg, new_heading)
+        st.fade_clip[rows], st.fade_time_s[rows] = st.clip[rows], st.clip_time_s[rows]
+        st.fade_loop[rows] = st.loop[rows]
+        st.fade_s[rows], st.fade_elapsed_s[rows] = np.maximum(fade, 0.0), 0.0
+        st.clip[rows], st.clip_time_s[rows], st.loop[rows] = new_clip, 0.0, new_loop
+        st.queue_head[rows] += 1
+        st.locked[rows] = False
 
     def report_frozen(self, rows: NDArray[np.int64]) -> None:
         """A character's pose went non-finite: it keeps its last good posture; say so once."""

@@ -17,6 +17,9 @@ from .skeleton import N_JOINTS, N_LENGTHS
 
 F64 = NDArray[np.float64]
 
+#: Most clips a character can have queued at once.
+MAX_QUEUE = 16
+
 
 def _empty_poses(n: int) -> NormalizedPoses:
     arrays = {}
@@ -69,9 +72,11 @@ class CharacterStore:
     positions: F64 = field(default_factory=lambda: np.zeros((0, N_JOINTS, 3)))
     local_rotations: F64 = field(default_factory=lambda: np.zeros((0, 0, 3, 3)))
     frozen: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
+    queue_clip: NDArray[np.int64] = field(default_factory=lambda: np.zeros((0, MAX_QUEUE), np.int64))
+    queue_fade_s: F64 = field(default_factory=lambda: np.zeros((0, MAX_QUEUE)))
+    queue_loop: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, MAX_QUEUE), bool))
+    queue_head: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     queue_len: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
-    next_fade_s: F64 = field(default_factory=lambda: np.zeros(0))
-    queue: list[list[object]] = field(default_factory=list)
     poses: NormalizedPoses = field(default_factory=lambda: _empty_poses(0))
     scaled: DecodedPose | None = None
     vertebrae: F64 | None = None
@@ -84,15 +89,16 @@ class CharacterStore:
         """Append one character; ``values`` give its row for any array field. Load time only."""
         row = self.n
         for f in fields(self):
-            if f.name in ("queue", "poses", "scaled", "vertebrae"):
+            if f.name in ("poses", "scaled", "vertebrae"):
                 continue
             current = getattr(self, f.name)
             fill = np.zeros((1,) + current.shape[1:], dtype=current.dtype)
             if f.name in values:
                 fill[0] = values[f.name]
             setattr(self, f.name, np.concatenate([current, fill]))
-        self.queue.append(list(values.get("queue", [])))  # type: ignore[call-overload]
-        self.poses = NormalizedPoses(**{
-            k: np.concatenate([v, getattr(_empty_poses(1), k)])
-            for k, v in self.poses.arrays().items()})
+        one = _empty_poses(1)
+        self.poses = NormalizedPoses(**{k: np.concatenate([v, getattr(one, k)])
+                                        for k, v in self.poses.arrays().items()})
+        self.scaled = None
+        self.vertebrae = None
         return row

@@ -114,12 +114,17 @@ def test_real_captured_walk_on_stairs():
 def test_body_replaced_while_playing(walk):
     sim = Simulation({"walk": walk})
     e = sim.spawn("grows", Morphology.preset("child"), MotionPlayer("walk"))
-    for _ in range(10):
+    pelvis = []
+    for tick in range(90):
+        if tick == 45:
+            sim.set_body(e, Morphology.preset("tall"))
         sim.step()
-    sim.set_body(e, Morphology.preset("tall"))
-    sim.step()
+        pelvis.append(sim.store.positions[0, 0].copy())
     lengths = bone_lengths_of(sim.store.positions)[0]
     np.testing.assert_allclose(lengths[IS_BONE], Morphology.preset("tall").lengths[IS_BONE], atol=1e-9)
+    horizontal = np.linalg.norm(np.diff(np.array(pelvis)[:, :2], axis=0), axis=-1)
+    assert horizontal.max() < 0.1  # m per tick: it grows where it stands, no jump along its path
+    assert np.array(pelvis)[46:, 2].min() > 0.85  # the tall body stands up, feet re-planted
 
 
 def test_queued_clip_crossfades_without_a_jump(walk):
@@ -201,3 +206,36 @@ def test_posture_with_a_finer_spine(walk):
     m = Morphology.preset("tall")
     total = m["spine_lower"] + m["spine_middle"] + m["spine_upper"]
     np.testing.assert_allclose(np.linalg.norm(np.diff(spine, axis=1), axis=-1), total / 7, atol=1e-9)
+
+
+def test_idle_then_walk_replants_the_feet(walk):
+    idle = import_bvh(MOTIONS_DIR / "idle.bvh")
+    sim = Simulation({"walk": walk, "idle": idle})
+    sim.spawn("a", Morphology.preset("adult_male"),
+              MotionPlayer("idle", loop=False, queue=(QueuedClip("walk", 0.5, loop=True),)))
+    metrics = MetricsRecorder(sim)
+    pelvis = []
+    for _ in range(int(14 * 30)):
+        sim.step()
+        metrics.record()
+        pelvis.append(sim.store.positions[0, 0].copy())
+    z = np.array(pelvis)[:, 2]
+    assert np.abs(np.diff(z)).max() < 0.03  # no drop and spring-back at the switch
+    assert z.min() > 0.8
+    report = metrics.report()["characters"][0]
+    assert report["foot_sliding_mm_per_frame"]["max"] < 1.0
+    assert report["ground_penetration_mm_max"] < 1.0
+
+
+def test_bad_names_and_bench_size(tmp_path, capsys):
+    text = (BAD / "typo_key.yaml").read_text().replace("motoin", "motion").replace(
+        "name: a", "name: ../escaped")
+    bad = BAD / "tmp_bad_name.yaml"  # beside the others: same relative motion paths
+    bad.write_text(text)
+    try:
+        with pytest.raises(InputError, match="characters\\[0\\].name: '../escaped'"):
+            load_scenario(bad)
+    finally:
+        bad.unlink()
+    assert main(["bench", "--characters", "3"]) == 1
+    assert "8 or more" in capsys.readouterr().err
