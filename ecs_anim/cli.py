@@ -252,7 +252,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if missing:
         raise EcsAnimError(f"bench import: no such file: {', '.join(missing)}")
     biggest = max(files, key=lambda p: p.stat().st_size)
-    timings = {"parse": [], "fk": [], "map_encode": []}
+    timings: dict[str, list[float]] = {"parse": [], "fk": [], "map_encode": []}
     n_frames = 0
     for _ in range(args.repeat):
         t0 = time.perf_counter()
@@ -311,8 +311,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type: ignore[no-untyped-def]
                    seconds: float, outdir: Path | None) -> int:
+    from .bvh import write_text_atomic
     from .exporting import bvh_from_rotations, write_npz
-    from .files import write_atomic
     from .metrics import MetricsRecorder
 
     names = [c.name for c in scenario.characters]
@@ -332,12 +332,12 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
         rot = np.stack(rotations, axis=1)
         con = np.stack(contacts, axis=1)
         for i, c in enumerate(scenario.characters):
-            text = bvh_from_rotations(c.morphology, pos[i, :, 0], rot[i], scenario.fps)
-            write_atomic(outdir / f"{c.name}.bvh", args.force, lambda f: f.write(text.encode()))
+            write_text_atomic(outdir / f"{c.name}.bvh",
+                              bvh_from_rotations(c.morphology, pos[i, :, 0], rot[i], scenario.fps),
+                              args.force)
             write_npz(outdir / f"{c.name}.npz", pos[i], scenario.fps, con[i], args.force)
     if args.report:
-        write_atomic(args.report, args.force,
-                     lambda f: f.write(json.dumps(report, indent=2).encode()))
+        write_text_atomic(args.report, json.dumps(report, indent=2), args.force)
     print(f"{args.scenario}: {ticks} ticks ({seconds:g} s at {scenario.fps:g} Hz), "
           f"{len(names)} characters")
     print(f"  {'character':14s} {'slide max mm/fr':>15s} {'penetr. mm':>10s} {'bone err m':>10s} "

@@ -66,7 +66,7 @@ def horizontal_speed(points: F64, fps: float) -> F64:
     return np.linalg.norm(velocity, axis=-1)
 
 
-def _intervals(mask: F64) -> list[tuple[int, int]]:
+def _intervals(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
     """Runs of True as (first, last) frame indices."""
     padded = np.concatenate([[False], mask, [False]]).astype(np.int8)
     edges = np.flatnonzero(np.diff(padded))

@@ -43,6 +43,8 @@ class ClipBank:
     loop_shift : (n_clips, 2) root displacement over one loop, normalized units, expressed in the
         clip's first-frame position frame (world xy of the clip).
     names : clip names.
+    contact_weight : (total_frames, 2) foot-contact activation per frame [left, right].
+    source_ankle_height : (n_clips, 2) each source's ankle heights in its leg lengths.
     """
 
     poses: NormalizedPoses
@@ -52,8 +54,8 @@ class ClipBank:
     loop_yaw: F64
     loop_shift: F64
     names: list[str]
-    contact_weight: F64 | None = None
-    source_ankle_height: F64 | None = None
+    contact_weight: F64
+    source_ankle_height: F64
 
     @classmethod
     def from_motions(cls, motions: dict[str, NormalizedMotion]) -> ClipBank:
@@ -84,9 +86,9 @@ class ClipBank:
                     side = 0 if c.segment.endswith("_l") else 1
                     w[:, side] = np.maximum(w[:, side], c.activation.weight(t))
             weights.append(w)
-        ankle = np.array([[motions[n].source_morphology["ankle_height_l"],
-                           motions[n].source_morphology["ankle_height_r"]]
-                          / np.float64(motions[n].source_morphology.leg_length) for n in names])
+        ankle = np.array([np.array([motions[n].source_morphology["ankle_height_l"],
+                                    motions[n].source_morphology["ankle_height_r"]])
+                          / motions[n].source_morphology.leg_length for n in names])
         return cls(NormalizedPoses(**fields), start, counts,
                    np.array([motions[n].fps for n in names], dtype=np.float64),
                    np.array(yaw), np.array(shift), names, np.concatenate(weights), ankle)

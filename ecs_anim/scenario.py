@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 import yaml
+from yaml import Node
 
 from .components import MotionPlayer, Placement, QueuedClip
 from .errors import EcsAnimError, InputError
@@ -23,7 +24,6 @@ from .ground import Bumps, Combined, Ground, HeightGrid, Plane, Slope, Stairs
 from .morphology import PRESET_SPECS, Morphology
 from .motion import NormalizedMotion, load_nmo
 
-Node = yaml.Node
 #: Names of characters and motions: they name files, so no path separators or leading dot.
 _NAME = re.compile(r"[A-Za-z0-9_\-][A-Za-z0-9_.\-]*")
 
