@@ -173,7 +173,7 @@ def default_bench_files() -> list[Path]:
     return shipped_motion_paths()
 
 
-def _pipeline_timing(n: int, seconds: float) -> dict[str, float]:
+def _pipeline_timing(n: int, seconds: float, rotations: bool = False) -> dict[str, float]:
     """ms per tick per system for ``n`` characters walking on bumps, after a warm-up."""
     from .components import MotionPlayer, Placement
     from .ground import Bumps
@@ -183,7 +183,7 @@ def _pipeline_timing(n: int, seconds: float) -> dict[str, float]:
     from .simulation import Simulation
 
     walk = import_bvh(MOTIONS_DIR / "walk.bvh")
-    sim = Simulation({"walk": walk}, Bumps(0.04, 2.5, 3.0), fps=30.0)
+    sim = Simulation({"walk": walk}, Bumps(0.04, 2.5, 3.0), fps=30.0, rotations=rotations)
     rng = np.random.default_rng(0)
     presets = list(PRESET_SPECS)
     side = int(np.ceil(np.sqrt(n)))
@@ -209,8 +209,8 @@ def cmd_bench_pipeline(args: argparse.Namespace) -> int:
         raise EcsAnimError("bench: give --characters 8 or more (the figure is fitted from a run "
                            "at N and one at N/4)")
     small = n // 4
-    timing_small = _pipeline_timing(small, args.seconds)
-    timing = _pipeline_timing(n, args.seconds)
+    timing_small = _pipeline_timing(small, args.seconds, args.rotations)
+    timing = _pipeline_timing(n, args.seconds, args.rotations)
     total, total_small = sum(timing.values()), sum(timing_small.values())
     # Linear model t(N) = fixed + per_character * N from the two runs (timing noise can make
     # the slope tiny: never below the average cost per character of the large run / 4).
@@ -220,6 +220,7 @@ def cmd_bench_pipeline(args: argparse.Namespace) -> int:
     max_chars = int(max((budget - fixed) / per_char, 0))
     result = {
         "characters": n,
+        "rotations": bool(args.rotations),
         "ms_per_tick": {k: round(v, 3) for k, v in timing.items()},
         "ms_per_tick_total": round(total, 3),
         "ms_per_character": round(per_char, 5),
@@ -229,7 +230,8 @@ def cmd_bench_pipeline(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result, indent=2))
         return 0
-    print(f"bench: {n} characters walking on bumps, {args.seconds:g} s simulated at 30 Hz, one core")
+    print(f"bench: {n} characters walking on bumps, {args.seconds:g} s simulated at 30 Hz, one core, "
+          f"{'positions and joint rotations' if args.rotations else 'joint positions'}")
     for k, v in timing.items():
         print(f"  {k:16s} {v:8.2f} ms/tick")
     print(f"  {'total':16s} {total:8.2f} ms/tick  ({total_small:.2f} ms with {small})")
@@ -305,7 +307,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     ticks = int(round(seconds * scenario.fps))
     if ticks < 1:
         raise EcsAnimError(f"--seconds {seconds:g} is less than one tick at {scenario.fps:g} Hz")
-    with build_simulation(scenario) as sim:
+    with build_simulation(scenario, rotations=bool(args.export)) as sim:
         return _run_and_write(args, scenario, sim, ticks, seconds, outdir if args.export else None)
 
 
@@ -415,6 +417,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="pipeline: characters (default %(default)s)")
     p.add_argument("--seconds", type=positive_float, default=3.0, metavar="S",
                    help="pipeline: simulated seconds to time (default %(default)s)")
+    p.add_argument("--rotations", action="store_true",
+                   help="pipeline: also compute local joint rotations every tick (as BVH export does)")
     p.add_argument("--repeat", type=positive_int, default=3, help="runs; the best is kept")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_bench)

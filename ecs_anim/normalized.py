@@ -381,6 +381,36 @@ def vertebrae(poses: NormalizedPoses, lengths: F64, count: int) -> F64:
     return pelvis[..., None, :] + _to_world(pelvis2world[..., None, :, :], local)
 
 
+@dataclass
+class DecodedLegs:
+    """Leg joints of :func:`decode_legs`: each (*B, 2, 3) [left, right], frames (*B, 2, 3, 3)."""
+
+    pelvis: F64
+    pelvis2world: F64
+    hips: F64
+    knees: F64
+    ankles: F64
+    toes: F64
+    leg2world: F64
+    shank2world: F64
+
+
+def decode_legs(poses: NormalizedPoses, seg: F64, base: F64) -> DecodedLegs:
+    """The root and both legs only (what ground adaptation needs), from segment lengths ``seg``
+    (*B, N_LENGTHS) and the unstretched ``base`` lengths that normalize the root."""
+    pelvis2world = rot_axis(2, poses.root_heading) @ matrix_from_quat(poses.pelvis_local)
+    pelvis = poses.root_position * leg_length(base)[..., None]
+    pw = pelvis2world[..., None, :, :]
+    hips = pelvis[..., None, :] + _to_world(pw, poses.hip_dir) * seg[..., SIDE_LENGTHS["pelvis"]][..., None]
+    leg2world = pw @ matrix_from_quat(poses.leg_frame)
+    thigh, shank = seg[..., SIDE_LENGTHS["thigh"]], seg[..., SIDE_LENGTHS["shank"]]
+    knees, ankles = two_bone_middle(leg2world, hips, thigh, shank,
+                                    poses.leg_fraction * (thigh + shank))
+    shank2world = distal_frames(leg2world, knees, ankles)
+    toes = ankles + _to_world(shank2world, poses.foot_dir) * seg[..., SIDE_LENGTHS["foot"]][..., None]
+    return DecodedLegs(pelvis, pelvis2world, hips, knees, ankles, toes, leg2world, shank2world)
+
+
 def decode(poses: NormalizedPoses, lengths: F64, use_stretch: bool = False) -> DecodedPose:
     """Joint positions of normalized poses on a body (paper eq. 2 and §8).
 
@@ -392,23 +422,13 @@ def decode(poses: NormalizedPoses, lengths: F64, use_stretch: bool = False) -> D
     base = np.broadcast_to(lengths, batch + (N_LENGTHS,))
     seg = base * poses.stretch if use_stretch else base
     out = np.empty(batch + (N_JOINTS, 3))
-
-    heading2world = rot_axis(2, poses.root_heading)
-    pelvis2world = heading2world @ matrix_from_quat(poses.pelvis_local)
-    pelvis = poses.root_position * leg_length(base)[..., None]
+    legs = decode_legs(poses, seg, base)
+    pelvis, pelvis2world, leg2world = legs.pelvis, legs.pelvis2world, legs.leg2world
     out[..., J["pelvis"], :] = pelvis
-    pw = pelvis2world[..., None, :, :]
-    hips = pelvis[..., None, :] + _to_world(pw, poses.hip_dir) * seg[..., SIDE_LENGTHS["pelvis"]][..., None]
-    leg2world = pw @ matrix_from_quat(poses.leg_frame)
-    thigh, shank = seg[..., SIDE_LENGTHS["thigh"]], seg[..., SIDE_LENGTHS["shank"]]
-    knees, ankles = two_bone_middle(leg2world, hips, thigh, shank,
-                                    poses.leg_fraction * (thigh + shank))
-    shank2world = distal_frames(leg2world, knees, ankles)
-    toes = ankles + _to_world(shank2world, poses.foot_dir) * seg[..., SIDE_LENGTHS["foot"]][..., None]
-    out[..., SIDE_JOINTS["hip"], :] = hips
-    out[..., SIDE_JOINTS["knee"], :] = knees
-    out[..., SIDE_JOINTS["ankle"], :] = ankles
-    out[..., SIDE_JOINTS["toe"], :] = toes
+    out[..., SIDE_JOINTS["hip"], :] = legs.hips
+    out[..., SIDE_JOINTS["knee"], :] = legs.knees
+    out[..., SIDE_JOINTS["ankle"], :] = legs.ankles
+    out[..., SIDE_JOINTS["toe"], :] = legs.toes
 
     spine_len = base[..., SPINE_LENGTHS].sum(axis=-1)
     control = np.concatenate([np.zeros(batch + (1, 3)), poses.spine_points * spine_len[..., None, None]],

@@ -355,11 +355,13 @@ def load_scenario(path: str | Path) -> Scenario:
     return Scenario(str(path), duration, fps, motions, ground, characters)
 
 
-def build_simulation(scenario: Scenario, window: bool = False):  # type: ignore[no-untyped-def]
+def build_simulation(scenario: Scenario, window: bool = False,  # type: ignore[no-untyped-def]
+                     rotations: bool = False):
     """A :class:`~ecs_anim.simulation.Simulation` with the scenario's characters spawned."""
     from .simulation import Simulation
 
-    sim = Simulation(scenario.motions, scenario.ground, scenario.fps, window=window)
+    sim = Simulation(scenario.motions, scenario.ground, scenario.fps, window=window,
+                     rotations=rotations)
     for c in scenario.characters:
         sim.spawn(c.name, c.morphology, c.player, c.placement, c.team)
     return sim

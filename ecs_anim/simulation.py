@@ -50,10 +50,13 @@ class Simulation:
     window : also schedule Render (a viewer sets ``renderer``).
     vertebrae : if > 0, PostureConvert also resamples each spine into this many vertebra joints
         (``store.vertebrae``, (n, vertebrae, 3)) for output skeletons with more spine joints.
+    rotations : PostureConvert also gives local joint rotations (``store.local_rotations``),
+        which BVH export and skinned rendering need; positions alone cost about half as much.
     """
 
     def __init__(self, motions: dict[str, NormalizedMotion], ground: Ground | None = None,
-                 fps: float = 30.0, window: bool = False, vertebrae: int = 0):
+                 fps: float = 30.0, window: bool = False, vertebrae: int = 0,
+                 rotations: bool = False):
         from .systems import HEADLESS, SCHEDULE
 
         if not motions:
@@ -64,6 +67,7 @@ class Simulation:
         if vertebrae < 0:
             raise EcsAnimError(f"vertebrae must be >= 0, got {vertebrae}")
         self.vertebrae = int(vertebrae)
+        self.rotations = bool(rotations)
         self.dt = 1.0 / fps
         self.fps = fps
         self.tick = 0

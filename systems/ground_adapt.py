@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from ecs_anim.ground_adapt import adapt_to_ground
-from ecs_anim.normalized import SIDE_JOINTS, SIDE_LENGTHS, decode, distal_frames
+from ecs_anim.normalized import SIDE_JOINTS, SIDE_LENGTHS, decode_legs
 from ecs_anim.system_base import System
 
 #: Time constant (s) with which the motion's floor follows the ground under the supporting feet.
@@ -24,7 +24,7 @@ GROUND_SMOOTHING_S = 0.15
 #: Height of the ball-of-foot joint above the sole, as a fraction of the leg (thigh + shank).
 BALL_HEIGHT_PER_LEG = 0.025 / 0.86
 
-HIPS, ANKLES, TOES = list(SIDE_JOINTS["hip"]), list(SIDE_JOINTS["ankle"]), list(SIDE_JOINTS["toe"])
+ANKLES, TOES = list(SIDE_JOINTS["ankle"]), list(SIDE_JOINTS["toe"])
 
 
 class GroundAdapt(System):
@@ -73,8 +73,8 @@ class GroundAdapt(System):
         asked again at the new place, a few passes.
         """
         st, ground = self.sim.store, self.sim.ground
-        after = decode(poses, st.lengths)
-        ankles, toes = after.positions[:, ANKLES], after.positions[:, TOES]
+        legs = decode_legs(poses, st.lengths, st.lengths)
+        ankles, toes = legs.ankles, legs.toes
         deficit = ground.height(toes[..., :2]) + ball - toes[..., 2]
         if not np.any(deficit > 0.0):
             return poses
@@ -89,8 +89,6 @@ class GroundAdapt(System):
             deficit = ground.height(toe[..., :2]) + ball - toe[..., 2]
         new_d = (toe - ankles) / foot[..., None]
         changed = np.abs(new_d - d).max(axis=-1) > 0.0
-        knees = after.positions[:, list(SIDE_JOINTS["knee"])]
-        shank2world = distal_frames(after.leg2world, knees, ankles)
-        in_shank = np.einsum("...ji,...j->...i", shank2world, new_d)
+        in_shank = np.einsum("...ji,...j->...i", legs.shank2world, new_d)
         poses.foot_dir = np.where(changed[..., None], in_shank, poses.foot_dir)
         return poses

@@ -1,8 +1,8 @@
 """PostureConvert: rebuild knees, elbows and vertebrae and give the world posture (paper §8).
 
 Reads: store.poses, store.lengths. Writes: store.positions (world joint positions), store.
-local_rotations (the BVH export skeleton's local joint rotation matrices), store.vertebrae (if
-the simulation asks for a finer spine), store.frozen (a character
+local_rotations (the BVH export skeleton's local joint rotation matrices, when the simulation
+asks for rotations), store.vertebrae (when it asks for a finer spine), store.frozen (a character
 whose pose went non-finite keeps its last good posture and is reported once).
 """
 
@@ -19,17 +19,22 @@ class PostureConvert(System):
     def run(self, dt: float) -> None:
         st = self.sim.store
         final = decode(st.poses, st.lengths)
-        local = local_rotations(final)
-        good = np.all(np.isfinite(final.positions), axis=(1, 2)) & np.all(np.isfinite(local), axis=(1, 2, 3))
+        good = np.all(np.isfinite(final.positions), axis=(1, 2))
+        # Joint rotations cost more than the positions; they are made when something uses them
+        # (BVH export, a viewer drawing skinned meshes): ``Simulation(rotations=True)``.
+        local = local_rotations(final) if self.sim.rotations else None
+        if local is not None:
+            good &= np.all(np.isfinite(local), axis=(1, 2, 3))
         newly_bad = ~good & ~st.frozen
         if newly_bad.any():
             self.sim.report_frozen(np.flatnonzero(newly_bad))
         st.frozen |= ~good
-        if st.local_rotations.shape != local.shape:
-            st.local_rotations = np.broadcast_to(np.eye(3), local.shape).copy()
         keep = st.frozen[:, None, None]
         st.positions = np.where(keep, st.positions, final.positions)
-        st.local_rotations = np.where(keep[..., None], st.local_rotations, local)
+        if local is not None:
+            if st.local_rotations.shape != local.shape:
+                st.local_rotations = np.broadcast_to(np.eye(3), local.shape).copy()
+            st.local_rotations = np.where(keep[..., None], st.local_rotations, local)
         if self.sim.vertebrae:
             spine = vertebrae(st.poses, st.lengths, self.sim.vertebrae)
             previous = st.vertebrae if st.vertebrae is not None else spine
