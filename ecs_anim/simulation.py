@@ -31,6 +31,8 @@ from .ground import Ground, Plane
 from .morphology import Morphology, leg_length
 from .motion import NormalizedMotion
 from .playback import ClipBank, _wrap, rotate_xy, sample
+from .constraint_table import ConstraintTable
+from .constraints import Activation
 from .store import MAX_QUEUE, CharacterStore
 from .system_base import System
 
@@ -73,6 +75,7 @@ class Simulation:
         self.tick = 0
         self.bank = ClipBank.from_motions(motions)
         self.store = CharacterStore()
+        self.constraints = ConstraintTable()
         self.renderer: object | None = None
         self.messages: list[str] = []
         schedule = SCHEDULE if window else HEADLESS
@@ -209,6 +212,37 @@ class Simulation:
         st.clip[rows], st.clip_time_s[rows], st.loop[rows] = new_clip, 0.0, new_loop
         st.queue_head[rows] += 1
         st.locked[rows] = False
+
+    def add_constraint(self, entity: int, name: str, point: str, priority: float,
+                       activation: Activation,
+                       target_in_world: tuple[float, float, float] | None = None,
+                       target_entity: int | None = None, target_point: str | None = None) -> int:
+        """Constrain a point of a character (e.g. ``"wrist_r"``) to a world point or to a joint
+        of another character (read from its previous posture every tick). Returns an index for
+        :meth:`set_target`. Validated here, never in the tick."""
+        values = [priority] + list(target_in_world or ())
+        if not all(np.isfinite(v) for v in values):
+            raise EcsAnimError(f"constraint {name!r}: priority and target must be finite")
+        target_row = None if target_entity is None else self.row(target_entity)
+        try:
+            return self.constraints.add(name, self.row(entity), point, priority, activation,
+                                        target_in_world, target_row,
+                                        target_point if target_entity is not None else None)
+        except ValueError as exc:
+            raise EcsAnimError(str(exc)) from None
+
+    def set_target(self, index: int, target_in_world: tuple[float, float, float]) -> None:
+        """Move a constraint's target from code; a non-finite target disables it at the next
+        tick (with a warning) rather than reaching a pose."""
+        self.constraints.set_target(index, target_in_world)
+
+    def report_disabled(self, indices: NDArray[np.int64]) -> None:
+        for i in indices:
+            message = (f"warning: t={self.time_s:.3f} s: constraint "
+                       f"{self.constraints.names[int(i)]!r} has a non-finite target and is "
+                       "switched off; the others go on")
+            self.messages.append(message)
+            print(message, file=sys.stderr)
 
     def report_frozen(self, rows: NDArray[np.int64]) -> None:
         """A character's pose went non-finite: it keeps its last good posture; say so once."""

@@ -1,0 +1,124 @@
+"""ConstraintSolve, first cut: wrist and elbow position constraints by priority (paper fig. 13)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from conftest import MOTIONS_DIR
+from ecs_anim.components import MotionPlayer, Placement
+from ecs_anim.constraints import Activation
+from ecs_anim.errors import EcsAnimError
+from ecs_anim.importing import import_bvh
+from ecs_anim.morphology import Morphology, bone_lengths_of
+from ecs_anim.simulation import Simulation
+from ecs_anim.skeleton import BONE_JOINTS, JOINT_INDEX as J
+
+IS_BONE = np.array([a >= 0 for a, _ in BONE_JOINTS])
+ALWAYS = Activation(0.0, 1e9)
+
+
+@pytest.fixture(scope="module")
+def idle():
+    return import_bvh(MOTIONS_DIR / "idle.bvh")
+
+
+def _sim(idle, n=1, speed=1.0):
+    sim = Simulation({"idle": idle})
+    entities = [sim.spawn(f"c{i}", Morphology.preset("adult_male"), MotionPlayer("idle", speed=speed),
+                          Placement((0.0, 2.0 * i))) for i in range(n)]
+    return sim, entities
+
+
+def test_reachable_wrist_target_is_met(idle):
+    sim, (e,) = _sim(idle)
+    sim.step()
+    shoulder = sim.store.positions[0, J["shoulder_r"]].copy()
+    target = shoulder + np.array([0.35, -0.1, 0.15])
+    sim.add_constraint(e, "reach", "wrist_r", 10, ALWAYS, tuple(target))
+    for _ in range(3):
+        sim.step()
+    p = sim.store.positions[0]
+    assert np.linalg.norm(p[J["wrist_r"]] - target) < 1e-3
+    np.testing.assert_allclose(bone_lengths_of(p)[IS_BONE], Morphology.preset("adult_male").lengths[IS_BONE], atol=1e-9)
+
+
+def test_unreachable_target_stretches_the_arm_without_jitter(idle):
+    sim, (e,) = _sim(idle)
+    sim.step()
+    target = sim.store.positions[0, J["shoulder_r"]] + np.array([2.0, -1.0, 0.5])
+    sim.add_constraint(e, "far", "wrist_r", 10, ALWAYS, tuple(target))
+    errors = []
+    for _ in range(10):
+        sim.step()
+        p = sim.store.positions[0]
+        errors.append(np.linalg.norm(p[J["wrist_r"]] - target)
+                      - (np.linalg.norm(target - p[J["shoulder_r"]])
+                         - Morphology.preset("adult_male")["upper_arm_r"]
+                         - Morphology.preset("adult_male")["forearm_r"]))
+    assert np.abs(errors).max() < 1e-3  # the geometric minimum, every tick
+    assert np.all(np.isfinite(sim.store.positions))
+
+
+def test_wrist_high_elbow_low(idle):
+    sim, (e,) = _sim(idle, speed=0.0)  # a still body: the targets stay a pose the arm can take
+    sim.step()
+    p = sim.store.positions[0]
+    m = Morphology.preset("adult_male")
+    shoulder = p[J["shoulder_r"]]
+    # A pose the arm can take: elbow out to the side, wrist forward.
+    out = np.array([0.05, -0.9, -0.436])
+    elbow_target = shoulder + out / np.linalg.norm(out) * m["upper_arm_r"]
+    wrist_target = elbow_target + np.array([m["forearm_r"], 0.0, 0.0])
+    sim.add_constraint(e, "wrist", "wrist_r", 10, ALWAYS, tuple(wrist_target))
+    sim.add_constraint(e, "elbow", "elbow_r", 1, ALWAYS, tuple(elbow_target))
+    for _ in range(3):
+        sim.step()
+    q = sim.store.positions[0]
+    assert np.linalg.norm(q[J["wrist_r"]] - wrist_target) < 1e-3
+    assert np.linalg.norm(q[J["elbow_r"]] - elbow_target) < 1e-3
+    # Elbow target out of reach of the elbow circle: wrist still met, elbow as close as it gets.
+    sim.add_constraint(e, "elbow2", "elbow_r", 2, ALWAYS, tuple(shoulder + [0, -2.0, 1.0]))
+    sim.step()
+    q = sim.store.positions[0]
+    assert np.linalg.norm(q[J["wrist_r"]] - wrist_target) < 1e-3
+
+
+def test_target_on_another_character_reads_its_previous_posture(idle):
+    sim, (a, b) = _sim(idle, 2)
+    sim.add_constraint(a, "touch", "wrist_r", 5, ALWAYS, target_entity=b, target_point="head")
+    heads = []
+    for _ in range(6):
+        heads.append(sim.store.positions[1, J["head"]].copy())  # b's posture before this tick
+        sim.step()
+    wrist = sim.store.positions[0, J["wrist_r"]]
+    shoulder = sim.store.positions[0, J["shoulder_r"]]
+    # b's head is 2 m away: out of reach, so the arm points at where b's head was last tick.
+    direction = (wrist - shoulder) / np.linalg.norm(wrist - shoulder)
+    wanted = (heads[-1] - shoulder) / np.linalg.norm(heads[-1] - shoulder)
+    assert np.dot(direction, wanted) > 1 - 1e-9
+
+
+def test_activation_ramp_has_no_jump_and_nan_target_disables_only_that_one(idle, capsys):
+    sim, (a, b) = _sim(idle, 2)
+    sim.step()
+    target = sim.store.positions[0, J["shoulder_r"]] + np.array([0.4, 0.0, 0.2])
+    sim.add_constraint(a, "ramp", "wrist_r", 5, Activation(0.5, 2.0, 0.5, 0.5), tuple(target))
+    other = sim.add_constraint(b, "other", "wrist_l", 5, ALWAYS,
+                               tuple(sim.store.positions[1, J["shoulder_l"]] + [0.3, 0.2, 0.0]))
+    wrists = []
+    distance = np.linalg.norm(target - sim.store.positions[0, J["wrist_r"]])
+    for _ in range(75):
+        sim.step()
+        wrists.append(sim.store.positions[0, J["wrist_r"]].copy())
+    step = np.linalg.norm(np.diff(np.array(wrists), axis=0), axis=1)
+    # A ramp, not a jump: the move is spread over the 0.5 s ease (15 ticks) both ways.
+    assert step.max() < 1.1 * distance / 15 + 0.005
+    sim.set_target(other, (np.nan, 0.0, 0.0))
+    sim.step()
+    assert "'other' has a non-finite target" in capsys.readouterr().err
+    assert np.all(np.isfinite(sim.store.positions))
+    with pytest.raises(EcsAnimError, match="not supported yet"):
+        sim.add_constraint(a, "bad", "knee_x", 1, ALWAYS, (0.0, 0.0, 0.0))
+    with pytest.raises(EcsAnimError, match="finite"):
+        sim.add_constraint(a, "nan", "wrist_l", 1, ALWAYS, (np.nan, 0.0, 0.0))
