@@ -19,6 +19,7 @@ import yaml
 from yaml import Node
 
 from .components import MotionPlayer, Placement, QueuedClip
+from .constraints import Activation
 from .errors import EcsAnimError, InputError
 from .ground import Bumps, Combined, Ground, HeightGrid, Plane, Slope, Stairs
 from .morphology import PRESET_SPECS, Morphology
@@ -29,12 +30,26 @@ _NAME = re.compile(r"[A-Za-z0-9_\-][A-Za-z0-9_.\-]*")
 
 
 @dataclass
+class ConstraintEntry:
+    """A scenario constraint: ``point`` of its character to a world point or another's joint."""
+
+    name: str
+    point: str
+    priority: float
+    activation: Activation
+    target_in_world: tuple[float, float, float] | None = None
+    target_character: str | None = None
+    target_joint: str | None = None
+
+
+@dataclass
 class CharacterSpec:
     name: str
     morphology: Morphology
     player: MotionPlayer
     placement: Placement
     team: str = ""
+    constraints: list[ConstraintEntry] = field(default_factory=list)
 
 
 @dataclass
@@ -270,7 +285,55 @@ def _load_motion(r: _Reader, node: Node, where: str, base_dir: Path) -> Normaliz
 
 CHARACTER_KEYS = {"name": True, "morphology": True, "motion": True, "position_m": False,
                   "heading_deg": False, "speed": False, "loop": False, "start_s": False,
-                  "then": False, "team": False}
+                  "then": False, "team": False, "constraints": False}
+
+
+def _constraint(r: _Reader, node: Node, where: str) -> tuple[ConstraintEntry, Node | None]:
+    """One constraint entry; returns it and the node naming a target character (checked once
+    every character is known)."""
+    from .constraint_table import POINTS
+    from .skeleton import JOINTS
+
+    keys = r.mapping(node, where, {"name": True, "point": True, "priority": False,
+                                   "target": True, "activation": False})
+    name = r.string(keys["name"], f"{where}.name")
+    point = r.string(keys["point"], f"{where}.point")
+    if point not in POINTS:
+        close = difflib.get_close_matches(point, list(POINTS), n=1)
+        hint = f"; did you mean {close[0]!r}?" if close else ""
+        raise r.fail(keys["point"], f"{where}.point", f"{point!r} cannot be constrained yet{hint} "
+                                                      f"(supported: {', '.join(POINTS)})")
+    priority = r.number(keys["priority"], f"{where}.priority", -1e6, 1e6) if "priority" in keys else 0.0
+    if "activation" in keys:
+        ak = r.mapping(keys["activation"], f"{where}.activation",
+                       {"start_s": False, "stop_s": False, "ease_in_s": False, "ease_out_s": False})
+        values = {k: r.number(v, f"{where}.activation.{k}", 0.0, 1e6, "s") for k, v in ak.items()}
+        try:
+            activation = Activation(values.get("start_s", 0.0), values.get("stop_s", 1e6),
+                                    values.get("ease_in_s", 0.0), values.get("ease_out_s", 0.0))
+        except ValueError as exc:
+            raise r.fail(keys["activation"], f"{where}.activation", str(exc)) from None
+    else:
+        activation = Activation(0.0, 1e6)
+    tk = r.mapping(keys["target"], f"{where}.target",
+                   {"world_m": False, "character": False, "joint": False})
+    if ("world_m" in tk) == ("character" in tk):
+        raise r.fail(keys["target"], f"{where}.target", "give either world_m: [x, y, z] or "
+                                                        "character: NAME with joint: JOINT")
+    if "world_m" in tk:
+        if "joint" in tk:
+            raise r.fail(tk["joint"], f"{where}.target.joint", "only with character:")
+        world = r.vector(tk["world_m"], f"{where}.target.world_m", 3, "m", 1e5)
+        return ConstraintEntry(name, point, priority, activation, (world[0], world[1], world[2])), None
+    if "joint" not in tk:
+        raise r.fail(keys["target"], f"{where}.target", "character: needs joint: (which joint to aim at)")
+    joint = r.string(tk["joint"], f"{where}.target.joint")
+    if joint not in JOINTS:
+        close = difflib.get_close_matches(joint, list(JOINTS), n=1)
+        hint = f"; did you mean {close[0]!r}?" if close else ""
+        raise r.fail(tk["joint"], f"{where}.target.joint", f"unknown joint {joint!r}{hint}")
+    other = r.string(tk["character"], f"{where}.target.character")
+    return ConstraintEntry(name, point, priority, activation, None, other, joint), tk["character"]
 
 
 def load_scenario(path: str | Path) -> Scenario:
@@ -308,6 +371,7 @@ def load_scenario(path: str | Path) -> Scenario:
     ground = _ground(r, top["ground"], "ground") if "ground" in top else Plane()
     characters: list[CharacterSpec] = []
     names: set[str] = set()
+    pending_targets: list[tuple[str | None, Node, str]] = []
     for i, node in enumerate(r.sequence(top["characters"], "characters")):
         where = f"characters[{i}]"
         keys = r.mapping(node, where, CHARACTER_KEYS)
@@ -346,12 +410,24 @@ def load_scenario(path: str | Path) -> Scenario:
             if "position_m" in keys else (0.0, 0.0)
         heading = r.number(keys["heading_deg"], f"{where}.heading_deg", -360, 360, "degrees") \
             if "heading_deg" in keys else 0.0
+        constraints = []
+        for j, cn in enumerate(r.sequence(keys["constraints"], f"{where}.constraints")
+                               if "constraints" in keys else []):
+            entry, who = _constraint(r, cn, f"{where}.constraints[{j}]")
+            constraints.append(entry)
+            if who is not None:
+                pending_targets.append((entry.target_character, who, f"{where}.constraints[{j}]"))
         characters.append(CharacterSpec(
             name, _morphology(r, keys["morphology"], f"{where}.morphology"), player,
             Placement((position[0], position[1]), math.radians(heading)),
-            r.string(keys["team"], f"{where}.team") if "team" in keys else ""))
+            r.string(keys["team"], f"{where}.team") if "team" in keys else "", constraints))
     if not characters:
         raise r.fail(top["characters"], "characters", "expected at least one character")
+    for other, node, cwhere in pending_targets:
+        if other not in names:
+            close = difflib.get_close_matches(str(other), sorted(names), n=1)
+            hint = f"; did you mean {close[0]!r}?" if close else ""
+            raise r.fail(node, f"{cwhere}.target.character", f"no character named {other!r}{hint}")
     return Scenario(str(path), duration, fps, motions, ground, characters)
 
 
@@ -362,6 +438,12 @@ def build_simulation(scenario: Scenario, window: bool = False,  # type: ignore[n
 
     sim = Simulation(scenario.motions, scenario.ground, scenario.fps, window=window,
                      rotations=rotations)
+    entities = {c.name: sim.spawn(c.name, c.morphology, c.player, c.placement, c.team)
+                for c in scenario.characters}
     for c in scenario.characters:
-        sim.spawn(c.name, c.morphology, c.player, c.placement, c.team)
+        for k in c.constraints:
+            sim.add_constraint(entities[c.name], k.name, k.point, k.priority, k.activation,
+                               k.target_in_world,
+                               None if k.target_character is None else entities[k.target_character],
+                               k.target_joint)
     return sim

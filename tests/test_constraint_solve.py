@@ -122,3 +122,43 @@ def test_activation_ramp_has_no_jump_and_nan_target_disables_only_that_one(idle,
         sim.add_constraint(a, "bad", "knee_x", 1, ALWAYS, (0.0, 0.0, 0.0))
     with pytest.raises(EcsAnimError, match="finite"):
         sim.add_constraint(a, "nan", "wrist_l", 1, ALWAYS, (np.nan, 0.0, 0.0))
+
+
+def test_scenario_constraints_are_wired_by_name():
+    from pathlib import Path
+
+    from ecs_anim.scenario import build_simulation, load_scenario
+
+    repo = Path(__file__).resolve().parents[1]
+    scenario = load_scenario(repo / "scenarios" / "reach_and_touch.yaml")
+    with build_simulation(scenario) as sim:
+        for _ in range(int(2.0 * 30)):  # fully active from 1.1 s
+            sim.step()
+        wrist = sim.store.positions[0, J["wrist_r"]]
+        assert np.linalg.norm(wrist - [0.45, -0.35, 1.25]) < 1e-3
+        assert sim.constraints.target_row[2] == 0  # the friend's target is the reacher
+
+
+def test_scenario_constraint_errors(tmp_path):
+    from pathlib import Path
+
+    from ecs_anim.errors import InputError
+    from ecs_anim.scenario import load_scenario
+
+    repo = Path(__file__).resolve().parents[1]
+    text = (repo / "scenarios" / "reach_and_touch.yaml").read_text()
+    cases = [
+        (text.replace("character: reacher", "character: reachr"), "no character named 'reachr'; did you mean 'reacher'?"),
+        (text.replace("point: wrist_l", "point: wrist_left"), "'wrist_left' cannot be constrained yet"),
+        (text.replace("joint: head_top", "joint: headtop"), "unknown joint 'headtop'; did you mean 'head_top'?"),
+        (text.replace("ease_out_s: 0.5}", "ease_out_s: 9.0}"), "activation ease_in_s + ease_out_s"),
+    ]
+    for k, (broken, fragment) in enumerate(cases):
+        path = repo / "scenarios" / f".tmp_constraint_{k}.yaml"  # beside the motions it names
+        path.write_text(broken)
+        try:
+            with pytest.raises(InputError) as err:
+                load_scenario(path)
+            assert fragment in str(err.value) and str(err.value).startswith(f"{path}:")
+        finally:
+            path.unlink()
