@@ -173,7 +173,8 @@ def default_bench_files() -> list[Path]:
     return shipped_motion_paths()
 
 
-def _pipeline_timing(n: int, seconds: float, rotations: bool = False) -> dict[str, float]:
+def _pipeline_timing(n: int, seconds: float, rotations: bool = False,
+                     constrained: bool = False) -> dict[str, float]:
     """ms per tick per system for ``n`` characters walking on bumps, after a warm-up."""
     from .components import MotionPlayer, Placement
     from .ground import Bumps
@@ -192,11 +193,34 @@ def _pipeline_timing(n: int, seconds: float, rotations: bool = False) -> dict[st
             Morphology.from_stature(float(rng.uniform(1.1, 2.05)))
         sim.spawn(f"c{i}", body, MotionPlayer("walk", start_s=float(rng.uniform(0, 4))),
                   Placement((1.5 * (i // side), 1.5 * (i % side)), float(rng.uniform(-0.3, 0.3))))
+    moving = np.zeros(0, np.int64)
+    if constrained:
+        from .constraints import Activation
+
+        # Each character: a wrist target (high priority) and an elbow target (low) on its right
+        # arm, both moving every tick (foot contacts come from the walk itself).
+        always = Activation(0.0, 1e9)
+        entities = sim.store.entity.tolist()
+        moving = np.array([sim.add_constraint(e, f"w{i}", "wrist_r", 10, always, (0.0, 0.0, 1.2))
+                           for i, e in enumerate(entities)]
+                          + [sim.add_constraint(e, f"e{i}", "elbow_r", 1, always, (0.0, 0.0, 1.0))
+                             for i, e in enumerate(entities)])
+        owners = sim.constraints.owner[moving]
+        offsets = np.where((np.arange(moving.size) < n)[:, None], [0.45, -0.3, 1.2], [0.0, -0.5, 1.0])
+
+    def move_targets() -> None:
+        if moving.size:
+            pelvis = sim.store.positions[owners, 0]
+            wobble = 0.1 * np.sin(2 * np.pi * 0.5 * sim.time_s + owners)[:, None]
+            sim.set_targets(moving, pelvis * [1, 1, 0] + offsets + wobble)
+
     for _ in range(10):
+        move_targets()
         sim.step()
     before = sim.system_seconds()
     ticks = max(1, int(round(seconds * 30.0)))
     for _ in range(ticks):
+        move_targets()
         sim.step()
     after = sim.system_seconds()
     sim.close()
@@ -209,8 +233,8 @@ def cmd_bench_pipeline(args: argparse.Namespace) -> int:
         raise EcsAnimError("bench: give --characters 8 or more (the figure is fitted from a run "
                            "at N and one at N/4)")
     small = n // 4
-    timing_small = _pipeline_timing(small, args.seconds, args.rotations)
-    timing = _pipeline_timing(n, args.seconds, args.rotations)
+    timing_small = _pipeline_timing(small, args.seconds, args.rotations, args.constrained)
+    timing = _pipeline_timing(n, args.seconds, args.rotations, args.constrained)
     total, total_small = sum(timing.values()), sum(timing_small.values())
     # Linear model t(N) = fixed + per_character * N from the two runs (timing noise can make
     # the slope tiny: never below the average cost per character of the large run / 4).
@@ -221,6 +245,7 @@ def cmd_bench_pipeline(args: argparse.Namespace) -> int:
     result = {
         "characters": n,
         "rotations": bool(args.rotations),
+        "constrained": bool(args.constrained),
         "ms_per_tick": {k: round(v, 3) for k, v in timing.items()},
         "ms_per_tick_total": round(total, 3),
         "ms_per_character": round(per_char, 5),
@@ -231,7 +256,8 @@ def cmd_bench_pipeline(args: argparse.Namespace) -> int:
         print(json.dumps(result, indent=2))
         return 0
     print(f"bench: {n} characters walking on bumps, {args.seconds:g} s simulated at 30 Hz, one core, "
-          f"{'positions and joint rotations' if args.rotations else 'joint positions'}")
+          f"{'positions and joint rotations' if args.rotations else 'joint positions'}"
+          f"{', wrist + elbow targets moving every tick' if args.constrained else ''}")
     for k, v in timing.items():
         print(f"  {k:16s} {v:8.2f} ms/tick")
     print(f"  {'total':16s} {total:8.2f} ms/tick  ({total_small:.2f} ms with {small})")
@@ -417,6 +443,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="pipeline: characters (default %(default)s)")
     p.add_argument("--seconds", type=positive_float, default=3.0, metavar="S",
                    help="pipeline: simulated seconds to time (default %(default)s)")
+    p.add_argument("--constrained", action="store_true",
+                   help="pipeline: each character also has a wrist and an elbow target (right arm), "
+                        "moving every tick")
     p.add_argument("--rotations", action="store_true",
                    help="pipeline: also compute local joint rotations every tick (as BVH export does)")
     p.add_argument("--repeat", type=positive_int, default=3, help="runs; the best is kept")

@@ -236,6 +236,13 @@ class Simulation:
         tick (with a warning) rather than reaching a pose."""
         self.constraints.set_target(index, target_in_world)
 
+    def set_targets(self, indices: NDArray[np.int64], targets_in_world: NDArray[np.float64]) -> None:
+        """Move many constraints' targets at once: ``indices`` (k,), ``targets_in_world`` (k, 3)."""
+        table = self.constraints
+        table.target_kind[indices] = 0
+        table.target_world[indices] = targets_in_world
+        table.enabled[indices] = True
+
     def report_disabled(self, indices: NDArray[np.int64]) -> None:
         for i in indices:
             message = (f"warning: t={self.time_s:.3f} s: constraint "
