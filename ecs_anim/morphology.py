@@ -242,6 +242,18 @@ def segment_mass_table(morph: Morphology) -> tuple[F64, F64, np.ndarray, np.ndar
     return masses, frac, prox, dist
 
 
+def centres_of_mass(positions: F64, masses: F64, com_fraction: F64) -> F64:
+    """Whole-body centres of mass of many bodies at once.
+
+    ``positions`` (n, N_JOINTS, 3); ``masses`` and ``com_fraction`` (n, n_segments) from
+    :func:`segment_mass_table` of each body (order of :data:`MASS_SEGMENTS`). Returns (n, 3).
+    """
+    prox = np.array([JOINT_INDEX[s[1]] for s in MASS_SEGMENTS])
+    dist = np.array([JOINT_INDEX[s[2]] for s in MASS_SEGMENTS])
+    seg_com = positions[:, prox] + com_fraction[..., None] * (positions[:, dist] - positions[:, prox])
+    return np.einsum("ns,nsc->nc", masses, seg_com) / masses.sum(axis=1, keepdims=True)
+
+
 def centre_of_mass(positions: F64, morph: Morphology) -> F64:
     """Whole-body centre of mass (m). ``positions`` (..., N_JOINTS, 3) -> (..., 3)."""
     masses, frac, prox, dist = segment_mass_table(morph)

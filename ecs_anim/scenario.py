@@ -50,6 +50,7 @@ class CharacterSpec:
     placement: Placement
     team: str = ""
     constraints: list[ConstraintEntry] = field(default_factory=list)
+    com_control: bool = True
 
 
 @dataclass
@@ -285,7 +286,7 @@ def _load_motion(r: _Reader, node: Node, where: str, base_dir: Path) -> Normaliz
 
 CHARACTER_KEYS = {"name": True, "morphology": True, "motion": True, "position_m": False,
                   "heading_deg": False, "speed": False, "loop": False, "start_s": False,
-                  "then": False, "team": False, "constraints": False}
+                  "then": False, "team": False, "constraints": False, "com_control": False}
 
 
 def _constraint(r: _Reader, node: Node, where: str) -> tuple[ConstraintEntry, Node | None]:
@@ -420,7 +421,8 @@ def load_scenario(path: str | Path) -> Scenario:
         characters.append(CharacterSpec(
             name, _morphology(r, keys["morphology"], f"{where}.morphology"), player,
             Placement((position[0], position[1]), math.radians(heading)),
-            r.string(keys["team"], f"{where}.team") if "team" in keys else "", constraints))
+            r.string(keys["team"], f"{where}.team") if "team" in keys else "", constraints,
+            r.boolean(keys["com_control"], f"{where}.com_control") if "com_control" in keys else True))
     if not characters:
         raise r.fail(top["characters"], "characters", "expected at least one character")
     for other, node, cwhere in pending_targets:
@@ -438,7 +440,8 @@ def build_simulation(scenario: Scenario, window: bool = False,  # type: ignore[n
 
     sim = Simulation(scenario.motions, scenario.ground, scenario.fps, window=window,
                      rotations=rotations)
-    entities = {c.name: sim.spawn(c.name, c.morphology, c.player, c.placement, c.team)
+    entities = {c.name: sim.spawn(c.name, c.morphology, c.player, c.placement, c.team,
+                                  c.com_control)
                 for c in scenario.characters}
     for c in scenario.characters:
         for k in c.constraints:

@@ -28,7 +28,7 @@ from .components import (
 )
 from .errors import EcsAnimError
 from .ground import Ground, Plane
-from .morphology import Morphology, leg_length
+from .morphology import Morphology, leg_length, segment_mass_table
 from .motion import NormalizedMotion
 from .playback import ClipBank, _wrap, rotate_xy, sample
 from .constraint_table import ConstraintTable
@@ -124,7 +124,7 @@ class Simulation:
     # --- characters -------------------------------------------------------------------------
 
     def spawn(self, name: str, body: Morphology, player: MotionPlayer,
-              placement: Placement = Placement(), team: str = "") -> int:
+              placement: Placement = Placement(), team: str = "", com_control: bool = True) -> int:
         """Add a character; returns its entity. Validates at the boundary (not in the tick)."""
         try:
             clip = self.bank.index(player.clip)
@@ -149,6 +149,8 @@ class Simulation:
                 placement_heading=placement.heading_rad, queue_clip=queue_clip,
                 queue_fade_s=queue_fade, queue_loop=queue_loop, queue_len=len(queue),
                 ground_ref=float(self.ground.height(np.array(placement.position_m, float))),
+                segment_mass_kg=segment_mass_table(body)[0],
+                segment_com_fraction=segment_mass_table(body)[1], com_control=com_control,
             )
             for component in (Name(name, team), Body(body), player, placement, CharacterRow(row),
                               NormalizedPose(row), Posture(row)):
@@ -177,6 +179,7 @@ class Simulation:
                 unplaced = rotate_xy(world - xy[row], -heading[row]) / old_leg
                 xy[row] += world - (rotate_xy(unplaced * new_leg, heading[row]) + xy[row])
         st.lengths[row] = body.lengths
+        st.segment_mass_kg[row], st.segment_com_fraction[row] = segment_mass_table(body)[:2]
         st.locked[row] = False
 
     def names(self) -> list[str]:

@@ -13,9 +13,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .normalized import TRAILING_SHAPES, DecodedPose, NormalizedPoses
+from .morphology import MASS_SEGMENTS
 from .skeleton import N_JOINTS, N_LENGTHS
 
 F64 = NDArray[np.float64]
+
+N_MASS_SEGMENTS = len(MASS_SEGMENTS)
 
 #: Most clips a character can have queued at once.
 MAX_QUEUE = 16
@@ -47,7 +50,10 @@ class CharacterStore:
     motion's floor is raised to under the character (smoothed);
     positions (n, N_JOINTS, 3) and local_rotations (n, n_export, 3, 3): the output posture;
     vertebrae (n, k, 3) a finer spine when the simulation asks for one;
-    frozen (n,) bool: characters whose pose went bad, held at their last good posture.
+    frozen (n,) bool: characters whose pose went bad, held at their last good posture;
+    segment_mass_kg, segment_com_fraction (n, segments): each body's de Leva segment masses and
+    centre-of-mass positions; com_control (n,) bool; com_desired (n, 3) where the centre of
+    mass should be this tick (the motion's own, before constraints).
     """
 
     entity: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -72,6 +78,10 @@ class CharacterStore:
     positions: F64 = field(default_factory=lambda: np.zeros((0, N_JOINTS, 3)))
     local_rotations: F64 = field(default_factory=lambda: np.zeros((0, 0, 3, 3)))
     frozen: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
+    segment_mass_kg: F64 = field(default_factory=lambda: np.zeros((0, N_MASS_SEGMENTS)))
+    segment_com_fraction: F64 = field(default_factory=lambda: np.zeros((0, N_MASS_SEGMENTS)))
+    com_control: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
+    com_desired: F64 = field(default_factory=lambda: np.zeros((0, 3)))
     queue_clip: NDArray[np.int64] = field(default_factory=lambda: np.zeros((0, MAX_QUEUE), np.int64))
     queue_fade_s: F64 = field(default_factory=lambda: np.zeros((0, MAX_QUEUE)))
     queue_loop: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, MAX_QUEUE), bool))
@@ -80,6 +90,7 @@ class CharacterStore:
     poses: NormalizedPoses = field(default_factory=lambda: _empty_poses(0))
     scaled: DecodedPose | None = None
     vertebrae: F64 | None = None
+    goals: object | None = None  # this tick's constraint goals (ecs_anim.solver_shell.ArmGoals)
 
     @property
     def n(self) -> int:
@@ -89,7 +100,7 @@ class CharacterStore:
         """Append one character; ``values`` give its row for any array field. Load time only."""
         row = self.n
         for f in fields(self):
-            if f.name in ("poses", "scaled", "vertebrae"):
+            if f.name in ("poses", "scaled", "vertebrae", "goals"):
                 continue
             current = getattr(self, f.name)
             fill = np.zeros((1,) + current.shape[1:], dtype=current.dtype)

@@ -23,10 +23,10 @@ def idle():
     return import_bvh(MOTIONS_DIR / "idle.bvh")
 
 
-def _sim(idle, n=1, speed=1.0):
+def _sim(idle, n=1, speed=1.0, com_control=True):
     sim = Simulation({"idle": idle})
     entities = [sim.spawn(f"c{i}", Morphology.preset("adult_male"), MotionPlayer("idle", speed=speed),
-                          Placement((0.0, 2.0 * i))) for i in range(n)]
+                          Placement((0.0, 2.0 * i)), com_control=com_control) for i in range(n)]
     return sim, entities
 
 
@@ -61,7 +61,9 @@ def test_unreachable_target_stretches_the_arm_without_jitter(idle):
 
 
 def test_wrist_high_elbow_low(idle):
-    sim, (e,) = _sim(idle, speed=0.0)  # a still body: the targets stay a pose the arm can take
+    # A still body without COM control: the shoulder stays, so the targets stay a pose the arm
+    # can take (with COM control the root would shift and the elbow target leave the circle).
+    sim, (e,) = _sim(idle, speed=0.0, com_control=False)
     sim.step()
     p = sim.store.positions[0]
     m = Morphology.preset("adult_male")
@@ -162,3 +164,32 @@ def test_scenario_constraint_errors(tmp_path):
             assert fragment in str(err.value) and str(err.value).startswith(f"{path}:")
         finally:
             path.unlink()
+
+
+@pytest.mark.parametrize("control", [True, False])
+def test_com_control_brings_the_centre_of_mass_back(idle, control):
+    from ecs_anim.morphology import centres_of_mass
+
+    sim = Simulation({"idle": idle})
+    e = sim.spawn("a", Morphology.preset("adult_male"), MotionPlayer("idle", speed=0.0),
+                  com_control=control)
+    sim.step()
+
+    def com():
+        st = sim.store
+        return centres_of_mass(st.positions, st.segment_mass_kg, st.segment_com_fraction)[0]
+
+    desired = com()
+    feet = sim.store.positions[0, [J["ankle_l"], J["ankle_r"]]].copy()
+    target = sim.store.positions[0, J["shoulder_r"]] + [0.9, -0.1, -0.3]  # a far reach forward
+    sim.add_constraint(e, "far", "wrist_r", 10, ALWAYS, tuple(target))
+    for _ in range(3):
+        sim.step()
+    drift = np.linalg.norm(com()[:2] - desired[:2])
+    if control:
+        assert drift < 0.01  # within 1 cm of where the motion had it
+    else:
+        assert drift > 0.01  # the reference: the reach pulls the COM forward
+    np.testing.assert_allclose(sim.store.positions[0, [J["ankle_l"], J["ankle_r"]]], feet, atol=1e-9)
+    bones = bone_lengths_of(sim.store.positions[0])[IS_BONE]
+    np.testing.assert_allclose(bones, Morphology.preset("adult_male").lengths[IS_BONE], atol=1e-9)
