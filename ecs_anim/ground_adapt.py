@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .morphology import leg_length
-from .normalized import SIDE_JOINTS, SIDE_LENGTHS, DecodedPose, NormalizedPoses, decode
+from .normalized import SIDE_JOINTS, SIDE_LENGTHS, DecodedLegs, DecodedPose, NormalizedPoses, decode_legs
 from .rotations import quat_from_matrix, rotation_between
 
 F64 = NDArray[np.float64]
@@ -41,7 +41,7 @@ def vertical_slack_for_reach(hips: F64, ankle_targets: F64, reach: F64) -> F64:
 
 def adapt_to_ground(poses: NormalizedPoses, lengths: F64, ankle_targets: F64,
                     weights: F64, root_height: F64,
-                    decoded: DecodedPose | None = None) -> NormalizedPoses:
+                    decoded: DecodedPose | DecodedLegs | None = None) -> NormalizedPoses:
     """Put the ankles on their targets, lowering the pelvis only as much as the legs in contact
     need (paper §7: ``h = min(h1, h2, h3)``).
 
@@ -58,19 +58,21 @@ def adapt_to_ground(poses: NormalizedPoses, lengths: F64, ankle_targets: F64,
     Returns new poses (root height, leg frames and fractions changed; all else shared). A target
     out of reach leaves the leg stretched (to :data:`MAX_LEG_EXTENSION`) towards it.
     """
-    decoded = decode(poses, lengths) if decoded is None else decoded
-    p = decoded.positions
-    hips = p[:, list(SIDE_JOINTS["hip"])]
+    decoded = decode_legs(poses, lengths, lengths) if decoded is None else decoded
+    if isinstance(decoded, DecodedLegs):
+        hips, pelvis_now_z = decoded.hips, decoded.pelvis[:, 2]
+    else:
+        hips, pelvis_now_z = decoded.positions[:, list(SIDE_JOINTS["hip"])], decoded.positions[:, 0, 2]
     w = np.clip(weights, 0.0, 1.0)
     thigh, shank = lengths[:, SIDE_LENGTHS["thigh"]], lengths[:, SIDE_LENGTHS["shank"]]
     reach = MAX_LEG_EXTENSION * (thigh + shank)
     # Put the pelvis at h1 first; a leg lowers it in proportion to its contact weight.
-    up = np.zeros_like(p[:, 0])
-    up[:, 2] = root_height - p[:, 0, 2]
+    up = np.zeros_like(hips[:, 0])
+    up[:, 2] = root_height - pelvis_now_z
     needed = vertical_slack_for_reach(hips + up[:, None], ankle_targets, reach)
     pelvis_z = root_height + np.min(w * np.minimum(needed, 0.0), axis=1)
     shift = np.zeros_like(up)
-    shift[:, 2] = pelvis_z - p[:, 0, 2]
+    shift[:, 2] = pelvis_z - pelvis_now_z
     new_hips = hips + shift[:, None]
     # Re-aim each leg: turn its half-plane frame so z points at the target, set the fraction.
     to_target = ankle_targets - new_hips

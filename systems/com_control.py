@@ -18,11 +18,13 @@ import numpy as np
 
 from ecs_anim.ground_adapt import adapt_to_ground
 from ecs_anim.morphology import centres_of_mass, leg_length
-from ecs_anim.normalized import SIDE_JOINTS, NormalizedPoses, decode
+from ecs_anim.normalized import SIDE_JOINTS, NormalizedPoses, decode, decode_legs
 from ecs_anim.solver_shell import ArmGoals, solve_arms
 from ecs_anim.system_base import System
 
-ITERATIONS = 6
+ITERATIONS = 3
+#: 1 / (share of body mass that moves with the root when both feet are planted, ~0.8).
+ROOT_GAIN = 1.25
 TOLERANCE_M = 1e-4
 ANKLES = list(SIDE_JOINTS["ankle"])
 
@@ -39,25 +41,30 @@ class COMControl(System):
         poses = st.poses.take(rows)
         lengths = st.lengths[rows]
         masses, fractions = st.segment_mass_kg[rows], st.segment_com_fraction[rows]
-        desired = st.com_desired[rows, :2]
-        weights = st.contact_weight[rows]
-        sub_goals = goals.take(rows)
-        leg = leg_length(lengths)
         decoded = decode(poses, lengths)
         feet = decoded.positions[:, ANKLES]  # where the feet are now: they stay
+        com = centres_of_mass(decoded.positions, masses, fractions)
+        error = st.com_desired[rows, :2] - com[:, :2]
+        todo = np.arange(rows.size)
         for _ in range(ITERATIONS):
-            com = centres_of_mass(decoded.positions, masses, fractions)
-            error = desired - com[:, :2]
-            if np.abs(error).max() < TOLERANCE_M:
+            # Only the characters still off their COM take another step (the set shrinks).
+            todo = todo[np.abs(error[todo]).max(axis=1) >= TOLERANCE_M]
+            if todo.size == 0:
                 break
-            root = poses.root_position.copy()
-            root[:, :2] += error / leg[:, None]
-            moved = replace(poses, root_position=root)
-            moved_decoded = decode(moved, lengths)
-            moved = adapt_to_ground(moved, lengths, feet, weights,
-                                    moved_decoded.positions[:, 0, 2], decoded=moved_decoded)
-            poses = solve_arms(moved, lengths, sub_goals)
-            decoded = decode(poses, lengths)
+            part = poses.take(todo)
+            part_lengths = lengths[todo]
+            root = part.root_position.copy()
+            # The legs' mass stays partly behind (feet planted): step past the error by the
+            # share that does not follow the root, so one or two steps converge.
+            root[:, :2] += error[todo] * ROOT_GAIN / leg_length(part_lengths)[:, None]
+            moved = replace(part, root_position=root)
+            legs = decode_legs(moved, part_lengths, part_lengths)
+            moved = adapt_to_ground(moved, part_lengths, feet[todo], st.contact_weight[rows[todo]],
+                                    legs.pelvis[:, 2], decoded=legs)
+            part = solve_arms(moved, part_lengths, goals.take(rows[todo]))
+            poses = _scatter(poses, todo, part)
+            com = centres_of_mass(decode(part, part_lengths).positions, masses[todo], fractions[todo])
+            error[todo] = st.com_desired[rows[todo], :2] - com[:, :2]
         st.poses = _scatter(st.poses, rows, poses)
 
 
