@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from .constraints import Activation
+from .constraints import Activation, ramp_weight
 from .skeleton import JOINT_INDEX
 
 F64 = NDArray[np.float64]
@@ -93,12 +93,7 @@ class ConstraintTable:
 
     def weights(self, time_s: float) -> F64:
         """(m,) activation weight of every constraint at ``time_s`` (0 where disabled)."""
-        start, stop, ease_in, ease_out = self.activation.T
-        up = np.where(ease_in > 0, (time_s - start) / np.maximum(ease_in, 1e-12),
-                      np.where(time_s >= start, 1.0, 0.0))
-        down = np.where(ease_out > 0, (stop - time_s) / np.maximum(ease_out, 1e-12),
-                        np.where(time_s <= stop, 1.0, 0.0))
-        return np.where(self.enabled, np.clip(np.minimum(up, down), 0.0, 1.0), 0.0)
+        return np.where(self.enabled, ramp_weight(time_s, *self.activation.T), 0.0)
 
 
 def winners(owner: NDArray[np.int64], key: NDArray[np.int64], priority: F64, active: NDArray[np.bool_],

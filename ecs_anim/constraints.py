@@ -39,12 +39,22 @@ class Activation:
 
     def weight(self, time_s: NDArray[np.float64] | float) -> NDArray[np.float64]:
         """Weight in [0, 1] at the given times (any shape)."""
-        t = np.asarray(time_s, dtype=np.float64)
-        up = np.where(self.ease_in_s > 0, (t - self.start_s) / max(self.ease_in_s, 1e-12),
-                      np.where(t >= self.start_s, 1.0, 0.0))
-        down = np.where(self.ease_out_s > 0, (self.stop_s - t) / max(self.ease_out_s, 1e-12),
-                        np.where(t <= self.stop_s, 1.0, 0.0))
-        return np.clip(np.minimum(up, down), 0.0, 1.0)
+        return ramp_weight(np.asarray(time_s, dtype=np.float64), self.start_s, self.stop_s,
+                           self.ease_in_s, self.ease_out_s)
+
+
+def ramp_weight(time_s: NDArray[np.float64] | float, start_s: NDArray[np.float64] | float,
+                stop_s: NDArray[np.float64] | float, ease_in_s: NDArray[np.float64] | float,
+                ease_out_s: NDArray[np.float64] | float) -> NDArray[np.float64]:
+    """The activation ramp 0 -> 1 -> 0 (paper fig. 8), broadcast over any of its arguments:
+    linear over ``ease_in_s`` from ``start_s``, 1, linear back to 0 over ``ease_out_s`` ending at
+    ``stop_s``; a zero ease is a step."""
+    ease_in, ease_out = np.asarray(ease_in_s, dtype=np.float64), np.asarray(ease_out_s, dtype=np.float64)
+    up = np.where(ease_in > 0, (time_s - start_s) / np.maximum(ease_in, 1e-12),
+                  np.where(np.greater_equal(time_s, start_s), 1.0, 0.0))
+    down = np.where(ease_out > 0, (stop_s - time_s) / np.maximum(ease_out, 1e-12),
+                    np.where(np.less_equal(time_s, stop_s), 1.0, 0.0))
+    return np.clip(np.minimum(up, down), 0.0, 1.0)
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from .bvh import BvhWriteJoint, format_bvh, write_text_atomic
+from .bvh import BvhWriteJoint, format_bvh, read_bvh, write_text_atomic
 from .errors import EcsAnimError, InputError
 from .files import atomic_output
 from .importing import YUP_TO_ZUP, canonical_clip, source_morphology
@@ -25,7 +25,6 @@ from .motion import NormalizedMotion
 from .normalized import DecodedPose, decode
 from .rotations import frame_from_axes, matrix_to_euler, rotation_between
 from .skeleton import JOINT_INDEX as J, JOINTS, REST_HIP_DIR_LEFT
-from .bvh import read_bvh
 
 F64 = NDArray[np.float64]
 

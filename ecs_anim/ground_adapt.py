@@ -20,6 +20,10 @@ from .rotations import quat_from_matrix, rotation_between
 
 F64 = NDArray[np.float64]
 
+#: Height of the ball-of-foot joint above the sole, as a fraction of the leg (thigh + shank):
+#: the toe joint must stay this high above the ground (also used by the metrics).
+BALL_HEIGHT_PER_LEG = 0.025 / 0.86
+
 #: Legs are never stretched beyond this fraction of thigh + shank: a fully straight knee has an
 #: undefined bend direction and looks locked.
 MAX_LEG_EXTENSION = 0.995

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from .ground_adapt import vertical_slack_for_reach
 from .morphology import Morphology
 from .normalized import (
     NormalizedPoses,
@@ -99,17 +100,14 @@ def _lower_pelvis_to_reach(pelvis: F64, pelvis2world: F64, ankles: F64, morph: M
                            max_extension: float = 0.985) -> F64:
     """Pelvis heights lowered where a leg could not reach its ankle (paper §7's min rule),
     smoothly; the clip is treated as periodic (our generators make whole cycles)."""
-    heights = [pelvis[:, 2]]
-    for k, s in enumerate("lr"):
-        sign = 1.0 if s == "l" else -1.0
-        hip_offset = (pelvis2world @ (np.array(REST_HIP_DIR_LEFT) * [1.0, sign, 1.0])) * morph[f"pelvis_{s}"]
-        reach = max_extension * (morph[f"thigh_{s}"] + morph[f"shank_{s}"])
-        horiz = pelvis[:, :2] + hip_offset[:, :2] - ankles[:, k, :2]
-        dz = np.sqrt(np.maximum(reach**2 - np.sum(horiz**2, axis=-1), 0.0))
-        heights.append(ankles[:, k, 2] + dz - hip_offset[:, 2])
+    hips = np.stack([pelvis + (pelvis2world @ (np.array(REST_HIP_DIR_LEFT) * [1.0, sign, 1.0]))
+                     * morph[f"pelvis_{s}"] for s, sign in (("l", 1.0), ("r", -1.0))], axis=1)
+    reach = max_extension * np.array([morph["thigh_l"] + morph["shank_l"],
+                                      morph["thigh_r"] + morph["shank_r"]])
+    slack = vertical_slack_for_reach(hips, ankles, np.broadcast_to(reach, ankles.shape[:2]))
     # Lower by the deficit, dilated then blurred over the same circular window: the result is
     # smooth (no kink where a leg becomes the limiting one) and never less than the deficit.
-    deficit = np.maximum(pelvis[:, 2] - np.min(np.stack(heights), axis=0), 0.0)
+    deficit = np.maximum(-slack.min(axis=1), 0.0)
     half = int(round(0.12 * FPS))
     shifts = range(-half, half + 1)
     dilated = np.max(np.stack([np.roll(deficit, k) for k in shifts]), axis=0)

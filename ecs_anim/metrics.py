@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from .ground_adapt import BALL_HEIGHT_PER_LEG
 from .morphology import bone_lengths_of
 from .normalized import SIDE_JOINTS, SIDE_LENGTHS
 from .simulation import Simulation
@@ -43,8 +44,6 @@ class MetricsRecorder:
         self.ticks = 0
 
     def record(self) -> None:
-        from ecs_anim.systems.ground_adapt import BALL_HEIGHT_PER_LEG
-
         sim, st = self.sim, self.sim.store
         if st.n != self.slide_max.shape[0]:
             raise RuntimeError("MetricsRecorder: characters were spawned after it was made; "

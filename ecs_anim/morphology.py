@@ -262,6 +262,27 @@ def centre_of_mass(positions: F64, morph: Morphology) -> F64:
     return np.einsum("s,...sc->...c", masses, seg_com) / masses.sum()
 
 
+#: Names a length may be given by: every segment, and each bilateral one without _l/_r.
+LENGTH_KEYS: tuple[str, ...] = tuple(LENGTHS) + tuple(sorted(
+    {n[:-2] for n in LENGTHS if n.endswith(("_l", "_r"))}))
+
+
+def with_lengths_m(base: Morphology, lengths_m: dict[str, float]) -> Morphology:
+    """``base`` with some segments set (metres): ``thigh`` sets both thighs, ``thigh_l`` one.
+
+    Names must be :data:`LENGTH_KEYS` and values already range-checked by the caller; raises
+    ValueError if the result is no human height (0.3 to 3 m).
+    """
+    lengths = base.lengths.copy()
+    for seg, value in lengths_m.items():
+        for n in ([seg] if seg in LENGTH_INDEX else [f"{seg}_l", f"{seg}_r"]):
+            lengths[LENGTH_INDEX[n]] = float(value)
+    body = base.with_lengths(lengths)
+    if not 0.3 <= body.stature <= 3.0:
+        raise ValueError(f"these lengths make a body {body.stature:.2f} m tall; expected 0.3 to 3 m")
+    return body
+
+
 def load_morphology_yaml(path: str | Path) -> Morphology:
     """A morphology from YAML: either ``{stature_m, sex?, proportions?, leg_scale?, mass_kg?}``
     or ``{lengths_m: {segment: metres, ...}, sex?, mass_kg?}`` (bilateral segments may be given
@@ -321,23 +342,19 @@ def load_morphology_yaml(path: str | Path) -> Morphology:
         leg_scale=number("leg_scale", 0.5, 1.5) if "leg_scale" in top else 1.0,
         mass_kg=number("mass_kg", 5.0, 400.0) if "mass_kg" in top else None,
         name=str(top.get("name", Path(path).stem)))
-    lengths = base.lengths.copy()
+    given: dict[str, float] = {}
     for seg, value in (top.get("lengths_m") or {}).items():
         key = f"lengths_m.{seg}"
-        names = [seg] if seg in LENGTH_INDEX else [f"{seg}_l", f"{seg}_r"]
-        if not all(n in LENGTH_INDEX for n in names):
-            bases = sorted({n[:-2] if n.endswith(("_l", "_r")) else n for n in LENGTHS})
-            close = difflib.get_close_matches(str(seg), list(LENGTHS) + bases, n=1)
+        if seg not in LENGTH_KEYS:
+            close = difflib.get_close_matches(str(seg), list(LENGTH_KEYS), n=1)
             hint = f" (did you mean {close[0]!r}?)" if close else ""
             raise InputError(path, f"{key}: unknown segment{hint}; segments: {', '.join(LENGTHS)}",
                              lines[key])
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.001 <= value <= 2.0:
             raise InputError(path, f"{key}: expected a length in metres between 0.001 and 2, "
                                    f"found {value!r}", lines[key])
-        for n in names:
-            lengths[LENGTH_INDEX[n]] = float(value)
-    body = base.with_lengths(lengths)
-    if not 0.3 <= body.stature <= 3.0:
-        raise InputError(path, f"these lengths make a body {body.stature:.2f} m tall; expected "
-                               "0.3 to 3 m", lines.get("lengths_m", 1))
-    return body
+        given[seg] = float(value)
+    try:
+        return with_lengths_m(base, given)
+    except ValueError as exc:
+        raise InputError(path, str(exc), lines.get("lengths_m", 1)) from None

@@ -128,10 +128,8 @@ def _frame(bank: ClipBank, clip: I64, local: I64, loops: F64) -> NormalizedPoses
     angle, moved = _loop_transform(bank, clip, loops)
     p0 = bank.poses.root_position[bank.start[clip], :2]
     rel = out.root_position[:, :2] - p0
-    c, s = np.cos(angle), np.sin(angle)
-    rotated = np.stack([c * rel[:, 0] - s * rel[:, 1], s * rel[:, 0] + c * rel[:, 1]], axis=-1)
     out.root_position = out.root_position.copy()
-    out.root_position[:, :2] = p0 + moved + rotated
+    out.root_position[:, :2] = p0 + moved + rotate_xy(rel, angle)
     out.root_heading = out.root_heading + angle
     return out
 

@@ -22,7 +22,7 @@ from .components import MotionPlayer, Placement, QueuedClip
 from .constraints import Activation
 from .errors import EcsAnimError, InputError
 from .ground import Bumps, Combined, Ground, HeightGrid, Plane, Slope, Stairs
-from .morphology import PRESET_SPECS, Morphology
+from .morphology import LENGTH_KEYS, PRESET_SPECS, Morphology, with_lengths_m
 from .motion import NormalizedMotion, load_nmo
 
 #: Names of characters and motions: they name files, so no path separators or leading dot.
@@ -250,21 +250,13 @@ def _morphology(r: _Reader, node: Node, where: str) -> Morphology:
             name=where)
     if "lengths_m" not in keys:
         return base
-    from .skeleton import LENGTH_INDEX, LENGTHS
-
-    lengths = base.lengths.copy()
-    bases = sorted({n[:-2] if n.endswith(("_l", "_r")) else n for n in LENGTHS})
-    seg_nodes = r.mapping(keys["lengths_m"], f"{where}.lengths_m",
-                          {k: False for k in list(LENGTHS) + bases})
-    for seg, value_node in seg_nodes.items():
-        value = r.number(value_node, f"{where}.lengths_m.{seg}", 0.001, 2.0, "m")
-        for n in ([seg] if seg in LENGTH_INDEX else [f"{seg}_l", f"{seg}_r"]):
-            lengths[LENGTH_INDEX[n]] = value
-    body = base.with_lengths(lengths)
-    if not 0.3 <= body.stature <= 3.0:
-        raise r.fail(keys["lengths_m"], f"{where}.lengths_m", f"these lengths make a body "
-                     f"{body.stature:.2f} m tall; expected 0.3 to 3 m")
-    return body
+    seg_nodes = r.mapping(keys["lengths_m"], f"{where}.lengths_m", {k: False for k in LENGTH_KEYS})
+    given = {seg: r.number(v, f"{where}.lengths_m.{seg}", 0.001, 2.0, "m")
+             for seg, v in seg_nodes.items()}
+    try:
+        return with_lengths_m(base, given)
+    except ValueError as exc:
+        raise r.fail(keys["lengths_m"], f"{where}.lengths_m", str(exc)) from None
 
 
 def _load_motion(r: _Reader, node: Node, where: str, base_dir: Path) -> NormalizedMotion:

@@ -15,14 +15,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ecs_anim.ground_adapt import adapt_to_ground
+from ecs_anim.ground_adapt import BALL_HEIGHT_PER_LEG, adapt_to_ground
 from ecs_anim.normalized import SIDE_JOINTS, SIDE_LENGTHS, decode_legs
 from ecs_anim.system_base import System
 
 #: Time constant (s) with which the motion's floor follows the ground under the supporting feet.
 GROUND_SMOOTHING_S = 0.15
-#: Height of the ball-of-foot joint above the sole, as a fraction of the leg (thigh + shank).
-BALL_HEIGHT_PER_LEG = 0.025 / 0.86
 
 ANKLES, TOES = list(SIDE_JOINTS["ankle"]), list(SIDE_JOINTS["toe"])
 
