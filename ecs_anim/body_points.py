@@ -92,23 +92,34 @@ class BodyPoint:
         return SEGMENTS[self.name][2]
 
 
-def body_point(name: str, fraction: float | None = None,
-               offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> BodyPoint:
-    """A point from a segment or joint name; raises ValueError with a suggestion when unknown.
+#: Points only a target can name (the root's): the pelvis bones and their joints.
+TARGET_ONLY_SEGMENTS = ("pelvis_l", "pelvis_r")
+TARGET_ONLY_JOINTS = {"pelvis": ("pelvis_l", 0.0), "hip_l": ("pelvis_l", 1.0), "hip_r": ("pelvis_r", 1.0)}
 
-    ``fraction`` defaults to 1 (the distal joint) for a joint name and 0.5 for a segment."""
-    if name in JOINT_AS_POINT:
+
+def body_point(name: str, fraction: float | None = None,
+               offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0),
+               as_target: bool = False) -> BodyPoint:
+    """A point from a segment or joint name; raises ValueError with a suggestion when unknown.
+    ``as_target``: the point is a target, which may also be on the root (pelvis, hips).
+
+    A name that is both (``head``, ``neck``, ``hand_l``) is the joint unless a ``fraction`` is
+    given; a segment without one is its middle (0.5)."""
+    if name in JOINT_AS_POINT and (fraction is None or name not in SEGMENTS):
         if fraction is not None:
             raise ValueError(f"{name!r} is a joint; give fraction with a segment "
                              f"(e.g. {JOINT_AS_POINT[name]!r})")
         seg, fraction = JOINT_AS_POINT[name], 1.0
-    elif name in SEGMENTS:
+    elif as_target and name in TARGET_ONLY_JOINTS and fraction is None:
+        seg, fraction = TARGET_ONLY_JOINTS[name]
+    elif name in SEGMENTS or (as_target and name in TARGET_ONLY_SEGMENTS):
         seg, fraction = name, 0.5 if fraction is None else fraction
     else:
         if name in LENGTH_INDEX or name in J:
             raise ValueError(f"{name!r} belongs to the root (pelvis), which only centre-of-mass "
                              f"control moves; constrain another point")
-        names = sorted(set(SEGMENTS) | set(JOINT_AS_POINT))
+        names = sorted(set(SEGMENTS) | set(JOINT_AS_POINT)
+                       | (set(TARGET_ONLY_JOINTS) | set(TARGET_ONLY_SEGMENTS) if as_target else set()))
         close = difflib.get_close_matches(name, names, n=1)
         hint = f"; did you mean {close[0]!r}?" if close else ""
         raise ValueError(f"unknown body point {name!r}{hint} (segments: {', '.join(sorted(SEGMENTS))}; "
@@ -123,7 +134,7 @@ def body_point(name: str, fraction: float | None = None,
 #: Per length index: proximal and distal joints, group, bone, frame (-1 where not a point).
 SEG_PROXIMAL = np.array([a for a, _ in BONE_JOINTS])
 SEG_DISTAL = np.array([b for _, b in BONE_JOINTS])
-SEG_FRAME = np.array([SEGMENTS[n][2] if n in SEGMENTS else -1 for n in LENGTHS])
+SEG_FRAME = np.array([SEGMENTS[n][2] if n in SEGMENTS else FRAME_PELVIS for n in LENGTHS])
 
 
 def segment_frames(decoded: DecodedPose, rows: I64, segment: I64) -> F64:

@@ -1,12 +1,20 @@
-"""Scenario and code constraints of all characters, as one structure-of-arrays table.
+"""Every character's constraints, as one structure-of-arrays table (paper §5, DESIGN §5).
 
-First cut of the constraint issue: position constraints on the arms' analytic limbs, the wrist
-(solved by reaching, highest priority first) and the elbow (solved by swivelling the arm about
-its shoulder -> wrist axis, so a higher-priority wrist constraint is kept: paper fig. 11 and 13).
-Targets are a fixed world point, a point given by code (:meth:`ConstraintTable.set_target`), or
-a joint of another character read from that character's posture of the previous tick (the
-posture every character had when this tick began: all characters see the same, consistent
-world, whatever their order).
+A constraint is ``{point, kind, chain, priority, activation}`` plus its target:
+
+* kinds: ``position`` (the point on a target point), ``distance`` (the point at ``distance_m``
+  from the target point; 0 is contact), ``area`` (keep the point inside, or outside, a box, a
+  sphere or a half-space placed at the target point), ``orientation`` (a segment axis along a
+  world direction, or looking at the target point);
+* targets: a fixed world point, a point given by code (:meth:`ConstraintTable.set_target`), or a
+  body point (segment + fraction + offset) of a character. Another character's point is read
+  from its posture of the previous tick (the posture every character had when this tick began:
+  all characters see the same, consistent world, whatever their order); a point on the
+  constrained character itself from its own pose of this tick before constraints (so two hands
+  of one body meet without a tick of lag);
+* chain: the groups (:data:`ecs_anim.body_points.GROUPS`) allowed to move for it, as a bit mask;
+* activation: a ramp in simulation time, or for constraints stored with a motion, in the time of
+  that clip while the character plays it (``clock`` = the clip's index in the bank).
 """
 
 from __future__ import annotations
@@ -16,70 +24,192 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from .body_points import ALLOWED_CHAIN, GROUP_INDEX, GROUPS, SEGMENTS, BodyPoint
 from .constraints import Activation, ramp_weight
-from .skeleton import JOINT_INDEX
 
 F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
 
-#: Constrained points supported so far: joint -> (limb slot, role). Slots: 0 arm_l, 1 arm_r;
-#: roles: 0 the limb's end (wrist), 1 its middle joint (elbow).
-POINTS: dict[str, tuple[int, int]] = {
-    "wrist_l": (0, 0), "wrist_r": (1, 0), "elbow_l": (0, 1), "elbow_r": (1, 1),
-}
-LIMBS = ("arm_l", "arm_r")
-TARGET_WORLD, TARGET_CHARACTER = 0, 1
+KIND_POSITION, KIND_DISTANCE, KIND_AREA, KIND_ORIENTATION = range(4)
+KIND_NAMES = {"position": KIND_POSITION, "distance": KIND_DISTANCE, "area": KIND_AREA,
+              "orientation": KIND_ORIENTATION}
+AREA_BOX, AREA_SPHERE, AREA_HALF_SPACE = 1, 2, 3
+AREA_NAMES = {"box": AREA_BOX, "sphere": AREA_SPHERE, "half_space": AREA_HALF_SPACE}
+TARGET_WORLD, TARGET_BODY = 0, 1
+#: Segments whose orientation can be constrained: the distal limb segments (their axis only),
+#: the head (any axis of its frame) and the thorax (spine_upper: any axis, moved by the trunk).
+ORIENTABLE = {"hand_l", "hand_r", "foot_l", "foot_r", "head", "spine_upper"}
+
+
+@dataclass(frozen=True)
+class Area:
+    """A restricted area, placed at its constraint's target point.
+
+    ``box``: ``low_m``/``high_m`` corners relative to that point; ``sphere``: ``radius_m``;
+    ``half_space``: ``normal`` (the allowed side is where the normal points). ``inside`` False
+    keeps the point out of the area instead."""
+
+    shape: str
+    low_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    high_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    radius_m: float = 0.0
+    normal: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    inside: bool = True
+
+    def __post_init__(self) -> None:
+        if self.shape not in AREA_NAMES:
+            raise ValueError(f"unknown area shape {self.shape!r}; shapes: {', '.join(AREA_NAMES)}")
+        values = self.low_m + self.high_m + self.normal + (self.radius_m,)
+        if not all(np.isfinite(v) for v in values):
+            raise ValueError("area values must be finite")
+        if self.shape == "box" and any(lo > hi for lo, hi in zip(self.low_m, self.high_m)):
+            raise ValueError(f"box low_m {self.low_m} must be below high_m {self.high_m}")
+        if self.shape == "sphere" and self.radius_m <= 0:
+            raise ValueError("sphere radius_m must be > 0")
+        if self.shape == "half_space" and np.linalg.norm(self.normal) < 1e-9:
+            raise ValueError("half_space normal must not be zero")
+
+
+@dataclass(frozen=True)
+class Target:
+    """Where a constraint aims: ``world_m`` (a fixed point, or the direction of an orientation
+    constraint), or ``point`` on the character in store row ``row``."""
+
+    world_m: tuple[float, float, float] | None = None
+    row: int | None = None
+    point: BodyPoint | None = None
+
+    def __post_init__(self) -> None:
+        if (self.world_m is None) == (self.row is None):
+            raise ValueError("give either a world target or a character")
+        if self.row is not None and self.point is None:
+            raise ValueError("a character target needs the body point to aim at")
+        if self.world_m is not None and not all(np.isfinite(v) for v in self.world_m):
+            raise ValueError(f"target {self.world_m} must be finite")
+
+
+def _col(dtype: type, *trailing: int):  # type: ignore[no-untyped-def]
+    return field(default_factory=lambda: np.zeros((0,) + trailing, dtype))
 
 
 @dataclass
 class ConstraintTable:
-    """m constraints. owner (m,) store row; slot (m,), role (m,) see :data:`POINTS`;
-    priority (m,); activation (m, 4) start, stop, ease in, ease out (s, simulation time);
-    target_kind (m,); target_world (m, 3) metres; target_row (m,), target_joint (m,) for a
-    point on another character; enabled (m,) (a constraint whose target went non-finite is
-    switched off, with a warning); names (m,) for messages."""
+    """m constraints, one row each (shapes (m,) unless given; metres, seconds).
 
-    owner: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
-    slot: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
-    role: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
-    priority: F64 = field(default_factory=lambda: np.zeros(0))
-    activation: F64 = field(default_factory=lambda: np.zeros((0, 4)))
-    target_kind: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
-    target_world: F64 = field(default_factory=lambda: np.zeros((0, 3)))
-    target_row: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
-    target_joint: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
-    enabled: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
+    owner: store row; kind; segment (length index), fraction, offset (m, 3): the point; group,
+    bone: where the point sits for the solver; chain: bit mask of groups allowed to move;
+    priority; activation (m, 4) start, stop, ease in, ease out; clock: -1 simulation time, else
+    the clip whose time drives the activation; target_kind; target_world (m, 3); target_row,
+    target_segment, target_fraction, target_offset (m, 3): a body point target; distance_m;
+    area_shape (0 none), area_low, area_high (m, 3), area_radius, area_normal (m, 3),
+    area_inside; axis (m, 3) the segment-frame axis an orientation constraint turns; enabled
+    (a constraint whose target went non-finite is switched off, with a warning); error: each
+    constraint's remaining error after the last tick (metres, or radians for orientation; NaN
+    while inactive); names.
+    """
+
+    owner: I64 = _col(np.int64)
+    kind: I64 = _col(np.int64)
+    segment: I64 = _col(np.int64)
+    fraction: F64 = _col(np.float64)
+    offset: F64 = _col(np.float64, 3)
+    group: I64 = _col(np.int64)
+    bone: I64 = _col(np.int64)
+    chain: I64 = _col(np.int64)
+    priority: F64 = _col(np.float64)
+    activation: F64 = _col(np.float64, 4)
+    clock: I64 = _col(np.int64)
+    target_kind: I64 = _col(np.int64)
+    target_world: F64 = _col(np.float64, 3)
+    target_row: I64 = _col(np.int64)
+    target_segment: I64 = _col(np.int64)
+    target_fraction: F64 = _col(np.float64)
+    target_offset: F64 = _col(np.float64, 3)
+    distance_m: F64 = _col(np.float64)
+    area_shape: I64 = _col(np.int64)
+    area_low: F64 = _col(np.float64, 3)
+    area_high: F64 = _col(np.float64, 3)
+    area_radius: F64 = _col(np.float64)
+    area_normal: F64 = _col(np.float64, 3)
+    area_inside: NDArray[np.bool_] = _col(np.bool_)
+    axis: F64 = _col(np.float64, 3)
+    enabled: NDArray[np.bool_] = _col(np.bool_)
+    error: F64 = _col(np.float64)
     names: list[str] = field(default_factory=list)
 
     @property
     def m(self) -> int:
         return int(self.owner.shape[0])
 
-    def add(self, name: str, owner: int, point: str, priority: float, activation: Activation,
-            target_world: tuple[float, float, float] | None = None,
-            target_row: int | None = None, target_point: str | None = None) -> int:
-        """Append one constraint (load time). Exactly one target: a world point or another
-        character's joint. Returns its index."""
-        if point not in POINTS:
-            raise ValueError(f"constraint {name!r}: point {point!r} is not supported yet; "
-                             f"supported: {', '.join(POINTS)}")
-        if (target_world is None) == (target_row is None):
-            raise ValueError(f"constraint {name!r}: give either a world target or a character")
-        if target_row is not None and target_point is None:
-            raise ValueError(f"constraint {name!r}: a character target needs the joint to aim at")
-        if target_point is not None and target_point not in JOINT_INDEX:
-            raise ValueError(f"constraint {name!r}: unknown joint {target_point!r}")
-        slot, role = POINTS[point]
+    def add(self, name: str, owner: int, kind: str, point: BodyPoint, target: Target,
+            priority: float = 0.0, activation: Activation = Activation(0.0, 1e9),
+            chain: tuple[str, ...] | None = None, distance_m: float = 0.0,
+            area: Area | None = None, axis: tuple[float, float, float] = (0.0, 0.0, 1.0),
+            clock: int = -1) -> int:
+        """Append one constraint (load time), validated; raises ValueError naming ``name``.
+        ``chain`` defaults to the point's own group. Returns its index."""
+        def fail(message: str) -> ValueError:
+            return ValueError(f"constraint {name!r}: {message}")
+
+        if kind not in KIND_NAMES:
+            raise fail(f"unknown kind {kind!r}; kinds: {', '.join(KIND_NAMES)}")
+        chain = (GROUPS[point.group],) if chain is None else tuple(chain)
+        if not chain:
+            raise fail("empty chain: name the body groups allowed to move "
+                       f"({', '.join(GROUPS)})")
+        unknown = [g for g in chain if g not in GROUP_INDEX]
+        if unknown:
+            raise fail(f"unknown chain group {unknown[0]!r}; groups: {', '.join(GROUPS)}")
+        groups = {GROUP_INDEX[g] for g in chain}
+        if point.group not in groups:
+            raise fail(f"the chain {list(chain)} must include {GROUPS[point.group]!r}, the group "
+                       f"of {point.name!r}")
+        if not groups <= ALLOWED_CHAIN[point.group]:
+            extra = sorted(GROUPS[g] for g in groups - ALLOWED_CHAIN[point.group])
+            raise fail(f"{point.name!r} cannot be moved by {', '.join(extra)}: a point of "
+                       f"{GROUPS[point.group]!r} can use "
+                       f"{' and '.join(sorted(GROUPS[g] for g in ALLOWED_CHAIN[point.group]))}")
+        if not np.isfinite(priority):
+            raise fail("priority must be finite")
+        if kind == "area" and area is None:
+            raise fail("an area constraint needs its area")
+        if kind != "area" and area is not None:
+            raise fail("only an area constraint takes an area")
+        if kind == "distance" and not (np.isfinite(distance_m) and distance_m >= 0):
+            raise fail(f"distance_m must be >= 0, got {distance_m}")
+        if kind == "orientation":
+            if point.name not in ORIENTABLE:
+                raise fail(f"the orientation of {point.name!r} cannot be constrained; "
+                           f"segments: {', '.join(sorted(ORIENTABLE))}")
+            if not all(np.isfinite(axis)) or np.linalg.norm(axis) < 1e-9:
+                raise fail(f"axis {axis} must be a non-zero direction")
+            if point.name not in ("head", "spine_upper") and not np.allclose(
+                    np.asarray(axis) / np.linalg.norm(axis), (0.0, 0.0, 1.0)):
+                raise fail(f"only the bone axis (0, 0, 1) of {point.name!r} can be oriented")
+            if target.world_m is not None and np.linalg.norm(target.world_m) < 1e-9:
+                raise fail("an orientation's world direction must not be zero")
         a = activation
-        row = {
-            "owner": owner, "slot": slot, "role": role, "priority": priority,
-            "activation": (a.start_s, a.stop_s, a.ease_in_s, a.ease_out_s),
-            "target_kind": TARGET_WORLD if target_world is not None else TARGET_CHARACTER,
-            "target_world": target_world if target_world is not None else (0.0, 0.0, 0.0),
-            "target_row": target_row if target_row is not None else 0,
-            "target_joint": JOINT_INDEX[target_point] if target_point else 0,
-            "enabled": True,
+        ar = area or Area("box")
+        values = {
+            "owner": owner, "kind": KIND_NAMES[kind], "segment": point.segment,
+            "fraction": point.fraction, "offset": point.offset_m, "group": point.group,
+            "bone": point.bone, "chain": sum(1 << g for g in groups), "priority": priority,
+            "activation": (a.start_s, a.stop_s, a.ease_in_s, a.ease_out_s), "clock": clock,
+            "target_kind": TARGET_WORLD if target.world_m is not None else TARGET_BODY,
+            "target_world": target.world_m if target.world_m is not None else (0.0, 0.0, 0.0),
+            "target_row": target.row if target.row is not None else 0,
+            "target_segment": target.point.segment if target.point else 0,
+            "target_fraction": target.point.fraction if target.point else 0.0,
+            "target_offset": target.point.offset_m if target.point else (0.0, 0.0, 0.0),
+            "distance_m": distance_m,
+            "area_shape": AREA_NAMES[ar.shape] if area is not None else 0,
+            "area_low": ar.low_m, "area_high": ar.high_m, "area_radius": ar.radius_m,
+            "area_normal": tuple(np.asarray(ar.normal) / np.linalg.norm(ar.normal)),
+            "area_inside": ar.inside,
+            "axis": tuple(np.asarray(axis, dtype=float) / np.linalg.norm(axis)),
+            "enabled": True, "error": np.nan,
         }
-        for key, value in row.items():
+        for key, value in values.items():
             current = getattr(self, key)
             setattr(self, key, np.concatenate([current, np.asarray([value], dtype=current.dtype)]))
         self.names.append(name)
@@ -91,13 +221,20 @@ class ConstraintTable:
         self.target_world[index] = target_in_world
         self.enabled[index] = True
 
-    def weights(self, time_s: float) -> F64:
-        """(m,) activation weight of every constraint at ``time_s`` (0 where disabled)."""
-        return np.where(self.enabled, ramp_weight(time_s, *self.activation.T), 0.0)
+    def weights(self, time_s: float, clip: I64 | None = None, clip_time_s: F64 | None = None) -> F64:
+        """(m,) activation weight of every constraint (0 where disabled). Motion constraints
+        (``clock >= 0``) follow their owner's clip time while it plays that clip: ``clip``,
+        ``clip_time_s`` (n,) per character."""
+        t = np.full(self.m, time_s)
+        on_clip = self.clock >= 0
+        if on_clip.any() and clip is not None and clip_time_s is not None:
+            playing = clip[self.owner] == self.clock
+            t = np.where(on_clip, np.where(playing, clip_time_s[self.owner], -np.inf), t)
+        return np.where(self.enabled, ramp_weight(t, *self.activation.T), 0.0)
 
 
-def winners(owner: NDArray[np.int64], key: NDArray[np.int64], priority: F64, active: NDArray[np.bool_],
-            n_rows: int, n_keys: int) -> NDArray[np.int64]:
+def winners(owner: I64, key: I64, priority: F64, active: NDArray[np.bool_],
+            n_rows: int, n_keys: int) -> I64:
     """For every (row, key), the index of the active constraint with the highest priority, or -1.
 
     Ties go to the constraint added last. Returns (n_rows, n_keys) indices into the table.
@@ -113,3 +250,6 @@ def winners(owner: NDArray[np.int64], key: NDArray[np.int64], priority: F64, act
     cells, first_in_reversed = np.unique(flat[::-1], return_index=True)
     out.reshape(-1)[cells] = order[::-1][first_in_reversed]
     return out
+
+
+__all__ = ["Area", "ConstraintTable", "Target", "winners", "SEGMENTS"]

@@ -31,7 +31,8 @@ _NAME = re.compile(r"[A-Za-z0-9_\-][A-Za-z0-9_.\-]*")
 
 @dataclass
 class ConstraintEntry:
-    """A scenario constraint: ``point`` of its character to a world point or another's joint."""
+    """A scenario constraint, as :meth:`Simulation.add_constraint` takes it; the target
+    character is a name until the simulation is built."""
 
     name: str
     point: str
@@ -39,7 +40,8 @@ class ConstraintEntry:
     activation: Activation
     target_in_world: tuple[float, float, float] | None = None
     target_character: str | None = None
-    target_joint: str | None = None
+    target_point: str | None = None
+    options: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass
@@ -283,19 +285,35 @@ CHARACTER_KEYS = {"name": True, "morphology": True, "motion": True, "position_m"
 
 def _constraint(r: _Reader, node: Node, where: str) -> tuple[ConstraintEntry, Node | None]:
     """One constraint entry; returns it and the node naming a target character (checked once
-    every character is known)."""
-    from .constraint_table import POINTS
-    from .skeleton import JOINTS
+    every character is known). Everything else is checked here, against a scratch table, so a
+    mistake is reported with its line."""
+    from .body_points import GROUPS, body_point
+    from .constraint_table import KIND_NAMES, Area, ConstraintTable, Target
 
-    keys = r.mapping(node, where, {"name": True, "point": True, "priority": False,
-                                   "target": True, "activation": False})
+    keys = r.mapping(node, where, {"name": True, "kind": False, "point": True, "fraction": False,
+                                   "offset_m": False, "chain": False, "priority": False,
+                                   "target": True, "activation": False, "distance_m": False,
+                                   "area": False, "axis": False})
     name = r.string(keys["name"], f"{where}.name")
-    point = r.string(keys["point"], f"{where}.point")
-    if point not in POINTS:
-        close = difflib.get_close_matches(point, list(POINTS), n=1)
+    kind = r.string(keys["kind"], f"{where}.kind") if "kind" in keys else "position"
+    if kind not in KIND_NAMES:
+        close = difflib.get_close_matches(kind, list(KIND_NAMES), n=1)
         hint = f"; did you mean {close[0]!r}?" if close else ""
-        raise r.fail(keys["point"], f"{where}.point", f"{point!r} cannot be constrained yet{hint} "
-                                                      f"(supported: {', '.join(POINTS)})")
+        raise r.fail(keys["kind"], f"{where}.kind", f"unknown kind {kind!r}{hint} "
+                                                    f"(kinds: {', '.join(KIND_NAMES)})")
+
+    def point_of(pkeys: dict[str, Node], pwhere: str, point_key: str,
+                 as_target: bool = False) -> tuple[str, float | None, tuple[float, float, float]]:
+        point = r.string(pkeys[point_key], f"{pwhere}.{point_key}")
+        fraction = r.number(pkeys["fraction"], f"{pwhere}.fraction", 0.0, 1.0) if "fraction" in pkeys else None
+        offset = r.vector(pkeys["offset_m"], f"{pwhere}.offset_m", 3, "m", 10.0) if "offset_m" in pkeys else (0.0, 0.0, 0.0)
+        try:
+            body_point(point, fraction, offset, as_target)  # type: ignore[arg-type]
+        except ValueError as exc:
+            raise r.fail(pkeys[point_key], f"{pwhere}.{point_key}", str(exc)) from None
+        return point, fraction, offset  # type: ignore[return-value]
+
+    point, fraction, offset = point_of(keys, where, "point")
     priority = r.number(keys["priority"], f"{where}.priority", -1e6, 1e6) if "priority" in keys else 0.0
     if "activation" in keys:
         ak = r.mapping(keys["activation"], f"{where}.activation",
@@ -308,25 +326,74 @@ def _constraint(r: _Reader, node: Node, where: str) -> tuple[ConstraintEntry, No
             raise r.fail(keys["activation"], f"{where}.activation", str(exc)) from None
     else:
         activation = Activation(0.0, 1e6)
+    options: dict[str, Any] = {"kind": kind, "fraction": fraction, "offset_m": offset}
+    if "chain" in keys:
+        chain = []
+        for j, gn in enumerate(r.sequence(keys["chain"], f"{where}.chain")):
+            group = r.string(gn, f"{where}.chain[{j}]")
+            if group not in GROUPS:
+                close = difflib.get_close_matches(group, list(GROUPS), n=1)
+                hint = f"; did you mean {close[0]!r}?" if close else ""
+                raise r.fail(gn, f"{where}.chain[{j}]", f"unknown group {group!r}{hint} "
+                                                       f"(groups: {', '.join(GROUPS)})")
+            chain.append(group)
+        options["chain"] = tuple(chain)
+    if "distance_m" in keys:
+        options["distance_m"] = r.number(keys["distance_m"], f"{where}.distance_m", 0.0, 100.0, "m")
+    if "axis" in keys:
+        options["axis"] = r.vector(keys["axis"], f"{where}.axis", 3, "", 1e3)
+    if "area" in keys:
+        ak = r.mapping(keys["area"], f"{where}.area", {"shape": True, "low_m": False, "high_m": False,
+                                                       "radius_m": False, "normal": False,
+                                                       "inside": False})
+        aw = f"{where}.area"
+        try:
+            options["area"] = Area(
+                r.string(ak["shape"], f"{aw}.shape"),
+                r.vector(ak["low_m"], f"{aw}.low_m", 3, "m", 1e5) if "low_m" in ak else (0.0, 0.0, 0.0),  # type: ignore[arg-type]
+                r.vector(ak["high_m"], f"{aw}.high_m", 3, "m", 1e5) if "high_m" in ak else (0.0, 0.0, 0.0),  # type: ignore[arg-type]
+                r.number(ak["radius_m"], f"{aw}.radius_m", 0.0, 1e5, "m") if "radius_m" in ak else 0.0,
+                r.vector(ak["normal"], f"{aw}.normal", 3, "", 1e3) if "normal" in ak else (0.0, 0.0, 1.0),  # type: ignore[arg-type]
+                r.boolean(ak["inside"], f"{aw}.inside") if "inside" in ak else True)
+        except ValueError as exc:
+            raise r.fail(keys["area"], aw, str(exc)) from None
     tk = r.mapping(keys["target"], f"{where}.target",
-                   {"world_m": False, "character": False, "joint": False})
-    if ("world_m" in tk) == ("character" in tk):
-        raise r.fail(keys["target"], f"{where}.target", "give either world_m: [x, y, z] or "
-                                                        "character: NAME with joint: JOINT")
-    if "world_m" in tk:
-        if "joint" in tk:
-            raise r.fail(tk["joint"], f"{where}.target.joint", "only with character:")
-        world = r.vector(tk["world_m"], f"{where}.target.world_m", 3, "m", 1e5)
-        return ConstraintEntry(name, point, priority, activation, (world[0], world[1], world[2])), None
-    if "joint" not in tk:
-        raise r.fail(keys["target"], f"{where}.target", "character: needs joint: (which joint to aim at)")
-    joint = r.string(tk["joint"], f"{where}.target.joint")
-    if joint not in JOINTS:
-        close = difflib.get_close_matches(joint, list(JOINTS), n=1)
-        hint = f"; did you mean {close[0]!r}?" if close else ""
-        raise r.fail(tk["joint"], f"{where}.target.joint", f"unknown joint {joint!r}{hint}")
-    other = r.string(tk["character"], f"{where}.target.character")
-    return ConstraintEntry(name, point, priority, activation, None, other, joint), tk["character"]
+                   {"world_m": False, "direction": False, "character": False, "point": False,
+                    "joint": False, "fraction": False, "offset_m": False})
+    given = [k for k in ("world_m", "direction", "character") if k in tk]
+    if len(given) != 1:
+        raise r.fail(keys["target"], f"{where}.target", "give one of world_m: [x, y, z], "
+                     "direction: [x, y, z] (orientation) or character: NAME with point: POINT")
+    target_world, other, target_point, who = None, None, None, None
+    if given[0] in ("world_m", "direction"):
+        for extra in ("point", "joint", "fraction", "offset_m"):
+            if extra in tk:
+                raise r.fail(tk[extra], f"{where}.target.{extra}", "only with character:")
+        if (given[0] == "direction") != (kind == "orientation"):
+            raise r.fail(tk[given[0]], f"{where}.target.{given[0]}",
+                         "an orientation aims along direction: [x, y, z] or looks at a character's "
+                         "point" if kind == "orientation" else "direction: is for orientation constraints")
+        target_world = r.vector(tk[given[0]], f"{where}.target.{given[0]}", 3, "m", 1e5)
+    else:
+        if ("point" in tk) == ("joint" in tk):
+            raise r.fail(keys["target"], f"{where}.target", "character: needs point: (a joint or "
+                                                            "a segment of that character)")
+        key = "point" if "point" in tk else "joint"
+        target_point, t_fraction, t_offset = point_of(tk, f"{where}.target", key, as_target=True)
+        options["target_fraction"], options["target_offset_m"] = t_fraction, t_offset
+        other, who = r.string(tk["character"], f"{where}.target.character"), tk["character"]
+    # Everything but the target character's existence, checked now (with this line).
+    target = Target(row=0, point=body_point(target_point, options.get("target_fraction"),
+                                            options.get("target_offset_m", (0.0, 0.0, 0.0)), True)) \
+        if target_point else Target(world_m=target_world)  # type: ignore[arg-type]
+    checks = {k: v for k, v in options.items() if k in ("chain", "distance_m", "area", "axis")}
+    try:
+        ConstraintTable().add(name, 0, kind, body_point(point, fraction, offset), target, priority,
+                              activation, **checks)
+    except ValueError as exc:
+        raise r.fail(node, where, str(exc)) from None
+    return ConstraintEntry(name, point, priority, activation, target_world, other, target_point,  # type: ignore[arg-type]
+                           options), who
 
 
 def load_scenario(path: str | Path) -> Scenario:
@@ -440,5 +507,5 @@ def build_simulation(scenario: Scenario, window: bool = False,  # type: ignore[n
             sim.add_constraint(entities[c.name], k.name, k.point, k.priority, k.activation,
                                k.target_in_world,
                                None if k.target_character is None else entities[k.target_character],
-                               k.target_joint)
+                               k.target_point, **k.options)
     return sim

@@ -31,7 +31,9 @@ from .ground import Ground, Plane
 from .morphology import Morphology, leg_length, segment_mass_table
 from .motion import NormalizedMotion
 from .playback import ClipBank, _wrap, rotate_xy, sample
-from .constraint_table import ConstraintTable
+from .body_points import body_point
+from .solver_shell import DEFAULT_SETTINGS, SolverSettings
+from .constraint_table import Area, ConstraintTable, Target
 from .constraints import Activation
 from .store import MAX_QUEUE, CharacterStore
 from .system_base import System
@@ -58,7 +60,7 @@ class Simulation:
 
     def __init__(self, motions: dict[str, NormalizedMotion], ground: Ground | None = None,
                  fps: float = 30.0, window: bool = False, vertebrae: int = 0,
-                 rotations: bool = False):
+                 rotations: bool = False, solver_settings: SolverSettings = DEFAULT_SETTINGS):
         from .systems import HEADLESS, SCHEDULE
 
         if not motions:
@@ -76,6 +78,7 @@ class Simulation:
         self.bank = ClipBank.from_motions(motions)
         self.store = CharacterStore()
         self.constraints = ConstraintTable()
+        self.solver_settings = solver_settings
         self.renderer: object | None = None
         self.messages: list[str] = []
         schedule = SCHEDULE if window else HEADLESS
@@ -124,8 +127,12 @@ class Simulation:
     # --- characters -------------------------------------------------------------------------
 
     def spawn(self, name: str, body: Morphology, player: MotionPlayer,
-              placement: Placement = Placement(), team: str = "", com_control: bool = True) -> int:
-        """Add a character; returns its entity. Validates at the boundary (not in the tick)."""
+              placement: Placement = Placement(), team: str = "", com_control: bool = True,
+              com_target_xy: tuple[float, float] | None = None) -> int:
+        """Add a character; returns its entity. Validates at the boundary (not in the tick).
+
+        ``com_control``: the solver moves the root to keep the centre of mass where the motion
+        has it, or over ``com_target_xy`` (world metres) when given."""
         try:
             clip = self.bank.index(player.clip)
             queue = [self.bank.index(q.clip) for q in player.queue]
@@ -133,7 +140,8 @@ class Simulation:
             raise EcsAnimError(f"character {name!r}: {exc.args[0]}") from None
         if len(queue) > MAX_QUEUE:
             raise EcsAnimError(f"character {name!r}: at most {MAX_QUEUE} queued clips, got {len(queue)}")
-        values = (*placement.position_m, placement.heading_rad, player.speed, player.start_s)
+        values = (*placement.position_m, placement.heading_rad, player.speed, player.start_s,
+                  *(com_target_xy or ()))
         if not all(np.isfinite(v) and abs(v) <= MAX_COORDINATE_M for v in values):
             raise EcsAnimError(f"character {name!r}: placement, speed and start must be finite "
                                f"and within {MAX_COORDINATE_M:g}")
@@ -151,6 +159,8 @@ class Simulation:
                 ground_ref=float(self.ground.height(np.array(placement.position_m, float))),
                 segment_mass_kg=segment_mass_table(body)[0],
                 segment_com_fraction=segment_mass_table(body)[1], com_control=com_control,
+                com_target_xy=com_target_xy if com_target_xy is not None else (np.nan, np.nan),
+                com_error_m=np.nan,
             )
             for component in (Name(name, team), Body(body), player, placement, CharacterRow(row),
                               NormalizedPose(row), Posture(row)):
@@ -216,23 +226,45 @@ class Simulation:
         st.queue_head[rows] += 1
         st.locked[rows] = False
 
-    def add_constraint(self, entity: int, name: str, point: str, priority: float,
-                       activation: Activation,
+    def add_constraint(self, entity: int, name: str, point: str, priority: float = 0.0,
+                       activation: Activation = Activation(0.0, 1e9),
                        target_in_world: tuple[float, float, float] | None = None,
-                       target_entity: int | None = None, target_point: str | None = None) -> int:
-        """Constrain a point of a character (e.g. ``"wrist_r"``) to a world point or to a joint
-        of another character (read from its previous posture every tick). Returns an index for
-        :meth:`set_target`. Validated here, never in the tick."""
+                       target_entity: int | None = None, target_point: str | None = None, *,
+                       kind: str = "position", chain: tuple[str, ...] | None = None,
+                       fraction: float | None = None,
+                       offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                       target_fraction: float | None = None,
+                       target_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                       distance_m: float = 0.0, area: Area | None = None,
+                       axis: tuple[float, float, float] = (0.0, 0.0, 1.0), clock: int = -1) -> int:
+        """Constrain a point of a character to a world point or to a body point of a character
+        (another one, read from its previous posture every tick, or itself).
+
+        ``point`` / ``target_point``: a joint (``"wrist_r"``) or a segment (``"forearm_r"``)
+        with ``fraction`` along it and ``offset_m`` in its frame (:mod:`ecs_anim.body_points`).
+        ``kind``: position, distance (``distance_m``), area (``area``, placed at the target),
+        orientation (``axis`` of the segment along the world direction ``target_in_world``, or
+        looking at the target point). ``chain``: the groups allowed to move (default the
+        point's own). Returns an index for :meth:`set_target`. Validated here, never in the
+        tick; errors are :class:`EcsAnimError` naming the constraint."""
         values = [priority] + list(target_in_world or ())
         if not all(np.isfinite(v) for v in values):
             raise EcsAnimError(f"constraint {name!r}: priority and target must be finite")
-        target_row = None if target_entity is None else self.row(target_entity)
         try:
-            return self.constraints.add(name, self.row(entity), point, priority, activation,
-                                        target_in_world, target_row,
-                                        target_point if target_entity is not None else None)
+            body = body_point(point, fraction, offset_m)
+            if target_entity is not None:
+                target = Target(row=self.row(target_entity),
+                                point=body_point(target_point or "", target_fraction, target_offset_m,
+                                                 as_target=True))
+            else:
+                target = Target(world_m=target_in_world)
+            return self.constraints.add(name, self.row(entity), kind, body, target, priority,
+                                        activation, chain, distance_m, area, axis, clock)
         except ValueError as exc:
-            raise EcsAnimError(str(exc)) from None
+            message = str(exc)
+            if not message.startswith("constraint "):
+                message = f"constraint {name!r}: {message}"
+            raise EcsAnimError(message) from None
 
     def set_target(self, index: int, target_in_world: tuple[float, float, float]) -> None:
         """Move a constraint's target from code; a non-finite target disables it at the next

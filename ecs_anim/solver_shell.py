@@ -1,99 +1,561 @@
-"""The constraint solver's shell: targets, priorities and weights in, new poses out.
+"""The constraint solver's shell (paper §9): goals, priorities, iterations, tolerance, budget.
 
-ConstraintSolve calls :func:`solve_arms` once per tick; COMControl calls it again after each
-root move (the paper's ``adaptRoot()`` sits inside the solver loop, after the trunk), so the
-constraints stay met while the centre of mass is brought back. Pure functions over arrays.
+Per tick, :func:`tick_goals` turns the active constraints into fixed goals: each constraint's
+point as the motion has it (``P0``), its full goal (``G``: the target, the point at a distance
+from it, its projection into an area, a direction) and the goal blended by the activation
+weight (``P0 + w (G - P0)``: the ramp blends from the motion, so iterating never compounds it).
+Foot contacts become goals of their legs with a priority above all others.
+
+:func:`solve` then iterates, as the paper does, over the body's groups in the order legs, head,
+arms, trunk, then the root (``adaptRoot``: centre-of-mass control), until every goal is within
+tolerance, progress stalls, or the iteration budget is spent; a last pass over legs, head and
+arms leaves the feet on their footprints and the limbs on their goals after the final root move.
+Inside a group, the highest-priority goal is met analytically (limbs) or by CCD rotations (head,
+trunk); a limb's second goal swivels the limb about the axis that keeps the first one. The trunk
+serves the highest-priority goal it can still improve, and a trunk move that would worsen a
+higher-priority goal is not made. The steps are pure functions over all characters at once
+(:mod:`ecs_anim.solver`); this module owns the policy. The solver works on the characters with
+an active constraint only.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .constraint_table import TARGET_WORLD, ConstraintTable, winners
-from .normalized import SIDE_JOINTS, SIDE_LENGTHS, NormalizedPoses, decode
-from .rotations import quat_from_matrix
-from .solver import reach, swivel
+from .body_points import (
+    ABOVE_TRUNK,
+    ARM_L,
+    HEAD,
+    LEG_L,
+    TRUNK,
+    point_positions,
+    segment_frames,
+)
+from .constraint_table import (
+    AREA_BOX,
+    AREA_HALF_SPACE,
+    AREA_SPHERE,
+    KIND_AREA,
+    KIND_DISTANCE,
+    KIND_ORIENTATION,
+    TARGET_WORLD,
+    ConstraintTable,
+    winners,
+)
+from .ground_adapt import MAX_LEG_EXTENSION, vertical_slack_for_reach
+from .morphology import centres_of_mass, leg_length
+from .normalized import SIDE_JOINTS, SIDE_LENGTHS, DecodedPose, NormalizedPoses, decode, distal_frames, two_bone_middle
+from .rotations import frame_from_axes, matrix_from_quat, normalize, quat_from_matrix
+from .skeleton import JOINT_INDEX as J, LENGTH_INDEX as L
+from .solver import axis_angle, point_in_limb, reach_point, rotation_toward, turn_about_axis
 
 F64 = NDArray[np.float64]
-SHOULDERS, WRISTS = SIDE_JOINTS["shoulder"], SIDE_JOINTS["wrist"]
-UPPER, FORE = SIDE_LENGTHS["upper_arm"], SIDE_LENGTHS["forearm"]
+I64 = NDArray[np.int64]
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """The shell's policy. ``iterations``: budget per tick; ``tolerance_m`` / ``tolerance_rad``:
+    a goal closer than this is met; ``max_ccd_step_rad``: the largest turn one CCD step of the
+    head or trunk makes (spreads a lean over the iterations); ``root_gain``: how far past the
+    centre-of-mass error the root steps (the planted legs' mass does not follow it)."""
+
+    iterations: int = 4
+    tolerance_m: float = 1e-4
+    tolerance_rad: float = 1e-3
+    max_ccd_step_rad: float = np.radians(15.0)
+    root_gain: float = 1.25
+
+
+DEFAULT_SETTINGS = SolverSettings()
+CONTACT_PRIORITY = np.inf
+SHANK = (L["shank_l"], L["shank_r"])
+LIMB_JOINTS = {  # group -> (root, middle, end, distal end) joints
+    LEG_L: (J["hip_l"], J["knee_l"], J["ankle_l"], J["toe_l"]),
+    LEG_L + 1: (J["hip_r"], J["knee_r"], J["ankle_r"], J["toe_r"]),
+    ARM_L: (J["shoulder_l"], J["elbow_l"], J["wrist_l"], J["hand_l"]),
+    ARM_L + 1: (J["shoulder_r"], J["elbow_r"], J["wrist_r"], J["hand_r"]),
+}
+UPPER_BODY_JOINTS = np.array([J[n] for n in ("spine_1", "spine_2", "neck", "head", "head_top",
+                                             "shoulder_l", "elbow_l", "wrist_l", "hand_l",
+                                             "shoulder_r", "elbow_r", "wrist_r", "hand_r")])
+NOT_LEG_BELOW_HIP = np.array([j for j in range(22) if j not in
+                              [J[f"{n}_{s}"] for n in ("knee", "ankle", "toe") for s in "lr"]])
 
 
 @dataclass
-class ArmGoals:
-    """Per character and arm, the constraint to meet this tick (-1: none).
+class TickGoals:
+    """The k goals of this tick for the r characters being solved (local rows 0..r-1).
 
-    end, middle : (n, 2) indices into ``targets`` / ``weight`` (wrist, elbow).
-    targets : (m, 3) world targets; weight : (m,) activation.
+    rows (r,) store rows; owner (k,) local row; table_index (k,) (-1: a foot contact);
+    orientation (k,) bool; group, bone, segment, fraction, offset (k, 3), chain (bit mask),
+    priority; goal (k, 3): the weighted point goal, or the weighted unit direction of an
+    orientation; full_goal (k, 3) unweighted (errors are reported against it where the weight
+    is 1); weight (k,); axis (k, 3) segment-frame axis of an orientation; footprint (r, 2, 3)
+    and in_contact (r, 2): the feet that must stay; com_desired (r, 3); com_on (r,) bool.
     """
 
-    end: NDArray[np.int64]
-    middle: NDArray[np.int64]
-    targets: F64
+    rows: I64
+    owner: I64
+    table_index: I64
+    orientation: NDArray[np.bool_]
+    group: I64
+    bone: I64
+    segment: I64
+    fraction: F64
+    offset: F64
+    chain: I64
+    priority: F64
+    goal: F64
+    full_goal: F64
     weight: F64
-    base_arm_frame: F64  # (n, 2, 4) the motion's own arms, before any constraint
-    base_arm_fraction: F64  # (n, 2)
-
-    def take(self, rows: NDArray[np.int64]) -> ArmGoals:
-        """The goals of some characters only (constraint indices stay valid)."""
-        return ArmGoals(self.end[rows], self.middle[rows], self.targets, self.weight,
-                        self.base_arm_frame[rows], self.base_arm_fraction[rows])
+    axis: F64
+    footprint: F64
+    in_contact: NDArray[np.bool_]
+    com_desired: F64
+    com_on: NDArray[np.bool_]
 
     @property
-    def rows(self) -> NDArray[np.bool_]:
-        """(n,) characters with anything to solve."""
-        return np.any((self.end >= 0) | (self.middle >= 0), axis=1)
+    def k(self) -> int:
+        return int(self.owner.shape[0])
 
 
-def arm_goals(table: ConstraintTable, poses: NormalizedPoses, time_s: float,
-              reference_positions: F64) -> tuple[ArmGoals, NDArray[np.int64]]:
-    """Targets and winning constraints for this tick; also the indices of constraints whose
-    target is not finite (the caller switches them off and says so)."""
-    weight = table.weights(time_s)
-    targets = np.where((table.target_kind == TARGET_WORLD)[:, None], table.target_world,
-                       reference_positions[table.target_row, table.target_joint])
-    broken = (weight > 0) & ~np.all(np.isfinite(targets), axis=1)
-    weight = np.where(broken, 0.0, weight)
-    targets = np.where(broken[:, None], 0.0, targets)
-    active = weight > 0
-    n = poses.batch_shape[0]
-    end = winners(table.owner, table.slot, table.priority, active & (table.role == 0), n, 2)
-    middle = winners(table.owner, table.slot, table.priority, active & (table.role == 1), n, 2)
-    return (ArmGoals(end, middle, targets, weight, poses.arm_frame.copy(),
-                     poses.arm_fraction.copy()), np.flatnonzero(broken))
-
-
-def solve_arms(poses: NormalizedPoses, lengths: F64, goals: ArmGoals) -> NormalizedPoses:
-    """Meet the wrist goals (reach), then the elbow goals (swivel, keeping the wrist), each
-    blended by its weight from the motion's own arm (so solving again, after the root moved,
-    does not compound the blend). Only the arms change. Rows of ``poses``, ``lengths`` and
-    ``goals`` match."""
-    if not goals.rows.any():
-        return poses
-    poses = replace(poses, arm_frame=goals.base_arm_frame, arm_fraction=goals.base_arm_fraction)
-    decoded = decode(poses, lengths)
-    arm2world = decoded.arm2world.copy()
-    fraction = poses.arm_fraction.copy()
-    for slot in range(2):  # the two arms (limbs, not characters)
-        rows = np.flatnonzero(goals.end[:, slot] >= 0)
-        if rows.size:
-            c = goals.end[rows, slot]
-            wrist = decoded.positions[rows, WRISTS[slot]]
-            goal = wrist + goals.weight[c, None] * (goals.targets[c] - wrist)
-            arm2world[rows, slot], fraction[rows, slot], _ = reach(
-                decoded.positions[rows, SHOULDERS[slot]], arm2world[rows, slot],
-                lengths[rows, UPPER[slot]], lengths[rows, FORE[slot]], goal)
-        rows = np.flatnonzero(goals.middle[:, slot] >= 0)
-        if rows.size:
-            c = goals.middle[rows, slot]
-            arm2world[rows, slot] = swivel(decoded.positions[rows, SHOULDERS[slot]],
-                                           arm2world[rows, slot], goals.targets[c], goals.weight[c])
-    changed = (goals.end >= 0) | (goals.middle >= 0)
-    arm2thorax = np.swapaxes(decoded.thorax2world[:, None], -1, -2) @ arm2world
-    out = NormalizedPoses(**poses.arrays())
-    out.arm_frame = np.where(changed[..., None], quat_from_matrix(arm2thorax), poses.arm_frame)
-    out.arm_fraction = np.where(changed, fraction, poses.arm_fraction)
+def target_points(table: ConstraintTable, unconstrained: DecodedPose, previous: DecodedPose | None) -> F64:
+    """(m, 3) every constraint's target point this tick: world points as given; a point on the
+    constrained character itself from its pose before constraints (this tick); a point on
+    another character from that character's posture of the previous tick (this tick's
+    unconstrained pose on the first tick)."""
+    out = table.target_world.copy()
+    body = np.flatnonzero(table.target_kind != TARGET_WORLD)
+    if body.size:
+        rows = table.target_row[body]
+        seg, frac, off = table.target_segment[body], table.target_fraction[body], table.target_offset[body]
+        now = point_positions(unconstrained, rows, seg, frac, off)
+        before = now if previous is None else point_positions(previous, rows, seg, frac, off)
+        out[body] = np.where((rows == table.owner[body])[:, None], now, before)
     return out
+
+
+def _area_goal(table: ConstraintTable, idx: I64, point: F64, anchor: F64) -> F64:
+    """Nearest point of each constraint's allowed region (inside or outside its area) to
+    ``point`` (k, 3); the area sits at ``anchor`` (k, 3)."""
+    shape, inside = table.area_shape[idx], table.area_inside[idx]
+    rel = point - anchor
+    low, high = table.area_low[idx], table.area_high[idx]
+    # Box: clamp inside; outside, push through the nearest face.
+    in_box = np.clip(rel, low, high)
+    gaps = np.concatenate([rel - low, high - rel], axis=1)  # (k, 6) distance to each face
+    face = np.argmin(gaps, axis=1)
+    out_box = rel.copy()
+    axis = face % 3
+    k = np.arange(idx.size)
+    out_box[k, axis] = np.where(face < 3, low[k, axis], high[k, axis])
+    strictly_inside = np.all((rel > low) & (rel < high), axis=1)
+    box = np.where(inside[:, None], in_box, np.where(strictly_inside[:, None], out_box, rel))
+    # Sphere about the anchor.
+    distance = np.linalg.norm(rel, axis=1)
+    direction = np.where((distance > 1e-12)[:, None], rel / np.maximum(distance, 1e-12)[:, None],
+                         [0.0, 0.0, 1.0])
+    radius = table.area_radius[idx]
+    sphere = direction * np.where(inside, np.minimum(distance, radius),
+                                  np.maximum(distance, radius))[:, None]
+    # Half-space: the allowed side is where the normal points (the other side when outside).
+    normal = table.area_normal[idx] * np.where(inside, 1.0, -1.0)[:, None]
+    height = np.sum(rel * normal, axis=1)
+    half = rel - np.minimum(height, 0.0)[:, None] * normal
+    goal = np.select([(shape == AREA_BOX)[:, None], (shape == AREA_SPHERE)[:, None],
+                      (shape == AREA_HALF_SPACE)[:, None]], [box, sphere, half], rel)
+    return anchor + goal
+
+
+def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained: DecodedPose,
+               contact_weight: F64, com_control: NDArray[np.bool_], com_desired: F64) -> TickGoals | None:
+    """This tick's goals from the table, its weights (m,) and target points (m, 3) (all finite
+    where the weight is > 0), for the characters with an active constraint; None if there is
+    none. ``unconstrained`` is this tick's decoded pose of every character before constraints;
+    ``contact_weight`` (n, 2); ``com_control`` (n,); ``com_desired`` (n, 3)."""
+    idx = np.flatnonzero(weight > 0)
+    if idx.size == 0:
+        return None
+    owner = table.owner[idx]
+    seg, frac, off = table.segment[idx], table.fraction[idx], table.offset[idx]
+    p0 = point_positions(unconstrained, owner, seg, frac, off)
+    kind = table.kind[idx]
+    t = targets[idx]
+    away = p0 - t
+    away_len = np.linalg.norm(away, axis=1, keepdims=True)
+    away_dir = np.where(away_len > 1e-9, away / np.maximum(away_len, 1e-12), [0.0, 0.0, 1.0])
+    goal = np.where((kind == KIND_DISTANCE)[:, None], t + table.distance_m[idx, None] * away_dir, t)
+    is_area = kind == KIND_AREA
+    if is_area.any():
+        goal[is_area] = _area_goal(table, idx[is_area], p0[is_area], t[is_area])
+    w = weight[idx]
+    # An area the motion already keeps needs nothing: it must not claim its limb.
+    w = np.where(is_area & (np.linalg.norm(goal - p0, axis=1) < 1e-9), 0.0, w)
+    orient = kind == KIND_ORIENTATION
+    if orient.any():
+        frames = segment_frames(unconstrained, owner[orient], seg[orient])
+        axis0 = np.einsum("kij,kj->ki", frames, table.axis[idx[orient]])
+        look = table.target_kind[idx[orient]] != TARGET_WORLD
+        direction = normalize(np.where(look[:, None], t[orient] - p0[orient], t[orient]))
+        goal[orient] = direction
+    weighted = p0 + w[:, None] * (goal - p0)
+    if orient.any():
+        weighted[orient] = normalize(np.einsum(
+            "kij,kj->ki", rotation_toward(axis0, goal[orient], weight=w[orient]), axis0))
+    keep = w > 0
+    if not keep.any():
+        return None
+    idx, owner, w = idx[keep], owner[keep], w[keep]
+    rows, local = np.unique(owner, return_inverse=True)
+    r = rows.size
+    # Foot contacts: each leg in contact keeps its ankle where ground adaptation put it.
+    ankles = unconstrained.positions[rows][:, list(SIDE_JOINTS["ankle"])]
+    in_contact = contact_weight[rows] > 0
+    c_owner, c_side = np.nonzero(in_contact)
+    nc = c_owner.size
+    cat = np.concatenate
+    return TickGoals(
+        rows=rows,
+        owner=cat([local, c_owner]),
+        table_index=cat([idx, np.full(nc, -1)]),
+        orientation=cat([orient[keep], np.zeros(nc, bool)]),
+        group=cat([table.group[idx], LEG_L + c_side]),
+        bone=cat([table.bone[idx], np.ones(nc, np.int64)]),
+        segment=cat([seg[keep], np.asarray(SHANK)[c_side]]),
+        fraction=cat([frac[keep], np.ones(nc)]),
+        offset=cat([off[keep], np.zeros((nc, 3))]),
+        chain=cat([table.chain[idx], 1 << (LEG_L + c_side)]),
+        priority=cat([table.priority[idx], np.full(nc, CONTACT_PRIORITY)]),
+        goal=cat([weighted[keep], ankles[c_owner, c_side]]),
+        full_goal=cat([goal[keep], ankles[c_owner, c_side]]),
+        weight=cat([w, np.ones(nc)]),
+        axis=cat([table.axis[idx], np.zeros((nc, 3))]),
+        footprint=ankles,
+        in_contact=in_contact,
+        com_desired=com_desired[rows],
+        com_on=com_control[rows],
+    )
+
+
+def _errors(g: TickGoals, dec: DecodedPose, use_full: bool = False) -> F64:
+    """(k,) distance of each point to its goal (m), or the angle of each orientation (rad)."""
+    point = point_positions(dec, g.owner, g.segment, g.fraction, g.offset)
+    goal = g.full_goal if use_full else g.goal
+    err = np.linalg.norm(point - goal, axis=1)
+    if g.orientation.any():
+        o = np.flatnonzero(g.orientation)
+        axis = np.einsum("kij,kj->ki", segment_frames(dec, g.owner[o], g.segment[o]), g.axis[o])
+        err[o] = np.arccos(np.clip(np.sum(axis * goal[o], axis=1), -1.0, 1.0))
+    return err
+
+
+class _Solve:
+    """One tick's solve over r characters: the poses being changed and their decoded form,
+    kept in step by each group's update (a full decode happens once per iteration)."""
+
+    def __init__(self, poses: NormalizedPoses, lengths: F64, goals: TickGoals,
+                 masses: F64, com_fraction: F64, settings: SolverSettings) -> None:
+        self.poses = NormalizedPoses(**{k: v.copy() for k, v in poses.arrays().items()})
+        self.lengths, self.g, self.s = lengths, goals, settings
+        self.masses, self.com_fraction = masses, com_fraction
+        self.r = int(goals.rows.size)
+        self.dec = decode(self.poses, lengths)
+        g = goals
+        self.is_point = ~g.orientation
+        # Winners never change within a tick: compute them once per group.
+        zero = np.zeros(g.k, np.int64)
+        self.first: dict[int, I64] = {}
+        self.second: dict[int, I64] = {}
+        self.orient: dict[int, I64] = {}
+        for group in range(6):
+            mine = g.group == group
+            first = winners(g.owner, zero, g.priority, mine & self.is_point, self.r, 1)[:, 0]
+            taken = np.zeros(g.k, bool)
+            taken[first[first >= 0]] = True
+            self.first[group] = first
+            self.second[group] = winners(g.owner, zero, g.priority, mine & self.is_point & ~taken,
+                                         self.r, 1)[:, 0]
+            self.orient[group] = winners(g.owner, zero, g.priority, mine & g.orientation, self.r, 1)[:, 0]
+
+    def redecode(self) -> None:
+        self.dec = decode(self.poses, self.lengths)
+
+    # --- limbs: analytic ---------------------------------------------------------------------
+    def _bone_coords(self, c: I64, rows: I64, slot: int, is_leg: bool, fraction: F64) -> tuple[F64, NDArray[np.bool_]]:
+        """Constraint points in their limb bone's frame (the distal segment expressed in the
+        lower bone's): (k, 3), and whether they move with the lower bone."""
+        g, L_ = self.g, self.lengths
+        names = ("thigh", "shank", "foot") if is_leg else ("upper_arm", "forearm", "hand")
+        upper = L_[rows, SIDE_LENGTHS[names[0]][slot]]
+        lower = L_[rows, SIDE_LENGTHS[names[1]][slot]]
+        distal = L_[rows, SIDE_LENGTHS[names[2]][slot]]
+        bone = g.bone[c]
+        along = fraction * np.where(bone == 0, upper, np.where(bone == 1, lower, distal))
+        q = g.offset[c].copy()
+        q[:, 2] += along
+        on_distal = bone == 2
+        if on_distal.any():
+            dirs = (self.poses.foot_dir if is_leg else self.poses.hand_dir)[rows[on_distal], slot]
+            frame = _distal_in_lower(dirs)
+            q[on_distal] = np.einsum("kij,kj->ki", frame, q[on_distal])
+            q[on_distal, 2] += lower[on_distal]
+        return q, bone >= 1
+
+    def limb(self, group: int) -> None:
+        is_leg = group < HEAD
+        slot = group - (LEG_L if is_leg else ARM_L)
+        first, second, orient = self.first[group], self.second[group], self.orient[group]
+        rows = np.flatnonzero(first >= 0)
+        names = ("thigh", "shank") if is_leg else ("upper_arm", "forearm")
+        dec, poses = self.dec, self.poses
+        limbs2world = dec.leg2world if is_leg else dec.arm2world
+        frames_field = "leg_frame" if is_leg else "arm_frame"
+        fraction_field = "leg_fraction" if is_leg else "arm_fraction"
+        root_j, mid_j, end_j, dist_j = LIMB_JOINTS[group]
+        changed = np.zeros(self.r, bool)
+        if rows.size:
+            c = first[rows]
+            u = self.lengths[rows, SIDE_LENGTHS[names[0]][slot]]
+            ll = self.lengths[rows, SIDE_LENGTHS[names[1]][slot]]
+            root = dec.positions[rows, root_j]
+            fraction = getattr(poses, fraction_field)[rows, slot]
+            q, on_lower = self._bone_coords(c, rows, slot, is_leg, self.g.fraction[c])
+            frame, new_fraction, point = reach_point(
+                root, limbs2world[rows, slot], u, ll, fraction, on_lower, q, self.g.goal[c],
+                MAX_LEG_EXTENSION if is_leg else 1.0)
+            two = np.flatnonzero(second[rows] >= 0)
+            if two.size:
+                c2, rows2 = second[rows[two]], rows[two]
+                q2, lower2 = self._bone_coords(c2, rows2, slot, is_leg, self.g.fraction[c2])
+                local2 = point_in_limb(u[two], ll[two], new_fraction[two], lower2, q2)
+                p2 = root[two] + np.einsum("kij,kj->ki", frame[two], local2)
+                frame[two] = turn_about_axis(root[two], point[two], p2, self.g.goal[c2]) @ frame[two]
+            limbs2world[rows, slot] = frame
+            getattr(poses, fraction_field)[rows, slot] = new_fraction
+            changed[rows] = True
+        changed_rows = np.flatnonzero(changed)
+        parent = dec.pelvis2world if is_leg else dec.thorax2world
+        if changed_rows.size:
+            parent_t = np.swapaxes(parent[changed_rows], -1, -2)
+            getattr(poses, frames_field)[changed_rows, slot] = quat_from_matrix(
+                parent_t @ limbs2world[changed_rows, slot])
+        # The distal segment's orientation (its bone axis), after the limb's points.
+        rows_o = np.flatnonzero(orient >= 0)
+        self._update_limb_joints(np.union1d(changed_rows, rows_o), group, slot, is_leg)
+        if rows_o.size:
+            c = orient[rows_o]
+            mid, end = dec.positions[rows_o, mid_j], dec.positions[rows_o, end_j]
+            lower2world = distal_frames(limbs2world[rows_o, slot], mid, end)
+            wanted = np.einsum("kji,kj->ki", lower2world, self.g.goal[c])
+            dir_field = "foot_dir" if is_leg else "hand_dir"
+            getattr(poses, dir_field)[rows_o, slot] = normalize(wanted)
+            self._update_limb_joints(rows_o, group, slot, is_leg)
+
+    def _update_limb_joints(self, rows: I64, group: int, slot: int, is_leg: bool) -> None:
+        if rows.size == 0:
+            return
+        dec, poses = self.dec, self.poses
+        names = ("thigh", "shank", "foot") if is_leg else ("upper_arm", "forearm", "hand")
+        root_j, mid_j, end_j, dist_j = LIMB_JOINTS[group]
+        u = self.lengths[rows, SIDE_LENGTHS[names[0]][slot]]
+        ll = self.lengths[rows, SIDE_LENGTHS[names[1]][slot]]
+        h = self.lengths[rows, SIDE_LENGTHS[names[2]][slot]]
+        frame = (dec.leg2world if is_leg else dec.arm2world)[rows, slot]
+        fraction = (poses.leg_fraction if is_leg else poses.arm_fraction)[rows, slot]
+        mid, end = two_bone_middle(frame, dec.positions[rows, root_j], u, ll, fraction * (u + ll))
+        lower2world = distal_frames(frame, mid, end)
+        dirs = (poses.foot_dir if is_leg else poses.hand_dir)[rows, slot]
+        dec.positions[rows, mid_j] = mid
+        dec.positions[rows, end_j] = end
+        dec.positions[rows, dist_j] = end + np.einsum("kij,kj->ki", lower2world, dirs) * h[:, None]
+
+    # --- head: CCD, from the head to the neck --------------------------------------------------
+    def head(self) -> None:
+        dec, poses, g, step = self.dec, self.poses, self.g, self.s.max_ccd_step_rad
+        first, orient = self.first[HEAD], self.orient[HEAD]
+        rows = np.flatnonzero((first >= 0) | (orient >= 0))
+        if rows.size == 0:
+            return
+        neck, head = dec.positions[rows, J["neck"]], dec.positions[rows, J["head"]].copy()
+        head2world = dec.head2world[rows].copy()
+        has_point = first[rows] >= 0
+        p = np.flatnonzero(has_point)
+        if p.size:
+            c, rp = first[rows[p]], rows[p]
+            point = point_positions(dec, rp, g.segment[c], g.fraction[c], g.offset[c])
+            goal = g.goal[c]
+            on_head = g.bone[c] == 1
+            # The head about the skull base (only for points on the head itself)...
+            turn = rotation_toward(point - head[p], goal - head[p], step)
+            turn = np.where(on_head[:, None, None], turn, np.eye(3))
+            head2world[p] = turn @ head2world[p]
+            point = head[p] + np.einsum("kij,kj->ki", turn, point - head[p])
+            # ... then the neck about its base, carrying the head.
+            turn = rotation_toward(point - neck[p], goal - neck[p], step)
+            head[p] = neck[p] + np.einsum("kij,kj->ki", turn, head[p] - neck[p])
+            head2world[p] = turn @ head2world[p]
+        o = np.flatnonzero(orient[rows] >= 0)
+        if o.size:
+            c = orient[rows[o]]
+            axis = np.einsum("kij,kj->ki", head2world[o], g.axis[c])
+            head2world[o] = rotation_toward(axis, g.goal[c]) @ head2world[o]
+        thorax_t = np.swapaxes(dec.thorax2world[rows], -1, -2)
+        neck_len = self.lengths[rows, L["neck"]]
+        poses.neck_dir[rows] = np.einsum("kij,kj->ki", thorax_t, (head - neck) / neck_len[:, None])
+        poses.head[rows] = quat_from_matrix(thorax_t @ head2world)
+        dec.head2world[rows] = head2world
+        dec.positions[rows, J["head"]] = head
+        dec.positions[rows, J["head_top"]] = head + np.einsum(
+            "kij,kj->ki", head2world, poses.head_top_dir[rows]) * self.lengths[rows, L["head"], None]
+
+    # --- trunk: CCD about the spine's base ----------------------------------------------------
+    def trunk(self) -> None:
+        dec, poses, g, s = self.dec, self.poses, self.g, self.s
+        carried = np.isin(g.group, ABOVE_TRUNK)
+        uses_trunk = (g.chain & (1 << TRUNK)) > 0
+        err = _errors(g, dec)
+        tol = np.where(g.orientation, s.tolerance_rad, s.tolerance_m)
+        candidates = uses_trunk & carried & (err > tol)
+        best = winners(g.owner, np.zeros(g.k, np.int64), g.priority, candidates, self.r, 1)[:, 0]
+        rows = np.flatnonzero(best >= 0)
+        if rows.size == 0:
+            return
+        c = best[rows]
+        base = dec.positions[rows, J["pelvis"]]
+        point = point_positions(dec, rows, g.segment[c], g.fraction[c], g.offset[c])
+        turn = rotation_toward(point - base, g.goal[c] - base, s.max_ccd_step_rad)
+        o = g.orientation[c]
+        if o.any():
+            frames = segment_frames(dec, rows[o], g.segment[c[o]])
+            axis = np.einsum("kij,kj->ki", frames, g.axis[c[o]])
+            turn[o] = rotation_toward(axis, g.goal[c[o]], s.max_ccd_step_rad)
+        # A move that worsens any higher-priority goal the trunk carries is not made.
+        row_turn = np.broadcast_to(np.eye(3), (self.r, 3, 3)).copy()
+        row_turn[rows] = turn
+        winner_priority = np.full(self.r, np.inf)
+        winner_priority[rows] = g.priority[c]
+        higher = carried & self.is_point & (g.priority > winner_priority[g.owner])
+        h = np.flatnonzero(higher)
+        if h.size:
+            base_h = dec.positions[g.owner[h], J["pelvis"]]
+            point_h = point_positions(dec, g.owner[h], g.segment[h], g.fraction[h], g.offset[h])
+            moved = base_h + np.einsum("kij,kj->ki", row_turn[g.owner[h]], point_h - base_h)
+            worse = np.linalg.norm(moved - g.goal[h], axis=1) > err[h] + s.tolerance_m
+            veto = np.zeros(self.r, bool)
+            veto[g.owner[h][worse]] = True
+            keep = ~veto[rows]
+            rows, turn, base = rows[keep], turn[keep], base[keep]
+            if rows.size == 0:
+                return
+        # Spread the turn along the spine (a third, two thirds, all of it at the neck); the
+        # thorax, and all it carries, turns by all of it.
+        pelvis_t = np.swapaxes(dec.pelvis2world[rows], -1, -2)
+        turn_in_pelvis = pelvis_t @ turn @ dec.pelvis2world[rows]
+        axis, angle = _axis_angle_of(turn_in_pelvis)
+        for k in range(3):  # the three spine control points
+            part = axis_angle(axis, angle * (k + 1) / 3.0)
+            poses.spine_points[rows, k] = np.einsum("kij,kj->ki", part, poses.spine_points[rows, k])
+        thorax = turn_in_pelvis @ matrix_from_quat(poses.thorax[rows])
+        poses.thorax[rows] = quat_from_matrix(thorax)
+        # Keep the decoded pose in step: everything above the spine's base turns rigidly.
+        joints = dec.positions[rows][:, UPPER_BODY_JOINTS] - base[:, None]
+        dec.positions[rows[:, None], UPPER_BODY_JOINTS] = base[:, None] + np.einsum(
+            "kij,kmj->kmi", turn, joints)
+        dec.thorax2world[rows] = turn @ dec.thorax2world[rows]
+        dec.head2world[rows] = turn @ dec.head2world[rows]
+        dec.arm2world[rows] = turn[:, None] @ dec.arm2world[rows]
+
+    # --- root: adaptRoot, the centre of mass back over its desired place ----------------------
+    def root(self) -> F64:
+        """Move the root horizontally by the centre-of-mass error (times the gain); lower it if
+        a planted leg could no longer reach its footprint. Returns (r,) the error before (m)."""
+        dec, poses, g, s = self.dec, self.poses, self.g, self.s
+        com = centres_of_mass(dec.positions, self.masses, self.com_fraction)
+        error = g.com_desired[:, :2] - com[:, :2]
+        error[~g.com_on] = 0.0
+        size = np.linalg.norm(error, axis=1)
+        rows = np.flatnonzero(size > s.tolerance_m)
+        if rows.size == 0:
+            return size
+        shift = np.zeros((rows.size, 3))
+        shift[:, :2] = error[rows] * s.root_gain
+        hips = dec.positions[rows][:, list(SIDE_JOINTS["hip"])] + shift[:, None]
+        lengths = self.lengths[rows]
+        reach = MAX_LEG_EXTENSION * (lengths[:, SIDE_LENGTHS["thigh"]] + lengths[:, SIDE_LENGTHS["shank"]])
+        needed = vertical_slack_for_reach(hips, g.footprint[rows], reach)
+        shift[:, 2] = np.min(np.where(g.in_contact[rows], np.minimum(needed, 0.0), 0.0), axis=1)
+        poses.root_position[rows] += shift / leg_length(lengths)[:, None]
+        dec.positions[rows[:, None], NOT_LEG_BELOW_HIP] += shift[:, None]
+        return size
+
+
+def _distal_in_lower(dirs: F64) -> F64:
+    """Frames (k, 3, 3) of a foot / hand in its lower bone's frame: z along ``dirs``, x the
+    limb normal (made orthogonal)."""
+    x = np.broadcast_to(np.array([1.0, 0.0, 0.0]), dirs.shape)
+    return frame_from_axes(dirs, x, 2, 0, fallback_secondary=np.broadcast_to([0.0, 1.0, 0.0], dirs.shape))
+
+
+def _axis_angle_of(rotation: F64) -> tuple[F64, F64]:
+    """Unit axis (k, 3) and angle (k,) of rotation matrices (angles below π)."""
+    axis = np.stack([rotation[:, 2, 1] - rotation[:, 1, 2], rotation[:, 0, 2] - rotation[:, 2, 0],
+                     rotation[:, 1, 0] - rotation[:, 0, 1]], axis=1)
+    sin2 = np.linalg.norm(axis, axis=1)
+    cos = np.trace(rotation, axis1=1, axis2=2) - 1.0
+    angle = np.arctan2(sin2, cos)
+    return normalize(axis), angle
+
+
+def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, com_fraction: F64,
+          settings: SolverSettings = DEFAULT_SETTINGS) -> tuple[NormalizedPoses, F64, int, F64]:
+    """Solve this tick's goals for their characters (rows of ``poses``, ``lengths``, ``masses``
+    and ``com_fraction`` are ``goals.rows``). Returns the new poses, each goal's remaining
+    error against its full (unweighted) goal (k,), the iterations used, and the joint positions
+    (r, N_JOINTS, 3) of the result."""
+    state = _Solve(poses, lengths, goals, masses, com_fraction, settings)
+    tol = np.where(goals.orientation, settings.tolerance_rad, settings.tolerance_m)
+    previous = np.full(state.r, np.inf)
+    used = 0
+    for used in range(1, settings.iterations + 1):
+        if used > 1:
+            state.redecode()
+        for group in (LEG_L, LEG_L + 1):
+            state.limb(group)
+        state.head()
+        for group in (ARM_L, ARM_L + 1):
+            state.limb(group)
+        state.trunk()
+        com_error = state.root()
+        # Converged (or stalled) everywhere: stop early.
+        err = _errors(goals, state.dec)
+        excess = np.zeros(state.r)
+        np.maximum.at(excess, goals.owner, np.maximum(err - tol, 0.0))
+        worst = np.maximum(excess, np.maximum(com_error - settings.tolerance_m, 0.0))
+        if np.all((worst == 0.0) | (np.abs(previous - worst) < 0.1 * settings.tolerance_m)):
+            break
+        previous = worst
+    # The last root move shifted the limbs: re-plant the feet, re-aim the head and the arms.
+    state.redecode()
+    for group in (LEG_L, LEG_L + 1):
+        state.limb(group)
+    state.head()
+    for group in (ARM_L, ARM_L + 1):
+        state.limb(group)
+    return state.poses, _errors(goals, state.dec, use_full=True), used, state.dec.positions
+
+
+def scatter(all_poses: NormalizedPoses, rows: I64, part: NormalizedPoses) -> NormalizedPoses:
+    """``all_poses`` with ``rows`` replaced by ``part`` (new arrays)."""
+    arrays = {}
+    for name, value in all_poses.arrays().items():
+        new = value.copy()
+        new[rows] = getattr(part, name)
+        arrays[name] = new
+    return NormalizedPoses(**arrays)
+
+
+__all__ = ["SolverSettings", "TickGoals", "scatter", "solve", "target_points", "tick_goals"]

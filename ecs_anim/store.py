@@ -52,8 +52,11 @@ class CharacterStore:
     vertebrae (n, k, 3) a finer spine when the simulation asks for one;
     frozen (n,) bool: characters whose pose went bad, held at their last good posture;
     segment_mass_kg, segment_com_fraction (n, segments): each body's de Leva segment masses and
-    centre-of-mass positions; com_control (n,) bool; com_desired (n, 3) where the centre of
-    mass should be this tick (the motion's own, before constraints).
+    centre-of-mass positions; com_control (n,) bool; com_target_xy (n, 2) a desired horizontal
+    centre of mass given by the scenario (NaN: the motion's own); com_desired (n, 3) where the
+    centre of mass should be this tick; com (n, 3) where it is after the solve and com_error_m
+    (n,) its horizontal distance from com_desired (NaN for characters nothing constrained);
+    posture: the last tick's decoded posture (frames too), which targets on other characters read.
     """
 
     entity: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -81,7 +84,10 @@ class CharacterStore:
     segment_mass_kg: F64 = field(default_factory=lambda: np.zeros((0, N_MASS_SEGMENTS)))
     segment_com_fraction: F64 = field(default_factory=lambda: np.zeros((0, N_MASS_SEGMENTS)))
     com_control: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
+    com_target_xy: F64 = field(default_factory=lambda: np.zeros((0, 2)))
     com_desired: F64 = field(default_factory=lambda: np.zeros((0, 3)))
+    com: F64 = field(default_factory=lambda: np.zeros((0, 3)))
+    com_error_m: F64 = field(default_factory=lambda: np.zeros(0))
     queue_clip: NDArray[np.int64] = field(default_factory=lambda: np.zeros((0, MAX_QUEUE), np.int64))
     queue_fade_s: F64 = field(default_factory=lambda: np.zeros((0, MAX_QUEUE)))
     queue_loop: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, MAX_QUEUE), bool))
@@ -90,7 +96,9 @@ class CharacterStore:
     poses: NormalizedPoses = field(default_factory=lambda: _empty_poses(0))
     scaled: DecodedPose | None = None
     vertebrae: F64 | None = None
-    goals: object | None = None  # this tick's constraint goals (ecs_anim.solver_shell.ArmGoals)
+    goals: object | None = None  # this tick's constraint goals (ecs_anim.solver_shell.TickGoals)
+    solved_positions: F64 | None = None  # (r, N_JOINTS, 3) the solver's result for goals.rows
+    posture: DecodedPose | None = None
 
     @property
     def n(self) -> int:
@@ -100,7 +108,7 @@ class CharacterStore:
         """Append one character; ``values`` give its row for any array field. Load time only."""
         row = self.n
         for f in fields(self):
-            if f.name in ("poses", "scaled", "vertebrae", "goals"):
+            if f.name in ("poses", "scaled", "vertebrae", "goals", "solved_positions", "posture"):
                 continue
             current = getattr(self, f.name)
             fill = np.zeros((1,) + current.shape[1:], dtype=current.dtype)
@@ -112,4 +120,5 @@ class CharacterStore:
                                         for k, v in self.poses.arrays().items()})
         self.scaled = None
         self.vertebrae = None
+        self.posture = None
         return row

@@ -1,41 +1,60 @@
-"""ConstraintSolve: Cartesian constraints by priority on the analytic limbs (paper §9).
+"""ConstraintSolve: every active constraint of every character, by priority (paper §9).
 
-First cut: position constraints on the wrists (reach, the highest-priority active one per arm)
-and elbows (swivel about the shoulder -> wrist axis, which keeps the wrist: fig. 11/13), each
-blended by its activation weight (the solver shell is :mod:`ecs_anim.solver_shell`). Targets on
-other characters are read from their posture of the previous tick (on the first tick, from this
-tick's unsolved poses), so every character sees the same world whatever the order. Trunk/head
-CCD, legs, distance/area constraints come with the rest of the constraint issue.
+Once per tick: the activation weights (simulation time, or the clip time of constraints stored
+with a motion), the targets (world points; a point on another character from its posture of the
+previous tick, so every character sees the same world whatever their order; a point on the same
+character from this tick's pose), then the solver shell (:mod:`ecs_anim.solver_shell`) iterates
+legs, head, arms, trunk and the root (``adaptRoot``, the centre-of-mass control the paper places
+inside the loop after the trunk) for the characters that have an active constraint, all at once.
+A constraint whose target is not finite is switched off with one warning; the others go on.
 
-Reads: store.poses, lengths, positions (the previous tick's posture), segment masses; the
-constraint table. Writes: store.poses (arms), store.com_desired (the centre of mass before
-constraints, for COMControl), store.goals; table.enabled (a constraint whose target turns
-non-finite is switched off, with one warning).
+Reads: store.poses, lengths, posture (the previous tick's), contact_weight, clip, clip_time_s,
+com_control, com_target_xy, segment masses; the constraint table.
+Writes: store.poses (solved characters), com_desired, goals, solved_positions;
+table.enabled, table.error (remaining error of each constraint, NaN while inactive).
 """
 
 from __future__ import annotations
 
+import numpy as np
+
 from ecs_anim.morphology import centres_of_mass
 from ecs_anim.normalized import decode
-from ecs_anim.solver_shell import arm_goals, solve_arms
+from ecs_anim.solver_shell import scatter, solve, target_points, tick_goals
 from ecs_anim.system_base import System
 
 
 class ConstraintSolve(System):
     def run(self, dt: float) -> None:
         sim, st, table = self.sim, self.sim.store, self.sim.constraints
-        st.goals = None
+        st.goals, st.solved_positions = None, None
         if table.m == 0:
             return
-        before = decode(st.poses, st.lengths)
-        reference = before.positions if sim.tick == 0 else st.positions
-        goals, broken = arm_goals(table, st.poses, sim.time_s, reference)
-        if broken.size:
-            sim.report_disabled(broken)
-            table.enabled[broken] = False
-        if not goals.rows.any():
+        table.error[:] = np.nan
+        weight = table.weights(sim.time_s, st.clip, st.clip_time_s)
+        if not np.any(weight > 0):
             return
-        st.com_desired = centres_of_mass(before.positions, st.segment_mass_kg,
-                                         st.segment_com_fraction)
-        st.goals = goals
-        st.poses = solve_arms(st.poses, st.lengths, goals)
+        unconstrained = decode(st.poses, st.lengths)
+        targets = target_points(table, unconstrained, st.posture)
+        broken = (weight > 0) & ~np.all(np.isfinite(targets), axis=1)
+        if broken.any():
+            sim.report_disabled(np.flatnonzero(broken))
+            table.enabled[broken] = False
+            weight = np.where(broken, 0.0, weight)
+            targets[broken] = 0.0
+        own = centres_of_mass(unconstrained.positions, st.segment_mass_kg, st.segment_com_fraction)
+        given = np.isfinite(st.com_target_xy).all(axis=1)
+        own[given, :2] = st.com_target_xy[given]
+        goals = tick_goals(table, weight, targets, unconstrained, st.contact_weight,
+                           st.com_control, own)
+        if goals is None:
+            return
+        rows = goals.rows
+        poses, error, _, positions = solve(st.poses.take(rows), st.lengths[rows], goals,
+                                           st.segment_mass_kg[rows], st.segment_com_fraction[rows],
+                                           sim.solver_settings)
+        st.poses = scatter(st.poses, rows, poses)
+        user = goals.table_index >= 0
+        table.error[goals.table_index[user]] = error[user]
+        st.com_desired[rows] = goals.com_desired
+        st.goals, st.solved_positions = goals, positions

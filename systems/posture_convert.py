@@ -1,6 +1,7 @@
 """PostureConvert: rebuild knees, elbows and vertebrae and give the world posture (paper §8).
 
-Reads: store.poses, store.lengths. Writes: store.positions (world joint positions), store.
+Reads: store.poses, store.lengths. Writes: store.positions (world joint positions), store.posture
+(the same with the body frames, for next tick's targets on other characters), store.
 local_rotations (the BVH export skeleton's local joint rotation matrices, when the simulation
 asks for rotations), store.vertebrae (when it asks for a finer spine), store.frozen (a character
 whose pose went non-finite keeps its last good posture and is reported once).
@@ -31,6 +32,9 @@ class PostureConvert(System):
         st.frozen |= ~good
         keep = st.frozen[:, None, None]
         st.positions = np.where(keep, st.positions, final.positions)
+        # Next tick's targets on other characters read this posture, frames included.
+        final.positions = st.positions
+        st.posture = final
         if local is not None:
             if st.local_rotations.shape != local.shape:
                 st.local_rotations = np.broadcast_to(np.eye(3), local.shape).copy()

@@ -120,7 +120,7 @@ def test_activation_ramp_has_no_jump_and_nan_target_disables_only_that_one(idle,
     sim.step()
     assert "'other' has a non-finite target" in capsys.readouterr().err
     assert np.all(np.isfinite(sim.store.positions))
-    with pytest.raises(EcsAnimError, match="not supported yet"):
+    with pytest.raises(EcsAnimError, match="unknown body point 'knee_x'; did you mean"):
         sim.add_constraint(a, "bad", "knee_x", 1, ALWAYS, (0.0, 0.0, 0.0))
     with pytest.raises(EcsAnimError, match="finite"):
         sim.add_constraint(a, "nan", "wrist_l", 1, ALWAYS, (np.nan, 0.0, 0.0))
@@ -151,8 +151,8 @@ def test_scenario_constraint_errors(tmp_path):
     text = (repo / "scenarios" / "reach_and_touch.yaml").read_text()
     cases = [
         (text.replace("character: reacher", "character: reachr"), "no character named 'reachr'; did you mean 'reacher'?"),
-        (text.replace("point: wrist_l", "point: wrist_left"), "'wrist_left' cannot be constrained yet"),
-        (text.replace("joint: head_top", "joint: headtop"), "unknown joint 'headtop'; did you mean 'head_top'?"),
+        (text.replace("point: wrist_l", "point: wrist_left"), "unknown body point 'wrist_left'; did you mean 'wrist_l'?"),
+        (text.replace("joint: head_top", "joint: headtop"), "unknown body point 'headtop'; did you mean 'head_top'?"),
         (text.replace("ease_out_s: 0.5}", "ease_out_s: 9.0}"), "activation ease_in_s + ease_out_s"),
     ]
     for k, (broken, fragment) in enumerate(cases):
