@@ -258,6 +258,11 @@ class DecodedPose:
     leg2world: F64
     arm2world: F64
 
+    def take(self, index: Any) -> DecodedPose:
+        """Select along the leading axis (a copy for an index array)."""
+        return DecodedPose(self.positions[index], self.pelvis2world[index], self.thorax2world[index],
+                           self.head2world[index], self.leg2world[index], self.arm2world[index])
+
 
 def two_bone_middle(limb2world: F64, root: F64, upper: F64, lower: F64, reach: F64) -> tuple[F64, F64]:
     """Knee or elbow by the two-sphere intersection in the half-plane (paper §8).

@@ -73,17 +73,18 @@ class SolverSettings:
 DEFAULT_SETTINGS = SolverSettings()
 CONTACT_PRIORITY = np.inf
 SHANK = (L["shank_l"], L["shank_r"])
-LIMB_JOINTS = {  # group -> (root, middle, end, distal end) joints
-    LEG_L: (J["hip_l"], J["knee_l"], J["ankle_l"], J["toe_l"]),
-    LEG_L + 1: (J["hip_r"], J["knee_r"], J["ankle_r"], J["toe_r"]),
-    ARM_L: (J["shoulder_l"], J["elbow_l"], J["wrist_l"], J["hand_l"]),
-    ARM_L + 1: (J["shoulder_r"], J["elbow_r"], J["wrist_r"], J["hand_r"]),
-}
+# The four limbs [leg_l, leg_r, arm_l, arm_r]: their group, joints (root, middle, end, distal
+# end), lengths (upper, lower, distal) and how far they may stretch.
+LIMB_OF_GROUP = np.array([0, 1, -1, 2, 3, -1])
+LIMB_J = tuple(np.array([J[f"{leg}_l"], J[f"{leg}_r"], J[f"{arm}_l"], J[f"{arm}_r"]])
+               for leg, arm in (("hip", "shoulder"), ("knee", "elbow"), ("ankle", "wrist"),
+                                ("toe", "hand")))
+LIMB_LENGTHS = tuple(np.array([L[f"{leg}_l"], L[f"{leg}_r"], L[f"{arm}_l"], L[f"{arm}_r"]])
+                     for leg, arm in (("thigh", "upper_arm"), ("shank", "forearm"), ("foot", "hand")))
+LIMB_EXTENSION = np.array([MAX_LEG_EXTENSION, MAX_LEG_EXTENSION, 1.0, 1.0])
 UPPER_BODY_JOINTS = np.array([J[n] for n in ("spine_1", "spine_2", "neck", "head", "head_top",
                                              "shoulder_l", "elbow_l", "wrist_l", "hand_l",
                                              "shoulder_r", "elbow_r", "wrist_r", "hand_r")])
-NOT_LEG_BELOW_HIP = np.array([j for j in range(22) if j not in
-                              [J[f"{n}_{s}"] for n in ("knee", "ankle", "toe") for s in "lr"]])
 
 
 @dataclass
@@ -258,125 +259,101 @@ class _Solve:
     kept in step by each group's update (a full decode happens once per iteration)."""
 
     def __init__(self, poses: NormalizedPoses, lengths: F64, goals: TickGoals,
-                 masses: F64, com_fraction: F64, settings: SolverSettings) -> None:
+                 masses: F64, com_fraction: F64, settings: SolverSettings,
+                 decoded: DecodedPose | None) -> None:
         self.poses = NormalizedPoses(**{k: v.copy() for k, v in poses.arrays().items()})
         self.lengths, self.g, self.s = lengths, goals, settings
         self.masses, self.com_fraction = masses, com_fraction
         self.r = int(goals.rows.size)
-        self.dec = decode(self.poses, lengths)
+        if decoded is None:
+            self.dec = decode(self.poses, lengths)
+        else:
+            self.dec = DecodedPose(**{k: getattr(decoded, k).copy() for k in (
+                "positions", "pelvis2world", "thorax2world", "head2world", "leg2world", "arm2world")})
         g = goals
         self.is_point = ~g.orientation
-        # Winners never change within a tick: compute them once per group.
+        # Winners never change within a tick: computed once. Limbs by (row, limb), the head by row.
+        limb = LIMB_OF_GROUP[g.group]
+        on_limb = limb >= 0
+        self.first_limb = winners(g.owner, limb, g.priority, on_limb & self.is_point, self.r, 4)
+        taken = np.zeros(g.k, bool)
+        taken[self.first_limb[self.first_limb >= 0]] = True
+        self.second_limb = winners(g.owner, limb, g.priority, on_limb & self.is_point & ~taken, self.r, 4)
+        self.orient_limb = winners(g.owner, limb, g.priority, on_limb & g.orientation, self.r, 4)
         zero = np.zeros(g.k, np.int64)
-        self.first: dict[int, I64] = {}
-        self.second: dict[int, I64] = {}
-        self.orient: dict[int, I64] = {}
-        for group in range(6):
-            mine = g.group == group
-            first = winners(g.owner, zero, g.priority, mine & self.is_point, self.r, 1)[:, 0]
-            taken = np.zeros(g.k, bool)
-            taken[first[first >= 0]] = True
-            self.first[group] = first
-            self.second[group] = winners(g.owner, zero, g.priority, mine & self.is_point & ~taken,
-                                         self.r, 1)[:, 0]
-            self.orient[group] = winners(g.owner, zero, g.priority, mine & g.orientation, self.r, 1)[:, 0]
+        on_head = g.group == HEAD
+        self.first_head = winners(g.owner, zero, g.priority, on_head & self.is_point, self.r, 1)[:, 0]
+        self.orient_head = winners(g.owner, zero, g.priority, on_head & g.orientation, self.r, 1)[:, 0]
+        self.trunk_moved = False  # this tick
+        self.dirty = False  # since the last decode
 
     def redecode(self) -> None:
         self.dec = decode(self.poses, self.lengths)
+        self.dirty = False
 
-    # --- limbs: analytic ---------------------------------------------------------------------
-    def _bone_coords(self, c: I64, rows: I64, slot: int, is_leg: bool, fraction: F64) -> tuple[F64, NDArray[np.bool_]]:
-        """Constraint points in their limb bone's frame (the distal segment expressed in the
-        lower bone's): (k, 3), and whether they move with the lower bone."""
-        g, L_ = self.g, self.lengths
-        names = ("thigh", "shank", "foot") if is_leg else ("upper_arm", "forearm", "hand")
-        upper = L_[rows, SIDE_LENGTHS[names[0]][slot]]
-        lower = L_[rows, SIDE_LENGTHS[names[1]][slot]]
-        distal = L_[rows, SIDE_LENGTHS[names[2]][slot]]
-        bone = g.bone[c]
-        along = fraction * np.where(bone == 0, upper, np.where(bone == 1, lower, distal))
-        q = g.offset[c].copy()
-        q[:, 2] += along
-        on_distal = bone == 2
-        if on_distal.any():
-            dirs = (self.poses.foot_dir if is_leg else self.poses.hand_dir)[rows[on_distal], slot]
-            frame = _distal_in_lower(dirs)
-            q[on_distal] = np.einsum("kij,kj->ki", frame, q[on_distal])
-            q[on_distal, 2] += lower[on_distal]
-        return q, bone >= 1
-
-    def limb(self, group: int) -> None:
-        is_leg = group < HEAD
-        slot = group - (LEG_L if is_leg else ARM_L)
-        first, second, orient = self.first[group], self.second[group], self.orient[group]
-        rows = np.flatnonzero(first >= 0)
-        names = ("thigh", "shank") if is_leg else ("upper_arm", "forearm")
-        dec, poses = self.dec, self.poses
-        limbs2world = dec.leg2world if is_leg else dec.arm2world
-        frames_field = "leg_frame" if is_leg else "arm_frame"
-        fraction_field = "leg_fraction" if is_leg else "arm_fraction"
-        root_j, mid_j, end_j, dist_j = LIMB_JOINTS[group]
-        changed = np.zeros(self.r, bool)
+    # --- limbs: analytic, all four at once (legs and arms do not move each other) ----------
+    def limbs(self) -> None:
+        """Each limb's highest-priority goal met analytically, its second by swivelling about
+        the axis that keeps the first; then the foot / hand orientation goal."""
+        dec, poses, g = self.dec, self.poses, self.g
+        frames = np.concatenate([dec.leg2world, dec.arm2world], axis=1)  # (r, 4, 3, 3)
+        fractions = np.concatenate([poses.leg_fraction, poses.arm_fraction], axis=1)
+        dirs = np.concatenate([poses.foot_dir, poses.hand_dir], axis=1)
+        rows, li = np.nonzero(self.first_limb >= 0)
         if rows.size:
-            c = first[rows]
-            u = self.lengths[rows, SIDE_LENGTHS[names[0]][slot]]
-            ll = self.lengths[rows, SIDE_LENGTHS[names[1]][slot]]
-            root = dec.positions[rows, root_j]
-            fraction = getattr(poses, fraction_field)[rows, slot]
-            q, on_lower = self._bone_coords(c, rows, slot, is_leg, self.g.fraction[c])
-            frame, new_fraction, point = reach_point(
-                root, limbs2world[rows, slot], u, ll, fraction, on_lower, q, self.g.goal[c],
-                MAX_LEG_EXTENSION if is_leg else 1.0)
-            two = np.flatnonzero(second[rows] >= 0)
+            c = self.first_limb[rows, li]
+            u, ll, h = (self.lengths[rows, LIMB_LENGTHS[k][li]] for k in range(3))
+            root = dec.positions[rows, LIMB_J[0][li]]
+            q, on_lower = _bone_coords(g.bone[c], g.fraction[c], g.offset[c], u, ll, h, dirs[rows, li])
+            frame, new_fraction, point = reach_point(root, frames[rows, li], u, ll, fractions[rows, li],
+                                                     on_lower, q, g.goal[c], LIMB_EXTENSION[li])
+            two = np.flatnonzero(self.second_limb[rows, li] >= 0)
             if two.size:
-                c2, rows2 = second[rows[two]], rows[two]
-                q2, lower2 = self._bone_coords(c2, rows2, slot, is_leg, self.g.fraction[c2])
+                c2 = self.second_limb[rows[two], li[two]]
+                q2, lower2 = _bone_coords(g.bone[c2], g.fraction[c2], g.offset[c2], u[two], ll[two],
+                                          h[two], dirs[rows[two], li[two]])
                 local2 = point_in_limb(u[two], ll[two], new_fraction[two], lower2, q2)
                 p2 = root[two] + np.einsum("kij,kj->ki", frame[two], local2)
-                frame[two] = turn_about_axis(root[two], point[two], p2, self.g.goal[c2]) @ frame[two]
-            limbs2world[rows, slot] = frame
-            getattr(poses, fraction_field)[rows, slot] = new_fraction
-            changed[rows] = True
-        changed_rows = np.flatnonzero(changed)
-        parent = dec.pelvis2world if is_leg else dec.thorax2world
-        if changed_rows.size:
-            parent_t = np.swapaxes(parent[changed_rows], -1, -2)
-            getattr(poses, frames_field)[changed_rows, slot] = quat_from_matrix(
-                parent_t @ limbs2world[changed_rows, slot])
-        # The distal segment's orientation (its bone axis), after the limb's points.
-        rows_o = np.flatnonzero(orient >= 0)
-        self._update_limb_joints(np.union1d(changed_rows, rows_o), group, slot, is_leg)
+                frame[two] = turn_about_axis(root[two], point[two], p2, g.goal[c2]) @ frame[two]
+            frames[rows, li] = frame
+            fractions[rows, li] = new_fraction
+            self._limb_joints(rows, li, frames, fractions, dirs)
+        rows_o, li_o = np.nonzero(self.orient_limb >= 0)
         if rows_o.size:
-            c = orient[rows_o]
-            mid, end = dec.positions[rows_o, mid_j], dec.positions[rows_o, end_j]
-            lower2world = distal_frames(limbs2world[rows_o, slot], mid, end)
-            wanted = np.einsum("kji,kj->ki", lower2world, self.g.goal[c])
-            dir_field = "foot_dir" if is_leg else "hand_dir"
-            getattr(poses, dir_field)[rows_o, slot] = normalize(wanted)
-            self._update_limb_joints(rows_o, group, slot, is_leg)
-
-    def _update_limb_joints(self, rows: I64, group: int, slot: int, is_leg: bool) -> None:
-        if rows.size == 0:
+            # The foot / hand axis, in its lower bone's frame (the ankle / wrist stays).
+            mid = dec.positions[rows_o, LIMB_J[1][li_o]]
+            end = dec.positions[rows_o, LIMB_J[2][li_o]]
+            lower2world = distal_frames(frames[rows_o, li_o], mid, end)
+            goal = g.goal[self.orient_limb[rows_o, li_o]]
+            dirs[rows_o, li_o] = normalize(np.einsum("kji,kj->ki", lower2world, goal))
+            self._limb_joints(rows_o, li_o, frames, fractions, dirs)
+        if rows.size == 0 and rows_o.size == 0:
             return
-        dec, poses = self.dec, self.poses
-        names = ("thigh", "shank", "foot") if is_leg else ("upper_arm", "forearm", "hand")
-        root_j, mid_j, end_j, dist_j = LIMB_JOINTS[group]
-        u = self.lengths[rows, SIDE_LENGTHS[names[0]][slot]]
-        ll = self.lengths[rows, SIDE_LENGTHS[names[1]][slot]]
-        h = self.lengths[rows, SIDE_LENGTHS[names[2]][slot]]
-        frame = (dec.leg2world if is_leg else dec.arm2world)[rows, slot]
-        fraction = (poses.leg_fraction if is_leg else poses.arm_fraction)[rows, slot]
-        mid, end = two_bone_middle(frame, dec.positions[rows, root_j], u, ll, fraction * (u + ll))
+        parent = np.concatenate([np.repeat(dec.pelvis2world[:, None], 2, axis=1),
+                                 np.repeat(dec.thorax2world[:, None], 2, axis=1)], axis=1)
+        local = quat_from_matrix(np.swapaxes(parent, -1, -2) @ frames)
+        poses.leg_frame, poses.arm_frame = local[:, :2].copy(), local[:, 2:].copy()
+        poses.leg_fraction, poses.arm_fraction = fractions[:, :2].copy(), fractions[:, 2:].copy()
+        poses.foot_dir, poses.hand_dir = dirs[:, :2].copy(), dirs[:, 2:].copy()
+        dec.leg2world, dec.arm2world = frames[:, :2].copy(), frames[:, 2:].copy()
+
+    def _limb_joints(self, rows: I64, li: I64, frames: F64, fractions: F64, dirs: F64) -> None:
+        """Middle, end and distal joints of the given (row, limb) pairs, from their frames."""
+        dec = self.dec
+        u, ll, h = (self.lengths[rows, LIMB_LENGTHS[k][li]] for k in range(3))
+        frame = frames[rows, li]
+        mid, end = two_bone_middle(frame, dec.positions[rows, LIMB_J[0][li]], u, ll,
+                                   fractions[rows, li] * (u + ll))
         lower2world = distal_frames(frame, mid, end)
-        dirs = (poses.foot_dir if is_leg else poses.hand_dir)[rows, slot]
-        dec.positions[rows, mid_j] = mid
-        dec.positions[rows, end_j] = end
-        dec.positions[rows, dist_j] = end + np.einsum("kij,kj->ki", lower2world, dirs) * h[:, None]
+        dec.positions[rows, LIMB_J[1][li]] = mid
+        dec.positions[rows, LIMB_J[2][li]] = end
+        dec.positions[rows, LIMB_J[3][li]] = end + np.einsum(
+            "kij,kj->ki", lower2world, dirs[rows, li]) * h[:, None]
 
     # --- head: CCD, from the head to the neck --------------------------------------------------
     def head(self) -> None:
         dec, poses, g, step = self.dec, self.poses, self.g, self.s.max_ccd_step_rad
-        first, orient = self.first[HEAD], self.orient[HEAD]
+        first, orient = self.first_head, self.orient_head
         rows = np.flatnonzero((first >= 0) | (orient >= 0))
         if rows.size == 0:
             return
@@ -459,6 +436,7 @@ class _Solve:
         for k in range(3):  # the three spine control points
             part = axis_angle(axis, angle * (k + 1) / 3.0)
             poses.spine_points[rows, k] = np.einsum("kij,kj->ki", part, poses.spine_points[rows, k])
+        self.trunk_moved = self.dirty = True
         thorax = turn_in_pelvis @ matrix_from_quat(poses.thorax[rows])
         poses.thorax[rows] = quat_from_matrix(thorax)
         # Keep the decoded pose in step: everything above the spine's base turns rigidly.
@@ -489,8 +467,24 @@ class _Solve:
         needed = vertical_slack_for_reach(hips, g.footprint[rows], reach)
         shift[:, 2] = np.min(np.where(g.in_contact[rows], np.minimum(needed, 0.0), 0.0), axis=1)
         poses.root_position[rows] += shift / leg_length(lengths)[:, None]
-        dec.positions[rows[:, None], NOT_LEG_BELOW_HIP] += shift[:, None]
+        # A translation of the root moves every joint by it (the legs re-aim next).
+        dec.positions[rows] += shift[:, None]
         return size
+
+
+def _bone_coords(bone: I64, fraction: F64, offset: F64, upper: F64, lower: F64, distal: F64,
+                 distal_dir: F64) -> tuple[F64, NDArray[np.bool_]]:
+    """Limb points in their bone's frame (k, 3) (a foot / hand point in its lower bone's frame,
+    through the distal direction ``distal_dir`` (k, 3)), and whether they move with the lower
+    bone (k,). ``bone`` 0 upper, 1 lower, 2 distal; lengths (k,) metres."""
+    q = offset.copy()
+    q[:, 2] += fraction * np.where(bone == 0, upper, np.where(bone == 1, lower, distal))
+    on_distal = bone == 2
+    if on_distal.any():
+        frame = _distal_in_lower(distal_dir[on_distal])
+        q[on_distal] = np.einsum("kij,kj->ki", frame, q[on_distal])
+        q[on_distal, 2] += lower[on_distal]
+    return q, bone >= 1
 
 
 def _distal_in_lower(dirs: F64) -> F64:
@@ -511,40 +505,40 @@ def _axis_angle_of(rotation: F64) -> tuple[F64, F64]:
 
 
 def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, com_fraction: F64,
-          settings: SolverSettings = DEFAULT_SETTINGS) -> tuple[NormalizedPoses, F64, int, F64]:
+          settings: SolverSettings = DEFAULT_SETTINGS, decoded: DecodedPose | None = None) -> tuple[NormalizedPoses, F64, int, F64]:
     """Solve this tick's goals for their characters (rows of ``poses``, ``lengths``, ``masses``
-    and ``com_fraction`` are ``goals.rows``). Returns the new poses, each goal's remaining
+    and ``com_fraction`` are ``goals.rows``; ``decoded`` is ``decode(poses, lengths)`` if the
+    caller has it). Returns the new poses, each goal's remaining
     error against its full (unweighted) goal (k,), the iterations used, and the joint positions
     (r, N_JOINTS, 3) of the result."""
-    state = _Solve(poses, lengths, goals, masses, com_fraction, settings)
+    state = _Solve(poses, lengths, goals, masses, com_fraction, settings, decoded)
     tol = np.where(goals.orientation, settings.tolerance_rad, settings.tolerance_m)
     previous = np.full(state.r, np.inf)
     used = 0
     for used in range(1, settings.iterations + 1):
-        if used > 1:
-            state.redecode()
-        for group in (LEG_L, LEG_L + 1):
-            state.limb(group)
+        if state.dirty:
+            state.redecode()  # the spine bent last iteration: its joints are exact once decoded
+        # Legs, head, arms: the paper's order (legs and arms are independent, so one batch).
+        state.limbs()
         state.head()
-        for group in (ARM_L, ARM_L + 1):
-            state.limb(group)
         state.trunk()
         com_error = state.root()
-        # Converged (or stalled) everywhere: stop early.
         err = _errors(goals, state.dec)
         excess = np.zeros(state.r)
         np.maximum.at(excess, goals.owner, np.maximum(err - tol, 0.0))
         worst = np.maximum(excess, np.maximum(com_error - settings.tolerance_m, 0.0))
+        # Converged (or stalled) everywhere: stop early.
         if np.all((worst == 0.0) | (np.abs(previous - worst) < 0.1 * settings.tolerance_m)):
             break
         previous = worst
     # The last root move shifted the limbs: re-plant the feet, re-aim the head and the arms.
-    state.redecode()
-    for group in (LEG_L, LEG_L + 1):
-        state.limb(group)
+    state.limbs()
     state.head()
-    for group in (ARM_L, ARM_L + 1):
-        state.limb(group)
+    if state.trunk_moved:
+        # A bent spine is exact only once decoded: check, and re-aim the limbs on it.
+        state.redecode()
+        state.limbs()
+        state.head()
     return state.poses, _errors(goals, state.dec, use_full=True), used, state.dec.positions
 
 

@@ -52,7 +52,7 @@ class ConstraintSolve(System):
         rows = goals.rows
         poses, error, _, positions = solve(st.poses.take(rows), st.lengths[rows], goals,
                                            st.segment_mass_kg[rows], st.segment_com_fraction[rows],
-                                           sim.solver_settings)
+                                           sim.solver_settings, unconstrained.take(rows))
         st.poses = scatter(st.poses, rows, poses)
         user = goals.table_index >= 0
         table.error[goals.table_index[user]] = error[user]
