@@ -99,13 +99,14 @@ TARGET_ONLY_JOINTS = {"pelvis": ("pelvis_l", 0.0), "hip_l": ("pelvis_l", 1.0), "
 
 def body_point(name: str, fraction: float | None = None,
                offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0),
-               as_target: bool = False) -> BodyPoint:
+               as_target: bool = False, segment: bool = False) -> BodyPoint:
     """A point from a segment or joint name; raises ValueError with a suggestion when unknown.
     ``as_target``: the point is a target, which may also be on the root (pelvis, hips).
+    ``segment``: a name that is both a joint and a segment means the segment (orientations).
 
     A name that is both (``head``, ``neck``, ``hand_l``) is the joint unless a ``fraction`` is
     given; a segment without one is its middle (0.5)."""
-    if name in JOINT_AS_POINT and (fraction is None or name not in SEGMENTS):
+    if name in JOINT_AS_POINT and (fraction is None and not segment or name not in SEGMENTS):
         if fraction is not None:
             raise ValueError(f"{name!r} is a joint; give fraction with a segment "
                              f"(e.g. {JOINT_AS_POINT[name]!r})")

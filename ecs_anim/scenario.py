@@ -388,7 +388,8 @@ def _constraint(r: _Reader, node: Node, where: str) -> tuple[ConstraintEntry, No
         if target_point else Target(world_m=target_world)  # type: ignore[arg-type]
     checks = {k: v for k, v in options.items() if k in ("chain", "distance_m", "area", "axis")}
     try:
-        ConstraintTable().add(name, 0, kind, body_point(point, fraction, offset), target, priority,
+        ConstraintTable().add(name, 0, kind, body_point(point, fraction, offset,
+                                                        segment=kind == "orientation"), target, priority,
                               activation, **checks)
     except ValueError as exc:
         raise r.fail(node, where, str(exc)) from None

@@ -251,7 +251,7 @@ class Simulation:
         if not all(np.isfinite(v) for v in values):
             raise EcsAnimError(f"constraint {name!r}: priority and target must be finite")
         try:
-            body = body_point(point, fraction, offset_m)
+            body = body_point(point, fraction, offset_m, segment=kind == "orientation")
             if target_entity is not None:
                 target = Target(row=self.row(target_entity),
                                 point=body_point(target_point or "", target_fraction, target_offset_m,

@@ -59,13 +59,15 @@ I64 = NDArray[np.int64]
 @dataclass(frozen=True)
 class SolverSettings:
     """The shell's policy. ``iterations``: budget per tick; ``tolerance_m`` / ``tolerance_rad``:
-    a goal closer than this is met; ``max_ccd_step_rad``: the largest turn one CCD step of the
+    a goal closer than this is met; ``com_tolerance_m``: the same for the horizontal centre of
+    mass; ``max_ccd_step_rad``: the largest turn one CCD step of the
     head or trunk makes (spreads a lean over the iterations); ``root_gain``: how far past the
     centre-of-mass error the root steps (the planted legs' mass does not follow it)."""
 
     iterations: int = 4
     tolerance_m: float = 1e-4
     tolerance_rad: float = 1e-3
+    com_tolerance_m: float = 1e-3
     max_ccd_step_rad: float = np.radians(15.0)
     root_gain: float = 1.25
 
@@ -350,7 +352,7 @@ class _Solve:
         dec.positions[rows, LIMB_J[3][li]] = end + np.einsum(
             "kij,kj->ki", lower2world, dirs[rows, li]) * h[:, None]
 
-    # --- head: CCD, from the head to the neck --------------------------------------------------
+    # --- head: neck and head as a two-segment chain; then its orientation --------------------------------------------------
     def head(self) -> None:
         dec, poses, g, step = self.dec, self.poses, self.g, self.s.max_ccd_step_rad
         first, orient = self.first_head, self.orient_head
@@ -362,19 +364,34 @@ class _Solve:
         has_point = first[rows] >= 0
         p = np.flatnonzero(has_point)
         if p.size:
+            # Neck and head are two segments from the neck's base, like a limb: the same
+            # analytic step (flexion at the skull base, then aim), exact where reachable.
             c, rp = first[rows[p]], rows[p]
-            point = point_positions(dec, rp, g.segment[c], g.fraction[c], g.offset[c])
-            goal = g.goal[c]
+            u, ll = self.lengths[rp, L["neck"]], self.lengths[rp, L["head"]]
+            top = dec.positions[rp, J["head_top"]]
+            thorax_forward = dec.thorax2world[rp][:, :, 0]
+            frame = frame_from_axes(top - neck[p], head[p] - neck[p], 2, 1,
+                                    fallback_secondary=thorax_forward)
+            lower = frame_from_axes(top - head[p], frame[:, :, 0], 2, 0,
+                                    fallback_secondary=frame[:, :, 1])
+            fraction = np.linalg.norm(top - neck[p], axis=1) / (u + ll)
             on_head = g.bone[c] == 1
-            # The head about the skull base (only for points on the head itself)...
-            turn = rotation_toward(point - head[p], goal - head[p], step)
-            turn = np.where(on_head[:, None, None], turn, np.eye(3))
-            head2world[p] = turn @ head2world[p]
-            point = head[p] + np.einsum("kij,kj->ki", turn, point - head[p])
-            # ... then the neck about its base, carrying the head.
-            turn = rotation_toward(point - neck[p], goal - neck[p], step)
-            head[p] = neck[p] + np.einsum("kij,kj->ki", turn, head[p] - neck[p])
-            head2world[p] = turn @ head2world[p]
+            # The point in its bone's frame (offsets are given in the head's / thorax's frame).
+            along = g.fraction[c] * np.where(on_head, ll, u)
+            offset_world = np.einsum("kij,kj->ki", np.where(on_head[:, None, None], head2world[p],
+                                                            dec.thorax2world[rp]), g.offset[c])
+            upper_bone = frame_from_axes(head[p] - neck[p], frame[:, :, 0], 2, 0,
+                                         fallback_secondary=frame[:, :, 1])
+            bone = np.where(on_head[:, None, None], lower, upper_bone)
+            q = np.einsum("kji,kj->ki", bone, offset_world)
+            q[:, 2] += along
+            new_frame, new_fraction, _ = reach_point(neck[p], frame, u, ll, fraction, on_head, q, g.goal[c])
+            new_head, new_top = two_bone_middle(new_frame, neck[p], u, ll, new_fraction * (u + ll))
+            new_lower = frame_from_axes(new_top - new_head, new_frame[:, :, 0], 2, 0,
+                                        fallback_secondary=new_frame[:, :, 1])
+            # The head turns as its bone does (twist included, through the plane's normal).
+            head2world[p] = new_lower @ np.swapaxes(lower, -1, -2) @ head2world[p]
+            head[p] = new_head
         o = np.flatnonzero(orient[rows] >= 0)
         if o.size:
             c = orient[rows[o]]
@@ -456,7 +473,7 @@ class _Solve:
         error = g.com_desired[:, :2] - com[:, :2]
         error[~g.com_on] = 0.0
         size = np.linalg.norm(error, axis=1)
-        rows = np.flatnonzero(size > s.tolerance_m)
+        rows = np.flatnonzero(size > 0.1 * s.com_tolerance_m)
         if rows.size == 0:
             return size
         shift = np.zeros((rows.size, 3))
@@ -516,29 +533,24 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
     previous = np.full(state.r, np.inf)
     used = 0
     for used in range(1, settings.iterations + 1):
-        if state.dirty:
-            state.redecode()  # the spine bent last iteration: its joints are exact once decoded
         # Legs, head, arms: the paper's order (legs and arms are independent, so one batch).
         state.limbs()
         state.head()
         state.trunk()
+        if state.dirty:
+            state.redecode()  # a bent spine's joints are exact once decoded
         com_error = state.root()
         err = _errors(goals, state.dec)
         excess = np.zeros(state.r)
         np.maximum.at(excess, goals.owner, np.maximum(err - tol, 0.0))
-        worst = np.maximum(excess, np.maximum(com_error - settings.tolerance_m, 0.0))
-        # Converged (or stalled) everywhere: stop early.
-        if np.all((worst == 0.0) | (np.abs(previous - worst) < 0.1 * settings.tolerance_m)):
+        worst = np.maximum(excess, np.maximum(com_error - settings.com_tolerance_m, 0.0))
+        # Converged, or no longer improving by a tolerance (an unreachable goal), everywhere.
+        if np.all((worst == 0.0) | (np.abs(previous - worst) < settings.tolerance_m)):
             break
         previous = worst
     # The last root move shifted the limbs: re-plant the feet, re-aim the head and the arms.
     state.limbs()
     state.head()
-    if state.trunk_moved:
-        # A bent spine is exact only once decoded: check, and re-aim the limbs on it.
-        state.redecode()
-        state.limbs()
-        state.head()
     return state.poses, _errors(goals, state.dec, use_full=True), used, state.dec.positions
 
 
