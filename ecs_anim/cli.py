@@ -59,8 +59,10 @@ def cmd_import(args: argparse.Namespace) -> int:
         height_m=args.contact_height, speed_mps=args.contact_speed,
         min_duration_s=args.contact_min_duration,
     )
+    extra = []
     if args.constraints:
-        raise EcsAnimError("--constraints is not supported yet (the solver issue adds it)")
+        from .scenario import load_motion_constraints
+        extra = load_motion_constraints(args.constraints)  # a mistake stops before any import
     sources = [Path(s) for s in args.sources]
     failed = 0
     show_bar = len(sources) > 1 and sys.stderr.isatty()
@@ -77,6 +79,7 @@ def cmd_import(args: argparse.Namespace) -> int:
             if src.suffix.lower() != ".bvh":
                 raise EcsAnimError(f"{src}: unsupported file type {src.suffix!r} (expected .bvh)")
             motion = import_bvh(src, args.map, args.unit, thresholds, args.up)
+            motion.constraints.extend(extra)
             save_nmo(motion, target, force=args.force)
             contacts = motion.contacts()
             message = (f"{src} -> {target}: {motion.n_frames} frames at {motion.fps:g} fps, "
@@ -86,6 +89,8 @@ def cmd_import(args: argparse.Namespace) -> int:
                        f"R {contacts[:, 1].mean():.0%}")
             if motion.info["filled_in"]:
                 message += f", filled in: {', '.join(motion.info['filled_in'])}"
+            if extra:
+                message += f", {len(extra)} stored constraint(s)"
             if show_bar:
                 sys.stderr.write("\r" + " " * 80 + "\r")
             print(message)
@@ -402,7 +407,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="length unit of the file (default: detected from the proportions)")
     p.add_argument("--up", choices=["y", "z"], default="y",
                    help="the file's up axis (default y, the BVH convention)")
-    p.add_argument("--constraints", metavar="FILE.yaml", help=argparse.SUPPRESS)
+    p.add_argument("--constraints", metavar="FILE.yaml",
+                   help="constraints to store with every imported motion (e.g. two hands in "
+                        "contact during a clap), times in the motion's own seconds; see "
+                        "docs/scenarios.md")
     p.add_argument("--contact-height", type=positive_float, default=ContactThresholds.height_m,
                    metavar="M", help="foot-contact height threshold, m (default %(default)s)")
     p.add_argument("--contact-speed", type=positive_float, default=ContactThresholds.speed_mps,

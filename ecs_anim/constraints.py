@@ -1,7 +1,8 @@
 """Constraint specifications stored with a motion (paper §5, DESIGN §5).
 
 ``C = {point, type, chain, priority, activation}``. This module holds the data and the activation
-ramp; solving them is the solver's job. Only foot contacts are produced at import for now.
+ramp; solving them is the solver's job. Foot contacts are detected at import; other constraints
+come from a YAML file given at import (``ecs-anim import --constraints``).
 """
 
 from __future__ import annotations
@@ -65,11 +66,11 @@ class ConstraintSpec:
     ----------
     name : unique within the motion, e.g. ``"contact_l_3"``.
     kind : one of :data:`KINDS`.
-    segment : canonical bone the constrained point belongs to, named by its proximal joint
-        (``"ankle_l"`` is the foot); ``fraction`` along the bone (0 = proximal joint) and
-        ``offset_m`` (3,) in the bone's frame locate the point.
-    chain : body groups allowed to move (``leg_l``, ``leg_r``, ``arm_l``, ``arm_r``, ``head``,
-        ``trunk``, ``root``).
+    segment : the constrained point: a joint (``"wrist_r"``) or a segment (``"forearm_r"``) with
+        ``fraction`` along it (None: the joint, or a segment's middle) and ``offset_m`` (3,) in
+        its frame (:mod:`ecs_anim.body_points`). Foot contacts name the ankle joint.
+    chain : body groups allowed to move (``leg_l``, ``leg_r``, ``head``, ``arm_l``, ``arm_r``,
+        ``trunk``); empty: the point's own group.
     priority : higher is solved first.
     activation : see :class:`Activation`.
     params : kind-specific values (target, distance, area), JSON-compatible.
@@ -80,8 +81,8 @@ class ConstraintSpec:
     segment: str
     activation: Activation
     chain: tuple[str, ...]
-    priority: int = 0
-    fraction: float = 0.0
+    priority: float = 0.0
+    fraction: float | None = None
     offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     params: dict[str, Any] = field(default_factory=dict)
 
@@ -101,7 +102,8 @@ class ConstraintSpec:
         return cls(
             name=str(d["name"]), kind=str(d["kind"]), segment=str(d["segment"]),
             activation=Activation(**d["activation"]), chain=tuple(d["chain"]),
-            priority=int(d.get("priority", 0)), fraction=float(d.get("fraction", 0.0)),
+            priority=float(d.get("priority", 0)),
+            fraction=None if d.get("fraction") is None else float(d["fraction"]),
             offset_m=tuple(float(x) for x in d.get("offset_m", (0, 0, 0))),  # type: ignore[arg-type]
             params=dict(d.get("params", {})),
         )

@@ -10,7 +10,7 @@ from __future__ import annotations
 import difflib
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +19,7 @@ import yaml
 from yaml import Node
 
 from .components import MotionPlayer, Placement, QueuedClip
-from .constraints import Activation
+from .constraints import Activation, ConstraintSpec
 from .errors import EcsAnimError, InputError
 from .ground import Bumps, Combined, Ground, HeightGrid, Plane, Slope, Stairs
 from .morphology import LENGTH_KEYS, PRESET_SPECS, Morphology, with_lengths_m
@@ -42,6 +42,22 @@ class ConstraintEntry:
     target_character: str | None = None
     target_point: str | None = None
     options: dict[str, Any] = field(default_factory=dict)
+
+    def to_spec(self) -> ConstraintSpec:
+        """The constraint stored with a motion (its target a point of the same body)."""
+        o = self.options
+        params: dict[str, Any] = {"target_point": self.target_point,
+                                  "target_fraction": o.get("target_fraction"),
+                                  "target_offset_m": list(o.get("target_offset_m", (0.0, 0.0, 0.0)))}
+        for key in ("distance_m", "axis"):
+            if key in o:
+                params[key] = list(o[key]) if key == "axis" else o[key]
+        if "area" in o:
+            params["area"] = asdict(o["area"])
+        return ConstraintSpec(self.name, o["kind"], self.point, self.activation,
+                              tuple(o.get("chain") or ()), self.priority,
+                              o.get("fraction"),
+                              tuple(o.get("offset_m", (0.0, 0.0, 0.0))), params)
 
 
 @dataclass
@@ -283,10 +299,13 @@ CHARACTER_KEYS = {"name": True, "morphology": True, "motion": True, "position_m"
                   "then": False, "team": False, "constraints": False, "com_control": False}
 
 
-def _constraint(r: _Reader, node: Node, where: str) -> tuple[ConstraintEntry, Node | None]:
+def _constraint(r: _Reader, node: Node, where: str,
+                in_motion: bool = False) -> tuple[ConstraintEntry, Node | None]:
     """One constraint entry; returns it and the node naming a target character (checked once
     every character is known). Everything else is checked here, against a scratch table, so a
-    mistake is reported with its line."""
+    mistake is reported with its line. A target ``point:`` without ``character:`` is on the
+    constrained character itself; ``in_motion`` (constraints stored with a motion) allows only
+    those."""
     from .body_points import GROUPS, body_point
     from .constraint_table import KIND_NAMES, Area, ConstraintTable, Target
 
@@ -361,9 +380,15 @@ def _constraint(r: _Reader, node: Node, where: str) -> tuple[ConstraintEntry, No
                    {"world_m": False, "direction": False, "character": False, "point": False,
                     "joint": False, "fraction": False, "offset_m": False})
     given = [k for k in ("world_m", "direction", "character") if k in tk]
+    if not given and ("point" in tk or "joint" in tk):
+        given = ["self"]
+    if in_motion and given != ["self"]:
+        raise r.fail(keys["target"], f"{where}.target", "a motion's constraint aims at a point of "
+                     "the same body: give point: (and fraction:, offset_m:) only")
     if len(given) != 1:
         raise r.fail(keys["target"], f"{where}.target", "give one of world_m: [x, y, z], "
-                     "direction: [x, y, z] (orientation) or character: NAME with point: POINT")
+                     "direction: [x, y, z] (orientation), point: POINT (this character) or "
+                     "character: NAME with point: POINT")
     target_world, other, target_point, who = None, None, None, None
     if given[0] in ("world_m", "direction"):
         for extra in ("point", "joint", "fraction", "offset_m"):
@@ -381,7 +406,8 @@ def _constraint(r: _Reader, node: Node, where: str) -> tuple[ConstraintEntry, No
         key = "point" if "point" in tk else "joint"
         target_point, t_fraction, t_offset = point_of(tk, f"{where}.target", key, as_target=True)
         options["target_fraction"], options["target_offset_m"] = t_fraction, t_offset
-        other, who = r.string(tk["character"], f"{where}.target.character"), tk["character"]
+        if "character" in tk:
+            other, who = r.string(tk["character"], f"{where}.target.character"), tk["character"]
     # Everything but the target character's existence, checked now (with this line).
     target = Target(row=0, point=body_point(target_point, options.get("target_fraction"),
                                             options.get("target_offset_m", (0.0, 0.0, 0.0)), True)) \
@@ -478,6 +504,8 @@ def load_scenario(path: str | Path) -> Scenario:
             constraints.append(entry)
             if who is not None:
                 pending_targets.append((entry.target_character, who, f"{where}.constraints[{j}]"))
+            elif entry.target_point is not None:
+                entry.target_character = name  # a point of this character itself
         characters.append(CharacterSpec(
             name, _morphology(r, keys["morphology"], f"{where}.morphology"), player,
             Placement((position[0], position[1]), math.radians(heading)),
@@ -491,6 +519,33 @@ def load_scenario(path: str | Path) -> Scenario:
             hint = f"; did you mean {close[0]!r}?" if close else ""
             raise r.fail(node, f"{cwhere}.target.character", f"no character named {other!r}{hint}")
     return Scenario(str(path), duration, fps, motions, ground, characters)
+
+
+def load_motion_constraints(path: str | Path) -> list[ConstraintSpec]:
+    """Constraints to store with a motion (``ecs-anim import --constraints FILE.yaml``): a
+    ``constraints:`` list in the scenario syntax, each aiming at a point of the same body, with
+    activation times in the motion's own time (docs/scenarios.md)."""
+    path = Path(path)
+    r = _Reader(str(path))
+    try:
+        root = yaml.compose(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise InputError(path, f"cannot read constraints: {exc.strerror or exc}") from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        raise InputError(path, f"not valid YAML: {getattr(exc, 'problem', exc)}",
+                         None if mark is None else mark.line + 1) from None
+    if root is None:
+        raise InputError(path, "the constraints file is empty", 1)
+    top = r.mapping(root, "", {"constraints": True})
+    specs, names = [], set()
+    for j, node in enumerate(r.sequence(top["constraints"], "constraints")):
+        entry, _ = _constraint(r, node, f"constraints[{j}]", in_motion=True)
+        if entry.name in names:
+            raise r.fail(node, f"constraints[{j}].name", f"{entry.name!r} is used twice")
+        names.add(entry.name)
+        specs.append(entry.to_spec())
+    return specs
 
 
 def build_simulation(scenario: Scenario, window: bool = False,  # type: ignore[no-untyped-def]

@@ -76,6 +76,7 @@ class Simulation:
         self.fps = fps
         self.tick = 0
         self.bank = ClipBank.from_motions(motions)
+        self.motions = dict(motions)
         self.store = CharacterStore()
         self.constraints = ConstraintTable()
         self.solver_settings = solver_settings
@@ -165,7 +166,26 @@ class Simulation:
             for component in (Name(name, team), Body(body), player, placement, CharacterRow(row),
                               NormalizedPose(row), Posture(row)):
                 esper.add_component(entity, component)
+        self._add_motion_constraints(entity, name, [player.clip] + [q.clip for q in player.queue])
         return entity
+
+    def _add_motion_constraints(self, entity: int, name: str, clips: list[str]) -> None:
+        """The constraints stored with each clip a character plays (other than foot contacts,
+        which ground adaptation keeps), active in that clip's own time while it plays."""
+        for clip in dict.fromkeys(clips):
+            for spec in self.motions[clip].constraints:
+                if spec.kind == "foot_contact":
+                    continue
+                p = spec.params
+                self.add_constraint(
+                    entity, f"{name}/{clip}/{spec.name}", spec.segment, spec.priority,
+                    spec.activation, target_entity=entity, target_point=p.get("target_point"),
+                    kind=spec.kind, chain=spec.chain or None, fraction=spec.fraction,
+                    offset_m=spec.offset_m, target_fraction=p.get("target_fraction"),
+                    target_offset_m=tuple(p.get("target_offset_m", (0.0, 0.0, 0.0))),
+                    distance_m=float(p.get("distance_m", 0.0)),
+                    area=Area(**p["area"]) if "area" in p else None,
+                    axis=tuple(p.get("axis", (0.0, 0.0, 1.0))), clock=self.bank.index(clip))
 
     def row(self, entity: int) -> int:
         with self._active():

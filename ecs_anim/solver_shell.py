@@ -120,6 +120,11 @@ class TickGoals:
     in_contact: NDArray[np.bool_]
     com_desired: F64
     com_on: NDArray[np.bool_]
+    on_self: I64  # (s,) goals aiming at a point of their own body: they follow it in the solve
+    self_segment: I64
+    self_fraction: F64
+    self_offset: F64
+    self_start: F64  # (s, 3) where that point was when the goals were made
 
     @property
     def k(self) -> int:
@@ -214,6 +219,7 @@ def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained:
         return None
     idx, owner, w = idx[keep], owner[keep], w[keep]
     rows, local = np.unique(owner, return_inverse=True)
+    on_self = np.flatnonzero((table.target_kind[idx] != TARGET_WORLD) & (table.target_row[idx] == owner))
     r = rows.size
     # Foot contacts: each leg in contact keeps its ankle where ground adaptation put it.
     ankles = unconstrained.positions[rows][:, list(SIDE_JOINTS["ankle"])]
@@ -241,6 +247,11 @@ def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained:
         in_contact=in_contact,
         com_desired=com_desired[rows],
         com_on=com_control[rows],
+        on_self=on_self,
+        self_segment=table.target_segment[idx[on_self]],
+        self_fraction=table.target_fraction[idx[on_self]],
+        self_offset=table.target_offset[idx[on_self]],
+        self_start=targets[idx[on_self]],
     )
 
 
@@ -286,8 +297,22 @@ class _Solve:
         on_head = g.group == HEAD
         self.first_head = winners(g.owner, zero, g.priority, on_head & self.is_point, self.r, 1)[:, 0]
         self.orient_head = winners(g.owner, zero, g.priority, on_head & g.orientation, self.r, 1)[:, 0]
+        self.self_at = goals.self_start.copy()
         self.trunk_moved = False  # this tick
         self.dirty = False  # since the last decode
+
+    def follow_own_targets(self) -> None:
+        """Goals aiming at a point of the same body move with that point as the body is solved
+        (the root and trunk move both hands when one holds the other)."""
+        g = self.g
+        if g.on_self.size == 0:
+            return
+        now = point_positions(self.dec, g.owner[g.on_self], g.self_segment, g.self_fraction, g.self_offset)
+        shift = now - self.self_at
+        self.self_at = now
+        orient = g.orientation[g.on_self]
+        g.goal[g.on_self[~orient]] += shift[~orient]
+        g.full_goal[g.on_self[~orient]] += shift[~orient]
 
     def redecode(self) -> None:
         self.dec = decode(self.poses, self.lengths)
@@ -534,6 +559,7 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
     used = 0
     for used in range(1, settings.iterations + 1):
         # Legs, head, arms: the paper's order (legs and arms are independent, so one batch).
+        state.follow_own_targets()
         state.limbs()
         state.head()
         state.trunk()
@@ -549,6 +575,7 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
             break
         previous = worst
     # The last root move shifted the limbs: re-plant the feet, re-aim the head and the arms.
+    state.follow_own_targets()
     state.limbs()
     state.head()
     return state.poses, _errors(goals, state.dec, use_full=True), used, state.dec.positions

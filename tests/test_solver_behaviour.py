@@ -304,3 +304,55 @@ def test_random_bodies_targets_and_priorities(stature, legs, picks):
     assert np.all(np.isfinite(q))
     bones_exact(q, body)
     assert sim.constraints.error[first] <= error_alone + 1e-3
+
+
+# --- constraints stored with a motion (import --constraints) ------------------------------------
+
+HOLD_BOX = """\
+# Hold a 0.27 m box between the wrists from 0.5 s to 2.5 s of the motion.
+constraints:
+  - name: hold_box
+    kind: distance
+    point: wrist_l
+    target: {point: wrist_r}
+    distance_m: 0.27
+    priority: 5
+    activation: {start_s: 0.5, stop_s: 2.5, ease_in_s: 0.2, ease_out_s: 0.2}
+"""
+
+
+def test_constraints_given_at_import_play_with_the_motion_on_every_body(tmp_path, capsys):
+    from ecs_anim.cli import main
+    from ecs_anim.motion import load_nmo
+
+    (tmp_path / "box.yaml").write_text(HOLD_BOX)
+    assert main(["import", str(MOTIONS_DIR / "idle.bvh"), "-o", str(tmp_path),
+                 "--constraints", str(tmp_path / "box.yaml")]) == 0
+    assert "1 stored constraint(s)" in capsys.readouterr().out
+    motion = load_nmo(tmp_path / "idle.nmo")
+    assert [c.name for c in motion.constraints if c.kind != "foot_contact"] == ["hold_box"]
+    sim = Simulation({"idle": motion})
+    for i, preset in enumerate(("child", "tall")):
+        sim.spawn(preset, Morphology.preset(preset), MotionPlayer("idle", loop=False),
+                  Placement((0.0, 1.5 * i)))
+    gaps = []
+    for _ in range(90):
+        sim.step()
+        q = sim.store.positions
+        gaps.append(np.linalg.norm(q[:, J["wrist_l"]] - q[:, J["wrist_r"]], axis=1))
+    gaps = np.array(gaps)  # (ticks, 2); tick k shows motion time k / 30 s
+    held = slice(21, 69)  # 0.7 s .. 2.3 s: fully active
+    np.testing.assert_allclose(gaps[held], 0.27, atol=1e-3)
+    assert np.all(np.abs(gaps[:10] - 0.27) > 0.005)  # before: the motion's own hands
+
+
+def test_a_bad_constraints_file_is_refused_before_importing(tmp_path, capsys):
+    from ecs_anim.cli import main
+
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(HOLD_BOX.replace("target: {point: wrist_r}", "target: {world_m: [0, 0, 1]}"))
+    assert main(["import", str(MOTIONS_DIR / "idle.bvh"), "-o", str(tmp_path / "out"),
+                 "--constraints", str(bad)]) != 0
+    err = capsys.readouterr().err
+    assert f"{bad}:6: constraints[0].target: a motion's constraint aims at a point" in err
+    assert not (tmp_path / "out" / "idle.nmo").exists()
