@@ -292,62 +292,62 @@ GUARD_LOOP = Gesture(2.4, GUARD, loop=True, tracks={
 
 KICK = Gesture(1.5, GUARD, tracks={
     # Weight onto the front (left) foot, the rear (right) leg kicks forward and comes back.
-    "pelvis": [(0.0, _g("pelvis")), (0.28, (0.10, 0.06, -0.08)), (0.52, (0.15, 0.07, -0.07)),
-               (0.72, (0.16, 0.06, -0.06)), (0.95, (0.14, 0.06, -0.07)),
+    "pelvis": [(0.0, _g("pelvis")), (0.28, (0.10, 0.06, -0.08)), (0.50, (0.15, 0.07, -0.07)),
+               (0.70, (0.16, 0.06, -0.06)), (0.90, (0.14, 0.06, -0.07)),
                (1.20, (0.06, 0.03, -0.08)), (1.5, _g("pelvis"))],
-    "pelvis_rot": [(0.0, _g("pelvis_rot")), (0.30, (-18.0, 0.0, 0.0)), (0.55, (-8.0, -8.0, 0.0)),
-                   (0.72, (-4.0, -16.0, 0.0)), (0.95, (-10.0, -8.0, 0.0)),
+    "pelvis_rot": [(0.0, _g("pelvis_rot")), (0.30, (-18.0, 0.0, 0.0)), (0.50, (-8.0, -8.0, 0.0)),
+                   (0.70, (-4.0, -16.0, 0.0)), (0.90, (-10.0, -8.0, 0.0)),
                    (1.20, (-20.0, 0.0, 0.0)), (1.5, _g("pelvis_rot"))],
-    "ankle_r": [(0.0, _g("ankle_r")), (0.30, _g("ankle_r")), (0.52, (0.10, -0.10, 0.42)),
-                (0.72, (1.12, -0.06, 1.02)), (0.95, (0.14, -0.10, 0.44)),
+    "ankle_r": [(0.0, _g("ankle_r")), (0.30, _g("ankle_r")), (0.50, (0.10, -0.10, 0.42)),
+                (0.70, (1.12, -0.06, 1.10)), (0.90, (0.14, -0.10, 0.44)),
                 (1.20, _g("ankle_r")), (1.5, _g("ankle_r"))],
-    "foot_r": [(0.0, _g("foot_r")), (0.30, (10.0, -30.0)), (0.52, (40.0, -10.0)),
-               (0.72, (-60.0, 0.0)), (0.95, (40.0, -10.0)), (1.15, (5.0, -35.0)),
+    "foot_r": [(0.0, _g("foot_r")), (0.30, (10.0, -30.0)), (0.50, (40.0, -10.0)),
+               (0.70, (-60.0, 0.0)), (0.90, (40.0, -10.0)), (1.15, (5.0, -35.0)),
                (1.20, _g("foot_r")), (1.5, _g("foot_r"))],
-    "trunk": [(0.0, _g("trunk")), (0.30, (4.0, 0.0, -3.0)), (0.52, (-8.0, 0.0, 0.0)),
-              (0.72, (-20.0, 0.0, 5.0)), (0.95, (-6.0, 0.0, 0.0)), (1.20, (6.0, 0.0, -5.0)),
+    "trunk": [(0.0, _g("trunk")), (0.30, (4.0, 0.0, -3.0)), (0.50, (-8.0, 0.0, 0.0)),
+              (0.70, (-20.0, 0.0, 5.0)), (0.90, (-6.0, 0.0, 0.0)), (1.20, (6.0, 0.0, -5.0)),
               (1.5, _g("trunk"))],
-    "head": [(0.0, _g("head")), (0.52, (18.0, 10.0)), (0.72, (30.0, 4.0)), (0.95, (18.0, 12.0)),
+    "head": [(0.0, _g("head")), (0.50, (18.0, 10.0)), (0.70, (30.0, 4.0)), (0.90, (18.0, 12.0)),
              (1.20, (10.0, 24.0)), (1.5, _g("head"))],
-    "wrist_l": [(0.0, _g("wrist_l")), (0.52, (0.50, -0.05, 0.15)), (0.72, (0.45, 0.05, 0.10)),
+    "wrist_l": [(0.0, _g("wrist_l")), (0.50, (0.50, -0.05, 0.15)), (0.70, (0.45, 0.05, 0.10)),
                 (1.0, (0.52, -0.10, 0.18)), (1.5, _g("wrist_l"))],
-    "wrist_r": [(0.0, _g("wrist_r")), (0.52, (0.30, -0.05, -0.10)), (0.72, (0.05, 0.15, -0.45)),
+    "wrist_r": [(0.0, _g("wrist_r")), (0.50, (0.30, -0.05, -0.10)), (0.70, (0.05, 0.15, -0.45)),
                 (1.0, (0.30, -0.10, 0.05)), (1.5, _g("wrist_r"))],
 })
 
 WARD_OFF_PUNCH = Gesture(2.0, GUARD, tracks={
     "pelvis": [(0.0, _g("pelvis")), (0.30, (0.0, 0.0, -0.09)), (0.60, (0.02, 0.0, -0.11)),
-               (0.75, (0.02, 0.0, -0.11)), (1.0, (0.0, -0.01, -0.08)), (1.25, (0.06, 0.0, -0.08)),
+               (0.75, (0.02, 0.0, -0.11)), (1.0, (0.0, -0.01, -0.08)), (1.20, (0.06, 0.0, -0.08)),
                (1.7, _g("pelvis")), (2.0, _g("pelvis"))],
     "pelvis_rot": [(0.0, _g("pelvis_rot")), (0.30, (-32.0, 0.0, 0.0)), (0.60, (-20.0, 5.0, 0.0)),
-                   (0.75, (-20.0, 5.0, 0.0)), (1.05, (-30.0, 0.0, 0.0)),
-                   (1.25, (-5.0, 0.0, 0.0)), (1.7, _g("pelvis_rot")), (2.0, _g("pelvis_rot"))],
+                   (0.75, (-20.0, 5.0, 0.0)), (1.0, (-30.0, 0.0, 0.0)),
+                   (1.20, (-5.0, 0.0, 0.0)), (1.7, _g("pelvis_rot")), (2.0, _g("pelvis_rot"))],
     "trunk": [(0.0, _g("trunk")), (0.30, (10.0, 0.0, -15.0)), (0.60, (18.0, -4.0, 8.0)),
-              (0.75, (18.0, -4.0, 8.0)), (1.05, (8.0, 0.0, -12.0)), (1.25, (12.0, 0.0, 25.0)),
+              (0.75, (18.0, -4.0, 8.0)), (1.0, (8.0, 0.0, -12.0)), (1.20, (12.0, 0.0, 25.0)),
               (1.7, _g("trunk")), (2.0, _g("trunk"))],
     "head": [(0.0, _g("head")), (0.30, (18.0, 40.0)), (0.60, (25.0, 22.0)), (0.75, (25.0, 22.0)),
-             (1.05, (10.0, 38.0)), (1.25, (8.0, 2.0)), (1.7, _g("head")), (2.0, _g("head"))],
+             (1.0, (10.0, 38.0)), (1.20, (8.0, 2.0)), (1.7, _g("head")), (2.0, _g("head"))],
     # Ward-off: the left forearm rises across the chest, then sweeps down and out.
     "wrist_l": [(0.0, _g("wrist_l")), (0.30, (0.40, -0.45, 0.15)), (0.60, (0.62, 0.40, -0.55)),
-                (0.75, (0.60, 0.42, -0.50)), (1.0, (0.50, -0.10, 0.15)), (1.25, (0.40, -0.10, 0.20)),
+                (0.75, (0.60, 0.42, -0.50)), (1.0, (0.50, -0.10, 0.15)), (1.20, (0.40, -0.10, 0.20)),
                 (1.7, _g("wrist_l")), (2.0, _g("wrist_l"))],
     "elbow_l": [(0.0, _g("elbow_l")), (0.30, (0.0, 0.6, -0.8)), (0.60, (0.2, 0.4, -1.0)),
                 (1.0, _g("elbow_l")), (2.0, _g("elbow_l"))],
     # Punch: the right fist cocks at the chin, then drives straight at head height.
-    "wrist_r": [(0.0, _g("wrist_r")), (0.60, (0.38, -0.30, 0.26)), (1.05, (0.35, -0.32, 0.30)),
-                (1.25, (0.88, -0.14, 0.35)), (1.35, (0.86, -0.14, 0.34)),
+    "wrist_r": [(0.0, _g("wrist_r")), (0.60, (0.38, -0.30, 0.26)), (1.0, (0.35, -0.32, 0.30)),
+                (1.20, (0.88, -0.14, 0.35)), (1.30, (0.86, -0.14, 0.34)),
                 (1.7, _g("wrist_r")), (2.0, _g("wrist_r"))],
-    "elbow_r": [(0.0, _g("elbow_r")), (1.05, _g("elbow_r")), (1.25, (0.0, 0.9, -0.45)),
+    "elbow_r": [(0.0, _g("elbow_r")), (1.0, _g("elbow_r")), (1.20, (0.0, 0.9, -0.45)),
                 (1.7, _g("elbow_r")), (2.0, _g("elbow_r"))],
 })
 
 DODGE = Gesture(1.5, GUARD, tracks={
-    "pelvis": [(0.0, _g("pelvis")), (0.15, _g("pelvis")), (0.55, (-0.12, -0.04, -0.10)),
-               (0.80, (-0.13, -0.04, -0.10)), (1.30, _g("pelvis")), (1.5, _g("pelvis"))],
-    "pelvis_rot": [(0.0, _g("pelvis_rot")), (0.15, _g("pelvis_rot")), (0.55, (-30.0, -10.0, 0.0)),
-                   (0.80, (-30.0, -11.0, 0.0)), (1.30, _g("pelvis_rot")), (1.5, _g("pelvis_rot"))],
-    "trunk": [(0.0, _g("trunk")), (0.15, _g("trunk")), (0.55, (-22.0, -4.0, -5.0)),
-              (0.80, (-24.0, -4.0, -5.0)), (1.30, _g("trunk")), (1.5, _g("trunk"))],
+    "pelvis": [(0.0, _g("pelvis")), (0.15, _g("pelvis")), (0.55, (-0.10, -0.04, -0.10)),
+               (0.80, (-0.11, -0.04, -0.10)), (1.30, _g("pelvis")), (1.5, _g("pelvis"))],
+    "pelvis_rot": [(0.0, _g("pelvis_rot")), (0.15, _g("pelvis_rot")), (0.55, (-30.0, -7.0, 0.0)),
+                   (0.80, (-30.0, -8.0, 0.0)), (1.30, _g("pelvis_rot")), (1.5, _g("pelvis_rot"))],
+    "trunk": [(0.0, _g("trunk")), (0.15, _g("trunk")), (0.55, (-14.0, -4.0, -5.0)),
+              (0.80, (-16.0, -4.0, -5.0)), (1.30, _g("trunk")), (1.5, _g("trunk"))],
     "head": [(0.0, _g("head")), (0.15, _g("head")), (0.55, (-5.0, 32.0)), (0.80, (-8.0, 32.0)),
              (1.30, _g("head")), (1.5, _g("head"))],
     "wrist_l": [(0.0, _g("wrist_l")), (0.55, (0.45, -0.10, 0.32)), (0.80, (0.45, -0.10, 0.32)),
@@ -359,15 +359,17 @@ DODGE = Gesture(1.5, GUARD, tracks={
 _WAIST = (0.42, -0.02, -0.62)
 _CHEST = (0.55, 0.04, -0.32)
 _WIDE = (0.50, 0.38, -0.42)
-_LOW = (0.18, 0.10, -0.86)
+_LOW = (0.28, 0.06, -0.90)
 
 TALK = Gesture(7.2, NEUTRAL, loop=True, tracks={
-    "pelvis": [(0.0, (0.0, 0.0, -0.025)), (1.8, (0.005, 0.03, -0.025)), (3.6, (0.0, 0.0, -0.03)),
+    "pelvis": [(0.0, (0.0, 0.0, -0.025)), (1.8, (0.005, 0.03, -0.025)), (3.0, (0.0, 0.01, -0.03)),
+               (3.6, (-0.04, 0.0, -0.07)), (4.4, (-0.04, 0.0, -0.07)), (5.0, (0.0, -0.02, -0.03)),
                (5.4, (0.005, -0.03, -0.025)), (7.2, (0.0, 0.0, -0.025))],
     "pelvis_rot": [(0.0, (0.0, 0.0, 0.0)), (1.8, (4.0, 0.0, -2.0)), (3.6, (0.0, 0.0, 0.0)),
                    (5.4, (-4.0, 0.0, 2.0)), (7.2, (0.0, 0.0, 0.0))],
     "trunk": [(0.0, (3.0, 0.0, 0.0)), (0.8, (6.0, 0.0, -6.0)), (2.3, (2.0, 0.0, 4.0)),
-              (3.6, (5.0, 0.0, 0.0)), (5.0, (8.0, 0.0, -10.0)), (6.2, (3.0, 0.0, 5.0)),
+              (3.0, (4.0, 0.0, 2.0)), (3.6, (16.0, 0.0, 0.0)), (4.4, (16.0, 0.0, 0.0)),
+              (5.0, (8.0, 0.0, -10.0)), (6.2, (3.0, 0.0, 5.0)),
               (7.2, (3.0, 0.0, 0.0))],
     "head": [(0.0, (0.0, 0.0)), (0.8, (8.0, -20.0)), (1.2, (2.0, -18.0)), (1.6, (8.0, -15.0)),
              (2.3, (-3.0, 5.0)), (3.0, (4.0, 25.0)), (3.6, (10.0, 20.0)), (4.4, (6.0, 15.0)),
@@ -384,17 +386,17 @@ TALK = Gesture(7.2, NEUTRAL, loop=True, tracks={
 })
 
 REACH = Gesture(3.0, NEUTRAL, arms_in="heading", tracks={
-    "pelvis": [(0.0, _n("pelvis")), (0.3, _n("pelvis")), (1.3, (-0.22, 0.01, -0.13)),
-               (1.9, (-0.22, 0.01, -0.13)), (2.8, _n("pelvis")), (3.0, _n("pelvis"))],
-    "pelvis_rot": [(0.0, _n("pelvis_rot")), (0.3, _n("pelvis_rot")), (1.3, (8.0, 35.0, 0.0)),
-                   (1.9, (8.0, 35.0, 0.0)), (2.8, _n("pelvis_rot")), (3.0, _n("pelvis_rot"))],
-    "trunk": [(0.0, _n("trunk")), (0.3, _n("trunk")), (1.3, (35.0, -4.0, 12.0)),
-              (1.9, (35.0, -4.0, 12.0)), (2.8, _n("trunk")), (3.0, _n("trunk"))],
+    "pelvis": [(0.0, _n("pelvis")), (0.3, _n("pelvis")), (1.3, (-0.25, 0.01, -0.16)),
+               (1.9, (-0.25, 0.01, -0.16)), (2.8, _n("pelvis")), (3.0, _n("pelvis"))],
+    "pelvis_rot": [(0.0, _n("pelvis_rot")), (0.3, _n("pelvis_rot")), (1.3, (8.0, 40.0, 0.0)),
+                   (1.9, (8.0, 40.0, 0.0)), (2.8, _n("pelvis_rot")), (3.0, _n("pelvis_rot"))],
+    "trunk": [(0.0, _n("trunk")), (0.3, _n("trunk")), (1.3, (42.0, -4.0, 12.0)),
+              (1.9, (42.0, -4.0, 12.0)), (2.8, _n("trunk")), (3.0, _n("trunk"))],
     "head": [(0.0, _n("head")), (0.3, (5.0, 0.0)), (1.3, (-30.0, 0.0)), (1.9, (-30.0, 0.0)),
              (2.8, _n("head")), (3.0, _n("head"))],
     # Wrists in the upright frame: the right one forward and down, the left one hangs back.
     "wrist_r": [(0.0, _n("wrist_r")), (0.3, _n("wrist_r")), (0.8, (0.55, 0.0, -0.70)),
-                (1.3, (0.80, -0.05, -0.55)), (1.9, (0.80, -0.05, -0.55)), (2.4, (0.45, 0.0, -0.80)),
+                (1.3, (0.74, -0.05, -0.64)), (1.9, (0.74, -0.05, -0.64)), (2.4, (0.45, 0.0, -0.80)),
                 (2.8, _n("wrist_r")), (3.0, _n("wrist_r"))],
     "wrist_l": [(0.0, _n("wrist_l")), (0.3, _n("wrist_l")), (1.3, (-0.10, 0.15, -0.90)),
                 (1.9, (-0.10, 0.15, -0.90)), (2.8, _n("wrist_l")), (3.0, _n("wrist_l"))],
@@ -403,47 +405,54 @@ REACH = Gesture(3.0, NEUTRAL, arms_in="heading", tracks={
 })
 
 
-def _dance_feet() -> tuple[list[Key], list[Key]]:
-    """Step-touch right and back, forward and back, twice (beats every 0.5 s)."""
-    y_l, y_r, side, fwd = 0.12, -0.12, 0.34, 0.30
-    swing = 0.28
-    left: list[tuple[float, float, tuple[float, float]]] = []
-    right: list[tuple[float, float, tuple[float, float]]] = []
+Move = tuple[float, float, tuple[float, float]]
+
+
+def _dance_steps() -> tuple[list[Move], list[Move]]:
+    """"Out, out, in, in" then "forward, forward, back, back", twice: the feet alternate, one
+    step on every beat (0.5 s), each foot 0.3 s in the air. Returns the left and right moves."""
+    y_l, y_r, side, fwd, swing = 0.12, -0.12, 0.16, 0.28, 0.3
+    left: list[Move] = []
+    right: list[Move] = []
     for t0 in (0.0, 4.0):
-        # Right figure: R out to the right, L closes; L back to the left, R closes.
-        right.append((t0 + 0.0, t0 + swing, (0.0, y_r - side)))
-        left.append((t0 + 0.5, t0 + 0.5 + swing, (0.0, y_l - side)))
-        left.append((t0 + 1.0, t0 + 1.0 + swing, (0.0, y_l)))
-        right.append((t0 + 1.5, t0 + 1.5 + swing, (0.0, y_r)))
-        # Forward figure: R forward, L closes; L back, R closes.
-        right.append((t0 + 2.0, t0 + 2.0 + swing, (fwd, y_r)))
-        left.append((t0 + 2.5, t0 + 2.5 + swing, (fwd, y_l)))
-        left.append((t0 + 3.0, t0 + 3.0 + swing, (0.0, y_l)))
-        right.append((t0 + 3.5, t0 + 3.5 + swing, (0.0, y_r)))
-    lk = steps((0.0, y_l), left) + [(8.0, (0.0, y_l, 0.0))]
-    rk = steps((0.0, y_r), right) + [(8.0, (0.0, y_r, 0.0))]
-    return lk, rk
+        right.append((t0 + 0.0, t0 + swing, (0.0, y_r - side)))       # out
+        left.append((t0 + 0.5, t0 + 0.5 + swing, (0.0, y_l + side)))  # out
+        right.append((t0 + 1.0, t0 + 1.0 + swing, (0.0, y_r)))        # in
+        left.append((t0 + 1.5, t0 + 1.5 + swing, (0.0, y_l)))         # in
+        right.append((t0 + 2.0, t0 + 2.0 + swing, (fwd, y_r)))        # forward
+        left.append((t0 + 2.5, t0 + 2.5 + swing, (fwd, y_l)))         # forward
+        right.append((t0 + 3.0, t0 + 3.0 + swing, (0.0, y_r)))        # back
+        left.append((t0 + 3.5, t0 + 3.5 + swing, (0.0, y_l)))         # back
+    return left, right
 
 
-def _dance_pelvis() -> list[Key]:
-    """Over the supporting foot, dipping on every beat (a bounce)."""
+def _pelvis_over_support(left: list[Move], right: list[Move], start: tuple[float, float],
+                         period: float) -> list[Key]:
+    """Pelvis keys for stepping: over the supporting foot (70 %) at each lift-off, between the
+    feet at each landing (+0.08 s, dipping: the bounce); loops back to its first key
+    (``start``: the feet's y at t = 0, leg lengths)."""
+    events = sorted([(m, 0) for m in left] + [(m, 1) for m in right])
+    feet = [np.array([0.0, start[0]]), np.array([0.0, start[1]])]
     keys: list[Key] = []
-    centre = {0.0: (0.0, 0.0), 0.5: (0.0, -0.28), 1.0: (0.0, -0.22), 1.5: (0.0, 0.06),
-              2.0: (0.0, 0.0), 2.5: (0.22, -0.06), 3.0: (0.25, 0.0), 3.5: (0.06, 0.06)}
-    for t0 in (0.0, 4.0):
-        for tb, (x, y) in centre.items():
-            keys.append((t0 + tb, (x, y, -0.04)))
-            keys.append((t0 + tb + 0.25, (x, y, -0.085)))
-    keys.append((8.0, keys[0][1]))
-    # Smooth the path between supports: move at mid-beat, dip at the beat.
+    for (t0, t1, (nx, ny)), side in events:
+        support = feet[1 - side]
+        over = 0.7 * support + 0.3 * feet[side]
+        keys.append((t0, (over[0], over[1], -0.045)))
+        feet[side] = np.array([nx, ny])
+        mid = 0.5 * (feet[0] + feet[1])
+        keys.append((t1 + 0.08, (mid[0], mid[1], -0.09)))
+    if keys[0][0] > 0.0:
+        keys.insert(0, (0.0, keys[-1][1]))
+    keys.append((period, keys[0][1]))
     return keys
 
 
-_DL, _DR = _dance_feet()
+_DANCE_LEFT, _DANCE_RIGHT = _dance_steps()
 
 DANCE = Gesture(8.0, NEUTRAL, loop=True, tracks={
-    "ankle_l": _DL, "ankle_r": _DR,
-    "pelvis": _dance_pelvis(),
+    "ankle_l": steps((0.0, 0.12), _DANCE_LEFT) + [(8.0, (0.0, 0.12, 0.0))],
+    "ankle_r": steps((0.0, -0.12), _DANCE_RIGHT) + [(8.0, (0.0, -0.12, 0.0))],
+    "pelvis": _pelvis_over_support(_DANCE_LEFT, _DANCE_RIGHT, (0.12, -0.12), 8.0),
     "pelvis_rot": [(0.0, (0.0, 0.0, 0.0)), (0.5, (-8.0, 0.0, -4.0)), (1.5, (8.0, 0.0, 4.0)),
                    (2.5, (-10.0, 4.0, 0.0)), (3.5, (10.0, -2.0, 0.0)), (4.0, (0.0, 0.0, 0.0)),
                    (4.5, (-8.0, 0.0, -4.0)), (5.5, (8.0, 0.0, 4.0)), (6.5, (-10.0, 4.0, 0.0)),
