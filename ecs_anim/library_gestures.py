@@ -28,31 +28,40 @@ Foot contacts are not stored in the BVH: the importer detects them (the feet are
 while planted).
 
 All fight clips start and end in the same guard pose (orthodox: left foot forward, fists up, the
-pelvis turned 25 degrees to the right), talk/reach/dance in the same neutral stance, so they queue
-and cross-fade. Timings (also in :data:`GESTURE_TIMINGS`; heights are on the adult_male body,
-1.75 m, leg length 0.846 m, and scale with the body):
+pelvis turned 25 degrees to the right), reach in the neutral stance, so they queue and cross-fade;
+guard, talk and dance loop seamlessly. Timings (also in :data:`GESTURE_TIMINGS`, for timing
+constraint activations); distances in leg lengths (L, thigh + shank) or arm lengths (A, upper
+arm + forearm) scale with the body; metres are on the adult_male body (1.75 m, L = 0.846 m,
+A = 0.571 m) that the files are written on:
 
 * ``guard`` (2.4 s, loop): fighting stance, light bounce, fists circling a little; feet planted.
-* ``kick`` (1.5 s): right (rear) leg front kick. Right foot lifts at 0.30 s, knee chambered at
-  0.52 s, ankle at its peak at 0.72 s (about 0.8 leg lengths in front of the pelvis, at hip
-  height + 0.08 leg), re-chambered at 0.95 s, lands back on its footprint at 1.20 s. The trunk
-  leans back up to 20 degrees at the peak. Left foot planted throughout.
-* ``ward_off_punch`` (2.0 s): left forearm sweeps down and out in front of the belly
-  (ward-off contact window 0.50-0.75 s, forearm lowest at 0.60 s), back to guard by 1.0 s, right
-  straight punch: wrist at its peak at 1.25 s, at head height (0.35 arm lengths above the
-  shoulder), 0.95 arm lengths from the shoulder, chest turned 25 degrees; back in guard at 1.7 s.
-  Feet planted.
-* ``dodge`` (1.5 s): lean back from 0.15 s, deepest at 0.55-0.80 s (head about 0.3 m behind
-  its guard position), back in guard at 1.3 s. Feet planted.
-* ``talk`` (7.2 s, loop): standing, both hands gesturing between waist and chest height, dipping
-  to the thighs at 3.6-4.4 s, a pointing right hand at 5.0 s; head turns to listeners on both
+* ``kick`` (1.5 s): front kick with the rear (right) leg. Weight onto the left foot by 0.28 s;
+  right foot off the ground at 0.30 s; knee chambered at 0.50 s; **ankle at its peak at
+  0.70 s**, 0.96 L (0.81 m) in front of the pelvis and 0.16 L (0.13 m) above the right hip
+  (ankle 1.00 m above the ground), leg nearly straight, trunk leaning back 20 degrees;
+  re-chambered at 0.90 s; lands back on its own footprint at 1.20 s; guard at 1.5 s. The left
+  foot stays planted. Kicking ankle up to 7 m/s.
+* ``ward_off_punch`` (2.0 s): the left forearm rises across the chest (0.30 s), then sweeps down
+  and out: **ward-off window 0.50-0.75 s**, forearm middle lowest at 0.60 s, 0.28 m in front of
+  the pelvis at 1.0 m height; back to guard with the right fist cocked at 1.0 s; **right straight
+  punch: wrist at its peak at 1.20 s** (held to 1.30 s), 0.96 A from the shoulder, at the
+  body's own head height (1.44 m), 0.57 m in front of the pelvis (0.23 m in guard), chest turned
+  left; back in guard at 1.7 s. Feet planted.
+* ``dodge`` (1.5 s): lean back from 0.15 s, **deepest 0.55-0.80 s** (head 0.33 m behind its
+  guard position, trunk 24 degrees back of guard, weight on the rear foot), back in guard at
+  1.30 s. Feet planted.
+* ``talk`` (7.2 s, loop): standing, hands gesturing between waist and chest (wrists 0.9-1.25 m),
+  both spread at 2.3 s, **dipping onto the thighs 3.6-4.4 s** (wrists down to 0.82 m, trunk
+  leaning 16 degrees), the right hand pointing forward at 5.0 s; head turns to listeners on both
   sides. Feet planted.
-* ``reach`` (3.0 s): far forward and downward reach with the right hand: starts at 0.3 s, wrist
-  furthest at 1.3 s (about knee height, 0.55 leg lengths in front of the toes), held (the grasp)
-  until 1.9 s, back to standing at 2.8 s. Feet planted, hips go back to balance.
-* ``dance`` (8.0 s, loop, 120 beats per minute): four two-second figures: step-touch to the
-  right and back, step-touch forward and back, twice; every step lifts and lands on a beat
-  (footprints change 16 times), the pelvis bounces on every beat, arms swing and pump.
+* ``reach`` (3.0 s): far forward and downward reach with the right hand: starts at 0.30 s,
+  **wrist furthest at 1.30 s, held (the grasp) until 1.90 s**: 0.52 L in front of the toes, at
+  0.75 L (0.64 m) above the ground, trunk bent about 80 degrees, hips back 0.25 L; back to
+  standing at 2.80 s. Feet planted.
+* ``dance`` (8.0 s, loop, 120 beats per minute): "out, out, in, in" then "forward, forward,
+  back, back", twice: one step on every beat (0.5 s, right foot first), the feet alternate, each
+  foot 0.3 s in the air with 0.12 L of lift; the pelvis moves over the supporting foot and dips
+  after each landing; arms swing out and pump up.
 """
 
 from __future__ import annotations
@@ -124,18 +133,20 @@ def sample_keys(keys: Sequence[Key], t: F64, loop: bool = False) -> F64:
 
 
 def steps(start: Sequence[float], moves: Sequence[tuple[float, float, Sequence[float]]],
-          lift: float = 0.10) -> list[Key]:
+          lift: float = 0.12) -> list[Key]:
     """Ankle keys for a foot that steps: ``moves`` are (lift-off s, landing s, new (x, y)).
 
     The foot holds still on the ground between steps and swings on a raised arc (``lift`` leg
-    lengths at mid-swing). Returns keys for an ``ankle_*`` channel.
+    lengths at mid-swing, 85 % of it already at 30 % of the swing: a clear lift-off, so contact
+    detection lets go quickly). Returns keys for an ``ankle_*`` channel.
     """
     x, y = start[0], start[1]
     keys: list[Key] = [(0.0, (x, y, 0.0))]
     for t0, t1, (nx, ny) in moves:
         if t0 > keys[-1][0]:
             keys.append((t0, (x, y, 0.0)))
-        keys.append((0.5 * (t0 + t1), (0.5 * (x + nx), 0.5 * (y + ny), lift)))
+        for u, height in ((0.3, 0.85), (0.5, 1.0), (0.7, 0.85)):
+            keys.append((t0 + u * (t1 - t0), (x + u * (nx - x), y + u * (ny - y), height * lift)))
         x, y = nx, ny
         keys.append((t1, (x, y, 0.0)))
     return keys
@@ -401,7 +412,7 @@ REACH = Gesture(3.0, NEUTRAL, arms_in="heading", tracks={
     "wrist_l": [(0.0, _n("wrist_l")), (0.3, _n("wrist_l")), (1.3, (-0.10, 0.15, -0.90)),
                 (1.9, (-0.10, 0.15, -0.90)), (2.8, _n("wrist_l")), (3.0, _n("wrist_l"))],
     "elbow_r": [(0.0, _n("elbow_r")), (0.8, (-0.5, 0.6, 0.0)), (1.3, (0.0, 0.6, 1.0)),
-                (1.9, (0.0, 0.6, 1.0)), (2.4, (-0.5, 0.6, 0.0)), (3.0, _n("elbow_r"))],
+                (1.9, (0.0, 0.6, 1.0)), (2.4, (-0.5, 0.6, 0.0)), (2.8, _n("elbow_r"))],
 })
 
 
@@ -495,3 +506,28 @@ def _generator(gesture: Gesture):  # type: ignore[no-untyped-def]
 
 #: Generators in the form ``ecs_anim.library`` writes and checks: name -> f(morph) -> positions.
 GESTURE_GENERATORS = {name: _generator(g) for name, g in GESTURES.items()}
+
+
+#: Key times of each gesture (seconds from the clip's start), for timing constraint activations;
+#: distances as in the module docstring. ``tests/test_gestures.py`` checks them on the files.
+GESTURE_TIMINGS: dict[str, dict[str, object]] = {
+    "guard": {"duration_s": 2.4, "loop": True},
+    "kick": {"duration_s": 1.5, "loop": False, "kicking_ankle": "ankle_r",
+             "weight_shifted_s": 0.28, "lift_off_s": 0.30, "chamber_s": 0.50, "peak_s": 0.70,
+             "rechamber_s": 0.90, "land_s": 1.20,
+             "peak_ankle_in_front_of_pelvis_L": 0.96, "peak_ankle_above_hip_L": 0.16},
+    "ward_off_punch": {"duration_s": 2.0, "loop": False, "ward_off_forearm": "l",
+                       "ward_off_start_s": 0.50, "ward_off_lowest_s": 0.60,
+                       "ward_off_end_s": 0.75, "cocked_s": 1.0, "punching_wrist": "wrist_r",
+                       "punch_peak_s": 1.20, "punch_hold_end_s": 1.30, "guard_again_s": 1.70,
+                       "punch_reach_A": 0.96},
+    "dodge": {"duration_s": 1.5, "loop": False, "lean_start_s": 0.15, "deepest_s": 0.55,
+              "deepest_end_s": 0.80, "guard_again_s": 1.30, "head_back_m_adult": 0.33},
+    "talk": {"duration_s": 7.2, "loop": True, "spread_s": 2.3, "hands_low_s": (3.6, 4.4),
+             "point_s": 5.0},
+    "reach": {"duration_s": 3.0, "loop": False, "reaching_wrist": "wrist_r", "start_s": 0.30,
+              "peak_s": 1.30, "hold_end_s": 1.90, "back_s": 2.80,
+              "wrist_in_front_of_toes_L": 0.52, "wrist_height_L": 0.75},
+    "dance": {"duration_s": 8.0, "loop": True, "beat_s": 0.5, "steps": 16, "first_foot": "r",
+              "air_s": 0.3},
+}
