@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -217,7 +217,7 @@ def generate_idle(morph: Morphology, seconds: float = 8.0) -> F64:
                  arm_swing=swing, elbow_bend=elbow, head_pitch=0.05 * np.sin(w * t + 1.0))
 
 
-GENERATORS = {"walk": generate_walk, "idle": generate_idle}
+GENERATORS: dict[str, Callable[[Morphology], F64]] = {"walk": generate_walk, "idle": generate_idle}
 
 
 def all_generators() -> dict[str, Callable[[Morphology], F64]]:

@@ -67,7 +67,7 @@ A = 0.571 m) that the files are written on:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -498,7 +498,7 @@ GESTURES: dict[str, Gesture] = {
 }
 
 
-def _generator(gesture: Gesture):  # type: ignore[no-untyped-def]
+def _generator(gesture: Gesture) -> Callable[[Morphology], F64]:
     def generate(morph: Morphology) -> F64:
         return gesture_positions(gesture, morph)
     return generate
