@@ -38,15 +38,18 @@ A = 0.571 m) that the files are written on:
 * ``kick`` (1.5 s): front kick with the rear (right) leg. Weight onto the left foot by 0.28 s;
   right foot off the ground at 0.30 s; knee chambered at 0.50 s; **ankle at its peak at
   0.70 s**, 0.96 L (0.81 m) in front of the pelvis and 0.16 L (0.13 m) above the right hip
-  (ankle 1.00 m above the ground), leg nearly straight, trunk leaning back 20 degrees;
-  re-chambered at 0.90 s; lands back on its own footprint at 1.20 s; guard at 1.5 s. The left
-  foot stays planted. Kicking ankle up to 7 m/s.
+  (ankle 1.00 m above the ground), leg nearly straight, trunk leaning back 20 degrees, hips
+  thrust forward: the ankle is 1.18 L (1.00 m) and the ball of the foot 1.13 m in front of the
+  pelvis' starting place; re-chambered at 0.90 s; lands back on its own footprint at 1.20 s;
+  guard at 1.5 s. The left foot stays planted. Kicking ankle up to 7 m/s.
 * ``ward_off_punch`` (2.0 s): the left forearm rises across the chest (0.30 s), then sweeps down
   and out: **ward-off window 0.50-0.75 s**, forearm middle lowest at 0.60 s, 0.28 m in front of
-  the pelvis at 1.0 m height; back to guard with the right fist cocked at 1.0 s; **right straight
-  punch: wrist at its peak at 1.20 s** (held to 1.30 s), 0.96 A from the shoulder, at the
-  body's own head height (1.44 m), 0.57 m in front of the pelvis (0.23 m in guard), chest turned
-  left; back in guard at 1.7 s. Feet planted.
+  the pelvis at 1.0 m height; back to guard with the right fist cocked at 1.0 s; the lead (left)
+  foot slides in 0.25 L (0.95-1.15 s) for a **right straight punch: wrist at its peak at
+  1.20 s** (held to 1.30 s), 0.96 A from the shoulder, at the body's own head height (1.41 m),
+  0.58 m in front of the pelvis (0.23 m in guard); the wrist is 0.71 m and the knuckles 0.83 m
+  in front of the pelvis' starting place; chest turned left; the lead foot slides back
+  (1.45-1.65 s), guard at 1.8 s. The rear foot stays planted.
 * ``dodge`` (1.5 s): lean back from 0.15 s, **deepest 0.55-0.80 s** (head 0.33 m behind its
   guard position, trunk 24 degrees back of guard, weight on the rear foot), back in guard at
   1.30 s. Feet planted.
@@ -303,14 +306,14 @@ GUARD_LOOP = Gesture(2.4, GUARD, loop=True, tracks={
 
 KICK = Gesture(1.5, GUARD, tracks={
     # Weight onto the front (left) foot, the rear (right) leg kicks forward and comes back.
-    "pelvis": [(0.0, _g("pelvis")), (0.28, (0.10, 0.06, -0.08)), (0.50, (0.15, 0.07, -0.07)),
-               (0.70, (0.16, 0.06, -0.06)), (0.90, (0.14, 0.06, -0.07)),
+    "pelvis": [(0.0, _g("pelvis")), (0.28, (0.12, 0.06, -0.08)), (0.50, (0.18, 0.07, -0.07)),
+               (0.70, (0.22, 0.06, -0.06)), (0.90, (0.17, 0.06, -0.07)),
                (1.20, (0.06, 0.03, -0.08)), (1.5, _g("pelvis"))],
     "pelvis_rot": [(0.0, _g("pelvis_rot")), (0.30, (-18.0, 0.0, 0.0)), (0.50, (-8.0, -8.0, 0.0)),
                    (0.70, (-4.0, -16.0, 0.0)), (0.90, (-10.0, -8.0, 0.0)),
                    (1.20, (-20.0, 0.0, 0.0)), (1.5, _g("pelvis_rot"))],
     "ankle_r": [(0.0, _g("ankle_r")), (0.30, _g("ankle_r")), (0.50, (0.10, -0.10, 0.42)),
-                (0.70, (1.12, -0.06, 1.10)), (0.90, (0.14, -0.10, 0.44)),
+                (0.70, (1.18, -0.06, 1.10)), (0.90, (0.14, -0.10, 0.44)),
                 (1.20, _g("ankle_r")), (1.5, _g("ankle_r"))],
     "foot_r": [(0.0, _g("foot_r")), (0.30, (10.0, -30.0)), (0.50, (40.0, -10.0)),
                (0.70, (-60.0, 0.0)), (0.90, (40.0, -10.0)), (1.15, (5.0, -35.0)),
@@ -326,30 +329,37 @@ KICK = Gesture(1.5, GUARD, tracks={
                 (1.0, (0.30, -0.10, 0.05)), (1.5, _g("wrist_r"))],
 })
 
+_LEAD = GUARD["ankle_l"]
 WARD_OFF_PUNCH = Gesture(2.0, GUARD, tracks={
     "pelvis": [(0.0, _g("pelvis")), (0.30, (0.0, 0.0, -0.09)), (0.60, (0.02, 0.0, -0.11)),
-               (0.75, (0.02, 0.0, -0.11)), (1.0, (0.0, -0.01, -0.08)), (1.20, (0.06, 0.0, -0.08)),
-               (1.7, _g("pelvis")), (2.0, _g("pelvis"))],
+               (0.75, (0.02, 0.0, -0.11)), (1.0, (-0.01, -0.02, -0.08)),
+               (1.20, (0.15, 0.01, -0.10)), (1.30, (0.15, 0.01, -0.10)),
+               (1.70, (0.0, -0.01, -0.075)), (1.8, _g("pelvis")), (2.0, _g("pelvis"))],
+    # The lead foot slides in for the punch and back out.
+    "ankle_l": steps(_LEAD[:2], [(0.95, 1.15, (_LEAD[0] + 0.25, _LEAD[1])),
+                                 (1.45, 1.65, _LEAD[:2])], lift=0.05) + [(2.0, _LEAD)],
     "pelvis_rot": [(0.0, _g("pelvis_rot")), (0.30, (-32.0, 0.0, 0.0)), (0.60, (-20.0, 5.0, 0.0)),
                    (0.75, (-20.0, 5.0, 0.0)), (1.0, (-30.0, 0.0, 0.0)),
-                   (1.20, (-5.0, 0.0, 0.0)), (1.7, _g("pelvis_rot")), (2.0, _g("pelvis_rot"))],
+                   (1.20, (-5.0, 0.0, 0.0)), (1.30, (-5.0, 0.0, 0.0)), (1.8, _g("pelvis_rot")),
+                   (2.0, _g("pelvis_rot"))],
     "trunk": [(0.0, _g("trunk")), (0.30, (10.0, 0.0, -15.0)), (0.60, (18.0, -4.0, 8.0)),
-              (0.75, (18.0, -4.0, 8.0)), (1.0, (8.0, 0.0, -12.0)), (1.20, (12.0, 0.0, 25.0)),
-              (1.7, _g("trunk")), (2.0, _g("trunk"))],
+              (0.75, (18.0, -4.0, 8.0)), (1.0, (8.0, 0.0, -12.0)), (1.20, (14.0, 0.0, 25.0)),
+              (1.30, (14.0, 0.0, 24.0)), (1.8, _g("trunk")), (2.0, _g("trunk"))],
     "head": [(0.0, _g("head")), (0.30, (18.0, 40.0)), (0.60, (25.0, 22.0)), (0.75, (25.0, 22.0)),
-             (1.0, (10.0, 38.0)), (1.20, (8.0, 2.0)), (1.7, _g("head")), (2.0, _g("head"))],
+             (1.0, (10.0, 38.0)), (1.20, (6.0, 2.0)), (1.30, (6.0, 3.0)), (1.8, _g("head")),
+             (2.0, _g("head"))],
     # Ward-off: the left forearm rises across the chest, then sweeps down and out.
     "wrist_l": [(0.0, _g("wrist_l")), (0.30, (0.40, -0.45, 0.15)), (0.60, (0.62, 0.40, -0.55)),
                 (0.75, (0.60, 0.42, -0.50)), (1.0, (0.50, -0.10, 0.15)), (1.20, (0.40, -0.10, 0.20)),
-                (1.7, _g("wrist_l")), (2.0, _g("wrist_l"))],
+                (1.8, _g("wrist_l")), (2.0, _g("wrist_l"))],
     "elbow_l": [(0.0, _g("elbow_l")), (0.30, (0.0, 0.6, -0.8)), (0.60, (0.2, 0.4, -1.0)),
                 (1.0, _g("elbow_l")), (2.0, _g("elbow_l"))],
     # Punch: the right fist cocks at the chin, then drives straight at head height.
     "wrist_r": [(0.0, _g("wrist_r")), (0.60, (0.38, -0.30, 0.26)), (1.0, (0.35, -0.32, 0.30)),
                 (1.20, (0.88, -0.14, 0.35)), (1.30, (0.86, -0.14, 0.34)),
-                (1.7, _g("wrist_r")), (2.0, _g("wrist_r"))],
+                (1.8, _g("wrist_r")), (2.0, _g("wrist_r"))],
     "elbow_r": [(0.0, _g("elbow_r")), (1.0, _g("elbow_r")), (1.20, (0.0, 0.9, -0.45)),
-                (1.7, _g("elbow_r")), (2.0, _g("elbow_r"))],
+                (1.30, (0.0, 0.9, -0.45)), (1.8, _g("elbow_r")), (2.0, _g("elbow_r"))],
 })
 
 DODGE = Gesture(1.5, GUARD, tracks={
@@ -515,11 +525,13 @@ GESTURE_TIMINGS: dict[str, dict[str, object]] = {
     "kick": {"duration_s": 1.5, "loop": False, "kicking_ankle": "ankle_r",
              "weight_shifted_s": 0.28, "lift_off_s": 0.30, "chamber_s": 0.50, "peak_s": 0.70,
              "rechamber_s": 0.90, "land_s": 1.20,
-             "peak_ankle_in_front_of_pelvis_L": 0.96, "peak_ankle_above_hip_L": 0.16},
+             "peak_ankle_in_front_of_pelvis_L": 0.96, "peak_ankle_above_hip_L": 0.16,
+             "peak_ankle_in_front_of_start_L": 1.18},
     "ward_off_punch": {"duration_s": 2.0, "loop": False, "ward_off_forearm": "l",
                        "ward_off_start_s": 0.50, "ward_off_lowest_s": 0.60,
                        "ward_off_end_s": 0.75, "cocked_s": 1.0, "punching_wrist": "wrist_r",
-                       "punch_peak_s": 1.20, "punch_hold_end_s": 1.30, "guard_again_s": 1.70,
+                       "step_in_s": (0.95, 1.15), "punch_peak_s": 1.20, "punch_hold_end_s": 1.30,
+                       "step_back_s": (1.45, 1.65), "guard_again_s": 1.80,
                        "punch_reach_A": 0.96},
     "dodge": {"duration_s": 1.5, "loop": False, "lean_start_s": 0.15, "deepest_s": 0.55,
               "deepest_end_s": 0.80, "guard_again_s": 1.30, "head_back_m_adult": 0.33},

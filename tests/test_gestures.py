@@ -171,6 +171,8 @@ def test_kick_peak_is_in_front_at_hip_height(clips):
     assert forward / LEG == pytest.approx(tm["peak_ankle_in_front_of_pelvis_L"], abs=0.02)
     assert above_hip / LEG == pytest.approx(tm["peak_ankle_above_hip_L"], abs=0.02)
     assert 0.75 < forward < 0.9 and 0.9 < ankle[f, 2] < 1.1  # metres on the adult body
+    from_start = (ankle[f, 0] - p[0, J["pelvis"], 0]) / LEG
+    assert from_start == pytest.approx(tm["peak_ankle_in_front_of_start_L"], abs=0.02)
     contact = motion.contacts()
     assert contact[:, 0].all()  # the standing foot never leaves the ground
     air = ~contact[:, 1]
@@ -197,6 +199,15 @@ def test_ward_off_sweeps_down_and_punch_extends_forward(clips):
     assert forward[f] - forward[0] > 0.25  # the fist travels forward at least 25 cm
     assert abs(p[f, J["wrist_r"], 2] - p[f, J["head"], 2]) < 0.1  # at head height
     assert reach[frame(tm["ward_off_lowest_s"])] < 0.9  # the right fist stays home meanwhile
+    # The lead foot slides in for the punch and back to its footprint; the rear foot stays.
+    motion, _ = clips["ward_off_punch"]
+    contact = motion.contacts()
+    assert contact[:, 1].all()
+    lead = p[:, J["ankle_l"], 0]
+    (a0, a1), (b0, b1) = tm["step_in_s"], tm["step_back_s"]
+    assert not contact[frame(0.5 * (a0 + a1)), 0] and not contact[frame(0.5 * (b0 + b1)), 0]
+    assert lead[frame(a1):frame(b0) + 1].min() - lead[0] > 0.2 * LEG
+    assert abs(lead[-1] - lead[0]) < 1e-3
 
 
 def test_dodge_moves_the_head_back(clips):
