@@ -50,6 +50,11 @@ A = 0.571 m) that the files are written on:
   0.58 m in front of the pelvis (0.23 m in guard); the wrist is 0.71 m and the knuckles 0.83 m
   in front of the pelvis' starting place; chest turned left; the lead foot slides back
   (1.45-1.65 s), guard at 1.8 s. The rear foot stays planted.
+* In a pair of adult_male bodies facing each other 1.2 m apart (pelvis to pelvis), ``kick`` and
+  ``ward_off_punch`` started together, unconstrained: at the kick's peak the ball of the foot is
+  0.12 m from the defender's lower spine (at its height, 1.0 m); the kicking ankle passes
+  0.28 m from the middle of the warding forearm (at 0.67 s); at the punch's peak the knuckles are
+  0.31 m from the kicker's head (0.40 m at 1.3 m apart): the constraints close these gaps.
 * ``dodge`` (1.5 s): lean back from 0.15 s, **deepest 0.55-0.80 s** (head 0.33 m behind its
   guard position, trunk 24 degrees back of guard, weight on the rear foot), back in guard at
   1.30 s. Feet planted.
@@ -200,7 +205,8 @@ class Gesture:
     def channels(self, t: F64) -> dict[str, F64]:
         unknown = set(self.tracks) - set(self.stance)
         if unknown:
-            raise KeyError(f"unknown channels {sorted(unknown)}; channels are {sorted(self.stance)}")
+            raise KeyError(f"unknown channels {sorted(unknown)}; "
+                           f"channels are {sorted(self.stance)}")
         return {name: sample_keys(self.tracks.get(name, [(0.0, value)]), t, self.loop)
                 for name, value in self.stance.items()}
 
@@ -283,11 +289,11 @@ def gesture_positions(gesture: Gesture, morph: Morphology) -> F64:
 # The motions: one table each
 
 
-def _g(name: str) -> tuple[float, ...]:
+def _guard(name: str) -> tuple[float, ...]:
     return GUARD[name]
 
 
-def _n(name: str) -> tuple[float, ...]:
+def _neutral(name: str) -> tuple[float, ...]:
     return NEUTRAL[name]
 
 
@@ -298,83 +304,90 @@ GUARD_LOOP = Gesture(2.4, GUARD, loop=True, tracks={
     "trunk": [(0.0, (8.0, 0.0, -5.0)), (0.6, (10.0, 1.0, -3.0)), (1.2, (8.0, 0.0, -7.0)),
               (1.8, (10.0, -1.0, -5.0)), (2.4, (8.0, 0.0, -5.0))],
     "head": [(0.0, (10.0, 28.0)), (1.2, (12.0, 24.0)), (2.4, (10.0, 28.0))],
-    "wrist_l": [(0.0, _g("wrist_l")), (0.6, (0.58, -0.12, 0.18)), (1.2, (0.53, -0.17, 0.24)),
-                (1.8, (0.57, -0.15, 0.27)), (2.4, _g("wrist_l"))],
-    "wrist_r": [(0.0, _g("wrist_r")), (0.6, (0.40, -0.28, 0.25)), (1.2, (0.44, -0.31, 0.30)),
-                (1.8, (0.41, -0.29, 0.31)), (2.4, _g("wrist_r"))],
+    "wrist_l": [(0.0, _guard("wrist_l")), (0.6, (0.58, -0.12, 0.18)), (1.2, (0.53, -0.17, 0.24)),
+                (1.8, (0.57, -0.15, 0.27)), (2.4, _guard("wrist_l"))],
+    "wrist_r": [(0.0, _guard("wrist_r")), (0.6, (0.40, -0.28, 0.25)), (1.2, (0.44, -0.31, 0.30)),
+                (1.8, (0.41, -0.29, 0.31)), (2.4, _guard("wrist_r"))],
 })
 
 KICK = Gesture(1.5, GUARD, tracks={
     # Weight onto the front (left) foot, the rear (right) leg kicks forward and comes back.
-    "pelvis": [(0.0, _g("pelvis")), (0.28, (0.12, 0.06, -0.08)), (0.50, (0.18, 0.07, -0.07)),
+    "pelvis": [(0.0, _guard("pelvis")), (0.28, (0.12, 0.06, -0.08)), (0.50, (0.18, 0.07, -0.07)),
                (0.70, (0.22, 0.06, -0.06)), (0.90, (0.17, 0.06, -0.07)),
-               (1.20, (0.06, 0.03, -0.08)), (1.5, _g("pelvis"))],
-    "pelvis_rot": [(0.0, _g("pelvis_rot")), (0.30, (-18.0, 0.0, 0.0)), (0.50, (-8.0, -8.0, 0.0)),
+               (1.20, (0.06, 0.03, -0.08)), (1.5, _guard("pelvis"))],
+    "pelvis_rot": [(0.0, _guard("pelvis_rot")), (0.30, (-18.0, 0.0, 0.0)),
+                   (0.50, (-8.0, -8.0, 0.0)),
                    (0.70, (-4.0, -16.0, 0.0)), (0.90, (-10.0, -8.0, 0.0)),
-                   (1.20, (-20.0, 0.0, 0.0)), (1.5, _g("pelvis_rot"))],
-    "ankle_r": [(0.0, _g("ankle_r")), (0.30, _g("ankle_r")), (0.50, (0.10, -0.10, 0.42)),
+                   (1.20, (-20.0, 0.0, 0.0)), (1.5, _guard("pelvis_rot"))],
+    "ankle_r": [(0.0, _guard("ankle_r")), (0.30, _guard("ankle_r")), (0.50, (0.10, -0.10, 0.42)),
                 (0.70, (1.18, -0.06, 1.10)), (0.90, (0.14, -0.10, 0.44)),
-                (1.20, _g("ankle_r")), (1.5, _g("ankle_r"))],
-    "foot_r": [(0.0, _g("foot_r")), (0.30, (10.0, -30.0)), (0.50, (40.0, -10.0)),
+                (1.20, _guard("ankle_r")), (1.5, _guard("ankle_r"))],
+    "foot_r": [(0.0, _guard("foot_r")), (0.30, (10.0, -30.0)), (0.50, (40.0, -10.0)),
                (0.70, (-60.0, 0.0)), (0.90, (40.0, -10.0)), (1.15, (5.0, -35.0)),
-               (1.20, _g("foot_r")), (1.5, _g("foot_r"))],
-    "trunk": [(0.0, _g("trunk")), (0.30, (4.0, 0.0, -3.0)), (0.50, (-8.0, 0.0, 0.0)),
+               (1.20, _guard("foot_r")), (1.5, _guard("foot_r"))],
+    "trunk": [(0.0, _guard("trunk")), (0.30, (4.0, 0.0, -3.0)), (0.50, (-8.0, 0.0, 0.0)),
               (0.70, (-20.0, 0.0, 5.0)), (0.90, (-6.0, 0.0, 0.0)), (1.20, (6.0, 0.0, -5.0)),
-              (1.5, _g("trunk"))],
-    "head": [(0.0, _g("head")), (0.50, (18.0, 10.0)), (0.70, (30.0, 4.0)), (0.90, (18.0, 12.0)),
-             (1.20, (10.0, 24.0)), (1.5, _g("head"))],
-    "wrist_l": [(0.0, _g("wrist_l")), (0.50, (0.50, -0.05, 0.15)), (0.70, (0.45, 0.05, 0.10)),
-                (1.0, (0.52, -0.10, 0.18)), (1.5, _g("wrist_l"))],
-    "wrist_r": [(0.0, _g("wrist_r")), (0.50, (0.30, -0.05, -0.10)), (0.70, (0.05, 0.15, -0.45)),
-                (1.0, (0.30, -0.10, 0.05)), (1.5, _g("wrist_r"))],
+              (1.5, _guard("trunk"))],
+    "head": [(0.0, _guard("head")), (0.50, (18.0, 10.0)), (0.70, (30.0, 4.0)), (0.90, (18.0, 12.0)),
+             (1.20, (10.0, 24.0)), (1.5, _guard("head"))],
+    "wrist_l": [(0.0, _guard("wrist_l")), (0.50, (0.50, -0.05, 0.15)), (0.70, (0.45, 0.05, 0.10)),
+                (1.0, (0.52, -0.10, 0.18)), (1.5, _guard("wrist_l"))],
+    "wrist_r": [(0.0, _guard("wrist_r")), (0.50, (0.30, -0.05, -0.10)), (0.70, (0.05, 0.15, -0.45)),
+                (1.0, (0.30, -0.10, 0.05)), (1.5, _guard("wrist_r"))],
 })
 
 _LEAD = GUARD["ankle_l"]
 WARD_OFF_PUNCH = Gesture(2.0, GUARD, tracks={
-    "pelvis": [(0.0, _g("pelvis")), (0.30, (0.0, 0.0, -0.09)), (0.60, (0.02, 0.0, -0.11)),
+    "pelvis": [(0.0, _guard("pelvis")), (0.30, (0.0, 0.0, -0.09)), (0.60, (0.02, 0.0, -0.11)),
                (0.75, (0.02, 0.0, -0.11)), (1.0, (-0.01, -0.02, -0.08)),
                (1.20, (0.15, 0.01, -0.10)), (1.30, (0.15, 0.01, -0.10)),
-               (1.70, (0.0, -0.01, -0.075)), (1.8, _g("pelvis")), (2.0, _g("pelvis"))],
+               (1.70, (0.0, -0.01, -0.075)), (1.8, _guard("pelvis")), (2.0, _guard("pelvis"))],
     # The lead foot slides in for the punch and back out.
     "ankle_l": steps(_LEAD[:2], [(0.95, 1.15, (_LEAD[0] + 0.25, _LEAD[1])),
                                  (1.45, 1.65, _LEAD[:2])], lift=0.05) + [(2.0, _LEAD)],
-    "pelvis_rot": [(0.0, _g("pelvis_rot")), (0.30, (-32.0, 0.0, 0.0)), (0.60, (-20.0, 5.0, 0.0)),
+    "pelvis_rot": [(0.0, _guard("pelvis_rot")), (0.30, (-32.0, 0.0, 0.0)),
+                   (0.60, (-20.0, 5.0, 0.0)),
                    (0.75, (-20.0, 5.0, 0.0)), (1.0, (-30.0, 0.0, 0.0)),
-                   (1.20, (-5.0, 0.0, 0.0)), (1.30, (-5.0, 0.0, 0.0)), (1.8, _g("pelvis_rot")),
-                   (2.0, _g("pelvis_rot"))],
-    "trunk": [(0.0, _g("trunk")), (0.30, (10.0, 0.0, -15.0)), (0.60, (18.0, -4.0, 8.0)),
+                   (1.20, (-5.0, 0.0, 0.0)), (1.30, (-5.0, 0.0, 0.0)), (1.8, _guard("pelvis_rot")),
+                   (2.0, _guard("pelvis_rot"))],
+    "trunk": [(0.0, _guard("trunk")), (0.30, (10.0, 0.0, -15.0)), (0.60, (18.0, -4.0, 8.0)),
               (0.75, (18.0, -4.0, 8.0)), (1.0, (8.0, 0.0, -12.0)), (1.20, (14.0, 0.0, 25.0)),
-              (1.30, (14.0, 0.0, 24.0)), (1.8, _g("trunk")), (2.0, _g("trunk"))],
-    "head": [(0.0, _g("head")), (0.30, (18.0, 40.0)), (0.60, (25.0, 22.0)), (0.75, (25.0, 22.0)),
-             (1.0, (10.0, 38.0)), (1.20, (6.0, 2.0)), (1.30, (6.0, 3.0)), (1.8, _g("head")),
-             (2.0, _g("head"))],
+              (1.30, (14.0, 0.0, 24.0)), (1.8, _guard("trunk")), (2.0, _guard("trunk"))],
+    "head": [(0.0, _guard("head")), (0.30, (18.0, 40.0)), (0.60, (25.0, 22.0)),
+             (0.75, (25.0, 22.0)),
+             (1.0, (10.0, 38.0)), (1.20, (6.0, 2.0)), (1.30, (6.0, 3.0)), (1.8, _guard("head")),
+             (2.0, _guard("head"))],
     # Ward-off: the left forearm rises across the chest, then sweeps down and out.
-    "wrist_l": [(0.0, _g("wrist_l")), (0.30, (0.40, -0.45, 0.15)), (0.60, (0.62, 0.40, -0.55)),
-                (0.75, (0.60, 0.42, -0.50)), (1.0, (0.50, -0.10, 0.15)), (1.20, (0.40, -0.10, 0.20)),
-                (1.8, _g("wrist_l")), (2.0, _g("wrist_l"))],
-    "elbow_l": [(0.0, _g("elbow_l")), (0.30, (0.0, 0.6, -0.8)), (0.60, (0.2, 0.4, -1.0)),
-                (1.0, _g("elbow_l")), (2.0, _g("elbow_l"))],
+    "wrist_l": [(0.0, _guard("wrist_l")), (0.30, (0.40, -0.45, 0.15)), (0.60, (0.62, 0.40, -0.55)),
+                (0.75, (0.60, 0.42, -0.50)), (1.0, (0.50, -0.10, 0.15)),
+                (1.20, (0.40, -0.10, 0.20)),
+                (1.8, _guard("wrist_l")), (2.0, _guard("wrist_l"))],
+    "elbow_l": [(0.0, _guard("elbow_l")), (0.30, (0.0, 0.6, -0.8)), (0.60, (0.2, 0.4, -1.0)),
+                (1.0, _guard("elbow_l")), (2.0, _guard("elbow_l"))],
     # Punch: the right fist cocks at the chin, then drives straight at head height.
-    "wrist_r": [(0.0, _g("wrist_r")), (0.60, (0.38, -0.30, 0.26)), (1.0, (0.35, -0.32, 0.30)),
+    "wrist_r": [(0.0, _guard("wrist_r")), (0.60, (0.38, -0.30, 0.26)), (1.0, (0.35, -0.32, 0.30)),
                 (1.20, (0.88, -0.14, 0.35)), (1.30, (0.86, -0.14, 0.34)),
-                (1.8, _g("wrist_r")), (2.0, _g("wrist_r"))],
-    "elbow_r": [(0.0, _g("elbow_r")), (1.0, _g("elbow_r")), (1.20, (0.0, 0.9, -0.45)),
-                (1.30, (0.0, 0.9, -0.45)), (1.8, _g("elbow_r")), (2.0, _g("elbow_r"))],
+                (1.8, _guard("wrist_r")), (2.0, _guard("wrist_r"))],
+    "elbow_r": [(0.0, _guard("elbow_r")), (1.0, _guard("elbow_r")), (1.20, (0.0, 0.9, -0.45)),
+                (1.30, (0.0, 0.9, -0.45)), (1.8, _guard("elbow_r")), (2.0, _guard("elbow_r"))],
 })
 
 DODGE = Gesture(1.5, GUARD, tracks={
-    "pelvis": [(0.0, _g("pelvis")), (0.15, _g("pelvis")), (0.55, (-0.10, -0.04, -0.10)),
-               (0.80, (-0.11, -0.04, -0.10)), (1.30, _g("pelvis")), (1.5, _g("pelvis"))],
-    "pelvis_rot": [(0.0, _g("pelvis_rot")), (0.15, _g("pelvis_rot")), (0.55, (-30.0, -7.0, 0.0)),
-                   (0.80, (-30.0, -8.0, 0.0)), (1.30, _g("pelvis_rot")), (1.5, _g("pelvis_rot"))],
-    "trunk": [(0.0, _g("trunk")), (0.15, _g("trunk")), (0.55, (-14.0, -4.0, -5.0)),
-              (0.80, (-16.0, -4.0, -5.0)), (1.30, _g("trunk")), (1.5, _g("trunk"))],
-    "head": [(0.0, _g("head")), (0.15, _g("head")), (0.55, (-5.0, 32.0)), (0.80, (-8.0, 32.0)),
-             (1.30, _g("head")), (1.5, _g("head"))],
-    "wrist_l": [(0.0, _g("wrist_l")), (0.55, (0.45, -0.10, 0.32)), (0.80, (0.45, -0.10, 0.32)),
-                (1.30, _g("wrist_l")), (1.5, _g("wrist_l"))],
-    "wrist_r": [(0.0, _g("wrist_r")), (0.55, (0.30, -0.22, 0.38)), (0.80, (0.30, -0.22, 0.38)),
-                (1.30, _g("wrist_r")), (1.5, _g("wrist_r"))],
+    "pelvis": [(0.0, _guard("pelvis")), (0.15, _guard("pelvis")), (0.55, (-0.10, -0.04, -0.10)),
+               (0.80, (-0.11, -0.04, -0.10)), (1.30, _guard("pelvis")), (1.5, _guard("pelvis"))],
+    "pelvis_rot": [(0.0, _guard("pelvis_rot")), (0.15, _guard("pelvis_rot")),
+                   (0.55, (-30.0, -7.0, 0.0)),
+                   (0.80, (-30.0, -8.0, 0.0)), (1.30, _guard("pelvis_rot")),
+                   (1.5, _guard("pelvis_rot"))],
+    "trunk": [(0.0, _guard("trunk")), (0.15, _guard("trunk")), (0.55, (-14.0, -4.0, -5.0)),
+              (0.80, (-16.0, -4.0, -5.0)), (1.30, _guard("trunk")), (1.5, _guard("trunk"))],
+    "head": [(0.0, _guard("head")), (0.15, _guard("head")), (0.55, (-5.0, 32.0)),
+             (0.80, (-8.0, 32.0)),
+             (1.30, _guard("head")), (1.5, _guard("head"))],
+    "wrist_l": [(0.0, _guard("wrist_l")), (0.55, (0.45, -0.10, 0.32)), (0.80, (0.45, -0.10, 0.32)),
+                (1.30, _guard("wrist_l")), (1.5, _guard("wrist_l"))],
+    "wrist_r": [(0.0, _guard("wrist_r")), (0.55, (0.30, -0.22, 0.38)), (0.80, (0.30, -0.22, 0.38)),
+                (1.30, _guard("wrist_r")), (1.5, _guard("wrist_r"))],
 })
 
 _WAIST = (0.42, -0.02, -0.62)
@@ -407,22 +420,25 @@ TALK = Gesture(7.2, NEUTRAL, loop=True, tracks={
 })
 
 REACH = Gesture(3.0, NEUTRAL, arms_in="heading", tracks={
-    "pelvis": [(0.0, _n("pelvis")), (0.3, _n("pelvis")), (1.3, (-0.25, 0.01, -0.16)),
-               (1.9, (-0.25, 0.01, -0.16)), (2.8, _n("pelvis")), (3.0, _n("pelvis"))],
-    "pelvis_rot": [(0.0, _n("pelvis_rot")), (0.3, _n("pelvis_rot")), (1.3, (8.0, 40.0, 0.0)),
-                   (1.9, (8.0, 40.0, 0.0)), (2.8, _n("pelvis_rot")), (3.0, _n("pelvis_rot"))],
-    "trunk": [(0.0, _n("trunk")), (0.3, _n("trunk")), (1.3, (42.0, -4.0, 12.0)),
-              (1.9, (42.0, -4.0, 12.0)), (2.8, _n("trunk")), (3.0, _n("trunk"))],
-    "head": [(0.0, _n("head")), (0.3, (5.0, 0.0)), (1.3, (-30.0, 0.0)), (1.9, (-30.0, 0.0)),
-             (2.8, _n("head")), (3.0, _n("head"))],
+    "pelvis": [(0.0, _neutral("pelvis")), (0.3, _neutral("pelvis")), (1.3, (-0.25, 0.01, -0.16)),
+               (1.9, (-0.25, 0.01, -0.16)), (2.8, _neutral("pelvis")), (3.0, _neutral("pelvis"))],
+    "pelvis_rot": [(0.0, _neutral("pelvis_rot")), (0.3, _neutral("pelvis_rot")),
+                   (1.3, (8.0, 40.0, 0.0)),
+                   (1.9, (8.0, 40.0, 0.0)), (2.8, _neutral("pelvis_rot")),
+                   (3.0, _neutral("pelvis_rot"))],
+    "trunk": [(0.0, _neutral("trunk")), (0.3, _neutral("trunk")), (1.3, (42.0, -4.0, 12.0)),
+              (1.9, (42.0, -4.0, 12.0)), (2.8, _neutral("trunk")), (3.0, _neutral("trunk"))],
+    "head": [(0.0, _neutral("head")), (0.3, (5.0, 0.0)), (1.3, (-30.0, 0.0)), (1.9, (-30.0, 0.0)),
+             (2.8, _neutral("head")), (3.0, _neutral("head"))],
     # Wrists in the upright frame: the right one forward and down, the left one hangs back.
-    "wrist_r": [(0.0, _n("wrist_r")), (0.3, _n("wrist_r")), (0.8, (0.55, 0.0, -0.70)),
+    "wrist_r": [(0.0, _neutral("wrist_r")), (0.3, _neutral("wrist_r")), (0.8, (0.55, 0.0, -0.70)),
                 (1.3, (0.74, -0.05, -0.64)), (1.9, (0.74, -0.05, -0.64)), (2.4, (0.45, 0.0, -0.80)),
-                (2.8, _n("wrist_r")), (3.0, _n("wrist_r"))],
-    "wrist_l": [(0.0, _n("wrist_l")), (0.3, _n("wrist_l")), (1.3, (-0.10, 0.15, -0.90)),
-                (1.9, (-0.10, 0.15, -0.90)), (2.8, _n("wrist_l")), (3.0, _n("wrist_l"))],
-    "elbow_r": [(0.0, _n("elbow_r")), (0.8, (-0.5, 0.6, 0.0)), (1.3, (0.0, 0.6, 1.0)),
-                (1.9, (0.0, 0.6, 1.0)), (2.4, (-0.5, 0.6, 0.0)), (2.8, _n("elbow_r"))],
+                (2.8, _neutral("wrist_r")), (3.0, _neutral("wrist_r"))],
+    "wrist_l": [(0.0, _neutral("wrist_l")), (0.3, _neutral("wrist_l")), (1.3, (-0.10, 0.15, -0.90)),
+                (1.9, (-0.10, 0.15, -0.90)), (2.8, _neutral("wrist_l")),
+                (3.0, _neutral("wrist_l"))],
+    "elbow_r": [(0.0, _neutral("elbow_r")), (0.8, (-0.5, 0.6, 0.0)), (1.3, (0.0, 0.6, 1.0)),
+                (1.9, (0.0, 0.6, 1.0)), (2.4, (-0.5, 0.6, 0.0)), (2.8, _neutral("elbow_r"))],
 })
 
 

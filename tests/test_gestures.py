@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from conftest import MOTIONS_DIR
-from ecs_anim.components import MotionPlayer, Placement
+from ecs_anim.components import MotionPlayer, Placement, QueuedClip
 from ecs_anim.contacts import _intervals
 from ecs_anim.importing import import_bvh
 from ecs_anim.library import main as library_main
@@ -37,7 +37,7 @@ FAST = {"kick": ("hip_r", "knee_r", "ankle_r", "toe_r"),
 
 @pytest.fixture(scope="module")
 def clips():
-    """name -> (imported NormalizedMotion, decoded joint positions (F, 22, 3) on its source body)."""
+    """name -> (imported NormalizedMotion, joint positions (F, 22, 3) on its source body)."""
     out = {}
     for name in GESTURES:
         motion = import_bvh(MOTIONS_DIR / f"{name}.bvh")
@@ -105,7 +105,8 @@ def test_interpolation_is_c1_with_zero_end_velocity_and_no_overshoot():
     assert np.abs(np.diff(v)).max() < 0.1
     assert x.min() >= -1e-12 and x.max() <= 3.0 + 1e-12
     assert np.all(np.abs(x[(t >= 0.5) & (t <= 1.0)] - 1.0) < 1e-12)  # a hold holds exactly
-    loop = sample_keys([(0.0, (0.0,)), (1.0, (1.0,)), (2.0, (0.0,))], np.array([0.0, 2.0]), loop=True)
+    loop = sample_keys([(0.0, (0.0,)), (1.0, (1.0,)), (2.0, (0.0,))], np.array([0.0, 2.0]),
+                       loop=True)
     assert loop[0, 0] == loop[1, 0]
     with pytest.raises(ValueError, match="looping channel"):
         sample_keys([(0.0, (0.0,)), (1.0, (1.0,))], t, loop=True)
@@ -296,3 +297,31 @@ def test_every_gesture_plays_on_a_child_and_a_tall_body(clips):
     child = dancers["dance_child"]
     assert child["stride_m_median"] is not None and child["stride_per_leg_length"] > 0.1
     assert Morphology.preset("child").stature == pytest.approx(1.20, abs=0.01)
+
+
+def test_fight_sequence_queues_and_crossfades_without_a_jump(clips):
+    """guard -> kick -> dodge -> guard and guard -> ward_off_punch -> guard, as the fight scene
+    will queue them, on two different bodies facing each other."""
+    sim = Simulation({name: motion for name, (motion, _) in clips.items()})
+    sim.spawn("kicker", Morphology.preset("adult_female"), MotionPlayer(
+        "guard", loop=False, queue=(QueuedClip("kick", 0.2), QueuedClip("dodge", 0.2),
+                                    QueuedClip("guard", 0.3, loop=True))))
+    sim.spawn("defender", Morphology.preset("tall"), MotionPlayer(
+        "guard", loop=False, queue=(QueuedClip("ward_off_punch", 0.2),
+                                    QueuedClip("guard", 0.3, loop=True))), Placement((1.3, 0.0), np.pi))
+    metrics = MetricsRecorder(sim)
+    positions = []
+    for _ in range(int(7.0 * FPS)):
+        sim.step()
+        metrics.record()
+        positions.append(sim.store.positions.copy())
+    p = np.array(positions)
+    speed = np.linalg.norm(np.diff(p, axis=0), axis=-1) * FPS  # (ticks, characters, joints)
+    assert speed.max() < 12.0
+    pelvis_speed = speed[:, :, J["pelvis"]]
+    assert pelvis_speed.max() < 2.0  # no teleport at any switch
+    assert speed[-30:].max() < 1.0  # back in a calm guard at the end
+    assert sim.store.clip.tolist() == [sim.bank.index("guard")] * 2
+    for c in metrics.report()["characters"]:
+        assert c["foot_sliding_mm_per_frame"]["max"] < 1.0, c
+        assert c["ground_penetration_mm_max"] < 1.0, c
