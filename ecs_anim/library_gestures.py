@@ -41,7 +41,7 @@ A = 0.571 m) that the files are written on:
   (ankle 1.00 m above the ground), leg nearly straight, trunk leaning back 20 degrees, hips
   thrust forward: the ankle is 1.18 L (1.00 m) and the ball of the foot 1.13 m in front of the
   pelvis' starting place; re-chambered at 0.90 s; lands back on its own footprint at 1.20 s;
-  guard at 1.5 s. The left foot stays planted. Kicking ankle up to 7 m/s.
+  guard at 1.5 s. The left foot stays planted. Kicking ankle up to 7.3 m/s.
 * ``ward_off_punch`` (2.0 s): the left forearm rises across the chest (0.30 s), then sweeps down
   and out: **ward-off window 0.50-0.75 s**, forearm middle lowest at 0.60 s, 0.28 m in front of
   the pelvis at 1.0 m height; back to guard with the right fist cocked at 1.0 s; the lead (left)
@@ -58,7 +58,7 @@ A = 0.571 m) that the files are written on:
 * ``dodge`` (1.5 s): lean back from 0.15 s, **deepest 0.55-0.80 s** (head 0.33 m behind its
   guard position, trunk 24 degrees back of guard, weight on the rear foot), back in guard at
   1.30 s. Feet planted.
-* ``talk`` (7.2 s, loop): standing, hands gesturing between waist and chest (wrists 0.9-1.25 m),
+* ``talk`` (7.2 s, loop): standing, hands gesturing between waist and chest (wrists 0.97-1.25 m),
   both spread at 2.3 s, **dipping onto the thighs 3.6-4.4 s** (wrists down to 0.82 m, trunk
   leaning 16 degrees), the right hand pointing forward at 5.0 s; head turns to listeners on both
   sides. Feet planted.
