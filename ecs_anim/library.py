@@ -1,7 +1,9 @@
 """The project's own small motion library, authored procedurally (no captured data).
 
-``python -m ecs_anim.library [--check]`` writes (or checks) ``scenarios/motions/*.bvh``; the
-shipped files are exactly what these generators produce, and a test keeps it so.
+``python -m ecs_anim.library [--check]`` writes (or checks) ``scenarios/motions/*.bvh``: the walk
+and idle generated here and the keyframed gestures of :mod:`ecs_anim.library_gestures` (guard,
+kick, ward_off_punch, dodge, talk, reach, dance); the shipped files are exactly what these
+generators produce, and a test keeps it so.
 
 Each generator builds canonical joint positions for a body frame by frame as arrays: footprints
 that stay put for the whole stance, swing feet on smooth arcs, the pelvis lowered where a leg
@@ -13,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -46,6 +49,34 @@ def _smoothstep(u: F64) -> F64:
     return u - np.sin(2 * np.pi * u) / (2 * np.pi)
 
 
+def hip_positions(morph: Morphology, pelvis: F64, pelvis2world: F64) -> F64:
+    """Left and right hip joints (F, 2, 3) of a pelvis at ``pelvis`` (F, 3), ``pelvis2world``."""
+    return np.stack([pelvis + (pelvis2world @ (np.array(REST_HIP_DIR_LEFT) * [1.0, sign, 1.0]))
+                     * morph[f"pelvis_{s}"] for s, sign in (("l", 1.0), ("r", -1.0))], axis=1)
+
+
+def _place_legs(out: F64, morph: Morphology, pelvis: F64, pelvis2world: F64, ankles: F64,
+                toes: F64, knee_hint: F64) -> None:
+    """Write pelvis, hips, knees (two-sphere construction), ankles and toes into ``out``.
+
+    ``out`` (F, N_JOINTS, 3); ``ankles``/``toes`` (F, 2, 3) targets (an ankle out of reach ends
+    where the straight leg points); ``knee_hint`` (F, 3) or (F, 2, 3): the side the knees bend to.
+    """
+    m = morph
+    n = pelvis.shape[0]
+    out[:, J["pelvis"]] = pelvis
+    hips = hip_positions(morph, pelvis, pelvis2world)
+    hints = np.broadcast_to(knee_hint[:, None] if knee_hint.ndim == 2 else knee_hint, (n, 2, 3))
+    for k, s in enumerate("lr"):
+        hip = hips[:, k]
+        thigh, shank = m[f"thigh_{s}"], m[f"shank_{s}"]
+        leg = limb_frames(hip, hip + hints[:, k], ankles[:, k], hints[:, k])
+        knee, ankle = two_bone_middle(leg, hip, np.full(n, thigh), np.full(n, shank),
+                                      np.linalg.norm(ankles[:, k] - hip, axis=-1))
+        out[:, J[f"hip_{s}"]], out[:, J[f"knee_{s}"]], out[:, J[f"ankle_{s}"]] = hip, knee, ankle
+        out[:, J[f"toe_{s}"]] = ankle + normalize(toes[:, k] - ankles[:, k]) * m[f"foot_{s}"]
+
+
 def _body(morph: Morphology, pelvis: F64, pelvis2world: F64, ankles: F64, toes: F64,
           lean_rad: F64, thorax_yaw: F64, arm_swing: F64, elbow_bend: F64,
           head_pitch: F64) -> F64:
@@ -56,17 +87,7 @@ def _body(morph: Morphology, pelvis: F64, pelvis2world: F64, ankles: F64, toes: 
     m = morph
     n = pelvis.shape[0]
     out = np.zeros((n, N_JOINTS, 3))
-    out[:, J["pelvis"]] = pelvis
-    for k, s in enumerate("lr"):
-        sign = 1.0 if s == "l" else -1.0
-        hip_dir = np.array(REST_HIP_DIR_LEFT) * [1.0, sign, 1.0]
-        hip = pelvis + (pelvis2world @ hip_dir) * m[f"pelvis_{s}"]
-        thigh, shank = m[f"thigh_{s}"], m[f"shank_{s}"]
-        leg = limb_frames(hip, hip + pelvis2world[:, :, 0], ankles[:, k], pelvis2world[:, :, 0])
-        knee, ankle = two_bone_middle(leg, hip, np.full(n, thigh), np.full(n, shank),
-                                      np.linalg.norm(ankles[:, k] - hip, axis=-1))
-        out[:, J[f"hip_{s}"]], out[:, J[f"knee_{s}"]], out[:, J[f"ankle_{s}"]] = hip, knee, ankle
-        out[:, J[f"toe_{s}"]] = ankle + normalize(toes[:, k] - ankles[:, k]) * m[f"foot_{s}"]
+    _place_legs(out, morph, pelvis, pelvis2world, ankles, toes, pelvis2world[:, :, 0])
     # Trunk: pelvis frame, leaned forward about its left axis, thorax turned against the pelvis.
     trunk = pelvis2world @ rot_axis(1, lean_rad)
     up = trunk[:, :, 2]
@@ -100,8 +121,7 @@ def _lower_pelvis_to_reach(pelvis: F64, pelvis2world: F64, ankles: F64, morph: M
                            max_extension: float = 0.985) -> F64:
     """Pelvis heights lowered where a leg could not reach its ankle (paper §7's min rule),
     smoothly; the clip is treated as periodic (our generators make whole cycles)."""
-    hips = np.stack([pelvis + (pelvis2world @ (np.array(REST_HIP_DIR_LEFT) * [1.0, sign, 1.0]))
-                     * morph[f"pelvis_{s}"] for s, sign in (("l", 1.0), ("r", -1.0))], axis=1)
+    hips = hip_positions(morph, pelvis, pelvis2world)
     reach = max_extension * np.array([morph["thigh_l"] + morph["shank_l"],
                                       morph["thigh_r"] + morph["shank_r"]])
     slack = vertical_slack_for_reach(hips, ankles, np.broadcast_to(reach, ankles.shape[:2]))
@@ -197,11 +217,18 @@ def generate_idle(morph: Morphology, seconds: float = 8.0) -> F64:
                  arm_swing=swing, elbow_bend=elbow, head_pitch=0.05 * np.sin(w * t + 1.0))
 
 
-GENERATORS = {"walk": generate_walk, "idle": generate_idle}
+GENERATORS: dict[str, Callable[[Morphology], F64]] = {"walk": generate_walk, "idle": generate_idle}
+
+
+def all_generators() -> dict[str, Callable[[Morphology], F64]]:
+    """Every authored motion: the walk and idle here, the gestures of ``library_gestures``."""
+    from .library_gestures import GESTURE_GENERATORS
+
+    return {**GENERATORS, **GESTURE_GENERATORS}
 
 
 def authored_poses(name: str, morph: Morphology) -> NormalizedPoses:
-    positions = GENERATORS[name](morph)
+    positions = all_generators()[name](morph)
     return encode(positions, *frames_from_positions(positions), morph.lengths)
 
 
@@ -220,7 +247,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--check", action="store_true", help="only compare with the shipped files")
     args = parser.parse_args(argv)
     stale = []
-    for name in GENERATORS:
+    for name in all_generators():
         path = MOTIONS_DIR / f"{name}.bvh"
         text = authored_bvh_text(name)
         if args.check:
