@@ -69,6 +69,7 @@ class CharacterSpec:
     team: str = ""
     constraints: list[ConstraintEntry] = field(default_factory=list)
     com_control: bool = True
+    com_target_xy: tuple[float, float] | None = None
 
 
 @dataclass
@@ -296,7 +297,8 @@ def _load_motion(r: _Reader, node: Node, where: str, base_dir: Path) -> Normaliz
 
 CHARACTER_KEYS = {"name": True, "morphology": True, "motion": True, "position_m": False,
                   "heading_deg": False, "speed": False, "loop": False, "start_s": False,
-                  "then": False, "team": False, "constraints": False, "com_control": False}
+                  "then": False, "team": False, "constraints": False, "com_control": False,
+                  "com_target_m": False}
 
 
 def _constraint(r: _Reader, node: Node, where: str,
@@ -510,7 +512,9 @@ def load_scenario(path: str | Path) -> Scenario:
             name, _morphology(r, keys["morphology"], f"{where}.morphology"), player,
             Placement((position[0], position[1]), math.radians(heading)),
             r.string(keys["team"], f"{where}.team") if "team" in keys else "", constraints,
-            r.boolean(keys["com_control"], f"{where}.com_control") if "com_control" in keys else True))
+            r.boolean(keys["com_control"], f"{where}.com_control") if "com_control" in keys else True,
+            r.vector(keys["com_target_m"], f"{where}.com_target_m", 2, "m", 1e5)  # type: ignore[arg-type]
+            if "com_target_m" in keys else None))
     if not characters:
         raise r.fail(top["characters"], "characters", "expected at least one character")
     for other, node, cwhere in pending_targets:
@@ -556,7 +560,7 @@ def build_simulation(scenario: Scenario, window: bool = False,  # type: ignore[n
     sim = Simulation(scenario.motions, scenario.ground, scenario.fps, window=window,
                      rotations=rotations)
     entities = {c.name: sim.spawn(c.name, c.morphology, c.player, c.placement, c.team,
-                                  c.com_control)
+                                  c.com_control, c.com_target_xy)
                 for c in scenario.characters}
     for c in scenario.characters:
         for k in c.constraints:
