@@ -374,11 +374,21 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
     print(f"{args.scenario}: {ticks} ticks ({seconds:g} s at {scenario.fps:g} Hz), "
           f"{len(names)} characters")
     print(f"  {'character':14s} {'slide max mm/fr':>15s} {'penetr. mm':>10s} {'bone err m':>10s} "
-          f"{'stride/leg':>10s}")
+          f"{'stride/leg':>10s} {'COM err mm':>10s}")
     for c in report["characters"]:
         stride = "-" if c["stride_per_leg_length"] is None else f"{c['stride_per_leg_length']:.3f}"
+        com = "-" if c["com_error_mm_max"] is None else f"{c['com_error_mm_max']:.1f}"
         print(f"  {c['name'][:14]:14s} {c['foot_sliding_mm_per_frame']['max']:15.3f} "
-              f"{c['ground_penetration_mm_max']:10.3f} {c['bone_length_error_m_max']:10.1e} {stride:>10s}")
+              f"{c['ground_penetration_mm_max']:10.3f} {c['bone_length_error_m_max']:10.1e} "
+              f"{stride:>10s} {com:>10s}")
+    if report["constraints"]:
+        print(f"  {'constraint':26s} {'max error mm (fully active / any weight)':>42s}")
+        for k in report["constraints"]:
+            full, any_ = k["error_mm_max_fully_active"], k["error_mm_max_active"]
+            text = (f"{'-' if full is None else f'{full:.1f}':>8s} / "
+                    f"{'-' if any_ is None else f'{any_:.1f}'}")
+            print(f"  {(k['character'] + '.' + k['name'])[:26]:26s} {text:>42s}"
+                  + ("" if k["enabled"] else "  (switched off: non-finite target)"))
     total = sum(report["ms_per_tick"].values())
     print(f"  time per tick {total:.2f} ms: " + ", ".join(
         f"{k} {v:.2f}" for k, v in report["ms_per_tick"].items()))

@@ -105,7 +105,7 @@ class ConstraintTable:
     area_inside; axis (m, 3) the segment-frame axis an orientation constraint turns; enabled
     (a constraint whose target went non-finite is switched off, with a warning); error: each
     constraint's remaining error after the last tick (metres, or radians for orientation; NaN
-    while inactive); names.
+    while inactive); weight: each constraint's activation weight in the last tick; names.
     """
 
     owner: I64 = _col(np.int64)
@@ -135,6 +135,7 @@ class ConstraintTable:
     axis: F64 = _col(np.float64, 3)
     enabled: NDArray[np.bool_] = _col(np.bool_)
     error: F64 = _col(np.float64)
+    weight: F64 = _col(np.float64)
     names: list[str] = field(default_factory=list)
 
     @property
@@ -207,7 +208,7 @@ class ConstraintTable:
             "area_normal": tuple(np.asarray(ar.normal) / np.linalg.norm(ar.normal)),
             "area_inside": ar.inside,
             "axis": tuple(np.asarray(axis, dtype=float) / np.linalg.norm(axis)),
-            "enabled": True, "error": np.nan,
+            "enabled": True, "error": np.nan, "weight": 0.0,
         }
         for key, value in values.items():
             current = getattr(self, key)

@@ -41,6 +41,10 @@ class MetricsRecorder:
         self.prev_locked = np.zeros((n, 2), bool)
         self.strides: list[list[float]] = [[] for _ in range(n)]
         self.last_print: list[list[np.ndarray | None]] = [[None, None] for _ in range(n)]
+        m = sim.constraints.m
+        self.constraint_error_full = np.full(m, np.nan)  # max while fully active (weight 1)
+        self.constraint_error_any = np.full(m, np.nan)  # max while active at all
+        self.com_error_max = np.full(n, np.nan)
         self.ticks = 0
 
     def record(self) -> None:
@@ -76,6 +80,14 @@ class MetricsRecorder:
                 self.strides[row].append(float(np.linalg.norm(here - last)))
             self.last_print[row][side] = here
         self.prev_locked = st.locked.copy()
+        table = sim.constraints
+        if table.m:
+            err = table.error
+            full = (table.weight >= 1.0) & np.isfinite(err)
+            self.constraint_error_full = np.where(full, np.fmax(self.constraint_error_full, err),
+                                                  self.constraint_error_full)
+            self.constraint_error_any = np.fmax(self.constraint_error_any, err)
+            self.com_error_max = np.fmax(self.com_error_max, st.com_error_m)
         self.ticks += 1
 
     def report(self) -> dict[str, Any]:
@@ -97,13 +109,25 @@ class MetricsRecorder:
                 "stride_per_leg_length": None if strides.size == 0
                 else round(float(np.median(strides) / legs[i]), 4),
                 "frozen": bool(sim.store.frozen[i]),
+                "com_error_mm_max": None if np.isnan(self.com_error_max[i])
+                else round(float(self.com_error_max[i]) * 1e3, 3),
             })
+        table = sim.constraints
+        constraints = [{
+            "name": table.names[k], "character": names[int(table.owner[k])],
+            "error_mm_max_fully_active": None if np.isnan(self.constraint_error_full[k])
+            else round(float(self.constraint_error_full[k]) * 1e3, 3),
+            "error_mm_max_active": None if np.isnan(self.constraint_error_any[k])
+            else round(float(self.constraint_error_any[k]) * 1e3, 3),
+            "enabled": bool(table.enabled[k]),
+        } for k in range(table.m)]
         ticks = max(self.ticks, 1)
         return {
             "seconds": round(sim.time_s, 4),
             "ticks": self.ticks,
             "fps": sim.fps,
             "characters": characters,
+            "constraints": constraints,
             "ms_per_tick": {k: round(v / ticks * 1e3, 4) for k, v in sim.system_seconds().items()},
             "messages": list(sim.messages),
         }

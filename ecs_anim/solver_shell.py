@@ -221,11 +221,14 @@ def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained:
     rows, local = np.unique(owner, return_inverse=True)
     on_self = np.flatnonzero((table.target_kind[idx] != TARGET_WORLD) & (table.target_row[idx] == owner))
     r = rows.size
-    # Foot contacts: each leg in contact keeps its ankle where ground adaptation put it.
+    # Each foot keeps where ground adaptation put it: above every goal while in contact; below
+    # every goal otherwise (a free foot stays clear of the ground when the root moves, unless a
+    # constraint of that leg takes it).
     ankles = unconstrained.positions[rows][:, list(SIDE_JOINTS["ankle"])]
     in_contact = contact_weight[rows] > 0
-    c_owner, c_side = np.nonzero(in_contact)
+    c_owner, c_side = np.divmod(np.arange(2 * rows.size), 2)
     nc = c_owner.size
+    foot_priority = np.where(in_contact[c_owner, c_side], CONTACT_PRIORITY, -CONTACT_PRIORITY)
     cat = np.concatenate
     return TickGoals(
         rows=rows,
@@ -238,7 +241,7 @@ def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained:
         fraction=cat([frac[keep], np.ones(nc)]),
         offset=cat([off[keep], np.zeros((nc, 3))]),
         chain=cat([table.chain[idx], 1 << (LEG_L + c_side)]),
-        priority=cat([table.priority[idx], np.full(nc, CONTACT_PRIORITY)]),
+        priority=cat([table.priority[idx], foot_priority]),
         goal=cat([weighted[keep], ankles[c_owner, c_side]]),
         full_goal=cat([goal[keep], ankles[c_owner, c_side]]),
         weight=cat([w, np.ones(nc)]),
@@ -298,6 +301,8 @@ class _Solve:
         self.first_head = winners(g.owner, zero, g.priority, on_head & self.is_point, self.r, 1)[:, 0]
         self.orient_head = winners(g.owner, zero, g.priority, on_head & g.orientation, self.r, 1)[:, 0]
         self.self_at = goals.self_start.copy()
+        p = self.dec.positions
+        self.foot_in_world = normalize(p[:, list(SIDE_JOINTS["toe"])] - p[:, list(SIDE_JOINTS["ankle"])])
         self.trunk_moved = False  # this tick
         self.dirty = False  # since the last decode
 
@@ -344,6 +349,16 @@ class _Solve:
                 frame[two] = turn_about_axis(root[two], point[two], p2, g.goal[c2]) @ frame[two]
             frames[rows, li] = frame
             fractions[rows, li] = new_fraction
+            # A foot held where ground adaptation put it keeps its world direction too (its toes
+            # must not dip into the ground as the leg re-aims); a constrained leg's foot turns
+            # with the leg.
+            held = np.flatnonzero(g.table_index[c] < 0)
+            if held.size:
+                rh, lh = rows[held], li[held]
+                mid, end = two_bone_middle(frame[held], root[held], u[held], ll[held],
+                                           new_fraction[held] * (u[held] + ll[held]))
+                lower2world = distal_frames(frame[held], mid, end)
+                dirs[rh, lh] = np.einsum("kji,kj->ki", lower2world, self.foot_in_world[rh, lh])
             self._limb_joints(rows, li, frames, fractions, dirs)
         rows_o, li_o = np.nonzero(self.orient_limb >= 0)
         if rows_o.size:

@@ -11,7 +11,8 @@ A constraint whose target is not finite is switched off with one warning; the ot
 Reads: store.poses, lengths, posture (the previous tick's), contact_weight, clip, clip_time_s,
 com_control, com_target_xy, segment masses; the constraint table.
 Writes: store.poses (solved characters), com_desired, goals, solved_positions;
-table.enabled, table.error (remaining error of each constraint, NaN while inactive).
+table.enabled, table.weight, table.error (remaining error of each constraint, NaN while
+inactive).
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ class ConstraintSolve(System):
             return
         table.error[:] = np.nan
         weight = table.weights(sim.time_s, st.clip, st.clip_time_s)
+        table.weight = weight
         if not np.any(weight > 0):
             return
         unconstrained = decode(st.poses, st.lengths)
@@ -41,6 +43,7 @@ class ConstraintSolve(System):
             sim.report_disabled(np.flatnonzero(broken))
             table.enabled[broken] = False
             weight = np.where(broken, 0.0, weight)
+            table.weight = weight
             targets[broken] = 0.0
         own = centres_of_mass(unconstrained.positions, st.segment_mass_kg, st.segment_com_fraction)
         given = np.isfinite(st.com_target_xy).all(axis=1)
