@@ -332,6 +332,13 @@ class _Solve:
         fractions = np.concatenate([poses.leg_fraction, poses.arm_fraction], axis=1)
         dirs = np.concatenate([poses.foot_dir, poses.hand_dir], axis=1)
         rows, li = np.nonzero(self.first_limb >= 0)
+        # Only limbs with something to do: a first goal not met, or a second one (which keeps
+        # the first exactly; a limb left alone keeps both as they are).
+        c = self.first_limb[rows, li]
+        met = np.linalg.norm(point_positions(dec, rows, g.segment[c], g.fraction[c], g.offset[c])
+                             - g.goal[c], axis=1) <= self.s.tolerance_m * 0.01
+        todo = ~met | (self.second_limb[rows, li] >= 0)
+        rows, li = rows[todo], li[todo]
         if rows.size:
             c = self.first_limb[rows, li]
             u, ll, h = (self.lengths[rows, LIMB_LENGTHS[k][li]] for k in range(3))
@@ -371,9 +378,10 @@ class _Solve:
             self._limb_joints(rows_o, li_o, frames, fractions, dirs)
         if rows.size == 0 and rows_o.size == 0:
             return
-        parent = np.concatenate([np.repeat(dec.pelvis2world[:, None], 2, axis=1),
-                                 np.repeat(dec.thorax2world[:, None], 2, axis=1)], axis=1)
-        local = quat_from_matrix(np.swapaxes(parent, -1, -2) @ frames)
+        rows_c, li_c = np.concatenate([rows, rows_o]), np.concatenate([li, li_o])
+        parent = np.where((li_c < 2)[:, None, None], dec.pelvis2world[rows_c], dec.thorax2world[rows_c])
+        local = np.concatenate([poses.leg_frame, poses.arm_frame], axis=1)
+        local[rows_c, li_c] = quat_from_matrix(np.swapaxes(parent, -1, -2) @ frames[rows_c, li_c])
         poses.leg_frame, poses.arm_frame = local[:, :2].copy(), local[:, 2:].copy()
         poses.leg_fraction, poses.arm_fraction = fractions[:, :2].copy(), fractions[:, 2:].copy()
         poses.foot_dir, poses.hand_dir = dirs[:, :2].copy(), dirs[:, 2:].copy()
@@ -570,7 +578,7 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
     (r, N_JOINTS, 3) of the result."""
     state = _Solve(poses, lengths, goals, masses, com_fraction, settings, decoded)
     tol = np.where(goals.orientation, settings.tolerance_rad, settings.tolerance_m)
-    previous = np.full(state.r, np.inf)
+    previous = np.full(goals.k, np.inf)
     used = 0
     for used in range(1, settings.iterations + 1):
         # Legs, head, arms: the paper's order (legs and arms are independent, so one batch).
@@ -582,13 +590,12 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
             state.redecode()  # a bent spine's joints are exact once decoded
         com_error = state.root()
         err = _errors(goals, state.dec)
-        excess = np.zeros(state.r)
-        np.maximum.at(excess, goals.owner, np.maximum(err - tol, 0.0))
-        worst = np.maximum(excess, np.maximum(com_error - settings.com_tolerance_m, 0.0))
-        # Converged, or no longer improving by a tolerance (an unreachable goal), everywhere.
-        if np.all((worst == 0.0) | (np.abs(previous - worst) < settings.tolerance_m)):
+        # Done where every goal is met or no longer improving by a tolerance (unreachable), and
+        # the centre of mass is back; stop when every character is done.
+        goal_open = (err > tol) & (np.abs(previous - err) >= settings.tolerance_m)
+        if not goal_open.any() and np.all(com_error <= settings.com_tolerance_m):
             break
-        previous = worst
+        previous = err
     # The last root move shifted the limbs: re-plant the feet, re-aim the head and the arms.
     state.follow_own_targets()
     state.limbs()
