@@ -1,0 +1,250 @@
+"""What the viewer draws, as numpy arrays built from a simulation's store: no OpenGL here.
+
+Every body part, constraint target, centre of mass and restricted area is a *capsule instance*:
+two end points ``a`` and ``b`` (a sphere when they coincide), a radius and a colour, packed as
+one float32 row. Rows for all characters are built with array operations (no per-character
+Python loop), so thousands of characters cost one instanced draw. Read-only (STYLE 8).
+"""
+
+from __future__ import annotations
+
+import colorsys
+from dataclasses import dataclass
+
+import esper
+import numpy as np
+from numpy.typing import NDArray
+
+from ..ground import Ground
+from ..morphology import centres_of_mass, leg_length
+from ..simulation import Simulation
+from ..skeleton import JOINT_INDEX
+from .constraint_view import (
+    ConstraintMarks,
+    constraint_marks,
+    max_constraint_error_m,
+    posture_time_s,
+    restricted_areas,
+)
+
+F32 = NDArray[np.float32]
+F64 = NDArray[np.float64]
+
+#: Floats per instance: a (3), b (3), radius (1), rgba (4).
+INSTANCE_FLOATS = 11
+
+# Body capsules: (from joint, to joint, start fraction, end fraction, radius per leg length,
+# shade). The radius scales with each character's leg length; shade darkens the left side so
+# a character's facing reads at a glance.
+_J = JOINT_INDEX
+BODY_CAPSULES: tuple[tuple[str, str, float, float, float, float], ...] = (
+    ("hip_l", "hip_r", 0.0, 1.0, 0.115, 1.0),
+    ("pelvis", "spine_1", 0.0, 1.0, 0.135, 1.0),
+    ("spine_1", "spine_2", 0.0, 1.0, 0.145, 1.0),
+    ("spine_2", "neck", 0.0, 0.8, 0.14, 1.0),
+    ("shoulder_l", "shoulder_r", 0.0, 1.0, 0.075, 1.0),
+    ("neck", "head", 0.0, 1.0, 0.055, 1.12),
+    ("head", "head_top", 0.42, 0.58, 0.12, 1.18),
+    ("hip_l", "knee_l", 0.0, 1.0, 0.085, 0.78),
+    ("knee_l", "ankle_l", 0.0, 1.0, 0.062, 0.78),
+    ("ankle_l", "toe_l", 0.0, 1.0, 0.048, 0.7),
+    ("hip_r", "knee_r", 0.0, 1.0, 0.085, 1.0),
+    ("knee_r", "ankle_r", 0.0, 1.0, 0.062, 1.0),
+    ("ankle_r", "toe_r", 0.0, 1.0, 0.048, 0.9),
+    ("shoulder_l", "elbow_l", 0.0, 1.0, 0.06, 0.78),
+    ("elbow_l", "wrist_l", 0.0, 1.0, 0.05, 0.78),
+    ("wrist_l", "hand_l", 0.0, 1.0, 0.04, 0.7),
+    ("shoulder_r", "elbow_r", 0.0, 1.0, 0.06, 1.0),
+    ("elbow_r", "wrist_r", 0.0, 1.0, 0.05, 1.0),
+    ("wrist_r", "hand_r", 0.0, 1.0, 0.04, 0.9),
+)
+_FROM = np.array([_J[c[0]] for c in BODY_CAPSULES])
+_TO = np.array([_J[c[1]] for c in BODY_CAPSULES])
+_T0 = np.array([c[2] for c in BODY_CAPSULES])[None, :, None]
+_T1 = np.array([c[3] for c in BODY_CAPSULES])[None, :, None]
+_RADIUS_PER_LEG = np.array([c[4] for c in BODY_CAPSULES])
+_SHADE = np.array([c[5] for c in BODY_CAPSULES])
+
+#: The head capsule's radius follows the head segment (skull base to top) rather than the leg.
+_HEAD = next(i for i, c in enumerate(BODY_CAPSULES) if c[:2] == ("head", "head_top"))
+HEAD_RADIUS_PER_HEAD_LENGTH = 0.5
+
+#: Team colours (RGB 0-1): saturated hues kept away from the targets' red and blue and the
+#: centre of mass's yellow, so each reads as a character.
+TEAM_PALETTE: tuple[tuple[float, float, float], ...] = tuple(
+    colorsys.hsv_to_rgb(h, 0.8, 0.9) for h in (0.08, 0.36, 0.78, 0.48, 0.90, 0.27, 0.56, 0.13)
+)
+TARGET_HIGH = (0.9, 0.1, 0.1)   # highest priority
+TARGET_LOW = (0.15, 0.3, 0.95)  # lowest priority
+COM_COLOUR = (1.0, 0.9, 0.1)
+AREA_COLOUR = (0.9, 0.2, 0.6)
+
+
+def character_teams(sim: Simulation) -> list[str]:
+    """Each row's team label (``""`` when none), in store order."""
+    from ..components import CharacterRow, Name
+
+    with sim._active():
+        by_row = {r.row: n.team for _, (r, n) in esper.get_components(CharacterRow, Name)}
+    return [by_row.get(i, "") for i in range(sim.store.n)]
+
+
+def team_colours(teams: list[str]) -> F64:
+    """(n, 3) RGB per character: one palette colour per team (in order of first appearance);
+    characters without a team get their own colour each, by index."""
+    keys: dict[str, int] = {}
+    index = []
+    for i, team in enumerate(teams):
+        key = team if team else f"\0{i}"
+        index.append(keys.setdefault(key, len(keys)))
+    palette = np.array(TEAM_PALETTE)
+    return palette[np.array(index, dtype=np.int64) % len(palette)].reshape(-1, 3)
+
+
+def pack_instances(a: F64, b: F64, radius: F64, rgba: F64) -> F32:
+    """(k, INSTANCE_FLOATS) float32 rows from a (k, 3), b (k, 3), radius (k,), rgba (k, 4)."""
+    return np.concatenate([a, b, radius[:, None], rgba], axis=1).astype(np.float32)
+
+
+def body_instances(positions: F64, lengths: F64, colours: F64) -> F32:
+    """Capsules of all bodies: positions (n, N_JOINTS, 3), lengths (n, N_LENGTHS) metres,
+    colours (n, 3) -> (n * len(BODY_CAPSULES), INSTANCE_FLOATS)."""
+    n = positions.shape[0]
+    p0, p1 = positions[:, _FROM], positions[:, _TO]
+    a, b = p0 + _T0 * (p1 - p0), p0 + _T1 * (p1 - p0)
+    radius = leg_length(lengths)[:, None] * _RADIUS_PER_LEG[None, :]
+    head = np.linalg.norm(positions[:, _J["head_top"]] - positions[:, _J["head"]], axis=-1)
+    radius[:, _HEAD] = HEAD_RADIUS_PER_HEAD_LENGTH * head
+    rgb = np.clip(colours[:, None, :] * _SHADE[None, :, None], 0.0, 1.0)
+    rgba = np.concatenate([rgb, np.ones(rgb.shape[:-1] + (1,))], axis=-1)
+    return pack_instances(a.reshape(-1, 3), b.reshape(-1, 3), radius.reshape(-1),
+                          rgba.reshape(-1, 4)) if n else np.zeros((0, INSTANCE_FLOATS), np.float32)
+
+
+def priority_colours(priority: F64) -> F64:
+    """(m, 3): red for the highest priority, blue for the lowest, blended in between (all red
+    when they are equal)."""
+    if priority.size == 0:
+        return np.zeros((0, 3))
+    lo, hi = float(priority.min()), float(priority.max())
+    t = np.ones_like(priority) if hi <= lo else (priority - lo) / (hi - lo)
+    return t[:, None] * np.array(TARGET_HIGH) + (1 - t[:, None]) * np.array(TARGET_LOW)
+
+
+def target_instances(marks: ConstraintMarks, scale_m: float = 1.0) -> F32:
+    """A sphere at every active target (bigger as its weight grows) and a thin rod from the
+    constrained point to it: (2 m, INSTANCE_FLOATS)."""
+    m = marks.target.shape[0]
+    if m == 0:
+        return np.zeros((0, INSTANCE_FLOATS), np.float32)
+    rgb = priority_colours(marks.priority)
+    rgba = np.concatenate([rgb, np.ones((m, 1))], axis=1)
+    spheres = pack_instances(marks.target, marks.target, scale_m * (0.025 + 0.025 * marks.weight), rgba)
+    rods = pack_instances(marks.point, marks.target, np.full(m, 0.006 * scale_m), rgba)
+    return np.concatenate([spheres, rods])
+
+
+def com_instances(com: F64, radius_m: F64) -> F32:
+    """A yellow sphere per centre of mass: com (n, 3), radius (n,)."""
+    rgba = np.tile(np.array([*COM_COLOUR, 1.0]), (com.shape[0], 1))
+    return pack_instances(com, com, radius_m, rgba)
+
+
+@dataclass(frozen=True)
+class SceneFrame:
+    """One drawable snapshot of a simulation.
+
+    bodies, targets, com, areas : (k, INSTANCE_FLOATS) float32 instance rows (areas are drawn
+    translucent); joints (n, N_JOINTS, 3) world metres (for framing); time_s the posture's
+    simulation time; max_error_m the largest distance to target of fully active constraints
+    (None without any); n_characters.
+    """
+
+    bodies: F32
+    targets: F32
+    com: F32
+    areas: F32
+    joints: F64
+    time_s: float
+    max_error_m: float | None
+    n_characters: int
+
+
+def snapshot(sim: Simulation, colours: F64 | None = None) -> SceneFrame:
+    """Build the frame for the posture now in ``sim.store`` (after at least one step).
+
+    ``colours`` (n, 3) RGB per character; default: by team (:func:`team_colours`).
+    Characters whose posture is not finite are left out.
+    """
+    st = sim.store
+    positions = st.positions
+    if colours is None:
+        colours = team_colours(character_teams(sim))
+    if positions.shape[0] != st.n:  # nothing stepped yet
+        positions = np.full((st.n, len(JOINT_INDEX), 3), np.nan)
+    ok = np.all(np.isfinite(positions), axis=(1, 2))
+    bodies = body_instances(positions[ok], st.lengths[ok], colours[ok])
+    marks = constraint_marks(sim)
+    targets = target_instances(marks)
+    if ok.any():
+        com = centres_of_mass(positions[ok], st.segment_mass_kg[ok], st.segment_com_fraction[ok])
+        com_rows = com_instances(com, 0.06 * leg_length(st.lengths[ok]))
+    else:
+        com_rows = np.zeros((0, INSTANCE_FLOATS), np.float32)
+    areas = restricted_areas(sim)
+    area_rgba = np.tile(np.array([*AREA_COLOUR, 0.3]), (areas.radius.shape[0], 1))
+    area_rows = pack_instances(areas.centre, areas.centre, areas.radius, area_rgba)
+    return SceneFrame(bodies, targets, com_rows, area_rows, positions[ok].copy(),
+                      posture_time_s(sim), max_constraint_error_m(marks), int(ok.sum()))
+
+
+# --- the ground --------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class GroundMesh:
+    """A height-field patch of the ground: vertices (k, 6) float32 (position, normal) world
+    metres, triangles (t, 3) uint32, and the xy rectangle it covers ``(x0, y0, x1, y1)``."""
+
+    vertices: F32
+    triangles: NDArray[np.uint32]
+    bounds: tuple[float, float, float, float]
+
+
+def ground_mesh(ground: Ground, centre_xy: tuple[float, float], half_size_m: float,
+                cell_m: float = 0.05) -> GroundMesh:
+    """Sample ``ground.height`` on a square grid around ``centre_xy`` (at most 400 x 400 cells;
+    the cell grows for a larger patch). Normals from central differences."""
+    cells = int(min(max(np.ceil(2 * half_size_m / cell_m), 2), 400))
+    cell = 2 * half_size_m / cells
+    x = centre_xy[0] + np.linspace(-half_size_m, half_size_m, cells + 1)
+    y = centre_xy[1] + np.linspace(-half_size_m, half_size_m, cells + 1)
+    gx, gy = np.meshgrid(x, y)  # (rows along y, columns along x)
+    xy = np.stack([gx, gy], axis=-1)
+    z = ground.height(xy)
+    eps = min(cell / 2, 0.01)
+    dzdx = (ground.height(xy + [eps, 0]) - ground.height(xy - [eps, 0])) / (2 * eps)
+    dzdy = (ground.height(xy + [0, eps]) - ground.height(xy - [0, eps])) / (2 * eps)
+    normal = np.stack([-dzdx, -dzdy, np.ones_like(z)], axis=-1)
+    normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
+    vertices = np.concatenate([gx[..., None], gy[..., None], z[..., None], normal], axis=-1)
+    side = cells + 1
+    i, j = np.meshgrid(np.arange(cells), np.arange(cells))
+    v00 = (j * side + i).reshape(-1)
+    v10, v01, v11 = v00 + 1, v00 + side, v00 + side + 1
+    triangles = np.concatenate([np.stack([v00, v10, v11], 1), np.stack([v00, v11, v01], 1)])
+    return GroundMesh(vertices.reshape(-1, 6).astype(np.float32), triangles.astype(np.uint32),
+                      (float(x[0]), float(y[0]), float(x[-1]), float(y[-1])))
+
+
+def ground_patch_for(points_in_world: F64, minimum_half_size_m: float = 6.0) -> tuple[tuple[float, float], float]:
+    """Centre (x, y) and half size of a ground patch covering the points (..., 3) with room
+    around them (at least ``minimum_half_size_m``)."""
+    p = np.asarray(points_in_world, dtype=np.float64).reshape(-1, 3)
+    p = p[np.all(np.isfinite(p), axis=1)]
+    if p.shape[0] == 0:
+        return (0.0, 0.0), minimum_half_size_m
+    lo, hi = p[:, :2].min(axis=0), p[:, :2].max(axis=0)
+    centre = (lo + hi) / 2
+    half = max(float((hi - lo).max()) / 2 + 4.0, minimum_half_size_m)
+    return (float(centre[0]), float(centre[1])), half
