@@ -78,7 +78,7 @@ class OrbitCamera:
     distance: float = 6.0
     yaw_rad: float = math.radians(-60.0)
     pitch_rad: float = math.radians(18.0)
-    fov_y_rad: float = math.radians(40.0)
+    fov_y_rad: float = math.radians(32.0)
 
     @property
     def eye(self) -> F64:
@@ -123,7 +123,7 @@ class OrbitCamera:
 
 
 def frame_points(points_in_world: F64, aspect: float, camera: OrbitCamera = OrbitCamera(),
-                 margin: float = 1.15) -> OrbitCamera:
+                 margin: float = 1.3) -> OrbitCamera:
     """The camera (same yaw, pitch, field of view) moved so all points (..., 3) are in view.
 
     Aims at the centre of the points' bounding box, far enough back that the bounding sphere
@@ -139,5 +139,21 @@ def frame_points(points_in_world: F64, aspect: float, camera: OrbitCamera = Orbi
     radius = max(float(np.linalg.norm(p - centre, axis=1).max()), 0.5)
     half_fov_y = camera.fov_y_rad / 2.0
     half_fov_x = math.atan(math.tan(half_fov_y) * aspect)
-    distance = margin * radius / math.sin(min(half_fov_x, half_fov_y))
-    return replace(camera, target=tuple(float(v) for v in centre), distance=distance)
+    # The bounding sphere always fits; then come as close as the points allow (bisection on
+    # the distance: every point in front of the eye and inside 1 / margin of the view).
+    far = margin * radius / math.sin(min(half_fov_x, half_fov_y))
+    framed = replace(camera, target=tuple(float(v) for v in centre), distance=far)
+    w, h = 1000, max(int(round(1000 / aspect)), 1)
+
+    def fits(distance: float) -> bool:
+        pixels = replace(framed, distance=distance).project(p, w, h)
+        ndc = np.abs(pixels / np.array([w, h]) * 2.0 - 1.0)
+        return bool(np.all(np.isfinite(ndc)) and ndc.max() <= 1.0 / margin)
+
+    near = radius * 0.5
+    if not fits(far):
+        return framed
+    for _ in range(30):
+        middle = (near + far) / 2
+        near, far = (near, middle) if fits(middle) else (middle, far)
+    return replace(framed, distance=far)

@@ -51,6 +51,7 @@ void main() {
 _LIGHTING = """
 uniform vec3 eye;
 uniform vec3 sky;
+uniform vec2 fog_range;
 vec3 shade(vec3 base, vec3 normal, vec3 world) {
     vec3 n = normalize(normal);
     vec3 key = normalize(vec3(0.45, -0.35, 0.82));
@@ -64,7 +65,7 @@ vec3 shade(vec3 base, vec3 normal, vec3 world) {
 }
 vec3 fog(vec3 colour, vec3 world) {
     float d = length(eye - world);
-    float f = clamp((d - 40.0) / 160.0, 0.0, 1.0);
+    float f = clamp((d - fog_range.x) / (fog_range.y - fog_range.x), 0.0, 1.0);
     return mix(colour, sky, f);
 }
 """
@@ -209,6 +210,7 @@ class SceneRenderer:
         program["world2clip"] = _matrix(world2clip)
         program["eye"] = tuple(float(v) for v in camera.eye)
         program["sky"] = SKY
+        program["fog_range"] = (camera.distance * 1.6, camera.distance * 4.0 + 10.0)
 
     def _instances(self, rows: np.ndarray) -> None:
         rows = np.ascontiguousarray(rows, dtype=np.float32)

@@ -237,7 +237,7 @@ def ground_mesh(ground: Ground, centre_xy: tuple[float, float], half_size_m: flo
                       (float(x[0]), float(y[0]), float(x[-1]), float(y[-1])))
 
 
-def ground_patch_for(points_in_world: F64, minimum_half_size_m: float = 6.0) -> tuple[tuple[float, float], float]:
+def ground_patch_for(points_in_world: F64, minimum_half_size_m: float = 15.0) -> tuple[tuple[float, float], float]:
     """Centre (x, y) and half size of a ground patch covering the points (..., 3) with room
     around them (at least ``minimum_half_size_m``)."""
     p = np.asarray(points_in_world, dtype=np.float64).reshape(-1, 3)

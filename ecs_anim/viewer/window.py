@@ -120,6 +120,11 @@ def _label(pyglet: Any, text: str, x: float, y: float, size: float) -> Any:
                              color=(25, 25, 30, 255))
 
 
+def _patch_half_m(camera: OrbitCamera) -> float:
+    """Half size of the ground patch to draw: out to where the fog hides it (capped)."""
+    return float(min(max(15.0, camera.distance * 4.0 + 10.0), 250.0))
+
+
 def default_camera(frame: SceneFrame, aspect: float) -> OrbitCamera:
     """Auto-frame all characters (and their constraint targets) from the default direction."""
     points = [frame.joints.reshape(-1, 3)]
@@ -156,7 +161,7 @@ def render_screenshot(scenario: Scenario, at_s: float, width: int = 1280, height
         frame = source.latest()
         assert frame is not None
         cam = camera or default_camera(frame, width / height)
-        centre, half = ground_patch_for(frame.joints)
+        centre, half = ground_patch_for(frame.joints, _patch_half_m(cam))
         mesh = ground_mesh(sim.ground, centre, half)
     pyglet = _pyglet(headless=True)
     from .gl_render import OffscreenTarget, SceneRenderer
@@ -213,7 +218,8 @@ HELP = ("drag: orbit  right/shift-drag: pan  wheel: zoom  space: play/pause  "
         "right arrow: step  up/down: speed  R: restart  T: targets  C: COM  F: frame  H: help")
 
 
-def run_viewer(scenario: Scenario, width: int = 1280, height: int = 720) -> None:
+def run_viewer(scenario: Scenario, width: int = 1280, height: int = 720,
+               show_targets: bool = True, show_com: bool = True) -> None:
     """Open the window and run until it is closed."""
     if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
                                                  or os.environ.get("WAYLAND_DISPLAY")):
@@ -222,11 +228,9 @@ def run_viewer(scenario: Scenario, width: int = 1280, height: int = 720) -> None
     pyglet = _pyglet(headless=False)
     from .gl_render import SceneRenderer
 
-    class ViewerWindow(pyglet.window.Window):  # type: ignore[misc, name-defined]
-        pass
-
     app = _ViewerApp(scenario, pyglet)
-    window = _make_window(pyglet, width, height, visible=True, samples=4, cls=ViewerWindow,
+    app.show_targets, app.show_com = show_targets, show_com
+    window = _make_window(pyglet, width, height, visible=True, samples=4,
                           resizable=True, caption=f"ecs-anim view {scenario.path}")
     app.attach(window, SceneRenderer())
     pyglet.app.run()
@@ -274,15 +278,17 @@ class _ViewerApp:
 
     def _ground(self, frame: SceneFrame, force: bool = False) -> None:
         bounds = self.renderer.ground_bounds
+        assert self.sim is not None and self.camera is not None
+        wanted = _patch_half_m(self.camera)
         xy = frame.joints[:, 0, :2] if frame.joints.size else np.zeros((0, 2))
         if not force and bounds is not None and xy.size:
             x0, y0, x1, y1 = bounds
             inside = ((xy[:, 0] > x0 + 3) & (xy[:, 0] < x1 - 3) & (xy[:, 1] > y0 + 3)
                       & (xy[:, 1] < y1 - 3))
-            if inside.all():
+            half = (x1 - x0) / 2
+            if inside.all() and wanted * 0.8 <= half <= wanted * 3:
                 return
-        assert self.sim is not None
-        centre, half = ground_patch_for(frame.joints)
+        centre, half = ground_patch_for(frame.joints, wanted)
         self.renderer.set_ground(ground_mesh(self.sim.ground, centre, half))
 
     # clock -------------------------------------------------------------------------------
