@@ -20,6 +20,8 @@ from .camera import OrbitCamera
 from .scene import INSTANCE_FLOATS, GroundMesh, SceneFrame
 
 SKY = (0.82, 0.84, 0.86)
+#: Above this many capsule instances in one draw, the coarse capsule mesh is used.
+FINE_CAPSULES_UP_TO = 4000
 
 _CAPSULE_VS = """
 #version 330 core
@@ -105,10 +107,13 @@ out vec4 frag;
 void main() {
     vec2 cell = floor(v_world.xy);
     float checker = mod(cell.x + cell.y, 2.0);
+    // far away a metre covers less than a pixel or two: fade the pattern to its mean (no moire)
+    float blur = clamp(max(fwidth(v_world.x), fwidth(v_world.y)) * 1.5 - 0.25, 0.0, 1.0);
+    checker = mix(checker, 0.5, blur);
     vec3 base = mix(vec3(0.62, 0.62, 0.60), vec3(0.52, 0.53, 0.52), checker);
     vec2 f = abs(fract(v_world.xy + 0.5) - 0.5);
     float line = 1.0 - smoothstep(0.0, 0.012, min(f.x, f.y));
-    base = mix(base, vec3(0.42), line * 0.6);
+    base = mix(base, vec3(0.42), line * 0.6 * (1.0 - blur));
     frag = vec4(fog(shade(base, v_normal, v_world), v_world), 1.0);
 }
 """
@@ -169,24 +174,30 @@ class SceneRenderer:
     def __init__(self) -> None:
         self.capsules = ShaderProgram(Shader(_CAPSULE_VS, "vertex"), Shader(_CAPSULE_FS, "fragment"))
         self.ground = ShaderProgram(Shader(_GROUND_VS, "vertex"), Shader(_GROUND_FS, "fragment"))
-        vertices, triangles = capsule_mesh()
-        self.capsule_count = int(triangles.size)
-        self.capsule_vao = gl.GLuint()
-        gl.glGenVertexArrays(1, ctypes.byref(self.capsule_vao))
-        gl.glBindVertexArray(self.capsule_vao)
-        self._mesh_vbo = _buffer(gl.GL_ARRAY_BUFFER, vertices)
-        _attribute(0, 3, 4, 0)
-        _attribute(1, 1, 4, 3)
-        self._mesh_ibo = _buffer(gl.GL_ELEMENT_ARRAY_BUFFER, triangles)
         self.instance_vbo = _buffer(gl.GL_ARRAY_BUFFER, np.zeros((1, INSTANCE_FLOATS), np.float32),
                                     gl.GL_STREAM_DRAW)
-        for location, size, offset in ((2, 3, 0), (3, 3, 3), (4, 1, 6), (5, 4, 7)):
-            _attribute(location, size, INSTANCE_FLOATS, offset, divisor=1)
-        gl.glBindVertexArray(0)
+        # Two levels of detail sharing the instance buffer: fine capsules for a few characters,
+        # coarse ones when there are many (a crowd is small on screen anyway).
+        self.meshes = [self._capsule_vao(*capsule_mesh(16, 6)), self._capsule_vao(*capsule_mesh(8, 3))]
+        self._keep: list[gl.GLuint] = []
         self.ground_vao: gl.GLuint | None = None
         self.ground_count = 0
         self.ground_bounds: tuple[float, float, float, float] | None = None
         self._ground_buffers: list[gl.GLuint] = []
+
+    def _capsule_vao(self, vertices: np.ndarray, triangles: np.ndarray) -> tuple[gl.GLuint, int]:
+        vao = gl.GLuint()
+        gl.glGenVertexArrays(1, ctypes.byref(vao))
+        gl.glBindVertexArray(vao)
+        _buffer(gl.GL_ARRAY_BUFFER, vertices)
+        _attribute(0, 3, 4, 0)
+        _attribute(1, 1, 4, 3)
+        _buffer(gl.GL_ELEMENT_ARRAY_BUFFER, triangles)
+        gl.glBindBuffer(gl.GL_ARRAY_BUFFER, self.instance_vbo)
+        for location, size, offset in ((2, 3, 0), (3, 3, 3), (4, 1, 6), (5, 4, 7)):
+            _attribute(location, size, INSTANCE_FLOATS, offset, divisor=1)
+        gl.glBindVertexArray(0)
+        return vao, int(triangles.size)
 
     def set_ground(self, mesh: GroundMesh) -> None:
         """Upload a new ground patch (replacing the previous one)."""
@@ -210,15 +221,16 @@ class SceneRenderer:
         program["world2clip"] = _matrix(world2clip)
         program["eye"] = tuple(float(v) for v in camera.eye)
         program["sky"] = SKY
-        program["fog_range"] = (camera.distance * 1.6, camera.distance * 4.0 + 10.0)
+        program["fog_range"] = (camera.distance * 1.5, camera.distance * 3.0 + 10.0)
 
     def _instances(self, rows: np.ndarray) -> None:
         rows = np.ascontiguousarray(rows, dtype=np.float32)
-        gl.glBindVertexArray(self.capsule_vao)
+        vao, count = self.meshes[0 if rows.shape[0] <= FINE_CAPSULES_UP_TO else 1]
+        gl.glBindVertexArray(vao)
         gl.glBindBuffer(gl.GL_ARRAY_BUFFER, self.instance_vbo)
         gl.glBufferData(gl.GL_ARRAY_BUFFER, rows.nbytes, rows.ctypes.data_as(ctypes.c_void_p),
                         gl.GL_STREAM_DRAW)
-        gl.glDrawElementsInstanced(gl.GL_TRIANGLES, self.capsule_count, gl.GL_UNSIGNED_INT,
+        gl.glDrawElementsInstanced(gl.GL_TRIANGLES, count, gl.GL_UNSIGNED_INT,
                                    ctypes.c_void_p(0), rows.shape[0])
 
     def draw(self, frame: SceneFrame, camera: OrbitCamera, width: int, height: int,

@@ -213,9 +213,9 @@ class GroundMesh:
 
 def ground_mesh(ground: Ground, centre_xy: tuple[float, float], half_size_m: float,
                 cell_m: float = 0.05) -> GroundMesh:
-    """Sample ``ground.height`` on a square grid around ``centre_xy`` (at most 400 x 400 cells;
+    """Sample ``ground.height`` on a square grid around ``centre_xy`` (at most 300 x 300 cells;
     the cell grows for a larger patch). Normals from central differences."""
-    cells = int(min(max(np.ceil(2 * half_size_m / cell_m), 2), 400))
+    cells = int(min(max(np.ceil(2 * half_size_m / cell_m), 2), 300))
     cell = 2 * half_size_m / cells
     x = centre_xy[0] + np.linspace(-half_size_m, half_size_m, cells + 1)
     y = centre_xy[1] + np.linspace(-half_size_m, half_size_m, cells + 1)

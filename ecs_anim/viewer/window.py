@@ -122,7 +122,14 @@ def _label(pyglet: Any, text: str, x: float, y: float, size: float) -> Any:
 
 def _patch_half_m(camera: OrbitCamera) -> float:
     """Half size of the ground patch to draw: out to where the fog hides it (capped)."""
-    return float(min(max(15.0, camera.distance * 4.0 + 10.0), 250.0))
+    return float(min(max(15.0, camera.distance * 4.0 + 10.0), 400.0))
+
+
+def _centroid(frame: SceneFrame) -> NDArray[np.float64]:
+    """(3,) mean pelvis position (NaN without characters)."""
+    if frame.joints.shape[0] == 0:
+        return np.full(3, np.nan)
+    return np.asarray(frame.joints[:, 0].mean(axis=0), dtype=np.float64)
 
 
 def default_camera(frame: SceneFrame, aspect: float) -> OrbitCamera:
@@ -214,8 +221,8 @@ def write_screenshot(scenario: Scenario, out: str | Path, at_s: float, width: in
 
 # --- the interactive window ---------------------------------------------------------------
 
-HELP = ("drag: orbit  right/shift-drag: pan  wheel: zoom  space: play/pause  "
-        "right arrow: step  up/down: speed  R: restart  T: targets  C: COM  F: frame  H: help")
+HELP = ("drag: orbit  right/shift-drag: pan  wheel: zoom  space: play/pause  right arrow: step  "
+        "up/down: speed  R: restart  T: targets  C: COM  F: frame and follow  H: help")
 
 
 def run_viewer(scenario: Scenario, width: int = 1280, height: int = 720,
@@ -249,6 +256,8 @@ class _ViewerApp:
         self.fps = 0.0
         self._last_draw = time.perf_counter()
         self.camera: OrbitCamera | None = None
+        self.follow = True  # the camera's target moves with the characters' mean position
+        self._followed: NDArray[np.float64] | None = None
         self.sim: Simulation | None = None
         self._start()
 
@@ -264,7 +273,9 @@ class _ViewerApp:
     def attach(self, window: Any, renderer: Any) -> None:
         self.window, self.renderer = window, renderer
         self.label = _label(self.pyglet, "", 10, window.height - 8, 11)
-        self.help = _label(self.pyglet, HELP, 10, 24, 10)
+        self.help = self.pyglet.text.Label(HELP, x=10, y=10, anchor_y="bottom", font_size=10,
+                                           multiline=True, width=max(window.width - 20, 200),
+                                           color=(25, 25, 30, 255))
         self._frame_camera()
         window.push_handlers(self)
         self.pyglet.clock.schedule_interval(self.update, 1 / 120)
@@ -274,6 +285,7 @@ class _ViewerApp:
         if frame is not None:
             w, h = self.window.get_size()
             self.camera = default_camera(frame, w / max(h, 1))
+            self.follow, self._followed = True, _centroid(frame)
             self._ground(frame, force=True)
 
     def _ground(self, frame: SceneFrame, force: bool = False) -> None:
@@ -316,6 +328,12 @@ class _ViewerApp:
         frame = self.source.latest()
         if frame is None or self.camera is None:
             return
+        centroid = _centroid(frame)
+        if self.follow and self._followed is not None and np.all(np.isfinite(centroid)):
+            shift = centroid - self._followed
+            self.camera = replace(self.camera, target=tuple(
+                float(v) for v in np.asarray(self.camera.target) + shift))
+        self._followed = centroid
         self._ground(frame)
         fw, fh = self.window.get_framebuffer_size()
         self.renderer.draw(frame, self.camera, fw, fh, self.show_targets, self.show_com)
@@ -328,6 +346,7 @@ class _ViewerApp:
 
     def on_resize(self, width: int, height: int) -> None:
         self.label.y = height - 8
+        self.help.width = max(width - 20, 200)
 
     def on_key_press(self, symbol: int, modifiers: int) -> bool | None:
         key = self.pyglet.window.key
@@ -343,6 +362,7 @@ class _ViewerApp:
             self.speed = max(self.speed / 2, 1 / 16)
         elif symbol == key.R:
             self._start()
+            self._followed = None
         elif symbol == key.T:
             self.show_targets = not self.show_targets
         elif symbol == key.C:
@@ -361,6 +381,7 @@ class _ViewerApp:
             return
         if buttons & (mouse.RIGHT | mouse.MIDDLE) or (buttons & mouse.LEFT and modifiers & key.MOD_SHIFT):
             self.camera = self.camera.pan(dx, dy, self.window.height)
+            self.follow = False  # panned by hand: stay there (F frames and follows again)
         elif buttons & mouse.LEFT:
             self.camera = self.camera.orbit(-dx * 0.006, -dy * 0.006)
 
@@ -375,4 +396,4 @@ class _ViewerApp:
 
 
 __all__ = ["SceneSource", "Screenshot", "render_screenshot", "write_screenshot", "run_viewer",
-           "status_line", "default_camera", "replace"]
+           "status_line", "default_camera"]
