@@ -226,6 +226,10 @@ def test_screenshot_shows_the_characters_where_they_are(tmp_path, name, at_s, ca
     assert main(["view", str(SCENARIOS / name), "--screenshot", str(out), "--at", str(at_s),
                  "--size", "640x360"]) == 0
     assert "wrote" in capsys.readouterr().out
+    keep = os.environ.get("ECS_ANIM_SCREENSHOT_DIR")  # CI keeps them for a person to look at
+    if keep:
+        Path(keep).mkdir(parents=True, exist_ok=True)
+        (Path(keep) / out.name).write_bytes(out.read_bytes())
     rgb = read_png(out)
     assert rgb.shape == (360, 640, 3)
     # the same frame rendered in-process gives the camera and joints to check against
