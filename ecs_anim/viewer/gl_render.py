@@ -103,8 +103,10 @@ _GROUND_FS = """
 in vec3 v_normal;
 in vec3 v_world;
 out vec4 frag;
+uniform vec4 hole;  // x0, y0, x1, y1: not drawn inside (where the finer patch is)
 """ + _LIGHTING + """
 void main() {
+    if (all(greaterThan(v_world.xy, hole.xy)) && all(lessThan(v_world.xy, hole.zw))) discard;
     vec2 cell = floor(v_world.xy);
     float checker = mod(cell.x + cell.y, 2.0);
     // far away a metre covers less than a pixel or two: fade the pattern to its mean (no moire)
@@ -180,10 +182,8 @@ class SceneRenderer:
         # coarse ones when there are many (a crowd is small on screen anyway).
         self.meshes = [self._capsule_vao(*capsule_mesh(16, 6)), self._capsule_vao(*capsule_mesh(8, 3))]
         self._keep: list[gl.GLuint] = []
-        self.ground_vao: gl.GLuint | None = None
-        self.ground_count = 0
-        self.ground_bounds: tuple[float, float, float, float] | None = None
-        self._ground_buffers: list[gl.GLuint] = []
+        self._grounds: list[tuple[gl.GLuint, list[gl.GLuint], int]] = []
+        self.ground_bounds: list[tuple[float, float, float, float]] = []
 
     def _capsule_vao(self, vertices: np.ndarray, triangles: np.ndarray) -> tuple[gl.GLuint, int]:
         vao = gl.GLuint()
@@ -199,22 +199,27 @@ class SceneRenderer:
         gl.glBindVertexArray(0)
         return vao, int(triangles.size)
 
-    def set_ground(self, mesh: GroundMesh) -> None:
-        """Upload a new ground patch (replacing the previous one)."""
-        if self.ground_vao is not None:
-            gl.glDeleteVertexArrays(1, ctypes.byref(self.ground_vao))
-            for b in self._ground_buffers:
+    def set_ground(self, near: GroundMesh, far: GroundMesh | None = None) -> None:
+        """Upload the ground (replacing the previous one): a fine ``near`` patch, and a coarse
+        ``far`` one drawn only outside the near one's rectangle."""
+        for vao, buffers, _ in self._grounds:
+            gl.glDeleteVertexArrays(1, ctypes.byref(vao))
+            for b in buffers:
                 gl.glDeleteBuffers(1, ctypes.byref(b))
-        self.ground_vao = gl.GLuint()
-        gl.glGenVertexArrays(1, ctypes.byref(self.ground_vao))
-        gl.glBindVertexArray(self.ground_vao)
-        self._ground_buffers = [_buffer(gl.GL_ARRAY_BUFFER, mesh.vertices)]
-        _attribute(0, 3, 6, 0)
-        _attribute(1, 3, 6, 3)
-        self._ground_buffers.append(_buffer(gl.GL_ELEMENT_ARRAY_BUFFER, mesh.triangles))
-        gl.glBindVertexArray(0)
-        self.ground_count = int(mesh.triangles.size)
-        self.ground_bounds = mesh.bounds
+        self._grounds, self.ground_bounds = [], []
+        for mesh in (near, far):
+            if mesh is None:
+                continue
+            vao = gl.GLuint()
+            gl.glGenVertexArrays(1, ctypes.byref(vao))
+            gl.glBindVertexArray(vao)
+            buffers = [_buffer(gl.GL_ARRAY_BUFFER, mesh.vertices)]
+            _attribute(0, 3, 6, 0)
+            _attribute(1, 3, 6, 3)
+            buffers.append(_buffer(gl.GL_ELEMENT_ARRAY_BUFFER, mesh.triangles))
+            gl.glBindVertexArray(0)
+            self._grounds.append((vao, buffers, int(mesh.triangles.size)))
+            self.ground_bounds.append(mesh.bounds)
 
     def _common(self, program: ShaderProgram, world2clip: np.ndarray, camera: OrbitCamera) -> None:
         program.use()
@@ -245,11 +250,14 @@ class SceneRenderer:
         gl.glCullFace(gl.GL_BACK)
         gl.glFrontFace(gl.GL_CCW)
         world2clip = camera.world2clip(width, height)
-        if self.ground_vao is not None:
+        if self._grounds:
             gl.glDisable(gl.GL_CULL_FACE)
             self._common(self.ground, world2clip, camera)
-            gl.glBindVertexArray(self.ground_vao)
-            gl.glDrawElements(gl.GL_TRIANGLES, self.ground_count, gl.GL_UNSIGNED_INT, ctypes.c_void_p(0))
+            for k, (vao, _, count) in enumerate(self._grounds):
+                # the far patch leaves out the near patch's rectangle
+                self.ground["hole"] = self.ground_bounds[0] if k else (0.0, 0.0, 0.0, 0.0)
+                gl.glBindVertexArray(vao)
+                gl.glDrawElements(gl.GL_TRIANGLES, count, gl.GL_UNSIGNED_INT, ctypes.c_void_p(0))
             gl.glEnable(gl.GL_CULL_FACE)
         self._common(self.capsules, world2clip, camera)
         opaque = [frame.bodies] + ([frame.targets] if show_targets else [])

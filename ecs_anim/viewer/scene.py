@@ -212,10 +212,10 @@ class GroundMesh:
 
 
 def ground_mesh(ground: Ground, centre_xy: tuple[float, float], half_size_m: float,
-                cell_m: float = 0.05) -> GroundMesh:
-    """Sample ``ground.height`` on a square grid around ``centre_xy`` (at most 300 x 300 cells;
-    the cell grows for a larger patch). Normals from central differences."""
-    cells = int(min(max(np.ceil(2 * half_size_m / cell_m), 2), 300))
+                cell_m: float = 0.05, max_cells: int = 300) -> GroundMesh:
+    """Sample ``ground.height`` on a square grid around ``centre_xy`` (at most ``max_cells``
+    cells a side; the cell grows for a larger patch). Normals from central differences."""
+    cells = int(min(max(np.ceil(2 * half_size_m / cell_m), 2), max_cells))
     cell = 2 * half_size_m / cells
     x = centre_xy[0] + np.linspace(-half_size_m, half_size_m, cells + 1)
     y = centre_xy[1] + np.linspace(-half_size_m, half_size_m, cells + 1)
@@ -237,14 +237,22 @@ def ground_mesh(ground: Ground, centre_xy: tuple[float, float], half_size_m: flo
                       (float(x[0]), float(y[0]), float(x[-1]), float(y[-1])))
 
 
-def ground_patch_for(points_in_world: F64, minimum_half_size_m: float = 15.0) -> tuple[tuple[float, float], float]:
-    """Centre (x, y) and half size of a ground patch covering the points (..., 3) with room
-    around them (at least ``minimum_half_size_m``)."""
+#: The near patch reaches this far beyond the characters (m); its cells are at most
+#: :data:`NEAR_CELL_M` (so stairs keep sharp risers) up to :data:`NEAR_MAX_CELLS` a side.
+NEAR_MARGIN_M, NEAR_CELL_M, NEAR_MAX_CELLS = 6.0, 0.04, 500
+
+
+def ground_patches(ground: Ground, points_in_world: F64, far_half_size_m: float
+                   ) -> tuple[GroundMesh, GroundMesh]:
+    """The ground to draw: a fine patch around the points (..., 3) and a coarse one out to
+    ``far_half_size_m`` around them (the renderer cuts the fine one's rectangle out of it)."""
     p = np.asarray(points_in_world, dtype=np.float64).reshape(-1, 3)
     p = p[np.all(np.isfinite(p), axis=1)]
     if p.shape[0] == 0:
-        return (0.0, 0.0), minimum_half_size_m
+        p = np.zeros((1, 3))
     lo, hi = p[:, :2].min(axis=0), p[:, :2].max(axis=0)
-    centre = (lo + hi) / 2
-    half = max(float((hi - lo).max()) / 2 + 4.0, minimum_half_size_m)
-    return (float(centre[0]), float(centre[1])), half
+    centre = (float((lo[0] + hi[0]) / 2), float((lo[1] + hi[1]) / 2))
+    near_half = float((hi - lo).max()) / 2 + NEAR_MARGIN_M
+    near = ground_mesh(ground, centre, near_half, NEAR_CELL_M, NEAR_MAX_CELLS)
+    far = ground_mesh(ground, centre, max(far_half_size_m, near_half * 1.5), 0.25, 200)
+    return near, far

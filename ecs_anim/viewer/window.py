@@ -22,7 +22,7 @@ from ..errors import EcsAnimError
 from ..scenario import Scenario, build_simulation
 from ..simulation import Simulation
 from .camera import OrbitCamera, frame_points
-from .scene import SceneFrame, ground_mesh, ground_patch_for, snapshot
+from .scene import NEAR_MARGIN_M, SceneFrame, ground_patches, snapshot
 
 INSTALL_HINT = ("on Debian/Ubuntu install libegl1 and libgl1-mesa-dri (headless EGL), "
                 "or run under xvfb-run (package xvfb)")
@@ -168,8 +168,7 @@ def render_screenshot(scenario: Scenario, at_s: float, width: int = 1280, height
         frame = source.latest()
         assert frame is not None
         cam = camera or default_camera(frame, width / height)
-        centre, half = ground_patch_for(frame.joints, _patch_half_m(cam))
-        mesh = ground_mesh(sim.ground, centre, half)
+        near, far = ground_patches(sim.ground, frame.joints, _patch_half_m(cam))
     pyglet = _pyglet(headless=True)
     from .gl_render import OffscreenTarget, SceneRenderer
 
@@ -179,7 +178,7 @@ def render_screenshot(scenario: Scenario, at_s: float, width: int = 1280, height
         big_w, big_h = width * SUPERSAMPLE, height * SUPERSAMPLE
         target = OffscreenTarget(big_w, big_h)
         renderer = SceneRenderer()
-        renderer.set_ground(mesh)
+        renderer.set_ground(near, far)
         target.bind()
         renderer.draw(frame, cam, big_w, big_h, show_targets, show_com)
         if status:
@@ -289,19 +288,18 @@ class _ViewerApp:
             self._ground(frame, force=True)
 
     def _ground(self, frame: SceneFrame, force: bool = False) -> None:
-        bounds = self.renderer.ground_bounds
         assert self.sim is not None and self.camera is not None
         wanted = _patch_half_m(self.camera)
         xy = frame.joints[:, 0, :2] if frame.joints.size else np.zeros((0, 2))
-        if not force and bounds is not None and xy.size:
-            x0, y0, x1, y1 = bounds
-            inside = ((xy[:, 0] > x0 + 3) & (xy[:, 0] < x1 - 3) & (xy[:, 1] > y0 + 3)
-                      & (xy[:, 1] < y1 - 3))
-            half = (x1 - x0) / 2
-            if inside.all() and wanted * 0.8 <= half <= wanted * 3:
+        if not force and len(self.renderer.ground_bounds) == 2 and xy.size:
+            (x0, y0, x1, y1), far = self.renderer.ground_bounds
+            edge = NEAR_MARGIN_M / 2
+            inside = ((xy[:, 0] > x0 + edge) & (xy[:, 0] < x1 - edge) & (xy[:, 1] > y0 + edge)
+                      & (xy[:, 1] < y1 - edge))
+            far_half = (far[2] - far[0]) / 2
+            if inside.all() and wanted * 0.8 <= far_half <= wanted * 3:
                 return
-        centre, half = ground_patch_for(frame.joints, wanted)
-        self.renderer.set_ground(ground_mesh(self.sim.ground, centre, half))
+        self.renderer.set_ground(*ground_patches(self.sim.ground, frame.joints, wanted))
 
     # clock -------------------------------------------------------------------------------
 
