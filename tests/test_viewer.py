@@ -20,7 +20,7 @@ import pytest
 from ecs_anim.cli import main
 from ecs_anim.scenario import build_simulation, load_scenario
 from ecs_anim.skeleton import JOINT_INDEX, N_JOINTS
-from ecs_anim.viewer.camera import OrbitCamera, frame_points, look_at, perspective
+from ecs_anim.viewer.camera import OrbitCamera, frame_points, look_at, perspective, spread_yaw
 from ecs_anim.viewer.png import encode_png, read_png
 from ecs_anim.viewer.scene import (
     BODY_CAPSULES,
@@ -100,6 +100,16 @@ def test_frame_points_shows_every_point():
         assert np.all((px >= 0) & (px <= [w, h]))
         # and it uses the view: points reach at least half-way to an edge
         assert np.max(np.abs(px / [w, h] * 2 - 1)) > 0.5
+
+
+def test_spread_yaw_spreads_a_row_of_characters_across_the_image():
+    row = np.stack([np.zeros(5), np.linspace(0, 4, 5)], axis=1)  # along y
+    yaw = spread_yaw(row)
+    cam = frame_points(np.column_stack([row, np.ones(5)]), 16 / 9, OrbitCamera(yaw_rad=yaw))
+    px = cam.project(np.column_stack([row, np.ones(5)]), 1600, 900)
+    assert np.all(np.diff(np.sort(px[:, 0])) > 100)  # well apart on screen
+    assert abs(math.remainder(yaw - OrbitCamera.yaw_rad, 2 * math.pi)) <= math.pi / 2
+    assert spread_yaw(np.zeros((3, 2))) == OrbitCamera.yaw_rad
 
 
 # --- scene arrays --------------------------------------------------------------------------

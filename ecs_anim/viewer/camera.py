@@ -76,7 +76,7 @@ class OrbitCamera:
 
     target: tuple[float, float, float] = (0.0, 0.0, 1.0)
     distance: float = 6.0
-    yaw_rad: float = math.radians(-60.0)
+    yaw_rad: float = math.radians(-105.0)
     pitch_rad: float = math.radians(18.0)
     fov_y_rad: float = math.radians(32.0)
 
@@ -157,3 +157,29 @@ def frame_points(points_in_world: F64, aspect: float, camera: OrbitCamera = Orbi
         middle = (near + far) / 2
         near, far = (near, middle) if fits(middle) else (middle, far)
     return replace(framed, distance=far)
+
+
+def spread_yaw(points_xy: F64, preferred_yaw_rad: float = OrbitCamera.yaw_rad,
+               off_axis_rad: float = math.radians(35.0)) -> float:
+    """An eye azimuth from which points spread in (x, y) overlap little.
+
+    The eye looks ``off_axis_rad`` away from the points' minor axis (principal components of
+    ``points_xy`` (k, 2)), so their main spread runs across the image (cos 35° ≈ 82 % of it)
+    while the view stays oblique; of the four such directions, the one nearest
+    ``preferred_yaw_rad``. Too few or too clustered points (< 0.3 m): ``preferred_yaw_rad``.
+    """
+    p = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
+    p = p[np.all(np.isfinite(p), axis=1)]
+    if p.shape[0] < 2:
+        return preferred_yaw_rad
+    centred = p - p.mean(axis=0)
+    values, vectors = np.linalg.eigh(centred.T @ centred / p.shape[0])
+    if math.sqrt(max(values[-1], 0.0)) < 0.15:
+        return preferred_yaw_rad
+    minor = math.atan2(vectors[1, 0], vectors[0, 0])
+    candidates = [minor + sign * off_axis_rad + k * math.pi for sign in (-1, 1) for k in (0, 1)]
+
+    def gap(a: float) -> float:
+        return abs(math.remainder(a - preferred_yaw_rad, 2 * math.pi))
+
+    return math.remainder(min(candidates, key=gap), 2 * math.pi)

@@ -15,7 +15,7 @@ import esper
 import numpy as np
 from numpy.typing import NDArray
 
-from ..ground import Ground
+from ..ground import Combined, Ground, HeightGrid, Stairs
 from ..morphology import centres_of_mass, leg_length
 from ..simulation import Simulation
 from ..skeleton import JOINT_INDEX
@@ -237,9 +237,24 @@ def ground_mesh(ground: Ground, centre_xy: tuple[float, float], half_size_m: flo
                       (float(x[0]), float(y[0]), float(x[-1]), float(y[-1])))
 
 
-#: The near patch reaches this far beyond the characters (m); its cells are at most
-#: :data:`NEAR_CELL_M` (so stairs keep sharp risers) up to :data:`NEAR_MAX_CELLS` a side.
-NEAR_MARGIN_M, NEAR_CELL_M, NEAR_MAX_CELLS = 6.0, 0.04, 500
+#: The near patch reaches this far beyond the characters (m), with at most this many cells a
+#: side; its cell size comes from :func:`near_cell_m`.
+NEAR_MARGIN_M, NEAR_MAX_CELLS = 6.0, 400
+
+
+def near_cell_m(ground: Ground) -> float:
+    """Cell size that shows this ground's shape near the characters: 4 cm where it has sharp
+    edges (stairs keep upright risers), half a height grid's cell, else 15 cm (smooth grounds)."""
+    parts = list(ground.parts) if isinstance(ground, Combined) else [ground]
+    cell = 0.15
+    for part in parts:
+        if isinstance(part, Stairs):
+            cell = min(cell, 0.04)
+        elif isinstance(part, HeightGrid):
+            cell = min(cell, max(part.cell_m / 2, 0.04))
+        elif isinstance(part, Combined):
+            cell = min(cell, near_cell_m(part))
+    return cell
 
 
 def ground_patches(ground: Ground, points_in_world: F64, far_half_size_m: float
@@ -253,6 +268,6 @@ def ground_patches(ground: Ground, points_in_world: F64, far_half_size_m: float
     lo, hi = p[:, :2].min(axis=0), p[:, :2].max(axis=0)
     centre = (float((lo[0] + hi[0]) / 2), float((lo[1] + hi[1]) / 2))
     near_half = float((hi - lo).max()) / 2 + NEAR_MARGIN_M
-    near = ground_mesh(ground, centre, near_half, NEAR_CELL_M, NEAR_MAX_CELLS)
+    near = ground_mesh(ground, centre, near_half, near_cell_m(ground), NEAR_MAX_CELLS)
     far = ground_mesh(ground, centre, max(far_half_size_m, near_half * 1.5), 0.25, 200)
     return near, far

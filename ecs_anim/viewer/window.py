@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from ..errors import EcsAnimError
 from ..scenario import Scenario, build_simulation
 from ..simulation import Simulation
-from .camera import OrbitCamera, frame_points
+from .camera import OrbitCamera, frame_points, spread_yaw
 from .scene import NEAR_MARGIN_M, SceneFrame, ground_patches, snapshot
 
 INSTALL_HINT = ("on Debian/Ubuntu install libegl1 and libgl1-mesa-dri (headless EGL), "
@@ -137,7 +137,8 @@ def default_camera(frame: SceneFrame, aspect: float) -> OrbitCamera:
     points = [frame.joints.reshape(-1, 3)]
     if frame.targets.shape[0]:
         points.append(frame.targets[:, 0:3].astype(np.float64))
-    return frame_points(np.concatenate(points), aspect)
+    yaw = spread_yaw(frame.joints[:, 0, :2]) if frame.joints.shape[0] else OrbitCamera.yaw_rad
+    return frame_points(np.concatenate(points), aspect, OrbitCamera(yaw_rad=yaw))
 
 
 # --- screenshots --------------------------------------------------------------------------
