@@ -11,7 +11,7 @@ import os
 import subprocess
 import sys
 from dataclasses import replace
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -115,7 +115,7 @@ def test_spread_yaw_spreads_a_row_of_characters_across_the_image():
 # --- scene arrays --------------------------------------------------------------------------
 
 
-@lru_cache(maxsize=None)
+@cache
 def _scenario(name: str):  # type: ignore[no-untyped-def]
     return load_scenario(SCENARIOS / name)
 
@@ -172,7 +172,7 @@ def test_png_round_trip(tmp_path):
 # --- rendering -----------------------------------------------------------------------------
 
 
-@lru_cache(maxsize=None)
+@cache
 def _headless_gl() -> str | None:
     """None if a headless OpenGL 3.3 context can be made, else why not (in a subprocess, so a
     crashing driver cannot take the test run with it)."""
@@ -180,7 +180,8 @@ def _headless_gl() -> str | None:
             "from ecs_anim.viewer.window import _make_window, _pyglet\n"
             "w = _make_window(_pyglet(True), 16, 16, visible=False); print('ok'); w.close()")
     try:
-        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                             timeout=60, check=False)
     except subprocess.TimeoutExpired:
         return "making a headless OpenGL context timed out"
     if out.returncode == 0 and "ok" in out.stdout:

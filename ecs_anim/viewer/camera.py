@@ -22,12 +22,19 @@ F64 = NDArray[np.float64]
 MAX_PITCH_RAD = math.radians(89.0)
 
 
-def look_at(eye: F64, target: F64, up: F64 = np.array([0.0, 0.0, 1.0])) -> F64:
+Z_UP = (0.0, 0.0, 1.0)
+
+
+def _point(v: F64) -> tuple[float, float, float]:
+    return (float(v[0]), float(v[1]), float(v[2]))
+
+
+def look_at(eye: F64, target: F64, up: tuple[float, float, float] = Z_UP) -> F64:
     """world2view (4, 4): the eye at the origin looking down its -z axis at ``target``."""
-    eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
+    eye, target = np.asarray(eye, dtype=np.float64), np.asarray(target, dtype=np.float64)
     forward = target - eye
     forward = forward / max(float(np.linalg.norm(forward)), 1e-12)
-    side = np.cross(forward, up)
+    side = np.cross(forward, np.asarray(up, dtype=np.float64))
     if np.linalg.norm(side) < 1e-9:  # looking straight along up: any side will do
         side = np.cross(forward, np.array([0.0, 1.0, 0.0]))
     side = side / np.linalg.norm(side)
@@ -119,7 +126,7 @@ class OrbitCamera:
         side, up = world2view[0, :3], world2view[1, :3]
         metres_per_px = 2.0 * self.distance * math.tan(self.fov_y_rad / 2.0) / max(height_px, 1)
         shift = (-dx_px * side - dy_px * up) * metres_per_px
-        return replace(self, target=tuple(float(v) for v in np.asarray(self.target) + shift))
+        return replace(self, target=_point(np.asarray(self.target) + shift))
 
 
 def frame_points(points_in_world: F64, aspect: float, camera: OrbitCamera = OrbitCamera(),
@@ -142,8 +149,8 @@ def frame_points(points_in_world: F64, aspect: float, camera: OrbitCamera = Orbi
     # The bounding sphere always fits; then come as close as the points allow (bisection on
     # the distance: every point in front of the eye and inside 1 / margin of the view).
     far = margin * radius / math.sin(min(half_fov_x, half_fov_y))
-    framed = replace(camera, target=tuple(float(v) for v in centre), distance=far)
-    w, h = 1000, max(int(round(1000 / aspect)), 1)
+    framed = replace(camera, target=_point(centre), distance=far)
+    w, h = 1000, max(round(1000 / aspect), 1)
 
     def fits(distance: float) -> bool:
         pixels = replace(framed, distance=distance).project(p, w, h)

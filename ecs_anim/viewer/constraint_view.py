@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ..constraint_table import ConstraintTable
 from ..simulation import Simulation
 from ..skeleton import JOINT_INDEX
 
@@ -34,7 +35,7 @@ class ConstraintMarks:
     @property
     def error_m(self) -> F64:
         """(m,) distance from each constrained point to its target, metres."""
-        return np.linalg.norm(self.target - self.point, axis=-1)
+        return np.asarray(np.linalg.norm(self.target - self.point, axis=-1), dtype=np.float64)
 
 
 def posture_time_s(sim: Simulation) -> float:
@@ -42,13 +43,13 @@ def posture_time_s(sim: Simulation) -> float:
     return max(sim.tick - 1, 0) * sim.dt
 
 
-def _joint_of_constraint(table: object) -> NDArray[np.int64]:
+def _joint_of_constraint(table: ConstraintTable) -> NDArray[np.int64]:
     """(m,) index of the constrained joint of every constraint of the table."""
     from ..constraint_table import POINTS
 
     lookup = {slot_role: JOINT_INDEX[joint] for joint, slot_role in POINTS.items()}
-    slots = np.asarray(getattr(table, "slot"), dtype=np.int64)
-    roles = np.asarray(getattr(table, "role"), dtype=np.int64)
+    slots = np.asarray(table.slot, dtype=np.int64)
+    roles = np.asarray(table.role, dtype=np.int64)
     return np.array([lookup.get((int(s), int(r)), 0) for s, r in zip(slots, roles)], dtype=np.int64)
 
 

@@ -98,7 +98,8 @@ def team_colours(teams: list[str]) -> F64:
         key = team if team else f"\0{i}"
         index.append(keys.setdefault(key, len(keys)))
     palette = np.array(TEAM_PALETTE)
-    return palette[np.array(index, dtype=np.int64) % len(palette)].reshape(-1, 3)
+    return np.asarray(palette[np.array(index, dtype=np.int64) % len(palette)].reshape(-1, 3),
+                      dtype=np.float64)
 
 
 def pack_instances(a: F64, b: F64, radius: F64, rgba: F64) -> F32:
@@ -128,7 +129,8 @@ def priority_colours(priority: F64) -> F64:
         return np.zeros((0, 3))
     lo, hi = float(priority.min()), float(priority.max())
     t = np.ones_like(priority) if hi <= lo else (priority - lo) / (hi - lo)
-    return t[:, None] * np.array(TARGET_HIGH) + (1 - t[:, None]) * np.array(TARGET_LOW)
+    rgb: F64 = t[:, None] * np.array(TARGET_HIGH) + (1 - t[:, None]) * np.array(TARGET_LOW)
+    return rgb
 
 
 def target_instances(marks: ConstraintMarks, scale_m: float = 1.0) -> F32:

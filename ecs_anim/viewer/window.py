@@ -78,9 +78,9 @@ def _pyglet(headless: bool) -> Any:
     elif bool(pyglet.options["headless"]) != headless and headless:
         pass  # already imported in the other mode: use what there is
     try:
-        import pyglet.window  # noqa: F401
+        import pyglet.window
         from pyglet import gl  # noqa: F401
-    except Exception as exc:
+    except Exception as exc:  # noqa: BLE001 - any loader failure means "no OpenGL here"
         raise EcsAnimError(f"cannot load OpenGL ({type(exc).__name__}: {exc}); {INSTALL_HINT}") from None
     return pyglet
 
@@ -102,7 +102,7 @@ def _make_window(pyglet: Any, width: int, height: int, visible: bool, samples: i
     for config in _gl_config(pyglet, samples):
         try:
             window = window_cls(width=width, height=height, visible=visible, config=config, **kwargs)
-        except Exception as exc:  # NoSuchConfigException, EGL/X errors
+        except Exception as exc:  # noqa: BLE001 - NoSuchConfigException, EGL/X errors
             last = exc
             continue
         version = tuple(int(v) for v in pyglet.gl.gl_info.get_version()[:2])
@@ -160,7 +160,7 @@ def render_screenshot(scenario: Scenario, at_s: float, width: int = 1280, height
     """Simulate ``scenario`` up to ``at_s`` seconds and render that frame without a screen."""
     if not (1 <= width <= 8192 and 1 <= height <= 8192):
         raise EcsAnimError(f"--size: width and height must be 1-8192 pixels, got {width}x{height}")
-    ticks = max(int(round(at_s * scenario.fps)), 0) + 1  # the posture at t = at_s
+    ticks = max(round(at_s * scenario.fps), 0) + 1  # the posture at t = at_s
     source = SceneSource()
     with build_simulation(scenario, window=True) as sim:
         sim.renderer = source
@@ -201,7 +201,7 @@ def _draw_status(pyglet: Any, window: Any, text: str, width: int, height: int) -
         window.projection = Mat4.orthogonal_projection(0, width, 0, height, -255, 255)
         label = _label(pyglet, text, 10, height - 8, 11)
         label.draw()
-    except Exception as exc:  # fonts missing
+    except Exception as exc:  # noqa: BLE001 - fonts missing
         print(f"warning: no status line ({type(exc).__name__}: {exc})", file=sys.stderr)
 
 
@@ -330,14 +330,14 @@ class _ViewerApp:
         centroid = _centroid(frame)
         if self.follow and self._followed is not None and np.all(np.isfinite(centroid)):
             shift = centroid - self._followed
-            self.camera = replace(self.camera, target=tuple(
-                float(v) for v in np.asarray(self.camera.target) + shift))
+            moved = np.asarray(self.camera.target) + shift
+            self.camera = replace(self.camera, target=(float(moved[0]), float(moved[1]),
+                                                       float(moved[2])))
         self._followed = centroid
         self._ground(frame)
         fw, fh = self.window.get_framebuffer_size()
         self.renderer.draw(frame, self.camera, fw, fh, self.show_targets, self.show_com)
-        w, h = self.window.get_size()
-        self.label.y = h - 8
+        self.label.y = self.window.height - 8
         self.label.text = status_line(frame, self.fps, self.speed, self.paused)
         self.label.draw()
         if self.show_help:
@@ -394,5 +394,5 @@ class _ViewerApp:
             self.sim.close()
 
 
-__all__ = ["SceneSource", "Screenshot", "render_screenshot", "write_screenshot", "run_viewer",
-           "status_line", "default_camera"]
+__all__ = ["SceneSource", "Screenshot", "default_camera", "render_screenshot", "run_viewer",
+           "status_line", "write_screenshot"]
