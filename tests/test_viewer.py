@@ -137,6 +137,38 @@ def test_snapshot_has_one_capsule_row_per_body_part():
         assert frame.max_error_m is not None and frame.max_error_m >= 0
 
 
+def test_body_instances_batched_equal_one_character_at_a_time():
+    from ecs_anim.viewer.scene import body_instances
+
+    rng = np.random.default_rng(3)
+    n = 7
+    positions = rng.normal(size=(n, N_JOINTS, 3))
+    lengths = rng.uniform(0.1, 0.5, (n, 23))
+    colours = rng.uniform(0, 1, (n, 3))
+    batched = body_instances(positions, lengths, colours)
+    single = np.concatenate([body_instances(positions[i:i + 1], lengths[i:i + 1], colours[i:i + 1])
+                             for i in range(n)])
+    assert np.array_equal(batched, single)
+    assert body_instances(positions[:0], lengths[:0], colours[:0]).shape == (0, INSTANCE_FLOATS)
+
+
+def test_snapshot_of_a_crowd():
+    from ecs_anim.components import MotionPlayer, Placement
+    from ecs_anim.morphology import Morphology
+    from ecs_anim.simulation import Simulation
+
+    motions = _scenario("terrain_walk.yaml").motions
+    with Simulation({"walk": motions["walk"]}) as sim:
+        for i in range(300):
+            sim.spawn(f"c{i}", Morphology.from_stature(1.2 + i / 500), MotionPlayer("walk"),
+                      Placement((1.5 * (i // 20), 1.5 * (i % 20))), team=f"t{i % 3}")
+        sim.step()
+        frame = snapshot(sim)
+        assert frame.bodies.shape == (300 * len(BODY_CAPSULES), INSTANCE_FLOATS)
+        colours = frame.bodies[::len(BODY_CAPSULES), 7:10]
+        assert len({tuple(c) for c in np.round(colours, 5)}) == 3  # one colour per team
+
+
 def test_team_colours_share_by_team_and_differ_by_index():
     c = team_colours(["red", "", "red", "", "blue"])
     assert np.allclose(c[0], c[2])

@@ -66,17 +66,27 @@ def status_line(frame: SceneFrame, fps: float | None = None, speed: float = 1.0,
     return "  |  ".join(parts)
 
 
+def offscreen_mode() -> bool:
+    """Whether screenshots use pyglet's headless (EGL) mode: yes, unless ``PYGLET_HEADLESS``
+    says otherwise, or there is a display and no EGL library (then a hidden X window)."""
+    import ctypes.util
+
+    explicit = os.environ.get("PYGLET_HEADLESS")
+    if explicit:
+        return explicit in ("true", "TRUE", "True", "1")
+    has_display = bool(os.environ.get("DISPLAY"))
+    return not (has_display and ctypes.util.find_library("EGL") is None)
+
+
 def _pyglet(headless: bool) -> Any:
     """Import pyglet for drawing, headless (EGL, no screen) or not. One-line errors."""
     try:
         import pyglet
     except ImportError as exc:  # pragma: no cover - a dependency
         raise EcsAnimError(f"pyglet is not installed ({exc}); pip install 'pyglet>=2,<3'") from None
-    if "pyglet.window" not in sys.modules:
+    if "pyglet.window" not in sys.modules:  # the mode is fixed once pyglet.window is imported
         pyglet.options["headless"] = headless
         pyglet.options["shadow_window"] = False
-    elif bool(pyglet.options["headless"]) != headless and headless:
-        pass  # already imported in the other mode: use what there is
     try:
         import pyglet.window
         from pyglet import gl  # noqa: F401
@@ -170,7 +180,7 @@ def render_screenshot(scenario: Scenario, at_s: float, width: int = 1280, height
         assert frame is not None
         cam = camera or default_camera(frame, width / height)
         near, far = ground_patches(sim.ground, frame.joints, _patch_half_m(cam))
-    pyglet = _pyglet(headless=True)
+    pyglet = _pyglet(headless=offscreen_mode())
     from .gl_render import OffscreenTarget, SceneRenderer
 
     window = _make_window(pyglet, 16, 16, visible=False)
