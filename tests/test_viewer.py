@@ -10,7 +10,7 @@ import math
 import os
 import subprocess
 import sys
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from functools import cache
 from pathlib import Path
 
@@ -169,6 +169,83 @@ def test_snapshot_of_a_crowd():
         assert len({tuple(c) for c in np.round(colours, 5)}) == 3  # one colour per team
 
 
+@dataclass
+class _FullTable:
+    """A stand-in with the columns of the full constraint table (body points, kinds, areas,
+    the solver's residual), to check the viewer's accessors read that shape too."""
+
+    owner: np.ndarray
+    kind: np.ndarray
+    segment: np.ndarray
+    fraction: np.ndarray
+    priority: np.ndarray
+    target_kind: np.ndarray
+    target_world: np.ndarray
+    target_row: np.ndarray
+    target_segment: np.ndarray
+    target_fraction: np.ndarray
+    area_shape: np.ndarray
+    area_low: np.ndarray
+    area_high: np.ndarray
+    area_radius: np.ndarray
+    area_normal: np.ndarray
+    error: np.ndarray
+
+    @property
+    def m(self) -> int:
+        return int(self.owner.shape[0])
+
+    def weights(self, time_s, clip=None, clip_time_s=None):  # type: ignore[no-untyped-def]
+        return np.ones(self.m)
+
+
+def _full_table() -> _FullTable:
+    from ecs_anim.skeleton import LENGTH_INDEX
+
+    fa, lw = LENGTH_INDEX["forearm_r"], LENGTH_INDEX["head"]
+    # 0: wrist_r -> world point (position); 1: wrist_r at the other's head top (distance);
+    # 2: orientation (not drawn); 3-5: areas sphere, box, half-space at world points
+    return _FullTable(
+        owner=np.array([0, 1, 0, 0, 0, 1]), kind=np.array([0, 1, 3, 2, 2, 2]),
+        segment=np.array([fa] * 6), fraction=np.array([1.0, 1.0, 1.0, 1.0, 1.0, 1.0]),
+        priority=np.array([10.0, 5.0, 1.0, 1.0, 1.0, 1.0]),
+        target_kind=np.array([0, 1, 0, 0, 0, 0]),
+        target_world=np.array([[0.45, -0.35, 1.25], [0, 0, 0], [0, 0, 1], [0.5, 0.5, 1.0],
+                               [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]),
+        target_row=np.array([0, 0, 0, 0, 0, 0]), target_segment=np.array([0, lw, 0, 0, 0, 0]),
+        target_fraction=np.array([0.0, 1.0, 0.0, 0.0, 0.0, 0.0]),
+        area_shape=np.array([0, 0, 0, 2, 1, 3]),
+        area_low=np.array([[0, 0, 0]] * 4 + [[-0.2, -0.2, 0.0], [0, 0, 0]], dtype=float),
+        area_high=np.array([[0, 0, 0]] * 4 + [[0.2, 0.2, 1.5], [0, 0, 0]], dtype=float),
+        area_radius=np.array([0, 0, 0, 0.3, 0, 0], dtype=float),
+        area_normal=np.array([[0, 0, 1]] * 5 + [[0, 1, 0]], dtype=float),
+        error=np.array([0.002, np.nan, 0.1, 0.0, 0.0, 0.0]))
+
+
+def test_accessors_read_the_full_constraint_table():
+    from ecs_anim.viewer.constraint_view import constraint_marks, restricted_areas
+    from ecs_anim.viewer.scene import area_instances
+
+    with build_simulation(_scenario("reach_and_touch.yaml")) as sim:
+        sim.step()
+        sim.constraints = _full_table()  # type: ignore[assignment]
+        p = sim.store.positions
+        marks = constraint_marks(sim)
+        assert marks.target.shape == (2, 3)  # orientation and areas are not point targets
+        assert np.allclose(marks.point, p[[0, 1], JOINT_INDEX["wrist_r"]])
+        assert np.allclose(marks.target[1], p[0, JOINT_INDEX["head_top"]])
+        assert marks.error_m[0] == pytest.approx(0.002)  # the solver's residual
+        assert marks.error_m[1] == pytest.approx(np.linalg.norm(marks.target[1] - marks.point[1]))
+        areas = restricted_areas(sim)
+        assert np.allclose(areas.sphere_centre, [[0.5, 0.5, 1.0]])
+        assert np.allclose(areas.box_low, [[0.8, -0.2, 0.0]]) and np.allclose(areas.box_high, [[1.2, 0.2, 1.5]])
+        assert np.allclose(areas.plane_normal, [[0, 1, 0]])
+        rows = area_instances(areas)
+        assert rows.shape == (1 + 12 + 5, INSTANCE_FLOATS)
+        frame = snapshot(sim)
+        assert frame.areas.shape == rows.shape and frame.targets.shape == (4, INSTANCE_FLOATS)
+
+
 def test_team_colours_share_by_team_and_differ_by_index():
     c = team_colours(["red", "", "red", "", "blue"])
     assert np.allclose(c[0], c[2])
@@ -304,6 +381,25 @@ def test_screenshot_without_targets_and_com_hides_them():
 
     assert red_blue_yellow(shown.rgb) > 30
     assert red_blue_yellow(hidden.rgb) < red_blue_yellow(shown.rgb) / 5
+
+
+def test_restricted_areas_are_drawn():
+    _need_gl()
+    from ecs_anim.viewer.window import render_frame
+
+    with build_simulation(_scenario("reach_and_touch.yaml")) as sim:
+        sim.step()
+        plain = snapshot(sim)
+        sim.constraints = _full_table()  # type: ignore[assignment]
+        with_areas = snapshot(sim)
+        ground = sim.ground
+    shot = render_frame(with_areas, ground, 320, 180, status=False)
+    without = render_frame(plain, ground, 320, 180, camera=shot.camera, status=False)
+    r, g, b = (shot.rgb[..., k].astype(int) for k in range(3))
+    magenta = (r > 150) & (b > 90) & (g < 120) & (r - g > 60)
+    r0, g0, b0 = (without.rgb[..., k].astype(int) for k in range(3))
+    assert magenta.sum() > 50
+    assert ((r0 > 150) & (b0 > 90) & (g0 < 120) & (r0 - g0 > 60)).sum() == 0
 
 
 def test_screenshot_refuses_to_overwrite(tmp_path, capsys):

@@ -271,7 +271,7 @@ class SceneRenderer:
             gl.glDisable(gl.GL_DEPTH_TEST)
             self._instances(frame.com)
             gl.glEnable(gl.GL_DEPTH_TEST)
-        if frame.areas.shape[0]:
+        if show_targets and frame.areas.shape[0]:
             gl.glDepthMask(gl.GL_FALSE)
             self._instances(frame.areas)
             gl.glDepthMask(gl.GL_TRUE)

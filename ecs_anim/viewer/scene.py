@@ -21,6 +21,7 @@ from ..simulation import Simulation
 from ..skeleton import JOINT_INDEX
 from .constraint_view import (
     ConstraintMarks,
+    RestrictedAreas,
     constraint_marks,
     max_constraint_error_m,
     posture_time_s,
@@ -146,6 +147,45 @@ def target_instances(marks: ConstraintMarks, scale_m: float = 1.0) -> F32:
     return np.concatenate([spheres, rods])
 
 
+_BOX_CORNERS = np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], dtype=np.float64)
+_BOX_EDGES = np.array([(a, b) for a in range(8) for b in range(a + 1, 8)
+                       if bin(a ^ b).count("1") == 1])  # (12, 2) corners one axis apart
+AREA_LINE_M = 0.008
+PLANE_HALF_SIZE_M = 1.0
+
+
+def area_instances(areas: RestrictedAreas) -> F32:
+    """Restricted areas: a translucent sphere per sphere, the 12 edges of each box, and for a
+    half-space a 2 m square outline in its boundary plane with a rod along its normal (the
+    allowed side)."""
+    rows = []
+    k = areas.sphere_centre.shape[0]
+    rows.append(pack_instances(areas.sphere_centre, areas.sphere_centre, areas.sphere_radius,
+                               np.tile([*AREA_COLOUR, 0.25], (k, 1))))
+    low, high = areas.box_low, areas.box_high
+    corners = low[:, None, :] + _BOX_CORNERS[None] * (high - low)[:, None, :]  # (b, 8, 3)
+    a, b = corners[:, _BOX_EDGES[:, 0]].reshape(-1, 3), corners[:, _BOX_EDGES[:, 1]].reshape(-1, 3)
+    rows.append(pack_instances(a, b, np.full(a.shape[0], AREA_LINE_M),
+                               np.tile([*AREA_COLOUR, 1.0], (a.shape[0], 1))))
+    point, normal = areas.plane_point, areas.plane_normal
+    if point.shape[0]:
+        n = normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+        helper = np.where((np.abs(n[:, 2]) < 0.9)[:, None], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
+        u = np.cross(n, helper)
+        u /= np.linalg.norm(u, axis=1, keepdims=True)
+        v = np.cross(n, u)
+        h = PLANE_HALF_SIZE_M
+        square = np.stack([point + h * (su * u + sv * v)
+                           for su, sv in ((-1, -1), (1, -1), (1, 1), (-1, 1))], axis=1)  # (c, 4, 3)
+        a = square.reshape(-1, 3)
+        b = np.roll(square, -1, axis=1).reshape(-1, 3)
+        a = np.concatenate([a, point])
+        b = np.concatenate([b, point + 0.3 * n])
+        rows.append(pack_instances(a, b, np.full(a.shape[0], AREA_LINE_M),
+                                   np.tile([*AREA_COLOUR, 1.0], (a.shape[0], 1))))
+    return np.concatenate(rows)
+
+
 def com_instances(com: F64, radius_m: F64) -> F32:
     """A yellow sphere per centre of mass: com (n, 3), radius (n,)."""
     rgba = np.tile(np.array([*COM_COLOUR, 1.0]), (com.shape[0], 1))
@@ -157,7 +197,7 @@ class SceneFrame:
     """One drawable snapshot of a simulation.
 
     bodies, targets, com, areas : (k, INSTANCE_FLOATS) float32 instance rows (areas are drawn
-    translucent); joints (n, N_JOINTS, 3) world metres (for framing); time_s the posture's
+    last, blended, without writing depth); joints (n, N_JOINTS, 3) world metres (for framing); time_s the posture's
     simulation time; max_error_m the largest distance to target of fully active constraints
     (None without any); n_characters.
     """
@@ -193,10 +233,8 @@ def snapshot(sim: Simulation, colours: F64 | None = None) -> SceneFrame:
         com_rows = com_instances(com, 0.06 * leg_length(st.lengths[ok]))
     else:
         com_rows = np.zeros((0, INSTANCE_FLOATS), np.float32)
-    areas = restricted_areas(sim)
-    area_rgba = np.tile(np.array([*AREA_COLOUR, 0.3]), (areas.radius.shape[0], 1))
-    area_rows = pack_instances(areas.centre, areas.centre, areas.radius, area_rgba)
-    return SceneFrame(bodies, targets, com_rows, area_rows, positions[ok].copy(),
+    return SceneFrame(bodies, targets, com_rows, area_instances(restricted_areas(sim)),
+                      positions[ok].copy(),
                       posture_time_s(sim), max_constraint_error_m(marks), int(ok.sum()))
 
 

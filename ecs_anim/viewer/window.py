@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import EcsAnimError
+from ..ground import Ground
 from ..scenario import Scenario, build_simulation
 from ..simulation import Simulation
 from .camera import OrbitCamera, frame_points, spread_yaw
@@ -178,8 +179,16 @@ def render_screenshot(scenario: Scenario, at_s: float, width: int = 1280, height
             sim.step()
         frame = source.latest()
         assert frame is not None
-        cam = camera or default_camera(frame, width / height)
-        near, far = ground_patches(sim.ground, frame.joints, _patch_half_m(cam))
+        return render_frame(frame, sim.ground, width, height, camera, show_targets, show_com,
+                            status)
+
+
+def render_frame(frame: SceneFrame, ground: Ground, width: int, height: int,
+                 camera: OrbitCamera | None = None, show_targets: bool = True,
+                 show_com: bool = True, status: bool = True) -> Screenshot:
+    """Render one frame offscreen (no window shown); the camera frames it when not given."""
+    cam = camera or default_camera(frame, width / height)
+    near, far = ground_patches(ground, frame.joints, _patch_half_m(cam))
     pyglet = _pyglet(headless=offscreen_mode())
     from .gl_render import OffscreenTarget, SceneRenderer
 
@@ -404,5 +413,5 @@ class _ViewerApp:
             self.sim.close()
 
 
-__all__ = ["SceneSource", "Screenshot", "default_camera", "render_screenshot", "run_viewer",
-           "status_line", "write_screenshot"]
+__all__ = ["SceneSource", "Screenshot", "default_camera", "render_frame", "render_screenshot",
+           "run_viewer", "status_line", "write_screenshot"]
