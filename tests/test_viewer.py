@@ -154,6 +154,7 @@ def test_body_instances_batched_equal_one_character_at_a_time():
 
 def test_snapshot_of_a_crowd():
     from ecs_anim.components import MotionPlayer, Placement
+
     from ecs_anim.morphology import Morphology
     from ecs_anim.simulation import Simulation
 

@@ -144,7 +144,8 @@ def max_constraint_error_m(marks: ConstraintMarks) -> float | None:
 def restricted_areas(sim: Simulation) -> RestrictedAreas:
     """The active restricted areas, placed at their targets (none with a table that has no
     ``area_shape`` column)."""
-    table, positions = sim.constraints, sim.store.positions
+    table: Any = sim.constraints
+    positions = sim.store.positions
     if (table.m == 0 or not hasattr(table, "area_shape") or positions.shape[0] != sim.store.n
             or positions.shape[0] == 0):
         return RestrictedAreas.none()

@@ -149,7 +149,7 @@ def target_instances(marks: ConstraintMarks, scale_m: float = 1.0) -> F32:
 
 _BOX_CORNERS = np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], dtype=np.float64)
 _BOX_EDGES = np.array([(a, b) for a in range(8) for b in range(a + 1, 8)
-                       if bin(a ^ b).count("1") == 1])  # (12, 2) corners one axis apart
+                       if (a ^ b).bit_count() == 1])  # (12, 2) corners one axis apart
 AREA_LINE_M = 0.008
 PLANE_HALF_SIZE_M = 1.0
 
