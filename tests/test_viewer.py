@@ -403,6 +403,50 @@ def test_restricted_areas_are_drawn():
     assert ((r0 > 150) & (b0 > 90) & (g0 < 120) & (r0 - g0 > 60)).sum() == 0
 
 
+def test_viewer_window_controls():
+    """The interactive viewer in an offscreen window: clock, keys, mouse, follow, restart."""
+    _need_gl()
+    import pyglet
+
+    from ecs_anim.viewer.window import open_viewer
+
+    app = open_viewer(_scenario("reach_and_touch.yaml"), 320, 180, headless=True)
+    key, mouse = pyglet.window.key, pyglet.window.mouse
+    try:
+        assert app.sim is not None and app.sim.tick == 1 and app.camera is not None
+        app.update(0.1)  # 0.1 s at 30 Hz: 3 fixed ticks
+        assert app.sim.tick == 4
+        app.update(10.0)  # a long stall is not caught up (at most 8 ticks a frame)
+        assert app.sim.tick == 4 + app.MAX_STEPS_PER_FRAME
+        app.on_key_press(key.SPACE, 0)
+        tick = app.sim.tick
+        app.update(1.0)
+        assert app.paused and app.sim.tick == tick
+        app.on_key_press(key.RIGHT, 0)
+        assert app.sim.tick == tick + 1
+        app.on_key_press(key.UP, 0)
+        assert app.speed == 2.0
+        app.on_key_press(key.T, 0)
+        app.on_key_press(key.C, 0)
+        assert not app.show_targets and not app.show_com
+        yaw, distance = app.camera.yaw_rad, app.camera.distance
+        app.on_mouse_drag(10, 10, 50, 0, mouse.LEFT, 0)
+        app.on_mouse_scroll(10, 10, 0, 1)
+        assert app.camera.yaw_rad != yaw and app.camera.distance < distance
+        app.on_mouse_drag(10, 10, 5, 5, mouse.RIGHT, 0)
+        assert not app.follow
+        app.on_draw()
+        assert "paused" in app.label.text and "speed x2" in app.label.text
+        app.on_key_press(key.F, 0)
+        assert app.follow
+        app.on_key_press(key.R, 0)
+        assert app.sim.tick == 1
+        app.on_draw()
+    finally:
+        app.on_close()
+        app.window.close()
+
+
 def test_screenshot_refuses_to_overwrite(tmp_path, capsys):
     out = tmp_path / "x.png"
     out.write_bytes(b"keep")

@@ -20,6 +20,9 @@ from .camera import OrbitCamera
 from .scene import INSTANCE_FLOATS, GroundMesh, SceneFrame
 
 SKY = (0.82, 0.84, 0.86)
+#: Width of the band where the near and far ground patches overlap, and how much lower the far
+#: one is drawn there (metres).
+GROUND_OVERLAP_M, GROUND_SINK_M = 0.5, 0.04
 #: Above this many capsule instances in one draw, the coarse capsule mesh is used.
 FINE_CAPSULES_UP_TO = 4000
 
@@ -89,10 +92,11 @@ _GROUND_VS = """
 layout(location = 0) in vec3 position;
 layout(location = 1) in vec3 normal;
 uniform mat4 world2clip;
+uniform float sink;  // the far patch sits this much lower, under the near one where they overlap
 out vec3 v_normal;
 out vec3 v_world;
 void main() {
-    v_world = position;
+    v_world = position - vec3(0.0, 0.0, sink);
     v_normal = normal;
     gl_Position = world2clip * vec4(position, 1.0);
 }
@@ -254,8 +258,12 @@ class SceneRenderer:
             gl.glDisable(gl.GL_CULL_FACE)
             self._common(self.ground, world2clip, camera)
             for k, (vao, _, count) in enumerate(self._grounds):
-                # the far patch leaves out the near patch's rectangle
-                self.ground["hole"] = self.ground_bounds[0] if k else (0.0, 0.0, 0.0, 0.0)
+                # the far patch leaves out the near patch's rectangle, less a band where both
+                # are drawn (the far one a little lower), so no crack opens between them
+                x0, y0, x1, y1 = self.ground_bounds[0]
+                band = GROUND_OVERLAP_M
+                self.ground["hole"] = (x0 + band, y0 + band, x1 - band, y1 - band) if k else (0.0,) * 4
+                self.ground["sink"] = GROUND_SINK_M if k else 0.0
                 gl.glBindVertexArray(vao)
                 gl.glDrawElements(gl.GL_TRIANGLES, count, gl.GL_UNSIGNED_INT, ctypes.c_void_p(0))
             gl.glEnable(gl.GL_CULL_FACE)

@@ -252,9 +252,12 @@ class GroundMesh:
 
 
 def ground_mesh(ground: Ground, centre_xy: tuple[float, float], half_size_m: float,
-                cell_m: float = 0.05, max_cells: int = 300) -> GroundMesh:
+                cell_m: float = 0.05, max_cells: int = 300, skirt_m: float = 0.0) -> GroundMesh:
     """Sample ``ground.height`` on a square grid around ``centre_xy`` (at most ``max_cells``
-    cells a side; the cell grows for a larger patch). Normals from central differences."""
+    cells a side; the cell grows for a larger patch). Normals from central differences.
+
+    ``skirt_m`` > 0 hangs a vertical strip that deep from the border, so where this patch meets
+    a coarser one no crack shows the sky."""
     cells = int(min(max(np.ceil(2 * half_size_m / cell_m), 2), max_cells))
     cell = 2 * half_size_m / cells
     x = centre_xy[0] + np.linspace(-half_size_m, half_size_m, cells + 1)
@@ -273,7 +276,23 @@ def ground_mesh(ground: Ground, centre_xy: tuple[float, float], half_size_m: flo
     v00 = (j * side + i).reshape(-1)
     v10, v01, v11 = v00 + 1, v00 + side, v00 + side + 1
     triangles = np.concatenate([np.stack([v00, v10, v11], 1), np.stack([v00, v11, v01], 1)])
-    return GroundMesh(vertices.reshape(-1, 6).astype(np.float32), triangles.astype(np.uint32),
+    vertices = vertices.reshape(-1, 6)
+    if skirt_m > 0:
+        last = cells
+        ring = np.concatenate([np.arange(0, last),                      # bottom row, left to right
+                               last + side * np.arange(0, last),         # right column, upwards
+                               last * side + np.arange(last, 0, -1),     # top row, right to left
+                               side * np.arange(last, 0, -1)])           # left column, downwards
+        below = vertices[ring].copy()
+        below[:, 2] -= skirt_m
+        first = vertices.shape[0]
+        dup = first + np.arange(ring.size)
+        ring_next, dup_next = np.roll(ring, -1), np.roll(dup, -1)
+        skirt = np.concatenate([np.stack([ring, ring_next, dup_next], 1),
+                                np.stack([ring, dup_next, dup], 1)])
+        vertices = np.concatenate([vertices, below])
+        triangles = np.concatenate([triangles, skirt])
+    return GroundMesh(vertices.astype(np.float32), triangles.astype(np.uint32),
                       (float(x[0]), float(y[0]), float(x[-1]), float(y[-1])))
 
 
@@ -308,6 +327,6 @@ def ground_patches(ground: Ground, points_in_world: F64, far_half_size_m: float
     lo, hi = p[:, :2].min(axis=0), p[:, :2].max(axis=0)
     centre = (float((lo[0] + hi[0]) / 2), float((lo[1] + hi[1]) / 2))
     near_half = float((hi - lo).max()) / 2 + NEAR_MARGIN_M
-    near = ground_mesh(ground, centre, near_half, near_cell_m(ground), NEAR_MAX_CELLS)
+    near = ground_mesh(ground, centre, near_half, near_cell_m(ground), NEAR_MAX_CELLS, skirt_m=0.5)
     far = ground_mesh(ground, centre, max(far_half_size_m, near_half * 1.5), 0.25, 200)
     return near, far

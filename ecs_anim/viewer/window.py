@@ -251,18 +251,29 @@ def run_viewer(scenario: Scenario, width: int = 1280, height: int = 720,
                                                  or os.environ.get("WAYLAND_DISPLAY")):
         raise EcsAnimError("no screen to open a window on (DISPLAY is not set); use "
                            "--screenshot OUT.png to render a frame without one, or run under xvfb-run")
-    pyglet = _pyglet(headless=False)
-    from .gl_render import SceneRenderer
+    open_viewer(scenario, width, height, show_targets, show_com, headless=False)
+    import pyglet
 
-    app = _ViewerApp(scenario, pyglet)
-    app.show_targets, app.show_com = show_targets, show_com
-    window = _make_window(pyglet, width, height, visible=True, samples=4,
-                          resizable=True, caption=f"ecs-anim view {scenario.path}")
-    app.attach(window, SceneRenderer())
     pyglet.app.run()
 
 
-class _ViewerApp:
+def open_viewer(scenario: Scenario, width: int = 1280, height: int = 720,
+                show_targets: bool = True, show_com: bool = True,
+                headless: bool = False) -> ViewerApp:
+    """Make the viewer's window and state (``pyglet.app.run()`` then runs it). ``headless``:
+    an offscreen window, for tests."""
+    pyglet = _pyglet(headless=headless)
+    from .gl_render import SceneRenderer
+
+    app = ViewerApp(scenario, pyglet)
+    app.show_targets, app.show_com = show_targets, show_com
+    window = _make_window(pyglet, width, height, visible=True, samples=0 if headless else 4,
+                          resizable=True, caption=f"ecs-anim view {scenario.path}")
+    app.attach(window, SceneRenderer())
+    return app
+
+
+class ViewerApp:
     """State of the interactive viewer: the simulation, the camera, toggles, the clock."""
 
     MAX_STEPS_PER_FRAME = 8
@@ -413,5 +424,5 @@ class _ViewerApp:
             self.sim.close()
 
 
-__all__ = ["SceneSource", "Screenshot", "default_camera", "render_frame", "render_screenshot",
-           "run_viewer", "status_line", "write_screenshot"]
+__all__ = ["SceneSource", "Screenshot", "ViewerApp", "default_camera", "open_viewer",
+           "render_frame", "render_screenshot", "run_viewer", "status_line", "write_screenshot"]
