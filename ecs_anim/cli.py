@@ -18,6 +18,7 @@ from .contacts import ContactThresholds
 from .errors import EcsAnimError
 from .joint_map import preset_summary
 from .morphology import PRESET_SPECS
+from .viewer.command import add_arguments as add_view_arguments, cmd_view
 
 EXIT_FAILED = 1
 
@@ -469,6 +470,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--repeat", type=positive_int, default=3, help="runs; the best is kept")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_bench)
+
+    p = sub.add_parser("view", help="watch a scenario in a window, or render one frame to a PNG")
+    add_view_arguments(p)
+    p.set_defaults(func=cmd_view)
     return parser
 
 

@@ -1,7 +1,9 @@
 """Render: hand the posture to a viewer; scheduled only when a window is open.
 
 Reads: store.positions (and whatever the viewer draws). Writes: nothing in the simulation.
-The pyglet viewer (scenario issue) plugs in as ``sim.renderer``: an object with ``draw(sim)``.
+The viewer plugs in as ``sim.renderer``: an object with ``draw(sim)``, called once per tick
+(``ecs_anim.viewer.window.SceneSource`` notes that a new posture is ready; the window draws it
+at its own rate, reading the store: STYLE 8).
 """
 
 from __future__ import annotations
