@@ -318,12 +318,19 @@ def _character_mask(rgb: np.ndarray, colour: np.ndarray) -> np.ndarray:
     return (saturation > 40) & (np.linalg.norm(chroma - target, axis=-1) < 0.06)
 
 
-def _check_characters_where_they_are(shot, colours: np.ndarray) -> None:  # type: ignore[no-untyped-def]
+def _check_characters_where_they_are(shot, colours: np.ndarray,  # type: ignore[no-untyped-def]
+                                     extra_points: np.ndarray | None = None) -> None:
+    """``extra_points`` (k, 3): other things drawn in colour (restricted areas' corners)."""
     h, w = shot.rgb.shape[:2]
     joints = shot.frame.joints
     pelvis_px = shot.camera.project(joints[:, PELVIS], w, h)
-    all_px = shot.camera.project(joints.reshape(-1, 3), w, h)
+    drawn = joints.reshape(-1, 3) if extra_points is None else np.concatenate(
+        [joints.reshape(-1, 3), extra_points])
+    all_px = shot.camera.project(drawn, w, h)
     saturated = (shot.rgb.max(axis=-1).astype(int) - shot.rgb.min(axis=-1)) > 40
+    # Restricted areas are drawn where the scenario puts them, not on characters.
+    from ecs_anim.viewer.scene import AREA_COLOUR
+    saturated &= ~_character_mask(shot.rgb, np.array(AREA_COLOUR) * 255)
     yy, xx = np.mgrid[0:h, 0:w]
     for i, (x, y) in enumerate(pelvis_px):
         assert 0 <= x < w and 0 <= y < h, f"character {i}'s pelvis is outside the image"
@@ -340,7 +347,10 @@ def _check_characters_where_they_are(shot, colours: np.ndarray) -> None:  # type
     assert (~saturated).sum() > 0.5 * h * w
 
 
-@pytest.mark.parametrize("name, at_s", [("terrain_walk.yaml", 3.0), ("reach_and_touch.yaml", 2.5)])
+@pytest.mark.parametrize("name, at_s", [
+    ("terrain_walk.yaml", 3.0), ("reach_and_touch.yaml", 2.5), ("fight_training.yaml", 0.6),
+    ("wrists_above_table.yaml", 4.0), ("grasp_com.yaml", 1.6), ("wrist_elbow_priority.yaml", 1.5),
+    ("dance_morphologies.yaml", 3.0)])
 def test_screenshot_shows_the_characters_where_they_are(tmp_path, name, at_s, capsys):
     _need_gl()
     out = tmp_path / f"{Path(name).stem}.png"
@@ -363,7 +373,12 @@ def test_screenshot_shows_the_characters_where_they_are(tmp_path, name, at_s, ca
         from ecs_anim.viewer.scene import character_teams
 
         colours = team_colours(character_teams(sim))
-    _check_characters_where_they_are(shot, colours)
+        table = sim.constraints
+        boxes = np.flatnonzero(table.area_shape == 1)
+        corners = np.array([table.target_world[k] + np.where(np.array([i >> b & 1 for b in range(3)]) > 0,
+                                                               table.area_high[k], table.area_low[k])
+                            for k in boxes for i in range(8)]).reshape(-1, 3)
+    _check_characters_where_they_are(shot, colours, corners if corners.size else None)
 
 
 def test_screenshot_without_targets_and_com_hides_them():
