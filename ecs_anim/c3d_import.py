@@ -1,0 +1,692 @@
+"""From labelled C3D markers straight to a :class:`~ecs_anim.motion.NormalizedMotion`.
+
+read (the ``c3d`` package) -> match labels to a marker set (:mod:`ecs_anim.marker_sets`) ->
+fill short gaps -> metres, Z up -> joint centres -> the same canonical clip, encoding, source
+morphology and contact detection as BVH import (:func:`ecs_anim.importing.normalize_clip`).
+No joint angle is ever computed: the representation is Cartesian.
+
+Joint centres
+-------------
+Landmark sets (Plug-in Gait, ISB/CAST):
+
+* hips: Harrington et al. 2007 (J Biomech 40:595) regression from pelvis width PW (ASIS-ASIS)
+  and depth PD (mid-ASIS to mid-PSIS or sacrum), in the pelvis frame (mm):
+  posterior 0.24 PD + 9.9, inferior 0.30 PW + 10.9, lateral 0.33 PW + 7.3;
+* knees / ankles: midpoint of the epicondyles / malleoli when both are marked; otherwise the
+  Plug-in-Gait chord rule: the centre lies half a joint width plus a marker radius from the
+  lateral marker, in the plane of the proximal joint centre, the lateral marker and the wand
+  (THI / TIB), with the proximal segment perpendicular to the offset;
+* toes (ball of the foot): TOE (2nd metatarsal head) or the midpoint of MT1 and MT5;
+* neck base: midpoint of C7 and the jugular notch (CLAV / IJ); mid-thorax: midpoint of
+  T10 (T8) and the xiphoid (STRN / PX) when both are marked, otherwise interpolated;
+* shoulders: 17 % of the acromion-acromion distance below the acromion marker, along the thorax
+  axis (after Rab et al. 2002);
+* elbows: midpoint of the humeral epicondyles, or the lateral marker moved medially by half an
+  elbow width plus a marker radius along the flexion axis (the normal of the shoulder-elbow-wrist
+  plane, averaged in an upper-arm frame so a straight arm keeps it);
+* wrists: midpoint of the radial and ulnar styloid markers (WRA/WRB); hand end: FIN or the
+  midpoint of the 2nd and 5th metacarpal heads;
+* head: the four head-band markers give the head frame; skull base and vertex lie half a head
+  length below and above their centre.
+
+Cluster sets (technical clusters, no landmarks): each cluster's pose by a weighted least-squares
+rigid fit (Kabsch) to its mean shape; hips, knees and ankles by SCoRE (Ehrig et al. 2006,
+J Biomech 39:2798), the centre of rotation that is fixed in both adjacent segments; knees and
+ankles move nearly as hinges, whose centre is only defined up to a point on the axis, so the
+point on the axis nearest the proximal joint centre is taken. The toe hangs a foot length
+(adult proportions of the measured leg) in front of the ankle in the foot cluster's frame.
+
+Gaps: a sample is invalid when its residual is negative, its coordinates are all zero or it is
+not finite. Runs of at most ``max_gap`` frames (default 10) are interpolated linearly; longer
+runs are interpolated as well (so no NaN ever reaches the output) and reported.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .contacts import ContactThresholds, _intervals
+from .errors import EcsAnimError, InputError
+from .importing import ADULT_PROPORTIONS, UNITS, YUP_TO_ZUP, CanonicalClip, detect_unit, normalize_clip
+from .joint_map import JointMap
+from .marker_sets import GROUPS, MarkerMap, check_usable, match_markers
+from .motion import NormalizedMotion
+from .rotations import frame_from_axes, normalize, rot_axis, yaw_of
+from .skeleton import JOINT_INDEX as J, JOINTS, N_JOINTS, REST_HIP_DIR_LEFT
+
+F64 = NDArray[np.float64]
+BOOL = NDArray[np.bool_]
+
+DEFAULT_MAX_GAP = 10
+#: Adult widths (m) for the chord rules, scaled by leg length / 0.8 m; marker radius (m).
+JOINT_WIDTH_PER_LEG = {"knee": 0.105 / 0.80, "ankle": 0.070 / 0.80, "elbow": 0.070 / 0.80}
+MARKER_RADIUS_M = 0.007
+HINGE_RATIO = 0.2  # SCoRE: weakest / next eigenvalue below this = a hinge (axis undetermined)
+SHOULDER_DROP = 0.17  # of the acromion-acromion distance (Rab et al. 2002)
+_LEG_P = ADULT_PROPORTIONS["thigh"] + ADULT_PROPORTIONS["shank"]
+
+
+def _prop(name: str, leg_m: float) -> float:
+    """An adult segment length for a body of the given leg length (m)."""
+    return ADULT_PROPORTIONS[name] / _LEG_P * leg_m
+
+
+# --- reading -----------------------------------------------------------------------------------
+
+@dataclass
+class C3dMarkers:
+    """Marker trajectories as read: file units and axes.
+
+    positions : (n_frames, n_markers, 3); valid : (n_frames, n_markers) bool.
+    """
+
+    labels: list[str]
+    positions: F64
+    valid: BOOL
+    rate: float
+    units: str
+    first_frame: int
+
+
+def read_c3d(path: str | Path) -> C3dMarkers:
+    """Read marker data with the ``c3d`` package. Raises :class:`InputError` on a damaged,
+    truncated or unlabelled file."""
+    import c3d
+
+    path = str(path)
+    try:
+        f = open(path, "rb")
+    except OSError as exc:
+        raise InputError(path, f"cannot read file: {exc.strerror or exc}") from None
+    with f, warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            reader = c3d.Reader(f)
+            n_points = int(reader.point_used)
+            rate = float(reader.point_rate)
+            expected = int(reader.last_frame) - int(reader.first_frame) + 1
+            first = int(reader.first_frame)
+            labels_param = reader.get("POINT:LABELS")
+            labels = [] if labels_param is None else [str(s).strip() for s in reader.point_labels]
+            units_param = reader.get("POINT:UNITS")
+            units = "" if units_param is None else \
+                "".join(ch for ch in units_param.string_value.lower() if ch.isalpha())
+            frames = [points[:, :4].astype(np.float64) for _, points, _ in reader.read_frames()] \
+                if n_points > 0 else []
+        except InputError:
+            raise
+        except Exception as exc:  # the reader raises struct, value, index errors on bad bytes
+            reason = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+            raise InputError(path, f"not a readable C3D file (damaged or truncated?): {reason}") from None
+    if n_points <= 0:
+        raise InputError(path, "the C3D file holds no marker (POINT:USED is 0)")
+    if not (math.isfinite(rate) and 0.1 <= rate <= 100000):
+        raise InputError(path, f"implausible point rate {rate:g} Hz in the C3D header")
+    if not frames:
+        raise InputError(path, f"the C3D file holds no frame of marker data (header says {expected}; "
+                               "truncated?)")
+    if len(frames) < expected:
+        raise InputError(path, f"file ends after {len(frames)} of {expected} frames (truncated?)")
+    labels = (labels + [""] * n_points)[:n_points]
+    if not any(labels):
+        raise InputError(path, "the markers have no labels (POINT:LABELS is missing or blank): "
+                               "label them in the capture software first")
+    data = np.stack(frames)
+    positions = data[:, :, :3]
+    finite = np.all(np.isfinite(positions), axis=-1)
+    valid = finite & (data[:, :, 3] >= 0) & np.any(positions != 0, axis=-1)
+    positions = np.where(finite[..., None], positions, 0.0)
+    return C3dMarkers(labels, positions, valid, rate, units, first)
+
+
+# --- gaps --------------------------------------------------------------------------------------
+
+def fill_gaps(positions: F64, valid: BOOL, max_gap: int = DEFAULT_MAX_GAP) -> tuple[F64, BOOL]:
+    """Interpolate invalid samples of each marker linearly (held at the clip's ends).
+
+    positions (F, M, 3), valid (F, M). Returns (filled positions, ``long``): ``long`` (F, M) is
+    True on samples in runs of more than ``max_gap`` invalid frames (filled too, but unreliable)
+    and on markers never seen. The loop runs over markers and gaps, never over frames.
+    """
+    out = positions.copy()
+    long = np.zeros(valid.shape, dtype=bool)
+    frames = np.arange(valid.shape[0])
+    for m in range(valid.shape[1]):
+        ok = valid[:, m]
+        if ok.all():
+            continue
+        if not ok.any():
+            long[:, m] = True
+            continue
+        bad = ~ok
+        for axis in range(3):
+            out[bad, m, axis] = np.interp(frames[bad], frames[ok], positions[ok, m, axis])
+        for a, b in _intervals(bad):
+            if b - a + 1 > max_gap:
+                long[a:b + 1, m] = True
+    return out, long
+
+
+def cluster_outliers(points: F64, valid: BOOL, tolerance_m: float = 0.015,
+                     tolerance_fraction: float = 0.1) -> BOOL:
+    """Samples of a rigid cluster that break its shape (mislabelled or swapped markers).
+
+    points (F, K, 3) metres, valid (F, K). A sample is an outlier when more than half of its
+    distances to the cluster's other valid markers differ from their median over the trial by
+    more than ``tolerance_m + tolerance_fraction * median``. Returns (F, K) bool.
+    """
+    k = points.shape[1]
+    dist = np.linalg.norm(points[:, :, None] - points[:, None], axis=-1)  # (F, K, K)
+    pair_ok = valid[:, :, None] & valid[:, None, :]
+    median = np.array([[np.median(dist[pair_ok[:, a, b], a, b]) if pair_ok[:, a, b].any() else 0.0
+                        for b in range(k)] for a in range(k)])
+    off = np.abs(dist - median) > tolerance_m + tolerance_fraction * median
+    bad_pairs = (off & pair_ok).sum(axis=2)
+    pairs = np.maximum(pair_ok.sum(axis=2) - 1, 0)  # the diagonal counts itself
+    return valid & (bad_pairs * 2 > pairs) & (pairs > 0)
+
+
+# --- small geometric kernels (batched over frames) --------------------------------------------
+
+def _mid(a: F64, b: F64) -> F64:
+    return 0.5 * (a + b)
+
+
+def chord_centre(proximal: F64, wand: F64, marker: F64, offset: F64 | float) -> F64:
+    """Plug-in-Gait chord rule: the joint centre ``c`` at ``offset`` from ``marker``, in the
+    plane of (proximal, wand, marker), with (proximal - c) perpendicular to (marker - c), on the
+    side away from the wand. All (F, 3) -> (F, 3)."""
+    u_vec = proximal - marker
+    length = np.linalg.norm(u_vec, axis=-1, keepdims=True)
+    u = u_vec / np.maximum(length, 1e-12)
+    w = wand - marker
+    v = -normalize(w - np.sum(w * u, axis=-1, keepdims=True) * u)
+    off = np.asarray(offset, dtype=np.float64)
+    off = off[..., None] if off.ndim else off
+    cos_t = np.clip(off / np.maximum(length, 1e-12), 0.0, 1.0)
+    sin_t = np.sqrt(1.0 - cos_t**2)
+    return marker + off * (cos_t * u + sin_t * v)
+
+
+def cluster_poses(points: F64, weights: F64, iterations: int = 2) -> tuple[F64, F64]:
+    """Rigid poses of a marker cluster by weighted least squares (Kabsch), batched over frames.
+
+    points (F, K, 3) world, weights (F, K) (0 for missing samples). The cluster's local shape is
+    its mean shape (first the first fully seen frame, then refined ``iterations`` times).
+    Returns (cluster2world (F, 3, 3), origin (F, 3)) with ``points ≈ R @ shape + origin``.
+    """
+    full = np.flatnonzero(weights.min(axis=1) > 0)
+    if len(full):  # the fully seen frame whose shape is closest to the typical one
+        dist = np.linalg.norm(points[full, :, None] - points[full, None], axis=-1)
+        ref_frame = int(full[np.argmin(np.abs(dist - np.median(dist, axis=0)).sum(axis=(1, 2)))])
+    else:
+        ref_frame = int(np.argmax(weights.sum(axis=1)))
+    shape = points[ref_frame] - points[ref_frame].mean(axis=0)
+    w = weights[..., None]
+    wsum = np.maximum(weights.sum(axis=1), 1e-12)[:, None]
+    for _ in range(iterations + 1):
+        c_ref = np.einsum("fk,ki->fi", weights, shape) / wsum
+        c_cur = (w * points).sum(axis=1) / wsum
+        a = shape[None] - c_ref[:, None]
+        b = points - c_cur[:, None]
+        h = np.einsum("fk,fki,fkj->fij", weights, a, b)
+        u, _, vt = np.linalg.svd(h)
+        d = np.sign(np.linalg.det(np.swapaxes(vt, -1, -2) @ np.swapaxes(u, -1, -2)))
+        fix = np.ones(u.shape[:-1])
+        fix[:, 2] = d
+        rot = np.swapaxes(vt, -1, -2) @ (fix[:, :, None] * np.swapaxes(u, -1, -2))
+        origin = c_cur - np.einsum("fij,fj->fi", rot, c_ref)
+        local = np.einsum("fji,fkj->fki", rot, points - origin[:, None])  # R^T (p - o)
+        shape = (w * local).sum(axis=0) / np.maximum(weights.sum(axis=0), 1e-12)[:, None]
+        shape -= shape.mean(axis=0)
+    return rot, origin
+
+
+def score_centre(parent: tuple[F64, F64], child: tuple[F64, F64], use: BOOL,
+                 hinge_prior_in_parent: F64 | None = None) -> tuple[F64, F64, F64]:
+    """SCoRE (Ehrig et al. 2006): the point fixed in both segments.
+
+    parent, child : (rotation (F, 3, 3), origin (F, 3)) segment poses; use : (F,) frames to fit.
+    For a hinge the point is only defined up to the axis: with ``hinge_prior_in_parent`` (3,),
+    when the weakest direction of the normal equations is clearly weaker than the others (by
+    :data:`HINGE_RATIO`), it is dropped from the least-squares solution and the point on it nearest
+    the prior is taken. Returns (centre in parent frame (3,), in child frame (3,),
+    world position (F, 3): the mean of both estimates).
+    """
+    rp, tp = parent
+    rc, tc = child
+    a = np.concatenate([rp, -rc], axis=-1)[use]  # (F, 3, 6)
+    b = (tc - tp)[use]
+    m = np.einsum("fki,fkj->ij", a, a)
+    v = np.einsum("fki,fk->i", a, b)
+    evals, evecs = np.linalg.eigh(m)
+    keep = evals > 1e-9 * evals[-1]
+    hinge = hinge_prior_in_parent is not None and evals[0] < HINGE_RATIO * evals[1]
+    if hinge:
+        keep[0] = False
+    coeff = np.where(keep, (evecs.T @ v) / np.where(keep, evals, 1.0), 0.0)
+    x = evecs @ coeff
+    if hinge:
+        assert hinge_prior_in_parent is not None
+        n = evecs[:, 0]
+        n_p = n[:3]
+        lam = float(n_p @ (hinge_prior_in_parent - x[:3])) / max(float(n_p @ n_p), 1e-12)
+        x = x + lam * n
+    c_parent, c_child = x[:3], x[3:]
+    world = 0.5 * (np.einsum("fij,j->fi", rp, c_parent) + tp + np.einsum("fij,j->fi", rc, c_child) + tc)
+    return c_parent, c_child, world
+
+
+# --- the importer ------------------------------------------------------------------------------
+
+@dataclass
+class _Markers:
+    """Marker access by role after gap filling, metres, Z up."""
+
+    points: F64  # (F, M, 3)
+    long: BOOL  # (F, M)
+    found: dict[str, int]
+
+    def __call__(self, role: str) -> F64:
+        return self.points[:, self.found[role]]
+
+    def has(self, *roles: str) -> bool:
+        return all(r in self.found for r in roles)
+
+
+@dataclass
+class _Build:
+    positions: F64
+    measured: BOOL
+    how: dict[str, str] = field(default_factory=dict)
+    pelvis2world: F64 | None = None
+    thorax2world: F64 | None = None
+    head2world: F64 | None = None
+
+
+def _detect_up(mk: _Markers, present: list[str], mmap: MarkerMap) -> str:
+    """The file's up axis: the axis along which the body is tallest in a typical frame (the
+    median over frames of the markers' spread), pointing from the legs to the pelvis (or from
+    the pelvis to the trunk when no leg is marked)."""
+    spread = np.median(mk.points.max(axis=1) - mk.points.min(axis=1), axis=0)
+    axis = int(np.argmax(spread))
+    groups = mmap.preset.groups
+    pelvis = np.mean([mk(r) for r in groups["pelvis"][0] if r in mk.found], axis=0)
+    legs = [g for g in ("leg_l", "leg_r") if g in present]
+    below = [r for g in legs for r in groups[g][0] if r in mk.found]
+    if below:
+        sign = float(np.median((pelvis - np.mean([mk(r) for r in below], axis=0))[:, axis]))
+    else:
+        above = [r for r in groups["trunk"][0] if r in mk.found]
+        sign = float(np.median((np.mean([mk(r) for r in above], axis=0) - pelvis)[:, axis])) \
+            if above else 0.0
+    name = "xyz"[axis]
+    if sign <= 0 or name == "x":
+        raise EcsAnimError(f"cannot tell the up axis (the body is tallest along {name}, "
+                           f"{'downwards' if sign <= 0 else 'sideways'}); give --up")
+    return name
+
+
+def import_c3d(path: str | Path, map_spec: str | None = None, unit: str | None = None,
+               thresholds: ContactThresholds = ContactThresholds(), up: str | None = None,
+               max_gap: int = DEFAULT_MAX_GAP) -> NormalizedMotion:
+    """Read a C3D file and normalize it. Raises :class:`EcsAnimError` subclasses on bad input."""
+    path = Path(path)
+    raw = read_c3d(path)
+    try:
+        clip, extra = canonical_clip_c3d(raw, map_spec, unit, up, max_gap)
+        motion = normalize_clip(clip, path.stem, str(path), thresholds)
+    except InputError:
+        raise
+    except EcsAnimError as exc:
+        raise InputError(path, str(exc)) from None
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        raise InputError(path, f"cannot compute joint centres from these markers: {exc}") from None
+    bad = [k for k, v in motion.poses.arrays().items() if not np.all(np.isfinite(v))]
+    if bad:
+        raise InputError(path, f"normalizing gave non-finite values in {', '.join(bad)} "
+                               "(degenerate marker data?); nothing written")
+    motion.info.update(extra)
+    return motion
+
+
+def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str | None = None,
+                       up: str | None = None, max_gap: int = DEFAULT_MAX_GAP
+                       ) -> tuple[CanonicalClip, dict[str, Any]]:
+    """Markers -> canonical clip (metres, Z up) plus provenance for ``info``."""
+    mmap = match_markers(raw.labels, map_spec)
+    # Markers never seen in the trial count as missing.
+    seen = raw.valid.any(axis=0)
+    never = [raw.labels[i] for i in mmap.marker.values() if not seen[i]]
+    mmap.marker = {r: i for r, i in mmap.marker.items() if seen[i]}
+    present, absent = check_usable(mmap, raw.labels)
+    valid = raw.valid.copy()
+    rejected = 0
+    if mmap.preset.method == "functional":  # rigid clusters: drop samples that break the shape
+        for members in _clusters(mmap):
+            out = cluster_outliers(raw.positions[:, members], valid[:, members],
+                                   0.015 / UNITS.get(raw.units, 0.001))
+            rejected += int(out.sum())
+            valid[:, members] &= ~out
+    filled, long = fill_gaps(raw.positions, valid, max_gap)
+    # Units.
+    if unit is not None:
+        if unit not in UNITS:
+            raise EcsAnimError(f"--unit {unit}: unknown unit; choose one of {', '.join(UNITS)}")
+        unit_name, reason = unit, "given with --unit"
+    elif raw.units in ("mm", "cm", "m"):
+        unit_name, reason = raw.units, f"POINT:UNITS says {raw.units!r}"
+    else:
+        z = filled[..., 2]
+        unit_name, reason = detect_unit(float(np.median(z.max(axis=1) - z.min(axis=1))) / 1.9)
+        reason = f"POINT:UNITS is {raw.units!r}; guessed from the body's height: {reason}"
+    scale = UNITS[unit_name]
+    mk = _Markers(filled * scale, long, mmap.marker)
+    if up is None:
+        up = _detect_up(mk, present, mmap)
+        up_reason = "detected from the markers"
+    else:
+        up_reason = "given with --up"
+    if up not in ("y", "z"):
+        raise EcsAnimError(f"--up {up}: expected 'y' or 'z'")
+    if up == "y":
+        mk.points = mk.points @ YUP_TO_ZUP.T
+    build = _joint_centres(mk, mmap, present)
+    # Frames where a marker of a present part was in a long gap.
+    used = sorted(set(mmap.marker.values()))
+    bad_frames = long[:, used].any(axis=1) if used else np.zeros(long.shape[0], dtype=bool)
+    gap_markers = {raw.labels[i]: int(long[:, i].sum()) for i in used if long[:, i].any()}
+    n_filled = int((~valid[:, used]).sum()) if used else 0
+    if not np.all(np.isfinite(build.positions)):
+        raise EcsAnimError("joint centres hold non-finite values (degenerate marker data)")
+    jmap = JointMap(source={}, thorax=-1, how=mmap.how,
+                    names={j: build.how.get(j) for j in JOINTS})
+    clip = CanonicalClip(
+        positions=build.positions, pelvis2world=build.pelvis2world,  # type: ignore[arg-type]
+        thorax2world=build.thorax2world, head2world=build.head2world,  # type: ignore[arg-type]
+        measured=build.measured, fps=raw.rate, unit=unit_name, unit_reason=reason,
+        joint_map=jmap, up_axis=up,
+    )
+    extra: dict[str, Any] = {
+        "format_in": "c3d",
+        "marker_set": mmap.preset.name,
+        "subject": mmap.subject,
+        "ignored_markers": mmap.ignored,
+        "markers_never_seen": never,
+        "up_reason": up_reason,
+        "absent": absent,
+        "absent_fill": "neutral pose" if absent else None,
+        "gaps": {
+            "max_gap_frames": max_gap,
+            "samples_filled": n_filled,
+            "samples_rejected_as_outliers": rejected,
+            "long_gap_frames": [[a, b] for a, b in _intervals(bad_frames)],
+            "long_gap_samples_per_marker": gap_markers,
+        },
+    }
+    return clip, extra
+
+
+def _clusters(mmap: MarkerMap) -> list[list[int]]:
+    """Marker indices of each rigid cluster of a functional marker set (by role prefix)."""
+    groups: dict[str, list[int]] = {}
+    for role, i in mmap.marker.items():
+        parts = role.split("_")
+        key = parts[0] + ("_" + parts[2] if len(parts) > 2 else "")
+        groups.setdefault(key, []).append(i)
+    return [g for g in groups.values() if len(g) >= 3]
+
+
+def _joint_centres(mk: _Markers, mmap: MarkerMap, present: list[str]) -> _Build:
+    n = mk.points.shape[0]
+    build = _Build(np.zeros((n, N_JOINTS, 3)), np.zeros(N_JOINTS, dtype=bool))
+    if mmap.preset.method == "functional":
+        _functional_lower_body(mk, present, build)
+    else:
+        _landmark_body(mk, present, build)
+    _fill_absent(build, present)
+    return build
+
+
+def _set(build: _Build, joint: str, value: F64, how: str) -> None:
+    build.positions[:, J[joint]] = value
+    build.measured[J[joint]] = True
+    build.how[joint] = how
+
+
+def _heading_frame(pelvis2world: F64) -> F64:
+    return rot_axis(2, yaw_of(pelvis2world))
+
+
+def _leg_length(build: _Build, present: list[str]) -> float:
+    p = build.positions
+    legs = [s for s in "lr" if f"leg_{s}" in present]
+    if legs:
+        return float(np.mean([np.median(np.linalg.norm(p[:, J[f"knee_{s}"]] - p[:, J[f"hip_{s}"]], axis=-1)
+                                        + np.linalg.norm(p[:, J[f"ankle_{s}"]] - p[:, J[f"knee_{s}"]], axis=-1))
+                              for s in legs]))
+    if "trunk" in present:
+        spine = np.median(np.linalg.norm(p[:, J["neck"]] - p[:, J["pelvis"]], axis=-1))
+        return float(spine / sum(ADULT_PROPORTIONS[k] for k in ("spine_lower", "spine_middle",
+                                                                  "spine_upper")) * _LEG_P)
+    width = np.median(np.linalg.norm(p[:, J["hip_l"]] - p[:, J["hip_r"]], axis=-1))
+    return float(width / (2 * ADULT_PROPORTIONS["pelvis"] * REST_HIP_DIR_LEFT[1]) * _LEG_P)
+
+
+def _landmark_body(mk: _Markers, present: list[str], build: _Build) -> None:
+    # Pelvis (ISB-like frame: y along ASIS_r -> ASIS_l, x forward in the ASIS/PSIS plane).
+    asis_l, asis_r = mk("ASIS_l"), mk("ASIS_r")
+    back = _mid(mk("PSIS_l"), mk("PSIS_r")) if mk.has("PSIS_l", "PSIS_r") else mk("SACRUM")
+    back_name = "LPSI/RPSI" if mk.has("PSIS_l", "PSIS_r") else "SACR"
+    front = _mid(asis_l, asis_r)
+    pelvis2world = frame_from_axes(asis_l - asis_r, front - back, 1, 0)
+    width = float(np.median(np.linalg.norm(asis_l - asis_r, axis=-1)))
+    depth = float(np.median(np.linalg.norm(front - back, axis=-1)))
+    harrington = f"Harrington 2007 (PW {width * 1000:.0f} mm, PD {depth * 1000:.0f} mm, ASIS + {back_name})"
+    for s, sign in (("l", 1.0), ("r", -1.0)):
+        local = np.array([-0.24 * depth - 0.0099, sign * (0.33 * width + 0.0073),
+                          -0.30 * width - 0.0109])
+        _set(build, f"hip_{s}", front + pelvis2world @ local, harrington)
+    _set(build, "pelvis", _mid(build.positions[:, J["hip_l"]], build.positions[:, J["hip_r"]]),
+         "midpoint of the hip centres")
+    build.pelvis2world = pelvis2world
+    # Legs.
+    leg_guess = _leg_guess_from_markers(mk, present, build)
+    for s in "lr":
+        if f"leg_{s}" not in present:
+            continue
+        hip = build.positions[:, J[f"hip_{s}"]]
+        if mk.has(f"KNEE_MED_{s}"):
+            knee, how = _mid(mk(f"KNEE_LAT_{s}"), mk(f"KNEE_MED_{s}")), "midpoint of the femoral epicondyles"
+        else:
+            d = 0.5 * JOINT_WIDTH_PER_LEG["knee"] * leg_guess + MARKER_RADIUS_M
+            knee = chord_centre(hip, mk(f"THIGH_{s}"), mk(f"KNEE_LAT_{s}"), d)
+            how = f"chord rule from hip, THI, KNE (offset {d * 1000:.0f} mm)"
+        _set(build, f"knee_{s}", knee, how)
+        if mk.has(f"ANKLE_MED_{s}"):
+            ankle, how = _mid(mk(f"ANKLE_LAT_{s}"), mk(f"ANKLE_MED_{s}")), "midpoint of the malleoli"
+        else:
+            d = 0.5 * JOINT_WIDTH_PER_LEG["ankle"] * leg_guess + MARKER_RADIUS_M
+            ankle = chord_centre(knee, mk(f"SHANK_{s}"), mk(f"ANKLE_LAT_{s}"), d)
+            how = f"chord rule from knee, TIB, ANK (offset {d * 1000:.0f} mm)"
+        _set(build, f"ankle_{s}", ankle, how)
+        if mk.has(f"TOE_{s}"):
+            _set(build, f"toe_{s}", mk(f"TOE_{s}"), "TOE marker (2nd metatarsal head)")
+        else:
+            _set(build, f"toe_{s}", _mid(mk(f"MT1_{s}"), mk(f"MT5_{s}")), "midpoint of MT1 and MT5")
+    leg = _leg_length(build, present)
+    # Trunk.
+    if "trunk" in present:
+        c7, ij = mk("C7"), mk("IJ")
+        neck = _mid(c7, ij)
+        _set(build, "neck", neck, "midpoint of C7 and the jugular notch")
+        pelvis = build.positions[:, J["pelvis"]]
+        if mk.has("T10", "PX"):
+            mid = _mid(mk("T10"), mk("PX"))
+            _set(build, "spine_2", mid, "midpoint of T10/T8 and the xiphoid")
+            _set(build, "spine_1", _mid(pelvis, mid), "")
+            build.measured[J["spine_1"]] = False
+            front, rear = _mid(ij, mk("PX")), _mid(c7, mk("T10"))
+        else:
+            mid = pelvis + (neck - pelvis) * (2 / 3)
+            build.positions[:, J["spine_1"]] = pelvis + (neck - pelvis) / 3
+            build.positions[:, J["spine_2"]] = mid
+            front, rear = ij, c7
+        build.thorax2world = frame_from_axes(neck - mid, front - rear, 2, 0)
+    # Arms.
+    thorax = build.thorax2world
+    acromion_width = None
+    if "arm_l" in present and "arm_r" in present:
+        acromion_width = float(np.median(np.linalg.norm(mk("ACROMION_l") - mk("ACROMION_r"), axis=-1)))
+    for s, medial_sign in (("l", -1.0), ("r", 1.0)):
+        if f"arm_{s}" not in present:
+            continue
+        down = -(thorax[..., :, 2] if thorax is not None else np.array([0.0, 0.0, 1.0]))
+        aw = acromion_width if acromion_width is not None else 2 * _prop("clavicle", leg) + 0.08
+        shoulder = mk(f"ACROMION_{s}") + SHOULDER_DROP * aw * down
+        _set(build, f"shoulder_{s}", shoulder,
+             f"{SHOULDER_DROP:.0%} of the acromion distance ({aw * 1000:.0f} mm) below the acromion")
+        wrist = _mid(mk(f"WRIST_RAD_{s}"), mk(f"WRIST_ULN_{s}"))
+        _set(build, f"wrist_{s}", wrist, "midpoint of the wrist markers")
+        lateral = mk(f"ELBOW_LAT_{s}")
+        if mk.has(f"ELBOW_MED_{s}"):
+            _set(build, f"elbow_{s}", _mid(lateral, mk(f"ELBOW_MED_{s}")),
+                 "midpoint of the humeral epicondyles")
+        else:
+            flex = np.cross(shoulder - lateral, wrist - lateral)  # |.| grows with flexion
+            second = mk(f"UPPER_ARM_{s}") - lateral if mk.has(f"UPPER_ARM_{s}") else \
+                np.broadcast_to(thorax[..., :, 0] if thorax is not None else [1.0, 0.0, 0.0], lateral.shape)
+            upper2world = frame_from_axes(shoulder - lateral, second, 2, 0)
+            axis_local = normalize(np.einsum("fji,fj->i", upper2world, flex))
+            medial = medial_sign * np.einsum("fij,j->fi", upper2world, axis_local)
+            d = 0.5 * JOINT_WIDTH_PER_LEG["elbow"] * leg + MARKER_RADIUS_M
+            _set(build, f"elbow_{s}", lateral + d * medial,
+                 f"ELB moved {d * 1000:.0f} mm medially along the flexion axis")
+        if mk.has(f"HAND_{s}"):
+            _set(build, f"hand_{s}", mk(f"HAND_{s}"), "FIN marker")
+        elif mk.has(f"MC2_{s}", f"MC5_{s}"):
+            _set(build, f"hand_{s}", _mid(mk(f"MC2_{s}"), mk(f"MC5_{s}")), "midpoint of MC2 and MC5")
+        else:
+            elbow = build.positions[:, J[f"elbow_{s}"]]
+            build.positions[:, J[f"hand_{s}"]] = wrist + normalize(wrist - elbow) * _prop("hand", leg)
+    # Head.
+    if "head" in present:
+        fl, fr, bl, br = (mk(f"HEAD_{p}_{s}") for p, s in
+                          (("FRONT", "l"), ("FRONT", "r"), ("BACK", "l"), ("BACK", "r")))
+        centre = 0.25 * (fl + fr + bl + br)
+        head2world = frame_from_axes(_mid(fl, fr) - _mid(bl, br), _mid(fl, bl) - _mid(fr, br), 0, 1)
+        half = 0.5 * _prop("head", leg)
+        _set(build, "head", centre - half * head2world[..., :, 2], "half a head length below the head markers' centre")
+        _set(build, "head_top", centre + half * head2world[..., :, 2], "half a head length above it")
+        build.head2world = head2world
+
+
+def _leg_guess_from_markers(mk: _Markers, present: list[str], build: _Build) -> float:
+    """Leg length (m) before knees and ankles are known: hip centre to lateral malleolus."""
+    values = [np.median(np.linalg.norm(mk(f"ANKLE_LAT_{s}") - build.positions[:, J[f"hip_{s}"]], axis=-1))
+              for s in "lr" if f"leg_{s}" in present]
+    return float(np.mean(values)) if values else 0.8
+
+
+def _functional_lower_body(mk: _Markers, present: list[str], build: _Build) -> None:
+    def cluster(prefix: str, side: str | None, count: int) -> tuple[F64, F64, BOOL]:
+        roles = [f"{prefix}_{k}" + (f"_{side}" if side else "") for k in range(1, count + 1)]
+        idx = [mk.found[r] for r in roles]
+        weights = (~mk.long[:, idx]).astype(np.float64)
+        rot, origin = cluster_poses(mk.points[:, idx], weights)
+        return rot, origin, weights.sum(axis=1) >= 3
+
+    pelvis_rot, pelvis_origin, pelvis_ok = cluster("PELVIS", None, 4)
+    for s in "lr":
+        if f"leg_{s}" not in present:
+            continue
+        thigh = cluster("THIGH", s, 4)
+        shank = cluster("SHANK", s, 4)
+        foot = cluster("FOOT", s, 3)
+        use = pelvis_ok & thigh[2]
+        _, hip_in_thigh, hip = score_centre((pelvis_rot, pelvis_origin), thigh[:2], use)
+        _set(build, f"hip_{s}", hip, "SCoRE (Ehrig 2006), pelvis and thigh clusters")
+        _, knee_in_shank, knee = score_centre(thigh[:2], shank[:2], thigh[2] & shank[2], hip_in_thigh)
+        _set(build, f"knee_{s}", knee, "SCoRE thigh/shank, point of the axis nearest the hip")
+        _, _, ankle = score_centre(shank[:2], foot[:2], shank[2] & foot[2], knee_in_shank)
+        _set(build, f"ankle_{s}", ankle, "SCoRE shank/foot, point of the axis nearest the knee")
+    # Pelvis: between the hips; tilt and roll from the pelvis cluster.
+    if "leg_l" in present and "leg_r" in present:
+        hip_l, hip_r = build.positions[:, J["hip_l"]], build.positions[:, J["hip_r"]]
+        _set(build, "pelvis", _mid(hip_l, hip_r), "midpoint of the hip centres")
+        up_local = normalize(np.einsum("fji,j->i", pelvis_rot, np.array([0.0, 0.0, 1.0])))
+        build.pelvis2world = frame_from_axes(hip_l - hip_r, pelvis_rot @ up_local, 1, 2)
+    else:
+        raise EcsAnimError("a cluster marker set needs both leg clusters to place the pelvis "
+                           f"(found {', '.join(present)})")
+    leg = _leg_length(build, present)
+    forward = build.pelvis2world[..., :, 0]
+    forward_h = normalize(forward * np.array([1.0, 1.0, 0.0]))
+    foot_len = _prop("foot", leg)
+    for s in "lr":
+        # The foot's stance orientation (the slowest third of the frames): the toe (ball of the
+        # foot) lies a foot length forward of the ankle and on the floor (z = 0) there.
+        foot_rot, foot_origin, _ = cluster("FOOT", s, 3)
+        ankle = build.positions[:, J[f"ankle_{s}"]]
+        speed = np.linalg.norm(np.gradient(foot_origin, axis=0), axis=-1)
+        stance = speed <= np.percentile(speed, 33)
+        up_local = normalize(np.einsum("fji,j->i", foot_rot[stance], np.array([0.0, 0.0, 1.0])))
+        fwd_local = np.einsum("fji,fj->i", foot_rot[stance], forward_h[stance])
+        fwd_local = normalize(fwd_local - (fwd_local @ up_local) * up_local)
+        height = float(np.median(ankle[stance, 2]))
+        drop = math.asin(float(np.clip(height / foot_len, 0.0, 0.85)))
+        toe_local = foot_len * (math.cos(drop) * fwd_local - math.sin(drop) * up_local)
+        _set(build, f"toe_{s}", ankle + foot_rot @ toe_local,
+             f"a foot length ({foot_len * 1000:.0f} mm) forward of the ankle, on the floor at stance")
+        build.measured[J[f"toe_{s}"]] = False
+
+
+def _fill_absent(build: _Build, present: list[str]) -> None:
+    """Neutral pose for absent body parts (upright trunk and head, arms hanging, legs straight),
+    adult proportions of the measured leg length. Also spine_1/spine_2 and hand ends that the
+    markers do not give."""
+    p = build.positions
+    assert build.pelvis2world is not None
+    leg = _leg_length(build, present)
+    heading = _heading_frame(build.pelvis2world)
+    up = np.array([0.0, 0.0, 1.0])
+    pelvis = p[:, J["pelvis"]]
+    for s, sign in (("l", 1.0), ("r", -1.0)):
+        if f"leg_{s}" in present:
+            continue
+        if not build.measured[J[f"hip_{s}"]]:
+            x, y, z = REST_HIP_DIR_LEFT
+            p[:, J[f"hip_{s}"]] = pelvis + build.pelvis2world @ (np.array([x, sign * y, z]) * _prop("pelvis", leg))
+        p[:, J[f"knee_{s}"]] = p[:, J[f"hip_{s}"]] - up * _prop("thigh", leg)
+        p[:, J[f"ankle_{s}"]] = p[:, J[f"knee_{s}"]] - up * _prop("shank", leg)
+        p[:, J[f"toe_{s}"]] = p[:, J[f"ankle_{s}"]] + heading[..., :, 0] * _prop("foot", leg) * 0.95 \
+            - up * _prop("ankle_height", leg)
+    if "trunk" not in present:
+        p[:, J["spine_1"]] = pelvis + up * _prop("spine_lower", leg)
+        p[:, J["spine_2"]] = p[:, J["spine_1"]] + up * _prop("spine_middle", leg)
+        p[:, J["neck"]] = p[:, J["spine_2"]] + up * _prop("spine_upper", leg)
+        build.thorax2world = heading
+    if "head" not in present:
+        thorax_up = build.thorax2world[..., :, 2]  # type: ignore[index]
+        p[:, J["head"]] = p[:, J["neck"]] + thorax_up * _prop("neck", leg)
+        p[:, J["head_top"]] = p[:, J["head"]] + thorax_up * _prop("head", leg)
+        build.head2world = build.thorax2world
+    thorax = build.thorax2world
+    for s, sign in (("l", 1.0), ("r", -1.0)):
+        if f"arm_{s}" in present:
+            continue
+        p[:, J[f"shoulder_{s}"]] = p[:, J["neck"]] + sign * thorax[..., :, 1] * _prop("clavicle", leg)  # type: ignore[index]
+        p[:, J[f"elbow_{s}"]] = p[:, J[f"shoulder_{s}"]] - up * _prop("upper_arm", leg)
+        p[:, J[f"wrist_{s}"]] = p[:, J[f"elbow_{s}"]] - up * _prop("forearm", leg)
+        p[:, J[f"hand_{s}"]] = p[:, J[f"wrist_{s}"]] - up * _prop("hand", leg)
+
+
+__all__ = ["import_c3d", "read_c3d", "fill_gaps", "cluster_poses", "score_centre",
+           "chord_centre", "canonical_clip_c3d", "C3dMarkers", "DEFAULT_MAX_GAP", "GROUPS"]
