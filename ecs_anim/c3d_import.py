@@ -36,6 +36,10 @@ ankles move nearly as hinges, whose centre is only defined up to a point on the 
 point on the axis nearest the proximal joint centre is taken. The toe hangs a foot length
 (adult proportions of the measured leg) in front of the ankle in the foot cluster's frame.
 
+Joint centres whose bones suddenly change length by more than 15 % (marker swaps or ghost
+markers in fast motion) are replaced by interpolation and reported
+(:func:`reject_joint_outliers`).
+
 Gaps: a sample is invalid when its residual is negative, its coordinates are all zero or it is
 not finite. Runs of at most ``max_gap`` frames (default 10) are interpolated linearly; longer
 runs are interpolated as well (so no NaN ever reaches the output) and reported.
@@ -399,6 +403,7 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
     if up == "y":
         mk.points = mk.points @ YUP_TO_ZUP.T
     build = _joint_centres(mk, mmap, present)
+    rejected_joints = reject_joint_outliers(build.positions, build.measured)
     # Frames where a marker of a present part was in a long gap.
     used = sorted(set(mmap.marker.values()))
     bad_frames = long[:, used].any(axis=1) if used else np.zeros(long.shape[0], dtype=bool)
@@ -429,9 +434,46 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
             "samples_rejected_as_outliers": rejected,
             "long_gap_frames": [[a, b] for a, b in _intervals(bad_frames)],
             "long_gap_samples_per_marker": gap_markers,
+            "joint_centres_rejected": rejected_joints,
         },
     }
     return clip, extra
+
+
+def reject_joint_outliers(positions: F64, measured: BOOL, tolerance: float = 0.15
+                          ) -> dict[str, int]:
+    """Replace limb joint centres that break their bone lengths (marker swaps, ghost markers
+    in fast motion) by interpolation from the neighbouring frames, in place.
+
+    positions (F, N_JOINTS, 3). A bone is off in a frame when its length differs from its
+    median over the trial by more than ``tolerance`` of it. A knee or elbow is rejected where
+    both of its bones are off; then an ankle or wrist where its own bone is still off. Returns joint -> rejected frame count (only joints with some).
+    """
+    frames = np.arange(positions.shape[0])
+    out: dict[str, int] = {}
+    for s in "lr":
+        for top, middle, end in (("hip", "knee", "ankle"), ("shoulder", "elbow", "wrist")):
+            a, b, c = (J[f"{n}_{s}"] for n in (top, middle, end))
+            if not measured[[a, b, c]].all():
+                continue
+            def off(p: int, q: int) -> BOOL:
+                length = np.linalg.norm(positions[:, q] - positions[:, p], axis=-1)
+                median = np.median(length)
+                return np.abs(length - median) > tolerance * median  # type: ignore[no-any-return]
+
+            bad_mid = off(a, b) & off(b, c)
+            _interpolate_frames(positions, b, bad_mid, frames, out)
+            _interpolate_frames(positions, c, off(b, c), frames, out)  # lengths after the fix
+    return out
+
+
+def _interpolate_frames(positions: F64, joint: int, bad: BOOL, frames: NDArray[np.int_],
+                        counts: dict[str, int]) -> None:
+    if bad.any() and not bad.all():
+        for axis in range(3):
+            positions[bad, joint, axis] = np.interp(frames[bad], frames[~bad],
+                                                    positions[~bad, joint, axis])
+        counts[JOINTS[joint]] = counts.get(JOINTS[joint], 0) + int(bad.sum())
 
 
 def _clusters(mmap: MarkerMap) -> list[list[int]]:
