@@ -319,7 +319,8 @@ def _detect_up(mk: _Markers, present: list[str], mmap: MarkerMap) -> str:
     """The file's up axis: the axis along which the body is tallest in a typical frame (the
     median over frames of the markers' spread), pointing from the legs to the pelvis (or from
     the pelvis to the trunk when no leg is marked)."""
-    spread = np.median(mk.points.max(axis=1) - mk.points.min(axis=1), axis=0)
+    body = mk.points[:, sorted(set(mk.found.values()))]  # not other objects' markers
+    spread = np.median(body.max(axis=1) - body.min(axis=1), axis=0)
     axis = int(np.argmax(spread))
     groups = mmap.preset.groups
     pelvis = np.mean([mk(r) for r in groups["pelvis"][0] if r in mk.found], axis=0)

@@ -56,7 +56,8 @@ class MarkerSet:
     roles : role -> candidate labels (compared by :func:`label_key`; first present wins).
     groups : body part -> (required roles, alternatives) where alternatives is a tuple of
         tuples of roles, one of which must be complete (e.g. both PSIS or the sacrum).
-    signature : roles that must all be present for the preset to be detected.
+    signature : roles of which more than half must be present for the preset to be detected
+        (the preset with most roles found wins).
     """
 
     name: str
@@ -243,7 +244,8 @@ def match_markers(labels: list[str], spec: str | None = None) -> MarkerMap:
         candidates = [PRESETS[base]] if base else list(PRESETS.values())
         for preset in candidates:
             found = _resolve(preset, keys)
-            if not base and not all(r in found for r in preset.signature):
+            # Detected when most of its signature is there; what is missing is then listed.
+            if not base and 2 * sum(r in found for r in preset.signature) <= len(preset.signature):
                 continue
             if best is None or len(found) > best[0]:
                 best = (len(found), subject, preset, found)
