@@ -58,12 +58,20 @@ from numpy.typing import NDArray
 
 from .contacts import ContactThresholds, _intervals
 from .errors import EcsAnimError, InputError
-from .importing import ADULT_PROPORTIONS, UNITS, YUP_TO_ZUP, CanonicalClip, detect_unit, normalize_clip
+from .importing import (
+    UNITS,
+    YUP_TO_ZUP,
+    CanonicalClip,
+    detect_unit,
+    normalize_clip,
+)
 from .joint_map import JointMap
 from .marker_sets import GROUPS, MarkerMap, check_usable, match_markers
+from .morphology import ADULT_PROPORTIONS
 from .motion import NormalizedMotion
 from .rotations import frame_from_axes, normalize, rot_axis, yaw_of
-from .skeleton import JOINT_INDEX as J, JOINTS, N_JOINTS, REST_HIP_DIR_LEFT
+from .skeleton import JOINT_INDEX as J
+from .skeleton import JOINTS, N_JOINTS, REST_HIP_DIR_LEFT
 
 F64 = NDArray[np.float64]
 BOOL = NDArray[np.bool_]
@@ -194,7 +202,8 @@ def cluster_outliers(points: F64, valid: BOOL, tolerance_m: float = 0.015,
     off = np.abs(dist - median) > tolerance_m + tolerance_fraction * median
     bad_pairs = (off & pair_ok).sum(axis=2)
     pairs = np.maximum(pair_ok.sum(axis=2) - 1, 0)  # the diagonal counts itself
-    return valid & (bad_pairs * 2 > pairs) & (pairs > 0)
+    out: BOOL = valid & (bad_pairs * 2 > pairs) & (pairs > 0)
+    return out
 
 
 # --- small geometric kernels (batched over frames) --------------------------------------------
@@ -216,7 +225,8 @@ def chord_centre(proximal: F64, wand: F64, marker: F64, offset: F64 | float) -> 
     off = off[..., None] if off.ndim else off
     cos_t = np.clip(off / np.maximum(length, 1e-12), 0.0, 1.0)
     sin_t = np.sqrt(1.0 - cos_t**2)
-    return marker + off * (cos_t * u + sin_t * v)
+    centre: F64 = marker + off * (cos_t * u + sin_t * v)
+    return centre
 
 
 def cluster_poses(points: F64, weights: F64, iterations: int = 2) -> tuple[F64, F64]:
@@ -368,7 +378,7 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
     """Markers -> canonical clip (metres, Z up) plus provenance for ``info``."""
     mmap = match_markers(raw.labels, map_spec)
     # Markers never seen in the trial count as missing.
-    seen = raw.valid.any(axis=0)
+    seen: BOOL = np.asarray(raw.valid.any(axis=0))
     never = [raw.labels[i] for i in mmap.marker.values() if not seen[i]]
     mmap.marker = {r: i for r, i in mmap.marker.items() if seen[i]}
     present, absent = check_usable(mmap, raw.labels)
@@ -407,7 +417,8 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
     rejected_joints = reject_joint_outliers(build.positions, build.measured)
     # Frames where a marker of a present part was in a long gap.
     used = sorted(set(mmap.marker.values()))
-    bad_frames = long[:, used].any(axis=1) if used else np.zeros(long.shape[0], dtype=bool)
+    bad_frames: BOOL = np.asarray(long[:, used].any(axis=1)) if used else \
+        np.zeros(long.shape[0], dtype=bool)
     gap_markers = {raw.labels[i]: int(long[:, i].sum()) for i in used if long[:, i].any()}
     n_filled = int((~valid[:, used]).sum()) if used else 0
     if not np.all(np.isfinite(build.positions)):
@@ -731,5 +742,15 @@ def _fill_absent(build: _Build, present: list[str]) -> None:
         p[:, J[f"hand_{s}"]] = p[:, J[f"wrist_{s}"]] - up * _prop("hand", leg)
 
 
-__all__ = ["import_c3d", "read_c3d", "fill_gaps", "cluster_poses", "score_centre",
-           "chord_centre", "canonical_clip_c3d", "C3dMarkers", "DEFAULT_MAX_GAP", "GROUPS"]
+__all__ = [
+    "DEFAULT_MAX_GAP",
+    "GROUPS",
+    "C3dMarkers",
+    "canonical_clip_c3d",
+    "chord_centre",
+    "cluster_poses",
+    "fill_gaps",
+    "import_c3d",
+    "read_c3d",
+    "score_centre",
+]

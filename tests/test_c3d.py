@@ -14,8 +14,8 @@ from pathlib import Path
 import c3d
 import numpy as np
 import pytest
-
 from conftest import MOCAP_DIR, mocap_params, require_mocap
+
 from ecs_anim.c3d_import import (
     canonical_clip_c3d,
     chord_centre,
@@ -28,11 +28,12 @@ from ecs_anim.c3d_import import (
 from ecs_anim.cli import main
 from ecs_anim.errors import EcsAnimError, InputError
 from ecs_anim.metrics import MetricsRecorder
-from ecs_anim.morphology import Morphology, bone_lengths_of
+from ecs_anim.morphology import bone_lengths_of
 from ecs_anim.motion import load_nmo
 from ecs_anim.rotations import rot_axis
 from ecs_anim.scenario import build_simulation, load_scenario
-from ecs_anim.skeleton import JOINT_INDEX as J, LENGTH_INDEX as L
+from ecs_anim.skeleton import JOINT_INDEX as J
+from ecs_anim.skeleton import LENGTH_INDEX as L
 
 MM = 1e-3
 TENNIS = MOCAP_DIR / "ktk_tennis_serve.c3d"
@@ -302,7 +303,7 @@ def test_c3d_walk_plays_on_a_child_and_a_tall_adult_without_sliding(tmp_path):
     scenario = load_scenario(scenario_path)
     sim = build_simulation(scenario)
     metrics = MetricsRecorder(sim)
-    for _ in range(int(round(scenario.duration_s * sim.fps))):
+    for _ in range(round(scenario.duration_s * sim.fps)):
         sim.step()
         metrics.record()
     report = metrics.report()["characters"]
