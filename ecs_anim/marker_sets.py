@@ -8,8 +8,10 @@ separators ``_ . -``, so ``L_ASIS``, ``l.asis`` and ``LASIS`` are one key.
 Presets:
 
 * ``plug_in_gait`` — Vicon Plug-in Gait full body (LASI, RPSI, LKNE, LTHI, LANK, LTIB, LTOE,
-  LHEE, C7, T10, CLAV, STRN, LSHO, LELB, LWRA, LWRB, LFIN, LFHD, ...). Lower-body and upper-body
-  trials are the same preset with the unmarked parts absent.
+  LHEE, C7, T10, CLAV, STRN, LSHO, LELB, LWRA, LWRB, LFIN, LFHD, ...). A lower-body trial is
+  detected as this preset with the unmarked parts absent.
+* ``plug_in_gait_lower`` — the same labels, pelvis and legs only (``--map plug_in_gait_lower``
+  ignores any upper-body marker, e.g. to import the legs of a trial whose arms are unusable).
 * ``isb_anatomical`` — anatomical landmarks with ISB (Wu et al. 2002/2005) or CAST
   (Cappozzo et al. 1995) style names: iliac spines (ASIS/PSIS), femoral epicondyles (FLE/FME, LE/ME),
   malleoli (FAL/TAM, LM/MM), metatarsal heads (FM1/FM5, MT1/MT5), calcaneus, acromion (AC),
@@ -165,6 +167,11 @@ PRESETS: dict[str, MarkerSet] = {
         MarkerSet("plug_in_gait", "Vicon Plug-in Gait, full or lower body (LASI, LKNE, LTHI, "
                   "LANK, LTIB, LTOE, C7, CLAV, LSHO, LELB, LWRA, LFHD, ...)",
                   _PIG_ROLES, _LANDMARK_GROUPS,
+                  ("ASIS_l", "ASIS_r", "KNEE_LAT_l", "ANKLE_LAT_l", "TOE_l")),
+        MarkerSet("plug_in_gait_lower", "Vicon Plug-in Gait lower body (pelvis and legs only; "
+                  "upper-body markers are ignored)",
+                  _PIG_ROLES, {g: v for g, v in _LANDMARK_GROUPS.items()
+                               if g in ("pelvis", "leg_l", "leg_r")},
                   ("ASIS_l", "ASIS_r", "KNEE_LAT_l", "ANKLE_LAT_l", "TOE_l")),
         MarkerSet("isb_anatomical", "anatomical landmarks, ISB/CAST names (ASIS, PSIS, FLE/FME, "
                   "FAL/TAM, FM1/FM5, AC, HLE/HME, RSP/USP, IJ, PX, C7)",

@@ -409,3 +409,13 @@ def test_user_marker_map_overrides_a_label(tmp_path):
 def test_unreadable_file_gives_an_error_not_a_crash(tmp_path):
     with pytest.raises(EcsAnimError, match="cannot read file"):
         import_c3d(tmp_path / "nope.c3d")
+
+
+def test_lower_body_preset_ignores_the_upper_body():
+    require_mocap()
+    lower, extra = canonical_clip_c3d(read_c3d(TENNIS), "plug_in_gait_lower")
+    full, _ = canonical_clip_c3d(read_c3d(TENNIS))
+    assert extra["marker_set"] == "plug_in_gait_lower"
+    assert extra["absent"] == ["trunk", "head", "arm_l", "arm_r"]
+    legs = [J[f"{j}_{s}"] for j in ("hip", "knee", "ankle", "toe") for s in "lr"]
+    np.testing.assert_allclose(lower.positions[:, legs], full.positions[:, legs], atol=1e-12)
