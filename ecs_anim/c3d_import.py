@@ -36,8 +36,8 @@ ankles move nearly as hinges, whose centre is only defined up to a point on the 
 point on the axis nearest the proximal joint centre is taken. The toe hangs a foot length
 (adult proportions of the measured leg) in front of the ankle in the foot cluster's frame.
 
-Joint centres whose bones suddenly change length by more than 15 % (marker swaps or ghost
-markers in fast motion) are replaced by interpolation and reported
+Joint centres whose bones change length by more than 15 % for at most 5 frames (marker swaps
+or ghost markers in fast motion) are replaced by interpolation and reported
 (:func:`reject_joint_outliers`).
 
 Gaps: a sample is invalid when its residual is negative, its coordinates are all zero or it is
@@ -80,6 +80,7 @@ DEFAULT_MAX_GAP = 10
 #: Adult widths (m) for the chord rules, scaled by leg length / 0.8 m; marker radius (m).
 JOINT_WIDTH_PER_LEG = {"knee": 0.105 / 0.80, "ankle": 0.070 / 0.80, "elbow": 0.070 / 0.80}
 MARKER_RADIUS_M = 0.007
+MAX_GLITCH_FRAMES = 5  # joint-centre outliers are replaced only in runs this short
 HINGE_RATIO = 0.2  # SCoRE: weakest / next eigenvalue below this = a hinge (axis undetermined)
 SHOULDER_DROP = 0.17  # of the acromion-acromion distance (Rab et al. 2002)
 _LEG_P = ADULT_PROPORTIONS["thigh"] + ADULT_PROPORTIONS["shank"]
@@ -328,20 +329,24 @@ class _Build:
 def _detect_up(mk: _Markers, present: list[str], mmap: MarkerMap) -> str:
     """The file's up axis: the axis along which the body is tallest in a typical frame (the
     median over frames of the markers' spread), pointing from the legs to the pelvis (or from
-    the pelvis to the trunk when no leg is marked)."""
+    the pelvis to the trunk, or the trunk to the head, when those are what is marked)."""
     body = mk.points[:, sorted(set(mk.found.values()))]  # not other objects' markers
     spread = np.median(body.max(axis=1) - body.min(axis=1), axis=0)
     axis = int(np.argmax(spread))
     groups = mmap.preset.groups
-    pelvis = np.mean([mk(r) for r in groups["pelvis"][0] if r in mk.found], axis=0)
-    legs = [g for g in ("leg_l", "leg_r") if g in present]
-    below = [r for g in legs for r in groups[g][0] if r in mk.found]
-    if below:
-        sign = float(np.median((pelvis - np.mean([mk(r) for r in below], axis=0))[:, axis]))
-    else:
-        above = [r for r in groups["trunk"][0] if r in mk.found]
-        sign = float(np.median((np.mean([mk(r) for r in above], axis=0) - pelvis)[:, axis])) \
-            if above else 0.0
+
+    def centre(group: str) -> F64 | None:
+        roles = [r for r in groups.get(group, ((), ()))[0] if r in mk.found]
+        return np.mean([mk(r) for r in roles], axis=0) if roles else None
+
+    legs = [c for c in (centre(g) for g in ("leg_l", "leg_r") if g in present) if c is not None]
+    pairs = [(centre("pelvis"), np.mean(legs, axis=0) if legs else None),
+             (centre("trunk"), centre("pelvis")), (centre("head"), centre("trunk"))]
+    sign = 0.0
+    for high, low in pairs:
+        if high is not None and low is not None:
+            sign = float(np.median((high - low)[:, axis]))
+            break
     name = "xyz"[axis]
     if sign <= 0 or name == "x":
         raise EcsAnimError(f"cannot tell the up axis (the body is tallest along {name}, "
@@ -458,7 +463,8 @@ def reject_joint_outliers(positions: F64, measured: BOOL, tolerance: float = 0.1
     in fast motion) by interpolation from the neighbouring frames, in place.
 
     positions (F, N_JOINTS, 3). A bone is off in a frame when its length differs from its
-    median over the trial by more than ``tolerance`` of it. A knee or elbow is rejected where
+    median over the trial by more than ``tolerance`` of it, in a run of at most
+    :data:`MAX_GLITCH_FRAMES` frames (longer runs are kept: they are motion). A knee or elbow is rejected where
     both of its bones are off; then an ankle or wrist where its own bone is still off. Returns joint -> rejected frame count (only joints with some).
     """
     frames = np.arange(positions.shape[0])
@@ -481,6 +487,10 @@ def reject_joint_outliers(positions: F64, measured: BOOL, tolerance: float = 0.1
 
 def _interpolate_frames(positions: F64, joint: int, bad: BOOL, frames: NDArray[np.int_],
                         counts: dict[str, int]) -> None:
+    bad = bad.copy()
+    for a, b in _intervals(bad):  # a long run is the motion (or the model), not a glitch
+        if b - a + 1 > MAX_GLITCH_FRAMES:
+            bad[a:b + 1] = False
     if bad.any() and not bad.all():
         for axis in range(3):
             positions[bad, joint, axis] = np.interp(frames[bad], frames[~bad],
@@ -534,7 +544,7 @@ def _leg_length(build: _Build, present: list[str]) -> float:
     return float(width / (2 * ADULT_PROPORTIONS["pelvis"] * REST_HIP_DIR_LEFT[1]) * _LEG_P)
 
 
-def _landmark_body(mk: _Markers, present: list[str], build: _Build) -> None:
+def _landmark_pelvis(mk: _Markers, build: _Build) -> None:
     # Pelvis (ISB-like frame: y along ASIS_r -> ASIS_l, x forward in the ASIS/PSIS plane).
     asis_l, asis_r = mk("ASIS_l"), mk("ASIS_r")
     back = _mid(mk("PSIS_l"), mk("PSIS_r")) if mk.has("PSIS_l", "PSIS_r") else mk("SACRUM")
@@ -551,6 +561,34 @@ def _landmark_body(mk: _Markers, present: list[str], build: _Build) -> None:
     _set(build, "pelvis", _mid(build.positions[:, J["hip_l"]], build.positions[:, J["hip_r"]]),
          "midpoint of the hip centres")
     build.pelvis2world = pelvis2world
+
+
+def _pelvis_under_trunk(mk: _Markers, present: list[str], build: _Build) -> None:
+    """Upper-body trials: the pelvis (not marked) hangs a spine length below the neck base along
+    the thorax axis, upright, facing the thorax' heading. The body's size comes from the
+    acromion distance (two clavicles of adult proportions) when both arms are marked."""
+    neck = _mid(mk("C7"), mk("IJ"))
+    if mk.has("T10", "PX"):
+        axis = normalize(neck - _mid(mk("T10"), mk("PX")))
+    else:
+        axis = np.broadcast_to(np.array([0.0, 0.0, 1.0]), neck.shape)
+    thorax2world = frame_from_axes(axis, mk("IJ") - mk("C7"), 2, 0)
+    if "arm_l" in present and "arm_r" in present:
+        width = float(np.median(np.linalg.norm(mk("ACROMION_l") - mk("ACROMION_r"), axis=-1)))
+        leg = width / (2 * ADULT_PROPORTIONS["clavicle"]) * _LEG_P
+    else:
+        leg = 0.8
+    spine = sum(_prop(k, leg) for k in ("spine_lower", "spine_middle", "spine_upper"))
+    build.positions[:, J["pelvis"]] = neck - spine * axis
+    build.pelvis2world = _heading_frame(thorax2world)
+    build.how["pelvis"] = "not marked: a spine length below the neck base"
+
+
+def _landmark_body(mk: _Markers, present: list[str], build: _Build) -> None:
+    if "pelvis" in present:
+        _landmark_pelvis(mk, build)
+    else:
+        _pelvis_under_trunk(mk, present, build)
     # Legs.
     leg_guess = _leg_guess_from_markers(mk, present, build)
     for s in "lr":
@@ -575,7 +613,6 @@ def _landmark_body(mk: _Markers, present: list[str], build: _Build) -> None:
             _set(build, f"toe_{s}", mk(f"TOE_{s}"), "TOE marker (2nd metatarsal head)")
         else:
             _set(build, f"toe_{s}", _mid(mk(f"MT1_{s}"), mk(f"MT5_{s}")), "midpoint of MT1 and MT5")
-    leg = _leg_length(build, present)
     # Trunk.
     if "trunk" in present:
         c7, ij = mk("C7"), mk("IJ")
@@ -594,6 +631,7 @@ def _landmark_body(mk: _Markers, present: list[str], build: _Build) -> None:
             build.positions[:, J["spine_2"]] = mid
             front, rear = ij, c7
         build.thorax2world = frame_from_axes(neck - mid, front - rear, 2, 0)
+    leg = _leg_length(build, present)  # (with no legs, from the trunk: after it)
     # Arms.
     thorax = build.thorax2world
     acromion_width = None

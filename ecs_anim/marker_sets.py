@@ -36,6 +36,7 @@ import yaml
 
 from .errors import InputError, MappingError
 
+MIN_ROLES_DETECTED = 8
 GROUPS: tuple[str, ...] = ("pelvis", "leg_l", "leg_r", "trunk", "head", "arm_l", "arm_r")
 GROUP_WORDS = {"pelvis": "pelvis", "leg_l": "left leg", "leg_r": "right leg", "trunk": "trunk",
                "head": "head", "arm_l": "left arm", "arm_r": "right arm"}
@@ -59,7 +60,7 @@ class MarkerSet:
     groups : body part -> (required roles, alternatives) where alternatives is a tuple of
         tuples of roles, one of which must be complete (e.g. both PSIS or the sacrum).
     signature : roles of which more than half must be present for the preset to be detected
-        (the preset with most roles found wins).
+        (or :data:`MIN_ROLES_DETECTED` roles in all); the preset with most roles found wins.
     """
 
     name: str
@@ -251,8 +252,10 @@ def match_markers(labels: list[str], spec: str | None = None) -> MarkerMap:
         candidates = [PRESETS[base]] if base else list(PRESETS.values())
         for preset in candidates:
             found = _resolve(preset, keys)
-            # Detected when most of its signature is there; what is missing is then listed.
-            if not base and 2 * sum(r in found for r in preset.signature) <= len(preset.signature):
+            # Detected when most of its signature (lower body) is there, or many of its roles
+            # (an upper-body trial); what is missing is then listed per body part.
+            if not base and 2 * sum(r in found for r in preset.signature) <= len(preset.signature) \
+                    and len(found) < MIN_ROLES_DETECTED:
                 continue
             if best is None or len(found) > best[0]:
                 best = (len(found), subject, preset, found)
@@ -320,10 +323,11 @@ def _describe(preset: MarkerSet, role: str) -> str:
 def check_usable(mmap: MarkerMap, labels: list[str]) -> tuple[list[str], list[str]]:
     """(present, absent) groups, or :class:`MappingError` listing missing markers per body part.
 
-    The pelvis is always required; every other body part may be absent as a whole.
+    The pelvis is required unless the trunk is marked (an upper-body trial: the pelvis is then
+    placed under the trunk); every other body part may be absent as a whole.
     """
     present, absent, incomplete = group_status(mmap)
-    if "pelvis" in absent:
+    if "pelvis" in absent and ("trunk" not in present or mmap.preset.method == "functional"):
         incomplete = {"pelvis": [" + ".join(_describe(mmap.preset, r)
                                             for r in mmap.preset.groups["pelvis"][0])]} | incomplete
     if incomplete:
