@@ -33,7 +33,9 @@ Cluster sets (technical clusters, no landmarks): each cluster's pose by a weight
 rigid fit (Kabsch) to its mean shape; hips, knees and ankles by SCoRE (Ehrig et al. 2006,
 J Biomech 39:2798), the centre of rotation that is fixed in both adjacent segments; knees and
 ankles move nearly as hinges, whose centre is only defined up to a point on the axis, so the
-point on the axis nearest the proximal joint centre is taken. The toe hangs a foot length
+point on the axis nearest the proximal joint centre is taken. A walk flexes the hips about
+one axis too: there the hip is placed on its axis half an adult inter-hip distance (175 mm per
+0.8 m of leg) from the pelvis cluster's mid-plane (the pelvis clusters here straddle it). The toe hangs a foot length
 (adult proportions of the measured leg) in front of the ankle in the foot cluster's frame.
 
 Joint centres whose bones change length by more than 15 % for at most 5 frames (marker swaps
@@ -81,7 +83,10 @@ DEFAULT_MAX_GAP = 10
 JOINT_WIDTH_PER_LEG = {"knee": 0.105 / 0.80, "ankle": 0.070 / 0.80, "elbow": 0.070 / 0.80}
 MARKER_RADIUS_M = 0.007
 MAX_GLITCH_FRAMES = 5  # joint-centre outliers are replaced only in runs this short
-HINGE_RATIO = 0.2  # SCoRE: weakest / next eigenvalue below this = a hinge (axis undetermined)
+HINGE_RATIO = 0.2
+#: Half the distance between the hip centres of an adult (about 175 mm for a 0.8 m leg), per m
+#: of leg: where a trial moves the hips about one axis only, SCoRE cannot place them along it.
+HALF_HIP_DISTANCE_PER_LEG = 0.0875 / 0.80  # SCoRE: weakest / next eigenvalue below this = a hinge (axis undetermined)
 SHOULDER_DROP = 0.17  # of the acromion-acromion distance (Rab et al. 2002)
 _LEG_P = ADULT_PROPORTIONS["thigh"] + ADULT_PROPORTIONS["shank"]
 
@@ -265,14 +270,17 @@ def cluster_poses(points: F64, weights: F64, iterations: int = 2) -> tuple[F64, 
 
 
 def score_centre(parent: tuple[F64, F64], child: tuple[F64, F64], use: BOOL,
-                 hinge_prior_in_parent: F64 | None = None) -> tuple[F64, F64, F64]:
+                 hinge_prior_in_parent: F64 | None = None,
+                 hinge_plane_in_parent: tuple[F64, float] | None = None) -> tuple[F64, F64, F64]:
     """SCoRE (Ehrig et al. 2006): the point fixed in both segments.
 
     parent, child : (rotation (F, 3, 3), origin (F, 3)) segment poses; use : (F,) frames to fit.
     For a hinge the point is only defined up to the axis: with ``hinge_prior_in_parent`` (3,),
     when the weakest direction of the normal equations is clearly weaker than the others (by
     :data:`HINGE_RATIO`), it is dropped from the least-squares solution and the point on it nearest
-    the prior is taken. Returns (centre in parent frame (3,), in child frame (3,),
+    the prior is taken; with ``hinge_plane_in_parent`` (unit direction d (3,), offset) instead,
+    the point on it with ``d . centre = offset``. Returns (centre in parent frame (3,), in child
+    frame (3,),
     world position (F, 3): the mean of both estimates).
     """
     rp, tp = parent
@@ -283,16 +291,21 @@ def score_centre(parent: tuple[F64, F64], child: tuple[F64, F64], use: BOOL,
     v = np.einsum("fki,fk->i", a, b)
     evals, evecs = np.linalg.eigh(m)
     keep = evals > 1e-9 * evals[-1]
-    hinge = hinge_prior_in_parent is not None and evals[0] < HINGE_RATIO * evals[1]
+    hinge = (hinge_prior_in_parent is not None or hinge_plane_in_parent is not None) \
+        and evals[0] < HINGE_RATIO * evals[1]
     if hinge:
         keep[0] = False
     coeff = np.where(keep, (evecs.T @ v) / np.where(keep, evals, 1.0), 0.0)
     x = evecs @ coeff
     if hinge:
-        assert hinge_prior_in_parent is not None
         n = evecs[:, 0]
         n_p = n[:3]
-        lam = float(n_p @ (hinge_prior_in_parent - x[:3])) / max(float(n_p @ n_p), 1e-12)
+        if hinge_plane_in_parent is not None:
+            d, offset = hinge_plane_in_parent
+            lam = (offset - float(d @ x[:3])) / float(d @ n_p) if abs(float(d @ n_p)) > 1e-6 else 0.0
+        else:
+            assert hinge_prior_in_parent is not None
+            lam = float(n_p @ (hinge_prior_in_parent - x[:3])) / max(float(n_p @ n_p), 1e-12)
         x = x + lam * n
     c_parent, c_child = x[:3], x[3:]
     world = 0.5 * (np.einsum("fij,j->fi", rp, c_parent) + tp + np.einsum("fij,j->fi", rc, c_child) + tc)
@@ -696,19 +709,30 @@ def _functional_lower_body(mk: _Markers, present: list[str], build: _Build) -> N
         return rot, origin, weights.sum(axis=1) >= 3
 
     pelvis_rot, pelvis_origin, pelvis_ok = cluster("PELVIS", None, 4)
-    for s in "lr":
-        if f"leg_{s}" not in present:
-            continue
-        thigh = cluster("THIGH", s, 4)
-        shank = cluster("SHANK", s, 4)
-        foot = cluster("FOOT", s, 3)
-        use = pelvis_ok & thigh[2]
-        _, hip_in_thigh, hip = score_centre((pelvis_rot, pelvis_origin), thigh[:2], use)
-        _set(build, f"hip_{s}", hip, "SCoRE (Ehrig 2006), pelvis and thigh clusters")
-        _, knee_in_shank, knee = score_centre(thigh[:2], shank[:2], thigh[2] & shank[2], hip_in_thigh)
-        _set(build, f"knee_{s}", knee, "SCoRE thigh/shank, point of the axis nearest the hip")
-        _, _, ankle = score_centre(shank[:2], foot[:2], shank[2] & foot[2], knee_in_shank)
-        _set(build, f"ankle_{s}", ankle, "SCoRE shank/foot, point of the axis nearest the knee")
+    segments = {s: (cluster("THIGH", s, 4), cluster("SHANK", s, 4), cluster("FOOT", s, 3))
+                for s in "lr" if f"leg_{s}" in present}
+    # The pelvis cluster's left, from the thigh clusters (in the pelvis cluster's frame).
+    lateral = np.zeros(3)
+    if len(segments) == 2:
+        between = segments["l"][0][1] - segments["r"][0][1]
+        lateral = normalize(np.einsum("fji,fj->i", pelvis_rot, between))
+    leg = 0.8
+    for _ in range(2):  # the hip's lateral placement scales with the leg, measured in pass 1
+        for s, (thigh, shank, foot) in segments.items():
+            use = pelvis_ok & thigh[2]
+            side = 1.0 if s == "l" else -1.0
+            plane = (side * lateral, HALF_HIP_DISTANCE_PER_LEG * leg) if lateral.any() else None
+            _, hip_in_thigh, hip = score_centre((pelvis_rot, pelvis_origin), thigh[:2], use,
+                                                hinge_plane_in_parent=plane)
+            _set(build, f"hip_{s}", hip, "SCoRE (Ehrig 2006), pelvis and thigh clusters; "
+                 f"a flexion-only hip placed {HALF_HIP_DISTANCE_PER_LEG * leg * 1000:.0f} mm "
+                 "from the pelvis cluster's mid-plane")
+            _, knee_in_shank, knee = score_centre(thigh[:2], shank[:2], thigh[2] & shank[2],
+                                                  hip_in_thigh)
+            _set(build, f"knee_{s}", knee, "SCoRE thigh/shank, point of the axis nearest the hip")
+            _, _, ankle = score_centre(shank[:2], foot[:2], shank[2] & foot[2], knee_in_shank)
+            _set(build, f"ankle_{s}", ankle, "SCoRE shank/foot, point of the axis nearest the knee")
+        leg = _leg_length(build, present)
     # Pelvis: between the hips; tilt and roll from the pelvis cluster.
     if "leg_l" in present and "leg_r" in present:
         hip_l, hip_r = build.positions[:, J["hip_l"]], build.positions[:, J["hip_r"]]

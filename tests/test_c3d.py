@@ -447,3 +447,18 @@ def test_upper_body_only_places_the_pelvis_under_the_trunk(tmp_path):
     assert np.median(guess) < 0.15, np.median(guess)
     shank = clip.positions[:, J["ankle_l"]] - clip.positions[:, J["knee_l"]]
     np.testing.assert_allclose(shank[:, :2], 0.0, atol=1e-12)
+
+
+def test_score_hinge_plane_rule_places_the_centre_on_the_axis():
+    """A hip that only flexes: the centre is put on its axis at a given lateral offset."""
+    rng = np.random.default_rng(8)
+    n = 100
+    parent_rot = rot_axis(2, rng.uniform(-0.2, 0.2, n))
+    parent_origin = rng.normal(size=(n, 3))
+    centre_in_parent = np.array([0.05, 0.09, -0.1])
+    centre = np.einsum("fij,j->fi", parent_rot, centre_in_parent) + parent_origin
+    child_rot = parent_rot @ rot_axis(1, rng.uniform(-0.6, 0.6, n))  # flexion about y only
+    child_origin = centre - np.einsum("fij,j->fi", child_rot, np.array([0.0, 0.0, 0.3]))
+    cp, _, _ = score_centre((parent_rot, parent_origin), (child_rot, child_origin),
+                            np.ones(n, dtype=bool), hinge_plane_in_parent=(np.array([0.0, 1.0, 0.0]), 0.07))
+    np.testing.assert_allclose(cp, [0.05, 0.07, -0.1], atol=1e-9)
