@@ -476,25 +476,34 @@ def reject_joint_outliers(positions: F64, measured: BOOL, tolerance: float = 0.1
     in fast motion) by interpolation from the neighbouring frames, in place.
 
     positions (F, N_JOINTS, 3). A bone is off in a frame when its length differs from its
-    median over the trial by more than ``tolerance`` of it, in a run of at most
-    :data:`MAX_GLITCH_FRAMES` frames (longer runs are kept: they are motion). A knee or elbow is rejected where
-    both of its bones are off; then an ankle or wrist where its own bone is still off. Returns joint -> rejected frame count (only joints with some).
+    median over the trial by more than ``tolerance`` of it; only runs of at most
+    :data:`MAX_GLITCH_FRAMES` frames are replaced (longer runs are motion, or the model).
+    Along hip-knee-ankle-toe and shoulder-elbow-wrist-hand, the middle joint (knee, elbow) is
+    the culprit where the shank (forearm) is off and so is the thigh (upper arm), or the foot
+    (hand) beyond it is not; the end joint (ankle, wrist) where the shank (forearm) is still
+    off after that; then the toe (hand end) where the foot (hand) is off. Returns joint -> replaced frame count (only joints with some).
     """
     frames = np.arange(positions.shape[0])
     out: dict[str, int] = {}
+
+    def off(p: int, q: int) -> BOOL:
+        length = np.linalg.norm(positions[:, q] - positions[:, p], axis=-1)
+        median = np.median(length)
+        bad: BOOL = np.abs(length - median) > tolerance * median
+        return bad
+
     for s in "lr":
-        for top, middle, end in (("hip", "knee", "ankle"), ("shoulder", "elbow", "wrist")):
-            a, b, c = (J[f"{n}_{s}"] for n in (top, middle, end))
+        for top, middle, end, tip in (("hip", "knee", "ankle", "toe"),
+                                      ("shoulder", "elbow", "wrist", "hand")):
+            a, b, c, d = (J[f"{n}_{s}"] for n in (top, middle, end, tip))
             if not measured[[a, b, c]].all():
                 continue
-            def off(p: int, q: int) -> BOOL:
-                length = np.linalg.norm(positions[:, q] - positions[:, p], axis=-1)
-                median = np.median(length)
-                return np.abs(length - median) > tolerance * median  # type: ignore[no-any-return]
-
-            bad_mid = off(a, b) & off(b, c)
-            _interpolate_frames(positions, b, bad_mid, frames, out)
+            lower = off(b, c)
+            tip_fine = ~off(c, d) if measured[d] else np.zeros_like(lower)
+            _interpolate_frames(positions, b, lower & (off(a, b) | tip_fine), frames, out)
             _interpolate_frames(positions, c, off(b, c), frames, out)  # lengths after the fix
+            if measured[d]:
+                _interpolate_frames(positions, d, off(c, d), frames, out)
     return out
 
 
