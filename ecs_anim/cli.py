@@ -165,6 +165,9 @@ def cmd_info(args: argparse.Namespace) -> int:
     filled = info.get("filled_in")
     if filled:
         print(f"  filled in  {', '.join(map(str, filled)) if isinstance(filled, list) else filled}")
+    absent = info.get("absent")
+    if absent and isinstance(absent, list):
+        print(f"  absent     {', '.join(map(str, absent))} (no markers: {info.get('absent_fill')})")
     return 0
 
 

@@ -462,3 +462,23 @@ def test_score_hinge_plane_rule_places_the_centre_on_the_axis():
     cp, _, _ = score_centre((parent_rot, parent_origin), (child_rot, child_origin),
                             np.ones(n, dtype=bool), hinge_plane_in_parent=(np.array([0.0, 1.0, 0.0]), 0.07))
     np.testing.assert_allclose(cp, [0.05, 0.07, -0.1], atol=1e-9)
+
+
+def test_y_up_file_is_detected_and_turned_z_up(tmp_path):
+    require_mocap()
+    labels, positions, rate = _tennis_markers()
+    y_up = np.stack([positions[..., 0], positions[..., 2], -positions[..., 1]], axis=-1)
+    path = write_c3d(tmp_path / "yup.c3d", labels, y_up, rate=rate)
+    clip, extra = canonical_clip_c3d(read_c3d(path))
+    assert clip.up_axis == "y" and extra["up_reason"] == "detected from the markers"
+    z_up, _ = canonical_clip_c3d(read_c3d(write_c3d(tmp_path / "zup.c3d", labels, positions,
+                                                    rate=rate)))
+    np.testing.assert_allclose(clip.positions, z_up.positions, atol=1e-5)  # float32 in files
+
+
+def test_info_names_the_absent_parts(tmp_path, capsys):
+    require_mocap()
+    assert main(["import", str(GAIT), "-o", str(tmp_path)]) == 0
+    capsys.readouterr()
+    assert main(["info", str(tmp_path / f"{GAIT.stem}.nmo")]) == 0
+    assert "absent     trunk, head, arm_l, arm_r (no markers: neutral pose)" in capsys.readouterr().out
