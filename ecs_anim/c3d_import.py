@@ -369,8 +369,13 @@ def _detect_up(mk: _Markers, present: list[str], mmap: MarkerMap) -> str:
 
 def import_c3d(path: str | Path, map_spec: str | None = None, unit: str | None = None,
                thresholds: ContactThresholds = ContactThresholds(), up: str | None = None,
-               max_gap: int = DEFAULT_MAX_GAP) -> NormalizedMotion:
-    """Read a C3D file and normalize it. Raises :class:`EcsAnimError` subclasses on bad input."""
+               max_gap: int = DEFAULT_MAX_GAP, fill_from: str | Path | None = None
+               ) -> NormalizedMotion:
+    """Read a C3D file and normalize it. Raises :class:`EcsAnimError` subclasses on bad input.
+
+    ``fill_from``: a motion (.nmo or .bvh) whose parts replace the absent ones (see
+    :func:`fill_absent_from`); by default they keep the neutral pose.
+    """
     path = Path(path)
     raw = read_c3d(path)
     try:
@@ -387,7 +392,75 @@ def import_c3d(path: str | Path, map_spec: str | None = None, unit: str | None =
         raise InputError(path, f"normalizing gave non-finite values in {', '.join(bad)} "
                                "(degenerate marker data?); nothing written")
     motion.info.update(extra)
+    if fill_from is not None:
+        motion = fill_absent_from(motion, _load_default(Path(fill_from)), Path(fill_from).name,
+                                  thresholds)
     return motion
+
+
+def _load_default(path: Path) -> NormalizedMotion:
+    from .importing import import_bvh
+    from .motion import load_nmo
+
+    if path.suffix.lower() == ".nmo":
+        return load_nmo(path)
+    if path.suffix.lower() == ".bvh":
+        return import_bvh(path)
+    raise EcsAnimError(f"--fill-absent-from {path}: expected a .nmo or .bvh motion")
+
+
+#: Normalized fields of each body group: (field, side index or None).
+GROUP_FIELDS: dict[str, tuple[tuple[str, int | None], ...]] = {
+    "trunk": (("spine_points", None), ("thorax", None)),
+    "head": (("neck_dir", None), ("head", None), ("head_top_dir", None)),
+    **{f"arm_{s}": (("clavicle_dir", i), ("arm_frame", i), ("arm_fraction", i), ("hand_dir", i))
+       for i, s in enumerate("lr")},
+    **{f"leg_{s}": (("hip_dir", i), ("leg_frame", i), ("leg_fraction", i), ("foot_dir", i))
+       for i, s in enumerate("lr")},
+}
+GROUP_SEGMENTS: dict[str, tuple[str, ...]] = {
+    "trunk": ("spine_lower", "spine_middle", "spine_upper"), "head": ("neck", "head"),
+    **{f"arm_{s}": (f"clavicle_{s}", f"upper_arm_{s}", f"forearm_{s}", f"hand_{s}") for s in "lr"},
+    **{f"leg_{s}": (f"pelvis_{s}", f"thigh_{s}", f"shank_{s}", f"foot_{s}") for s in "lr"},
+}
+
+
+def fill_absent_from(motion: NormalizedMotion, default: NormalizedMotion, default_name: str,
+                     thresholds: ContactThresholds = ContactThresholds()) -> NormalizedMotion:
+    """Replace the absent body parts of ``motion`` (``info.absent``) by those of a default
+    motion, frame by frame at the same time (the default loops), in normalized form: the parts
+    are relative to their parent part, so e.g. a walk's arm swing rides on the captured trunk.
+    The pelvis is never taken from the default. Foot contacts are detected again when legs were
+    replaced. Returns a new motion; ``info.absent_fill`` names the default.
+    """
+    from .contacts import contact_constraints, detect_contacts
+    from .normalized import NormalizedPoses, decode
+    from .skeleton import LENGTH_INDEX
+
+    groups = [g for g in motion.info.get("absent", []) if g in GROUP_FIELDS]
+    if not groups:
+        return motion
+    t = np.arange(motion.n_frames) / motion.fps
+    index = np.round(t * default.fps).astype(int) % default.n_frames
+    arrays = {k: v.copy() for k, v in motion.poses.arrays().items()}
+    source = default.poses.arrays()
+    for group in groups:
+        for name, side in GROUP_FIELDS[group]:
+            if side is None:
+                arrays[name] = source[name][index].copy()
+            else:
+                arrays[name][:, side] = source[name][index, side]
+        for segment in GROUP_SEGMENTS[group]:
+            arrays["stretch"][:, LENGTH_INDEX[segment]] = 1.0
+    poses = NormalizedPoses(**arrays)
+    constraints = motion.constraints
+    if any(g.startswith("leg_") for g in groups):
+        positions = decode(poses, motion.source_morphology.lengths, use_stretch=True).positions
+        contact = detect_contacts(positions, motion.fps, thresholds)
+        constraints = [c for c in motion.constraints if c.kind != "foot_contact"] + \
+            contact_constraints(contact, motion.fps, thresholds)
+    info = dict(motion.info) | {"absent_fill": f"from {default_name}"}
+    return NormalizedMotion(poses, motion.fps, motion.source_morphology, constraints, info)
 
 
 def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str | None = None,

@@ -81,7 +81,8 @@ def cmd_import(args: argparse.Namespace) -> int:
                 raise EcsAnimError(f"{src}: unsupported file type {src.suffix!r} (expected .bvh "
                                    "or .c3d)")
             if suffix == ".c3d":
-                motion = import_c3d(src, args.map, args.unit, thresholds, args.up, args.max_gap)
+                motion = import_c3d(src, args.map, args.unit, thresholds, args.up, args.max_gap,
+                                    args.fill_absent_from)
             else:
                 motion = import_bvh(src, args.map, args.unit, thresholds, args.up or "y")
             save_nmo(motion, target, force=args.force)
@@ -94,7 +95,8 @@ def cmd_import(args: argparse.Namespace) -> int:
             if motion.info["filled_in"]:
                 message += f", filled in: {', '.join(motion.info['filled_in'])}"
             if motion.info.get("absent"):
-                message += (f", absent (neutral pose): {', '.join(motion.info['absent'])}")
+                message += (f", absent ({motion.info['absent_fill']}): "
+                            f"{', '.join(motion.info['absent'])}")
             gaps = motion.info.get("gaps")
             if gaps:
                 message += f", {gaps['samples_filled']} marker samples filled"
@@ -426,6 +428,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-gap", type=positive_int, default=10, metavar="FRAMES",
                    help="C3D: longest run of missing marker samples filled without a warning "
                    "(default %(default)s)")
+    p.add_argument("--fill-absent-from", metavar="MOTION.nmo|MOTION.bvh",
+                   help="C3D: take body parts with no markers from this motion (looped) instead "
+                   "of a neutral pose")
     p.add_argument("--constraints", metavar="FILE.yaml", help=argparse.SUPPRESS)
     p.add_argument("--contact-height", type=positive_float, default=ContactThresholds.height_m,
                    metavar="M", help="foot-contact height threshold, m (default %(default)s)")

@@ -14,7 +14,7 @@ from pathlib import Path
 import c3d
 import numpy as np
 import pytest
-from conftest import MOCAP_DIR, mocap_params, require_mocap
+from conftest import MOCAP_DIR, MOTIONS_DIR, mocap_params, require_mocap
 
 from ecs_anim.c3d_import import (
     canonical_clip_c3d,
@@ -27,9 +27,11 @@ from ecs_anim.c3d_import import (
 )
 from ecs_anim.cli import main
 from ecs_anim.errors import EcsAnimError, InputError
+from ecs_anim.importing import import_bvh
 from ecs_anim.metrics import MetricsRecorder
 from ecs_anim.morphology import bone_lengths_of
 from ecs_anim.motion import load_nmo
+from ecs_anim.normalized import decode
 from ecs_anim.rotations import rot_axis
 from ecs_anim.scenario import build_simulation, load_scenario
 from ecs_anim.skeleton import JOINT_INDEX as J
@@ -482,3 +484,22 @@ def test_info_names_the_absent_parts(tmp_path, capsys):
     capsys.readouterr()
     assert main(["info", str(tmp_path / f"{GAIT.stem}.nmo")]) == 0
     assert "absent     trunk, head, arm_l, arm_r (no markers: neutral pose)" in capsys.readouterr().out
+
+
+def test_absent_parts_from_a_default_motion(tmp_path, capsys):
+    require_mocap()
+    walk = MOTIONS_DIR / "walk.bvh"
+    neutral = import_c3d(GAIT)
+    filled = import_c3d(GAIT, fill_from=walk)
+    assert filled.info["absent_fill"] == "from walk.bvh"
+    default = import_bvh(walk)
+    index = np.round(np.arange(filled.n_frames) / filled.fps * default.fps).astype(int) % default.n_frames
+    np.testing.assert_array_equal(filled.poses.arm_frame, default.poses.arm_frame[index])
+    np.testing.assert_array_equal(filled.poses.thorax, default.poses.thorax[index])
+    np.testing.assert_array_equal(filled.poses.leg_frame, neutral.poses.leg_frame)  # captured
+    np.testing.assert_array_equal(filled.poses.root_position, neutral.poses.root_position)
+    arms = decode(filled.poses, filled.source_morphology.lengths).positions[:, J["wrist_l"]]
+    assert np.ptp(arms[:, 0] - decode(neutral.poses, neutral.source_morphology.lengths)
+                  .positions[:, J["wrist_l"], 0]) > 0.05  # the arms swing now
+    assert main(["import", str(GAIT), "-o", str(tmp_path), "--fill-absent-from", str(walk)]) == 0
+    assert "absent (from walk.bvh): trunk, head, arm_l, arm_r" in capsys.readouterr().out
