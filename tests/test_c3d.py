@@ -224,6 +224,7 @@ def test_lower_body_subset_with_prefix_other_objects_and_gaps(tmp_path):
     valid[100:106, lkne] = False  # 6 frames: filled
     ltoe = names.index("Bob:LTOE")
     valid[150:180, ltoe] = False  # 30 frames: reported
+    points[200:203, names.index("Bob:RHEE")] = np.nan  # not-a-number samples: filled too
     path = write_c3d(tmp_path / "lower.c3d", names, points, valid, rate)
     motion = import_c3d(path)
     info = motion.info
@@ -232,6 +233,7 @@ def test_lower_body_subset_with_prefix_other_objects_and_gaps(tmp_path):
     assert info["absent"] == ["trunk", "head", "arm_l", "arm_r"]
     assert info["gaps"]["long_gap_frames"] == [[150, 179]]
     assert info["gaps"]["long_gap_samples_per_marker"] == {"Bob:LTOE": 30}
+    assert info["gaps"]["samples_filled"] == 6 + 30 + 3
     assert all(np.all(np.isfinite(v)) for v in motion.poses.arrays().values())
     # The short gap was interpolated: the knee stays close to the full file's knee.
     full, _ = canonical_clip_c3d(read_c3d(path))
