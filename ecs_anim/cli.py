@@ -17,6 +17,7 @@ from typing import Sequence
 from .contacts import ContactThresholds
 from .errors import EcsAnimError
 from .joint_map import preset_summary
+from .marker_sets import preset_summary as marker_set_summary
 from .morphology import PRESET_SPECS
 from .viewer.command import add_arguments as add_view_arguments, cmd_view
 
@@ -52,6 +53,7 @@ def _progress(done: int, total: int, label: str) -> None:
 
 
 def cmd_import(args: argparse.Namespace) -> int:
+    from .c3d_import import import_c3d
     from .importing import import_bvh
     from .motion import save_nmo
 
@@ -77,9 +79,15 @@ def cmd_import(args: argparse.Namespace) -> int:
             stems[src.stem] = src
             if target.exists() and not args.force:
                 raise EcsAnimError(f"{target}: already exists (use --force to overwrite)")
-            if src.suffix.lower() != ".bvh":
-                raise EcsAnimError(f"{src}: unsupported file type {src.suffix!r} (expected .bvh)")
-            motion = import_bvh(src, args.map, args.unit, thresholds, args.up)
+            suffix = src.suffix.lower()
+            if suffix not in (".bvh", ".c3d"):
+                raise EcsAnimError(f"{src}: unsupported file type {src.suffix!r} (expected .bvh "
+                                   "or .c3d)")
+            if suffix == ".c3d":
+                motion = import_c3d(src, args.map, args.unit, thresholds, args.up, args.max_gap,
+                                    args.fill_absent_from)
+            else:
+                motion = import_bvh(src, args.map, args.unit, thresholds, args.up or "y")
             motion.constraints.extend(extra)
             save_nmo(motion, target, force=args.force)
             contacts = motion.contacts()
@@ -92,6 +100,16 @@ def cmd_import(args: argparse.Namespace) -> int:
                 message += f", filled in: {', '.join(motion.info['filled_in'])}"
             if extra:
                 message += f", {len(extra)} stored constraint(s)"
+            if motion.info.get("absent"):
+                message += (f", absent ({motion.info['absent_fill']}): "
+                            f"{', '.join(motion.info['absent'])}")
+            gaps = motion.info.get("gaps")
+            if gaps:
+                message += f", {gaps['samples_filled']} marker samples filled"
+                if gaps["long_gap_frames"]:
+                    spans = ", ".join(f"{a}-{b}" for a, b in gaps["long_gap_frames"])
+                    message += (f"; frames {spans} had gaps longer than {gaps['max_gap_frames']} "
+                                "frames (interpolated, unreliable)")
             if show_bar:
                 sys.stderr.write("\r" + " " * 80 + "\r")
             print(message)
@@ -155,6 +173,9 @@ def cmd_info(args: argparse.Namespace) -> int:
     filled = info.get("filled_in")
     if filled:
         print(f"  filled in  {', '.join(map(str, filled)) if isinstance(filled, list) else filled}")
+    absent = info.get("absent")
+    if absent and isinstance(absent, list):
+        print(f"  absent     {', '.join(map(str, absent))} (no markers: {info.get('absent_fill')})")
     return 0
 
 
@@ -407,17 +428,25 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True)
 
-    p = sub.add_parser("import", help="normalize captured clips (BVH) into .nmo files",
+    p = sub.add_parser("import", help="normalize captured clips (BVH, C3D) into .nmo files",
                        formatter_class=argparse.RawDescriptionHelpFormatter,
-                       epilog="joint-name presets:\n" + preset_summary())
-    p.add_argument("sources", nargs="+", metavar="SRC", help="BVH files")
+                       epilog="joint-name presets (BVH):\n" + preset_summary()
+                       + "\nmarker sets (C3D):\n" + marker_set_summary())
+    p.add_argument("sources", nargs="+", metavar="SRC", help="BVH or C3D files")
     p.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="folder for .nmo files")
     p.add_argument("--map", metavar="PRESET|FILE.yaml", help="joint-name preset or YAML map "
-                   "(default: detect)")
+                   "(BVH), marker-set preset or YAML marker map (C3D) (default: detect)")
     p.add_argument("--unit", choices=["m", "cm", "mm", "inch", "cmu"],
                    help="length unit of the file (default: detected from the proportions)")
-    p.add_argument("--up", choices=["y", "z"], default="y",
-                   help="the file's up axis (default y, the BVH convention)")
+    p.add_argument("--up", choices=["y", "z"], default=None,
+                   help="the file's up axis (default: y for BVH, the format's convention; "
+                   "detected from the markers for C3D)")
+    p.add_argument("--max-gap", type=positive_int, default=10, metavar="FRAMES",
+                   help="C3D: longest run of missing marker samples filled without a warning "
+                   "(default %(default)s)")
+    p.add_argument("--fill-absent-from", metavar="MOTION.nmo|MOTION.bvh",
+                   help="C3D: take body parts with no markers from this motion (looped) instead "
+                   "of a neutral pose")
     p.add_argument("--constraints", metavar="FILE.yaml",
                    help="constraints to store with every imported motion (e.g. two hands in "
                         "contact during a clap), times in the motion's own seconds; see "

@@ -279,6 +279,7 @@ def _morphology(r: _Reader, node: Node, where: str) -> Morphology:
 
 
 def _load_motion(r: _Reader, node: Node, where: str, base_dir: Path) -> NormalizedMotion:
+    from .c3d_import import import_c3d
     from .importing import import_bvh
 
     rel = r.string(node, where)
@@ -290,9 +291,11 @@ def _load_motion(r: _Reader, node: Node, where: str, base_dir: Path) -> Normaliz
             return load_nmo(path)
         if path.suffix.lower() == ".bvh":
             return import_bvh(path)
+        if path.suffix.lower() == ".c3d":
+            return import_c3d(path)
     except EcsAnimError as exc:
         raise r.fail(node, where, f"cannot load motion: {exc}") from None
-    raise r.fail(node, where, f"expected a .bvh or .nmo file, found {rel!r}")
+    raise r.fail(node, where, f"expected a .bvh, .c3d or .nmo file, found {rel!r}")
 
 
 CHARACTER_KEYS = {"name": True, "morphology": True, "motion": True, "position_m": False,
@@ -447,7 +450,7 @@ def load_scenario(path: str | Path) -> Scenario:
     duration = r.number(top["duration_s"], "duration_s", 1.0 / fps, 86400.0, "s")
     motion_nodes = top["motions"]
     if not isinstance(motion_nodes, yaml.MappingNode) or not motion_nodes.value:
-        raise r.fail(motion_nodes, "motions", "expected a mapping name: file (.bvh or .nmo)")
+        raise r.fail(motion_nodes, "motions", "expected a mapping name: file (.bvh, .c3d or .nmo)")
     motions: dict[str, NormalizedMotion] = {}
     for key_node, value in motion_nodes.value:
         if not isinstance(key_node, yaml.ScalarNode) or not _NAME.fullmatch(str(key_node.value)):

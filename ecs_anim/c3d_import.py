@@ -1,0 +1,900 @@
+"""From labelled C3D markers straight to a :class:`~ecs_anim.motion.NormalizedMotion`.
+
+read (the ``c3d`` package) -> match labels to a marker set (:mod:`ecs_anim.marker_sets`) ->
+fill short gaps -> metres, Z up -> joint centres -> the same canonical clip, encoding, source
+morphology and contact detection as BVH import (:func:`ecs_anim.importing.normalize_clip`).
+No joint angle is ever computed: the representation is Cartesian.
+
+Joint centres
+-------------
+Landmark sets (Plug-in Gait, ISB/CAST):
+
+* hips: Harrington et al. 2007 (J Biomech 40:595) regression from pelvis width PW (ASIS-ASIS)
+  and depth PD (mid-ASIS to mid-PSIS or sacrum), in the pelvis frame (mm):
+  posterior 0.24 PD + 9.9, inferior 0.30 PW + 10.9, lateral 0.33 PW + 7.3;
+* knees / ankles: midpoint of the epicondyles / malleoli when both are marked; otherwise the
+  Plug-in-Gait chord rule: the centre lies half a joint width plus a marker radius from the
+  lateral marker, in the plane of the proximal joint centre, the lateral marker and the wand
+  (THI / TIB), with the proximal segment perpendicular to the offset;
+* toes (ball of the foot): TOE (2nd metatarsal head) or the midpoint of MT1 and MT5;
+* neck base: midpoint of C7 and the jugular notch (CLAV / IJ); mid-thorax: midpoint of
+  T10 (T8) and the xiphoid (STRN / PX) when both are marked, otherwise interpolated;
+* shoulders: 17 % of the acromion-acromion distance below the acromion marker, along the thorax
+  axis (after Rab et al. 2002);
+* elbows: midpoint of the humeral epicondyles, or the lateral marker moved medially by half an
+  elbow width plus a marker radius along the flexion axis (the normal of the shoulder-elbow-wrist
+  plane, averaged in an upper-arm frame so a straight arm keeps it);
+* wrists: midpoint of the radial and ulnar styloid markers (WRA/WRB); hand end: FIN or the
+  midpoint of the 2nd and 5th metacarpal heads;
+* head: the four head-band markers give the head frame; skull base and vertex lie half a head
+  length below and above their centre.
+
+Cluster sets (technical clusters, no landmarks): each cluster's pose by a weighted least-squares
+rigid fit (Kabsch) to its mean shape; hips, knees and ankles by SCoRE (Ehrig et al. 2006,
+J Biomech 39:2798), the centre of rotation that is fixed in both adjacent segments; knees and
+ankles move nearly as hinges, whose centre is only defined up to a point on the axis, so the
+point on the axis nearest the proximal joint centre is taken. A walk flexes the hips about
+one axis too: there the hip is placed on its axis half an adult inter-hip distance (175 mm per
+0.8 m of leg) from the pelvis cluster's mid-plane (the pelvis clusters here straddle it). The toe hangs a foot length
+(adult proportions of the measured leg) in front of the ankle in the foot cluster's frame.
+
+Joint centres whose bones change length by more than 15 % for at most 5 frames (marker swaps
+or ghost markers in fast motion) are replaced by interpolation and reported
+(:func:`reject_joint_outliers`).
+
+Gaps: a sample is invalid when its residual is negative, its coordinates are all zero or it is
+not finite. Runs of at most ``max_gap`` frames (default 10) are interpolated linearly; longer
+runs are interpolated as well (so no NaN ever reaches the output) and reported.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .contacts import ContactThresholds, _intervals
+from .errors import EcsAnimError, InputError
+from .importing import (
+    UNITS,
+    YUP_TO_ZUP,
+    CanonicalClip,
+    detect_unit,
+    normalize_clip,
+)
+from .joint_map import JointMap
+from .marker_sets import GROUPS, MarkerMap, check_usable, match_markers
+from .morphology import ADULT_PROPORTIONS
+from .motion import NormalizedMotion
+from .rotations import frame_from_axes, normalize, rot_axis, yaw_of
+from .skeleton import JOINT_INDEX as J
+from .skeleton import JOINTS, N_JOINTS, REST_HIP_DIR_LEFT
+
+F64 = NDArray[np.float64]
+BOOL = NDArray[np.bool_]
+
+DEFAULT_MAX_GAP = 10
+#: Adult widths (m) for the chord rules, scaled by leg length / 0.8 m; marker radius (m).
+JOINT_WIDTH_PER_LEG = {"knee": 0.105 / 0.80, "ankle": 0.070 / 0.80, "elbow": 0.070 / 0.80}
+MARKER_RADIUS_M = 0.007
+MAX_GLITCH_FRAMES = 5  # joint-centre outliers are replaced only in runs this short
+HINGE_RATIO = 0.2
+#: Half the distance between the hip centres of an adult (about 175 mm for a 0.8 m leg), per m
+#: of leg: where a trial moves the hips about one axis only, SCoRE cannot place them along it.
+HALF_HIP_DISTANCE_PER_LEG = 0.0875 / 0.80  # SCoRE: weakest / next eigenvalue below this = a hinge (axis undetermined)
+SHOULDER_DROP = 0.17  # of the acromion-acromion distance (Rab et al. 2002)
+_LEG_P = ADULT_PROPORTIONS["thigh"] + ADULT_PROPORTIONS["shank"]
+
+
+def _prop(name: str, leg_m: float) -> float:
+    """An adult segment length for a body of the given leg length (m)."""
+    return ADULT_PROPORTIONS[name] / _LEG_P * leg_m
+
+
+# --- reading -----------------------------------------------------------------------------------
+
+@dataclass
+class C3dMarkers:
+    """Marker trajectories as read: file units and axes.
+
+    positions : (n_frames, n_markers, 3); valid : (n_frames, n_markers) bool.
+    """
+
+    labels: list[str]
+    positions: F64
+    valid: BOOL
+    rate: float
+    units: str
+    first_frame: int
+
+
+def read_c3d(path: str | Path) -> C3dMarkers:
+    """Read marker data with the ``c3d`` package. Raises :class:`InputError` on a damaged,
+    truncated or unlabelled file."""
+    import c3d
+
+    path = str(path)
+    try:
+        f = open(path, "rb")
+    except OSError as exc:
+        raise InputError(path, f"cannot read file: {exc.strerror or exc}") from None
+    with f, warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            reader = c3d.Reader(f)
+            n_points = int(reader.point_used)
+            rate = float(reader.point_rate)
+            expected = int(reader.last_frame) - int(reader.first_frame) + 1
+            first = int(reader.first_frame)
+            labels_param = reader.get("POINT:LABELS")
+            labels = [] if labels_param is None else [str(s).strip() for s in reader.point_labels]
+            units_param = reader.get("POINT:UNITS")
+            units = "" if units_param is None else \
+                "".join(ch for ch in units_param.string_value.lower() if ch.isalpha())
+            frames = [points[:, :4].astype(np.float64) for _, points, _ in reader.read_frames()] \
+                if n_points > 0 else []
+        except InputError:
+            raise
+        except Exception as exc:  # the reader raises struct, value, index errors on bad bytes
+            reason = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+            raise InputError(path, f"not a readable C3D file (damaged or truncated?): {reason}") from None
+    if n_points <= 0:
+        raise InputError(path, "the C3D file holds no marker (POINT:USED is 0)")
+    if not (math.isfinite(rate) and 0.1 <= rate <= 100000):
+        raise InputError(path, f"implausible point rate {rate:g} Hz in the C3D header")
+    if not frames:
+        raise InputError(path, f"the C3D file holds no frame of marker data (header says {expected}; "
+                               "truncated?)")
+    if len(frames) < expected:
+        raise InputError(path, f"file ends after {len(frames)} of {expected} frames (truncated?)")
+    labels = (labels + [""] * n_points)[:n_points]
+    if not any(labels):
+        raise InputError(path, "the markers have no labels (POINT:LABELS is missing or blank): "
+                               "label them in the capture software first")
+    data = np.stack(frames)
+    positions = data[:, :, :3]
+    finite = np.all(np.isfinite(positions), axis=-1)
+    valid = finite & (data[:, :, 3] >= 0) & np.any(positions != 0, axis=-1)
+    positions = np.where(finite[..., None], positions, 0.0)
+    return C3dMarkers(labels, positions, valid, rate, units, first)
+
+
+# --- gaps --------------------------------------------------------------------------------------
+
+def fill_gaps(positions: F64, valid: BOOL, max_gap: int = DEFAULT_MAX_GAP) -> tuple[F64, BOOL]:
+    """Interpolate invalid samples of each marker linearly (held at the clip's ends).
+
+    positions (F, M, 3), valid (F, M). Returns (filled positions, ``long``): ``long`` (F, M) is
+    True on samples in runs of more than ``max_gap`` invalid frames (filled too, but unreliable)
+    and on markers never seen. The loop runs over markers and gaps, never over frames.
+    """
+    out = positions.copy()
+    long = np.zeros(valid.shape, dtype=bool)
+    frames = np.arange(valid.shape[0])
+    for m in range(valid.shape[1]):
+        ok = valid[:, m]
+        if ok.all():
+            continue
+        if not ok.any():
+            long[:, m] = True
+            continue
+        bad = ~ok
+        for axis in range(3):
+            out[bad, m, axis] = np.interp(frames[bad], frames[ok], positions[ok, m, axis])
+        for a, b in _intervals(bad):
+            if b - a + 1 > max_gap:
+                long[a:b + 1, m] = True
+    return out, long
+
+
+def cluster_outliers(points: F64, valid: BOOL, tolerance_m: float = 0.015,
+                     tolerance_fraction: float = 0.1) -> BOOL:
+    """Samples of a rigid cluster that break its shape (mislabelled or swapped markers).
+
+    points (F, K, 3) metres, valid (F, K). A sample is an outlier when more than half of its
+    distances to the cluster's other valid markers differ from their median over the trial by
+    more than ``tolerance_m + tolerance_fraction * median``. Returns (F, K) bool.
+    """
+    k = points.shape[1]
+    dist = np.linalg.norm(points[:, :, None] - points[:, None], axis=-1)  # (F, K, K)
+    pair_ok = valid[:, :, None] & valid[:, None, :]
+    median = np.array([[np.median(dist[pair_ok[:, a, b], a, b]) if pair_ok[:, a, b].any() else 0.0
+                        for b in range(k)] for a in range(k)])
+    off = np.abs(dist - median) > tolerance_m + tolerance_fraction * median
+    bad_pairs = (off & pair_ok).sum(axis=2)
+    pairs = np.maximum(pair_ok.sum(axis=2) - 1, 0)  # the diagonal counts itself
+    out: BOOL = valid & (bad_pairs * 2 > pairs) & (pairs > 0)
+    return out
+
+
+# --- small geometric kernels (batched over frames) --------------------------------------------
+
+def _mid(a: F64, b: F64) -> F64:
+    return 0.5 * (a + b)
+
+
+def chord_centre(proximal: F64, wand: F64, marker: F64, offset: F64 | float) -> F64:
+    """Plug-in-Gait chord rule: the joint centre ``c`` at ``offset`` from ``marker``, in the
+    plane of (proximal, wand, marker), with (proximal - c) perpendicular to (marker - c), on the
+    side away from the wand. All (F, 3) -> (F, 3)."""
+    u_vec = proximal - marker
+    length = np.linalg.norm(u_vec, axis=-1, keepdims=True)
+    u = u_vec / np.maximum(length, 1e-12)
+    w = wand - marker
+    v = -normalize(w - np.sum(w * u, axis=-1, keepdims=True) * u)
+    off = np.asarray(offset, dtype=np.float64)
+    off = off[..., None] if off.ndim else off
+    cos_t = np.clip(off / np.maximum(length, 1e-12), 0.0, 1.0)
+    sin_t = np.sqrt(1.0 - cos_t**2)
+    centre: F64 = marker + off * (cos_t * u + sin_t * v)
+    return centre
+
+
+def cluster_poses(points: F64, weights: F64, iterations: int = 2) -> tuple[F64, F64]:
+    """Rigid poses of a marker cluster by weighted least squares (Kabsch), batched over frames.
+
+    points (F, K, 3) world, weights (F, K) (0 for missing samples). The cluster's local shape is
+    its mean shape (first the first fully seen frame, then refined ``iterations`` times).
+    Returns (cluster2world (F, 3, 3), origin (F, 3)) with ``points ≈ R @ shape + origin``.
+    """
+    full = np.flatnonzero(weights.min(axis=1) > 0)
+    if len(full):  # the fully seen frame whose shape is closest to the typical one
+        dist = np.linalg.norm(points[full, :, None] - points[full, None], axis=-1)
+        ref_frame = int(full[np.argmin(np.abs(dist - np.median(dist, axis=0)).sum(axis=(1, 2)))])
+    else:
+        ref_frame = int(np.argmax(weights.sum(axis=1)))
+    shape = points[ref_frame] - points[ref_frame].mean(axis=0)
+    w = weights[..., None]
+    wsum = np.maximum(weights.sum(axis=1), 1e-12)[:, None]
+    for _ in range(iterations + 1):
+        c_ref = np.einsum("fk,ki->fi", weights, shape) / wsum
+        c_cur = (w * points).sum(axis=1) / wsum
+        a = shape[None] - c_ref[:, None]
+        b = points - c_cur[:, None]
+        h = np.einsum("fk,fki,fkj->fij", weights, a, b)
+        u, _, vt = np.linalg.svd(h)
+        d = np.sign(np.linalg.det(np.swapaxes(vt, -1, -2) @ np.swapaxes(u, -1, -2)))
+        fix = np.ones(u.shape[:-1])
+        fix[:, 2] = d
+        rot = np.swapaxes(vt, -1, -2) @ (fix[:, :, None] * np.swapaxes(u, -1, -2))
+        origin = c_cur - np.einsum("fij,fj->fi", rot, c_ref)
+        local = np.einsum("fji,fkj->fki", rot, points - origin[:, None])  # R^T (p - o)
+        shape = (w * local).sum(axis=0) / np.maximum(weights.sum(axis=0), 1e-12)[:, None]
+        shape -= shape.mean(axis=0)
+    return rot, origin
+
+
+def score_centre(parent: tuple[F64, F64], child: tuple[F64, F64], use: BOOL,
+                 hinge_prior_in_parent: F64 | None = None,
+                 hinge_plane_in_parent: tuple[F64, float] | None = None) -> tuple[F64, F64, F64]:
+    """SCoRE (Ehrig et al. 2006): the point fixed in both segments.
+
+    parent, child : (rotation (F, 3, 3), origin (F, 3)) segment poses; use : (F,) frames to fit.
+    For a hinge the point is only defined up to the axis: with ``hinge_prior_in_parent`` (3,),
+    when the weakest direction of the normal equations is clearly weaker than the others (by
+    :data:`HINGE_RATIO`), it is dropped from the least-squares solution and the point on it nearest
+    the prior is taken; with ``hinge_plane_in_parent`` (unit direction d (3,), offset) instead,
+    the point on it with ``d . centre = offset``. Returns (centre in parent frame (3,), in child
+    frame (3,),
+    world position (F, 3): the mean of both estimates).
+    """
+    rp, tp = parent
+    rc, tc = child
+    a = np.concatenate([rp, -rc], axis=-1)[use]  # (F, 3, 6)
+    b = (tc - tp)[use]
+    m = np.einsum("fki,fkj->ij", a, a)
+    v = np.einsum("fki,fk->i", a, b)
+    evals, evecs = np.linalg.eigh(m)
+    keep = evals > 1e-9 * evals[-1]
+    hinge = (hinge_prior_in_parent is not None or hinge_plane_in_parent is not None) \
+        and evals[0] < HINGE_RATIO * evals[1]
+    if hinge:
+        keep[0] = False
+    coeff = np.where(keep, (evecs.T @ v) / np.where(keep, evals, 1.0), 0.0)
+    x = evecs @ coeff
+    if hinge:
+        n = evecs[:, 0]
+        n_p = n[:3]
+        if hinge_plane_in_parent is not None:
+            d, offset = hinge_plane_in_parent
+            lam = (offset - float(d @ x[:3])) / float(d @ n_p) if abs(float(d @ n_p)) > 1e-6 else 0.0
+        else:
+            assert hinge_prior_in_parent is not None
+            lam = float(n_p @ (hinge_prior_in_parent - x[:3])) / max(float(n_p @ n_p), 1e-12)
+        x = x + lam * n
+    c_parent, c_child = x[:3], x[3:]
+    world = 0.5 * (np.einsum("fij,j->fi", rp, c_parent) + tp + np.einsum("fij,j->fi", rc, c_child) + tc)
+    return c_parent, c_child, world
+
+
+# --- the importer ------------------------------------------------------------------------------
+
+@dataclass
+class _Markers:
+    """Marker access by role after gap filling, metres, Z up."""
+
+    points: F64  # (F, M, 3)
+    long: BOOL  # (F, M)
+    found: dict[str, int]
+
+    def __call__(self, role: str) -> F64:
+        return self.points[:, self.found[role]]
+
+    def has(self, *roles: str) -> bool:
+        return all(r in self.found for r in roles)
+
+
+@dataclass
+class _Build:
+    positions: F64
+    measured: BOOL
+    how: dict[str, str] = field(default_factory=dict)
+    pelvis2world: F64 | None = None
+    thorax2world: F64 | None = None
+    head2world: F64 | None = None
+
+
+def _detect_up(mk: _Markers, present: list[str], mmap: MarkerMap) -> str:
+    """The file's up axis: the axis along which the body is tallest in a typical frame (the
+    median over frames of the markers' spread), pointing from the legs to the pelvis (or from
+    the pelvis to the trunk, or the trunk to the head, when those are what is marked)."""
+    body = mk.points[:, sorted(set(mk.found.values()))]  # not other objects' markers
+    spread = np.median(body.max(axis=1) - body.min(axis=1), axis=0)
+    axis = int(np.argmax(spread))
+    groups = mmap.preset.groups
+
+    def centre(group: str) -> F64 | None:
+        roles = [r for r in groups.get(group, ((), ()))[0] if r in mk.found]
+        return np.mean([mk(r) for r in roles], axis=0) if roles else None
+
+    legs = [c for c in (centre(g) for g in ("leg_l", "leg_r") if g in present) if c is not None]
+    pairs = [(centre("pelvis"), np.mean(legs, axis=0) if legs else None),
+             (centre("trunk"), centre("pelvis")), (centre("head"), centre("trunk"))]
+    sign = 0.0
+    for high, low in pairs:
+        if high is not None and low is not None:
+            sign = float(np.median((high - low)[:, axis]))
+            break
+    name = "xyz"[axis]
+    if sign <= 0 or name == "x":
+        raise EcsAnimError(f"cannot tell the up axis (the body is tallest along {name}, "
+                           f"{'downwards' if sign <= 0 else 'sideways'}); give --up")
+    return name
+
+
+def import_c3d(path: str | Path, map_spec: str | None = None, unit: str | None = None,
+               thresholds: ContactThresholds = ContactThresholds(), up: str | None = None,
+               max_gap: int = DEFAULT_MAX_GAP, fill_from: str | Path | None = None
+               ) -> NormalizedMotion:
+    """Read a C3D file and normalize it. Raises :class:`EcsAnimError` subclasses on bad input.
+
+    ``fill_from``: a motion (.nmo or .bvh) whose parts replace the absent ones (see
+    :func:`fill_absent_from`); by default they keep the neutral pose.
+    """
+    path = Path(path)
+    raw = read_c3d(path)
+    try:
+        clip, extra = canonical_clip_c3d(raw, map_spec, unit, up, max_gap)
+        motion = normalize_clip(clip, path.stem, str(path), thresholds)
+    except InputError:
+        raise
+    except EcsAnimError as exc:
+        raise InputError(path, str(exc)) from None
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        raise InputError(path, f"cannot compute joint centres from these markers: {exc}") from None
+    bad = [k for k, v in motion.poses.arrays().items() if not np.all(np.isfinite(v))]
+    if bad:
+        raise InputError(path, f"normalizing gave non-finite values in {', '.join(bad)} "
+                               "(degenerate marker data?); nothing written")
+    motion.info.update(extra)
+    if fill_from is not None:
+        motion = fill_absent_from(motion, _load_default(Path(fill_from)), Path(fill_from).name,
+                                  thresholds)
+    return motion
+
+
+def _load_default(path: Path) -> NormalizedMotion:
+    from .importing import import_bvh
+    from .motion import load_nmo
+
+    if path.suffix.lower() == ".nmo":
+        return load_nmo(path)
+    if path.suffix.lower() == ".bvh":
+        return import_bvh(path)
+    raise EcsAnimError(f"--fill-absent-from {path}: expected a .nmo or .bvh motion")
+
+
+#: Normalized fields of each body group: (field, side index or None).
+GROUP_FIELDS: dict[str, tuple[tuple[str, int | None], ...]] = {
+    "trunk": (("spine_points", None), ("thorax", None)),
+    "head": (("neck_dir", None), ("head", None), ("head_top_dir", None)),
+    **{f"arm_{s}": (("clavicle_dir", i), ("arm_frame", i), ("arm_fraction", i), ("hand_dir", i))
+       for i, s in enumerate("lr")},
+    **{f"leg_{s}": (("hip_dir", i), ("leg_frame", i), ("leg_fraction", i), ("foot_dir", i))
+       for i, s in enumerate("lr")},
+}
+GROUP_SEGMENTS: dict[str, tuple[str, ...]] = {
+    "trunk": ("spine_lower", "spine_middle", "spine_upper"), "head": ("neck", "head"),
+    **{f"arm_{s}": (f"clavicle_{s}", f"upper_arm_{s}", f"forearm_{s}", f"hand_{s}") for s in "lr"},
+    **{f"leg_{s}": (f"pelvis_{s}", f"thigh_{s}", f"shank_{s}", f"foot_{s}") for s in "lr"},
+}
+
+
+def fill_absent_from(motion: NormalizedMotion, default: NormalizedMotion, default_name: str,
+                     thresholds: ContactThresholds = ContactThresholds()) -> NormalizedMotion:
+    """Replace the absent body parts of ``motion`` (``info.absent``) by those of a default
+    motion, frame by frame at the same time (the default loops), in normalized form: the parts
+    are relative to their parent part, so e.g. a walk's arm swing rides on the captured trunk.
+    The pelvis is never taken from the default. Foot contacts are detected again when legs were
+    replaced. Returns a new motion; ``info.absent_fill`` names the default.
+    """
+    from .contacts import contact_constraints, detect_contacts
+    from .normalized import NormalizedPoses, decode
+    from .skeleton import LENGTH_INDEX
+
+    groups = [g for g in motion.info.get("absent", []) if g in GROUP_FIELDS]
+    if not groups:
+        return motion
+    t = np.arange(motion.n_frames) / motion.fps
+    index = np.round(t * default.fps).astype(int) % default.n_frames
+    arrays = {k: v.copy() for k, v in motion.poses.arrays().items()}
+    source = default.poses.arrays()
+    for group in groups:
+        for name, side in GROUP_FIELDS[group]:
+            if side is None:
+                arrays[name] = source[name][index].copy()
+            else:
+                arrays[name][:, side] = source[name][index, side]
+        for segment in GROUP_SEGMENTS[group]:
+            arrays["stretch"][:, LENGTH_INDEX[segment]] = 1.0
+    poses = NormalizedPoses(**arrays)
+    constraints = motion.constraints
+    if any(g.startswith("leg_") for g in groups):
+        positions = decode(poses, motion.source_morphology.lengths, use_stretch=True).positions
+        contact = detect_contacts(positions, motion.fps, thresholds)
+        constraints = [c for c in motion.constraints if c.kind != "foot_contact"] + \
+            contact_constraints(contact, motion.fps, thresholds)
+    info = dict(motion.info) | {"absent_fill": f"from {default_name}"}
+    return NormalizedMotion(poses, motion.fps, motion.source_morphology, constraints, info)
+
+
+def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str | None = None,
+                       up: str | None = None, max_gap: int = DEFAULT_MAX_GAP
+                       ) -> tuple[CanonicalClip, dict[str, Any]]:
+    """Markers -> canonical clip (metres, Z up) plus provenance for ``info``."""
+    mmap = match_markers(raw.labels, map_spec)
+    # Markers never seen in the trial count as missing.
+    seen: BOOL = np.asarray(raw.valid.any(axis=0))
+    never = [raw.labels[i] for i in mmap.marker.values() if not seen[i]]
+    mmap.marker = {r: i for r, i in mmap.marker.items() if seen[i]}
+    present, absent = check_usable(mmap, raw.labels)
+    valid = raw.valid.copy()
+    rejected = 0
+    if mmap.preset.method == "functional":  # rigid clusters: drop samples that break the shape
+        for members in _clusters(mmap):
+            out = cluster_outliers(raw.positions[:, members], valid[:, members],
+                                   0.015 / UNITS.get(raw.units, 0.001))
+            rejected += int(out.sum())
+            valid[:, members] &= ~out
+    filled, long = fill_gaps(raw.positions, valid, max_gap)
+    # Units.
+    if unit is not None:
+        if unit not in UNITS:
+            raise EcsAnimError(f"--unit {unit}: unknown unit; choose one of {', '.join(UNITS)}")
+        unit_name, reason = unit, "given with --unit"
+    elif raw.units in ("mm", "cm", "m"):
+        unit_name, reason = raw.units, f"POINT:UNITS says {raw.units!r}"
+    else:
+        z = filled[..., 2]
+        unit_name, reason = detect_unit(float(np.median(z.max(axis=1) - z.min(axis=1))) / 1.9)
+        reason = f"POINT:UNITS is {raw.units!r}; guessed from the body's height: {reason}"
+    scale = UNITS[unit_name]
+    mk = _Markers(filled * scale, long, mmap.marker)
+    if up is None:
+        up = _detect_up(mk, present, mmap)
+        up_reason = "detected from the markers"
+    else:
+        up_reason = "given with --up"
+    if up not in ("y", "z"):
+        raise EcsAnimError(f"--up {up}: expected 'y' or 'z'")
+    if up == "y":
+        mk.points = mk.points @ YUP_TO_ZUP.T
+    build = _joint_centres(mk, mmap, present)
+    rejected_joints = reject_joint_outliers(build.positions, build.measured)
+    # Frames where a marker of a present part was in a long gap.
+    used = sorted(set(mmap.marker.values()))
+    bad_frames: BOOL = np.asarray(long[:, used].any(axis=1)) if used else \
+        np.zeros(long.shape[0], dtype=bool)
+    gap_markers = {raw.labels[i]: int(long[:, i].sum()) for i in used if long[:, i].any()}
+    n_filled = int((~valid[:, used]).sum()) if used else 0
+    if not np.all(np.isfinite(build.positions)):
+        raise EcsAnimError("joint centres hold non-finite values (degenerate marker data)")
+    jmap = JointMap(source={}, thorax=-1, how=mmap.how,
+                    names={j: build.how.get(j) for j in JOINTS})
+    clip = CanonicalClip(
+        positions=build.positions, pelvis2world=build.pelvis2world,  # type: ignore[arg-type]
+        thorax2world=build.thorax2world, head2world=build.head2world,  # type: ignore[arg-type]
+        measured=build.measured, fps=raw.rate, unit=unit_name, unit_reason=reason,
+        joint_map=jmap, up_axis=up,
+    )
+    extra: dict[str, Any] = {
+        "format_in": "c3d",
+        "marker_set": mmap.preset.name,
+        "subject": mmap.subject,
+        "ignored_markers": mmap.ignored,
+        "markers_never_seen": never,
+        "up_reason": up_reason,
+        "absent": absent,
+        "absent_fill": "neutral pose" if absent else None,
+        "gaps": {
+            "max_gap_frames": max_gap,
+            "samples_filled": n_filled,
+            "samples_rejected_as_outliers": rejected,
+            "long_gap_frames": [[a, b] for a, b in _intervals(bad_frames)],
+            "long_gap_samples_per_marker": gap_markers,
+            "joint_centres_rejected": rejected_joints,
+        },
+    }
+    return clip, extra
+
+
+def reject_joint_outliers(positions: F64, measured: BOOL, tolerance: float = 0.15
+                          ) -> dict[str, int]:
+    """Replace limb joint centres that break their bone lengths (marker swaps, ghost markers
+    in fast motion) by interpolation from the neighbouring frames, in place.
+
+    positions (F, N_JOINTS, 3). A bone is off in a frame when its length differs from its
+    median over the trial by more than ``tolerance`` of it; only runs of at most
+    :data:`MAX_GLITCH_FRAMES` frames are replaced (longer runs are motion, or the model).
+    Along hip-knee-ankle-toe and shoulder-elbow-wrist-hand, the middle joint (knee, elbow) is
+    the culprit where the shank (forearm) is off and so is the thigh (upper arm), or the foot
+    (hand) beyond it is not; the end joint (ankle, wrist) where the shank (forearm) is still
+    off after that; then the toe (hand end) where the foot (hand) is off. Returns joint -> replaced frame count (only joints with some).
+    """
+    frames = np.arange(positions.shape[0])
+    out: dict[str, int] = {}
+
+    def off(p: int, q: int) -> BOOL:
+        length = np.linalg.norm(positions[:, q] - positions[:, p], axis=-1)
+        median = np.median(length)
+        bad: BOOL = np.abs(length - median) > tolerance * median
+        return bad
+
+    for s in "lr":
+        for top, middle, end, tip in (("hip", "knee", "ankle", "toe"),
+                                      ("shoulder", "elbow", "wrist", "hand")):
+            a, b, c, d = (J[f"{n}_{s}"] for n in (top, middle, end, tip))
+            if not measured[[a, b, c]].all():
+                continue
+            lower = off(b, c)
+            tip_fine = ~off(c, d) if measured[d] else np.zeros_like(lower)
+            _interpolate_frames(positions, b, lower & (off(a, b) | tip_fine), frames, out)
+            _interpolate_frames(positions, c, off(b, c), frames, out)  # lengths after the fix
+            if measured[d]:
+                _interpolate_frames(positions, d, off(c, d), frames, out)
+    return out
+
+
+def _interpolate_frames(positions: F64, joint: int, bad: BOOL, frames: NDArray[np.int_],
+                        counts: dict[str, int]) -> None:
+    bad = bad.copy()
+    for a, b in _intervals(bad):  # a long run is the motion (or the model), not a glitch
+        if b - a + 1 > MAX_GLITCH_FRAMES:
+            bad[a:b + 1] = False
+    if bad.any() and not bad.all():
+        for axis in range(3):
+            positions[bad, joint, axis] = np.interp(frames[bad], frames[~bad],
+                                                    positions[~bad, joint, axis])
+        counts[JOINTS[joint]] = counts.get(JOINTS[joint], 0) + int(bad.sum())
+
+
+def _clusters(mmap: MarkerMap) -> list[list[int]]:
+    """Marker indices of each rigid cluster of a functional marker set (by role prefix)."""
+    groups: dict[str, list[int]] = {}
+    for role, i in mmap.marker.items():
+        parts = role.split("_")
+        key = parts[0] + ("_" + parts[2] if len(parts) > 2 else "")
+        groups.setdefault(key, []).append(i)
+    return [g for g in groups.values() if len(g) >= 3]
+
+
+def _joint_centres(mk: _Markers, mmap: MarkerMap, present: list[str]) -> _Build:
+    n = mk.points.shape[0]
+    build = _Build(np.zeros((n, N_JOINTS, 3)), np.zeros(N_JOINTS, dtype=bool))
+    if mmap.preset.method == "functional":
+        _functional_lower_body(mk, present, build)
+    else:
+        _landmark_body(mk, present, build)
+    _fill_absent(build, present)
+    return build
+
+
+def _set(build: _Build, joint: str, value: F64, how: str) -> None:
+    build.positions[:, J[joint]] = value
+    build.measured[J[joint]] = True
+    build.how[joint] = how
+
+
+def _heading_frame(pelvis2world: F64) -> F64:
+    return rot_axis(2, yaw_of(pelvis2world))
+
+
+def _leg_length(build: _Build, present: list[str]) -> float:
+    p = build.positions
+    legs = [s for s in "lr" if f"leg_{s}" in present]
+    if legs:
+        return float(np.mean([np.median(np.linalg.norm(p[:, J[f"knee_{s}"]] - p[:, J[f"hip_{s}"]], axis=-1)
+                                        + np.linalg.norm(p[:, J[f"ankle_{s}"]] - p[:, J[f"knee_{s}"]], axis=-1))
+                              for s in legs]))
+    if "trunk" in present:
+        spine = np.median(np.linalg.norm(p[:, J["neck"]] - p[:, J["pelvis"]], axis=-1))
+        return float(spine / sum(ADULT_PROPORTIONS[k] for k in ("spine_lower", "spine_middle",
+                                                                  "spine_upper")) * _LEG_P)
+    width = np.median(np.linalg.norm(p[:, J["hip_l"]] - p[:, J["hip_r"]], axis=-1))
+    return float(width / (2 * ADULT_PROPORTIONS["pelvis"] * REST_HIP_DIR_LEFT[1]) * _LEG_P)
+
+
+def _landmark_pelvis(mk: _Markers, build: _Build) -> None:
+    # Pelvis (ISB-like frame: y along ASIS_r -> ASIS_l, x forward in the ASIS/PSIS plane).
+    asis_l, asis_r = mk("ASIS_l"), mk("ASIS_r")
+    back = _mid(mk("PSIS_l"), mk("PSIS_r")) if mk.has("PSIS_l", "PSIS_r") else mk("SACRUM")
+    back_name = "LPSI/RPSI" if mk.has("PSIS_l", "PSIS_r") else "SACR"
+    front = _mid(asis_l, asis_r)
+    pelvis2world = frame_from_axes(asis_l - asis_r, front - back, 1, 0)
+    width = float(np.median(np.linalg.norm(asis_l - asis_r, axis=-1)))
+    depth = float(np.median(np.linalg.norm(front - back, axis=-1)))
+    harrington = f"Harrington 2007 (PW {width * 1000:.0f} mm, PD {depth * 1000:.0f} mm, ASIS + {back_name})"
+    for s, sign in (("l", 1.0), ("r", -1.0)):
+        local = np.array([-0.24 * depth - 0.0099, sign * (0.33 * width + 0.0073),
+                          -0.30 * width - 0.0109])
+        _set(build, f"hip_{s}", front + pelvis2world @ local, harrington)
+    _set(build, "pelvis", _mid(build.positions[:, J["hip_l"]], build.positions[:, J["hip_r"]]),
+         "midpoint of the hip centres")
+    build.pelvis2world = pelvis2world
+
+
+def _pelvis_under_trunk(mk: _Markers, present: list[str], build: _Build) -> None:
+    """Upper-body trials: the pelvis (not marked) hangs a spine length below the neck base along
+    the thorax axis, upright, facing the thorax' heading. The body's size comes from the
+    acromion distance (two clavicles of adult proportions) when both arms are marked."""
+    neck = _mid(mk("C7"), mk("IJ"))
+    if mk.has("T10", "PX"):
+        axis = normalize(neck - _mid(mk("T10"), mk("PX")))
+    else:
+        axis = np.broadcast_to(np.array([0.0, 0.0, 1.0]), neck.shape)
+    thorax2world = frame_from_axes(axis, mk("IJ") - mk("C7"), 2, 0)
+    if "arm_l" in present and "arm_r" in present:
+        width = float(np.median(np.linalg.norm(mk("ACROMION_l") - mk("ACROMION_r"), axis=-1)))
+        leg = width / (2 * ADULT_PROPORTIONS["clavicle"]) * _LEG_P
+    else:
+        leg = 0.8
+    spine = sum(_prop(k, leg) for k in ("spine_lower", "spine_middle", "spine_upper"))
+    build.positions[:, J["pelvis"]] = neck - spine * axis
+    build.pelvis2world = _heading_frame(thorax2world)
+    build.how["pelvis"] = "not marked: a spine length below the neck base"
+
+
+def _landmark_body(mk: _Markers, present: list[str], build: _Build) -> None:
+    if "pelvis" in present:
+        _landmark_pelvis(mk, build)
+    else:
+        _pelvis_under_trunk(mk, present, build)
+    # Legs.
+    leg_guess = _leg_guess_from_markers(mk, present, build)
+    for s in "lr":
+        if f"leg_{s}" not in present:
+            continue
+        hip = build.positions[:, J[f"hip_{s}"]]
+        if mk.has(f"KNEE_MED_{s}"):
+            knee, how = _mid(mk(f"KNEE_LAT_{s}"), mk(f"KNEE_MED_{s}")), "midpoint of the femoral epicondyles"
+        else:
+            d = 0.5 * JOINT_WIDTH_PER_LEG["knee"] * leg_guess + MARKER_RADIUS_M
+            knee = chord_centre(hip, mk(f"THIGH_{s}"), mk(f"KNEE_LAT_{s}"), d)
+            how = f"chord rule from hip, THI, KNE (offset {d * 1000:.0f} mm)"
+        _set(build, f"knee_{s}", knee, how)
+        if mk.has(f"ANKLE_MED_{s}"):
+            ankle, how = _mid(mk(f"ANKLE_LAT_{s}"), mk(f"ANKLE_MED_{s}")), "midpoint of the malleoli"
+        else:
+            d = 0.5 * JOINT_WIDTH_PER_LEG["ankle"] * leg_guess + MARKER_RADIUS_M
+            ankle = chord_centre(knee, mk(f"SHANK_{s}"), mk(f"ANKLE_LAT_{s}"), d)
+            how = f"chord rule from knee, TIB, ANK (offset {d * 1000:.0f} mm)"
+        _set(build, f"ankle_{s}", ankle, how)
+        if mk.has(f"TOE_{s}"):
+            _set(build, f"toe_{s}", mk(f"TOE_{s}"), "TOE marker (2nd metatarsal head)")
+        else:
+            _set(build, f"toe_{s}", _mid(mk(f"MT1_{s}"), mk(f"MT5_{s}")), "midpoint of MT1 and MT5")
+    # Trunk.
+    if "trunk" in present:
+        c7, ij = mk("C7"), mk("IJ")
+        neck = _mid(c7, ij)
+        _set(build, "neck", neck, "midpoint of C7 and the jugular notch")
+        pelvis = build.positions[:, J["pelvis"]]
+        if mk.has("T10", "PX"):
+            mid = _mid(mk("T10"), mk("PX"))
+            _set(build, "spine_2", mid, "midpoint of T10/T8 and the xiphoid")
+            _set(build, "spine_1", _mid(pelvis, mid), "")
+            build.measured[J["spine_1"]] = False
+            front, rear = _mid(ij, mk("PX")), _mid(c7, mk("T10"))
+        else:
+            mid = pelvis + (neck - pelvis) * (2 / 3)
+            build.positions[:, J["spine_1"]] = pelvis + (neck - pelvis) / 3
+            build.positions[:, J["spine_2"]] = mid
+            front, rear = ij, c7
+        build.thorax2world = frame_from_axes(neck - mid, front - rear, 2, 0)
+    leg = _leg_length(build, present)  # (with no legs, from the trunk: after it)
+    # Arms.
+    thorax = build.thorax2world
+    acromion_width = None
+    if "arm_l" in present and "arm_r" in present:
+        acromion_width = float(np.median(np.linalg.norm(mk("ACROMION_l") - mk("ACROMION_r"), axis=-1)))
+    for s, medial_sign in (("l", -1.0), ("r", 1.0)):
+        if f"arm_{s}" not in present:
+            continue
+        down = -(thorax[..., :, 2] if thorax is not None else np.array([0.0, 0.0, 1.0]))
+        aw = acromion_width if acromion_width is not None else 2 * _prop("clavicle", leg) + 0.08
+        shoulder = mk(f"ACROMION_{s}") + SHOULDER_DROP * aw * down
+        _set(build, f"shoulder_{s}", shoulder,
+             f"{SHOULDER_DROP:.0%} of the acromion distance ({aw * 1000:.0f} mm) below the acromion")
+        wrist = _mid(mk(f"WRIST_RAD_{s}"), mk(f"WRIST_ULN_{s}"))
+        _set(build, f"wrist_{s}", wrist, "midpoint of the wrist markers")
+        lateral = mk(f"ELBOW_LAT_{s}")
+        if mk.has(f"ELBOW_MED_{s}"):
+            _set(build, f"elbow_{s}", _mid(lateral, mk(f"ELBOW_MED_{s}")),
+                 "midpoint of the humeral epicondyles")
+        else:
+            flex = np.cross(shoulder - lateral, wrist - lateral)  # |.| grows with flexion
+            second = mk(f"UPPER_ARM_{s}") - lateral if mk.has(f"UPPER_ARM_{s}") else \
+                np.broadcast_to(thorax[..., :, 0] if thorax is not None else [1.0, 0.0, 0.0], lateral.shape)
+            upper2world = frame_from_axes(shoulder - lateral, second, 2, 0)
+            axis_local = normalize(np.einsum("fji,fj->i", upper2world, flex))
+            medial = medial_sign * np.einsum("fij,j->fi", upper2world, axis_local)
+            d = 0.5 * JOINT_WIDTH_PER_LEG["elbow"] * leg + MARKER_RADIUS_M
+            _set(build, f"elbow_{s}", lateral + d * medial,
+                 f"ELB moved {d * 1000:.0f} mm medially along the flexion axis")
+        if mk.has(f"HAND_{s}"):
+            _set(build, f"hand_{s}", mk(f"HAND_{s}"), "FIN marker")
+        elif mk.has(f"MC2_{s}", f"MC5_{s}"):
+            _set(build, f"hand_{s}", _mid(mk(f"MC2_{s}"), mk(f"MC5_{s}")), "midpoint of MC2 and MC5")
+        else:
+            elbow = build.positions[:, J[f"elbow_{s}"]]
+            build.positions[:, J[f"hand_{s}"]] = wrist + normalize(wrist - elbow) * _prop("hand", leg)
+    # Head.
+    if "head" in present:
+        fl, fr, bl, br = (mk(f"HEAD_{p}_{s}") for p, s in
+                          (("FRONT", "l"), ("FRONT", "r"), ("BACK", "l"), ("BACK", "r")))
+        centre = 0.25 * (fl + fr + bl + br)
+        head2world = frame_from_axes(_mid(fl, fr) - _mid(bl, br), _mid(fl, bl) - _mid(fr, br), 0, 1)
+        half = 0.5 * _prop("head", leg)
+        _set(build, "head", centre - half * head2world[..., :, 2], "half a head length below the head markers' centre")
+        _set(build, "head_top", centre + half * head2world[..., :, 2], "half a head length above it")
+        build.head2world = head2world
+
+
+def _leg_guess_from_markers(mk: _Markers, present: list[str], build: _Build) -> float:
+    """Leg length (m) before knees and ankles are known: hip centre to lateral malleolus."""
+    values = [np.median(np.linalg.norm(mk(f"ANKLE_LAT_{s}") - build.positions[:, J[f"hip_{s}"]], axis=-1))
+              for s in "lr" if f"leg_{s}" in present]
+    return float(np.mean(values)) if values else 0.8
+
+
+def _functional_lower_body(mk: _Markers, present: list[str], build: _Build) -> None:
+    def cluster(prefix: str, side: str | None, count: int) -> tuple[F64, F64, BOOL]:
+        roles = [f"{prefix}_{k}" + (f"_{side}" if side else "") for k in range(1, count + 1)]
+        idx = [mk.found[r] for r in roles]
+        weights = (~mk.long[:, idx]).astype(np.float64)
+        rot, origin = cluster_poses(mk.points[:, idx], weights)
+        return rot, origin, weights.sum(axis=1) >= 3
+
+    pelvis_rot, pelvis_origin, pelvis_ok = cluster("PELVIS", None, 4)
+    segments = {s: (cluster("THIGH", s, 4), cluster("SHANK", s, 4), cluster("FOOT", s, 3))
+                for s in "lr" if f"leg_{s}" in present}
+    # The pelvis cluster's left, from the thigh clusters (in the pelvis cluster's frame).
+    lateral = np.zeros(3)
+    if len(segments) == 2:
+        between = segments["l"][0][1] - segments["r"][0][1]
+        lateral = normalize(np.einsum("fji,fj->i", pelvis_rot, between))
+    leg = 0.8
+    for _ in range(2):  # the hip's lateral placement scales with the leg, measured in pass 1
+        for s, (thigh, shank, foot) in segments.items():
+            use = pelvis_ok & thigh[2]
+            side = 1.0 if s == "l" else -1.0
+            plane = (side * lateral, HALF_HIP_DISTANCE_PER_LEG * leg) if lateral.any() else None
+            _, hip_in_thigh, hip = score_centre((pelvis_rot, pelvis_origin), thigh[:2], use,
+                                                hinge_plane_in_parent=plane)
+            _set(build, f"hip_{s}", hip, "SCoRE (Ehrig 2006), pelvis and thigh clusters; "
+                 f"a flexion-only hip placed {HALF_HIP_DISTANCE_PER_LEG * leg * 1000:.0f} mm "
+                 "from the pelvis cluster's mid-plane")
+            _, knee_in_shank, knee = score_centre(thigh[:2], shank[:2], thigh[2] & shank[2],
+                                                  hip_in_thigh)
+            _set(build, f"knee_{s}", knee, "SCoRE thigh/shank, point of the axis nearest the hip")
+            _, _, ankle = score_centre(shank[:2], foot[:2], shank[2] & foot[2], knee_in_shank)
+            _set(build, f"ankle_{s}", ankle, "SCoRE shank/foot, point of the axis nearest the knee")
+        leg = _leg_length(build, present)
+    # Pelvis: between the hips; tilt and roll from the pelvis cluster.
+    if "leg_l" in present and "leg_r" in present:
+        hip_l, hip_r = build.positions[:, J["hip_l"]], build.positions[:, J["hip_r"]]
+        _set(build, "pelvis", _mid(hip_l, hip_r), "midpoint of the hip centres")
+        up_local = normalize(np.einsum("fji,j->i", pelvis_rot, np.array([0.0, 0.0, 1.0])))
+        build.pelvis2world = frame_from_axes(hip_l - hip_r, pelvis_rot @ up_local, 1, 2)
+    else:
+        raise EcsAnimError("a cluster marker set needs both leg clusters to place the pelvis "
+                           f"(found {', '.join(present)})")
+    leg = _leg_length(build, present)
+    forward = build.pelvis2world[..., :, 0]
+    forward_h = normalize(forward * np.array([1.0, 1.0, 0.0]))
+    foot_len = _prop("foot", leg)
+    for s in "lr":
+        # The foot's stance orientation (the slowest third of the frames): the toe (ball of the
+        # foot) lies a foot length forward of the ankle and on the floor (z = 0) there.
+        foot_rot, foot_origin, _ = cluster("FOOT", s, 3)
+        ankle = build.positions[:, J[f"ankle_{s}"]]
+        speed = np.linalg.norm(np.gradient(foot_origin, axis=0), axis=-1)
+        stance = speed <= np.percentile(speed, 33)
+        up_local = normalize(np.einsum("fji,j->i", foot_rot[stance], np.array([0.0, 0.0, 1.0])))
+        fwd_local = np.einsum("fji,fj->i", foot_rot[stance], forward_h[stance])
+        fwd_local = normalize(fwd_local - (fwd_local @ up_local) * up_local)
+        height = float(np.median(ankle[stance, 2]))
+        drop = math.asin(float(np.clip(height / foot_len, 0.0, 0.85)))
+        toe_local = foot_len * (math.cos(drop) * fwd_local - math.sin(drop) * up_local)
+        _set(build, f"toe_{s}", ankle + foot_rot @ toe_local,
+             f"a foot length ({foot_len * 1000:.0f} mm) forward of the ankle, on the floor at stance")
+        build.measured[J[f"toe_{s}"]] = False
+
+
+def _fill_absent(build: _Build, present: list[str]) -> None:
+    """Neutral pose for absent body parts (upright trunk and head, arms hanging, legs straight),
+    adult proportions of the measured leg length. Also spine_1/spine_2 and hand ends that the
+    markers do not give."""
+    p = build.positions
+    assert build.pelvis2world is not None
+    leg = _leg_length(build, present)
+    heading = _heading_frame(build.pelvis2world)
+    up = np.array([0.0, 0.0, 1.0])
+    pelvis = p[:, J["pelvis"]]
+    for s, sign in (("l", 1.0), ("r", -1.0)):
+        if f"leg_{s}" in present:
+            continue
+        if not build.measured[J[f"hip_{s}"]]:
+            x, y, z = REST_HIP_DIR_LEFT
+            p[:, J[f"hip_{s}"]] = pelvis + build.pelvis2world @ (np.array([x, sign * y, z]) * _prop("pelvis", leg))
+        p[:, J[f"knee_{s}"]] = p[:, J[f"hip_{s}"]] - up * _prop("thigh", leg)
+        p[:, J[f"ankle_{s}"]] = p[:, J[f"knee_{s}"]] - up * _prop("shank", leg)
+        p[:, J[f"toe_{s}"]] = p[:, J[f"ankle_{s}"]] + heading[..., :, 0] * _prop("foot", leg) * 0.95 \
+            - up * _prop("ankle_height", leg)
+    if "trunk" not in present:
+        p[:, J["spine_1"]] = pelvis + up * _prop("spine_lower", leg)
+        p[:, J["spine_2"]] = p[:, J["spine_1"]] + up * _prop("spine_middle", leg)
+        p[:, J["neck"]] = p[:, J["spine_2"]] + up * _prop("spine_upper", leg)
+        build.thorax2world = heading
+    if "head" not in present:
+        thorax_up = build.thorax2world[..., :, 2]  # type: ignore[index]
+        p[:, J["head"]] = p[:, J["neck"]] + thorax_up * _prop("neck", leg)
+        p[:, J["head_top"]] = p[:, J["head"]] + thorax_up * _prop("head", leg)
+        build.head2world = build.thorax2world
+    thorax = build.thorax2world
+    for s, sign in (("l", 1.0), ("r", -1.0)):
+        if f"arm_{s}" in present:
+            continue
+        p[:, J[f"shoulder_{s}"]] = p[:, J["neck"]] + sign * thorax[..., :, 1] * _prop("clavicle", leg)  # type: ignore[index]
+        p[:, J[f"elbow_{s}"]] = p[:, J[f"shoulder_{s}"]] - up * _prop("upper_arm", leg)
+        p[:, J[f"wrist_{s}"]] = p[:, J[f"elbow_{s}"]] - up * _prop("forearm", leg)
+        p[:, J[f"hand_{s}"]] = p[:, J[f"wrist_{s}"]] - up * _prop("hand", leg)
+
+
+__all__ = [
+    "DEFAULT_MAX_GAP",
+    "GROUPS",
+    "C3dMarkers",
+    "canonical_clip_c3d",
+    "chord_centre",
+    "cluster_poses",
+    "fill_gaps",
+    "import_c3d",
+    "read_c3d",
+    "score_centre",
+]

@@ -1,0 +1,389 @@
+"""Which C3D marker is which anatomical landmark: marker-set presets, detection, user maps.
+
+A marker set maps *roles* (our names for landmarks, e.g. ``ASIS_L`` the left anterior superior
+iliac spine, ``KNEE_LAT_L`` the lateral femoral epicondyle) to candidate marker labels. Labels
+are compared after removing a subject prefix (``Bob:LASI`` -> ``LASI``), case, spaces and the
+separators ``_ . -``, so ``L_ASIS``, ``l.asis`` and ``LASIS`` are one key.
+
+Presets:
+
+* ``plug_in_gait`` — Vicon Plug-in Gait full body (LASI, RPSI, LKNE, LTHI, LANK, LTIB, LTOE,
+  LHEE, C7, T10, CLAV, STRN, LSHO, LELB, LWRA, LWRB, LFIN, LFHD, ...). A lower-body trial is
+  detected as this preset with the unmarked parts absent.
+* ``plug_in_gait_lower`` — the same labels, pelvis and legs only (``--map plug_in_gait_lower``
+  ignores any upper-body marker, e.g. to import the legs of a trial whose arms are unusable).
+* ``isb_anatomical`` — anatomical landmarks with ISB (Wu et al. 2002/2005) or CAST
+  (Cappozzo et al. 1995) style names: iliac spines (ASIS/PSIS), femoral epicondyles (FLE/FME, LE/ME),
+  malleoli (FAL/TAM, LM/MM), metatarsal heads (FM1/FM5, MT1/MT5), calcaneus, acromion (AC),
+  humeral epicondyles (HLE/HME, EL/EM), styloids (RSP/USP, RS/US), IJ, PX, C7, T8.
+* ``cluster_gait`` — technical marker clusters (c3d.org sample ``Eb015pi``: ``PV1-4`` pelvis,
+  ``RTH1-4`` thigh, ``RSK1-4`` shank, ``RFT1-3`` foot): no landmarks, so joint centres are found
+  functionally (see :mod:`ecs_anim.c3d_import`).
+
+Body parts (groups): ``pelvis``, ``leg_l``, ``leg_r``, ``trunk``, ``head``, ``arm_l``, ``arm_r``.
+A group whose markers are all missing is *absent* (filled with a neutral pose, recorded in the
+file); a group with only some of its markers is an error that lists what is missing.
+"""
+
+from __future__ import annotations
+
+import difflib
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+from .errors import InputError, MappingError
+
+MIN_ROLES_DETECTED = 8
+GROUPS: tuple[str, ...] = ("pelvis", "leg_l", "leg_r", "trunk", "head", "arm_l", "arm_r")
+GROUP_WORDS = {"pelvis": "pelvis", "leg_l": "left leg", "leg_r": "right leg", "trunk": "trunk",
+               "head": "head", "arm_l": "left arm", "arm_r": "right arm"}
+
+
+def label_key(label: str) -> str:
+    """Comparison key of a marker label: no subject prefix, upper case, no separators."""
+    return re.sub(r"[\s_.\-]", "", label.split(":")[-1]).upper()
+
+
+def subject_of(label: str) -> str:
+    """The subject prefix of a label (``Bob:LASI`` -> ``Bob``), '' when none."""
+    return label.rsplit(":", 1)[0].strip() if ":" in label else ""
+
+
+@dataclass(frozen=True)
+class MarkerSet:
+    """A marker-set preset.
+
+    roles : role -> candidate labels (compared by :func:`label_key`; first present wins).
+    groups : body part -> (required roles, alternatives) where alternatives is a tuple of
+        tuples of roles, one of which must be complete (e.g. both PSIS or the sacrum).
+    signature : roles of which more than half must be present for the preset to be detected
+        (or :data:`MIN_ROLES_DETECTED` roles in all); the preset with most roles found wins.
+    """
+
+    name: str
+    description: str
+    roles: dict[str, tuple[str, ...]]
+    groups: dict[str, tuple[tuple[str, ...], tuple[tuple[str, ...], ...]]]
+    signature: tuple[str, ...]
+    method: str = "landmarks"  # or "functional"
+
+
+def _sided(table: dict[str, tuple[str, ...]]) -> dict[str, tuple[str, ...]]:
+    """Expand ``{"ASIS_{s}": ("{S}ASI",)}`` for both sides; ``{S}`` is L or R, and a label
+    written ``*X`` is tried with the side letter or word before and after (``LX``, ``XL``,
+    ``LEFTX``, ``XLEFT``)."""
+    out: dict[str, tuple[str, ...]] = {}
+    for role, labels in table.items():
+        sides = (("l", "L", "LEFT"), ("r", "R", "RIGHT")) if "{s}" in role else ((None, "", ""),)
+        for s, letter, word in sides:
+            cands: list[str] = []
+            for lab in labels:
+                if lab.startswith("*"):
+                    base = lab[1:]
+                    cands += [letter + base, word + base]
+                    if len(base) >= 3:  # short suffixed forms would collide (LE+L = L+EL)
+                        cands += [base + letter, base + word]
+                else:
+                    cands.append(lab.format(S=letter))
+            out[role.format(s=s) if s else role] = tuple(dict.fromkeys(label_key(c) for c in cands))
+    return out
+
+
+def _groups_sided(table: dict[str, tuple[tuple[str, ...], tuple[tuple[str, ...], ...]]]
+                  ) -> dict[str, tuple[tuple[str, ...], tuple[tuple[str, ...], ...]]]:
+    out = {}
+    for group, (required, alternatives) in table.items():
+        if group.endswith("_{s}"):
+            for s in "lr":
+                out[group.format(s=s)] = (tuple(r.format(s=s) for r in required),
+                                          tuple(tuple(r.format(s=s) for r in alt)
+                                                for alt in alternatives))
+        else:
+            out[group] = (required, alternatives)
+    return out
+
+
+_PIG_ROLES = _sided({
+    "ASIS_{s}": ("{S}ASI",), "PSIS_{s}": ("{S}PSI",), "SACRUM": ("SACR", "SACRUM"),
+    "THIGH_{s}": ("{S}THI",), "KNEE_LAT_{s}": ("{S}KNE",), "KNEE_MED_{s}": ("{S}KNM", "{S}MKNE"),
+    "SHANK_{s}": ("{S}TIB",), "ANKLE_LAT_{s}": ("{S}ANK",), "ANKLE_MED_{s}": ("{S}MMA", "{S}MED"),
+    "HEEL_{s}": ("{S}HEE",), "TOE_{s}": ("{S}TOE",),
+    "C7": ("C7",), "T10": ("T10",), "IJ": ("CLAV",), "PX": ("STRN",),
+    "ACROMION_{s}": ("{S}SHO",), "ELBOW_LAT_{s}": ("{S}ELB",), "ELBOW_MED_{s}": ("{S}MEL",),
+    "UPPER_ARM_{s}": ("{S}UPA",), "WRIST_RAD_{s}": ("{S}WRA",), "WRIST_ULN_{s}": ("{S}WRB",),
+    "HAND_{s}": ("{S}FIN",),
+    "HEAD_FRONT_{s}": ("{S}FHD",), "HEAD_BACK_{s}": ("{S}BHD",),
+})
+
+_ISB_ROLES = _sided({
+    "ASIS_{s}": ("*ASIS", "*ASI", "*IAS"), "PSIS_{s}": ("*PSIS", "*PSI", "*IPS"),
+    "SACRUM": ("SACR", "SACRUM", "S1"),
+    "KNEE_LAT_{s}": ("*FLE", "*LE", "*LFE", "*LEPI", "*LFC", "*KNEL", "*KNE"),
+    "KNEE_MED_{s}": ("*FME", "*ME", "*MFE", "*MEPI", "*MFC", "*KNEM", "*KNM"),
+    "ANKLE_LAT_{s}": ("*FAL", "*LM", "*LMAL", "*LMA", "*ANKL", "*ANK"),
+    "ANKLE_MED_{s}": ("*TAM", "*MM", "*MMAL", "*MMA", "*ANKM"),
+    "HEEL_{s}": ("*FCC", "*CAL", "*HEE", "*HEEL"),
+    "MT1_{s}": ("*FM1", "*MT1", "*MH1", "*MET1", "*M1"),
+    "MT5_{s}": ("*FM5", "*MT5", "*MH5", "*MET5", "*M5"),
+    "TOE_{s}": ("*FM2", "*MT2", "*MH2", "*TOE"),
+    "C7": ("C7", "CV7"), "T10": ("T8", "TV8", "T10", "TV10"), "IJ": ("IJ", "SJN", "CLAV"),
+    "PX": ("PX", "SXS", "STRN", "XP"),
+    "ACROMION_{s}": ("*AC", "*ACR", "*ACRO", "*CAJ", "*SAE", "*SHO"),
+    "ELBOW_LAT_{s}": ("*HLE", "*EL", "*LEL", "*LHE", "*ELB"),
+    "ELBOW_MED_{s}": ("*HME", "*EM", "*MEL", "*MHE"),
+    "WRIST_RAD_{s}": ("*RSP", "*RS", "*RST", "*WRA"), "WRIST_ULN_{s}": ("*USP", "*US", "*UST", "*WRB"),
+    "MC2_{s}": ("*HM2", "*MC2", "*MCP2"), "MC5_{s}": ("*HM5", "*MC5", "*MCP5"),
+    "HEAD_FRONT_{s}": ("*FHD",), "HEAD_BACK_{s}": ("*BHD",),
+})
+
+_CLUSTER_ROLES = _sided({
+    **{f"PELVIS_{k}": (f"PV{k}",) for k in range(1, 5)},
+    **{f"THIGH_{k}_{{s}}": (f"{{S}}TH{k}",) for k in range(1, 5)},
+    **{f"SHANK_{k}_{{s}}": (f"{{S}}SK{k}",) for k in range(1, 5)},
+    **{f"FOOT_{k}_{{s}}": (f"{{S}}FT{k}",) for k in range(1, 4)},
+})
+
+_LANDMARK_GROUPS = _groups_sided({
+    "pelvis": (("ASIS_l", "ASIS_r"), (("PSIS_l", "PSIS_r"), ("SACRUM",))),
+    "leg_{s}": (("KNEE_LAT_{s}", "ANKLE_LAT_{s}"),
+                (("THIGH_{s}", "SHANK_{s}", "TOE_{s}"), ("KNEE_MED_{s}", "ANKLE_MED_{s}", "TOE_{s}"),
+                 ("KNEE_MED_{s}", "ANKLE_MED_{s}", "MT1_{s}", "MT5_{s}"))),
+    "trunk": (("C7", "IJ"), ()),
+    "head": (("HEAD_FRONT_l", "HEAD_FRONT_r", "HEAD_BACK_l", "HEAD_BACK_r"), ()),
+    "arm_{s}": (("ACROMION_{s}", "ELBOW_LAT_{s}", "WRIST_RAD_{s}", "WRIST_ULN_{s}"),
+                (("UPPER_ARM_{s}",), ("ELBOW_MED_{s}",))),
+})
+
+_CLUSTER_GROUPS = _groups_sided({
+    "pelvis": (tuple(f"PELVIS_{k}" for k in range(1, 5)), ()),
+    "leg_{s}": (tuple(f"{seg}_{k}_{{s}}" for seg, n in (("THIGH", 4), ("SHANK", 4), ("FOOT", 3))
+                      for k in range(1, n + 1)), ()),
+})
+
+PRESETS: dict[str, MarkerSet] = {
+    m.name: m for m in [
+        MarkerSet("plug_in_gait", "Vicon Plug-in Gait, full or lower body (LASI, LKNE, LTHI, "
+                  "LANK, LTIB, LTOE, C7, CLAV, LSHO, LELB, LWRA, LFHD, ...)",
+                  _PIG_ROLES, _LANDMARK_GROUPS,
+                  ("ASIS_l", "ASIS_r", "KNEE_LAT_l", "ANKLE_LAT_l", "TOE_l")),
+        MarkerSet("plug_in_gait_lower", "Vicon Plug-in Gait lower body (pelvis and legs only; "
+                  "upper-body markers are ignored)",
+                  _PIG_ROLES, {g: v for g, v in _LANDMARK_GROUPS.items()
+                               if g in ("pelvis", "leg_l", "leg_r")},
+                  ("ASIS_l", "ASIS_r", "KNEE_LAT_l", "ANKLE_LAT_l", "TOE_l")),
+        MarkerSet("isb_anatomical", "anatomical landmarks, ISB/CAST names (ASIS, PSIS, FLE/FME, "
+                  "FAL/TAM, FM1/FM5, AC, HLE/HME, RSP/USP, IJ, PX, C7)",
+                  _ISB_ROLES, _LANDMARK_GROUPS,
+                  ("ASIS_l", "ASIS_r", "KNEE_LAT_l", "KNEE_MED_l", "ANKLE_LAT_l", "ANKLE_MED_l")),
+        MarkerSet("cluster_gait", "technical clusters, pelvis and legs (PV1-4, RTH1-4, RSK1-4, "
+                  "RFT1-3; c3d.org Eb015pi): functional joint centres",
+                  _CLUSTER_ROLES, _CLUSTER_GROUPS,
+                  ("PELVIS_1", "PELVIS_2", "PELVIS_3", "THIGH_1_l", "SHANK_1_l", "FOOT_1_l"),
+                  method="functional"),
+    ]
+}
+
+
+@dataclass
+class MarkerMap:
+    """The result of matching a file's labels to a marker set.
+
+    marker : role -> index into the file's markers (only roles that were found).
+    subject : the subject prefix used ('' when none); ignored : labels of other objects.
+    how : a sentence for the import report.
+    """
+
+    preset: MarkerSet
+    marker: dict[str, int]
+    subject: str
+    ignored: list[str] = field(default_factory=list)
+    how: str = ""
+
+
+def _resolve(preset: MarkerSet, keys: dict[str, int]) -> dict[str, int]:
+    found = {}
+    for role, cands in preset.roles.items():
+        for c in cands:
+            if c in keys:
+                found[role] = keys[c]
+                break
+    return found
+
+
+def _subjects(labels: list[str]) -> dict[str, list[int]]:
+    out: dict[str, list[int]] = {}
+    for i, lab in enumerate(labels):
+        out.setdefault(subject_of(lab), []).append(i)
+    return out
+
+
+def match_markers(labels: list[str], spec: str | None = None) -> MarkerMap:
+    """Match ``labels`` to a marker set. ``spec``: None (detect), a preset name or a YAML map.
+
+    With several subject prefixes in the file, the subject whose labels match a preset best is
+    used and the others' markers are ignored. Raises :class:`MappingError`.
+    """
+    user: dict[str, str] = {}
+    user_lines: dict[str, int] = {}
+    user_path: str | None = None
+    base: str | None = None
+    subject_wanted: str | None = None
+    if spec is not None:
+        if spec in PRESETS:
+            base = spec
+        elif spec.endswith((".yaml", ".yml")) or Path(spec).exists():
+            user_path = spec
+            base, subject_wanted, user, user_lines = load_marker_map(spec)
+        else:
+            close = difflib.get_close_matches(spec, list(PRESETS), n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise MappingError(f"--map {spec}: not a marker-set preset nor a YAML file{hint}; "
+                               f"marker sets: {', '.join(PRESETS)}")
+    best: tuple[int, str, MarkerSet, dict[str, int]] | None = None
+    for subject, indices in _subjects(labels).items():
+        if subject_wanted is not None and subject != subject_wanted:
+            continue
+        keys: dict[str, int] = {}
+        for i in indices:
+            keys.setdefault(label_key(labels[i]), i)
+        candidates = [PRESETS[base]] if base else list(PRESETS.values())
+        for preset in candidates:
+            found = _resolve(preset, keys)
+            # Detected when most of its signature (lower body) is there, or many of its roles
+            # (an upper-body trial); what is missing is then listed per body part.
+            if not base and 2 * sum(r in found for r in preset.signature) <= len(preset.signature) \
+                    and len(found) < MIN_ROLES_DETECTED:
+                continue
+            if best is None or len(found) > best[0]:
+                best = (len(found), subject, preset, found)
+    if best is None:
+        if subject_wanted is not None and subject_wanted not in _subjects(labels):
+            raise MappingError(f"no markers of subject {subject_wanted!r}; subjects in the file: "
+                               f"{', '.join(repr(s) for s in _subjects(labels))}")
+        shown = ", ".join(labels[:60]) + (" ..." if len(labels) > 60 else "")
+        raise MappingError(
+            f"no marker set recognised from the labels (presets: {', '.join(PRESETS)}); give "
+            f"--map PRESET or --map FILE.yaml (markers: {{ROLE: label}}). Labels: {shown}")
+    _, subject, preset, found = best
+    how = f"marker set {preset.name} ({'requested' if base and not user_path else 'detected'})"
+    if user_path:
+        how = f"marker set {preset.name} + {user_path}"
+    for role, label in user.items():
+        if role not in preset.roles:
+            close = difflib.get_close_matches(role, list(preset.roles), n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise InputError(user_path, f"markers.{role}: unknown role for {preset.name}{hint}; "
+                                        f"roles: {', '.join(preset.roles)}", user_lines[role])
+        matches = [i for i, lab in enumerate(labels)
+                   if label_key(lab) == label_key(label) and subject_of(lab) == subject]
+        if not matches:
+            close = difflib.get_close_matches(label, labels, n=3)
+            raise InputError(user_path, f"markers.{role}: no marker {label!r} in the file "
+                                        f"(closest: {', '.join(close) or 'none'})", user_lines[role])
+        found[role] = matches[0]
+    if subject:
+        how += f", subject {subject!r}"
+    ignored = [lab for lab in labels if subject_of(lab) != subject]
+    return MarkerMap(preset, found, subject, ignored, how)
+
+
+def group_status(mmap: MarkerMap) -> tuple[list[str], list[str], dict[str, list[str]]]:
+    """Which body parts are present, absent, or incomplete.
+
+    Returns (present groups, absent groups, incomplete: group -> missing marker descriptions).
+    A group is absent when none of its markers is in the file.
+    """
+    present, absent, incomplete = [], [], {}
+    preset = mmap.preset
+    for group, (required, alternatives) in preset.groups.items():
+        roles = set(required) | {r for alt in alternatives for r in alt}
+        if not any(r in mmap.marker for r in roles):
+            absent.append(group)
+            continue
+        missing = [_describe(preset, r) for r in required if r not in mmap.marker]
+        if alternatives and not any(all(r in mmap.marker for r in alt) for alt in alternatives):
+            missing.append(" or ".join(
+                "+".join(_describe(preset, r) for r in alt if r not in mmap.marker)
+                for alt in alternatives))
+        if missing:
+            incomplete[group] = missing
+        else:
+            present.append(group)
+    return present, absent, incomplete
+
+
+def _describe(preset: MarkerSet, role: str) -> str:
+    cands = preset.roles.get(role, ())
+    return cands[0] if cands else role
+
+
+def check_usable(mmap: MarkerMap, labels: list[str]) -> tuple[list[str], list[str]]:
+    """(present, absent) groups, or :class:`MappingError` listing missing markers per body part.
+
+    The pelvis is required unless the trunk is marked (an upper-body trial: the pelvis is then
+    placed under the trunk); every other body part may be absent as a whole.
+    """
+    present, absent, incomplete = group_status(mmap)
+    if "pelvis" in absent and ("trunk" not in present or mmap.preset.method == "functional"):
+        incomplete = {"pelvis": [" + ".join(_describe(mmap.preset, r)
+                                            for r in mmap.preset.groups["pelvis"][0])]} | incomplete
+    if incomplete:
+        parts = "; ".join(f"{GROUP_WORDS[g]}: {', '.join(m)}" for g, m in incomplete.items())
+        raise MappingError(f"{mmap.how}: missing markers by body part: {parts} (give them in "
+                           f"--map FILE.yaml, markers: {{ROLE: label}})")
+    return present, [g for g in GROUPS if g not in present]
+
+
+def load_marker_map(path: str | Path) -> tuple[str | None, str | None, dict[str, str], dict[str, int]]:
+    """A user marker map: ``{base: PRESET, subject: NAME, markers: {ROLE: label}}`` (all optional
+    but ``markers`` or ``base``). Returns (base, subject, markers, line of each marker entry)."""
+    path = str(path)
+    try:
+        with open(path, encoding="utf-8") as f:
+            node = yaml.compose(f.read())
+    except OSError as exc:
+        raise InputError(path, f"cannot read map: {exc.strerror or exc}") from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        raise InputError(path, f"not valid YAML: {getattr(exc, 'problem', exc)}",
+                         None if mark is None else mark.line + 1) from None
+    if node is None or not isinstance(node, yaml.MappingNode):
+        raise InputError(path, "a marker map must be a mapping with 'markers:' (and optional "
+                               "'base:', 'subject:')", 1)
+    base: str | None = None
+    subject: str | None = None
+    markers: dict[str, str] = {}
+    lines: dict[str, int] = {}
+    for key_node, value_node in node.value:
+        key, line = key_node.value, key_node.start_mark.line + 1
+        if key == "base":
+            base = str(value_node.value)
+            if base not in PRESETS:
+                raise InputError(path, f"base: unknown marker set {base!r}; marker sets are "
+                                       f"{', '.join(PRESETS)}", line)
+        elif key == "subject":
+            subject = str(value_node.value)
+        elif key == "markers":
+            if not isinstance(value_node, yaml.MappingNode):
+                raise InputError(path, "markers: expected a mapping ROLE: label", line)
+            for k_node, v_node in value_node.value:
+                if not isinstance(v_node, yaml.ScalarNode) or not v_node.value:
+                    raise InputError(path, f"markers.{k_node.value}: expected a marker label",
+                                     k_node.start_mark.line + 1)
+                markers[str(k_node.value)] = str(v_node.value)
+                lines[str(k_node.value)] = k_node.start_mark.line + 1
+        else:
+            close = difflib.get_close_matches(str(key), ["base", "subject", "markers"], n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise InputError(path, f"{key}: unknown key{hint}; expected 'base', 'subject', "
+                                   "'markers'", line)
+    if base is None:
+        base = "plug_in_gait"
+    return base, subject, markers, lines
+
+
+def preset_summary() -> str:
+    return "\n".join(f"  {p.name:18s} {p.description}" for p in PRESETS.values())
