@@ -152,6 +152,11 @@ BAD_CASES = [
     ("unknown_motion.yaml", 7, "characters[0].motion: unknown motion 'wlak'; did you mean 'walk'?"),
     ("unknown_ground.yaml", 4, "ground.type: unknown ground 'stair'; did you mean 'stairs'?"),
     ("bad_yaml.yaml", 3, "not valid YAML"),
+    ("constraint_kind_typo.yaml", 15, "characters[1].constraints[0].kind: unknown kind 'postion'; did you mean 'position'?"),
+    ("constraint_bad_chain.yaml", 14, "constraint 'hit': 'forearm_r' cannot be moved by leg_l"),
+    ("constraint_area_without_area.yaml", 14, "constraint 'above': an area constraint needs its area"),
+    ("constraint_unknown_character.yaml", 16, "constraints[0].target.character: no character named 'c'"),
+    ("constraint_unknown_segment.yaml", 15, "constraints[0].point: unknown body point 'forarm_r'; did you mean 'forearm_r'?"),
 ]
 
 
