@@ -80,6 +80,7 @@ class Scenario:
     motions: dict[str, NormalizedMotion]
     ground: Ground
     characters: list[CharacterSpec] = field(default_factory=list)
+    camera: dict[str, Any] = field(default_factory=dict)  # viewer hints (docs/scenarios.md)
 
 
 class _Reader:
@@ -445,7 +446,8 @@ def load_scenario(path: str | Path) -> Scenario:
     if root is None:
         raise InputError(path, "the scenario is empty", 1)
     top = r.mapping(root, "", {"duration_s": True, "fps": False, "motions": True,
-                               "ground": False, "characters": True, "description": False})
+                               "ground": False, "characters": True, "description": False,
+                               "camera": False})
     fps = r.number(top["fps"], "fps", 1.0, 1000.0, "Hz") if "fps" in top else 30.0
     duration = r.number(top["duration_s"], "duration_s", 1.0 / fps, 86400.0, "s")
     motion_nodes = top["motions"]
@@ -525,7 +527,19 @@ def load_scenario(path: str | Path) -> Scenario:
             close = difflib.get_close_matches(str(other), sorted(names), n=1)
             hint = f"; did you mean {close[0]!r}?" if close else ""
             raise r.fail(node, f"{cwhere}.target.character", f"no character named {other!r}{hint}")
-    return Scenario(str(path), duration, fps, motions, ground, characters)
+    camera: dict[str, Any] = {}
+    if "camera" in top:
+        ck = r.mapping(top["camera"], "camera", {"yaw_deg": False, "pitch_deg": False,
+                                                 "distance_m": False, "target_m": False})
+        if "yaw_deg" in ck:
+            camera["yaw_deg"] = r.number(ck["yaw_deg"], "camera.yaw_deg", -360, 360, "degrees")
+        if "pitch_deg" in ck:
+            camera["pitch_deg"] = r.number(ck["pitch_deg"], "camera.pitch_deg", -89, 89, "degrees")
+        if "distance_m" in ck:
+            camera["distance_m"] = r.number(ck["distance_m"], "camera.distance_m", 0.1, 1e4, "m")
+        if "target_m" in ck:
+            camera["target_m"] = r.vector(ck["target_m"], "camera.target_m", 3, "m", 1e5)
+    return Scenario(str(path), duration, fps, motions, ground, characters, camera)
 
 
 def load_motion_constraints(path: str | Path) -> list[ConstraintSpec]:

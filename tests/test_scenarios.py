@@ -126,3 +126,17 @@ def test_dance_step_length_scales_with_the_legs():
     metres = [c["stride_m_median"] for c in r["report"]["characters"]]
     child, tall = r["names"].index("child"), r["names"].index("tall")
     assert metres[tall] > 1.5 * metres[child]
+
+
+def test_camera_hints_are_read_and_checked(tmp_path):
+    from ecs_anim.errors import InputError
+
+    scenario = load_scenario(SCENARIOS / "fight_training.yaml")
+    assert scenario.camera == {"yaw_deg": -65.0, "pitch_deg": 14.0}
+    bad = SCENARIOS / ".tmp_camera.yaml"  # beside the motions it names
+    bad.write_text((SCENARIOS / "fight_training.yaml").read_text().replace("pitch_deg: 14", "pich_deg: 14"))
+    try:
+        with pytest.raises(InputError, match=r":14: camera.pich_deg: unknown key; did you mean 'pitch_deg'\?"):
+            load_scenario(bad)
+    finally:
+        bad.unlink()

@@ -143,13 +143,25 @@ def _centroid(frame: SceneFrame) -> NDArray[np.float64]:
     return np.asarray(frame.joints[:, 0].mean(axis=0), dtype=np.float64)
 
 
-def default_camera(frame: SceneFrame, aspect: float) -> OrbitCamera:
-    """Auto-frame all characters (and their constraint targets) from the default direction."""
+def default_camera(frame: SceneFrame, aspect: float,
+                   hints: dict[str, Any] | None = None) -> OrbitCamera:
+    """Auto-frame all characters (and their constraint targets) from the default direction, or
+    from the scenario's camera hints (``yaw_deg``, ``pitch_deg``: the direction; ``target_m``,
+    ``distance_m``: where it looks from; what a hint leaves out is framed automatically)."""
+    hints = hints or {}
     points = [frame.joints.reshape(-1, 3)]
     if frame.targets.shape[0]:
         points.append(frame.targets[:, 0:3].astype(np.float64))
     yaw = spread_yaw(frame.joints[:, 0, :2]) if frame.joints.shape[0] else OrbitCamera.yaw_rad
-    return frame_points(np.concatenate(points), aspect, OrbitCamera(yaw_rad=yaw))
+    base = OrbitCamera(yaw_rad=math.radians(hints["yaw_deg"]) if "yaw_deg" in hints else yaw)
+    if "pitch_deg" in hints:
+        base = replace(base, pitch_rad=math.radians(hints["pitch_deg"]))
+    camera = frame_points(np.concatenate(points), aspect, base)
+    if "target_m" in hints:
+        camera = replace(camera, target=tuple(float(v) for v in hints["target_m"]))
+    if "distance_m" in hints:
+        camera = replace(camera, distance=float(hints["distance_m"]))
+    return camera
 
 
 # --- screenshots --------------------------------------------------------------------------
@@ -179,6 +191,7 @@ def render_screenshot(scenario: Scenario, at_s: float, width: int = 1280, height
             sim.step()
         frame = source.latest()
         assert frame is not None
+        camera = camera or default_camera(frame, width / height, scenario.camera)
         return render_frame(frame, sim.ground, width, height, camera, show_targets, show_com,
                             status)
 
@@ -314,7 +327,7 @@ class ViewerApp:
         frame = self.source.latest()
         if frame is not None:
             w, h = self.window.get_size()
-            self.camera = default_camera(frame, w / max(h, 1))
+            self.camera = default_camera(frame, w / max(h, 1), self.scenario.camera)
             self.follow, self._followed = True, _centroid(frame)
             self._ground(frame, force=True)
 
