@@ -27,3 +27,23 @@ class InputError(EcsAnimError):
 
 class MappingError(EcsAnimError):
     """A source skeleton whose joints could not be matched to the canonical body parts."""
+
+
+def compose_yaml(path: str | Path, what: str) -> object:
+    """The YAML node tree of a file (``yaml.compose``: nodes keep their line numbers), or None for
+    an empty file; an unreadable file or bad YAML is an :class:`InputError` naming ``what``
+    (e.g. "scenario") and, for bad YAML, the line."""
+    import yaml
+
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as exc:
+        raise InputError(path, f"cannot read {what}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError:
+        raise InputError(path, f"cannot read {what}: not UTF-8 text") from None
+    try:
+        return yaml.compose(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        raise InputError(path, f"not valid YAML: {getattr(exc, 'problem', exc)}",
+                         None if mark is None else mark.line + 1) from None

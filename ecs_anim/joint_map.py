@@ -25,7 +25,7 @@ import numpy as np
 import yaml
 
 from .bvh import BvhSkeleton, rest_positions
-from .errors import InputError, MappingError
+from .errors import InputError, MappingError, compose_yaml
 from .skeleton import JOINTS
 
 #: Canonical joints every source must provide (the others can be filled in).
@@ -426,16 +426,7 @@ def load_user_map(path: str | Path) -> tuple[str | None, dict[str, str], dict[st
     Returns (base preset name, joints, line of each entry). Errors name the file, line and key.
     """
     path = str(path)
-    try:
-        with open(path, encoding="utf-8") as f:
-            text = f.read()
-        node = yaml.compose(text)
-    except OSError as exc:
-        raise InputError(path, f"cannot read map: {exc.strerror or exc}") from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        raise InputError(path, f"not valid YAML: {getattr(exc, 'problem', exc)}",
-                         None if mark is None else mark.line + 1) from None
+    node = compose_yaml(path, "map")
     if node is None or not isinstance(node, yaml.MappingNode):
         raise InputError(path, "a joint map must be a mapping with 'joints:' (and optional 'base:')", 1)
     base: str | None = None

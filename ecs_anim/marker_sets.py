@@ -34,7 +34,7 @@ from pathlib import Path
 
 import yaml
 
-from .errors import InputError, MappingError
+from .errors import InputError, MappingError, compose_yaml
 
 MIN_ROLES_DETECTED = 8
 GROUPS: tuple[str, ...] = ("pelvis", "leg_l", "leg_r", "trunk", "head", "arm_l", "arm_r")
@@ -341,15 +341,7 @@ def load_marker_map(path: str | Path) -> tuple[str | None, str | None, dict[str,
     """A user marker map: ``{base: PRESET, subject: NAME, markers: {ROLE: label}}`` (all optional
     but ``markers`` or ``base``). Returns (base, subject, markers, line of each marker entry)."""
     path = str(path)
-    try:
-        with open(path, encoding="utf-8") as f:
-            node = yaml.compose(f.read())
-    except OSError as exc:
-        raise InputError(path, f"cannot read map: {exc.strerror or exc}") from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        raise InputError(path, f"not valid YAML: {getattr(exc, 'problem', exc)}",
-                         None if mark is None else mark.line + 1) from None
+    node = compose_yaml(path, "map")
     if node is None or not isinstance(node, yaml.MappingNode):
         raise InputError(path, "a marker map must be a mapping with 'markers:' (and optional "
                                "'base:', 'subject:')", 1)

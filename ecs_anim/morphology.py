@@ -23,7 +23,7 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
-from .errors import InputError
+from .errors import InputError, compose_yaml
 from .skeleton import BONE_JOINTS, JOINT_INDEX, LENGTH_INDEX, LENGTHS, N_LENGTHS, REST_HIP_DIR_LEFT
 
 F64 = NDArray[np.float64]
@@ -288,15 +288,7 @@ def load_morphology_yaml(path: str | Path) -> Morphology:
     or ``{lengths_m: {segment: metres, ...}, sex?, mass_kg?}`` (bilateral segments may be given
     once without ``_l``/``_r``; unspecified ones come from ``stature_m`` or 1.75 m)."""
     path = str(path)
-    try:
-        with open(path, encoding="utf-8") as f:
-            node = yaml.compose(f.read())
-    except OSError as exc:
-        raise InputError(path, f"cannot read morphology: {exc.strerror or exc}") from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        raise InputError(path, f"not valid YAML: {getattr(exc, 'problem', exc)}",
-                         None if mark is None else mark.line + 1) from None
+    node = compose_yaml(path, "morphology")
     if not isinstance(node, yaml.MappingNode):
         raise InputError(path, "a morphology must be a mapping (stature_m: ... or lengths_m: ...)", 1)
     allowed = {"name", "stature_m", "sex", "proportions", "leg_scale", "mass_kg", "lengths_m"}

@@ -20,7 +20,7 @@ from yaml import Node
 
 from .components import MotionPlayer, Placement, QueuedClip
 from .constraints import Activation, ConstraintSpec
-from .errors import EcsAnimError, InputError
+from .errors import EcsAnimError, InputError, compose_yaml
 from .ground import Bumps, Combined, Ground, HeightGrid, Plane, Slope, Stairs
 from .morphology import LENGTH_KEYS, PRESET_SPECS, Morphology, with_lengths_m
 from .motion import NormalizedMotion, load_nmo
@@ -433,16 +433,7 @@ def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario; motions are loaded (BVH imported) here, once."""
     path = Path(path)
     r = _Reader(str(path))
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise InputError(path, f"cannot read scenario: {exc.strerror or exc}") from None
-    try:
-        root = yaml.compose(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        raise InputError(path, f"not valid YAML: {getattr(exc, 'problem', exc)}",
-                         None if mark is None else mark.line + 1) from None
+    root = compose_yaml(path, "scenario")
     if root is None:
         raise InputError(path, "the scenario is empty", 1)
     top = r.mapping(root, "", {"duration_s": True, "fps": False, "motions": True,
@@ -548,14 +539,7 @@ def load_motion_constraints(path: str | Path) -> list[ConstraintSpec]:
     activation times in the motion's own time (docs/scenarios.md)."""
     path = Path(path)
     r = _Reader(str(path))
-    try:
-        root = yaml.compose(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise InputError(path, f"cannot read constraints: {exc.strerror or exc}") from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        raise InputError(path, f"not valid YAML: {getattr(exc, 'problem', exc)}",
-                         None if mark is None else mark.line + 1) from None
+    root = compose_yaml(path, "constraints")
     if root is None:
         raise InputError(path, "the constraints file is empty", 1)
     top = r.mapping(root, "", {"constraints": True})

@@ -4,14 +4,17 @@ Per tick, :func:`tick_goals` turns the active constraints into fixed goals: each
 point as the motion has it (``P0``), its full goal (``G``: the target, the point at a distance
 from it, its projection into an area, a direction) and the goal blended by the activation
 weight (``P0 + w (G - P0)``: the ramp blends from the motion, so iterating never compounds it).
-Foot contacts become goals of their legs with a priority above all others.
+Each foot becomes a goal of its leg (stay where ground adaptation put it, facing the same way):
+above every priority while in contact, below every priority while free. Goals aiming at a point
+of the same body follow that point as the body is solved.
 
 :func:`solve` then iterates, as the paper does, over the body's groups in the order legs, head,
 arms, trunk, then the root (``adaptRoot``: centre-of-mass control), until every goal is within
 tolerance, progress stalls, or the iteration budget is spent; a last pass over legs, head and
 arms leaves the feet on their footprints and the limbs on their goals after the final root move.
-Inside a group, the highest-priority goal is met analytically (limbs) or by CCD rotations (head,
-trunk); a limb's second goal swivels the limb about the axis that keeps the first one. The trunk
+Inside a group, the highest-priority goal is met analytically (limbs; neck and head as a
+two-segment chain) or by CCD rotations (trunk, about the spine's base, spread along the spine
+spline); a limb's second goal swivels the limb about the axis that keeps the first one. The trunk
 serves the highest-priority goal it can still improve, and a trunk move that would worsen a
 higher-priority goal is not made. The steps are pure functions over all characters at once
 (:mod:`ecs_anim.solver`); this module owns the policy. The solver works on the characters with
@@ -27,7 +30,6 @@ from numpy.typing import NDArray
 
 from .body_points import (
     ABOVE_TRUNK,
-    ARM_L,
     HEAD,
     LEG_L,
     TRUNK,
@@ -61,7 +63,7 @@ class SolverSettings:
     """The shell's policy. ``iterations``: budget per tick; ``tolerance_m`` / ``tolerance_rad``:
     a goal closer than this is met; ``com_tolerance_m``: the same for the horizontal centre of
     mass; ``max_ccd_step_rad``: the largest turn one CCD step of the
-    head or trunk makes (spreads a lean over the iterations); ``root_gain``: how far past the
+    trunk makes (spreads a lean over the iterations); ``root_gain``: how far past the
     centre-of-mass error the root steps (the planted legs' mass does not follow it)."""
 
     iterations: int = 4
@@ -220,7 +222,6 @@ def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained:
     idx, owner, w = idx[keep], owner[keep], w[keep]
     rows, local = np.unique(owner, return_inverse=True)
     on_self = np.flatnonzero((table.target_kind[idx] != TARGET_WORLD) & (table.target_row[idx] == owner))
-    r = rows.size
     # Each foot keeps where ground adaptation put it: above every goal while in contact; below
     # every goal otherwise (a free foot stays clear of the ground when the root moves, unless a
     # constraint of that leg takes it).
@@ -400,9 +401,9 @@ class _Solve:
         dec.positions[rows, LIMB_J[3][li]] = end + np.einsum(
             "kij,kj->ki", lower2world, dirs[rows, li]) * h[:, None]
 
-    # --- head: neck and head as a two-segment chain; then its orientation --------------------------------------------------
+    # --- head: neck and head as a two-segment chain; then its orientation ------------------
     def head(self) -> None:
-        dec, poses, g, step = self.dec, self.poses, self.g, self.s.max_ccd_step_rad
+        dec, poses, g = self.dec, self.poses, self.g
         first, orient = self.first_head, self.orient_head
         rows = np.flatnonzero((first >= 0) | (orient >= 0))
         if rows.size == 0:
