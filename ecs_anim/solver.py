@@ -112,6 +112,25 @@ def rotation_toward(a: F64, b: F64, max_angle: float | F64 = np.pi, weight: F64 
     return axis_angle(normalize(axis), np.where(degenerate, 0.0, angle))
 
 
+def bring_within_reach(base: F64, limb_root: F64, goal: F64, reach: F64,
+                       max_angle: float | F64 = np.pi) -> F64:
+    """The smallest rotation about ``base`` (the pelvis) that brings ``limb_root`` (a shoulder,
+    the neck) within ``reach`` (n,) metres of ``goal``, at most ``max_angle`` radians; where no
+    turn does, the one that brings it nearest (``base -> limb_root`` turned onto ``base ->
+    goal``). Points (n, 3); returns (n, 3, 3). A limb that cannot reach its goal needs its root
+    moved toward it, not its end turned about the pelvis: the second stalls once the limb is
+    straight, short of a goal the straightened trunk and limb together reach."""
+    a_vec, b_vec = limb_root - base, goal - base
+    a = np.linalg.norm(a_vec, axis=-1)
+    b = np.linalg.norm(b_vec, axis=-1)
+    angle_now = np.arccos(np.clip(np.sum(a_vec * b_vec, axis=-1) / np.maximum(a * b, 1e-12), -1.0, 1.0))
+    # Law of cosines: the angle between base->root and base->goal at which |root - goal| = reach.
+    cos_enough = (a**2 + b**2 - reach**2) / np.maximum(2.0 * a * b, 1e-12)
+    angle_enough = np.arccos(np.clip(cos_enough, -1.0, 1.0))
+    turn = np.clip(angle_now - angle_enough, 0.0, max_angle)
+    return rotation_toward(a_vec, b_vec, weight=np.where(angle_now > 1e-12, turn / np.maximum(angle_now, 1e-12), 0.0))
+
+
 def flexion(fraction: F64, upper: F64, lower: F64) -> F64:
     """Middle-joint flexion (radians, 0 = straight) of a limb at ``fraction`` of its length."""
     span = fraction * (upper + lower)

@@ -52,7 +52,7 @@ from .morphology import centres_of_mass, leg_length
 from .normalized import SIDE_JOINTS, SIDE_LENGTHS, DecodedPose, NormalizedPoses, decode, distal_frames, two_bone_middle
 from .rotations import frame_from_axes, matrix_from_quat, normalize, quat_from_matrix
 from .skeleton import JOINT_INDEX as J, LENGTH_INDEX as L
-from .solver import axis_angle, point_in_limb, reach_point, rotation_toward, turn_about_axis
+from .solver import axis_angle, bring_within_reach, point_in_limb, reach_point, rotation_toward, turn_about_axis
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -66,11 +66,11 @@ class SolverSettings:
     trunk makes (spreads a lean over the iterations); ``root_gain``: how far past the
     centre-of-mass error the root steps (the planted legs' mass does not follow it)."""
 
-    iterations: int = 4
+    iterations: int = 6
     tolerance_m: float = 1e-4
     tolerance_rad: float = 1e-3
     com_tolerance_m: float = 1e-3
-    max_ccd_step_rad: float = np.radians(15.0)
+    max_ccd_step_rad: float = np.radians(20.0)
     root_gain: float = 1.25
 
 
@@ -86,6 +86,12 @@ LIMB_J = tuple(np.array([J[f"{leg}_l"], J[f"{leg}_r"], J[f"{arm}_l"], J[f"{arm}_
 LIMB_LENGTHS = tuple(np.array([L[f"{leg}_l"], L[f"{leg}_r"], L[f"{arm}_l"], L[f"{arm}_r"]])
                      for leg, arm in (("thigh", "upper_arm"), ("shank", "forearm"), ("foot", "hand")))
 LIMB_EXTENSION = np.array([MAX_LEG_EXTENSION, MAX_LEG_EXTENSION, 1.0, 1.0])
+# Per group [leg_l, leg_r, head, arm_l, arm_r, trunk]: the root and middle joint of the limb the
+# trunk carries (-1: not carried), and the share of its length the trunk aims to bring a goal
+# within (a little bent, so the limb's own step then meets it).
+LIMB_ROOT_JOINT = np.array([-1, -1, J["neck"], J["shoulder_l"], J["shoulder_r"], -1])
+LIMB_MIDDLE_JOINT = np.array([-1, -1, J["head"], J["elbow_l"], J["elbow_r"], -1])
+LIMB_REACH_SHARE = 0.99
 UPPER_BODY_JOINTS = np.array([J[n] for n in ("spine_1", "spine_2", "neck", "head", "head_top",
                                              "shoulder_l", "elbow_l", "wrist_l", "hand_l",
                                              "shoulder_r", "elbow_r", "wrist_r", "hand_r")])
@@ -179,6 +185,34 @@ def _area_goal(table: ConstraintTable, idx: I64, point: F64, anchor: F64) -> F64
     goal = np.select([(shape == AREA_BOX)[:, None], (shape == AREA_SPHERE)[:, None],
                       (shape == AREA_HALF_SPACE)[:, None]], [box, sphere, half], rel)
     return anchor + goal
+
+
+def constraint_errors(table: ConstraintTable, idx: I64, decoded: DecodedPose, targets: F64) -> F64:
+    """(k,) how far each constraint ``idx`` (k,) is from being met on ``decoded`` (every
+    character's pose), against this tick's ``targets`` (m, 3): position, the distance to the
+    target; distance, how far from ``distance_m`` of it; area, the distance to the allowed
+    region (0 anywhere in it); metres. Orientation: the angle (radians) from its direction.
+    The solver aims at one goal point per constraint, fixed for the tick; this is the measure a
+    user means (a point anywhere outside a sphere it must leave has met it)."""
+    owner = table.owner[idx]
+    seg, frac, off = table.segment[idx], table.fraction[idx], table.offset[idx]
+    point = point_positions(decoded, owner, seg, frac, off)
+    t = targets[idx]
+    kind = table.kind[idx]
+    gap = np.linalg.norm(point - t, axis=1)
+    err = np.where(kind == KIND_DISTANCE, np.abs(gap - table.distance_m[idx]), gap)
+    area = kind == KIND_AREA
+    if area.any():
+        allowed = _area_goal(table, idx[area], point[area], t[area])
+        err[area] = np.linalg.norm(point[area] - allowed, axis=1)
+    orient = kind == KIND_ORIENTATION
+    if orient.any():
+        o = np.flatnonzero(orient)
+        axis = np.einsum("kij,kj->ki", segment_frames(decoded, owner[o], seg[o]), table.axis[idx[o]])
+        look = table.target_kind[idx[o]] != TARGET_WORLD
+        direction = normalize(np.where(look[:, None], t[o] - point[o], t[o]))
+        err[o] = np.arccos(np.clip(np.sum(axis * direction, axis=1), -1.0, 1.0))
+    return err
 
 
 def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained: DecodedPose,
@@ -471,6 +505,20 @@ class _Solve:
         base = dec.positions[rows, J["pelvis"]]
         point = point_positions(dec, rows, g.segment[c], g.fraction[c], g.offset[c])
         turn = rotation_toward(point - base, g.goal[c] - base, s.max_ccd_step_rad)
+        # A head or arm point its limb cannot reach from where the limb's root is: turn the trunk
+        # to bring that root (neck, shoulder) within reach rather than the point onto the goal.
+        limb_root = LIMB_ROOT_JOINT[g.group[c]]
+        far = (limb_root >= 0) & ~g.orientation[c]
+        if far.any():
+            f = np.flatnonzero(far)
+            root_at = dec.positions[rows[f], limb_root[f]]
+            middle_at = dec.positions[rows[f], LIMB_MIDDLE_JOINT[g.group[c[f]]]]
+            reach = LIMB_REACH_SHARE * (np.linalg.norm(middle_at - root_at, axis=1)
+                                        + np.linalg.norm(point[f] - middle_at, axis=1))
+            short = np.linalg.norm(g.goal[c[f]] - root_at, axis=1) > reach
+            f = f[short]
+            turn[f] = bring_within_reach(base[f], root_at[short], g.goal[c[f]], reach[short],
+                                         s.max_ccd_step_rad)
         o = g.orientation[c]
         if o.any():
             frames = segment_frames(dec, rows[o], g.segment[c[o]])
@@ -571,12 +619,12 @@ def _axis_angle_of(rotation: F64) -> tuple[F64, F64]:
 
 
 def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, com_fraction: F64,
-          settings: SolverSettings = DEFAULT_SETTINGS, decoded: DecodedPose | None = None) -> tuple[NormalizedPoses, F64, int, F64]:
+          settings: SolverSettings = DEFAULT_SETTINGS, decoded: DecodedPose | None = None) -> tuple[NormalizedPoses, F64, int, DecodedPose]:
     """Solve this tick's goals for their characters (rows of ``poses``, ``lengths``, ``masses``
     and ``com_fraction`` are ``goals.rows``; ``decoded`` is ``decode(poses, lengths)`` if the
     caller has it). Returns the new poses, each goal's remaining
-    error against its full (unweighted) goal (k,), the iterations used, and the joint positions
-    (r, N_JOINTS, 3) of the result."""
+    error against its full (unweighted) goal (k,), the iterations used, and the decoded result
+    (joint positions (r, N_JOINTS, 3) and frames)."""
     state = _Solve(poses, lengths, goals, masses, com_fraction, settings, decoded)
     tol = np.where(goals.orientation, settings.tolerance_rad, settings.tolerance_m)
     previous = np.full(goals.k, np.inf)
@@ -601,7 +649,7 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
     state.follow_own_targets()
     state.limbs()
     state.head()
-    return state.poses, _errors(goals, state.dec, use_full=True), used, state.dec.positions
+    return state.poses, _errors(goals, state.dec, use_full=True), used, state.dec
 
 
 def scatter(all_poses: NormalizedPoses, rows: I64, part: NormalizedPoses) -> NormalizedPoses:

@@ -11,17 +11,19 @@ A constraint whose target is not finite is switched off with one warning; the ot
 Reads: store.poses, lengths, posture (the previous tick's), contact_weight, clip, clip_time_s,
 com_control, com_target_xy, segment masses; the constraint table.
 Writes: store.poses (solved characters), com_desired, goals, solved_positions;
-table.enabled, table.weight, table.error (remaining error of each constraint, NaN while
-inactive).
+table.enabled, table.weight, table.error (how far each active constraint is from being met on
+the result, :func:`~ecs_anim.solver_shell.constraint_errors`; NaN while inactive).
 """
 
 from __future__ import annotations
 
+from dataclasses import fields
+
 import numpy as np
 
 from ecs_anim.morphology import centres_of_mass
-from ecs_anim.normalized import decode
-from ecs_anim.solver_shell import scatter, solve, target_points, tick_goals
+from ecs_anim.normalized import DecodedPose, decode
+from ecs_anim.solver_shell import constraint_errors, scatter, solve, target_points, tick_goals
 from ecs_anim.system_base import System
 
 
@@ -50,14 +52,20 @@ class ConstraintSolve(System):
         own[given, :2] = st.com_target_xy[given]
         goals = tick_goals(table, weight, targets, unconstrained, st.contact_weight,
                            st.com_control, own)
-        if goals is None:
+        active = np.flatnonzero(weight > 0)
+        if goals is None:  # only areas the motion already keeps
+            table.error[active] = constraint_errors(table, active, unconstrained, targets)
             return
         rows = goals.rows
-        poses, error, _, positions = solve(st.poses.take(rows), st.lengths[rows], goals,
-                                           st.segment_mass_kg[rows], st.segment_com_fraction[rows],
-                                           sim.solver_settings, unconstrained.take(rows))
+        poses, _, _, solved = solve(st.poses.take(rows), st.lengths[rows], goals,
+                                    st.segment_mass_kg[rows], st.segment_com_fraction[rows],
+                                    sim.solver_settings, unconstrained.take(rows))
         st.poses = scatter(st.poses, rows, poses)
-        user = goals.table_index >= 0
-        table.error[goals.table_index[user]] = error[user]
+        # Every active constraint's error on the result (an area the motion already kept was
+        # not a goal, but another constraint's move may have taken its point out).
+        result = unconstrained
+        for field in fields(DecodedPose):
+            getattr(result, field.name)[rows] = getattr(solved, field.name)
+        table.error[active] = constraint_errors(table, active, result, targets)
         st.com_desired[rows] = goals.com_desired
-        st.goals, st.solved_positions = goals, positions
+        st.goals, st.solved_positions = goals, solved.positions

@@ -113,6 +113,30 @@ def test_foot_contacts_keep_the_feet_while_an_arm_and_the_trunk_reach(idle):
     bones_exact(after)
 
 
+@pytest.mark.parametrize("elevation_deg, share", [(-20.0, 0.80), (10.0, 0.90), (35.0, 0.90)])
+def test_the_trunk_bends_to_reach_what_the_arm_alone_cannot(floating, elevation_deg, share):
+    """A target in front, low, level or high, at ``share`` of pelvis-to-shoulder plus arm (a
+    spine bent far forward is a curve, its chord shorter than standing): the trunk brings the
+    shoulder within reach and the arm meets it. (Turning the trunk to aim the wrist alone
+    stalled once the arm was straight: 17, 11 and 7 cm short here.)"""
+    sim, (e,) = still(floating)
+    before = sim.store.positions[0].copy()
+    pelvis, shoulder = before[J["pelvis"]], before[J["shoulder_r"]]
+    arm = ADULT["upper_arm_r"] + ADULT["forearm_r"]
+    forward = before[J["toe_r"]] - before[J["ankle_r"]]
+    forward[2] = 0.0
+    forward /= np.linalg.norm(forward)
+    side = np.cross([0.0, 0.0, 1.0], forward)
+    up = np.radians(90.0 - elevation_deg)  # from vertical
+    direction = np.cos(up) * np.array([0.0, 0.0, 1.0]) + np.sin(up) * forward
+    target = pelvis + share * (np.linalg.norm(shoulder - pelvis) + arm) * direction - 0.15 * side
+    k = sim.add_constraint(e, "far", "wrist_r", 1, ALWAYS, tuple(target), chain=("arm_r", "trunk"))
+    after = settle(sim, 3)[0]
+    assert sim.constraints.error[k] < 1e-3
+    assert np.linalg.norm(after[J["wrist_r"]] - target) < 1e-3
+    bones_exact(after)
+
+
 # --- kinds and points ---------------------------------------------------------------------------
 
 def test_a_point_along_the_forearm_reaches_its_target(floating):
@@ -163,6 +187,25 @@ def test_areas_keep_a_point_inside_or_outside(floating):
                        chain=("head", "trunk"))
     q2 = settle(sim, 4)[0]
     assert q2[J["head_top"], 2] <= q[J["head_top"], 2] - 0.02 + 1e-3
+
+
+def test_reported_errors_measure_the_constraint_not_the_solver_goal(floating):
+    """An area's error is the distance to its allowed region (0 anywhere in it), a distance's
+    how far from the distance: on the result, whatever goal point the solver aimed at."""
+    sim, (e,) = still(floating)
+    p = sim.store.positions[0]
+    # Already inside a box the motion keeps: nothing to do, error 0 (not "not evaluated").
+    inside = sim.add_constraint(e, "kept", "wrist_r", 1, ALWAYS, tuple(p[J["wrist_r"]]), kind="area",
+                                area=Area("box", low_m=(-0.3, -0.3, -0.3), high_m=(0.3, 0.3, 0.3)))
+    # The left wrist 0.25 m from a point 0.4 m away, on any side of it.
+    centre = p[J["wrist_l"]] + [0.0, 0.0, 0.4]
+    apart = sim.add_constraint(e, "apart", "wrist_l", 1, ALWAYS, tuple(centre), kind="distance",
+                               distance_m=0.25)
+    q = settle(sim, 2)[0]
+    errors = sim.constraints.error
+    assert errors[inside] == 0.0
+    assert errors[apart] == pytest.approx(abs(np.linalg.norm(q[J["wrist_l"]] - centre) - 0.25), abs=1e-12)
+    assert errors[apart] < 1e-3
 
 
 def test_orientation_of_the_head_and_of_a_hand(floating):
