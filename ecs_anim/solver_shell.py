@@ -155,15 +155,19 @@ def target_points(table: ConstraintTable, unconstrained: DecodedPose, previous: 
     return out
 
 
-def _area_goal(table: ConstraintTable, idx: I64, point: F64, anchor: F64) -> F64:
+def _area_goal(table: ConstraintTable, idx: I64, point: F64, anchor: F64,
+               side: F64 | None = None) -> F64:
     """Nearest point of each constraint's allowed region (inside or outside its area) to
-    ``point`` (k, 3); the area sits at ``anchor`` (k, 3)."""
+    ``point`` (k, 3); the area sits at ``anchor`` (k, 3). A point inside an area it must leave
+    goes out on the side of ``side`` (k, 3; default the point itself): through the box face,
+    or along the sphere's radius, nearest to it."""
     shape, inside = table.area_shape[idx], table.area_inside[idx]
     rel = point - anchor
+    rel_side = rel if side is None else side - anchor
     low, high = table.area_low[idx], table.area_high[idx]
-    # Box: clamp inside; outside, push through the nearest face.
+    # Box: clamp inside; outside, push through the face nearest the side point.
     in_box = np.clip(rel, low, high)
-    gaps = np.concatenate([rel - low, high - rel], axis=1)  # (k, 6) distance to each face
+    gaps = np.concatenate([rel_side - low, high - rel_side], axis=1)  # (k, 6) to each face
     face = np.argmin(gaps, axis=1)
     out_box = rel.copy()
     axis = face % 3
@@ -173,11 +177,20 @@ def _area_goal(table: ConstraintTable, idx: I64, point: F64, anchor: F64) -> F64
     box = np.where(inside[:, None], in_box, np.where(strictly_inside[:, None], out_box, rel))
     # Sphere about the anchor.
     distance = np.linalg.norm(rel, axis=1)
-    direction = np.where((distance > 1e-12)[:, None], rel / np.maximum(distance, 1e-12)[:, None],
-                         [0.0, 0.0, 1.0])
     radius = table.area_radius[idx]
+    # A sphere to stay out of is left on the side point's side, and its far side is not reached
+    # through it: while the way from the side point to the point crosses the sphere, the goal
+    # stays on the surface facing the side point (a head behind a fist stays behind it).
+    way = rel - rel_side
+    along = np.clip(-np.sum(rel_side * way, axis=1) / np.maximum(np.sum(way * way, axis=1), 1e-18), 0.0, 1.0)
+    nearest_on_way = np.linalg.norm(rel_side + along[:, None] * way, axis=1)
+    leave = ~inside & ((distance < radius) | (nearest_on_way < radius))
+    toward = np.where(leave[:, None], rel_side, rel)
+    toward_len = np.linalg.norm(toward, axis=1)
+    direction = np.where((toward_len > 1e-12)[:, None], toward / np.maximum(toward_len, 1e-12)[:, None],
+                         [0.0, 0.0, 1.0])
     sphere = direction * np.where(inside, np.minimum(distance, radius),
-                                  np.maximum(distance, radius))[:, None]
+                                  np.where(leave, radius, distance))[:, None]
     # Half-space: the allowed side is where the normal points (the other side when outside).
     normal = table.area_normal[idx] * np.where(inside, 1.0, -1.0)[:, None]
     height = np.sum(rel * normal, axis=1)
@@ -216,26 +229,33 @@ def constraint_errors(table: ConstraintTable, idx: I64, decoded: DecodedPose, ta
 
 
 def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained: DecodedPose,
-               contact_weight: F64, com_control: NDArray[np.bool_], com_desired: F64) -> TickGoals | None:
+               contact_weight: F64, com_control: NDArray[np.bool_], com_desired: F64,
+               previous: DecodedPose | None = None) -> TickGoals | None:
     """This tick's goals from the table, its weights (m,) and target points (m, 3) (all finite
     where the weight is > 0), for the characters with an active constraint; None if there is
     none. ``unconstrained`` is this tick's decoded pose of every character before constraints;
-    ``contact_weight`` (n, 2); ``com_control`` (n,); ``com_desired`` (n, 3)."""
+    ``contact_weight`` (n, 2); ``com_control`` (n,); ``com_desired`` (n, 3); ``previous`` the
+    last tick's posture (None on the first tick).
+
+    A distance goal, and an area the point must leave, keep the point on the side of its target
+    where it was last tick: a head dodging a fist that has come past where the motion holds the
+    head goes on backwards instead of through the fist to its front."""
     idx = np.flatnonzero(weight > 0)
     if idx.size == 0:
         return None
     owner = table.owner[idx]
     seg, frac, off = table.segment[idx], table.fraction[idx], table.offset[idx]
     p0 = point_positions(unconstrained, owner, seg, frac, off)
+    was = p0 if previous is None else point_positions(previous, owner, seg, frac, off)
     kind = table.kind[idx]
     t = targets[idx]
-    away = p0 - t
+    away = was - t
     away_len = np.linalg.norm(away, axis=1, keepdims=True)
     away_dir = np.where(away_len > 1e-9, away / np.maximum(away_len, 1e-12), [0.0, 0.0, 1.0])
     goal = np.where((kind == KIND_DISTANCE)[:, None], t + table.distance_m[idx, None] * away_dir, t)
     is_area = kind == KIND_AREA
     if is_area.any():
-        goal[is_area] = _area_goal(table, idx[is_area], p0[is_area], t[is_area])
+        goal[is_area] = _area_goal(table, idx[is_area], p0[is_area], t[is_area], was[is_area])
     w = weight[idx]
     # An area the motion already keeps needs nothing: it must not claim its limb.
     w = np.where(is_area & (np.linalg.norm(goal - p0, axis=1) < 1e-9), 0.0, w)

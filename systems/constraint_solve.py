@@ -51,7 +51,7 @@ class ConstraintSolve(System):
         given = np.isfinite(st.com_target_xy).all(axis=1)
         own[given, :2] = st.com_target_xy[given]
         goals = tick_goals(table, weight, targets, unconstrained, st.contact_weight,
-                           st.com_control, own)
+                           st.com_control, own, st.posture)
         active = np.flatnonzero(weight > 0)
         if goals is None:  # only areas the motion already keeps
             table.error[active] = constraint_errors(table, active, unconstrained, targets)

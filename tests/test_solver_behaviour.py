@@ -189,6 +189,38 @@ def test_areas_keep_a_point_inside_or_outside(floating):
     assert q2[J["head_top"], 2] <= q[J["head_top"], 2] - 0.02 + 1e-3
 
 
+def test_a_point_dodging_a_moving_sphere_stays_on_its_side(floating):
+    """An obstacle (a fist) sweeps through where the motion holds the head, from the front to
+    behind it: the head leans back ahead of it, is never caught inside it, never passes
+    through it to the front, and moves smoothly; once the obstacle is out of the way the head
+    goes back to the motion."""
+    sim, (e,) = still(floating)
+    p = sim.store.positions[0]
+    head = 0.5 * (p[J["head"]] + p[J["head_top"]])
+    forward = p[J["toe_r"]] - p[J["ankle_r"]]
+    forward[2] = 0.0
+    forward /= np.linalg.norm(forward)
+    radius = 0.2
+    k = sim.add_constraint(e, "dodge", "head", 1, ALWAYS, tuple(head + 0.5 * forward), kind="area",
+                           fraction=0.5, chain=("head", "trunk"),
+                           area=Area("sphere", radius_m=radius, inside=False))
+    heads, fists = [], []
+    path = np.concatenate([np.linspace(0.5, 0.0, 11), np.linspace(-0.02, -0.10, 5)])
+    for along in path:  # 5 cm a tick toward the head, then on past it
+        fist = head + along * forward
+        sim.set_target(k, tuple(fist))
+        q = settle(sim, 1)[0]
+        heads.append(0.5 * (q[J["head"]] + q[J["head_top"]]))
+        fists.append(fist)
+        assert np.linalg.norm(heads[-1] - fist) >= radius - 2e-3  # never caught
+        assert np.dot(heads[-1] - fist, forward) < 0.0  # always behind the fist
+    steps = np.linalg.norm(np.diff(np.array(heads), axis=0), axis=1)
+    assert steps.max() < 0.08  # no jump: the fist moves 5 cm a tick
+    sim.set_target(k, tuple(head + 2.0 * forward))  # withdrawn far in front
+    q = settle(sim, 1)[0]
+    np.testing.assert_allclose(0.5 * (q[J["head"]] + q[J["head_top"]]), head, atol=1e-9)
+
+
 def test_reported_errors_measure_the_constraint_not_the_solver_goal(floating):
     """An area's error is the distance to its allowed region (0 anywhere in it), a distance's
     how far from the distance: on the result, whatever goal point the solver aimed at."""
