@@ -457,6 +457,20 @@ def test_viewer_window_controls():
         app.on_key_press(key.R, 0)
         assert app.sim.tick == 1
         app.on_draw()
+        # At the scenario's end it starts again (L switches that off).
+        app.on_key_press(key.SPACE, 0)
+        app.speed = 1.0
+        end_tick = int(round(app.scenario.duration_s * app.scenario.fps))
+        while app.sim.tick < end_tick + 1:
+            app.update(app.sim.dt)
+        assert app.sim.tick == end_tick + 1
+        app.update(app.sim.dt)
+        assert app.sim.tick == 1
+        app.on_key_press(key.L, 0)
+        assert not app.loop
+        while app.sim.tick < end_tick + 3:
+            app.update(app.sim.dt)
+        assert app.sim.tick == end_tick + 3
     finally:
         app.on_close()
         app.window.close()

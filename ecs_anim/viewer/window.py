@@ -254,7 +254,8 @@ def write_screenshot(scenario: Scenario, out: str | Path, at_s: float, width: in
 # --- the interactive window ---------------------------------------------------------------
 
 HELP = ("drag: orbit  right/shift-drag: pan  wheel: zoom  space: play/pause  right arrow: step  "
-        "up/down: speed  R: restart  T: targets  C: COM  F: frame and follow  H: help")
+        "up/down: speed  R: restart  L: loop at the end  T: targets  C: COM  F: frame and follow  "
+        "H: help")
 
 
 def run_viewer(scenario: Scenario, width: int = 1280, height: int = 720,
@@ -294,6 +295,7 @@ class ViewerApp:
     def __init__(self, scenario: Scenario, pyglet: Any) -> None:
         self.scenario, self.pyglet = scenario, pyglet
         self.paused, self.speed = False, 1.0
+        self.loop = True  # start again at the scenario's end (its duration_s), camera kept
         self.show_targets, self.show_com, self.show_help = True, True, False
         self.accumulator = 0.0
         self.fps = 0.0
@@ -354,6 +356,10 @@ class ViewerApp:
         self.accumulator += dt * self.speed
         steps = 0
         while self.accumulator >= self.sim.dt and steps < self.MAX_STEPS_PER_FRAME:
+            if self.loop and self.sim.time_s > self.scenario.duration_s + 1e-9:
+                self._start()  # its first tick stands for this one
+                self._followed = None
+                break
             self.sim.step()
             self.accumulator -= self.sim.dt
             steps += 1
@@ -405,6 +411,8 @@ class ViewerApp:
         elif symbol == key.R:
             self._start()
             self._followed = None
+        elif symbol == key.L:
+            self.loop = not self.loop
         elif symbol == key.T:
             self.show_targets = not self.show_targets
         elif symbol == key.C:
