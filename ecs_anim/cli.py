@@ -7,12 +7,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
-from typing import Sequence
+from typing import Any, Sequence
 
 from .contacts import ContactThresholds
 from .errors import EcsAnimError
@@ -194,7 +195,7 @@ def default_bench_files() -> list[Path]:
     from .library import shipped_motion_paths
 
     for candidate in (Path("../shared/mocap"), Path(__file__).resolve().parents[2] / "shared" / "mocap"):
-        files = sorted(candidate.glob("*.bvh"))
+        files = sorted(candidate.glob("*.bvh")) + sorted(candidate.glob("*.c3d"))
         if files:
             return files
     return shipped_motion_paths()
@@ -296,26 +297,55 @@ def cmd_bench_pipeline(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     if args.what == "pipeline":
         return cmd_bench_pipeline(args)
-    from .bvh import forward_kinematics, read_bvh
-    from .importing import canonical_clip, normalize_clip
-
     files = [Path(f) for f in args.files] or default_bench_files()
     if not files:
-        raise EcsAnimError("bench import: no clips found (give BVH files, or run from the "
+        raise EcsAnimError("bench import: no clips found (give BVH or C3D files, or run from the "
                            "repository next to ../shared/mocap)")
     missing = [str(f) for f in files if not f.is_file()]
     if missing:
         raise EcsAnimError(f"bench import: no such file: {', '.join(missing)}")
-    biggest = max(files, key=lambda p: p.stat().st_size)
+    other = [str(f) for f in files if f.suffix.lower() not in (".bvh", ".c3d")]
+    if other:
+        raise EcsAnimError(f"bench import: not a .bvh or .c3d file: {', '.join(other)}")
+    bvh_files = [f for f in files if f.suffix.lower() == ".bvh"]
+    result: dict[str, object] = {}
+    if bvh_files:
+        result = _bench_bvh(max(bvh_files, key=lambda p: p.stat().st_size), args.repeat)
+    c3d = [_bench_c3d(f, args.repeat) for f in files if f.suffix.lower() == ".c3d"]
+    if c3d:
+        result["c3d"] = c3d
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    if bvh_files:
+        best = result["seconds"]
+        assert isinstance(best, dict)
+        print(f"bench import: {Path(str(result['file'])).name}, {result['frames']} frames, best of {args.repeat}")
+        print(f"  parse {best['parse'] * 1e3:8.1f} ms")
+        print(f"  FK    {best['fk'] * 1e3:8.1f} ms")
+        print(f"  map + FK + encode + contacts {best['map_encode'] * 1e3:8.1f} ms")
+        print(f"  total {best['total'] * 1e3:8.1f} ms -> {result['frames_per_second']:.0f} frames/s")
+    for one in c3d:
+        print(f"bench import: {Path(str(one['file'])).name}, {one['frames']} frames, best of {args.repeat}: "
+              f"read {one['seconds']['read'] * 1e3:.1f} ms, joint centres + encode + contacts "
+              f"{one['seconds']['centres_encode'] * 1e3:.1f} ms -> {one['frames_per_second']:.0f} frames/s")
+    return 0
+
+
+def _bench_bvh(path: Path, repeat: int) -> dict[str, object]:
+    """Best-of-``repeat`` timings of one BVH import: parse, FK, map + FK + encode + contacts."""
+    from .bvh import forward_kinematics, read_bvh
+    from .importing import canonical_clip, normalize_clip
+
     timings: dict[str, list[float]] = {"parse": [], "fk": [], "map_encode": []}
     n_frames = 0
-    for _ in range(args.repeat):
+    for _ in range(repeat):
         t0 = time.perf_counter()
-        motion = read_bvh(biggest)
+        motion = read_bvh(path)
         t1 = time.perf_counter()
         forward_kinematics(motion)
         t2 = time.perf_counter()
-        normalize_clip(canonical_clip(motion), biggest.stem, str(biggest))
+        normalize_clip(canonical_clip(motion), path.stem, str(path))
         t3 = time.perf_counter()
         timings["parse"].append(t1 - t0)
         timings["fk"].append(t2 - t1)
@@ -324,21 +354,37 @@ def cmd_bench(args: argparse.Namespace) -> int:
     best = {k: min(v) for k, v in timings.items()}
     # canonical_clip runs FK again internally; count the pipeline once: parse + (map + FK + encode).
     total = best["parse"] + best["map_encode"]
-    result = {
-        "file": str(biggest),
+    return {
+        "file": str(path),
         "frames": n_frames,
         "seconds": {k: round(v, 5) for k, v in best.items()} | {"total": round(total, 5)},
         "frames_per_second": round(n_frames / total, 1),
     }
-    if args.json:
-        print(json.dumps(result, indent=2))
-    else:
-        print(f"bench import: {biggest.name}, {n_frames} frames, best of {args.repeat}")
-        print(f"  parse {best['parse'] * 1e3:8.1f} ms")
-        print(f"  FK    {best['fk'] * 1e3:8.1f} ms")
-        print(f"  map + FK + encode + contacts {best['map_encode'] * 1e3:8.1f} ms")
-        print(f"  total {total * 1e3:8.1f} ms -> {result['frames_per_second']:.0f} frames/s")
-    return 0
+
+
+def _bench_c3d(path: Path, repeat: int) -> dict[str, Any]:
+    """Best-of-``repeat`` timings of one C3D import: reading the markers, then joint centres,
+    encoding and contacts."""
+    from .c3d_import import canonical_clip_c3d, read_c3d
+    from .importing import normalize_clip
+
+    reads, rest = [], []
+    n_frames = 0
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        raw = read_c3d(path)
+        t1 = time.perf_counter()
+        clip, _ = canonical_clip_c3d(raw)
+        motion = normalize_clip(clip, path.stem, str(path))
+        t2 = time.perf_counter()
+        reads.append(t1 - t0)
+        rest.append(t2 - t1)
+        n_frames = motion.n_frames
+    read_s, rest_s = min(reads), min(rest)
+    return {"file": str(path), "frames": n_frames,
+            "seconds": {"read": round(read_s, 5), "centres_encode": round(rest_s, 5),
+                        "total": round(read_s + rest_s, 5)},
+            "frames_per_second": round(n_frames / (read_s + rest_s), 1)}
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -518,6 +564,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader went away (``| head``): stop quietly, as Unix tools do
+        # (Python's documented recipe: point stdout at devnull so the exit flush cannot fail.)
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_FAILED
     except OSError as exc:  # unwritable folder, full disk, ...: say which file
         print(f"error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
         return EXIT_FAILED

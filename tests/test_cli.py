@@ -49,3 +49,17 @@ def test_info_json_and_text(tmp_path, capsys):
 def test_bench_rejects_missing_files(capsys):
     assert main(["bench", "import", "nope.bvh"]) == 1
     assert "no such file: nope.bvh" in capsys.readouterr().err
+
+
+def test_bench_import_times_c3d_files_too(capsys):
+    from conftest import mocap_files, require_mocap
+
+    require_mocap()
+    c3d = mocap_files("*.c3d")[:1]
+    assert main(["bench", "import", str(c3d[0]), "--json", "--repeat", "1"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    (one,) = result["c3d"]
+    assert one["frames"] > 100 and one["frames_per_second"] > 0
+    assert set(one["seconds"]) == {"read", "centres_encode", "total"}
+    assert main(["bench", "import", "README.md"]) == 1
+    assert "not a .bvh or .c3d file" in capsys.readouterr().err
