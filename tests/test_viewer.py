@@ -348,7 +348,7 @@ def _check_characters_where_they_are(shot, colours: np.ndarray,  # type: ignore[
 
 
 @pytest.mark.parametrize("name, at_s", [
-    ("terrain_walk.yaml", 3.0), ("reach_and_touch.yaml", 2.5), ("fight_training.yaml", 0.6),
+    ("terrain_walk.yaml", 3.0), ("reach_and_touch.yaml", 2.5), ("fight_training.yaml", 1.2),
     ("wrists_above_table.yaml", 4.0), ("grasp_com.yaml", 1.6), ("wrist_elbow_priority.yaml", 1.5),
     ("dance_morphologies.yaml", 3.0)])
 def test_screenshot_shows_the_characters_where_they_are(tmp_path, name, at_s, capsys):
