@@ -151,6 +151,8 @@ def target_points(table: ConstraintTable, unconstrained: DecodedPose, previous: 
         seg, frac, off = table.target_segment[body], table.target_fraction[body], table.target_offset[body]
         now = point_positions(unconstrained, rows, seg, frac, off)
         before = now if previous is None else point_positions(previous, rows, seg, frac, off)
+        # A character added since the last tick has no posture there yet: its pose now.
+        before = np.where(np.isfinite(before), before, now)
         out[body] = np.where((rows == table.owner[body])[:, None], now, before)
     return out
 
@@ -185,7 +187,8 @@ def _area_goal(table: ConstraintTable, idx: I64, point: F64, anchor: F64,
     along = np.clip(-np.sum(rel_side * way, axis=1) / np.maximum(np.sum(way * way, axis=1), 1e-18), 0.0, 1.0)
     nearest_on_way = np.linalg.norm(rel_side + along[:, None] * way, axis=1)
     leave = ~inside & ((distance < radius) | (nearest_on_way < radius))
-    toward = np.where(leave[:, None], rel_side, rel)
+    side_len = np.linalg.norm(rel_side, axis=1)
+    toward = np.where((leave & (side_len > 1e-12))[:, None], rel_side, rel)
     toward_len = np.linalg.norm(toward, axis=1)
     direction = np.where((toward_len > 1e-12)[:, None], toward / np.maximum(toward_len, 1e-12)[:, None],
                          [0.0, 0.0, 1.0])
@@ -247,6 +250,8 @@ def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained:
     seg, frac, off = table.segment[idx], table.fraction[idx], table.offset[idx]
     p0 = point_positions(unconstrained, owner, seg, frac, off)
     was = p0 if previous is None else point_positions(previous, owner, seg, frac, off)
+    # No last tick for this point (a character added since, a frozen pose): the motion's side.
+    was = np.where(np.isfinite(was), was, p0)
     kind = table.kind[idx]
     t = targets[idx]
     away = was - t
@@ -257,7 +262,8 @@ def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained:
     if is_area.any():
         goal[is_area] = _area_goal(table, idx[is_area], p0[is_area], t[is_area], was[is_area])
     w = weight[idx]
-    # An area the motion already keeps needs nothing: it must not claim its limb.
+    # An area the motion already keeps (and a sphere it need not cross to get there) needs
+    # nothing: it must not claim its limb.
     w = np.where(is_area & (np.linalg.norm(goal - p0, axis=1) < 1e-9), 0.0, w)
     orient = kind == KIND_ORIENTATION
     if orient.any():
@@ -533,8 +539,14 @@ class _Solve:
             f = np.flatnonzero(far)
             root_at = dec.positions[rows[f], limb_root[f]]
             middle_at = dec.positions[rows[f], LIMB_MIDDLE_JOINT[g.group[c[f]]]]
-            reach = LIMB_REACH_SHARE * (np.linalg.norm(middle_at - root_at, axis=1)
-                                        + np.linalg.norm(point[f] - middle_at, axis=1))
+            # A point on the limb's first bone (upper arm, neck) keeps its distance from the
+            # root: the root must come exactly that far from the goal. One further out reaches
+            # up to the first bone's length plus its distance from the middle joint.
+            first_bone = g.bone[c[f]] == 0
+            reach = np.where(
+                first_bone, np.linalg.norm(point[f] - root_at, axis=1),
+                LIMB_REACH_SHARE * (np.linalg.norm(middle_at - root_at, axis=1)
+                                    + np.linalg.norm(point[f] - middle_at, axis=1)))
             short = np.linalg.norm(g.goal[c[f]] - root_at, axis=1) > reach
             f = f[short]
             turn[f] = bring_within_reach(base[f], root_at[short], g.goal[c[f]], reach[short],

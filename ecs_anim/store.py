@@ -120,5 +120,9 @@ class CharacterStore:
                                         for k, v in self.poses.arrays().items()})
         self.scaled = None
         self.vertebrae = None
-        self.posture = None
+        if self.posture is not None:  # no last tick for the new row: NaN, read as "none"
+            self.posture = DecodedPose(**{
+                f.name: np.concatenate([getattr(self.posture, f.name),
+                                        np.full((1,) + getattr(self.posture, f.name).shape[1:], np.nan)])
+                for f in fields(DecodedPose)})
         return row

@@ -23,6 +23,7 @@ import numpy as np
 
 from ecs_anim.morphology import centres_of_mass
 from ecs_anim.normalized import DecodedPose, decode
+from ecs_anim.constraint_table import TARGET_WORLD
 from ecs_anim.solver_shell import constraint_errors, scatter, solve, target_points, tick_goals
 from ecs_anim.system_base import System
 
@@ -66,6 +67,10 @@ class ConstraintSolve(System):
         result = unconstrained
         for field in fields(DecodedPose):
             getattr(result, field.name)[rows] = getattr(solved, field.name)
+        # Targets on the character's own body moved with it during the solve: read them again.
+        targets = np.where((table.target_row == table.owner)[:, None]
+                           & (table.target_kind != TARGET_WORLD)[:, None],
+                           target_points(table, result, st.posture), targets)
         table.error[active] = constraint_errors(table, active, result, targets)
         st.com_desired[rows] = goals.com_desired
         st.goals, st.solved_positions = goals, solved.positions

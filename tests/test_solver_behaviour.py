@@ -137,6 +137,54 @@ def test_the_trunk_bends_to_reach_what_the_arm_alone_cannot(floating, elevation_
     bones_exact(after)
 
 
+@pytest.mark.parametrize("point, fraction, chain", [
+    ("upper_arm_r", 0.5, ("arm_r", "trunk")), ("elbow_r", None, ("arm_r", "trunk")),
+    ("forearm_l", 0.5, ("arm_l", "trunk")), ("neck", 0.5, ("head", "trunk")),
+    ("head", 0.5, ("head", "trunk"))])
+def test_points_on_every_bone_of_the_arms_and_head_reach_with_the_trunk(floating, point, fraction, chain):
+    """Forward and down, 80 % of the way the straight pelvis-to-point chain reaches: met, whichever
+    bone the point is on (a point on the first bone, upper arm or neck, reaches only its own
+    distance from the shoulder or neck)."""
+    sim, (e,) = still(floating)
+    before = sim.store.positions[0].copy()
+    pelvis = before[J["pelvis"]]
+    start = point_positions_now(sim, point, fraction)
+    forward = before[J["toe_r"]] - before[J["ankle_r"]]
+    forward[2] = 0.0
+    forward /= np.linalg.norm(forward)
+    direction = np.cos(np.radians(60.0)) * np.array([0.0, 0.0, 1.0]) + np.sin(np.radians(60.0)) * forward
+    target = pelvis + 0.8 * straight_reach(before, point, fraction) * direction
+    assert np.linalg.norm(start - target) > 0.1
+    k = sim.add_constraint(e, "far", point, 1, ALWAYS, tuple(target), chain=chain, fraction=fraction)
+    settle(sim, 3)
+    assert sim.constraints.error[k] < 1e-3
+
+
+def point_positions_now(sim, point, fraction):
+    from ecs_anim.body_points import point_positions
+    from ecs_anim.normalized import decode
+
+    bp = body_point(point, fraction)
+    dec = decode(sim.store.poses, sim.store.lengths)
+    return point_positions(dec, np.array([0]), np.array([bp.segment]), np.array([bp.fraction]),
+                           np.array([bp.offset_m]))[0]
+
+
+def straight_reach(p, point, fraction):
+    """Pelvis to the point's limb root, plus the limb straightened out to the point (m)."""
+    side = point[-1]
+    if point.startswith(("neck", "head")):
+        root, bones = p[J["neck"]], [("neck", "head"), ("head", "head_top")]
+    else:
+        root, bones = p[J[f"shoulder_{side}"]], [(f"shoulder_{side}", f"elbow_{side}"),
+                                                   (f"elbow_{side}", f"wrist_{side}")]
+    lengths = [np.linalg.norm(p[J[b]] - p[J[a]]) for a, b in bones]
+    first_bone = point.startswith(("upper_arm", "neck"))
+    along = {"elbow_r": lengths[0]}.get(point, (fraction or 1.0) * lengths[0] if first_bone
+                                        else lengths[0] + (fraction or 1.0) * lengths[1])
+    return np.linalg.norm(root - p[J["pelvis"]]) + along
+
+
 # --- kinds and points ---------------------------------------------------------------------------
 
 def test_a_point_along_the_forearm_reaches_its_target(floating):
@@ -219,6 +267,49 @@ def test_a_point_dodging_a_moving_sphere_stays_on_its_side(floating):
     sim.set_target(k, tuple(head + 2.0 * forward))  # withdrawn far in front
     q = settle(sim, 1)[0]
     np.testing.assert_allclose(0.5 * (q[J["head"]] + q[J["head_top"]]), head, atol=1e-9)
+
+
+def test_a_character_added_mid_run_changes_no_one_elses_side(floating):
+    """A character spawned while another dodges has no last posture yet: the dodging head keeps
+    its side (no flip through the sphere), and a target on the newcomer is read at once."""
+    sim, (e,) = still(floating)
+    p = sim.store.positions[0]
+    head = 0.5 * (p[J["head"]] + p[J["head_top"]])
+    forward = p[J["toe_r"]] - p[J["ankle_r"]]
+    forward[2] = 0.0
+    forward /= np.linalg.norm(forward)
+    k = sim.add_constraint(e, "dodge", "head", 1, ALWAYS, tuple(head + 0.5 * forward), kind="area",
+                           fraction=0.5, chain=("head", "trunk"),
+                           area=Area("sphere", radius_m=0.2, inside=False))
+    for along in np.linspace(0.5, -0.1, 13):
+        fist = head + along * forward
+        sim.set_target(k, tuple(fist))
+        if along < -0.04 and sim.store.n == 1:
+            late = sim.spawn("late", ADULT, MotionPlayer("m", speed=0.0), Placement((0.0, 1.0)))
+            touch = sim.add_constraint(late, "touch", "wrist_r", 1, ALWAYS, target_entity=e,
+                                       target_point="hand_l")
+        q = settle(sim, 1)[0]
+        h = 0.5 * (q[J["head"]] + q[J["head_top"]])
+        assert np.dot(h - fist, forward) < 0.0 and np.linalg.norm(h - fist) > 0.2 - 2e-3
+    assert sim.store.n == 2 and sim.constraints.enabled[touch] and not sim.messages
+    assert np.isfinite(sim.constraints.error[touch])
+
+
+def test_a_target_on_the_own_body_is_measured_where_it_ended(floating):
+    """The left wrist holds the right hand while the right arm and trunk reach far: the reported
+    error is the gap between them on the result, wherever the solve took the hand."""
+    sim, (e,) = still(floating)
+    p = sim.store.positions[0]
+    forward = p[J["toe_r"]] - p[J["ankle_r"]]
+    forward[2] = 0.0
+    forward /= np.linalg.norm(forward)
+    hold = sim.add_constraint(e, "hold", "wrist_l", 10, ALWAYS, target_entity=e, target_point="hand_r",
+                              chain=("arm_l",))
+    sim.add_constraint(e, "far", "wrist_r", 5, ALWAYS,
+                       tuple(p[J["shoulder_r"]] + 0.85 * forward - [0.0, 0.0, 0.3]), chain=("arm_r", "trunk"))
+    q = settle(sim, 2)[0]
+    gap = np.linalg.norm(q[J["wrist_l"]] - q[J["hand_r"]])
+    assert sim.constraints.error[hold] == pytest.approx(gap, abs=1e-9)
 
 
 def test_reported_errors_measure_the_constraint_not_the_solver_goal(floating):

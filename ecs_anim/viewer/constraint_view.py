@@ -126,7 +126,7 @@ def constraint_marks(sim: Simulation) -> ConstraintMarks:
     target, point = _targets(table, positions), _constrained_points(table, positions)
     kind = _kinds(table)
     error = np.linalg.norm(target - point, axis=-1)
-    if hasattr(table, "error"):  # the solver's own residual (distance constraints included)
+    if hasattr(table, "error"):  # as ConstraintSolve measured it on its result (any kind)
         solver_error = np.asarray(table.error, dtype=np.float64)
         error = np.where(np.isfinite(solver_error), solver_error, error)
     keep = ((weight > 0) & (kind != KIND_ORIENTATION) & (kind != KIND_AREA)
