@@ -63,6 +63,23 @@ def bones_exact(positions, body=ADULT):
         body.lengths[IS_BONE], bone_lengths_of(positions)[..., IS_BONE].shape), atol=1e-9)
 
 
+def facing(p):
+    """Unit horizontal direction (3,) the body with joint positions ``p`` faces (its right foot)."""
+    forward = p[J["toe_r"]] - p[J["ankle_r"]]
+    forward[2] = 0.0
+    return forward / np.linalg.norm(forward)
+
+
+def head_centre(p):
+    return 0.5 * (p[J["head"]] + p[J["head_top"]])
+
+
+def dodging(sim, e, fist, radius):
+    """A constraint keeping the head's centre ``radius`` metres out of a sphere about ``fist``."""
+    return sim.add_constraint(e, "dodge", "head", 1, ALWAYS, tuple(fist), kind="area", fraction=0.5,
+                              chain=("head", "trunk"), area=Area("sphere", radius_m=radius, inside=False))
+
+
 # --- only the chain moves: one test per group ---------------------------------------------------
 
 CHAINS = [
@@ -123,9 +140,7 @@ def test_the_trunk_bends_to_reach_what_the_arm_alone_cannot(floating, elevation_
     before = sim.store.positions[0].copy()
     pelvis, shoulder = before[J["pelvis"]], before[J["shoulder_r"]]
     arm = ADULT["upper_arm_r"] + ADULT["forearm_r"]
-    forward = before[J["toe_r"]] - before[J["ankle_r"]]
-    forward[2] = 0.0
-    forward /= np.linalg.norm(forward)
+    forward = facing(before)
     side = np.cross([0.0, 0.0, 1.0], forward)
     up = np.radians(90.0 - elevation_deg)  # from vertical
     direction = np.cos(up) * np.array([0.0, 0.0, 1.0]) + np.sin(up) * forward
@@ -149,9 +164,7 @@ def test_points_on_every_bone_of_the_arms_and_head_reach_with_the_trunk(floating
     before = sim.store.positions[0].copy()
     pelvis = before[J["pelvis"]]
     start = point_positions_now(sim, point, fraction)
-    forward = before[J["toe_r"]] - before[J["ankle_r"]]
-    forward[2] = 0.0
-    forward /= np.linalg.norm(forward)
+    forward = facing(before)
     direction = np.cos(np.radians(60.0)) * np.array([0.0, 0.0, 1.0]) + np.sin(np.radians(60.0)) * forward
     target = pelvis + 0.8 * straight_reach(before, point, fraction) * direction
     assert np.linalg.norm(start - target) > 0.1
@@ -244,29 +257,22 @@ def test_a_point_dodging_a_moving_sphere_stays_on_its_side(floating):
     goes back to the motion."""
     sim, (e,) = still(floating)
     p = sim.store.positions[0]
-    head = 0.5 * (p[J["head"]] + p[J["head_top"]])
-    forward = p[J["toe_r"]] - p[J["ankle_r"]]
-    forward[2] = 0.0
-    forward /= np.linalg.norm(forward)
-    radius = 0.2
-    k = sim.add_constraint(e, "dodge", "head", 1, ALWAYS, tuple(head + 0.5 * forward), kind="area",
-                           fraction=0.5, chain=("head", "trunk"),
-                           area=Area("sphere", radius_m=radius, inside=False))
-    heads, fists = [], []
+    head, forward, radius = head_centre(p), facing(p), 0.2
+    k = dodging(sim, e, head + 0.5 * forward, radius)
+    heads = []
     path = np.concatenate([np.linspace(0.5, 0.0, 11), np.linspace(-0.02, -0.10, 5)])
     for along in path:  # 5 cm a tick toward the head, then on past it
         fist = head + along * forward
         sim.set_target(k, tuple(fist))
         q = settle(sim, 1)[0]
-        heads.append(0.5 * (q[J["head"]] + q[J["head_top"]]))
-        fists.append(fist)
+        heads.append(head_centre(q))
         assert np.linalg.norm(heads[-1] - fist) >= radius - 2e-3  # never caught
         assert np.dot(heads[-1] - fist, forward) < 0.0  # always behind the fist
     steps = np.linalg.norm(np.diff(np.array(heads), axis=0), axis=1)
     assert steps.max() < 0.08  # no jump: the fist moves 5 cm a tick
     sim.set_target(k, tuple(head + 2.0 * forward))  # withdrawn far in front
     q = settle(sim, 1)[0]
-    np.testing.assert_allclose(0.5 * (q[J["head"]] + q[J["head_top"]]), head, atol=1e-9)
+    np.testing.assert_allclose(head_centre(q), head, atol=1e-9)
 
 
 def test_a_character_added_mid_run_changes_no_one_elses_side(floating):
@@ -274,13 +280,8 @@ def test_a_character_added_mid_run_changes_no_one_elses_side(floating):
     its side (no flip through the sphere), and a target on the newcomer is read at once."""
     sim, (e,) = still(floating)
     p = sim.store.positions[0]
-    head = 0.5 * (p[J["head"]] + p[J["head_top"]])
-    forward = p[J["toe_r"]] - p[J["ankle_r"]]
-    forward[2] = 0.0
-    forward /= np.linalg.norm(forward)
-    k = sim.add_constraint(e, "dodge", "head", 1, ALWAYS, tuple(head + 0.5 * forward), kind="area",
-                           fraction=0.5, chain=("head", "trunk"),
-                           area=Area("sphere", radius_m=0.2, inside=False))
+    head, forward = head_centre(p), facing(p)
+    k = dodging(sim, e, head + 0.5 * forward, 0.2)
     for along in np.linspace(0.5, -0.1, 13):
         fist = head + along * forward
         sim.set_target(k, tuple(fist))
@@ -289,7 +290,7 @@ def test_a_character_added_mid_run_changes_no_one_elses_side(floating):
             touch = sim.add_constraint(late, "touch", "wrist_r", 1, ALWAYS, target_entity=e,
                                        target_point="hand_l")
         q = settle(sim, 1)[0]
-        h = 0.5 * (q[J["head"]] + q[J["head_top"]])
+        h = head_centre(q)
         assert np.dot(h - fist, forward) < 0.0 and np.linalg.norm(h - fist) > 0.2 - 2e-3
     assert sim.store.n == 2 and sim.constraints.enabled[touch] and not sim.messages
     assert np.isfinite(sim.constraints.error[touch])
@@ -300,9 +301,7 @@ def test_a_target_on_the_own_body_is_measured_where_it_ended(floating):
     error is the gap between them on the result, wherever the solve took the hand."""
     sim, (e,) = still(floating)
     p = sim.store.positions[0]
-    forward = p[J["toe_r"]] - p[J["ankle_r"]]
-    forward[2] = 0.0
-    forward /= np.linalg.norm(forward)
+    forward = facing(p)
     hold = sim.add_constraint(e, "hold", "wrist_l", 10, ALWAYS, target_entity=e, target_point="hand_r",
                               chain=("arm_l",))
     sim.add_constraint(e, "far", "wrist_r", 5, ALWAYS,
