@@ -103,7 +103,8 @@ class ConstraintTable:
     target_segment, target_fraction, target_offset (m, 3): a body point target; distance_m;
     area_shape (0 none), area_low, area_high (m, 3), area_radius, area_normal (m, 3),
     area_inside; axis (m, 3) the segment-frame axis an orientation constraint turns; enabled
-    (a constraint whose target went non-finite is switched off, with a warning); error: each
+    (a constraint whose target went non-finite is switched off, with a warning); held: a sphere
+    to stay out of kept its point off the motion's place in the last tick; error: each
     constraint's remaining error after the last tick (metres, or radians for orientation; NaN
     while inactive); weight: each constraint's activation weight in the last tick; names.
     """
@@ -134,6 +135,7 @@ class ConstraintTable:
     area_inside: NDArray[np.bool_] = _col(np.bool_)
     axis: F64 = _col(np.float64, 3)
     enabled: NDArray[np.bool_] = _col(np.bool_)
+    held: NDArray[np.bool_] = _col(np.bool_)
     error: F64 = _col(np.float64)
     weight: F64 = _col(np.float64)
     names: list[str] = field(default_factory=list)
@@ -208,7 +210,7 @@ class ConstraintTable:
             "area_normal": tuple(np.asarray(ar.normal) / np.linalg.norm(ar.normal)),
             "area_inside": ar.inside,
             "axis": tuple(np.asarray(axis, dtype=float) / np.linalg.norm(axis)),
-            "enabled": True, "error": np.nan, "weight": 0.0,
+            "enabled": True, "held": False, "error": np.nan, "weight": 0.0,
         }
         for key, value in values.items():
             current = getattr(self, key)

@@ -64,7 +64,9 @@ class SolverSettings:
     a goal closer than this is met; ``com_tolerance_m``: the same for the horizontal centre of
     mass; ``max_ccd_step_rad``: the largest turn one CCD step of the
     trunk makes (spreads a lean over the iterations); ``root_gain``: how far past the
-    centre-of-mass error the root steps (the planted legs' mass does not follow it)."""
+    centre-of-mass error the root steps (the planted legs' mass does not follow it);
+    ``release_speed_m_s``: how fast a point a sphere held off the motion's place goes back to it
+    once the sphere lets it go (instead of in one tick)."""
 
     iterations: int = 6
     tolerance_m: float = 1e-4
@@ -72,6 +74,7 @@ class SolverSettings:
     com_tolerance_m: float = 1e-3
     max_ccd_step_rad: float = np.radians(20.0)
     root_gain: float = 1.25
+    release_speed_m_s: float = 1.5
 
 
 DEFAULT_SETTINGS = SolverSettings()
@@ -133,6 +136,7 @@ class TickGoals:
     self_fraction: F64
     self_offset: F64
     self_start: F64  # (s, 3) where that point was when the goals were made
+    held: NDArray[np.bool_]  # (k,) a sphere keeps this goal's point off the motion's place
 
     @property
     def k(self) -> int:
@@ -233,7 +237,7 @@ def constraint_errors(table: ConstraintTable, idx: I64, decoded: DecodedPose, ta
 
 def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained: DecodedPose,
                contact_weight: F64, com_control: NDArray[np.bool_], com_desired: F64,
-               previous: DecodedPose | None = None) -> TickGoals | None:
+               previous: DecodedPose | None = None, max_release_m: float = np.inf) -> TickGoals | None:
     """This tick's goals from the table, its weights (m,) and target points (m, 3) (all finite
     where the weight is > 0), for the characters with an active constraint; None if there is
     none. ``unconstrained`` is this tick's decoded pose of every character before constraints;
@@ -242,7 +246,9 @@ def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained:
 
     A distance goal, and an area the point must leave, keep the point on the side of its target
     where it was last tick: a head dodging a fist that has come past where the motion holds the
-    head goes on backwards instead of through the fist to its front."""
+    head goes on backwards instead of through the fist to its front. A point such a sphere held
+    off the motion's place last tick (``table.held``) and no longer holds goes back at most
+    ``max_release_m`` this tick."""
     idx = np.flatnonzero(weight > 0)
     if idx.size == 0:
         return None
@@ -261,6 +267,15 @@ def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained:
     is_area = kind == KIND_AREA
     if is_area.any():
         goal[is_area] = _area_goal(table, idx[is_area], p0[is_area], t[is_area], was[is_area])
+    sphere_out = is_area & ~table.area_inside[idx] & (table.area_shape[idx] == AREA_SPHERE)
+    held = sphere_out & (np.linalg.norm(goal - p0, axis=1) > 1e-9)
+    released = sphere_out & table.held[idx] & ~held
+    if released.any():
+        back = p0[released] - was[released]
+        gap = np.linalg.norm(back, axis=1)
+        share = np.minimum(1.0, max_release_m / np.maximum(gap, 1e-12))
+        goal[released] = was[released] + share[:, None] * back
+        held[released] = gap > max_release_m
     w = weight[idx]
     # An area the motion already keeps (and a sphere it need not cross to get there) needs
     # nothing: it must not claim its limb.
@@ -316,6 +331,7 @@ def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained:
         self_fraction=table.target_fraction[idx[on_self]],
         self_offset=table.target_offset[idx[on_self]],
         self_start=targets[idx[on_self]],
+        held=cat([held[keep], np.zeros(nc, bool)]),
     )
 
 

@@ -10,7 +10,7 @@ A constraint whose target is not finite is switched off with one warning; the ot
 
 Reads: store.poses, lengths, posture (the previous tick's), contact_weight, clip, clip_time_s,
 com_control, com_target_xy, segment masses; the constraint table.
-Writes: store.poses (solved characters), com_desired, goals, solved_positions;
+Writes: store.poses (solved characters), com_desired, goals, solved_positions; table.held;
 table.enabled, table.weight, table.error (how far each active constraint is from being met on
 the result, :func:`~ecs_anim.solver_shell.constraint_errors`; NaN while inactive).
 """
@@ -38,6 +38,7 @@ class ConstraintSolve(System):
         weight = table.weights(sim.time_s, st.clip, st.clip_time_s)
         table.weight = weight
         if not np.any(weight > 0):
+            table.held[:] = False
             return
         unconstrained = decode(st.poses, st.lengths)
         targets = target_points(table, unconstrained, st.posture)
@@ -52,7 +53,9 @@ class ConstraintSolve(System):
         given = np.isfinite(st.com_target_xy).all(axis=1)
         own[given, :2] = st.com_target_xy[given]
         goals = tick_goals(table, weight, targets, unconstrained, st.contact_weight,
-                           st.com_control, own, st.posture)
+                           st.com_control, own, st.posture,
+                           sim.solver_settings.release_speed_m_s * sim.dt)
+        table.held[:] = False
         active = np.flatnonzero(weight > 0)
         if goals is None:  # only areas the motion already keeps
             table.error[active] = constraint_errors(table, active, unconstrained, targets)
@@ -62,6 +65,8 @@ class ConstraintSolve(System):
                                     st.segment_mass_kg[rows], st.segment_com_fraction[rows],
                                     sim.solver_settings, unconstrained.take(rows))
         st.poses = scatter(st.poses, rows, poses)
+        user = goals.table_index >= 0
+        table.held[goals.table_index[user]] = goals.held[user]
         # Every active constraint's error on the result (an area the motion already kept was
         # not a goal, but another constraint's move may have taken its point out).
         result = unconstrained
