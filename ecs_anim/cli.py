@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 from typing import Any, Sequence
 
+from .constraint_table import check_stored
 from .contacts import ContactThresholds
 from .errors import EcsAnimError
 from .joint_map import preset_summary
@@ -90,6 +91,10 @@ def cmd_import(args: argparse.Namespace) -> int:
             else:
                 motion = import_bvh(src, args.map, args.unit, thresholds, args.up or "y")
             motion.constraints.extend(extra)
+            try:
+                check_stored(extra, motion.duration_s)
+            except ValueError as exc:
+                raise EcsAnimError(f"{args.constraints}: with {src}: {exc}") from None
             save_nmo(motion, target, force=args.force)
             contacts = motion.contacts()
             message = (f"{src} -> {target}: {motion.n_frames} frames at {motion.fps:g} fps, "

@@ -24,8 +24,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from .body_points import ALLOWED_CHAIN, GROUP_INDEX, GROUPS, SEGMENTS, BodyPoint
-from .constraints import Activation, ramp_weight
+from .body_points import ALLOWED_CHAIN, GROUP_INDEX, GROUPS, SEGMENTS, BodyPoint, body_point
+from .constraints import Activation, ConstraintSpec, ramp_weight
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -59,6 +59,13 @@ class Area:
     def __post_init__(self) -> None:
         if self.shape not in AREA_NAMES:
             raise ValueError(f"unknown area shape {self.shape!r}; shapes: {', '.join(AREA_NAMES)}")
+        # Lists are welcome (an .nmo header is JSON): stored as 3-tuples of floats.
+        for name in ("low_m", "high_m", "normal"):
+            value = tuple(float(v) for v in getattr(self, name))
+            if len(value) != 3:
+                raise ValueError(f"area {name} must have 3 values, got {len(value)}")
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, "radius_m", float(self.radius_m))
         values = self.low_m + self.high_m + self.normal + (self.radius_m,)
         if not all(np.isfinite(v) for v in values):
             raise ValueError("area values must be finite")
@@ -256,3 +263,45 @@ def winners(owner: I64, key: I64, priority: F64, active: NDArray[np.bool_],
 
 
 __all__ = ["Area", "ConstraintTable", "Target", "winners", "SEGMENTS"]
+
+
+def add_stored(table: "ConstraintTable", owner: int, spec: ConstraintSpec, name: str,
+               clock: int = -1) -> int:
+    """Add a constraint stored with a motion (its target, if any, a point of the same body) for
+    the character in row ``owner``. Raises ValueError naming ``name`` if it is malformed."""
+    p = spec.params
+    try:
+        body = body_point(spec.segment, spec.fraction, tuple(spec.offset_m),
+                          segment=spec.kind == "orientation")
+        target = Target(row=owner, point=body_point(
+            str(p.get("target_point") or ""), p.get("target_fraction"),
+            tuple(p.get("target_offset_m", (0.0, 0.0, 0.0))), as_target=True))
+        area = Area(**p["area"]) if "area" in p else None
+        chain = tuple(spec.chain) if spec.chain else None
+        if chain is not None and not all(isinstance(g, str) for g in chain):
+            raise ValueError(f"chain {spec.chain!r} must be a list of group names")
+        return table.add(name, owner, spec.kind, body, target, spec.priority, spec.activation,
+                         chain, float(p.get("distance_m", 0.0)), area,
+                         tuple(p.get("axis", (0.0, 0.0, 1.0))), clock)
+    except (TypeError, KeyError) as exc:
+        raise ValueError(f"constraint {name!r}: malformed ({type(exc).__name__}: {exc})") from None
+    except ValueError as exc:
+        message = str(exc)
+        raise ValueError(message if message.startswith("constraint ") else
+                         f"constraint {name!r}: {message}") from None
+
+
+def check_stored(specs: list[ConstraintSpec], duration_s: float) -> None:
+    """Raise ValueError if a constraint stored with a motion of ``duration_s`` seconds is
+    malformed or can never be active (it starts after the clip ends)."""
+    scratch = ConstraintTable()
+    for spec in specs:
+        if spec.kind == "foot_contact":
+            if spec.segment not in ("ankle_l", "ankle_r"):
+                raise ValueError(f"foot contact {spec.name!r} on {spec.segment!r}: foot contacts "
+                                 "are on ankle_l or ankle_r")
+            continue
+        add_stored(scratch, 0, spec, spec.name)
+        if spec.activation.start_s > duration_s + 1e-9:
+            raise ValueError(f"constraint {spec.name!r}: starts at {spec.activation.start_s:g} s, "
+                             f"after the clip ends ({duration_s:g} s): it would never be active")

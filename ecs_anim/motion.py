@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from .constraint_table import check_stored
 from .constraints import ConstraintSpec
 from .contacts import contacts_from_constraints
 from .errors import InputError
@@ -112,6 +113,7 @@ def load_nmo(path: str | Path) -> NormalizedMotion:
     try:
         morph = Morphology.from_dict(header["source_morphology"])
         constraints = [ConstraintSpec.from_dict(c) for c in header.get("constraints", [])]
+        check_stored(constraints, (n - 1) / float(header["fps"]))
     except (KeyError, TypeError, ValueError) as exc:
         raise InputError(path, f"damaged .nmo header: {exc}") from None
     return NormalizedMotion(NormalizedPoses(**arrays), float(header["fps"]), morph, constraints,

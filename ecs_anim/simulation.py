@@ -33,7 +33,7 @@ from .motion import NormalizedMotion
 from .playback import ClipBank, _wrap, rotate_xy, sample
 from .body_points import body_point
 from .solver_shell import DEFAULT_SETTINGS, SolverSettings
-from .constraint_table import Area, ConstraintTable, Target
+from .constraint_table import Area, ConstraintTable, Target, add_stored
 from .constraints import Activation
 from .store import MAX_QUEUE, CharacterStore
 from .system_base import System
@@ -176,16 +176,11 @@ class Simulation:
             for spec in self.motions[clip].constraints:
                 if spec.kind == "foot_contact":
                     continue
-                p = spec.params
-                self.add_constraint(
-                    entity, f"{name}/{clip}/{spec.name}", spec.segment, spec.priority,
-                    spec.activation, target_entity=entity, target_point=p.get("target_point"),
-                    kind=spec.kind, chain=spec.chain or None, fraction=spec.fraction,
-                    offset_m=spec.offset_m, target_fraction=p.get("target_fraction"),
-                    target_offset_m=tuple(p.get("target_offset_m", (0.0, 0.0, 0.0))),
-                    distance_m=float(p.get("distance_m", 0.0)),
-                    area=Area(**p["area"]) if "area" in p else None,
-                    axis=tuple(p.get("axis", (0.0, 0.0, 1.0))), clock=self.bank.index(clip))
+                try:
+                    add_stored(self.constraints, self.row(entity), spec, f"{name}/{clip}/{spec.name}",
+                               clock=self.bank.index(clip))
+                except ValueError as exc:
+                    raise EcsAnimError(f"motion {clip!r}: {exc}") from None
 
     def row(self, entity: int) -> int:
         with self._active():

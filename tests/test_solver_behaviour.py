@@ -524,3 +524,50 @@ def test_a_bad_constraints_file_is_refused_before_importing(tmp_path, capsys):
     err = capsys.readouterr().err
     assert f"{bad}:6: constraints[0].target: a motion's constraint aims at a point" in err
     assert not (tmp_path / "out" / "idle.nmo").exists()
+
+
+KEEP_OUT = """constraints:
+  - name: elbow_clear
+    kind: area
+    point: wrist_l
+    target: {point: head}
+    area: {shape: sphere, radius_m: 0.3, inside: false}
+"""
+
+
+def test_a_stored_area_plays_and_a_stored_constraint_past_the_clip_is_refused(tmp_path, capsys):
+    """An area stored with a motion (its corners and normal come back from the .nmo as JSON
+    lists) plays; a constraint that would start after the clip ends is refused at import; a
+    damaged stored constraint is refused when the .nmo is read, naming the file."""
+    from dataclasses import replace as dc_replace
+
+    from ecs_anim.cli import main
+    from ecs_anim.errors import InputError
+    from ecs_anim.motion import load_nmo, save_nmo
+
+    (tmp_path / "keep.yaml").write_text(KEEP_OUT)
+    assert main(["import", str(MOTIONS_DIR / "idle.bvh"), "-o", str(tmp_path),
+                 "--constraints", str(tmp_path / "keep.yaml")]) == 0
+    motion = load_nmo(tmp_path / "idle.nmo")
+    sim = Simulation({"idle": motion})
+    sim.spawn("a", ADULT, MotionPlayer("idle"))
+    for _ in range(5):
+        sim.step()
+    q = sim.store.positions[0]
+    assert np.linalg.norm(q[J["wrist_l"]] - q[J["head"]]) >= 0.3 - 1e-3
+    capsys.readouterr()
+
+    late = KEEP_OUT + "    activation: {start_s: 100, stop_s: 200}\n"
+    (tmp_path / "late.yaml").write_text(late)
+    assert main(["import", str(MOTIONS_DIR / "idle.bvh"), "-o", str(tmp_path / "late"),
+                 "--constraints", str(tmp_path / "late.yaml")]) == 1
+    assert "after the clip ends" in capsys.readouterr().err
+    assert not (tmp_path / "late" / "idle.nmo").exists()
+
+    stored = [c for c in motion.constraints if c.kind != "foot_contact"][0]
+    for damage in ({"segment": "tail"}, {"chain": ("leg_l",)},
+                   {"params": {**stored.params, "target_point": "wing"}}):
+        broken = dc_replace(motion, constraints=[dc_replace(stored, **damage)])
+        save_nmo(broken, tmp_path / "broken.nmo", force=True)
+        with pytest.raises(InputError, match="broken.nmo: damaged .nmo header: constraint 'elbow_clear'"):
+            load_nmo(tmp_path / "broken.nmo")
