@@ -18,12 +18,15 @@ from typing import Any, Sequence
 from .constraint_table import check_stored
 from .contacts import ContactThresholds
 from .errors import EcsAnimError
+from .files import folder_problem, output_problem
 from .joint_map import preset_summary
 from .marker_sets import preset_summary as marker_set_summary
 from .morphology import PRESET_SPECS
 from .viewer.command import add_arguments as add_view_arguments, cmd_view
 
 EXIT_FAILED = 1
+#: ``bench --characters`` above this would take minutes to set up (and gigabytes).
+MAX_BENCH_CHARACTERS = 100_000
 
 
 def positive_float(text: str) -> float:
@@ -60,6 +63,8 @@ def cmd_import(args: argparse.Namespace) -> int:
     from .motion import save_nmo
 
     outdir = Path(args.output)
+    if folder_problem(outdir):
+        raise EcsAnimError(f"-o {folder_problem(outdir)}")
     thresholds = ContactThresholds(
         height_m=args.contact_height, speed_mps=args.contact_speed,
         min_duration_s=args.contact_min_duration,
@@ -265,6 +270,10 @@ def cmd_bench_pipeline(args: argparse.Namespace) -> int:
     if n < 8:
         raise EcsAnimError("bench: give --characters 8 or more (the figure is fitted from a run "
                            "at N and one at N/4)")
+    if n > MAX_BENCH_CHARACTERS:
+        raise EcsAnimError(f"bench: --characters {n}: at most {MAX_BENCH_CHARACTERS:,}")
+    if not 0 < args.seconds <= 600:
+        raise EcsAnimError(f"bench: --seconds {args.seconds:g}: expected more than 0 and at most 600")
     small = n // 4
     timing_small = _pipeline_timing(small, args.seconds, args.rotations, args.constrained)
     timing = _pipeline_timing(n, args.seconds, args.rotations, args.constrained)
@@ -393,7 +402,7 @@ def _bench_c3d(path: Path, repeat: int) -> dict[str, Any]:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from .scenario import build_simulation, load_scenario
+    from .scenario import MAX_DURATION_S, build_simulation, load_scenario
 
     scenario = load_scenario(args.scenario)
     seconds = scenario.duration_s if args.seconds is None else args.seconds
@@ -405,9 +414,17 @@ def cmd_run(args: argparse.Namespace) -> int:
         outputs = [outdir / f"{n}.{ext}" for n in names for ext in ("bvh", "npz")]
     if args.report:
         outputs.append(Path(args.report))
-    existing = [str(p) for p in outputs if p.exists()]
-    if existing and not args.force:
+    if args.export and folder_problem(outdir):
+        raise EcsAnimError(f"--export {folder_problem(outdir)}")
+    problems = [output_problem(p, args.force) for p in outputs]
+    existing = [str(p) for p, why in zip(outputs, problems) if why and "already exists" in why]
+    if existing:
         raise EcsAnimError(f"{', '.join(existing)}: already exist(s) (use --force to overwrite)")
+    other = [why for why in problems if why]
+    if other:
+        raise EcsAnimError(other[0])
+    if seconds > MAX_DURATION_S:
+        raise EcsAnimError(f"--seconds {seconds:g}: at most {MAX_DURATION_S:g} s (a day) in one run")
     ticks = int(round(seconds * scenario.fps))
     if ticks < 1:
         raise EcsAnimError(f"--seconds {seconds:g} is less than one tick at {scenario.fps:g} Hz")

@@ -43,7 +43,13 @@ def compose_yaml(path: str | Path, what: str) -> object:
         raise InputError(path, f"cannot read {what}: not UTF-8 text") from None
     try:
         return yaml.compose(text)
+    except RecursionError:
+        raise InputError(path, "not valid YAML: nested too deeply") from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
-        raise InputError(path, f"not valid YAML: {getattr(exc, 'problem', exc)}",
-                         None if mark is None else mark.line + 1) from None
+        line = None if mark is None else mark.line + 1
+        position = getattr(exc, "position", None)  # a reader error: a character offset
+        if line is None and isinstance(position, int):
+            line = text.count("\n", 0, position) + 1
+        problem = getattr(exc, "problem", None) or getattr(exc, "reason", None) or str(exc)
+        raise InputError(path, f"not valid YAML: {' '.join(str(problem).split())}", line) from None

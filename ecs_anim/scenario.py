@@ -24,9 +24,19 @@ from .errors import EcsAnimError, InputError, compose_yaml
 from .ground import Bumps, Combined, Ground, HeightGrid, Plane, Slope, Stairs
 from .morphology import LENGTH_KEYS, PRESET_SPECS, Morphology, with_lengths_m
 from .motion import NormalizedMotion, load_nmo
+from .simulation import MAX_COORDINATE_M
+from .store import MAX_QUEUE
 
 #: Names of characters and motions: they name files, so no path separators or leading dot.
 _NAME = re.compile(r"[A-Za-z0-9_\-][A-Za-z0-9_.\-]*")
+
+
+#: The longest scenario (and ``ecs-anim run --seconds``): a day.
+MAX_DURATION_S = 86400.0
+#: Longest character name (it names exported files).
+MAX_NAME_LENGTH = 64
+#: How far a desired centre of mass may lie from the character's position (over its feet).
+MAX_COM_OFFSET_M = 1.0
 
 
 @dataclass
@@ -42,6 +52,20 @@ class ConstraintEntry:
     target_character: str | None = None
     target_point: str | None = None
     options: dict[str, Any] = field(default_factory=dict)
+
+    def aims_at_itself(self) -> bool:
+        """Whether the target is the constrained point itself (on its own body)."""
+        from .body_points import body_point
+
+        if self.target_point is None:
+            return False
+        o = self.options
+        own = body_point(self.point, o.get("fraction"), o.get("offset_m", (0.0, 0.0, 0.0)),
+                         segment=o.get("kind") == "orientation")
+        aim = body_point(self.target_point, o.get("target_fraction"),
+                         o.get("target_offset_m", (0.0, 0.0, 0.0)), as_target=True)
+        return (own.segment, own.fraction, tuple(own.offset_m)) == \
+            (aim.segment, aim.fraction, tuple(aim.offset_m))
 
     def to_spec(self) -> ConstraintSpec:
         """The constraint stored with a motion (its target a point of the same body)."""
@@ -99,6 +123,9 @@ class _Reader:
             raise self.fail(node, where, f"expected a mapping, found {self._kind(node)}")
         out: dict[str, Node] = {}
         for key_node, value in node.value:
+            if not isinstance(key_node, yaml.ScalarNode):
+                raise self.fail(key_node, where or "top level",
+                                f"a key must be a name, found {self._kind(key_node)}")
             key = str(key_node.value)
             here = f"{where}.{key}" if where else key
             if key not in allowed:
@@ -133,9 +160,19 @@ class _Reader:
     def number(self, node: Node, where: str, lo: float = -math.inf, hi: float = math.inf,
                unit: str = "") -> float:
         value = self.scalar(node, where)
+        if isinstance(value, str):
+            try:  # YAML 1.1 reads 1e6 (an exponent without a decimal point) as text
+                value = float(value)
+            except ValueError:
+                pass
+        if isinstance(value, int) and not isinstance(value, bool) and abs(value) > 1e300:
+            value = math.inf  # beyond any float: refused below, not an OverflowError
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            found = self.scalar(node, where)
+            shown = "a number too large" if isinstance(found, int) and not isinstance(found, bool) \
+                else repr(found)
             raise self.fail(node, where, f"expected a number{' in ' + unit if unit else ''}, "
-                                         f"found {value!r}")
+                                         f"found {shown}")
         if not lo <= value <= hi:
             raise self.fail(node, where, f"expected a number between {lo:g} and {hi:g}"
                                          f"{' ' + unit if unit else ''}, found {value!r}")
@@ -186,7 +223,9 @@ GROUND_KEYS: dict[str, dict[str, bool]] = {
 }
 
 
-def _ground(r: _Reader, node: Node, where: str) -> Ground:
+def _ground(r: _Reader, node: Node, where: str, inside: tuple[int, ...] = ()) -> Ground:
+    if id(node) in inside:  # a YAML alias back to an enclosing ground
+        raise r.fail(node, where, "a ground cannot contain itself")
     if not isinstance(node, yaml.MappingNode):
         raise r.fail(node, where, "expected a mapping with 'type:' (plane, slope, stairs, bumps, "
                                   "grid, combined)")
@@ -232,7 +271,8 @@ def _ground(r: _Reader, node: Node, where: str) -> Ground:
     parts = r.sequence(keys["parts"], f"{where}.parts")
     if not parts:
         raise r.fail(keys["parts"], f"{where}.parts", "expected at least one ground")
-    return Combined(tuple(_ground(r, p, f"{where}.parts[{i}]") for i, p in enumerate(parts)))
+    return Combined(tuple(_ground(r, p, f"{where}.parts[{i}]", inside + (id(node),))
+                          for i, p in enumerate(parts)))
 
 
 def _morphology(r: _Reader, node: Node, where: str) -> Morphology:
@@ -364,6 +404,9 @@ def _constraint(r: _Reader, node: Node, where: str,
             chain.append(group)
         options["chain"] = tuple(chain)
     if "distance_m" in keys:
+        if kind != "distance":
+            raise r.fail(keys["distance_m"], f"{where}.distance_m", f"only a distance constraint "
+                         f"takes distance_m (this one is kind {kind!r})")
         options["distance_m"] = r.number(keys["distance_m"], f"{where}.distance_m", 0.0, 100.0, "m")
     if "axis" in keys:
         options["axis"] = r.vector(keys["axis"], f"{where}.axis", 3, "", 1e3)
@@ -429,6 +472,21 @@ def _constraint(r: _Reader, node: Node, where: str,
                            options), who
 
 
+def _com_target(r: _Reader, keys: dict[str, Node], where: str,
+                position: tuple[float, ...]) -> tuple[float, float] | None:
+    """A character's desired centre of mass (x, y), which must lie over its feet: within
+    :data:`MAX_COM_OFFSET_M` of its position."""
+    if "com_target_m" not in keys:
+        return None
+    xy = r.vector(keys["com_target_m"], f"{where}.com_target_m", 2, "m", 1e5)
+    away = math.hypot(xy[0] - position[0], xy[1] - position[1])
+    if away > MAX_COM_OFFSET_M:
+        raise r.fail(keys["com_target_m"], f"{where}.com_target_m", f"{away:.2f} m from the "
+                     f"character's position_m: the centre of mass must stay over its feet (within "
+                     f"{MAX_COM_OFFSET_M:g} m)")
+    return (xy[0], xy[1])
+
+
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario; motions are loaded (BVH imported) here, once."""
     path = Path(path)
@@ -440,7 +498,7 @@ def load_scenario(path: str | Path) -> Scenario:
                                "ground": False, "characters": True, "description": False,
                                "camera": False})
     fps = r.number(top["fps"], "fps", 1.0, 1000.0, "Hz") if "fps" in top else 30.0
-    duration = r.number(top["duration_s"], "duration_s", 1.0 / fps, 86400.0, "s")
+    duration = r.number(top["duration_s"], "duration_s", 1.0 / fps, MAX_DURATION_S, "s")
     motion_nodes = top["motions"]
     if not isinstance(motion_nodes, yaml.MappingNode) or not motion_nodes.value:
         raise r.fail(motion_nodes, "motions", "expected a mapping name: file (.bvh, .c3d or .nmo)")
@@ -464,6 +522,9 @@ def load_scenario(path: str | Path) -> Scenario:
         if not _NAME.fullmatch(name):
             raise r.fail(keys["name"], f"{where}.name", f"{name!r}: a character name names its "
                          "exported files, so it must be letters, digits, _ . - (not starting with .)")
+        if len(name) > MAX_NAME_LENGTH:
+            raise r.fail(keys["name"], f"{where}.name", f"a character name has at most "
+                         f"{MAX_NAME_LENGTH} characters (it names files), got {len(name)}")
         if name in names:
             raise r.fail(keys["name"], f"{where}.name", f"another character is already named {name!r}")
         names.add(name)
@@ -478,6 +539,8 @@ def load_scenario(path: str | Path) -> Scenario:
 
         queue = []
         if "then" in keys:
+            if len(r.sequence(keys["then"], f"{where}.then")) > MAX_QUEUE:
+                raise r.fail(keys["then"], f"{where}.then", f"at most {MAX_QUEUE} clips can be queued")
             for j, q in enumerate(r.sequence(keys["then"], f"{where}.then")):
                 qw = f"{where}.then[{j}]"
                 qk = r.mapping(q, qw, {"motion": True, "crossfade_s": False, "loop": False})
@@ -489,7 +552,7 @@ def load_scenario(path: str | Path) -> Scenario:
             clip(keys["motion"], f"{where}.motion"),
             speed=r.number(keys["speed"], f"{where}.speed", 0.0, 10.0) if "speed" in keys else 1.0,
             loop=r.boolean(keys["loop"], f"{where}.loop") if "loop" in keys else True,
-            start_s=r.number(keys["start_s"], f"{where}.start_s", 0.0, 1e6, "s") if "start_s" in keys else 0.0,
+            start_s=r.number(keys["start_s"], f"{where}.start_s", 0.0, MAX_COORDINATE_M, "s") if "start_s" in keys else 0.0,
             queue=tuple(queue))
         position = r.vector(keys["position_m"], f"{where}.position_m", 2, "m", 1e5) \
             if "position_m" in keys else (0.0, 0.0)
@@ -499,6 +562,12 @@ def load_scenario(path: str | Path) -> Scenario:
         for j, cn in enumerate(r.sequence(keys["constraints"], f"{where}.constraints")
                                if "constraints" in keys else []):
             entry, who = _constraint(r, cn, f"{where}.constraints[{j}]")
+            if any(c.name == entry.name for c in constraints):
+                raise r.fail(cn, f"{where}.constraints[{j}].name",
+                             f"{entry.name!r} is used twice on {name!r}")
+            if entry.target_character in (None, name) and entry.aims_at_itself():
+                raise r.fail(cn, f"{where}.constraints[{j}].target", "the target is the "
+                             "constrained point itself")
             constraints.append(entry)
             if who is not None:
                 pending_targets.append((entry.target_character, who, f"{where}.constraints[{j}]"))
@@ -509,8 +578,7 @@ def load_scenario(path: str | Path) -> Scenario:
             Placement((position[0], position[1]), math.radians(heading)),
             r.string(keys["team"], f"{where}.team") if "team" in keys else "", constraints,
             r.boolean(keys["com_control"], f"{where}.com_control") if "com_control" in keys else True,
-            r.vector(keys["com_target_m"], f"{where}.com_target_m", 2, "m", 1e5)  # type: ignore[arg-type]
-            if "com_target_m" in keys else None))
+            _com_target(r, keys, where, position)))
     if not characters:
         raise r.fail(top["characters"], "characters", "expected at least one character")
     for other, node, cwhere in pending_targets:
@@ -548,6 +616,8 @@ def load_motion_constraints(path: str | Path) -> list[ConstraintSpec]:
         entry, _ = _constraint(r, node, f"constraints[{j}]", in_motion=True)
         if entry.name in names:
             raise r.fail(node, f"constraints[{j}].name", f"{entry.name!r} is used twice")
+        if entry.aims_at_itself():
+            raise r.fail(node, f"constraints[{j}].target", "the target is the constrained point itself")
         names.add(entry.name)
         specs.append(entry.to_spec())
     return specs

@@ -63,3 +63,46 @@ def test_bench_import_times_c3d_files_too(capsys):
     assert set(one["seconds"]) == {"read", "centres_encode", "total"}
     assert main(["bench", "import", "README.md"]) == 1
     assert "not a .bvh or .c3d file" in capsys.readouterr().err
+
+
+def test_outputs_that_are_not_files_limits_and_links(tmp_path, capsys):
+    """Bad output paths and out-of-range runs are one-line errors before any work; an output
+    that is a link is written through it (the link stays)."""
+    from pathlib import Path
+
+    scenario = str(Path(__file__).resolve().parents[1] / "scenarios" / "reach_and_touch.yaml")
+    folder, plain = tmp_path / "a_folder", tmp_path / "a_file"
+    folder.mkdir()
+    plain.write_text("keep")
+    cases = [
+        (["run", scenario, "--report", str(folder), "--force"], "not a file (a folder or a device)"),
+        (["run", scenario, "--export", str(plain)], "--export " + str(plain) + ": not a folder"),
+        (["import", "x.bvh", "-o", str(plain)], "-o " + str(plain) + ": not a folder"),
+        (["run", scenario, "--seconds", "1e9"], "at most 86400 s"),
+        (["bench", "--characters", "200000"], "at most 100,000"),
+    ]
+    for argv, message in cases:
+        assert main(argv) == 1, argv
+        err = capsys.readouterr().err
+        assert message in err and "Traceback" not in err, (argv, err)
+    assert plain.read_text() == "keep"
+    real = tmp_path / "real.json"
+    real.write_text("{}")
+    link = tmp_path / "link.json"
+    link.symlink_to(real)
+    assert main(["run", scenario, "--seconds", "0.1", "--report", str(link), "--force"]) == 0
+    assert link.is_symlink() and json.loads(real.read_text())["ticks"] == 3
+
+
+def test_numbers_written_like_1e3_are_numbers(tmp_path):
+    """YAML 1.1 reads 1e3 (no decimal point) as text; the scenario reader takes it as a number."""
+    from pathlib import Path
+
+    from ecs_anim.scenario import load_scenario
+
+    motions = Path(__file__).resolve().parents[1] / "scenarios" / "motions"
+    path = tmp_path / "s.yaml"
+    path.write_text(f"duration_s: 2e0\nfps: 3e1\nmotions: {{idle: {motions / 'idle.bvh'}}}\n"
+                    "characters:\n  - {name: a, morphology: child, motion: idle}\n")
+    scenario = load_scenario(path)
+    assert scenario.fps == 30.0 and scenario.duration_s == 2.0

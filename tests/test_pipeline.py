@@ -157,6 +157,11 @@ BAD_CASES = [
     ("constraint_area_without_area.yaml", 14, "constraint 'above': an area constraint needs its area"),
     ("constraint_unknown_character.yaml", 16, "constraints[0].target.character: no character named 'c'"),
     ("constraint_unknown_segment.yaml", 15, "constraints[0].point: unknown body point 'forarm_r'; did you mean 'forearm_r'?"),
+    ("ground_contains_itself.yaml", 5, "ground.parts[0]: a ground cannot contain itself"),
+    ("constraint_aims_at_itself.yaml", 10, "constraints[0].target: the target is the constrained point itself"),
+    ("constraint_name_twice.yaml", 11, "constraints[1].name: 'reach' is used twice on 'a'"),
+    ("com_target_far.yaml", 10, "com_target_m: 70.71 m from the character's position_m"),
+    ("distance_on_position.yaml", 12, "distance_m: only a distance constraint takes distance_m"),
 ]
 
 
