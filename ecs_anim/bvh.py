@@ -109,6 +109,10 @@ class _Lines:
                          len(self.lines) or 1)
 
 
+#: Largest magnitude of a BVH number (offsets, positions, angles); beyond it the file is wrong.
+MAX_VALUE = 1e7
+
+
 def _floats(tokens: list[str], count: int, path: str, line: int, what: str) -> F64:
     if len(tokens) != count:
         raise InputError(path, f"{what}: expected {count} numbers, found {len(tokens)}", line)
@@ -119,6 +123,9 @@ def _floats(tokens: list[str], count: int, path: str, line: int, what: str) -> F
         raise InputError(path, f"{what}: expected a number, found {bad!r}", line) from None
     if not np.all(np.isfinite(values)):
         raise InputError(path, f"{what}: values must be finite, found {' '.join(tokens)}", line)
+    if np.any(np.abs(values) > MAX_VALUE):
+        raise InputError(path, f"{what}: values beyond {MAX_VALUE:g} (a length unit of "
+                               f"millimetres would make that 10 km), found {' '.join(tokens)}", line)
     return values
 
 
@@ -213,12 +220,14 @@ def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
                 if not _is_number(tok):
                     raise InputError(path, f"expected a number, found {tok!r}", line_no) from None
         raise
-    bad = ~np.isfinite(values)
+    bad = ~np.isfinite(values) | (np.abs(values) > MAX_VALUE)
     if bad.any():
         frame = int(np.argmax(bad.any(axis=1)))
         col = int(np.argmax(bad[frame]))
         name, channel = _channel_owner(skeleton, col)
-        raise InputError(path, f"non-finite value {values[frame, col]} in channel {channel} of "
+        what = "non-finite value" if not np.isfinite(values[frame, col]) else \
+            f"value beyond {MAX_VALUE:g}:"
+        raise InputError(path, f"{what} {values[frame, col]} in channel {channel} of "
                                f"joint {name!r} (frame {frame + 1} of {n_frames})", rows[frame][0])
     return BvhMotion(skeleton, values, frame_time)
 

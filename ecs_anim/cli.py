@@ -74,6 +74,9 @@ def cmd_import(args: argparse.Namespace) -> int:
         from .scenario import load_motion_constraints
         extra = load_motion_constraints(args.constraints)  # a mistake stops before any import
     sources = [Path(s) for s in args.sources]
+    if not any(s.suffix.lower() == ".c3d" for s in sources) and (
+            args.fill_absent_from or args.max_gap != 10):
+        raise EcsAnimError("--max-gap and --fill-absent-from are for .c3d files; none is given")
     failed = 0
     show_bar = len(sources) > 1 and sys.stderr.isatty()
     stems: dict[str, Path] = {}
@@ -477,7 +480,8 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
         print(f"  {'constraint':26s} {'max error mm while fully active':>32s}")
         for k in report["constraints"]:
             full = k["error_mm_max_fully_active"]
-            text = "never fully active" if full is None else f"{full:.1f}"
+            unit = " mrad" if k["unit"] == "mrad" else ""
+            text = "never fully active" if full is None else f"{full:.1f}{unit}"
             print(f"  {(k['character'] + '.' + k['name'])[:26]:26s} {text:>32s}"
                   + ("" if k["enabled"] else "  (switched off: non-finite target)"))
     total = sum(report["ms_per_tick"].values())

@@ -72,6 +72,10 @@ class CanonicalClip:
     up_axis: str = "y"
 
 
+#: A captured subject's plausible stature (m): outside, the length unit is wrong.
+MIN_STATURE_M, MAX_STATURE_M = 0.3, 3.0
+
+
 def detect_unit(leg_in_file_units: float) -> tuple[str, str]:
     """Pick the unit that gives a human leg (thigh + shank) closest to 0.8 m.
 
@@ -241,6 +245,10 @@ def normalize_clip(clip: CanonicalClip, name: str, source: str,
                    thresholds: ContactThresholds = ContactThresholds()) -> NormalizedMotion:
     """Encode a canonical clip, detect its foot contacts, and gather its provenance."""
     morph = source_morphology(clip.positions, f"{name} (source)")
+    if not MIN_STATURE_M <= morph.stature <= MAX_STATURE_M:
+        raise EcsAnimError(f"the captured body comes out {morph.stature:.3g} m tall with the length "
+                           f"unit {clip.unit!r} ({clip.unit_reason}); expected "
+                           f"{MIN_STATURE_M:g}-{MAX_STATURE_M:g} m: is the unit right? (--unit)")
     poses = encode(clip.positions, clip.pelvis2world, clip.thorax2world, clip.head2world,
                    morph.lengths)
     contact = detect_contacts(clip.positions, clip.fps, thresholds)

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from .constraint_table import KIND_NAMES, KIND_ORIENTATION
 from .ground_adapt import BALL_HEIGHT_PER_LEG
 from .morphology import bone_lengths_of
 from .normalized import SIDE_JOINTS, SIDE_LENGTHS
@@ -22,6 +23,9 @@ from .skeleton import BONE_JOINTS
 
 ANKLES, TOES = list(SIDE_JOINTS["ankle"]), list(SIDE_JOINTS["toe"])
 IS_BONE = np.array([a >= 0 for a, _ in BONE_JOINTS])
+
+
+KIND_BY_NUMBER = {number: name for name, number in KIND_NAMES.items()}
 
 
 class MetricsRecorder:
@@ -115,6 +119,9 @@ class MetricsRecorder:
         table = sim.constraints
         constraints = [{
             "name": table.names[k], "character": names[int(table.owner[k])],
+            "kind": KIND_BY_NUMBER[int(table.kind[k])],
+            # an orientation's error is an angle: these figures are then milliradians
+            "unit": "mrad" if int(table.kind[k]) == KIND_ORIENTATION else "mm",
             "error_mm_max_fully_active": None if np.isnan(self.constraint_error_full[k])
             else round(float(self.constraint_error_full[k]) * 1e3, 3),
             "error_mm_max_active": None if np.isnan(self.constraint_error_any[k])

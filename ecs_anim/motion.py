@@ -79,6 +79,14 @@ def load_nmo(path: str | Path) -> NormalizedMotion:
     path = str(path)
     if not Path(path).exists():
         raise InputError(path, "no such file")
+    with open(path, "rb") as head:
+        if head.read(4) != b"PK\x03\x04":  # an .nmo is a zip archive (numpy's .npz)
+            if Path(path).suffix.lower() == ".nmo":
+                raise InputError(path, "not a readable .nmo file (damaged or truncated?): not a "
+                                       "zip archive")
+            hint = " (import it first: ecs-anim import FILE -o DIR)" \
+                if Path(path).suffix.lower() in (".bvh", ".c3d") else ""
+            raise InputError(path, f"not an .nmo file{hint}")
     try:
         loaded = np.load(path, allow_pickle=False)
         if not isinstance(loaded, np.lib.npyio.NpzFile):
@@ -106,6 +114,13 @@ def load_nmo(path: str | Path) -> NormalizedMotion:
                                    f"expected {(n,) + trailing}")
         if not np.all(np.isfinite(arrays[name])):
             raise InputError(path, f"damaged .nmo file: {name} holds non-finite values")
+        if np.any(np.abs(arrays[name]) > 1e6):  # leg lengths, fractions, unit vectors: never
+            raise InputError(path, f"damaged .nmo file: {name} holds values beyond 1e6")
+    # A limb's length fraction is 0 (folded) to 1 (straight); a bone's stretch is positive.
+    for name, lo, hi in (("leg_fraction", 0.0, 1.0 + 1e-6), ("arm_fraction", 0.0, 1.0 + 1e-6),
+                         ("stretch", 1e-3, 1e3)):
+        if np.any((arrays[name] < lo) | (arrays[name] > hi)):
+            raise InputError(path, f"damaged .nmo file: {name} holds values outside {lo:g}-{hi:g}")
     for name in QUATERNION_FIELDS + DIRECTION_FIELDS:
         if np.any(np.abs(np.linalg.norm(arrays[name], axis=-1) - 1.0) > 1e-6):
             what = "quaternions" if name in QUATERNION_FIELDS else "directions"

@@ -106,3 +106,39 @@ def test_numbers_written_like_1e3_are_numbers(tmp_path):
                     "characters:\n  - {name: a, morphology: child, motion: idle}\n")
     scenario = load_scenario(path)
     assert scenario.fps == 30.0 and scenario.duration_s == 2.0
+
+
+def test_more_user_mistakes_are_one_line_errors(tmp_path, capsys):
+    """A wrong --unit, a BVH given where an .nmo is wanted, a .jpg screenshot, a C3D option
+    without a C3D, a BVH number of 1e308, an .nmo whose limb fractions are out of range."""
+    from dataclasses import replace
+    from pathlib import Path
+
+    from ecs_anim.importing import import_bvh
+    from ecs_anim.motion import save_nmo
+
+    walk = str(MOTIONS_DIR / "walk.bvh")
+    scenario = str(Path(__file__).resolve().parents[1] / "scenarios" / "reach_and_touch.yaml")
+    huge = tmp_path / "huge.bvh"
+    lines = Path(walk).read_text().splitlines()
+    first_frame = next(i for i, ln in enumerate(lines) if ln.startswith("Frame Time")) + 1
+    values = lines[first_frame].split()
+    lines[first_frame] = " ".join(["1e308"] + values[1:])
+    huge.write_text("\n".join(lines) + "\n")
+    motion = import_bvh(walk)
+    poses = motion.poses.arrays()
+    poses["leg_fraction"] = poses["leg_fraction"] * 5.0
+    save_nmo(replace(motion, poses=type(motion.poses)(**poses)), tmp_path / "bent.nmo")
+    cases = [
+        (["import", walk, "-o", str(tmp_path / "mm"), "--unit", "mm"], "m tall with the length unit 'mm'"),
+        (["info", walk], "not an .nmo file (import it first"),
+        (["view", scenario, "--screenshot", str(tmp_path / "v.jpg")], "screenshots are PNG files"),
+        (["import", walk, "-o", str(tmp_path / "g"), "--max-gap", "3"], "are for .c3d files"),
+        (["import", str(huge), "-o", str(tmp_path / "h")], f"{huge}:{first_frame + 1}: value beyond 1e+07"),
+        (["info", str(tmp_path / "bent.nmo")], "leg_fraction holds values outside 0-1"),
+    ]
+    for argv, message in cases:
+        assert main(argv) == 1, argv
+        err = capsys.readouterr().err
+        assert message in err and "Traceback" not in err, (argv, err)
+    assert not (tmp_path / "v.jpg").exists() and not (tmp_path / "mm").exists()

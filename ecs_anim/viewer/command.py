@@ -11,7 +11,7 @@ from ..errors import EcsAnimError
 
 def window_size(text: str) -> tuple[int, int]:
     """``WIDTHxHEIGHT`` in pixels, e.g. ``1280x720``."""
-    match = re.fullmatch(r"\s*(\d{1,5})\s*[xX]\s*(\d{1,5})\s*", text)
+    match = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", text)
     if not match:
         raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT in pixels (e.g. 1280x720), got {text!r}")
     w, h = int(match.group(1)), int(match.group(2))
@@ -56,6 +56,8 @@ def cmd_view(args: argparse.Namespace) -> int:
         run_viewer(scenario, width, height, show_targets=not args.no_targets,
                    show_com=not args.no_com)
         return 0
+    if not str(args.screenshot).lower().endswith(".png"):
+        raise EcsAnimError(f"--screenshot {args.screenshot}: screenshots are PNG files: name it .png")
     if args.at > scenario.duration_s:
         raise EcsAnimError(f"--at {args.at:g} is after the scenario's end ({scenario.duration_s:g} s)")
     from .window import write_screenshot
