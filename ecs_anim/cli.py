@@ -90,6 +90,9 @@ def cmd_import(args: argparse.Namespace) -> int:
             if target.exists() and not args.force:
                 raise EcsAnimError(f"{target}: already exists (use --force to overwrite)")
             suffix = src.suffix.lower()
+            if src.is_dir():
+                raise EcsAnimError(f"{src}: a folder; give the .bvh or .c3d files in it "
+                                   f"(e.g. {src}/*.bvh)")
             if suffix not in (".bvh", ".c3d"):
                 raise EcsAnimError(f"{src}: unsupported file type {src.suffix!r} (expected .bvh "
                                    "or .c3d)")

@@ -325,6 +325,8 @@ def _load_motion(r: _Reader, node: Node, where: str, base_dir: Path) -> Normaliz
 
     rel = r.string(node, where)
     path = (base_dir / rel) if not Path(rel).is_absolute() else Path(rel)
+    if path.is_dir():
+        raise r.fail(node, where, f"{rel!r} is a folder, not a motion file (looked at {path})")
     if not path.is_file():
         raise r.fail(node, where, f"motion file {rel!r} not found (looked at {path})")
     try:
