@@ -341,6 +341,23 @@ def _load_motion(r: _Reader, node: Node, where: str, base_dir: Path) -> Normaliz
     raise r.fail(node, where, f"expected a .bvh, .c3d or .nmo file, found {rel!r}")
 
 
+def _fill_absent(r: _Reader, motions: dict[str, NormalizedMotion], name: str, node: Node) -> None:
+    """``motions.NAME.absent_from: OTHER``: the body parts NAME's capture lacks (a lower-body
+    C3D's trunk, head and arms) are played from motion OTHER, looped, instead of a neutral
+    pose."""
+    from .c3d_import import fill_absent_from
+
+    where = f"motions.{name}.absent_from"
+    other = r.string(node, where)
+    if other == name or other not in motions:
+        close = difflib.get_close_matches(other, [m for m in motions if m != name], n=1)
+        hint = f"; did you mean {close[0]!r}?" if close else ""
+        raise r.fail(node, where, f"no other motion named {other!r}{hint}")
+    if not motions[name].info.get("absent"):
+        raise r.fail(node, where, f"{name!r} has every body part: nothing to take from {other!r}")
+    motions[name] = fill_absent_from(motions[name], motions[other], other)
+
+
 CHARACTER_KEYS = {"name": True, "morphology": True, "motion": True, "position_m": False,
                   "heading_deg": False, "speed": False, "loop": False, "start_s": False,
                   "then": False, "team": False, "constraints": False, "com_control": False,
@@ -505,6 +522,7 @@ def load_scenario(path: str | Path) -> Scenario:
     if not isinstance(motion_nodes, yaml.MappingNode) or not motion_nodes.value:
         raise r.fail(motion_nodes, "motions", "expected a mapping name: file (.bvh, .c3d or .nmo)")
     motions: dict[str, NormalizedMotion] = {}
+    fills: list[tuple[str, Node]] = []
     for key_node, value in motion_nodes.value:
         if not isinstance(key_node, yaml.ScalarNode) or not _NAME.fullmatch(str(key_node.value)):
             raise r.fail(key_node, "motions", "motion names must be plain names (letters, digits, "
@@ -512,7 +530,15 @@ def load_scenario(path: str | Path) -> Scenario:
         name = str(key_node.value)
         if name in motions:
             raise r.fail(key_node, f"motions.{name}", "given twice")
-        motions[name] = _load_motion(r, value, f"motions.{name}", path.parent)
+        if isinstance(value, yaml.MappingNode):  # {file: ..., absent_from: OTHER}
+            mk = r.mapping(value, f"motions.{name}", {"file": True, "absent_from": False})
+            motions[name] = _load_motion(r, mk["file"], f"motions.{name}.file", path.parent)
+            if "absent_from" in mk:
+                fills.append((name, mk["absent_from"]))
+        else:
+            motions[name] = _load_motion(r, value, f"motions.{name}", path.parent)
+    for name, node in fills:
+        _fill_absent(r, motions, name, node)
     ground = _ground(r, top["ground"], "ground") if "ground" in top else Plane()
     characters: list[CharacterSpec] = []
     names: set[str] = set()

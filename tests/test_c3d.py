@@ -8,6 +8,7 @@ written at test time with the ``c3d`` package's writer.
 
 from __future__ import annotations
 
+import re
 import warnings
 from pathlib import Path
 
@@ -505,3 +506,31 @@ def test_absent_parts_from_a_default_motion(tmp_path, capsys):
                   .positions[:, J["wrist_l"], 0]) > 0.05  # the arms swing now
     assert main(["import", str(GAIT), "-o", str(tmp_path), "--fill-absent-from", str(walk)]) == 0
     assert "absent (from walk.bvh): trunk, head, arm_l, arm_r" in capsys.readouterr().out
+
+
+def test_a_scenario_plays_absent_parts_from_another_of_its_motions(tmp_path):
+    """``motions: {gait: {file: X.c3d, absent_from: walk}}``: the lower-body capture plays with
+    the walk's trunk and arms, chosen at playback, not baked in at import; a motion that lacks
+    nothing, or an unknown name, is a one-line error."""
+    require_mocap()
+    walk = MOTIONS_DIR / "walk.bvh"
+    text = (f"duration_s: 1.0\nmotions:\n  walk: {walk}\n"
+            f"  gait: {{file: {GAIT}, absent_from: walk}}\n"
+            "characters:\n  - {name: a, morphology: tall, motion: gait}\n")
+    path = tmp_path / "s.yaml"
+    path.write_text(text)
+    scenario = load_scenario(path)
+    gait = scenario.motions["gait"]
+    assert gait.info["absent_fill"] == "from walk"
+    np.testing.assert_array_equal(gait.poses.arm_frame, import_c3d(GAIT, fill_from=walk).poses.arm_frame)
+    with build_simulation(scenario) as sim:
+        for _ in range(10):
+            sim.step()
+        assert np.all(np.isfinite(sim.store.positions))
+    for bad, message in ((text.replace("absent_from: walk", "absent_from: wlak"),
+                          ":4: motions.gait.absent_from: no other motion named 'wlak'; did you mean 'walk'?"),
+                         (text.replace(f"  walk: {walk}", f"  walk: {{file: {walk}, absent_from: gait}}"),
+                          ":3: motions.walk.absent_from: 'walk' has every body part")):
+        path.write_text(bad)
+        with pytest.raises(InputError, match=re.escape(message)):
+            load_scenario(path)
