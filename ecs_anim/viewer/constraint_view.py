@@ -135,10 +135,16 @@ def constraint_marks(sim: Simulation) -> ConstraintMarks:
                            weight[keep], error[keep])
 
 
-def max_constraint_error_m(marks: ConstraintMarks) -> float | None:
-    """Largest error among fully active point constraints (weight 1), or None."""
-    full = marks.weight >= 1.0 - 1e-9
-    return float(marks.error_m[full].max()) if full.any() else None
+def max_constraint_error_m(sim: Simulation) -> float | None:
+    """Largest error (m) among the fully active constraints (weight 1) of every kind measured
+    in metres (all but orientations), as ConstraintSolve measured it; None without any."""
+    table: Any = sim.constraints
+    if table.m == 0 or not hasattr(table, "error"):
+        return None
+    error = np.asarray(table.error, dtype=np.float64)
+    full = ((_weights(sim, table) >= 1.0 - 1e-9) & (_kinds(table) != KIND_ORIENTATION)
+            & np.isfinite(error))
+    return float(error[full].max()) if full.any() else None
 
 
 def restricted_areas(sim: Simulation) -> RestrictedAreas:

@@ -198,8 +198,8 @@ class SceneFrame:
 
     bodies, targets, com, areas : (k, INSTANCE_FLOATS) float32 instance rows (areas are drawn
     last, blended, without writing depth); joints (n, N_JOINTS, 3) world metres (for framing); time_s the posture's
-    simulation time; max_error_m the largest distance to target of fully active constraints
-    (None without any); n_characters.
+    simulation time; max_error_m the largest error (m) of the fully active constraints, all kinds
+    but orientations (None without any); n_characters.
     """
 
     bodies: F32
@@ -235,7 +235,7 @@ def snapshot(sim: Simulation, colours: F64 | None = None) -> SceneFrame:
         com_rows = np.zeros((0, INSTANCE_FLOATS), np.float32)
     return SceneFrame(bodies, targets, com_rows, area_instances(restricted_areas(sim)),
                       positions[ok].copy(),
-                      posture_time_s(sim), max_constraint_error_m(marks), int(ok.sum()))
+                      posture_time_s(sim), max_constraint_error_m(sim), int(ok.sum()))
 
 
 # --- the ground --------------------------------------------------------------------------
