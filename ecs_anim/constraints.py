@@ -38,24 +38,29 @@ class Activation:
         if self.ease_in_s + self.ease_out_s > self.stop_s - self.start_s + 1e-9:
             raise ValueError("activation ease_in_s + ease_out_s is longer than stop_s - start_s")
 
-    def weight(self, time_s: NDArray[np.float64] | float) -> NDArray[np.float64]:
-        """Weight in [0, 1] at the given times (any shape)."""
+    def weight(self, time_s: NDArray[np.float64] | float, smooth: bool = True) -> NDArray[np.float64]:
+        """Weight in [0, 1] at the given times (any shape); see :func:`ramp_weight`."""
         return ramp_weight(np.asarray(time_s, dtype=np.float64), self.start_s, self.stop_s,
-                           self.ease_in_s, self.ease_out_s)
+                           self.ease_in_s, self.ease_out_s, smooth)
 
 
 def ramp_weight(time_s: NDArray[np.float64] | float, start_s: NDArray[np.float64] | float,
                 stop_s: NDArray[np.float64] | float, ease_in_s: NDArray[np.float64] | float,
-                ease_out_s: NDArray[np.float64] | float) -> NDArray[np.float64]:
-    """The activation ramp 0 -> 1 -> 0 (paper fig. 8), broadcast over any of its arguments:
-    linear over ``ease_in_s`` from ``start_s``, 1, linear back to 0 over ``ease_out_s`` ending at
-    ``stop_s``; a zero ease is a step."""
+                ease_out_s: NDArray[np.float64] | float, smooth: bool = True) -> NDArray[np.float64]:
+    """The activation ramp 0 -> 1 -> 0 (paper fig. 8), broadcast over any of its arguments: up
+    over ``ease_in_s`` from ``start_s``, 1, back to 0 over ``ease_out_s`` ending at ``stop_s``; a
+    zero ease is a step. With ``smooth`` each ease is a quintic smoothstep
+    (``6x^5 - 15x^4 + 10x^3``): the weight's rate and acceleration are 0 at both ends, so a
+    constraint starts and stops moving a body as gently as the motion itself moves (a straight
+    line would set every joint it moves going at full speed in the first tick). Without, a
+    straight line (foot contacts: their short ramps only blend a footprint in and out)."""
     ease_in, ease_out = np.asarray(ease_in_s, dtype=np.float64), np.asarray(ease_out_s, dtype=np.float64)
     up = np.where(ease_in > 0, (time_s - start_s) / np.maximum(ease_in, 1e-12),
                   np.where(np.greater_equal(time_s, start_s), 1.0, 0.0))
     down = np.where(ease_out > 0, (stop_s - time_s) / np.maximum(ease_out, 1e-12),
                     np.where(np.less_equal(time_s, stop_s), 1.0, 0.0))
-    return np.clip(np.minimum(up, down), 0.0, 1.0)
+    x = np.clip(np.minimum(up, down), 0.0, 1.0)
+    return x * x * x * (x * (6.0 * x - 15.0) + 10.0) if smooth else x
 
 
 @dataclass(frozen=True)

@@ -84,7 +84,7 @@ class ClipBank:
             for c in m.constraints:
                 if c.kind == "foot_contact":
                     side = 0 if c.segment.endswith("_l") else 1
-                    w[:, side] = np.maximum(w[:, side], c.activation.weight(t))
+                    w[:, side] = np.maximum(w[:, side], c.activation.weight(t, smooth=False))
             weights.append(w)
         ankle = np.array([np.array([motions[n].source_morphology["ankle_height_l"],
                                     motions[n].source_morphology["ankle_height_r"]])

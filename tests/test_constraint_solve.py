@@ -102,20 +102,34 @@ def test_target_on_another_character_reads_its_previous_posture(idle):
 
 
 def test_activation_ramp_has_no_jump_and_nan_target_disables_only_that_one(idle, capsys):
-    sim, (a, b) = _sim(idle, 2)
+    """The weight follows the ramp tick by tick; at the activation's start and stop no joint
+    moves further in a tick than the motion's own joints do (plus 1 mm), and between them the
+    move is spread over the eases; a NaN target switches off only its own constraint."""
+    from ecs_anim.constraints import ramp_weight
+
+    sim, (a, b, twin) = _sim(idle, 3)  # the twin plays the same motion, unconstrained
     sim.step()
     target = sim.store.positions[0, J["shoulder_r"]] + np.array([0.4, 0.0, 0.2])
-    sim.add_constraint(a, "ramp", "wrist_r", 5, Activation(0.5, 2.0, 0.5, 0.5), tuple(target))
+    activation = Activation(0.5, 3.0, 1.0, 1.0)
+    ramp = sim.add_constraint(a, "ramp", "wrist_r", 5, activation, tuple(target))
     other = sim.add_constraint(b, "other", "wrist_l", 5, ALWAYS,
                                tuple(sim.store.positions[1, J["shoulder_l"]] + [0.3, 0.2, 0.0]))
-    wrists = []
     distance = np.linalg.norm(target - sim.store.positions[0, J["wrist_r"]])
-    for _ in range(75):
+    positions, weights, times = [], [], []
+    for _ in range(110):
+        times.append(sim.time_s)
         sim.step()
-        wrists.append(sim.store.positions[0, J["wrist_r"]].copy())
-    step = np.linalg.norm(np.diff(np.array(wrists), axis=0), axis=1)
-    # A ramp, not a jump: the move is spread over the 0.5 s ease (15 ticks) both ways.
-    assert step.max() < 1.1 * distance / 15 + 0.005
+        positions.append(sim.store.positions[[0, 2]].copy())
+        weights.append(sim.constraints.weight[ramp])
+    np.testing.assert_allclose(weights, ramp_weight(np.array(times), 0.5, 3.0, 1.0, 1.0), atol=1e-12)
+    steps = np.linalg.norm(np.diff(np.array(positions), axis=0), axis=-1)  # (ticks, 2, joints)
+    own = steps[:, 1].max()  # the motion's own largest step of any joint
+    active = np.flatnonzero(np.array(weights) > 0)
+    first, last = active[0], active[-1] + 1  # the ticks the constraint starts and stops moving it
+    assert steps[first - 1, 0].max() <= own + 1e-3 and steps[last - 1, 0].max() <= own + 1e-3
+    # A smooth ramp, not a jump: the wrist's fastest tick is the quintic's peak rate (1.875)
+    # times the move spread over the 1 s ease (30 ticks).
+    assert steps[:, 0, J["wrist_r"]].max() < 1.875 * distance / 30 + own
     sim.set_target(other, (np.nan, 0.0, 0.0))
     sim.step()
     assert "'other' has a non-finite target" in capsys.readouterr().err

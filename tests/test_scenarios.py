@@ -80,7 +80,7 @@ def test_fight_training_hits_and_ward_offs_are_met_and_heads_dodge_the_punches()
         knuckles = pos[:, d, J["wrist_r"]] + 0.6 * (pos[:, d, J["hand_r"]] - pos[:, d, J["wrist_r"]])
         return head, knuckles
 
-    # The dodge: the kicker's head leans back and keeps at least 20 cm from the knuckles through
+    # The dodge: the kicker's head leans back and keeps at least 18 cm from the knuckles through
     # the punch (1.0-1.5 s), twice as far as without it, and moves smoothly: no tick moves it
     # further than the fist itself moves in a tick.
     punch_window = slice(30, 45)
@@ -89,7 +89,7 @@ def test_fight_training_hits_and_ward_offs_are_met_and_heads_dodge_the_punches()
         head_without, knuckles_without = head_and_knuckles(without, pair)
         gap = np.linalg.norm(head - knuckles, axis=1)[punch_window].min()
         gap_without = np.linalg.norm(head_without - knuckles_without, axis=1)[punch_window].min()
-        assert gap > 0.2 and gap > 2 * gap_without, (pair, gap, gap_without)
+        assert gap > 0.18 and gap > 2 * gap_without, (pair, gap, gap_without)
         head_step = np.linalg.norm(np.diff(head, axis=0), axis=1).max()
         fist_step = np.linalg.norm(np.diff(knuckles_without, axis=0), axis=1).max()
         assert head_step <= fist_step + 0.01, (pair, head_step, fist_step)
