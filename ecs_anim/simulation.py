@@ -184,7 +184,10 @@ class Simulation:
 
     def row(self, entity: int) -> int:
         with self._active():
-            return esper.component_for_entity(entity, CharacterRow).row
+            try:
+                return esper.component_for_entity(entity, CharacterRow).row
+            except KeyError:
+                raise EcsAnimError(f"no character with entity id {entity!r} in this simulation") from None
 
     def set_body(self, entity: int, body: Morphology) -> None:
         """Replace a character's morphology while it plays (paper §6).
@@ -193,8 +196,8 @@ class Simulation:
         along its path; the placement is shifted so it stays where it is, and its feet re-plant.
         """
         st = self.store
+        row = self.row(entity)
         with self._active():
-            row = esper.component_for_entity(entity, CharacterRow).row
             esper.add_component(entity, Body(body))
         old_leg, new_leg = leg_length(st.lengths[row]), body.leg_length
         if st.poses.root_position.shape[0] == st.n and self.tick > 0:

@@ -143,3 +143,10 @@ def test_more_user_mistakes_are_one_line_errors(tmp_path, capsys):
         err = capsys.readouterr().err
         assert message in err and "Traceback" not in err, (argv, err)
     assert not (tmp_path / "v.jpg").exists() and not (tmp_path / "mm").exists()
+
+
+def test_constrained_bench_runs_and_prints_json(capsys):
+    """A smoke run of the constrained benchmark (figures are printed, never asserted)."""
+    assert main(["bench", "--constrained", "--characters", "8", "--seconds", "0.1", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["max_characters_at_30hz"] > 0 and "ConstraintSolve" in result["ms_per_tick"]

@@ -422,6 +422,16 @@ def test_bad_constraints_are_refused_with_their_name(floating, kwargs, message):
     assert message in str(err.value) and str(err.value).startswith("constraint 'bad':")
 
 
+def test_an_unknown_character_is_a_clear_error(floating):
+    sim, (e,) = still(floating)
+    with pytest.raises(EcsAnimError, match="no character with entity id 999"):
+        sim.add_constraint(999, "x", "wrist_r", 1, ALWAYS, (0.0, 0.0, 1.0))
+    with pytest.raises(EcsAnimError, match="no character with entity id 999"):
+        sim.add_constraint(e, "x", "wrist_r", 1, ALWAYS, target_entity=999, target_point="head")
+    with pytest.raises(EcsAnimError, match="no character with entity id 999"):
+        sim.set_body(999, ADULT)
+
+
 def test_a_nan_target_switches_off_one_constraint_and_the_others_go_on(floating, capsys):
     sim, (a, b) = still(floating, n=2)
     ka = sim.add_constraint(a, "a", "wrist_r", 1, ALWAYS, (0.3, -0.3, 1.2))
