@@ -382,6 +382,10 @@ class _Solve:
         self.foot_in_world = normalize(p[:, list(SIDE_JOINTS["toe"])] - p[:, list(SIDE_JOINTS["ankle"])])
         self.trunk_moved = False  # this tick
         self.dirty = False  # since the last decode
+        # Goals that stopped improving (unreachable): the trunk no longer turns for them, so an
+        # unreachable trunk goal ends where it stalled however long other goals keep the loop
+        # going (turning on, the bent spine would drift it by millimetres).
+        self.stalled = np.zeros(goals.k, bool)
 
     def follow_own_targets(self) -> None:
         """Goals aiming at a point of the same body move with that point as the body is solved
@@ -538,7 +542,7 @@ class _Solve:
         uses_trunk = (g.chain & (1 << TRUNK)) > 0
         err = _errors(g, dec)
         tol = np.where(g.orientation, s.tolerance_rad, s.tolerance_m)
-        candidates = uses_trunk & carried & (err > tol)
+        candidates = uses_trunk & carried & (err > tol) & ~self.stalled
         best = winners(g.owner, np.zeros(g.k, np.int64), g.priority, candidates, self.r, 1)[:, 0]
         rows = np.flatnonzero(best >= 0)
         if rows.size == 0:
@@ -692,6 +696,7 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
         goal_open = (err > tol) & (np.abs(previous - err) >= settings.tolerance_m)
         if not goal_open.any() and np.all(com_error <= settings.com_tolerance_m):
             break
+        state.stalled |= (err > tol) & ~goal_open
         previous = err
     # The last root move shifted the limbs: re-plant the feet, re-aim the head and the arms.
     state.follow_own_targets()

@@ -10,7 +10,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import example, given, settings, strategies as st
 
 from conftest import MOTIONS_DIR
 from ecs_anim.components import MotionPlayer, Placement
@@ -453,16 +453,21 @@ POINTS = ["wrist_l", "wrist_r", "elbow_l", "elbow_r", "hand_r", "head_top", "ank
 FLOATING = replace(import_bvh(MOTIONS_DIR / "idle.bvh"), constraints=[])
 
 
-@settings(max_examples=30, deadline=None)
+@settings(max_examples=60, deadline=None)
 @given(stature=st.floats(1.0, 2.1), legs=st.floats(0.85, 1.15),
        picks=st.lists(st.tuples(st.sampled_from(POINTS), st.integers(0, 20),
                                 st.tuples(*[st.floats(-1.2, 1.2)] * 3), st.booleans()),
                       min_size=1, max_size=4))
+# Found by a search: an unreachable neck target drifted 3.6 mm while an arm-only elbow goal kept
+# the loop going (the trunk now stops turning for a goal that has stalled).
+@example(stature=1.4402034402789332, legs=0.9484956092574444,
+         picks=[("neck", 0, (-1.084290435723114, 1.1311791537951967, 1.1897171626930805), True),
+                ("elbow_r", 3, (-1.079236196294697, -0.19249646541511556, -0.5621111947884702), False)])
 def test_random_bodies_targets_and_priorities(stature, legs, picks):
     """Finite poses, exact bones, and the highest-priority constraint (priority 100, added first
-    and solved alone for two ticks) no worse once lower-priority ones join it. Without COM
-    control: with it, the root moves for all the constraints together (the paper's adaptRoot),
-    which by design may move an unreachable high-priority target's limb root."""
+    and solved alone for two ticks) no worse (to 1 um) once lower-priority ones join it. Without
+    COM control: with it, the root moves for all the constraints together (the paper's
+    adaptRoot), which by design may move an unreachable high-priority target's limb root."""
     base = Morphology.from_stature(stature)
     body = with_lengths_m(base, {k: base[k] * legs for k in ("thigh_l", "thigh_r", "shank_l", "shank_r")})
     sim, (e,) = still(FLOATING, body=body)
@@ -481,7 +486,7 @@ def test_random_bodies_targets_and_priorities(stature, legs, picks):
     q = settle(sim, 2)[0]
     assert np.all(np.isfinite(q))
     bones_exact(q, body)
-    assert sim.constraints.error[first] <= error_alone + 1e-3
+    assert sim.constraints.error[first] <= error_alone + 1e-6
 
 
 # --- constraints stored with a motion (import --constraints) ------------------------------------
