@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -407,6 +408,18 @@ def _bench_c3d(path: Path, repeat: int) -> dict[str, Any]:
             "frames_per_second": round(n_frames / (read_s + rest_s), 1)}
 
 
+def _json_safe(value: Any) -> Any:
+    """``value`` with every non-finite float replaced by None: strict JSON has no NaN or
+    Infinity, and a report must load in any JSON reader."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    return value
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from .scenario import MAX_DURATION_S, build_simulation, load_scenario
 
@@ -466,7 +479,8 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
                               args.force)
             write_npz(outdir / f"{c.name}.npz", pos[i], scenario.fps, con[i], args.force)
     if args.report:
-        write_text_atomic(args.report, json.dumps(report, indent=2), args.force)
+        write_text_atomic(args.report, json.dumps(_json_safe(report), indent=2, allow_nan=False),
+                          args.force)
     print(f"{args.scenario}: {ticks} ticks ({seconds:g} s at {scenario.fps:g} Hz), "
           f"{len(names)} characters")
     print(f"  {'character':14s} {'slide max mm/fr':>15s} {'penetr. mm':>10s} {'bone err m':>10s} "

@@ -150,3 +150,12 @@ def test_constrained_bench_runs_and_prints_json(capsys):
     assert main(["bench", "--constrained", "--characters", "8", "--seconds", "0.1", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
     assert result["max_characters_at_30hz"] > 0 and "ConstraintSolve" in result["ms_per_tick"]
+
+
+def test_reports_are_strict_json():
+    """A report never holds NaN or Infinity (strict JSON readers reject them): they become null."""
+    from ecs_anim.cli import _json_safe
+
+    report = {"a": float("inf"), "b": [1.0, float("nan")], "c": {"d": np.float64(2.0)}}
+    text = json.dumps(_json_safe(report), allow_nan=False)
+    assert json.loads(text) == {"a": None, "b": [1.0, None], "c": {"d": 2.0}}
