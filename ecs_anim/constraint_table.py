@@ -262,10 +262,7 @@ def winners(owner: I64, key: I64, priority: F64, active: NDArray[np.bool_],
     return out
 
 
-__all__ = ["Area", "ConstraintTable", "Target", "winners", "SEGMENTS"]
-
-
-def add_stored(table: "ConstraintTable", owner: int, spec: ConstraintSpec, name: str,
+def add_stored(table: ConstraintTable, owner: int, spec: ConstraintSpec, name: str,
                clock: int = -1) -> int:
     """Add a constraint stored with a motion (its target, if any, a point of the same body) for
     the character in row ``owner``. Raises ValueError naming ``name`` if it is malformed."""
@@ -305,3 +302,6 @@ def check_stored(specs: list[ConstraintSpec], duration_s: float) -> None:
         if spec.activation.start_s > duration_s + 1e-9:
             raise ValueError(f"constraint {spec.name!r}: starts at {spec.activation.start_s:g} s, "
                              f"after the clip ends ({duration_s:g} s): it would never be active")
+
+
+__all__ = ["Area", "ConstraintTable", "Target", "add_stored", "check_stored", "winners", "SEGMENTS"]

@@ -45,8 +45,8 @@ def folder_problem(path: str | Path) -> str | None:
 def atomic_output(path: str | Path, force: bool) -> Iterator[IO[bytes]]:
     """A binary file object whose content replaces ``path`` only when the block succeeds.
 
-    Refuses an existing ``path`` unless ``force`` (FileExistsError), and a folder or device
-    (IsADirectoryError / FileExistsError). A link is written through: the file it points to is
+    Refuses (FileExistsError, saying why) an existing ``path`` unless ``force``, and a folder or
+    a device whatever ``force``. A link is written through: the file it points to is
     replaced, the link stays. The temporary file lives in the target folder (so the final
     rename is atomic) and gets the usual permissions (0666 less the umask; ``mkstemp`` alone
     would leave 0600).

@@ -79,6 +79,8 @@ def load_nmo(path: str | Path) -> NormalizedMotion:
     path = str(path)
     if not Path(path).exists():
         raise InputError(path, "no such file")
+    if not Path(path).is_file():
+        raise InputError(path, "a folder (or device), not an .nmo file")
     with open(path, "rb") as head:
         if head.read(4) != b"PK\x03\x04":  # an .nmo is a zip archive (numpy's .npz)
             if Path(path).suffix.lower() == ".nmo":
