@@ -59,7 +59,7 @@ def _progress(done: int, total: int, label: str) -> None:
 
 
 def cmd_import(args: argparse.Namespace) -> int:
-    from .c3d_import import import_c3d
+    from .c3d_import import DEFAULT_MAX_GAP, import_c3d
     from .importing import import_bvh
     from .motion import save_nmo
 
@@ -76,7 +76,7 @@ def cmd_import(args: argparse.Namespace) -> int:
         extra = load_motion_constraints(args.constraints)  # a mistake stops before any import
     sources = [Path(s) for s in args.sources]
     if not any(s.suffix.lower() == ".c3d" for s in sources) and (
-            args.fill_absent_from or args.max_gap != 10):
+            args.fill_absent_from or args.max_gap is not None):
         raise EcsAnimError("--max-gap and --fill-absent-from are for .c3d files; none is given")
     failed = 0
     show_bar = len(sources) > 1 and sys.stderr.isatty()
@@ -98,7 +98,8 @@ def cmd_import(args: argparse.Namespace) -> int:
                 raise EcsAnimError(f"{src}: unsupported file type {src.suffix!r} (expected .bvh "
                                    "or .c3d)")
             if suffix == ".c3d":
-                motion = import_c3d(src, args.map, args.unit, thresholds, args.up, args.max_gap,
+                motion = import_c3d(src, args.map, args.unit, thresholds, args.up,
+                                    DEFAULT_MAX_GAP if args.max_gap is None else args.max_gap,
                                     args.fill_absent_from)
             else:
                 motion = import_bvh(src, args.map, args.unit, thresholds, args.up or "y")
@@ -435,13 +436,12 @@ def cmd_run(args: argparse.Namespace) -> int:
         outputs.append(Path(args.report))
     if args.export and folder_problem(outdir):
         raise EcsAnimError(f"--export {folder_problem(outdir)}")
-    problems = [output_problem(p, args.force) for p in outputs]
-    existing = [str(p) for p, why in zip(outputs, problems) if why and "already exists" in why]
-    if existing:
+    not_files = [why for why in (output_problem(p, force=True) for p in outputs) if why]
+    if not_files:  # a folder, a device, a path through a file: even --force cannot write there
+        raise EcsAnimError(not_files[0])
+    existing = [str(p) for p in outputs if p.exists()]
+    if existing and not args.force:
         raise EcsAnimError(f"{', '.join(existing)}: already exist(s) (use --force to overwrite)")
-    other = [why for why in problems if why]
-    if other:
-        raise EcsAnimError(other[0])
     if seconds > MAX_DURATION_S:
         raise EcsAnimError(f"--seconds {seconds:g}: at most {MAX_DURATION_S:g} s (a day) in one run")
     ticks = int(round(seconds * scenario.fps))
@@ -512,6 +512,8 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .c3d_import import DEFAULT_MAX_GAP
+
     parser = argparse.ArgumentParser(
         prog="ecs-anim",
         description="Morphology-independent motions for many characters (Kulpa et al. 2005).",
@@ -531,9 +533,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--up", choices=["y", "z"], default=None,
                    help="the file's up axis (default: y for BVH, the format's convention; "
                    "detected from the markers for C3D)")
-    p.add_argument("--max-gap", type=positive_int, default=10, metavar="FRAMES",
+    p.add_argument("--max-gap", type=positive_int, metavar="FRAMES",
                    help="C3D: longest run of missing marker samples filled without a warning "
-                   "(default %(default)s)")
+                   f"(default {DEFAULT_MAX_GAP})")
     p.add_argument("--fill-absent-from", metavar="MOTION.nmo|MOTION.bvh",
                    help="C3D: take body parts with no markers from this motion (looped) instead "
                    "of a neutral pose")
