@@ -96,6 +96,18 @@ class CharacterSpec:
     com_target_xy: tuple[float, float] | None = None
 
 
+@dataclass(frozen=True)
+class Table:
+    """A table drawn in the scene (a prop: nothing collides with it): its top's centre
+    ``centre_m`` (x, y) and size ``size_m`` (along its heading, across), metres; the top's
+    height above the ground, metres; heading, radians anticlockwise from +x."""
+
+    centre_m: tuple[float, float]
+    size_m: tuple[float, float]
+    height_m: float
+    heading_rad: float = 0.0
+
+
 @dataclass
 class Scenario:
     path: str
@@ -105,6 +117,7 @@ class Scenario:
     ground: Ground
     characters: list[CharacterSpec] = field(default_factory=list)
     camera: dict[str, Any] = field(default_factory=dict)  # viewer hints (docs/scenarios.md)
+    tables: list[Table] = field(default_factory=list)  # props, drawn only
 
 
 class _Reader:
@@ -515,7 +528,7 @@ def load_scenario(path: str | Path) -> Scenario:
         raise InputError(path, "the scenario is empty", 1)
     top = r.mapping(root, "", {"duration_s": True, "fps": False, "motions": True,
                                "ground": False, "characters": True, "description": False,
-                               "camera": False})
+                               "camera": False, "tables": False})
     fps = r.number(top["fps"], "fps", 1.0, 1000.0, "Hz") if "fps" in top else 30.0
     duration = r.number(top["duration_s"], "duration_s", 1.0 / fps, MAX_DURATION_S, "s")
     motion_nodes = top["motions"]
@@ -626,7 +639,22 @@ def load_scenario(path: str | Path) -> Scenario:
             camera["distance_m"] = r.number(ck["distance_m"], "camera.distance_m", 0.1, 1e4, "m")
         if "target_m" in ck:
             camera["target_m"] = r.vector(ck["target_m"], "camera.target_m", 3, "m", 1e5)
-    return Scenario(str(path), duration, fps, motions, ground, characters, camera)
+    tables = [_table(r, node, f"tables[{i}]") for i, node in
+              enumerate(r.sequence(top["tables"], "tables") if "tables" in top else [])]
+    return Scenario(str(path), duration, fps, motions, ground, characters, camera, tables)
+
+
+def _table(r: _Reader, node: Node, where: str) -> Table:
+    keys = r.mapping(node, where, {"centre_m": True, "size_m": True, "height_m": True,
+                                   "heading_deg": False})
+    size = r.vector(keys["size_m"], f"{where}.size_m", 2, "m", 100.0)
+    if min(size) <= 0:
+        raise r.fail(keys["size_m"], f"{where}.size_m", "a table's length and width must be > 0")
+    return Table(r.vector(keys["centre_m"], f"{where}.centre_m", 2, "m", 1e5),  # type: ignore[arg-type]
+                 size,  # type: ignore[arg-type]
+                 r.number(keys["height_m"], f"{where}.height_m", 0.1, 3.0, "m"),
+                 math.radians(r.number(keys["heading_deg"], f"{where}.heading_deg", -360, 360, "degrees"))
+                 if "heading_deg" in keys else 0.0)
 
 
 def load_motion_constraints(path: str | Path) -> list[ConstraintSpec]:
@@ -658,6 +686,7 @@ def build_simulation(scenario: Scenario, window: bool = False,  # type: ignore[n
 
     sim = Simulation(scenario.motions, scenario.ground, scenario.fps, window=window,
                      rotations=rotations)
+    sim.tables = tuple(scenario.tables)
     entities = {c.name: sim.spawn(c.name, c.morphology, c.player, c.placement, c.team,
                                   c.com_control, c.com_target_xy)
                 for c in scenario.characters}

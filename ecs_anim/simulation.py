@@ -11,6 +11,7 @@ import itertools
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
+from typing import Any
 
 import esper
 import numpy as np
@@ -81,6 +82,7 @@ class Simulation:
         self.constraints = ConstraintTable()
         self.solver_settings = solver_settings
         self.renderer: object | None = None
+        self.tables: tuple[Any, ...] = ()  # props for a renderer (scenario ``tables``); never simulated
         self.messages: list[str] = []
         schedule = SCHEDULE if window else HEADLESS
         self.systems: list[System] = []

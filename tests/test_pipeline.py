@@ -162,6 +162,7 @@ BAD_CASES = [
     ("constraint_name_twice.yaml", 11, "constraints[1].name: 'reach' is used twice on 'a'"),
     ("com_target_far.yaml", 10, "com_target_m: 70.71 m from the character's position_m"),
     ("distance_on_position.yaml", 12, "distance_m: only a distance constraint takes distance_m"),
+    ("table_without_size.yaml", 6, "tables[0].size_m: a table's length and width must be > 0"),
 ]
 
 

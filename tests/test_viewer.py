@@ -515,3 +515,25 @@ def test_render_system_only_notes_the_tick():
         assert frame is not None and frame.time_s == pytest.approx(19 / 30)
         assert np.array_equal(windowed.store.positions, headless.store.positions)
         assert np.allclose(replace(frame).joints, headless.store.positions)
+
+
+def test_tables_are_drawn_where_the_scenario_puts_them():
+    """The table scene's two tables become capsules: a top of touching rods at the table's
+    height, and four legs standing on the ground; they are unsaturated (never a character)."""
+    from ecs_anim.viewer.scene import TABLE_COLOUR, TABLE_TOP_RADIUS_M, snapshot
+
+    scenario = _scenario("wrists_above_table.yaml")
+    assert len(scenario.tables) == 2
+    with build_simulation(scenario, window=True) as sim:
+        sim.step()
+        frame = snapshot(sim)
+    rows = frame.props
+    top = rows[rows[:, 6] == np.float32(TABLE_TOP_RADIUS_M)]
+    legs = rows[rows[:, 6] != np.float32(TABLE_TOP_RADIUS_M)]
+    assert len(legs) == 8 and len(top) >= 2 * 20
+    np.testing.assert_allclose(top[:, 2] + TABLE_TOP_RADIUS_M, 0.92, atol=1e-6)  # the top's height
+    np.testing.assert_allclose(legs[:, 5] - legs[:, 6], 0.0, atol=1e-6)  # legs reach the ground
+    for table in scenario.tables:
+        near = np.linalg.norm(top[:, :2] - np.array(table.centre_m), axis=1) < 0.7
+        assert near.any()
+    assert max(TABLE_COLOUR) - min(TABLE_COLOUR) < 40 / 255

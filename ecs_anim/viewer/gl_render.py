@@ -268,7 +268,7 @@ class SceneRenderer:
                 gl.glDrawElements(gl.GL_TRIANGLES, count, gl.GL_UNSIGNED_INT, ctypes.c_void_p(0))
             gl.glEnable(gl.GL_CULL_FACE)
         self._common(self.capsules, world2clip, camera)
-        opaque = [frame.bodies] + ([frame.targets] if show_targets else [])
+        opaque = [frame.bodies, frame.props] + ([frame.targets] if show_targets else [])
         rows = np.concatenate(opaque)
         if rows.shape[0]:
             self._instances(rows)

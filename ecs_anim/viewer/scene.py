@@ -9,7 +9,9 @@ Python loop), so thousands of characters cost one instanced draw. Read-only (STY
 from __future__ import annotations
 
 import colorsys
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
 
 import esper
 import numpy as np
@@ -186,6 +188,37 @@ def area_instances(areas: RestrictedAreas) -> F32:
     return np.concatenate(rows)
 
 
+TABLE_COLOUR = (0.62, 0.58, 0.53)  # pale wood: unsaturated, so never taken for a character
+TABLE_TOP_RADIUS_M = 0.02
+TABLE_LEG_RADIUS_M = 0.025
+
+
+def table_instances(tables: Sequence[Any], ground: Ground) -> F32:
+    """Capsules drawing each table: its top as rods side by side along its length, touching
+    (0.04 m thick), and a leg at each corner down to the ground. ``tables``: scenario tables
+    (``centre_m``, ``size_m``, ``height_m``, ``heading_rad``)."""
+    rows = [np.zeros((0, INSTANCE_FLOATS), np.float32)]
+    r = TABLE_TOP_RADIUS_M
+    for t in tables:
+        along = np.array([np.cos(t.heading_rad), np.sin(t.heading_rad), 0.0])
+        across = np.array([-along[1], along[0], 0.0])
+        centre_xy = np.asarray(t.centre_m, dtype=np.float64)
+        floor = float(ground.height(centre_xy))
+        top = np.array([centre_xy[0], centre_xy[1], floor + t.height_m - r])
+        half_l, half_w = 0.5 * t.size_m[0] - r, 0.5 * t.size_m[1] - r
+        offsets = np.linspace(-half_w, half_w, max(int(round(2 * half_w / (2 * r))) + 1, 2))
+        a = top + offsets[:, None] * across - half_l * along
+        b = top + offsets[:, None] * across + half_l * along
+        corners = np.array([top + sl * (half_l - 0.03) * along + sw * (half_w - 0.03) * across
+                            for sl in (-1, 1) for sw in (-1, 1)])
+        feet = corners.copy()
+        feet[:, 2] = ground.height(corners[:, :2]) + TABLE_LEG_RADIUS_M
+        starts, ends = np.concatenate([a, corners]), np.concatenate([b, feet])
+        radius = np.concatenate([np.full(len(a), r), np.full(4, TABLE_LEG_RADIUS_M)])
+        rows.append(pack_instances(starts, ends, radius, np.tile([*TABLE_COLOUR, 1.0], (len(radius), 1))))
+    return np.concatenate(rows)
+
+
 def com_instances(com: F64, radius_m: F64) -> F32:
     """A yellow sphere per centre of mass: com (n, 3), radius (n,)."""
     rgba = np.tile(np.array([*COM_COLOUR, 1.0]), (com.shape[0], 1))
@@ -196,8 +229,8 @@ def com_instances(com: F64, radius_m: F64) -> F32:
 class SceneFrame:
     """One drawable snapshot of a simulation.
 
-    bodies, targets, com, areas : (k, INSTANCE_FLOATS) float32 instance rows (areas are drawn
-    last, blended, without writing depth); joints (n, N_JOINTS, 3) world metres (for framing); time_s the posture's
+    bodies, targets, com, areas, props : (k, INSTANCE_FLOATS) float32 instance rows (areas
+    are drawn last, blended, without writing depth; props are the scenario's tables); joints (n, N_JOINTS, 3) world metres (for framing); time_s the posture's
     simulation time; max_error_m the largest error (m) of the fully active constraints, all kinds
     but orientations (None without any); n_characters.
     """
@@ -210,6 +243,7 @@ class SceneFrame:
     time_s: float
     max_error_m: float | None
     n_characters: int
+    props: F32 = field(default_factory=lambda: np.zeros((0, INSTANCE_FLOATS), np.float32))
 
 
 def snapshot(sim: Simulation, colours: F64 | None = None) -> SceneFrame:
@@ -235,7 +269,8 @@ def snapshot(sim: Simulation, colours: F64 | None = None) -> SceneFrame:
         com_rows = np.zeros((0, INSTANCE_FLOATS), np.float32)
     return SceneFrame(bodies, targets, com_rows, area_instances(restricted_areas(sim)),
                       positions[ok].copy(),
-                      posture_time_s(sim), max_constraint_error_m(sim), int(ok.sum()))
+                      posture_time_s(sim), max_constraint_error_m(sim), int(ok.sum()),
+                      table_instances(getattr(sim, "tables", ()), sim.ground))
 
 
 # --- the ground --------------------------------------------------------------------------
