@@ -580,9 +580,10 @@ def load_scenario(path: str | Path) -> Scenario:
 
         queue = []
         if "then" in keys:
-            if len(r.sequence(keys["then"], f"{where}.then")) > MAX_QUEUE:
+            queued = r.sequence(keys["then"], f"{where}.then")
+            if len(queued) > MAX_QUEUE:
                 raise r.fail(keys["then"], f"{where}.then", f"at most {MAX_QUEUE} clips can be queued")
-            for j, q in enumerate(r.sequence(keys["then"], f"{where}.then")):
+            for j, q in enumerate(queued):
                 qw = f"{where}.then[{j}]"
                 qk = r.mapping(q, qw, {"motion": True, "crossfade_s": False, "loop": False})
                 queue.append(QueuedClip(

@@ -107,8 +107,7 @@ class TickGoals:
     rows (r,) store rows; owner (k,) local row; table_index (k,) (-1: a foot contact);
     orientation (k,) bool; group, bone, segment, fraction, offset (k, 3), chain (bit mask),
     priority; goal (k, 3): the weighted point goal, or the weighted unit direction of an
-    orientation; full_goal (k, 3) unweighted (errors are reported against it where the weight
-    is 1); weight (k,); axis (k, 3) segment-frame axis of an orientation; footprint (r, 2, 3)
+    orientation; weight (k,); axis (k, 3) segment-frame axis of an orientation; footprint (r, 2, 3)
     and in_contact (r, 2): the feet that must stay; com_desired (r, 3); com_on (r,) bool.
     """
 
@@ -124,7 +123,6 @@ class TickGoals:
     chain: I64
     priority: F64
     goal: F64
-    full_goal: F64
     weight: F64
     axis: F64
     footprint: F64
@@ -319,7 +317,6 @@ def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained:
         chain=cat([table.chain[idx], 1 << (LEG_L + c_side)]),
         priority=cat([table.priority[idx], foot_priority]),
         goal=cat([weighted[keep], ankles[c_owner, c_side]]),
-        full_goal=cat([goal[keep], ankles[c_owner, c_side]]),
         weight=cat([w, np.ones(nc)]),
         axis=cat([table.axis[idx], np.zeros((nc, 3))]),
         footprint=ankles,
@@ -335,10 +332,11 @@ def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained:
     )
 
 
-def _errors(g: TickGoals, dec: DecodedPose, use_full: bool = False) -> F64:
-    """(k,) distance of each point to its goal (m), or the angle of each orientation (rad)."""
+def _errors(g: TickGoals, dec: DecodedPose) -> F64:
+    """(k,) distance of each point to its (weighted) goal of this tick (m), or the angle of each
+    orientation (rad): the solver's convergence measure (users see :func:`constraint_errors`)."""
     point = point_positions(dec, g.owner, g.segment, g.fraction, g.offset)
-    goal = g.full_goal if use_full else g.goal
+    goal = g.goal
     err = np.linalg.norm(point - goal, axis=1)
     if g.orientation.any():
         o = np.flatnonzero(g.orientation)
@@ -398,7 +396,6 @@ class _Solve:
         self.self_at = now
         orient = g.orientation[g.on_self]
         g.goal[g.on_self[~orient]] += shift[~orient]
-        g.full_goal[g.on_self[~orient]] += shift[~orient]
 
     def redecode(self) -> None:
         self.dec = decode(self.poses, self.lengths)
@@ -671,12 +668,12 @@ def _axis_angle_of(rotation: F64) -> tuple[F64, F64]:
 
 
 def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, com_fraction: F64,
-          settings: SolverSettings = DEFAULT_SETTINGS, decoded: DecodedPose | None = None) -> tuple[NormalizedPoses, F64, int, DecodedPose]:
+          settings: SolverSettings = DEFAULT_SETTINGS, decoded: DecodedPose | None = None) -> tuple[NormalizedPoses, int, DecodedPose]:
     """Solve this tick's goals for their characters (rows of ``poses``, ``lengths``, ``masses``
     and ``com_fraction`` are ``goals.rows``; ``decoded`` is ``decode(poses, lengths)`` if the
-    caller has it). Returns the new poses, each goal's remaining
-    error against its full (unweighted) goal (k,), the iterations used, and the decoded result
-    (joint positions (r, N_JOINTS, 3) and frames)."""
+    caller has it). Returns the new poses, the iterations used, and the decoded result (joint
+    positions (r, N_JOINTS, 3) and frames), on which :func:`constraint_errors` measures each
+    constraint."""
     state = _Solve(poses, lengths, goals, masses, com_fraction, settings, decoded)
     tol = np.where(goals.orientation, settings.tolerance_rad, settings.tolerance_m)
     previous = np.full(goals.k, np.inf)
@@ -702,7 +699,7 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
     state.follow_own_targets()
     state.limbs()
     state.head()
-    return state.poses, _errors(goals, state.dec, use_full=True), used, state.dec
+    return state.poses, used, state.dec
 
 
 def scatter(all_poses: NormalizedPoses, rows: I64, part: NormalizedPoses) -> NormalizedPoses:

@@ -61,9 +61,9 @@ class ConstraintSolve(System):
             table.error[active] = constraint_errors(table, active, unconstrained, targets)
             return
         rows = goals.rows
-        poses, _, _, solved = solve(st.poses.take(rows), st.lengths[rows], goals,
-                                    st.segment_mass_kg[rows], st.segment_com_fraction[rows],
-                                    sim.solver_settings, unconstrained.take(rows))
+        poses, _, solved = solve(st.poses.take(rows), st.lengths[rows], goals,
+                                 st.segment_mass_kg[rows], st.segment_com_fraction[rows],
+                                 sim.solver_settings, unconstrained.take(rows))
         st.poses = scatter(st.poses, rows, poses)
         user = goals.table_index >= 0
         table.held[goals.table_index[user]] = goals.held[user]

@@ -46,6 +46,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def cmd_view(args: argparse.Namespace) -> int:
     from ..scenario import load_scenario
 
+    if args.screenshot is not None and not str(args.screenshot).lower().endswith(".png"):
+        raise EcsAnimError(f"--screenshot {args.screenshot}: screenshots are PNG files: name it .png")
     scenario = load_scenario(args.scenario)
     width, height = args.size
     if args.screenshot is None:
@@ -56,8 +58,6 @@ def cmd_view(args: argparse.Namespace) -> int:
         run_viewer(scenario, width, height, show_targets=not args.no_targets,
                    show_com=not args.no_com)
         return 0
-    if not str(args.screenshot).lower().endswith(".png"):
-        raise EcsAnimError(f"--screenshot {args.screenshot}: screenshots are PNG files: name it .png")
     if args.at > scenario.duration_s:
         raise EcsAnimError(f"--at {args.at:g} is after the scenario's end ({scenario.duration_s:g} s)")
     from .window import write_screenshot

@@ -230,8 +230,8 @@ class SceneFrame:
     """One drawable snapshot of a simulation.
 
     bodies, targets, com, areas, props : (k, INSTANCE_FLOATS) float32 instance rows (areas
-    are drawn last, blended, without writing depth; props are the scenario's tables); joints (n, N_JOINTS, 3) world metres (for framing); time_s the posture's
-    simulation time; max_error_m the largest error (m) of the fully active constraints, all kinds
+    are drawn last, blended, without writing depth; props are the scenario's tables);
+    joints (n, N_JOINTS, 3) world metres (for framing); time_s the posture's simulation time; max_error_m the largest error (m) of the fully active constraints, all kinds
     but orientations (None without any); n_characters.
     """
 

@@ -315,6 +315,11 @@ class ViewerApp:
         self.sim.step()
         self.accumulator = 0.0
 
+    def _restart(self) -> None:
+        """From the scenario's start again, the camera where the user left it."""
+        self._start()
+        self._followed = None
+
     def attach(self, window: Any, renderer: Any) -> None:
         self.window, self.renderer = window, renderer
         self.label = _label(self.pyglet, "", 10, window.height - 8, 11)
@@ -357,8 +362,7 @@ class ViewerApp:
         steps = 0
         while self.accumulator >= self.sim.dt and steps < self.MAX_STEPS_PER_FRAME:
             if self.loop and self.sim.time_s > self.scenario.duration_s + 1e-9:
-                self._start()  # its first tick stands for this one
-                self._followed = None
+                self._restart()  # its first tick stands for this one
                 break
             self.sim.step()
             self.accumulator -= self.sim.dt
@@ -409,8 +413,7 @@ class ViewerApp:
         elif symbol in (key.DOWN, key.MINUS, key.NUM_SUBTRACT):
             self.speed = max(self.speed / 2, 1 / 16)
         elif symbol == key.R:
-            self._start()
-            self._followed = None
+            self._restart()
         elif symbol == key.L:
             self.loop = not self.loop
         elif symbol == key.T:
