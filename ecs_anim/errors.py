@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
 
 
@@ -53,3 +54,15 @@ def compose_yaml(path: str | Path, what: str) -> object:
             line = text.count("\n", 0, position) + 1
         problem = getattr(exc, "problem", None) or getattr(exc, "reason", None) or str(exc)
         raise InputError(path, f"not valid YAML: {' '.join(str(problem).split())}", line) from None
+
+
+def listed(names: Iterable[object], limit: int = 6) -> str:
+    """``names`` joined by commas, cut after ``limit`` with the count of the rest, so that an error
+    message stays one short line whatever the input holds (a 5,000-joint file, 10,000 labels).
+
+    >>> listed(["a", "b", "c"], limit=2)
+    'a, b (+1 more)'
+    """
+    items = [str(name) for name in names]
+    shown = ", ".join(items[:limit])
+    return shown if len(items) <= limit else f"{shown} (+{len(items) - limit} more)"
