@@ -118,6 +118,8 @@ class Scenario:
     characters: list[CharacterSpec] = field(default_factory=list)
     camera: dict[str, Any] = field(default_factory=dict)  # viewer hints (docs/scenarios.md)
     tables: list[Table] = field(default_factory=list)  # props, drawn only
+    #: The scenario file and every motion file it read: no output may overwrite one.
+    input_files: tuple[str, ...] = ()
 
 
 class _Reader:
@@ -332,7 +334,8 @@ def _morphology(r: _Reader, node: Node, where: str) -> Morphology:
         raise r.fail(keys["lengths_m"], f"{where}.lengths_m", str(exc)) from None
 
 
-def _load_motion(r: _Reader, node: Node, where: str, base_dir: Path) -> NormalizedMotion:
+def _load_motion(r: _Reader, node: Node, where: str, base_dir: Path,
+                 read: list[str]) -> NormalizedMotion:
     from .c3d_import import import_c3d
     from .importing import import_bvh
 
@@ -342,6 +345,7 @@ def _load_motion(r: _Reader, node: Node, where: str, base_dir: Path) -> Normaliz
         raise r.fail(node, where, f"{rel!r} is a folder, not a motion file (looked at {path})")
     if not path.is_file():
         raise r.fail(node, where, f"motion file {rel!r} not found (looked at {path})")
+    read.append(str(path))
     try:
         if path.suffix.lower() == ".nmo":
             return load_nmo(path)
@@ -536,6 +540,7 @@ def load_scenario(path: str | Path) -> Scenario:
         raise r.fail(motion_nodes, "motions", "expected a mapping name: file (.bvh, .c3d or .nmo)")
     motions: dict[str, NormalizedMotion] = {}
     fills: list[tuple[str, Node]] = []
+    read = [str(path)]
     for key_node, value in motion_nodes.value:
         if not isinstance(key_node, yaml.ScalarNode) or not _NAME.fullmatch(str(key_node.value)):
             raise r.fail(key_node, "motions", "motion names must be plain names (letters, digits, "
@@ -545,11 +550,12 @@ def load_scenario(path: str | Path) -> Scenario:
             raise r.fail(key_node, f"motions.{name}", "given twice")
         if isinstance(value, yaml.MappingNode):  # {file: ..., absent_from: OTHER}
             mk = r.mapping(value, f"motions.{name}", {"file": True, "absent_from": False})
-            motions[name] = _load_motion(r, mk["file"], f"motions.{name}.file", path.parent)
+            motions[name] = _load_motion(r, mk["file"], f"motions.{name}.file", path.parent,
+                                         read)
             if "absent_from" in mk:
                 fills.append((name, mk["absent_from"]))
         else:
-            motions[name] = _load_motion(r, value, f"motions.{name}", path.parent)
+            motions[name] = _load_motion(r, value, f"motions.{name}", path.parent, read)
     for name, node in fills:
         _fill_absent(r, motions, name, node)
     ground = _ground(r, top["ground"], "ground") if "ground" in top else Plane()
@@ -642,7 +648,8 @@ def load_scenario(path: str | Path) -> Scenario:
             camera["target_m"] = r.vector(ck["target_m"], "camera.target_m", 3, "m", 1e5)
     tables = [_table(r, node, f"tables[{i}]") for i, node in
               enumerate(r.sequence(top["tables"], "tables") if "tables" in top else [])]
-    return Scenario(str(path), duration, fps, motions, ground, characters, camera, tables)
+    return Scenario(str(path), duration, fps, motions, ground, characters, camera, tables,
+                    tuple(read))
 
 
 def _table(r: _Reader, node: Node, where: str) -> Table:
