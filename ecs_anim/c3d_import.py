@@ -71,7 +71,7 @@ from .joint_map import JointMap
 from .marker_sets import GROUPS, MarkerMap, check_usable, match_markers
 from .morphology import ADULT_PROPORTIONS
 from .motion import NormalizedMotion
-from .rotations import frame_from_axes, normalize, rot_axis, yaw_of
+from .rotations import frame_from_axes, matrix_from_quat, normalize, quat_from_matrix, rot_axis, slerp, yaw_of
 from .skeleton import JOINT_INDEX as J
 from .skeleton import JOINTS, N_JOINTS, REST_HIP_DIR_LEFT
 
@@ -337,6 +337,8 @@ class _Build:
     pelvis2world: F64 | None = None
     thorax2world: F64 | None = None
     head2world: F64 | None = None
+    #: (F,) frames whose pelvis frame the markers determine (None: all of them).
+    root_trusted: BOOL | None = None
 
 
 def _detect_up(mk: _Markers, present: list[str], mmap: MarkerMap) -> str:
@@ -504,7 +506,8 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
         raise EcsAnimError(f"--up {up}: expected 'y' or 'z'")
     if up == "y":
         mk.points = mk.points @ YUP_TO_ZUP.T
-    build = _joint_centres(mk, mmap, present)
+    build, kept, repaired = _joint_centres(mk, mmap, present)
+    long, valid = long[kept], valid[kept]
     rejected_joints = reject_joint_outliers(build.positions, build.measured)
     # Frames where a marker of a present part was in a long gap.
     used = sorted(set(mmap.marker.values()))
@@ -531,6 +534,10 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
         "up_reason": up_reason,
         "absent": absent,
         "absent_fill": "neutral pose" if absent else None,
+        # Where the pelvis markers could not place the pelvis: trimmed (numbered as in the file,
+        # from 0), repaired (numbered as the motion's frames, like the gaps below).
+        "root_frames_trimmed": [[a, b] for a, b in _intervals(~_mask(kept, raw.positions.shape[0]))],
+        "root_frames_repaired": repaired,
         "gaps": {
             "max_gap_frames": max_gap,
             "samples_filled": n_filled,
@@ -541,6 +548,51 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
         },
     }
     return clip, extra
+
+
+def trust_root(build: _Build) -> tuple[slice, list[list[int]]]:
+    """Drop or repair the frames whose pelvis frame the markers do not determine, in place.
+
+    Where the pelvis markers are missing (a cluster with fewer than three seen, a landmark in a
+    long gap), the computed pelvis frame is noise: it flipped the body upside down from one
+    frame to the next, and every part filled in or taken from a default motion followed it.
+    Such runs at the start and end of the trial are trimmed (the capture had not started yet);
+    inside it, the pelvis frame is interpolated along the shorter arc, and the pelvis and hip
+    centres (placed from it) linearly, between the trusted frames on either side. Joints that
+    their own markers place are kept.
+
+    Returns the slice of frames kept (in the file's numbering) and the repaired runs as
+    ``[first, last]`` pairs in the kept frames' numbering (the motion's).
+    """
+    assert build.pelvis2world is not None, "every pelvis builder sets the pelvis frame"
+    n = build.positions.shape[0]
+    trusted = np.ones(n, dtype=bool) if build.root_trusted is None else build.root_trusted
+    good = np.flatnonzero(trusted)
+    if len(good) < 2:
+        raise EcsAnimError(f"the pelvis markers place the pelvis in {len(good)} of {n} frames; "
+                           "nothing to import")
+    kept = slice(int(good[0]), int(good[-1]) + 1)
+    repaired = [[a, b] for a, b in _intervals(~trusted[kept])]
+    frames = [f for f in ("pelvis2world", "thorax2world", "head2world") if getattr(build, f) is not None]
+    build.positions = build.positions[kept]
+    for name in frames:
+        setattr(build, name, getattr(build, name)[kept])
+    for first, last in repaired:
+        before, after = first - 1, last + 1
+        t = (np.arange(first, last + 1) - before) / (after - before)
+        root = [J["pelvis"], J["hip_l"], J["hip_r"]]
+        build.positions[before + 1:after, root] = (1.0 - t[:, None, None]) * build.positions[before, root] \
+            + t[:, None, None] * build.positions[after, root]
+        quats = quat_from_matrix(build.pelvis2world[[before, after]])
+        build.pelvis2world[before + 1:after] = matrix_from_quat(slerp(quats[0], quats[1], t))
+    build.root_trusted = None
+    return kept, repaired
+
+
+def _mask(part: slice, n: int) -> BOOL:
+    mask = np.zeros(n, dtype=bool)
+    mask[part] = True
+    return mask
 
 
 def reject_joint_outliers(positions: F64, measured: BOOL, tolerance: float = 0.15
@@ -603,15 +655,19 @@ def _clusters(mmap: MarkerMap) -> list[list[int]]:
     return [g for g in groups.values() if len(g) >= 3]
 
 
-def _joint_centres(mk: _Markers, mmap: MarkerMap, present: list[str]) -> _Build:
+def _joint_centres(mk: _Markers, mmap: MarkerMap, present: list[str]
+                   ) -> tuple[_Build, slice, list[list[int]]]:
+    """Joint centres and frames of every frame kept, with :func:`trust_root`'s kept slice and
+    repaired runs; absent parts are filled on the trusted pelvis frame."""
     n = mk.points.shape[0]
     build = _Build(np.zeros((n, N_JOINTS, 3)), np.zeros(N_JOINTS, dtype=bool))
     if mmap.preset.method == "functional":
         _functional_lower_body(mk, present, build)
     else:
         _landmark_body(mk, present, build)
+    kept, repaired = trust_root(build)
     _fill_absent(build, present)
-    return build
+    return build, kept, repaired
 
 
 def _set(build: _Build, joint: str, value: F64, how: str) -> None:
@@ -646,6 +702,8 @@ def _landmark_pelvis(mk: _Markers, build: _Build) -> None:
     back_name = "LPSI/RPSI" if mk.has("PSIS_l", "PSIS_r") else "SACR"
     front = _mid(asis_l, asis_r)
     pelvis2world = frame_from_axes(asis_l - asis_r, front - back, 1, 0)
+    roles = ["ASIS_l", "ASIS_r"] + (["PSIS_l", "PSIS_r"] if mk.has("PSIS_l", "PSIS_r") else ["SACRUM"])
+    build.root_trusted = np.asarray(~mk.long[:, [mk.found[r] for r in roles]].any(axis=1))
     width = float(np.median(np.linalg.norm(asis_l - asis_r, axis=-1)))
     depth = float(np.median(np.linalg.norm(front - back, axis=-1)))
     harrington = f"Harrington 2007 (PW {width * 1000:.0f} mm, PD {depth * 1000:.0f} mm, ASIS + {back_name})"
@@ -668,6 +726,8 @@ def _pelvis_under_trunk(mk: _Markers, present: list[str], build: _Build) -> None
     else:
         axis = np.broadcast_to(np.array([0.0, 0.0, 1.0]), neck.shape)
     thorax2world = frame_from_axes(axis, mk("IJ") - mk("C7"), 2, 0)
+    roles = ["C7", "IJ"] + (["T10", "PX"] if mk.has("T10", "PX") else [])
+    build.root_trusted = np.asarray(~mk.long[:, [mk.found[r] for r in roles]].any(axis=1))
     if "arm_l" in present and "arm_r" in present:
         width = float(np.median(np.linalg.norm(mk("ACROMION_l") - mk("ACROMION_r"), axis=-1)))
         leg = width / (2 * ADULT_PROPORTIONS["clavicle"]) * _LEG_P
@@ -793,6 +853,8 @@ def _functional_lower_body(mk: _Markers, present: list[str], build: _Build) -> N
     pelvis_rot, pelvis_origin, pelvis_ok = cluster("PELVIS", None, 4)
     segments = {s: (cluster("THIGH", s, 4), cluster("SHANK", s, 4), cluster("FOOT", s, 3))
                 for s in "lr" if f"leg_{s}" in present}
+    # The pelvis frame's lateral axis joins the hips, which ride on the pelvis and thigh clusters.
+    build.root_trusted = pelvis_ok & np.all([thigh[2] for thigh, _, _ in segments.values()], axis=0)
     # The pelvis cluster's left, from the thigh clusters (in the pelvis cluster's frame).
     lateral = np.zeros(3)
     if len(segments) == 2:

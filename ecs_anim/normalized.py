@@ -359,10 +359,30 @@ def spine_joints(control: F64, segment_lengths: F64, iterations: int = 6) -> F64
             safe = np.abs(slope) > 1e-12
             t = np.clip(t - np.where(safe, g / np.where(safe, slope, 1.0), 0.0), prev_t + 1e-6, 9.0)
             point, tangent = _curve_at(coefficients, t)
+        point = _at_distance(prev_p, point, tangent, length)
         prev_t = t
         prev_p = point
         out.append(prev_p)
     return np.stack(out, axis=-2)
+
+
+def _at_distance(start: F64, point: F64, tangent: F64, length: F64) -> F64:
+    """``point`` moved along the ray from ``start`` to exactly ``length`` from it, (..., 3).
+
+    Newton lands on the curve at the bone's length wherever the spline is well formed; where it
+    did not converge (a spline folded on itself, as between two frames whose spines point
+    opposite ways in the pelvis frame) the joint keeps the direction it reached, so bones stay
+    exact whatever the control points (the tangent, then the pelvis frame's z, when that
+    direction is undefined).
+    """
+    offset = point - start
+    norm = np.linalg.norm(offset, axis=-1, keepdims=True)
+    tangent_norm = np.linalg.norm(tangent, axis=-1, keepdims=True)
+    up = np.zeros_like(offset)
+    up[..., 2] = 1.0
+    direction = np.where(norm > 1e-9, offset / np.maximum(norm, 1e-300),
+                         np.where(tangent_norm > 1e-9, tangent / np.maximum(tangent_norm, 1e-300), up))
+    return start + direction * length[..., None]
 
 
 def vertebrae(poses: NormalizedPoses, lengths: F64, count: int) -> F64:

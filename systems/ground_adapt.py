@@ -22,6 +22,9 @@ from ecs_anim.system_base import System
 #: Time constant (s) with which the motion's floor follows the ground under the supporting feet.
 GROUND_SMOOTHING_S = 0.15
 
+#: A heel this far under the ground (m) is lifted: well below the metrics' 1 mm, above rounding.
+HEEL_TOLERANCE_M = 1e-6
+
 ANKLES, TOES = list(SIDE_JOINTS["ankle"]), list(SIDE_JOINTS["toe"])
 
 
@@ -62,16 +65,41 @@ class GroundAdapt(System):
         targets[..., 2] = np.maximum(targets[..., 2], ground.height(targets[..., :2]) + ankle_height)
         root_height = scaled.positions[:, 0, 2] + st.ground_ref
         poses = adapt_to_ground(st.poses, st.lengths, targets, w, root_height, decoded=scaled)
-        st.poses = self._toes_onto_ground(poses, ball)
+        poses, legs = self._heels_onto_ground(poses, targets, ankle_height, root_height)
+        st.poses = self._toes_onto_ground(poses, legs, ball)
 
-    def _toes_onto_ground(self, poses, ball, passes: int = 4):  # type: ignore[no-untyped-def]
-        """Pitch a foot up about its ankle where its toe joint would be under the ground.
+    def _heels_onto_ground(self, poses, targets, ankle_height, root_height,  # type: ignore[no-untyped-def]
+                           passes: int = 4):
+        """Lift an ankle target where the leg, stretched short of it, would put the heel under
+        the ground; returns the poses and their decoded legs.
+
+        A target out of the leg's reach (a contact ramping out while the pelvis rises, say)
+        leaves the ankle on the line from the hip towards it: over a step edge that point can be
+        above the higher step while the target is above the lower one (heels sank 12-20 mm on
+        stairs). Raising the target turns that line up and back, so a few passes suffice.
+        """
+        st, ground, scaled = self.sim.store, self.sim.ground, self.sim.store.scaled
+        w = st.contact_weight
+        for _ in range(passes):
+            legs = decode_legs(poses, st.lengths, st.lengths)
+            deficit = ground.height(legs.ankles[..., :2]) + ankle_height - legs.ankles[..., 2]
+            if not np.any(deficit > HEEL_TOLERANCE_M):
+                break
+            targets = targets.copy()
+            targets[..., 2] += np.maximum(deficit, 0.0)
+            poses = adapt_to_ground(st.poses, st.lengths, targets, w, root_height, decoded=scaled)
+        else:
+            legs = decode_legs(poses, st.lengths, st.lengths)
+        return poses, legs
+
+    def _toes_onto_ground(self, poses, legs, ball, passes: int = 4):  # type: ignore[no-untyped-def]
+        """Pitch a foot up about its ankle where its toe joint would be under the ground
+        (``legs``: the decoded legs of ``poses``).
 
         Raising the toe moves it horizontally too (onto the next step, say), so the ground is
         asked again at the new place, a few passes.
         """
         st, ground = self.sim.store, self.sim.ground
-        legs = decode_legs(poses, st.lengths, st.lengths)
         ankles, toes = legs.ankles, legs.toes
         deficit = ground.height(toes[..., :2]) + ball - toes[..., 2]
         if not np.any(deficit > 0.0):
