@@ -19,13 +19,15 @@ from typing import Any, Sequence
 from .constraint_table import check_stored
 from .contacts import ContactThresholds
 from .errors import EcsAnimError
-from .files import folder_problem, output_problem
+from .files import folder_problem, input_problem, output_folder_problem, output_problem
 from .joint_map import preset_summary
 from .marker_sets import preset_summary as marker_set_summary
 from .morphology import PRESET_SPECS
 from .viewer.command import add_arguments as add_view_arguments, cmd_view
 
 EXIT_FAILED = 1
+#: The longest error line printed: a last guard (messages cut their own lists with ``listed``).
+MAX_ERROR_CHARS = 300
 #: ``bench --characters`` above this would take minutes to set up (and gigabytes).
 MAX_BENCH_CHARACTERS = 100_000
 
@@ -64,8 +66,9 @@ def cmd_import(args: argparse.Namespace) -> int:
     from .motion import save_nmo
 
     outdir = Path(args.output)
-    if folder_problem(outdir):
-        raise EcsAnimError(f"-o {folder_problem(outdir)}")
+    problem = folder_problem(outdir)
+    if problem is not None:
+        raise EcsAnimError(f"-o {problem}")
     thresholds = ContactThresholds(
         height_m=args.contact_height, speed_mps=args.contact_speed,
         min_duration_s=args.contact_min_duration,
@@ -75,6 +78,11 @@ def cmd_import(args: argparse.Namespace) -> int:
         from .scenario import load_motion_constraints
         extra = load_motion_constraints(args.constraints)  # a mistake stops before any import
     sources = [Path(s) for s in args.sources]
+    inputs = [*sources, *(p for p in (args.map, args.constraints, args.fill_absent_from) if p)]
+    for src in sources:
+        problem = input_problem(outdir / f"{src.stem}.nmo", inputs)
+        if problem is not None:
+            raise EcsAnimError(f"-o {problem}")
     if not any(s.suffix.lower() == ".c3d" for s in sources) and (
             args.fill_absent_from or args.max_gap is not None):
         raise EcsAnimError("--max-gap and --fill-absent-from are for .c3d files; none is given")
@@ -136,7 +144,7 @@ def cmd_import(args: argparse.Namespace) -> int:
             failed += 1
             if show_bar:
                 sys.stderr.write("\r" + " " * 80 + "\r")
-            print(f"error: {exc}", file=sys.stderr)
+            print(f"error: {error_line(exc)}", file=sys.stderr)
         if show_bar:
             _progress(k, len(sources), src.name)
     if failed:
@@ -202,8 +210,13 @@ def cmd_export(args: argparse.Namespace) -> int:
     from .exporting import export_motion
     from .motion import load_nmo
 
+    inputs = [args.file] if args.morphology == "source" or args.morphology in PRESET_SPECS \
+        else [args.file, args.morphology]
+    problem = input_problem(args.output, inputs)
+    if problem is not None:
+        raise EcsAnimError(problem)
     motion = load_nmo(args.file)
-    morph, pose = export_motion(motion, args.morphology, args.output, force=args.force)
+    morph, _ = export_motion(motion, args.morphology, args.output, force=args.force)
     print(f"{args.file} on {morph.name} (stature {morph.stature:.3f} m) -> {args.output}: "
           f"{motion.n_frames} frames")
     return 0
@@ -424,37 +437,45 @@ def _json_safe(value: Any) -> Any:
 def cmd_run(args: argparse.Namespace) -> int:
     from .scenario import MAX_DURATION_S, build_simulation, load_scenario
 
+    if args.report is not None and Path(args.report).suffix.lower() != ".json":
+        raise EcsAnimError(f"--report {args.report}: a report is JSON: name it .json")
     scenario = load_scenario(args.scenario)
     seconds = scenario.duration_s if args.seconds is None else args.seconds
-    names = [c.name for c in scenario.characters]
-    outputs: list[Path] = []
-    outdir = Path(".")
+    problems: list[tuple[str, str | None]] = []
     if args.export:
-        outdir = Path(args.export)
-        outputs = [outdir / f"{n}.{ext}" for n in names for ext in ("bvh", "npz")]
+        problems += [("--export", input_problem(args.export, scenario.input_files, folder=True)),
+                     ("--export", output_folder_problem(args.export, _export_names(scenario),
+                                                        args.force))]
     if args.report:
-        outputs.append(Path(args.report))
-    if args.export and folder_problem(outdir):
-        raise EcsAnimError(f"--export {folder_problem(outdir)}")
-    not_files = [why for why in (output_problem(p, force=True) for p in outputs) if why]
-    if not_files:  # a folder, a device, a path through a file: even --force cannot write there
-        raise EcsAnimError(not_files[0])
-    existing = [str(p) for p in outputs if p.exists()]
-    if existing and not args.force:
-        raise EcsAnimError(f"{', '.join(existing)}: already exist(s) (use --force to overwrite)")
+        problems += [("--report", input_problem(args.report, scenario.input_files)),
+                     ("--report", output_problem(args.report, args.force))]
+        if args.export and Path(os.path.realpath(args.report)).is_relative_to(
+                os.path.realpath(args.export)):
+            problems.append(("--report", (f"{args.report}: inside the --export folder, which an "
+                                          "export replaces as a whole; write it elsewhere")))
+    for flag, problem in problems:  # before any work: a run can last minutes
+        if problem is not None:
+            raise EcsAnimError(f"{flag} {problem}")
     if seconds > MAX_DURATION_S:
         raise EcsAnimError(f"--seconds {seconds:g}: at most {MAX_DURATION_S:g} s (a day) in one run")
     ticks = int(round(seconds * scenario.fps))
     if ticks < 1:
         raise EcsAnimError(f"--seconds {seconds:g} is less than one tick at {scenario.fps:g} Hz")
     with build_simulation(scenario, rotations=bool(args.export)) as sim:
-        return _run_and_write(args, scenario, sim, ticks, seconds, outdir if args.export else None)
+        return _run_and_write(args, scenario, sim, ticks, seconds)
+
+
+def _export_names(scenario) -> list[str]:  # type: ignore[no-untyped-def]
+    """The files ``run --export`` writes: a ``.bvh`` and an ``.npz`` per character."""
+    return [f"{c.name}.{ext}" for c in scenario.characters for ext in ("bvh", "npz")]
 
 
 def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type: ignore[no-untyped-def]
-                   seconds: float, outdir: Path | None) -> int:
-    from .bvh import write_text_atomic
+                   seconds: float) -> int:
+    """Run, then write the export folder as one set (:func:`~ecs_anim.files.output_set`) and
+    after it the report, then print the metrics."""
     from .exporting import bvh_from_rotations, write_npz
+    from .files import atomic_output, output_set
     from .metrics import MetricsRecorder
 
     names = [c.name for c in scenario.characters]
@@ -469,18 +490,20 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
             rotations.append(sim.store.local_rotations.copy())
             contacts.append(sim.store.contact_weight >= 1.0)
     report = metrics.report() | {"scenario": str(args.scenario)}
-    if record and outdir is not None:
+    if record:
         pos = np.stack(positions, axis=1)  # (n, frames, joints, 3)
         rot = np.stack(rotations, axis=1)
         con = np.stack(contacts, axis=1)
-        for i, c in enumerate(scenario.characters):
-            write_text_atomic(outdir / f"{c.name}.bvh",
-                              bvh_from_rotations(c.morphology, pos[i, :, 0], rot[i], scenario.fps),
-                              args.force)
-            write_npz(outdir / f"{c.name}.npz", pos[i], scenario.fps, con[i], args.force)
+        with output_set(args.export, _export_names(scenario), args.force) as export:
+            for i, c in enumerate(scenario.characters):
+                with export.file(f"{c.name}.bvh") as f:
+                    f.write(bvh_from_rotations(c.morphology, pos[i, :, 0], rot[i],
+                                               scenario.fps).encode("utf-8"))
+                with export.file(f"{c.name}.npz") as f:
+                    write_npz(f, pos[i], scenario.fps, con[i])
     if args.report:
-        write_text_atomic(args.report, json.dumps(_json_safe(report), indent=2, allow_nan=False),
-                          args.force)
+        with atomic_output(args.report, args.force) as f:
+            f.write(json.dumps(_json_safe(report), indent=2, allow_nan=False).encode("utf-8"))
     print(f"{args.scenario}: {ticks} ticks ({seconds:g} s at {scenario.fps:g} Hz), "
           f"{len(names)} characters")
     print(f"  {'character':14s} {'slide max mm/fr':>15s} {'penetr. mm':>10s} {'bone err m':>10s} "
@@ -598,13 +621,24 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def error_line(exc: Exception) -> str:
+    """What the user sees of an error: one line of at most :data:`MAX_ERROR_CHARS` characters;
+    a system error names its file (``path: No such file or directory``)."""
+    if isinstance(exc, OSError) and not isinstance(exc, FileExistsError) and exc.strerror:
+        text = f"{exc.filename}: {exc.strerror}" if exc.filename else exc.strerror
+    else:
+        text = str(exc)
+    text = " ".join(text.splitlines())
+    return text if len(text) <= MAX_ERROR_CHARS else text[:MAX_ERROR_CHARS - 3] + "..."
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         return int(args.func(args))
     except (EcsAnimError, FileExistsError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {error_line(exc)}", file=sys.stderr)
         return EXIT_FAILED
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
@@ -613,8 +647,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         # (Python's documented recipe: point stdout at devnull so the exit flush cannot fail.)
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_FAILED
-    except OSError as exc:  # unwritable folder, full disk, ...: say which file
-        print(f"error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
+    except OSError as exc:  # an unreadable input, ...: say which file
+        print(f"error: {error_line(exc)}", file=sys.stderr)
         return EXIT_FAILED
 
 

@@ -12,13 +12,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import IO
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .bvh import BvhWriteJoint, format_bvh, read_bvh, write_text_atomic
+from .bvh import BvhWriteJoint, format_bvh, read_bvh
 from .errors import EcsAnimError, InputError
-from .files import atomic_output
+from .files import atomic_output, output_problem
 from .importing import YUP_TO_ZUP, canonical_clip, source_morphology
 from .morphology import PRESET_SPECS, Morphology, load_morphology_yaml
 from .motion import NormalizedMotion
@@ -232,33 +233,35 @@ def bvh_text(pose: DecodedPose, morph: Morphology, fps: float) -> str:
     return bvh_from_rotations(morph, pose.positions[:, J["pelvis"]], local_rotations(pose), fps)
 
 
-def write_npz(path: str | Path, positions: F64, fps: float, contacts: np.ndarray,
-              force: bool) -> None:
-    """Joint positions for analysis: ``positions`` (frames, joints, 3) metres world Z up,
-    ``joints`` names, ``fps``, ``contacts`` (frames, 2) bool [left, right]."""
-    with atomic_output(path, force) as f:
-        np.savez_compressed(f, positions=positions, joints=np.array(JOINTS),
-                            fps=np.float64(fps), contacts=contacts)
+def write_npz(f: IO[bytes], positions: F64, fps: float, contacts: np.ndarray) -> None:
+    """Joint positions for analysis, written to the binary file ``f``: ``positions`` (frames,
+    joints, 3) metres world Z up, ``joints`` names, ``fps``, ``contacts`` (frames, 2) bool
+    [left, right]."""
+    np.savez_compressed(f, positions=positions, joints=np.array(JOINTS), fps=np.float64(fps),
+                        contacts=contacts)
 
 
 def export_motion(motion: NormalizedMotion, morphology_spec: str, out: str | Path,
                   force: bool = False) -> tuple[Morphology, DecodedPose]:
-    """Play ``motion`` on a body and write ``out`` (.bvh or .npz)."""
+    """Play ``motion`` on a body and write ``out`` (.bvh or .npz); an existing ``out`` without
+    ``force``, or a path that cannot be written, is an :class:`EcsAnimError` before any work."""
     out = Path(out)
     suffix = out.suffix.lower()
     if suffix not in (".bvh", ".npz"):
         raise EcsAnimError(f"-o {out}: the output must end in .bvh or .npz")
-    if out.exists() and not force:
-        raise FileExistsError(f"{out}: already exists (use --force to overwrite)")
+    problem = output_problem(out, force)
+    if problem is not None:
+        raise EcsAnimError(problem)
     morph, is_source = resolve_morphology(morphology_spec, motion)
     # BVH bones are rigid, so a BVH gets the rigid body even on the source morphology; the .npz
     # on the source carries the measured stretch and reproduces the source exactly.
     pose = play_on(motion, morph, is_source and suffix == ".npz")
     if not np.all(np.isfinite(pose.positions)):
         raise EcsAnimError(f"{out}: the decoded motion holds non-finite positions (bug); nothing written")
-    if suffix == ".bvh":
-        write_text_atomic(out, bvh_text(pose, morph, motion.fps), force)
-    else:
-        write_npz(out, pose.positions, motion.fps, motion.contacts(), force)
+    with atomic_output(out, force) as f:
+        if suffix == ".bvh":
+            f.write(bvh_text(pose, morph, motion.fps).encode("utf-8"))
+        else:
+            write_npz(f, pose.positions, motion.fps, motion.contacts())
     return morph, pose
 

@@ -71,7 +71,7 @@ def test_outputs_that_are_not_files_limits_and_links(tmp_path, capsys):
     from pathlib import Path
 
     scenario = str(Path(__file__).resolve().parents[1] / "scenarios" / "reach_and_touch.yaml")
-    folder, plain = tmp_path / "a_folder", tmp_path / "a_file"
+    folder, plain = tmp_path / "a_folder.json", tmp_path / "a_file"
     folder.mkdir()
     plain.write_text("keep")
     cases = [

@@ -7,6 +7,7 @@ import math
 import re
 
 from ..errors import EcsAnimError
+from ..files import input_problem, output_problem
 
 
 def window_size(text: str) -> tuple[int, int]:
@@ -48,6 +49,10 @@ def cmd_view(args: argparse.Namespace) -> int:
 
     if args.screenshot is not None and not str(args.screenshot).lower().endswith(".png"):
         raise EcsAnimError(f"--screenshot {args.screenshot}: screenshots are PNG files: name it .png")
+    if args.screenshot is not None:
+        problem = output_problem(args.screenshot, args.force)
+        if problem is not None:
+            raise EcsAnimError(f"--screenshot {problem}")
     scenario = load_scenario(args.scenario)
     width, height = args.size
     if args.screenshot is None:
@@ -58,6 +63,9 @@ def cmd_view(args: argparse.Namespace) -> int:
         run_viewer(scenario, width, height, show_targets=not args.no_targets,
                    show_com=not args.no_com)
         return 0
+    problem = input_problem(args.screenshot, scenario.input_files)
+    if problem is not None:
+        raise EcsAnimError(f"--screenshot {problem}")
     if args.at > scenario.duration_s:
         raise EcsAnimError(f"--at {args.at:g} is after the scenario's end ({scenario.duration_s:g} s)")
     from .window import write_screenshot
