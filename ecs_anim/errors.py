@@ -2,8 +2,14 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from numpy.typing import NDArray
 
 
 class EcsAnimError(Exception):
@@ -30,18 +36,117 @@ class MappingError(EcsAnimError):
     """A source skeleton whose joints could not be matched to the canonical body parts."""
 
 
-def compose_yaml(path: str | Path, what: str) -> object:
+#: A plain decimal number as YAML reads it to the same value as ``float()`` (no octal ``012``,
+#: ``1_000``, ``.nan``, hex or sexagesimal forms: those lists take the node-by-node path).
+_PLAIN_NUMBER = r"(?>[-+]?(?:(?:0|[1-9][0-9]*)(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][-+]?[0-9]+)?)"
+_NUMBER_LIST = re.compile(rf"\[\s*+({_PLAIN_NUMBER}(?:\s*+,\s*+{_PLAIN_NUMBER})*+)\s*+\]")
+#: Flow lists of at least this many plain numbers are read in one go (a height grid's rows).
+NUMBER_LIST_MIN = 16
+_NUMBER_LIST_TAG = "!ecs-anim-number-list"
+
+
+class NumberList(yaml.SequenceNode):
+    """A flow list of plain numbers (``[0.0, 0.12, ...]``) read in one go by :func:`compose_yaml`.
+
+    ``numbers`` (n,) float64 holds the values; ``value``, the list of scalar nodes with their lines
+    that generic code (and error messages) walk, is only built when first asked for.
+    """
+
+    def __init__(self, numbers: NDArray[np.float64], text: str, start_mark: yaml.Mark,
+                 end_mark: yaml.Mark):
+        self._items: list[yaml.Node] | None = None
+        super().__init__("tag:yaml.org,2002:seq", None, start_mark, end_mark, flow_style=True)
+        self.numbers = numbers
+        self._text = text  # the numbers as written, with their line breaks
+
+    @property  # type: ignore[override]
+    def value(self) -> list[yaml.Node]:
+        if self._items is None:
+            resolver = yaml.resolver.Resolver()
+            start = self.start_mark
+            self._items = []
+            for token in re.finditer(r"[^,\s]+", self._text):
+                line = start.line + self._text.count("\n", 0, token.start())
+                mark = yaml.Mark(start.name, 0, line, 0, None, None)
+                tag = resolver.resolve(yaml.ScalarNode, token.group(), (True, False))
+                self._items.append(yaml.ScalarNode(tag, token.group(), mark, mark))
+        return self._items
+
+    @value.setter
+    def value(self, items: list[yaml.Node] | None) -> None:
+        self._items = items
+
+
+def _packed(text: str) -> tuple[str, list[str]]:
+    """``text`` with each flow list of :data:`NUMBER_LIST_MIN` or more plain numbers replaced by a
+    one-item placeholder list keeping its line breaks (so every line number stays), and the
+    lists' contents in order."""
+    contents: list[str] = []
+
+    def pack(match: re.Match[str]) -> str:
+        inner = match.group(1)
+        if inner.count(",") + 1 < NUMBER_LIST_MIN:
+            return match.group()
+        contents.append(inner)
+        return f"[{_NUMBER_LIST_TAG} {len(contents) - 1}" + "\n" * match.group().count("\n") + "]"
+
+    return _NUMBER_LIST.sub(pack, text), contents
+
+
+def _unpack(root: yaml.Node, contents: list[str]) -> bool:
+    """Replace the placeholders of :func:`_packed` in the tree by :class:`NumberList` nodes (one
+    node per placeholder, so aliases stay shared); False unless every placeholder was a list
+    node (one in a comment or a quoted text means the packed text is not the file's meaning)."""
+    found: dict[int, NumberList] = {}
+    seen: set[int] = set()
+
+    def swap(node: yaml.Node) -> yaml.Node:
+        if isinstance(node, yaml.SequenceNode) and len(node.value) == 1 \
+                and getattr(node.value[0], "tag", None) == _NUMBER_LIST_TAG:
+            if id(node) not in found:
+                inner = contents[int(node.value[0].value)]
+                found[id(node)] = NumberList(np.array(inner.split(","), dtype=np.float64), inner,
+                                             node.start_mark, node.end_mark)
+            return found[id(node)]
+        if id(node) not in seen:
+            seen.add(id(node))
+            if isinstance(node, yaml.SequenceNode):
+                node.value = [swap(item) for item in node.value]
+            elif isinstance(node, yaml.MappingNode):
+                node.value = [(swap(key), swap(value)) for key, value in node.value]
+        return node
+
+    swap(root)
+    return len(found) == len(contents)
+
+
+def compose_yaml(path: str | Path, what: str, number_lists: bool = False) -> Any:
     """The YAML node tree of a file (``yaml.compose``: nodes keep their line numbers), or None for
     an empty file; an unreadable file or bad YAML is an :class:`InputError` naming ``what``
-    (e.g. "scenario") and, for bad YAML, the line."""
-    import yaml
+    (e.g. "scenario") and, for bad YAML, the line.
 
+    ``number_lists``: long flow lists of plain numbers come back as :class:`NumberList` nodes,
+    read in one go (composing a million scalar nodes one by one takes about 30 s).
+    """
     try:
         text = Path(path).read_text(encoding="utf-8")
     except OSError as exc:
         raise InputError(path, f"cannot read {what}: {exc.strerror or exc}") from None
     except UnicodeDecodeError:
         raise InputError(path, f"cannot read {what}: not UTF-8 text") from None
+    if number_lists:
+        packed, contents = _packed(text)
+        if contents:
+            try:
+                root = yaml.compose(packed)
+            except (RecursionError, yaml.YAMLError):
+                root = None  # reported from the file's own text below
+            if root is not None and _unpack(root, contents):
+                return root
+    return _compose_text(path, text)
+
+
+def _compose_text(path: str | Path, text: str) -> Any:
     try:
         return yaml.compose(text)
     except RecursionError:
@@ -54,6 +159,32 @@ def compose_yaml(path: str | Path, what: str) -> object:
             line = text.count("\n", 0, position) + 1
         problem = getattr(exc, "problem", None) or getattr(exc, "reason", None) or str(exc)
         raise InputError(path, f"not valid YAML: {' '.join(str(problem).split())}", line) from None
+
+
+def expanded_size(root: yaml.Node, limit: int) -> int:
+    """How many values (nodes) the tree holds once its aliases are expanded, each alias counting
+    its whole subtree again (a :class:`NumberList` counts its numbers); counting stops above
+    ``limit``. Linear in the distinct nodes (memoised), so a small file of nested aliases that
+    expands to billions is measured at once. A node inside itself (a recursive alias) counts once
+    there (its reader reports it)."""
+    sizes: dict[int, int] = {}
+
+    def size(node: yaml.Node) -> int:
+        if id(node) in sizes:
+            return sizes[id(node)]
+        sizes[id(node)] = 1  # while inside it
+        if isinstance(node, NumberList):
+            total = 1 + len(node.numbers)
+        elif isinstance(node, yaml.SequenceNode):
+            total = 1 + sum(min(size(item), limit + 1) for item in node.value)
+        elif isinstance(node, yaml.MappingNode):
+            total = 1 + sum(min(size(k), limit + 1) + min(size(v), limit + 1) for k, v in node.value)
+        else:
+            total = 1
+        sizes[id(node)] = min(total, limit + 1)
+        return sizes[id(node)]
+
+    return size(root)
 
 
 def listed(names: Iterable[object], limit: int = 6) -> str:

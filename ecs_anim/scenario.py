@@ -20,7 +20,7 @@ from yaml import Node
 
 from .components import MotionPlayer, Placement, QueuedClip
 from .constraints import Activation, ConstraintSpec
-from .errors import EcsAnimError, InputError, compose_yaml
+from .errors import EcsAnimError, InputError, NumberList, compose_yaml, expanded_size, listed
 from .ground import Bumps, Combined, Ground, HeightGrid, Plane, Slope, Stairs
 from .morphology import LENGTH_KEYS, PRESET_SPECS, Morphology, with_lengths_m
 from .motion import NormalizedMotion, load_nmo
@@ -37,6 +37,19 @@ MAX_DURATION_S = 86400.0
 MAX_NAME_LENGTH = 64
 #: How far a desired centre of mass may lie from the character's position (over its feet).
 MAX_COM_OFFSET_M = 1.0
+#: How far a world target may lie from its character's start, and a table from the nearest
+#: character; also the largest area corner or radius. Beyond, the metres were likely millimetres.
+MAX_TARGET_DISTANCE_M = 100.0
+#: Sizes of a scenario once its YAML aliases are expanded (an alias counts each time it is used),
+#: so that a small file cannot take hours to load or to run (docs/scenarios.md).
+MAX_YAML_VALUES = 5_000_000
+MAX_GRID_CELLS = 4_000_000  # heights over all the height grids of the ground
+MAX_GROUND_PARTS = 1_000  # grounds, combined ones and their parts included
+MAX_CHARACTERS = 100_000
+MAX_CONSTRAINTS = 100_000  # over all characters
+MAX_TABLES = 1_000
+#: Highest and lowest ground height or level (m).
+MAX_GROUND_HEIGHT_M = 1e3
 
 
 @dataclass
@@ -127,6 +140,9 @@ class _Reader:
 
     def __init__(self, path: str):
         self.path = path
+        self._constructor = yaml.constructor.SafeConstructor()
+        self.ground_parts = 0  # read so far, against MAX_GROUND_PARTS
+        self.grid_cells = 0  # against MAX_GRID_CELLS
 
     def fail(self, node: Node | None, where: str, message: str) -> InputError:
         line = None if node is None else node.start_mark.line + 1
@@ -167,8 +183,8 @@ class _Reader:
     def scalar(self, node: Node, where: str) -> Any:
         if not isinstance(node, yaml.ScalarNode):
             raise self.fail(node, where, f"expected a single value, found {self._kind(node)}")
-        try:
-            return yaml.safe_load(yaml.serialize(node))
+        try:  # the node's tag was resolved when composed: construct it as yaml.safe_load would
+            return self._constructor.construct_object(node, deep=True)
         except yaml.YAMLError as exc:
             raise self.fail(node, where, f"not plain YAML data ({getattr(exc, 'problem', exc)})") from None
 
@@ -199,9 +215,10 @@ class _Reader:
             raise self.fail(node, where, f"expected a whole number from {lo} to {hi}, found {value!r}")
         return value
 
-    def string(self, node: Node, where: str) -> str:
+    def string(self, node: Node, where: str, empty: bool = False) -> str:
+        """A text; ``empty`` allows ``''``."""
         value = self.scalar(node, where)
-        if not isinstance(value, str) or not value:
+        if not isinstance(value, str) or not (value or empty):
             raise self.fail(node, where, f"expected a name, found {value!r}")
         return value
 
@@ -211,9 +228,13 @@ class _Reader:
             raise self.fail(node, where, f"expected true or false, found {value!r}")
         return value
 
-    def sequence(self, node: Node, where: str) -> list[Node]:
+    def sequence(self, node: Node, where: str, most: int | None = None, what: str = "items") -> list[Node]:
+        """The items of a list; ``most`` bounds their number (an alias counted each time it is
+        used)."""
         if not isinstance(node, yaml.SequenceNode):
             raise self.fail(node, where, f"expected a list, found {self._kind(node)}")
+        if most is not None and len(node.value) > most:
+            raise self.fail(node, where, f"at most {most:,} {what}, found {len(node.value):,}")
         return list(node.value)
 
     def vector(self, node: Node, where: str, size: int, unit: str,
@@ -224,6 +245,15 @@ class _Reader:
                                          f"{len(items)}")
         return tuple(self.number(v, f"{where}[{i}]", -bound, bound, unit=unit)
                      for i, v in enumerate(items))
+
+    def too_far(self, node: Node, where: str, away_m: float, what: str, reference: str) -> None:
+        """Refuse ``what`` lying ``away_m`` from ``reference`` beyond :data:`MAX_TARGET_DISTANCE_M`
+        (metres given as millimetres, most likely)."""
+        if away_m > MAX_TARGET_DISTANCE_M:
+            guess = "was it given in mm?" if away_m / 1000.0 <= MAX_TARGET_DISTANCE_M else "is the unit right?"
+            raise self.fail(node, where, f"{what} is {away_m:,.0f} m from {reference} (at most "
+                            f"{MAX_TARGET_DISTANCE_M:g} m); {where.rsplit('.', 1)[-1]} is in metres "
+                            f"({guess})")
 
 
 GROUND_KEYS: dict[str, dict[str, bool]] = {
@@ -241,6 +271,10 @@ GROUND_KEYS: dict[str, dict[str, bool]] = {
 def _ground(r: _Reader, node: Node, where: str, inside: tuple[int, ...] = ()) -> Ground:
     if id(node) in inside:  # a YAML alias back to an enclosing ground
         raise r.fail(node, where, "a ground cannot contain itself")
+    r.ground_parts += 1
+    if r.ground_parts > MAX_GROUND_PARTS:
+        raise r.fail(node, where, f"a ground has at most {MAX_GROUND_PARTS:,} parts (combined grounds "
+                                  "included, an alias counted each time it is used)")
     if not isinstance(node, yaml.MappingNode):
         raise r.fail(node, where, "expected a mapping with 'type:' (plane, slope, stairs, bumps, "
                                   "grid, combined)")
@@ -256,7 +290,8 @@ def _ground(r: _Reader, node: Node, where: str, inside: tuple[int, ...] = ()) ->
                                                  f"{', '.join(GROUND_KEYS)})")
     keys = r.mapping(node, where, GROUND_KEYS[kind])
 
-    def num(key: str, default: float, lo: float = -1e3, hi: float = 1e3, unit: str = "") -> float:
+    def num(key: str, default: float, lo: float = -MAX_GROUND_HEIGHT_M, hi: float = MAX_GROUND_HEIGHT_M,
+            unit: str = "") -> float:
         return r.number(keys[key], f"{where}.{key}", lo, hi, unit) if key in keys else default
 
     if kind == "plane":
@@ -272,22 +307,43 @@ def _ground(r: _Reader, node: Node, where: str, inside: tuple[int, ...] = ()) ->
         return Bumps(num("amplitude_m", 0.05, 0, 5, "m"), num("wavelength_x_m", 2.0, 0.05, 1e3, "m"),
                      num("wavelength_y_m", 2.0, 0.05, 1e3, "m"), num("z_m", 0.0, unit="m"))
     if kind == "grid":
-        rows = r.sequence(keys["heights_m"], f"{where}.heights_m")
-        values = [[r.number(v, f"{where}.heights_m[{i}][{j}]", unit="m")
-                   for j, v in enumerate(r.sequence(row, f"{where}.heights_m[{i}]"))]
-                  for i, row in enumerate(rows)]
-        widths = {len(v) for v in values}
-        if len(values) < 2 or len(widths) != 1 or widths.pop() < 2:
-            raise r.fail(keys["heights_m"], f"{where}.heights_m", "expected a rectangular grid of at "
-                         f"least 2 x 2 heights (rows along y), found row lengths {[len(v) for v in values]}")
+        heights = _grid_heights(r, keys["heights_m"], f"{where}.heights_m")
         origin = r.vector(keys["origin_m"], f"{where}.origin_m", 2, "m") if "origin_m" in keys else (0.0, 0.0)
-        return HeightGrid(np.array(values), r.number(keys["cell_m"], f"{where}.cell_m", 1e-3, 1e3, "m"),
+        return HeightGrid(heights, r.number(keys["cell_m"], f"{where}.cell_m", 1e-3, 1e3, "m"),
                           origin[0], origin[1])
     parts = r.sequence(keys["parts"], f"{where}.parts")
     if not parts:
         raise r.fail(keys["parts"], f"{where}.parts", "expected at least one ground")
     return Combined(tuple(_ground(r, p, f"{where}.parts[{i}]", inside + (id(node),))
                           for i, p in enumerate(parts)))
+
+
+def _grid_heights(r: _Reader, node: Node, where: str) -> np.ndarray:
+    """A grid's ``heights_m``, rows along y -> (ny, nx) metres. Sizes are checked before any value
+    is read (at most :data:`MAX_GRID_CELLS` over the whole ground); a row written as a flow list
+    of numbers (a :class:`NumberList`) is checked in one go, any other row value by value."""
+    rows = r.sequence(node, where)
+    widths = [len(row.numbers) if isinstance(row, NumberList) else len(r.sequence(row, f"{where}[{i}]"))
+              for i, row in enumerate(rows)]
+    r.grid_cells += sum(widths)
+    if r.grid_cells > MAX_GRID_CELLS:
+        raise r.fail(node, where, f"at most {MAX_GRID_CELLS:,} heights in the ground's grids, found "
+                                  f"{r.grid_cells:,} (an alias counted each time it is used)")
+    if len(rows) < 2 or len(set(widths)) != 1 or widths[0] < 2:
+        raise r.fail(node, where, "expected a rectangular grid of at least 2 x 2 heights (rows along "
+                                  f"y), found {len(rows)} rows of lengths {listed(widths)}")
+    values = []
+    for i, row in enumerate(rows):
+        if isinstance(row, NumberList):
+            bad = ~(np.abs(row.numbers) <= MAX_GROUND_HEIGHT_M)  # NaN included
+            if not bad.any():
+                values.append(row.numbers)
+                continue
+            j = int(np.argmax(bad))  # the first bad height, read again for its message and line
+            r.number(row.value[j], f"{where}[{i}][{j}]", -MAX_GROUND_HEIGHT_M, MAX_GROUND_HEIGHT_M, "m")
+        values.append(np.array([r.number(v, f"{where}[{i}][{j}]", -MAX_GROUND_HEIGHT_M,
+                                         MAX_GROUND_HEIGHT_M, "m") for j, v in enumerate(row.value)]))
+    return np.stack(values)
 
 
 def _morphology(r: _Reader, node: Node, where: str) -> Morphology:
@@ -335,17 +391,24 @@ def _morphology(r: _Reader, node: Node, where: str) -> Morphology:
 
 
 def _load_motion(r: _Reader, node: Node, where: str, base_dir: Path,
-                 read: list[str]) -> NormalizedMotion:
-    from .c3d_import import import_c3d
-    from .importing import import_bvh
-
+                 read: dict[Path, NormalizedMotion]) -> NormalizedMotion:
+    """The motion a file holds; ``read`` (resolved path -> motion) keeps each file read once,
+    however many names it is given (or an alias repeats)."""
     rel = r.string(node, where)
     path = (base_dir / rel) if not Path(rel).is_absolute() else Path(rel)
     if path.is_dir():
         raise r.fail(node, where, f"{rel!r} is a folder, not a motion file (looked at {path})")
     if not path.is_file():
         raise r.fail(node, where, f"motion file {rel!r} not found (looked at {path})")
-    read.append(str(path))
+    if path.resolve() not in read:
+        read[path.resolve()] = _read_motion(r, node, where, path, rel)
+    return read[path.resolve()]
+
+
+def _read_motion(r: _Reader, node: Node, where: str, path: Path, rel: str) -> NormalizedMotion:
+    from .c3d_import import import_c3d
+    from .importing import import_bvh
+
     try:
         if path.suffix.lower() == ".nmo":
             return load_nmo(path)
@@ -381,13 +444,14 @@ CHARACTER_KEYS = {"name": True, "morphology": True, "motion": True, "position_m"
                   "com_target_m": False}
 
 
-def _constraint(r: _Reader, node: Node, where: str,
-                in_motion: bool = False) -> tuple[ConstraintEntry, Node | None]:
+def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
+                origin_m: tuple[float, ...] | None = None) -> tuple[ConstraintEntry, Node | None]:
     """One constraint entry; returns it and the node naming a target character (checked once
     every character is known). Everything else is checked here, against a scratch table, so a
     mistake is reported with its line. A target ``point:`` without ``character:`` is on the
     constrained character itself; ``in_motion`` (constraints stored with a motion) allows only
-    those."""
+    those. A ``world_m`` target lies within :data:`MAX_TARGET_DISTANCE_M` of ``origin_m`` (x, y),
+    the character's start."""
     from .body_points import GROUPS, body_point
     from .constraint_table import KIND_NAMES, Area, ConstraintTable, Target
 
@@ -454,9 +518,9 @@ def _constraint(r: _Reader, node: Node, where: str,
         try:
             options["area"] = Area(
                 r.string(ak["shape"], f"{aw}.shape"),
-                r.vector(ak["low_m"], f"{aw}.low_m", 3, "m", 1e5) if "low_m" in ak else (0.0, 0.0, 0.0),  # type: ignore[arg-type]
-                r.vector(ak["high_m"], f"{aw}.high_m", 3, "m", 1e5) if "high_m" in ak else (0.0, 0.0, 0.0),  # type: ignore[arg-type]
-                r.number(ak["radius_m"], f"{aw}.radius_m", 0.0, 1e5, "m") if "radius_m" in ak else 0.0,
+                r.vector(ak["low_m"], f"{aw}.low_m", 3, "m", MAX_TARGET_DISTANCE_M) if "low_m" in ak else (0.0, 0.0, 0.0),  # type: ignore[arg-type]
+                r.vector(ak["high_m"], f"{aw}.high_m", 3, "m", MAX_TARGET_DISTANCE_M) if "high_m" in ak else (0.0, 0.0, 0.0),  # type: ignore[arg-type]
+                r.number(ak["radius_m"], f"{aw}.radius_m", 0.0, MAX_TARGET_DISTANCE_M, "m") if "radius_m" in ak else 0.0,
                 r.vector(ak["normal"], f"{aw}.normal", 3, "", 1e3) if "normal" in ak else (0.0, 0.0, 1.0),  # type: ignore[arg-type]
                 r.boolean(ak["inside"], f"{aw}.inside") if "inside" in ak else True)
         except ValueError as exc:
@@ -484,6 +548,10 @@ def _constraint(r: _Reader, node: Node, where: str,
                          "an orientation aims along direction: [x, y, z] or looks at a character's "
                          "point" if kind == "orientation" else "direction: is for orientation constraints")
         target_world = r.vector(tk[given[0]], f"{where}.target.{given[0]}", 3, "m", 1e5)
+        if given[0] == "world_m" and origin_m is not None:
+            r.too_far(tk["world_m"], f"{where}.target.world_m",
+                      math.dist(target_world, (origin_m[0], origin_m[1], 0.0)), "the target",
+                      "the character's start (position_m, on the ground)")
     else:
         if ("point" in tk) == ("joint" in tk):
             raise r.fail(keys["target"], f"{where}.target", "character: needs point: (a joint or "
@@ -523,13 +591,39 @@ def _com_target(r: _Reader, keys: dict[str, Node], where: str,
     return (xy[0], xy[1])
 
 
+def _refuse_clip(path: Path) -> None:
+    """A motion clip given where a scenario is expected (``ecs-anim run walk.bvh``) is said to be
+    one, by its extension or its first bytes, with how to play it."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(16)
+    except OSError:
+        return  # compose_yaml says why it cannot be read
+    suffix = path.suffix.lower()
+    where = "name it in a scenario's motions: (docs/scenarios.md)"
+    if suffix == ".bvh" or head.lstrip(b"\xef\xbb\xbf \t\r\n").upper().startswith(b"HIERARCHY"):
+        what, how = "a BVH clip", f"import it (ecs-anim import {path} -o motions/) or {where}"
+    elif suffix == ".c3d" or (len(head) > 1 and head[0] < 0x20 and head[1] == 0x50):
+        what, how = "a C3D capture", f"import it (ecs-anim import {path} -o motions/) or {where}"
+    elif suffix in (".nmo", ".npz") or head.startswith(b"PK\x03\x04"):
+        what, how = "an .nmo motion (a zip archive)", where
+    else:
+        return
+    raise InputError(path, f"a scenario YAML was expected, not {what}; to play it, {how}")
+
+
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario; motions are loaded (BVH imported) here, once."""
     path = Path(path)
     r = _Reader(str(path))
-    root = compose_yaml(path, "scenario")
+    _refuse_clip(path)
+    root = compose_yaml(path, "scenario", number_lists=True)
     if root is None:
         raise InputError(path, "the scenario is empty", 1)
+    if expanded_size(root, MAX_YAML_VALUES) > MAX_YAML_VALUES:
+        raise InputError(path, f"the scenario holds more than {MAX_YAML_VALUES:,} values once its "
+                               "aliases (*name) are expanded, each counted every time it is used "
+                               "(docs/scenarios.md, Sizes)", 1)
     top = r.mapping(root, "", {"duration_s": True, "fps": False, "motions": True,
                                "ground": False, "characters": True, "description": False,
                                "camera": False, "tables": False})
@@ -540,7 +634,7 @@ def load_scenario(path: str | Path) -> Scenario:
         raise r.fail(motion_nodes, "motions", "expected a mapping name: file (.bvh, .c3d or .nmo)")
     motions: dict[str, NormalizedMotion] = {}
     fills: list[tuple[str, Node]] = []
-    read = [str(path)]
+    read: dict[Path, NormalizedMotion] = {}
     for key_node, value in motion_nodes.value:
         if not isinstance(key_node, yaml.ScalarNode) or not _NAME.fullmatch(str(key_node.value)):
             raise r.fail(key_node, "motions", "motion names must be plain names (letters, digits, "
@@ -562,7 +656,8 @@ def load_scenario(path: str | Path) -> Scenario:
     characters: list[CharacterSpec] = []
     names: set[str] = set()
     pending_targets: list[tuple[str | None, Node, str]] = []
-    for i, node in enumerate(r.sequence(top["characters"], "characters")):
+    n_constraints = 0
+    for i, node in enumerate(r.sequence(top["characters"], "characters", MAX_CHARACTERS, "characters")):
         where = f"characters[{i}]"
         keys = r.mapping(node, where, CHARACTER_KEYS)
         name = r.string(keys["name"], f"{where}.name")
@@ -607,9 +702,14 @@ def load_scenario(path: str | Path) -> Scenario:
         heading = r.number(keys["heading_deg"], f"{where}.heading_deg", -360, 360, "degrees") \
             if "heading_deg" in keys else 0.0
         constraints = []
-        for j, cn in enumerate(r.sequence(keys["constraints"], f"{where}.constraints")
-                               if "constraints" in keys else []):
-            entry, who = _constraint(r, cn, f"{where}.constraints[{j}]")
+        own = r.sequence(keys["constraints"], f"{where}.constraints") if "constraints" in keys else []
+        n_constraints += len(own)
+        if n_constraints > MAX_CONSTRAINTS:
+            raise r.fail(keys["constraints"], f"{where}.constraints", f"at most {MAX_CONSTRAINTS:,} "
+                         f"constraints over all characters, found {n_constraints:,} by here (an "
+                         "alias counted each time it is used)")
+        for j, cn in enumerate(own):
+            entry, who = _constraint(r, cn, f"{where}.constraints[{j}]", origin_m=position)
             if any(c.name == entry.name for c in constraints):
                 raise r.fail(cn, f"{where}.constraints[{j}].name",
                              f"{entry.name!r} is used twice on {name!r}")
@@ -624,7 +724,7 @@ def load_scenario(path: str | Path) -> Scenario:
         characters.append(CharacterSpec(
             name, _morphology(r, keys["morphology"], f"{where}.morphology"), player,
             Placement((position[0], position[1]), math.radians(heading)),
-            r.string(keys["team"], f"{where}.team") if "team" in keys else "", constraints,
+            r.string(keys["team"], f"{where}.team", empty=True) if "team" in keys else "", constraints,
             r.boolean(keys["com_control"], f"{where}.com_control") if "com_control" in keys else True,
             _com_target(r, keys, where, position)))
     if not characters:
@@ -646,19 +746,26 @@ def load_scenario(path: str | Path) -> Scenario:
             camera["distance_m"] = r.number(ck["distance_m"], "camera.distance_m", 0.1, 1e4, "m")
         if "target_m" in ck:
             camera["target_m"] = r.vector(ck["target_m"], "camera.target_m", 3, "m", 1e5)
-    tables = [_table(r, node, f"tables[{i}]") for i, node in
-              enumerate(r.sequence(top["tables"], "tables") if "tables" in top else [])]
+    starts = np.array([c.placement.position_m for c in characters])
+    tables = [_table(r, node, f"tables[{i}]", starts) for i, node in
+              enumerate(r.sequence(top["tables"], "tables", MAX_TABLES, "tables") if "tables" in top else [])]
     return Scenario(str(path), duration, fps, motions, ground, characters, camera, tables,
-                    tuple(read))
+                    (str(path),) + tuple(str(p) for p in read))
 
 
-def _table(r: _Reader, node: Node, where: str) -> Table:
+def _table(r: _Reader, node: Node, where: str, starts: np.ndarray) -> Table:
+    """A table; ``starts`` (n_characters, 2) the characters' positions, m: the table stands
+    within :data:`MAX_TARGET_DISTANCE_M` of one."""
     keys = r.mapping(node, where, {"centre_m": True, "size_m": True, "height_m": True,
                                    "heading_deg": False})
-    size = r.vector(keys["size_m"], f"{where}.size_m", 2, "m", 100.0)
+    size = r.vector(keys["size_m"], f"{where}.size_m", 2, "m", MAX_TARGET_DISTANCE_M)
     if min(size) <= 0:
         raise r.fail(keys["size_m"], f"{where}.size_m", "a table's length and width must be > 0")
-    return Table(r.vector(keys["centre_m"], f"{where}.centre_m", 2, "m", 1e5),  # type: ignore[arg-type]
+    centre = r.vector(keys["centre_m"], f"{where}.centre_m", 2, "m", 1e5)
+    r.too_far(keys["centre_m"], f"{where}.centre_m",
+              float(np.min(np.linalg.norm(starts - np.array(centre), axis=-1))), "the table",
+              "the nearest character's position_m")
+    return Table(centre,  # type: ignore[arg-type]
                  size,  # type: ignore[arg-type]
                  r.number(keys["height_m"], f"{where}.height_m", 0.1, 3.0, "m"),
                  math.radians(r.number(keys["heading_deg"], f"{where}.heading_deg", -360, 360, "degrees"))
