@@ -124,7 +124,8 @@ def canonical_clip(motion: BvhMotion, map_spec: str | None = None,
     if up not in UP_AXES:
         raise EcsAnimError(f"--up {up}: expected 'y' or 'z'")
     skeleton = motion.skeleton
-    jmap = map_skeleton(skeleton, map_spec)
+    joint2file, pos_file = forward_kinematics(motion)
+    jmap = map_skeleton(skeleton, map_spec, pos_file)
     leg_units = _leg_rest_length(skeleton, jmap)
     if unit is None:
         unit, reason = detect_unit(leg_units)
@@ -133,7 +134,6 @@ def canonical_clip(motion: BvhMotion, map_spec: str | None = None,
             raise EcsAnimError(f"--unit {unit}: unknown unit; choose one of {', '.join(UNITS)}")
         reason = f"given with --unit (thigh + shank = {leg_units * UNITS[unit]:.3f} m)"
     scale = UNITS[unit]
-    joint2file, pos_file = forward_kinematics(motion)
     rest = rest_positions(skeleton)
     src = jmap.source
     # Body axes of the rest (all-zero-rotation) pose, in file axes: forward, left, up as columns.

@@ -6,8 +6,9 @@ A source skeleton (BVH hierarchy, names in any convention) is matched to the can
 1. a user YAML map (``--map FILE.yaml``), which may name a preset to start from and override
    single joints;
 2. a named preset (``--map mixamo``), or the preset detected from the joint names;
-3. failing both, a structural match: hands and feet found by name, everything else by the
-   hierarchy (the upper arm is the nearest ancestor of the elbow at a different place, ...).
+3. failing both, a structural match on the hierarchy and its lengths alone (names are not read):
+   the legs, the spine and the arms are the long branches, left and right from where the knees
+   bend and the toes point (see :func:`structural_map`).
 
 Canonical joints that a skeleton does not have are filled in by the importer: ``spine_1`` /
 ``spine_2`` between the pelvis and the neck, ``toe_*``, ``hand_*`` and ``head_top`` from the
@@ -23,10 +24,14 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from numpy.typing import NDArray
 
 from .bvh import BvhSkeleton, rest_positions
-from .errors import InputError, MappingError, compose_yaml
+from .errors import InputError, MappingError, compose_yaml, listed
+from .rotations import normalize
 from .skeleton import JOINTS
+
+F64 = NDArray[np.float64]
 
 #: Canonical joints every source must provide (the others can be filled in).
 REQUIRED: tuple[str, ...] = (
@@ -253,6 +258,7 @@ def detect_preset(skeleton: BvhSkeleton) -> Preset | None:
 # --- structural matching ---------------------------------------------------------------------
 
 def _side_of(name: str) -> str | None:
+    """The side a joint's name suggests (``LeftHand``, ``hand_l``, ``lShin``), for hints only."""
     raw = re.split(r"[:|]", name)[-1]
     low = raw.lower()
     if "left" in low or re.search(r"(^|[_\s.\-])l($|[_\s.\-])", low) or re.match(r"^l[A-Z_]", raw):
@@ -277,145 +283,286 @@ def _lca(skeleton: BvhSkeleton, joints: list[int]) -> int:
     return next(j for j in chains[0] if j in common)
 
 
-def _nearest_distinct_ancestor(skeleton: BvhSkeleton, rest: np.ndarray, j: int,
-                               stop: set[int] | None = None) -> int | None:
-    """Nearest ancestor at another place in the rest pose, skipping twist/roll helpers."""
-    for a in _ancestors(skeleton, j):
-        if stop and a in stop:
-            return None
-        name = skeleton.joints[a].name.lower()
-        if "twist" in name or "roll" in name:
-            continue
-        if np.linalg.norm(rest[a] - rest[j]) > 1e-6 * max(1.0, float(np.abs(rest).max())):
-            return a
-    return None
+#: A branch is a major one (a limb, the spine, the neck and head) when it reaches at least this
+#: fraction as far as the longest branch leaving the same joint; fingers, toes, twist helpers and
+#: props reach less (a neck and head reaches about 0.35 as far as an arm from the thorax).
+MAJOR_BRANCH_FRACTION = 0.15
 
 
-def _by_keyword(skeleton: BvhSkeleton, side: str, words: tuple[str, ...],
-                exclude: tuple[str, ...] = ()) -> list[int]:
-    out = []
-    for i, joint in enumerate(skeleton.joints):
-        if joint.is_end_site:
-            continue
-        low = _key(joint.name)
-        if any(w in low for w in words) and not any(x in low for x in exclude):
-            if _side_of(joint.name) == side:
-                out.append(i)
-    return out
+#: Limbs are looked for among this many of a joint's farthest-reaching branches (a hub of a
+#: generated 5,000-branch skeleton would otherwise compare 12 million pairs).
+COMPARED_BRANCHES = 6
 
 
-def structural_map(skeleton: BvhSkeleton, given: dict[str, int] | None = None,
-                   partial: bool = False) -> dict[str, int | None]:
-    """Match by structure plus a few unambiguous name cues.
+class _Tree:
+    """A skeleton's hierarchy and rest lengths, as structural matching reads them.
 
-    ``given`` joints (from a user map) are taken as decided and the rest is derived from them
-    (a given wrist finds its elbow and shoulder). Raises :class:`MappingError` naming what is
-    missing, unless ``partial`` (then the parts it could not find are None).
+    ``bone`` (n_joints,): distance from each joint to its parent at rest (0 for the root);
+    ``reach`` (n_joints,): the longest path from a joint down to a leaf; ``onward``: the child on
+    that path (-1 at a leaf); ``size``: joints in each subtree. Joints at the place of their parent
+    (zero offsets, zero-length End Sites) are *at the same place*; a run of them is one place.
     """
-    given = given or {}
-    rest = rest_positions(skeleton)
+
+    def __init__(self, skeleton: BvhSkeleton):
+        rest = rest_positions(skeleton)
+        n = len(skeleton.joints)
+        self.parents = np.array([j.parent for j in skeleton.joints])
+        self.children: list[list[int]] = [[] for _ in range(n)]
+        for i, p in enumerate(self.parents):
+            if p >= 0:
+                self.children[p].append(i)
+        offsets = rest - rest[np.maximum(self.parents, 0)]
+        self.bone = np.linalg.norm(offsets, axis=1)
+        self.same_place = self.bone <= 1e-6 * max(1.0, float(np.abs(rest).max()))
+        self.reach = np.zeros(n)
+        self.onward = np.full(n, -1)
+        self.size = np.ones(n, dtype=int)
+        # File order is topological, so children are done before their parent; on a tie the
+        # first child in the file wins.
+        for i in range(n - 1, 0, -1):
+            p = self.parents[i]
+            if p < 0:
+                continue
+            self.size[p] += self.size[i]
+            if self.branch(i) >= self.reach[p]:
+                self.reach[p], self.onward[p] = self.branch(i), i
+
+    def branch(self, child: int) -> float:
+        """How far the branch starting at ``child`` reaches from ``child``'s parent."""
+        return float(self.bone[child] + self.reach[child])
+
+    def hub_below(self, start: int) -> tuple[int, list[int]] | None:
+        """The first joint from ``start`` down its longest path where three or more major branches
+        leave (the pelvis: two legs and the spine; the thorax: two arms and the neck), with them."""
+        j = start
+        while j >= 0:
+            longest = self.reach[j]
+            major = [c for c in self.children[j]
+                     if longest > 0 and self.branch(c) >= MAJOR_BRANCH_FRACTION * longest]
+            if len(major) >= 3:
+                return j, major
+            j = int(self.onward[j])
+        return None
+
+    def mirror_pair(self, branches: list[int]) -> tuple[int, int]:
+        """The two branches most alike in joints and reach (the legs, the arms), among the
+        :data:`COMPARED_BRANCHES` reaching farthest."""
+        branches = sorted(branches, key=self.branch, reverse=True)[:COMPARED_BRANCHES]
+        def unlike(a: int, b: int) -> float:
+            return (abs(self.size[a] - self.size[b]) / max(self.size[a], self.size[b])
+                    + abs(self.branch(a) - self.branch(b)) / max(self.branch(a), self.branch(b)))
+        pairs = [(a, b) for k, a in enumerate(branches) for b in branches[k + 1:]]
+        return min(pairs, key=lambda pair: unlike(*pair))
+
+    def places(self, start: int) -> list[list[int]]:
+        """The longest path from ``start`` down to a leaf, as places: runs of joints at one place,
+        each listed top-down (the topmost of a run is the one a convention names)."""
+        out: list[list[int]] = []
+        j = start
+        while j >= 0:
+            if out and self.same_place[j]:
+                out[-1].append(j)
+            else:
+                out.append([j])
+            j = int(self.onward[j])
+        return out
+
+
+def _limb(tree: _Tree, hub: int, branch: int) -> dict[str, int | None]:
+    """A leg or an arm leaving ``hub`` by ``branch``: its proximal, middle and distal joints (hip,
+    knee, ankle / shoulder, elbow, wrist) and the end beyond (toe / hand).
+
+    The two long bones are the path's longest segment and the longer of its neighbours, never
+    the segment leaving the hub (a pelvis offset, a clavicle: CMU's clavicle is longer than its
+    forearm).
+    """
+    places = tree.places(branch)
+    if tree.same_place[branch]:
+        places[0].insert(0, hub)
+    else:
+        places.insert(0, [hub])
+    # lengths[k]: from places[k - 1] to places[k]; k = 1 leaves the hub.
+    lengths = [0.0] + [float(tree.bone[p[0]]) for p in places[1:]]
+    if len(places) < 4:
+        return {"proximal": None, "middle": None, "distal": None, "end": None}
+    longest = max(range(1, len(places)), key=lambda k: lengths[k])
+    before = lengths[longest - 1] if longest >= 3 else -1.0
+    after = lengths[longest + 1] if longest + 1 < len(places) else -1.0
+    first = longest - 1 if before > after else longest  # lengths[first], lengths[first + 1]
+    proximal = places[first - 1][0] if first >= 2 else places[0][min(1, len(places[0]) - 1)]
+    end = places[first + 2][0] if first + 2 < len(places) else None
+    return {"proximal": proximal, "middle": places[first][0], "distal": places[first + 1][0],
+            "end": end}
+
+
+def _head(tree: _Tree, thorax: int, branch: int) -> tuple[int, int, int | None]:
+    """(neck, head, head top) on the branch leaving the thorax upwards: the neck is its first
+    joint (the thorax itself when the head hangs straight from it), the head top a leaf at its
+    end, the head the place before that leaf, or the place where eyes or a jaw branch off."""
+    places = tree.places(branch)
+    branching = next((k for k, place in enumerate(places) if len(tree.children[place[-1]]) > 1),
+                     len(places) - 1)
+    places = places[:branching + 1]
+    last = places[-1][0]
+    if len(places) >= 2 and not tree.children[last]:
+        head_top: int | None = last
+        head = places[-2][0]
+    else:
+        head_top, head = None, last
+    return (branch if branch != head else thorax), head, head_top
+
+
+def _leftness(poses: F64, pelvis: int, thorax: int,
+              legs: tuple[dict[str, int | None], dict[str, int | None]]) -> float:
+    """How clearly the first of two legs is the left one, from -1 (surely the right) to 1: knees
+    bend forward and toes point forward, and left is up x forward (BVH axes are right-handed).
+    ``poses`` (n_poses, n_joints, 3); each pose counts by how much it shows."""
+    up = poses[:, thorax] - poses[:, pelvis]
+    forward = np.zeros_like(up)
+    for leg in legs:
+        hip, knee, ankle = (poses[:, leg[k]] for k in ("proximal", "middle", "distal"))  # type: ignore[index]
+        along = normalize(ankle - hip)
+        bend = knee - hip
+        forward += bend - np.sum(bend * along, axis=-1, keepdims=True) * along
+        if leg["end"] is not None:
+            forward += poses[:, leg["end"]] - ankle
+    lateral = poses[:, legs[0]["proximal"]] - poses[:, legs[1]["proximal"]]  # type: ignore[index]
+    shown = np.linalg.norm(lateral, axis=-1) * np.linalg.norm(np.cross(up, forward), axis=-1)
+    return float(np.sum(lateral * np.cross(up, forward)) / max(float(np.sum(shown)), 1e-300))
+
+
+#: A rest pose whose cues say left or right at least this clearly (1: every cue agrees, exactly
+#: across the body) decides the sides; real rest poses give 0 (no cue) or above 0.99.
+CLEAR_LEFTNESS = 0.5
+
+
+def _stands(pose: F64, pelvis: int, thorax: int,
+            legs: tuple[dict[str, int | None], dict[str, int | None]]) -> bool:
+    """Whether both legs point away from the spine (within 60 degrees) in ``pose`` (n_joints, 3)."""
+    up = normalize(pose[thorax] - pose[pelvis])
+    return all(float(np.dot(up, normalize(pose[leg["distal"]] - pose[leg["proximal"]]))) < -0.5  # type: ignore[index]
+               for leg in legs)
+
+
+def structural_map(skeleton: BvhSkeleton, poses: F64 | None = None,
+                   partial: bool = False) -> dict[str, int | None]:
+    """Match by the hierarchy and its lengths alone, whatever the joints are called.
+
+    The pelvis is the first joint below the root where three major branches leave: the two most
+    alike are the legs, the largest other one the spine; the thorax is the first such joint up the
+    spine, its two most alike branches the arms and the largest other one the neck and head.
+    Along each limb the two long bones give hip, knee, ankle (shoulder, elbow, wrist); spine joints
+    are picked evenly between pelvis and neck. Left is up x forward, forward being where the knees
+    bend and the toes point: in the rest pose when it is a stance that shows it, otherwise in
+    ``poses`` ((n_poses, n_joints, 3) joint positions in file axes, e.g. every frame of the clip).
+
+    Raises :class:`MappingError` saying what it could not find, unless ``partial`` (then the parts
+    it could not find are None).
+    """
+    tree = _Tree(skeleton)
     found: dict[str, int | None] = {}
-    problems: list[str] = []
-
-    def topmost(cands: list[int]) -> int | None:
-        if not cands:
-            return None
-        depth = {c: len(_ancestors(skeleton, c)) for c in cands}
-        best = min(depth.values())
-        tops = [c for c in cands if depth[c] == best]
-        return tops[0] if len(tops) == 1 else None
-
-    for side in ("l", "r"):
-        ankle = given.get(f"ankle_{side}", topmost(_by_keyword(skeleton, side, ("foot", "ankle"))))
-        wrist = given.get(f"wrist_{side}", topmost(_by_keyword(skeleton, side, ("hand", "wrist"))))
-        if ankle is None:
-            problems.append(f"ankle_{side}: no single joint named like a {_SIDE_WORD[side]} foot or ankle")
-        if wrist is None:
-            problems.append(f"wrist_{side}: no single joint named like a {_SIDE_WORD[side]} hand or wrist")
-        found[f"ankle_{side}"], found[f"wrist_{side}"] = ankle, wrist
-        for distal, mid, prox in (("ankle", "knee", "hip"), ("wrist", "elbow", "shoulder")):
-            d = found[f"{distal}_{side}"]
-            m = given.get(f"{mid}_{side}",
-                          None if d is None else _nearest_distinct_ancestor(skeleton, rest, d))
-            p = given.get(f"{prox}_{side}",
-                          None if m is None else _nearest_distinct_ancestor(skeleton, rest, m))
-            found[f"{mid}_{side}"], found[f"{prox}_{side}"] = m, p
-        toe_cands = [] if ankle is None else [
-            c for c in _by_keyword(skeleton, side, ("toe", "ball")) if ankle in _ancestors(skeleton, c)
-        ]
-        found[f"toe_{side}"] = topmost(toe_cands)
-    heads = [i for i, j in enumerate(skeleton.joints)
-             if not j.is_end_site and "head" in _key(j.name) and "top" not in _key(j.name)
-             and _side_of(j.name) is None]
-    head = given.get("head", topmost(heads))
-    if head is None:
-        problems.append("head: no single joint named like a head")
-    found["head"] = head
-    if found.get("hip_l") is not None and found.get("hip_r") is not None and head is not None:
-        pelvis = _lca(skeleton, [found["hip_l"], found["hip_r"], head])  # type: ignore[list-item]
+    root = int(np.flatnonzero(tree.parents < 0)[0])
+    pelvis_hub = tree.hub_below(root)
+    thorax_hub = None
+    problem = "no joint where two legs and a spine branch off"
+    if pelvis_hub is not None:
+        pelvis, branches = pelvis_hub
+        legs = tree.mirror_pair(branches)
+        spine = max((b for b in branches if b not in legs), key=lambda b: tree.size[b])
+        thorax_hub = tree.hub_below(spine)
+        problem = "no joint up the spine where two arms and a neck branch off"
+    if pelvis_hub is not None and thorax_hub is not None:
+        thorax, branches = thorax_hub
+        arms = tree.mirror_pair(branches)
+        neck_branch = max((b for b in branches if b not in arms), key=lambda b: tree.size[b])
         found["pelvis"] = pelvis
-        necks = [i for i in [head] + _ancestors(skeleton, head)
-                 if "neck" in _key(skeleton.joints[i].name)]
-        found["neck"] = necks[-1] if necks else _nearest_distinct_ancestor(skeleton, rest, head)
-        # Spine joints strictly between pelvis and neck, at distinct places.
-        neck = found["neck"]
-        if neck is not None:
-            chain = [a for a in reversed(_ancestors(skeleton, neck)) if a not in
-                     [pelvis] + _ancestors(skeleton, pelvis)]
-            distinct = [a for a in chain
-                        if np.linalg.norm(rest[a] - rest[pelvis]) > 1e-9
-                        and np.linalg.norm(rest[a] - rest[neck]) > 1e-9]
-            found["spine_1"] = distinct[len(distinct) // 3] if distinct else None
-            found["spine_2"] = distinct[(2 * len(distinct)) // 3] if len(distinct) >= 2 else None
-            if found["spine_1"] == found["spine_2"]:
-                found["spine_2"] = None
-    found.update(given)
-    # Ends: the End Site below the head and each wrist's farthest descendant, if any.
-    if head is not None:
-        found["head_top"] = _farthest_descendant(skeleton, rest, head)
-    for side in "lr":
-        wrist = found.get(f"wrist_{side}")
-        found[f"hand_{side}"] = None if wrist is None else _farthest_descendant(skeleton, rest, wrist)
-    missing = [j for j in REQUIRED if found.get(j) is None]
-    if missing and not partial:
-        raise MappingError(_missing_message(skeleton, missing, problems))
+        neck, found["head"], found["head_top"] = _head(tree, thorax, neck_branch)
+        found["neck"] = neck
+        leg_parts = (_limb(tree, pelvis, legs[0]), _limb(tree, pelvis, legs[1]))
+        arm_parts = (_limb(tree, thorax, arms[0]), _limb(tree, thorax, arms[1]))
+        if all(limb["distal"] is not None for limb in leg_parts + arm_parts):
+            # The rest pose tells the sides if it is a stance with feet or knees showing forward;
+            # otherwise (Bandai's bones lie along X at rest; Biped's stand straight with a sole
+            # End Site and no toes) the clip's poses do.
+            geometry = rest_positions(skeleton)[None]
+            leftness = _leftness(geometry, pelvis, thorax, leg_parts)
+            if poses is not None and not (_stands(geometry[0], pelvis, thorax, leg_parts)
+                                          and abs(leftness) > CLEAR_LEFTNESS):
+                geometry = poses
+                leftness = _leftness(geometry, pelvis, thorax, leg_parts)
+            if leftness < 0.0:
+                leg_parts = leg_parts[::-1]
+            # The left arm is the one on the left hip's side.
+            lateral = geometry[:, leg_parts[0]["proximal"]] - geometry[:, leg_parts[1]["proximal"]]  # type: ignore[index]
+            across = geometry[:, arm_parts[0]["proximal"]] - geometry[:, arm_parts[1]["proximal"]]  # type: ignore[index]
+            if float(np.sum(lateral * across)) < 0.0:
+                arm_parts = arm_parts[::-1]
+            for side, leg, arm in zip("lr", leg_parts, arm_parts):
+                found |= {f"hip_{side}": leg["proximal"], f"knee_{side}": leg["middle"],
+                          f"ankle_{side}": leg["distal"],
+                          f"shoulder_{side}": arm["proximal"], f"elbow_{side}": arm["middle"],
+                          f"wrist_{side}": arm["distal"], f"hand_{side}": arm["end"]}
+                # An End Site below the ankle may mark the sole rather than the toe: only a joint.
+                toe = leg["end"]
+                found[f"toe_{side}"] = None if toe is None or skeleton.joints[toe].is_end_site \
+                    else toe
+            found.update(_spine(skeleton, pelvis, neck))
+            problem = ""
+        else:
+            problem = "a leg or an arm has fewer than three joints at distinct places"
+    if problem and not partial:
+        raise MappingError(f"cannot match the skeleton by its names (no preset fits) nor by its "
+                           f"structure ({problem}); {_GIVE_A_MAP}")
     return found
 
 
-def _farthest_descendant(skeleton: BvhSkeleton, rest: np.ndarray, j: int) -> int | None:
-    """The descendant of ``j`` farthest from it in the rest pose (None if all coincide)."""
-    best, best_d = None, 1e-9
-    stack = skeleton.children(j)
-    while stack:
-        c = stack.pop()
-        d = float(np.linalg.norm(rest[c] - rest[j]))
-        if d > best_d:
-            best, best_d = c, d
-        stack.extend(skeleton.children(c))
-    return best
+def _spine(skeleton: BvhSkeleton, pelvis: int, neck: int) -> dict[str, int | None]:
+    """``spine_1`` and ``spine_2``: joints strictly between pelvis and neck at places of their
+    own, picked at a third and two thirds of them (Mixamo's Spine1, Spine2 of three)."""
+    rest = rest_positions(skeleton)
+    below_pelvis = set([pelvis] + _ancestors(skeleton, pelvis))
+    chain = [a for a in reversed(_ancestors(skeleton, neck)) if a not in below_pelvis]
+    distinct = [a for a in chain
+                if np.linalg.norm(rest[a] - rest[pelvis]) > 1e-9
+                and np.linalg.norm(rest[a] - rest[neck]) > 1e-9]
+    spine_1 = distinct[len(distinct) // 3] if distinct else None
+    spine_2 = distinct[(2 * len(distinct)) // 3] if len(distinct) >= 2 else None
+    return {"spine_1": spine_1, "spine_2": None if spine_2 == spine_1 else spine_2}
 
-
-_SIDE_WORD = {"l": "left", "r": "right"}
 _PART_WORDS = {"pelvis": "hips pelvis root", "hip": "upleg thigh hip", "knee": "leg knee shin calf",
                "ankle": "foot ankle", "neck": "neck", "head": "head", "shoulder": "arm shoulder",
                "elbow": "forearm elbow", "wrist": "hand wrist"}
+#: Missing parts named in an error, each with this many closest joint names; the rest counted.
+HINTED_PARTS, HINTS_PER_PART = 3, 2
 
 
 def _missing_message(skeleton: BvhSkeleton, missing: list[str], problems: list[str]) -> str:
+    """One line: the first missing parts with the joints named most like them, the count of the
+    others, why, and what to give instead."""
     names = [j.name for j in skeleton.joints if not j.is_end_site]
+    keys = [_key(n) for n in names]
     parts = []
-    for m in missing:
+    for m in missing[:HINTED_PARTS]:
         base, _, side = m.partition("_")
         # Closest names: similarity to the part's usual words, the right side slightly preferred.
-        words = [base] + _PART_WORDS.get(base, "").split()
-        scored = sorted(names, key=lambda n: -(max(
-            difflib.SequenceMatcher(None, w, _key(n)).ratio() for w in words)
-            + (0.1 if side and _side_of(n) == side else 0.0)))
-        parts.append(f"{m} (closest: {', '.join(scored[:3]) if scored else 'none'})")
+        matcher = difflib.SequenceMatcher()
+        score = np.zeros(len(names))
+        for word in [base] + _PART_WORDS.get(base, "").split():
+            matcher.set_seq2(word)
+            for k, key in enumerate(keys):
+                matcher.set_seq1(key)
+                if matcher.real_quick_ratio() > score[k] and matcher.quick_ratio() > score[k]:
+                    score[k] = max(score[k], matcher.ratio())
+        score += [0.1 if side and _side_of(n) == side else 0.0 for n in names]
+        closest = [names[k] for k in np.argsort(-score, kind="stable")[:HINTS_PER_PART]]
+        parts.append(f"{m} (closest: {', '.join(closest) or 'none'})")
+    found_parts = listed(parts + missing[len(parts):], HINTED_PARTS)
     why = f" ({'; '.join(problems)})" if problems else ""
-    return (f"cannot find these body parts in the skeleton: {'; '.join(parts)}{why}. "
-            f"Give a map with --map FILE.yaml (joints: {{canonical: source_name}}) or a preset "
-            f"({', '.join(PRESETS)}). Joints in the file: {', '.join(names)}")
+    return f"cannot find these body parts in the skeleton: {found_parts}{why}; {_GIVE_A_MAP}"
+
+
+_GIVE_A_MAP = ("give --map PRESET or FILE.yaml (joints: {canonical: source_name}); presets: "
+               "ecs-anim import --help")
 
 
 # --- user maps --------------------------------------------------------------------------------
@@ -471,9 +618,12 @@ def _find(skeleton: BvhSkeleton, name: str) -> int | None:
     return keys.index(_key(name)) if _key(name) in keys else None
 
 
-def map_skeleton(skeleton: BvhSkeleton, map_spec: str | None = None) -> JointMap:
+def map_skeleton(skeleton: BvhSkeleton, map_spec: str | None = None,
+                 poses: F64 | None = None) -> JointMap:
     """Match ``skeleton`` to the canonical joints. ``map_spec``: None (detect), a preset name,
-    or a path to a user YAML map. Raises :class:`MappingError` / :class:`InputError`."""
+    or a path to a user YAML map; ``poses`` (n_poses, n_joints, 3): joint positions in file axes
+    that tell left from right in a structural match (see :func:`structural_map`). Raises
+    :class:`MappingError` / :class:`InputError`."""
     user: dict[str, str] = {}
     user_lines: dict[str, int] = {}
     base: str | None = None
@@ -500,10 +650,8 @@ def map_skeleton(skeleton: BvhSkeleton, map_spec: str | None = None) -> JointMap
             how = f"preset {detected.name} (detected)"
         else:
             # With a user map, a partial structural match is completed by the user's entries.
-            given = {k: _find(skeleton, v) for k, v in user.items()}
-            found = structural_map(skeleton, {k: i for k, i in given.items() if i is not None},
-                                   partial=bool(user))
-            how = "structure and names (no preset matched)"
+            found = structural_map(skeleton, poses, partial=bool(user))
+            how = "structure (no preset matched)"
         if user_path is not None:
             how += f" + {user_path}"
     for canonical, source_name in user.items():

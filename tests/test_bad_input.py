@@ -90,8 +90,8 @@ BAD_BVH: tuple[BadBvh, ...] = (
     BadBvh("negative_frame_time.bvh", 149, "Frame Time must be a positive number of seconds, "
            "found -0.03333333"),
     BadBvh("frames_unicode_digit.bvh", 148, "expected 'Frames: <count>'"),
-    BadBvh("missing_left_arm.bvh", None, "cannot find these body parts in the skeleton: "
-           "shoulder_l (closest: shoulder_r", stage="map"),
+    BadBvh("missing_left_arm.bvh", None, "nor by its structure (no joint up the spine where two "
+           "arms and a neck branch off)", stage="map"),
     BadBvh("offset_two_numbers.bvh", 16, "OFFSET of 'knee_l': expected 3 numbers, found 2"),
     BadBvh("missing_brace.bvh", 15, "expected '{' after 'knee_l', found 'OFFSET"),
     BadBvh("empty.bvh", 1, "unexpected end of file: expected HIERARCHY"),
@@ -121,8 +121,7 @@ def test_bad_bvh_gives_one_line_error_with_file_and_line(case: BadBvh):
             import_bvh(path)
     assert_one_line_error(exc.value, path, case.line, case.fragment)
     if case.stage == "map":
-        for part in ("shoulder_l", "elbow_l", "wrist_l"):
-            assert part in str(exc.value)
+        assert "--map" in str(exc.value)
 
 
 @pytest.mark.parametrize("case", _params())

@@ -71,9 +71,9 @@ def test_unknown_convention_is_matched_by_structure():
 
 
 def test_unmappable_skeleton_lists_missing_parts_and_closest_names():
-    names = STRUCTURAL | {"wrist_l": "Thing", "wrist_r": "Other"}
+    names = preset_names("mixamo") | {"wrist_l": "Thing", "wrist_r": "Other"}
     with pytest.raises(MappingError) as err:
-        map_skeleton(parse_bvh(renamed(WALK_TEXT, names), "bad.bvh").skeleton)
+        map_skeleton(parse_bvh(renamed(WALK_TEXT, names), "bad.bvh").skeleton, "mixamo")
     message = str(err.value)
     assert "wrist_l" in message and "wrist_r" in message and "closest" in message
     assert "--map" in message and "\n" not in message
