@@ -225,6 +225,20 @@ class ConstraintTable:
         self.names.append(name)
         return self.m - 1
 
+    def remove_character(self, row: int) -> list[str]:
+        """Delete the constraints of store row ``row`` and those whose target is a point on it,
+        and renumber the rows after it (the store deletes that row too). Returns the deleted
+        constraints' names; the indices of the constraints after them move down."""
+        gone = (self.owner == row) | ((self.target_kind == TARGET_BODY) & (self.target_row == row))
+        names = [n for n, g in zip(self.names, gone) if g]
+        for key in self.__dataclass_fields__:
+            if key != "names":
+                setattr(self, key, getattr(self, key)[~gone])
+        self.names = [n for n, g in zip(self.names, gone) if not g]
+        self.owner[self.owner > row] -= 1
+        self.target_row[(self.target_kind == TARGET_BODY) & (self.target_row > row)] -= 1
+        return names
+
     def set_target(self, index: int, target_in_world: tuple[float, float, float]) -> None:
         """Give a constraint a new world target from code (read at the next tick)."""
         self.target_kind[index] = TARGET_WORLD

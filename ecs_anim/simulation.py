@@ -27,7 +27,7 @@ from .components import (
     Placement,
     Posture,
 )
-from .errors import EcsAnimError
+from .errors import EcsAnimError, listed
 from .ground import Ground, Plane
 from .morphology import Morphology, leg_length, segment_mass_table
 from .motion import NormalizedMotion
@@ -211,6 +211,40 @@ class Simulation:
         st.lengths[row] = body.lengths
         st.segment_mass_kg[row], st.segment_com_fraction[row] = segment_mass_table(body)[:2]
         st.locked[row] = False
+
+    def remove(self, entity: int) -> None:
+        """Take a character out of the simulation (between ticks), with its constraints and
+        every constraint of another character aiming at a point on it; one warning names those
+        constraints. The other characters go on; indices that :meth:`add_constraint` returned
+        for constraints after the removed ones move down (find them again with
+        :meth:`constraint_index`)."""
+        row = self.row(entity)
+        with self._active():
+            name = esper.component_for_entity(entity, Name).name
+            esper.delete_entity(entity, immediate=True)
+            for other, (character_row,) in list(esper.get_components(CharacterRow)):
+                if character_row.row > row:
+                    for component in (CharacterRow, NormalizedPose, Posture):
+                        esper.add_component(other, component(character_row.row - 1))
+        self.store.remove_row(row)
+        removed = self.constraints.remove_character(row)
+        if removed:
+            message = (f"warning: t={self.time_s:.3f} s: character {name!r} removed with its "
+                       f"constraints {listed(removed)}")
+            self.messages.append(message)
+            print(message, file=sys.stderr)
+
+    def constraint_index(self, entity: int, name: str) -> int:
+        """The index of the constraint ``name`` of a character (its name as the scenario gives
+        it, or as :meth:`add_constraint` got it), for :meth:`set_target`."""
+        row = self.row(entity)
+        table = self.constraints
+        found = [k for k in range(table.m) if table.owner[k] == row and table.names[k] == name]
+        if not found:
+            mine = [table.names[k] for k in range(table.m) if table.owner[k] == row]
+            raise EcsAnimError(f"no constraint {name!r} on this character (it has: "
+                               f"{listed(mine) or 'none'})")
+        return found[0]
 
     def names(self) -> list[str]:
         with self._active():

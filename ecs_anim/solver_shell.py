@@ -66,7 +66,10 @@ class SolverSettings:
     trunk makes (spreads a lean over the iterations); ``root_gain``: how far past the
     centre-of-mass error the root steps (the planted legs' mass does not follow it);
     ``release_speed_m_s``: how fast a point a sphere held off the motion's place goes back to it
-    once the sphere lets it go (instead of in one tick)."""
+    once the sphere lets it go (instead of in one tick); ``stall_fraction``: a goal whose error
+    falls by less than this share of itself (and by less than the tolerance) in an iteration
+    has stalled: an unreachable goal creeping closer by a trunk step at a time no longer keeps
+    the loop, and every character in it, going."""
 
     iterations: int = 6
     tolerance_m: float = 1e-4
@@ -75,6 +78,7 @@ class SolverSettings:
     max_ccd_step_rad: float = np.radians(20.0)
     root_gain: float = 1.25
     release_speed_m_s: float = 1.5
+    stall_fraction: float = 0.05
 
 
 DEFAULT_SETTINGS = SolverSettings()
@@ -688,9 +692,11 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
             state.redecode()  # a bent spine's joints are exact once decoded
         com_error = state.root()
         err = _errors(goals, state.dec)
-        # Done where every goal is met or no longer improving by a tolerance (unreachable), and
-        # the centre of mass is back; stop when every character is done.
-        goal_open = (err > tol) & (np.abs(previous - err) >= settings.tolerance_m)
+        # Done where every goal is met or has stalled (no longer falling by the tolerance and
+        # by a share of itself: unreachable), and the centre of mass is back; stop when every
+        # character is done. A stalled goal stays stalled for the tick.
+        improving = previous - err >= np.maximum(tol, settings.stall_fraction * previous)
+        goal_open = (err > tol) & improving & ~state.stalled
         if not goal_open.any() and np.all(com_error <= settings.com_tolerance_m):
             break
         state.stalled |= (err > tol) & ~goal_open

@@ -126,3 +126,18 @@ class CharacterStore:
                                         np.full((1,) + getattr(self.posture, f.name).shape[1:], np.nan)])
                 for f in fields(DecodedPose)})
         return row
+
+    def remove_row(self, row: int) -> None:
+        """Delete one character's row; the rows after it move down by one. Not in the tick.
+
+        This tick's derived arrays (goals, the solver's result, vertebrae) are dropped: the next
+        tick makes them again."""
+        keep = np.arange(self.n) != row
+        for f in fields(self):
+            if f.name in ("poses", "scaled", "vertebrae", "goals", "solved_positions", "posture"):
+                continue
+            setattr(self, f.name, getattr(self, f.name)[keep])
+        self.poses = self.poses.take(keep)
+        self.scaled = None if self.scaled is None else self.scaled.take(keep)
+        self.posture = None if self.posture is None else self.posture.take(keep)
+        self.vertebrae = self.goals = self.solved_positions = None
