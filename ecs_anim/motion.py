@@ -8,6 +8,7 @@ never leaves a damaged file behind.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -17,14 +18,17 @@ import numpy as np
 from .constraint_table import check_stored
 from .constraints import ConstraintSpec
 from .contacts import contacts_from_constraints
-from .errors import InputError
+from .errors import InputError, listed
 from .files import atomic_output
 from .morphology import Morphology
+from .skeleton import LENGTHS
 from .normalized import DIRECTION_FIELDS, QUATERNION_FIELDS, TRAILING_SHAPES, NormalizedPoses
 
 FORMAT_NAME = "ecs_anim.nmo"
 FORMAT_VERSION = 1
 HEADER_KEY = "header_json"
+#: The heaviest source body a header may hold (import writes 22 kg/m² x stature², at most 198 kg).
+MAX_MASS_KG = 1000.0
 
 
 @dataclass
@@ -141,7 +145,7 @@ def _check_header(path: str, header: Any) -> None:
     if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:
         raise InputError(path, "not an .nmo file (wrong format name in header)")
     version = header.get("version")
-    if version != FORMAT_VERSION:
+    if type(version) is not int or version != FORMAT_VERSION:  # JSON true is not version 1
         raise InputError(path, f".nmo format version {version!r} is not supported by this "
                                f"ecs_anim (reads version {FORMAT_VERSION}); re-import the source "
                                "clip or upgrade ecs_anim")
@@ -154,3 +158,38 @@ def _check_header(path: str, header: Any) -> None:
         raise InputError(path, f"damaged .nmo header: fps={fps!r}, n_frames={n!r}")
     if not isinstance(header.get("info", {}), dict) or not isinstance(header.get("constraints", []), list):
         raise InputError(path, "damaged .nmo header: 'info' must be an object and 'constraints' a list")
+    problem = _source_body_problem(header["source_morphology"])
+    if problem:
+        raise InputError(path, f"damaged .nmo header: source_morphology: {problem}")
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _source_body_problem(body: Any) -> str | None:
+    """What is wrong with a header's source body, or None: what import guarantees, checked again
+    (every segment of :data:`LENGTHS` a number 0-3 m, a stature of 0.3-3 m, a positive mass, a
+    sex of de Leva's table)."""
+    from .importing import MAX_STATURE_M, MIN_STATURE_M
+
+    if not isinstance(body, dict) or not isinstance(body.get("lengths_m"), dict):
+        return "expected an object with lengths_m: {segment: metres}"
+    lengths = body["lengths_m"]
+    missing = [name for name in LENGTHS if name not in lengths]
+    if missing:
+        return f"lengths_m lacks {listed(missing)}"
+    bad = [f"{name}={lengths[name]!r}" for name in LENGTHS
+           if not (_is_number(lengths[name]) and 0.0 < lengths[name] <= MAX_STATURE_M)]
+    if bad:
+        return f"segment lengths must be numbers above 0 and at most {MAX_STATURE_M:g} m, found {listed(bad, 3)}"
+    mass = body.get("mass_kg")
+    if not (_is_number(mass) and 0.0 < mass <= MAX_MASS_KG):
+        return f"mass_kg must be a number above 0 and at most {MAX_MASS_KG:g}, found {mass!r}"
+    if body.get("sex") not in ("male", "female"):
+        return f"sex must be 'male' or 'female', found {body.get('sex')!r}"
+    stature = Morphology(np.array([lengths[name] for name in LENGTHS], dtype=np.float64)).stature
+    if not MIN_STATURE_M <= stature <= MAX_STATURE_M:
+        return (f"the body is {stature:.3g} m tall; import only writes bodies of "
+                f"{MIN_STATURE_M:g}-{MAX_STATURE_M:g} m")
+    return None

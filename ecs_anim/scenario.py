@@ -605,8 +605,10 @@ def _refuse_clip(path: Path) -> None:
         what, how = "a BVH clip", f"import it (ecs-anim import {path} -o motions/) or {where}"
     elif suffix == ".c3d" or (len(head) > 1 and head[0] < 0x20 and head[1] == 0x50):
         what, how = "a C3D capture", f"import it (ecs-anim import {path} -o motions/) or {where}"
-    elif suffix in (".nmo", ".npz") or head.startswith(b"PK\x03\x04"):
-        what, how = "an .nmo motion (a zip archive)", where
+    elif suffix == ".nmo":
+        what, how = "an .nmo motion", where
+    elif head.startswith(b"PK\x03\x04"):
+        what, how = "a zip archive (an .nmo motion?)", where
     else:
         return
     raise InputError(path, f"a scenario YAML was expected, not {what}; to play it, {how}")
