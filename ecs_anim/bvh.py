@@ -120,7 +120,9 @@ def _floats(tokens: list[str], count: int, path: str, line: int, what: str) -> F
         values = np.array([float(t) for t in tokens])
     except ValueError:
         bad = next(t for t in tokens if not _is_number(t))
-        raise InputError(path, f"{what}: expected a number, found {bad!r}", line) from None
+        raise InputError(path, f"{what}: expected a number, found {_shown([bad], 30)!r}",
+                         line) from None
+    _require_plain(tokens, path, line, what)
     if not np.all(np.isfinite(values)):
         raise InputError(path, f"{what}: values must be finite, found {' '.join(tokens)}", line)
     if np.any(np.abs(values) > MAX_VALUE):
@@ -144,6 +146,22 @@ def _is_number(token: str) -> bool:
     except ValueError:
         return False
     return True
+
+
+def _is_plain(text: str) -> bool:
+    """Whether ``text`` can only hold numbers as BVH writes them: ASCII without underscores.
+    Python's ``float`` also reads ``1_000``, Arabic-Indic ``١٢.٥`` and full-width ``１２``, and
+    ``str.split`` splits at non-ASCII spaces; no BVH writer produces those."""
+    return text.isascii() and "_" not in text
+
+
+def _require_plain(tokens: list[str], path: str, line: int, what: str) -> None:
+    """Raise :class:`InputError` at ``line`` naming the first number of ``tokens`` (already known
+    to read as numbers) written otherwise than in ASCII digits."""
+    bad = next((t for t in tokens if not _is_plain(t)), None)
+    if bad is not None:
+        raise InputError(path, f"{what}: expected a number in ASCII digits (no '_' separators), "
+                               f"found {_shown([bad], 30)!r}", line)
 
 
 def read_bvh(path: str | Path) -> BvhMotion:
@@ -184,7 +202,9 @@ def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
     try:
         frame_time = float(tokens[2])
     except ValueError:
-        raise InputError(path, f"Frame Time must be a number, found {tokens[2]!r}", line) from None
+        raise InputError(path, f"Frame Time must be a number, found {_shown(tokens[2:], 30)!r}",
+                         line) from None
+    _require_plain(tokens[2:], path, line, "Frame Time")
     if not (math.isfinite(frame_time) and frame_time > 0):
         raise InputError(path, f"Frame Time must be a positive number of seconds, found {tokens[2]}",
                          line)
@@ -218,8 +238,12 @@ def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
         for line_no, ln in rows:
             for tok in ln.split():
                 if not _is_number(tok):
-                    raise InputError(path, f"expected a number, found {tok!r}", line_no) from None
+                    raise InputError(path, f"expected a number, found {_shown([tok], 30)!r}",
+                                     line_no) from None
         raise
+    # One pass over all the frame text; only a file that fails it is searched line by line.
+    if not _is_plain("".join(ln for _, ln in rows)):
+        _reject_unplain_frame(rows, split_rows, path)
     bad = ~np.isfinite(values) | (np.abs(values) > MAX_VALUE)
     if bad.any():
         frame = int(np.argmax(bad.any(axis=1)))
@@ -230,6 +254,17 @@ def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
         raise InputError(path, f"{what} {values[frame, col]} in channel {channel} of "
                                f"joint {name!r} (frame {frame + 1} of {n_frames})", rows[frame][0])
     return BvhMotion(skeleton, values, frame_time)
+
+
+def _reject_unplain_frame(rows: list[tuple[int, str]], split_rows: list[list[str]],
+                          path: str) -> None:
+    """Raise :class:`InputError` at the first frame line holding a non-ASCII character or '_'."""
+    for (line_no, ln), tokens in zip(rows, split_rows):
+        if not _is_plain(ln):
+            _require_plain(tokens, path, line_no, "frame line")
+            char = next(c for c in ln if not _is_plain(c))  # a non-ASCII space between numbers
+            raise InputError(path, f"frame line: numbers must be separated by ASCII spaces or "
+                                   f"tabs, found {char!r} (U+{ord(char):04X})", line_no)
 
 
 def _channel_owner(skeleton: BvhSkeleton, column: int) -> tuple[str, str]:

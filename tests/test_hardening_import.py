@@ -11,6 +11,7 @@ import pytest
 
 from conftest import MOCAP_DIR, MOTIONS_DIR, require_mocap
 from ecs_anim.bvh import parse_bvh
+from ecs_anim.errors import InputError
 from ecs_anim.importing import canonical_clip
 from ecs_anim.skeleton import JOINT_INDEX, JOINTS
 
@@ -70,3 +71,64 @@ def test_generic_names_on_a_z_up_file_read_with_up_z():
     # Z up in, Z up out: the head is above the pelvis by most of a trunk in every frame.
     rise = generic[:, JOINT_INDEX["head"], 2] - generic[:, JOINT_INDEX["pelvis"], 2]
     assert rise.min() > 0.4
+
+
+# --- item 10: BVH numbers are ASCII ----------------------------------------------------------
+
+WALK_LINES = WALK.read_text().split("\n")
+FRAMES_START = 150  # walk.bvh: MOTION on line 147, Frames 148, Frame Time 149, frames from 150
+
+
+def _with_line(number: int, edit) -> str:
+    """walk.bvh with line ``number`` (1-based) replaced by ``edit(line)``."""
+    lines = list(WALK_LINES)
+    lines[number - 1] = edit(lines[number - 1])
+    return "\n".join(lines)
+
+
+def _second_value(replacement: str):
+    """Replace the second number of a line (the root's Y position in a frame line)."""
+    def edit(line: str) -> str:
+        values = line.split(" ")
+        values[1] = replacement
+        return " ".join(values)
+    return edit
+
+
+def _parse_error(text: str) -> str:
+    with pytest.raises(InputError) as exc:
+        parse_bvh(text, "walk.bvh")
+    return str(exc.value)
+
+
+@pytest.mark.parametrize("written", ["1_000", "\u0661\u0662.\u0665", "\uff11\uff12",
+                                     "0.8_22245"])
+def test_frame_value_not_in_ascii_digits_is_refused_with_file_and_line(written):
+    assert float(written) > 0  # Python reads every one of them
+    line = FRAMES_START + 1  # frame 2
+    message = _parse_error(_with_line(line, _second_value(written)))
+    assert message == (f"walk.bvh:{line}: frame line: expected a number in ASCII digits "
+                       f"(no '_' separators), found {written!r}")
+
+
+def test_frame_values_separated_by_a_non_ascii_space_are_refused():
+    line = FRAMES_START + 2
+    text = _with_line(line, lambda ln: ln.replace(" ", "\u3000", 1))  # ideographic space
+    assert _parse_error(text) == (f"walk.bvh:{line}: frame line: numbers must be separated by "
+                                  "ASCII spaces or tabs, found '\\u3000' (U+3000)")
+
+
+def test_offset_and_frame_time_not_in_ascii_digits_are_refused():
+    offset = _with_line(16, lambda ln: ln.replace("-0.421998", "-0.421_998"))
+    assert WALK_LINES[15].strip() == "OFFSET 0.000000 -0.421998 0.000000"
+    assert _parse_error(offset) == ("walk.bvh:16: OFFSET of 'knee_l': expected a number in ASCII "
+                                    "digits (no '_' separators), found '-0.421_998'")
+    frame_time = _with_line(149, lambda ln: ln.replace("0.0333333333333", "0.0\uff13"))
+    assert _parse_error(frame_time) == ("walk.bvh:149: Frame Time: expected a number in ASCII "
+                                        "digits (no '_' separators), found '0.0\uff13'")
+
+
+def test_plain_files_still_parse_alike():
+    motion = parse_bvh(WALK.read_text(), "walk.bvh")
+    assert motion.channels.shape == (132, 78)
+    assert motion.channels[0, 1] == 0.822245
