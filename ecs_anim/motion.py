@@ -21,8 +21,8 @@ from .contacts import contacts_from_constraints
 from .errors import InputError, listed
 from .files import atomic_output
 from .morphology import Morphology
-from .skeleton import LENGTHS
 from .normalized import DIRECTION_FIELDS, QUATERNION_FIELDS, TRAILING_SHAPES, NormalizedPoses
+from .skeleton import LENGTHS
 
 FORMAT_NAME = "ecs_anim.nmo"
 FORMAT_VERSION = 1
@@ -183,7 +183,7 @@ def _source_body_problem(body: Any) -> str | None:
            if not (_is_number(lengths[name]) and 0.0 < lengths[name] <= MAX_STATURE_M)]
     if bad:
         return f"segment lengths must be numbers above 0 and at most {MAX_STATURE_M:g} m, found {listed(bad, 3)}"
-    mass = body.get("mass_kg")
+    mass: Any = body.get("mass_kg")
     if not (_is_number(mass) and 0.0 < mass <= MAX_MASS_KG):
         return f"mass_kg must be a number above 0 and at most {MAX_MASS_KG:g}, found {mass!r}"
     if body.get("sex") not in ("male", "female"):

@@ -71,7 +71,7 @@ def test_a_1000_by_1000_grid_loads_without_building_a_node_per_height(tmp_path):
 
 
 def test_grid_rows_aliased_into_more_heights_than_the_bound_are_refused(tmp_path):
-    # 11 KB: one row of 2,000 zeros used 2,100 times is 4.2 million heights.
+    # 19 KB: one row of 2,000 zeros used 2,100 times is 4.2 million heights.
     path = write(tmp_path, HEAD + "row: &r " + row(np.zeros(2000)) + "\n"
                  "ground:\n  type: grid\n  cell_m: 0.1\n  heights_m: [" + ", ".join(["*r"] * 2100)
                  + "]\n" + ONE)
@@ -203,6 +203,25 @@ def test_a_file_named_twice_is_read_once(tmp_path):
     loaded = load_scenario(path)
     assert loaded.motions["a"] is loaded.motions["b"]
     assert loaded.input_files == (str(path), str(WALK.resolve()))
+
+
+BAD = Path(__file__).parent / "data" / "bad_scenarios"
+
+
+@pytest.mark.parametrize("name, line, message", [
+    ("aliases_million_grounds.yaml", 1, f"the scenario holds more than {MAX_YAML_VALUES:,} values once "
+     "its aliases (*name) are expanded, each counted every time it is used (docs/scenarios.md, Sizes)"),
+    ("aliases_grid_too_big.yaml", 9, f"ground.heights_m: at most {MAX_GRID_CELLS:,} heights in the "
+     "ground's grids, found 4,200,000 (an alias counted each time it is used)"),
+    ("target_in_mm.yaml", 13, "characters[0].constraints[0].target.world_m: the target is 998 m from "
+     "the character's start (position_m, on the ground) (at most 100 m); world_m is in metres (was it "
+     "given in mm?)"),
+])
+def test_corpus_cases_fail_in_one_line_from_the_cli(name, line, message, capsys):
+    path = BAD / name
+    assert load_error(path) == f"{path}:{line}: {message}"
+    assert main(["run", str(path)]) == 1
+    assert capsys.readouterr().err == f"error: {path}:{line}: {message}\n"
 
 
 # --- item 14: metres given as millimetres ---------------------------------------------------------
