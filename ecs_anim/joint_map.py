@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 from .bvh import BvhSkeleton, rest_positions
 from .errors import InputError, MappingError, compose_yaml, listed
 from .rotations import normalize
-from .skeleton import JOINTS
+from .skeleton import JOINT_INDEX, JOINTS, PARENTS
 
 F64 = NDArray[np.float64]
 
@@ -679,9 +679,56 @@ def map_skeleton(skeleton: BvhSkeleton, map_spec: str | None = None,
                     if skeleton.joints[c].is_end_site
                     and np.linalg.norm(skeleton.joints[c].offset) > 1e-9]
             source[end] = ends[0] if len(ends) == 1 else None
+    if user_path is not None:
+        _check_user_map(skeleton, source, user_path, user_lines, how)
     thorax = _lca(skeleton, [source["shoulder_l"], source["shoulder_r"], source["head"]])  # type: ignore[list-item]
     names = {j: (None if i is None else skeleton.names[i]) for j, i in source.items()}
     return JointMap(source=source, thorax=thorax, how=how, names=names)
+
+
+def _hierarchy_parent(joint: str, source: dict[str, int | None]) -> str | None:
+    """The nearest mapped canonical ancestor a source must hang below: the canonical parent, but
+    for a shoulder the spine under the neck (CMU's clavicles branch off below the neck joint)."""
+    parent = PARENTS[JOINT_INDEX[joint]]
+    while parent >= 0 and (source[JOINTS[parent]] is None
+                           or (joint.startswith("shoulder_") and JOINTS[parent] == "neck")):
+        parent = PARENTS[parent]
+    return None if parent < 0 else JOINTS[parent]
+
+
+def _check_user_map(skeleton: BvhSkeleton, source: dict[str, int | None], user_path: str,
+                    user_lines: dict[str, int], how: str) -> None:
+    """Blame the map file, at the entry's line, for an entry that cannot be right: two canonical
+    joints on one source joint, a joint not below its canonical parent's, or at its place."""
+    rest = rest_positions(skeleton)
+    same_place = 1e-6 * max(1.0, float(np.abs(rest).max()))
+    owner: dict[int, str] = {}
+    for joint, i in source.items():
+        if i is None:
+            continue
+        other = owner.setdefault(i, joint)
+        if other != joint and (joint in user_lines or other in user_lines):
+            entry, first = (joint, other) if joint in user_lines else (other, joint)
+            given = f"joints.{first} (line {user_lines[first]})" if first in user_lines else \
+                f"{first} by {how.split(' + ')[0]}"
+            raise InputError(user_path, f"joints.{entry}: {skeleton.names[i]!r} is already "
+                                        f"{given}; each canonical joint needs a joint of its own",
+                             user_lines[entry])
+    for joint in JOINTS:
+        parent = _hierarchy_parent(joint, source)
+        if source[joint] is None or parent is None or not {joint, parent} & user_lines.keys():
+            continue
+        i, p = source[joint], source[parent]
+        assert i is not None and p is not None
+        entry = joint if joint in user_lines else parent
+        pair = f"{skeleton.names[i]!r} ({joint}) is {{}} {skeleton.names[p]!r} ({parent})"
+        if p not in _ancestors(skeleton, i):
+            raise InputError(user_path, f"joints.{entry}: {pair.format('not below')} in "
+                                        f"{skeleton.path}", user_lines[entry])
+        if PARENTS[JOINT_INDEX[joint]] == JOINT_INDEX[parent] and \
+                float(np.linalg.norm(rest[i] - rest[p])) <= same_place:
+            raise InputError(user_path, f"joints.{entry}: {pair.format('at the place of')} at "
+                                        "rest (a bone of zero length)", user_lines[entry])
 
 
 def preset_summary() -> str:

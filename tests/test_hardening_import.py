@@ -23,7 +23,8 @@ def generic_names(text: str) -> str:
     Sites stay End Sites), so that no name says what a joint is."""
     numbers = iter(range(1_000_000))
     return re.sub(r"^(\s*(?:ROOT|JOINT)\s+).+?\s*$",
-                  lambda m: f"{m.group(1)}Bone_{next(numbers):03d}", text, flags=re.M)
+                  lambda m: f"{m.group(1)}Bone_{next(numbers):03d}", text,
+                  flags=re.MULTILINE)
 
 
 # --- item 16: structural matching on topology and rest geometry ------------------------------
@@ -132,3 +133,48 @@ def test_plain_files_still_parse_alike():
     motion = parse_bvh(WALK.read_text(), "walk.bvh")
     assert motion.channels.shape == (132, 78)
     assert motion.channels[0, 1] == 0.822245
+
+
+# --- item 12: a map mistake is blamed on the map ---------------------------------------------
+
+def _map_error(tmp_path, entries: str) -> str:
+    path = tmp_path / "map.yaml"
+    path.write_text("joints:\n" + entries)
+    with pytest.raises(InputError) as exc:
+        canonical_clip(parse_bvh(WALK.read_text(), "walk.bvh"), map_spec=str(path))
+    return str(exc.value).replace(str(path), "map.yaml")
+
+
+def test_two_canonical_joints_on_one_source_joint_name_the_map_and_both_keys(tmp_path):
+    # Before: "walk.bvh: cannot normalize this skeleton: ... lengths must be positive, not
+    # ['thigh_l']", blaming the BVH.
+    assert _map_error(tmp_path, "  hip_l: hip_l\n  knee_l: hip_l\n") == (
+        "map.yaml:3: joints.knee_l: 'hip_l' is already joints.hip_l (line 2); each canonical "
+        "joint needs a joint of its own")
+
+
+def test_a_map_entry_taking_a_joint_the_preset_gave_another_part(tmp_path):
+    # Before: imported without a word, the left knee on the right leg.
+    assert _map_error(tmp_path, "  knee_l: knee_r\n") == (
+        "map.yaml:2: joints.knee_l: 'knee_r' is already knee_r by preset ecs_anim (detected); "
+        "each canonical joint needs a joint of its own")
+
+
+def test_a_map_entry_not_below_its_canonical_parent(tmp_path):
+    assert _map_error(tmp_path, "  ankle_l: toe_l\n  toe_l: ankle_l\n") == (
+        "map.yaml:3: joints.toe_l: 'ankle_l' (toe_l) is not below 'toe_l' (ankle_l) in walk.bvh")
+
+
+def test_a_map_entry_at_the_place_of_its_canonical_parent(tmp_path):
+    # walk.bvh's pelvis_l helper sits at the pelvis: a hip there makes a zero-length bone.
+    assert _map_error(tmp_path, "  hip_l: pelvis_l\n") == (
+        "map.yaml:2: joints.hip_l: 'pelvis_l' (hip_l) is at the place of 'pelvis' (pelvis) at rest "
+        "(a bone of zero length)")
+
+
+def test_a_map_that_only_renames_still_imports(tmp_path):
+    path = tmp_path / "map.yaml"
+    path.write_text("base: ecs_anim\njoints:\n  hip_l: hip_l\n  head_top: head.end\n")
+    clip = canonical_clip(parse_bvh(WALK.read_text(), "walk.bvh"), map_spec=str(path))
+    reference = canonical_clip(parse_bvh(WALK.read_text(), "walk.bvh"))
+    assert np.abs(clip.positions - reference.positions).max() == 0.0
