@@ -65,8 +65,10 @@ class NumberList(yaml.SequenceNode):
             resolver = yaml.resolver.Resolver()
             start = self.start_mark
             self._items = []
+            line, counted = start.line, 0
             for token in re.finditer(r"[^,\s]+", self._text):
-                line = start.line + self._text.count("\n", 0, token.start())
+                line += self._text.count("\n", counted, token.start())
+                counted = token.start()
                 mark = yaml.Mark(start.name, 0, line, 0, None, None)
                 tag = resolver.resolve(yaml.ScalarNode, token.group(), (True, False))
                 self._items.append(yaml.ScalarNode(tag, token.group(), mark, mark))
@@ -139,10 +141,10 @@ def compose_yaml(path: str | Path, what: str, number_lists: bool = False) -> Any
         if contents:
             try:
                 root = yaml.compose(packed)
+                if _unpack(root, contents):
+                    return root
             except (RecursionError, yaml.YAMLError):
-                root = None  # reported from the file's own text below
-            if root is not None and _unpack(root, contents):
-                return root
+                pass  # reported from the file's own text below
     return _compose_text(path, text)
 
 

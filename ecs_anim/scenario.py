@@ -591,6 +591,23 @@ def _com_target(r: _Reader, keys: dict[str, Node], where: str,
     return (xy[0], xy[1])
 
 
+def _compose(path: Path, what: str, label: str) -> Node:
+    """The file's YAML tree (long number lists read in one go), refused when empty or when it holds
+    more than :data:`MAX_YAML_VALUES` values with its aliases expanded."""
+    root = compose_yaml(path, what, number_lists=True)
+    if root is None:
+        raise InputError(path, f"{label} is empty", 1)
+    try:
+        expanded = expanded_size(root, MAX_YAML_VALUES)
+    except RecursionError:
+        raise InputError(path, "not valid YAML: nested too deeply") from None
+    if expanded > MAX_YAML_VALUES:
+        raise InputError(path, f"{label} holds more than {MAX_YAML_VALUES:,} values once its aliases "
+                               "(*name) are expanded, each counted every time it is used "
+                               "(docs/scenarios.md, Sizes)", 1)
+    return root
+
+
 def _refuse_clip(path: Path) -> None:
     """A motion clip given where a scenario is expected (``ecs-anim run walk.bvh``) is said to be
     one, by its extension or its first bytes, with how to play it."""
@@ -619,13 +636,7 @@ def load_scenario(path: str | Path) -> Scenario:
     path = Path(path)
     r = _Reader(str(path))
     _refuse_clip(path)
-    root = compose_yaml(path, "scenario", number_lists=True)
-    if root is None:
-        raise InputError(path, "the scenario is empty", 1)
-    if expanded_size(root, MAX_YAML_VALUES) > MAX_YAML_VALUES:
-        raise InputError(path, f"the scenario holds more than {MAX_YAML_VALUES:,} values once its "
-                               "aliases (*name) are expanded, each counted every time it is used "
-                               "(docs/scenarios.md, Sizes)", 1)
+    root = _compose(path, "scenario", "the scenario")
     top = r.mapping(root, "", {"duration_s": True, "fps": False, "motions": True,
                                "ground": False, "characters": True, "description": False,
                                "camera": False, "tables": False})
@@ -780,9 +791,7 @@ def load_motion_constraints(path: str | Path) -> list[ConstraintSpec]:
     activation times in the motion's own time (docs/scenarios.md)."""
     path = Path(path)
     r = _Reader(str(path))
-    root = compose_yaml(path, "constraints")
-    if root is None:
-        raise InputError(path, "the constraints file is empty", 1)
+    root = _compose(path, "constraints", "the constraints file")
     top = r.mapping(root, "", {"constraints": True})
     specs, names = [], set()
     for j, node in enumerate(r.sequence(top["constraints"], "constraints")):
