@@ -199,3 +199,13 @@ def listed(names: Iterable[object], limit: int = 6) -> str:
     items = [str(name) for name in names]
     shown = ", ".join(items[:limit])
     return shown if len(items) <= limit else f"{shown} (+{len(items) - limit} more)"
+
+def quoted(text: object, limit: int = 40) -> str:
+    """``repr(text)``, cut after ``limit`` characters with "...", so that a name taken from a file
+    (a 5,000-character joint name) leaves an error message one short line.
+
+    >>> quoted("a" * 50, limit=10)
+    "'aaaaaaa...'"
+    """
+    text = str(text)
+    return repr(text if len(text) <= limit else text[: limit - 3] + "...")
