@@ -200,6 +200,7 @@ def listed(names: Iterable[object], limit: int = 6) -> str:
     shown = ", ".join(items[:limit])
     return shown if len(items) <= limit else f"{shown} (+{len(items) - limit} more)"
 
+
 def quoted(text: object, limit: int = 40) -> str:
     """``repr(text)``, cut after ``limit`` characters with "...", so that a name taken from a file
     (a 5,000-character joint name) leaves an error message one short line.
