@@ -18,12 +18,12 @@ import shutil
 import stat
 import sys
 import tempfile
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import IO
 
-from .errors import EcsAnimError, listed
+from .errors import EcsAnimError, listed, quoted
 
 #: Written last into every export folder: the names of the files of the set, so that a later
 #: ``--force`` knows which files it may replace (and refuses a folder holding anything else).
@@ -108,8 +108,8 @@ def _process_alive(pid: int) -> bool:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
-    except PermissionError:
-        return True
+    except PermissionError:  # another user's process
+        pass
     return True
 
 
@@ -187,12 +187,6 @@ def atomic_output(path: str | Path, force: bool) -> Iterator[IO[bytes]]:
         raise
 
 
-def write_atomic(path: str | Path, force: bool, write: Callable[[IO[bytes]], object]) -> None:
-    """Call ``write(file)`` inside :func:`atomic_output`."""
-    with atomic_output(path, force) as f:
-        write(f)
-
-
 def _manifest_names(folder: Path) -> set[str]:
     """The files an earlier export listed in ``folder``'s manifest (none if it has none or it is
     damaged: then nothing more is ours)."""
@@ -226,7 +220,7 @@ def output_folder_problem(path: str | Path, names: Iterable[str], force: bool) -
     foreign = [e for e in entries
                if e not in ours or (real / e).is_symlink() or not (real / e).is_file()]
     if foreign:
-        return (f"{path}: holds files ecs-anim did not write ({listed(foreign, 4)}); an export "
+        return (f"{path}: holds files ecs-anim did not write ({listed(map(quoted, foreign), 4)}); an export "
                 "replaces its whole folder, so give a new or empty folder")
     if entries and not force:
         return f"{path}: holds an earlier export (use --force to replace it)"

@@ -153,7 +153,7 @@ def test_export_folder_is_replaced_as_a_set_and_a_users_files_are_kept(tmp_path,
     capsys.readouterr()
     assert main(["run", str(renamed), "--export", str(out), "--force"]) == 1
     assert error_of(capsys) == (f"error: --export {out}: holds files ecs-anim did not write "
-                                "(notes.txt); an export replaces its whole folder, so give a new "
+                                "('notes.txt'); an export replaces its whole folder, so give a new "
                                 "or empty folder")
     assert (out / "notes.txt").read_text() == "mine"
     report = out / "r.json"
