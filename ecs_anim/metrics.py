@@ -1,6 +1,7 @@
 """Per-character quality figures of a run, recorded after every tick (all characters at once).
 
-* foot sliding: how far a fully planted ankle moves from one tick to the next (mm per frame);
+* foot sliding: how far a fully planted ankle moves from one tick to the next (mm per frame),
+  and each slide beyond :data:`SLIDE_EVENT_MM` as an event naming the character, foot and tick;
 * ground penetration: how far the heel (the sole under the ankle) or the sole under the ball of
   the foot goes below the ground (mm);
 * bone-length error: the largest difference between a bone and the morphology (m);
@@ -26,6 +27,10 @@ IS_BONE = np.array([a >= 0 for a, _ in BONE_JOINTS])
 
 
 KIND_BY_NUMBER = {number: name for name, number in KIND_NAMES.items()}
+#: A planted foot moving more than this in one tick (mm) is recorded as a slide event.
+SLIDE_EVENT_MM = 1.0
+#: Slide events kept (the first ones; the count goes on).
+MAX_SLIDE_EVENTS = 100
 
 
 class MetricsRecorder:
@@ -40,6 +45,8 @@ class MetricsRecorder:
         self.slide_max = np.zeros(n)
         self.slide_sum = np.zeros(n)
         self.slide_count = np.zeros(n)
+        self.slides: list[dict[str, Any]] = []
+        self.slide_events = 0
         self.penetration_max = np.zeros(n)
         self.bone_error_max = np.zeros(n)
         self.prev_locked = np.zeros((n, 2), bool)
@@ -66,6 +73,8 @@ class MetricsRecorder:
             self.slide_max = np.maximum(self.slide_max, move_mm.max(axis=1))
             self.slide_sum += move_mm.sum(axis=1)
             self.slide_count += both.sum(axis=1)
+            if np.any(move_mm > SLIDE_EVENT_MM):  # rare: only then are the rows visited
+                self._record_slides(move_mm)
         self.prev_ankles, self.prev_planted = ankles.copy(), planted
         ankle_height = st.lengths[:, SIDE_LENGTHS["ankle_height"]]
         ball = BALL_HEIGHT_PER_LEG * sim.leg_length()[:, None]
@@ -93,6 +102,16 @@ class MetricsRecorder:
             self.constraint_error_any = np.fmax(self.constraint_error_any, err)
             self.com_error_max = np.fmax(self.com_error_max, st.com_error_m)
         self.ticks += 1
+
+    def _record_slides(self, move_mm: np.ndarray) -> None:
+        rows, sides = np.nonzero(move_mm > SLIDE_EVENT_MM)
+        self.slide_events += rows.size
+        names = self.sim.names()
+        for row, side in zip(rows[:MAX_SLIDE_EVENTS - len(self.slides)],
+                             sides[:MAX_SLIDE_EVENTS - len(self.slides)]):
+            self.slides.append({"tick": self.sim.tick, "time_s": round(self.sim.time_s, 4),
+                                "character": names[row], "foot": "left" if side == 0 else "right",
+                                "mm": round(float(move_mm[row, side]), 3)})
 
     def report(self) -> dict[str, Any]:
         sim = self.sim
@@ -136,5 +155,7 @@ class MetricsRecorder:
             "characters": characters,
             "constraints": constraints,
             "ms_per_tick": {k: round(v / ticks * 1e3, 4) for k, v in sim.system_seconds().items()},
+            "slide_events": {"count": self.slide_events, "threshold_mm": SLIDE_EVENT_MM,
+                             "first": list(self.slides)},
             "messages": list(sim.messages),
         }

@@ -114,23 +114,9 @@ def load_nmo(path: str | Path) -> NormalizedMotion:
         reason = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
         raise InputError(path, f"not a readable .nmo file (damaged or truncated?): {reason}") from None
     n = int(header["n_frames"])
-    for name, trailing in TRAILING_SHAPES.items():
-        if arrays[name].shape != (n,) + trailing:
-            raise InputError(path, f"damaged .nmo file: {name} has shape {arrays[name].shape}, "
-                                   f"expected {(n,) + trailing}")
-        if not np.all(np.isfinite(arrays[name])):
-            raise InputError(path, f"damaged .nmo file: {name} holds non-finite values")
-        if np.any(np.abs(arrays[name]) > 1e6):  # leg lengths, fractions, unit vectors: never
-            raise InputError(path, f"damaged .nmo file: {name} holds values beyond 1e6")
-    # A limb's length fraction is 0 (folded) to 1 (straight); a bone's stretch is positive.
-    for name, lo, hi in (("leg_fraction", 0.0, 1.0 + 1e-6), ("arm_fraction", 0.0, 1.0 + 1e-6),
-                         ("stretch", 1e-3, 1e3)):
-        if np.any((arrays[name] < lo) | (arrays[name] > hi)):
-            raise InputError(path, f"damaged .nmo file: {name} holds values outside {lo:g}-{hi:g}")
-    for name in QUATERNION_FIELDS + DIRECTION_FIELDS:
-        if np.any(np.abs(np.linalg.norm(arrays[name], axis=-1) - 1.0) > 1e-6):
-            what = "quaternions" if name in QUATERNION_FIELDS else "directions"
-            raise InputError(path, f"damaged .nmo file: {name} holds non-unit {what}")
+    problem = pose_arrays_problem(arrays, n)
+    if problem:
+        raise InputError(path, f"damaged .nmo file: {problem}")
     try:
         morph = Morphology.from_dict(header["source_morphology"])
         constraints = [ConstraintSpec.from_dict(c) for c in header.get("constraints", [])]
@@ -139,6 +125,52 @@ def load_nmo(path: str | Path) -> NormalizedMotion:
         raise InputError(path, f"damaged .nmo header: {exc}") from None
     return NormalizedMotion(NormalizedPoses(**arrays), float(header["fps"]), morph, constraints,
                             dict(header.get("info", {})))
+
+
+def pose_arrays_problem(arrays: dict[str, np.ndarray], n_frames: int) -> str | None:
+    """What is wrong with a motion's normalized pose arrays (``NormalizedPoses.arrays()``,
+    each (n_frames, *TRAILING_SHAPES[name])), or None: shapes, finite values, limb fractions
+    0-1, positive stretch, unit quaternions and directions. Import guarantees all of it; a file
+    or a motion made by code is checked against it."""
+    for name, trailing in TRAILING_SHAPES.items():
+        if name not in arrays:
+            return f"array {name!r} is missing"
+        value = arrays[name]
+        if value.shape != (n_frames,) + trailing:
+            return f"{name} has shape {value.shape}, expected {(n_frames,) + trailing}"
+        if not np.all(np.isfinite(value)):
+            return f"{name} holds non-finite values"
+        if np.any(np.abs(value) > 1e6):  # leg lengths, fractions, unit vectors: never
+            return f"{name} holds values beyond 1e6"
+    # A limb's length fraction is 0 (folded) to 1 (straight); a bone's stretch is positive.
+    for name, lo, hi in (("leg_fraction", 0.0, 1.0 + 1e-6), ("arm_fraction", 0.0, 1.0 + 1e-6),
+                         ("stretch", 1e-3, 1e3)):
+        if np.any((arrays[name] < lo) | (arrays[name] > hi)):
+            return f"{name} holds values outside {lo:g}-{hi:g}"
+    for name in QUATERNION_FIELDS + DIRECTION_FIELDS:
+        if np.any(np.abs(np.linalg.norm(arrays[name], axis=-1) - 1.0) > 1e-6):
+            what = "quaternions" if name in QUATERNION_FIELDS else "directions"
+            return f"{name} holds non-unit {what}"
+    return None
+
+
+def motion_problem(motion: object) -> str | None:
+    """What is wrong with a motion handed over by code (not read from a file), or None: a
+    :class:`NormalizedMotion` with at least one frame, a frame rate of 0.1-10,000 fps, pose
+    arrays as :func:`pose_arrays_problem` checks them and a source body of positive lengths."""
+    if not isinstance(motion, NormalizedMotion):
+        return f"expected a NormalizedMotion, got {type(motion).__name__}"
+    if not (_is_number(motion.fps) and 0.1 <= motion.fps <= 10000):
+        return f"fps must be a number from 0.1 to 10000, got {motion.fps!r}"
+    if motion.n_frames < 1:
+        return "no frames"
+    problem = pose_arrays_problem(motion.poses.arrays(), motion.n_frames)
+    if problem:
+        return problem
+    lengths = np.asarray(motion.source_morphology.lengths, dtype=float)
+    if not np.all(np.isfinite(lengths) & (lengths > 0.0)):
+        return "its source body has non-finite or non-positive segment lengths"
+    return None
 
 
 def _check_header(path: str, header: Any) -> None:

@@ -27,10 +27,10 @@ from .components import (
     Placement,
     Posture,
 )
-from .errors import EcsAnimError, listed
+from .errors import EcsAnimError, listed, quoted
 from .ground import Ground, Plane
 from .morphology import Morphology, leg_length, segment_mass_table
-from .motion import NormalizedMotion
+from .motion import NormalizedMotion, motion_problem
 from .playback import ClipBank, _wrap, rotate_xy, sample
 from .body_points import body_point
 from .solver_shell import DEFAULT_SETTINGS, SolverSettings
@@ -66,6 +66,10 @@ class Simulation:
 
         if not motions:
             raise EcsAnimError("a simulation needs at least one motion")
+        for name, motion in motions.items():
+            problem = motion_problem(motion)
+            if problem:
+                raise EcsAnimError(f"motion {quoted(name)}: {problem}")
         if not (np.isfinite(fps) and fps > 0):
             raise EcsAnimError(f"fps must be a positive number, got {fps}")
         self.world = f"ecs_anim-{next(_counter)}-{id(self):x}"

@@ -250,3 +250,22 @@ def test_remove_a_character_with_the_constraints_aiming_at_it(capsys):
         sim.remove(b)
     with pytest.raises(Exception, match=r"no constraint 'touch_b' on this character \(it has: touch_a\)"):
         sim.constraint_index(c, "touch_b")
+
+
+def test_motions_handed_straight_to_a_simulation_are_checked():
+    """Item 17: a NaN motion was accepted (and its characters' poses went NaN)."""
+    from dataclasses import replace
+
+    from ecs_anim.errors import EcsAnimError
+
+    walk = import_bvh(MOTIONS_DIR / "walk.bvh")
+    arrays = walk.poses.arrays()
+    arrays["root_position"] = arrays["root_position"].copy()
+    arrays["root_position"][3, 0] = np.nan
+    broken = replace(walk, poses=type(walk.poses)(**arrays))
+    with pytest.raises(EcsAnimError, match=r"^motion 'bad': root_position holds non-finite values$"):
+        Simulation({"walk": walk, "bad": broken})
+    with pytest.raises(EcsAnimError, match=r"^motion 'slow': fps must be a number from 0.1 to 10000, got 0.0$"):
+        Simulation({"slow": replace(walk, fps=0.0)})
+    with pytest.raises(EcsAnimError, match=r"^motion 'x': expected a NormalizedMotion, got str$"):
+        Simulation({"x": "walk.bvh"})  # type: ignore[dict-item]
