@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import InputError
+from .errors import InputError, quoted
 from .files import atomic_output
 from .rotations import euler_to_matrix
 
@@ -120,24 +120,18 @@ def _floats(tokens: list[str], count: int, path: str, line: int, what: str) -> F
         values = np.array([float(t) for t in tokens])
     except ValueError:
         bad = next(t for t in tokens if not _is_number(t))
-        raise InputError(path, f"{what}: expected a number, found {_shown([bad], 30)!r}",
+        raise InputError(path, f"{what}: expected a number, found {quoted(bad)}",
                          line) from None
     _require_plain(tokens, path, line, what)
     if not np.all(np.isfinite(values)):
-        raise InputError(path, f"{what}: values must be finite, found {' '.join(tokens)}", line)
+        raise InputError(path, f"{what}: values must be finite, found {quoted(' '.join(tokens), 60)}", line)
     if np.any(np.abs(values) > MAX_VALUE):
         raise InputError(path, f"{what}: values beyond {MAX_VALUE:g} (a length unit of "
-                               f"millimetres would make that 10 km), found {' '.join(tokens)}", line)
+                               f"millimetres would make that 10 km), found {quoted(' '.join(tokens), 60)}", line)
     return values
 
 
 _ASCII_INT = re.compile(r"[0-9]+")
-
-
-def _shown(tokens: list[str], limit: int = 60) -> str:
-    """Tokens joined for an error message, shortened so the message stays readable."""
-    text = " ".join(tokens)
-    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _is_number(token: str) -> bool:
@@ -161,7 +155,7 @@ def _require_plain(tokens: list[str], path: str, line: int, what: str) -> None:
     bad = next((t for t in tokens if not _is_plain(t)), None)
     if bad is not None:
         raise InputError(path, f"{what}: expected a number in ASCII digits (no '_' separators), "
-                               f"found {_shown([bad], 30)!r}", line)
+                               f"found {quoted(bad)}", line)
 
 
 def read_bvh(path: str | Path) -> BvhMotion:
@@ -181,7 +175,7 @@ def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
     tokens, line = reader.next_tokens("HIERARCHY")
     if tokens[0].upper() != "HIERARCHY":
         raise InputError(path, "expected 'HIERARCHY' at the start of a BVH file, found "
-                               f"{_shown(tokens[:1], 30)!r}", line)
+                               f"{quoted(tokens[0])}", line)
     joints: list[BvhJoint] = []
     tokens, line = reader.next_tokens("ROOT")
     if tokens[0].upper() != "ROOT" or len(tokens) < 2:
@@ -190,19 +184,19 @@ def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
 
     tokens, line = reader.next_tokens("MOTION")
     if tokens[0].upper() != "MOTION":
-        raise InputError(path, f"expected 'MOTION' after the hierarchy, found {_shown(tokens)!r}",
+        raise InputError(path, f"expected 'MOTION' after the hierarchy, found {quoted(' '.join(tokens), 60)}",
                          line)
     tokens, frames_line = reader.next_tokens("'Frames: N'")
     if tokens[0].lower() != "frames:" or len(tokens) != 2 or not _ASCII_INT.fullmatch(tokens[1]):
-        raise InputError(path, f"expected 'Frames: <count>', found {_shown(tokens)!r}", frames_line)
+        raise InputError(path, f"expected 'Frames: <count>', found {quoted(' '.join(tokens), 60)}", frames_line)
     n_frames = int(tokens[1])
     tokens, line = reader.next_tokens("'Frame Time: T'")
     if [t.lower() for t in tokens[:2]] != ["frame", "time:"] or len(tokens) != 3:
-        raise InputError(path, f"expected 'Frame Time: <seconds>', found {_shown(tokens)!r}", line)
+        raise InputError(path, f"expected 'Frame Time: <seconds>', found {quoted(' '.join(tokens), 60)}", line)
     try:
         frame_time = float(tokens[2])
     except ValueError:
-        raise InputError(path, f"Frame Time must be a number, found {_shown(tokens[2:], 30)!r}",
+        raise InputError(path, f"Frame Time must be a number, found {quoted(tokens[2])}",
                          line) from None
     _require_plain(tokens[2:], path, line, "Frame Time")
     if not (math.isfinite(frame_time) and frame_time > 0):
@@ -238,7 +232,7 @@ def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
         for line_no, ln in rows:
             for tok in ln.split():
                 if not _is_number(tok):
-                    raise InputError(path, f"expected a number, found {_shown([tok], 30)!r}",
+                    raise InputError(path, f"expected a number, found {quoted(tok)}",
                                      line_no) from None
         raise
     # One pass over all the frame text; only a file that fails it is searched line by line.
@@ -252,7 +246,7 @@ def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
         what = "non-finite value" if not np.isfinite(values[frame, col]) else \
             f"value beyond {MAX_VALUE:g}:"
         raise InputError(path, f"{what} {values[frame, col]} in channel {channel} of "
-                               f"joint {name!r} (frame {frame + 1} of {n_frames})", rows[frame][0])
+                               f"joint {quoted(name)} (frame {frame + 1} of {n_frames})", rows[frame][0])
     return BvhMotion(skeleton, values, frame_time)
 
 
@@ -264,7 +258,7 @@ def _reject_unplain_frame(rows: list[tuple[int, str]], split_rows: list[list[str
             _require_plain(tokens, path, line_no, "frame line")
             char = next(c for c in ln if not _is_plain(c))  # a non-ASCII space between numbers
             raise InputError(path, f"frame line: numbers must be separated by ASCII spaces or "
-                                   f"tabs, found {char!r} (U+{ord(char):04X})", line_no)
+                                   f"tabs, found {quoted(char)} (U+{ord(char):04X})", line_no)
 
 
 def _channel_owner(skeleton: BvhSkeleton, column: int) -> tuple[str, str]:
@@ -280,45 +274,45 @@ def _parse_joint(reader: _Lines, joints: list[BvhJoint], name: str, parent: int,
     path = reader.path
     tokens, brace_line = reader.next_tokens("'{'")
     if tokens != ["{"]:
-        raise InputError(path, f"expected '{{' after {name!r}, found {_shown(tokens)!r}",
+        raise InputError(path, f"expected '{{' after {quoted(name)}, found {quoted(' '.join(tokens), 60)}",
                          brace_line)
     tokens, off_line = reader.next_tokens("OFFSET")
     if tokens[0].upper() != "OFFSET":
-        raise InputError(path, f"expected 'OFFSET x y z' in {name!r}, found {tokens[0]!r}", off_line)
-    offset = _floats(tokens[1:], 3, path, off_line, f"OFFSET of {name!r}")
+        raise InputError(path, f"expected 'OFFSET x y z' in {quoted(name)}, found {quoted(tokens[0])}", off_line)
+    offset = _floats(tokens[1:], 3, path, off_line, f"OFFSET of {quoted(name)}")
     index = len(joints)
     depth = 0
     p = parent
     while p >= 0:
         depth, p = depth + 1, joints[p].parent
     if depth > MAX_DEPTH:
-        raise InputError(path, f"hierarchy nested more than {MAX_DEPTH} joints deep at {name!r}",
+        raise InputError(path, f"hierarchy nested more than {MAX_DEPTH} joints deep at {quoted(name)}",
                          line)
     joint = BvhJoint(name=name, parent=parent, offset=offset, is_end_site=is_end, line=line)
     joints.append(joint)
     if is_end:
         tokens, close_line = reader.next_tokens("'}'")
         if tokens != ["}"]:
-            raise InputError(path, f"expected '}}' closing End Site of {joints[parent].name!r}",
+            raise InputError(path, f"expected '}}' closing End Site of {quoted(joints[parent].name)}",
                              close_line)
         return
     tokens, ch_line = reader.next_tokens("CHANNELS")
     if tokens[0].upper() == "CHANNELS":
         if len(tokens) < 2 or not _ASCII_INT.fullmatch(tokens[1]):
-            raise InputError(path, f"expected 'CHANNELS <count> <names...>' in {name!r}", ch_line)
+            raise InputError(path, f"expected 'CHANNELS <count> <names...>' in {quoted(name)}", ch_line)
         count = int(tokens[1])
         names = tokens[2:]
         if len(names) != count:
-            raise InputError(path, f"CHANNELS of {name!r} announces {count} channels but lists "
+            raise InputError(path, f"CHANNELS of {quoted(name)} announces {count} channels but lists "
                                    f"{len(names)}", ch_line)
         seen: set[str] = set()
         for ch in names:
             key = ch.lower()
             if key not in _ROTATION_CHANNELS and key not in _POSITION_CHANNELS:
-                raise InputError(path, f"unknown channel {ch!r} in {name!r} (expected X/Y/Z "
+                raise InputError(path, f"unknown channel {quoted(ch)} in {quoted(name)} (expected X/Y/Z "
                                        "position or rotation)", ch_line)
             if key in seen:
-                raise InputError(path, f"channel {ch!r} appears twice in {name!r}", ch_line)
+                raise InputError(path, f"channel {quoted(ch)} appears twice in {quoted(name)}", ch_line)
             seen.add(key)
         joint.channels = names
         tokens, ch_line = reader.next_tokens("JOINT, End Site or '}'")
@@ -331,11 +325,11 @@ def _parse_joint(reader: _Lines, joints: list[BvhJoint], name: str, parent: int,
         elif tokens == ["}"]:
             return
         elif head == "MOTION":
-            raise InputError(path, f"joint {name!r} is not closed with '}}' before MOTION", ch_line)
+            raise InputError(path, f"joint {quoted(name)} is not closed with '}}' before MOTION", ch_line)
         else:
-            raise InputError(path, f"expected JOINT, End Site or '}}' in {name!r}, found "
-                                   f"{_shown(tokens)!r}", ch_line)
-        tokens, ch_line = reader.next_tokens(f"'}}' closing {name!r}")
+            raise InputError(path, f"expected JOINT, End Site or '}}' in {quoted(name)}, found "
+                                   f"{quoted(' '.join(tokens), 60)}", ch_line)
+        tokens, ch_line = reader.next_tokens(f"'}}' closing {quoted(name)}")
 
 
 def joint_local_transforms(motion: BvhMotion) -> tuple[F64, F64]:

@@ -59,7 +59,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .contacts import ContactThresholds, _intervals
-from .errors import EcsAnimError, InputError
+from .errors import EcsAnimError, InputError, quoted
 from .importing import (
     UNITS,
     YUP_TO_ZUP,
@@ -142,7 +142,8 @@ def read_c3d(path: str | Path) -> C3dMarkers:
             raise
         except Exception as exc:  # the reader raises struct, value, index errors on bad bytes
             reason = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
-            raise InputError(path, f"not a readable C3D file (damaged or truncated?): {reason}") from None
+            raise InputError(path, "not a readable C3D file (damaged or truncated?): "
+                                   f"{quoted(reason, 100)}") from None
     if n_points <= 0:
         raise InputError(path, "the C3D file holds no marker (POINT:USED is 0)")
     if not (math.isfinite(rate) and 0.1 <= rate <= 100000):

@@ -27,7 +27,7 @@ import yaml
 from numpy.typing import NDArray
 
 from .bvh import BvhSkeleton, rest_positions
-from .errors import InputError, MappingError, compose_yaml, listed
+from .errors import InputError, MappingError, compose_yaml, listed, quoted
 from .rotations import normalize
 from .skeleton import JOINT_INDEX, JOINTS, PARENTS
 
@@ -533,7 +533,7 @@ _PART_WORDS = {"pelvis": "hips pelvis root", "hip": "upleg thigh hip", "knee": "
                "ankle": "foot ankle", "neck": "neck", "head": "head", "shoulder": "arm shoulder",
                "elbow": "forearm elbow", "wrist": "hand wrist"}
 #: Missing parts named in an error, each with this many closest joint names; the rest counted.
-HINTED_PARTS, HINTS_PER_PART = 3, 2
+HINTED_PARTS, HINTS_PER_PART = 2, 2
 
 
 def _missing_message(skeleton: BvhSkeleton, missing: list[str], problems: list[str]) -> str:
@@ -555,7 +555,7 @@ def _missing_message(skeleton: BvhSkeleton, missing: list[str], problems: list[s
                     score[k] = max(score[k], matcher.ratio())
         score += [0.1 if side and _side_of(n) == side else 0.0 for n in names]
         closest = [names[k] for k in np.argsort(-score, kind="stable")[:HINTS_PER_PART]]
-        parts.append(f"{m} (closest: {', '.join(closest) or 'none'})")
+        parts.append(f"{m} (closest: {listed(quoted(n) for n in closest) or 'none'})")
     found_parts = listed(parts + missing[len(parts):], HINTED_PARTS)
     why = f" ({'; '.join(problems)})" if problems else ""
     return f"cannot find these body parts in the skeleton: {found_parts}{why}; {_GIVE_A_MAP}"
@@ -585,7 +585,7 @@ def load_user_map(path: str | Path) -> tuple[str | None, dict[str, str], dict[st
         if key == "base":
             base = str(value_node.value)
             if base not in PRESETS:
-                raise InputError(path, f"base: unknown preset {base!r}; presets are "
+                raise InputError(path, f"base: unknown preset {quoted(base)}; presets are "
                                        f"{', '.join(PRESETS)}", line)
         elif key == "joints":
             if not isinstance(value_node, yaml.MappingNode):
@@ -597,7 +597,8 @@ def load_user_map(path: str | Path) -> tuple[str | None, dict[str, str], dict[st
                     close = difflib.get_close_matches(k, JOINTS, n=1)
                     hint = f" (did you mean {close[0]!r}?)" if close else ""
                     raise InputError(path, f"joints.{k}: unknown canonical joint{hint}; "
-                                           f"canonical joints are {', '.join(JOINTS)}", kline)
+                                           f"canonical joints are {listed(JOINTS)} (all in "
+                                           "docs/format.md)", kline)
                 if not isinstance(v_node, yaml.ScalarNode) or v_node.value in ("", None):
                     raise InputError(path, f"joints.{k}: expected a source joint name", kline)
                 joints[k] = str(v_node.value)
@@ -658,8 +659,9 @@ def map_skeleton(skeleton: BvhSkeleton, map_spec: str | None = None,
         i = _find(skeleton, source_name)
         if i is None:
             close = difflib.get_close_matches(source_name, skeleton.names, n=3)
-            raise InputError(user_path, f"joints.{canonical}: no joint {source_name!r} in "
-                                        f"{skeleton.path} (closest: {', '.join(close) or 'none'})",
+            raise InputError(user_path, f"joints.{canonical}: no joint {quoted(source_name)} in "
+                                        f"{skeleton.path} (closest: "
+                                        f"{listed(quoted(n) for n in close) or 'none'})",
                              user_lines[canonical])
         found[canonical] = i
     missing = [j for j in REQUIRED if found.get(j) is None]
@@ -711,7 +713,7 @@ def _check_user_map(skeleton: BvhSkeleton, source: dict[str, int | None], user_p
             entry, first = (joint, other) if joint in user_lines else (other, joint)
             given = f"joints.{first} (line {user_lines[first]})" if first in user_lines else \
                 f"{first} by {how.split(' + ')[0]}"
-            raise InputError(user_path, f"joints.{entry}: {skeleton.names[i]!r} is already "
+            raise InputError(user_path, f"joints.{entry}: {quoted(skeleton.names[i])} is already "
                                         f"{given}; each canonical joint needs a joint of its own",
                              user_lines[entry])
     for joint in JOINTS:
@@ -721,7 +723,7 @@ def _check_user_map(skeleton: BvhSkeleton, source: dict[str, int | None], user_p
         i, p = source[joint], source[parent]
         assert i is not None and p is not None
         entry = joint if joint in user_lines else parent
-        pair = f"{skeleton.names[i]!r} ({joint}) is {{}} {skeleton.names[p]!r} ({parent})"
+        pair = f"{quoted(skeleton.names[i])} ({joint}) is {{}} {quoted(skeleton.names[p])} ({parent})"
         if p not in _ancestors(skeleton, i):
             raise InputError(user_path, f"joints.{entry}: {pair.format('not below')} in "
                                         f"{skeleton.path}", user_lines[entry])

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import yaml
 
-from .errors import InputError, MappingError, compose_yaml
+from .errors import InputError, MappingError, compose_yaml, listed, quoted
 
 MIN_ROLES_DETECTED = 8
 GROUPS: tuple[str, ...] = ("pelvis", "leg_l", "leg_r", "trunk", "head", "arm_l", "arm_r")
@@ -240,7 +240,7 @@ def match_markers(labels: list[str], spec: str | None = None) -> MarkerMap:
         else:
             close = difflib.get_close_matches(spec, list(PRESETS), n=1)
             hint = f" (did you mean {close[0]!r}?)" if close else ""
-            raise MappingError(f"--map {spec}: not a marker-set preset nor a YAML file{hint}; "
+            raise MappingError(f"--map {quoted(spec)}: not a marker-set preset nor a YAML file{hint}; "
                                f"marker sets: {', '.join(PRESETS)}")
     best: tuple[int, str, MarkerSet, dict[str, int]] | None = None
     for subject, indices in _subjects(labels).items():
@@ -261,12 +261,12 @@ def match_markers(labels: list[str], spec: str | None = None) -> MarkerMap:
                 best = (len(found), subject, preset, found)
     if best is None:
         if subject_wanted is not None and subject_wanted not in _subjects(labels):
-            raise MappingError(f"no markers of subject {subject_wanted!r}; subjects in the file: "
-                               f"{', '.join(repr(s) for s in _subjects(labels))}")
-        shown = ", ".join(labels[:60]) + (" ..." if len(labels) > 60 else "")
+            raise MappingError(f"no markers of subject {quoted(subject_wanted)}; subjects in the "
+                               f"file: {listed(quoted(s) for s in _subjects(labels))}")
         raise MappingError(
-            f"no marker set recognised from the labels (presets: {', '.join(PRESETS)}); give "
-            f"--map PRESET or --map FILE.yaml (markers: {{ROLE: label}}). Labels: {shown}")
+            f"no marker set recognised from the labels ({listed(quoted(lab) for lab in labels)}); "
+            f"give --map PRESET (presets: {', '.join(PRESETS)}) or FILE.yaml "
+            "(markers: {ROLE: label})")
     _, subject, preset, found = best
     how = f"marker set {preset.name} ({'requested' if base and not user_path else 'detected'})"
     if user_path:
@@ -276,13 +276,15 @@ def match_markers(labels: list[str], spec: str | None = None) -> MarkerMap:
             close = difflib.get_close_matches(role, list(preset.roles), n=1)
             hint = f" (did you mean {close[0]!r}?)" if close else ""
             raise InputError(user_path, f"markers.{role}: unknown role for {preset.name}{hint}; "
-                                        f"roles: {', '.join(preset.roles)}", user_lines[role])
+                                        f"roles: {listed(preset.roles)} (all in "
+                                        "ecs_anim/marker_sets.py)", user_lines[role])
         matches = [i for i, lab in enumerate(labels)
                    if label_key(lab) == label_key(label) and subject_of(lab) == subject]
         if not matches:
             close = difflib.get_close_matches(label, labels, n=3)
-            raise InputError(user_path, f"markers.{role}: no marker {label!r} in the file "
-                                        f"(closest: {', '.join(close) or 'none'})", user_lines[role])
+            raise InputError(user_path, f"markers.{role}: no marker {quoted(label)} in the file "
+                                        f"(closest: {listed(quoted(c) for c in close) or 'none'})",
+                             user_lines[role])
         found[role] = matches[0]
     if subject:
         how += f", subject {subject!r}"
@@ -320,6 +322,10 @@ def _describe(preset: MarkerSet, role: str) -> str:
     return cands[0] if cands else role
 
 
+#: Body parts, and markers per part, a "missing markers" error names; the rest are counted.
+MISSING_PARTS, MISSING_PER_PART = 3, 3
+
+
 def check_usable(mmap: MarkerMap, labels: list[str]) -> tuple[list[str], list[str]]:
     """(present, absent) groups, or :class:`MappingError` listing missing markers per body part.
 
@@ -331,7 +337,8 @@ def check_usable(mmap: MarkerMap, labels: list[str]) -> tuple[list[str], list[st
         incomplete = {"pelvis": [" + ".join(_describe(mmap.preset, r)
                                             for r in mmap.preset.groups["pelvis"][0])]} | incomplete
     if incomplete:
-        parts = "; ".join(f"{GROUP_WORDS[g]}: {', '.join(m)}" for g, m in incomplete.items())
+        parts = listed((f"{GROUP_WORDS[g]}: {listed(m, MISSING_PER_PART)}"
+                        for g, m in incomplete.items()), MISSING_PARTS)
         raise MappingError(f"{mmap.how}: missing markers by body part: {parts} (give them in "
                            f"--map FILE.yaml, markers: {{ROLE: label}})")
     return present, [g for g in GROUPS if g not in present]
@@ -354,7 +361,7 @@ def load_marker_map(path: str | Path) -> tuple[str | None, str | None, dict[str,
         if key == "base":
             base = str(value_node.value)
             if base not in PRESETS:
-                raise InputError(path, f"base: unknown marker set {base!r}; marker sets are "
+                raise InputError(path, f"base: unknown marker set {quoted(base)}; marker sets are "
                                        f"{', '.join(PRESETS)}", line)
         elif key == "subject":
             subject = str(value_node.value)

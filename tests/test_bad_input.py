@@ -270,7 +270,7 @@ def test_bad_joint_map_names_file_line_and_key(name, line, fragment):
         map_skeleton(skeleton, str(path))
     text = assert_one_line_error(exc.value, path, line, fragment)
     if name == "map_missing_source_joint.yaml":
-        assert "closest: wrist_l" in text
+        assert "closest: 'wrist_l'" in text
 
 
 @pytest.mark.parametrize("name, line, fragment", BAD_MAPS)

@@ -11,8 +11,9 @@ import pytest
 
 from conftest import MOCAP_DIR, MOTIONS_DIR, require_mocap
 from ecs_anim.bvh import parse_bvh
+from ecs_anim.c3d_import import import_c3d
 from ecs_anim.errors import InputError
-from ecs_anim.importing import canonical_clip
+from ecs_anim.importing import canonical_clip, import_bvh
 from ecs_anim.skeleton import JOINT_INDEX, JOINTS
 
 WALK = MOTIONS_DIR / "walk.bvh"
@@ -178,3 +179,111 @@ def test_a_map_that_only_renames_still_imports(tmp_path):
     clip = canonical_clip(parse_bvh(WALK.read_text(), "walk.bvh"), map_spec=str(path))
     reference = canonical_clip(parse_bvh(WALK.read_text(), "walk.bvh"))
     assert np.abs(clip.positions - reference.positions).max() == 0.0
+
+
+# --- item 13: error messages stay one short line ---------------------------------------------
+
+#: Longest message the house style allows (about 300 characters), the file's path aside.
+MESSAGE_CHARS = 300
+
+
+def _wide_bvh(n_joints: int) -> str:
+    """A skeleton of ``n_joints`` joints hanging side by side from the root, one frame."""
+    joints = "".join(f"  JOINT Joint_{i:04d}\n  {{\n    OFFSET 0 1 0\n    CHANNELS 1 Zrotation\n"
+                     "    End Site\n    {\n      OFFSET 0 1 0\n    }\n  }\n"
+                     for i in range(n_joints))
+    return ("HIERARCHY\nROOT Root\n{\n  OFFSET 0 0 0\n  CHANNELS 3 Xposition Yposition Zposition\n"
+            f"{joints}}}\nMOTION\nFrames: 1\nFrame Time: 0.033333\n"
+            + " ".join(["0"] * (3 + n_joints)) + "\n")
+
+
+def _message(exc: pytest.ExceptionInfo[BaseException], path: object) -> str:
+    """The error's text without its ``path:`` prefix, checked to be one line."""
+    text = str(exc.value)
+    assert "\n" not in text
+    return text.removeprefix(f"{path}: ")
+
+
+def test_a_5000_joint_bvh_that_cannot_be_mapped_gives_a_short_error(tmp_path):
+    # Before: one 61,292-character line listing every joint (and each part's closest names).
+    path = tmp_path / "wide.bvh"
+    path.write_text(_wide_bvh(5000))
+    with pytest.raises(InputError) as exc:
+        import_bvh(path)
+    message = _message(exc, path)
+    assert message == ("cannot match the skeleton by its names (no preset fits) nor by its "
+                       "structure (no joint up the spine where two arms and a neck branch off); "
+                       "give --map PRESET or FILE.yaml (joints: {canonical: source_name}); "
+                       "presets: ecs-anim import --help")
+    assert len(message) < MESSAGE_CHARS
+
+
+def test_a_5000_joint_bvh_with_a_requested_preset_lists_a_few_missing_parts(tmp_path):
+    path = tmp_path / "wide.bvh"
+    path.write_text(_wide_bvh(5000))
+    with pytest.raises(InputError) as exc:
+        import_bvh(path, map_spec="mixamo")
+    message = _message(exc, path)
+    assert message.startswith("cannot find these body parts in the skeleton: pelvis (closest: ")
+    assert "(+13 more) (using preset mixamo (requested)); give --map" in message
+    assert len(message) < MESSAGE_CHARS
+
+
+def test_long_joint_names_are_cut_in_messages():
+    name = "Hip" * 2000
+    text = _with_line(2, lambda ln: f"ROOT {name}")
+    text = text.replace("OFFSET 0.000000 0.000000 0.000000", "OFFSET 0.000000 0.000000", 1)
+    assert _parse_error(text) == (f"walk.bvh:4: OFFSET of '{name[:37]}...': expected 3 numbers, "
+                                  "found 2")
+
+
+def _labels_c3d(tmp_path, labels: list[str]):
+    from test_c3d import write_c3d
+
+    rng = np.random.default_rng(13)
+    return write_c3d(tmp_path / "many.c3d", labels, rng.uniform(0.0, 1.0, (5, len(labels), 3)))
+
+
+#: The most labels one POINT:LABELS parameter holds (its dimensions are bytes); the reader reads
+#: no LABELS2.
+MAX_LABELS = 255
+
+
+def test_a_c3d_with_hundreds_of_unknown_labels_gives_a_short_error(tmp_path):
+    # Before: the first 60 labels (632 characters).
+    labels = [f"M{i:04d}" for i in range(MAX_LABELS)]
+    path = _labels_c3d(tmp_path, labels)
+    with pytest.raises(InputError) as exc:
+        import_c3d(path)
+    message = _message(exc, path)
+    assert message.startswith("no marker set recognised from the labels ('M0000', 'M0001', "
+                              "'M0002', 'M0003', 'M0004', 'M0005' (+249 more)); give --map PRESET")
+    assert len(message) < MESSAGE_CHARS
+
+
+def test_a_c3d_with_hundreds_of_subjects_gives_a_short_error(tmp_path):
+    # Before: every subject (3,897 characters).
+    labels = [f"Subject{i:04d}:LASI" for i in range(MAX_LABELS)]
+    path = _labels_c3d(tmp_path, labels)
+    user_map = tmp_path / "map.yaml"
+    user_map.write_text("subject: Bob\nmarkers:\n  KNEE_LAT_l: LKNE\n")
+    with pytest.raises(InputError) as exc:
+        import_c3d(path, str(user_map))
+    message = _message(exc, path)
+    assert message == ("no markers of subject 'Bob'; subjects in the file: 'Subject0000', "
+                       "'Subject0001', 'Subject0002', 'Subject0003', 'Subject0004', 'Subject0005' "
+                       "(+249 more)")
+
+
+def test_a_marker_map_with_an_unknown_role_lists_a_few_roles(tmp_path):
+    labels = ["LASI", "RASI", "LPSI", "RPSI"] + [f"M{i:04d}" for i in range(MAX_LABELS - 4)]
+    path = _labels_c3d(tmp_path, labels)
+    user_map = tmp_path / "map.yaml"
+    user_map.write_text("markers:\n  KNEE_LAT_x: M0001\n")
+    with pytest.raises(InputError) as exc:
+        import_c3d(path, str(user_map))
+    # Before: all 43 roles of Plug-in Gait (557 characters).
+    message = _message(exc, f"{user_map}:2")
+    assert message == ("markers.KNEE_LAT_x: unknown role for plug_in_gait (did you mean "
+                       "'KNEE_LAT_r'?); roles: ASIS_l, ASIS_r, PSIS_l, PSIS_r, SACRUM, THIGH_l "
+                       "(+37 more) (all in ecs_anim/marker_sets.py)")
