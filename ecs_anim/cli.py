@@ -137,6 +137,11 @@ def cmd_import(args: argparse.Namespace) -> int:
                     spans = ", ".join(f"{a}-{b}" for a, b in gaps["long_gap_frames"])
                     message += (f"; frames {spans} had gaps longer than {gaps['max_gap_frames']} "
                                 "frames (interpolated, unreliable)")
+            for key, what in (("root_frames_trimmed", "trimmed (of the file's frames)"),
+                              ("root_frames_repaired", "repaired")):
+                if motion.info.get(key):
+                    spans = ", ".join(f"{a}-{b}" for a, b in motion.info[key])
+                    message += f"; frames {spans} {what}: the pelvis markers could not place the pelvis"
             if show_bar:
                 sys.stderr.write("\r" + " " * 80 + "\r")
             print(message)
@@ -203,6 +208,12 @@ def cmd_info(args: argparse.Namespace) -> int:
     absent = info.get("absent")
     if absent and isinstance(absent, list):
         print(f"  absent     {', '.join(map(str, absent))} (no markers: {info.get('absent_fill')})")
+    for key, what in (("root_frames_trimmed", "trimmed    frames {} of the file"),
+                      ("root_frames_repaired", "repaired   frames {}")):
+        spans = info.get(key)
+        if spans and isinstance(spans, list):
+            shown = ", ".join(f"{a}-{b}" for a, b in spans)
+            print(f"  {what.format(shown)} (the pelvis markers could not place the pelvis)")
     return 0
 
 

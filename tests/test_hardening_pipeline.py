@@ -269,3 +269,17 @@ def test_motions_handed_straight_to_a_simulation_are_checked():
         Simulation({"slow": replace(walk, fps=0.0)})
     with pytest.raises(EcsAnimError, match=r"^motion 'x': expected a NormalizedMotion, got str$"):
         Simulation({"x": "walk.bvh"})  # type: ignore[dict-item]
+
+
+def test_import_and_info_say_which_frames_were_trimmed(tmp_path, capsys):
+    require_mocap()
+    from ecs_anim.cli import main
+
+    assert main(["import", str(GAIT), "-o", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert ("frames 0-18, 438-449 trimmed (of the file's frames): the pelvis markers could not "
+            "place the pelvis") in out
+    assert "419 frames at 50 fps" in out
+    assert main(["info", str(tmp_path / f"{GAIT.stem}.nmo")]) == 0
+    assert ("  trimmed    frames 0-18, 438-449 of the file (the pelvis markers could not place the "
+            "pelvis)") in capsys.readouterr().out
