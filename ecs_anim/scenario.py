@@ -48,7 +48,7 @@ MAX_GROUND_PARTS = 1_000  # grounds, combined ones and their parts included
 MAX_CHARACTERS = 100_000
 MAX_CONSTRAINTS = 100_000  # over all characters
 MAX_TABLES = 1_000
-#: Highest and lowest ground height or level (m).
+#: Highest (and, negated, lowest) height of a grid ground (m), as for a plane's level ``z_m``.
 MAX_GROUND_HEIGHT_M = 1e3
 
 
@@ -290,8 +290,7 @@ def _ground(r: _Reader, node: Node, where: str, inside: tuple[int, ...] = ()) ->
                                                  f"{', '.join(GROUND_KEYS)})")
     keys = r.mapping(node, where, GROUND_KEYS[kind])
 
-    def num(key: str, default: float, lo: float = -MAX_GROUND_HEIGHT_M, hi: float = MAX_GROUND_HEIGHT_M,
-            unit: str = "") -> float:
+    def num(key: str, default: float, lo: float = -1e3, hi: float = 1e3, unit: str = "") -> float:
         return r.number(keys[key], f"{where}.{key}", lo, hi, unit) if key in keys else default
 
     if kind == "plane":
