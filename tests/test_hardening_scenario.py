@@ -209,13 +209,13 @@ BAD = Path(__file__).parent / "data" / "bad_scenarios"
 
 
 @pytest.mark.parametrize("name, line, message", [
-    ("aliases_million_grounds.yaml", 1, f"the scenario holds more than {MAX_YAML_VALUES:,} values once "
-     "its aliases (*name) are expanded, each counted every time it is used (docs/scenarios.md, Sizes)"),
-    ("aliases_grid_too_big.yaml", 9, f"ground.heights_m: at most {MAX_GRID_CELLS:,} heights in the "
-     "ground's grids, found 4,200,000 (an alias counted each time it is used)"),
-    ("target_in_mm.yaml", 13, "characters[0].constraints[0].target.world_m: the target is 998 m from "
+    ("aliases_million_grounds.yaml", 1, (f"the scenario holds more than {MAX_YAML_VALUES:,} values once "
+     "its aliases (*name) are expanded, each counted every time it is used (docs/scenarios.md, Sizes)")),
+    ("aliases_grid_too_big.yaml", 9, (f"ground.heights_m: at most {MAX_GRID_CELLS:,} heights in the "
+     "ground's grids, found 4,200,000 (an alias counted each time it is used)")),
+    ("target_in_mm.yaml", 13, ("characters[0].constraints[0].target.world_m: the target is 998 m from "
      "the character's start (position_m, on the ground) (at most 100 m); world_m is in metres (was it "
-     "given in mm?)"),
+     "given in mm?)")),
 ])
 def test_corpus_cases_fail_in_one_line_from_the_cli(name, line, message, capsys):
     path = BAD / name
