@@ -374,7 +374,7 @@ def _limb(tree: _Tree, hub: int, branch: int) -> dict[str, int | None]:
 
     The two long bones are the path's longest segment and the longer of its neighbours, never
     the segment leaving the hub (a pelvis offset, a clavicle: CMU's clavicle is longer than its
-    forearm).
+    forearm, and an ASF thorax's clavicle joints sit 0.28 m up at the neck base).
     """
     places = tree.places(branch)
     if tree.same_place[branch]:
@@ -385,11 +385,11 @@ def _limb(tree: _Tree, hub: int, branch: int) -> dict[str, int | None]:
     lengths = [0.0] + [float(tree.bone[p[0]]) for p in places[1:]]
     if len(places) < 4:
         return {"proximal": None, "middle": None, "distal": None, "end": None}
-    longest = max(range(1, len(places)), key=lambda k: lengths[k])
+    longest = max(range(2, len(places)), key=lambda k: lengths[k])
     before = lengths[longest - 1] if longest >= 3 else -1.0
     after = lengths[longest + 1] if longest + 1 < len(places) else -1.0
     first = longest - 1 if before > after else longest  # lengths[first], lengths[first + 1]
-    proximal = places[first - 1][0] if first >= 2 else places[0][min(1, len(places[0]) - 1)]
+    proximal = places[first - 1][0]
     end = places[first + 2][0] if first + 2 < len(places) else None
     return {"proximal": proximal, "middle": places[first][0], "distal": places[first + 1][0],
             "end": end}
