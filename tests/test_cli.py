@@ -149,7 +149,8 @@ def test_constrained_bench_runs_and_prints_json(capsys):
     """A smoke run of the constrained benchmark (figures are printed, never asserted)."""
     assert main(["bench", "--constrained", "--characters", "8", "--seconds", "0.1", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
-    assert result["max_characters_at_30hz"] > 0 and "ConstraintSolve" in result["ms_per_tick"]
+    # Figures only: a busy machine may hold no character at 30 Hz (tests never assert speed).
+    assert result["max_characters_at_30hz"] >= 0 and "ConstraintSolve" in result["ms_per_tick"]
 
 
 def test_reports_are_strict_json():
