@@ -75,6 +75,23 @@ def test_generic_names_on_a_z_up_file_read_with_up_z():
     assert rise.min() > 0.4
 
 
+def test_a_skeleton_no_preset_knows_is_matched_by_structure():
+    """An Acclaim ASF conversion (no neck joint; the clavicle joints sit 0.28 m above the thorax
+    joint, at the neck base): the names agree with what the structure found."""
+    require_mocap()
+    path = MOCAP_DIR / "varied" / "asf_noneck_walk_circle_120hz.bvh"
+    if not path.exists():
+        pytest.skip(f"{path} not there")
+    motion = import_bvh(path)
+    assert motion.info["joint_map"] == "structure (no preset matched)"
+    side_names = {"hip": "femur", "knee": "tibia", "ankle": "foot", "toe": "toes",
+                  "shoulder": "humerus", "elbow": "radius", "wrist": "hand"}
+    for part, bone in side_names.items():
+        for side in "lr":
+            assert motion.info["joints"][f"{part}_{side}"] == f"{side}{bone}"
+    assert 1.5 < motion.source_morphology.stature < 1.8
+
+
 # --- item 10: BVH numbers are ASCII ----------------------------------------------------------
 
 WALK_LINES = WALK.read_text().split("\n")
