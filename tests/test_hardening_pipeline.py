@@ -283,3 +283,14 @@ def test_import_and_info_say_which_frames_were_trimmed(tmp_path, capsys):
     assert main(["info", str(tmp_path / f"{GAIT.stem}.nmo")]) == 0
     assert ("  trimmed    frames 0-18, 438-449 of the file (the pelvis markers could not place the "
             "pelvis)") in capsys.readouterr().out
+
+
+def test_the_readme_python_example_runs(capsys, monkeypatch):
+    """The README's "From Python" example, as written there."""
+    text = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    block = text.split("## From Python", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
+    monkeypatch.chdir(Path(__file__).resolve().parents[1])
+    exec(compile(block, "README.md", "exec"), {})
+    captured = capsys.readouterr()
+    assert "['tall'] (1, 22, 3)" in captured.out
+    assert "character 'child' removed with its constraints touch" in captured.err
