@@ -18,7 +18,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import InputError, quoted
-from .files import atomic_output
 from .rotations import euler_to_matrix
 
 F64 = NDArray[np.float64]
@@ -462,9 +461,3 @@ def format_bvh(joints: list[BvhWriteJoint], root_positions: F64, euler_deg: F64,
     line_fmt = " ".join([fmt] * values.shape[1])
     out.extend(line_fmt.format(*row) for row in values.tolist())
     return "\n".join(out) + "\n"
-
-
-def write_text_atomic(path: str | Path, text: str, force: bool) -> None:
-    """Write UTF-8 ``text`` to ``path`` atomically; refuses an existing file unless ``force``."""
-    with atomic_output(path, force) as f:
-        f.write(text.encode("utf-8"))
