@@ -66,10 +66,11 @@ class SolverSettings:
     trunk makes (spreads a lean over the iterations); ``root_gain``: how far past the
     centre-of-mass error the root steps (the planted legs' mass does not follow it);
     ``release_speed_m_s``: how fast a point a sphere held off the motion's place goes back to it
-    once the sphere lets it go (instead of in one tick); ``stall_fraction``: a goal whose error
-    falls by less than this share of itself (and by less than the tolerance) in an iteration
-    has stalled: an unreachable goal creeping closer by a trunk step at a time no longer keeps
-    the loop, and every character in it, going."""
+    once the sphere lets it go (instead of in one tick); ``stall_fraction``: a goal has stalled
+    when its error no longer changes by the tolerance, or when it falls by less than this share
+    of itself in two iterations running (0 turns the second test off): an unreachable goal
+    creeping closer by a trunk step at a time no longer keeps the loop, and every character in
+    it, going."""
 
     iterations: int = 6
     tolerance_m: float = 1e-4
@@ -79,6 +80,10 @@ class SolverSettings:
     root_gain: float = 1.25
     release_speed_m_s: float = 1.5
     stall_fraction: float = 0.05
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.stall_fraction < 1.0:
+            raise ValueError(f"stall_fraction must be in [0, 1), got {self.stall_fraction}")
 
 
 DEFAULT_SETTINGS = SolverSettings()
@@ -681,6 +686,9 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
     state = _Solve(poses, lengths, goals, masses, com_fraction, settings, decoded)
     tol = np.where(goals.orientation, settings.tolerance_rad, settings.tolerance_m)
     previous = np.full(goals.k, np.inf)
+    slow_before = np.zeros(goals.k, bool)
+    # Planted feet are re-planted after the loop: their error after a root move is not work left.
+    planted = goals.priority == CONTACT_PRIORITY
     used = 0
     for used in range(1, settings.iterations + 1):
         # Legs, head, arms: the paper's order (legs and arms are independent, so one batch).
@@ -692,15 +700,17 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
             state.redecode()  # a bent spine's joints are exact once decoded
         com_error = state.root()
         err = _errors(goals, state.dec)
-        # Done where every goal is met or has stalled (no longer falling by the tolerance and
-        # by a share of itself: unreachable), and the centre of mass is back; stop when every
-        # character is done. A stalled goal stays stalled for the tick.
-        improving = previous - err >= np.maximum(tol, settings.stall_fraction * previous)
-        goal_open = (err > tol) & improving & ~state.stalled
+        # Done where every goal is met or has stalled (unchanged, or falling by less than a
+        # share of itself twice running: unreachable), and the centre of mass is back; stop
+        # when every character is done. A stalled goal stays stalled for the tick.
+        first = np.isinf(previous)
+        unchanged = ~first & (np.abs(previous - err) < settings.tolerance_m)
+        slow = ~first & (previous - err < settings.stall_fraction * np.where(first, 0.0, previous))
+        goal_open = (err > tol) & ~unchanged & ~(slow & slow_before) & ~state.stalled & ~planted
         if not goal_open.any() and np.all(com_error <= settings.com_tolerance_m):
             break
         state.stalled |= (err > tol) & ~goal_open
-        previous = err
+        previous, slow_before = err, slow
     # The last root move shifted the limbs: re-plant the feet, re-aim the head and the arms.
     state.follow_own_targets()
     state.limbs()
