@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from .constraint_table import KIND_NAMES, KIND_ORIENTATION
+from .errors import EcsAnimError
 from .ground_adapt import BALL_HEIGHT_PER_LEG
 from .morphology import bone_lengths_of
 from .normalized import SIDE_JOINTS, SIDE_LENGTHS
@@ -61,8 +62,8 @@ class MetricsRecorder:
     def record(self) -> None:
         sim, st = self.sim, self.sim.store
         if st.n != self.slide_max.shape[0]:
-            raise RuntimeError("MetricsRecorder: characters were spawned after it was made; "
-                               "make the recorder after spawning")
+            raise EcsAnimError("MetricsRecorder: characters were added or removed after it was "
+                               "made; make a new recorder after changing who is simulated")
         p = st.positions
         ankles, toes = p[:, ANKLES], p[:, TOES]
         planted = st.contact_weight >= 1.0
@@ -106,10 +107,13 @@ class MetricsRecorder:
     def _record_slides(self, move_mm: np.ndarray) -> None:
         rows, sides = np.nonzero(move_mm > SLIDE_EVENT_MM)
         self.slide_events += rows.size
+        room = MAX_SLIDE_EVENTS - len(self.slides)
+        if room <= 0:
+            return
         names = self.sim.names()
-        for row, side in zip(rows[:MAX_SLIDE_EVENTS - len(self.slides)],
-                             sides[:MAX_SLIDE_EVENTS - len(self.slides)]):
-            self.slides.append({"tick": self.sim.tick, "time_s": round(self.sim.time_s, 4),
+        tick = self.sim.tick - 1  # the posture recorded is the last tick stepped
+        for row, side in zip(rows[:room], sides[:room]):
+            self.slides.append({"tick": tick, "time_s": round(self.sim.posture_time_s, 4),
                                 "character": names[row], "foot": "left" if side == 0 else "right",
                                 "mm": round(float(move_mm[row, side]), 3)})
 

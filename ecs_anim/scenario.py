@@ -449,8 +449,8 @@ def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
     every character is known). Everything else is checked here, against a scratch table, so a
     mistake is reported with its line. A target ``point:`` without ``character:`` is on the
     constrained character itself; ``in_motion`` (constraints stored with a motion) allows only
-    those. A ``world_m`` target lies within :data:`MAX_TARGET_DISTANCE_M` of ``origin_m`` (x, y),
-    the character's start."""
+    those. A ``world_m`` target lies within :data:`MAX_TARGET_DISTANCE_M` of ``origin_m``
+    (x, y, z), the character's start on the ground."""
     from .body_points import GROUPS, body_point
     from .constraint_table import KIND_NAMES, Area, ConstraintTable, Target
 
@@ -549,7 +549,7 @@ def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
         target_world = r.vector(tk[given[0]], f"{where}.target.{given[0]}", 3, "m", 1e5)
         if given[0] == "world_m" and origin_m is not None:
             r.too_far(tk["world_m"], f"{where}.target.world_m",
-                      math.dist(target_world, (origin_m[0], origin_m[1], 0.0)), "the target",
+                      math.dist(target_world, origin_m), "the target",
                       "the character's start (position_m, on the ground)")
     else:
         if ("point" in tk) == ("joint" in tk):
@@ -721,7 +721,8 @@ def load_scenario(path: str | Path) -> Scenario:
                          f"constraints over all characters, found {n_constraints:,} by here (an "
                          "alias counted each time it is used)")
         for j, cn in enumerate(own):
-            entry, who = _constraint(r, cn, f"{where}.constraints[{j}]", origin_m=position)
+            on_ground = (*position, float(ground.height(np.array(position, dtype=float))))
+            entry, who = _constraint(r, cn, f"{where}.constraints[{j}]", origin_m=on_ground)
             if any(c.name == entry.name for c in constraints):
                 raise r.fail(cn, f"{where}.constraints[{j}].name",
                              f"{entry.name!r} is used twice on {name!r}")

@@ -104,6 +104,11 @@ class Simulation:
         return self.tick * self.dt
 
     @property
+    def posture_time_s(self) -> float:
+        """Simulated time of the posture now in the store: the last tick stepped (s)."""
+        return max(self.tick - 1, 0) * self.dt
+
+    @property
     def ground(self) -> Ground:
         """The ground, from the environment entity's GroundQuery component."""
         with self._active():

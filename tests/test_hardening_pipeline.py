@@ -313,3 +313,34 @@ def test_stall_fraction_zero_turns_the_share_test_off():
     assert errors[0.0] < 1e-4 and errors[0.05] < 1e-4
     with pytest.raises(ValueError, match=r"stall_fraction must be in \[0, 1\), got 1.5"):
         SolverSettings(stall_fraction=1.5)
+
+
+def test_a_slide_event_names_the_character_foot_and_tick():
+    walk = import_bvh(MOTIONS_DIR / "walk.bvh")
+    sim = Simulation({"walk": walk})
+    sim.spawn("a", Morphology.preset("adult_male"), MotionPlayer("walk"))
+    sim.spawn("b", Morphology.preset("child"), MotionPlayer("walk"), Placement((0.0, 1.0)))
+    metrics = MetricsRecorder(sim)
+    kicked = None
+    for tick in range(40):
+        sim.step()
+        planted = np.flatnonzero(sim.store.contact_weight[1] >= 1.0)
+        if kicked is None and tick > 5 and planted.size and metrics.prev_planted[1, planted[0]]:
+            kicked = (tick, int(planted[0]))  # push b's planted ankle 10 mm in this posture
+            sim.store.positions[1, J["ankle_l" if planted[0] == 0 else "ankle_r"], 0] += 0.01
+        metrics.record()
+    assert kicked is not None
+    first = metrics.report()["slide_events"]["first"][0]
+    assert first == {"tick": kicked[0], "time_s": round(kicked[0] / 30.0, 4), "character": "b",
+                     "foot": "left" if kicked[1] == 0 else "right", "mm": 10.0}
+
+
+def test_a_target_is_measured_from_the_ground_under_the_character(tmp_path):
+    """A review: a target 1.2 m above a plane at z = 300 m was refused as 301 m away."""
+    path = tmp_path / "high.yaml"
+    path.write_text(f"duration_s: 0.5\nmotions:\n  idle: {MOTIONS_DIR / 'idle.bvh'}\n"
+                    "ground: {type: plane, z_m: 300}\n"
+                    "characters:\n  - name: a\n    morphology: adult_male\n    motion: idle\n"
+                    "    constraints:\n      - {name: r, point: wrist_r, target: {world_m: [0.4, 0.2, 301.2]}}\n")
+    scenario = load_scenario(path)
+    assert scenario.characters[0].constraints[0].name == "r"

@@ -65,17 +65,12 @@ class RestrictedAreas:
         return RestrictedAreas(e3, np.zeros(0), e3, e3, e3, e3)
 
 
-def posture_time_s(sim: Simulation) -> float:
-    """Simulation time of the posture now in the store (the last tick stepped)."""
-    return max(sim.tick - 1, 0) * sim.dt
-
-
 def _weights(sim: Simulation, table: Any) -> F64:
     st = sim.store
     try:  # the full table: motion constraints follow their clip's time
-        w = table.weights(posture_time_s(sim), st.clip, st.clip_time_s)
+        w = table.weights(sim.posture_time_s, st.clip, st.clip_time_s)
     except TypeError:
-        w = table.weights(posture_time_s(sim))
+        w = table.weights(sim.posture_time_s)
     return np.asarray(w, dtype=np.float64)
 
 

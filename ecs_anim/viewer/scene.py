@@ -26,7 +26,6 @@ from .constraint_view import (
     RestrictedAreas,
     constraint_marks,
     max_constraint_error_m,
-    posture_time_s,
     restricted_areas,
 )
 
@@ -269,7 +268,7 @@ def snapshot(sim: Simulation, colours: F64 | None = None) -> SceneFrame:
         com_rows = np.zeros((0, INSTANCE_FLOATS), np.float32)
     return SceneFrame(bodies, targets, com_rows, area_instances(restricted_areas(sim)),
                       positions[ok].copy(),
-                      posture_time_s(sim), max_constraint_error_m(sim), int(ok.sum()),
+                      sim.posture_time_s, max_constraint_error_m(sim), int(ok.sum()),
                       table_instances(getattr(sim, "tables", ()), sim.ground))
 
 
