@@ -538,6 +538,9 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
         # Where the pelvis markers could not place the pelvis: trimmed (numbered as in the file,
         # from 0), repaired (numbered as the motion's frames, like the gaps below).
         "root_frames_trimmed": [[a, b] for a, b in _intervals(~_mask(kept, raw.positions.shape[0]))],
+        # The motion's frame 0 is this frame of the file: times given against the file (a
+        # --constraints file, gait events) are shifted by it.
+        "first_file_frame": kept.start,
         "root_frames_repaired": repaired,
         "gaps": {
             "max_gap_frames": max_gap,
@@ -569,8 +572,9 @@ def trust_root(build: _Build) -> tuple[slice, list[list[int]]]:
     n = build.positions.shape[0]
     trusted = np.ones(n, dtype=bool) if build.root_trusted is None else build.root_trusted
     good = np.flatnonzero(trusted)
-    if len(good) < 2:
-        raise EcsAnimError(f"the pelvis markers place the pelvis in {len(good)} of {n} frames; "
+    if len(good) == 0:
+        raise EcsAnimError(f"the pelvis markers place the pelvis in none of the {n} frames "
+                           "(a cluster needs three of its markers seen, landmarks all of theirs); "
                            "nothing to import")
     kept = slice(int(good[0]), int(good[-1]) + 1)
     repaired = [[a, b] for a, b in _intervals(~trusted[kept])]

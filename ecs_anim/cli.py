@@ -11,6 +11,7 @@ import math
 import os
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -111,9 +112,14 @@ def cmd_import(args: argparse.Namespace) -> int:
                                     args.fill_absent_from)
             else:
                 motion = import_bvh(src, args.map, args.unit, thresholds, args.up or "y")
-            motion.constraints.extend(extra)
+            # A --constraints file times the file's frames; a C3D import may have trimmed some.
+            shift_s = motion.info.get("first_file_frame", 0) / motion.fps
+            on_clip = [replace(c, activation=replace(c.activation, start_s=c.activation.start_s - shift_s,
+                                                     stop_s=c.activation.stop_s - shift_s))
+                       for c in extra] if shift_s else extra
+            motion.constraints.extend(on_clip)
             try:
-                check_stored(extra, motion.duration_s)
+                check_stored(on_clip, motion.duration_s)
             except ValueError as exc:
                 raise EcsAnimError(f"{args.constraints}: with {src}: {exc}") from None
             save_nmo(motion, target, force=args.force)

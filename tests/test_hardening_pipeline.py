@@ -344,3 +344,30 @@ def test_a_target_is_measured_from_the_ground_under_the_character(tmp_path):
                     "    constraints:\n      - {name: r, point: wrist_r, target: {world_m: [0.4, 0.2, 301.2]}}\n")
     scenario = load_scenario(path)
     assert scenario.characters[0].constraints[0].name == "r"
+
+
+def test_constraint_times_stay_on_the_file_after_a_trim(tmp_path):
+    """A review: trimming the gait sample's first 19 frames moved --constraints times by 0.38 s."""
+    require_mocap()
+    from ecs_anim.cli import main
+    from ecs_anim.motion import load_nmo
+
+    constraints = tmp_path / "c.yaml"
+    constraints.write_text("constraints:\n  - name: hold\n    kind: distance\n    point: ankle_l\n"
+                           "    distance_m: 0.2\n    target: {point: ankle_r}\n"
+                           "    activation: {start_s: 1.0, stop_s: 2.0}\n")
+    assert main(["import", str(GAIT), "-o", str(tmp_path / "out"), "--constraints", str(constraints)]) == 0
+    motion = load_nmo(tmp_path / "out" / f"{GAIT.stem}.nmo")
+    assert motion.info["first_file_frame"] == 19
+    hold = [c for c in motion.constraints if c.name == "hold"][0]
+    assert hold.activation.start_s == pytest.approx(1.0 - 19 / 50.0)
+    assert hold.activation.stop_s == pytest.approx(2.0 - 19 / 50.0)
+
+
+def test_a_one_frame_c3d_still_imports(tmp_path):
+    require_mocap()
+    raw = read_c3d(TENNIS)
+    labels = [lab.split(":")[-1] for lab in raw.labels]
+    clip, extra = canonical_clip_c3d(read_c3d(write_c3d(tmp_path / "one.c3d", labels,
+                                                        raw.positions[100:101], None, raw.rate)))
+    assert len(clip.positions) == 1 and extra["root_frames_trimmed"] == []
