@@ -41,13 +41,80 @@ def _cannot_write(path: str | Path, exc: OSError) -> EcsAnimError:
     return EcsAnimError(f"{path}: cannot write: {exc.strerror or exc}")
 
 
+def _loop_problem(path: str | Path) -> str | None:
+    """``path: a symlink loop`` when following ``path`` (or a folder on the way) comes back to a
+    link already followed, or None. ``Path.resolve()`` raises ``RuntimeError`` on a loop and
+    ``exists()`` says False, so a loop would pass for a missing file until the write."""
+    try:
+        os.stat(path)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            return f"{path}: a symlink loop"
+    except ValueError:  # a NUL in the name: the write says so
+        pass
+    return None
+
+
+def _nearest_existing(folder: str | Path) -> Path:
+    existing = Path(folder)
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    return existing
+
+
+#: The random part ``tempfile.mkstemp`` puts in a name (its ``_RandomNameSequence``).
+_RANDOM_CHARS = 8
+
+
+def _tmp_prefix(name: str) -> str:
+    """The start of the temporary file's name beside the output file ``name``."""
+    return f".{name}."
+
+
+def _tmp_suffix() -> str:
+    """The end of the temporary file's name beside an output file: it names this process."""
+    return f".ecs-anim-{os.getpid()}.tmp"
+
+
+def _aside(target: Path, kind: str) -> Path:
+    """The hidden sibling of the export folder ``target`` (``partial`` or ``old``) this process
+    uses."""
+    return target.parent / f".{target.name}.{kind}-{os.getpid()}"
+
+
+def _name_max(folder: Path) -> int:
+    """The longest file name (in bytes) the file system of ``folder`` (or of the nearest folder
+    above it that exists) allows; 255 where the system does not say."""
+    try:
+        limit = os.pathconf(_nearest_existing(folder), "PC_NAME_MAX")
+    except (OSError, ValueError, AttributeError):  # AttributeError: no pathconf (Windows)
+        return 255
+    return limit if limit > 0 else 255
+
+
+def _shown(path: str | Path) -> str:
+    """``path`` as an error names it, the middle cut from a very long one so the reason fits
+    in the line."""
+    text = str(path)
+    return text if len(text) <= 120 else f"{text[:80]}...{text[-30:]}"
+
+
+def _name_length_problem(path: str | Path, longest: str, folder: Path) -> str | None:
+    """Why the temporary name ``longest`` (the longest name a write of ``path`` makes in
+    ``folder``) is too long for the file system there, or None. Found before any work: else a
+    run ends in "File name too long" on a name the user never gave."""
+    need, limit = len(os.fsencode(longest)), _name_max(folder)
+    if need <= limit:
+        return None
+    return (f"{_shown(path)}: name too long: writing it takes a temporary name of {need} bytes "
+            f"beside it, and this file system allows {limit}; shorten the name by {need - limit}")
+
+
 def write_problem(folder: str | Path) -> str | None:
     """Why files cannot be made in ``folder`` (or, while it does not exist, in the nearest folder
     above it, where it would be made), or None. A real probe (a nameless temporary file made
     and dropped there): ``os.access`` says yes to root even on an immutable folder."""
-    existing = Path(folder)
-    while not existing.exists() and existing != existing.parent:
-        existing = existing.parent
+    existing = _nearest_existing(folder)
     if not existing.is_dir():
         return f"{existing} is a file, not a folder"
     try:
@@ -60,20 +127,31 @@ def write_problem(folder: str | Path) -> str | None:
 
 def output_problem(path: str | Path, force: bool) -> str | None:
     """Why ``path`` cannot be written as an output file, or None: it is a folder or a device
-    rather than a file, it exists and ``force`` is not given, or its folder cannot be written.
-    A link counts as what it points to (outputs are written through links)."""
+    rather than a file, it exists and ``force`` is not given, it is a symlink loop, its folder
+    cannot be written, or the temporary file's name would be too long there. A link counts as
+    what it points to (outputs are written through links)."""
     path = Path(path)
+    problem = _loop_problem(path)
+    if problem is not None:
+        return problem
     if path.exists() and not path.is_file():
         return f"{path}: not a file (a folder or a device); give a file path"
     if path.exists() and not force:
         return f"{path}: already exists (use --force to overwrite)"
-    problem = write_problem(Path(os.path.realpath(path)).parent)
-    return None if problem is None else f"{path}: {problem}"
+    real = Path(os.path.realpath(path))
+    problem = write_problem(real.parent)
+    if problem is not None:
+        return f"{path}: {problem}"
+    longest = _tmp_prefix(real.name) + "x" * _RANDOM_CHARS + _tmp_suffix()
+    return _name_length_problem(path, longest, real.parent)
 
 
 def folder_problem(path: str | Path) -> str | None:
     """Why files cannot be written into the folder ``path``, or None."""
     path = Path(path)
+    problem = _loop_problem(path)
+    if problem is not None:
+        return problem
     if path.exists() and not path.is_dir():
         return f"{path}: not a folder"
     problem = write_problem(path)
@@ -159,18 +237,18 @@ def atomic_output(path: str | Path, force: bool) -> Iterator[IO[bytes]]:
     fails, and, when a killed process left one for the same ``path``, is removed by the next
     write.
     """
-    path = Path(path)
-    if path.is_symlink():
-        path = path.resolve()
     problem = output_problem(path, force)
     if problem is not None:
         raise FileExistsError(problem)
+    path = Path(path)
+    if path.is_symlink():
+        path = Path(os.path.realpath(path))
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        leftovers = re.escape(f".{path.name}.") + r"\w+\.ecs-anim-(?P<pid>\d+)\.tmp"
+        leftovers = re.escape(_tmp_prefix(path.name)) + r"\w+\.ecs-anim-(?P<pid>\d+)\.tmp"
         for leftover, _ in _left_by_killed_writers(path.parent, leftovers):
             leftover.unlink(missing_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".ecs-anim-{os.getpid()}.tmp",
+        fd, tmp = tempfile.mkstemp(prefix=_tmp_prefix(path.name), suffix=_tmp_suffix(),
                                    dir=path.parent)
     except OSError as exc:
         raise _cannot_write(path, exc) from None
@@ -200,19 +278,34 @@ def _manifest_names(folder: Path) -> set[str]:
 def output_folder_problem(path: str | Path, names: Iterable[str], force: bool) -> str | None:
     """Why the folder ``path`` cannot be replaced by a set of files called ``names`` (see
     :func:`output_set`), or None. The folder and its siblings are made in its parent, which
-    must be writable. An existing folder may be replaced only with ``force``, and only when it
-    holds nothing but this set's names and what an earlier export's manifest lists (regular
-    files): anything else is the user's, and is never deleted."""
+    must be writable, and the longest of them named there. An existing folder may be replaced
+    only with ``force``, and only when it holds nothing but this set's names and what an
+    earlier export's manifest lists (regular files): anything else is the user's, and is never
+    deleted.
+
+    What killed exports to the same folder left is dealt with first (see
+    :func:`_recover_leftovers`): a set put aside and not yet replaced is back in ``path``
+    before it is looked at, so it needs ``force`` like any earlier export."""
     path = Path(path)
+    problem = _loop_problem(path)
+    if problem is not None:
+        return problem
     if path.exists() and not path.is_dir():
         return f"{path}: not a folder"
     real = Path(os.path.realpath(path))
-    cwd = Path.cwd().resolve()
+    cwd = Path(os.path.realpath(os.getcwd()))
     if real == cwd or real in cwd.parents:
         return f"{path}: is (or holds) the current folder, and an export replaces its folder"
     problem = write_problem(real.parent)
     if problem is not None:
         return f"{path}: {problem}"
+    problem = _name_length_problem(path, _aside(real, "partial").name, real.parent)
+    if problem is not None:
+        return problem
+    try:
+        _recover_leftovers(real)
+    except OSError as exc:
+        return f"{path}: cannot put back what a killed export left ({exc.strerror or exc})"
     if not real.exists():
         return None
     ours = set(names) | _manifest_names(real) | {MANIFEST_NAME}
@@ -276,6 +369,15 @@ def _put_back_or_remove(leftover: Path, kind: str, target: Path) -> None:
         shutil.rmtree(leftover)
 
 
+def _recover_leftovers(target: Path) -> None:
+    """Put back or remove what killed exports to the folder ``target`` (a real path) left
+    beside it: an earlier set put aside while the folder is missing goes back (see
+    :func:`_put_back_or_remove`), the rest is removed. Leftovers of running exports stay."""
+    leftovers = re.escape(f".{target.name}.") + r"(?P<kind>partial|old)-(?P<pid>\d+)"
+    for leftover, match in _left_by_killed_writers(target.parent, leftovers):
+        _put_back_or_remove(leftover, match["kind"], target)
+
+
 @contextmanager
 def output_set(path: str | Path, names: Iterable[str], force: bool) -> Iterator[OutputSet]:
     """A set of files called ``names`` that replaces the folder ``path`` as a whole when the
@@ -287,18 +389,16 @@ def output_set(path: str | Path, names: Iterable[str], force: bool) -> Iterator[
     atomic rename (on Linux; elsewhere the old one is first renamed ``.NAME.old-<pid>``, and put
     back by the next export if the process stopped in between), and the old one is deleted. A
     link to a folder stays and points to the new set. Leftovers of killed exports to the same
-    folder are removed first; a failed write removes its own. Yields an :class:`OutputSet`.
+    folder are put back or removed first, by the check (:func:`output_folder_problem`), so a
+    set put back is checked like any other; a failed write removes its own. Yields an
+    :class:`OutputSet`.
     """
     problem = output_folder_problem(path, names, force)
     if problem is not None:
         raise EcsAnimError(problem)
     target = Path(os.path.realpath(path))
-    leftovers = re.escape(f".{target.name}.") + r"(?P<kind>partial|old)-(?P<pid>\d+)"
-    partial = target.parent / f".{target.name}.partial-{os.getpid()}"
-    old = target.parent / f".{target.name}.old-{os.getpid()}"
+    partial, old = _aside(target, "partial"), _aside(target, "old")
     try:
-        for leftover, match in _left_by_killed_writers(target.parent, leftovers):
-            _put_back_or_remove(leftover, match["kind"], target)
         target.parent.mkdir(parents=True, exist_ok=True)
         partial.mkdir()
         if target.is_dir():

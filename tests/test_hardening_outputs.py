@@ -357,3 +357,128 @@ def test_error_lines_are_capped(tmp_path, capsys):
     line = error_of(capsys)
     assert len(line) == len("error: ") + MAX_ERROR_CHARS and line.endswith("...")
     assert line.startswith(f"error: {tmp_path}/aaa")
+
+
+# --- review of the output checks: loops, long names, a set put aside, one check -----------
+
+
+def dead_pid() -> str:
+    """The id of a process that has ended."""
+    return subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True).stdout.strip()
+
+
+def test_a_symlink_loop_as_an_output_is_refused_before_any_work(tmp_path, capsys):
+    scenario = write_scenario(tmp_path, MOTIONS / "kick.bvh")
+    nmo = tmp_path / "walk.nmo"
+    assert main(["import", str(MOTIONS / "walk.bvh"), "-o", str(tmp_path)]) == 0
+    capsys.readouterr()
+    loops = {}
+    for name in ("loop.bvh", "loop.json", "loopA", "loop.png", "loopdir"):
+        loops[name] = tmp_path / name
+        loops[name].symlink_to(name)  # the link points to itself
+    (tmp_path / "ping").symlink_to("pong")
+    (tmp_path / "pong").symlink_to("ping")
+    cases = [
+        (["export", str(nmo), "--morphology", "child", "-o", str(loops["loop.bvh"])],
+         f"{loops['loop.bvh']}: a symlink loop"),
+        (["export", str(nmo), "-o", str(tmp_path / "ping" / "x.npz")],
+         f"{tmp_path / 'ping' / 'x.npz'}: a symlink loop"),
+        (["run", str(scenario), "--report", str(loops["loop.json"])],
+         f"--report {loops['loop.json']}: a symlink loop"),
+        (["run", str(scenario), "--export", str(loops["loopA"]), "--force"],
+         f"--export {loops['loopA']}: a symlink loop"),
+        (["run", str(scenario), "--export", str(tmp_path / "ping")],
+         f"--export {tmp_path / 'ping'}: a symlink loop"),
+        (["view", str(scenario), "--screenshot", str(loops["loop.png"]), "--force"],
+         f"--screenshot {loops['loop.png']}: a symlink loop"),
+        (["import", str(MOTIONS / "walk.bvh"), "-o", str(loops["loopdir"])],
+         f"-o {loops['loopdir']}: a symlink loop"),
+    ]
+    before = sorted(os.listdir(tmp_path))
+    for argv, message in cases:
+        assert main(argv) == 1, argv
+        captured = capsys.readouterr()
+        assert captured.err == f"error: {message}\n" and captured.out == "", argv
+    assert sorted(os.listdir(tmp_path)) == before
+    with pytest.raises(FileExistsError) as error, atomic_output(loops["loop.bvh"], force=True):
+        pass
+    assert str(error.value) == f"{loops['loop.bvh']}: a symlink loop"
+
+
+def test_a_name_too_long_for_the_temporary_file_is_refused_before_any_work(tmp_path, capsys,
+                                                                           monkeypatch):
+    """A name the file system takes, but not with the hidden sibling's or the temporary file's
+    additions around it: found by the checks, not after the run."""
+    scenario = write_scenario(tmp_path, MOTIONS / "kick.bvh")
+    monkeypatch.chdir(tmp_path)
+    limit = os.pathconf(tmp_path, "PC_NAME_MAX")
+    pid = len(str(os.getpid()))
+    report = "r" * (limit - 10) + ".json"  # a name the file system allows
+    export = "e" * (limit - 5)
+    temporary = {report: len(f".{report}.") + 8 + len(f".ecs-anim-{os.getpid()}.tmp"),
+                 export: len(f".{export}.partial-") + pid}
+    for flag, name in (("--report", report), ("--export", export)):
+        assert main(["run", str(scenario), "--seconds", "0.1", flag, name]) == 1
+        captured = capsys.readouterr()
+        assert captured.out == ""  # nothing ran
+        need = temporary[name]
+        assert captured.err == (f"error: {flag} {name[:80]}...{name[-30:]}: name too long: "
+                                f"writing it takes a temporary name of {need} bytes beside it, "
+                                f"and this file system allows {limit}; shorten the name by "
+                                f"{need - limit}\n")
+        assert len(captured.err) < 300
+    assert sorted(os.listdir(tmp_path)) == ["s.yaml"]
+    # A name that leaves room for the additions is written.
+    fits = "f" * (limit - 10 - pid)
+    assert main(["run", str(scenario), "--seconds", "0.1", "--export", fits]) == 0
+    assert sorted(os.listdir(fits)) == [MANIFEST_NAME, *SET]
+    # Where the system does not say (no pathconf), 255.
+    monkeypatch.setattr(os, "pathconf", lambda *args: (_ for _ in ()).throw(OSError(errno.EINVAL, "")))
+    assert files._name_max(tmp_path) == 255
+
+
+def test_a_set_put_aside_by_a_killed_export_needs_force(tmp_path, capsys):
+    """Off Linux (no atomic exchange) a killed export may leave the earlier set aside and the
+    folder missing: the next run puts it back before checking, so it needs --force."""
+    scenario = write_scenario(tmp_path, MOTIONS / "kick.bvh")
+    out = tmp_path / "out"
+    assert main(["run", str(scenario), "--seconds", "0.1", "--export", str(out)]) == 0
+    old = snapshot(out)
+    out.rename(tmp_path / f".out.old-{dead_pid()}")
+    (tmp_path / f".out.partial-{dead_pid()}").mkdir()
+    capsys.readouterr()
+    assert main(["run", str(scenario), "--seconds", "0.2", "--export", str(out)]) == 1
+    assert error_of(capsys) == (f"error: --export {out}: holds an earlier export (use --force "
+                                "to replace it)")
+    assert snapshot(out) == old and sorted(os.listdir(tmp_path)) == ["out", "s.yaml"]
+    assert main(["run", str(scenario), "--seconds", "0.2", "--export", str(out), "--force"]) == 0
+    assert snapshot(out) != old and sorted(os.listdir(out)) == [MANIFEST_NAME, *SET]
+
+
+def test_the_screenshot_writer_checks_its_output_with_the_shared_check(tmp_path, monkeypatch):
+    """``write_screenshot`` refuses what ``output_problem`` refuses, as a user error, before
+    rendering."""
+    from ecs_anim.scenario import load_scenario
+    from ecs_anim.viewer import window
+
+    scenario = load_scenario(write_scenario(tmp_path, MOTIONS / "kick.bvh"))
+
+    def no_render(*args, **kwargs):  # type: ignore[no-untyped-def]
+        raise AssertionError("rendered before the output was checked")
+
+    monkeypatch.setattr(window, "render_screenshot", no_render)
+    existing = tmp_path / "shot.png"
+    existing.write_bytes(b"mine")
+    loop = tmp_path / "loop.png"
+    loop.symlink_to("loop.png")
+    folder = tmp_path / "folder.png"
+    folder.mkdir()
+    for out, force, message in [
+            (existing, False, f"{existing}: already exists (use --force to overwrite)"),
+            (loop, True, f"{loop}: a symlink loop"),
+            (folder, True, f"{folder}: not a file (a folder or a device); give a file path")]:
+        with pytest.raises(EcsAnimError) as error:
+            window.write_screenshot(scenario, out, 0.0, 64, 48, force)
+        assert str(error.value) == message
+    assert existing.read_bytes() == b"mine"

@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import EcsAnimError
+from ..files import output_problem
 from ..ground import Ground
 from ..scenario import Scenario, build_simulation
 from ..simulation import Simulation
@@ -239,12 +240,14 @@ def _draw_status(pyglet: Any, window: Any, text: str, width: int, height: int) -
 
 def write_screenshot(scenario: Scenario, out: str | Path, at_s: float, width: int, height: int,
                      force: bool, show_targets: bool = True, show_com: bool = True) -> Screenshot:
-    """Render and write ``out`` (PNG); refuses an existing file without ``force``."""
+    """Render and write ``out`` (PNG). What :func:`~ecs_anim.files.output_problem` refuses (an
+    existing file without ``force``, a folder, an unwritable place, ...) is an
+    :class:`EcsAnimError` before rendering."""
     from .png import write_png
 
-    out = Path(out)
-    if out.exists() and not force:
-        raise FileExistsError(f"{out}: already exists (use --force to overwrite)")
+    problem = output_problem(out, force)
+    if problem is not None:
+        raise EcsAnimError(problem)
     shot = render_screenshot(scenario, at_s, width, height, show_targets=show_targets,
                              show_com=show_com)
     write_png(out, shot.rgb, force)
