@@ -281,7 +281,7 @@ def _pipeline_timing(n: int, seconds: float, rotations: bool = False,
                            for i, e in enumerate(entities)]
                           + [sim.add_constraint(e, f"e{i}", "elbow_r", 1, always, (0.0, 0.0, 1.0))
                              for i, e in enumerate(entities)])
-        owners = sim.constraints.owner[moving]
+        owners = sim.constraints.owner[sim.constraints.rows_of(moving)]
         offsets = np.where((np.arange(moving.size) < n)[:, None], [0.45, -0.3, 1.2], [0.0, -0.5, 1.0])
 
     def move_targets() -> None:

@@ -6,7 +6,7 @@ A constraint is ``{point, kind, chain, priority, activation}`` plus its target:
   from the target point; 0 is contact), ``area`` (keep the point inside, or outside, a box, a
   sphere or a half-space placed at the target point), ``orientation`` (a segment axis along a
   world direction, or looking at the target point);
-* targets: a fixed world point, a point given by code (:meth:`ConstraintTable.set_target`), or a
+* targets: a fixed world point, a point given by code (:meth:`ConstraintTable.set_targets`), or a
   body point (segment + fraction + offset) of a character. Another character's point is read
   from its posture of the previous tick (the posture every character had when this tick began:
   all characters see the same, consistent world, whatever their order); a point on the
@@ -113,7 +113,9 @@ class ConstraintTable:
     (a constraint whose target went non-finite is switched off, with a warning); held: a sphere
     to stay out of kept its point off the motion's place in the last tick; error: each
     constraint's remaining error after the last tick (metres, or radians for orientation; NaN
-    while inactive); weight: each constraint's activation weight in the last tick; names.
+    while inactive); weight: each constraint's activation weight in the last tick; names; uid:
+    each constraint's id, given once and never reused (rows move when a character is removed,
+    ids do not; they stay in increasing order), ``next_uid`` the next one.
     """
 
     owner: I64 = _col(np.int64)
@@ -146,6 +148,8 @@ class ConstraintTable:
     error: F64 = _col(np.float64)
     weight: F64 = _col(np.float64)
     names: list[str] = field(default_factory=list)
+    uid: I64 = _col(np.int64)
+    next_uid: int = 0
 
     @property
     def m(self) -> int:
@@ -217,13 +221,29 @@ class ConstraintTable:
             "area_normal": tuple(np.asarray(ar.normal) / np.linalg.norm(ar.normal)),
             "area_inside": ar.inside,
             "axis": tuple(np.asarray(axis, dtype=float) / np.linalg.norm(axis)),
-            "enabled": True, "held": False, "error": np.nan, "weight": 0.0,
+            "enabled": True, "held": False, "error": np.nan, "weight": 0.0, "uid": self.next_uid,
         }
         for key, value in values.items():
             current = getattr(self, key)
             setattr(self, key, np.concatenate([current, np.asarray([value], dtype=current.dtype)]))
         self.names.append(name)
-        return self.m - 1
+        self.next_uid += 1
+        return self.next_uid - 1
+
+    def rows_of(self, uids: I64) -> I64:
+        """The table rows of constraint ids (as :meth:`add` returned them), (k,); raises
+        ValueError naming an id whose constraint was removed (with its character) or never was."""
+        uids = np.asarray(uids, dtype=np.int64)
+        if self.m == 0:
+            lost = np.ones(uids.shape, bool)
+            rows = np.zeros(uids.shape, np.int64)
+        else:
+            rows = np.minimum(np.searchsorted(self.uid, uids), self.m - 1)
+            lost = self.uid[rows] != uids
+        if np.any(lost):
+            raise ValueError(f"constraint id {int(uids[np.argmax(lost)])} is not in the simulation "
+                             "(removed with its character, or never added)")
+        return rows
 
     def remove_character(self, row: int) -> list[str]:
         """Delete the constraints of store row ``row`` and those whose target is a point on it,
@@ -232,18 +252,21 @@ class ConstraintTable:
         gone = (self.owner == row) | ((self.target_kind == TARGET_BODY) & (self.target_row == row))
         names = [n for n, g in zip(self.names, gone) if g]
         for key in self.__dataclass_fields__:
-            if key != "names":
+            if isinstance(getattr(self, key), np.ndarray):
                 setattr(self, key, getattr(self, key)[~gone])
         self.names = [n for n, g in zip(self.names, gone) if not g]
         self.owner[self.owner > row] -= 1
         self.target_row[(self.target_kind == TARGET_BODY) & (self.target_row > row)] -= 1
         return names
 
-    def set_target(self, index: int, target_in_world: tuple[float, float, float]) -> None:
-        """Give a constraint a new world target from code (read at the next tick)."""
-        self.target_kind[index] = TARGET_WORLD
-        self.target_world[index] = target_in_world
-        self.enabled[index] = True
+    def set_targets(self, uids: I64, targets_in_world: F64) -> None:
+        """New world targets from code for constraints given by id: ``uids`` (k,),
+        ``targets_in_world`` (k, 3), read at the next tick (a non-finite one switches its
+        constraint off then, with a warning)."""
+        rows = self.rows_of(uids)
+        self.target_kind[rows] = TARGET_WORLD
+        self.target_world[rows] = targets_in_world
+        self.enabled[rows] = True
 
     def weights(self, time_s: float, clip: I64 | None = None, clip_time_s: F64 | None = None) -> F64:
         """(m,) activation weight of every constraint (0 where disabled). Motion constraints

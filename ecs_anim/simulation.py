@@ -224,9 +224,8 @@ class Simulation:
     def remove(self, entity: int) -> None:
         """Take a character out of the simulation (between ticks), with its constraints and
         every constraint of another character aiming at a point on it; one warning names those
-        constraints. The other characters go on; indices that :meth:`add_constraint` returned
-        for constraints after the removed ones move down (find them again with
-        :meth:`constraint_index`)."""
+        constraints. The other characters go on, and the ids :meth:`add_constraint` returned for
+        their constraints stay valid; a removed constraint's id is refused from then on."""
         row = self.row(entity)
         with self._active():
             name = esper.component_for_entity(entity, Name).name
@@ -244,16 +243,16 @@ class Simulation:
             print(message, file=sys.stderr)
 
     def constraint_index(self, entity: int, name: str) -> int:
-        """The index of the constraint ``name`` of a character (its name as the scenario gives
-        it, or as :meth:`add_constraint` got it), for :meth:`set_target`."""
+        """The id of the constraint ``name`` of a character (its name as the scenario gives it, or
+        as :meth:`add_constraint` got it), for :meth:`set_target`; the first if two share it."""
         row = self.row(entity)
         table = self.constraints
-        found = [k for k in range(table.m) if table.owner[k] == row and table.names[k] == name]
+        mine = np.flatnonzero(table.owner == row)
+        found = [k for k in mine if table.names[k] == name]
         if not found:
-            mine = [table.names[k] for k in range(table.m) if table.owner[k] == row]
-            raise EcsAnimError(f"no constraint {name!r} on this character (it has: "
-                               f"{listed(mine) or 'none'})")
-        return found[0]
+            raise EcsAnimError(f"no constraint {quoted(name)} on this character (it has: "
+                               f"{listed(table.names[k] for k in mine) or 'none'})")
+        return int(table.uid[found[0]])
 
     def names(self) -> list[str]:
         with self._active():
@@ -308,7 +307,7 @@ class Simulation:
         ``kind``: position, distance (``distance_m``), area (``area``, placed at the target),
         orientation (``axis`` of the segment along the world direction ``target_in_world``, or
         looking at the target point). ``chain``: the groups allowed to move (default the
-        point's own). Returns an index for :meth:`set_target`. Validated here, never in the
+        point's own). Returns its id for :meth:`set_target`. Validated here, never in the
         tick; errors are :class:`EcsAnimError` naming the constraint."""
         values = [priority] + list(target_in_world or ())
         if not all(np.isfinite(v) for v in values):
@@ -329,17 +328,18 @@ class Simulation:
                 message = f"constraint {name!r}: {message}"
             raise EcsAnimError(message) from None
 
-    def set_target(self, index: int, target_in_world: tuple[float, float, float]) -> None:
-        """Move a constraint's target from code; a non-finite target disables it at the next
-        tick (with a warning) rather than reaching a pose."""
-        self.constraints.set_target(index, target_in_world)
+    def set_target(self, uid: int, target_in_world: tuple[float, float, float]) -> None:
+        """Move a constraint's target (its id from :meth:`add_constraint` or
+        :meth:`constraint_index`) from code; a non-finite target disables it at the next tick
+        (with a warning) rather than reaching a pose."""
+        self.set_targets(np.array([uid]), np.asarray([target_in_world], dtype=np.float64))
 
-    def set_targets(self, indices: NDArray[np.int64], targets_in_world: NDArray[np.float64]) -> None:
-        """Move many constraints' targets at once: ``indices`` (k,), ``targets_in_world`` (k, 3)."""
-        table = self.constraints
-        table.target_kind[indices] = 0
-        table.target_world[indices] = targets_in_world
-        table.enabled[indices] = True
+    def set_targets(self, uids: NDArray[np.int64], targets_in_world: NDArray[np.float64]) -> None:
+        """Move many constraints' targets at once: ``uids`` (k,) ids, ``targets_in_world`` (k, 3)."""
+        try:
+            self.constraints.set_targets(uids, targets_in_world)
+        except ValueError as exc:
+            raise EcsAnimError(str(exc)) from None
 
     def report_disabled(self, indices: NDArray[np.int64]) -> None:
         for i in indices:

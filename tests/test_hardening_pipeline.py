@@ -224,9 +224,10 @@ def test_remove_a_character_with_the_constraints_aiming_at_it(capsys):
     b = sim.spawn("b", Morphology.preset("tall"), MotionPlayer("idle"), Placement((1.0, 0.0), np.pi))
     c = sim.spawn("c", Morphology.preset("adult_female"), MotionPlayer("idle"), Placement((0.0, 1.5)))
     sim.add_constraint(a, "touch_b", "wrist_r", 1.0, target_entity=b, target_point="head")
-    sim.add_constraint(b, "own", "wrist_l", 1.0, target_in_world=(1.0, 0.3, 1.2))
-    sim.add_constraint(c, "touch_a", "wrist_r", 1.0, target_entity=a, target_point="spine_upper")
+    own = sim.add_constraint(b, "own", "wrist_l", 1.0, target_in_world=(1.0, 0.3, 1.2))
+    touch_a = sim.add_constraint(c, "touch_a", "wrist_r", 1.0, target_entity=a, target_point="spine_upper")
     sim.add_constraint(c, "touch_b", "wrist_l", 1.0, target_entity=b, target_point="hand_r")
+    reach = sim.add_constraint(a, "reach", "wrist_l", 0.5, target_in_world=(0.3, 0.3, 1.0))
     for _ in range(5):
         sim.step()
     before = sim.store.positions[[0, 2]].copy()
@@ -234,10 +235,16 @@ def test_remove_a_character_with_the_constraints_aiming_at_it(capsys):
     sim.remove(b)
     assert "character 'b' removed with its constraints touch_b, own, touch_b" in capsys.readouterr().err
     assert sim.names() == ["a", "c"] and sim.store.n == 2
-    assert sim.constraints.names == ["touch_a"]
-    index = sim.constraint_index(c, "touch_a")
+    assert sim.constraints.names == ["touch_a", "reach"]
+    # Ids kept from before the removal still name the same constraints; a removed one is refused.
+    assert sim.constraint_index(c, "touch_a") == touch_a and sim.constraint_index(a, "reach") == reach
+    index = int(sim.constraints.rows_of(np.array([touch_a]))[0])
     assert sim.constraints.owner[index] == sim.row(c) == 1
     assert sim.constraints.target_row[index] == sim.row(a) == 0
+    sim.set_target(reach, (0.3, 0.25, 1.0))
+    assert tuple(sim.constraints.target_world[sim.constraints.rows_of(np.array([reach]))[0]]) == (0.3, 0.25, 1.0)
+    with pytest.raises(Exception, match=rf"^constraint id {own} is not in the simulation \(removed with its character"):
+        sim.set_target(own, (0.0, 0.0, 1.0))
     for _ in range(5):
         sim.step()
     assert np.all(np.isfinite(sim.store.positions))

@@ -41,7 +41,7 @@ def soak(ticks: int, characters: int = 100, constrained: int = 30, seed: int = 2
     entities = sim.store.entity[:constrained].tolist()
     wrists = np.array([sim.add_constraint(e, "wrist", "wrist_r", 10, Activation(0.0, 1e9),
                                           (0.0, 0.0, 1.2)) for e in entities], dtype=np.int64)
-    owners = sim.constraints.owner[wrists]
+    owners = sim.constraints.owner[sim.constraints.rows_of(wrists)]
     phase = rng.uniform(0, 2 * np.pi, constrained)
     metrics = MetricsRecorder(sim)
     for tick in range(ticks):
