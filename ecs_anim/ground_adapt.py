@@ -14,8 +14,16 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
+from .ground import Ground
 from .morphology import leg_length
-from .normalized import SIDE_JOINTS, SIDE_LENGTHS, DecodedLegs, DecodedPose, NormalizedPoses, decode_legs
+from .normalized import (
+    SIDE_JOINTS,
+    SIDE_LENGTHS,
+    DecodedLegs,
+    DecodedPose,
+    NormalizedPoses,
+    decode_legs,
+)
 from .rotations import quat_from_matrix, rotation_between
 
 F64 = NDArray[np.float64]
@@ -27,6 +35,15 @@ BALL_HEIGHT_PER_LEG = 0.025 / 0.86
 #: Legs are never stretched beyond this fraction of thigh + shank: a fully straight knee has an
 #: undefined bend direction and looks locked.
 MAX_LEG_EXTENSION = 0.995
+
+#: A heel this far under the ground (m) is lifted: well below the metrics' 1 mm, above rounding.
+HEEL_TOLERANCE_M = 1e-6
+
+
+def heel_depth(ground: Ground, ankles: F64, ankle_height: F64) -> F64:
+    """How far each heel (the sole under the ankle) is below the ground, metres: ``ankles``
+    (..., 3) world, ``ankle_height`` (...) the ankle's height above the sole; negative above."""
+    return ground.height(ankles[..., :2]) + ankle_height - ankles[..., 2]
 
 
 def vertical_slack_for_reach(hips: F64, ankle_targets: F64, reach: F64) -> F64:
@@ -90,4 +107,30 @@ def adapt_to_ground(poses: NormalizedPoses, lengths: F64, ankle_targets: F64,
                    leg_fraction=distance / (thigh + shank))
 
 
-__all__ = ["adapt_to_ground", "vertical_slack_for_reach"]
+def adapt_keeping_heels_up(poses: NormalizedPoses, lengths: F64, ankle_targets: F64, weights: F64,
+                           root_height: F64, decoded: DecodedPose | DecodedLegs, ground: Ground,
+                           passes: int = 4) -> tuple[NormalizedPoses, DecodedLegs]:
+    """:func:`adapt_to_ground`, then lift each ankle target whose leg, stretched short of it,
+    would put the heel under the ground; returns the poses and their decoded legs.
+
+    A target out of the leg's reach (a contact ramping out while the pelvis rises, say) leaves
+    the ankle on the line from the hip towards it: over a step edge that point can be above the
+    higher step while the target is above the lower one (heels sank 12-31 mm on stairs).
+    Raising the target turns that line up and back, so a few passes suffice. Arguments as for
+    :func:`adapt_to_ground` (``decoded``: the pose the legs are re-aimed from).
+    """
+    ankle_height = lengths[:, SIDE_LENGTHS["ankle_height"]]
+    adapted = adapt_to_ground(poses, lengths, ankle_targets, weights, root_height, decoded)
+    legs = decode_legs(adapted, lengths, lengths)
+    for _ in range(passes):
+        deficit = heel_depth(ground, legs.ankles, ankle_height)
+        if not np.any(deficit > HEEL_TOLERANCE_M):
+            break
+        ankle_targets = ankle_targets.copy()
+        ankle_targets[..., 2] += np.maximum(deficit, 0.0)
+        adapted = adapt_to_ground(poses, lengths, ankle_targets, weights, root_height, decoded)
+        legs = decode_legs(adapted, lengths, lengths)
+    return adapted, legs
+
+
+__all__ = ["adapt_keeping_heels_up", "adapt_to_ground", "heel_depth", "vertical_slack_for_reach"]

@@ -17,7 +17,7 @@ import numpy as np
 
 from .constraint_table import KIND_NAMES, KIND_ORIENTATION
 from .errors import EcsAnimError
-from .ground_adapt import BALL_HEIGHT_PER_LEG
+from .ground_adapt import BALL_HEIGHT_PER_LEG, heel_depth
 from .morphology import bone_lengths_of
 from .normalized import SIDE_JOINTS, SIDE_LENGTHS
 from .simulation import Simulation
@@ -79,9 +79,8 @@ class MetricsRecorder:
         self.prev_ankles, self.prev_planted = ankles.copy(), planted
         ankle_height = st.lengths[:, SIDE_LENGTHS["ankle_height"]]
         ball = BALL_HEIGHT_PER_LEG * sim.leg_length()[:, None]
-        heel_depth = sim.ground.height(ankles[..., :2]) - (ankles[..., 2] - ankle_height)
         toe_depth = sim.ground.height(toes[..., :2]) - (toes[..., 2] - ball)
-        depth_mm = np.maximum(heel_depth, toe_depth).max(axis=1) * 1e3
+        depth_mm = np.maximum(heel_depth(sim.ground, ankles, ankle_height), toe_depth).max(axis=1) * 1e3
         self.penetration_max = np.maximum(self.penetration_max, depth_mm)
         error = np.abs(bone_lengths_of(p)[:, IS_BONE] - st.lengths[:, IS_BONE]).max(axis=1)
         self.bone_error_max = np.maximum(self.bone_error_max, error)

@@ -4,7 +4,8 @@ A foot entering contact gets a footprint: where the motion puts its ankle, on th
 it. The footprint stays locked in the world for the whole contact (no sliding), the pelvis is
 lowered only as far as the legs in contact need (``min(h1, h2, h3)``), legs are re-aimed
 analytically, free feet ride on the ground level of the supporting feet and are lifted clear of
-steps, and a planted foot whose toe would go into a step is pitched up onto it.
+steps, a heel the stretched leg would put under a step is lifted, and a planted foot whose toe
+would go into a step is pitched up onto it.
 
 Reads: store.poses, scaled, contact_weight, lengths, clip; the ground; the bank's ankle heights.
 Writes: store.poses (root height, leg frames and fractions, foot directions), footprint, locked,
@@ -15,15 +16,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ecs_anim.ground_adapt import BALL_HEIGHT_PER_LEG, adapt_to_ground
-from ecs_anim.normalized import SIDE_JOINTS, SIDE_LENGTHS, decode_legs
+from ecs_anim.ground_adapt import BALL_HEIGHT_PER_LEG, adapt_keeping_heels_up, heel_depth
+from ecs_anim.normalized import SIDE_JOINTS, SIDE_LENGTHS
 from ecs_anim.system_base import System
 
 #: Time constant (s) with which the motion's floor follows the ground under the supporting feet.
 GROUND_SMOOTHING_S = 0.15
-
-#: A heel this far under the ground (m) is lifted: well below the metrics' 1 mm, above rounding.
-HEEL_TOLERANCE_M = 1e-6
 
 ANKLES, TOES = list(SIDE_JOINTS["ankle"]), list(SIDE_JOINTS["toe"])
 
@@ -57,40 +55,16 @@ class GroundAdapt(System):
         # Free feet ride on that floor, lifted where heel or toe would go under the ground.
         free = ankles.copy()
         free[..., 2] += st.ground_ref[:, None]
-        need_heel = ground_at_ankle + ankle_height - free[..., 2]
+        need_heel = heel_depth(ground, free, ankle_height)
         need_toe = ground.height(toes[..., :2]) + ball - (toes[..., 2] + st.ground_ref[:, None])
         free[..., 2] += np.maximum(0.0, np.maximum(need_heel, need_toe))
         targets = free + w[..., None] * (st.footprint - free)
         # While a contact ramps in, the blend can cross a step edge: keep the heel above ground.
-        targets[..., 2] = np.maximum(targets[..., 2], ground.height(targets[..., :2]) + ankle_height)
+        targets[..., 2] += np.maximum(heel_depth(ground, targets, ankle_height), 0.0)
         root_height = scaled.positions[:, 0, 2] + st.ground_ref
-        poses = adapt_to_ground(st.poses, st.lengths, targets, w, root_height, decoded=scaled)
-        poses, legs = self._heels_onto_ground(poses, targets, ankle_height, root_height)
+        poses, legs = adapt_keeping_heels_up(st.poses, st.lengths, targets, w, root_height, scaled,
+                                             ground)
         st.poses = self._toes_onto_ground(poses, legs, ball)
-
-    def _heels_onto_ground(self, poses, targets, ankle_height, root_height,  # type: ignore[no-untyped-def]
-                           passes: int = 4):
-        """Lift an ankle target where the leg, stretched short of it, would put the heel under
-        the ground; returns the poses and their decoded legs.
-
-        A target out of the leg's reach (a contact ramping out while the pelvis rises, say)
-        leaves the ankle on the line from the hip towards it: over a step edge that point can be
-        above the higher step while the target is above the lower one (heels sank 12-20 mm on
-        stairs). Raising the target turns that line up and back, so a few passes suffice.
-        """
-        st, ground, scaled = self.sim.store, self.sim.ground, self.sim.store.scaled
-        w = st.contact_weight
-        for _ in range(passes):
-            legs = decode_legs(poses, st.lengths, st.lengths)
-            deficit = ground.height(legs.ankles[..., :2]) + ankle_height - legs.ankles[..., 2]
-            if not np.any(deficit > HEEL_TOLERANCE_M):
-                break
-            targets = targets.copy()
-            targets[..., 2] += np.maximum(deficit, 0.0)
-            poses = adapt_to_ground(st.poses, st.lengths, targets, w, root_height, decoded=scaled)
-        else:
-            legs = decode_legs(poses, st.lengths, st.lengths)
-        return poses, legs
 
     def _toes_onto_ground(self, poses, legs, ball, passes: int = 4):  # type: ignore[no-untyped-def]
         """Pitch a foot up about its ankle where its toe joint would be under the ground
@@ -99,7 +73,7 @@ class GroundAdapt(System):
         Raising the toe moves it horizontally too (onto the next step, say), so the ground is
         asked again at the new place, a few passes.
         """
-        st, ground = self.sim.store, self.sim.ground
+        ground = self.sim.ground
         ankles, toes = legs.ankles, legs.toes
         deficit = ground.height(toes[..., :2]) + ball - toes[..., 2]
         if not np.any(deficit > 0.0):
