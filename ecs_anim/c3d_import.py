@@ -537,7 +537,8 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
         "absent_fill": "neutral pose" if absent else None,
         # Where the pelvis markers could not place the pelvis: trimmed (numbered as in the file,
         # from 0), repaired (numbered as the motion's frames, like the gaps below).
-        "root_frames_trimmed": [[a, b] for a, b in _intervals(~_mask(kept, raw.positions.shape[0]))],
+        "root_frames_trimmed": [[a, b] for a, b in ((0, kept.start - 1), (kept.stop, raw.positions.shape[0] - 1))
+                                if a <= b],
         # The motion's frame 0 is this frame of the file: times given against the file (a
         # --constraints file, gait events) are shifted by it.
         "first_file_frame": kept.start,
@@ -592,12 +593,6 @@ def trust_root(build: _Build) -> tuple[slice, list[list[int]]]:
         build.pelvis2world[before + 1:after] = matrix_from_quat(slerp(quats[0], quats[1], t))
     build.root_trusted = None
     return kept, repaired
-
-
-def _mask(part: slice, n: int) -> BOOL:
-    mask = np.zeros(n, dtype=bool)
-    mask[part] = True
-    return mask
 
 
 def reject_joint_outliers(positions: F64, measured: BOOL, tolerance: float = 0.15

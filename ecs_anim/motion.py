@@ -29,6 +29,8 @@ FORMAT_VERSION = 1
 HEADER_KEY = "header_json"
 #: The heaviest source body a header may hold (import writes 22 kg/m² x stature², at most 198 kg).
 MAX_MASS_KG = 1000.0
+#: Frame rates a motion may have (frames per second).
+MIN_FPS, MAX_FPS = 0.1, 10000.0
 
 
 @dataclass
@@ -160,17 +162,15 @@ def motion_problem(motion: object) -> str | None:
     arrays as :func:`pose_arrays_problem` checks them and a source body of positive lengths."""
     if not isinstance(motion, NormalizedMotion):
         return f"expected a NormalizedMotion, got {type(motion).__name__}"
-    if not (_is_number(motion.fps) and 0.1 <= motion.fps <= 10000):
-        return f"fps must be a number from 0.1 to 10000, got {motion.fps!r}"
+    if not (_is_number(motion.fps) and MIN_FPS <= motion.fps <= MAX_FPS):
+        return f"fps must be a number from {MIN_FPS:g} to {MAX_FPS:g}, got {motion.fps!r}"
     if motion.n_frames < 1:
         return "no frames"
     problem = pose_arrays_problem(motion.poses.arrays(), motion.n_frames)
     if problem:
         return problem
-    lengths = np.asarray(motion.source_morphology.lengths, dtype=float)
-    if not np.all(np.isfinite(lengths) & (lengths > 0.0)):
-        return "its source body has non-finite or non-positive segment lengths"
-    return None
+    body = _source_body_problem(motion.source_morphology.to_dict())
+    return None if body is None else f"source body: {body}"
 
 
 def _check_header(path: str, header: Any) -> None:
@@ -185,7 +185,7 @@ def _check_header(path: str, header: Any) -> None:
         if key not in header:
             raise InputError(path, f"damaged .nmo header: {key!r} is missing")
     fps, n = header["fps"], header["n_frames"]
-    if isinstance(fps, bool) or not isinstance(fps, (int, float)) or not 0.1 <= fps <= 10000 \
+    if not (_is_number(fps) and MIN_FPS <= fps <= MAX_FPS) \
             or isinstance(n, bool) or not isinstance(n, int) or n <= 0:
         raise InputError(path, f"damaged .nmo header: fps={fps!r}, n_frames={n!r}")
     if not isinstance(header.get("info", {}), dict) or not isinstance(header.get("constraints", []), list):

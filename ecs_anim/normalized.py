@@ -372,16 +372,15 @@ def _at_distance(start: F64, point: F64, tangent: F64, length: F64) -> F64:
     Newton lands on the curve at the bone's length wherever the spline is well formed; where it
     did not converge (a spline folded on itself, as between two frames whose spines point
     opposite ways in the pelvis frame) the joint keeps the direction it reached, so bones stay
-    exact whatever the control points (the tangent, then the pelvis frame's z, when that
-    direction is undefined).
+    exact whatever the control points (the curve's tangent, then the z axis of the frame the
+    control points are in, when that direction is undefined).
     """
     offset = point - start
-    norm = np.linalg.norm(offset, axis=-1, keepdims=True)
-    tangent_norm = np.linalg.norm(tangent, axis=-1, keepdims=True)
     up = np.zeros_like(offset)
     up[..., 2] = 1.0
-    direction = np.where(norm > 1e-9, offset / np.maximum(norm, 1e-300),
-                         np.where(tangent_norm > 1e-9, tangent / np.maximum(tangent_norm, 1e-300), up))
+    has_offset = np.linalg.norm(offset, axis=-1, keepdims=True) > 1e-9
+    has_tangent = np.linalg.norm(tangent, axis=-1, keepdims=True) > 1e-9
+    direction = np.where(has_offset, normalize(offset), np.where(has_tangent, normalize(tangent), up))
     return start + direction * length[..., None]
 
 

@@ -22,6 +22,9 @@ N_MASS_SEGMENTS = len(MASS_SEGMENTS)
 
 #: Most clips a character can have queued at once.
 MAX_QUEUE = 16
+#: Fields that are not one array row per character: the poses (arrays of their own) and what the
+#: tick derives from them.
+NOT_ROWS = ("poses", "scaled", "vertebrae", "goals", "solved_positions", "posture")
 
 
 def _empty_poses(n: int) -> NormalizedPoses:
@@ -108,7 +111,7 @@ class CharacterStore:
         """Append one character; ``values`` give its row for any array field. Load time only."""
         row = self.n
         for f in fields(self):
-            if f.name in ("poses", "scaled", "vertebrae", "goals", "solved_positions", "posture"):
+            if f.name in NOT_ROWS:
                 continue
             current = getattr(self, f.name)
             fill = np.zeros((1,) + current.shape[1:], dtype=current.dtype)
@@ -134,9 +137,8 @@ class CharacterStore:
         tick makes them again."""
         keep = np.arange(self.n) != row
         for f in fields(self):
-            if f.name in ("poses", "scaled", "vertebrae", "goals", "solved_positions", "posture"):
-                continue
-            setattr(self, f.name, getattr(self, f.name)[keep])
+            if f.name not in NOT_ROWS:
+                setattr(self, f.name, getattr(self, f.name)[keep])
         self.poses = self.poses.take(keep)
         self.scaled = None if self.scaled is None else self.scaled.take(keep)
         self.posture = None if self.posture is None else self.posture.take(keep)
