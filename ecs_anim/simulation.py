@@ -312,6 +312,10 @@ class Simulation:
         values = [priority] + list(target_in_world or ())
         if not all(np.isfinite(v) for v in values):
             raise EcsAnimError(f"constraint {name!r}: priority and target must be finite")
+        table, row = self.constraints, self.row(entity)
+        if any(table.names[k] == name for k in np.flatnonzero(table.owner == row)):
+            raise EcsAnimError(f"constraint {quoted(name)}: this character has one of that name "
+                               "already (constraint_index finds constraints by name)")
         try:
             body = body_point(point, fraction, offset_m, segment=kind == "orientation")
             if target_entity is not None:

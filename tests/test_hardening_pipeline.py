@@ -378,3 +378,16 @@ def test_a_one_frame_c3d_still_imports(tmp_path):
     clip, extra = canonical_clip_c3d(read_c3d(write_c3d(tmp_path / "one.c3d", labels,
                                                         raw.positions[100:101], None, raw.rate)))
     assert len(clip.positions) == 1 and extra["root_frames_trimmed"] == []
+
+
+def test_a_constraint_name_is_used_once_per_character():
+    idle = import_bvh(MOTIONS_DIR / "idle.bvh")
+    sim = Simulation({"idle": idle})
+    a = sim.spawn("a", Morphology.preset("child"), MotionPlayer("idle"))
+    b = sim.spawn("b", Morphology.preset("child"), MotionPlayer("idle"), Placement((0.0, 1.0)))
+    sim.add_constraint(a, "reach", "wrist_r", target_in_world=(0.3, 0.0, 1.0))
+    sim.add_constraint(b, "reach", "wrist_r", target_in_world=(0.3, 1.0, 1.0))  # another body: fine
+    from ecs_anim.errors import EcsAnimError
+
+    with pytest.raises(EcsAnimError, match=r"^constraint 'reach': this character has one of that name already"):
+        sim.add_constraint(a, "reach", "wrist_l", target_in_world=(0.3, 0.2, 1.0))
