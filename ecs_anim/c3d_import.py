@@ -64,8 +64,10 @@ from .importing import (
     UNITS,
     YUP_TO_ZUP,
     CanonicalClip,
+    FrameRange,
     detect_unit,
     normalize_clip,
+    trim_clip,
 )
 from .joint_map import JointMap
 from .marker_sets import GROUPS, MarkerMap, check_usable, match_markers
@@ -372,17 +374,22 @@ def _detect_up(mk: _Markers, present: list[str], mmap: MarkerMap) -> str:
 
 def import_c3d(path: str | Path, map_spec: str | None = None, unit: str | None = None,
                thresholds: ContactThresholds = ContactThresholds(), up: str | None = None,
-               max_gap: int = DEFAULT_MAX_GAP, fill_from: str | Path | None = None
-               ) -> NormalizedMotion:
+               max_gap: int = DEFAULT_MAX_GAP, fill_from: str | Path | None = None,
+               trim: FrameRange | None = None) -> NormalizedMotion:
     """Read a C3D file and normalize it. Raises :class:`EcsAnimError` subclasses on bad input.
 
     ``fill_from``: a motion (.nmo or .bvh) whose parts replace the absent ones (see
-    :func:`fill_absent_from`); by default they keep the neutral pose.
+    :func:`fill_absent_from`); by default they keep the neutral pose. ``trim``: only those
+    frames (numbered as in the file).
     """
     path = Path(path)
     raw = read_c3d(path)
     try:
         clip, extra = canonical_clip_c3d(raw, map_spec, unit, up, max_gap)
+        if trim is not None:
+            kept = trim.frames(len(clip.positions), clip.fps, extra["first_file_frame"])
+            clip = trim_clip(clip, kept)
+            extra = _after_trim(extra, kept)
         motion = normalize_clip(clip, path.stem, str(path), thresholds)
     except InputError:
         raise
@@ -399,6 +406,17 @@ def import_c3d(path: str | Path, map_spec: str | None = None, unit: str | None =
         motion = fill_absent_from(motion, _load_default(Path(fill_from)), Path(fill_from).name,
                                   thresholds)
     return motion
+
+
+def _after_trim(extra: dict[str, Any], kept: slice) -> dict[str, Any]:
+    """``extra``'s frame spans (numbered as the motion's frames) after keeping only ``kept``."""
+    def spans(pairs: list[list[int]]) -> list[list[int]]:
+        return [[max(a, kept.start) - kept.start, min(b, kept.stop - 1) - kept.start]
+                for a, b in pairs if b >= kept.start and a < kept.stop]
+
+    gaps = dict(extra["gaps"], long_gap_frames=spans(extra["gaps"]["long_gap_frames"]))
+    return dict(extra, gaps=gaps, root_frames_repaired=spans(extra["root_frames_repaired"]),
+                first_file_frame=extra["first_file_frame"] + kept.start)
 
 
 def _load_default(path: Path) -> NormalizedMotion:

@@ -19,8 +19,9 @@ from typing import Any, Sequence
 
 from .constraint_table import check_stored
 from .contacts import ContactThresholds
-from .errors import EcsAnimError
+from .errors import EcsAnimError, listed
 from .files import folder_problem, input_problem, output_folder_problem, output_problem
+from .importing import FrameRange
 from .joint_map import preset_summary
 from .marker_sets import preset_summary as marker_set_summary
 from .morphology import PRESET_SPECS
@@ -42,6 +43,14 @@ def positive_float(text: str) -> float:
     if not (value > 0 and value < float("inf")):
         raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text}")
     return value
+
+
+def frame_range(text: str) -> FrameRange:
+    """argparse type of ``--trim``: :meth:`FrameRange.parse`, its error as argparse's."""
+    try:
+        return FrameRange.parse(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def positive_int(text: str) -> int:
@@ -109,10 +118,10 @@ def cmd_import(args: argparse.Namespace) -> int:
             if suffix == ".c3d":
                 motion = import_c3d(src, args.map, args.unit, thresholds, args.up,
                                     DEFAULT_MAX_GAP if args.max_gap is None else args.max_gap,
-                                    args.fill_absent_from)
+                                    args.fill_absent_from, args.trim)
             else:
-                motion = import_bvh(src, args.map, args.unit, thresholds, args.up or "y")
-            # A --constraints file times the file's frames; a C3D import may have trimmed some.
+                motion = import_bvh(src, args.map, args.unit, thresholds, args.up or "y", args.trim)
+            # A --constraints file times the file's frames; --trim or a C3D import may drop some.
             shift_s = motion.info.get("first_file_frame", 0) / motion.fps
             on_clip = [replace(c, activation=replace(c.activation, start_s=c.activation.start_s - shift_s,
                                                      stop_s=c.activation.stop_s - shift_s))
@@ -166,7 +175,7 @@ def cmd_import(args: argparse.Namespace) -> int:
 
 
 def motion_summary(path: str) -> dict[str, object]:
-    from .motion import load_nmo
+    from .motion import facing_and_travel, load_nmo
 
     motion = load_nmo(path)
     contacts = motion.contacts()
@@ -175,6 +184,7 @@ def motion_summary(path: str) -> dict[str, object]:
         "frames": motion.n_frames,
         "fps": motion.fps,
         "duration_s": round(motion.duration_s, 4),
+        "root": facing_and_travel(motion),
         "source_morphology": motion.source_morphology.to_dict()
         | {"stature_m": round(motion.source_morphology.stature, 4)},
         "contacts": {
@@ -191,17 +201,39 @@ def motion_summary(path: str) -> dict[str, object]:
     }
 
 
+def _info_files(given: list[str]) -> list[str]:
+    """The .nmo files named, a folder standing for the .nmo files in it (sorted)."""
+    files: list[str] = []
+    for name in given:
+        if Path(name).is_dir():
+            found = sorted(str(p) for p in Path(name).glob("*.nmo"))
+            if not found:
+                raise EcsAnimError(f"{name}: a folder with no .nmo file (import clips first: "
+                                   f"ecs-anim import CLIP.bvh -o {name})")
+            files.extend(found)
+        else:
+            files.append(name)
+    return files
+
+
 def cmd_info(args: argparse.Namespace) -> int:
-    summary = motion_summary(args.file)
+    files = _info_files(args.file)
+    if len(files) > 1 or Path(args.file[0]).is_dir():
+        return _info_table(files, args.json)
+    summary = motion_summary(files[0])
     if args.json:
         print(json.dumps(summary, indent=2))
         return 0
     m = summary["source_morphology"]
     c = summary["contacts"]
     info = summary["info"]
-    assert isinstance(m, dict) and isinstance(c, dict) and isinstance(info, dict)
-    print(f"{args.file}")
+    root = summary["root"]
+    assert isinstance(m, dict) and isinstance(c, dict) and isinstance(info, dict) and isinstance(root, dict)
+    print(f"{files[0]}")
     print(f"  frames     {summary['frames']} at {summary['fps']:g} fps ({summary['duration_s']} s)")
+    print(f"  facing     {root['facing_deg']:g} deg from +x at the first frame; the root travels "
+          f"{root['straight_m']:g} m towards {root['direction_deg']:g} deg ({root['path_m']:g} m "
+          "along its path)")
     print(f"  source     {info.get('source', '?')} ({info.get('joint_map', '?')}, unit "
           f"{info.get('unit', '?')})")
     print(f"  body       stature {m['stature_m']:.3f} m, mass {m['mass_kg']:.1f} kg, "
@@ -236,6 +268,38 @@ def cmd_export(args: argparse.Namespace) -> int:
     morph, _ = export_motion(motion, args.morphology, args.output, force=args.force)
     print(f"{args.file} on {morph.name} (stature {morph.stature:.3f} m) -> {args.output}: "
           f"{motion.n_frames} frames")
+    return 0
+
+
+def _info_table(files: list[str], as_json: bool) -> int:
+    """``info`` on several files: one row each; a file that cannot be read is a row saying why,
+    and the others go on (exit status 1 if any failed)."""
+    rows: list[dict[str, Any]] = []
+    for name in files:
+        try:
+            rows.append(motion_summary(name))
+        except EcsAnimError as exc:
+            rows.append({"file": name, "error": str(exc)})
+    failed = sum("error" in r for r in rows)
+    if as_json:
+        print(json.dumps(rows, indent=2))
+        return EXIT_FAILED if failed else 0
+    print(f"{'file':<28} {'frames':>6} {'fps':>5} {'s':>6} {'facing':>7} {'travel m':>8} "
+          f"{'L %':>4} {'R %':>4}  parts filled in or absent")
+    for r in rows:
+        label = Path(str(r["file"])).name
+        label = label if len(label) <= 28 else label[:25] + "..."
+        if "error" in r:
+            print(f"{label:<28} error: {r['error']}")
+            continue
+        c, root, info = r["contacts"], r["root"], r["info"]
+        parts = list(info.get("absent") or []) + [f"{j} (filled)" for j in info.get("filled_in") or []]
+        print(f"{label:<28} {r['frames']:>6} {r['fps']:>5g} {r['duration_s']:>6.2f} "
+              f"{root['facing_deg']:>7g} {root['straight_m']:>8.2f} {c['left_fraction']:>4.0%} "
+              f"{c['right_fraction']:>4.0%}  {listed(parts, 4) or '-'}")
+    if failed:
+        print(f"{failed} of {len(rows)} file(s) could not be read", file=sys.stderr)
+        return EXIT_FAILED
     return 0
 
 
@@ -573,6 +637,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--up", choices=["y", "z"], default=None,
                    help="the file's up axis (default: y for BVH, the format's convention; "
                    "detected from the markers for C3D)")
+    p.add_argument("--trim", type=frame_range, metavar="START:END",
+                   help="keep only these frames of each file: frame numbers (START included, END "
+                   "not; negative from the end; either may be left out, e.g. 1: drops a T-pose "
+                   "first frame) or seconds with s (0.5s:12s)")
     p.add_argument("--max-gap", type=positive_int, metavar="FRAMES",
                    help="C3D: longest run of missing marker samples filled without a warning "
                    f"(default {DEFAULT_MAX_GAP})")
@@ -592,8 +660,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
     p.set_defaults(func=cmd_import)
 
-    p = sub.add_parser("info", help="describe a .nmo file")
-    p.add_argument("file", metavar="FILE.nmo")
+    p = sub.add_parser("info", help="describe .nmo files (several, or a folder: a table)")
+    p.add_argument("file", metavar="FILE.nmo|FOLDER", nargs="+")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_info)
 

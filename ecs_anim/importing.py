@@ -7,7 +7,7 @@ parse -> map joints -> detect units -> forward kinematics (all frames at once) -
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -70,6 +70,65 @@ class CanonicalClip:
     unit_reason: str
     joint_map: JointMap
     up_axis: str = "y"
+
+
+@dataclass(frozen=True)
+class FrameRange:
+    """``import --trim START:END``: the frames kept, from ``start`` up to (not including) ``stop``;
+    each a frame number of the file (seconds from its first frame when ``seconds``), negative
+    from the clip's end, None for the clip's own start or end (Python slice rules)."""
+
+    start: float | None
+    stop: float | None
+    seconds: bool = False
+
+    @classmethod
+    def parse(cls, text: str) -> FrameRange:
+        """``"1:"`` (drop a T-pose frame), ``":-30"``, ``"0.5s:12s"``; raises ValueError."""
+        if text.count(":") != 1:
+            raise ValueError(f"--trim {text!r}: expected START:END (frames, or seconds with s)")
+        ends = [part.strip() for part in text.split(":")]
+        in_seconds = {part.endswith("s") for part in ends if part}
+        if len(in_seconds) > 1:
+            raise ValueError(f"--trim {text!r}: give both ends in frames or both in seconds")
+        seconds = in_seconds == {True}
+        values: list[float | None] = []
+        for part in ends:
+            number = part[:-1] if seconds and part else part
+            if not number:
+                values.append(None)
+                continue
+            try:
+                value = float(number) if seconds else int(number)
+            except ValueError:
+                raise ValueError(f"--trim {text!r}: {part!r} is not a "
+                                 f"{'number of seconds' if seconds else 'frame number'}") from None
+            if not math.isfinite(value):
+                raise ValueError(f"--trim {text!r}: {part!r} is not finite")
+            values.append(value)
+        return cls(values[0], values[1], seconds)
+
+    def frames(self, n_frames: int, fps: float, first_frame: int = 0) -> slice:
+        """The kept frames of a clip of ``n_frames`` whose frame 0 is the file's ``first_frame``
+        (a C3D import may have trimmed some); raises :class:`EcsAnimError` when nothing is left."""
+        def index(value: float | None, default: int) -> int:
+            if value is None:
+                return default
+            frame = int(round(value * fps)) if self.seconds else int(value)
+            return frame + n_frames if frame < 0 else frame - first_frame
+
+        start = min(max(index(self.start, 0), 0), n_frames)
+        stop = min(max(index(self.stop, n_frames), 0), n_frames)
+        if stop - start < 1:
+            raise EcsAnimError(f"--trim keeps no frame of the {n_frames} "
+                             f"(frames {first_frame}-{first_frame + n_frames - 1} of the file)")
+        return slice(start, stop)
+
+
+def trim_clip(clip: CanonicalClip, frames: slice) -> CanonicalClip:
+    """The clip's frames ``frames`` only (everything per frame sliced alike)."""
+    return replace(clip, positions=clip.positions[frames], pelvis2world=clip.pelvis2world[frames],
+                   thorax2world=clip.thorax2world[frames], head2world=clip.head2world[frames])
 
 
 #: A captured subject's plausible stature (m): outside, the length unit is wrong.
@@ -221,13 +280,20 @@ def source_morphology(positions: F64, name: str) -> Morphology:
 
 def import_bvh(path: str | Path, map_spec: str | None = None, unit: str | None = None,
                thresholds: ContactThresholds = ContactThresholds(),
-               up: str = "y") -> NormalizedMotion:
-    """Read a BVH file and normalize it. Raises :class:`EcsAnimError` subclasses on bad input."""
+               up: str = "y", trim: FrameRange | None = None) -> NormalizedMotion:
+    """Read a BVH file and normalize it (``trim``: only those frames). Raises
+    :class:`EcsAnimError` subclasses on bad input."""
     path = Path(path)
     motion = read_bvh(path)
     try:
         clip = canonical_clip(motion, map_spec, unit, up)
+        first_file_frame = 0
+        if trim is not None:
+            kept = trim.frames(len(clip.positions), clip.fps)
+            clip, first_file_frame = trim_clip(clip, kept), kept.start
         normalized = normalize_clip(clip, path.stem, str(path), thresholds)
+        if first_file_frame:
+            normalized.info["first_file_frame"] = first_file_frame
     except InputError:
         raise
     except EcsAnimError as exc:

@@ -20,7 +20,7 @@ from .constraints import ConstraintSpec
 from .contacts import contacts_from_constraints
 from .errors import InputError, listed
 from .files import atomic_output
-from .morphology import Morphology
+from .morphology import Morphology, leg_length
 from .normalized import DIRECTION_FIELDS, QUATERNION_FIELDS, TRAILING_SHAPES, NormalizedPoses
 from .skeleton import LENGTHS
 
@@ -61,6 +61,22 @@ class NormalizedMotion:
     def contacts(self) -> np.ndarray:
         """Bool (n_frames, 2): left/right foot in full contact."""
         return contacts_from_constraints(self.constraints, self.n_frames, self.fps)
+
+
+def facing_and_travel(motion: NormalizedMotion) -> dict[str, float]:
+    """Which way the clip faces at its first frame (degrees anticlockwise from +x, the pelvis's
+    forward axis) and how far its root travels on the source body: first to last frame
+    (``straight_m``, horizontal) and along its path (``path_m``), with the direction of travel."""
+    leg = float(leg_length(motion.source_morphology.lengths))
+    root_xy = motion.poses.root_position[:, :2] * leg
+    travel = root_xy[-1] - root_xy[0]
+    heading = float(motion.poses.root_heading[0])
+    return {  # + 0.0: no "-0" in a table
+        "facing_deg": round(math.degrees(math.atan2(math.sin(heading), math.cos(heading))), 1) + 0.0,
+        "straight_m": round(float(np.linalg.norm(travel)), 3),
+        "path_m": round(float(np.linalg.norm(np.diff(root_xy, axis=0), axis=1).sum()), 3),
+        "direction_deg": round(math.degrees(math.atan2(travel[1], travel[0])), 1) + 0.0,
+    }
 
 
 def save_nmo(motion: NormalizedMotion, path: str | Path, force: bool = False) -> None:

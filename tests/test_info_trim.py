@@ -1,0 +1,92 @@
+"""``ecs-anim info`` on many files or a folder (a table), facing and travel, ``import --trim``
+(issue 15, item 6)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from conftest import MOCAP_DIR, MOTIONS_DIR, require_mocap
+from ecs_anim.cli import main
+from ecs_anim.errors import EcsAnimError
+from ecs_anim.importing import FrameRange, import_bvh
+from ecs_anim.motion import facing_and_travel, load_nmo
+
+
+@pytest.fixture(scope="module")
+def library(tmp_path_factory):
+    out = tmp_path_factory.mktemp("lib")
+    assert main(["import", *(str(MOTIONS_DIR / f"{n}.bvh") for n in ("walk", "idle", "kick")),
+                 "-o", str(out)]) == 0
+    return out
+
+
+def test_info_on_a_folder_is_a_table_and_a_bad_file_is_a_row(library, capsys):
+    (library / "broken.nmo").write_bytes(b"junk")
+    capsys.readouterr()
+    assert main(["info", str(library)]) == 1
+    out, err = capsys.readouterr()
+    lines = out.splitlines()
+    assert lines[0].split()[:4] == ["file", "frames", "fps", "s"]
+    assert lines[1].startswith("broken.nmo") and "not a readable .nmo file" in lines[1]
+    walk = next(line for line in lines if line.startswith("walk.nmo")).split()
+    assert walk[1:3] == ["132", "30"]  # frames, fps
+    assert float(walk[5]) == pytest.approx(5.44, abs=0.01)  # root travel, m
+    assert "1 of 4 file(s) could not be read" in err
+    (library / "broken.nmo").unlink()
+    assert main(["info", str(library / "walk.nmo"), str(library / "idle.nmo"), "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert [r["frames"] for r in rows] == [132, 240]
+
+
+def test_facing_and_travel_of_our_walk_and_a_turned_copy():
+    walk = import_bvh(MOTIONS_DIR / "walk.bvh")
+    root = facing_and_travel(walk)
+    assert abs(root["facing_deg"]) < 2.0 and abs(root["direction_deg"]) < 1.0  # faces and walks +x
+    assert root["straight_m"] == pytest.approx(5.44, abs=0.01)
+    assert root["path_m"] >= root["straight_m"]
+
+
+def test_info_on_one_file_says_facing_and_travel(library, capsys):
+    assert main(["info", str(library / "walk.nmo")]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.strip().startswith("facing"))
+    assert "deg from +x at the first frame; the root travels 5.439 m towards" in line
+
+
+def test_trim_parses_frames_and_seconds():
+    assert FrameRange.parse("1:").frames(100, 30.0) == slice(1, 100)
+    assert FrameRange.parse(":-30").frames(100, 30.0) == slice(0, 70)
+    assert FrameRange.parse("0.5s:2s").frames(100, 30.0) == slice(15, 60)
+    assert FrameRange.parse("10:20").frames(100, 30.0, first_frame=5) == slice(5, 15)
+    for bad, message in (("x", "expected START:END"), ("a:b", "'a' is not a frame number"),
+                         ("1s:20", "both ends in frames or both in seconds")):
+        with pytest.raises(ValueError, match=message):
+            FrameRange.parse(bad)
+    with pytest.raises(EcsAnimError, match="--trim keeps no frame of the 100"):
+        FrameRange.parse("200:300").frames(100, 30.0)
+
+
+def test_import_trim_drops_frames_and_says_where_the_clip_starts(tmp_path, capsys):
+    require_mocap()
+    cmu = MOCAP_DIR / "cmu_01_01_playground_jumps.bvh"
+    assert main(["import", str(cmu), "-o", str(tmp_path / "all")]) == 0
+    assert main(["import", str(cmu), "-o", str(tmp_path / "cut"), "--trim", "1:"]) == 0
+    full, cut = load_nmo(tmp_path / "all" / f"{cmu.stem}.nmo"), load_nmo(tmp_path / "cut" / f"{cmu.stem}.nmo")
+    assert cut.n_frames == full.n_frames - 1 and cut.info["first_file_frame"] == 1
+    # The same frames, encoded on a body measured without the T-pose frame: bones within 1 %.
+    assert np.abs(cut.source_morphology.lengths / full.source_morphology.lengths - 1.0).max() < 0.01
+    capsys.readouterr()
+    assert main(["import", str(cmu), "-o", str(tmp_path / "none"), "--trim", "99999:"]) == 1
+    assert "--trim keeps no frame of the" in capsys.readouterr().err
+
+
+def test_import_trim_on_a_c3d_counts_the_files_frames(tmp_path):
+    require_mocap()
+    from ecs_anim.c3d_import import import_c3d
+
+    gait = MOCAP_DIR / "c3dorg_eb015pi_gait.c3d"
+    motion = import_c3d(gait, trim=FrameRange.parse("0:100"))
+    # Frames 0-18 were trimmed already (no pelvis): the file's frames 19-99 remain.
+    assert motion.n_frames == 81 and motion.info["first_file_frame"] == 19
