@@ -90,3 +90,20 @@ def test_import_trim_on_a_c3d_counts_the_files_frames(tmp_path):
     motion = import_c3d(gait, trim=FrameRange.parse("0:100"))
     # Frames 0-18 were trimmed already (no pelvis): the file's frames 19-99 remain.
     assert motion.n_frames == 81 and motion.info["first_file_frame"] == 19
+
+
+def test_the_readme_info_example_runs(tmp_path, monkeypatch, capsys):
+    """The README's info example (import the library into a folder, then info on the folder)."""
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[1]
+    text = (repo / "README.md").read_text(encoding="utf-8")
+    block = text.split("- **info** describes", 1)[1].split("- **import --trim", 1)[0]
+    commands = [line.strip().replace(".venv/bin/ecs-anim ", "") for line in block.splitlines()
+                if line.strip().startswith(".venv/bin/ecs-anim")]
+    assert len(commands) == 2
+    monkeypatch.chdir(repo)
+    out = tmp_path / "library"
+    assert main(commands[0].replace("out/library", str(out)).split()) == 0
+    assert main(commands[1].replace("out/library", str(out)).split()) == 0
+    assert "walk.nmo" in capsys.readouterr().out
