@@ -212,17 +212,27 @@ def local_rotations(pose: DecodedPose) -> F64:
     return local
 
 
+def rest_offsets(morph: Morphology) -> tuple[F64, F64]:
+    """The export skeleton's rest pose (a T-pose) on ``morph``, in BVH axes, metres: each
+    joint's offset from its parent (the root's is zero) and its end site's offset from it (zero
+    where it has none). Returns two (len(EXPORT_NAMES), 3) arrays; the BVH and glTF writers
+    share them."""
+    joint_offsets = np.array([BODY_TO_BVH_REST @ _offset(j.rest_offset, morph)
+                              for j in EXPORT_JOINTS])
+    end_offsets = np.array([np.zeros(3) if j.end_site is None
+                            else BODY_TO_BVH_REST @ _offset(j.end_site, morph)
+                            for j in EXPORT_JOINTS])
+    return joint_offsets, end_offsets
+
+
 def bvh_from_rotations(morph: Morphology, pelvis_in_world: F64, local: F64, fps: float) -> str:
     """BVH text from the pelvis path (frames, 3) in world metres and the export skeleton's local
     rotations (frames, len(EXPORT_NAMES), 3, 3) as given by :func:`local_rotations`."""
-    index = {n: i for i, n in enumerate(EXPORT_NAMES)}
+    joint_offsets, end_offsets = rest_offsets(morph)
     joints = [
-        BvhWriteJoint(
-            j.name, -1 if j.parent is None else index[j.parent],
-            BODY_TO_BVH_REST @ _offset(j.rest_offset, morph),
-            None if j.end_site is None else BODY_TO_BVH_REST @ _offset(j.end_site, morph),
-        )
-        for j in EXPORT_JOINTS
+        BvhWriteJoint(j.name, int(EXPORT_PARENTS[k]), joint_offsets[k],
+                      None if j.end_site is None else end_offsets[k])
+        for k, j in enumerate(EXPORT_JOINTS)
     ]
     euler = matrix_to_euler(local, EULER_ORDER)
     return format_bvh(joints, pelvis_in_world @ YUP_TO_ZUP, euler, 1.0 / fps, EULER_ORDER)
@@ -243,24 +253,29 @@ def write_npz(f: IO[bytes], positions: F64, fps: float, contacts: np.ndarray) ->
 
 def export_motion(motion: NormalizedMotion, morphology_spec: str, out: str | Path,
                   force: bool = False) -> tuple[Morphology, DecodedPose]:
-    """Play ``motion`` on a body and write ``out`` (.bvh or .npz); an existing ``out`` without
-    ``force``, or a path that cannot be written, is an :class:`EcsAnimError` before any work."""
+    """Play ``motion`` on a body and write ``out`` (.bvh, .npz or .glb); an existing ``out``
+    without ``force``, or a path that cannot be written, is an :class:`EcsAnimError` before any
+    work."""
     out = Path(out)
     suffix = out.suffix.lower()
-    if suffix not in (".bvh", ".npz"):
-        raise EcsAnimError(f"-o {out}: the output must end in .bvh or .npz")
+    if suffix not in (".bvh", ".npz", ".glb"):
+        raise EcsAnimError(f"-o {out}: the output must end in .bvh, .npz or .glb")
     problem = output_problem(out, force)
     if problem is not None:
         raise EcsAnimError(problem)
     morph, is_source = resolve_morphology(morphology_spec, motion)
-    # BVH bones are rigid, so a BVH gets the rigid body even on the source morphology; the .npz
-    # on the source carries the measured stretch and reproduces the source exactly.
+    # BVH and glTF bones are rigid, so they get the rigid body even on the source morphology;
+    # the .npz on the source carries the measured stretch and reproduces the source exactly.
     pose = play_on(motion, morph, is_source and suffix == ".npz")
     if not np.all(np.isfinite(pose.positions)):
         raise EcsAnimError(f"{out}: the decoded motion holds non-finite positions (bug); nothing written")
     with atomic_output(out, force) as f:
         if suffix == ".bvh":
             f.write(bvh_text(pose, morph, motion.fps).encode("utf-8"))
+        elif suffix == ".glb":
+            from .gltf import glb_from_pose  # gltf imports this module's skeleton
+
+            f.write(glb_from_pose(pose, morph, motion.fps))
         else:
             write_npz(f, pose.positions, motion.fps, motion.contacts())
     return morph, pose
