@@ -547,8 +547,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def _export_names(scenario) -> list[str]:  # type: ignore[no-untyped-def]
-    """The files ``run --export`` writes: a ``.bvh`` and an ``.npz`` per character."""
-    return [f"{c.name}.{ext}" for c in scenario.characters for ext in ("bvh", "npz")]
+    """The files ``run --export`` writes: a ``.bvh``, an ``.npz`` and a ``.glb`` per character."""
+    return [f"{c.name}.{ext}" for c in scenario.characters for ext in ("bvh", "npz", "glb")]
 
 
 def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type: ignore[no-untyped-def]
@@ -557,6 +557,7 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
     after it the report, then print the metrics."""
     from .exporting import bvh_from_rotations, write_npz
     from .files import atomic_output, output_set
+    from .gltf import glb_bytes
     from .metrics import MetricsRecorder
 
     names = [c.name for c in scenario.characters]
@@ -582,6 +583,8 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
                                                scenario.fps).encode("utf-8"))
                 with export.file(f"{c.name}.npz") as f:
                     write_npz(f, pos[i], scenario.fps, con[i])
+                with export.file(f"{c.name}.glb") as f:
+                    f.write(glb_bytes(c.morphology, pos[i, :, 0], rot[i], scenario.fps))
     if args.report:
         with atomic_output(args.report, args.force) as f:
             f.write(json.dumps(_json_safe(report), indent=2, allow_nan=False).encode("utf-8"))
@@ -609,7 +612,7 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
     print(f"  time per tick {total:.2f} ms: " + ", ".join(
         f"{k} {v:.2f}" for k, v in report["ms_per_tick"].items()))
     if args.export:
-        print(f"  wrote {len(names)} x (.bvh, .npz) to {args.export}")
+        print(f"  wrote {len(names)} x (.bvh, .npz, .glb) to {args.export}")
     if args.report:
         print(f"  wrote report {args.report}")
     return 0
@@ -665,12 +668,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_info)
 
-    p = sub.add_parser("export", help="play a .nmo on a body and write BVH or joint positions")
+    p = sub.add_parser("export", help="play a .nmo on a body and write BVH, glTF or joint positions")
     p.add_argument("file", metavar="FILE.nmo")
     p.add_argument("--morphology", default="source",
                    help=f"source | {' | '.join(PRESET_SPECS)} | FILE.yaml | SKELETON.bvh "
                         "(default: source)")
-    p.add_argument("-o", "--output", required=True, metavar="OUT.bvh|OUT.npz")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.bvh|OUT.npz|OUT.glb")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     p.set_defaults(func=cmd_export)
 

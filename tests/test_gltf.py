@@ -267,3 +267,19 @@ def test_the_validator_reports_a_broken_file(tmp_path):
     report = validate([broken])[str(broken)]
     assert report["numErrors"] >= 1
     assert "ACCESSOR_MAX_MISMATCH" in {m["code"] for m in report["messages"]}
+
+
+def test_run_export_writes_a_valid_glb_per_character_equal_to_its_npz(tmp_path):
+    """``run --export`` on a shipped scenario: each character's .glb (adapted to the ground,
+    constraints solved) reads back equal to its .npz and passes the validator."""
+    out = tmp_path / "reach"
+    assert main(["run", str(REPO / "scenarios" / "reach_and_touch.yaml"), "--seconds", "2",
+                 "--export", str(out)]) == 0
+    glbs = sorted(out.glob("*.glb"))
+    assert glbs and len(glbs) == len(sorted(out.glob("*.npz")))
+    for glb in glbs:
+        reader = GlbReader(glb)
+        got = reader.joint_positions_ours(reader.world_transforms())
+        error = np.linalg.norm(got - np.load(glb.with_suffix(".npz"))["positions"], axis=-1).max()
+        assert error < 0.1 * MM, (glb.name, f"{error / MM:.4f} mm")
+    _assert_valid(glbs)
