@@ -1,0 +1,260 @@
+"""The batch report (issue 15 item 2): report.html with non-blank plots (checked by pixels), the
+worst jobs first with their files linked, failed jobs with their one-line error.
+
+Records follow the job-record contract (metrics.json's ``jobs``). Most tests build them by hand;
+one plays real clips (scenarios/motions) through the same pipeline ``ecs-anim run`` uses."""
+
+from __future__ import annotations
+
+import base64
+import io
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from matplotlib import image as mpimg
+
+from ecs_anim import batch_report
+from ecs_anim.batch_report import badness, figure_pngs, report_html, write_report
+
+MOTIONS = Path(__file__).resolve().parents[1] / "scenarios" / "motions"
+
+
+def record(clip, body, stature_m, ground="", status="ok", error="", slide=0.2, penetration=0.1,
+           floating=0.3, skate=0.01, constraints=None, com=None, contacts=None, frames=90):
+    """One job record as contract 3 gives it (failed jobs carry no figures)."""
+    ok = status != "failed"
+    suffix = f"_{ground}" if ground else ""
+    return {
+        "clip": clip, "body": body, "ground": ground, "stature_m": stature_m, "frames": frames,
+        "status": status, "error": error,
+        "slide_max_mm": slide if ok else None, "slide_mean_mm": slide / 3 if ok else None,
+        "penetration_max_mm": penetration if ok else None,
+        "floating_max_mm": floating if ok else None,
+        "bone_error_m": 2e-9 if ok else None, "com_error_mm": com,
+        "foot_skate_ratio": skate if ok else None, "seconds": 0.4,
+        "outputs": [f"{clip}/{body}{suffix}.bvh", f"{clip}/{body}{suffix}.npz"] if ok else [],
+        "constraint_errors_mm": constraints or {},
+        "contacts": contacts if contacts is not None else
+        {"left": [[0.0, 0.9], [1.9, 2.9]], "right": [[0.5, 1.4], [2.4, 3.0]]},
+    }
+
+
+def hand_jobs():
+    """3 clips × 3 bodies × 2 grounds; one job slides badly, one clip failed to import."""
+    jobs = []
+    bodies = (("child", 1.20), ("adult_male", 1.75), ("tall", 2.00))
+    for c, clip in enumerate(("walk", "dance", "kick")):
+        for b, (body, stature) in enumerate(bodies):
+            for ground in ("", "stairs"):
+                jobs.append(record(clip, body, stature, ground, slide=0.1 + 0.05 * b + 0.1 * c,
+                                   penetration=0.2 * b, constraints={"reach": 1.0 + b}))
+    jobs[6]["slide_max_mm"] = 6.5  # dance / child / plane: the worst job
+    jobs.append(record("broken", "child", 1.20, status="failed",
+                       error="broken.bvh:3: expected a number, found 'x1'"))
+    jobs.append(record("broken", "tall", 2.00, status="failed",
+                       error="broken.bvh:3: expected a number, found 'x1'"))
+    jobs[0]["status"] = "skipped"
+    return jobs
+
+
+def decode_png(png: bytes) -> np.ndarray:
+    """RGB(A) floats in [0, 1], shape (height, width, channels)."""
+    return mpimg.imread(io.BytesIO(png), format="png")
+
+
+def ink(pixels: np.ndarray) -> dict[str, float]:
+    """How much of an image is drawn: the fraction of pixels not white, and the fraction that
+    are saturated colour (the dots and bars, not the black text and grey grid)."""
+    rgb = pixels[..., :3]
+    not_white = np.any(rgb < 0.95, axis=-1)
+    saturation = rgb.max(axis=-1) - rgb.min(axis=-1)
+    return {"drawn": float(not_white.mean()), "coloured": float((saturation > 0.3).mean())}
+
+
+def embedded_pngs(page: str) -> list[bytes]:
+    return [base64.b64decode(m) for m in re.findall(r"data:image/png;base64,([A-Za-z0-9+/=]+)", page)]
+
+
+def test_every_plot_is_drawn_with_data():
+    pngs = figure_pngs(hand_jobs())
+    assert set(pngs) == {"by_body", "by_clip", "stature", "contacts"}
+    for name, png in pngs.items():
+        pixels = decode_png(png)
+        assert pixels.shape[0] > 200 and pixels.shape[1] > 400, name
+        amount = ink(pixels)
+        assert 0.02 < amount["drawn"] < 0.6, (name, amount)  # neither blank nor a filled block
+        assert amount["coloured"] > 0.001, (name, amount)  # dots or bars, not only axes
+
+
+def test_contact_timeline_bars_are_where_the_feet_are_planted():
+    """The left foot's bar covers its planted second and not the gap; checked on the pixels of
+    a column through the lanes."""
+    jobs = [record("walk", "adult_male", 1.75,
+                   contacts={"left": [[0.0, 1.0], [3.0, 4.0]], "right": [[2.0, 4.0]]})]
+    pixels = decode_png(figure_pngs(jobs)["contacts"])[..., :3]
+    blue = np.all(np.abs(pixels - np.array([0x2B, 0x6C, 0xB0]) / 255) < 0.05, axis=-1)
+    orange = np.all(np.abs(pixels - np.array([0xC0, 0x56, 0x21]) / 255) < 0.05, axis=-1)
+    # Along the pixel row through each lane (the row with the most of its colour; the legend's
+    # swatches are shorter): two blue runs (0-1 s, 3-4 s) with a gap, one orange run (2-4 s).
+    def runs(mask):
+        columns = np.nonzero(mask[np.argmax(mask.sum(axis=1))])[0]
+        return [r for r in np.split(columns, np.nonzero(np.diff(columns) > 1)[0] + 1)
+                if r.size > 5]
+
+    big, orange_runs = runs(blue), runs(orange)
+    assert len(big) == 2, [r.size for r in big]
+    assert len(orange_runs) == 1, [r.size for r in orange_runs]
+    second = big[0].size  # pixels per second of the time axis
+    assert big[1][0] - big[0][-1] == pytest.approx(2 * second, rel=0.1)  # the 1-3 s gap
+    assert orange_runs[0][0] - big[0][0] == pytest.approx(2 * second, rel=0.1)  # right from 2 s
+    assert orange_runs[0].size == pytest.approx(2 * second, rel=0.1)  # for 2 s
+
+
+def test_worst_job_first_and_failed_jobs_listed_with_their_error(tmp_path):
+    jobs = hand_jobs()
+    out = tmp_path / "report.html"
+    write_report(out, jobs)
+    page = out.read_text("utf-8")
+    assert [p for p in tmp_path.iterdir()] == [out]  # one file: plots embedded, no temporary left
+    assert len(embedded_pngs(page)) == 4
+    table = page[page.index("Jobs, the worst first"):]
+    first_row = table.split("<tr>")[2]
+    assert ">dance<" in first_row and ">child<" in first_row and "6.50" in first_row
+    assert 'href="dance/child.bvh"' in first_row and 'href="dance/child.npz"' in first_row
+    ranked = sorted((j for j in jobs if j["status"] != "failed"), key=lambda j: -badness(j)[0])
+    assert badness(ranked[0]) == (pytest.approx(6.5 / batch_report.SLIDE_EVENT_MM), "slide_max_mm")
+    failed = page[page.index("Failed jobs (2)"):page.index("Per body")]
+    assert failed.count("broken.bvh:3: expected a number, found &#x27;x1&#x27;") == 2
+    assert "broken" not in table  # failed jobs are not ranked among the measured ones
+    assert "17 ok</b>, 1 skipped" in page and "2 failed" in page
+
+
+def test_names_are_escaped_and_links_quoted(tmp_path):
+    job = record("a<b>&c", "body one", 1.7, constraints={"<x>": 50.0})
+    page = report_html([job])
+    assert "<b>&amp;c" not in page and "a&lt;b&gt;&amp;c" in page
+    assert 'href="a%3Cb%3E%26c/body%20one.bvh"' in page
+    assert "&lt;x&gt;: 50.00" in page  # and over the 10 mm tolerance:
+    assert re.search(r"<td class=bad>&lt;x&gt;: 50.00</td>", page)
+
+
+def test_all_failed_or_no_jobs_still_writes_a_report(tmp_path):
+    out = tmp_path / "report.html"
+    write_report(out, [record("x", "child", 1.2, status="failed", error="x.bvh: not found")])
+    page = out.read_text("utf-8")
+    assert "x.bvh: not found" in page and not embedded_pngs(page)
+    write_report(out, [])  # rewritten whole
+    assert "0 jobs" in out.read_text("utf-8")
+
+
+def test_a_missing_figure_is_a_dash_not_a_crash():
+    """No COM control (null), no constraints, a NaN figure: the report shows dashes and plots
+    the rest."""
+    job = record("walk", "child", 1.2, com=None)
+    job["floating_max_mm"] = float("nan")
+    del job["contacts"]
+    pngs = figure_pngs([job, record("walk", "tall", 2.0, com=3.0)])
+    assert all(ink(decode_png(p))["drawn"] > 0.02 for p in pngs.values())
+    page = report_html([job])
+    assert page.count("<td>—</td>") >= 3  # floating, COM, worst constraint
+
+
+# ---------------------------------------------------------------------------------------------
+# From real runs: clips played through build_simulation + MetricsRecorder, as the batch does.
+
+SCENARIO = """\
+duration_s: {seconds}
+fps: 30
+motions: {{clip: {motion}}}
+ground: {ground}
+characters:
+  - {{name: job, morphology: {body}, motion: clip, loop: false}}
+"""
+
+
+def run_job(tmp_path, clip, body, ground_name, ground_yaml, seconds=2.0):
+    """One job record from a real run (the figures the batch takes from the same pipeline; the
+    floating height and foot-skate ratio computed here as the contract defines them)."""
+    from ecs_anim.ground_adapt import BALL_HEIGHT_PER_LEG, heel_depth
+    from ecs_anim.metrics import ANKLES, TOES, MetricsRecorder
+    from ecs_anim.normalized import SIDE_LENGTHS
+    from ecs_anim.scenario import build_simulation, load_scenario
+
+    path = tmp_path / f"{clip}_{body}_{ground_name}.yaml"
+    path.write_text(SCENARIO.format(seconds=seconds, motion=MOTIONS / f"{clip}.bvh",
+                                    ground=ground_yaml, body=body))
+    scenario = load_scenario(path)
+    with build_simulation(scenario) as sim:
+        metrics = MetricsRecorder(sim)
+        planted, ankles, heights = [], [], []
+        for _ in range(round(seconds * scenario.fps)):
+            sim.step()
+            metrics.record()
+            st = sim.store
+            feet = st.positions[0, ANKLES]
+            on = st.contact_weight[0] >= 1.0
+            heel = -heel_depth(sim.ground, feet[None], st.lengths[:1, SIDE_LENGTHS["ankle_height"]])[0]
+            toes = st.positions[0, TOES]
+            ball = BALL_HEIGHT_PER_LEG * sim.leg_length()[0]
+            height = np.minimum(heel, toes[:, 2] - ball - sim.ground.height(toes[:, :2]))
+            planted.append(on)
+            heights.append(height)
+            ankles.append(feet.copy())
+        report = metrics.report()
+    planted_a, ankles_a, sole_m = np.array(planted), np.array(ankles), np.array(heights)
+    floating = float(np.max(np.where(planted_a, sole_m, 0.0))) * 1e3
+    dt = 1.0 / scenario.fps
+    step = np.linalg.norm(np.diff(ankles_a[..., :2], axis=0), axis=-1) * (1 / 30) / dt
+    low = sole_m[1:] < 0.05  # the sole under 5 cm above the ground
+    skate = float(np.mean(np.any(low & (step > 0.025), axis=1)))
+    contacts = {}
+    for side, foot in enumerate(("left", "right")):
+        edges = np.diff(np.concatenate([[0], planted_a[:, side].astype(int), [0]]))
+        starts, ends = np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0]
+        contacts[foot] = [[round(a * dt, 4), round(b * dt, 4)] for a, b in zip(starts, ends)]
+    character = report["characters"][0]
+    return {
+        "clip": clip, "body": body, "ground": ground_name, "stature_m": PRESET_STATURES[body],
+        "frames": report["ticks"], "status": "ok", "error": "",
+        "slide_max_mm": character["foot_sliding_mm_per_frame"]["max"],
+        "slide_mean_mm": character["foot_sliding_mm_per_frame"]["mean"],
+        "penetration_max_mm": character["ground_penetration_mm_max"],
+        "floating_max_mm": round(floating, 4),
+        "bone_error_m": character["bone_length_error_m_max"],
+        "com_error_mm": character["com_error_mm_max"], "foot_skate_ratio": skate,
+        "seconds": 0.0, "outputs": [f"{clip}/{body}{'_' + ground_name if ground_name else ''}.bvh"],
+        "constraint_errors_mm": {c["name"]: c["error_mm_max_fully_active"]
+                                 for c in report["constraints"]
+                                 if c["error_mm_max_fully_active"] is not None},
+        "contacts": contacts, "duration_s": seconds,
+    }
+
+
+PRESET_STATURES = {"child": 1.20, "adult_male": 1.75, "tall": 2.00}
+GROUNDS = {"": "{type: plane}", "slope": "{type: slope, grade_x: 0.08}"}
+
+
+def real_jobs(tmp_path):
+    return [run_job(tmp_path, clip, body, name, yaml)
+            for clip in ("walk", "dance") for body in ("child", "tall")
+            for name, yaml in GROUNDS.items()]
+
+
+def test_report_from_real_runs(tmp_path):
+    jobs = real_jobs(tmp_path)
+    walk = [j for j in jobs if j["clip"] == "walk"]
+    assert all(len(j["contacts"]["left"]) >= 2 for j in walk)  # a walk plants each foot again
+    out = tmp_path / "batch" / "report.html"
+    write_report(out, jobs)
+    page = out.read_text("utf-8")
+    pngs = embedded_pngs(page)
+    assert len(pngs) == 4
+    for png in pngs:
+        amount = ink(decode_png(png))
+        assert 0.02 < amount["drawn"] < 0.6 and amount["coloured"] > 0.001, amount
+    worst = max(jobs, key=lambda j: badness(j)[0])
+    first_row = page[page.index("Jobs, the worst first"):].split("<tr>")[2]
+    assert f">{worst['clip']}<" in first_row and f">{worst['body']}<" in first_row
+    assert f"{badness(worst)[0]:.2f}" in first_row
