@@ -26,7 +26,7 @@ from ecs_anim.files import MANIFEST_NAME, atomic_output, output_set
 
 REPO = Path(__file__).resolve().parents[1]
 MOTIONS = REPO / "scenarios" / "motions"
-SET = ["kick.bvh", "kick.npz", "other.bvh", "other.npz"]
+SET = ["kick.bvh", "kick.glb", "kick.npz", "other.bvh", "other.glb", "other.npz"]
 
 
 def write_scenario(folder: Path, kick: Path, names: tuple[str, ...] = ("kick", "other"),
@@ -138,15 +138,15 @@ def test_export_folder_is_replaced_as_a_set_and_a_users_files_are_kept(tmp_path,
     out = tmp_path / "out"
     assert main(["run", str(scenario), "--seconds", "0.2", "--export", str(out)]) == 0
     assert sorted(os.listdir(out)) == [MANIFEST_NAME, *SET]
-    assert json.loads((out / MANIFEST_NAME).read_text())["files"] == SET
+    assert sorted(json.loads((out / MANIFEST_NAME).read_text())["files"]) == SET
     # The next scenario has other characters: the earlier set (in the manifest) goes as a whole.
     renamed = write_scenario(tmp_path, MOTIONS / "kick.bvh", ("kick", "third"), "t.yaml")
     assert main(["run", str(renamed), "--seconds", "0.2", "--export", str(out)]) == 1
     assert error_of(capsys) == (f"error: --export {out}: holds an earlier export (use --force "
                                 "to replace it)")
     assert main(["run", str(renamed), "--seconds", "0.2", "--export", str(out), "--force"]) == 0
-    assert sorted(os.listdir(out)) == [MANIFEST_NAME, "kick.bvh", "kick.npz", "third.bvh",
-                                       "third.npz"]
+    assert sorted(os.listdir(out)) == [MANIFEST_NAME, "kick.bvh", "kick.glb", "kick.npz",
+                                       "third.bvh", "third.glb", "third.npz"]
     assert np.load(out / "third.npz")["positions"].shape == (6, 22, 3)
     # A file ecs-anim did not write is never deleted, --force or not.
     (out / "notes.txt").write_text("mine")
@@ -245,9 +245,10 @@ def test_a_killed_export_leaves_the_old_set_or_the_new_one(no_exchange, old_and_
         status = killed_at(step, run_args(scenario, work, "0.2"), no_exchange)
         assert status in (0, -signal.SIGKILL)
         check_killed_run(work, old, new, run_args(scenario, work, "0.2"))
-    # 4 files and the manifest, the folder, the swap (one or two renames), the old set's
-    # removal, the parent folder, the report's data and its rename
-    assert step == (12 if no_exchange else 11) + 1
+    # 6 files (a .bvh, .npz and .glb for each of 2 characters) and the manifest, the folder, the
+    # swap (one or two renames), the old set's removal, the parent folder, the report's data and
+    # its rename
+    assert step == (14 if no_exchange else 13) + 1
     capsys.readouterr()
 
 
