@@ -1,0 +1,423 @@
+"""``ecs-anim batch``: plans and their errors, metrics equal to ``ecs-anim run``'s, resumption after
+a kill, a bad clip failing only its jobs, and Ray (a real local Ray with 2 CPUs) writing the
+same bytes as the local pool."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import MOCAP_DIR, MOTIONS_DIR, REPO, mocap_files, require_mocap
+
+from ecs_anim import batch
+from ecs_anim.cli import main as cli_main
+from ecs_anim.errors import EcsAnimError
+from ecs_anim.ground import Plane
+
+GROUNDS_YAML = """\
+grounds:
+  flat: {type: plane}
+  bumps: {type: bumps, amplitude_m: 0.04, wavelength_x_m: 1.5, wavelength_y_m: 2.0}
+"""
+GROUND_SPECS = {"flat": {"type": "plane"},
+                "bumps": {"type": "bumps", "amplitude_m": 0.04, "wavelength_x_m": 1.5,
+                          "wavelength_y_m": 2.0}}
+#: The command as the CLI registers it (the lead adds it to ecs_anim/cli.py's parser).
+RUNNER = """\
+import argparse, sys
+from ecs_anim import batch
+from ecs_anim.cli import error_line
+from ecs_anim.errors import EcsAnimError
+parser = argparse.ArgumentParser(prog="ecs-anim")
+batch.add_parser(parser.add_subparsers(dest="command", required=True))
+try:
+    sys.exit(batch.cmd_batch(parser.parse_args(["batch", *sys.argv[1:]])))
+except (EcsAnimError, FileExistsError) as exc:
+    print("error: " + error_line(exc), file=sys.stderr)
+    sys.exit(1)
+"""
+
+
+def parse(*argv: str) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="ecs-anim")
+    batch.add_parser(parser.add_subparsers(dest="command", required=True))
+    return parser.parse_args(["batch", *argv])
+
+
+def run_batch_cli(*argv: str) -> int:
+    return batch.cmd_batch(parse(*argv))
+
+
+def job_files(folder: Path) -> dict[str, bytes]:
+    """Every job output under ``folder`` (not the metrics, report or stamps) by relative path."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.glob("*/*"))
+            if p.suffix in (".bvh", ".npz", ".glb")}
+
+
+def records(folder: Path) -> list[dict]:
+    return json.loads((folder / "metrics.json").read_text())["jobs"]
+
+
+def without_time(record: dict) -> dict:
+    return {k: v for k, v in record.items() if k not in ("seconds", "status")}
+
+
+@pytest.fixture
+def grounds_file(tmp_path: Path) -> Path:
+    path = tmp_path / "grounds.yaml"
+    path.write_text(GROUNDS_YAML)
+    return path
+
+
+# ---------------------------------------------------------------------------------------------
+# Kernels and plans
+
+
+def test_foot_metrics_count_skating_frames_and_floating() -> None:
+    """A foot 1 cm up sliding 3 cm per 1/30 s skates (frames 1..9 of 10); at 2 cm per frame it
+    does not; a planted sole 7 mm above the ground floats 7 mm."""
+    frames, fps = 10, 30.0
+    positions = np.zeros((frames, 22, 3))
+    from ecs_anim.metrics import ANKLES, TOES
+
+    ankle_height, ball = np.array([0.08, 0.08]), 0.02
+    positions[:, ANKLES, 2] = 0.08 + 0.007  # heels 7 mm up
+    positions[:, TOES, 2] = 0.01 + ball  # ball 1 cm up (toe joint 3 cm: under 5 cm)
+    positions[:, TOES[0], 0] = 0.03 * np.arange(frames)  # left toe: 3 cm a frame
+    planted = np.zeros((frames, 2), bool)
+    planted[:, 1] = True
+    floating, ratio = batch.foot_metrics(positions, planted, Plane(), ankle_height, ball, fps)
+    assert floating == pytest.approx(7.0)
+    assert ratio == pytest.approx(9 / 10)
+    positions[:, TOES[0], 0] = 0.02 * np.arange(frames)
+    assert batch.foot_metrics(positions, planted, Plane(), ankle_height, ball, fps)[1] == 0.0
+    # at 60 Hz, 1.5 cm a frame is 3 cm per 1/30 s: skating again
+    positions[:, TOES[0], 0] = 0.015 * np.arange(frames)
+    assert batch.foot_metrics(positions, planted, Plane(), ankle_height, ball, 60.0)[1] == \
+        pytest.approx(0.9)
+
+
+def test_contact_intervals_are_first_and_last_planted_frame_times() -> None:
+    planted = np.array([1, 1, 0, 0, 1, 1, 1, 0, 1], bool)
+    assert batch._intervals(planted, 10.0) == [[0.0, 0.1], [0.4, 0.6], [0.8, 0.8]]
+    assert batch._intervals(np.zeros(4, bool), 10.0) == []
+
+
+def test_manifest_plan_bodies_statures_grounds(tmp_path: Path) -> None:
+    (tmp_path / "wide.yaml").write_text("stature_m: 1.7\nleg_scale: 0.9\n")
+    manifest = tmp_path / "batch.yaml"
+    manifest.write_text(textwrap.dedent(f"""\
+        clips: ["{MOTIONS_DIR}/walk.bvh", "{MOTIONS_DIR}/k*.bvh"]
+        bodies:
+          - child
+          - wide.yaml
+          - statures: {{from_m: 1.2, to_m: 1.8, count: 3}}
+          - statures: {{from_m: 1.5, to_m: 1.5, count: 1}}
+            proportions: child
+            sex: female
+        grounds:
+          bumps: {{type: bumps, amplitude_m: 0.03}}
+        formats: [npz]
+        out: results
+        """))
+    plan = batch.plan_from_args(parse("--manifest", str(manifest)))
+    assert [c.name for c in plan.clips] == ["walk.bvh", "kick.bvh"]
+    assert [b.name for b in plan.bodies] == ["child", "wide", "stature_1.20", "stature_1.50",
+                                             "stature_1.80", "stature_1.50_female_child"]
+    assert [round(b.morphology.stature, 3) for b in plan.bodies[2:]] == [1.2, 1.5, 1.8, 1.5]
+    assert plan.out == tmp_path / "results" and plan.formats == ("npz",)
+    jobs = plan.jobs()
+    assert len(jobs) == 12 and jobs[0].stem == "walk/child_bumps"
+    assert jobs[0].outputs() == ["walk/child_bumps.npz"]
+    # the command line's --out and --formats win over the manifest's
+    plan = batch.plan_from_args(parse("--manifest", str(manifest), "--out", "x", "--formats", "bvh,glb"))
+    assert plan.out == Path("x") and plan.formats == ("bvh", "glb")
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("clips: [walk.bvh]\nbodys: [child]\n", "batch.yaml:2: bodys: unknown key; did you mean 'bodies'?"),
+    ("clips: [nothing*.bvh]\nbodies: [child]\n", "batch.yaml:1: clips: nothing*.bvh: matches no"),
+    ("clips: [walk.bvh]\nbodies:\n  - child\n  - chlid\n",
+     "batch.yaml:4: bodies[1]: body 'chlid': not a preset (did you mean 'child'?)"),
+    ("clips: [walk.bvh]\nbodies: [child, child]\n", "batch.yaml:2: bodies[1]: a body named 'child' is given twice"),
+    ("clips: [walk.bvh]\nbodies:\n  - statures: {from_m: 1.2, to_m: 9, count: 3}\n",
+     "batch.yaml:3: bodies[0].statures.to_m: expected a number between 0.3 and 3 m, found 9"),
+    ("clips: [walk.bvh]\nbodies: [child]\ngrounds:\n  hill: {type: slop}\n",
+     "batch.yaml:4: grounds.hill.type: unknown ground 'slop'; did you mean 'slope'?"),
+    ("clips: [walk.bvh]\nbodies: [child]\nformats: [bvh, fbx]\n", "batch.yaml:3: formats: unknown format 'fbx'"),
+])
+def test_manifest_errors_name_file_and_line(tmp_path: Path, text: str, expected: str) -> None:
+    (tmp_path / "walk.bvh").write_bytes((MOTIONS_DIR / "walk.bvh").read_bytes())
+    manifest = tmp_path / "batch.yaml"
+    manifest.write_text(text + "out: out\n")
+    with pytest.raises(EcsAnimError) as info:
+        batch.plan_from_args(parse("--manifest", str(manifest)))
+    message = str(info.value)
+    assert "\n" not in message
+    assert message.startswith(str(tmp_path / expected.split(":", 1)[0]) + ":" + expected.split(":", 1)[1])
+
+
+def test_command_line_errors(tmp_path: Path, grounds_file: Path) -> None:
+    walk = str(MOTIONS_DIR / "walk.bvh")
+    cases = [
+        ((walk, "--out", str(tmp_path / "o")), "give --bodies"),
+        ((walk, "--bodies", "child,talll", "--out", str(tmp_path / "o")), "did you mean 'tall'?"),
+        ((walk, "--bodies", "child", "--out", str(tmp_path / "o"), "--formats", "bvh,bvh"),
+         "at most once"),
+        (("--manifest", str(grounds_file), "--bodies", "child"), "not also --bodies"),
+        ((walk, walk.replace("walk", "../motions/walk"), "--bodies", "child", "--out", "o"), None),
+    ]
+    for argv, expected in cases:
+        if expected is None:  # the same file twice counts once
+            assert len(batch.plan_from_args(parse(*argv)).clips) == 1
+            continue
+        with pytest.raises(EcsAnimError, match=expected.replace("(", r"\(").replace(")", r"\)")):
+            batch.plan_from_args(parse(*argv))
+    # a folder holding someone else's files is refused, never written into
+    foreign = tmp_path / "mine"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("keep")
+    with pytest.raises(EcsAnimError, match="did not write"):
+        run_batch_cli(walk, "--bodies", "child", "--out", str(foreign), "--seconds", "0.1")
+    assert sorted(os.listdir(foreign)) == ["notes.txt"]
+
+
+def test_digest_follows_every_input() -> None:
+    walk = MOTIONS_DIR / "walk.bvh"
+    job = batch.Job(str(walk), "walk", batch.body_from_text("child"), batch.NamedGround("", Plane()),
+                    ("bvh",))
+    base = batch.job_digest(job, "clip", "1.0")
+    from dataclasses import replace
+    changed = [replace(job, body=batch.body_from_text("tall")),
+               replace(job, ground=batch.NamedGround("", Plane(0.01))),
+               replace(job, formats=("bvh", "npz")), replace(job, seconds=2.0)]
+    digests = {batch.job_digest(j, "clip", "1.0") for j in changed}
+    digests |= {batch.job_digest(job, "other clip", "1.0"), batch.job_digest(job, "clip", "1.1")}
+    assert base not in digests and len(digests) == 6
+    assert batch.job_digest(replace(job, body=batch.body_from_text("child")), "clip", "1.0") == base
+
+
+# ---------------------------------------------------------------------------------------------
+# The pipeline: every job's figures are ``ecs-anim run``'s
+
+
+def _scenario_for(record: dict, clip: Path, fps: float, tmp: Path) -> Path:
+    """The scenario ``ecs-anim run`` plays for the batch job ``record``."""
+    import yaml
+
+    doc = {"duration_s": record["frames"] / fps, "fps": fps, "motions": {record["clip"]: str(clip)},
+           "characters": [{"name": record["body"], "morphology": record["body"],
+                           "motion": record["clip"], "loop": False}]}
+    if record["ground"]:
+        doc["ground"] = GROUND_SPECS[record["ground"]]
+    path = tmp / f"{record['clip']}_{record['body']}_{record['ground']}.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def test_mocap_batch_metrics_equal_ecs_anim_run(tmp_path: Path, grounds_file: Path) -> None:
+    """The dev clips (BVH and C3D) x 3 bodies x 2 grounds: every job is ok, metrics.csv and
+    metrics.json hold the same rows, and each clip's figures (a different body and ground per
+    clip) equal what ``ecs-anim run`` reports for the same case."""
+    require_mocap()
+    clips = mocap_files("*.bvh") + mocap_files("*.c3d")
+    out = tmp_path / "out"
+    formats = "bvh,npz" + (",glb" if _has_gltf() else "")
+    status = run_batch_cli(*map(str, clips), "--bodies", "child,adult_female,tall", "--grounds",
+                           str(grounds_file), "--out", str(out), "--seconds", "0.25",
+                           "--formats", formats, "--jobs", "2")
+    assert status == 0
+    jobs = records(out)
+    assert len(jobs) == len(clips) * 6
+    assert all(j["status"] == "ok" and j["error"] == "" for j in jobs)
+    for j in jobs:  # every file listed exists
+        assert j["outputs"] == [f"{j['clip']}/{j['body']}_{j['ground']}.{f}" for f in formats.split(",")]
+        assert all((out / rel).stat().st_size > 0 for rel in j["outputs"])
+    with open(out / "metrics.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert list(rows[0])[:len(batch.CSV_FIELDS)] == list(batch.CSV_FIELDS)
+    assert [(r["clip"], r["body"], r["ground"]) for r in rows] == \
+        [(j["clip"], j["body"], j["ground"]) for j in jobs]
+    assert [float(r["slide_max_mm"]) for r in rows] == [j["slide_max_mm"] for j in jobs]
+    by_clip = {c.stem: c for c in clips}
+    for k, clip in enumerate(clips):
+        job = [j for j in jobs if j["clip"] == clip.stem][k % 6]
+        fps = batch.import_clip(by_clip[job["clip"]]).fps
+        scenario = _scenario_for(job, clip, fps, tmp_path)
+        report = tmp_path / f"{scenario.stem}.json"
+        assert cli_main(["run", str(scenario), "--report", str(report),
+                         "--export", str(tmp_path / scenario.stem)]) == 0
+        run = json.loads(report.read_text())
+        character = run["characters"][0]
+        assert run["ticks"] == job["frames"]
+        assert job["slide_max_mm"] == character["foot_sliding_mm_per_frame"]["max"]
+        assert job["slide_mean_mm"] == character["foot_sliding_mm_per_frame"]["mean"]
+        assert job["penetration_max_mm"] == character["ground_penetration_mm_max"]
+        assert job["bone_error_m"] == character["bone_length_error_m_max"]
+        assert job["com_error_mm"] == character["com_error_mm_max"]
+        assert job["constraint_errors_mm"] == {c["name"]: c["error_mm_max_fully_active"]
+                                               for c in run["constraints"]}
+        # the same motion comes out: run's export equals the batch's files
+        stem = f"{job['clip']}/{job['body']}_{job['ground']}"
+        ours = np.load(out / f"{stem}.npz")["positions"]
+        theirs = np.load(tmp_path / scenario.stem / f"{job['body']}.npz")["positions"]
+        np.testing.assert_array_equal(ours, theirs)
+        assert (out / f"{stem}.bvh").read_bytes() == \
+            (tmp_path / scenario.stem / f"{job['body']}.bvh").read_bytes()
+
+
+def _has_gltf() -> bool:
+    try:
+        import ecs_anim.gltf  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def test_template_gives_constraints_their_csv_columns(tmp_path: Path) -> None:
+    """A template's world constraint is every job's, with its own ``constraint:<name>_mm``
+    column; the template's fps and duration hold."""
+    template = tmp_path / "template.yaml"
+    template.write_text(textwrap.dedent(f"""\
+        duration_s: 0.5
+        fps: 30
+        motions: {{idle: {MOTIONS_DIR}/idle.bvh}}
+        characters:
+          - name: anyone
+            morphology: adult_male
+            motion: idle
+            com_control: false
+            constraints:
+              - {{name: reach, point: wrist_r, priority: 1, target: {{world_m: [0.45, -0.25, 1.1]}}}}
+        """))
+    out = tmp_path / "out"
+    assert run_batch_cli(str(MOTIONS_DIR / "idle.bvh"), "--bodies", "child,tall", "--template",
+                         str(template), "--out", str(out), "--formats", "npz", "--jobs", "1") == 0
+    jobs = records(out)
+    assert [j["frames"] for j in jobs] == [15, 15]
+    errors = [j["constraint_errors_mm"]["reach"] for j in jobs]
+    assert errors[1] < 1.0 < errors[0]  # the tall body reaches the target, the child cannot
+    header = (out / "metrics.csv").read_text().splitlines()[0].split(",")
+    assert header[len(batch.CSV_FIELDS):] == ["constraint:reach_mm"]
+
+
+def test_bad_clip_fails_its_jobs_only(tmp_path: Path) -> None:
+    bad = tmp_path / "broken.bvh"
+    bad.write_text("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 zero\n")
+    out = tmp_path / "out"
+    status = run_batch_cli(str(bad), str(MOTIONS_DIR / "kick.bvh"), "--bodies", "child,tall",
+                           "--out", str(out), "--seconds", "0.2", "--jobs", "2")
+    assert status == 1
+    jobs = records(out)
+    failed = [j for j in jobs if j["status"] == "failed"]
+    assert [(j["clip"], j["body"]) for j in failed] == [("broken", "child"), ("broken", "tall")]
+    assert all(str(bad) in j["error"] and "\n" not in j["error"] and j["outputs"] == []
+               for j in failed)
+    assert all(j["status"] == "ok" for j in jobs if j["clip"] == "kick")
+    assert not (out / "broken").exists()
+    rows = (out / "metrics.csv").read_text().splitlines()
+    assert len(rows) == 5 and rows[1].startswith("broken,child,,1.2,0,failed,")
+
+
+# ---------------------------------------------------------------------------------------------
+# Resumption
+
+
+def test_second_run_skips_changed_inputs_redo_force_redoes(tmp_path: Path, grounds_file: Path) -> None:
+    walk, kick = str(MOTIONS_DIR / "walk.bvh"), str(MOTIONS_DIR / "kick.bvh")
+    out = tmp_path / "out"
+    argv = (walk, kick, "--bodies", "child,tall", "--grounds", str(grounds_file), "--out",
+            str(out), "--seconds", "0.1", "--jobs", "1", "--formats", "npz")
+    assert run_batch_cli(*argv) == 0
+    first = job_files(out)
+    times = {p: (out / p).stat().st_mtime_ns for p in first}
+    assert run_batch_cli(*argv) == 0
+    assert {j["status"] for j in records(out)} == {"skipped"}
+    assert {p: (out / p).stat().st_mtime_ns for p in first} == times  # nothing rewritten
+    # the bumps get higher: only the jobs on them are redone
+    grounds_file.write_text(GROUNDS_YAML.replace("0.04", "0.05"))
+    assert run_batch_cli(*argv) == 0
+    assert [(j["ground"], j["status"]) for j in records(out)] == \
+        [(g, "ok" if g == "bumps" else "skipped") for _ in range(4) for g in ("flat", "bumps")]
+    assert run_batch_cli(*argv, "--force") == 0
+    assert {j["status"] for j in records(out)} == {"ok"}
+    # a job whose output went missing is redone, the others not
+    (out / "kick/tall_flat.npz").unlink()
+    assert run_batch_cli(*argv) == 0
+    assert [j["body"] + "_" + j["ground"] for j in records(out) if j["status"] == "ok"] == \
+        ["tall_flat"]
+
+
+def test_killed_batch_resumes_to_the_same_outputs(tmp_path: Path, grounds_file: Path) -> None:
+    """A batch killed (SIGKILL, pool workers included) after a few jobs: the next run skips
+    those, does the rest, and the folder ends byte for byte as an uninterrupted run's, with no
+    temporary file left."""
+    clips = [str(MOTIONS_DIR / n) for n in ("walk.bvh", "kick.bvh", "dodge.bvh")]
+    argv = [*clips, "--bodies", "child,adult_male,tall", "--grounds", str(grounds_file),
+            "--seconds", "0.25", "--formats", "bvh,npz"]
+    whole = tmp_path / "whole"
+    assert run_batch_cli(*argv, "--out", str(whole), "--jobs", "2") == 0
+    runner = tmp_path / "runner.py"
+    runner.write_text(RUNNER)
+    killed = tmp_path / "killed"
+    process = subprocess.Popen([sys.executable, str(runner), *argv, "--out", str(killed),
+                                "--jobs", "2"], cwd=REPO, start_new_session=True,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while len(list(killed.glob(f"*/.*{batch.STAMP_SUFFIX}"))) < 4:
+            assert process.poll() is None, "the batch ended before it could be killed"
+            assert time.monotonic() < deadline
+            time.sleep(0.02)
+    finally:
+        os.killpg(process.pid, signal.SIGKILL)
+        process.wait()
+    done_before = len(list(killed.glob(f"*/.*{batch.STAMP_SUFFIX}")))
+    assert 4 <= done_before < 18
+    assert not (killed / "metrics.json").exists()
+    assert run_batch_cli(*argv, "--out", str(killed), "--jobs", "2") == 0
+    statuses = [j["status"] for j in records(killed)]
+    assert statuses.count("skipped") == done_before and statuses.count("ok") == 18 - done_before
+    assert job_files(killed) == job_files(whole)
+    assert [without_time(j) for j in records(killed)] == [without_time(j) for j in records(whole)]
+    assert not [p for p in killed.rglob("*") if p.name.endswith(".tmp")]
+
+
+# ---------------------------------------------------------------------------------------------
+# Ray: a real local cluster with 2 CPUs, started once for the module
+
+
+@pytest.fixture(scope="module")
+def local_ray():  # type: ignore[no-untyped-def]
+    ray = pytest.importorskip("ray", reason="Ray is not installed (pip install 'ecs_anim[ray]')")
+    ray.init(num_cpus=2, include_dashboard=False, logging_level="warning", log_to_driver=False)
+    yield ray
+    ray.shutdown()
+
+
+def test_ray_writes_the_same_bytes_as_the_local_pool(tmp_path: Path, grounds_file: Path,
+                                                      local_ray) -> None:  # type: ignore[no-untyped-def]
+    bad = tmp_path / "broken.bvh"
+    bad.write_text("HIERARCHY\n")
+    clips = [str(MOTIONS_DIR / "walk.bvh"), str(MOTIONS_DIR / "guard.bvh"), str(bad)]
+    if MOCAP_DIR.is_dir():
+        clips.append(str(MOCAP_DIR / "c3dorg_eb015pi_gait.c3d"))
+    argv = [*clips, "--bodies", "child,tall", "--grounds", str(grounds_file), "--seconds", "0.3"]
+    local, on_ray = tmp_path / "local", tmp_path / "ray"
+    assert run_batch_cli(*argv, "--out", str(local), "--jobs", "2") == 1
+    assert local_ray.cluster_resources().get("CPU") == 2
+    assert run_batch_cli(*argv, "--out", str(on_ray), "--engine", "ray") == 1
+    assert job_files(on_ray) == job_files(local)
+    assert len(job_files(local)) == 2 * 4 * (len(clips) - 1)
+    assert [without_time(j) for j in records(on_ray)] == [without_time(j) for j in records(local)]
+    assert [j["status"] for j in records(on_ray)].count("failed") == 4
