@@ -3,7 +3,8 @@
 * foot sliding: how far a fully planted ankle moves from one tick to the next (mm per frame),
   and each slide beyond :data:`SLIDE_EVENT_MM` as an event naming the character, foot and tick;
 * ground penetration: how far the heel (the sole under the ankle) or the sole under the ball of
-  the foot goes below the ground (mm);
+  the foot goes below the ground (mm); floating: how far a fully planted foot's lower of the two
+  stays above it (mm);
 * bone-length error: the largest difference between a bone and the morphology (m);
 * stride: distance between successive footprints of the same foot, also per leg length;
 * time per system per tick.
@@ -49,6 +50,7 @@ class MetricsRecorder:
         self.slides: list[dict[str, Any]] = []
         self.slide_events = 0
         self.penetration_max = np.zeros(n)
+        self.floating_max = np.zeros(n)
         self.bone_error_max = np.zeros(n)
         self.prev_locked = np.zeros((n, 2), bool)
         self.strides: list[list[float]] = [[] for _ in range(n)]
@@ -80,8 +82,12 @@ class MetricsRecorder:
         ankle_height = st.lengths[:, SIDE_LENGTHS["ankle_height"]]
         ball = BALL_HEIGHT_PER_LEG * sim.leg_length()[:, None]
         toe_depth = sim.ground.height(toes[..., :2]) - (toes[..., 2] - ball)
-        depth_mm = np.maximum(heel_depth(sim.ground, ankles, ankle_height), toe_depth).max(axis=1) * 1e3
+        heel = heel_depth(sim.ground, ankles, ankle_height)
+        depth_mm = np.maximum(heel, toe_depth).max(axis=1) * 1e3
         self.penetration_max = np.maximum(self.penetration_max, depth_mm)
+        # A fully planted foot floats by how far the lower of its heel and ball is above ground.
+        float_mm = np.where(planted, -np.maximum(heel, toe_depth), 0.0).max(axis=1) * 1e3
+        self.floating_max = np.maximum(self.floating_max, float_mm)
         error = np.abs(bone_lengths_of(p)[:, IS_BONE] - st.lengths[:, IS_BONE]).max(axis=1)
         self.bone_error_max = np.maximum(self.bone_error_max, error)
         # Strides: a new footprint is laid (an event; only those feet are visited).
@@ -130,6 +136,7 @@ class MetricsRecorder:
                     "max": round(float(self.slide_max[i]), 4),
                     "mean": round(float(self.slide_sum[i] / max(self.slide_count[i], 1)), 4)},
                 "ground_penetration_mm_max": round(float(max(self.penetration_max[i], 0.0)), 4),
+                "floating_mm_max": round(float(self.floating_max[i]), 4),
                 "bone_length_error_m_max": float(self.bone_error_max[i]),
                 "stride_m_median": None if strides.size == 0 else round(float(np.median(strides)), 4),
                 "stride_per_leg_length": None if strides.size == 0

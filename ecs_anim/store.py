@@ -49,7 +49,8 @@ class CharacterStore:
     the same for the clip being faded out);
     poses: this tick's normalized poses (n,); contact_weight (n, 2) foot-contact activation;
     scaled: the pose decoded on each body before ground adaptation;
-    footprint (n, 2, 3) locked ankle positions, locked (n, 2) bool; ground_ref (n,) metres the
+    footprint (n, 2, 3) locked ankle positions, locked (n, 2) bool, footprint_settled (n, 2) bool
+    (the contact has been fully planted: its footprint's height is fixed); ground_ref (n,) metres the
     motion's floor is raised to under the character (smoothed);
     positions (n, N_JOINTS, 3) and local_rotations (n, n_export, 3, 3): the output posture;
     vertebrae (n, k, 3) a finer spine when the simulation asks for one;
@@ -80,6 +81,7 @@ class CharacterStore:
     contact_weight: F64 = field(default_factory=lambda: np.zeros((0, 2)))
     footprint: F64 = field(default_factory=lambda: np.zeros((0, 2, 3)))
     locked: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, 2), bool))
+    footprint_settled: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, 2), bool))
     ground_ref: F64 = field(default_factory=lambda: np.zeros(0))
     positions: F64 = field(default_factory=lambda: np.zeros((0, N_JOINTS, 3)))
     local_rotations: F64 = field(default_factory=lambda: np.zeros((0, 0, 3, 3)))

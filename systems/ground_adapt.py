@@ -9,7 +9,7 @@ would go into a step is pitched up onto it.
 
 Reads: store.poses, scaled, contact_weight, lengths, clip; the ground; the bank's ankle heights.
 Writes: store.poses (root height, leg frames and fractions, foot directions), footprint, locked,
-ground_ref.
+footprint_settled, ground_ref.
 """
 
 from __future__ import annotations
@@ -38,14 +38,23 @@ class GroundAdapt(System):
         ball = BALL_HEIGHT_PER_LEG * leg[:, None]
         ankles, toes = scaled.positions[:, ANKLES], scaled.positions[:, TOES]
         w = st.contact_weight
-        # Footprints: where the motion's ankle is, standing on the ground under it.
+        # Footprints: where the motion's ankle is, standing on the ground under it (raised by as
+        # much as the motion's ankle is above its standing height).
         ground_at_ankle = ground.height(ankles[..., :2])
+        above_standing = np.maximum(ankles[..., 2] - motion_ankle_height, 0.0)
         landing = ankles.copy()
-        landing[..., 2] = ground_at_ankle + ankle_height + np.maximum(
-            ankles[..., 2] - motion_ankle_height, 0.0)
+        landing[..., 2] = ground_at_ankle + ankle_height + above_standing
         starting = (w > 0.0) & ~st.locked
         st.footprint = np.where(starting[..., None], landing, st.footprint)
+        # A contact is locked as it starts to ramp in, while the motion's foot is still coming
+        # down: until its first fully planted tick the footprint goes down with it (it stood
+        # 10-39 mm in the air on flat ground), never up; then its height is fixed too.
+        settling = (w > 0.0) & ~starting & ~st.footprint_settled
+        settled_z = ground.height(st.footprint[..., :2]) + ankle_height + above_standing
+        st.footprint[..., 2] = np.where(settling, np.minimum(st.footprint[..., 2], settled_z),
+                                        st.footprint[..., 2])
         st.locked = w > 0.0
+        st.footprint_settled = st.locked & ((st.footprint_settled & ~starting) | (w >= 1.0))
         # The motion's floor follows the ground under the supporting feet, smoothly.
         support = w.sum(axis=1)
         under_feet = np.sum(w * (st.footprint[..., 2] - ankle_height), axis=1) / np.maximum(support, 1e-9)
