@@ -588,38 +588,25 @@ def _intervals(planted: NDArray[np.bool_], fps: float) -> list[list[float]]:
     return [[round(a / fps, 4), round(b / fps, 4)] for a, b in zip(starts, stops)]
 
 
-def foot_metrics(positions: F64, planted: NDArray[np.bool_], ground: Ground, ankle_height: F64,
-                 ball_height: float, fps: float) -> tuple[float, float]:
-    """(floating_max_mm, foot_skate_ratio) of one character's frames.
+def foot_skate_ratio(positions: F64, ground: Ground, fps: float) -> float:
+    """The fraction of all frames in which a foot's toe joint is under :data:`SKATE_HEIGHT_M`
+    above the ground and moved horizontally more than :data:`SKATE_STEP_M` per 1/30 s since the
+    frame before (the motion-synthesis literature's foot skate); ``positions`` (frames,
+    joints, 3) world metres."""
+    from .metrics import TOES
 
-    ``positions`` (frames, joints, 3) world metres; ``planted`` (frames, 2) feet fully in
-    contact; ``ankle_height`` (2,) m, the ankle above its sole; ``ball_height`` m, the toe
-    joint above its sole. Floating: the largest height above the ground of a planted foot's
-    lowest sole point (heel or ball), mm. Foot skate: the fraction of all frames in which a
-    foot's toe joint is under :data:`SKATE_HEIGHT_M` above the ground and moved horizontally
-    more than :data:`SKATE_STEP_M` per 1/30 s since the frame before.
-    """
-    from .ground_adapt import heel_depth
-    from .metrics import ANKLES, TOES
-
-    ankles, toes = positions[:, ANKLES], positions[:, TOES]  # (frames, 2, 3)
-    heel_above = -heel_depth(ground, ankles, ankle_height)
+    toes = positions[:, TOES]  # (frames, 2, 3)
     toe_above = toes[..., 2] - ground.height(toes[..., :2])
-    sole_above = np.minimum(heel_above, toe_above - ball_height)
-    floating = float(np.max(np.where(planted, sole_above, 0.0), initial=0.0))
     step = np.linalg.norm(np.diff(toes[..., :2], axis=0), axis=-1) * (fps / SKATE_REFERENCE_HZ)
     skating = (toe_above[1:] < SKATE_HEIGHT_M) & (step > SKATE_STEP_M)  # (frames - 1, 2)
-    ratio = float(np.count_nonzero(skating.any(axis=1)) / max(positions.shape[0], 1))
-    return max(floating, 0.0) * 1e3, ratio
+    return float(np.count_nonzero(skating.any(axis=1)) / max(positions.shape[0], 1))
 
 
 def run_job(job: Job, motion: NormalizedMotion) -> Outcome:
     """Play ``motion`` for ``job`` and return its record and files (nothing is written here).
     The simulation, metrics and encoders are those ``ecs-anim run --export`` uses."""
     from .exporting import bvh_from_rotations, write_npz
-    from .ground_adapt import BALL_HEIGHT_PER_LEG
     from .metrics import MetricsRecorder
-    from .normalized import SIDE_LENGTHS
     from .scenario import build_simulation
 
     start = time.perf_counter()
@@ -643,8 +630,6 @@ def run_job(job: Job, motion: NormalizedMotion) -> Outcome:
                 local[tick] = sim.store.local_rotations[0]
         report = recorder.report()
         ground = sim.ground
-        ankle_height = sim.store.lengths[0, SIDE_LENGTHS["ankle_height"]].copy()
-        ball_height = float(BALL_HEIGHT_PER_LEG * sim.leg_length()[0])
     if not np.all(np.isfinite(positions)):
         raise EcsAnimError(f"{job.stem}: the simulation gave non-finite positions (bug); nothing "
                            "written")
@@ -664,7 +649,6 @@ def run_job(job: Job, motion: NormalizedMotion) -> Outcome:
 
             assert local is not None
             files[name] = glb_bytes(morph, positions[:, 0], local, fps)
-    floating_mm, skate = foot_metrics(positions, planted, ground, ankle_height, ball_height, fps)
     character = report["characters"][0]
     record = {
         "clip": job.clip, "body": job.body.name, "ground": job.ground.name,
@@ -672,10 +656,10 @@ def run_job(job: Job, motion: NormalizedMotion) -> Outcome:
         "slide_max_mm": character["foot_sliding_mm_per_frame"]["max"],
         "slide_mean_mm": character["foot_sliding_mm_per_frame"]["mean"],
         "penetration_max_mm": character["ground_penetration_mm_max"],
-        "floating_max_mm": round(floating_mm, 4),
+        "floating_max_mm": character["floating_mm_max"],
         "bone_error_m": character["bone_length_error_m_max"],
         "com_error_mm": character["com_error_mm_max"],
-        "foot_skate_ratio": round(skate, 4),
+        "foot_skate_ratio": round(foot_skate_ratio(positions, ground, fps), 4),
         "seconds": round(time.perf_counter() - start, 4),
         "outputs": list(files),
         "constraint_errors_mm": {k["name"]: k["error_mm_max_fully_active"]

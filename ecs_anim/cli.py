@@ -685,6 +685,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
     p.set_defaults(func=cmd_run)
 
+    from .batch import add_parser as add_batch_parser
+
+    add_batch_parser(sub)
+
     p = sub.add_parser("bench", help="print performance figures (default: the pipeline)")
     p.add_argument("what", nargs="?", choices=["pipeline", "import"], default="pipeline",
                    help="pipeline: characters per tick; import: parse+FK+encode frames/s")

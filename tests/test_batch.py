@@ -83,28 +83,43 @@ def grounds_file(tmp_path: Path) -> Path:
 # Kernels and plans
 
 
-def test_foot_metrics_count_skating_frames_and_floating() -> None:
-    """A foot 1 cm up sliding 3 cm per 1/30 s skates (frames 1..9 of 10); at 2 cm per frame it
-    does not; a planted sole 7 mm above the ground floats 7 mm."""
+def test_foot_skate_counts_low_toes_moving_fast() -> None:
+    """A toe joint 3 cm up sliding 3 cm per 1/30 s skates (frames 1..9 of 10); at 2 cm per frame
+    it does not; at 60 Hz, 1.5 cm a frame is 3 cm per 1/30 s. (Floating is MetricsRecorder's.)"""
     frames, fps = 10, 30.0
     positions = np.zeros((frames, 22, 3))
-    from ecs_anim.metrics import ANKLES, TOES
+    from ecs_anim.metrics import TOES
 
-    ankle_height, ball = np.array([0.08, 0.08]), 0.02
-    positions[:, ANKLES, 2] = 0.08 + 0.007  # heels 7 mm up
-    positions[:, TOES, 2] = 0.01 + ball  # ball 1 cm up (toe joint 3 cm: under 5 cm)
+    positions[:, TOES, 2] = 0.03  # under 5 cm
     positions[:, TOES[0], 0] = 0.03 * np.arange(frames)  # left toe: 3 cm a frame
-    planted = np.zeros((frames, 2), bool)
-    planted[:, 1] = True
-    floating, ratio = batch.foot_metrics(positions, planted, Plane(), ankle_height, ball, fps)
-    assert floating == pytest.approx(7.0)
-    assert ratio == pytest.approx(9 / 10)
+    assert batch.foot_skate_ratio(positions, Plane(), fps) == pytest.approx(9 / 10)
     positions[:, TOES[0], 0] = 0.02 * np.arange(frames)
-    assert batch.foot_metrics(positions, planted, Plane(), ankle_height, ball, fps)[1] == 0.0
-    # at 60 Hz, 1.5 cm a frame is 3 cm per 1/30 s: skating again
+    assert batch.foot_skate_ratio(positions, Plane(), fps) == 0.0
     positions[:, TOES[0], 0] = 0.015 * np.arange(frames)
-    assert batch.foot_metrics(positions, planted, Plane(), ankle_height, ball, 60.0)[1] == \
-        pytest.approx(0.9)
+    assert batch.foot_skate_ratio(positions, Plane(), 60.0) == pytest.approx(0.9)
+    positions[:, TOES, 2] = 0.06  # above 5 cm: a swing, not a skate
+    assert batch.foot_skate_ratio(positions, Plane(), 60.0) == 0.0
+
+
+def test_a_floating_planted_foot_is_reported_by_the_metrics(tmp_path) -> None:
+    """Floating as the batch records it comes from MetricsRecorder: a planted sole lifted 7 mm
+    above the ground in the posture floats 7 mm."""
+    from conftest import MOTIONS_DIR
+    from ecs_anim.components import MotionPlayer
+
+    from ecs_anim.importing import import_bvh
+    from ecs_anim.metrics import ANKLES, TOES, MetricsRecorder
+    from ecs_anim.morphology import Morphology
+    from ecs_anim.simulation import Simulation
+
+    sim = Simulation({"idle": import_bvh(MOTIONS_DIR / "idle.bvh")})
+    sim.spawn("a", Morphology.preset("adult_male"), MotionPlayer("idle"))
+    metrics = MetricsRecorder(sim)
+    for _ in range(3):
+        sim.step()
+        sim.store.positions[0, ANKLES + TOES, 2] += 0.007  # heels and balls 7 mm up
+        metrics.record()
+    assert metrics.report()["characters"][0]["floating_mm_max"] == pytest.approx(7.0, abs=0.01)
 
 
 def test_contact_intervals_are_first_and_last_planted_frame_times() -> None:

@@ -254,7 +254,9 @@ def test_report_from_real_runs(tmp_path):
     for png in pngs:
         amount = ink(decode_png(png))
         assert 0.02 < amount["drawn"] < 0.6 and amount["coloured"] > 0.001, amount
-    worst = max(jobs, key=lambda j: badness(j)[0])
+    worst = max(badness(j)[0] for j in jobs)
     first_row = page[page.index("Jobs, the worst first"):].split("<tr>")[2]
-    assert f">{worst['clip']}<" in first_row and f">{worst['body']}<" in first_row
-    assert f"{badness(worst)[0]:.2f}" in first_row
+    # The first row is a job of the largest badness (several may share it).
+    assert any(f">{j['clip']}<" in first_row and f">{j['body']}<" in first_row
+               for j in jobs if badness(j)[0] == worst)
+    assert f"{worst:.2f}" in first_row
