@@ -436,3 +436,25 @@ def test_ray_writes_the_same_bytes_as_the_local_pool(tmp_path: Path, grounds_fil
     assert len(job_files(local)) == 2 * 4 * (len(clips) - 1)
     assert [without_time(j) for j in records(on_ray)] == [without_time(j) for j in records(local)]
     assert [j["status"] for j in records(on_ray)].count("failed") == 4
+
+
+def test_the_readme_batch_example_runs(tmp_path) -> None:
+    """The README's batch example, as a shell runs it (out/ becomes a temporary folder)."""
+    import shlex
+    import subprocess
+
+    readme = (REPO / "README.md").read_text(encoding="utf-8")
+    block = readme.split("The report is rewritten on every run. For example", 1)[1]
+    lines = [line.strip() for line in block.splitlines()[1:6] if line.strip()][:2]
+    assert lines[0].startswith("printf") and lines[1].startswith(".venv/bin/ecs-anim batch")
+    ecs_anim = f"{shlex.quote(sys.executable)} -c 'import sys; from ecs_anim.cli import main; sys.exit(main())'"
+    script = "\n".join(line.replace("out/", f"{tmp_path}/").replace(".venv/bin/ecs-anim", ecs_anim)
+                       for line in lines)
+    done = subprocess.run(["bash", "-euc", script], cwd=REPO, capture_output=True, text=True,
+                          timeout=600, check=False)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "54 job(s)" in done.stderr + done.stdout and "54 ok" in done.stderr + done.stdout
+    jobs = json.loads((tmp_path / "batch" / "metrics.json").read_text())["jobs"]
+    assert len(jobs) == 54 and all(j["status"] == "ok" for j in jobs)
+    assert (tmp_path / "batch" / "walk" / "tall_bumps.glb").is_file()
+    assert max(j["slide_max_mm"] for j in jobs) < 1.0 and max(j["penetration_max_mm"] for j in jobs) < 1.0
