@@ -457,4 +457,7 @@ def test_the_readme_batch_example_runs(tmp_path) -> None:
     jobs = json.loads((tmp_path / "batch" / "metrics.json").read_text())["jobs"]
     assert len(jobs) == 54 and all(j["status"] == "ok" for j in jobs)
     assert (tmp_path / "batch" / "walk" / "tall_bumps.glb").is_file()
+    from test_gltf import _assert_valid
+
+    _assert_valid(sorted((tmp_path / "batch").glob("*/*.glb")))  # Khronos: 0 errors, 0 warnings
     assert max(j["slide_max_mm"] for j in jobs) < 1.0 and max(j["penetration_max_mm"] for j in jobs) < 1.0
