@@ -313,9 +313,11 @@ def default_bench_files() -> list[Path]:
     return shipped_motion_paths()
 
 
-def _pipeline_timing(n: int, seconds: float, rotations: bool = False,
-                     constrained: bool = False) -> dict[str, float]:
-    """ms per tick per system for ``n`` characters walking on bumps, after a warm-up."""
+def walkers_on_bumps(n: int, rotations: bool = False, seed: int = 0):  # type: ignore[no-untyped-def]
+    """The benchmark's scene (and the soak test's): ``n`` characters walking on bumps on a
+    1.5 m grid, every other one a preset body and the rest random statures of 1.10-2.05 m, each
+    starting at a random time of the walk and heading within 0.3 rad of +x. Returns
+    (simulation, the seeded generator, for the caller's further draws)."""
     from .components import MotionPlayer, Placement
     from .ground import Bumps
     from .importing import import_bvh
@@ -325,7 +327,7 @@ def _pipeline_timing(n: int, seconds: float, rotations: bool = False,
 
     walk = import_bvh(MOTIONS_DIR / "walk.bvh")
     sim = Simulation({"walk": walk}, Bumps(0.04, 2.5, 3.0), fps=30.0, rotations=rotations)
-    rng = np.random.default_rng(0)
+    rng = np.random.default_rng(seed)
     presets = list(PRESET_SPECS)
     side = int(np.ceil(np.sqrt(n)))
     for i in range(n):
@@ -333,6 +335,13 @@ def _pipeline_timing(n: int, seconds: float, rotations: bool = False,
             Morphology.from_stature(float(rng.uniform(1.1, 2.05)))
         sim.spawn(f"c{i}", body, MotionPlayer("walk", start_s=float(rng.uniform(0, 4))),
                   Placement((1.5 * (i // side), 1.5 * (i % side)), float(rng.uniform(-0.3, 0.3))))
+    return sim, rng
+
+
+def _pipeline_timing(n: int, seconds: float, rotations: bool = False,
+                     constrained: bool = False) -> dict[str, float]:
+    """ms per tick per system for ``n`` characters walking on bumps, after a warm-up."""
+    sim, _ = walkers_on_bumps(n, rotations)
     moving = np.zeros(0, np.int64)
     if constrained:
         from .constraints import Activation

@@ -13,14 +13,9 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import MOTIONS_DIR
-from ecs_anim.components import MotionPlayer, Placement
+from ecs_anim.cli import walkers_on_bumps
 from ecs_anim.constraints import Activation
-from ecs_anim.ground import Bumps
-from ecs_anim.importing import import_bvh
 from ecs_anim.metrics import MetricsRecorder
-from ecs_anim.morphology import PRESET_SPECS, Morphology
-from ecs_anim.simulation import Simulation
 
 SOAK_TICKS = int(os.environ.get("ECS_ANIM_SOAK_TICKS", "3000"))
 
@@ -28,16 +23,7 @@ SOAK_TICKS = int(os.environ.get("ECS_ANIM_SOAK_TICKS", "3000"))
 def soak(ticks: int, characters: int = 100, constrained: int = 30, seed: int = 2026,
          progress: bool = False) -> dict:
     """Run the soak scene for ``ticks`` ticks; returns the metrics report."""
-    walk = import_bvh(MOTIONS_DIR / "walk.bvh")
-    sim = Simulation({"walk": walk}, Bumps(0.04, 2.5, 3.0), fps=30.0)
-    rng = np.random.default_rng(seed)
-    presets = list(PRESET_SPECS)
-    side = int(np.ceil(np.sqrt(characters)))
-    for i in range(characters):
-        body = Morphology.preset(presets[i % len(presets)]) if i % 2 == 0 else \
-            Morphology.from_stature(float(rng.uniform(1.1, 2.05)))
-        sim.spawn(f"c{i}", body, MotionPlayer("walk", start_s=float(rng.uniform(0, 4))),
-                  Placement((1.5 * (i // side), 1.5 * (i % side)), float(rng.uniform(-0.3, 0.3))))
+    sim, rng = walkers_on_bumps(characters, seed=seed)
     entities = sim.store.entity[:constrained].tolist()
     wrists = np.array([sim.add_constraint(e, "wrist", "wrist_r", 10, Activation(0.0, 1e9),
                                           (0.0, 0.0, 1.2)) for e in entities], dtype=np.int64)
