@@ -20,7 +20,7 @@ from yaml import Node
 
 from .components import MotionPlayer, Placement, QueuedClip
 from .constraints import Activation, ConstraintSpec
-from .errors import EcsAnimError, InputError, NumberList, compose_yaml, expanded_size, listed
+from .errors import EcsAnimError, InputError, NumberList, compose_yaml, expanded_size, listed, quoted
 from .ground import Bumps, Combined, Ground, HeightGrid, Plane, Slope, Stairs
 from .morphology import LENGTH_KEYS, PRESET_SPECS, Morphology, with_lengths_m
 from .motion import NormalizedMotion, load_nmo
@@ -617,10 +617,12 @@ def _refuse_clip(path: Path) -> None:
         return  # compose_yaml says why it cannot be read
     suffix = path.suffix.lower()
     where = "name it in a scenario's motions: (docs/scenarios.md)"
+    # The path leads the message already: the example names the file alone, so the line stays short.
+    name = quoted(path.name)
     if suffix == ".bvh" or head.lstrip(b"\xef\xbb\xbf \t\r\n").upper().startswith(b"HIERARCHY"):
-        what, how = "a BVH clip", f"import it (ecs-anim import {path} -o motions/) or {where}"
+        what, how = "a BVH clip", f"import it (ecs-anim import {name} -o motions/) or {where}"
     elif suffix == ".c3d" or (len(head) > 1 and head[0] < 0x20 and head[1] == 0x50):
-        what, how = "a C3D capture", f"import it (ecs-anim import {path} -o motions/) or {where}"
+        what, how = "a C3D capture", f"import it (ecs-anim import {name} -o motions/) or {where}"
     elif suffix == ".nmo":
         what, how = "an .nmo motion", where
     elif head.startswith(b"PK\x03\x04"):

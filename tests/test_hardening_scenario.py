@@ -281,10 +281,10 @@ def test_a_clip_given_as_a_scenario_says_how_to_play_it(walk_nmo, tmp_path, caps
     zipped.write_bytes(walk_nmo.read_bytes())
     expected = {
         WALK: f"{WALK}: a scenario YAML was expected, not a BVH clip; to play it, import it "
-              f"(ecs-anim import {WALK} -o motions/) or name it in a scenario's motions: "
+              "(ecs-anim import 'walk.bvh' -o motions/) or name it in a scenario's motions: "
               "(docs/scenarios.md)",
         renamed: f"{renamed}: a scenario YAML was expected, not a BVH clip; to play it, import it "
-                 f"(ecs-anim import {renamed} -o motions/) or name it in a scenario's motions: "
+                 "(ecs-anim import 'walk.yaml' -o motions/) or name it in a scenario's motions: "
                  "(docs/scenarios.md)",
         walk_nmo: f"{walk_nmo}: a scenario YAML was expected, not an .nmo motion; to play it, name it "
                   "in a scenario's motions: (docs/scenarios.md)",
