@@ -72,6 +72,9 @@ class BvhMotion:
     skeleton: BvhSkeleton
     channels: F64  # (n_frames, n_channels)
     frame_time_s: float
+    #: One-line notes on what was tolerated while reading (``file:line: ...``), e.g. one frame
+    #: line more than ``Frames:`` announces.
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def n_frames(self) -> int:
@@ -216,6 +219,13 @@ def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
         last = rows[-1][0] if rows else first_data_row
         raise InputError(path, f"file ends after {len(rows)} of {n_frames} frames "
                                "(truncated? 'Frames:' promises more)", last)
+    warnings: list[str] = []
+    if len(rows) == n_frames + 1:
+        # Some writers count the frames after a first (rest) frame line; Blender and bvhio read
+        # every line. More than one extra line is no such off-by-one: refused below.
+        warnings.append(f"{path}:{frames_line}: 'Frames:' says {n_frames} but there are "
+                        f"{len(rows)} frame lines; read all {len(rows)}")
+        n_frames = len(rows)
     if len(rows) > n_frames:
         raise InputError(path, f"found {len(rows)} frame lines but 'Frames:' says {n_frames}",
                          rows[n_frames][0])
@@ -246,7 +256,7 @@ def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
             f"value beyond {MAX_VALUE:g}:"
         raise InputError(path, f"{what} {values[frame, col]} in channel {channel} of "
                                f"joint {quoted(name)} (frame {frame + 1} of {n_frames})", rows[frame][0])
-    return BvhMotion(skeleton, values, frame_time)
+    return BvhMotion(skeleton, values, frame_time, warnings)
 
 
 def _reject_unplain_frame(rows: list[tuple[int, str]], split_rows: list[list[str]],
@@ -371,6 +381,12 @@ def forward_kinematics(motion: BvhMotion) -> tuple[F64, F64]:
 
     Returns ``joint2file`` (n_frames, n_joints, 3, 3) and ``positions`` (n_frames, n_joints, 3).
     End Sites get their parent's orientation.
+
+    A non-root joint's three position channels usually replace its OFFSET (Bandai writes the
+    OFFSET itself there); some writers store the joint's position in the file's frame instead
+    (an ASF-converted rig's thorax and head). Which one is read from the numbers: the reading
+    whose distance to the parent stays closer to the OFFSET's length (median over the frames).
+    Orientations chain through the hierarchy either way.
     """
     local_rot, local_pos = joint_local_transforms(motion)
     n_frames, n_joints = local_pos.shape[:2]
@@ -381,11 +397,28 @@ def forward_kinematics(motion: BvhMotion) -> tuple[F64, F64]:
         if p < 0:
             joint2file[:, j] = local_rot[:, j]
             positions[:, j] = local_pos[:, j]
+            continue
+        joint2file[:, j] = joint2file[:, p] @ local_rot[:, j]
+        if _positions_in_file_frame(joint, local_pos[:, j], positions[:, p]):
+            positions[:, j] = local_pos[:, j]
         else:
-            joint2file[:, j] = joint2file[:, p] @ local_rot[:, j]
             positions[:, j] = positions[:, p] + np.einsum("fab,fb->fa", joint2file[:, p],
                                                           local_pos[:, j])
     return joint2file, positions
+
+
+def _positions_in_file_frame(joint: BvhJoint, translation: F64, parent_positions: F64) -> bool:
+    """Whether a non-root joint's position channels hold its position in the file's frame:
+    ``translation`` (n_frames, 3) read as such stays nearer the OFFSET's length from
+    ``parent_positions`` (n_frames, 3) than read as the offset from the parent."""
+    names = {ch.lower() for ch in joint.channels}
+    if not set(_POSITION_CHANNELS) <= names:
+        return False
+    length = float(np.linalg.norm(joint.offset))
+    as_offset = float(np.median(np.abs(np.linalg.norm(translation, axis=1) - length)))
+    as_position = float(np.median(np.abs(np.linalg.norm(translation - parent_positions, axis=1)
+                                         - length)))
+    return as_offset > 0.25 * length and as_position < 0.5 * as_offset
 
 
 def rest_positions(skeleton: BvhSkeleton) -> F64:

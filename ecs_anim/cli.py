@@ -53,6 +53,17 @@ def frame_range(text: str) -> FrameRange:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def length_unit(text: str) -> str:
+    """argparse type of ``--unit``: a unit name or metres per file unit
+    (:func:`~ecs_anim.importing.unit_scale`), kept as text."""
+    from .importing import unit_scale
+    try:
+        unit_scale(text)
+    except EcsAnimError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix(f"--unit {text}: ")) from None
+    return text
+
+
 def positive_int(text: str) -> int:
     """argparse type: a whole number >= 1."""
     if not text.isascii() or not text.isdigit() or int(text) < 1:
@@ -115,12 +126,18 @@ def cmd_import(args: argparse.Namespace) -> int:
             if suffix not in (".bvh", ".c3d"):
                 raise EcsAnimError(f"{src}: unsupported file type {src.suffix!r} (expected .bvh "
                                    "or .c3d)")
+            if suffix == ".c3d" and args.stature is not None:
+                raise EcsAnimError(f"{src}: --stature applies to BVH files (a C3D's markers are "
+                                   "in the unit of POINT:UNITS)")
             if suffix == ".c3d":
                 motion = import_c3d(src, args.map, args.unit, thresholds, args.up,
                                     DEFAULT_MAX_GAP if args.max_gap is None else args.max_gap,
                                     args.fill_absent_from, args.trim)
             else:
-                motion = import_bvh(src, args.map, args.unit, thresholds, args.up or "y", args.trim)
+                motion = import_bvh(src, args.map, args.unit, thresholds, args.up, args.trim,
+                                    args.stature)
+                for warning in motion.info.get("warnings", []):
+                    print(f"warning: {warning}", file=sys.stderr)
             # A --constraints file times the file's frames; --trim or a C3D import may drop some.
             shift_s = motion.info.get("first_file_frame", 0) / motion.fps
             on_clip = [replace(c, activation=replace(c.activation, start_s=c.activation.start_s - shift_s,
@@ -134,7 +151,9 @@ def cmd_import(args: argparse.Namespace) -> int:
             save_nmo(motion, target, force=args.force)
             contacts = motion.contacts()
             message = (f"{src} -> {target}: {motion.n_frames} frames at {motion.fps:g} fps, "
-                       f"{motion.info['joint_map']}, {motion.info['up_axis'].upper()} up, unit "
+                       f"{motion.info['joint_map']}, {motion.info['up_axis'].upper()} up"
+                       + (f" ({motion.info['up_reason']})" if motion.info.get("up_reason") else "")
+                       + ", unit "
                        f"{motion.info['unit']} ({motion.info['unit_reason']}), "
                        f"contacts L {contacts[:, 0].mean():.0%} "
                        f"R {contacts[:, 1].mean():.0%}")
@@ -644,11 +663,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="folder for .nmo files")
     p.add_argument("--map", metavar="PRESET|FILE.yaml", help="joint-name preset or YAML map "
                    "(BVH), marker-set preset or YAML marker map (C3D) (default: detect)")
-    p.add_argument("--unit", choices=["m", "cm", "mm", "inch", "cmu"],
-                   help="length unit of the file (default: detected from the proportions)")
+    p.add_argument("--unit", type=length_unit, metavar="m|cm|mm|inch|cmu|METRES",
+                   help="length unit of the file: a name, or for BVH metres per file unit "
+                   "(0.0254) (default: detected from the proportions)")
+    p.add_argument("--stature", type=positive_float, metavar="M",
+                   help="BVH: scale the source so that its body is M metres tall (a rig "
+                   "scaled by its tool, a child whose unit the proportions cannot tell)")
     p.add_argument("--up", choices=["y", "z"], default=None,
-                   help="the file's up axis (default: y for BVH, the format's convention; "
-                   "detected from the markers for C3D)")
+                   help="the file's up axis (default: detected from the rest pose and the motion, "
+                   "head above the feet, for BVH; from the markers for C3D)")
     p.add_argument("--trim", type=frame_range, metavar="START:END",
                    help="keep only these frames of each file: frame numbers (START included, END "
                    "not; negative from the end; either may be left out, e.g. 1: drops a T-pose "

@@ -70,6 +70,8 @@ class CanonicalClip:
     unit_reason: str
     joint_map: JointMap
     up_axis: str = "y"
+    up_reason: str = ""
+    warnings: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -174,25 +176,78 @@ def _leg_rest_length(skeleton: BvhSkeleton, jmap: JointMap) -> float:
 UP_AXES = {"y": YUP_TO_ZUP, "z": np.eye(3)}
 
 
+def unit_scale(unit: str) -> float:
+    """Metres per file unit for ``--unit``: a name of :data:`UNITS` or a positive number
+    (``0.0254``); raises :class:`EcsAnimError` otherwise."""
+    if unit in UNITS:
+        return UNITS[unit]
+    try:
+        scale = float(unit)
+    except ValueError:
+        scale = math.nan
+    if not (math.isfinite(scale) and scale > 0):
+        raise EcsAnimError(f"--unit {unit}: expected one of {', '.join(UNITS)} or a positive "
+                           "number of metres per file unit (0.0254 for inches)")
+    return scale
+
+
+def detect_up(skeleton: BvhSkeleton, jmap: JointMap, pos_file: F64) -> tuple[str, str]:
+    """The file's up axis, ``"y"`` or ``"z"``, with a sentence saying why: the axis along which
+    the head stands above the feet, in the rest pose (the spine from pelvis to neck) and over
+    the clip's frames (the head above the lower ankle), each as a fraction of its length.
+
+    ``pos_file`` (n_frames, n_joints, 3): joint positions in file axes. A tie or no axis showing
+    the head above the feet keeps the BVH convention, Y up, and says so.
+    """
+    src = jmap.source
+    rest = rest_positions(skeleton)
+    spine = normalize(rest[src["neck"]] - rest[src["pelvis"]])  # type: ignore[index]
+    head = pos_file[:, src["head"]]  # type: ignore[index]
+    rise = {}
+    for axis, k in (("y", 1), ("z", 2)):
+        feet = np.minimum(pos_file[:, src["ankle_l"], k], pos_file[:, src["ankle_r"], k])  # type: ignore[index]
+        above = (head[:, k] - feet) / np.maximum(
+            np.linalg.norm(head - 0.5 * (pos_file[:, src["ankle_l"]] + pos_file[:, src["ankle_r"]]),  # type: ignore[index]
+                           axis=-1), 1e-12)
+        rise[axis] = (float(spine[k]), float(np.median(above)), float(np.mean(above > 0.5)))
+    score = {axis: r[0] + r[1] for axis, r in rise.items()}
+    up = max(score, key=lambda a: score[a])
+    if score[up] <= 0.5 or abs(score["y"] - score["z"]) < 0.2:
+        return "y", ("assumed (the BVH convention): neither Y nor Z shows the head clearly above "
+                     "the feet; give --up if wrong")
+    spine_k, _, share = rise[up]
+    rest_text = (f"the rest pose's spine points {spine_k:+.2f} along {up.upper()}"
+                 if abs(spine_k) > 0.5 else "the rest pose shows no stance")
+    return up, (f"detected: the head is above the feet along +{up.upper()} in {share:.0%} of "
+                f"frames and {rest_text}")
+
+
 def canonical_clip(motion: BvhMotion, map_spec: str | None = None,
-                   unit: str | None = None, up: str = "y") -> CanonicalClip:
+                   unit: str | None = None, up: str | None = None,
+                   stature_m: float | None = None) -> CanonicalClip:
     """Map, scale and rotate a BVH clip onto the canonical skeleton (see module docstring).
 
-    ``up`` is the file's up axis: ``"y"`` (the BVH convention, the default) or ``"z"``.
+    ``up`` is the file's up axis, ``"y"`` or ``"z"``; None detects it (:func:`detect_up`).
+    ``unit``: a unit name or metres per file unit as text (:func:`unit_scale`); None detects it.
+    ``stature_m``: scale the source so that its body is this tall (m) instead.
     """
-    if up not in UP_AXES:
+    if up is not None and up not in UP_AXES:
         raise EcsAnimError(f"--up {up}: expected 'y' or 'z'")
     skeleton = motion.skeleton
     joint2file, pos_file = forward_kinematics(motion)
     jmap = map_skeleton(skeleton, map_spec, pos_file)
+    if up is None:
+        up, up_reason = detect_up(skeleton, jmap, pos_file)
+    else:
+        up_reason = "given with --up"
     leg_units = _leg_rest_length(skeleton, jmap)
-    if unit is None:
+    if unit is None and stature_m is not None:
+        unit, reason = "m", ""  # the stature sets the scale below
+    elif unit is None:
         unit, reason = detect_unit(leg_units)
     else:
-        if unit not in UNITS:
-            raise EcsAnimError(f"--unit {unit}: unknown unit; choose one of {', '.join(UNITS)}")
-        reason = f"given with --unit (thigh + shank = {leg_units * UNITS[unit]:.3f} m)"
-    scale = UNITS[unit]
+        reason = f"given with --unit (thigh + shank = {leg_units * unit_scale(unit):.3f} m)"
+    scale = unit_scale(unit)
     rest = rest_positions(skeleton)
     src = jmap.source
     # Body axes of the rest (all-zero-rotation) pose, in file axes: forward, left, up as columns.
@@ -215,6 +270,15 @@ def canonical_clip(motion: BvhMotion, map_spec: str | None = None,
     def world_frame(i: int) -> F64:
         return to_world @ joint2file[:, i] @ rest_body
 
+    # No neck joint (the head and both clavicles hang straight off the thorax, as in Acclaim
+    # ASF): the neck base is where the clavicles meet, the middle of the arms' first joints.
+    neck_at_clavicles = False
+    if src["neck"] == jmap.thorax:
+        roots = [_child_towards(skeleton, jmap.thorax, src[f"shoulder_{s}"]) for s in "lr"]  # type: ignore[arg-type]
+        meet = 0.5 * (pos_file[:, roots[0]] + pos_file[:, roots[1]]) @ to_world.T * scale
+        if np.linalg.norm(meet[0] - positions[0, J["neck"]]) > 1e-3 * leg_units * scale:
+            positions[:, J["neck"]] = meet
+            neck_at_clavicles = True
     # Spine joints a skeleton lacks: evenly between their neighbours on the pelvis-neck line.
     chain = ["pelvis", "spine_1", "spine_2", "neck"]
     known = [k for k, name in enumerate(chain) if measured[J[name]]]
@@ -244,14 +308,33 @@ def canonical_clip(motion: BvhMotion, map_spec: str | None = None,
             up_head = up0 / np.linalg.norm(up0)
         d = to_world @ joint2file[:, src["head"]] @ up_head  # type: ignore[index]
         positions[:, J["head_top"]] = positions[:, J["head"]] + d * FILL_FRACTION["head_top"] * leg_m
+    if neck_at_clavicles:
+        measured[J["neck"]] = False
+    if stature_m is not None:
+        if not MIN_STATURE_M <= stature_m <= MAX_STATURE_M:
+            raise EcsAnimError(f"--stature {stature_m:g}: expected {MIN_STATURE_M:g}-"
+                               f"{MAX_STATURE_M:g} m")
+        factor = stature_m / source_morphology(positions, "source").stature
+        positions *= factor
+        scale *= factor
+        unit = f"{scale:.6g}"
+        reason = (f"--stature {stature_m:g} m: {scale:.6g} m per file unit (thigh + shank = "
+                  f"{leg_units * scale:.3f} m)")
     return CanonicalClip(
         positions=positions,
         pelvis2world=world_frame(src["pelvis"]),  # type: ignore[arg-type]
         thorax2world=world_frame(jmap.thorax),
         head2world=world_frame(src["head"]),  # type: ignore[arg-type]
         measured=measured, fps=motion.fps, unit=unit, unit_reason=reason, joint_map=jmap,
-        up_axis=up,
+        up_axis=up, up_reason=up_reason, warnings=tuple(motion.warnings),
     )
+
+
+def _child_towards(skeleton: BvhSkeleton, ancestor: int, joint: int) -> int:
+    """The child of ``ancestor`` on the path down to ``joint`` (``joint`` itself if a child)."""
+    while skeleton.joints[joint].parent not in (ancestor, -1):
+        joint = skeleton.joints[joint].parent
+    return joint
 
 
 def source_morphology(positions: F64, name: str) -> Morphology:
@@ -280,13 +363,15 @@ def source_morphology(positions: F64, name: str) -> Morphology:
 
 def import_bvh(path: str | Path, map_spec: str | None = None, unit: str | None = None,
                thresholds: ContactThresholds = ContactThresholds(),
-               up: str = "y", trim: FrameRange | None = None) -> NormalizedMotion:
-    """Read a BVH file and normalize it (``trim``: only those frames). Raises
-    :class:`EcsAnimError` subclasses on bad input."""
+               up: str | None = None, trim: FrameRange | None = None,
+               stature_m: float | None = None) -> NormalizedMotion:
+    """Read a BVH file and normalize it (``trim``: only those frames; ``up``, ``unit``,
+    ``stature_m`` as in :func:`canonical_clip`). Raises :class:`EcsAnimError` subclasses on bad
+    input."""
     path = Path(path)
     motion = read_bvh(path)
     try:
-        clip = canonical_clip(motion, map_spec, unit, up)
+        clip = canonical_clip(motion, map_spec, unit, up, stature_m)
         first_file_frame = 0
         if trim is not None:
             kept = trim.frames(len(clip.positions), clip.fps)
@@ -329,4 +414,8 @@ def normalize_clip(clip: CanonicalClip, name: str, source: str,
         "up_axis": clip.up_axis,
         "max_stretch": float(np.max(np.abs(poses.stretch - 1.0))),
     }
+    if clip.up_reason:
+        info["up_reason"] = clip.up_reason
+    if clip.warnings:
+        info["warnings"] = list(clip.warnings)
     return NormalizedMotion(poses, clip.fps, morph, constraints, info)

@@ -681,11 +681,32 @@ def map_skeleton(skeleton: BvhSkeleton, map_spec: str | None = None,
                     if skeleton.joints[c].is_end_site
                     and np.linalg.norm(skeleton.joints[c].offset) > 1e-9]
             source[end] = ends[0] if len(ends) == 1 else None
+    # Toes a skeleton lacks: the End Site below the ankle when it is the toe tip (Daz, Perception
+    # Neuron, OptiTrack), not when it marks the sole straight below (Biped).
+    for side in "lr":
+        if source[f"toe_{side}"] is None:
+            source[f"toe_{side}"] = _toe_end_site(skeleton, source[f"knee_{side}"],  # type: ignore[arg-type]
+                                                  source[f"ankle_{side}"])  # type: ignore[arg-type]
     if user_path is not None:
         _check_user_map(skeleton, source, user_path, user_lines, how)
     thorax = _lca(skeleton, [source["shoulder_l"], source["shoulder_r"], source["head"]])  # type: ignore[list-item]
     names = {j: (None if i is None else skeleton.names[i]) for j, i in source.items()}
     return JointMap(source=source, thorax=thorax, how=how, names=names)
+
+
+def _toe_end_site(skeleton: BvhSkeleton, knee: int, ankle: int) -> int | None:
+    """The ankle's one End Site when it points more across the shank than along it (a toe tip
+    ahead of the ankle, within 45 degrees of square to the shank), else None (a sole marker
+    below the ankle, or no single End Site)."""
+    ends = [c for c in skeleton.children(ankle) if skeleton.joints[c].is_end_site]
+    if len(ends) != 1 or any(not skeleton.joints[c].is_end_site for c in skeleton.children(ankle)):
+        return None
+    rest = rest_positions(skeleton)
+    shank = normalize(rest[ankle] - rest[knee])
+    tip = skeleton.joints[ends[0]].offset
+    along = float(np.dot(tip, shank))
+    across = float(np.linalg.norm(tip - along * shank))
+    return ends[0] if across > max(abs(along), 1e-9) else None
 
 
 def _hierarchy_parent(joint: str, source: dict[str, int | None]) -> str | None:
