@@ -171,6 +171,8 @@ def cmd_import(args: argparse.Namespace) -> int:
                     spans = ", ".join(f"{a}-{b}" for a, b in gaps["long_gap_frames"])
                     message += (f"; frames {spans} had gaps longer than {gaps['max_gap_frames']} "
                                 "frames (interpolated, unreliable)")
+            if args.trim is not None:
+                message += f"; --trim kept frames from frame {motion.info.get('first_file_frame', 0)} of the file"
             for key, what in (("root_frames_trimmed", "trimmed (of the file's frames)"),
                               ("root_frames_repaired", "repaired")):
                 if motion.info.get(key):
@@ -271,6 +273,9 @@ def cmd_info(args: argparse.Namespace) -> int:
         if spans and isinstance(spans, list):
             shown = ", ".join(f"{a}-{b}" for a, b in spans)
             print(f"  {what.format(shown)} (the pelvis markers could not place the pelvis)")
+    if info.get("first_file_frame"):
+        print(f"  starts at  frame {info['first_file_frame']} of the file (--trim, or frames the "
+              "pelvis markers could not place)")
     return 0
 
 

@@ -74,6 +74,10 @@ class CanonicalClip:
     warnings: tuple[str, ...] = ()
 
 
+#: The largest frame number or seconds ``--trim`` takes (a day at 10,000 fps is under 1e9).
+MAX_TRIM = 1e9
+
+
 @dataclass(frozen=True)
 class FrameRange:
     """``import --trim START:END``: the frames kept, from ``start`` up to (not including) ``stop``;
@@ -97,16 +101,18 @@ class FrameRange:
         values: list[float | None] = []
         for part in ends:
             number = part[:-1] if seconds and part else part
-            if not number:
+            if not part:
                 values.append(None)
                 continue
+            if not number:
+                raise ValueError(f"--trim {text!r}: {part!r} has no number")
             try:
                 value = float(number) if seconds else int(number)
             except ValueError:
                 raise ValueError(f"--trim {text!r}: {part!r} is not a "
                                  f"{'number of seconds' if seconds else 'frame number'}") from None
-            if not math.isfinite(value):
-                raise ValueError(f"--trim {text!r}: {part!r} is not finite")
+            if not math.isfinite(value) or abs(value) > MAX_TRIM:
+                raise ValueError(f"--trim {text!r}: {part!r} is beyond {MAX_TRIM:g}")
             values.append(value)
         return cls(values[0], values[1], seconds)
 

@@ -110,3 +110,16 @@ def test_the_readme_info_example_runs(tmp_path, monkeypatch, capsys):
         argv = [w for word in words for w in (sorted(glob.glob(word)) if "*" in word else [word])]
         assert main(argv) == 0
     assert "walk.nmo" in capsys.readouterr().out
+
+
+def test_trim_refuses_hostile_ends_and_info_says_where_the_clip_starts(tmp_path, capsys):
+    """A review: ``--trim 1e308s:`` ended in a traceback, ``s:`` meant the whole clip, and info
+    did not show where a trimmed clip starts."""
+    for bad, message in (("1e308s:", r"is beyond 1e\+09"), ("s:", "'s' has no number"),
+                         (":s", "'s' has no number")):
+        with pytest.raises(ValueError, match=message):
+            FrameRange.parse(bad)
+    assert main(["import", str(MOTIONS_DIR / "walk.bvh"), "-o", str(tmp_path), "--trim", "10:"]) == 0
+    assert "; --trim kept frames from frame 10 of the file" in capsys.readouterr().out
+    assert main(["info", str(tmp_path / "walk.nmo")]) == 0
+    assert "  starts at  frame 10 of the file" in capsys.readouterr().out
