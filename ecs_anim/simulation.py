@@ -230,7 +230,7 @@ class Simulation:
         with self._active():
             name = esper.component_for_entity(entity, Name).name
             esper.delete_entity(entity, immediate=True)
-            for other, (character_row,) in list(esper.get_components(CharacterRow)):
+            for other, character_row in list(esper.get_component(CharacterRow)):
                 if character_row.row > row:
                     for component in (CharacterRow, NormalizedPose, Posture):
                         esper.add_component(other, component(character_row.row - 1))
