@@ -34,6 +34,7 @@ import logging
 import math
 import multiprocessing
 import os
+import pickle
 import re
 import sys
 import time
@@ -54,13 +55,15 @@ from .motion import NormalizedMotion
 
 F64 = NDArray[np.float64]
 
-#: Output formats a batch writes (``--formats``); glb needs :mod:`ecs_anim.gltf`.
+#: Output formats a batch writes (``--formats``).
 FORMATS = ("bvh", "npz", "glb")
 DEFAULT_FORMATS = ("bvh", "npz")
 #: Clip files a batch reads, and what a folder given as a clip contributes.
 CLIP_SUFFIXES = (".bvh", ".c3d", ".nmo")
 #: Written first into a batch folder: a folder without it that holds anything is not ours.
 BATCH_MARKER = ".ecs-anim-batch.json"
+#: The batch's own files in its folder: no clip may be named so (its folder would be theirs).
+RESERVED = ("metrics.csv", "metrics.json", "report.html")
 #: Beside each job's outputs, written after them: the job's input hash and its record.
 STAMP_SUFFIX = ".ecs-anim-job.json"
 #: Names of bodies and grounds (they name files): as scenario names, without path separators.
@@ -82,13 +85,38 @@ CSV_FIELDS = ("clip", "body", "ground", "stature_m", "frames", "status", "error"
 
 
 def project_version() -> str:
-    """The installed ecs_anim version: part of every job's hash, so an upgrade redoes jobs."""
+    """The installed ecs_anim version (written into metrics.json and the batch marker)."""
     from importlib.metadata import PackageNotFoundError, version
 
     try:
         return version("ecs_anim")
     except PackageNotFoundError:
         return "0+unknown"
+
+
+_SOURCE_DIGEST: str | None = None
+
+
+def source_digest() -> str:
+    """A hash of the package's own source files (``ecs_anim/*.py`` with the viewer, and the
+    ``ecs_anim.components`` and ``ecs_anim.systems`` packages, wherever they are installed
+    from), computed once per process: part of every job's hash, so a code change redoes jobs
+    even when the version string stays."""
+    global _SOURCE_DIGEST
+    if _SOURCE_DIGEST is None:
+        import importlib
+
+        digest = hashlib.sha256()
+        for name in ("ecs_anim", "ecs_anim.components", "ecs_anim.systems"):
+            module = importlib.import_module(name)
+            folder = Path(module.__file__ or "").resolve().parent
+            files = sorted(folder.rglob("*.py")) if name != "ecs_anim" else \
+                sorted(folder.glob("*.py")) + sorted((folder / "viewer").rglob("*.py"))
+            for path in files:
+                digest.update(f"{name}/{path.relative_to(folder)}".encode() + b"\0")
+                digest.update(hashlib.sha256(path.read_bytes()).digest())
+        _SOURCE_DIGEST = digest.hexdigest()
+    return _SOURCE_DIGEST
 
 
 # --------------------------------------------------------------------------------------------
@@ -123,6 +151,7 @@ class Template:
     motions: dict[str, NormalizedMotion]
     character: Any  # scenario.CharacterSpec (its morphology and clip replaced per job)
     digest: str  # of the template file and every motion file it read
+    input_files: tuple[str, ...] = ()  # the template's motion (and other) files
 
 
 @dataclass(frozen=True)
@@ -150,6 +179,11 @@ class Job:
 
     def outputs(self) -> list[str]:
         return [f"{self.stem}.{ext}" for ext in self.formats]
+
+    def all_outputs(self) -> list[str]:
+        """The job's files in every format: a job redone or failed deletes those it no longer
+        writes."""
+        return [f"{self.stem}.{ext}" for ext in FORMATS]
 
 
 @dataclass
@@ -185,9 +219,10 @@ def stature_name(stature_m: float, sex: str = "male", proportions: str = "adult"
         ("" if proportions == "adult" else f"_{proportions}")
 
 
-def body_from_text(text: str, base: Path = Path(".")) -> Body:
+def body_from_text(text: str, base: Path = Path("."), inputs: list[str] | None = None) -> Body:
     """A body given as text: a preset, a morphology YAML file (named by its stem; relative
-    paths from ``base``) or ``stature_<metres>`` (adult proportions)."""
+    paths from ``base``; appended to ``inputs`` when given) or ``stature_<metres>`` (adult
+    proportions)."""
     if text in PRESET_SPECS:
         return Body(text, Morphology.preset(text))
     if text.lower().endswith((".yaml", ".yml")):
@@ -197,6 +232,8 @@ def body_from_text(text: str, base: Path = Path(".")) -> Body:
         problem = _check_name(path.stem, "body")
         if problem:
             raise InputError(path, problem)
+        if inputs is not None:
+            inputs.append(str(path))
         return Body(path.stem, load_morphology_yaml(path))
     match = re.fullmatch(r"stature_([0-9]+(?:\.[0-9]+)?)", text)
     if match:
@@ -217,13 +254,18 @@ def _reader(path: str | Path) -> Any:
     return _Reader(str(path))
 
 
-def _manifest_body(r: Any, node: yaml.Node, where: str, base: Path) -> list[Body]:
+def _manifest_body(r: Any, node: yaml.Node, where: str, base: Path,
+                   inputs: list[str] | None = None) -> list[Body]:
     """One ``bodies:`` item: a name (see :func:`body_from_text`) or
     ``{statures: {from_m, to_m, count}, proportions: adult|child, sex: male|female}``."""
     if isinstance(node, yaml.ScalarNode):
         text = r.string(node, where)
+        if text.lower().endswith((".yaml", ".yml")):
+            path = Path(text) if Path(text).is_absolute() else base / text
+            if not path.is_file():
+                raise r.fail(node, where, f"no such morphology file {quoted(str(path))}")
         try:
-            return [body_from_text(text, base)]
+            return [body_from_text(text, base, inputs)]
         except InputError:
             raise
         except EcsAnimError as exc:
@@ -297,7 +339,8 @@ def load_template(path: str | Path) -> Template:
     if any(k.target_character not in (None, character.name) for k in character.constraints):
         raise InputError(path, "a batch template's constraints aim at the world or its own body")
     return Template(str(path), scenario.fps, scenario.duration_s, scenario.ground,
-                    dict(scenario.motions), character, _files_digest(scenario.input_files))
+                    dict(scenario.motions), character, _files_digest(scenario.input_files),
+                    tuple(str(f) for f in scenario.input_files))
 
 
 def expand_clips(patterns: Sequence[str], base: Path = Path(".")) -> list[Path]:
@@ -335,6 +378,9 @@ def expand_clips(patterns: Sequence[str], base: Path = Path(".")) -> list[Path]:
             if path.stem.startswith("."):
                 raise EcsAnimError(f"{path}: a clip's name names its output folder: it may not "
                                    "start with '.'")
+            if path.stem.lower() in RESERVED:
+                raise EcsAnimError(f"{path}: a clip's name names its output folder, and "
+                                   f"{path.stem} is the batch's own file; rename the clip")
             found.append(path)
     if not found:
         raise EcsAnimError("batch: give clips (files, globs or folders) or --manifest FILE.yaml")
@@ -360,7 +406,7 @@ MANIFEST_KEYS = {"clips": True, "bodies": True, "grounds": False, "template": Fa
 def load_manifest(path: str | Path) -> dict[str, Any]:
     """A manifest (``--manifest``), validated with ``file:line:`` errors; paths in it are
     relative to its folder. Returns the plan's parts: clips, bodies, grounds, template, formats,
-    out, seconds (absent keys absent)."""
+    out, seconds (absent keys absent), and inputs (the morphology files read)."""
     from .scenario import _compose
 
     path = Path(path)
@@ -368,7 +414,8 @@ def load_manifest(path: str | Path) -> dict[str, Any]:
     r = _reader(path)
     root = _compose(path, "batch manifest", "the manifest")
     top = r.mapping(root, "", MANIFEST_KEYS)
-    parts: dict[str, Any] = {}
+    inputs: list[str] = []
+    parts: dict[str, Any] = {"inputs": inputs}
     patterns = [r.string(n, f"clips[{i}]") for i, n in enumerate(r.sequence(top["clips"], "clips"))]
     try:
         parts["clips"] = expand_clips(patterns, base)
@@ -379,7 +426,7 @@ def load_manifest(path: str | Path) -> dict[str, Any]:
         raise r.fail(top["bodies"], "bodies", "expected at least one body")
     bodies: list[Body] = []
     for i, node in enumerate(body_nodes):
-        for body in _manifest_body(r, node, f"bodies[{i}]", base):
+        for body in _manifest_body(r, node, f"bodies[{i}]", base, inputs):
             if any(b.name == body.name for b in bodies):
                 raise r.fail(node, f"bodies[{i}]", f"a body named {body.name!r} is given twice")
             bodies.append(body)
@@ -391,6 +438,9 @@ def load_manifest(path: str | Path) -> dict[str, Any]:
             given = r.string(top[key], key)
             parts[key] = Path(given) if Path(given).is_absolute() else base / given
     if "template" in parts:
+        if not parts["template"].is_file():
+            raise r.fail(top["template"], "template", f"no such scenario file "
+                                                      f"{quoted(str(parts['template']))}")
         parts["template"] = load_template(parts["template"])
     if "formats" in top:
         names = [r.string(n, f"formats[{i}]") for i, n in enumerate(r.sequence(top["formats"], "formats"))]
@@ -415,7 +465,7 @@ def plan_from_args(args: argparse.Namespace) -> Plan:
             raise EcsAnimError(f"--manifest: give clips, bodies, grounds and the template in the "
                                f"manifest, not also {', '.join(given)}")
         parts = load_manifest(args.manifest)
-        inputs.append(args.manifest)
+        inputs += [args.manifest, *parts["inputs"]]
     else:
         parts = {"clips": expand_clips(args.clips or [])}
         if not args.bodies:
@@ -424,7 +474,7 @@ def plan_from_args(args: argparse.Namespace) -> Plan:
         for text in (t.strip() for t in args.bodies.split(",")):
             if not text:
                 continue
-            body = body_from_text(text)
+            body = body_from_text(text, inputs=inputs)
             if any(b.name == body.name for b in bodies):
                 raise EcsAnimError(f"--bodies: {body.name!r} is given twice")
             bodies.append(body)
@@ -443,6 +493,8 @@ def plan_from_args(args: argparse.Namespace) -> Plan:
     if args.seconds is not None:
         parts["seconds"] = args.seconds
     template: Template | None = parts.get("template")
+    if parts.get("seconds") is not None:
+        _check_seconds(parts["seconds"], parts["clips"], template)
     grounds = parts.get("grounds") or [NamedGround("", template.ground if template else Plane())]
     bodies = parts["bodies"]
     stems: dict[str, str] = {}
@@ -455,13 +507,46 @@ def plan_from_args(args: argparse.Namespace) -> Plan:
             stems[stem] = f"body {b.name!r} over ground {g.name!r}"
     inputs += [str(c) for c in parts["clips"]]
     if template is not None:
-        inputs.append(template.path)
+        inputs += [template.path, *template.input_files]
     plan = Plan(parts["clips"], bodies, grounds, parts.get("formats", DEFAULT_FORMATS),
                 parts["out"], template, parts.get("seconds"), inputs)
     n_jobs = len(plan.clips) * len(bodies) * len(grounds)
     if n_jobs > MAX_JOBS:
         raise EcsAnimError(f"batch: {n_jobs:,} jobs; at most {MAX_JOBS:,} in one batch")
     return plan
+
+
+def _check_seconds(seconds: float, clips: Sequence[Path], template: Template | None) -> None:
+    """``--seconds`` as ``run`` bounds it: at most :data:`~ecs_anim.scenario.MAX_DURATION_S`,
+    and at least one tick at the template's rate, or at every clip's (read from the file's
+    header where that is cheap; a clip's rate is checked again when it plays)."""
+    from .scenario import MAX_DURATION_S
+
+    if seconds > MAX_DURATION_S:
+        raise EcsAnimError(f"--seconds {seconds:g}: at most {MAX_DURATION_S:g} s (a day) in one job")
+    rates = [template.fps] if template is not None else [fps for c in clips
+                                                         if (fps := _clip_fps(c)) is not None]
+    for fps in rates:
+        if round(seconds * fps) < 1:
+            raise EcsAnimError(f"--seconds {seconds:g} is less than one tick at {fps:g} Hz")
+
+
+def _clip_fps(path: Path) -> float | None:
+    """A BVH clip's frame rate from its ``Frame Time:`` line, or None (other formats, or not
+    found: the job checks it)."""
+    if path.suffix.lower() != ".bvh":
+        return None
+    try:
+        with open(path, "rb") as f:
+            head = f.read(1 << 20)
+    except OSError:
+        return None
+    match = re.search(rb"Frame\s+Time\s*:\s*([0-9.eE+\-]+)", head)
+    try:
+        step = float(match[1]) if match else 0.0
+    except ValueError:
+        return None
+    return 1.0 / step if step > 0 else None
 
 
 # --------------------------------------------------------------------------------------------
@@ -497,7 +582,8 @@ def _files_digest(paths: Sequence[str | Path]) -> str:
 
 def job_digest(job: Job, clip_digest: str, version: str) -> str:
     """The hash a job's stamp holds: its clip's bytes, body, ground, template, formats, length
-    and the project version. Equal hashes mean equal outputs."""
+    and ``version`` (the project version and :func:`source_digest`). Equal hashes mean equal
+    outputs."""
     data = {"version": version, "clip": clip_digest, "body": _canonical(job.body),
             "ground": _canonical(job.ground), "formats": list(job.formats),
             "seconds": _canonical(job.seconds),
@@ -510,18 +596,17 @@ def job_digest(job: Job, clip_digest: str, version: str) -> str:
 
 
 def import_clip(path: str | Path) -> NormalizedMotion:
-    """The motion in a clip file, read as a scenario's ``motions:`` reads it (the importers'
-    defaults), so a job plays what ``ecs-anim run`` would."""
-    from .c3d_import import import_c3d
-    from .importing import import_bvh
-    from .motion import load_nmo
+    """The motion in a clip file, read by a scenario's ``motions:`` reader
+    (:func:`ecs_anim.scenario._read_motion`: the importers' defaults), so a job plays what
+    ``ecs-anim run`` would."""
+    from .scenario import _read_motion
 
-    suffix = Path(path).suffix.lower()
-    if suffix == ".nmo":
-        return load_nmo(path)
-    if suffix == ".c3d":
-        return import_c3d(path)
-    return import_bvh(path)
+    class _Clip:  # the reader _read_motion reports through: a clip has no line of its own
+        @staticmethod
+        def fail(node: Any, where: str, message: str) -> EcsAnimError:
+            return EcsAnimError(message)
+
+    return _read_motion(_Clip(), None, "", Path(path), str(path))  # type: ignore[arg-type]
 
 
 @dataclass
@@ -546,7 +631,7 @@ def failed_record(job: Job, error: str, seconds: float = 0.0) -> dict[str, Any]:
     """The record of a job that failed with the one-line ``error``."""
     return {"clip": job.clip, "body": job.body.name, "ground": job.ground.name,
             "stature_m": round(job.body.morphology.stature, 4), "frames": 0, "status": "failed",
-            "error": error, "slide_max_mm": None, "slide_mean_mm": None, "penetration_max_mm": None,
+            "error": error, "duration_s": None, "slide_max_mm": None, "slide_mean_mm": None, "penetration_max_mm": None,
             "floating_max_mm": None, "bone_error_m": None, "com_error_mm": None,
             "foot_skate_ratio": None, "seconds": round(seconds, 4), "outputs": [],
             "constraint_errors_mm": {}, "contacts": {"left": [], "right": []}}
@@ -582,10 +667,10 @@ def job_scenario(job: Job, motion: NormalizedMotion) -> Any:
 
 def _intervals(planted: NDArray[np.bool_], fps: float) -> list[list[float]]:
     """``[[t0_s, t1_s], ...]``: the times of the first and last frame of each run of True in
-    ``planted`` (frames,)."""
-    edges = np.diff(np.concatenate([[0], planted.astype(np.int8), [0]]))
-    starts, stops = np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0] - 1
-    return [[round(a / fps, 4), round(b / fps, 4)] for a, b in zip(starts, stops)]
+    ``planted`` (frames,) (the runs of :func:`ecs_anim.contacts._intervals`)."""
+    from .contacts import _intervals as runs
+
+    return [[round(a / fps, 4), round(b / fps, 4)] for a, b in runs(planted)]
 
 
 def foot_skate_ratio(positions: F64, ground: Ground, fps: float) -> float:
@@ -611,7 +696,10 @@ def run_job(job: Job, motion: NormalizedMotion) -> Outcome:
 
     start = time.perf_counter()
     scenario = job_scenario(job, motion)
-    ticks = max(1, round(scenario.duration_s * scenario.fps))
+    ticks = round(scenario.duration_s * scenario.fps)
+    if ticks < 1:
+        raise EcsAnimError(f"--seconds {scenario.duration_s:g} is less than one tick at "
+                           f"{scenario.fps:g} Hz")
     rotations = any(f in ("bvh", "glb") for f in job.formats)
     with build_simulation(scenario, rotations=rotations) as sim:
         recorder = MetricsRecorder(sim)
@@ -653,6 +741,7 @@ def run_job(job: Job, motion: NormalizedMotion) -> Outcome:
     record = {
         "clip": job.clip, "body": job.body.name, "ground": job.ground.name,
         "stature_m": round(morph.stature, 4), "frames": ticks, "status": "ok", "error": "",
+        "duration_s": round(ticks / fps, 6),
         "slide_max_mm": character["foot_sliding_mm_per_frame"]["max"],
         "slide_mean_mm": character["foot_sliding_mm_per_frame"]["mean"],
         "penetration_max_mm": character["ground_penetration_mm_max"],
@@ -703,43 +792,156 @@ def _in_process(work: WorkList) -> Iterator[tuple[Job, Outcome]]:
             yield job, job_task(job, imported)
 
 
+#: Why a job failed whose worker process died under it (and again when it ran alone).
+WORKER_DIED = "its worker process died (killed by a signal, or out of memory)"
+_started: Any = None  # in a pool worker: the queue it tells which task it starts
+
+
+def _set_started(queue: Any) -> None:
+    global _started
+    _started = queue
+
+
+def _pool_task(key: str, function: Any, *args: Any) -> Any:
+    """``function(*args)`` in a pool worker, saying first that task ``key`` started, so a worker
+    that dies is matched with the task it ran."""
+    _started.put(key)
+    return function(*args)
+
+
 def _local_pool(work: WorkList, workers: int) -> Iterator[tuple[Job, Outcome]]:
     """A process pool of ``workers``: each clip imported once (a task), then its jobs as tasks
-    given the motion."""
+    given the motion. A worker that dies (SIGKILL, out of memory) breaks the pool: a new pool
+    takes the unfinished tasks, those that were running each run alone first; one that kills
+    its worker again, alone, fails (for an import, its clip's jobs) and the others go on."""
+    from concurrent.futures.process import BrokenProcessPool
+
     methods = multiprocessing.get_all_start_methods()
     context = multiprocessing.get_context("fork" if "fork" in methods else "spawn")
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context)
-    try:
-        imports: dict[Future[Any], str] = {pool.submit(import_task, clip): clip for clip in work}
-        running: dict[Future[Any], Job] = {}
-        pending: set[Future[Any]] = set(imports)
-        while pending:
-            done, pending = wait(pending, return_when=FIRST_COMPLETED)
-            for future in done:
-                if future in imports:
-                    imported = _result(future, "the import's worker process died")
-                    for job in work[imports.pop(future)]:
-                        if imported[0] is None:
-                            yield job, Outcome(failed_record(job, imported[1]))
-                        else:
-                            submitted = pool.submit(job_task, job, imported)
-                            running[submitted] = job
-                            pending.add(submitted)
+    jobs = {job.stem: job for clip_jobs in work.values() for job in clip_jobs}
+    imported: dict[str, Any] = {}
+    todo: list[str] = [f"import:{clip}" for clip in work]  # task keys: import:<clip>, job:<stem>
+    suspects: list[str] = []  # running when a pool broke: each runs alone next
+    blind = 0  # pools that broke with no task running
+    while todo or suspects:
+        alone = suspects.pop(0) if suspects else None
+        started = context.SimpleQueue()
+        pool = ProcessPoolExecutor(max_workers=1 if alone else workers, mp_context=context,
+                                   initializer=_set_started, initargs=(started,))
+        tasks: dict[Future[Any], str] = {}
+        broken = False
+
+        def submit(key: str, pool: ProcessPoolExecutor = pool,
+                   tasks: dict[Future[Any], str] = tasks) -> None:
+            nonlocal broken
+            if broken:
+                return
+            name = key.split(":", 1)[1]
+            try:
+                if key.startswith("import:"):
+                    future = pool.submit(_pool_task, key, import_task, name)
                 else:
-                    job = running.pop(future)
+                    job = jobs[name]
+                    future = pool.submit(_pool_task, key, job_task, job, imported[job.clip_path])
+            except BrokenProcessPool:
+                broken = True
+                return
+            tasks[future] = key
+
+        try:
+            for key in [alone] if alone else list(todo):
+                submit(key)
+            pending = set(tasks)
+            while pending and not broken:
+                done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for future in done:
+                    key = tasks[future]
+                    name = key.split(":", 1)[1]
                     try:
-                        yield job, future.result()
-                    except Exception as exc:  # noqa: BLE001 - the worker died (killed, out of memory)
-                        yield job, Outcome(failed_record(job, f"worker failed: {error_text(exc)}"))
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+                        result = future.result()
+                    except BrokenProcessPool:
+                        broken = True
+                        continue
+                    except Exception as exc:  # noqa: BLE001 - e.g. a result that cannot be pickled
+                        result = (None, error_text(exc)) if key.startswith("import:") else \
+                            Outcome(failed_record(jobs[name], error_text(exc)))
+                    if key in todo:
+                        todo.remove(key)
+                    if key.startswith("job:"):
+                        yield jobs[name], result
+                        continue
+                    imported[name] = result
+                    for job in work[name]:
+                        if result[0] is None:
+                            yield job, Outcome(failed_record(job, result[1]))
+                            continue
+                        todo.append(f"job:{job.stem}")
+                        if alone is None:  # a task run alone runs with nothing else
+                            submit(todo[-1])
+                            if not broken:
+                                pending.add(next(reversed(tasks)))
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+        if not broken:
+            continue
+        if alone is not None:  # it killed its worker again, running alone: it fails
+            name = alone.split(":", 1)[1]
+            if alone.startswith("import:"):
+                for job in work[name]:
+                    yield job, Outcome(failed_record(job, f"{name}: the import's {WORKER_DIED}"))
+            else:
+                yield jobs[name], Outcome(failed_record(jobs[name], WORKER_DIED))
+            continue
+        running: list[str] = []
+        try:
+            while not started.empty():
+                key = started.get()
+                if key in todo and key not in running:
+                    running.append(key)
+        except (OSError, EOFError, ValueError, pickle.UnpicklingError):
+            pass  # a worker killed while it said so: what was read is what is known
+        if not running:  # a worker died before its task began: the pool itself cannot work
+            blind += 1
+            if blind >= 3:
+                for key in todo:
+                    name = key.split(":", 1)[1]
+                    for job in work[name] if key.startswith("import:") else [jobs[name]]:
+                        yield job, Outcome(failed_record(job, f"{WORKER_DIED} before its task began"))
+                return
+        for key in running:
+            todo.remove(key)
+        suspects += running
+
+#: How long ``--address HOST:PORT`` may take to accept a TCP connection before it is unreachable.
+RAY_CONNECT_TIMEOUT_S = 3.0
 
 
-def _result(future: Future[Any], message: str) -> Any:
+def check_ray_address(address: str | None) -> None:
+    """Refuse, in one line and quickly, what ``ray.init`` would wait minutes on: Ray is not
+    installed, ``ray://`` (Ray Client: the clips are imported on the driver's node, which with
+    Ray Client is the head, not this machine), or a ``HOST:PORT`` that does not accept a TCP
+    connection within :data:`RAY_CONNECT_TIMEOUT_S`. ``auto`` is left to Ray."""
+    import importlib.util
+    import socket
+
+    if importlib.util.find_spec("ray") is None:
+        raise EcsAnimError("--engine ray needs Ray: pip install 'ecs_anim[ray]'")
+    if not address or address == "auto":
+        return
+    if "://" in address:
+        raise EcsAnimError(f"--address {address}: Ray Client (ray://) is not supported; run the "
+                           "command on a cluster node (--address auto) or give the head's "
+                           "HOST:PORT (e.g. head:6379) from a machine in the cluster")
+    host, sep, port = address.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise EcsAnimError(f"--address {address}: expected HOST:PORT (e.g. head:6379) or auto")
     try:
-        return future.result()
-    except Exception as exc:  # noqa: BLE001 - a dead worker fails the clip, not the batch
-        return None, f"{message}: {error_text(exc)}"
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=RAY_CONNECT_TIMEOUT_S):
+            pass
+    except OSError as exc:
+        reason = "timed out" if isinstance(exc, TimeoutError) else (exc.strerror or str(exc))
+        raise EcsAnimError(f"--address {address}: no Ray cluster reachable there ({reason} "
+                           f"within {RAY_CONNECT_TIMEOUT_S:g} s)") from None
 
 
 def _ray_engine(work: WorkList, workers: int, address: str | None) -> Iterator[tuple[Job, Outcome]]:
@@ -845,16 +1047,15 @@ def _check_folder(out: Path) -> None:
 
 
 def _check_outputs(plan: Plan, jobs: list[Job]) -> None:
-    """Refuse outputs that would overwrite one of the batch's inputs (by real path)."""
-    inputs = {os.path.realpath(p) for p in plan.inputs}
-    for job in jobs:
-        for rel in (*job.outputs(), job.stamp):
-            if os.path.realpath(plan.out / rel) in inputs:
-                raise EcsAnimError(f"--out {plan.out}: {rel} would overwrite an input of this "
-                                   "batch; give another folder")
-    for name in ("metrics.csv", "metrics.json", "report.html"):
-        if os.path.realpath(plan.out / name) in inputs:
-            raise EcsAnimError(f"--out {plan.out}: {name} would overwrite an input of this batch")
+    """Refuse outputs (every format a job may write or delete, its stamp, the metrics and the
+    report) that are one of the batch's inputs (by real path or, hard links, by inode)."""
+    from .files import input_problem
+
+    names = [rel for job in jobs for rel in (*job.all_outputs(), job.stamp)] + list(RESERVED)
+    for rel in names:
+        problem = input_problem(plan.out / rel, plan.inputs)
+        if problem is not None:
+            raise EcsAnimError(f"--out {problem.replace(' command', ' batch')}")
 
 
 def _done_record(out: Path, job: Job, digest: str) -> dict[str, Any] | None:
@@ -874,19 +1075,38 @@ def _done_record(out: Path, job: Job, digest: str) -> dict[str, Any] | None:
     return record
 
 
+def _clear(out: Path, job: Job) -> None:
+    """Delete a job's stamp, then its files in every format (a failed job leaves none, a job
+    redone with other formats none of the others)."""
+    try:
+        (out / job.stamp).unlink(missing_ok=True)
+        for rel in job.all_outputs():
+            (out / rel).unlink(missing_ok=True)
+    except OSError as exc:
+        raise EcsAnimError(f"{out / job.stem}: cannot delete an earlier run's files "
+                           f"({exc.strerror or exc})") from None
+
+
 def _commit(out: Path, job: Job, outcome: Outcome, digest: str) -> None:
-    """Write a finished job: its stamp goes first (a job being redone is not done), then each
-    file atomically, then the new stamp, so a job counts as done only with all of its files."""
+    """Write a finished job whole or not at all: every file goes to a temporary name first
+    (:func:`~ecs_anim.files.atomic_output`, all open at once); then the stamp and the earlier
+    run's files in every format are deleted, the new files renamed in, and the new stamp
+    written last. A job counts as done only with its stamp, so a kill at any point leaves it to
+    be redone, never with old and new files mixed."""
+    from contextlib import ExitStack
+
     from .files import atomic_output
 
-    stamp = out / job.stamp
-    stamp.unlink(missing_ok=True)
     if outcome.record["status"] != "ok":
+        _clear(out, job)
         return
-    for rel, data in outcome.files.items():
-        with atomic_output(out / rel, force=True) as f:  # the batch's own file (checked above)
-            f.write(data)
-    with atomic_output(stamp, force=True) as f:
+    with ExitStack() as files:
+        for rel, data in outcome.files.items():
+            # the batch's own file (checked against the inputs by _check_outputs)
+            files.enter_context(atomic_output(out / rel, force=True)).write(data)
+        _clear(out, job)
+    # leaving the block renamed every file in (or, when one failed, removed every temporary)
+    with atomic_output(out / job.stamp, force=True) as f:
         f.write(json.dumps({"digest": digest, "record": outcome.record}, allow_nan=False,
                            indent=1).encode("utf-8"))
 
@@ -919,15 +1139,6 @@ def write_metrics(out: Path, records: list[dict[str, Any]], seconds: float) -> N
         f.write(text.getvalue().encode("utf-8"))
 
 
-def _write_report(out: Path, records: list[dict[str, Any]], progress: Progress) -> bool:
-    """report.html by :func:`ecs_anim.batch_report.write_report`; False (said) if unavailable."""
-    try:
-        from .batch_report import write_report
-    except ImportError as exc:
-        progress.write(f"warning: no report.html ({exc})")
-        return False
-    write_report(out / "report.html", records)
-    return True
 
 
 def run_batch(plan: Plan, engine: str = "local", workers: int | None = None,
@@ -942,12 +1153,9 @@ def run_batch(plan: Plan, engine: str = "local", workers: int | None = None,
     jobs = plan.jobs()
     _check_folder(plan.out)
     _check_outputs(plan, jobs)
-    if "glb" in plan.formats:
-        try:
-            import ecs_anim.gltf  # noqa: F401
-        except ImportError as exc:
-            raise EcsAnimError(f"--formats glb: this install cannot write glTF ({exc})") from None
-    version = project_version()
+    if engine == "ray":
+        check_ray_address(address)
+    version = f"{project_version()}+{source_digest()}"
     clip_digests = {str(c): hashlib.sha256(c.read_bytes()).hexdigest() for c in plan.clips}
     digests = {job.stem: job_digest(job, clip_digests[job.clip_path], version) for job in jobs}
     records: dict[str, dict[str, Any]] = {}
@@ -960,7 +1168,8 @@ def run_batch(plan: Plan, engine: str = "local", workers: int | None = None,
             work.setdefault(job.clip_path, []).append(job)
     if not (plan.out / BATCH_MARKER).is_file():
         with atomic_output(plan.out / BATCH_MARKER, force=True) as f:
-            f.write(json.dumps({"written_by": "ecs-anim batch", "version": version}).encode("utf-8"))
+            f.write(json.dumps({"written_by": "ecs-anim batch",
+                                "version": project_version()}).encode("utf-8"))
     n_work = sum(len(j) for j in work.values())
     workers = max(1, min(workers or os.cpu_count() or 1, max(n_work, 1)))
     progress = Progress(n_work, stream)
@@ -980,15 +1189,18 @@ def run_batch(plan: Plan, engine: str = "local", workers: int | None = None,
                     _commit(plan.out, job, outcome, digests[job.stem])
                 except EcsAnimError as exc:  # e.g. the disk is full: this job failed
                     outcome = Outcome(failed_record(job, str(exc), outcome.record["seconds"]))
+                    _clear(plan.out, job)
             else:
-                (plan.out / job.stamp).unlink(missing_ok=True)
+                _clear(plan.out, job)
             records[job.stem] = outcome.record
             progress.update(job.stem, outcome.record)
     finally:
         progress.close()
     ordered = [records[job.stem] for job in jobs]
     write_metrics(plan.out, ordered, time.perf_counter() - start)
-    _write_report(plan.out, ordered, progress)
+    from .batch_report import write_report
+
+    write_report(plan.out / "report.html", ordered)
     return ordered
 
 
@@ -1042,8 +1254,8 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
                    help="worker processes (default: every core; 1: in this process); with "
                         "--engine ray, the CPUs of the local Ray it starts")
     p.add_argument("--address", metavar="HOST:PORT",
-                   help="--engine ray: a running Ray cluster (e.g. auto or ray://head:10001); "
-                        "default: start a local one")
+                   help="--engine ray: a running Ray cluster's head (HOST:PORT, e.g. head:6379, "
+                        "or auto on a cluster node); default: start a local one")
     p.add_argument("--force", action="store_true", help="redo jobs already done")
     p.set_defaults(func=cmd_batch)
     assert isinstance(p, argparse.ArgumentParser)

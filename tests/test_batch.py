@@ -242,14 +242,18 @@ def _scenario_for(record: dict, clip: Path, fps: float, tmp: Path) -> Path:
 
 def test_mocap_batch_metrics_equal_ecs_anim_run(tmp_path: Path, grounds_file: Path) -> None:
     """The dev clips (BVH and C3D) x 3 bodies x 2 grounds: every job is ok, metrics.csv and
-    metrics.json hold the same rows, and each clip's figures (a different body and ground per
-    clip) equal what ``ecs-anim run`` reports for the same case."""
+    metrics.json hold the same rows, every job's figures (every scalar column and each
+    constraint's error) and files equal what ``ecs-anim run`` reports and exports for the same
+    case, every .glb passes the Khronos validator, and the report's plots are drawn."""
+    from test_batch_report import decode_png, embedded_pngs, ink
+    from test_gltf import _assert_valid
+
     require_mocap()
     clips = mocap_files("*.bvh") + mocap_files("*.c3d")
     out = tmp_path / "out"
-    formats = "bvh,npz" + (",glb" if _has_gltf() else "")
+    formats = "bvh,npz,glb"
     status = run_batch_cli(*map(str, clips), "--bodies", "child,adult_female,tall", "--grounds",
-                           str(grounds_file), "--out", str(out), "--seconds", "0.25",
+                           str(grounds_file), "--out", str(out), "--seconds", "0.2",
                            "--formats", formats, "--jobs", "2")
     assert status == 0
     jobs = records(out)
@@ -263,40 +267,42 @@ def test_mocap_batch_metrics_equal_ecs_anim_run(tmp_path: Path, grounds_file: Pa
     assert list(rows[0])[:len(batch.CSV_FIELDS)] == list(batch.CSV_FIELDS)
     assert [(r["clip"], r["body"], r["ground"]) for r in rows] == \
         [(j["clip"], j["body"], j["ground"]) for j in jobs]
-    assert [float(r["slide_max_mm"]) for r in rows] == [j["slide_max_mm"] for j in jobs]
+    numbers = [k for k in batch.CSV_FIELDS if k.endswith(("_mm", "_m", "_ratio"))]
+    for row, j in zip(rows, jobs):
+        assert [float(row[k]) if row[k] else None for k in numbers] == [j[k] for k in numbers]
     by_clip = {c.stem: c for c in clips}
-    for k, clip in enumerate(clips):
-        job = [j for j in jobs if j["clip"] == clip.stem][k % 6]
-        fps = batch.import_clip(by_clip[job["clip"]]).fps
-        scenario = _scenario_for(job, clip, fps, tmp_path)
+    fps_of = {c.stem: batch.import_clip(c).fps for c in clips}
+    for job in jobs:
+        clip = by_clip[job["clip"]]
+        scenario = _scenario_for(job, clip, fps_of[job["clip"]], tmp_path)
         report = tmp_path / f"{scenario.stem}.json"
         assert cli_main(["run", str(scenario), "--report", str(report),
                          "--export", str(tmp_path / scenario.stem)]) == 0
         run = json.loads(report.read_text())
         character = run["characters"][0]
-        assert run["ticks"] == job["frames"]
-        assert job["slide_max_mm"] == character["foot_sliding_mm_per_frame"]["max"]
-        assert job["slide_mean_mm"] == character["foot_sliding_mm_per_frame"]["mean"]
-        assert job["penetration_max_mm"] == character["ground_penetration_mm_max"]
-        assert job["bone_error_m"] == character["bone_length_error_m_max"]
-        assert job["com_error_mm"] == character["com_error_mm_max"]
+        case = f"{job['clip']}/{job['body']}_{job['ground']}"
+        assert run["ticks"] == job["frames"], case
+        assert job["duration_s"] == pytest.approx(run["ticks"] / fps_of[job["clip"]]), case
+        assert [job["slide_max_mm"], job["slide_mean_mm"], job["penetration_max_mm"],
+                job["floating_max_mm"], job["bone_error_m"], job["com_error_mm"]] == \
+            [character["foot_sliding_mm_per_frame"]["max"],
+             character["foot_sliding_mm_per_frame"]["mean"],
+             character["ground_penetration_mm_max"], character["floating_mm_max"],
+             character["bone_length_error_m_max"], character["com_error_mm_max"]], case
         assert job["constraint_errors_mm"] == {c["name"]: c["error_mm_max_fully_active"]
-                                               for c in run["constraints"]}
+                                               for c in run["constraints"]}, case
         # the same motion comes out: run's export equals the batch's files
-        stem = f"{job['clip']}/{job['body']}_{job['ground']}"
-        ours = np.load(out / f"{stem}.npz")["positions"]
+        ours = np.load(out / f"{case}.npz")["positions"]
         theirs = np.load(tmp_path / scenario.stem / f"{job['body']}.npz")["positions"]
         np.testing.assert_array_equal(ours, theirs)
-        assert (out / f"{stem}.bvh").read_bytes() == \
-            (tmp_path / scenario.stem / f"{job['body']}.bvh").read_bytes()
-
-
-def _has_gltf() -> bool:
-    try:
-        import ecs_anim.gltf  # noqa: F401
-    except ImportError:
-        return False
-    return True
+        assert (out / f"{case}.bvh").read_bytes() == \
+            (tmp_path / scenario.stem / f"{job['body']}.bvh").read_bytes(), case
+    _assert_valid(sorted(out.glob("*/*.glb")))  # Khronos: 0 errors, 0 warnings
+    pngs = embedded_pngs((out / "report.html").read_text("utf-8"))
+    assert len(pngs) == 4
+    for png in pngs:  # not blank: drawn, with coloured dots and bars
+        amount = ink(decode_png(png))
+        assert 0.02 < amount["drawn"] < 0.6 and amount["coloured"] > 0.001, amount
 
 
 def test_template_gives_constraints_their_csv_columns(tmp_path: Path) -> None:
@@ -409,7 +415,36 @@ def test_killed_batch_resumes_to_the_same_outputs(tmp_path: Path, grounds_file: 
 
 
 # ---------------------------------------------------------------------------------------------
-# Ray: a real local cluster with 2 CPUs, started once for the module
+# Ray: a real local cluster with 2 CPUs: one the command starts and stops, then one started
+# once for the module
+
+
+def test_ray_started_by_the_command_writes_the_same_bytes_and_stops(tmp_path: Path,
+                                                                    grounds_file: Path,
+                                                                    monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """No Ray running: ``--engine ray --jobs 2`` starts a local Ray of 2 CPUs, runs the jobs on
+    it (glb too, byte for byte the local pool's) and stops it."""
+    ray = pytest.importorskip("ray", reason="Ray is not installed (pip install 'ecs_anim[ray]')")
+    if ray.is_initialized():
+        pytest.skip("a Ray is already running in this process (run this test before the module's)")
+    real_init, calls = ray.init, []
+
+    def init(*args, **kwargs):  # type: ignore[no-untyped-def]
+        calls.append(kwargs)
+        return real_init(*args, **kwargs)
+
+    monkeypatch.setattr(ray, "init", init)  # the real Ray, started as the command asks
+    bad = tmp_path / "broken.bvh"
+    bad.write_text("HIERARCHY\n")
+    argv = [str(MOTIONS_DIR / "walk.bvh"), str(bad), "--bodies", "child,tall", "--grounds",
+            str(grounds_file), "--seconds", "0.2", "--formats", "bvh,npz,glb", "--jobs", "2"]
+    local, on_ray = tmp_path / "local", tmp_path / "ray"
+    assert run_batch_cli(*argv, "--out", str(local)) == 1
+    assert run_batch_cli(*argv, "--out", str(on_ray), "--engine", "ray") == 1
+    assert [c.get("num_cpus") for c in calls] == [2] and "address" not in calls[0]
+    assert not ray.is_initialized()  # the command stopped the Ray it started
+    assert len(job_files(local)) == 3 * 4 and job_files(on_ray) == job_files(local)
+    assert [without_time(j) for j in records(on_ray)] == [without_time(j) for j in records(local)]
 
 
 @pytest.fixture(scope="module")
@@ -427,13 +462,15 @@ def test_ray_writes_the_same_bytes_as_the_local_pool(tmp_path: Path, grounds_fil
     clips = [str(MOTIONS_DIR / "walk.bvh"), str(MOTIONS_DIR / "guard.bvh"), str(bad)]
     if MOCAP_DIR.is_dir():
         clips.append(str(MOCAP_DIR / "c3dorg_eb015pi_gait.c3d"))
-    argv = [*clips, "--bodies", "child,tall", "--grounds", str(grounds_file), "--seconds", "0.3"]
+    argv = [*clips, "--bodies", "child,tall", "--grounds", str(grounds_file), "--seconds", "0.3",
+            "--formats", "bvh,npz,glb"]
     local, on_ray = tmp_path / "local", tmp_path / "ray"
     assert run_batch_cli(*argv, "--out", str(local), "--jobs", "2") == 1
     assert local_ray.cluster_resources().get("CPU") == 2
     assert run_batch_cli(*argv, "--out", str(on_ray), "--engine", "ray") == 1
     assert job_files(on_ray) == job_files(local)
-    assert len(job_files(local)) == 2 * 4 * (len(clips) - 1)
+    assert len(job_files(local)) == 3 * 4 * (len(clips) - 1)
+    assert any(rel.endswith(".glb") for rel in job_files(on_ray))
     assert [without_time(j) for j in records(on_ray)] == [without_time(j) for j in records(local)]
     assert [j["status"] for j in records(on_ray)].count("failed") == 4
 
@@ -461,3 +498,211 @@ def test_the_readme_batch_example_runs(tmp_path) -> None:
 
     _assert_valid(sorted((tmp_path / "batch").glob("*/*.glb")))  # Khronos: 0 errors, 0 warnings
     assert max(j["slide_max_mm"] for j in jobs) < 1.0 and max(j["penetration_max_mm"] for j in jobs) < 1.0
+
+
+# ---------------------------------------------------------------------------------------------
+# Review fixes
+
+
+def test_a_dead_worker_fails_only_its_job(tmp_path: Path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """A job whose worker process dies (SIGKILL, as the out-of-memory killer does) fails with a
+    one-line reason; the pool is started again and every other job is done."""
+    real_run_job = batch.run_job
+
+    def run_job(job, motion):  # type: ignore[no-untyped-def]
+        if job.clip == "kick" and job.body.name == "tall":
+            os.kill(os.getpid(), signal.SIGKILL)
+        return real_run_job(job, motion)
+
+    monkeypatch.setattr(batch, "run_job", run_job)  # the pool's workers are forked: they see it
+    out = tmp_path / "out"
+    clips = [str(MOTIONS_DIR / n) for n in ("walk.bvh", "kick.bvh", "idle.bvh")]
+    status = run_batch_cli(*clips, "--bodies", "child,tall,adult_male", "--out", str(out),
+                           "--seconds", "0.1", "--formats", "npz", "--jobs", "2")
+    assert status == 1
+    jobs = records(out)
+    failed = [(j["clip"], j["body"]) for j in jobs if j["status"] == "failed"]
+    assert failed == [("kick", "tall")]
+    error = next(j["error"] for j in jobs if j["status"] == "failed")
+    assert error == batch.WORKER_DIED and "internal error" not in error
+    assert sorted(job_files(out)) == sorted(f"{c}/{b}.npz" for c in ("walk", "kick", "idle")
+                                            for b in ("child", "tall", "adult_male")
+                                            if (c, b) != ("kick", "tall"))
+
+
+def test_a_failed_or_reformatted_job_leaves_none_of_its_earlier_files(tmp_path: Path) -> None:
+    clip = tmp_path / "walk.bvh"
+    clip.write_bytes((MOTIONS_DIR / "walk.bvh").read_bytes())
+    out = tmp_path / "out"
+    argv = (str(clip), "--bodies", "child", "--out", str(out), "--seconds", "0.1", "--jobs", "1")
+    assert run_batch_cli(*argv, "--formats", "bvh,npz") == 0
+    assert sorted(job_files(out)) == ["walk/child.bvh", "walk/child.npz"]
+    assert run_batch_cli(*argv, "--formats", "npz") == 0  # bvh no longer asked for: gone
+    assert sorted(job_files(out)) == ["walk/child.npz"]
+    clip.write_text("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 zero\n")  # the input breaks
+    assert run_batch_cli(*argv, "--formats", "npz") == 1
+    assert job_files(out) == {} and not list(out.glob(f"walk/.*{batch.STAMP_SUFFIX}"))
+
+
+def test_a_job_killed_while_renaming_has_no_old_file_beside_a_new_one(tmp_path: Path,
+                                                                       monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """Every file of a job is written to a temporary name before any is renamed in, and the
+    earlier run's files go first: a kill between two renames leaves new files only, no stamp."""
+    from ecs_anim import files
+
+    out = tmp_path / "out"
+    argv = (str(MOTIONS_DIR / "walk.bvh"), "--bodies", "child", "--out", str(out), "--jobs", "1",
+            "--formats", "bvh,npz")
+    assert run_batch_cli(*argv, "--seconds", "0.1") == 0
+    old = job_files(out)
+    real_replace, renamed = os.replace, []
+
+    def replace(src, dst):  # type: ignore[no-untyped-def]
+        if str(dst).endswith((".bvh", ".npz")):
+            if renamed:
+                raise KeyboardInterrupt  # killed after the job's first rename
+            renamed.append(dst)
+        return real_replace(src, dst)
+
+    monkeypatch.setattr(files.os, "replace", replace)
+    with pytest.raises(KeyboardInterrupt):
+        run_batch_cli(*argv, "--seconds", "0.2")
+    monkeypatch.undo()
+    left = job_files(out)
+    assert len(left) == 1 and not set(left.items()) & set(old.items())  # only a new file
+    assert not list(out.glob(f"walk/.*{batch.STAMP_SUFFIX}"))  # not done: the next run redoes it
+    assert not [p for p in out.rglob("*") if p.name.endswith(".tmp")]
+    assert run_batch_cli(*argv, "--seconds", "0.2") == 0
+    assert [j["status"] for j in records(out)] == ["ok"]
+
+
+@pytest.mark.parametrize("name", ["metrics.csv", "metrics.json", "report.html", "Report.HTML"])
+def test_clips_named_as_the_batch_files_are_refused_up_front(tmp_path: Path, name: str) -> None:
+    clip = tmp_path / f"{name}.bvh"
+    clip.write_bytes((MOTIONS_DIR / "walk.bvh").read_bytes())
+    with pytest.raises(EcsAnimError, match="the batch's own file") as info:
+        batch.expand_clips([str(clip)])
+    assert "\n" not in str(info.value)
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("seconds, expected", [("1e12", "at most 86400 s"),
+                                               ("0.0001", "less than one tick at 30 Hz")])
+def test_seconds_is_bounded_like_run(tmp_path: Path, seconds: str, expected: str) -> None:
+    with pytest.raises(EcsAnimError, match=expected) as info:
+        batch.plan_from_args(parse(str(MOTIONS_DIR / "walk.bvh"), "--bodies", "child", "--out",
+                                   str(tmp_path / "o"), "--seconds", seconds))
+    assert "\n" not in str(info.value)
+
+
+def test_seconds_under_a_tick_of_an_nmo_clip_fails_its_jobs_not_one_tick(tmp_path: Path) -> None:
+    """A clip whose rate is not read up front (.nmo, .c3d): its jobs fail with the same line."""
+    nmo = tmp_path / "walk.nmo"
+    from ecs_anim.motion import save_nmo
+
+    save_nmo(batch.import_clip(MOTIONS_DIR / "walk.bvh"), nmo)
+    out = tmp_path / "out"
+    assert run_batch_cli(str(nmo), "--bodies", "child", "--out", str(out), "--seconds", "0.0001",
+                         "--jobs", "1") == 1
+    assert "less than one tick" in records(out)[0]["error"]
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("bodies: [child, missing.yaml]\n", "batch.yaml:2: bodies[1]: no such morphology file"),
+    ("bodies: [child]\ntemplate: nowhere.yaml\n", "batch.yaml:3: template: no such scenario file"),
+])
+def test_missing_manifest_files_name_the_manifest_line(tmp_path: Path, text: str, expected: str) -> None:
+    (tmp_path / "walk.bvh").write_bytes((MOTIONS_DIR / "walk.bvh").read_bytes())
+    manifest = tmp_path / "batch.yaml"
+    manifest.write_text("clips: [walk.bvh]\n" + text + "out: out\n")
+    with pytest.raises(EcsAnimError) as info:
+        batch.plan_from_args(parse("--manifest", str(manifest)))
+    assert str(info.value).startswith(f"{tmp_path / expected.split(':', 1)[0]}:{expected.split(':', 1)[1]}")
+    assert "\n" not in str(info.value)
+
+
+def test_the_job_hash_follows_the_package_source() -> None:
+    """The hash holds a digest of ecs_anim's own .py files (components and systems too): a
+    change to any of them changes it."""
+    import hashlib
+    import importlib
+
+    digest = batch.source_digest()
+    assert digest == batch.source_digest() and len(digest) == 64
+    systems = Path(importlib.import_module("ecs_anim.systems").__file__).parent
+    original = (systems / "ground_adapt.py").read_bytes()
+    real_read = Path.read_bytes
+
+    def read_bytes(path):  # type: ignore[no-untyped-def]
+        data = real_read(path)
+        return data + b"# changed" if path.name == "ground_adapt.py" and path.parent == systems else data
+
+    try:
+        batch._SOURCE_DIGEST = None
+        Path.read_bytes = read_bytes  # type: ignore[method-assign]
+        changed = batch.source_digest()
+    finally:
+        Path.read_bytes = real_read  # type: ignore[method-assign]
+        batch._SOURCE_DIGEST = None
+    assert changed != digest and batch.source_digest() == digest
+    assert (systems / "ground_adapt.py").read_bytes() == original
+    assert hashlib.sha256(b"").hexdigest() not in (digest, changed)
+    walk = MOTIONS_DIR / "walk.bvh"
+    job = batch.Job(str(walk), "walk", batch.body_from_text("child"), batch.NamedGround("", Plane()),
+                    ("npz",))
+    assert batch.job_digest(job, "clip", f"0.1.0+{digest}") != \
+        batch.job_digest(job, "clip", f"0.1.0+{'0' * 64}")
+
+
+def test_outputs_never_overwrite_body_files_or_template_motions(tmp_path: Path) -> None:
+    """Morphology files and the template's motion files are inputs: an output on one of them
+    (here a hard link, the same file under another name) is refused before anything is run."""
+    out = tmp_path / "out"
+    (out / "walk").mkdir(parents=True)
+    (out / batch.BATCH_MARKER).write_text("{}")
+    body = tmp_path / "wide.yaml"
+    body.write_text("stature_m: 1.7\nleg_scale: 0.9\n")
+    os.link(body, out / "walk" / "wide.glb")  # a glb the job would delete, being another format
+    with pytest.raises(EcsAnimError, match="an input of this batch"):
+        run_batch_cli(str(MOTIONS_DIR / "walk.bvh"), "--bodies", str(body), "--out", str(out),
+                      "--seconds", "0.1", "--formats", "npz", "--jobs", "1")
+    assert body.read_text().startswith("stature_m")
+    motion = tmp_path / "idle.bvh"
+    motion.write_bytes((MOTIONS_DIR / "idle.bvh").read_bytes())
+    template = tmp_path / "template.yaml"
+    template.write_text(f"duration_s: 0.2\nfps: 30\nmotions: {{idle: {motion}}}\ncharacters:\n"
+                        "  - {name: a, morphology: child, motion: idle}\n")
+    os.link(motion, out / "walk" / "child.bvh")
+    with pytest.raises(EcsAnimError, match="an input of this batch"):
+        run_batch_cli(str(MOTIONS_DIR / "walk.bvh"), "--bodies", "child", "--template",
+                      str(template), "--out", str(out), "--jobs", "1")
+    assert motion.read_bytes() == (MOTIONS_DIR / "idle.bvh").read_bytes()
+
+
+def test_unreachable_or_client_ray_addresses_fail_at_once(tmp_path: Path) -> None:
+    """A closed port and ray:// fail in one line before the batch folder is touched."""
+    pytest.importorskip("ray")
+    import socket
+
+    with socket.socket() as s:  # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    out = tmp_path / "out"
+    walk = str(MOTIONS_DIR / "walk.bvh")
+    for address, expected in ((f"127.0.0.1:{port}", "no Ray cluster reachable there"),
+                              ("ray://127.0.0.1:10001", "Ray Client (ray://) is not supported"),
+                              ("nonsense", "expected HOST:PORT")):
+        with pytest.raises(EcsAnimError, match=expected.replace("(", r"\(").replace(")", r"\)")) as info:
+            run_batch_cli(walk, "--bodies", "child", "--out", str(out), "--engine", "ray",
+                          "--address", address, "--seconds", "0.1")
+        assert "\n" not in str(info.value)
+        assert not out.exists()
+
+
+def test_a_source_change_redoes_the_jobs(tmp_path: Path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    argv = (str(MOTIONS_DIR / "walk.bvh"), "--bodies", "child", "--out", str(tmp_path / "out"),
+            "--seconds", "0.1", "--formats", "npz", "--jobs", "1")
+    assert run_batch_cli(*argv) == 0
+    assert run_batch_cli(*argv) == 0 and records(tmp_path / "out")[0]["status"] == "skipped"
+    monkeypatch.setattr(batch, "source_digest", lambda: "another source")
+    assert run_batch_cli(*argv) == 0 and records(tmp_path / "out")[0]["status"] == "ok"
