@@ -162,90 +162,41 @@ def test_a_missing_figure_is_a_dash_not_a_crash():
 
 
 # ---------------------------------------------------------------------------------------------
-# From real runs: clips played through build_simulation + MetricsRecorder, as the batch does.
+# From real runs: the batch's own jobs (ecs_anim.batch.run_job), records as metrics.json holds.
 
-SCENARIO = """\
-duration_s: {seconds}
-fps: 30
-motions: {{clip: {motion}}}
-ground: {ground}
-characters:
-  - {{name: job, morphology: {body}, motion: clip, loop: false}}
-"""
-
-
-def run_job(tmp_path, clip, body, ground_name, ground_yaml, seconds=2.0):
-    """One job record from a real run (the figures the batch takes from the same pipeline; the
-    floating height and foot-skate ratio computed here as the contract defines them)."""
-    from ecs_anim.ground_adapt import BALL_HEIGHT_PER_LEG, heel_depth
-    from ecs_anim.metrics import ANKLES, TOES, MetricsRecorder
-    from ecs_anim.normalized import SIDE_LENGTHS
-    from ecs_anim.scenario import build_simulation, load_scenario
-
-    path = tmp_path / f"{clip}_{body}_{ground_name}.yaml"
-    path.write_text(SCENARIO.format(seconds=seconds, motion=MOTIONS / f"{clip}.bvh",
-                                    ground=ground_yaml, body=body))
-    scenario = load_scenario(path)
-    with build_simulation(scenario) as sim:
-        metrics = MetricsRecorder(sim)
-        planted, ankles, heights = [], [], []
-        for _ in range(round(seconds * scenario.fps)):
-            sim.step()
-            metrics.record()
-            st = sim.store
-            feet = st.positions[0, ANKLES]
-            on = st.contact_weight[0] >= 1.0
-            heel = -heel_depth(sim.ground, feet[None], st.lengths[:1, SIDE_LENGTHS["ankle_height"]])[0]
-            toes = st.positions[0, TOES]
-            ball = BALL_HEIGHT_PER_LEG * sim.leg_length()[0]
-            height = np.minimum(heel, toes[:, 2] - ball - sim.ground.height(toes[:, :2]))
-            planted.append(on)
-            heights.append(height)
-            ankles.append(feet.copy())
-        report = metrics.report()
-    planted_a, ankles_a, sole_m = np.array(planted), np.array(ankles), np.array(heights)
-    floating = float(np.max(np.where(planted_a, sole_m, 0.0))) * 1e3
-    dt = 1.0 / scenario.fps
-    step = np.linalg.norm(np.diff(ankles_a[..., :2], axis=0), axis=-1) * (1 / 30) / dt
-    low = sole_m[1:] < 0.05  # the sole under 5 cm above the ground
-    skate = float(np.mean(np.any(low & (step > 0.025), axis=1)))
-    contacts = {}
-    for side, foot in enumerate(("left", "right")):
-        edges = np.diff(np.concatenate([[0], planted_a[:, side].astype(int), [0]]))
-        starts, ends = np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0]
-        contacts[foot] = [[round(a * dt, 4), round(b * dt, 4)] for a, b in zip(starts, ends)]
-    character = report["characters"][0]
-    return {
-        "clip": clip, "body": body, "ground": ground_name, "stature_m": PRESET_STATURES[body],
-        "frames": report["ticks"], "status": "ok", "error": "",
-        "slide_max_mm": character["foot_sliding_mm_per_frame"]["max"],
-        "slide_mean_mm": character["foot_sliding_mm_per_frame"]["mean"],
-        "penetration_max_mm": character["ground_penetration_mm_max"],
-        "floating_max_mm": round(floating, 4),
-        "bone_error_m": character["bone_length_error_m_max"],
-        "com_error_mm": character["com_error_mm_max"], "foot_skate_ratio": skate,
-        "seconds": 0.0, "outputs": [f"{clip}/{body}{'_' + ground_name if ground_name else ''}.bvh"],
-        "constraint_errors_mm": {c["name"]: c["error_mm_max_fully_active"]
-                                 for c in report["constraints"]
-                                 if c["error_mm_max_fully_active"] is not None},
-        "contacts": contacts, "duration_s": seconds,
-    }
-
-
-PRESET_STATURES = {"child": 1.20, "adult_male": 1.75, "tall": 2.00}
 GROUNDS = {"": "{type: plane}", "slope": "{type: slope, grade_x: 0.08}"}
 
 
-def real_jobs(tmp_path):
-    return [run_job(tmp_path, clip, body, name, yaml)
-            for clip in ("walk", "dance") for body in ("child", "tall")
-            for name, yaml in GROUNDS.items()]
+def real_jobs(tmp_path, seconds=2.0):
+    from ecs_anim import batch
+
+    (tmp_path / "grounds.yaml").write_text("grounds:\n" + "".join(
+        f"  {name}: {spec}\n" for name, spec in GROUNDS.items() if name))
+    grounds = [batch.NamedGround("", batch.Plane()), *batch.load_grounds(tmp_path / "grounds.yaml")]
+    jobs = []
+    for clip in ("walk", "dance"):
+        path = MOTIONS / f"{clip}.bvh"
+        motion = batch.import_clip(path)
+        for body in ("child", "tall"):
+            for ground in grounds:
+                job = batch.Job(str(path), clip, batch.body_from_text(body), ground, ("bvh",),
+                                seconds)
+                jobs.append(batch.run_job(job, motion).record)
+    return jobs
 
 
 def test_report_from_real_runs(tmp_path):
     jobs = real_jobs(tmp_path)
     walk = [j for j in jobs if j["clip"] == "walk"]
     assert all(len(j["contacts"]["left"]) >= 2 for j in walk)  # a walk plants each foot again
+    # the job's simulated length, which the contact timeline marks as the clip's end
+    assert all(j["duration_s"] == pytest.approx(j["frames"] / 30.0) == pytest.approx(2.0)
+               for j in jobs)
+    assert all(b <= j["duration_s"] for j in jobs for side in j["contacts"].values()
+               for _, b in side)
+    without_end = [{k: v for k, v in j.items() if k != "duration_s"} for j in jobs]
+    with_end_pngs, without_end_pngs = (embedded_pngs(report_html(js)) for js in (jobs, without_end))
+    assert [a == b for a, b in zip(with_end_pngs, without_end_pngs)].count(False) == 1  # the timeline
     out = tmp_path / "batch" / "report.html"
     write_report(out, jobs)
     page = out.read_text("utf-8")
