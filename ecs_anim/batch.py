@@ -829,7 +829,15 @@ def _local_pool(work: WorkList, workers: int) -> Iterator[tuple[Job, Outcome]]:
         pool = ProcessPoolExecutor(max_workers=1 if alone else workers, mp_context=context,
                                    initializer=_set_started, initargs=(started,))
         tasks: dict[Future[Any], str] = {}
-        broken = False
+        began: list[str] = []  # keys the workers said they started, read as they come (a full
+        broken = False         # pipe would block the workers)
+
+        def read_started(started: Any = started, began: list[str] = began) -> None:
+            try:
+                while not started.empty():
+                    began.append(started.get())
+            except (OSError, EOFError, ValueError, pickle.UnpicklingError):
+                pass  # a worker killed while it said so: what was read is what is known
 
         def submit(key: str, pool: ProcessPoolExecutor = pool,
                    tasks: dict[Future[Any], str] = tasks) -> None:
@@ -854,6 +862,7 @@ def _local_pool(work: WorkList, workers: int) -> Iterator[tuple[Job, Outcome]]:
             pending = set(tasks)
             while pending and not broken:
                 done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                read_started()
                 for future in done:
                     key = tasks[future]
                     name = key.split(":", 1)[1]
@@ -892,14 +901,8 @@ def _local_pool(work: WorkList, workers: int) -> Iterator[tuple[Job, Outcome]]:
             else:
                 yield jobs[name], Outcome(failed_record(jobs[name], WORKER_DIED))
             continue
-        running: list[str] = []
-        try:
-            while not started.empty():
-                key = started.get()
-                if key in todo and key not in running:
-                    running.append(key)
-        except (OSError, EOFError, ValueError, pickle.UnpicklingError):
-            pass  # a worker killed while it said so: what was read is what is known
+        read_started()
+        running = [key for key in dict.fromkeys(began) if key in todo]
         if not running:  # a worker died before its task began: the pool itself cannot work
             blind += 1
             if blind >= 3:
@@ -911,6 +914,7 @@ def _local_pool(work: WorkList, workers: int) -> Iterator[tuple[Job, Outcome]]:
         for key in running:
             todo.remove(key)
         suspects += running
+
 
 #: How long ``--address HOST:PORT`` may take to accept a TCP connection before it is unreachable.
 RAY_CONNECT_TIMEOUT_S = 3.0
