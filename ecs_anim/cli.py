@@ -22,6 +22,7 @@ from .contacts import ContactThresholds
 from .errors import EcsAnimError, listed
 from .files import folder_problem, input_problem, output_folder_problem, output_problem
 from .importing import FrameRange
+from .motion import FACINGS, turned_to_face
 from .joint_map import preset_summary
 from .marker_sets import preset_summary as marker_set_summary
 from .morphology import PRESET_SPECS
@@ -43,6 +44,20 @@ def positive_float(text: str) -> float:
     if not (value > 0 and value < float("inf")):
         raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text}")
     return value
+
+
+def facing(text: str) -> float:
+    """argparse type of ``--face``: ``+x``, ``-x``, ``+y``, ``-y`` or degrees; radians."""
+    if text.strip().lower() in FACINGS:
+        return FACINGS[text.strip().lower()]
+    try:
+        degrees = float(text)
+    except ValueError:
+        degrees = math.nan
+    if not (math.isfinite(degrees) and abs(degrees) <= 360.0):
+        raise argparse.ArgumentTypeError(f"--face {text!r}: expected +x, -x, +y, -y or degrees "
+                                         "from -360 to 360")
+    return math.radians(degrees)
 
 
 def frame_range(text: str) -> FrameRange:
@@ -138,6 +153,8 @@ def cmd_import(args: argparse.Namespace) -> int:
                                     args.stature)
                 for warning in motion.info.get("warnings", []):
                     print(f"warning: {warning}", file=sys.stderr)
+            if args.face is not None:
+                motion = turned_to_face(motion, args.face)
             # A --constraints file times the file's frames; --trim or a C3D import may drop some.
             shift_s = motion.info.get("first_file_frame", 0) / motion.fps
             on_clip = [replace(c, activation=replace(c.activation, start_s=c.activation.start_s - shift_s,
@@ -677,6 +694,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--up", choices=["y", "z"], default=None,
                    help="the file's up axis (default: detected from the rest pose and the motion, "
                    "head above the feet, for BVH; from the markers for C3D)")
+    p.add_argument("--face", type=facing, metavar="+x|-x|+y|-y|DEGREES",
+                   help="turn each clip about its origin so that it faces this way at its first "
+                   "frame (degrees anticlockwise from +x), as our motion library does; "
+                   "--constraints are then given in the turned clip's frame")
     p.add_argument("--trim", type=frame_range, metavar="START:END",
                    help="keep only these frames of each file: frame numbers (START included, END "
                    "not; negative from the end; either may be left out, e.g. 1: drops a T-pose "

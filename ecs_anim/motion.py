@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -77,6 +77,23 @@ def facing_and_travel(motion: NormalizedMotion) -> dict[str, float]:
         "path_m": round(float(np.linalg.norm(np.diff(root_xy, axis=0), axis=1).sum()), 3),
         "direction_deg": round(math.degrees(math.atan2(travel[1], travel[0])), 1) + 0.0,
     }
+
+
+#: ``import --face``: the directions a clip can be turned to face at its first frame (radians).
+FACINGS = {"+x": 0.0, "+y": math.pi / 2, "-x": math.pi, "-y": -math.pi / 2}
+
+
+def turned_to_face(motion: NormalizedMotion, heading_rad: float) -> NormalizedMotion:
+    """The clip turned about the vertical through its origin so that it faces ``heading_rad``
+    (anticlockwise from +x) at its first frame, as :func:`facing_and_travel` measures it: the
+    root path turns with it; everything below the root is relative to it and stays."""
+    start = float(motion.poses.root_heading[0])
+    turn = math.atan2(math.sin(heading_rad - start), math.cos(heading_rad - start))
+    c, s = math.cos(turn), math.sin(turn)
+    root = motion.poses.root_position.copy()
+    root[:, :2] = root[:, :2] @ np.array([[c, s], [-s, c]])  # each row (x, y) turned by +turn
+    poses = replace(motion.poses, root_position=root, root_heading=motion.poses.root_heading + turn)
+    return replace(motion, poses=poses, info=dict(motion.info, turned_deg=round(math.degrees(turn), 3)))
 
 
 def save_nmo(motion: NormalizedMotion, path: str | Path, force: bool = False) -> None:

@@ -123,3 +123,32 @@ def test_trim_refuses_hostile_ends_and_info_says_where_the_clip_starts(tmp_path,
     assert "; --trim kept frames from frame 10 of the file" in capsys.readouterr().out
     assert main(["info", str(tmp_path / "walk.nmo")]) == 0
     assert "  starts at  frame 10 of the file" in capsys.readouterr().out
+
+
+def test_import_face_turns_the_clip_rigidly_to_start_facing_the_way_asked(tmp_path, capsys):
+    """Issue 12, item 5: ``import --face`` turns a clip about its origin; decoded on its own
+    body, every joint is the original turned rigidly (within 1e-9 m)."""
+    require_mocap()
+    import math
+
+    from ecs_anim.normalized import decode
+
+    clip = MOCAP_DIR / "bandai_walk_turn_left.bvh"
+    assert main(["import", str(clip), "-o", str(tmp_path / "as_is")]) == 0
+    assert main(["import", str(clip), "-o", str(tmp_path / "faced"), "--face", "+x"]) == 0
+    original = load_nmo(tmp_path / "as_is" / f"{clip.stem}.nmo")
+    faced = load_nmo(tmp_path / "faced" / f"{clip.stem}.nmo")
+    assert facing_and_travel(faced)["facing_deg"] == 0.0
+    turn = float(faced.poses.root_heading[0] - original.poses.root_heading[0])  # info rounds it
+    assert abs(faced.info["turned_deg"] + facing_and_travel(original)["facing_deg"]) < 0.1
+    body = original.source_morphology.lengths
+    before = decode(original.poses, body, use_stretch=True).positions
+    after = decode(faced.poses, body, use_stretch=True).positions
+    c, s = math.cos(turn), math.sin(turn)
+    expected = before @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+    np.testing.assert_allclose(after, expected, atol=1e-9)
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit_status:  # argparse's usage error, exit status 2
+        main(["import", str(clip), "-o", str(tmp_path / "bad"), "--face", "up"])
+    assert exit_status.value.code == 2
+    assert "--face 'up': expected +x, -x, +y, -y or degrees" in capsys.readouterr().err
