@@ -488,9 +488,9 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
                        up: str | None = None, max_gap: int = DEFAULT_MAX_GAP
                        ) -> tuple[CanonicalClip, dict[str, Any]]:
     """Markers -> canonical clip (metres, Z up) plus provenance for ``info``."""
-    mmap = match_markers(raw.labels, map_spec)
     # Markers never seen in the trial count as missing.
     seen: BOOL = np.asarray(raw.valid.any(axis=0))
+    mmap = match_markers(raw.labels, map_spec, [bool(v) for v in seen])
     never = [raw.labels[i] for i in mmap.marker.values() if not seen[i]]
     mmap.marker = {r: i for r, i in mmap.marker.items() if seen[i]}
     present, absent = check_usable(mmap, raw.labels)
@@ -552,6 +552,8 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
         "markers_never_seen": never,
         "up_reason": up_reason,
         "absent": absent,
+        # Parts with some of their markers, not computed: one message each (part, found, lacking).
+        "parts_not_computed": dict(mmap.not_computed),
         "absent_fill": "neutral pose" if absent else None,
         # Where the pelvis markers could not place the pelvis: trimmed (numbered as in the file,
         # from 0), repaired (numbered as the motion's frames, like the gaps below).
@@ -818,8 +820,12 @@ def _landmark_body(mk: _Markers, present: list[str], build: _Build) -> None:
         shoulder = mk(f"ACROMION_{s}") + SHOULDER_DROP * aw * down
         _set(build, f"shoulder_{s}", shoulder,
              f"{SHOULDER_DROP:.0%} of the acromion distance ({aw * 1000:.0f} mm) below the acromion")
-        wrist = _mid(mk(f"WRIST_RAD_{s}"), mk(f"WRIST_ULN_{s}"))
-        _set(build, f"wrist_{s}", wrist, "midpoint of the wrist markers")
+        if mk.has(f"WRIST_RAD_{s}", f"WRIST_ULN_{s}"):
+            wrist = _mid(mk(f"WRIST_RAD_{s}"), mk(f"WRIST_ULN_{s}"))
+            _set(build, f"wrist_{s}", wrist, "midpoint of the wrist markers")
+        else:
+            wrist = mk(f"WRIST_{s}")
+            _set(build, f"wrist_{s}", wrist, "the wrist marker")
         lateral = mk(f"ELBOW_LAT_{s}")
         if mk.has(f"ELBOW_MED_{s}"):
             _set(build, f"elbow_{s}", _mid(lateral, mk(f"ELBOW_MED_{s}")),

@@ -12,17 +12,25 @@ Presets:
   detected as this preset with the unmarked parts absent.
 * ``plug_in_gait_lower`` — the same labels, pelvis and legs only (``--map plug_in_gait_lower``
   ignores any upper-body marker, e.g. to import the legs of a trial whose arms are unusable).
+* ``helen_hayes`` — Helen Hayes (Kadaba et al. 1990) / Davis (Davis et al. 1991) sets as
+  Motion Analysis Cortex (``VSAC``, ``RSHA``, ``R.TO``, ``RWRI``), BTS (``r bar 1``, ``r knee 1``,
+  ``r mall``, ``r met``) and Codamotion (``R.ASIS``, ``R.Ant.Fem.``, ``R.Knee``, ``R.Ankle``) write them.
 * ``isb_anatomical`` — anatomical landmarks with ISB (Wu et al. 2002/2005) or CAST
   (Cappozzo et al. 1995) style names: iliac spines (ASIS/PSIS), femoral epicondyles (FLE/FME, LE/ME),
   malleoli (FAL/TAM, LM/MM), metatarsal heads (FM1/FM5, MT1/MT5), calcaneus, acromion (AC),
-  humeral epicondyles (HLE/HME, EL/EM), styloids (RSP/USP, RS/US), IJ, PX, C7, T8.
+  humeral epicondyles (HLE/HME, EL/EM; Vicon upper limb ELL/ELM), styloids (RSP/USP, RS/US;
+  ulnar head UHE as the Rehazenter/Qualisys set writes it), IJ (SJN), PX (SXS), C7 (CV7), T8.
 * ``cluster_gait`` — technical marker clusters (c3d.org sample ``Eb015pi``: ``PV1-4`` pelvis,
   ``RTH1-4`` thigh, ``RSK1-4`` shank, ``RFT1-3`` foot): no landmarks, so joint centres are found
   functionally (see :mod:`ecs_anim.c3d_import`).
 
 Body parts (groups): ``pelvis``, ``leg_l``, ``leg_r``, ``trunk``, ``head``, ``arm_l``, ``arm_r``.
 A group whose markers are all missing is *absent* (filled with a neutral pose, recorded in the
-file); a group with only some of its markers is an error that lists what is missing.
+file); so is a group with only some of its markers, with one message (under 300 characters)
+naming the part, the markers found and those it lacks (``MarkerMap.not_computed``). An arm
+needs the acromion, the lateral elbow and the wrist (both styloids or one wrist marker); UPA
+and the medial epicondyle are optional. The file is refused only when neither the pelvis nor
+the trunk can be computed.
 """
 
 from __future__ import annotations
@@ -114,7 +122,7 @@ _PIG_ROLES = _sided({
     "C7": ("C7",), "T10": ("T10",), "IJ": ("CLAV",), "PX": ("STRN",),
     "ACROMION_{s}": ("{S}SHO",), "ELBOW_LAT_{s}": ("{S}ELB",), "ELBOW_MED_{s}": ("{S}MEL",),
     "UPPER_ARM_{s}": ("{S}UPA",), "WRIST_RAD_{s}": ("{S}WRA",), "WRIST_ULN_{s}": ("{S}WRB",),
-    "HAND_{s}": ("{S}FIN",),
+    "WRIST_{s}": ("{S}WRI", "{S}WRS"), "HAND_{s}": ("{S}FIN",),
     "HEAD_FRONT_{s}": ("{S}FHD",), "HEAD_BACK_{s}": ("{S}BHD",),
 })
 
@@ -132,11 +140,34 @@ _ISB_ROLES = _sided({
     "C7": ("C7", "CV7"), "T10": ("T8", "TV8", "T10", "TV10"), "IJ": ("IJ", "SJN", "CLAV"),
     "PX": ("PX", "SXS", "STRN", "XP"),
     "ACROMION_{s}": ("*AC", "*ACR", "*ACRO", "*CAJ", "*SAE", "*SHO"),
-    "ELBOW_LAT_{s}": ("*HLE", "*EL", "*LEL", "*LHE", "*ELB"),
-    "ELBOW_MED_{s}": ("*HME", "*EM", "*MEL", "*MHE"),
-    "WRIST_RAD_{s}": ("*RSP", "*RS", "*RST", "*WRA"), "WRIST_ULN_{s}": ("*USP", "*US", "*UST", "*WRB"),
+    # Vicon upper-limb spellings ELL/ELM (lateral/medial); Rehazenter/Qualisys UHE (ulnar head).
+    "ELBOW_LAT_{s}": ("*HLE", "*EL", "*LEL", "*LHE", "*ELB", "*ELL"),
+    "ELBOW_MED_{s}": ("*HME", "*EM", "*MEL", "*MHE", "*ELM"),
+    "WRIST_RAD_{s}": ("*RSP", "*RS", "*RST", "*WRA"),
+    "WRIST_ULN_{s}": ("*USP", "*US", "*UST", "*WRB", "*UHE"),
+    "WRIST_{s}": ("*WRI", "*WRIST"),
     "MC2_{s}": ("*HM2", "*MC2", "*MCP2"), "MC5_{s}": ("*HM5", "*MC5", "*MCP5"),
     "HEAD_FRONT_{s}": ("*FHD",), "HEAD_BACK_{s}": ("*BHD",),
+})
+
+# Helen Hayes (Kadaba et al. 1990) and Davis (Davis et al. 1991) sets: wands or thigh/shank
+# markers with the lateral epicondyle and malleolus, as Motion Analysis Cortex (VSAC, RSHA,
+# R.TO), BTS (Davis protocol: "r bar 1" thigh wand, "r knee 1" lateral epicondyle, "r bar 2"
+# shank wand, "r mall", "r met" 5th metatarsal head) and Codamotion gait wands (R.ASIS,
+# R.Ant.Fem. = anterior marker of the lateral thigh wand, R.Knee, R.Ankle, R.Toe) spell them.
+# Order matters: "r knee 1" (marker) comes before "r knee" (a lab's computed centre in BTS).
+_HH_ROLES = _sided({
+    "ASIS_{s}": ("{S}ASI", "*ASIS"), "PSIS_{s}": ("{S}PSI", "*PSIS"),
+    "SACRUM": ("SACR", "SACRUM", "VSAC"),
+    "THIGH_{s}": ("{S}THI", "*BAR1", "*WAND1", "*ANTFEM", "*THIGH"),
+    "KNEE_LAT_{s}": ("{S}KNE", "*KNEE1", "*KNEE"),
+    "SHANK_{s}": ("{S}TIB", "{S}SHA", "*BAR2", "*WAND2", "*ANTTIB", "*SHANK"),
+    "ANKLE_LAT_{s}": ("{S}ANK", "*MALL", "*ANKLE"),
+    "HEEL_{s}": ("{S}HEE", "*HEEL"), "TOE_{s}": ("{S}TOE", "*TO", "*MET", "*TOE"),
+    "C7": ("C7",), "T10": ("T10",), "IJ": ("CLAV",), "PX": ("STRN",),
+    "ACROMION_{s}": ("{S}SHO", "*SHOULDER", "*SHOULD"), "ELBOW_LAT_{s}": ("{S}ELB", "*ELBOW"),
+    "WRIST_{s}": ("{S}WRI", "*WRIST"),
+    "HEAD_FRONT_{s}": ("{S}FHD",), "HEAD_BACK_{s}": ("{S}BHD",),
 })
 
 _CLUSTER_ROLES = _sided({
@@ -153,8 +184,10 @@ _LANDMARK_GROUPS = _groups_sided({
                  ("KNEE_MED_{s}", "ANKLE_MED_{s}", "MT1_{s}", "MT5_{s}"))),
     "trunk": (("C7", "IJ"), ()),
     "head": (("HEAD_FRONT_l", "HEAD_FRONT_r", "HEAD_BACK_l", "HEAD_BACK_r"), ()),
-    "arm_{s}": (("ACROMION_{s}", "ELBOW_LAT_{s}", "WRIST_RAD_{s}", "WRIST_ULN_{s}"),
-                (("UPPER_ARM_{s}",), ("ELBOW_MED_{s}",))),
+    # An arm needs shoulder, elbow and wrist landmarks; UPA and the medial epicondyle only
+    # refine the elbow (without them the flexion axis comes from the arm's own plane).
+    "arm_{s}": (("ACROMION_{s}", "ELBOW_LAT_{s}"),
+                (("WRIST_RAD_{s}", "WRIST_ULN_{s}"), ("WRIST_{s}",))),
 })
 
 _CLUSTER_GROUPS = _groups_sided({
@@ -173,6 +206,11 @@ PRESETS: dict[str, MarkerSet] = {
                   "upper-body markers are ignored)",
                   _PIG_ROLES, {g: v for g, v in _LANDMARK_GROUPS.items()
                                if g in ("pelvis", "leg_l", "leg_r")},
+                  ("ASIS_l", "ASIS_r", "KNEE_LAT_l", "ANKLE_LAT_l", "TOE_l")),
+        MarkerSet("helen_hayes", "Helen Hayes / Davis (Kadaba 1990, Davis 1991) as Cortex, BTS "
+                  "and Codamotion write it (ASIS, SACR/VSAC, THI/bar 1, KNE/knee 1, TIB/SHA/bar 2, "
+                  "ANK/mall, TOE/met, SHO, ELB, WRI)",
+                  _HH_ROLES, _LANDMARK_GROUPS,
                   ("ASIS_l", "ASIS_r", "KNEE_LAT_l", "ANKLE_LAT_l", "TOE_l")),
         MarkerSet("isb_anatomical", "anatomical landmarks, ISB/CAST names (ASIS, PSIS, FLE/FME, "
                   "FAL/TAM, FM1/FM5, AC, HLE/HME, RSP/USP, IJ, PX, C7)",
@@ -201,6 +239,8 @@ class MarkerMap:
     subject: str
     ignored: list[str] = field(default_factory=list)
     how: str = ""
+    #: body part -> why it could not be computed (set by :func:`check_usable`).
+    not_computed: dict[str, str] = field(default_factory=dict)
 
 
 def _resolve(preset: MarkerSet, keys: dict[str, int]) -> dict[str, int]:
@@ -220,11 +260,14 @@ def _subjects(labels: list[str]) -> dict[str, list[int]]:
     return out
 
 
-def match_markers(labels: list[str], spec: str | None = None) -> MarkerMap:
+def match_markers(labels: list[str], spec: str | None = None,
+                  usable: list[bool] | None = None) -> MarkerMap:
     """Match ``labels`` to a marker set. ``spec``: None (detect), a preset name or a YAML map.
 
     With several subject prefixes in the file, the subject whose labels match a preset best is
-    used and the others' markers are ignored. Raises :class:`MappingError`.
+    used and the others' markers are ignored. ``usable``: per label, whether it holds samples;
+    of two markers with the same label (or key) the first usable one is taken. Raises
+    :class:`MappingError`.
     """
     user: dict[str, str] = {}
     user_lines: dict[str, int] = {}
@@ -247,7 +290,7 @@ def match_markers(labels: list[str], spec: str | None = None) -> MarkerMap:
         if subject_wanted is not None and subject != subject_wanted:
             continue
         keys: dict[str, int] = {}
-        for i in indices:
+        for i in sorted(indices, key=lambda i: usable is not None and not usable[i]):
             keys.setdefault(label_key(labels[i]), i)
         candidates = [PRESETS[base]] if base else list(PRESETS.values())
         for preset in candidates:
@@ -322,25 +365,48 @@ def _describe(preset: MarkerSet, role: str) -> str:
     return cands[0] if cands else role
 
 
-#: Body parts, and markers per part, a "missing markers" error names; the rest are counted.
-MISSING_PARTS, MISSING_PER_PART = 3, 3
+#: A body part that cannot be computed is reported in one message of at most this many characters.
+MESSAGE_MAX = 300
+
+
+def _part_message(mmap: MarkerMap, labels: list[str], group: str, missing: list[str],
+                  why: str = "") -> str:
+    """``left arm not computed: found LSHO; lacks LELB, LWRA+LWRB or LWRI`` (< 300 chars)."""
+    required, alternatives = mmap.preset.groups[group]
+    roles = list(dict.fromkeys([*required, *(r for alt in alternatives for r in alt)]))
+    found = [labels[mmap.marker[r]] for r in roles if r in mmap.marker]
+    text = (f"{GROUP_WORDS[group]} not computed{why}: found {listed(found, 4) if found else 'none'}"
+            f"; lacks {listed(missing, 3) if missing else 'nothing'}")
+    return text if len(text) < MESSAGE_MAX else text[:MESSAGE_MAX - 4] + " ..."
 
 
 def check_usable(mmap: MarkerMap, labels: list[str]) -> tuple[list[str], list[str]]:
-    """(present, absent) groups, or :class:`MappingError` listing missing markers per body part.
+    """(present, absent) groups; every body part whose markers are all there is computed.
 
-    The pelvis is required unless the trunk is marked (an upper-body trial: the pelvis is then
-    placed under the trunk); every other body part may be absent as a whole.
+    A part with only some of its markers is marked absent too, and ``mmap.not_computed`` holds
+    one message per such part (the part, the markers found, the ones it lacks). The legs hang
+    from the pelvis, so they are absent when the pelvis is. Raises :class:`MappingError` only
+    when nothing can carry the body: neither the pelvis nor (an upper-body trial) the trunk.
     """
     present, absent, incomplete = group_status(mmap)
-    if "pelvis" in absent and ("trunk" not in present or mmap.preset.method == "functional"):
-        incomplete = {"pelvis": [" + ".join(_describe(mmap.preset, r)
-                                            for r in mmap.preset.groups["pelvis"][0])]} | incomplete
-    if incomplete:
-        parts = listed((f"{GROUP_WORDS[g]}: {listed(m, MISSING_PER_PART)}"
-                        for g, m in incomplete.items()), MISSING_PARTS)
-        raise MappingError(f"{mmap.how}: missing markers by body part: {parts} (give them in "
-                           f"--map FILE.yaml, markers: {{ROLE: label}})")
+    notes: dict[str, str] = {g: _part_message(mmap, labels, g, m) for g, m in incomplete.items()}
+    if "pelvis" not in present:
+        for s in "lr":
+            if f"leg_{s}" in present:
+                present.remove(f"leg_{s}")
+                notes[f"leg_{s}"] = _part_message(mmap, labels, f"leg_{s}", [],
+                                                  " (no pelvis to hang it from)")
+    functional = mmap.preset.method == "functional"
+    if functional and incomplete:
+        raise MappingError(f"{mmap.how}: " + "; ".join(notes.values())[:MESSAGE_MAX])
+    if "pelvis" not in present and ("trunk" not in present or functional):
+        pelvis = notes.get("pelvis") or _part_message(
+            mmap, labels, "pelvis", [_describe(mmap.preset, r) for r in mmap.preset.groups["pelvis"][0]])
+        trunk = notes.get("trunk", "")
+        raise MappingError(f"{mmap.how}: nothing to carry the body: {pelvis}"
+                           + (f"; {trunk}" if trunk and not functional else "")
+                           + " (give markers in --map FILE.yaml, markers: {ROLE: label})")
+    mmap.not_computed = {g: notes[g] for g in GROUPS if g in notes}
     return present, [g for g in GROUPS if g not in present]
 
 

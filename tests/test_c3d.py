@@ -27,6 +27,7 @@ from ecs_anim.c3d_import import (
     score_centre,
 )
 from ecs_anim.cli import main
+from ecs_anim.marker_sets import check_usable, match_markers
 from ecs_anim.errors import EcsAnimError, InputError
 from ecs_anim.importing import import_bvh
 from ecs_anim.metrics import MetricsRecorder
@@ -383,10 +384,12 @@ def test_unknown_marker_set_lists_labels(tmp_path):
 def test_missing_markers_listed_per_body_part(tmp_path):
     labels = ["LASI", "RASI", "LPSI", "RPSI", "LTHI", "LKNE", "LTIB", "LANK", "LTOE",
               "RTHI", "RKNE", "RTIB", "RTOE", "LSHO", "LELB", "LWRA"]
-    path = write_c3d(tmp_path / "missing.c3d", labels, _small_markers(labels))
-    text = _assert_error(path, "missing markers by body part")
-    assert "right leg: RANK" in text
-    assert "left arm: LWRB" in text
+    mmap = match_markers(labels)
+    present, absent = check_usable(mmap, labels)
+    assert present == ["pelvis", "leg_l"] and "leg_r" in absent and "arm_l" in absent
+    notes = mmap.not_computed
+    assert notes["leg_r"] == "right leg not computed: found RKNE, RTHI, RTIB, RTOE; lacks RANK"
+    assert "lacks LWRB or LWRI" in notes["arm_l"]
 
 
 def test_cli_reports_a_bad_c3d_and_imports_the_others(tmp_path, capsys):
@@ -407,16 +410,16 @@ def test_cli_reports_a_bad_c3d_and_imports_the_others(tmp_path, capsys):
 def test_user_marker_map_overrides_a_label(tmp_path):
     require_mocap()
     labels, positions, rate = _tennis_markers()
-    labels = ["LeftKnee" if lab == "LKNE" else lab for lab in labels]
+    labels = ["KnieLinks" if lab == "LKNE" else lab for lab in labels]
     path = write_c3d(tmp_path / "renamed.c3d", labels, positions, rate=rate)
-    with pytest.raises(InputError, match="left leg: LKNE"):
-        import_c3d(path)
+    notes = import_c3d(path).info["parts_not_computed"]
+    assert notes["leg_l"] == "left leg not computed: found LANK, LTHI, LTIB, LTOE; lacks LKNE"
     user_map = tmp_path / "map.yaml"
-    user_map.write_text("base: plug_in_gait\nmarkers:\n  KNEE_LAT_l: LeftKnee\n")
+    user_map.write_text("base: plug_in_gait\nmarkers:\n  KNEE_LAT_l: KnieLinks\n")
     motion = import_c3d(path, str(user_map))
     assert str(user_map) in motion.info["joint_map"]
     bad_map = tmp_path / "bad_map.yaml"
-    bad_map.write_text("markers:\n  KNEE_LAT_x: LeftKnee\n")
+    bad_map.write_text("markers:\n  KNEE_LAT_x: KnieLinks\n")
     with pytest.raises(InputError) as err:
         import_c3d(path, str(bad_map))
     assert str(err.value).startswith(f"{bad_map}:2: markers.KNEE_LAT_x: unknown role")

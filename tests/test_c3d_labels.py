@@ -1,0 +1,129 @@
+"""C3D labels as labs write them (issue 12 item 3, labels): case, separators, subject prefixes,
+synonyms per convention, and every computable body part imported while the rest is absent."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from conftest import MOCAP_DIR
+from ecs_anim.c3d_import import canonical_clip_c3d, import_c3d, read_c3d
+from ecs_anim.errors import MappingError
+from ecs_anim.marker_sets import check_usable, label_key, match_markers
+from ecs_anim.skeleton import JOINT_INDEX as J
+
+VARIED = MOCAP_DIR / "varied"
+
+# file -> (marker set detected, parts present). Files a convention covers; see the README.
+COVERED = {
+    "codamotion_dotted_gait_2015_200hz.c3d": ("helen_hayes", {"pelvis", "leg_l", "leg_r"}),
+    "mac_helenhayes_events_vjc_60hz.c3d": ("helen_hayes", {"pelvis", "leg_l", "leg_r", "arm_l",
+                                                           "arm_r"}),
+    "qualisys_pig_noarms_squat_100hz.c3d": ("plug_in_gait", {"pelvis", "leg_l", "leg_r", "trunk"}),
+    "qualisys_pig_yup_events_100hz.c3d": ("plug_in_gait", {"pelvis", "leg_l", "leg_r", "trunk",
+                                                           "head", "arm_l", "arm_r"}),
+    "rehazenter_isb_events_100hz.c3d": ("isb_anatomical", {"pelvis", "leg_l", "leg_r", "trunk",
+                                                           "arm_l", "arm_r"}),
+    "vicon_cgm24_events_jc_100hz.c3d": ("plug_in_gait", {"pelvis", "leg_l", "leg_r"}),
+    "vicon_pig_noclav_prefix_events_60hz.c3d": ("plug_in_gait", {"pelvis", "leg_l", "leg_r"}),
+    "vicon_rightarm_hand_120hz.c3d": ("isb_anatomical", {"pelvis", "trunk", "arm_r"}),
+}
+SEGMENTS = {"leg_{s}": (("hip_{s}", "knee_{s}"), ("knee_{s}", "ankle_{s}")),
+            "arm_{s}": (("shoulder_{s}", "elbow_{s}"), ("elbow_{s}", "wrist_{s}"))}
+GROUPS = ("pelvis", "leg_l", "leg_r", "trunk", "head", "arm_l", "arm_r")
+
+
+def _varied(name: str):
+    path = VARIED / name
+    if not path.exists():
+        pytest.skip(f"{path} not available")
+    return path
+
+
+@pytest.mark.parametrize("name", sorted(COVERED))
+def test_covered_files_import_with_no_flags(name):
+    path = _varied(name)
+    preset, present = COVERED[name]
+    motion = import_c3d(path)
+    assert motion.info["marker_set"] == preset
+    assert set(motion.info["absent"]) == set(GROUPS) - present
+    for msg in motion.info["parts_not_computed"].values():
+        assert len(msg) < 300
+
+
+# Open (joint-centre construction, not labels): the shank (knee to ankle) is not steady where
+# the chord rule's knee centre sits off the flexion axis (a thigh marker or wand out of the
+# frontal plane, no static trial to calibrate it): Codamotion 5.7-5.9 % (anterior wand marker
+# stands in for the wand), Cortex Helen Hayes 5.8-6.0 % (our knee 99 mm from the lab's VRKN,
+# hip 10 mm from VRHI), Qualisys squat 5.1 % (deep flexion); Vicon Matt 7.0 % from one frame
+# (frame 0, shank 0.175 m: a gap-filled start).
+STEADY_OPEN = {"codamotion_dotted_gait_2015_200hz.c3d": "shank 5.9 %",
+               "mac_helenhayes_events_vjc_60hz.c3d": "shank 6.0 %, knee 99 mm off the lab's",
+               "qualisys_pig_noarms_squat_100hz.c3d": "shank 5.1 % in deep squats",
+               "vicon_pig_noclav_prefix_events_60hz.c3d": "shank 7.0 % from frame 0"}
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.xfail(
+    reason=STEADY_OPEN[n], strict=True)) if n in STEADY_OPEN
+    else n for n in sorted(COVERED)])
+def test_limb_segment_lengths_are_steady(name):
+    raw = read_c3d(_varied(name))
+    clip, extra = canonical_clip_c3d(raw)
+    p = clip.positions
+    for group in GROUPS:
+        if group in extra["absent"]:
+            continue
+        for pattern, pairs in SEGMENTS.items():
+            for s in "lr":
+                if pattern.format(s=s) != group:
+                    continue
+                for a, b in pairs:
+                    a, b = a.format(s=s), b.format(s=s)
+                    length = np.linalg.norm(p[:, J[a]] - p[:, J[b]], axis=-1)
+                    cv = length.std() / length.mean()
+                    assert cv < 0.05, f"{name} {a}-{b}: std {cv:.1%} of the mean"
+                    assert 0.15 < length.mean() < 0.6, f"{name} {a}-{b}: {length.mean():.3f} m"
+
+
+def test_parts_not_computed_are_named_with_found_and_lacking():
+    motion = import_c3d(_varied("qualisys_pig_noarms_squat_100hz.c3d"))
+    msg = motion.info["parts_not_computed"]["arm_l"]
+    assert msg.startswith("left arm not computed: found LSHO; lacks LELB") and len(msg) < 300
+    motion = import_c3d(_varied("vicon_pig_noclav_prefix_events_60hz.c3d"))
+    assert motion.info["parts_not_computed"]["trunk"] == "trunk not computed: found Matt:C7; lacks CLAV"
+
+
+@pytest.mark.parametrize("labels", [
+    ["L.ASIS", "R.ASIS", "L.PSIS", "R.PSIS", "L.Knee", "L.Ankle", "L.Toe"],
+    ["l asis", "r asis", "l psis", "r psis", "l knee 1", "l mall", "l met"],
+    ["Jane Doe:l_asis", "Jane Doe:r_asis", "Jane Doe:l-psis", "Jane Doe:r-psis",
+     "Jane Doe:l.knee", "Jane Doe:l ankle", "Jane Doe:L_TOE"],
+])
+def test_case_separators_and_prefixes_with_spaces(labels):
+    mmap = match_markers(labels)
+    assert {"ASIS_l", "ASIS_r", "PSIS_l", "PSIS_r", "KNEE_LAT_l", "ANKLE_LAT_l", "TOE_l"} <= set(mmap.marker)
+    if ":" in labels[0]:
+        assert mmap.subject == "Jane Doe"
+
+
+def test_synonyms_per_convention():
+    assert label_key("Bob Smith:r_knee 1") == "RKNEE1"
+    isb = match_markers(["L_IAS", "R_IAS", "L_IPS", "R_IPS", "L_SAE", "L_HLE", "L_HME", "L_RSP",
+                         "L_UHE", "CV7", "SJN", "L_FLE", "L_FAL"])
+    assert isb.preset.name == "isb_anatomical"
+    assert {"ACROMION_l", "ELBOW_LAT_l", "WRIST_RAD_l", "WRIST_ULN_l", "C7", "IJ"} <= set(isb.marker)
+    vicon_arm = match_markers(["RASI", "LASI", "RPSI", "LPSI", "C7", "CLAV", "RSHO", "RELL",
+                               "RELM", "RRS", "RUS"])
+    assert {"ELBOW_LAT_r", "ELBOW_MED_r"} <= set(vicon_arm.marker)
+
+
+def test_an_arm_needs_no_upa_and_nothing_to_carry_the_body_is_refused():
+    labels = ["LASI", "RASI", "LPSI", "RPSI", "C7", "CLAV", "LSHO", "LELB", "LWRA", "LWRB"]
+    mmap = match_markers(labels)
+    present, _ = check_usable(mmap, labels)
+    assert "arm_l" in present and not mmap.not_computed.get("arm_l")
+    labels = ["LSHO", "LELB", "LWRA", "LWRB", "RSHO", "RELB", "RWRA", "RWRB", "C7", "LKNE"]
+    mmap = match_markers(labels)
+    with pytest.raises(MappingError) as err:
+        check_usable(mmap, labels)
+    assert "trunk not computed: found C7; lacks CLAV" in str(err.value)
