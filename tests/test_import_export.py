@@ -11,8 +11,8 @@ import json
 
 import numpy as np
 import pytest
+from conftest import MOCAP_DIR, MOTIONS_DIR, mocap_params, require_mocap
 
-from conftest import MOTIONS_DIR, mocap_params, require_mocap, MOCAP_DIR
 from ecs_anim.bvh import read_bvh
 from ecs_anim.cli import main
 from ecs_anim.contacts import _intervals, horizontal_speed
@@ -43,8 +43,11 @@ def _axis_matrix(axis: str, deg: np.ndarray) -> np.ndarray:
     return np.moveaxis(np.array(rows), [0, 1], [-2, -1])
 
 
-def reference_positions(path) -> tuple[list[str], np.ndarray]:
-    """Independent FK: (joint names incl. '<parent>.end', positions (F, n, 3) in file units)."""
+def reference_positions(path, file_frame: frozenset[str] = frozenset()
+                        ) -> tuple[list[str], np.ndarray]:
+    """Independent FK: (joint names incl. '<parent>.end', positions (F, n, 3) in file units).
+    Joints named in ``file_frame`` have position channels that give their place in the file's
+    frame rather than an offset from their parent."""
     motion = read_bvh(path)  # parsing itself is tested by the bad-input corpus
     sk = motion.skeleton
     values = motion.channels
@@ -67,7 +70,8 @@ def reference_positions(path) -> tuple[list[str], np.ndarray]:
         else:
             pr, pp = glob_r[joint.parent], glob_p[joint.parent]
             glob_r.append(pr @ rot)
-            glob_p.append(pp + np.einsum("fij,fj->fi", pr, trans))
+            glob_p.append(trans if joint.name in file_frame
+                          else pp + np.einsum("fij,fj->fi", pr, trans))
     return sk.names, np.stack(glob_p, axis=1)
 
 

@@ -16,8 +16,8 @@ import re
 import numpy as np
 import pytest
 from conftest import MOCAP_DIR
+from test_import_export import reference_positions
 
-from ecs_anim.bvh import read_bvh
 from ecs_anim.cli import main
 from ecs_anim.motion import load_nmo
 from ecs_anim.skeleton import JOINT_INDEX, JOINTS
@@ -56,48 +56,14 @@ def _all_bvh() -> list[object]:
     return [pytest.param(f, id=f.name) for f in files]
 
 
-def _axis_matrix(axis: str, deg: np.ndarray) -> np.ndarray:
-    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
-    one, zero = np.ones_like(c), np.zeros_like(c)
-    rows = {
-        "X": [[one, zero, zero], [zero, c, -s], [zero, s, c]],
-        "Y": [[c, zero, s], [zero, one, zero], [-s, zero, c]],
-        "Z": [[c, -s, zero], [s, c, zero], [zero, zero, one]],
-    }[axis]
-    return np.moveaxis(np.array(rows), [0, 1], [-2, -1])
-
-
 def reference_world(path, scale: float, up: str, file_frame: frozenset[str] = frozenset()
                     ) -> tuple[list[str], np.ndarray]:
     """Independent FK in metres, Z up: (joint names incl. '<parent>.end', (F, n, 3))."""
-    motion = read_bvh(path)
-    values = motion.channels
-    n_frames = values.shape[0]
-    col = 0
-    glob_r: list[np.ndarray] = []
-    glob_p: list[np.ndarray] = []
-    for joint in motion.skeleton.joints:
-        rot = np.broadcast_to(np.eye(3), (n_frames, 3, 3))
-        trans = np.tile(joint.offset, (n_frames, 1))
-        for ch in joint.channels:
-            axis, kind = ch[0].upper(), ch[1:].lower()
-            if kind == "position":
-                trans[:, "XYZ".index(axis)] = values[:, col]
-            else:
-                rot = rot @ _axis_matrix(axis, values[:, col])
-            col += 1
-        if joint.parent < 0:
-            glob_r.append(rot)
-            glob_p.append(trans)
-        else:
-            pr, pp = glob_r[joint.parent], glob_p[joint.parent]
-            glob_r.append(pr @ rot)
-            glob_p.append(trans if joint.name in file_frame
-                          else pp + np.einsum("fij,fj->fi", pr, trans))
-    p = np.stack(glob_p, axis=1) * scale
+    names, p = reference_positions(path, file_frame)
+    p = p * scale
     if up == "y":
         p = np.stack([p[..., 0], -p[..., 2], p[..., 1]], axis=-1)
-    return motion.skeleton.names, p
+    return names, p
 
 
 def _import_and_export(path, tmp_path, extra: list[str] | None = None):
