@@ -10,60 +10,69 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
+from numpy.typing import NDArray
+
+F64 = NDArray[np.float64]
+Vec3 = tuple[float, float, float]
+#: Scalar last: (x, y, z, w).
+Quat = tuple[float, float, float, float]
+#: A rotation matrix as its three axes (columns): (x_axis, y_axis, z_axis).
+Frame = tuple[Vec3, Vec3, Vec3]
 
 #: As :data:`ecs_anim.rotations.TINY`: the smallest norm divided by.
 TINY = 1e-12
 
 
 @njit(cache=True)
-def add(a, b):  # type: ignore[no-untyped-def]
+def add(a: Vec3, b: Vec3) -> Vec3:
     """``a + b``."""
     return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
 
 
 @njit(cache=True)
-def sub(a, b):  # type: ignore[no-untyped-def]
+def sub(a: Vec3, b: Vec3) -> Vec3:
     """``a - b``."""
     return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
 
 
 @njit(cache=True)
-def scale(a, s):  # type: ignore[no-untyped-def]
+def scale(a: Vec3, s: float) -> Vec3:
     """``a * s`` for a scalar ``s``."""
     return (a[0] * s, a[1] * s, a[2] * s)
 
 
 @njit(cache=True)
-def add_scaled(a, b, s):  # type: ignore[no-untyped-def]
+def add_scaled(a: Vec3, b: Vec3, s: float) -> Vec3:
     """``a + b * s``."""
     return (a[0] + b[0] * s, a[1] + b[1] * s, a[2] + b[2] * s)
 
 
 @njit(cache=True)
-def dot(a, b):  # type: ignore[no-untyped-def]
+def dot(a: Vec3, b: Vec3) -> float:
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
 @njit(cache=True)
-def cross(a, b):  # type: ignore[no-untyped-def]
+def cross(a: Vec3, b: Vec3) -> Vec3:
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
 @njit(cache=True)
-def norm(a):  # type: ignore[no-untyped-def]
+def norm(a: Vec3) -> float:
     return math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
 
 
 @njit(cache=True)
-def normalize(a):  # type: ignore[no-untyped-def]
+def normalize(a: Vec3) -> Vec3:
     """Mirrors :func:`ecs_anim.rotations.normalize` for one 3-vector (zero stays zero)."""
     n = max(norm(a), TINY)
     return (a[0] / n, a[1] / n, a[2] / n)
 
 
 @njit(cache=True)
-def to_world(m, v):  # type: ignore[no-untyped-def]
+def to_world(m: Frame, v: Vec3) -> Vec3:
     """``m @ v`` (mirrors ``normalized._to_world``): ``v`` given in the frame ``m``, in its parent."""
     x, y, z = m
     return (x[0] * v[0] + y[0] * v[1] + z[0] * v[2],
@@ -72,32 +81,32 @@ def to_world(m, v):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def in_frame(m, v):  # type: ignore[no-untyped-def]
+def in_frame(m: Frame, v: Vec3) -> Vec3:
     """``m.T @ v`` (mirrors ``normalized._in_frame``): a parent-frame vector in the frame ``m``."""
     return (dot(m[0], v), dot(m[1], v), dot(m[2], v))
 
 
 @njit(cache=True)
-def matmul(a, b):  # type: ignore[no-untyped-def]
+def matmul(a: Frame, b: Frame) -> Frame:
     """``a @ b``: the frame ``b`` (given in ``a``) in ``a``'s parent."""
     return (to_world(a, b[0]), to_world(a, b[1]), to_world(a, b[2]))
 
 
 @njit(cache=True)
-def transpose(m):  # type: ignore[no-untyped-def]
+def transpose(m: Frame) -> Frame:
     x, y, z = m
     return ((x[0], y[0], z[0]), (x[1], y[1], z[1]), (x[2], y[2], z[2]))
 
 
 @njit(cache=True)
-def rot_z(angle):  # type: ignore[no-untyped-def]
+def rot_z(angle: float) -> Frame:
     """Mirrors ``rotations.rot_axis(2, angle)``."""
     c, s = math.cos(angle), math.sin(angle)
     return ((c, s, 0.0), (-s, c, 0.0), (0.0, 0.0, 1.0))
 
 
 @njit(cache=True)
-def matrix_from_quat(q):  # type: ignore[no-untyped-def]
+def matrix_from_quat(q: Quat) -> Frame:
     """Mirrors :func:`ecs_anim.rotations.matrix_from_quat` (normalizes first)."""
     n = max(math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]), TINY)
     x, y, z, w = q[0] / n, q[1] / n, q[2] / n, q[3] / n
@@ -107,7 +116,7 @@ def matrix_from_quat(q):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def quat_from_matrix(m):  # type: ignore[no-untyped-def]
+def quat_from_matrix(m: Frame) -> Quat:
     """Mirrors :func:`ecs_anim.rotations.quat_from_matrix` (w >= 0)."""
     # m[col][row]: element (row i, column j) is m[j][i].
     m00, m11, m22 = m[0][0], m[1][1], m[2][2]
@@ -134,7 +143,8 @@ def quat_from_matrix(m):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def frame_from_axes(primary, secondary, primary_axis, secondary_axis, fallback_secondary):  # type: ignore[no-untyped-def]
+def frame_from_axes(primary: Vec3, secondary: Vec3, primary_axis: int, secondary_axis: int,
+                    fallback_secondary: Vec3) -> Frame:
     """Mirrors :func:`ecs_anim.rotations.frame_from_axes` with a fallback always given (pass
     ``secondary`` again for none: it is only used where ``secondary`` is parallel to ``primary``)."""
     p = normalize(primary)
@@ -153,7 +163,7 @@ def frame_from_axes(primary, secondary, primary_axis, secondary_axis, fallback_s
 
 
 @njit(cache=True)
-def rotation_between(a, b):  # type: ignore[no-untyped-def]
+def rotation_between(a: Vec3, b: Vec3) -> Frame:
     """Mirrors :func:`ecs_anim.rotations.rotation_between`: the smallest rotation taking the
     direction ``a`` onto ``b`` (a half turn for opposite directions)."""
     a = normalize(a)
@@ -181,34 +191,34 @@ def rotation_between(a, b):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def load3(a):  # type: ignore[no-untyped-def]
+def load3(a: F64) -> Vec3:
     """A 3-vector from a 1-D array view of length 3."""
     return (a[0], a[1], a[2])
 
 
 @njit(cache=True)
-def store3(out, v):  # type: ignore[no-untyped-def]
+def store3(out: F64, v: Vec3) -> None:
     out[0], out[1], out[2] = v[0], v[1], v[2]
 
 
 @njit(cache=True)
-def load4(a):  # type: ignore[no-untyped-def]
+def load4(a: F64) -> Quat:
     return (a[0], a[1], a[2], a[3])
 
 
 @njit(cache=True)
-def store4(out, q):  # type: ignore[no-untyped-def]
+def store4(out: F64, q: Quat) -> None:
     out[0], out[1], out[2], out[3] = q[0], q[1], q[2], q[3]
 
 
 @njit(cache=True)
-def load_frame(a):  # type: ignore[no-untyped-def]
+def load_frame(a: F64) -> Frame:
     """A frame from a (3, 3) array view holding its axes as columns (``a[row, column]``)."""
     return ((a[0, 0], a[1, 0], a[2, 0]), (a[0, 1], a[1, 1], a[2, 1]), (a[0, 2], a[1, 2], a[2, 2]))
 
 
 @njit(cache=True)
-def store_frame(out, m):  # type: ignore[no-untyped-def]
+def store_frame(out: F64, m: Frame) -> None:
     """Write a frame into a (3, 3) array view, axes as columns."""
     for j in range(3):
         for i in range(3):
