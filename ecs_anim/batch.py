@@ -1009,7 +1009,7 @@ class Progress:
         self.start = time.perf_counter()
         self.bar = None
         if total and getattr(self.stream, "isatty", lambda: False)():
-            from tqdm import tqdm  # type: ignore[import-untyped]
+            from tqdm import tqdm
 
             self.bar = tqdm(total=total, unit="job", file=self.stream, dynamic_ncols=True)
 

@@ -38,6 +38,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Rectangle
 
 from .files import atomic_output
 from .metrics import SLIDE_EVENT_MM
@@ -175,7 +177,7 @@ def _strip_panel(ax: Any, jobs: Sequence[Job], key: str, rows: list[str],
 def _legend(fig: Figure, colours: dict[str, Any], title: str) -> None:
     if len(colours) < 2:
         return
-    handles = [plt.Line2D([], [], ls="none", marker="o", color=c, label=name or "(plane)")
+    handles = [Line2D([], [], ls="none", marker="o", color=c, label=name or "(plane)")
                for name, c in colours.items()]
     fig.legend(handles=handles, title=title, loc="upper center", ncol=min(len(colours), 6),
                frameon=False, bbox_to_anchor=(0.5, 1.0))
@@ -276,13 +278,13 @@ def plot_against_stature(jobs: Sequence[Job]) -> Figure:
         ax.set_xlabel("stature (m)")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
-    handles = [plt.Line2D([], [], color="#a0aec0", marker="o", mfc="#4a5568", mec="none", ms=3,
+    handles = [Line2D([], [], color="#a0aec0", marker="o", mfc="#4a5568", mec="none", ms=3,
                           label="one clip (and ground) across bodies"),
-               plt.Line2D([], [], color="#2b6cb0", lw=2, marker="o", ms=5,
+               Line2D([], [], color="#2b6cb0", lw=2, marker="o", ms=5,
                           label="median at each stature"),
-               plt.Rectangle((0, 0), 1, 1, color="#2b6cb0", alpha=0.18,
+               Rectangle((0, 0), 1, 1, color="#2b6cb0", alpha=0.18,
                              label="middle half of the jobs (25-75 %)"),
-               plt.Line2D([], [], color="#c53030", ls="--", lw=1, label="tolerance")]
+               Line2D([], [], color="#c53030", ls="--", lw=1, label="tolerance")]
     fig.legend(handles=handles, loc="upper center", ncol=4, frameon=False, fontsize=9)
     fig.tight_layout(rect=(0, 0, 1, 1 - 0.35 / fig.get_figheight()))
     return fig
@@ -338,7 +340,7 @@ def plot_contact_timeline(jobs: Sequence[Job]) -> Figure:
     ax.set_xlabel("time (s)")
     ax.set_axisbelow(True)  # the grid behind the bars: a bar reads as one piece
     ax.grid(axis="x", alpha=0.3)
-    handles = [plt.Rectangle((0, 0), 1, 1, color=c, label=f"{foot} foot planted")
+    handles = [Rectangle((0, 0), 1, 1, color=c, label=f"{foot} foot planted")
                for foot, c in FOOT_COLOURS.items()]
     ax.legend(handles=handles, loc="lower right", fontsize=8, ncol=2,
               bbox_to_anchor=(1.0, 1.0), frameon=False)

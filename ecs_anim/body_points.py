@@ -25,7 +25,8 @@ from numpy.typing import NDArray
 
 from .normalized import DecodedPose
 from .rotations import frame_from_axes
-from .skeleton import BONE_JOINTS, JOINT_INDEX as J, JOINTS, LENGTH_INDEX, LENGTHS
+from .skeleton import BONE_JOINTS, JOINTS, LENGTH_INDEX, LENGTHS
+from .skeleton import JOINT_INDEX as J
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -158,7 +159,7 @@ def point_positions(decoded: DecodedPose, rows: I64, segment: I64, fraction: F64
     indices, ``fraction`` (k,), ``offset`` (k, 3) metres in the segment frame."""
     p = decoded.positions
     a, b = p[rows, SEG_PROXIMAL[segment]], p[rows, SEG_DISTAL[segment]]
-    point = a + fraction[:, None] * (b - a)
+    point: F64 = a + fraction[:, None] * (b - a)
     has_offset = np.any(offset != 0.0, axis=1)
     if has_offset.any():
         frames = segment_frames(decoded, rows, segment)

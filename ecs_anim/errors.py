@@ -59,7 +59,7 @@ class NumberList(yaml.SequenceNode):
         self.numbers = numbers
         self._text = text  # the numbers as written, with their line breaks
 
-    @property  # type: ignore[override]
+    @property
     def value(self) -> list[yaml.Node]:
         if self._items is None:
             resolver = yaml.resolver.Resolver()
@@ -69,7 +69,7 @@ class NumberList(yaml.SequenceNode):
             for token in re.finditer(r"[^,\s]+", self._text):
                 line += self._text.count("\n", counted, token.start())
                 counted = token.start()
-                mark = yaml.Mark(start.name, 0, line, 0, None, None)
+                mark = yaml.Mark(start.name, 0, line, 0, None, 0)  # no buffer: no snippet
                 tag = resolver.resolve(yaml.ScalarNode, token.group(), (True, False))
                 self._items.append(yaml.ScalarNode(tag, token.group(), mark, mark))
         return self._items
@@ -141,7 +141,7 @@ def compose_yaml(path: str | Path, what: str, number_lists: bool = False) -> Any
         if contents:
             try:
                 root = yaml.compose(packed)
-                if _unpack(root, contents):
+                if root is not None and _unpack(root, contents):
                     return root
             except (RecursionError, yaml.YAMLError):
                 pass  # reported from the file's own text below

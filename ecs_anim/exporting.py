@@ -25,7 +25,8 @@ from .morphology import PRESET_SPECS, Morphology, load_morphology_yaml
 from .motion import NormalizedMotion
 from .normalized import DecodedPose, decode
 from .rotations import frame_from_axes, matrix_to_euler, rotation_between
-from .skeleton import JOINT_INDEX as J, JOINTS, REST_HIP_DIR_LEFT
+from .skeleton import JOINT_INDEX as J
+from .skeleton import JOINTS, REST_HIP_DIR_LEFT
 
 F64 = NDArray[np.float64]
 
@@ -207,7 +208,7 @@ def local_rotations(pose: DecodedPose) -> F64:
     # joint2bvh = world_to_bvh @ joint2world @ bvh_rest2body, for all joints in one product.
     glob = YUP_TO_ZUP.T @ world @ BODY_TO_BVH_REST.T
     parent = glob[..., np.maximum(EXPORT_PARENTS, 0), :, :]
-    local = np.swapaxes(parent, -1, -2) @ glob
+    local: F64 = np.swapaxes(parent, -1, -2) @ glob
     local[..., EXPORT_PARENTS < 0, :, :] = glob[..., EXPORT_PARENTS < 0, :, :]
     return local
 

@@ -349,8 +349,9 @@ class _Tree:
         :data:`COMPARED_BRANCHES` reaching farthest."""
         branches = sorted(branches, key=self.branch, reverse=True)[:COMPARED_BRANCHES]
         def unlike(a: int, b: int) -> float:
-            return (abs(self.size[a] - self.size[b]) / max(self.size[a], self.size[b])
-                    + abs(self.branch(a) - self.branch(b)) / max(self.branch(a), self.branch(b)))
+            joints: float = abs(self.size[a] - self.size[b]) / max(self.size[a], self.size[b])
+            return joints + abs(self.branch(a) - self.branch(b)) / max(self.branch(a),
+                                                                        self.branch(b))
         pairs = [(a, b) for k, a in enumerate(branches) for b in branches[k + 1:]]
         return min(pairs, key=lambda pair: unlike(*pair))
 
@@ -420,13 +421,13 @@ def _leftness(poses: F64, pelvis: int, thorax: int,
     up = poses[:, thorax] - poses[:, pelvis]
     forward = np.zeros_like(up)
     for leg in legs:
-        hip, knee, ankle = (poses[:, leg[k]] for k in ("proximal", "middle", "distal"))  # type: ignore[index]
+        hip, knee, ankle = (poses[:, leg[k]] for k in ("proximal", "middle", "distal"))
         along = normalize(ankle - hip)
         bend = knee - hip
         forward += bend - np.sum(bend * along, axis=-1, keepdims=True) * along
         if leg["end"] is not None:
             forward += poses[:, leg["end"]] - ankle
-    lateral = poses[:, legs[0]["proximal"]] - poses[:, legs[1]["proximal"]]  # type: ignore[index]
+    lateral = poses[:, legs[0]["proximal"]] - poses[:, legs[1]["proximal"]]
     shown = np.linalg.norm(lateral, axis=-1) * np.linalg.norm(np.cross(up, forward), axis=-1)
     return float(np.sum(lateral * np.cross(up, forward)) / max(float(np.sum(shown)), 1e-300))
 
@@ -440,7 +441,7 @@ def _stands(pose: F64, pelvis: int, thorax: int,
             legs: tuple[dict[str, int | None], dict[str, int | None]]) -> bool:
     """Whether both legs point away from the spine (within 60 degrees) in ``pose`` (n_joints, 3)."""
     up = normalize(pose[thorax] - pose[pelvis])
-    return all(float(np.dot(up, normalize(pose[leg["distal"]] - pose[leg["proximal"]]))) < -0.5  # type: ignore[index]
+    return all(float(np.dot(up, normalize(pose[leg["distal"]] - pose[leg["proximal"]]))) < -0.5
                for leg in legs)
 
 
@@ -493,8 +494,8 @@ def structural_map(skeleton: BvhSkeleton, poses: F64 | None = None,
             if leftness < 0.0:
                 leg_parts = leg_parts[::-1]
             # The left arm is the one on the left hip's side.
-            lateral = geometry[:, leg_parts[0]["proximal"]] - geometry[:, leg_parts[1]["proximal"]]  # type: ignore[index]
-            across = geometry[:, arm_parts[0]["proximal"]] - geometry[:, arm_parts[1]["proximal"]]  # type: ignore[index]
+            lateral = geometry[:, leg_parts[0]["proximal"]] - geometry[:, leg_parts[1]["proximal"]]
+            across = geometry[:, arm_parts[0]["proximal"]] - geometry[:, arm_parts[1]["proximal"]]
             if float(np.sum(lateral * across)) < 0.0:
                 arm_parts = arm_parts[::-1]
             for side, leg, arm in zip("lr", leg_parts, arm_parts):

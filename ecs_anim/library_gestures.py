@@ -74,8 +74,8 @@ A = 0.571 m) that the files are written on:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -84,7 +84,8 @@ from .library import FPS, _lower_pelvis_to_reach, _place_legs
 from .morphology import Morphology
 from .normalized import limb_frames, two_bone_middle
 from .rotations import normalize, rot_axis
-from .skeleton import JOINT_INDEX as J, N_JOINTS
+from .skeleton import JOINT_INDEX as J
+from .skeleton import N_JOINTS
 
 F64 = NDArray[np.float64]
 Key = tuple[float, Sequence[float]]
@@ -199,7 +200,7 @@ class Gesture:
     arms_in: str = "thorax"  # or "heading": wrist and elbow keys in the upright heading frame
 
     def n_frames(self) -> int:
-        n = int(round(self.duration_s * FPS))
+        n = round(self.duration_s * FPS)
         return n if self.loop else n + 1  # one-shots end exactly on their last key
 
     def channels(self, t: F64) -> dict[str, F64]:

@@ -139,7 +139,7 @@ class Morphology:
     @property
     def leg_length(self) -> float:
         """Mean of left and right thigh + shank: the unit of normalized root positions (m)."""
-        return leg_length(self.lengths[None])[0].item()
+        return float(leg_length(self.lengths[None])[0])
 
     @property
     def stature(self) -> float:
@@ -251,7 +251,8 @@ def centres_of_mass(positions: F64, masses: F64, com_fraction: F64) -> F64:
     prox = np.array([JOINT_INDEX[s[1]] for s in MASS_SEGMENTS])
     dist = np.array([JOINT_INDEX[s[2]] for s in MASS_SEGMENTS])
     seg_com = positions[:, prox] + com_fraction[..., None] * (positions[:, dist] - positions[:, prox])
-    return np.einsum("ns,nsc->nc", masses, seg_com) / masses.sum(axis=1, keepdims=True)
+    com: F64 = np.einsum("ns,nsc->nc", masses, seg_com) / masses.sum(axis=1, keepdims=True)
+    return com
 
 
 def centre_of_mass(positions: F64, morph: Morphology) -> F64:
@@ -259,7 +260,8 @@ def centre_of_mass(positions: F64, morph: Morphology) -> F64:
     masses, frac, prox, dist = segment_mass_table(morph)
     seg_com = positions[..., prox, :] + frac[:, None] * (positions[..., dist, :]
                                                          - positions[..., prox, :])
-    return np.einsum("s,...sc->...c", masses, seg_com) / masses.sum()
+    com: F64 = np.einsum("s,...sc->...c", masses, seg_com) / masses.sum()
+    return com
 
 
 #: Names a length may be given by: every segment, and each bilateral one without _l/_r.

@@ -34,7 +34,9 @@ from .rotations import (
     rot_axis,
     yaw_of,
 )
-from .skeleton import BONE_JOINTS, JOINT_INDEX as J, LENGTH_INDEX as L, N_JOINTS, N_LENGTHS
+from .skeleton import BONE_JOINTS, N_JOINTS, N_LENGTHS
+from .skeleton import JOINT_INDEX as J
+from .skeleton import LENGTH_INDEX as L
 
 F64 = NDArray[np.float64]
 
@@ -130,11 +132,13 @@ DIRECTION_FIELDS = ("hip_dir", "foot_dir", "neck_dir", "head_top_dir", "clavicle
 
 def _in_frame(frame: F64, v: F64) -> F64:
     """Express world vectors in a frame: frame^T v. frame (..., 3, 3), v (..., 3)."""
-    return np.einsum("...ji,...j->...i", frame, v)
+    in_frame: F64 = np.einsum("...ji,...j->...i", frame, v)
+    return in_frame
 
 
 def _to_world(frame: F64, v: F64) -> F64:
-    return np.einsum("...ij,...j->...i", frame, v)
+    in_world: F64 = np.einsum("...ij,...j->...i", frame, v)
+    return in_world
 
 
 def _swap(x: F64) -> F64:

@@ -19,7 +19,8 @@ def normalize(v: F64) -> F64:
     """Unit vectors (or quaternions) along the last axis; zero ones stay zero.
     Shape (..., k) -> (..., k)."""
     n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.maximum(n, TINY)
+    unit: F64 = v / np.maximum(n, TINY)
+    return unit
 
 
 def rot_axis(axis: int, angle: F64) -> F64:
@@ -75,7 +76,8 @@ def matrix_to_euler(matrix: F64, order: str) -> F64:
     t1_locked = np.arctan2(sign * m[..., c, b], m[..., b, b])
     t1 = np.where(regular, t1, t1_locked)
     t3 = np.where(regular, t3, 0.0)
-    return np.rad2deg(np.stack([t1, t2, t3], axis=-1))
+    degrees: F64 = np.rad2deg(np.stack([t1, t2, t3], axis=-1))
+    return degrees
 
 
 def quat_from_matrix(matrix: F64) -> F64:
@@ -103,7 +105,8 @@ def quat_from_matrix(matrix: F64) -> F64:
     best = np.argmax(diag, axis=-1)
     q = np.take_along_axis(cands, best[..., None, None], axis=-2)[..., 0, :]
     q = q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), TINY)
-    return np.where(q[..., 3:4] < 0.0, -q, q)
+    positive_w: F64 = np.where(q[..., 3:4] < 0.0, -q, q)
+    return positive_w
 
 
 def matrix_from_quat(quat: F64) -> F64:
@@ -167,7 +170,7 @@ def rotation_between(a: F64, b: F64) -> F64:
     kx[..., 2, 0], kx[..., 2, 1] = -axis[..., 1], axis[..., 0]
     eye = np.broadcast_to(np.eye(3), kx.shape)
     denom = np.maximum(1.0 + c, 1e-12)[..., None, None]
-    out = eye + kx + kx @ kx / denom
+    out: F64 = eye + kx + kx @ kx / denom
     # Opposite directions: rotate by pi about any axis perpendicular to a.
     opposite = (c < -1.0 + 1e-9) & (s < 1e-6)
     if np.any(opposite):

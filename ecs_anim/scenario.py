@@ -20,7 +20,15 @@ from yaml import Node
 
 from .components import MotionPlayer, Placement, QueuedClip
 from .constraints import Activation, ConstraintSpec
-from .errors import EcsAnimError, InputError, NumberList, compose_yaml, expanded_size, listed, quoted
+from .errors import (
+    EcsAnimError,
+    InputError,
+    NumberList,
+    compose_yaml,
+    expanded_size,
+    listed,
+    quoted,
+)
 from .ground import Bumps, Combined, Ground, HeightGrid, Plane, Slope, Stairs
 from .morphology import LENGTH_KEYS, PRESET_SPECS, Morphology, with_lengths_m
 from .motion import NormalizedMotion, load_nmo
@@ -527,7 +535,7 @@ def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
     tk = r.mapping(keys["target"], f"{where}.target",
                    {"world_m": False, "direction": False, "character": False, "point": False,
                     "joint": False, "fraction": False, "offset_m": False})
-    given = [k for k in ("world_m", "direction", "character") if k in tk]
+    given: list[str] = [k for k in ("world_m", "direction", "character") if k in tk]
     if not given and ("point" in tk or "joint" in tk):
         given = ["self"]
     if in_motion and given != ["self"]:
@@ -593,7 +601,7 @@ def _com_target(r: _Reader, keys: dict[str, Node], where: str,
 def _compose(path: Path, what: str, label: str) -> Node:
     """The file's YAML tree (long number lists read in one go), refused when empty or when it holds
     more than :data:`MAX_YAML_VALUES` values with its aliases expanded."""
-    root = compose_yaml(path, what, number_lists=True)
+    root: Node | None = compose_yaml(path, what, number_lists=True)
     if root is None:
         raise InputError(path, f"{label} is empty", 1)
     try:
@@ -715,7 +723,7 @@ def load_scenario(path: str | Path) -> Scenario:
             if "position_m" in keys else (0.0, 0.0)
         heading = r.number(keys["heading_deg"], f"{where}.heading_deg", -360, 360, "degrees") \
             if "heading_deg" in keys else 0.0
-        constraints = []
+        constraints: list[ConstraintEntry] = []
         own = r.sequence(keys["constraints"], f"{where}.constraints") if "constraints" in keys else []
         n_constraints += len(own)
         if n_constraints > MAX_CONSTRAINTS:
