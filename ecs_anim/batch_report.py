@@ -213,7 +213,7 @@ def plot_by_group(jobs: Sequence[Job], group: str) -> Figure:
     height = 1.6 + 0.32 * len(rows) + (0.4 if len(colours) > 1 else 0.0)
     fig, axes = plt.subplots(1, len(GROUP_PANELS), figsize=(13, height), sharey=True,
                              squeeze=False)
-    for ax, key in zip(axes[0], GROUP_PANELS):
+    for ax, key in zip(axes[0], GROUP_PANELS, strict=False):
         _strip_panel(ax, measured, key, rows, lambda j: str(j.get(group, "")),
                      lambda j: str(j.get(colour_key) or ""), colours)
     if group == "clip" and len(worst) > len(rows):
@@ -246,7 +246,7 @@ def plot_against_stature(jobs: Sequence[Job]) -> Figure:
     fig, axes = plt.subplots(lines, columns, figsize=(4.2 * columns, 3.3 * lines), squeeze=False)
     for ax in axes.flat[len(panels):]:
         ax.set_visible(False)
-    for ax, (key, label) in zip(axes.flat, panels):
+    for ax, (key, label) in zip(axes.flat, panels, strict=False):
         series: dict[tuple[str, str], list[tuple[float, float]]] = {}
         at_stature: dict[float, list[float]] = {}
         for j in measured:
@@ -261,7 +261,7 @@ def plot_against_stature(jobs: Sequence[Job]) -> Figure:
                                          colors="#a0aec0", linewidths=0.8, alpha=alpha, zorder=1))
         every = [p for points in series.values() for p in points]
         if every:
-            ax.scatter(*zip(*every), s=9, color="#4a5568", alpha=min(0.6, 3 * alpha),
+            ax.scatter(*zip(*every, strict=False), s=9, color="#4a5568", alpha=min(0.6, 3 * alpha),
                        edgecolors="none", zorder=2)
         if at_stature:
             xs = sorted(at_stature)
@@ -299,7 +299,7 @@ def _same_contacts(a: Job, b: Job, tolerance_s: float = 0.05) -> bool:
     for foot in ("left", "right"):
         x, y = _intervals(a, foot), _intervals(b, foot)
         if len(x) != len(y) or any(abs(p - q) > tolerance_s
-                                   for s, t in zip(x, y) for p, q in zip(s, t)):
+                                   for s, t in zip(x, y, strict=False) for p, q in zip(s, t, strict=False)):
             return False
     return True
 

@@ -17,12 +17,12 @@ allowed to move for it.
 
 from __future__ import annotations
 
-import difflib
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
+from .errors import did_you_mean
 from .normalized import DecodedPose
 from .rotations import frame_from_axes
 from .skeleton import BONE_JOINTS, JOINTS, LENGTH_INDEX, LENGTHS
@@ -60,7 +60,7 @@ SEGMENTS.update({
 })
 
 #: A joint used as a point: the bone it ends (fraction 1).
-JOINT_AS_POINT = {JOINTS[b]: name for name, (a, b) in zip(LENGTHS, BONE_JOINTS)
+JOINT_AS_POINT = {JOINTS[b]: name for name, (a, b) in zip(LENGTHS, BONE_JOINTS, strict=False)
                   if b >= 0 and name in SEGMENTS}
 
 #: Chains a point's group may extend to: its own group, plus the trunk above the head and arms
@@ -107,7 +107,7 @@ def body_point(name: str, fraction: float | None = None,
 
     A name that is both (``head``, ``neck``, ``hand_l``) is the joint unless a ``fraction`` is
     given; a segment without one is its middle (0.5)."""
-    if name in JOINT_AS_POINT and (fraction is None and not segment or name not in SEGMENTS):
+    if name in JOINT_AS_POINT and ((fraction is None and not segment) or name not in SEGMENTS):
         if fraction is not None:
             raise ValueError(f"{name!r} is a joint; give fraction with a segment "
                              f"(e.g. {JOINT_AS_POINT[name]!r})")
@@ -122,8 +122,7 @@ def body_point(name: str, fraction: float | None = None,
                              f"control moves; constrain another point")
         names = sorted(set(SEGMENTS) | set(JOINT_AS_POINT)
                        | (set(TARGET_ONLY_JOINTS) | set(TARGET_ONLY_SEGMENTS) if as_target else set()))
-        close = difflib.get_close_matches(name, names, n=1)
-        hint = f"; did you mean {close[0]!r}?" if close else ""
+        hint = did_you_mean(name, names)
         raise ValueError(f"unknown body point {name!r}{hint} (segments: {', '.join(sorted(SEGMENTS))}; "
                          f"or a joint: {', '.join(sorted(JOINT_AS_POINT))})")
     if not (np.isfinite(fraction) and 0.0 <= fraction <= 1.0):

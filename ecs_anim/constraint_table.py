@@ -73,7 +73,7 @@ class Area:
         values = self.low_m + self.high_m + self.normal + (self.radius_m,)
         if not all(np.isfinite(v) for v in values):
             raise ValueError("area values must be finite")
-        if self.shape == "box" and any(lo > hi for lo, hi in zip(self.low_m, self.high_m)):
+        if self.shape == "box" and any(lo > hi for lo, hi in zip(self.low_m, self.high_m, strict=False)):
             raise ValueError(f"box low_m {self.low_m} must be below high_m {self.high_m}")
         if self.shape == "sphere" and self.radius_m <= 0:
             raise ValueError("sphere radius_m must be > 0")
@@ -255,11 +255,11 @@ class ConstraintTable:
         and renumber the rows after it (the store deletes that row too). Returns the deleted
         constraints' names; the indices of the constraints after them move down."""
         gone = (self.owner == row) | ((self.target_kind == TARGET_BODY) & (self.target_row == row))
-        names = [n for n, g in zip(self.names, gone) if g]
+        names = [n for n, g in zip(self.names, gone, strict=False) if g]
         for key in self.__dataclass_fields__:
             if isinstance(getattr(self, key), np.ndarray):
                 setattr(self, key, getattr(self, key)[~gone])
-        self.names = [n for n, g in zip(self.names, gone) if not g]
+        self.names = [n for n, g in zip(self.names, gone, strict=False) if not g]
         self.owner[self.owner > row] -= 1
         self.target_row[(self.target_kind == TARGET_BODY) & (self.target_row > row)] -= 1
         return names

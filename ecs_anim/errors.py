@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import difflib
 import re
 from collections.abc import Iterable
 from pathlib import Path
@@ -10,6 +11,15 @@ from typing import Any
 import numpy as np
 import yaml
 from numpy.typing import NDArray
+
+
+def did_you_mean(word: str, choices: Iterable[str], parenthesized: bool = False) -> str:
+    """The hint for a misspelt name: ``; did you mean 'x'?`` (or `` (did you mean 'x'?)``) with
+    the closest of ``choices``, or "" when none is close (difflib's default cutoff, 0.6)."""
+    close = difflib.get_close_matches(word, list(choices), n=1)
+    if not close:
+        return ""
+    return f" (did you mean {close[0]!r}?)" if parenthesized else f"; did you mean {close[0]!r}?"
 
 
 class EcsAnimError(Exception):

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .bvh import BvhWriteJoint, format_bvh, read_bvh
-from .errors import EcsAnimError, InputError
+from .errors import EcsAnimError, InputError, did_you_mean
 from .files import atomic_output, output_problem
 from .importing import YUP_TO_ZUP, canonical_clip, source_morphology
 from .morphology import PRESET_SPECS, Morphology, load_morphology_yaml
@@ -55,9 +55,7 @@ def resolve_morphology(spec: str, motion: NormalizedMotion) -> tuple[Morphology,
             raise
         except (EcsAnimError, ValueError) as exc:  # unmappable, unknown unit, zero-length bone
             raise InputError(path, f"cannot take a morphology from this skeleton: {exc}") from None
-    import difflib
-    close = difflib.get_close_matches(spec, list(PRESET_SPECS) + ["source"], n=1)
-    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    hint = did_you_mean(spec, list(PRESET_SPECS) + ["source"], parenthesized=True)
     raise EcsAnimError(f"--morphology {spec}: not 'source', a preset{hint}, a .yaml or a .bvh file; "
                        f"presets: {', '.join(PRESET_SPECS)}")
 

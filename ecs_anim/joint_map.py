@@ -27,7 +27,7 @@ import yaml
 from numpy.typing import NDArray
 
 from .bvh import BvhSkeleton, rest_positions
-from .errors import InputError, MappingError, compose_yaml, listed, quoted
+from .errors import InputError, MappingError, compose_yaml, did_you_mean, listed, quoted
 from .rotations import normalize
 from .skeleton import JOINT_INDEX, JOINTS, PARENTS
 
@@ -498,7 +498,7 @@ def structural_map(skeleton: BvhSkeleton, poses: F64 | None = None,
             across = geometry[:, arm_parts[0]["proximal"]] - geometry[:, arm_parts[1]["proximal"]]
             if float(np.sum(lateral * across)) < 0.0:
                 arm_parts = arm_parts[::-1]
-            for side, leg, arm in zip("lr", leg_parts, arm_parts):
+            for side, leg, arm in zip("lr", leg_parts, arm_parts, strict=False):
                 found |= {f"hip_{side}": leg["proximal"], f"knee_{side}": leg["middle"],
                           f"ankle_{side}": leg["distal"],
                           f"shoulder_{side}": arm["proximal"], f"elbow_{side}": arm["middle"],
@@ -595,8 +595,7 @@ def load_user_map(path: str | Path) -> tuple[str | None, dict[str, str], dict[st
                 k = k_node.value
                 kline = k_node.start_mark.line + 1
                 if k not in JOINTS:
-                    close = difflib.get_close_matches(k, JOINTS, n=1)
-                    hint = f" (did you mean {close[0]!r}?)" if close else ""
+                    hint = did_you_mean(k, JOINTS, parenthesized=True)
                     raise InputError(path, f"joints.{k}: unknown canonical joint{hint}; "
                                            f"canonical joints are {listed(JOINTS)} (all in "
                                            "docs/format.md)", kline)
@@ -605,8 +604,7 @@ def load_user_map(path: str | Path) -> tuple[str | None, dict[str, str], dict[st
                 joints[k] = str(v_node.value)
                 lines[k] = kline
         else:
-            close = difflib.get_close_matches(str(key), ["base", "joints"], n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            hint = did_you_mean(str(key), ["base", "joints"], parenthesized=True)
             raise InputError(path, f"{key}: unknown key{hint}; expected 'base' and 'joints'", line)
     return base, joints, lines
 
@@ -637,8 +635,7 @@ def map_skeleton(skeleton: BvhSkeleton, map_spec: str | None = None,
             user_path = map_spec
             base, user, user_lines = load_user_map(map_spec)
         else:
-            close = difflib.get_close_matches(map_spec, list(PRESETS), n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            hint = did_you_mean(map_spec, list(PRESETS), parenthesized=True)
             raise MappingError(f"--map {map_spec}: not a preset nor a YAML file{hint}; presets: "
                                f"{', '.join(PRESETS)}")
     if base is not None:

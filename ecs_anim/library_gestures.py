@@ -76,6 +76,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -537,7 +538,7 @@ GESTURE_GENERATORS = {name: _generator(g) for name, g in GESTURES.items()}
 
 #: Key times of each gesture (seconds from the clip's start), for timing constraint activations;
 #: distances as in the module docstring. ``tests/test_gestures.py`` checks them on the files.
-GESTURE_TIMINGS: dict[str, dict[str, object]] = {
+GESTURE_TIMINGS: dict[str, dict[str, Any]] = {
     "guard": {"duration_s": 2.4, "loop": True},
     "kick": {"duration_s": 1.5, "loop": False, "kicking_ankle": "ankle_r",
              "weight_shifted_s": 0.28, "lift_off_s": 0.30, "chamber_s": 0.50, "peak_s": 0.70,

@@ -283,31 +283,12 @@ def two_bone_middle(limb2world: F64, root: F64, upper: F64, lower: F64, reach: F
     return middle, end
 
 
-def catmull_rom(control: F64, t: F64) -> F64:
-    """Uniform Catmull-Rom spline through ``control`` (..., 4, 3) at parameters ``t`` (..., K).
-
-    ``t`` in [0, 3] runs through the four control points (at 0, 1, 2, 3); end tangents come from
-    mirrored phantom points; beyond 3 the curve continues straight along its end tangent.
-    Returns (..., K, 3).
-    """
-    q = control
-    padded = np.concatenate([2 * q[..., :1, :] - q[..., 1:2, :], q,
-                             2 * q[..., 3:, :] - q[..., 2:3, :]], axis=-2)  # (..., 6, 3)
-    span = np.clip(np.floor(t), 0, 2).astype(np.int64)
-    u = np.clip(t - span, 0.0, 1.0)[..., None]
-    idx = span[..., None] + np.arange(4)  # (..., K, 4) into padded
-    pts = np.take_along_axis(padded[..., None, :, :], idx[..., None], axis=-2)  # (..., K, 4, 3)
-    p0, p1, p2, p3 = pts[..., 0, :], pts[..., 1, :], pts[..., 2, :], pts[..., 3, :]
-    curve = 0.5 * (2 * p1 + (p2 - p0) * u + (2 * p0 - 5 * p1 + 4 * p2 - p3) * u**2
-                   + (3 * p1 - p0 - 3 * p2 + p3) * u**3)
-    beyond = (t > 3.0)[..., None]
-    extension = q[..., None, 3, :] + (t[..., None] - 3.0) * (q[..., None, 3, :] - q[..., None, 2, :])
-    return np.where(beyond, extension, curve)
-
-
 def _span_coefficients(control: F64) -> F64:
-    """Polynomial coefficients of the three spans of :func:`catmull_rom`, plus the straight
-    extension as a fourth span: (..., 4 spans, 4 powers, 3) with point = Σ c_k u^k."""
+    """Polynomial coefficients of the uniform Catmull-Rom spline through ``control`` (..., 4, 3).
+
+    ``t`` in [0, 3] runs through the four control points (at 0, 1, 2, 3) in three spans; end
+    tangents come from mirrored phantom points; beyond 3 the curve continues straight along its
+    end tangent, the fourth span. Returns (..., 4 spans, 4 powers, 3) with point = Σ c_k u^k."""
     q = control
     padded = np.concatenate([2 * q[..., :1, :] - q[..., 1:2, :], q,
                              2 * q[..., 3:, :] - q[..., 2:3, :]], axis=-2)  # (..., 6, 3)

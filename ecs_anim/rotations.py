@@ -23,7 +23,7 @@ def normalize(v: F64) -> F64:
     return unit
 
 
-def rot_axis(axis: int, angle: F64) -> F64:
+def rot_axis(axis: int, angle: F64 | float) -> F64:
     """Rotations by ``angle`` (radians, shape (...)) about a coordinate axis (0=x, 1=y, 2=z).
 
     Returns shape (..., 3, 3).
@@ -38,6 +38,24 @@ def rot_axis(axis: int, angle: F64) -> F64:
     out[..., i, j] = -s
     out[..., j, i] = s
     return out
+
+
+def cross_matrix(k: F64) -> F64:
+    """The matrices ``[k]x`` with ``[k]x @ v == cross(k, v)``. Shape (..., 3) -> (..., 3, 3)."""
+    kx = np.zeros(k.shape[:-1] + (3, 3))
+    kx[..., 0, 1], kx[..., 0, 2] = -k[..., 2], k[..., 1]
+    kx[..., 1, 0], kx[..., 1, 2] = k[..., 2], -k[..., 0]
+    kx[..., 2, 0], kx[..., 2, 1] = -k[..., 1], k[..., 0]
+    return kx
+
+
+def axis_angle(axis: F64, angle: F64) -> F64:
+    """Rotations by ``angle`` (...) radians about unit ``axis`` (..., 3) (Rodrigues: R = I +
+    sin(angle) [k]x + (1 - cos(angle)) [k]x^2). Returns (..., 3, 3)."""
+    kx = cross_matrix(axis)
+    s, c = np.sin(angle)[..., None, None], np.cos(angle)[..., None, None]
+    rotation: F64 = np.eye(3) + s * kx + (1.0 - c) * (kx @ kx)
+    return rotation
 
 
 def euler_to_matrix(angles_deg: F64, order: str) -> F64:
@@ -163,11 +181,8 @@ def rotation_between(a: F64, b: F64) -> F64:
     axis = np.cross(a, b)
     s = np.linalg.norm(axis, axis=-1)
     c = np.sum(a * b, axis=-1)
-    # Rodrigues with k = axis (unnormalized): R = I + [k]x + [k]x^2 / (1 + c).
-    kx = np.zeros(a.shape[:-1] + (3, 3))
-    kx[..., 0, 1], kx[..., 0, 2] = -axis[..., 2], axis[..., 1]
-    kx[..., 1, 0], kx[..., 1, 2] = axis[..., 2], -axis[..., 0]
-    kx[..., 2, 0], kx[..., 2, 1] = -axis[..., 1], axis[..., 0]
+    # Rodrigues with k = axis (unnormalized, |k| = sin): R = I + [k]x + [k]x^2 / (1 + c).
+    kx = cross_matrix(axis)
     eye = np.broadcast_to(np.eye(3), kx.shape)
     denom = np.maximum(1.0 + c, 1e-12)[..., None, None]
     out: F64 = eye + kx + kx @ kx / denom
@@ -186,7 +201,7 @@ def yaw_of(frame: F64) -> F64:
     return np.arctan2(frame[..., 1, 0], frame[..., 0, 0])
 
 
-def slerp(q0: F64, q1: F64, t: F64) -> F64:
+def slerp(q0: F64, q1: F64, t: F64 | float) -> F64:
     """Spherical interpolation of quaternions (x, y, z, w) along the shorter arc.
 
     ``q0``, ``q1`` shape (..., 4); ``t`` shape (...) in [0, 1]. Returns (..., 4).

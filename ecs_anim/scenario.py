@@ -7,9 +7,7 @@ tick. The schema is documented in ``docs/scenarios.md``.
 
 from __future__ import annotations
 
-import difflib
 import math
-import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,24 +23,20 @@ from .errors import (
     InputError,
     NumberList,
     compose_yaml,
+    did_you_mean,
     expanded_size,
     listed,
     quoted,
 )
+from .files import MAX_NAME_LENGTH, NAME_PATTERN
 from .ground import Bumps, Combined, Ground, HeightGrid, Plane, Slope, Stairs
 from .morphology import LENGTH_KEYS, PRESET_SPECS, Morphology, with_lengths_m
 from .motion import NormalizedMotion, load_nmo
 from .simulation import MAX_COORDINATE_M
 from .store import MAX_QUEUE
 
-#: Names of characters and motions: they name files, so no path separators or leading dot.
-_NAME = re.compile(r"[A-Za-z0-9_\-][A-Za-z0-9_.\-]*")
-
-
 #: The longest scenario (and ``ecs-anim run --seconds``): a day.
 MAX_DURATION_S = 86400.0
-#: Longest character name (it names exported files).
-MAX_NAME_LENGTH = 64
 #: How far a desired centre of mass may lie from the character's position (over its feet).
 MAX_COM_OFFSET_M = 1.0
 #: How far a world target may lie from its character's start, and a table from the nearest
@@ -168,8 +162,7 @@ class _Reader:
             key = str(key_node.value)
             here = f"{where}.{key}" if where else key
             if key not in allowed:
-                close = difflib.get_close_matches(key, list(allowed), n=1, cutoff=0.6)
-                hint = f"; did you mean {close[0]!r}?" if close else ""
+                hint = did_you_mean(key, list(allowed))
                 raise self.fail(key_node, here, f"unknown key{hint} (expected one of "
                                                f"{', '.join(allowed)})")
             if key in out:
@@ -292,8 +285,7 @@ def _ground(r: _Reader, node: Node, where: str, inside: tuple[int, ...] = ()) ->
                                   "combined)")
     kind = r.string(type_node, f"{where}.type")
     if kind not in GROUND_KEYS:
-        close = difflib.get_close_matches(kind, list(GROUND_KEYS), n=1)
-        hint = f"; did you mean {close[0]!r}?" if close else ""
+        hint = did_you_mean(kind, list(GROUND_KEYS))
         raise r.fail(type_node, f"{where}.type", f"unknown ground {kind!r}{hint} (expected one of "
                                                  f"{', '.join(GROUND_KEYS)})")
     keys = r.mapping(node, where, GROUND_KEYS[kind])
@@ -357,8 +349,7 @@ def _morphology(r: _Reader, node: Node, where: str) -> Morphology:
     if isinstance(node, yaml.ScalarNode):
         name = r.string(node, where)
         if name not in PRESET_SPECS:
-            close = difflib.get_close_matches(name, list(PRESET_SPECS), n=1)
-            hint = f"; did you mean {close[0]!r}?" if close else ""
+            hint = did_you_mean(name, list(PRESET_SPECS))
             raise r.fail(node, where, f"unknown morphology preset {name!r}{hint} (presets: "
                                       f"{', '.join(PRESET_SPECS)}, or a mapping with stature_m / "
                                       "lengths_m)")
@@ -437,8 +428,7 @@ def _fill_absent(r: _Reader, motions: dict[str, NormalizedMotion], name: str, no
     where = f"motions.{name}.absent_from"
     other = r.string(node, where)
     if other == name or other not in motions:
-        close = difflib.get_close_matches(other, [m for m in motions if m != name], n=1)
-        hint = f"; did you mean {close[0]!r}?" if close else ""
+        hint = did_you_mean(other, [m for m in motions if m != name])
         raise r.fail(node, where, f"no other motion named {other!r}{hint}")
     if not motions[name].info.get("absent"):
         raise r.fail(node, where, f"{name!r} has every body part: nothing to take from {other!r}")
@@ -469,8 +459,7 @@ def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
     name = r.string(keys["name"], f"{where}.name")
     kind = r.string(keys["kind"], f"{where}.kind") if "kind" in keys else "position"
     if kind not in KIND_NAMES:
-        close = difflib.get_close_matches(kind, list(KIND_NAMES), n=1)
-        hint = f"; did you mean {close[0]!r}?" if close else ""
+        hint = did_you_mean(kind, list(KIND_NAMES))
         raise r.fail(keys["kind"], f"{where}.kind", f"unknown kind {kind!r}{hint} "
                                                     f"(kinds: {', '.join(KIND_NAMES)})")
 
@@ -504,8 +493,7 @@ def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
         for j, gn in enumerate(r.sequence(keys["chain"], f"{where}.chain")):
             group = r.string(gn, f"{where}.chain[{j}]")
             if group not in GROUPS:
-                close = difflib.get_close_matches(group, list(GROUPS), n=1)
-                hint = f"; did you mean {close[0]!r}?" if close else ""
+                hint = did_you_mean(group, list(GROUPS))
                 raise r.fail(gn, f"{where}.chain[{j}]", f"unknown group {group!r}{hint} "
                                                        f"(groups: {', '.join(GROUPS)})")
             chain.append(group)
@@ -658,7 +646,7 @@ def load_scenario(path: str | Path) -> Scenario:
     fills: list[tuple[str, Node]] = []
     read: dict[Path, NormalizedMotion] = {}
     for key_node, value in motion_nodes.value:
-        if not isinstance(key_node, yaml.ScalarNode) or not _NAME.fullmatch(str(key_node.value)):
+        if not isinstance(key_node, yaml.ScalarNode) or not NAME_PATTERN.fullmatch(str(key_node.value)):
             raise r.fail(key_node, "motions", "motion names must be plain names (letters, digits, "
                                               "_ . -)")
         name = str(key_node.value)
@@ -683,7 +671,7 @@ def load_scenario(path: str | Path) -> Scenario:
         where = f"characters[{i}]"
         keys = r.mapping(node, where, CHARACTER_KEYS)
         name = r.string(keys["name"], f"{where}.name")
-        if not _NAME.fullmatch(name):
+        if not NAME_PATTERN.fullmatch(name):
             raise r.fail(keys["name"], f"{where}.name", f"{name!r}: a character name names its "
                          "exported files, so it must be letters, digits, _ . - (not starting with .)")
         if len(name) > MAX_NAME_LENGTH:
@@ -696,8 +684,7 @@ def load_scenario(path: str | Path) -> Scenario:
         def clip(n: Node, w: str) -> str:
             c = r.string(n, w)
             if c not in motions:
-                close = difflib.get_close_matches(c, list(motions), n=1)
-                hint = f"; did you mean {close[0]!r}?" if close else ""
+                hint = did_you_mean(c, list(motions))
                 raise r.fail(n, w, f"unknown motion {c!r}{hint} (motions: {', '.join(motions)})")
             return c
 
@@ -754,8 +741,7 @@ def load_scenario(path: str | Path) -> Scenario:
         raise r.fail(top["characters"], "characters", "expected at least one character")
     for other, node, cwhere in pending_targets:
         if other not in names:
-            close = difflib.get_close_matches(str(other), sorted(names), n=1)
-            hint = f"; did you mean {close[0]!r}?" if close else ""
+            hint = did_you_mean(str(other), sorted(names))
             raise r.fail(node, f"{cwhere}.target.character", f"no character named {other!r}{hint}")
     camera: dict[str, Any] = {}
     if "camera" in top:
