@@ -129,7 +129,8 @@ def body_point(name: str, fraction: float | None = None,
         raise ValueError(f"fraction along {seg!r} must be in [0, 1], got {fraction}")
     if not all(np.isfinite(v) and abs(v) <= 10.0 for v in offset_m):
         raise ValueError(f"offset_m {offset_m} must be finite and within 10 m")
-    return BodyPoint(LENGTH_INDEX[seg], float(fraction), tuple(float(v) for v in offset_m))  # type: ignore[arg-type]
+    x, y, z = (float(v) for v in offset_m)
+    return BodyPoint(LENGTH_INDEX[seg], float(fraction), (x, y, z))
 
 
 #: Per length index: proximal and distal joints, group, bone, frame (-1 where not a point).

@@ -268,6 +268,16 @@ class DecodedPose:
                            self.head2world[index], self.leg2world[index], self.arm2world[index])
 
 
+def two_sphere_middle(upper: F64, lower: F64, span: F64, tiny: float = 1e-12) -> tuple[F64, F64]:
+    """Where the middle joint (knee, elbow) of a limb lies in its half-plane: the intersection of
+    the spheres of radius ``upper`` about the root and ``lower`` about the end, ``span`` from the
+    root along z. Returns (y, z), each (...), metres; ``span`` (...) should lie within
+    ``[|upper - lower|, upper + lower]`` (divisions use at least ``tiny``)."""
+    z = (upper**2 - lower**2 + span**2) / (2.0 * np.maximum(span, tiny))
+    y = np.sqrt(np.maximum(upper**2 - z**2, 0.0))
+    return y, z
+
+
 def two_bone_middle(limb2world: F64, root: F64, upper: F64, lower: F64, reach: F64) -> tuple[F64, F64]:
     """Knee or elbow by the two-sphere intersection in the half-plane (paper §8).
 
@@ -275,9 +285,7 @@ def two_bone_middle(limb2world: F64, root: F64, upper: F64, lower: F64, reach: F
     Returns (middle joint, end joint), each (..., 3). Shapes: frames (..., 3, 3), others (...).
     """
     reach = np.clip(reach, np.abs(upper - lower), upper + lower)
-    safe = np.maximum(reach, 1e-9)
-    z = (upper**2 - lower**2 + reach**2) / (2.0 * safe)
-    y = np.sqrt(np.maximum(upper**2 - z**2, 0.0))
+    y, z = two_sphere_middle(upper, lower, reach, 1e-9)
     middle = root + limb2world[..., :, 1] * y[..., None] + limb2world[..., :, 2] * z[..., None]
     end = root + limb2world[..., :, 2] * reach[..., None]
     return middle, end

@@ -32,7 +32,7 @@ from .files import MAX_NAME_LENGTH, NAME_PATTERN
 from .ground import Bumps, Combined, Ground, HeightGrid, Plane, Slope, Stairs
 from .morphology import LENGTH_KEYS, PRESET_SPECS, Morphology, with_lengths_m
 from .motion import NormalizedMotion, load_nmo
-from .simulation import MAX_COORDINATE_M
+from .simulation import MAX_COORDINATE_M, Simulation
 from .store import MAX_QUEUE
 
 #: The longest scenario (and ``ecs-anim run --seconds``): a day.
@@ -247,6 +247,18 @@ class _Reader:
         return tuple(self.number(v, f"{where}[{i}]", -bound, bound, unit=unit)
                      for i, v in enumerate(items))
 
+    def vector3(self, node: Node, where: str, unit: str,
+                bound: float = math.inf) -> tuple[float, float, float]:
+        """:meth:`vector` of three numbers (a point or a direction)."""
+        x, y, z = self.vector(node, where, 3, unit, bound)
+        return (x, y, z)
+
+    def vector2(self, node: Node, where: str, unit: str,
+                bound: float = math.inf) -> tuple[float, float]:
+        """:meth:`vector` of two numbers (a horizontal place or size)."""
+        x, y = self.vector(node, where, 2, unit, bound)
+        return (x, y)
+
     def too_far(self, node: Node, where: str, away_m: float, what: str, reference: str) -> None:
         """Refuse ``what`` lying ``away_m`` from ``reference`` beyond :data:`MAX_TARGET_DISTANCE_M`
         (metres given as millimetres, most likely)."""
@@ -307,7 +319,7 @@ def _ground(r: _Reader, node: Node, where: str, inside: tuple[int, ...] = ()) ->
                      num("wavelength_y_m", 2.0, 0.05, 1e3, "m"), num("z_m", 0.0, unit="m"))
     if kind == "grid":
         heights = _grid_heights(r, keys["heights_m"], f"{where}.heights_m")
-        origin = r.vector(keys["origin_m"], f"{where}.origin_m", 2, "m") if "origin_m" in keys else (0.0, 0.0)
+        origin = r.vector2(keys["origin_m"], f"{where}.origin_m", "m") if "origin_m" in keys else (0.0, 0.0)
         return HeightGrid(heights, r.number(keys["cell_m"], f"{where}.cell_m", 1e-3, 1e3, "m"),
                           origin[0], origin[1])
     parts = r.sequence(keys["parts"], f"{where}.parts")
@@ -467,12 +479,12 @@ def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
                  as_target: bool = False) -> tuple[str, float | None, tuple[float, float, float]]:
         point = r.string(pkeys[point_key], f"{pwhere}.{point_key}")
         fraction = r.number(pkeys["fraction"], f"{pwhere}.fraction", 0.0, 1.0) if "fraction" in pkeys else None
-        offset = r.vector(pkeys["offset_m"], f"{pwhere}.offset_m", 3, "m", 10.0) if "offset_m" in pkeys else (0.0, 0.0, 0.0)
+        offset = r.vector3(pkeys["offset_m"], f"{pwhere}.offset_m", "m", 10.0) if "offset_m" in pkeys else (0.0, 0.0, 0.0)
         try:
-            body_point(point, fraction, offset, as_target)  # type: ignore[arg-type]
+            body_point(point, fraction, offset, as_target)
         except ValueError as exc:
             raise r.fail(pkeys[point_key], f"{pwhere}.{point_key}", str(exc)) from None
-        return point, fraction, offset  # type: ignore[return-value]
+        return point, fraction, offset
 
     point, fraction, offset = point_of(keys, where, "point")
     priority = r.number(keys["priority"], f"{where}.priority", -1e6, 1e6) if "priority" in keys else 0.0
@@ -504,7 +516,7 @@ def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
                          f"takes distance_m (this one is kind {kind!r})")
         options["distance_m"] = r.number(keys["distance_m"], f"{where}.distance_m", 0.0, 100.0, "m")
     if "axis" in keys:
-        options["axis"] = r.vector(keys["axis"], f"{where}.axis", 3, "", 1e3)
+        options["axis"] = r.vector3(keys["axis"], f"{where}.axis", "", 1e3)
     if "area" in keys:
         ak = r.mapping(keys["area"], f"{where}.area", {"shape": True, "low_m": False, "high_m": False,
                                                        "radius_m": False, "normal": False,
@@ -513,10 +525,10 @@ def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
         try:
             options["area"] = Area(
                 r.string(ak["shape"], f"{aw}.shape"),
-                r.vector(ak["low_m"], f"{aw}.low_m", 3, "m", MAX_TARGET_DISTANCE_M) if "low_m" in ak else (0.0, 0.0, 0.0),  # type: ignore[arg-type]
-                r.vector(ak["high_m"], f"{aw}.high_m", 3, "m", MAX_TARGET_DISTANCE_M) if "high_m" in ak else (0.0, 0.0, 0.0),  # type: ignore[arg-type]
+                r.vector3(ak["low_m"], f"{aw}.low_m", "m", MAX_TARGET_DISTANCE_M) if "low_m" in ak else (0.0, 0.0, 0.0),
+                r.vector3(ak["high_m"], f"{aw}.high_m", "m", MAX_TARGET_DISTANCE_M) if "high_m" in ak else (0.0, 0.0, 0.0),
                 r.number(ak["radius_m"], f"{aw}.radius_m", 0.0, MAX_TARGET_DISTANCE_M, "m") if "radius_m" in ak else 0.0,
-                r.vector(ak["normal"], f"{aw}.normal", 3, "", 1e3) if "normal" in ak else (0.0, 0.0, 1.0),  # type: ignore[arg-type]
+                r.vector3(ak["normal"], f"{aw}.normal", "", 1e3) if "normal" in ak else (0.0, 0.0, 1.0),
                 r.boolean(ak["inside"], f"{aw}.inside") if "inside" in ak else True)
         except ValueError as exc:
             raise r.fail(keys["area"], aw, str(exc)) from None
@@ -542,7 +554,7 @@ def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
             raise r.fail(tk[given[0]], f"{where}.target.{given[0]}",
                          "an orientation aims along direction: [x, y, z] or looks at a character's "
                          "point" if kind == "orientation" else "direction: is for orientation constraints")
-        target_world = r.vector(tk[given[0]], f"{where}.target.{given[0]}", 3, "m", 1e5)
+        target_world = r.vector3(tk[given[0]], f"{where}.target.{given[0]}", "m", 1e5)
         if given[0] == "world_m" and origin_m is not None:
             r.too_far(tk["world_m"], f"{where}.target.world_m",
                       math.dist(target_world, origin_m), "the target",
@@ -559,7 +571,7 @@ def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
     # Everything but the target character's existence, checked now (with this line).
     target = Target(row=0, point=body_point(target_point, options.get("target_fraction"),
                                             options.get("target_offset_m", (0.0, 0.0, 0.0)), True)) \
-        if target_point else Target(world_m=target_world)  # type: ignore[arg-type]
+        if target_point else Target(world_m=target_world)
     checks = {k: v for k, v in options.items() if k in ("chain", "distance_m", "area", "axis")}
     try:
         ConstraintTable().add(name, 0, kind, body_point(point, fraction, offset,
@@ -567,7 +579,7 @@ def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
                               activation, **checks)
     except ValueError as exc:
         raise r.fail(node, where, str(exc)) from None
-    return ConstraintEntry(name, point, priority, activation, target_world, other, target_point,  # type: ignore[arg-type]
+    return ConstraintEntry(name, point, priority, activation, target_world, other, target_point,
                            options), who
 
 
@@ -577,7 +589,7 @@ def _com_target(r: _Reader, keys: dict[str, Node], where: str,
     :data:`MAX_COM_OFFSET_M` of its position."""
     if "com_target_m" not in keys:
         return None
-    xy = r.vector(keys["com_target_m"], f"{where}.com_target_m", 2, "m", 1e5)
+    xy = r.vector2(keys["com_target_m"], f"{where}.com_target_m", "m", 1e5)
     away = math.hypot(xy[0] - position[0], xy[1] - position[1])
     if away > MAX_COM_OFFSET_M:
         raise r.fail(keys["com_target_m"], f"{where}.com_target_m", f"{away:.2f} m from the "
@@ -706,7 +718,7 @@ def load_scenario(path: str | Path) -> Scenario:
             loop=r.boolean(keys["loop"], f"{where}.loop") if "loop" in keys else True,
             start_s=r.number(keys["start_s"], f"{where}.start_s", 0.0, MAX_COORDINATE_M, "s") if "start_s" in keys else 0.0,
             queue=tuple(queue))
-        position = r.vector(keys["position_m"], f"{where}.position_m", 2, "m", 1e5) \
+        position = r.vector2(keys["position_m"], f"{where}.position_m", "m", 1e5) \
             if "position_m" in keys else (0.0, 0.0)
         heading = r.number(keys["heading_deg"], f"{where}.heading_deg", -360, 360, "degrees") \
             if "heading_deg" in keys else 0.0
@@ -754,7 +766,7 @@ def load_scenario(path: str | Path) -> Scenario:
         if "distance_m" in ck:
             camera["distance_m"] = r.number(ck["distance_m"], "camera.distance_m", 0.1, 1e4, "m")
         if "target_m" in ck:
-            camera["target_m"] = r.vector(ck["target_m"], "camera.target_m", 3, "m", 1e5)
+            camera["target_m"] = r.vector3(ck["target_m"], "camera.target_m", "m", 1e5)
     starts = np.array([c.placement.position_m for c in characters])
     tables = [_table(r, node, f"tables[{i}]", starts) for i, node in
               enumerate(r.sequence(top["tables"], "tables", MAX_TABLES, "tables") if "tables" in top else [])]
@@ -767,15 +779,15 @@ def _table(r: _Reader, node: Node, where: str, starts: np.ndarray) -> Table:
     within :data:`MAX_TARGET_DISTANCE_M` of one."""
     keys = r.mapping(node, where, {"centre_m": True, "size_m": True, "height_m": True,
                                    "heading_deg": False})
-    size = r.vector(keys["size_m"], f"{where}.size_m", 2, "m", MAX_TARGET_DISTANCE_M)
+    size = r.vector2(keys["size_m"], f"{where}.size_m", "m", MAX_TARGET_DISTANCE_M)
     if min(size) <= 0:
         raise r.fail(keys["size_m"], f"{where}.size_m", "a table's length and width must be > 0")
-    centre = r.vector(keys["centre_m"], f"{where}.centre_m", 2, "m", 1e5)
+    centre = r.vector2(keys["centre_m"], f"{where}.centre_m", "m", 1e5)
     r.too_far(keys["centre_m"], f"{where}.centre_m",
               float(np.min(np.linalg.norm(starts - np.array(centre), axis=-1))), "the table",
               "the nearest character's position_m")
-    return Table(centre,  # type: ignore[arg-type]
-                 size,  # type: ignore[arg-type]
+    return Table(centre,
+                 size,
                  r.number(keys["height_m"], f"{where}.height_m", 0.1, 3.0, "m"),
                  math.radians(r.number(keys["heading_deg"], f"{where}.heading_deg", -360, 360, "degrees"))
                  if "heading_deg" in keys else 0.0)
@@ -801,11 +813,9 @@ def load_motion_constraints(path: str | Path) -> list[ConstraintSpec]:
     return specs
 
 
-def build_simulation(scenario: Scenario, window: bool = False,  # type: ignore[no-untyped-def]
-                     rotations: bool = False):
+def build_simulation(scenario: Scenario, window: bool = False,
+                     rotations: bool = False) -> Simulation:
     """A :class:`~ecs_anim.simulation.Simulation` with the scenario's characters spawned."""
-    from .simulation import Simulation
-
     sim = Simulation(scenario.motions, scenario.ground, scenario.fps, window=window,
                      rotations=rotations)
     sim.tables = tuple(scenario.tables)
