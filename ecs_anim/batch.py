@@ -599,10 +599,10 @@ def import_clip(path: str | Path) -> NormalizedMotion:
 
     class _Clip:  # the reader _read_motion reports through: a clip has no line of its own
         @staticmethod
-        def fail(node: Any, where: str, message: str) -> EcsAnimError:
+        def fail(node: object, where: str, message: str) -> EcsAnimError:
             return EcsAnimError(message)
 
-    return _read_motion(_Clip(), None, "", Path(path), str(path))  # type: ignore[arg-type]
+    return _read_motion(_Clip(), None, "", Path(path), str(path))
 
 
 @dataclass

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import yaml
@@ -415,7 +415,14 @@ def _load_motion(r: _Reader, node: Node, where: str, base_dir: Path,
     return read[path.resolve()]
 
 
-def _read_motion(r: _Reader, node: Node, where: str, path: Path, rel: str) -> NormalizedMotion:
+class _Fails(Protocol):
+    """What :func:`_read_motion` reports through: a :class:`_Reader`, or a clip's own reader."""
+
+    def fail(self, node: Node | None, where: str, message: str) -> EcsAnimError: ...
+
+
+def _read_motion(r: _Fails, node: Node | None, where: str, path: Path,
+                 rel: str) -> NormalizedMotion:
     from .c3d_import import import_c3d
     from .importing import import_bvh
 
