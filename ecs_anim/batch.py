@@ -25,7 +25,6 @@ from __future__ import annotations
 import argparse
 import csv
 import dataclasses
-import difflib
 import glob
 import hashlib
 import io
@@ -48,7 +47,8 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
-from .errors import EcsAnimError, InputError, quoted
+from .errors import EcsAnimError, InputError, did_you_mean, quoted
+from .files import MAX_NAME_LENGTH, NAME_PATTERN
 from .ground import Ground, Plane
 from .morphology import PRESET_SPECS, Morphology, load_morphology_yaml
 from .motion import NormalizedMotion
@@ -66,9 +66,6 @@ BATCH_MARKER = ".ecs-anim-batch.json"
 RESERVED = ("metrics.csv", "metrics.json", "report.html")
 #: Beside each job's outputs, written after them: the job's input hash and its record.
 STAMP_SUFFIX = ".ecs-anim-job.json"
-#: Names of bodies and grounds (they name files): as scenario names, without path separators.
-_NAME = re.compile(r"[A-Za-z0-9_\-][A-Za-z0-9_.\-]*")
-MAX_NAME_LENGTH = 64
 #: ``statures: {count}`` and the whole product are bounded so a typo cannot plan a year of work.
 MAX_STATURES = 1_000
 MAX_JOBS = 1_000_000
@@ -206,7 +203,7 @@ class Plan:
 
 def _check_name(name: str, what: str) -> str | None:
     """Why ``name`` cannot name output files, or None."""
-    if not _NAME.fullmatch(name):
+    if not NAME_PATTERN.fullmatch(name):  # bodies and grounds name files, as scenario names
         return f"{quoted(name)}: a {what} name names files: letters, digits, _ . - (not starting with .)"
     if len(name) > MAX_NAME_LENGTH:
         return f"a {what} name has at most {MAX_NAME_LENGTH} characters, got {len(name)}"
@@ -242,8 +239,7 @@ def body_from_text(text: str, base: Path = Path("."), inputs: list[str] | None =
             raise EcsAnimError(f"body {text}: a stature from 0.3 to 3.0 m")
         name = stature_name(stature)
         return Body(name, Morphology.from_stature(stature, name=name))
-    close = difflib.get_close_matches(text, list(PRESET_SPECS), n=1)
-    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    hint = did_you_mean(text, list(PRESET_SPECS), parenthesized=True)
     raise EcsAnimError(f"body {quoted(text)}: not a preset{hint}, a .yaml morphology or "
                        f"stature_<m>; presets: {', '.join(PRESET_SPECS)}")
 
@@ -293,7 +289,7 @@ def _manifest_body(r: Any, node: yaml.Node, where: str, base: Path,
         raise r.fail(keys["statures"], f"{where}.statures", f"{count} statures from {low:g} to "
                      f"{high:g} m repeat a name at 1 cm ({names[0]}, ...); give fewer")
     return [Body(n, Morphology.from_stature(float(s), given["sex"], given["proportions"], name=n))
-            for n, s in zip(names, statures)]
+            for n, s in zip(names, statures, strict=False)]
 
 
 def _grounds_mapping(r: Any, node: yaml.Node, where: str) -> list[NamedGround]:
@@ -603,10 +599,10 @@ def import_clip(path: str | Path) -> NormalizedMotion:
 
     class _Clip:  # the reader _read_motion reports through: a clip has no line of its own
         @staticmethod
-        def fail(node: Any, where: str, message: str) -> EcsAnimError:
+        def fail(node: object, where: str, message: str) -> EcsAnimError:
             return EcsAnimError(message)
 
-    return _read_motion(_Clip(), None, "", Path(path), str(path))  # type: ignore[arg-type]
+    return _read_motion(_Clip(), None, "", Path(path), str(path))
 
 
 @dataclass
@@ -1009,7 +1005,7 @@ class Progress:
         self.start = time.perf_counter()
         self.bar = None
         if total and getattr(self.stream, "isatty", lambda: False)():
-            from tqdm import tqdm  # type: ignore[import-untyped]
+            from tqdm import tqdm
 
             self.bar = tqdm(total=total, unit="job", file=self.stream, dynamic_ncols=True)
 

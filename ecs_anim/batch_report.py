@@ -38,6 +38,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Rectangle
 
 from .files import atomic_output
 from .metrics import SLIDE_EVENT_MM
@@ -175,7 +177,7 @@ def _strip_panel(ax: Any, jobs: Sequence[Job], key: str, rows: list[str],
 def _legend(fig: Figure, colours: dict[str, Any], title: str) -> None:
     if len(colours) < 2:
         return
-    handles = [plt.Line2D([], [], ls="none", marker="o", color=c, label=name or "(plane)")
+    handles = [Line2D([], [], ls="none", marker="o", color=c, label=name or "(plane)")
                for name, c in colours.items()]
     fig.legend(handles=handles, title=title, loc="upper center", ncol=min(len(colours), 6),
                frameon=False, bbox_to_anchor=(0.5, 1.0))
@@ -211,7 +213,7 @@ def plot_by_group(jobs: Sequence[Job], group: str) -> Figure:
     height = 1.6 + 0.32 * len(rows) + (0.4 if len(colours) > 1 else 0.0)
     fig, axes = plt.subplots(1, len(GROUP_PANELS), figsize=(13, height), sharey=True,
                              squeeze=False)
-    for ax, key in zip(axes[0], GROUP_PANELS):
+    for ax, key in zip(axes[0], GROUP_PANELS, strict=False):
         _strip_panel(ax, measured, key, rows, lambda j: str(j.get(group, "")),
                      lambda j: str(j.get(colour_key) or ""), colours)
     if group == "clip" and len(worst) > len(rows):
@@ -244,7 +246,7 @@ def plot_against_stature(jobs: Sequence[Job]) -> Figure:
     fig, axes = plt.subplots(lines, columns, figsize=(4.2 * columns, 3.3 * lines), squeeze=False)
     for ax in axes.flat[len(panels):]:
         ax.set_visible(False)
-    for ax, (key, label) in zip(axes.flat, panels):
+    for ax, (key, label) in zip(axes.flat, panels, strict=False):
         series: dict[tuple[str, str], list[tuple[float, float]]] = {}
         at_stature: dict[float, list[float]] = {}
         for j in measured:
@@ -259,7 +261,7 @@ def plot_against_stature(jobs: Sequence[Job]) -> Figure:
                                          colors="#a0aec0", linewidths=0.8, alpha=alpha, zorder=1))
         every = [p for points in series.values() for p in points]
         if every:
-            ax.scatter(*zip(*every), s=9, color="#4a5568", alpha=min(0.6, 3 * alpha),
+            ax.scatter(*zip(*every, strict=False), s=9, color="#4a5568", alpha=min(0.6, 3 * alpha),
                        edgecolors="none", zorder=2)
         if at_stature:
             xs = sorted(at_stature)
@@ -276,13 +278,13 @@ def plot_against_stature(jobs: Sequence[Job]) -> Figure:
         ax.set_xlabel("stature (m)")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
-    handles = [plt.Line2D([], [], color="#a0aec0", marker="o", mfc="#4a5568", mec="none", ms=3,
+    handles = [Line2D([], [], color="#a0aec0", marker="o", mfc="#4a5568", mec="none", ms=3,
                           label="one clip (and ground) across bodies"),
-               plt.Line2D([], [], color="#2b6cb0", lw=2, marker="o", ms=5,
+               Line2D([], [], color="#2b6cb0", lw=2, marker="o", ms=5,
                           label="median at each stature"),
-               plt.Rectangle((0, 0), 1, 1, color="#2b6cb0", alpha=0.18,
+               Rectangle((0, 0), 1, 1, color="#2b6cb0", alpha=0.18,
                              label="middle half of the jobs (25-75 %)"),
-               plt.Line2D([], [], color="#c53030", ls="--", lw=1, label="tolerance")]
+               Line2D([], [], color="#c53030", ls="--", lw=1, label="tolerance")]
     fig.legend(handles=handles, loc="upper center", ncol=4, frameon=False, fontsize=9)
     fig.tight_layout(rect=(0, 0, 1, 1 - 0.35 / fig.get_figheight()))
     return fig
@@ -297,7 +299,7 @@ def _same_contacts(a: Job, b: Job, tolerance_s: float = 0.05) -> bool:
     for foot in ("left", "right"):
         x, y = _intervals(a, foot), _intervals(b, foot)
         if len(x) != len(y) or any(abs(p - q) > tolerance_s
-                                   for s, t in zip(x, y) for p, q in zip(s, t)):
+                                   for s, t in zip(x, y, strict=False) for p, q in zip(s, t, strict=False)):
             return False
     return True
 
@@ -338,7 +340,7 @@ def plot_contact_timeline(jobs: Sequence[Job]) -> Figure:
     ax.set_xlabel("time (s)")
     ax.set_axisbelow(True)  # the grid behind the bars: a bar reads as one piece
     ax.grid(axis="x", alpha=0.3)
-    handles = [plt.Rectangle((0, 0), 1, 1, color=c, label=f"{foot} foot planted")
+    handles = [Rectangle((0, 0), 1, 1, color=c, label=f"{foot} foot planted")
                for foot, c in FOOT_COLOURS.items()]
     ax.legend(handles=handles, loc="lower right", fontsize=8, ncol=2,
               bbox_to_anchor=(1.0, 1.0), frameon=False)

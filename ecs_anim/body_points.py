@@ -17,15 +17,16 @@ allowed to move for it.
 
 from __future__ import annotations
 
-import difflib
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
+from .errors import did_you_mean
 from .normalized import DecodedPose
 from .rotations import frame_from_axes
-from .skeleton import BONE_JOINTS, JOINT_INDEX as J, JOINTS, LENGTH_INDEX, LENGTHS
+from .skeleton import BONE_JOINTS, JOINTS, LENGTH_INDEX, LENGTHS
+from .skeleton import JOINT_INDEX as J
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -59,7 +60,7 @@ SEGMENTS.update({
 })
 
 #: A joint used as a point: the bone it ends (fraction 1).
-JOINT_AS_POINT = {JOINTS[b]: name for name, (a, b) in zip(LENGTHS, BONE_JOINTS)
+JOINT_AS_POINT = {JOINTS[b]: name for name, (a, b) in zip(LENGTHS, BONE_JOINTS, strict=False)
                   if b >= 0 and name in SEGMENTS}
 
 #: Chains a point's group may extend to: its own group, plus the trunk above the head and arms
@@ -106,7 +107,7 @@ def body_point(name: str, fraction: float | None = None,
 
     A name that is both (``head``, ``neck``, ``hand_l``) is the joint unless a ``fraction`` is
     given; a segment without one is its middle (0.5)."""
-    if name in JOINT_AS_POINT and (fraction is None and not segment or name not in SEGMENTS):
+    if name in JOINT_AS_POINT and ((fraction is None and not segment) or name not in SEGMENTS):
         if fraction is not None:
             raise ValueError(f"{name!r} is a joint; give fraction with a segment "
                              f"(e.g. {JOINT_AS_POINT[name]!r})")
@@ -121,15 +122,15 @@ def body_point(name: str, fraction: float | None = None,
                              f"control moves; constrain another point")
         names = sorted(set(SEGMENTS) | set(JOINT_AS_POINT)
                        | (set(TARGET_ONLY_JOINTS) | set(TARGET_ONLY_SEGMENTS) if as_target else set()))
-        close = difflib.get_close_matches(name, names, n=1)
-        hint = f"; did you mean {close[0]!r}?" if close else ""
+        hint = did_you_mean(name, names)
         raise ValueError(f"unknown body point {name!r}{hint} (segments: {', '.join(sorted(SEGMENTS))}; "
                          f"or a joint: {', '.join(sorted(JOINT_AS_POINT))})")
     if not (np.isfinite(fraction) and 0.0 <= fraction <= 1.0):
         raise ValueError(f"fraction along {seg!r} must be in [0, 1], got {fraction}")
     if not all(np.isfinite(v) and abs(v) <= 10.0 for v in offset_m):
         raise ValueError(f"offset_m {offset_m} must be finite and within 10 m")
-    return BodyPoint(LENGTH_INDEX[seg], float(fraction), tuple(float(v) for v in offset_m))  # type: ignore[arg-type]
+    x, y, z = (float(v) for v in offset_m)
+    return BodyPoint(LENGTH_INDEX[seg], float(fraction), (x, y, z))
 
 
 #: Per length index: proximal and distal joints, group, bone, frame (-1 where not a point).
@@ -158,7 +159,7 @@ def point_positions(decoded: DecodedPose, rows: I64, segment: I64, fraction: F64
     indices, ``fraction`` (k,), ``offset`` (k, 3) metres in the segment frame."""
     p = decoded.positions
     a, b = p[rows, SEG_PROXIMAL[segment]], p[rows, SEG_DISTAL[segment]]
-    point = a + fraction[:, None] * (b - a)
+    point: F64 = a + fraction[:, None] * (b - a)
     has_offset = np.any(offset != 0.0, axis=1)
     if has_offset.any():
         frames = segment_frames(decoded, rows, segment)

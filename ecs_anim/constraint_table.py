@@ -19,7 +19,9 @@ A constraint is ``{point, kind, chain, priority, activation}`` plus its target:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -39,6 +41,8 @@ TARGET_WORLD, TARGET_BODY = 0, 1
 #: Segments whose orientation can be constrained: the distal limb segments (their axis only),
 #: the head (any axis of its frame) and the thorax (spine_upper: any axis, moved by the trunk).
 ORIENTABLE = {"hand_l", "hand_r", "foot_l", "foot_r", "head", "spine_upper"}
+#: The default activation of :meth:`ConstraintTable.add`: on from the start, for good.
+ALWAYS = Activation(0.0, 1e9)
 
 
 @dataclass(frozen=True)
@@ -69,7 +73,7 @@ class Area:
         values = self.low_m + self.high_m + self.normal + (self.radius_m,)
         if not all(np.isfinite(v) for v in values):
             raise ValueError("area values must be finite")
-        if self.shape == "box" and any(lo > hi for lo, hi in zip(self.low_m, self.high_m)):
+        if self.shape == "box" and any(lo > hi for lo, hi in zip(self.low_m, self.high_m, strict=False)):
             raise ValueError(f"box low_m {self.low_m} must be below high_m {self.high_m}")
         if self.shape == "sphere" and self.radius_m <= 0:
             raise ValueError("sphere radius_m must be > 0")
@@ -95,8 +99,9 @@ class Target:
             raise ValueError(f"target {self.world_m} must be finite")
 
 
-def _col(dtype: type, *trailing: int):  # type: ignore[no-untyped-def]
-    return field(default_factory=lambda: np.zeros((0,) + trailing, dtype))
+def _empty(dtype: type, *trailing: int) -> Callable[[], NDArray[Any]]:
+    """A dataclass default factory: an empty column of ``dtype``, shape (0, *trailing)."""
+    return lambda: np.zeros((0, *trailing), dtype)
 
 
 @dataclass
@@ -118,37 +123,37 @@ class ConstraintTable:
     ids do not; they stay in increasing order), ``next_uid`` the next one.
     """
 
-    owner: I64 = _col(np.int64)
-    kind: I64 = _col(np.int64)
-    segment: I64 = _col(np.int64)
-    fraction: F64 = _col(np.float64)
-    offset: F64 = _col(np.float64, 3)
-    group: I64 = _col(np.int64)
-    bone: I64 = _col(np.int64)
-    chain: I64 = _col(np.int64)
-    priority: F64 = _col(np.float64)
-    activation: F64 = _col(np.float64, 4)
-    clock: I64 = _col(np.int64)
-    target_kind: I64 = _col(np.int64)
-    target_world: F64 = _col(np.float64, 3)
-    target_row: I64 = _col(np.int64)
-    target_segment: I64 = _col(np.int64)
-    target_fraction: F64 = _col(np.float64)
-    target_offset: F64 = _col(np.float64, 3)
-    distance_m: F64 = _col(np.float64)
-    area_shape: I64 = _col(np.int64)
-    area_low: F64 = _col(np.float64, 3)
-    area_high: F64 = _col(np.float64, 3)
-    area_radius: F64 = _col(np.float64)
-    area_normal: F64 = _col(np.float64, 3)
-    area_inside: NDArray[np.bool_] = _col(np.bool_)
-    axis: F64 = _col(np.float64, 3)
-    enabled: NDArray[np.bool_] = _col(np.bool_)
-    held: NDArray[np.bool_] = _col(np.bool_)
-    error: F64 = _col(np.float64)
-    weight: F64 = _col(np.float64)
+    owner: I64 = field(default_factory=_empty(np.int64))
+    kind: I64 = field(default_factory=_empty(np.int64))
+    segment: I64 = field(default_factory=_empty(np.int64))
+    fraction: F64 = field(default_factory=_empty(np.float64))
+    offset: F64 = field(default_factory=_empty(np.float64, 3))
+    group: I64 = field(default_factory=_empty(np.int64))
+    bone: I64 = field(default_factory=_empty(np.int64))
+    chain: I64 = field(default_factory=_empty(np.int64))
+    priority: F64 = field(default_factory=_empty(np.float64))
+    activation: F64 = field(default_factory=_empty(np.float64, 4))
+    clock: I64 = field(default_factory=_empty(np.int64))
+    target_kind: I64 = field(default_factory=_empty(np.int64))
+    target_world: F64 = field(default_factory=_empty(np.float64, 3))
+    target_row: I64 = field(default_factory=_empty(np.int64))
+    target_segment: I64 = field(default_factory=_empty(np.int64))
+    target_fraction: F64 = field(default_factory=_empty(np.float64))
+    target_offset: F64 = field(default_factory=_empty(np.float64, 3))
+    distance_m: F64 = field(default_factory=_empty(np.float64))
+    area_shape: I64 = field(default_factory=_empty(np.int64))
+    area_low: F64 = field(default_factory=_empty(np.float64, 3))
+    area_high: F64 = field(default_factory=_empty(np.float64, 3))
+    area_radius: F64 = field(default_factory=_empty(np.float64))
+    area_normal: F64 = field(default_factory=_empty(np.float64, 3))
+    area_inside: NDArray[np.bool_] = field(default_factory=_empty(np.bool_))
+    axis: F64 = field(default_factory=_empty(np.float64, 3))
+    enabled: NDArray[np.bool_] = field(default_factory=_empty(np.bool_))
+    held: NDArray[np.bool_] = field(default_factory=_empty(np.bool_))
+    error: F64 = field(default_factory=_empty(np.float64))
+    weight: F64 = field(default_factory=_empty(np.float64))
     names: list[str] = field(default_factory=list)
-    uid: I64 = _col(np.int64)
+    uid: I64 = field(default_factory=_empty(np.int64))
     next_uid: int = 0
 
     @property
@@ -156,7 +161,7 @@ class ConstraintTable:
         return int(self.owner.shape[0])
 
     def add(self, name: str, owner: int, kind: str, point: BodyPoint, target: Target,
-            priority: float = 0.0, activation: Activation = Activation(0.0, 1e9),
+            priority: float = 0.0, activation: Activation = ALWAYS,
             chain: tuple[str, ...] | None = None, distance_m: float = 0.0,
             area: Area | None = None, axis: tuple[float, float, float] = (0.0, 0.0, 1.0),
             clock: int = -1) -> int:
@@ -250,11 +255,11 @@ class ConstraintTable:
         and renumber the rows after it (the store deletes that row too). Returns the deleted
         constraints' names; the indices of the constraints after them move down."""
         gone = (self.owner == row) | ((self.target_kind == TARGET_BODY) & (self.target_row == row))
-        names = [n for n, g in zip(self.names, gone) if g]
+        names = [n for n, g in zip(self.names, gone, strict=False) if g]
         for key in self.__dataclass_fields__:
             if isinstance(getattr(self, key), np.ndarray):
                 setattr(self, key, getattr(self, key)[~gone])
-        self.names = [n for n, g in zip(self.names, gone) if not g]
+        self.names = [n for n, g in zip(self.names, gone, strict=False) if not g]
         self.owner[self.owner > row] -= 1
         self.target_row[(self.target_kind == TARGET_BODY) & (self.target_row > row)] -= 1
         return names
@@ -305,7 +310,7 @@ def add_stored(table: ConstraintTable, owner: int, spec: ConstraintSpec, name: s
     the character in row ``owner``. Raises ValueError naming ``name`` if it is malformed."""
     p = spec.params
     try:
-        body = body_point(spec.segment, spec.fraction, tuple(spec.offset_m),
+        body = body_point(spec.segment, spec.fraction, spec.offset_m,
                           segment=spec.kind == "orientation")
         target = Target(row=owner, point=body_point(
             str(p.get("target_point") or ""), p.get("target_fraction"),
@@ -341,4 +346,4 @@ def check_stored(specs: list[ConstraintSpec], duration_s: float) -> None:
                              f"after the clip ends ({duration_s:g} s): it would never be active")
 
 
-__all__ = ["Area", "ConstraintTable", "Target", "add_stored", "check_stored", "winners", "SEGMENTS"]
+__all__ = ["SEGMENTS", "Area", "ConstraintTable", "Target", "add_stored", "check_stored", "winners"]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import difflib
 import re
 from collections.abc import Iterable
 from pathlib import Path
@@ -10,6 +11,15 @@ from typing import Any
 import numpy as np
 import yaml
 from numpy.typing import NDArray
+
+
+def did_you_mean(word: str, choices: Iterable[str], parenthesized: bool = False) -> str:
+    """The hint for a misspelt name: ``; did you mean 'x'?`` (or `` (did you mean 'x'?)``) with
+    the closest of ``choices``, or "" when none is close (difflib's default cutoff, 0.6)."""
+    close = difflib.get_close_matches(word, list(choices), n=1)
+    if not close:
+        return ""
+    return f" (did you mean {close[0]!r}?)" if parenthesized else f"; did you mean {close[0]!r}?"
 
 
 class EcsAnimError(Exception):
@@ -59,7 +69,7 @@ class NumberList(yaml.SequenceNode):
         self.numbers = numbers
         self._text = text  # the numbers as written, with their line breaks
 
-    @property  # type: ignore[override]
+    @property
     def value(self) -> list[yaml.Node]:
         if self._items is None:
             resolver = yaml.resolver.Resolver()
@@ -69,7 +79,7 @@ class NumberList(yaml.SequenceNode):
             for token in re.finditer(r"[^,\s]+", self._text):
                 line += self._text.count("\n", counted, token.start())
                 counted = token.start()
-                mark = yaml.Mark(start.name, 0, line, 0, None, None)
+                mark = yaml.Mark(start.name, 0, line, 0, None, 0)  # no buffer: no snippet
                 tag = resolver.resolve(yaml.ScalarNode, token.group(), (True, False))
                 self._items.append(yaml.ScalarNode(tag, token.group(), mark, mark))
         return self._items
@@ -141,7 +151,7 @@ def compose_yaml(path: str | Path, what: str, number_lists: bool = False) -> Any
         if contents:
             try:
                 root = yaml.compose(packed)
-                if _unpack(root, contents):
+                if root is not None and _unpack(root, contents):
                     return root
             except (RecursionError, yaml.YAMLError):
                 pass  # reported from the file's own text below

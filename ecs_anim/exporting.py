@@ -18,14 +18,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .bvh import BvhWriteJoint, format_bvh, read_bvh
-from .errors import EcsAnimError, InputError
+from .errors import EcsAnimError, InputError, did_you_mean
 from .files import atomic_output, output_problem
 from .importing import YUP_TO_ZUP, canonical_clip, source_morphology
 from .morphology import PRESET_SPECS, Morphology, load_morphology_yaml
 from .motion import NormalizedMotion
 from .normalized import DecodedPose, decode
 from .rotations import frame_from_axes, matrix_to_euler, rotation_between
-from .skeleton import JOINT_INDEX as J, JOINTS, REST_HIP_DIR_LEFT
+from .skeleton import JOINT_INDEX as J
+from .skeleton import JOINTS, REST_HIP_DIR_LEFT
 
 F64 = NDArray[np.float64]
 
@@ -54,9 +55,7 @@ def resolve_morphology(spec: str, motion: NormalizedMotion) -> tuple[Morphology,
             raise
         except (EcsAnimError, ValueError) as exc:  # unmappable, unknown unit, zero-length bone
             raise InputError(path, f"cannot take a morphology from this skeleton: {exc}") from None
-    import difflib
-    close = difflib.get_close_matches(spec, list(PRESET_SPECS) + ["source"], n=1)
-    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    hint = did_you_mean(spec, list(PRESET_SPECS) + ["source"], parenthesized=True)
     raise EcsAnimError(f"--morphology {spec}: not 'source', a preset{hint}, a .yaml or a .bvh file; "
                        f"presets: {', '.join(PRESET_SPECS)}")
 
@@ -207,7 +206,7 @@ def local_rotations(pose: DecodedPose) -> F64:
     # joint2bvh = world_to_bvh @ joint2world @ bvh_rest2body, for all joints in one product.
     glob = YUP_TO_ZUP.T @ world @ BODY_TO_BVH_REST.T
     parent = glob[..., np.maximum(EXPORT_PARENTS, 0), :, :]
-    local = np.swapaxes(parent, -1, -2) @ glob
+    local: F64 = np.swapaxes(parent, -1, -2) @ glob
     local[..., EXPORT_PARENTS < 0, :, :] = glob[..., EXPORT_PARENTS < 0, :, :]
     return local
 

@@ -28,6 +28,10 @@ from .errors import EcsAnimError, listed, quoted
 #: Written last into every export folder: the names of the files of the set, so that a later
 #: ``--force`` knows which files it may replace (and refuses a folder holding anything else).
 MANIFEST_NAME = ".ecs-anim-export.json"
+#: Names that name files (characters, motions, bodies, grounds): no path separators, no leading
+#: dot, at most :data:`MAX_NAME_LENGTH` characters.
+NAME_PATTERN = re.compile(r"[A-Za-z0-9_\-][A-Za-z0-9_.\-]*")
+MAX_NAME_LENGTH = 64
 
 
 def _umask() -> int:

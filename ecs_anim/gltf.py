@@ -23,7 +23,7 @@ from __future__ import annotations
 from importlib import metadata
 
 import numpy as np
-import pygltflib as gl  # type: ignore[import-untyped]
+import pygltflib as gl
 from numpy.typing import NDArray
 
 from .exporting import EXPORT_JOINTS, EXPORT_NAMES, EXPORT_PARENTS, local_rotations, rest_offsets

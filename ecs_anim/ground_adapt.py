@@ -57,7 +57,8 @@ def vertical_slack_for_reach(hips: F64, ankle_targets: F64, reach: F64) -> F64:
     """
     horizontal = np.linalg.norm(hips[..., :2] - ankle_targets[..., :2], axis=-1)
     vertical = np.sqrt(np.maximum(reach**2 - horizontal**2, 0.0))
-    return ankle_targets[..., 2] + vertical - hips[..., 2]
+    lift: F64 = ankle_targets[..., 2] + vertical - hips[..., 2]
+    return lift
 
 
 def adapt_to_ground(poses: NormalizedPoses, lengths: F64, ankle_targets: F64,

@@ -27,7 +27,7 @@ import yaml
 from numpy.typing import NDArray
 
 from .bvh import BvhSkeleton, rest_positions
-from .errors import InputError, MappingError, compose_yaml, listed, quoted
+from .errors import InputError, MappingError, compose_yaml, did_you_mean, listed, quoted
 from .rotations import normalize
 from .skeleton import JOINT_INDEX, JOINTS, PARENTS
 
@@ -349,8 +349,9 @@ class _Tree:
         :data:`COMPARED_BRANCHES` reaching farthest."""
         branches = sorted(branches, key=self.branch, reverse=True)[:COMPARED_BRANCHES]
         def unlike(a: int, b: int) -> float:
-            return (abs(self.size[a] - self.size[b]) / max(self.size[a], self.size[b])
-                    + abs(self.branch(a) - self.branch(b)) / max(self.branch(a), self.branch(b)))
+            joints: float = abs(self.size[a] - self.size[b]) / max(self.size[a], self.size[b])
+            return joints + abs(self.branch(a) - self.branch(b)) / max(self.branch(a),
+                                                                        self.branch(b))
         pairs = [(a, b) for k, a in enumerate(branches) for b in branches[k + 1:]]
         return min(pairs, key=lambda pair: unlike(*pair))
 
@@ -420,13 +421,13 @@ def _leftness(poses: F64, pelvis: int, thorax: int,
     up = poses[:, thorax] - poses[:, pelvis]
     forward = np.zeros_like(up)
     for leg in legs:
-        hip, knee, ankle = (poses[:, leg[k]] for k in ("proximal", "middle", "distal"))  # type: ignore[index]
+        hip, knee, ankle = (poses[:, leg[k]] for k in ("proximal", "middle", "distal"))
         along = normalize(ankle - hip)
         bend = knee - hip
         forward += bend - np.sum(bend * along, axis=-1, keepdims=True) * along
         if leg["end"] is not None:
             forward += poses[:, leg["end"]] - ankle
-    lateral = poses[:, legs[0]["proximal"]] - poses[:, legs[1]["proximal"]]  # type: ignore[index]
+    lateral = poses[:, legs[0]["proximal"]] - poses[:, legs[1]["proximal"]]
     shown = np.linalg.norm(lateral, axis=-1) * np.linalg.norm(np.cross(up, forward), axis=-1)
     return float(np.sum(lateral * np.cross(up, forward)) / max(float(np.sum(shown)), 1e-300))
 
@@ -440,7 +441,7 @@ def _stands(pose: F64, pelvis: int, thorax: int,
             legs: tuple[dict[str, int | None], dict[str, int | None]]) -> bool:
     """Whether both legs point away from the spine (within 60 degrees) in ``pose`` (n_joints, 3)."""
     up = normalize(pose[thorax] - pose[pelvis])
-    return all(float(np.dot(up, normalize(pose[leg["distal"]] - pose[leg["proximal"]]))) < -0.5  # type: ignore[index]
+    return all(float(np.dot(up, normalize(pose[leg["distal"]] - pose[leg["proximal"]]))) < -0.5
                for leg in legs)
 
 
@@ -493,11 +494,11 @@ def structural_map(skeleton: BvhSkeleton, poses: F64 | None = None,
             if leftness < 0.0:
                 leg_parts = leg_parts[::-1]
             # The left arm is the one on the left hip's side.
-            lateral = geometry[:, leg_parts[0]["proximal"]] - geometry[:, leg_parts[1]["proximal"]]  # type: ignore[index]
-            across = geometry[:, arm_parts[0]["proximal"]] - geometry[:, arm_parts[1]["proximal"]]  # type: ignore[index]
+            lateral = geometry[:, leg_parts[0]["proximal"]] - geometry[:, leg_parts[1]["proximal"]]
+            across = geometry[:, arm_parts[0]["proximal"]] - geometry[:, arm_parts[1]["proximal"]]
             if float(np.sum(lateral * across)) < 0.0:
                 arm_parts = arm_parts[::-1]
-            for side, leg, arm in zip("lr", leg_parts, arm_parts):
+            for side, leg, arm in zip("lr", leg_parts, arm_parts, strict=False):
                 found |= {f"hip_{side}": leg["proximal"], f"knee_{side}": leg["middle"],
                           f"ankle_{side}": leg["distal"],
                           f"shoulder_{side}": arm["proximal"], f"elbow_{side}": arm["middle"],
@@ -594,8 +595,7 @@ def load_user_map(path: str | Path) -> tuple[str | None, dict[str, str], dict[st
                 k = k_node.value
                 kline = k_node.start_mark.line + 1
                 if k not in JOINTS:
-                    close = difflib.get_close_matches(k, JOINTS, n=1)
-                    hint = f" (did you mean {close[0]!r}?)" if close else ""
+                    hint = did_you_mean(k, JOINTS, parenthesized=True)
                     raise InputError(path, f"joints.{k}: unknown canonical joint{hint}; "
                                            f"canonical joints are {listed(JOINTS)} (all in "
                                            "docs/format.md)", kline)
@@ -604,8 +604,7 @@ def load_user_map(path: str | Path) -> tuple[str | None, dict[str, str], dict[st
                 joints[k] = str(v_node.value)
                 lines[k] = kline
         else:
-            close = difflib.get_close_matches(str(key), ["base", "joints"], n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            hint = did_you_mean(str(key), ["base", "joints"], parenthesized=True)
             raise InputError(path, f"{key}: unknown key{hint}; expected 'base' and 'joints'", line)
     return base, joints, lines
 
@@ -636,8 +635,7 @@ def map_skeleton(skeleton: BvhSkeleton, map_spec: str | None = None,
             user_path = map_spec
             base, user, user_lines = load_user_map(map_spec)
         else:
-            close = difflib.get_close_matches(map_spec, list(PRESETS), n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            hint = did_you_mean(map_spec, list(PRESETS), parenthesized=True)
             raise MappingError(f"--map {map_spec}: not a preset nor a YAML file{hint}; presets: "
                                f"{', '.join(PRESETS)}")
     if base is not None:

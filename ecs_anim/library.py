@@ -32,7 +32,8 @@ from .normalized import (
     two_bone_middle,
 )
 from .rotations import normalize, rot_axis
-from .skeleton import JOINT_INDEX as J, N_JOINTS, REST_HIP_DIR_LEFT
+from .skeleton import JOINT_INDEX as J
+from .skeleton import N_JOINTS, REST_HIP_DIR_LEFT
 
 F64 = NDArray[np.float64]
 
@@ -128,7 +129,7 @@ def _lower_pelvis_to_reach(pelvis: F64, pelvis2world: F64, ankles: F64, morph: M
     # Lower by the deficit, dilated then blurred over the same circular window: the result is
     # smooth (no kink where a leg becomes the limiting one) and never less than the deficit.
     deficit = np.maximum(-slack.min(axis=1), 0.0)
-    half = int(round(0.12 * FPS))
+    half = round(0.12 * FPS)
     shifts = range(-half, half + 1)
     dilated = np.max(np.stack([np.roll(deficit, k) for k in shifts]), axis=0)
     smooth = np.mean(np.stack([np.roll(dilated, k) for k in shifts]), axis=0)
@@ -144,7 +145,7 @@ def generate_walk(morph: Morphology, cycles: int = 4, period_s: float = 1.1,
     Returns joint positions (frames, N_JOINTS, 3), metres, Z up.
     """
     stride = 1.62 * morph.leg_length if stride_m is None else stride_m
-    n = int(round(cycles * period_s * FPS))
+    n = round(cycles * period_s * FPS)
     t = np.arange(n) / FPS
     phase = t / period_s
     speed = stride / period_s
@@ -188,7 +189,7 @@ def generate_walk(morph: Morphology, cycles: int = 4, period_s: float = 1.1,
 
 def generate_idle(morph: Morphology, seconds: float = 8.0) -> F64:
     """Standing at rest: weight shifts, breathing, a slow look around; feet planted; loopable."""
-    n = int(round(seconds * FPS))
+    n = round(seconds * FPS)
     t = np.arange(n) / FPS
     w = 2 * np.pi / seconds
     ah = 0.5 * (morph["ankle_height_l"] + morph["ankle_height_r"])

@@ -74,8 +74,9 @@ A = 0.571 m) that the files are written on:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -84,7 +85,8 @@ from .library import FPS, _lower_pelvis_to_reach, _place_legs
 from .morphology import Morphology
 from .normalized import limb_frames, two_bone_middle
 from .rotations import normalize, rot_axis
-from .skeleton import JOINT_INDEX as J, N_JOINTS
+from .skeleton import JOINT_INDEX as J
+from .skeleton import N_JOINTS
 
 F64 = NDArray[np.float64]
 Key = tuple[float, Sequence[float]]
@@ -199,7 +201,7 @@ class Gesture:
     arms_in: str = "thorax"  # or "heading": wrist and elbow keys in the upright heading frame
 
     def n_frames(self) -> int:
-        n = int(round(self.duration_s * FPS))
+        n = round(self.duration_s * FPS)
         return n if self.loop else n + 1  # one-shots end exactly on their last key
 
     def channels(self, t: F64) -> dict[str, F64]:
@@ -536,7 +538,7 @@ GESTURE_GENERATORS = {name: _generator(g) for name, g in GESTURES.items()}
 
 #: Key times of each gesture (seconds from the clip's start), for timing constraint activations;
 #: distances as in the module docstring. ``tests/test_gestures.py`` checks them on the files.
-GESTURE_TIMINGS: dict[str, dict[str, object]] = {
+GESTURE_TIMINGS: dict[str, dict[str, Any]] = {
     "guard": {"duration_s": 2.4, "loop": True},
     "kick": {"duration_s": 1.5, "loop": False, "kicking_ankle": "ankle_r",
              "weight_shifted_s": 0.28, "lift_off_s": 0.30, "chamber_s": 0.50, "peak_s": 0.70,

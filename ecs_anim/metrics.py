@@ -92,7 +92,7 @@ class MetricsRecorder:
         self.bone_error_max = np.maximum(self.bone_error_max, error)
         # Strides: a new footprint is laid (an event; only those feet are visited).
         new = st.locked & ~self.prev_locked
-        for row, side in zip(*np.nonzero(new)):
+        for row, side in zip(*np.nonzero(new), strict=False):
             here = st.footprint[row, side, :2].copy()
             last = self.last_print[row][side]
             if last is not None:
@@ -117,7 +117,7 @@ class MetricsRecorder:
             return
         names = self.sim.names()
         tick = self.sim.tick - 1  # the posture recorded is the last tick stepped
-        for row, side in zip(rows[:room], sides[:room]):
+        for row, side in zip(rows[:room], sides[:room], strict=False):
             self.slides.append({"tick": tick, "time_s": round(self.sim.posture_time_s, 4),
                                 "character": names[row], "foot": "left" if side == 0 else "right",
                                 "mm": round(float(move_mm[row, side]), 3)})

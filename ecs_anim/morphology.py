@@ -14,7 +14,6 @@ centres placed as our canonical skeleton defines them (see :func:`Morphology.fro
 
 from __future__ import annotations
 
-import difflib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,7 +22,7 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
-from .errors import InputError, compose_yaml
+from .errors import InputError, compose_yaml, did_you_mean
 from .skeleton import BONE_JOINTS, JOINT_INDEX, LENGTH_INDEX, LENGTHS, N_LENGTHS, REST_HIP_DIR_LEFT
 
 F64 = NDArray[np.float64]
@@ -67,6 +66,9 @@ MASS_SEGMENTS: tuple[tuple[str, str, str, str], ...] = (
     ("forearm_l", "elbow_l", "wrist_l", "forearm"), ("forearm_r", "elbow_r", "wrist_r", "forearm"),
     ("hand_l", "wrist_l", "hand_l", "hand"), ("hand_r", "wrist_r", "hand_r", "hand"),
 )
+#: The joints bounding each of :data:`MASS_SEGMENTS`: proximal and distal, (n_segments,) each.
+_MASS_PROXIMAL = np.array([JOINT_INDEX[s[1]] for s in MASS_SEGMENTS])
+_MASS_DISTAL = np.array([JOINT_INDEX[s[2]] for s in MASS_SEGMENTS])
 
 #: Adult lengths as fractions of stature (Drillis & Contini proportions, joint centres ours).
 ADULT_PROPORTIONS: dict[str, float] = {
@@ -125,7 +127,7 @@ class Morphology:
         if lengths.shape != (N_LENGTHS,):
             raise ValueError(f"Morphology.lengths must have shape ({N_LENGTHS},), got {lengths.shape}")
         if not np.all(np.isfinite(lengths)) or np.any(lengths <= 0.0):
-            bad = [n for n, v in zip(LENGTHS, lengths) if not (np.isfinite(v) and v > 0)]
+            bad = [n for n, v in zip(LENGTHS, lengths, strict=False) if not (np.isfinite(v) and v > 0)]
             raise ValueError(f"Morphology {self.name!r}: lengths must be positive, not {bad}")
         if self.sex not in DE_LEVA_1996:
             raise ValueError(f"Morphology sex must be 'male' or 'female', got {self.sex!r}")
@@ -139,7 +141,7 @@ class Morphology:
     @property
     def leg_length(self) -> float:
         """Mean of left and right thigh + shank: the unit of normalized root positions (m)."""
-        return leg_length(self.lengths[None])[0].item()
+        return float(leg_length(self.lengths[None])[0])
 
     @property
     def stature(self) -> float:
@@ -188,15 +190,14 @@ class Morphology:
         ``long_legs``, ``short_legs``)."""
         spec = PRESET_SPECS.get(name)
         if spec is None:
-            close = difflib.get_close_matches(name, list(PRESET_SPECS), n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            hint = did_you_mean(name, list(PRESET_SPECS), parenthesized=True)
             raise KeyError(f"unknown morphology preset {name!r}{hint}; presets: "
                            f"{', '.join(PRESET_SPECS)}")
         return cls.from_stature(name=name, **spec)
 
     def to_dict(self) -> dict[str, Any]:
         return {"name": self.name, "sex": self.sex, "mass_kg": self.mass_kg,
-                "lengths_m": {n: float(v) for n, v in zip(LENGTHS, self.lengths)}}
+                "lengths_m": {n: float(v) for n, v in zip(LENGTHS, self.lengths, strict=False)}}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Morphology:
@@ -237,9 +238,7 @@ def segment_mass_table(morph: Morphology) -> tuple[F64, F64, np.ndarray, np.ndar
     table = DE_LEVA_1996[morph.sex]
     masses = np.array([table[s[3]][0] for s in MASS_SEGMENTS]) * morph.mass_kg
     frac = np.array([table[s[3]][1] for s in MASS_SEGMENTS])
-    prox = np.array([JOINT_INDEX[s[1]] for s in MASS_SEGMENTS])
-    dist = np.array([JOINT_INDEX[s[2]] for s in MASS_SEGMENTS])
-    return masses, frac, prox, dist
+    return masses, frac, _MASS_PROXIMAL.copy(), _MASS_DISTAL.copy()
 
 
 def centres_of_mass(positions: F64, masses: F64, com_fraction: F64) -> F64:
@@ -248,18 +247,10 @@ def centres_of_mass(positions: F64, masses: F64, com_fraction: F64) -> F64:
     ``positions`` (n, N_JOINTS, 3); ``masses`` and ``com_fraction`` (n, n_segments) from
     :func:`segment_mass_table` of each body (order of :data:`MASS_SEGMENTS`). Returns (n, 3).
     """
-    prox = np.array([JOINT_INDEX[s[1]] for s in MASS_SEGMENTS])
-    dist = np.array([JOINT_INDEX[s[2]] for s in MASS_SEGMENTS])
+    prox, dist = _MASS_PROXIMAL, _MASS_DISTAL
     seg_com = positions[:, prox] + com_fraction[..., None] * (positions[:, dist] - positions[:, prox])
-    return np.einsum("ns,nsc->nc", masses, seg_com) / masses.sum(axis=1, keepdims=True)
-
-
-def centre_of_mass(positions: F64, morph: Morphology) -> F64:
-    """Whole-body centre of mass (m). ``positions`` (..., N_JOINTS, 3) -> (..., 3)."""
-    masses, frac, prox, dist = segment_mass_table(morph)
-    seg_com = positions[..., prox, :] + frac[:, None] * (positions[..., dist, :]
-                                                         - positions[..., prox, :])
-    return np.einsum("s,...sc->...c", masses, seg_com) / masses.sum()
+    com: F64 = np.einsum("ns,nsc->nc", masses, seg_com) / masses.sum(axis=1, keepdims=True)
+    return com
 
 
 #: Names a length may be given by: every segment, and each bilateral one without _l/_r.
@@ -298,8 +289,7 @@ def load_morphology_yaml(path: str | Path) -> Morphology:
         key = k_node.value
         line = k_node.start_mark.line + 1
         if key not in allowed:
-            close = difflib.get_close_matches(key, sorted(allowed), n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            hint = did_you_mean(key, sorted(allowed), parenthesized=True)
             raise InputError(path, f"{key}: unknown key{hint}; expected one of "
                                    f"{', '.join(sorted(allowed))}", line)
         lines[key] = line
@@ -338,8 +328,7 @@ def load_morphology_yaml(path: str | Path) -> Morphology:
     for seg, value in (top.get("lengths_m") or {}).items():
         key = f"lengths_m.{seg}"
         if seg not in LENGTH_KEYS:
-            close = difflib.get_close_matches(str(seg), list(LENGTH_KEYS), n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            hint = did_you_mean(str(seg), list(LENGTH_KEYS), parenthesized=True)
             raise InputError(path, f"{key}: unknown segment{hint}; segments: {', '.join(LENGTHS)}",
                              lines[key])
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.001 <= value <= 2.0:

@@ -34,7 +34,9 @@ from .rotations import (
     rot_axis,
     yaw_of,
 )
-from .skeleton import BONE_JOINTS, JOINT_INDEX as J, LENGTH_INDEX as L, N_JOINTS, N_LENGTHS
+from .skeleton import BONE_JOINTS, N_JOINTS, N_LENGTHS
+from .skeleton import JOINT_INDEX as J
+from .skeleton import LENGTH_INDEX as L
 
 F64 = NDArray[np.float64]
 
@@ -130,11 +132,13 @@ DIRECTION_FIELDS = ("hip_dir", "foot_dir", "neck_dir", "head_top_dir", "clavicle
 
 def _in_frame(frame: F64, v: F64) -> F64:
     """Express world vectors in a frame: frame^T v. frame (..., 3, 3), v (..., 3)."""
-    return np.einsum("...ji,...j->...i", frame, v)
+    in_frame: F64 = np.einsum("...ji,...j->...i", frame, v)
+    return in_frame
 
 
 def _to_world(frame: F64, v: F64) -> F64:
-    return np.einsum("...ij,...j->...i", frame, v)
+    in_world: F64 = np.einsum("...ij,...j->...i", frame, v)
+    return in_world
 
 
 def _swap(x: F64) -> F64:
@@ -264,6 +268,16 @@ class DecodedPose:
                            self.head2world[index], self.leg2world[index], self.arm2world[index])
 
 
+def two_sphere_middle(upper: F64, lower: F64, span: F64, tiny: float = 1e-12) -> tuple[F64, F64]:
+    """Where the middle joint (knee, elbow) of a limb lies in its half-plane: the intersection of
+    the spheres of radius ``upper`` about the root and ``lower`` about the end, ``span`` from the
+    root along z. Returns (y, z), each (...), metres; ``span`` (...) should lie within
+    ``[|upper - lower|, upper + lower]`` (divisions use at least ``tiny``)."""
+    z = (upper**2 - lower**2 + span**2) / (2.0 * np.maximum(span, tiny))
+    y = np.sqrt(np.maximum(upper**2 - z**2, 0.0))
+    return y, z
+
+
 def two_bone_middle(limb2world: F64, root: F64, upper: F64, lower: F64, reach: F64) -> tuple[F64, F64]:
     """Knee or elbow by the two-sphere intersection in the half-plane (paper §8).
 
@@ -271,39 +285,18 @@ def two_bone_middle(limb2world: F64, root: F64, upper: F64, lower: F64, reach: F
     Returns (middle joint, end joint), each (..., 3). Shapes: frames (..., 3, 3), others (...).
     """
     reach = np.clip(reach, np.abs(upper - lower), upper + lower)
-    safe = np.maximum(reach, 1e-9)
-    z = (upper**2 - lower**2 + reach**2) / (2.0 * safe)
-    y = np.sqrt(np.maximum(upper**2 - z**2, 0.0))
+    y, z = two_sphere_middle(upper, lower, reach, 1e-9)
     middle = root + limb2world[..., :, 1] * y[..., None] + limb2world[..., :, 2] * z[..., None]
     end = root + limb2world[..., :, 2] * reach[..., None]
     return middle, end
 
 
-def catmull_rom(control: F64, t: F64) -> F64:
-    """Uniform Catmull-Rom spline through ``control`` (..., 4, 3) at parameters ``t`` (..., K).
-
-    ``t`` in [0, 3] runs through the four control points (at 0, 1, 2, 3); end tangents come from
-    mirrored phantom points; beyond 3 the curve continues straight along its end tangent.
-    Returns (..., K, 3).
-    """
-    q = control
-    padded = np.concatenate([2 * q[..., :1, :] - q[..., 1:2, :], q,
-                             2 * q[..., 3:, :] - q[..., 2:3, :]], axis=-2)  # (..., 6, 3)
-    span = np.clip(np.floor(t), 0, 2).astype(np.int64)
-    u = np.clip(t - span, 0.0, 1.0)[..., None]
-    idx = span[..., None] + np.arange(4)  # (..., K, 4) into padded
-    pts = np.take_along_axis(padded[..., None, :, :], idx[..., None], axis=-2)  # (..., K, 4, 3)
-    p0, p1, p2, p3 = pts[..., 0, :], pts[..., 1, :], pts[..., 2, :], pts[..., 3, :]
-    curve = 0.5 * (2 * p1 + (p2 - p0) * u + (2 * p0 - 5 * p1 + 4 * p2 - p3) * u**2
-                   + (3 * p1 - p0 - 3 * p2 + p3) * u**3)
-    beyond = (t > 3.0)[..., None]
-    extension = q[..., None, 3, :] + (t[..., None] - 3.0) * (q[..., None, 3, :] - q[..., None, 2, :])
-    return np.where(beyond, extension, curve)
-
-
 def _span_coefficients(control: F64) -> F64:
-    """Polynomial coefficients of the three spans of :func:`catmull_rom`, plus the straight
-    extension as a fourth span: (..., 4 spans, 4 powers, 3) with point = Σ c_k u^k."""
+    """Polynomial coefficients of the uniform Catmull-Rom spline through ``control`` (..., 4, 3).
+
+    ``t`` in [0, 3] runs through the four control points (at 0, 1, 2, 3) in three spans; end
+    tangents come from mirrored phantom points; beyond 3 the curve continues straight along its
+    end tangent, the fourth span. Returns (..., 4 spans, 4 powers, 3) with point = Σ c_k u^k."""
     q = control
     padded = np.concatenate([2 * q[..., :1, :] - q[..., 1:2, :], q,
                              2 * q[..., 3:, :] - q[..., 2:3, :]], axis=-2)  # (..., 6, 3)

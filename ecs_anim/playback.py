@@ -170,7 +170,8 @@ def sample_table(bank: ClipBank, table: F64, clip: I64, time_s: F64,
     """Linear interpolation of a per-frame table aligned with the bank (total_frames, ...)."""
     i0, i1, w, _, _ = frame_position(bank, clip, time_s, loop)
     a, b = table[bank.start[clip] + i0], table[bank.start[clip] + i1]
-    return a + w.reshape(w.shape + (1,) * (a.ndim - 1)) * (b - a)
+    sampled: F64 = a + w.reshape(w.shape + (1,) * (a.ndim - 1)) * (b - a)
+    return sampled
 
 
 def sample(bank: ClipBank, clip: I64, time_s: F64, loop: NDArray[np.bool_]) -> NormalizedPoses:

@@ -19,10 +19,11 @@ def normalize(v: F64) -> F64:
     """Unit vectors (or quaternions) along the last axis; zero ones stay zero.
     Shape (..., k) -> (..., k)."""
     n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.maximum(n, TINY)
+    unit: F64 = v / np.maximum(n, TINY)
+    return unit
 
 
-def rot_axis(axis: int, angle: F64) -> F64:
+def rot_axis(axis: int, angle: F64 | float) -> F64:
     """Rotations by ``angle`` (radians, shape (...)) about a coordinate axis (0=x, 1=y, 2=z).
 
     Returns shape (..., 3, 3).
@@ -37,6 +38,24 @@ def rot_axis(axis: int, angle: F64) -> F64:
     out[..., i, j] = -s
     out[..., j, i] = s
     return out
+
+
+def cross_matrix(k: F64) -> F64:
+    """The matrices ``[k]x`` with ``[k]x @ v == cross(k, v)``. Shape (..., 3) -> (..., 3, 3)."""
+    kx = np.zeros(k.shape[:-1] + (3, 3))
+    kx[..., 0, 1], kx[..., 0, 2] = -k[..., 2], k[..., 1]
+    kx[..., 1, 0], kx[..., 1, 2] = k[..., 2], -k[..., 0]
+    kx[..., 2, 0], kx[..., 2, 1] = -k[..., 1], k[..., 0]
+    return kx
+
+
+def axis_angle(axis: F64, angle: F64) -> F64:
+    """Rotations by ``angle`` (...) radians about unit ``axis`` (..., 3) (Rodrigues: R = I +
+    sin(angle) [k]x + (1 - cos(angle)) [k]x^2). Returns (..., 3, 3)."""
+    kx = cross_matrix(axis)
+    s, c = np.sin(angle)[..., None, None], np.cos(angle)[..., None, None]
+    rotation: F64 = np.eye(3) + s * kx + (1.0 - c) * (kx @ kx)
+    return rotation
 
 
 def euler_to_matrix(angles_deg: F64, order: str) -> F64:
@@ -75,7 +94,8 @@ def matrix_to_euler(matrix: F64, order: str) -> F64:
     t1_locked = np.arctan2(sign * m[..., c, b], m[..., b, b])
     t1 = np.where(regular, t1, t1_locked)
     t3 = np.where(regular, t3, 0.0)
-    return np.rad2deg(np.stack([t1, t2, t3], axis=-1))
+    degrees: F64 = np.rad2deg(np.stack([t1, t2, t3], axis=-1))
+    return degrees
 
 
 def quat_from_matrix(matrix: F64) -> F64:
@@ -103,7 +123,8 @@ def quat_from_matrix(matrix: F64) -> F64:
     best = np.argmax(diag, axis=-1)
     q = np.take_along_axis(cands, best[..., None, None], axis=-2)[..., 0, :]
     q = q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), TINY)
-    return np.where(q[..., 3:4] < 0.0, -q, q)
+    positive_w: F64 = np.where(q[..., 3:4] < 0.0, -q, q)
+    return positive_w
 
 
 def matrix_from_quat(quat: F64) -> F64:
@@ -160,14 +181,11 @@ def rotation_between(a: F64, b: F64) -> F64:
     axis = np.cross(a, b)
     s = np.linalg.norm(axis, axis=-1)
     c = np.sum(a * b, axis=-1)
-    # Rodrigues with k = axis (unnormalized): R = I + [k]x + [k]x^2 / (1 + c).
-    kx = np.zeros(a.shape[:-1] + (3, 3))
-    kx[..., 0, 1], kx[..., 0, 2] = -axis[..., 2], axis[..., 1]
-    kx[..., 1, 0], kx[..., 1, 2] = axis[..., 2], -axis[..., 0]
-    kx[..., 2, 0], kx[..., 2, 1] = -axis[..., 1], axis[..., 0]
+    # Rodrigues with k = axis (unnormalized, |k| = sin): R = I + [k]x + [k]x^2 / (1 + c).
+    kx = cross_matrix(axis)
     eye = np.broadcast_to(np.eye(3), kx.shape)
     denom = np.maximum(1.0 + c, 1e-12)[..., None, None]
-    out = eye + kx + kx @ kx / denom
+    out: F64 = eye + kx + kx @ kx / denom
     # Opposite directions: rotate by pi about any axis perpendicular to a.
     opposite = (c < -1.0 + 1e-9) & (s < 1e-6)
     if np.any(opposite):
@@ -183,7 +201,7 @@ def yaw_of(frame: F64) -> F64:
     return np.arctan2(frame[..., 1, 0], frame[..., 0, 0])
 
 
-def slerp(q0: F64, q1: F64, t: F64) -> F64:
+def slerp(q0: F64, q1: F64, t: F64 | float) -> F64:
     """Spherical interpolation of quaternions (x, y, z, w) along the shorter arc.
 
     ``q0``, ``q1`` shape (..., 4); ``t`` shape (...) in [0, 1]. Returns (..., 4).

@@ -7,12 +7,10 @@ tick. The schema is documented in ``docs/scenarios.md``.
 
 from __future__ import annotations
 
-import difflib
 import math
-import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import yaml
@@ -20,21 +18,25 @@ from yaml import Node
 
 from .components import MotionPlayer, Placement, QueuedClip
 from .constraints import Activation, ConstraintSpec
-from .errors import EcsAnimError, InputError, NumberList, compose_yaml, expanded_size, listed, quoted
+from .errors import (
+    EcsAnimError,
+    InputError,
+    NumberList,
+    compose_yaml,
+    did_you_mean,
+    expanded_size,
+    listed,
+    quoted,
+)
+from .files import MAX_NAME_LENGTH, NAME_PATTERN
 from .ground import Bumps, Combined, Ground, HeightGrid, Plane, Slope, Stairs
 from .morphology import LENGTH_KEYS, PRESET_SPECS, Morphology, with_lengths_m
 from .motion import NormalizedMotion, load_nmo
-from .simulation import MAX_COORDINATE_M
+from .simulation import MAX_COORDINATE_M, Simulation
 from .store import MAX_QUEUE
-
-#: Names of characters and motions: they name files, so no path separators or leading dot.
-_NAME = re.compile(r"[A-Za-z0-9_\-][A-Za-z0-9_.\-]*")
-
 
 #: The longest scenario (and ``ecs-anim run --seconds``): a day.
 MAX_DURATION_S = 86400.0
-#: Longest character name (it names exported files).
-MAX_NAME_LENGTH = 64
 #: How far a desired centre of mass may lie from the character's position (over its feet).
 MAX_COM_OFFSET_M = 1.0
 #: How far a world target may lie from its character's start, and a table from the nearest
@@ -160,8 +162,7 @@ class _Reader:
             key = str(key_node.value)
             here = f"{where}.{key}" if where else key
             if key not in allowed:
-                close = difflib.get_close_matches(key, list(allowed), n=1, cutoff=0.6)
-                hint = f"; did you mean {close[0]!r}?" if close else ""
+                hint = did_you_mean(key, list(allowed))
                 raise self.fail(key_node, here, f"unknown key{hint} (expected one of "
                                                f"{', '.join(allowed)})")
             if key in out:
@@ -246,6 +247,18 @@ class _Reader:
         return tuple(self.number(v, f"{where}[{i}]", -bound, bound, unit=unit)
                      for i, v in enumerate(items))
 
+    def vector3(self, node: Node, where: str, unit: str,
+                bound: float = math.inf) -> tuple[float, float, float]:
+        """:meth:`vector` of three numbers (a point or a direction)."""
+        x, y, z = self.vector(node, where, 3, unit, bound)
+        return (x, y, z)
+
+    def vector2(self, node: Node, where: str, unit: str,
+                bound: float = math.inf) -> tuple[float, float]:
+        """:meth:`vector` of two numbers (a horizontal place or size)."""
+        x, y = self.vector(node, where, 2, unit, bound)
+        return (x, y)
+
     def too_far(self, node: Node, where: str, away_m: float, what: str, reference: str) -> None:
         """Refuse ``what`` lying ``away_m`` from ``reference`` beyond :data:`MAX_TARGET_DISTANCE_M`
         (metres given as millimetres, most likely)."""
@@ -284,8 +297,7 @@ def _ground(r: _Reader, node: Node, where: str, inside: tuple[int, ...] = ()) ->
                                   "combined)")
     kind = r.string(type_node, f"{where}.type")
     if kind not in GROUND_KEYS:
-        close = difflib.get_close_matches(kind, list(GROUND_KEYS), n=1)
-        hint = f"; did you mean {close[0]!r}?" if close else ""
+        hint = did_you_mean(kind, list(GROUND_KEYS))
         raise r.fail(type_node, f"{where}.type", f"unknown ground {kind!r}{hint} (expected one of "
                                                  f"{', '.join(GROUND_KEYS)})")
     keys = r.mapping(node, where, GROUND_KEYS[kind])
@@ -307,7 +319,7 @@ def _ground(r: _Reader, node: Node, where: str, inside: tuple[int, ...] = ()) ->
                      num("wavelength_y_m", 2.0, 0.05, 1e3, "m"), num("z_m", 0.0, unit="m"))
     if kind == "grid":
         heights = _grid_heights(r, keys["heights_m"], f"{where}.heights_m")
-        origin = r.vector(keys["origin_m"], f"{where}.origin_m", 2, "m") if "origin_m" in keys else (0.0, 0.0)
+        origin = r.vector2(keys["origin_m"], f"{where}.origin_m", "m") if "origin_m" in keys else (0.0, 0.0)
         return HeightGrid(heights, r.number(keys["cell_m"], f"{where}.cell_m", 1e-3, 1e3, "m"),
                           origin[0], origin[1])
     parts = r.sequence(keys["parts"], f"{where}.parts")
@@ -349,8 +361,7 @@ def _morphology(r: _Reader, node: Node, where: str) -> Morphology:
     if isinstance(node, yaml.ScalarNode):
         name = r.string(node, where)
         if name not in PRESET_SPECS:
-            close = difflib.get_close_matches(name, list(PRESET_SPECS), n=1)
-            hint = f"; did you mean {close[0]!r}?" if close else ""
+            hint = did_you_mean(name, list(PRESET_SPECS))
             raise r.fail(node, where, f"unknown morphology preset {name!r}{hint} (presets: "
                                       f"{', '.join(PRESET_SPECS)}, or a mapping with stature_m / "
                                       "lengths_m)")
@@ -404,7 +415,14 @@ def _load_motion(r: _Reader, node: Node, where: str, base_dir: Path,
     return read[path.resolve()]
 
 
-def _read_motion(r: _Reader, node: Node, where: str, path: Path, rel: str) -> NormalizedMotion:
+class _Fails(Protocol):
+    """What :func:`_read_motion` reports through: a :class:`_Reader`, or a clip's own reader."""
+
+    def fail(self, node: Node | None, where: str, message: str) -> EcsAnimError: ...
+
+
+def _read_motion(r: _Fails, node: Node | None, where: str, path: Path,
+                 rel: str) -> NormalizedMotion:
     from .c3d_import import import_c3d
     from .importing import import_bvh
 
@@ -429,8 +447,7 @@ def _fill_absent(r: _Reader, motions: dict[str, NormalizedMotion], name: str, no
     where = f"motions.{name}.absent_from"
     other = r.string(node, where)
     if other == name or other not in motions:
-        close = difflib.get_close_matches(other, [m for m in motions if m != name], n=1)
-        hint = f"; did you mean {close[0]!r}?" if close else ""
+        hint = did_you_mean(other, [m for m in motions if m != name])
         raise r.fail(node, where, f"no other motion named {other!r}{hint}")
     if not motions[name].info.get("absent"):
         raise r.fail(node, where, f"{name!r} has every body part: nothing to take from {other!r}")
@@ -461,8 +478,7 @@ def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
     name = r.string(keys["name"], f"{where}.name")
     kind = r.string(keys["kind"], f"{where}.kind") if "kind" in keys else "position"
     if kind not in KIND_NAMES:
-        close = difflib.get_close_matches(kind, list(KIND_NAMES), n=1)
-        hint = f"; did you mean {close[0]!r}?" if close else ""
+        hint = did_you_mean(kind, list(KIND_NAMES))
         raise r.fail(keys["kind"], f"{where}.kind", f"unknown kind {kind!r}{hint} "
                                                     f"(kinds: {', '.join(KIND_NAMES)})")
 
@@ -470,12 +486,12 @@ def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
                  as_target: bool = False) -> tuple[str, float | None, tuple[float, float, float]]:
         point = r.string(pkeys[point_key], f"{pwhere}.{point_key}")
         fraction = r.number(pkeys["fraction"], f"{pwhere}.fraction", 0.0, 1.0) if "fraction" in pkeys else None
-        offset = r.vector(pkeys["offset_m"], f"{pwhere}.offset_m", 3, "m", 10.0) if "offset_m" in pkeys else (0.0, 0.0, 0.0)
+        offset = r.vector3(pkeys["offset_m"], f"{pwhere}.offset_m", "m", 10.0) if "offset_m" in pkeys else (0.0, 0.0, 0.0)
         try:
-            body_point(point, fraction, offset, as_target)  # type: ignore[arg-type]
+            body_point(point, fraction, offset, as_target)
         except ValueError as exc:
             raise r.fail(pkeys[point_key], f"{pwhere}.{point_key}", str(exc)) from None
-        return point, fraction, offset  # type: ignore[return-value]
+        return point, fraction, offset
 
     point, fraction, offset = point_of(keys, where, "point")
     priority = r.number(keys["priority"], f"{where}.priority", -1e6, 1e6) if "priority" in keys else 0.0
@@ -496,8 +512,7 @@ def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
         for j, gn in enumerate(r.sequence(keys["chain"], f"{where}.chain")):
             group = r.string(gn, f"{where}.chain[{j}]")
             if group not in GROUPS:
-                close = difflib.get_close_matches(group, list(GROUPS), n=1)
-                hint = f"; did you mean {close[0]!r}?" if close else ""
+                hint = did_you_mean(group, list(GROUPS))
                 raise r.fail(gn, f"{where}.chain[{j}]", f"unknown group {group!r}{hint} "
                                                        f"(groups: {', '.join(GROUPS)})")
             chain.append(group)
@@ -508,7 +523,7 @@ def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
                          f"takes distance_m (this one is kind {kind!r})")
         options["distance_m"] = r.number(keys["distance_m"], f"{where}.distance_m", 0.0, 100.0, "m")
     if "axis" in keys:
-        options["axis"] = r.vector(keys["axis"], f"{where}.axis", 3, "", 1e3)
+        options["axis"] = r.vector3(keys["axis"], f"{where}.axis", "", 1e3)
     if "area" in keys:
         ak = r.mapping(keys["area"], f"{where}.area", {"shape": True, "low_m": False, "high_m": False,
                                                        "radius_m": False, "normal": False,
@@ -517,17 +532,17 @@ def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
         try:
             options["area"] = Area(
                 r.string(ak["shape"], f"{aw}.shape"),
-                r.vector(ak["low_m"], f"{aw}.low_m", 3, "m", MAX_TARGET_DISTANCE_M) if "low_m" in ak else (0.0, 0.0, 0.0),  # type: ignore[arg-type]
-                r.vector(ak["high_m"], f"{aw}.high_m", 3, "m", MAX_TARGET_DISTANCE_M) if "high_m" in ak else (0.0, 0.0, 0.0),  # type: ignore[arg-type]
+                r.vector3(ak["low_m"], f"{aw}.low_m", "m", MAX_TARGET_DISTANCE_M) if "low_m" in ak else (0.0, 0.0, 0.0),
+                r.vector3(ak["high_m"], f"{aw}.high_m", "m", MAX_TARGET_DISTANCE_M) if "high_m" in ak else (0.0, 0.0, 0.0),
                 r.number(ak["radius_m"], f"{aw}.radius_m", 0.0, MAX_TARGET_DISTANCE_M, "m") if "radius_m" in ak else 0.0,
-                r.vector(ak["normal"], f"{aw}.normal", 3, "", 1e3) if "normal" in ak else (0.0, 0.0, 1.0),  # type: ignore[arg-type]
+                r.vector3(ak["normal"], f"{aw}.normal", "", 1e3) if "normal" in ak else (0.0, 0.0, 1.0),
                 r.boolean(ak["inside"], f"{aw}.inside") if "inside" in ak else True)
         except ValueError as exc:
             raise r.fail(keys["area"], aw, str(exc)) from None
     tk = r.mapping(keys["target"], f"{where}.target",
                    {"world_m": False, "direction": False, "character": False, "point": False,
                     "joint": False, "fraction": False, "offset_m": False})
-    given = [k for k in ("world_m", "direction", "character") if k in tk]
+    given: list[str] = [k for k in ("world_m", "direction", "character") if k in tk]
     if not given and ("point" in tk or "joint" in tk):
         given = ["self"]
     if in_motion and given != ["self"]:
@@ -546,7 +561,7 @@ def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
             raise r.fail(tk[given[0]], f"{where}.target.{given[0]}",
                          "an orientation aims along direction: [x, y, z] or looks at a character's "
                          "point" if kind == "orientation" else "direction: is for orientation constraints")
-        target_world = r.vector(tk[given[0]], f"{where}.target.{given[0]}", 3, "m", 1e5)
+        target_world = r.vector3(tk[given[0]], f"{where}.target.{given[0]}", "m", 1e5)
         if given[0] == "world_m" and origin_m is not None:
             r.too_far(tk["world_m"], f"{where}.target.world_m",
                       math.dist(target_world, origin_m), "the target",
@@ -563,7 +578,7 @@ def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
     # Everything but the target character's existence, checked now (with this line).
     target = Target(row=0, point=body_point(target_point, options.get("target_fraction"),
                                             options.get("target_offset_m", (0.0, 0.0, 0.0)), True)) \
-        if target_point else Target(world_m=target_world)  # type: ignore[arg-type]
+        if target_point else Target(world_m=target_world)
     checks = {k: v for k, v in options.items() if k in ("chain", "distance_m", "area", "axis")}
     try:
         ConstraintTable().add(name, 0, kind, body_point(point, fraction, offset,
@@ -571,7 +586,7 @@ def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
                               activation, **checks)
     except ValueError as exc:
         raise r.fail(node, where, str(exc)) from None
-    return ConstraintEntry(name, point, priority, activation, target_world, other, target_point,  # type: ignore[arg-type]
+    return ConstraintEntry(name, point, priority, activation, target_world, other, target_point,
                            options), who
 
 
@@ -581,7 +596,7 @@ def _com_target(r: _Reader, keys: dict[str, Node], where: str,
     :data:`MAX_COM_OFFSET_M` of its position."""
     if "com_target_m" not in keys:
         return None
-    xy = r.vector(keys["com_target_m"], f"{where}.com_target_m", 2, "m", 1e5)
+    xy = r.vector2(keys["com_target_m"], f"{where}.com_target_m", "m", 1e5)
     away = math.hypot(xy[0] - position[0], xy[1] - position[1])
     if away > MAX_COM_OFFSET_M:
         raise r.fail(keys["com_target_m"], f"{where}.com_target_m", f"{away:.2f} m from the "
@@ -593,7 +608,7 @@ def _com_target(r: _Reader, keys: dict[str, Node], where: str,
 def _compose(path: Path, what: str, label: str) -> Node:
     """The file's YAML tree (long number lists read in one go), refused when empty or when it holds
     more than :data:`MAX_YAML_VALUES` values with its aliases expanded."""
-    root = compose_yaml(path, what, number_lists=True)
+    root: Node | None = compose_yaml(path, what, number_lists=True)
     if root is None:
         raise InputError(path, f"{label} is empty", 1)
     try:
@@ -650,7 +665,7 @@ def load_scenario(path: str | Path) -> Scenario:
     fills: list[tuple[str, Node]] = []
     read: dict[Path, NormalizedMotion] = {}
     for key_node, value in motion_nodes.value:
-        if not isinstance(key_node, yaml.ScalarNode) or not _NAME.fullmatch(str(key_node.value)):
+        if not isinstance(key_node, yaml.ScalarNode) or not NAME_PATTERN.fullmatch(str(key_node.value)):
             raise r.fail(key_node, "motions", "motion names must be plain names (letters, digits, "
                                               "_ . -)")
         name = str(key_node.value)
@@ -675,7 +690,7 @@ def load_scenario(path: str | Path) -> Scenario:
         where = f"characters[{i}]"
         keys = r.mapping(node, where, CHARACTER_KEYS)
         name = r.string(keys["name"], f"{where}.name")
-        if not _NAME.fullmatch(name):
+        if not NAME_PATTERN.fullmatch(name):
             raise r.fail(keys["name"], f"{where}.name", f"{name!r}: a character name names its "
                          "exported files, so it must be letters, digits, _ . - (not starting with .)")
         if len(name) > MAX_NAME_LENGTH:
@@ -688,8 +703,7 @@ def load_scenario(path: str | Path) -> Scenario:
         def clip(n: Node, w: str) -> str:
             c = r.string(n, w)
             if c not in motions:
-                close = difflib.get_close_matches(c, list(motions), n=1)
-                hint = f"; did you mean {close[0]!r}?" if close else ""
+                hint = did_you_mean(c, list(motions))
                 raise r.fail(n, w, f"unknown motion {c!r}{hint} (motions: {', '.join(motions)})")
             return c
 
@@ -711,11 +725,11 @@ def load_scenario(path: str | Path) -> Scenario:
             loop=r.boolean(keys["loop"], f"{where}.loop") if "loop" in keys else True,
             start_s=r.number(keys["start_s"], f"{where}.start_s", 0.0, MAX_COORDINATE_M, "s") if "start_s" in keys else 0.0,
             queue=tuple(queue))
-        position = r.vector(keys["position_m"], f"{where}.position_m", 2, "m", 1e5) \
+        position = r.vector2(keys["position_m"], f"{where}.position_m", "m", 1e5) \
             if "position_m" in keys else (0.0, 0.0)
         heading = r.number(keys["heading_deg"], f"{where}.heading_deg", -360, 360, "degrees") \
             if "heading_deg" in keys else 0.0
-        constraints = []
+        constraints: list[ConstraintEntry] = []
         own = r.sequence(keys["constraints"], f"{where}.constraints") if "constraints" in keys else []
         n_constraints += len(own)
         if n_constraints > MAX_CONSTRAINTS:
@@ -746,8 +760,7 @@ def load_scenario(path: str | Path) -> Scenario:
         raise r.fail(top["characters"], "characters", "expected at least one character")
     for other, node, cwhere in pending_targets:
         if other not in names:
-            close = difflib.get_close_matches(str(other), sorted(names), n=1)
-            hint = f"; did you mean {close[0]!r}?" if close else ""
+            hint = did_you_mean(str(other), sorted(names))
             raise r.fail(node, f"{cwhere}.target.character", f"no character named {other!r}{hint}")
     camera: dict[str, Any] = {}
     if "camera" in top:
@@ -760,7 +773,7 @@ def load_scenario(path: str | Path) -> Scenario:
         if "distance_m" in ck:
             camera["distance_m"] = r.number(ck["distance_m"], "camera.distance_m", 0.1, 1e4, "m")
         if "target_m" in ck:
-            camera["target_m"] = r.vector(ck["target_m"], "camera.target_m", 3, "m", 1e5)
+            camera["target_m"] = r.vector3(ck["target_m"], "camera.target_m", "m", 1e5)
     starts = np.array([c.placement.position_m for c in characters])
     tables = [_table(r, node, f"tables[{i}]", starts) for i, node in
               enumerate(r.sequence(top["tables"], "tables", MAX_TABLES, "tables") if "tables" in top else [])]
@@ -773,15 +786,15 @@ def _table(r: _Reader, node: Node, where: str, starts: np.ndarray) -> Table:
     within :data:`MAX_TARGET_DISTANCE_M` of one."""
     keys = r.mapping(node, where, {"centre_m": True, "size_m": True, "height_m": True,
                                    "heading_deg": False})
-    size = r.vector(keys["size_m"], f"{where}.size_m", 2, "m", MAX_TARGET_DISTANCE_M)
+    size = r.vector2(keys["size_m"], f"{where}.size_m", "m", MAX_TARGET_DISTANCE_M)
     if min(size) <= 0:
         raise r.fail(keys["size_m"], f"{where}.size_m", "a table's length and width must be > 0")
-    centre = r.vector(keys["centre_m"], f"{where}.centre_m", 2, "m", 1e5)
+    centre = r.vector2(keys["centre_m"], f"{where}.centre_m", "m", 1e5)
     r.too_far(keys["centre_m"], f"{where}.centre_m",
               float(np.min(np.linalg.norm(starts - np.array(centre), axis=-1))), "the table",
               "the nearest character's position_m")
-    return Table(centre,  # type: ignore[arg-type]
-                 size,  # type: ignore[arg-type]
+    return Table(centre,
+                 size,
                  r.number(keys["height_m"], f"{where}.height_m", 0.1, 3.0, "m"),
                  math.radians(r.number(keys["heading_deg"], f"{where}.heading_deg", -360, 360, "degrees"))
                  if "heading_deg" in keys else 0.0)
@@ -807,11 +820,9 @@ def load_motion_constraints(path: str | Path) -> list[ConstraintSpec]:
     return specs
 
 
-def build_simulation(scenario: Scenario, window: bool = False,  # type: ignore[no-untyped-def]
-                     rotations: bool = False):
+def build_simulation(scenario: Scenario, window: bool = False,
+                     rotations: bool = False) -> Simulation:
     """A :class:`~ecs_anim.simulation.Simulation` with the scenario's characters spawned."""
-    from .simulation import Simulation
-
     sim = Simulation(scenario.motions, scenario.ground, scenario.fps, window=window,
                      rotations=rotations)
     sim.tables = tuple(scenario.tables)

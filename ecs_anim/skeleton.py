@@ -36,7 +36,7 @@ _PARENT_NAMES: Final[dict[str, str | None]] = {
 }
 #: Parent index per joint, -1 for the root. Shape (N_JOINTS,).
 PARENTS: Final[tuple[int, ...]] = tuple(
-    -1 if _PARENT_NAMES[j] is None else JOINT_INDEX[_PARENT_NAMES[j]]  # type: ignore[index]
+    -1 if (parent := _PARENT_NAMES[j]) is None else JOINT_INDEX[parent]
     for j in JOINTS
 )
 

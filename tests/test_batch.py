@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import MOCAP_DIR, MOTIONS_DIR, REPO, mocap_files, require_mocap
 
+from conftest import MOCAP_DIR, MOTIONS_DIR, REPO, mocap_files, require_mocap
 from ecs_anim import batch
 from ecs_anim.cli import main as cli_main
 from ecs_anim.errors import EcsAnimError
@@ -106,7 +106,6 @@ def test_a_floating_planted_foot_is_reported_by_the_metrics(tmp_path) -> None:
     above the ground in the posture floats 7 mm."""
     from conftest import MOTIONS_DIR
     from ecs_anim.components import MotionPlayer
-
     from ecs_anim.importing import import_bvh
     from ecs_anim.metrics import ANKLES, TOES, MetricsRecorder
     from ecs_anim.morphology import Morphology
@@ -268,7 +267,7 @@ def test_mocap_batch_metrics_equal_ecs_anim_run(tmp_path: Path, grounds_file: Pa
     assert [(r["clip"], r["body"], r["ground"]) for r in rows] == \
         [(j["clip"], j["body"], j["ground"]) for j in jobs]
     numbers = [k for k in batch.CSV_FIELDS if k.endswith(("_mm", "_m", "_ratio"))]
-    for row, j in zip(rows, jobs):
+    for row, j in zip(rows, jobs, strict=False):
         assert [float(row[k]) if row[k] else None for k in numbers] == [j[k] for k in numbers]
     by_clip = {c.stem: c for c in clips}
     fps_of = {c.stem: batch.import_clip(c).fps for c in clips}
@@ -552,14 +551,13 @@ def test_a_job_killed_while_renaming_has_no_old_file_beside_a_new_one(tmp_path: 
                                                                        monkeypatch) -> None:  # type: ignore[no-untyped-def]
     """Every file of a job is written to a temporary name before any is renamed in, and the
     earlier run's files go first: a kill between two renames leaves new files only, no stamp."""
-    from ecs_anim import files
-
     out = tmp_path / "out"
     argv = (str(MOTIONS_DIR / "walk.bvh"), "--bodies", "child", "--out", str(out), "--jobs", "1",
             "--formats", "bvh,npz")
     assert run_batch_cli(*argv, "--seconds", "0.1") == 0
     old = job_files(out)
-    real_replace, renamed = os.replace, []
+    real_replace = os.replace
+    renamed: list[object] = []
 
     def replace(src, dst):  # type: ignore[no-untyped-def]
         if str(dst).endswith((".bvh", ".npz")):
@@ -568,7 +566,7 @@ def test_a_job_killed_while_renaming_has_no_old_file_beside_a_new_one(tmp_path: 
             renamed.append(dst)
         return real_replace(src, dst)
 
-    monkeypatch.setattr(files.os, "replace", replace)
+    monkeypatch.setattr("ecs_anim.files.os.replace", replace)
     with pytest.raises(KeyboardInterrupt):
         run_batch_cli(*argv, "--seconds", "0.2")
     monkeypatch.undo()
@@ -633,7 +631,7 @@ def test_the_job_hash_follows_the_package_source() -> None:
 
     digest = batch.source_digest()
     assert digest == batch.source_digest() and len(digest) == 64
-    systems = Path(importlib.import_module("ecs_anim.systems").__file__).parent
+    systems = Path(str(importlib.import_module("ecs_anim.systems").__file__)).parent
     original = (systems / "ground_adapt.py").read_bytes()
     real_read = Path.read_bytes
 

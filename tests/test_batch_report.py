@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 from matplotlib import image as mpimg
 
-from ecs_anim import batch_report
+from ecs_anim import metrics
 from ecs_anim.batch_report import badness, figure_pngs, report_html, write_report
+from ecs_anim.ground import Plane
 
 MOTIONS = Path(__file__).resolve().parents[1] / "scenarios" / "motions"
 
@@ -124,7 +125,8 @@ def test_worst_job_first_and_failed_jobs_listed_with_their_error(tmp_path):
     assert ">dance<" in first_row and ">child<" in first_row and "6.50" in first_row
     assert 'href="dance/child.bvh"' in first_row and 'href="dance/child.npz"' in first_row
     ranked = sorted((j for j in jobs if j["status"] != "failed"), key=lambda j: -badness(j)[0])
-    assert badness(ranked[0]) == (pytest.approx(6.5 / batch_report.SLIDE_EVENT_MM), "slide_max_mm")
+    worst, worst_key = badness(ranked[0])
+    assert worst == pytest.approx(6.5 / metrics.SLIDE_EVENT_MM) and worst_key == "slide_max_mm"
     failed = page[page.index("Failed jobs (2)"):page.index("Per body")]
     assert failed.count("broken.bvh:3: expected a number, found &#x27;x1&#x27;") == 2
     assert "broken" not in table  # failed jobs are not ranked among the measured ones
@@ -172,7 +174,7 @@ def real_jobs(tmp_path, seconds=2.0):
 
     (tmp_path / "grounds.yaml").write_text("grounds:\n" + "".join(
         f"  {name}: {spec}\n" for name, spec in GROUNDS.items() if name))
-    grounds = [batch.NamedGround("", batch.Plane()), *batch.load_grounds(tmp_path / "grounds.yaml")]
+    grounds = [batch.NamedGround("", Plane()), *batch.load_grounds(tmp_path / "grounds.yaml")]
     jobs = []
     for clip in ("walk", "dance"):
         path = MOTIONS / f"{clip}.bvh"
@@ -192,12 +194,12 @@ def test_report_from_real_runs(tmp_path):
     # the job's simulated length, which the contact timeline marks as the clip's end
     simulated_s = [j["duration_s"] for j in jobs]  # simulated, not wall-clock, seconds
     assert all(s == pytest.approx(j["frames"] / 30.0) == pytest.approx(2.0)
-               for s, j in zip(simulated_s, jobs))
-    assert all(b <= s for s, j in zip(simulated_s, jobs) for side in j["contacts"].values()
+               for s, j in zip(simulated_s, jobs, strict=False))
+    assert all(b <= s for s, j in zip(simulated_s, jobs, strict=False) for side in j["contacts"].values()
                for _, b in side)
     without_end = [{k: v for k, v in j.items() if k != "duration_s"} for j in jobs]
     with_end_pngs, without_end_pngs = (embedded_pngs(report_html(js)) for js in (jobs, without_end))
-    assert [a == b for a, b in zip(with_end_pngs, without_end_pngs)].count(False) == 1  # the timeline
+    assert [a == b for a, b in zip(with_end_pngs, without_end_pngs, strict=False)].count(False) == 1  # the timeline
     out = tmp_path / "batch" / "report.html"
     write_report(out, jobs)
     page = out.read_text("utf-8")

@@ -11,6 +11,8 @@ Bounds used below, and why:
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -24,7 +26,8 @@ from ecs_anim.metrics import MetricsRecorder
 from ecs_anim.morphology import Morphology, bone_lengths_of
 from ecs_anim.normalized import decode
 from ecs_anim.simulation import Simulation
-from ecs_anim.skeleton import BONE_JOINTS, JOINT_INDEX as J, JOINTS
+from ecs_anim.skeleton import BONE_JOINTS, JOINTS
+from ecs_anim.skeleton import JOINT_INDEX as J
 
 FPS = 30.0
 ADULT = Morphology.preset("adult_male")
@@ -46,7 +49,7 @@ def clips():
 
 
 def frame(t_s: float) -> int:
-    return int(round(t_s * FPS))
+    return round(t_s * FPS)
 
 
 def test_every_gesture_is_shipped_with_its_timings(clips):
@@ -264,7 +267,7 @@ def test_dance_steps_alternate(clips):
     wraps = [side for side in (0, 1) if not contact[0, side] and not contact[-1, side]]
     assert len(flights) - len(wraps) == tm["steps"]
     sides = [side for _, side in flights]
-    assert all(a != b for a, b in zip(sides, sides[1:])), sides
+    assert all(a != b for a, b in itertools.pairwise(sides)), sides
     assert sides[0] == (1 if tm["first_foot"] == "r" else 0)
     starts = np.array([a for a, _ in flights]) / FPS
     np.testing.assert_allclose(np.diff(starts), tm["beat_s"], atol=2.5 / FPS)

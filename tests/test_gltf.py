@@ -15,12 +15,13 @@ import os
 import shutil
 import subprocess
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pygltflib
 import pytest
-from conftest import MOTIONS_DIR, REPO, mocap_files, mocap_params
 
+from conftest import MOTIONS_DIR, REPO, mocap_files, mocap_params
 from ecs_anim.cli import main
 from ecs_anim.morphology import Morphology
 from ecs_anim.skeleton import JOINTS
@@ -147,7 +148,8 @@ def test_authored_walk_reads_back_equal_to_the_npz_and_passes_the_validator(tmp_
     _assert_valid([glb])
 
 
-CLIPS = [p for p in mocap_params("*") if p.values[0] is None
+_ALL_CLIPS: list[Any] = mocap_params("*")  # pytest params, each holding one file (or None)
+CLIPS = [p for p in _ALL_CLIPS if p.values[0] is None
          or p.values[0].suffix.lower() in (".bvh", ".c3d")]
 BODIES = ["child", "adult_female", "adult_male", "tall", "long_legs", "short_legs"]
 

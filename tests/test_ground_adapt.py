@@ -34,7 +34,7 @@ def test_feet_land_on_stairs_and_pelvis_obeys_the_min_rule():
     in_contact = weights == 1.0
     assert in_contact.any() and err[in_contact & reachable].max() < 1e-9
     lengths_after = bone_lengths_of(after)
-    for k, (a, b) in enumerate(BONE_JOINTS):
+    for k, (a, _b) in enumerate(BONE_JOINTS):
         if a >= 0:
             assert np.abs(lengths_after[:, k] - morph.lengths[k]).max() < 1e-9
 

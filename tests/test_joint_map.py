@@ -25,7 +25,7 @@ HELPERS = ["pelvis_l", "pelvis_r", "lumbar", "cervical", "clavicle_l", "clavicle
 def renamed(text: str, names: dict[str, str]) -> str:
     def sub(m: re.Match[str]) -> str:
         return m.group(1) + names.get(m.group(2), m.group(2))
-    return re.sub(r"^(\s*(?:ROOT|JOINT)\s+)(\S+)\s*$", sub, text, flags=re.M)
+    return re.sub(r"^(\s*(?:ROOT|JOINT)\s+)(\S+)\s*$", sub, text, flags=re.MULTILINE)
 
 
 def preset_names(preset_name: str, prefix: str = "") -> dict[str, str]:

@@ -13,8 +13,9 @@ from ecs_anim.morphology import (
     PRESET_SPECS,
     Morphology,
     bone_lengths_of,
-    centre_of_mass,
+    centres_of_mass,
     load_morphology_yaml,
+    segment_mass_table,
 )
 from ecs_anim.motion import load_nmo, save_nmo
 from ecs_anim.normalized import decode, encode, frames_from_positions, spine_joints
@@ -59,7 +60,7 @@ def test_decode_on_any_body_has_exact_bone_lengths_and_finite_positions(walk):
         pos = decode(walk.poses, lengths).positions
         assert np.all(np.isfinite(pos))
         got = bone_lengths_of(pos)
-        for k, (a, b) in enumerate(BONE_JOINTS):
+        for k, (a, _b) in enumerate(BONE_JOINTS):
             if a >= 0:
                 assert np.abs(got[:, k] - lengths[k]).max() < 1e-9, LENGTHS[k]
 
@@ -107,7 +108,9 @@ def test_spine_walk_lands_on_control_points_with_matching_lengths():
 def test_centre_of_mass_of_a_standing_body_is_above_the_feet(walk):
     m = Morphology.preset("adult_male")
     pos = decode(import_bvh(MOTIONS_DIR / "idle.bvh").poses, m.lengths).positions
-    com = centre_of_mass(pos, m)
+    masses, fraction = segment_mass_table(m)[:2]
+    frames = pos.shape[0]
+    com = centres_of_mass(pos, np.tile(masses, (frames, 1)), np.tile(fraction, (frames, 1)))
     feet = pos[:, [JOINT_INDEX["ankle_l"], JOINT_INDEX["ankle_r"]], :2].mean(axis=1)
     assert np.linalg.norm(com[:, :2] - feet, axis=-1).max() < 0.12
     assert np.all((com[:, 2] > 0.5 * 1.75) & (com[:, 2] < 0.62 * 1.75))  # about 55 % of stature

@@ -4,6 +4,8 @@ import numpy as np
 import pytest
 
 from ecs_anim.rotations import (
+    axis_angle,
+    cross_matrix,
     euler_to_matrix,
     frame_from_axes,
     matrix_from_quat,
@@ -58,6 +60,30 @@ def test_rotation_between_handles_parallel_and_opposite():
     r = rotation_between(a, b)
     np.testing.assert_allclose(np.einsum("nij,nj->ni", r, a), b, atol=1e-12)
     np.testing.assert_allclose(r @ np.swapaxes(r, 1, 2), np.broadcast_to(np.eye(3), r.shape), atol=1e-12)
+
+
+def test_cross_matrix_is_the_cross_product():
+    rng = np.random.default_rng(3)
+    k, v = rng.normal(size=(2, 50, 3))
+    np.testing.assert_allclose(np.einsum("nij,nj->ni", cross_matrix(k), v), np.cross(k, v),
+                               atol=1e-14)
+
+
+def test_axis_angle_matches_coordinate_axes_and_quaternions():
+    rng = np.random.default_rng(4)
+    angle = rng.uniform(-np.pi, np.pi, 200)
+    for axis in range(3):
+        unit = np.zeros((200, 3))
+        unit[:, axis] = 1.0
+        np.testing.assert_allclose(axis_angle(unit, angle), rot_axis(axis, angle), atol=1e-15)
+    axes = rng.normal(size=(200, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    quat = np.concatenate([np.sin(angle / 2)[:, None] * axes, np.cos(angle / 2)[:, None]], axis=1)
+    batch = axis_angle(axes, angle)
+    np.testing.assert_allclose(batch, matrix_from_quat(quat), atol=1e-14)
+    single = np.stack([axis_angle(axes[i], angle[i]) for i in range(10)])
+    np.testing.assert_allclose(single, batch[:10], atol=1e-15)
+    np.testing.assert_allclose(np.einsum("nij,nj->ni", batch, axes), axes, atol=1e-14)
 
 
 def test_frame_from_axes_is_right_handed_with_fallback():

@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import math
 import os
+import struct
 import subprocess
 import sys
+import zlib
 from dataclasses import dataclass, replace
 from functools import cache
 from pathlib import Path
@@ -21,7 +23,7 @@ from ecs_anim.cli import main
 from ecs_anim.scenario import build_simulation, load_scenario
 from ecs_anim.skeleton import JOINT_INDEX, N_JOINTS
 from ecs_anim.viewer.camera import OrbitCamera, frame_points, look_at, perspective, spread_yaw
-from ecs_anim.viewer.png import encode_png, read_png
+from ecs_anim.viewer.png import SIGNATURE, encode_png
 from ecs_anim.viewer.scene import (
     BODY_CAPSULES,
     INSTANCE_FLOATS,
@@ -154,7 +156,6 @@ def test_body_instances_batched_equal_one_character_at_a_time():
 
 def test_snapshot_of_a_crowd():
     from ecs_anim.components import MotionPlayer, Placement
-
     from ecs_anim.morphology import Morphology
     from ecs_anim.simulation import Simulation
 
@@ -269,6 +270,69 @@ def test_ground_mesh_follows_the_ground():
     assert np.all(np.any([np.isclose(xyz[:, 2], h, atol=1e-5) for h in heights], axis=0))
     assert np.allclose(np.linalg.norm(mesh.vertices[:, 3:], axis=1), 1.0, atol=1e-5)
     assert mesh.triangles.max() < mesh.vertices.shape[0]
+
+
+# --- PNG ----------------------------------------------------------------------------------
+
+def _unfilter(raw: bytes, h: int, w: int, channels: int) -> np.ndarray:
+    stride = w * channels
+    out = np.zeros((h, stride), np.int32)
+    rows = np.frombuffer(raw, np.uint8).reshape(h, stride + 1)
+    prev = np.zeros(stride, np.int32)
+    for y in range(h):
+        kind, line = rows[y, 0], rows[y, 1:].astype(np.int32)
+        if kind == 0:
+            cur = line
+        elif kind == 2:
+            cur = (line + prev) & 255
+        else:  # 1 (sub), 3 (average), 4 (Paeth) depend on the left pixel: go byte by byte
+            cur = np.zeros(stride, np.int32)
+            for x in range(stride):
+                left = cur[x - channels] if x >= channels else 0
+                up, upleft = prev[x], (prev[x - channels] if x >= channels else 0)
+                if kind == 1:
+                    pred = left
+                elif kind == 3:
+                    pred = (left + up) // 2
+                elif kind == 4:
+                    p = left + up - upleft
+                    pa, pb, pc = abs(p - left), abs(p - up), abs(p - upleft)
+                    pred = left if pa <= pb and pa <= pc else (up if pb <= pc else upleft)
+                else:
+                    raise ValueError(f"PNG: unknown filter type {kind}")
+                cur[x] = (line[x] + pred) & 255
+        out[y] = cur
+        prev = cur
+    return out.astype(np.uint8).reshape(h, w, channels)
+
+
+def read_png(path: str | Path) -> np.ndarray:
+    """(height, width, 3) uint8 of an 8-bit RGB or RGBA non-interlaced PNG (alpha dropped): what
+    :func:`ecs_anim.viewer.png.write_png` writes, read back to check it."""
+    data = Path(path).read_bytes()
+    if not data.startswith(SIGNATURE):
+        raise ValueError(f"{path}: not a PNG file")
+    pos, idat, header = len(SIGNATURE), b"", None
+    while pos < len(data):
+        (length,) = struct.unpack(">I", data[pos:pos + 4])
+        kind, body = data[pos + 4:pos + 8], data[pos + 8:pos + 8 + length]
+        (crc,) = struct.unpack(">I", data[pos + 8 + length:pos + 12 + length])
+        if zlib.crc32(kind + body) != crc:
+            raise ValueError(f"{path}: PNG chunk {kind!r} has a bad checksum")
+        if kind == b"IHDR":
+            header = struct.unpack(">IIBBBBB", body)
+        elif kind == b"IDAT":
+            idat += body
+        elif kind == b"IEND":
+            break
+        pos += 12 + length
+    if header is None:
+        raise ValueError(f"{path}: PNG without a header")
+    w, h, depth, colour, _, _, interlace = header
+    if depth != 8 or colour not in (2, 6) or interlace:
+        raise ValueError(f"{path}: only 8-bit RGB/RGBA non-interlaced PNGs are read here")
+    channels = 3 if colour == 2 else 4
+    return _unfilter(zlib.decompress(idat), h, w, channels)[..., :3]
 
 
 def test_png_round_trip(tmp_path):
@@ -460,7 +524,7 @@ def test_viewer_window_controls():
         # At the scenario's end it starts again (L switches that off).
         app.on_key_press(key.SPACE, 0)
         app.speed = 1.0
-        end_tick = int(round(app.scenario.duration_s * app.scenario.fps))
+        end_tick = round(app.scenario.duration_s * app.scenario.fps)
         while app.sim.tick < end_tick + 1:
             app.update(app.sim.dt)
         assert app.sim.tick == end_tick + 1

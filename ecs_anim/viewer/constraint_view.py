@@ -89,7 +89,7 @@ def _constrained_points(table: Any, positions: F64) -> F64:
 
     points: dict[str, tuple[int, int]] = getattr(constraint_table, "POINTS", {})
     lookup = {slot_role: JOINT_INDEX[joint] for joint, slot_role in points.items()}
-    joints = np.array([lookup.get((int(s), int(r)), 0) for s, r in zip(table.slot, table.role)],
+    joints = np.array([lookup.get((int(s), int(r)), 0) for s, r in zip(table.slot, table.role, strict=False)],
                       dtype=np.int64)
     return np.asarray(positions[owner, joints], dtype=np.float64)
 

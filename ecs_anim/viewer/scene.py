@@ -205,7 +205,7 @@ def table_instances(tables: Sequence[Any], ground: Ground) -> F32:
         floor = float(ground.height(centre_xy))
         top = np.array([centre_xy[0], centre_xy[1], floor + t.height_m - r])
         half_l, half_w = 0.5 * t.size_m[0] - r, 0.5 * t.size_m[1] - r
-        offsets = np.linspace(-half_w, half_w, max(int(round(2 * half_w / (2 * r))) + 1, 2))
+        offsets = np.linspace(-half_w, half_w, max(round(2 * half_w / (2 * r)) + 1, 2))
         a = top + offsets[:, None] * across - half_l * along
         b = top + offsets[:, None] * across + half_l * along
         corners = np.array([top + sl * (half_l - 0.03) * along + sw * (half_w - 0.03) * across

@@ -159,7 +159,8 @@ def default_camera(frame: SceneFrame, aspect: float,
         base = replace(base, pitch_rad=math.radians(hints["pitch_deg"]))
     camera = frame_points(np.concatenate(points), aspect, base)
     if "target_m" in hints:
-        camera = replace(camera, target=tuple(float(v) for v in hints["target_m"]))
+        x, y, z = (float(v) for v in hints["target_m"])  # a 3-vector (the scenario checks)
+        camera = replace(camera, target=(x, y, z))
     if "distance_m" in hints:
         camera = replace(camera, distance=float(hints["distance_m"]))
     return camera
