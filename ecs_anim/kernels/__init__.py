@@ -77,7 +77,7 @@ def available_threads() -> int:
     process may run on, unless set)."""
     import numba
 
-    return int(numba.config.NUMBA_NUM_THREADS)
+    return int(vars(numba.config)["NUMBA_NUM_THREADS"])  # set at import, unknown to mypy
 
 
 def set_threads(n: int | None) -> int:
