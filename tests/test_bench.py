@@ -180,3 +180,24 @@ def test_the_readme_threads_examples_run(tmp_path, capsys):
             assert main(argv) == 0, argv
             continue
         assert main([*argv, "--seconds", "0.1"]) == 0, argv
+
+
+def _one_tick_in_a_child(n: int) -> tuple[int, ...]:
+    scene = BenchScene(n)
+    scene.tick()
+    shape = scene.sim.store.positions.shape
+    scene.sim.close()
+    return tuple(shape)
+
+
+def test_a_process_that_ran_the_kernels_can_fork_workers_that_run_them():
+    """The batch's pool forks; numba's GNU OpenMP layer would kill a child forked from a process
+    whose kernels ran on threads. The kernels use a fork-safe layer (TBB, else workqueue)."""
+    import multiprocessing
+
+    import numba
+
+    assert _one_tick_in_a_child(4)[0] == 4  # the kernels' threads start in this process
+    assert numba.threading_layer() != "omp"
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        assert pool.map(_one_tick_in_a_child, [3]) == [(3, 22, 3)]
