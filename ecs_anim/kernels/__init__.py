@@ -26,9 +26,8 @@ def cache_dir() -> Path:
 
 
 os.environ.setdefault("NUMBA_CACHE_DIR", str(cache_dir()))
-# The threads of the loops over characters: a layer that survives fork() (the batch's process
-# pool forks; GNU OpenMP, numba's usual layer, then kills the child: "fork() called from a
-# process already using GNU OpenMP"): TBB when installed, else numba's own workqueue.
+# The batch runner forks worker processes after kernels ran in the parent: GNU OpenMP (numba's
+# first choice here) then kills the child, so take a fork-safe threading layer (workqueue here).
 os.environ.setdefault("NUMBA_THREADING_LAYER", "forksafe")
 
 
