@@ -10,13 +10,13 @@ import json
 import math
 import os
 import sys
-import time
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 from typing import Any, Sequence
 
+from .benchmark import cmd_bench, size_list, walkers_on_bumps
 from .constraint_table import check_stored
 from .contacts import ContactThresholds
 from .errors import EcsAnimError, listed
@@ -31,8 +31,6 @@ from .viewer.command import add_arguments as add_view_arguments, cmd_view
 EXIT_FAILED = 1
 #: The longest error line printed: a last guard (messages cut their own lists with ``listed``).
 MAX_ERROR_CHARS = 300
-#: ``bench --characters`` above this would take minutes to set up (and gigabytes).
-MAX_BENCH_CHARACTERS = 100_000
 
 
 def positive_float(text: str) -> float:
@@ -344,215 +342,6 @@ def _info_table(files: list[str], as_json: bool) -> int:
     return 0
 
 
-def default_bench_files() -> list[Path]:
-    from .library import shipped_motion_paths
-
-    for candidate in (Path("../shared/mocap"), Path(__file__).resolve().parents[2] / "shared" / "mocap"):
-        files = sorted(candidate.glob("*.bvh")) + sorted(candidate.glob("*.c3d"))
-        if files:
-            return files
-    return shipped_motion_paths()
-
-
-def walkers_on_bumps(n: int, rotations: bool = False, seed: int = 0):  # type: ignore[no-untyped-def]
-    """The benchmark's scene (and the soak test's): ``n`` characters walking on bumps on a
-    1.5 m grid, every other one a preset body and the rest random statures of 1.10-2.05 m, each
-    starting at a random time of the walk and heading within 0.3 rad of +x. Returns
-    (simulation, the seeded generator, for the caller's further draws)."""
-    from .components import MotionPlayer, Placement
-    from .ground import Bumps
-    from .importing import import_bvh
-    from .library import MOTIONS_DIR
-    from .morphology import PRESET_SPECS, Morphology
-    from .simulation import Simulation
-
-    walk = import_bvh(MOTIONS_DIR / "walk.bvh")
-    sim = Simulation({"walk": walk}, Bumps(0.04, 2.5, 3.0), fps=30.0, rotations=rotations)
-    rng = np.random.default_rng(seed)
-    presets = list(PRESET_SPECS)
-    side = int(np.ceil(np.sqrt(n)))
-    for i in range(n):
-        body = Morphology.preset(presets[i % len(presets)]) if i % 2 == 0 else \
-            Morphology.from_stature(float(rng.uniform(1.1, 2.05)))
-        sim.spawn(f"c{i}", body, MotionPlayer("walk", start_s=float(rng.uniform(0, 4))),
-                  Placement((1.5 * (i // side), 1.5 * (i % side)), float(rng.uniform(-0.3, 0.3))))
-    return sim, rng
-
-
-def _pipeline_timing(n: int, seconds: float, rotations: bool = False,
-                     constrained: bool = False) -> dict[str, float]:
-    """ms per tick per system for ``n`` characters walking on bumps, after a warm-up."""
-    sim, _ = walkers_on_bumps(n, rotations)
-    moving = np.zeros(0, np.int64)
-    if constrained:
-        from .constraints import Activation
-
-        # Each character: a wrist target (high priority) and an elbow target (low) on its right
-        # arm, both moving every tick (foot contacts come from the walk itself).
-        always = Activation(0.0, 1e9)
-        entities = sim.store.entity.tolist()
-        moving = np.array([sim.add_constraint(e, f"w{i}", "wrist_r", 10, always, (0.0, 0.0, 1.2))
-                           for i, e in enumerate(entities)]
-                          + [sim.add_constraint(e, f"e{i}", "elbow_r", 1, always, (0.0, 0.0, 1.0))
-                             for i, e in enumerate(entities)])
-        owners = sim.constraints.owner[sim.constraints.rows_of(moving)]
-        offsets = np.where((np.arange(moving.size) < n)[:, None], [0.45, -0.3, 1.2], [0.0, -0.5, 1.0])
-
-    def move_targets() -> None:
-        if moving.size:
-            pelvis = sim.store.positions[owners, 0]
-            wobble = 0.1 * np.sin(2 * np.pi * 0.5 * sim.time_s + owners)[:, None]
-            sim.set_targets(moving, pelvis * [1, 1, 0] + offsets + wobble)
-
-    for _ in range(10):
-        move_targets()
-        sim.step()
-    before = sim.system_seconds()
-    ticks = max(1, int(round(seconds * 30.0)))
-    for _ in range(ticks):
-        move_targets()
-        sim.step()
-    after = sim.system_seconds()
-    sim.close()
-    return {k: (after[k] - before[k]) / ticks * 1e3 for k in after}
-
-
-def cmd_bench_pipeline(args: argparse.Namespace) -> int:
-    n = args.characters
-    if n < 8:
-        raise EcsAnimError("bench: give --characters 8 or more (the figure is fitted from a run "
-                           "at N and one at N/4)")
-    if n > MAX_BENCH_CHARACTERS:
-        raise EcsAnimError(f"bench: --characters {n}: at most {MAX_BENCH_CHARACTERS:,}")
-    if not 0 < args.seconds <= 600:
-        raise EcsAnimError(f"bench: --seconds {args.seconds:g}: expected more than 0 and at most 600")
-    small = n // 4
-    timing_small = _pipeline_timing(small, args.seconds, args.rotations, args.constrained)
-    timing = _pipeline_timing(n, args.seconds, args.rotations, args.constrained)
-    total, total_small = sum(timing.values()), sum(timing_small.values())
-    # Linear model t(N) = fixed + per_character * N from the two runs (timing noise can make
-    # the slope tiny: never below the average cost per character of the large run / 4).
-    per_char = max((total - total_small) / (n - small), total / n / 4)
-    fixed = max(total - per_char * n, 0.0)
-    budget = 1000.0 / 30.0
-    max_chars = int(max((budget - fixed) / per_char, 0))
-    result = {
-        "characters": n,
-        "rotations": bool(args.rotations),
-        "constrained": bool(args.constrained),
-        "ms_per_tick": {k: round(v, 3) for k, v in timing.items()},
-        "ms_per_tick_total": round(total, 3),
-        "ms_per_character": round(per_char, 5),
-        "ms_fixed_per_tick": round(fixed, 3),
-        "max_characters_at_30hz": max_chars,
-    }
-    if args.json:
-        print(json.dumps(result, indent=2))
-        return 0
-    print(f"bench: {n} characters walking on bumps, {args.seconds:g} s simulated at 30 Hz, one core, "
-          f"{'positions and joint rotations' if args.rotations else 'joint positions'}"
-          f"{', wrist + elbow targets moving every tick' if args.constrained else ''}")
-    for k, v in timing.items():
-        print(f"  {k:16s} {v:8.2f} ms/tick")
-    print(f"  {'total':16s} {total:8.2f} ms/tick  ({total_small:.2f} ms with {small})")
-    print(f"  => about {max_chars} characters hold 30 Hz (33.3 ms/tick): "
-          f"{per_char * 1e3:.1f} us per character + {fixed:.2f} ms per tick")
-    return 0
-
-
-def cmd_bench(args: argparse.Namespace) -> int:
-    if args.what == "pipeline":
-        return cmd_bench_pipeline(args)
-    files = [Path(f) for f in args.files] or default_bench_files()
-    if not files:
-        raise EcsAnimError("bench import: no clips found (give BVH or C3D files, or run from the "
-                           "repository next to ../shared/mocap)")
-    missing = [str(f) for f in files if not f.is_file()]
-    if missing:
-        raise EcsAnimError(f"bench import: no such file: {', '.join(missing)}")
-    other = [str(f) for f in files if f.suffix.lower() not in (".bvh", ".c3d")]
-    if other:
-        raise EcsAnimError(f"bench import: not a .bvh or .c3d file: {', '.join(other)}")
-    bvh_files = [f for f in files if f.suffix.lower() == ".bvh"]
-    result: dict[str, object] = {}
-    if bvh_files:
-        result = _bench_bvh(max(bvh_files, key=lambda p: p.stat().st_size), args.repeat)
-    c3d = [_bench_c3d(f, args.repeat) for f in files if f.suffix.lower() == ".c3d"]
-    if c3d:
-        result["c3d"] = c3d
-    if args.json:
-        print(json.dumps(result, indent=2))
-        return 0
-    if bvh_files:
-        best = result["seconds"]
-        assert isinstance(best, dict)
-        print(f"bench import: {Path(str(result['file'])).name}, {result['frames']} frames, best of {args.repeat}")
-        print(f"  parse {best['parse'] * 1e3:8.1f} ms")
-        print(f"  FK    {best['fk'] * 1e3:8.1f} ms")
-        print(f"  map + FK + encode + contacts {best['map_encode'] * 1e3:8.1f} ms")
-        print(f"  total {best['total'] * 1e3:8.1f} ms -> {result['frames_per_second']:.0f} frames/s")
-    for one in c3d:
-        print(f"bench import: {Path(str(one['file'])).name}, {one['frames']} frames, best of {args.repeat}: "
-              f"read {one['seconds']['read'] * 1e3:.1f} ms, joint centres + encode + contacts "
-              f"{one['seconds']['centres_encode'] * 1e3:.1f} ms -> {one['frames_per_second']:.0f} frames/s")
-    return 0
-
-
-def _bench_bvh(path: Path, repeat: int) -> dict[str, object]:
-    """Best-of-``repeat`` timings of one BVH import: parse, FK, map + FK + encode + contacts."""
-    from .bvh import forward_kinematics, read_bvh
-    from .importing import canonical_clip, normalize_clip
-
-    timings: dict[str, list[float]] = {"parse": [], "fk": [], "map_encode": []}
-    n_frames = 0
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        motion = read_bvh(path)
-        t1 = time.perf_counter()
-        forward_kinematics(motion)
-        t2 = time.perf_counter()
-        normalize_clip(canonical_clip(motion), path.stem, str(path))
-        t3 = time.perf_counter()
-        timings["parse"].append(t1 - t0)
-        timings["fk"].append(t2 - t1)
-        timings["map_encode"].append(t3 - t2)
-        n_frames = motion.n_frames
-    best = {k: min(v) for k, v in timings.items()}
-    # canonical_clip runs FK again internally; count the pipeline once: parse + (map + FK + encode).
-    total = best["parse"] + best["map_encode"]
-    return {
-        "file": str(path),
-        "frames": n_frames,
-        "seconds": {k: round(v, 5) for k, v in best.items()} | {"total": round(total, 5)},
-        "frames_per_second": round(n_frames / total, 1),
-    }
-
-
-def _bench_c3d(path: Path, repeat: int) -> dict[str, Any]:
-    """Best-of-``repeat`` timings of one C3D import: reading the markers, then joint centres,
-    encoding and contacts."""
-    from .c3d_import import canonical_clip_c3d, read_c3d
-    from .importing import normalize_clip
-
-    reads, rest = [], []
-    n_frames = 0
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        raw = read_c3d(path)
-        t1 = time.perf_counter()
-        clip, _ = canonical_clip_c3d(raw)
-        motion = normalize_clip(clip, path.stem, str(path))
-        t2 = time.perf_counter()
-        reads.append(t1 - t0)
-        rest.append(t2 - t1)
-        n_frames = motion.n_frames
-    read_s, rest_s = min(reads), min(rest)
-    return {"file": str(path), "frames": n_frames,
-            "seconds": {"read": round(read_s, 5), "centres_encode": round(rest_s, 5),
-                        "total": round(read_s + rest_s, 5)},
-            "frames_per_second": round(n_frames / (read_s + rest_s), 1)}
-
-
 def _json_safe(value: Any) -> Any:
     """``value`` with every non-finite float replaced by None: strict JSON has no NaN or
     Infinity, and a report must load in any JSON reader."""
@@ -565,8 +354,43 @@ def _json_safe(value: Any) -> Any:
     return value
 
 
+def use_threads(args: argparse.Namespace) -> None:
+    """``--threads N``: the kernels' threads (:func:`ecs_anim.kernels.set_threads`; None: all
+    cores)."""
+    from . import kernels
+
+    try:
+        kernels.set_threads(args.threads)
+    except ValueError as exc:
+        raise EcsAnimError(f"--threads {args.threads}: {exc}") from None
+
+
+#: The commands that run ticks (and so, on a first run, compile the kernels).
+TICKING_COMMANDS = ("run", "view", "batch", "bench")
+
+
+def say_if_compiling(args: argparse.Namespace) -> None:
+    """Before the first tick of a first run: one line on stderr saying the kernels are being
+    compiled (once; cached in the user's cache folder)."""
+    from . import kernels
+
+    if args.command not in TICKING_COMMANDS or getattr(args, "what", "pipeline") != "pipeline":
+        return
+    notice = kernels.compile_notice()
+    if notice is not None:
+        print(notice, file=sys.stderr, flush=True)
+
+
+def cmd_view_threads(args: argparse.Namespace) -> int:
+    """``view`` on ``--threads`` threads."""
+    use_threads(args)
+    return cmd_view(args)
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from .scenario import MAX_DURATION_S, build_simulation, load_scenario
+
+    use_threads(args)
 
     if args.report is not None and Path(args.report).suffix.lower() != ".json":
         raise EcsAnimError(f"--report {args.report}: a report is JSON: name it .json")
@@ -668,6 +492,14 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
     return 0
 
 
+def add_threads_argument(p: argparse.ArgumentParser, default: int | None) -> None:
+    """``--threads N``: how many threads the kernels run on (None: every core)."""
+    p.add_argument("--threads", type=positive_int, default=default, metavar="N",
+                   help="threads the tick's kernels run on "
+                   + ("(default: every core)" if default is None
+                      else f"(default {default}: the figures per core)"))
+
+
 def build_parser() -> argparse.ArgumentParser:
     from .c3d_import import DEFAULT_MAX_GAP
 
@@ -741,6 +573,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--export", metavar="DIR", help="write <character>.bvh and .npz per character")
     p.add_argument("--report", metavar="FILE.json", help="write the metrics as JSON")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    add_threads_argument(p, None)
     p.set_defaults(func=cmd_run)
 
     from .batch import add_parser as add_batch_parser
@@ -761,13 +594,20 @@ def build_parser() -> argparse.ArgumentParser:
                         "moving every tick")
     p.add_argument("--rotations", action="store_true",
                    help="pipeline: also compute local joint rotations every tick (as BVH export does)")
-    p.add_argument("--repeat", type=positive_int, default=3, help="runs; the best is kept")
+    p.add_argument("--sizes", type=size_list, metavar="N,N,...",
+                   help="pipeline: the numbers of characters timed (default: N/8, N/4, N/2, N)")
+    p.add_argument("--no-compile-timing", action="store_true",
+                   help="pipeline: skip timing a start with an empty kernel cache and one with "
+                   "the cache filled (about 40 s)")
+    add_threads_argument(p, 1)
+    p.add_argument("--repeat", type=positive_int, default=3, help="import: runs; the best is kept")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("view", help="watch a scenario in a window, or render one frame to a PNG")
     add_view_arguments(p)
-    p.set_defaults(func=cmd_view)
+    add_threads_argument(p, None)
+    p.set_defaults(func=cmd_view_threads)
     return parser
 
 
@@ -786,6 +626,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        say_if_compiling(args)
         return int(args.func(args))
     except (EcsAnimError, FileExistsError) as exc:
         print(f"error: {error_line(exc)}", file=sys.stderr)
@@ -806,4 +647,4 @@ if __name__ == "__main__":
     sys.exit(main())
 
 
-__all__ = ["main", "build_parser"]
+__all__ = ["build_parser", "main", "walkers_on_bumps"]

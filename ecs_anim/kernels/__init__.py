@@ -29,3 +29,78 @@ os.environ.setdefault("NUMBA_CACHE_DIR", str(cache_dir()))
 # The batch runner forks worker processes after kernels ran in the parent: GNU OpenMP (numba's
 # first choice here) then kills the child, so take a fork-safe threading layer (workqueue here).
 os.environ.setdefault("NUMBA_THREADING_LAYER", "forksafe")
+
+
+def kernel_sources() -> list[Path]:
+    """The modules of this package whose functions numba compiles (``vec.py``, ``decode.py``,
+    ...), sorted."""
+    here = Path(__file__).resolve().parent
+    return sorted(p for p in here.glob("*.py") if p.name not in ("__init__.py", "__main__.py"))
+
+
+def _cache_subfolder() -> Path:
+    """The folder numba writes this package's compiled code into: ``<cache>/kernels_<sha1 of the
+    package folder>`` (numba's ``_CacheLocator.get_suitable_cache_subpath``)."""
+    import hashlib
+
+    here = str(Path(__file__).resolve().parent)
+    return cache_dir() / f"kernels_{hashlib.sha1(here.encode()).hexdigest()}"
+
+
+#: Modules of scalar helpers only: compiled as part of the kernels that call them.
+HELPER_MODULES = ("vec",)
+
+
+def uncompiled_kernels() -> list[str]:
+    """Names of the kernel modules the cache holds no up-to-date compiled code for: not
+    compiled yet, or changed after its newest compiled function (a cheap check on file times;
+    numba itself checks each function). A helper module counts only once it has some."""
+    folder = _cache_subfolder()
+    missing = []
+    for source in kernel_sources():
+        if source.stem in HELPER_MODULES and not any(folder.glob(f"{source.stem}.*.nbi")):
+            continue
+        stamps = [p.stat().st_mtime for p in folder.glob(f"{source.stem}.*.nbi")] \
+            if folder.is_dir() else []
+        if not stamps or max(stamps) < source.stat().st_mtime:
+            missing.append(source.stem)
+    return missing
+
+
+def compile_notice() -> str | None:
+    """The line to show before the first tick when the kernels still have to be compiled (the
+    first run on a machine, or after an update), else None."""
+    if not uncompiled_kernels():
+        return None
+    return f"compiling the tick's kernels once (about 30 s); cached in {cache_dir()}"
+
+
+def available_threads() -> int:
+    """How many threads the kernels may use: numba's ``NUMBA_NUM_THREADS`` (the cores this
+    process may run on, unless set)."""
+    import numba
+
+    return int(vars(numba.config)["NUMBA_NUM_THREADS"])  # set at import, unknown to mypy
+
+
+def set_threads(n: int | None) -> int:
+    """Run the kernels' loops over characters on ``n`` threads (``numba.set_num_threads``);
+    None: on all of :func:`available_threads`. Returns the number set. Results never depend on
+    it (each character is computed by one thread, independently of the others)."""
+    import numba
+
+    most = available_threads()
+    if n is None:
+        n = most
+    if not 1 <= n <= most:
+        raise ValueError(f"expected 1 to {most} threads (the cores this process may use, or "
+                         f"NUMBA_NUM_THREADS), got {n}")
+    numba.set_num_threads(n)
+    return n
+
+
+def threads() -> int:
+    """The number of threads the kernels run on now (``numba.get_num_threads``)."""
+    import numba
+
+    return int(numba.get_num_threads())

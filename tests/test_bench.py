@@ -1,0 +1,203 @@
+"""The benchmark command, ``--threads``, and the first run's compile notice (issue 13, items 6
+and 8). Figures are printed, never asserted: only their presence and consistency are checked."""
+
+from __future__ import annotations
+
+import json
+import os
+import shlex
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ecs_anim import kernels
+from ecs_anim.benchmark import BenchScene, capacity_fit, linear_fit
+from ecs_anim.cli import main
+
+REPO = Path(__file__).resolve().parents[1]
+SCENARIO = str(REPO / "scenarios" / "reach_and_touch.yaml")
+#: Makes any bench example quick: two small sizes, a few ticks, no timed cold start.
+QUICK = ["--sizes", "4,8", "--seconds", "0.1", "--no-compile-timing"]
+#: Every key ``bench --json`` had before issue 13 (kept), then the new ones.
+OLD_KEYS = {"characters", "rotations", "constrained", "ms_per_tick", "ms_per_tick_total",
+            "ms_per_character", "ms_fixed_per_tick", "max_characters_at_30hz"}
+NEW_KEYS = {"threads", "cpu_ms_per_character", "cpu_ms_fixed_per_tick",
+            "max_characters_at_30hz_cpu", "wall_ms_per_tick", "cpu_ms_per_tick", "sizes",
+            "peak_memory_mb", "peak_memory_kb_per_character", "peak_memory_mb_fixed", "compile",
+            "kernel_cache"}
+
+
+def test_bench_json_keeps_its_keys_and_adds_cpu_wall_memory_and_threads(capsys):
+    assert main(["bench", "--constrained", "--json", *QUICK]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert OLD_KEYS | NEW_KEYS <= set(result)
+    assert result["characters"] == 8 and result["threads"] == 1 and result["constrained"]
+    assert [s["characters"] for s in result["sizes"]] == [4, 8]
+    assert all(s["ticks"] == 3 and s["peak_memory_mb"] > 0 for s in result["sizes"])
+    assert "ConstraintSolve" in result["ms_per_tick"] and result["compile"] is None
+    assert result["max_characters_at_30hz"] >= 0 and result["max_characters_at_30hz_cpu"] >= 0
+
+
+def test_bench_text_names_the_threads_and_every_size(capsys):
+    assert main(["bench", *QUICK]) == 0
+    out = capsys.readouterr().out
+    assert "1 thread," in out and "characters hold 30 Hz" in out and "kB per character" in out
+    rows = [line.split() for line in out.splitlines() if line.strip().split(" ")[0] in ("4", "8")]
+    assert [r[0] for r in rows] == ["4", "8"]
+
+
+def test_bench_sizes_default_to_four_and_bad_sizes_are_one_line_errors(capsys):
+    from ecs_anim.benchmark import bench_sizes
+
+    assert bench_sizes(400, None) == [50, 100, 200, 400]
+    assert bench_sizes(8, None) == [1, 2, 4, 8]
+    cases = [(["bench", "--sizes", "8"], "give two sizes or more"),
+             (["bench", "--sizes", "8,200000"], "at most 100,000"),
+             (["bench", "--threads", "999", *QUICK], "--threads 999: expected 1 to")]
+    for argv, message in cases:
+        assert main(argv) == 1, argv
+        err = capsys.readouterr().err
+        assert message in err and "Traceback" not in err, (argv, err)
+    with pytest.raises(SystemExit):
+        main(["bench", "--sizes", "4,x"])
+    assert "expected whole numbers >= 1" in capsys.readouterr().err
+
+
+def test_the_fit_is_least_squares_over_every_size():
+    sizes = [10, 20, 40, 80]
+    fixed, slope = linear_fit(sizes, [2.0 + 0.5 * n for n in sizes])
+    np.testing.assert_allclose([fixed, slope], [2.0, 0.5], atol=1e-9)
+    fit = capacity_fit(sizes, [2.0 + 0.5 * n for n in sizes])
+    assert fit["max_characters_at_30hz"] == int((1000.0 / 30.0 - 2.0) / 0.5)
+
+
+def test_run_and_view_take_threads(tmp_path, capsys):
+    assert main(["run", SCENARIO, "--seconds", "0.1", "--threads", "1"]) == 0
+    assert kernels.threads() == 1
+    assert main(["run", SCENARIO, "--seconds", "0.1"]) == 0  # default: every core
+    assert kernels.threads() == kernels.available_threads()
+    shot = tmp_path / "v.png"
+    assert main(["view", SCENARIO, "--threads", "999", "--screenshot", str(shot)]) == 1
+    assert "--threads 999: expected 1 to" in capsys.readouterr().err and not shot.exists()
+
+
+def test_results_do_not_depend_on_the_thread_count():
+    """Each character is computed by one thread on its own: the bench scene, constrained, gives
+    the same joint positions on one thread as on all."""
+    if kernels.available_threads() < 2:
+        pytest.skip("one core available: nothing to compare")
+    positions = []
+    for n_threads in (1, kernels.available_threads()):
+        kernels.set_threads(n_threads)
+        scene = BenchScene(12, constrained=True)
+        for _ in range(5):
+            scene.tick()
+        positions.append(scene.sim.store.positions.copy())
+        scene.sim.close()
+    kernels.set_threads(None)
+    np.testing.assert_array_equal(positions[0], positions[1])
+
+
+def _fake_cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """An empty kernel cache folder of this package in ``tmp_path`` (NUMBA_CACHE_DIR)."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    folder = kernels._cache_subfolder()
+    assert folder.parent == tmp_path and folder.name.startswith("kernels_")
+    return folder
+
+
+def test_uncompiled_kernels_reads_the_cache_folder(tmp_path, monkeypatch):
+    folder = _fake_cache(tmp_path, monkeypatch)
+    modules = [p.stem for p in kernels.kernel_sources() if p.stem not in kernels.HELPER_MODULES]
+    assert kernels.uncompiled_kernels() == modules  # nothing compiled yet
+    if not modules:
+        pytest.skip("no kernel module yet")
+    folder.mkdir()
+    for stem in modules:
+        (folder / f"{stem}.some_kernel-10.py311.nbi").write_bytes(b"")
+    assert kernels.uncompiled_kernels() == [] and kernels.compile_notice() is None
+    first = kernels.kernel_sources()[0]
+    index = next(folder.glob(f"{first.stem}.*.nbi")) if first.stem in modules else None
+    if index is not None:  # a module changed after it was compiled: compiled again
+        before = first.stat().st_mtime - 10
+        os.utime(index, (before, before))
+        assert first.stem in kernels.uncompiled_kernels()
+
+
+def test_a_first_run_says_once_that_it_compiles(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(kernels, "uncompiled_kernels", lambda: ["decode"])
+    assert main(["run", SCENARIO, "--seconds", "0.1"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("compiling the tick's kernels once (about 30 s); cached in ") == 1
+    assert str(kernels.cache_dir()) in err
+    assert main(["bench", "import", "nope.bvh"]) == 1  # no tick: nothing said
+    assert "compiling" not in capsys.readouterr().err
+    monkeypatch.setattr(kernels, "uncompiled_kernels", lambda: [])
+    assert main(["run", SCENARIO, "--seconds", "0.1"]) == 0
+    assert "compiling" not in capsys.readouterr().err
+
+
+def _readme_commands(section: str) -> list[list[str]]:
+    """The ``ecs-anim`` command lines of a README section (indented code), as argv."""
+    text = (REPO / "README.md").read_text(encoding="utf-8")
+    block = text.split(f"## {section}\n", 1)[1].split("\n## ", 1)[0]
+    commands = []
+    for line in block.splitlines():
+        words = shlex.split(line.strip(), comments=True) if line.startswith("    ") else []
+        if ".venv/bin/ecs-anim" in words:  # an example (the synopsis lines say ecs-anim)
+            commands.append(words[words.index(".venv/bin/ecs-anim") + 1:])
+    return commands
+
+
+def test_the_readme_performance_commands_run(capsys):
+    """Every command of the README's Performance section, made quick (two small sizes, a few
+    ticks, no timed cold start); taskset is left out (the figures are not checked)."""
+    commands = _readme_commands("Performance")
+    flags = {w for argv in commands for w in argv if w.startswith("--")}
+    assert {"--constrained", "--threads", "--rotations", "--sizes", "--no-compile-timing",
+            "--json", "--characters", "--seconds"} <= flags
+    for argv in commands:
+        assert argv[0] == "bench", argv
+        if "--threads" in argv and int(argv[argv.index("--threads") + 1]) > \
+                kernels.available_threads():
+            continue  # a one-core machine cannot run the two-thread example
+        assert main([*argv, *QUICK]) == 0, argv  # the last --sizes, --seconds count
+        assert "characters hold 30 Hz" in capsys.readouterr().out or "--json" in argv
+
+
+def test_the_readme_threads_examples_run(tmp_path, capsys):
+    """The README's ``--threads`` examples of run and view (a screenshot: it needs headless
+    OpenGL, as tests/test_viewer.py's do), their outputs in a temporary folder."""
+    commands = [c for c in _readme_commands("Commands") if "--threads" in c]
+    assert {c[0] for c in commands} >= {"run", "view"}
+    for argv in commands:
+        argv = [w.replace("out/", f"{tmp_path}/") for w in argv]
+        if "--screenshot" in argv:
+            from test_viewer import _need_gl
+
+            _need_gl()
+            assert main(argv) == 0, argv
+            continue
+        assert main([*argv, "--seconds", "0.1"]) == 0, argv
+
+
+def _one_tick_in_a_child(n: int) -> tuple[int, ...]:
+    scene = BenchScene(n)
+    scene.tick()
+    shape = scene.sim.store.positions.shape
+    scene.sim.close()
+    return tuple(shape)
+
+
+def test_a_process_that_ran_the_kernels_can_fork_workers_that_run_them():
+    """The batch's pool forks; numba's GNU OpenMP layer would kill a child forked from a process
+    whose kernels ran on threads. The kernels use a fork-safe layer (TBB, else workqueue)."""
+    import multiprocessing
+
+    import numba
+
+    assert _one_tick_in_a_child(4)[0] == 4  # the kernels' threads start in this process
+    assert numba.threading_layer() != "omp"
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        assert pool.map(_one_tick_in_a_child, [3]) == [(3, 22, 3)]
