@@ -34,8 +34,8 @@ def grid_height(x: float, y: float, p: F64, grid: F64) -> float:
     cell, origin_x, origin_y = p[3], p[4], p[5]
     gx = min(max((x - origin_x) / cell, 0.0), nx - 1.0)
     gy = min(max((y - origin_y) / cell, 0.0), ny - 1.0)
-    i0 = min(int(math.floor(gx)), nx - 2)
-    j0 = min(int(math.floor(gy)), ny - 2)
+    i0 = min(math.floor(gx), nx - 2)
+    j0 = min(math.floor(gy), ny - 2)
     u, v = gx - i0, gy - j0
     k = offset + j0 * nx + i0
     return ((1 - u) * (1 - v) * grid[k] + u * (1 - v) * grid[k + 1]
