@@ -38,8 +38,8 @@ def grid_height(x: float, y: float, p: F64, grid: F64) -> float:
     j0 = min(math.floor(gy), ny - 2)
     u, v = gx - i0, gy - j0
     k = offset + j0 * nx + i0
-    return ((1 - u) * (1 - v) * grid[k] + u * (1 - v) * grid[k + 1]
-            + (1 - u) * v * grid[k + nx] + u * v * grid[k + nx + 1])
+    return float((1 - u) * (1 - v) * grid[k] + u * (1 - v) * grid[k + 1]
+                 + (1 - u) * v * grid[k + nx] + u * v * grid[k + nx + 1])
 
 
 @njit(cache=True)
@@ -47,15 +47,16 @@ def part_height(kind: int, x: float, y: float, p: F64, grid: F64) -> float:
     """Mirrors the ``height`` of :class:`~ecs_anim.ground.Plane`, ``Slope``, ``Stairs``,
     ``Bumps`` or ``HeightGrid`` (by ``kind``) at one point (m); ``p`` the part's parameters."""
     if kind == _PLANE:
-        return p[0]
+        return float(p[0])
     if kind == _SLOPE:
-        return p[0] + p[1] * x + p[2] * y
+        return float(p[0] + p[1] * x + p[2] * y)
     if kind == _STAIRS:
         along = x * p[5] + y * p[6] - p[4]
         step = min(max(math.floor(along / p[2]) + 1.0, 0.0), p[3])
-        return p[0] + p[1] * step
+        return float(p[0] + p[1] * step)
     if kind == _BUMPS:
-        return p[0] + p[1] * math.sin(2 * np.pi * x / p[2]) * math.sin(2 * np.pi * y / p[3])
+        return float(p[0] + p[1] * math.sin(2 * np.pi * x / p[2])
+                     * math.sin(2 * np.pi * y / p[3]))
     return grid_height(x, y, p, grid)
 
 
