@@ -15,6 +15,7 @@ import numpy as np
 from numba import njit, prange
 from numpy.typing import NDArray
 
+from ..normalized import TRAILING_SHAPES, NormalizedPoses
 from .decode import PoseArrays
 from .vec import F64, Quat, Vec3, load3, load4, store3, store4
 
@@ -266,3 +267,20 @@ def blend_row(old: PoseArrays, i: int, w: float, out: PoseArrays, c: int) -> Non
     blend_parts(old, i, out, c, w, out, c)
     store3(out.root_position[c], p)
     out.root_heading[c] = h
+
+
+def empty_poses(n: int) -> NormalizedPoses:
+    """Uninitialized poses for ``n`` rows (for a kernel to fill)."""
+    return NormalizedPoses(**{name: np.empty((n,) + trailing)
+                              for name, trailing in TRAILING_SHAPES.items()})
+
+
+def writable_poses(poses: NormalizedPoses, n: int) -> NormalizedPoses:
+    """``poses`` (a store's), each array made a contiguous float64 array of ``n`` rows of its
+    own that kernels may write in place (replaced by a copy only where it is not one)."""
+    for name, trailing in TRAILING_SHAPES.items():
+        a = getattr(poses, name)
+        if (a.shape != (n,) + trailing or a.dtype != np.float64
+                or not (a.flags.c_contiguous and a.flags.writeable and a.flags.owndata)):
+            setattr(poses, name, np.array(np.broadcast_to(a, (n,) + trailing), dtype=np.float64))
+    return poses
