@@ -14,9 +14,10 @@ footprint_settled, ground_ref.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ecs_anim.ground import Ground, GroundDescription, describe
 from ecs_anim.ground_adapt import (
@@ -45,7 +46,7 @@ TOE_PASSES = 4
 ANKLES, TOES = list(SIDE_JOINTS["ankle"]), list(SIDE_JOINTS["toe"])
 
 
-def _own(a: np.ndarray) -> np.ndarray:  # type: ignore[type-arg]
+def _own(a: NDArray[Any]) -> NDArray[Any]:
     """``a`` if a kernel may write it in place, else a contiguous copy of it."""
     return a if a.flags.c_contiguous and a.flags.writeable and a.flags.owndata else a.copy()
 

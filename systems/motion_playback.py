@@ -12,6 +12,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ecs_anim.kernels.decode import PoseArrays, pose_arrays
 from ecs_anim.kernels.playback import (
@@ -21,6 +22,7 @@ from ecs_anim.kernels.playback import (
     sample_table_rows,
     writable_poses,
 )
+from ecs_anim.normalized import NormalizedPoses
 from ecs_anim.playback import ClipBank, blend, rotate_xy, sample, sample_table
 from ecs_anim.system_base import System
 
@@ -98,7 +100,8 @@ class MotionPlayback(System):
             self._bank = bank, PoseArrays(*(np.ascontiguousarray(a) for a in pose_arrays(bank.poses)))
         return self._bank[1]
 
-    def _placed(self, poses, xy, heading):  # type: ignore[no-untyped-def]
+    def _placed(self, poses: NormalizedPoses, xy: NDArray[np.float64],
+                heading: NDArray[np.float64]) -> NormalizedPoses:
         """Lay each motion out from its placement (``xy`` (n, 2) m, ``heading`` (n,) rad):
         rotate the root path about the motion origin, then shift it."""
         leg = self.sim.leg_length()

@@ -1,9 +1,12 @@
-"""Compiled ground heights equal the numpy grounds (every kind, and combinations)."""
+"""Compiled ground heights equal the numpy grounds (every kind, and combinations), and the
+compiled GroundAdapt equals its numpy reference on terrain scenes."""
 
 from dataclasses import dataclass
 
 import numpy as np
 import pytest
+from ecs_anim.components import MotionPlayer, Placement, QueuedClip
+from ecs_anim.systems import GroundAdapt
 
 from ecs_anim.ground import (
     Bumps,
@@ -15,7 +18,12 @@ from ecs_anim.ground import (
     Stairs,
     describe,
 )
+from ecs_anim.importing import import_bvh
 from ecs_anim.kernels.ground import height_at
+from ecs_anim.library import MOTIONS_DIR
+from ecs_anim.morphology import Morphology
+from ecs_anim.normalized import QUATERNION_FIELDS
+from ecs_anim.simulation import Simulation
 
 
 def _grid(seed: int) -> HeightGrid:
@@ -75,14 +83,6 @@ def test_a_ground_of_ones_own_has_no_compiled_form() -> None:
 
 
 # --- GroundAdapt: the compiled system against its numpy reference ---------------------------
-
-from ecs_anim.components import MotionPlayer, Placement, QueuedClip  # noqa: E402
-from ecs_anim.importing import import_bvh  # noqa: E402
-from ecs_anim.library import MOTIONS_DIR  # noqa: E402
-from ecs_anim.morphology import Morphology  # noqa: E402
-from ecs_anim.normalized import QUATERNION_FIELDS  # noqa: E402
-from ecs_anim.simulation import Simulation  # noqa: E402
-from ecs_anim.systems import GroundAdapt  # noqa: E402
 
 TERRAINS = {
     "bumps_and_stairs": Combined((Bumps(0.03, 2.5, 3.0), Stairs(0.12, 0.40, 6, 2.0))),

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from ecs_anim.components import MotionPlayer, Placement, QueuedClip
+from ecs_anim.systems import MotionPlayback
 
 from ecs_anim.importing import import_bvh
 from ecs_anim.kernels.decode import pose_arrays
@@ -15,8 +17,10 @@ from ecs_anim.kernels.playback import (
     sample_table_rows,
 )
 from ecs_anim.library import MOTIONS_DIR
+from ecs_anim.morphology import Morphology
 from ecs_anim.normalized import QUATERNION_FIELDS, NormalizedPoses
 from ecs_anim.playback import ClipBank, blend, rotate_xy, sample, sample_table
+from ecs_anim.simulation import Simulation
 
 
 @pytest.fixture(scope="module")
@@ -141,3 +145,45 @@ def test_fade_blend_equals_numpy(bank: ClipBank) -> None:
     _assert_poses_equal(out.take(rows), want.take(rows))
     untouched = np.setdiff1d(np.arange(n), rows)
     _assert_poses_equal(out.take(untouched), new.take(untouched))
+
+
+def test_compiled_motion_playback_equals_numpy_with_fades_and_queues() -> None:
+    rng = np.random.default_rng(1317)
+    motions = {p.stem: import_bvh(p) for p in sorted(MOTIONS_DIR.glob("*.bvh"))}
+    names = list(motions)
+
+    def make() -> Simulation:
+        sim = Simulation(motions)
+        local = np.random.default_rng(1318)
+        for k in range(10):
+            queue = tuple(QueuedClip(names[int(j)], float(local.uniform(0.0, 0.6)),
+                                     bool(local.random() < 0.5))
+                          for j in local.integers(0, len(names), int(local.integers(0, 4))))
+            player = MotionPlayer(names[int(local.integers(0, len(names)))],
+                                  speed=float(local.uniform(0.5, 2.0)),
+                                  loop=bool(local.random() < 0.5),
+                                  start_s=float(local.uniform(0.0, 3.0)), queue=queue)
+            sim.spawn(f"c{k}", Morphology.from_stature(float(local.uniform(1.1, 2.0))), player,
+                      Placement((float(local.uniform(-5, 5)), float(local.uniform(-5, 5))),
+                                float(local.uniform(-3, 3))))
+        return sim
+
+    compiled, reference = make(), make()
+    system = next(s for s in reference.systems if isinstance(s, MotionPlayback))
+    system.run = system.run_numpy  # type: ignore[method-assign]
+    faded = 0
+    for tick in range(int(rng.integers(200, 260))):
+        faded += int(np.count_nonzero(compiled.store.fade_s > 0.0))
+        compiled.step()
+        reference.step()
+        got, want = compiled.store, reference.store
+        np.testing.assert_allclose(got.positions, want.positions, rtol=0, atol=1e-9,
+                                   err_msg=f"tick {tick}")
+        np.testing.assert_allclose(got.contact_weight, want.contact_weight, rtol=0, atol=1e-12)
+        # numpy blends every row while any fades (weight 1 for the others), which may move a
+        # heading by a whole turn: the same pose.
+        turns = (got.poses.root_heading - want.poses.root_heading) / (2 * np.pi)
+        np.testing.assert_allclose(turns, np.round(turns), rtol=0, atol=1e-10)
+        np.testing.assert_array_equal(got.fade_s, want.fade_s)
+        np.testing.assert_array_equal(got.clip, want.clip)
+    assert faded > 0
