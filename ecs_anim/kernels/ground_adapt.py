@@ -71,7 +71,7 @@ def vertical_slack_for_reach(hip: Vec3, ankle_target: Vec3, reach: float) -> flo
     return ankle_target[2] + vertical - hip[2]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def adapt_to_ground(c: int, pose: PoseArrays, scaled: DecodedArrays, lengths_row: F64,
                     leg: float, targets: tuple[Vec3, Vec3], weights: tuple[float, float],
                     root_height: float, max_extension: float) -> None:
@@ -141,7 +141,7 @@ def adapt_keeping_heels_up(c: int, pose: PoseArrays, scaled: DecodedArrays, leng
     return legs[4], legs[5], legs[7]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def toes_onto_ground(c: int, pose: PoseArrays, ankles: tuple[Vec3, Vec3],
                      toes: tuple[Vec3, Vec3], shank2world: tuple[Frame, Frame], ball: float,
                      ground: GroundArrays, passes: int) -> None:

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from ..normalized import TRAILING_SHAPES, NormalizedPoses
 from .decode import PoseArrays
-from .vec import F64, Quat, Vec3, load3, load4, store3, store4
+from .vec import F64, Quat, Vec3, load3, store3
 
 I64 = NDArray[np.int64]
 B1 = NDArray[np.bool_]
@@ -68,44 +68,74 @@ def nlerp(a: Vec3, b: Vec3, w: float) -> Vec3:
 
 
 @njit(cache=True)
-def _blend_quats(a: F64, b: F64, w: float, out: F64) -> None:
-    store4(out, slerp(load4(a), load4(b), w))
+def _blend_quat(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
+    """Row ``ro`` of the (n, 4) quaternions ``out``: rows ``ra`` of ``a``, ``rb`` of ``b``
+    slerped (scalar indexing: no array views in the loop over characters)."""
+    q = slerp((a[ra, 0], a[ra, 1], a[ra, 2], a[ra, 3]), (b[rb, 0], b[rb, 1], b[rb, 2], b[rb, 3]), w)
+    out[ro, 0], out[ro, 1], out[ro, 2], out[ro, 3] = q[0], q[1], q[2], q[3]
 
 
 @njit(cache=True)
-def _blend_dirs(a: F64, b: F64, w: float, out: F64) -> None:
-    store3(out, nlerp(load3(a), load3(b), w))
+def _blend_quat2(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
+    """As :func:`_blend_quat` for (n, 2, 4) quaternions [left, right]."""
+    for s in range(2):
+        q = slerp((a[ra, s, 0], a[ra, s, 1], a[ra, s, 2], a[ra, s, 3]),
+                  (b[rb, s, 0], b[rb, s, 1], b[rb, s, 2], b[rb, s, 3]), w)
+        out[ro, s, 0], out[ro, s, 1], out[ro, s, 2], out[ro, s, 3] = q[0], q[1], q[2], q[3]
 
 
 @njit(cache=True)
-def _lerp(a: F64, b: F64, w: float, out: F64) -> None:
-    for k in range(a.shape[0]):
-        out[k] = (1 - w) * a[k] + w * b[k]
+def _blend_dir(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
+    """Row ``ro`` of the (n, 3) directions ``out``: normalized lerp of ``a[ra]``, ``b[rb]``."""
+    v = nlerp((a[ra, 0], a[ra, 1], a[ra, 2]), (b[rb, 0], b[rb, 1], b[rb, 2]), w)
+    out[ro, 0], out[ro, 1], out[ro, 2] = v[0], v[1], v[2]
 
 
 @njit(cache=True)
+def _blend_dir2(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
+    """As :func:`_blend_dir` for (n, 2, 3) directions [left, right]."""
+    for s in range(2):
+        v = nlerp((a[ra, s, 0], a[ra, s, 1], a[ra, s, 2]), (b[rb, s, 0], b[rb, s, 1], b[rb, s, 2]),
+                  w)
+        out[ro, s, 0], out[ro, s, 1], out[ro, s, 2] = v[0], v[1], v[2]
+
+
+@njit(cache=True)
+def _lerp(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
+    """Row ``ro`` of the (n, k) ``out``: ``(1 - w) a[ra] + w b[rb]``."""
+    for k in range(a.shape[1]):
+        out[ro, k] = (1 - w) * a[ra, k] + w * b[rb, k]
+
+
+@njit(cache=True)
+def _lerp3(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
+    """As :func:`_lerp` for (n, 3, 3) points."""
+    for j in range(3):
+        for k in range(3):
+            out[ro, j, k] = (1 - w) * a[ra, j, k] + w * b[rb, j, k]
+
+
+@njit(cache=True, inline="always")
 def blend_parts(a: PoseArrays, ra: int, b: PoseArrays, rb: int, w: float, out: PoseArrays,
                 ro: int) -> None:
     """Mirrors :func:`ecs_anim.playback.blend` for every field but the root's: row ``ra`` of
     ``a`` and row ``rb`` of ``b`` with weight ``w`` of ``b``, into row ``ro`` of ``out`` (which
     may be ``b``'s row itself)."""
-    _blend_quats(a.pelvis_local[ra], b.pelvis_local[rb], w, out.pelvis_local[ro])
-    _blend_quats(a.thorax[ra], b.thorax[rb], w, out.thorax[ro])
-    _blend_quats(a.head[ra], b.head[rb], w, out.head[ro])
-    _blend_dirs(a.neck_dir[ra], b.neck_dir[rb], w, out.neck_dir[ro])
-    _blend_dirs(a.head_top_dir[ra], b.head_top_dir[rb], w, out.head_top_dir[ro])
-    for s in range(2):
-        _blend_quats(a.leg_frame[ra, s], b.leg_frame[rb, s], w, out.leg_frame[ro, s])
-        _blend_quats(a.arm_frame[ra, s], b.arm_frame[rb, s], w, out.arm_frame[ro, s])
-        _blend_dirs(a.hip_dir[ra, s], b.hip_dir[rb, s], w, out.hip_dir[ro, s])
-        _blend_dirs(a.foot_dir[ra, s], b.foot_dir[rb, s], w, out.foot_dir[ro, s])
-        _blend_dirs(a.clavicle_dir[ra, s], b.clavicle_dir[rb, s], w, out.clavicle_dir[ro, s])
-        _blend_dirs(a.hand_dir[ra, s], b.hand_dir[rb, s], w, out.hand_dir[ro, s])
-    _lerp(a.leg_fraction[ra], b.leg_fraction[rb], w, out.leg_fraction[ro])
-    _lerp(a.arm_fraction[ra], b.arm_fraction[rb], w, out.arm_fraction[ro])
-    for k in range(3):
-        _lerp(a.spine_points[ra, k], b.spine_points[rb, k], w, out.spine_points[ro, k])
-    _lerp(a.stretch[ra], b.stretch[rb], w, out.stretch[ro])
+    _blend_quat(a.pelvis_local, ra, b.pelvis_local, rb, w, out.pelvis_local, ro)
+    _blend_quat(a.thorax, ra, b.thorax, rb, w, out.thorax, ro)
+    _blend_quat(a.head, ra, b.head, rb, w, out.head, ro)
+    _blend_quat2(a.leg_frame, ra, b.leg_frame, rb, w, out.leg_frame, ro)
+    _blend_quat2(a.arm_frame, ra, b.arm_frame, rb, w, out.arm_frame, ro)
+    _blend_dir(a.neck_dir, ra, b.neck_dir, rb, w, out.neck_dir, ro)
+    _blend_dir(a.head_top_dir, ra, b.head_top_dir, rb, w, out.head_top_dir, ro)
+    _blend_dir2(a.hip_dir, ra, b.hip_dir, rb, w, out.hip_dir, ro)
+    _blend_dir2(a.foot_dir, ra, b.foot_dir, rb, w, out.foot_dir, ro)
+    _blend_dir2(a.clavicle_dir, ra, b.clavicle_dir, rb, w, out.clavicle_dir, ro)
+    _blend_dir2(a.hand_dir, ra, b.hand_dir, rb, w, out.hand_dir, ro)
+    _lerp(a.leg_fraction, ra, b.leg_fraction, rb, w, out.leg_fraction, ro)
+    _lerp(a.arm_fraction, ra, b.arm_fraction, rb, w, out.arm_fraction, ro)
+    _lerp3(a.spine_points, ra, b.spine_points, rb, w, out.spine_points, ro)
+    _lerp(a.stretch, ra, b.stretch, rb, w, out.stretch, ro)
 
 
 @njit(cache=True)
@@ -176,7 +206,7 @@ def loop_transform(yaw: float, shift_x: float, shift_y: float,
     return loops * yaw, moved.real, moved.imag
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _frame_root(bank: PoseArrays, first: int, frame: int, angle: float, moved_x: float,
                 moved_y: float) -> tuple[Vec3, float]:
     """Root position and heading of bank row ``frame`` after the loop transform (mirrors
