@@ -14,6 +14,14 @@ from numpy.typing import NDArray
 
 F64 = NDArray[np.float64]
 
+#: Kind codes of a ground part in a :class:`GroundDescription`.
+PLANE, SLOPE, STAIRS, BUMPS, HEIGHT_GRID = 0, 1, 2, 3, 4
+#: Parameters per part (unused ones are zero); what each holds is given by its kind:
+#: plane (z), slope (z, grade_x, grade_y), stairs (z, rise, run, steps, start, cos, sin of the
+#: heading), bumps (z, amplitude, wavelength_x, wavelength_y), height grid (offset of its values
+#: in ``grid``, nx, ny, cell, origin_x, origin_y).
+N_GROUND_PARAMS = 7
+
 
 class Ground(Protocol):
     """Anything that answers ground heights for arrays of points."""
@@ -151,3 +159,63 @@ class Combined:
         for part in self.parts:
             out = out + part.height(xy)
         return out
+
+
+@dataclass(frozen=True)
+class GroundDescription:
+    """A built-in ground as arrays, for :func:`ecs_anim.kernels.ground.height_at`: the sum of
+    its parts (one part unless the ground is :class:`Combined`).
+
+    kinds : (parts,) int64 kind codes (:data:`PLANE` ...); params : (parts, N_GROUND_PARAMS);
+    grid : every height grid's heights (metres), rows along y, flattened and concatenated.
+    """
+
+    kinds: NDArray[np.int64]
+    params: F64
+    grid: F64
+
+
+def _parts(ground: Ground, grids: list[F64]) -> list[list[float]] | None:
+    """``[kind, *params]`` of each part of ``ground`` (None: not a built-in ground); a height
+    grid's heights are appended to ``grids``."""
+    if isinstance(ground, Plane):
+        return [[PLANE, ground.z_m]]
+    if isinstance(ground, Slope):
+        return [[SLOPE, ground.z_m, ground.grade_x, ground.grade_y]]
+    if isinstance(ground, Stairs):
+        a = np.radians(ground.heading_deg)
+        return [[STAIRS, ground.z_m, ground.rise_m, ground.run_m, float(ground.steps),
+                 ground.start_m, float(np.cos(a)), float(np.sin(a))]]
+    if isinstance(ground, Bumps):
+        return [[BUMPS, ground.z_m, ground.amplitude_m, ground.wavelength_x_m,
+                 ground.wavelength_y_m]]
+    if isinstance(ground, HeightGrid):
+        h = ground._h
+        offset = sum(g.size for g in grids)
+        grids.append(h.ravel())
+        return [[HEIGHT_GRID, float(offset), float(h.shape[1]), float(h.shape[0]), ground.cell_m,
+                 ground.origin_x_m, ground.origin_y_m]]
+    if isinstance(ground, Combined):
+        out: list[list[float]] = []
+        for part in ground.parts:
+            sub = _parts(part, grids)
+            if sub is None:
+                return None
+            out.extend(sub)
+        return out
+    return None
+
+
+def describe(ground: Ground) -> GroundDescription | None:
+    """The compiled description of a built-in ground (nested :class:`Combined` flattened into
+    its parts); None for any other :class:`Ground` (it has only its numpy ``height``)."""
+    grids: list[F64] = []
+    parts = _parts(ground, grids)
+    if parts is None:
+        return None
+    params = np.zeros((len(parts), N_GROUND_PARAMS))
+    for k, p in enumerate(parts):
+        params[k, :len(p) - 1] = p[1:]
+    kinds = np.array([p[0] for p in parts], dtype=np.int64)
+    grid = np.concatenate(grids) if grids else np.zeros(1)
+    return GroundDescription(kinds, params, np.ascontiguousarray(grid, dtype=np.float64))

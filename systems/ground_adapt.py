@@ -14,20 +14,81 @@ footprint_settled, ground_ref.
 
 from __future__ import annotations
 
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
-from ecs_anim.ground_adapt import BALL_HEIGHT_PER_LEG, adapt_keeping_heels_up, heel_depth
+import numpy as np
+from numpy.typing import NDArray
+
+from ecs_anim.ground import Ground, GroundDescription, describe
+from ecs_anim.ground_adapt import (
+    BALL_HEIGHT_PER_LEG,
+    HEEL_TOLERANCE_M,
+    MAX_LEG_EXTENSION,
+    adapt_keeping_heels_up,
+    heel_depth,
+)
+from ecs_anim.kernels.decode import decoded_arrays, pose_arrays
+from ecs_anim.kernels.ground_adapt import ground_adapt_rows
+from ecs_anim.kernels.playback import writable_poses
 from ecs_anim.normalized import SIDE_JOINTS, SIDE_LENGTHS
 from ecs_anim.system_base import System
+
+if TYPE_CHECKING:
+    from ecs_anim.simulation import Simulation
 
 #: Time constant (s) with which the motion's floor follows the ground under the supporting feet.
 GROUND_SMOOTHING_S = 0.15
 
+#: Passes lifting heels (``adapt_keeping_heels_up``) and pitching toes onto the ground.
+HEEL_PASSES = 4
+TOE_PASSES = 4
+
 ANKLES, TOES = list(SIDE_JOINTS["ankle"]), list(SIDE_JOINTS["toe"])
 
 
+def _own(a: NDArray[Any]) -> NDArray[Any]:
+    """``a`` if a kernel may write it in place, else a contiguous copy of it."""
+    return a if a.flags.c_contiguous and a.flags.writeable and a.flags.owndata else a.copy()
+
+
 class GroundAdapt(System):
+    """Adapts with the compiled :mod:`ecs_anim.kernels.ground_adapt` on a built-in ground; a
+    ground of the user's own (only its numpy ``height``) goes through :meth:`run_numpy`."""
+
+    def __init__(self, sim: Simulation):
+        super().__init__(sim)
+        self._ground: tuple[Ground, GroundDescription | None] | None = None
+
+    def _description(self, ground: Ground) -> GroundDescription | None:
+        """The ground's compiled description, made once per ground object."""
+        if self._ground is None or self._ground[0] is not ground:
+            self._ground = ground, describe(ground)
+        return self._ground[1]
+
     def run(self, dt: float) -> None:
+        sim, st = self.sim, self.sim.store
+        description = self._description(sim.ground)
+        if description is None:
+            self.run_numpy(dt)
+            return
+        scaled = st.scaled
+        assert scaled is not None, "MorphologyAdapt runs before GroundAdapt"
+        pose = pose_arrays(writable_poses(st.poses, st.n))
+        st.footprint, st.locked = _own(st.footprint), _own(st.locked)
+        st.footprint_settled, st.ground_ref = _own(st.footprint_settled), _own(st.ground_ref)
+        decoded = decoded_arrays(scaled)
+        decoded = type(decoded)(*(np.ascontiguousarray(a) for a in decoded))
+        ground = (description.kinds, description.params, description.grid)
+        ground_adapt_rows(np.arange(st.n, dtype=np.int64), pose, decoded,
+                          np.ascontiguousarray(st.lengths), sim.leg_length(),
+                          np.ascontiguousarray(st.contact_weight), st.clip,
+                          sim.bank.source_ankle_height, st.footprint, st.locked,
+                          st.footprint_settled, st.ground_ref, ground, dt, GROUND_SMOOTHING_S,
+                          BALL_HEIGHT_PER_LEG, MAX_LEG_EXTENSION, HEEL_TOLERANCE_M, HEEL_PASSES,
+                          TOE_PASSES)
+
+    def run_numpy(self, dt: float) -> None:
+        """The numpy reference of :meth:`run` (any ground with a ``height``)."""
         sim, st = self.sim, self.sim.store
         ground = sim.ground
         scaled = st.scaled
@@ -72,10 +133,10 @@ class GroundAdapt(System):
         targets[..., 2] += np.maximum(heel_depth(ground, targets, ankle_height), 0.0)
         root_height = scaled.positions[:, 0, 2] + st.ground_ref
         poses, legs = adapt_keeping_heels_up(st.poses, st.lengths, targets, w, root_height, scaled,
-                                             ground)
-        st.poses = self._toes_onto_ground(poses, legs, ball)
+                                             ground, HEEL_PASSES)
+        st.poses = self._toes_onto_ground(poses, legs, ball, TOE_PASSES)
 
-    def _toes_onto_ground(self, poses, legs, ball, passes: int = 4):  # type: ignore[no-untyped-def]
+    def _toes_onto_ground(self, poses, legs, ball, passes: int = TOE_PASSES):  # type: ignore[no-untyped-def]
         """Pitch a foot up about its ankle where its toe joint would be under the ground
         (``legs``: the decoded legs of ``poses``).
 

@@ -9,23 +9,73 @@ store.clip_time_s, fade_time_s, fade_elapsed_s, fade_s; on a clip change (throug
 
 from __future__ import annotations
 
-import numpy as np
+from typing import TYPE_CHECKING
 
-from ecs_anim.playback import blend, rotate_xy, sample, sample_table
+import numpy as np
+from numpy.typing import NDArray
+
+from ecs_anim.kernels.decode import PoseArrays, pose_arrays
+from ecs_anim.kernels.playback import (
+    blend_rows,
+    empty_poses,
+    sample_placed_rows,
+    sample_table_rows,
+    writable_poses,
+)
+from ecs_anim.normalized import NormalizedPoses
+from ecs_anim.playback import ClipBank, blend, rotate_xy, sample, sample_table
 from ecs_anim.system_base import System
+
+if TYPE_CHECKING:
+    from ecs_anim.simulation import Simulation
 
 
 class MotionPlayback(System):
+    """Samples with the compiled :mod:`ecs_anim.kernels.playback` (numpy reference:
+    :meth:`run_numpy`), into the store's pose arrays in place."""
+
+    def __init__(self, sim: Simulation):
+        super().__init__(sim)
+        self._bank: tuple[ClipBank, PoseArrays] | None = None
+
     def run(self, dt: float) -> None:
+        st, bank = self.sim.store, self.sim.bank
+        self._start_queued_clips()
+        rows = np.arange(st.n, dtype=np.int64)
+        leg = self.sim.leg_length()
+        out = pose_arrays(writable_poses(st.poses, st.n))
+        bank_poses = self._bank_poses(bank)
+        sample_placed_rows(rows, bank_poses, bank.start, bank.n_frames, bank.fps, bank.loop_yaw,
+                           bank.loop_shift, st.clip, st.clip_time_s, st.loop, st.placement_xy,
+                           st.placement_heading, leg, out, rows)
+        if st.contact_weight.shape != (st.n, 2) or not st.contact_weight.flags.writeable:
+            st.contact_weight = np.zeros((st.n, 2))
+        sample_table_rows(rows, bank.contact_weight, bank.start, bank.n_frames, bank.fps,
+                          st.clip, st.clip_time_s, st.loop, st.contact_weight)
+        fading = np.flatnonzero(st.fade_s > 0.0)
+        if fading.size:
+            # While two clips blend, their feet are in neither clip's footprints: no foot is
+            # locked (feet follow the blend, kept above the ground). Footprints resume with the
+            # incoming clip's own contacts once the fade is over.
+            st.contact_weight[fading] = 0.0
+            old = pose_arrays(empty_poses(fading.size))
+            sample_placed_rows(fading, bank_poses, bank.start, bank.n_frames, bank.fps,
+                               bank.loop_yaw, bank.loop_shift, st.fade_clip, st.fade_time_s,
+                               st.fade_loop, st.fade_placement_xy, st.fade_placement_heading, leg,
+                               old, np.arange(fading.size, dtype=np.int64))
+            w = np.clip(st.fade_elapsed_s[fading] / np.maximum(st.fade_s[fading], 1e-9), 0, 1)
+            blend_rows(fading, old, w, out)
+            st.fade_s[fading] = np.where(w >= 1.0, 0.0, st.fade_s[fading])
+        self._advance_clocks(dt)
+
+    def run_numpy(self, dt: float) -> None:
+        """The numpy reference of :meth:`run` (the tests compare the two)."""
         st, bank = self.sim.store, self.sim.bank
         self._start_queued_clips()
         poses = self._placed(sample(bank, st.clip, st.clip_time_s, st.loop),
                              st.placement_xy, st.placement_heading)
         weights = sample_table(bank, bank.contact_weight, st.clip, st.clip_time_s, st.loop)
         fading = st.fade_s > 0.0
-        # While two clips blend, their feet are in neither clip's footprints: no foot is locked
-        # (feet follow the blend, kept above the ground). Footprints resume with the incoming
-        # clip's own contacts once the fade is over.
         weights = np.where(fading[:, None], 0.0, weights)
         if np.any(fading):
             old = self._placed(sample(bank, st.fade_clip, st.fade_time_s, st.fade_loop),
@@ -35,12 +85,23 @@ class MotionPlayback(System):
             st.fade_s = np.where(w >= 1.0, 0.0, st.fade_s)
         st.poses = poses
         st.contact_weight = weights
+        self._advance_clocks(dt)
+
+    def _advance_clocks(self, dt: float) -> None:
+        st = self.sim.store
         step = dt * st.speed
         st.clip_time_s += step
         st.fade_time_s += step
         st.fade_elapsed_s += dt
 
-    def _placed(self, poses, xy, heading):  # type: ignore[no-untyped-def]
+    def _bank_poses(self, bank: ClipBank) -> PoseArrays:
+        """The bank's poses as contiguous arrays (made once per bank)."""
+        if self._bank is None or self._bank[0] is not bank:
+            self._bank = bank, PoseArrays(*(np.ascontiguousarray(a) for a in pose_arrays(bank.poses)))
+        return self._bank[1]
+
+    def _placed(self, poses: NormalizedPoses, xy: NDArray[np.float64],
+                heading: NDArray[np.float64]) -> NormalizedPoses:
         """Lay each motion out from its placement (``xy`` (n, 2) m, ``heading`` (n,) rad):
         rotate the root path about the motion origin, then shift it."""
         leg = self.sim.leg_length()

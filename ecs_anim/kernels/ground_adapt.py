@@ -1,0 +1,271 @@
+"""Compiled ground adaptation (paper §7): the whole of ``GroundAdapt.run``, one character at a time.
+
+Mirrors ``systems.ground_adapt.GroundAdapt.run`` (footprints laid, locked and settled, the
+motion's floor following the supporting feet, free feet lifted clear of the ground, the toes
+pitched onto it) with :func:`ecs_anim.ground_adapt.adapt_keeping_heels_up`,
+:func:`~ecs_anim.ground_adapt.adapt_to_ground` and
+:func:`~ecs_anim.ground_adapt.vertical_slack_for_reach`, on a built-in ground given as its
+:class:`~ecs_anim.ground.GroundDescription` arrays.
+
+Every decision the numpy code takes for the whole batch (another heel pass, the toe passes) is
+taken here per character, so a character's result never depends on who else is in the batch.
+
+Joint and length indices are literals (numba's cache keys on this file's source); an import-time
+check pins them to the skeleton.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+from numpy.typing import NDArray
+
+from ..skeleton import JOINT_INDEX as J
+from ..skeleton import LENGTH_INDEX as L
+from .decode import DecodedArrays, PoseArrays, decode_legs_row
+from .ground import height_at
+from .posture import rotation_between  # list-free (vec's builds a list on the heap)
+from .vec import (
+    F64,
+    Frame,
+    Vec3,
+    in_frame,
+    load3,
+    load_frame,
+    matmul,
+    norm,
+    quat_from_matrix,
+    store4,
+    sub,
+    transpose,
+)
+
+I64 = NDArray[np.int64]
+B1 = NDArray[np.bool_]
+#: A ground's description: (kinds, params, grid) of :class:`ecs_anim.ground.GroundDescription`.
+GroundArrays = tuple[I64, F64, F64]
+
+# Joints of side s (0 left, 1 right) are these plus 4 * s; lengths plus s.
+_PELVIS, _HIP, _ANKLE, _TOE = 0, 1, 3, 4
+_L_THIGH, _L_SHANK, _L_ANKLE_HEIGHT = 2, 4, 8
+assert (J["pelvis"], J["hip_l"], J["ankle_l"], J["toe_l"], J["hip_r"], J["ankle_r"], J["toe_r"]) \
+    == (_PELVIS, _HIP, _ANKLE, _TOE, _HIP + 4, _ANKLE + 4, _TOE + 4)
+assert (L["thigh_l"], L["shank_l"], L["ankle_height_l"], L["thigh_r"], L["ankle_height_r"]) \
+    == (_L_THIGH, _L_SHANK, _L_ANKLE_HEIGHT, _L_THIGH + 1, _L_ANKLE_HEIGHT + 1)
+
+
+@njit(cache=True)
+def _height(ground: GroundArrays, p: Vec3) -> float:
+    """The ground's height under the point ``p`` (m)."""
+    return height_at(p[0], p[1], ground[0], ground[1], ground[2])
+
+
+@njit(cache=True)
+def vertical_slack_for_reach(hip: Vec3, ankle_target: Vec3, reach: float) -> float:
+    """Mirrors :func:`ecs_anim.ground_adapt.vertical_slack_for_reach` for one leg (m)."""
+    dx, dy = hip[0] - ankle_target[0], hip[1] - ankle_target[1]
+    horizontal = math.sqrt(dx * dx + dy * dy)
+    vertical = math.sqrt(max(reach**2 - horizontal**2, 0.0))
+    return ankle_target[2] + vertical - hip[2]
+
+
+@njit(cache=True, inline="always")
+def adapt_to_ground(c: int, pose: PoseArrays, scaled: DecodedArrays, lengths_row: F64,
+                    leg: float, targets: tuple[Vec3, Vec3], weights: tuple[float, float],
+                    root_height: float, max_extension: float) -> None:
+    """Mirrors :func:`ecs_anim.ground_adapt.adapt_to_ground` for store row ``c`` (legs
+    re-aimed from the decoded pose ``scaled``, the pelvis lowered as the legs in contact need),
+    writing the root height, leg frames and fractions of row ``c`` of ``pose``.
+
+    ``targets``: each ankle's target (m, world); ``weights``: contact activations;
+    ``root_height`` (m): the pelvis height the motion wants; ``leg``: the leg length (m).
+    """
+    pos = scaled.positions[c]
+    pelvis2world = load_frame(scaled.pelvis2world[c])
+    pelvis_now_z = pos[_PELVIS, 2]
+    up = root_height - pelvis_now_z
+    lowest = 0.0
+    for s in range(2):
+        hip = load3(pos[_HIP + 4 * s])
+        reach = max_extension * (lengths_row[_L_THIGH + s] + lengths_row[_L_SHANK + s])
+        needed = vertical_slack_for_reach((hip[0] + 0.0, hip[1] + 0.0, hip[2] + up), targets[s],
+                                          reach)
+        w = min(max(weights[s], 0.0), 1.0)
+        drop = w * min(needed, 0.0)
+        lowest = drop if s == 0 else min(lowest, drop)
+    pelvis_z = root_height + lowest
+    shift = pelvis_z - pelvis_now_z
+    for s in range(2):
+        hip = load3(pos[_HIP + 4 * s])
+        thigh, shank = lengths_row[_L_THIGH + s], lengths_row[_L_SHANK + s]
+        reach = max_extension * (thigh + shank)
+        to_target = sub(targets[s], (hip[0] + 0.0, hip[1] + 0.0, hip[2] + shift))
+        leg2world = load_frame(scaled.leg2world[c, s])
+        turn = rotation_between(leg2world[2], to_target)
+        new_leg2pelvis = matmul(transpose(pelvis2world), matmul(turn, leg2world))
+        store4(pose.leg_frame[c, s], quat_from_matrix(new_leg2pelvis))
+        pose.leg_fraction[c, s] = min(norm(to_target), reach) / (thigh + shank)
+    pose.root_position[c, 2] = pelvis_z / leg
+
+
+@njit(cache=True)
+def adapt_keeping_heels_up(c: int, pose: PoseArrays, scaled: DecodedArrays, lengths_row: F64,
+                           leg: float, targets: tuple[Vec3, Vec3], weights: tuple[float, float],
+                           root_height: float, ground: GroundArrays, ankle_height: Vec3,
+                           max_extension: float, heel_tolerance: float,
+                           passes: int) -> tuple[tuple[Vec3, Vec3], tuple[Vec3, Vec3],
+                                                 tuple[Frame, Frame]]:
+    """Mirrors :func:`ecs_anim.ground_adapt.adapt_keeping_heels_up` for store row ``c``: the
+    ankle targets lifted (up to ``passes`` times) while a heel would be more than
+    ``heel_tolerance`` (m) under the ground. ``ankle_height`` (left, right, unused) m.
+
+    Writes row ``c`` of ``pose`` as :func:`adapt_to_ground`; returns the decoded (ankles, toes,
+    shank2world) of the result.
+    """
+    adapt_to_ground(c, pose, scaled, lengths_row, leg, targets, weights, root_height,
+                    max_extension)
+    legs = decode_legs_row(c, pose, lengths_row, lengths_row)
+    for _ in range(passes):
+        ankles = legs[4]
+        d0 = _height(ground, ankles[0]) + ankle_height[0] - ankles[0][2]
+        d1 = _height(ground, ankles[1]) + ankle_height[1] - ankles[1][2]
+        if not (d0 > heel_tolerance or d1 > heel_tolerance):
+            break
+        t0, t1 = targets
+        targets = ((t0[0], t0[1], t0[2] + max(d0, 0.0)), (t1[0], t1[1], t1[2] + max(d1, 0.0)))
+        adapt_to_ground(c, pose, scaled, lengths_row, leg, targets, weights, root_height,
+                        max_extension)
+        legs = decode_legs_row(c, pose, lengths_row, lengths_row)
+    return legs[4], legs[5], legs[7]
+
+
+@njit(cache=True, inline="always")
+def toes_onto_ground(c: int, pose: PoseArrays, ankles: tuple[Vec3, Vec3],
+                     toes: tuple[Vec3, Vec3], shank2world: tuple[Frame, Frame], ball: float,
+                     ground: GroundArrays, passes: int) -> None:
+    """Mirrors ``GroundAdapt._toes_onto_ground`` for store row ``c``: a foot whose toe joint
+    would be under the ground (by ``ball`` m, its height above the sole) is pitched up about
+    its ankle, ``passes`` times asking the ground again; writes ``pose.foot_dir[c]``."""
+    d0 = _height(ground, toes[0]) + ball - toes[0][2]
+    d1 = _height(ground, toes[1]) + ball - toes[1][2]
+    if not (d0 > 0.0 or d1 > 0.0):
+        return
+    for s in range(2):
+        ankle, toe = ankles[s], toes[s]
+        deficit = d0 if s == 0 else d1
+        foot = max(norm(sub(toe, ankle)), 1e-9)
+        d = ((toe[0] - ankle[0]) / foot, (toe[1] - ankle[1]) / foot, (toe[2] - ankle[2]) / foot)
+        flat = max(math.sqrt(d[0] * d[0] + d[1] * d[1]), 1e-9)
+        hx, hy = d[0] / flat, d[1] / flat
+        dz = d[2]
+        moved = toe
+        for _ in range(passes):
+            dz = min(max(dz + max(deficit, 0.0) / foot, -1.0), 1.0)
+            along = math.sqrt(1.0 - dz**2)
+            moved = (ankle[0] + foot * (hx * along), ankle[1] + foot * (hy * along),
+                     ankle[2] + foot * dz)
+            deficit = _height(ground, moved) + ball - moved[2]
+        new_d = ((moved[0] - ankle[0]) / foot, (moved[1] - ankle[1]) / foot,
+                 (moved[2] - ankle[2]) / foot)
+        if max(abs(new_d[0] - d[0]), abs(new_d[1] - d[1]), abs(new_d[2] - d[2])) > 0.0:
+            in_shank = in_frame(shank2world[s], new_d)
+            out = pose.foot_dir[c, s]
+            out[0], out[1], out[2] = in_shank[0], in_shank[1], in_shank[2]
+
+
+@njit(cache=True)
+def _foot_target(ankle: Vec3, toe: Vec3, footprint: Vec3, w: float, ground_ref: float,
+                 ankle_height: float, ball: float, ground: GroundArrays) -> Vec3:
+    """One ankle's target in ``GroundAdapt.run``: the motion's free foot on the floor
+    ``ground_ref`` (m), lifted where its heel or toe would be under the ground, blended
+    towards its ``footprint`` by the contact weight ``w``, its heel kept above the ground."""
+    free = (ankle[0], ankle[1], ankle[2] + ground_ref)
+    need_heel = _height(ground, free) + ankle_height - free[2]
+    need_toe = _height(ground, toe) + ball - (toe[2] + ground_ref)
+    free = (free[0], free[1], free[2] + max(0.0, max(need_heel, need_toe)))
+    t = (free[0] + w * (footprint[0] - free[0]), free[1] + w * (footprint[1] - free[1]),
+         free[2] + w * (footprint[2] - free[2]))
+    return (t[0], t[1], t[2] + max(_height(ground, t) + ankle_height - t[2], 0.0))
+
+
+@njit(cache=True)
+def ground_adapt_row(c: int, pose: PoseArrays, scaled: DecodedArrays, lengths: F64, leg: F64,
+                     contact_weight: F64, clip: I64, source_ankle_height: F64, footprint: F64,
+                     locked: B1, footprint_settled: B1, ground_ref: F64, ground: GroundArrays,
+                     dt: float, smoothing_s: float, ball_per_leg: float, max_extension: float,
+                     heel_tolerance: float, heel_passes: int, toe_passes: int) -> None:
+    """Mirrors ``GroundAdapt.run`` for store row ``c``; arguments as for
+    :func:`ground_adapt_rows`."""
+    lengths_row = lengths[c]
+    leg_c = leg[c]
+    pos = scaled.positions[c]
+    ball = ball_per_leg * leg_c
+    ankle_height = (lengths_row[_L_ANKLE_HEIGHT], lengths_row[_L_ANKLE_HEIGHT + 1], 0.0)
+    w = (contact_weight[c, 0], contact_weight[c, 1])
+    ankles = (load3(pos[_ANKLE]), load3(pos[_ANKLE + 4]))
+    toes = (load3(pos[_TOE]), load3(pos[_TOE + 4]))
+    # Footprints: where the motion's ankle is, standing on the ground under it (raised by as
+    # much as the motion's ankle is above its standing height); locked from the contact's
+    # start, going down with the motion's foot until its first fully planted tick.
+    for s in range(2):
+        ankle = ankles[s]
+        above_standing = max(ankle[2] - source_ankle_height[clip[c], s] * leg_c, 0.0)
+        starting = w[s] > 0.0 and not locked[c, s]
+        fp = footprint[c, s]
+        if starting:
+            fp[0], fp[1] = ankle[0], ankle[1]
+            fp[2] = _height(ground, ankle) + ankle_height[s] + above_standing
+        elif w[s] > 0.0 and not footprint_settled[c, s]:
+            settled_z = _height(ground, load3(fp)) + ankle_height[s] + above_standing
+            fp[2] = min(fp[2], settled_z)
+        locked[c, s] = w[s] > 0.0
+        footprint_settled[c, s] = locked[c, s] and (
+            (footprint_settled[c, s] and not starting) or w[s] >= 1.0)
+    # The motion's floor follows the ground under the supporting feet, smoothly.
+    support = w[0] + w[1]
+    under_feet = (w[0] * (footprint[c, 0, 2] - ankle_height[0])
+                  + w[1] * (footprint[c, 1, 2] - ankle_height[1])) / max(support, 1e-9)
+    target = under_feet if support > 0.0 else _height(ground, load3(pos[_PELVIS]))
+    ground_ref[c] += (1.0 - math.exp(-dt / smoothing_s)) * (target - ground_ref[c])
+    g = ground_ref[c]
+    # Free feet ride on that floor, lifted where heel or toe would go under the ground; a
+    # contact ramping in blends towards its footprint, its heel kept above the ground.
+    targets = (_foot_target(ankles[0], toes[0], load3(footprint[c, 0]), w[0], g,
+                            ankle_height[0], ball, ground),
+               _foot_target(ankles[1], toes[1], load3(footprint[c, 1]), w[1], g,
+                            ankle_height[1], ball, ground))
+    root_height = pos[_PELVIS, 2] + g
+    new_ankles, new_toes, shank2world = adapt_keeping_heels_up(
+        c, pose, scaled, lengths_row, leg_c, targets, w, root_height, ground,
+        ankle_height, max_extension, heel_tolerance, heel_passes)
+    toes_onto_ground(c, pose, new_ankles, new_toes, shank2world, ball, ground, toe_passes)
+
+
+@njit(cache=True, parallel=True)
+def ground_adapt_rows(rows: I64, pose: PoseArrays, scaled: DecodedArrays, lengths: F64,
+                      leg: F64, contact_weight: F64, clip: I64, source_ankle_height: F64,
+                      footprint: F64, locked: B1, footprint_settled: B1, ground_ref: F64,
+                      ground: GroundArrays, dt: float, smoothing_s: float, ball_per_leg: float,
+                      max_extension: float, heel_tolerance: float, heel_passes: int,
+                      toe_passes: int) -> None:
+    """Mirrors ``systems.ground_adapt.GroundAdapt.run`` over the store rows ``rows``, in
+    parallel, in place.
+
+    Per row: ``pose`` the store's poses (root height, leg frames and fractions, foot
+    directions written); ``scaled`` the pose decoded on each body (positions (n, N_JOINTS, 3),
+    pelvis2world (n, 3, 3), leg2world (n, 2, 3, 3)); ``lengths`` (n, N_LENGTHS) m; ``leg``
+    (n,) leg lengths m; ``contact_weight`` (n, 2); ``clip`` (n,) int64;
+    ``source_ankle_height`` (n_clips, 2) in leg lengths; ``footprint`` (n, 2, 3) m,
+    ``locked``, ``footprint_settled`` (n, 2) bool and ``ground_ref`` (n,) m, read and written.
+    ``ground``: (kinds, params, grid) of the ground's description. Settings: ``dt`` (s) the
+    tick, ``smoothing_s`` the floor's time constant, ``ball_per_leg`` the toe joint's height
+    above the sole per leg length, ``max_extension`` of a leg, ``heel_tolerance`` (m),
+    ``heel_passes``, ``toe_passes``.
+    """
+    for i in prange(rows.shape[0]):
+        ground_adapt_row(rows[i], pose, scaled, lengths, leg, contact_weight, clip,
+                         source_ankle_height, footprint, locked, footprint_settled, ground_ref,
+                         ground, dt, smoothing_s, ball_per_leg, max_extension, heel_tolerance,
+                         heel_passes, toe_passes)

@@ -1,0 +1,316 @@
+"""Compiled playback: each character's clip sampled, placed in the world and cross-faded.
+
+Mirrors :func:`ecs_anim.playback.sample` (frames interpolated in normalized space, root motion
+carried across loops), :func:`ecs_anim.playback.sample_table`, the placement of
+``MotionPlayback._placed`` and :func:`ecs_anim.playback.blend`, one store row at a time, writing
+the store's pose arrays in place. The clip bank's poses and the store's are passed as
+:class:`~ecs_anim.kernels.decode.PoseArrays`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+from numpy.typing import NDArray
+
+from ..normalized import TRAILING_SHAPES, NormalizedPoses
+from .decode import PoseArrays
+from .vec import F64, Quat, Vec3, load3, store3
+
+I64 = NDArray[np.int64]
+B1 = NDArray[np.bool_]
+
+#: As :data:`ecs_anim.rotations.TINY`.
+_TINY = 1e-12
+
+
+@njit(cache=True)
+def wrap(angle: float) -> float:
+    """Mirrors ``ecs_anim.playback._wrap``: the angle in [-pi, pi)."""
+    return float((angle + np.pi) % (2 * np.pi) - np.pi)
+
+
+@njit(cache=True)
+def rotate_xy(x: float, y: float, angle: float) -> tuple[float, float]:
+    """Mirrors :func:`ecs_anim.playback.rotate_xy` for one point."""
+    c, s = math.cos(angle), math.sin(angle)
+    return c * x - s * y, s * x + c * y
+
+
+@njit(cache=True)
+def slerp(q0: Quat, q1: Quat, t: float) -> Quat:
+    """Mirrors :func:`ecs_anim.rotations.slerp` for one pair (shorter arc, normalized)."""
+    dot = q0[0] * q1[0] + q0[1] * q1[1] + q0[2] * q1[2] + q0[3] * q1[3]
+    if dot < 0.0:
+        q1 = (-q1[0], -q1[1], -q1[2], -q1[3])
+    dot = abs(dot)
+    theta = math.acos(min(max(dot, -1.0), 1.0))
+    sin_theta = math.sin(theta)
+    if sin_theta < 1e-6:
+        w0, w1 = 1.0 - t, t
+    else:
+        w0 = math.sin((1.0 - t) * theta) / sin_theta
+        w1 = math.sin(t * theta) / sin_theta
+    q = (w0 * q0[0] + w1 * q1[0], w0 * q0[1] + w1 * q1[1], w0 * q0[2] + w1 * q1[2],
+         w0 * q0[3] + w1 * q1[3])
+    n = max(math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]), _TINY)
+    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
+
+
+@njit(cache=True)
+def nlerp(a: Vec3, b: Vec3, w: float) -> Vec3:
+    """Mirrors ``normalize((1 - w) * a + w * b)`` of :func:`ecs_anim.playback.blend`."""
+    v = ((1 - w) * a[0] + w * b[0], (1 - w) * a[1] + w * b[1], (1 - w) * a[2] + w * b[2])
+    n = max(math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]), _TINY)
+    return (v[0] / n, v[1] / n, v[2] / n)
+
+
+@njit(cache=True)
+def _blend_quat(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
+    """Row ``ro`` of the (n, 4) quaternions ``out``: rows ``ra`` of ``a``, ``rb`` of ``b``
+    slerped (scalar indexing: no array views in the loop over characters)."""
+    q = slerp((a[ra, 0], a[ra, 1], a[ra, 2], a[ra, 3]), (b[rb, 0], b[rb, 1], b[rb, 2], b[rb, 3]), w)
+    out[ro, 0], out[ro, 1], out[ro, 2], out[ro, 3] = q[0], q[1], q[2], q[3]
+
+
+@njit(cache=True)
+def _blend_quat2(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
+    """As :func:`_blend_quat` for (n, 2, 4) quaternions [left, right]."""
+    for s in range(2):
+        q = slerp((a[ra, s, 0], a[ra, s, 1], a[ra, s, 2], a[ra, s, 3]),
+                  (b[rb, s, 0], b[rb, s, 1], b[rb, s, 2], b[rb, s, 3]), w)
+        out[ro, s, 0], out[ro, s, 1], out[ro, s, 2], out[ro, s, 3] = q[0], q[1], q[2], q[3]
+
+
+@njit(cache=True)
+def _blend_dir(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
+    """Row ``ro`` of the (n, 3) directions ``out``: normalized lerp of ``a[ra]``, ``b[rb]``."""
+    v = nlerp((a[ra, 0], a[ra, 1], a[ra, 2]), (b[rb, 0], b[rb, 1], b[rb, 2]), w)
+    out[ro, 0], out[ro, 1], out[ro, 2] = v[0], v[1], v[2]
+
+
+@njit(cache=True)
+def _blend_dir2(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
+    """As :func:`_blend_dir` for (n, 2, 3) directions [left, right]."""
+    for s in range(2):
+        v = nlerp((a[ra, s, 0], a[ra, s, 1], a[ra, s, 2]), (b[rb, s, 0], b[rb, s, 1], b[rb, s, 2]),
+                  w)
+        out[ro, s, 0], out[ro, s, 1], out[ro, s, 2] = v[0], v[1], v[2]
+
+
+@njit(cache=True)
+def _lerp(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
+    """Row ``ro`` of the (n, k) ``out``: ``(1 - w) a[ra] + w b[rb]``."""
+    for k in range(a.shape[1]):
+        out[ro, k] = (1 - w) * a[ra, k] + w * b[rb, k]
+
+
+@njit(cache=True)
+def _lerp3(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
+    """As :func:`_lerp` for (n, 3, 3) points."""
+    for j in range(3):
+        for k in range(3):
+            out[ro, j, k] = (1 - w) * a[ra, j, k] + w * b[rb, j, k]
+
+
+@njit(cache=True, inline="always")
+def blend_parts(a: PoseArrays, ra: int, b: PoseArrays, rb: int, w: float, out: PoseArrays,
+                ro: int) -> None:
+    """Mirrors :func:`ecs_anim.playback.blend` for every field but the root's: row ``ra`` of
+    ``a`` and row ``rb`` of ``b`` with weight ``w`` of ``b``, into row ``ro`` of ``out`` (which
+    may be ``b``'s row itself)."""
+    _blend_quat(a.pelvis_local, ra, b.pelvis_local, rb, w, out.pelvis_local, ro)
+    _blend_quat(a.thorax, ra, b.thorax, rb, w, out.thorax, ro)
+    _blend_quat(a.head, ra, b.head, rb, w, out.head, ro)
+    _blend_quat2(a.leg_frame, ra, b.leg_frame, rb, w, out.leg_frame, ro)
+    _blend_quat2(a.arm_frame, ra, b.arm_frame, rb, w, out.arm_frame, ro)
+    _blend_dir(a.neck_dir, ra, b.neck_dir, rb, w, out.neck_dir, ro)
+    _blend_dir(a.head_top_dir, ra, b.head_top_dir, rb, w, out.head_top_dir, ro)
+    _blend_dir2(a.hip_dir, ra, b.hip_dir, rb, w, out.hip_dir, ro)
+    _blend_dir2(a.foot_dir, ra, b.foot_dir, rb, w, out.foot_dir, ro)
+    _blend_dir2(a.clavicle_dir, ra, b.clavicle_dir, rb, w, out.clavicle_dir, ro)
+    _blend_dir2(a.hand_dir, ra, b.hand_dir, rb, w, out.hand_dir, ro)
+    _lerp(a.leg_fraction, ra, b.leg_fraction, rb, w, out.leg_fraction, ro)
+    _lerp(a.arm_fraction, ra, b.arm_fraction, rb, w, out.arm_fraction, ro)
+    _lerp3(a.spine_points, ra, b.spine_points, rb, w, out.spine_points, ro)
+    _lerp(a.stretch, ra, b.stretch, rb, w, out.stretch, ro)
+
+
+@njit(cache=True)
+def blend_root(pa: Vec3, ha: float, pb: Vec3, hb: float, w: float) -> tuple[Vec3, float]:
+    """Mirrors :func:`ecs_anim.playback.blend` of ``root_position`` (lerp) and ``root_heading``
+    (the shorter way round)."""
+    p = ((1 - w) * pa[0] + w * pb[0], (1 - w) * pa[1] + w * pb[1], (1 - w) * pa[2] + w * pb[2])
+    return p, ha + w * wrap(hb - ha)
+
+
+@njit(cache=True)
+def frame_position(n_frames: int, fps: float, time_s: float,
+                   loop: bool) -> tuple[int, int, float, float, bool]:
+    """Mirrors :func:`ecs_anim.playback.frame_position` for one character: (frame i0, frame i1,
+    weight of i1, whole loops done, whether i1 wraps into the next loop)."""
+    f = time_s * fps
+    if loop:
+        loops = math.floor(f / n_frames) * 1.0
+        local = f - loops * n_frames
+    else:
+        loops = 0.0
+        local = min(max(f, 0.0), n_frames - 1.0)
+    i0 = min(math.floor(local), n_frames - 1)
+    wraps = loop and i0 + 1 >= n_frames
+    i1 = 0 if wraps else min(i0 + 1, n_frames - 1)
+    return i0, i1, local - i0, loops, wraps
+
+
+@njit(cache=True)
+def complex_power(re: float, im: float, exponent: float) -> tuple[float, float]:
+    """``(re + i im) ** exponent`` as numpy computes it (``npy_cpow``): repeated squaring for a
+    whole exponent under 100 in size, else ``exp(exponent * log(z))`` (the C library's
+    ``cpow``, with ``log |z|`` from ``log1p`` as it computes it near the unit circle)."""
+    n = int(exponent)
+    if n == exponent and abs(n) < 100:
+        rr, ri = 1.0, 0.0
+        ar, ai = re, im
+        m = abs(n)
+        mask = 1
+        while mask <= m:
+            if m & mask:
+                rr, ri = rr * ar - ri * ai, rr * ai + ri * ar
+            mask <<= 1
+            ar, ai = ar * ar - ai * ai, ar * ai + ai * ar
+        if n < 0:
+            z = 1.0 / complex(rr, ri)
+            return z.real, z.imag
+        return rr, ri
+    log_abs = 0.5 * math.log1p((re - 1.0) * (re + 1.0) + im * im)
+    a, b = exponent * log_abs, exponent * math.atan2(im, re)
+    e = math.exp(a)
+    return e * math.cos(b), e * math.sin(b)
+
+
+@njit(cache=True)
+def loop_transform(yaw: float, shift_x: float, shift_y: float,
+                   loops: float) -> tuple[float, float, float]:
+    """Mirrors ``ecs_anim.playback._loop_transform`` for one character: (angle, moved x, moved
+    y) of the root after ``loops`` whole loops of a clip gaining ``yaw`` and ``shift`` each."""
+    shift = complex(shift_x, shift_y)
+    step = complex(math.cos(yaw), math.sin(yaw))
+    if abs(yaw) < 1e-9:
+        series = complex(loops, 0.0)
+    else:
+        pr, pi = complex_power(step.real, step.imag, loops)
+        series = complex(1.0 - pr, -pi) / (1.0 - step)
+    moved = shift * series
+    return loops * yaw, moved.real, moved.imag
+
+
+@njit(cache=True, inline="always")
+def _frame_root(bank: PoseArrays, first: int, frame: int, angle: float, moved_x: float,
+                moved_y: float) -> tuple[Vec3, float]:
+    """Root position and heading of bank row ``frame`` after the loop transform (mirrors
+    ``ecs_anim.playback._frame``); ``first`` the clip's first row."""
+    p0x, p0y = bank.root_position[first, 0], bank.root_position[first, 1]
+    p = bank.root_position[frame]
+    rx, ry = rotate_xy(p[0] - p0x, p[1] - p0y, angle)
+    return (p0x + moved_x + rx, p0y + moved_y + ry, p[2]), bank.root_heading[frame] + angle
+
+
+@njit(cache=True)
+def sample_placed_row(c: int, bank: PoseArrays, start: I64, n_frames: I64, fps: F64,
+                      loop_yaw: F64, loop_shift: F64, clip: I64, time_s: F64, loop: B1,
+                      placement_xy: F64, placement_heading: F64, leg: F64, out: PoseArrays,
+                      o: int) -> None:
+    """Mirrors ``MotionPlayback._placed(sample(...))`` for store row ``c``, into row ``o`` of
+    ``out``. Arguments as for :func:`sample_placed_rows`."""
+    k = clip[c]
+    i0, i1, w, loops, wraps = frame_position(n_frames[k], fps[k], time_s[c], loop[c])
+    first = start[k]
+    r0, r1 = first + i0, first + i1
+    angle, mx, my = loop_transform(loop_yaw[k], loop_shift[k, 0], loop_shift[k, 1], loops)
+    pa, ha = _frame_root(bank, first, r0, angle, mx, my)
+    if wraps:
+        angle, mx, my = loop_transform(loop_yaw[k], loop_shift[k, 0], loop_shift[k, 1],
+                                       loops + 1.0)
+    pb, hb = _frame_root(bank, first, r1, angle, mx, my)
+    p, h = blend_root(pa, ha, pb, hb, w)
+    blend_parts(bank, r0, bank, r1, w, out, o)
+    # MotionPlayback._placed: rotate the root path about the motion origin, then shift it.
+    heading, scale = placement_heading[c], leg[c]
+    x, y = rotate_xy(p[0] * scale, p[1] * scale, heading)
+    store3(out.root_position[o], ((x + placement_xy[c, 0]) / scale,
+                                  (y + placement_xy[c, 1]) / scale, p[2]))
+    out.root_heading[o] = h + heading
+
+
+@njit(cache=True, parallel=True)
+def sample_placed_rows(rows: I64, bank: PoseArrays, start: I64, n_frames: I64, fps: F64,
+                       loop_yaw: F64, loop_shift: F64, clip: I64, time_s: F64, loop: B1,
+                       placement_xy: F64, placement_heading: F64, leg: F64, out: PoseArrays,
+                       out_rows: I64) -> None:
+    """Mirrors ``MotionPlayback._placed(sample(bank, clip, time_s, loop), placement_xy,
+    placement_heading)`` over the store rows ``rows``, in parallel, into rows ``out_rows`` of
+    ``out``.
+
+    ``bank``: the clip bank's poses (total_frames,); ``start``, ``n_frames`` (n_clips,) int64,
+    ``fps``, ``loop_yaw`` (n_clips,), ``loop_shift`` (n_clips, 2): as in
+    :class:`ecs_anim.playback.ClipBank`. Per store row: ``clip`` (n,) int64, ``time_s`` (n,) s,
+    ``loop`` (n,) bool, ``placement_xy`` (n, 2) m, ``placement_heading`` (n,) rad, ``leg`` (n,)
+    leg length (m).
+    """
+    for i in prange(rows.shape[0]):
+        sample_placed_row(rows[i], bank, start, n_frames, fps, loop_yaw, loop_shift, clip,
+                          time_s, loop, placement_xy, placement_heading, leg, out, out_rows[i])
+
+
+@njit(cache=True, parallel=True)
+def sample_table_rows(rows: I64, table: F64, start: I64, n_frames: I64, fps: F64, clip: I64,
+                      time_s: F64, loop: B1, out: F64) -> None:
+    """Mirrors :func:`ecs_anim.playback.sample_table` over the store rows ``rows``, in
+    parallel: ``table`` (total_frames, k) interpolated at each row's clip time into ``out[c]``
+    ((n, k)). Bank and row arguments as for :func:`sample_placed_rows`."""
+    for i in prange(rows.shape[0]):
+        c = rows[i]
+        k = clip[c]
+        i0, i1, w, _, _ = frame_position(n_frames[k], fps[k], time_s[c], loop[c])
+        a, b = table[start[k] + i0], table[start[k] + i1]
+        for j in range(table.shape[1]):
+            out[c, j] = a[j] + w * (b[j] - a[j])
+
+
+@njit(cache=True, parallel=True)
+def blend_rows(rows: I64, old: PoseArrays, w: F64, out: PoseArrays) -> None:
+    """Mirrors :func:`ecs_anim.playback.blend` (``blend(old, out, w)``) in place over the store
+    rows ``rows``, in parallel: row ``c = rows[i]`` of ``out`` becomes row ``i`` of ``old``
+    blended into it with the weight ``w[i]`` (in [0, 1]) of ``out``'s own pose."""
+    for i in prange(rows.shape[0]):
+        blend_row(old, i, w[i], out, rows[i])
+
+
+@njit(cache=True)
+def blend_row(old: PoseArrays, i: int, w: float, out: PoseArrays, c: int) -> None:
+    """Row ``c`` of ``out`` becomes row ``i`` of ``old`` blended into it with the weight ``w``
+    of its own pose (mirrors :func:`ecs_anim.playback.blend`)."""
+    p, h = blend_root(load3(old.root_position[i]), old.root_heading[i],
+                      load3(out.root_position[c]), out.root_heading[c], w)
+    blend_parts(old, i, out, c, w, out, c)
+    store3(out.root_position[c], p)
+    out.root_heading[c] = h
+
+
+def empty_poses(n: int) -> NormalizedPoses:
+    """Uninitialized poses for ``n`` rows (for a kernel to fill)."""
+    return NormalizedPoses(**{name: np.empty((n,) + trailing)
+                              for name, trailing in TRAILING_SHAPES.items()})
+
+
+def writable_poses(poses: NormalizedPoses, n: int) -> NormalizedPoses:
+    """``poses`` (a store's), each array made a contiguous float64 array of ``n`` rows of its
+    own that kernels may write in place (replaced by a copy only where it is not one)."""
+    for name, trailing in TRAILING_SHAPES.items():
+        a = getattr(poses, name)
+        if (a.shape != (n,) + trailing or a.dtype != np.float64
+                or not (a.flags.c_contiguous and a.flags.writeable and a.flags.owndata)):
+            setattr(poses, name, np.array(np.broadcast_to(a, (n,) + trailing), dtype=np.float64))
+    return poses

@@ -1,0 +1,189 @@
+"""Compiled playback equals the numpy playback (sample, placement, contact weights, fades) on
+the shipped motions, to 1e-9."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from ecs_anim.components import MotionPlayer, Placement, QueuedClip
+from ecs_anim.systems import MotionPlayback
+
+from ecs_anim.importing import import_bvh
+from ecs_anim.kernels.decode import pose_arrays
+from ecs_anim.kernels.playback import (
+    blend_rows,
+    complex_power,
+    sample_placed_rows,
+    sample_table_rows,
+)
+from ecs_anim.library import MOTIONS_DIR
+from ecs_anim.morphology import Morphology
+from ecs_anim.normalized import QUATERNION_FIELDS, NormalizedPoses
+from ecs_anim.playback import ClipBank, blend, rotate_xy, sample, sample_table
+from ecs_anim.simulation import Simulation
+
+
+@pytest.fixture(scope="module")
+def bank() -> ClipBank:
+    motions = {p.stem: import_bvh(p) for p in sorted(MOTIONS_DIR.glob("*.bvh"))}
+    return ClipBank.from_motions(motions)
+
+
+def _placed(poses: NormalizedPoses, xy: np.ndarray, heading: np.ndarray,
+            leg: np.ndarray) -> NormalizedPoses:
+    """MotionPlayback._placed, the numpy reference."""
+    root = poses.root_position.copy()
+    root[:, :2] = (rotate_xy(root[:, :2] * leg[:, None], heading) + xy) / leg[:, None]
+    poses.root_position = root
+    poses.root_heading = poses.root_heading + heading
+    return poses
+
+
+def _empty(n: int, like: NormalizedPoses) -> NormalizedPoses:
+    return NormalizedPoses(**{k: np.full((n,) + v.shape[1:], np.nan)
+                              for k, v in like.arrays().items()})
+
+
+def _assert_poses_equal(got: NormalizedPoses, want: NormalizedPoses) -> None:
+    for name, w in want.arrays().items():
+        g = getattr(got, name)
+        if name in QUATERNION_FIELDS:  # q and -q are one rotation
+            sign = np.where(np.sum(g * w, axis=-1, keepdims=True) < 0.0, -1.0, 1.0)
+            g = g * sign
+        np.testing.assert_allclose(g, w, rtol=0, atol=1e-9, err_msg=name)
+
+
+def _scene(bank: ClipBank, rng: np.random.Generator, n: int):  # type: ignore[no-untyped-def]
+    clip = rng.integers(0, len(bank.names), n).astype(np.int64)
+    period = bank.duration_s(clip)
+    # Inside the clip, past its end (loops, or held), before its start, and exactly on frames.
+    time_s = period * rng.choice([rng.uniform(0, 1), rng.uniform(1, 40), rng.uniform(-3, 0)], n)
+    time_s[: n // 8] = np.round(time_s[: n // 8] * 30.0) / 30.0
+    loop = rng.random(n) < 0.6
+    xy = rng.uniform(-20.0, 20.0, (n, 2))
+    heading = rng.uniform(-7.0, 7.0, n)
+    leg = rng.uniform(0.5, 1.1, n)
+    return clip, time_s, loop, xy, heading, leg
+
+
+def test_sample_placed_rows_equals_numpy(bank: ClipBank) -> None:
+    rng = np.random.default_rng(1311)
+    n = 400
+    clip, time_s, loop, xy, heading, leg = _scene(bank, rng, n)
+    want = _placed(sample(bank, clip, time_s, loop), xy, heading, leg)
+    got = _empty(n, want)
+    rows = np.arange(n, dtype=np.int64)
+    sample_placed_rows(rows, pose_arrays(bank.poses), bank.start, bank.n_frames, bank.fps,
+                       bank.loop_yaw, bank.loop_shift, clip, time_s, loop, xy, heading, leg,
+                       pose_arrays(got), rows)
+    _assert_poses_equal(got, want)
+
+
+def test_only_the_given_rows_are_written(bank: ClipBank) -> None:
+    rng = np.random.default_rng(1312)
+    n = 50
+    clip, time_s, loop, xy, heading, leg = _scene(bank, rng, n)
+    want = _placed(sample(bank, clip, time_s, loop), xy, heading, leg)
+    rows = np.flatnonzero(rng.random(n) < 0.5).astype(np.int64)
+    got = _empty(rows.size, want)
+    sample_placed_rows(rows, pose_arrays(bank.poses), bank.start, bank.n_frames, bank.fps,
+                       bank.loop_yaw, bank.loop_shift, clip, time_s, loop, xy, heading, leg,
+                       pose_arrays(got), np.arange(rows.size, dtype=np.int64))
+    _assert_poses_equal(got, want.take(rows))
+
+
+def test_long_loops_carry_root_motion_as_numpy(bank: ClipBank) -> None:
+    rng = np.random.default_rng(1313)
+    n = 200
+    clip = np.full(n, bank.index("walk"), dtype=np.int64)
+    time_s = bank.duration_s(clip) * rng.uniform(0, 5000, n)  # up to 5000 loops
+    loop = np.ones(n, bool)
+    xy, heading, leg = np.zeros((n, 2)), np.zeros(n), np.full(n, 0.9)
+    want = _placed(sample(bank, clip, time_s, loop), xy, heading, leg)
+    got = _empty(n, want)
+    rows = np.arange(n, dtype=np.int64)
+    sample_placed_rows(rows, pose_arrays(bank.poses), bank.start, bank.n_frames, bank.fps,
+                       bank.loop_yaw, bank.loop_shift, clip, time_s, loop, xy, heading, leg,
+                       pose_arrays(got), rows)
+    np.testing.assert_allclose(got.root_position * 0.9, want.root_position * 0.9, rtol=0,
+                               atol=1e-9)
+    _assert_poses_equal(got, want)
+
+
+def test_complex_power_equals_numpy() -> None:
+    rng = np.random.default_rng(1314)
+    for yaw in rng.uniform(-0.01, 0.01, 20):
+        step = np.exp(1j * yaw)
+        for exponent in np.concatenate([np.arange(-120.0, 120.0), rng.integers(0, 10**5, 50)]):
+            re, im = complex_power(step.real, step.imag, float(exponent))
+            assert abs(complex(re, im) - step**exponent) < 1e-12
+
+
+def test_contact_weights_equal_numpy(bank: ClipBank) -> None:
+    rng = np.random.default_rng(1315)
+    n = 300
+    clip, time_s, loop, _, _, _ = _scene(bank, rng, n)
+    want = sample_table(bank, bank.contact_weight, clip, time_s, loop)
+    got = np.full((n, 2), np.nan)
+    sample_table_rows(np.arange(n, dtype=np.int64), bank.contact_weight, bank.start,
+                      bank.n_frames, bank.fps, clip, time_s, loop, got)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+
+
+def test_fade_blend_equals_numpy(bank: ClipBank) -> None:
+    rng = np.random.default_rng(1316)
+    n = 300
+    clip, time_s, loop, xy, heading, leg = _scene(bank, rng, n)
+    old_clip, old_time, old_loop, old_xy, old_heading, _ = _scene(bank, rng, n)
+    new = _placed(sample(bank, clip, time_s, loop), xy, heading, leg)
+    old = _placed(sample(bank, old_clip, old_time, old_loop), old_xy, old_heading, leg)
+    w = np.clip(rng.uniform(-0.2, 1.2, n), 0.0, 1.0)
+    want = blend(old, new, w)
+    rows = np.flatnonzero(rng.random(n) < 0.7).astype(np.int64)
+    out = NormalizedPoses(**{k: v.copy() for k, v in new.arrays().items()})
+    blend_rows(rows, pose_arrays(old.take(rows)), w[rows], pose_arrays(out))
+    _assert_poses_equal(out.take(rows), want.take(rows))
+    untouched = np.setdiff1d(np.arange(n), rows)
+    _assert_poses_equal(out.take(untouched), new.take(untouched))
+
+
+def test_compiled_motion_playback_equals_numpy_with_fades_and_queues() -> None:
+    rng = np.random.default_rng(1317)
+    motions = {p.stem: import_bvh(p) for p in sorted(MOTIONS_DIR.glob("*.bvh"))}
+    names = list(motions)
+
+    def make() -> Simulation:
+        sim = Simulation(motions)
+        local = np.random.default_rng(1318)
+        for k in range(10):
+            queue = tuple(QueuedClip(names[int(j)], float(local.uniform(0.0, 0.6)),
+                                     bool(local.random() < 0.5))
+                          for j in local.integers(0, len(names), int(local.integers(0, 4))))
+            player = MotionPlayer(names[int(local.integers(0, len(names)))],
+                                  speed=float(local.uniform(0.5, 2.0)),
+                                  loop=bool(local.random() < 0.5),
+                                  start_s=float(local.uniform(0.0, 3.0)), queue=queue)
+            sim.spawn(f"c{k}", Morphology.from_stature(float(local.uniform(1.1, 2.0))), player,
+                      Placement((float(local.uniform(-5, 5)), float(local.uniform(-5, 5))),
+                                float(local.uniform(-3, 3))))
+        return sim
+
+    compiled, reference = make(), make()
+    system = next(s for s in reference.systems if isinstance(s, MotionPlayback))
+    system.run = system.run_numpy  # type: ignore[method-assign]
+    faded = 0
+    for tick in range(int(rng.integers(200, 260))):
+        faded += int(np.count_nonzero(compiled.store.fade_s > 0.0))
+        compiled.step()
+        reference.step()
+        got, want = compiled.store, reference.store
+        np.testing.assert_allclose(got.positions, want.positions, rtol=0, atol=1e-9,
+                                   err_msg=f"tick {tick}")
+        np.testing.assert_allclose(got.contact_weight, want.contact_weight, rtol=0, atol=1e-12)
+        # numpy blends every row while any fades (weight 1 for the others), which may move a
+        # heading by a whole turn: the same pose.
+        turns = (got.poses.root_heading - want.poses.root_heading) / (2 * np.pi)
+        np.testing.assert_allclose(turns, np.round(turns), rtol=0, atol=1e-10)
+        np.testing.assert_array_equal(got.fade_s, want.fade_s)
+        np.testing.assert_array_equal(got.clip, want.clip)
+    assert faded > 0
