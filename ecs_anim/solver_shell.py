@@ -387,8 +387,10 @@ class _Solve:
         self.self_at = goals.self_start.copy()
         p = self.dec.positions
         self.foot_in_world = normalize(p[:, list(SIDE_JOINTS["toe"])] - p[:, list(SIDE_JOINTS["ankle"])])
-        self.trunk_moved = False  # this tick
-        self.dirty = False  # since the last decode
+        # The characters still being solved: each stops when its own goals are met or stalled
+        # and its centre of mass is back (so its result does not depend on who else is solved).
+        self.active = np.ones(self.r, bool)
+        self.moved = np.zeros(self.r, bool)  # the trunk turned since the last decode
         # Goals that stopped improving (unreachable): the trunk no longer turns for them, so an
         # unreachable trunk goal ends where it stalled however long other goals keep the loop
         # going (turning on, the bent spine would drift it by millimetres).
@@ -407,8 +409,16 @@ class _Solve:
         g.goal[g.on_self[~orient]] += shift[~orient]
 
     def redecode(self) -> None:
-        self.dec = decode(self.poses, self.lengths)
-        self.dirty = False
+        """Decode again the characters whose trunk turned (a bent spine's joints are exact once
+        decoded); the others keep their decoded pose as their steps left it."""
+        rows = np.flatnonzero(self.moved)
+        if rows.size == 0:
+            return
+        fresh = decode(self.poses.take(rows), self.lengths[rows])
+        for name in ("positions", "pelvis2world", "thorax2world", "head2world", "leg2world",
+                     "arm2world"):
+            getattr(self.dec, name)[rows] = getattr(fresh, name)
+        self.moved[:] = False
 
     # --- limbs: analytic, all four at once (legs and arms do not move each other) ----------
     def limbs(self) -> None:
@@ -418,7 +428,7 @@ class _Solve:
         frames = np.concatenate([dec.leg2world, dec.arm2world], axis=1)  # (r, 4, 3, 3)
         fractions = np.concatenate([poses.leg_fraction, poses.arm_fraction], axis=1)
         dirs = np.concatenate([poses.foot_dir, poses.hand_dir], axis=1)
-        rows, li = np.nonzero(self.first_limb >= 0)
+        rows, li = np.nonzero((self.first_limb >= 0) & self.active[:, None])
         # Only limbs with something to do: a first goal not met, or a second one (which keeps
         # the first exactly; a limb left alone keeps both as they are).
         c = self.first_limb[rows, li]
@@ -454,7 +464,7 @@ class _Solve:
                 lower2world = distal_frames(frame[held], mid, end)
                 dirs[rh, lh] = np.einsum("kji,kj->ki", lower2world, self.foot_in_world[rh, lh])
             self._limb_joints(rows, li, frames, fractions, dirs)
-        rows_o, li_o = np.nonzero(self.orient_limb >= 0)
+        rows_o, li_o = np.nonzero((self.orient_limb >= 0) & self.active[:, None])
         if rows_o.size:
             # The foot / hand axis, in its lower bone's frame (the ankle / wrist stays).
             mid = dec.positions[rows_o, LIMB_J[1][li_o]]
@@ -491,7 +501,7 @@ class _Solve:
     def head(self) -> None:
         dec, poses, g = self.dec, self.poses, self.g
         first, orient = self.first_head, self.orient_head
-        rows = np.flatnonzero((first >= 0) | (orient >= 0))
+        rows = np.flatnonzero(((first >= 0) | (orient >= 0)) & self.active)
         if rows.size == 0:
             return
         neck, head = dec.positions[rows, J["neck"]], dec.positions[rows, J["head"]].copy()
@@ -548,7 +558,7 @@ class _Solve:
         uses_trunk = (g.chain & (1 << TRUNK)) > 0
         err = _errors(g, dec)
         tol = np.where(g.orientation, s.tolerance_rad, s.tolerance_m)
-        candidates = uses_trunk & carried & (err > tol) & ~self.stalled
+        candidates = uses_trunk & carried & (err > tol) & ~self.stalled & self.active[g.owner]
         best = winners(g.owner, np.zeros(g.k, np.int64), g.priority, candidates, self.r, 1)[:, 0]
         rows = np.flatnonzero(best >= 0)
         if rows.size == 0:
@@ -608,7 +618,7 @@ class _Solve:
         for k in range(3):  # the three spine control points
             part = axis_angle(axis, angle * (k + 1) / 3.0)
             poses.spine_points[rows, k] = np.einsum("kij,kj->ki", part, poses.spine_points[rows, k])
-        self.trunk_moved = self.dirty = True
+        self.moved[rows] = True
         thorax = turn_in_pelvis @ matrix_from_quat(poses.thorax[rows])
         poses.thorax[rows] = quat_from_matrix(thorax)
         # Keep the decoded pose in step: everything above the spine's base turns rigidly.
@@ -628,7 +638,7 @@ class _Solve:
         error = g.com_desired[:, :2] - com[:, :2]
         error[~g.com_on] = 0.0
         size = np.linalg.norm(error, axis=1)
-        rows = np.flatnonzero(size > 0.1 * s.com_tolerance_m)
+        rows = np.flatnonzero((size > 0.1 * s.com_tolerance_m) & self.active)
         if rows.size == 0:
             return size
         shift = np.zeros((rows.size, 3))
@@ -677,11 +687,11 @@ def _axis_angle_of(rotation: F64) -> tuple[F64, F64]:
 
 
 def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, com_fraction: F64,
-          settings: SolverSettings = DEFAULT_SETTINGS, decoded: DecodedPose | None = None) -> tuple[NormalizedPoses, int, DecodedPose]:
+          settings: SolverSettings = DEFAULT_SETTINGS, decoded: DecodedPose | None = None) -> tuple[NormalizedPoses, I64, DecodedPose]:
     """Solve this tick's goals for their characters (rows of ``poses``, ``lengths``, ``masses``
     and ``com_fraction`` are ``goals.rows``; ``decoded`` is ``decode(poses, lengths)`` if the
-    caller has it). Returns the new poses, the iterations used, and the decoded result (joint
-    positions (r, N_JOINTS, 3) and frames), on which :func:`constraint_errors` measures each
+    caller has it). Returns the new poses, the iterations each character used (r,), and the
+    decoded result (joint positions (r, N_JOINTS, 3) and frames), on which :func:`constraint_errors` measures each
     constraint."""
     state = _Solve(poses, lengths, goals, masses, com_fraction, settings, decoded)
     tol = np.where(goals.orientation, settings.tolerance_rad, settings.tolerance_m)
@@ -689,29 +699,36 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
     slow_before = np.zeros(goals.k, bool)
     # Planted feet are re-planted after the loop: their error after a root move is not work left.
     planted = goals.priority == CONTACT_PRIORITY
-    used = 0
-    for used in range(1, settings.iterations + 1):
+    used = np.zeros(state.r, np.int64)
+    for _ in range(settings.iterations):
+        used += state.active
         # Legs, head, arms: the paper's order (legs and arms are independent, so one batch).
         state.follow_own_targets()
         state.limbs()
         state.head()
         state.trunk()
-        if state.dirty:
-            state.redecode()  # a bent spine's joints are exact once decoded
+        state.redecode()  # where the trunk turned
         com_error = state.root()
         err = _errors(goals, state.dec)
-        # Done where every goal is met or has stalled (unchanged, or falling by less than a
-        # share of itself twice running: unreachable), and the centre of mass is back; stop
-        # when every character is done. A stalled goal stays stalled for the tick.
+        # A character is done where every goal of its own is met or has stalled (unchanged, or
+        # falling by less than a share of itself twice running: unreachable), and its centre of
+        # mass is back; done characters are no longer stepped. A stalled goal stays stalled.
         first = np.isinf(previous)
         unchanged = ~first & (np.abs(previous - err) < settings.tolerance_m)
         slow = ~first & (previous - err < settings.stall_fraction * np.where(first, 0.0, previous))
         goal_open = (err > tol) & ~unchanged & ~(slow & slow_before) & ~state.stalled & ~planted
-        if not goal_open.any() and np.all(com_error <= settings.com_tolerance_m):
+        stepped = state.active[goals.owner]
+        state.stalled |= (err > tol) & ~goal_open & stepped
+        previous = np.where(stepped, err, previous)
+        slow_before = np.where(stepped, slow, slow_before)
+        open_rows = np.zeros(state.r, bool)
+        open_rows[goals.owner[goal_open]] = True
+        state.active &= open_rows | (com_error > settings.com_tolerance_m)
+        if not state.active.any():
             break
-        state.stalled |= (err > tol) & ~goal_open
-        previous, slow_before = err, slow
-    # The last root move shifted the limbs: re-plant the feet, re-aim the head and the arms.
+    # The last root move shifted the limbs: re-plant the feet, re-aim the head and the arms
+    # (every character).
+    state.active[:] = True
     state.follow_own_targets()
     state.limbs()
     state.head()
