@@ -17,6 +17,7 @@ by character, precomputes the winners and calls the kernel.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
@@ -26,7 +27,13 @@ from ..constraint_table import winners
 from ..ground_adapt import MAX_LEG_EXTENSION
 from ..normalized import DecodedPose, NormalizedPoses
 from ..rotations import normalize
-from ..solver_shell import CONTACT_PRIORITY, DEFAULT_SETTINGS, LIMB_OF_GROUP, SolverSettings, TickGoals
+from ..solver_shell import (
+    CONTACT_PRIORITY,
+    DEFAULT_SETTINGS,
+    LIMB_OF_GROUP,
+    SolverSettings,
+    TickGoals,
+)
 from .decode import DecodedArrays, PoseArrays, decode_row
 from .solve_head import solve_head
 from .solve_limbs import solve_limbs
@@ -190,12 +197,23 @@ def sorted_goals(goals: TickGoals) -> tuple[Goals, Winners, I64]:
     return g, w, order
 
 
-def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, com_fraction: F64,
-          settings: SolverSettings = DEFAULT_SETTINGS,
-          decoded: DecodedPose | None = None) -> tuple[NormalizedPoses, I64, DecodedPose]:
-    """Compiled :func:`ecs_anim.solver_shell.solve`: the same arguments and results (the new
-    poses (r,), the iterations each character used (r,), the decoded result). ``goals.goal``
-    ends where goals following a point of their own body have moved, as there."""
+class SolveState(NamedTuple):
+    """What :func:`solve_rows` works on: copies of the solved characters' pose and decoded rows
+    (written in place), their goals sorted by character (``order`` (k,) takes the
+    :class:`~ecs_anim.solver_shell.TickGoals` indices to the sorted ones), the winners and the
+    bodies."""
+
+    pose: PoseArrays
+    dec: DecodedArrays
+    goals: Goals
+    winners: Winners
+    bodies: Bodies
+    order: I64
+
+
+def prepare(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64,
+            com_fraction: F64, decoded: DecodedPose | None = None) -> SolveState:
+    """Gather the solve state of :func:`solve` (the arguments are the same)."""
     from .decode import decode as decode_compiled
 
     g, w, order = sorted_goals(goals)
@@ -215,14 +233,25 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
                com_desired=np.ascontiguousarray(goals.com_desired, dtype=np.float64),
                com_on=np.ascontiguousarray(goals.com_on, dtype=np.bool_),
                foot_in_world=np.ascontiguousarray(foot_in_world))
+    return SolveState(pose, dec, g, w, b, order)
+
+
+def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, com_fraction: F64,
+          settings: SolverSettings = DEFAULT_SETTINGS,
+          decoded: DecodedPose | None = None) -> tuple[NormalizedPoses, I64, DecodedPose]:
+    """Compiled :func:`ecs_anim.solver_shell.solve`: the same arguments and results (the new
+    poses (r,), the iterations each character used (r,), the decoded result). ``goals.goal``
+    ends where goals following a point of their own body have moved, as there."""
+    state = prepare(poses, lengths, goals, masses, com_fraction, decoded)
     used = np.zeros(goals.rows.size, np.int64)
     s = settings
-    solve_rows(pose, dec, g, w, b, TABLES, used, int(s.iterations), float(s.tolerance_m),
-               float(s.tolerance_rad), float(s.com_tolerance_m), float(s.max_ccd_step_rad),
-               float(s.root_gain), float(s.stall_fraction), float(MAX_LEG_EXTENSION))
-    goals.goal[order] = g.goal
-    return (NormalizedPoses(**dict(zip(PoseArrays._fields, pose))), used,
-            DecodedPose(*dec))
+    solve_rows(state.pose, state.dec, state.goals, state.winners, state.bodies, TABLES, used,
+               int(s.iterations), float(s.tolerance_m), float(s.tolerance_rad),
+               float(s.com_tolerance_m), float(s.max_ccd_step_rad), float(s.root_gain),
+               float(s.stall_fraction), float(MAX_LEG_EXTENSION))
+    goals.goal[state.order] = state.goals.goal
+    return (NormalizedPoses(**dict(zip(PoseArrays._fields, state.pose))), used,
+            DecodedPose(*state.dec))
 
 
 assert CONTACT_PRIORITY == math.inf  # the kernel reads a planted foot's priority as inf

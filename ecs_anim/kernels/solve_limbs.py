@@ -40,7 +40,7 @@ from .vec import (
 
 @njit(cache=True)
 def limb_fraction(pose: PoseArrays, c: int, li: int) -> float:
-    return pose.leg_fraction[c, li] if li < 2 else pose.arm_fraction[c, li - 2]
+    return float(pose.leg_fraction[c, li] if li < 2 else pose.arm_fraction[c, li - 2])
 
 
 @njit(cache=True)
