@@ -23,7 +23,8 @@ an active constraint only.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 from numpy.typing import NDArray
@@ -735,6 +736,86 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
     return state.poses, used, state.dec
 
 
+@dataclass
+class TickResult:
+    """What :func:`constrain` decided this tick, for the system to write back.
+
+    weight (m,) each constraint's activation (0 where switched off); broken (b,) constraints
+    whose target is not finite, to switch off; error (m,) how far each active constraint is from
+    being met on the result (:func:`constraint_errors`; NaN while inactive); held (m,) a sphere
+    kept the point off the motion's place; goals, rows (r,), poses (r,), solved (decoded
+    result (r,)) and iterations (r,) of the characters solved (None / empty when none)."""
+
+    weight: F64
+    broken: I64
+    error: F64
+    held: NDArray[np.bool_]
+    goals: TickGoals | None = None
+    rows: I64 = field(default_factory=lambda: np.zeros(0, np.int64))
+    poses: NormalizedPoses | None = None
+    solved: DecodedPose | None = None
+    iterations: I64 | None = None
+
+
+Solve = Callable[..., tuple[NormalizedPoses, I64, DecodedPose]]
+
+
+def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
+              unconstrained: DecodedPose | None,
+              lengths: F64, contact_weight: F64, com_control: NDArray[np.bool_], com_target_xy: F64,
+              masses: F64, com_fraction: F64, previous: DecodedPose | None,
+              settings: SolverSettings, max_release_m: float, solve: Solve) -> TickResult:
+    """One tick of ConstraintSolve's policy over every character (n rows): the targets, the
+    constraints switched off (a target not finite), the desired centre of mass (the motion's own,
+    or ``com_target_xy`` (n, 2) where finite), the goals, the ``solve`` (the compiled
+    :func:`ecs_anim.kernels.solve.solve` or the numpy :func:`solve`, same arguments) of the
+    characters with an active constraint, and every active constraint's error on the result.
+
+    ``weight`` (m,) this tick's activations; ``unconstrained`` the decoded ``poses`` (None only
+    when no weight is above 0); masses and
+    com_fraction (n, S); ``previous`` the last tick's posture (None on the first)."""
+    m = table.m
+    error = np.full(m, np.nan)
+    held = np.zeros(m, bool)
+    none = np.zeros(0, np.int64)
+    if not np.any(weight > 0):
+        return TickResult(weight, none, error, held)
+    if unconstrained is None:
+        raise ValueError("constrain: the decoded poses are needed when a constraint is active")
+    targets = target_points(table, unconstrained, previous)
+    broken = np.flatnonzero((weight > 0) & ~np.all(np.isfinite(targets), axis=1))
+    if broken.size:
+        weight = weight.copy()
+        weight[broken] = 0.0
+        targets[broken] = 0.0
+    own = centres_of_mass(unconstrained.positions, masses, com_fraction)
+    given = np.isfinite(com_target_xy).all(axis=1)
+    own[given, :2] = com_target_xy[given]
+    goals = tick_goals(table, weight, targets, unconstrained, contact_weight, com_control, own,
+                       previous, max_release_m)
+    active = np.flatnonzero(weight > 0)
+    if goals is None:  # only areas the motion already keeps
+        error[active] = constraint_errors(table, active, unconstrained, targets)
+        return TickResult(weight, broken, error, held)
+    rows = goals.rows
+    solved_poses, iterations, solved = solve(poses.take(rows), lengths[rows], goals, masses[rows],
+                                             com_fraction[rows], settings, unconstrained.take(rows))
+    user = goals.table_index >= 0
+    held[goals.table_index[user]] = goals.held[user]
+    # Every active constraint's error on the result (an area the motion already kept was not a
+    # goal, but another constraint's move may have taken its point out).
+    result = DecodedPose(**{name.name: getattr(unconstrained, name.name).copy()
+                            for name in fields(DecodedPose)})
+    for name in fields(DecodedPose):
+        getattr(result, name.name)[rows] = getattr(solved, name.name)
+    # Targets on the character's own body moved with it during the solve: read them again.
+    targets = np.where((table.target_row == table.owner)[:, None]
+                       & (table.target_kind != TARGET_WORLD)[:, None],
+                       target_points(table, result, previous), targets)
+    error[active] = constraint_errors(table, active, result, targets)
+    return TickResult(weight, broken, error, held, goals, rows, solved_poses, solved, iterations)
+
+
 def scatter(all_poses: NormalizedPoses, rows: I64, part: NormalizedPoses) -> NormalizedPoses:
     """``all_poses`` with ``rows`` replaced by ``part`` (new arrays)."""
     arrays = {}
@@ -745,4 +826,5 @@ def scatter(all_poses: NormalizedPoses, rows: I64, part: NormalizedPoses) -> Nor
     return NormalizedPoses(**arrays)
 
 
-__all__ = ["SolverSettings", "TickGoals", "scatter", "solve", "target_points", "tick_goals"]
+__all__ = ["SolverSettings", "TickGoals", "TickResult", "constrain", "scatter", "solve", "target_points",
+           "tick_goals"]
