@@ -8,13 +8,15 @@ from __future__ import annotations
 import copy
 import math
 
+import ecs_anim.systems.constraint_solve as system
 import numpy as np
 import pytest
-
 from conftest import MOTIONS_DIR
+from ecs_anim.components import MotionPlayer, Placement
+from test_scenarios import SCENARIOS, run
+
 from ecs_anim import solver_shell
 from ecs_anim.cli import walkers_on_bumps
-from ecs_anim.components import MotionPlayer, Placement
 from ecs_anim.constraints import Activation
 from ecs_anim.ground_adapt import MAX_LEG_EXTENSION
 from ecs_anim.importing import import_bvh
@@ -28,9 +30,6 @@ from ecs_anim.morphology import Morphology
 from ecs_anim.rotations import matrix_from_quat
 from ecs_anim.simulation import Simulation
 from ecs_anim.skeleton import JOINT_INDEX as J
-from test_scenarios import SCENARIOS, run
-
-import ecs_anim.systems.constraint_solve as system
 
 ALWAYS = Activation(0.0, 1e9)
 ADULT = Morphology.preset("adult_male")
@@ -160,17 +159,17 @@ def assert_same_state(reference, state):
                                    rtol=0, atol=1e-9)
 
 
-def each(state, step):
-    for c in range(state.bodies.lengths.shape[0]):
-        step(c)
+def limbs(s):
+    for c in range(s.bodies.lengths.shape[0]):
+        solve_limbs(c, s.pose, s.dec, s.goals, s.winners, s.bodies, T, S.tolerance_m,
+                    MAX_LEG_EXTENSION)
 
 
 def test_limb_step_equals_numpy(states):
     for args in states:
         reference, s = both_states(args)
         reference.limbs()
-        each(s, lambda c: solve_limbs(c, s.pose, s.dec, s.goals, s.winners, s.bodies, T,
-                                      S.tolerance_m, MAX_LEG_EXTENSION))
+        limbs(s)
         assert_same_state(reference, s)
 
 
@@ -178,7 +177,8 @@ def test_head_step_equals_numpy(states):
     for args in states:
         reference, s = both_states(args)
         reference.head()
-        each(s, lambda c: solve_head(c, s.pose, s.dec, s.goals, s.winners, s.bodies, T))
+        for c in range(s.bodies.lengths.shape[0]):
+            solve_head(c, s.pose, s.dec, s.goals, s.winners, s.bodies, T)
         assert_same_state(reference, s)
 
 
@@ -237,11 +237,6 @@ def one_state(idle, add, n=1, com_control=False):
         patch.undo()
     args = capture.calls[0]
     return compiled.prepare(*args[:5], decoded=args[6]), args
-
-
-def limbs(s):
-    each(s, lambda c: solve_limbs(c, s.pose, s.dec, s.goals, s.winners, s.bodies, T,
-                                  S.tolerance_m, MAX_LEG_EXTENSION))
 
 
 def user_goal(s, table_index):

@@ -20,9 +20,22 @@ from numpy.typing import NDArray
 
 from ..body_points import FRAME_PELVIS, SEG_DISTAL, SEG_FRAME, SEG_PROXIMAL
 from ..morphology import MASS_SEGMENTS
-from ..skeleton import JOINT_INDEX as J, LENGTH_INDEX as L
+from ..skeleton import JOINT_INDEX as J
+from ..skeleton import LENGTH_INDEX as L
 from .decode import DecodedArrays
-from .vec import F64, Frame, Vec3, add, add_scaled, dot, frame_from_axes, load3, load_frame, sub, to_world
+from .vec import (
+    F64,
+    Frame,
+    Vec3,
+    add,
+    add_scaled,
+    dot,
+    frame_from_axes,
+    load3,
+    load_frame,
+    sub,
+    to_world,
+)
 
 I64 = NDArray[np.int64]
 B8 = NDArray[np.bool_]

@@ -52,10 +52,10 @@ def solve_trunk(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, err: F64
         carried = g.group[j] >= _HEAD
         uses_trunk = (g.chain[j] & (1 << _TRUNK)) > 0
         tol = tolerance_rad if g.orientation[j] else tolerance_m
-        if uses_trunk and carried and err[j] > tol and not stalled[j]:
-            # Highest priority; ties to the goal added last.
-            if best < 0 or g.priority[j] >= g.priority[best]:
-                best = j
+        # Highest priority; ties to the goal added last.
+        if (uses_trunk and carried and err[j] > tol and not stalled[j]
+                and (best < 0 or g.priority[j] >= g.priority[best])):
+            best = j
     if best < 0:
         return False
     p = dec.positions[c]
