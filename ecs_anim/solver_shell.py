@@ -9,16 +9,21 @@ above every priority while in contact, below every priority while free. Goals ai
 of the same body follow that point as the body is solved.
 
 :func:`solve` then iterates, as the paper does, over the body's groups in the order legs, head,
-arms, trunk, then the root (``adaptRoot``: centre-of-mass control), until every goal is within
-tolerance, progress stalls, or the iteration budget is spent; a last pass over legs, head and
+arms, trunk, then the root (``adaptRoot``: centre-of-mass control); each character stops when
+every goal of its own is within tolerance or has stalled and its centre of mass is back, or when
+the iteration budget is spent (so its result does not depend on who else is solved); a last pass over legs, head and
 arms leaves the feet on their footprints and the limbs on their goals after the final root move.
 Inside a group, the highest-priority goal is met analytically (limbs; neck and head as a
 two-segment chain) or by CCD rotations (trunk, about the spine's base, spread along the spine
 spline); a limb's second goal swivels the limb about the axis that keeps the first one. The trunk
 serves the highest-priority goal it can still improve, and a trunk move that would worsen a
 higher-priority goal is not made. The steps are pure functions over all characters at once
-(:mod:`ecs_anim.solver`); this module owns the policy. The solver works on the characters with
-an active constraint only.
+(:mod:`ecs_anim.solver`); this module owns the policy (:func:`constrain`: one tick of it). The
+solver works on the characters with an active constraint only.
+
+This numpy :func:`solve` is the reference: the tick runs the compiled
+:func:`ecs_anim.kernels.solve.solve` (same arguments, same results to 1e-9 m), which the tests
+compare with it.
 """
 
 from __future__ import annotations

@@ -56,7 +56,7 @@ _TRUNK = 5
 TABLES = tables()
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def follow_own_targets(c: int, dec: DecodedArrays, g: Goals, t: Tables) -> None:
     """Mirrors ``ecs_anim.solver_shell._Solve.follow_own_targets`` for character ``c``: goals
     aiming at a point of the same body move with that point."""

@@ -33,7 +33,7 @@ from .vec import (
 )
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def solve_head(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners, b: Bodies,
                t: Tables) -> None:
     """Mirrors ``ecs_anim.solver_shell._Solve.head`` for character ``c`` (in place)."""

@@ -38,18 +38,18 @@ from .vec import (
 )
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def limb_fraction(pose: PoseArrays, c: int, li: int) -> float:
     return float(pose.leg_fraction[c, li] if li < 2 else pose.arm_fraction[c, li - 2])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def limb_dir(pose: PoseArrays, c: int, li: int) -> Vec3:
     """The foot / hand direction of limb ``li`` in its lower bone's frame."""
     return load3(pose.foot_dir[c, li]) if li < 2 else load3(pose.hand_dir[c, li - 2])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _store_limb(pose: PoseArrays, dec: DecodedArrays, c: int, li: int, frame: Frame,
                 fraction: float, direction: Vec3) -> None:
     if li < 2:
@@ -62,7 +62,7 @@ def _store_limb(pose: PoseArrays, dec: DecodedArrays, c: int, li: int, frame: Fr
         store3(pose.hand_dir[c, li - 2], direction)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def limb_joints(dec: DecodedArrays, c: int, li: int, frame: Frame, fraction: float,
                 direction: Vec3, lengths_row: F64, t: Tables) -> None:
     """Mirrors ``_Solve._limb_joints``: the middle, end and distal joints of limb ``li`` from
@@ -78,7 +78,7 @@ def limb_joints(dec: DecodedArrays, c: int, li: int, frame: Frame, fraction: flo
     store3(p[t.limb_joint[li, 3]], add(end, scale(to_world(lower2world, direction), h)))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def solve_limbs(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners,
                 b: Bodies, t: Tables, tolerance_m: float, leg_extension: float) -> None:
     """Mirrors ``ecs_anim.solver_shell._Solve.limbs`` for character ``c`` (its rows of ``pose``

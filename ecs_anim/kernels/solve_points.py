@@ -158,7 +158,7 @@ class Bodies(NamedTuple):
     foot_in_world: F64
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def limb_frame(dec: DecodedArrays, c: int, slot: int) -> Frame:
     """The half-plane frame of limb ``slot`` (0, 1 legs; 2, 3 arms) of character ``c``."""
     if slot < 2:
@@ -166,7 +166,7 @@ def limb_frame(dec: DecodedArrays, c: int, slot: int) -> Frame:
     return load_frame(dec.arm2world[c, slot - 2])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def segment_frame(dec: DecodedArrays, c: int, segment: int, t: Tables) -> Frame:
     """Mirrors :func:`ecs_anim.body_points.segment_frames` for one segment of character ``c``."""
     kind = t.seg_frame[segment]
@@ -182,7 +182,7 @@ def segment_frame(dec: DecodedArrays, c: int, segment: int, t: Tables) -> Frame:
     return load_frame(dec.head2world[c])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def point_position(dec: DecodedArrays, c: int, segment: int, fraction: float, offset: Vec3,
                    t: Tables) -> Vec3:
     """Mirrors :func:`ecs_anim.body_points.point_positions` for one point of character ``c``:
@@ -196,13 +196,13 @@ def point_position(dec: DecodedArrays, c: int, segment: int, fraction: float, of
     return point
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def goal_point(dec: DecodedArrays, c: int, g: Goals, j: int, t: Tables) -> Vec3:
     """Where goal ``j``'s point of character ``c`` is now."""
     return point_position(dec, c, g.segment[j], g.fraction[j], load3(g.offset[j]), t)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def goal_error(dec: DecodedArrays, c: int, g: Goals, j: int, t: Tables) -> float:
     """Mirrors ``ecs_anim.solver_shell._errors`` for goal ``j`` of character ``c``: the distance
     of its point to its goal (m), or the angle of an orientation (rad)."""
@@ -213,7 +213,7 @@ def goal_error(dec: DecodedArrays, c: int, g: Goals, j: int, t: Tables) -> float
     return math.sqrt(dot(d, d))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def centre_of_mass(dec: DecodedArrays, c: int, masses: F64, com_fraction: F64,
                    t: Tables) -> Vec3:
     """Mirrors :func:`ecs_anim.morphology.centres_of_mass` for character ``c`` (masses and

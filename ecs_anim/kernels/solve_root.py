@@ -16,7 +16,7 @@ from .decode import DecodedArrays, PoseArrays, leg_length
 from .solve_points import Bodies, Tables, centre_of_mass
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def solve_root(c: int, pose: PoseArrays, dec: DecodedArrays, b: Bodies, t: Tables,
                com_tolerance_m: float, root_gain: float, leg_extension: float) -> float:
     """Mirrors ``ecs_anim.solver_shell._Solve.root`` for character ``c`` (in place): returns

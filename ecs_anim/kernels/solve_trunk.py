@@ -39,7 +39,7 @@ _HEAD, _TRUNK = 2, 5
 _LIMB_REACH_SHARE = 0.99
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def solve_trunk(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, err: F64,
                 stalled: NDArray[np.bool_], t: Tables, tolerance_m: float, tolerance_rad: float,
                 max_ccd_step_rad: float) -> bool:
