@@ -26,3 +26,6 @@ def cache_dir() -> Path:
 
 
 os.environ.setdefault("NUMBA_CACHE_DIR", str(cache_dir()))
+# The batch runner forks worker processes after kernels ran in the parent: GNU OpenMP (numba's
+# first choice here) then kills the child, so take a fork-safe threading layer (workqueue here).
+os.environ.setdefault("NUMBA_THREADING_LAYER", "forksafe")
