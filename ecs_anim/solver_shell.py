@@ -9,21 +9,27 @@ above every priority while in contact, below every priority while free. Goals ai
 of the same body follow that point as the body is solved.
 
 :func:`solve` then iterates, as the paper does, over the body's groups in the order legs, head,
-arms, trunk, then the root (``adaptRoot``: centre-of-mass control), until every goal is within
-tolerance, progress stalls, or the iteration budget is spent; a last pass over legs, head and
+arms, trunk, then the root (``adaptRoot``: centre-of-mass control); each character stops when
+every goal of its own is within tolerance or has stalled and its centre of mass is back, or when
+the iteration budget is spent (so its result does not depend on who else is solved); a last pass over legs, head and
 arms leaves the feet on their footprints and the limbs on their goals after the final root move.
 Inside a group, the highest-priority goal is met analytically (limbs; neck and head as a
 two-segment chain) or by CCD rotations (trunk, about the spine's base, spread along the spine
 spline); a limb's second goal swivels the limb about the axis that keeps the first one. The trunk
 serves the highest-priority goal it can still improve, and a trunk move that would worsen a
 higher-priority goal is not made. The steps are pure functions over all characters at once
-(:mod:`ecs_anim.solver`); this module owns the policy. The solver works on the characters with
-an active constraint only.
+(:mod:`ecs_anim.solver`); this module owns the policy (:func:`constrain`: one tick of it). The
+solver works on the characters with an active constraint only.
+
+This numpy :func:`solve` is the reference: the tick runs the compiled
+:func:`ecs_anim.kernels.solve.solve` (same arguments, same results to 1e-9 m), which the tests
+compare with it.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 from numpy.typing import NDArray
@@ -387,8 +393,10 @@ class _Solve:
         self.self_at = goals.self_start.copy()
         p = self.dec.positions
         self.foot_in_world = normalize(p[:, list(SIDE_JOINTS["toe"])] - p[:, list(SIDE_JOINTS["ankle"])])
-        self.trunk_moved = False  # this tick
-        self.dirty = False  # since the last decode
+        # The characters still being solved: each stops when its own goals are met or stalled
+        # and its centre of mass is back (so its result does not depend on who else is solved).
+        self.active = np.ones(self.r, bool)
+        self.moved = np.zeros(self.r, bool)  # the trunk turned since the last decode
         # Goals that stopped improving (unreachable): the trunk no longer turns for them, so an
         # unreachable trunk goal ends where it stalled however long other goals keep the loop
         # going (turning on, the bent spine would drift it by millimetres).
@@ -407,8 +415,16 @@ class _Solve:
         g.goal[g.on_self[~orient]] += shift[~orient]
 
     def redecode(self) -> None:
-        self.dec = decode(self.poses, self.lengths)
-        self.dirty = False
+        """Decode again the characters whose trunk turned (a bent spine's joints are exact once
+        decoded); the others keep their decoded pose as their steps left it."""
+        rows = np.flatnonzero(self.moved)
+        if rows.size == 0:
+            return
+        fresh = decode(self.poses.take(rows), self.lengths[rows])
+        for name in ("positions", "pelvis2world", "thorax2world", "head2world", "leg2world",
+                     "arm2world"):
+            getattr(self.dec, name)[rows] = getattr(fresh, name)
+        self.moved[:] = False
 
     # --- limbs: analytic, all four at once (legs and arms do not move each other) ----------
     def limbs(self) -> None:
@@ -418,7 +434,7 @@ class _Solve:
         frames = np.concatenate([dec.leg2world, dec.arm2world], axis=1)  # (r, 4, 3, 3)
         fractions = np.concatenate([poses.leg_fraction, poses.arm_fraction], axis=1)
         dirs = np.concatenate([poses.foot_dir, poses.hand_dir], axis=1)
-        rows, li = np.nonzero(self.first_limb >= 0)
+        rows, li = np.nonzero((self.first_limb >= 0) & self.active[:, None])
         # Only limbs with something to do: a first goal not met, or a second one (which keeps
         # the first exactly; a limb left alone keeps both as they are).
         c = self.first_limb[rows, li]
@@ -454,7 +470,7 @@ class _Solve:
                 lower2world = distal_frames(frame[held], mid, end)
                 dirs[rh, lh] = np.einsum("kji,kj->ki", lower2world, self.foot_in_world[rh, lh])
             self._limb_joints(rows, li, frames, fractions, dirs)
-        rows_o, li_o = np.nonzero(self.orient_limb >= 0)
+        rows_o, li_o = np.nonzero((self.orient_limb >= 0) & self.active[:, None])
         if rows_o.size:
             # The foot / hand axis, in its lower bone's frame (the ankle / wrist stays).
             mid = dec.positions[rows_o, LIMB_J[1][li_o]]
@@ -491,7 +507,7 @@ class _Solve:
     def head(self) -> None:
         dec, poses, g = self.dec, self.poses, self.g
         first, orient = self.first_head, self.orient_head
-        rows = np.flatnonzero((first >= 0) | (orient >= 0))
+        rows = np.flatnonzero(((first >= 0) | (orient >= 0)) & self.active)
         if rows.size == 0:
             return
         neck, head = dec.positions[rows, J["neck"]], dec.positions[rows, J["head"]].copy()
@@ -548,7 +564,7 @@ class _Solve:
         uses_trunk = (g.chain & (1 << TRUNK)) > 0
         err = _errors(g, dec)
         tol = np.where(g.orientation, s.tolerance_rad, s.tolerance_m)
-        candidates = uses_trunk & carried & (err > tol) & ~self.stalled
+        candidates = uses_trunk & carried & (err > tol) & ~self.stalled & self.active[g.owner]
         best = winners(g.owner, np.zeros(g.k, np.int64), g.priority, candidates, self.r, 1)[:, 0]
         rows = np.flatnonzero(best >= 0)
         if rows.size == 0:
@@ -608,7 +624,7 @@ class _Solve:
         for k in range(3):  # the three spine control points
             part = axis_angle(axis, angle * (k + 1) / 3.0)
             poses.spine_points[rows, k] = np.einsum("kij,kj->ki", part, poses.spine_points[rows, k])
-        self.trunk_moved = self.dirty = True
+        self.moved[rows] = True
         thorax = turn_in_pelvis @ matrix_from_quat(poses.thorax[rows])
         poses.thorax[rows] = quat_from_matrix(thorax)
         # Keep the decoded pose in step: everything above the spine's base turns rigidly.
@@ -628,7 +644,7 @@ class _Solve:
         error = g.com_desired[:, :2] - com[:, :2]
         error[~g.com_on] = 0.0
         size = np.linalg.norm(error, axis=1)
-        rows = np.flatnonzero(size > 0.1 * s.com_tolerance_m)
+        rows = np.flatnonzero((size > 0.1 * s.com_tolerance_m) & self.active)
         if rows.size == 0:
             return size
         shift = np.zeros((rows.size, 3))
@@ -677,11 +693,11 @@ def _axis_angle_of(rotation: F64) -> tuple[F64, F64]:
 
 
 def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, com_fraction: F64,
-          settings: SolverSettings = DEFAULT_SETTINGS, decoded: DecodedPose | None = None) -> tuple[NormalizedPoses, int, DecodedPose]:
+          settings: SolverSettings = DEFAULT_SETTINGS, decoded: DecodedPose | None = None) -> tuple[NormalizedPoses, I64, DecodedPose]:
     """Solve this tick's goals for their characters (rows of ``poses``, ``lengths``, ``masses``
     and ``com_fraction`` are ``goals.rows``; ``decoded`` is ``decode(poses, lengths)`` if the
-    caller has it). Returns the new poses, the iterations used, and the decoded result (joint
-    positions (r, N_JOINTS, 3) and frames), on which :func:`constraint_errors` measures each
+    caller has it). Returns the new poses, the iterations each character used (r,), and the
+    decoded result (joint positions (r, N_JOINTS, 3) and frames), on which :func:`constraint_errors` measures each
     constraint."""
     state = _Solve(poses, lengths, goals, masses, com_fraction, settings, decoded)
     tol = np.where(goals.orientation, settings.tolerance_rad, settings.tolerance_m)
@@ -689,33 +705,120 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
     slow_before = np.zeros(goals.k, bool)
     # Planted feet are re-planted after the loop: their error after a root move is not work left.
     planted = goals.priority == CONTACT_PRIORITY
-    used = 0
-    for used in range(1, settings.iterations + 1):
+    used = np.zeros(state.r, np.int64)
+    for _ in range(settings.iterations):
+        used += state.active
         # Legs, head, arms: the paper's order (legs and arms are independent, so one batch).
         state.follow_own_targets()
         state.limbs()
         state.head()
         state.trunk()
-        if state.dirty:
-            state.redecode()  # a bent spine's joints are exact once decoded
+        state.redecode()  # where the trunk turned
         com_error = state.root()
         err = _errors(goals, state.dec)
-        # Done where every goal is met or has stalled (unchanged, or falling by less than a
-        # share of itself twice running: unreachable), and the centre of mass is back; stop
-        # when every character is done. A stalled goal stays stalled for the tick.
+        # A character is done where every goal of its own is met or has stalled (unchanged, or
+        # falling by less than a share of itself twice running: unreachable), and its centre of
+        # mass is back; done characters are no longer stepped. A stalled goal stays stalled.
         first = np.isinf(previous)
         unchanged = ~first & (np.abs(previous - err) < settings.tolerance_m)
         slow = ~first & (previous - err < settings.stall_fraction * np.where(first, 0.0, previous))
         goal_open = (err > tol) & ~unchanged & ~(slow & slow_before) & ~state.stalled & ~planted
-        if not goal_open.any() and np.all(com_error <= settings.com_tolerance_m):
+        stepped = state.active[goals.owner]
+        state.stalled |= (err > tol) & ~goal_open & stepped
+        previous = np.where(stepped, err, previous)
+        slow_before = np.where(stepped, slow, slow_before)
+        open_rows = np.zeros(state.r, bool)
+        open_rows[goals.owner[goal_open]] = True
+        state.active &= open_rows | (com_error > settings.com_tolerance_m)
+        if not state.active.any():
             break
-        state.stalled |= (err > tol) & ~goal_open
-        previous, slow_before = err, slow
-    # The last root move shifted the limbs: re-plant the feet, re-aim the head and the arms.
+    # The last root move shifted the limbs: re-plant the feet, re-aim the head and the arms
+    # (every character).
+    state.active[:] = True
     state.follow_own_targets()
     state.limbs()
     state.head()
     return state.poses, used, state.dec
+
+
+@dataclass
+class TickResult:
+    """What :func:`constrain` decided this tick, for the system to write back.
+
+    weight (m,) each constraint's activation (0 where switched off); broken (b,) constraints
+    whose target is not finite, to switch off; error (m,) how far each active constraint is from
+    being met on the result (:func:`constraint_errors`; NaN while inactive); held (m,) a sphere
+    kept the point off the motion's place; goals, rows (r,), poses (r,), solved (decoded
+    result (r,)) and iterations (r,) of the characters solved (None / empty when none)."""
+
+    weight: F64
+    broken: I64
+    error: F64
+    held: NDArray[np.bool_]
+    goals: TickGoals | None = None
+    rows: I64 = field(default_factory=lambda: np.zeros(0, np.int64))
+    poses: NormalizedPoses | None = None
+    solved: DecodedPose | None = None
+    iterations: I64 | None = None
+
+
+Solve = Callable[..., tuple[NormalizedPoses, I64, DecodedPose]]
+
+
+def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
+              unconstrained: DecodedPose | None,
+              lengths: F64, contact_weight: F64, com_control: NDArray[np.bool_], com_target_xy: F64,
+              masses: F64, com_fraction: F64, previous: DecodedPose | None,
+              settings: SolverSettings, max_release_m: float, solve: Solve) -> TickResult:
+    """One tick of ConstraintSolve's policy over every character (n rows): the targets, the
+    constraints switched off (a target not finite), the desired centre of mass (the motion's own,
+    or ``com_target_xy`` (n, 2) where finite), the goals, the ``solve`` (the compiled
+    :func:`ecs_anim.kernels.solve.solve` or the numpy :func:`solve`, same arguments) of the
+    characters with an active constraint, and every active constraint's error on the result.
+
+    ``weight`` (m,) this tick's activations; ``unconstrained`` the decoded ``poses`` (None only
+    when no weight is above 0); masses and
+    com_fraction (n, S); ``previous`` the last tick's posture (None on the first)."""
+    m = table.m
+    error = np.full(m, np.nan)
+    held = np.zeros(m, bool)
+    none = np.zeros(0, np.int64)
+    if not np.any(weight > 0):
+        return TickResult(weight, none, error, held)
+    if unconstrained is None:
+        raise ValueError("constrain: the decoded poses are needed when a constraint is active")
+    targets = target_points(table, unconstrained, previous)
+    broken = np.flatnonzero((weight > 0) & ~np.all(np.isfinite(targets), axis=1))
+    if broken.size:
+        weight = weight.copy()
+        weight[broken] = 0.0
+        targets[broken] = 0.0
+    own = centres_of_mass(unconstrained.positions, masses, com_fraction)
+    given = np.isfinite(com_target_xy).all(axis=1)
+    own[given, :2] = com_target_xy[given]
+    goals = tick_goals(table, weight, targets, unconstrained, contact_weight, com_control, own,
+                       previous, max_release_m)
+    active = np.flatnonzero(weight > 0)
+    if goals is None:  # only areas the motion already keeps
+        error[active] = constraint_errors(table, active, unconstrained, targets)
+        return TickResult(weight, broken, error, held)
+    rows = goals.rows
+    solved_poses, iterations, solved = solve(poses.take(rows), lengths[rows], goals, masses[rows],
+                                             com_fraction[rows], settings, unconstrained.take(rows))
+    user = goals.table_index >= 0
+    held[goals.table_index[user]] = goals.held[user]
+    # Every active constraint's error on the result (an area the motion already kept was not a
+    # goal, but another constraint's move may have taken its point out).
+    result = DecodedPose(**{name.name: getattr(unconstrained, name.name).copy()
+                            for name in fields(DecodedPose)})
+    for name in fields(DecodedPose):
+        getattr(result, name.name)[rows] = getattr(solved, name.name)
+    # Targets on the character's own body moved with it during the solve: read them again.
+    targets = np.where((table.target_row == table.owner)[:, None]
+                       & (table.target_kind != TARGET_WORLD)[:, None],
+                       target_points(table, result, previous), targets)
+    error[active] = constraint_errors(table, active, result, targets)
+    return TickResult(weight, broken, error, held, goals, rows, solved_poses, solved, iterations)
 
 
 def scatter(all_poses: NormalizedPoses, rows: I64, part: NormalizedPoses) -> NormalizedPoses:
@@ -728,4 +831,5 @@ def scatter(all_poses: NormalizedPoses, rows: I64, part: NormalizedPoses) -> Nor
     return NormalizedPoses(**arrays)
 
 
-__all__ = ["SolverSettings", "TickGoals", "scatter", "solve", "target_points", "tick_goals"]
+__all__ = ["SolverSettings", "TickGoals", "TickResult", "constrain", "scatter", "solve", "target_points",
+           "tick_goals"]

@@ -593,3 +593,51 @@ def test_a_stored_area_plays_and_a_stored_constraint_past_the_clip_is_refused(tm
         save_nmo(broken, tmp_path / "broken.nmo", force=True)
         with pytest.raises(InputError, match="broken.nmo: damaged .nmo header: constraint 'elbow_clear'"):
             load_nmo(tmp_path / "broken.nmo")
+
+
+
+def test_a_characters_result_does_not_depend_on_who_else_is_solved(idle, monkeypatch):
+    """Each character stops when its own goals are met or stalled: alone, or solved in one batch
+    with a character whose target is out of reach (which keeps iterating), it takes the same
+    iterations and ends the same."""
+    import ecs_anim.systems.constraint_solve as system
+
+    iterations = []
+
+    def counting(*args, **kwargs):
+        result = system_solve(*args, **kwargs)
+        iterations.append(result[1][0])
+        return result
+
+    system_solve = system.solve
+    monkeypatch.setattr(system, "solve", counting)
+
+    def reaching(with_unreachable):
+        sim = Simulation({"m": idle})
+        e = sim.spawn("reacher", ADULT, MotionPlayer("m", speed=1.0), Placement((0.0, 0.0)),
+                      com_control=True)
+        if with_unreachable:
+            far = sim.spawn("far", ADULT, MotionPlayer("m", speed=1.0), Placement((0.0, 3.0)),
+                            com_control=True)
+        sim.step()
+        p = sim.store.positions[0]
+        sim.add_constraint(e, "reach", "wrist_r", 5, ALWAYS, tuple(p[J["shoulder_r"]] + [0.3, -0.2, 0.2]))
+        sim.add_constraint(e, "elbow", "elbow_r", 1, ALWAYS, tuple(p[J["elbow_r"]] + [0.0, -0.1, 0.0]))
+        if with_unreachable:
+            q = sim.store.positions[1]
+            sim.add_constraint(far, "far", "wrist_l", 5, ALWAYS, tuple(q[J["shoulder_l"]] + [3.0, 1.0, 0.5]),
+                               chain=("arm_l", "trunk"))
+            sim.add_constraint(far, "look", "head_top", 1, ALWAYS, tuple(q[J["head_top"]] + [0.5, 0.3, -0.4]))
+        out = []
+        for _ in range(8):
+            sim.step()
+            out.append((sim.store.positions[0].copy(), sim.constraints.error[:2].copy()))
+        return out
+
+    alone = reaching(False)
+    alone_iterations, iterations[:] = list(iterations), []
+    batched = reaching(True)
+    assert iterations == alone_iterations and max(iterations) < DEFAULT_SETTINGS.iterations
+    for (p_alone, err_alone), (p_batched, err_batched) in zip(alone, batched):
+        np.testing.assert_allclose(p_batched, p_alone, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(err_batched, err_alone, rtol=0, atol=1e-12)
