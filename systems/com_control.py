@@ -8,19 +8,25 @@ segment masses of each body) of the solved posture and its horizontal distance f
 one, which metrics, tests and the viewer read. Switched off per character (``com_control``), the
 error shows the drift the constraints cause.
 
-Reads: store.goals, solved_positions, com_desired, segment masses.
+Rows: characters with a Constraint component.
+Reads: store.goals, solved_positions, com_desired, segment_mass_kg, segment_com_fraction.
 Writes: store.com, store.com_error_m (NaN for characters nothing constrained this tick).
 """
 
 from __future__ import annotations
 
 import numpy as np
+from ecs_anim.components import Constraint
 
 from ecs_anim.morphology import centres_of_mass
 from ecs_anim.system_base import System
 
 
 class COMControl(System):
+    query = (Constraint,)
+    reads = ("goals", "solved_positions", "com_desired", "segment_mass_kg", "segment_com_fraction")
+    writes = ("com_error_m", "com")
+
     def run(self, dt: float) -> None:
         st = self.sim.store
         st.com_error_m = np.full(st.n, np.nan)

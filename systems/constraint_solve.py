@@ -8,8 +8,9 @@ legs, head, arms, trunk and the root (``adaptRoot``, the centre-of-mass control 
 inside the loop after the trunk) for the characters that have an active constraint, all at once.
 A constraint whose target is not finite is switched off with one warning; the others go on.
 
+Rows: characters with a Constraint component.
 Reads: store.poses, lengths, posture (the previous tick's), contact_weight, clip, clip_time_s,
-com_control, com_target_xy, segment masses; the constraint table.
+com_control, com_target_xy, segment_mass_kg, segment_com_fraction; the constraints table.
 Writes: store.poses (solved characters), com_desired, goals, solved_positions; table.held;
 table.enabled, table.weight, table.error (how far each active constraint is from being met on
 the result, :func:`~ecs_anim.solver_shell.constraint_errors`; NaN while inactive).
@@ -20,15 +21,22 @@ from __future__ import annotations
 from dataclasses import fields
 
 import numpy as np
+from ecs_anim.components import Constraint
 
+from ecs_anim.constraint_table import TARGET_WORLD
 from ecs_anim.morphology import centres_of_mass
 from ecs_anim.normalized import DecodedPose, decode
-from ecs_anim.constraint_table import TARGET_WORLD
 from ecs_anim.solver_shell import constraint_errors, scatter, solve, target_points, tick_goals
 from ecs_anim.system_base import System
 
 
 class ConstraintSolve(System):
+    query = (Constraint,)
+    reads = ("constraints", "clip", "clip_time_s", "poses", "lengths", "posture", "contact_weight",
+             "com_control", "com_target_xy", "segment_mass_kg", "segment_com_fraction")
+    writes = ("goals", "solved_positions", "constraints.error", "constraints.weight",
+              "constraints.enabled", "constraints.held", "poses", "com_desired")
+
     def run(self, dt: float) -> None:
         sim, st, table = self.sim, self.sim.store, self.sim.constraints
         st.goals, st.solved_positions = None, None

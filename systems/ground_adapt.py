@@ -7,7 +7,10 @@ analytically, free feet ride on the ground level of the supporting feet and are 
 steps, a heel the stretched leg would put under a step is lifted, and a planted foot whose toe
 would go into a step is pitched up onto it.
 
-Reads: store.poses, scaled, contact_weight, lengths, clip; the ground; the bank's ankle heights.
+Rows: every character, grouped by ground (``System.ground_groups``: its own GroundQuery or the
+environment's).
+Reads: store.poses, scaled, contact_weight, lengths, clip, footprint, locked, footprint_settled,
+ground_ref (the last tick's); the ground; the bank's ankle heights.
 Writes: store.poses (root height, leg frames and fractions, foot directions), footprint, locked,
 footprint_settled, ground_ref.
 """
@@ -27,6 +30,10 @@ ANKLES, TOES = list(SIDE_JOINTS["ankle"]), list(SIDE_JOINTS["toe"])
 
 
 class GroundAdapt(System):
+    reads = ("poses", "scaled", "contact_weight", "lengths", "clip", "footprint", "locked",
+             "footprint_settled", "ground_ref")
+    writes = ("footprint", "locked", "footprint_settled", "ground_ref", "poses")
+
     def run(self, dt: float) -> None:
         sim, st = self.sim, self.sim.store
         ground = sim.ground

@@ -1,21 +1,33 @@
 """MotionPlayback: sample each character's clip(s) in normalized space, then advance the clocks.
 
-Reads: store.clip, clip_time_s, speed, loop, fade_*, queue_*, placement_*, fade_placement_*;
-the clip bank.
+Rows: characters with a MotionPlayer.
+Reads: store.clip, clip_time_s, speed, loop, fade_*, queue_*, placement_*, fade_placement_*,
+lengths (leg length: the root path's unit); the clip bank.
 Writes: store.poses (placed in the world; first writer each tick), store.contact_weight,
 store.clip_time_s, fade_time_s, fade_elapsed_s, fade_s; on a clip change (through
-``Simulation.start_next_clips``) clip, loop, queue_head, placement_*, fade_*, locked.
+:func:`ecs_anim.playback_queue.start_next_clips`) clip, loop, queue_head, placement_*, fade_*,
+locked.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from ecs_anim.components import MotionPlayer
 
 from ecs_anim.playback import blend, rotate_xy, sample, sample_table
 from ecs_anim.system_base import System
 
 
 class MotionPlayback(System):
+    query = (MotionPlayer,)
+    reads = ("clip", "clip_time_s", "speed", "loop", "fade_clip", "fade_time_s", "fade_loop",
+             "fade_s", "fade_elapsed_s", "queue_clip", "queue_fade_s", "queue_loop", "queue_head",
+             "queue_len", "placement_xy", "placement_heading", "fade_placement_xy",
+             "fade_placement_heading", "lengths")
+    writes = ("poses", "contact_weight", "clip_time_s", "fade_time_s", "fade_elapsed_s", "fade_s",
+              "clip", "loop", "queue_head", "placement_xy", "placement_heading",
+              "fade_placement_xy", "fade_placement_heading", "fade_clip", "fade_loop", "locked")
+
     def run(self, dt: float) -> None:
         st, bank = self.sim.store, self.sim.bank
         self._start_queued_clips()

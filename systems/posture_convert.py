@@ -1,6 +1,8 @@
 """PostureConvert: rebuild knees, elbows and vertebrae and give the world posture (paper §8).
 
-Reads: store.poses, store.lengths. Writes: store.positions (world joint positions), store.posture
+Rows: every character.
+Reads: store.poses, store.lengths, frozen, and the last good positions, local_rotations and
+vertebrae (kept for a frozen character). Writes: store.positions (world joint positions), store.posture
 (the same with the body frames, for next tick's targets on other characters), store.
 local_rotations (the BVH export skeleton's local joint rotation matrices, when the simulation
 asks for rotations), store.vertebrae (when it asks for a finer spine), store.frozen (a character
@@ -17,6 +19,9 @@ from ecs_anim.system_base import System
 
 
 class PostureConvert(System):
+    reads = ("poses", "lengths", "frozen", "positions", "local_rotations", "vertebrae")
+    writes = ("frozen", "positions", "posture", "local_rotations", "vertebrae")
+
     def run(self, dt: float) -> None:
         st = self.sim.store
         final = decode(st.poses, st.lengths)
