@@ -112,7 +112,7 @@ class Posture:
     local_rotations: NDArray[np.float64]
 
 
-@dataclass
+@dataclass(frozen=True)
 class Name:
     """A character's name, for reports and exports."""
 

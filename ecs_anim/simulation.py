@@ -332,9 +332,7 @@ class Simulation:
     def posture(self, entity: int) -> Posture:
         """A character's world posture this tick (views of the store, until the next tick)."""
         row, st = self.row(entity), self.store
-        rotations = st.local_rotations[row] if st.local_rotations.shape[0] == st.n \
-            else np.zeros((0, 3, 3))
-        return Posture(row, st.positions[row], rotations)
+        return Posture(row, st.positions[row], st.local_rotations[row])
 
     def set_body(self, entity: int, body: Morphology) -> None:
         """Replace a character's morphology while it plays (paper §6): its Morphology component.

@@ -177,9 +177,13 @@ def test_the_constraint_component_goes_with_the_last_constraint(walk, capsys):
 
 
 def test_a_character_may_stand_on_a_ground_of_its_own(walk):
-    stairs = Stairs(0.3, 0.15, 1.0)
+    stairs = Stairs(rise_m=0.15, run_m=0.3, steps=4, start_m=1.0)
     sim, (_a, b, _c) = _sim(walk, ground=Plane())
     sim.set_ground(b, stairs)
+    on_stairs = sim.spawn("d", Morphology.preset("child"), MotionPlayer("walk"),
+                          Placement((2.5, 0.0)), ground=stairs)
+    assert sim.store.ground_ref[3] == pytest.approx(0.6)  # on the top of its own stairs
+    sim.remove(on_stairs)
     ground = system(sim, "GroundAdapt")
     groups = ground.ground_groups()
     assert [g for g, _ in groups] == [sim.grounds[0], stairs]
@@ -191,12 +195,14 @@ def test_a_character_may_stand_on_a_ground_of_its_own(walk):
     assert [rows.tolist() for _, rows in ground.ground_groups()] == [[0, 1, 2]]
     with sim._active():
         assert not esper.has_component(b, GroundQuery)
+    sim.step()
+    assert np.all(np.isfinite(sim.store.positions))
 
 
 def test_specifications_are_replaced_not_mutated(walk):
     sim, (a, b, _c) = _sim(walk)
     with sim._active():
-        for component in (Morphology, MotionPlayer, Placement, CharacterRow):
+        for component in (Morphology, MotionPlayer, Placement, CharacterRow, Name):
             spec = esper.component_for_entity(a, component)
             with pytest.raises(dataclasses.FrozenInstanceError):
                 spec.__setattr__(dataclasses.fields(spec)[0].name, None)
@@ -214,6 +220,7 @@ def test_pose_and_posture_are_views_of_the_characters_row(walk):
     sim, (_a, b, _c) = _sim(walk)
     sim.step()
     pose, posture = sim.pose(b), sim.posture(b)
+    assert posture.local_rotations.shape == (0, 3, 3)  # rotations not asked for
     assert isinstance(pose, NormalizedPose) and isinstance(posture, Posture)
     assert pose.row == posture.row == 1
     assert np.shares_memory(posture.positions, sim.store.positions)
