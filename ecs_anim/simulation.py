@@ -170,8 +170,11 @@ class Simulation:
                    grounds: Sequence[Ground | None] | None = None) -> NDArray[np.int64]:
         """Add many characters at once (one store append, one structural change); the
         arguments are :meth:`spawn`'s, one per character (``None``: every character the
-        default). Returns their entities (k,). All are validated before any is added."""
+        default). Returns their entities (k,). All are validated before any is added (but a
+        malformed constraint stored with a clip is reported once they are, naming it)."""
         k = len(names)
+        if k == 0:
+            return np.zeros(0, np.int64)
         placements = placements if placements is not None else [Placement()] * k
         teams = teams if teams is not None else [""] * k
         com_control = com_control if com_control is not None else [True] * k

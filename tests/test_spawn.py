@@ -127,3 +127,8 @@ def test_the_benchmark_scene_spawns_in_bulk():
     assert sim.store.n == 500 and len(set(sim.names())) == 500
     sim.step()
     assert np.all(np.isfinite(sim.store.positions))
+
+
+def test_spawning_nobody_changes_nothing(motions):
+    sim = Simulation(motions)
+    assert sim.spawn_many([], [], []).tolist() == [] and sim.store.n == 0
