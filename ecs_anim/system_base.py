@@ -9,7 +9,8 @@ component added, replaced or removed: ``Simulation.structure_version``), never p
 kernel iterates exactly ``rows`` (``for k in prange(rows.shape[0]): c = rows[k]``); a numpy
 system indexes with it, or uses the whole arrays when :meth:`System.all_rows` says every
 character is in. :meth:`System.ground_groups` splits the rows by the ground each stands on
-(its own GroundQuery, or the environment's).
+(its own GroundQuery, or the environment's); :meth:`System.row_ground` is the same as one
+ground for numpy code over all rows.
 
 Declarations (STYLE 5, Bevy's system parameters): ``reads`` and ``writes`` are tuples of store
 field names (``"poses"``, ``"contact_weight"``; ``"constraints.weight"`` for a column of the
@@ -60,6 +61,8 @@ class System(esper.Processor):
         self._groups_version = -1
         self._groups: list[tuple[Ground, I64]] = []
         self._hooks_version = -1
+        self._row_ground_version = -1
+        self._row_ground: RowGrounds
 
     def process(self, dt: float) -> None:  # type: ignore[override]
         start = time.perf_counter()
@@ -99,6 +102,36 @@ class System(esper.Processor):
             self._groups_version = version
         return self._groups
 
+    def row_ground(self) -> RowGrounds:
+        """The ground under each character as one ground for arrays over all store rows
+        (leading axis n): each row's points answered by its own ground. Cached like
+        :meth:`rows`."""
+        version = self.sim.structure_version
+        if self._row_ground_version != version:
+            self._row_ground = RowGrounds(self.sim.grounds, self.sim.store.ground_index.copy())
+            self._row_ground_version = version
+        return self._row_ground
+
     def run(self, dt: float) -> None:
         raise NotImplementedError
+
+
+class RowGrounds:
+    """Every character's ground (``grounds[index[row]]``) answering as one: :meth:`height` of
+    points ``xy`` (n, ..., 2) whose leading axis is the store's rows gives (n, ...) metres, each
+    row from its own ground; with one ground in use it is that ground's own call."""
+
+    def __init__(self, grounds: list[Ground], index: I64):
+        used = np.unique(index)
+        self.groups = [(grounds[int(k)], np.flatnonzero(index == k)) for k in used]
+        self.n = int(index.shape[0])
+
+    def height(self, xy: NDArray[np.float64]) -> NDArray[np.float64]:
+        if len(self.groups) <= 1:
+            return self.groups[0][0].height(xy) if self.groups else np.zeros(xy.shape[:-1])
+        assert xy.shape[0] == self.n, "a RowGrounds answers arrays over every store row"
+        out = np.empty(xy.shape[:-1])
+        for ground, rows in self.groups:
+            out[rows] = ground.height(xy[rows])
+        return out
 

@@ -228,3 +228,16 @@ def test_pose_and_posture_are_views_of_the_characters_row(walk):
     np.testing.assert_array_equal(pose.pose.root_position[0], sim.store.poses.root_position[1])
     with sim._active():
         assert esper.component_for_entity(b, Name).name == "c1"
+
+
+def test_row_ground_answers_each_row_from_its_own_ground(walk):
+    rng = np.random.default_rng(3)
+    stairs = Stairs(rise_m=0.15, run_m=0.3, steps=4, start_m=-1.0)
+    sim, (_a, b, _c) = _sim(walk, ground=Plane(0.1))
+    ground = system(sim, "GroundAdapt")
+    xy = rng.uniform(-2, 2, (3, 2, 2))
+    np.testing.assert_array_equal(ground.row_ground().height(xy), sim.ground.height(xy))
+    sim.set_ground(b, stairs)
+    heights = ground.row_ground().height(xy)
+    np.testing.assert_array_equal(heights[[0, 2]], sim.ground.height(xy[[0, 2]]))
+    np.testing.assert_array_equal(heights[1], stairs.height(xy[1]))
