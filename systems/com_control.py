@@ -10,7 +10,8 @@ error shows the drift the constraints cause.
 
 Rows: characters with a Constraint component.
 Reads: store.goals, solved_positions, com_desired, segment_mass_kg, segment_com_fraction.
-Writes: store.com, store.com_error_m (NaN for characters nothing constrained this tick).
+Writes: store.com, store.com_error_m (NaN for characters nothing constrained this tick), in
+place, by the compiled :mod:`ecs_anim.kernels.com`.
 """
 
 from __future__ import annotations
@@ -18,8 +19,10 @@ from __future__ import annotations
 import numpy as np
 from ecs_anim.components import Constraint
 
-from ecs_anim.morphology import centres_of_mass
+from ecs_anim.kernels.com import centres_of_mass, horizontal_errors, segment_joints
 from ecs_anim.system_base import System
+
+_PROXIMAL, _DISTAL = segment_joints()
 
 
 class COMControl(System):
@@ -29,10 +32,13 @@ class COMControl(System):
 
     def run(self, dt: float) -> None:
         st = self.sim.store
-        st.com_error_m = np.full(st.n, np.nan)
+        if st.com_error_m.shape == (st.n,) and st.com_error_m.flags.writeable:
+            st.com_error_m.fill(np.nan)
+        else:
+            st.com_error_m = np.full(st.n, np.nan)
         if st.goals is None or st.solved_positions is None:
             return
-        rows = st.goals.rows  # type: ignore[attr-defined]
-        com = centres_of_mass(st.solved_positions, st.segment_mass_kg[rows], st.segment_com_fraction[rows])
-        st.com[rows] = com
-        st.com_error_m[rows] = np.linalg.norm(com[:, :2] - st.com_desired[rows, :2], axis=1)
+        rows = np.asarray(st.goals.rows, dtype=np.int64)  # type: ignore[attr-defined]
+        centres_of_mass(rows, np.arange(rows.size, dtype=np.int64), st.solved_positions,
+                        st.segment_mass_kg, st.segment_com_fraction, _PROXIMAL, _DISTAL, st.com)
+        horizontal_errors(rows, st.com, st.com_desired, st.com_error_m)

@@ -2,20 +2,29 @@
 
 Rows: every character.
 Reads: store.poses, store.lengths, frozen, and the last good positions, local_rotations and
-vertebrae (kept for a frozen character). Writes: store.positions (world joint positions), store.posture
-(the same with the body frames, for next tick's targets on other characters), store.
-local_rotations (the BVH export skeleton's local joint rotation matrices, when the simulation
-asks for rotations), store.vertebrae (when it asks for a finer spine), store.frozen (a character
-whose pose went non-finite keeps its last good posture and is reported once).
+vertebrae (kept for a frozen character).
+Writes: store.positions (world joint positions), store.posture (the same with the body frames,
+for next tick's targets on other characters), store.local_rotations (the BVH export skeleton's
+local joint rotation matrices, when the simulation asks for rotations), store.vertebrae (when
+it asks for a finer spine), store.frozen (a character whose pose went non-finite keeps its last
+good posture and is reported once). All in place, by the compiled
+:func:`ecs_anim.kernels.posture.posture_rows`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ecs_anim.exporting import local_rotations
-from ecs_anim.normalized import decode, vertebrae
+from ecs_anim.kernels.decode import decoded_arrays, decoded_pose, empty_decoded, fits, pose_arrays
+from ecs_anim.kernels.posture import N_EXPORT, export_constants, posture_rows
+from ecs_anim.skeleton import N_JOINTS
 from ecs_anim.system_base import System
+
+_EXPORT = export_constants()
+
+
+def _writable(a: np.ndarray, shape: tuple[int, ...]) -> bool:
+    return a.shape == shape and a.dtype == np.float64 and a.flags.writeable
 
 
 class PostureConvert(System):
@@ -23,28 +32,35 @@ class PostureConvert(System):
     writes = ("frozen", "positions", "posture", "local_rotations", "vertebrae")
 
     def run(self, dt: float) -> None:
-        st = self.sim.store
-        final = decode(st.poses, st.lengths)
-        good = np.all(np.isfinite(final.positions), axis=(1, 2))
+        st, sim = self.sim.store, self.sim
+        n = st.n
+        if not _writable(st.positions, (n, N_JOINTS, 3)):
+            st.positions = np.array(st.positions, dtype=np.float64)
+        frames = decoded_arrays(st.posture) if fits(st.posture, n) else None  # type: ignore[arg-type]
+        if frames is None:
+            decoded = empty_decoded(n)
+        else:  # the posture's frames are written again; positions need a scratch of their own
+            decoded = frames._replace(positions=np.empty((n, N_JOINTS, 3)))
         # Joint rotations cost more than the positions; they are made when something uses them
         # (BVH export, a viewer drawing skinned meshes): ``Simulation(rotations=True)``.
-        local = local_rotations(final) if self.sim.rotations else None
-        if local is not None:
-            good &= np.all(np.isfinite(local), axis=(1, 2, 3))
-        newly_bad = ~good & ~st.frozen
+        rotations = bool(sim.rotations)
+        if rotations and not _writable(st.local_rotations, (n, N_EXPORT, 3, 3)):
+            st.local_rotations = np.broadcast_to(np.eye(3), (n, N_EXPORT, 3, 3)).copy()
+        count = int(sim.vertebrae)
+        have_previous = (count > 0 and st.vertebrae is not None
+                         and _writable(st.vertebrae, (n, count, 3)))
+        if count and not have_previous:
+            st.vertebrae = np.empty((n, count, 3))
+        spine = st.vertebrae if count and st.vertebrae is not None else np.empty((n, 0, 3))
+        k = _EXPORT
+        newly_bad = np.zeros(n, bool)
+        posture_rows(np.arange(n, dtype=np.int64), pose_arrays(st.poses), st.lengths, decoded,
+                     st.frozen, newly_bad, st.positions, rotations,
+                     np.empty((n if rotations else 0, N_EXPORT, 3, 3)),
+                     st.local_rotations if rotations else np.empty((0, N_EXPORT, 3, 3)),
+                     k.rest_hips, k.bvh_from_world, k.rest2body, k.parents,
+                     spine, have_previous)
         if newly_bad.any():
-            self.sim.report_frozen(np.flatnonzero(newly_bad))
-        st.frozen |= ~good
-        keep = st.frozen[:, None, None]
-        st.positions = np.where(keep, st.positions, final.positions)
+            sim.report_frozen(np.flatnonzero(newly_bad))
         # Next tick's targets on other characters read this posture, frames included.
-        final.positions = st.positions
-        st.posture = final
-        if local is not None:
-            if st.local_rotations.shape != local.shape:
-                st.local_rotations = np.broadcast_to(np.eye(3), local.shape).copy()
-            st.local_rotations = np.where(keep[..., None], st.local_rotations, local)
-        if self.sim.vertebrae:
-            spine = vertebrae(st.poses, st.lengths, self.sim.vertebrae)
-            previous = st.vertebrae if st.vertebrae is not None else spine
-            st.vertebrae = np.where(keep, previous, spine)
+        st.posture = decoded_pose(decoded._replace(positions=st.positions))
