@@ -30,8 +30,8 @@ from .vec import (
     Vec3,
     add,
     add_scaled,
+    cross,
     dot,
-    frame_from_axes,
     load3,
     load4,
     matmul,
@@ -145,6 +145,25 @@ def fits(arrays: DecodedArrays | DecodedPose | None, n: int) -> bool:
 
 
 @njit(cache=True)
+def frame_from_axes(primary: Vec3, secondary: Vec3, primary_axis: int, secondary_axis: int,
+                    fallback_secondary: Vec3) -> Frame:
+    """Mirrors :func:`ecs_anim.rotations.frame_from_axes` with a fallback always given (pass
+    ``secondary`` again for none), as :func:`.vec.frame_from_axes` but without a list (numba
+    allocates lists on the heap: about 0.2 us a call)."""
+    p = normalize(primary)
+    s = add_scaled(secondary, p, -dot(secondary, p))
+    if norm(s) < 1e-9:
+        s = add_scaled(fallback_secondary, p, -dot(fallback_secondary, p))
+    s = normalize(s)
+    cyclic = (secondary_axis - primary_axis) % 3 == 1
+    t = cross(p, s) if cyclic else cross(s, p)
+    x = p if primary_axis == 0 else (s if secondary_axis == 0 else t)
+    y = p if primary_axis == 1 else (s if secondary_axis == 1 else t)
+    z = p if primary_axis == 2 else (s if secondary_axis == 2 else t)
+    return (x, y, z)
+
+
+@njit(cache=True)
 def leg_length(lengths_row: F64) -> float:
     """Mirrors :func:`ecs_anim.morphology.leg_length` for one (N_LENGTHS,) row (m)."""
     total: float = 0.5 * (lengths_row[_L_THIGH] + lengths_row[_L_SHANK]
@@ -178,13 +197,13 @@ def limb_frames(root: Vec3, mid: Vec3, end: Vec3, hint: Vec3) -> Frame:
     return frame_from_axes(sub(end, root), sub(mid, root), 2, 1, hint)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def pelvis_frame(c: int, pose: PoseArrays) -> Frame:
     """``pelvis2world`` of row ``c``: heading about Z times the local pelvis rotation."""
     return matmul(rot_z(pose.root_heading[c]), matrix_from_quat(load4(pose.pelvis_local[c])))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def decode_legs_row(c: int, pose: PoseArrays, seg: F64, base: F64) -> tuple[
         Vec3, Frame, tuple[Vec3, Vec3], tuple[Vec3, Vec3], tuple[Vec3, Vec3], tuple[Vec3, Vec3],
         tuple[Frame, Frame], tuple[Frame, Frame]]:
@@ -196,27 +215,25 @@ def decode_legs_row(c: int, pose: PoseArrays, seg: F64, base: F64) -> tuple[
     """
     pelvis2world = pelvis_frame(c, pose)
     pelvis = scale(load3(pose.root_position[c]), leg_length(base))
-    hips = [pelvis, pelvis]
-    knees = [pelvis, pelvis]
-    ankles = [pelvis, pelvis]
-    toes = [pelvis, pelvis]
-    legs = [pelvis2world, pelvis2world]
-    shanks = [pelvis2world, pelvis2world]
-    for s in range(2):
-        hip = add(pelvis, scale(to_world(pelvis2world, load3(pose.hip_dir[c, s])),
-                                seg[_L_PELVIS + s]))
-        leg2world = matmul(pelvis2world, matrix_from_quat(load4(pose.leg_frame[c, s])))
-        thigh, shank = seg[_L_THIGH + s], seg[_L_SHANK + s]
-        knee, ankle = two_bone_middle(leg2world, hip, thigh, shank,
-                                      pose.leg_fraction[c, s] * (thigh + shank))
-        shank2world = distal_frames(leg2world, knee, ankle)
-        toe = add(ankle, scale(to_world(shank2world, load3(pose.foot_dir[c, s])),
-                               seg[_L_FOOT + s]))
-        hips[s], knees[s], ankles[s], toes[s] = hip, knee, ankle, toe
-        legs[s], shanks[s] = leg2world, shank2world
-    return (pelvis, pelvis2world, (hips[0], hips[1]), (knees[0], knees[1]),
-            (ankles[0], ankles[1]), (toes[0], toes[1]), (legs[0], legs[1]),
-            (shanks[0], shanks[1]))
+    hip_l, knee_l, ankle_l, toe_l, leg_l, shank_l = _leg(c, 0, pose, seg, pelvis, pelvis2world)
+    hip_r, knee_r, ankle_r, toe_r, leg_r, shank_r = _leg(c, 1, pose, seg, pelvis, pelvis2world)
+    return (pelvis, pelvis2world, (hip_l, hip_r), (knee_l, knee_r), (ankle_l, ankle_r),
+            (toe_l, toe_r), (leg_l, leg_r), (shank_l, shank_r))
+
+
+@njit(cache=True, inline="always")
+def _leg(c: int, s: int, pose: PoseArrays, seg: F64, pelvis: Vec3, pelvis2world: Frame
+         ) -> tuple[Vec3, Vec3, Vec3, Vec3, Frame, Frame]:
+    """One leg of :func:`decode_legs_row` (side ``s``): hip, knee, ankle, toe, leg2world,
+    shank2world."""
+    hip = add(pelvis, scale(to_world(pelvis2world, load3(pose.hip_dir[c, s])), seg[_L_PELVIS + s]))
+    leg2world = matmul(pelvis2world, matrix_from_quat(load4(pose.leg_frame[c, s])))
+    thigh, shank = seg[_L_THIGH + s], seg[_L_SHANK + s]
+    knee, ankle = two_bone_middle(leg2world, hip, thigh, shank,
+                                  pose.leg_fraction[c, s] * (thigh + shank))
+    shank2world = distal_frames(leg2world, knee, ankle)
+    toe = add(ankle, scale(to_world(shank2world, load3(pose.foot_dir[c, s])), seg[_L_FOOT + s]))
+    return hip, knee, ankle, toe, leg2world, shank2world
 
 
 @njit(cache=True)
@@ -277,30 +294,32 @@ def spine_joints(control: tuple[Vec3, Vec3, Vec3, Vec3], lower: float, middle: f
     """
     chords = (norm(sub(control[1], control[0])), norm(sub(control[2], control[1])),
               norm(sub(control[3], control[2])))
-    lengths = (lower, middle, upper)
-    prev_t = 0.0
-    prev_p = control[0]
-    out = [prev_p, prev_p, prev_p]
-    for k in range(3):
-        length = lengths[k]
-        t = prev_t + length / max(chords[k], 1e-9)
-        point, tangent = curve_at(control, t)
-        for _ in range(iterations):
-            d = sub(point, prev_p)
-            g = dot(d, d) - length**2
-            if abs(g) <= 1e-13 * length**2:
-                break
-            slope = 2.0 * dot(d, tangent)
-            step = g / slope if abs(slope) > 1e-12 else 0.0
-            t = min(max(t - step, prev_t + 1e-6), 9.0)
-            point, tangent = curve_at(control, t)
-        prev_p = at_distance(prev_p, point, tangent, length)
-        prev_t = t
-        out[k] = prev_p
-    return out[0], out[1], out[2]
+    t, first = spine_joint(control, chords[0], lower, 0.0, control[0], iterations)
+    t, second = spine_joint(control, chords[1], middle, t, first, iterations)
+    _, third = spine_joint(control, chords[2], upper, t, second, iterations)
+    return first, second, third
 
 
 @njit(cache=True)
+def spine_joint(control: tuple[Vec3, Vec3, Vec3, Vec3], chord: float, length: float,
+                 prev_t: float, prev_p: Vec3, iterations: int) -> tuple[float, Vec3]:
+    """One step of :func:`spine_joints`: the curve parameter and the joint ``length`` (m) from
+    ``prev_p`` (at parameter ``prev_t``) along the spline, ``chord`` the control points' own."""
+    t = prev_t + length / max(chord, 1e-9)
+    point, tangent = curve_at(control, t)
+    for _ in range(iterations):
+        d = sub(point, prev_p)
+        g = dot(d, d) - length**2
+        if abs(g) <= 1e-13 * length**2:
+            break
+        slope = 2.0 * dot(d, tangent)
+        step = g / slope if abs(slope) > 1e-12 else 0.0
+        t = min(max(t - step, prev_t + 1e-6), 9.0)
+        point, tangent = curve_at(control, t)
+    return t, at_distance(prev_p, point, tangent, length)
+
+
+@njit(cache=True, inline="always")
 def decode_row(c: int, pose: PoseArrays, lengths_row: F64, out: DecodedArrays) -> None:
     """Mirrors :func:`ecs_anim.normalized.decode` (``use_stretch=False``) for store row ``c``
     on the body ``lengths_row`` (N_LENGTHS,) (m): writes row ``c`` of every ``out`` array."""

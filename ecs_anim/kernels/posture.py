@@ -43,26 +43,26 @@ from .decode import (
     _WRIST,
     DecodedArrays,
     PoseArrays,
-    at_distance,
-    curve_at,
     decode_row,
     decoded_arrays,
+    frame_from_axes,
     leg_length,
     pelvis_frame,
     pose_arrays,
+    spine_joint,
 )
 from .vec import (
     F64,
     Frame,
     Vec3,
     add,
+    cross,
     dot,
-    frame_from_axes,
     load3,
     load_frame,
     matmul,
     norm,
-    rotation_between,
+    normalize,
     scale,
     store3,
     store_frame,
@@ -113,13 +113,43 @@ def export_constants() -> ExportConstants:
 
 
 @njit(cache=True)
+def rotation_between(a: Vec3, b: Vec3) -> Frame:
+    """Mirrors :func:`ecs_anim.rotations.rotation_between` (the smallest rotation taking the
+    direction ``a`` onto ``b``, a half turn for opposite ones), as :func:`.vec.rotation_between`
+    but without a list (numba allocates lists on the heap)."""
+    a = normalize(a)
+    b = normalize(b)
+    k = cross(a, b)
+    s = norm(k)
+    c = dot(a, b)
+    if c < -1.0 + 1e-9 and s < 1e-6:
+        helper = (1.0, 0.0, 0.0) if abs(a[0]) < 0.9 else (0.0, 1.0, 0.0)
+        p = normalize(cross(a, helper))
+        return ((2.0 * p[0] * p[0] - 1.0, 2.0 * p[1] * p[0], 2.0 * p[2] * p[0]),
+                (2.0 * p[0] * p[1], 2.0 * p[1] * p[1] - 1.0, 2.0 * p[2] * p[1]),
+                (2.0 * p[0] * p[2], 2.0 * p[1] * p[2], 2.0 * p[2] * p[2] - 1.0))
+    d = 1.0 / max(1.0 + c, 1e-12)
+    kk = dot(k, k)
+    return (_rodrigues_column(k, kk, d, (1.0, 0.0, 0.0), k[0]),
+            _rodrigues_column(k, kk, d, (0.0, 1.0, 0.0), k[1]),
+            _rodrigues_column(k, kk, d, (0.0, 0.0, 1.0), k[2]))
+
+
+@njit(cache=True)
+def _rodrigues_column(k: Vec3, kk: float, d: float, e: Vec3, k_j: float) -> Vec3:
+    """Column ``j`` of ``I + [k]x + [k]x^2 d`` (``e`` = e_j, ``k_j`` = k[j], ``kk`` = |k|^2):
+    ``e + k x e + (k k_j - e |k|^2) d``, as in :func:`.vec.rotation_between`."""
+    return add(add(e, cross(k, e)), scale(sub(scale(k, k_j), scale(e, kk)), d))
+
+
+@njit(cache=True)
 def swing_from(parent_frame: Frame, rest_axis: Vec3, direction: Vec3) -> Frame:
     """Mirrors ``ecs_anim.exporting._swing_from``: ``parent_frame`` turned by the smallest
     rotation taking its ``rest_axis`` onto ``direction`` (a bone with no twist of its own)."""
     return matmul(rotation_between(to_world(parent_frame, rest_axis), direction), parent_frame)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def export_rotations_row(c: int, decoded: DecodedArrays, rest_hips: F64, out: F64) -> None:
     """Mirrors :func:`ecs_anim.exporting.export_rotations` for row ``c`` of ``decoded``: the
     world orientation (joint2world) of every export joint into ``out`` (N_EXPORT, 3, 3)."""
@@ -200,26 +230,14 @@ def even_spine_joints(control: tuple[Vec3, Vec3, Vec3, Vec3], length: float, cou
     of the control points. Newton stops per spine (see :func:`.decode.spine_joints`)."""
     chords = (norm(sub(control[1], control[0])), norm(sub(control[2], control[1])),
               norm(sub(control[3], control[2])))
-    prev_t = 0.0
-    prev_p = control[0]
+    t = 0.0
+    point = control[0]
     for k in range(count):
-        t = prev_t + length / max(chords[min(k, 2)], 1e-9)
-        point, tangent = curve_at(control, t)
-        for _ in range(iterations):
-            d = sub(point, prev_p)
-            g = dot(d, d) - length**2
-            if abs(g) <= 1e-13 * length**2:
-                break
-            slope = 2.0 * dot(d, tangent)
-            step = g / slope if abs(slope) > 1e-12 else 0.0
-            t = min(max(t - step, prev_t + 1e-6), 9.0)
-            point, tangent = curve_at(control, t)
-        prev_p = at_distance(prev_p, point, tangent, length)
-        prev_t = t
-        store3(out[k], prev_p)
+        t, point = spine_joint(control, chords[min(k, 2)], length, t, point, iterations)
+        store3(out[k], point)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def vertebrae_row(c: int, pose: PoseArrays, lengths_row: F64, out: F64) -> None:
     """Mirrors :func:`ecs_anim.normalized.vertebrae` for store row ``c``: ``out.shape[0]``
     evenly spaced vertebra joints from the pelvis origin to the neck, world (count, 3), m."""
