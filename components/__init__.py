@@ -1,9 +1,9 @@
 """Data-only ECS components (installed as ``ecs_anim.components``)."""
 
 from .character import (
-    Body,
     CharacterRow,
-    Constraints,
+    Constraint,
+    Morphology,
     MotionPlayer,
     Name,
     NormalizedPose,
@@ -13,5 +13,15 @@ from .character import (
 )
 from .environment import GroundQuery
 
-__all__ = ["Body", "CharacterRow", "Constraints", "GroundQuery", "MotionPlayer", "Name",
-           "NormalizedPose", "Placement", "Posture", "QueuedClip"]
+__all__ = [
+    "CharacterRow",
+    "Constraint",
+    "GroundQuery",
+    "Morphology",
+    "MotionPlayer",
+    "Name",
+    "NormalizedPose",
+    "Placement",
+    "Posture",
+    "QueuedClip",
+]

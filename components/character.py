@@ -1,25 +1,43 @@
 """Per-character components. Data only; each field says its shape, frame and unit.
 
-Body, MotionPlayer, Placement and Constraints are specifications: what a character was given
-when it was spawned (Body is replaced by ``Simulation.set_body``). The live state the systems
-work on, every tick and for all characters at once, is the simulation's structure-of-arrays
-store (``Simulation.store``, STYLE 12): NormalizedPose and Posture name a character's row in it,
-and MotionPlayback advances clips and queues there, not in these components.
+A character's components decide which systems process it (DESIGN §7b): each system's
+:attr:`~ecs_anim.system_base.System.query` names the components it needs, and its rows are the
+characters that have them all. Specifications (Morphology, MotionPlayer, Placement, Constraint,
+a GroundQuery of the character's own) are frozen and replaced, never mutated; replacing one is a
+structural change (the systems' cached rows are recomputed once, not per tick).
+
+The live state the systems work on, every tick and for all characters at once, is the
+simulation's structure-of-arrays store (``Simulation.store``, STYLE 12). A character has one
+handle into it, :class:`CharacterRow`; :class:`NormalizedPose` and :class:`Posture` are views of
+its row (``Simulation.pose(entity)``, ``Simulation.posture(entity)``), made on request and
+valid until the next tick replaces the store's arrays.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ecs_anim.constraints import ConstraintSpec
+import numpy as np
+from numpy.typing import NDArray
+
 from ecs_anim.morphology import Morphology
+from ecs_anim.normalized import NormalizedPoses
 
+__all__ = [
+    "CharacterRow",
+    "Constraint",
+    "Morphology",
+    "MotionPlayer",
+    "Name",
+    "NormalizedPose",
+    "Placement",
+    "Posture",
+    "QueuedClip",
+]
 
-@dataclass(frozen=True)
-class Body:
-    """The character's morphology (segment lengths in metres, masses). Replace to resize."""
-
-    morphology: Morphology
+# ``Morphology`` (ecs_anim.morphology) is itself the component: the body spec, a frozen
+# dataclass of segment lengths (metres), total mass (kg) and sex (the de Leva mass table).
+# ``Simulation.set_body`` replaces it; MorphologyAdapt takes the new body into the store.
 
 
 @dataclass(frozen=True)
@@ -53,37 +71,48 @@ class Placement:
 
 
 @dataclass(frozen=True)
-class Constraints:
-    """Constraints added to the character's motion by the scenario (the solver issue)."""
+class Constraint:
+    """The character's constraints: ``uids`` (ids as ``Simulation.add_constraint`` returns
+    them, in the order added) and their ``names``; the specs live in the simulation's constraint
+    table (``table.rows_of(uids)``). Present while the character has at least one constraint (its
+    own, or stored with a clip it plays); a character without it is not in the solve."""
 
-    specs: tuple[ConstraintSpec, ...] = ()
+    uids: tuple[int, ...]
+    names: tuple[str, ...]
 
 
 @dataclass(frozen=True)
 class CharacterRow:
-    """The character's row in the simulation's structure-of-arrays store."""
+    """The character's row in the simulation's structure-of-arrays store: its one handle to
+    its per-tick state (renumbered when a character before it is removed)."""
 
     row: int
 
 
 @dataclass(frozen=True)
 class NormalizedPose:
-    """This tick's normalized pose: ``Simulation.store.poses`` at ``row`` (see
-    :class:`ecs_anim.normalized.NormalizedPoses` for every field's shape and frame)."""
+    """This tick's normalized pose of one character: views of ``Simulation.store.poses`` at its
+    row, batch shape (1,) (see :class:`ecs_anim.normalized.NormalizedPoses` for every field's
+    shape and frame). Not attached to the entity: ``Simulation.pose(entity)`` makes one."""
 
     row: int
+    pose: NormalizedPoses
 
 
 @dataclass(frozen=True)
 class Posture:
-    """This tick's world posture: ``Simulation.store.positions[row]`` (N_JOINTS, 3) metres,
-    world Z up, and ``Simulation.store.local_rotations[row]`` (n_export_joints, 3, 3) local
-    rotation matrices (BVH axes) of the export skeleton (:data:`ecs_anim.exporting.EXPORT_NAMES`)."""
+    """This tick's world posture of one character, views of the store at its row:
+    ``positions`` (N_JOINTS, 3) metres, world Z up; ``local_rotations`` (n_export_joints, 3, 3)
+    local rotation matrices (BVH axes) of the export skeleton (:data:`ecs_anim.exporting.
+    EXPORT_NAMES`), empty (0, 3, 3) unless the simulation makes rotations. Not attached to the
+    entity: ``Simulation.posture(entity)`` makes one."""
 
     row: int
+    positions: NDArray[np.float64]
+    local_rotations: NDArray[np.float64]
 
 
-@dataclass
+@dataclass(frozen=True)
 class Name:
     """A character's name, for reports and exports."""
 

@@ -1,4 +1,5 @@
-"""World-level components, held by one environment entity per simulation."""
+"""The ground component: held by the environment entity (the ground under everyone), and by a
+character that has a ground of its own (GroundAdapt then adapts it to that one)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,6 @@ from ecs_anim.ground import Ground
 
 @dataclass(frozen=True)
 class GroundQuery:
-    """The ground under everyone: anything with ``height(xy (..., 2)) -> (...)`` in metres."""
+    """A ground: anything with ``height(xy (..., 2)) -> (...)`` in metres, world Z up."""
 
     ground: Ground

@@ -62,11 +62,15 @@ def walkers_on_bumps(n: int, rotations: bool = False,
     rng = np.random.default_rng(seed)
     presets = list(PRESET_SPECS)
     side = int(np.ceil(np.sqrt(n)))
+    preset_bodies = [Morphology.preset(p) for p in presets]  # frozen: shared by many
+    bodies, players, placements = [], [], []
     for i in range(n):
-        body = Morphology.preset(presets[i % len(presets)]) if i % 2 == 0 else \
-            Morphology.from_stature(float(rng.uniform(1.1, 2.05)))
-        sim.spawn(f"c{i}", body, MotionPlayer("walk", start_s=float(rng.uniform(0, 4))),
-                  Placement((1.5 * (i // side), 1.5 * (i % side)), float(rng.uniform(-0.3, 0.3))))
+        bodies.append(preset_bodies[i % len(presets)] if i % 2 == 0 else
+                      Morphology.from_stature(float(rng.uniform(1.1, 2.05))))
+        players.append(MotionPlayer("walk", start_s=float(rng.uniform(0, 4))))
+        placements.append(Placement((1.5 * (i // side), 1.5 * (i % side)),
+                                    float(rng.uniform(-0.3, 0.3))))
+    sim.spawn_many([f"c{i}" for i in range(n)], bodies, players, placements)
     return sim, rng
 
 

@@ -9,17 +9,19 @@ from __future__ import annotations
 
 import itertools
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
-from typing import Any
+from typing import Any, Self, TypeVar
 
 import esper
 import numpy as np
 from numpy.typing import NDArray
 
+from .body_change import mass_tables
+from .body_points import body_point
 from .components import (
-    Body,
     CharacterRow,
+    Constraint,
     GroundQuery,
     MotionPlayer,
     Name,
@@ -27,17 +29,21 @@ from .components import (
     Placement,
     Posture,
 )
-from .errors import EcsAnimError, listed, quoted
-from .ground import Ground, Plane
-from .morphology import Morphology, leg_length, segment_mass_table
-from .motion import NormalizedMotion, motion_problem
-from .playback import ClipBank, _wrap, rotate_xy, sample
-from .body_points import body_point
-from .solver_shell import DEFAULT_SETTINGS, SolverSettings
 from .constraint_table import Area, ConstraintTable, Target, add_stored
 from .constraints import Activation
+from .errors import EcsAnimError, listed, quoted
+from .ground import Ground, Plane
+from .morphology import Morphology, leg_length
+from .motion import NormalizedMotion, motion_problem
+from .playback import ClipBank
+from .solver_shell import DEFAULT_SETTINGS, SolverSettings
 from .store import MAX_QUEUE, CharacterStore
 from .system_base import System
+
+C = TypeVar("C")
+#: Defaults: a character at the world origin heading along +x; a constraint always active.
+ORIGIN = Placement()
+ALWAYS = Activation(0.0, 1e9)
 
 _counter = itertools.count()
 #: Placements, speeds and start times beyond this are refused (metres / seconds).
@@ -83,6 +89,11 @@ class Simulation:
         self.bank = ClipBank.from_motions(motions)
         self.motions = dict(motions)
         self.store = CharacterStore()
+        #: Bumped by every structural change (a character spawned or removed, a component
+        #: added, replaced or removed): the systems' cached rows are recomputed when it moves.
+        self.structure_version = 0
+        #: The grounds characters stand on: [0] the environment's, then characters' own.
+        self.grounds: list[Ground] = [ground or Plane()]
         self.constraints = ConstraintTable()
         self.solver_settings = solver_settings
         self.renderer: object | None = None
@@ -91,7 +102,7 @@ class Simulation:
         schedule = SCHEDULE if window else HEADLESS
         self.systems: list[System] = []
         with self._active():
-            self._environment = esper.create_entity(GroundQuery(ground or Plane()))
+            self._environment = esper.create_entity(GroundQuery(self.grounds[0]))
             for order, cls in enumerate(schedule):
                 system = cls(self)
                 # esper runs higher priorities first: derive them from the declared order.
@@ -112,9 +123,10 @@ class Simulation:
     def ground(self) -> Ground:
         """The ground, from the environment entity's GroundQuery component."""
         with self._active():
-            return esper.component_for_entity(self._environment, GroundQuery).ground
+            query: GroundQuery = esper.component_for_entity(self._environment, GroundQuery)
+        return query.ground
 
-    def __enter__(self) -> Simulation:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -139,46 +151,111 @@ class Simulation:
     # --- characters -------------------------------------------------------------------------
 
     def spawn(self, name: str, body: Morphology, player: MotionPlayer,
-              placement: Placement = Placement(), team: str = "", com_control: bool = True,
-              com_target_xy: tuple[float, float] | None = None) -> int:
+              placement: Placement = ORIGIN, team: str = "", com_control: bool = True,
+              com_target_xy: tuple[float, float] | None = None,
+              ground: Ground | None = None) -> int:
         """Add a character; returns its entity. Validates at the boundary (not in the tick).
 
         ``com_control``: the solver moves the root to keep the centre of mass where the motion
-        has it, or over ``com_target_xy`` (world metres) when given."""
-        try:
-            clip = self.bank.index(player.clip)
-            queue = [self.bank.index(q.clip) for q in player.queue]
-        except KeyError as exc:
-            raise EcsAnimError(f"character {name!r}: {exc.args[0]}") from None
-        if len(queue) > MAX_QUEUE:
-            raise EcsAnimError(f"character {name!r}: at most {MAX_QUEUE} queued clips, got {len(queue)}")
-        values = (*placement.position_m, placement.heading_rad, player.speed, player.start_s,
-                  *(com_target_xy or ()))
-        if not all(np.isfinite(v) and abs(v) <= MAX_COORDINATE_M for v in values):
-            raise EcsAnimError(f"character {name!r}: placement, speed and start must be finite "
-                               f"and within {MAX_COORDINATE_M:g}")
-        padded = np.zeros(MAX_QUEUE)
-        queue_clip, queue_fade, queue_loop = padded.astype(np.int64), padded.copy(), padded.astype(bool)
-        for k, q in enumerate(player.queue):
-            queue_clip[k], queue_fade[k], queue_loop[k] = queue[k], max(q.crossfade_s, 0.0), q.loop
+        has it, or over ``com_target_xy`` (world metres) when given. ``ground``: a ground of
+        the character's own (default: the environment's). Many at once: :meth:`spawn_many`."""
+        return int(self.spawn_many([name], [body], [player], [placement], [team], [com_control],
+                                   [com_target_xy], [ground])[0])
+
+    def spawn_many(self, names: Sequence[str], bodies: Sequence[Morphology],
+                   players: Sequence[MotionPlayer], placements: Sequence[Placement] | None = None,
+                   teams: Sequence[str] | None = None, com_control: Sequence[bool] | None = None,
+                   com_target_xy: Sequence[tuple[float, float] | None] | None = None,
+                   grounds: Sequence[Ground | None] | None = None) -> NDArray[np.int64]:
+        """Add many characters at once (one store append, one structural change); the
+        arguments are :meth:`spawn`'s, one per character (``None``: every character the
+        default). Returns their entities (k,). All are validated before any is added (but a
+        malformed constraint stored with a clip is reported once they are, naming it)."""
+        k = len(names)
+        if k == 0:
+            return np.zeros(0, np.int64)
+        placements = placements if placements is not None else [Placement()] * k
+        teams = teams if teams is not None else [""] * k
+        com_control = com_control if com_control is not None else [True] * k
+        com_target_xy = com_target_xy if com_target_xy is not None else [None] * k
+        grounds = grounds if grounds is not None else [None] * k
+        given = (bodies, players, placements, teams, com_control, com_target_xy, grounds)
+        if any(len(g) != k for g in given):
+            raise EcsAnimError(f"spawn_many: {k} names but {[len(g) for g in given]} bodies, "
+                               "players, placements, teams, com_control, com_target_xy, grounds")
+        queue_clip = np.zeros((k, MAX_QUEUE), np.int64)
+        queue_fade, queue_loop = np.zeros((k, MAX_QUEUE)), np.zeros((k, MAX_QUEUE), bool)
+        clip, queue_len = np.zeros(k, np.int64), np.zeros(k, np.int64)
+        for i, (name, player) in enumerate(zip(names, players)):
+            try:
+                clip[i] = self.bank.index(player.clip)
+                queue = [self.bank.index(q.clip) for q in player.queue]
+            except KeyError as exc:
+                raise EcsAnimError(f"character {name!r}: {exc.args[0]}") from None
+            if len(queue) > MAX_QUEUE:
+                raise EcsAnimError(f"character {name!r}: at most {MAX_QUEUE} queued clips, "
+                                   f"got {len(queue)}")
+            queue_len[i] = len(queue)
+            for j, q in enumerate(player.queue):
+                queue_clip[i, j], queue_fade[i, j], queue_loop[i, j] = (
+                    queue[j], max(q.crossfade_s, 0.0), q.loop)
+        xy = np.array([p.position_m for p in placements], dtype=np.float64).reshape(k, 2)
+        heading = np.array([p.heading_rad for p in placements], dtype=np.float64)
+        speed = np.array([p.speed for p in players], dtype=np.float64)
+        start = np.array([p.start_s for p in players], dtype=np.float64)
+        target = np.array([t if t is not None else (np.nan, np.nan) for t in com_target_xy],
+                          dtype=np.float64).reshape(k, 2)
+        given_target = np.array([t is not None for t in com_target_xy], bool)
+        values = np.concatenate([xy, heading[:, None], speed[:, None], start[:, None],
+                                 np.where(given_target[:, None], target, 0.0)], 1)
+        bad = ~np.all(np.isfinite(values) & (np.abs(values) <= MAX_COORDINATE_M), axis=1)
+        if bad.any():
+            raise EcsAnimError(f"character {names[int(np.argmax(bad))]!r}: placement, speed and "
+                               f"start must be finite and within {MAX_COORDINATE_M:g}")
+        ground_index = np.array([self._ground_slot(g) for g in grounds], np.int64)
+        ground_ref = np.zeros(k)
+        for slot in np.unique(ground_index):
+            mine = ground_index == slot
+            ground_ref[mine] = self.grounds[slot].height(xy[mine])
+        masses, fractions = mass_tables(list(bodies))
+        store = self.store
+        first = store.n
         with self._active():
-            entity = esper.create_entity()
-            row = self.store.add_row(
-                entity=entity, lengths=body.lengths, clip=clip, clip_time_s=player.start_s,
-                speed=player.speed, loop=player.loop, placement_xy=placement.position_m,
-                placement_heading=placement.heading_rad, queue_clip=queue_clip,
-                queue_fade_s=queue_fade, queue_loop=queue_loop, queue_len=len(queue),
-                ground_ref=float(self.ground.height(np.array(placement.position_m, float))),
-                segment_mass_kg=segment_mass_table(body)[0],
-                segment_com_fraction=segment_mass_table(body)[1], com_control=com_control,
-                com_target_xy=com_target_xy if com_target_xy is not None else (np.nan, np.nan),
-                com_error_m=np.nan,
-            )
-            for component in (Name(name, team), Body(body), player, placement, CharacterRow(row),
-                              NormalizedPose(row), Posture(row)):
-                esper.add_component(entity, component)
-        self._add_motion_constraints(entity, name, [player.clip] + [q.clip for q in player.queue])
-        return entity
+            entities = np.array([esper.create_entity() for _ in range(k)], np.int64)
+            store.add_rows(
+                k, entity=entities, lengths=np.array([b.lengths for b in bodies]).reshape(k, -1),
+                clip=clip, clip_time_s=start, speed=speed,
+                loop=np.array([p.loop for p in players], bool), placement_xy=xy,
+                placement_heading=heading, queue_clip=queue_clip, queue_fade_s=queue_fade,
+                queue_loop=queue_loop, queue_len=queue_len, ground_ref=ground_ref,
+                segment_mass_kg=masses, segment_com_fraction=fractions,
+                com_control=np.array(com_control, bool), com_target_xy=target,
+                com_error_m=np.nan, ground_index=ground_index)
+            for i in range(k):
+                entity = int(entities[i])
+                esper.add_component(entity, Name(names[i], teams[i]))
+                esper.add_component(entity, bodies[i])
+                esper.add_component(entity, players[i])
+                esper.add_component(entity, placements[i])
+                esper.add_component(entity, CharacterRow(first + i))
+                if grounds[i] is not None:
+                    esper.add_component(entity, GroundQuery(grounds[i]))
+        self.structure_version += 1
+        for i, player in enumerate(players):
+            clips = [player.clip] + [q.clip for q in player.queue]
+            if any(spec.kind != "foot_contact" for c in clips for spec in self.motions[c].constraints):
+                self._add_motion_constraints(int(entities[i]), names[i], clips)
+        return entities
+
+    def _ground_slot(self, ground: Ground | None) -> int:
+        """The index of ``ground`` in :attr:`grounds` (0: the environment's), added if new."""
+        if ground is None:
+            return 0
+        for slot, known in enumerate(self.grounds):
+            if known is ground:
+                return slot
+        self.grounds.append(ground)
+        return len(self.grounds) - 1
 
     def _add_motion_constraints(self, entity: int, name: str, clips: list[str]) -> None:
         """The constraints stored with each clip a character plays (other than foot contacts,
@@ -187,39 +264,100 @@ class Simulation:
             for spec in self.motions[clip].constraints:
                 if spec.kind == "foot_contact":
                     continue
+                full = f"{name}/{clip}/{spec.name}"
                 try:
-                    add_stored(self.constraints, self.row(entity), spec, f"{name}/{clip}/{spec.name}",
-                               clock=self.bank.index(clip))
+                    uid = add_stored(self.constraints, self.row(entity), spec, full,
+                                     clock=self.bank.index(clip))
                 except ValueError as exc:
                     raise EcsAnimError(f"motion {clip!r}: {exc}") from None
+                self._constraint_added(entity, uid, full)
+
+    def _constraint_added(self, entity: int, uid: int, name: str) -> None:
+        """Replace the character's Constraint component by one with this constraint too."""
+        with self._active():
+            current = esper.try_component(entity, Constraint) or Constraint((), ())
+            esper.add_component(entity, Constraint(current.uids + (uid,), current.names + (name,)))
+        self.structure_version += 1
+
+    def _update_constraint_components(self) -> None:
+        """Give every character its Constraint component from the table (its uids and names),
+        or take it away when it has none left; a structural change when one changed."""
+        table = self.constraints
+        mine: dict[int, tuple[list[int], list[str]]] = {}
+        for k in range(table.m):
+            uids, names = mine.setdefault(int(table.owner[k]), ([], []))
+            uids.append(int(table.uid[k]))
+            names.append(table.names[k])
+        changed = False
+        with self._active():
+            for entity, handle in esper.get_component(CharacterRow):
+                uids, names = mine.get(handle.row, ([], []))
+                wanted = Constraint(tuple(uids), tuple(names)) if uids else None
+                current = esper.try_component(entity, Constraint)
+                if current == wanted:
+                    continue
+                changed = True
+                if wanted is None:
+                    esper.remove_component(entity, Constraint)
+                else:
+                    esper.add_component(entity, wanted)
+        if changed:
+            self.structure_version += 1
 
     def row(self, entity: int) -> int:
         with self._active():
             try:
-                return esper.component_for_entity(entity, CharacterRow).row
+                handle: CharacterRow = esper.component_for_entity(entity, CharacterRow)
+                return handle.row
             except KeyError:
                 raise EcsAnimError(f"no character with entity id {entity!r} in this simulation") from None
 
-    def set_body(self, entity: int, body: Morphology) -> None:
-        """Replace a character's morphology while it plays (paper §6).
+    def rows_with(self, *components: type) -> NDArray[np.int64]:
+        """(r,) sorted store rows of the characters that have every one of ``components``
+        (an esper query; systems cache it per :attr:`structure_version`)."""
+        with self._active():
+            rows = [handle.row for _, (handle, *_) in esper.get_components(CharacterRow, *components)]
+        return np.sort(np.array(rows, dtype=np.int64))
 
-        The root path is stored in leg lengths, so a new leg length would move the character
-        along its path; the placement is shifted so it stays where it is, and its feet re-plant.
-        """
-        st = self.store
+    def rows_and_components(self, component: type[C]) -> tuple[NDArray[np.int64], list[C]]:
+        """The store rows of the characters having ``component`` (sorted) and their components."""
+        with self._active():
+            found = sorted((handle.row, c) for _, (handle, c) in
+                           esper.get_components(CharacterRow, component))
+        return np.array([r for r, _ in found], dtype=np.int64), [c for _, c in found]
+
+    def pose(self, entity: int) -> NormalizedPose:
+        """A character's normalized pose this tick (views of the store, until the next tick)."""
+        row = self.row(entity)
+        return NormalizedPose(row, self.store.poses.take(slice(row, row + 1)))
+
+    def posture(self, entity: int) -> Posture:
+        """A character's world posture this tick (views of the store, until the next tick)."""
+        row, st = self.row(entity), self.store
+        return Posture(row, st.positions[row], st.local_rotations[row])
+
+    def set_body(self, entity: int, body: Morphology) -> None:
+        """Replace a character's morphology while it plays (paper §6): its Morphology component.
+
+        It takes effect on the next tick (MorphologyAdapt, :mod:`ecs_anim.body_change`): the
+        character grows or shrinks where it stands, and its feet re-plant."""
+        self.row(entity)
+        with self._active():
+            esper.add_component(entity, body)
+        self.structure_version += 1
+
+    def set_ground(self, entity: int, ground: Ground | None) -> None:
+        """Give a character a ground of its own (its GroundQuery component), or ``None``: back
+        to the environment's. GroundAdapt reads it from the next tick."""
         row = self.row(entity)
         with self._active():
-            esper.add_component(entity, Body(body))
-        old_leg, new_leg = leg_length(st.lengths[row]), body.leg_length
-        if st.poses.root_position.shape[0] == st.n and self.tick > 0:
-            for xy, heading in ((st.placement_xy, st.placement_heading),
-                                (st.fade_placement_xy, st.fade_placement_heading)):
-                world = st.poses.root_position[row, :2] * old_leg
-                unplaced = rotate_xy(world - xy[row], -heading[row]) / old_leg
-                xy[row] += world - (rotate_xy(unplaced * new_leg, heading[row]) + xy[row])
-        st.lengths[row] = body.lengths
-        st.segment_mass_kg[row], st.segment_com_fraction[row] = segment_mass_table(body)[:2]
-        st.locked[row] = False
+            if ground is None:
+                if esper.has_component(entity, GroundQuery):
+                    esper.remove_component(entity, GroundQuery)
+            else:
+                esper.add_component(entity, GroundQuery(ground))
+        self.store.ground_index[row] = self._ground_slot(ground)
+        self.structure_version += 1
 
     def remove(self, entity: int) -> None:
         """Take a character out of the simulation (between ticks), with its constraints and
@@ -232,10 +370,11 @@ class Simulation:
             esper.delete_entity(entity, immediate=True)
             for other, character_row in list(esper.get_component(CharacterRow)):
                 if character_row.row > row:
-                    for component in (CharacterRow, NormalizedPose, Posture):
-                        esper.add_component(other, component(character_row.row - 1))
+                    esper.add_component(other, CharacterRow(character_row.row - 1))
         self.store.remove_row(row)
         removed = self.constraints.remove_character(row)
+        self.structure_version += 1
+        self._update_constraint_components()
         if removed:
             message = (f"warning: t={self.time_s:.3f} s: character {name!r} removed with its "
                        f"constraints {listed(removed)}")
@@ -263,33 +402,8 @@ class Simulation:
         """(n,) each character's leg length (mean thigh + shank), metres."""
         return leg_length(self.store.lengths)
 
-    def start_next_clips(self, rows: NDArray[np.int64]) -> None:
-        """Begin the next queued clip of these characters (all at once), cross-fading from the
-        current one and continuing its root path, heading included. Footprints are released so
-        the incoming motion's steps lay new ones."""
-        st, bank = self.store, self.bank
-        head = st.queue_head[rows]
-        new_clip, fade = st.queue_clip[rows, head], st.queue_fade_s[rows, head]
-        new_loop = st.queue_loop[rows, head]
-        old = sample(bank, st.clip[rows], st.clip_time_s[rows], st.loop[rows])
-        new = sample(bank, new_clip, np.zeros(rows.size), new_loop)
-        leg = leg_length(st.lengths[rows])[:, None]
-        heading = st.placement_heading[rows]
-        old_xy = rotate_xy(old.root_position[:, :2] * leg, heading) + st.placement_xy[rows]
-        new_heading = _wrap(old.root_heading + heading - new.root_heading)
-        st.fade_placement_xy[rows] = st.placement_xy[rows]
-        st.fade_placement_heading[rows] = heading
-        st.placement_heading[rows] = new_heading
-        st.placement_xy[rows] = old_xy - rotate_xy(new.root_position[:, :2] * leg, new_heading)
-        st.fade_clip[rows], st.fade_time_s[rows] = st.clip[rows], st.clip_time_s[rows]
-        st.fade_loop[rows] = st.loop[rows]
-        st.fade_s[rows], st.fade_elapsed_s[rows] = np.maximum(fade, 0.0), 0.0
-        st.clip[rows], st.clip_time_s[rows], st.loop[rows] = new_clip, 0.0, new_loop
-        st.queue_head[rows] += 1
-        st.locked[rows] = False
-
     def add_constraint(self, entity: int, name: str, point: str, priority: float = 0.0,
-                       activation: Activation = Activation(0.0, 1e9),
+                       activation: Activation = ALWAYS,
                        target_in_world: tuple[float, float, float] | None = None,
                        target_entity: int | None = None, target_point: str | None = None, *,
                        kind: str = "position", chain: tuple[str, ...] | None = None,
@@ -324,13 +438,15 @@ class Simulation:
                                                  as_target=True))
             else:
                 target = Target(world_m=target_in_world)
-            return self.constraints.add(name, self.row(entity), kind, body, target, priority,
-                                        activation, chain, distance_m, area, axis, clock)
+            uid = self.constraints.add(name, self.row(entity), kind, body, target, priority,
+                                       activation, chain, distance_m, area, axis, clock)
         except ValueError as exc:
             message = str(exc)
             if not message.startswith("constraint "):
                 message = f"constraint {name!r}: {message}"
             raise EcsAnimError(message) from None
+        self._constraint_added(entity, uid, name)
+        return uid
 
     def set_target(self, uid: int, target_in_world: tuple[float, float, float]) -> None:
         """Move a constraint's target (its id from :meth:`add_constraint` or

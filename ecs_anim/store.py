@@ -2,7 +2,9 @@
 
 Gathering and scattering go through here only (STYLE 12): rows are added when characters spawn
 (load time, not in the tick), specification changes write one row, and each system reads and
-writes whole arrays. Field writers are declared in each system's docstring.
+writes whole arrays. Each system declares the fields it reads and writes (``System.reads`` /
+``writes``, checked by tests/test_ecs.py); :data:`SPEC_FIELDS` are written outside the tick
+(spawn, ``Simulation.set_*``) and read by the systems as their inputs.
 """
 
 from __future__ import annotations
@@ -12,8 +14,8 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 from numpy.typing import NDArray
 
-from .normalized import TRAILING_SHAPES, DecodedPose, NormalizedPoses
 from .morphology import MASS_SEGMENTS
+from .normalized import TRAILING_SHAPES, DecodedPose, NormalizedPoses
 from .skeleton import N_JOINTS, N_LENGTHS
 
 F64 = NDArray[np.float64]
@@ -25,6 +27,11 @@ MAX_QUEUE = 16
 #: Fields that are not one array row per character: the poses (arrays of their own) and what the
 #: tick derives from them.
 NOT_ROWS = ("poses", "scaled", "vertebrae", "goals", "solved_positions", "posture")
+#: Fields set when a character spawns or a specification component is replaced, between ticks:
+#: the systems' inputs (a system may also write one, e.g. MorphologyAdapt takes a new body in).
+SPEC_FIELDS = ("entity", "lengths", "speed", "queue_clip", "queue_fade_s", "queue_loop",
+               "queue_len", "segment_mass_kg", "segment_com_fraction", "com_control",
+               "com_target_xy", "ground_index", "constraints")
 
 
 def _empty_poses(n: int) -> NormalizedPoses:
@@ -60,7 +67,9 @@ class CharacterStore:
     centre of mass given by the scenario (NaN: the motion's own); com_desired (n, 3) where the
     centre of mass should be this tick; com (n, 3) where it is after the solve and com_error_m
     (n,) its horizontal distance from com_desired (NaN for characters nothing constrained);
-    posture: the last tick's decoded posture (frames too), which targets on other characters read.
+    posture: the last tick's decoded posture (frames too), which targets on other characters read;
+    ground_index (n,) the ground each character stands on: 0 the environment's, k > 0
+    ``Simulation.grounds[k]`` (a GroundQuery of the character's own).
     """
 
     entity: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -93,6 +102,7 @@ class CharacterStore:
     com_desired: F64 = field(default_factory=lambda: np.zeros((0, 3)))
     com: F64 = field(default_factory=lambda: np.zeros((0, 3)))
     com_error_m: F64 = field(default_factory=lambda: np.zeros(0))
+    ground_index: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     queue_clip: NDArray[np.int64] = field(default_factory=lambda: np.zeros((0, MAX_QUEUE), np.int64))
     queue_fade_s: F64 = field(default_factory=lambda: np.zeros((0, MAX_QUEUE)))
     queue_loop: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, MAX_QUEUE), bool))
@@ -105,32 +115,60 @@ class CharacterStore:
     solved_positions: F64 | None = None  # (r, N_JOINTS, 3) the solver's result for goals.rows
     posture: DecodedPose | None = None
 
+    #: Growth buffers behind each array: field name (``"poses.root_position"`` for a pose
+    #: array) -> (the buffer, the view of its first ``n`` rows handed out as the attribute).
+    _buffers: dict[str, tuple[np.ndarray, np.ndarray]] = field(
+        default_factory=dict, init=False, repr=False, compare=False)
+
     @property
     def n(self) -> int:
         return int(self.entity.shape[0])
 
     def add_row(self, **values: object) -> int:
         """Append one character; ``values`` give its row for any array field. Load time only."""
-        row = self.n
-        for f in fields(self):
-            if f.name in NOT_ROWS:
-                continue
-            current = getattr(self, f.name)
-            fill = np.zeros((1,) + current.shape[1:], dtype=current.dtype)
-            if f.name in values:
-                fill[0] = values[f.name]
-            setattr(self, f.name, np.concatenate([current, fill]))
-        one = _empty_poses(1)
-        self.poses = NormalizedPoses(**{k: np.concatenate([v, getattr(one, k)])
-                                        for k, v in self.poses.arrays().items()})
+        return int(self.add_rows(1, **{k: np.asarray(v)[None] for k, v in values.items()})[0])
+
+    def add_rows(self, count: int, **values: object) -> NDArray[np.int64]:
+        """Append ``count`` characters at once; ``values`` give, for any array field, their
+        rows ``(count, ...)`` (or one row broadcast to all); other fields start at zero (poses
+        at the identity, the last posture at NaN: "none yet"). Returns the new rows. Load time.
+
+        The arrays grow by capacity doubling: each field is a view of the first ``n`` rows of a
+        larger buffer, so spawning ``k`` characters one by one costs O(k), not O(k^2). A system
+        may still replace a whole field (``st.contact_weight = weights``): the new array becomes
+        that field's buffer, and the next spawn copies it into a grown one."""
+        n = self.n
+        for name in _ROW_FIELDS:
+            fill = values.get(name)
+            self._grow(self, name, name, count, 0 if fill is None else fill)
+        for name, trailing in TRAILING_SHAPES.items():
+            identity = 1.0 if trailing and trailing[-1] == 4 else None
+            self._grow(self.poses, name, f"poses.{name}", count, 0.0, identity)
         self.scaled = None
         self.vertebrae = None
-        if self.posture is not None:  # no last tick for the new row: NaN, read as "none"
-            self.posture = DecodedPose(**{
-                f.name: np.concatenate([getattr(self.posture, f.name),
-                                        np.full((1,) + getattr(self.posture, f.name).shape[1:], np.nan)])
-                for f in fields(DecodedPose)})
-        return row
+        if self.posture is not None:  # no last tick for the new rows: NaN, read as "none"
+            for f in fields(DecodedPose):
+                self._grow(self.posture, f.name, f"posture.{f.name}", count, np.nan)
+        return np.arange(n, n + count, dtype=np.int64)
+
+    def _grow(self, holder: object, name: str, key: str, count: int, fill: object,
+              quaternion_w: float | None = None) -> None:
+        """Append ``count`` rows set to ``fill`` to ``holder.name`` (buffer ``key``)."""
+        current = getattr(holder, name)
+        n = current.shape[0]
+        buffer, view = self._buffers.get(key, (None, None))
+        if buffer is None or view is not current:  # replaced since: adopt the new array
+            buffer = current
+        if buffer.shape[0] < n + count or buffer.shape[1:] != current.shape[1:]:
+            grown = np.empty((max(2 * (n + count), 16),) + current.shape[1:], current.dtype)
+            grown[:n] = current
+            buffer = grown
+        buffer[n:n + count] = fill
+        if quaternion_w is not None:
+            buffer[n:n + count, ..., 3] = quaternion_w
+        view = buffer[:n + count]
+        self._buffers[key] = (buffer, view)
+        setattr(holder, name, view)
 
     def remove_row(self, row: int) -> None:
         """Delete one character's row; the rows after it move down by one. Not in the tick.
@@ -138,10 +176,15 @@ class CharacterStore:
         This tick's derived arrays (goals, the solver's result, vertebrae) are dropped: the next
         tick makes them again."""
         keep = np.arange(self.n) != row
-        for f in fields(self):
-            if f.name not in NOT_ROWS:
-                setattr(self, f.name, getattr(self, f.name)[keep])
+        for name in _ROW_FIELDS:
+            setattr(self, name, getattr(self, name)[keep])
         self.poses = self.poses.take(keep)
         self.scaled = None if self.scaled is None else self.scaled.take(keep)
         self.posture = None if self.posture is None else self.posture.take(keep)
         self.vertebrae = self.goals = self.solved_positions = None
+        self._buffers.clear()
+
+
+#: The fields that are one array row per character.
+_ROW_FIELDS = tuple(f.name for f in fields(CharacterStore)
+                    if f.name not in NOT_ROWS and not f.name.startswith("_"))

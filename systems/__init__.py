@@ -13,5 +13,14 @@ SCHEDULE = (MotionPlayback, MorphologyAdapt, GroundAdapt, ConstraintSolve, COMCo
             PostureConvert, Render)
 HEADLESS = SCHEDULE[:-1]
 
-__all__ = ["SCHEDULE", "HEADLESS", "MotionPlayback", "MorphologyAdapt", "GroundAdapt",
-           "ConstraintSolve", "COMControl", "PostureConvert", "Render"]
+__all__ = [
+            "HEADLESS",
+            "SCHEDULE",
+            "COMControl",
+            "ConstraintSolve",
+            "GroundAdapt",
+            "MorphologyAdapt",
+            "MotionPlayback",
+            "PostureConvert",
+            "Render",
+]

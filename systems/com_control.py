@@ -8,7 +8,8 @@ segment masses of each body) of the solved posture and its horizontal distance f
 one, which metrics, tests and the viewer read. Switched off per character (``com_control``), the
 error shows the drift the constraints cause.
 
-Reads: store.goals, solved_positions, com_desired, segment masses.
+Rows: characters with a Constraint component.
+Reads: store.goals, solved_positions, com_desired, segment_mass_kg, segment_com_fraction.
 Writes: store.com, store.com_error_m (NaN for characters nothing constrained this tick), in
 place, by the compiled :mod:`ecs_anim.kernels.com`.
 """
@@ -16,6 +17,7 @@ place, by the compiled :mod:`ecs_anim.kernels.com`.
 from __future__ import annotations
 
 import numpy as np
+from ecs_anim.components import Constraint
 
 from ecs_anim.kernels.com import centres_of_mass, horizontal_errors, segment_joints
 from ecs_anim.system_base import System
@@ -24,6 +26,10 @@ _PROXIMAL, _DISTAL = segment_joints()
 
 
 class COMControl(System):
+    query = (Constraint,)
+    reads = ("goals", "solved_positions", "com_desired", "segment_mass_kg", "segment_com_fraction")
+    writes = ("com_error_m", "com")
+
     def run(self, dt: float) -> None:
         st = self.sim.store
         if st.com_error_m.shape == (st.n,) and st.com_error_m.flags.writeable:

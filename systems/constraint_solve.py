@@ -8,8 +8,9 @@ motion; a point on another character is read from its posture of the previous ti
 character sees the same world whatever their order), a point on the same character from this
 tick's pose. A constraint whose target is not finite is switched off with one warning.
 
+Rows: characters with a Constraint component.
 Reads: store.poses, lengths, posture (the previous tick's), contact_weight, clip, clip_time_s,
-com_control, com_target_xy, segment masses; the constraint table.
+com_control, com_target_xy, segment_mass_kg, segment_com_fraction; the constraints table.
 Writes: store.poses (solved characters), com_desired, goals, solved_positions; table.held;
 table.enabled, table.weight, table.error (how far each active constraint is from being met on
 the result, :func:`~ecs_anim.solver_shell.constraint_errors`; NaN while inactive).
@@ -17,6 +18,7 @@ the result, :func:`~ecs_anim.solver_shell.constraint_errors`; NaN while inactive
 
 from __future__ import annotations
 
+from ecs_anim.components import Constraint
 from ecs_anim.kernels.decode import decode
 from ecs_anim.kernels.solve import solve
 from ecs_anim.solver_shell import constrain, scatter
@@ -24,6 +26,12 @@ from ecs_anim.system_base import System
 
 
 class ConstraintSolve(System):
+    query = (Constraint,)
+    reads = ("constraints", "clip", "clip_time_s", "poses", "lengths", "posture", "contact_weight",
+             "com_control", "com_target_xy", "segment_mass_kg", "segment_com_fraction")
+    writes = ("goals", "solved_positions", "constraints.error", "constraints.weight",
+              "constraints.enabled", "constraints.held", "poses", "com_desired")
+
     def run(self, dt: float) -> None:
         sim, st, table = self.sim, self.sim.store, self.sim.constraints
         st.goals, st.solved_positions = None, None

@@ -7,7 +7,10 @@ analytically, free feet ride on the ground level of the supporting feet and are 
 steps, a heel the stretched leg would put under a step is lifted, and a planted foot whose toe
 would go into a step is pitched up onto it.
 
-Reads: store.poses, scaled, contact_weight, lengths, clip; the ground; the bank's ankle heights.
+Rows: every character, grouped by ground (``System.ground_groups``: its own GroundQuery or the
+environment's).
+Reads: store.poses, scaled, contact_weight, lengths, clip, footprint, locked, footprint_settled,
+ground_ref (the last tick's), ground_index; the ground; the bank's ankle heights.
 Writes: store.poses (root height, leg frames and fractions, foot directions), footprint, locked,
 footprint_settled, ground_ref.
 """
@@ -55,20 +58,25 @@ class GroundAdapt(System):
     """Adapts with the compiled :mod:`ecs_anim.kernels.ground_adapt` on a built-in ground; a
     ground of the user's own (only its numpy ``height``) goes through :meth:`run_numpy`."""
 
+    reads = ("poses", "scaled", "contact_weight", "lengths", "clip", "footprint", "locked",
+             "footprint_settled", "ground_ref", "ground_index")
+    writes = ("footprint", "locked", "footprint_settled", "ground_ref", "poses")
+
     def __init__(self, sim: Simulation):
         super().__init__(sim)
-        self._ground: tuple[Ground, GroundDescription | None] | None = None
+        self._descriptions: dict[int, tuple[Ground, GroundDescription | None]] = {}
 
     def _description(self, ground: Ground) -> GroundDescription | None:
         """The ground's compiled description, made once per ground object."""
-        if self._ground is None or self._ground[0] is not ground:
-            self._ground = ground, describe(ground)
-        return self._ground[1]
+        known = self._descriptions.get(id(ground))
+        if known is None or known[0] is not ground:
+            known = self._descriptions[id(ground)] = ground, describe(ground)
+        return known[1]
 
     def run(self, dt: float) -> None:
         sim, st = self.sim, self.sim.store
-        description = self._description(sim.ground)
-        if description is None:
+        groups = [(rows, self._description(ground)) for ground, rows in self.ground_groups()]
+        if any(description is None for _, description in groups):
             self.run_numpy(dt)
             return
         scaled = st.scaled
@@ -78,19 +86,22 @@ class GroundAdapt(System):
         st.footprint_settled, st.ground_ref = _own(st.footprint_settled), _own(st.ground_ref)
         decoded = decoded_arrays(scaled)
         decoded = type(decoded)(*(np.ascontiguousarray(a) for a in decoded))
-        ground = (description.kinds, description.params, description.grid)
-        ground_adapt_rows(np.arange(st.n, dtype=np.int64), pose, decoded,
-                          np.ascontiguousarray(st.lengths), sim.leg_length(),
-                          np.ascontiguousarray(st.contact_weight), st.clip,
-                          sim.bank.source_ankle_height, st.footprint, st.locked,
-                          st.footprint_settled, st.ground_ref, ground, dt, GROUND_SMOOTHING_S,
-                          BALL_HEIGHT_PER_LEG, MAX_LEG_EXTENSION, HEEL_TOLERANCE_M, HEEL_PASSES,
-                          TOE_PASSES)
+        lengths, leg = np.ascontiguousarray(st.lengths), sim.leg_length()
+        contact_weight = np.ascontiguousarray(st.contact_weight)
+        for rows, description in groups:
+            assert description is not None
+            ground = (description.kinds, description.params, description.grid)
+            ground_adapt_rows(rows.copy(), pose, decoded, lengths, leg, contact_weight, st.clip,
+                              sim.bank.source_ankle_height, st.footprint, st.locked,
+                              st.footprint_settled, st.ground_ref, ground, dt, GROUND_SMOOTHING_S,
+                              BALL_HEIGHT_PER_LEG, MAX_LEG_EXTENSION, HEEL_TOLERANCE_M,
+                              HEEL_PASSES, TOE_PASSES)
 
     def run_numpy(self, dt: float) -> None:
-        """The numpy reference of :meth:`run` (any ground with a ``height``)."""
+        """The numpy reference of :meth:`run` (any ground with a ``height``; each character on
+        its own)."""
         sim, st = self.sim, self.sim.store
-        ground = sim.ground
+        ground = self.row_ground()
         scaled = st.scaled
         assert scaled is not None, "MorphologyAdapt runs before GroundAdapt"
         leg = sim.leg_length()
@@ -143,7 +154,7 @@ class GroundAdapt(System):
         Raising the toe moves it horizontally too (onto the next step, say), so the ground is
         asked again at the new place, a few passes.
         """
-        ground = self.sim.ground
+        ground = self.row_ground()
         ankles, toes = legs.ankles, legs.toes
         deficit = ground.height(toes[..., :2]) + ball - toes[..., 2]
         if not np.any(deficit > 0.0):

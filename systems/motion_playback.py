@@ -1,10 +1,12 @@
 """MotionPlayback: sample each character's clip(s) in normalized space, then advance the clocks.
 
-Reads: store.clip, clip_time_s, speed, loop, fade_*, queue_*, placement_*, fade_placement_*;
-the clip bank.
+Rows: characters with a MotionPlayer.
+Reads: store.clip, clip_time_s, speed, loop, fade_*, queue_*, placement_*, fade_placement_*,
+lengths (leg length: the root path's unit); the clip bank.
 Writes: store.poses (placed in the world; first writer each tick), store.contact_weight,
 store.clip_time_s, fade_time_s, fade_elapsed_s, fade_s; on a clip change (through
-``Simulation.start_next_clips``) clip, loop, queue_head, placement_*, fade_*, locked.
+:func:`ecs_anim.playback_queue.start_next_clips`) clip, loop, queue_head, placement_*, fade_*,
+locked.
 """
 
 from __future__ import annotations
@@ -22,8 +24,10 @@ from ecs_anim.kernels.playback import (
     sample_table_rows,
     writable_poses,
 )
+from ecs_anim.components import MotionPlayer
 from ecs_anim.normalized import NormalizedPoses
 from ecs_anim.playback import ClipBank, blend, rotate_xy, sample, sample_table
+from ecs_anim.playback_queue import start_next_clips
 from ecs_anim.system_base import System
 
 if TYPE_CHECKING:
@@ -33,6 +37,15 @@ if TYPE_CHECKING:
 class MotionPlayback(System):
     """Samples with the compiled :mod:`ecs_anim.kernels.playback` (numpy reference:
     :meth:`run_numpy`), into the store's pose arrays in place."""
+
+    query = (MotionPlayer,)
+    reads = ("clip", "clip_time_s", "speed", "loop", "fade_clip", "fade_time_s", "fade_loop",
+             "fade_s", "fade_elapsed_s", "queue_clip", "queue_fade_s", "queue_loop", "queue_head",
+             "queue_len", "placement_xy", "placement_heading", "fade_placement_xy",
+             "fade_placement_heading", "lengths")
+    writes = ("poses", "contact_weight", "clip_time_s", "fade_time_s", "fade_elapsed_s", "fade_s",
+              "clip", "loop", "queue_head", "placement_xy", "placement_heading",
+              "fade_placement_xy", "fade_placement_heading", "fade_clip", "fade_loop", "locked")
 
     def __init__(self, sim: Simulation):
         super().__init__(sim)
@@ -122,4 +135,4 @@ class MotionPlayback(System):
         next_fade = st.queue_fade_s[np.arange(st.n), head]
         due = pending & (st.fade_s == 0.0) & (st.clip_time_s >= bank.duration_s(st.clip) - next_fade)
         if due.any():
-            self.sim.start_next_clips(np.flatnonzero(due))
+            start_next_clips(st, bank, np.flatnonzero(due))

@@ -1,11 +1,14 @@
 """PostureConvert: rebuild knees, elbows and vertebrae and give the world posture (paper §8).
 
-Reads: store.poses, store.lengths. Writes: store.positions (world joint positions), store.posture
-(the same with the body frames, for next tick's targets on other characters), store.
-local_rotations (the BVH export skeleton's local joint rotation matrices, when the simulation
-asks for rotations), store.vertebrae (when it asks for a finer spine), store.frozen (a character
-whose pose went non-finite keeps its last good posture and is reported once). All in place, by
-the compiled :func:`ecs_anim.kernels.posture.posture_rows`.
+Rows: every character.
+Reads: store.poses, store.lengths, frozen, and the last good positions, local_rotations and
+vertebrae (kept for a frozen character).
+Writes: store.positions (world joint positions), store.posture (the same with the body frames,
+for next tick's targets on other characters), store.local_rotations (the BVH export skeleton's
+local joint rotation matrices, when the simulation asks for rotations), store.vertebrae (when
+it asks for a finer spine), store.frozen (a character whose pose went non-finite keeps its last
+good posture and is reported once). All in place, by the compiled
+:func:`ecs_anim.kernels.posture.posture_rows`.
 """
 
 from __future__ import annotations
@@ -25,6 +28,9 @@ def _writable(a: np.ndarray, shape: tuple[int, ...]) -> bool:
 
 
 class PostureConvert(System):
+    reads = ("poses", "lengths", "frozen", "positions", "local_rotations", "vertebrae")
+    writes = ("frozen", "positions", "posture", "local_rotations", "vertebrae")
+
     def run(self, dt: float) -> None:
         st, sim = self.sim.store, self.sim
         n = st.n

@@ -12,6 +12,8 @@ from ecs_anim.system_base import System
 
 
 class Render(System):
+    reads = ("positions",)
+
     def run(self, dt: float) -> None:
         renderer = getattr(self.sim, "renderer", None)
         if renderer is not None:

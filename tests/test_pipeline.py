@@ -11,7 +11,7 @@ import pytest
 
 from conftest import MOCAP_DIR, MOTIONS_DIR, require_mocap
 from ecs_anim.cli import main
-from ecs_anim.components import Body, MotionPlayer, Placement, QueuedClip
+from ecs_anim.components import MotionPlayer, Placement, QueuedClip
 from ecs_anim.errors import InputError
 from ecs_anim.ground import Bumps, Combined, Stairs
 from ecs_anim.importing import import_bvh
@@ -51,9 +51,9 @@ def test_two_simulations_do_not_see_each_other(walk):
         b.spawn(f"b{i}", Morphology.preset("tall"), MotionPlayer("walk"))
     a.step()
     with a._active():
-        assert len(esper.get_component(Body)) == 2
+        assert len(esper.get_component(Morphology)) == 2
     with b._active():
-        assert len(esper.get_component(Body)) == 3
+        assert len(esper.get_component(Morphology)) == 3
     assert b.tick == 0 and not np.any(b.store.positions)  # stepping a did not touch b
     assert a.names() == ["a0", "a1"] and b.names() == ["b0", "b1", "b2"]
     a.close()
