@@ -58,7 +58,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .contacts import ContactThresholds, _intervals
+from .contacts import ContactThresholds, _intervals, gait_event_kind
 from .errors import EcsAnimError, InputError, quoted
 from .importing import (
     UNITS,
@@ -113,6 +113,40 @@ class C3dMarkers:
     rate: float
     units: str
     first_frame: int
+    #: The ``EVENT`` group as stored: (label, context, time in seconds from the capture's start).
+    events: list[tuple[str, str, float]] = field(default_factory=list)
+
+
+def _read_events(reader: Any) -> list[tuple[str, str, float]]:
+    """``EVENT:LABELS``, ``EVENT:CONTEXTS`` and ``EVENT:TIMES`` (minutes and seconds per event,
+    C3D's convention) as (label, context, seconds); ``EVENT:USED`` is not trusted (often 0 or
+    unreadable), the number of times is. An unreadable group gives no event."""
+    group = reader.get("EVENT")
+    if group is None or group.get("TIMES") is None:
+        return []
+    try:
+        times = np.asarray(group.get("TIMES").float_array, dtype=np.float64).reshape(-1, 2)
+    except (AssertionError, ValueError, TypeError):
+        return []
+
+    def texts(name: str) -> list[str]:
+        param = group.get(name)
+        if param is None:
+            return []
+        try:
+            return [str(t).strip() for t in np.atleast_1d(param.string_array)]
+        except (AssertionError, ValueError, TypeError):
+            return []
+
+    labels, contexts = texts("LABELS"), texts("CONTEXTS")
+    out = []
+    for k, (minutes, seconds) in enumerate(times):
+        label = labels[k] if k < len(labels) else ""
+        context = contexts[k] if k < len(contexts) else ""
+        t = 60.0 * minutes + seconds
+        if math.isfinite(t):
+            out.append((label, context, float(t)))
+    return out
 
 
 def read_c3d(path: str | Path) -> C3dMarkers:
@@ -138,6 +172,7 @@ def read_c3d(path: str | Path) -> C3dMarkers:
             units_param = reader.get("POINT:UNITS")
             units = "" if units_param is None else \
                 "".join(ch for ch in units_param.string_value.lower() if ch.isalpha())
+            events = _read_events(reader)
             frames = [points[:, :4].astype(np.float64) for _, points, _ in reader.read_frames()] \
                 if n_points > 0 else []
         except InputError:
@@ -164,7 +199,7 @@ def read_c3d(path: str | Path) -> C3dMarkers:
     finite = np.all(np.isfinite(positions), axis=-1)
     valid = finite & (data[:, :, 3] >= 0) & np.any(positions != 0, axis=-1)
     positions = np.where(finite[..., None], positions, 0.0)
-    return C3dMarkers(labels, positions, valid, rate, units, first)
+    return C3dMarkers(labels, positions, valid, rate, units, first, events)
 
 
 # --- gaps --------------------------------------------------------------------------------------
@@ -375,12 +410,15 @@ def _detect_up(mk: _Markers, present: list[str], mmap: MarkerMap) -> str:
 def import_c3d(path: str | Path, map_spec: str | None = None, unit: str | None = None,
                thresholds: ContactThresholds = ContactThresholds(), up: str | None = None,
                max_gap: int = DEFAULT_MAX_GAP, fill_from: str | Path | None = None,
-               trim: FrameRange | None = None) -> NormalizedMotion:
+               trim: FrameRange | None = None, treadmill: bool = True,
+               contacts: str = "detect") -> NormalizedMotion:
     """Read a C3D file and normalize it. Raises :class:`EcsAnimError` subclasses on bad input.
 
     ``fill_from``: a motion (.nmo or .bvh) whose parts replace the absent ones (see
     :func:`fill_absent_from`); by default they keep the neutral pose. ``trim``: only those
-    frames (numbered as in the file).
+    frames (numbered as in the file). The file's gait events go to ``info.gait_events``;
+    ``contacts="events"`` makes them the foot contacts; ``treadmill`` as in
+    :func:`~ecs_anim.importing.normalize_clip`.
     """
     path = Path(path)
     raw = read_c3d(path)
@@ -390,7 +428,14 @@ def import_c3d(path: str | Path, map_spec: str | None = None, unit: str | None =
             kept = trim.frames(len(clip.positions), clip.fps, extra["first_file_frame"])
             clip = trim_clip(clip, kept)
             extra = _after_trim(extra, kept)
-        motion = normalize_clip(clip, path.stem, str(path), thresholds)
+        # EVENT:TIMES count from the capture's start; the clip's frame 0 is the file's frame
+        # first_frame - 1 + first_file_frame (0-based) of it.
+        start_s = (raw.first_frame - 1 + extra["first_file_frame"]) / raw.rate
+        events = gait_events(raw.events, start_s)
+        motion = normalize_clip(clip, path.stem, str(path), thresholds, treadmill, events,
+                                contacts)
+        if events or raw.events:
+            extra["gait_events"] = events
     except InputError:
         raise
     except EcsAnimError as exc:
@@ -406,6 +451,20 @@ def import_c3d(path: str | Path, map_spec: str | None = None, unit: str | None =
         motion = fill_absent_from(motion, _load_default(Path(fill_from)), Path(fill_from).name,
                                   thresholds)
     return motion
+
+
+def gait_events(stored: list[tuple[str, str, float]], start_s: float) -> list[dict[str, Any]]:
+    """A file's ``EVENT`` entries as gait events in the clip's seconds (``time_s``, from its
+    first frame at ``start_s`` of the capture), sorted by time: ``side`` ``"l"``/``"r"`` and
+    ``kind`` ``"strike"``/``"off"`` where the label and context say so
+    (:func:`~ecs_anim.contacts.gait_event_kind`), ``None`` for other events."""
+    out = []
+    for label, context, time_s in stored:
+        kind = gait_event_kind(label, context)
+        out.append({"label": label, "context": context, "side": kind[0] if kind else None,
+                    "kind": kind[1] if kind else None, "time_s": round(time_s - start_s, 6),
+                    "file_time_s": round(time_s, 6)})
+    return sorted(out, key=lambda e: e["time_s"])
 
 
 def _after_trim(extra: dict[str, Any], kept: slice) -> dict[str, Any]:
@@ -454,7 +513,7 @@ def fill_absent_from(motion: NormalizedMotion, default: NormalizedMotion, defaul
     The pelvis is never taken from the default. Foot contacts are detected again when legs were
     replaced. Returns a new motion; ``info.absent_fill`` names the default.
     """
-    from .contacts import contact_constraints, detect_contacts
+    from .contacts import contact_constraints, detect_foot_contacts
     from .normalized import NormalizedPoses, decode
     from .skeleton import LENGTH_INDEX
 
@@ -474,14 +533,17 @@ def fill_absent_from(motion: NormalizedMotion, default: NormalizedMotion, defaul
         for segment in GROUP_SEGMENTS[group]:
             arrays["stretch"][:, LENGTH_INDEX[segment]] = 1.0
     poses = NormalizedPoses(**arrays)
-    constraints = motion.constraints
+    constraints, planted = motion.constraints, motion.planted
     if any(g.startswith("leg_") for g in groups):
         positions = decode(poses, motion.source_morphology.lengths, use_stretch=True).positions
-        contact = detect_contacts(positions, motion.fps, thresholds)
+        found = detect_foot_contacts(positions, motion.fps, thresholds)
         constraints = [c for c in motion.constraints if c.kind != "foot_contact"] + \
-            contact_constraints(contact, motion.fps, thresholds)
+            contact_constraints(found.foot, motion.fps, thresholds)
+        planted = {"heel": found.heel, "ball": found.ball, "foot": found.foot,
+                   "on_ground": found.on_ground}
     info = dict(motion.info) | {"absent_fill": f"from {default_name}"}
-    return NormalizedMotion(poses, motion.fps, motion.source_morphology, constraints, info)
+    return NormalizedMotion(poses, motion.fps, motion.source_morphology, constraints, info,
+                            planted)
 
 
 def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str | None = None,
