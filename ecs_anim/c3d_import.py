@@ -573,9 +573,19 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
     elif raw.units in ("mm", "cm", "m"):
         unit_name, reason = raw.units, f"POINT:UNITS says {raw.units!r}"
     else:
-        z = filled[..., 2]
-        unit_name, reason = detect_unit(float(np.median(z.max(axis=1) - z.min(axis=1))) / 1.9)
-        reason = f"POINT:UNITS is {raw.units!r}; guessed from the body's height: {reason}"
+        # The body's size, as BVH import reads it: the markers' spread along the axis the body
+        # is tallest on (whichever is up), over frames, as a leg length (a standing adult's
+        # markers span about 1.9 legs; a lower-body set about 1.1, which still tells mm from cm
+        # and m apart).
+        used = sorted(set(mmap.marker.values())) or list(range(filled.shape[1]))
+        body = np.where(valid[:, used, None], filled[:, used], np.nan)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            spread = np.nanmedian(np.nanmax(body, axis=1) - np.nanmin(body, axis=1), axis=0)
+        tallest = float(np.nanmax(spread)) if np.isfinite(spread).any() else 0.0
+        unit_name, reason = detect_unit(tallest / 1.9)
+        what = "there is no POINT:UNITS" if not raw.units else f"POINT:UNITS is {raw.units!r}"
+        reason = f"{what}; guessed from the body's size: {reason}"
     scale = UNITS[unit_name]
     mk = _Markers(filled * scale, long, mmap.marker)
     if up is None:
@@ -589,6 +599,7 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
         mk.points = mk.points @ YUP_TO_ZUP.T
     build, kept, repaired = _joint_centres(mk, mmap, present)
     long, valid = long[kept], valid[kept]
+    lab = lab_joint_centres(raw.labels, mk.points[kept], valid, build.positions, mmap, present)
     rejected_joints = reject_joint_outliers(build.positions, build.measured)
     # Frames where a marker of a present part was in a long gap.
     used = sorted(set(mmap.marker.values()))
@@ -617,6 +628,8 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
         # Parts with some of their markers, not computed: one message each (part, found, lacking).
         "parts_not_computed": dict(mmap.not_computed),
         "absent_fill": "neutral pose" if absent else None,
+        # Ours against the centres the lab's model stored in the file (LHJC, VRKN, "r ankle").
+        "lab_joint_centres": lab,
         # Where the pelvis markers could not place the pelvis: trimmed (numbered as in the file,
         # from 0), repaired (numbered as the motion's frames, like the gaps below).
         "root_frames_trimmed": [[a, b] for a, b in ((0, kept.start - 1), (kept.stop, raw.positions.shape[0] - 1))
@@ -635,6 +648,50 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
         },
     }
     return clip, extra
+
+
+#: How labs store their own joint centres as points, per joint and side ({S}: L/R), compared
+#: on label keys (:func:`~ecs_anim.marker_sets.label_key`): Vicon Plug-in Gait and pyCGM2
+#: (``LHJC``, ``RKJC_CGM_2.4``: a key starting so), Motion Analysis Cortex virtual points
+#: (``VRHI``, ``VLKN``, ``VRAN``) and BTS (``r hip``, ``l knee``, ``r ankle``: exact keys).
+LAB_CENTRES = {
+    "hip": (("{S}HJC", True), ("V{S}HI", False), ("{S}HIP", False)),
+    "knee": (("{S}KJC", True), ("V{S}KN", False), ("{S}KNEE", False)),
+    "ankle": (("{S}AJC", True), ("V{S}AN", False), ("{S}ANKLE", False)),
+}
+
+
+def lab_joint_centres(labels: list[str], points: F64, valid: BOOL, positions: F64,
+                      mmap: MarkerMap, present: list[str]) -> dict[str, dict[str, Any]]:
+    """Our hip, knee and ankle centres against the lab's stored ones (:data:`LAB_CENTRES`),
+    per joint found: the lab's label, the median and 95th percentile of the distance (mm) over
+    the frames where the lab's point holds a sample. Points the marker set uses as markers are
+    never taken for centres; of two points with one label the one with most samples is.
+
+    points (F, M, 3) all points, metres, Z up; valid (F, M); positions (F, N_JOINTS, 3)."""
+    from .marker_sets import label_key, subject_of
+
+    used = set(mmap.marker.values())
+    keys = [label_key(lab) if subject_of(lab) == mmap.subject else "" for lab in labels]
+    out: dict[str, dict[str, Any]] = {}
+    for joint, patterns in LAB_CENTRES.items():
+        for side in "lr":
+            if f"leg_{side}" not in present:
+                continue
+            for pattern, prefix in patterns:
+                want = pattern.format(S=side.upper())
+                found = [i for i, k in enumerate(keys) if i not in used and valid[:, i].any()
+                         and (k.startswith(want) if prefix else k == want)]
+                if found:
+                    i = max(found, key=lambda m: int(valid[:, m].sum()))
+                    ok = valid[:, i]
+                    dist = np.linalg.norm(points[ok, i] - positions[ok, J[f"{joint}_{side}"]], axis=-1)
+                    out[f"{joint}_{side}"] = {
+                        "label": labels[i], "median_mm": round(float(np.median(dist)) * 1000, 1),
+                        "p95_mm": round(float(np.percentile(dist, 95)) * 1000, 1),
+                        "frames": int(ok.sum())}
+                    break
+    return out
 
 
 def trust_root(build: _Build) -> tuple[slice, list[list[int]]]:

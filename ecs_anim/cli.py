@@ -231,6 +231,11 @@ def _events_and_treadmill(info: dict[str, Any]) -> str:
         text += f", {n} gait events"
         if check.get("worst_ms") is not None:
             text += f" (detected contacts within {check['worst_ms']:g} ms of them)"
+    centres = info.get("lab_joint_centres")
+    if centres:
+        joint, row = max(centres.items(), key=lambda kv: kv[1]["median_mm"])
+        text += (f", {len(centres)} lab joint centres in the file: ours within "
+                 f"{row['median_mm']:g} mm of them (median; farthest {joint})")
     belt = info.get("treadmill")
     if belt:
         text += (f"; in place on a treadmill-like belt at {belt['speed_mps']:g} m/s: "
