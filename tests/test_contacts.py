@@ -228,3 +228,27 @@ def test_contact_speed_can_be_given(tmp_path):
     assert motion.info["contacts"]["speed_threshold_mps"] == [0.2, 0.2]
     clip = canonical_clip(read_bvh(path))
     assert motion.n_frames == len(clip.positions)
+
+
+def test_the_readme_contacts_examples_run(tmp_path, monkeypatch, capsys):
+    """The README's foot-contact examples (--contacts events, info, --no-treadmill,
+    --contact-speed), as a shell runs them from the repository (out/ becomes a temporary
+    folder)."""
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[1]
+    text = (repo / "README.md").read_text(encoding="utf-8")
+    block = text.split("- **Foot contacts** come", 1)[1].split("- **info** describes", 1)[0]
+    commands = [line.strip().replace(".venv/bin/ecs-anim ", "") for line in block.splitlines()
+                if line.strip().startswith(".venv/bin/ecs-anim")]
+    assert len(commands) == 3
+    if not (repo / "../shared/mocap/varied").is_dir():
+        pytest.skip("../shared/mocap not available")
+    monkeypatch.chdir(repo)
+    for command in commands:
+        assert main(command.replace("out/", f"{tmp_path}/").split()) == 0
+    out = capsys.readouterr().out
+    assert "(from the gait events)" in out and "event         1.041 s  L foot strike" in out
+    motion = load_nmo(tmp_path / "gait" / "bandai_walk.nmo")
+    assert motion.info["contacts"]["speed_threshold_mps"] == [0.3, 0.3]
+    assert "treadmill" not in motion.info  # over ground: --no-treadmill changes nothing
