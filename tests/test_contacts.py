@@ -178,6 +178,28 @@ def test_treadmill_stance_becomes_root_motion_and_the_foot_is_planted(tmp_path, 
     assert np.ptp(root, axis=0).max() < 0.2
 
 
+def test_the_treadmill_run_gets_its_belt_as_root_motion():
+    """Vicon's treadmill run (cluster model, 240 Hz): the body stays in place while each stance
+    foot moves back with the belt at about 3.2 m/s (varied/README.md)."""
+    path = VARIED / "vicon_treadmill_run_clusters_240hz.c3d"
+    if not path.exists():
+        pytest.skip(f"{path} not available")
+    motion = import_c3d(path)
+    belt = motion.info["treadmill"]
+    assert belt["converted"] and 2.9 < belt["speed_mps"] < 3.6
+    from ecs_anim.morphology import leg_length
+    root = motion.poses.root_position[:, :2] * float(leg_length(motion.source_morphology.lengths))
+    assert np.linalg.norm(root[-1] - root[0]) > 25.0  # 10 s at 3.3 m/s, as over ground
+    p = decode(motion.poses, motion.source_morphology.lengths, use_stretch=True).positions
+    speed = horizontal_speed(p[:, [J["ankle_l"], J["ankle_r"], J["toe_l"], J["toe_r"]]], motion.fps)
+    heel, ball = motion.planted_part("heel"), motion.planted_part("ball")
+    part = np.minimum(np.where(heel, speed[:, :2], np.inf), np.where(ball, speed[:, 2:], np.inf))
+    planted = part[np.isfinite(part)]
+    assert len(planted) and np.median(planted) < 0.15 and planted.max() < 0.5
+    contact = motion.contacts()
+    assert np.all((contact.mean(axis=0) > 0.1) & (contact.mean(axis=0) < 0.5))  # a run
+
+
 def test_over_ground_clips_are_not_taken_for_treadmills():
     for name in ("bandai_walk.bvh", "bandai_run.bvh", "bandai_bow.bvh", "bandai_dance.bvh"):
         path = MOCAP_DIR / name
