@@ -58,7 +58,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .contacts import ContactThresholds, _intervals
+from .contacts import ContactThresholds, _intervals, gait_event_kind
 from .errors import EcsAnimError, InputError, quoted
 from .importing import (
     UNITS,
@@ -113,6 +113,40 @@ class C3dMarkers:
     rate: float
     units: str
     first_frame: int
+    #: The ``EVENT`` group as stored: (label, context, time in seconds from the capture's start).
+    events: list[tuple[str, str, float]] = field(default_factory=list)
+
+
+def _read_events(reader: Any) -> list[tuple[str, str, float]]:
+    """``EVENT:LABELS``, ``EVENT:CONTEXTS`` and ``EVENT:TIMES`` (minutes and seconds per event,
+    C3D's convention) as (label, context, seconds); ``EVENT:USED`` is not trusted (often 0 or
+    unreadable), the number of times is. An unreadable group gives no event."""
+    group = reader.get("EVENT")
+    if group is None or group.get("TIMES") is None:
+        return []
+    try:
+        times = np.asarray(group.get("TIMES").float_array, dtype=np.float64).reshape(-1, 2)
+    except (AssertionError, ValueError, TypeError):
+        return []
+
+    def texts(name: str) -> list[str]:
+        param = group.get(name)
+        if param is None:
+            return []
+        try:
+            return [str(t).strip() for t in np.atleast_1d(param.string_array)]
+        except (AssertionError, ValueError, TypeError):
+            return []
+
+    labels, contexts = texts("LABELS"), texts("CONTEXTS")
+    out = []
+    for k, (minutes, seconds) in enumerate(times):
+        label = labels[k] if k < len(labels) else ""
+        context = contexts[k] if k < len(contexts) else ""
+        t = 60.0 * minutes + seconds
+        if math.isfinite(t):
+            out.append((label, context, float(t)))
+    return out
 
 
 def read_c3d(path: str | Path) -> C3dMarkers:
@@ -138,6 +172,7 @@ def read_c3d(path: str | Path) -> C3dMarkers:
             units_param = reader.get("POINT:UNITS")
             units = "" if units_param is None else \
                 "".join(ch for ch in units_param.string_value.lower() if ch.isalpha())
+            events = _read_events(reader)
             frames = [points[:, :4].astype(np.float64) for _, points, _ in reader.read_frames()] \
                 if n_points > 0 else []
         except InputError:
@@ -164,7 +199,7 @@ def read_c3d(path: str | Path) -> C3dMarkers:
     finite = np.all(np.isfinite(positions), axis=-1)
     valid = finite & (data[:, :, 3] >= 0) & np.any(positions != 0, axis=-1)
     positions = np.where(finite[..., None], positions, 0.0)
-    return C3dMarkers(labels, positions, valid, rate, units, first)
+    return C3dMarkers(labels, positions, valid, rate, units, first, events)
 
 
 # --- gaps --------------------------------------------------------------------------------------
@@ -375,12 +410,15 @@ def _detect_up(mk: _Markers, present: list[str], mmap: MarkerMap) -> str:
 def import_c3d(path: str | Path, map_spec: str | None = None, unit: str | None = None,
                thresholds: ContactThresholds = ContactThresholds(), up: str | None = None,
                max_gap: int = DEFAULT_MAX_GAP, fill_from: str | Path | None = None,
-               trim: FrameRange | None = None) -> NormalizedMotion:
+               trim: FrameRange | None = None, treadmill: bool = True,
+               contacts: str = "detect") -> NormalizedMotion:
     """Read a C3D file and normalize it. Raises :class:`EcsAnimError` subclasses on bad input.
 
     ``fill_from``: a motion (.nmo or .bvh) whose parts replace the absent ones (see
     :func:`fill_absent_from`); by default they keep the neutral pose. ``trim``: only those
-    frames (numbered as in the file).
+    frames (numbered as in the file). The file's gait events go to ``info.gait_events``;
+    ``contacts="events"`` makes them the foot contacts; ``treadmill`` as in
+    :func:`~ecs_anim.importing.normalize_clip`.
     """
     path = Path(path)
     raw = read_c3d(path)
@@ -390,7 +428,14 @@ def import_c3d(path: str | Path, map_spec: str | None = None, unit: str | None =
             kept = trim.frames(len(clip.positions), clip.fps, extra["first_file_frame"])
             clip = trim_clip(clip, kept)
             extra = _after_trim(extra, kept)
-        motion = normalize_clip(clip, path.stem, str(path), thresholds)
+        # EVENT:TIMES count from the capture's start; the clip's frame 0 is the file's frame
+        # first_frame - 1 + first_file_frame (0-based) of it.
+        start_s = (raw.first_frame - 1 + extra["first_file_frame"]) / raw.rate
+        events = gait_events(raw.events, start_s)
+        motion = normalize_clip(clip, path.stem, str(path), thresholds, treadmill, events,
+                                contacts)
+        if events or raw.events:
+            extra["gait_events"] = events
     except InputError:
         raise
     except EcsAnimError as exc:
@@ -406,6 +451,20 @@ def import_c3d(path: str | Path, map_spec: str | None = None, unit: str | None =
         motion = fill_absent_from(motion, _load_default(Path(fill_from)), Path(fill_from).name,
                                   thresholds)
     return motion
+
+
+def gait_events(stored: list[tuple[str, str, float]], start_s: float) -> list[dict[str, Any]]:
+    """A file's ``EVENT`` entries as gait events in the clip's seconds (``time_s``, from its
+    first frame at ``start_s`` of the capture), sorted by time: ``side`` ``"l"``/``"r"`` and
+    ``kind`` ``"strike"``/``"off"`` where the label and context say so
+    (:func:`~ecs_anim.contacts.gait_event_kind`), ``None`` for other events."""
+    out = []
+    for label, context, time_s in stored:
+        kind = gait_event_kind(label, context)
+        out.append({"label": label, "context": context, "side": kind[0] if kind else None,
+                    "kind": kind[1] if kind else None, "time_s": round(time_s - start_s, 6),
+                    "file_time_s": round(time_s, 6)})
+    return sorted(out, key=lambda e: e["time_s"])
 
 
 def _after_trim(extra: dict[str, Any], kept: slice) -> dict[str, Any]:
@@ -454,7 +513,7 @@ def fill_absent_from(motion: NormalizedMotion, default: NormalizedMotion, defaul
     The pelvis is never taken from the default. Foot contacts are detected again when legs were
     replaced. Returns a new motion; ``info.absent_fill`` names the default.
     """
-    from .contacts import contact_constraints, detect_contacts
+    from .contacts import contact_constraints, detect_foot_contacts
     from .normalized import NormalizedPoses, decode
     from .skeleton import LENGTH_INDEX
 
@@ -474,14 +533,17 @@ def fill_absent_from(motion: NormalizedMotion, default: NormalizedMotion, defaul
         for segment in GROUP_SEGMENTS[group]:
             arrays["stretch"][:, LENGTH_INDEX[segment]] = 1.0
     poses = NormalizedPoses(**arrays)
-    constraints = motion.constraints
+    constraints, planted = motion.constraints, motion.planted
     if any(g.startswith("leg_") for g in groups):
         positions = decode(poses, motion.source_morphology.lengths, use_stretch=True).positions
-        contact = detect_contacts(positions, motion.fps, thresholds)
+        found = detect_foot_contacts(positions, motion.fps, thresholds)
         constraints = [c for c in motion.constraints if c.kind != "foot_contact"] + \
-            contact_constraints(contact, motion.fps, thresholds)
+            contact_constraints(found.foot, motion.fps, thresholds)
+        planted = {"heel": found.heel, "ball": found.ball, "foot": found.foot,
+                   "on_ground": found.on_ground}
     info = dict(motion.info) | {"absent_fill": f"from {default_name}"}
-    return NormalizedMotion(poses, motion.fps, motion.source_morphology, constraints, info)
+    return NormalizedMotion(poses, motion.fps, motion.source_morphology, constraints, info,
+                            planted)
 
 
 def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str | None = None,
@@ -511,9 +573,19 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
     elif raw.units in ("mm", "cm", "m"):
         unit_name, reason = raw.units, f"POINT:UNITS says {raw.units!r}"
     else:
-        z = filled[..., 2]
-        unit_name, reason = detect_unit(float(np.median(z.max(axis=1) - z.min(axis=1))) / 1.9)
-        reason = f"POINT:UNITS is {raw.units!r}; guessed from the body's height: {reason}"
+        # The body's size, as BVH import reads it: the markers' spread along the axis the body
+        # is tallest on (whichever is up), over frames, as a leg length (a standing adult's
+        # markers span about 1.9 legs; a lower-body set about 1.1, which still tells mm from cm
+        # and m apart).
+        used = sorted(set(mmap.marker.values())) or list(range(filled.shape[1]))
+        body = np.where(valid[:, used, None], filled[:, used], np.nan)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            spread = np.nanmedian(np.nanmax(body, axis=1) - np.nanmin(body, axis=1), axis=0)
+        tallest = float(np.nanmax(spread)) if np.isfinite(spread).any() else 0.0
+        unit_name, reason = detect_unit(tallest / 1.9)
+        what = "there is no POINT:UNITS" if not raw.units else f"POINT:UNITS is {raw.units!r}"
+        reason = f"{what}; guessed from the body's size: {reason}"
     scale = UNITS[unit_name]
     mk = _Markers(filled * scale, long, mmap.marker)
     if up is None:
@@ -527,6 +599,7 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
         mk.points = mk.points @ YUP_TO_ZUP.T
     build, kept, repaired = _joint_centres(mk, mmap, present)
     long, valid = long[kept], valid[kept]
+    lab = lab_joint_centres(raw.labels, mk.points[kept], valid, build.positions, mmap, present)
     rejected_joints = reject_joint_outliers(build.positions, build.measured)
     # Frames where a marker of a present part was in a long gap.
     used = sorted(set(mmap.marker.values()))
@@ -555,6 +628,8 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
         # Parts with some of their markers, not computed: one message each (part, found, lacking).
         "parts_not_computed": dict(mmap.not_computed),
         "absent_fill": "neutral pose" if absent else None,
+        # Ours against the centres the lab's model stored in the file (LHJC, VRKN, "r ankle").
+        "lab_joint_centres": lab,
         # Where the pelvis markers could not place the pelvis: trimmed (numbered as in the file,
         # from 0), repaired (numbered as the motion's frames, like the gaps below).
         "root_frames_trimmed": [[a, b] for a, b in ((0, kept.start - 1), (kept.stop, raw.positions.shape[0] - 1))
@@ -573,6 +648,50 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
         },
     }
     return clip, extra
+
+
+#: How labs store their own joint centres as points, per joint and side ({S}: L/R), compared
+#: on label keys (:func:`~ecs_anim.marker_sets.label_key`): Vicon Plug-in Gait and pyCGM2
+#: (``LHJC``, ``RKJC_CGM_2.4``: a key starting so), Motion Analysis Cortex virtual points
+#: (``VRHI``, ``VLKN``, ``VRAN``) and BTS (``r hip``, ``l knee``, ``r ankle``: exact keys).
+LAB_CENTRES = {
+    "hip": (("{S}HJC", True), ("V{S}HI", False), ("{S}HIP", False)),
+    "knee": (("{S}KJC", True), ("V{S}KN", False), ("{S}KNEE", False)),
+    "ankle": (("{S}AJC", True), ("V{S}AN", False), ("{S}ANKLE", False)),
+}
+
+
+def lab_joint_centres(labels: list[str], points: F64, valid: BOOL, positions: F64,
+                      mmap: MarkerMap, present: list[str]) -> dict[str, dict[str, Any]]:
+    """Our hip, knee and ankle centres against the lab's stored ones (:data:`LAB_CENTRES`),
+    per joint found: the lab's label, the median and 95th percentile of the distance (mm) over
+    the frames where the lab's point holds a sample. Points the marker set uses as markers are
+    never taken for centres; of two points with one label the one with most samples is.
+
+    points (F, M, 3) all points, metres, Z up; valid (F, M); positions (F, N_JOINTS, 3)."""
+    from .marker_sets import label_key, subject_of
+
+    used = set(mmap.marker.values())
+    keys = [label_key(lab) if subject_of(lab) == mmap.subject else "" for lab in labels]
+    out: dict[str, dict[str, Any]] = {}
+    for joint, patterns in LAB_CENTRES.items():
+        for side in "lr":
+            if f"leg_{side}" not in present:
+                continue
+            for pattern, prefix in patterns:
+                want = pattern.format(S=side.upper())
+                found = [i for i, k in enumerate(keys) if i not in used and valid[:, i].any()
+                         and (k.startswith(want) if prefix else k == want)]
+                if found:
+                    i = max(found, key=lambda m: int(valid[:, m].sum()))
+                    ok = valid[:, i]
+                    dist = np.linalg.norm(points[ok, i] - positions[ok, J[f"{joint}_{side}"]], axis=-1)
+                    out[f"{joint}_{side}"] = {
+                        "label": labels[i], "median_mm": round(float(np.median(dist)) * 1000, 1),
+                        "p95_mm": round(float(np.percentile(dist, 95)) * 1000, 1),
+                        "frames": int(ok.sum())}
+                    break
+    return out
 
 
 def trust_root(build: _Build) -> tuple[slice, list[list[int]]]:

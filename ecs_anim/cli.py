@@ -145,10 +145,14 @@ def cmd_import(args: argparse.Namespace) -> int:
             if suffix == ".c3d":
                 motion = import_c3d(src, args.map, args.unit, thresholds, args.up,
                                     DEFAULT_MAX_GAP if args.max_gap is None else args.max_gap,
-                                    args.fill_absent_from, args.trim)
+                                    args.fill_absent_from, args.trim, not args.no_treadmill,
+                                    args.contacts)
             else:
+                if args.contacts == "events":
+                    raise EcsAnimError(f"{src}: --contacts events needs a C3D file's gait events "
+                                       "(a BVH has none)")
                 motion = import_bvh(src, args.map, args.unit, thresholds, args.up, args.trim,
-                                    args.stature)
+                                    args.stature, not args.no_treadmill)
                 for warning in motion.info.get("warnings", []):
                     print(f"warning: {warning}", file=sys.stderr)
             if args.face is not None:
@@ -171,7 +175,10 @@ def cmd_import(args: argparse.Namespace) -> int:
                        + ", unit "
                        f"{motion.info['unit']} ({motion.info['unit_reason']}), "
                        f"contacts L {contacts[:, 0].mean():.0%} "
-                       f"R {contacts[:, 1].mean():.0%}")
+                       f"R {contacts[:, 1].mean():.0%}"
+                       + (" (from the gait events)" if motion.info.get("contacts", {}).get("method")
+                          == "gait events" else ""))
+            message += _events_and_treadmill(motion.info)
             if motion.info["filled_in"]:
                 message += f", filled in: {', '.join(motion.info['filled_in'])}"
             if extra:
@@ -196,6 +203,8 @@ def cmd_import(args: argparse.Namespace) -> int:
             if show_bar:
                 sys.stderr.write("\r" + " " * 80 + "\r")
             print(message)
+            for why in (motion.info.get("parts_not_computed") or {}).values():
+                print(f"  {why}")
         except (EcsAnimError, OSError) as exc:  # one bad file must not stop the others
             failed += 1
             if show_bar:
@@ -208,6 +217,29 @@ def cmd_import(args: argparse.Namespace) -> int:
         print(f"{failed} of {len(sources)} file(s) failed{rest}", file=sys.stderr)
         return EXIT_FAILED
     return 0
+
+
+def _events_and_treadmill(info: dict[str, Any]) -> str:
+    """The import line's part on gait events and an in-place (treadmill) stance."""
+    text = ""
+    events = info.get("gait_events")
+    if events:
+        check = info.get("contacts", {}).get("events_check") or {}
+        n = sum(e["kind"] in ("strike", "off") for e in events)
+        text += f", {n} gait events"
+        if check.get("worst_ms") is not None:
+            text += f" (detected contacts within {check['worst_ms']:g} ms of them)"
+    centres = info.get("lab_joint_centres")
+    if centres:
+        joint, row = max(centres.items(), key=lambda kv: kv[1]["median_mm"])
+        text += (f", {len(centres)} lab joint centres in the file: ours within "
+                 f"{row['median_mm']:g} mm of them (median; farthest {joint})")
+    belt = info.get("treadmill")
+    if belt:
+        text += (f"; in place on a treadmill-like belt at {belt['speed_mps']:g} m/s: "
+                 + ("turned into root motion (--no-treadmill keeps it in place)"
+                    if belt["converted"] else "kept in place (--no-treadmill)"))
+    return text
 
 
 def motion_summary(path: str) -> dict[str, object]:
@@ -291,6 +323,31 @@ def cmd_info(args: argparse.Namespace) -> int:
     if info.get("first_file_frame"):
         print(f"  starts at  frame {info['first_file_frame']} of the file (--trim, or frames the "
               "pelvis markers could not place)")
+    for why in (info.get("parts_not_computed") or {}).values():
+        print(f"  {why}")
+    contacts_info = info.get("contacts") or {}
+    if contacts_info:
+        print(f"  contacts   {contacts_info.get('method', 'detected')}"
+              + (f", still under {'/'.join(f'{v:g}' for v in contacts_info['speed_threshold_mps'])}"
+                 " m/s (heel/ball)" if contacts_info.get("speed_threshold_mps") else ""))
+    for event in info.get("gait_events") or []:
+        what = f"{event['side'].upper()} {'foot strike' if event['kind'] == 'strike' else 'foot off'}" \
+            if event.get("kind") else f"{event['label'] or '-'} ({event['context'] or '-'})"
+        print(f"  event      {event['time_s']:8.3f} s  {what}")
+    check = contacts_info.get("events_check")
+    if check:
+        print(f"  events     detected contacts within {check['worst_ms']:g} ms of the gait events"
+              if check.get("worst_ms") is not None else
+              "  events     some gait event has no detected contact edge")
+    belt = info.get("treadmill")
+    if belt:
+        print(f"  treadmill  in place, belt {belt['speed_mps']:g} m/s: "
+              + ("turned into root motion" if belt["converted"] else "kept in place"))
+    centres = info.get("lab_joint_centres")
+    if centres:
+        for joint, row in centres.items():
+            print(f"  lab centre {joint:<8} ours {row['median_mm']:.0f} mm from {row['label']} "
+                  f"(median; 95th percentile {row['p95_mm']:.0f} mm)")
     return 0
 
 
@@ -545,9 +602,17 @@ def build_parser() -> argparse.ArgumentParser:
                         "contact during a clap), times in the motion's own seconds; see "
                         "docs/scenarios.md")
     p.add_argument("--contact-height", type=positive_float, default=ContactThresholds.height_m,
-                   metavar="M", help="foot-contact height threshold, m (default %(default)s)")
-    p.add_argument("--contact-speed", type=positive_float, default=ContactThresholds.speed_mps,
-                   metavar="M/S", help="foot-contact speed threshold, m/s (default %(default)s)")
+                   metavar="M", help="foot-contact height above the local ground under the foot, m, "
+                   "for a 0.8 m leg, scaled by the body's (default %(default)s)")
+    p.add_argument("--contact-speed", type=positive_float, default=None, metavar="M/S",
+                   help="foot-contact speed threshold, m/s (default: relative to the body and "
+                   "the clip's own motion)")
+    p.add_argument("--contacts", choices=["detect", "events"], default="detect",
+                   help="foot contacts detected from the feet's stillness (default), or C3D: "
+                   "taken from the file's gait events (EVENT group: foot strike to foot off)")
+    p.add_argument("--no-treadmill", action="store_true",
+                   help="keep an in-place clip in place: by default a stance foot sliding back "
+                   "under a still root, as on a treadmill, becomes root motion (reported)")
     p.add_argument("--contact-min-duration", type=positive_float, default=ContactThresholds.min_duration_s,
                    metavar="S", help="shortest contact kept, s (default %(default)s)")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")

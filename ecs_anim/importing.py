@@ -9,12 +9,19 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .bvh import BvhMotion, BvhSkeleton, forward_kinematics, read_bvh, rest_positions
-from .contacts import ContactThresholds, contact_constraints, detect_contacts
+from .contacts import (
+    ContactThresholds,
+    contact_constraints,
+    contacts_from_events,
+    detect_foot_contacts,
+    treadmill_belt,
+)
 from .errors import EcsAnimError, InputError
 from .joint_map import JointMap, map_skeleton
 from .morphology import ADULT_PROPORTIONS, Morphology, bone_lengths_of
@@ -370,10 +377,12 @@ def source_morphology(positions: F64, name: str) -> Morphology:
 def import_bvh(path: str | Path, map_spec: str | None = None, unit: str | None = None,
                thresholds: ContactThresholds = ContactThresholds(),
                up: str | None = None, trim: FrameRange | None = None,
-               stature_m: float | None = None) -> NormalizedMotion:
+               stature_m: float | None = None, treadmill: bool = True,
+               contacts: str = "detect") -> NormalizedMotion:
     """Read a BVH file and normalize it (``trim``: only those frames; ``up``, ``unit``,
-    ``stature_m`` as in :func:`canonical_clip`). Raises :class:`EcsAnimError` subclasses on bad
-    input."""
+    ``stature_m`` as in :func:`canonical_clip`; ``treadmill``, ``contacts`` as in
+    :func:`normalize_clip`: a BVH has no gait events). Raises :class:`EcsAnimError` subclasses
+    on bad input."""
     path = Path(path)
     motion = read_bvh(path)
     try:
@@ -382,7 +391,8 @@ def import_bvh(path: str | Path, map_spec: str | None = None, unit: str | None =
         if trim is not None:
             kept = trim.frames(len(clip.positions), clip.fps)
             clip, first_file_frame = trim_clip(clip, kept), kept.start
-        normalized = normalize_clip(clip, path.stem, str(path), thresholds)
+        normalized = normalize_clip(clip, path.stem, str(path), thresholds, treadmill,
+                                    contacts=contacts)
         if first_file_frame:
             normalized.info["first_file_frame"] = first_file_frame
     except InputError:
@@ -399,8 +409,30 @@ def import_bvh(path: str | Path, map_spec: str | None = None, unit: str | None =
 
 
 def normalize_clip(clip: CanonicalClip, name: str, source: str,
-                   thresholds: ContactThresholds = ContactThresholds()) -> NormalizedMotion:
-    """Encode a canonical clip, detect its foot contacts, and gather its provenance."""
+                   thresholds: ContactThresholds = ContactThresholds(), treadmill: bool = True,
+                   events: list[dict[str, Any]] | None = None,
+                   contacts: str = "detect") -> NormalizedMotion:
+    """Encode a canonical clip, detect its foot contacts, and gather its provenance.
+
+    ``treadmill``: an in-place clip whose stance foot slides back as on a treadmill
+    (:func:`~ecs_anim.contacts.treadmill_belt`) gets the belt's motion as root motion, so the
+    stance foot is planted (``info.treadmill`` says so); False keeps it in place.
+    ``events``: gait events in the clip's seconds (``{"side", "kind", "time_s"}``);
+    ``contacts="events"`` takes the foot contacts from them instead of detecting them (the
+    heel and ball planted frames are still detected, within those contacts).
+    """
+    if contacts not in ("detect", "events"):
+        raise EcsAnimError(f"--contacts {contacts}: expected 'detect' or 'events'")
+    treadmill_info: dict[str, Any] | None = None
+    belt = treadmill_belt(clip.positions, clip.fps)
+    if belt is not None:
+        treadmill_info = {"belt_mps": [round(float(b), 4) for b in belt],
+                          "speed_mps": round(float(np.linalg.norm(belt)), 3),
+                          "converted": treadmill}
+        if treadmill:
+            shift = np.zeros((len(clip.positions), 3))
+            shift[:, :2] = -belt * (np.arange(len(clip.positions)) / clip.fps)[:, None]
+            clip = replace(clip, positions=clip.positions + shift[:, None, :])
     morph = source_morphology(clip.positions, f"{name} (source)")
     if not MIN_STATURE_M <= morph.stature <= MAX_STATURE_M:
         raise EcsAnimError(f"the captured body comes out {morph.stature:.3g} m tall with the length "
@@ -408,8 +440,25 @@ def normalize_clip(clip: CanonicalClip, name: str, source: str,
                            f"{MIN_STATURE_M:g}-{MAX_STATURE_M:g} m: is the unit right? (--unit)")
     poses = encode(clip.positions, clip.pelvis2world, clip.thorax2world, clip.head2world,
                    morph.lengths)
-    contact = detect_contacts(clip.positions, clip.fps, thresholds)
-    constraints = contact_constraints(contact, clip.fps, thresholds)
+    found = detect_foot_contacts(clip.positions, clip.fps, thresholds)
+    foot = found.foot
+    contact_info: dict[str, Any] = {
+        "method": "detected",
+        "speed_threshold_mps": [round(v, 3) for v in found.speed_threshold_mps],
+    }
+    strikes = [e for e in events or [] if e.get("kind") in ("strike", "off")]
+    on_ground = found.on_ground
+    if strikes:
+        contact_info["events_check"] = event_agreement(on_ground, strikes, clip.fps)
+    if contacts == "events":
+        if not strikes:
+            raise EcsAnimError("--contacts events: the file holds no gait event (EVENT group "
+                               "with foot strikes and foot offs)")
+        foot = on_ground = contacts_from_events(strikes, len(clip.positions), clip.fps)
+        contact_info["method"] = "gait events"
+    constraints = contact_constraints(foot, clip.fps, thresholds)
+    planted = {"heel": found.heel & foot, "ball": found.ball & foot, "foot": foot,
+               "on_ground": on_ground}
     info = {
         "source": source,
         "joint_map": clip.joint_map.how,
@@ -419,9 +468,47 @@ def normalize_clip(clip: CanonicalClip, name: str, source: str,
         "unit_reason": clip.unit_reason,
         "up_axis": clip.up_axis,
         "max_stretch": float(np.max(np.abs(poses.stretch - 1.0))),
+        "contacts": contact_info,
     }
+    if treadmill_info is not None:
+        info["treadmill"] = treadmill_info
     if clip.up_reason:
         info["up_reason"] = clip.up_reason
     if clip.warnings:
         info["warnings"] = list(clip.warnings)
-    return NormalizedMotion(poses, clip.fps, morph, constraints, info)
+    return NormalizedMotion(poses, clip.fps, morph, constraints, info, planted)
+
+
+def event_agreement(foot: NDArray[np.bool_], events: list[dict[str, Any]], fps: float
+                    ) -> dict[str, Any]:
+    """How far the detected contacts' edges lie from the file's gait events: for each event
+    (``{"side", "kind", "time_s"}``, clip seconds), the nearest touch-down (strike) or lift-off
+    (off) of that foot, signed (detected minus event, ms). Events within the shortest contact
+    of the clip's ends cannot show an edge and are counted apart (``at_clip_ends``)."""
+    from .contacts import _intervals
+
+    n = len(foot)
+    duration = (n - 1) / fps
+    errors: list[dict[str, Any]] = []
+    at_ends = 0
+    for side_i, side in enumerate("lr"):
+        runs = _intervals(foot[:, side_i])
+        downs = [a / fps for a, _ in runs if a > 0]
+        ups = [(b + 1) / fps for _, b in runs if b < n - 1]
+        for e in events:
+            if e["side"] != side:
+                continue
+            if e["time_s"] < EVENT_EDGE_S or e["time_s"] > duration - EVENT_EDGE_S:
+                at_ends += 1
+                continue
+            edges = downs if e["kind"] == "strike" else ups
+            diff = min((t - e["time_s"] for t in edges), key=abs, default=math.inf)
+            errors.append({"side": side, "kind": e["kind"], "time_s": round(e["time_s"], 4),
+                           "error_ms": round(1000 * diff, 1) if math.isfinite(diff) else None})
+    finite = [abs(x["error_ms"]) for x in errors if x["error_ms"] is not None]
+    return {"events": errors, "worst_ms": max(finite) if len(finite) == len(errors) and finite
+            else None, "at_clip_ends": at_ends}
+
+
+#: Events closer than this to a clip's ends are not compared (no contact edge can show there).
+EVENT_EDGE_S = 0.08

@@ -170,11 +170,14 @@ _HH_ROLES = _sided({
     "HEAD_FRONT_{s}": ("{S}FHD",), "HEAD_BACK_{s}": ("{S}BHD",),
 })
 
+# Numbered (c3d.org Eb015pi: PV1-4, RTH1-4, RSK1-4, RFT1-3) or lettered as Vicon's cluster
+# model writes them (Vicon sample data 2018: PELA-PELD, LFMA-LFMD femur, LTBA-LTBD tibia,
+# LFTA-LFTD foot; the first three foot markers are used).
 _CLUSTER_ROLES = _sided({
-    **{f"PELVIS_{k}": (f"PV{k}",) for k in range(1, 5)},
-    **{f"THIGH_{k}_{{s}}": (f"{{S}}TH{k}",) for k in range(1, 5)},
-    **{f"SHANK_{k}_{{s}}": (f"{{S}}SK{k}",) for k in range(1, 5)},
-    **{f"FOOT_{k}_{{s}}": (f"{{S}}FT{k}",) for k in range(1, 4)},
+    **{f"PELVIS_{k}": (f"PV{k}", f"PEL{'ABCD'[k - 1]}") for k in range(1, 5)},
+    **{f"THIGH_{k}_{{s}}": (f"{{S}}TH{k}", f"{{S}}FM{'ABCD'[k - 1]}") for k in range(1, 5)},
+    **{f"SHANK_{k}_{{s}}": (f"{{S}}SK{k}", f"{{S}}TB{'ABCD'[k - 1]}") for k in range(1, 5)},
+    **{f"FOOT_{k}_{{s}}": (f"{{S}}FT{k}", f"{{S}}FT{'ABC'[k - 1]}") for k in range(1, 4)},
 })
 
 _LANDMARK_GROUPS = _groups_sided({

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from .constraint_table import check_stored
 from .constraints import ConstraintSpec
@@ -25,7 +26,12 @@ from .normalized import DIRECTION_FIELDS, QUATERNION_FIELDS, TRAILING_SHAPES, No
 from .skeleton import LENGTHS
 
 FORMAT_NAME = "ecs_anim.nmo"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: Versions this ecs_anim reads: 1 (no planted arrays: the foot contacts stand for every part)
+#: and 2 (``planted/heel``, ``planted/ball``, ``planted/foot``, ``planted/on_ground``).
+READ_VERSIONS = (1, 2)
+#: The foot parts whose planted frames a motion stores (:attr:`NormalizedMotion.planted`).
+PLANTED_PARTS = ("heel", "ball", "foot", "on_ground")
 HEADER_KEY = "header_json"
 #: The heaviest source body a header may hold (import writes 22 kg/m² x stature², at most 198 kg).
 MAX_MASS_KG = 1000.0
@@ -42,6 +48,13 @@ class NormalizedMotion:
     source_morphology : the captured subject's body (decoding on it gives the source back).
     constraints : foot contacts and user constraints, times in seconds from the first frame.
     info : provenance (source file, joint map, unit assumed, joints filled in, ...).
+    planted : part -> bool (n_frames, 2), left/right, as import found them: ``"heel"`` (the
+        ankle joint still on the ground), ``"ball"`` (the toe joint), ``"foot"`` (either: the
+        foot contacts, as the constraints hold them), ``"on_ground"`` (touch-down to lift-off,
+        the span gait events mark: the foot rolling in and off as well). None: not known (a
+        version-1 file, a motion made by code); :meth:`planted_part` then answers with the
+        foot contacts. The tick plants the whole foot from the contact constraints; these say
+        which part is down, for a pipeline that pins the ball through toe-off.
     """
 
     poses: NormalizedPoses
@@ -49,6 +62,7 @@ class NormalizedMotion:
     source_morphology: Morphology
     constraints: list[ConstraintSpec] = field(default_factory=list)
     info: dict[str, Any] = field(default_factory=dict)
+    planted: dict[str, NDArray[np.bool_]] | None = None
 
     @property
     def n_frames(self) -> int:
@@ -61,6 +75,15 @@ class NormalizedMotion:
     def contacts(self) -> np.ndarray:
         """Bool (n_frames, 2): left/right foot in full contact."""
         return contacts_from_constraints(self.constraints, self.n_frames, self.fps)
+
+    def planted_part(self, part: str) -> NDArray[np.bool_]:
+        """Bool (n_frames, 2): frames where ``part`` (``"heel"``, ``"ball"``, ``"foot"``) of the
+        left/right foot is planted; the foot contacts where the motion does not know."""
+        if part not in PLANTED_PARTS:
+            raise ValueError(f"planted part {part!r}: expected one of {', '.join(PLANTED_PARTS)}")
+        if self.planted is not None and part in self.planted:
+            return self.planted[part]
+        return self.contacts()
 
 
 def facing_and_travel(motion: NormalizedMotion) -> dict[str, float]:
@@ -98,8 +121,10 @@ def turned_to_face(motion: NormalizedMotion, heading_rad: float) -> NormalizedMo
 
 def save_nmo(motion: NormalizedMotion, path: str | Path, force: bool = False) -> None:
     """Write ``motion`` to ``path``; refuses to overwrite unless ``force``."""
-    arrays = {f"poses/{k}": np.ascontiguousarray(v, dtype=np.float64)
-              for k, v in motion.poses.arrays().items()}
+    arrays: dict[str, Any] = {f"poses/{k}": np.ascontiguousarray(v, dtype=np.float64)
+                              for k, v in motion.poses.arrays().items()}
+    for part, flags in (motion.planted or {}).items():
+        arrays[f"planted/{part}"] = np.ascontiguousarray(flags, dtype=bool)
     header = {
         "format": FORMAT_NAME,
         "version": FORMAT_VERSION,
@@ -143,6 +168,8 @@ def load_nmo(path: str | Path) -> NormalizedMotion:
                 if key not in data.files:
                     raise InputError(path, f"damaged .nmo file: array {name!r} is missing")
                 arrays[name] = np.asarray(data[key], dtype=np.float64)
+            planted = {part: np.asarray(data[f"planted/{part}"]) for part in PLANTED_PARTS
+                       if f"planted/{part}" in data.files}
     except InputError:
         raise
     except Exception as exc:  # zip, zlib, json, numpy: any failure to read means a damaged file
@@ -152,6 +179,10 @@ def load_nmo(path: str | Path) -> NormalizedMotion:
     problem = pose_arrays_problem(arrays, n)
     if problem:
         raise InputError(path, f"damaged .nmo file: {problem}")
+    for part, flags in planted.items():
+        if flags.dtype != np.bool_ or flags.shape != (n, 2):
+            raise InputError(path, f"damaged .nmo file: planted/{part} must be bool ({n}, 2), "
+                                   f"found {flags.dtype} {flags.shape}")
     try:
         morph = Morphology.from_dict(header["source_morphology"])
         constraints = [ConstraintSpec.from_dict(c) for c in header.get("constraints", [])]
@@ -159,7 +190,7 @@ def load_nmo(path: str | Path) -> NormalizedMotion:
     except (KeyError, TypeError, ValueError) as exc:
         raise InputError(path, f"damaged .nmo header: {exc}") from None
     return NormalizedMotion(NormalizedPoses(**arrays), float(header["fps"]), morph, constraints,
-                            dict(header.get("info", {})))
+                            dict(header.get("info", {})), planted or None)
 
 
 def pose_arrays_problem(arrays: dict[str, np.ndarray], n_frames: int) -> str | None:
@@ -210,10 +241,10 @@ def _check_header(path: str, header: Any) -> None:
     if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:
         raise InputError(path, "not an .nmo file (wrong format name in header)")
     version = header.get("version")
-    if type(version) is not int or version != FORMAT_VERSION:  # JSON true is not version 1
+    if type(version) is not int or version not in READ_VERSIONS:  # JSON true is not version 1
         raise InputError(path, f".nmo format version {version!r} is not supported by this "
-                               f"ecs_anim (reads version {FORMAT_VERSION}); re-import the source "
-                               "clip or upgrade ecs_anim")
+                               f"ecs_anim (reads versions {READ_VERSIONS[0]}-{READ_VERSIONS[-1]}); "
+                               "re-import the source clip or upgrade ecs_anim")
     for key in ("fps", "n_frames", "source_morphology"):
         if key not in header:
             raise InputError(path, f"damaged .nmo header: {key!r} is missing")

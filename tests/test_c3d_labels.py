@@ -127,3 +127,18 @@ def test_an_arm_needs_no_upa_and_nothing_to_carry_the_body_is_refused():
     with pytest.raises(MappingError) as err:
         check_usable(mmap, labels)
     assert "trunk not computed: found C7; lacks CLAV" in str(err.value)
+
+
+def test_custom_knee_labels_need_the_user_map_kept_in_tests_data():
+    """Qualisys' knee markers (``r_knjntln``, ``r_suppat``, ``r_tubtib``) follow no convention:
+    with no flag the legs are not computed; with tests/data/maps/qualisys_knee_joint_line.yaml
+    the walk imports, legs and all."""
+    from pathlib import Path
+
+    path = _varied("qualisys_lowercase_underscore_240hz.c3d")
+    user_map = Path(__file__).parent / "data" / "maps" / "qualisys_knee_joint_line.yaml"
+    motion = import_c3d(path, map_spec=str(user_map))
+    assert {"leg_l", "leg_r", "pelvis"}.isdisjoint(motion.info["absent"])
+    assert 1.3 < motion.source_morphology.stature < 2.0
+    contact = motion.contacts()
+    assert np.all((contact.mean(axis=0) > 0.3) & (contact.mean(axis=0) < 0.85))

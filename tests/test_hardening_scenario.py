@@ -317,9 +317,9 @@ def set_length(segment: str, value: object):
 
 @pytest.mark.parametrize("edit, message", [
     (lambda h: h.update(version=True), (".nmo format version True is not supported by this ecs_anim "
-                                       "(reads version 1); re-import the source clip or upgrade ecs_anim")),
+                                       "(reads versions 1-2); re-import the source clip or upgrade ecs_anim")),
     (lambda h: h.update(version=1.0), (".nmo format version 1.0 is not supported by this ecs_anim "
-                                      "(reads version 1); re-import the source clip or upgrade ecs_anim")),
+                                      "(reads versions 1-2); re-import the source clip or upgrade ecs_anim")),
     (set_length("thigh_l", 1000.0), ("damaged .nmo header: source_morphology: segment lengths must be "
                                     "numbers above 0 and at most 3 m, found thigh_l=1000.0")),
     (set_length("forearm_r", "0.25"), ("damaged .nmo header: source_morphology: segment lengths must be "
