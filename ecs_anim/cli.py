@@ -422,20 +422,26 @@ def use_threads(args: argparse.Namespace) -> None:
         raise EcsAnimError(f"--threads {args.threads}: {exc}") from None
 
 
-#: The commands that run ticks (and so, on a first run, compile the kernels).
-TICKING_COMMANDS = ("run", "view", "batch", "bench")
+#: The commands that run ticks in other processes (batch workers, the bench's sizes): they say
+#: that the kernels compile before they start them. ``run`` and ``view`` say it on their first
+#: tick, after their input was checked (an error comes alone).
+EARLY_NOTICE_COMMANDS = ("batch", "bench")
 
 
 def say_if_compiling(args: argparse.Namespace) -> None:
-    """Before the first tick of a first run: one line on stderr saying the kernels are being
-    compiled (once; cached in the user's cache folder)."""
+    """On a first run (the kernels not compiled yet): one line on stderr saying they are being
+    compiled (once; cached in the user's cache folder), before the first tick."""
     from . import kernels
 
-    if args.command not in TICKING_COMMANDS or getattr(args, "what", "pipeline") != "pipeline":
-        return
-    notice = kernels.compile_notice()
-    if notice is not None:
+    def say(notice: str) -> None:
         print(notice, file=sys.stderr, flush=True)
+
+    if args.command in ("run", "view"):
+        kernels.announce_compiling(say)
+    elif args.command in EARLY_NOTICE_COMMANDS and getattr(args, "what", "pipeline") == "pipeline":
+        notice = kernels.compile_notice()
+        if notice is not None:
+            say(notice)
 
 
 def cmd_view_threads(args: argparse.Namespace) -> int:
@@ -706,6 +712,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as exc:  # an unreadable input, ...: say which file
         print(f"error: {error_line(exc)}", file=sys.stderr)
         return EXIT_FAILED
+    finally:
+        from . import kernels
+
+        kernels.announce_compiling(None)  # a command that never ticked leaves nothing behind
 
 
 if __name__ == "__main__":

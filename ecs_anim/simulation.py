@@ -17,6 +17,7 @@ import esper
 import numpy as np
 from numpy.typing import NDArray
 
+from . import kernels
 from .body_change import mass_tables
 from .body_points import body_point
 from .components import (
@@ -482,6 +483,8 @@ class Simulation:
 
     def step(self) -> None:
         """Advance one fixed tick through the schedule."""
+        if self.tick == 0:
+            kernels.before_first_tick()
         with self._active():
             esper.process(self.dt)
         self.tick += 1

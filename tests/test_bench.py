@@ -133,6 +133,8 @@ def test_a_first_run_says_once_that_it_compiles(tmp_path, monkeypatch, capsys):
     assert str(kernels.cache_dir()) in err
     assert main(["bench", "import", "nope.bvh"]) == 1  # no tick: nothing said
     assert "compiling" not in capsys.readouterr().err
+    assert main(["run", str(tmp_path / "missing.yaml")]) == 1  # refused before a tick: the error alone
+    assert capsys.readouterr().err.count("\n") == 1
     monkeypatch.setattr(kernels, "uncompiled_kernels", lambda: [])
     assert main(["run", SCENARIO, "--seconds", "0.1"]) == 0
     assert "compiling" not in capsys.readouterr().err

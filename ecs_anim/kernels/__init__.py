@@ -13,6 +13,7 @@ imported, so the package imports its kernels only through here.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
 
 
@@ -73,6 +74,25 @@ def compile_notice() -> str | None:
     if not uncompiled_kernels():
         return None
     return f"compiling the tick's kernels once (about 30 s); cached in {cache_dir()}"
+
+
+_announcers: list[Callable[[str], None]] = []
+
+
+def announce_compiling(say: Callable[[str], None] | None) -> None:
+    """Have this process's next first simulation tick call ``say`` with :func:`compile_notice`
+    if the kernels still have to be compiled (the CLI prints it on stderr); None: no more."""
+    _announcers[:] = [] if say is None else [say]
+
+
+def before_first_tick() -> None:
+    """Called by :meth:`ecs_anim.simulation.Simulation.step` before a simulation's first tick:
+    says, once per process, what :func:`announce_compiling` asked for."""
+    if _announcers:
+        say = _announcers.pop()
+        notice = compile_notice()
+        if notice is not None:
+            say(notice)
 
 
 def available_threads() -> int:
