@@ -52,18 +52,35 @@ def _cache_subfolder() -> Path:
 HELPER_MODULES = ("vec",)
 
 
+def _compiled_from(index: Path, source_hash: bytes) -> bool:
+    """Whether a numba cache index (``.nbi``) was written for the source whose sha256 is
+    ``source_hash``: numba 0.68 stamps each index with that hash (``caching._CacheLocator.
+    get_source_stamp``) and recompiles when it differs, whatever the file times say."""
+    import pickle
+
+    try:
+        with open(index, "rb") as f:
+            pickle.load(f)  # numba's version
+            stamp, _ = pickle.loads(f.read())
+    except Exception:  # noqa: BLE001 - an unreadable or foreign index is just not ours
+        return False
+    return bool(stamp == source_hash)
+
+
 def uncompiled_kernels() -> list[str]:
-    """Names of the kernel modules the cache holds no up-to-date compiled code for: not
-    compiled yet, or changed after its newest compiled function (a cheap check on file times;
-    numba itself checks each function). A helper module counts only once it has some."""
+    """Names of the kernel modules the cache holds no compiled code for that matches their
+    current source (not compiled yet, or changed since). A module of helpers only (compiled as
+    part of the kernels calling it) counts once it has some."""
+    import hashlib
+
     folder = _cache_subfolder()
     missing = []
     for source in kernel_sources():
-        if source.stem in HELPER_MODULES and not any(folder.glob(f"{source.stem}.*.nbi")):
+        indexes = list(folder.glob(f"{source.stem}.*.nbi")) if folder.is_dir() else []
+        if source.stem in HELPER_MODULES and not indexes:
             continue
-        stamps = [p.stat().st_mtime for p in folder.glob(f"{source.stem}.*.nbi")] \
-            if folder.is_dir() else []
-        if not stamps or max(stamps) < source.stat().st_mtime:
+        source_hash = hashlib.sha256(source.read_bytes()).digest()
+        if not any(_compiled_from(index, source_hash) for index in indexes):
             missing.append(source.stem)
     return missing
 
