@@ -137,7 +137,7 @@ def _intervals(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
     """Runs of True as (first, last) frame indices."""
     padded = np.concatenate([[False], mask, [False]]).astype(np.int8)
     edges = np.flatnonzero(np.diff(padded))
-    return [(int(a), int(b) - 1) for a, b in zip(edges[::2], edges[1::2])]
+    return [(int(a), int(b) - 1) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
 def _hysteresis(enter: NDArray[np.bool_], leave: NDArray[np.bool_]) -> NDArray[np.bool_]:
@@ -152,8 +152,8 @@ def _hysteresis(enter: NDArray[np.bool_], leave: NDArray[np.bool_]) -> NDArray[n
 def _clean(flags: NDArray[np.bool_], fps: float, th: ContactThresholds) -> NDArray[np.bool_]:
     """Short gaps between two contacts filled, then short contacts dropped (per column)."""
     flags = flags.copy()
-    min_len = max(1, int(round(th.min_duration_s * fps)))
-    min_gap = max(1, int(round(th.min_gap_s * fps)))
+    min_len = max(1, round(th.min_duration_s * fps))
+    min_gap = max(1, round(th.min_gap_s * fps))
     for side in range(flags.shape[1]):
         col = flags[:, side]
         for a, b in _intervals(~col):

@@ -28,7 +28,8 @@ from .morphology import ADULT_PROPORTIONS, Morphology, bone_lengths_of
 from .motion import NormalizedMotion
 from .normalized import encode
 from .rotations import frame_from_axes, normalize
-from .skeleton import JOINT_INDEX as J, JOINTS, LENGTH_INDEX, N_JOINTS
+from .skeleton import JOINT_INDEX as J
+from .skeleton import JOINTS, LENGTH_INDEX, N_JOINTS
 
 F64 = NDArray[np.float64]
 
@@ -129,7 +130,7 @@ class FrameRange:
         def index(value: float | None, default: int) -> int:
             if value is None:
                 return default
-            frame = int(round(value * fps)) if self.seconds else int(value)
+            frame = round(value * fps) if self.seconds else int(value)
             return frame + n_frames if frame < 0 else frame - first_frame
 
         start = min(max(index(self.start, 0), 0), n_frames)
@@ -463,7 +464,7 @@ def normalize_clip(clip: CanonicalClip, name: str, source: str,
         "source": source,
         "joint_map": clip.joint_map.how,
         "joints": {j: clip.joint_map.names.get(j) for j in JOINTS},
-        "filled_in": [j for j, m in zip(JOINTS, clip.measured) if not m],
+        "filled_in": [j for j, m in zip(JOINTS, clip.measured, strict=True) if not m],
         "unit": clip.unit,
         "unit_reason": clip.unit_reason,
         "up_axis": clip.up_axis,

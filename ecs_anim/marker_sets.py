@@ -391,7 +391,7 @@ def check_usable(mmap: MarkerMap, labels: list[str]) -> tuple[list[str], list[st
     from the pelvis, so they are absent when the pelvis is. Raises :class:`MappingError` only
     when nothing can carry the body: neither the pelvis nor (an upper-body trial) the trunk.
     """
-    present, absent, incomplete = group_status(mmap)
+    present, _absent, incomplete = group_status(mmap)
     notes: dict[str, str] = {g: _part_message(mmap, labels, g, m) for g, m in incomplete.items()}
     if "pelvis" not in present:
         for s in "lr":

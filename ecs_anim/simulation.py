@@ -186,7 +186,7 @@ class Simulation:
         queue_clip = np.zeros((k, MAX_QUEUE), np.int64)
         queue_fade, queue_loop = np.zeros((k, MAX_QUEUE)), np.zeros((k, MAX_QUEUE), bool)
         clip, queue_len = np.zeros(k, np.int64), np.zeros(k, np.int64)
-        for i, (name, player) in enumerate(zip(names, players)):
+        for i, (name, player) in enumerate(zip(names, players, strict=True)):
             try:
                 clip[i] = self.bank.index(player.clip)
                 queue = [self.bank.index(q.clip) for q in player.queue]

@@ -55,10 +55,26 @@ from .constraint_table import (
 )
 from .ground_adapt import MAX_LEG_EXTENSION, vertical_slack_for_reach
 from .morphology import centres_of_mass, leg_length
-from .normalized import SIDE_JOINTS, SIDE_LENGTHS, DecodedPose, NormalizedPoses, decode, distal_frames, two_bone_middle
+from .normalized import (
+    SIDE_JOINTS,
+    SIDE_LENGTHS,
+    DecodedPose,
+    NormalizedPoses,
+    decode,
+    distal_frames,
+    two_bone_middle,
+)
 from .rotations import frame_from_axes, matrix_from_quat, normalize, quat_from_matrix
-from .skeleton import JOINT_INDEX as J, LENGTH_INDEX as L
-from .solver import axis_angle, bring_within_reach, point_in_limb, reach_point, rotation_toward, turn_about_axis
+from .skeleton import JOINT_INDEX as J
+from .skeleton import LENGTH_INDEX as L
+from .solver import (
+    axis_angle,
+    bring_within_reach,
+    point_in_limb,
+    reach_point,
+    rotation_toward,
+    turn_about_axis,
+)
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]

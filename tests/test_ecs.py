@@ -11,6 +11,7 @@ import sys
 import esper
 import numpy as np
 import pytest
+
 from conftest import MOTIONS_DIR
 from ecs_anim.components import (
     CharacterRow,
@@ -23,13 +24,12 @@ from ecs_anim.components import (
     Placement,
     Posture,
 )
-from ecs_anim.systems import SCHEDULE
-
 from ecs_anim.constraint_table import ConstraintTable
 from ecs_anim.ground import Plane, Stairs
 from ecs_anim.importing import import_bvh
 from ecs_anim.simulation import Simulation
 from ecs_anim.store import SPEC_FIELDS, CharacterStore
+from ecs_anim.systems import SCHEDULE
 
 #: Every store field's writers in tick order (DESIGN §6), derived from the declarations below.
 EXPECTED_WRITERS = {

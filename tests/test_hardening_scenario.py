@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from conftest import mocap_files
 
+from conftest import mocap_files
 from ecs_anim import scenario as scenario_module
 from ecs_anim.c3d_import import import_c3d
 from ecs_anim.cli import main

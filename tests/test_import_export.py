@@ -11,8 +11,8 @@ import json
 
 import numpy as np
 import pytest
-from conftest import MOCAP_DIR, MOTIONS_DIR, mocap_params, require_mocap
 
+from conftest import MOCAP_DIR, MOTIONS_DIR, mocap_params, require_mocap
 from ecs_anim.bvh import read_bvh
 from ecs_anim.cli import main
 from ecs_anim.contacts import _intervals, horizontal_speed
@@ -132,7 +132,7 @@ def test_exported_bvh_reads_back_and_has_the_morphology_lengths(tmp_path, preset
     assert np.abs(clip.positions - from_npz).max() < 0.1 * MM
     # Exactly the morphology's segment lengths, in the file and on every frame.
     lengths = bone_lengths_of(clip.positions)
-    for k, (a, b) in enumerate(BONE_JOINTS):
+    for k, (a, _b) in enumerate(BONE_JOINTS):
         if a >= 0:
             np.testing.assert_allclose(lengths[:, k], morph.lengths[k], atol=1e-5,
                                        err_msg=LENGTHS[k])

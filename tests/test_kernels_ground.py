@@ -5,9 +5,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
-from ecs_anim.components import MotionPlayer, Placement, QueuedClip
-from ecs_anim.systems import GroundAdapt
 
+from ecs_anim.components import MotionPlayer, Placement, QueuedClip
 from ecs_anim.ground import (
     Bumps,
     Combined,
@@ -24,6 +23,7 @@ from ecs_anim.library import MOTIONS_DIR
 from ecs_anim.morphology import Morphology
 from ecs_anim.normalized import QUATERNION_FIELDS
 from ecs_anim.simulation import Simulation
+from ecs_anim.systems import GroundAdapt
 
 
 def _grid(seed: int) -> HeightGrid:

@@ -15,9 +15,9 @@ import re
 
 import numpy as np
 import pytest
-from conftest import MOCAP_DIR
 from test_import_export import reference_positions
 
+from conftest import MOCAP_DIR
 from ecs_anim.cli import main
 from ecs_anim.motion import load_nmo
 from ecs_anim.skeleton import JOINT_INDEX, JOINTS

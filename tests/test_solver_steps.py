@@ -79,7 +79,7 @@ def test_elbow_target_off_the_circle_gets_the_closest_point():
 
 
 def test_swivel_weight_and_degenerate_target_are_finite():
-    root, frame, upper, lower = _limbs()
+    root, frame, _upper, _lower = _limbs()
     on_axis = root + frame[:, :, 2]
     same = swivel(root, frame, on_axis)
     np.testing.assert_allclose(same, frame, atol=1e-12)

@@ -141,7 +141,7 @@ def fits(arrays: DecodedArrays | DecodedPose | None, n: int) -> bool:
     if isinstance(arrays, DecodedPose):
         arrays = decoded_arrays(arrays)
     return all(a.shape == s and a.dtype == np.float64 and a.flags.writeable
-               for a, s in zip(arrays, shapes))
+               for a, s in zip(arrays, shapes, strict=True))
 
 
 @njit(cache=True)
