@@ -238,8 +238,9 @@ class Simulation:
                 esper.add_component(entity, players[i])
                 esper.add_component(entity, placements[i])
                 esper.add_component(entity, CharacterRow(first + i))
-                if grounds[i] is not None:
-                    esper.add_component(entity, GroundQuery(grounds[i]))
+                ground = grounds[i]
+                if ground is not None:
+                    esper.add_component(entity, GroundQuery(ground))
         self.structure_version += 1
         for i, player in enumerate(players):
             clips = [player.clip] + [q.clip for q in player.queue]

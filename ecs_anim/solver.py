@@ -154,7 +154,8 @@ def point_in_limb(upper: F64, lower: F64, fraction: F64, on_lower: NDArray[np.bo
     origin = np.where(on_lower[..., None], middle, 0.0)
     # Bone frame: x = limb normal, z = d, y = z × x = (0, d_z, -d_y).
     y_axis = np.stack([zeros, d[..., 2], -d[..., 1]], axis=-1)
-    return origin + q[..., :1] * np.array([1.0, 0.0, 0.0]) + q[..., 1:2] * y_axis + q[..., 2:3] * d
+    point: F64 = origin + q[..., :1] * np.array([1.0, 0.0, 0.0]) + q[..., 1:2] * y_axis + q[..., 2:3] * d
+    return point
 
 
 def reach_point(root: F64, limb2world: F64, upper: F64, lower: F64, fraction: F64,

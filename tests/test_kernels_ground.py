@@ -95,11 +95,11 @@ BODIES = [Morphology.preset("child"), Morphology.preset("adult_male"), Morpholog
 
 
 @pytest.fixture(scope="module")
-def motions() -> dict:  # type: ignore[type-arg]
+def motions() -> dict:
     return {name: import_bvh(MOTIONS_DIR / f"{name}.bvh") for name in ("walk", "idle", "kick")}
 
 
-def _sim(motions: dict, ground: Ground, seed: int) -> Simulation:  # type: ignore[type-arg]
+def _sim(motions: dict, ground: Ground, seed: int) -> Simulation:
     rng = np.random.default_rng(seed)
     sim = Simulation(motions, ground)
     for k in range(8):
@@ -134,7 +134,7 @@ def _assert_same_state(a: Simulation, b: Simulation, tick: int) -> None:
 
 
 @pytest.mark.parametrize("terrain", list(TERRAINS))
-def test_compiled_ground_adapt_equals_numpy(motions: dict, terrain: str) -> None:  # type: ignore[type-arg]
+def test_compiled_ground_adapt_equals_numpy(motions: dict, terrain: str) -> None:
     compiled = _sim(motions, TERRAINS[terrain], 1321)
     reference = _sim(motions, TERRAINS[terrain], 1321)
     system = _ground_adapt(reference)
@@ -145,7 +145,7 @@ def test_compiled_ground_adapt_equals_numpy(motions: dict, terrain: str) -> None
         _assert_same_state(compiled, reference, tick)
 
 
-def test_a_ground_of_ones_own_goes_through_numpy(motions: dict) -> None:  # type: ignore[type-arg]
+def test_a_ground_of_ones_own_goes_through_numpy(motions: dict) -> None:
     mine = _sim(motions, Combined((Bumps(0.03, 2.5, 3.0), _Ripples())), 1322)
     assert _ground_adapt(mine)._description(mine.ground) is None
     reference = _sim(motions, Combined((Bumps(0.03, 2.5, 3.0), _Ripples())), 1322)

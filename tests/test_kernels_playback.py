@@ -53,7 +53,7 @@ def _assert_poses_equal(got: NormalizedPoses, want: NormalizedPoses) -> None:
         np.testing.assert_allclose(g, w, rtol=0, atol=1e-9, err_msg=name)
 
 
-def _scene(bank: ClipBank, rng: np.random.Generator, n: int):  # type: ignore[no-untyped-def]
+def _scene(bank: ClipBank, rng: np.random.Generator, n: int):
     clip = rng.integers(0, len(bank.names), n).astype(np.int64)
     period = bank.duration_s(clip)
     # Inside the clip, past its end (loops, or held), before its start, and exactly on frames.
