@@ -66,9 +66,9 @@ def write_c3d(path: Path, labels: list[str], positions: np.ndarray, valid: np.nd
         frames.append((points, np.zeros((0, 0), dtype=np.float32)))
     writer.add_frames(frames)
     writer.set_point_labels(labels)
-    with open(path, "wb") as f, warnings.catch_warnings():
+    with open(path, "wb") as out, warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        writer.write(f)
+        writer.write(out)
     return path
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import re
 import sys
+from typing import Any
 
 import esper
 import numpy as np
@@ -203,7 +204,7 @@ def test_specifications_are_replaced_not_mutated(walk):
     sim, (a, b, _c) = _sim(walk)
     with sim._active():
         for component in (Morphology, MotionPlayer, Placement, CharacterRow, Name):
-            spec = esper.component_for_entity(a, component)
+            spec: Any = esper.component_for_entity(a, component)  # a frozen dataclass
             with pytest.raises(dataclasses.FrozenInstanceError):
                 spec.__setattr__(dataclasses.fields(spec)[0].name, None)
     sim.step()

@@ -182,7 +182,7 @@ def test_landmark_pelvis_gaps_trimmed_at_the_ends_and_repaired_inside(tmp_path):
 def _iterations_per_tick(idle, far_rows: set[int], n: int, monkeypatch) -> tuple[float, np.ndarray]:
     import ecs_anim.systems.constraint_solve as constraint_solve
 
-    used: list[int] = []
+    used: list[np.ndarray] = []
     solve = constraint_solve.solve
 
     def counting(*args, **kwargs):

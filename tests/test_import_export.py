@@ -94,7 +94,7 @@ def test_source_export_reproduces_every_mapped_joint_within_0_1_mm(path, tmp_pat
                           axis=-1).max()
         for j, s in mapped.items()
     }
-    worst = max(errors, key=errors.get)
+    worst = max(errors, key=lambda j: errors[j])
     assert errors[worst] < 0.1 * MM, f"{worst} off by {errors[worst] * 1e3:.4f} mm"
     assert exported["positions"].shape == (ref.shape[0], len(JOINTS), 3)
     assert np.all(np.isfinite(exported["positions"]))

@@ -31,7 +31,7 @@ def _grid(seed: int) -> HeightGrid:
     return HeightGrid(rng.uniform(-0.2, 0.3, (7, 11)), 0.45, -1.3, 0.7)
 
 
-GROUNDS = {
+GROUNDS: dict[str, Ground] = {
     "plane": Plane(0.12),
     "slope": Slope(0.08, -0.05, 0.3),
     "stairs": Stairs(rise_m=0.13, run_m=0.31, steps=5, start_m=0.4, heading_deg=37.0, z_m=0.02),
@@ -84,7 +84,7 @@ def test_a_ground_of_ones_own_has_no_compiled_form() -> None:
 
 # --- GroundAdapt: the compiled system against its numpy reference ---------------------------
 
-TERRAINS = {
+TERRAINS: dict[str, Ground] = {
     "bumps_and_stairs": Combined((Bumps(0.03, 2.5, 3.0), Stairs(0.12, 0.40, 6, 2.0))),
     "steep_stairs": Stairs(rise_m=0.17, run_m=0.28, steps=10, start_m=0.8, heading_deg=15.0),
     "slope": Combined((Slope(0.12, -0.05), Bumps(0.05, 1.5, 1.2))),

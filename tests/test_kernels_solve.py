@@ -236,7 +236,8 @@ def one_state(idle, add, n=1, com_control=False):
     finally:
         patch.undo()
     args = capture.calls[0]
-    return compiled.prepare(*args[:5], decoded=args[6]), args
+    poses, lengths, goals, masses, com_fraction = args[:5]
+    return compiled.prepare(poses, lengths, goals, masses, com_fraction, decoded=args[6]), args
 
 
 def user_goal(s, table_index):

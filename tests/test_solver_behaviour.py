@@ -481,7 +481,7 @@ def test_random_bodies_targets_and_priorities(stature, legs, picks):
     body = with_lengths_m(base, {k: base[k] * legs for k in ("thigh_l", "thigh_r", "shank_l", "shank_r")})
     sim, (e,) = still(FLOATING, body=body)
     pelvis = sim.store.positions[0, J["pelvis"]]
-    first, error_alone = None, None
+    first, error_alone = -1, np.inf
     for k, (point, priority, offset, trunk) in enumerate(picks):
         group = GROUPS[body_point(point, 0.5 if point == "forearm_l" else None).group]
         chain = (group, "trunk") if trunk and group in ("head", "arm_l", "arm_r") else None
@@ -527,12 +527,12 @@ def test_constraints_given_at_import_play_with_the_motion_on_every_body(tmp_path
     for i, preset in enumerate(("child", "tall")):
         sim.spawn(preset, Morphology.preset(preset), MotionPlayer("idle", loop=False),
                   Placement((0.0, 1.5 * i)))
-    gaps = []
+    gap_rows = []
     for _ in range(90):
         sim.step()
         q = sim.store.positions
-        gaps.append(np.linalg.norm(q[:, J["wrist_l"]] - q[:, J["wrist_r"]], axis=1))
-    gaps = np.array(gaps)  # (ticks, 2); tick k shows motion time k / 30 s
+        gap_rows.append(np.linalg.norm(q[:, J["wrist_l"]] - q[:, J["wrist_r"]], axis=1))
+    gaps = np.array(gap_rows)  # (ticks, 2); tick k shows motion time k / 30 s
     held = slice(21, 69)  # 0.7 s .. 2.3 s: fully active
     np.testing.assert_allclose(gaps[held], 0.27, atol=1e-3)
     assert np.all(np.abs(gaps[:10] - 0.27) > 0.005)  # before: the motion's own hands
@@ -604,7 +604,7 @@ def test_a_characters_result_does_not_depend_on_who_else_is_solved(idle, monkeyp
     iterations and ends the same."""
     import ecs_anim.systems.constraint_solve as system
 
-    iterations = []
+    iterations: list[int] = []
 
     def counting(*args, **kwargs):
         result = system_solve(*args, **kwargs)
