@@ -64,11 +64,10 @@ from .normalized import (
     distal_frames,
     two_bone_middle,
 )
-from .rotations import frame_from_axes, matrix_from_quat, normalize, quat_from_matrix
+from .rotations import axis_angle, frame_from_axes, matrix_from_quat, normalize, quat_from_matrix
 from .skeleton import JOINT_INDEX as J
 from .skeleton import LENGTH_INDEX as L
 from .solver import (
-    axis_angle,
     bring_within_reach,
     point_in_limb,
     reach_point,

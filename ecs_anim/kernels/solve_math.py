@@ -32,7 +32,7 @@ from .vec import (
 
 @njit(cache=True)
 def axis_angle(k: Vec3, angle: float) -> Frame:
-    """Mirrors :func:`ecs_anim.solver.axis_angle`: the rotation by ``angle`` about the unit axis
+    """Mirrors :func:`ecs_anim.rotations.axis_angle`: the rotation by ``angle`` about the unit axis
     ``k`` (Rodrigues, ``I + sin K + (1 - cos) K K``)."""
     s, c = math.sin(angle), math.cos(angle)
     v = 1.0 - c
