@@ -289,7 +289,7 @@ def _manifest_body(r: Any, node: yaml.Node, where: str, base: Path,
         raise r.fail(keys["statures"], f"{where}.statures", f"{count} statures from {low:g} to "
                      f"{high:g} m repeat a name at 1 cm ({names[0]}, ...); give fewer")
     return [Body(n, Morphology.from_stature(float(s), given["sex"], given["proportions"], name=n))
-            for n, s in zip(names, statures, strict=False)]
+            for n, s in zip(names, statures, strict=True)]
 
 
 def _grounds_mapping(r: Any, node: yaml.Node, where: str) -> list[NamedGround]:
@@ -758,7 +758,7 @@ def import_task(path: str) -> tuple[NormalizedMotion | None, str]:
     """A worker's import: (motion, "") or (None, the one-line error)."""
     try:
         return import_clip(path), ""
-    except Exception as exc:  # noqa: BLE001 - a bad clip fails its own jobs, never the batch
+    except Exception as exc:
         return None, error_text(exc)
 
 
@@ -770,7 +770,7 @@ def job_task(job: Job, imported: tuple[NormalizedMotion | None, str]) -> Outcome
     start = time.perf_counter()
     try:
         return run_job(job, motion)
-    except Exception as exc:  # noqa: BLE001 - one bad job must not stop the others
+    except Exception as exc:
         return Outcome(failed_record(job, error_text(exc), time.perf_counter() - start))
 
 
@@ -867,7 +867,7 @@ def _local_pool(work: WorkList, workers: int) -> Iterator[tuple[Job, Outcome]]:
                     except BrokenProcessPool:
                         broken = True
                         continue
-                    except Exception as exc:  # noqa: BLE001 - e.g. a result that cannot be pickled
+                    except Exception as exc:
                         result = (None, error_text(exc)) if key.startswith("import:") else \
                             Outcome(failed_record(jobs[name], error_text(exc)))
                     if key in todo:
@@ -983,7 +983,7 @@ def _ray_engine(work: WorkList, workers: int, address: str | None) -> Iterator[t
                 job = refs.pop(ref)
                 try:
                     yield job, ray.get(ref)
-                except Exception as exc:  # noqa: BLE001 - a worker or node died
+                except Exception as exc:
                     yield job, Outcome(failed_record(job, f"ray task failed: "
                                                           f"{' '.join(str(exc).split())[:200]}"))
     finally:

@@ -230,7 +230,7 @@ def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
         raise InputError(path, f"found {len(rows)} frame lines but 'Frames:' says {n_frames}",
                          rows[n_frames][0])
     split_rows = [ln.split() for _, ln in rows]
-    for (line_no, _), tokens in zip(rows, split_rows):
+    for (line_no, _), tokens in zip(rows, split_rows, strict=True):
         if len(tokens) != n_channels:
             raise InputError(path, f"frame line has {len(tokens)} values, expected {n_channels} "
                                    "(one per channel of the hierarchy)", line_no)
@@ -262,7 +262,7 @@ def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
 def _reject_unplain_frame(rows: list[tuple[int, str]], split_rows: list[list[str]],
                           path: str) -> None:
     """Raise :class:`InputError` at the first frame line holding a non-ASCII character or '_'."""
-    for (line_no, ln), tokens in zip(rows, split_rows):
+    for (line_no, ln), tokens in zip(rows, split_rows, strict=True):
         if not _is_plain(ln):
             _require_plain(tokens, path, line_no, "frame line")
             char = next(c for c in ln if not _is_plain(c))  # a non-ASCII space between numbers

@@ -73,7 +73,15 @@ from .joint_map import JointMap
 from .marker_sets import GROUPS, MarkerMap, check_usable, match_markers
 from .morphology import ADULT_PROPORTIONS
 from .motion import NormalizedMotion
-from .rotations import frame_from_axes, matrix_from_quat, normalize, quat_from_matrix, rot_axis, slerp, yaw_of
+from .rotations import (
+    frame_from_axes,
+    matrix_from_quat,
+    normalize,
+    quat_from_matrix,
+    rot_axis,
+    slerp,
+    yaw_of,
+)
 from .skeleton import JOINT_INDEX as J
 from .skeleton import JOINTS, N_JOINTS, REST_HIP_DIR_LEFT
 

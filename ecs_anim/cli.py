@@ -10,11 +10,12 @@ import json
 import math
 import os
 import sys
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
-from typing import Any, Sequence
 
 from .benchmark import cmd_bench, size_list, walkers_on_bumps
 from .constraint_table import check_stored
@@ -22,11 +23,12 @@ from .contacts import ContactThresholds
 from .errors import EcsAnimError, listed
 from .files import folder_problem, input_problem, output_folder_problem, output_problem
 from .importing import FrameRange
-from .motion import FACINGS, turned_to_face
 from .joint_map import preset_summary
 from .marker_sets import preset_summary as marker_set_summary
 from .morphology import PRESET_SPECS
-from .viewer.command import add_arguments as add_view_arguments, cmd_view
+from .motion import FACINGS, turned_to_face
+from .viewer.command import add_arguments as add_view_arguments
+from .viewer.command import cmd_view
 
 EXIT_FAILED = 1
 #: The longest error line printed: a last guard (messages cut their own lists with ``listed``).
@@ -476,7 +478,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             raise EcsAnimError(f"{flag} {problem}")
     if seconds > MAX_DURATION_S:
         raise EcsAnimError(f"--seconds {seconds:g}: at most {MAX_DURATION_S:g} s (a day) in one run")
-    ticks = int(round(seconds * scenario.fps))
+    ticks = round(seconds * scenario.fps)
     if ticks < 1:
         raise EcsAnimError(f"--seconds {seconds:g} is less than one tick at {scenario.fps:g} Hz")
     with build_simulation(scenario, rotations=bool(args.export)) as sim:

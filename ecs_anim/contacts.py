@@ -79,7 +79,8 @@ def _box_filter(x: F64, width: int) -> F64:
     pad = width // 2
     padded = np.concatenate([np.repeat(x[:1], pad, axis=0), x, np.repeat(x[-1:], pad, axis=0)])
     c = np.cumsum(np.concatenate([np.zeros((1,) + x.shape[1:]), padded]), axis=0)
-    return (c[width:] - c[:-width])[: x.shape[0]] / width
+    mean: F64 = (c[width:] - c[:-width])[: x.shape[0]] / width
+    return mean
 
 
 def _width(seconds: float, fps: float) -> int:
@@ -94,7 +95,8 @@ def horizontal_speed(points: F64, fps: float, filter_s: float = 0.05) -> F64:
         return np.zeros(points.shape[:-1])
     velocity = np.gradient(points[..., :2], axis=0) * fps
     velocity = _box_filter(velocity, _width(filter_s, fps))
-    return np.linalg.norm(velocity, axis=-1)
+    speed: F64 = np.linalg.norm(velocity, axis=-1)
+    return speed
 
 
 def speed(points: F64, fps: float, filter_s: float = 0.03) -> F64:
@@ -103,7 +105,8 @@ def speed(points: F64, fps: float, filter_s: float = 0.03) -> F64:
     if points.shape[0] < 2:
         return np.zeros(points.shape[:-1])
     velocity = _box_filter(np.gradient(points, axis=0) * fps, _width(filter_s, fps))
-    return np.linalg.norm(velocity, axis=-1)
+    speed: F64 = np.linalg.norm(velocity, axis=-1)
+    return speed
 
 
 def local_ground(points: F64, fps: float, window_s: float, radius_m: float,
@@ -137,7 +140,7 @@ def _intervals(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
     """Runs of True as (first, last) frame indices."""
     padded = np.concatenate([[False], mask, [False]]).astype(np.int8)
     edges = np.flatnonzero(np.diff(padded))
-    return [(int(a), int(b) - 1) for a, b in zip(edges[::2], edges[1::2])]
+    return [(int(a), int(b) - 1) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
 def _hysteresis(enter: NDArray[np.bool_], leave: NDArray[np.bool_]) -> NDArray[np.bool_]:
@@ -152,8 +155,8 @@ def _hysteresis(enter: NDArray[np.bool_], leave: NDArray[np.bool_]) -> NDArray[n
 def _clean(flags: NDArray[np.bool_], fps: float, th: ContactThresholds) -> NDArray[np.bool_]:
     """Short gaps between two contacts filled, then short contacts dropped (per column)."""
     flags = flags.copy()
-    min_len = max(1, int(round(th.min_duration_s * fps)))
-    min_gap = max(1, int(round(th.min_gap_s * fps)))
+    min_len = max(1, round(th.min_duration_s * fps))
+    min_gap = max(1, round(th.min_gap_s * fps))
     for side in range(flags.shape[1]):
         col = flags[:, side]
         for a, b in _intervals(~col):

@@ -88,7 +88,8 @@ class Stairs:
         a = np.radians(self.heading_deg)
         along = xy[..., 0] * np.cos(a) + xy[..., 1] * np.sin(a) - self.start_m
         step = np.clip(np.floor(along / self.run_m) + 1.0, 0.0, float(self.steps))
-        return self.z_m + self.rise_m * step
+        height: F64 = self.z_m + self.rise_m * step
+        return height
 
 
 @dataclass(frozen=True)
@@ -144,8 +145,9 @@ class HeightGrid:
         i0 = np.minimum(np.floor(gx).astype(np.int64), nx - 2)
         j0 = np.minimum(np.floor(gy).astype(np.int64), ny - 2)
         u, v = gx - i0, gy - j0
-        return ((1 - u) * (1 - v) * h[j0, i0] + u * (1 - v) * h[j0, i0 + 1]
-                + (1 - u) * v * h[j0 + 1, i0] + u * v * h[j0 + 1, i0 + 1])
+        height: F64 = ((1 - u) * (1 - v) * h[j0, i0] + u * (1 - v) * h[j0, i0 + 1]
+                       + (1 - u) * v * h[j0 + 1, i0] + u * v * h[j0 + 1, i0 + 1])
+        return height
 
 
 @dataclass(frozen=True)

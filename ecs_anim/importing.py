@@ -28,7 +28,8 @@ from .morphology import ADULT_PROPORTIONS, Morphology, bone_lengths_of
 from .motion import NormalizedMotion
 from .normalized import encode
 from .rotations import frame_from_axes, normalize
-from .skeleton import JOINT_INDEX as J, JOINTS, LENGTH_INDEX, N_JOINTS
+from .skeleton import JOINT_INDEX as J
+from .skeleton import JOINTS, LENGTH_INDEX, N_JOINTS
 
 F64 = NDArray[np.float64]
 
@@ -129,7 +130,7 @@ class FrameRange:
         def index(value: float | None, default: int) -> int:
             if value is None:
                 return default
-            frame = int(round(value * fps)) if self.seconds else int(value)
+            frame = round(value * fps) if self.seconds else int(value)
             return frame + n_frames if frame < 0 else frame - first_frame
 
         start = min(max(index(self.start, 0), 0), n_frames)
@@ -182,7 +183,7 @@ def _leg_rest_length(skeleton: BvhSkeleton, jmap: JointMap) -> float:
     total = 0.0
     for s in "lr":
         hip, knee, ankle = (jmap.source[f"{p}_{s}"] for p in ("hip", "knee", "ankle"))
-        total += float(np.linalg.norm(rest[knee] - rest[hip]) + np.linalg.norm(rest[ankle] - rest[knee]))  # type: ignore[index]
+        total += float(np.linalg.norm(rest[knee] - rest[hip]) + np.linalg.norm(rest[ankle] - rest[knee]))
     return 0.5 * total
 
 
@@ -214,13 +215,13 @@ def detect_up(skeleton: BvhSkeleton, jmap: JointMap, pos_file: F64) -> tuple[str
     """
     src = jmap.source
     rest = rest_positions(skeleton)
-    spine = normalize(rest[src["neck"]] - rest[src["pelvis"]])  # type: ignore[index]
-    head = pos_file[:, src["head"]]  # type: ignore[index]
+    spine = normalize(rest[src["neck"]] - rest[src["pelvis"]])
+    head = pos_file[:, src["head"]]
     rise = {}
     for axis, k in (("y", 1), ("z", 2)):
-        feet = np.minimum(pos_file[:, src["ankle_l"], k], pos_file[:, src["ankle_r"], k])  # type: ignore[index]
+        feet = np.minimum(pos_file[:, src["ankle_l"], k], pos_file[:, src["ankle_r"], k])
         above = (head[:, k] - feet) / np.maximum(
-            np.linalg.norm(head - 0.5 * (pos_file[:, src["ankle_l"]] + pos_file[:, src["ankle_r"]]),  # type: ignore[index]
+            np.linalg.norm(head - 0.5 * (pos_file[:, src["ankle_l"]] + pos_file[:, src["ankle_r"]]),
                            axis=-1), 1e-12)
         rise[axis] = (float(spine[k]), float(np.median(above)), float(np.mean(above > 0.5)))
     score = {axis: r[0] + r[1] for axis, r in rise.items()}
@@ -266,8 +267,8 @@ def canonical_clip(motion: BvhMotion, map_spec: str | None = None,
     # Body axes of the rest (all-zero-rotation) pose, in file axes: forward, left, up as columns.
     # A joint's orientation in the rest pose is the identity, so these are also the body axes in
     # each joint's local frame; joint2file @ rest_body gives a part's frame in any frame.
-    left0 = rest[src["hip_l"]] - rest[src["hip_r"]]  # type: ignore[index]
-    up0 = rest[src["neck"]] - rest[src["pelvis"]]  # type: ignore[index]
+    left0 = rest[src["hip_l"]] - rest[src["hip_r"]]
+    up0 = rest[src["neck"]] - rest[src["pelvis"]]
     rest_body = frame_from_axes(left0, up0, 1, 2)
 
     to_world = UP_AXES[up]
@@ -307,19 +308,19 @@ def canonical_clip(motion: BvhMotion, map_spec: str | None = None,
         fills = (
             (f"toe_{side}", f"ankle_{side}", forward0, FILL_FRACTION["toe"]),
             (f"hand_{side}", f"wrist_{side}",
-             normalize(rest[src[f"wrist_{side}"]] - rest[src[f"elbow_{side}"]]),  # type: ignore[index]
+             normalize(rest[src[f"wrist_{side}"]] - rest[src[f"elbow_{side}"]]),
              FILL_FRACTION["hand"]),
         )
         for name, parent, dir_rest, frac in fills:
             if not measured[J[name]]:
                 i = src[parent]
-                d = (to_world @ joint2file[:, i] @ dir_rest)  # type: ignore[index]
+                d = (to_world @ joint2file[:, i] @ dir_rest)
                 positions[:, J[name]] = positions[:, J[parent]] + d * frac * leg_m
     if not measured[J["head_top"]]:
-        up_head = normalize(rest[src["head"]] - rest[src["neck"]])  # type: ignore[index]
+        up_head = normalize(rest[src["head"]] - rest[src["neck"]])
         if np.linalg.norm(up_head) < 0.5:
             up_head = up0 / np.linalg.norm(up0)
-        d = to_world @ joint2file[:, src["head"]] @ up_head  # type: ignore[index]
+        d = to_world @ joint2file[:, src["head"]] @ up_head
         positions[:, J["head_top"]] = positions[:, J["head"]] + d * FILL_FRACTION["head_top"] * leg_m
     if neck_at_clavicles:
         measured[J["neck"]] = False
@@ -463,7 +464,7 @@ def normalize_clip(clip: CanonicalClip, name: str, source: str,
         "source": source,
         "joint_map": clip.joint_map.how,
         "joints": {j: clip.joint_map.names.get(j) for j in JOINTS},
-        "filled_in": [j for j, m in zip(JOINTS, clip.measured) if not m],
+        "filled_in": [j for j, m in zip(JOINTS, clip.measured, strict=True) if not m],
         "unit": clip.unit,
         "unit_reason": clip.unit_reason,
         "up_axis": clip.up_axis,

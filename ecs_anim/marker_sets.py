@@ -42,7 +42,7 @@ from pathlib import Path
 
 import yaml
 
-from .errors import InputError, MappingError, compose_yaml, listed, quoted
+from .errors import InputError, MappingError, compose_yaml, did_you_mean, listed, quoted
 
 MIN_ROLES_DETECTED = 8
 GROUPS: tuple[str, ...] = ("pelvis", "leg_l", "leg_r", "trunk", "head", "arm_l", "arm_r")
@@ -284,8 +284,7 @@ def match_markers(labels: list[str], spec: str | None = None,
             user_path = spec
             base, subject_wanted, user, user_lines = load_marker_map(spec)
         else:
-            close = difflib.get_close_matches(spec, list(PRESETS), n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            hint = did_you_mean(spec, PRESETS, parenthesized=True)
             raise MappingError(f"--map {quoted(spec)}: not a marker-set preset nor a YAML file{hint}; "
                                f"marker sets: {', '.join(PRESETS)}")
     best: tuple[int, str, MarkerSet, dict[str, int]] | None = None
@@ -319,8 +318,7 @@ def match_markers(labels: list[str], spec: str | None = None,
         how = f"marker set {preset.name} + {user_path}"
     for role, label in user.items():
         if role not in preset.roles:
-            close = difflib.get_close_matches(role, list(preset.roles), n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            hint = did_you_mean(role, preset.roles, parenthesized=True)
             raise InputError(user_path, f"markers.{role}: unknown role for {preset.name}{hint}; "
                                         f"roles: {listed(preset.roles)} (all in "
                                         "ecs_anim/marker_sets.py)", user_lines[role])
@@ -391,7 +389,7 @@ def check_usable(mmap: MarkerMap, labels: list[str]) -> tuple[list[str], list[st
     from the pelvis, so they are absent when the pelvis is. Raises :class:`MappingError` only
     when nothing can carry the body: neither the pelvis nor (an upper-body trial) the trunk.
     """
-    present, absent, incomplete = group_status(mmap)
+    present, _absent, incomplete = group_status(mmap)
     notes: dict[str, str] = {g: _part_message(mmap, labels, g, m) for g, m in incomplete.items()}
     if "pelvis" not in present:
         for s in "lr":
@@ -444,8 +442,7 @@ def load_marker_map(path: str | Path) -> tuple[str | None, str | None, dict[str,
                 markers[str(k_node.value)] = str(v_node.value)
                 lines[str(k_node.value)] = k_node.start_mark.line + 1
         else:
-            close = difflib.get_close_matches(str(key), ["base", "subject", "markers"], n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            hint = did_you_mean(str(key), ["base", "subject", "markers"], parenthesized=True)
             raise InputError(path, f"{key}: unknown key{hint}; expected 'base', 'subject', "
                                    "'markers'", line)
     if base is None:

@@ -135,7 +135,9 @@ def save_nmo(motion: NormalizedMotion, path: str | Path, force: bool = False) ->
         "info": motion.info,
     }
     with atomic_output(path, force) as f:
-        np.savez_compressed(f, **{HEADER_KEY: np.array(json.dumps(header))}, **arrays)
+        # Any: numpy's stubs would match a dict of arrays against savez's allow_pickle: bool.
+        payload: dict[str, Any] = {HEADER_KEY: np.array(json.dumps(header)), **arrays}
+        np.savez_compressed(f, **payload)
 
 
 def load_nmo(path: str | Path) -> NormalizedMotion:

@@ -187,7 +187,7 @@ class Simulation:
         queue_clip = np.zeros((k, MAX_QUEUE), np.int64)
         queue_fade, queue_loop = np.zeros((k, MAX_QUEUE)), np.zeros((k, MAX_QUEUE), bool)
         clip, queue_len = np.zeros(k, np.int64), np.zeros(k, np.int64)
-        for i, (name, player) in enumerate(zip(names, players)):
+        for i, (name, player) in enumerate(zip(names, players, strict=True)):
             try:
                 clip[i] = self.bank.index(player.clip)
                 queue = [self.bank.index(q.clip) for q in player.queue]
@@ -239,8 +239,9 @@ class Simulation:
                 esper.add_component(entity, players[i])
                 esper.add_component(entity, placements[i])
                 esper.add_component(entity, CharacterRow(first + i))
-                if grounds[i] is not None:
-                    esper.add_component(entity, GroundQuery(grounds[i]))
+                ground = grounds[i]
+                if ground is not None:
+                    esper.add_component(entity, GroundQuery(ground))
         self.structure_version += 1
         for i, player in enumerate(players):
             clips = [player.clip] + [q.clip for q in player.queue]

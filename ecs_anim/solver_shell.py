@@ -55,10 +55,25 @@ from .constraint_table import (
 )
 from .ground_adapt import MAX_LEG_EXTENSION, vertical_slack_for_reach
 from .morphology import centres_of_mass, leg_length
-from .normalized import SIDE_JOINTS, SIDE_LENGTHS, DecodedPose, NormalizedPoses, decode, distal_frames, two_bone_middle
-from .rotations import frame_from_axes, matrix_from_quat, normalize, quat_from_matrix
-from .skeleton import JOINT_INDEX as J, LENGTH_INDEX as L
-from .solver import axis_angle, bring_within_reach, point_in_limb, reach_point, rotation_toward, turn_about_axis
+from .normalized import (
+    SIDE_JOINTS,
+    SIDE_LENGTHS,
+    DecodedPose,
+    NormalizedPoses,
+    decode,
+    distal_frames,
+    two_bone_middle,
+)
+from .rotations import axis_angle, frame_from_axes, matrix_from_quat, normalize, quat_from_matrix
+from .skeleton import JOINT_INDEX as J
+from .skeleton import LENGTH_INDEX as L
+from .solver import (
+    bring_within_reach,
+    point_in_limb,
+    reach_point,
+    rotation_toward,
+    turn_about_axis,
+)
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -217,7 +232,8 @@ def _area_goal(table: ConstraintTable, idx: I64, point: F64, anchor: F64,
     half = rel - np.minimum(height, 0.0)[:, None] * normal
     goal = np.select([(shape == AREA_BOX)[:, None], (shape == AREA_SPHERE)[:, None],
                       (shape == AREA_HALF_SPACE)[:, None]], [box, sphere, half], rel)
-    return anchor + goal
+    allowed: F64 = anchor + goal
+    return allowed
 
 
 def constraint_errors(table: ConstraintTable, idx: I64, decoded: DecodedPose, targets: F64) -> F64:
@@ -233,7 +249,7 @@ def constraint_errors(table: ConstraintTable, idx: I64, decoded: DecodedPose, ta
     t = targets[idx]
     kind = table.kind[idx]
     gap = np.linalg.norm(point - t, axis=1)
-    err = np.where(kind == KIND_DISTANCE, np.abs(gap - table.distance_m[idx]), gap)
+    err: F64 = np.where(kind == KIND_DISTANCE, np.abs(gap - table.distance_m[idx]), gap)
     area = kind == KIND_AREA
     if area.any():
         allowed = _area_goal(table, idx[area], point[area], t[area])
@@ -352,7 +368,7 @@ def _errors(g: TickGoals, dec: DecodedPose) -> F64:
     orientation (rad): the solver's convergence measure (users see :func:`constraint_errors`)."""
     point = point_positions(dec, g.owner, g.segment, g.fraction, g.offset)
     goal = g.goal
-    err = np.linalg.norm(point - goal, axis=1)
+    err: F64 = np.linalg.norm(point - goal, axis=1)
     if g.orientation.any():
         o = np.flatnonzero(g.orientation)
         axis = np.einsum("kij,kj->ki", segment_frames(dec, g.owner[o], g.segment[o]), g.axis[o])
@@ -643,7 +659,7 @@ class _Solve:
         com = centres_of_mass(dec.positions, self.masses, self.com_fraction)
         error = g.com_desired[:, :2] - com[:, :2]
         error[~g.com_on] = 0.0
-        size = np.linalg.norm(error, axis=1)
+        size: F64 = np.linalg.norm(error, axis=1)
         rows = np.flatnonzero((size > 0.1 * s.com_tolerance_m) & self.active)
         if rows.size == 0:
             return size

@@ -64,7 +64,7 @@ class System(esper.Processor):
         self._row_ground_version = -1
         self._row_ground: RowGrounds
 
-    def process(self, dt: float) -> None:  # type: ignore[override]
+    def process(self, dt: float) -> None:
         start = time.perf_counter()
         if self.sim.store.n:
             if self._hooks_version != self.sim.structure_version:

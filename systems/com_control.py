@@ -17,8 +17,8 @@ place, by the compiled :mod:`ecs_anim.kernels.com`.
 from __future__ import annotations
 
 import numpy as np
-from ecs_anim.components import Constraint
 
+from ecs_anim.components import Constraint
 from ecs_anim.kernels.com import centres_of_mass, horizontal_errors, segment_joints
 from ecs_anim.system_base import System
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from ecs_anim.components import Constraint
 from ecs_anim.kernels.decode import decode
-from ecs_anim.kernels.solve import solve
+from ecs_anim.kernels.solve import solve as solve  # re-exported: tests patch it here
 from ecs_anim.solver_shell import constrain, scatter
 from ecs_anim.system_base import System
 

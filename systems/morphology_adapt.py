@@ -13,9 +13,8 @@ when the store's arrays still fit (compiled :func:`ecs_anim.kernels.decode.decod
 
 from __future__ import annotations
 
-from ecs_anim.components import Morphology
-
 from ecs_anim.body_change import adopt_bodies
+from ecs_anim.components import Morphology
 from ecs_anim.kernels.decode import decode, fits
 from ecs_anim.system_base import System
 

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from ecs_anim.components import MotionPlayer
 from ecs_anim.kernels.decode import PoseArrays, pose_arrays
 from ecs_anim.kernels.playback import (
     blend_rows,
@@ -24,7 +25,6 @@ from ecs_anim.kernels.playback import (
     sample_table_rows,
     writable_poses,
 )
-from ecs_anim.components import MotionPlayer
 from ecs_anim.normalized import NormalizedPoses
 from ecs_anim.playback import ClipBank, blend, rotate_xy, sample, sample_table
 from ecs_anim.playback_queue import start_next_clips

@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import json
 import zipfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Any
 
 import numpy as np
 import pytest
@@ -155,7 +156,8 @@ def _rewrite(src: Path, dst: Path, edit: Callable[[dict, dict], None]) -> None:
         arrays = {k: data[k] for k in data.files if k != HEADER_KEY}
     edit(header, arrays)
     with open(dst, "wb") as f:  # a file object: np.savez would append ".npz" to a name
-        np.savez_compressed(f, **{HEADER_KEY: np.array(json.dumps(header))}, **arrays)
+        payload: dict[str, Any] = {HEADER_KEY: np.array(json.dumps(header)), **arrays}
+        np.savez_compressed(f, **payload)
 
 
 def make_random_bytes(src: Path, dst: Path) -> None:

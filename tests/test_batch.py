@@ -424,7 +424,7 @@ def test_killed_batch_resumes_to_the_same_outputs(tmp_path: Path, grounds_file: 
 
 def test_ray_started_by_the_command_writes_the_same_bytes_and_stops(tmp_path: Path,
                                                                     grounds_file: Path,
-                                                                    monkeypatch) -> None:  # type: ignore[no-untyped-def]
+                                                                    monkeypatch) -> None:
     """No Ray running: ``--engine ray --jobs 2`` starts a local Ray of 2 CPUs, runs the jobs on
     it (glb too, byte for byte the local pool's) and stops it."""
     ray = pytest.importorskip("ray", reason="Ray is not installed (pip install 'ecs_anim[ray]')")
@@ -432,7 +432,7 @@ def test_ray_started_by_the_command_writes_the_same_bytes_and_stops(tmp_path: Pa
         pytest.skip("a Ray is already running in this process (run this test before the module's)")
     real_init, calls = ray.init, []
 
-    def init(*args, **kwargs):  # type: ignore[no-untyped-def]
+    def init(*args, **kwargs):
         calls.append(kwargs)
         return real_init(*args, **kwargs)
 
@@ -451,7 +451,7 @@ def test_ray_started_by_the_command_writes_the_same_bytes_and_stops(tmp_path: Pa
 
 
 @pytest.fixture(scope="module")
-def local_ray():  # type: ignore[no-untyped-def]
+def local_ray():
     ray = pytest.importorskip("ray", reason="Ray is not installed (pip install 'ecs_anim[ray]')")
     ray.init(num_cpus=2, include_dashboard=False, logging_level="warning", log_to_driver=False)
     yield ray
@@ -459,7 +459,7 @@ def local_ray():  # type: ignore[no-untyped-def]
 
 
 def test_ray_writes_the_same_bytes_as_the_local_pool(tmp_path: Path, grounds_file: Path,
-                                                      local_ray) -> None:  # type: ignore[no-untyped-def]
+                                                      local_ray) -> None:
     bad = tmp_path / "broken.bvh"
     bad.write_text("HIERARCHY\n")
     clips = [str(MOTIONS_DIR / "walk.bvh"), str(MOTIONS_DIR / "guard.bvh"), str(bad)]
@@ -507,12 +507,12 @@ def test_the_readme_batch_example_runs(tmp_path) -> None:
 # Review fixes
 
 
-def test_a_dead_worker_fails_only_its_job(tmp_path: Path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+def test_a_dead_worker_fails_only_its_job(tmp_path: Path, monkeypatch) -> None:
     """A job whose worker process dies (SIGKILL, as the out-of-memory killer does) fails with a
     one-line reason; the pool is started again and every other job is done."""
     real_run_job = batch.run_job
 
-    def run_job(job, motion):  # type: ignore[no-untyped-def]
+    def run_job(job, motion):
         if job.clip == "kick" and job.body.name == "tall":
             os.kill(os.getpid(), signal.SIGKILL)
         return real_run_job(job, motion)
@@ -548,7 +548,7 @@ def test_a_failed_or_reformatted_job_leaves_none_of_its_earlier_files(tmp_path: 
 
 
 def test_a_job_killed_while_renaming_has_no_old_file_beside_a_new_one(tmp_path: Path,
-                                                                       monkeypatch) -> None:  # type: ignore[no-untyped-def]
+                                                                       monkeypatch) -> None:
     """Every file of a job is written to a temporary name before any is renamed in, and the
     earlier run's files go first: a kill between two renames leaves new files only, no stamp."""
     out = tmp_path / "out"
@@ -559,7 +559,7 @@ def test_a_job_killed_while_renaming_has_no_old_file_beside_a_new_one(tmp_path: 
     real_replace = os.replace
     renamed: list[object] = []
 
-    def replace(src, dst):  # type: ignore[no-untyped-def]
+    def replace(src, dst):
         if str(dst).endswith((".bvh", ".npz")):
             if renamed:
                 raise KeyboardInterrupt  # killed after the job's first rename
@@ -635,7 +635,7 @@ def test_the_job_hash_follows_the_package_source() -> None:
     original = (systems / "ground_adapt.py").read_bytes()
     real_read = Path.read_bytes
 
-    def read_bytes(path):  # type: ignore[no-untyped-def]
+    def read_bytes(path):
         data = real_read(path)
         return data + b"# changed" if path.name == "ground_adapt.py" and path.parent == systems else data
 
@@ -701,7 +701,7 @@ def test_unreachable_or_client_ray_addresses_fail_at_once(tmp_path: Path) -> Non
         assert not out.exists()
 
 
-def test_a_source_change_redoes_the_jobs(tmp_path: Path, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+def test_a_source_change_redoes_the_jobs(tmp_path: Path, monkeypatch) -> None:
     argv = (str(MOTIONS_DIR / "walk.bvh"), "--bodies", "child", "--out", str(tmp_path / "out"),
             "--seconds", "0.1", "--formats", "npz", "--jobs", "1")
     assert run_batch_cli(*argv) == 0

@@ -15,8 +15,8 @@ from pathlib import Path
 import c3d
 import numpy as np
 import pytest
-from conftest import MOCAP_DIR, MOTIONS_DIR, mocap_params, require_mocap
 
+from conftest import MOCAP_DIR, MOTIONS_DIR, mocap_params, require_mocap
 from ecs_anim.c3d_import import (
     canonical_clip_c3d,
     chord_centre,
@@ -27,9 +27,9 @@ from ecs_anim.c3d_import import (
     score_centre,
 )
 from ecs_anim.cli import main
-from ecs_anim.marker_sets import check_usable, match_markers
 from ecs_anim.errors import EcsAnimError, InputError
 from ecs_anim.importing import import_bvh
+from ecs_anim.marker_sets import check_usable, match_markers
 from ecs_anim.metrics import MetricsRecorder
 from ecs_anim.morphology import bone_lengths_of
 from ecs_anim.motion import load_nmo
@@ -66,9 +66,9 @@ def write_c3d(path: Path, labels: list[str], positions: np.ndarray, valid: np.nd
         frames.append((points, np.zeros((0, 0), dtype=np.float32)))
     writer.add_frames(frames)
     writer.set_point_labels(labels)
-    with open(path, "wb") as f, warnings.catch_warnings():
+    with open(path, "wb") as out, warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        writer.write(f)
+        writer.write(out)
     return path
 
 
@@ -171,7 +171,7 @@ def test_every_c3d_imports_with_rigid_adult_bones(path, tmp_path, capsys):
     # clavicles (neck base to shoulder centre) within 15 %, the acromion marker riding on the
     # shoulder girdle as it elevates (14 % in the tennis serve, stated in the README).
     measured = np.array(clip.measured)
-    for name, (a, b) in zip(LENGTHS, BONE_JOINTS):
+    for name, (a, b) in zip(LENGTHS, BONE_JOINTS, strict=True):
         if a < 0 or not (measured[a] and measured[b]) or name[:-2] in ADULT_RANGE_M:
             continue
         x = lengths[:, L[name]]

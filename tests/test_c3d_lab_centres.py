@@ -5,8 +5,8 @@ lab's point holds a sample); and C3D files without POINT:UNITS, or Y up, import 
 from __future__ import annotations
 
 import pytest
-from conftest import MOCAP_DIR
 
+from conftest import MOCAP_DIR
 from ecs_anim.c3d_import import import_c3d
 from ecs_anim.cli import main
 

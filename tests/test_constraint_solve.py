@@ -12,7 +12,8 @@ from ecs_anim.errors import EcsAnimError
 from ecs_anim.importing import import_bvh
 from ecs_anim.morphology import Morphology, bone_lengths_of
 from ecs_anim.simulation import Simulation
-from ecs_anim.skeleton import BONE_JOINTS, JOINT_INDEX as J
+from ecs_anim.skeleton import BONE_JOINTS
+from ecs_anim.skeleton import JOINT_INDEX as J
 
 IS_BONE = np.array([a >= 0 for a, _ in BONE_JOINTS])
 ALWAYS = Activation(0.0, 1e9)
@@ -107,7 +108,7 @@ def test_activation_ramp_has_no_jump_and_nan_target_disables_only_that_one(idle,
     move is spread over the eases; a NaN target switches off only its own constraint."""
     from ecs_anim.constraints import ramp_weight
 
-    sim, (a, b, twin) = _sim(idle, 3)  # the twin plays the same motion, unconstrained
+    sim, (a, b, _twin) = _sim(idle, 3)  # the twin plays the same motion, unconstrained
     sim.step()
     target = sim.store.positions[0, J["shoulder_r"]] + np.array([0.4, 0.0, 0.2])
     activation = Activation(0.5, 3.0, 1.0, 1.0)

@@ -8,8 +8,8 @@ import re
 
 import numpy as np
 import pytest
-from conftest import MOCAP_DIR
 
+from conftest import MOCAP_DIR
 from ecs_anim.bvh import read_bvh
 from ecs_anim.c3d_import import import_c3d
 from ecs_anim.cli import main

@@ -7,10 +7,12 @@ from __future__ import annotations
 import dataclasses
 import re
 import sys
+from typing import Any
 
 import esper
 import numpy as np
 import pytest
+
 from conftest import MOTIONS_DIR
 from ecs_anim.components import (
     CharacterRow,
@@ -23,13 +25,12 @@ from ecs_anim.components import (
     Placement,
     Posture,
 )
-from ecs_anim.systems import SCHEDULE
-
 from ecs_anim.constraint_table import ConstraintTable
 from ecs_anim.ground import Plane, Stairs
 from ecs_anim.importing import import_bvh
 from ecs_anim.simulation import Simulation
 from ecs_anim.store import SPEC_FIELDS, CharacterStore
+from ecs_anim.systems import SCHEDULE
 
 #: Every store field's writers in tick order (DESIGN §6), derived from the declarations below.
 EXPECTED_WRITERS = {
@@ -203,7 +204,7 @@ def test_specifications_are_replaced_not_mutated(walk):
     sim, (a, b, _c) = _sim(walk)
     with sim._active():
         for component in (Morphology, MotionPlayer, Placement, CharacterRow, Name):
-            spec = esper.component_for_entity(a, component)
+            spec: Any = esper.component_for_entity(a, component)  # a frozen dataclass
             with pytest.raises(dataclasses.FrozenInstanceError):
                 spec.__setattr__(dataclasses.fields(spec)[0].name, None)
     sim.step()

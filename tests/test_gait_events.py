@@ -8,8 +8,8 @@ import json
 
 import numpy as np
 import pytest
-from conftest import MOCAP_DIR
 
+from conftest import MOCAP_DIR
 from ecs_anim.c3d_import import import_c3d, read_c3d
 from ecs_anim.cli import main
 from ecs_anim.contacts import _intervals, contacts_from_events, gait_event_kind

@@ -175,8 +175,8 @@ def killed_at(step: int, argv: list[str], no_exchange: bool = False) -> int | No
     def child() -> None:
         calls = [0]
 
-        def counted(action):  # type: ignore[no-untyped-def]
-            def wrapper(*args, **kwargs):  # type: ignore[no-untyped-def]
+        def counted(action):
+            def wrapper(*args, **kwargs):
                 calls[0] += 1
                 if calls[0] == step:
                     os.kill(os.getpid(), signal.SIGKILL)
@@ -467,7 +467,7 @@ def test_the_screenshot_writer_checks_its_output_with_the_shared_check(tmp_path,
 
     scenario = load_scenario(write_scenario(tmp_path, MOTIONS / "kick.bvh"))
 
-    def no_render(*args, **kwargs):  # type: ignore[no-untyped-def]
+    def no_render(*args, **kwargs):
         raise AssertionError("rendered before the output was checked")
 
     monkeypatch.setattr(window, "render_screenshot", no_render)

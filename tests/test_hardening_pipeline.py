@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_c3d import write_c3d
 
 from conftest import MOCAP_DIR, MOTIONS_DIR, require_mocap
 from ecs_anim.c3d_import import canonical_clip_c3d, import_c3d, read_c3d
@@ -20,7 +21,6 @@ from ecs_anim.scenario import build_simulation, load_scenario
 from ecs_anim.simulation import Simulation
 from ecs_anim.skeleton import BONE_JOINTS
 from ecs_anim.skeleton import JOINT_INDEX as J
-from test_c3d import write_c3d
 
 GAIT = MOCAP_DIR / "c3dorg_eb015pi_gait.c3d"
 TENNIS = MOCAP_DIR / "ktk_tennis_serve.c3d"
@@ -76,7 +76,7 @@ def _bone_error_per_tick(scenario_path: Path) -> np.ndarray:
     scenario = load_scenario(scenario_path)
     sim = build_simulation(scenario)
     errors = []
-    for _ in range(int(round(scenario.duration_s * sim.fps))):
+    for _ in range(round(scenario.duration_s * sim.fps)):
         sim.step()
         p = sim.store.positions
         errors.append(np.abs(bone_lengths_of(p)[:, IS_BONE] - sim.store.lengths[:, IS_BONE]).max())
@@ -182,7 +182,7 @@ def test_landmark_pelvis_gaps_trimmed_at_the_ends_and_repaired_inside(tmp_path):
 def _iterations_per_tick(idle, far_rows: set[int], n: int, monkeypatch) -> tuple[float, np.ndarray]:
     import ecs_anim.systems.constraint_solve as constraint_solve
 
-    used: list[int] = []
+    used: list[np.ndarray] = []
     solve = constraint_solve.solve
 
     def counting(*args, **kwargs):
@@ -366,7 +366,7 @@ def test_constraint_times_stay_on_the_file_after_a_trim(tmp_path):
     assert main(["import", str(GAIT), "-o", str(tmp_path / "out"), "--constraints", str(constraints)]) == 0
     motion = load_nmo(tmp_path / "out" / f"{GAIT.stem}.nmo")
     assert motion.info["first_file_frame"] == 19
-    hold = [c for c in motion.constraints if c.name == "hold"][0]
+    hold = next(c for c in motion.constraints if c.name == "hold")
     assert hold.activation.start_s == pytest.approx(1.0 - 19 / 50.0)
     assert hold.activation.stop_s == pytest.approx(2.0 - 19 / 50.0)
 

@@ -6,12 +6,13 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 import yaml
-from conftest import mocap_files
 
+from conftest import mocap_files
 from ecs_anim import scenario as scenario_module
 from ecs_anim.c3d_import import import_c3d
 from ecs_anim.cli import main
@@ -23,6 +24,7 @@ from ecs_anim.errors import (
     compose_yaml,
     expanded_size,
 )
+from ecs_anim.ground import HeightGrid
 from ecs_anim.importing import import_bvh
 from ecs_anim.motion import HEADER_KEY, load_nmo, save_nmo
 from ecs_anim.scenario import MAX_GRID_CELLS, MAX_GROUND_PARTS, MAX_YAML_VALUES, load_scenario
@@ -62,7 +64,9 @@ def test_a_1000_by_1000_grid_loads_without_building_a_node_per_height(tmp_path):
     root = compose_yaml(path, "scenario", number_lists=True)
     grid_rows = root.value[2][1].value[2][1].value  # ground.heights_m
     assert len(grid_rows) == 1000 and all(isinstance(r, NumberList) for r in grid_rows)
-    np.testing.assert_array_equal(load_scenario(path).ground._h, heights)
+    grid = load_scenario(path).ground
+    assert isinstance(grid, HeightGrid)
+    np.testing.assert_array_equal(grid._h, heights)
     # The work is one array per row: no scalar node is built for any of the million heights.
     read = scenario_module._Reader(str(path))
     np.testing.assert_array_equal(scenario_module._grid_heights(read, root.value[2][1].value[2][1], "h"),
@@ -111,6 +115,7 @@ def test_a_ground_of_too_many_parts_is_refused_at_the_first_one_beyond(tmp_path)
 def test_expanded_size_counts_each_use_of_an_alias_in_linear_time():
     doubling = ["a0: &a0 [1, 2]"] + [f"a{k}: &a{k} [*a{k - 1}, *a{k - 1}]" for k in range(1, 60)]
     root = yaml.compose("\n".join(doubling))
+    assert root is not None
     # a_k expands to 2**(k+2) - 1 values; 2**61 is far beyond the limit, counted in 60 steps.
     assert expanded_size(root.value[3][1], 10**9) == 2**5 - 1
     assert expanded_size(root, 10**9) == 10**9 + 1
@@ -307,7 +312,8 @@ def rewrite(src: Path, dst: Path, edit) -> Path:
         arrays = {k: data[k] for k in data.files if k != HEADER_KEY}
     edit(header)
     with open(dst, "wb") as f:
-        np.savez_compressed(f, **{HEADER_KEY: np.array(json.dumps(header))}, **arrays)
+        payload: dict[str, Any] = {HEADER_KEY: np.array(json.dumps(header)), **arrays}
+        np.savez_compressed(f, **payload)
     return dst
 
 

@@ -11,8 +11,8 @@ import json
 
 import numpy as np
 import pytest
-from conftest import MOCAP_DIR, MOTIONS_DIR, mocap_params, require_mocap
 
+from conftest import MOCAP_DIR, MOTIONS_DIR, mocap_params, require_mocap
 from ecs_anim.bvh import read_bvh
 from ecs_anim.cli import main
 from ecs_anim.contacts import _intervals, horizontal_speed
@@ -94,7 +94,7 @@ def test_source_export_reproduces_every_mapped_joint_within_0_1_mm(path, tmp_pat
                           axis=-1).max()
         for j, s in mapped.items()
     }
-    worst = max(errors, key=errors.get)
+    worst = max(errors, key=lambda j: errors[j])
     assert errors[worst] < 0.1 * MM, f"{worst} off by {errors[worst] * 1e3:.4f} mm"
     assert exported["positions"].shape == (ref.shape[0], len(JOINTS), 3)
     assert np.all(np.isfinite(exported["positions"]))
@@ -132,7 +132,7 @@ def test_exported_bvh_reads_back_and_has_the_morphology_lengths(tmp_path, preset
     assert np.abs(clip.positions - from_npz).max() < 0.1 * MM
     # Exactly the morphology's segment lengths, in the file and on every frame.
     lengths = bone_lengths_of(clip.positions)
-    for k, (a, b) in enumerate(BONE_JOINTS):
+    for k, (a, _b) in enumerate(BONE_JOINTS):
         if a >= 0:
             np.testing.assert_allclose(lengths[:, k], morph.lengths[k], atol=1e-5,
                                        err_msg=LENGTHS[k])

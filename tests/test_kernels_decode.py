@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import MOCAP_DIR, MOTIONS_DIR, require_mocap
 
+from conftest import MOCAP_DIR, MOTIONS_DIR, require_mocap
 from ecs_anim.importing import import_bvh
 from ecs_anim.kernels import decode as kd
 from ecs_anim.morphology import Morphology
@@ -48,7 +48,8 @@ def random_poses(rng: np.random.Generator, n: int) -> NormalizedPoses:
 
 def random_bodies(rng: np.random.Generator, n: int) -> np.ndarray:
     return np.stack([Morphology.from_stature(float(s), leg_scale=float(k)).lengths
-                     for s, k in zip(rng.uniform(0.9, 2.1, n), rng.uniform(0.85, 1.15, n))])
+                     for s, k in zip(rng.uniform(0.9, 2.1, n), rng.uniform(0.85, 1.15, n),
+                                     strict=True)])
 
 
 def assert_same(got: DecodedPose, ref: DecodedPose) -> None:
@@ -86,7 +87,7 @@ def test_decode_rows_writes_only_its_rows():
     kd.decode_rows(rows, kd.pose_arrays(poses), lengths, arrays)
     ref = decode(poses, lengths)
     untouched = np.setdiff1d(np.arange(40), rows)
-    for name, a in zip(FIELDS, arrays):
+    for name, a in zip(FIELDS, arrays, strict=True):
         np.testing.assert_allclose(a[rows], getattr(ref, name)[rows], rtol=0, atol=TOL)
         assert np.all(np.isnan(a[untouched]))
 
@@ -136,8 +137,9 @@ def test_pose_arrays_and_decoded_pose_share_memory():
     poses = random_poses(rng, 5)
     pose = kd.pose_arrays(poses)
     assert pose._fields == tuple(poses.arrays())
-    assert all(np.shares_memory(a, getattr(poses, k)) for k, a in zip(pose._fields, pose))
+    assert all(np.shares_memory(a, getattr(poses, k))
+               for k, a in zip(pose._fields, pose, strict=True))
     arrays = kd.empty_decoded(5)
     decoded = kd.decoded_pose(arrays)
-    assert all(a is b for a, b in zip(kd.decoded_arrays(decoded), arrays))
+    assert all(a is b for a, b in zip(kd.decoded_arrays(decoded), arrays, strict=True))
     assert kd.fits(decoded, 5) and not kd.fits(decoded, 6) and not kd.fits(None, 5)

@@ -5,9 +5,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
-from ecs_anim.components import MotionPlayer, Placement, QueuedClip
-from ecs_anim.systems import GroundAdapt
 
+from ecs_anim.components import MotionPlayer, Placement, QueuedClip
 from ecs_anim.ground import (
     Bumps,
     Combined,
@@ -24,6 +23,7 @@ from ecs_anim.library import MOTIONS_DIR
 from ecs_anim.morphology import Morphology
 from ecs_anim.normalized import QUATERNION_FIELDS
 from ecs_anim.simulation import Simulation
+from ecs_anim.systems import GroundAdapt
 
 
 def _grid(seed: int) -> HeightGrid:
@@ -31,7 +31,7 @@ def _grid(seed: int) -> HeightGrid:
     return HeightGrid(rng.uniform(-0.2, 0.3, (7, 11)), 0.45, -1.3, 0.7)
 
 
-GROUNDS = {
+GROUNDS: dict[str, Ground] = {
     "plane": Plane(0.12),
     "slope": Slope(0.08, -0.05, 0.3),
     "stairs": Stairs(rise_m=0.13, run_m=0.31, steps=5, start_m=0.4, heading_deg=37.0, z_m=0.02),
@@ -84,7 +84,7 @@ def test_a_ground_of_ones_own_has_no_compiled_form() -> None:
 
 # --- GroundAdapt: the compiled system against its numpy reference ---------------------------
 
-TERRAINS = {
+TERRAINS: dict[str, Ground] = {
     "bumps_and_stairs": Combined((Bumps(0.03, 2.5, 3.0), Stairs(0.12, 0.40, 6, 2.0))),
     "steep_stairs": Stairs(rise_m=0.17, run_m=0.28, steps=10, start_m=0.8, heading_deg=15.0),
     "slope": Combined((Slope(0.12, -0.05), Bumps(0.05, 1.5, 1.2))),
@@ -95,11 +95,11 @@ BODIES = [Morphology.preset("child"), Morphology.preset("adult_male"), Morpholog
 
 
 @pytest.fixture(scope="module")
-def motions() -> dict:  # type: ignore[type-arg]
+def motions() -> dict:
     return {name: import_bvh(MOTIONS_DIR / f"{name}.bvh") for name in ("walk", "idle", "kick")}
 
 
-def _sim(motions: dict, ground: Ground, seed: int) -> Simulation:  # type: ignore[type-arg]
+def _sim(motions: dict, ground: Ground, seed: int) -> Simulation:
     rng = np.random.default_rng(seed)
     sim = Simulation(motions, ground)
     for k in range(8):
@@ -134,7 +134,7 @@ def _assert_same_state(a: Simulation, b: Simulation, tick: int) -> None:
 
 
 @pytest.mark.parametrize("terrain", list(TERRAINS))
-def test_compiled_ground_adapt_equals_numpy(motions: dict, terrain: str) -> None:  # type: ignore[type-arg]
+def test_compiled_ground_adapt_equals_numpy(motions: dict, terrain: str) -> None:
     compiled = _sim(motions, TERRAINS[terrain], 1321)
     reference = _sim(motions, TERRAINS[terrain], 1321)
     system = _ground_adapt(reference)
@@ -145,7 +145,7 @@ def test_compiled_ground_adapt_equals_numpy(motions: dict, terrain: str) -> None
         _assert_same_state(compiled, reference, tick)
 
 
-def test_a_ground_of_ones_own_goes_through_numpy(motions: dict) -> None:  # type: ignore[type-arg]
+def test_a_ground_of_ones_own_goes_through_numpy(motions: dict) -> None:
     mine = _sim(motions, Combined((Bumps(0.03, 2.5, 3.0), _Ripples())), 1322)
     assert _ground_adapt(mine)._description(mine.ground) is None
     reference = _sim(motions, Combined((Bumps(0.03, 2.5, 3.0), _Ripples())), 1322)

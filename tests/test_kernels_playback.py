@@ -5,9 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from ecs_anim.components import MotionPlayer, Placement, QueuedClip
-from ecs_anim.systems import MotionPlayback
 
+from ecs_anim.components import MotionPlayer, Placement, QueuedClip
 from ecs_anim.importing import import_bvh
 from ecs_anim.kernels.decode import pose_arrays
 from ecs_anim.kernels.playback import (
@@ -21,6 +20,7 @@ from ecs_anim.morphology import Morphology
 from ecs_anim.normalized import QUATERNION_FIELDS, NormalizedPoses
 from ecs_anim.playback import ClipBank, blend, rotate_xy, sample, sample_table
 from ecs_anim.simulation import Simulation
+from ecs_anim.systems import MotionPlayback
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +53,7 @@ def _assert_poses_equal(got: NormalizedPoses, want: NormalizedPoses) -> None:
         np.testing.assert_allclose(g, w, rtol=0, atol=1e-9, err_msg=name)
 
 
-def _scene(bank: ClipBank, rng: np.random.Generator, n: int):  # type: ignore[no-untyped-def]
+def _scene(bank: ClipBank, rng: np.random.Generator, n: int):
     clip = rng.integers(0, len(bank.names), n).astype(np.int64)
     period = bank.duration_s(clip)
     # Inside the clip, past its end (loops, or held), before its start, and exactly on frames.

@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import MOTIONS_DIR
 from test_kernels_decode import random_bodies, random_poses
 
+from conftest import MOTIONS_DIR
 from ecs_anim.exporting import local_rotations
 from ecs_anim.importing import import_bvh
 from ecs_anim.kernels import com as kc
@@ -121,7 +121,7 @@ def test_posture_rows_keeps_the_last_good_posture_like_numpy():
         np.testing.assert_array_equal(newly_bad, ref[1])
         np.testing.assert_allclose(got_positions, ref[2], rtol=0, atol=TOL)
         good = ~ref[0]
-        for name, a in zip(kd.DecodedArrays._fields[1:], decoded[1:]):
+        for name, a in zip(kd.DecodedArrays._fields[1:], decoded[1:], strict=True):
             np.testing.assert_allclose(a[good], getattr(ref[3], name)[good], rtol=0, atol=TOL)
         np.testing.assert_allclose(got_local, ref[4], rtol=0, atol=TOL)
         np.testing.assert_allclose(got_spine, ref[5], rtol=0, atol=TOL)
@@ -151,7 +151,7 @@ def test_centres_of_mass_match_numpy_for_some_rows():
     n = 30
     bodies = [Morphology.from_stature(float(s), sex=str(x), mass_kg=float(m))
               for s, x, m in zip(rng.uniform(1.0, 2.0, n), rng.choice(["male", "female"], n),
-                                 rng.uniform(20, 110, n))]
+                                 rng.uniform(20, 110, n), strict=True)]
     masses = np.stack([segment_mass_table(b)[0] for b in bodies])
     fraction = np.stack([segment_mass_table(b)[1] for b in bodies])
     positions = decode(random_poses(rng, n), np.stack([b.lengths for b in bodies])).positions

@@ -8,15 +8,15 @@ from __future__ import annotations
 import copy
 import math
 
-import ecs_anim.systems.constraint_solve as system
 import numpy as np
 import pytest
-from conftest import MOTIONS_DIR
-from ecs_anim.components import MotionPlayer, Placement
 from test_scenarios import SCENARIOS, run
 
+import ecs_anim.systems.constraint_solve as system
+from conftest import MOTIONS_DIR
 from ecs_anim import solver_shell
 from ecs_anim.cli import walkers_on_bumps
+from ecs_anim.components import MotionPlayer, Placement
 from ecs_anim.constraints import Activation
 from ecs_anim.ground_adapt import MAX_LEG_EXTENSION
 from ecs_anim.importing import import_bvh
@@ -236,7 +236,8 @@ def one_state(idle, add, n=1, com_control=False):
     finally:
         patch.undo()
     args = capture.calls[0]
-    return compiled.prepare(*args[:5], decoded=args[6]), args
+    poses, lengths, goals, masses, com_fraction = args[:5]
+    return compiled.prepare(poses, lengths, goals, masses, com_fraction, decoded=args[6]), args
 
 
 def user_goal(s, table_index):

@@ -63,7 +63,7 @@ def test_two_simulations_do_not_see_each_other(walk):
 
 def _run(sim: Simulation, seconds: float) -> dict:
     metrics = MetricsRecorder(sim)
-    for _ in range(int(round(seconds * sim.fps))):
+    for _ in range(round(seconds * sim.fps)):
         sim.step()
         metrics.record()
     return metrics.report()
@@ -133,7 +133,7 @@ def test_queued_clip_crossfades_without_a_jump(walk):
     sim.spawn("a", Morphology.preset("adult_male"),
               MotionPlayer("walk", loop=False, queue=(QueuedClip("idle", 0.5, loop=True),)))
     pelvis = []
-    for _ in range(int(7 * 30)):
+    for _ in range(7 * 30):
         sim.step()
         pelvis.append(sim.store.positions[0, 0].copy())
     step = np.linalg.norm(np.diff(np.array(pelvis), axis=0), axis=-1) * 30
@@ -226,7 +226,7 @@ def test_idle_then_walk_replants_the_feet(walk):
               MotionPlayer("idle", loop=False, queue=(QueuedClip("walk", 0.5, loop=True),)))
     metrics = MetricsRecorder(sim)
     pelvis = []
-    for _ in range(int(14 * 30)):
+    for _ in range(14 * 30):
         sim.step()
         metrics.record()
         pelvis.append(sim.store.positions[0, 0].copy())
@@ -240,7 +240,7 @@ def test_idle_then_walk_replants_the_feet(walk):
     alone = Simulation({"walk": walk})
     alone.spawn("a", Morphology.preset("adult_male"), MotionPlayer("walk"))
     walk_z = []
-    for _ in range(int(6 * 30)):
+    for _ in range(6 * 30):
         alone.step()
         walk_z.append(alone.store.positions[0, 0, 2])
     assert z.min() > min(walk_z) - 1e-3 and z.min() > 0.78  # never lower than the walk itself
@@ -255,7 +255,7 @@ def test_bad_names_and_bench_size(tmp_path, capsys):
     bad = BAD / "tmp_bad_name.yaml"  # beside the others: same relative motion paths
     bad.write_text(text)
     try:
-        with pytest.raises(InputError, match="characters\\[0\\].name: '../escaped'"):
+        with pytest.raises(InputError, match=r"characters\[0\].name: '../escaped'"):
             load_scenario(bad)
     finally:
         bad.unlink()

@@ -12,12 +12,13 @@ from __future__ import annotations
 
 import json
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import MOCAP_DIR
 from test_import_export import reference_positions
 
+from conftest import MOCAP_DIR
 from ecs_anim.cli import main
 from ecs_anim.motion import load_nmo
 from ecs_anim.skeleton import JOINT_INDEX, JOINTS
@@ -129,7 +130,7 @@ def test_z_up_is_detected_with_its_reason_and_up_overrides(name, tmp_path, capsy
     assert "Y up (given with --up)" in capsys.readouterr().out
 
 
-def _dev_copy(tmp_path, name: str, edit) -> object:
+def _dev_copy(tmp_path, name: str, edit) -> Path:
     src = VARIED / name
     if not src.exists():
         pytest.skip(f"{src} not found")

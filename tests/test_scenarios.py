@@ -22,7 +22,7 @@ def run(name, drop=()):
         c.constraints = [k for k in c.constraints if k.name not in drop]
     with build_simulation(scenario) as sim:
         metrics = MetricsRecorder(sim)
-        ticks = int(round(scenario.duration_s * scenario.fps))
+        ticks = round(scenario.duration_s * scenario.fps)
         positions, errors, weights, com = [], [], [], []
         for _ in range(ticks):
             sim.step()
@@ -33,7 +33,7 @@ def run(name, drop=()):
             weights.append(sim.constraints.weight.copy())
             com.append(centres_of_mass(st.positions, st.segment_mass_kg, st.segment_com_fraction))
         index = {f"{sim.names()[o]}.{n}": k for k, (o, n) in
-                 enumerate(zip(sim.constraints.owner, sim.constraints.names))}
+                 enumerate(zip(sim.constraints.owner, sim.constraints.names, strict=True))}
         return {"names": sim.names(), "positions": np.array(positions), "errors": np.array(errors),
                 "weights": np.array(weights), "com": np.array(com), "index": index,
                 "report": metrics.report(), "leg": sim.leg_length()}
@@ -127,7 +127,7 @@ def test_wrist_elbow_priority_follows_the_rule():
     alone = run("wrist_elbow_priority", drop=("elbow",))
     k = r["names"].index("elbow_unreachable")
     scenario = load_scenario(SCENARIOS / "wrist_elbow_priority.yaml")
-    target = np.array([c for c in scenario.characters if c.name == "elbow_unreachable"][0]
+    target = np.array(next(c for c in scenario.characters if c.name == "elbow_unreachable")
                       .constraints[1].target_in_world)
     with_elbow = np.linalg.norm(r["positions"][full, k, J["elbow_r"]] - target, axis=1)
     wrist_only = np.linalg.norm(alone["positions"][full, k, J["elbow_r"]] - target, axis=1)

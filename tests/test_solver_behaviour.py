@@ -10,20 +10,22 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from hypothesis import example, given, settings, strategies as st
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
 
 from conftest import MOTIONS_DIR
+from ecs_anim.body_points import GROUPS, body_point
 from ecs_anim.components import MotionPlayer, Placement
 from ecs_anim.constraint_table import Area
 from ecs_anim.constraints import Activation
 from ecs_anim.errors import EcsAnimError
 from ecs_anim.importing import import_bvh
-from ecs_anim.body_points import GROUPS, body_point
 from ecs_anim.morphology import Morphology, bone_lengths_of, centres_of_mass, with_lengths_m
-from ecs_anim.simulation import Simulation
-from ecs_anim.solver_shell import DEFAULT_SETTINGS
 from ecs_anim.rotations import rot_axis
-from ecs_anim.skeleton import BONE_JOINTS, JOINT_INDEX as J, JOINTS
+from ecs_anim.simulation import Simulation
+from ecs_anim.skeleton import BONE_JOINTS, JOINTS
+from ecs_anim.skeleton import JOINT_INDEX as J
+from ecs_anim.solver_shell import DEFAULT_SETTINGS
 
 IS_BONE = np.array([a >= 0 for a, _ in BONE_JOINTS])
 ALWAYS = Activation(0.0, 1e9)
@@ -479,7 +481,7 @@ def test_random_bodies_targets_and_priorities(stature, legs, picks):
     body = with_lengths_m(base, {k: base[k] * legs for k in ("thigh_l", "thigh_r", "shank_l", "shank_r")})
     sim, (e,) = still(FLOATING, body=body)
     pelvis = sim.store.positions[0, J["pelvis"]]
-    first, error_alone = None, None
+    first, error_alone = -1, np.inf
     for k, (point, priority, offset, trunk) in enumerate(picks):
         group = GROUPS[body_point(point, 0.5 if point == "forearm_l" else None).group]
         chain = (group, "trunk") if trunk and group in ("head", "arm_l", "arm_r") else None
@@ -525,12 +527,12 @@ def test_constraints_given_at_import_play_with_the_motion_on_every_body(tmp_path
     for i, preset in enumerate(("child", "tall")):
         sim.spawn(preset, Morphology.preset(preset), MotionPlayer("idle", loop=False),
                   Placement((0.0, 1.5 * i)))
-    gaps = []
+    gap_rows = []
     for _ in range(90):
         sim.step()
         q = sim.store.positions
-        gaps.append(np.linalg.norm(q[:, J["wrist_l"]] - q[:, J["wrist_r"]], axis=1))
-    gaps = np.array(gaps)  # (ticks, 2); tick k shows motion time k / 30 s
+        gap_rows.append(np.linalg.norm(q[:, J["wrist_l"]] - q[:, J["wrist_r"]], axis=1))
+    gaps = np.array(gap_rows)  # (ticks, 2); tick k shows motion time k / 30 s
     held = slice(21, 69)  # 0.7 s .. 2.3 s: fully active
     np.testing.assert_allclose(gaps[held], 0.27, atol=1e-3)
     assert np.all(np.abs(gaps[:10] - 0.27) > 0.005)  # before: the motion's own hands
@@ -586,12 +588,12 @@ def test_a_stored_area_plays_and_a_stored_constraint_past_the_clip_is_refused(tm
     assert "after the clip ends" in capsys.readouterr().err
     assert not (tmp_path / "late" / "idle.nmo").exists()
 
-    stored = [c for c in motion.constraints if c.kind != "foot_contact"][0]
+    stored = next(c for c in motion.constraints if c.kind != "foot_contact")
     for damage in ({"segment": "tail"}, {"chain": ("leg_l",)},
                    {"params": {**stored.params, "target_point": "wing"}}):
         broken = dc_replace(motion, constraints=[dc_replace(stored, **damage)])
         save_nmo(broken, tmp_path / "broken.nmo", force=True)
-        with pytest.raises(InputError, match="broken.nmo: damaged .nmo header: constraint 'elbow_clear'"):
+        with pytest.raises(InputError, match=r"broken.nmo: damaged .nmo header: constraint 'elbow_clear'"):
             load_nmo(tmp_path / "broken.nmo")
 
 
@@ -602,7 +604,7 @@ def test_a_characters_result_does_not_depend_on_who_else_is_solved(idle, monkeyp
     iterations and ends the same."""
     import ecs_anim.systems.constraint_solve as system
 
-    iterations = []
+    iterations: list[int] = []
 
     def counting(*args, **kwargs):
         result = system_solve(*args, **kwargs)
@@ -638,6 +640,6 @@ def test_a_characters_result_does_not_depend_on_who_else_is_solved(idle, monkeyp
     alone_iterations, iterations[:] = list(iterations), []
     batched = reaching(True)
     assert iterations == alone_iterations and max(iterations) < DEFAULT_SETTINGS.iterations
-    for (p_alone, err_alone), (p_batched, err_batched) in zip(alone, batched):
+    for (p_alone, err_alone), (p_batched, err_batched) in zip(alone, batched, strict=True):
         np.testing.assert_allclose(p_batched, p_alone, rtol=0, atol=1e-12)
         np.testing.assert_allclose(err_batched, err_alone, rtol=0, atol=1e-12)

@@ -8,9 +8,9 @@ import dataclasses
 import esper
 import numpy as np
 import pytest
+
 from conftest import MOTIONS_DIR
 from ecs_anim.components import CharacterRow, Morphology, MotionPlayer, Placement, QueuedClip
-
 from ecs_anim.errors import EcsAnimError
 from ecs_anim.importing import import_bvh
 from ecs_anim.normalized import NormalizedPoses
@@ -47,7 +47,7 @@ def test_spawn_many_is_spawning_one_by_one(motions):
     bodies, players, placements = _characters(rng, 7)
     names = [f"c{i}" for i in range(7)]
     one = Simulation(motions)
-    for args in zip(names, bodies, players, placements):
+    for args in zip(names, bodies, players, placements, strict=True):
         one.spawn(*args, com_target_xy=(1.0, 2.0) if args[0] == "c3" else None)
     many = Simulation(motions)
     many.spawn_many(names, bodies, players, placements,
@@ -113,7 +113,7 @@ def test_a_bad_character_in_a_bulk_spawn_adds_none(motions):
     with pytest.raises(EcsAnimError, match="character 'b'"):
         sim.spawn_many(["a", "b", "c"], bodies, players, placements)
     placements[1] = Placement((np.nan, 0.0))
-    with pytest.raises(EcsAnimError, match="character 'b'.*finite"):
+    with pytest.raises(EcsAnimError, match=r"character 'b'.*finite"):
         sim.spawn_many(["a", "b", "c"], bodies, [MotionPlayer("walk")] * 3, placements)
     with pytest.raises(EcsAnimError, match="3 names"):
         sim.spawn_many(["a", "b", "c"], bodies[:2], players, placements)

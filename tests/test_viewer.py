@@ -118,7 +118,7 @@ def test_spread_yaw_spreads_a_row_of_characters_across_the_image():
 
 
 @cache
-def _scenario(name: str):  # type: ignore[no-untyped-def]
+def _scenario(name: str):
     return load_scenario(SCENARIOS / name)
 
 
@@ -197,7 +197,7 @@ class _FullTable:
     def m(self) -> int:
         return int(self.owner.shape[0])
 
-    def weights(self, time_s, clip=None, clip_time_s=None):  # type: ignore[no-untyped-def]
+    def weights(self, time_s, clip=None, clip_time_s=None):
         return np.ones(self.m)
 
 
@@ -382,7 +382,7 @@ def _character_mask(rgb: np.ndarray, colour: np.ndarray) -> np.ndarray:
     return (saturation > 40) & (np.linalg.norm(chroma - target, axis=-1) < 0.06)
 
 
-def _check_characters_where_they_are(shot, colours: np.ndarray,  # type: ignore[no-untyped-def]
+def _check_characters_where_they_are(shot, colours: np.ndarray,
                                      extra_points: np.ndarray | None = None) -> None:
     """``extra_points`` (k, 3): other things drawn in colour (restricted areas' corners)."""
     h, w = shot.rgb.shape[:2]

@@ -30,8 +30,8 @@ from .vec import (
     Vec3,
     add,
     add_scaled,
-    cross,
     dot,
+    frame_from_axes,
     load3,
     load4,
     matmul,
@@ -141,26 +141,7 @@ def fits(arrays: DecodedArrays | DecodedPose | None, n: int) -> bool:
     if isinstance(arrays, DecodedPose):
         arrays = decoded_arrays(arrays)
     return all(a.shape == s and a.dtype == np.float64 and a.flags.writeable
-               for a, s in zip(arrays, shapes))
-
-
-@njit(cache=True)
-def frame_from_axes(primary: Vec3, secondary: Vec3, primary_axis: int, secondary_axis: int,
-                    fallback_secondary: Vec3) -> Frame:
-    """Mirrors :func:`ecs_anim.rotations.frame_from_axes` with a fallback always given (pass
-    ``secondary`` again for none), as :func:`.vec.frame_from_axes` but without a list (numba
-    allocates lists on the heap: about 0.2 us a call)."""
-    p = normalize(primary)
-    s = add_scaled(secondary, p, -dot(secondary, p))
-    if norm(s) < 1e-9:
-        s = add_scaled(fallback_secondary, p, -dot(fallback_secondary, p))
-    s = normalize(s)
-    cyclic = (secondary_axis - primary_axis) % 3 == 1
-    t = cross(p, s) if cyclic else cross(s, p)
-    x = p if primary_axis == 0 else (s if secondary_axis == 0 else t)
-    y = p if primary_axis == 1 else (s if secondary_axis == 1 else t)
-    z = p if primary_axis == 2 else (s if secondary_axis == 2 else t)
-    return (x, y, z)
+               for a, s in zip(arrays, shapes, strict=True))
 
 
 @njit(cache=True)

@@ -26,7 +26,6 @@ from ..skeleton import JOINT_INDEX as J
 from ..skeleton import LENGTH_INDEX as L
 from .decode import DecodedArrays, PoseArrays, decode_legs_row
 from .ground import height_at
-from .posture import rotation_between  # list-free (vec's builds a list on the heap)
 from .vec import (
     F64,
     Frame,
@@ -37,6 +36,7 @@ from .vec import (
     matmul,
     norm,
     quat_from_matrix,
+    rotation_between,
     store4,
     sub,
     transpose,

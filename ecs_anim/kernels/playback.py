@@ -17,19 +17,18 @@ from numpy.typing import NDArray
 
 from ..normalized import TRAILING_SHAPES, NormalizedPoses
 from .decode import PoseArrays
-from .vec import F64, Quat, Vec3, load3, store3
+from .vec import (
+    F64,
+    Vec3,
+    load3,
+    nlerp,
+    slerp,
+    store3,
+    wrap,
+)
 
 I64 = NDArray[np.int64]
 B1 = NDArray[np.bool_]
-
-#: As :data:`ecs_anim.rotations.TINY`.
-_TINY = 1e-12
-
-
-@njit(cache=True)
-def wrap(angle: float) -> float:
-    """Mirrors ``ecs_anim.playback._wrap``: the angle in [-pi, pi)."""
-    return float((angle + np.pi) % (2 * np.pi) - np.pi)
 
 
 @njit(cache=True)
@@ -37,34 +36,6 @@ def rotate_xy(x: float, y: float, angle: float) -> tuple[float, float]:
     """Mirrors :func:`ecs_anim.playback.rotate_xy` for one point."""
     c, s = math.cos(angle), math.sin(angle)
     return c * x - s * y, s * x + c * y
-
-
-@njit(cache=True)
-def slerp(q0: Quat, q1: Quat, t: float) -> Quat:
-    """Mirrors :func:`ecs_anim.rotations.slerp` for one pair (shorter arc, normalized)."""
-    dot = q0[0] * q1[0] + q0[1] * q1[1] + q0[2] * q1[2] + q0[3] * q1[3]
-    if dot < 0.0:
-        q1 = (-q1[0], -q1[1], -q1[2], -q1[3])
-    dot = abs(dot)
-    theta = math.acos(min(max(dot, -1.0), 1.0))
-    sin_theta = math.sin(theta)
-    if sin_theta < 1e-6:
-        w0, w1 = 1.0 - t, t
-    else:
-        w0 = math.sin((1.0 - t) * theta) / sin_theta
-        w1 = math.sin(t * theta) / sin_theta
-    q = (w0 * q0[0] + w1 * q1[0], w0 * q0[1] + w1 * q1[1], w0 * q0[2] + w1 * q1[2],
-         w0 * q0[3] + w1 * q1[3])
-    n = max(math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]), _TINY)
-    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
-
-
-@njit(cache=True)
-def nlerp(a: Vec3, b: Vec3, w: float) -> Vec3:
-    """Mirrors ``normalize((1 - w) * a + w * b)`` of :func:`ecs_anim.playback.blend`."""
-    v = ((1 - w) * a[0] + w * b[0], (1 - w) * a[1] + w * b[1], (1 - w) * a[2] + w * b[2])
-    n = max(math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]), _TINY)
-    return (v[0] / n, v[1] / n, v[2] / n)
 
 
 @njit(cache=True)

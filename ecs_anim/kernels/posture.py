@@ -45,7 +45,6 @@ from .decode import (
     PoseArrays,
     decode_row,
     decoded_arrays,
-    frame_from_axes,
     leg_length,
     pelvis_frame,
     pose_arrays,
@@ -56,13 +55,12 @@ from .vec import (
     Frame,
     Vec3,
     add,
-    cross,
-    dot,
+    frame_from_axes,
     load3,
     load_frame,
     matmul,
     norm,
-    normalize,
+    rotation_between,
     scale,
     store3,
     store_frame,
@@ -110,36 +108,6 @@ def export_constants() -> ExportConstants:
                            np.ascontiguousarray(YUP_TO_ZUP.T),
                            np.ascontiguousarray(BODY_TO_BVH_REST.T),
                            np.asarray(EXPORT_PARENTS, dtype=np.int64))
-
-
-@njit(cache=True)
-def rotation_between(a: Vec3, b: Vec3) -> Frame:
-    """Mirrors :func:`ecs_anim.rotations.rotation_between` (the smallest rotation taking the
-    direction ``a`` onto ``b``, a half turn for opposite ones), as :func:`.vec.rotation_between`
-    but without a list (numba allocates lists on the heap)."""
-    a = normalize(a)
-    b = normalize(b)
-    k = cross(a, b)
-    s = norm(k)
-    c = dot(a, b)
-    if c < -1.0 + 1e-9 and s < 1e-6:
-        helper = (1.0, 0.0, 0.0) if abs(a[0]) < 0.9 else (0.0, 1.0, 0.0)
-        p = normalize(cross(a, helper))
-        return ((2.0 * p[0] * p[0] - 1.0, 2.0 * p[1] * p[0], 2.0 * p[2] * p[0]),
-                (2.0 * p[0] * p[1], 2.0 * p[1] * p[1] - 1.0, 2.0 * p[2] * p[1]),
-                (2.0 * p[0] * p[2], 2.0 * p[1] * p[2], 2.0 * p[2] * p[2] - 1.0))
-    d = 1.0 / max(1.0 + c, 1e-12)
-    kk = dot(k, k)
-    return (_rodrigues_column(k, kk, d, (1.0, 0.0, 0.0), k[0]),
-            _rodrigues_column(k, kk, d, (0.0, 1.0, 0.0), k[1]),
-            _rodrigues_column(k, kk, d, (0.0, 0.0, 1.0), k[2]))
-
-
-@njit(cache=True)
-def _rodrigues_column(k: Vec3, kk: float, d: float, e: Vec3, k_j: float) -> Vec3:
-    """Column ``j`` of ``I + [k]x + [k]x^2 d`` (``e`` = e_j, ``k_j`` = k[j], ``kk`` = |k|^2):
-    ``e + k x e + (k k_j - e |k|^2) d``, as in :func:`.vec.rotation_between`."""
-    return add(add(e, cross(k, e)), scale(sub(scale(k, k_j), scale(e, kk)), d))
 
 
 @njit(cache=True)

@@ -250,7 +250,7 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
                float(s.com_tolerance_m), float(s.max_ccd_step_rad), float(s.root_gain),
                float(s.stall_fraction), float(MAX_LEG_EXTENSION))
     goals.goal[state.order] = state.goals.goal
-    return (NormalizedPoses(**dict(zip(PoseArrays._fields, state.pose))), used,
+    return (NormalizedPoses(**dict(zip(PoseArrays._fields, state.pose, strict=True))), used,
             DecodedPose(*state.dec))
 
 

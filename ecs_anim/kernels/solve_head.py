@@ -12,7 +12,7 @@ import math
 from numba import njit
 
 from .decode import DecodedArrays, PoseArrays, two_bone_middle
-from .solve_math import reach_point, rotation_toward
+from .solve_math import reach_point
 from .solve_points import Bodies, Goals, Tables, Winners
 from .vec import (
     add,
@@ -23,6 +23,7 @@ from .vec import (
     matmul,
     norm,
     quat_from_matrix,
+    rotation_toward,
     scale,
     store3,
     store4,

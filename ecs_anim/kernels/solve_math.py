@@ -4,8 +4,8 @@ Each function mirrors the batched numpy function of :mod:`ecs_anim.solver` (or o
 :mod:`ecs_anim.solver_shell`) with the same name, on tuples (3-vectors, frames as their three
 axes, :mod:`ecs_anim.kernels.vec`). Lengths in metres, angles in radians.
 
-Candidates for :mod:`ecs_anim.kernels.vec` (generic): :func:`axis_angle`, :func:`rotation_toward`,
-:func:`axis_angle_of`.
+The generic rotations they build on (``axis_angle``, ``rotation_toward``, ``axis_angle_of``) are
+in :mod:`ecs_anim.kernels.vec`.
 """
 
 from __future__ import annotations
@@ -19,55 +19,17 @@ from .vec import (
     Vec3,
     add,
     add_scaled,
+    axis_angle,
     cross,
     dot,
     frame_from_axes,
     norm,
     normalize,
+    rotation_toward,
     scale,
     sub,
     to_world,
 )
-
-
-@njit(cache=True)
-def axis_angle(k: Vec3, angle: float) -> Frame:
-    """Mirrors :func:`ecs_anim.solver.axis_angle`: the rotation by ``angle`` about the unit axis
-    ``k`` (Rodrigues, ``I + sin K + (1 - cos) K K``)."""
-    s, c = math.sin(angle), math.cos(angle)
-    v = 1.0 - c
-    # Rows of K = [k]x; K K = (K @ K) element by element.
-    k0, k1, k2 = k
-    kk00 = -k2 * k2 - k1 * k1
-    kk01 = k1 * k0
-    kk02 = k2 * k0
-    kk10 = k0 * k1
-    kk11 = -k2 * k2 - k0 * k0
-    kk12 = k2 * k1
-    kk20 = k0 * k2
-    kk21 = k1 * k2
-    kk22 = -k1 * k1 - k0 * k0
-    # Columns (x, y, z) of the matrix.
-    return ((1.0 + v * kk00, s * k2 + v * kk10, -s * k1 + v * kk20),
-            (-s * k2 + v * kk01, 1.0 + v * kk11, s * k0 + v * kk21),
-            (s * k1 + v * kk02, -s * k0 + v * kk12, 1.0 + v * kk22))
-
-
-@njit(cache=True)
-def rotation_toward(a: Vec3, b: Vec3, max_angle: float, weight: float) -> Frame:
-    """Mirrors :func:`ecs_anim.solver.rotation_toward`: the smallest rotation taking direction
-    ``a`` toward ``b``, ``weight`` of the way and at most ``max_angle``; the identity for a zero
-    vector."""
-    axis = cross(a, b)
-    sin_ab = norm(axis)
-    angle = math.atan2(sin_ab, dot(a, b))
-    if sin_ab < 1e-12:
-        helper = (1.0, 0.0, 0.0) if abs(a[0]) < 0.9 else (0.0, 1.0, 0.0)
-        axis = cross(a, helper)
-    angle = min(angle * weight, max_angle)
-    if norm(a) < 1e-12 or norm(b) < 1e-12:
-        angle = 0.0
-    return axis_angle(normalize(axis), angle)
 
 
 @njit(cache=True)
@@ -162,16 +124,6 @@ def turn_about_axis(root: Vec3, axis_through: Vec3, point: Vec3, goal: Vec3) -> 
     if not (norm(v) > 1e-9 and norm(t) > 1e-9):
         angle = 0.0
     return axis_angle(k, angle)
-
-
-@njit(cache=True)
-def axis_angle_of(m: Frame) -> tuple[Vec3, float]:
-    """Mirrors ``solver_shell._axis_angle_of``: unit axis and angle of a rotation (below π)."""
-    # Element (row i, column j) is m[j][i].
-    axis = (m[1][2] - m[2][1], m[2][0] - m[0][2], m[0][1] - m[1][0])
-    sin2 = norm(axis)
-    cos = m[0][0] + m[1][1] + m[2][2] - 1.0
-    return normalize(axis), math.atan2(sin2, cos)
 
 
 @njit(cache=True)

@@ -13,11 +13,13 @@ from numba import njit
 from numpy.typing import NDArray
 
 from .decode import DecodedArrays, PoseArrays
-from .solve_math import axis_angle, axis_angle_of, bring_within_reach, rotation_toward
+from .solve_math import bring_within_reach
 from .solve_points import Goals, Tables, goal_point, segment_frame
 from .vec import (
     F64,
     add,
+    axis_angle,
+    axis_angle_of,
     load3,
     load4,
     load_frame,
@@ -25,6 +27,7 @@ from .vec import (
     matrix_from_quat,
     norm,
     quat_from_matrix,
+    rotation_toward,
     store3,
     store4,
     store_frame,

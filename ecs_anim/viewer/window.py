@@ -92,7 +92,7 @@ def _pyglet(headless: bool) -> Any:
     try:
         import pyglet.window
         from pyglet import gl  # noqa: F401
-    except Exception as exc:  # noqa: BLE001 - any loader failure means "no OpenGL here"
+    except Exception as exc:
         raise EcsAnimError(f"cannot load OpenGL ({type(exc).__name__}: {exc}); {INSTALL_HINT}") from None
     return pyglet
 
@@ -114,7 +114,7 @@ def _make_window(pyglet: Any, width: int, height: int, visible: bool, samples: i
     for config in _gl_config(pyglet, samples):
         try:
             window = window_cls(width=width, height=height, visible=visible, config=config, **kwargs)
-        except Exception as exc:  # noqa: BLE001 - NoSuchConfigException, EGL/X errors
+        except Exception as exc:
             last = exc
             continue
         version = tuple(int(v) for v in pyglet.gl.gl_info.get_version()[:2])
@@ -235,7 +235,7 @@ def _draw_status(pyglet: Any, window: Any, text: str, width: int, height: int) -
         window.projection = Mat4.orthogonal_projection(0, width, 0, height, -255, 255)
         label = _label(pyglet, text, 10, height - 8, 11)
         label.draw()
-    except Exception as exc:  # noqa: BLE001 - fonts missing
+    except Exception as exc:
         print(f"warning: no status line ({type(exc).__name__}: {exc})", file=sys.stderr)
 
 
