@@ -4,7 +4,6 @@ and 8). Figures are printed, never asserted: only their presence and consistency
 from __future__ import annotations
 
 import json
-import os
 import shlex
 from pathlib import Path
 

@@ -62,7 +62,7 @@ def _compiled_from(index: Path, source_hash: bytes) -> bool:
         with open(index, "rb") as f:
             pickle.load(f)  # numba's version
             stamp, _ = pickle.loads(f.read())
-    except Exception:  # noqa: BLE001 - an unreadable or foreign index is just not ours
+    except Exception:
         return False
     return bool(stamp == source_hash)
 
