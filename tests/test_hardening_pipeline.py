@@ -292,15 +292,23 @@ def test_import_and_info_say_which_frames_were_trimmed(tmp_path, capsys):
             "pelvis)") in capsys.readouterr().out
 
 
-def test_the_readme_python_example_runs(capsys, monkeypatch):
-    """The README's "From Python" example, as written there."""
+def test_the_readme_python_examples_run(capsys, monkeypatch):
+    """The README's "From Python" examples, as written there."""
     text = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
-    block = text.split("## From Python", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
+    section = text.split("## From Python", 1)[1].split("\n## ", 1)[0]
+    blocks = [part.split("```", 1)[0] for part in section.split("```python\n")[1:]]
+    assert len(blocks) == 2
     monkeypatch.chdir(Path(__file__).resolve().parents[1])
-    exec(compile(block, "README.md", "exec"), {})
+    exec(compile(blocks[0], "README.md", "exec"), {})
     captured = capsys.readouterr()
     assert "['tall'] (1, 22, 3)" in captured.out
     assert "character 'child' removed with its constraints touch" in captured.err
+    scope: dict[str, object] = {}
+    exec(compile(blocks[1], "README.md", "exec"), scope)
+    assert capsys.readouterr().out.splitlines() == ["100 (22, 3)", "(1, 3)"]
+    sim = scope["sim"]
+    climber, neighbour = sim.store.positions[0, 0, 2], sim.store.positions[1, 0, 2]  # pelvis z
+    assert climber > neighbour + 0.1, (climber, neighbour)  # w0 went up its own stairs
 
 
 def test_stall_fraction_zero_turns_the_share_test_off():
