@@ -11,12 +11,11 @@ import math
 
 from numba import njit
 
-from .decode import DecodedArrays, PoseArrays, two_bone_middle
+from .decode import DecodedArrays, PoseArrays, frame_from_axes, two_bone_middle
 from .solve_math import reach_point, rotation_toward
 from .solve_points import Bodies, Goals, Tables, Winners
 from .vec import (
     add,
-    frame_from_axes,
     in_frame,
     load3,
     load_frame,

@@ -14,6 +14,7 @@ import math
 
 from numba import njit
 
+from .decode import frame_from_axes
 from .vec import (
     Frame,
     Vec3,
@@ -21,7 +22,6 @@ from .vec import (
     add_scaled,
     cross,
     dot,
-    frame_from_axes,
     norm,
     normalize,
     scale,

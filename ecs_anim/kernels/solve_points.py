@@ -22,7 +22,7 @@ from ..body_points import FRAME_PELVIS, SEG_DISTAL, SEG_FRAME, SEG_PROXIMAL
 from ..morphology import MASS_SEGMENTS
 from ..skeleton import JOINT_INDEX as J
 from ..skeleton import LENGTH_INDEX as L
-from .decode import DecodedArrays
+from .decode import DecodedArrays, frame_from_axes
 from .vec import (
     F64,
     Frame,
@@ -30,7 +30,6 @@ from .vec import (
     add,
     add_scaled,
     dot,
-    frame_from_axes,
     load3,
     load_frame,
     sub,
@@ -194,6 +193,16 @@ def point_position(dec: DecodedArrays, c: int, segment: int, fraction: float, of
     if offset[0] != 0.0 or offset[1] != 0.0 or offset[2] != 0.0:
         point = add(point, to_world(segment_frame(dec, c, segment, t), offset))
     return point
+
+
+@njit(cache=True, inline="always")
+def plain_point(positions: F64, c: int, proximal: int, distal: int, fraction: float) -> Vec3:
+    """:func:`point_position` of a point without offset: ``fraction`` of the way from joint
+    ``proximal`` to ``distal`` of character ``c`` (``positions`` (r, N_JOINTS, 3) m); taking
+    the arrays, not the state tuples (each array a tuple holds costs a reference count)."""
+    a = load3(positions[c, proximal])
+    b = load3(positions[c, distal])
+    return add_scaled(a, sub(b, a), fraction)
 
 
 @njit(cache=True, inline="always")
