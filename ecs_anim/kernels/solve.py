@@ -47,7 +47,7 @@ from .solve_points import (
     point_position,
     tables,
 )
-from .solve_root import solve_root
+from .solve_root import root_step
 from .solve_trunk import solve_trunk
 from .vec import F64, dot, load3, store3, sub
 
@@ -112,7 +112,10 @@ def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: W
             if solve_trunk(c, pose, dec, g, err, stalled, t, tolerance_m, tolerance_rad,
                            max_ccd_step_rad):
                 decode_row(c, pose, b.lengths[c], dec)  # a bent spine's joints are exact
-        com_error = solve_root(c, pose, dec, b, t, com_tolerance_m, root_gain, leg_extension)
+        com_error = root_step(c, pose.root_position, positions, b.lengths, b.masses,
+                              b.com_fraction, b.footprint, b.in_contact, b.com_desired, b.com_on,
+                              t.mass_proximal, t.mass_distal, t.hip, t.thigh, t.shank,
+                              com_tolerance_m, root_gain, leg_extension)
         # Done where every goal is met or has stalled (unchanged, or falling by less than a
         # share of itself twice running), and the centre of mass is back.
         any_open = False
