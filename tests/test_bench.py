@@ -119,7 +119,9 @@ def _index(path: Path, source: bytes) -> None:
 
 def test_uncompiled_kernels_reads_the_cache_folder(tmp_path, monkeypatch):
     folder = _fake_cache(tmp_path, monkeypatch)
-    modules = [p.stem for p in kernels.kernel_sources() if p.stem not in kernels.HELPER_MODULES]
+    modules = [p.stem for p in kernels.kernel_sources()
+               if "parallel=True" in p.read_text(encoding="utf-8")]
+    assert {"decode", "playback", "ground_adapt", "solve", "posture", "com"} <= set(modules)
     assert kernels.uncompiled_kernels() == modules  # nothing compiled yet
     folder.mkdir()
     for source in kernels.kernel_sources():
@@ -132,6 +134,22 @@ def test_uncompiled_kernels_reads_the_cache_folder(tmp_path, monkeypatch):
     assert kernels.uncompiled_kernels() == [first.stem]
     (folder / "vec.broken-1.py311.nbi").write_bytes(b"not an index")
     assert kernels.uncompiled_kernels() == [first.stem]
+
+
+def test_compiled_code_of_other_kernel_sources_is_dropped(tmp_path, monkeypatch):
+    """numba checks only a compiled function's own file; a kernel inlining an updated helper
+    of another module must not keep running its old code."""
+    folder = _fake_cache(tmp_path, monkeypatch)
+    folder.mkdir()
+    stale = [folder / "solve.solve_rows-130.py311.nbi", folder / "solve.solve_rows-130.py311.1.nbc"]
+    for path in stale:
+        path.write_bytes(b"old")
+    (folder / kernels.SOURCES_MARKER).write_text("0" * 64 + "\n")  # made from other sources
+    assert kernels.drop_stale_cache()
+    assert not any(path.exists() for path in stale)
+    assert (folder / kernels.SOURCES_MARKER).read_text().strip() == kernels.sources_digest()
+    stale[0].write_bytes(b"compiled from these sources")
+    assert not kernels.drop_stale_cache() and stale[0].exists()  # same sources: kept
 
 
 def test_a_first_run_says_once_that_it_compiles(tmp_path, monkeypatch, capsys):

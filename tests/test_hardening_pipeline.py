@@ -307,6 +307,7 @@ def test_the_readme_python_examples_run(capsys, monkeypatch):
     exec(compile(blocks[1], "README.md", "exec"), scope)
     assert capsys.readouterr().out.splitlines() == ["100 (22, 3)", "(1, 3)"]
     sim = scope["sim"]
+    assert isinstance(sim, Simulation)
     climber, neighbour = sim.store.positions[0, 0, 2], sim.store.positions[1, 0, 2]  # pelvis z
     assert climber > neighbour + 0.1, (climber, neighbour)  # w0 went up its own stairs
 

@@ -48,8 +48,48 @@ def _cache_subfolder() -> Path:
     return cache_dir() / f"kernels_{hashlib.sha1(here.encode()).hexdigest()}"
 
 
-#: Modules of scalar helpers only: compiled as part of the kernels that call them.
-HELPER_MODULES = ("vec",)
+def sources_digest() -> str:
+    """sha256 of every kernel module's source together (hex)."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    for source in kernel_sources():
+        digest.update(source.name.encode() + b"\0" + source.read_bytes())
+    return digest.hexdigest()
+
+
+#: The file in the cache folder naming the kernel sources its compiled code was made from.
+SOURCES_MARKER = "ecs_anim_sources.sha256"
+
+
+def drop_stale_cache() -> bool:
+    """Delete this package's compiled code if any kernel module changed since it was compiled.
+
+    numba checks only the source file of each compiled function, not the helpers of other
+    modules compiled into it (a kernel of ``solve.py`` inlines ``vec.py``'s): after an update
+    that changed only ``vec.py``, the old code would run. So the cache is kept only for the same
+    sources, all of them, as a marker file records. Returns whether anything was dropped."""
+    folder = _cache_subfolder()
+    marker = folder / SOURCES_MARKER
+    digest = sources_digest()
+    try:
+        if marker.read_text().strip() == digest:
+            return False
+    except OSError:
+        pass
+    dropped = False
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        for stale in list(folder.glob("*.nbi")) + list(folder.glob("*.nbc")):
+            stale.unlink(missing_ok=True)
+            dropped = True
+        marker.write_text(digest + "\n")
+    except OSError:  # a read-only cache: numba then compiles in memory, as without a cache
+        pass
+    return dropped
+
+
+drop_stale_cache()
 
 
 def _compiled_from(index: Path, source_hash: bytes) -> bool:
@@ -68,17 +108,17 @@ def _compiled_from(index: Path, source_hash: bytes) -> bool:
 
 
 def uncompiled_kernels() -> list[str]:
-    """Names of the kernel modules the cache holds no compiled code for that matches their
-    current source (not compiled yet, or changed since). A module of helpers only (compiled as
-    part of the kernels calling it) counts once it has some."""
+    """Names of the kernel modules (those with a kernel over characters, ``parallel=True``) the
+    cache holds no compiled code for that matches their current source (not compiled yet, or
+    changed since)."""
     import hashlib
 
     folder = _cache_subfolder()
     missing = []
     for source in kernel_sources():
+        if "parallel=True" not in source.read_text(encoding="utf-8"):
+            continue  # helpers only: compiled into the kernels that call them (often inlined)
         indexes = list(folder.glob(f"{source.stem}.*.nbi")) if folder.is_dir() else []
-        if source.stem in HELPER_MODULES and not indexes:
-            continue
         source_hash = hashlib.sha256(source.read_bytes()).digest()
         if not any(_compiled_from(index, source_hash) for index in indexes):
             missing.append(source.stem)

@@ -72,18 +72,23 @@ def vertical_slack_for_reach(hip: Vec3, ankle_target: Vec3, reach: float) -> flo
 
 
 @njit(cache=True, inline="always")
-def adapt_to_ground(c: int, pose: PoseArrays, scaled: DecodedArrays, lengths_row: F64,
-                    leg: float, targets: tuple[Vec3, Vec3], weights: tuple[float, float],
-                    root_height: float, max_extension: float) -> None:
+def adapt_to_ground(c: int, root_position: F64, leg_frame: F64, leg_fraction: F64,
+                    positions: F64, pelvis2world_rows: F64, leg2world_rows: F64,
+                    lengths_row: F64, leg: float, targets: tuple[Vec3, Vec3],
+                    weights: tuple[float, float], root_height: float,
+                    max_extension: float) -> None:
     """Mirrors :func:`ecs_anim.ground_adapt.adapt_to_ground` for store row ``c`` (legs
     re-aimed from the decoded pose ``scaled``, the pelvis lowered as the legs in contact need),
-    writing the root height, leg frames and fractions of row ``c`` of ``pose``.
+    writing the root height, leg frames and fractions of row ``c`` of ``pose``. The arrays are
+    passed one by one (``root_position``, ``leg_frame``, ``leg_fraction`` of ``pose``;
+    ``positions``, ``pelvis2world``, ``leg2world`` of ``scaled``): passing the state tuples on
+    costs a reference count per array they hold.
 
     ``targets``: each ankle's target (m, world); ``weights``: contact activations;
     ``root_height`` (m): the pelvis height the motion wants; ``leg``: the leg length (m).
     """
-    pos = scaled.positions[c]
-    pelvis2world = load_frame(scaled.pelvis2world[c])
+    pos = positions[c]
+    pelvis2world = load_frame(pelvis2world_rows[c])
     pelvis_now_z = pos[_PELVIS, 2]
     up = root_height - pelvis_now_z
     lowest = 0.0
@@ -102,12 +107,12 @@ def adapt_to_ground(c: int, pose: PoseArrays, scaled: DecodedArrays, lengths_row
         thigh, shank = lengths_row[_L_THIGH + s], lengths_row[_L_SHANK + s]
         reach = max_extension * (thigh + shank)
         to_target = sub(targets[s], (hip[0] + 0.0, hip[1] + 0.0, hip[2] + shift))
-        leg2world = load_frame(scaled.leg2world[c, s])
+        leg2world = load_frame(leg2world_rows[c, s])
         turn = rotation_between(leg2world[2], to_target)
         new_leg2pelvis = matmul(transpose(pelvis2world), matmul(turn, leg2world))
-        store4(pose.leg_frame[c, s], quat_from_matrix(new_leg2pelvis))
-        pose.leg_fraction[c, s] = min(norm(to_target), reach) / (thigh + shank)
-    pose.root_position[c, 2] = pelvis_z / leg
+        store4(leg_frame[c, s], quat_from_matrix(new_leg2pelvis))
+        leg_fraction[c, s] = min(norm(to_target), reach) / (thigh + shank)
+    root_position[c, 2] = pelvis_z / leg
 
 
 @njit(cache=True)
@@ -124,32 +129,39 @@ def adapt_keeping_heels_up(c: int, pose: PoseArrays, scaled: DecodedArrays, leng
     Writes row ``c`` of ``pose`` as :func:`adapt_to_ground`; returns the decoded (ankles, toes,
     shank2world) of the result.
     """
-    adapt_to_ground(c, pose, scaled, lengths_row, leg, targets, weights, root_height,
-                    max_extension)
+    kinds, params, grid = ground
+    root_position, leg_frame, leg_fraction = pose.root_position, pose.leg_frame, pose.leg_fraction
+    positions, pelvis2world, leg2world = scaled.positions, scaled.pelvis2world, scaled.leg2world
+    adapt_to_ground(c, root_position, leg_frame, leg_fraction, positions, pelvis2world,
+                    leg2world, lengths_row, leg, targets, weights, root_height, max_extension)
     legs = decode_legs_row(c, pose, lengths_row, lengths_row)
     for _ in range(passes):
         ankles = legs[4]
-        d0 = _height(ground, ankles[0]) + ankle_height[0] - ankles[0][2]
-        d1 = _height(ground, ankles[1]) + ankle_height[1] - ankles[1][2]
+        d0 = height_at(ankles[0][0], ankles[0][1], kinds, params, grid) + ankle_height[0] \
+            - ankles[0][2]
+        d1 = height_at(ankles[1][0], ankles[1][1], kinds, params, grid) + ankle_height[1] \
+            - ankles[1][2]
         if not (d0 > heel_tolerance or d1 > heel_tolerance):
             break
         t0, t1 = targets
         targets = ((t0[0], t0[1], t0[2] + max(d0, 0.0)), (t1[0], t1[1], t1[2] + max(d1, 0.0)))
-        adapt_to_ground(c, pose, scaled, lengths_row, leg, targets, weights, root_height,
+        adapt_to_ground(c, root_position, leg_frame, leg_fraction, positions, pelvis2world,
+                        leg2world, lengths_row, leg, targets, weights, root_height,
                         max_extension)
         legs = decode_legs_row(c, pose, lengths_row, lengths_row)
     return legs[4], legs[5], legs[7]
 
 
 @njit(cache=True, inline="always")
-def toes_onto_ground(c: int, pose: PoseArrays, ankles: tuple[Vec3, Vec3],
+def toes_onto_ground(c: int, foot_dir: F64, ankles: tuple[Vec3, Vec3],
                      toes: tuple[Vec3, Vec3], shank2world: tuple[Frame, Frame], ball: float,
-                     ground: GroundArrays, passes: int) -> None:
+                     kinds: I64, params: F64, grid: F64, passes: int) -> None:
     """Mirrors ``GroundAdapt._toes_onto_ground`` for store row ``c``: a foot whose toe joint
     would be under the ground (by ``ball`` m, its height above the sole) is pitched up about
-    its ankle, ``passes`` times asking the ground again; writes ``pose.foot_dir[c]``."""
-    d0 = _height(ground, toes[0]) + ball - toes[0][2]
-    d1 = _height(ground, toes[1]) + ball - toes[1][2]
+    its ankle, ``passes`` times asking the ground (``kinds``, ``params``, ``grid``) again;
+    writes ``foot_dir[c]`` (``pose.foot_dir``)."""
+    d0 = height_at(toes[0][0], toes[0][1], kinds, params, grid) + ball - toes[0][2]
+    d1 = height_at(toes[1][0], toes[1][1], kinds, params, grid) + ball - toes[1][2]
     if not (d0 > 0.0 or d1 > 0.0):
         return
     for s in range(2):
@@ -166,12 +178,14 @@ def toes_onto_ground(c: int, pose: PoseArrays, ankles: tuple[Vec3, Vec3],
             along = math.sqrt(1.0 - dz**2)
             moved = (ankle[0] + foot * (hx * along), ankle[1] + foot * (hy * along),
                      ankle[2] + foot * dz)
-            deficit = _height(ground, moved) + ball - moved[2]
+            deficit = height_at(moved[0], moved[1], kinds, params, grid) + ball - moved[2]
+            if not deficit > 0.0:
+                break  # the next passes would not move it (dz + 0, the same point)
         new_d = ((moved[0] - ankle[0]) / foot, (moved[1] - ankle[1]) / foot,
                  (moved[2] - ankle[2]) / foot)
         if max(abs(new_d[0] - d[0]), abs(new_d[1] - d[1]), abs(new_d[2] - d[2])) > 0.0:
             in_shank = in_frame(shank2world[s], new_d)
-            out = pose.foot_dir[c, s]
+            out = foot_dir[c, s]
             out[0], out[1], out[2] = in_shank[0], in_shank[1], in_shank[2]
 
 
@@ -240,7 +254,8 @@ def ground_adapt_row(c: int, pose: PoseArrays, scaled: DecodedArrays, lengths: F
     new_ankles, new_toes, shank2world = adapt_keeping_heels_up(
         c, pose, scaled, lengths_row, leg_c, targets, w, root_height, ground,
         ankle_height, max_extension, heel_tolerance, heel_passes)
-    toes_onto_ground(c, pose, new_ankles, new_toes, shank2world, ball, ground, toe_passes)
+    toes_onto_ground(c, pose.foot_dir, new_ankles, new_toes, shank2world, ball, ground[0],
+                     ground[1], ground[2], toe_passes)
 
 
 @njit(cache=True, parallel=True)

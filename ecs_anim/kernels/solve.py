@@ -43,12 +43,13 @@ from .solve_points import (
     Tables,
     Winners,
     goal_error,
+    plain_point,
     point_position,
     tables,
 )
-from .solve_root import solve_root
+from .solve_root import root_step
 from .solve_trunk import solve_trunk
-from .vec import F64, load3, store3, sub
+from .vec import F64, dot, load3, store3, sub
 
 I64 = NDArray[np.int64]
 B8 = NDArray[np.bool_]
@@ -82,35 +83,55 @@ def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: W
     it used. Mirrors the loop of :func:`ecs_anim.solver_shell.solve` for one character."""
     start, stop = g.start[c], g.start[c + 1]
     uses_trunk = False
+    on_self = False
     for j in range(start, stop):
         stalled[j] = False
         previous[j] = math.inf
         slow_before[j] = False
         if (g.chain[j] & (1 << _TRUNK)) > 0:
             uses_trunk = True
+        on_self = on_self or g.on_self[j]
+    # Steps with nothing to do are not called (passing the state tuples on costs a reference
+    # count per array they hold), and the errors of points without offset are measured on the
+    # arrays themselves (the same operations as goal_error).
+    uses_head = w.first_head[c] >= 0 or w.orient_head[c] >= 0
+    positions, seg_proximal, seg_distal = dec.positions, t.seg_proximal, t.seg_distal
+    orientation, segment, fraction, offset = g.orientation, g.segment, g.fraction, g.offset
+    goal, priority = g.goal, g.priority
     used = 0
     for _ in range(iterations):
         used += 1
-        follow_own_targets(c, dec, g, t)
+        if on_self:
+            follow_own_targets(c, dec, g, t)
         solve_limbs(c, pose, dec, g, w, b, t, tolerance_m, leg_extension)
-        solve_head(c, pose, dec, g, w, b, t)
+        if uses_head:
+            solve_head(c, pose, dec, g, w, b, t)
         if uses_trunk:
             for j in range(start, stop):
                 err[j] = goal_error(dec, c, g, j, t)
             if solve_trunk(c, pose, dec, g, err, stalled, t, tolerance_m, tolerance_rad,
                            max_ccd_step_rad):
                 decode_row(c, pose, b.lengths[c], dec)  # a bent spine's joints are exact
-        com_error = solve_root(c, pose, dec, b, t, com_tolerance_m, root_gain, leg_extension)
+        com_error = root_step(c, pose.root_position, positions, b.lengths, b.masses,
+                              b.com_fraction, b.footprint, b.in_contact, b.com_desired, b.com_on,
+                              t.mass_proximal, t.mass_distal, t.hip, t.thigh, t.shank,
+                              com_tolerance_m, root_gain, leg_extension)
         # Done where every goal is met or has stalled (unchanged, or falling by less than a
         # share of itself twice running), and the centre of mass is back.
         any_open = False
         for j in range(start, stop):
-            e = goal_error(dec, c, g, j, t)
-            tol = tolerance_rad if g.orientation[j] else tolerance_m
+            if (not orientation[j] and offset[j, 0] == 0.0 and offset[j, 1] == 0.0
+                    and offset[j, 2] == 0.0):
+                d = sub(plain_point(positions, c, seg_proximal[segment[j]],
+                                    seg_distal[segment[j]], fraction[j]), load3(goal[j]))
+                e = math.sqrt(dot(d, d))
+            else:
+                e = goal_error(dec, c, g, j, t)
+            tol = tolerance_rad if orientation[j] else tolerance_m
             first = math.isinf(previous[j])
             unchanged = not first and abs(previous[j] - e) < tolerance_m
             slow = not first and previous[j] - e < stall_fraction * previous[j]
-            planted = g.priority[j] == math.inf
+            planted = priority[j] == math.inf
             goal_open = (e > tol and not unchanged and not (slow and slow_before[j])
                          and not stalled[j] and not planted)
             if e > tol and not goal_open:
@@ -121,9 +142,11 @@ def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: W
         if not any_open and com_error <= com_tolerance_m:
             break
     # The last root move shifted the limbs: re-plant the feet, re-aim the head and the arms.
-    follow_own_targets(c, dec, g, t)
+    if on_self:
+        follow_own_targets(c, dec, g, t)
     solve_limbs(c, pose, dec, g, w, b, t, tolerance_m, leg_extension)
-    solve_head(c, pose, dec, g, w, b, t)
+    if uses_head:
+        solve_head(c, pose, dec, g, w, b, t)
     return used
 
 

@@ -197,6 +197,16 @@ def point_position(dec: DecodedArrays, c: int, segment: int, fraction: float, of
 
 
 @njit(cache=True, inline="always")
+def plain_point(positions: F64, c: int, proximal: int, distal: int, fraction: float) -> Vec3:
+    """:func:`point_position` of a point without offset: ``fraction`` of the way from joint
+    ``proximal`` to ``distal`` of character ``c`` (``positions`` (r, N_JOINTS, 3) m); taking
+    the arrays, not the state tuples (each array a tuple holds costs a reference count)."""
+    a = load3(positions[c, proximal])
+    b = load3(positions[c, distal])
+    return add_scaled(a, sub(b, a), fraction)
+
+
+@njit(cache=True, inline="always")
 def goal_point(dec: DecodedArrays, c: int, g: Goals, j: int, t: Tables) -> Vec3:
     """Where goal ``j``'s point of character ``c`` is now."""
     return point_position(dec, c, g.segment[j], g.fraction[j], load3(g.offset[j]), t)

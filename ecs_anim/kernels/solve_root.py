@@ -13,7 +13,8 @@ import math
 from numba import njit
 
 from .decode import DecodedArrays, PoseArrays, leg_length
-from .solve_points import Bodies, Tables, centre_of_mass
+from .solve_points import B8, I64, Bodies, Tables
+from .vec import F64, add_scaled, load3, sub
 
 
 @njit(cache=True, inline="always")
@@ -22,30 +23,55 @@ def solve_root(c: int, pose: PoseArrays, dec: DecodedArrays, b: Bodies, t: Table
     """Mirrors ``ecs_anim.solver_shell._Solve.root`` for character ``c`` (in place): returns
     the horizontal centre-of-mass error before the move (m; 0 without COM control).
     ``leg_extension``: the longest a planted leg stretches, as a share of thigh + shank."""
-    if not b.com_on[c]:
+    return root_step(c, pose.root_position, dec.positions, b.lengths, b.masses, b.com_fraction,
+                     b.footprint, b.in_contact, b.com_desired, b.com_on, t.mass_proximal,
+                     t.mass_distal, t.hip, t.thigh, t.shank, com_tolerance_m, root_gain,
+                     leg_extension)
+
+
+@njit(cache=True, inline="always")
+def root_step(c: int, root_position: F64, positions: F64, lengths: F64, masses: F64,
+              com_fraction: F64, footprint: F64, in_contact: B8, com_desired: F64, com_on: B8,
+              mass_proximal: I64, mass_distal: I64, hip: I64, thigh: I64, shank: I64,
+              com_tolerance_m: float, root_gain: float, leg_extension: float) -> float:
+    """:func:`solve_root` on the arrays it reads and writes (the fields of the same names of
+    the pose, the decoded rows, the bodies and the tables), which the shell passes rather than
+    the state tuples (each array a tuple holds costs a reference count)."""
+    if not com_on[c]:
         return 0.0
-    com = centre_of_mass(dec, c, b.masses[c], b.com_fraction[c], t)
-    ex = b.com_desired[c, 0] - com[0]
-    ey = b.com_desired[c, 1] - com[1]
+    # Mirrors solve_points.centre_of_mass (the same operations).
+    total = 0.0
+    x = y = z = 0.0
+    for s in range(masses.shape[1]):
+        a = load3(positions[c, mass_proximal[s]])
+        bb = load3(positions[c, mass_distal[s]])
+        seg_com = add_scaled(a, sub(bb, a), com_fraction[c, s])
+        x += masses[c, s] * seg_com[0]
+        y += masses[c, s] * seg_com[1]
+        z += masses[c, s] * seg_com[2]
+        total += masses[c, s]
+    com = (x / total, y / total, z / total)
+    ex = com_desired[c, 0] - com[0]
+    ey = com_desired[c, 1] - com[1]
     size = math.sqrt(ex * ex + ey * ey)
     if not size > 0.1 * com_tolerance_m:
         return size
     sx, sy = ex * root_gain, ey * root_gain
-    lengths_row = b.lengths[c]
-    p = dec.positions[c]
+    lengths_row = lengths[c]
+    p = positions[c]
     sz = 0.0
     for s in range(2):
         # Mirrors ground_adapt.vertical_slack_for_reach for this hip once shifted.
-        hx, hy, hz = p[t.hip[s], 0] + sx, p[t.hip[s], 1] + sy, p[t.hip[s], 2] + 0.0
-        reach = leg_extension * (lengths_row[t.thigh[s]] + lengths_row[t.shank[s]])
-        fx, fy, fz = b.footprint[c, s, 0], b.footprint[c, s, 1], b.footprint[c, s, 2]
+        hx, hy, hz = p[hip[s], 0] + sx, p[hip[s], 1] + sy, p[hip[s], 2] + 0.0
+        reach = leg_extension * (lengths_row[thigh[s]] + lengths_row[shank[s]])
+        fx, fy, fz = footprint[c, s, 0], footprint[c, s, 1], footprint[c, s, 2]
         horizontal = math.sqrt((hx - fx) ** 2 + (hy - fy) ** 2)
         needed = fz + math.sqrt(max(reach**2 - horizontal**2, 0.0)) - hz
-        sz = min(sz, min(needed, 0.0) if b.in_contact[c, s] else 0.0)
+        sz = min(sz, min(needed, 0.0) if in_contact[c, s] else 0.0)
     unit = leg_length(lengths_row)
-    pose.root_position[c, 0] += sx / unit
-    pose.root_position[c, 1] += sy / unit
-    pose.root_position[c, 2] += sz / unit
+    root_position[c, 0] += sx / unit
+    root_position[c, 1] += sy / unit
+    root_position[c, 2] += sz / unit
     for joint in range(p.shape[0]):
         p[joint, 0] += sx
         p[joint, 1] += sy
