@@ -130,7 +130,7 @@ def compile_notice() -> str | None:
     first run on a machine, or after an update), else None."""
     if not uncompiled_kernels():
         return None
-    return f"compiling the tick's kernels once (about 30 s); cached in {cache_dir()}"
+    return f"compiling the tick's kernels once (a few minutes); cached in {cache_dir()}"
 
 
 _announcers: list[Callable[[str], None]] = []
