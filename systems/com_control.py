@@ -1,7 +1,8 @@
 """COMControl: where the centre of mass ended up, for the characters the solver moved.
 
 The paper's ``adaptRoot()`` runs inside the solver's loop, after the trunk in every iteration
-(:meth:`ecs_anim.solver_shell._Solve.root`: the root moves horizontally by the centre-of-mass
+(:func:`ecs_anim.kernels.solve_root.solve_root`, mirroring
+:meth:`ecs_anim.solver_shell._Solve.root`: the root moves horizontally by the centre-of-mass
 error, lowered if a planted leg could not reach its footprint), so it is a step of
 ConstraintSolve. This system checks its result every tick: the whole-body centre of mass (de Leva
 segment masses of each body) of the solved posture and its horizontal distance from the desired
