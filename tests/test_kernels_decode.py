@@ -143,3 +143,15 @@ def test_pose_arrays_and_decoded_pose_share_memory():
     decoded = kd.decoded_pose(arrays)
     assert all(a is b for a, b in zip(kd.decoded_arrays(decoded), arrays, strict=True))
     assert kd.fits(decoded, 5) and not kd.fits(decoded, 6) and not kd.fits(None, 5)
+
+
+def test_the_kernels_tuples_name_the_dataclasses_fields_in_order():
+    """PoseArrays / DecodedArrays are built positionally from the dataclasses (numba needs the
+    tuples spelled out): a field added to one side only would shift every array after it."""
+    from dataclasses import fields
+
+    from ecs_anim.kernels.decode import DecodedArrays, PoseArrays
+    from ecs_anim.normalized import DecodedPose, NormalizedPoses
+
+    assert PoseArrays._fields == tuple(f.name for f in fields(NormalizedPoses))
+    assert DecodedArrays._fields == tuple(f.name for f in fields(DecodedPose))
