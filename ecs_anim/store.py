@@ -55,7 +55,8 @@ class CharacterStore:
     placement_xy (n, 2) metres and placement_heading (n,) of each motion origin (fade_placement_*
     the same for the clip being faded out);
     poses: this tick's normalized poses (n,); contact_weight (n, 2) foot-contact activation;
-    scaled: the pose decoded on each body before ground adaptation;
+    scaled: the pelvis and legs decoded on each body before ground adaptation (the other joints
+    and frames are not filled);
     footprint (n, 2, 3) locked ankle positions, locked (n, 2) bool, footprint_settled (n, 2) bool
     (the contact has been fully planted: its footprint's height is fixed); ground_ref (n,) metres the
     motion's floor is raised to under the character (smoothed);

@@ -30,7 +30,7 @@ from ecs_anim.ground_adapt import (
     adapt_keeping_heels_up,
     heel_depth,
 )
-from ecs_anim.kernels.decode import decoded_arrays, pose_arrays
+from ecs_anim.kernels.decode import decoded_arrays, leg_pose_arrays, pose_arrays
 from ecs_anim.kernels.ground_adapt import ground_adapt_rows
 from ecs_anim.kernels.playback import writable_poses
 from ecs_anim.normalized import SIDE_JOINTS, SIDE_LENGTHS
@@ -81,7 +81,7 @@ class GroundAdapt(System):
             return
         scaled = st.scaled
         assert scaled is not None, "MorphologyAdapt runs before GroundAdapt"
-        pose = pose_arrays(writable_poses(st.poses, st.n))
+        pose = leg_pose_arrays(pose_arrays(writable_poses(st.poses, st.n)))
         st.footprint, st.locked = _own(st.footprint), _own(st.locked)
         st.footprint_settled, st.ground_ref = _own(st.footprint_settled), _own(st.ground_ref)
         decoded = decoded_arrays(scaled)

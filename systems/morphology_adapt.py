@@ -7,15 +7,17 @@ Reads: store.poses, store.lengths; on a body change the Morphology components, s
 segment_com_fraction, placement_*, fade_placement_*, posture (whether the character has played).
 Writes: on a body change lengths, segment_mass_kg, segment_com_fraction, placement_xy,
 fade_placement_xy (it stays where it stands), the root of poses, locked (its feet re-plant);
-store.scaled (joint positions and part frames on each body, before ground adaptation), in place
-when the store's arrays still fit (compiled :func:`ecs_anim.kernels.decode.decode`).
+store.scaled: the pelvis and legs on each body before ground adaptation (the pelvis and leg joint
+positions, pelvis2world and leg2world: what GroundAdapt reads; the upper body is decoded once,
+by PostureConvert), in place when the store's arrays still fit (compiled
+:func:`ecs_anim.kernels.decode.decode_legs`).
 """
 
 from __future__ import annotations
 
 from ecs_anim.body_change import adopt_bodies
 from ecs_anim.components import Morphology
-from ecs_anim.kernels.decode import decode, fits
+from ecs_anim.kernels.decode import decode_legs, fits
 from ecs_anim.system_base import System
 
 
@@ -30,4 +32,4 @@ class MorphologyAdapt(System):
     def run(self, dt: float) -> None:
         st = self.sim.store
         reuse = st.scaled if fits(st.scaled, st.n) else None
-        st.scaled = decode(st.poses, st.lengths, reuse)
+        st.scaled = decode_legs(st.poses, st.lengths, reuse)

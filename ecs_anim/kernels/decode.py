@@ -110,6 +110,25 @@ class DecodedArrays(NamedTuple):
     arm2world: F64
 
 
+class LegPoseArrays(NamedTuple):
+    """The arrays of :class:`PoseArrays` that :func:`decode_legs_row` reads (same names), for
+    kernels that need only the legs: a tuple passed to a function costs a reference count per
+    array it holds."""
+
+    root_position: F64
+    root_heading: F64
+    pelvis_local: F64
+    hip_dir: F64
+    leg_frame: F64
+    leg_fraction: F64
+    foot_dir: F64
+
+
+def leg_pose_arrays(pose: PoseArrays) -> LegPoseArrays:
+    """The leg arrays of ``pose`` (the same arrays, no copies)."""
+    return LegPoseArrays(*(getattr(pose, name) for name in LegPoseArrays._fields))
+
+
 def pose_arrays(poses: NormalizedPoses) -> PoseArrays:
     """The arrays of ``poses`` as a :class:`PoseArrays` (views, no copies)."""
     return PoseArrays(*(np.asarray(getattr(poses, name), dtype=np.float64)
@@ -301,12 +320,13 @@ def spine_joint(control: tuple[Vec3, Vec3, Vec3, Vec3], chord: float, length: fl
 
 
 @njit(cache=True, inline="always")
-def decode_row(c: int, pose: PoseArrays, lengths_row: F64, out: DecodedArrays) -> None:
-    """Mirrors :func:`ecs_anim.normalized.decode` (``use_stretch=False``) for store row ``c``
-    on the body ``lengths_row`` (N_LENGTHS,) (m): writes row ``c`` of every ``out`` array."""
-    seg = lengths_row
+def store_legs_row(c: int, pose: PoseArrays, lengths_row: F64, out: DecodedArrays
+                   ) -> tuple[Vec3, Frame]:
+    """:func:`decode_legs_row` of store row ``c`` on the body ``lengths_row`` (N_LENGTHS,) (m)
+    written into row ``c`` of ``out``: the pelvis and leg joints of ``positions``,
+    ``pelvis2world`` and ``leg2world``. Returns (pelvis, pelvis2world)."""
     pelvis, pelvis2world, hips, knees, ankles, toes, legs, _ = decode_legs_row(
-        c, pose, seg, lengths_row)
+        c, pose, lengths_row, lengths_row)
     positions = out.positions[c]
     store3(positions[_PELVIS], pelvis)
     for s in range(2):
@@ -316,6 +336,34 @@ def decode_row(c: int, pose: PoseArrays, lengths_row: F64, out: DecodedArrays) -
         store3(positions[_TOE + 4 * s], toes[s])
         store_frame(out.leg2world[c, s], legs[s])
     store_frame(out.pelvis2world[c], pelvis2world)
+    return pelvis, pelvis2world
+
+
+@njit(cache=True)
+def decode_legs_into(c: int, pose: PoseArrays, lengths_row: F64, out: DecodedArrays) -> None:
+    """:func:`store_legs_row` for :func:`decode_legs_rows` (a prange body calls a function
+    numba does not inline)."""
+    store_legs_row(c, pose, lengths_row, out)
+
+
+@njit(cache=True, parallel=True)
+def decode_legs_rows(rows: I64, pose: PoseArrays, lengths: F64, out: DecodedArrays) -> None:
+    """Mirrors :func:`ecs_anim.normalized.decode_legs` over the store rows ``rows`` (int64), in
+    parallel: the pelvis and legs of row ``c`` of ``pose`` on the body ``lengths[c]``
+    ((n, N_LENGTHS), m) into row ``c`` of ``out`` (the pelvis and leg joints of ``positions``,
+    ``pelvis2world``, ``leg2world``; the rest is left as it is)."""
+    for i in prange(rows.shape[0]):
+        c = rows[i]
+        decode_legs_into(c, pose, lengths[c], out)
+
+
+@njit(cache=True, inline="always")
+def decode_row(c: int, pose: PoseArrays, lengths_row: F64, out: DecodedArrays) -> None:
+    """Mirrors :func:`ecs_anim.normalized.decode` (``use_stretch=False``) for store row ``c``
+    on the body ``lengths_row`` (N_LENGTHS,) (m): writes row ``c`` of every ``out`` array."""
+    seg = lengths_row
+    pelvis, pelvis2world = store_legs_row(c, pose, seg, out)
+    positions = out.positions[c]
 
     spine_len = seg[_L_SPINE_LOWER] + seg[_L_SPINE_LOWER + 1] + seg[_L_SPINE_LOWER + 2]
     points = pose.spine_points[c]
@@ -361,6 +409,23 @@ def decode_rows(rows: I64, pose: PoseArrays, lengths: F64, out: DecodedArrays) -
     for i in prange(rows.shape[0]):
         c = rows[i]
         decode_row(c, pose, lengths[c], out)
+
+
+def decode_legs(poses: NormalizedPoses, lengths: F64, out: DecodedPose | None = None
+                ) -> DecodedPose:
+    """Compiled :func:`ecs_anim.normalized.decode_legs` of every row, as the legs' part of a
+    :class:`~ecs_anim.normalized.DecodedPose`: the pelvis and leg joints of ``positions``,
+    ``pelvis2world`` and ``leg2world`` (what ground adaptation reads). ``out`` is written in
+    place when given (and returned; its other entries are left as they are), else allocated
+    with NaN in the other entries.
+    """
+    pose = pose_arrays(poses)
+    n = pose.root_heading.shape[0]
+    lengths = np.ascontiguousarray(np.broadcast_to(lengths, (n, N_LENGTHS)), dtype=np.float64)
+    arrays = (DecodedArrays(*(np.full_like(a, np.nan) for a in empty_decoded(n)))
+              if out is None else decoded_arrays(out))
+    decode_legs_rows(np.arange(n, dtype=np.int64), pose, lengths, arrays)
+    return decoded_pose(arrays) if out is None else out
 
 
 def decode(poses: NormalizedPoses, lengths: F64, out: DecodedPose | None = None) -> DecodedPose:

@@ -25,6 +25,9 @@ assert (_ground.PLANE, _ground.SLOPE, _ground.STAIRS, _ground.BUMPS, _ground.HEI
     == (_PLANE, _SLOPE, _STAIRS, _BUMPS, _HEIGHT_GRID)
 
 I64 = NDArray[np.int64]
+#: A ground part's parameters (N_GROUND_PARAMS of :mod:`ecs_anim.ground`).
+GroundParams = tuple[float, float, float, float, float, float, float]
+assert _ground.N_GROUND_PARAMS == 7
 
 
 @njit(cache=True)
@@ -43,9 +46,10 @@ def grid_height(x: float, y: float, p: F64, grid: F64) -> float:
 
 
 @njit(cache=True)
-def part_height(kind: int, x: float, y: float, p: F64, grid: F64) -> float:
-    """Mirrors the ``height`` of :class:`~ecs_anim.ground.Plane`, ``Slope``, ``Stairs``,
-    ``Bumps`` or ``HeightGrid`` (by ``kind``) at one point (m); ``p`` the part's parameters."""
+def part_height(kind: int, x: float, y: float, p: GroundParams) -> float:
+    """Mirrors the ``height`` of :class:`~ecs_anim.ground.Plane`, ``Slope``, ``Stairs`` or
+    ``Bumps`` (by ``kind``) at one point (m); ``p`` the part's parameters (a tuple: an array
+    passed to a function costs a reference count)."""
     if kind == _PLANE:
         return float(p[0])
     if kind == _SLOPE:
@@ -54,10 +58,7 @@ def part_height(kind: int, x: float, y: float, p: F64, grid: F64) -> float:
         along = x * p[5] + y * p[6] - p[4]
         step = min(max(math.floor(along / p[2]) + 1.0, 0.0), p[3])
         return float(p[0] + p[1] * step)
-    if kind == _BUMPS:
-        return float(p[0] + p[1] * math.sin(2 * np.pi * x / p[2])
-                     * math.sin(2 * np.pi * y / p[3]))
-    return grid_height(x, y, p, grid)
+    return float(p[0] + p[1] * math.sin(2 * np.pi * x / p[2]) * math.sin(2 * np.pi * y / p[3]))
 
 
 @njit(cache=True)
@@ -68,5 +69,10 @@ def height_at(x: float, y: float, kinds: I64, params: F64, grid: F64) -> float:
     ``grid`` the height grids' values). Returns metres."""
     out = 0.0
     for k in range(kinds.shape[0]):
-        out = out + part_height(kinds[k], x, y, params[k], grid)
+        if kinds[k] == _HEIGHT_GRID:
+            out = out + grid_height(x, y, params[k], grid)
+        else:
+            out = out + part_height(kinds[k], x, y, (params[k, 0], params[k, 1], params[k, 2],
+                                                     params[k, 3], params[k, 4], params[k, 5],
+                                                     params[k, 6]))
     return out

@@ -24,20 +24,22 @@ from numpy.typing import NDArray
 
 from ..skeleton import JOINT_INDEX as J
 from ..skeleton import LENGTH_INDEX as L
-from .decode import DecodedArrays, PoseArrays, decode_legs_row
+from .decode import DecodedArrays, LegPoseArrays, decode_legs_row
 from .ground import height_at
 from .vec import (
     F64,
     Frame,
     Vec3,
+    frame_at,
     in_frame,
-    load3,
-    load_frame,
+    load3_at,
     matmul,
     norm,
     quat_from_matrix,
     rotation_between,
-    store4,
+    side_frame_at,
+    store3_at,
+    store4_at,
     sub,
     transpose,
 )
@@ -57,9 +59,9 @@ assert (L["thigh_l"], L["shank_l"], L["ankle_height_l"], L["thigh_r"], L["ankle_
 
 
 @njit(cache=True)
-def _height(ground: GroundArrays, p: Vec3) -> float:
+def _height(kinds: I64, params: F64, grid: F64, p: Vec3) -> float:
     """The ground's height under the point ``p`` (m)."""
-    return height_at(p[0], p[1], ground[0], ground[1], ground[2])
+    return height_at(p[0], p[1], kinds, params, grid)
 
 
 @njit(cache=True)
@@ -74,27 +76,26 @@ def vertical_slack_for_reach(hip: Vec3, ankle_target: Vec3, reach: float) -> flo
 @njit(cache=True, inline="always")
 def adapt_to_ground(c: int, root_position: F64, leg_frame: F64, leg_fraction: F64,
                     positions: F64, pelvis2world_rows: F64, leg2world_rows: F64,
-                    lengths_row: F64, leg: float, targets: tuple[Vec3, Vec3],
+                    lengths: F64, leg: float, targets: tuple[Vec3, Vec3],
                     weights: tuple[float, float], root_height: float,
                     max_extension: float) -> None:
     """Mirrors :func:`ecs_anim.ground_adapt.adapt_to_ground` for store row ``c`` (legs
     re-aimed from the decoded pose ``scaled``, the pelvis lowered as the legs in contact need),
     writing the root height, leg frames and fractions of row ``c`` of ``pose``. The arrays are
     passed one by one (``root_position``, ``leg_frame``, ``leg_fraction`` of ``pose``;
-    ``positions``, ``pelvis2world``, ``leg2world`` of ``scaled``): passing the state tuples on
-    costs a reference count per array they hold.
+    ``positions``, ``pelvis2world``, ``leg2world`` of ``scaled``) and read element by element:
+    passing a tuple of arrays on, or taking a view of one, costs a reference count per array.
 
     ``targets``: each ankle's target (m, world); ``weights``: contact activations;
     ``root_height`` (m): the pelvis height the motion wants; ``leg``: the leg length (m).
     """
-    pos = positions[c]
-    pelvis2world = load_frame(pelvis2world_rows[c])
-    pelvis_now_z = pos[_PELVIS, 2]
+    pelvis2world = frame_at(pelvis2world_rows, c)
+    pelvis_now_z = positions[c, _PELVIS, 2]
     up = root_height - pelvis_now_z
     lowest = 0.0
     for s in range(2):
-        hip = load3(pos[_HIP + 4 * s])
-        reach = max_extension * (lengths_row[_L_THIGH + s] + lengths_row[_L_SHANK + s])
+        hip = load3_at(positions, c, _HIP + 4 * s)
+        reach = max_extension * (lengths[c, _L_THIGH + s] + lengths[c, _L_SHANK + s])
         needed = vertical_slack_for_reach((hip[0] + 0.0, hip[1] + 0.0, hip[2] + up), targets[s],
                                           reach)
         w = min(max(weights[s], 0.0), 1.0)
@@ -103,37 +104,37 @@ def adapt_to_ground(c: int, root_position: F64, leg_frame: F64, leg_fraction: F6
     pelvis_z = root_height + lowest
     shift = pelvis_z - pelvis_now_z
     for s in range(2):
-        hip = load3(pos[_HIP + 4 * s])
-        thigh, shank = lengths_row[_L_THIGH + s], lengths_row[_L_SHANK + s]
+        hip = load3_at(positions, c, _HIP + 4 * s)
+        thigh, shank = lengths[c, _L_THIGH + s], lengths[c, _L_SHANK + s]
         reach = max_extension * (thigh + shank)
         to_target = sub(targets[s], (hip[0] + 0.0, hip[1] + 0.0, hip[2] + shift))
-        leg2world = load_frame(leg2world_rows[c, s])
+        leg2world = side_frame_at(leg2world_rows, c, s)
         turn = rotation_between(leg2world[2], to_target)
         new_leg2pelvis = matmul(transpose(pelvis2world), matmul(turn, leg2world))
-        store4(leg_frame[c, s], quat_from_matrix(new_leg2pelvis))
+        store4_at(leg_frame, c, s, quat_from_matrix(new_leg2pelvis))
         leg_fraction[c, s] = min(norm(to_target), reach) / (thigh + shank)
     root_position[c, 2] = pelvis_z / leg
 
 
 @njit(cache=True)
-def adapt_keeping_heels_up(c: int, pose: PoseArrays, scaled: DecodedArrays, lengths_row: F64,
-                           leg: float, targets: tuple[Vec3, Vec3], weights: tuple[float, float],
-                           root_height: float, ground: GroundArrays, ankle_height: Vec3,
-                           max_extension: float, heel_tolerance: float,
-                           passes: int) -> tuple[tuple[Vec3, Vec3], tuple[Vec3, Vec3],
-                                                 tuple[Frame, Frame]]:
+def adapt_keeping_heels_up(c: int, pose: LegPoseArrays, positions: F64, pelvis2world: F64,
+                           leg2world: F64, lengths: F64, leg: float, targets: tuple[Vec3, Vec3],
+                           weights: tuple[float, float], root_height: float, kinds: I64,
+                           params: F64, grid: F64, ankle_height: Vec3, max_extension: float,
+                           heel_tolerance: float, passes: int
+                           ) -> tuple[tuple[Vec3, Vec3], tuple[Vec3, Vec3], tuple[Frame, Frame]]:
     """Mirrors :func:`ecs_anim.ground_adapt.adapt_keeping_heels_up` for store row ``c``: the
     ankle targets lifted (up to ``passes`` times) while a heel would be more than
-    ``heel_tolerance`` (m) under the ground. ``ankle_height`` (left, right, unused) m.
+    ``heel_tolerance`` (m) under the ground. ``ankle_height`` (left, right, unused) m;
+    ``positions``, ``pelvis2world``, ``leg2world``: the decoded pose before adaptation.
 
     Writes row ``c`` of ``pose`` as :func:`adapt_to_ground`; returns the decoded (ankles, toes,
     shank2world) of the result.
     """
-    kinds, params, grid = ground
     root_position, leg_frame, leg_fraction = pose.root_position, pose.leg_frame, pose.leg_fraction
-    positions, pelvis2world, leg2world = scaled.positions, scaled.pelvis2world, scaled.leg2world
     adapt_to_ground(c, root_position, leg_frame, leg_fraction, positions, pelvis2world,
-                    leg2world, lengths_row, leg, targets, weights, root_height, max_extension)
+                    leg2world, lengths, leg, targets, weights, root_height, max_extension)
+    lengths_row = lengths[c]
     legs = decode_legs_row(c, pose, lengths_row, lengths_row)
     for _ in range(passes):
         ankles = legs[4]
@@ -146,8 +147,7 @@ def adapt_keeping_heels_up(c: int, pose: PoseArrays, scaled: DecodedArrays, leng
         t0, t1 = targets
         targets = ((t0[0], t0[1], t0[2] + max(d0, 0.0)), (t1[0], t1[1], t1[2] + max(d1, 0.0)))
         adapt_to_ground(c, root_position, leg_frame, leg_fraction, positions, pelvis2world,
-                        leg2world, lengths_row, leg, targets, weights, root_height,
-                        max_extension)
+                        leg2world, lengths, leg, targets, weights, root_height, max_extension)
         legs = decode_legs_row(c, pose, lengths_row, lengths_row)
     return legs[4], legs[5], legs[7]
 
@@ -184,42 +184,43 @@ def toes_onto_ground(c: int, foot_dir: F64, ankles: tuple[Vec3, Vec3],
         new_d = ((moved[0] - ankle[0]) / foot, (moved[1] - ankle[1]) / foot,
                  (moved[2] - ankle[2]) / foot)
         if max(abs(new_d[0] - d[0]), abs(new_d[1] - d[1]), abs(new_d[2] - d[2])) > 0.0:
-            in_shank = in_frame(shank2world[s], new_d)
-            out = foot_dir[c, s]
-            out[0], out[1], out[2] = in_shank[0], in_shank[1], in_shank[2]
+            store3_at(foot_dir, c, s, in_frame(shank2world[s], new_d))
 
 
 @njit(cache=True)
 def _foot_target(ankle: Vec3, toe: Vec3, footprint: Vec3, w: float, ground_ref: float,
-                 ankle_height: float, ball: float, ground: GroundArrays) -> Vec3:
+                 ankle_height: float, ball: float, kinds: I64, params: F64, grid: F64) -> Vec3:
     """One ankle's target in ``GroundAdapt.run``: the motion's free foot on the floor
     ``ground_ref`` (m), lifted where its heel or toe would be under the ground, blended
     towards its ``footprint`` by the contact weight ``w``, its heel kept above the ground."""
     free = (ankle[0], ankle[1], ankle[2] + ground_ref)
-    need_heel = _height(ground, free) + ankle_height - free[2]
-    need_toe = _height(ground, toe) + ball - (toe[2] + ground_ref)
+    need_heel = _height(kinds, params, grid, free) + ankle_height - free[2]
+    need_toe = _height(kinds, params, grid, toe) + ball - (toe[2] + ground_ref)
     free = (free[0], free[1], free[2] + max(0.0, max(need_heel, need_toe)))
     t = (free[0] + w * (footprint[0] - free[0]), free[1] + w * (footprint[1] - free[1]),
          free[2] + w * (footprint[2] - free[2]))
-    return (t[0], t[1], t[2] + max(_height(ground, t) + ankle_height - t[2], 0.0))
+    return (t[0], t[1], t[2] + max(_height(kinds, params, grid, t) + ankle_height - t[2], 0.0))
 
 
 @njit(cache=True)
-def ground_adapt_row(c: int, pose: PoseArrays, scaled: DecodedArrays, lengths: F64, leg: F64,
-                     contact_weight: F64, clip: I64, source_ankle_height: F64, footprint: F64,
-                     locked: B1, footprint_settled: B1, ground_ref: F64, ground: GroundArrays,
-                     dt: float, smoothing_s: float, ball_per_leg: float, max_extension: float,
-                     heel_tolerance: float, heel_passes: int, toe_passes: int) -> None:
+def ground_adapt_row(c: int, pose: LegPoseArrays, positions: F64, pelvis2world: F64,
+                     leg2world: F64, lengths: F64, leg: F64, contact_weight: F64, clip: I64,
+                     source_ankle_height: F64, footprint: F64, locked: B1,
+                     footprint_settled: B1, ground_ref: F64, kinds: I64, params: F64,
+                     grid: F64, dt: float, smoothing_s: float, ball_per_leg: float,
+                     max_extension: float, heel_tolerance: float, heel_passes: int,
+                     toe_passes: int) -> None:
     """Mirrors ``GroundAdapt.run`` for store row ``c``; arguments as for
-    :func:`ground_adapt_rows`."""
-    lengths_row = lengths[c]
+    :func:`ground_adapt_rows` (``positions``, ``pelvis2world``, ``leg2world`` of ``scaled``,
+    ``kinds``, ``params``, ``grid`` of ``ground``: the arrays one by one, read element by
+    element; a tuple of arrays passed on, or a view taken, costs a reference count per array,
+    which threads contend for)."""
     leg_c = leg[c]
-    pos = scaled.positions[c]
     ball = ball_per_leg * leg_c
-    ankle_height = (lengths_row[_L_ANKLE_HEIGHT], lengths_row[_L_ANKLE_HEIGHT + 1], 0.0)
+    ankle_height = (lengths[c, _L_ANKLE_HEIGHT], lengths[c, _L_ANKLE_HEIGHT + 1], 0.0)
     w = (contact_weight[c, 0], contact_weight[c, 1])
-    ankles = (load3(pos[_ANKLE]), load3(pos[_ANKLE + 4]))
-    toes = (load3(pos[_TOE]), load3(pos[_TOE + 4]))
+    ankles = (load3_at(positions, c, _ANKLE), load3_at(positions, c, _ANKLE + 4))
+    toes = (load3_at(positions, c, _TOE), load3_at(positions, c, _TOE + 4))
     # Footprints: where the motion's ankle is, standing on the ground under it (raised by as
     # much as the motion's ankle is above its standing height); locked from the contact's
     # start, going down with the motion's foot until its first fully planted tick.
@@ -227,13 +228,14 @@ def ground_adapt_row(c: int, pose: PoseArrays, scaled: DecodedArrays, lengths: F
         ankle = ankles[s]
         above_standing = max(ankle[2] - source_ankle_height[clip[c], s] * leg_c, 0.0)
         starting = w[s] > 0.0 and not locked[c, s]
-        fp = footprint[c, s]
         if starting:
-            fp[0], fp[1] = ankle[0], ankle[1]
-            fp[2] = _height(ground, ankle) + ankle_height[s] + above_standing
+            footprint[c, s, 0], footprint[c, s, 1] = ankle[0], ankle[1]
+            footprint[c, s, 2] = (_height(kinds, params, grid, ankle) + ankle_height[s]
+                                  + above_standing)
         elif w[s] > 0.0 and not footprint_settled[c, s]:
-            settled_z = _height(ground, load3(fp)) + ankle_height[s] + above_standing
-            fp[2] = min(fp[2], settled_z)
+            settled_z = (_height(kinds, params, grid, load3_at(footprint, c, s))
+                         + ankle_height[s] + above_standing)
+            footprint[c, s, 2] = min(footprint[c, s, 2], settled_z)
         locked[c, s] = w[s] > 0.0
         footprint_settled[c, s] = locked[c, s] and (
             (footprint_settled[c, s] and not starting) or w[s] >= 1.0)
@@ -241,25 +243,26 @@ def ground_adapt_row(c: int, pose: PoseArrays, scaled: DecodedArrays, lengths: F
     support = w[0] + w[1]
     under_feet = (w[0] * (footprint[c, 0, 2] - ankle_height[0])
                   + w[1] * (footprint[c, 1, 2] - ankle_height[1])) / max(support, 1e-9)
-    target = under_feet if support > 0.0 else _height(ground, load3(pos[_PELVIS]))
+    target = (under_feet if support > 0.0
+              else _height(kinds, params, grid, load3_at(positions, c, _PELVIS)))
     ground_ref[c] += (1.0 - math.exp(-dt / smoothing_s)) * (target - ground_ref[c])
     g = ground_ref[c]
     # Free feet ride on that floor, lifted where heel or toe would go under the ground; a
     # contact ramping in blends towards its footprint, its heel kept above the ground.
-    targets = (_foot_target(ankles[0], toes[0], load3(footprint[c, 0]), w[0], g,
-                            ankle_height[0], ball, ground),
-               _foot_target(ankles[1], toes[1], load3(footprint[c, 1]), w[1], g,
-                            ankle_height[1], ball, ground))
-    root_height = pos[_PELVIS, 2] + g
+    targets = (_foot_target(ankles[0], toes[0], load3_at(footprint, c, 0), w[0], g,
+                            ankle_height[0], ball, kinds, params, grid),
+               _foot_target(ankles[1], toes[1], load3_at(footprint, c, 1), w[1], g,
+                            ankle_height[1], ball, kinds, params, grid))
+    root_height = positions[c, _PELVIS, 2] + g
     new_ankles, new_toes, shank2world = adapt_keeping_heels_up(
-        c, pose, scaled, lengths_row, leg_c, targets, w, root_height, ground,
-        ankle_height, max_extension, heel_tolerance, heel_passes)
-    toes_onto_ground(c, pose.foot_dir, new_ankles, new_toes, shank2world, ball, ground[0],
-                     ground[1], ground[2], toe_passes)
+        c, pose, positions, pelvis2world, leg2world, lengths, leg_c, targets, w, root_height,
+        kinds, params, grid, ankle_height, max_extension, heel_tolerance, heel_passes)
+    toes_onto_ground(c, pose.foot_dir, new_ankles, new_toes, shank2world, ball, kinds, params,
+                     grid, toe_passes)
 
 
 @njit(cache=True, parallel=True)
-def ground_adapt_rows(rows: I64, pose: PoseArrays, scaled: DecodedArrays, lengths: F64,
+def ground_adapt_rows(rows: I64, pose: LegPoseArrays, scaled: DecodedArrays, lengths: F64,
                       leg: F64, contact_weight: F64, clip: I64, source_ankle_height: F64,
                       footprint: F64, locked: B1, footprint_settled: B1, ground_ref: F64,
                       ground: GroundArrays, dt: float, smoothing_s: float, ball_per_leg: float,
@@ -268,9 +271,10 @@ def ground_adapt_rows(rows: I64, pose: PoseArrays, scaled: DecodedArrays, length
     """Mirrors ``systems.ground_adapt.GroundAdapt.run`` over the store rows ``rows``, in
     parallel, in place.
 
-    Per row: ``pose`` the store's poses (root height, leg frames and fractions, foot
-    directions written); ``scaled`` the pose decoded on each body (positions (n, N_JOINTS, 3),
-    pelvis2world (n, 3, 3), leg2world (n, 2, 3, 3)); ``lengths`` (n, N_LENGTHS) m; ``leg``
+    Per row: ``pose`` the store's poses' leg arrays (:func:`.decode.leg_pose_arrays`; root
+    height, leg frames and fractions, foot directions written); ``scaled`` the pelvis and legs
+    decoded on each body (positions (n, N_JOINTS, 3), pelvis2world (n, 3, 3), leg2world
+    (n, 2, 3, 3) read); ``lengths`` (n, N_LENGTHS) m; ``leg``
     (n,) leg lengths m; ``contact_weight`` (n, 2); ``clip`` (n,) int64;
     ``source_ankle_height`` (n_clips, 2) in leg lengths; ``footprint`` (n, 2, 3) m,
     ``locked``, ``footprint_settled`` (n, 2) bool and ``ground_ref`` (n,) m, read and written.
@@ -279,8 +283,10 @@ def ground_adapt_rows(rows: I64, pose: PoseArrays, scaled: DecodedArrays, length
     above the sole per leg length, ``max_extension`` of a leg, ``heel_tolerance`` (m),
     ``heel_passes``, ``toe_passes``.
     """
+    positions, pelvis2world, leg2world = scaled.positions, scaled.pelvis2world, scaled.leg2world
+    kinds, params, grid = ground
     for i in prange(rows.shape[0]):
-        ground_adapt_row(rows[i], pose, scaled, lengths, leg, contact_weight, clip,
-                         source_ankle_height, footprint, locked, footprint_settled, ground_ref,
-                         ground, dt, smoothing_s, ball_per_leg, max_extension, heel_tolerance,
-                         heel_passes, toe_passes)
+        ground_adapt_row(rows[i], pose, positions, pelvis2world, leg2world, lengths, leg,
+                         contact_weight, clip, source_ankle_height, footprint, locked,
+                         footprint_settled, ground_ref, kinds, params, grid, dt, smoothing_s,
+                         ball_per_leg, max_extension, heel_tolerance, heel_passes, toe_passes)
