@@ -26,7 +26,7 @@ N_MASS_SEGMENTS = len(MASS_SEGMENTS)
 MAX_QUEUE = 16
 #: Fields that are not one array row per character: the poses (arrays of their own) and what the
 #: tick derives from them.
-NOT_ROWS = ("poses", "scaled", "vertebrae", "goals", "solved_positions", "posture")
+NOT_ROWS = ("poses", "vertebrae", "goals", "solved_positions", "posture")
 #: Fields set when a character spawns or a specification component is replaced, between ticks:
 #: the systems' inputs (a system may also write one, e.g. MorphologyAdapt takes a new body in).
 SPEC_FIELDS = ("entity", "lengths", "speed", "queue_clip", "queue_fade_s", "queue_loop",
@@ -55,8 +55,6 @@ class CharacterStore:
     placement_xy (n, 2) metres and placement_heading (n,) of each motion origin (fade_placement_*
     the same for the clip being faded out);
     poses: this tick's normalized poses (n,); contact_weight (n, 2) foot-contact activation;
-    scaled: the pelvis and legs decoded on each body before ground adaptation (the other joints
-    and frames are not filled);
     footprint (n, 2, 3) locked ankle positions, locked (n, 2) bool, footprint_settled (n, 2) bool
     (the contact has been fully planted: its footprint's height is fixed); ground_ref (n,) metres the
     motion's floor is raised to under the character (smoothed);
@@ -110,7 +108,6 @@ class CharacterStore:
     queue_head: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     queue_len: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     poses: NormalizedPoses = field(default_factory=lambda: _empty_poses(0))
-    scaled: DecodedPose | None = None
     vertebrae: F64 | None = None
     goals: object | None = None  # this tick's constraint goals (ecs_anim.solver_shell.TickGoals)
     solved_positions: F64 | None = None  # (r, N_JOINTS, 3) the solver's result for goals.rows
@@ -145,7 +142,6 @@ class CharacterStore:
         for name, trailing in TRAILING_SHAPES.items():
             identity = 1.0 if trailing and trailing[-1] == 4 else None
             self._grow(self.poses, name, f"poses.{name}", count, 0.0, identity)
-        self.scaled = None
         self.vertebrae = None
         if self.posture is not None:  # no last tick for the new rows: NaN, read as "none"
             for f in fields(DecodedPose):
@@ -180,7 +176,6 @@ class CharacterStore:
         for name in _ROW_FIELDS:
             setattr(self, name, getattr(self, name)[keep])
         self.poses = self.poses.take(keep)
-        self.scaled = None if self.scaled is None else self.scaled.take(keep)
         self.posture = None if self.posture is None else self.posture.take(keep)
         self.vertebrae = self.goals = self.solved_positions = None
         self._buffers.clear()

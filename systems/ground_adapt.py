@@ -9,8 +9,9 @@ would go into a step is pitched up onto it.
 
 Rows: every character, grouped by ground (``System.ground_groups``: its own GroundQuery or the
 environment's).
-Reads: store.poses, scaled, contact_weight, lengths, clip, footprint, locked, footprint_settled,
-ground_ref (the last tick's), ground_index; the ground; the bank's ankle heights.
+Reads: store.poses (the pelvis and legs, decoded here on each body: MorphologyAdapt's scaling),
+contact_weight, lengths, clip, footprint, locked, footprint_settled, ground_ref (the last
+tick's), ground_index; the ground; the bank's ankle heights.
 Writes: store.poses (root height, leg frames and fractions, foot directions), footprint, locked,
 footprint_settled, ground_ref.
 """
@@ -30,10 +31,10 @@ from ecs_anim.ground_adapt import (
     adapt_keeping_heels_up,
     heel_depth,
 )
-from ecs_anim.kernels.decode import decoded_arrays, leg_pose_arrays, pose_arrays
+from ecs_anim.kernels.decode import leg_pose_arrays, pose_arrays
 from ecs_anim.kernels.ground_adapt import ground_adapt_rows
 from ecs_anim.kernels.playback import writable_poses
-from ecs_anim.normalized import SIDE_JOINTS, SIDE_LENGTHS
+from ecs_anim.normalized import SIDE_LENGTHS, decode_legs
 from ecs_anim.system_base import System
 
 if TYPE_CHECKING:
@@ -46,9 +47,6 @@ GROUND_SMOOTHING_S = 0.15
 HEEL_PASSES = 4
 TOE_PASSES = 4
 
-ANKLES, TOES = list(SIDE_JOINTS["ankle"]), list(SIDE_JOINTS["toe"])
-
-
 def _own(a: NDArray[Any]) -> NDArray[Any]:
     """``a`` if a kernel may write it in place, else a contiguous copy of it."""
     return a if a.flags.c_contiguous and a.flags.writeable and a.flags.owndata else a.copy()
@@ -58,7 +56,7 @@ class GroundAdapt(System):
     """Adapts with the compiled :mod:`ecs_anim.kernels.ground_adapt` on a built-in ground; a
     ground of the user's own (only its numpy ``height``) goes through :meth:`run_numpy`."""
 
-    reads = ("poses", "scaled", "contact_weight", "lengths", "clip", "footprint", "locked",
+    reads = ("poses", "contact_weight", "lengths", "clip", "footprint", "locked",
              "footprint_settled", "ground_ref", "ground_index")
     writes = ("footprint", "locked", "footprint_settled", "ground_ref", "poses")
 
@@ -79,19 +77,15 @@ class GroundAdapt(System):
         if any(description is None for _, description in groups):
             self.run_numpy(dt)
             return
-        scaled = st.scaled
-        assert scaled is not None, "MorphologyAdapt runs before GroundAdapt"
         pose = leg_pose_arrays(pose_arrays(writable_poses(st.poses, st.n)))
         st.footprint, st.locked = _own(st.footprint), _own(st.locked)
         st.footprint_settled, st.ground_ref = _own(st.footprint_settled), _own(st.ground_ref)
-        decoded = decoded_arrays(scaled)
-        decoded = type(decoded)(*(np.ascontiguousarray(a) for a in decoded))
         lengths, leg = np.ascontiguousarray(st.lengths), sim.leg_length()
         contact_weight = np.ascontiguousarray(st.contact_weight)
         for rows, description in groups:
             assert description is not None
             ground = (description.kinds, description.params, description.grid)
-            ground_adapt_rows(rows.copy(), pose, decoded, lengths, leg, contact_weight, st.clip,
+            ground_adapt_rows(rows.copy(), pose, lengths, leg, contact_weight, st.clip,
                               sim.bank.source_ankle_height, st.footprint, st.locked,
                               st.footprint_settled, st.ground_ref, ground, dt, GROUND_SMOOTHING_S,
                               BALL_HEIGHT_PER_LEG, MAX_LEG_EXTENSION, HEEL_TOLERANCE_M,
@@ -102,13 +96,12 @@ class GroundAdapt(System):
         its own)."""
         sim, st = self.sim, self.sim.store
         ground = self.row_ground()
-        scaled = st.scaled
-        assert scaled is not None, "MorphologyAdapt runs before GroundAdapt"
+        motion_legs = decode_legs(st.poses, st.lengths, st.lengths)
         leg = sim.leg_length()
         ankle_height = st.lengths[:, SIDE_LENGTHS["ankle_height"]]  # (n, 2)
         motion_ankle_height = sim.bank.source_ankle_height[st.clip] * leg[:, None]
         ball = BALL_HEIGHT_PER_LEG * leg[:, None]
-        ankles, toes = scaled.positions[:, ANKLES], scaled.positions[:, TOES]
+        ankles, toes = motion_legs.ankles, motion_legs.toes
         w = st.contact_weight
         # Footprints: where the motion's ankle is, standing on the ground under it (raised by as
         # much as the motion's ankle is above its standing height).
@@ -130,7 +123,7 @@ class GroundAdapt(System):
         # The motion's floor follows the ground under the supporting feet, smoothly.
         support = w.sum(axis=1)
         under_feet = np.sum(w * (st.footprint[..., 2] - ankle_height), axis=1) / np.maximum(support, 1e-9)
-        under_pelvis = ground.height(scaled.positions[:, 0, :2])
+        under_pelvis = ground.height(motion_legs.pelvis[:, :2])
         target = np.where(support > 0.0, under_feet, under_pelvis)
         st.ground_ref += (1.0 - np.exp(-dt / GROUND_SMOOTHING_S)) * (target - st.ground_ref)
         # Free feet ride on that floor, lifted where heel or toe would go under the ground.
@@ -142,8 +135,8 @@ class GroundAdapt(System):
         targets = free + w[..., None] * (st.footprint - free)
         # While a contact ramps in, the blend can cross a step edge: keep the heel above ground.
         targets[..., 2] += np.maximum(heel_depth(ground, targets, ankle_height), 0.0)
-        root_height = scaled.positions[:, 0, 2] + st.ground_ref
-        poses, legs = adapt_keeping_heels_up(st.poses, st.lengths, targets, w, root_height, scaled,
+        root_height = motion_legs.pelvis[:, 2] + st.ground_ref
+        poses, legs = adapt_keeping_heels_up(st.poses, st.lengths, targets, w, root_height, motion_legs,
                                              ground, HEEL_PASSES)
         st.poses = self._toes_onto_ground(poses, legs, ball, TOE_PASSES)
 

@@ -43,7 +43,7 @@ EXPECTED_WRITERS = {
     "fade_placement_xy": ["MotionPlayback", "MorphologyAdapt"],
     "locked": ["MotionPlayback", "MorphologyAdapt", "GroundAdapt"],
     **{name: ["MorphologyAdapt"] for name in (
-        "lengths", "segment_mass_kg", "segment_com_fraction", "scaled")},
+        "lengths", "segment_mass_kg", "segment_com_fraction")},
     **{name: ["GroundAdapt"] for name in ("footprint", "footprint_settled", "ground_ref")},
     **{name: ["ConstraintSolve"] for name in (
         "goals", "solved_positions", "com_desired", "constraints.error", "constraints.weight",

@@ -10,8 +10,7 @@ from ecs_anim.importing import import_bvh
 from ecs_anim.kernels import decode as kd
 from ecs_anim.morphology import Morphology
 from ecs_anim.normalized import DecodedPose, NormalizedPoses, decode, decode_legs
-from ecs_anim.skeleton import JOINT_INDEX as J
-from ecs_anim.skeleton import N_JOINTS, N_LENGTHS
+from ecs_anim.skeleton import N_LENGTHS
 
 FIELDS = ("positions", "pelvis2world", "thorax2world", "head2world", "leg2world", "arm2world")
 TOL = 1e-9
@@ -113,24 +112,6 @@ def test_decode_legs_row_matches_numpy():
             np.testing.assert_allclose(np.array(legs[s]).T, ref.leg2world[c, s], rtol=0, atol=TOL)
             np.testing.assert_allclose(np.array(shanks[s]).T, ref.shank2world[c, s], rtol=0,
                                        atol=TOL)
-
-
-def test_decode_legs_fills_the_pelvis_and_legs_only():
-    """MorphologyAdapt's legs-only decode (what GroundAdapt reads): the pelvis and leg joints,
-    pelvis2world and leg2world equal numpy's full decode; the rest stays NaN."""
-    rng = np.random.default_rng(1307)
-    poses = random_poses(rng, 60)
-    lengths = random_bodies(rng, 60)
-    got, ref = kd.decode_legs(poses, lengths), decode(poses, lengths)
-    legs = [J["pelvis"]] + [J[f"{j}_{s}"] for s in "lr" for j in ("hip", "knee", "ankle", "toe")]
-    np.testing.assert_allclose(got.positions[:, legs], ref.positions[:, legs], rtol=0, atol=TOL)
-    for name in ("pelvis2world", "leg2world"):
-        np.testing.assert_allclose(getattr(got, name), getattr(ref, name), rtol=0, atol=TOL)
-    others = np.setdiff1d(np.arange(N_JOINTS), legs)
-    assert np.all(np.isnan(got.positions[:, others]))
-    for name in ("thorax2world", "head2world", "arm2world"):
-        assert np.all(np.isnan(getattr(got, name)))
-    assert kd.decode_legs(poses, lengths, got) is got
 
 
 def test_leg_pose_arrays_are_the_poses_own():

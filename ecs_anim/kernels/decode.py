@@ -198,13 +198,13 @@ def limb_frames(root: Vec3, mid: Vec3, end: Vec3, hint: Vec3) -> Frame:
 
 
 @njit(cache=True, inline="always")
-def pelvis_frame(c: int, pose: PoseArrays) -> Frame:
+def pelvis_frame(c: int, pose: PoseArrays | LegPoseArrays) -> Frame:
     """``pelvis2world`` of row ``c``: heading about Z times the local pelvis rotation."""
     return matmul(rot_z(pose.root_heading[c]), matrix_from_quat(load4(pose.pelvis_local[c])))
 
 
 @njit(cache=True, inline="always")
-def decode_legs_row(c: int, pose: PoseArrays, seg: F64, base: F64) -> tuple[
+def decode_legs_row(c: int, pose: PoseArrays | LegPoseArrays, seg: F64, base: F64) -> tuple[
         Vec3, Frame, tuple[Vec3, Vec3], tuple[Vec3, Vec3], tuple[Vec3, Vec3], tuple[Vec3, Vec3],
         tuple[Frame, Frame], tuple[Frame, Frame]]:
     """Mirrors :func:`ecs_anim.normalized.decode_legs` for store row ``c``.
@@ -222,8 +222,8 @@ def decode_legs_row(c: int, pose: PoseArrays, seg: F64, base: F64) -> tuple[
 
 
 @njit(cache=True, inline="always")
-def _leg(c: int, s: int, pose: PoseArrays, seg: F64, pelvis: Vec3, pelvis2world: Frame
-         ) -> tuple[Vec3, Vec3, Vec3, Vec3, Frame, Frame]:
+def _leg(c: int, s: int, pose: PoseArrays | LegPoseArrays, seg: F64, pelvis: Vec3,
+         pelvis2world: Frame) -> tuple[Vec3, Vec3, Vec3, Vec3, Frame, Frame]:
     """One leg of :func:`decode_legs_row` (side ``s``): hip, knee, ankle, toe, leg2world,
     shank2world."""
     hip = add(pelvis, scale(to_world(pelvis2world, load3(pose.hip_dir[c, s])), seg[_L_PELVIS + s]))
@@ -320,13 +320,12 @@ def spine_joint(control: tuple[Vec3, Vec3, Vec3, Vec3], chord: float, length: fl
 
 
 @njit(cache=True, inline="always")
-def store_legs_row(c: int, pose: PoseArrays, lengths_row: F64, out: DecodedArrays
-                   ) -> tuple[Vec3, Frame]:
-    """:func:`decode_legs_row` of store row ``c`` on the body ``lengths_row`` (N_LENGTHS,) (m)
-    written into row ``c`` of ``out``: the pelvis and leg joints of ``positions``,
-    ``pelvis2world`` and ``leg2world``. Returns (pelvis, pelvis2world)."""
+def decode_row(c: int, pose: PoseArrays, lengths_row: F64, out: DecodedArrays) -> None:
+    """Mirrors :func:`ecs_anim.normalized.decode` (``use_stretch=False``) for store row ``c``
+    on the body ``lengths_row`` (N_LENGTHS,) (m): writes row ``c`` of every ``out`` array."""
+    seg = lengths_row
     pelvis, pelvis2world, hips, knees, ankles, toes, legs, _ = decode_legs_row(
-        c, pose, lengths_row, lengths_row)
+        c, pose, seg, lengths_row)
     positions = out.positions[c]
     store3(positions[_PELVIS], pelvis)
     for s in range(2):
@@ -336,34 +335,6 @@ def store_legs_row(c: int, pose: PoseArrays, lengths_row: F64, out: DecodedArray
         store3(positions[_TOE + 4 * s], toes[s])
         store_frame(out.leg2world[c, s], legs[s])
     store_frame(out.pelvis2world[c], pelvis2world)
-    return pelvis, pelvis2world
-
-
-@njit(cache=True)
-def decode_legs_into(c: int, pose: PoseArrays, lengths_row: F64, out: DecodedArrays) -> None:
-    """:func:`store_legs_row` for :func:`decode_legs_rows` (a prange body calls a function
-    numba does not inline)."""
-    store_legs_row(c, pose, lengths_row, out)
-
-
-@njit(cache=True, parallel=True)
-def decode_legs_rows(rows: I64, pose: PoseArrays, lengths: F64, out: DecodedArrays) -> None:
-    """Mirrors :func:`ecs_anim.normalized.decode_legs` over the store rows ``rows`` (int64), in
-    parallel: the pelvis and legs of row ``c`` of ``pose`` on the body ``lengths[c]``
-    ((n, N_LENGTHS), m) into row ``c`` of ``out`` (the pelvis and leg joints of ``positions``,
-    ``pelvis2world``, ``leg2world``; the rest is left as it is)."""
-    for i in prange(rows.shape[0]):
-        c = rows[i]
-        decode_legs_into(c, pose, lengths[c], out)
-
-
-@njit(cache=True, inline="always")
-def decode_row(c: int, pose: PoseArrays, lengths_row: F64, out: DecodedArrays) -> None:
-    """Mirrors :func:`ecs_anim.normalized.decode` (``use_stretch=False``) for store row ``c``
-    on the body ``lengths_row`` (N_LENGTHS,) (m): writes row ``c`` of every ``out`` array."""
-    seg = lengths_row
-    pelvis, pelvis2world = store_legs_row(c, pose, seg, out)
-    positions = out.positions[c]
 
     spine_len = seg[_L_SPINE_LOWER] + seg[_L_SPINE_LOWER + 1] + seg[_L_SPINE_LOWER + 2]
     points = pose.spine_points[c]
@@ -409,23 +380,6 @@ def decode_rows(rows: I64, pose: PoseArrays, lengths: F64, out: DecodedArrays) -
     for i in prange(rows.shape[0]):
         c = rows[i]
         decode_row(c, pose, lengths[c], out)
-
-
-def decode_legs(poses: NormalizedPoses, lengths: F64, out: DecodedPose | None = None
-                ) -> DecodedPose:
-    """Compiled :func:`ecs_anim.normalized.decode_legs` of every row, as the legs' part of a
-    :class:`~ecs_anim.normalized.DecodedPose`: the pelvis and leg joints of ``positions``,
-    ``pelvis2world`` and ``leg2world`` (what ground adaptation reads). ``out`` is written in
-    place when given (and returned; its other entries are left as they are), else allocated
-    with NaN in the other entries.
-    """
-    pose = pose_arrays(poses)
-    n = pose.root_heading.shape[0]
-    lengths = np.ascontiguousarray(np.broadcast_to(lengths, (n, N_LENGTHS)), dtype=np.float64)
-    arrays = (DecodedArrays(*(np.full_like(a, np.nan) for a in empty_decoded(n)))
-              if out is None else decoded_arrays(out))
-    decode_legs_rows(np.arange(n, dtype=np.int64), pose, lengths, arrays)
-    return decoded_pose(arrays) if out is None else out
 
 
 def decode(poses: NormalizedPoses, lengths: F64, out: DecodedPose | None = None) -> DecodedPose:

@@ -10,7 +10,7 @@ pitched onto it) with :func:`ecs_anim.ground_adapt.adapt_keeping_heels_up`,
 Every decision the numpy code takes for the whole batch (another heel pass, the toe passes) is
 taken here per character, so a character's result never depends on who else is in the batch.
 
-Joint and length indices are literals (numba's cache keys on this file's source); an import-time
+Length indices are literals (numba's cache keys on this file's source); an import-time
 check pins them to the skeleton.
 """
 
@@ -22,22 +22,19 @@ import numpy as np
 from numba import njit, prange
 from numpy.typing import NDArray
 
-from ..skeleton import JOINT_INDEX as J
 from ..skeleton import LENGTH_INDEX as L
-from .decode import DecodedArrays, LegPoseArrays, decode_legs_row
+from .decode import LegPoseArrays, decode_legs_row
 from .ground import height_at
 from .vec import (
     F64,
     Frame,
     Vec3,
-    frame_at,
     in_frame,
     load3_at,
     matmul,
     norm,
     quat_from_matrix,
     rotation_between,
-    side_frame_at,
     store3_at,
     store4_at,
     sub,
@@ -49,11 +46,8 @@ B1 = NDArray[np.bool_]
 #: A ground's description: (kinds, params, grid) of :class:`ecs_anim.ground.GroundDescription`.
 GroundArrays = tuple[I64, F64, F64]
 
-# Joints of side s (0 left, 1 right) are these plus 4 * s; lengths plus s.
-_PELVIS, _HIP, _ANKLE, _TOE = 0, 1, 3, 4
+# Lengths of side s (0 left, 1 right) are these plus s.
 _L_THIGH, _L_SHANK, _L_ANKLE_HEIGHT = 2, 4, 8
-assert (J["pelvis"], J["hip_l"], J["ankle_l"], J["toe_l"], J["hip_r"], J["ankle_r"], J["toe_r"]) \
-    == (_PELVIS, _HIP, _ANKLE, _TOE, _HIP + 4, _ANKLE + 4, _TOE + 4)
 assert (L["thigh_l"], L["shank_l"], L["ankle_height_l"], L["thigh_r"], L["ankle_height_r"]) \
     == (_L_THIGH, _L_SHANK, _L_ANKLE_HEIGHT, _L_THIGH + 1, _L_ANKLE_HEIGHT + 1)
 
@@ -75,26 +69,24 @@ def vertical_slack_for_reach(hip: Vec3, ankle_target: Vec3, reach: float) -> flo
 
 @njit(cache=True, inline="always")
 def adapt_to_ground(c: int, root_position: F64, leg_frame: F64, leg_fraction: F64,
-                    positions: F64, pelvis2world_rows: F64, leg2world_rows: F64,
-                    lengths: F64, leg: float, targets: tuple[Vec3, Vec3],
-                    weights: tuple[float, float], root_height: float,
-                    max_extension: float) -> None:
+                    hips: tuple[Vec3, Vec3], pelvis_now_z: float, pelvis2world: Frame,
+                    leg2world: tuple[Frame, Frame], lengths: F64, leg: float,
+                    targets: tuple[Vec3, Vec3], weights: tuple[float, float],
+                    root_height: float, max_extension: float) -> None:
     """Mirrors :func:`ecs_anim.ground_adapt.adapt_to_ground` for store row ``c`` (legs
-    re-aimed from the decoded pose ``scaled``, the pelvis lowered as the legs in contact need),
-    writing the root height, leg frames and fractions of row ``c`` of ``pose``. The arrays are
-    passed one by one (``root_position``, ``leg_frame``, ``leg_fraction`` of ``pose``;
-    ``positions``, ``pelvis2world``, ``leg2world`` of ``scaled``) and read element by element:
-    passing a tuple of arrays on, or taking a view of one, costs a reference count per array.
+    re-aimed from the pose decoded before adaptation: its ``hips``, pelvis height
+    ``pelvis_now_z`` (m), ``pelvis2world`` and ``leg2world``; the pelvis lowered as the legs in
+    contact need), writing the root height, leg frames and fractions of row ``c`` of the poses
+    (``root_position``, ``leg_frame``, ``leg_fraction``, element by element: a view of an array
+    costs a reference count, which threads contend for).
 
     ``targets``: each ankle's target (m, world); ``weights``: contact activations;
     ``root_height`` (m): the pelvis height the motion wants; ``leg``: the leg length (m).
     """
-    pelvis2world = frame_at(pelvis2world_rows, c)
-    pelvis_now_z = positions[c, _PELVIS, 2]
     up = root_height - pelvis_now_z
     lowest = 0.0
     for s in range(2):
-        hip = load3_at(positions, c, _HIP + 4 * s)
+        hip = hips[s]
         reach = max_extension * (lengths[c, _L_THIGH + s] + lengths[c, _L_SHANK + s])
         needed = vertical_slack_for_reach((hip[0] + 0.0, hip[1] + 0.0, hip[2] + up), targets[s],
                                           reach)
@@ -104,36 +96,39 @@ def adapt_to_ground(c: int, root_position: F64, leg_frame: F64, leg_fraction: F6
     pelvis_z = root_height + lowest
     shift = pelvis_z - pelvis_now_z
     for s in range(2):
-        hip = load3_at(positions, c, _HIP + 4 * s)
+        hip = hips[s]
         thigh, shank = lengths[c, _L_THIGH + s], lengths[c, _L_SHANK + s]
         reach = max_extension * (thigh + shank)
         to_target = sub(targets[s], (hip[0] + 0.0, hip[1] + 0.0, hip[2] + shift))
-        leg2world = side_frame_at(leg2world_rows, c, s)
-        turn = rotation_between(leg2world[2], to_target)
-        new_leg2pelvis = matmul(transpose(pelvis2world), matmul(turn, leg2world))
+        turn = rotation_between(leg2world[s][2], to_target)
+        new_leg2pelvis = matmul(transpose(pelvis2world), matmul(turn, leg2world[s]))
         store4_at(leg_frame, c, s, quat_from_matrix(new_leg2pelvis))
         leg_fraction[c, s] = min(norm(to_target), reach) / (thigh + shank)
     root_position[c, 2] = pelvis_z / leg
 
 
 @njit(cache=True)
-def adapt_keeping_heels_up(c: int, pose: LegPoseArrays, positions: F64, pelvis2world: F64,
-                           leg2world: F64, lengths: F64, leg: float, targets: tuple[Vec3, Vec3],
-                           weights: tuple[float, float], root_height: float, kinds: I64,
-                           params: F64, grid: F64, ankle_height: Vec3, max_extension: float,
-                           heel_tolerance: float, passes: int
+def adapt_keeping_heels_up(c: int, pose: LegPoseArrays, hips: tuple[Vec3, Vec3],
+                           pelvis_now_z: float, pelvis2world: Frame,
+                           leg2world: tuple[Frame, Frame], lengths: F64, leg: float,
+                           targets: tuple[Vec3, Vec3], weights: tuple[float, float],
+                           root_height: float, kinds: I64, params: F64, grid: F64,
+                           ankle_height: Vec3, max_extension: float, heel_tolerance: float,
+                           passes: int
                            ) -> tuple[tuple[Vec3, Vec3], tuple[Vec3, Vec3], tuple[Frame, Frame]]:
     """Mirrors :func:`ecs_anim.ground_adapt.adapt_keeping_heels_up` for store row ``c``: the
     ankle targets lifted (up to ``passes`` times) while a heel would be more than
     ``heel_tolerance`` (m) under the ground. ``ankle_height`` (left, right, unused) m;
-    ``positions``, ``pelvis2world``, ``leg2world``: the decoded pose before adaptation.
+    ``hips``, ``pelvis_now_z``, ``pelvis2world``, ``leg2world``: the pose decoded before
+    adaptation, as :func:`adapt_to_ground` takes them.
 
     Writes row ``c`` of ``pose`` as :func:`adapt_to_ground`; returns the decoded (ankles, toes,
     shank2world) of the result.
     """
     root_position, leg_frame, leg_fraction = pose.root_position, pose.leg_frame, pose.leg_fraction
-    adapt_to_ground(c, root_position, leg_frame, leg_fraction, positions, pelvis2world,
-                    leg2world, lengths, leg, targets, weights, root_height, max_extension)
+    adapt_to_ground(c, root_position, leg_frame, leg_fraction, hips, pelvis_now_z,
+                    pelvis2world, leg2world, lengths, leg, targets, weights, root_height,
+                    max_extension)
     lengths_row = lengths[c]
     legs = decode_legs_row(c, pose, lengths_row, lengths_row)
     for _ in range(passes):
@@ -146,8 +141,9 @@ def adapt_keeping_heels_up(c: int, pose: LegPoseArrays, positions: F64, pelvis2w
             break
         t0, t1 = targets
         targets = ((t0[0], t0[1], t0[2] + max(d0, 0.0)), (t1[0], t1[1], t1[2] + max(d1, 0.0)))
-        adapt_to_ground(c, root_position, leg_frame, leg_fraction, positions, pelvis2world,
-                        leg2world, lengths, leg, targets, weights, root_height, max_extension)
+        adapt_to_ground(c, root_position, leg_frame, leg_fraction, hips, pelvis_now_z,
+                        pelvis2world, leg2world, lengths, leg, targets, weights, root_height,
+                        max_extension)
         legs = decode_legs_row(c, pose, lengths_row, lengths_row)
     return legs[4], legs[5], legs[7]
 
@@ -203,24 +199,25 @@ def _foot_target(ankle: Vec3, toe: Vec3, footprint: Vec3, w: float, ground_ref: 
 
 
 @njit(cache=True)
-def ground_adapt_row(c: int, pose: LegPoseArrays, positions: F64, pelvis2world: F64,
-                     leg2world: F64, lengths: F64, leg: F64, contact_weight: F64, clip: I64,
-                     source_ankle_height: F64, footprint: F64, locked: B1,
-                     footprint_settled: B1, ground_ref: F64, kinds: I64, params: F64,
-                     grid: F64, dt: float, smoothing_s: float, ball_per_leg: float,
+def ground_adapt_row(c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
+                     contact_weight: F64, clip: I64, source_ankle_height: F64, footprint: F64,
+                     locked: B1, footprint_settled: B1, ground_ref: F64, kinds: I64,
+                     params: F64, grid: F64, dt: float, smoothing_s: float, ball_per_leg: float,
                      max_extension: float, heel_tolerance: float, heel_passes: int,
                      toe_passes: int) -> None:
     """Mirrors ``GroundAdapt.run`` for store row ``c``; arguments as for
-    :func:`ground_adapt_rows` (``positions``, ``pelvis2world``, ``leg2world`` of ``scaled``,
-    ``kinds``, ``params``, ``grid`` of ``ground``: the arrays one by one, read element by
-    element; a tuple of arrays passed on, or a view taken, costs a reference count per array,
-    which threads contend for)."""
+    :func:`ground_adapt_rows` (``kinds``, ``params``, ``grid`` of ``ground``: the arrays one
+    by one, read element by element; a tuple of arrays passed on, or a view taken, costs a
+    reference count per array, which threads contend for)."""
+    # The pose on the character's body as the motion gives it (MorphologyAdapt's scaling,
+    # decoded here: ground adaptation reads only the pelvis and legs).
+    lengths_row = lengths[c]
+    pelvis, pelvis2world, hips, _, ankles, toes, leg2world, _ = decode_legs_row(
+        c, pose, lengths_row, lengths_row)
     leg_c = leg[c]
     ball = ball_per_leg * leg_c
     ankle_height = (lengths[c, _L_ANKLE_HEIGHT], lengths[c, _L_ANKLE_HEIGHT + 1], 0.0)
     w = (contact_weight[c, 0], contact_weight[c, 1])
-    ankles = (load3_at(positions, c, _ANKLE), load3_at(positions, c, _ANKLE + 4))
-    toes = (load3_at(positions, c, _TOE), load3_at(positions, c, _TOE + 4))
     # Footprints: where the motion's ankle is, standing on the ground under it (raised by as
     # much as the motion's ankle is above its standing height); locked from the contact's
     # start, going down with the motion's foot until its first fully planted tick.
@@ -243,8 +240,7 @@ def ground_adapt_row(c: int, pose: LegPoseArrays, positions: F64, pelvis2world: 
     support = w[0] + w[1]
     under_feet = (w[0] * (footprint[c, 0, 2] - ankle_height[0])
                   + w[1] * (footprint[c, 1, 2] - ankle_height[1])) / max(support, 1e-9)
-    target = (under_feet if support > 0.0
-              else _height(kinds, params, grid, load3_at(positions, c, _PELVIS)))
+    target = under_feet if support > 0.0 else _height(kinds, params, grid, pelvis)
     ground_ref[c] += (1.0 - math.exp(-dt / smoothing_s)) * (target - ground_ref[c])
     g = ground_ref[c]
     # Free feet ride on that floor, lifted where heel or toe would go under the ground; a
@@ -253,28 +249,27 @@ def ground_adapt_row(c: int, pose: LegPoseArrays, positions: F64, pelvis2world: 
                             ankle_height[0], ball, kinds, params, grid),
                _foot_target(ankles[1], toes[1], load3_at(footprint, c, 1), w[1], g,
                             ankle_height[1], ball, kinds, params, grid))
-    root_height = positions[c, _PELVIS, 2] + g
+    root_height = pelvis[2] + g
     new_ankles, new_toes, shank2world = adapt_keeping_heels_up(
-        c, pose, positions, pelvis2world, leg2world, lengths, leg_c, targets, w, root_height,
-        kinds, params, grid, ankle_height, max_extension, heel_tolerance, heel_passes)
+        c, pose, hips, pelvis[2], pelvis2world, leg2world, lengths, leg_c, targets, w,
+        root_height, kinds, params, grid, ankle_height, max_extension, heel_tolerance,
+        heel_passes)
     toes_onto_ground(c, pose.foot_dir, new_ankles, new_toes, shank2world, ball, kinds, params,
                      grid, toe_passes)
 
 
 @njit(cache=True, parallel=True)
-def ground_adapt_rows(rows: I64, pose: LegPoseArrays, scaled: DecodedArrays, lengths: F64,
-                      leg: F64, contact_weight: F64, clip: I64, source_ankle_height: F64,
-                      footprint: F64, locked: B1, footprint_settled: B1, ground_ref: F64,
+def ground_adapt_rows(rows: I64, pose: LegPoseArrays, lengths: F64, leg: F64,
+                      contact_weight: F64, clip: I64, source_ankle_height: F64, footprint: F64, locked: B1, footprint_settled: B1, ground_ref: F64,
                       ground: GroundArrays, dt: float, smoothing_s: float, ball_per_leg: float,
                       max_extension: float, heel_tolerance: float, heel_passes: int,
                       toe_passes: int) -> None:
     """Mirrors ``systems.ground_adapt.GroundAdapt.run`` over the store rows ``rows``, in
     parallel, in place.
 
-    Per row: ``pose`` the store's poses' leg arrays (:func:`.decode.leg_pose_arrays`; root
-    height, leg frames and fractions, foot directions written); ``scaled`` the pelvis and legs
-    decoded on each body (positions (n, N_JOINTS, 3), pelvis2world (n, 3, 3), leg2world
-    (n, 2, 3, 3) read); ``lengths`` (n, N_LENGTHS) m; ``leg``
+    Per row: ``pose`` the store's poses' leg arrays (:func:`.decode.leg_pose_arrays`; decoded
+    on the body here, then root height, leg frames and fractions, foot directions written);
+    ``lengths`` (n, N_LENGTHS) m; ``leg``
     (n,) leg lengths m; ``contact_weight`` (n, 2); ``clip`` (n,) int64;
     ``source_ankle_height`` (n_clips, 2) in leg lengths; ``footprint`` (n, 2, 3) m,
     ``locked``, ``footprint_settled`` (n, 2) bool and ``ground_ref`` (n,) m, read and written.
@@ -283,10 +278,9 @@ def ground_adapt_rows(rows: I64, pose: LegPoseArrays, scaled: DecodedArrays, len
     above the sole per leg length, ``max_extension`` of a leg, ``heel_tolerance`` (m),
     ``heel_passes``, ``toe_passes``.
     """
-    positions, pelvis2world, leg2world = scaled.positions, scaled.pelvis2world, scaled.leg2world
     kinds, params, grid = ground
     for i in prange(rows.shape[0]):
-        ground_adapt_row(rows[i], pose, positions, pelvis2world, leg2world, lengths, leg,
-                         contact_weight, clip, source_ankle_height, footprint, locked,
-                         footprint_settled, ground_ref, kinds, params, grid, dt, smoothing_s,
-                         ball_per_leg, max_extension, heel_tolerance, heel_passes, toe_passes)
+        ground_adapt_row(rows[i], pose, lengths, leg, contact_weight, clip, source_ankle_height,
+                         footprint, locked, footprint_settled, ground_ref, kinds, params, grid,
+                         dt, smoothing_s, ball_per_leg, max_extension, heel_tolerance,
+                         heel_passes, toe_passes)

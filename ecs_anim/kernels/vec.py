@@ -329,18 +329,3 @@ def store3_at(a: F64, c: int, j: int, v: Vec3) -> None:
 def store4_at(a: F64, c: int, j: int, q: Quat) -> None:
     """``a[c, j] = q`` for an (n, m, 4) array (no view)."""
     a[c, j, 0], a[c, j, 1], a[c, j, 2], a[c, j, 3] = q[0], q[1], q[2], q[3]
-
-
-@njit(cache=True, inline="always")
-def frame_at(a: F64, c: int) -> Frame:
-    """The frame ``a[c]`` of an (n, 3, 3) array of frames (axes as columns; no view)."""
-    return ((a[c, 0, 0], a[c, 1, 0], a[c, 2, 0]), (a[c, 0, 1], a[c, 1, 1], a[c, 2, 1]),
-            (a[c, 0, 2], a[c, 1, 2], a[c, 2, 2]))
-
-
-@njit(cache=True, inline="always")
-def side_frame_at(a: F64, c: int, s: int) -> Frame:
-    """The frame ``a[c, s]`` of an (n, 2, 3, 3) array of frames (axes as columns; no view)."""
-    return ((a[c, s, 0, 0], a[c, s, 1, 0], a[c, s, 2, 0]),
-            (a[c, s, 0, 1], a[c, s, 1, 1], a[c, s, 2, 1]),
-            (a[c, s, 0, 2], a[c, s, 1, 2], a[c, s, 2, 2]))
