@@ -11,7 +11,8 @@ import itertools
 import sys
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
-from typing import Any, Self, TypeVar
+from dataclasses import replace
+from typing import Any, Self, TypeVar, cast
 
 import esper
 import numpy as np
@@ -37,6 +38,7 @@ from .ground import Ground, Plane
 from .morphology import Morphology, leg_length
 from .motion import NormalizedMotion, motion_problem
 from .playback import ClipBank
+from .solver_budget import SolverReport
 from .solver_shell import DEFAULT_SETTINGS, SolverSettings
 from .store import MAX_QUEUE, CharacterStore
 from .system_base import System
@@ -489,6 +491,27 @@ class Simulation:
         with self._active():
             esper.process(self.dt)
         self.tick += 1
+
+    def solver_report(self) -> SolverReport | None:
+        """What the constraint solver did in the last tick and what the frame budget
+        (``SolverSettings.budget_ms``) cut: :class:`ecs_anim.solver_budget.SolverReport`; None
+        before the first tick or when no constraint was solved."""
+        from .systems import ConstraintSolve
+
+        for system in self.systems:
+            if isinstance(system, ConstraintSolve):
+                return system.report
+        return None
+
+    def set_solver_focus(self, focus_in_world: Sequence[float] | NDArray[np.float64] | None) -> None:
+        """Where the frame budget keeps its iterations longest ((3,) m, world; the viewer gives
+        its camera's eye): the characters furthest from it are cut first. None: no focus."""
+        focus = None if focus_in_world is None else cast(
+            tuple[float, float, float], tuple(float(v) for v in focus_in_world))
+        try:
+            self.solver_settings = replace(self.solver_settings, focus_in_world=focus)
+        except ValueError as exc:
+            raise EcsAnimError(f"set_solver_focus: {exc}") from None
 
     def system_seconds(self) -> dict[str, float]:
         """Wall seconds spent in each system so far."""

@@ -26,7 +26,7 @@ N_MASS_SEGMENTS = len(MASS_SEGMENTS)
 MAX_QUEUE = 16
 #: Fields that are not one array row per character: the poses (arrays of their own) and what the
 #: tick derives from them.
-NOT_ROWS = ("poses", "scaled", "vertebrae", "goals", "solved_positions", "posture")
+NOT_ROWS = ("poses", "scaled", "vertebrae", "goals", "solved", "posture")
 #: Fields set when a character spawns or a specification component is replaced, between ticks:
 #: the systems' inputs (a system may also write one, e.g. MorphologyAdapt takes a new body in).
 SPEC_FIELDS = ("entity", "lengths", "speed", "queue_clip", "queue_fade_s", "queue_loop",
@@ -112,7 +112,7 @@ class CharacterStore:
     scaled: DecodedPose | None = None
     vertebrae: F64 | None = None
     goals: object | None = None  # this tick's constraint goals (ecs_anim.solver_shell.TickGoals)
-    solved_positions: F64 | None = None  # (r, N_JOINTS, 3) the solver's result for goals.rows
+    solved: DecodedPose | None = None  # (r, ...) the solver's decoded result for goals.rows
     posture: DecodedPose | None = None
 
     #: Growth buffers behind each array: field name (``"poses.root_position"`` for a pose
@@ -181,7 +181,7 @@ class CharacterStore:
         self.poses = self.poses.take(keep)
         self.scaled = None if self.scaled is None else self.scaled.take(keep)
         self.posture = None if self.posture is None else self.posture.take(keep)
-        self.vertebrae = self.goals = self.solved_positions = None
+        self.vertebrae = self.goals = self.solved = None
         self._buffers.clear()
 
 

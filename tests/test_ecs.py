@@ -46,7 +46,7 @@ EXPECTED_WRITERS = {
         "lengths", "segment_mass_kg", "segment_com_fraction", "scaled")},
     **{name: ["GroundAdapt"] for name in ("footprint", "footprint_settled", "ground_ref")},
     **{name: ["ConstraintSolve"] for name in (
-        "goals", "solved_positions", "com_desired", "constraints.error", "constraints.weight",
+        "goals", "solved", "com_desired", "constraints.error", "constraints.weight",
         "constraints.enabled", "constraints.held")},
     "com": ["COMControl"],
     "com_error_m": ["COMControl"],

@@ -363,6 +363,8 @@ class ViewerApp:
         if self.paused:
             return
         self.accumulator += dt * self.speed
+        if self.camera is not None:  # the solver's frame budget cuts far from the eye first
+            self.sim.set_solver_focus(self.camera.eye)
         steps = 0
         while self.accumulator >= self.sim.dt and steps < self.MAX_STEPS_PER_FRAME:
             if self.loop and self.sim.time_s > self.scenario.duration_s + 1e-9:
