@@ -11,6 +11,7 @@ from test_scenarios import run
 import ecs_anim.systems.posture_convert as posture_convert
 from ecs_anim.benchmark import BenchScene
 from ecs_anim.exporting import local_rotations
+from ecs_anim.kernels.solved_posture import posture_solved_rows
 from ecs_anim.normalized import DecodedPose, decode
 
 
@@ -27,7 +28,7 @@ def assert_posture_is_the_decoded_poses(sim):
 
 def test_the_bench_scene_posture_and_rotations_equal_a_fresh_decode(monkeypatch):
     handed = []
-    real = posture_convert.posture_solved_rows
+    real = posture_solved_rows
 
     def counting(rows, *args):
         handed.append(rows.size)
