@@ -38,6 +38,8 @@ from .morphology import Morphology, leg_length
 from .motion import NormalizedMotion, motion_problem
 from .playback import ClipBank
 from .solver_shell import DEFAULT_SETTINGS, SolverSettings
+from .steering import DEFAULT_STEERING
+from .steering_api import SteeringCalls
 from .store import MAX_QUEUE, CharacterStore
 from .system_base import System
 
@@ -51,7 +53,7 @@ _counter = itertools.count()
 MAX_COORDINATE_M = 1e5
 
 
-class Simulation:
+class Simulation(SteeringCalls):
     """Characters playing normalized motions on a ground, stepped at a fixed rate.
 
     Parameters
@@ -97,6 +99,7 @@ class Simulation:
         self.grounds: list[Ground] = [ground or Plane()]
         self.constraints = ConstraintTable()
         self.solver_settings = solver_settings
+        self.steering_settings = DEFAULT_STEERING  # ecs_anim.steering.SteeringSettings
         self.renderer: object | None = None
         self.tables: tuple[Any, ...] = ()  # props for a renderer (scenario ``tables``); never simulated
         self.messages: list[str] = []
@@ -231,7 +234,7 @@ class Simulation:
                 queue_loop=queue_loop, queue_len=queue_len, ground_ref=ground_ref,
                 segment_mass_kg=masses, segment_com_fraction=fractions,
                 com_control=np.array(com_control, bool), com_target_xy=target,
-                com_error_m=np.nan, ground_index=ground_index)
+                com_error_m=np.nan, ground_index=ground_index, gait_clip=-1)
             for i in range(k):
                 entity = int(entities[i])
                 esper.add_component(entity, Name(names[i], teams[i]))

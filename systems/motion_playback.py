@@ -1,12 +1,15 @@
-"""MotionPlayback: sample each character's clip(s) in normalized space, then advance the clocks.
+"""MotionPlayback: steer, sample each character's clip(s) in normalized space, advance the clocks.
 
 Rows: characters with a MotionPlayer.
 Reads: store.clip, clip_time_s, speed, loop, fade_*, queue_*, placement_*, fade_placement_*,
-lengths (leg length: the root path's unit); the clip bank.
+lengths (leg length: the root path's unit); for steered characters (:func:`ecs_anim.steering.
+steer`) steer_mode, steer_heading_rad, steer_speed_m_s, path_xy, path_len, path_progress_m,
+gait, gait_clip, and the last tick's contact_weight, locked, footprint; the clip bank.
 Writes: store.poses (placed in the world; first writer each tick), store.contact_weight,
 store.clip_time_s, fade_time_s, fade_elapsed_s, fade_s; on a clip change (through
 :func:`ecs_anim.playback_queue.start_next_clips`) clip, loop, queue_head, placement_*, fade_*,
-locked.
+fade_keeps_contacts, locked; steering writes speed (the playback rate), placement_*,
+fade_placement_*, steer_mode, steer_heading_rad, steer_speed_m_s, path_progress_m, gait.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from ecs_anim.kernels.playback import (
 from ecs_anim.normalized import NormalizedPoses
 from ecs_anim.playback import ClipBank, blend, rotate_xy, sample, sample_table
 from ecs_anim.playback_queue import start_next_clips
+from ecs_anim.steering import steer
 from ecs_anim.system_base import System
 
 if TYPE_CHECKING:
@@ -42,10 +46,14 @@ class MotionPlayback(System):
     reads = ("clip", "clip_time_s", "speed", "loop", "fade_clip", "fade_time_s", "fade_loop",
              "fade_s", "fade_elapsed_s", "queue_clip", "queue_fade_s", "queue_loop", "queue_head",
              "queue_len", "placement_xy", "placement_heading", "fade_placement_xy",
-             "fade_placement_heading", "lengths")
+             "fade_placement_heading", "lengths", "steer_mode", "steer_heading_rad",
+             "steer_speed_m_s", "path_xy", "path_len", "path_progress_m", "gait", "gait_clip",
+             "contact_weight", "locked", "footprint")
     writes = ("poses", "contact_weight", "clip_time_s", "fade_time_s", "fade_elapsed_s", "fade_s",
               "clip", "loop", "queue_head", "placement_xy", "placement_heading",
-              "fade_placement_xy", "fade_placement_heading", "fade_clip", "fade_loop", "locked")
+              "fade_placement_xy", "fade_placement_heading", "fade_clip", "fade_loop", "locked",
+              "fade_keeps_contacts", "speed", "steer_mode", "steer_heading_rad",
+              "steer_speed_m_s", "path_progress_m", "gait")
 
     def __init__(self, sim: Simulation):
         super().__init__(sim)
@@ -54,6 +62,7 @@ class MotionPlayback(System):
     def run(self, dt: float) -> None:
         st, bank = self.sim.store, self.sim.bank
         self._start_queued_clips()
+        self._steer(dt)
         rows = np.arange(st.n, dtype=np.int64)
         leg = self.sim.leg_length()
         out = pose_arrays(writable_poses(st.poses, st.n))
@@ -67,10 +76,12 @@ class MotionPlayback(System):
                           st.clip, st.clip_time_s, st.loop, st.contact_weight)
         fading = np.flatnonzero(st.fade_s > 0.0)
         if fading.size:
-            # While two clips blend, their feet are in neither clip's footprints: no foot is
-            # locked (feet follow the blend, kept above the ground). Footprints resume with the
-            # incoming clip's own contacts once the fade is over.
-            st.contact_weight[fading] = 0.0
+            old_weight = np.zeros((st.n, 2))
+            sample_table_rows(fading, bank.contact_weight, bank.start, bank.n_frames, bank.fps,
+                              st.fade_clip, st.fade_time_s, st.fade_loop, old_weight)
+            st.contact_weight[fading] = self._fading_weights(st.contact_weight[fading],
+                                                             old_weight[fading],
+                                                             st.fade_keeps_contacts[fading])
             old = pose_arrays(empty_poses(fading.size))
             sample_placed_rows(fading, bank_poses, bank.start, bank.n_frames, bank.fps,
                                bank.loop_yaw, bank.loop_shift, st.fade_clip, st.fade_time_s,
@@ -85,11 +96,16 @@ class MotionPlayback(System):
         """The numpy reference of :meth:`run` (the tests compare the two)."""
         st, bank = self.sim.store, self.sim.bank
         self._start_queued_clips()
+        self._steer(dt)
         poses = self._placed(sample(bank, st.clip, st.clip_time_s, st.loop),
                              st.placement_xy, st.placement_heading)
         weights = sample_table(bank, bank.contact_weight, st.clip, st.clip_time_s, st.loop)
         fading = st.fade_s > 0.0
-        weights = np.where(fading[:, None], 0.0, weights)
+        old_weights = sample_table(bank, bank.contact_weight, st.fade_clip, st.fade_time_s,
+                                   st.fade_loop)
+        weights = np.where(fading[:, None],
+                           self._fading_weights(weights, old_weights, st.fade_keeps_contacts),
+                           weights)
         if np.any(fading):
             old = self._placed(sample(bank, st.fade_clip, st.fade_time_s, st.fade_loop),
                                st.fade_placement_xy, st.fade_placement_heading)
@@ -99,6 +115,22 @@ class MotionPlayback(System):
         st.poses = poses
         st.contact_weight = weights
         self._advance_clocks(dt)
+
+    @staticmethod
+    def _fading_weights(new: NDArray[np.float64], old: NDArray[np.float64],
+                        keep: NDArray[np.bool_]) -> NDArray[np.float64]:
+        """Contact weights (r, 2) while two clips blend. Clips switched at matching foot phases
+        (``keep``, locomotion) keep a foot down in both on its footprint (the lesser weight);
+        otherwise their feet are in neither clip's footprints: no foot is locked (feet follow
+        the blend, kept above the ground), and footprints resume with the incoming clip's own
+        contacts once the fade is over."""
+        weights: NDArray[np.float64] = np.where(keep[:, None], np.minimum(new, old), 0.0)
+        return weights
+
+    def _steer(self, dt: float) -> None:
+        """Steered characters' heading, speed and clip for this tick (:func:`steer`)."""
+        sim = self.sim
+        steer(sim.store, sim.bank, sim.gait_table(), sim.steering_settings, dt)
 
     def _advance_clocks(self, dt: float) -> None:
         st = self.sim.store
