@@ -40,8 +40,8 @@ def start_clips(st: CharacterStore, bank: ClipBank, rows: NDArray[np.int64],
     switched at matching foot phases, as locomotion does); otherwise footprints are released and
     no foot is locked while the clips blend.
 
-    Reads store.clip, clip_time_s, loop, lengths, placement_*; writes fade_* (the outgoing clip
-    and its placement), fade_keeps_contacts, clip, clip_time_s, loop, placement_*, locked.
+    Reads store.clip, clip_time_s, loop, lengths, placement_*; writes fade_* (the outgoing clip,
+    its placement and rate), fade_keeps_contacts, clip, clip_time_s, loop, placement_*, locked.
     """
     old = sample(bank, st.clip[rows], st.clip_time_s[rows], st.loop[rows])
     new = sample(bank, new_clip, new_time_s, new_loop)
@@ -57,6 +57,7 @@ def start_clips(st: CharacterStore, bank: ClipBank, rows: NDArray[np.int64],
     st.fade_loop[rows] = st.loop[rows]
     st.fade_s[rows], st.fade_elapsed_s[rows] = np.maximum(fade_s, 0.0), 0.0
     st.fade_keeps_contacts[rows] = keep_contacts
+    st.fade_speed[rows] = st.speed[rows]
     st.clip[rows], st.clip_time_s[rows], st.loop[rows] = new_clip, new_time_s, new_loop
     if not keep_contacts:
         st.locked[rows] = False

@@ -58,12 +58,14 @@ class SteeringSettings:
     lookahead_s, lookahead_min_m : pure pursuit aims this far ahead along the path (seconds at
         the current speed, at least ``lookahead_min_m`` metres).
     gait_fade_s : cross-fade between clips of the locomotion set (s).
+    contact_release_s : during that fade, a foot that one of the clips lifts leaves its
+        footprint over this time (s), not at once.
     run_hysteresis : a run goes back to a walk only below ``rate_max - run_hysteresis`` of the
         walk's own speed (no switching back and forth at the threshold).
     """
 
     rate_min: float = 0.5
-    rate_max: float = 1.3
+    rate_max: float = 1.2
     rate_change_per_s: float = 1.0
     max_turn_rad_s: float = 1.5
     turn_in_place_rad_s: float = 2.0
@@ -71,6 +73,7 @@ class SteeringSettings:
     lookahead_s: float = 0.5
     lookahead_min_m: float = 0.4
     gait_fade_s: float = 0.4
+    contact_release_s: float = 0.15
     run_hysteresis: float = 0.15
 
 

@@ -79,7 +79,8 @@ class CharacterStore:
     character was when given it), path_len (n,) how many, path_progress_m (n,) arc length done;
     gait_clip (n, 3) the clips of the locomotion set [idle, walk, run] (-1: none), gait (n,) the
     one playing (index into those columns); fade_keeps_contacts (n,) bool: the running
-    cross-fade keeps a foot down in both clips on its footprint.
+    cross-fade keeps a foot down in both clips on its footprint; fade_speed (n,) the playback
+    rate of the clip being faded out (its rate when the fade began).
     """
 
     entity: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -122,6 +123,7 @@ class CharacterStore:
     gait_clip: NDArray[np.int64] = field(default_factory=lambda: np.zeros((0, 3), np.int64))
     gait: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     fade_keeps_contacts: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
+    fade_speed: F64 = field(default_factory=lambda: np.zeros(0))
     queue_clip: NDArray[np.int64] = field(default_factory=lambda: np.zeros((0, MAX_QUEUE), np.int64))
     queue_fade_s: F64 = field(default_factory=lambda: np.zeros((0, MAX_QUEUE)))
     queue_loop: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, MAX_QUEUE), bool))

@@ -39,7 +39,7 @@ EXPECTED_WRITERS = {
     **{name: ["MotionPlayback"] for name in (
         "clip", "clip_time_s", "loop", "fade_clip", "fade_time_s", "fade_loop", "fade_s",
         "fade_elapsed_s", "queue_head", "placement_heading", "fade_placement_heading",
-        "fade_keeps_contacts", "speed", "steer_mode", "steer_heading_rad", "steer_speed_m_s",
+        "fade_keeps_contacts", "fade_speed", "speed", "steer_mode", "steer_heading_rad", "steer_speed_m_s",
         "path_progress_m", "gait")},
     "placement_xy": ["MotionPlayback", "MorphologyAdapt"],
     "fade_placement_xy": ["MotionPlayback", "MorphologyAdapt"],
