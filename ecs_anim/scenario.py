@@ -33,7 +33,7 @@ from .ground import Bumps, Combined, Ground, HeightGrid, Plane, Slope, Stairs
 from .morphology import LENGTH_KEYS, PRESET_SPECS, Morphology, with_lengths_m
 from .motion import NormalizedMotion, load_nmo
 from .simulation import MAX_COORDINATE_M, Simulation
-from .store import MAX_QUEUE
+from .store import MAX_QUEUE, MAX_WAYPOINTS
 
 #: The longest scenario (and ``ecs-anim run --seconds``): a day.
 MAX_DURATION_S = 86400.0
@@ -99,6 +99,18 @@ class ConstraintEntry:
                               tuple(o.get("offset_m", (0.0, 0.0, 0.0))), params)
 
 
+@dataclass(frozen=True)
+class SteeringSpec:
+    """A character's locomotion set and steering from the scenario (docs/steering.md):
+    ``locomotion`` gait -> motion name (``walk`` always, ``idle`` and ``run`` if given),
+    ``path_m`` waypoints (x, y) metres walked in order (empty: none), ``speed_m_s`` the speed
+    asked for (None: the walk's own)."""
+
+    locomotion: dict[str, str]
+    path_m: tuple[tuple[float, float], ...] = ()
+    speed_m_s: float | None = None
+
+
 @dataclass
 class CharacterSpec:
     name: str
@@ -109,6 +121,7 @@ class CharacterSpec:
     constraints: list[ConstraintEntry] = field(default_factory=list)
     com_control: bool = True
     com_target_xy: tuple[float, float] | None = None
+    steering: SteeringSpec | None = None
 
 
 @dataclass(frozen=True)
@@ -454,10 +467,70 @@ def _fill_absent(r: _Reader, motions: dict[str, NormalizedMotion], name: str, no
     motions[name] = fill_absent_from(motions[name], motions[other], other)
 
 
-CHARACTER_KEYS = {"name": True, "morphology": True, "motion": True, "position_m": False,
+CHARACTER_KEYS = {"name": True, "morphology": True, "motion": False, "position_m": False,
                   "heading_deg": False, "speed": False, "loop": False, "start_s": False,
                   "then": False, "team": False, "constraints": False, "com_control": False,
-                  "com_target_m": False}
+                  "com_target_m": False, "locomotion": False, "path_m": False,
+                  "speed_m_s": False}
+STEERING_KEYS = ("locomotion", "path_m", "speed_m_s")
+
+
+def _travels(motion: NormalizedMotion) -> bool:
+    """Whether a motion's root goes somewhere over the clip (a walk, not an idle)."""
+    root = motion.poses.root_position[:, :2]
+    return bool(np.linalg.norm(root[-1] - root[0]) > 1e-3 * max(motion.n_frames, 1))
+
+
+def _steering(r: _Reader, keys: dict[str, Node], where: str, motions: dict[str, NormalizedMotion],
+              start_m: tuple[float, float]) -> SteeringSpec | None:
+    """A character's ``locomotion``, ``path_m`` and ``speed_m_s`` (None: none of them)."""
+    if not any(k in keys for k in STEERING_KEYS):
+        return None
+    if "locomotion" not in keys:
+        given = next(k for k in STEERING_KEYS if k in keys)
+        raise r.fail(keys[given], f"{where}.{given}", "a steered character needs a locomotion "
+                     "set: locomotion: {idle: MOTION, walk: MOTION} (run: optional)")
+    lwhere = f"{where}.locomotion"
+    lk = r.mapping(keys["locomotion"], lwhere, {"idle": False, "walk": True, "run": False})
+    locomotion: dict[str, str] = {}
+    for gait, node in lk.items():
+        name = r.string(node, f"{lwhere}.{gait}")
+        if name not in motions:
+            raise r.fail(node, f"{lwhere}.{gait}", f"unknown motion {name!r}"
+                         f"{did_you_mean(name, list(motions))} (motions: {', '.join(motions)})")
+        if gait != "idle" and not _travels(motions[name]):
+            raise r.fail(node, f"{lwhere}.{gait}", f"motion {name!r} does not travel (its root "
+                         f"ends where it starts): a {gait} must go somewhere")
+        locomotion[gait] = name
+    path: list[tuple[float, float]] = []
+    if "path_m" in keys:
+        pwhere = f"{where}.path_m"
+        points = r.sequence(keys["path_m"], pwhere, MAX_WAYPOINTS - 1, "waypoints")
+        if not points:
+            raise r.fail(keys["path_m"], pwhere, "a path needs at least 1 waypoint [x, y] (m)")
+        for j, point in enumerate(points):
+            xy = r.vector2(point, f"{pwhere}[{j}]", "m", MAX_COORDINATE_M)
+            r.too_far(point, f"{pwhere}[{j}]", math.dist(xy, start_m), "the waypoint",
+                      "the character's position_m")
+            path.append(xy)
+        if "idle" not in locomotion:
+            raise r.fail(keys["locomotion"], lwhere, "a character given path_m stops on its "
+                         "idle motion at the end: add idle: MOTION")
+    speed = (r.number(keys["speed_m_s"], f"{where}.speed_m_s", 0.0, 20.0, "m/s")
+             if "speed_m_s" in keys else None)
+    return SteeringSpec(locomotion, tuple(path), speed)
+
+
+def apply_steering(sim: Simulation, entity: int, spec: SteeringSpec, heading_rad: float) -> None:
+    """Give a spawned character its scenario steering: its locomotion set, then its path, or
+    its speed along ``heading_rad`` (without ``speed_m_s`` nor a path it stands on its idle
+    motion, or walks on at its own speed if it has none)."""
+    loco = spec.locomotion
+    sim.set_locomotion(entity, loco["walk"], loco.get("idle"), loco.get("run"))
+    if spec.path_m:
+        sim.follow_path(entity, spec.path_m, spec.speed_m_s)
+    elif spec.speed_m_s is not None or "idle" not in loco:
+        sim.steer(entity, heading_rad, spec.speed_m_s)
 
 
 def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
@@ -719,14 +792,22 @@ def load_scenario(path: str | Path) -> Scenario:
                     clip(qk["motion"], f"{qw}.motion"),
                     r.number(qk["crossfade_s"], f"{qw}.crossfade_s", 0.0, 10.0, "s") if "crossfade_s" in qk else 0.3,
                     r.boolean(qk["loop"], f"{qw}.loop") if "loop" in qk else False))
+        position = r.vector2(keys["position_m"], f"{where}.position_m", "m", 1e5) \
+            if "position_m" in keys else (0.0, 0.0)
+        steering = _steering(r, keys, where, motions, position)
+        if "motion" in keys:
+            first_clip = clip(keys["motion"], f"{where}.motion")
+        elif steering is not None:  # a locomotion set starts standing (or walking, without idle)
+            first_clip = steering.locomotion.get("idle", steering.locomotion["walk"])
+        else:
+            raise r.fail(node, where, "missing required key 'motion' (or a locomotion set: "
+                         "locomotion)")
         player = MotionPlayer(
-            clip(keys["motion"], f"{where}.motion"),
+            first_clip,
             speed=r.number(keys["speed"], f"{where}.speed", 0.0, 10.0) if "speed" in keys else 1.0,
             loop=r.boolean(keys["loop"], f"{where}.loop") if "loop" in keys else True,
             start_s=r.number(keys["start_s"], f"{where}.start_s", 0.0, MAX_COORDINATE_M, "s") if "start_s" in keys else 0.0,
             queue=tuple(queue))
-        position = r.vector2(keys["position_m"], f"{where}.position_m", "m", 1e5) \
-            if "position_m" in keys else (0.0, 0.0)
         heading = r.number(keys["heading_deg"], f"{where}.heading_deg", -360, 360, "degrees") \
             if "heading_deg" in keys else 0.0
         constraints: list[ConstraintEntry] = []
@@ -755,7 +836,7 @@ def load_scenario(path: str | Path) -> Scenario:
             Placement((position[0], position[1]), math.radians(heading)),
             r.string(keys["team"], f"{where}.team", empty=True) if "team" in keys else "", constraints,
             r.boolean(keys["com_control"], f"{where}.com_control") if "com_control" in keys else True,
-            _com_target(r, keys, where, position)))
+            _com_target(r, keys, where, position), steering))
     if not characters:
         raise r.fail(top["characters"], "characters", "expected at least one character")
     for other, node, cwhere in pending_targets:
@@ -835,4 +916,7 @@ def build_simulation(scenario: Scenario, window: bool = False,
                                k.target_in_world,
                                None if k.target_character is None else entities[k.target_character],
                                k.target_point, **k.options)
+    for c in scenario.characters:
+        if c.steering is not None:
+            apply_steering(sim, entities[c.name], c.steering, c.placement.heading_rad)
     return sim
