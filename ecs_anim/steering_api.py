@@ -122,6 +122,8 @@ class SteeringCalls:
             points = np.asarray(path_in_world, dtype=np.float64)
         except (TypeError, ValueError):
             raise EcsAnimError("path: expected a list of [x, y] points, metres") from None
+        if points.size == 0:
+            points = points.reshape(0, 2)
         if points.ndim != 2 or points.shape[1] not in (2, 3):
             raise EcsAnimError(f"path: expected a list of [x, y] points, got shape {points.shape}")
         if not 1 <= points.shape[0] <= MAX_WAYPOINTS - 1:
