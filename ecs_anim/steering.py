@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .morphology import leg_length
-from .playback import ClipBank, _wrap, frame_position, _loop_transform, rotate_xy
+from .playback import ClipBank, _loop_transform, _wrap, frame_position, rotate_xy
 from .playback_queue import start_clips
 from .store import CharacterStore
 

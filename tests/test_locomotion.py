@@ -11,7 +11,8 @@ import pytest
 from ecs_anim.components import MotionPlayer
 from ecs_anim.ground import Bumps
 from ecs_anim.importing import import_bvh
-from ecs_anim.library import MOTIONS_DIR, main as library_main
+from ecs_anim.library import MOTIONS_DIR
+from ecs_anim.library import main as library_main
 from ecs_anim.metrics import MetricsRecorder
 from ecs_anim.morphology import Morphology
 from ecs_anim.motion import NormalizedMotion

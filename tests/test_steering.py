@@ -180,8 +180,9 @@ def test_steering_equals_its_numpy_reference(motions: dict[str, NormalizedMotion
 
 def test_bad_paths_and_speeds_are_refused(motions: dict[str, NormalizedMotion]) -> None:
     sim, (e,) = walkers(motions, (1.75,), Plane())
-    for path, message in (([], "1 to 127 waypoints"), ([[0.0, np.nan]], "finite"),
-                          ([1.0, 2.0], r"list of \[x, y\] points")):
+    for path, message in ((np.zeros((0, 2)), "1 to 127 waypoints"),
+                          (np.array([[0.0, np.nan]]), "finite"),
+                          (np.array([1.0, 2.0]), r"list of \[x, y\] points")):
         with pytest.raises(EcsAnimError, match=message):
             sim.follow_path(e, path)
     with pytest.raises(EcsAnimError, match="speed_m_s"):
