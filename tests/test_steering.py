@@ -3,6 +3,9 @@ by turning their motion's global heading about the planted foot (docs/steering.m
 
 from __future__ import annotations
 
+import re
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -246,3 +249,17 @@ def test_steered_crowd_reaches_its_waypoints() -> None:
             assert sim.arrived(int(sim.store.entity[k])), c.name
             end = np.array(c.steering.path_m[-1])
             assert np.linalg.norm(sim.store.positions[k, 0, :2] - end) < 0.3, c.name
+
+
+def test_the_game_loop_example_runs_and_follows_the_point() -> None:
+    repo = Path(__file__).resolve().parents[1]
+    done = subprocess.run([sys.executable, "examples/steer_to_point.py"], cwd=repo,
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    out = done.stdout
+    assert "gaits: idle -> run -> walk -> idle" in out, out
+    following = re.search(r"4-16 s: median ([\d.]+) m, max ([\d.]+) m", out)
+    assert following and float(following.group(2)) < 2.0, out
+    end = re.search(r"([\d.]+) m from the point at the end, arrived: True", out)
+    assert end and float(end.group(1)) < 0.3, out
+    assert "max 0.000 mm a frame; sole below the ground: 0.000 mm" in out, out
