@@ -154,7 +154,7 @@ def _gait_feet(morph: Morphology, phase: F64, stride: float, stance: float,
     for k, offset in enumerate((0.0, 0.5)):
         cycle = np.floor(phase - offset)
         psi = phase - offset - cycle
-        land_x = (cycle + offset + 0.3) * stride
+        land_x = (cycle + offset + stance / 2) * stride  # mid-stance under the pelvis
         swing_u = np.clip((psi - stance) / (1 - stance), 0.0, 1.0)
         in_swing = psi >= stance
         x = land_x + np.where(in_swing, _smoothstep(swing_u) * stride, 0.0)
