@@ -147,7 +147,8 @@ def motion_root_xy(bank: ClipBank, st: CharacterStore, rows: I64, fading: bool =
         angle, moved = _loop_transform(bank, clip, n_loops)
         return p0 + moved + rotate_xy(bank.poses.root_position[first + frame, :2] - p0, angle)
 
-    root = at(i0, loops) + w[:, None] * (at(i1, loops + wraps) - at(i0, loops))
+    before = at(i0, loops)
+    root = before + w[:, None] * (at(i1, loops + wraps) - before)
     leg = leg_length(st.lengths[rows])[:, None]
     placed: F64 = rotate_xy(root * leg, heading) + xy
     return placed
@@ -171,41 +172,45 @@ def carry_fading_roots(st: CharacterStore, bank: ClipBank) -> None:
     st.fade_placement_xy[rows] += blended - old
 
 
-def _path_progress(path: F64, count: I64, progress: F64, here: F64) -> tuple[F64, F64]:
-    """Arc length along each path of the point nearest ``here`` (r, 2) no further back than
-    ``progress`` (r,) - 0.5 m nor more than 2 m ahead (so a path crossing itself is not cut
-    short); returns (that arc length (r,), the path's total length (r,)). ``path`` (r, M, 2),
-    ``count`` (r,) its points (the first is where the character started)."""
-    a, b = path[:, :-1], path[:, 1:]
+#: Path segments searched each tick for the point nearest the character (from the one its
+#: progress, less half a metre, is on).
+NEAREST_SEGMENTS = 8
+
+
+def _path_progress(path: F64, cum_m: F64, rows: I64, count: I64, progress: F64,
+                   here: F64) -> tuple[F64, F64]:
+    """Arc length along each path of the point nearest ``here`` (r, 2), searched from half a
+    metre behind ``progress`` (r,) over :data:`NEAREST_SEGMENTS` segments and at most 2 m
+    ahead (so a path crossing itself is not cut short); never less than ``progress``. Returns
+    (that arc length (r,), the path's total length (r,)). ``path`` (n, M, 2) the store's paths
+    and ``cum_m`` (n, M) the arc length at each point, read at the store ``rows`` (r,), which
+    have ``count`` (r,) points (the first: where the character started)."""
+    r = rows[:, None]
+    last = (count - 2)[:, None]  # the last segment's index
+    first = np.sum(cum_m[rows, 1:] < (progress - 0.5)[:, None], axis=1)[:, None]
+    k = np.minimum(first + np.arange(NEAREST_SEGMENTS)[None], np.maximum(last, 0))
+    a, b = path[r, k], path[r, k + 1]
     seg = b - a
-    seg_len = np.linalg.norm(seg, axis=-1)
-    valid = np.arange(seg.shape[1])[None] < (count - 1)[:, None]
-    seg_len = np.where(valid, seg_len, 0.0)
-    cum = np.concatenate([np.zeros((path.shape[0], 1)), np.cumsum(seg_len, axis=1)], axis=1)
+    seg_len = cum_m[r, k + 1] - cum_m[r, k]
     t = np.clip(np.einsum("rmi,rmi->rm", here[:, None] - a, seg)
                 / np.maximum(seg_len**2, 1e-12), 0.0, 1.0)
-    s = cum[:, :-1] + t * seg_len
+    s = cum_m[r, k] + t * seg_len
     distance = np.linalg.norm(a + t[..., None] * seg - here[:, None], axis=-1)
-    window = valid & (s >= progress[:, None] - 0.5) & (s <= progress[:, None] + 2.0)
-    distance = np.where(window, distance, np.inf)
+    distance = np.where(s <= progress[:, None] + 2.0, distance, np.inf)
     best = np.argmin(distance, axis=1)
-    found = np.isfinite(distance[np.arange(best.size), best])
-    nearest = np.where(found, s[np.arange(best.size), best], progress)
-    total = cum[np.arange(count.size), count - 1]
-    return np.maximum(progress, nearest), total
+    i = np.arange(best.size)
+    nearest = np.where(np.isfinite(distance[i, best]), s[i, best], progress)
+    return np.maximum(progress, nearest), cum_m[rows, count - 1]
 
 
-def _point_at(path: F64, count: I64, arc_m: F64) -> F64:
-    """The point (r, 2) at arc length ``arc_m`` (r,) along each path (clamped to its ends)."""
-    seg = path[:, 1:] - path[:, :-1]
-    valid = np.arange(seg.shape[1])[None] < (count - 1)[:, None]
-    seg_len = np.where(valid, np.linalg.norm(seg, axis=-1), 0.0)
-    cum = np.cumsum(seg_len, axis=1)
-    k = np.minimum(np.sum((cum < arc_m[:, None]) & valid, axis=1), np.maximum(count - 2, 0))
-    r = np.arange(k.size)
-    before = cum[r, k] - seg_len[r, k]
-    u = np.clip((arc_m - before) / np.maximum(seg_len[r, k], 1e-12), 0.0, 1.0)
-    point: F64 = path[r, k] + u[:, None] * seg[r, k]
+def _point_at(path: F64, cum_m: F64, rows: I64, count: I64, arc_m: F64) -> F64:
+    """The point (r, 2) at arc length ``arc_m`` (r,) along each path (clamped to its ends);
+    arguments as for :func:`_path_progress`."""
+    r = rows
+    k = np.minimum(np.sum(cum_m[rows, 1:] < arc_m[:, None], axis=1), np.maximum(count - 2, 0))
+    length = cum_m[r, k + 1] - cum_m[r, k]
+    u = np.clip((arc_m - cum_m[r, k]) / np.maximum(length, 1e-12), 0.0, 1.0)
+    point: F64 = path[r, k] + u[:, None] * (path[r, k + 1] - path[r, k])
     return point
 
 
@@ -216,7 +221,7 @@ def steer(st: CharacterStore, bank: ClipBank, gaits: GaitTable, settings: Steeri
     cross-fade started at matching foot phases), the playback rate, and the turn of the
     placement about the planted foot.
 
-    Reads store.steer_*, path_*, gait, gait_clip, clip, clip_time_s, loop, speed, fade_s,
+    Reads store.steer_*, path_* (path_cum_m the arc lengths), gait, gait_clip, clip, clip_time_s, loop, speed, fade_s,
     placement_*, lengths, contact_weight, locked, footprint (the last tick's). Writes
     steer_mode, steer_heading_rad, steer_speed_m_s (a path's end: stopped), path_progress_m,
     gait, speed, placement_*, fade_placement_* (also :func:`carry_fading_roots`), and through
@@ -239,13 +244,15 @@ def steer(st: CharacterStore, bank: ClipBank, gaits: GaitTable, settings: Steeri
     on_path = st.steer_mode[rows] == STEER_PATH
     if on_path.any():
         p = rows[on_path]
-        progress, total = _path_progress(st.path_xy[p], st.path_len[p], st.path_progress_m[p],
-                                         here[on_path])
+        count = st.path_len[p]
+        progress, total = _path_progress(st.path_xy, st.path_cum_m, p, count,
+                                         st.path_progress_m[p], here[on_path])
         st.path_progress_m[p] = progress
         lookahead = np.maximum(settings.lookahead_s * np.maximum(speed_now[on_path], 0.0),
                                settings.lookahead_min_m)
-        aim = _point_at(st.path_xy[p], st.path_len[p], np.minimum(progress + lookahead, total))
-        end = st.path_xy[p, st.path_len[p] - 1]
+        aim = _point_at(st.path_xy, st.path_cum_m, p, count,
+                        np.minimum(progress + lookahead, total))
+        end = st.path_xy[p, count - 1]
         to_end = np.linalg.norm(end - here[on_path], axis=1)
         to_aim = aim - here[on_path]
         wanted_heading[on_path] = np.where(np.linalg.norm(to_aim, axis=1) > 1e-6,

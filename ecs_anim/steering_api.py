@@ -138,6 +138,10 @@ class SteeringCalls:
         st.path_xy[row, 0] = motion_root_xy(sim.bank, st, rows)[0]
         st.path_xy[row, 1:points.shape[0] + 1] = points[:, :2]
         st.path_len[row] = points.shape[0] + 1
+        steps = np.linalg.norm(np.diff(st.path_xy[row, :points.shape[0] + 1], axis=0), axis=1)
+        st.path_cum_m[row] = 0.0
+        st.path_cum_m[row, 1:points.shape[0] + 1] = np.cumsum(steps)
+        st.path_cum_m[row, points.shape[0] + 1:] = st.path_cum_m[row, points.shape[0]]
         st.path_progress_m[row] = 0.0
         st.steer_mode[row] = STEER_PATH
 

@@ -34,7 +34,7 @@ NOT_ROWS = ("poses", "scaled", "vertebrae", "goals", "solved_positions", "postur
 SPEC_FIELDS = ("entity", "lengths", "speed", "queue_clip", "queue_fade_s", "queue_loop",
                "queue_len", "segment_mass_kg", "segment_com_fraction", "com_control",
                "com_target_xy", "ground_index", "constraints", "path_xy", "path_len",
-               "gait_clip")
+               "path_cum_m", "gait_clip")
 
 
 def _empty_poses(n: int) -> NormalizedPoses:
@@ -76,7 +76,8 @@ class CharacterStore:
     Steering (:mod:`ecs_anim.steering`): steer_mode (n,) 0 none, 1 heading and speed, 2 a path;
     steer_heading_rad (n,) the heading wanted; steer_speed_m_s (n,) the speed wanted (NaN: the
     walk's own); path_xy (n, MAX_WAYPOINTS, 2) metres, the path's points (its first: where the
-    character was when given it), path_len (n,) how many, path_progress_m (n,) arc length done;
+    character was when given it), path_len (n,) how many, path_cum_m (n, MAX_WAYPOINTS) the arc
+    length at each (m; beyond the last: its total), path_progress_m (n,) arc length done;
     gait_clip (n, 3) the clips of the locomotion set [idle, walk, run] (-1: none), gait (n,) the
     one playing (index into those columns); fade_keeps_contacts (n,) bool: the running
     cross-fade keeps a foot down in both clips on its footprint; fade_speed (n,) the playback
@@ -119,6 +120,7 @@ class CharacterStore:
     steer_speed_m_s: F64 = field(default_factory=lambda: np.zeros(0))
     path_xy: F64 = field(default_factory=lambda: np.zeros((0, MAX_WAYPOINTS, 2)))
     path_len: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    path_cum_m: F64 = field(default_factory=lambda: np.zeros((0, MAX_WAYPOINTS)))
     path_progress_m: F64 = field(default_factory=lambda: np.zeros(0))
     gait_clip: NDArray[np.int64] = field(default_factory=lambda: np.zeros((0, 3), np.int64))
     gait: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))

@@ -1,10 +1,11 @@
 """MotionPlayback: steer, sample each character's clip(s) in normalized space, advance the clocks.
 
 Rows: characters with a MotionPlayer.
-Reads: store.clip, clip_time_s, speed, fade_speed, loop, fade_*, queue_*, placement_*, fade_placement_*,
-lengths (leg length: the root path's unit); for steered characters (:func:`ecs_anim.steering.
-steer`) steer_mode, steer_heading_rad, steer_speed_m_s, path_xy, path_len, path_progress_m,
-gait, gait_clip, and the last tick's contact_weight, locked, footprint; the clip bank.
+Reads: store.clip, clip_time_s, speed, fade_speed, loop, fade_*, queue_*, placement_*,
+fade_placement_*, lengths (leg length: the root path's unit); for steered characters
+(:func:`ecs_anim.steering.steer`) steer_mode, steer_heading_rad, steer_speed_m_s, path_xy,
+path_len, path_cum_m, path_progress_m, gait, gait_clip, and the last tick's contact_weight,
+locked, footprint; the clip bank.
 Writes: store.poses (placed in the world; first writer each tick), store.contact_weight,
 store.clip_time_s, fade_time_s, fade_elapsed_s, fade_s; on a clip change (through
 :func:`ecs_anim.playback_queue.start_next_clips`) clip, loop, queue_head, placement_*, fade_*,
@@ -47,7 +48,8 @@ class MotionPlayback(System):
              "fade_s", "fade_elapsed_s", "queue_clip", "queue_fade_s", "queue_loop", "queue_head",
              "queue_len", "placement_xy", "placement_heading", "fade_placement_xy",
              "fade_placement_heading", "lengths", "steer_mode", "steer_heading_rad",
-             "steer_speed_m_s", "path_xy", "path_len", "path_progress_m", "gait", "gait_clip",
+             "steer_speed_m_s", "path_xy", "path_len", "path_cum_m", "path_progress_m", "gait",
+             "gait_clip",
              "contact_weight", "locked", "footprint")
     writes = ("poses", "contact_weight", "clip_time_s", "fade_time_s", "fade_elapsed_s", "fade_s",
               "clip", "loop", "queue_head", "placement_xy", "placement_heading",
