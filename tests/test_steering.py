@@ -263,3 +263,19 @@ def test_the_game_loop_example_runs_and_follows_the_point() -> None:
     end = re.search(r"([\d.]+) m from the point at the end, arrived: True", out)
     assert end and float(end.group(1)) < 0.3, out
     assert "max 0.000 mm a frame; sole below the ground: 0.000 mm" in out, out
+
+
+def test_removing_a_steered_character_keeps_the_others_on_their_paths(
+        motions: dict[str, NormalizedMotion]) -> None:
+    sim, entities = walkers(motions, (1.20, 1.75, 2.00), Plane())
+    goals = [(3.0, 0.0), (0.0, 3.0), (-3.0, 0.0)]
+    for e, goal in zip(entities, goals, strict=True):
+        sim.walk_to(e, goal)
+    for _ in range(30):
+        sim.step()
+    sim.remove(entities[1])
+    for _ in range(round(8 * sim.fps)):
+        sim.step()
+    for e, goal in ((entities[0], goals[0]), (entities[2], goals[2])):
+        assert sim.arrived(e)
+        assert np.linalg.norm(sim.posture(e).positions[0, :2] - goal) < 0.3
