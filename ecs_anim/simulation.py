@@ -32,7 +32,7 @@ from .components import (
 )
 from .constraint_table import Area, ConstraintTable, Target, add_stored
 from .constraints import Activation
-from .errors import EcsAnimError, listed, quoted
+from .errors import EcsAnimError, did_you_mean, listed, quoted
 from .ground import Ground, Plane
 from .morphology import Morphology, leg_length
 from .motion import NormalizedMotion, motion_problem
@@ -307,6 +307,8 @@ class Simulation:
             self.structure_version += 1
 
     def row(self, entity: int) -> int:
+        """The character's row in :attr:`store` (``store.positions[row]``); rows move down when a
+        character before it is removed, entities do not."""
         with self._active():
             try:
                 handle: CharacterRow = esper.component_for_entity(entity, CharacterRow)
@@ -383,19 +385,41 @@ class Simulation:
             self.messages.append(message)
             print(message, file=sys.stderr)
 
+    # --- looking characters and constraints up by name ----------------------------------------
+
+    def entity(self, name: str) -> int:
+        """The entity of the character named ``name`` (as the scenario or :meth:`spawn` named
+        it). Raises :class:`EcsAnimError` listing the characters (with the closest name) when
+        none is, or when several are (spawn does not require unique names: keep the entities
+        it returned then)."""
+        names = self.names()
+        rows = [row for row, known in enumerate(names) if known == name]
+        if not rows:
+            raise EcsAnimError(f"no character {quoted(name)} in this simulation (characters: "
+                               f"{listed(names) or 'none'}){did_you_mean(name, names)}")
+        if len(rows) > 1:
+            raise EcsAnimError(f"{len(rows)} characters are named {quoted(name)}: use the entities "
+                               "spawn returned")
+        return int(self.store.entity[rows[0]])
+
     def constraint_index(self, entity: int, name: str) -> int:
-        """The id of the constraint ``name`` of a character (its name as the scenario gives it, or
-        as :meth:`add_constraint` got it), for :meth:`set_target`; the first if two share it."""
+        """The id of a character's constraint ``name``, for :meth:`set_target`: its name as the
+        scenario gives it or :meth:`add_constraint` got it, and ``"<character>/<clip>/<name>"``
+        for one stored with a clip it plays. Names are unique per character (add_constraint
+        refuses a second one), so ``(entity, name)`` is one constraint; an unknown name raises
+        :class:`EcsAnimError` listing the character's constraints, with the closest name."""
         row = self.row(entity)
         table = self.constraints
         mine = np.flatnonzero(table.owner == row)
-        found = [k for k in mine if table.names[k] == name]
-        if not found:
+        names = [table.names[k] for k in mine]
+        if name not in names:
             raise EcsAnimError(f"no constraint {quoted(name)} on this character (it has: "
-                               f"{listed(table.names[k] for k in mine) or 'none'})")
-        return int(table.uid[found[0]])
+                               f"{listed(names) or 'none'}){did_you_mean(name, names)}")
+        return int(table.uid[mine[names.index(name)]])
 
     def names(self) -> list[str]:
+        """Every character's name, in store row order (``names()[i]`` is row ``i`` of
+        :attr:`store`, e.g. ``store.positions[i]``)."""
         with self._active():
             by_row = {r.row: n.name for _, (r, n) in esper.get_components(CharacterRow, Name)}
         return [by_row[i] for i in range(self.store.n)]
