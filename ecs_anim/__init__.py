@@ -11,7 +11,8 @@ from .components import MotionPlayer, Placement, QueuedClip
 from .constraint_table import Area
 from .constraints import Activation
 from .errors import EcsAnimError, InputError
-from .exporting import EXPORT_NAMES, bvh_from_rotations, write_npz
+from .exporting import EXPORT_NAMES, bvh_from_rotations, export_motion, write_npz
+from .gltf import glb_bytes
 from .ground import Bumps, Combined, Ground, HeightGrid, Plane, Slope, Stairs
 from .importing import import_bvh
 from .kernels import set_threads, threads
@@ -21,6 +22,7 @@ from .motion import NormalizedMotion, load_nmo, save_nmo
 from .scenario import Scenario, build_simulation, load_scenario
 from .simulation import Simulation
 from .skeleton import JOINT_INDEX, JOINTS, LENGTHS
+from .solver_shell import SolverSettings
 
 __all__ = [
     "EXPORT_NAMES",
@@ -45,9 +47,12 @@ __all__ = [
     "Scenario",
     "Simulation",
     "Slope",
+    "SolverSettings",
     "Stairs",
     "build_simulation",
     "bvh_from_rotations",
+    "export_motion",
+    "glb_bytes",
     "import_bvh",
     "load_morphology_yaml",
     "load_nmo",

@@ -125,6 +125,10 @@ class Table:
 
 @dataclass
 class Scenario:
+    """A scenario file as :func:`load_scenario` read it (docs/scenarios.md): ``duration_s`` and
+    ``fps`` (Hz), ``motions`` by name, the ``ground``, the ``characters`` to spawn
+    (:func:`build_simulation`), viewer hints and props."""
+
     path: str
     duration_s: float
     fps: float

@@ -64,6 +64,8 @@ class Simulation:
         (``store.vertebrae``, (n, vertebrae, 3)) for output skeletons with more spine joints.
     rotations : PostureConvert also gives local joint rotations (``store.local_rotations``),
         which BVH export and skinned rendering need; positions alone cost about half as much.
+    solver_settings : the constraint solver's iterations and tolerances
+        (:class:`ecs_anim.solver_shell.SolverSettings`).
     """
 
     def __init__(self, motions: dict[str, NormalizedMotion], ground: Ground | None = None,
@@ -488,6 +490,8 @@ class Simulation:
             raise EcsAnimError(str(exc)) from None
 
     def report_disabled(self, indices: NDArray[np.int64]) -> None:
+        """Warn once (stderr and :attr:`messages`) for each constraint switched off this tick
+        for a non-finite target: ``indices`` (k,) rows of :attr:`constraints`."""
         for i in indices:
             message = (f"warning: t={self.time_s:.3f} s: constraint "
                        f"{self.constraints.names[int(i)]!r} has a non-finite target and is "

@@ -74,6 +74,22 @@ def test_there_are_docs_with_python_blocks_and_none_is_missed():
             "spelt ```python (it would not be run)")
 
 
+def test_the_api_page_imports_only_what_the_package_exports():
+    """docs/api.md is the public API: its examples import from ``ecs_anim`` itself, and only
+    names in ``ecs_anim.__all__``."""
+    import ast
+
+    import ecs_anim
+
+    for line, code in python_blocks((REPO / "docs" / "api.md").read_text(encoding="utf-8")):
+        for node in ast.walk(ast.parse(code)):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("ecs_anim"):
+                where = f"docs/api.md:{line + node.lineno - 1}"
+                assert node.module == "ecs_anim", f"{where}: imports from {node.module}"
+                missing = [a.name for a in node.names if a.name not in ecs_anim.__all__]
+                assert not missing, f"{where}: {missing} not in ecs_anim.__all__"
+
+
 @pytest.mark.parametrize("path", DOCS, ids=[p.name for p in DOCS])
 def test_every_python_block_of_the_docs_runs(path: Path, monkeypatch: pytest.MonkeyPatch):
     run_blocks(path, python_blocks(path.read_text(encoding="utf-8")), monkeypatch)
