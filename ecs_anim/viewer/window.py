@@ -606,6 +606,8 @@ class ViewerApp:
         self.help = pyglet.text.Label(HELP, x=10, y=self.timeline_top() + 8, anchor_y="bottom",
                                       font_size=10, multiline=True,
                                       width=max(window.width - 20, 200), color=(25, 25, 30, 255))
+        self._help_panel = pyglet.shapes.Rectangle(4, self.timeline_top() + 4, 1, 1,
+                                                   color=(250, 250, 250, 215))
         self._label_batch = pyglet.graphics.Batch()
         self._bar_batch = pyglet.graphics.Batch()
         timeline = Timeline(self.scenario.duration_s)
@@ -752,6 +754,9 @@ class ViewerApp:
             self.notice_label.text = self.notice
             self.notice_label.draw()
         if self.show_help:
+            self._help_panel.width = self.help.content_width + 12
+            self._help_panel.height = self.help.content_height + 8
+            self._help_panel.draw()
             self.help.draw()
 
     def screenshot(self) -> NDArray[np.uint8]:
