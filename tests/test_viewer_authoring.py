@@ -22,7 +22,7 @@ from ecs_anim.scenario import build_simulation, load_scenario
 from ecs_anim.skeleton import JOINT_INDEX
 from ecs_anim.viewer.authoring import Timeline, drag_in_view_plane, pick_capsule
 from ecs_anim.viewer.camera import OrbitCamera
-from ecs_anim.viewer.edits import Edit, EditLog, apply_edit, body_of, entity_named, spawn_copy
+from ecs_anim.viewer.edits import Edit, EditLog, body_of, entity_named, spawn_copy
 
 REPO = Path(__file__).resolve().parents[1]
 SCENARIOS = REPO / "scenarios"
@@ -373,7 +373,10 @@ def _touch(path: Path, text: str) -> None:
 def test_reload_on_change_keeps_the_camera_and_the_time_and_survives_errors(viewer, tmp_path):
     path = _scenario_copy(tmp_path)
     app = viewer(path, at_s=2.0)
-    app.on_mouse_scroll(0, 0, 0, 2)  # a camera of the user's own
+    _click(app, *_window_px(app, _joints(app, "reacher")[PELVIS]))
+    _key(app, "EQUAL")  # an edit of the user's own, kept through the reload
+    grown = body_of(app.sim, app.picked_entity()).stature
+    app.on_mouse_scroll(0, 0, 0, 2)  # and a camera
     camera, tick = app.camera, app.sim.tick
     app.check_files()
     assert app.sim.tick == tick and not app.notice  # nothing changed: nothing reloaded
@@ -383,8 +386,10 @@ def test_reload_on_change_keeps_the_camera_and_the_time_and_survives_errors(view
     assert "reloaded" in app.notice
     assert app.sim.tick == tick and app.sim.posture_time_s == pytest.approx(2.0)
     assert app.camera == camera
+    assert app.picked == "reacher" and body_of(app.sim, app.picked_entity()).stature == grown
     with build_simulation(load_scenario(path)) as fresh:  # as if it had run from the start
         while fresh.tick < tick:
+            app.edits.replay(fresh)
             fresh.step()
         assert np.array_equal(fresh.store.positions, app.sim.store.positions)
     good = app.sim.store.positions.copy()
@@ -424,8 +429,10 @@ def test_the_timeline_scrubs_back_and_forth_deterministically(viewer):
     at3 = app.sim.store.positions.copy()
     x1 = timeline.x_of(1.0, W)
     app.on_mouse_drag(x1, y, int(x1 - x3), 0, pyglet.window.mouse.LEFT, 0)
-    app.on_mouse_release(x1, y, pyglet.window.mouse.LEFT, 0)
+    assert app.sim.posture_time_s == pytest.approx(3.0, abs=0.5 / 30)  # sought once a frame:
+    app.update(0.0)  # at the next update (even paused)
     assert app.sim.posture_time_s == pytest.approx(1.0, abs=0.5 / 30)
+    app.on_mouse_release(x1, y, pyglet.window.mouse.LEFT, 0)
     assert app.picked is None
     with build_simulation(app.scenario) as fresh:
         while fresh.tick < app.sim.tick:
@@ -435,7 +442,7 @@ def test_the_timeline_scrubs_back_and_forth_deterministically(viewer):
     assert np.array_equal(app.sim.store.positions, at3)  # the same posture at the same time
     shot = app.screenshot()
     row = shot[H - int(y)].astype(int).sum(axis=1)
-    cursor = int(round(timeline.x_of(app.sim.posture_time_s, W)))
+    cursor = round(timeline.x_of(app.sim.posture_time_s, W))
     assert row[int(left) + 5:cursor - 4].max() < row[cursor + 4:int(right) - 5].min()  # done: darker
     assert row[cursor - 1:cursor + 2].max() > 600  # the cursor: light
     _click(app, right + 3, y)  # just past its end: the end

@@ -410,6 +410,7 @@ class ViewerApp:
         self.notice = ""  # a message under the status line (a reload error stays until fixed)
         self._notice_until: float | None = None
         self._press: _Press | None = None
+        self._seek_to: float | None = None  # a timeline drag's time, sought once a frame
         self._labels: dict[int, Any] = {}  # entity -> its name label
         self._ground_stale = False
         self._stamps = file_stamps(scenario.input_files)
@@ -447,7 +448,11 @@ class ViewerApp:
             self.sim.close()
         self.sim, self.source = sim, source
         self.accumulator = 0.0
-        self._live.clear()
+        # the edits of the tick it stopped before are made now, as they were when made live
+        for problem in self.edits.replay(sim):
+            self._say(problem)
+        self._live = list(self.edits.by_tick.get(sim.tick, ()))
+        source.unposed.update(e.value for e in self._live if e.kind == "copy")
         for label in self._labels.values():
             label.delete()
         self._labels.clear()
@@ -657,6 +662,9 @@ class ViewerApp:
 
     def update(self, dt: float) -> None:
         assert self.sim is not None
+        if self._seek_to is not None:
+            self.seek(self._seek_to)
+            self._seek_to = None
         if self.paused:
             return
         self.accumulator += dt * self.speed
@@ -842,7 +850,8 @@ class ViewerApp:
             self.camera = self.camera.pan(dx, dy, self.window.height)
             self.follow = False  # panned by hand: stay there (F frames and follows again)
         elif buttons & mouse.LEFT and press is not None and press.kind == "timeline":
-            self.seek(self.timeline.time_at(x, self.window.get_size()[0]))
+            # sought at the next update: going back re-simulates, so once a frame at most
+            self._seek_to = self.timeline.time_at(x, self.window.get_size()[0])
         elif buttons & mouse.LEFT and press is not None and press.kind == "target":
             self._move_target(press, x, y)
         elif buttons & mouse.LEFT:
@@ -852,6 +861,9 @@ class ViewerApp:
 
     def on_mouse_release(self, x: int, y: int, button: int, modifiers: int) -> None:
         press, self._press = self._press, None
+        if self._seek_to is not None:
+            self.seek(self._seek_to)
+            self._seek_to = None
         if press is not None and press.kind == "view" and press.moved_px < CLICK_SLOP_PX:
             self._pick(self.character_at(x, y))
 
