@@ -56,10 +56,11 @@ def scaled_body(body: Morphology, factor: float) -> Morphology:
 
 
 def spawn_copy(sim: Simulation, entity: int, name: str) -> int:
-    """Add a character called ``name`` with ``entity``'s body and team, playing its clip in
-    step with it (same clip time, speed, loop and the clips still queued), placed
-    :data:`COPY_SIDE_M` to its left. Its motion's own stored constraints come with the clip;
-    the scenario's constraints on the original do not. Returns the new entity."""
+    """Add a character called ``name`` with ``entity``'s body, team, ground and centre-of-mass
+    control, playing its clip in step with it (same clip time, speed, loop and the clips still
+    queued), placed :data:`COPY_SIDE_M` to its left. Its motion's own stored constraints come
+    with the clip; the scenario's constraints on the original (and a desired centre of mass
+    given as a point) do not. Returns the new entity."""
     row, st = sim.row(entity), sim.store
     with sim._active():
         team = esper.component_for_entity(entity, Name).team
@@ -74,8 +75,11 @@ def spawn_copy(sim: Simulation, entity: int, name: str) -> int:
     heading = float(st.placement_heading[row])
     left = np.array([-math.sin(heading), math.cos(heading)])
     xy = st.placement_xy[row] + COPY_SIDE_M * left
+    ground = int(st.ground_index[row])
     return sim.spawn(name, body_of(sim, entity), player,
-                     Placement((float(xy[0]), float(xy[1])), heading), team)
+                     Placement((float(xy[0]), float(xy[1])), heading), team,
+                     com_control=bool(st.com_control[row]),
+                     ground=sim.grounds[ground] if ground else None)
 
 
 def copy_name(sim: Simulation, name: str) -> str:

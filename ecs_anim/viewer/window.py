@@ -530,36 +530,44 @@ class ViewerApp:
         return True
 
     def picked_entity(self) -> int | None:
-        """The picked character's entity (None when none is picked)."""
+        """The picked character's entity (None when none is picked, or it is gone: removed by
+        an edit replayed while scrubbing, say)."""
         assert self.sim is not None
+        if self.picked is not None and self.picked not in self.sim.names():
+            self._pick(None)
         return None if self.picked is None else entity_named(self.sim, self.picked)
 
     def _pick(self, name: str | None) -> None:
         self.picked = self.source.picked = name
         self.source.changed()
 
+    def _picked_or_say(self) -> str | None:
+        """The picked character's name, or None (saying how to pick one)."""
+        if self.picked_entity() is None or self.picked is None:
+            self._say("pick a character first (click it)")
+            return None
+        return self.picked
+
     def scale_picked(self, factor: float) -> None:
         """The picked character's body (all lengths) times ``factor``, live."""
-        if self.picked is None:
-            self._say("pick a character first (click it)")
-        else:
-            self._edit("scale", self.picked, factor)
+        picked = self._picked_or_say()
+        if picked is not None:
+            self._edit("scale", picked, factor)
 
     def copy_picked(self) -> None:
         """Add a character playing the picked one's motion in step, beside it; pick the copy."""
         assert self.sim is not None
-        if self.picked is None:
-            self._say("pick a character first (click it)")
+        picked = self._picked_or_say()
+        if picked is None:
             return
-        name = copy_name(self.sim, self.picked)
-        if self._edit("copy", self.picked, name):
+        name = copy_name(self.sim, picked)
+        if self._edit("copy", picked, name):
             self.source.unposed.add(name)  # drawn from the next tick, when it has a posture
             self._pick(name)
 
     def remove_picked(self) -> None:
-        if self.picked is None:
-            self._say("pick a character first (click it)")
-        elif self._edit("remove", self.picked):
+        picked = self._picked_or_say()
+        if picked is not None and self._edit("remove", picked):
             self._pick(None)
 
     def _move_target(self, press: _Press, x: float, y: float) -> None:
@@ -684,7 +692,7 @@ class ViewerApp:
     def status(self, frame: SceneFrame) -> str:
         """The status line, with the picked character and its stature."""
         text = status_line(frame, self.fps, self.speed, self.paused)
-        entity = self.picked_entity() if self.picked is not None else None
+        entity = self.picked_entity()
         if entity is not None:
             assert self.sim is not None
             text += f"  |  picked {self.picked} ({body_of(self.sim, entity).stature:.2f} m)"
