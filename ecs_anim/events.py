@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 
 from .body_points import BodyPoint, point_positions
 from .components import QueuedClip
+from .constraints import Activation
 from .errors import EcsAnimError, listed, quoted
 from .morphology import Morphology
 from .playback_queue import start_next_clips
@@ -260,15 +261,15 @@ def listens_to(condition: Condition, kind: str, entity: int, clip: str | None) -
     return own is None or clip is None or own == clip
 
 
-def find_cycle(triggers: list[tuple[float, bool, Condition, tuple[Action, ...]]]) -> list[int]:
-    """Triggers (delay_s, repeat, when, then) that would fire each other forever in one tick: a
-    cycle of repeating triggers without delay, each one's actions causing an event the next one
-    waits for. Returns the cycle's indices (empty: none)."""
-    live = [i for i, (delay, repeat, _, _) in enumerate(triggers) if delay <= 0.0 and repeat]
+def find_cycle(triggers: list[Trigger]) -> list[int]:
+    """Triggers that would fire each other forever in one tick: a cycle of repeating triggers
+    without delay, each one's actions causing an event the next one waits for. Returns the
+    cycle's indices (empty: none)."""
+    live = [i for i, t in enumerate(triggers) if t.delay_s <= 0.0 and t.repeat]
     edges: dict[int, list[int]] = {i: [] for i in live}
     for i in live:
-        effects = [e for a in triggers[i][3] for e in event_effects(a)]
-        edges[i] = [j for j in live if any(listens_to(triggers[j][2], *e) for e in effects)]
+        effects = [e for a in triggers[i].then for e in event_effects(a)]
+        edges[i] = [j for j in live if any(listens_to(triggers[j].when, *e) for e in effects)]
     state: dict[int, int] = {}  # 1: on the path, 2: done
     path: list[int] = []
 
@@ -538,6 +539,8 @@ class Reactions:
             return
         self._fired_this_tick.add(i)
         self.fired[i] = True
+        if not t.repeat:
+            self._compiled = None  # its condition is no longer watched
         if t.delay_s > 0.0:  # shown from the first posture at or after the condition + delay
             self._pending.append((at_s + t.delay_s, i))
         else:
@@ -583,7 +586,8 @@ class Reactions:
         if self._compiled is not None:
             return self._compiled
         c = _Compiled()
-        live = [(i, t.when) for i, t in enumerate(self.triggers) if not self.dropped[i]]
+        live = [(i, t.when) for i, t in enumerate(self.triggers)
+                if not self.dropped[i] and (t.repeat or not self.fired[i])]
         near = [(i, w) for i, w in live if isinstance(w, Near)]
         if near:
             c.near = np.array([i for i, _ in near], np.int64)
@@ -685,6 +689,12 @@ def switch_off(sim: Simulation, uid: int, now_s: float) -> None:
     else:
         table.activation[row, 1] = min(stop, now_s + ease_out)
     table.clock[row] = -1
+
+
+def switched_off(ease_in_s: float, ease_out_s: float) -> Activation:
+    """The activation of a constraint off until a trigger switches it on (:class:`SwitchOn`):
+    it ended before the simulation began; its eases are those the switch uses."""
+    return Activation(-1.0 - ease_in_s - ease_out_s, -1.0, ease_in_s, ease_out_s)
 
 
 def _constraint_row(sim: Simulation, uid: int) -> int:
