@@ -196,19 +196,29 @@ class Remove:
     entity: int
 
 
-Action = Play | SwitchOn | SwitchOff | MoveTarget | SetBody | Remove
+@dataclass(frozen=True)
+class Arm:
+    """Start watching the condition of the trigger named ``trigger`` (one made with
+    ``armed=False`` waits for this), e.g. a dodge watched only once the punch is coming."""
+
+    trigger: str
+
+
+Action = Play | SwitchOn | SwitchOff | MoveTarget | SetBody | Remove | Arm
 
 
 @dataclass(frozen=True)
 class Trigger:
     """``when`` the condition holds (its edge), do ``then`` after ``delay_s``; once, or every
-    time with ``repeat``. ``name`` names it in events and warnings."""
+    time with ``repeat``. ``name`` names it in events and warnings. ``armed`` False: its
+    condition is not watched until an :class:`Arm` action arms it."""
 
     name: str
     when: Condition
     then: tuple[Action, ...]
     delay_s: float = 0.0
     repeat: bool = False
+    armed: bool = True
 
 
 @dataclass(frozen=True)
@@ -325,6 +335,7 @@ class Reactions:
         self.fired = np.zeros(0, bool)  # fired once already (a trigger without repeat)
         self.dropped = np.zeros(0, bool)  # names a removed character or constraint
         self.holds = np.zeros(0, bool)  # the condition held at the last evaluation (edges)
+        self.armed = np.zeros(0, bool)  # its condition is watched
         self.tracks: list[TargetTrack] = []
         self._compiled: _Compiled | None = None
         self._pending: list[tuple[float, int]] = []  # (due time, trigger) delayed actions
@@ -345,6 +356,7 @@ class Reactions:
         self.fired = np.append(self.fired, False)
         self.dropped = np.append(self.dropped, False)
         self.holds = np.append(self.holds, False)
+        self.armed = np.append(self.armed, trigger.armed)
         self._compiled = None
         return len(self.triggers) - 1
 
@@ -380,9 +392,11 @@ class Reactions:
         now, tick = sim.posture_time_s, sim.tick - 1
         edges = self._store_edges(sim)
         names = sim.names() if any(rows.size for _, rows, _ in edges) else []
-        for kind, rows, detail in edges:
-            for r, d in zip(rows, detail, strict=True):
-                self._emit(sim, Event(kind, int(st.entity[r]), names[r], now, tick, d))
+        # All made before any is emitted: an action may remove a character (and shift the rows).
+        found = [Event(kind, int(st.entity[r]), names[r], now, tick, d)
+                 for kind, rows, detail in edges for r, d in zip(rows, detail, strict=True)]
+        for event in found:
+            self._emit(sim, event)
         c = self._compile()
         if c.near.size:
             self._edges(sim, c.near, self._near_holds(sim, c), "near")
@@ -475,7 +489,8 @@ class Reactions:
                                  c.near_fractions.reshape(-1), c.near_offsets.reshape(-1, 3))
         points = points.reshape(-1, 2, 3)
         distance = np.linalg.norm(points[:, 0] - points[:, 1], axis=-1)
-        return ok & (distance <= c.near_within_m)  # NaN (no posture yet): False
+        near: NDArray[np.bool_] = ok & (distance <= c.near_within_m)  # NaN (no posture): False
+        return near
 
     def _reached_holds(self, sim: Simulation, c: _Compiled) -> NDArray[np.bool_]:
         table = sim.constraints
@@ -531,7 +546,7 @@ class Reactions:
     def _fire(self, sim: Simulation, i: int, at_s: float) -> None:
         """Fire trigger ``i``, whose condition came at ``at_s``: its actions now, or delayed."""
         t = self.triggers[i]
-        if self.dropped[i] or (self.fired[i] and not t.repeat):
+        if self.dropped[i] or not self.armed[i] or (self.fired[i] and not t.repeat):
             return
         if i in self._fired_this_tick:
             warn(sim, f"trigger {t.name!r} would fire again in the same tick (triggers firing each "
@@ -579,6 +594,13 @@ class Reactions:
             sim.set_body(a.entity, a.body, blend_s=a.blend_s)
         elif isinstance(a, Remove):
             sim.remove(a.entity)
+        elif isinstance(a, Arm):
+            found = [i for i, t in enumerate(self.triggers) if t.name == a.trigger]
+            if not found:
+                raise EcsAnimError(f"no trigger named {quoted(a.trigger)} to arm")
+            self.armed[found[0]] = True
+            self.holds[found[0]] = False  # a condition already holding is an edge now
+            self._compiled = None
 
     # --- compiled conditions, tracks ------------------------------------------------------------
 
@@ -586,8 +608,8 @@ class Reactions:
         if self._compiled is not None:
             return self._compiled
         c = _Compiled()
-        live = [(i, t.when) for i, t in enumerate(self.triggers)
-                if not self.dropped[i] and (t.repeat or not self.fired[i])]
+        live = [(i, t.when) for i, t in enumerate(self.triggers) if self.armed[i]
+                and not self.dropped[i] and (t.repeat or not self.fired[i])]
         near = [(i, w) for i, w in live if isinstance(w, Near)]
         if near:
             c.near = np.array([i for i, _ in near], np.int64)
@@ -751,6 +773,8 @@ def check_trigger(sim: Simulation, trigger: Trigger) -> None:
             raise fail(f"for_s must be a duration > 0, got {a.for_s}")
         if isinstance(a, MoveTarget) and not all(np.isfinite(a.target_in_world)):
             raise fail("the target must be finite")
+    if any(t.name == trigger.name for t in sim.reactions.triggers):
+        raise fail("another trigger has this name (Arm names triggers)")
 
 
 def check_track(sim: Simulation, track: TargetTrack) -> None:

@@ -916,7 +916,8 @@ ACTION_KEYS = {"play": ("crossfade_s", "loop", "from_s", "then"),
                "switch_off": (),
                "move_target": ("world_m",),
                "set_body": ("morphology", "blend_s"),
-               "remove": ()}
+               "remove": (),
+               "arm": ()}
 
 
 def _split_ref(r: _Reader, node: Node, where: str, characters: list[CharacterSpec],
@@ -1014,8 +1015,9 @@ def _when(r: _Reader, node: Node, where: str, characters: list[CharacterSpec],
 
 
 def _action(r: _Reader, node: Node, where: str, characters: list[CharacterSpec],
-            motions: dict[str, NormalizedMotion], queued: Any, refs: list[tuple[int, str]]) -> Action:
-    from .events import MoveTarget, Play, Remove, SetBody, SwitchOff, SwitchOn
+            motions: dict[str, NormalizedMotion], queued: Any, refs: list[tuple[int, str]],
+            trigger_names: list[str]) -> Action:
+    from .events import Arm, MoveTarget, Play, Remove, SetBody, SwitchOff, SwitchOn
 
     if not isinstance(node, yaml.MappingNode) or not node.value:
         raise r.fail(node, where, f"expected a mapping with one of {', '.join(ACTION_KEYS)}")
@@ -1048,6 +1050,12 @@ def _action(r: _Reader, node: Node, where: str, characters: list[CharacterSpec],
             return SwitchOn(uid, r.number(keys["for_s"], f"{where}.for_s", 1e-3, MAX_DURATION_S, "s")
                             if "for_s" in keys else None)
         return MoveTarget(uid, r.vector3(keys["world_m"], f"{where}.world_m", "m", 1e5))
+    if kind == "arm":
+        other = r.string(keys[kind], w)
+        if other not in trigger_names:
+            hint = did_you_mean(other, trigger_names)
+            raise r.fail(keys[kind], w, f"no trigger named {other!r}{hint}")
+        return Arm(other)
     who, _ = _split_ref(r, keys[kind], w, characters, "", optional=True)
     if kind == "remove":
         return Remove(who)
@@ -1065,23 +1073,31 @@ def _triggers(r: _Reader, node: Node, characters: list[CharacterSpec],
 
     triggers: list[Trigger] = []
     nodes = r.sequence(node, "triggers", MAX_TRIGGERS, "triggers")
+    names: list[str] = []  # every trigger's, first (an arm: action may name a later one)
+    for i, tn in enumerate(nodes):
+        keys = r.mapping(tn, f"triggers[{i}]", {"name": False, "when": True, "then": True,
+                                                 "delay_s": False, "repeat": False, "armed": False})
+        name = r.string(keys["name"], f"triggers[{i}].name") if "name" in keys else f"triggers[{i}]"
+        if name in names:
+            raise r.fail(keys.get("name", tn), f"triggers[{i}].name",
+                         f"another trigger is named {name!r}")
+        names.append(name)
     for i, tn in enumerate(nodes):
         where = f"triggers[{i}]"
         keys = r.mapping(tn, where, {"name": False, "when": True, "then": True, "delay_s": False,
-                                     "repeat": False})
-        name = r.string(keys["name"], f"{where}.name") if "name" in keys else where
-        if any(t.name == name for t in triggers):
-            raise r.fail(keys.get("name", tn), f"{where}.name", f"another trigger is named {name!r}")
+                                     "repeat": False, "armed": False})
+        name = names[i]
         actions = r.sequence(keys["then"], f"{where}.then")
         if not actions:
             raise r.fail(keys["then"], f"{where}.then", "expected at least one action")
         triggers.append(Trigger(
             name, _when(r, keys["when"], f"{where}.when", characters, motions, refs),
-            tuple(_action(r, a, f"{where}.then[{j}]", characters, motions, queued, refs)
+            tuple(_action(r, a, f"{where}.then[{j}]", characters, motions, queued, refs, names)
                   for j, a in enumerate(actions)),
             r.number(keys["delay_s"], f"{where}.delay_s", 0.0, MAX_DURATION_S, "s")
             if "delay_s" in keys else 0.0,
-            r.boolean(keys["repeat"], f"{where}.repeat") if "repeat" in keys else False))
+            r.boolean(keys["repeat"], f"{where}.repeat") if "repeat" in keys else False,
+            r.boolean(keys["armed"], f"{where}.armed") if "armed" in keys else True))
     cycle = find_cycle(triggers)
     if cycle:
         path = " -> ".join(repr(triggers[i].name) for i in cycle + cycle[:1])
