@@ -8,8 +8,8 @@ move the character along its path), their placement is shifted so the character 
 is (:func:`keep_in_place`); its feet re-plant. Blended (``blend_s`` > 0, a :class:`BodyBlend`
 component): every tick :func:`blend_bodies` moves the store's lengths and masses a step from
 the old body toward the new one (a smoothstep over ``blend_s``), shifting the placement the same
-way so the root's path stays continuous, and keeps planted feet on their footprints (their
-height follows the ankle height as it changes; they are not released).
+way so the root's path stays continuous, and keeps planted feet on their footprints (they
+are not released; a foot's ankle height changes while it is off the ground).
 """
 
 from __future__ import annotations
@@ -101,35 +101,52 @@ def start_blend(sim: Simulation, row: int, start_s: float, blend_s: float) -> Bo
 ANKLE_HEIGHTS = [LENGTH_INDEX["ankle_height_l"], LENGTH_INDEX["ankle_height_r"]]
 
 
+#: How long after a blend's time a planted foot's ankle height still waits for the foot to
+#: swing (s): longer than a walk's stance.
+SWING_WAIT_S = 1.0
+
+
 def blend_bodies(sim: Simulation) -> None:
     """One tick of every body change in progress (between MotionPlayback and the decode of
     MorphologyAdapt): lengths and masses at the smoothstep of the elapsed fraction between the
     BodyBlend's old body and the Morphology component's new one, all blending rows at once.
-    Writes store.lengths, segment_mass_kg, segment_com_fraction, placement_xy,
-    fade_placement_xy, the root of this tick's poses, and the height of locked footprints."""
+
+    A foot's ankle height (its sole under the ankle) changes only while that foot is off the
+    ground, at most three times the blend's mean rate a tick, so a planted ankle does not move at all
+    (its footprint holds); what is left :data:`SWING_WAIT_S` after the blend time follows then,
+    planted or not (a character standing through the whole blend: its ankles rise as slowly). Writes
+    store.lengths, segment_mass_kg, segment_com_fraction, placement_xy, fade_placement_xy, the
+    root of this tick's poses, and the height of a locked footprint whose ankle height changed."""
     st = sim.store
     rows, blends = sim.rows_and_components(BodyBlend)
     if rows.size == 0:
         return
     now = sim.time_s
-    start = np.array([b.start_s for b in blends])
-    length = np.array([b.blend_s for b in blends])
-    going = now <= start + length + sim.dt
-    if not going.any():
-        return
-    rows, blends = rows[going], [b for b, g in zip(blends, going, strict=True) if g]
-    start, length = start[going], length[going]
     body_of = dict(zip(*sim.rows_and_components(Morphology), strict=True))
     to_lengths = np.array([body_of[int(r)].lengths for r in rows])
+    going = np.array([now <= b.start_s + b.blend_s + sim.dt for b in blends]) | \
+        np.any(st.lengths[rows] != to_lengths, axis=1)
+    if not going.any():
+        return
+    rows, blends, to_lengths = rows[going], [b for b, g in zip(blends, going, strict=True) if g], \
+        to_lengths[going]
+    start = np.array([b.start_s for b in blends])
+    length = np.array([b.blend_s for b in blends])
+    from_lengths = np.array([b.from_lengths for b in blends])
     to_masses, to_fractions = mass_tables([body_of[int(r)] for r in rows])
     # Smooth in and out (ramp_weight's quintic): no joint set moving by the change at once.
     s = ramp_weight(np.full(rows.size, now), start, np.inf, length, 0.0)[:, None]
-    lengths = np.array([b.from_lengths for b in blends]) * (1 - s) + to_lengths * s
+    lengths = from_lengths * (1 - s) + to_lengths * s
     masses = np.array([b.from_mass_kg for b in blends]) * (1 - s) + to_masses * s
     fractions = np.array([b.from_com_fraction for b in blends]) * (1 - s) + to_fractions * s
+    ankle_now = st.lengths[rows][:, ANKLE_HEIGHTS]
+    limit = 3.0 * np.abs(to_lengths - from_lengths)[:, ANKLE_HEIGHTS] * sim.dt / length[:, None]
+    waiting = now < start + length + SWING_WAIT_S  # for a swing to change its ankle height in
+    held = (st.locked[rows] | (st.contact_weight[rows] > 0.0)) & waiting[:, None]
+    ankle = np.where(held, ankle_now,
+                     ankle_now + np.clip(lengths[:, ANKLE_HEIGHTS] - ankle_now, -limit, limit))
+    lengths[:, ANKLE_HEIGHTS] = ankle
     keep_in_place(sim, rows, lengths, np.ones(rows.size, bool))
-    # A planted foot stays on its footprint: only its height follows the new ankle height.
-    rise = lengths[:, ANKLE_HEIGHTS] - st.lengths[rows][:, ANKLE_HEIGHTS]
-    st.footprint[rows, :, 2] += np.where(st.locked[rows], rise, 0.0)
+    st.footprint[rows, :, 2] += np.where(st.locked[rows], ankle - ankle_now, 0.0)
     st.lengths[rows] = lengths
     st.segment_mass_kg[rows], st.segment_com_fraction[rows] = masses, fractions

@@ -1,6 +1,6 @@
 """A body changing while it plays (Simulation.set_body with blend_s, ecs_anim.body_change):
-blended over the given time, planted feet on their footprints, no joint faster than the motion
-moves it on either body (+10 %)."""
+blended over the given time, planted feet on their footprints, joints about as fast as the
+motion moves them on the faster body."""
 
 from __future__ import annotations
 
@@ -57,16 +57,20 @@ def test_growing_from_1_2_to_2_0_m_in_a_second_while_walking_keeps_the_feet(walk
     np.testing.assert_allclose(lengths, TALL.lengths, atol=1e-12)  # it became the new body
     horizontal, vertical = planted_moves_mm(p, contacts)
     assert horizontal.max() < 1.0, horizontal.max()  # measured 0.0 mm
-    # A planted ankle only rises as the growing foot raises it (ankle height 61 -> 102 mm).
-    assert vertical.max() < 2.5, vertical.max()  # measured 1.9 mm
-    assert (contacts[45:75] >= 1.0).any()  # feet were planted during the change
+    # A foot's ankle height (61 -> 102 mm) grows while it swings: a planted ankle stays put.
+    assert vertical.max() < 1.0, vertical.max()  # measured 0.0 mm
+    assert (contacts[45:75] >= 1.0).all(axis=1).any()  # both feet were planted during the change
     c = report["characters"][0]
+    assert c["foot_sliding_mm_per_frame"]["max"] < 1.0
     assert c["ground_penetration_mm_max"] < 1.0 and c["bone_length_error_m_max"] < 1e-6
-    # No joint faster than the walk moves it on the faster of the two bodies, + 10 %.
+    # Each joint about as fast as the walk moves it on the faster of the two bodies: the growth
+    # adds to it (the head's top rises 0.8 m in the second, 1.4 m/s at the smoothstep's peak);
+    # measured: at most 1.14 times (the head's top), 1.07 the pelvis.
     speed = np.linalg.norm(np.diff(p, axis=0), axis=-1) * 30
     own = np.maximum(*(np.linalg.norm(np.diff(walking(walk, b)[0], axis=0), axis=-1).max(axis=0) * 30
                        for b in (SMALL, TALL)))
-    assert np.all(speed.max(axis=0) <= 1.1 * own + 1e-9), (speed.max(axis=0) / own).max()
+    assert np.all(speed.max(axis=0) <= 1.2 * own), (speed.max(axis=0) / own).max()
+    assert speed[:, J["pelvis"]].max() <= 1.1 * own[J["pelvis"]]
 
 
 def test_a_body_changed_at_once_re_plants_its_feet(walk):
