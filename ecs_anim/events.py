@@ -412,7 +412,7 @@ class Reactions:
         live = set(int(u) for u in sim.constraints.uid)
         gone = []
         for i, t in enumerate(self.triggers):
-            if self.dropped[i] or (isinstance(t.when, Removed) and self.fired[i]):
+            if self.dropped[i] or (self.fired[i] and not t.repeat):  # done already
                 continue
             items: list[Condition | Action] = [t.when, *t.then]
             if any(entity in entities_named(x) for x in items) or \

@@ -442,3 +442,19 @@ def test_a_cycle_of_triggers_is_refused_at_load_with_its_line(tmp_path):
     # A delay (or no repeat) breaks the cycle: it loads.
     load_scenario(scenario_file(tmp_path, cycle.replace("    repeat: true\n    when: {clip_started: red.dodge}",
                                                         "    repeat: true\n    delay_s: 0.2\n    when: {clip_started: red.dodge}")))
+
+
+def test_the_documented_trigger_scenario_loads_and_reacts(tmp_path):
+    """docs/scenarios.md, Triggers: its complete scenario, motions read from scenarios/motions."""
+    text = (REPO / "docs" / "scenarios.md").read_text()
+    section = text[text.index("## Triggers"):]
+    example = section[section.index("```yaml\n") + 8:section.index("```\n", section.index("```yaml"))]
+    path = tmp_path / "triggers.yaml"
+    path.write_text(example.replace("motions/", f"{MOTIONS}/"))
+    with build_simulation(load_scenario(path)) as sim:
+        events, p = steps(sim, 60)
+    happened = [(e.kind, e.character, e.detail) for e in events if e.kind != "contact_began"]
+    assert ("clip_started", "red", "kick") in happened
+    assert ("clip_started", "blue", "dodge") in happened
+    assert happened.index(("clip_started", "red", "kick")) < happened.index(("clip_started", "blue", "dodge"))
+    assert np.all(np.isfinite(p))
