@@ -320,6 +320,8 @@ class _Compiled:
     reached_within: F64 = field(default_factory=lambda: np.zeros(0))
     timed: I64 = field(default_factory=lambda: np.zeros(0, np.int64))
     timed_at_s: F64 = field(default_factory=lambda: np.zeros(0))
+    #: (event kind, entity) -> the triggers waiting for such an event (clips, contacts, removal)
+    listeners: dict[tuple[str, int], list[int]] = field(default_factory=dict)
 
 
 class Reactions:
@@ -342,6 +344,8 @@ class Reactions:
         self._events: list[Event] = []  # of the tick in progress
         self._last: list[Event] = []  # of the last tick stepped
         self._fired_this_tick: set[int] = set()
+        self._names_cache: list[str] = []
+        self._names_version = -1
         # per entity id: the clip (-1: not seen yet), its time after the last tick, whether its
         # end was reported, its contact weights
         self._seen_clip = np.zeros(0, np.int64)
@@ -391,7 +395,7 @@ class Reactions:
         self._grow(int(st.entity.max()) + 1 if st.n else 0)
         now, tick = sim.posture_time_s, sim.tick - 1
         edges = self._store_edges(sim)
-        names = sim.names() if any(rows.size for _, rows, _ in edges) else []
+        names = self._names(sim) if any(rows.size for _, rows, _ in edges) else []
         # All made before any is emitted: an action may remove a character (and shift the rows).
         found = [Event(kind, int(st.entity[r]), names[r], now, tick, d)
                  for kind, rows, detail in edges for r, d in zip(rows, detail, strict=True)]
@@ -462,7 +466,7 @@ class Reactions:
             (self._seen_contact[e] < CONTACT_BEGAN_WEIGHT)
         rows, feet = np.nonzero(began)
         out.append(("contact_began", rows, [FEET[f] for f in feet]))
-        self._seen_ended[e] = np.where(new_clip, at_end & ~new_clip, self._seen_ended[e] | at_end)
+        self._seen_ended[e] = ~new_clip & (self._seen_ended[e] | at_end)
         self._seen_clip[e], self._seen_time[e] = st.clip, st.clip_time_s
         self._seen_contact[e] = st.contact_weight
         return out
@@ -507,21 +511,31 @@ class Reactions:
         self.holds[triggers] = holds
         for i in triggers[rising]:
             t = self.triggers[i]
-            who = entities_named(t.when)
-            entity = who[0] if who else -1
-            if kind == "reached":
-                entity = int(sim.constraints.owner[sim.constraints.rows_of(
-                    np.array([t.when.uid]))[0]]) if isinstance(t.when, Reached) else -1
-                entity = int(sim.store.entity[entity]) if entity >= 0 else -1
-            name = self._name_of(sim, entity)
-            self._emit(sim, Event(kind, entity, name, sim.posture_time_s, sim.tick - 1, t.name), i)
+            entity = self._subject(sim, t.when)
+            self._emit(sim, Event(kind, entity, self._name_of(sim, entity), sim.posture_time_s,
+                                  sim.tick - 1, t.name), i)
 
     @staticmethod
-    def _name_of(sim: Simulation, entity: int) -> str:
+    def _subject(sim: Simulation, condition: Condition) -> int:
+        """The entity a condition's event is about: its (first) character, a constraint's
+        owner; -1 for a time."""
+        if isinstance(condition, Reached):
+            table = sim.constraints
+            return int(sim.store.entity[table.owner[table.rows_of(np.array([condition.uid]))[0]]])
+        who = entities_named(condition)
+        return who[0] if who else -1
+
+    def _name_of(self, sim: Simulation, entity: int) -> str:
         if entity < 0:
             return ""
         rows = np.flatnonzero(sim.store.entity == entity)
-        return sim.names()[int(rows[0])] if rows.size else ""
+        return self._names(sim)[int(rows[0])] if rows.size else ""
+
+    def _names(self, sim: Simulation) -> list[str]:
+        """Every character's name by store row (an esper query once per structural change)."""
+        if self._names_version != sim.structure_version:
+            self._names_cache, self._names_version = sim.names(), sim.structure_version
+        return self._names_cache
 
     # --- firing ---------------------------------------------------------------------------------
 
@@ -532,8 +546,8 @@ class Reactions:
         if source is not None:
             self._fire(sim, source, event.time_s)
             return
-        for i, t in enumerate(self.triggers):
-            if self._matches(t.when, event):
+        for i in self._compile().listeners.get((event.kind, event.entity), []):
+            if self._matches(self.triggers[i].when, event):
                 self._fire(sim, i, event.time_s)
 
     @staticmethod
@@ -625,6 +639,11 @@ class Reactions:
             c.reached = np.array([i for i, _ in reached], np.int64)
             c.reached_uids = np.array([w.uid for _, w in reached], np.int64)
             c.reached_within = np.array([w.within_m for _, w in reached])
+        kinds: dict[type, str] = {ClipStarted: "clip_started", ClipEnded: "clip_ended",
+                                  ContactBegan: "contact_began", Removed: "removed"}
+        for i, w in live:
+            if isinstance(w, ClipStarted | ClipEnded | ContactBegan | Removed):
+                c.listeners.setdefault((kinds[type(w)], w.entity), []).append(i)
         timed = [(i, w) for i, w in live if isinstance(w, AtTime)]
         if timed:
             c.timed = np.array([i for i, _ in timed], np.int64)
