@@ -19,7 +19,8 @@ posture); actions are applied between ticks, so their effect shows from the next
   fire again in the same tick (a cycle of triggers firing each other) is skipped with a warning
   and the others go on (a scenario refuses such a cycle at load).
 
-Triggers naming a character that is removed are dropped with one warning; the others go on.
+Triggers naming a character that is removed are dropped with one warning; the others go on. A
+trigger made with ``armed=False`` is not watched until an :class:`Arm` action names it.
 
 Moving targets (:class:`TargetTrack`): a constraint's world target given as keyframes
 ``(t_s, at_m)``, interpolated linearly in simulation time (held before the first and after the
@@ -50,8 +51,7 @@ F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 
 #: The kinds of :class:`Event`.
-EVENT_KINDS = ("clip_started", "clip_ended", "contact_began", "removed", "near", "reached",
-               "time", "body_changed")
+EVENT_KINDS = ("clip_started", "clip_ended", "contact_began", "removed", "near", "reached", "time")
 #: A foot contact has begun when its weight rises through this.
 CONTACT_BEGAN_WEIGHT = 0.5
 FEET = ("left", "right")
