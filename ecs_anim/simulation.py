@@ -21,6 +21,7 @@ from . import kernels
 from .body_change import mass_tables
 from .body_points import body_point
 from .components import (
+    BodyBlend,
     CharacterRow,
     Constraint,
     GroundQuery,
@@ -33,6 +34,7 @@ from .components import (
 from .constraint_table import Area, ConstraintTable, Target, add_stored
 from .constraints import Activation
 from .errors import EcsAnimError, did_you_mean, listed, quoted
+from .events import Event, Reactions, TargetTrack, Trigger
 from .ground import Ground, Plane
 from .morphology import Morphology, leg_length
 from .motion import NormalizedMotion, motion_problem
@@ -102,6 +104,8 @@ class Simulation:
         self.renderer: object | None = None
         self.tables: tuple[Any, ...] = ()  # props for a renderer (scenario ``tables``); never simulated
         self.messages: list[str] = []
+        #: Triggers, moving targets and the last tick's events (:mod:`ecs_anim.events`).
+        self.reactions = Reactions()
         schedule = SCHEDULE if window else HEADLESS
         self.systems: list[System] = []
         with self._active():
@@ -342,13 +346,23 @@ class Simulation:
         row, st = self.row(entity), self.store
         return Posture(row, st.positions[row], st.local_rotations[row])
 
-    def set_body(self, entity: int, body: Morphology) -> None:
+    def set_body(self, entity: int, body: Morphology, blend_s: float = 0.0) -> None:
         """Replace a character's morphology while it plays (paper §6): its Morphology component.
 
         It takes effect on the next tick (MorphologyAdapt, :mod:`ecs_anim.body_change`): the
-        character grows or shrinks where it stands, and its feet re-plant."""
-        self.row(entity)
+        character grows or shrinks where it stands. ``blend_s`` 0: at once, its feet re-plant;
+        > 0: its segment lengths and masses blend into the new body's over ``blend_s`` seconds
+        (a smoothstep), planted feet staying on their footprints (a BodyBlend component)."""
+        from .body_change import start_blend
+
+        row = self.row(entity)
+        if not (np.isfinite(blend_s) and 0.0 <= blend_s <= MAX_COORDINATE_M):
+            raise EcsAnimError(f"blend_s must be a finite number of seconds >= 0, got {blend_s}")
         with self._active():
+            if blend_s > 0.0:
+                esper.add_component(entity, start_blend(self, row, self.time_s, blend_s))
+            elif esper.has_component(entity, BodyBlend):
+                esper.remove_component(entity, BodyBlend)
             esper.add_component(entity, body)
         self.structure_version += 1
 
@@ -386,6 +400,7 @@ class Simulation:
                        f"constraints {listed(removed)}")
             self.messages.append(message)
             print(message, file=sys.stderr)
+        self.reactions.character_removed(self, entity, name)
 
     # --- looking characters and constraints up by name ----------------------------------------
 
@@ -508,15 +523,46 @@ class Simulation:
             self.messages.append(message)
             print(message, file=sys.stderr)
 
+    # --- events and triggers (ecs_anim.events) -----------------------------------------------
+
+    def events(self) -> list[Event]:
+        """What happened in the last :meth:`step` (edges: clips started and ended, foot contacts
+        begun, characters removed, triggers' conditions met), in order; also those between it and
+        the step before (a character removed from code)."""
+        return self.reactions.events
+
+    def add_trigger(self, trigger: Trigger) -> int:
+        """Add a trigger (:class:`ecs_anim.events.Trigger`): ``when`` its condition begins to
+        hold, its actions run (``delay_s`` later). Everything it names is checked here; returns
+        its index."""
+        from .events import check_trigger
+
+        check_trigger(self, trigger)
+        return self.reactions.add(trigger)
+
+    def add_target_track(self, uid: int, times_s: Sequence[float],
+                         points_m: Sequence[tuple[float, float, float]]) -> None:
+        """Move the constraint ``uid``'s world target along keyframes: at ``times_s`` (k,)
+        (increasing, simulation seconds) it is at ``points_m`` (k, 3), linearly interpolated
+        between them, held before the first and after the last; set before every tick."""
+        from .events import check_track
+
+        track = TargetTrack(int(uid), tuple(float(t) for t in times_s),
+                            tuple((float(x), float(y), float(z)) for x, y, z in points_m))
+        check_track(self, track)
+        self.reactions.tracks.append(track)
+
     # --- running ----------------------------------------------------------------------------
 
     def step(self) -> None:
-        """Advance one fixed tick through the schedule."""
+        """Advance one fixed tick through the schedule (triggers and moving targets around it)."""
         if self.tick == 0:
             kernels.before_first_tick()
+        self.reactions.before_tick(self)
         with self._active():
             esper.process(self.dt)
         self.tick += 1
+        self.reactions.after_tick(self)
 
     def system_seconds(self) -> dict[str, float]:
         """Wall seconds spent in each system so far."""
