@@ -346,6 +346,14 @@ class Simulation:
         row, st = self.row(entity), self.store
         return Posture(row, st.positions[row], st.local_rotations[row])
 
+    def body(self, entity: int) -> Morphology:
+        """A character's body: its Morphology component, as :meth:`spawn` or :meth:`set_body`
+        last gave it (while a blend runs, the body it blends into)."""
+        self.row(entity)
+        with self._active():
+            body: Morphology = esper.component_for_entity(entity, Morphology)
+        return body
+
     def set_body(self, entity: int, body: Morphology, blend_s: float = 0.0) -> None:
         """Replace a character's morphology while it plays (paper §6): its Morphology component.
 

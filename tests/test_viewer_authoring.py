@@ -22,7 +22,7 @@ from ecs_anim.scenario import build_simulation, load_scenario
 from ecs_anim.skeleton import JOINT_INDEX
 from ecs_anim.viewer.authoring import Timeline, drag_in_view_plane, pick_capsule
 from ecs_anim.viewer.camera import OrbitCamera
-from ecs_anim.viewer.edits import Edit, EditLog, body_of, entity_named, spawn_copy
+from ecs_anim.viewer.edits import Edit, EditLog, spawn_copy
 
 REPO = Path(__file__).resolve().parents[1]
 SCENARIOS = REPO / "scenarios"
@@ -97,7 +97,7 @@ def test_edits_replay_to_the_same_postures():
                 assert log.replay(sim) == []
                 sim.step()
             assert sim.names() == ["reacher", "reacher_2"]
-            uid = sim.constraint_index(entity_named(sim, "reacher"), "reach_point")
+            uid = sim.constraint_index(sim.entity("reacher"), "reach_point")
             assert np.allclose(sim.constraints.target_world[sim.constraints.rows_of(np.array([uid]))],
                                [0.55, -0.3, 1.35])
             runs.append(sim.store.positions.copy())
@@ -106,7 +106,7 @@ def test_edits_replay_to_the_same_postures():
     with build_simulation(scenario) as sim:
         sim.tick = 3
         problems = log.replay(sim)
-    assert len(problems) == 1 and "no character named 'nobody'" in problems[0]
+    assert len(problems) == 1 and "no character 'nobody' in this simulation" in problems[0]
     assert len(log) == 4
 
 
@@ -130,7 +130,7 @@ def test_a_copy_plays_in_step_beside_its_original():
             # plants where the clip has it then, up to 2.5 cm from the original's footprint
             # (planted earlier): once that contact is over, they are one motion
             assert gap_m < 0.025 if tick < 24 else gap_m < 1e-5
-        assert body_of(sim, entity_named(sim, "b")).stature == pytest.approx(1.7)
+        assert sim.body(sim.entity("b")).stature == pytest.approx(1.7)
 
 
 # --- the window ----------------------------------------------------------------------------
@@ -249,7 +249,7 @@ def test_dragging_a_target_sphere_moves_it_in_the_view_plane_and_the_solve_follo
 
     app = viewer()
     table = app.sim.constraints
-    uid = app.sim.constraint_index(entity_named(app.sim, "reacher"), "reach_point")
+    uid = app.sim.constraint_index(app.sim.entity("reacher"), "reach_point")
     k = int(table.rows_of(np.array([uid]))[0])
     start = table.target_world[k].copy()
     x, y = _window_px(app, start)
@@ -287,13 +287,13 @@ def test_plus_and_minus_change_the_picked_characters_stature_live(viewer):
     assert "pick a character first" in app.notice
     _click(app, *_window_px(app, _joints(app, "reacher")[PELVIS]))
     entity = app.picked_entity()
-    stature = body_of(app.sim, entity).stature
+    stature = app.sim.body(entity).stature
     for _ in range(3):
         _key(app, "EQUAL")
-    grown = body_of(app.sim, entity).stature
+    grown = app.sim.body(entity).stature
     assert grown == pytest.approx(stature * 1.05**3, rel=1e-12)
     _key(app, "MINUS")
-    assert body_of(app.sim, entity).stature == pytest.approx(stature * 1.05**2, rel=1e-12)
+    assert app.sim.body(entity).stature == pytest.approx(stature * 1.05**2, rel=1e-12)
     _key(app, "EQUAL")
     for other in (app, reference):
         for _ in range(30):  # one second: the new body is in the posture
@@ -375,7 +375,7 @@ def test_reload_on_change_keeps_the_camera_and_the_time_and_survives_errors(view
     app = viewer(path, at_s=2.0)
     _click(app, *_window_px(app, _joints(app, "reacher")[PELVIS]))
     _key(app, "EQUAL")  # an edit of the user's own, kept through the reload
-    grown = body_of(app.sim, app.picked_entity()).stature
+    grown = app.sim.body(app.picked_entity()).stature
     app.on_mouse_scroll(0, 0, 0, 2)  # and a camera
     camera, tick = app.camera, app.sim.tick
     app.check_files()
@@ -386,7 +386,7 @@ def test_reload_on_change_keeps_the_camera_and_the_time_and_survives_errors(view
     assert "reloaded" in app.notice
     assert app.sim.tick == tick and app.sim.posture_time_s == pytest.approx(2.0)
     assert app.camera == camera
-    assert app.picked == "reacher" and body_of(app.sim, app.picked_entity()).stature == grown
+    assert app.picked == "reacher" and app.sim.body(app.picked_entity()).stature == grown
     with build_simulation(load_scenario(path)) as fresh:  # as if it had run from the start
         while fresh.tick < tick:
             app.edits.replay(fresh)

@@ -19,7 +19,7 @@ import esper
 import numpy as np
 
 from ..components import MotionPlayer, Name, Placement, QueuedClip
-from ..errors import EcsAnimError, did_you_mean
+from ..errors import EcsAnimError
 from ..morphology import Morphology
 from ..simulation import Simulation
 
@@ -27,22 +27,9 @@ from ..simulation import Simulation
 COPY_SIDE_M = 1.0
 #: Statures the viewer's grow and shrink keys stay within (those Morphology.from_stature takes).
 MIN_STATURE_M, MAX_STATURE_M = 0.3, 3.0
-
-
-def entity_named(sim: Simulation, name: str) -> int:
-    """The entity of the character called ``name``."""
-    names = sim.names()
-    if name not in names:
-        raise EcsAnimError(f"no character named {name!r}{did_you_mean(name, names)}")
-    return int(sim.store.entity[names.index(name)])
-
-
-def body_of(sim: Simulation, entity: int) -> Morphology:
-    """A character's body (its Morphology component: what :meth:`Simulation.set_body` set)."""
-    sim.row(entity)
-    with sim._active():
-        body: Morphology = esper.component_for_entity(entity, Morphology)
-    return body
+#: A stature key's change blends in over this long (s), so that the feet stay planted and no
+#: joint jumps (Simulation.set_body's blend).
+STATURE_BLEND_S = 0.25
 
 
 def scaled_body(body: Morphology, factor: float) -> Morphology:
@@ -76,7 +63,7 @@ def spawn_copy(sim: Simulation, entity: int, name: str) -> int:
     left = np.array([-math.sin(heading), math.cos(heading)])
     xy = st.placement_xy[row] + COPY_SIDE_M * left
     ground = int(st.ground_index[row])
-    return sim.spawn(name, body_of(sim, entity), player,
+    return sim.spawn(name, sim.body(entity), player,
                      Placement((float(xy[0]), float(xy[1])), heading), team,
                      com_control=bool(st.com_control[row]),
                      ground=sim.grounds[ground] if ground else None)
@@ -109,9 +96,10 @@ class Edit:
 def apply_edit(sim: Simulation, edit: Edit) -> int | None:
     """Make ``edit``'s change in ``sim`` now; returns the new entity for a copy. Errors (a
     character or constraint that is not there, a stature out of range) are EcsAnimError."""
-    entity = entity_named(sim, edit.character)
+    entity = sim.entity(edit.character)
     if edit.kind == "scale":
-        sim.set_body(entity, scaled_body(body_of(sim, entity), float(edit.value)))
+        sim.set_body(entity, scaled_body(sim.body(entity), float(edit.value)),
+                     blend_s=STATURE_BLEND_S)
     elif edit.kind == "target":
         constraint, target_in_world = edit.value
         sim.set_target(sim.constraint_index(entity, constraint), target_in_world)

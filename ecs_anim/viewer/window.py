@@ -26,7 +26,7 @@ from ..simulation import Simulation
 from ..skeleton import JOINT_INDEX
 from .authoring import Timeline, drag_in_view_plane, pick_capsule
 from .camera import OrbitCamera, frame_points, spread_yaw
-from .edits import Edit, EditLog, apply_edit, body_of, copy_name, entity_named
+from .edits import Edit, EditLog, apply_edit, copy_name
 from .scene import (
     BODY_CAPSULES,
     NEAR_MARGIN_M,
@@ -535,7 +535,7 @@ class ViewerApp:
         assert self.sim is not None
         if self.picked is not None and self.picked not in self.sim.names():
             self._pick(None)
-        return None if self.picked is None else entity_named(self.sim, self.picked)
+        return None if self.picked is None else self.sim.entity(self.picked)
 
     def _pick(self, name: str | None) -> None:
         self.picked = self.source.picked = name
@@ -695,7 +695,7 @@ class ViewerApp:
         entity = self.picked_entity()
         if entity is not None:
             assert self.sim is not None
-            text += f"  |  picked {self.picked} ({body_of(self.sim, entity).stature:.2f} m)"
+            text += f"  |  picked {self.picked} ({self.sim.body(entity).stature:.2f} m)"
         return text
 
     def _draw_labels(self, frame: SceneFrame) -> None:
