@@ -35,11 +35,9 @@ from .files import MAX_NAME_LENGTH, NAME_PATTERN
 from .ground import Bumps, Combined, Ground, HeightGrid, Plane, Slope, Stairs
 from .morphology import LENGTH_KEYS, PRESET_SPECS, Morphology, with_lengths_m
 from .motion import NormalizedMotion, load_nmo
-from .simulation import MAX_COORDINATE_M, Simulation
+from .simulation import MAX_DURATION_S, Simulation
 from .store import MAX_QUEUE
 
-#: The longest scenario (and ``ecs-anim run --seconds``): a day.
-MAX_DURATION_S = 86400.0
 #: How far a desired centre of mass may lie from the character's position (over its feet).
 MAX_COM_OFFSET_M = 1.0
 #: How far a world target may lie from its character's start, and a table from the nearest
@@ -747,7 +745,7 @@ def load_scenario(path: str | Path) -> Scenario:
             clip(keys["motion"], f"{where}.motion"),
             speed=r.number(keys["speed"], f"{where}.speed", 0.0, 10.0) if "speed" in keys else 1.0,
             loop=r.boolean(keys["loop"], f"{where}.loop") if "loop" in keys else True,
-            start_s=r.number(keys["start_s"], f"{where}.start_s", 0.0, MAX_COORDINATE_M, "s") if "start_s" in keys else 0.0,
+            start_s=r.number(keys["start_s"], f"{where}.start_s", 0.0, MAX_DURATION_S, "s") if "start_s" in keys else 0.0,
             queue=queue)
         position = r.vector2(keys["position_m"], f"{where}.position_m", "m", 1e5) \
             if "position_m" in keys else (0.0, 0.0)

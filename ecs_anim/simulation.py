@@ -51,6 +51,9 @@ ALWAYS = Activation(0.0, 1e9)
 _counter = itertools.count()
 #: Placements, speeds and start times beyond this are refused (metres / seconds).
 MAX_COORDINATE_M = 1e5
+#: The longest time a simulation takes in (s; a day): durations, delays and blends beyond it
+#: are refused as typos.
+MAX_DURATION_S = 86400.0
 
 
 class Simulation:
@@ -364,7 +367,7 @@ class Simulation:
         from .body_change import start_blend
 
         row = self.row(entity)
-        if not (np.isfinite(blend_s) and 0.0 <= blend_s <= MAX_COORDINATE_M):
+        if not (np.isfinite(blend_s) and 0.0 <= blend_s <= MAX_DURATION_S):
             raise EcsAnimError(f"blend_s must be a finite number of seconds >= 0, got {blend_s}")
         with self._active():
             if blend_s > 0.0:
