@@ -14,16 +14,19 @@ from .playback import ClipBank, _wrap, rotate_xy, sample
 from .store import CharacterStore
 
 
-def start_next_clips(st: CharacterStore, bank: ClipBank, rows: NDArray[np.int64]) -> None:
+def start_next_clips(st: CharacterStore, bank: ClipBank, rows: NDArray[np.int64],
+                     start_s: NDArray[np.float64] | None = None) -> None:
     """Begin the next queued clip of the characters in ``rows`` (r,) (all at once),
-    cross-fading from the current one and continuing its root path, heading included.
+    cross-fading from the current one and continuing its root path, heading included, at
+    ``start_s`` (r,) seconds into it (None: at its start; a trigger's ``Play.from_s``).
     Footprints are released so the incoming motion's steps lay new ones.
 
     Reads store.queue_*; writes queue_head and, through :func:`start_clips`, the clip, fade and
     placement fields and locked.
     """
     head = st.queue_head[rows]
-    start_clips(st, bank, rows, st.queue_clip[rows, head], np.zeros(rows.size),
+    start_clips(st, bank, rows, st.queue_clip[rows, head],
+                np.zeros(rows.size) if start_s is None else start_s,
                 st.queue_fade_s[rows, head], st.queue_loop[rows, head])
     st.queue_head[rows] += 1
 

@@ -1,6 +1,6 @@
 """A game loop: a character follows a moving ground point (a simulated mouse), every tick.
 
-Run from the repository root (headless, a few seconds):
+Run it from any folder (headless, a few seconds):
 
     .venv/bin/python examples/steer_to_point.py
 
@@ -13,6 +13,7 @@ pelvis followed the point, the feet's sliding and the time per tick.
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -23,6 +24,9 @@ from ecs_anim.metrics import MetricsRecorder
 from ecs_anim.morphology import Morphology
 from ecs_anim.simulation import Simulation
 from ecs_anim.steering import GAITS
+
+#: The project's own motions, found beside this file so that the example runs from any folder.
+MOTIONS = Path(__file__).resolve().parents[1] / "scenarios" / "motions"
 
 SECONDS = 24.0
 
@@ -37,7 +41,7 @@ def mouse_point(t: float) -> tuple[float, float]:
 
 
 def main() -> None:
-    motions = {name: import_bvh(f"scenarios/motions/{name}.bvh")
+    motions = {name: import_bvh(MOTIONS / f"{name}.bvh")
                for name in ("idle", "walk", "run")}
     sim = Simulation(motions, Bumps(amplitude_m=0.03, wavelength_x_m=2.5, wavelength_y_m=3.0))
     hero = sim.spawn("hero", Morphology.preset("adult_female"), MotionPlayer("idle"))

@@ -46,7 +46,8 @@ EXPECTED_WRITERS = {
     "locked": ["MotionPlayback", "MorphologyAdapt", "GroundAdapt"],
     **{name: ["MorphologyAdapt"] for name in (
         "lengths", "segment_mass_kg", "segment_com_fraction", "scaled")},
-    **{name: ["GroundAdapt"] for name in ("footprint", "footprint_settled", "ground_ref")},
+    **{name: ["GroundAdapt"] for name in ("footprint_settled", "ground_ref")},
+    "footprint": ["MorphologyAdapt", "GroundAdapt"],
     **{name: ["ConstraintSolve"] for name in (
         "goals", "solved_positions", "com_desired", "constraints.error", "constraints.weight",
         "constraints.enabled", "constraints.held")},
