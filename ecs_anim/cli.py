@@ -453,7 +453,8 @@ def cmd_view_threads(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from .scenario import MAX_DURATION_S, build_simulation, load_scenario
+    from .scenario import build_simulation, load_scenario
+    from .simulation import MAX_DURATION_S
 
     use_threads(args)
 
