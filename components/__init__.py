@@ -1,6 +1,7 @@
 """Data-only ECS components (installed as ``ecs_anim.components``)."""
 
 from .character import (
+    BodyBlend,
     CharacterRow,
     Constraint,
     Morphology,
@@ -14,6 +15,7 @@ from .character import (
 from .environment import GroundQuery
 
 __all__ = [
+    "BodyBlend",
     "CharacterRow",
     "Constraint",
     "GroundQuery",

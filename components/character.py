@@ -24,6 +24,7 @@ from ecs_anim.morphology import Morphology
 from ecs_anim.normalized import NormalizedPoses
 
 __all__ = [
+    "BodyBlend",
     "CharacterRow",
     "Constraint",
     "Morphology",
@@ -118,3 +119,17 @@ class Name:
 
     name: str
     team: str = field(default="")
+
+
+@dataclass(frozen=True)
+class BodyBlend:
+    """A body change in progress (``Simulation.set_body(..., blend_s=...)``): the character's
+    segment lengths (metres, N_LENGTHS), segment masses (kg) and centre-of-mass fractions (per
+    de Leva segment) when it began, at simulation time ``start_s``; over ``blend_s`` seconds they
+    blend into those of its Morphology component (MorphologyAdapt, every tick)."""
+
+    from_lengths: tuple[float, ...]
+    from_mass_kg: tuple[float, ...]
+    from_com_fraction: tuple[float, ...]
+    start_s: float
+    blend_s: float

@@ -513,10 +513,10 @@ def plan_from_args(args: argparse.Namespace) -> Plan:
 
 
 def _check_seconds(seconds: float, clips: Sequence[Path], template: Template | None) -> None:
-    """``--seconds`` as ``run`` bounds it: at most :data:`~ecs_anim.scenario.MAX_DURATION_S`,
+    """``--seconds`` as ``run`` bounds it: at most :data:`~ecs_anim.simulation.MAX_DURATION_S`,
     and at least one tick at the template's rate, or at every clip's (read from the file's
     header where that is cheap; a clip's rate is checked again when it plays)."""
-    from .scenario import MAX_DURATION_S
+    from .simulation import MAX_DURATION_S
 
     if seconds > MAX_DURATION_S:
         raise EcsAnimError(f"--seconds {seconds:g}: at most {MAX_DURATION_S:g} s (a day) in one job")

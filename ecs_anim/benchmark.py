@@ -77,11 +77,15 @@ def walkers_on_bumps(n: int, rotations: bool = False,
 class BenchScene:
     """:func:`walkers_on_bumps`, and with ``constrained`` a wrist target (high priority) and an
     elbow target (low) on each character's right arm, both moving every tick (foot contacts
-    come from the walk itself)."""
+    come from the walk itself); ``budget_ms`` the solver's frame budget (None: none)."""
 
-    def __init__(self, n: int, rotations: bool = False, constrained: bool = False) -> None:
+    def __init__(self, n: int, rotations: bool = False, constrained: bool = False,
+                 budget_ms: float | None = None) -> None:
+        from .solver_shell import SolverSettings
+
         self.sim, _ = walkers_on_bumps(n, rotations)
         sim = self.sim
+        sim.solver_settings = SolverSettings(budget_ms=budget_ms)
         self.moving = np.zeros(0, np.int64)
         self.owners = np.zeros(0, np.int64)
         self.offsets = np.zeros((0, 3))
@@ -113,29 +117,65 @@ class BenchScene:
 
 
 def time_size(n: int, seconds: float, rotations: bool = False,
-              constrained: bool = False) -> dict[str, Any]:
+              constrained: bool = False, budget_ms: float | None = None) -> dict[str, Any]:
     """One size, in this process: after :data:`WARM_UP_TICKS` ticks, ``seconds`` simulated at
     30 Hz. Returns ms per tick per system (wall), of the whole step (wall and CPU: every
-    thread of the process), and the process's peak memory (MB)."""
-    scene = BenchScene(n, rotations, constrained)
+    thread of the process), and the process's peak memory (MB); with ``budget_ms``, ``budget``:
+    how much further from its target the budget left the top priority than a twin scene solved
+    without a budget, stepped alongside (untimed; the largest difference of a constraint over
+    the timed ticks, mm: the error the cut cost), the characters cut per tick and the ticks that
+    cut anything."""
+    scene = BenchScene(n, rotations, constrained, budget_ms)
+    twin = None if budget_ms is None else BenchScene(n, rotations, constrained)
     sim = scene.sim
     for _ in range(WARM_UP_TICKS):
         scene.tick()
+        if twin is not None:
+            twin.tick()
     before = sim.system_seconds()
     ticks = max(1, round(seconds * 30.0))
     wall = cpu = 0.0
+    cost_m = 0.0
+    cut_characters = ticks_cut = 0
+    top = sim.constraints.priority == sim.constraints.priority.max(initial=0.0)
     for _ in range(ticks):
         scene.move_targets()
         w0, c0 = time.perf_counter(), time.process_time()
         sim.step()
         wall += time.perf_counter() - w0
         cpu += time.process_time() - c0
+        report = sim.solver_report()
+        if twin is not None and report is not None:
+            twin.tick()
+            extra = sim.constraints.error[top] - twin.sim.constraints.error[top]
+            cost_m = max(cost_m, float(np.nanmax(extra, initial=0.0)))
+            cut_characters += len(report.cut_characters)
+            ticks_cut += report.cut
     after = sim.system_seconds()
     sim.close()
-    return {"characters": n, "ticks": ticks,
-            "ms_per_tick": {k: (after[k] - before[k]) / ticks * 1e3 for k in after},
-            "wall_ms_per_tick": wall / ticks * 1e3, "cpu_ms_per_tick": cpu / ticks * 1e3,
-            "peak_memory_mb": peak_memory_mb()}
+    if twin is not None:
+        twin.sim.close()
+    result: dict[str, Any] = {
+        "characters": n, "ticks": ticks,
+        "ms_per_tick": {k: (after[k] - before[k]) / ticks * 1e3 for k in after},
+        "wall_ms_per_tick": wall / ticks * 1e3, "cpu_ms_per_tick": cpu / ticks * 1e3,
+        "peak_memory_mb": peak_memory_mb()}
+    if budget_ms is not None:
+        result["budget"] = {"top_priority_cost_mm": cost_m * 1e3,
+                            "characters_cut_per_tick": cut_characters / ticks,
+                            "ticks_cut": ticks_cut}
+    return result
+
+
+def budget_capacity(budget_ms: float, runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """How many constrained characters a frame budget holds: the largest size whose ticks took
+    at most ``budget_ms`` on average (wall) with the top priority within 1 mm of where the
+    solve without a budget leaves it (0: none did); and the figures of each size."""
+    held = [r["characters"] for r in runs
+            if r["wall_ms_per_tick"] <= budget_ms and r["budget"]["top_priority_cost_mm"] <= 1.0]
+    return {"budget_ms": budget_ms, "characters_held": max(held, default=0),
+            "sizes": [{"characters": r["characters"], "wall_ms_per_tick": round(r["wall_ms_per_tick"], 3),
+                       **{k: round(v, 4) for k, v in r["budget"].items()}} for r in runs]}
 
 
 def peak_memory_mb() -> float:
@@ -275,8 +315,13 @@ def bench_pipeline(args: argparse.Namespace) -> dict[str, Any]:
     compiled = None if args.no_compile_timing else compile_timing(threads)
     if kernels.uncompiled_kernels():  # so that no size's peak memory holds the compiler's
         warm_up(threads)
+    budget_ms = getattr(args, "budget_ms", None)
+    if budget_ms is not None and not args.constrained:
+        raise EcsAnimError("bench: --budget-ms is the solver's frame budget: give --constrained too")
     flags = [f for f, on in (("--rotations", args.rotations),
                              ("--constrained", args.constrained)) if on]
+    if budget_ms is not None:
+        flags += ["--budget-ms", repr(budget_ms)]
     runs = [json.loads(_run_child(["size", str(size), "--seconds", repr(args.seconds),
                                    "--threads", str(threads), *flags]))
             for size in sizes]
@@ -312,6 +357,7 @@ def bench_pipeline(args: argparse.Namespace) -> dict[str, Any]:
         "peak_memory_mb_fixed": round(memory_fixed, 1),
         "compile": compiled,
         "kernel_cache": str(kernels.cache_dir()),
+        "budget": None if budget_ms is None else budget_capacity(budget_ms, runs),
     }
 
 
@@ -349,6 +395,17 @@ def cmd_bench_pipeline(args: argparse.Namespace) -> int:
     print(f"  peak memory {result['peak_memory_mb']:.0f} MB at {n}: "
           f"{result['peak_memory_kb_per_character']:.1f} kB per character + "
           f"{result['peak_memory_mb_fixed']:.0f} MB")
+    budget = result["budget"]
+    if budget is not None:
+        print(f"  frame budget {budget['budget_ms']:g} ms (the solver cuts iterations to hold it):")
+        print(f"  {'characters':>10s} {'wall ms/tick':>13s} {'top priority cost mm':>21s} "
+              f"{'characters cut/tick':>20s}")
+        for s in budget["sizes"]:
+            print(f"  {s['characters']:10d} {s['wall_ms_per_tick']:13.2f} "
+                  f"{s['top_priority_cost_mm']:21.3f} {s['characters_cut_per_tick']:20.1f}")
+        print(f"  => a {budget['budget_ms']:g} ms budget holds {budget['characters_held']} constrained "
+              "characters with the top priority within 1 mm of the unbudgeted solve (the largest "
+              "size timed that did)")
     compiled = result["compile"]
     if compiled is not None:
         print(f"  start to first tick: {compiled['first_compile_s']:.1f} s compiling the "
@@ -473,9 +530,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 
 def child_main(argv: list[str] | None = None) -> int:
-    """``size N [--seconds S] [--threads T] [--rotations] [--constrained]``: time one size and
-    print JSON; ``first-tick [--threads T]``: print :data:`FIRST_TICK_DONE` and the phases'
-    seconds as soon as the first tick is done."""
+    """``size N [--seconds S] [--threads T] [--rotations] [--constrained] [--budget-ms MS]``:
+    time one size and print JSON; ``first-tick [--threads T]``: print :data:`FIRST_TICK_DONE`
+    and the phases' seconds as soon as the first tick is done."""
     from . import kernels
 
     parser = argparse.ArgumentParser(prog="python -m ecs_anim.benchmark")
@@ -485,6 +542,7 @@ def child_main(argv: list[str] | None = None) -> int:
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--rotations", action="store_true")
     parser.add_argument("--constrained", action="store_true")
+    parser.add_argument("--budget-ms", type=float)
     args = parser.parse_args(argv)
     if args.what == "first-tick":
         phases = first_tick(args.threads)
@@ -492,7 +550,7 @@ def child_main(argv: list[str] | None = None) -> int:
         return 0
     kernels.set_threads(args.threads)
     print(json.dumps(time_size(args.characters, args.seconds, args.rotations,
-                               args.constrained)))
+                               args.constrained, args.budget_ms)))
     return 0
 
 

@@ -453,7 +453,8 @@ def cmd_view_threads(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from .scenario import MAX_DURATION_S, build_simulation, load_scenario
+    from .scenario import build_simulation, load_scenario
+    from .simulation import MAX_DURATION_S
 
     use_threads(args)
 
@@ -667,6 +668,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "moving every tick")
     p.add_argument("--rotations", action="store_true",
                    help="pipeline: also compute local joint rotations every tick (as BVH export does)")
+    p.add_argument("--budget-ms", type=positive_float, metavar="MS",
+                   help="pipeline, with --constrained: the solver's frame budget (ms a tick); "
+                        "prints how many characters it holds with the top priority within 1 mm")
     p.add_argument("--sizes", type=size_list, metavar="N,N,...",
                    help="pipeline: the numbers of characters timed (default: N/8, N/4, N/2, N)")
     p.add_argument("--no-compile-timing", action="store_true",

@@ -1,7 +1,7 @@
 """The project's own small motion library, authored procedurally (no captured data).
 
-``python -m ecs_anim.library [--check]`` writes (or checks) ``scenarios/motions/*.bvh``: the walk
-and idle generated here and the keyframed gestures of :mod:`ecs_anim.library_gestures` (guard,
+``python -m ecs_anim.library [--check]`` writes (or checks) ``scenarios/motions/*.bvh``: the walk,
+run and idle generated here and the keyframed gestures of :mod:`ecs_anim.library_gestures` (guard,
 kick, ward_off_punch, dodge, talk, reach, dance); the shipped files are exactly what these
 generators produce, and a test keeps it so.
 
@@ -138,6 +138,36 @@ def _lower_pelvis_to_reach(pelvis: F64, pelvis2world: F64, ankles: F64, morph: M
     return out
 
 
+def _gait_feet(morph: Morphology, phase: F64, stride: float, stance: float,
+               lift_per_leg: float, swing_pitch: float) -> tuple[F64, F64]:
+    """Ankles and toes (F, 2, 3) of a gait along +x at gait ``phase`` (F,) (cycles; the left
+    foot lands at each whole cycle, the right half a cycle later): each footprint
+    stays put for the ``stance`` fraction of the cycle, then the foot swings ``stride`` metres
+    forward on a smooth arc ``lift_per_leg`` leg lengths high, toes pitched by ``swing_pitch``."""
+    n = phase.shape[0]
+    ah = 0.5 * (morph["ankle_height_l"] + morph["ankle_height_r"])
+    foot = 0.5 * (morph["foot_l"] + morph["foot_r"])
+    ball_height = 0.025 * morph.leg_length / 0.86
+    flat_pitch = np.arcsin(np.clip((ah - ball_height) / foot, -1, 1))
+    ankles = np.zeros((n, 2, 3))
+    toes = np.zeros((n, 2, 3))
+    for k, offset in enumerate((0.0, 0.5)):
+        cycle = np.floor(phase - offset)
+        psi = phase - offset - cycle
+        land_x = (cycle + offset + stance / 2) * stride  # mid-stance under the pelvis
+        swing_u = np.clip((psi - stance) / (1 - stance), 0.0, 1.0)
+        in_swing = psi >= stance
+        x = land_x + np.where(in_swing, _smoothstep(swing_u) * stride, 0.0)
+        lift = lift_per_leg * morph.leg_length * np.sin(np.pi * swing_u) ** 1.5
+        ankles[:, k, 0] = x
+        ankles[:, k, 1] = (0.11 if k == 0 else -0.11) * morph.leg_length
+        ankles[:, k, 2] = ah + np.where(in_swing, lift, 0.0)
+        pitch = flat_pitch + np.where(in_swing, swing_pitch * np.sin(np.pi * swing_u) *
+                                      np.cos(np.pi * swing_u), 0.0)
+        toes[:, k] = ankles[:, k] + np.stack([np.cos(pitch), np.zeros(n), -np.sin(pitch)], -1) * foot
+    return ankles, toes
+
+
 def generate_walk(morph: Morphology, cycles: int = 4, period_s: float = 1.1,
                   stride_m: float | None = None) -> F64:
     """A straight walk along +x: ``cycles`` gait cycles (two steps each), loopable.
@@ -150,26 +180,7 @@ def generate_walk(morph: Morphology, cycles: int = 4, period_s: float = 1.1,
     phase = t / period_s
     speed = stride / period_s
     ah = 0.5 * (morph["ankle_height_l"] + morph["ankle_height_r"])
-    foot = 0.5 * (morph["foot_l"] + morph["foot_r"])
-    ball_height = 0.025 * morph.leg_length / 0.86
-    flat_pitch = np.arcsin(np.clip((ah - ball_height) / foot, -1, 1))
-    stance = 0.6
-    ankles = np.zeros((n, 2, 3))
-    toes = np.zeros((n, 2, 3))
-    for k, offset in enumerate((0.0, 0.5)):
-        cycle = np.floor(phase - offset)
-        psi = phase - offset - cycle
-        land_x = (cycle + offset + 0.3) * stride
-        swing_u = np.clip((psi - stance) / (1 - stance), 0.0, 1.0)
-        in_swing = psi >= stance
-        x = land_x + np.where(in_swing, _smoothstep(swing_u) * stride, 0.0)
-        lift = 0.11 * morph.leg_length * np.sin(np.pi * swing_u) ** 1.5
-        ankles[:, k, 0] = x
-        ankles[:, k, 1] = (0.11 if k == 0 else -0.11) * morph.leg_length
-        ankles[:, k, 2] = ah + np.where(in_swing, lift, 0.0)
-        pitch = flat_pitch + np.where(in_swing, 0.35 * np.sin(np.pi * swing_u) *
-                                      np.cos(np.pi * swing_u), 0.0)
-        toes[:, k] = ankles[:, k] + np.stack([np.cos(pitch), np.zeros(n), -np.sin(pitch)], -1) * foot
+    ankles, toes = _gait_feet(morph, phase, stride, 0.6, 0.11, 0.35)
     pelvis = np.zeros((n, 3))
     pelvis[:, 0] = speed * t
     pelvis[:, 1] = 0.025 * morph.leg_length * np.cos(2 * np.pi * (phase - 0.3))
@@ -185,6 +196,38 @@ def generate_walk(morph: Morphology, cycles: int = 4, period_s: float = 1.1,
     return _body(morph, pelvis, pelvis2world, ankles, toes,
                  lean_rad=np.full(n, 0.06), thorax_yaw=-1.5 * yaw, arm_swing=swing,
                  elbow_bend=elbow, head_pitch=np.full(n, -0.05))
+
+
+def generate_run(morph: Morphology, cycles: int = 4, period_s: float = 0.7) -> F64:
+    """A straight run along +x: ``cycles`` gait cycles, loopable; each foot is down for 32 % of
+    a cycle, so both are in the air twice a cycle (flight). Stride 2.2 leg lengths a cycle
+    (adult_male: 2.66 m/s), the pelvis lowest in mid-stance and highest in flight, the trunk
+    leaning forward, elbows bent about 80 degrees, arms swinging wider than the walk's.
+
+    Returns joint positions (frames, N_JOINTS, 3), metres, Z up.
+    """
+    stride = 2.2 * morph.leg_length
+    n = round(cycles * period_s * FPS)
+    t = np.arange(n) / FPS
+    phase = t / period_s
+    ah = 0.5 * (morph["ankle_height_l"] + morph["ankle_height_r"])
+    ankles, toes = _gait_feet(morph, phase, stride, 0.32, 0.22, 0.6)
+    pelvis = np.zeros((n, 3))
+    pelvis[:, 0] = stride / period_s * t
+    pelvis[:, 1] = 0.015 * morph.leg_length * np.cos(2 * np.pi * (phase - 0.16))
+    standing = ah + 0.5 * (morph["thigh_l"] + morph["shank_l"] + morph["thigh_r"] + morph["shank_r"])
+    # Mid-stance of the left foot is at phase 0.16, of the right at 0.66: lowest there.
+    pelvis[:, 2] = standing * 0.95 - 0.03 * morph.leg_length * np.cos(4 * np.pi * (phase - 0.16))
+    yaw = 0.09 * np.sin(2 * np.pi * phase)
+    roll = 0.03 * np.sin(2 * np.pi * (phase - 0.16) + np.pi / 2)
+    pelvis2world = rot_axis(2, yaw) @ rot_axis(0, roll)
+    pelvis = _lower_pelvis_to_reach(pelvis, pelvis2world, ankles, morph)
+    swing = np.stack([-0.6 * np.cos(2 * np.pi * (phase - 0.11)),
+                      0.6 * np.cos(2 * np.pi * (phase - 0.11))], axis=-1)
+    elbow = 1.35 + 0.15 * np.maximum(swing, 0.0)
+    return _body(morph, pelvis, pelvis2world, ankles, toes,
+                 lean_rad=np.full(n, 0.16), thorax_yaw=-1.5 * yaw, arm_swing=swing,
+                 elbow_bend=elbow, head_pitch=np.full(n, -0.12))
 
 
 def generate_idle(morph: Morphology, seconds: float = 8.0) -> F64:
@@ -218,7 +261,8 @@ def generate_idle(morph: Morphology, seconds: float = 8.0) -> F64:
                  arm_swing=swing, elbow_bend=elbow, head_pitch=0.05 * np.sin(w * t + 1.0))
 
 
-GENERATORS: dict[str, Callable[[Morphology], F64]] = {"walk": generate_walk, "idle": generate_idle}
+GENERATORS: dict[str, Callable[[Morphology], F64]] = {"walk": generate_walk, "run": generate_run,
+                                                      "idle": generate_idle}
 
 
 def all_generators() -> dict[str, Callable[[Morphology], F64]]:

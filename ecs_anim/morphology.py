@@ -196,16 +196,19 @@ class Morphology:
         return cls.from_stature(name=name, **spec)
 
     def to_dict(self) -> dict[str, Any]:
+        """``{name, sex, mass_kg, lengths_m: {segment: metres}}`` (JSON-ready; :meth:`from_dict`)."""
         return {"name": self.name, "sex": self.sex, "mass_kg": self.mass_kg,
                 "lengths_m": {n: float(v) for n, v in zip(LENGTHS, self.lengths, strict=False)}}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Morphology:
+        """The body :meth:`to_dict` gave (every segment of :data:`LENGTHS` in ``lengths_m``)."""
         lengths = data["lengths_m"]
         return cls(np.array([float(lengths[n]) for n in LENGTHS]), float(data["mass_kg"]),
                    str(data["sex"]), str(data.get("name", "custom")))
 
     def with_lengths(self, lengths: F64, name: str | None = None) -> Morphology:
+        """This body with all its segment lengths replaced: ``lengths`` (N_LENGTHS,) metres."""
         return Morphology(np.asarray(lengths, dtype=np.float64), self.mass_kg, self.sex,
                           name or self.name)
 

@@ -66,10 +66,12 @@ class NormalizedMotion:
 
     @property
     def n_frames(self) -> int:
+        """Frames in the clip."""
         return int(self.poses.root_heading.shape[0])
 
     @property
     def duration_s(self) -> float:
+        """Seconds from the first frame to the last: (n_frames - 1) / fps."""
         return (self.n_frames - 1) / self.fps
 
     def contacts(self) -> np.ndarray:

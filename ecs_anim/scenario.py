@@ -8,7 +8,8 @@ tick. The schema is documented in ``docs/scenarios.md``.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -16,6 +17,7 @@ import numpy as np
 import yaml
 from yaml import Node
 
+from .body_points import BodyPoint
 from .components import MotionPlayer, Placement, QueuedClip
 from .constraints import Activation, ConstraintSpec
 from .errors import (
@@ -28,15 +30,14 @@ from .errors import (
     listed,
     quoted,
 )
+from .events import Action, Condition, Trigger, constraints_named, switched_off
 from .files import MAX_NAME_LENGTH, NAME_PATTERN
 from .ground import Bumps, Combined, Ground, HeightGrid, Plane, Slope, Stairs
 from .morphology import LENGTH_KEYS, PRESET_SPECS, Morphology, with_lengths_m
 from .motion import NormalizedMotion, load_nmo
-from .simulation import MAX_COORDINATE_M, Simulation
-from .store import MAX_QUEUE
+from .simulation import MAX_COORDINATE_M, MAX_DURATION_S, Simulation
+from .store import MAX_QUEUE, MAX_WAYPOINTS
 
-#: The longest scenario (and ``ecs-anim run --seconds``): a day.
-MAX_DURATION_S = 86400.0
 #: How far a desired centre of mass may lie from the character's position (over its feet).
 MAX_COM_OFFSET_M = 1.0
 #: How far a world target may lie from its character's start, and a table from the nearest
@@ -67,6 +68,10 @@ class ConstraintEntry:
     target_character: str | None = None
     target_point: str | None = None
     options: dict[str, Any] = field(default_factory=dict)
+    #: ``activation.motion``: the activation runs in this clip's own time while it plays.
+    clock_motion: str | None = None
+    #: A moving world target: keyframe times (s) and points (m), interpolated linearly.
+    target_keyframes: tuple[tuple[float, ...], tuple[tuple[float, float, float], ...]] | None = None
 
     def aims_at_itself(self) -> bool:
         """Whether the target is the constrained point itself (on its own body)."""
@@ -99,6 +104,18 @@ class ConstraintEntry:
                               tuple(o.get("offset_m", (0.0, 0.0, 0.0))), params)
 
 
+@dataclass(frozen=True)
+class SteeringSpec:
+    """A character's locomotion set and steering from the scenario (docs/steering.md):
+    ``locomotion`` gait -> motion name (``walk`` always, ``idle`` and ``run`` if given),
+    ``path_m`` waypoints (x, y) metres walked in order (empty: none), ``speed_m_s`` the speed
+    asked for (None: the walk's own)."""
+
+    locomotion: dict[str, str]
+    path_m: tuple[tuple[float, float], ...] = ()
+    speed_m_s: float | None = None
+
+
 @dataclass
 class CharacterSpec:
     name: str
@@ -109,6 +126,7 @@ class CharacterSpec:
     constraints: list[ConstraintEntry] = field(default_factory=list)
     com_control: bool = True
     com_target_xy: tuple[float, float] | None = None
+    steering: SteeringSpec | None = None
 
 
 @dataclass(frozen=True)
@@ -125,6 +143,10 @@ class Table:
 
 @dataclass
 class Scenario:
+    """A scenario file as :func:`load_scenario` read it (docs/scenarios.md): ``duration_s`` and
+    ``fps`` (Hz), ``motions`` by name, the ``ground``, the ``characters`` to spawn
+    (:func:`build_simulation`), viewer hints and props."""
+
     path: str
     duration_s: float
     fps: float
@@ -135,6 +157,10 @@ class Scenario:
     tables: list[Table] = field(default_factory=list)  # props, drawn only
     #: The scenario file and every motion file it read: no output may overwrite one.
     input_files: tuple[str, ...] = ()
+    #: Reactions (ecs_anim.events), naming characters and constraints by scenario index.
+    triggers: list[Trigger] = field(default_factory=list)
+    #: The constraints triggers name: (character index, constraint name) by placeholder id.
+    trigger_constraints: list[tuple[int, str]] = field(default_factory=list)
 
 
 class _Reader:
@@ -454,14 +480,75 @@ def _fill_absent(r: _Reader, motions: dict[str, NormalizedMotion], name: str, no
     motions[name] = fill_absent_from(motions[name], motions[other], other)
 
 
-CHARACTER_KEYS = {"name": True, "morphology": True, "motion": True, "position_m": False,
+CHARACTER_KEYS = {"name": True, "morphology": True, "motion": False, "position_m": False,
                   "heading_deg": False, "speed": False, "loop": False, "start_s": False,
                   "then": False, "team": False, "constraints": False, "com_control": False,
-                  "com_target_m": False}
+                  "com_target_m": False, "locomotion": False, "path_m": False,
+                  "speed_m_s": False}
+STEERING_KEYS = ("locomotion", "path_m", "speed_m_s")
+
+
+def _travels(motion: NormalizedMotion) -> bool:
+    """Whether a motion's root goes somewhere over the clip (a walk, not an idle)."""
+    root = motion.poses.root_position[:, :2]
+    return bool(np.linalg.norm(root[-1] - root[0]) > 1e-3 * max(motion.n_frames, 1))
+
+
+def _steering(r: _Reader, keys: dict[str, Node], where: str, motions: dict[str, NormalizedMotion],
+              start_m: tuple[float, float]) -> SteeringSpec | None:
+    """A character's ``locomotion``, ``path_m`` and ``speed_m_s`` (None: none of them)."""
+    if not any(k in keys for k in STEERING_KEYS):
+        return None
+    if "locomotion" not in keys:
+        given = next(k for k in STEERING_KEYS if k in keys)
+        raise r.fail(keys[given], f"{where}.{given}", "a steered character needs a locomotion "
+                     "set: locomotion: {idle: MOTION, walk: MOTION} (run: optional)")
+    lwhere = f"{where}.locomotion"
+    lk = r.mapping(keys["locomotion"], lwhere, {"idle": False, "walk": True, "run": False})
+    locomotion: dict[str, str] = {}
+    for gait, node in lk.items():
+        name = r.string(node, f"{lwhere}.{gait}")
+        if name not in motions:
+            raise r.fail(node, f"{lwhere}.{gait}", f"unknown motion {name!r}"
+                         f"{did_you_mean(name, list(motions))} (motions: {', '.join(motions)})")
+        if gait != "idle" and not _travels(motions[name]):
+            raise r.fail(node, f"{lwhere}.{gait}", f"motion {name!r} does not travel (its root "
+                         f"ends where it starts): a {gait} must go somewhere")
+        locomotion[gait] = name
+    path: list[tuple[float, float]] = []
+    if "path_m" in keys:
+        pwhere = f"{where}.path_m"
+        points = r.sequence(keys["path_m"], pwhere, MAX_WAYPOINTS - 1, "waypoints")
+        if not points:
+            raise r.fail(keys["path_m"], pwhere, "a path needs at least 1 waypoint [x, y] (m)")
+        for j, point in enumerate(points):
+            xy = r.vector2(point, f"{pwhere}[{j}]", "m", MAX_COORDINATE_M)
+            r.too_far(point, f"{pwhere}[{j}]", math.dist(xy, start_m), "the waypoint",
+                      "the character's position_m")
+            path.append(xy)
+        if "idle" not in locomotion:
+            raise r.fail(keys["locomotion"], lwhere, "a character given path_m stops on its "
+                         "idle motion at the end: add idle: MOTION")
+    speed = (r.number(keys["speed_m_s"], f"{where}.speed_m_s", 0.0, 20.0, "m/s")
+             if "speed_m_s" in keys else None)
+    return SteeringSpec(locomotion, tuple(path), speed)
+
+
+def apply_steering(sim: Simulation, entity: int, spec: SteeringSpec, heading_rad: float) -> None:
+    """Give a spawned character its scenario steering: its locomotion set, then its path, or
+    its speed along ``heading_rad`` (without ``speed_m_s`` nor a path it stands on its idle
+    motion, or walks on at its own speed if it has none)."""
+    loco = spec.locomotion
+    sim.set_locomotion(entity, loco["walk"], loco.get("idle"), loco.get("run"))
+    if spec.path_m:
+        sim.follow_path(entity, spec.path_m, spec.speed_m_s)
+    elif spec.speed_m_s is not None or "idle" not in loco:
+        sim.steer(entity, heading_rad, spec.speed_m_s)
 
 
 def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
-                origin_m: tuple[float, ...] | None = None) -> tuple[ConstraintEntry, Node | None]:
+                origin_m: tuple[float, ...] | None = None,
+                motion_names: tuple[str, ...] = ()) -> tuple[ConstraintEntry, Node | None]:
     """One constraint entry; returns it and the node naming a target character (checked once
     every character is known). Everything else is checked here, against a scratch table, so a
     mistake is reported with its line. A target ``point:`` without ``character:`` is on the
@@ -497,15 +584,21 @@ def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
     priority = r.number(keys["priority"], f"{where}.priority", -1e6, 1e6) if "priority" in keys else 0.0
     if "activation" in keys:
         ak = r.mapping(keys["activation"], f"{where}.activation",
-                       {"start_s": False, "stop_s": False, "ease_in_s": False, "ease_out_s": False})
-        values = {k: r.number(v, f"{where}.activation.{k}", 0.0, 1e6, "s") for k, v in ak.items()}
+                       {"start_s": False, "stop_s": False, "ease_in_s": False, "ease_out_s": False,
+                        "motion": False, "by_trigger": False})
+        clock_motion, by_trigger = _activation_clock(r, ak, f"{where}.activation", in_motion,
+                                                     motion_names)
+        values = {k: r.number(v, f"{where}.activation.{k}", 0.0, 1e6, "s") for k, v in ak.items()
+                  if k not in ("motion", "by_trigger")}
         try:
             activation = Activation(values.get("start_s", 0.0), values.get("stop_s", 1e6),
                                     values.get("ease_in_s", 0.0), values.get("ease_out_s", 0.0))
+            if by_trigger:
+                activation = switched_off(activation.ease_in_s, activation.ease_out_s)
         except ValueError as exc:
             raise r.fail(keys["activation"], f"{where}.activation", str(exc)) from None
     else:
-        activation = Activation(0.0, 1e6)
+        activation, clock_motion = Activation(0.0, 1e6), None
     options: dict[str, Any] = {"kind": kind, "fraction": fraction, "offset_m": offset}
     if "chain" in keys:
         chain = []
@@ -561,7 +654,17 @@ def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
             raise r.fail(tk[given[0]], f"{where}.target.{given[0]}",
                          "an orientation aims along direction: [x, y, z] or looks at a character's "
                          "point" if kind == "orientation" else "direction: is for orientation constraints")
-        target_world = r.vector3(tk[given[0]], f"{where}.target.{given[0]}", "m", 1e5)
+        keyframes = None
+        if given[0] == "world_m" and isinstance(tk["world_m"], yaml.SequenceNode) and \
+                tk["world_m"].value and isinstance(tk["world_m"].value[0], yaml.MappingNode):
+            keyframes = _keyframes(r, tk["world_m"], f"{where}.target.world_m")
+            target_world = keyframes[1][0]
+        else:
+            target_world = r.vector3(tk[given[0]], f"{where}.target.{given[0]}", "m", 1e5)
+        for far in (keyframes[1] if keyframes else ()):
+            if origin_m is not None:
+                r.too_far(tk["world_m"], f"{where}.target.world_m", math.dist(far, origin_m),
+                          "a keyframe", "the character's start (position_m, on the ground)")
         if given[0] == "world_m" and origin_m is not None:
             r.too_far(tk["world_m"], f"{where}.target.world_m",
                       math.dist(target_world, origin_m), "the target",
@@ -586,8 +689,11 @@ def _constraint(r: _Reader, node: Node, where: str, in_motion: bool = False,
                               activation, **checks)
     except ValueError as exc:
         raise r.fail(node, where, str(exc)) from None
-    return ConstraintEntry(name, point, priority, activation, target_world, other, target_point,
-                           options), who
+    entry = ConstraintEntry(name, point, priority, activation, target_world, other, target_point,
+                            options, clock_motion)
+    if given[0] == "world_m":
+        entry.target_keyframes = keyframes
+    return entry, who
 
 
 def _com_target(r: _Reader, keys: dict[str, Node], where: str,
@@ -655,7 +761,7 @@ def load_scenario(path: str | Path) -> Scenario:
     root = _compose(path, "scenario", "the scenario")
     top = r.mapping(root, "", {"duration_s": True, "fps": False, "motions": True,
                                "ground": False, "characters": True, "description": False,
-                               "camera": False, "tables": False})
+                               "camera": False, "tables": False, "triggers": False})
     fps = r.number(top["fps"], "fps", 1.0, 1000.0, "Hz") if "fps" in top else 30.0
     duration = r.number(top["duration_s"], "duration_s", 1.0 / fps, MAX_DURATION_S, "s")
     motion_nodes = top["motions"]
@@ -707,26 +813,23 @@ def load_scenario(path: str | Path) -> Scenario:
                 raise r.fail(n, w, f"unknown motion {c!r}{hint} (motions: {', '.join(motions)})")
             return c
 
-        queue = []
-        if "then" in keys:
-            queued = r.sequence(keys["then"], f"{where}.then")
-            if len(queued) > MAX_QUEUE:
-                raise r.fail(keys["then"], f"{where}.then", f"at most {MAX_QUEUE} clips can be queued")
-            for j, q in enumerate(queued):
-                qw = f"{where}.then[{j}]"
-                qk = r.mapping(q, qw, {"motion": True, "crossfade_s": False, "loop": False})
-                queue.append(QueuedClip(
-                    clip(qk["motion"], f"{qw}.motion"),
-                    r.number(qk["crossfade_s"], f"{qw}.crossfade_s", 0.0, 10.0, "s") if "crossfade_s" in qk else 0.3,
-                    r.boolean(qk["loop"], f"{qw}.loop") if "loop" in qk else False))
-        player = MotionPlayer(
-            clip(keys["motion"], f"{where}.motion"),
-            speed=r.number(keys["speed"], f"{where}.speed", 0.0, 10.0) if "speed" in keys else 1.0,
-            loop=r.boolean(keys["loop"], f"{where}.loop") if "loop" in keys else True,
-            start_s=r.number(keys["start_s"], f"{where}.start_s", 0.0, MAX_COORDINATE_M, "s") if "start_s" in keys else 0.0,
-            queue=tuple(queue))
+        queue = _queued_clips(r, keys["then"], f"{where}.then", clip, MAX_QUEUE) if "then" in keys else ()
         position = r.vector2(keys["position_m"], f"{where}.position_m", "m", 1e5) \
             if "position_m" in keys else (0.0, 0.0)
+        steering = _steering(r, keys, where, motions, position)
+        if "motion" in keys:
+            first_clip = clip(keys["motion"], f"{where}.motion")
+        elif steering is not None:  # a locomotion set starts standing (or walking, without idle)
+            first_clip = steering.locomotion.get("idle", steering.locomotion["walk"])
+        else:
+            raise r.fail(node, where, "missing required key 'motion' (or a locomotion set: "
+                         "locomotion)")
+        player = MotionPlayer(
+            first_clip,
+            speed=r.number(keys["speed"], f"{where}.speed", 0.0, 10.0) if "speed" in keys else 1.0,
+            loop=r.boolean(keys["loop"], f"{where}.loop") if "loop" in keys else True,
+            start_s=r.number(keys["start_s"], f"{where}.start_s", 0.0, MAX_DURATION_S, "s") if "start_s" in keys else 0.0,
+            queue=queue)
         heading = r.number(keys["heading_deg"], f"{where}.heading_deg", -360, 360, "degrees") \
             if "heading_deg" in keys else 0.0
         constraints: list[ConstraintEntry] = []
@@ -738,7 +841,8 @@ def load_scenario(path: str | Path) -> Scenario:
                          "alias counted each time it is used)")
         for j, cn in enumerate(own):
             on_ground = (*position, float(ground.height(np.array(position, dtype=float))))
-            entry, who = _constraint(r, cn, f"{where}.constraints[{j}]", origin_m=on_ground)
+            entry, who = _constraint(r, cn, f"{where}.constraints[{j}]", origin_m=on_ground,
+                                     motion_names=tuple(motions))
             if any(c.name == entry.name for c in constraints):
                 raise r.fail(cn, f"{where}.constraints[{j}].name",
                              f"{entry.name!r} is used twice on {name!r}")
@@ -755,7 +859,7 @@ def load_scenario(path: str | Path) -> Scenario:
             Placement((position[0], position[1]), math.radians(heading)),
             r.string(keys["team"], f"{where}.team", empty=True) if "team" in keys else "", constraints,
             r.boolean(keys["com_control"], f"{where}.com_control") if "com_control" in keys else True,
-            _com_target(r, keys, where, position)))
+            _com_target(r, keys, where, position), steering))
     if not characters:
         raise r.fail(top["characters"], "characters", "expected at least one character")
     for other, node, cwhere in pending_targets:
@@ -777,8 +881,27 @@ def load_scenario(path: str | Path) -> Scenario:
     starts = np.array([c.placement.position_m for c in characters])
     tables = [_table(r, node, f"tables[{i}]", starts) for i, node in
               enumerate(r.sequence(top["tables"], "tables", MAX_TABLES, "tables") if "tables" in top else [])]
+    refs: list[tuple[int, str]] = []
+    triggers = _scenario_triggers(r, top, characters, motions, refs)
     return Scenario(str(path), duration, fps, motions, ground, characters, camera, tables,
-                    (str(path),) + tuple(str(p) for p in read))
+                    (str(path),) + tuple(str(p) for p in read), triggers, refs)
+
+
+def _queued_clips(r: _Reader, node: Node, where: str, clip: Callable[[Node, str], str],
+                  most: int) -> tuple[QueuedClip, ...]:
+    """A ``then:`` list of clips to play next (at most ``most``); ``clip`` reads a motion name."""
+    queued = r.sequence(node, where)
+    if len(queued) > most:
+        raise r.fail(node, where, f"at most {most} clips can be queued")
+    queue = []
+    for j, q in enumerate(queued):
+        qw = f"{where}[{j}]"
+        qk = r.mapping(q, qw, {"motion": True, "crossfade_s": False, "loop": False})
+        queue.append(QueuedClip(
+            clip(qk["motion"], f"{qw}.motion"),
+            r.number(qk["crossfade_s"], f"{qw}.crossfade_s", 0.0, 10.0, "s") if "crossfade_s" in qk else 0.3,
+            r.boolean(qk["loop"], f"{qw}.loop") if "loop" in qk else False))
+    return tuple(queue)
 
 
 def _table(r: _Reader, node: Node, where: str, starts: np.ndarray) -> Table:
@@ -829,10 +952,319 @@ def build_simulation(scenario: Scenario, window: bool = False,
     entities = {c.name: sim.spawn(c.name, c.morphology, c.player, c.placement, c.team,
                                   c.com_control, c.com_target_xy)
                 for c in scenario.characters}
-    for c in scenario.characters:
+    added: dict[tuple[int, str], int] = {}
+    for i, c in enumerate(scenario.characters):
         for k in c.constraints:
-            sim.add_constraint(entities[c.name], k.name, k.point, k.priority, k.activation,
-                               k.target_in_world,
-                               None if k.target_character is None else entities[k.target_character],
-                               k.target_point, **k.options)
+            clock = -1 if k.clock_motion is None else sim.bank.index(k.clock_motion)
+            uid = sim.add_constraint(entities[c.name], k.name, k.point, k.priority, k.activation,
+                                     k.target_in_world,
+                                     None if k.target_character is None else entities[k.target_character],
+                                     k.target_point, **k.options, clock=clock)
+            added[i, k.name] = uid
+            if k.target_keyframes is not None:
+                sim.add_target_track(uid, *k.target_keyframes)
+    for c in scenario.characters:
+        if c.steering is not None:
+            apply_steering(sim, entities[c.name], c.steering, c.placement.heading_rad)
+    order = [entities[c.name] for c in scenario.characters]
+    uids = {placeholder: added[ref] for placeholder, ref in enumerate(scenario.trigger_constraints)
+            if ref in added}
+    for trigger in scenario.triggers:
+        missing = [scenario.trigger_constraints[u] for x in (trigger.when, *trigger.then)
+                   for u in constraints_named(x) if u not in uids]
+        if missing:
+            who, name = missing[0]
+            raise EcsAnimError(f"trigger {trigger.name!r} names constraint "
+                               f"{scenario.characters[who].name}.{name}, which is not in the scenario")
+        sim.add_trigger(_bind_trigger(trigger, order, uids))
     return sim
+
+
+# --- triggers, keyframed targets (ecs_anim.events) ----------------------------------------------
+# Triggers are read after every character: they name characters, their points, clips and
+# constraints ("character.constraint"). At load a trigger holds scenario indices in place of
+# entity ids and constraint ids (the character's index in ``characters``; a constraint's index
+# in ``Scenario.trigger_constraints``, which holds (character index, constraint name));
+# build_simulation maps them to the simulation's (:func:`_bind_trigger`).
+
+#: At most this many triggers in a scenario.
+MAX_TRIGGERS = 100_000
+
+WHEN_KEYS = {"clip_started": ("character.motion or character",),
+             "clip_ended": ("character.motion or character",),
+             "near": ("character.point", "to", "within_m", "fraction", "to_fraction"),
+             "reached": ("character.constraint", "within_m"),
+             "contact_began": ("character", "foot"),
+             "at_s": ("seconds",),
+             "removed": ("character",)}
+ACTION_KEYS = {"play": ("crossfade_s", "loop", "from_s", "then"),
+               "switch_on": ("for_s",),
+               "switch_off": (),
+               "move_target": ("world_m",),
+               "set_body": ("morphology", "blend_s"),
+               "remove": (),
+               "arm": ()}
+
+
+def _split_ref(r: _Reader, node: Node, where: str, characters: list[CharacterSpec],
+               what: str, optional: bool = False) -> tuple[int, str | None]:
+    """``character.thing`` (``character`` alone with ``optional``) -> (character index, thing or
+    None). The thing follows the last dot (character names may hold dots)."""
+    text = r.string(node, where)
+    names = [c.name for c in characters]
+    who, thing = (text, None) if text in names or "." not in text else text.rsplit(".", 1)
+    if who not in names:
+        hint = did_you_mean(who, names)
+        raise r.fail(node, where, f"no character named {who!r}{hint} (expected "
+                                  f"{'character' if what == '' else 'character.' + what})")
+    if thing is None and not optional:
+        raise r.fail(node, where, f"expected character.{what}, found {text!r}")
+    return names.index(who), thing
+
+
+def _constraint_ref(r: _Reader, node: Node, where: str, characters: list[CharacterSpec],
+                    refs: list[tuple[int, str]]) -> int:
+    """``character.constraint`` -> its placeholder id at load: its index in ``refs`` (character
+    index, constraint name), added there if new."""
+    who, name = _split_ref(r, node, where, characters, "constraint")
+    own = [k.name for k in characters[who].constraints]
+    if name not in own:
+        hint = did_you_mean(str(name), own)
+        raise r.fail(node, where, f"{characters[who].name!r} has no constraint {name!r}{hint} "
+                     f"(it has: {listed(own) or 'none'})")
+    if (who, str(name)) not in refs:
+        refs.append((who, str(name)))
+    return refs.index((who, str(name)))
+
+
+def _clip_ref(r: _Reader, node: Node, where: str, characters: list[CharacterSpec],
+              motions: dict[str, NormalizedMotion], optional: bool) -> tuple[int, str | None]:
+    who, clip = _split_ref(r, node, where, characters, "motion", optional)
+    if clip is not None and clip not in motions:
+        hint = did_you_mean(clip, list(motions))
+        raise r.fail(node, where, f"unknown motion {clip!r}{hint} (motions: {', '.join(motions)})")
+    return who, clip
+
+
+def _point_ref(r: _Reader, node: Node, where: str, characters: list[CharacterSpec],
+               fraction: float | None) -> tuple[int, BodyPoint]:
+    from .body_points import body_point
+
+    who, point = _split_ref(r, node, where, characters, "point")
+    try:
+        return who, body_point(str(point), fraction, as_target=True)
+    except ValueError as exc:
+        raise r.fail(node, where, str(exc)) from None
+
+
+def _when(r: _Reader, node: Node, where: str, characters: list[CharacterSpec],
+          motions: dict[str, NormalizedMotion], refs: list[tuple[int, str]]) -> Condition:
+    from .events import AtTime, ClipEnded, ClipStarted, ContactBegan, Near, Reached, Removed
+
+    if not isinstance(node, yaml.MappingNode) or not node.value:
+        raise r.fail(node, where, f"expected a mapping with one of {', '.join(WHEN_KEYS)}")
+    kind = str(node.value[0][0].value)
+    if kind not in WHEN_KEYS:
+        hint = did_you_mean(kind, list(WHEN_KEYS))
+        raise r.fail(node.value[0][0], f"{where}.{kind}", f"unknown condition{hint} (expected one "
+                     f"of {', '.join(WHEN_KEYS)})")
+    allowed = {kind: True} | {k: False for k in WHEN_KEYS[kind][1:]}
+    if kind == "near":
+        allowed |= {"to": True, "within_m": True}
+    keys = r.mapping(node, where, allowed)
+    w = f"{where}.{kind}"
+    if kind in ("clip_started", "clip_ended"):
+        who, clip = _clip_ref(r, keys[kind], w, characters, motions, optional=True)
+        return (ClipStarted if kind == "clip_started" else ClipEnded)(who, clip)
+    if kind == "near":
+        frac = {k: r.number(keys[k], f"{where}.{k}", 0.0, 1.0) for k in ("fraction", "to_fraction")
+                if k in keys}
+        who, point = _point_ref(r, keys["near"], w, characters, frac.get("fraction"))
+        other, other_point = _point_ref(r, keys["to"], f"{where}.to", characters,
+                                        frac.get("to_fraction"))
+        return Near(who, point, other, other_point,
+                    r.number(keys["within_m"], f"{where}.within_m", 0.0, MAX_TARGET_DISTANCE_M, "m"))
+    if kind == "reached":
+        return Reached(_constraint_ref(r, keys["reached"], w, characters, refs),
+                       r.number(keys["within_m"], f"{where}.within_m", 0.0, 10.0, "m")
+                       if "within_m" in keys else 0.001)
+    if kind == "contact_began":
+        who, _ = _split_ref(r, keys[kind], w, characters, "", optional=True)
+        foot = r.string(keys["foot"], f"{where}.foot") if "foot" in keys else None
+        if foot not in (None, "left", "right"):
+            raise r.fail(keys["foot"], f"{where}.foot", f"expected left or right, found {foot!r}")
+        return ContactBegan(who, foot)
+    if kind == "at_s":
+        return AtTime(r.number(keys[kind], w, 0.0, MAX_DURATION_S, "s"))
+    who, _ = _split_ref(r, keys[kind], w, characters, "", optional=True)
+    return Removed(who)
+
+
+def _action(r: _Reader, node: Node, where: str, characters: list[CharacterSpec],
+            motions: dict[str, NormalizedMotion], queued: Any, refs: list[tuple[int, str]],
+            trigger_names: list[str]) -> Action:
+    from .events import Arm, MoveTarget, Play, Remove, SetBody, SwitchOff, SwitchOn
+
+    if not isinstance(node, yaml.MappingNode) or not node.value:
+        raise r.fail(node, where, f"expected a mapping with one of {', '.join(ACTION_KEYS)}")
+    kind = str(node.value[0][0].value)
+    if kind not in ACTION_KEYS:
+        hint = did_you_mean(kind, list(ACTION_KEYS))
+        raise r.fail(node.value[0][0], f"{where}.{kind}", f"unknown action{hint} (expected one of "
+                     f"{', '.join(ACTION_KEYS)})")
+    allowed = {kind: True} | {k: False for k in ACTION_KEYS[kind]}
+    if kind == "move_target":
+        allowed["world_m"] = True
+    if kind == "set_body":
+        allowed["morphology"] = True
+    keys = r.mapping(node, where, allowed)
+    w = f"{where}.{kind}"
+    if kind == "play":
+        who, clip = _clip_ref(r, keys[kind], w, characters, motions, optional=False)
+        return Play(who, str(clip),
+                    r.number(keys["crossfade_s"], f"{where}.crossfade_s", 0.0, 10.0, "s")
+                    if "crossfade_s" in keys else 0.3,
+                    r.boolean(keys["loop"], f"{where}.loop") if "loop" in keys else False,
+                    r.number(keys["from_s"], f"{where}.from_s", 0.0, MAX_DURATION_S, "s")
+                    if "from_s" in keys else 0.0,
+                    queued(keys["then"], f"{where}.then") if "then" in keys else ())
+    if kind in ("switch_on", "switch_off", "move_target"):
+        uid = _constraint_ref(r, keys[kind], w, characters, refs)
+        if kind == "switch_off":
+            return SwitchOff(uid)
+        if kind == "switch_on":
+            return SwitchOn(uid, r.number(keys["for_s"], f"{where}.for_s", 1e-3, MAX_DURATION_S, "s")
+                            if "for_s" in keys else None)
+        return MoveTarget(uid, r.vector3(keys["world_m"], f"{where}.world_m", "m", 1e5))
+    if kind == "arm":
+        other = r.string(keys[kind], w)
+        if other not in trigger_names:
+            hint = did_you_mean(other, trigger_names)
+            raise r.fail(keys[kind], w, f"no trigger named {other!r}{hint}")
+        return Arm(other)
+    who, _ = _split_ref(r, keys[kind], w, characters, "", optional=True)
+    if kind == "remove":
+        return Remove(who)
+    return SetBody(who, _morphology(r, keys["morphology"], f"{where}.morphology"),
+                   r.number(keys["blend_s"], f"{where}.blend_s", 0.0, 600.0, "s")
+                   if "blend_s" in keys else 0.0)
+
+
+def _triggers(r: _Reader, node: Node, characters: list[CharacterSpec],
+              motions: dict[str, NormalizedMotion], queued: Any,
+              refs: list[tuple[int, str]]) -> list[Trigger]:
+    """The scenario's ``triggers:`` (docs/scenarios.md, Triggers); a cycle of triggers that
+    would fire each other forever in one tick is refused here, at the first one's line."""
+    from .events import Trigger, find_cycle
+
+    triggers: list[Trigger] = []
+    nodes = r.sequence(node, "triggers", MAX_TRIGGERS, "triggers")
+    names: list[str] = []  # every trigger's, first (an arm: action may name a later one)
+    for i, tn in enumerate(nodes):
+        keys = r.mapping(tn, f"triggers[{i}]", {"name": False, "when": True, "then": True,
+                                                 "delay_s": False, "repeat": False, "armed": False})
+        name = r.string(keys["name"], f"triggers[{i}].name") if "name" in keys else f"triggers[{i}]"
+        if name in names:
+            raise r.fail(keys.get("name", tn), f"triggers[{i}].name",
+                         f"another trigger is named {name!r}")
+        names.append(name)
+    for i, tn in enumerate(nodes):
+        where = f"triggers[{i}]"
+        keys = r.mapping(tn, where, {"name": False, "when": True, "then": True, "delay_s": False,
+                                     "repeat": False, "armed": False})
+        name = names[i]
+        actions = r.sequence(keys["then"], f"{where}.then")
+        if not actions:
+            raise r.fail(keys["then"], f"{where}.then", "expected at least one action")
+        triggers.append(Trigger(
+            name, _when(r, keys["when"], f"{where}.when", characters, motions, refs),
+            tuple(_action(r, a, f"{where}.then[{j}]", characters, motions, queued, refs, names)
+                  for j, a in enumerate(actions)),
+            r.number(keys["delay_s"], f"{where}.delay_s", 0.0, MAX_DURATION_S, "s")
+            if "delay_s" in keys else 0.0,
+            r.boolean(keys["repeat"], f"{where}.repeat") if "repeat" in keys else False,
+            r.boolean(keys["armed"], f"{where}.armed") if "armed" in keys else True))
+    cycle = find_cycle(triggers)
+    if cycle:
+        path = " -> ".join(repr(triggers[i].name) for i in cycle + cycle[:1])
+        raise r.fail(nodes[cycle[0]], f"triggers[{cycle[0]}]", f"triggers {path} would fire each "
+                     "other forever in one tick (each repeats without delay): give one of them "
+                     "delay_s, or drop its repeat")
+    return triggers
+
+
+def _keyframes(r: _Reader, node: Node, where: str) -> tuple[tuple[float, ...], tuple[tuple[float, float, float], ...]]:
+    """A moving ``world_m`` target: a list of ``{t_s, at_m}``, times increasing."""
+    frames = r.sequence(node, where)
+    if not frames:
+        raise r.fail(node, where, "expected at least one keyframe {t_s: S, at_m: [x, y, z]}")
+    times: list[float] = []
+    points: list[tuple[float, float, float]] = []
+    for j, fn in enumerate(frames):
+        fk = r.mapping(fn, f"{where}[{j}]", {"t_s": True, "at_m": True})
+        t = r.number(fk["t_s"], f"{where}[{j}].t_s", 0.0, MAX_DURATION_S, "s")
+        if times and t <= times[-1]:
+            raise r.fail(fk["t_s"], f"{where}[{j}].t_s", f"keyframe times must increase: {t:g} s "
+                         f"after {times[-1]:g} s")
+        times.append(t)
+        points.append(r.vector3(fk["at_m"], f"{where}[{j}].at_m", "m", 1e5))
+    return tuple(times), tuple(points)
+
+
+def _activation_clock(r: _Reader, keys: dict[str, Node], where: str, in_motion: bool,
+                      motion_names: tuple[str, ...]) -> tuple[str | None, bool]:
+    """An activation's ``motion:`` (its times in that clip's own time, while the character plays
+    it) and ``by_trigger:`` (off until a trigger's switch_on); at most one of them."""
+    if "motion" in keys and "by_trigger" in keys:
+        raise r.fail(keys["by_trigger"], f"{where}.by_trigger", "give motion: or by_trigger:, not both")
+    if in_motion and ("motion" in keys or "by_trigger" in keys):
+        key = "motion" if "motion" in keys else "by_trigger"
+        raise r.fail(keys[key], f"{where}.{key}", "a motion's own constraint runs in its clip's time "
+                     "already")
+    clock = None
+    if "motion" in keys:
+        clock = r.string(keys["motion"], f"{where}.motion")
+        if clock not in motion_names:
+            hint = did_you_mean(clock, list(motion_names))
+            raise r.fail(keys["motion"], f"{where}.motion", f"unknown motion {clock!r}{hint} "
+                         f"(motions: {', '.join(motion_names)})")
+    by_trigger = r.boolean(keys["by_trigger"], f"{where}.by_trigger") if "by_trigger" in keys else False
+    if by_trigger and ("start_s" in keys or "stop_s" in keys):
+        key = "start_s" if "start_s" in keys else "stop_s"
+        raise r.fail(keys[key], f"{where}.{key}", "a constraint switched on by a trigger takes only "
+                     "ease_in_s and ease_out_s (the trigger's switch_on gives for_s)")
+    return clock, by_trigger
+
+
+def _scenario_triggers(r: _Reader, top: dict[str, Node], characters: list[CharacterSpec],
+                       motions: dict[str, NormalizedMotion],
+                       refs: list[tuple[int, str]]) -> list[Trigger]:
+    """The ``triggers:`` of a scenario (none if absent); ``refs`` gets the constraints they name."""
+    if "triggers" not in top:
+        return []
+
+    def clip(n: Node, w: str) -> str:
+        c = r.string(n, w)
+        if c not in motions:
+            hint = did_you_mean(c, list(motions))
+            raise r.fail(n, w, f"unknown motion {c!r}{hint} (motions: {', '.join(motions)})")
+        return c
+
+    def queued(n: Node, w: str) -> tuple[QueuedClip, ...]:
+        return _queued_clips(r, n, w, clip, MAX_QUEUE - 1)
+
+    return _triggers(r, top["triggers"], characters, motions, queued, refs)
+
+
+def _bind_trigger(trigger: Trigger, entities: list[int], uids: dict[int, int]) -> Trigger:
+    """A trigger read at load with the simulation's entity ids and constraint ids."""
+    def bind(item: Any) -> Any:
+        changes: dict[str, int] = {}
+        for key in ("entity", "other"):
+            if hasattr(item, key):
+                changes[key] = entities[getattr(item, key)]
+        if hasattr(item, "uid"):
+            changes["uid"] = uids[item.uid]
+        return replace(item, **changes)
+
+    return replace(trigger, when=bind(trigger.when), then=tuple(bind(a) for a in trigger.then))

@@ -11,7 +11,8 @@ import itertools
 import sys
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
-from typing import Any, Self, TypeVar
+from dataclasses import replace
+from typing import Any, Self, TypeVar, cast
 
 import esper
 import numpy as np
@@ -21,6 +22,7 @@ from . import kernels
 from .body_change import mass_tables
 from .body_points import body_point
 from .components import (
+    BodyBlend,
     CharacterRow,
     Constraint,
     GroundQuery,
@@ -32,12 +34,16 @@ from .components import (
 )
 from .constraint_table import Area, ConstraintTable, Target, add_stored
 from .constraints import Activation
-from .errors import EcsAnimError, listed, quoted
+from .errors import EcsAnimError, did_you_mean, listed, quoted
+from .events import Event, Reactions, TargetTrack, Trigger
 from .ground import Ground, Plane
 from .morphology import Morphology, leg_length
 from .motion import NormalizedMotion, motion_problem
 from .playback import ClipBank
+from .solver_budget import SolverReport
 from .solver_shell import DEFAULT_SETTINGS, SolverSettings
+from .steering import DEFAULT_STEERING
+from .steering_api import SteeringCalls
 from .store import MAX_QUEUE, CharacterStore
 from .system_base import System
 
@@ -49,9 +55,12 @@ ALWAYS = Activation(0.0, 1e9)
 _counter = itertools.count()
 #: Placements, speeds and start times beyond this are refused (metres / seconds).
 MAX_COORDINATE_M = 1e5
+#: The longest time a simulation takes in (s; a day): durations, delays and blends beyond it
+#: are refused as typos.
+MAX_DURATION_S = 86400.0
 
 
-class Simulation:
+class Simulation(SteeringCalls):
     """Characters playing normalized motions on a ground, stepped at a fixed rate.
 
     Parameters
@@ -64,6 +73,8 @@ class Simulation:
         (``store.vertebrae``, (n, vertebrae, 3)) for output skeletons with more spine joints.
     rotations : PostureConvert also gives local joint rotations (``store.local_rotations``),
         which BVH export and skinned rendering need; positions alone cost about half as much.
+    solver_settings : the constraint solver's iterations and tolerances
+        (:class:`ecs_anim.solver_shell.SolverSettings`).
     """
 
     def __init__(self, motions: dict[str, NormalizedMotion], ground: Ground | None = None,
@@ -97,9 +108,12 @@ class Simulation:
         self.grounds: list[Ground] = [ground or Plane()]
         self.constraints = ConstraintTable()
         self.solver_settings = solver_settings
+        self.steering_settings = DEFAULT_STEERING  # ecs_anim.steering.SteeringSettings
         self.renderer: object | None = None
         self.tables: tuple[Any, ...] = ()  # props for a renderer (scenario ``tables``); never simulated
         self.messages: list[str] = []
+        #: Triggers, moving targets and the last tick's events (:mod:`ecs_anim.events`).
+        self.reactions = Reactions()
         schedule = SCHEDULE if window else HEADLESS
         self.systems: list[System] = []
         with self._active():
@@ -231,7 +245,7 @@ class Simulation:
                 queue_loop=queue_loop, queue_len=queue_len, ground_ref=ground_ref,
                 segment_mass_kg=masses, segment_com_fraction=fractions,
                 com_control=np.array(com_control, bool), com_target_xy=target,
-                com_error_m=np.nan, ground_index=ground_index)
+                com_error_m=np.nan, ground_index=ground_index, gait_clip=-1)
             for i in range(k):
                 entity = int(entities[i])
                 esper.add_component(entity, Name(names[i], teams[i]))
@@ -307,6 +321,8 @@ class Simulation:
             self.structure_version += 1
 
     def row(self, entity: int) -> int:
+        """The character's row in :attr:`store` (``store.positions[row]``); rows move down when a
+        character before it is removed, entities do not."""
         with self._active():
             try:
                 handle: CharacterRow = esper.component_for_entity(entity, CharacterRow)
@@ -338,13 +354,31 @@ class Simulation:
         row, st = self.row(entity), self.store
         return Posture(row, st.positions[row], st.local_rotations[row])
 
-    def set_body(self, entity: int, body: Morphology) -> None:
+    def body(self, entity: int) -> Morphology:
+        """A character's body: its Morphology component, as :meth:`spawn` or :meth:`set_body`
+        last gave it (while a blend runs, the body it blends into)."""
+        self.row(entity)
+        with self._active():
+            body: Morphology = esper.component_for_entity(entity, Morphology)
+        return body
+
+    def set_body(self, entity: int, body: Morphology, blend_s: float = 0.0) -> None:
         """Replace a character's morphology while it plays (paper §6): its Morphology component.
 
         It takes effect on the next tick (MorphologyAdapt, :mod:`ecs_anim.body_change`): the
-        character grows or shrinks where it stands, and its feet re-plant."""
-        self.row(entity)
+        character grows or shrinks where it stands. ``blend_s`` 0: at once, its feet re-plant;
+        > 0: its segment lengths and masses blend into the new body's over ``blend_s`` seconds
+        (a smoothstep), planted feet staying on their footprints (a BodyBlend component)."""
+        from .body_change import start_blend
+
+        row = self.row(entity)
+        if not (np.isfinite(blend_s) and 0.0 <= blend_s <= MAX_DURATION_S):
+            raise EcsAnimError(f"blend_s must be a finite number of seconds >= 0, got {blend_s}")
         with self._active():
+            if blend_s > 0.0:
+                esper.add_component(entity, start_blend(self, row, self.time_s, blend_s))
+            elif esper.has_component(entity, BodyBlend):
+                esper.remove_component(entity, BodyBlend)
             esper.add_component(entity, body)
         self.structure_version += 1
 
@@ -382,20 +416,43 @@ class Simulation:
                        f"constraints {listed(removed)}")
             self.messages.append(message)
             print(message, file=sys.stderr)
+        self.reactions.character_removed(self, entity, name)
+
+    # --- looking characters and constraints up by name ----------------------------------------
+
+    def entity(self, name: str) -> int:
+        """The entity of the character named ``name`` (as the scenario or :meth:`spawn` named
+        it). Raises :class:`EcsAnimError` listing the characters (with the closest name) when
+        none is, or when several are (spawn does not require unique names: keep the entities
+        it returned then)."""
+        names = self.names()
+        rows = [row for row, known in enumerate(names) if known == name]
+        if not rows:
+            raise EcsAnimError(f"no character {quoted(name)} in this simulation (characters: "
+                               f"{listed(names) or 'none'}){did_you_mean(name, names)}")
+        if len(rows) > 1:
+            raise EcsAnimError(f"{len(rows)} characters are named {quoted(name)}: use the entities "
+                               "spawn returned")
+        return int(self.store.entity[rows[0]])
 
     def constraint_index(self, entity: int, name: str) -> int:
-        """The id of the constraint ``name`` of a character (its name as the scenario gives it, or
-        as :meth:`add_constraint` got it), for :meth:`set_target`; the first if two share it."""
+        """The id of a character's constraint ``name``, for :meth:`set_target`: its name as the
+        scenario gives it or :meth:`add_constraint` got it, and ``"<character>/<clip>/<name>"``
+        for one stored with a clip it plays. Names are unique per character (add_constraint
+        refuses a second one), so ``(entity, name)`` is one constraint; an unknown name raises
+        :class:`EcsAnimError` listing the character's constraints, with the closest name."""
         row = self.row(entity)
         table = self.constraints
         mine = np.flatnonzero(table.owner == row)
-        found = [k for k in mine if table.names[k] == name]
-        if not found:
+        names = [table.names[k] for k in mine]
+        if name not in names:
             raise EcsAnimError(f"no constraint {quoted(name)} on this character (it has: "
-                               f"{listed(table.names[k] for k in mine) or 'none'})")
-        return int(table.uid[found[0]])
+                               f"{listed(names) or 'none'}){did_you_mean(name, names)}")
+        return int(table.uid[mine[names.index(name)]])
 
     def names(self) -> list[str]:
+        """Every character's name, in store row order (``names()[i]`` is row ``i`` of
+        :attr:`store`, e.g. ``store.positions[i]``)."""
         with self._active():
             by_row = {r.row: n.name for _, (r, n) in esper.get_components(CharacterRow, Name)}
         return [by_row[i] for i in range(self.store.n)]
@@ -464,6 +521,8 @@ class Simulation:
             raise EcsAnimError(str(exc)) from None
 
     def report_disabled(self, indices: NDArray[np.int64]) -> None:
+        """Warn once (stderr and :attr:`messages`) for each constraint switched off this tick
+        for a non-finite target: ``indices`` (k,) rows of :attr:`constraints`."""
         for i in indices:
             message = (f"warning: t={self.time_s:.3f} s: constraint "
                        f"{self.constraints.names[int(i)]!r} has a non-finite target and is "
@@ -480,15 +539,67 @@ class Simulation:
             self.messages.append(message)
             print(message, file=sys.stderr)
 
+    # --- events and triggers (ecs_anim.events) -----------------------------------------------
+
+    def events(self) -> list[Event]:
+        """What happened in the last :meth:`step` (edges: clips started and ended, foot contacts
+        begun, characters removed, triggers' conditions met), in order; also those between it and
+        the step before (a character removed from code)."""
+        return self.reactions.events
+
+    def add_trigger(self, trigger: Trigger) -> int:
+        """Add a trigger (:class:`ecs_anim.events.Trigger`): ``when`` its condition begins to
+        hold, its actions run (``delay_s`` later). Everything it names is checked here; returns
+        its index."""
+        from .events import check_trigger
+
+        check_trigger(self, trigger)
+        return self.reactions.add(trigger)
+
+    def add_target_track(self, uid: int, times_s: Sequence[float],
+                         points_m: Sequence[tuple[float, float, float]]) -> None:
+        """Move the constraint ``uid``'s world target along keyframes: at ``times_s`` (k,)
+        (increasing, simulation seconds) it is at ``points_m`` (k, 3), linearly interpolated
+        between them, held before the first and after the last; set before every tick."""
+        from .events import check_track
+
+        track = TargetTrack(int(uid), tuple(float(t) for t in times_s),
+                            tuple((float(x), float(y), float(z)) for x, y, z in points_m))
+        check_track(self, track)
+        self.reactions.tracks.append(track)
+
     # --- running ----------------------------------------------------------------------------
 
     def step(self) -> None:
-        """Advance one fixed tick through the schedule."""
+        """Advance one fixed tick through the schedule (triggers and moving targets around it)."""
         if self.tick == 0:
             kernels.before_first_tick()
+        self.reactions.before_tick(self)
         with self._active():
             esper.process(self.dt)
         self.tick += 1
+        self.reactions.after_tick(self)
+
+    def solver_report(self) -> SolverReport | None:
+        """What the constraint solver did in the last tick and what the frame budget
+        (``SolverSettings.budget_ms``) cut: :class:`ecs_anim.solver_budget.SolverReport`; None
+        before the first tick or when no constraint was solved."""
+        from .systems import ConstraintSolve
+
+        for system in self.systems:
+            if isinstance(system, ConstraintSolve):
+                return system.report
+        return None
+
+    def set_solver_focus(self, focus_in_world: Sequence[float] | NDArray[np.float64] | None) -> None:
+        """Where the frame budget keeps its iterations longest ((3,) m, world; the viewer gives
+        its camera's eye): the characters furthest from it are cut first. None: no focus."""
+        focus = None if focus_in_world is None else cast(
+            tuple[float, float, float], tuple(float(v) for v in focus_in_world))
+        try:
+            self.solver_settings = replace(self.solver_settings, focus_in_world=focus)
+        except ValueError as exc:
+            raise EcsAnimError(f"set_solver_focus: {exc}") from None
 
     def system_seconds(self) -> dict[str, float]:
         """Wall seconds spent in each system so far."""

@@ -28,6 +28,7 @@ compare with it.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 
@@ -74,6 +75,7 @@ from .solver import (
     rotation_toward,
     turn_about_axis,
 )
+from .solver_budget import BudgetCut, SolverCostModel, cut_to_budget
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -91,7 +93,13 @@ class SolverSettings:
     when its error no longer changes by the tolerance, or when it falls by less than this share
     of itself in two iterations running (0 turns the second test off): an unreachable goal
     creeping closer by a trunk step at a time no longer keeps the loop, and every character in
-    it, going."""
+    it, going.
+
+    The frame budget (:mod:`ecs_anim.solver_budget`): ``budget_ms`` the most a whole tick may
+    take, ms (None: no budget); when the tick would overrun it, the lowest priorities, then the
+    characters furthest from ``focus_in_world`` (a world point, m; None: the earlier rows are
+    cut first), get fewer iterations. ``cost_model``: the cost the cut is decided by (None:
+    calibrated every tick from the last tick's measured times)."""
 
     iterations: int = 6
     tolerance_m: float = 1e-4
@@ -101,10 +109,20 @@ class SolverSettings:
     root_gain: float = 1.25
     release_speed_m_s: float = 1.5
     stall_fraction: float = 0.05
+    budget_ms: float | None = None
+    focus_in_world: tuple[float, float, float] | None = None
+    cost_model: SolverCostModel | None = None
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.stall_fraction < 1.0:
             raise ValueError(f"stall_fraction must be in [0, 1), got {self.stall_fraction}")
+        if self.budget_ms is not None and not (np.isfinite(self.budget_ms) and self.budget_ms > 0):
+            raise ValueError(f"budget_ms must be a positive number of milliseconds or None, "
+                             f"got {self.budget_ms}")
+        if self.focus_in_world is not None and not (
+                len(self.focus_in_world) == 3 and np.all(np.isfinite(self.focus_in_world))):
+            raise ValueError(f"focus_in_world must be a finite (x, y, z) point or None, "
+                             f"got {self.focus_in_world}")
 
 
 DEFAULT_SETTINGS = SolverSettings()
@@ -134,7 +152,8 @@ UPPER_BODY_JOINTS = np.array([J[n] for n in ("spine_1", "spine_2", "neck", "head
 class TickGoals:
     """The k goals of this tick for the r characters being solved (local rows 0..r-1).
 
-    rows (r,) store rows; owner (k,) local row; table_index (k,) (-1: a foot contact);
+    Sorted by character (owner), each character's goals in the table's order, its two feet
+    last. rows (r,) store rows; owner (k,) local row; table_index (k,) (-1: a foot contact);
     orientation (k,) bool; group, bone, segment, fraction, offset (k, 3), chain (bit mask),
     priority; goal (k, 3): the weighted point goal, or the weighted unit direction of an
     orientation; weight (k,); axis (k, 3) segment-frame axis of an orientation; footprint (r, 2, 3)
@@ -165,6 +184,11 @@ class TickGoals:
     self_offset: F64
     self_start: F64  # (s, 3) where that point was when the goals were made
     held: NDArray[np.bool_]  # (k,) a sphere keeps this goal's point off the motion's place
+    # The frame budget's cut (None: the settings' iterations for every goal and character):
+    # (k,) the iterations after which a goal no longer keeps its character's loop going nor
+    # turns the trunk, (r,) the most iterations each character gets.
+    goal_iterations: I64 | None = None
+    row_iterations: I64 | None = None
 
     @property
     def k(self) -> int:
@@ -281,6 +305,7 @@ def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained:
     idx = np.flatnonzero(weight > 0)
     if idx.size == 0:
         return None
+    idx = idx[np.argsort(table.owner[idx], kind="stable")]  # by character, then table order
     owner = table.owner[idx]
     seg, frac, off = table.segment[idx], table.fraction[idx], table.offset[idx]
     p0 = point_positions(unconstrained, owner, seg, frac, off)
@@ -325,42 +350,65 @@ def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained:
         return None
     idx, owner, w = idx[keep], owner[keep], w[keep]
     rows, local = np.unique(owner, return_inverse=True)
+    r, n_user = rows.size, idx.size
+    # Each character's goals, then its two feet: where each user goal and each foot goes.
+    user_end = np.cumsum(np.bincount(local, minlength=r))
+    at_user = np.arange(n_user) + 2 * local
+    at_foot = (user_end + 2 * np.arange(r))[:, None] + np.arange(2)  # (r, 2)
+    at_foot = at_foot.reshape(-1)
+    k = n_user + 2 * r
+
+    def place(user: np.ndarray, foot: np.ndarray | float | int) -> np.ndarray:
+        out = np.empty((k, *user.shape[1:]), dtype=user.dtype)
+        out[at_user] = user
+        out[at_foot] = foot
+        return out
+
     on_self = np.flatnonzero((table.target_kind[idx] != TARGET_WORLD) & (table.target_row[idx] == owner))
     # Each foot keeps where ground adaptation put it: above every goal while in contact; below
     # every goal otherwise (a free foot stays clear of the ground when the root moves, unless a
     # constraint of that leg takes it).
     ankles = unconstrained.positions[rows][:, list(SIDE_JOINTS["ankle"])]
     in_contact = contact_weight[rows] > 0
-    c_owner, c_side = np.divmod(np.arange(2 * rows.size), 2)
-    nc = c_owner.size
-    foot_priority = np.where(in_contact[c_owner, c_side], CONTACT_PRIORITY, -CONTACT_PRIORITY)
-    cat = np.concatenate
+    sides = np.tile(np.arange(2), r)
+    foot_priority = np.where(in_contact.reshape(-1), CONTACT_PRIORITY, -CONTACT_PRIORITY)
     return TickGoals(
         rows=rows,
-        owner=cat([local, c_owner]),
-        table_index=cat([idx, np.full(nc, -1)]),
-        orientation=cat([orient[keep], np.zeros(nc, bool)]),
-        group=cat([table.group[idx], LEG_L + c_side]),
-        bone=cat([table.bone[idx], np.ones(nc, np.int64)]),
-        segment=cat([seg[keep], np.asarray(SHANK)[c_side]]),
-        fraction=cat([frac[keep], np.ones(nc)]),
-        offset=cat([off[keep], np.zeros((nc, 3))]),
-        chain=cat([table.chain[idx], 1 << (LEG_L + c_side)]),
-        priority=cat([table.priority[idx], foot_priority]),
-        goal=cat([weighted[keep], ankles[c_owner, c_side]]),
-        weight=cat([w, np.ones(nc)]),
-        axis=cat([table.axis[idx], np.zeros((nc, 3))]),
+        owner=place(local, np.repeat(np.arange(r), 2)),
+        table_index=place(idx, -1),
+        orientation=place(orient[keep], False),
+        group=place(table.group[idx], LEG_L + sides),
+        bone=place(table.bone[idx], 1),
+        segment=place(seg[keep], np.asarray(SHANK)[sides]),
+        fraction=place(frac[keep], 1.0),
+        offset=place(off[keep], 0.0),
+        chain=place(table.chain[idx], 1 << (LEG_L + sides)),
+        priority=place(table.priority[idx], foot_priority),
+        goal=place(weighted[keep], ankles.reshape(-1, 3)),
+        weight=place(w, 1.0),
+        axis=place(table.axis[idx], 0.0),
         footprint=ankles,
         in_contact=in_contact,
         com_desired=com_desired[rows],
         com_on=com_control[rows],
-        on_self=on_self,
+        on_self=at_user[on_self],
         self_segment=table.target_segment[idx[on_self]],
         self_fraction=table.target_fraction[idx[on_self]],
         self_offset=table.target_offset[idx[on_self]],
         self_start=targets[idx[on_self]],
-        held=cat([held[keep], np.zeros(nc, bool)]),
+        held=place(held[keep], False),
     )
+
+
+def iteration_caps(goals: TickGoals, settings: SolverSettings) -> tuple[I64, I64]:
+    """(k,) the iterations each goal may keep its character's loop going, and (r,) the most
+    iterations each character gets: the frame budget's cut, or the settings' ``iterations``."""
+    full = int(settings.iterations)
+    goal_caps = (np.full(goals.k, full, np.int64) if goals.goal_iterations is None
+                 else goals.goal_iterations)
+    row_caps = (np.full(goals.rows.size, full, np.int64) if goals.row_iterations is None
+                else goals.row_iterations)
+    return goal_caps, row_caps
 
 
 def _errors(g: TickGoals, dec: DecodedPose) -> F64:
@@ -709,12 +757,14 @@ def _axis_angle_of(rotation: F64) -> tuple[F64, F64]:
 
 
 def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, com_fraction: F64,
-          settings: SolverSettings = DEFAULT_SETTINGS, decoded: DecodedPose | None = None) -> tuple[NormalizedPoses, I64, DecodedPose]:
+          settings: SolverSettings = DEFAULT_SETTINGS, decoded: DecodedPose | None = None,
+          in_place: bool = False) -> tuple[NormalizedPoses, I64, DecodedPose]:
     """Solve this tick's goals for their characters (rows of ``poses``, ``lengths``, ``masses``
     and ``com_fraction`` are ``goals.rows``; ``decoded`` is ``decode(poses, lengths)`` if the
     caller has it). Returns the new poses, the iterations each character used (r,), and the
     decoded result (joint positions (r, N_JOINTS, 3) and frames), on which :func:`constraint_errors` measures each
-    constraint."""
+    constraint. With ``in_place`` the given ``poses`` and ``decoded`` are the caller's scratch
+    copies, solved in place (as the compiled solve does; here they are copied all the same)."""
     state = _Solve(poses, lengths, goals, masses, com_fraction, settings, decoded)
     tol = np.where(goals.orientation, settings.tolerance_rad, settings.tolerance_m)
     previous = np.full(goals.k, np.inf)
@@ -722,7 +772,8 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
     # Planted feet are re-planted after the loop: their error after a root move is not work left.
     planted = goals.priority == CONTACT_PRIORITY
     used = np.zeros(state.r, np.int64)
-    for _ in range(settings.iterations):
+    goal_caps, row_caps = iteration_caps(goals, settings)
+    for _ in range(int(row_caps.max(initial=0))):
         used += state.active
         # Legs, head, arms: the paper's order (legs and arms are independent, so one batch).
         state.follow_own_targets()
@@ -738,14 +789,16 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
         first = np.isinf(previous)
         unchanged = ~first & (np.abs(previous - err) < settings.tolerance_m)
         slow = ~first & (previous - err < settings.stall_fraction * np.where(first, 0.0, previous))
-        goal_open = (err > tol) & ~unchanged & ~(slow & slow_before) & ~state.stalled & ~planted
+        cut = used[goals.owner] >= goal_caps  # the frame budget gave it no more iterations
+        goal_open = ((err > tol) & ~unchanged & ~(slow & slow_before) & ~state.stalled & ~planted
+                     & ~cut)
         stepped = state.active[goals.owner]
         state.stalled |= (err > tol) & ~goal_open & stepped
         previous = np.where(stepped, err, previous)
         slow_before = np.where(stepped, slow, slow_before)
         open_rows = np.zeros(state.r, bool)
         open_rows[goals.owner[goal_open]] = True
-        state.active &= open_rows | (com_error > settings.com_tolerance_m)
+        state.active &= (open_rows | (com_error > settings.com_tolerance_m)) & (used < row_caps)
         if not state.active.any():
             break
     # The last root move shifted the limbs: re-plant the feet, re-aim the head and the arms
@@ -765,7 +818,9 @@ class TickResult:
     whose target is not finite, to switch off; error (m,) how far each active constraint is from
     being met on the result (:func:`constraint_errors`; NaN while inactive); held (m,) a sphere
     kept the point off the motion's place; goals, rows (r,), poses (r,), solved (decoded
-    result (r,)) and iterations (r,) of the characters solved (None / empty when none)."""
+    result (r,)) and iterations (r,) of the characters solved (None / empty when none); cut:
+    what the frame budget cut (None: nothing to decide: no budget, no model or no goal);
+    solve_s: the wall time the solve itself took (s), for the cost model's calibration."""
 
     weight: F64
     broken: I64
@@ -776,25 +831,45 @@ class TickResult:
     poses: NormalizedPoses | None = None
     solved: DecodedPose | None = None
     iterations: I64 | None = None
+    cut: BudgetCut | None = None
+    solve_s: float = 0.0
 
 
 Solve = Callable[..., tuple[NormalizedPoses, I64, DecodedPose]]
+Centres = Callable[[F64, F64, F64], F64]
+
+
+def focus_distances(positions: F64, focus_in_world: tuple[float, float, float] | None) -> F64:
+    """(r,) each character's pelvis distance from the focus point (m); zeros without one.
+    ``positions`` (r, N_JOINTS, 3)."""
+    if focus_in_world is None:
+        return np.zeros(positions.shape[0])
+    distance: F64 = np.linalg.norm(positions[:, J["pelvis"]] - np.asarray(focus_in_world), axis=1)
+    return distance
 
 
 def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
               unconstrained: DecodedPose | None,
               lengths: F64, contact_weight: F64, com_control: NDArray[np.bool_], com_target_xy: F64,
               masses: F64, com_fraction: F64, previous: DecodedPose | None,
-              settings: SolverSettings, max_release_m: float, solve: Solve) -> TickResult:
+              settings: SolverSettings, max_release_m: float, solve: Solve,
+              centres: Centres = centres_of_mass, model: SolverCostModel | None = None,
+              expected_iterations: I64 | None = None) -> TickResult:
     """One tick of ConstraintSolve's policy over every character (n rows): the targets, the
     constraints switched off (a target not finite), the desired centre of mass (the motion's own,
-    or ``com_target_xy`` (n, 2) where finite), the goals, the ``solve`` (the compiled
-    :func:`ecs_anim.kernels.solve.solve` or the numpy :func:`solve`, same arguments) of the
-    characters with an active constraint, and every active constraint's error on the result.
+    or ``com_target_xy`` (n, 2) where finite), the goals, the frame budget's cut, the ``solve``
+    (the compiled :func:`ecs_anim.kernels.solve.solve` or the numpy :func:`solve`, same
+    arguments) of the characters with an active constraint, and every active constraint's
+    error on the result.
 
     ``weight`` (m,) this tick's activations; ``unconstrained`` the decoded ``poses`` (None only
-    when no weight is above 0); masses and
-    com_fraction (n, S); ``previous`` the last tick's posture (None on the first)."""
+    when no weight is above 0), this call's own: its solved rows are overwritten with the
+    result; masses and com_fraction (n, S); ``previous`` the last tick's posture (None on the
+    first); ``centres`` the centres of mass (:func:`ecs_anim.morphology.centres_of_mass` or a
+    compiled one of the same signature). With ``settings.budget_ms`` and a ``model`` (the
+    settings' own ``cost_model`` first), :func:`ecs_anim.solver_budget.cut_to_budget` decides
+    the iterations; ``expected_iterations`` (n,) what each character took last tick (0: not
+    solved: the settings' ``iterations``)."""
     m = table.m
     error = np.full(m, np.nan)
     held = np.zeros(m, bool)
@@ -809,7 +884,7 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
         weight = weight.copy()
         weight[broken] = 0.0
         targets[broken] = 0.0
-    own = centres_of_mass(unconstrained.positions, masses, com_fraction)
+    own = centres(unconstrained.positions, masses, com_fraction)
     given = np.isfinite(com_target_xy).all(axis=1)
     own[given, :2] = com_target_xy[given]
     goals = tick_goals(table, weight, targets, unconstrained, contact_weight, com_control, own,
@@ -819,22 +894,39 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
         error[active] = constraint_errors(table, active, unconstrained, targets)
         return TickResult(weight, broken, error, held)
     rows = goals.rows
-    solved_poses, iterations, solved = solve(poses.take(rows), lengths[rows], goals, masses[rows],
-                                             com_fraction[rows], settings, unconstrained.take(rows))
+    every_row = rows.size == lengths.shape[0]
+    cut = None
+    model = settings.cost_model or model
+    if settings.budget_ms is not None and model is not None:
+        expected = (np.full(rows.size, settings.iterations, np.int64) if expected_iterations is None
+                    else expected_iterations[rows])
+        expected = np.where(expected > 0, expected, settings.iterations)
+        cut = cut_to_budget(goals, expected,
+                            focus_distances(unconstrained.positions[rows], settings.focus_in_world),
+                            settings.budget_ms, model, settings.iterations)
+        goals.goal_iterations, goals.row_iterations = cut.goal_iterations, cut.row_iterations
+    # The solve works on copies of its rows (on the decoded poses themselves when every
+    # character is solved: they are this call's own).
+    start = time.perf_counter()
+    solved_poses, iterations, solved = solve(
+        poses.take(rows), lengths[rows], goals, masses[rows], com_fraction[rows], settings,
+        unconstrained if every_row else unconstrained.take(rows), True)
+    solve_s = time.perf_counter() - start
     user = goals.table_index >= 0
     held[goals.table_index[user]] = goals.held[user]
     # Every active constraint's error on the result (an area the motion already kept was not a
     # goal, but another constraint's move may have taken its point out).
-    result = DecodedPose(**{name.name: getattr(unconstrained, name.name).copy()
-                            for name in fields(DecodedPose)})
-    for name in fields(DecodedPose):
-        getattr(result, name.name)[rows] = getattr(solved, name.name)
+    result = unconstrained
+    if solved.positions is not result.positions:  # not solved in place
+        for name in fields(DecodedPose):
+            getattr(result, name.name)[rows] = getattr(solved, name.name)
     # Targets on the character's own body moved with it during the solve: read them again.
-    targets = np.where((table.target_row == table.owner)[:, None]
-                       & (table.target_kind != TARGET_WORLD)[:, None],
-                       target_points(table, result, previous), targets)
+    on_own_body = (table.target_row == table.owner) & (table.target_kind != TARGET_WORLD)
+    if on_own_body.any():
+        targets = np.where(on_own_body[:, None], target_points(table, result, previous), targets)
     error[active] = constraint_errors(table, active, result, targets)
-    return TickResult(weight, broken, error, held, goals, rows, solved_poses, solved, iterations)
+    return TickResult(weight, broken, error, held, goals, rows, solved_poses, solved, iterations,
+                      cut, solve_s)
 
 
 def scatter(all_poses: NormalizedPoses, rows: I64, part: NormalizedPoses) -> NormalizedPoses:
@@ -847,5 +939,5 @@ def scatter(all_poses: NormalizedPoses, rows: I64, part: NormalizedPoses) -> Nor
     return NormalizedPoses(**arrays)
 
 
-__all__ = ["SolverSettings", "TickGoals", "TickResult", "constrain", "scatter", "solve", "target_points",
-           "tick_goals"]
+__all__ = ["SolverSettings", "TickGoals", "TickResult", "constrain", "iteration_caps", "scatter",
+           "solve", "target_points", "tick_goals"]

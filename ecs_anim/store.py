@@ -24,14 +24,17 @@ N_MASS_SEGMENTS = len(MASS_SEGMENTS)
 
 #: Most clips a character can have queued at once.
 MAX_QUEUE = 16
+#: Most waypoints a steered character's path holds (its start point included).
+MAX_WAYPOINTS = 128
 #: Fields that are not one array row per character: the poses (arrays of their own) and what the
 #: tick derives from them.
-NOT_ROWS = ("poses", "vertebrae", "goals", "solved_positions", "posture")
+NOT_ROWS = ("poses", "vertebrae", "goals", "solved", "posture")
 #: Fields set when a character spawns or a specification component is replaced, between ticks:
 #: the systems' inputs (a system may also write one, e.g. MorphologyAdapt takes a new body in).
 SPEC_FIELDS = ("entity", "lengths", "speed", "queue_clip", "queue_fade_s", "queue_loop",
                "queue_len", "segment_mass_kg", "segment_com_fraction", "com_control",
-               "com_target_xy", "ground_index", "constraints")
+               "com_target_xy", "ground_index", "constraints", "path_xy", "path_len",
+               "path_cum_m", "gait_clip")
 
 
 def _empty_poses(n: int) -> NormalizedPoses:
@@ -69,6 +72,15 @@ class CharacterStore:
     posture: the last tick's decoded posture (frames too), which targets on other characters read;
     ground_index (n,) the ground each character stands on: 0 the environment's, k > 0
     ``Simulation.grounds[k]`` (a GroundQuery of the character's own).
+    Steering (:mod:`ecs_anim.steering`): steer_mode (n,) 0 none, 1 heading and speed, 2 a path;
+    steer_heading_rad (n,) the heading wanted; steer_speed_m_s (n,) the speed wanted (NaN: the
+    walk's own); path_xy (n, MAX_WAYPOINTS, 2) metres, the path's points (its first: where the
+    character was when given it), path_len (n,) how many, path_cum_m (n, MAX_WAYPOINTS) the arc
+    length at each (m; beyond the last: its total), path_progress_m (n,) arc length done;
+    gait_clip (n, 3) the clips of the locomotion set [idle, walk, run] (-1: none), gait (n,) the
+    one playing (index into those columns); fade_keeps_contacts (n,) bool: the running
+    cross-fade keeps a foot down in both clips on its footprint; fade_speed (n,) the playback
+    rate of the clip being faded out (its rate when the fade began).
     """
 
     entity: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -102,6 +114,17 @@ class CharacterStore:
     com: F64 = field(default_factory=lambda: np.zeros((0, 3)))
     com_error_m: F64 = field(default_factory=lambda: np.zeros(0))
     ground_index: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    steer_mode: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    steer_heading_rad: F64 = field(default_factory=lambda: np.zeros(0))
+    steer_speed_m_s: F64 = field(default_factory=lambda: np.zeros(0))
+    path_xy: F64 = field(default_factory=lambda: np.zeros((0, MAX_WAYPOINTS, 2)))
+    path_len: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    path_cum_m: F64 = field(default_factory=lambda: np.zeros((0, MAX_WAYPOINTS)))
+    path_progress_m: F64 = field(default_factory=lambda: np.zeros(0))
+    gait_clip: NDArray[np.int64] = field(default_factory=lambda: np.zeros((0, 3), np.int64))
+    gait: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    fade_keeps_contacts: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
+    fade_speed: F64 = field(default_factory=lambda: np.zeros(0))
     queue_clip: NDArray[np.int64] = field(default_factory=lambda: np.zeros((0, MAX_QUEUE), np.int64))
     queue_fade_s: F64 = field(default_factory=lambda: np.zeros((0, MAX_QUEUE)))
     queue_loop: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, MAX_QUEUE), bool))
@@ -110,7 +133,7 @@ class CharacterStore:
     poses: NormalizedPoses = field(default_factory=lambda: _empty_poses(0))
     vertebrae: F64 | None = None
     goals: object | None = None  # this tick's constraint goals (ecs_anim.solver_shell.TickGoals)
-    solved_positions: F64 | None = None  # (r, N_JOINTS, 3) the solver's result for goals.rows
+    solved: DecodedPose | None = None  # (r, ...) the solver's decoded result for goals.rows
     posture: DecodedPose | None = None
 
     #: Growth buffers behind each array: field name (``"poses.root_position"`` for a pose
@@ -177,7 +200,7 @@ class CharacterStore:
             setattr(self, name, getattr(self, name)[keep])
         self.poses = self.poses.take(keep)
         self.posture = None if self.posture is None else self.posture.take(keep)
-        self.vertebrae = self.goals = self.solved_positions = None
+        self.vertebrae = self.goals = self.solved = None
         self._buffers.clear()
 
 

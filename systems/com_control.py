@@ -10,7 +10,7 @@ one, which metrics, tests and the viewer read. Switched off per character (``com
 error shows the drift the constraints cause.
 
 Rows: characters with a Constraint component.
-Reads: store.goals, solved_positions, com_desired, segment_mass_kg, segment_com_fraction.
+Reads: store.goals, solved (the solver's decoded result), com_desired, segment_mass_kg, segment_com_fraction.
 Writes: store.com, store.com_error_m (NaN for characters nothing constrained this tick), in
 place, by the compiled :mod:`ecs_anim.kernels.com`.
 """
@@ -28,7 +28,7 @@ _PROXIMAL, _DISTAL = segment_joints()
 
 class COMControl(System):
     query = (Constraint,)
-    reads = ("goals", "solved_positions", "com_desired", "segment_mass_kg", "segment_com_fraction")
+    reads = ("goals", "solved", "com_desired", "segment_mass_kg", "segment_com_fraction")
     writes = ("com_error_m", "com")
 
     def run(self, dt: float) -> None:
@@ -37,9 +37,9 @@ class COMControl(System):
             st.com_error_m.fill(np.nan)
         else:
             st.com_error_m = np.full(st.n, np.nan)
-        if st.goals is None or st.solved_positions is None:
+        if st.goals is None or st.solved is None:
             return
         rows = np.asarray(st.goals.rows, dtype=np.int64)  # type: ignore[attr-defined]
-        centres_of_mass(rows, np.arange(rows.size, dtype=np.int64), st.solved_positions,
+        centres_of_mass(rows, np.arange(rows.size, dtype=np.int64), st.solved.positions,
                         st.segment_mass_kg, st.segment_com_fraction, _PROXIMAL, _DISTAL, st.com)
         horizontal_errors(rows, st.com, st.com_desired, st.com_error_m)

@@ -11,47 +11,125 @@ tick's pose. A constraint whose target is not finite is switched off with one wa
 Rows: characters with a Constraint component.
 Reads: store.poses, lengths, posture (the previous tick's), contact_weight, clip, clip_time_s,
 com_control, com_target_xy, segment_mass_kg, segment_com_fraction; the constraints table.
-Writes: store.poses (solved characters), com_desired, goals, solved_positions; table.held;
+Writes: store.poses (solved characters), com_desired, goals, solved (the decoded result of
+the solved characters, which PostureConvert takes instead of decoding them again); table.held;
 table.enabled, table.weight, table.error (how far each active constraint is from being met on
 the result, :func:`~ecs_anim.solver_shell.constraint_errors`; NaN while inactive).
 """
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
 from ecs_anim.components import Constraint
+from ecs_anim.constraint_table import KIND_ORIENTATION
+from ecs_anim.kernels.com import centres_of_mass, segment_joints
 from ecs_anim.kernels.decode import decode
 from ecs_anim.kernels.solve import solve as solve  # re-exported: tests patch it here
-from ecs_anim.solver_shell import constrain, scatter
+from ecs_anim.solver_budget import SolverCostModel, SolverReport, errors_by_priority
+from ecs_anim.solver_shell import TickResult, constrain, scatter
 from ecs_anim.system_base import System
+
+if TYPE_CHECKING:
+    from ecs_anim.simulation import Simulation
+
+_PROXIMAL, _DISTAL = segment_joints()
+
+
+def _centres(positions: NDArray[np.float64], masses: NDArray[np.float64],
+             com_fraction: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The compiled :func:`ecs_anim.morphology.centres_of_mass` (same arguments, (n, 3))."""
+    n = positions.shape[0]
+    out = np.empty((n, 3))
+    every = np.arange(n, dtype=np.int64)
+    centres_of_mass(every, every, positions, masses, com_fraction, _PROXIMAL, _DISTAL, out)
+    return out
 
 
 class ConstraintSolve(System):
     query = (Constraint,)
     reads = ("constraints", "clip", "clip_time_s", "poses", "lengths", "posture", "contact_weight",
              "com_control", "com_target_xy", "segment_mass_kg", "segment_com_fraction")
-    writes = ("goals", "solved_positions", "constraints.error", "constraints.weight",
+    writes = ("goals", "solved", "constraints.error", "constraints.weight",
               "constraints.enabled", "constraints.held", "poses", "com_desired")
+
+    def __init__(self, sim: Simulation) -> None:
+        super().__init__(sim)
+        #: This tick's :class:`~ecs_anim.solver_budget.SolverReport` (``sim.solver_report()``).
+        self.report: SolverReport | None = None
+        # The last tick, for the frame budget's cost model: (structure version, iterations each
+        # store row took (n,)), the systems' total seconds at the end of this system's last run
+        # (one whole tick lies between two such marks), and the model measured on it.
+        self._last_iterations: tuple[int, NDArray[np.int64]] | None = None
+        self._last_mark_s: float | None = None
+        self._model: SolverCostModel | None = None
 
     def run(self, dt: float) -> None:
         sim, st, table = self.sim, self.sim.store, self.sim.constraints
-        st.goals, st.solved_positions = None, None
+        st.goals, st.solved = None, None
+        self.report = None
         if table.m == 0:
             return
         weight = table.weights(sim.time_s, st.clip, st.clip_time_s)
         settings = sim.solver_settings
         unconstrained = decode(st.poses, st.lengths) if (weight > 0).any() else None
+        expected = None
+        if self._last_iterations is not None and self._last_iterations[0] == sim.structure_version:
+            expected = self._last_iterations[1]
         result = constrain(table, weight, st.poses, unconstrained, st.lengths,
                            st.contact_weight, st.com_control, st.com_target_xy, st.segment_mass_kg,
                            st.segment_com_fraction, st.posture, settings,
-                           settings.release_speed_m_s * sim.dt, solve)
+                           settings.release_speed_m_s * sim.dt, solve, _centres, self._model,
+                           expected)
         if result.broken.size:
             sim.report_disabled(result.broken)
             table.enabled[result.broken] = False
         table.weight = result.weight
         table.error[:] = result.error
         table.held[:] = result.held
+        self._report(result)
         if result.goals is None or result.poses is None or result.solved is None:
             return
-        st.poses = scatter(st.poses, result.rows, result.poses)
+        every_row = result.rows.size == st.n
+        st.poses = result.poses if every_row else scatter(st.poses, result.rows, result.poses)
         st.com_desired[result.rows] = result.goals.com_desired
-        st.goals, st.solved_positions = result.goals, result.solved.positions
+        st.goals, st.solved = result.goals, result.solved
+
+    def _report(self, result: TickResult) -> None:
+        """This tick's report, and the cost model the next tick's budget decides by (the
+        systems' time over one whole tick, this solve's share of it)."""
+        sim, table = self.sim, self.sim.constraints
+        cut_by = None if result.cut is None else (sim.solver_settings.cost_model or self._model)
+        now_s = sum(system.seconds for system in sim.systems)
+        used = 0 if result.iterations is None else int(result.iterations.sum())
+        if self._last_mark_s is not None:
+            self._model = SolverCostModel.calibrated((now_s - self._last_mark_s) * 1e3,
+                                                     result.solve_s * 1e3, used) or self._model
+        self._last_mark_s = now_s
+        by_row = np.zeros(sim.store.n, np.int64)
+        if result.iterations is not None:
+            by_row[result.rows] = result.iterations
+        self._last_iterations = (sim.structure_version, by_row)
+        cut = result.cut
+        cut_constraint = np.zeros(table.m, bool)
+        cut_entities: tuple[int, ...] = ()
+        if cut is not None and result.goals is not None:
+            g = result.goals
+            user = g.table_index >= 0
+            lowered = user & ((cut.goal_iterations < sim.solver_settings.iterations)
+                              | np.isin(g.owner, cut.cut_rows))
+            cut_constraint[g.table_index[lowered]] = True
+            cut_entities = tuple(int(e) for e in sim.store.entity[result.rows[cut.cut_rows]])
+        self.report = SolverReport(
+            tick=sim.tick, characters=int(result.rows.size), iterations=used,
+            budget_ms=sim.solver_settings.budget_ms,
+            model=cut_by,
+            expected_ms=float("nan") if cut is None else cut.expected_ms,
+            cut_ms=float("nan") if cut is None else cut.cut_ms,
+            priority_iterations={} if cut is None else dict(cut.priority_iterations),
+            cut_characters=cut_entities,
+            errors=errors_by_priority(table.priority, table.error,
+                                      table.kind == KIND_ORIENTATION, cut_constraint))

@@ -2,12 +2,14 @@
 
 Rows: characters with a Morphology. A body replaced while playing (``Simulation.set_body``)
 is taken in on the next tick, before any system decodes the pose on it
-(:func:`ecs_anim.body_change.adopt_bodies`).
+(:func:`ecs_anim.body_change.adopt_bodies`), or blended into over ``blend_s`` tick by tick
+(:func:`ecs_anim.body_change.blend_bodies`).
 
-Reads: store.poses, store.lengths; on a body change the Morphology components, segment_mass_kg,
+Reads: store.poses, store.lengths; on a body change the Morphology (and BodyBlend) components, segment_mass_kg,
 segment_com_fraction, placement_*, fade_placement_*, posture (whether the character has played).
 Writes: on a body change lengths, segment_mass_kg, segment_com_fraction, placement_xy,
-fade_placement_xy (it stays where it stands), the root of poses, locked (its feet re-plant).
+fade_placement_xy (it stays where it stands), the root of poses, locked (its feet re-plant; or,
+while blending, footprint: a planted foot's height follows the ankle height).
 
 The scaling itself (eq. 2: segment lengths, the root by the leg length) is not stored: the
 systems that need the pose on each body decode it in their own kernels, each what it reads
@@ -17,7 +19,7 @@ no pass over every character decodes a pose only to hand it on.
 
 from __future__ import annotations
 
-from ecs_anim.body_change import adopt_bodies
+from ecs_anim.body_change import adopt_bodies, blend_bodies
 from ecs_anim.components import Morphology
 from ecs_anim.system_base import System
 
@@ -28,7 +30,7 @@ class MorphologyAdapt(System):
     reads = ("poses", "lengths", "segment_mass_kg", "segment_com_fraction", "placement_xy",
              "placement_heading", "fade_placement_xy", "fade_placement_heading", "posture")
     writes = ("lengths", "segment_mass_kg", "segment_com_fraction", "placement_xy",
-              "fade_placement_xy", "poses", "locked")
+              "fade_placement_xy", "poses", "locked", "footprint")
 
     def run(self, dt: float) -> None:
-        pass  # bodies are taken in by ``on_structure_change``; see the module docstring
+        blend_bodies(self.sim)  # a new body itself is taken in by ``on_structure_change``

@@ -1,12 +1,16 @@
-"""MotionPlayback: sample each character's clip(s) in normalized space, then advance the clocks.
+"""MotionPlayback: steer, sample each character's clip(s) in normalized space, advance the clocks.
 
 Rows: characters with a MotionPlayer.
-Reads: store.clip, clip_time_s, speed, loop, fade_*, queue_*, placement_*, fade_placement_*,
-lengths (leg length: the root path's unit); the clip bank.
+Reads: store.clip, clip_time_s, speed, fade_speed, loop, fade_*, queue_*, placement_*,
+fade_placement_*, lengths (leg length: the root path's unit); for steered characters
+(:func:`ecs_anim.steering.steer`) steer_mode, steer_heading_rad, steer_speed_m_s, path_xy,
+path_len, path_cum_m, path_progress_m, gait, gait_clip, and the last tick's contact_weight,
+locked, footprint; the clip bank.
 Writes: store.poses (placed in the world; first writer each tick), store.contact_weight,
 store.clip_time_s, fade_time_s, fade_elapsed_s, fade_s; on a clip change (through
 :func:`ecs_anim.playback_queue.start_next_clips`) clip, loop, queue_head, placement_*, fade_*,
-locked.
+fade_keeps_contacts, fade_speed, locked; steering writes speed (the playback rate), placement_*,
+fade_placement_*, steer_mode, steer_heading_rad, steer_speed_m_s, path_progress_m, gait.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from ecs_anim.kernels.playback import (
 from ecs_anim.normalized import NormalizedPoses
 from ecs_anim.playback import ClipBank, blend, rotate_xy, sample, sample_table
 from ecs_anim.playback_queue import start_next_clips
+from ecs_anim.steering import steer
 from ecs_anim.system_base import System
 
 if TYPE_CHECKING:
@@ -39,13 +44,18 @@ class MotionPlayback(System):
     :meth:`run_numpy`), into the store's pose arrays in place."""
 
     query = (MotionPlayer,)
-    reads = ("clip", "clip_time_s", "speed", "loop", "fade_clip", "fade_time_s", "fade_loop",
+    reads = ("clip", "clip_time_s", "speed", "fade_speed", "loop", "fade_clip", "fade_time_s", "fade_loop",
              "fade_s", "fade_elapsed_s", "queue_clip", "queue_fade_s", "queue_loop", "queue_head",
              "queue_len", "placement_xy", "placement_heading", "fade_placement_xy",
-             "fade_placement_heading", "lengths")
+             "fade_placement_heading", "lengths", "steer_mode", "steer_heading_rad",
+             "steer_speed_m_s", "path_xy", "path_len", "path_cum_m", "path_progress_m", "gait",
+             "gait_clip",
+             "contact_weight", "locked", "footprint")
     writes = ("poses", "contact_weight", "clip_time_s", "fade_time_s", "fade_elapsed_s", "fade_s",
               "clip", "loop", "queue_head", "placement_xy", "placement_heading",
-              "fade_placement_xy", "fade_placement_heading", "fade_clip", "fade_loop", "locked")
+              "fade_placement_xy", "fade_placement_heading", "fade_clip", "fade_loop", "locked",
+              "fade_keeps_contacts", "fade_speed", "speed", "steer_mode", "steer_heading_rad",
+              "steer_speed_m_s", "path_progress_m", "gait")
 
     def __init__(self, sim: Simulation):
         super().__init__(sim)
@@ -54,6 +64,8 @@ class MotionPlayback(System):
     def run(self, dt: float) -> None:
         st, bank = self.sim.store, self.sim.bank
         self._start_queued_clips()
+        self._steer(dt)
+        release_step = dt / self.sim.steering_settings.contact_release_s
         rows = np.arange(st.n, dtype=np.int64)
         leg = self.sim.leg_length()
         out = pose_arrays(writable_poses(st.poses, st.n))
@@ -63,14 +75,17 @@ class MotionPlayback(System):
                            st.placement_heading, leg, out, rows)
         if st.contact_weight.shape != (st.n, 2) or not st.contact_weight.flags.writeable:
             st.contact_weight = np.zeros((st.n, 2))
+        fading = np.flatnonzero(st.fade_s > 0.0)
+        previous = st.contact_weight[fading]  # the last tick's (a copy)
         sample_table_rows(rows, bank.contact_weight, bank.start, bank.n_frames, bank.fps,
                           st.clip, st.clip_time_s, st.loop, st.contact_weight)
-        fading = np.flatnonzero(st.fade_s > 0.0)
         if fading.size:
-            # While two clips blend, their feet are in neither clip's footprints: no foot is
-            # locked (feet follow the blend, kept above the ground). Footprints resume with the
-            # incoming clip's own contacts once the fade is over.
-            st.contact_weight[fading] = 0.0
+            old_weight = np.zeros((st.n, 2))
+            sample_table_rows(fading, bank.contact_weight, bank.start, bank.n_frames, bank.fps,
+                              st.fade_clip, st.fade_time_s, st.fade_loop, old_weight)
+            st.contact_weight[fading] = self._fading_weights(
+                st.contact_weight[fading], old_weight[fading], previous,
+                st.fade_keeps_contacts[fading], release_step)
             old = pose_arrays(empty_poses(fading.size))
             sample_placed_rows(fading, bank_poses, bank.start, bank.n_frames, bank.fps,
                                bank.loop_yaw, bank.loop_shift, st.fade_clip, st.fade_time_s,
@@ -84,27 +99,55 @@ class MotionPlayback(System):
     def run_numpy(self, dt: float) -> None:
         """The numpy reference of :meth:`run` (the tests compare the two)."""
         st, bank = self.sim.store, self.sim.bank
+        previous = st.contact_weight.copy()
         self._start_queued_clips()
+        self._steer(dt)
         poses = self._placed(sample(bank, st.clip, st.clip_time_s, st.loop),
                              st.placement_xy, st.placement_heading)
         weights = sample_table(bank, bank.contact_weight, st.clip, st.clip_time_s, st.loop)
         fading = st.fade_s > 0.0
-        weights = np.where(fading[:, None], 0.0, weights)
+        w = np.where(fading, np.clip(st.fade_elapsed_s / np.maximum(st.fade_s, 1e-9), 0, 1), 1.0)
+        old_weights = sample_table(bank, bank.contact_weight, st.fade_clip, st.fade_time_s,
+                                   st.fade_loop)
+        weights = np.where(fading[:, None],
+                           self._fading_weights(weights, old_weights, previous,
+                                                st.fade_keeps_contacts,
+                                                dt / self.sim.steering_settings.contact_release_s),
+                           weights)
         if np.any(fading):
             old = self._placed(sample(bank, st.fade_clip, st.fade_time_s, st.fade_loop),
                                st.fade_placement_xy, st.fade_placement_heading)
-            w = np.where(fading, np.clip(st.fade_elapsed_s / np.maximum(st.fade_s, 1e-9), 0, 1), 1.0)
             poses = blend(old, poses, w)
             st.fade_s = np.where(w >= 1.0, 0.0, st.fade_s)
         st.poses = poses
         st.contact_weight = weights
         self._advance_clocks(dt)
 
+    @staticmethod
+    def _fading_weights(new: NDArray[np.float64], old: NDArray[np.float64],
+                        previous: NDArray[np.float64], keep: NDArray[np.bool_],
+                        release_step: float) -> NDArray[np.float64]:
+        """Contact weights (r, 2) while two clips blend (``new``, ``old``: each clip's own;
+        ``previous``: the last tick's). Clips switched at matching foot phases (``keep``,
+        locomotion): a foot down in both stays on its footprint; one that either clip lifts is
+        released by at most ``release_step`` a tick (the blended pose's ankle is not where the
+        footprint is: an instant release would jump to it). Otherwise their feet are in neither
+        clip's footprints: no foot is locked (feet follow the blend, kept above the ground), and
+        footprints resume with the incoming clip's own contacts once the fade is over."""
+        both = np.minimum(new, old)
+        kept = np.where(previous > both, np.maximum(both, previous - release_step), both)
+        weights: NDArray[np.float64] = np.where(keep[:, None], kept, 0.0)
+        return weights
+
+    def _steer(self, dt: float) -> None:
+        """Steered characters' heading, speed and clip for this tick (:func:`steer`)."""
+        sim = self.sim
+        steer(sim.store, sim.bank, sim.gait_table(), sim.steering_settings, dt)
+
     def _advance_clocks(self, dt: float) -> None:
         st = self.sim.store
-        step = dt * st.speed
-        st.clip_time_s += step
-        st.fade_time_s += step
+        st.clip_time_s += dt * st.speed
+        st.fade_time_s += dt * st.fade_speed
         st.fade_elapsed_s += dt
 
     def _bank_poses(self, bank: ClipBank) -> PoseArrays:

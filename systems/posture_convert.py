@@ -2,7 +2,9 @@
 
 Rows: every character.
 Reads: store.poses, store.lengths, frozen, and the last good positions, local_rotations and
-vertebrae (kept for a frozen character).
+vertebrae (kept for a frozen character); store.goals and solved: the characters the solver moved
+are not decoded again, their pose as the solver decoded it is taken
+(:func:`ecs_anim.kernels.solved_posture.posture_solved_rows`).
 Writes: store.positions (world joint positions), store.posture (the same with the body frames,
 for next tick's targets on other characters), store.local_rotations (the BVH export skeleton's
 local joint rotation matrices, when the simulation asks for rotations), store.vertebrae (when
@@ -17,6 +19,7 @@ import numpy as np
 
 from ecs_anim.kernels.decode import decoded_arrays, decoded_pose, empty_decoded, fits, pose_arrays
 from ecs_anim.kernels.posture import N_EXPORT, export_constants, posture_rows
+from ecs_anim.kernels.solved_posture import posture_solved_rows
 from ecs_anim.skeleton import N_JOINTS
 from ecs_anim.system_base import System
 
@@ -28,7 +31,8 @@ def _writable(a: np.ndarray, shape: tuple[int, ...]) -> bool:
 
 
 class PostureConvert(System):
-    reads = ("poses", "lengths", "frozen", "positions", "local_rotations", "vertebrae")
+    reads = ("poses", "lengths", "frozen", "positions", "local_rotations", "vertebrae", "goals",
+             "solved")
     writes = ("frozen", "positions", "posture", "local_rotations", "vertebrae")
 
     def run(self, dt: float) -> None:
@@ -54,12 +58,18 @@ class PostureConvert(System):
         spine = st.vertebrae if count and st.vertebrae is not None else np.empty((n, 0, 3))
         k = _EXPORT
         newly_bad = np.zeros(n, bool)
-        posture_rows(np.arange(n, dtype=np.int64), pose_arrays(st.poses), st.lengths, decoded,
-                     st.frozen, newly_bad, st.positions, rotations,
-                     np.empty((n if rotations else 0, N_EXPORT, 3, 3)),
-                     st.local_rotations if rotations else np.empty((0, N_EXPORT, 3, 3)),
-                     k.rest_hips, k.bvh_from_world, k.rest2body, k.parents,
-                     spine, have_previous)
+        pose = pose_arrays(st.poses)
+        rest = (st.frozen, newly_bad, st.positions, rotations,
+                np.empty((n if rotations else 0, N_EXPORT, 3, 3)),
+                st.local_rotations if rotations else np.empty((0, N_EXPORT, 3, 3)),
+                k.rest_hips, k.bvh_from_world, k.rest2body, k.parents, spine, have_previous)
+        decode_rows = np.arange(n, dtype=np.int64)
+        if st.goals is not None and st.solved is not None:  # decoded once, by the solver
+            solved_rows = np.asarray(st.goals.rows, dtype=np.int64)  # type: ignore[attr-defined]
+            decode_rows = np.delete(decode_rows, solved_rows)
+            posture_solved_rows(solved_rows, decoded_arrays(st.solved), pose, st.lengths, decoded,
+                                *rest)
+        posture_rows(decode_rows, pose, st.lengths, decoded, *rest)
         if newly_bad.any():
             sim.report_frozen(np.flatnonzero(newly_bad))
         # Next tick's targets on other characters read this posture, frames included.

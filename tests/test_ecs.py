@@ -38,15 +38,18 @@ EXPECTED_WRITERS = {
     "contact_weight": ["MotionPlayback"],
     **{name: ["MotionPlayback"] for name in (
         "clip", "clip_time_s", "loop", "fade_clip", "fade_time_s", "fade_loop", "fade_s",
-        "fade_elapsed_s", "queue_head", "placement_heading", "fade_placement_heading")},
+        "fade_elapsed_s", "queue_head", "placement_heading", "fade_placement_heading",
+        "fade_keeps_contacts", "fade_speed", "speed", "steer_mode", "steer_heading_rad", "steer_speed_m_s",
+        "path_progress_m", "gait")},
     "placement_xy": ["MotionPlayback", "MorphologyAdapt"],
     "fade_placement_xy": ["MotionPlayback", "MorphologyAdapt"],
     "locked": ["MotionPlayback", "MorphologyAdapt", "GroundAdapt"],
     **{name: ["MorphologyAdapt"] for name in (
         "lengths", "segment_mass_kg", "segment_com_fraction")},
-    **{name: ["GroundAdapt"] for name in ("footprint", "footprint_settled", "ground_ref")},
+    **{name: ["GroundAdapt"] for name in ("footprint_settled", "ground_ref")},
+    "footprint": ["MorphologyAdapt", "GroundAdapt"],
     **{name: ["ConstraintSolve"] for name in (
-        "goals", "solved_positions", "com_desired", "constraints.error", "constraints.weight",
+        "goals", "solved", "com_desired", "constraints.error", "constraints.weight",
         "constraints.enabled", "constraints.held")},
     "com": ["COMControl"],
     "com_error_m": ["COMControl"],
@@ -54,7 +57,7 @@ EXPECTED_WRITERS = {
         "positions", "posture", "local_rotations", "vertebrae", "frozen")},
 }
 #: Fields a system reads as the previous tick left them, before this tick's writer.
-LAST_TICK = {"posture"}
+LAST_TICK = {"posture", "footprint"}
 STORE_FIELDS = {f.name for f in dataclasses.fields(CharacterStore) if not f.name.startswith("_")}
 TABLE_FIELDS = {f.name for f in dataclasses.fields(ConstraintTable)}
 

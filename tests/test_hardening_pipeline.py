@@ -297,7 +297,7 @@ def test_the_readme_python_examples_run(capsys, monkeypatch):
     text = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
     section = text.split("## From Python", 1)[1].split("\n## ", 1)[0]
     blocks = [part.split("```", 1)[0] for part in section.split("```python\n")[1:]]
-    assert len(blocks) == 2
+    assert len(blocks) == 3  # the third, the frame budget: tests/test_solver_budget.py
     monkeypatch.chdir(Path(__file__).resolve().parents[1])
     exec(compile(blocks[0], "README.md", "exec"), {})
     captured = capsys.readouterr()

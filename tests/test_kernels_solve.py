@@ -136,7 +136,7 @@ def states():
 
 
 def both_states(args):
-    poses, lengths, goals, masses, com_fraction, settings, decoded = copy.deepcopy(args)
+    poses, lengths, goals, masses, com_fraction, settings, decoded = copy.deepcopy(args)[:7]
     reference = solver_shell._Solve(poses, lengths, goals, masses, com_fraction, settings, decoded)
     state = compiled.prepare(*copy.deepcopy((poses, lengths, goals, masses, com_fraction)),
                              decoded=copy.deepcopy(decoded))

@@ -6,12 +6,14 @@ characters in parallel (``prange``); per character, :func:`solve_character` owns
 follow the goals on its own body, the limbs (:mod:`.solve_limbs`), the head
 (:mod:`.solve_head`), the trunk (:mod:`.solve_trunk`, skipped when no goal's chain includes it;
 the row decoded again when it turned), the root (:mod:`.solve_root`), then the stopping rule
-(every goal met or stalled and the centre of mass back; the budget ``iterations``), and the
+(every goal met or stalled and the centre of mass back; its budget of iterations), and the
 final re-plant of the limbs and the head. Each character stops on its own goals: its result does
 not depend on who else is solved, nor on the thread count.
 
-The goals come from the numpy :func:`ecs_anim.solver_shell.tick_goals`; :func:`solve` sorts them
-by character, precomputes the winners and calls the kernel.
+The goals come from the numpy :func:`ecs_anim.solver_shell.tick_goals`, already sorted by
+character (then nothing is copied); :func:`character_winners` picks the goal each limb and the
+head serve, and the frame budget's caps (``Goals.iterations``, ``Bodies.iterations``) bound each
+goal's and each character's iterations.
 """
 
 from __future__ import annotations
@@ -23,16 +25,16 @@ import numpy as np
 from numba import njit, prange
 from numpy.typing import NDArray
 
-from ..constraint_table import winners
+from ..body_points import HEAD
 from ..ground_adapt import MAX_LEG_EXTENSION
 from ..normalized import DecodedPose, NormalizedPoses
 from ..rotations import normalize
 from ..solver_shell import (
     CONTACT_PRIORITY,
     DEFAULT_SETTINGS,
-    LIMB_OF_GROUP,
     SolverSettings,
     TickGoals,
+    iteration_caps,
 )
 from .decode import DecodedArrays, PoseArrays, decode_row
 from .solve_head import solve_head
@@ -75,12 +77,14 @@ def follow_own_targets(c: int, dec: DecodedArrays, g: Goals, t: Tables) -> None:
 @njit(cache=True)
 def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners,
                     b: Bodies, t: Tables, err: F64, stalled: B8, previous: F64, slow_before: B8,
-                    iterations: int, tolerance_m: float, tolerance_rad: float,
+                    tolerance_m: float, tolerance_rad: float,
                     com_tolerance_m: float, max_ccd_step_rad: float, root_gain: float,
                     stall_fraction: float, leg_extension: float) -> int:
     """Solve character ``c``'s goals (its rows of ``pose`` and ``dec`` in place; ``err``,
-    ``stalled``, ``previous``, ``slow_before`` (k,) per-goal scratch). Returns the iterations
-    it used. Mirrors the loop of :func:`ecs_anim.solver_shell.solve` for one character."""
+    ``stalled``, ``previous``, ``slow_before`` (k,) per-goal scratch) in at most
+    ``b.iterations[c]`` iterations, each goal keeping the loop going for at most
+    ``g.iterations`` of them. Returns the iterations it used. Mirrors the loop of
+    :func:`ecs_anim.solver_shell.solve` for one character."""
     start, stop = g.start[c], g.start[c + 1]
     uses_trunk = False
     on_self = False
@@ -97,9 +101,9 @@ def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: W
     uses_head = w.first_head[c] >= 0 or w.orient_head[c] >= 0
     positions, seg_proximal, seg_distal = dec.positions, t.seg_proximal, t.seg_distal
     orientation, segment, fraction, offset = g.orientation, g.segment, g.fraction, g.offset
-    goal, priority = g.goal, g.priority
+    goal, priority, goal_iterations = g.goal, g.priority, g.iterations
     used = 0
-    for _ in range(iterations):
+    for _ in range(b.iterations[c]):
         used += 1
         if on_self:
             follow_own_targets(c, dec, g, t)
@@ -132,8 +136,9 @@ def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: W
             unchanged = not first and abs(previous[j] - e) < tolerance_m
             slow = not first and previous[j] - e < stall_fraction * previous[j]
             planted = priority[j] == math.inf
+            cut = used >= goal_iterations[j]  # the frame budget gave it no more iterations
             goal_open = (e > tol and not unchanged and not (slow and slow_before[j])
-                         and not stalled[j] and not planted)
+                         and not stalled[j] and not planted and not cut)
             if e > tol and not goal_open:
                 stalled[j] = True
             previous[j] = e
@@ -152,7 +157,7 @@ def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: W
 
 @njit(cache=True, parallel=True)
 def solve_rows(pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners, b: Bodies,
-               t: Tables, used: I64, iterations: int, tolerance_m: float, tolerance_rad: float,
+               t: Tables, used: I64, tolerance_m: float, tolerance_rad: float,
                com_tolerance_m: float, max_ccd_step_rad: float, root_gain: float,
                stall_fraction: float, leg_extension: float) -> None:
     """Solve every character (rows 0..r-1 of ``pose``, ``dec``, ``b``; goals ``g``) in
@@ -164,15 +169,63 @@ def solve_rows(pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners, b: Bo
     slow_before = np.zeros(k, np.bool_)
     for c in prange(used.shape[0]):
         used[c] = solve_character(c, pose, dec, g, w, b, t, err, stalled, previous, slow_before,
-                                  iterations, tolerance_m, tolerance_rad, com_tolerance_m,
+                                  tolerance_m, tolerance_rad, com_tolerance_m,
                                   max_ccd_step_rad, root_gain, stall_fraction, leg_extension)
 
 
-def sorted_goals(goals: TickGoals) -> tuple[Goals, Winners, I64]:
+@njit(cache=True)
+def character_winners(c: int, g: Goals, w: Winners, limb_of_group: I64, head_group: int) -> None:
+    """Mirrors :func:`ecs_anim.constraint_table.winners` as ``ecs_anim.solver_shell._Solve``
+    uses it, for character ``c``: per limb its highest-priority point goal (``first_limb``),
+    the next (``second_limb``) and its orientation goal; the head's point and orientation goal
+    (-1: none). Ties go to the goal added last (the later index: the goals are sorted stably)."""
+    first_limb, second_limb, orient_limb = w.first_limb, w.second_limb, w.orient_limb
+    first_head, orient_head = w.first_head, w.orient_head
+    group, orientation, priority = g.group, g.orientation, g.priority
+    for slot in range(4):
+        first_limb[c, slot] = -1
+        second_limb[c, slot] = -1
+        orient_limb[c, slot] = -1
+    first_head[c] = -1
+    orient_head[c] = -1
+    start, stop = g.start[c], g.start[c + 1]
+    for j in range(start, stop):
+        slot = limb_of_group[group[j]]
+        p = priority[j]
+        if slot >= 0:
+            if orientation[j]:
+                if orient_limb[c, slot] < 0 or p >= priority[orient_limb[c, slot]]:
+                    orient_limb[c, slot] = j
+            elif first_limb[c, slot] < 0 or p >= priority[first_limb[c, slot]]:
+                first_limb[c, slot] = j
+        elif group[j] == head_group:
+            if orientation[j]:
+                if orient_head[c] < 0 or p >= priority[orient_head[c]]:
+                    orient_head[c] = j
+            elif first_head[c] < 0 or p >= priority[first_head[c]]:
+                first_head[c] = j
+    for j in range(start, stop):
+        slot = limb_of_group[group[j]]
+        if (slot >= 0 and not orientation[j] and j != first_limb[c, slot]
+                and (second_limb[c, slot] < 0 or priority[j] >= priority[second_limb[c, slot]])):
+            second_limb[c, slot] = j
+
+
+@njit(cache=True, parallel=True)
+def winners_rows(g: Goals, w: Winners, limb_of_group: I64, head_group: int) -> None:
+    """:func:`character_winners` of every character (rows 0..r-1), in parallel, in place."""
+    for c in prange(g.start.shape[0] - 1):
+        character_winners(c, g, w, limb_of_group, head_group)
+
+
+def sorted_goals(goals: TickGoals, settings: SolverSettings = DEFAULT_SETTINGS) -> tuple[Goals, Winners, I64]:
     """The goals sorted by character (stable: ties between priorities still go to the goal
-    added last), their winners, and the order (k,) taking ``goals``' indices to the sorted."""
+    added last), their winners, and the order (k,) taking ``goals``' indices to the sorted.
+    :func:`ecs_anim.solver_shell.tick_goals` makes them sorted already: then nothing is
+    copied (``goal`` is the same array)."""
     r, k = int(goals.rows.size), goals.k
-    order = np.argsort(goals.owner, kind="stable")
+    already = bool(np.all(goals.owner[1:] >= goals.owner[:-1]))
+    order = np.arange(k) if already else np.argsort(goals.owner, kind="stable")
     owner = goals.owner[order]
     start = np.zeros(r + 1, np.int64)
     np.cumsum(np.bincount(owner, minlength=r), out=start[1:])
@@ -187,41 +240,30 @@ def sorted_goals(goals: TickGoals) -> tuple[Goals, Winners, I64]:
         self_fraction[goals.on_self] = goals.self_fraction
         self_offset[goals.on_self] = goals.self_offset
         self_at[goals.on_self] = goals.self_start
+    goal_iterations, _ = iteration_caps(goals, settings)
 
-    def take(a: np.ndarray) -> np.ndarray:
-        return np.ascontiguousarray(a[order])
+    def take(a: np.ndarray, dtype: type) -> np.ndarray:
+        return np.ascontiguousarray(a if already else a[order], dtype=dtype)
 
-    g = Goals(start=start, table_index=take(goals.table_index).astype(np.int64),
-              orientation=take(goals.orientation).astype(np.bool_),
-              group=take(goals.group).astype(np.int64), bone=take(goals.bone).astype(np.int64),
-              segment=take(goals.segment).astype(np.int64),
-              fraction=take(goals.fraction).astype(np.float64),
-              offset=take(goals.offset).astype(np.float64), chain=take(goals.chain).astype(np.int64),
-              priority=take(goals.priority).astype(np.float64),
-              goal=take(goals.goal).astype(np.float64), axis=take(goals.axis).astype(np.float64),
-              on_self=take(on_self), self_segment=take(self_segment),
-              self_fraction=take(self_fraction), self_offset=take(self_offset),
-              self_at=take(self_at))
-    is_point = ~g.orientation
-    limb = LIMB_OF_GROUP[g.group]
-    on_limb = limb >= 0
-    first_limb = winners(owner, limb, g.priority, on_limb & is_point, r, 4)
-    taken = np.zeros(k, bool)
-    taken[first_limb[first_limb >= 0]] = True
-    zero = np.zeros(k, np.int64)
-    on_head = g.group == 2
-    w = Winners(first_limb=first_limb,
-                second_limb=winners(owner, limb, g.priority, on_limb & is_point & ~taken, r, 4),
-                orient_limb=winners(owner, limb, g.priority, on_limb & g.orientation, r, 4),
-                first_head=np.ascontiguousarray(
-                    winners(owner, zero, g.priority, on_head & is_point, r, 1)[:, 0]),
-                orient_head=np.ascontiguousarray(
-                    winners(owner, zero, g.priority, on_head & g.orientation, r, 1)[:, 0]))
+    g = Goals(start=start, table_index=take(goals.table_index, np.int64),
+              orientation=take(goals.orientation, np.bool_), group=take(goals.group, np.int64),
+              bone=take(goals.bone, np.int64), segment=take(goals.segment, np.int64),
+              fraction=take(goals.fraction, np.float64), offset=take(goals.offset, np.float64),
+              chain=take(goals.chain, np.int64), priority=take(goals.priority, np.float64),
+              goal=take(goals.goal, np.float64), axis=take(goals.axis, np.float64),
+              on_self=take(on_self, np.bool_), self_segment=take(self_segment, np.int64),
+              self_fraction=take(self_fraction, np.float64),
+              self_offset=take(self_offset, np.float64), self_at=take(self_at, np.float64),
+              iterations=take(goal_iterations, np.int64))
+    w = Winners(first_limb=np.empty((r, 4), np.int64), second_limb=np.empty((r, 4), np.int64),
+                orient_limb=np.empty((r, 4), np.int64), first_head=np.empty(r, np.int64),
+                orient_head=np.empty(r, np.int64))
+    winners_rows(g, w, TABLES.limb_of_group, HEAD)
     return g, w, order
 
 
 class SolveState(NamedTuple):
-    """What :func:`solve_rows` works on: copies of the solved characters' pose and decoded rows
+    """What :func:`solve_rows` works on: the solved characters' pose and decoded rows
     (written in place), their goals sorted by character (``order`` (k,) takes the
     :class:`~ecs_anim.solver_shell.TickGoals` indices to the sorted ones), the winners and the
     bodies."""
@@ -235,44 +277,55 @@ class SolveState(NamedTuple):
 
 
 def prepare(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64,
-            com_fraction: F64, decoded: DecodedPose | None = None) -> SolveState:
-    """Gather the solve state of :func:`solve` (the arguments are the same)."""
+            com_fraction: F64, decoded: DecodedPose | None = None,
+            settings: SolverSettings = DEFAULT_SETTINGS, in_place: bool = False) -> SolveState:
+    """Gather the solve state of :func:`solve` (the arguments are the same): copies of
+    ``poses`` and ``decoded``, or with ``in_place`` those arrays themselves (when already
+    float64 and C-contiguous)."""
     from .decode import decode as decode_compiled
 
-    g, w, order = sorted_goals(goals)
-    pose = PoseArrays(*(np.array(getattr(poses, name), dtype=np.float64, order="C")
-                        for name in PoseArrays._fields))
+    g, w, order = sorted_goals(goals, settings)
+
+    def own(a: np.ndarray) -> np.ndarray:
+        return (np.ascontiguousarray(a, dtype=np.float64) if in_place
+                else np.array(a, dtype=np.float64, order="C"))
+
+    pose = PoseArrays(*(own(getattr(poses, name)) for name in PoseArrays._fields))
     lengths = np.ascontiguousarray(lengths, dtype=np.float64)
     if decoded is None:
         decoded = decode_compiled(poses, lengths)
-    dec = DecodedArrays(*(np.array(getattr(decoded, name), dtype=np.float64, order="C")
-                          for name in DecodedArrays._fields))
+    dec = DecodedArrays(*(own(getattr(decoded, name)) for name in DecodedArrays._fields))
     p = dec.positions
     foot_in_world = normalize(p[:, TABLES.toe] - p[:, TABLES.ankle])
+    _, row_iterations = iteration_caps(goals, settings)
     b = Bodies(lengths=lengths, masses=np.ascontiguousarray(masses, dtype=np.float64),
                com_fraction=np.ascontiguousarray(com_fraction, dtype=np.float64),
                footprint=np.ascontiguousarray(goals.footprint, dtype=np.float64),
                in_contact=np.ascontiguousarray(goals.in_contact, dtype=np.bool_),
                com_desired=np.ascontiguousarray(goals.com_desired, dtype=np.float64),
                com_on=np.ascontiguousarray(goals.com_on, dtype=np.bool_),
-               foot_in_world=np.ascontiguousarray(foot_in_world))
+               foot_in_world=np.ascontiguousarray(foot_in_world),
+               iterations=np.ascontiguousarray(row_iterations, dtype=np.int64))
     return SolveState(pose, dec, g, w, b, order)
 
 
 def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, com_fraction: F64,
-          settings: SolverSettings = DEFAULT_SETTINGS,
-          decoded: DecodedPose | None = None) -> tuple[NormalizedPoses, I64, DecodedPose]:
+          settings: SolverSettings = DEFAULT_SETTINGS, decoded: DecodedPose | None = None,
+          in_place: bool = False) -> tuple[NormalizedPoses, I64, DecodedPose]:
     """Compiled :func:`ecs_anim.solver_shell.solve`: the same arguments and results (the new
     poses (r,), the iterations each character used (r,), the decoded result). ``goals.goal``
-    ends where goals following a point of their own body have moved, as there."""
-    state = prepare(poses, lengths, goals, masses, com_fraction, decoded)
+    ends where goals following a point of their own body have moved, as there. With
+    ``in_place`` the given ``poses`` and ``decoded`` are the caller's scratch copies: they are
+    solved in place (and returned) instead of copied."""
+    state = prepare(poses, lengths, goals, masses, com_fraction, decoded, settings, in_place)
     used = np.zeros(goals.rows.size, np.int64)
     s = settings
     solve_rows(state.pose, state.dec, state.goals, state.winners, state.bodies, TABLES, used,
-               int(s.iterations), float(s.tolerance_m), float(s.tolerance_rad),
+               float(s.tolerance_m), float(s.tolerance_rad),
                float(s.com_tolerance_m), float(s.max_ccd_step_rad), float(s.root_gain),
                float(s.stall_fraction), float(MAX_LEG_EXTENSION))
-    goals.goal[state.order] = state.goals.goal
+    if state.goals.goal is not goals.goal:
+        goals.goal[state.order] = state.goals.goal
     return (NormalizedPoses(**dict(zip(PoseArrays._fields, state.pose, strict=True))), used,
             DecodedPose(*state.dec))
 

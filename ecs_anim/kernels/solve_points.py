@@ -49,7 +49,8 @@ class Tables(NamedTuple):
     [leg_l, leg_r, arm_l, arm_r] its root, middle, end and distal-end joints; limb_length (4, 3)
     its upper, lower and distal lengths; group_limb_root, group_limb_middle (6,) per group the
     root and middle joint of the limb the trunk carries (-1: none); upper_body (13,) the joints
-    a trunk turn carries; mass_proximal, mass_distal (n_segments,) the joints bounding each mass
+    a trunk turn carries; limb_of_group (6,) per group its limb slot (-1: not a limb);
+    mass_proximal, mass_distal (n_segments,) the joints bounding each mass
     segment; hip, ankle, toe (2,) joints; thigh, shank (2,) lengths; then single joints and
     lengths."""
 
@@ -61,6 +62,7 @@ class Tables(NamedTuple):
     group_limb_root: I64
     group_limb_middle: I64
     upper_body: I64
+    limb_of_group: I64
     mass_proximal: I64
     mass_distal: I64
     hip: I64
@@ -95,6 +97,7 @@ def tables() -> Tables:
         upper_body=_ints([J[n] for n in ("spine_1", "spine_2", "neck", "head", "head_top",
                                          "shoulder_l", "elbow_l", "wrist_l", "hand_l",
                                          "shoulder_r", "elbow_r", "wrist_r", "hand_r")]),
+        limb_of_group=_ints([0, 1, -1, 2, 3, -1]),
         mass_proximal=_ints([J[s[1]] for s in MASS_SEGMENTS]),
         mass_distal=_ints([J[s[2]] for s in MASS_SEGMENTS]),
         hip=_ints([J["hip_l"], J["hip_r"]]), ankle=_ints([J["ankle_l"], J["ankle_r"]]),
@@ -111,7 +114,9 @@ class Goals(NamedTuple):
     start (r + 1,): character ``c``'s goals are ``start[c]:start[c + 1]``; the others as in
     :class:`ecs_anim.solver_shell.TickGoals` (k,) / (k, 3); ``goal`` is moved by goals that
     follow a point of their own body: ``on_self`` (k,) bool, that point's ``self_segment``,
-    ``self_fraction``, ``self_offset`` and where it is now, ``self_at`` (k, 3)."""
+    ``self_fraction``, ``self_offset`` and where it is now, ``self_at`` (k, 3); ``iterations``
+    (k,) the iterations after which a goal no longer keeps its character's loop going nor
+    turns the trunk (the frame budget's cut; the settings' ``iterations`` when uncut)."""
 
     start: I64
     table_index: I64
@@ -130,6 +135,7 @@ class Goals(NamedTuple):
     self_fraction: F64
     self_offset: F64
     self_at: F64
+    iterations: I64
 
 
 class Winners(NamedTuple):
@@ -146,7 +152,8 @@ class Winners(NamedTuple):
 class Bodies(NamedTuple):
     """Per solved character: lengths (r, N_LENGTHS) m; masses (r, S) kg and com_fraction (r, S);
     footprint (r, 2, 3) where each foot must stay; in_contact (r, 2); com_desired (r, 3);
-    com_on (r,); foot_in_world (r, 2, 3) each foot's world direction before the solve."""
+    com_on (r,); foot_in_world (r, 2, 3) each foot's world direction before the solve;
+    iterations (r,) the most iterations each character gets this tick."""
 
     lengths: F64
     masses: F64
@@ -156,6 +163,7 @@ class Bodies(NamedTuple):
     com_desired: F64
     com_on: B8
     foot_in_world: F64
+    iterations: I64
 
 
 @njit(cache=True, inline="always")

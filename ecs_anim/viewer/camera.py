@@ -109,6 +109,15 @@ class OrbitCamera:
         """Pixels (..., 2), top-left origin, of world points (..., 3) in a width x height image."""
         return project_points(points_in_world, self.world2clip(width, height), width, height)
 
+    def pixel_ray(self, x_px: float, y_px: float, width: int, height: int) -> tuple[F64, F64]:
+        """The ray from the eye through pixel (x_px, y_px) (top-left origin, y down) of a
+        width x height image: its origin (3,) (the eye) and unit direction (3,), world."""
+        clip2world = np.linalg.inv(self.world2clip(width, height))
+        ndc_x, ndc_y = 2.0 * x_px / width - 1.0, 1.0 - 2.0 * y_px / height
+        far = clip2world @ np.array([ndc_x, ndc_y, 1.0, 1.0])
+        direction = far[:3] / far[3] - self.eye
+        return self.eye, direction / max(float(np.linalg.norm(direction)), 1e-12)
+
     # --- interaction ---------------------------------------------------------------------
 
     def orbit(self, d_yaw_rad: float, d_pitch_rad: float) -> OrbitCamera:

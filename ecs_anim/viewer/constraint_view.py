@@ -9,7 +9,7 @@ per-constraint ``error``). Read-only (STYLE 8).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -36,7 +36,9 @@ class ConstraintMarks:
 
     target (m, 3) and point (m, 3): world metres, where the constrained point should be and
     where it is; priority (m,); weight (m,) activation in (0, 1]; error_m (m,) how far each is
-    from being met (the solver's own figure where the table keeps one).
+    from being met (the solver's own figure where the table keeps one); uid (m,) each one's id
+    (for :meth:`Simulation.set_target`); in_world (m,) bool whether its target is a world point
+    (which the viewer lets the user drag) rather than a point on a body.
     """
 
     target: F64
@@ -44,6 +46,8 @@ class ConstraintMarks:
     priority: F64
     weight: F64
     error_m: F64
+    uid: I64 = field(default_factory=lambda: np.zeros(0, np.int64))
+    in_world: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
 
 
 @dataclass(frozen=True)
@@ -126,8 +130,10 @@ def constraint_marks(sim: Simulation) -> ConstraintMarks:
         error = np.where(np.isfinite(solver_error), solver_error, error)
     keep = ((weight > 0) & (kind != KIND_ORIENTATION) & (kind != KIND_AREA)
             & np.all(np.isfinite(target), axis=1) & np.all(np.isfinite(point), axis=1))
+    uid = np.asarray(getattr(table, "uid", np.arange(table.m)), dtype=np.int64)
+    in_world = np.asarray(table.target_kind) == TARGET_WORLD
     return ConstraintMarks(target[keep], point[keep], np.asarray(table.priority)[keep],
-                           weight[keep], error[keep])
+                           weight[keep], error[keep], uid[keep], in_world[keep])
 
 
 def max_constraint_error_m(sim: Simulation) -> float | None:

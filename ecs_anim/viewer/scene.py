@@ -230,8 +230,11 @@ class SceneFrame:
 
     bodies, targets, com, areas, props : (k, INSTANCE_FLOATS) float32 instance rows (areas
     are drawn last, blended, without writing depth; props are the scenario's tables);
-    joints (n, N_JOINTS, 3) world metres (for framing); time_s the posture's simulation time; max_error_m the largest error (m) of the fully active constraints, all kinds
-    but orientations (None without any); n_characters.
+    joints (n, N_JOINTS, 3) world metres (for framing and labels); time_s the posture's
+    simulation time; max_error_m the largest error (m) of the fully active constraints, all
+    kinds but orientations (None without any); n_characters; rows (n,) the store row of each
+    drawn character (those with a finite posture); marks the point constraints drawn as
+    ``targets`` (their first ``m`` rows are the target spheres, in the marks' order).
     """
 
     bodies: F32
@@ -243,13 +246,29 @@ class SceneFrame:
     max_error_m: float | None
     n_characters: int
     props: F32 = field(default_factory=lambda: np.zeros((0, INSTANCE_FLOATS), np.float32))
+    rows: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    marks: ConstraintMarks | None = None
 
 
-def snapshot(sim: Simulation, colours: F64 | None = None) -> SceneFrame:
+#: A picked character is drawn this far from its colour towards white.
+HIGHLIGHT_MIX = 0.6
+
+
+def highlighted(colours: F64, rows: NDArray[np.int64]) -> F64:
+    """``colours`` (n, 3) with the characters at ``rows`` lightened (:data:`HIGHLIGHT_MIX`
+    of the way to white): how the viewer shows the picked character."""
+    out = np.array(colours, dtype=np.float64)
+    out[rows] = (1.0 - HIGHLIGHT_MIX) * out[rows] + HIGHLIGHT_MIX
+    return out
+
+
+def snapshot(sim: Simulation, colours: F64 | None = None,
+             hidden_rows: NDArray[np.int64] | None = None) -> SceneFrame:
     """Build the frame for the posture now in ``sim.store`` (after at least one step).
 
     ``colours`` (n, 3) RGB per character; default: by team (:func:`team_colours`).
-    Characters whose posture is not finite are left out.
+    Characters whose posture is not finite are left out, and those at ``hidden_rows`` (ones
+    spawned since the last tick: they have no posture yet).
     """
     st = sim.store
     positions = st.positions
@@ -258,6 +277,8 @@ def snapshot(sim: Simulation, colours: F64 | None = None) -> SceneFrame:
     if positions.shape[0] != st.n:  # nothing stepped yet
         positions = np.full((st.n, len(JOINT_INDEX), 3), np.nan)
     ok = np.all(np.isfinite(positions), axis=(1, 2))
+    if hidden_rows is not None:
+        ok[hidden_rows] = False
     bodies = body_instances(positions[ok], st.lengths[ok], colours[ok])
     marks = constraint_marks(sim)
     targets = target_instances(marks)
@@ -269,7 +290,8 @@ def snapshot(sim: Simulation, colours: F64 | None = None) -> SceneFrame:
     return SceneFrame(bodies, targets, com_rows, area_instances(restricted_areas(sim)),
                       positions[ok].copy(),
                       sim.posture_time_s, max_constraint_error_m(sim), int(ok.sum()),
-                      table_instances(getattr(sim, "tables", ()), sim.ground))
+                      table_instances(getattr(sim, "tables", ()), sim.ground),
+                      np.flatnonzero(ok).astype(np.int64), marks)
 
 
 # --- the ground --------------------------------------------------------------------------
