@@ -132,10 +132,15 @@ def adapt_keeping_heels_up(c: int, pose: PoseArrays, scaled: DecodedArrays, leng
     kinds, params, grid = ground
     root_position, leg_frame, leg_fraction = pose.root_position, pose.leg_frame, pose.leg_fraction
     positions, pelvis2world, leg2world = scaled.positions, scaled.pelvis2world, scaled.leg2world
-    adapt_to_ground(c, root_position, leg_frame, leg_fraction, positions, pelvis2world,
-                    leg2world, lengths_row, leg, targets, weights, root_height, max_extension)
-    legs = decode_legs_row(c, pose, lengths_row, lengths_row)
-    for _ in range(passes):
+    # One call site each for the two inlined steps (numba compiles an inlined body at each):
+    # the first pass adapts to the targets given, the next ones to the lifted targets.
+    for lift in range(passes + 1):
+        adapt_to_ground(c, root_position, leg_frame, leg_fraction, positions, pelvis2world,
+                        leg2world, lengths_row, leg, targets, weights, root_height,
+                        max_extension)
+        legs = decode_legs_row(c, pose, lengths_row, lengths_row)
+        if lift == passes:
+            break
         ankles = legs[4]
         d0 = height_at(ankles[0][0], ankles[0][1], kinds, params, grid) + ankle_height[0] \
             - ankles[0][2]
@@ -145,10 +150,6 @@ def adapt_keeping_heels_up(c: int, pose: PoseArrays, scaled: DecodedArrays, leng
             break
         t0, t1 = targets
         targets = ((t0[0], t0[1], t0[2] + max(d0, 0.0)), (t1[0], t1[1], t1[2] + max(d1, 0.0)))
-        adapt_to_ground(c, root_position, leg_frame, leg_fraction, positions, pelvis2world,
-                        leg2world, lengths_row, leg, targets, weights, root_height,
-                        max_extension)
-        legs = decode_legs_row(c, pose, lengths_row, lengths_row)
     return legs[4], legs[5], legs[7]
 
 
