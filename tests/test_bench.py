@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import shlex
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -156,7 +157,7 @@ def test_a_first_run_says_once_that_it_compiles(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(kernels, "uncompiled_kernels", lambda: ["decode"])
     assert main(["run", SCENARIO, "--seconds", "0.1"]) == 0
     err = capsys.readouterr().err
-    assert err.count("compiling the tick's kernels once (a few minutes); cached in ") == 1
+    assert err.count("compiling the tick's kernels once (about a minute); cached in ") == 1
     assert str(kernels.cache_dir()) in err
     assert main(["bench", "import", "nope.bvh"]) == 1  # no tick: nothing said
     assert "compiling" not in capsys.readouterr().err
@@ -165,6 +166,63 @@ def test_a_first_run_says_once_that_it_compiles(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(kernels, "uncompiled_kernels", lambda: [])
     assert main(["run", SCENARIO, "--seconds", "0.1"]) == 0
     assert "compiling" not in capsys.readouterr().err
+
+
+class _FakeProcess:
+    """Stands for the process compiling the solver aside: records the command and the waits."""
+
+    started: ClassVar[list[tuple[str, ...]]] = []
+
+    def __init__(self, command, **_: object) -> None:
+        self.started.append(tuple(command))
+        self.waited = 0
+
+    def wait(self) -> int:
+        self.waited += 1
+        return 0
+
+    def poll(self) -> int:
+        return 0
+
+
+def test_a_first_run_compiles_the_solver_in_a_second_process_and_the_solve_waits_for_it(
+        monkeypatch):
+    monkeypatch.setattr("ecs_anim.kernels.subprocess.Popen", _FakeProcess)
+    monkeypatch.setattr("ecs_anim.kernels.os.sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    _FakeProcess.started = []
+    monkeypatch.setattr(kernels, "_solver_compile", {})
+    monkeypatch.setattr(kernels, "uncompiled_kernels", lambda: [])
+    kernels.compile_solver_aside()  # compiled already: nothing started, not asked again
+    monkeypatch.setattr(kernels, "uncompiled_kernels", lambda: ["posture", "solve"])
+    kernels.compile_solver_aside()
+    assert _FakeProcess.started == []
+    monkeypatch.setattr(kernels, "_solver_compile", {})
+    monkeypatch.setattr("ecs_anim.kernels.os.sched_getaffinity", lambda pid: {0}, raising=False)
+    kernels.compile_solver_aside()  # one core: this process compiles everything itself
+    assert _FakeProcess.started == []
+    monkeypatch.setattr(kernels, "_solver_compile", {})
+    monkeypatch.setattr("ecs_anim.kernels.os.sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    kernels.compile_solver_aside()
+    kernels.compile_solver_aside()  # once per process
+    assert _FakeProcess.started == [kernels.SOLVER_COMMAND]
+    child = kernels._solver_compile["process"]
+    assert isinstance(child, _FakeProcess)
+    BenchScene(2, constrained=True).tick()  # the solve waits for the other process, once
+    kernels.wait_for_solver()
+    assert child.waited == 1 and kernels._solver_compile["process"] is None
+
+
+def test_the_solver_compiled_aside_is_the_one_a_solve_runs():
+    """``python -m ecs_anim.kernels --solver`` (solving no character) compiles solve_rows for
+    the argument types of a real solve: a real solve then finds it (no second compilation)."""
+    from ecs_anim.kernels.__main__ import compile_solver
+    from ecs_anim.kernels.solve import solve_rows
+
+    scene = BenchScene(2, constrained=True)
+    scene.tick()
+    scene.sim.close()
+    compile_solver()
+    assert len(solve_rows.signatures) == 1
 
 
 def _readme_commands(section: str) -> list[list[str]]:

@@ -5,14 +5,18 @@ as the reference the tests compare it with (to 1e-9 m). ``vec`` holds the scalar
 share: 3-vectors as tuples, frames as tuples of their three axes.
 
 Compiled code is cached in the user's cache folder (``$XDG_CACHE_HOME/ecs_anim/numba``, else
-``~/.cache/ecs_anim/numba``) unless ``NUMBA_CACHE_DIR`` says where: the first run compiles (tens
-of seconds), later ones load in a fraction of a second. This must be set before numba is
-imported, so the package imports its kernels only through here.
+``~/.cache/ecs_anim/numba``) unless ``NUMBA_CACHE_DIR`` says where: the first run compiles (about
+a minute, the solver in a second process: :func:`compile_solver_aside`), later ones load in a
+fraction of a second. This must be set before numba is imported, so the package imports its
+kernels only through here.
 """
 
 from __future__ import annotations
 
+import atexit
 import os
+import subprocess
+import sys
 from collections.abc import Callable
 from pathlib import Path
 
@@ -130,7 +134,7 @@ def compile_notice() -> str | None:
     first run on a machine, or after an update), else None."""
     if not uncompiled_kernels():
         return None
-    return f"compiling the tick's kernels once (a few minutes); cached in {cache_dir()}"
+    return f"compiling the tick's kernels once (about a minute); cached in {cache_dir()}"
 
 
 _announcers: list[Callable[[str], None]] = []
@@ -144,12 +148,58 @@ def announce_compiling(say: Callable[[str], None] | None) -> None:
 
 def before_first_tick() -> None:
     """Called by :meth:`ecs_anim.simulation.Simulation.step` before a simulation's first tick:
-    says, once per process, what :func:`announce_compiling` asked for."""
+    says, once per process, what :func:`announce_compiling` asked for, and starts compiling the
+    solver aside if it has to be (:func:`compile_solver_aside`)."""
     if _announcers:
         say = _announcers.pop()
         notice = compile_notice()
         if notice is not None:
             say(notice)
+    compile_solver_aside()
+
+
+#: The command of the process compiling the solver's kernel aside (``python -m ecs_anim.kernels
+#: --solver``): it calls :func:`ecs_anim.kernels.solve.solve` on no character.
+SOLVER_COMMAND = (sys.executable, "-m", "ecs_anim.kernels", "--solver")
+_solver_compile: dict[str, subprocess.Popen[bytes] | None] = {}
+
+
+def compile_solver_aside() -> None:
+    """Once per process: when the solver's kernel (about half of the compile time on its own)
+    is not compiled yet and this process may use two cores or more, compile it in a second
+    process while this one compiles the others; :func:`wait_for_solver` (the solve, before its
+    kernel) then waits for it and loads its code from the cache. A process that ends before
+    (a scene without constraints) stops it."""
+    if "process" in _solver_compile:
+        return
+    _solver_compile["process"] = None
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    if (cores or 1) < 2 or "solve" not in uncompiled_kernels():
+        return
+    try:
+        child = subprocess.Popen(SOLVER_COMMAND, stdout=subprocess.DEVNULL,
+                                 stderr=subprocess.DEVNULL)
+    except OSError:  # cannot start a process: this one compiles the solver itself
+        return
+    _solver_compile["process"] = child
+    atexit.register(_stop_solver_compile)
+
+
+def wait_for_solver() -> None:
+    """Called by :func:`ecs_anim.kernels.solve.solve` before its kernel: wait for the solver
+    compiling aside, if it is. Whatever became of it, the kernel then loads from the cache, or
+    compiles here (if the other process failed)."""
+    child = _solver_compile.get("process")
+    if child is not None:
+        child.wait()
+        _solver_compile["process"] = None
+
+
+def _stop_solver_compile() -> None:
+    child = _solver_compile.get("process")
+    if child is not None and child.poll() is None:
+        child.terminate()
+        child.wait()
 
 
 def available_threads() -> int:

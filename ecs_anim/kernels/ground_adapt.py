@@ -126,12 +126,16 @@ def adapt_keeping_heels_up(c: int, pose: LegPoseArrays, hips: tuple[Vec3, Vec3],
     shank2world) of the result.
     """
     root_position, leg_frame, leg_fraction = pose.root_position, pose.leg_frame, pose.leg_fraction
-    adapt_to_ground(c, root_position, leg_frame, leg_fraction, hips, pelvis_now_z,
-                    pelvis2world, leg2world, lengths, leg, targets, weights, root_height,
-                    max_extension)
     lengths_row = lengths[c]
-    legs = decode_legs_row(c, pose, lengths_row, lengths_row)
-    for _ in range(passes):
+    # One call site each for the two inlined steps (numba compiles an inlined body at each):
+    # the first pass adapts to the targets given, the next ones to the lifted targets.
+    for lift in range(passes + 1):
+        adapt_to_ground(c, root_position, leg_frame, leg_fraction, hips, pelvis_now_z,
+                        pelvis2world, leg2world, lengths, leg, targets, weights, root_height,
+                        max_extension)
+        legs = decode_legs_row(c, pose, lengths_row, lengths_row)
+        if lift == passes:
+            break
         ankles = legs[4]
         d0 = height_at(ankles[0][0], ankles[0][1], kinds, params, grid) + ankle_height[0] \
             - ankles[0][2]
@@ -141,10 +145,6 @@ def adapt_keeping_heels_up(c: int, pose: LegPoseArrays, hips: tuple[Vec3, Vec3],
             break
         t0, t1 = targets
         targets = ((t0[0], t0[1], t0[2] + max(d0, 0.0)), (t1[0], t1[1], t1[2] + max(d1, 0.0)))
-        adapt_to_ground(c, root_position, leg_frame, leg_fraction, hips, pelvis_now_z,
-                        pelvis2world, leg2world, lengths, leg, targets, weights, root_height,
-                        max_extension)
-        legs = decode_legs_row(c, pose, lengths_row, lengths_row)
     return legs[4], legs[5], legs[7]
 
 

@@ -256,7 +256,8 @@ def blend_rows(rows: I64, old: PoseArrays, w: F64, out: PoseArrays) -> None:
     rows ``rows``, in parallel: row ``c = rows[i]`` of ``out`` becomes row ``i`` of ``old``
     blended into it with the weight ``w[i]`` (in [0, 1]) of ``out``'s own pose."""
     for i in prange(rows.shape[0]):
-        blend_row(old, i, w[i], out, rows[i])
+        # np.int64: the loop's index is unsigned in numba's thread function (a second compile)
+        blend_row(old, np.int64(i), w[i], out, rows[i])  # type: ignore[arg-type]
 
 
 @njit(cache=True)

@@ -117,7 +117,9 @@ def swing_from(parent_frame: Frame, rest_axis: Vec3, direction: Vec3) -> Frame:
     return matmul(rotation_between(to_world(parent_frame, rest_axis), direction), parent_frame)
 
 
-@njit(cache=True, inline="always")
+# Not inlined: numba types an inlined body twice in a parallel loop (posture_rows,
+# local_rotations_rows), compiling for tens of seconds more.
+@njit(cache=True)
 def export_rotations_row(c: int, decoded: DecodedArrays, rest_hips: F64, out: F64) -> None:
     """Mirrors :func:`ecs_anim.exporting.export_rotations` for row ``c`` of ``decoded``: the
     world orientation (joint2world) of every export joint into ``out`` (N_EXPORT, 3, 3)."""

@@ -36,6 +36,7 @@ from ..solver_shell import (
     TickGoals,
     iteration_caps,
 )
+from . import wait_for_solver
 from .decode import DecodedArrays, PoseArrays, decode_row
 from .solve_head import solve_head
 from .solve_limbs import solve_limbs
@@ -103,13 +104,20 @@ def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: W
     orientation, segment, fraction, offset = g.orientation, g.segment, g.fraction, g.offset
     goal, priority, goal_iterations = g.goal, g.priority, g.iterations
     used = 0
-    for _ in range(b.iterations[c]):
-        used += 1
+    iterations = b.iterations[c]
+    done = iterations <= 0
+    # Each pass follows the goals on the body, then the limbs and the head; the last pass (the
+    # budget used, or every goal done) is the final re-plant, as the last root move shifted the
+    # limbs. One call site each: numba inlines these steps' bodies at every site it compiles.
+    while True:
         if on_self:
             follow_own_targets(c, dec, g, t)
         solve_limbs(c, pose, dec, g, w, b, t, tolerance_m, leg_extension)
         if uses_head:
             solve_head(c, pose, dec, g, w, b, t)
+        if done:
+            break
+        used += 1
         if uses_trunk:
             for j in range(start, stop):
                 err[j] = goal_error(dec, c, g, j, t)
@@ -144,14 +152,7 @@ def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: W
             previous[j] = e
             slow_before[j] = slow
             any_open = any_open or goal_open
-        if not any_open and com_error <= com_tolerance_m:
-            break
-    # The last root move shifted the limbs: re-plant the feet, re-aim the head and the arms.
-    if on_self:
-        follow_own_targets(c, dec, g, t)
-    solve_limbs(c, pose, dec, g, w, b, t, tolerance_m, leg_extension)
-    if uses_head:
-        solve_head(c, pose, dec, g, w, b, t)
+        done = used == iterations or (not any_open and com_error <= com_tolerance_m)
     return used
 
 
@@ -168,9 +169,13 @@ def solve_rows(pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners, b: Bo
     previous = np.zeros(k)
     slow_before = np.zeros(k, np.bool_)
     for c in prange(used.shape[0]):
-        used[c] = solve_character(c, pose, dec, g, w, b, t, err, stalled, previous, slow_before,
-                                  tolerance_m, tolerance_rad, com_tolerance_m,
-                                  max_ccd_step_rad, root_gain, stall_fraction, leg_extension)
+        # np.int64: the parallel loop's index is unsigned where numba builds the loop's thread
+        # function, and solve_character would be compiled a second time for uint64 (minutes).
+        row = np.int64(c)
+        used[c] = solve_character(row, pose, dec, g, w, b, t, err,  # type: ignore[arg-type]
+                                  stalled, previous, slow_before, tolerance_m, tolerance_rad,
+                                  com_tolerance_m, max_ccd_step_rad, root_gain, stall_fraction,
+                                  leg_extension)
 
 
 @njit(cache=True)
@@ -320,6 +325,7 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
     state = prepare(poses, lengths, goals, masses, com_fraction, decoded, settings, in_place)
     used = np.zeros(goals.rows.size, np.int64)
     s = settings
+    wait_for_solver()  # a first run may be compiling solve_rows in another process
     solve_rows(state.pose, state.dec, state.goals, state.winners, state.bodies, TABLES, used,
                float(s.tolerance_m), float(s.tolerance_rad),
                float(s.com_tolerance_m), float(s.max_ccd_step_rad), float(s.root_gain),
