@@ -4,6 +4,11 @@ Each kernel writes its results in place and mirrors a numpy function of the pack
 as the reference the tests compare it with (to 1e-9 m). ``vec`` holds the scalar helpers they
 share: 3-vectors as tuples, frames as tuples of their three axes.
 
+The kernels over characters are compiled ``nogil`` and take a range ``lo, hi`` of their loop's
+indices; :func:`over_chunks` runs one over all of them, split into contiguous chunks on
+:func:`threads` threads of this process (numba's ``parallel=True`` with ``prange``, used before,
+made the first compile half as long again).
+
 Compiled code is cached in the user's cache folder (``$XDG_CACHE_HOME/ecs_anim/numba``, else
 ``~/.cache/ecs_anim/numba``) unless ``NUMBA_CACHE_DIR`` says where: the first run compiles (about
 a minute, the solver in a second process: :func:`compile_solver_aside`), later ones load in a
