@@ -48,9 +48,9 @@ class Tables(NamedTuple):
     offsets are in (0..3 a limb slot, 4 pelvis, 5 thorax, 6 head); limb_joint (4, 4) per limb
     [leg_l, leg_r, arm_l, arm_r] its root, middle, end and distal-end joints; limb_length (4, 3)
     its upper, lower and distal lengths; group_limb_root, group_limb_middle (6,) per group the
-    root and middle joint of the limb the trunk carries (-1: none); mass_proximal, mass_distal (n_segments,) the joints bounding each mass
-    segment; hip, ankle, toe (2,) joints; thigh, shank (2,) lengths; then single joints and
-    lengths."""
+    root and middle joint of the limb the trunk carries (-1: none); mass_proximal, mass_distal
+    (n_segments,) the joints bounding each mass segment; hip, ankle, toe (2,) joints; thigh,
+    shank (2,) lengths; then single joints and lengths."""
 
     seg_proximal: I64
     seg_distal: I64
