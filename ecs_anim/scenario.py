@@ -1057,17 +1057,23 @@ def _point_ref(r: _Reader, node: Node, where: str, characters: list[CharacterSpe
         raise r.fail(node, where, str(exc)) from None
 
 
+def _kind_of(r: _Reader, node: Node, where: str, kinds: dict[str, Any], what: str) -> str:
+    """The kind of a trigger's condition or action: its mapping's first key, one of ``kinds``."""
+    if not isinstance(node, yaml.MappingNode) or not node.value:
+        raise r.fail(node, where, f"expected a mapping with one of {', '.join(kinds)}")
+    kind = str(node.value[0][0].value)
+    if kind not in kinds:
+        hint = did_you_mean(kind, list(kinds))
+        raise r.fail(node.value[0][0], f"{where}.{kind}", f"unknown {what}{hint} (expected one "
+                     f"of {', '.join(kinds)})")
+    return kind
+
+
 def _when(r: _Reader, node: Node, where: str, characters: list[CharacterSpec],
           motions: dict[str, NormalizedMotion], refs: list[tuple[int, str]]) -> Condition:
     from .events import AtTime, ClipEnded, ClipStarted, ContactBegan, Near, Reached, Removed
 
-    if not isinstance(node, yaml.MappingNode) or not node.value:
-        raise r.fail(node, where, f"expected a mapping with one of {', '.join(WHEN_KEYS)}")
-    kind = str(node.value[0][0].value)
-    if kind not in WHEN_KEYS:
-        hint = did_you_mean(kind, list(WHEN_KEYS))
-        raise r.fail(node.value[0][0], f"{where}.{kind}", f"unknown condition{hint} (expected one "
-                     f"of {', '.join(WHEN_KEYS)})")
+    kind = _kind_of(r, node, where, WHEN_KEYS, "condition")
     allowed = {kind: True} | {k: False for k in WHEN_KEYS[kind][1:]}
     if kind == "near":
         allowed |= {"to": True, "within_m": True}
@@ -1105,13 +1111,7 @@ def _action(r: _Reader, node: Node, where: str, characters: list[CharacterSpec],
             trigger_names: list[str]) -> Action:
     from .events import Arm, MoveTarget, Play, Remove, SetBody, SwitchOff, SwitchOn
 
-    if not isinstance(node, yaml.MappingNode) or not node.value:
-        raise r.fail(node, where, f"expected a mapping with one of {', '.join(ACTION_KEYS)}")
-    kind = str(node.value[0][0].value)
-    if kind not in ACTION_KEYS:
-        hint = did_you_mean(kind, list(ACTION_KEYS))
-        raise r.fail(node.value[0][0], f"{where}.{kind}", f"unknown action{hint} (expected one of "
-                     f"{', '.join(ACTION_KEYS)})")
+    kind = _kind_of(r, node, where, ACTION_KEYS, "action")
     allowed = {kind: True} | {k: False for k in ACTION_KEYS[kind]}
     if kind == "move_target":
         allowed["world_m"] = True

@@ -143,9 +143,6 @@ LIMB_EXTENSION = np.array([MAX_LEG_EXTENSION, MAX_LEG_EXTENSION, 1.0, 1.0])
 LIMB_ROOT_JOINT = np.array([-1, -1, J["neck"], J["shoulder_l"], J["shoulder_r"], -1])
 LIMB_MIDDLE_JOINT = np.array([-1, -1, J["head"], J["elbow_l"], J["elbow_r"], -1])
 LIMB_REACH_SHARE = 0.99
-UPPER_BODY_JOINTS = np.array([J[n] for n in ("spine_1", "spine_2", "neck", "head", "head_top",
-                                             "shoulder_l", "elbow_l", "wrist_l", "hand_l",
-                                             "shoulder_r", "elbow_r", "wrist_r", "hand_r")])
 
 
 @dataclass
@@ -460,7 +457,6 @@ class _Solve:
         # The characters still being solved: each stops when its own goals are met or stalled
         # and its centre of mass is back (so its result does not depend on who else is solved).
         self.active = np.ones(self.r, bool)
-        self.moved = np.zeros(self.r, bool)  # the trunk turned since the last decode
         # Goals that stopped improving (unreachable): the trunk no longer turns for them, so an
         # unreachable trunk goal ends where it stalled however long other goals keep the loop
         # going (turning on, the bent spine would drift it by millimetres).
@@ -478,17 +474,14 @@ class _Solve:
         orient = g.orientation[g.on_self]
         g.goal[g.on_self[~orient]] += shift[~orient]
 
-    def redecode(self) -> None:
-        """Decode again the characters whose trunk turned (a bent spine's joints are exact once
-        decoded); the others keep their decoded pose as their steps left it."""
-        rows = np.flatnonzero(self.moved)
-        if rows.size == 0:
-            return
+    def _decode(self, rows: I64) -> None:
+        """Decode ``rows`` (local) again from their poses (after a trunk turn: a bent spine's
+        joints are exact once decoded); the others keep their decoded pose as their steps left
+        it."""
         fresh = decode(self.poses.take(rows), self.lengths[rows])
         for name in ("positions", "pelvis2world", "thorax2world", "head2world", "leg2world",
                      "arm2world"):
             getattr(self.dec, name)[rows] = getattr(fresh, name)
-        self.moved[:] = False
 
     # --- limbs: analytic, all four at once (legs and arms do not move each other) ----------
     def limbs(self) -> None:
@@ -662,42 +655,33 @@ class _Solve:
             frames = segment_frames(dec, rows[o], g.segment[c[o]])
             axis = np.einsum("kij,kj->ki", frames, g.axis[c[o]])
             turn[o] = rotation_toward(axis, g.goal[c[o]], s.max_ccd_step_rad)
-        # A move that worsens any higher-priority goal the trunk carries is not made.
-        row_turn = np.broadcast_to(np.eye(3), (self.r, 3, 3)).copy()
-        row_turn[rows] = turn
-        winner_priority = np.full(self.r, np.inf)
-        winner_priority[rows] = g.priority[c]
-        higher = carried & self.is_point & (g.priority > winner_priority[g.owner])
-        h = np.flatnonzero(higher)
-        if h.size:
-            base_h = dec.positions[g.owner[h], J["pelvis"]]
-            point_h = point_positions(dec, g.owner[h], g.segment[h], g.fraction[h], g.offset[h])
-            moved = base_h + np.einsum("kij,kj->ki", row_turn[g.owner[h]], point_h - base_h)
-            worse = np.linalg.norm(moved - g.goal[h], axis=1) > err[h] + s.tolerance_m
-            veto = np.zeros(self.r, bool)
-            veto[g.owner[h][worse]] = True
-            keep = ~veto[rows]
-            rows, turn, base = rows[keep], turn[keep], base[keep]
-            if rows.size == 0:
-                return
-        # Spread the turn along the spine (a third, two thirds, all of it at the neck); the
-        # thorax, and all it carries, turns by all of it.
+        # Spread the turn along the spine (a third, two thirds, all of it at the neck); the thorax,
+        # and all it carries, turns by all of it.
+        spine_before, thorax_before = poses.spine_points[rows].copy(), poses.thorax[rows].copy()
         pelvis_t = np.swapaxes(dec.pelvis2world[rows], -1, -2)
         turn_in_pelvis = pelvis_t @ turn @ dec.pelvis2world[rows]
         axis, angle = _axis_angle_of(turn_in_pelvis)
         for k in range(3):  # the three spine control points
             part = axis_angle(axis, angle * (k + 1) / 3.0)
             poses.spine_points[rows, k] = np.einsum("kij,kj->ki", part, poses.spine_points[rows, k])
-        self.moved[rows] = True
         thorax = turn_in_pelvis @ matrix_from_quat(poses.thorax[rows])
         poses.thorax[rows] = quat_from_matrix(thorax)
-        # Keep the decoded pose in step: everything above the spine's base turns rigidly.
-        joints = dec.positions[rows][:, UPPER_BODY_JOINTS] - base[:, None]
-        dec.positions[rows[:, None], UPPER_BODY_JOINTS] = base[:, None] + np.einsum(
-            "kij,kmj->kmi", turn, joints)
-        dec.thorax2world[rows] = turn @ dec.thorax2world[rows]
-        dec.head2world[rows] = turn @ dec.head2world[rows]
-        dec.arm2world[rows] = turn[:, None] @ dec.arm2world[rows]
+        self._decode(rows)
+        # A move that worsens any higher-priority goal the trunk carries is undone. Measured on
+        # the decoded result: the vertebrae keep their lengths along the bent spline, so the
+        # neck, and all the trunk carries, does not end where a rigid turn about the pelvis
+        # would take it (a lower-priority goal's turns drifted an unreachable elbow's by 2.6 mm).
+        winner_priority = np.full(self.r, np.inf)
+        winner_priority[rows] = g.priority[c]
+        h = np.flatnonzero(carried & self.is_point & (g.priority > winner_priority[g.owner]))
+        if h.size:
+            point_h = point_positions(dec, g.owner[h], g.segment[h], g.fraction[h], g.offset[h])
+            worse = np.linalg.norm(point_h - g.goal[h], axis=1) > err[h] + s.tolerance_m
+            undo = np.isin(rows, g.owner[h][worse])
+            if undo.any():
+                back = rows[undo]
+                poses.spine_points[back], poses.thorax[back] = spine_before[undo], thorax_before[undo]
+                self._decode(back)
 
     # --- root: adaptRoot, the centre of mass back over its desired place ----------------------
     def root(self) -> F64:
@@ -780,7 +764,6 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
         state.limbs()
         state.head()
         state.trunk()
-        state.redecode()  # where the trunk turned
         com_error = state.root()
         err = _errors(goals, state.dec)
         # A character is done where every goal of its own is met or has stalled (unchanged, or

@@ -369,6 +369,26 @@ def test_lower_priority_never_costs_the_higher_one(floating):
     assert sim.constraints.error[k] < elbow_alone - 0.05  # and the swivel did bring it closer
 
 
+
+def test_a_lower_goal_turning_the_trunk_leaves_an_unreachable_higher_one_where_it_was(floating):
+    """An elbow goal 1 m left of the pelvis (priority 100, 587.2 mm out of reach), then a wrist
+    goal at the same point (priority 0), both with the trunk. Once the elbow's goal stalls the
+    trunk turns for the wrist; a turn that took the elbow no further as a rigid turn about the
+    pelvis bent the spine, whose vertebrae keep their lengths along it, so the shoulder (and the
+    elbow) ended 2.6 mm further (589.79 mm, the wrist too: 451.96 mm). The veto now measures the
+    decoded turn: neither gets worse."""
+    sim, (e,) = still(floating, body=Morphology.from_stature(1.0))
+    target = tuple(sim.store.positions[0, J["pelvis"]] + [0.0, 1.0, 0.0])
+    elbow = sim.add_constraint(e, "elbow", "elbow_l", 100, ALWAYS, target, chain=("arm_l", "trunk"))
+    settle(sim, 2)
+    alone = sim.constraints.error[elbow]
+    assert alone == pytest.approx(0.5872, abs=1e-4)
+    wrist = sim.add_constraint(e, "wrist", "wrist_l", 0, ALWAYS, target, chain=("arm_l", "trunk"))
+    for _ in range(3):
+        sim.step()
+        assert sim.constraints.error[elbow] <= alone + 1e-6
+        assert sim.constraints.error[wrist] == pytest.approx(0.4494, abs=1e-4)
+
 # --- centre of mass -----------------------------------------------------------------------------
 
 def test_com_within_a_centimetre_while_the_trunk_bends(idle):
@@ -471,6 +491,11 @@ FLOATING = replace(import_bvh(MOTIONS_DIR / "idle.bvh"), constraints=[])
 @example(stature=1.0, legs=1.0,
          picks=[("head_top", 0, (1.0, 0.0, 1.0), True), ("wrist_l", 0, (0.0, 0.0, 0.0), False),
                 ("wrist_l", 0, (0.0, 0.0, 0.0), False), ("neck", 0, (1.0, 0.0, 1.0), False)])
+# Found in the full suite: an unreachable elbow goal 2.6 mm worse once a lower wrist goal turned
+# the trunk (the veto judged the turn as rigid; the bent spine carried the shoulder further).
+@example(stature=1.0, legs=1.0,
+         picks=[("elbow_l", 0, (0.0, 1.0, 0.0), True), ("wrist_l", 0, (0.0, 0.0, 0.0), False),
+                ("wrist_l", 0, (0.0, 1.0, 0.0), True)])
 def test_random_bodies_targets_and_priorities(stature, legs, picks):
     """Finite poses, exact bones, and the highest-priority constraint (priority 100, added first
     and solved alone for two ticks) no worse, beyond the solver's 0.1 mm tolerance (the trunk's

@@ -5,7 +5,7 @@ which the tests compare this with to 1e-9 m). :func:`solve_rows` runs over the s
 (a range of them per thread: :func:`ecs_anim.kernels.over_chunks`); per character,
 :func:`solve_character` owns the loop: follow the goals on its own body, the limbs
 (:mod:`.solve_limbs`), the head (:mod:`.solve_head`), the trunk (:mod:`.solve_trunk`, skipped
-when no goal's chain includes it; the row decoded again when it turned), the root
+when no goal's chain includes it; it decodes the row again when it turns), the root
 (:mod:`.solve_root`), then the stopping rule (every goal met or stalled and the centre of mass
 back; its budget of iterations), and the final re-plant of the limbs and the head. Each
 character stops on its own goals: its result does not depend on who else is solved, nor on the
@@ -38,7 +38,7 @@ from ..solver_shell import (
     iteration_caps,
 )
 from . import over_chunks, wait_for_solver
-from .decode import DecodedArrays, PoseArrays, decode_row
+from .decode import DecodedArrays, PoseArrays
 from .solve_head import solve_head
 from .solve_limbs import solve_limbs
 from .solve_points import (
@@ -122,9 +122,8 @@ def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: W
         if uses_trunk:
             for j in range(start, stop):
                 err[j] = goal_error(dec, c, g, j, t)
-            if solve_trunk(c, pose, dec, g, err, stalled, t, tolerance_m, tolerance_rad,
-                           max_ccd_step_rad):
-                decode_row(c, pose, b.lengths[c], dec)  # a bent spine's joints are exact
+            solve_trunk(c, pose, dec, b.lengths[c], g, err, stalled, t, tolerance_m, tolerance_rad,
+                        max_ccd_step_rad)
         com_error = root_step(c, pose.root_position, positions, b.lengths, b.masses,
                               b.com_fraction, b.footprint, b.in_contact, b.com_desired, b.com_on,
                               t.mass_proximal, t.mass_distal, t.hip, t.thigh, t.shank,

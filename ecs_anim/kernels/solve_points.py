@@ -48,11 +48,10 @@ class Tables(NamedTuple):
     offsets are in (0..3 a limb slot, 4 pelvis, 5 thorax, 6 head); limb_joint (4, 4) per limb
     [leg_l, leg_r, arm_l, arm_r] its root, middle, end and distal-end joints; limb_length (4, 3)
     its upper, lower and distal lengths; group_limb_root, group_limb_middle (6,) per group the
-    root and middle joint of the limb the trunk carries (-1: none); upper_body (13,) the joints
-    a trunk turn carries; limb_of_group (6,) per group its limb slot (-1: not a limb);
-    mass_proximal, mass_distal (n_segments,) the joints bounding each mass
-    segment; hip, ankle, toe (2,) joints; thigh, shank (2,) lengths; then single joints and
-    lengths."""
+    root and middle joint of the limb the trunk carries (-1: none); limb_of_group (6,) per
+    group its limb slot (-1: not a limb); mass_proximal, mass_distal (n_segments,) the joints
+    bounding each mass segment; hip, ankle, toe (2,) joints; thigh, shank (2,) lengths; then
+    single joints and lengths."""
 
     seg_proximal: I64
     seg_distal: I64
@@ -61,7 +60,6 @@ class Tables(NamedTuple):
     limb_length: I64
     group_limb_root: I64
     group_limb_middle: I64
-    upper_body: I64
     limb_of_group: I64
     mass_proximal: I64
     mass_distal: I64
@@ -94,9 +92,6 @@ def tables() -> Tables:
                           + [[L[f"{b}_{s}"] for b in ("upper_arm", "forearm", "hand")] for s in sides]),
         group_limb_root=_ints([-1, -1, J["neck"], J["shoulder_l"], J["shoulder_r"], -1]),
         group_limb_middle=_ints([-1, -1, J["head"], J["elbow_l"], J["elbow_r"], -1]),
-        upper_body=_ints([J[n] for n in ("spine_1", "spine_2", "neck", "head", "head_top",
-                                         "shoulder_l", "elbow_l", "wrist_l", "hand_l",
-                                         "shoulder_r", "elbow_r", "wrist_r", "hand_r")]),
         limb_of_group=_ints([0, 1, -1, 2, 3, -1]),
         mass_proximal=_ints([J[s[1]] for s in MASS_SEGMENTS]),
         mass_distal=_ints([J[s[2]] for s in MASS_SEGMENTS]),

@@ -2,8 +2,8 @@
 for the highest-priority goal the trunk can still improve, spread along the spine.
 
 Mirrors ``ecs_anim.solver_shell._Solve.trunk`` for one character's row of the solve state,
-written in place: pose ``spine_points`` and ``thorax``, decoded upper-body joints and the
-thorax, head and arm frames (the spine's own joints are exact once the row is decoded again).
+written in place: pose ``spine_points`` and ``thorax``, then the row decoded again (a bent
+spine's joints are exact once decoded), on which the higher-priority goals are checked.
 """
 
 from __future__ import annotations
@@ -12,12 +12,11 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from .decode import DecodedArrays, PoseArrays
+from .decode import DecodedArrays, PoseArrays, decode_row
 from .solve_math import bring_within_reach
 from .solve_points import Goals, Tables, goal_point, segment_frame
 from .vec import (
     F64,
-    add,
     axis_angle,
     axis_angle_of,
     load3,
@@ -30,7 +29,6 @@ from .vec import (
     rotation_toward,
     store3,
     store4,
-    store_frame,
     sub,
     to_world,
     transpose,
@@ -43,11 +41,11 @@ _LIMB_REACH_SHARE = 0.99
 
 
 @njit(cache=True, inline="always")
-def solve_trunk(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, err: F64,
-                stalled: NDArray[np.bool_], t: Tables, tolerance_m: float, tolerance_rad: float,
-                max_ccd_step_rad: float) -> bool:
-    """Mirrors ``ecs_anim.solver_shell._Solve.trunk`` for character ``c`` (in place); ``err``
-    (k,) each goal's error now (:func:`~ecs_anim.kernels.solve_points.goal_error`), ``stalled``
+def solve_trunk(c: int, pose: PoseArrays, dec: DecodedArrays, lengths_row: F64, g: Goals,
+                err: F64, stalled: NDArray[np.bool_], t: Tables, tolerance_m: float,
+                tolerance_rad: float, max_ccd_step_rad: float) -> bool:
+    """Mirrors ``ecs_anim.solver_shell._Solve.trunk`` for character ``c`` (in place) on its body
+    ``lengths_row`` (N_LENGTHS,) (m); ``err`` (k,) each goal's error now (:func:`~ecs_anim.kernels.solve_points.goal_error`), ``stalled``
     (k,) goals that stopped improving. Returns whether the trunk turned."""
     start, stop = g.start[c], g.start[c + 1]
     best = -1
@@ -82,29 +80,28 @@ def solve_trunk(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, err: F64
             reach = _LIMB_REACH_SHARE * (norm(sub(middle_at, root_at)) + norm(sub(point, middle_at)))
         if norm(sub(goal, root_at)) > reach:
             turn = bring_within_reach(base, root_at, goal, reach, max_ccd_step_rad)
-    # A move that worsens any higher-priority goal the trunk carries is not made.
-    for j in range(start, stop):
-        if g.group[j] >= _HEAD and not g.orientation[j] and g.priority[j] > g.priority[best]:
-            point_h = goal_point(dec, c, g, j, t)
-            moved = add(base, to_world(turn, sub(point_h, base)))
-            if norm(sub(moved, load3(g.goal[j]))) > err[j] + tolerance_m:
-                return False
     # Spread the turn along the spine (a third, two thirds, all of it at the neck); the thorax,
     # and all it carries, turns by all of it.
+    spine_before = (load3(pose.spine_points[c, 0]), load3(pose.spine_points[c, 1]),
+                    load3(pose.spine_points[c, 2]))
+    thorax_before = load4(pose.thorax[c])
     pelvis2world = load_frame(dec.pelvis2world[c])
     turn_in_pelvis = matmul(matmul(transpose(pelvis2world), turn), pelvis2world)
     axis, angle = axis_angle_of(turn_in_pelvis)
     for k in range(3):
         part = axis_angle(axis, angle * (k + 1) / 3.0)
-        store3(pose.spine_points[c, k], to_world(part, load3(pose.spine_points[c, k])))
-    thorax = matmul(turn_in_pelvis, matrix_from_quat(load4(pose.thorax[c])))
-    store4(pose.thorax[c], quat_from_matrix(thorax))
-    for i in range(t.upper_body.shape[0]):
-        joint = t.upper_body[i]
-        store3(p[joint], add(base, to_world(turn, sub(load3(p[joint]), base))))
-    store_frame(dec.thorax2world[c], matmul(turn, load_frame(dec.thorax2world[c])))
-    store_frame(dec.head2world[c], matmul(turn, load_frame(dec.head2world[c])))
-    for s in range(2):
-        store_frame(dec.arm2world[c, s], matmul(turn, load_frame(dec.arm2world[c, s])))
+        store3(pose.spine_points[c, k], to_world(part, spine_before[k]))
+    store4(pose.thorax[c], quat_from_matrix(matmul(turn_in_pelvis, matrix_from_quat(thorax_before))))
+    decode_row(c, pose, lengths_row, dec)
+    # A move that worsens any higher-priority goal the trunk carries is undone, measured on the
+    # decoded result (the bent spine does not carry the neck where a rigid turn would).
+    for j in range(start, stop):
+        if g.group[j] >= _HEAD and not g.orientation[j] and g.priority[j] > g.priority[best]:
+            if norm(sub(goal_point(dec, c, g, j, t), load3(g.goal[j]))) > err[j] + tolerance_m:
+                for k in range(3):
+                    store3(pose.spine_points[c, k], spine_before[k])
+                store4(pose.thorax[c], thorax_before)
+                decode_row(c, pose, lengths_row, dec)
+                return False
     return True
 
