@@ -9,12 +9,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 
 from ..morphology import MASS_SEGMENTS
 from ..skeleton import JOINT_INDEX
-from .vec import F64
+from .vec import F64, jit
 
 I64 = NDArray[np.int64]
 
@@ -25,7 +24,7 @@ def segment_joints() -> tuple[I64, I64]:
             np.array([JOINT_INDEX[s[2]] for s in MASS_SEGMENTS], dtype=np.int64))
 
 
-@njit(cache=True)
+@jit()
 def centre_of_mass_row(p: F64, masses: F64, com_fraction: F64, proximal: I64,
                        distal: I64) -> tuple[float, float, float]:
     """Whole-body centre of mass of one posture ``p`` (N_JOINTS, 3) m, from its segments'
@@ -43,7 +42,7 @@ def centre_of_mass_row(p: F64, masses: F64, com_fraction: F64, proximal: I64,
     return (x / total, y / total, z / total)
 
 
-@njit(cache=True, nogil=True)
+@jit(nogil=True)
 def centres_of_mass(lo: int, hi: int, rows: I64, position_rows: I64, positions: F64, masses: F64,
                     com_fraction: F64, proximal: I64, distal: I64, out: F64) -> None:
     """Mirrors :func:`ecs_anim.morphology.centres_of_mass` over the store rows ``rows`` (int64)
@@ -58,7 +57,7 @@ def centres_of_mass(lo: int, hi: int, rows: I64, position_rows: I64, positions: 
         out[c, 0], out[c, 1], out[c, 2] = com
 
 
-@njit(cache=True, nogil=True)
+@jit(nogil=True)
 def horizontal_errors(lo: int, hi: int, rows: I64, com: F64, desired: F64, out: F64) -> None:
     """Horizontal distance (m) of ``com[c]`` from ``desired[c]`` ((n, 3) each) into ``out[c]``
     ((n,)) for the store rows ``c`` in ``rows`` (``np.linalg.norm`` of the x, y difference)."""

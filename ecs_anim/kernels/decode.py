@@ -17,7 +17,6 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 
 from ..normalized import DecodedPose, NormalizedPoses
@@ -33,6 +32,7 @@ from .vec import (
     add_scaled,
     dot,
     frame_from_axes,
+    jit,
     load3,
     load4,
     matmul,
@@ -164,7 +164,7 @@ def fits(arrays: DecodedArrays | DecodedPose | None, n: int) -> bool:
                for a, s in zip(arrays, shapes, strict=True))
 
 
-@njit(cache=True)
+@jit()
 def leg_length(lengths_row: F64) -> float:
     """Mirrors :func:`ecs_anim.morphology.leg_length` for one (N_LENGTHS,) row (m)."""
     total: float = 0.5 * (lengths_row[_L_THIGH] + lengths_row[_L_SHANK]
@@ -172,7 +172,7 @@ def leg_length(lengths_row: F64) -> float:
     return total
 
 
-@njit(cache=True)
+@jit()
 def two_bone_middle(limb2world: Frame, root: Vec3, upper: float, lower: float,
                     reach: float) -> tuple[Vec3, Vec3]:
     """Mirrors :func:`ecs_anim.normalized.two_bone_middle` for one limb: (middle, end) joints,
@@ -186,25 +186,25 @@ def two_bone_middle(limb2world: Frame, root: Vec3, upper: float, lower: float,
     return middle, end
 
 
-@njit(cache=True)
+@jit()
 def distal_frames(limb: Frame, mid: Vec3, end: Vec3) -> Frame:
     """Mirrors :func:`ecs_anim.normalized.distal_frames`: z mid->end, x the limb frame's x."""
     return frame_from_axes(sub(end, mid), limb[0], 2, 0, limb[1])
 
 
-@njit(cache=True)
+@jit()
 def limb_frames(root: Vec3, mid: Vec3, end: Vec3, hint: Vec3) -> Frame:
     """Mirrors :func:`ecs_anim.normalized.limb_frames`: z root->end, y towards ``mid``."""
     return frame_from_axes(sub(end, root), sub(mid, root), 2, 1, hint)
 
 
-@njit(cache=True, inline="always")
+@jit(inline="always")
 def pelvis_frame(c: int, pose: PoseArrays | LegPoseArrays) -> Frame:
     """``pelvis2world`` of row ``c``: heading about Z times the local pelvis rotation."""
     return matmul(rot_z(pose.root_heading[c]), matrix_from_quat(load4(pose.pelvis_local[c])))
 
 
-@njit(cache=True, inline="always")
+@jit(inline="always")
 def decode_legs_row(c: int, pose: PoseArrays | LegPoseArrays, seg: F64, base: F64) -> tuple[
         Vec3, Frame, tuple[Vec3, Vec3], tuple[Vec3, Vec3], tuple[Vec3, Vec3], tuple[Vec3, Vec3],
         tuple[Frame, Frame], tuple[Frame, Frame]]:
@@ -222,7 +222,7 @@ def decode_legs_row(c: int, pose: PoseArrays | LegPoseArrays, seg: F64, base: F6
             (toe_l, toe_r), (leg_l, leg_r), (shank_l, shank_r))
 
 
-@njit(cache=True, inline="always")
+@jit(inline="always")
 def _leg(c: int, s: int, pose: PoseArrays | LegPoseArrays, seg: F64, pelvis: Vec3,
          pelvis2world: Frame) -> tuple[Vec3, Vec3, Vec3, Vec3, Frame, Frame]:
     """One leg of :func:`decode_legs_row` (side ``s``): hip, knee, ankle, toe, leg2world,
@@ -237,7 +237,7 @@ def _leg(c: int, s: int, pose: PoseArrays | LegPoseArrays, seg: F64, pelvis: Vec
     return hip, knee, ankle, toe, leg2world, shank2world
 
 
-@njit(cache=True)
+@jit()
 def _span(q0: Vec3, q1: Vec3, q2: Vec3, q3: Vec3, u: float) -> tuple[Vec3, Vec3]:
     """Point and tangent of the Catmull-Rom span from ``q1`` to ``q2`` at ``u``, with the
     coefficients of :func:`ecs_anim.normalized._span_coefficients` (same operation order)."""
@@ -250,7 +250,7 @@ def _span(q0: Vec3, q1: Vec3, q2: Vec3, q3: Vec3, u: float) -> tuple[Vec3, Vec3]
     return point, tangent
 
 
-@njit(cache=True)
+@jit()
 def curve_at(control: tuple[Vec3, Vec3, Vec3, Vec3], t: float) -> tuple[Vec3, Vec3]:
     """Mirrors :func:`ecs_anim.normalized._curve_at` for one spline: point and tangent (d/dt)
     at ``t`` (three spans through the four control points, then the straight extension)."""
@@ -269,7 +269,7 @@ def curve_at(control: tuple[Vec3, Vec3, Vec3, Vec3], t: float) -> tuple[Vec3, Ve
     return _span(q1, q2, q3, end, u)
 
 
-@njit(cache=True)
+@jit()
 def at_distance(start: Vec3, point: Vec3, tangent: Vec3, length: float) -> Vec3:
     """Mirrors :func:`ecs_anim.normalized._at_distance`: ``point`` moved along the ray from
     ``start`` to exactly ``length`` (m) from it (the tangent, then z, where that is undefined)."""
@@ -283,7 +283,7 @@ def at_distance(start: Vec3, point: Vec3, tangent: Vec3, length: float) -> Vec3:
     return add_scaled(start, direction, length)
 
 
-@njit(cache=True)
+@jit()
 def spine_joints(control: tuple[Vec3, Vec3, Vec3, Vec3], lower: float, middle: float,
                  upper: float, iterations: int) -> tuple[Vec3, Vec3, Vec3]:
     """Mirrors :func:`ecs_anim.normalized.spine_joints` for one spine of three segments: the
@@ -301,7 +301,7 @@ def spine_joints(control: tuple[Vec3, Vec3, Vec3, Vec3], lower: float, middle: f
     return first, second, third
 
 
-@njit(cache=True)
+@jit()
 def spine_joint(control: tuple[Vec3, Vec3, Vec3, Vec3], chord: float, length: float,
                  prev_t: float, prev_p: Vec3, iterations: int) -> tuple[float, Vec3]:
     """One step of :func:`spine_joints`: the curve parameter and the joint ``length`` (m) from
@@ -322,7 +322,7 @@ def spine_joint(control: tuple[Vec3, Vec3, Vec3, Vec3], chord: float, length: fl
 
 # Not inlined: three kernels call it (decode_rows, posture_rows, the solver's), and numba types
 # an inlined body again at every site, (minutes of first compile).
-@njit(cache=True)
+@jit()
 def decode_row(c: int, pose: PoseArrays, lengths_row: F64, out: DecodedArrays) -> None:
     """Mirrors :func:`ecs_anim.normalized.decode` (``use_stretch=False``) for store row ``c``
     on the body ``lengths_row`` (N_LENGTHS,) (m): writes row ``c`` of every ``out`` array."""
@@ -375,7 +375,7 @@ def decode_row(c: int, pose: PoseArrays, lengths_row: F64, out: DecodedArrays) -
         store_frame(out.arm2world[c, s], arm2world)
 
 
-@njit(cache=True, nogil=True)
+@jit(nogil=True)
 def decode_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64,
                 out: DecodedArrays) -> None:
     """Mirrors :func:`ecs_anim.normalized.decode` over the store rows ``rows[lo:hi]``

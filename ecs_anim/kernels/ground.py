@@ -14,11 +14,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 
 from .. import ground as _ground
-from .vec import F64
+from .vec import F64, jit
 
 _PLANE, _SLOPE, _STAIRS, _BUMPS, _HEIGHT_GRID = 0, 1, 2, 3, 4
 assert (_ground.PLANE, _ground.SLOPE, _ground.STAIRS, _ground.BUMPS, _ground.HEIGHT_GRID) \
@@ -30,7 +29,7 @@ GroundParams = tuple[float, float, float, float, float, float, float]
 assert _ground.N_GROUND_PARAMS == 7
 
 
-@njit(cache=True)
+@jit()
 def grid_height(x: float, y: float, p: F64, grid: F64) -> float:
     """Mirrors :meth:`ecs_anim.ground.HeightGrid.height` at one point (``p`` its parameters)."""
     offset, nx, ny = int(p[0]), int(p[1]), int(p[2])
@@ -45,7 +44,7 @@ def grid_height(x: float, y: float, p: F64, grid: F64) -> float:
                  + (1 - u) * v * grid[k + nx] + u * v * grid[k + nx + 1])
 
 
-@njit(cache=True)
+@jit()
 def part_height(kind: int, x: float, y: float, p: GroundParams) -> float:
     """Mirrors the ``height`` of :class:`~ecs_anim.ground.Plane`, ``Slope``, ``Stairs`` or
     ``Bumps`` (by ``kind``) at one point (m); ``p`` the part's parameters (a tuple: an array
@@ -61,7 +60,7 @@ def part_height(kind: int, x: float, y: float, p: GroundParams) -> float:
     return float(p[0] + p[1] * math.sin(2 * np.pi * x / p[2]) * math.sin(2 * np.pi * y / p[3]))
 
 
-@njit(cache=True)
+@jit()
 def height_at(x: float, y: float, kinds: I64, params: F64, grid: F64) -> float:
     """Mirrors ``ground.height`` of a built-in ground (:class:`~ecs_anim.ground.Combined`: the
     sum of its parts) at the point (``x``, ``y``) metres; the ground as described by

@@ -19,7 +19,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 
 from ..skeleton import LENGTH_INDEX as L
@@ -30,6 +29,7 @@ from .vec import (
     Frame,
     Vec3,
     in_frame,
+    jit,
     load3_at,
     matmul,
     norm,
@@ -52,13 +52,13 @@ assert (L["thigh_l"], L["shank_l"], L["ankle_height_l"], L["thigh_r"], L["ankle_
     == (_L_THIGH, _L_SHANK, _L_ANKLE_HEIGHT, _L_THIGH + 1, _L_ANKLE_HEIGHT + 1)
 
 
-@njit(cache=True)
+@jit()
 def _height(kinds: I64, params: F64, grid: F64, p: Vec3) -> float:
     """The ground's height under the point ``p`` (m)."""
     return height_at(p[0], p[1], kinds, params, grid)
 
 
-@njit(cache=True)
+@jit()
 def vertical_slack_for_reach(hip: Vec3, ankle_target: Vec3, reach: float) -> float:
     """Mirrors :func:`ecs_anim.ground_adapt.vertical_slack_for_reach` for one leg (m)."""
     dx, dy = hip[0] - ankle_target[0], hip[1] - ankle_target[1]
@@ -67,7 +67,7 @@ def vertical_slack_for_reach(hip: Vec3, ankle_target: Vec3, reach: float) -> flo
     return ankle_target[2] + vertical - hip[2]
 
 
-@njit(cache=True, inline="always")
+@jit(inline="always")
 def adapt_to_ground(c: int, root_position: F64, leg_frame: F64, leg_fraction: F64,
                     hips: tuple[Vec3, Vec3], pelvis_now_z: float, pelvis2world: Frame,
                     leg2world: tuple[Frame, Frame], lengths: F64, leg: float,
@@ -107,7 +107,7 @@ def adapt_to_ground(c: int, root_position: F64, leg_frame: F64, leg_fraction: F6
     root_position[c, 2] = pelvis_z / leg
 
 
-@njit(cache=True)
+@jit()
 def adapt_keeping_heels_up(c: int, pose: LegPoseArrays, hips: tuple[Vec3, Vec3],
                            pelvis_now_z: float, pelvis2world: Frame,
                            leg2world: tuple[Frame, Frame], lengths: F64, leg: float,
@@ -148,7 +148,7 @@ def adapt_keeping_heels_up(c: int, pose: LegPoseArrays, hips: tuple[Vec3, Vec3],
     return legs[4], legs[5], legs[7]
 
 
-@njit(cache=True, inline="always")
+@jit(inline="always")
 def toes_onto_ground(c: int, foot_dir: F64, ankles: tuple[Vec3, Vec3],
                      toes: tuple[Vec3, Vec3], shank2world: tuple[Frame, Frame], ball: float,
                      kinds: I64, params: F64, grid: F64, passes: int) -> None:
@@ -183,7 +183,7 @@ def toes_onto_ground(c: int, foot_dir: F64, ankles: tuple[Vec3, Vec3],
             store3_at(foot_dir, c, s, in_frame(shank2world[s], new_d))
 
 
-@njit(cache=True)
+@jit()
 def _foot_target(ankle: Vec3, toe: Vec3, footprint: Vec3, w: float, ground_ref: float,
                  ankle_height: float, ball: float, kinds: I64, params: F64, grid: F64) -> Vec3:
     """One ankle's target in ``GroundAdapt.run``: the motion's free foot on the floor
@@ -198,7 +198,7 @@ def _foot_target(ankle: Vec3, toe: Vec3, footprint: Vec3, w: float, ground_ref: 
     return (t[0], t[1], t[2] + max(_height(kinds, params, grid, t) + ankle_height - t[2], 0.0))
 
 
-@njit(cache=True)
+@jit()
 def ground_adapt_row(c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
                      contact_weight: F64, clip: I64, source_ankle_height: F64, footprint: F64,
                      locked: B1, footprint_settled: B1, ground_ref: F64, kinds: I64,
@@ -258,7 +258,7 @@ def ground_adapt_row(c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
                      grid, toe_passes)
 
 
-@njit(cache=True, nogil=True)
+@jit(nogil=True)
 def ground_adapt_rows(lo: int, hi: int, rows: I64, pose: LegPoseArrays, lengths: F64, leg: F64,
                       contact_weight: F64, clip: I64, source_ankle_height: F64, footprint: F64,
                       locked: B1, footprint_settled: B1, ground_ref: F64, ground: GroundArrays,

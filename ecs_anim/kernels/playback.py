@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 
 from ..normalized import TRAILING_SHAPES, NormalizedPoses
@@ -20,6 +19,7 @@ from .decode import PoseArrays
 from .vec import (
     F64,
     Vec3,
+    jit,
     load3,
     nlerp,
     slerp,
@@ -31,14 +31,14 @@ I64 = NDArray[np.int64]
 B1 = NDArray[np.bool_]
 
 
-@njit(cache=True)
+@jit()
 def rotate_xy(x: float, y: float, angle: float) -> tuple[float, float]:
     """Mirrors :func:`ecs_anim.playback.rotate_xy` for one point."""
     c, s = math.cos(angle), math.sin(angle)
     return c * x - s * y, s * x + c * y
 
 
-@njit(cache=True)
+@jit()
 def _blend_quat(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
     """Row ``ro`` of the (n, 4) quaternions ``out``: rows ``ra`` of ``a``, ``rb`` of ``b``
     slerped (scalar indexing: no array views in the loop over characters)."""
@@ -46,7 +46,7 @@ def _blend_quat(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -
     out[ro, 0], out[ro, 1], out[ro, 2], out[ro, 3] = q[0], q[1], q[2], q[3]
 
 
-@njit(cache=True)
+@jit()
 def _blend_quat2(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
     """As :func:`_blend_quat` for (n, 2, 4) quaternions [left, right]."""
     for s in range(2):
@@ -55,14 +55,14 @@ def _blend_quat2(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) 
         out[ro, s, 0], out[ro, s, 1], out[ro, s, 2], out[ro, s, 3] = q[0], q[1], q[2], q[3]
 
 
-@njit(cache=True)
+@jit()
 def _blend_dir(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
     """Row ``ro`` of the (n, 3) directions ``out``: normalized lerp of ``a[ra]``, ``b[rb]``."""
     v = nlerp((a[ra, 0], a[ra, 1], a[ra, 2]), (b[rb, 0], b[rb, 1], b[rb, 2]), w)
     out[ro, 0], out[ro, 1], out[ro, 2] = v[0], v[1], v[2]
 
 
-@njit(cache=True)
+@jit()
 def _blend_dir2(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
     """As :func:`_blend_dir` for (n, 2, 3) directions [left, right]."""
     for s in range(2):
@@ -71,14 +71,14 @@ def _blend_dir2(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -
         out[ro, s, 0], out[ro, s, 1], out[ro, s, 2] = v[0], v[1], v[2]
 
 
-@njit(cache=True)
+@jit()
 def _lerp(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
     """Row ``ro`` of the (n, k) ``out``: ``(1 - w) a[ra] + w b[rb]``."""
     for k in range(a.shape[1]):
         out[ro, k] = (1 - w) * a[ra, k] + w * b[rb, k]
 
 
-@njit(cache=True)
+@jit()
 def _lerp3(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
     """As :func:`_lerp` for (n, 3, 3) points."""
     for j in range(3):
@@ -86,7 +86,7 @@ def _lerp3(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> Non
             out[ro, j, k] = (1 - w) * a[ra, j, k] + w * b[rb, j, k]
 
 
-@njit(cache=True, inline="always")
+@jit(inline="always")
 def blend_parts(a: PoseArrays, ra: int, b: PoseArrays, rb: int, w: float, out: PoseArrays,
                 ro: int) -> None:
     """Mirrors :func:`ecs_anim.playback.blend` for every field but the root's: row ``ra`` of
@@ -109,7 +109,7 @@ def blend_parts(a: PoseArrays, ra: int, b: PoseArrays, rb: int, w: float, out: P
     _lerp(a.stretch, ra, b.stretch, rb, w, out.stretch, ro)
 
 
-@njit(cache=True)
+@jit()
 def blend_root(pa: Vec3, ha: float, pb: Vec3, hb: float, w: float) -> tuple[Vec3, float]:
     """Mirrors :func:`ecs_anim.playback.blend` of ``root_position`` (lerp) and ``root_heading``
     (the shorter way round)."""
@@ -117,7 +117,7 @@ def blend_root(pa: Vec3, ha: float, pb: Vec3, hb: float, w: float) -> tuple[Vec3
     return p, ha + w * wrap(hb - ha)
 
 
-@njit(cache=True)
+@jit()
 def frame_position(n_frames: int, fps: float, time_s: float,
                    loop: bool) -> tuple[int, int, float, float, bool]:
     """Mirrors :func:`ecs_anim.playback.frame_position` for one character: (frame i0, frame i1,
@@ -135,7 +135,7 @@ def frame_position(n_frames: int, fps: float, time_s: float,
     return i0, i1, local - i0, loops, wraps
 
 
-@njit(cache=True)
+@jit()
 def complex_power(re: float, im: float, exponent: float) -> tuple[float, float]:
     """``(re + i im) ** exponent`` as numpy computes it (``npy_cpow``): repeated squaring for a
     whole exponent under 100 in size, else ``exp(exponent * log(z))`` (the C library's
@@ -161,7 +161,7 @@ def complex_power(re: float, im: float, exponent: float) -> tuple[float, float]:
     return e * math.cos(b), e * math.sin(b)
 
 
-@njit(cache=True)
+@jit()
 def loop_transform(yaw: float, shift_x: float, shift_y: float,
                    loops: float) -> tuple[float, float, float]:
     """Mirrors ``ecs_anim.playback._loop_transform`` for one character: (angle, moved x, moved
@@ -177,7 +177,7 @@ def loop_transform(yaw: float, shift_x: float, shift_y: float,
     return loops * yaw, moved.real, moved.imag
 
 
-@njit(cache=True, inline="always")
+@jit(inline="always")
 def _frame_root(bank: PoseArrays, first: int, frame: int, angle: float, moved_x: float,
                 moved_y: float) -> tuple[Vec3, float]:
     """Root position and heading of bank row ``frame`` after the loop transform (mirrors
@@ -188,7 +188,7 @@ def _frame_root(bank: PoseArrays, first: int, frame: int, angle: float, moved_x:
     return (p0x + moved_x + rx, p0y + moved_y + ry, p[2]), bank.root_heading[frame] + angle
 
 
-@njit(cache=True)
+@jit()
 def sample_placed_row(c: int, bank: PoseArrays, start: I64, n_frames: I64, fps: F64,
                       loop_yaw: F64, loop_shift: F64, clip: I64, time_s: F64, loop: B1,
                       placement_xy: F64, placement_heading: F64, leg: F64, out: PoseArrays,
@@ -215,7 +215,7 @@ def sample_placed_row(c: int, bank: PoseArrays, start: I64, n_frames: I64, fps: 
     out.root_heading[o] = h + heading
 
 
-@njit(cache=True, nogil=True)
+@jit(nogil=True)
 def sample_placed_rows(lo: int, hi: int, rows: I64, bank: PoseArrays, start: I64, n_frames: I64,
                        fps: F64, loop_yaw: F64, loop_shift: F64, clip: I64, time_s: F64, loop: B1,
                        placement_xy: F64, placement_heading: F64, leg: F64, out: PoseArrays,
@@ -235,7 +235,7 @@ def sample_placed_rows(lo: int, hi: int, rows: I64, bank: PoseArrays, start: I64
                           time_s, loop, placement_xy, placement_heading, leg, out, out_rows[i])
 
 
-@njit(cache=True, nogil=True)
+@jit(nogil=True)
 def sample_table_rows(lo: int, hi: int, rows: I64, table: F64, start: I64, n_frames: I64, fps: F64,
                       clip: I64, time_s: F64, loop: B1, out: F64) -> None:
     """Mirrors :func:`ecs_anim.playback.sample_table` over the store rows
@@ -250,7 +250,7 @@ def sample_table_rows(lo: int, hi: int, rows: I64, table: F64, start: I64, n_fra
             out[c, j] = a[j] + w * (b[j] - a[j])
 
 
-@njit(cache=True, nogil=True)
+@jit(nogil=True)
 def blend_rows(lo: int, hi: int, rows: I64, old: PoseArrays, w: F64, out: PoseArrays) -> None:
     """Mirrors :func:`ecs_anim.playback.blend` (``blend(old, out, w)``) in place over the store
     rows ``rows[lo:hi]``: row ``c = rows[i]`` of ``out`` becomes row ``i`` of ``old``
@@ -259,7 +259,7 @@ def blend_rows(lo: int, hi: int, rows: I64, old: PoseArrays, w: F64, out: PoseAr
         blend_row(old, i, w[i], out, rows[i])
 
 
-@njit(cache=True)
+@jit()
 def blend_row(old: PoseArrays, i: int, w: float, out: PoseArrays, c: int) -> None:
     """Row ``c`` of ``out`` becomes row ``i`` of ``old`` blended into it with the weight ``w``
     of its own pose (mirrors :func:`ecs_anim.playback.blend`)."""

@@ -18,7 +18,6 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 
 from ..exporting import BODY_TO_BVH_REST, EXPORT_NAMES, EXPORT_PARENTS
@@ -57,6 +56,7 @@ from .vec import (
     Vec3,
     add,
     frame_from_axes,
+    jit,
     load3,
     load_frame,
     matmul,
@@ -111,7 +111,7 @@ def export_constants() -> ExportConstants:
                            np.asarray(EXPORT_PARENTS, dtype=np.int64))
 
 
-@njit(cache=True)
+@jit()
 def swing_from(parent_frame: Frame, rest_axis: Vec3, direction: Vec3) -> Frame:
     """Mirrors ``ecs_anim.exporting._swing_from``: ``parent_frame`` turned by the smallest
     rotation taking its ``rest_axis`` onto ``direction`` (a bone with no twist of its own)."""
@@ -120,7 +120,7 @@ def swing_from(parent_frame: Frame, rest_axis: Vec3, direction: Vec3) -> Frame:
 
 # Not inlined: numba types an inlined body again at every site (posture_rows,
 # local_rotations_rows, posture_solved_rows), compiling for longer.
-@njit(cache=True)
+@jit()
 def export_rotations_row(c: int, decoded: DecodedArrays, rest_hips: F64, out: F64) -> None:
     """Mirrors :func:`ecs_anim.exporting.export_rotations` for row ``c`` of ``decoded``: the
     world orientation (joint2world) of every export joint into ``out`` (N_EXPORT, 3, 3)."""
@@ -170,7 +170,7 @@ def export_rotations_row(c: int, decoded: DecodedArrays, rest_hips: F64, out: F6
     store_frame(out[_E_HEAD], swing_from(head2world, up, sub(load3(p[_HEAD_TOP]), head)))
 
 
-@njit(cache=True)
+@jit()
 def bvh_globals_row(world: F64, bvh_from_world: F64, rest2body: F64) -> None:
     """In place, each (3, 3) of ``world`` (N_EXPORT, 3, 3) joint2world becomes joint2bvh =
     ``bvh_from_world @ joint2world @ rest2body``, as in :func:`ecs_anim.exporting.local_rotations`."""
@@ -180,7 +180,7 @@ def bvh_globals_row(world: F64, bvh_from_world: F64, rest2body: F64) -> None:
         store_frame(world[j], matmul(matmul(a, load_frame(world[j])), b))
 
 
-@njit(cache=True)
+@jit()
 def local_from_globals_row(glob: F64, parents: I64, out: F64) -> None:
     """Mirrors the last step of :func:`ecs_anim.exporting.local_rotations`: each joint's
     rotation relative to its parent, ``glob[parent].T @ glob[joint]`` (the root's own), from
@@ -193,7 +193,7 @@ def local_from_globals_row(glob: F64, parents: I64, out: F64) -> None:
             store_frame(out[j], matmul(transpose(load_frame(glob[parents[j]])), g))
 
 
-@njit(cache=True)
+@jit()
 def even_spine_joints(control: tuple[Vec3, Vec3, Vec3, Vec3], length: float, count: int,
                       iterations: int, out: F64) -> None:
     """Mirrors :func:`ecs_anim.normalized.spine_joints` for one spine cut into ``count``
@@ -208,7 +208,7 @@ def even_spine_joints(control: tuple[Vec3, Vec3, Vec3, Vec3], length: float, cou
         store3(out[k], point)
 
 
-@njit(cache=True, inline="always")
+@jit(inline="always")
 def vertebrae_row(c: int, pose: PoseArrays, lengths_row: F64, out: F64) -> None:
     """Mirrors :func:`ecs_anim.normalized.vertebrae` for store row ``c``: ``out.shape[0]``
     evenly spaced vertebra joints from the pelvis origin to the neck, world (count, 3), m."""
@@ -225,7 +225,7 @@ def vertebrae_row(c: int, pose: PoseArrays, lengths_row: F64, out: F64) -> None:
         store3(out[k], add(pelvis, to_world(pelvis2world, load3(out[k]))))
 
 
-@njit(cache=True)
+@jit()
 def all_finite(a: F64) -> bool:
     """Whether every element of the array ``a`` is finite."""
     for x in a.flat:
@@ -234,7 +234,7 @@ def all_finite(a: F64) -> bool:
     return True
 
 
-@njit(cache=True, nogil=True)
+@jit(nogil=True)
 def posture_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64,
                  decoded: DecodedArrays, frozen: B8, newly_bad: B8, positions: F64, rotations: bool,
                  world: F64, local: F64, rest_hips: F64, bvh_from_world: F64, rest2body: F64,
@@ -271,7 +271,7 @@ def posture_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64,
             vertebrae_row(c, pose, lengths[c], vertebrae[c])
 
 
-@njit(cache=True, nogil=True)
+@jit(nogil=True)
 def local_rotations_rows(lo: int, hi: int, rows: I64, decoded: DecodedArrays, rest_hips: F64,
                          bvh_from_world: F64, rest2body: F64, parents: I64, world: F64,
                          out: F64) -> None:
@@ -296,7 +296,7 @@ def local_rotations(pose: DecodedPose) -> F64:
     return out
 
 
-@njit(cache=True, nogil=True)
+@jit(nogil=True)
 def vertebrae_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64, out: F64) -> None:
     """Mirrors :func:`ecs_anim.normalized.vertebrae` over the rows ``rows[lo:hi]``: into ``out``
     (n, count, 3) world, m, from ``lengths`` (n, N_LENGTHS)."""

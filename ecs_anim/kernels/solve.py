@@ -23,7 +23,6 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 
 from ..body_points import HEAD
@@ -53,7 +52,7 @@ from .solve_points import (
 )
 from .solve_root import root_step
 from .solve_trunk import solve_trunk
-from .vec import F64, dot, load3, store3, sub
+from .vec import F64, dot, jit, load3, store3, sub
 
 I64 = NDArray[np.int64]
 B8 = NDArray[np.bool_]
@@ -61,7 +60,7 @@ _TRUNK = 5
 TABLES = tables()
 
 
-@njit(cache=True, inline="always")
+@jit(inline="always")
 def follow_own_targets(c: int, dec: DecodedArrays, g: Goals, t: Tables) -> None:
     """Mirrors ``ecs_anim.solver_shell._Solve.follow_own_targets`` for character ``c``: goals
     aiming at a point of the same body move with that point."""
@@ -76,7 +75,7 @@ def follow_own_targets(c: int, dec: DecodedArrays, g: Goals, t: Tables) -> None:
                     g.goal[j, i] += shift[i]
 
 
-@njit(cache=True)
+@jit()
 def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners,
                     b: Bodies, t: Tables, err: F64, stalled: B8, previous: F64, slow_before: B8,
                     tolerance_m: float, tolerance_rad: float,
@@ -156,7 +155,7 @@ def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: W
     return used
 
 
-@njit(cache=True, nogil=True)
+@jit(nogil=True)
 def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners,
                b: Bodies, t: Tables, used: I64, tolerance_m: float, tolerance_rad: float,
                com_tolerance_m: float, max_ccd_step_rad: float, root_gain: float,
@@ -175,7 +174,7 @@ def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
                                   leg_extension)
 
 
-@njit(cache=True)
+@jit()
 def character_winners(c: int, g: Goals, w: Winners, limb_of_group: I64, head_group: int) -> None:
     """Mirrors :func:`ecs_anim.constraint_table.winners` as ``ecs_anim.solver_shell._Solve``
     uses it, for character ``c``: per limb its highest-priority point goal (``first_limb``),
@@ -213,7 +212,7 @@ def character_winners(c: int, g: Goals, w: Winners, limb_of_group: I64, head_gro
             second_limb[c, slot] = j
 
 
-@njit(cache=True, nogil=True)
+@jit(nogil=True)
 def winners_rows(lo: int, hi: int, g: Goals, w: Winners, limb_of_group: I64,
                  head_group: int) -> None:
     """:func:`character_winners` of every character ``lo..hi-1``, in place."""

@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
-
 from .decode import DecodedArrays, PoseArrays, two_bone_middle
 from .solve_math import reach_point
 from .solve_points import Bodies, Goals, Tables, Winners
@@ -18,6 +16,7 @@ from .vec import (
     add,
     frame_from_axes,
     in_frame,
+    jit,
     load3,
     load_frame,
     matmul,
@@ -34,7 +33,7 @@ from .vec import (
 )
 
 
-@njit(cache=True, inline="always")
+@jit(inline="always")
 def solve_head(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners, b: Bodies,
                t: Tables) -> None:
     """Mirrors ``ecs_anim.solver_shell._Solve.head`` for character ``c`` (in place)."""

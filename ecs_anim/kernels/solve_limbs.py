@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
-
 from .decode import DecodedArrays, PoseArrays, distal_frames, two_bone_middle
 from .solve_math import bone_coords, point_in_limb, reach_point, turn_about_axis
 from .solve_points import I64, Bodies, Goals, Tables, Winners, goal_point, plain_point
@@ -23,6 +21,7 @@ from .vec import (
     Vec3,
     add,
     in_frame,
+    jit,
     load3,
     load_frame,
     matmul,
@@ -38,7 +37,7 @@ from .vec import (
 )
 
 
-@njit(cache=True, inline="always")
+@jit(inline="always")
 def _store_limb(frames: F64, fractions: F64, directions: F64, c: int, slot: int, frame: Frame,
                 fraction: float, direction: Vec3) -> None:
     """Write limb ``slot`` of its kind (legs or arms) of character ``c``: its half-plane frame
@@ -48,7 +47,7 @@ def _store_limb(frames: F64, fractions: F64, directions: F64, c: int, slot: int,
     store3(directions[c, slot], direction)
 
 
-@njit(cache=True, inline="always")
+@jit(inline="always")
 def limb_joints(positions: F64, c: int, li: int, frame: Frame, fraction: float,
                 direction: Vec3, lengths_row: F64, limb_joint: I64, limb_length: I64) -> None:
     """Mirrors ``_Solve._limb_joints``: the middle, end and distal joints of limb ``li`` from
@@ -64,7 +63,7 @@ def limb_joints(positions: F64, c: int, li: int, frame: Frame, fraction: float,
     store3(positions[c, limb_joint[li, 3]], add(end, scale(to_world(lower2world, direction), h)))
 
 
-@njit(cache=True, inline="always")
+@jit(inline="always")
 def solve_limbs(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners,
                 b: Bodies, t: Tables, tolerance_m: float, leg_extension: float) -> None:
     """Mirrors ``ecs_anim.solver_shell._Solve.limbs`` for character ``c`` (its rows of ``pose``

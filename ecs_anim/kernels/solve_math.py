@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
-
 from .vec import (
     Frame,
     Vec3,
@@ -23,6 +21,7 @@ from .vec import (
     cross,
     dot,
     frame_from_axes,
+    jit,
     norm,
     normalize,
     rotation_toward,
@@ -32,7 +31,7 @@ from .vec import (
 )
 
 
-@njit(cache=True)
+@jit()
 def bring_within_reach(base: Vec3, limb_root: Vec3, goal: Vec3, reach: float,
                        max_angle: float) -> Frame:
     """Mirrors :func:`ecs_anim.solver.bring_within_reach`: the smallest rotation about ``base``
@@ -48,14 +47,14 @@ def bring_within_reach(base: Vec3, limb_root: Vec3, goal: Vec3, reach: float,
     return rotation_toward(a_vec, b_vec, math.pi, weight)
 
 
-@njit(cache=True)
+@jit()
 def flexion(fraction: float, upper: float, lower: float) -> float:
     """Mirrors :func:`ecs_anim.solver.flexion`: middle-joint flexion (0 = straight)."""
     span = fraction * (upper + lower)
     return math.acos(min(max((span**2 - upper**2 - lower**2) / (2 * upper * lower), -1.0), 1.0))
 
 
-@njit(cache=True)
+@jit()
 def point_in_limb(upper: float, lower: float, fraction: float, on_lower: bool, q: Vec3) -> Vec3:
     """Mirrors :func:`ecs_anim.solver.point_in_limb`: a limb point (bone coordinates ``q``) in
     the half-plane frame, the root at the origin."""
@@ -74,7 +73,7 @@ def point_in_limb(upper: float, lower: float, fraction: float, on_lower: bool, q
     return add(out, scale(d, q[2]))
 
 
-@njit(cache=True)
+@jit()
 def reach_point(root: Vec3, limb2world: Frame, upper: float, lower: float, fraction: float,
                 on_lower: bool, q: Vec3, goal: Vec3,
                 max_extension: float) -> tuple[Frame, float, Vec3]:
@@ -112,7 +111,7 @@ def reach_point(root: Vec3, limb2world: Frame, upper: float, lower: float, fract
     return frame, new_fraction, add(root, to_world(frame, local))
 
 
-@njit(cache=True)
+@jit()
 def turn_about_axis(root: Vec3, axis_through: Vec3, point: Vec3, goal: Vec3) -> Frame:
     """Mirrors :func:`ecs_anim.solver.turn_about_axis`: the rotation about root ->
     ``axis_through`` bringing ``point`` closest to ``goal`` (the identity on the axis)."""
@@ -126,14 +125,14 @@ def turn_about_axis(root: Vec3, axis_through: Vec3, point: Vec3, goal: Vec3) -> 
     return axis_angle(k, angle)
 
 
-@njit(cache=True)
+@jit()
 def distal_in_lower(direction: Vec3) -> Frame:
     """Mirrors ``solver_shell._distal_in_lower``: a foot / hand frame in its lower bone's frame
     (z along ``direction``, x the limb normal)."""
     return frame_from_axes(direction, (1.0, 0.0, 0.0), 2, 0, (0.0, 1.0, 0.0))
 
 
-@njit(cache=True)
+@jit()
 def bone_coords(bone: int, fraction: float, offset: Vec3, upper: float, lower: float,
                 distal: float, distal_dir: Vec3) -> tuple[Vec3, bool]:
     """Mirrors ``solver_shell._bone_coords`` for one point: its coordinates in its bone's frame

@@ -15,7 +15,6 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 
 from ..body_points import FRAME_PELVIS, SEG_DISTAL, SEG_FRAME, SEG_PROXIMAL
@@ -31,6 +30,7 @@ from .vec import (
     add_scaled,
     dot,
     frame_from_axes,
+    jit,
     load3,
     load_frame,
     sub,
@@ -161,7 +161,7 @@ class Bodies(NamedTuple):
     iterations: I64
 
 
-@njit(cache=True, inline="always")
+@jit(inline="always")
 def limb_frame(dec: DecodedArrays, c: int, slot: int) -> Frame:
     """The half-plane frame of limb ``slot`` (0, 1 legs; 2, 3 arms) of character ``c``."""
     if slot < 2:
@@ -169,7 +169,7 @@ def limb_frame(dec: DecodedArrays, c: int, slot: int) -> Frame:
     return load_frame(dec.arm2world[c, slot - 2])
 
 
-@njit(cache=True, inline="always")
+@jit(inline="always")
 def segment_frame(dec: DecodedArrays, c: int, segment: int, t: Tables) -> Frame:
     """Mirrors :func:`ecs_anim.body_points.segment_frames` for one segment of character ``c``."""
     kind = t.seg_frame[segment]
@@ -185,7 +185,7 @@ def segment_frame(dec: DecodedArrays, c: int, segment: int, t: Tables) -> Frame:
     return load_frame(dec.head2world[c])
 
 
-@njit(cache=True, inline="always")
+@jit(inline="always")
 def point_position(dec: DecodedArrays, c: int, segment: int, fraction: float, offset: Vec3,
                    t: Tables) -> Vec3:
     """Mirrors :func:`ecs_anim.body_points.point_positions` for one point of character ``c``:
@@ -199,7 +199,7 @@ def point_position(dec: DecodedArrays, c: int, segment: int, fraction: float, of
     return point
 
 
-@njit(cache=True, inline="always")
+@jit(inline="always")
 def plain_point(positions: F64, c: int, proximal: int, distal: int, fraction: float) -> Vec3:
     """:func:`point_position` of a point without offset: ``fraction`` of the way from joint
     ``proximal`` to ``distal`` of character ``c`` (``positions`` (r, N_JOINTS, 3) m); taking
@@ -209,13 +209,13 @@ def plain_point(positions: F64, c: int, proximal: int, distal: int, fraction: fl
     return add_scaled(a, sub(b, a), fraction)
 
 
-@njit(cache=True, inline="always")
+@jit(inline="always")
 def goal_point(dec: DecodedArrays, c: int, g: Goals, j: int, t: Tables) -> Vec3:
     """Where goal ``j``'s point of character ``c`` is now."""
     return point_position(dec, c, g.segment[j], g.fraction[j], load3(g.offset[j]), t)
 
 
-@njit(cache=True, inline="always")
+@jit(inline="always")
 def goal_error(dec: DecodedArrays, c: int, g: Goals, j: int, t: Tables) -> float:
     """Mirrors ``ecs_anim.solver_shell._errors`` for goal ``j`` of character ``c``: the distance
     of its point to its goal (m), or the angle of an orientation (rad)."""
@@ -226,7 +226,7 @@ def goal_error(dec: DecodedArrays, c: int, g: Goals, j: int, t: Tables) -> float
     return math.sqrt(dot(d, d))
 
 
-@njit(cache=True, inline="always")
+@jit(inline="always")
 def centre_of_mass(dec: DecodedArrays, c: int, masses: F64, com_fraction: F64,
                    t: Tables) -> Vec3:
     """Mirrors :func:`ecs_anim.morphology.centres_of_mass` for character ``c`` (masses and

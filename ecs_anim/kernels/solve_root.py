@@ -10,14 +10,12 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
-
 from .decode import DecodedArrays, PoseArrays, leg_length
 from .solve_points import B8, I64, Bodies, Tables
-from .vec import F64, add_scaled, load3, sub
+from .vec import F64, add_scaled, jit, load3, sub
 
 
-@njit(cache=True, inline="always")
+@jit(inline="always")
 def solve_root(c: int, pose: PoseArrays, dec: DecodedArrays, b: Bodies, t: Tables,
                com_tolerance_m: float, root_gain: float, leg_extension: float) -> float:
     """Mirrors ``ecs_anim.solver_shell._Solve.root`` for character ``c`` (in place): returns
@@ -29,7 +27,7 @@ def solve_root(c: int, pose: PoseArrays, dec: DecodedArrays, b: Bodies, t: Table
                      leg_extension)
 
 
-@njit(cache=True, inline="always")
+@jit(inline="always")
 def root_step(c: int, root_position: F64, positions: F64, lengths: F64, masses: F64,
               com_fraction: F64, footprint: F64, in_contact: B8, com_desired: F64, com_on: B8,
               mass_proximal: I64, mass_distal: I64, hip: I64, thigh: I64, shank: I64,

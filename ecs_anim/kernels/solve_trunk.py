@@ -9,7 +9,6 @@ spine's joints are exact once decoded), on which the higher-priority goals are c
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 
 from .decode import DecodedArrays, PoseArrays, decode_row
@@ -19,6 +18,7 @@ from .vec import (
     F64,
     axis_angle,
     axis_angle_of,
+    jit,
     load3,
     load4,
     load_frame,
@@ -40,7 +40,7 @@ _HEAD, _TRUNK = 2, 5
 _LIMB_REACH_SHARE = 0.99
 
 
-@njit(cache=True, inline="always")
+@jit(inline="always")
 def solve_trunk(c: int, pose: PoseArrays, dec: DecodedArrays, lengths_row: F64, g: Goals,
                 err: F64, stalled: NDArray[np.bool_], t: Tables, tolerance_m: float,
                 tolerance_rad: float, max_ccd_step_rad: float) -> bool:

@@ -10,7 +10,6 @@ solver's rows; PostureConvert calls it for the solved rows and ``posture_rows`` 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 
 from .decode import DecodedArrays, PoseArrays
@@ -21,13 +20,14 @@ from .posture import (
     local_from_globals_row,
     vertebrae_row,
 )
+from .vec import jit
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 B8 = NDArray[np.bool_]
 
 
-@njit(cache=True, nogil=True)
+@jit(nogil=True)
 def posture_solved_rows(lo: int, hi: int, rows: I64, solved: DecodedArrays, pose: PoseArrays,
                         lengths: F64, decoded: DecodedArrays, frozen: B8, newly_bad: B8,
                         positions: F64, rotations: bool, world: F64, local: F64, rest_hips: F64,
