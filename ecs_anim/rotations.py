@@ -209,10 +209,11 @@ def slerp(q0: F64, q1: F64, t: F64 | float) -> F64:
     t = np.asarray(t, dtype=np.float64)[..., None]
     dot = np.sum(q0 * q1, axis=-1, keepdims=True)
     q1 = np.where(dot < 0.0, -q1, q1)
-    dot = np.abs(dot)
-    theta = np.arccos(np.clip(dot, -1.0, 1.0))
-    sin_theta = np.sin(theta)
-    near = sin_theta < 1e-6
-    w0 = np.where(near, 1.0 - t, np.sin((1.0 - t) * theta) / np.where(near, 1.0, sin_theta))
-    w1 = np.where(near, t, np.sin(t * theta) / np.where(near, 1.0, sin_theta))
+    dot = np.clip(np.abs(dot), 0.0, 1.0)
+    theta = np.arccos(dot)
+    # The sum is normalized: the weights need not be divided by sin(theta), which is only
+    # compared (squared, as 1 - cos^2: no sine) with 1e-6, where the arc is too short to tell.
+    near = (1.0 - dot) * (1.0 + dot) < 1e-12
+    w0 = np.where(near, 1.0 - t, np.sin((1.0 - t) * theta))
+    w1 = np.where(near, t, np.sin(t * theta))
     return normalize(w0 * q0 + w1 * q1)

@@ -107,7 +107,7 @@ def adapt_to_ground(c: int, root_position: F64, leg_frame: F64, leg_fraction: F6
     root_position[c, 2] = pelvis_z / leg
 
 
-@jit()
+@jit(inline="always")  # one call site
 def adapt_keeping_heels_up(c: int, pose: LegPoseArrays, hips: tuple[Vec3, Vec3],
                            pelvis_now_z: float, pelvis2world: Frame,
                            leg2world: tuple[Frame, Frame], lengths: F64, leg: float,
@@ -198,7 +198,7 @@ def _foot_target(ankle: Vec3, toe: Vec3, footprint: Vec3, w: float, ground_ref: 
     return (t[0], t[1], t[2] + max(_height(kinds, params, grid, t) + ankle_height - t[2], 0.0))
 
 
-@jit()
+@jit(inline="always")  # one call site: no tuples of arrays passed per row
 def ground_adapt_row(c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
                      contact_weight: F64, clip: I64, source_ankle_height: F64, footprint: F64,
                      locked: B1, footprint_settled: B1, ground_ref: F64, kinds: I64,

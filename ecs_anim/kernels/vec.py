@@ -213,14 +213,13 @@ def slerp(q0: Quat, q1: Quat, t: float) -> Quat:
     cos_half = q0[0] * q1[0] + q0[1] * q1[1] + q0[2] * q1[2] + q0[3] * q1[3]
     if cos_half < 0.0:
         q1 = (-q1[0], -q1[1], -q1[2], -q1[3])
-    cos_half = abs(cos_half)
-    theta = math.acos(min(max(cos_half, -1.0), 1.0))
-    sin_theta = math.sin(theta)
-    if sin_theta < 1e-6:
+    cos_half = min(abs(cos_half), 1.0)
+    if (1.0 - cos_half) * (1.0 + cos_half) < 1e-12:
         w0, w1 = 1.0 - t, t
     else:
-        w0 = math.sin((1.0 - t) * theta) / sin_theta
-        w1 = math.sin(t * theta) / sin_theta
+        theta = math.acos(cos_half)
+        w0 = math.sin((1.0 - t) * theta)
+        w1 = math.sin(t * theta)
     q = (w0 * q0[0] + w1 * q1[0], w0 * q0[1] + w1 * q1[1], w0 * q0[2] + w1 * q1[2],
          w0 * q0[3] + w1 * q1[3])
     n = max(math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]), TINY)
