@@ -189,12 +189,15 @@ def _foot_target(ankle: Vec3, toe: Vec3, footprint: Vec3, w: float, ground_ref: 
     """One ankle's target in ``GroundAdapt.run``: the motion's free foot on the floor
     ``ground_ref`` (m), lifted where its heel or toe would be under the ground, blended
     towards its ``footprint`` by the contact weight ``w``, its heel kept above the ground."""
-    free = (ankle[0], ankle[1], ankle[2] + ground_ref)
-    need_heel = _height(kinds, params, grid, free) + ankle_height - free[2]
-    need_toe = _height(kinds, params, grid, toe) + ball - (toe[2] + ground_ref)
-    free = (free[0], free[1], free[2] + max(0.0, max(need_heel, need_toe)))
-    t = (free[0] + w * (footprint[0] - free[0]), free[1] + w * (footprint[1] - free[1]),
-         free[2] + w * (footprint[2] - free[2]))
+    if w == 1.0:  # planted: where the free foot would be does not count (two queries fewer)
+        t = footprint
+    else:
+        free = (ankle[0], ankle[1], ankle[2] + ground_ref)
+        need_heel = _height(kinds, params, grid, free) + ankle_height - free[2]
+        need_toe = _height(kinds, params, grid, toe) + ball - (toe[2] + ground_ref)
+        free = (free[0], free[1], free[2] + max(0.0, max(need_heel, need_toe)))
+        t = (free[0] + w * (footprint[0] - free[0]), free[1] + w * (footprint[1] - free[1]),
+             free[2] + w * (footprint[2] - free[2]))
     return (t[0], t[1], t[2] + max(_height(kinds, params, grid, t) + ankle_height - t[2], 0.0))
 
 

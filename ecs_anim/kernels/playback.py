@@ -38,7 +38,9 @@ def rotate_xy(x: float, y: float, angle: float) -> tuple[float, float]:
     return c * x - s * y, s * x + c * y
 
 
-@jit()
+# The blends are inlined: each array passed to a call costs an atomic reference count on the
+# way in and out, and fifteen blends a character made those half of playback's time.
+@jit(inline="always")
 def _blend_quat(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
     """Row ``ro`` of the (n, 4) quaternions ``out``: rows ``ra`` of ``a``, ``rb`` of ``b``
     slerped (scalar indexing: no array views in the loop over characters)."""
@@ -46,7 +48,7 @@ def _blend_quat(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -
     out[ro, 0], out[ro, 1], out[ro, 2], out[ro, 3] = q[0], q[1], q[2], q[3]
 
 
-@jit()
+@jit(inline="always")
 def _blend_quat2(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
     """As :func:`_blend_quat` for (n, 2, 4) quaternions [left, right]."""
     for s in range(2):
@@ -55,14 +57,14 @@ def _blend_quat2(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) 
         out[ro, s, 0], out[ro, s, 1], out[ro, s, 2], out[ro, s, 3] = q[0], q[1], q[2], q[3]
 
 
-@jit()
+@jit(inline="always")
 def _blend_dir(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
     """Row ``ro`` of the (n, 3) directions ``out``: normalized lerp of ``a[ra]``, ``b[rb]``."""
     v = nlerp((a[ra, 0], a[ra, 1], a[ra, 2]), (b[rb, 0], b[rb, 1], b[rb, 2]), w)
     out[ro, 0], out[ro, 1], out[ro, 2] = v[0], v[1], v[2]
 
 
-@jit()
+@jit(inline="always")
 def _blend_dir2(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
     """As :func:`_blend_dir` for (n, 2, 3) directions [left, right]."""
     for s in range(2):
@@ -71,14 +73,14 @@ def _blend_dir2(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -
         out[ro, s, 0], out[ro, s, 1], out[ro, s, 2] = v[0], v[1], v[2]
 
 
-@jit()
+@jit(inline="always")
 def _lerp(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
     """Row ``ro`` of the (n, k) ``out``: ``(1 - w) a[ra] + w b[rb]``."""
     for k in range(a.shape[1]):
         out[ro, k] = (1 - w) * a[ra, k] + w * b[rb, k]
 
 
-@jit()
+@jit(inline="always")
 def _lerp3(a: F64, ra: int, b: F64, rb: int, w: float, out: F64, ro: int) -> None:
     """As :func:`_lerp` for (n, 3, 3) points."""
     for j in range(3):
