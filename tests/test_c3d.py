@@ -548,3 +548,38 @@ def test_a_scenario_plays_absent_parts_from_another_of_its_motions(tmp_path):
         path.write_text(bad)
         with pytest.raises(InputError, match=re.escape(message)):
             load_scenario(path)
+
+
+def test_a_wand_in_front_of_the_segment_gives_the_knee_and_ankle_on_the_flexion_axis(tmp_path):
+    """The chord rule's wand (THI, TIB) moved from the side of the thigh and shank to their
+    front, as some Helen Hayes sets place it: the centres come from the knee's flexion axis
+    instead (found from the motion), near where the lateral wands put them, not behind the knee."""
+    require_mocap()
+    labels, positions, rate = _tennis_markers()
+    reference, _ = canonical_clip_c3d(read_c3d(write_c3d(tmp_path / "lateral.c3d", labels, positions,
+                                                          rate=rate)))
+    ref = reference.positions
+    moved = positions.copy()
+    forward = reference.pelvis2world[:, :, 0]
+    for s, S in (("l", "L"), ("r", "R")):
+        for wand, top, bottom in (("THI", "hip", "KNE"), ("TIB", "knee", "ANK")):
+            line_top = ref[:, J[f"{top}_{s}"]]
+            line_bottom = positions[:, labels.index(f"{S}{bottom}")]
+            u = (line_top - line_bottom) / np.linalg.norm(line_top - line_bottom, axis=-1, keepdims=True)
+            w = positions[:, labels.index(f"{S}{wand}")] - line_bottom
+            along = np.sum(w * u, axis=-1, keepdims=True)
+            front = forward - np.sum(forward * u, axis=-1, keepdims=True) * u
+            front /= np.linalg.norm(front, axis=-1, keepdims=True)
+            moved[:, labels.index(f"{S}{wand}")] = line_bottom + along * u \
+                + np.linalg.norm(w - along * u, axis=-1, keepdims=True) * front
+    clip, _ = canonical_clip_c3d(read_c3d(write_c3d(tmp_path / "front.c3d", labels, moved, rate=rate)))
+    for joint, proximal, marker, wand in (("knee", "hip", "KNE", "THI"), ("ankle", "knee", "ANK", "TIB")):
+        for s, S in (("l", "L"), ("r", "R")):
+            assert "in the plane of the flexion axis (the wand is" in str(clip.joint_map.names[f"{joint}_{s}"])
+            error = np.linalg.norm(clip.positions[:, J[f"{joint}_{s}"]] - ref[:, J[f"{joint}_{s}"]], axis=-1)
+            # Measured 10-21 mm (the lateral wands' centres are themselves skin-marker estimates);
+            # the chord rule in the front wand's plane puts them 60-91 mm off.
+            assert np.median(error) < 0.025, (joint, s, np.median(error))
+            behind = chord_centre(ref[:, J[f"{proximal}_{s}"]], moved[:, labels.index(f"{S}{wand}")],
+                                  moved[:, labels.index(f"{S}{marker}")], 0.05)
+            assert np.median(np.linalg.norm(behind - ref[:, J[f"{joint}_{s}"]], axis=-1)) > 0.05

@@ -19,15 +19,9 @@ WITH_CENTRES = {
     "bts_spaced_lowercase_nounits_yup.c3d": ("hip", "knee", "ankle"),
     "vicon_treadmill_run_clusters_240hz.c3d": ("hip",),
 }
-#: Measured medians (mm) where the bound does not hold (open in issue 12). Cortex's knee and
-#: ankle centres lie 75-100 mm from ours: its knee and ankle labels each name two markers
-#: (lateral and medial, RKNE/RANK twice), and our chord rule takes the first one seen; BTS's
-#: left hip and right ankle lie just beyond the bounds (cause not found).
+#: Measured medians (mm) where the bound does not hold (open in issue 12). BTS's left hip and
+#: right ankle lie just beyond the bounds.
 OPEN_MM = {
-    ("mac_helenhayes_events_vjc_60hz.c3d", "knee_l"): 92.0,
-    ("mac_helenhayes_events_vjc_60hz.c3d", "knee_r"): 100.1,
-    ("mac_helenhayes_events_vjc_60hz.c3d", "ankle_l"): 74.7,
-    ("mac_helenhayes_events_vjc_60hz.c3d", "ankle_r"): 79.4,
     ("bts_spaced_lowercase_nounits_yup.c3d", "hip_l"): 25.5,
     ("bts_spaced_lowercase_nounits_yup.c3d", "ankle_r"): 15.8,
     # Cluster sets: SCoRE on a run's hip flexion places the hips on their axis half an adult
