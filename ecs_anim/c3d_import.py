@@ -597,6 +597,7 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
     mmap = match_markers(raw.labels, map_spec, [bool(v) for v in seen])
     never = [raw.labels[i] for i in mmap.marker.values() if not seen[i]]
     mmap.marker = {r: i for r, i in mmap.marker.items() if seen[i]}
+    split_same_label(mmap, raw.positions, raw.valid)
     present, absent = check_usable(mmap, raw.labels)
     valid = raw.valid.copy()
     rejected = 0
@@ -690,6 +691,37 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
         },
     }
     return clip, extra
+
+
+#: Lateral landmark roles and their medial twins, which some labs label alike.
+MEDIAL_TWIN = {"KNEE_LAT": "KNEE_MED", "ANKLE_LAT": "ANKLE_MED", "ELBOW_LAT": "ELBOW_MED"}
+
+
+def split_same_label(mmap: MarkerMap, positions: F64, valid: BOOL) -> None:
+    """Where one label names two markers of a lateral landmark (Cortex's Helen Hayes set writes
+    ``RKNE`` for both femoral epicondyles and ``RANK`` for both malleoli; the descriptions say
+    R.Knee / R.Knee.Medial), tell them apart by position, not by their order in the file: the
+    medial one is the nearer to the other limb's markers of that landmark (median distance over
+    the frames where all are seen), and it takes the medial role if the file has no marker for
+    it. ``mmap.marker`` is updated in place. positions (F, M, 3) in file units; valid (F, M)."""
+    for lateral_base, medial_base in MEDIAL_TWIN.items():
+        for s, other in (("l", "r"), ("r", "l")):
+            lateral, medial = f"{lateral_base}_{s}", f"{medial_base}_{s}"
+            pair = mmap.same_label.get(lateral, [])
+            if len(pair) != 2 or medial in mmap.marker or medial not in mmap.preset.roles:
+                continue
+            opposite = mmap.same_label.get(f"{lateral_base}_{other}") or \
+                [mmap.marker[r] for r in (f"{lateral_base}_{other}",) if r in mmap.marker]
+            if not opposite:
+                continue
+            both = valid[:, pair].all(axis=1) & valid[:, opposite].all(axis=1)
+            if not both.any():
+                continue
+            across = positions[both][:, opposite].mean(axis=1)
+            distance = [float(np.median(np.linalg.norm(positions[both, i] - across, axis=-1)))
+                        for i in pair]
+            mmap.marker[lateral], mmap.marker[medial] = pair[int(np.argmax(distance))], \
+                pair[int(np.argmin(distance))]
 
 
 #: How labs store their own joint centres as points, per joint and side ({S}: L/R), compared

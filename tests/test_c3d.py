@@ -583,3 +583,28 @@ def test_a_wand_in_front_of_the_segment_gives_the_knee_and_ankle_on_the_flexion_
             behind = chord_centre(ref[:, J[f"{proximal}_{s}"]], moved[:, labels.index(f"{S}{wand}")],
                                   moved[:, labels.index(f"{S}{marker}")], 0.05)
             assert np.median(np.linalg.norm(behind - ref[:, J[f"{joint}_{s}"]], axis=-1)) > 0.05
+
+
+@pytest.mark.parametrize("medial_first", [True, False])
+def test_a_label_naming_the_lateral_and_the_medial_marker_is_split_by_position(tmp_path, medial_first):
+    """Cortex writes RKNE / RANK for both epicondyles and both malleoli: the one nearer the
+    other leg is medial, wherever it comes in the file, and the centre is the midpoint."""
+    require_mocap()
+    labels, positions, rate = _tennis_markers()
+    reference, _ = canonical_clip_c3d(read_c3d(write_c3d(tmp_path / "lateral.c3d", labels, positions,
+                                                          rate=rate)))
+    ref = reference.positions
+    names, columns = list(labels), [positions[:, i] for i in range(len(labels))]
+    for s, S in (("l", "L"), ("r", "R")):
+        for joint, marker in (("knee", "KNE"), ("ankle", "ANK")):
+            lateral = positions[:, labels.index(f"{S}{marker}")]
+            medial = 2 * ref[:, J[f"{joint}_{s}"]] - lateral  # mirrored through the centre
+            at = 0 if medial_first else len(names)
+            names.insert(at, f"{S}{marker}")
+            columns.insert(at, medial)
+    path = write_c3d(tmp_path / "twins.c3d", names, np.stack(columns, axis=1), rate=rate)
+    clip, _ = canonical_clip_c3d(read_c3d(path))
+    for joint in ("knee_l", "knee_r", "ankle_l", "ankle_r"):
+        assert clip.joint_map.names[joint] in ("midpoint of the femoral epicondyles", "midpoint of the malleoli")
+        error = np.linalg.norm(clip.positions[:, J[joint]] - ref[:, J[joint]], axis=-1)
+        assert np.median(error) < 1e-5, (joint, np.median(error))  # float32 in the file
