@@ -42,7 +42,12 @@ J Biomech 39:2798), the centre of rotation that is fixed in both adjacent segmen
 ankles move nearly as hinges, whose centre is only defined up to a point on the axis, so the
 point on the axis nearest the proximal joint centre is taken. A walk flexes the hips about
 one axis too: there the hip is placed on its axis half an adult inter-hip distance (175 mm per
-0.8 m of leg) from the pelvis cluster's mid-plane (the pelvis clusters here straddle it). The toe hangs a foot length
+0.8 m of leg) from the pelvis cluster's mid-plane (the pelvis clusters here straddle it). On
+such a hinge SCoRE's axis direction depends on the segment rotations only, but its location
+also on the clusters' soft-tissue sliding (60 mm too high on a treadmill run); where the greater
+trochanter is marked (``LGT``), the axis is moved to pass through it: the trochanter lies on the
+hip's lateral axis at the femoral head centre's level (on average 3.4 mm above it, range -10 to
++20 mm: Theivendran & Hart 2009, Acta Orthop Belg 75(4)). The toe hangs a foot length
 (adult proportions of the measured leg) in front of the ankle in the foot cluster's frame.
 
 Joint centres whose bones change length by more than 15 % for at most 5 frames (marker swaps
@@ -351,7 +356,8 @@ def cluster_poses(points: F64, weights: F64, iterations: int = 2) -> tuple[F64, 
 
 def score_centre(parent: tuple[F64, F64], child: tuple[F64, F64], use: BOOL,
                  hinge_prior_in_parent: F64 | None = None,
-                 hinge_plane_in_parent: tuple[F64, float] | None = None) -> tuple[F64, F64, F64]:
+                 hinge_plane_in_parent: tuple[F64, float] | None = None,
+                 hinge_through_in_parent: F64 | None = None) -> tuple[F64, F64, F64]:
     """SCoRE (Ehrig et al. 2006): the point fixed in both segments.
 
     parent, child : (rotation (F, 3, 3), origin (F, 3)) segment poses; use : (F,) frames to fit.
@@ -359,9 +365,10 @@ def score_centre(parent: tuple[F64, F64], child: tuple[F64, F64], use: BOOL,
     when the weakest direction of the normal equations is clearly weaker than the others (by
     :data:`HINGE_RATIO`), it is dropped from the least-squares solution and the point on it nearest
     the prior is taken; with ``hinge_plane_in_parent`` (unit direction d (3,), offset) instead,
-    the point on it with ``d . centre = offset``. Returns (centre in parent frame (3,), in child
-    frame (3,),
-    world position (F, 3): the mean of both estimates).
+    the point on it with ``d . centre = offset``. ``hinge_through_in_parent`` (3,): a point known
+    to lie on the hinge's axis (a landmark on it); the axis keeps SCoRE's direction but passes
+    through that point, and the child's centre is refitted to it. Returns (centre in parent
+    frame (3,), in child frame (3,), world position (F, 3): the mean of both estimates).
     """
     rp, tp = parent
     rc, tc = child
@@ -380,6 +387,12 @@ def score_centre(parent: tuple[F64, F64], child: tuple[F64, F64], use: BOOL,
     if hinge:
         n = evecs[:, 0]
         n_p = n[:3]
+        if hinge_through_in_parent is not None:  # the axis through the landmark, in both frames
+            x[:3] = hinge_through_in_parent
+            x[3:] = np.mean(np.einsum("fji,fj->fi", rc[use], np.einsum("fij,j->fi", rp[use], x[:3])
+                                      + tp[use] - tc[use]), axis=0)
+            n = np.concatenate([n_p, np.mean(np.einsum("fji,fj->fi", rc[use],
+                                                       np.einsum("fij,j->fi", rp[use], n_p)), axis=0)])
         if hinge_plane_in_parent is not None:
             d, offset = hinge_plane_in_parent
             lam = (offset - float(d @ x[:3])) / float(d @ n_p) if abs(float(d @ n_p)) > 1e-6 else 0.0
@@ -1127,11 +1140,17 @@ def _functional_lower_body(mk: _Markers, present: list[str], build: _Build) -> N
             use = pelvis_ok & thigh[2]
             side = 1.0 if s == "l" else -1.0
             plane = (side * lateral, HALF_HIP_DISTANCE_PER_LEG * leg) if lateral.any() else None
+            trochanter = None
+            if mk.has(f"TROCHANTER_{s}"):  # the greater trochanter, in the pelvis cluster's frame
+                trochanter = np.mean(np.einsum("fji,fj->fi", pelvis_rot[use],
+                                               (mk(f"TROCHANTER_{s}") - pelvis_origin)[use]), axis=0)
             _, hip_in_thigh, hip = score_centre((pelvis_rot, pelvis_origin), thigh[:2], use,
-                                                hinge_plane_in_parent=plane)
+                                                hinge_plane_in_parent=plane,
+                                                hinge_through_in_parent=trochanter)
             _set(build, f"hip_{s}", hip, "SCoRE (Ehrig 2006), pelvis and thigh clusters; "
                  f"a flexion-only hip placed {HALF_HIP_DISTANCE_PER_LEG * leg * 1000:.0f} mm "
-                 "from the pelvis cluster's mid-plane")
+                 "from the pelvis cluster's mid-plane"
+                 + (" on the axis through the greater trochanter" if trochanter is not None else ""))
             _, knee_in_shank, knee = score_centre(thigh[:2], shank[:2], thigh[2] & shank[2],
                                                   hip_in_thigh)
             _set(build, f"knee_{s}", knee, "SCoRE thigh/shank, point of the axis nearest the hip")

@@ -23,8 +23,9 @@ Presets:
   humeral epicondyles (HLE/HME, EL/EM; Vicon upper limb ELL/ELM), styloids (RSP/USP, RS/US;
   ulnar head UHE as the Rehazenter/Qualisys set writes it), IJ (SJN), PX (SXS), C7 (CV7), T8.
 * ``cluster_gait`` — technical marker clusters (c3d.org sample ``Eb015pi``: ``PV1-4`` pelvis,
-  ``RTH1-4`` thigh, ``RSK1-4`` shank, ``RFT1-3`` foot): no landmarks, so joint centres are found
-  functionally (see :mod:`ecs_anim.c3d_import`).
+  ``RTH1-4`` thigh, ``RSK1-4`` shank, ``RFT1-3`` foot; Vicon's lettered ``PELA``, ``LFMA``,
+  ``LTBA``, ``LFTA``): no landmarks, so joint centres are found functionally (see
+  :mod:`ecs_anim.c3d_import`); optional greater-trochanter markers (``LGT``) fix a hip's axis.
 
 Body parts (groups): ``pelvis``, ``leg_l``, ``leg_r``, ``trunk``, ``head``, ``arm_l``, ``arm_r``.
 A group whose markers are all missing is *absent* (filled with a neutral pose, recorded in the
@@ -182,6 +183,8 @@ _CLUSTER_ROLES = _sided({
     **{f"THIGH_{k}_{{s}}": (f"{{S}}TH{k}", f"{{S}}FM{'ABCD'[k - 1]}") for k in range(1, 5)},
     **{f"SHANK_{k}_{{s}}": (f"{{S}}SK{k}", f"{{S}}TB{'ABCD'[k - 1]}") for k in range(1, 5)},
     **{f"FOOT_{k}_{{s}}": (f"{{S}}FT{k}", f"{{S}}FT{'ABC'[k - 1]}") for k in range(1, 4)},
+    # Optional: the greater trochanter (Vicon cluster model LGT/RGT) places a flexion-only hip.
+    "TROCHANTER_{s}": ("{S}GT", "{S}GTR", "{S}TROC", "*TROCHANTER"),
 })
 
 _LANDMARK_GROUPS = _groups_sided({

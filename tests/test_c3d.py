@@ -483,6 +483,28 @@ def test_score_hinge_plane_rule_places_the_centre_on_the_axis():
     np.testing.assert_allclose(cp, [0.05, 0.07, -0.1], atol=1e-9)
 
 
+def test_score_hinge_through_a_landmark_ignores_soft_tissue_sliding_along_the_thigh():
+    """A flexion-only hip whose thigh cluster slides along the thigh with flexion (soft tissue):
+    SCoRE's axis direction comes from the rotations alone and stays right, its location does
+    not; through the greater trochanter (a point on the axis) the centre is found again."""
+    rng = np.random.default_rng(9)
+    n = 200
+    parent_rot = rot_axis(2, rng.uniform(-0.2, 0.2, n))
+    parent_origin = rng.normal(size=(n, 3))
+    centre_in_parent = np.array([0.05, 0.09, -0.1])
+    centre = np.einsum("fij,j->fi", parent_rot, centre_in_parent) + parent_origin
+    flexion = rng.uniform(-0.6, 0.6, n)
+    child_rot = parent_rot @ rot_axis(1, flexion)
+    slide = 0.03 * flexion[:, None] * child_rot[:, :, 2]  # 30 mm per radian along the thigh
+    child_origin = centre - np.einsum("fij,j->fi", child_rot, np.array([0.0, 0.0, 0.3])) + slide
+    plane = (np.array([0.0, 1.0, 0.0]), 0.07)
+    args = ((parent_rot, parent_origin), (child_rot, child_origin), np.ones(n, dtype=bool))
+    biased, _, _ = score_centre(*args, hinge_plane_in_parent=plane)
+    assert np.linalg.norm(biased - [0.05, 0.07, -0.1]) > 0.005
+    trochanter = centre_in_parent + np.array([0.0, 0.09, 0.0])
+    cp, _, _ = score_centre(*args, hinge_plane_in_parent=plane, hinge_through_in_parent=trochanter)
+    np.testing.assert_allclose(cp, [0.05, 0.07, -0.1], atol=1e-9)
+
 def test_y_up_file_is_detected_and_turned_z_up(tmp_path):
     require_mocap()
     labels, positions, rate = _tennis_markers()
