@@ -1068,6 +1068,8 @@ def _knee_and_ankle(mk: _Markers, build: _Build, s: str, leg_guess: float) -> No
     use: BOOL = np.asarray(~mk.long[:, [mk.found[r] for r in roles]].any(axis=1))
     if build.root_trusted is not None:
         use &= build.root_trusted
+    if not use.any():  # nothing reliable: trust_root refuses the file or the gaps are reported
+        use = np.ones_like(use)
 
     def wand_or_axis(proximal: F64, marker: F64, role: str, medial: F64, offset: float
                      ) -> tuple[F64, str]:
