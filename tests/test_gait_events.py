@@ -32,7 +32,7 @@ BOUND_MS = 25.0
 OPEN_MS = {
     "vicon_cgm24_events_jc_100hz.c3d": 60,
     "vicon_pig_noclav_prefix_events_60hz.c3d": 50,
-    "mac_helenhayes_events_vjc_60hz.c3d": 50,
+    "mac_helenhayes_events_vjc_60hz.c3d": 33.4,
     "rehazenter_isb_events_100hz.c3d": 60,
 }
 
