@@ -55,6 +55,7 @@ from .vec import (
     Frame,
     Vec3,
     add,
+    copy_row,
     frame_from_axes,
     jit,
     load3,
@@ -264,7 +265,7 @@ def posture_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64,
         if not good:
             frozen[c] = True
         if not frozen[c]:
-            positions[c] = decoded.positions[c]
+            copy_row(positions, c, decoded.positions, c)
             if rotations:
                 local_from_globals_row(world[c], parents, local[c])
         if count > 0 and (not frozen[c] or not have_previous):

@@ -157,16 +157,14 @@ def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: W
 
 @jit(nogil=True)
 def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners,
-               b: Bodies, t: Tables, used: I64, tolerance_m: float, tolerance_rad: float,
+               b: Bodies, t: Tables, used: I64, err: F64, stalled: B8, previous: F64,
+               slow_before: B8, tolerance_m: float, tolerance_rad: float,
                com_tolerance_m: float, max_ccd_step_rad: float, root_gain: float,
                stall_fraction: float, leg_extension: float) -> None:
     """Solve the characters ``lo..hi-1`` (rows of ``pose``, ``dec``, ``b``, ``used``; goals
-    ``g``) in place; ``used`` (r,) the iterations each one took."""
-    k = g.priority.shape[0]
-    err = np.zeros(k)
-    stalled = np.zeros(k, np.bool_)
-    previous = np.zeros(k)
-    slow_before = np.zeros(k, np.bool_)
+    ``g``) in place; ``used`` (r,) the iterations each one took. ``err``, ``stalled``,
+    ``previous``, ``slow_before`` (k,): per-goal scratch (each character uses its own goals'
+    entries, so the threads share them)."""
     for c in range(lo, hi):
         used[c] = solve_character(c, pose, dec, g, w, b, t, err,
                                   stalled, previous, slow_before, tolerance_m, tolerance_rad,
@@ -323,8 +321,10 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
     used = np.zeros(goals.rows.size, np.int64)
     s = settings
     wait_for_solver()  # a first run may be compiling solve_rows in another process
+    k = goals.k
     over_chunks(solve_rows, used.shape[0], state.pose, state.dec, state.goals, state.winners,
-                state.bodies, TABLES, used, float(s.tolerance_m), float(s.tolerance_rad),
+                state.bodies, TABLES, used, np.zeros(k), np.zeros(k, np.bool_), np.zeros(k),
+                np.zeros(k, np.bool_), float(s.tolerance_m), float(s.tolerance_rad),
                 float(s.com_tolerance_m), float(s.max_ccd_step_rad), float(s.root_gain),
                 float(s.stall_fraction), float(MAX_LEG_EXTENSION))
     if state.goals.goal is not goals.goal:

@@ -20,7 +20,7 @@ from .posture import (
     local_from_globals_row,
     vertebrae_row,
 )
-from .vec import jit
+from .vec import copy_row, jit
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -42,12 +42,12 @@ def posture_solved_rows(lo: int, hi: int, rows: I64, solved: DecodedArrays, pose
     head2world, leg2world, arm2world = decoded.head2world, decoded.leg2world, decoded.arm2world
     for i in range(lo, hi):
         c = rows[i]
-        joints[c] = solved.positions[i]
-        pelvis2world[c] = solved.pelvis2world[i]
-        thorax2world[c] = solved.thorax2world[i]
-        head2world[c] = solved.head2world[i]
-        leg2world[c] = solved.leg2world[i]
-        arm2world[c] = solved.arm2world[i]
+        copy_row(joints, c, solved.positions, i)
+        copy_row(pelvis2world, c, solved.pelvis2world, i)
+        copy_row(thorax2world, c, solved.thorax2world, i)
+        copy_row(head2world, c, solved.head2world, i)
+        copy_row(leg2world, c, solved.leg2world, i)
+        copy_row(arm2world, c, solved.arm2world, i)
         good = all_finite(joints[c])
         if rotations:
             export_rotations_row(c, decoded, rest_hips, world[c])
@@ -57,7 +57,7 @@ def posture_solved_rows(lo: int, hi: int, rows: I64, solved: DecodedArrays, pose
         if not good:
             frozen[c] = True
         if not frozen[c]:
-            positions[c] = decoded.positions[c]
+            copy_row(positions, c, decoded.positions, c)
             if rotations:
                 local_from_globals_row(world[c], parents, local[c])
         if count > 0 and (not frozen[c] or not have_previous):

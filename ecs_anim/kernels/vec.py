@@ -28,9 +28,13 @@ TINY = 1e-12
 
 #: numba's ``njit`` as every kernel of this package is compiled (``jit()``, ``jit(nogil=True)``,
 #: ``jit(inline="always")``): cached on disk; numpy's error model (a division by zero gives inf
-#: or nan, as in the numpy reference, instead of a test and a raise at every division: the tick
-#: runs about 15 % faster); never fastmath (it broke the 1e-9 m agreement with numpy).
-jit = partial(njit, cache=True, error_model="numpy")
+#: or nan, as in the numpy reference, instead of a test and a raise at every division); never
+#: fastmath (it broke the 1e-9 m agreement with numpy); and without numba's runtime (``_nrt``).
+#: The kernels allocate nothing (their callers pass every array, scratch included) and the
+#: callers hold the arrays while they run, so the runtime's reference counts bought nothing and
+#: cost an atomic operation at every array a step was handed or a view taken: a third to a half
+#: of playback's and the solver's time.
+jit = partial(njit, cache=True, error_model="numpy", _nrt=False)
 
 
 @jit()
@@ -317,6 +321,15 @@ def store_frame(out: F64, m: Frame) -> None:
     for j in range(3):
         for i in range(3):
             out[i, j] = m[j][i]
+
+
+@jit(inline="always")
+def copy_row(dst: F64, c: int, src: F64, i: int) -> None:
+    """``dst[c] = src[i]`` element by element, for C-contiguous arrays of the same trailing
+    shape (a slice assignment may allocate a temporary, which needs numba's runtime)."""
+    to, frm = dst[c].reshape(-1), src[i].reshape(-1)
+    for k in range(to.shape[0]):
+        to[k] = frm[k]
 
 
 @jit(inline="always")
