@@ -2,7 +2,9 @@
 
 Each foot is in contact while its ankle (heel strike, flat foot) or its toe joint (push-off) is
 near its ground level and nearly still. Hysteresis keeps the state from chattering, short
-contacts are dropped and short gaps filled. Everything is vectorized over frames.
+contacts are dropped and short gaps filled. The contact's edges are then moved to the foot's
+touch-down (the heel lands) and lift-off (the ball leaves the ground), where gait events are.
+Everything is vectorized over frames but those edges (a loop over contacts).
 """
 
 from __future__ import annotations
@@ -36,6 +38,12 @@ class ContactThresholds:
         ``release`` times the thresholds.
     min_duration_s : shorter contacts are dropped; min_gap_s : shorter gaps are filled.
     ease_s : activation ramp added before and after each contact.
+    edge_height_m, edge_sink_mps, edge_rise_mps, edge_max_s : where a contact's touch-down and
+        lift-off lie (:func:`touch_down_to_lift_off`; for a 0.8 m leg, scaled by the body's):
+        the foot touches down when its heel point is within ``edge_height_m`` of its ground and
+        sinks slower than ``edge_sink_mps``, and lifts off when its toe joint rises over
+        ``edge_height_m`` or faster than ``edge_rise_mps``; each edge moves at most
+        ``edge_max_s`` from the foot's stillness contact.
     """
 
     height_m: float = 0.05
@@ -47,12 +55,15 @@ class ContactThresholds:
     filter_s: float = 0.05
     ground_window_s: float = 1.5
     ground_radius: float = 0.15
-    edge_height_m: float = 0.01
+    edge_height_m: float = 0.015
+    edge_sink_mps: float = 0.08
+    edge_rise_mps: float = 0.4
     edge_max_s: float = 0.1
 
     def __post_init__(self) -> None:
         for name in ("height_m", "speed_mps", "min_duration_s", "min_gap_s", "ease_s",
-                     "filter_s", "ground_window_s", "ground_radius", "edge_height_m", "edge_max_s"):
+                     "filter_s", "ground_window_s", "ground_radius", "edge_height_m",
+                     "edge_sink_mps", "edge_rise_mps", "edge_max_s"):
             value = getattr(self, name)
             if value is None and name == "speed_mps":
                 continue
@@ -173,9 +184,10 @@ class FootContacts:
     """Which part of each foot is planted, per frame: bool (n_frames, 2) each, left/right.
 
     heel : the ankle joint still and low; ball : the toe joint still and low; foot : either
-    (the whole-foot contact the tick plants); on_ground : from touch-down (the heel reaches the
-    ground while the ankle still rolls in) to lift-off (the ball leaves it): the foot's
-    contacts widened to where its gait events are. speed_threshold_mps : (2,) the heel's and the ball's threshold
+    (the whole-foot contact the tick plants); on_ground : from touch-down (the heel lands) to
+    lift-off (the ball leaves the ground), :func:`touch_down_to_lift_off`: the foot's
+    stillness contacts with their edges moved to where gait events are. heel, ball and foot
+    hold only within on_ground. speed_threshold_mps : (2,) the heel's and the ball's threshold
     used. Arrays ``height`` (n_frames, 4): heel l, heel r, ball l, ball r above their local
     ground (m); ``speed`` (n_frames, 4) their speeds (m/s).
     """
@@ -236,34 +248,94 @@ def detect_foot_contacts(positions: F64, fps: float,
     part &= ~leave  # a filled gap plants no part that moves (the whole foot may bridge it)
     heel, ball = part[:, :2], part[:, 2:]
     planted = _clean(heel | ball, fps, th)
-    # Touch-down and lift-off: the foot is on the ground from the moment its lower point
-    # reaches the ground (the heel strikes while the ankle still rolls forward) until it
-    # leaves it (the ball rises at toe-off), which stillness alone finds late and early.
-    edge = th.edge_height_m * leg / REFERENCE_LEG_M
-    on_ground = _extend(planted, above[:, :2] < edge, above[:, 2:] < edge,
-                        round(th.edge_max_s * fps))
-    return FootContacts(heel & planted, ball & planted, planted, on_ground,
-                        (float(limit[0]), float(limit[1])), above, v)
+    on_ground = touch_down_to_lift_off(points, planted, fps, leg, th)
+    return FootContacts(heel & planted & on_ground, ball & planted & on_ground,
+                        planted & on_ground, on_ground, (float(limit[0]), float(limit[1])),
+                        above, v)
 
 
-def _extend(flags: NDArray[np.bool_], before: NDArray[np.bool_], after: NDArray[np.bool_],
-            most: int) -> NDArray[np.bool_]:
-    """Each run of ``flags`` extended back over the frames before it where ``before`` holds
-    without a break, and on over those after it where ``after`` does, by at most ``most``
-    frames each way (columns apart)."""
-    out = flags.copy()
-    n = len(flags)
-    for side in range(flags.shape[1]):
-        col, back, on = flags[:, side], before[:, side], after[:, side]
+#: The heel point a touch-down is found on: this fraction of the ankle-to-toe vector behind the
+#: ankle joint, on the line through both (about over the heel's contact point for adult and
+#: child proportions). The foot rolls onto the heel and then about it, so that point stops
+#: sinking when the heel lands, while the ankle still sinks until the foot is flat.
+HEEL_BEHIND_ANKLE = 0.25
+
+
+def touch_down_to_lift_off(points: F64, planted: NDArray[np.bool_], fps: float, leg: float,
+                           thresholds: ContactThresholds) -> NDArray[np.bool_]:
+    """Each foot on the ground from touch-down to lift-off, from its stillness contacts.
+
+    ``points`` (n_frames, 4, 3): ankle l, r, toe l, r; ``planted`` (n_frames, 2) the stillness
+    contacts. Heights are taken over the ground of each contact: the lowest its point comes
+    during it. Touch-down is when the heel lands: the heel point (:data:`HEEL_BEHIND_ANKLE`)
+    within ``edge_height_m`` of the ground and sinking slower than ``edge_sink_mps`` (a
+    vertical-velocity rule like the foot velocity algorithm of O'Connor et al. 2007, Gait
+    Posture 25:469, which reads strikes off the foot centre's vertical velocity; here the
+    heel's, whose sinking ends as it lands). Lift-off is when the ball leaves the ground: the
+    toe joint over ``edge_height_m`` or rising faster than ``edge_rise_mps`` (a threshold on
+    the toe, as Ghoussayni et al. 2004, Gait Posture 20:266, threshold its speed). Each edge of
+    a stillness contact moves to them, earlier or later, by at most ``edge_max_s`` (stillness
+    alone starts late at a brisk walk, while the heel rolls in, and early at a slow one, while
+    the ankle settles), but never so that both feet are up where one was low (see below).
+    Returns bool (n_frames, 2)."""
+    th = thresholds
+    scale = leg / REFERENCE_LEG_M
+    ankle, toe = points[:, :2], points[:, 2:]
+    heel_z = (ankle - HEEL_BEHIND_ANKLE * (toe - ankle))[..., 2]
+    toe_z = toe[..., 2]
+    n = len(points)
+    heel_vz = np.gradient(heel_z, axis=0) * fps if n > 1 else np.zeros_like(heel_z)
+    toe_vz = np.gradient(toe_z, axis=0) * fps if n > 1 else np.zeros_like(toe_z)
+    edge = th.edge_height_m * scale
+    most = round(th.edge_max_s * fps)
+    out = np.zeros_like(planted)
+    widest = planted.copy()
+    for side in range(planted.shape[1]):
+        col = planted[:, side]
         for a, b in _intervals(col):
-            k = a
-            while k > 0 and a - k < most and back[k - 1] and not col[k - 1]:
-                k -= 1
-            m = b
-            while m < n - 1 and m - b < most and on[m + 1] and not col[m + 1]:
-                m += 1
-            out[k:m + 1, side] = True
+            lo, hi = max(0, a - most), min(n, b + most + 1)
+            down = (heel_z[lo:hi, side] < heel_z[a:b + 1, side].min() + edge) \
+                & (heel_vz[lo:hi, side] > -th.edge_sink_mps * scale)
+            still_down = (toe_z[lo:hi, side] < toe_z[a:b + 1, side].min() + edge) \
+                & (toe_vz[lo:hi, side] < th.edge_rise_mps * scale)
+            k, m = _moved_run(col[lo:hi], a - lo, b - lo, down, still_down, most)
+            out[lo + k:lo + m + 1, side] = True
+            # The widest the contact can be: on over the low frames next to it (ankle before,
+            # toe after).
+            ankle_low = ankle[lo:hi, side, 2] < ankle[a:b + 1, side, 2].min() + edge
+            toe_low = toe_z[lo:hi, side] < toe_z[a:b + 1, side].min() + edge
+            k, m = _moved_run(col[lo:hi], a - lo, b - lo, ankle_low | col[lo:hi],
+                              toe_low | col[lo:hi], most)
+            widest[lo + k:lo + m + 1, side] = True
+    # A moved edge never makes a flight phase where a foot was low (a stance foot still
+    # sinking or rising over uneven ground is not in the air while the other one is too).
+    airborne = ~out.any(axis=1)
+    out[airborne] |= widest[airborne]
     return out
+
+
+def _moved_run(col: NDArray[np.bool_], a: int, b: int, down: NDArray[np.bool_],
+               still_down: NDArray[np.bool_], most: int) -> tuple[int, int]:
+    """The run ``a..b`` of ``col`` started where ``down`` begins to hold and ended where
+    ``still_down`` stops holding, by at most ``most`` frames either way: back over the frames
+    before it where ``down`` holds without a break (not into another run), or on to its first
+    frame where it holds; likewise for the end. The run keeps at least one frame."""
+    n = len(col)
+    k = a
+    if down[a]:
+        while k > 0 and a - k < most and down[k - 1] and not col[k - 1]:
+            k -= 1
+    else:
+        while k < b and k - a < most and not down[k]:
+            k += 1
+    m = b
+    if still_down[b]:
+        while m < n - 1 and m - b < most and still_down[m + 1] and not col[m + 1]:
+            m += 1
+    else:
+        while m > k and b - m < most and not still_down[m]:
+            m -= 1
+    return k, m
 
 
 def detect_contacts(positions: F64, fps: float,
