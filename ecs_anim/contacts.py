@@ -40,10 +40,9 @@ class ContactThresholds:
     ease_s : activation ramp added before and after each contact.
     edge_height_m, edge_sink_mps, edge_rise_mps, edge_max_s : where a contact's touch-down and
         lift-off lie (:func:`touch_down_to_lift_off`; for a 0.8 m leg, scaled by the body's):
-        the foot touches down when its heel point is within ``edge_height_m`` of its ground and
-        sinks slower than ``edge_sink_mps``, and lifts off when its toe joint rises over
-        ``edge_height_m`` or faster than ``edge_rise_mps``; each edge moves at most
-        ``edge_max_s`` from the foot's stillness contact.
+        the foot is down while its heel point or toe joint is within ``edge_height_m`` of its
+        ground, sinking slower than ``edge_sink_mps`` and rising slower than
+        ``edge_rise_mps``; each edge of a stillness contact moves at most ``edge_max_s``.
     """
 
     height_m: float = 0.05
@@ -263,79 +262,83 @@ HEEL_BEHIND_ANKLE = 0.25
 
 def touch_down_to_lift_off(points: F64, planted: NDArray[np.bool_], fps: float, leg: float,
                            thresholds: ContactThresholds) -> NDArray[np.bool_]:
-    """Each foot on the ground from touch-down to lift-off, from its stillness contacts.
+    """Each foot on the ground from touch-down to lift-off: its stillness contacts with their
+    edges moved to where the foot lands and leaves the ground. -> bool (n_frames, 2).
 
-    ``points`` (n_frames, 4, 3): ankle l, r, toe l, r; ``planted`` (n_frames, 2) the stillness
-    contacts. Heights are taken over the ground of each contact: the lowest its point comes
-    during it. Touch-down is when the heel lands: the heel point (:data:`HEEL_BEHIND_ANKLE`)
-    within ``edge_height_m`` of the ground and sinking slower than ``edge_sink_mps`` (a
-    vertical-velocity rule like the foot velocity algorithm of O'Connor et al. 2007, Gait
-    Posture 25:469, which reads strikes off the foot centre's vertical velocity; here the
-    heel's, whose sinking ends as it lands). Lift-off is when the ball leaves the ground: the
-    toe joint over ``edge_height_m`` or rising faster than ``edge_rise_mps`` (a threshold on
-    the toe, as Ghoussayni et al. 2004, Gait Posture 20:266, threshold its speed). Each edge of
-    a stillness contact moves to them, earlier or later, by at most ``edge_max_s`` (stillness
-    alone starts late at a brisk walk, while the heel rolls in, and early at a slow one, while
-    the ankle settles), but never so that both feet are up where one was low (see below).
-    Returns bool (n_frames, 2)."""
+    ``points`` (n_frames, 4, 3): ankle l, r, toe l, r; ``planted`` (n_frames, 2): the stillness
+    contacts. A point of the foot (the heel point, :data:`HEEL_BEHIND_ANKLE`, or the toe
+    joint) is *down* while it is within ``edge_height_m`` of the contact's ground (the lowest it
+    comes during the contact) and neither sinks faster than ``edge_sink_mps`` nor rises faster
+    than ``edge_rise_mps``; the foot is down while either point is. Touch-down: the heel point
+    stops sinking as the heel lands (a vertical-velocity rule like the foot velocity algorithm
+    of O'Connor et al. 2007, Gait Posture 25:469, which reads strikes off the foot centre's
+    vertical velocity; here the heel's), or the ball lands first. Lift-off: the toe joint rises
+    over ``edge_height_m`` or faster than ``edge_rise_mps`` (a threshold on the toe, as
+    Ghoussayni et al. 2004, Gait Posture 20:266, threshold its speed). Each edge moves by at
+    most ``edge_max_s``: out over down frames next to it, in over frames where heel and toe
+    both still sink (start) or both already rise (end). Stillness alone starts late at a
+    brisk walk, while the heel rolls in, and early at a slow one, while the ankle settles. A
+    moved edge never leaves both feet up where one was low (a stance foot sinking or rising
+    over uneven ground is not in the air)."""
     th = thresholds
     scale = leg / REFERENCE_LEG_M
     ankle, toe = points[:, :2], points[:, 2:]
-    heel_z = (ankle - HEEL_BEHIND_ANKLE * (toe - ankle))[..., 2]
-    toe_z = toe[..., 2]
     n = len(points)
-    heel_vz = np.gradient(heel_z, axis=0) * fps if n > 1 else np.zeros_like(heel_z)
-    toe_vz = np.gradient(toe_z, axis=0) * fps if n > 1 else np.zeros_like(toe_z)
+    z = np.stack([(ankle - HEEL_BEHIND_ANKLE * (toe - ankle))[..., 2], toe[..., 2]])  # (2, F, 2)
+    vz = np.gradient(z, axis=1) * fps if n > 1 else np.zeros_like(z)
     edge = th.edge_height_m * scale
+    sinks, rises = vz <= -th.edge_sink_mps * scale, vz >= th.edge_rise_mps * scale
+    # Heel point and toe both still falling (the foot has not landed) / both rising (it has left).
+    falling: NDArray[np.bool_] = np.all(sinks, axis=0)
+    leaving: NDArray[np.bool_] = np.all(rises, axis=0)
     most = round(th.edge_max_s * fps)
     out = np.zeros_like(planted)
-    widest = planted.copy()
+    widest = planted.copy()  # the contacts over every low frame next to them
+    nowhere = np.zeros(n, dtype=bool)
     for side in range(planted.shape[1]):
         col = planted[:, side]
         for a, b in _intervals(col):
-            lo, hi = max(0, a - most), min(n, b + most + 1)
-            down = (heel_z[lo:hi, side] < heel_z[a:b + 1, side].min() + edge) \
-                & (heel_vz[lo:hi, side] > -th.edge_sink_mps * scale)
-            still_down = (toe_z[lo:hi, side] < toe_z[a:b + 1, side].min() + edge) \
-                & (toe_vz[lo:hi, side] < th.edge_rise_mps * scale)
-            k, m = _moved_run(col[lo:hi], a - lo, b - lo, down, still_down, most)
-            out[lo + k:lo + m + 1, side] = True
-            # The widest the contact can be: on over the low frames next to it (ankle before,
-            # toe after).
-            ankle_low = ankle[lo:hi, side, 2] < ankle[a:b + 1, side, 2].min() + edge
-            toe_low = toe_z[lo:hi, side] < toe_z[a:b + 1, side].min() + edge
-            k, m = _moved_run(col[lo:hi], a - lo, b - lo, ankle_low | col[lo:hi],
-                              toe_low | col[lo:hi], most)
-            widest[lo + k:lo + m + 1, side] = True
-    # A moved edge never makes a flight phase where a foot was low (a stance foot still
-    # sinking or rising over uneven ground is not in the air while the other one is too).
+            ground = z[:, a:b + 1, side].min(axis=1, keepdims=True)  # heel point, toe
+            low = z[:, :, side] < ground + edge
+            down = (low & ~sinks[:, :, side] & ~rises[:, :, side]).any(axis=0)
+            start = _edge_back(col, a, b, down, falling[:, side], most)
+            end = _edge_on(col, a, b, down, leaving[:, side], most)
+            out[start:end + 1, side] = True
+            ankle_low = ankle[:, side, 2] < ankle[a:b + 1, side, 2].min() + edge
+            widest[_edge_back(col, a, b, ankle_low | col, nowhere, most):
+                   _edge_on(col, a, b, low[1] | col, nowhere, most) + 1, side] = True
     airborne = ~out.any(axis=1)
     out[airborne] |= widest[airborne]
     return out
 
 
-def _moved_run(col: NDArray[np.bool_], a: int, b: int, down: NDArray[np.bool_],
-               still_down: NDArray[np.bool_], most: int) -> tuple[int, int]:
-    """The run ``a..b`` of ``col`` started where ``down`` begins to hold and ended where
-    ``still_down`` stops holding, by at most ``most`` frames either way: back over the frames
-    before it where ``down`` holds without a break (not into another run), or on to its first
-    frame where it holds; likewise for the end. The run keeps at least one frame."""
-    n = len(col)
+def _edge_back(col: NDArray[np.bool_], a: int, b: int, down: NDArray[np.bool_],
+               moving: NDArray[np.bool_], most: int) -> int:
+    """Where the run ``a..b`` of ``col`` starts: back from ``a`` over the frames where
+    ``down`` holds without a break (not into another run), or, when ``down`` fails at ``a``,
+    on over the frames where ``moving`` holds; at most ``most`` frames, never past ``b``."""
     k = a
     if down[a]:
         while k > 0 and a - k < most and down[k - 1] and not col[k - 1]:
             k -= 1
     else:
-        while k < b and k - a < most and not down[k]:
+        while k < b and k - a < most and moving[k]:
             k += 1
+    return k
+
+
+def _edge_on(col: NDArray[np.bool_], a: int, b: int, down: NDArray[np.bool_],
+             moving: NDArray[np.bool_], most: int) -> int:
+    """Where the run ``a..b`` of ``col`` ends: :func:`_edge_back` mirrored in time."""
+    n = len(col)
     m = b
-    if still_down[b]:
-        while m < n - 1 and m - b < most and still_down[m + 1] and not col[m + 1]:
+    if down[b]:
+        while m < n - 1 and m - b < most and down[m + 1] and not col[m + 1]:
             m += 1
     else:
-        while m > k and b - m < most and not still_down[m]:
+        while m > a and b - m < most and moving[m]:
             m -= 1
-    return k, m
+    return m
 
 
 def detect_contacts(positions: F64, fps: float,
