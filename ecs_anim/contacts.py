@@ -287,10 +287,16 @@ def touch_down_to_lift_off(points: F64, planted: NDArray[np.bool_], fps: float, 
     z = np.stack([(ankle - HEEL_BEHIND_ANKLE * (toe - ankle))[..., 2], toe[..., 2]])  # (2, F, 2)
     vz = np.gradient(z, axis=1) * fps if n > 1 else np.zeros_like(z)
     edge = th.edge_height_m * scale
-    sinks, rises = vz <= -th.edge_sink_mps * scale, vz >= th.edge_rise_mps * scale
-    # Heel point and toe both still falling (the foot has not landed) / both rising (it has left).
-    falling: NDArray[np.bool_] = np.all(sinks, axis=0)
-    leaving: NDArray[np.bool_] = np.all(rises, axis=0)
+    sink, rise = th.edge_sink_mps * scale, th.edge_rise_mps * scale
+    settled = (vz > -sink) & (vz < rise)
+    # Heel point and toe both to sink over the next frame (the foot has not landed) / both
+    # risen over the previous one (it has left): one-sided, so that the frame where the foot
+    # arrives, and the last before it leaves, stay on the ground.
+    step = np.diff(z, axis=1) * fps
+    falling: NDArray[np.bool_] = np.zeros(planted.shape, dtype=bool)
+    leaving: NDArray[np.bool_] = np.zeros(planted.shape, dtype=bool)
+    falling[:-1] = np.all(step <= -sink, axis=0)
+    leaving[1:] = np.all(step >= rise, axis=0)
     most = round(th.edge_max_s * fps)
     out = np.zeros_like(planted)
     widest = planted.copy()  # the contacts over every low frame next to them
@@ -300,7 +306,7 @@ def touch_down_to_lift_off(points: F64, planted: NDArray[np.bool_], fps: float, 
         for a, b in _intervals(col):
             ground = z[:, a:b + 1, side].min(axis=1, keepdims=True)  # heel point, toe
             low = z[:, :, side] < ground + edge
-            down = (low & ~sinks[:, :, side] & ~rises[:, :, side]).any(axis=0)
+            down = (low & settled[:, :, side]).any(axis=0)
             start = _edge_back(col, a, b, down, falling[:, side], most)
             end = _edge_on(col, a, b, down, leaving[:, side], most)
             out[start:end + 1, side] = True
