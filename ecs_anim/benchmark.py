@@ -200,8 +200,8 @@ def first_tick(threads: int = 1) -> dict[str, float]:
     t2 = time.perf_counter()
     scene.tick()
     # the arguments MotionPlayback passes: rows, the old clip's poses, weights, the store's poses
-    blend_rows(np.zeros(0, np.int64), pose_arrays(empty_poses(0)), np.zeros(0),
-               pose_arrays(empty_poses(0)))
+    kernels.over_chunks(blend_rows, 0, np.zeros(0, np.int64), pose_arrays(empty_poses(0)),
+                        np.zeros(0), pose_arrays(empty_poses(0)))
     t3 = time.perf_counter()
     scene.sim.close()
     return {"import_s": t1 - t0, "setup_s": t2 - t1, "first_tick_s": t3 - t2}

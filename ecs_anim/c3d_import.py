@@ -13,9 +13,16 @@ Landmark sets (Plug-in Gait, ISB/CAST):
   and depth PD (mid-ASIS to mid-PSIS or sacrum), in the pelvis frame (mm):
   posterior 0.24 PD + 9.9, inferior 0.30 PW + 10.9, lateral 0.33 PW + 7.3;
 * knees / ankles: midpoint of the epicondyles / malleoli when both are marked; otherwise the
-  Plug-in-Gait chord rule: the centre lies half a joint width plus a marker radius from the
-  lateral marker, in the plane of the proximal joint centre, the lateral marker and the wand
-  (THI / TIB), with the proximal segment perpendicular to the offset;
+  Plug-in-Gait chord rule (Davis et al. 1991; Kadaba et al. 1990): the centre lies half a joint
+  width plus a marker radius from the lateral marker, in the plane of the proximal joint
+  centre, the lateral marker and the wand (THI / TIB), with the proximal segment perpendicular
+  to the offset. The rule assumes the wand stands out along the flexion axis; where it lies
+  more than :data:`WAND_MAX_ANGLE_DEG` off the axis (a technical marker in front of the thigh
+  or shank, as Motion Analysis' Helen Hayes set and some Codamotion and Qualisys sets place
+  it), the plane is that of the flexion axis itself: the normal of the hip-knee-ankle plane,
+  averaged in the thigh frame over the most flexed frames (after the dynamic knee-axis calibration of
+  pyCGM2's ``calibrate2dof``, "similar to DynaKAD", Baker, Finney & Orr 1999), or the
+  epicondyle line where the medial epicondyle is marked;
 * toes (ball of the foot): TOE (2nd metatarsal head) or the midpoint of MT1 and MT5;
 * neck base: midpoint of C7 and the jugular notch (CLAV / IJ); mid-thorax: midpoint of
   T10 (T8) and the xiphoid (STRN / PX) when both are marked, otherwise interpolated;
@@ -35,7 +42,12 @@ J Biomech 39:2798), the centre of rotation that is fixed in both adjacent segmen
 ankles move nearly as hinges, whose centre is only defined up to a point on the axis, so the
 point on the axis nearest the proximal joint centre is taken. A walk flexes the hips about
 one axis too: there the hip is placed on its axis half an adult inter-hip distance (175 mm per
-0.8 m of leg) from the pelvis cluster's mid-plane (the pelvis clusters here straddle it). The toe hangs a foot length
+0.8 m of leg) from the pelvis cluster's mid-plane (the pelvis clusters here straddle it). On
+such a hinge SCoRE's axis direction depends on the segment rotations only, but its location
+also on the clusters' soft-tissue sliding (60 mm too high on a treadmill run); where the greater
+trochanter is marked (``LGT``), the axis is moved to pass through it: the trochanter lies on the
+hip's lateral axis at the femoral head centre's level (on average 3.4 mm above it, range -10 to
++20 mm: Theivendran & Hart 2009, Acta Orthop Belg 75(4)). The toe hangs a foot length
 (adult proportions of the measured leg) in front of the ankle in the foot cluster's frame.
 
 Joint centres whose bones change length by more than 15 % for at most 5 frames (marker swaps
@@ -94,6 +106,13 @@ JOINT_WIDTH_PER_LEG = {"knee": 0.105 / 0.80, "ankle": 0.070 / 0.80, "elbow": 0.0
 MARKER_RADIUS_M = 0.007
 MAX_GLITCH_FRAMES = 5  # joint-centre outliers are replaced only in runs this short
 HINGE_RATIO = 0.2
+#: A thigh or shank wand whose offset from the limb lies within this angle of the flexion axis
+#: marks the chord rule's plane (Plug-in Gait, Davis 1991); further off, the axis itself does.
+WAND_MAX_ANGLE_DEG = 45.0
+#: A limb's plane gives its flexion axis in the frames flexed this much of the trial's most.
+FLEXED_FRACTION = 0.7
+#: Hip-knee-ankle plane normal -> knee and ankle centres -> plane normal again (converged by 3).
+FLEXION_AXIS_ITERATIONS = 3
 #: Half the distance between the hip centres of an adult (about 175 mm for a 0.8 m leg), per m
 #: of leg: where a trial moves the hips about one axis only, SCoRE cannot place them along it.
 HALF_HIP_DISTANCE_PER_LEG = 0.0875 / 0.80  # SCoRE: weakest / next eigenvalue below this = a hinge (axis undetermined)
@@ -281,6 +300,26 @@ def chord_centre(proximal: F64, wand: F64, marker: F64, offset: F64 | float) -> 
     return centre
 
 
+def flexion_axis(proximal: F64, joint: F64, distal: F64, segment_second: F64,
+                 use: BOOL | None = None) -> F64:
+    """A hinge's flexion axis (unit, world, (F, 3)) as the normal of the proximal-joint-distal
+    plane, ``cross(proximal - joint, distal - joint)``, averaged in the proximal segment's frame
+    (long axis joint -> proximal, ``segment_second`` a second direction fixed in the segment)
+    over the most flexed of the frames ``use`` (F,) (all when None): those whose flexion sine
+    is at least :data:`FLEXED_FRACTION` of its 95th percentile. Near straight, the plane is set
+    by skin-marker noise and ab/adduction more than by flexion. All inputs (F, 3)."""
+    upper, lower = proximal - joint, distal - joint
+    flex = np.cross(upper, lower)
+    sine = np.linalg.norm(flex, axis=-1) / np.maximum(
+        np.linalg.norm(upper, axis=-1) * np.linalg.norm(lower, axis=-1), 1e-12)
+    frames = np.ones(len(flex), dtype=bool) if use is None else use
+    flexed = frames & (sine >= FLEXED_FRACTION * np.percentile(sine[frames], 95))
+    segment2world = frame_from_axes(upper, segment_second, 2, 0)
+    axis_local = normalize(np.einsum("fji,fj->i", segment2world[flexed], flex[flexed]))
+    axis: F64 = np.einsum("fij,j->fi", segment2world, axis_local)
+    return axis
+
+
 def cluster_poses(points: F64, weights: F64, iterations: int = 2) -> tuple[F64, F64]:
     """Rigid poses of a marker cluster by weighted least squares (Kabsch), batched over frames.
 
@@ -317,7 +356,8 @@ def cluster_poses(points: F64, weights: F64, iterations: int = 2) -> tuple[F64, 
 
 def score_centre(parent: tuple[F64, F64], child: tuple[F64, F64], use: BOOL,
                  hinge_prior_in_parent: F64 | None = None,
-                 hinge_plane_in_parent: tuple[F64, float] | None = None) -> tuple[F64, F64, F64]:
+                 hinge_plane_in_parent: tuple[F64, float] | None = None,
+                 hinge_through_in_parent: F64 | None = None) -> tuple[F64, F64, F64]:
     """SCoRE (Ehrig et al. 2006): the point fixed in both segments.
 
     parent, child : (rotation (F, 3, 3), origin (F, 3)) segment poses; use : (F,) frames to fit.
@@ -325,9 +365,10 @@ def score_centre(parent: tuple[F64, F64], child: tuple[F64, F64], use: BOOL,
     when the weakest direction of the normal equations is clearly weaker than the others (by
     :data:`HINGE_RATIO`), it is dropped from the least-squares solution and the point on it nearest
     the prior is taken; with ``hinge_plane_in_parent`` (unit direction d (3,), offset) instead,
-    the point on it with ``d . centre = offset``. Returns (centre in parent frame (3,), in child
-    frame (3,),
-    world position (F, 3): the mean of both estimates).
+    the point on it with ``d . centre = offset``. ``hinge_through_in_parent`` (3,): a point known
+    to lie on the hinge's axis (a landmark on it); the axis keeps SCoRE's direction but passes
+    through that point, and the child's centre is refitted to it. Returns (centre in parent
+    frame (3,), in child frame (3,), world position (F, 3): the mean of both estimates).
     """
     rp, tp = parent
     rc, tc = child
@@ -346,6 +387,12 @@ def score_centre(parent: tuple[F64, F64], child: tuple[F64, F64], use: BOOL,
     if hinge:
         n = evecs[:, 0]
         n_p = n[:3]
+        if hinge_through_in_parent is not None:  # the axis through the landmark, in both frames
+            x[:3] = hinge_through_in_parent
+            x[3:] = np.mean(np.einsum("fji,fj->fi", rc[use], np.einsum("fij,j->fi", rp[use], x[:3])
+                                      + tp[use] - tc[use]), axis=0)
+            n = np.concatenate([n_p, np.mean(np.einsum("fji,fj->fi", rc[use],
+                                                       np.einsum("fij,j->fi", rp[use], n_p)), axis=0)])
         if hinge_plane_in_parent is not None:
             d, offset = hinge_plane_in_parent
             lam = (offset - float(d @ x[:3])) / float(d @ n_p) if abs(float(d @ n_p)) > 1e-6 else 0.0
@@ -563,6 +610,7 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
     mmap = match_markers(raw.labels, map_spec, [bool(v) for v in seen])
     never = [raw.labels[i] for i in mmap.marker.values() if not seen[i]]
     mmap.marker = {r: i for r, i in mmap.marker.items() if seen[i]}
+    split_same_label(mmap, raw.positions, raw.valid)
     present, absent = check_usable(mmap, raw.labels)
     valid = raw.valid.copy()
     rejected = 0
@@ -656,6 +704,37 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
         },
     }
     return clip, extra
+
+
+#: Lateral landmark roles and their medial twins, which some labs label alike.
+MEDIAL_TWIN = {"KNEE_LAT": "KNEE_MED", "ANKLE_LAT": "ANKLE_MED", "ELBOW_LAT": "ELBOW_MED"}
+
+
+def split_same_label(mmap: MarkerMap, positions: F64, valid: BOOL) -> None:
+    """Where one label names two markers of a lateral landmark (Cortex's Helen Hayes set writes
+    ``RKNE`` for both femoral epicondyles and ``RANK`` for both malleoli; the descriptions say
+    R.Knee / R.Knee.Medial), tell them apart by position, not by their order in the file: the
+    medial one is the nearer to the other limb's markers of that landmark (median distance over
+    the frames where all are seen), and it takes the medial role if the file has no marker for
+    it. ``mmap.marker`` is updated in place. positions (F, M, 3) in file units; valid (F, M)."""
+    for lateral_base, medial_base in MEDIAL_TWIN.items():
+        for s, other in (("l", "r"), ("r", "l")):
+            lateral, medial = f"{lateral_base}_{s}", f"{medial_base}_{s}"
+            pair = mmap.same_label.get(lateral, [])
+            if len(pair) != 2 or medial in mmap.marker or medial not in mmap.preset.roles:
+                continue
+            opposite = mmap.same_label.get(f"{lateral_base}_{other}") or \
+                [mmap.marker[r] for r in (f"{lateral_base}_{other}",) if r in mmap.marker]
+            if not opposite:
+                continue
+            both = valid[:, pair].all(axis=1) & valid[:, opposite].all(axis=1)
+            if not both.any():
+                continue
+            across = positions[both][:, opposite].mean(axis=1)
+            distance = [float(np.median(np.linalg.norm(positions[both, i] - across, axis=-1)))
+                        for i in pair]
+            mmap.marker[lateral], mmap.marker[medial] = pair[int(np.argmax(distance))], \
+                pair[int(np.argmin(distance))]
 
 
 #: How labs store their own joint centres as points, per joint and side ({S}: L/R), compared
@@ -896,21 +975,7 @@ def _landmark_body(mk: _Markers, present: list[str], build: _Build) -> None:
     for s in "lr":
         if f"leg_{s}" not in present:
             continue
-        hip = build.positions[:, J[f"hip_{s}"]]
-        if mk.has(f"KNEE_MED_{s}"):
-            knee, how = _mid(mk(f"KNEE_LAT_{s}"), mk(f"KNEE_MED_{s}")), "midpoint of the femoral epicondyles"
-        else:
-            d = 0.5 * JOINT_WIDTH_PER_LEG["knee"] * leg_guess + MARKER_RADIUS_M
-            knee = chord_centre(hip, mk(f"THIGH_{s}"), mk(f"KNEE_LAT_{s}"), d)
-            how = f"chord rule from hip, THI, KNE (offset {d * 1000:.0f} mm)"
-        _set(build, f"knee_{s}", knee, how)
-        if mk.has(f"ANKLE_MED_{s}"):
-            ankle, how = _mid(mk(f"ANKLE_LAT_{s}"), mk(f"ANKLE_MED_{s}")), "midpoint of the malleoli"
-        else:
-            d = 0.5 * JOINT_WIDTH_PER_LEG["ankle"] * leg_guess + MARKER_RADIUS_M
-            ankle = chord_centre(knee, mk(f"SHANK_{s}"), mk(f"ANKLE_LAT_{s}"), d)
-            how = f"chord rule from knee, TIB, ANK (offset {d * 1000:.0f} mm)"
-        _set(build, f"ankle_{s}", ankle, how)
+        _knee_and_ankle(mk, build, s, leg_guess)
         if mk.has(f"TOE_{s}"):
             _set(build, f"toe_{s}", mk(f"TOE_{s}"), "TOE marker (2nd metatarsal head)")
         else:
@@ -958,12 +1023,9 @@ def _landmark_body(mk: _Markers, present: list[str], build: _Build) -> None:
             _set(build, f"elbow_{s}", _mid(lateral, mk(f"ELBOW_MED_{s}")),
                  "midpoint of the humeral epicondyles")
         else:
-            flex = np.cross(shoulder - lateral, wrist - lateral)  # |.| grows with flexion
             second = mk(f"UPPER_ARM_{s}") - lateral if mk.has(f"UPPER_ARM_{s}") else \
                 np.broadcast_to(thorax[..., :, 0] if thorax is not None else [1.0, 0.0, 0.0], lateral.shape)
-            upper2world = frame_from_axes(shoulder - lateral, second, 2, 0)
-            axis_local = normalize(np.einsum("fji,fj->i", upper2world, flex))
-            medial = medial_sign * np.einsum("fij,j->fi", upper2world, axis_local)
+            medial = medial_sign * flexion_axis(shoulder, lateral, wrist, second)
             d = 0.5 * JOINT_WIDTH_PER_LEG["elbow"] * leg + MARKER_RADIUS_M
             _set(build, f"elbow_{s}", lateral + d * medial,
                  f"ELB moved {d * 1000:.0f} mm medially along the flexion axis")
@@ -984,6 +1046,69 @@ def _landmark_body(mk: _Markers, present: list[str], build: _Build) -> None:
         _set(build, "head", centre - half * head2world[..., :, 2], "half a head length below the head markers' centre")
         _set(build, "head_top", centre + half * head2world[..., :, 2], "half a head length above it")
         build.head2world = head2world
+
+
+def _knee_and_ankle(mk: _Markers, build: _Build, s: str, leg_guess: float) -> None:
+    """Knee and ankle centres of leg ``s``: midpoints of the epicondyles / malleoli where both
+    are marked; otherwise the chord rule, in the plane of the wand (THI / TIB) where the wand
+    stands out laterally along the flexion axis (within :data:`WAND_MAX_ANGLE_DEG`, as Plug-in
+    Gait and Davis 1991 place it), else in the plane of the flexion axis itself.
+
+    The flexion axis is the epicondyle line where the medial epicondyle is marked; otherwise
+    the normal of the hip-knee-ankle plane, averaged in the thigh frame (hip-knee, THI) over
+    the frames that flex it (:func:`flexion_axis`) and found by iterating from the hip-to-hip
+    line: a wand in front of the thigh (a technical marker, as in Motion Analysis' Helen Hayes
+    set) would put the centre behind the knee. The axis' sign: towards the other hip."""
+    hip = build.positions[:, J[f"hip_{s}"]]
+    towards_other_hip = build.positions[:, J[f"hip_{'r' if s == 'l' else 'l'}"]] - hip
+    knee_lat, ankle_lat = mk(f"KNEE_LAT_{s}"), mk(f"ANKLE_LAT_{s}")
+    d_knee = 0.5 * JOINT_WIDTH_PER_LEG["knee"] * leg_guess + MARKER_RADIUS_M
+    d_ankle = 0.5 * JOINT_WIDTH_PER_LEG["ankle"] * leg_guess + MARKER_RADIUS_M
+    roles = [f"{r}_{s}" for r in ("KNEE_LAT", "ANKLE_LAT", "THIGH") if f"{r}_{s}" in mk.found]
+    use: BOOL = np.asarray(~mk.long[:, [mk.found[r] for r in roles]].any(axis=1))
+    if build.root_trusted is not None:
+        use &= build.root_trusted
+    if not use.any():  # nothing reliable: trust_root refuses the file or the gaps are reported
+        use = np.ones_like(use)
+
+    def wand_or_axis(proximal: F64, marker: F64, role: str, medial: F64, offset: float
+                     ) -> tuple[F64, str]:
+        """The chord-rule centre and how it was placed."""
+        if mk.has(role):
+            u = normalize(proximal - marker)
+            w = mk(role) - marker
+            off_line = normalize(w - np.sum(w * u, axis=-1, keepdims=True) * u)
+            cos_lateral = float(np.median(np.sum(off_line * -medial, axis=-1)[use]))
+            if cos_lateral >= math.cos(math.radians(WAND_MAX_ANGLE_DEG)):
+                return chord_centre(proximal, mk(role), marker, offset), "the wand"
+            angle = math.degrees(math.acos(max(-1.0, min(1.0, cos_lateral))))
+            return chord_centre(proximal, marker - medial, marker, offset), \
+                f"the flexion axis (the wand is {angle:.0f} deg off it)"
+        return chord_centre(proximal, marker - medial, marker, offset), "the flexion axis"
+
+    epicondyles = mk.has(f"KNEE_MED_{s}")
+    if epicondyles:
+        medial = normalize(mk(f"KNEE_MED_{s}") - knee_lat)
+        iterations = 1
+    else:
+        medial = normalize(towards_other_hip)
+        iterations = FLEXION_AXIS_ITERATIONS
+    for _ in range(iterations):
+        if epicondyles:
+            knee, knee_how = _mid(knee_lat, mk(f"KNEE_MED_{s}")), "midpoint of the femoral epicondyles"
+        else:
+            knee, plane = wand_or_axis(hip, knee_lat, f"THIGH_{s}", medial, d_knee)
+            knee_how = f"chord rule from hip and KNE in the plane of {plane} (offset {d_knee * 1000:.0f} mm)"
+        if mk.has(f"ANKLE_MED_{s}"):
+            ankle, ankle_how = _mid(ankle_lat, mk(f"ANKLE_MED_{s}")), "midpoint of the malleoli"
+        else:
+            ankle, plane = wand_or_axis(knee, ankle_lat, f"SHANK_{s}", medial, d_ankle)
+            ankle_how = f"chord rule from knee and ANK in the plane of {plane} (offset {d_ankle * 1000:.0f} mm)"
+        if not epicondyles:
+            axis = flexion_axis(hip, knee, ankle, mk(f"THIGH_{s}") - knee, use)
+            medial = axis * np.sign(np.median(np.sum(axis * towards_other_hip, axis=-1)[use]))
+    _set(build, f"knee_{s}", knee, knee_how)
+    _set(build, f"ankle_{s}", ankle, ankle_how)
 
 
 def _leg_guess_from_markers(mk: _Markers, present: list[str], build: _Build) -> float:
@@ -1017,11 +1142,17 @@ def _functional_lower_body(mk: _Markers, present: list[str], build: _Build) -> N
             use = pelvis_ok & thigh[2]
             side = 1.0 if s == "l" else -1.0
             plane = (side * lateral, HALF_HIP_DISTANCE_PER_LEG * leg) if lateral.any() else None
+            trochanter = None
+            if mk.has(f"TROCHANTER_{s}"):  # the greater trochanter, in the pelvis cluster's frame
+                trochanter = np.mean(np.einsum("fji,fj->fi", pelvis_rot[use],
+                                               (mk(f"TROCHANTER_{s}") - pelvis_origin)[use]), axis=0)
             _, hip_in_thigh, hip = score_centre((pelvis_rot, pelvis_origin), thigh[:2], use,
-                                                hinge_plane_in_parent=plane)
+                                                hinge_plane_in_parent=plane,
+                                                hinge_through_in_parent=trochanter)
             _set(build, f"hip_{s}", hip, "SCoRE (Ehrig 2006), pelvis and thigh clusters; "
                  f"a flexion-only hip placed {HALF_HIP_DISTANCE_PER_LEG * leg * 1000:.0f} mm "
-                 "from the pelvis cluster's mid-plane")
+                 "from the pelvis cluster's mid-plane"
+                 + (" on the axis through the greater trochanter" if trochanter is not None else ""))
             _, knee_in_shank, knee = score_centre(thigh[:2], shank[:2], thigh[2] & shank[2],
                                                   hip_in_thigh)
             _set(build, f"knee_{s}", knee, "SCoRE thigh/shank, point of the axis nearest the hip")

@@ -14,15 +14,18 @@ Presets:
   ignores any upper-body marker, e.g. to import the legs of a trial whose arms are unusable).
 * ``helen_hayes`` — Helen Hayes (Kadaba et al. 1990) / Davis (Davis et al. 1991) sets as
   Motion Analysis Cortex (``VSAC``, ``RSHA``, ``R.TO``, ``RWRI``), BTS (``r bar 1``, ``r knee 1``,
-  ``r mall``, ``r met``) and Codamotion (``R.ASIS``, ``R.Ant.Fem.``, ``R.Knee``, ``R.Ankle``) write them.
+  ``r mall``, ``r met``) and Codamotion (``R.ASIS``, ``R.Ant.Fem.``, ``R.Knee``, ``R.Ankle``) write them;
+  a label that names both the lateral and the medial marker (Cortex's ``RKNE``) is split by
+  position (:func:`ecs_anim.c3d_import.split_same_label`).
 * ``isb_anatomical`` — anatomical landmarks with ISB (Wu et al. 2002/2005) or CAST
   (Cappozzo et al. 1995) style names: iliac spines (ASIS/PSIS), femoral epicondyles (FLE/FME, LE/ME),
   malleoli (FAL/TAM, LM/MM), metatarsal heads (FM1/FM5, MT1/MT5), calcaneus, acromion (AC),
   humeral epicondyles (HLE/HME, EL/EM; Vicon upper limb ELL/ELM), styloids (RSP/USP, RS/US;
   ulnar head UHE as the Rehazenter/Qualisys set writes it), IJ (SJN), PX (SXS), C7 (CV7), T8.
 * ``cluster_gait`` — technical marker clusters (c3d.org sample ``Eb015pi``: ``PV1-4`` pelvis,
-  ``RTH1-4`` thigh, ``RSK1-4`` shank, ``RFT1-3`` foot): no landmarks, so joint centres are found
-  functionally (see :mod:`ecs_anim.c3d_import`).
+  ``RTH1-4`` thigh, ``RSK1-4`` shank, ``RFT1-3`` foot; Vicon's lettered ``PELA``, ``LFMA``,
+  ``LTBA``, ``LFTA``): no landmarks, so joint centres are found functionally (see
+  :mod:`ecs_anim.c3d_import`); optional greater-trochanter markers (``LGT``) fix a hip's axis.
 
 Body parts (groups): ``pelvis``, ``leg_l``, ``leg_r``, ``trunk``, ``head``, ``arm_l``, ``arm_r``.
 A group whose markers are all missing is *absent* (filled with a neutral pose, recorded in the
@@ -156,13 +159,15 @@ _ISB_ROLES = _sided({
 # shank wand, "r mall", "r met" 5th metatarsal head) and Codamotion gait wands (R.ASIS,
 # R.Ant.Fem. = anterior marker of the lateral thigh wand, R.Knee, R.Ankle, R.Toe) spell them.
 # Order matters: "r knee 1" (marker) comes before "r knee" (a lab's computed centre in BTS).
+# Medial epicondyle and malleolus as Plug-in Gait spells them; Cortex writes RKNE / RANK for
+# the medial markers too (``c3d_import.split_same_label``: the medial one is nearer the other leg).
 _HH_ROLES = _sided({
     "ASIS_{s}": ("{S}ASI", "*ASIS"), "PSIS_{s}": ("{S}PSI", "*PSIS"),
     "SACRUM": ("SACR", "SACRUM", "VSAC"),
     "THIGH_{s}": ("{S}THI", "*BAR1", "*WAND1", "*ANTFEM", "*THIGH"),
-    "KNEE_LAT_{s}": ("{S}KNE", "*KNEE1", "*KNEE"),
+    "KNEE_LAT_{s}": ("{S}KNE", "*KNEE1", "*KNEE"), "KNEE_MED_{s}": ("{S}KNM", "{S}MKNE"),
     "SHANK_{s}": ("{S}TIB", "{S}SHA", "*BAR2", "*WAND2", "*ANTTIB", "*SHANK"),
-    "ANKLE_LAT_{s}": ("{S}ANK", "*MALL", "*ANKLE"),
+    "ANKLE_LAT_{s}": ("{S}ANK", "*MALL", "*ANKLE"), "ANKLE_MED_{s}": ("{S}MMA", "{S}MED"),
     "HEEL_{s}": ("{S}HEE", "*HEEL"), "TOE_{s}": ("{S}TOE", "*TO", "*MET", "*TOE"),
     "C7": ("C7",), "T10": ("T10",), "IJ": ("CLAV",), "PX": ("STRN",),
     "ACROMION_{s}": ("{S}SHO", "*SHOULDER", "*SHOULD"), "ELBOW_LAT_{s}": ("{S}ELB", "*ELBOW"),
@@ -178,6 +183,8 @@ _CLUSTER_ROLES = _sided({
     **{f"THIGH_{k}_{{s}}": (f"{{S}}TH{k}", f"{{S}}FM{'ABCD'[k - 1]}") for k in range(1, 5)},
     **{f"SHANK_{k}_{{s}}": (f"{{S}}SK{k}", f"{{S}}TB{'ABCD'[k - 1]}") for k in range(1, 5)},
     **{f"FOOT_{k}_{{s}}": (f"{{S}}FT{k}", f"{{S}}FT{'ABC'[k - 1]}") for k in range(1, 4)},
+    # Optional: the greater trochanter (Vicon cluster model LGT/RGT) places a flexion-only hip.
+    "TROCHANTER_{s}": ("{S}GT", "{S}GTR", "{S}TROC", "*TROCHANTER"),
 })
 
 _LANDMARK_GROUPS = _groups_sided({
@@ -244,6 +251,9 @@ class MarkerMap:
     how: str = ""
     #: body part -> why it could not be computed (set by :func:`check_usable`).
     not_computed: dict[str, str] = field(default_factory=dict)
+    #: role -> every usable marker of the subject with the role's label (only roles whose label
+    #: names several markers, e.g. Cortex's ``RKNE`` for both femoral epicondyles).
+    same_label: dict[str, list[int]] = field(default_factory=dict)
 
 
 def _resolve(preset: MarkerSet, keys: dict[str, int]) -> dict[str, int]:
@@ -333,7 +343,10 @@ def match_markers(labels: list[str], spec: str | None = None,
     if subject:
         how += f", subject {subject!r}"
     ignored = [lab for lab in labels if subject_of(lab) != subject]
-    return MarkerMap(preset, found, subject, ignored, how)
+    mine = [i for i in _subjects(labels).get(subject, []) if usable is None or usable[i]]
+    same_label = {role: same for role, i in found.items()
+                  if len(same := [j for j in mine if label_key(labels[j]) == label_key(labels[i])]) > 1}
+    return MarkerMap(preset, found, subject, ignored, how, same_label=same_label)
 
 
 def group_status(mmap: MarkerMap) -> tuple[list[str], list[str], dict[str, list[str]]]:

@@ -4,13 +4,13 @@ reads and writes; timing.
 Rows (DESIGN §7b): a system's :attr:`System.query` names the components a character needs for
 the system to process it (beyond :class:`~ecs_anim.components.CharacterRow`, which every
 character has). :meth:`System.rows` is the sorted int64 array of store rows of those characters,
-from an esper query made once per structural change (a character spawned or removed, a
-component added, replaced or removed: ``Simulation.structure_version``), never per tick. A
-kernel iterates exactly ``rows`` (``for k in prange(rows.shape[0]): c = rows[k]``); a numpy
-system indexes with it, or uses the whole arrays when :meth:`System.all_rows` says every
-character is in. :meth:`System.ground_groups` splits the rows by the ground each stands on
-(its own GroundQuery, or the environment's); :meth:`System.row_ground` is the same as one
-ground for numpy code over all rows.
+from an esper query made once per structural change (a character spawned or removed, a component
+added, replaced or removed: ``Simulation.structure_version``), never per tick. A kernel iterates
+exactly ``rows`` (``for k in range(lo, hi): c = rows[k]``, a chunk per thread); a numpy system
+indexes with it, or uses the whole arrays when :meth:`System.all_rows` says every character is
+in. :meth:`System.ground_groups` splits the rows by the ground each stands on (its own
+GroundQuery, or the environment's); :meth:`System.row_ground` is the same as one ground for
+numpy code over all rows.
 
 Declarations (STYLE 5, Bevy's system parameters): ``reads`` and ``writes`` are tuples of store
 field names (``"poses"``, ``"contact_weight"``; ``"constraints.weight"`` for a column of the

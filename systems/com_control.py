@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from ecs_anim.components import Constraint
+from ecs_anim.kernels import over_chunks
 from ecs_anim.kernels.com import centres_of_mass, horizontal_errors, segment_joints
 from ecs_anim.system_base import System
 
@@ -40,6 +41,7 @@ class COMControl(System):
         if st.goals is None or st.solved is None:
             return
         rows = np.asarray(st.goals.rows, dtype=np.int64)  # type: ignore[attr-defined]
-        centres_of_mass(rows, np.arange(rows.size, dtype=np.int64), st.solved.positions,
-                        st.segment_mass_kg, st.segment_com_fraction, _PROXIMAL, _DISTAL, st.com)
-        horizontal_errors(rows, st.com, st.com_desired, st.com_error_m)
+        over_chunks(centres_of_mass, rows.size, rows, np.arange(rows.size, dtype=np.int64),
+                    st.solved.positions, st.segment_mass_kg, st.segment_com_fraction, _PROXIMAL,
+                    _DISTAL, st.com)
+        over_chunks(horizontal_errors, rows.size, rows, st.com, st.com_desired, st.com_error_m)

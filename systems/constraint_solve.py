@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 
 from ecs_anim.components import Constraint
 from ecs_anim.constraint_table import KIND_ORIENTATION
+from ecs_anim.kernels import over_chunks
 from ecs_anim.kernels.com import centres_of_mass, segment_joints
 from ecs_anim.kernels.decode import decode
 from ecs_anim.kernels.solve import solve as solve  # re-exported: tests patch it here
@@ -45,7 +46,8 @@ def _centres(positions: NDArray[np.float64], masses: NDArray[np.float64],
     n = positions.shape[0]
     out = np.empty((n, 3))
     every = np.arange(n, dtype=np.int64)
-    centres_of_mass(every, every, positions, masses, com_fraction, _PROXIMAL, _DISTAL, out)
+    over_chunks(centres_of_mass, n, every, every, positions, masses, com_fraction, _PROXIMAL,
+                _DISTAL, out)
     return out
 
 

@@ -31,6 +31,7 @@ from ecs_anim.ground_adapt import (
     adapt_keeping_heels_up,
     heel_depth,
 )
+from ecs_anim.kernels import over_chunks
 from ecs_anim.kernels.decode import leg_pose_arrays, pose_arrays
 from ecs_anim.kernels.ground_adapt import ground_adapt_rows
 from ecs_anim.kernels.playback import writable_poses
@@ -85,11 +86,11 @@ class GroundAdapt(System):
         for rows, description in groups:
             assert description is not None
             ground = (description.kinds, description.params, description.grid)
-            ground_adapt_rows(rows.copy(), pose, lengths, leg, contact_weight, st.clip,
-                              sim.bank.source_ankle_height, st.footprint, st.locked,
-                              st.footprint_settled, st.ground_ref, ground, dt, GROUND_SMOOTHING_S,
-                              BALL_HEIGHT_PER_LEG, MAX_LEG_EXTENSION, HEEL_TOLERANCE_M,
-                              HEEL_PASSES, TOE_PASSES)
+            over_chunks(ground_adapt_rows, rows.size, rows.copy(), pose, lengths, leg,
+                        contact_weight, st.clip, sim.bank.source_ankle_height, st.footprint,
+                        st.locked, st.footprint_settled, st.ground_ref, ground, dt,
+                        GROUND_SMOOTHING_S, BALL_HEIGHT_PER_LEG, MAX_LEG_EXTENSION,
+                        HEEL_TOLERANCE_M, HEEL_PASSES, TOE_PASSES)
 
     def run_numpy(self, dt: float) -> None:
         """The numpy reference of :meth:`run` (any ground with a ``height``; each character on

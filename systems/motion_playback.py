@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.components import MotionPlayer
+from ecs_anim.kernels import over_chunks
 from ecs_anim.kernels.decode import PoseArrays, pose_arrays
 from ecs_anim.kernels.playback import (
     blend_rows,
@@ -70,29 +71,31 @@ class MotionPlayback(System):
         leg = self.sim.leg_length()
         out = pose_arrays(writable_poses(st.poses, st.n))
         bank_poses = self._bank_poses(bank)
-        sample_placed_rows(rows, bank_poses, bank.start, bank.n_frames, bank.fps, bank.loop_yaw,
-                           bank.loop_shift, st.clip, st.clip_time_s, st.loop, st.placement_xy,
-                           st.placement_heading, leg, out, rows)
+        over_chunks(sample_placed_rows, rows.size, rows, bank_poses, bank.start, bank.n_frames,
+                    bank.fps, bank.loop_yaw, bank.loop_shift, st.clip, st.clip_time_s, st.loop,
+                    st.placement_xy, st.placement_heading, leg, out, rows)
         if st.contact_weight.shape != (st.n, 2) or not st.contact_weight.flags.writeable:
             st.contact_weight = np.zeros((st.n, 2))
         fading = np.flatnonzero(st.fade_s > 0.0)
         previous = st.contact_weight[fading]  # the last tick's (a copy)
-        sample_table_rows(rows, bank.contact_weight, bank.start, bank.n_frames, bank.fps,
-                          st.clip, st.clip_time_s, st.loop, st.contact_weight)
+        over_chunks(sample_table_rows, rows.size, rows, bank.contact_weight, bank.start,
+                    bank.n_frames, bank.fps, st.clip, st.clip_time_s, st.loop, st.contact_weight)
         if fading.size:
             old_weight = np.zeros((st.n, 2))
-            sample_table_rows(fading, bank.contact_weight, bank.start, bank.n_frames, bank.fps,
-                              st.fade_clip, st.fade_time_s, st.fade_loop, old_weight)
+            over_chunks(sample_table_rows, fading.size, fading, bank.contact_weight, bank.start,
+                        bank.n_frames, bank.fps, st.fade_clip, st.fade_time_s, st.fade_loop,
+                        old_weight)
             st.contact_weight[fading] = self._fading_weights(
                 st.contact_weight[fading], old_weight[fading], previous,
                 st.fade_keeps_contacts[fading], release_step)
             old = pose_arrays(empty_poses(fading.size))
-            sample_placed_rows(fading, bank_poses, bank.start, bank.n_frames, bank.fps,
-                               bank.loop_yaw, bank.loop_shift, st.fade_clip, st.fade_time_s,
-                               st.fade_loop, st.fade_placement_xy, st.fade_placement_heading, leg,
-                               old, np.arange(fading.size, dtype=np.int64))
+            over_chunks(sample_placed_rows, fading.size, fading, bank_poses, bank.start,
+                        bank.n_frames, bank.fps, bank.loop_yaw, bank.loop_shift, st.fade_clip,
+                        st.fade_time_s, st.fade_loop, st.fade_placement_xy,
+                        st.fade_placement_heading, leg, old,
+                        np.arange(fading.size, dtype=np.int64))
             w = np.clip(st.fade_elapsed_s[fading] / np.maximum(st.fade_s[fading], 1e-9), 0, 1)
-            blend_rows(fading, old, w, out)
+            over_chunks(blend_rows, fading.size, fading, old, w, out)
             st.fade_s[fading] = np.where(w >= 1.0, 0.0, st.fade_s[fading])
         self._advance_clocks(dt)
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ecs_anim.kernels import over_chunks
 from ecs_anim.kernels.decode import decoded_arrays, decoded_pose, empty_decoded, fits, pose_arrays
 from ecs_anim.kernels.posture import N_EXPORT, export_constants, posture_rows
 from ecs_anim.kernels.solved_posture import posture_solved_rows
@@ -67,9 +68,9 @@ class PostureConvert(System):
         if st.goals is not None and st.solved is not None:  # decoded once, by the solver
             solved_rows = np.asarray(st.goals.rows, dtype=np.int64)  # type: ignore[attr-defined]
             decode_rows = np.delete(decode_rows, solved_rows)
-            posture_solved_rows(solved_rows, decoded_arrays(st.solved), pose, st.lengths, decoded,
-                                *rest)
-        posture_rows(decode_rows, pose, st.lengths, decoded, *rest)
+            over_chunks(posture_solved_rows, solved_rows.size, solved_rows,
+                        decoded_arrays(st.solved), pose, st.lengths, decoded, *rest)
+        over_chunks(posture_rows, decode_rows.size, decode_rows, pose, st.lengths, decoded, *rest)
         if newly_bad.any():
             sim.report_frozen(np.flatnonzero(newly_bad))
         # Next tick's targets on other characters read this posture, frames included.

@@ -99,6 +99,39 @@ def test_results_do_not_depend_on_the_thread_count():
     np.testing.assert_array_equal(positions[0], positions[1])
 
 
+def test_over_chunks_splits_the_rows_and_raises_what_a_chunk_raised():
+    """Contiguous chunks covering 0..n once, one per thread; a failing chunk's error is raised
+    after the others are done."""
+    chunks: list[tuple[int, int]] = []
+
+    def record(lo: int, hi: int, tag: str) -> None:
+        assert tag == "rows"
+        chunks.append((lo, hi))
+
+    kernels.set_threads(kernels.available_threads())
+    kernels.over_chunks(record, 101, "rows")
+    assert sorted(chunks) == [(101 * i // kernels.threads(), 101 * (i + 1) // kernels.threads())
+                              for i in range(kernels.threads())]
+    chunks.clear()
+    kernels.over_chunks(record, 3, "rows")  # too few rows to share
+    assert chunks == [(0, 3)]
+    kernels.set_threads(1)
+    chunks.clear()
+    kernels.over_chunks(record, 101, "rows")
+    assert chunks == [(0, 101)]
+    kernels.set_threads(None)
+
+    def fail_late(lo: int, hi: int) -> None:
+        if hi == 101:
+            raise ValueError(f"rows {lo}..{hi}")
+        chunks.append((lo, hi))
+
+    chunks.clear()
+    with pytest.raises(ValueError, match=r"\.\.101"):
+        kernels.over_chunks(fail_late, 101)
+    assert len(chunks) == kernels.threads() - 1
+
+
 def _fake_cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     """An empty kernel cache folder of this package in ``tmp_path`` (NUMBA_CACHE_DIR)."""
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
@@ -121,7 +154,7 @@ def _index(path: Path, source: bytes) -> None:
 def test_uncompiled_kernels_reads_the_cache_folder(tmp_path, monkeypatch):
     folder = _fake_cache(tmp_path, monkeypatch)
     modules = [p.stem for p in kernels.kernel_sources()
-               if "parallel=True" in p.read_text(encoding="utf-8")]
+               if "nogil=True" in p.read_text(encoding="utf-8")]
     assert {"decode", "playback", "ground_adapt", "solve", "posture", "com"} <= set(modules)
     assert kernels.uncompiled_kernels() == modules  # nothing compiled yet
     folder.mkdir()
@@ -278,13 +311,13 @@ def _one_tick_in_a_child(n: int) -> tuple[int, ...]:
 
 
 def test_a_process_that_ran_the_kernels_can_fork_workers_that_run_them():
-    """The batch's pool forks; numba's GNU OpenMP layer would kill a child forked from a process
-    whose kernels ran on threads. The kernels use a fork-safe layer (TBB, else workqueue)."""
+    """The batch's pool forks after the kernels ran on this process's threads, which a forked
+    child does not have: each process makes its own (:func:`ecs_anim.kernels.over_chunks`)."""
     import multiprocessing
+    import os
 
-    import numba
-
-    assert _one_tick_in_a_child(4)[0] == 4  # the kernels' threads start in this process
-    assert numba.threading_layer() != "omp"
+    kernels.set_threads(None)
+    assert _one_tick_in_a_child(16)[0] == 16  # the kernels' threads start in this process
+    assert (os.getpid() in kernels._pools) == (kernels.available_threads() > 1)
     with multiprocessing.get_context("fork").Pool(1) as pool:
-        assert pool.map(_one_tick_in_a_child, [3]) == [(3, 22, 3)]
+        assert pool.map(_one_tick_in_a_child, [12]) == [(12, 22, 3)]

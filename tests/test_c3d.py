@@ -483,6 +483,28 @@ def test_score_hinge_plane_rule_places_the_centre_on_the_axis():
     np.testing.assert_allclose(cp, [0.05, 0.07, -0.1], atol=1e-9)
 
 
+def test_score_hinge_through_a_landmark_ignores_soft_tissue_sliding_along_the_thigh():
+    """A flexion-only hip whose thigh cluster slides along the thigh with flexion (soft tissue):
+    SCoRE's axis direction comes from the rotations alone and stays right, its location does
+    not; through the greater trochanter (a point on the axis) the centre is found again."""
+    rng = np.random.default_rng(9)
+    n = 200
+    parent_rot = rot_axis(2, rng.uniform(-0.2, 0.2, n))
+    parent_origin = rng.normal(size=(n, 3))
+    centre_in_parent = np.array([0.05, 0.09, -0.1])
+    centre = np.einsum("fij,j->fi", parent_rot, centre_in_parent) + parent_origin
+    flexion = rng.uniform(-0.6, 0.6, n)
+    child_rot = parent_rot @ rot_axis(1, flexion)
+    slide = 0.03 * flexion[:, None] * child_rot[:, :, 2]  # 30 mm per radian along the thigh
+    child_origin = centre - np.einsum("fij,j->fi", child_rot, np.array([0.0, 0.0, 0.3])) + slide
+    plane = (np.array([0.0, 1.0, 0.0]), 0.07)
+    args = ((parent_rot, parent_origin), (child_rot, child_origin), np.ones(n, dtype=bool))
+    biased, _, _ = score_centre(*args, hinge_plane_in_parent=plane)
+    assert np.linalg.norm(biased - [0.05, 0.07, -0.1]) > 0.005
+    trochanter = centre_in_parent + np.array([0.0, 0.09, 0.0])
+    cp, _, _ = score_centre(*args, hinge_plane_in_parent=plane, hinge_through_in_parent=trochanter)
+    np.testing.assert_allclose(cp, [0.05, 0.07, -0.1], atol=1e-9)
+
 def test_y_up_file_is_detected_and_turned_z_up(tmp_path):
     require_mocap()
     labels, positions, rate = _tennis_markers()
@@ -548,3 +570,63 @@ def test_a_scenario_plays_absent_parts_from_another_of_its_motions(tmp_path):
         path.write_text(bad)
         with pytest.raises(InputError, match=re.escape(message)):
             load_scenario(path)
+
+
+def test_a_wand_in_front_of_the_segment_gives_the_knee_and_ankle_on_the_flexion_axis(tmp_path):
+    """The chord rule's wand (THI, TIB) moved from the side of the thigh and shank to their
+    front, as some Helen Hayes sets place it: the centres come from the knee's flexion axis
+    instead (found from the motion), near where the lateral wands put them, not behind the knee."""
+    require_mocap()
+    labels, positions, rate = _tennis_markers()
+    reference, _ = canonical_clip_c3d(read_c3d(write_c3d(tmp_path / "lateral.c3d", labels, positions,
+                                                          rate=rate)))
+    ref = reference.positions
+    moved = positions.copy()
+    forward = reference.pelvis2world[:, :, 0]
+    for s, S in (("l", "L"), ("r", "R")):
+        for wand, top, bottom in (("THI", "hip", "KNE"), ("TIB", "knee", "ANK")):
+            line_top = ref[:, J[f"{top}_{s}"]]
+            line_bottom = positions[:, labels.index(f"{S}{bottom}")]
+            u = (line_top - line_bottom) / np.linalg.norm(line_top - line_bottom, axis=-1, keepdims=True)
+            w = positions[:, labels.index(f"{S}{wand}")] - line_bottom
+            along = np.sum(w * u, axis=-1, keepdims=True)
+            front = forward - np.sum(forward * u, axis=-1, keepdims=True) * u
+            front /= np.linalg.norm(front, axis=-1, keepdims=True)
+            moved[:, labels.index(f"{S}{wand}")] = line_bottom + along * u \
+                + np.linalg.norm(w - along * u, axis=-1, keepdims=True) * front
+    clip, _ = canonical_clip_c3d(read_c3d(write_c3d(tmp_path / "front.c3d", labels, moved, rate=rate)))
+    for joint, proximal, marker, wand in (("knee", "hip", "KNE", "THI"), ("ankle", "knee", "ANK", "TIB")):
+        for s, S in (("l", "L"), ("r", "R")):
+            assert "in the plane of the flexion axis (the wand is" in str(clip.joint_map.names[f"{joint}_{s}"])
+            error = np.linalg.norm(clip.positions[:, J[f"{joint}_{s}"]] - ref[:, J[f"{joint}_{s}"]], axis=-1)
+            # Measured 10-21 mm (the lateral wands' centres are themselves skin-marker estimates);
+            # the chord rule in the front wand's plane puts them 60-91 mm off.
+            assert np.median(error) < 0.025, (joint, s, np.median(error))
+            behind = chord_centre(ref[:, J[f"{proximal}_{s}"]], moved[:, labels.index(f"{S}{wand}")],
+                                  moved[:, labels.index(f"{S}{marker}")], 0.05)
+            assert np.median(np.linalg.norm(behind - ref[:, J[f"{joint}_{s}"]], axis=-1)) > 0.05
+
+
+@pytest.mark.parametrize("medial_first", [True, False])
+def test_a_label_naming_the_lateral_and_the_medial_marker_is_split_by_position(tmp_path, medial_first):
+    """Cortex writes RKNE / RANK for both epicondyles and both malleoli: the one nearer the
+    other leg is medial, wherever it comes in the file, and the centre is the midpoint."""
+    require_mocap()
+    labels, positions, rate = _tennis_markers()
+    reference, _ = canonical_clip_c3d(read_c3d(write_c3d(tmp_path / "lateral.c3d", labels, positions,
+                                                          rate=rate)))
+    ref = reference.positions
+    names, columns = list(labels), [positions[:, i] for i in range(len(labels))]
+    for s, S in (("l", "L"), ("r", "R")):
+        for joint, marker in (("knee", "KNE"), ("ankle", "ANK")):
+            lateral = positions[:, labels.index(f"{S}{marker}")]
+            medial = 2 * ref[:, J[f"{joint}_{s}"]] - lateral  # mirrored through the centre
+            at = 0 if medial_first else len(names)
+            names.insert(at, f"{S}{marker}")
+            columns.insert(at, medial)
+    path = write_c3d(tmp_path / "twins.c3d", names, np.stack(columns, axis=1), rate=rate)
+    clip, _ = canonical_clip_c3d(read_c3d(path))
+    for joint in ("knee_l", "knee_r", "ankle_l", "ankle_r"):
+        assert clip.joint_map.names[joint] in ("midpoint of the femoral epicondyles", "midpoint of the malleoli")
+        error = np.linalg.norm(clip.positions[:, J[joint]] - ref[:, J[joint]], axis=-1)
+        assert np.median(error) < 1e-5, (joint, np.median(error))  # float32 in the file

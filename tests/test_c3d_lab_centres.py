@@ -19,21 +19,14 @@ WITH_CENTRES = {
     "bts_spaced_lowercase_nounits_yup.c3d": ("hip", "knee", "ankle"),
     "vicon_treadmill_run_clusters_240hz.c3d": ("hip",),
 }
-#: Measured medians (mm) where the bound does not hold (open in issue 12). Cortex's knee and
-#: ankle centres lie 75-100 mm from ours: its knee and ankle labels each name two markers
-#: (lateral and medial, RKNE/RANK twice), and our chord rule takes the first one seen; BTS's
-#: left hip and right ankle lie just beyond the bounds (cause not found).
+#: Measured medians (mm) where the bound does not hold (open in issue 12). BTS's left hip and
+#: right ankle lie just beyond the bounds: our hips 10-18 mm in front of and 16-17 mm above the
+#: lab's (its pelvis depth from the sacrum marker is 198 mm; the Davis 1991 regression with the
+#: file's SUBJECT anthropometry fits no better, 28-36 mm), and the right ankle 45-50 mm off for
+#: a few frames after each heel strike, where the shank wand swings 60 deg about the shank.
 OPEN_MM = {
-    ("mac_helenhayes_events_vjc_60hz.c3d", "knee_l"): 92.0,
-    ("mac_helenhayes_events_vjc_60hz.c3d", "knee_r"): 100.1,
-    ("mac_helenhayes_events_vjc_60hz.c3d", "ankle_l"): 74.7,
-    ("mac_helenhayes_events_vjc_60hz.c3d", "ankle_r"): 79.4,
     ("bts_spaced_lowercase_nounits_yup.c3d", "hip_l"): 25.5,
     ("bts_spaced_lowercase_nounits_yup.c3d", "ankle_r"): 15.8,
-    # Cluster sets: SCoRE on a run's hip flexion places the hips on their axis half an adult
-    # inter-hip distance from the pelvis cluster's mid-plane; the lab's LHJC/RHJC lie 61-71 mm off.
-    ("vicon_treadmill_run_clusters_240hz.c3d", "hip_l"): 60.8,
-    ("vicon_treadmill_run_clusters_240hz.c3d", "hip_r"): 71.1,
 }
 _CACHE: dict[str, dict] = {}
 

@@ -51,16 +51,11 @@ def test_covered_files_import_with_no_flags(name):
         assert len(msg) < 300
 
 
-# Open (joint-centre construction, not labels): the shank (knee to ankle) is not steady where
-# the chord rule's knee centre sits off the flexion axis (a thigh marker or wand out of the
-# frontal plane, no static trial to calibrate it): Codamotion 5.7-5.9 % (anterior wand marker
-# stands in for the wand), Cortex Helen Hayes 5.8-6.0 % (our knee 99 mm from the lab's VRKN,
-# hip 10 mm from VRHI), Qualisys squat 5.1 % (deep flexion); Vicon Matt 7.0 % from one frame
-# (frame 0, shank 0.175 m: a gap-filled start).
-STEADY_OPEN = {"codamotion_dotted_gait_2015_200hz.c3d": "shank 5.9 %",
-               "mac_helenhayes_events_vjc_60hz.c3d": "shank 6.0 %, knee 99 mm off the lab's",
-               "qualisys_pig_noarms_squat_100hz.c3d": "shank 5.1 % in deep squats",
-               "vicon_pig_noclav_prefix_events_60hz.c3d": "shank 7.0 % from frame 0"}
+# Open: Vicon Matt's right shank 7.0 % from one frame (frame 0, shank 0.175 m: a gap-filled
+# start). (The chord rule's plane now follows the knee's flexion axis where a thigh or shank
+# marker stands in front of the segment: Codamotion, Cortex and Qualisys-squat shanks went from
+# 5.1-6.0 % to 0.9-2.6 %.)
+STEADY_OPEN = {"vicon_pig_noclav_prefix_events_60hz.c3d": "shank 7.0 % from frame 0"}
 
 
 @pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.xfail(

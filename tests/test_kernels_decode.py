@@ -84,7 +84,7 @@ def test_decode_rows_writes_only_its_rows():
     for a in arrays:
         a.fill(np.nan)
     rows = np.array([3, 17, 39, 0], dtype=np.int64)
-    kd.decode_rows(rows, kd.pose_arrays(poses), lengths, arrays)
+    kd.decode_rows(0, rows.size, rows, kd.pose_arrays(poses), lengths, arrays)
     ref = decode(poses, lengths)
     untouched = np.setdiff1d(np.arange(40), rows)
     for name, a in zip(FIELDS, arrays, strict=True):

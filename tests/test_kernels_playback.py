@@ -73,7 +73,7 @@ def test_sample_placed_rows_equals_numpy(bank: ClipBank) -> None:
     want = _placed(sample(bank, clip, time_s, loop), xy, heading, leg)
     got = _empty(n, want)
     rows = np.arange(n, dtype=np.int64)
-    sample_placed_rows(rows, pose_arrays(bank.poses), bank.start, bank.n_frames, bank.fps,
+    sample_placed_rows(0, n, rows, pose_arrays(bank.poses), bank.start, bank.n_frames, bank.fps,
                        bank.loop_yaw, bank.loop_shift, clip, time_s, loop, xy, heading, leg,
                        pose_arrays(got), rows)
     _assert_poses_equal(got, want)
@@ -86,9 +86,9 @@ def test_only_the_given_rows_are_written(bank: ClipBank) -> None:
     want = _placed(sample(bank, clip, time_s, loop), xy, heading, leg)
     rows = np.flatnonzero(rng.random(n) < 0.5).astype(np.int64)
     got = _empty(rows.size, want)
-    sample_placed_rows(rows, pose_arrays(bank.poses), bank.start, bank.n_frames, bank.fps,
-                       bank.loop_yaw, bank.loop_shift, clip, time_s, loop, xy, heading, leg,
-                       pose_arrays(got), np.arange(rows.size, dtype=np.int64))
+    sample_placed_rows(0, rows.size, rows, pose_arrays(bank.poses), bank.start, bank.n_frames,
+                       bank.fps, bank.loop_yaw, bank.loop_shift, clip, time_s, loop, xy, heading,
+                       leg, pose_arrays(got), np.arange(rows.size, dtype=np.int64))
     _assert_poses_equal(got, want.take(rows))
 
 
@@ -102,7 +102,7 @@ def test_long_loops_carry_root_motion_as_numpy(bank: ClipBank) -> None:
     want = _placed(sample(bank, clip, time_s, loop), xy, heading, leg)
     got = _empty(n, want)
     rows = np.arange(n, dtype=np.int64)
-    sample_placed_rows(rows, pose_arrays(bank.poses), bank.start, bank.n_frames, bank.fps,
+    sample_placed_rows(0, n, rows, pose_arrays(bank.poses), bank.start, bank.n_frames, bank.fps,
                        bank.loop_yaw, bank.loop_shift, clip, time_s, loop, xy, heading, leg,
                        pose_arrays(got), rows)
     np.testing.assert_allclose(got.root_position * 0.9, want.root_position * 0.9, rtol=0,
@@ -125,7 +125,7 @@ def test_contact_weights_equal_numpy(bank: ClipBank) -> None:
     clip, time_s, loop, _, _, _ = _scene(bank, rng, n)
     want = sample_table(bank, bank.contact_weight, clip, time_s, loop)
     got = np.full((n, 2), np.nan)
-    sample_table_rows(np.arange(n, dtype=np.int64), bank.contact_weight, bank.start,
+    sample_table_rows(0, n, np.arange(n, dtype=np.int64), bank.contact_weight, bank.start,
                       bank.n_frames, bank.fps, clip, time_s, loop, got)
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
 
@@ -141,7 +141,7 @@ def test_fade_blend_equals_numpy(bank: ClipBank) -> None:
     want = blend(old, new, w)
     rows = np.flatnonzero(rng.random(n) < 0.7).astype(np.int64)
     out = NormalizedPoses(**{k: v.copy() for k, v in new.arrays().items()})
-    blend_rows(rows, pose_arrays(old.take(rows)), w[rows], pose_arrays(out))
+    blend_rows(0, rows.size, rows, pose_arrays(old.take(rows)), w[rows], pose_arrays(out))
     _assert_poses_equal(out.take(rows), want.take(rows))
     untouched = np.setdiff1d(np.arange(n), rows)
     _assert_poses_equal(out.take(untouched), new.take(untouched))

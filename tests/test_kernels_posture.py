@@ -113,8 +113,8 @@ def test_posture_rows_keeps_the_last_good_posture_like_numpy():
         newly_bad = np.zeros(n, bool)
         got_frozen, got_positions, got_local = frozen.copy(), positions.copy(), local.copy()
         got_spine = np.empty((n, count, 3)) if spine is None else spine.copy()
-        kp.posture_rows(np.arange(n, dtype=np.int64), kd.pose_arrays(poses), lengths, decoded,
-                        got_frozen, newly_bad, got_positions, True,
+        kp.posture_rows(0, n, np.arange(n, dtype=np.int64), kd.pose_arrays(poses), lengths,
+                        decoded, got_frozen, newly_bad, got_positions, True,
                         np.empty((n, kp.N_EXPORT, 3, 3)), got_local, k.rest_hips,
                         k.bvh_from_world, k.rest2body, k.parents, got_spine, spine is not None)
         np.testing.assert_array_equal(got_frozen, ref[0])
@@ -137,10 +137,11 @@ def test_posture_rows_without_rotations_or_vertebrae_writes_positions_only():
     k = kp.export_constants()
     positions = np.zeros((n, N_JOINTS, 3))
     rows = np.array([1, 4, 6], dtype=np.int64)
-    kp.posture_rows(rows, kd.pose_arrays(poses), lengths, kd.empty_decoded(n), np.zeros(n, bool),
-                    np.zeros(n, bool), positions, False, np.empty((0, kp.N_EXPORT, 3, 3)),
-                    np.empty((0, kp.N_EXPORT, 3, 3)), k.rest_hips, k.bvh_from_world,
-                    k.rest2body, k.parents, np.empty((n, 0, 3)), False)
+    kp.posture_rows(0, rows.size, rows, kd.pose_arrays(poses), lengths, kd.empty_decoded(n),
+                    np.zeros(n, bool), np.zeros(n, bool), positions, False,
+                    np.empty((0, kp.N_EXPORT, 3, 3)), np.empty((0, kp.N_EXPORT, 3, 3)),
+                    k.rest_hips, k.bvh_from_world, k.rest2body, k.parents, np.empty((n, 0, 3)),
+                    False)
     np.testing.assert_allclose(positions[rows], decode(poses, lengths).positions[rows], rtol=0,
                                atol=TOL)
     assert np.all(positions[np.setdiff1d(np.arange(n), rows)] == 0.0)
@@ -159,17 +160,17 @@ def test_centres_of_mass_match_numpy_for_some_rows():
     proximal, distal = kc.segment_joints()
     rows = np.array([2, 5, 11, 29, 0], dtype=np.int64)
     out = np.full((n, 3), np.nan)
-    kc.centres_of_mass(rows, rows, positions, masses, fraction, proximal, distal, out)
+    kc.centres_of_mass(0, rows.size, rows, rows, positions, masses, fraction, proximal, distal, out)
     np.testing.assert_allclose(out[rows], ref[rows], rtol=0, atol=TOL)
     assert np.all(np.isnan(np.delete(out, rows, axis=0)))
     # Gathered positions (as the solver gives them): positions[i] belongs to rows[i].
     gathered = np.full((n, 3), np.nan)
-    kc.centres_of_mass(rows, np.arange(rows.size, dtype=np.int64), positions[rows], masses,
-                       fraction, proximal, distal, gathered)
+    kc.centres_of_mass(0, rows.size, rows, np.arange(rows.size, dtype=np.int64), positions[rows],
+                       masses, fraction, proximal, distal, gathered)
     np.testing.assert_allclose(gathered[rows], ref[rows], rtol=0, atol=TOL)
     desired = rng.normal(size=(n, 3))
     error = np.full(n, np.nan)
-    kc.horizontal_errors(rows, out, desired, error)
+    kc.horizontal_errors(0, rows.size, rows, out, desired, error)
     np.testing.assert_allclose(error[rows], np.linalg.norm(ref[rows, :2] - desired[rows, :2],
                                                            axis=1), rtol=0, atol=TOL)
     assert np.all(np.isnan(np.delete(error, rows)))

@@ -30,9 +30,9 @@ def test_the_bench_scene_posture_and_rotations_equal_a_fresh_decode(monkeypatch)
     handed = []
     real = posture_solved_rows
 
-    def counting(rows, *args):
+    def counting(lo, hi, rows, *args):
         handed.append(rows.size)
-        return real(rows, *args)
+        return real(lo, hi, rows, *args)
 
     monkeypatch.setattr(posture_convert, "posture_solved_rows", counting)
     scene = BenchScene(6, rotations=True, constrained=True)

@@ -4,6 +4,11 @@ Each kernel writes its results in place and mirrors a numpy function of the pack
 as the reference the tests compare it with (to 1e-9 m). ``vec`` holds the scalar helpers they
 share: 3-vectors as tuples, frames as tuples of their three axes.
 
+The kernels over characters are compiled ``nogil`` and take a range ``lo, hi`` of their loop's
+indices; :func:`over_chunks` runs one over all of them, split into contiguous chunks on
+:func:`threads` threads of this process (numba's ``parallel=True`` with ``prange``, used before,
+made the first compile half as long again).
+
 Compiled code is cached in the user's cache folder (``$XDG_CACHE_HOME/ecs_anim/numba``, else
 ``~/.cache/ecs_anim/numba``) unless ``NUMBA_CACHE_DIR`` says where: the first run compiles (about
 a minute, the solver in a second process: :func:`compile_solver_aside`), later ones load in a
@@ -18,6 +23,7 @@ import os
 import subprocess
 import sys
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 
@@ -31,9 +37,6 @@ def cache_dir() -> Path:
 
 
 os.environ.setdefault("NUMBA_CACHE_DIR", str(cache_dir()))
-# The batch runner forks worker processes after kernels ran in the parent: GNU OpenMP (numba's
-# first choice here) then kills the child, so take a fork-safe threading layer (workqueue here).
-os.environ.setdefault("NUMBA_THREADING_LAYER", "forksafe")
 
 
 def kernel_sources() -> list[Path]:
@@ -112,7 +115,7 @@ def _compiled_from(index: Path, source_hash: bytes) -> bool:
 
 
 def uncompiled_kernels() -> list[str]:
-    """Names of the kernel modules (those with a kernel over characters, ``parallel=True``) the
+    """Names of the kernel modules (those with a kernel over characters, ``nogil=True``) the
     cache holds no compiled code for that matches their current source (not compiled yet, or
     changed since)."""
     import hashlib
@@ -120,7 +123,7 @@ def uncompiled_kernels() -> list[str]:
     folder = _cache_subfolder()
     missing = []
     for source in kernel_sources():
-        if "parallel=True" not in source.read_text(encoding="utf-8"):
+        if "nogil=True" not in source.read_text(encoding="utf-8"):
             continue  # helpers only: compiled into the kernels that call them (often inlined)
         indexes = list(folder.glob(f"{source.stem}.*.nbi")) if folder.is_dir() else []
         source_hash = hashlib.sha256(source.read_bytes()).digest()
@@ -203,31 +206,67 @@ def _stop_solver_compile() -> None:
 
 
 def available_threads() -> int:
-    """How many threads the kernels may use: numba's ``NUMBA_NUM_THREADS`` (the cores this
-    process may run on, unless set)."""
-    import numba
+    """How many threads the kernels may use: the cores this process may run on
+    (``os.sched_getaffinity``, else ``os.cpu_count``)."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return max(1, os.cpu_count() or 1)
 
-    return int(vars(numba.config)["NUMBA_NUM_THREADS"])  # set at import, unknown to mypy
+
+_thread_count: list[int] = []  # set by set_threads; empty: all of available_threads()
 
 
 def set_threads(n: int | None) -> int:
-    """Run the kernels' loops over characters on ``n`` threads (``numba.set_num_threads``);
-    None: on all of :func:`available_threads`. Returns the number set. Results never depend on
-    it (each character is computed by one thread, independently of the others)."""
-    import numba
-
+    """Run the kernels' loops over characters on ``n`` threads (:func:`over_chunks`); None: on
+    all of :func:`available_threads`. Returns the number set. Results never depend on it (each
+    character is computed by one thread, independently of the others)."""
     most = available_threads()
     if n is None:
         n = most
     if not 1 <= n <= most:
-        raise ValueError(f"expected 1 to {most} threads (the cores this process may use, or "
-                         f"NUMBA_NUM_THREADS), got {n}")
-    numba.set_num_threads(n)
+        raise ValueError(f"expected 1 to {most} threads (the cores this process may use), got {n}")
+    _thread_count[:] = [n]
     return n
 
 
 def threads() -> int:
-    """The number of threads the kernels run on now (``numba.get_num_threads``)."""
-    import numba
+    """The number of threads the kernels run on now."""
+    return _thread_count[0] if _thread_count else available_threads()
 
-    return int(numba.get_num_threads())
+
+#: Fewest rows worth handing to another thread: below, waking it costs more than it saves.
+MIN_ROWS_PER_THREAD = 4
+_pools: dict[int, ThreadPoolExecutor] = {}  # by process id: a forked child makes its own
+
+
+def _pool() -> ThreadPoolExecutor:
+    """This process's threads for :func:`over_chunks` (made on first use: threads do not
+    survive a fork, so the batch's forked workers each make their own)."""
+    pid = os.getpid()
+    pool = _pools.get(pid)
+    if pool is None:
+        _pools.clear()
+        pool = _pools[pid] = ThreadPoolExecutor(thread_name_prefix="ecs_anim_kernel")
+    return pool
+
+
+def over_chunks(kernel: Callable[..., None], n: int, *args: object) -> None:
+    """Run ``kernel(lo, hi, *args)``, a compiled kernel (``nogil=True``: it releases the GIL)
+    over the loop indices ``lo..hi-1``, on the whole of ``0..n`` split into :func:`threads`
+    contiguous chunks, one per thread (this one runs the first), and wait for all of them; an
+    error of any chunk is raised once all are done. On one thread, or for few rows, it is one
+    call here. The chunks write disjoint rows, so the result does not depend on the split."""
+    count = min(threads(), n // MIN_ROWS_PER_THREAD)
+    if count <= 1:
+        kernel(0, n, *args)
+        return
+    bounds = [n * i // count for i in range(count + 1)]
+    pool = _pool()
+    others = [pool.submit(kernel, bounds[i], bounds[i + 1], *args) for i in range(1, count)]
+    try:
+        kernel(0, bounds[1], *args)
+    finally:
+        for chunk in others:
+            chunk.exception()  # wait for every chunk before raising (they write the arrays)
+    for chunk in others:
+        chunk.result()

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 from numpy.typing import NDArray
 
 from ..morphology import MASS_SEGMENTS
@@ -43,26 +43,26 @@ def centre_of_mass_row(p: F64, masses: F64, com_fraction: F64, proximal: I64,
     return (x / total, y / total, z / total)
 
 
-@njit(cache=True, parallel=True)
-def centres_of_mass(rows: I64, position_rows: I64, positions: F64, masses: F64,
+@njit(cache=True, nogil=True)
+def centres_of_mass(lo: int, hi: int, rows: I64, position_rows: I64, positions: F64, masses: F64,
                     com_fraction: F64, proximal: I64, distal: I64, out: F64) -> None:
-    """Mirrors :func:`ecs_anim.morphology.centres_of_mass` over the store rows ``rows`` (int64),
-    in parallel: the centre of mass of the posture ``positions[position_rows[i]]``
+    """Mirrors :func:`ecs_anim.morphology.centres_of_mass` over the store rows ``rows`` (int64)
+    ``rows[lo:hi]``: the centre of mass of the posture ``positions[position_rows[i]]``
     ((m, N_JOINTS, 3), m) of store row ``c = rows[i]`` on its segments ``masses[c]`` (kg) and
     ``com_fraction[c]`` ((n, n_segments) each) into ``out[c]`` ((n, 3), m). Pass ``rows`` as
     ``position_rows`` for positions held by store row, ``arange`` for gathered ones."""
-    for i in prange(rows.shape[0]):
+    for i in range(lo, hi):
         c = rows[i]
         com = centre_of_mass_row(positions[position_rows[i]], masses[c], com_fraction[c],
                                  proximal, distal)
         out[c, 0], out[c, 1], out[c, 2] = com
 
 
-@njit(cache=True, parallel=True)
-def horizontal_errors(rows: I64, com: F64, desired: F64, out: F64) -> None:
+@njit(cache=True, nogil=True)
+def horizontal_errors(lo: int, hi: int, rows: I64, com: F64, desired: F64, out: F64) -> None:
     """Horizontal distance (m) of ``com[c]`` from ``desired[c]`` ((n, 3) each) into ``out[c]``
     ((n,)) for the store rows ``c`` in ``rows`` (``np.linalg.norm`` of the x, y difference)."""
-    for i in prange(rows.shape[0]):
+    for i in range(lo, hi):
         c = rows[i]
         dx, dy = com[c, 0] - desired[c, 0], com[c, 1] - desired[c, 1]
         out[c] = math.sqrt(dx * dx + dy * dy)

@@ -1,11 +1,11 @@
 """Compiled decode: normalized poses on each character's body (paper eq. 2 and §8).
 
 Mirrors :func:`ecs_anim.normalized.decode` (the ``use_stretch=False`` path, what the tick uses)
-one store row at a time: :func:`decode_row` for one character, :func:`decode_rows` over a set of
-store rows in parallel, :func:`decode` the Python entry over every row. The poses are passed as
-:class:`PoseArrays` (the arrays of a :class:`~ecs_anim.normalized.NormalizedPoses`, no copies)
-and the result written into :class:`DecodedArrays` (the arrays of a
-:class:`~ecs_anim.normalized.DecodedPose`).
+one store row at a time: :func:`decode_row` for one character, :func:`decode_rows` over a chunk
+of store rows (``rows[lo:hi]``: one chunk per thread), :func:`decode` the Python entry over
+every row. The poses are passed as :class:`PoseArrays` (the arrays of a
+:class:`~ecs_anim.normalized.NormalizedPoses`, no copies) and the result written into
+:class:`DecodedArrays` (the arrays of a :class:`~ecs_anim.normalized.DecodedPose`).
 
 Joint and length indices are written here as literals (numba's cache keys on this file's source,
 not on :mod:`ecs_anim.skeleton`'s); an import-time check pins them to the skeleton.
@@ -17,13 +17,14 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 from numpy.typing import NDArray
 
 from ..normalized import DecodedPose, NormalizedPoses
 from ..skeleton import JOINT_INDEX as J
 from ..skeleton import LENGTH_INDEX as L
 from ..skeleton import N_JOINTS, N_LENGTHS
+from . import over_chunks
 from .vec import (
     F64,
     Frame,
@@ -320,7 +321,7 @@ def spine_joint(control: tuple[Vec3, Vec3, Vec3, Vec3], chord: float, length: fl
 
 
 # Not inlined: three kernels call it (decode_rows, posture_rows, the solver's), and numba types
-# an inlined body again at every site, twice in a parallel loop (minutes of first compile).
+# an inlined body again at every site, (minutes of first compile).
 @njit(cache=True)
 def decode_row(c: int, pose: PoseArrays, lengths_row: F64, out: DecodedArrays) -> None:
     """Mirrors :func:`ecs_anim.normalized.decode` (``use_stretch=False``) for store row ``c``
@@ -374,12 +375,13 @@ def decode_row(c: int, pose: PoseArrays, lengths_row: F64, out: DecodedArrays) -
         store_frame(out.arm2world[c, s], arm2world)
 
 
-@njit(cache=True, parallel=True)
-def decode_rows(rows: I64, pose: PoseArrays, lengths: F64, out: DecodedArrays) -> None:
-    """Mirrors :func:`ecs_anim.normalized.decode` over the store rows ``rows`` (int64), in
-    parallel: row ``c`` of ``pose`` on the body ``lengths[c]`` ((n, N_LENGTHS), m) into row ``c``
+@njit(cache=True, nogil=True)
+def decode_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64,
+                out: DecodedArrays) -> None:
+    """Mirrors :func:`ecs_anim.normalized.decode` over the store rows ``rows[lo:hi]``
+    (int64): row ``c`` of ``pose`` on the body ``lengths[c]`` ((n, N_LENGTHS), m) into row ``c``
     of every ``out`` array (the other rows are left as they are)."""
-    for i in prange(rows.shape[0]):
+    for i in range(lo, hi):
         c = rows[i]
         decode_row(c, pose, lengths[c], out)
 
@@ -394,5 +396,5 @@ def decode(poses: NormalizedPoses, lengths: F64, out: DecodedPose | None = None)
     n = pose.root_heading.shape[0]
     lengths = np.ascontiguousarray(np.broadcast_to(lengths, (n, N_LENGTHS)), dtype=np.float64)
     arrays = empty_decoded(n) if out is None else decoded_arrays(out)
-    decode_rows(np.arange(n, dtype=np.int64), pose, lengths, arrays)
+    over_chunks(decode_rows, n, np.arange(n, dtype=np.int64), pose, lengths, arrays)
     return decoded_pose(arrays) if out is None else out

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 from numpy.typing import NDArray
 
 from ..skeleton import LENGTH_INDEX as L
@@ -258,14 +258,14 @@ def ground_adapt_row(c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
                      grid, toe_passes)
 
 
-@njit(cache=True, parallel=True)
-def ground_adapt_rows(rows: I64, pose: LegPoseArrays, lengths: F64, leg: F64,
-                      contact_weight: F64, clip: I64, source_ankle_height: F64, footprint: F64, locked: B1, footprint_settled: B1, ground_ref: F64,
-                      ground: GroundArrays, dt: float, smoothing_s: float, ball_per_leg: float,
-                      max_extension: float, heel_tolerance: float, heel_passes: int,
-                      toe_passes: int) -> None:
-    """Mirrors ``systems.ground_adapt.GroundAdapt.run`` over the store rows ``rows``, in
-    parallel, in place.
+@njit(cache=True, nogil=True)
+def ground_adapt_rows(lo: int, hi: int, rows: I64, pose: LegPoseArrays, lengths: F64, leg: F64,
+                      contact_weight: F64, clip: I64, source_ankle_height: F64, footprint: F64,
+                      locked: B1, footprint_settled: B1, ground_ref: F64, ground: GroundArrays,
+                      dt: float, smoothing_s: float, ball_per_leg: float, max_extension: float,
+                      heel_tolerance: float, heel_passes: int, toe_passes: int) -> None:
+    """Mirrors ``systems.ground_adapt.GroundAdapt.run`` over the store rows
+    ``rows[lo:hi]``, in place.
 
     Per row: ``pose`` the store's poses' leg arrays (:func:`.decode.leg_pose_arrays`; decoded
     on the body here, then root height, leg frames and fractions, foot directions written);
@@ -279,7 +279,7 @@ def ground_adapt_rows(rows: I64, pose: LegPoseArrays, lengths: F64, leg: F64,
     ``heel_passes``, ``toe_passes``.
     """
     kinds, params, grid = ground
-    for i in prange(rows.shape[0]):
+    for i in range(lo, hi):
         ground_adapt_row(rows[i], pose, lengths, leg, contact_weight, clip, source_ankle_height,
                          footprint, locked, footprint_settled, ground_ref, kinds, params, grid,
                          dt, smoothing_s, ball_per_leg, max_extension, heel_tolerance,

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 from numpy.typing import NDArray
 
 from ..normalized import TRAILING_SHAPES, NormalizedPoses
@@ -215,13 +215,13 @@ def sample_placed_row(c: int, bank: PoseArrays, start: I64, n_frames: I64, fps: 
     out.root_heading[o] = h + heading
 
 
-@njit(cache=True, parallel=True)
-def sample_placed_rows(rows: I64, bank: PoseArrays, start: I64, n_frames: I64, fps: F64,
-                       loop_yaw: F64, loop_shift: F64, clip: I64, time_s: F64, loop: B1,
+@njit(cache=True, nogil=True)
+def sample_placed_rows(lo: int, hi: int, rows: I64, bank: PoseArrays, start: I64, n_frames: I64,
+                       fps: F64, loop_yaw: F64, loop_shift: F64, clip: I64, time_s: F64, loop: B1,
                        placement_xy: F64, placement_heading: F64, leg: F64, out: PoseArrays,
                        out_rows: I64) -> None:
     """Mirrors ``MotionPlayback._placed(sample(bank, clip, time_s, loop), placement_xy,
-    placement_heading)`` over the store rows ``rows``, in parallel, into rows ``out_rows`` of
+    placement_heading)`` over the store rows ``rows[lo:hi]``, into rows ``out_rows`` of
     ``out``.
 
     ``bank``: the clip bank's poses (total_frames,); ``start``, ``n_frames`` (n_clips,) int64,
@@ -230,18 +230,18 @@ def sample_placed_rows(rows: I64, bank: PoseArrays, start: I64, n_frames: I64, f
     ``loop`` (n,) bool, ``placement_xy`` (n, 2) m, ``placement_heading`` (n,) rad, ``leg`` (n,)
     leg length (m).
     """
-    for i in prange(rows.shape[0]):
+    for i in range(lo, hi):
         sample_placed_row(rows[i], bank, start, n_frames, fps, loop_yaw, loop_shift, clip,
                           time_s, loop, placement_xy, placement_heading, leg, out, out_rows[i])
 
 
-@njit(cache=True, parallel=True)
-def sample_table_rows(rows: I64, table: F64, start: I64, n_frames: I64, fps: F64, clip: I64,
-                      time_s: F64, loop: B1, out: F64) -> None:
-    """Mirrors :func:`ecs_anim.playback.sample_table` over the store rows ``rows``, in
-    parallel: ``table`` (total_frames, k) interpolated at each row's clip time into ``out[c]``
-    ((n, k)). Bank and row arguments as for :func:`sample_placed_rows`."""
-    for i in prange(rows.shape[0]):
+@njit(cache=True, nogil=True)
+def sample_table_rows(lo: int, hi: int, rows: I64, table: F64, start: I64, n_frames: I64, fps: F64,
+                      clip: I64, time_s: F64, loop: B1, out: F64) -> None:
+    """Mirrors :func:`ecs_anim.playback.sample_table` over the store rows
+    ``rows[lo:hi]``: ``table`` (total_frames, k) interpolated at each row's clip time into
+    ``out[c]`` ((n, k)). Bank and row arguments as for :func:`sample_placed_rows`."""
+    for i in range(lo, hi):
         c = rows[i]
         k = clip[c]
         i0, i1, w, _, _ = frame_position(n_frames[k], fps[k], time_s[c], loop[c])
@@ -250,14 +250,13 @@ def sample_table_rows(rows: I64, table: F64, start: I64, n_frames: I64, fps: F64
             out[c, j] = a[j] + w * (b[j] - a[j])
 
 
-@njit(cache=True, parallel=True)
-def blend_rows(rows: I64, old: PoseArrays, w: F64, out: PoseArrays) -> None:
+@njit(cache=True, nogil=True)
+def blend_rows(lo: int, hi: int, rows: I64, old: PoseArrays, w: F64, out: PoseArrays) -> None:
     """Mirrors :func:`ecs_anim.playback.blend` (``blend(old, out, w)``) in place over the store
-    rows ``rows``, in parallel: row ``c = rows[i]`` of ``out`` becomes row ``i`` of ``old``
+    rows ``rows[lo:hi]``: row ``c = rows[i]`` of ``out`` becomes row ``i`` of ``old``
     blended into it with the weight ``w[i]`` (in [0, 1]) of ``out``'s own pose."""
-    for i in prange(rows.shape[0]):
-        # np.int64: the loop's index is unsigned in numba's thread function (a second compile)
-        blend_row(old, np.int64(i), w[i], out, rows[i])  # type: ignore[arg-type]
+    for i in range(lo, hi):
+        blend_row(old, i, w[i], out, rows[i])
 
 
 @njit(cache=True)

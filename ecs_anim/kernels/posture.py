@@ -18,13 +18,14 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 from numpy.typing import NDArray
 
 from ..exporting import BODY_TO_BVH_REST, EXPORT_NAMES, EXPORT_PARENTS
 from ..importing import YUP_TO_ZUP
 from ..normalized import DecodedPose, NormalizedPoses
 from ..skeleton import N_LENGTHS, REST_HIP_DIR_LEFT
+from . import over_chunks
 from .decode import (
     _ANKLE,
     _ELBOW,
@@ -117,8 +118,8 @@ def swing_from(parent_frame: Frame, rest_axis: Vec3, direction: Vec3) -> Frame:
     return matmul(rotation_between(to_world(parent_frame, rest_axis), direction), parent_frame)
 
 
-# Not inlined: numba types an inlined body twice in a parallel loop (posture_rows,
-# local_rotations_rows), compiling for tens of seconds more.
+# Not inlined: numba types an inlined body again at every site (posture_rows,
+# local_rotations_rows, posture_solved_rows), compiling for longer.
 @njit(cache=True)
 def export_rotations_row(c: int, decoded: DecodedArrays, rest_hips: F64, out: F64) -> None:
     """Mirrors :func:`ecs_anim.exporting.export_rotations` for row ``c`` of ``decoded``: the
@@ -233,12 +234,12 @@ def all_finite(a: F64) -> bool:
     return True
 
 
-@njit(cache=True, parallel=True)
-def posture_rows(rows: I64, pose: PoseArrays, lengths: F64, decoded: DecodedArrays,
-                 frozen: B8, newly_bad: B8, positions: F64, rotations: bool, world: F64,
-                 local: F64, rest_hips: F64, bvh_from_world: F64, rest2body: F64, parents: I64,
-                 vertebrae: F64, have_previous: bool) -> None:
-    """PostureConvert over the store rows ``rows`` (int64), in parallel, in place.
+@njit(cache=True, nogil=True)
+def posture_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64,
+                 decoded: DecodedArrays, frozen: B8, newly_bad: B8, positions: F64, rotations: bool,
+                 world: F64, local: F64, rest_hips: F64, bvh_from_world: F64, rest2body: F64,
+                 parents: I64, vertebrae: F64, have_previous: bool) -> None:
+    """PostureConvert over the store rows ``rows[lo:hi]`` (int64), in place.
 
     Each row ``c``: decode on ``lengths[c]`` into ``decoded`` (all of it: the posture frames,
     and positions used as scratch); with ``rotations``, the export joints' joint2bvh into the
@@ -251,7 +252,7 @@ def posture_rows(rows: I64, pose: PoseArrays, lengths: F64, decoded: DecodedArra
     :func:`ecs_anim.exporting.local_rotations` and :func:`ecs_anim.normalized.vertebrae`.
     """
     count = vertebrae.shape[1]
-    for i in prange(rows.shape[0]):
+    for i in range(lo, hi):
         c = rows[i]
         decode_row(c, pose, lengths[c], decoded)
         good = all_finite(decoded.positions[c])
@@ -270,13 +271,13 @@ def posture_rows(rows: I64, pose: PoseArrays, lengths: F64, decoded: DecodedArra
             vertebrae_row(c, pose, lengths[c], vertebrae[c])
 
 
-@njit(cache=True, parallel=True)
-def local_rotations_rows(rows: I64, decoded: DecodedArrays, rest_hips: F64,
+@njit(cache=True, nogil=True)
+def local_rotations_rows(lo: int, hi: int, rows: I64, decoded: DecodedArrays, rest_hips: F64,
                          bvh_from_world: F64, rest2body: F64, parents: I64, world: F64,
                          out: F64) -> None:
-    """Mirrors :func:`ecs_anim.exporting.local_rotations` over the rows ``rows`` of ``decoded``:
-    into ``out`` (n, N_EXPORT, 3, 3), with ``world`` (n, N_EXPORT, 3, 3) as scratch."""
-    for i in prange(rows.shape[0]):
+    """Mirrors :func:`ecs_anim.exporting.local_rotations` over the rows ``rows[lo:hi]`` of
+    ``decoded``: into ``out`` (n, N_EXPORT, 3, 3), with ``world`` (n, N_EXPORT, 3, 3) as scratch."""
+    for i in range(lo, hi):
         c = rows[i]
         export_rotations_row(c, decoded, rest_hips, world[c])
         bvh_globals_row(world[c], bvh_from_world, rest2body)
@@ -290,16 +291,16 @@ def local_rotations(pose: DecodedPose) -> F64:
     n = arrays.positions.shape[0]
     k = export_constants()
     out = np.empty((n, N_EXPORT, 3, 3))
-    local_rotations_rows(np.arange(n, dtype=np.int64), arrays, k.rest_hips, k.bvh_from_world,
-                         k.rest2body, k.parents, np.empty((n, N_EXPORT, 3, 3)), out)
+    over_chunks(local_rotations_rows, n, np.arange(n, dtype=np.int64), arrays, k.rest_hips,
+                k.bvh_from_world, k.rest2body, k.parents, np.empty((n, N_EXPORT, 3, 3)), out)
     return out
 
 
-@njit(cache=True, parallel=True)
-def vertebrae_rows(rows: I64, pose: PoseArrays, lengths: F64, out: F64) -> None:
-    """Mirrors :func:`ecs_anim.normalized.vertebrae` over the rows ``rows``: into ``out``
+@njit(cache=True, nogil=True)
+def vertebrae_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64, out: F64) -> None:
+    """Mirrors :func:`ecs_anim.normalized.vertebrae` over the rows ``rows[lo:hi]``: into ``out``
     (n, count, 3) world, m, from ``lengths`` (n, N_LENGTHS)."""
-    for i in prange(rows.shape[0]):
+    for i in range(lo, hi):
         c = rows[i]
         vertebrae_row(c, pose, lengths[c], out[c])
 
@@ -312,5 +313,5 @@ def vertebrae(poses: NormalizedPoses, lengths: F64, count: int) -> F64:
     n = pose.root_heading.shape[0]
     lengths = np.ascontiguousarray(np.broadcast_to(lengths, (n, N_LENGTHS)), dtype=np.float64)
     out = np.empty((n, count, 3))
-    vertebrae_rows(np.arange(n, dtype=np.int64), pose, lengths, out)
+    over_chunks(vertebrae_rows, n, np.arange(n, dtype=np.int64), pose, lengths, out)
     return out

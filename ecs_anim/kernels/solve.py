@@ -1,14 +1,15 @@
 """The compiled constraint solver's shell (paper §9): the iteration loop of every character.
 
-Mirrors :func:`ecs_anim.solver_shell.solve` (the numpy reference, which stays in the package
-and which the tests compare this with to 1e-9 m). :func:`solve_rows` runs over the solved
-characters in parallel (``prange``); per character, :func:`solve_character` owns the loop:
-follow the goals on its own body, the limbs (:mod:`.solve_limbs`), the head
-(:mod:`.solve_head`), the trunk (:mod:`.solve_trunk`, skipped when no goal's chain includes it;
-it decodes the row again when it turns), the root (:mod:`.solve_root`), then the stopping rule
-(every goal met or stalled and the centre of mass back; its budget of iterations), and the
-final re-plant of the limbs and the head. Each character stops on its own goals: its result does
-not depend on who else is solved, nor on the thread count.
+Mirrors :func:`ecs_anim.solver_shell.solve` (the numpy reference, which stays in the package and
+which the tests compare this with to 1e-9 m). :func:`solve_rows` runs over the solved characters
+(a range of them per thread: :func:`ecs_anim.kernels.over_chunks`); per character,
+:func:`solve_character` owns the loop: follow the goals on its own body, the limbs
+(:mod:`.solve_limbs`), the head (:mod:`.solve_head`), the trunk (:mod:`.solve_trunk`, skipped
+when no goal's chain includes it; it decodes the row again when it turns), the root
+(:mod:`.solve_root`), then the stopping rule (every goal met or stalled and the centre of mass
+back; its budget of iterations), and the final re-plant of the limbs and the head. Each
+character stops on its own goals: its result does not depend on who else is solved, nor on the
+thread count.
 
 The goals come from the numpy :func:`ecs_anim.solver_shell.tick_goals`, already sorted by
 character (then nothing is copied); :func:`character_winners` picks the goal each limb and the
@@ -22,7 +23,7 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 from numpy.typing import NDArray
 
 from ..body_points import HEAD
@@ -36,7 +37,7 @@ from ..solver_shell import (
     TickGoals,
     iteration_caps,
 )
-from . import wait_for_solver
+from . import over_chunks, wait_for_solver
 from .decode import DecodedArrays, PoseArrays
 from .solve_head import solve_head
 from .solve_limbs import solve_limbs
@@ -155,23 +156,20 @@ def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: W
     return used
 
 
-@njit(cache=True, parallel=True)
-def solve_rows(pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners, b: Bodies,
-               t: Tables, used: I64, tolerance_m: float, tolerance_rad: float,
+@njit(cache=True, nogil=True)
+def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners,
+               b: Bodies, t: Tables, used: I64, tolerance_m: float, tolerance_rad: float,
                com_tolerance_m: float, max_ccd_step_rad: float, root_gain: float,
                stall_fraction: float, leg_extension: float) -> None:
-    """Solve every character (rows 0..r-1 of ``pose``, ``dec``, ``b``; goals ``g``) in
-    parallel, in place; ``used`` (r,) the iterations each one took."""
+    """Solve the characters ``lo..hi-1`` (rows of ``pose``, ``dec``, ``b``, ``used``; goals
+    ``g``) in place; ``used`` (r,) the iterations each one took."""
     k = g.priority.shape[0]
     err = np.zeros(k)
     stalled = np.zeros(k, np.bool_)
     previous = np.zeros(k)
     slow_before = np.zeros(k, np.bool_)
-    for c in prange(used.shape[0]):
-        # np.int64: the parallel loop's index is unsigned where numba builds the loop's thread
-        # function, and solve_character would be compiled a second time for uint64 (minutes).
-        row = np.int64(c)
-        used[c] = solve_character(row, pose, dec, g, w, b, t, err,  # type: ignore[arg-type]
+    for c in range(lo, hi):
+        used[c] = solve_character(c, pose, dec, g, w, b, t, err,
                                   stalled, previous, slow_before, tolerance_m, tolerance_rad,
                                   com_tolerance_m, max_ccd_step_rad, root_gain, stall_fraction,
                                   leg_extension)
@@ -215,10 +213,11 @@ def character_winners(c: int, g: Goals, w: Winners, limb_of_group: I64, head_gro
             second_limb[c, slot] = j
 
 
-@njit(cache=True, parallel=True)
-def winners_rows(g: Goals, w: Winners, limb_of_group: I64, head_group: int) -> None:
-    """:func:`character_winners` of every character (rows 0..r-1), in parallel, in place."""
-    for c in prange(g.start.shape[0] - 1):
+@njit(cache=True, nogil=True)
+def winners_rows(lo: int, hi: int, g: Goals, w: Winners, limb_of_group: I64,
+                 head_group: int) -> None:
+    """:func:`character_winners` of every character ``lo..hi-1``, in place."""
+    for c in range(lo, hi):
         character_winners(c, g, w, limb_of_group, head_group)
 
 
@@ -262,7 +261,7 @@ def sorted_goals(goals: TickGoals, settings: SolverSettings = DEFAULT_SETTINGS) 
     w = Winners(first_limb=np.empty((r, 4), np.int64), second_limb=np.empty((r, 4), np.int64),
                 orient_limb=np.empty((r, 4), np.int64), first_head=np.empty(r, np.int64),
                 orient_head=np.empty(r, np.int64))
-    winners_rows(g, w, TABLES.limb_of_group, HEAD)
+    over_chunks(winners_rows, r, g, w, TABLES.limb_of_group, HEAD)
     return g, w, order
 
 
@@ -325,10 +324,10 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
     used = np.zeros(goals.rows.size, np.int64)
     s = settings
     wait_for_solver()  # a first run may be compiling solve_rows in another process
-    solve_rows(state.pose, state.dec, state.goals, state.winners, state.bodies, TABLES, used,
-               float(s.tolerance_m), float(s.tolerance_rad),
-               float(s.com_tolerance_m), float(s.max_ccd_step_rad), float(s.root_gain),
-               float(s.stall_fraction), float(MAX_LEG_EXTENSION))
+    over_chunks(solve_rows, used.shape[0], state.pose, state.dec, state.goals, state.winners,
+                state.bodies, TABLES, used, float(s.tolerance_m), float(s.tolerance_rad),
+                float(s.com_tolerance_m), float(s.max_ccd_step_rad), float(s.root_gain),
+                float(s.stall_fraction), float(MAX_LEG_EXTENSION))
     if state.goals.goal is not goals.goal:
         goals.goal[state.order] = state.goals.goal
     return (NormalizedPoses(**dict(zip(PoseArrays._fields, state.pose, strict=True))), used,

@@ -10,7 +10,7 @@ solver's rows; PostureConvert calls it for the solved rows and ``posture_rows`` 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 from numpy.typing import NDArray
 
 from .decode import DecodedArrays, PoseArrays
@@ -27,21 +27,20 @@ I64 = NDArray[np.int64]
 B8 = NDArray[np.bool_]
 
 
-@njit(cache=True, parallel=True)
-def posture_solved_rows(rows: I64, solved: DecodedArrays, pose: PoseArrays, lengths: F64,
-                        decoded: DecodedArrays, frozen: B8, newly_bad: B8, positions: F64,
-                        rotations: bool, world: F64, local: F64, rest_hips: F64,
+@njit(cache=True, nogil=True)
+def posture_solved_rows(lo: int, hi: int, rows: I64, solved: DecodedArrays, pose: PoseArrays,
+                        lengths: F64, decoded: DecodedArrays, frozen: B8, newly_bad: B8,
+                        positions: F64, rotations: bool, world: F64, local: F64, rest_hips: F64,
                         bvh_from_world: F64, rest2body: F64, parents: I64, vertebrae: F64,
                         have_previous: bool) -> None:
     """:func:`ecs_anim.kernels.posture.posture_rows` over the store rows ``rows`` (r,) that the
-    solver moved, in parallel, in place: row ``rows[i]`` of ``decoded`` is row ``i`` of
+    solver moved (``rows[lo:hi]``), in place: row ``rows[i]`` of ``decoded`` is row ``i`` of
     ``solved`` (the solver's decoded result, (r, ...)) instead of a decode of ``pose``; the
     other arguments and results as there."""
     count = vertebrae.shape[1]
-    # Bound to locals: numba 0.68 drops writes into a NamedTuple's arrays inside a prange body.
     joints, pelvis2world, thorax2world = decoded.positions, decoded.pelvis2world, decoded.thorax2world
     head2world, leg2world, arm2world = decoded.head2world, decoded.leg2world, decoded.arm2world
-    for i in prange(rows.shape[0]):
+    for i in range(lo, hi):
         c = rows[i]
         joints[c] = solved.positions[i]
         pelvis2world[c] = solved.pelvis2world[i]
