@@ -2,7 +2,9 @@
 
 Each foot is in contact while its ankle (heel strike, flat foot) or its toe joint (push-off) is
 near its ground level and nearly still. Hysteresis keeps the state from chattering, short
-contacts are dropped and short gaps filled. Everything is vectorized over frames.
+contacts are dropped and short gaps filled. The contact's edges are then moved to the foot's
+touch-down (the heel lands) and lift-off (the ball leaves the ground), where gait events are.
+Everything is vectorized over frames but those edges (a loop over contacts).
 """
 
 from __future__ import annotations
@@ -36,6 +38,11 @@ class ContactThresholds:
         ``release`` times the thresholds.
     min_duration_s : shorter contacts are dropped; min_gap_s : shorter gaps are filled.
     ease_s : activation ramp added before and after each contact.
+    edge_height_m, edge_sink_mps, edge_rise_mps, edge_max_s : where a contact's touch-down and
+        lift-off lie (:func:`touch_down_to_lift_off`; for a 0.8 m leg, scaled by the body's):
+        the foot is down while its heel point or toe joint is within ``edge_height_m`` of its
+        ground, sinking slower than ``edge_sink_mps`` and rising slower than
+        ``edge_rise_mps``; each edge of a stillness contact moves at most ``edge_max_s``.
     """
 
     height_m: float = 0.05
@@ -47,12 +54,15 @@ class ContactThresholds:
     filter_s: float = 0.05
     ground_window_s: float = 1.5
     ground_radius: float = 0.15
-    edge_height_m: float = 0.01
+    edge_height_m: float = 0.015
+    edge_sink_mps: float = 0.08
+    edge_rise_mps: float = 0.4
     edge_max_s: float = 0.1
 
     def __post_init__(self) -> None:
         for name in ("height_m", "speed_mps", "min_duration_s", "min_gap_s", "ease_s",
-                     "filter_s", "ground_window_s", "ground_radius", "edge_height_m", "edge_max_s"):
+                     "filter_s", "ground_window_s", "ground_radius", "edge_height_m",
+                     "edge_sink_mps", "edge_rise_mps", "edge_max_s"):
             value = getattr(self, name)
             if value is None and name == "speed_mps":
                 continue
@@ -173,9 +183,10 @@ class FootContacts:
     """Which part of each foot is planted, per frame: bool (n_frames, 2) each, left/right.
 
     heel : the ankle joint still and low; ball : the toe joint still and low; foot : either
-    (the whole-foot contact the tick plants); on_ground : from touch-down (the heel reaches the
-    ground while the ankle still rolls in) to lift-off (the ball leaves it): the foot's
-    contacts widened to where its gait events are. speed_threshold_mps : (2,) the heel's and the ball's threshold
+    (the whole-foot contact the tick plants); on_ground : from touch-down (the heel lands) to
+    lift-off (the ball leaves the ground), :func:`touch_down_to_lift_off`: the foot's
+    stillness contacts with their edges moved to where gait events are. heel, ball and foot
+    hold only within on_ground. speed_threshold_mps : (2,) the heel's and the ball's threshold
     used. Arrays ``height`` (n_frames, 4): heel l, heel r, ball l, ball r above their local
     ground (m); ``speed`` (n_frames, 4) their speeds (m/s).
     """
@@ -236,34 +247,104 @@ def detect_foot_contacts(positions: F64, fps: float,
     part &= ~leave  # a filled gap plants no part that moves (the whole foot may bridge it)
     heel, ball = part[:, :2], part[:, 2:]
     planted = _clean(heel | ball, fps, th)
-    # Touch-down and lift-off: the foot is on the ground from the moment its lower point
-    # reaches the ground (the heel strikes while the ankle still rolls forward) until it
-    # leaves it (the ball rises at toe-off), which stillness alone finds late and early.
-    edge = th.edge_height_m * leg / REFERENCE_LEG_M
-    on_ground = _extend(planted, above[:, :2] < edge, above[:, 2:] < edge,
-                        round(th.edge_max_s * fps))
-    return FootContacts(heel & planted, ball & planted, planted, on_ground,
-                        (float(limit[0]), float(limit[1])), above, v)
+    on_ground = touch_down_to_lift_off(points, planted, fps, leg, th)
+    return FootContacts(heel & planted & on_ground, ball & planted & on_ground,
+                        planted & on_ground, on_ground, (float(limit[0]), float(limit[1])),
+                        above, v)
 
 
-def _extend(flags: NDArray[np.bool_], before: NDArray[np.bool_], after: NDArray[np.bool_],
-            most: int) -> NDArray[np.bool_]:
-    """Each run of ``flags`` extended back over the frames before it where ``before`` holds
-    without a break, and on over those after it where ``after`` does, by at most ``most``
-    frames each way (columns apart)."""
-    out = flags.copy()
-    n = len(flags)
-    for side in range(flags.shape[1]):
-        col, back, on = flags[:, side], before[:, side], after[:, side]
+#: The heel point a touch-down is found on: this fraction of the ankle-to-toe vector behind the
+#: ankle joint, on the line through both (about over the heel's contact point for adult and
+#: child proportions). The foot rolls onto the heel and then about it, so that point stops
+#: sinking when the heel lands, while the ankle still sinks until the foot is flat.
+HEEL_BEHIND_ANKLE = 0.25
+
+
+def touch_down_to_lift_off(points: F64, planted: NDArray[np.bool_], fps: float, leg: float,
+                           thresholds: ContactThresholds) -> NDArray[np.bool_]:
+    """Each foot on the ground from touch-down to lift-off: its stillness contacts with their
+    edges moved to where the foot lands and leaves the ground. -> bool (n_frames, 2).
+
+    ``points`` (n_frames, 4, 3): ankle l, r, toe l, r; ``planted`` (n_frames, 2): the stillness
+    contacts. A point of the foot (the heel point, :data:`HEEL_BEHIND_ANKLE`, or the toe
+    joint) is *down* while it is within ``edge_height_m`` of the contact's ground (the lowest it
+    comes during the contact) and neither sinks faster than ``edge_sink_mps`` nor rises faster
+    than ``edge_rise_mps``; the foot is down while either point is. Touch-down: the heel point
+    stops sinking as the heel lands (a vertical-velocity rule like the foot velocity algorithm
+    of O'Connor et al. 2007, Gait Posture 25:469, which reads strikes off the foot centre's
+    vertical velocity; here the heel's), or the ball lands first. Lift-off: the toe joint rises
+    over ``edge_height_m`` or faster than ``edge_rise_mps`` (a threshold on the toe, as
+    Ghoussayni et al. 2004, Gait Posture 20:266, threshold its speed). Each edge moves by at
+    most ``edge_max_s``: out over down frames next to it, in over frames where heel and toe
+    both still sink (start) or both already rise (end). Stillness alone starts late at a
+    brisk walk, while the heel rolls in, and early at a slow one, while the ankle settles. A
+    moved edge never leaves both feet up where one was low (a stance foot sinking or rising
+    over uneven ground is not in the air)."""
+    th = thresholds
+    scale = leg / REFERENCE_LEG_M
+    ankle, toe = points[:, :2], points[:, 2:]
+    n = len(points)
+    z = np.stack([(ankle - HEEL_BEHIND_ANKLE * (toe - ankle))[..., 2], toe[..., 2]])  # (2, F, 2)
+    vz = np.gradient(z, axis=1) * fps if n > 1 else np.zeros_like(z)
+    edge = th.edge_height_m * scale
+    sink, rise = th.edge_sink_mps * scale, th.edge_rise_mps * scale
+    settled = (vz > -sink) & (vz < rise)
+    # Heel point and toe both to sink over the next frame (the foot has not landed) / both
+    # risen over the previous one (it has left): one-sided, so that the frame where the foot
+    # arrives, and the last before it leaves, stay on the ground.
+    step = np.diff(z, axis=1) * fps
+    falling: NDArray[np.bool_] = np.zeros(planted.shape, dtype=bool)
+    leaving: NDArray[np.bool_] = np.zeros(planted.shape, dtype=bool)
+    falling[:-1] = np.all(step <= -sink, axis=0)
+    leaving[1:] = np.all(step >= rise, axis=0)
+    most = round(th.edge_max_s * fps)
+    out = np.zeros_like(planted)
+    widest = planted.copy()  # the contacts over every low frame next to them
+    nowhere = np.zeros(n, dtype=bool)
+    for side in range(planted.shape[1]):
+        col = planted[:, side]
         for a, b in _intervals(col):
-            k = a
-            while k > 0 and a - k < most and back[k - 1] and not col[k - 1]:
-                k -= 1
-            m = b
-            while m < n - 1 and m - b < most and on[m + 1] and not col[m + 1]:
-                m += 1
-            out[k:m + 1, side] = True
+            ground = z[:, a:b + 1, side].min(axis=1, keepdims=True)  # heel point, toe
+            low = z[:, :, side] < ground + edge
+            down = (low & settled[:, :, side]).any(axis=0)
+            start = _edge_back(col, a, b, down, falling[:, side], most)
+            end = _edge_on(col, a, b, down, leaving[:, side], most)
+            out[start:end + 1, side] = True
+            ankle_low = ankle[:, side, 2] < ankle[a:b + 1, side, 2].min() + edge
+            widest[_edge_back(col, a, b, ankle_low | col, nowhere, most):
+                   _edge_on(col, a, b, low[1] | col, nowhere, most) + 1, side] = True
+    airborne = ~out.any(axis=1)
+    out[airborne] |= widest[airborne]
     return out
+
+
+def _edge_back(col: NDArray[np.bool_], a: int, b: int, down: NDArray[np.bool_],
+               moving: NDArray[np.bool_], most: int) -> int:
+    """Where the run ``a..b`` of ``col`` starts: back from ``a`` over the frames where
+    ``down`` holds without a break (not into another run), or, when ``down`` fails at ``a``,
+    on over the frames where ``moving`` holds; at most ``most`` frames, never past ``b``."""
+    k = a
+    if down[a]:
+        while k > 0 and a - k < most and down[k - 1] and not col[k - 1]:
+            k -= 1
+    else:
+        while k < b and k - a < most and moving[k]:
+            k += 1
+    return k
+
+
+def _edge_on(col: NDArray[np.bool_], a: int, b: int, down: NDArray[np.bool_],
+             moving: NDArray[np.bool_], most: int) -> int:
+    """Where the run ``a..b`` of ``col`` ends: :func:`_edge_back` mirrored in time."""
+    n = len(col)
+    m = b
+    if down[b]:
+        while m < n - 1 and m - b < most and down[m + 1] and not col[m + 1]:
+            m += 1
+    else:
+        while m > a and b - m < most and moving[m]:
+            m -= 1
+    return m
 
 
 def detect_contacts(positions: F64, fps: float,

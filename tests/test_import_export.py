@@ -212,7 +212,9 @@ def test_start_walk_stop_contacts_while_walking():
     assert walking.mean() > 0.2  # a slow, stylised walk of about 1.7 m
     fraction = contact[walking].mean(axis=0)
     assert np.all((fraction >= 0.40) & (fraction <= 0.80)), fraction
-    assert contact[~walking].mean() > 0.8  # standing still at start and end: feet down
+    # Standing still at start and end, and slow steps: feet down. (Measured 0.799; the 0.806
+    # planted before contacts ended at lift-off included swing frames, the ankle 10-21 cm up.)
+    assert contact[~walking].mean() > 0.78
 
 
 def test_bow_keeps_both_feet_down():
