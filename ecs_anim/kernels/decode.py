@@ -113,8 +113,7 @@ class DecodedArrays(NamedTuple):
 
 class LegPoseArrays(NamedTuple):
     """The arrays of :class:`PoseArrays` that :func:`decode_legs_row` reads (same names), for
-    kernels that need only the legs: a tuple passed to a function costs a reference count per
-    array it holds."""
+    kernels that need only the legs."""
 
     root_position: F64
     root_heading: F64

@@ -47,8 +47,7 @@ def grid_height(x: float, y: float, p: F64, grid: F64) -> float:
 @jit()
 def part_height(kind: int, x: float, y: float, p: GroundParams) -> float:
     """Mirrors the ``height`` of :class:`~ecs_anim.ground.Plane`, ``Slope``, ``Stairs`` or
-    ``Bumps`` (by ``kind``) at one point (m); ``p`` the part's parameters (a tuple: an array
-    passed to a function costs a reference count)."""
+    ``Bumps`` (by ``kind``) at one point (m); ``p`` the part's parameters."""
     if kind == _PLANE:
         return float(p[0])
     if kind == _SLOPE:
@@ -60,8 +59,7 @@ def part_height(kind: int, x: float, y: float, p: GroundParams) -> float:
     return float(p[0] + p[1] * math.sin(2 * np.pi * x / p[2]) * math.sin(2 * np.pi * y / p[3]))
 
 
-# Inlined: passing the three arrays to a call costs a reference count each way (six atomic
-# operations a query), and ground adaptation asks about ten queries a character.
+# Inlined: small, and ground adaptation asks it about ten times a character.
 @jit(inline="always")
 def height_at(x: float, y: float, kinds: I64, params: F64, grid: F64) -> float:
     """Mirrors ``ground.height`` of a built-in ground (:class:`~ecs_anim.ground.Combined`: the

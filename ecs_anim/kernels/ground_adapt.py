@@ -30,13 +30,13 @@ from .vec import (
     Vec3,
     in_frame,
     jit,
-    load3_at,
+    load3,
     matmul,
     norm,
     quat_from_matrix,
     rotation_between,
-    store3_at,
-    store4_at,
+    store3,
+    store4,
     sub,
     transpose,
 )
@@ -77,8 +77,7 @@ def adapt_to_ground(c: int, root_position: F64, leg_frame: F64, leg_fraction: F6
     re-aimed from the pose decoded before adaptation: its ``hips``, pelvis height
     ``pelvis_now_z`` (m), ``pelvis2world`` and ``leg2world``; the pelvis lowered as the legs in
     contact need), writing the root height, leg frames and fractions of row ``c`` of the poses
-    (``root_position``, ``leg_frame``, ``leg_fraction``, element by element: a view of an array
-    costs a reference count, which threads contend for).
+    (``root_position``, ``leg_frame``, ``leg_fraction``).
 
     ``targets``: each ankle's target (m, world); ``weights``: contact activations;
     ``root_height`` (m): the pelvis height the motion wants; ``leg``: the leg length (m).
@@ -102,7 +101,7 @@ def adapt_to_ground(c: int, root_position: F64, leg_frame: F64, leg_fraction: F6
         to_target = sub(targets[s], (hip[0] + 0.0, hip[1] + 0.0, hip[2] + shift))
         turn = rotation_between(leg2world[s][2], to_target)
         new_leg2pelvis = matmul(transpose(pelvis2world), matmul(turn, leg2world[s]))
-        store4_at(leg_frame, c, s, quat_from_matrix(new_leg2pelvis))
+        store4(leg_frame[c, s], quat_from_matrix(new_leg2pelvis))
         leg_fraction[c, s] = min(norm(to_target), reach) / (thigh + shank)
     root_position[c, 2] = pelvis_z / leg
 
@@ -180,7 +179,7 @@ def toes_onto_ground(c: int, foot_dir: F64, ankles: tuple[Vec3, Vec3],
         new_d = ((moved[0] - ankle[0]) / foot, (moved[1] - ankle[1]) / foot,
                  (moved[2] - ankle[2]) / foot)
         if max(abs(new_d[0] - d[0]), abs(new_d[1] - d[1]), abs(new_d[2] - d[2])) > 0.0:
-            store3_at(foot_dir, c, s, in_frame(shank2world[s], new_d))
+            store3(foot_dir[c, s], in_frame(shank2world[s], new_d))
 
 
 @jit()
@@ -209,9 +208,7 @@ def ground_adapt_row(c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
                      max_extension: float, heel_tolerance: float, heel_passes: int,
                      toe_passes: int) -> None:
     """Mirrors ``GroundAdapt.run`` for store row ``c``; arguments as for
-    :func:`ground_adapt_rows` (``kinds``, ``params``, ``grid`` of ``ground``: the arrays one
-    by one, read element by element; a tuple of arrays passed on, or a view taken, costs a
-    reference count per array, which threads contend for)."""
+    :func:`ground_adapt_rows` (``kinds``, ``params``, ``grid``: the arrays of ``ground``)."""
     # The pose on the character's body as the motion gives it (MorphologyAdapt's scaling,
     # decoded here: ground adaptation reads only the pelvis and legs).
     lengths_row = lengths[c]
@@ -233,7 +230,7 @@ def ground_adapt_row(c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
             footprint[c, s, 2] = (_height(kinds, params, grid, ankle) + ankle_height[s]
                                   + above_standing)
         elif w[s] > 0.0 and not footprint_settled[c, s]:
-            settled_z = (_height(kinds, params, grid, load3_at(footprint, c, s))
+            settled_z = (_height(kinds, params, grid, load3(footprint[c, s]))
                          + ankle_height[s] + above_standing)
             footprint[c, s, 2] = min(footprint[c, s, 2], settled_z)
         locked[c, s] = w[s] > 0.0
@@ -248,9 +245,9 @@ def ground_adapt_row(c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
     g = ground_ref[c]
     # Free feet ride on that floor, lifted where heel or toe would go under the ground; a
     # contact ramping in blends towards its footprint, its heel kept above the ground.
-    targets = (_foot_target(ankles[0], toes[0], load3_at(footprint, c, 0), w[0], g,
+    targets = (_foot_target(ankles[0], toes[0], load3(footprint[c, 0]), w[0], g,
                             ankle_height[0], ball, kinds, params, grid),
-               _foot_target(ankles[1], toes[1], load3_at(footprint, c, 1), w[1], g,
+               _foot_target(ankles[1], toes[1], load3(footprint[c, 1]), w[1], g,
                             ankle_height[1], ball, kinds, params, grid))
     root_height = pelvis[2] + g
     new_ankles, new_toes, shank2world = adapt_keeping_heels_up(

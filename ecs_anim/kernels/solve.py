@@ -96,9 +96,8 @@ def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: W
         if (g.chain[j] & (1 << _TRUNK)) > 0:
             uses_trunk = True
         on_self = on_self or g.on_self[j]
-    # Steps with nothing to do are not called (passing the state tuples on costs a reference
-    # count per array they hold), and the errors of points without offset are measured on the
-    # arrays themselves (the same operations as goal_error).
+    # Steps with nothing to do are not called, and the errors of points without offset are
+    # measured on the arrays themselves (the same operations as goal_error).
     uses_head = w.first_head[c] >= 0 or w.orient_head[c] >= 0
     positions, seg_proximal, seg_distal = dec.positions, t.seg_proximal, t.seg_distal
     orientation, segment, fraction, offset = g.orientation, g.segment, g.fraction, g.offset

@@ -202,8 +202,7 @@ def point_position(dec: DecodedArrays, c: int, segment: int, fraction: float, of
 @jit(inline="always")
 def plain_point(positions: F64, c: int, proximal: int, distal: int, fraction: float) -> Vec3:
     """:func:`point_position` of a point without offset: ``fraction`` of the way from joint
-    ``proximal`` to ``distal`` of character ``c`` (``positions`` (r, N_JOINTS, 3) m); taking
-    the arrays, not the state tuples (each array a tuple holds costs a reference count)."""
+    ``proximal`` to ``distal`` of character ``c`` (``positions`` (r, N_JOINTS, 3) m)."""
     a = load3(positions[c, proximal])
     b = load3(positions[c, distal])
     return add_scaled(a, sub(b, a), fraction)

@@ -34,7 +34,7 @@ def root_step(c: int, root_position: F64, positions: F64, lengths: F64, masses: 
               com_tolerance_m: float, root_gain: float, leg_extension: float) -> float:
     """:func:`solve_root` on the arrays it reads and writes (the fields of the same names of
     the pose, the decoded rows, the bodies and the tables), which the shell passes rather than
-    the state tuples (each array a tuple holds costs a reference count)."""
+    the state tuples."""
     if not com_on[c]:
         return 0.0
     # Mirrors solve_points.centre_of_mass (the same operations).

@@ -13,13 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .decode import DecodedArrays, PoseArrays
-from .posture import (
-    all_finite,
-    bvh_globals_row,
-    export_rotations_row,
-    local_from_globals_row,
-    vertebrae_row,
-)
+from .posture import posture_of_decoded_row
 from .vec import copy_row, jit
 
 F64 = NDArray[np.float64]
@@ -37,7 +31,6 @@ def posture_solved_rows(lo: int, hi: int, rows: I64, solved: DecodedArrays, pose
     solver moved (``rows[lo:hi]``), in place: row ``rows[i]`` of ``decoded`` is row ``i`` of
     ``solved`` (the solver's decoded result, (r, ...)) instead of a decode of ``pose``; the
     other arguments and results as there."""
-    count = vertebrae.shape[1]
     joints, pelvis2world, thorax2world = decoded.positions, decoded.pelvis2world, decoded.thorax2world
     head2world, leg2world, arm2world = decoded.head2world, decoded.leg2world, decoded.arm2world
     for i in range(lo, hi):
@@ -48,17 +41,6 @@ def posture_solved_rows(lo: int, hi: int, rows: I64, solved: DecodedArrays, pose
         copy_row(head2world, c, solved.head2world, i)
         copy_row(leg2world, c, solved.leg2world, i)
         copy_row(arm2world, c, solved.arm2world, i)
-        good = all_finite(joints[c])
-        if rotations:
-            export_rotations_row(c, decoded, rest_hips, world[c])
-            bvh_globals_row(world[c], bvh_from_world, rest2body)
-            good = good and all_finite(world[c])
-        newly_bad[c] = not good and not frozen[c]
-        if not good:
-            frozen[c] = True
-        if not frozen[c]:
-            copy_row(positions, c, decoded.positions, c)
-            if rotations:
-                local_from_globals_row(world[c], parents, local[c])
-        if count > 0 and (not frozen[c] or not have_previous):
-            vertebrae_row(c, pose, lengths[c], vertebrae[c])
+        posture_of_decoded_row(c, pose, lengths, decoded, frozen, newly_bad, positions, rotations,
+                               world, local, rest_hips, bvh_from_world, rest2body, parents,
+                               vertebrae, have_previous)
