@@ -30,7 +30,8 @@ Landmark sets (Plug-in Gait, ISB/CAST):
   axis (after Rab et al. 2002);
 * elbows: midpoint of the humeral epicondyles, or the lateral marker moved medially by half an
   elbow width plus a marker radius along the flexion axis (the normal of the shoulder-elbow-wrist
-  plane, averaged in an upper-arm frame so a straight arm keeps it);
+  plane, averaged in an upper-arm frame over the most flexed frames, so a straight arm keeps
+  it: :func:`flexion_axis`);
 * wrists: midpoint of the radial and ulnar styloid markers (WRA/WRB); hand end: FIN or the
   midpoint of the 2nd and 5th metacarpal heads;
 * head: the four head-band markers give the head frame; skull base and vertex lie half a head
@@ -1093,7 +1094,7 @@ def _knee_and_ankle(mk: _Markers, build: _Build, s: str, leg_guess: float) -> No
     else:
         medial = normalize(towards_other_hip)
         iterations = FLEXION_AXIS_ITERATIONS
-    for _ in range(iterations):
+    for step in range(iterations):
         if epicondyles:
             knee, knee_how = _mid(knee_lat, mk(f"KNEE_MED_{s}")), "midpoint of the femoral epicondyles"
         else:
@@ -1104,7 +1105,7 @@ def _knee_and_ankle(mk: _Markers, build: _Build, s: str, leg_guess: float) -> No
         else:
             ankle, plane = wand_or_axis(knee, ankle_lat, f"SHANK_{s}", medial, d_ankle)
             ankle_how = f"chord rule from knee and ANK in the plane of {plane} (offset {d_ankle * 1000:.0f} mm)"
-        if not epicondyles:
+        if not epicondyles and step < iterations - 1:  # the axis for the next pass
             axis = flexion_axis(hip, knee, ankle, mk(f"THIGH_{s}") - knee, use)
             medial = axis * np.sign(np.median(np.sum(axis * towards_other_hip, axis=-1)[use]))
     _set(build, f"knee_{s}", knee, knee_how)

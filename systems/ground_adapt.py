@@ -133,7 +133,9 @@ class GroundAdapt(System):
         need_heel = heel_depth(ground, free, ankle_height)
         need_toe = ground.height(toes[..., :2]) + ball - (toes[..., 2] + st.ground_ref[:, None])
         free[..., 2] += np.maximum(0.0, np.maximum(need_heel, need_toe))
-        targets = free + w[..., None] * (st.footprint - free)
+        # A planted foot's target is its footprint (the kernel does not ask where it would be).
+        targets = np.where((w == 1.0)[..., None], st.footprint,
+                           free + w[..., None] * (st.footprint - free))
         # While a contact ramps in, the blend can cross a step edge: keep the heel above ground.
         targets[..., 2] += np.maximum(heel_depth(ground, targets, ankle_height), 0.0)
         root_height = motion_legs.pelvis[:, 2] + st.ground_ref

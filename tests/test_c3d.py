@@ -505,6 +505,7 @@ def test_score_hinge_through_a_landmark_ignores_soft_tissue_sliding_along_the_th
     cp, _, _ = score_centre(*args, hinge_plane_in_parent=plane, hinge_through_in_parent=trochanter)
     np.testing.assert_allclose(cp, [0.05, 0.07, -0.1], atol=1e-9)
 
+
 def test_y_up_file_is_detected_and_turned_z_up(tmp_path):
     require_mocap()
     labels, positions, rate = _tennis_markers()

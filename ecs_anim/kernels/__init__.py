@@ -22,6 +22,7 @@ import atexit
 import os
 import subprocess
 import sys
+import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -123,7 +124,7 @@ def uncompiled_kernels() -> list[str]:
     folder = _cache_subfolder()
     missing = []
     for source in kernel_sources():
-        if "nogil=True" not in source.read_text(encoding="utf-8"):
+        if "@jit(nogil=True)" not in source.read_text(encoding="utf-8"):
             continue  # helpers only: compiled into the kernels that call them (often inlined)
         indexes = list(folder.glob(f"{source.stem}.*.nbi")) if folder.is_dir() else []
         source_hash = hashlib.sha256(source.read_bytes()).digest()
@@ -237,16 +238,18 @@ def threads() -> int:
 #: Fewest rows worth handing to another thread: below, waking it costs more than it saves.
 MIN_ROWS_PER_THREAD = 4
 _pools: dict[int, ThreadPoolExecutor] = {}  # by process id: a forked child makes its own
+_pools_lock = threading.Lock()
 
 
 def _pool() -> ThreadPoolExecutor:
     """This process's threads for :func:`over_chunks` (made on first use: threads do not
     survive a fork, so the batch's forked workers each make their own)."""
     pid = os.getpid()
-    pool = _pools.get(pid)
-    if pool is None:
-        _pools.clear()
-        pool = _pools[pid] = ThreadPoolExecutor(thread_name_prefix="ecs_anim_kernel")
+    with _pools_lock:  # two threads ticking for the first time make one pool
+        pool = _pools.get(pid)
+        if pool is None:
+            _pools.clear()
+            pool = _pools[pid] = ThreadPoolExecutor(thread_name_prefix="ecs_anim_kernel")
     return pool
 
 

@@ -319,9 +319,7 @@ def spine_joint(control: tuple[Vec3, Vec3, Vec3, Vec3], chord: float, length: fl
     return t, at_distance(prev_p, point, tangent, length)
 
 
-# Not inlined: three kernels call it (decode_rows, posture_rows, the solver's), and numba types
-# an inlined body again at every site, (minutes of first compile).
-@jit()
+@jit(inline="always")
 def decode_row(c: int, pose: PoseArrays, lengths_row: F64, out: DecodedArrays) -> None:
     """Mirrors :func:`ecs_anim.normalized.decode` (``use_stretch=False``) for store row ``c``
     on the body ``lengths_row`` (N_LENGTHS,) (m): writes row ``c`` of every ``out`` array."""

@@ -52,7 +52,7 @@ assert (L["thigh_l"], L["shank_l"], L["ankle_height_l"], L["thigh_r"], L["ankle_
     == (_L_THIGH, _L_SHANK, _L_ANKLE_HEIGHT, _L_THIGH + 1, _L_ANKLE_HEIGHT + 1)
 
 
-@jit()
+@jit(inline="always")
 def _height(kinds: I64, params: F64, grid: F64, p: Vec3) -> float:
     """The ground's height under the point ``p`` (m)."""
     return height_at(p[0], p[1], kinds, params, grid)
@@ -182,7 +182,7 @@ def toes_onto_ground(c: int, foot_dir: F64, ankles: tuple[Vec3, Vec3],
             store3(foot_dir[c, s], in_frame(shank2world[s], new_d))
 
 
-@jit()
+@jit(inline="always")
 def _foot_target(ankle: Vec3, toe: Vec3, footprint: Vec3, w: float, ground_ref: float,
                  ankle_height: float, ball: float, kinds: I64, params: F64, grid: F64) -> Vec3:
     """One ankle's target in ``GroundAdapt.run``: the motion's free foot on the floor
@@ -200,7 +200,7 @@ def _foot_target(ankle: Vec3, toe: Vec3, footprint: Vec3, w: float, ground_ref: 
     return (t[0], t[1], t[2] + max(_height(kinds, params, grid, t) + ankle_height - t[2], 0.0))
 
 
-@jit(inline="always")  # one call site: no tuples of arrays passed per row
+@jit(inline="always")  # one call site: a call per row, handed its arrays, costs
 def ground_adapt_row(c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
                      contact_weight: F64, clip: I64, source_ankle_height: F64, footprint: F64,
                      locked: B1, footprint_settled: B1, ground_ref: F64, kinds: I64,

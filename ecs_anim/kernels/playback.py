@@ -189,7 +189,7 @@ def _frame_root(bank: PoseArrays, first: int, frame: int, angle: float, moved_x:
     return (p0x + moved_x + rx, p0y + moved_y + ry, p[2]), bank.root_heading[frame] + angle
 
 
-@jit(inline="always")  # one call site: no tuples of arrays passed per row
+@jit(inline="always")  # one call site: a call per row, handed its arrays, costs
 def sample_placed_row(c: int, bank: PoseArrays, start: I64, n_frames: I64, fps: F64,
                       loop_yaw: F64, loop_shift: F64, clip: I64, time_s: F64, loop: B1,
                       placement_xy: F64, placement_heading: F64, leg: F64, out: PoseArrays,
