@@ -10,7 +10,7 @@ indices; :func:`over_chunks` runs one over all of them, split into contiguous ch
 made the first compile half as long again).
 
 Compiled code is cached in the user's cache folder (``$XDG_CACHE_HOME/ecs_anim/numba``, else
-``~/.cache/ecs_anim/numba``) unless ``NUMBA_CACHE_DIR`` says where: the first run compiles (about
+``~/.cache/ecs_anim/numba``) unless ``NUMBA_CACHE_DIR`` says where: the first run compiles (under
 a minute, the solver in a second process: :func:`compile_solver_aside`), later ones load in a
 fraction of a second. This must be set before numba is imported, so the package imports its
 kernels only through here.
@@ -138,7 +138,7 @@ def compile_notice() -> str | None:
     first run on a machine, or after an update), else None."""
     if not uncompiled_kernels():
         return None
-    return f"compiling the tick's kernels once (about a minute); cached in {cache_dir()}"
+    return f"compiling the tick's kernels once (under a minute); cached in {cache_dir()}"
 
 
 _announcers: list[Callable[[str], None]] = []
