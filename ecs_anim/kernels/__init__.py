@@ -2,7 +2,9 @@
 
 Each kernel writes its results in place and mirrors a numpy function of the package, which stays
 as the reference the tests compare it with (to 1e-9 m). ``vec`` holds the scalar helpers they
-share: 3-vectors as tuples, frames as tuples of their three axes.
+share (3-vectors as tuples, frames as tuples of their three axes) and :data:`~.vec.jit`, the
+decorator of every kernel: compiled without numba's runtime, so a kernel allocates nothing and
+its caller passes every array it writes, scratch included.
 
 The kernels over characters are compiled ``nogil`` and take a range ``lo, hi`` of their loop's
 indices; :func:`over_chunks` runs one over all of them, split into contiguous chunks on
