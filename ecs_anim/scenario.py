@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
+from functools import partial
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -753,6 +754,16 @@ def _refuse_clip(path: Path) -> None:
     raise InputError(path, f"a scenario YAML was expected, not {what}; to play it, {how}")
 
 
+def _motion_name(r: _Reader, n: Node, w: str, motions: dict[str, NormalizedMotion]) -> str:
+    """The name of one of ``motions`` at node ``n`` (``w`` its place in the file), or a
+    ``file:line:`` error with "did you mean"."""
+    c = r.string(n, w)
+    if c not in motions:
+        hint = did_you_mean(c, list(motions))
+        raise r.fail(n, w, f"unknown motion {c!r}{hint} (motions: {', '.join(motions)})")
+    return c
+
+
 def load_scenario(path: str | Path) -> Scenario:
     """Read and validate a scenario; motions are loaded (BVH imported) here, once."""
     path = Path(path)
@@ -806,12 +817,7 @@ def load_scenario(path: str | Path) -> Scenario:
             raise r.fail(keys["name"], f"{where}.name", f"another character is already named {name!r}")
         names.add(name)
 
-        def clip(n: Node, w: str) -> str:
-            c = r.string(n, w)
-            if c not in motions:
-                hint = did_you_mean(c, list(motions))
-                raise r.fail(n, w, f"unknown motion {c!r}{hint} (motions: {', '.join(motions)})")
-            return c
+        clip = partial(_motion_name, r, motions=motions)
 
         queue = _queued_clips(r, keys["then"], f"{where}.then", clip, MAX_QUEUE) if "then" in keys else ()
         position = r.vector2(keys["position_m"], f"{where}.position_m", "m", 1e5) \
@@ -1243,12 +1249,7 @@ def _scenario_triggers(r: _Reader, top: dict[str, Node], characters: list[Charac
     if "triggers" not in top:
         return []
 
-    def clip(n: Node, w: str) -> str:
-        c = r.string(n, w)
-        if c not in motions:
-            hint = did_you_mean(c, list(motions))
-            raise r.fail(n, w, f"unknown motion {c!r}{hint} (motions: {', '.join(motions)})")
-        return c
+    clip = partial(_motion_name, r, motions=motions)
 
     def queued(n: Node, w: str) -> tuple[QueuedClip, ...]:
         return _queued_clips(r, n, w, clip, MAX_QUEUE - 1)

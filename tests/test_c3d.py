@@ -468,15 +468,23 @@ def test_upper_body_only_places_the_pelvis_under_the_trunk(tmp_path):
     np.testing.assert_allclose(shank[:, :2], 0.0, atol=1e-12)
 
 
-def test_score_hinge_plane_rule_places_the_centre_on_the_axis():
-    """A hip that only flexes: the centre is put on its axis at a given lateral offset."""
-    rng = np.random.default_rng(8)
-    n = 100
+def _flexing_hip(seed: int, n: int):
+    """``n`` frames of a hip that only flexes (about the parent's y): the parent's rotations and
+    origins, the centre in the parent (m) and in the world (n, 3), the flexion angles (n,) rad
+    and the child's rotations."""
+    rng = np.random.default_rng(seed)
     parent_rot = rot_axis(2, rng.uniform(-0.2, 0.2, n))
     parent_origin = rng.normal(size=(n, 3))
     centre_in_parent = np.array([0.05, 0.09, -0.1])
     centre = np.einsum("fij,j->fi", parent_rot, centre_in_parent) + parent_origin
-    child_rot = parent_rot @ rot_axis(1, rng.uniform(-0.6, 0.6, n))  # flexion about y only
+    flexion = rng.uniform(-0.6, 0.6, n)
+    return parent_rot, parent_origin, centre_in_parent, centre, flexion, parent_rot @ rot_axis(1, flexion)
+
+
+def test_score_hinge_plane_rule_places_the_centre_on_the_axis():
+    """A hip that only flexes: the centre is put on its axis at a given lateral offset."""
+    parent_rot, parent_origin, _, centre, _, child_rot = _flexing_hip(8, 100)
+    n = len(centre)
     child_origin = centre - np.einsum("fij,j->fi", child_rot, np.array([0.0, 0.0, 0.3]))
     cp, _, _ = score_centre((parent_rot, parent_origin), (child_rot, child_origin),
                             np.ones(n, dtype=bool), hinge_plane_in_parent=(np.array([0.0, 1.0, 0.0]), 0.07))
@@ -487,14 +495,8 @@ def test_score_hinge_through_a_landmark_ignores_soft_tissue_sliding_along_the_th
     """A flexion-only hip whose thigh cluster slides along the thigh with flexion (soft tissue):
     SCoRE's axis direction comes from the rotations alone and stays right, its location does
     not; through the greater trochanter (a point on the axis) the centre is found again."""
-    rng = np.random.default_rng(9)
-    n = 200
-    parent_rot = rot_axis(2, rng.uniform(-0.2, 0.2, n))
-    parent_origin = rng.normal(size=(n, 3))
-    centre_in_parent = np.array([0.05, 0.09, -0.1])
-    centre = np.einsum("fij,j->fi", parent_rot, centre_in_parent) + parent_origin
-    flexion = rng.uniform(-0.6, 0.6, n)
-    child_rot = parent_rot @ rot_axis(1, flexion)
+    parent_rot, parent_origin, centre_in_parent, centre, flexion, child_rot = _flexing_hip(9, 200)
+    n = len(centre)
     slide = 0.03 * flexion[:, None] * child_rot[:, :, 2]  # 30 mm per radian along the thigh
     child_origin = centre - np.einsum("fij,j->fi", child_rot, np.array([0.0, 0.0, 0.3])) + slide
     plane = (np.array([0.0, 1.0, 0.0]), 0.07)
