@@ -43,6 +43,7 @@ class ContactThresholds:
         the foot is down while its heel point or toe joint is within ``edge_height_m`` of its
         ground, sinking slower than ``edge_sink_mps`` and rising slower than
         ``edge_rise_mps``; each edge of a stillness contact moves at most ``edge_max_s``.
+        Those heights are first smoothed over ``edge_filter_s`` seconds (centred, no lag).
     """
 
     height_m: float = 0.05
@@ -58,11 +59,12 @@ class ContactThresholds:
     edge_sink_mps: float = 0.08
     edge_rise_mps: float = 0.4
     edge_max_s: float = 0.1
+    edge_filter_s: float = 0.03
 
     def __post_init__(self) -> None:
         for name in ("height_m", "speed_mps", "min_duration_s", "min_gap_s", "ease_s",
                      "filter_s", "ground_window_s", "ground_radius", "edge_height_m",
-                     "edge_sink_mps", "edge_rise_mps", "edge_max_s"):
+                     "edge_sink_mps", "edge_rise_mps", "edge_max_s", "edge_filter_s"):
             value = getattr(self, name)
             if value is None and name == "speed_mps":
                 continue
@@ -285,6 +287,9 @@ def touch_down_to_lift_off(points: F64, planted: NDArray[np.bool_], fps: float, 
     ankle, toe = points[:, :2], points[:, 2:]
     n = len(points)
     z = np.stack([(ankle - HEEL_BEHIND_ANKLE * (toe - ankle))[..., 2], toe[..., 2]])  # (2, F, 2)
+    # Zero-phase smoothing over a few hundredths of a second, whatever the rate: a marker's
+    # jitter or a one-frame step (a toe marker jumping 8 mm) is no sink or rise.
+    z = _box_filter(z.transpose(1, 0, 2), _width(th.edge_filter_s, fps)).transpose(1, 0, 2)
     vz = np.gradient(z, axis=1) * fps if n > 1 else np.zeros_like(z)
     edge = th.edge_height_m * scale
     sink, rise = th.edge_sink_mps * scale, th.edge_rise_mps * scale
