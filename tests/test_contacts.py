@@ -36,13 +36,19 @@ WALKS = {
     "varied/qualisys_pig_yup_events_100hz.c3d": {},
 }
 #: Measured where a bound does not hold (open in issue 12), as the worst figures today. On the
-#: uneven-terrain walks (CMU 03, Daz release, no toe joint) the stance foot keeps moving at
-#: 0.2-0.4 m/s while it climbs over the terrain (the ankle rises 10 cm in one stance), so the
-#: planted speed bound and "never both feet up" fail there. (The c3d.org walk, very slow, had
-#: its right foot planted 85.5 % of the time until the plant ended at the foot's lift-off.)
+#: uneven-terrain walks (CMU 03, Daz release, no toe joint: the toe is the End Site, the toe's
+#: tip) the stance foot drifts 8-16 cm while it is planted (0.10-0.28 m/s net, the ankle rising
+#: 5-11 cm): with the stillness threshold lowered to 0.2 m/s 03_01's planted median is still
+#: 0.16 m/s while a foot is planted only 29 % of the time. Both feet are up in 03_01 at frames
+#: 149-168, where the left foot steps down 16 cm lower after the right toe has left (4 cm up
+#: and rising at the first; the joints' centroid falls at 9-13 m/s^2 for 40 ms of it), and
+#: 404-432, where the clip ends in a step down 22 cm lower after the left toe has left (3 cm
+#: up); in 03_02 twice for 8 frames while a foot comes down (9-11 cm above the ground at the
+#: first). (The c3d.org walk, very slow, had its right foot planted 85.5 % of the time until
+#: the plant ended at the foot's lift-off.)
 OPEN = {
-    "varied/cmudaz_03_01_uneven_terrain.bvh": {"median": 0.215, "both_up": 0.12},
-    "varied/cmudaz_03_02_uneven_terrain.bvh": {"both_up": 0.045},
+    "varied/cmudaz_03_01_uneven_terrain.bvh": {"median": 0.211, "both_up": 0.118},
+    "varied/cmudaz_03_02_uneven_terrain.bvh": {"both_up": 0.044},
 }
 SHARE, MEDIAN_MPS, MAX_MPS = (0.30, 0.85), 0.15, 0.5
 
