@@ -30,9 +30,9 @@ BOUND_MS = 25.0
 #: contacts.touch_down_to_lift_off). Measured against each file's own markers, its events
 #: disagree with each other by more than 50 ms, so no rule on these points holds 25 ms on all:
 #: - vicon_cgm24: left strikes 8-30 ms before the heel marker is lowest (the force-plate one,
-#:   2.732 s in the file, 8 ms: detected 8 ms from it), right strikes 0 ms (first two) and
-#:   40-50 ms after it (last three, where the toe marker lands): any edge tied to the heel's
-#:   landing is 40 ms or more from one of them;
+#:   2.732 s in the file, 8 ms: detected 8 ms from it), right strikes 0-10 ms before it (first
+#:   two) and 40-50 ms after it (last three, where the toe marker lands): any edge tied to the
+#:   heel's landing is 40 ms or more from one of them;
 #: - vicon_pig (no heel marker): the force-plate strike (1.041 s) 70 ms before the heel point
 #:   stops sinking (the ankle still falls at 0.2 m/s), the right strike at 1.883 s 25 ms after;
 #: - mac (Cortex, 60 Hz: 25 ms allows one frame): strikes where the heel marker is lowest, which
