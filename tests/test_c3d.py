@@ -81,19 +81,19 @@ def _reliable(clip, extra) -> np.ndarray:
 
 # --- kernels -----------------------------------------------------------------------------------
 
-def test_fill_gaps_interpolates_short_and_reports_long():
+def test_fill_gaps_interpolates_short_and_reports_long_and_held_ends():
     f = np.arange(100, dtype=float)
     points = np.stack([np.stack([f, 2 * f, np.full(100, 5.0)], axis=-1)] * 2, axis=1)
     valid = np.ones((100, 2), dtype=bool)
     valid[10:15, 0] = False  # 5 frames: short
     valid[40:70, 1] = False  # 30 frames: long
-    valid[:3, 1] = False  # at the start: held
-    filled, long = fill_gaps(points * np.where(valid, 1.0, 0.0)[..., None], valid, max_gap=10)
+    valid[:3, 1] = False  # at the start: held, so unreliable however short
+    filled, unreliable = fill_gaps(points * np.where(valid, 1.0, 0.0)[..., None], valid, max_gap=10)
     np.testing.assert_allclose(filled[10:15, 0], points[10:15, 0])  # linear motion comes back
     np.testing.assert_allclose(filled[40:70, 1], points[40:70, 1])
     np.testing.assert_allclose(filled[:3, 1], np.repeat(points[3:4, 1], 3, axis=0))
-    assert not long[:, 0].any()
-    assert long[40:70, 1].all() and long[:, 1].sum() == 30
+    assert not unreliable[:, 0].any()
+    assert unreliable[40:70, 1].all() and unreliable[:3, 1].all() and unreliable[:, 1].sum() == 33
     assert np.all(np.isfinite(filled))
 
 
