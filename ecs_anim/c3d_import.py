@@ -11,7 +11,10 @@ Landmark sets (Plug-in Gait, ISB/CAST):
 
 * hips: Harrington et al. 2007 (J Biomech 40:595) regression from pelvis width PW (ASIS-ASIS)
   and depth PD (mid-ASIS to mid-PSIS or sacrum), in the pelvis frame (mm):
-  posterior 0.24 PD + 9.9, inferior 0.30 PW + 10.9, lateral 0.33 PW + 7.3;
+  posterior 0.24 PD + 9.9, inferior 0.30 PW + 10.9, lateral 0.33 PW + 7.3; where the file
+  stores the subject's measured leg length and ASIS-trochanter distance (Plug-in Gait's
+  ``PROCESSING``, BTS's ``SUBJECT`` group: :data:`ANTHROPOMETRY`), Davis et al. 1991 with
+  them (:func:`davis_hip`);
 * knees / ankles: midpoint of the epicondyles / malleoli when both are marked; otherwise the
   Plug-in-Gait chord rule (Davis et al. 1991; Kadaba et al. 1990): the centre lies half a joint
   width plus a marker radius from the lateral marker, in the plane of the proximal joint
@@ -57,12 +60,17 @@ or ghost markers in fast motion) are replaced by interpolation and reported
 
 Gaps: a sample is invalid when its residual is negative, its coordinates are all zero or it is
 not finite. Runs of at most ``max_gap`` frames (default 10) are interpolated linearly; longer
-runs are interpolated as well (so no NaN ever reaches the output) and reported.
+runs are interpolated as well (so no NaN ever reaches the output) and reported. Runs at the
+trial's start or end are held from the nearest sample, so they are unreliable at any length:
+the frames at the ends where a body part's own markers are missing are trimmed, with one line
+each in ``info.parts_frames_trimmed`` (:func:`kept_frames`), as are those where the pelvis
+markers are (:func:`trust_root`).
 """
 
 from __future__ import annotations
 
 import math
+import struct
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -143,6 +151,63 @@ class C3dMarkers:
     first_frame: int
     #: The ``EVENT`` group as stored: (label, context, time in seconds from the capture's start).
     events: list[tuple[str, str, float]] = field(default_factory=list)
+    #: The subject's measurements stored with the trial (:data:`ANTHROPOMETRY`), metres.
+    anthropometry: dict[str, float] = field(default_factory=dict)
+
+
+#: The subject's measurements labs store with a trial that place the hip, mm, as (group:
+#: parameter names) per quantity ({S}: L/R, {SIDE}: LEFT/RIGHT), compared without case, spaces
+#: or underscores: Vicon Plug-in Gait and pyCGM2 (``PROCESSING:LLegLength``,
+#: ``InterAsisDistance``, ``LAsisTrocanterDistance``, ``MarkerDiameter``) and BTS's Davis
+#: protocol (``SUBJECT:LEFT LEG``, ``PELVIS WIDTH``, ``LEFT PELVIS DEPTH``: the ASIS to greater
+#: trochanter distance). With each, the range (mm) a value must lie in to be taken (0 is "not
+#: measured" in Plug-in Gait). (Knee and ankle widths are stored too; the chord rule keeps
+#: adult widths: BTS's own centres lie 15-19 mm beyond half its measured widths, larger markers
+#: than the radius assumed, and the measured widths took its ankle 2 mm further from them.)
+ANTHROPOMETRY: dict[str, tuple[tuple[str, ...], tuple[float, float]]] = {
+    "leg_length_{s}": (("PROCESSING:{S}LEGLENGTH", "SUBJECT:{SIDE}LEG"), (400.0, 1300.0)),
+    "asis_distance": (("PROCESSING:INTERASISDISTANCE", "SUBJECT:PELVISWIDTH"), (150.0, 450.0)),
+    "asis_trochanter_{s}": (("PROCESSING:{S}ASISTROCANTERDISTANCE", "SUBJECT:{SIDE}PELVISDEPTH"),
+                            (20.0, 200.0)),
+    "marker_diameter": (("PROCESSING:MARKERDIAMETER",), (3.0, 40.0)),
+}
+
+
+def _read_anthropometry(reader: Any) -> dict[str, float]:
+    """The :data:`ANTHROPOMETRY` a file holds, metres; a value out of its range, unreadable or
+    not a single number is left out (so is a quantity no parameter gives)."""
+    params: dict[str, Any] = {}
+    for group_name in ("PROCESSING", "SUBJECT"):
+        group = reader.get(group_name)
+        if group is None:
+            continue
+        for name, param in group.param_items():
+            params[f"{group_name}:{''.join(str(name).split()).replace('_', '').upper()}"] = param
+    out: dict[str, float] = {}
+    for pattern, (names, (low, high)) in ANTHROPOMETRY.items():
+        for s, side in (("l", "LEFT"), ("r", "RIGHT")) if "{s}" in pattern else ((None, ""),):
+            for name in names:
+                param = params.get(name.format(S=(s or "").upper(), SIDE=side))
+                value = _number(param) if param is not None else None
+                if value is not None and low <= value <= high:
+                    out[pattern.format(s=s)] = value / 1000.0
+                    break
+    return out
+
+
+def _number(param: Any) -> float | None:
+    """A parameter's single number (float or integer storage), None otherwise."""
+    try:
+        size, scalar = int(param.bytes_per_element), not param.dimensions
+        if size == 4:
+            values = np.atleast_1d(param.float_value if scalar else param.float_array)
+        elif size == 2:
+            values = np.atleast_1d(param.int16_value if scalar else param.int16_array)
+        else:
+            return None
+    except (AssertionError, ValueError, TypeError, AttributeError, struct.error):
+        return None
+    return float(values[0]) if values.size == 1 and np.isfinite(values[0]) else None
 
 
 def _read_events(reader: Any) -> list[tuple[str, str, float]]:
@@ -201,6 +266,7 @@ def read_c3d(path: str | Path) -> C3dMarkers:
             units = "" if units_param is None else \
                 "".join(ch for ch in units_param.string_value.lower() if ch.isalpha())
             events = _read_events(reader)
+            anthropometry = _read_anthropometry(reader)
             frames = [points[:, :4].astype(np.float64) for _, points, _ in reader.read_frames()] \
                 if n_points > 0 else []
         except InputError:
@@ -227,7 +293,7 @@ def read_c3d(path: str | Path) -> C3dMarkers:
     finite = np.all(np.isfinite(positions), axis=-1)
     valid = finite & (data[:, :, 3] >= 0) & np.any(positions != 0, axis=-1)
     positions = np.where(finite[..., None], positions, 0.0)
-    return C3dMarkers(labels, positions, valid, rate, units, first, events)
+    return C3dMarkers(labels, positions, valid, rate, units, first, events, anthropometry)
 
 
 # --- gaps --------------------------------------------------------------------------------------
@@ -418,6 +484,13 @@ class _Markers:
     points: F64  # (F, M, 3)
     unreliable: BOOL  # (F, M): in a long gap or held at an end (:func:`fill_gaps`)
     found: dict[str, int]
+    #: The subject's measurements stored in the file (:data:`ANTHROPOMETRY`), metres.
+    anthropometry: dict[str, float] = field(default_factory=dict)
+
+    def marker_radius(self) -> float:
+        """Metres: half the file's marker diameter, else :data:`MARKER_RADIUS_M`."""
+        return 0.5 * self.anthropometry["marker_diameter"] if "marker_diameter" in self.anthropometry \
+            else MARKER_RADIUS_M
 
     def __call__(self, role: str) -> F64:
         return self.points[:, self.found[role]]
@@ -647,7 +720,7 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
         what = "there is no POINT:UNITS" if not raw.units else f"POINT:UNITS is {raw.units!r}"
         reason = f"{what}; guessed from the body's size: {reason}"
     scale = UNITS[unit_name]
-    mk = _Markers(filled * scale, unreliable, mmap.marker)
+    mk = _Markers(filled * scale, unreliable, mmap.marker, raw.anthropometry)
     if up is None:
         up = _detect_up(mk, present, mmap)
         up_reason = "detected from the markers"
@@ -1011,12 +1084,51 @@ def _landmark_pelvis(mk: _Markers, build: _Build) -> None:
     depth = float(np.median(np.linalg.norm(front - back, axis=-1)))
     harrington = f"Harrington 2007 (PW {width * 1000:.0f} mm, PD {depth * 1000:.0f} mm, ASIS + {back_name})"
     for s, sign in (("l", 1.0), ("r", -1.0)):
-        local = np.array([-0.24 * depth - 0.0099, sign * (0.33 * width + 0.0073),
-                          -0.30 * width - 0.0109])
-        _set(build, f"hip_{s}", front + pelvis2world @ local, harrington)
+        davis = davis_hip(mk.anthropometry, s, mk.marker_radius(), width)
+        if davis is not None:
+            local, how = davis
+            local[1] *= sign
+        else:
+            local = np.array([-0.24 * depth - 0.0099, sign * (0.33 * width + 0.0073),
+                              -0.30 * width - 0.0109])
+            how = harrington
+        _set(build, f"hip_{s}", front + pelvis2world @ local, how)
     _set(build, "pelvis", _mid(build.positions[:, J["hip_l"]], build.positions[:, J["hip_r"]]),
          "midpoint of the hip centres")
     build.pelvis2world = pelvis2world
+
+
+#: Davis et al. 1991 (Hum Mov Sci 10:575): the hip lies C = 0.115 L - 15.3 mm (L the leg
+#: length) from the ASIS along a line at THETA to the frontal plane and BETA to the transverse
+#: one, set back by the ASIS-trochanter distance plus a marker radius. Without a measured
+#: distance the model takes 0.1288 L - 48.56 mm, which Plug-in Gait writes back to the file.
+DAVIS_THETA_DEG, DAVIS_BETA_DEG = 28.4, 18.0
+DAVIS_TROCHANTER_PER_LEG, DAVIS_TROCHANTER_M = 0.1288, -0.04856
+
+
+def davis_hip(anthropometry: dict[str, float], side: str, marker_radius_m: float,
+              asis_width_m: float) -> tuple[F64, str] | None:
+    """The hip of ``side`` in the pelvis frame (x forward, y the lateral distance, z up; from
+    the mid-ASIS; (3,) metres) by Davis 1991 from the file's measured leg length and
+    ASIS-trochanter distance, and its inter-ASIS distance (else the markers', ``asis_width_m``),
+    with how it was placed; None unless the file holds both and the distance is a measurement,
+    not the regression on the leg. A measurement of this subject (BTS's Davis protocol stores
+    it as the pelvis depth) beats a population regression; without one, Harrington 2007
+    validates better than Davis's own regression."""
+    leg = anthropometry.get(f"leg_length_{side}")
+    trochanter = anthropometry.get(f"asis_trochanter_{side}")
+    asis = anthropometry.get("asis_distance", asis_width_m)
+    if leg is None or trochanter is None \
+            or abs(trochanter - (DAVIS_TROCHANTER_PER_LEG * leg + DAVIS_TROCHANTER_M)) < 0.0005:
+        return None
+    c = 0.115 * leg - 0.0153
+    theta, beta = math.radians(DAVIS_THETA_DEG), math.radians(DAVIS_BETA_DEG)
+    back = trochanter + marker_radius_m
+    local = np.array([c * math.cos(theta) * math.sin(beta) - back * math.cos(beta),
+                      0.5 * asis - c * math.sin(theta),
+                      -c * math.cos(theta) * math.cos(beta) - back * math.sin(beta)])
+    return local, (f"Davis 1991 with the file's leg length {leg * 1000:.0f} mm, ASIS-trochanter "
+                   f"distance {trochanter * 1000:.0f} mm and ASIS distance {asis * 1000:.0f} mm")
 
 
 def _pelvis_under_trunk(mk: _Markers, present: list[str], build: _Build) -> None:
@@ -1139,8 +1251,8 @@ def _knee_and_ankle(mk: _Markers, build: _Build, s: str, leg_guess: float) -> No
     hip = build.positions[:, J[f"hip_{s}"]]
     towards_other_hip = build.positions[:, J[f"hip_{'r' if s == 'l' else 'l'}"]] - hip
     knee_lat, ankle_lat = mk(f"KNEE_LAT_{s}"), mk(f"ANKLE_LAT_{s}")
-    d_knee = 0.5 * JOINT_WIDTH_PER_LEG["knee"] * leg_guess + MARKER_RADIUS_M
-    d_ankle = 0.5 * JOINT_WIDTH_PER_LEG["ankle"] * leg_guess + MARKER_RADIUS_M
+    d_knee = 0.5 * JOINT_WIDTH_PER_LEG["knee"] * leg_guess + mk.marker_radius()
+    d_ankle = 0.5 * JOINT_WIDTH_PER_LEG["ankle"] * leg_guess + mk.marker_radius()
     roles = [f"{r}_{s}" for r in ("KNEE_LAT", "ANKLE_LAT", "THIGH") if f"{r}_{s}" in mk.found]
     use: BOOL = np.asarray(~mk.unreliable[:, [mk.found[r] for r in roles]].any(axis=1))
     if build.root_trusted is not None:
@@ -1314,6 +1426,7 @@ __all__ = [
     "canonical_clip_c3d",
     "chord_centre",
     "cluster_poses",
+    "davis_hip",
     "fill_gaps",
     "import_c3d",
     "read_c3d",

@@ -225,6 +225,39 @@ def _tennis_markers() -> tuple[list[str], np.ndarray, float]:
     return labels, raw.positions[:300], raw.rate
 
 
+def test_a_part_missing_at_the_ends_has_those_frames_trimmed_and_said(tmp_path):
+    """A marker held before it is first seen, or after it is last seen, is no measurement: Vicon
+    Matt's RANK, missing in the first 7 frames, stood still while the knee walked on (the shank
+    0.175 m of 0.40). Such frames at the ends go, with one line each naming the part and its
+    markers; where that would keep less than half the trial, they stay and are reported."""
+    require_mocap()
+    labels, positions, rate = _tennis_markers()
+    valid = np.ones(positions.shape[:2], dtype=bool)
+    valid[:6, labels.index("RANK")] = False
+    valid[-4:, labels.index("LWRA")] = False
+    clip, extra = canonical_clip_c3d(read_c3d(write_c3d(tmp_path / "ends.c3d", labels, positions,
+                                                        valid, rate)))
+    assert len(clip.positions) == 290 and extra["first_file_frame"] == 6
+    assert extra["root_frames_trimmed"] == []
+    assert extra["parts_frames_trimmed"] == [
+        "frames 0-5 of the file trimmed: the markers of the right leg (RANK) are unseen or in a "
+        "long gap there",
+        "frames 296-299 of the file trimmed: the markers of the left arm (LWRA) are unseen or in a "
+        "long gap there"]
+    whole, _ = canonical_clip_c3d(read_c3d(write_c3d(tmp_path / "whole.c3d", labels, positions,
+                                                     None, rate)))
+    shank = np.linalg.norm(clip.positions[:, J["ankle_r"]] - clip.positions[:, J["knee_r"]], axis=-1)
+    shank_whole = np.linalg.norm(whole.positions[6:296, J["ankle_r"]] - whole.positions[6:296, J["knee_r"]],
+                                 axis=-1)
+    assert np.abs(shank - shank_whole).max() < 0.002
+    valid[:, :] = True
+    valid[:200, labels.index("RTOE")] = False  # trimming would keep a third of the trial
+    clip, extra = canonical_clip_c3d(read_c3d(write_c3d(tmp_path / "toe.c3d", labels, positions,
+                                                        valid, rate)))
+    assert len(clip.positions) == 300 and extra["parts_frames_trimmed"] == []
+    assert extra["gaps"]["long_gap_frames"] == [[0, 199]]
+
+
 def test_lower_body_subset_with_prefix_other_objects_and_gaps(tmp_path):
     require_mocap()
     labels, positions, rate = _tennis_markers()
