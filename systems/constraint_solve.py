@@ -33,7 +33,7 @@ from ecs_anim.kernels.decode import decode
 from ecs_anim.kernels.goals import constraint_errors as constraint_errors  # tests patch these
 from ecs_anim.kernels.goals import tick_goals as tick_goals
 from ecs_anim.kernels.solve import solve as solve
-from ecs_anim.solver_budget import SolverCostModel, SolverReport, errors_by_priority
+from ecs_anim.solver_budget import SolverCostModel, SolverReport
 from ecs_anim.solver_shell import TickResult, TickSteps, constrain, scatter
 from ecs_anim.system_base import System
 
@@ -137,5 +137,5 @@ class ConstraintSolve(System):
             cut_ms=float("nan") if cut is None else cut.cut_ms,
             priority_iterations={} if cut is None else dict(cut.priority_iterations),
             cut_characters=cut_entities,
-            errors=errors_by_priority(table.priority, table.error,
-                                      table.kind == KIND_ORIENTATION, cut_constraint))
+            constraint_errors=(table.priority.copy(), result.error,
+                               table.kind == KIND_ORIENTATION, cut_constraint))
