@@ -11,7 +11,10 @@ Landmark sets (Plug-in Gait, ISB/CAST):
 
 * hips: Harrington et al. 2007 (J Biomech 40:595) regression from pelvis width PW (ASIS-ASIS)
   and depth PD (mid-ASIS to mid-PSIS or sacrum), in the pelvis frame (mm):
-  posterior 0.24 PD + 9.9, inferior 0.30 PW + 10.9, lateral 0.33 PW + 7.3;
+  posterior 0.24 PD + 9.9, inferior 0.30 PW + 10.9, lateral 0.33 PW + 7.3; where the file
+  stores the subject's measured leg length and ASIS-trochanter distance (Plug-in Gait's
+  ``PROCESSING``, BTS's ``SUBJECT`` group: :data:`ANTHROPOMETRY`), Davis et al. 1991 with
+  them (:func:`davis_hip`);
 * knees / ankles: midpoint of the epicondyles / malleoli when both are marked; otherwise the
   Plug-in-Gait chord rule (Davis et al. 1991; Kadaba et al. 1990): the centre lies half a joint
   width plus a marker radius from the lateral marker, in the plane of the proximal joint
@@ -57,12 +60,17 @@ or ghost markers in fast motion) are replaced by interpolation and reported
 
 Gaps: a sample is invalid when its residual is negative, its coordinates are all zero or it is
 not finite. Runs of at most ``max_gap`` frames (default 10) are interpolated linearly; longer
-runs are interpolated as well (so no NaN ever reaches the output) and reported.
+runs are interpolated as well (so no NaN ever reaches the output) and reported. Runs at the
+trial's start or end are held from the nearest sample, so they are unreliable at any length:
+the frames at the ends where a body part's own markers are missing are trimmed, with one line
+each in ``info.parts_frames_trimmed`` (:func:`kept_frames`), as are those where the pelvis
+markers are (:func:`trust_root`).
 """
 
 from __future__ import annotations
 
 import math
+import struct
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -72,7 +80,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .contacts import ContactThresholds, _intervals, gait_event_kind
-from .errors import EcsAnimError, InputError, quoted
+from .errors import EcsAnimError, InputError, listed, quoted
 from .importing import (
     UNITS,
     YUP_TO_ZUP,
@@ -83,7 +91,7 @@ from .importing import (
     trim_clip,
 )
 from .joint_map import JointMap
-from .marker_sets import GROUPS, MarkerMap, check_usable, match_markers
+from .marker_sets import GROUP_WORDS, GROUPS, MarkerMap, check_usable, match_markers, part_roles
 from .morphology import ADULT_PROPORTIONS
 from .motion import NormalizedMotion
 from .rotations import (
@@ -143,6 +151,63 @@ class C3dMarkers:
     first_frame: int
     #: The ``EVENT`` group as stored: (label, context, time in seconds from the capture's start).
     events: list[tuple[str, str, float]] = field(default_factory=list)
+    #: The subject's measurements stored with the trial (:data:`ANTHROPOMETRY`), metres.
+    anthropometry: dict[str, float] = field(default_factory=dict)
+
+
+#: The subject's measurements labs store with a trial that place the hip, mm, as (group:
+#: parameter names) per quantity ({S}: L/R, {SIDE}: LEFT/RIGHT), compared without case, spaces
+#: or underscores: Vicon Plug-in Gait and pyCGM2 (``PROCESSING:LLegLength``,
+#: ``InterAsisDistance``, ``LAsisTrocanterDistance``, ``MarkerDiameter``) and BTS's Davis
+#: protocol (``SUBJECT:LEFT LEG``, ``PELVIS WIDTH``, ``LEFT PELVIS DEPTH``: the ASIS to greater
+#: trochanter distance). With each, the range (mm) a value must lie in to be taken (0 is "not
+#: measured" in Plug-in Gait). (Knee and ankle widths are stored too; the chord rule keeps
+#: adult widths: BTS's own centres lie 15-19 mm beyond half its measured widths, larger markers
+#: than the radius assumed, and the measured widths took its ankle 2 mm further from them.)
+ANTHROPOMETRY: dict[str, tuple[tuple[str, ...], tuple[float, float]]] = {
+    "leg_length_{s}": (("PROCESSING:{S}LEGLENGTH", "SUBJECT:{SIDE}LEG"), (400.0, 1300.0)),
+    "asis_distance": (("PROCESSING:INTERASISDISTANCE", "SUBJECT:PELVISWIDTH"), (150.0, 450.0)),
+    "asis_trochanter_{s}": (("PROCESSING:{S}ASISTROCANTERDISTANCE", "SUBJECT:{SIDE}PELVISDEPTH"),
+                            (20.0, 200.0)),
+    "marker_diameter": (("PROCESSING:MARKERDIAMETER",), (3.0, 40.0)),
+}
+
+
+def _read_anthropometry(reader: Any) -> dict[str, float]:
+    """The :data:`ANTHROPOMETRY` a file holds, metres; a value out of its range, unreadable or
+    not a single number is left out (so is a quantity no parameter gives)."""
+    params: dict[str, Any] = {}
+    for group_name in ("PROCESSING", "SUBJECT"):
+        group = reader.get(group_name)
+        if group is None:
+            continue
+        for name, param in group.param_items():
+            params[f"{group_name}:{''.join(str(name).split()).replace('_', '').upper()}"] = param
+    out: dict[str, float] = {}
+    for pattern, (names, (low, high)) in ANTHROPOMETRY.items():
+        for s, side in (("l", "LEFT"), ("r", "RIGHT")) if "{s}" in pattern else ((None, ""),):
+            for name in names:
+                param = params.get(name.format(S=(s or "").upper(), SIDE=side))
+                value = _number(param) if param is not None else None
+                if value is not None and low <= value <= high:
+                    out[pattern.format(s=s)] = value / 1000.0
+                    break
+    return out
+
+
+def _number(param: Any) -> float | None:
+    """A parameter's single number (float or integer storage), None otherwise."""
+    try:
+        size, scalar = int(param.bytes_per_element), not param.dimensions
+        if size == 4:
+            values = np.atleast_1d(param.float_value if scalar else param.float_array)
+        elif size == 2:
+            values = np.atleast_1d(param.int16_value if scalar else param.int16_array)
+        else:
+            return None
+    except (AssertionError, ValueError, TypeError, AttributeError, struct.error):
+        return None
+    return float(values[0]) if values.size == 1 and np.isfinite(values[0]) else None
 
 
 def _read_events(reader: Any) -> list[tuple[str, str, float]]:
@@ -201,6 +266,7 @@ def read_c3d(path: str | Path) -> C3dMarkers:
             units = "" if units_param is None else \
                 "".join(ch for ch in units_param.string_value.lower() if ch.isalpha())
             events = _read_events(reader)
+            anthropometry = _read_anthropometry(reader)
             frames = [points[:, :4].astype(np.float64) for _, points, _ in reader.read_frames()] \
                 if n_points > 0 else []
         except InputError:
@@ -227,7 +293,7 @@ def read_c3d(path: str | Path) -> C3dMarkers:
     finite = np.all(np.isfinite(positions), axis=-1)
     valid = finite & (data[:, :, 3] >= 0) & np.any(positions != 0, axis=-1)
     positions = np.where(finite[..., None], positions, 0.0)
-    return C3dMarkers(labels, positions, valid, rate, units, first, events)
+    return C3dMarkers(labels, positions, valid, rate, units, first, events, anthropometry)
 
 
 # --- gaps --------------------------------------------------------------------------------------
@@ -235,27 +301,30 @@ def read_c3d(path: str | Path) -> C3dMarkers:
 def fill_gaps(positions: F64, valid: BOOL, max_gap: int = DEFAULT_MAX_GAP) -> tuple[F64, BOOL]:
     """Interpolate invalid samples of each marker linearly (held at the clip's ends).
 
-    positions (F, M, 3), valid (F, M). Returns (filled positions, ``long``): ``long`` (F, M) is
-    True on samples in runs of more than ``max_gap`` invalid frames (filled too, but unreliable)
-    and on markers never seen. The loop runs over markers and gaps, never over frames.
+    positions (F, M, 3), valid (F, M). Returns (filled positions, ``unreliable``): True (F, M)
+    on samples in runs of more than ``max_gap`` invalid frames (filled too, but a guess), on
+    runs at the trial's start or end of any length (held from the nearest sample: nothing
+    brackets them, so a moving marker is simply wrong there) and on markers never seen. The
+    loop runs over markers and gaps, never over frames.
     """
     out = positions.copy()
-    long = np.zeros(valid.shape, dtype=bool)
+    unreliable = np.zeros(valid.shape, dtype=bool)
     frames = np.arange(valid.shape[0])
+    last = valid.shape[0] - 1
     for m in range(valid.shape[1]):
         ok = valid[:, m]
         if ok.all():
             continue
         if not ok.any():
-            long[:, m] = True
+            unreliable[:, m] = True
             continue
         bad = ~ok
         for axis in range(3):
             out[bad, m, axis] = np.interp(frames[bad], frames[ok], positions[ok, m, axis])
         for a, b in _intervals(bad):
-            if b - a + 1 > max_gap:
-                long[a:b + 1, m] = True
-    return out, long
+            if b - a + 1 > max_gap or a == 0 or b == last:
+                unreliable[a:b + 1, m] = True
+    return out, unreliable
 
 
 def cluster_outliers(points: F64, valid: BOOL, tolerance_m: float = 0.015,
@@ -413,8 +482,15 @@ class _Markers:
     """Marker access by role after gap filling, metres, Z up."""
 
     points: F64  # (F, M, 3)
-    long: BOOL  # (F, M)
+    unreliable: BOOL  # (F, M): in a long gap or held at an end (:func:`fill_gaps`)
     found: dict[str, int]
+    #: The subject's measurements stored in the file (:data:`ANTHROPOMETRY`), metres.
+    anthropometry: dict[str, float] = field(default_factory=dict)
+
+    def marker_radius(self) -> float:
+        """Metres: half the file's marker diameter, else :data:`MARKER_RADIUS_M`."""
+        return 0.5 * self.anthropometry["marker_diameter"] if "marker_diameter" in self.anthropometry \
+            else MARKER_RADIUS_M
 
     def __call__(self, role: str) -> F64:
         return self.points[:, self.found[role]]
@@ -621,7 +697,7 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
                                    0.015 / UNITS.get(raw.units, 0.001))
             rejected += int(out.sum())
             valid[:, members] &= ~out
-    filled, long = fill_gaps(raw.positions, valid, max_gap)
+    filled, unreliable = fill_gaps(raw.positions, valid, max_gap)
     # Units.
     if unit is not None:
         if unit not in UNITS:
@@ -644,7 +720,7 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
         what = "there is no POINT:UNITS" if not raw.units else f"POINT:UNITS is {raw.units!r}"
         reason = f"{what}; guessed from the body's size: {reason}"
     scale = UNITS[unit_name]
-    mk = _Markers(filled * scale, long, mmap.marker)
+    mk = _Markers(filled * scale, unreliable, mmap.marker, raw.anthropometry)
     if up is None:
         up = _detect_up(mk, present, mmap)
         up_reason = "detected from the markers"
@@ -654,15 +730,16 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
         raise EcsAnimError(f"--up {up}: expected 'y' or 'z'")
     if up == "y":
         mk.points = mk.points @ YUP_TO_ZUP.T
-    build, kept, repaired = _joint_centres(mk, mmap, present)
-    long, valid = long[kept], valid[kept]
+    build, root, kept, repaired = _joint_centres(mk, mmap, present)
+    parts_trimmed = _parts_trimmed(mk, mmap, present, raw.labels, root, kept)
+    unreliable, valid = unreliable[kept], valid[kept]
     lab = lab_joint_centres(raw.labels, mk.points[kept], valid, build.positions, mmap, present)
     rejected_joints = reject_joint_outliers(build.positions, build.measured)
-    # Frames where a marker of a present part was in a long gap.
+    # Frames where a marker was in a long gap or held at an end (not trimmed: kept_frames).
     used = sorted(set(mmap.marker.values()))
-    bad_frames: BOOL = np.asarray(long[:, used].any(axis=1)) if used else \
-        np.zeros(long.shape[0], dtype=bool)
-    gap_markers = {raw.labels[i]: int(long[:, i].sum()) for i in used if long[:, i].any()}
+    bad_frames: BOOL = np.asarray(unreliable[:, used].any(axis=1)) if used else \
+        np.zeros(unreliable.shape[0], dtype=bool)
+    gap_markers = {raw.labels[i]: int(unreliable[:, i].sum()) for i in used if unreliable[:, i].any()}
     n_filled = int((~valid[:, used]).sum()) if used else 0
     if not np.all(np.isfinite(build.positions)):
         raise EcsAnimError("joint centres hold non-finite values (degenerate marker data)")
@@ -689,8 +766,10 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
         "lab_joint_centres": lab,
         # Where the pelvis markers could not place the pelvis: trimmed (numbered as in the file,
         # from 0), repaired (numbered as the motion's frames, like the gaps below).
-        "root_frames_trimmed": [[a, b] for a, b in ((0, kept.start - 1), (kept.stop, raw.positions.shape[0] - 1))
+        "root_frames_trimmed": [[a, b] for a, b in ((0, root.start - 1), (root.stop, raw.positions.shape[0] - 1))
                                 if a <= b],
+        # Beyond those, frames at the ends where a part's own markers were not seen: one line each.
+        "parts_frames_trimmed": parts_trimmed,
         # The motion's frame 0 is this frame of the file: times given against the file (a
         # --constraints file, gait events) are shifted by it.
         "first_file_frame": kept.start,
@@ -705,6 +784,28 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
         },
     }
     return clip, extra
+
+
+def _parts_trimmed(mk: _Markers, mmap: MarkerMap, present: list[str], labels: list[str],
+                   root: slice, kept: slice) -> list[str]:
+    """One line per end of the pelvis' span trimmed because a part's markers did not place it
+    (:func:`kept_frames`), naming those parts and their markers unseen or unreliable there."""
+    placed = parts_placed(mk, mmap, present)
+    out = []
+    for first, stop in ((root.start, kept.start), (kept.stop, root.stop)):
+        if first >= stop:
+            continue
+        parts = []
+        for group, where in placed.items():
+            unplaced = ~where[first:stop]
+            markers = [labels[mk.found[r]] for r in part_roles(mmap.preset, group)
+                       if r in mk.found and (mk.unreliable[first:stop, mk.found[r]] & unplaced).any()]
+            if unplaced.any():
+                parts.append(f"{GROUP_WORDS[group]} ({listed(markers, 4)})")
+        frames = f"frame {first}" if stop - first == 1 else f"frames {first}-{stop - 1}"
+        out.append(f"{frames} of the file trimmed: the markers of the {listed(parts, 3)} are "
+                   "unseen or in a long gap there")
+    return out
 
 
 #: Lateral landmark roles and their medial twins, which some labs label alike.
@@ -782,29 +883,71 @@ def lab_joint_centres(labels: list[str], points: F64, valid: BOOL, positions: F6
     return out
 
 
-def trust_root(build: _Build) -> tuple[slice, list[list[int]]]:
-    """Drop or repair the frames whose pelvis frame the markers do not determine, in place.
+#: A part whose markers are missing at the trial's start or end gets those frames trimmed,
+#: unless that keeps less than this share of the frames the pelvis markers place (then the
+#: frames are kept and reported with the long gaps).
+MIN_KEPT_SHARE = 0.5
+
+
+def parts_placed(mk: _Markers, mmap: MarkerMap, present: list[str]) -> dict[str, BOOL]:
+    """Per present body part but the pelvis (``root_trusted`` places it), the frames (F,) bool
+    where its own markers place it: none of its markers unreliable (:func:`fill_gaps`: in a
+    long gap, or held at the trial's start or end where it is not seen); in a cluster set, each
+    of its clusters with three reliable markers (what a rigid fit needs). Elsewhere its joints
+    are a guess."""
+    out: dict[str, BOOL] = {}
+    for group in (g for g in present if g != "pelvis"):
+        roles = [r for r in part_roles(mmap.preset, group) if r in mk.found]
+        reliable = ~mk.unreliable[:, [mk.found[r] for r in roles]]
+        if mmap.preset.method == "functional":
+            clusters: dict[str, list[int]] = {}
+            for k, role in enumerate(roles):
+                clusters.setdefault(_cluster_key(role), []).append(k)
+            out[group] = np.all([reliable[:, ks].sum(axis=1) >= 3 for ks in clusters.values()],
+                                axis=0)
+        else:
+            out[group] = np.asarray(reliable.all(axis=1))
+    return out
+
+
+def kept_frames(root_trusted: BOOL | None, placed: dict[str, BOOL], n: int) -> tuple[slice, slice]:
+    """(the pelvis' span, the frames kept), file frames: the pelvis' span runs from the first to
+    the last frame whose pelvis frame the markers determine (``root_trusted`` (n,), None: all);
+    the frames kept, from the first to the last of those where every part is ``placed`` too
+    (:func:`parts_placed`), unless that would keep less than :data:`MIN_KEPT_SHARE` of the
+    pelvis' span or nothing (then the pelvis' span). Raises :class:`EcsAnimError` when the
+    pelvis is placed nowhere."""
+    trusted = np.ones(n, dtype=bool) if root_trusted is None else root_trusted
+    good = np.flatnonzero(trusted)
+    if len(good) == 0:
+        raise EcsAnimError(f"the pelvis markers place the pelvis in none of the {n} frames "
+                           "(a cluster needs three of its markers seen, landmarks all of theirs); "
+                           "nothing to import")
+    root = slice(int(good[0]), int(good[-1]) + 1)
+    everything = np.flatnonzero(trusted & np.all(list(placed.values()), axis=0)) if placed else good
+    if len(everything) and everything[-1] + 1 - everything[0] >= MIN_KEPT_SHARE * (root.stop - root.start):
+        return root, slice(int(everything[0]), int(everything[-1]) + 1)
+    return root, root
+
+
+def trust_root(build: _Build, kept: slice) -> list[list[int]]:
+    """Keep only the frames ``kept`` (:func:`kept_frames`) and repair those inside whose pelvis
+    frame the markers do not determine, in place.
 
     Where the pelvis markers are missing (a cluster with fewer than three seen, a landmark in a
     long gap), the computed pelvis frame is noise: it flipped the body upside down from one
     frame to the next, and every part filled in or taken from a default motion followed it.
     Such runs at the start and end of the trial are trimmed (the capture had not started yet);
     inside it, the pelvis frame is interpolated along the shorter arc, and the pelvis and hip
-    centres (placed from it) linearly, between the trusted frames on either side. Joints that
-    their own markers place are kept.
+    centres (placed from it) linearly, between the trusted frames on either side (``kept``
+    starts and ends on such frames). Joints that their own markers place are kept.
 
-    Returns the slice of frames kept (in the file's numbering) and the repaired runs as
-    ``[first, last]`` pairs in the kept frames' numbering (the motion's).
+    Returns the repaired runs as ``[first, last]`` pairs in the kept frames' numbering (the
+    motion's).
     """
     assert build.pelvis2world is not None, "every pelvis builder sets the pelvis frame"
     n = build.positions.shape[0]
     trusted = np.ones(n, dtype=bool) if build.root_trusted is None else build.root_trusted
-    good = np.flatnonzero(trusted)
-    if len(good) == 0:
-        raise EcsAnimError(f"the pelvis markers place the pelvis in none of the {n} frames "
-                           "(a cluster needs three of its markers seen, landmarks all of theirs); "
-                           "nothing to import")
-    kept = slice(int(good[0]), int(good[-1]) + 1)
     repaired = [[a, b] for a, b in _intervals(~trusted[kept])]
     frames = [f for f in ("pelvis2world", "thorax2world", "head2world") if getattr(build, f) is not None]
     build.positions = build.positions[kept]
@@ -819,7 +962,7 @@ def trust_root(build: _Build) -> tuple[slice, list[list[int]]]:
         quats = quat_from_matrix(build.pelvis2world[[before, after]])
         build.pelvis2world[before + 1:after] = matrix_from_quat(slerp(quats[0], quats[1], t))
     build.root_trusted = None
-    return kept, repaired
+    return repaired
 
 
 def reject_joint_outliers(positions: F64, measured: BOOL, tolerance: float = 0.15
@@ -872,29 +1015,35 @@ def _interpolate_frames(positions: F64, joint: int, bad: BOOL, frames: NDArray[n
         counts[JOINTS[joint]] = counts.get(JOINTS[joint], 0) + int(bad.sum())
 
 
+def _cluster_key(role: str) -> str:
+    """The rigid cluster a functional set's role belongs to (``THIGH_2_l`` -> ``THIGH_l``)."""
+    parts = role.split("_")
+    return parts[0] + ("_" + parts[2] if len(parts) > 2 else "")
+
+
 def _clusters(mmap: MarkerMap) -> list[list[int]]:
     """Marker indices of each rigid cluster of a functional marker set (by role prefix)."""
     groups: dict[str, list[int]] = {}
     for role, i in mmap.marker.items():
-        parts = role.split("_")
-        key = parts[0] + ("_" + parts[2] if len(parts) > 2 else "")
-        groups.setdefault(key, []).append(i)
+        groups.setdefault(_cluster_key(role), []).append(i)
     return [g for g in groups.values() if len(g) >= 3]
 
 
 def _joint_centres(mk: _Markers, mmap: MarkerMap, present: list[str]
-                   ) -> tuple[_Build, slice, list[list[int]]]:
-    """Joint centres and frames of every frame kept, with :func:`trust_root`'s kept slice and
-    repaired runs; absent parts are filled on the trusted pelvis frame."""
+                   ) -> tuple[_Build, slice, slice, list[list[int]]]:
+    """Joint centres and frames of every frame kept, with :func:`kept_frames`' slices (the
+    pelvis' span, the frames kept) and :func:`trust_root`'s repaired runs; absent parts are
+    filled on the trusted pelvis frame."""
     n = mk.points.shape[0]
     build = _Build(np.zeros((n, N_JOINTS, 3)), np.zeros(N_JOINTS, dtype=bool))
     if mmap.preset.method == "functional":
         _functional_lower_body(mk, present, build)
     else:
         _landmark_body(mk, present, build)
-    kept, repaired = trust_root(build)
+    root, kept = kept_frames(build.root_trusted, parts_placed(mk, mmap, present), n)
+    repaired = trust_root(build, kept)
     _fill_absent(build, present)
-    return build, kept, repaired
+    return build, root, kept, repaired
 
 
 def _set(build: _Build, joint: str, value: F64, how: str) -> None:
@@ -930,17 +1079,56 @@ def _landmark_pelvis(mk: _Markers, build: _Build) -> None:
     front = _mid(asis_l, asis_r)
     pelvis2world = frame_from_axes(asis_l - asis_r, front - back, 1, 0)
     roles = ["ASIS_l", "ASIS_r"] + (["PSIS_l", "PSIS_r"] if mk.has("PSIS_l", "PSIS_r") else ["SACRUM"])
-    build.root_trusted = np.asarray(~mk.long[:, [mk.found[r] for r in roles]].any(axis=1))
+    build.root_trusted = np.asarray(~mk.unreliable[:, [mk.found[r] for r in roles]].any(axis=1))
     width = float(np.median(np.linalg.norm(asis_l - asis_r, axis=-1)))
     depth = float(np.median(np.linalg.norm(front - back, axis=-1)))
     harrington = f"Harrington 2007 (PW {width * 1000:.0f} mm, PD {depth * 1000:.0f} mm, ASIS + {back_name})"
     for s, sign in (("l", 1.0), ("r", -1.0)):
-        local = np.array([-0.24 * depth - 0.0099, sign * (0.33 * width + 0.0073),
-                          -0.30 * width - 0.0109])
-        _set(build, f"hip_{s}", front + pelvis2world @ local, harrington)
+        davis = davis_hip(mk.anthropometry, s, mk.marker_radius(), width)
+        if davis is not None:
+            local, how = davis
+            local[1] *= sign
+        else:
+            local = np.array([-0.24 * depth - 0.0099, sign * (0.33 * width + 0.0073),
+                              -0.30 * width - 0.0109])
+            how = harrington
+        _set(build, f"hip_{s}", front + pelvis2world @ local, how)
     _set(build, "pelvis", _mid(build.positions[:, J["hip_l"]], build.positions[:, J["hip_r"]]),
          "midpoint of the hip centres")
     build.pelvis2world = pelvis2world
+
+
+#: Davis et al. 1991 (Hum Mov Sci 10:575): the hip lies C = 0.115 L - 15.3 mm (L the leg
+#: length) from the ASIS along a line at THETA to the frontal plane and BETA to the transverse
+#: one, set back by the ASIS-trochanter distance plus a marker radius. Without a measured
+#: distance the model takes 0.1288 L - 48.56 mm, which Plug-in Gait writes back to the file.
+DAVIS_THETA_DEG, DAVIS_BETA_DEG = 28.4, 18.0
+DAVIS_TROCHANTER_PER_LEG, DAVIS_TROCHANTER_M = 0.1288, -0.04856
+
+
+def davis_hip(anthropometry: dict[str, float], side: str, marker_radius_m: float,
+              asis_width_m: float) -> tuple[F64, str] | None:
+    """The hip of ``side`` in the pelvis frame (x forward, y the lateral distance, z up; from
+    the mid-ASIS; (3,) metres) by Davis 1991 from the file's measured leg length and
+    ASIS-trochanter distance, and its inter-ASIS distance (else the markers', ``asis_width_m``),
+    with how it was placed; None unless the file holds both and the distance is a measurement,
+    not the regression on the leg. A measurement of this subject (BTS's Davis protocol stores
+    it as the pelvis depth) beats a population regression; without one, Harrington 2007
+    validates better than Davis's own regression."""
+    leg = anthropometry.get(f"leg_length_{side}")
+    trochanter = anthropometry.get(f"asis_trochanter_{side}")
+    asis = anthropometry.get("asis_distance", asis_width_m)
+    if leg is None or trochanter is None \
+            or abs(trochanter - (DAVIS_TROCHANTER_PER_LEG * leg + DAVIS_TROCHANTER_M)) < 0.0005:
+        return None
+    c = 0.115 * leg - 0.0153
+    theta, beta = math.radians(DAVIS_THETA_DEG), math.radians(DAVIS_BETA_DEG)
+    back = trochanter + marker_radius_m
+    local = np.array([c * math.cos(theta) * math.sin(beta) - back * math.cos(beta),
+                      0.5 * asis - c * math.sin(theta),
+                      -c * math.cos(theta) * math.cos(beta) - back * math.sin(beta)])
+    return local, (f"Davis 1991 with the file's leg length {leg * 1000:.0f} mm, ASIS-trochanter "
+                   f"distance {trochanter * 1000:.0f} mm and ASIS distance {asis * 1000:.0f} mm")
 
 
 def _pelvis_under_trunk(mk: _Markers, present: list[str], build: _Build) -> None:
@@ -954,7 +1142,7 @@ def _pelvis_under_trunk(mk: _Markers, present: list[str], build: _Build) -> None
         axis = np.broadcast_to(np.array([0.0, 0.0, 1.0]), neck.shape)
     thorax2world = frame_from_axes(axis, mk("IJ") - mk("C7"), 2, 0)
     roles = ["C7", "IJ"] + (["T10", "PX"] if mk.has("T10", "PX") else [])
-    build.root_trusted = np.asarray(~mk.long[:, [mk.found[r] for r in roles]].any(axis=1))
+    build.root_trusted = np.asarray(~mk.unreliable[:, [mk.found[r] for r in roles]].any(axis=1))
     if "arm_l" in present and "arm_r" in present:
         width = float(np.median(np.linalg.norm(mk("ACROMION_l") - mk("ACROMION_r"), axis=-1)))
         leg = width / (2 * ADULT_PROPORTIONS["clavicle"]) * _LEG_P
@@ -1063,10 +1251,10 @@ def _knee_and_ankle(mk: _Markers, build: _Build, s: str, leg_guess: float) -> No
     hip = build.positions[:, J[f"hip_{s}"]]
     towards_other_hip = build.positions[:, J[f"hip_{'r' if s == 'l' else 'l'}"]] - hip
     knee_lat, ankle_lat = mk(f"KNEE_LAT_{s}"), mk(f"ANKLE_LAT_{s}")
-    d_knee = 0.5 * JOINT_WIDTH_PER_LEG["knee"] * leg_guess + MARKER_RADIUS_M
-    d_ankle = 0.5 * JOINT_WIDTH_PER_LEG["ankle"] * leg_guess + MARKER_RADIUS_M
+    d_knee = 0.5 * JOINT_WIDTH_PER_LEG["knee"] * leg_guess + mk.marker_radius()
+    d_ankle = 0.5 * JOINT_WIDTH_PER_LEG["ankle"] * leg_guess + mk.marker_radius()
     roles = [f"{r}_{s}" for r in ("KNEE_LAT", "ANKLE_LAT", "THIGH") if f"{r}_{s}" in mk.found]
-    use: BOOL = np.asarray(~mk.long[:, [mk.found[r] for r in roles]].any(axis=1))
+    use: BOOL = np.asarray(~mk.unreliable[:, [mk.found[r] for r in roles]].any(axis=1))
     if build.root_trusted is not None:
         use &= build.root_trusted
     if not use.any():  # nothing reliable: trust_root refuses the file or the gaps are reported
@@ -1123,7 +1311,7 @@ def _functional_lower_body(mk: _Markers, present: list[str], build: _Build) -> N
     def cluster(prefix: str, side: str | None, count: int) -> tuple[F64, F64, BOOL]:
         roles = [f"{prefix}_{k}" + (f"_{side}" if side else "") for k in range(1, count + 1)]
         idx = [mk.found[r] for r in roles]
-        weights = (~mk.long[:, idx]).astype(np.float64)
+        weights = (~mk.unreliable[:, idx]).astype(np.float64)
         rot, origin = cluster_poses(mk.points[:, idx], weights)
         return rot, origin, weights.sum(axis=1) >= 3
 
@@ -1238,6 +1426,7 @@ __all__ = [
     "canonical_clip_c3d",
     "chord_centre",
     "cluster_poses",
+    "davis_hip",
     "fill_gaps",
     "import_c3d",
     "read_c3d",

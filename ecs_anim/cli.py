@@ -194,7 +194,8 @@ def cmd_import(args: argparse.Namespace) -> int:
                 if gaps["long_gap_frames"]:
                     spans = ", ".join(f"{a}-{b}" for a, b in gaps["long_gap_frames"])
                     message += (f"; frames {spans} had gaps longer than {gaps['max_gap_frames']} "
-                                "frames (interpolated, unreliable)")
+                                "frames or markers not yet or no longer seen (interpolated or "
+                                "held, unreliable)")
             if args.trim is not None:
                 message += f"; --trim kept frames from frame {motion.info.get('first_file_frame', 0)} of the file"
             for key, what in (("root_frames_trimmed", "trimmed (of the file's frames)"),
@@ -202,6 +203,8 @@ def cmd_import(args: argparse.Namespace) -> int:
                 if motion.info.get(key):
                     spans = ", ".join(f"{a}-{b}" for a, b in motion.info[key])
                     message += f"; frames {spans} {what}: the pelvis markers could not place the pelvis"
+            for line in motion.info.get("parts_frames_trimmed") or []:
+                message += f"; {line}"
             if show_bar:
                 sys.stderr.write("\r" + " " * 80 + "\r")
             print(message)
@@ -322,9 +325,11 @@ def cmd_info(args: argparse.Namespace) -> int:
         if spans and isinstance(spans, list):
             shown = ", ".join(f"{a}-{b}" for a, b in spans)
             print(f"  {what.format(shown)} (the pelvis markers could not place the pelvis)")
+    for line in info.get("parts_frames_trimmed") or []:
+        print(f"  trimmed    {line}")
     if info.get("first_file_frame"):
         print(f"  starts at  frame {info['first_file_frame']} of the file (--trim, or frames the "
-              "pelvis markers could not place)")
+              "markers could not place)")
     for why in (info.get("parts_not_computed") or {}).values():
         print(f"  {why}")
     contacts_info = info.get("contacts") or {}

@@ -323,6 +323,31 @@ class _Compiled:
     #: (event kind, entity) -> the triggers waiting for such an event (clips, contacts, removal)
     listeners: dict[tuple[str, int], list[int]] = field(default_factory=dict)
 
+    def listened(self, kind: str) -> I64:
+        """The entities some trigger waits on for events of ``kind`` (sorted)."""
+        return np.unique(np.array([e for k, e in self.listeners if k == kind], np.int64))
+
+
+@dataclass
+class _StoreEdges:
+    """The clip and contact events of one tick, kept as arrays until someone asks for them
+    (a crowd makes hundreds a tick, and usually no trigger waits on most): per kind, the store
+    rows, their entities and each one's detail as an index into ``detail_names``; ``names``
+    the characters' names by store row then; ``at`` where they go in the tick's event list."""
+
+    edges: list[tuple[str, I64, I64, list[str]]]
+    entity: I64
+    names: list[str]
+    time_s: float
+    tick: int
+    at: int
+
+    def events(self) -> list[Event]:
+        return [Event(kind, int(self.entity[r]), self.names[r], self.time_s, self.tick,
+                      detail_names[d])
+                for kind, rows, detail, detail_names in self.edges
+                for r, d in zip(rows.tolist(), detail.tolist(), strict=True)]
+
 
 class Reactions:
     """A simulation's triggers, moving targets and the events of its last tick.
@@ -343,6 +368,10 @@ class Reactions:
         self._pending: list[tuple[float, int]] = []  # (due time, trigger) delayed actions
         self._events: list[Event] = []  # of the tick in progress
         self._last: list[Event] = []  # of the last tick stepped
+        # the store edges of the tick in progress / of the last one when no trigger waited
+        # on any (made into events only when asked for)
+        self._edges_kept: _StoreEdges | None = None
+        self._last_edges: _StoreEdges | None = None
         self._fired_this_tick: set[int] = set()
         self._names_cache: list[str] = []
         self._names_version = -1
@@ -366,7 +395,10 @@ class Reactions:
 
     @property
     def events(self) -> list[Event]:
-        return list(self._last)
+        kept = self._last_edges
+        if kept is None:
+            return list(self._last)
+        return self._last[:kept.at] + kept.events() + self._last[kept.at:]
 
     # --- the tick -------------------------------------------------------------------------------
 
@@ -395,18 +427,24 @@ class Reactions:
         self._grow(int(st.entity.max()) + 1 if st.n else 0)
         now, tick = sim.posture_time_s, sim.tick - 1
         edges = self._store_edges(sim)
-        names = self._names(sim) if any(rows.size for _, rows, _ in edges) else []
-        # All made before any is emitted: an action may remove a character (and shift the rows).
-        found = [Event(kind, int(st.entity[r]), names[r], now, tick, d)
-                 for kind, rows, detail in edges for r, d in zip(rows, detail, strict=True)]
-        for event in found:
-            self._emit(sim, event)
         c = self._compile()
+        if any(rows.size for _, rows, _, _ in edges):
+            kept = _StoreEdges(edges, st.entity.copy(), self._names(sim), now, tick,
+                               len(self._events))
+            if any(np.isin(kept.entity[rows], c.listened(kind)).any()
+                   for kind, rows, _, _ in edges):
+                # All made before any is emitted: an action may remove a character (and shift
+                # the rows).
+                for event in kept.events():
+                    self._emit(sim, event)
+            else:  # nothing to fire: the events are made if someone asks for them
+                self._edges_kept = kept
         if c.near.size:
             self._edges(sim, c.near, self._near_holds(sim, c), "near")
         if c.reached.size:
             self._edges(sim, c.reached, self._reached_holds(sim, c), "reached")
         self._last, self._events = self._events, []
+        self._last_edges, self._edges_kept = self._edges_kept, None
         self._fired_this_tick = set()
 
     def character_removed(self, sim: Simulation, entity: int, name: str) -> None:
@@ -441,9 +479,10 @@ class Reactions:
         self._seen_ended = np.concatenate([self._seen_ended, np.zeros(extra, bool)])
         self._seen_contact = np.concatenate([self._seen_contact, np.zeros((extra, 2))])
 
-    def _store_edges(self, sim: Simulation) -> list[tuple[str, I64, list[str]]]:
-        """(kind, store rows, details) of the clip and contact edges of the tick just stepped,
-        from the store against the last tick's values (all characters as arrays)."""
+    def _store_edges(self, sim: Simulation) -> list[tuple[str, I64, I64, list[str]]]:
+        """(kind, store rows, details, detail names) of the clip and contact edges of the tick
+        just stepped, from the store against the last tick's values (all characters as
+        arrays); each event's detail is ``detail_names[detail]``."""
         st, bank = sim.store, sim.bank
         if st.n == 0:
             return []
@@ -455,17 +494,17 @@ class Reactions:
         replaced = new_clip & (seen_clip >= 0) & ~self._seen_ended[e]
         ended_here = ~new_clip & at_end & ~self._seen_ended[e]
         clip_names = list(sim.bank.names)
-        out: list[tuple[str, I64, list[str]]] = []
+        out: list[tuple[str, I64, I64, list[str]]] = []
         rows = np.flatnonzero(replaced)
-        out.append(("clip_ended", rows, [clip_names[int(seen_clip[r])] for r in rows]))
+        out.append(("clip_ended", rows, seen_clip[rows], clip_names))
         rows = np.flatnonzero(ended_here)
-        out.append(("clip_ended", rows, [clip_names[int(st.clip[r])] for r in rows]))
+        out.append(("clip_ended", rows, st.clip[rows], clip_names))
         rows = np.flatnonzero(new_clip)
-        out.append(("clip_started", rows, [clip_names[int(st.clip[r])] for r in rows]))
+        out.append(("clip_started", rows, st.clip[rows], clip_names))
         began = (st.contact_weight >= CONTACT_BEGAN_WEIGHT) & \
             (self._seen_contact[e] < CONTACT_BEGAN_WEIGHT)
         rows, feet = np.nonzero(began)
-        out.append(("contact_began", rows, [FEET[f] for f in feet]))
+        out.append(("contact_began", rows, feet, list(FEET)))
         self._seen_ended[e] = ~new_clip & (self._seen_ended[e] | at_end)
         self._seen_clip[e], self._seen_time[e] = st.clip, st.clip_time_s
         self._seen_contact[e] = st.contact_weight

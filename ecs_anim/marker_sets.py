@@ -80,6 +80,8 @@ class MarkerSet:
     groups: dict[str, tuple[tuple[str, ...], tuple[tuple[str, ...], ...]]]
     signature: tuple[str, ...]
     method: str = "landmarks"  # or "functional"
+    #: body part -> roles that refine it where marked (not needed to compute it).
+    refining: dict[str, tuple[str, ...]] = field(default_factory=dict)
 
 
 def _sided(table: dict[str, tuple[str, ...]]) -> dict[str, tuple[str, ...]]:
@@ -200,6 +202,14 @@ _LANDMARK_GROUPS = _groups_sided({
                 (("WRIST_RAD_{s}", "WRIST_ULN_{s}"), ("WRIST_{s}",))),
 })
 
+#: Roles that refine a part where they are marked, though it is computed without them: the
+#: thorax axis (T10, PX), an arm's upper-arm wand, medial epicondyle and hand end.
+_LANDMARK_REFINING: dict[str, tuple[str, ...]] = {
+    "trunk": ("T10", "PX"),
+    **{f"arm_{s}": (f"UPPER_ARM_{s}", f"ELBOW_MED_{s}", f"HAND_{s}", f"MC2_{s}", f"MC5_{s}")
+       for s in "lr"},
+}
+
 _CLUSTER_GROUPS = _groups_sided({
     "pelvis": (tuple(f"PELVIS_{k}" for k in range(1, 5)), ()),
     "leg_{s}": (tuple(f"{seg}_{k}_{{s}}" for seg, n in (("THIGH", 4), ("SHANK", 4), ("FOOT", 3))
@@ -211,7 +221,8 @@ PRESETS: dict[str, MarkerSet] = {
         MarkerSet("plug_in_gait", "Vicon Plug-in Gait, full or lower body (LASI, LKNE, LTHI, "
                   "LANK, LTIB, LTOE, C7, CLAV, LSHO, LELB, LWRA, LFHD, ...)",
                   _PIG_ROLES, _LANDMARK_GROUPS,
-                  ("ASIS_l", "ASIS_r", "KNEE_LAT_l", "ANKLE_LAT_l", "TOE_l")),
+                  ("ASIS_l", "ASIS_r", "KNEE_LAT_l", "ANKLE_LAT_l", "TOE_l"),
+                  refining=_LANDMARK_REFINING),
         MarkerSet("plug_in_gait_lower", "Vicon Plug-in Gait lower body (pelvis and legs only; "
                   "upper-body markers are ignored)",
                   _PIG_ROLES, {g: v for g, v in _LANDMARK_GROUPS.items()
@@ -221,11 +232,13 @@ PRESETS: dict[str, MarkerSet] = {
                   "and Codamotion write it (ASIS, SACR/VSAC, THI/bar 1, KNE/knee 1, TIB/SHA/bar 2, "
                   "ANK/mall, TOE/met, SHO, ELB, WRI)",
                   _HH_ROLES, _LANDMARK_GROUPS,
-                  ("ASIS_l", "ASIS_r", "KNEE_LAT_l", "ANKLE_LAT_l", "TOE_l")),
+                  ("ASIS_l", "ASIS_r", "KNEE_LAT_l", "ANKLE_LAT_l", "TOE_l"),
+                  refining=_LANDMARK_REFINING),
         MarkerSet("isb_anatomical", "anatomical landmarks, ISB/CAST names (ASIS, PSIS, FLE/FME, "
                   "FAL/TAM, FM1/FM5, AC, HLE/HME, RSP/USP, IJ, PX, C7)",
                   _ISB_ROLES, _LANDMARK_GROUPS,
-                  ("ASIS_l", "ASIS_r", "KNEE_LAT_l", "KNEE_MED_l", "ANKLE_LAT_l", "ANKLE_MED_l")),
+                  ("ASIS_l", "ASIS_r", "KNEE_LAT_l", "KNEE_MED_l", "ANKLE_LAT_l", "ANKLE_MED_l"),
+                  refining=_LANDMARK_REFINING),
         MarkerSet("cluster_gait", "technical clusters, pelvis and legs (PV1-4, RTH1-4, RSK1-4, "
                   "RFT1-3; c3d.org Eb015pi): functional joint centres",
                   _CLUSTER_ROLES, _CLUSTER_GROUPS,
@@ -347,6 +360,13 @@ def match_markers(labels: list[str], spec: str | None = None,
     same_label = {role: same for role, i in found.items()
                   if len(same := [j for j in mine if label_key(labels[j]) == label_key(labels[i])]) > 1}
     return MarkerMap(preset, found, subject, ignored, how, same_label=same_label)
+
+
+def part_roles(preset: MarkerSet, group: str) -> tuple[str, ...]:
+    """Every role that places body part ``group``: required, alternatives and refining."""
+    required, alternatives = preset.groups[group]
+    return tuple(dict.fromkeys([*required, *(r for alt in alternatives for r in alt),
+                                *preset.refining.get(group, ())]))
 
 
 def group_status(mmap: MarkerMap) -> tuple[list[str], list[str], dict[str, list[str]]]:

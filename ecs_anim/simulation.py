@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import kernels
+from .allocator import keep_freed_memory
 from .body_change import mass_tables
 from .body_points import body_point
 from .components import (
@@ -82,6 +83,7 @@ class Simulation(SteeringCalls):
                  rotations: bool = False, solver_settings: SolverSettings = DEFAULT_SETTINGS):
         from .systems import HEADLESS, SCHEDULE
 
+        keep_freed_memory()  # the tick's arrays reuse memory instead of faulting it in anew
         if not motions:
             raise EcsAnimError("a simulation needs at least one motion")
         for name, motion in motions.items():

@@ -24,7 +24,8 @@ here (they are planted after the loop whatever the budget).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import functools
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -157,7 +158,9 @@ class SolverReport:
     tick); expected_ms / cut_ms: the tick's cost by that model before and after the cut (NaN
     without a model); priority_iterations: each cut priority and the iterations its goals kept;
     cut_characters: the entities whose own iterations were cut (to one; furthest from the focus
-    first); errors: per priority of the active constraints, :class:`PriorityError`."""
+    first); errors: per priority of the active constraints, :class:`PriorityError` (made from
+    ``constraint_errors`` (priority, error, orientation, cut) (m,) each, this tick's table
+    columns: :func:`errors_by_priority`, when first asked for)."""
 
     tick: int
     characters: int
@@ -168,7 +171,13 @@ class SolverReport:
     cut_ms: float
     priority_iterations: dict[float, int]
     cut_characters: tuple[int, ...]
-    errors: dict[float, PriorityError]
+    constraint_errors: tuple[F64, F64, NDArray[np.bool_], NDArray[np.bool_]] = field(
+        repr=False, compare=False)
+
+    @functools.cached_property
+    def errors(self) -> dict[float, PriorityError]:
+        """Per priority of the active constraints, :class:`PriorityError`."""
+        return errors_by_priority(*self.constraint_errors)
 
     @property
     def cut(self) -> bool:

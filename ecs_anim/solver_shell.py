@@ -31,6 +31,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -818,8 +819,21 @@ class TickResult:
     solve_s: float = 0.0
 
 
-Solve = Callable[..., tuple[NormalizedPoses, I64, DecodedPose]]
-Centres = Callable[[F64, F64, F64], F64]
+class TickSteps(NamedTuple):
+    """The computations one tick of :func:`constrain` is made of, each a function of the
+    signature of its numpy reference here: ``goals`` (:func:`tick_goals`), ``solve``
+    (:func:`solve`), ``errors`` (:func:`constraint_errors`) and ``centres``
+    (:func:`ecs_anim.morphology.centres_of_mass`). :data:`NUMPY_STEPS` are those references;
+    ConstraintSolve runs the compiled ones (:mod:`ecs_anim.kernels.goals`,
+    :func:`ecs_anim.kernels.solve.solve`)."""
+
+    goals: Callable[..., TickGoals | None]
+    solve: Callable[..., tuple[NormalizedPoses, I64, DecodedPose]]
+    errors: Callable[[ConstraintTable, I64, DecodedPose, F64], F64]
+    centres: Callable[[F64, F64, F64], F64]
+
+
+NUMPY_STEPS = TickSteps(tick_goals, solve, constraint_errors, centres_of_mass)
 
 
 def focus_distances(positions: F64, focus_in_world: tuple[float, float, float] | None) -> F64:
@@ -835,21 +849,20 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
               unconstrained: DecodedPose | None,
               lengths: F64, contact_weight: F64, com_control: NDArray[np.bool_], com_target_xy: F64,
               masses: F64, com_fraction: F64, previous: DecodedPose | None,
-              settings: SolverSettings, max_release_m: float, solve: Solve,
-              centres: Centres = centres_of_mass, model: SolverCostModel | None = None,
+              settings: SolverSettings, max_release_m: float, steps: TickSteps,
+              model: SolverCostModel | None = None,
               expected_iterations: I64 | None = None) -> TickResult:
     """One tick of ConstraintSolve's policy over every character (n rows): the targets, the
     constraints switched off (a target not finite), the desired centre of mass (the motion's own,
-    or ``com_target_xy`` (n, 2) where finite), the goals, the frame budget's cut, the ``solve``
-    (the compiled :func:`ecs_anim.kernels.solve.solve` or the numpy :func:`solve`, same
-    arguments) of the characters with an active constraint, and every active constraint's
-    error on the result.
+    or ``com_target_xy`` (n, 2) where finite), the goals, the frame budget's cut, the solve of
+    the characters with an active constraint, and every active constraint's error on the
+    result; ``steps`` computes the goals, the solve, the errors and the centres of mass (the
+    numpy references, :data:`NUMPY_STEPS`, or the compiled ones).
 
-    ``weight`` (m,) this tick's activations; ``unconstrained`` the decoded ``poses`` (None only
-    when no weight is above 0), this call's own: its solved rows are overwritten with the
-    result; masses and com_fraction (n, S); ``previous`` the last tick's posture (None on the
-    first); ``centres`` the centres of mass (:func:`ecs_anim.morphology.centres_of_mass` or a
-    compiled one of the same signature). With ``settings.budget_ms`` and a ``model`` (the
+    ``weight`` (m,) this tick's activations; ``poses`` (n,) this tick's, solved in place when
+    every character is solved; ``unconstrained`` the decoded ``poses`` (None only when no weight
+    is above 0), this call's own: its solved rows are overwritten with the result; masses and com_fraction (n, S); ``previous`` the last tick's posture (None on the
+    first). With ``settings.budget_ms`` and a ``model`` (the
     settings' own ``cost_model`` first), :func:`ecs_anim.solver_budget.cut_to_budget` decides
     the iterations; ``expected_iterations`` (n,) what each character took last tick (0: not
     solved: the settings' ``iterations``)."""
@@ -867,14 +880,14 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
         weight = weight.copy()
         weight[broken] = 0.0
         targets[broken] = 0.0
-    own = centres(unconstrained.positions, masses, com_fraction)
+    own = steps.centres(unconstrained.positions, masses, com_fraction)
     given = np.isfinite(com_target_xy).all(axis=1)
     own[given, :2] = com_target_xy[given]
-    goals = tick_goals(table, weight, targets, unconstrained, contact_weight, com_control, own,
-                       previous, max_release_m)
+    goals = steps.goals(table, weight, targets, unconstrained, contact_weight, com_control, own,
+                        previous, max_release_m)
     active = np.flatnonzero(weight > 0)
     if goals is None:  # only areas the motion already keeps
-        error[active] = constraint_errors(table, active, unconstrained, targets)
+        error[active] = steps.errors(table, active, unconstrained, targets)
         return TickResult(weight, broken, error, held)
     rows = goals.rows
     every_row = rows.size == lengths.shape[0]
@@ -888,12 +901,17 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
                             focus_distances(unconstrained.positions[rows], settings.focus_in_world),
                             settings.budget_ms, model, settings.iterations)
         goals.goal_iterations, goals.row_iterations = cut.goal_iterations, cut.row_iterations
-    # The solve works on copies of its rows (on the decoded poses themselves when every
-    # character is solved: they are this call's own).
+    # The solve works on copies of its rows; when every character is solved, on the poses and
+    # the decoded poses themselves (the store's pose of this tick, which the result replaces
+    # anyway, and this call's own), and on the bodies as they are (it only reads them).
     start = time.perf_counter()
-    solved_poses, iterations, solved = solve(
-        poses.take(rows), lengths[rows], goals, masses[rows], com_fraction[rows], settings,
-        unconstrained if every_row else unconstrained.take(rows), True)
+    if every_row:
+        solved_poses, iterations, solved = steps.solve(
+            poses, lengths, goals, masses, com_fraction, settings, unconstrained, True)
+    else:
+        solved_poses, iterations, solved = steps.solve(
+            poses.take(rows), lengths[rows], goals, masses[rows], com_fraction[rows], settings,
+            unconstrained.take(rows), True)
     solve_s = time.perf_counter() - start
     user = goals.table_index >= 0
     held[goals.table_index[user]] = goals.held[user]
@@ -907,7 +925,7 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
     on_own_body = (table.target_row == table.owner) & (table.target_kind != TARGET_WORLD)
     if on_own_body.any():
         targets = np.where(on_own_body[:, None], target_points(table, result, previous), targets)
-    error[active] = constraint_errors(table, active, result, targets)
+    error[active] = steps.errors(table, active, result, targets)
     return TickResult(weight, broken, error, held, goals, rows, solved_poses, solved, iterations,
                       cut, solve_s)
 

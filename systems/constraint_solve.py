@@ -1,8 +1,9 @@
 """ConstraintSolve: every active constraint of every character, by priority (paper §9).
 
 Gathers the store's arrays, calls the solver's tick (:func:`ecs_anim.solver_shell.constrain`:
-targets, goals, the compiled solve :func:`ecs_anim.kernels.solve.solve` of the characters with
-an active constraint, each constraint's error on the result) and writes the results back. The
+targets, the goals, the solve of the characters with an active constraint, each constraint's
+error on the result, all compiled: :mod:`ecs_anim.kernels.goals`,
+:func:`ecs_anim.kernels.solve.solve`) and writes the results back. The
 activation weights run on simulation time, or on the clip time of constraints stored with a
 motion; a point on another character is read from its posture of the previous tick (so every
 character sees the same world whatever their order), a point on the same character from this
@@ -29,9 +30,11 @@ from ecs_anim.constraint_table import KIND_ORIENTATION
 from ecs_anim.kernels import over_chunks
 from ecs_anim.kernels.com import centres_of_mass, segment_joints
 from ecs_anim.kernels.decode import decode
-from ecs_anim.kernels.solve import solve as solve  # re-exported: tests patch it here
-from ecs_anim.solver_budget import SolverCostModel, SolverReport, errors_by_priority
-from ecs_anim.solver_shell import TickResult, constrain, scatter
+from ecs_anim.kernels.goals import constraint_errors as constraint_errors  # tests patch these
+from ecs_anim.kernels.goals import tick_goals as tick_goals
+from ecs_anim.kernels.solve import solve as solve
+from ecs_anim.solver_budget import SolverCostModel, SolverReport
+from ecs_anim.solver_shell import TickResult, TickSteps, constrain, scatter
 from ecs_anim.system_base import System
 
 if TYPE_CHECKING:
@@ -84,8 +87,9 @@ class ConstraintSolve(System):
         result = constrain(table, weight, st.poses, unconstrained, st.lengths,
                            st.contact_weight, st.com_control, st.com_target_xy, st.segment_mass_kg,
                            st.segment_com_fraction, st.posture, settings,
-                           settings.release_speed_m_s * sim.dt, solve, _centres, self._model,
-                           expected)
+                           settings.release_speed_m_s * sim.dt,
+                           TickSteps(tick_goals, solve, constraint_errors, _centres),
+                           self._model, expected)
         if result.broken.size:
             sim.report_disabled(result.broken)
             table.enabled[result.broken] = False
@@ -133,5 +137,5 @@ class ConstraintSolve(System):
             cut_ms=float("nan") if cut is None else cut.cut_ms,
             priority_iterations={} if cut is None else dict(cut.priority_iterations),
             cut_characters=cut_entities,
-            errors=errors_by_priority(table.priority, table.error,
-                                      table.kind == KIND_ORIENTATION, cut_constraint))
+            constraint_errors=(table.priority.copy(), result.error,
+                               table.kind == KIND_ORIENTATION, cut_constraint))

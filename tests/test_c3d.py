@@ -81,19 +81,19 @@ def _reliable(clip, extra) -> np.ndarray:
 
 # --- kernels -----------------------------------------------------------------------------------
 
-def test_fill_gaps_interpolates_short_and_reports_long():
+def test_fill_gaps_interpolates_short_and_reports_long_and_held_ends():
     f = np.arange(100, dtype=float)
     points = np.stack([np.stack([f, 2 * f, np.full(100, 5.0)], axis=-1)] * 2, axis=1)
     valid = np.ones((100, 2), dtype=bool)
     valid[10:15, 0] = False  # 5 frames: short
     valid[40:70, 1] = False  # 30 frames: long
-    valid[:3, 1] = False  # at the start: held
-    filled, long = fill_gaps(points * np.where(valid, 1.0, 0.0)[..., None], valid, max_gap=10)
+    valid[:3, 1] = False  # at the start: held, so unreliable however short
+    filled, unreliable = fill_gaps(points * np.where(valid, 1.0, 0.0)[..., None], valid, max_gap=10)
     np.testing.assert_allclose(filled[10:15, 0], points[10:15, 0])  # linear motion comes back
     np.testing.assert_allclose(filled[40:70, 1], points[40:70, 1])
     np.testing.assert_allclose(filled[:3, 1], np.repeat(points[3:4, 1], 3, axis=0))
-    assert not long[:, 0].any()
-    assert long[40:70, 1].all() and long[:, 1].sum() == 30
+    assert not unreliable[:, 0].any()
+    assert unreliable[40:70, 1].all() and unreliable[:3, 1].all() and unreliable[:, 1].sum() == 33
     assert np.all(np.isfinite(filled))
 
 
@@ -223,6 +223,39 @@ def _tennis_markers() -> tuple[list[str], np.ndarray, float]:
     raw = read_c3d(TENNIS)
     labels = [lab.split(":")[-1] for lab in raw.labels]
     return labels, raw.positions[:300], raw.rate
+
+
+def test_a_part_missing_at_the_ends_has_those_frames_trimmed_and_said(tmp_path):
+    """A marker held before it is first seen, or after it is last seen, is no measurement: Vicon
+    Matt's RANK, missing in the first 7 frames, stood still while the knee walked on (the shank
+    0.175 m of 0.40). Such frames at the ends go, with one line each naming the part and its
+    markers; where that would keep less than half the trial, they stay and are reported."""
+    require_mocap()
+    labels, positions, rate = _tennis_markers()
+    valid = np.ones(positions.shape[:2], dtype=bool)
+    valid[:6, labels.index("RANK")] = False
+    valid[-4:, labels.index("LWRA")] = False
+    clip, extra = canonical_clip_c3d(read_c3d(write_c3d(tmp_path / "ends.c3d", labels, positions,
+                                                        valid, rate)))
+    assert len(clip.positions) == 290 and extra["first_file_frame"] == 6
+    assert extra["root_frames_trimmed"] == []
+    assert extra["parts_frames_trimmed"] == [
+        "frames 0-5 of the file trimmed: the markers of the right leg (RANK) are unseen or in a "
+        "long gap there",
+        "frames 296-299 of the file trimmed: the markers of the left arm (LWRA) are unseen or in a "
+        "long gap there"]
+    whole, _ = canonical_clip_c3d(read_c3d(write_c3d(tmp_path / "whole.c3d", labels, positions,
+                                                     None, rate)))
+    shank = np.linalg.norm(clip.positions[:, J["ankle_r"]] - clip.positions[:, J["knee_r"]], axis=-1)
+    shank_whole = np.linalg.norm(whole.positions[6:296, J["ankle_r"]] - whole.positions[6:296, J["knee_r"]],
+                                 axis=-1)
+    assert np.abs(shank - shank_whole).max() < 0.002
+    valid[:, :] = True
+    valid[:200, labels.index("RTOE")] = False  # trimming would keep a third of the trial
+    clip, extra = canonical_clip_c3d(read_c3d(write_c3d(tmp_path / "toe.c3d", labels, positions,
+                                                        valid, rate)))
+    assert len(clip.positions) == 300 and extra["parts_frames_trimmed"] == []
+    assert extra["gaps"]["long_gap_frames"] == [[0, 199]]
 
 
 def test_lower_body_subset_with_prefix_other_objects_and_gaps(tmp_path):

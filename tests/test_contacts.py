@@ -275,7 +275,7 @@ def test_the_readme_contacts_examples_run(tmp_path, monkeypatch, capsys):
     for command in commands:
         assert main(command.replace("out/", f"{tmp_path}/").split()) == 0
     out = capsys.readouterr().out
-    assert "(from the gait events)" in out and "event         1.041 s  L foot strike" in out
+    assert "(from the gait events)" in out and "event         0.924 s  L foot strike" in out
     motion = load_nmo(tmp_path / "gait" / "bandai_walk.nmo")
     assert motion.info["contacts"]["speed_threshold_mps"] == [0.3, 0.3]
     assert "treadmill" not in motion.info  # over ground: --no-treadmill changes nothing

@@ -158,6 +158,30 @@ def test_clips_starting_and_ending_and_contacts_beginning_are_events(clips):
     assert began == expected and len(began) >= 4
 
 
+def test_the_events_are_the_same_whether_a_trigger_waits_on_them_or_none_does(clips):
+    """With no trigger waiting, a tick's clip and contact events are kept as arrays and made
+    only when asked for; they are the same events, in the same order, as when a trigger waits
+    on them (and they are made and emitted at once)."""
+    def run(watch: bool) -> list:
+        sim, (_, e1, e2) = one(clips, MotionPlayer("kick", loop=False), MotionPlayer("walk"),
+                               MotionPlayer("walk", start_s=0.4))
+        # (a constraint in both runs, for the trigger's action: clips and contacts come from
+        # the motions, not from the solve)
+        uid = sim.add_constraint(e2, "reach", "wrist_r", 1, Activation(0.0, 1e9), (1.0, 2.0, 1.2))
+        if watch:
+            sim.add_trigger(Trigger("step", ContactBegan(e1), (SwitchOff(uid),), repeat=True))
+        events = []
+        for _ in range(45):
+            sim.step()
+            events.append(sim.events())
+        sim.close()
+        return events
+
+    kept, emitted = run(False), run(True)
+    assert kept == emitted
+    assert sum(e.kind == "contact_began" for tick in kept for e in tick) >= 6
+
+
 def test_near_fires_once_or_on_every_edge_with_repeat(clips):
     sim, (walker,) = one(clips, MotionPlayer("walk"))
     uid = sim.add_constraint(walker, "reach", "wrist_r", activation=ALWAYS_OFF,

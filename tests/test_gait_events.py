@@ -131,7 +131,7 @@ def test_contacts_events_uses_them_and_info_reports_them(tmp_path, capsys):
     nmo = tmp_path / f"{path.stem}.nmo"
     assert main(["info", str(nmo)]) == 0
     out = capsys.readouterr().out
-    assert "event         1.041 s  L foot strike" in out and "R foot off" in out
+    assert "event         0.924 s  L foot strike" in out and "R foot off" in out
     assert main(["info", str(nmo), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)["info"]
     assert info["contacts"]["method"] == "gait events"

@@ -120,7 +120,12 @@ def test_cluster_frames_without_three_pelvis_markers_are_trimmed():
     clip, extra = canonical_clip_c3d(read_c3d(GAIT))
     assert extra["root_frames_trimmed"] == [[0, 18], [438, 449]]
     assert extra["root_frames_repaired"] == []
-    assert len(clip.positions) == 450 - 19 - 12
+    # Frames 19-42 too: the left foot cluster has fewer than three markers there (the ankle
+    # jumped 0.1 m from frame to frame).
+    assert extra["parts_frames_trimmed"] == [
+        "frames 19-42 of the file trimmed: the markers of the left leg (LTH1, LFT1, LFT2, LFT3) "
+        "are unseen or in a long gap there"]
+    assert len(clip.positions) == 450 - 43 - 12
     assert _pelvis_up(clip).min() > 0.9  # upright within 26 degrees on every frame
 
 
@@ -286,10 +291,13 @@ def test_import_and_info_say_which_frames_were_trimmed(tmp_path, capsys):
     out = capsys.readouterr().out
     assert ("frames 0-18, 438-449 trimmed (of the file's frames): the pelvis markers could not "
             "place the pelvis") in out
-    assert "419 frames at 50 fps" in out
+    assert "frames 19-42 of the file trimmed: the markers of the left leg" in out
+    assert "395 frames at 50 fps" in out
     assert main(["info", str(tmp_path / f"{GAIT.stem}.nmo")]) == 0
+    out = capsys.readouterr().out
     assert ("  trimmed    frames 0-18, 438-449 of the file (the pelvis markers could not place the "
-            "pelvis)") in capsys.readouterr().out
+            "pelvis)") in out
+    assert "  trimmed    frames 19-42 of the file trimmed: the markers of the left leg" in out
 
 
 def test_the_readme_python_examples_run(capsys, monkeypatch):
@@ -363,7 +371,8 @@ def test_a_target_is_measured_from_the_ground_under_the_character(tmp_path):
 
 
 def test_constraint_times_stay_on_the_file_after_a_trim(tmp_path):
-    """A review: trimming the gait sample's first 19 frames moved --constraints times by 0.38 s."""
+    """A review: trimming the gait sample's first 19 frames moved --constraints times by 0.38 s
+    (now its first 43: no pelvis, then too few left-foot markers)."""
     require_mocap()
     from ecs_anim.cli import main
     from ecs_anim.motion import load_nmo
@@ -374,10 +383,10 @@ def test_constraint_times_stay_on_the_file_after_a_trim(tmp_path):
                            "    activation: {start_s: 1.0, stop_s: 2.0}\n")
     assert main(["import", str(GAIT), "-o", str(tmp_path / "out"), "--constraints", str(constraints)]) == 0
     motion = load_nmo(tmp_path / "out" / f"{GAIT.stem}.nmo")
-    assert motion.info["first_file_frame"] == 19
+    assert motion.info["first_file_frame"] == 43
     hold = next(c for c in motion.constraints if c.name == "hold")
-    assert hold.activation.start_s == pytest.approx(1.0 - 19 / 50.0)
-    assert hold.activation.stop_s == pytest.approx(2.0 - 19 / 50.0)
+    assert hold.activation.start_s == pytest.approx(1.0 - 43 / 50.0)
+    assert hold.activation.stop_s == pytest.approx(2.0 - 43 / 50.0)
 
 
 def test_a_one_frame_c3d_still_imports(tmp_path):

@@ -89,8 +89,9 @@ def test_import_trim_on_a_c3d_counts_the_files_frames(tmp_path):
 
     gait = MOCAP_DIR / "c3dorg_eb015pi_gait.c3d"
     motion = import_c3d(gait, trim=FrameRange.parse("0:100"))
-    # Frames 0-18 were trimmed already (no pelvis): the file's frames 19-99 remain.
-    assert motion.n_frames == 81 and motion.info["first_file_frame"] == 19
+    # Frames 0-42 were trimmed already (no pelvis in 0-18, two of the three left-foot cluster
+    # markers in 19-42): the file's frames 43-99 remain.
+    assert motion.n_frames == 57 and motion.info["first_file_frame"] == 43
 
 
 def test_the_readme_info_example_runs(tmp_path, monkeypatch, capsys):

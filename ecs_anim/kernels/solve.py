@@ -28,7 +28,6 @@ from numpy.typing import NDArray
 from ..body_points import HEAD
 from ..ground_adapt import MAX_LEG_EXTENSION
 from ..normalized import DecodedPose, NormalizedPoses
-from ..rotations import normalize
 from ..solver_shell import (
     CONTACT_PRIORITY,
     DEFAULT_SETTINGS,
@@ -52,7 +51,7 @@ from .solve_points import (
 )
 from .solve_root import root_step
 from .solve_trunk import solve_trunk
-from .vec import F64, dot, jit, load3, store3, sub
+from .vec import F64, dot, jit, load3, normalize, store3, sub
 
 I64 = NDArray[np.int64]
 B8 = NDArray[np.bool_]
@@ -171,6 +170,16 @@ def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
                                   leg_extension)
 
 
+@jit(nogil=True)
+def foot_directions_rows(lo: int, hi: int, positions: F64, t: Tables, out: F64) -> None:
+    """``out[c, side]`` (r, 2, 3): the unit direction from ankle to toe of each foot of the
+    characters ``lo..hi-1`` (``positions`` (r, N_JOINTS, 3) m)."""
+    for c in range(lo, hi):
+        for side in range(2):
+            store3(out[c, side], normalize(sub(load3(positions[c, t.toe[side]]),
+                                               load3(positions[c, t.ankle[side]]))))
+
+
 @jit()
 def character_winners(c: int, g: Goals, w: Winners, limb_of_group: I64, head_group: int) -> None:
     """Mirrors :func:`ecs_anim.constraint_table.winners` as ``ecs_anim.solver_shell._Solve``
@@ -217,9 +226,10 @@ def winners_rows(lo: int, hi: int, g: Goals, w: Winners, limb_of_group: I64,
         character_winners(c, g, w, limb_of_group, head_group)
 
 
-def sorted_goals(goals: TickGoals, settings: SolverSettings = DEFAULT_SETTINGS) -> tuple[Goals, Winners, I64]:
+def sorted_goals(goals: TickGoals, goal_iterations: I64) -> tuple[Goals, Winners, I64]:
     """The goals sorted by character (stable: ties between priorities still go to the goal
-    added last), their winners, and the order (k,) taking ``goals``' indices to the sorted.
+    added last), their winners, and the order (k,) taking ``goals``' indices to the sorted;
+    ``goal_iterations`` (k,) each goal's cap (:func:`~ecs_anim.solver_shell.iteration_caps`).
     :func:`ecs_anim.solver_shell.tick_goals` makes them sorted already: then nothing is
     copied (``goal`` is the same array)."""
     r, k = int(goals.rows.size), goals.k
@@ -239,7 +249,6 @@ def sorted_goals(goals: TickGoals, settings: SolverSettings = DEFAULT_SETTINGS) 
         self_fraction[goals.on_self] = goals.self_fraction
         self_offset[goals.on_self] = goals.self_offset
         self_at[goals.on_self] = goals.self_start
-    goal_iterations, _ = iteration_caps(goals, settings)
 
     def take(a: np.ndarray, dtype: type) -> np.ndarray:
         return np.ascontiguousarray(a if already else a[order], dtype=dtype)
@@ -283,7 +292,8 @@ def prepare(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64,
     float64 and C-contiguous)."""
     from .decode import decode as decode_compiled
 
-    g, w, order = sorted_goals(goals, settings)
+    goal_iterations, row_iterations = iteration_caps(goals, settings)
+    g, w, order = sorted_goals(goals, goal_iterations)
 
     def own(a: np.ndarray) -> np.ndarray:
         return (np.ascontiguousarray(a, dtype=np.float64) if in_place
@@ -294,16 +304,16 @@ def prepare(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64,
     if decoded is None:
         decoded = decode_compiled(poses, lengths)
     dec = DecodedArrays(*(own(getattr(decoded, name)) for name in DecodedArrays._fields))
-    p = dec.positions
-    foot_in_world = normalize(p[:, TABLES.toe] - p[:, TABLES.ankle])
-    _, row_iterations = iteration_caps(goals, settings)
+    r = goals.rows.size
+    foot_in_world = np.empty((r, 2, 3))
+    over_chunks(foot_directions_rows, r, dec.positions, TABLES, foot_in_world)
     b = Bodies(lengths=lengths, masses=np.ascontiguousarray(masses, dtype=np.float64),
                com_fraction=np.ascontiguousarray(com_fraction, dtype=np.float64),
                footprint=np.ascontiguousarray(goals.footprint, dtype=np.float64),
                in_contact=np.ascontiguousarray(goals.in_contact, dtype=np.bool_),
                com_desired=np.ascontiguousarray(goals.com_desired, dtype=np.float64),
                com_on=np.ascontiguousarray(goals.com_on, dtype=np.bool_),
-               foot_in_world=np.ascontiguousarray(foot_in_world),
+               foot_in_world=foot_in_world,
                iterations=np.ascontiguousarray(row_iterations, dtype=np.int64))
     return SolveState(pose, dec, g, w, b, order)
 
