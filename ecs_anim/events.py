@@ -322,10 +322,15 @@ class _Compiled:
     timed_at_s: F64 = field(default_factory=lambda: np.zeros(0))
     #: (event kind, entity) -> the triggers waiting for such an event (clips, contacts, removal)
     listeners: dict[tuple[str, int], list[int]] = field(default_factory=dict)
+    _listened: dict[str, I64] = field(default_factory=dict)
 
     def listened(self, kind: str) -> I64:
-        """The entities some trigger waits on for events of ``kind`` (sorted)."""
-        return np.unique(np.array([e for k, e in self.listeners if k == kind], np.int64))
+        """The entities some trigger waits on for events of ``kind`` (sorted; made once per
+        rebuild)."""
+        if kind not in self._listened:
+            self._listened[kind] = np.unique(np.array([e for k, e in self.listeners if k == kind],
+                                                      np.int64))
+        return self._listened[kind]
 
 
 @dataclass

@@ -875,14 +875,17 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
     if unconstrained is None:
         raise ValueError("constrain: the decoded poses are needed when a constraint is active")
     targets = target_points(table, unconstrained, previous)
-    broken = np.flatnonzero((weight > 0) & ~np.all(np.isfinite(targets), axis=1))
+    broken = none
+    if not np.isfinite(targets).all():  # (one test of the whole array first: the usual case)
+        broken = np.flatnonzero((weight > 0) & ~np.all(np.isfinite(targets), axis=1))
     if broken.size:
         weight = weight.copy()
         weight[broken] = 0.0
         targets[broken] = 0.0
     own = steps.centres(unconstrained.positions, masses, com_fraction)
-    given = np.isfinite(com_target_xy).all(axis=1)
-    own[given, :2] = com_target_xy[given]
+    if np.isfinite(com_target_xy).any():  # (usually none is given: all NaN)
+        given = np.isfinite(com_target_xy).all(axis=1)
+        own[given, :2] = com_target_xy[given]
     goals = steps.goals(table, weight, targets, unconstrained, contact_weight, com_control, own,
                         previous, max_release_m)
     active = np.flatnonzero(weight > 0)
@@ -922,7 +925,8 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
         for name in fields(DecodedPose):
             getattr(result, name.name)[rows] = getattr(solved, name.name)
     # Targets on the character's own body moved with it during the solve: read them again.
-    on_own_body = (table.target_row == table.owner) & (table.target_kind != TARGET_WORLD)
+    on_body = table.target_kind != TARGET_WORLD
+    on_own_body = on_body & (table.target_row == table.owner) if on_body.any() else on_body
     if on_own_body.any():
         targets = np.where(on_own_body[:, None], target_points(table, result, previous), targets)
     error[active] = steps.errors(table, active, result, targets)

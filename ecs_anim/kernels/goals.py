@@ -349,12 +349,13 @@ def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained:
                 np.ascontiguousarray(contact_weight, dtype=np.float64),
                 np.ascontiguousarray(com_control, dtype=np.bool_),
                 np.ascontiguousarray(com_desired, dtype=np.float64), TABLES, CODES, out)
-    # Goals aiming at a point of their own body (usually none).
-    on_self = np.flatnonzero((table.target_kind[idx] != TARGET_WORLD) & (table.target_row[idx] == owner))
-    local = np.cumsum(first) - 1
+    # Goals aiming at a point of their own body (usually none: no target is on a body).
+    on_body = table.target_kind[idx] != TARGET_WORLD
+    on_self = np.flatnonzero(on_body & (table.target_row[idx] == owner)) if on_body.any() \
+        else np.zeros(0, np.int64)
     return TickGoals(
         rows=rows, **out._asdict(),
-        on_self=on_self + 2 * local[on_self],
+        on_self=on_self + 2 * (np.cumsum(first)[on_self] - 1),
         self_segment=table.target_segment[idx[on_self]],
         self_fraction=table.target_fraction[idx[on_self]],
         self_offset=table.target_offset[idx[on_self]],
