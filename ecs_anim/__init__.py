@@ -7,6 +7,7 @@ with :func:`load_scenario` and :func:`build_simulation`), spawn characters on bo
 :class:`Area`), step it and read ``Simulation.store``. Z up, metres, seconds, radians.
 """
 
+from .allocator import keep_freed_memory
 from .components import MotionPlayer, Placement, QueuedClip
 from .constraint_table import Area
 from .constraints import Activation
@@ -54,6 +55,7 @@ __all__ = [
     "export_motion",
     "glb_bytes",
     "import_bvh",
+    "keep_freed_memory",
     "load_morphology_yaml",
     "load_nmo",
     "load_scenario",
