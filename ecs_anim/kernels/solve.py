@@ -11,9 +11,9 @@ back; its budget of iterations), and the final re-plant of the limbs and the hea
 character stops on its own goals: its result does not depend on who else is solved, nor on the
 thread count.
 
-The goals come from the numpy :func:`ecs_anim.solver_shell.tick_goals`, already sorted by
-character (then nothing is copied); :func:`character_winners` picks the goal each limb and the
-head serve, and the frame budget's caps (``Goals.iterations``, ``Bodies.iterations``) bound each
+The goals come from :func:`ecs_anim.kernels.goals.tick_goals` (or its numpy reference),
+already sorted by character (then nothing is copied); :func:`character_winners` picks the goal
+each limb and the head serve, and the frame budget's caps (``Goals.iterations``, ``Bodies.iterations``) bound each
 goal's and each character's iterations.
 """
 
