@@ -689,16 +689,7 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
     mmap.marker = {r: i for r, i in mmap.marker.items() if seen[i]}
     split_same_label(mmap, raw.positions, raw.valid)
     present, absent = check_usable(mmap, raw.labels)
-    valid = raw.valid.copy()
-    rejected = 0
-    if mmap.preset.method == "functional":  # rigid clusters: drop samples that break the shape
-        for members in _clusters(mmap):
-            out = cluster_outliers(raw.positions[:, members], valid[:, members],
-                                   0.015 / UNITS.get(raw.units, 0.001))
-            rejected += int(out.sum())
-            valid[:, members] &= ~out
-    filled, unreliable = fill_gaps(raw.positions, valid, max_gap)
-    # Units.
+    # Units (before the cluster check below, whose tolerance is a length).
     if unit is not None:
         if unit not in UNITS:
             raise EcsAnimError(f"--unit {unit}: unknown unit; choose one of {', '.join(UNITS)}")
@@ -710,8 +701,8 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
         # is tallest on (whichever is up), over frames, as a leg length (a standing adult's
         # markers span about 1.9 legs; a lower-body set about 1.1, which still tells mm from cm
         # and m apart).
-        used = sorted(set(mmap.marker.values())) or list(range(filled.shape[1]))
-        body = np.where(valid[:, used, None], filled[:, used], np.nan)
+        used = sorted(set(mmap.marker.values())) or list(range(raw.positions.shape[1]))
+        body = np.where(raw.valid[:, used, None], raw.positions[:, used], np.nan)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             spread = np.nanmedian(np.nanmax(body, axis=1) - np.nanmin(body, axis=1), axis=0)
@@ -719,6 +710,15 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
         unit_name, reason = detect_unit(tallest / 1.9)
         what = "there is no POINT:UNITS" if not raw.units else f"POINT:UNITS is {raw.units!r}"
         reason = f"{what}; guessed from the body's size: {reason}"
+    valid = raw.valid.copy()
+    rejected = 0
+    if mmap.preset.method == "functional":  # rigid clusters: drop samples that break the shape
+        for members in _clusters(mmap):
+            out = cluster_outliers(raw.positions[:, members], valid[:, members],
+                                   0.015 / UNITS[unit_name])
+            rejected += int(out.sum())
+            valid[:, members] &= ~out
+    filled, unreliable = fill_gaps(raw.positions, valid, max_gap)
     scale = UNITS[unit_name]
     mk = _Markers(filled * scale, unreliable, mmap.marker, raw.anthropometry)
     if up is None:

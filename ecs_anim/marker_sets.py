@@ -87,7 +87,8 @@ class MarkerSet:
 def _sided(table: dict[str, tuple[str, ...]]) -> dict[str, tuple[str, ...]]:
     """Expand ``{"ASIS_{s}": ("{S}ASI",)}`` for both sides; ``{S}`` is L or R, and a label
     written ``*X`` is tried with the side letter or word before and after (``LX``, ``XL``,
-    ``LEFTX``, ``XLEFT``)."""
+    ``LEFTX``, ``XLEFT``). A ``{S}X`` label of three or more letters after the side is also
+    tried with the side after it (``ASI_L``: labs that put the side last), as ``*X`` is."""
     out: dict[str, tuple[str, ...]] = {}
     for role, labels in table.items():
         sides = (("l", "L", "LEFT"), ("r", "R", "RIGHT")) if "{s}" in role else ((None, "", ""),)
@@ -101,6 +102,9 @@ def _sided(table: dict[str, tuple[str, ...]]) -> dict[str, tuple[str, ...]]:
                         cands += [base + letter, base + word]
                 else:
                     cands.append(lab.format(S=letter))
+                    base = lab.removeprefix("{S}")
+                    if base != lab and len(base) >= 3 and "{S}" not in base:
+                        cands.append(base + letter)
             out[role.format(s=s) if s else role] = tuple(dict.fromkeys(label_key(c) for c in cands))
     return out
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import re
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import c3d
@@ -666,3 +667,18 @@ def test_a_label_naming_the_lateral_and_the_medial_marker_is_split_by_position(t
         assert clip.joint_map.names[joint] in ("midpoint of the femoral epicondyles", "midpoint of the malleoli")
         error = np.linalg.norm(clip.positions[:, J[joint]] - ref[:, J[joint]], axis=-1)
         assert np.median(error) < 1e-5, (joint, np.median(error))  # float32 in the file
+
+
+def test_cluster_set_without_point_units_rejects_outliers_at_its_guessed_unit():
+    """The cluster shape check's 15 mm tolerance is in the file's unit: a cluster trial in
+    metres without ``POINT:UNITS`` imports as with it (before, the tolerance was taken in mm,
+    15 m: no outlier was rejected and 18 frames more were kept, 413 of the file's 395)."""
+    raw = read_c3d(GAIT)
+    in_metres = replace(raw, positions=raw.positions * 1e-3, units="m")
+    with_units, _ = canonical_clip_c3d(in_metres)
+    without, extra_without = canonical_clip_c3d(replace(in_metres, units=""))
+    reference, extra_mm = canonical_clip_c3d(raw)
+    assert extra_without["gaps"]["samples_rejected_as_outliers"] == \
+        extra_mm["gaps"]["samples_rejected_as_outliers"] > 0
+    assert without.positions.shape == reference.positions.shape
+    assert np.abs(without.positions - with_units.positions).max() == 0.0

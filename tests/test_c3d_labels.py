@@ -3,6 +3,8 @@ synonyms per convention, and every computable body part imported while the rest 
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -138,3 +140,20 @@ def test_custom_knee_labels_need_the_user_map_kept_in_tests_data():
     assert 1.3 < motion.source_morphology.stature < 2.0
     contact = motion.contacts()
     assert np.all((contact.mean(axis=0) > 0.3) & (contact.mean(axis=0) < 0.85))
+
+
+def test_side_written_after_the_landmark_reads_as_before_it():
+    """Plug-in Gait labels with the side last (``ASI_L``, ``KNE_R``, as some labs write them)
+    import as the file's own ``LASI``, ``RKNE``: every joint centre within 0.1 mm. (They read
+    as ISB names before, with both legs left out: the toes 187 mm off.)"""
+    raw = read_c3d(MOCAP_DIR / "ktk_tennis_serve.c3d")
+    sided = {"L", "R"}
+
+    def side_last(label: str) -> str:
+        name = label.split(":")[-1]
+        return f"{name[1:]}_{name[0]}" if name[0] in sided and len(name) >= 4 else name
+
+    reference, _ = canonical_clip_c3d(raw)
+    clip, extra = canonical_clip_c3d(replace(raw, labels=[side_last(lab) for lab in raw.labels]))
+    assert extra["marker_set"] == "plug_in_gait" and not extra["absent"]
+    assert np.abs(clip.positions - reference.positions).max() < 1e-4
