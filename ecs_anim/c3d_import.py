@@ -83,7 +83,7 @@ from .contacts import ContactThresholds, _intervals, gait_event_kind
 from .errors import EcsAnimError, InputError, listed, quoted
 from .importing import (
     UNITS,
-    YUP_TO_ZUP,
+    UP_AXES,
     CanonicalClip,
     FrameRange,
     detect_unit,
@@ -533,9 +533,9 @@ def _detect_up(mk: _Markers, present: list[str], mmap: MarkerMap) -> str:
             sign = float(np.median((high - low)[:, axis]))
             break
     name = "xyz"[axis]
-    if sign <= 0 or name == "x":
+    if sign <= 0:
         raise EcsAnimError(f"cannot tell the up axis (the body is tallest along {name}, "
-                           f"{'downwards' if sign <= 0 else 'sideways'}); give --up")
+                           "downwards); give --up")
     return name
 
 
@@ -726,10 +726,10 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
         up_reason = "detected from the markers"
     else:
         up_reason = "given with --up"
-    if up not in ("y", "z"):
-        raise EcsAnimError(f"--up {up}: expected 'y' or 'z'")
-    if up == "y":
-        mk.points = mk.points @ YUP_TO_ZUP.T
+    if up not in UP_AXES:
+        raise EcsAnimError(f"--up {up}: expected {', '.join(UP_AXES)}")
+    if up != "z":
+        mk.points = mk.points @ UP_AXES[up].T
     build, root, kept, repaired = _joint_centres(mk, mmap, present)
     parts_trimmed = _parts_trimmed(mk, mmap, present, raw.labels, root, kept)
     unreliable, valid = unreliable[kept], valid[kept]

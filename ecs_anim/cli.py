@@ -594,7 +594,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--stature", type=positive_float, metavar="M",
                    help="BVH: scale the source so that its body is M metres tall (a rig "
                    "scaled by its tool, a child whose unit the proportions cannot tell)")
-    p.add_argument("--up", choices=["y", "z"], default=None,
+    p.add_argument("--up", choices=["x", "y", "z"], default=None,
                    help="the file's up axis (default: detected from the rest pose and the motion, "
                    "head above the feet, for BVH; from the markers for C3D)")
     p.add_argument("--face", type=facing, metavar="+x|-x|+y|-y|DEGREES",

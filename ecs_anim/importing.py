@@ -35,6 +35,8 @@ F64 = NDArray[np.float64]
 
 #: DESIGN §2: a Y-up source becomes Z-up by +90° about X: (x, y, z) -> (x, -z, y).
 YUP_TO_ZUP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+#: An X-up source (some labs' C3D, rare BVH) turns its axes round: (x, y, z) -> (y, z, x).
+XUP_TO_ZUP = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
 
 #: Length units a BVH may be written in, as metres per unit.
 UNITS: dict[str, float] = {
@@ -187,7 +189,7 @@ def _leg_rest_length(skeleton: BvhSkeleton, jmap: JointMap) -> float:
     return 0.5 * total
 
 
-UP_AXES = {"y": YUP_TO_ZUP, "z": np.eye(3)}
+UP_AXES = {"x": XUP_TO_ZUP, "y": YUP_TO_ZUP, "z": np.eye(3)}
 
 
 def unit_scale(unit: str) -> float:
@@ -241,12 +243,12 @@ def canonical_clip(motion: BvhMotion, map_spec: str | None = None,
                    stature_m: float | None = None) -> CanonicalClip:
     """Map, scale and rotate a BVH clip onto the canonical skeleton (see module docstring).
 
-    ``up`` is the file's up axis, ``"y"`` or ``"z"``; None detects it (:func:`detect_up`).
+    ``up`` is the file's up axis, ``"x"``, ``"y"`` or ``"z"``; None detects it (:func:`detect_up`).
     ``unit``: a unit name or metres per file unit as text (:func:`unit_scale`); None detects it.
     ``stature_m``: scale the source so that its body is this tall (m) instead.
     """
     if up is not None and up not in UP_AXES:
-        raise EcsAnimError(f"--up {up}: expected 'y' or 'z'")
+        raise EcsAnimError(f"--up {up}: expected {', '.join(UP_AXES)}")
     skeleton = motion.skeleton
     joint2file, pos_file = forward_kinematics(motion)
     jmap = map_skeleton(skeleton, map_spec, pos_file)

@@ -682,3 +682,18 @@ def test_cluster_set_without_point_units_rejects_outliers_at_its_guessed_unit():
         extra_mm["gaps"]["samples_rejected_as_outliers"] > 0
     assert without.positions.shape == reference.positions.shape
     assert np.abs(without.positions - with_units.positions).max() == 0.0
+
+
+def test_x_up_lab_is_recognised():
+    """A lab whose vertical is X (the tennis serve turned so: x = its z, z = -its x) imports with
+    no flag, X up detected, every joint centre within 0.1 mm of the file's own after the turn
+    about the vertical that X up -> Z up gives ((x, y, z) -> (y, z, x)). It was refused."""
+    raw = read_c3d(TENNIS)
+    z_to_x = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
+    turned = replace(raw, positions=raw.positions @ z_to_x.T)
+    reference, _ = canonical_clip_c3d(raw)
+    clip, _ = canonical_clip_c3d(turned)
+    assert clip.up_axis == "x"
+    p = clip.positions
+    back = np.stack([-p[..., 1], p[..., 0], p[..., 2]], axis=-1)
+    assert np.abs(back - reference.positions).max() < 0.1 * MM

@@ -231,3 +231,27 @@ def test_generic_names_keep_the_end_site_toe_and_the_round_trip(tmp_path):
     assert all(info["joints"][f"toe_{s}"].endswith(".end") for s in "lr")
     assert max(errors.values()) < 0.1 * MM
     assert list(np.load(tmp_path / "source.npz")["joints"]) == list(JOINTS)
+
+
+def _x_up(text: str) -> str:
+    """The same clip with X up: axes turned (x, y, z) -> (z, x, y) by renaming, so old Y is new X
+    (OFFSETs' components rotated, each channel renamed to the axis it now turns about)."""
+    head, motion = text.split("MOTION", 1)
+    head = re.sub(r"(OFFSET)\s+(\S+)\s+(\S+)\s+(\S+)",
+                  lambda m: f"{m.group(1)} {m.group(3)} {m.group(4)} {m.group(2)}", head)
+    renamed = {"X": "Z", "Y": "X", "Z": "Y"}
+    head = re.sub(r"\b([XYZ])(rotation|position)\b",
+                  lambda m: renamed[m.group(1)] + m.group(2), head)
+    return head + "MOTION" + motion
+
+
+def test_x_up_file_imports_with_up_x(tmp_path):
+    """A BVH with X up (no real dev file has one) is read with ``--up x``: the same joints
+    within 0.1 mm, turned about the vertical as X up -> Z up turns them ((x, y, z) -> (y, z, x))."""
+    name = "cmudaz_03_02_uneven_terrain.bvh"
+    x_up = _dev_copy(tmp_path, name, _x_up)  # skips when the dev file is not there
+    _, plain = _import_and_export(VARIED / name, tmp_path / "plain")
+    info, turned = _import_and_export(x_up, tmp_path / "x_up", ["--up", "x"])
+    assert info["up_axis"] == "x"
+    back = np.stack([turned[..., 1], -turned[..., 0], turned[..., 2]], axis=-1)
+    assert np.abs(back - plain).max() < 0.1 * MM
