@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from itertools import pairwise
 from pathlib import Path
 from typing import Any
 
@@ -189,6 +190,9 @@ def _leg_rest_length(skeleton: BvhSkeleton, jmap: JointMap) -> float:
     return 0.5 * total
 
 
+#: Two joints closer than this fraction of the leg at rest are at the same place (no bone).
+SAME_PLACE_FRACTION = 1e-3
+
 UP_AXES = {"x": XUP_TO_ZUP, "y": YUP_TO_ZUP, "z": np.eye(3)}
 
 
@@ -295,8 +299,15 @@ def canonical_clip(motion: BvhMotion, map_spec: str | None = None,
         if np.linalg.norm(meet[0] - positions[0, J["neck"]]) > 1e-3 * leg_units * scale:
             positions[:, J["neck"]] = meet
             neck_at_clavicles = True
-    # Spine joints a skeleton lacks: evenly between their neighbours on the pelvis-neck line.
+    # Spine joints a skeleton lacks: evenly between their neighbours on the pelvis-neck line. A
+    # mapped spine joint at the place of the next one up at rest (a Neck with a zero OFFSET under
+    # Spine2) measures no bone: it is placed so too.
     chain = ["pelvis", "spine_1", "spine_2", "neck"]
+    for name, above in pairwise(chain[1:]):
+        i, j = src[name], src[above]
+        if i is not None and j is not None and \
+                np.linalg.norm(rest[i] - rest[j]) <= SAME_PLACE_FRACTION * leg_units:
+            measured[J[name]] = False
     known = [k for k, name in enumerate(chain) if measured[J[name]]]
     for k, name in enumerate(chain):
         if not measured[J[name]]:
