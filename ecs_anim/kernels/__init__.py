@@ -244,6 +244,11 @@ def threads() -> int:
 
 #: Fewest rows worth handing to another thread: below, waking it costs more than it saves.
 MIN_ROWS_PER_THREAD = 4
+#: The same for a light kernel (tens of ns a row: the winners, the feet's directions, a table
+#: sampled, the errors): a hand-over (16-20 µs, the threads taking the GIL in turn) costs more
+#: than half of a few thousand rows; measured on two threads at 3,200 characters, each of them
+#: ran 1.2-3.4x slower split than on one.
+LIGHT_ROWS_PER_THREAD = 8192
 _pools: dict[int, SpinningThreads] = {}  # by process id: a forked child makes its own
 _pools_lock = threading.Lock()
 
@@ -263,14 +268,16 @@ def _pool() -> SpinningThreads:
     return pool
 
 
-def over_chunks(kernel: Callable[..., None], n: int, *args: object) -> None:
+def over_chunks(kernel: Callable[..., None], n: int, *args: object,
+                rows_per_thread: int = MIN_ROWS_PER_THREAD) -> None:
     """Run ``kernel(lo, hi, *args)``, a compiled kernel (``nogil=True``: it releases the GIL)
     over the loop indices ``lo..hi-1``, on the whole of ``0..n`` split into :func:`threads`
     contiguous chunks, one per thread (this one runs the first; the others wait for theirs
     spinning, :mod:`ecs_anim.kernels.handover`), and wait for all of them; an error of any chunk
-    is raised once all are done. On one thread, or for few rows, it is one call here. The chunks
+    is raised once all are done. On one thread, or for fewer than ``rows_per_thread`` rows a
+    thread (:data:`LIGHT_ROWS_PER_THREAD` for a light kernel), it is one call here. The chunks
     write disjoint rows, so the result does not depend on the split."""
-    count = min(threads(), n // MIN_ROWS_PER_THREAD)
+    count = min(threads(), n // rows_per_thread)
     if count <= 1:
         kernel(0, n, *args)
         return
