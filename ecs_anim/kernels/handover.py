@@ -127,6 +127,13 @@ class SpinningThreads:
         if self._asleep[i]:
             self._wake[i].set()
 
+    def _wait_for(self, i: int, number: int) -> None:
+        """Spin until worker ``i`` has done chunk ``number`` (looking at signals every 10 ms)."""
+        done = self.workers + i
+        seen = int(self.counters[done])
+        while seen != number:
+            seen = spin_while_equal(self.counters, done, seen, self._wait_spins)
+
     def run(self, kernel: Callable[..., None], bounds: Sequence[int],
             args: Sequence[object]) -> None:
         """``kernel(bounds[c], bounds[c + 1], *args)`` for every chunk ``c``: the first in this
@@ -142,9 +149,6 @@ class SpinningThreads:
         try:
             self._given += 1
             number = self._given
-            # A worker's done counter holds the last chunk it finished, all of them given before
-            # this call (each call waits for its own): it changes only to this number.
-            before = [int(self.counters[self.workers + i]) for i in others]
             for i in others:
                 self._jobs[i] = (kernel, bounds[i + 1], bounds[i + 2], args)
                 self._give(i, number)
@@ -152,9 +156,7 @@ class SpinningThreads:
                 kernel(bounds[0], bounds[1], *args)
             finally:  # every chunk done before anything is raised: they write the arrays
                 for i in others:
-                    while spin_while_equal(self.counters, self.workers + i, before[i],
-                                           self._wait_spins) == before[i]:
-                        pass
+                    self._wait_for(i, number)
         finally:
             errors = self._errors[:chunks - 1]
             self._errors[:chunks - 1] = [None] * (chunks - 1)
