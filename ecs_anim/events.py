@@ -534,7 +534,8 @@ class Reactions:
         edges, previous_clip = compiled_edges(
             st.entity, st.clip, st.clip_time_s, st.speed, st.loop,
             bank.duration_s(np.arange(bank.n_frames.size)), st.contact_weight, sim.dt,
-            TIME_SLACK_S, CONTACT_BEGAN_WEIGHT, self._seen_clip, self._seen_time, self._seen_ended, self._seen_contact)
+            TIME_SLACK_S, CONTACT_BEGAN_WEIGHT, self._seen_clip, self._seen_time,
+            self._seen_ended, self._seen_contact)
         clip_names = list(bank.names)
         out: list[tuple[str, I64, I64, list[str]]] = []
         rows = np.flatnonzero(edges[:, EDGE_REPLACED])
