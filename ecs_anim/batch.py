@@ -47,6 +47,7 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
+from . import kernels
 from .errors import EcsAnimError, InputError, did_you_mean, quoted
 from .files import MAX_NAME_LENGTH, NAME_PATTERN
 from .ground import Ground, Plane
@@ -794,8 +795,17 @@ _started: Any = None  # in a pool worker: the queue it tells which task it start
 
 
 def _set_started(queue: Any) -> None:
+    """A pool worker's start: the queue it tells which task it starts; its kernels tick on one
+    thread (the pool's processes share the cores, and a kernel thread spins between chunks)."""
     global _started
     _started = queue
+    kernels.set_threads(1)
+
+
+def _ray_job_task(job: Job, imported: tuple[NormalizedMotion | None, str]) -> Outcome:
+    """:func:`job_task` in a Ray worker, which has one CPU: its kernels tick on one thread."""
+    kernels.set_threads(1)
+    return job_task(job, imported)
 
 
 def _pool_task(key: str, function: Any, *args: Any) -> Any:
@@ -970,7 +980,7 @@ def _ray_engine(work: WorkList, workers: int, address: str | None) -> Iterator[t
 
         here = NodeAffinitySchedulingStrategy(ray.get_runtime_context().get_node_id(), soft=False)
         import_remote = ray.remote(import_task).options(num_cpus=1, scheduling_strategy=here)
-        job_remote = ray.remote(job_task).options(num_cpus=1)
+        job_remote = ray.remote(_ray_job_task).options(num_cpus=1)
         refs: dict[Any, Job] = {}
         for clip, jobs in work.items():
             imported = import_remote.remote(clip)  # one object, shared by the clip's jobs

@@ -40,6 +40,7 @@ from .body_points import BodyPoint, point_positions
 from .components import QueuedClip
 from .constraints import Activation
 from .errors import EcsAnimError, listed, quoted
+from .kernels.edges import clip_and_contact_edges as compiled_edges
 from .morphology import Morphology
 from .playback_queue import start_next_clips
 from .store import MAX_QUEUE
@@ -333,6 +334,44 @@ class _Compiled:
         return self._listened[kind]
 
 
+#: Columns of :func:`clip_and_contact_edges`'s edges: the clip seen last tick was replaced
+#: before it ended, the clip ended this tick, a clip started, a foot's contact began (left,
+#: right: the last two).
+EDGE_REPLACED, EDGE_ENDED, EDGE_STARTED, EDGE_CONTACT = 0, 1, 2, 3
+
+
+def clip_and_contact_edges(entity: I64, clip: I64, clip_time_s: F64, speed: F64,
+                           loop: NDArray[np.bool_], duration_s: F64, contact_weight: F64,
+                           dt: float, slack_s: float, began_weight: float, seen_clip: I64,
+                           seen_time_s: F64, seen_ended: NDArray[np.bool_],
+                           seen_contact: F64) -> tuple[NDArray[np.bool_], I64]:
+    """The clip and contact edges of each store row in the tick just stepped (numpy; the
+    reference of the compiled :func:`ecs_anim.kernels.edges.clip_and_contact_edges`).
+
+    The store's ``entity``, ``clip``, ``clip_time_s``, ``speed``, ``loop`` (n,) and
+    ``contact_weight`` (n, 2); ``duration_s`` each clip's loop period; ``dt`` the tick (s). A
+    clip starts when it differs from the one seen or its time went back (beyond ``slack_s``);
+    it ends when the pose was sampled at its end and it does not loop; a contact begins when
+    its weight reaches ``began_weight``. ``seen_*`` (by entity id) hold what the last tick left
+    (clip -1: none seen) and are updated in place. Returns the edges (n, 5) bool, columns
+    :data:`EDGE_REPLACED` ... :data:`EDGE_CONTACT` + foot, and the clip seen before (n,)."""
+    seen_clip_now, seen_time_now = seen_clip[entity], seen_time_s[entity]
+    ended_before = seen_ended[entity]
+    new_clip = (clip != seen_clip_now) | (clip_time_s < seen_time_now - slack_s)
+    sampled = clip_time_s - dt * speed  # the clip time this tick's pose was at
+    at_end = ~loop & (sampled >= duration_s[clip] - slack_s)
+    edges = np.zeros((entity.shape[0], 5), bool)
+    edges[:, EDGE_REPLACED] = new_clip & (seen_clip_now >= 0) & ~ended_before
+    edges[:, EDGE_ENDED] = ~new_clip & at_end & ~ended_before
+    edges[:, EDGE_STARTED] = new_clip
+    edges[:, EDGE_CONTACT:] = (contact_weight >= began_weight) & \
+        (seen_contact[entity] < began_weight)
+    seen_ended[entity] = ~new_clip & (ended_before | at_end)
+    seen_clip[entity], seen_time_s[entity] = clip, clip_time_s
+    seen_contact[entity] = contact_weight
+    return edges, seen_clip_now
+
+
 @dataclass
 class _StoreEdges:
     """The clip and contact events of one tick, kept as arrays until someone asks for them
@@ -486,33 +525,27 @@ class Reactions:
 
     def _store_edges(self, sim: Simulation) -> list[tuple[str, I64, I64, list[str]]]:
         """(kind, store rows, details, detail names) of the clip and contact edges of the tick
-        just stepped, from the store against the last tick's values (all characters as
-        arrays); each event's detail is ``detail_names[detail]``."""
+        just stepped, from the store against the last tick's values (all characters at once:
+        :func:`clip_and_contact_edges`, compiled); each event's detail is
+        ``detail_names[detail]``."""
         st, bank = sim.store, sim.bank
         if st.n == 0:
             return []
-        e = st.entity
-        seen_clip, seen_time = self._seen_clip[e], self._seen_time[e]
-        new_clip = (st.clip != seen_clip) | (st.clip_time_s < seen_time - TIME_SLACK_S)
-        sampled = st.clip_time_s - sim.dt * st.speed  # the clip time this tick's pose was at
-        at_end = ~st.loop & (sampled >= bank.duration_s(st.clip) - TIME_SLACK_S)
-        replaced = new_clip & (seen_clip >= 0) & ~self._seen_ended[e]
-        ended_here = ~new_clip & at_end & ~self._seen_ended[e]
-        clip_names = list(sim.bank.names)
+        edges, previous_clip = compiled_edges(
+            st.entity, st.clip, st.clip_time_s, st.speed, st.loop,
+            bank.duration_s(np.arange(bank.n_frames.size)), st.contact_weight, sim.dt,
+            TIME_SLACK_S, CONTACT_BEGAN_WEIGHT, self._seen_clip, self._seen_time,
+            self._seen_ended, self._seen_contact)
+        clip_names = list(bank.names)
         out: list[tuple[str, I64, I64, list[str]]] = []
-        rows = np.flatnonzero(replaced)
-        out.append(("clip_ended", rows, seen_clip[rows], clip_names))
-        rows = np.flatnonzero(ended_here)
+        rows = np.flatnonzero(edges[:, EDGE_REPLACED])
+        out.append(("clip_ended", rows, previous_clip[rows], clip_names))
+        rows = np.flatnonzero(edges[:, EDGE_ENDED])
         out.append(("clip_ended", rows, st.clip[rows], clip_names))
-        rows = np.flatnonzero(new_clip)
+        rows = np.flatnonzero(edges[:, EDGE_STARTED])
         out.append(("clip_started", rows, st.clip[rows], clip_names))
-        began = (st.contact_weight >= CONTACT_BEGAN_WEIGHT) & \
-            (self._seen_contact[e] < CONTACT_BEGAN_WEIGHT)
-        rows, feet = np.nonzero(began)
+        rows, feet = np.nonzero(edges[:, EDGE_CONTACT:])
         out.append(("contact_began", rows, feet, list(FEET)))
-        self._seen_ended[e] = ~new_clip & (self._seen_ended[e] | at_end)
-        self._seen_clip[e], self._seen_time[e] = st.clip, st.clip_time_s
-        self._seen_contact[e] = st.contact_weight
         return out
 
     def _rows_of(self, sim: Simulation, entities: I64) -> I64:

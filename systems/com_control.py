@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from ecs_anim.components import Constraint
-from ecs_anim.kernels import over_chunks
+from ecs_anim.kernels import LIGHT_ROWS_PER_THREAD, over_chunks
 from ecs_anim.kernels.com import centres_of_mass, horizontal_errors, segment_joints
 from ecs_anim.system_base import System
 
@@ -44,4 +44,5 @@ class COMControl(System):
         over_chunks(centres_of_mass, rows.size, rows, np.arange(rows.size, dtype=np.int64),
                     st.solved.positions, st.segment_mass_kg, st.segment_com_fraction, _PROXIMAL,
                     _DISTAL, st.com)
-        over_chunks(horizontal_errors, rows.size, rows, st.com, st.com_desired, st.com_error_m)
+        over_chunks(horizontal_errors, rows.size, rows, st.com, st.com_desired, st.com_error_m,
+                    rows_per_thread=LIGHT_ROWS_PER_THREAD)

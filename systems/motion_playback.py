@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.components import MotionPlayer
-from ecs_anim.kernels import over_chunks
+from ecs_anim.kernels import LIGHT_ROWS_PER_THREAD, over_chunks
 from ecs_anim.kernels.decode import PoseArrays, pose_arrays
 from ecs_anim.kernels.playback import (
     blend_rows,
@@ -79,12 +79,13 @@ class MotionPlayback(System):
         fading = np.flatnonzero(st.fade_s > 0.0)
         previous = st.contact_weight[fading]  # the last tick's (a copy)
         over_chunks(sample_table_rows, rows.size, rows, bank.contact_weight, bank.start,
-                    bank.n_frames, bank.fps, st.clip, st.clip_time_s, st.loop, st.contact_weight)
+                    bank.n_frames, bank.fps, st.clip, st.clip_time_s, st.loop, st.contact_weight,
+                    rows_per_thread=LIGHT_ROWS_PER_THREAD)
         if fading.size:
             old_weight = np.zeros((st.n, 2))
             over_chunks(sample_table_rows, fading.size, fading, bank.contact_weight, bank.start,
                         bank.n_frames, bank.fps, st.fade_clip, st.fade_time_s, st.fade_loop,
-                        old_weight)
+                        old_weight, rows_per_thread=LIGHT_ROWS_PER_THREAD)
             st.contact_weight[fading] = self._fading_weights(
                 st.contact_weight[fading], old_weight[fading], previous,
                 st.fade_keeps_contacts[fading], release_step)

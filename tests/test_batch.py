@@ -710,3 +710,16 @@ def test_a_source_change_redoes_the_jobs(tmp_path: Path, monkeypatch) -> None:
     assert run_batch_cli(*argv) == 0 and records(tmp_path / "out")[0]["status"] == "skipped"
     monkeypatch.setattr(batch, "source_digest", lambda: "another source")
     assert run_batch_cli(*argv) == 0 and records(tmp_path / "out")[0]["status"] == "ok"
+
+
+def test_pool_workers_tick_on_one_thread():
+    """A pool's processes share the cores: each ticks on one thread (a kernel thread spins
+    between chunks, so two per process on shared cores would take turns spinning)."""
+    import multiprocessing
+
+    from ecs_anim import kernels
+    from ecs_anim.batch import _set_started
+
+    context = multiprocessing.get_context("fork")
+    with context.Pool(1, initializer=_set_started, initargs=(None,)) as pool:
+        assert pool.apply(kernels.threads) == 1

@@ -153,8 +153,9 @@ def _index(path: Path, source: bytes) -> None:
 
 def test_uncompiled_kernels_reads_the_cache_folder(tmp_path, monkeypatch):
     folder = _fake_cache(tmp_path, monkeypatch)
+    # The threads' hand-over is not waited for: a tick on one thread never compiles it.
     modules = [p.stem for p in kernels.kernel_sources()
-               if "@jit(nogil=True)" in p.read_text(encoding="utf-8")]
+               if "@jit(nogil=True)" in p.read_text(encoding="utf-8") and p.stem != "handover"]
     assert {"decode", "playback", "ground_adapt", "solve", "posture", "com"} <= set(modules)
     assert kernels.uncompiled_kernels() == modules  # nothing compiled yet
     folder.mkdir()

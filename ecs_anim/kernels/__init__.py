@@ -26,8 +26,11 @@ import subprocess
 import sys
 import threading
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from .handover import SpinningThreads
 
 
 def cache_dir() -> Path:
@@ -128,6 +131,8 @@ def uncompiled_kernels() -> list[str]:
     for source in kernel_sources():
         if "@jit(nogil=True)" not in source.read_text(encoding="utf-8"):
             continue  # helpers only: compiled into the kernels that call them (often inlined)
+        if source.stem == "handover":
+            continue  # compiled in a fraction of a second when a tick first uses two threads
         indexes = list(folder.glob(f"{source.stem}.*.nbi")) if folder.is_dir() else []
         source_hash = hashlib.sha256(source.read_bytes()).digest()
         if not any(_compiled_from(index, source_hash) for index in indexes):
@@ -239,39 +244,41 @@ def threads() -> int:
 
 #: Fewest rows worth handing to another thread: below, waking it costs more than it saves.
 MIN_ROWS_PER_THREAD = 4
-_pools: dict[int, ThreadPoolExecutor] = {}  # by process id: a forked child makes its own
+#: The same for a light kernel (tens of ns a row: the winners, the feet's directions, a table
+#: sampled, the errors): a hand-over (16-20 µs, the threads taking the GIL in turn) costs more
+#: than half of a few thousand rows; measured on two threads at 3,200 characters, each of them
+#: ran 1.2-3.4x slower split than on one.
+LIGHT_ROWS_PER_THREAD = 8192
+_pools: dict[int, SpinningThreads] = {}  # by process id: a forked child makes its own
 _pools_lock = threading.Lock()
 
 
-def _pool() -> ThreadPoolExecutor:
-    """This process's threads for :func:`over_chunks` (made on first use: threads do not
-    survive a fork, so the batch's forked workers each make their own)."""
+def _pool() -> SpinningThreads:
+    """This process's threads for :func:`over_chunks`, one fewer than
+    :func:`available_threads` (made on first use: threads do not survive a fork, so the batch's
+    forked workers each make their own)."""
     pid = os.getpid()
     with _pools_lock:  # two threads ticking for the first time make one pool
         pool = _pools.get(pid)
         if pool is None:
+            from .handover import SpinningThreads
+
             _pools.clear()
-            pool = _pools[pid] = ThreadPoolExecutor(thread_name_prefix="ecs_anim_kernel")
+            pool = _pools[pid] = SpinningThreads(available_threads() - 1)
     return pool
 
 
-def over_chunks(kernel: Callable[..., None], n: int, *args: object) -> None:
+def over_chunks(kernel: Callable[..., None], n: int, *args: object,
+                rows_per_thread: int = MIN_ROWS_PER_THREAD) -> None:
     """Run ``kernel(lo, hi, *args)``, a compiled kernel (``nogil=True``: it releases the GIL)
     over the loop indices ``lo..hi-1``, on the whole of ``0..n`` split into :func:`threads`
-    contiguous chunks, one per thread (this one runs the first), and wait for all of them; an
-    error of any chunk is raised once all are done. On one thread, or for few rows, it is one
-    call here. The chunks write disjoint rows, so the result does not depend on the split."""
-    count = min(threads(), n // MIN_ROWS_PER_THREAD)
+    contiguous chunks, one per thread (this one runs the first; the others wait for theirs
+    spinning, :mod:`ecs_anim.kernels.handover`), and wait for all of them; an error of any chunk
+    is raised once all are done. On one thread, or for fewer than ``rows_per_thread`` rows a
+    thread (:data:`LIGHT_ROWS_PER_THREAD` for a light kernel), it is one call here. The chunks
+    write disjoint rows, so the result does not depend on the split."""
+    count = min(threads(), n // rows_per_thread)
     if count <= 1:
         kernel(0, n, *args)
         return
-    bounds = [n * i // count for i in range(count + 1)]
-    pool = _pool()
-    others = [pool.submit(kernel, bounds[i], bounds[i + 1], *args) for i in range(1, count)]
-    try:
-        kernel(0, bounds[1], *args)
-    finally:
-        for chunk in others:
-            chunk.exception()  # wait for every chunk before raising (they write the arrays)
-    for chunk in others:
-        chunk.result()
+    _pool().run(kernel, [n * i // count for i in range(count + 1)], args)

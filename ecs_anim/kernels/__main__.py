@@ -11,6 +11,7 @@ import sys
 import time
 
 from . import cache_dir, compile_notice
+from .handover import spins_per_second
 
 
 def compile_solver() -> None:
@@ -50,6 +51,7 @@ def main() -> int:
     from ..benchmark import first_tick
 
     phases = first_tick()
+    spins_per_second()  # the threads' hand-over too (a tick on one thread does not compile it)
     print(f"kernels ready in {time.perf_counter() - start:.1f} s ({'compiled' if notice else 'loaded'}; "
           f"import {phases['import_s']:.1f} s, first tick {phases['first_tick_s']:.1f} s), "
           f"cached in {cache_dir()}")

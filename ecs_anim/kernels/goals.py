@@ -31,7 +31,7 @@ from ..constraint_table import (
 )
 from ..normalized import DecodedPose
 from ..solver_shell import CONTACT_PRIORITY, TickGoals
-from . import over_chunks
+from . import LIGHT_ROWS_PER_THREAD, over_chunks
 from .decode import DecodedArrays
 from .solve_points import Tables, point_position, segment_frame, tables
 from .vec import (
@@ -392,7 +392,8 @@ def constraint_errors(table: ConstraintTable, idx: I64, decoded: DecodedPose, ta
     idx = np.ascontiguousarray(idx, dtype=np.int64)
     out = np.empty(idx.size)
     over_chunks(error_rows, idx.size, idx, columns(table), _arrays(decoded),
-                np.ascontiguousarray(targets, dtype=np.float64), TABLES, CODES, out)
+                np.ascontiguousarray(targets, dtype=np.float64), TABLES, CODES, out,
+                rows_per_thread=LIGHT_ROWS_PER_THREAD)
     return out
 
 

@@ -35,7 +35,7 @@ from ..solver_shell import (
     TickGoals,
     iteration_caps,
 )
-from . import over_chunks, wait_for_solver
+from . import LIGHT_ROWS_PER_THREAD, over_chunks, wait_for_solver
 from .decode import DecodedArrays, PoseArrays
 from .solve_head import solve_head
 from .solve_limbs import solve_limbs
@@ -266,7 +266,8 @@ def sorted_goals(goals: TickGoals, goal_iterations: I64) -> tuple[Goals, Winners
     w = Winners(first_limb=np.empty((r, 4), np.int64), second_limb=np.empty((r, 4), np.int64),
                 orient_limb=np.empty((r, 4), np.int64), first_head=np.empty(r, np.int64),
                 orient_head=np.empty(r, np.int64))
-    over_chunks(winners_rows, r, g, w, TABLES.limb_of_group, HEAD)
+    over_chunks(winners_rows, r, g, w, TABLES.limb_of_group, HEAD,
+                rows_per_thread=LIGHT_ROWS_PER_THREAD)
     return g, w, order
 
 
@@ -306,7 +307,8 @@ def prepare(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64,
     dec = DecodedArrays(*(own(getattr(decoded, name)) for name in DecodedArrays._fields))
     r = goals.rows.size
     foot_in_world = np.empty((r, 2, 3))
-    over_chunks(foot_directions_rows, r, dec.positions, TABLES, foot_in_world)
+    over_chunks(foot_directions_rows, r, dec.positions, TABLES, foot_in_world,
+                rows_per_thread=LIGHT_ROWS_PER_THREAD)
     b = Bodies(lengths=lengths, masses=np.ascontiguousarray(masses, dtype=np.float64),
                com_fraction=np.ascontiguousarray(com_fraction, dtype=np.float64),
                footprint=np.ascontiguousarray(goals.footprint, dtype=np.float64),

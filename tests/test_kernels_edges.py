@@ -1,0 +1,54 @@
+"""The compiled clip and contact edges (ecs_anim.kernels.edges) equal the numpy reference
+(ecs_anim.events.clip_and_contact_edges): the edges, the clips seen before, and what is kept
+per entity for the next tick, over ticks where clips start, loop, end, go back and are replaced,
+and contacts begin and end."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ecs_anim.events import CONTACT_BEGAN_WEIGHT, TIME_SLACK_S, clip_and_contact_edges
+from ecs_anim.kernels.edges import clip_and_contact_edges as compiled
+
+
+def _seen(n_entities: int) -> list[np.ndarray]:
+    return [np.full(n_entities, -1, np.int64), np.zeros(n_entities),
+            np.zeros(n_entities, bool), np.zeros((n_entities, 2))]
+
+
+def test_compiled_edges_equal_numpy_over_ticks():
+    rng = np.random.default_rng(7)
+    n, n_entities, dt = 200, 260, 1 / 30
+    entity = rng.permutation(n_entities)[:n].astype(np.int64)  # ids with gaps, any order
+    duration_s = np.array([1.0, 0.5, 2.0])
+    loop = rng.random(n) < 0.5
+    speed = rng.choice([0.5, 1.0, 2.0], n)
+    clip = rng.integers(0, 3, n)
+    clip_time_s = rng.random(n) * 0.5
+    weights = rng.random((n, 2))
+    seen_numpy, seen_compiled = _seen(n_entities), _seen(n_entities)
+    kinds = np.zeros(5, np.int64)
+    for _ in range(60):
+        edges, previous = clip_and_contact_edges(
+            entity, clip, clip_time_s, speed, loop, duration_s, weights, dt, TIME_SLACK_S,
+            CONTACT_BEGAN_WEIGHT, *seen_numpy)
+        got_edges, got_previous = compiled(
+            entity, clip, clip_time_s, speed, loop, duration_s, weights, dt, TIME_SLACK_S,
+            CONTACT_BEGAN_WEIGHT, *seen_compiled)
+        np.testing.assert_array_equal(got_edges, edges)
+        np.testing.assert_array_equal(got_previous, previous)
+        for got, expected in zip(seen_compiled, seen_numpy, strict=True):
+            np.testing.assert_array_equal(got, expected)
+        kinds += edges.sum(axis=0)
+        # The next tick: clips advance (a looping one wraps), some are replaced or restarted,
+        # the contacts move around the threshold (exactly on it too).
+        clip_time_s = clip_time_s + dt * speed
+        ends = duration_s[clip]
+        clip_time_s = np.where(loop & (clip_time_s >= ends), clip_time_s - ends,
+                               np.minimum(clip_time_s, ends + dt * speed))
+        replaced = rng.random(n) < 0.05
+        clip = np.where(replaced, rng.integers(0, 3, n), clip)
+        clip_time_s = np.where(replaced | (rng.random(n) < 0.02), 0.0, clip_time_s)
+        weights = np.clip(weights + rng.normal(0, 0.3, (n, 2)), 0, 1)
+        weights[rng.random((n, 2)) < 0.05] = CONTACT_BEGAN_WEIGHT
+    assert (kinds > 0).all(), kinds  # every kind of edge was met
