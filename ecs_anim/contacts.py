@@ -24,7 +24,10 @@ F64 = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class ContactThresholds:
-    """Detection thresholds (all settable from ``ecs-anim import``).
+    """Detection thresholds. ``ecs-anim import`` sets three: ``height_m``
+    (``--contact-height``), ``speed_mps`` (``--contact-speed``) and ``min_duration_s``
+    (``--contact-min-duration``); the others from Python (``import_bvh`` and ``import_c3d``:
+    ``thresholds=``).
 
     height_m : a point (heel = ankle joint, ball = toe joint) is low when less than this above
         the local ground under it, for a body of 0.8 m leg (scaled by the body's leg): the
