@@ -53,8 +53,9 @@ BOUND_MS = 25.0
 #: disagree in sign); Hreljac & Marshall 2000 strike at the heel's acceleration peak
 #: 250 / 158 / 100 / 20 / 150, off at the toe's forward acceleration peak 50 / 50 / 17 / 20 / 40;
 #: Desailly et al. 2009 strike 110 / 33 / 17 / 90 / 60, off 40 / 33 / 17 / 70 / 30. Even the best
-#: rule per event and file leaves cgm24 at 30-40 ms: closing this needs the labs' own heel and
-#: toe markers (a C3D contact source), not points on the joints.
+#: rule per event and file leaves cgm24 at 30-40 ms, and its own heel marker does not close it
+#: either (its strikes are 8-50 ms from the marker's lowest, above): the events follow the
+#: force plates and each lab's hand-placed marks, which no kinematic rule reproduces.
 OPEN_MS = {
     "vicon_cgm24_events_jc_100hz.c3d": 50,
     "vicon_pig_noclav_prefix_events_60hz.c3d": 43,
