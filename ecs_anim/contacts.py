@@ -168,7 +168,9 @@ def _hysteresis(enter: NDArray[np.bool_], leave: NDArray[np.bool_]) -> NDArray[n
 
 
 def _clean(flags: NDArray[np.bool_], fps: float, th: ContactThresholds) -> NDArray[np.bool_]:
-    """Short gaps between two contacts filled, then short contacts dropped (per column)."""
+    """Short gaps between two contacts filled, then short contacts dropped (per column). A
+    contact or gap at the clip's first or last frame is kept whatever its length: the clip
+    cuts it, so how long it lasts is not known (a clip starting late in a stance keeps it)."""
     flags = flags.copy()
     min_len = max(1, round(th.min_duration_s * fps))
     min_gap = max(1, round(th.min_gap_s * fps))
@@ -178,7 +180,7 @@ def _clean(flags: NDArray[np.bool_], fps: float, th: ContactThresholds) -> NDArr
             if a > 0 and b < len(col) - 1 and b - a + 1 < min_gap:
                 col[a:b + 1] = True
         for a, b in _intervals(col):
-            if b - a + 1 < min_len:
+            if a > 0 and b < len(col) - 1 and b - a + 1 < min_len:
                 col[a:b + 1] = False
     return flags
 
