@@ -86,6 +86,7 @@ from .importing import (
     UP_AXES,
     CanonicalClip,
     FrameRange,
+    ankle_height_or_typical,
     detect_unit,
     normalize_clip,
     trim_clip,
@@ -1408,7 +1409,7 @@ def _functional_lower_body(mk: _Markers, present: list[str], build: _Build) -> N
         up_local = normalize(np.einsum("fji,j->i", foot_rot[stance], np.array([0.0, 0.0, 1.0])))
         fwd_local = np.einsum("fji,fj->i", foot_rot[stance], forward_h[stance])
         fwd_local = normalize(fwd_local - (fwd_local @ up_local) * up_local)
-        height = float(np.median(ankle[stance, 2]))
+        height = ankle_height_or_typical(float(np.median(ankle[stance, 2])), leg)
         drop = math.asin(float(np.clip(height / foot_len, 0.0, 0.85)))
         toe_local = foot_len * (math.cos(drop) * fwd_local - math.sin(drop) * up_local)
         _set(build, f"toe_{s}", ankle + foot_rot @ toe_local,

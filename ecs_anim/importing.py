@@ -364,6 +364,14 @@ def _child_towards(skeleton: BvhSkeleton, ancestor: int, joint: int) -> int:
     return joint
 
 
+def ankle_height_or_typical(height_m: float, leg_m: float) -> float:
+    """An ankle's height over the floor read as its height over z = 0 (m), or the adult
+    proportion for the leg (m) where that is implausible: a capture whose floor is not at
+    z = 0 (a lab's origin elsewhere, a BVH root offset) or that never stands."""
+    typical = FILL_FRACTION["ankle_height"] * leg_m
+    return height_m if 0.4 * typical <= height_m <= 2.5 * typical else typical
+
+
 def source_morphology(positions: F64, name: str) -> Morphology:
     """The captured subject's body: mean bone lengths over the clip, ankle height from the
     lowest ankle positions, mass from stature at a body-mass index of 22.
@@ -376,13 +384,9 @@ def source_morphology(positions: F64, name: str) -> Morphology:
     lengths[is_bone] = per_frame[:, is_bone].mean(axis=0)
     leg = 0.5 * (lengths[LENGTH_INDEX["thigh_l"]] + lengths[LENGTH_INDEX["shank_l"]]
                  + lengths[LENGTH_INDEX["thigh_r"]] + lengths[LENGTH_INDEX["shank_r"]])
-    typical = FILL_FRACTION["ankle_height"] * leg
     for side in "lr":
-        z = positions[:, J[f"ankle_{side}"], 2]
-        low = float(np.percentile(z, 5))
-        # Captures whose floor is not at z = 0 (or that never stand) fall back to proportions.
-        lengths[LENGTH_INDEX[f"ankle_height_{side}"]] = low if 0.4 * typical <= low <= 2.5 * typical \
-            else typical
+        low = float(np.percentile(positions[:, J[f"ankle_{side}"], 2], 5))
+        lengths[LENGTH_INDEX[f"ankle_height_{side}"]] = ankle_height_or_typical(low, leg)
     morph = Morphology(lengths, 1.0, "male", name)
     stature = morph.stature
     return Morphology(lengths, 22.0 * stature**2, "male", name)
