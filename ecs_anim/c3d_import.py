@@ -59,7 +59,8 @@ or ghost markers in fast motion) are replaced by interpolation and reported
 (:func:`reject_joint_outliers`).
 
 Gaps: a sample is invalid when its residual is negative, its coordinates are all zero or it is
-not finite. Runs of at most ``max_gap`` frames (default 10) are interpolated linearly; longer
+not finite. Runs of at most ``max_gap`` frames (default :data:`DEFAULT_MAX_GAP_S` worth: 10
+at 100 Hz, whatever the rate the same stretch of time) are interpolated linearly; longer
 runs are interpolated as well (so no NaN ever reaches the output) and reported. Runs at the
 trial's start or end are held from the nearest sample, so they are unreliable at any length:
 the frames at the ends where a body part's own markers are missing are trimmed, with one line
@@ -110,11 +111,12 @@ from .skeleton import JOINTS, N_JOINTS, REST_HIP_DIR_LEFT
 F64 = NDArray[np.float64]
 BOOL = NDArray[np.bool_]
 
-DEFAULT_MAX_GAP = 10
+#: Longest marker gap filled without a warning, in seconds (``--max-gap`` gives frames).
+DEFAULT_MAX_GAP_S = 0.1
 #: Adult widths (m) for the chord rules, scaled by leg length / 0.8 m; marker radius (m).
 JOINT_WIDTH_PER_LEG = {"knee": 0.105 / 0.80, "ankle": 0.070 / 0.80, "elbow": 0.070 / 0.80}
 MARKER_RADIUS_M = 0.007
-MAX_GLITCH_FRAMES = 5  # joint-centre outliers are replaced only in runs this short
+MAX_GLITCH_S = 0.05  # joint-centre outliers are replaced only in runs this short (seconds)
 HINGE_RATIO = 0.2
 #: A thigh or shank wand whose offset from the limb lies within this angle of the flexion axis
 #: marks the chord rule's plane (Plug-in Gait, Davis 1991); further off, the axis itself does.
@@ -316,7 +318,12 @@ def read_c3d(path: str | Path) -> C3dMarkers:
 
 # --- gaps --------------------------------------------------------------------------------------
 
-def fill_gaps(positions: F64, valid: BOOL, max_gap: int = DEFAULT_MAX_GAP) -> tuple[F64, BOOL]:
+def frames_of(seconds: float, rate: float) -> int:
+    """The number of frames (at least 1) spanning ``seconds`` at ``rate`` Hz."""
+    return max(1, round(seconds * rate))
+
+
+def fill_gaps(positions: F64, valid: BOOL, max_gap: int) -> tuple[F64, BOOL]:
     """Interpolate invalid samples of each marker linearly (held at the clip's ends).
 
     positions (F, M, 3), valid (F, M). Returns (filled positions, ``unreliable``): True (F, M)
@@ -559,7 +566,7 @@ def _detect_up(mk: _Markers, present: list[str], mmap: MarkerMap) -> str:
 
 def import_c3d(path: str | Path, map_spec: str | None = None, unit: str | None = None,
                thresholds: ContactThresholds = ContactThresholds(), up: str | None = None,
-               max_gap: int = DEFAULT_MAX_GAP, fill_from: str | Path | None = None,
+               max_gap: int | None = None, fill_from: str | Path | None = None,
                trim: FrameRange | None = None, treadmill: bool = True,
                contacts: str = "detect") -> NormalizedMotion:
     """Read a C3D file and normalize it. Raises :class:`EcsAnimError` subclasses on bad input.
@@ -717,9 +724,12 @@ def _match_labels(raw: C3dMarkers, map_spec: str | None, usable: list[bool]
 
 
 def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str | None = None,
-                       up: str | None = None, max_gap: int = DEFAULT_MAX_GAP
+                       up: str | None = None, max_gap: int | None = None
                        ) -> tuple[CanonicalClip, dict[str, Any]]:
-    """Markers -> canonical clip (metres, Z up) plus provenance for ``info``."""
+    """Markers -> canonical clip (metres, Z up) plus provenance for ``info``. ``max_gap``
+    (frames): None for :data:`DEFAULT_MAX_GAP_S` at the file's rate."""
+    if max_gap is None:
+        max_gap = frames_of(DEFAULT_MAX_GAP_S, raw.rate)
     # Markers never seen in the trial count as missing.
     seen: BOOL = np.asarray(raw.valid.any(axis=0))
     mmap, labels = _match_labels(raw, map_spec, [bool(v) for v in seen])
@@ -774,7 +784,8 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
     parts_trimmed = _parts_trimmed(mk, mmap, present, raw.labels, root, kept)
     unreliable, valid = unreliable[kept], valid[kept]
     lab = lab_joint_centres(raw.labels, mk.points[kept], valid, build.positions, mmap, present)
-    rejected_joints = reject_joint_outliers(build.positions, build.measured)
+    rejected_joints = reject_joint_outliers(build.positions, build.measured,
+                                            frames_of(MAX_GLITCH_S, raw.rate))
     # Frames where a marker was in a long gap or held at an end (not trimmed: kept_frames).
     used = sorted(set(mmap.marker.values()))
     bad_frames: BOOL = np.asarray(unreliable[:, used].any(axis=1)) if used else \
@@ -1003,14 +1014,15 @@ def trust_root(build: _Build, kept: slice) -> list[list[int]]:
     return repaired
 
 
-def reject_joint_outliers(positions: F64, measured: BOOL, tolerance: float = 0.15
+def reject_joint_outliers(positions: F64, measured: BOOL, longest: int, tolerance: float = 0.15
                           ) -> dict[str, int]:
     """Replace limb joint centres that break their bone lengths (marker swaps, ghost markers
     in fast motion) by interpolation from the neighbouring frames, in place.
 
     positions (F, N_JOINTS, 3). A bone is off in a frame when its length differs from its
-    median over the trial by more than ``tolerance`` of it; only runs of at most
-    :data:`MAX_GLITCH_FRAMES` frames are replaced (longer runs are motion, or the model).
+    median over the trial by more than ``tolerance`` of it; only runs of at most ``longest``
+    frames (:data:`MAX_GLITCH_S` at the file's rate) are replaced (longer runs are motion, or
+    the model).
     Along hip-knee-ankle-toe and shoulder-elbow-wrist-hand, the middle joint (knee, elbow) is
     the culprit where the shank (forearm) is off and so is the thigh (upper arm), or the foot
     (hand) beyond it is not; the end joint (ankle, wrist) where the shank (forearm) is still
@@ -1033,18 +1045,19 @@ def reject_joint_outliers(positions: F64, measured: BOOL, tolerance: float = 0.1
                 continue
             lower = off(b, c)
             tip_fine = ~off(c, d) if measured[d] else np.zeros_like(lower)
-            _interpolate_frames(positions, b, lower & (off(a, b) | tip_fine), frames, out)
-            _interpolate_frames(positions, c, off(b, c), frames, out)  # lengths after the fix
+            _interpolate_frames(positions, b, lower & (off(a, b) | tip_fine), frames, longest,
+                                out)
+            _interpolate_frames(positions, c, off(b, c), frames, longest, out)  # after the fix
             if measured[d]:
-                _interpolate_frames(positions, d, off(c, d), frames, out)
+                _interpolate_frames(positions, d, off(c, d), frames, longest, out)
     return out
 
 
 def _interpolate_frames(positions: F64, joint: int, bad: BOOL, frames: NDArray[np.int_],
-                        counts: dict[str, int]) -> None:
+                        longest: int, counts: dict[str, int]) -> None:
     bad = bad.copy()
     for a, b in _intervals(bad):  # a long run is the motion (or the model), not a glitch
-        if b - a + 1 > MAX_GLITCH_FRAMES:
+        if b - a + 1 > longest:
             bad[a:b + 1] = False
     if bad.any() and not bad.all():
         for axis in range(3):
@@ -1458,7 +1471,7 @@ def _fill_absent(build: _Build, present: list[str]) -> None:
 
 
 __all__ = [
-    "DEFAULT_MAX_GAP",
+    "DEFAULT_MAX_GAP_S",
     "GROUPS",
     "C3dMarkers",
     "canonical_clip_c3d",

@@ -97,7 +97,7 @@ def _progress(done: int, total: int, label: str) -> None:
 
 
 def cmd_import(args: argparse.Namespace) -> int:
-    from .c3d_import import DEFAULT_MAX_GAP, import_c3d
+    from .c3d_import import import_c3d
     from .importing import import_bvh
     from .motion import save_nmo
 
@@ -146,7 +146,7 @@ def cmd_import(args: argparse.Namespace) -> int:
                                    "in the unit of POINT:UNITS)")
             if suffix == ".c3d":
                 motion = import_c3d(src, args.map, args.unit, thresholds, args.up,
-                                    DEFAULT_MAX_GAP if args.max_gap is None else args.max_gap,
+                                    args.max_gap,
                                     args.fill_absent_from, args.trim, not args.no_treadmill,
                                     args.contacts)
             else:
@@ -572,7 +572,7 @@ def add_threads_argument(p: argparse.ArgumentParser, default: int | None) -> Non
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from .c3d_import import DEFAULT_MAX_GAP
+    from .c3d_import import DEFAULT_MAX_GAP_S
 
     parser = argparse.ArgumentParser(
         prog="ecs-anim",
@@ -607,7 +607,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "first frame) or seconds with s (0.5s:12s)")
     p.add_argument("--max-gap", type=positive_int, metavar="FRAMES",
                    help="C3D: longest run of missing marker samples filled without a warning "
-                   f"(default {DEFAULT_MAX_GAP})")
+                   f"(default: {DEFAULT_MAX_GAP_S:g} s at the file's rate, 10 at 100 Hz)")
     p.add_argument("--fill-absent-from", metavar="MOTION.nmo|MOTION.bvh",
                    help="C3D: take body parts with no markers from this motion (looped) instead "
                    "of a neutral pose")
