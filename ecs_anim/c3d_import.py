@@ -118,6 +118,10 @@ JOINT_WIDTH_PER_LEG = {"knee": 0.105 / 0.80, "ankle": 0.070 / 0.80, "elbow": 0.0
 MARKER_RADIUS_M = 0.007
 MAX_GLITCH_S = 0.05  # joint-centre outliers are replaced only in runs this short (seconds)
 HINGE_RATIO = 0.2
+#: ... and a hinge's axis runs across its segment (a knee's, an ankle's): the weakest direction
+#: is taken for a hinge with a prior only when its cosine with the line from the free solution
+#: to the prior (the proximal joint, up the segment) is below this (at least 60 degrees apart).
+HINGE_ACROSS_COS = 0.5
 #: A thigh or shank wand whose offset from the limb lies within this angle of the flexion axis
 #: marks the chord rule's plane (Plug-in Gait, Davis 1991); further off, the axis itself does.
 WAND_MAX_ANGLE_DEG = 45.0
@@ -458,7 +462,9 @@ def score_centre(parent: tuple[F64, F64], child: tuple[F64, F64], use: BOOL,
     parent, child : (rotation (F, 3, 3), origin (F, 3)) segment poses; use : (F,) frames to fit.
     For a hinge the point is only defined up to the axis: with ``hinge_prior_in_parent`` (3,),
     when the weakest direction of the normal equations is clearly weaker than the others (by
-    :data:`HINGE_RATIO`), it is dropped from the least-squares solution and the point on it nearest
+    :data:`HINGE_RATIO`) and runs across the segment (:data:`HINGE_ACROSS_COS`: along it, it is
+    the segment's twist in a joint that is no hinge, and the point nearest the prior would slide
+    up the segment), it is dropped from the least-squares solution and the point on it nearest
     the prior is taken; with ``hinge_plane_in_parent`` (unit direction d (3,), offset) instead,
     the point on it with ``d . centre = offset``. ``hinge_through_in_parent`` (3,): a point known
     to lie on the hinge's axis (a landmark on it); the axis keeps SCoRE's direction but passes
@@ -475,6 +481,10 @@ def score_centre(parent: tuple[F64, F64], child: tuple[F64, F64], use: BOOL,
     keep = evals > 1e-9 * evals[-1]
     hinge = (hinge_prior_in_parent is not None or hinge_plane_in_parent is not None) \
         and evals[0] < HINGE_RATIO * evals[1]
+    if hinge and hinge_prior_in_parent is not None and hinge_plane_in_parent is None:
+        free = evecs @ np.where(keep, (evecs.T @ v) / np.where(keep, evals, 1.0), 0.0)
+        up_segment = normalize(hinge_prior_in_parent - free[:3])
+        hinge = abs(float(normalize(evecs[:3, 0]) @ up_segment)) < HINGE_ACROSS_COS
     if hinge:
         keep[0] = False
     coeff = np.where(keep, (evecs.T @ v) / np.where(keep, evals, 1.0), 0.0)

@@ -98,7 +98,7 @@ def test_fill_gaps_interpolates_short_and_reports_long_and_held_ends():
     assert np.all(np.isfinite(filled))
 
 
-def test_score_finds_a_ball_joint_and_the_hinge_point_nearest_the_prior():
+def test_score_finds_a_ball_joint_and_the_hinge_point_nearest_the_prior_up_the_segment():
     rng = np.random.default_rng(6)
     n = 200
     parent_rot = rot_axis(2, rng.uniform(-0.3, 0.3, n)) @ rot_axis(0, rng.uniform(-0.2, 0.2, n))
@@ -113,12 +113,19 @@ def test_score_finds_a_ball_joint_and_the_hinge_point_nearest_the_prior():
     np.testing.assert_allclose(cp, centre_in_parent, atol=1e-9)
     np.testing.assert_allclose(cc, centre_in_child, atol=1e-9)
     np.testing.assert_allclose(world, centre, atol=1e-9)
-    # A hinge about the parent's y axis: any point on that axis fits; the prior picks one.
+    # A hinge about the parent's y axis: any point on that axis fits; the prior (the proximal
+    # joint, up the segment along z) picks one.
     hinge_rot = parent_rot @ rot_axis(1, rng.uniform(-1.0, 1.0, n))
     hinge_origin = centre - np.einsum("fij,j->fi", hinge_rot, centre_in_child)
-    prior = centre_in_parent + np.array([0.3, 0.4, 0.1])
-    cp, _, world = score_centre((parent_rot, parent_origin), (hinge_rot, hinge_origin), use, prior)
-    np.testing.assert_allclose(cp, centre_in_parent + [0.0, 0.4, 0.0], atol=1e-9)
+    prior = centre_in_parent + np.array([0.05, 0.1, 0.4])
+    hinge = ((parent_rot, parent_origin), (hinge_rot, hinge_origin), use)
+    cp, _, world = score_centre(*hinge, prior)
+    np.testing.assert_allclose(cp, centre_in_parent + [0.0, 0.1, 0.0], atol=1e-9)
+    # A weakest direction pointing at the prior is no flexion axis across the segment (a
+    # twist): the prior does not move the centre along it.
+    free, _, _ = score_centre(*hinge)
+    along, _, _ = score_centre(*hinge, centre_in_parent + np.array([0.05, 0.4, 0.1]))
+    np.testing.assert_allclose(along, free, atol=1e-9)
 
 
 def test_cluster_poses_recover_a_rigid_motion_with_a_missing_marker():
