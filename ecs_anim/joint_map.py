@@ -298,6 +298,7 @@ class _Tree:
     """A skeleton's hierarchy and rest lengths, as structural matching reads them.
 
     ``bone`` (n_joints,): distance from each joint to its parent at rest (0 for the root);
+    ``is_end_site`` (n_joints,): End Sites, which mark where a chain ends rather than a joint;
     ``reach`` (n_joints,): the longest path from a joint down to a leaf; ``onward``: the child on
     that path (-1 at a leaf); ``size``: joints in each subtree. Joints at the place of their parent
     (zero offsets, zero-length End Sites) are *at the same place*; a run of them is one place.
@@ -307,6 +308,7 @@ class _Tree:
         rest = rest_positions(skeleton)
         n = len(skeleton.joints)
         self.parents = np.array([j.parent for j in skeleton.joints])
+        self.is_end_site = [j.is_end_site for j in skeleton.joints]
         self.children: list[list[int]] = [[] for _ in range(n)]
         for i, p in enumerate(self.parents):
             if p >= 0:
@@ -398,14 +400,16 @@ def _limb(tree: _Tree, hub: int, branch: int) -> dict[str, int | None]:
 
 def _head(tree: _Tree, thorax: int, branch: int) -> tuple[int, int, int | None]:
     """(neck, head, head top) on the branch leaving the thorax upwards: the neck is its first
-    joint (the thorax itself when the head hangs straight from it), the head top a leaf at its
-    end, the head the place before that leaf, or the place where eyes or a jaw branch off."""
+    joint (the thorax itself when the head hangs straight from it), the head top an End Site at
+    its end, the head the place before that End Site, or the place where eyes or a jaw branch
+    off. A leaf joint is the head itself: a file written without End Sites ends the neck there
+    (OptiTrack's Chest, Neck, Head), and the head top is then filled in from proportions."""
     places = tree.places(branch)
     branching = next((k for k, place in enumerate(places) if len(tree.children[place[-1]]) > 1),
                      len(places) - 1)
     places = places[:branching + 1]
     last = places[-1][0]
-    if len(places) >= 2 and not tree.children[last]:
+    if len(places) >= 2 and not tree.children[last] and tree.is_end_site[last]:
         head_top: int | None = last
         head = places[-2][0]
     else:
