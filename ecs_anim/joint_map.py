@@ -6,9 +6,10 @@ A source skeleton (BVH hierarchy, names in any convention) is matched to the can
 1. a user YAML map (``--map FILE.yaml``), which may name a preset to start from and override
    single joints;
 2. a named preset (``--map mixamo``), or the preset detected from the joint names;
-3. failing both, a structural match on the hierarchy and its lengths alone (names are not read):
-   the legs, the spine and the arms are the long branches, left and right from where the knees
-   bend and the toes point (see :func:`structural_map`).
+3. failing both, a structural match on the hierarchy and its lengths alone (names are read only
+   to tell left from right when no pose shows it): the legs, the spine and the arms are the
+   long branches, left and right from where the knees bend and the toes point (see
+   :func:`structural_map`).
 
 Canonical joints that a skeleton does not have are filled in by the importer: ``spine_1`` /
 ``spine_2`` between the pelvis and the neck, ``toe_*``, ``hand_*`` and ``head_top`` from the
@@ -418,27 +419,51 @@ def _head(tree: _Tree, thorax: int, branch: int) -> tuple[int, int, int | None]:
 
 
 def _leftness(poses: F64, pelvis: int, thorax: int,
-              legs: tuple[dict[str, int | None], dict[str, int | None]]) -> float:
+              legs: tuple[dict[str, int | None], dict[str, int | None]]) -> tuple[float, float]:
     """How clearly the first of two legs is the left one, from -1 (surely the right) to 1: knees
     bend forward and toes point forward, and left is up x forward (BVH axes are right-handed).
-    ``poses`` (n_poses, n_joints, 3); each pose counts by how much it shows."""
+    ``poses`` (n_poses, n_joints, 3); each pose counts by how much it shows. Also returns how
+    much the poses show forward: the median length of those cues over the legs' length (a few
+    hundredths for straight standing legs without toes, about 0.3 with toes or walking)."""
     up = poses[:, thorax] - poses[:, pelvis]
     forward = np.zeros_like(up)
+    leg_length = np.zeros(len(poses))
     for leg in legs:
         hip, knee, ankle = (poses[:, leg[k]] for k in ("proximal", "middle", "distal"))
         along = normalize(ankle - hip)
         bend = knee - hip
         forward += bend - np.sum(bend * along, axis=-1, keepdims=True) * along
+        leg_length += np.linalg.norm(bend, axis=-1) + np.linalg.norm(ankle - knee, axis=-1)
         if leg["end"] is not None:
             forward += poses[:, leg["end"]] - ankle
     lateral = poses[:, legs[0]["proximal"]] - poses[:, legs[1]["proximal"]]
     shown = np.linalg.norm(lateral, axis=-1) * np.linalg.norm(np.cross(up, forward), axis=-1)
-    return float(np.sum(lateral * np.cross(up, forward)) / max(float(np.sum(shown)), 1e-300))
+    leftness = float(np.sum(lateral * np.cross(up, forward)) / max(float(np.sum(shown)), 1e-300))
+    cue = float(np.median(np.linalg.norm(forward, axis=-1) / np.maximum(leg_length, 1e-300)))
+    return leftness, cue
 
 
 #: A rest pose whose cues say left or right at least this clearly (1: every cue agrees, exactly
 #: across the body) decides the sides; real rest poses give 0 (no cue) or above 0.99.
 CLEAR_LEFTNESS = 0.5
+
+
+#: Poses whose forward cues (:func:`_leftness`) are shorter than this fraction of the legs show
+#: no side: straight standing legs without toes (a toe-less file with its End Sites dropped) give
+#: 0.03-0.07, where any toe or a walk gives 0.17 or more. The joints' names then decide.
+WEAK_FORWARD_CUE = 0.1
+
+
+def _named_leftness(skeleton: BvhSkeleton,
+                    legs: tuple[dict[str, int | None], dict[str, int | None]]) -> float:
+    """1 when the first limb's joints are named left and the second's right (``LeftHip``,
+    ``thigh_l``), -1 the other way round, 0 when the names say neither or disagree."""
+    votes = 0
+    for leg, sign in zip(legs, (1, -1), strict=True):
+        for part in ("proximal", "middle", "distal"):
+            side = _side_of(skeleton.joints[leg[part]].name)  # type: ignore[index]
+            votes += sign * {"l": 1, "r": -1}.get(side or "", 0)
+    return float(np.sign(votes))
 
 
 def _stands(pose: F64, pelvis: int, thorax: int,
@@ -459,7 +484,9 @@ def structural_map(skeleton: BvhSkeleton, poses: F64 | None = None,
     Along each limb the two long bones give hip, knee, ankle (shoulder, elbow, wrist); spine joints
     are picked evenly between pelvis and neck. Left is up x forward, forward being where the knees
     bend and the toes point: in the rest pose when it is a stance that shows it, otherwise in
-    ``poses`` ((n_poses, n_joints, 3) joint positions in file axes, e.g. every frame of the clip).
+    ``poses`` ((n_poses, n_joints, 3) joint positions in file axes, e.g. every frame of the clip),
+    and when those show no forward either (:data:`WEAK_FORWARD_CUE`), the joints' names if they
+    say the sides (``LeftHip``, ``thigh_l``).
 
     Raises :class:`MappingError` saying what it could not find, unless ``partial`` (then the parts
     it could not find are None).
@@ -489,18 +516,25 @@ def structural_map(skeleton: BvhSkeleton, poses: F64 | None = None,
             # The rest pose tells the sides if it is a stance with feet or knees showing forward;
             # otherwise (Bandai's bones lie along X at rest; Biped's stand straight with a sole
             # End Site and no toes) the clip's poses do.
+            # Poses showing no forward (straight legs without toes) leave the sides to the
+            # joints' names when these say them, for the arms as well.
             geometry = rest_positions(skeleton)[None]
-            leftness = _leftness(geometry, pelvis, thorax, leg_parts)
+            leftness, _ = _leftness(geometry, pelvis, thorax, leg_parts)
+            by_names = False
             if poses is not None and not (_stands(geometry[0], pelvis, thorax, leg_parts)
                                           and abs(leftness) > CLEAR_LEFTNESS):
                 geometry = poses
-                leftness = _leftness(geometry, pelvis, thorax, leg_parts)
+                leftness, cue = _leftness(geometry, pelvis, thorax, leg_parts)
+                named = _named_leftness(skeleton, leg_parts)
+                by_names = cue < WEAK_FORWARD_CUE and named != 0.0
+                leftness = named if by_names else leftness
             if leftness < 0.0:
                 leg_parts = leg_parts[::-1]
             # The left arm is the one on the left hip's side.
             lateral = geometry[:, leg_parts[0]["proximal"]] - geometry[:, leg_parts[1]["proximal"]]
             across = geometry[:, arm_parts[0]["proximal"]] - geometry[:, arm_parts[1]["proximal"]]
-            if float(np.sum(lateral * across)) < 0.0:
+            named_arms = _named_leftness(skeleton, arm_parts) if by_names else 0.0
+            if (named_arms or float(np.sum(lateral * across))) < 0.0:
                 arm_parts = arm_parts[::-1]
             for side, leg, arm in zip("lr", leg_parts, arm_parts, strict=False):
                 found |= {f"hip_{side}": leg["proximal"], f"knee_{side}": leg["middle"],
