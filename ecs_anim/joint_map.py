@@ -336,21 +336,28 @@ class _Tree:
 
     def hub_below(self, start: int) -> tuple[int, list[int]] | None:
         """The first joint from ``start`` down its longest path where three or more major branches
-        leave (the pelvis: two legs and the spine; the thorax: two arms and the neck), with them."""
+        leave, two of them limbs (the pelvis: two legs and the spine; the thorax: two arms and the
+        neck), with them. Single-bone leaves reaching as far (IK targets at the feet under a
+        root) make no hub."""
         j = start
         while j >= 0:
             longest = self.reach[j]
             major = [c for c in self.children[j]
                      if longest > 0 and self.branch(c) >= MAJOR_BRANCH_FRACTION * longest]
-            if len(major) >= 3:
+            if len(major) >= 3 and sum(self.is_limb(c) for c in major) >= 2:
                 return j, major
             j = int(self.onward[j])
         return None
 
+    def is_limb(self, branch: int) -> bool:
+        """Whether ``branch`` has three places along its longest path (hip, knee, ankle)."""
+        return len(self.places(branch)) >= 3
+
     def mirror_pair(self, branches: list[int]) -> tuple[int, int]:
-        """The two branches most alike in joints and reach (the legs, the arms), among the
+        """The two limbs most alike in joints and reach (the legs, the arms), among the
         :data:`COMPARED_BRANCHES` reaching farthest."""
-        branches = sorted(branches, key=self.branch, reverse=True)[:COMPARED_BRANCHES]
+        branches = sorted((b for b in branches if self.is_limb(b)), key=self.branch,
+                          reverse=True)[:COMPARED_BRANCHES]
         def unlike(a: int, b: int) -> float:
             joints: float = abs(self.size[a] - self.size[b]) / max(self.size[a], self.size[b])
             return joints + abs(self.branch(a) - self.branch(b)) / max(self.branch(a),

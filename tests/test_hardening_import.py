@@ -229,7 +229,7 @@ def test_a_5000_joint_bvh_that_cannot_be_mapped_gives_a_short_error(tmp_path):
         import_bvh(path)
     message = _message(exc, path)
     assert message == ("cannot match the skeleton by its names (no preset fits) nor by its "
-                       "structure (no joint up the spine where two arms and a neck branch off); "
+                       "structure (no joint where two legs and a spine branch off); "
                        "give --map PRESET or FILE.yaml (joints: {canonical: source_name}); "
                        "presets: ecs-anim import --help")
     assert len(message) < MESSAGE_CHARS
