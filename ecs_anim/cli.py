@@ -183,6 +183,8 @@ def cmd_import(args: argparse.Namespace) -> int:
             message += _events_and_treadmill(motion.info)
             if motion.info["filled_in"]:
                 message += f", filled in: {', '.join(motion.info['filled_in'])}"
+            if motion.info.get("ignored_joints"):
+                message += f", ignored (no body part): {listed(motion.info['ignored_joints'])}"
             if extra:
                 message += f", {len(extra)} stored constraint(s)"
             if motion.info.get("absent"):

@@ -24,7 +24,7 @@ from .contacts import (
     treadmill_belt,
 )
 from .errors import EcsAnimError, InputError
-from .joint_map import JointMap, map_skeleton
+from .joint_map import JointMap, map_skeleton, unused_joints
 from .morphology import ADULT_PROPORTIONS, Morphology, bone_lengths_of
 from .motion import NormalizedMotion
 from .normalized import encode
@@ -83,6 +83,8 @@ class CanonicalClip:
     up_axis: str = "y"
     up_reason: str = ""
     warnings: tuple[str, ...] = ()
+    #: Source joints no canonical part uses (:func:`~ecs_anim.joint_map.unused_joints`).
+    ignored: tuple[str, ...] = ()
 
 
 #: The largest frame number or seconds ``--trim`` takes (a day at 10,000 fps is under 1e9).
@@ -354,6 +356,7 @@ def canonical_clip(motion: BvhMotion, map_spec: str | None = None,
         head2world=world_frame(src["head"]),  # type: ignore[arg-type]
         measured=measured, fps=motion.fps, unit=unit, unit_reason=reason, joint_map=jmap,
         up_axis=up, up_reason=up_reason, warnings=tuple(motion.warnings),
+        ignored=tuple(unused_joints(skeleton, jmap)),
     )
 
 
@@ -490,6 +493,8 @@ def normalize_clip(clip: CanonicalClip, name: str, source: str,
         info["up_reason"] = clip.up_reason
     if clip.warnings:
         info["warnings"] = list(clip.warnings)
+    if clip.ignored:
+        info["ignored_joints"] = list(clip.ignored)
     return NormalizedMotion(poses, clip.fps, morph, constraints, info, planted)
 
 

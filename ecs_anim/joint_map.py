@@ -737,6 +737,20 @@ def map_skeleton(skeleton: BvhSkeleton, map_spec: str | None = None,
     return JointMap(source=source, thorax=thorax, how=how, names=names)
 
 
+def unused_joints(skeleton: BvhSkeleton, jmap: JointMap) -> list[str]:
+    """Joints (End Sites aside) that move no mapped joint: leaves and chains the canonical body
+    has no part for (fingers, eyes, twist and IK helpers, props), in file order. Helper joints
+    above the pelvis (a ``Reference`` or ``Armature`` root) do move it and are not listed."""
+    mapped = {i for i in jmap.source.values() if i is not None}
+    carries = [i in mapped for i in range(len(skeleton.joints))]
+    for i in range(len(skeleton.joints) - 1, 0, -1):  # file order is topological
+        parent = skeleton.joints[i].parent
+        if parent >= 0 and carries[i]:
+            carries[parent] = True
+    return [j.name for j, used in zip(skeleton.joints, carries, strict=True)
+            if not used and not j.is_end_site]
+
+
 def _toe_end_site(skeleton: BvhSkeleton, knee: int, ankle: int) -> int | None:
     """The ankle's one End Site when it points more across the shank than along it (a toe tip
     ahead of the ankle, within 45 degrees of square to the shank), else None (a sole marker
