@@ -216,7 +216,8 @@ def unit_scale(unit: str) -> float:
 def detect_up(skeleton: BvhSkeleton, jmap: JointMap, pos_file: F64) -> tuple[str, str]:
     """The file's up axis, ``"y"`` or ``"z"``, with a sentence saying why: the axis along which
     the head stands above the feet, in the rest pose (the spine from pelvis to neck) and over
-    the clip's frames (the head above the lower ankle), each as a fraction of its length.
+    the clip's frames (the head above the lower ankle), each as a fraction of its length; when
+    the two disagree, the frames if they show it clearly.
 
     ``pos_file`` (n_frames, n_joints, 3): joint positions in file axes. A tie or no axis showing
     the head above the feet keeps the BVH convention, Y up, and says so.
@@ -235,8 +236,17 @@ def detect_up(skeleton: BvhSkeleton, jmap: JointMap, pos_file: F64) -> tuple[str
     score = {axis: r[0] + r[1] for axis, r in rise.items()}
     up = max(score, key=lambda a: score[a])
     if score[up] <= 0.5 or abs(score["y"] - score["z"]) < 0.2:
-        return "y", ("assumed (the BVH convention): neither Y nor Z shows the head clearly above "
-                     "the feet; give --up if wrong")
+        # The rest pose and the frames disagree (a Blender armature turns a Z-up rest pose to
+        # Y up in its channels): the frames are what is imported, so they decide if clear.
+        clear = [axis for axis, r in rise.items() if r[1] > 0.5]
+        if len(clear) != 1:
+            return "y", ("assumed (the BVH convention): neither Y nor Z shows the head clearly "
+                         "above the feet; give --up if wrong")
+        up = clear[0]
+        rest_up = next(a for a in rise if a != up)
+        return up, (f"detected: the head is above the feet along +{up.upper()} in "
+                    f"{rise[up][2]:.0%} of frames, which decide over the rest pose's spine "
+                    f"pointing {rise[rest_up][0]:+.2f} along {rest_up.upper()}")
     spine_k, _, share = rise[up]
     rest_text = (f"the rest pose's spine points {spine_k:+.2f} along {up.upper()}"
                  if abs(spine_k) > 0.5 else "the rest pose shows no stance")

@@ -267,6 +267,25 @@ def test_helper_bones_above_the_hips_keep_the_round_trip(name, tmp_path):
         assert info.get("ignored_joints") == plain.get("ignored_joints"), variant
 
 
+def test_an_armature_turning_a_z_up_rest_pose_to_y_up_is_read_y_up(tmp_path, capsys):
+    """Blender's exporter writes the armature object's turn (-90 degrees about X) in a root
+    above the hips, unlike the helper roots above: the rest pose stands along Z, every frame
+    along Y. The frames decide, and the body comes out as the Z-up original."""
+    source = _dev_file("varied/fair_zup_walk_inch_120hz.bvh")
+    clip = load_clip(source)
+    turned = np.tile([0.0, -90.0, 0.0], (clip.n_frames, 1))
+    for joint in clip.joints:
+        joint.parent += 1
+    clip.joints.insert(0, EditJoint("Armature", -1, np.zeros(3), POSITIONS + [
+        "Zrotation", "Xrotation", "Yrotation"], np.concatenate([0 * turned, turned], axis=1)))
+    path = tmp_path / "blender.bvh"
+    path.write_text(clip.text())
+    info, _ = _round_trip(source, path, tmp_path)
+    assert info["up_axis"] == "y"
+    assert ("Y up (detected: the head is above the feet along +Y in 100% of frames, which decide "
+            "over the rest pose's spine pointing +1.00 along Z)") in capsys.readouterr().out
+
+
 # --- extra bones ---------------------------------------------------------------------------------
 
 def _leaf(clip: EditClip, parent: str, name: str, offset, end_site: bool = True) -> None:
