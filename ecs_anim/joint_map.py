@@ -285,8 +285,9 @@ def _lca(skeleton: BvhSkeleton, joints: list[int]) -> int:
 
 
 #: A branch is a major one (a limb, the spine, the neck and head) when it reaches at least this
-#: fraction as far as the longest branch leaving the same joint; fingers, toes, twist helpers and
-#: props reach less (a neck and head reaches about 0.35 as far as an arm from the thorax).
+#: fraction as far as the second-longest branch leaving the same joint (the other arm: a prop in
+#: one hand makes its arm the longest by far); fingers, toes and twist helpers reach less (a neck
+#: and head reaches about 0.35 as far as an arm from the thorax).
 MAJOR_BRANCH_FRACTION = 0.15
 
 
@@ -341,9 +342,10 @@ class _Tree:
         root) make no hub."""
         j = start
         while j >= 0:
-            longest = self.reach[j]
+            reaches = sorted((self.branch(c) for c in self.children[j]), reverse=True)
+            yardstick = reaches[1] if len(reaches) > 1 else self.reach[j]
             major = [c for c in self.children[j]
-                     if longest > 0 and self.branch(c) >= MAJOR_BRANCH_FRACTION * longest]
+                     if yardstick > 0 and self.branch(c) >= MAJOR_BRANCH_FRACTION * yardstick]
             if len(major) >= 3 and sum(self.is_limb(c) for c in major) >= 2:
                 return j, major
             j = int(self.onward[j])
@@ -379,9 +381,10 @@ class _Tree:
         return out
 
 
-def _limb(tree: _Tree, hub: int, branch: int) -> dict[str, int | None]:
-    """A leg or an arm leaving ``hub`` by ``branch``: its proximal, middle and distal joints (hip,
-    knee, ankle / shoulder, elbow, wrist) and the end beyond (toe / hand).
+def _limb_places(tree: _Tree, hub: int, branch: int) -> tuple[list[list[int]], list[float], int]:
+    """A leg or an arm leaving ``hub`` by ``branch``: its places from the hub on, the length of
+    the segment reaching each (``lengths[k]`` from place k - 1 to k; k = 1 leaves the hub), and
+    ``first``, the segment of the first long bone (0 when the path has too few places).
 
     The two long bones are the path's longest segment and the longer of its neighbours, never
     the segment leaving the hub (a pelvis offset, a clavicle: CMU's clavicle is longer than its
@@ -392,18 +395,56 @@ def _limb(tree: _Tree, hub: int, branch: int) -> dict[str, int | None]:
         places[0].insert(0, hub)
     else:
         places.insert(0, [hub])
-    # lengths[k]: from places[k - 1] to places[k]; k = 1 leaves the hub.
     lengths = [0.0] + [float(tree.bone[p[0]]) for p in places[1:]]
     if len(places) < 4:
-        return {"proximal": None, "middle": None, "distal": None, "end": None}
+        return places, lengths, 0
     longest = max(range(2, len(places)), key=lambda k: lengths[k])
     before = lengths[longest - 1] if longest >= 3 else -1.0
     after = lengths[longest + 1] if longest + 1 < len(places) else -1.0
-    first = longest - 1 if before > after else longest  # lengths[first], lengths[first + 1]
-    proximal = places[first - 1][0]
-    end = places[first + 2][0] if first + 2 < len(places) else None
-    return {"proximal": proximal, "middle": places[first][0], "distal": places[first + 1][0],
-            "end": end}
+    return places, lengths, longest - 1 if before > after else longest
+
+
+#: Two segments are a mirror image of each other within this fraction of the longer.
+MIRROR_TOLERANCE = 0.25
+
+
+#: A leg's or an arm's joints: "proximal", "middle", "distal" and "end" (None: not found).
+Limb = dict[str, int | None]
+
+
+def _limbs(tree: _Tree, hub: int, pair: tuple[int, int]) -> tuple[Limb, Limb]:
+    """The two legs (or arms) leaving ``hub`` by the branches ``pair``: each one's proximal,
+    middle and distal joints (hip, knee, ankle / shoulder, elbow, wrist) and the end beyond (toe /
+    hand). Where the two limbs' long bones (:func:`_limb_places`) are not at the same segment, a
+    bone on one side only (a sword held in one hand, longer than the arm) was taken for one: both
+    take the segment whose bones are alike on both sides. An end farther from the distal joint
+    than the bone before it is dropped (filled in instead)."""
+    (places_a, lengths_a, first_a), (places_b, lengths_b, first_b) = \
+        (_limb_places(tree, hub, b) for b in pair)
+
+    def alike(first: int) -> bool:
+        return all(first + d < min(len(lengths_a), len(lengths_b)) and
+                   abs(lengths_a[first + d] - lengths_b[first + d])
+                   <= MIRROR_TOLERANCE * max(lengths_a[first + d], lengths_b[first + d])
+                   for d in (0, 1))
+
+    firsts = [first_a, first_b]
+    if first_a != first_b:
+        mirrored = [f for f in (first_a, first_b) if f and alike(f)]
+        if len(mirrored) == 1:
+            firsts = mirrored * 2
+    out: list[Limb] = []
+    for places, first in zip((places_a, places_b), firsts, strict=True):
+        if not first:
+            out.append({"proximal": None, "middle": None, "distal": None, "end": None})
+            continue
+        end = places[first + 2][0] if first + 2 < len(places) else None
+        out.append({"proximal": places[first - 1][0], "middle": places[first][0],
+                    "distal": places[first + 1][0], "end": end})
+    for limb, lengths, first in zip(out, (lengths_a, lengths_b), firsts, strict=True):
+        if limb["end"] is not None and lengths[first + 2] > lengths[first + 1]:
+            limb["end"] = None  # farther than the forearm or shank: a prop, no hand or toe
+    return out[0], out[1]
 
 
 def _head(tree: _Tree, thorax: int, branch: int) -> tuple[int, int, int | None]:
@@ -517,8 +558,8 @@ def structural_map(skeleton: BvhSkeleton, poses: F64 | None = None,
         found["pelvis"] = pelvis
         neck, found["head"], found["head_top"] = _head(tree, thorax, neck_branch)
         found["neck"] = neck
-        leg_parts = (_limb(tree, pelvis, legs[0]), _limb(tree, pelvis, legs[1]))
-        arm_parts = (_limb(tree, thorax, arms[0]), _limb(tree, thorax, arms[1]))
+        leg_parts = _limbs(tree, pelvis, legs)
+        arm_parts = _limbs(tree, thorax, arms)
         if all(limb["distal"] is not None for limb in leg_parts + arm_parts):
             # The rest pose tells the sides if it is a stance with feet or knees showing forward;
             # otherwise (Bandai's bones lie along X at rest; Biped's stand straight with a sole

@@ -386,6 +386,21 @@ def test_structure_alone_skips_ik_leaves_and_twist_bones(name, tmp_path):
         _structural_joints(plain, tmp_path, "plain_generic")
 
 
+@pytest.mark.parametrize("name", DEV_FILES)
+def test_structure_alone_takes_no_prop_for_a_forearm_or_a_hand(name, tmp_path):
+    """A sword under the right hand, four forearms long: the arms' long bones are those alike on
+    both sides, and the sword is no hand end (filled in instead)."""
+    source = _dev_file(name)
+    plain = load_clip(source)
+    wrist = _plain_import(source, tmp_path)["joints"]["wrist_r"]
+    armed = copy.deepcopy(plain)
+    _leaf(armed, wrist, "Sword", 4.0 * armed.joints[armed.index(wrist)].offset)
+    found = _structural_joints(armed, tmp_path, "armed")
+    expected = _structural_joints(plain, tmp_path, "plain_generic")
+    assert found.pop("hand_r") in (None, expected.pop("hand_r"))
+    assert found == expected
+
+
 # --- no End Sites ----------------------------------------------------------------------------------
 
 def _without_end_sites(clip: EditClip) -> EditClip:
