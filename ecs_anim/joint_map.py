@@ -148,7 +148,7 @@ PRESETS: dict[str, Preset] = {
                 "spine_2": ["Spine2"], "neck": ["Neck"], "head": ["Head"],
                 "head_top": ["HeadTop_End", "Head.end"], "shoulder_{s}": ["{S}Arm"],
                 "elbow_{s}": ["{S}ForeArm"], "wrist_{s}": ["{S}Hand"],
-                "hand_{s}": ["{S}HandMiddle1", "{S}Hand.end"],
+                "hand_{s}": ["{S}HandMiddle1", "{S}HandEnd", "{S}Hand.end"],
             }, "Left", "Right"),
             ("Spine2", "LeftUpLeg", "LeftForeArm"),
         ),
