@@ -150,6 +150,56 @@ def trim_clip(clip: CanonicalClip, frames: slice) -> CanonicalClip:
                    thorax2world=clip.thorax2world[frames], head2world=clip.head2world[frames])
 
 
+#: A leading rest pose (a converter's T-pose frame) is told from the motion by the jump to the
+#: first captured frame: the largest frame-to-frame move of any joint within the first second
+#: (m) must be at least this many times the 99th percentile of the same move over the frames
+#: after it (measured on ../shared/mocap and varied/: 4.0-23.7 with a rest frame, at most 1.2
+#: without, 3.1 for a frame with only two joints at rest, which the leg fraction refuses),
+REST_JUMP_RATIO = 2.5
+#: and at least this fraction of the leg (thigh + shank), so a clip that starts fast and
+#: then slows (a kick, a jump start) is not cut (0.44-1.28 with a rest frame; 0.09 for the
+#: two joints at rest; fast motion without one reaches 0.36 at a ratio of 1.0).
+REST_JUMP_LEG_FRACTION = 0.25
+
+
+@dataclass(frozen=True)
+class RestFrames:
+    """Frames 0 to ``count - 1`` of a clip come before its motion (a rest pose): some joint
+    jumps ``jump_m`` metres from frame ``count - 1`` to frame ``count``."""
+
+    count: int
+    jump_m: float
+
+    def report(self, first_file_frame: int = 0) -> str:
+        """The import's line saying what was dropped, frames numbered as in the file (the clip's
+        frame 0 is the file's ``first_file_frame``) and how to keep them."""
+        first, last = first_file_frame, first_file_frame + self.count - 1
+        frames = f"frame {first}" if first == last else f"frames {first}-{last}"
+        return (f"dropped {frames}: a rest pose (T-pose) before the motion, joints jump "
+                f"{self.jump_m:.2f} m to frame {last + 1}; --trim {first}: keeps it")
+
+
+def leading_rest_frames(positions: F64, fps: float) -> RestFrames | None:
+    """The rest pose a converter put before the motion (CMU's T-pose frame 0), if any: a jump
+    within the first second that is many times the clip's own fastest frame-to-frame motion
+    after it and a sizeable part of the leg (:data:`REST_JUMP_RATIO`,
+    :data:`REST_JUMP_LEG_FRACTION`). None when the clip starts with its motion.
+
+    ``positions`` (n_frames, N_JOINTS, 3): canonical joint positions, metres.
+    """
+    if len(positions) < 3:
+        return None
+    move = np.max(np.linalg.norm(np.diff(positions, axis=0), axis=-1), axis=1)  # (n_frames - 1,)
+    jump = int(np.argmax(move[:max(1, min(round(fps), len(move) - 1))]))
+    fastest_after = float(np.percentile(move[jump + 1:], 99))
+    leg = 0.5 * sum(float(np.median(np.linalg.norm(positions[:, J[f"{upper}_{s}"]]
+                                                   - positions[:, J[f"{lower}_{s}"]], axis=-1)))
+                    for s in "lr" for upper, lower in (("hip", "knee"), ("knee", "ankle")))
+    if move[jump] >= REST_JUMP_RATIO * fastest_after and move[jump] >= REST_JUMP_LEG_FRACTION * leg:
+        return RestFrames(jump + 1, float(move[jump]))
+    return None
+
+
 #: A captured subject's plausible stature (m): outside, the length unit is wrong.
 MIN_STATURE_M, MAX_STATURE_M = 0.3, 3.0
 
@@ -393,22 +443,29 @@ def import_bvh(path: str | Path, map_spec: str | None = None, unit: str | None =
                up: str | None = None, trim: FrameRange | None = None,
                stature_m: float | None = None, treadmill: bool = True,
                contacts: str = "detect") -> NormalizedMotion:
-    """Read a BVH file and normalize it (``trim``: only those frames; ``up``, ``unit``,
-    ``stature_m`` as in :func:`canonical_clip`; ``treadmill``, ``contacts`` as in
+    """Read a BVH file and normalize it (``trim``: only those frames, else a leading rest pose
+    is dropped, :func:`leading_rest_frames`, and ``info.rest_frames_dropped`` says so; ``up``,
+    ``unit``, ``stature_m`` as in :func:`canonical_clip`; ``treadmill``, ``contacts`` as in
     :func:`normalize_clip`: a BVH has no gait events). Raises :class:`EcsAnimError` subclasses
     on bad input."""
     path = Path(path)
     motion = read_bvh(path)
     try:
         clip = canonical_clip(motion, map_spec, unit, up, stature_m)
-        first_file_frame = 0
+        first_file_frame, rest = 0, None
         if trim is not None:
             kept = trim.frames(len(clip.positions), clip.fps)
             clip, first_file_frame = trim_clip(clip, kept), kept.start
+        else:
+            rest = leading_rest_frames(clip.positions, clip.fps)
+            if rest is not None:
+                clip, first_file_frame = trim_clip(clip, slice(rest.count, None)), rest.count
         normalized = normalize_clip(clip, path.stem, str(path), thresholds, treadmill,
                                     contacts=contacts)
         if first_file_frame:
             normalized.info["first_file_frame"] = first_file_frame
+        if rest is not None:
+            normalized.info["rest_frames_dropped"] = rest.report()
     except InputError:
         raise
     except EcsAnimError as exc:
