@@ -151,21 +151,22 @@ def trim_clip(clip: CanonicalClip, frames: slice) -> CanonicalClip:
 
 
 #: A leading rest pose (a converter's T-pose frame) is told from the motion by the jump to the
-#: first captured frame: the largest frame-to-frame move of any joint within the first second
-#: (m) must be at least this many times the 99th percentile of the same move over the frames
-#: after it (measured on ../shared/mocap and varied/: 4.0-23.7 with a rest frame, at most 1.2
-#: without, 3.1 for a frame with only two joints at rest, which the leg fraction refuses),
-REST_JUMP_RATIO = 2.5
-#: and at least this fraction of the leg (thigh + shank), so a clip that starts fast and
-#: then slows (a kick, a jump start) is not cut (0.44-1.28 with a rest frame; 0.09 for the
-#: two joints at rest; fast motion without one reaches 0.36 at a ratio of 1.0).
-REST_JUMP_LEG_FRACTION = 0.25
+#: first captured frame: within the first second, the frame-to-frame move of the joints,
+#: averaged over them (m; the mean, so one joint's glitch later in a clip does not hide the
+#: jump), must be at least this many times the 99th percentile of the same move over the frames
+#: after it (measured on ../shared/mocap and varied/: 3.0-19.4 with a rest pose, at most 1.5
+#: without),
+REST_JUMP_RATIO = 2.2
+#: and at least this fraction of the leg (thigh + shank), so a clip that starts after a still
+#: moment is not cut for a small move (0.13-0.31 with a rest pose; 0.04 at most where the ratio
+#: passes 1.2 without one; fast motion reaches 0.18 at a ratio of 1.0).
+REST_JUMP_LEG_FRACTION = 0.08
 
 
 @dataclass(frozen=True)
 class RestFrames:
-    """Frames 0 to ``count - 1`` of a clip come before its motion (a rest pose): some joint
-    jumps ``jump_m`` metres from frame ``count - 1`` to frame ``count``."""
+    """Frames 0 to ``count - 1`` of a clip come before its motion (a rest pose): the joints move
+    ``jump_m`` metres on average from frame ``count - 1`` to frame ``count``."""
 
     count: int
     jump_m: float
@@ -175,27 +176,28 @@ class RestFrames:
         frame 0 is the file's ``first_file_frame``) and how to keep them."""
         first, last = first_file_frame, first_file_frame + self.count - 1
         frames = f"frame {first}" if first == last else f"frames {first}-{last}"
-        return (f"dropped {frames}: a rest pose (T-pose) before the motion, joints jump "
-                f"{self.jump_m:.2f} m to frame {last + 1}; --trim {first}: keeps it")
+        return (f"dropped {frames}: a rest pose (T-pose) before the motion, the joints jump "
+                f"{self.jump_m:.2f} m on average to frame {last + 1}; --trim {first}: keeps it")
 
 
 def leading_rest_frames(positions: F64, fps: float) -> RestFrames | None:
-    """The rest pose a converter put before the motion (CMU's T-pose frame 0), if any: a jump
-    within the first second that is many times the clip's own fastest frame-to-frame motion
-    after it and a sizeable part of the leg (:data:`REST_JUMP_RATIO`,
-    :data:`REST_JUMP_LEG_FRACTION`). None when the clip starts with its motion.
+    """The rest pose a converter put before the motion (CMU's T-pose frame 0, with any frames
+    it then ramps or holds through), if any: a jump within the first second that is many times
+    the clip's own fast frame-to-frame motion after it and a part of the leg
+    (:data:`REST_JUMP_RATIO`, :data:`REST_JUMP_LEG_FRACTION`). None when the clip starts with
+    its motion.
 
     ``positions`` (n_frames, N_JOINTS, 3): canonical joint positions, metres.
     """
     if len(positions) < 3:
         return None
-    move = np.max(np.linalg.norm(np.diff(positions, axis=0), axis=-1), axis=1)  # (n_frames - 1,)
+    move = np.mean(np.linalg.norm(np.diff(positions, axis=0), axis=-1), axis=1)  # (n_frames - 1,)
     jump = int(np.argmax(move[:max(1, min(round(fps), len(move) - 1))]))
-    fastest_after = float(np.percentile(move[jump + 1:], 99))
+    fast_after = float(np.percentile(move[jump + 1:], 99))
     leg = 0.5 * sum(float(np.median(np.linalg.norm(positions[:, J[f"{upper}_{s}"]]
                                                    - positions[:, J[f"{lower}_{s}"]], axis=-1)))
                     for s in "lr" for upper, lower in (("hip", "knee"), ("knee", "ankle")))
-    if move[jump] >= REST_JUMP_RATIO * fastest_after and move[jump] >= REST_JUMP_LEG_FRACTION * leg:
+    if move[jump] >= REST_JUMP_RATIO * fast_after and move[jump] >= REST_JUMP_LEG_FRACTION * leg:
         return RestFrames(jump + 1, float(move[jump]))
     return None
 

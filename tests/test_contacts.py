@@ -44,12 +44,12 @@ WALKS = {
 #: frame 0 dropped: 51 of 432 frames) at the file's frames 149-168, where the left foot steps down 16 cm lower after the right toe has left (4 cm up
 #: and rising at the first; the joints' centroid falls at 9-13 m/s^2 for 40 ms of it), and
 #: 404-432, where the clip ends in a step down 22 cm lower after the left toe has left (3 cm
-#: up); in 03_02 twice for 8 frames while a foot comes down (9-11 cm above the ground at the
+#: up); in 03_02 twice for 8-9 frames while a foot comes down (9-11 cm above the ground at the
 #: first). (The c3d.org walk, very slow, had its right foot planted 85.5 % of the time until
 #: the plant ended at the foot's lift-off.)
 OPEN = {
     "varied/cmudaz_03_01_uneven_terrain.bvh": {"median": 0.211, "both_up": 0.1181},
-    "varied/cmudaz_03_02_uneven_terrain.bvh": {"both_up": 0.044},
+    "varied/cmudaz_03_02_uneven_terrain.bvh": {"both_up": 0.0499},
 }
 SHARE, MEDIAN_MPS, MAX_MPS = (0.30, 0.85), 0.15, 0.5
 
