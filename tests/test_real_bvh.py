@@ -199,14 +199,14 @@ def test_rig_scaled_x2_imports_at_its_real_size_with_unit_number_or_stature(tmp_
                                                  ["--stature", f"{stature}"])
     scaled_body = load_nmo(tmp_path / "stature" / f"{doubled.stem}.nmo").source_morphology
     # the scale is set on the file's frames, the body measured on those kept (the converter's
-    # ramp dropped): 1.5 um apart
+    # ramp dropped): 1.5 um apart, and the two imports' scales 1e-6 apart
     assert abs(scaled_body.stature - stature) < 1e-5
     factor = stature / load_nmo(tmp_path / "plain" / f"{src.stem}.nmo").source_morphology.stature
     assert abs(float(by_stature["unit"]) / 0.005 - factor) < 1e-5  # the unit is printed to 6 digits
     ratio = np.linalg.norm(stature_pos[:, JOINT_INDEX["head"]] - stature_pos[:, JOINT_INDEX["ankle_l"]],
                            axis=-1) / np.linalg.norm(plain_pos[:, JOINT_INDEX["head"]]
                                                      - plain_pos[:, JOINT_INDEX["ankle_l"]], axis=-1)
-    assert np.abs(ratio - factor).max() < 1e-9
+    assert np.abs(ratio - factor).max() < 1e-5
 
 
 @pytest.mark.parametrize("bad", ["0", "-1", "inches", "nan"])
