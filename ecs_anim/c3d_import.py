@@ -72,7 +72,7 @@ from __future__ import annotations
 import math
 import struct
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -80,13 +80,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .contacts import ContactThresholds, _intervals, gait_event_kind
-from .errors import EcsAnimError, InputError, listed, quoted
+from .errors import EcsAnimError, InputError, MappingError, listed, quoted
 from .importing import (
     UNITS,
     UP_AXES,
     CanonicalClip,
     FrameRange,
     detect_unit,
+    leading_rest_frames,
     normalize_clip,
     trim_clip,
 )
@@ -153,6 +154,8 @@ class C3dMarkers:
     events: list[tuple[str, str, float]] = field(default_factory=list)
     #: The subject's measurements stored with the trial (:data:`ANTHROPOMETRY`), metres.
     anthropometry: dict[str, float] = field(default_factory=dict)
+    #: ``POINT:DESCRIPTIONS``, one per marker ('' where none).
+    descriptions: list[str] = field(default_factory=list)
 
 
 #: The subject's measurements labs store with a trial that place the hip, mm, as (group:
@@ -242,6 +245,19 @@ def _read_events(reader: Any) -> list[tuple[str, str, float]]:
     return out
 
 
+def _point_texts(reader: Any, base: str) -> list[str]:
+    """``POINT:LABELS`` (``base``) then ``LABELS2``, ``LABELS3``, ... (a parameter holds at
+    most 255 entries; files with more points go on in the next), each without the spaces and
+    NUL bytes that pad it."""
+    labels: list[str] = []
+    for name in (base, *(f"{base}{k}" for k in range(2, 100))):
+        param = reader.get(f"POINT:{name}")
+        if param is None:
+            break
+        labels += [str(s).replace("\x00", " ").strip() for s in np.atleast_1d(param.string_array)]
+    return labels
+
+
 def read_c3d(path: str | Path) -> C3dMarkers:
     """Read marker data with the ``c3d`` package. Raises :class:`InputError` on a damaged,
     truncated or unlabelled file."""
@@ -260,8 +276,8 @@ def read_c3d(path: str | Path) -> C3dMarkers:
             rate = float(reader.point_rate)
             expected = int(reader.last_frame) - int(reader.first_frame) + 1
             first = int(reader.first_frame)
-            labels_param = reader.get("POINT:LABELS")
-            labels = [] if labels_param is None else [str(s).strip() for s in reader.point_labels]
+            labels = _point_texts(reader, "LABELS")
+            descriptions = _point_texts(reader, "DESCRIPTIONS")
             units_param = reader.get("POINT:UNITS")
             units = "" if units_param is None else \
                 "".join(ch for ch in units_param.string_value.lower() if ch.isalpha())
@@ -293,7 +309,9 @@ def read_c3d(path: str | Path) -> C3dMarkers:
     finite = np.all(np.isfinite(positions), axis=-1)
     valid = finite & (data[:, :, 3] >= 0) & np.any(positions != 0, axis=-1)
     positions = np.where(finite[..., None], positions, 0.0)
-    return C3dMarkers(labels, positions, valid, rate, units, first, events, anthropometry)
+    descriptions = (descriptions + [""] * n_points)[:n_points]
+    return C3dMarkers(labels, positions, valid, rate, units, first, events, anthropometry,
+                      descriptions)
 
 
 # --- gaps --------------------------------------------------------------------------------------
@@ -548,8 +566,10 @@ def import_c3d(path: str | Path, map_spec: str | None = None, unit: str | None =
 
     ``fill_from``: a motion (.nmo or .bvh) whose parts replace the absent ones (see
     :func:`fill_absent_from`); by default they keep the neutral pose. ``trim``: only those
-    frames (numbered as in the file). The file's gait events go to ``info.gait_events``;
-    ``contacts="events"`` makes them the foot contacts; ``treadmill`` as in
+    frames (numbered as in the file); without it a leading rest pose is dropped
+    (:func:`~ecs_anim.importing.leading_rest_frames`, ``info.rest_frames_dropped``). The file's
+    gait events go to ``info.gait_events``; ``contacts="events"`` makes them the foot contacts;
+    ``treadmill`` as in
     :func:`~ecs_anim.importing.normalize_clip`.
     """
     path = Path(path)
@@ -560,6 +580,13 @@ def import_c3d(path: str | Path, map_spec: str | None = None, unit: str | None =
             kept = trim.frames(len(clip.positions), clip.fps, extra["first_file_frame"])
             clip = trim_clip(clip, kept)
             extra = _after_trim(extra, kept)
+        else:
+            rest = leading_rest_frames(clip.positions, clip.fps)
+            if rest is not None:
+                kept = slice(rest.count, len(clip.positions))
+                rest_line = rest.report(extra["first_file_frame"])
+                clip = trim_clip(clip, kept)
+                extra = dict(_after_trim(extra, kept), rest_frames_dropped=rest_line)
         # EVENT:TIMES count from the capture's start; the clip's frame 0 is the file's frame
         # first_frame - 1 + first_file_frame (0-based) of it.
         start_s = (raw.first_frame - 1 + extra["first_file_frame"]) / raw.rate
@@ -678,14 +705,36 @@ def fill_absent_from(motion: NormalizedMotion, default: NormalizedMotion, defaul
                             planted)
 
 
+def _match_labels(raw: C3dMarkers, map_spec: str | None, usable: list[bool]
+                  ) -> tuple[MarkerMap, list[str]]:
+    """The marker map and the labels it names: ``POINT:LABELS``, or, where they name no marker
+    set (generic ``M001``, ``M002``, ...) and no ``--map`` is given, ``POINT:DESCRIPTIONS``
+    (Cortex's ``R.Shoulder``, ``L.ASIS``). Raises the labels' :class:`MappingError`."""
+    try:
+        return match_markers(raw.labels, map_spec, usable), raw.labels
+    except MappingError:
+        if map_spec is not None or not any(raw.descriptions):
+            raise
+        try:
+            mmap = match_markers(raw.descriptions, None, usable)
+        except MappingError:
+            pass
+        else:
+            mmap.how += " from POINT:DESCRIPTIONS (the labels name no marker set)"
+            return mmap, raw.descriptions
+        raise
+
+
 def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str | None = None,
                        up: str | None = None, max_gap: int = DEFAULT_MAX_GAP
                        ) -> tuple[CanonicalClip, dict[str, Any]]:
     """Markers -> canonical clip (metres, Z up) plus provenance for ``info``."""
     # Markers never seen in the trial count as missing.
     seen: BOOL = np.asarray(raw.valid.any(axis=0))
-    mmap = match_markers(raw.labels, map_spec, [bool(v) for v in seen])
-    never = [raw.labels[i] for i in mmap.marker.values() if not seen[i]]
+    mmap, labels = _match_labels(raw, map_spec, [bool(v) for v in seen])
+    raw = replace(raw, labels=labels)
+    mmap.unseen = {r: raw.labels[i] for r, i in mmap.marker.items() if not seen[i]}
+    never = list(dict.fromkeys(mmap.unseen.values()))
     mmap.marker = {r: i for r, i in mmap.marker.items() if seen[i]}
     split_same_label(mmap, raw.positions, raw.valid)
     present, absent = check_usable(mmap, raw.labels)
@@ -858,10 +907,8 @@ def lab_joint_centres(labels: list[str], points: F64, valid: BOOL, positions: F6
     never taken for centres; of two points with one label the one with most samples is.
 
     points (F, M, 3) all points, metres, Z up; valid (F, M); positions (F, N_JOINTS, 3)."""
-    from .marker_sets import label_key, subject_of
-
     used = set(mmap.marker.values())
-    keys = [label_key(lab) if subject_of(lab) == mmap.subject else "" for lab in labels]
+    keys = [mmap.keys.get(i, "") for i in range(len(labels))]
     out: dict[str, dict[str, Any]] = {}
     for joint, patterns in LAB_CENTRES.items():
         for side in "lr":

@@ -152,6 +152,58 @@ def trim_clip(clip: CanonicalClip, frames: slice) -> CanonicalClip:
                    thorax2world=clip.thorax2world[frames], head2world=clip.head2world[frames])
 
 
+#: A leading rest pose (a converter's T-pose frame) is told from the motion by the jump to the
+#: first captured frame: within the first second, the frame-to-frame move of the joints,
+#: averaged over them (m; the mean, so one joint's glitch later in a clip does not hide the
+#: jump), must be at least this many times the 99th percentile of the same move over the frames
+#: after it (measured on ../shared/mocap and varied/: 3.0-19.4 with a rest pose, at most 1.5
+#: without),
+REST_JUMP_RATIO = 2.2
+#: and at least this fraction of the leg (thigh + shank), so a clip that starts after a still
+#: moment is not cut for a small move (0.13-0.31 with a rest pose; 0.04 at most where the ratio
+#: passes 1.2 without one; fast motion reaches 0.18 at a ratio of 1.0).
+REST_JUMP_LEG_FRACTION = 0.08
+
+
+@dataclass(frozen=True)
+class RestFrames:
+    """Frames 0 to ``count - 1`` of a clip come before its motion (a rest pose): the joints move
+    ``jump_m`` metres on average from frame ``count - 1`` to frame ``count``."""
+
+    count: int
+    jump_m: float
+
+    def report(self, first_file_frame: int = 0) -> str:
+        """The import's line saying what was dropped, frames numbered as in the file (the clip's
+        frame 0 is the file's ``first_file_frame``) and how to keep them."""
+        first, last = first_file_frame, first_file_frame + self.count - 1
+        frames = f"frame {first}" if first == last else f"frames {first}-{last}"
+        return (f"dropped {frames}: a rest pose (T-pose) before the motion, the joints jump "
+                f"{self.jump_m:.2f} m on average to frame {last + 1}; --trim {first}: keeps it")
+
+
+def leading_rest_frames(positions: F64, fps: float) -> RestFrames | None:
+    """The rest pose a converter put before the motion (CMU's T-pose frame 0, with any frames
+    it then ramps or holds through), if any: a jump within the first second that is many times
+    the clip's own fast frame-to-frame motion after it and a part of the leg
+    (:data:`REST_JUMP_RATIO`, :data:`REST_JUMP_LEG_FRACTION`). None when the clip starts with
+    its motion.
+
+    ``positions`` (n_frames, N_JOINTS, 3): canonical joint positions, metres.
+    """
+    if len(positions) < 3:
+        return None
+    move = np.mean(np.linalg.norm(np.diff(positions, axis=0), axis=-1), axis=1)  # (n_frames - 1,)
+    jump = int(np.argmax(move[:max(1, min(round(fps), len(move) - 1))]))
+    fast_after = float(np.percentile(move[jump + 1:], 99))
+    leg = 0.5 * sum(float(np.median(np.linalg.norm(positions[:, J[f"{upper}_{s}"]]
+                                                   - positions[:, J[f"{lower}_{s}"]], axis=-1)))
+                    for s in "lr" for upper, lower in (("hip", "knee"), ("knee", "ankle")))
+    if move[jump] >= REST_JUMP_RATIO * fast_after and move[jump] >= REST_JUMP_LEG_FRACTION * leg:
+        return RestFrames(jump + 1, float(move[jump]))
+    return None
+
+
 #: A captured subject's plausible stature (m): outside, the length unit is wrong.
 MIN_STATURE_M, MAX_STATURE_M = 0.3, 3.0
 
@@ -406,22 +458,29 @@ def import_bvh(path: str | Path, map_spec: str | None = None, unit: str | None =
                up: str | None = None, trim: FrameRange | None = None,
                stature_m: float | None = None, treadmill: bool = True,
                contacts: str = "detect") -> NormalizedMotion:
-    """Read a BVH file and normalize it (``trim``: only those frames; ``up``, ``unit``,
-    ``stature_m`` as in :func:`canonical_clip`; ``treadmill``, ``contacts`` as in
+    """Read a BVH file and normalize it (``trim``: only those frames, else a leading rest pose
+    is dropped, :func:`leading_rest_frames`, and ``info.rest_frames_dropped`` says so; ``up``,
+    ``unit``, ``stature_m`` as in :func:`canonical_clip`; ``treadmill``, ``contacts`` as in
     :func:`normalize_clip`: a BVH has no gait events). Raises :class:`EcsAnimError` subclasses
     on bad input."""
     path = Path(path)
     motion = read_bvh(path)
     try:
         clip = canonical_clip(motion, map_spec, unit, up, stature_m)
-        first_file_frame = 0
+        first_file_frame, rest = 0, None
         if trim is not None:
             kept = trim.frames(len(clip.positions), clip.fps)
             clip, first_file_frame = trim_clip(clip, kept), kept.start
+        else:
+            rest = leading_rest_frames(clip.positions, clip.fps)
+            if rest is not None:
+                clip, first_file_frame = trim_clip(clip, slice(rest.count, None)), rest.count
         normalized = normalize_clip(clip, path.stem, str(path), thresholds, treadmill,
                                     contacts=contacts)
         if first_file_frame:
             normalized.info["first_file_frame"] = first_file_frame
+        if rest is not None:
+            normalized.info["rest_frames_dropped"] = rest.report()
     except InputError:
         raise
     except EcsAnimError as exc:

@@ -2,8 +2,11 @@
 
 A marker set maps *roles* (our names for landmarks, e.g. ``ASIS_L`` the left anterior superior
 iliac spine, ``KNEE_LAT_L`` the lateral femoral epicondyle) to candidate marker labels. Labels
-are compared after removing a subject prefix (``Bob:LASI`` -> ``LASI``), case, spaces and the
-separators ``_ . -``, so ``L_ASIS``, ``l.asis`` and ``LASIS`` are one key.
+are compared after removing a subject prefix (``Bob:LASI`` -> ``LASI``; ``Bob_LASI`` where
+that reading finds more roles, :func:`_subjects`), case, spaces and the separators ``_ . -``,
+so ``L_ASIS``, ``l.asis`` and ``LASIS`` are one key. Of a role's candidates the first label
+with samples wins, and a label with a duplicate's suffix (``LASI_1``) stands for ``LASI``
+where no ``LASI`` has samples (:func:`_resolve`).
 
 Presets:
 
@@ -165,15 +168,18 @@ _ISB_ROLES = _sided({
 # shank wand, "r mall", "r met" 5th metatarsal head) and Codamotion gait wands (R.ASIS,
 # R.Ant.Fem. = anterior marker of the lateral thigh wand, R.Knee, R.Ankle, R.Toe) spell them.
 # Order matters: "r knee 1" (marker) comes before "r knee" (a lab's computed centre in BTS).
+# Cortex's POINT:DESCRIPTIONS spell the markers out (V.Sacral, R.Knee.Medial, R.Ankle.Medial).
 # Medial epicondyle and malleolus as Plug-in Gait spells them; Cortex writes RKNE / RANK for
 # the medial markers too (``c3d_import.split_same_label``: the medial one is nearer the other leg).
 _HH_ROLES = _sided({
     "ASIS_{s}": ("{S}ASI", "*ASIS"), "PSIS_{s}": ("{S}PSI", "*PSIS"),
-    "SACRUM": ("SACR", "SACRUM", "VSAC"),
+    "SACRUM": ("SACR", "SACRUM", "VSAC", "VSACRAL"),
     "THIGH_{s}": ("{S}THI", "*BAR1", "*WAND1", "*ANTFEM", "*THIGH"),
-    "KNEE_LAT_{s}": ("{S}KNE", "*KNEE1", "*KNEE"), "KNEE_MED_{s}": ("{S}KNM", "{S}MKNE"),
+    "KNEE_LAT_{s}": ("{S}KNE", "*KNEE1", "*KNEE"),
+    "KNEE_MED_{s}": ("{S}KNM", "{S}MKNE", "*KNEEMEDIAL"),
     "SHANK_{s}": ("{S}TIB", "{S}SHA", "*BAR2", "*WAND2", "*ANTTIB", "*SHANK"),
-    "ANKLE_LAT_{s}": ("{S}ANK", "*MALL", "*ANKLE"), "ANKLE_MED_{s}": ("{S}MMA", "{S}MED"),
+    "ANKLE_LAT_{s}": ("{S}ANK", "*MALL", "*ANKLE"),
+    "ANKLE_MED_{s}": ("{S}MMA", "{S}MED", "*ANKLEMEDIAL"),
     "HEEL_{s}": ("{S}HEE", "*HEEL"), "TOE_{s}": ("{S}TOE", "*TO", "*MET", "*TOE"),
     "C7": ("C7",), "T10": ("T10",), "IJ": ("CLAV",), "PX": ("STRN",),
     "ACROMION_{s}": ("{S}SHO", "*SHOULDER", "*SHOULD"), "ELBOW_LAT_{s}": ("{S}ELB", "*ELBOW"),
@@ -271,22 +277,61 @@ class MarkerMap:
     #: role -> every usable marker of the subject with the role's label (only roles whose label
     #: names several markers, e.g. Cortex's ``RKNE`` for both femoral epicondyles).
     same_label: dict[str, list[int]] = field(default_factory=dict)
+    #: index -> label key without the subject's prefix, for every label of the subject.
+    keys: dict[int, str] = field(default_factory=dict)
+    #: role -> the label naming it that holds no sample in the trial (the role is missing).
+    unseen: dict[str, str] = field(default_factory=dict)
 
 
-def _resolve(preset: MarkerSet, keys: dict[str, int]) -> dict[str, int]:
+#: The suffix some software appends to a duplicated label (``LASI_1``, ``LASI_2``): such a
+#: label stands for the label itself where no marker of the role is in the file with a sample.
+#: Only with an underscore: ``RKD1``, ``PV1``, ``r knee 2`` are markers of their own.
+_DUPLICATE_SUFFIX = re.compile(r"_\d+$")
+
+
+def _resolve(preset: MarkerSet, names: dict[int, str], usable: set[int]) -> dict[str, int]:
+    """role -> marker index. Per role, the candidates' exact labels in candidate order, then
+    duplicate-suffixed ones (:data:`_DUPLICATE_SUFFIX`); the first that holds samples wins,
+    else the first (reported as never seen)."""
+    every = {c for cands in preset.roles.values() for c in cands}
+    exact: dict[str, list[int]] = {}
+    duplicate: dict[str, list[int]] = {}
+    for i, name in names.items():
+        key = label_key(name)
+        exact.setdefault(key, []).append(i)
+        base = _DUPLICATE_SUFFIX.sub("", name)
+        if base != name and key not in every:
+            duplicate.setdefault(label_key(base), []).append(i)
     found = {}
     for role, cands in preset.roles.items():
-        for c in cands:
-            if c in keys:
-                found[role] = keys[c]
-                break
+        options = [i for table in (exact, duplicate) for c in cands for i in table.get(c, [])]
+        if options:
+            found[role] = min(options, key=lambda i: i not in usable)
     return found
 
 
-def _subjects(labels: list[str]) -> dict[str, list[int]]:
-    out: dict[str, list[int]] = {}
+#: A prefix ending at ``_`` or a space that this many of a subject's labels share is tried as
+#: the subject's name too (``Jo_LASI``, ``Jo LASI``, ``Subject_001_LASI``): the reading that
+#: finds more roles wins, so a side or role word (``L_IAS``, ``r asis``) is kept.
+MIN_PREFIXED = MIN_ROLES_DETECTED
+_PREFIX_END = re.compile(r"[\s_]+(?=\S)")
+
+
+def _subjects(labels: list[str]) -> dict[str, dict[int, str]]:
+    """subject -> {index: label without the subject's prefix}: the ``Bob:`` prefixes (``''``
+    for labels without one), then each shared prefix before ``_`` or a space
+    (:data:`MIN_PREFIXED`)."""
+    out: dict[str, dict[int, str]] = {}
     for i, lab in enumerate(labels):
-        out.setdefault(subject_of(lab), []).append(i)
+        out.setdefault(subject_of(lab), {})[i] = lab.split(":")[-1].strip()
+    for subject, names in list(out.items()):
+        prefixed: dict[str, dict[int, str]] = {}
+        for i, name in names.items():
+            for end in _PREFIX_END.finditer(name):
+                prefixed.setdefault(name[:end.start()], {})[i] = name[end.end():]
+        for prefix, rest in prefixed.items():
+            if len(rest) >= MIN_PREFIXED:
+                out.setdefault(f"{subject}:{prefix}" if subject else prefix, rest)
     return out
 
 
@@ -296,7 +341,8 @@ def match_markers(labels: list[str], spec: str | None = None,
 
     With several subject prefixes in the file, the subject whose labels match a preset best is
     used and the others' markers are ignored. ``usable``: per label, whether it holds samples;
-    of two markers with the same label (or key) the first usable one is taken. Raises
+    of a role's markers (same label or key, synonyms, duplicates) the first usable one is
+    taken (:func:`_resolve`). Raises
     :class:`MappingError`.
     """
     user: dict[str, str] = {}
@@ -315,15 +361,14 @@ def match_markers(labels: list[str], spec: str | None = None,
             raise MappingError(f"--map {quoted(spec)}: not a marker-set preset nor a YAML file{hint}; "
                                f"marker sets: {', '.join(PRESETS)}")
     best: tuple[int, str, MarkerSet, dict[str, int]] | None = None
-    for subject, indices in _subjects(labels).items():
+    subjects = _subjects(labels)
+    with_samples = {i for i in range(len(labels)) if usable is None or usable[i]}
+    for subject, names in subjects.items():
         if subject_wanted is not None and subject != subject_wanted:
             continue
-        keys: dict[str, int] = {}
-        for i in sorted(indices, key=lambda i: usable is not None and not usable[i]):
-            keys.setdefault(label_key(labels[i]), i)
         candidates = [PRESETS[base]] if base else list(PRESETS.values())
         for preset in candidates:
-            found = _resolve(preset, keys)
+            found = _resolve(preset, names, with_samples)
             # Detected when most of its signature (lower body) is there, or many of its roles
             # (an upper-body trial); what is missing is then listed per body part.
             if not base and 2 * sum(r in found for r in preset.signature) <= len(preset.signature) \
@@ -332,14 +377,15 @@ def match_markers(labels: list[str], spec: str | None = None,
             if best is None or len(found) > best[0]:
                 best = (len(found), subject, preset, found)
     if best is None:
-        if subject_wanted is not None and subject_wanted not in _subjects(labels):
+        if subject_wanted is not None and subject_wanted not in subjects:
             raise MappingError(f"no markers of subject {quoted(subject_wanted)}; subjects in the "
-                               f"file: {listed(quoted(s) for s in _subjects(labels))}")
+                               f"file: {listed(quoted(s) for s in dict.fromkeys(map(subject_of, labels)))}")
         raise MappingError(
             f"no marker set recognised from the labels ({listed(quoted(lab) for lab in labels)}); "
             f"give --map PRESET (presets: {', '.join(PRESETS)}) or FILE.yaml "
             "(markers: {ROLE: label})")
     _, subject, preset, found = best
+    keys = {i: label_key(name) for i, name in subjects[subject].items()}
     how = f"marker set {preset.name} ({'requested' if base and not user_path else 'detected'})"
     if user_path:
         how = f"marker set {preset.name} + {user_path}"
@@ -349,8 +395,8 @@ def match_markers(labels: list[str], spec: str | None = None,
             raise InputError(user_path, f"markers.{role}: unknown role for {preset.name}{hint}; "
                                         f"roles: {listed(preset.roles)} (all in "
                                         "ecs_anim/marker_sets.py)", user_lines[role])
-        matches = [i for i, lab in enumerate(labels)
-                   if label_key(lab) == label_key(label) and subject_of(lab) == subject]
+        matches = [i for i, k in keys.items()
+                   if label_key(label) in (k, label_key(labels[i].split(":")[-1]))]
         if not matches:
             close = difflib.get_close_matches(label, labels, n=3)
             raise InputError(user_path, f"markers.{role}: no marker {quoted(label)} in the file "
@@ -359,11 +405,10 @@ def match_markers(labels: list[str], spec: str | None = None,
         found[role] = matches[0]
     if subject:
         how += f", subject {subject!r}"
-    ignored = [lab for lab in labels if subject_of(lab) != subject]
-    mine = [i for i in _subjects(labels).get(subject, []) if usable is None or usable[i]]
+    ignored = [lab for i, lab in enumerate(labels) if i not in keys]
     same_label = {role: same for role, i in found.items()
-                  if len(same := [j for j in mine if label_key(labels[j]) == label_key(labels[i])]) > 1}
-    return MarkerMap(preset, found, subject, ignored, how, same_label=same_label)
+                  if len(same := [j for j in keys if j in with_samples and keys[j] == keys[i]]) > 1}
+    return MarkerMap(preset, found, subject, ignored, how, same_label=same_label, keys=keys)
 
 
 def part_roles(preset: MarkerSet, group: str) -> tuple[str, ...]:
@@ -386,10 +431,10 @@ def group_status(mmap: MarkerMap) -> tuple[list[str], list[str], dict[str, list[
         if not any(r in mmap.marker for r in roles):
             absent.append(group)
             continue
-        missing = [_describe(preset, r) for r in required if r not in mmap.marker]
+        missing = [_describe(mmap, r) for r in required if r not in mmap.marker]
         if alternatives and not any(all(r in mmap.marker for r in alt) for alt in alternatives):
             missing.append(" or ".join(
-                "+".join(_describe(preset, r) for r in alt if r not in mmap.marker)
+                "+".join(_describe(mmap, r) for r in alt if r not in mmap.marker)
                 for alt in alternatives))
         if missing:
             incomplete[group] = missing
@@ -398,8 +443,11 @@ def group_status(mmap: MarkerMap) -> tuple[list[str], list[str], dict[str, list[
     return present, absent, incomplete
 
 
-def _describe(preset: MarkerSet, role: str) -> str:
-    cands = preset.roles.get(role, ())
+def _describe(mmap: MarkerMap, role: str) -> str:
+    """A missing role as the message names it: its label with no sample, or its first candidate."""
+    if role in mmap.unseen:
+        return f"{mmap.unseen[role]} (no sample)"
+    cands = mmap.preset.roles.get(role, ())
     return cands[0] if cands else role
 
 
@@ -439,11 +487,11 @@ def check_usable(mmap: MarkerMap, labels: list[str]) -> tuple[list[str], list[st
         raise MappingError(f"{mmap.how}: " + "; ".join(notes.values())[:MESSAGE_MAX])
     if "pelvis" not in present and ("trunk" not in present or functional):
         pelvis = notes.get("pelvis") or _part_message(
-            mmap, labels, "pelvis", [_describe(mmap.preset, r) for r in mmap.preset.groups["pelvis"][0]])
+            mmap, labels, "pelvis", [_describe(mmap, r) for r in mmap.preset.groups["pelvis"][0]])
         trunk = notes.get("trunk", "")
         raise MappingError(f"{mmap.how}: nothing to carry the body: {pelvis}"
                            + (f"; {trunk}" if trunk and not functional else "")
-                           + " (give markers in --map FILE.yaml, markers: {ROLE: label})")
+                           + " (name the markers with --map FILE.yaml)")
     mmap.not_computed = {g: notes[g] for g in GROUPS if g in notes}
     return present, [g for g in GROUPS if g not in present]
 

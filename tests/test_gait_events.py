@@ -46,6 +46,16 @@ BOUND_MS = 25.0
 #: lowest, a sink threshold relative to the heel's own descent, lift-off from the toe's rising
 #: speed relative to its swing peak or from its upward acceleration, a point ahead of the toe
 #: joint, and Zeni et al.'s 2008 heel and toe extremes relative to the pelvis.
+#: Also measured (0.05 s smoothing; worst ms on cgm24 / pig / mac / rehazenter / qualisys, the
+#: current rule 50 / 42 / 33 / 20 / 20 at strikes and 50 / 33 / 33 / 30 / 20 at offs): foot-velocity
+#: (O'Connor et al. 2007) strike at the last local minimum 60 / 133 / 50 / 10 / 30, off at the
+#: rising peak 50 / 17 / 17 / 60 / 50 (its mean offsets +25 / -4 / +6 / -37 / +43 ms: the labs
+#: disagree in sign); Hreljac & Marshall 2000 strike at the heel's acceleration peak
+#: 250 / 158 / 100 / 20 / 150, off at the toe's forward acceleration peak 50 / 50 / 17 / 20 / 40;
+#: Desailly et al. 2009 strike 110 / 33 / 17 / 90 / 60, off 40 / 33 / 17 / 70 / 30. Even the best
+#: rule per event and file leaves cgm24 at 30-40 ms, and its own heel marker does not close it
+#: either (its strikes are 8-50 ms from the marker's lowest, above): the events follow the
+#: force plates and each lab's hand-placed marks, which no kinematic rule reproduces.
 OPEN_MS = {
     "vicon_cgm24_events_jc_100hz.c3d": 50,
     "vicon_pig_noclav_prefix_events_60hz.c3d": 43,
