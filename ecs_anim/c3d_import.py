@@ -89,6 +89,7 @@ from .importing import (
     FrameRange,
     ankle_height_or_typical,
     detect_unit,
+    leading_rest_frames,
     normalize_clip,
     trim_clip,
 )
@@ -583,8 +584,10 @@ def import_c3d(path: str | Path, map_spec: str | None = None, unit: str | None =
 
     ``fill_from``: a motion (.nmo or .bvh) whose parts replace the absent ones (see
     :func:`fill_absent_from`); by default they keep the neutral pose. ``trim``: only those
-    frames (numbered as in the file). The file's gait events go to ``info.gait_events``;
-    ``contacts="events"`` makes them the foot contacts; ``treadmill`` as in
+    frames (numbered as in the file); without it a leading rest pose is dropped
+    (:func:`~ecs_anim.importing.leading_rest_frames`, ``info.rest_frames_dropped``). The file's
+    gait events go to ``info.gait_events``; ``contacts="events"`` makes them the foot contacts;
+    ``treadmill`` as in
     :func:`~ecs_anim.importing.normalize_clip`.
     """
     path = Path(path)
@@ -595,6 +598,13 @@ def import_c3d(path: str | Path, map_spec: str | None = None, unit: str | None =
             kept = trim.frames(len(clip.positions), clip.fps, extra["first_file_frame"])
             clip = trim_clip(clip, kept)
             extra = _after_trim(extra, kept)
+        else:
+            rest = leading_rest_frames(clip.positions, clip.fps)
+            if rest is not None:
+                kept = slice(rest.count, len(clip.positions))
+                rest_line = rest.report(extra["first_file_frame"])
+                clip = trim_clip(clip, kept)
+                extra = dict(_after_trim(extra, kept), rest_frames_dropped=rest_line)
         # EVENT:TIMES count from the capture's start; the clip's frame 0 is the file's frame
         # first_frame - 1 + first_file_frame (0-based) of it.
         start_s = (raw.first_frame - 1 + extra["first_file_frame"]) / raw.rate

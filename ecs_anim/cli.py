@@ -183,6 +183,8 @@ def cmd_import(args: argparse.Namespace) -> int:
             message += _events_and_treadmill(motion.info)
             if motion.info["filled_in"]:
                 message += f", filled in: {', '.join(motion.info['filled_in'])}"
+            if motion.info.get("ignored_joints"):
+                message += f", ignored (no body part): {listed(motion.info['ignored_joints'])}"
             if extra:
                 message += f", {len(extra)} stored constraint(s)"
             if motion.info.get("absent"):
@@ -198,6 +200,8 @@ def cmd_import(args: argparse.Namespace) -> int:
                                 "held, unreliable)")
             if args.trim is not None:
                 message += f"; --trim kept frames from frame {motion.info.get('first_file_frame', 0)} of the file"
+            if motion.info.get("rest_frames_dropped"):
+                message += f"; {motion.info['rest_frames_dropped']}"
             for key, what in (("root_frames_trimmed", "trimmed (of the file's frames)"),
                               ("root_frames_repaired", "repaired")):
                 if motion.info.get(key):
@@ -328,8 +332,10 @@ def cmd_info(args: argparse.Namespace) -> int:
     for line in info.get("parts_frames_trimmed") or []:
         print(f"  trimmed    {line}")
     if info.get("first_file_frame"):
-        print(f"  starts at  frame {info['first_file_frame']} of the file (--trim, or frames the "
-              "markers could not place)")
+        print(f"  starts at  frame {info['first_file_frame']} of the file (--trim, a rest pose "
+              "dropped, or frames the markers could not place)")
+    if info.get("rest_frames_dropped"):
+        print(f"  {info['rest_frames_dropped']}")
     for why in (info.get("parts_not_computed") or {}).values():
         print(f"  {why}")
     contacts_info = info.get("contacts") or {}
@@ -603,8 +609,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "--constraints are then given in the turned clip's frame")
     p.add_argument("--trim", type=frame_range, metavar="START:END",
                    help="keep only these frames of each file: frame numbers (START included, END "
-                   "not; negative from the end; either may be left out, e.g. 1: drops a T-pose "
-                   "first frame) or seconds with s (0.5s:12s)")
+                   "not; negative from the end; either may be left out, e.g. 1: drops a first "
+                   "frame) or seconds with s (0.5s:12s). Without it a rest pose (T-pose) before "
+                   "the motion is dropped, and said; 0: keeps it")
     p.add_argument("--max-gap", type=positive_int, metavar="FRAMES",
                    help="C3D: longest run of missing marker samples filled without a warning "
                    f"(default: {DEFAULT_MAX_GAP_S:g} s at the file's rate, 10 at 100 Hz)")

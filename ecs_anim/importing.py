@@ -24,7 +24,7 @@ from .contacts import (
     treadmill_belt,
 )
 from .errors import EcsAnimError, InputError
-from .joint_map import JointMap, map_skeleton
+from .joint_map import JointMap, map_skeleton, unused_joints
 from .morphology import ADULT_PROPORTIONS, Morphology, bone_lengths_of
 from .motion import NormalizedMotion
 from .normalized import encode
@@ -83,6 +83,8 @@ class CanonicalClip:
     up_axis: str = "y"
     up_reason: str = ""
     warnings: tuple[str, ...] = ()
+    #: Source joints no canonical part uses (:func:`~ecs_anim.joint_map.unused_joints`).
+    ignored: tuple[str, ...] = ()
 
 
 #: The largest frame number or seconds ``--trim`` takes (a day at 10,000 fps is under 1e9).
@@ -150,6 +152,58 @@ def trim_clip(clip: CanonicalClip, frames: slice) -> CanonicalClip:
                    thorax2world=clip.thorax2world[frames], head2world=clip.head2world[frames])
 
 
+#: A leading rest pose (a converter's T-pose frame) is told from the motion by the jump to the
+#: first captured frame: within the first second, the frame-to-frame move of the joints,
+#: averaged over them (m; the mean, so one joint's glitch later in a clip does not hide the
+#: jump), must be at least this many times the 99th percentile of the same move over the frames
+#: after it (measured on ../shared/mocap and varied/: 3.0-19.4 with a rest pose, at most 1.5
+#: without),
+REST_JUMP_RATIO = 2.2
+#: and at least this fraction of the leg (thigh + shank), so a clip that starts after a still
+#: moment is not cut for a small move (0.13-0.31 with a rest pose; 0.04 at most where the ratio
+#: passes 1.2 without one; fast motion reaches 0.18 at a ratio of 1.0).
+REST_JUMP_LEG_FRACTION = 0.08
+
+
+@dataclass(frozen=True)
+class RestFrames:
+    """Frames 0 to ``count - 1`` of a clip come before its motion (a rest pose): the joints move
+    ``jump_m`` metres on average from frame ``count - 1`` to frame ``count``."""
+
+    count: int
+    jump_m: float
+
+    def report(self, first_file_frame: int = 0) -> str:
+        """The import's line saying what was dropped, frames numbered as in the file (the clip's
+        frame 0 is the file's ``first_file_frame``) and how to keep them."""
+        first, last = first_file_frame, first_file_frame + self.count - 1
+        frames = f"frame {first}" if first == last else f"frames {first}-{last}"
+        return (f"dropped {frames}: a rest pose (T-pose) before the motion, the joints jump "
+                f"{self.jump_m:.2f} m on average to frame {last + 1}; --trim {first}: keeps it")
+
+
+def leading_rest_frames(positions: F64, fps: float) -> RestFrames | None:
+    """The rest pose a converter put before the motion (CMU's T-pose frame 0, with any frames
+    it then ramps or holds through), if any: a jump within the first second that is many times
+    the clip's own fast frame-to-frame motion after it and a part of the leg
+    (:data:`REST_JUMP_RATIO`, :data:`REST_JUMP_LEG_FRACTION`). None when the clip starts with
+    its motion.
+
+    ``positions`` (n_frames, N_JOINTS, 3): canonical joint positions, metres.
+    """
+    if len(positions) < 3:
+        return None
+    move = np.mean(np.linalg.norm(np.diff(positions, axis=0), axis=-1), axis=1)  # (n_frames - 1,)
+    jump = int(np.argmax(move[:max(1, min(round(fps), len(move) - 1))]))
+    fast_after = float(np.percentile(move[jump + 1:], 99))
+    leg = 0.5 * sum(float(np.median(np.linalg.norm(positions[:, J[f"{upper}_{s}"]]
+                                                   - positions[:, J[f"{lower}_{s}"]], axis=-1)))
+                    for s in "lr" for upper, lower in (("hip", "knee"), ("knee", "ankle")))
+    if move[jump] >= REST_JUMP_RATIO * fast_after and move[jump] >= REST_JUMP_LEG_FRACTION * leg:
+        return RestFrames(jump + 1, float(move[jump]))
+    return None
+
+
 #: A captured subject's plausible stature (m): outside, the length unit is wrong.
 MIN_STATURE_M, MAX_STATURE_M = 0.3, 3.0
 
@@ -214,7 +268,8 @@ def unit_scale(unit: str) -> float:
 def detect_up(skeleton: BvhSkeleton, jmap: JointMap, pos_file: F64) -> tuple[str, str]:
     """The file's up axis, ``"y"`` or ``"z"``, with a sentence saying why: the axis along which
     the head stands above the feet, in the rest pose (the spine from pelvis to neck) and over
-    the clip's frames (the head above the lower ankle), each as a fraction of its length.
+    the clip's frames (the head above the lower ankle), each as a fraction of its length; when
+    the two disagree, the frames if they show it clearly.
 
     ``pos_file`` (n_frames, n_joints, 3): joint positions in file axes. A tie or no axis showing
     the head above the feet keeps the BVH convention, Y up, and says so.
@@ -233,8 +288,17 @@ def detect_up(skeleton: BvhSkeleton, jmap: JointMap, pos_file: F64) -> tuple[str
     score = {axis: r[0] + r[1] for axis, r in rise.items()}
     up = max(score, key=lambda a: score[a])
     if score[up] <= 0.5 or abs(score["y"] - score["z"]) < 0.2:
-        return "y", ("assumed (the BVH convention): neither Y nor Z shows the head clearly above "
-                     "the feet; give --up if wrong")
+        # The rest pose and the frames disagree (a Blender armature turns a Z-up rest pose to
+        # Y up in its channels): the frames are what is imported, so they decide if clear.
+        clear = [axis for axis, r in rise.items() if r[1] > 0.5]
+        if len(clear) != 1:
+            return "y", ("assumed (the BVH convention): neither Y nor Z shows the head clearly "
+                         "above the feet; give --up if wrong")
+        up = clear[0]
+        rest_up = next(a for a in rise if a != up)
+        return up, (f"detected: the head is above the feet along +{up.upper()} in "
+                    f"{rise[up][2]:.0%} of frames, which decide over the rest pose's spine "
+                    f"pointing {rise[rest_up][0]:+.2f} along {rest_up.upper()}")
     spine_k, _, share = rise[up]
     rest_text = (f"the rest pose's spine points {spine_k:+.2f} along {up.upper()}"
                  if abs(spine_k) > 0.5 else "the rest pose shows no stance")
@@ -354,6 +418,7 @@ def canonical_clip(motion: BvhMotion, map_spec: str | None = None,
         head2world=world_frame(src["head"]),  # type: ignore[arg-type]
         measured=measured, fps=motion.fps, unit=unit, unit_reason=reason, joint_map=jmap,
         up_axis=up, up_reason=up_reason, warnings=tuple(motion.warnings),
+        ignored=tuple(unused_joints(skeleton, jmap)),
     )
 
 
@@ -397,22 +462,29 @@ def import_bvh(path: str | Path, map_spec: str | None = None, unit: str | None =
                up: str | None = None, trim: FrameRange | None = None,
                stature_m: float | None = None, treadmill: bool = True,
                contacts: str = "detect") -> NormalizedMotion:
-    """Read a BVH file and normalize it (``trim``: only those frames; ``up``, ``unit``,
-    ``stature_m`` as in :func:`canonical_clip`; ``treadmill``, ``contacts`` as in
+    """Read a BVH file and normalize it (``trim``: only those frames, else a leading rest pose
+    is dropped, :func:`leading_rest_frames`, and ``info.rest_frames_dropped`` says so; ``up``,
+    ``unit``, ``stature_m`` as in :func:`canonical_clip`; ``treadmill``, ``contacts`` as in
     :func:`normalize_clip`: a BVH has no gait events). Raises :class:`EcsAnimError` subclasses
     on bad input."""
     path = Path(path)
     motion = read_bvh(path)
     try:
         clip = canonical_clip(motion, map_spec, unit, up, stature_m)
-        first_file_frame = 0
+        first_file_frame, rest = 0, None
         if trim is not None:
             kept = trim.frames(len(clip.positions), clip.fps)
             clip, first_file_frame = trim_clip(clip, kept), kept.start
+        else:
+            rest = leading_rest_frames(clip.positions, clip.fps)
+            if rest is not None:
+                clip, first_file_frame = trim_clip(clip, slice(rest.count, None)), rest.count
         normalized = normalize_clip(clip, path.stem, str(path), thresholds, treadmill,
                                     contacts=contacts)
         if first_file_frame:
             normalized.info["first_file_frame"] = first_file_frame
+        if rest is not None:
+            normalized.info["rest_frames_dropped"] = rest.report()
     except InputError:
         raise
     except EcsAnimError as exc:
@@ -494,6 +566,8 @@ def normalize_clip(clip: CanonicalClip, name: str, source: str,
         info["up_reason"] = clip.up_reason
     if clip.warnings:
         info["warnings"] = list(clip.warnings)
+    if clip.ignored:
+        info["ignored_joints"] = list(clip.ignored)
     return NormalizedMotion(poses, clip.fps, morph, constraints, info, planted)
 
 

@@ -6,9 +6,10 @@ A source skeleton (BVH hierarchy, names in any convention) is matched to the can
 1. a user YAML map (``--map FILE.yaml``), which may name a preset to start from and override
    single joints;
 2. a named preset (``--map mixamo``), or the preset detected from the joint names;
-3. failing both, a structural match on the hierarchy and its lengths alone (names are not read):
-   the legs, the spine and the arms are the long branches, left and right from where the knees
-   bend and the toes point (see :func:`structural_map`).
+3. failing both, a structural match on the hierarchy and its lengths alone (names are read only
+   to tell left from right when no pose shows it): the legs, the spine and the arms are the
+   long branches, left and right from where the knees bend and the toes point (see
+   :func:`structural_map`).
 
 Canonical joints that a skeleton does not have are filled in by the importer: ``spine_1`` /
 ``spine_2`` between the pelvis and the neck, ``toe_*``, ``hand_*`` and ``head_top`` from the
@@ -147,7 +148,7 @@ PRESETS: dict[str, Preset] = {
                 "spine_2": ["Spine2"], "neck": ["Neck"], "head": ["Head"],
                 "head_top": ["HeadTop_End", "Head.end"], "shoulder_{s}": ["{S}Arm"],
                 "elbow_{s}": ["{S}ForeArm"], "wrist_{s}": ["{S}Hand"],
-                "hand_{s}": ["{S}HandMiddle1", "{S}Hand.end"],
+                "hand_{s}": ["{S}HandMiddle1", "{S}HandEnd", "{S}Hand.end"],
             }, "Left", "Right"),
             ("Spine2", "LeftUpLeg", "LeftForeArm"),
         ),
@@ -284,8 +285,9 @@ def _lca(skeleton: BvhSkeleton, joints: list[int]) -> int:
 
 
 #: A branch is a major one (a limb, the spine, the neck and head) when it reaches at least this
-#: fraction as far as the longest branch leaving the same joint; fingers, toes, twist helpers and
-#: props reach less (a neck and head reaches about 0.35 as far as an arm from the thorax).
+#: fraction as far as the second-longest branch leaving the same joint (the other arm: a prop in
+#: one hand makes its arm the longest by far); fingers, toes and twist helpers reach less (a neck
+#: and head reaches about 0.35 as far as an arm from the thorax).
 MAJOR_BRANCH_FRACTION = 0.15
 
 
@@ -298,6 +300,7 @@ class _Tree:
     """A skeleton's hierarchy and rest lengths, as structural matching reads them.
 
     ``bone`` (n_joints,): distance from each joint to its parent at rest (0 for the root);
+    ``is_end_site`` (n_joints,): End Sites, which mark where a chain ends rather than a joint;
     ``reach`` (n_joints,): the longest path from a joint down to a leaf; ``onward``: the child on
     that path (-1 at a leaf); ``size``: joints in each subtree. Joints at the place of their parent
     (zero offsets, zero-length End Sites) are *at the same place*; a run of them is one place.
@@ -307,6 +310,7 @@ class _Tree:
         rest = rest_positions(skeleton)
         n = len(skeleton.joints)
         self.parents = np.array([j.parent for j in skeleton.joints])
+        self.is_end_site = [j.is_end_site for j in skeleton.joints]
         self.children: list[list[int]] = [[] for _ in range(n)]
         for i, p in enumerate(self.parents):
             if p >= 0:
@@ -333,21 +337,29 @@ class _Tree:
 
     def hub_below(self, start: int) -> tuple[int, list[int]] | None:
         """The first joint from ``start`` down its longest path where three or more major branches
-        leave (the pelvis: two legs and the spine; the thorax: two arms and the neck), with them."""
+        leave, two of them limbs (the pelvis: two legs and the spine; the thorax: two arms and the
+        neck), with them. Single-bone leaves reaching as far (IK targets at the feet under a
+        root) make no hub."""
         j = start
         while j >= 0:
-            longest = self.reach[j]
+            reaches = sorted((self.branch(c) for c in self.children[j]), reverse=True)
+            yardstick = reaches[1] if len(reaches) > 1 else self.reach[j]
             major = [c for c in self.children[j]
-                     if longest > 0 and self.branch(c) >= MAJOR_BRANCH_FRACTION * longest]
-            if len(major) >= 3:
+                     if yardstick > 0 and self.branch(c) >= MAJOR_BRANCH_FRACTION * yardstick]
+            if len(major) >= 3 and sum(self.is_limb(c) for c in major) >= 2:
                 return j, major
             j = int(self.onward[j])
         return None
 
+    def is_limb(self, branch: int) -> bool:
+        """Whether ``branch`` has three places along its longest path (hip, knee, ankle)."""
+        return len(self.places(branch)) >= 3
+
     def mirror_pair(self, branches: list[int]) -> tuple[int, int]:
-        """The two branches most alike in joints and reach (the legs, the arms), among the
+        """The two limbs most alike in joints and reach (the legs, the arms), among the
         :data:`COMPARED_BRANCHES` reaching farthest."""
-        branches = sorted(branches, key=self.branch, reverse=True)[:COMPARED_BRANCHES]
+        branches = sorted((b for b in branches if self.is_limb(b)), key=self.branch,
+                          reverse=True)[:COMPARED_BRANCHES]
         def unlike(a: int, b: int) -> float:
             joints: float = abs(self.size[a] - self.size[b]) / max(self.size[a], self.size[b])
             return joints + abs(self.branch(a) - self.branch(b)) / max(self.branch(a),
@@ -369,9 +381,10 @@ class _Tree:
         return out
 
 
-def _limb(tree: _Tree, hub: int, branch: int) -> dict[str, int | None]:
-    """A leg or an arm leaving ``hub`` by ``branch``: its proximal, middle and distal joints (hip,
-    knee, ankle / shoulder, elbow, wrist) and the end beyond (toe / hand).
+def _limb_places(tree: _Tree, hub: int, branch: int) -> tuple[list[list[int]], list[float], int]:
+    """A leg or an arm leaving ``hub`` by ``branch``: its places from the hub on, the length of
+    the segment reaching each (``lengths[k]`` from place k - 1 to k; k = 1 leaves the hub), and
+    ``first``, the segment of the first long bone (0 when the path has too few places).
 
     The two long bones are the path's longest segment and the longer of its neighbours, never
     the segment leaving the hub (a pelvis offset, a clavicle: CMU's clavicle is longer than its
@@ -382,30 +395,70 @@ def _limb(tree: _Tree, hub: int, branch: int) -> dict[str, int | None]:
         places[0].insert(0, hub)
     else:
         places.insert(0, [hub])
-    # lengths[k]: from places[k - 1] to places[k]; k = 1 leaves the hub.
     lengths = [0.0] + [float(tree.bone[p[0]]) for p in places[1:]]
     if len(places) < 4:
-        return {"proximal": None, "middle": None, "distal": None, "end": None}
+        return places, lengths, 0
     longest = max(range(2, len(places)), key=lambda k: lengths[k])
     before = lengths[longest - 1] if longest >= 3 else -1.0
     after = lengths[longest + 1] if longest + 1 < len(places) else -1.0
-    first = longest - 1 if before > after else longest  # lengths[first], lengths[first + 1]
-    proximal = places[first - 1][0]
-    end = places[first + 2][0] if first + 2 < len(places) else None
-    return {"proximal": proximal, "middle": places[first][0], "distal": places[first + 1][0],
-            "end": end}
+    return places, lengths, longest - 1 if before > after else longest
+
+
+#: Two segments are a mirror image of each other within this fraction of the longer.
+MIRROR_TOLERANCE = 0.25
+
+
+#: A leg's or an arm's joints: "proximal", "middle", "distal" and "end" (None: not found).
+Limb = dict[str, int | None]
+
+
+def _limbs(tree: _Tree, hub: int, pair: tuple[int, int]) -> tuple[Limb, Limb]:
+    """The two legs (or arms) leaving ``hub`` by the branches ``pair``: each one's proximal,
+    middle and distal joints (hip, knee, ankle / shoulder, elbow, wrist) and the end beyond (toe /
+    hand). Where the two limbs' long bones (:func:`_limb_places`) are not at the same segment, a
+    bone on one side only (a sword held in one hand, longer than the arm) was taken for one: both
+    take the segment whose bones are alike on both sides. An end farther from the distal joint
+    than the bone before it is dropped (filled in instead)."""
+    (places_a, lengths_a, first_a), (places_b, lengths_b, first_b) = \
+        (_limb_places(tree, hub, b) for b in pair)
+
+    def alike(first: int) -> bool:
+        return all(first + d < min(len(lengths_a), len(lengths_b)) and
+                   abs(lengths_a[first + d] - lengths_b[first + d])
+                   <= MIRROR_TOLERANCE * max(lengths_a[first + d], lengths_b[first + d])
+                   for d in (0, 1))
+
+    firsts = [first_a, first_b]
+    if first_a != first_b:
+        mirrored = [f for f in (first_a, first_b) if f and alike(f)]
+        if len(mirrored) == 1:
+            firsts = mirrored * 2
+    out: list[Limb] = []
+    for places, first in zip((places_a, places_b), firsts, strict=True):
+        if not first:
+            out.append({"proximal": None, "middle": None, "distal": None, "end": None})
+            continue
+        end = places[first + 2][0] if first + 2 < len(places) else None
+        out.append({"proximal": places[first - 1][0], "middle": places[first][0],
+                    "distal": places[first + 1][0], "end": end})
+    for limb, lengths, first in zip(out, (lengths_a, lengths_b), firsts, strict=True):
+        if limb["end"] is not None and lengths[first + 2] > lengths[first + 1]:
+            limb["end"] = None  # farther than the forearm or shank: a prop, no hand or toe
+    return out[0], out[1]
 
 
 def _head(tree: _Tree, thorax: int, branch: int) -> tuple[int, int, int | None]:
     """(neck, head, head top) on the branch leaving the thorax upwards: the neck is its first
-    joint (the thorax itself when the head hangs straight from it), the head top a leaf at its
-    end, the head the place before that leaf, or the place where eyes or a jaw branch off."""
+    joint (the thorax itself when the head hangs straight from it), the head top an End Site at
+    its end, the head the place before that End Site, or the place where eyes or a jaw branch
+    off. A leaf joint is the head itself: a file written without End Sites ends the neck there
+    (OptiTrack's Chest, Neck, Head), and the head top is then filled in from proportions."""
     places = tree.places(branch)
     branching = next((k for k, place in enumerate(places) if len(tree.children[place[-1]]) > 1),
                      len(places) - 1)
     places = places[:branching + 1]
     last = places[-1][0]
-    if len(places) >= 2 and not tree.children[last]:
+    if len(places) >= 2 and not tree.children[last] and tree.is_end_site[last]:
         head_top: int | None = last
         head = places[-2][0]
     else:
@@ -414,27 +467,51 @@ def _head(tree: _Tree, thorax: int, branch: int) -> tuple[int, int, int | None]:
 
 
 def _leftness(poses: F64, pelvis: int, thorax: int,
-              legs: tuple[dict[str, int | None], dict[str, int | None]]) -> float:
+              legs: tuple[dict[str, int | None], dict[str, int | None]]) -> tuple[float, float]:
     """How clearly the first of two legs is the left one, from -1 (surely the right) to 1: knees
     bend forward and toes point forward, and left is up x forward (BVH axes are right-handed).
-    ``poses`` (n_poses, n_joints, 3); each pose counts by how much it shows."""
+    ``poses`` (n_poses, n_joints, 3); each pose counts by how much it shows. Also returns how
+    much the poses show forward: the median length of those cues over the legs' length (a few
+    hundredths for straight standing legs without toes, about 0.3 with toes or walking)."""
     up = poses[:, thorax] - poses[:, pelvis]
     forward = np.zeros_like(up)
+    leg_length = np.zeros(len(poses))
     for leg in legs:
         hip, knee, ankle = (poses[:, leg[k]] for k in ("proximal", "middle", "distal"))
         along = normalize(ankle - hip)
         bend = knee - hip
         forward += bend - np.sum(bend * along, axis=-1, keepdims=True) * along
+        leg_length += np.linalg.norm(bend, axis=-1) + np.linalg.norm(ankle - knee, axis=-1)
         if leg["end"] is not None:
             forward += poses[:, leg["end"]] - ankle
     lateral = poses[:, legs[0]["proximal"]] - poses[:, legs[1]["proximal"]]
     shown = np.linalg.norm(lateral, axis=-1) * np.linalg.norm(np.cross(up, forward), axis=-1)
-    return float(np.sum(lateral * np.cross(up, forward)) / max(float(np.sum(shown)), 1e-300))
+    leftness = float(np.sum(lateral * np.cross(up, forward)) / max(float(np.sum(shown)), 1e-300))
+    cue = float(np.median(np.linalg.norm(forward, axis=-1) / np.maximum(leg_length, 1e-300)))
+    return leftness, cue
 
 
 #: A rest pose whose cues say left or right at least this clearly (1: every cue agrees, exactly
 #: across the body) decides the sides; real rest poses give 0 (no cue) or above 0.99.
 CLEAR_LEFTNESS = 0.5
+
+
+#: Poses whose forward cues (:func:`_leftness`) are shorter than this fraction of the legs show
+#: no side: straight standing legs without toes (a toe-less file with its End Sites dropped) give
+#: 0.03-0.07, where any toe or a walk gives 0.17 or more. The joints' names then decide.
+WEAK_FORWARD_CUE = 0.1
+
+
+def _named_leftness(skeleton: BvhSkeleton,
+                    legs: tuple[dict[str, int | None], dict[str, int | None]]) -> float:
+    """1 when the first limb's joints are named left and the second's right (``LeftHip``,
+    ``thigh_l``), -1 the other way round, 0 when the names say neither or disagree."""
+    votes = 0
+    for leg, sign in zip(legs, (1, -1), strict=True):
+        for part in ("proximal", "middle", "distal"):
+            side = _side_of(skeleton.joints[leg[part]].name)  # type: ignore[index]
+            votes += sign * {"l": 1, "r": -1}.get(side or "", 0)
+    return float(np.sign(votes))
 
 
 def _stands(pose: F64, pelvis: int, thorax: int,
@@ -455,7 +532,9 @@ def structural_map(skeleton: BvhSkeleton, poses: F64 | None = None,
     Along each limb the two long bones give hip, knee, ankle (shoulder, elbow, wrist); spine joints
     are picked evenly between pelvis and neck. Left is up x forward, forward being where the knees
     bend and the toes point: in the rest pose when it is a stance that shows it, otherwise in
-    ``poses`` ((n_poses, n_joints, 3) joint positions in file axes, e.g. every frame of the clip).
+    ``poses`` ((n_poses, n_joints, 3) joint positions in file axes, e.g. every frame of the clip),
+    and when those show no forward either (:data:`WEAK_FORWARD_CUE`), the joints' names if they
+    say the sides (``LeftHip``, ``thigh_l``).
 
     Raises :class:`MappingError` saying what it could not find, unless ``partial`` (then the parts
     it could not find are None).
@@ -479,24 +558,31 @@ def structural_map(skeleton: BvhSkeleton, poses: F64 | None = None,
         found["pelvis"] = pelvis
         neck, found["head"], found["head_top"] = _head(tree, thorax, neck_branch)
         found["neck"] = neck
-        leg_parts = (_limb(tree, pelvis, legs[0]), _limb(tree, pelvis, legs[1]))
-        arm_parts = (_limb(tree, thorax, arms[0]), _limb(tree, thorax, arms[1]))
+        leg_parts = _limbs(tree, pelvis, legs)
+        arm_parts = _limbs(tree, thorax, arms)
         if all(limb["distal"] is not None for limb in leg_parts + arm_parts):
             # The rest pose tells the sides if it is a stance with feet or knees showing forward;
             # otherwise (Bandai's bones lie along X at rest; Biped's stand straight with a sole
             # End Site and no toes) the clip's poses do.
+            # Poses showing no forward (straight legs without toes) leave the sides to the
+            # joints' names when these say them, for the arms as well.
             geometry = rest_positions(skeleton)[None]
-            leftness = _leftness(geometry, pelvis, thorax, leg_parts)
+            leftness, _ = _leftness(geometry, pelvis, thorax, leg_parts)
+            by_names = False
             if poses is not None and not (_stands(geometry[0], pelvis, thorax, leg_parts)
                                           and abs(leftness) > CLEAR_LEFTNESS):
                 geometry = poses
-                leftness = _leftness(geometry, pelvis, thorax, leg_parts)
+                leftness, cue = _leftness(geometry, pelvis, thorax, leg_parts)
+                named = _named_leftness(skeleton, leg_parts)
+                by_names = cue < WEAK_FORWARD_CUE and named != 0.0
+                leftness = named if by_names else leftness
             if leftness < 0.0:
                 leg_parts = leg_parts[::-1]
             # The left arm is the one on the left hip's side.
             lateral = geometry[:, leg_parts[0]["proximal"]] - geometry[:, leg_parts[1]["proximal"]]
             across = geometry[:, arm_parts[0]["proximal"]] - geometry[:, arm_parts[1]["proximal"]]
-            if float(np.sum(lateral * across)) < 0.0:
+            named_arms = _named_leftness(skeleton, arm_parts) if by_names else 0.0
+            if (named_arms or float(np.sum(lateral * across))) < 0.0:
                 arm_parts = arm_parts[::-1]
             for side, leg, arm in zip("lr", leg_parts, arm_parts, strict=False):
                 found |= {f"hip_{side}": leg["proximal"], f"knee_{side}": leg["middle"],
@@ -690,6 +776,20 @@ def map_skeleton(skeleton: BvhSkeleton, map_spec: str | None = None,
     thorax = _lca(skeleton, [source["shoulder_l"], source["shoulder_r"], source["head"]])  # type: ignore[list-item]
     names = {j: (None if i is None else skeleton.names[i]) for j, i in source.items()}
     return JointMap(source=source, thorax=thorax, how=how, names=names)
+
+
+def unused_joints(skeleton: BvhSkeleton, jmap: JointMap) -> list[str]:
+    """Joints (End Sites aside) that move no mapped joint: leaves and chains the canonical body
+    has no part for (fingers, eyes, twist and IK helpers, props), in file order. Helper joints
+    above the pelvis (a ``Reference`` or ``Armature`` root) do move it and are not listed."""
+    mapped = {i for i in jmap.source.values() if i is not None}
+    carries = [i in mapped for i in range(len(skeleton.joints))]
+    for i in range(len(skeleton.joints) - 1, 0, -1):  # file order is topological
+        parent = skeleton.joints[i].parent
+        if parent >= 0 and carries[i]:
+            carries[parent] = True
+    return [j.name for j, used in zip(skeleton.joints, carries, strict=True)
+            if not used and not j.is_end_site]
 
 
 def _toe_end_site(skeleton: BvhSkeleton, knee: int, ankle: int) -> int | None:

@@ -14,17 +14,18 @@ from ecs_anim.bvh import read_bvh
 from ecs_anim.c3d_import import import_c3d
 from ecs_anim.cli import main
 from ecs_anim.contacts import horizontal_speed, local_ground
-from ecs_anim.importing import FrameRange, canonical_clip, import_bvh
+from ecs_anim.importing import canonical_clip, import_bvh
 from ecs_anim.motion import load_nmo, save_nmo
 from ecs_anim.normalized import decode
 from ecs_anim.skeleton import JOINT_INDEX as J
 
 VARIED = MOCAP_DIR / "varied"
 #: Walks (over-ground, both feet), with the flags a file needs (see the README's table): the
-#: child's unit (no proportion tells it), the converter's T-pose first frame dropped.
+#: child's unit (no proportion tells it). (The converters' rest-pose first frames of the CMU
+#: walks are dropped on import, with no flag.)
 WALKS = {
     "bandai_walk.bvh": {}, "bandai_walk_turn_left.bvh": {},
-    "varied/cmu_walk_120hz_adelaide.bvh": {"trim": "1:"},
+    "varied/cmu_walk_120hz_adelaide.bvh": {},
     "varied/fair_zup_walk_inch_120hz.bvh": {},
     "varied/fair_zup_child_walk_120hz.bvh": {"unit": "inch"},
     "varied/asf_noneck_walk_speeds_120hz.bvh": {}, "varied/asf_noneck_walk_circle_120hz.bvh": {},
@@ -39,16 +40,16 @@ WALKS = {
 #: uneven-terrain walks (CMU 03, Daz release, no toe joint: the toe is the End Site, the toe's
 #: tip) the stance foot drifts 8-16 cm while it is planted (0.10-0.28 m/s net, the ankle rising
 #: 5-11 cm): with the stillness threshold lowered to 0.2 m/s 03_01's planted median is still
-#: 0.16 m/s while a foot is planted only 29 % of the time. Both feet are up in 03_01 at frames
-#: 149-168, where the left foot steps down 16 cm lower after the right toe has left (4 cm up
+#: 0.16 m/s while a foot is planted only 29 % of the time. Both feet are up in 03_01 (its rest
+#: frame 0 dropped: 51 of 432 frames) at the file's frames 149-168, where the left foot steps down 16 cm lower after the right toe has left (4 cm up
 #: and rising at the first; the joints' centroid falls at 9-13 m/s^2 for 40 ms of it), and
 #: 404-432, where the clip ends in a step down 22 cm lower after the left toe has left (3 cm
-#: up); in 03_02 twice for 8 frames while a foot comes down (9-11 cm above the ground at the
+#: up); in 03_02 twice for 8-9 frames while a foot comes down (9-11 cm above the ground at the
 #: first). (The c3d.org walk, very slow, had its right foot planted 85.5 % of the time until
 #: the plant ended at the foot's lift-off.)
 OPEN = {
-    "varied/cmudaz_03_01_uneven_terrain.bvh": {"median": 0.211, "both_up": 0.118},
-    "varied/cmudaz_03_02_uneven_terrain.bvh": {"both_up": 0.044},
+    "varied/cmudaz_03_01_uneven_terrain.bvh": {"median": 0.211, "both_up": 0.1181},
+    "varied/cmudaz_03_02_uneven_terrain.bvh": {"both_up": 0.0499},
 }
 SHARE, MEDIAN_MPS, MAX_MPS = (0.30, 0.85), 0.15, 0.5
 
@@ -57,11 +58,9 @@ def _import(name: str):
     path = MOCAP_DIR / name
     if not path.exists():
         pytest.skip(f"{path} not available")
-    flags = WALKS.get(name, {})
-    trim = FrameRange.parse(flags["trim"]) if "trim" in flags else None
     if path.suffix == ".c3d":
-        return import_c3d(path, trim=trim)
-    return import_bvh(path, unit=flags.get("unit"), trim=trim)
+        return import_c3d(path)
+    return import_bvh(path, unit=WALKS.get(name, {}).get("unit"))
 
 
 def walk_figures(name: str) -> dict[str, float]:

@@ -72,7 +72,8 @@ def test_trim_parses_frames_and_seconds():
 def test_import_trim_drops_frames_and_says_where_the_clip_starts(tmp_path, capsys):
     require_mocap()
     cmu = MOCAP_DIR / "cmu_01_01_playground_jumps.bvh"
-    assert main(["import", str(cmu), "-o", str(tmp_path / "all")]) == 0
+    # --trim 0: keeps the T-pose frame that an import without --trim drops (test_rest_frames).
+    assert main(["import", str(cmu), "-o", str(tmp_path / "all"), "--trim", "0:"]) == 0
     assert main(["import", str(cmu), "-o", str(tmp_path / "cut"), "--trim", "1:"]) == 0
     full, cut = load_nmo(tmp_path / "all" / f"{cmu.stem}.nmo"), load_nmo(tmp_path / "cut" / f"{cmu.stem}.nmo")
     assert cut.n_frames == full.n_frames - 1 and cut.info["first_file_frame"] == 1

@@ -90,7 +90,8 @@ def test_every_bvh_imports_and_exports_its_source_joints_within_0_1_mm(path, tmp
     assert info["up_axis"] == up
     names, ref = reference_world(path, scale, up,
                                  frozenset(FILE_FRAME_POSITIONS.get(path.name, ())))
-    errors = _errors_m(info, exported, names, ref)
+    # A converter's rest-pose first frame is dropped on import (info.first_file_frame says so).
+    errors = _errors_m(info, exported, names, ref[info.get("first_file_frame", 0):])
     assert {"pelvis", "hip_l", "knee_l", "ankle_l", "head", "wrist_r"} <= set(errors)
     if _lookup({k: True for k in TOE_END_SITE}, path.name):
         ends = [info["joints"][f"toe_{s}"] for s in "lr"]
@@ -152,7 +153,8 @@ def test_one_frame_line_more_than_frames_imports_with_one_warning(tmp_path, caps
     assert re.fullmatch(rf"warning: {re.escape(str(path))}:\d+: 'Frames:' says 365 but there "
                         r"are 366 frame lines; read all 366", err[0]), err[0]
     header = json.loads(str(np.load(tmp_path / "out" / f"{path.stem}.nmo")["header_json"]))
-    assert header["n_frames"] == 366
+    # all 366 read; the converter's 25 frames before the motion dropped (test_rest_frames.py)
+    assert header["n_frames"] + header["info"]["first_file_frame"] == 366
 
 
 @pytest.mark.parametrize("delta, message", [(1, "file ends after 366 of 367 frames (truncated?"),
@@ -196,13 +198,15 @@ def test_rig_scaled_x2_imports_at_its_real_size_with_unit_number_or_stature(tmp_
     by_stature, stature_pos = _import_and_export(doubled, tmp_path / "stature",
                                                  ["--stature", f"{stature}"])
     scaled_body = load_nmo(tmp_path / "stature" / f"{doubled.stem}.nmo").source_morphology
-    assert abs(scaled_body.stature - stature) < 1e-9
+    # the scale is set on the file's frames, the body measured on those kept (the converter's
+    # ramp dropped): 1.5 um apart, and the two imports' scales 1e-6 apart
+    assert abs(scaled_body.stature - stature) < 1e-5
     factor = stature / load_nmo(tmp_path / "plain" / f"{src.stem}.nmo").source_morphology.stature
     assert abs(float(by_stature["unit"]) / 0.005 - factor) < 1e-5  # the unit is printed to 6 digits
     ratio = np.linalg.norm(stature_pos[:, JOINT_INDEX["head"]] - stature_pos[:, JOINT_INDEX["ankle_l"]],
                            axis=-1) / np.linalg.norm(plain_pos[:, JOINT_INDEX["head"]]
                                                      - plain_pos[:, JOINT_INDEX["ankle_l"]], axis=-1)
-    assert np.abs(ratio - factor).max() < 1e-9
+    assert np.abs(ratio - factor).max() < 1e-5
 
 
 @pytest.mark.parametrize("bad", ["0", "-1", "inches", "nan"])
