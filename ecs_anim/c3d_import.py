@@ -550,19 +550,25 @@ class _Build:
 def _detect_up(mk: _Markers, present: list[str], mmap: MarkerMap) -> str:
     """The file's up axis: the axis along which the body is tallest in a typical frame (the
     median over frames of the markers' spread), pointing from the legs to the pelvis (or from
-    the pelvis to the trunk, or the trunk to the head, when those are what is marked)."""
+    the pelvis to the trunk, the trunk to the head, or the sternum's and spine's lower markers
+    (PX, T10) to their upper ones (IJ, C7), when those are what is marked)."""
     body = mk.points[:, sorted(set(mk.found.values()))]  # not other objects' markers
     spread = np.median(body.max(axis=1) - body.min(axis=1), axis=0)
     axis = int(np.argmax(spread))
     groups = mmap.preset.groups
 
+    def mean_of(roles: list[str] | tuple[str, ...]) -> F64 | None:
+        found = [r for r in roles if r in mk.found]
+        return np.mean([mk(r) for r in found], axis=0) if found else None
+
     def centre(group: str) -> F64 | None:
-        roles = [r for r in groups.get(group, ((), ()))[0] if r in mk.found]
-        return np.mean([mk(r) for r in roles], axis=0) if roles else None
+        return mean_of(groups.get(group, ((), ()))[0])
 
     legs = [c for c in (centre(g) for g in ("leg_l", "leg_r") if g in present) if c is not None]
+    # The thorax's own markers last: an upper-body set (seated, in a wheelchair) has no pelvis.
     pairs = [(centre("pelvis"), np.mean(legs, axis=0) if legs else None),
-             (centre("trunk"), centre("pelvis")), (centre("head"), centre("trunk"))]
+             (centre("trunk"), centre("pelvis")), (centre("head"), centre("trunk")),
+             (mean_of(("IJ", "C7")), mean_of(("PX", "T10")))]
     sign = 0.0
     for high, low in pairs:
         if high is not None and low is not None:

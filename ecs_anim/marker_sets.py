@@ -159,6 +159,9 @@ _ISB_ROLES = _sided({
     "WRIST_ULN_{s}": ("*USP", "*US", "*UST", "*WRB", "*UHE"),
     "WRIST_{s}": ("*WRI", "*WRIST"),
     "MC2_{s}": ("*HM2", "*MC2", "*MCP2"), "MC5_{s}": ("*HM5", "*MC5", "*MCP5"),
+    # Roles that refine an arm (``_LANDMARK_REFINING``), as the other landmark sets have them:
+    # an upper-arm marker and the third metacarpal head (the hand end, as Plug-in Gait's FIN).
+    "UPPER_ARM_{s}": ("*UPA",), "HAND_{s}": ("*HM3", "*MC3", "*FIN"),
     "HEAD_FRONT_{s}": ("*FHD",), "HEAD_BACK_{s}": ("*BHD",),
 })
 
@@ -393,8 +396,8 @@ def match_markers(labels: list[str], spec: str | None = None,
         if role not in preset.roles:
             hint = did_you_mean(role, preset.roles, parenthesized=True)
             raise InputError(user_path, f"markers.{role}: unknown role for {preset.name}{hint}; "
-                                        f"roles: {listed(preset.roles)} (all in "
-                                        "ecs_anim/marker_sets.py)", user_lines[role])
+                                        f"roles: {listed(preset.roles)} (all in the "
+                                        "README's marker maps)", user_lines[role])
         matches = [i for i, k in keys.items()
                    if label_key(label) in (k, label_key(labels[i].split(":")[-1]))]
         if not matches:

@@ -10,7 +10,7 @@ import pytest
 
 from conftest import MOCAP_DIR
 from ecs_anim.c3d_import import canonical_clip_c3d, import_c3d, read_c3d
-from ecs_anim.errors import MappingError
+from ecs_anim.errors import InputError, MappingError
 from ecs_anim.marker_sets import check_usable, label_key, match_markers
 from ecs_anim.skeleton import JOINT_INDEX as J
 
@@ -140,6 +140,30 @@ def test_custom_knee_labels_need_the_user_map_kept_in_tests_data():
     assert 1.3 < motion.source_morphology.stature < 2.0
     contact = motion.contacts()
     assert np.all((contact.mean(axis=0) > 0.3) & (contact.mean(axis=0) < 0.85))
+
+
+def test_a_seated_upper_body_with_custom_labels_imports_with_its_user_map():
+    """The Rancho wheelchair trial (trunk MAN/XIP/T3/T10, right arm RTB/RLEP/RRSP/RUSP/RM3, no
+    pelvis, legs or head) follows no convention: with no flag it is refused, naming its labels;
+    with tests/data/maps/rancho_wheelchair_rightarm.yaml the trunk and the right arm import, Z
+    up found from the sternum and spine markers, the arm's segments steady and of adult length
+    (measured: upper arm 245 mm, 3.7 % std; forearm 283 mm, 1.7 %)."""
+    from pathlib import Path
+
+    path = _varied("rancho_wheelchair_rightarm_50hz.c3d")
+    with pytest.raises(InputError, match=r"no marker set recognised from the labels \('MAN'"):
+        import_c3d(path)
+    user_map = Path(__file__).parent / "data" / "maps" / "rancho_wheelchair_rightarm.yaml"
+    clip, extra = canonical_clip_c3d(read_c3d(path), str(user_map))
+    assert set(extra["absent"]) == {"pelvis", "leg_l", "leg_r", "head", "arm_l"}
+    assert clip.up_axis == "z" and not np.isnan(clip.positions).any()
+    p = clip.positions
+    for (a, b), (low_m, high_m) in {("shoulder_r", "elbow_r"): (0.22, 0.34),
+                                    ("elbow_r", "wrist_r"): (0.22, 0.32)}.items():
+        length = np.linalg.norm(p[:, J[a]] - p[:, J[b]], axis=-1)
+        assert low_m < length.mean() < high_m and length.std() < 0.05 * length.mean(), (a, b)
+    # Seated and leaning into each push: the neck stays above the thorax's middle.
+    assert np.all(p[:, J["neck"], 2] - p[:, J["spine_2"], 2] > 0.1)
 
 
 def test_side_written_after_the_landmark_reads_as_before_it():

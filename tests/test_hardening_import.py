@@ -302,7 +302,7 @@ def test_a_marker_map_with_an_unknown_role_lists_a_few_roles(tmp_path):
     message = _message(exc, f"{user_map}:2")
     assert message == ("markers.KNEE_LAT_x: unknown role for plug_in_gait (did you mean "
                        "'KNEE_LAT_r'?); roles: ASIS_l, ASIS_r, PSIS_l, PSIS_r, SACRUM, THIGH_l "
-                       "(+39 more) (all in ecs_anim/marker_sets.py)")
+                       "(+39 more) (all in the README's marker maps)")
 
 
 def mixamo_names(text: str) -> str:

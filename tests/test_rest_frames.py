@@ -27,11 +27,11 @@ VARIED = MOCAP_DIR / "varied"
 REST_FRAME = {"cmu_01_01_playground_jumps.bvh": 1, "cmu_walk_120hz_adelaide.bvh": 1,
               "cmubiped_10_01_kick_30fps.bvh": 1, "cmudaz_03_01_uneven_terrain.bvh": 1,
               "cmudaz_03_02_uneven_terrain.bvh": 25}
-#: The --map without which a file does not import at all (README's tables); the rancho
-#: wheelchair trial imports with none (no marker set is recognised).
+#: The --map a file needs (README's tables): labels no convention uses.
 MAPS = {"qualisys_lowercase_underscore_240hz.c3d":
-        str(Path(__file__).parent / "data" / "maps" / "qualisys_knee_joint_line.yaml")}
-NOT_IMPORTED = {"rancho_wheelchair_rightarm_50hz.c3d"}
+        str(Path(__file__).parent / "data" / "maps" / "qualisys_knee_joint_line.yaml"),
+        "rancho_wheelchair_rightarm_50hz.c3d":
+        str(Path(__file__).parent / "data" / "maps" / "rancho_wheelchair_rightarm.yaml")}
 
 
 def _dev_files() -> list[object]:
@@ -40,7 +40,7 @@ def _dev_files() -> list[object]:
     files += sorted((Path(__file__).resolve().parents[1] / "scenarios" / "motions").glob("*.bvh"))
     if not any(f.is_relative_to(MOCAP_DIR) for f in files):
         files.append(Path("mocap-not-found"))
-    return [pytest.param(f, id=f.name) for f in files if f.name not in NOT_IMPORTED]
+    return [pytest.param(f, id=f.name) for f in files]
 
 
 @pytest.mark.parametrize("path", _dev_files())
