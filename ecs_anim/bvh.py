@@ -183,6 +183,7 @@ def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
     if tokens[0].upper() != "ROOT" or len(tokens) < 2:
         raise InputError(path, "expected 'ROOT <name>'", line)
     _parse_joint(reader, joints, " ".join(tokens[1:]), -1, line, is_end=False)
+    _reject_duplicate_names(joints, path)
 
     tokens, line = reader.next_tokens("MOTION")
     if tokens[0].upper() != "MOTION":
@@ -257,6 +258,19 @@ def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
         raise InputError(path, f"{what} {values[frame, col]} in channel {channel} of "
                                f"joint {quoted(name)} (frame {frame + 1} of {n_frames})", rows[frame][0])
     return BvhMotion(skeleton, values, frame_time, warnings)
+
+
+def _reject_duplicate_names(joints: list[BvhJoint], path: str) -> None:
+    """Raise :class:`InputError` at the second joint of a name already used: the joint map finds
+    bones by name, so two joints of one name would silently map the wrong one."""
+    first_line: dict[str, int] = {}
+    for joint in joints:
+        if joint.is_end_site:
+            continue
+        if joint.name in first_line:
+            raise InputError(path, f"joint name {quoted(joint.name)} is used twice (first at line "
+                                   f"{first_line[joint.name]}); joint names must be unique", joint.line)
+        first_line[joint.name] = joint.line
 
 
 def _reject_unplain_frame(rows: list[tuple[int, str]], split_rows: list[list[str]],
