@@ -23,7 +23,7 @@ from .contacts import (
     detect_foot_contacts,
     treadmill_belt,
 )
-from .errors import EcsAnimError, InputError
+from .errors import EcsAnimError, InputError, listed
 from .joint_map import JointMap, map_skeleton, unused_joints
 from .morphology import ADULT_PROPORTIONS, Morphology, bone_lengths_of
 from .motion import NormalizedMotion
@@ -452,6 +452,10 @@ def source_morphology(positions: F64, name: str) -> Morphology:
     for side in "lr":
         low = float(np.percentile(positions[:, J[f"ankle_{side}"], 2], 5))
         lengths[LENGTH_INDEX[f"ankle_height_{side}"]] = ankle_height_or_typical(low, leg)
+    collapsed = [length for length, i in LENGTH_INDEX.items() if not lengths[i] > 0]
+    if collapsed:  # said here: Morphology's own check would list every length, on no line
+        raise EcsAnimError(f"bones of zero length over the whole clip: {listed(collapsed)} "
+                           "(their joints coincide in every frame)")
     morph = Morphology(lengths, 1.0, "male", name)
     stature = morph.stature
     return Morphology(lengths, 22.0 * stature**2, "male", name)
