@@ -71,6 +71,7 @@ markers are (:func:`trust_root`).
 from __future__ import annotations
 
 import math
+import os
 import struct
 import warnings
 from dataclasses import dataclass, field, replace
@@ -117,6 +118,7 @@ DEFAULT_MAX_GAP_S = 0.1
 #: Adult widths (m) for the chord rules, scaled by leg length / 0.8 m; marker radius (m).
 JOINT_WIDTH_PER_LEG = {"knee": 0.105 / 0.80, "ankle": 0.070 / 0.80, "elbow": 0.070 / 0.80}
 MARKER_RADIUS_M = 0.007
+C3D_BLOCK_BYTES = 512  # a C3D file is made of blocks of this size; its data ends padded to one
 MAX_GLITCH_S = 0.05  # joint-centre outliers are replaced only in runs this short (seconds)
 HINGE_RATIO = 0.2
 #: ... and a hinge's axis runs across its segment (a knee's, an ankle's): the weakest direction
@@ -290,8 +292,13 @@ def read_c3d(path: str | Path) -> C3dMarkers:
                 "".join(ch for ch in units_param.string_value.lower() if ch.isalpha())
             events = _read_events(reader)
             anthropometry = _read_anthropometry(reader)
-            frames = [points[:, :4].astype(np.float64) for _, points, _ in reader.read_frames()] \
-                if n_points > 0 else []
+            data_start = (int(reader.header.data_block) - 1) * C3D_BLOCK_BYTES
+            frames, data_end = [], data_start
+            for _, points, _ in (reader.read_frames() if n_points > 0 else ()):
+                frames.append(points[:, :4].astype(np.float64))
+                data_end = f.tell()  # here, not after the loop: the reader reads on at its end
+            unread = os.fstat(f.fileno()).st_size - data_end
+            frame_bytes = (data_end - data_start) / max(len(frames), 1)
         except InputError:
             raise
         except Exception as exc:  # the reader raises struct, value, index errors on bad bytes
@@ -307,6 +314,12 @@ def read_c3d(path: str | Path) -> C3dMarkers:
                                "truncated?)")
     if len(frames) < expected:
         raise InputError(path, f"file ends after {len(frames)} of {expected} frames (truncated?)")
+    if unread > C3D_BLOCK_BYTES and unread >= frame_bytes:
+        # Writers pad the data to a whole block; more left over means the frame layout read is
+        # not the file's (a POINT:USED below the markers stored shifts every frame: garbage).
+        raise InputError(path, f"{unread} bytes of data follow the {expected} frames of "
+                               f"{n_points} markers the header announces: POINT:USED or the "
+                               "frame range is wrong (damaged file?)")
     labels = (labels + [""] * n_points)[:n_points]
     if not any(labels):
         raise InputError(path, "the markers have no labels (POINT:LABELS is missing or blank): "
