@@ -66,16 +66,16 @@ def test_odd_but_valid_bvh_imports_sanely(tmp_path, variant):
     require_mocap()
     text = WALK.read_text()
     if variant == "single_frame":
-        head, motion = text.split("MOTION\n")
-        lines = motion.splitlines()
+        head, frames = text.split("MOTION\n")
+        lines = frames.splitlines()
         text = head + "MOTION\nFrames: 1\n" + lines[1] + "\n" + lines[2] + "\n"
     else:
         text = "\ufeff" + text.replace("\n", "\r\n")
     path = tmp_path / f"{variant}.bvh"
     path.write_text(text, newline="")
-    motion = import_bvh(path)
-    assert all(np.all(np.isfinite(v)) for v in motion.poses.arrays().values())
-    assert 0.5 <= motion.source_morphology.stature <= 2.5
+    imported = import_bvh(path)
+    assert all(np.all(np.isfinite(v)) for v in imported.poses.arrays().values())
+    assert 0.5 <= imported.source_morphology.stature <= 2.5
 
 
 def _parameter_offset(data: bytes, group: str, name: str) -> int:
