@@ -54,8 +54,8 @@ hip's lateral axis at the femoral head centre's level (on average 3.4 mm above i
 +20 mm: Theivendran & Hart 2009, Acta Orthop Belg 75(4)). The toe hangs a foot length
 (adult proportions of the measured leg) in front of the ankle in the foot cluster's frame.
 
-Joint centres whose bones change length by more than 15 % for at most 5 frames (marker swaps
-or ghost markers in fast motion) are replaced by interpolation and reported
+Joint centres whose bones change length by more than 15 % for at most ``MAX_GLITCH_S``
+(0.05 s; marker swaps or ghost markers in fast motion) are replaced by interpolation and reported
 (:func:`reject_joint_outliers`).
 
 Gaps: a sample is invalid when its residual is negative, its coordinates are all zero or it is
@@ -81,7 +81,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .contacts import ContactThresholds, _intervals, gait_event_kind
+from .contacts import ContactThresholds, _intervals, frames_of, gait_event_kind
 from .errors import EcsAnimError, InputError, MappingError, listed, quoted
 from .importing import (
     UNITS,
@@ -335,11 +335,6 @@ def read_c3d(path: str | Path) -> C3dMarkers:
 
 
 # --- gaps --------------------------------------------------------------------------------------
-
-def frames_of(seconds: float, rate: float) -> int:
-    """The number of frames (at least 1) spanning ``seconds`` at ``rate`` Hz."""
-    return max(1, round(seconds * rate))
-
 
 def fill_gaps(positions: F64, valid: BOOL, max_gap: int) -> tuple[F64, BOOL]:
     """Interpolate invalid samples of each marker linearly (held at the clip's ends).

@@ -98,9 +98,15 @@ def _box_filter(x: F64, width: int) -> F64:
     return mean
 
 
+def frames_of(seconds: float, fps: float) -> int:
+    """The number of frames (at least 1) spanning ``seconds`` at ``fps`` Hz (Python's rounding:
+    a half frame rounds to even, 0.05 s at 50 Hz is 2 frames)."""
+    return max(1, round(seconds * fps))
+
+
 def _width(seconds: float, fps: float) -> int:
     """An odd number of frames spanning about ``seconds``."""
-    return max(1, round(seconds * fps) | 1)
+    return frames_of(seconds, fps) | 1
 
 
 def horizontal_speed(points: F64, fps: float, filter_s: float = 0.05) -> F64:
@@ -134,7 +140,7 @@ def local_ground(points: F64, fps: float, window_s: float, radius_m: float,
     (n_frames, K) heights. The loop runs over the window's frame offsets and the points, never
     over frames."""
     n, k = points.shape[:2]
-    reach = max(1, round(window_s * fps))
+    reach = frames_of(window_s, fps)
     ground = np.where(still, points[..., 2], np.inf)
     z_still = np.where(still, points[..., 2], np.inf)
     step = max(1, reach // 120)  # at most ~240 offsets, whatever the rate
@@ -172,8 +178,8 @@ def _clean(flags: NDArray[np.bool_], fps: float, th: ContactThresholds) -> NDArr
     contact or gap at the clip's first or last frame is kept whatever its length: the clip
     cuts it, so how long it lasts is not known (a clip starting late in a stance keeps it)."""
     flags = flags.copy()
-    min_len = max(1, round(th.min_duration_s * fps))
-    min_gap = max(1, round(th.min_gap_s * fps))
+    min_len = frames_of(th.min_duration_s, fps)
+    min_gap = frames_of(th.min_gap_s, fps)
     for side in range(flags.shape[1]):
         col = flags[:, side]
         for a, b in _intervals(~col):

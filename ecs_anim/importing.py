@@ -268,8 +268,9 @@ def unit_scale(unit: str) -> float:
 def detect_up(skeleton: BvhSkeleton, jmap: JointMap, pos_file: F64) -> tuple[str, str]:
     """The file's up axis, ``"y"`` or ``"z"``, with a sentence saying why: the axis along which
     the head stands above the feet, in the rest pose (the spine from pelvis to neck) and over
-    the clip's frames (the head above the lower ankle), each as a fraction of its length; when
-    the two disagree, the frames if they show it clearly.
+    the clip's frames (the head above the lower ankle), each as a fraction of its length,
+    summed per axis; when the sums are within 0.2 of each other (the rest pose and the frames
+    disagree), the frames if they show it along one axis only (median over 0.5).
 
     ``pos_file`` (n_frames, n_joints, 3): joint positions in file axes. A tie or no axis showing
     the head above the feet keeps the BVH convention, Y up, and says so.
@@ -296,9 +297,10 @@ def detect_up(skeleton: BvhSkeleton, jmap: JointMap, pos_file: F64) -> tuple[str
                          "above the feet; give --up if wrong")
         up = clear[0]
         rest_up = next(a for a in rise if a != up)
-        return up, (f"detected: the head is above the feet along +{up.upper()} in "
-                    f"{rise[up][2]:.0%} of frames, which decide over the rest pose's spine "
-                    f"pointing {rise[rest_up][0]:+.2f} along {rest_up.upper()}")
+        if abs(rise[rest_up][0]) > 0.5:
+            return up, (f"detected: the head is above the feet along +{up.upper()} in "
+                        f"{rise[up][2]:.0%} of frames, which decide over the rest pose's spine "
+                        f"pointing {rise[rest_up][0]:+.2f} along {rest_up.upper()}")
     spine_k, _, share = rise[up]
     rest_text = (f"the rest pose's spine points {spine_k:+.2f} along {up.upper()}"
                  if abs(spine_k) > 0.5 else "the rest pose shows no stance")

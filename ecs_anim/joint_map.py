@@ -259,7 +259,8 @@ def detect_preset(skeleton: BvhSkeleton) -> Preset | None:
 # --- structural matching ---------------------------------------------------------------------
 
 def _side_of(name: str) -> str | None:
-    """The side a joint's name suggests (``LeftHand``, ``hand_l``, ``lShin``), for hints only."""
+    """The side a joint's name suggests (``LeftHand``, ``hand_l``, ``lShin``): for hints, and
+    for left and right where no pose shows which way the body faces (:func:`_named_leftness`)."""
     raw = re.split(r"[:|]", name)[-1]
     low = raw.lower()
     if "left" in low or re.search(r"(^|[_\s.\-])l($|[_\s.\-])", low) or re.match(r"^l[A-Z_]", raw):
