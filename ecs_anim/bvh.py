@@ -183,7 +183,7 @@ def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
     if tokens[0].upper() != "ROOT" or len(tokens) < 2:
         raise InputError(path, "expected 'ROOT <name>'", line)
     _parse_joint(reader, joints, " ".join(tokens[1:]), -1, line, is_end=False)
-    _reject_duplicate_names(joints, path)
+    warnings = _rename_duplicate_names(joints, path)
 
     tokens, line = reader.next_tokens("MOTION")
     if tokens[0].upper() != "MOTION":
@@ -220,7 +220,6 @@ def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
         last = rows[-1][0] if rows else first_data_row
         raise InputError(path, f"file ends after {len(rows)} of {n_frames} frames "
                                "(truncated? 'Frames:' promises more)", last)
-    warnings: list[str] = []
     if len(rows) == n_frames + 1:
         # Some writers count the frames after a first (rest) frame line; Blender and bvhio read
         # every line. More than one extra line is no such off-by-one: refused below.
@@ -260,17 +259,26 @@ def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:
     return BvhMotion(skeleton, values, frame_time, warnings)
 
 
-def _reject_duplicate_names(joints: list[BvhJoint], path: str) -> None:
-    """Raise :class:`InputError` at the second joint of a name already used: the joint map finds
-    bones by name, so two joints of one name would silently map the wrong one."""
+def _rename_duplicate_names(joints: list[BvhJoint], path: str) -> list[str]:
+    """Rename each joint whose name an earlier joint has (``Spine`` -> ``Spine#2``), in place,
+    and return one warning per rename: the joint map finds bones by name, and must not take
+    the second for the first silently (rigs with extra bones do repeat names; the file is
+    still read)."""
     first_line: dict[str, int] = {}
+    count: dict[str, int] = {}
+    warnings = []
     for joint in joints:
-        if joint.is_end_site:
+        if joint.is_end_site:  # named after its joint (parents come first: already renamed)
+            joint.name = f"{joints[joint.parent].name}.end"
             continue
         if joint.name in first_line:
-            raise InputError(path, f"joint name {quoted(joint.name)} is used twice (first at line "
-                                   f"{first_line[joint.name]}); joint names must be unique", joint.line)
-        first_line[joint.name] = joint.line
+            count[joint.name] = count.get(joint.name, 1) + 1
+            renamed = f"{joint.name}#{count[joint.name]}"
+            warnings.append(f"{path}:{joint.line}: joint name {quoted(joint.name)} is used again "
+                            f"(first at line {first_line[joint.name]}); read as {quoted(renamed)}")
+            joint.name = renamed
+        first_line.setdefault(joint.name, joint.line)
+    return warnings
 
 
 def _reject_unplain_frame(rows: list[tuple[int, str]], split_rows: list[list[str]],
