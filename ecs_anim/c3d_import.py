@@ -283,6 +283,9 @@ def read_c3d(path: str | Path) -> C3dMarkers:
             reader = c3d.Reader(f)
             n_points = int(reader.point_used)
             rate = float(reader.point_rate)
+            if float(reader.point_scale) == 0.0:  # every sample would read 0: all "no sample"
+                raise InputError(path, "POINT:SCALE is 0 (a damaged header): the samples cannot "
+                                       "be scaled to lengths")
             expected = int(reader.last_frame) - int(reader.first_frame) + 1
             first = int(reader.first_frame)
             labels = _point_texts(reader, "LABELS")
@@ -302,7 +305,9 @@ def read_c3d(path: str | Path) -> C3dMarkers:
         except InputError:
             raise
         except Exception as exc:  # the reader raises struct, value, index errors on bad bytes
-            reason = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+            # The reader's own checks (AssertionError) say what is inconsistent in plain words.
+            reason = str(exc) if isinstance(exc, AssertionError) and str(exc) else \
+                f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
             raise InputError(path, "not a readable C3D file (damaged or truncated?): "
                                    f"{quoted(reason, 100)}") from None
     if n_points <= 0:

@@ -128,3 +128,23 @@ def test_the_dev_c3d_files_end_within_a_block_of_their_frames():
     require_mocap()
     for path in sorted([*MOCAP_DIR.glob("*.c3d"), *MOCAP_DIR.glob("varied/*.c3d")]):
         read_c3d(path)
+
+
+@pytest.mark.parametrize(("parameter", "header_at", "value", "message"), [
+    # Before: every marker read as "no sample", and the pelvis "lacks LASI (no sample)".
+    ("SCALE", 12, 0.0, "POINT:SCALE is 0 (a damaged header): the samples cannot be scaled to "
+                       "lengths"),
+    # Before: the same words behind "AssertionError: ".
+    ("RATE", 20, -50.0, "not a readable C3D file (damaged or truncated?): 'inconsistent analog "
+                        "rate! 10 header != 1000.0 analog-fps / -50.0 point-fps'"),
+])
+def test_a_damaged_scale_or_rate_is_named(tmp_path, parameter, header_at, value, message):
+    require_mocap()
+    data = bytearray(PIG.read_bytes())
+    struct.pack_into("<f", data, _parameter_offset(bytes(data), "POINT", parameter), value)
+    struct.pack_into("<f", data, header_at, value)  # the header's copy
+    path = tmp_path / f"{parameter.lower()}.c3d"
+    path.write_bytes(bytes(data))
+    with pytest.raises(InputError) as exc:
+        import_c3d(path)
+    assert str(exc.value) == f"{path}: {message}"
