@@ -565,8 +565,16 @@ def _detect_up(mk: _Markers, present: list[str], mmap: MarkerMap) -> str:
     median over frames of the markers' spread), pointing from the legs to the pelvis (or from
     the pelvis to the trunk, the trunk to the head, or the sternum's and spine's lower markers
     (PX, T10) to their upper ones (IJ, C7), when those are what is marked)."""
-    body = mk.points[:, sorted(set(mk.found.values()))]  # not other objects' markers
-    spread = np.median(body.max(axis=1) - body.min(axis=1), axis=0)
+    used = sorted(set(mk.found.values()))  # not other objects' markers
+    # Measured samples only: a marker held over a long gap (seen in one frame, say) stays where
+    # it was while the body walks on, and would stretch the spread along the walk.
+    body = np.where(mk.unreliable[:, used, None], np.nan, mk.points[:, used])
+    seen = np.sum(~mk.unreliable[:, used], axis=1) >= 2
+    if not seen.any():
+        body, seen = mk.points[:, used], np.ones(len(body), dtype=bool)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns of a frame
+        spread = np.median(np.nanmax(body[seen], axis=1) - np.nanmin(body[seen], axis=1), axis=0)
     axis = int(np.argmax(spread))
     groups = mmap.preset.groups
 

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_c3d import write_c3d
 
 from conftest import MOCAP_DIR, require_mocap
 from ecs_anim.c3d_import import import_c3d, read_c3d
@@ -148,3 +149,22 @@ def test_a_damaged_scale_or_rate_is_named(tmp_path, parameter, header_at, value,
     with pytest.raises(InputError) as exc:
         import_c3d(path)
     assert str(exc.value) == f"{path}: {message}"
+
+
+def test_a_marker_seen_in_one_frame_does_not_turn_the_up_axis(tmp_path):
+    """c3d.org's cluster-set walk with its first foot-cluster marker seen in one frame only:
+    held there while the body walks on, it stretched the markers' spread along the walk, and
+    the file was read Y up (the body on its side). Only measured samples give the spread."""
+    require_mocap()
+    raw = read_c3d(MOCAP_DIR / "c3dorg_eb015pi_gait.c3d")
+    valid = raw.valid.copy()
+    seen_once = raw.labels.index(next(lab for lab in raw.labels if lab.upper().endswith("FT1")))
+    valid[:, seen_once] = False
+    valid[50, seen_once] = True  # 1 s in (50 Hz)
+    positions = np.where(raw.valid[..., None], raw.positions, 0.0)
+    path = write_c3d(tmp_path / "seen_once.c3d", raw.labels, positions, valid, raw.rate, raw.units)
+    motion = import_c3d(path)
+    assert motion.info["up_axis"] == "z"
+    original = import_c3d(write_c3d(tmp_path / "original.c3d", raw.labels, positions, raw.valid,
+                                    raw.rate, raw.units))
+    assert abs(motion.source_morphology.stature - original.source_morphology.stature) < 0.05
