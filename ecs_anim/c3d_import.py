@@ -1469,11 +1469,14 @@ def _functional_lower_body(mk: _Markers, present: list[str], build: _Build) -> N
         up_local = normalize(np.einsum("fji,j->i", foot_rot[stance], np.array([0.0, 0.0, 1.0])))
         fwd_local = np.einsum("fji,fj->i", foot_rot[stance], forward_h[stance])
         fwd_local = normalize(fwd_local - (fwd_local @ up_local) * up_local)
-        height = ankle_height_or_typical(float(np.median(ankle[stance, 2])), leg)
+        stance_height = float(np.median(ankle[stance, 2]))
+        height = ankle_height_or_typical(stance_height, leg)
         drop = math.asin(float(np.clip(height / foot_len, 0.0, 0.85)))
         toe_local = foot_len * (math.cos(drop) * fwd_local - math.sin(drop) * up_local)
+        level = "on the floor at stance" if height == stance_height else \
+            f"an adult's ankle height ({height * 1000:.0f} mm) below the ankle at stance (the floor is not at z = 0)"
         _set(build, f"toe_{s}", ankle + foot_rot @ toe_local,
-             f"a foot length ({foot_len * 1000:.0f} mm) forward of the ankle, on the floor at stance")
+             f"a foot length ({foot_len * 1000:.0f} mm) forward of the ankle, {level}")
         build.measured[J[f"toe_{s}"]] = False
 
 
