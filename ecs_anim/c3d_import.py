@@ -305,9 +305,9 @@ def read_c3d(path: str | Path) -> C3dMarkers:
         except InputError:
             raise
         except Exception as exc:  # the reader raises struct, value, index errors on bad bytes
-            # The reader's own checks (AssertionError) say what is inconsistent in plain words.
-            reason = str(exc) if isinstance(exc, AssertionError) and str(exc) else \
-                f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+            reason = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+            if isinstance(exc, AssertionError) and str(exc):
+                reason = str(exc)  # the reader's own consistency checks, in plain words
             raise InputError(path, "not a readable C3D file (damaged or truncated?): "
                                    f"{quoted(reason, 100)}") from None
     if n_points <= 0:
