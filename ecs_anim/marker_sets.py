@@ -30,6 +30,10 @@ Presets:
   ``LTBA``, ``LFTA``): no landmarks, so joint centres are found functionally (see
   :mod:`ecs_anim.c3d_import`); optional greater-trochanter markers (``LGT``) fix a hip's axis.
 
+The landmark presets also read other conventions' spellings of their markers (the Vicon
+41-marker set of the CMU captures, MoSh/AMASS, KIT, IOR, the Oxford foot model, RRIS40,
+Cortex and OpenSim's example sets), each table saying whose.
+
 Body parts (groups): ``pelvis``, ``leg_l``, ``leg_r``, ``trunk``, ``head``, ``arm_l``, ``arm_r``.
 A group whose markers are all missing is *absent* (filled with a neutral pose, recorded in the
 file); so is a group with only some of its markers, with one message (under 300 characters)
@@ -126,18 +130,34 @@ def _groups_sided(table: dict[str, tuple[tuple[str, ...], tuple[tuple[str, ...],
     return out
 
 
+# Besides Plug-in Gait's own labels, the Vicon-family spellings of the same markers: the older
+# Vicon 41-marker set of the CMU and HDM05 captures (FWT/BWT front and back waist at the
+# iliac spines, SHN shin for TIB; CMU mocap data definition), MoSh/AMASS (nghorbani/moshpp
+# marker layout: KNI inner knee, ELBIN/IEL inner elbow, IWR/OWR the thumb- and pinkie-side
+# wrist markers, HEL heel) and KIT's whole-body set (motion-database.humanoids.kit.edu:
+# AEL lateral epicondyle, WTS/WPS radial and ulnar styloids); MT1/MT5 metatarsal heads as
+# CMU's and MoSh's sets add them.
 _PIG_ROLES = _sided({
-    "ASIS_{s}": ("{S}ASI",), "PSIS_{s}": ("{S}PSI",), "SACRUM": ("SACR", "SACRUM"),
-    "THIGH_{s}": ("{S}THI",), "KNEE_LAT_{s}": ("{S}KNE",), "KNEE_MED_{s}": ("{S}KNM", "{S}MKNE"),
-    "SHANK_{s}": ("{S}TIB",), "ANKLE_LAT_{s}": ("{S}ANK",), "ANKLE_MED_{s}": ("{S}MMA", "{S}MED"),
-    "HEEL_{s}": ("{S}HEE",), "TOE_{s}": ("{S}TOE",),
+    "ASIS_{s}": ("{S}ASI", "{S}FWT"), "PSIS_{s}": ("{S}PSI", "{S}BWT"), "SACRUM": ("SACR", "SACRUM"),
+    "THIGH_{s}": ("{S}THI",), "KNEE_LAT_{s}": ("{S}KNE",),
+    "KNEE_MED_{s}": ("{S}KNM", "{S}MKNE", "{S}KNI"),
+    "SHANK_{s}": ("{S}TIB", "{S}SHN"), "ANKLE_LAT_{s}": ("{S}ANK",), "ANKLE_MED_{s}": ("{S}MMA", "{S}MED"),
+    "HEEL_{s}": ("{S}HEE", "{S}HEL"), "TOE_{s}": ("{S}TOE",),
+    "MT1_{s}": ("{S}MT1",), "MT5_{s}": ("{S}MT5",),
     "C7": ("C7",), "T10": ("T10",), "IJ": ("CLAV",), "PX": ("STRN",),
-    "ACROMION_{s}": ("{S}SHO",), "ELBOW_LAT_{s}": ("{S}ELB",), "ELBOW_MED_{s}": ("{S}MEL",),
-    "UPPER_ARM_{s}": ("{S}UPA",), "WRIST_RAD_{s}": ("{S}WRA",), "WRIST_ULN_{s}": ("{S}WRB",),
+    "ACROMION_{s}": ("{S}SHO",), "ELBOW_LAT_{s}": ("{S}ELB", "{S}AEL"),
+    "ELBOW_MED_{s}": ("{S}MEL", "{S}ELBIN", "{S}IEL"),
+    "UPPER_ARM_{s}": ("{S}UPA",), "WRIST_RAD_{s}": ("{S}WRA", "{S}IWR", "{S}WTS"),
+    "WRIST_ULN_{s}": ("{S}WRB", "{S}OWR", "{S}WPS"),
     "WRIST_{s}": ("{S}WRI", "{S}WRS"), "HAND_{s}": ("{S}FIN",),
     "HEAD_FRONT_{s}": ("{S}FHD",), "HEAD_BACK_{s}": ("{S}BHD",),
 })
 
+# ISB / Van Sint Jan names (IAS, FLE, FAL, FCC, FM1, CAJ, SJN, SXS) with the IOR gait
+# protocol's short forms (Leardini et al. 2007, as Visual3D's IOR models list them: CA
+# calcaneus, FM/SM/VM first, second and fifth metatarsal heads), the IOR foot model's and
+# pyCGM2's FMH/SMH/VMH, the Oxford foot model's D1M/D5M (distal first and fifth metatarsal),
+# RRIS40's STER/XPRO/FMT1/HMC2, OpenSim's (Rajagopal; AddBiomechanics' XYPH, LEE/MEE elbows).
 _ISB_ROLES = _sided({
     "ASIS_{s}": ("*ASIS", "*ASI", "*IAS"), "PSIS_{s}": ("*PSIS", "*PSI", "*IPS"),
     "SACRUM": ("SACR", "SACRUM", "S1"),
@@ -145,20 +165,22 @@ _ISB_ROLES = _sided({
     "KNEE_MED_{s}": ("*FME", "*ME", "*MFE", "*MEPI", "*MFC", "*KNEM", "*KNM"),
     "ANKLE_LAT_{s}": ("*FAL", "*LM", "*LMAL", "*LMA", "*ANKL", "*ANK"),
     "ANKLE_MED_{s}": ("*TAM", "*MM", "*MMAL", "*MMA", "*ANKM"),
-    "HEEL_{s}": ("*FCC", "*CAL", "*HEE", "*HEEL"),
-    "MT1_{s}": ("*FM1", "*MT1", "*MH1", "*MET1", "*M1"),
-    "MT5_{s}": ("*FM5", "*MT5", "*MH5", "*MET5", "*M5"),
-    "TOE_{s}": ("*FM2", "*MT2", "*MH2", "*TOE"),
-    "C7": ("C7", "CV7"), "T10": ("T8", "TV8", "T10", "TV10"), "IJ": ("IJ", "SJN", "CLAV"),
-    "PX": ("PX", "SXS", "STRN", "XP"),
-    "ACROMION_{s}": ("*AC", "*ACR", "*ACRO", "*CAJ", "*SAE", "*SHO"),
+    "HEEL_{s}": ("*FCC", "*CAL", "*HEE", "*HEEL", "*CA"),
+    "MT1_{s}": ("*FM1", "*MT1", "*MH1", "*MET1", "*M1", "*FM", "*FMH", "*FMT1", "*D1M"),
+    "MT5_{s}": ("*FM5", "*MT5", "*MH5", "*MET5", "*M5", "*VM", "*VMH", "*FMT5", "*D5M"),
+    "TOE_{s}": ("*FM2", "*MT2", "*MH2", "*TOE", "*SM", "*SMH"),
+    "C7": ("C7", "CV7"), "T10": ("T8", "TV8", "T10", "TV10"),
+    "IJ": ("IJ", "SJN", "SNJ", "STER", "CLAV"), "PX": ("PX", "SXS", "STRN", "XP", "XPRO", "XYPH"),
+    "ACROMION_{s}": ("*AC", "*ACR", "*ACRO", "*CAJ", "*SAE", "*SAJ", "*SHO", "*ACROMION",
+                     "*ACROMIUM"),
     # Vicon upper-limb spellings ELL/ELM (lateral/medial); Rehazenter/Qualisys UHE (ulnar head).
-    "ELBOW_LAT_{s}": ("*HLE", "*EL", "*LEL", "*LHE", "*ELB", "*ELL"),
-    "ELBOW_MED_{s}": ("*HME", "*EM", "*MEL", "*MHE", "*ELM"),
-    "WRIST_RAD_{s}": ("*RSP", "*RS", "*RST", "*WRA"),
-    "WRIST_ULN_{s}": ("*USP", "*US", "*UST", "*WRB", "*UHE"),
+    "ELBOW_LAT_{s}": ("*HLE", "*EL", "*LEL", "*LHE", "*ELB", "*ELL", "*LEE"),
+    "ELBOW_MED_{s}": ("*HME", "*EM", "*MEL", "*MHE", "*ELM", "*MEE"),
+    # OpenSim's Rajagopal set marks the distal forearm on the radius and the ulna (FAradius).
+    "WRIST_RAD_{s}": ("*RSP", "*RS", "*RST", "*WRA", "*FARADIUS", "*RADIUSSTYLOID"),
+    "WRIST_ULN_{s}": ("*USP", "*US", "*UST", "*WRB", "*UHE", "*FAULNA", "*ULNASTYLOID"),
     "WRIST_{s}": ("*WRI", "*WRIST"),
-    "MC2_{s}": ("*HM2", "*MC2", "*MCP2"), "MC5_{s}": ("*HM5", "*MC5", "*MCP5"),
+    "MC2_{s}": ("*HM2", "*MC2", "*MCP2", "*HMC2"), "MC5_{s}": ("*HM5", "*MC5", "*MCP5", "*HMC5"),
     # Roles that refine an arm (``_LANDMARK_REFINING``), as the other landmark sets have them:
     # an upper-arm marker and the third metacarpal head (the hand end, as Plug-in Gait's FIN).
     "UPPER_ARM_{s}": ("*UPA",), "HAND_{s}": ("*HM3", "*MC3", "*FIN"),
@@ -171,22 +193,28 @@ _ISB_ROLES = _sided({
 # shank wand, "r mall", "r met" 5th metatarsal head) and Codamotion gait wands (R.ASIS,
 # R.Ant.Fem. = anterior marker of the lateral thigh wand, R.Knee, R.Ankle, R.Toe) spell them.
 # Order matters: "r knee 1" (marker) comes before "r knee" (a lab's computed centre in BTS).
-# Cortex's POINT:DESCRIPTIONS spell the markers out (V.Sacral, R.Knee.Medial, R.Ankle.Medial).
+# Cortex's POINT:DESCRIPTIONS spell the markers out (V.Sacral, R.Knee.Medial, R.Ankle.Medial);
+# Cortex exports (BMClab's walk) also mark R.MT1, R.MT2 and R.MT5, and OpenSim's example sets
+# (opensim-models: gait2392, Hamner) R.Knee.Lat, R.Ankle.Med, R.Toe.Tip, R.Acromium, R.Bicep.
 # Medial epicondyle and malleolus as Plug-in Gait spells them; Cortex writes RKNE / RANK for
 # the medial markers too (``c3d_import.split_same_label``: the medial one is nearer the other leg).
 _HH_ROLES = _sided({
     "ASIS_{s}": ("{S}ASI", "*ASIS"), "PSIS_{s}": ("{S}PSI", "*PSIS"),
     "SACRUM": ("SACR", "SACRUM", "VSAC", "VSACRAL"),
     "THIGH_{s}": ("{S}THI", "*BAR1", "*WAND1", "*ANTFEM", "*THIGH"),
-    "KNEE_LAT_{s}": ("{S}KNE", "*KNEE1", "*KNEE"),
-    "KNEE_MED_{s}": ("{S}KNM", "{S}MKNE", "*KNEEMEDIAL"),
+    "KNEE_LAT_{s}": ("{S}KNE", "*KNEE1", "*KNEE", "*KNEELAT"),
+    "KNEE_MED_{s}": ("{S}KNM", "{S}MKNE", "*KNEEMEDIAL", "*KNEEMED"),
     "SHANK_{s}": ("{S}TIB", "{S}SHA", "*BAR2", "*WAND2", "*ANTTIB", "*SHANK"),
-    "ANKLE_LAT_{s}": ("{S}ANK", "*MALL", "*ANKLE"),
-    "ANKLE_MED_{s}": ("{S}MMA", "{S}MED", "*ANKLEMEDIAL"),
-    "HEEL_{s}": ("{S}HEE", "*HEEL"), "TOE_{s}": ("{S}TOE", "*TO", "*MET", "*TOE"),
+    "ANKLE_LAT_{s}": ("{S}ANK", "*MALL", "*ANKLE", "*ANKLELAT"),
+    "ANKLE_MED_{s}": ("{S}MMA", "{S}MED", "*ANKLEMEDIAL", "*ANKLEMED"),
+    "HEEL_{s}": ("{S}HEE", "*HEEL"), "TOE_{s}": ("{S}TOE", "*TO", "*MET", "*TOE", "*MT2", "*TOETIP"),
+    "MT1_{s}": ("*MT1",), "MT5_{s}": ("*MT5",),
     "C7": ("C7",), "T10": ("T10",), "IJ": ("CLAV",), "PX": ("STRN",),
-    "ACROMION_{s}": ("{S}SHO", "*SHOULDER", "*SHOULD"), "ELBOW_LAT_{s}": ("{S}ELB", "*ELBOW"),
-    "WRIST_{s}": ("{S}WRI", "*WRIST"),
+    "ACROMION_{s}": ("{S}SHO", "*SHOULDER", "*SHOULD", "*ACROMION", "*ACROMIUM"),
+    "ELBOW_LAT_{s}": ("{S}ELB", "*ELBOW"), "UPPER_ARM_{s}": ("*BICEP",),
+    # OpenSim's gait2392 and Hamner sets: wrist markers lateral (radial) and medial (ulnar).
+    "WRIST_RAD_{s}": ("*WRISTLAT",), "WRIST_ULN_{s}": ("*WRISTMED",),
+    "WRIST_{s}": ("{S}WRI", "*WRIST"), "HAND_{s}": ("{S}FIN",),
     "HEAD_FRONT_{s}": ("{S}FHD",), "HEAD_BACK_{s}": ("{S}BHD",),
 })
 

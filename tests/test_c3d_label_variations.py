@@ -19,12 +19,15 @@ from conftest import MOCAP_DIR
 from ecs_anim.c3d_import import canonical_clip_c3d, import_c3d, read_c3d
 from ecs_anim.errors import InputError
 from ecs_anim.importing import CanonicalClip
+from ecs_anim.marker_sets import match_markers
 
 VARIED = MOCAP_DIR / "varied"
 CLUSTERS = MOCAP_DIR / "c3dorg_eb015pi_gait.c3d"
 VICON = VARIED / "vicon_pig_noclav_prefix_events_60hz.c3d"  # Matt: prefix, 24 empty points
 QUALISYS = VARIED / "qualisys_pig_yup_events_100hz.c3d"  # full-body Plug-in Gait, Y up
 CORTEX = VARIED / "mac_helenhayes_events_vjc_60hz.c3d"  # labels and spelled-out descriptions
+REHAZENTER = VARIED / "rehazenter_isb_events_100hz.c3d"  # ISB / Van Sint Jan names, L_ prefixed
+CODAMOTION = VARIED / "codamotion_dotted_gait_2015_200hz.c3d"  # L.ASIS, L.Knee, L.Toe
 BOUND_M = 1e-4
 BLOCK = 512
 
@@ -238,3 +241,52 @@ def test_generic_labels_are_read_from_the_descriptions(tmp_path):
     labels = _labels(CORTEX)
     clip, _ = _same_joints(CORTEX, tmp_path, {"LABELS": [f"M{i:03d}" for i in range(len(labels))]})
     assert "from POINT:DESCRIPTIONS" in clip.joint_map.how
+
+
+def _both_sides(**names: str) -> dict[str, str]:
+    """``L``-side renames (old=new, ``{S}`` for the side letter) for both sides."""
+    return {old.format(S=s): new.format(S=s) for old, new in names.items() for s in "LR"}
+
+
+#: Other conventions' spellings of the markers of a dev file (marker_sets.py names each one's
+#: source): file, {old label: new label}. The roles must come out on the renamed markers.
+CONVENTIONS: dict[str, tuple[Path, dict[str, str]]] = {
+    # CMU's and HDM05's Vicon 41-marker set: front/back waist, shin, back offset marker.
+    "cmu_vicon41": (QUALISYS, _both_sides(**{"{S}ASI": "{S}FWT", "{S}PSI": "{S}BWT",
+                                            "{S}TIB": "{S}SHN"}) | {"RBAK": "RBAC"}),
+    # MoSh/AMASS: thumb- and pinkie-side wrist markers inner and outer, heel HEL.
+    "mosh_amass": (QUALISYS, _both_sides(**{"{S}WRA": "{S}IWR", "{S}WRB": "{S}OWR",
+                                           "{S}HEE": "{S}HEL"})),
+    # KIT whole-body: lateral epicondyle, wrist thumb and pinkie sides.
+    "kit": (QUALISYS, _both_sides(**{"{S}ELB": "{S}AEL", "{S}WRA": "{S}WTS", "{S}WRB": "{S}WPS"})),
+    # OpenSim's dotted example sets (gait2392, Hamner) on a full-body Plug-in Gait file.
+    "opensim_upper": (QUALISYS, _both_sides(**{"{S}SHO": "{S}.Acromium", "{S}UPA": "{S}.Bicep",
+                                              "{S}ELB": "{S}.Elbow", "{S}WRA": "{S}.Wrist.Lat",
+                                              "{S}WRB": "{S}.Wrist.Med", "{S}TOE": "{S}.Toe.Tip"})),
+    "opensim_lower": (CODAMOTION, _both_sides(**{"{S}.Knee": "{S}.Knee.Lat",
+                                                "{S}.Ankle": "{S}.Ankle.Lat",
+                                                "{S}.Toe": "{S}.Toe.Tip"})),
+    # Cortex's metatarsal markers in place of the toe marker.
+    "cortex_mt2": (CODAMOTION, _both_sides(**{"{S}.Toe": "{S}.MT2"})),
+    # IOR gait protocol short forms, the issue's SNJ and SAJ.
+    "ior": (REHAZENTER, _both_sides(**{"{S}_FCC": "{S}CA", "{S}_FM1": "{S}FM", "{S}_FM2": "{S}SM",
+                                      "{S}_FM5": "{S}VM", "{S}_SAE": "{S}_SAJ"}) | {"SJN": "SNJ"}),
+    # Oxford foot model's distal metatarsals; RRIS40's sternum and hand.
+    "oxford_foot": (REHAZENTER, _both_sides(**{"{S}_FM1": "{S}D1M", "{S}_FM5": "{S}D5M"})),
+    "rris40": (REHAZENTER, _both_sides(**{"{S}_FM1": "{S}FMT1", "{S}_FM5": "{S}FMT5",
+                                         "{S}_HM2": "{S}HMC2", "{S}_HM5": "{S}HMC5"})
+               | {"SJN": "STER", "SXS": "XPRO"}),
+}
+
+
+@pytest.mark.parametrize("convention", sorted(CONVENTIONS))
+def test_another_conventions_spellings_give_the_same_joints_from_the_same_markers(convention, tmp_path):
+    src, names = CONVENTIONS[convention]
+    original = _labels(src)
+    assert set(names) <= set(original), set(names) - set(original)
+    renamed = _renamed(original, **names)
+    _same_joints(src, tmp_path, {"LABELS": renamed})
+    before = match_markers(original).marker
+    after = match_markers(renamed).marker
+    moved = {role: renamed[i] for role, i in before.items() if original[i] in names}
+    assert moved and {role: renamed[after[role]] for role in moved if role in after} == moved
