@@ -25,6 +25,9 @@ Presets:
   malleoli (FAL/TAM, LM/MM), metatarsal heads (FM1/FM5, MT1/MT5), calcaneus, acromion (AC),
   humeral epicondyles (HLE/HME, EL/EM; Vicon upper limb ELL/ELM), styloids (RSP/USP, RS/US;
   ulnar head UHE as the Rehazenter/Qualisys set writes it), IJ (SJN), PX (SXS), C7 (CV7), T8.
+* ``animation`` — OptiTrack Motive (Baseline) and Qualisys (Animation) sets, markers near the
+  landmarks rather than on them (``WaistLFront``, ``LKneeOut``, ``LToeOut``, ``BackTop``,
+  ``LWristOut``): centres approximate, head absent.
 * ``cluster_gait`` — technical marker clusters (c3d.org sample ``Eb015pi``: ``PV1-4`` pelvis,
   ``RTH1-4`` thigh, ``RSK1-4`` shank, ``RFT1-3`` foot; Vicon's lettered ``PELA``, ``LFMA``,
   ``LTBA``, ``LFTA``): no landmarks, so joint centres are found functionally (see
@@ -218,6 +221,28 @@ _HH_ROLES = _sided({
     "HEAD_FRONT_{s}": ("{S}FHD",), "HEAD_BACK_{s}": ("{S}BHD",),
 })
 
+# Animation marker sets, whose markers sit near the landmarks rather than on them: OptiTrack
+# Motive's Baseline set (docs.optitrack.com: WaistLFront on the anterior iliac spine,
+# WaistLBack "about 10 cm above the hip joint", BackTop below the neck, Chest mid-sternum,
+# WristOut on the distal radius, WristIn on the distal ulna, ToeIn/ToeOut) and Qualisys'
+# Animation set (QTM's skeleton solver: HeadL, SpineTop, LKneeOut, LAnkleOut, LHeelBack,
+# LForefootIn/Out, LToeTip; its sports variant LKneeIn, LAnkleIn, LElbowIn, LForefoot1/2/5).
+# The toe tip marks no joint: the toe comes from the forefoot markers. No head role: these
+# sets mark the head's top, front and sides, not the four head markers the head needs.
+_ANIMATION_ROLES = _sided({
+    "ASIS_{s}": ("WAIST{S}FRONT",), "PSIS_{s}": ("WAIST{S}BACK",), "SACRUM": ("WAISTBACK",),
+    "THIGH_{s}": ("{S}THIGH",), "KNEE_LAT_{s}": ("{S}KNEEOUT",), "KNEE_MED_{s}": ("{S}KNEEIN",),
+    "SHANK_{s}": ("{S}SHIN", "{S}SHINSIDE"), "ANKLE_LAT_{s}": ("{S}ANKLEOUT",),
+    "ANKLE_MED_{s}": ("{S}ANKLEIN",), "HEEL_{s}": ("{S}HEELBACK", "{S}HEEL"),
+    "TOE_{s}": ("{S}FOREFOOT2",), "MT1_{s}": ("{S}FOREFOOTIN", "{S}FOREFOOT1", "{S}TOEIN"),
+    "MT5_{s}": ("{S}FOREFOOTOUT", "{S}FOREFOOT5", "{S}TOEOUT"),
+    "C7": ("BACKTOP", "SPINETOP"), "IJ": ("CHEST",), "PX": ("CHESTLOW",),
+    "ACROMION_{s}": ("{S}SHOULDERTOP",), "UPPER_ARM_{s}": ("{S}UARMHIGH",),
+    "ELBOW_LAT_{s}": ("{S}ELBOWOUT",), "ELBOW_MED_{s}": ("{S}ELBOWIN",),
+    "WRIST_RAD_{s}": ("{S}WRISTOUT",), "WRIST_ULN_{s}": ("{S}WRISTIN",),
+    "MC2_{s}": ("{S}HANDIN", "{S}HAND2"), "MC5_{s}": ("{S}HANDOUT",),
+})
+
 # Numbered (c3d.org Eb015pi: PV1-4, RTH1-4, RSK1-4, RFT1-3) or lettered as Vicon's cluster
 # model writes them (Vicon sample data 2018: PELA-PELD, LFMA-LFMD femur, LTBA-LTBD tibia,
 # LFTA-LFTD foot; the first three foot markers are used).
@@ -234,7 +259,8 @@ _LANDMARK_GROUPS = _groups_sided({
     "pelvis": (("ASIS_l", "ASIS_r"), (("PSIS_l", "PSIS_r"), ("SACRUM",))),
     "leg_{s}": (("KNEE_LAT_{s}", "ANKLE_LAT_{s}"),
                 (("THIGH_{s}", "SHANK_{s}", "TOE_{s}"), ("KNEE_MED_{s}", "ANKLE_MED_{s}", "TOE_{s}"),
-                 ("KNEE_MED_{s}", "ANKLE_MED_{s}", "MT1_{s}", "MT5_{s}"))),
+                 ("KNEE_MED_{s}", "ANKLE_MED_{s}", "MT1_{s}", "MT5_{s}"),
+                 ("THIGH_{s}", "SHANK_{s}", "MT1_{s}", "MT5_{s}"))),
     "trunk": (("C7", "IJ"), ()),
     "head": (("HEAD_FRONT_l", "HEAD_FRONT_r", "HEAD_BACK_l", "HEAD_BACK_r"), ()),
     # An arm needs shoulder, elbow and wrist landmarks; UPA and the medial epicondyle only
@@ -279,6 +305,13 @@ PRESETS: dict[str, MarkerSet] = {
                   "FAL/TAM, FM1/FM5, AC, HLE/HME, RSP/USP, IJ, PX, C7)",
                   _ISB_ROLES, _LANDMARK_GROUPS,
                   ("ASIS_l", "ASIS_r", "KNEE_LAT_l", "KNEE_MED_l", "ANKLE_LAT_l", "ANKLE_MED_l"),
+                  refining=_LANDMARK_REFINING),
+        MarkerSet("animation", "animation sets, markers near the landmarks (OptiTrack Motive "
+                  "Baseline, Qualisys Animation: WaistLFront, LKneeOut, LAnkleOut, LToeOut, "
+                  "BackTop, Chest, LShoulderTop, LElbowOut, LWristOut, ...): joint centres "
+                  "approximate, head absent",
+                  _ANIMATION_ROLES, _LANDMARK_GROUPS,
+                  ("ASIS_l", "ASIS_r", "KNEE_LAT_l", "ANKLE_LAT_l", "MT5_l"),
                   refining=_LANDMARK_REFINING),
         MarkerSet("cluster_gait", "technical clusters, pelvis and legs (PV1-4, RTH1-4, RSK1-4, "
                   "RFT1-3; c3d.org Eb015pi): functional joint centres",
