@@ -12,9 +12,10 @@ Landmark sets (Plug-in Gait, ISB/CAST):
 * hips: Harrington et al. 2007 (J Biomech 40:595) regression from pelvis width PW (ASIS-ASIS)
   and depth PD (mid-ASIS to mid-PSIS or sacrum), in the pelvis frame (mm):
   posterior 0.24 PD + 9.9, inferior 0.30 PW + 10.9, lateral 0.33 PW + 7.3; where the file
-  stores the subject's measured leg length and ASIS-trochanter distance (Plug-in Gait's
-  ``PROCESSING``, BTS's ``SUBJECT`` group: :data:`ANTHROPOMETRY`), Davis et al. 1991 with
-  them (:func:`davis_hip`);
+  stores the subject's leg length (Plug-in Gait's ``PROCESSING``, BTS's ``SUBJECT`` group:
+  :data:`ANTHROPOMETRY`), the lab's model on it (:func:`lab_model_hip`): Davis et al. 1991 with
+  the file's ASIS-trochanter distance, or Hara et al. 2016 where the file names pyCGM2's
+  CGM 2.1 or later;
 * knees / ankles: midpoint of the epicondyles / malleoli when both are marked; otherwise the
   Plug-in-Gait chord rule (Davis et al. 1991; Kadaba et al. 1990): the centre lies half a joint
   width plus a marker radius from the lateral marker, in the plane of the proximal joint
@@ -72,6 +73,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import struct
 import warnings
 from dataclasses import dataclass, field, replace
@@ -165,6 +167,8 @@ class C3dMarkers:
     anthropometry: dict[str, float] = field(default_factory=dict)
     #: ``POINT:DESCRIPTIONS``, one per marker ('' where none).
     descriptions: list[str] = field(default_factory=list)
+    #: The lab's gait model the file names (:func:`lab_model_named`), '' where none.
+    lab_model: str = ""
 
 
 #: The subject's measurements labs store with a trial that place the hip, mm, as (group:
@@ -205,6 +209,22 @@ def _read_anthropometry(reader: Any) -> dict[str, float]:
                     out[pattern.format(s=s)] = value / 1000.0
                     break
     return out
+
+
+#: pyCGM2's Conventional Gait Model 2.1 and later (``SUBJECTS:MARKER_SETS``
+#: ``pyCGM2-LowerLimb_CGM24``, outputs ``LHJC_CGM_2.4``): they place the hips by Hara 2016.
+_CGM2_NAME = re.compile(r"CGM[\s_.\-]*2[\s_.\-]*([1-9])", re.IGNORECASE)
+
+
+def lab_model_named(texts: list[str]) -> str:
+    """The gait model the lab ran, as a file's marker-set names or point labels say it:
+    ``"CGM 2.4"`` for pyCGM2's CGM 2.1 and later, '' where none is named (Plug-in Gait writes
+    its outputs without a model's name)."""
+    for text in texts:
+        match = _CGM2_NAME.search(text)
+        if match:
+            return f"CGM 2.{match.group(1)}"
+    return ""
 
 
 def _number(param: Any) -> float | None:
@@ -295,6 +315,10 @@ def read_c3d(path: str | Path) -> C3dMarkers:
                 "".join(ch for ch in units_param.string_value.lower() if ch.isalpha())
             events = _read_events(reader)
             anthropometry = _read_anthropometry(reader)
+            marker_sets = reader.get("SUBJECTS:MARKER_SETS")
+            lab_model = lab_model_named(
+                labels + ([] if marker_sets is None else
+                          [str(t) for t in np.atleast_1d(marker_sets.string_array)]))
             data_start = (int(reader.header.data_block) - 1) * C3D_BLOCK_BYTES
             frames, data_end = [], data_start
             for _, points, _ in (reader.read_frames() if n_points > 0 else ()):
@@ -336,7 +360,7 @@ def read_c3d(path: str | Path) -> C3dMarkers:
     positions = np.where(finite[..., None], positions, 0.0)
     descriptions = (descriptions + [""] * n_points)[:n_points]
     return C3dMarkers(labels, positions, valid, rate, units, first, events, anthropometry,
-                      descriptions)
+                      descriptions, lab_model)
 
 
 # --- gaps --------------------------------------------------------------------------------------
@@ -535,6 +559,8 @@ class _Markers:
     found: dict[str, int]
     #: The subject's measurements stored in the file (:data:`ANTHROPOMETRY`), metres.
     anthropometry: dict[str, float] = field(default_factory=dict)
+    #: The lab's gait model the file names (:attr:`C3dMarkers.lab_model`).
+    lab_model: str = ""
 
     def marker_radius(self) -> float:
         """Metres: half the file's marker diameter, else :data:`MARKER_RADIUS_M`."""
@@ -817,7 +843,7 @@ def canonical_clip_c3d(raw: C3dMarkers, map_spec: str | None = None, unit: str |
             valid[:, members] &= ~out
     filled, unreliable = fill_gaps(raw.positions, valid, max_gap)
     scale = UNITS[unit_name]
-    mk = _Markers(filled * scale, unreliable, mmap.marker, raw.anthropometry)
+    mk = _Markers(filled * scale, unreliable, mmap.marker, raw.anthropometry, raw.lab_model)
     if up is None:
         up = _detect_up(mk, present, mmap)
         up_reason = "detected from the markers"
@@ -1182,9 +1208,9 @@ def _landmark_pelvis(mk: _Markers, build: _Build) -> None:
     depth = float(np.median(np.linalg.norm(front - back, axis=-1)))
     harrington = f"Harrington 2007 (PW {width * 1000:.0f} mm, PD {depth * 1000:.0f} mm, ASIS + {back_name})"
     for s, sign in (("l", 1.0), ("r", -1.0)):
-        davis = davis_hip(mk.anthropometry, s, mk.marker_radius(), width)
-        if davis is not None:
-            local, how = davis
+        lab = lab_model_hip(mk.anthropometry, mk.lab_model, s, mk.marker_radius(), width)
+        if lab is not None:
+            local, how = lab
             local[1] *= sign
         else:
             local = np.array([-0.24 * depth - 0.0099, sign * (0.33 * width + 0.0073),
@@ -1202,23 +1228,35 @@ def _landmark_pelvis(mk: _Markers, build: _Build) -> None:
 #: distance the model takes 0.1288 L - 48.56 mm, which Plug-in Gait writes back to the file.
 DAVIS_THETA_DEG, DAVIS_BETA_DEG = 28.4, 18.0
 DAVIS_TROCHANTER_PER_LEG, DAVIS_TROCHANTER_M = 0.1288, -0.04856
+#: Hara et al. 2016 (Sci Rep 6:37707), in the pelvis frame from the mid-ASIS, mm: forward
+#: 11 - 0.063 L, lateral 8 + 0.086 L, up -9 - 0.078 L; pyCGM2 moves it back by the marker
+#: radius and a 2 mm base plate (its markers sit on the skin, the regression's on the bone).
+HARA_BASE_PLATE_M = 0.002
 
 
-def davis_hip(anthropometry: dict[str, float], side: str, marker_radius_m: float,
-              asis_width_m: float) -> tuple[F64, str] | None:
+def lab_model_hip(anthropometry: dict[str, float], lab_model: str, side: str,
+                  marker_radius_m: float, asis_width_m: float) -> tuple[F64, str] | None:
     """The hip of ``side`` in the pelvis frame (x forward, y the lateral distance, z up; from
-    the mid-ASIS; (3,) metres) by Davis 1991 from the file's measured leg length and
-    ASIS-trochanter distance, and its inter-ASIS distance (else the markers', ``asis_width_m``),
-    with how it was placed; None unless the file holds both and the distance is a measurement,
-    not the regression on the leg. A measurement of this subject (BTS's Davis protocol stores
-    it as the pelvis depth) beats a population regression; without one, Harrington 2007
-    validates better than Davis's own regression."""
+    the mid-ASIS; (3,) metres) as the lab's model placed it from the subject's leg length the
+    file stores, with how it was placed; None where the file stores no leg length.
+
+    A file that stores a leg length was processed by a lab's model, whose centres it often holds
+    too: pyCGM2's CGM 2.1 and later (``lab_model``) place the hips by Hara 2016; Plug-in Gait
+    (and BTS's Davis protocol) by Davis 1991 with the file's ASIS-trochanter distance, measured or
+    the model's own regression on the leg, and the inter-ASIS distance (else the markers',
+    ``asis_width_m``). Following the lab's model puts ours within 4-13 mm of the centres these
+    files hold, where a regression from the markers alone (Harrington 2007) gave 20-26 mm."""
     leg = anthropometry.get(f"leg_length_{side}")
-    trochanter = anthropometry.get(f"asis_trochanter_{side}")
-    asis = anthropometry.get("asis_distance", asis_width_m)
-    if leg is None or trochanter is None \
-            or abs(trochanter - (DAVIS_TROCHANTER_PER_LEG * leg + DAVIS_TROCHANTER_M)) < 0.0005:
+    if leg is None:
         return None
+    if lab_model.startswith("CGM 2."):
+        leg_mm = leg * 1000.0
+        local = np.array([11.0 - 0.063 * leg_mm, 8.0 + 0.086 * leg_mm, -9.0 - 0.078 * leg_mm]) / 1000.0
+        local[0] -= marker_radius_m + HARA_BASE_PLATE_M
+        return local, f"Hara 2016 with the file's leg length {leg_mm:.0f} mm ({lab_model}, as the file says)"
+    trochanter = anthropometry.get(f"asis_trochanter_{side}",
+                                   DAVIS_TROCHANTER_PER_LEG * leg + DAVIS_TROCHANTER_M)
+    asis = anthropometry.get("asis_distance", asis_width_m)
     c = 0.115 * leg - 0.0153
     theta, beta = math.radians(DAVIS_THETA_DEG), math.radians(DAVIS_BETA_DEG)
     back = trochanter + marker_radius_m
@@ -1527,9 +1565,10 @@ __all__ = [
     "canonical_clip_c3d",
     "chord_centre",
     "cluster_poses",
-    "davis_hip",
     "fill_gaps",
     "import_c3d",
+    "lab_model_hip",
+    "lab_model_named",
     "read_c3d",
     "score_centre",
 ]

