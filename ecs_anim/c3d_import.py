@@ -38,8 +38,9 @@ Landmark sets (Plug-in Gait, ISB/CAST):
   it: :func:`flexion_axis`);
 * wrists: midpoint of the radial and ulnar styloid markers (WRA/WRB); hand end: FIN or the
   midpoint of the 2nd and 5th metacarpal heads;
-* head: the four head-band markers give the head frame; skull base and vertex lie half a head
-  length below and above their centre.
+* head: the four head-band markers give the head frame (or a marker on each side of the head
+  and one on the forehead: their midpoint and the forehead's direction); skull base and vertex
+  lie half a head length below and above the markers' centre.
 
 Cluster sets (technical clusters, no landmarks): each cluster's pose by a weighted least-squares
 rigid fit (Kabsch) to its mean shape; hips, knees and ankles by SCoRE (Ehrig et al. 2006,
@@ -1363,10 +1364,15 @@ def _landmark_body(mk: _Markers, present: list[str], build: _Build) -> None:
             build.positions[:, J[f"hand_{s}"]] = wrist + normalize(wrist - elbow) * _prop("hand", leg)
     # Head.
     if "head" in present:
-        fl, fr, bl, br = (mk(f"HEAD_{p}_{s}") for p, s in
-                          (("FRONT", "l"), ("FRONT", "r"), ("BACK", "l"), ("BACK", "r")))
-        centre = 0.25 * (fl + fr + bl + br)
-        head2world = frame_from_axes(_mid(fl, fr) - _mid(bl, br), _mid(fl, bl) - _mid(fr, br), 0, 1)
+        if mk.has("HEAD_FRONT_l", "HEAD_FRONT_r", "HEAD_BACK_l", "HEAD_BACK_r"):
+            fl, fr, bl, br = (mk(f"HEAD_{p}_{s}") for p, s in
+                              (("FRONT", "l"), ("FRONT", "r"), ("BACK", "l"), ("BACK", "r")))
+            centre = 0.25 * (fl + fr + bl + br)
+            forward, left = _mid(fl, fr) - _mid(bl, br), _mid(fl, bl) - _mid(fr, br)
+        else:  # a marker on each side of the head, level with the forehead's
+            centre = _mid(mk("HEAD_SIDE_l"), mk("HEAD_SIDE_r"))
+            forward, left = mk("FOREHEAD") - centre, mk("HEAD_SIDE_l") - mk("HEAD_SIDE_r")
+        head2world = frame_from_axes(forward, left, 0, 1)
         half = 0.5 * _prop("head", leg)
         _set(build, "head", centre - half * head2world[..., :, 2], "half a head length below the head markers' centre")
         _set(build, "head_top", centre + half * head2world[..., :, 2], "half a head length above it")

@@ -27,7 +27,7 @@ Presets:
   ulnar head UHE as the Rehazenter/Qualisys set writes it), IJ (SJN), PX (SXS), C7 (CV7), T8.
 * ``animation`` — OptiTrack Motive (Baseline) and Qualisys (Animation) sets, markers near the
   landmarks rather than on them (``WaistLFront``, ``LKneeOut``, ``LToeOut``, ``BackTop``,
-  ``LWristOut``): centres approximate, head absent.
+  ``LWristOut``, ``HeadL``): centres approximate.
 * ``cluster_gait`` — technical marker clusters (c3d.org sample ``Eb015pi``: ``PV1-4`` pelvis,
   ``RTH1-4`` thigh, ``RSK1-4`` shank, ``RFT1-3`` foot; Vicon's lettered ``PELA``, ``LFMA``,
   ``LTBA``, ``LFTA``): no landmarks, so joint centres are found functionally (see
@@ -227,8 +227,8 @@ _HH_ROLES = _sided({
 # WristOut on the distal radius, WristIn on the distal ulna, ToeIn/ToeOut) and Qualisys'
 # Animation set (QTM's skeleton solver: HeadL, SpineTop, LKneeOut, LAnkleOut, LHeelBack,
 # LForefootIn/Out, LToeTip; its sports variant LKneeIn, LAnkleIn, LElbowIn, LForefoot1/2/5).
-# The toe tip marks no joint: the toe comes from the forefoot markers. No head role: these
-# sets mark the head's top, front and sides, not the four head markers the head needs.
+# The toe tip marks no joint: the toe comes from the forefoot markers. The head needs both
+# sides and the forehead (Qualisys' HeadL, HeadR, HeadFront; Motive marks one side only).
 _ANIMATION_ROLES = _sided({
     "ASIS_{s}": ("WAIST{S}FRONT",), "PSIS_{s}": ("WAIST{S}BACK",), "SACRUM": ("WAISTBACK",),
     "THIGH_{s}": ("{S}THIGH",), "KNEE_LAT_{s}": ("{S}KNEEOUT",), "KNEE_MED_{s}": ("{S}KNEEIN",),
@@ -241,6 +241,7 @@ _ANIMATION_ROLES = _sided({
     "ELBOW_LAT_{s}": ("{S}ELBOWOUT",), "ELBOW_MED_{s}": ("{S}ELBOWIN",),
     "WRIST_RAD_{s}": ("{S}WRISTOUT",), "WRIST_ULN_{s}": ("{S}WRISTIN",),
     "MC2_{s}": ("{S}HANDIN", "{S}HAND2"), "MC5_{s}": ("{S}HANDOUT",),
+    "HEAD_SIDE_{s}": ("HEAD{S}",), "FOREHEAD": ("HEADFRONT",),
 })
 
 # Numbered (c3d.org Eb015pi: PV1-4, RTH1-4, RSK1-4, RFT1-3) or lettered as Vicon's cluster
@@ -262,7 +263,9 @@ _LANDMARK_GROUPS = _groups_sided({
                  ("KNEE_MED_{s}", "ANKLE_MED_{s}", "MT1_{s}", "MT5_{s}"),
                  ("THIGH_{s}", "SHANK_{s}", "MT1_{s}", "MT5_{s}"))),
     "trunk": (("C7", "IJ"), ()),
-    "head": (("HEAD_FRONT_l", "HEAD_FRONT_r", "HEAD_BACK_l", "HEAD_BACK_r"), ()),
+    # Four head-band markers, or a marker on each side of the head and one on the forehead.
+    "head": ((), (("HEAD_FRONT_l", "HEAD_FRONT_r", "HEAD_BACK_l", "HEAD_BACK_r"),
+                  ("HEAD_SIDE_l", "HEAD_SIDE_r", "FOREHEAD"))),
     # An arm needs shoulder, elbow and wrist landmarks; UPA and the medial epicondyle only
     # refine the elbow (without them the flexion axis comes from the arm's own plane).
     "arm_{s}": (("ACROMION_{s}", "ELBOW_LAT_{s}"),
@@ -308,8 +311,8 @@ PRESETS: dict[str, MarkerSet] = {
                   refining=_LANDMARK_REFINING),
         MarkerSet("animation", "animation sets, markers near the landmarks (OptiTrack Motive "
                   "Baseline, Qualisys Animation: WaistLFront, LKneeOut, LAnkleOut, LToeOut, "
-                  "BackTop, Chest, LShoulderTop, LElbowOut, LWristOut, ...): joint centres "
-                  "approximate, head absent",
+                  "BackTop, Chest, LShoulderTop, LElbowOut, LWristOut, HeadL, ...): joint "
+                  "centres approximate",
                   _ANIMATION_ROLES, _LANDMARK_GROUPS,
                   ("ASIS_l", "ASIS_r", "KNEE_LAT_l", "ANKLE_LAT_l", "MT5_l"),
                   refining=_LANDMARK_REFINING),

@@ -299,7 +299,7 @@ ANIMATION_NAMES = _both_sides(**{
     "{S}ASI": "Waist{S}Front", "{S}PSI": "Waist{S}Back", "{S}THI": "{S}Thigh", "{S}KNE": "{S}KneeOut",
     "{S}TIB": "{S}Shin", "{S}ANK": "{S}AnkleOut", "{S}HEE": "{S}HeelBack", "{S}TOE": "{S}Forefoot2",
     "{S}MT5": "{S}ForefootOut", "{S}SHO": "{S}ShoulderTop", "{S}UPA": "{S}UArmHigh",
-    "{S}ELB": "{S}ElbowOut", "{S}WRA": "{S}WristOut", "{S}WRB": "{S}WristIn", "{S}FHD": "Head{S}",
+    "{S}ELB": "{S}ElbowOut", "{S}WRA": "{S}WristOut", "{S}WRB": "{S}WristIn", "{S}FHD": "Head{S}Front",
     "{S}BHD": "Head{S}Back"}) | {"C7": "BackTop", "CLAV": "Chest", "STRN": "ChestLow", "T10": "BackLeft"}
 #: Joints that those markers place as the Plug-in Gait ones do (the thorax's tilt needs T10, and
 #: the shoulders, elbows and spine follow it; the head and hands are not marked).
@@ -317,6 +317,19 @@ def test_an_animation_marker_set_imports_its_pelvis_legs_trunk_and_arms(tmp_path
     same = [JOINTS.index(j) for j in ANIMATION_SAME]
     assert extra["marker_set"] == "animation" and extra["absent"] == ["head"]
     assert np.abs(clip.positions[:, same] - reference[:, same]).max() < BOUND_M
+    # Qualisys' head markers, one each side and the forehead (here the back head markers as the
+    # sides and the left front one as the forehead): the head half a head length below the
+    # sides' midpoint, that is where the four markers put it moved back along the head's
+    # forward axis (by half the head band's depth: 98 mm), not off it (1 mm).
+    heads = _renamed(renamed, HeadLBack="HeadL", HeadRBack="HeadR", HeadLFront="HeadFront")
+    clip, extra = canonical_clip_c3d(read_c3d(
+        rewrite_point_texts(QUALISYS, tmp_path / "heads.c3d", {"LABELS": heads})))
+    assert extra["absent"] == []
+    head, forward = JOINTS.index("head"), canonical_clip_c3d(read_c3d(QUALISYS))[0].head2world[:, :, 0]
+    moved = clip.positions[:, head] - reference[:, head]
+    along = np.sum(moved * forward, axis=-1)
+    across = np.linalg.norm(moved - along[:, None] * forward, axis=-1)
+    assert -0.12 < np.median(along) < -0.04 and np.median(across) < 0.01
     # OptiTrack's toe markers (in and out at the forefoot): the toe halfway between them, where
     # the Plug-in Gait import puts the toe of a copy whose LMT5 is named LTOE.
     motive = _renamed(renamed, LForefoot2="LToeIn", LForefootOut="LToeOut")
