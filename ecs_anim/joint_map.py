@@ -297,6 +297,11 @@ MAJOR_BRANCH_FRACTION = 0.15
 COMPARED_BRANCHES = 6
 
 
+#: A joint named as the end of a chain (Mixamo's ``HeadTop_End``, Biped's ``HeadNub``,
+#: Blender's ``head_end``, Maya's ``head_tip``) marks where the chain ends, as an End Site does.
+_CHAIN_END_NAME = re.compile(r"(end|nub|tip|top|site)[\d_.\-\s]*$", re.IGNORECASE)
+
+
 class _Tree:
     """A skeleton's hierarchy and rest lengths, as structural matching reads them.
 
@@ -312,6 +317,7 @@ class _Tree:
         n = len(skeleton.joints)
         self.parents = np.array([j.parent for j in skeleton.joints])
         self.is_end_site = [j.is_end_site for j in skeleton.joints]
+        self.names = [j.name for j in skeleton.joints]
         self.children: list[list[int]] = [[] for _ in range(n)]
         for i, p in enumerate(self.parents):
             if p >= 0:
@@ -331,6 +337,10 @@ class _Tree:
             self.size[p] += self.size[i]
             if self.branch(i) >= self.reach[p]:
                 self.reach[p], self.onward[p] = self.branch(i), i
+
+    def named_end(self, j: int) -> bool:
+        """Whether joint ``j`` is named as the end of a chain (:data:`_CHAIN_END_NAME`)."""
+        return bool(_CHAIN_END_NAME.search(self.names[j].split(":")[-1]))
 
     def branch(self, child: int) -> float:
         """How far the branch starting at ``child`` reaches from ``child``'s parent."""
@@ -451,17 +461,20 @@ def _limbs(tree: _Tree, hub: int, pair: tuple[int, int]) -> tuple[Limb, Limb]:
 def _head(tree: _Tree, thorax: int, branch: int) -> tuple[int, int, int | None]:
     """(neck, head, head top) on the branch leaving the thorax upwards: the neck is its first
     joint (the thorax itself when the head hangs straight from it), the head top an End Site at
-    its end, the head the place before that End Site, or the place where eyes or a jaw branch
-    off. A leaf joint is the head itself: a file written without End Sites ends the neck there
-    (OptiTrack's Chest, Neck, Head), and the head top is then filled in from proportions."""
+    its end (or a joint named as a chain's end, :data:`_CHAIN_END_NAME`, at the end or just before
+    that End Site), the head the place before it, or the place where eyes or a jaw branch off. Any other leaf joint is the head
+    itself: a file written without End Sites ends the neck there (OptiTrack's Chest, Neck,
+    Head), and the head top is then filled in from proportions."""
     places = tree.places(branch)
     branching = next((k for k, place in enumerate(places) if len(tree.children[place[-1]]) > 1),
                      len(places) - 1)
     places = places[:branching + 1]
-    last = places[-1][0]
-    if len(places) >= 2 and not tree.children[last] and tree.is_end_site[last]:
-        head_top: int | None = last
-        head = places[-2][0]
+    last, k = places[-1][0], len(places) - 1
+    if k >= 1 and not tree.children[last] and (tree.is_end_site[last] or tree.named_end(last)):
+        if k >= 2 and tree.is_end_site[last] and tree.named_end(places[k - 1][0]):
+            k -= 1  # an End Site beyond a joint named as the end (HeadTop_End): that joint
+        head_top: int | None = places[k][0]
+        head = places[k - 1][0]
     else:
         head_top, head = None, last
     return (branch if branch != head else thorax), head, head_top

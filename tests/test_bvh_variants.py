@@ -446,6 +446,45 @@ def test_no_end_sites_fills_toes_and_head_top_and_keeps_the_joints(name, tmp_pat
     assert list(np.load(tmp_path / "out" / "source.npz")["joints"]) == list(JOINTS)
 
 
+#: Dev files whose head End Site lies above the head (Bandai's is at the head itself).
+HEAD_TOP_FILES = [n for n in DEV_FILES if not n.startswith("bandai")]
+
+
+@pytest.mark.parametrize("end_sites", [False, True], ids=["no_end_sites", "end_sites"])
+@pytest.mark.parametrize("name", HEAD_TOP_FILES)
+def test_a_head_top_joint_is_the_head_top_not_the_head(name, end_sites, tmp_path):
+    """Names no preset knows, and the head's End Site turned into a joint named as a chain's
+    end (Mixamo's ``HeadTop_End``, here after a ``Character1_`` prefix no preset reads), with
+    or without End Sites: the head is the original head, the head top that joint, exported
+    where the original's End Site is (within 0.1 mm), not 10-20 cm above the head."""
+    source = _dev_file(name)
+    original = _plain_import(source, tmp_path)["joints"]
+    clip, old_names = _generic_names(load_clip(source))
+    head = next(new for new, old in old_names.items() if old == original["head"])
+    top = next(i for i in clip.children(clip.index(head)) if clip.joints[i].is_end_site)
+    joint = clip.joints[top]
+    joint.name, joint.is_end_site = "Character1_HeadTop_End", False
+    joint.channels, joint.values = ["Zrotation", "Xrotation", "Yrotation"], np.zeros((clip.n_frames, 3))
+    if end_sites:
+        clip.insert(EditJoint(f"{joint.name}_Site", top, 0.2 * joint.offset, [],
+                              np.zeros((clip.n_frames, 0)), is_end_site=True))
+    else:
+        clip = _without_end_sites(clip)
+    path = tmp_path / "head_top.bvh"
+    path.write_text(clip.text())
+    info, exported = _import_and_export(path, tmp_path / "out")
+    assert info["joint_map"].startswith("structure")
+    assert (info["joints"]["head"], info["joints"]["head_top"]) == (head, joint.name)
+    assert "head_top" not in info["filled_in"]
+    scale, up = _lookup(DOCUMENTED, source.name)
+    names, ref = reference_world(source, scale, up)
+    start = info.get("first_file_frame", 0)
+    ref = ref[start: start + len(exported)]
+    for canonical, old in (("head", original["head"]), ("head_top", original["head_top"])):
+        off = np.linalg.norm(exported[:, JOINT_INDEX[canonical]] - ref[:, names.index(old)], axis=-1)
+        assert off.max() < 0.1 * MM, f"{canonical} off by {off.max() * 1e3:.4f} mm"
+
+
 # --- text rewrites -------------------------------------------------------------------------------
 
 def _mixed_orders(clip: EditClip) -> EditClip:
