@@ -141,11 +141,11 @@ PRESETS: dict[str, Preset] = {
             ("joint_Root", "UpperLeg_L"),
         ),
         Preset(
-            "mixamo", "Adobe Mixamo (mixamorig:Hips, mixamorig:LeftUpLeg, ...; prefix optional)",
+            "mixamo", "Adobe Mixamo (mixamorig:Hips, mixamorig:LeftUpLeg, ...; prefix optional; also Ubisoft LaFAN1, whose toes are LeftToe)",
             _sided({
                 "pelvis": ["Hips"], "hip_{s}": ["{S}UpLeg"], "knee_{s}": ["{S}Leg"],
-                "ankle_{s}": ["{S}Foot"], "toe_{s}": ["{S}ToeBase"], "spine_1": ["Spine1"],
-                "spine_2": ["Spine2"], "neck": ["Neck"], "head": ["Head"],
+                "ankle_{s}": ["{S}Foot"], "toe_{s}": ["{S}ToeBase", "{S}Toe"],
+                "spine_1": ["Spine1"], "spine_2": ["Spine2"], "neck": ["Neck"], "head": ["Head"],
                 "head_top": ["HeadTop_End", "Head.end"], "shoulder_{s}": ["{S}Arm"],
                 "elbow_{s}": ["{S}ForeArm"], "wrist_{s}": ["{S}Hand"],
                 "hand_{s}": ["{S}HandMiddle1", "{S}HandEnd", "{S}Hand.end"],
