@@ -459,7 +459,9 @@ TOOLS.append(Tool(
 # 左腕 > 左ひじ > 左手首; センター > 下半身 > 左足 > 左ひざ > 左足首 > 左つま先. (The English name
 # "lower body" is not in that source.) Rotations Z X Y.
 def _mmd(names: dict[str, str]) -> tuple[list[Joint], dict[str, str]]:
-    n = names.get
+    def n(name: str) -> str:
+        return names[name]
+
     left = [(n("左肩"), n("上半身2"), (3, 14, 0), None), (n("左腕"), n("左肩"), (12, 0, 0), None),
             (n("左ひじ"), n("左腕"), UPPER_ARM, None), (n("左手首"), n("左ひじ"), FOREARM, HAND),
             (n("左足"), n("下半身"), (9, -8, 0), None), (n("左ひざ"), n("左足"), THIGH, None),
@@ -492,8 +494,9 @@ _MMD_EN = {"センター": "center", "下半身": "lower body", "上半身": "up
            "右ひじ": "elbow_R", "右手首": "wrist_R", "右足": "leg_R", "右ひざ": "knee_R",
            "右足首": "ankle_R", "右つま先": "R toe"}
 for _label, _names in (("mmd_japanese", _MMD_JA), ("mmd_romanised", _MMD_EN)):
-    _j, _e = _mmd(_names)
-    TOOLS.append(Tool(_label, "find_string '\"左ひざ\"' (VMD loader bone mapping)", _j, _e))
+    _mmd_joints, _mmd_expected = _mmd(_names)
+    TOOLS.append(Tool(_label, "find_string '\"左ひざ\"' (VMD loader bone mapping)", _mmd_joints,
+                      _mmd_expected))
 
 
 #: Tools whose import is known to be wrong, with the measured result (see the report).
