@@ -214,7 +214,9 @@ def _read_anthropometry(reader: Any) -> dict[str, float]:
 
 #: pyCGM2's Conventional Gait Model 2.1 and later (``SUBJECTS:MARKER_SETS``
 #: ``pyCGM2-LowerLimb_CGM24``, outputs ``LHJC_CGM_2.4``): they place the hips by Hara 2016.
-_CGM2_NAME = re.compile(r"CGM[\s_.\-]*2[\s_.\-]*([1-9])", re.IGNORECASE)
+#: The name stands alone ("pyCGM2 3.5" is the program's version, "CGM2.10" no model) and the
+#: minor version is one digit.
+_CGM2_NAME = re.compile(r"(?<![A-Za-z])CGM[\s_.\-]*2[\s_.\-]*([1-9])(?!\d)", re.IGNORECASE)
 
 
 def lab_model_named(texts: list[str]) -> str:
@@ -1224,14 +1226,19 @@ def _landmark_pelvis(mk: _Markers, build: _Build) -> None:
 
 
 #: Davis et al. 1991 (Hum Mov Sci 10:575): the hip lies C = 0.115 L - 15.3 mm (L the leg
-#: length) from the ASIS along a line at THETA to the frontal plane and BETA to the transverse
-#: one, set back by the ASIS-trochanter distance plus a marker radius. Without a measured
-#: distance the model takes 0.1288 L - 48.56 mm, which Plug-in Gait writes back to the file.
-DAVIS_THETA_DEG, DAVIS_BETA_DEG = 28.4, 18.0
+#: length, the mean of both legs as Plug-in Gait takes it) from the ASIS along a line at THETA to
+#: the frontal plane and BETA to the transverse one (0.5 and 0.314 rad, the values Plug-in Gait
+#: and pyCGM use), set back by the ASIS-trochanter distance plus a marker radius. Without a
+#: measured distance the model takes 0.1288 L - 48.56 mm, which Plug-in Gait writes back to the
+#: file.
+DAVIS_C_PER_LEG, DAVIS_C_M = 0.115, -0.0153
+DAVIS_THETA_RAD, DAVIS_BETA_RAD = 0.5, 0.314
 DAVIS_TROCHANTER_PER_LEG, DAVIS_TROCHANTER_M = 0.1288, -0.04856
-#: Hara et al. 2016 (Sci Rep 6:37707), in the pelvis frame from the mid-ASIS, mm: forward
-#: 11 - 0.063 L, lateral 8 + 0.086 L, up -9 - 0.078 L; pyCGM2 moves it back by the marker
-#: radius and a 2 mm base plate (its markers sit on the skin, the regression's on the bone).
+#: Hara et al. 2016 (Sci Rep 6:37707), in the pelvis frame from the mid-ASIS: (forward, lateral,
+#: up) = HARA_PER_LEG * L + HARA_M (L the leg length). pyCGM2 moves it back by the marker radius
+#: and a 2 mm base plate (its markers sit on the skin, the regression's on the bone).
+HARA_PER_LEG = np.array([-0.063, 0.086, -0.078])
+HARA_M = np.array([0.011, 0.008, -0.009])
 HARA_BASE_PLATE_M = 0.002
 
 
@@ -1245,21 +1252,25 @@ def lab_model_hip(anthropometry: dict[str, float], lab_model: str, side: str,
     too: pyCGM2's CGM 2.1 and later (``lab_model``) place the hips by Hara 2016; Plug-in Gait
     (and BTS's Davis protocol) by Davis 1991 with the file's ASIS-trochanter distance, measured or
     the model's own regression on the leg, and the inter-ASIS distance (else the markers',
-    ``asis_width_m``). Following the lab's model puts ours within 4-13 mm of the centres these
-    files hold, where a regression from the markers alone (Harrington 2007) gave 20-26 mm."""
+    ``asis_width_m``). Measured on the files here that store centres: Hara puts ours 4-5 mm from
+    a CGM 2.4 file's (Harrington from the markers: 20-25 mm), Davis with a measured trochanter
+    distance 6-13 mm from BTS's (Harrington: 21-26 mm). Davis on its regressed distance is
+    unmeasured against a lab's centres (on the CGM 2.4 file, its model's name removed: 19 mm);
+    a CGM 2.x file that does not name its model gets Davis."""
     leg = anthropometry.get(f"leg_length_{side}")
     if leg is None:
         return None
     if lab_model.startswith("CGM 2."):
-        leg_mm = leg * 1000.0
-        local = np.array([11.0 - 0.063 * leg_mm, 8.0 + 0.086 * leg_mm, -9.0 - 0.078 * leg_mm]) / 1000.0
+        local = HARA_PER_LEG * leg + HARA_M
         local[0] -= marker_radius_m + HARA_BASE_PLATE_M
-        return local, f"Hara 2016 with the file's leg length {leg_mm:.0f} mm ({lab_model}, as the file says)"
+        return local, (f"Hara 2016 with the file's leg length {leg * 1000:.0f} mm ({lab_model}, "
+                       "as the file says)")
     trochanter = anthropometry.get(f"asis_trochanter_{side}",
                                    DAVIS_TROCHANTER_PER_LEG * leg + DAVIS_TROCHANTER_M)
     asis = anthropometry.get("asis_distance", asis_width_m)
-    c = 0.115 * leg - 0.0153
-    theta, beta = math.radians(DAVIS_THETA_DEG), math.radians(DAVIS_BETA_DEG)
+    both_legs = [anthropometry[k] for k in ("leg_length_l", "leg_length_r") if k in anthropometry]
+    c = DAVIS_C_PER_LEG * float(np.mean(both_legs)) + DAVIS_C_M
+    theta, beta = DAVIS_THETA_RAD, DAVIS_BETA_RAD
     back = trochanter + marker_radius_m
     local = np.array([c * math.cos(theta) * math.sin(beta) - back * math.cos(beta),
                       0.5 * asis - c * math.sin(theta),
