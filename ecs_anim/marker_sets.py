@@ -137,7 +137,8 @@ def _groups_sided(table: dict[str, tuple[tuple[str, ...], tuple[tuple[str, ...],
 # Vicon 41-marker set of the CMU and HDM05 captures (FWT/BWT front and back waist at the
 # iliac spines, SHN shin for TIB; CMU mocap data definition), MoSh/AMASS (nghorbani/moshpp
 # marker layout: KNI inner knee, ELBIN/IEL inner elbow, IWR/OWR the thumb- and pinkie-side
-# wrist markers, HEL heel) and KIT's whole-body set (motion-database.humanoids.kit.edu:
+# wrist markers, HEL heel: in an ISB set LHE_L would be the lateral epicondyle, but a file
+# matches one preset, by its fit) and KIT's whole-body set (motion-database.humanoids.kit.edu:
 # AEL lateral epicondyle, WTS/WPS radial and ulnar styloids); MT1/MT5 metatarsal heads as
 # CMU's and MoSh's sets add them.
 _PIG_ROLES = _sided({
@@ -160,7 +161,8 @@ _PIG_ROLES = _sided({
 # protocol's short forms (Leardini et al. 2007, as Visual3D's IOR models list them: CA
 # calcaneus, FM/SM/VM first, second and fifth metatarsal heads), the IOR foot model's and
 # pyCGM2's FMH/SMH/VMH, the Oxford foot model's D1M/D5M (distal first and fifth metatarsal),
-# RRIS40's STER/XPRO/FMT1/HMC2, OpenSim's (Rajagopal; AddBiomechanics' XYPH, LEE/MEE elbows).
+# RRIS40's STER/XPRO/FMT1/HMC2 (the two-letter keys CA, FM, SM, VM are read with the side
+# before them only, LCA or LEFT_CA: a side after them would collide, LE+L = L+EL), OpenSim's (Rajagopal; AddBiomechanics' XYPH, LEE/MEE elbows).
 _ISB_ROLES = _sided({
     "ASIS_{s}": ("*ASIS", "*ASI", "*IAS"), "PSIS_{s}": ("*PSIS", "*PSI", "*IPS"),
     "SACRUM": ("SACR", "SACRUM", "S1"),
@@ -173,7 +175,7 @@ _ISB_ROLES = _sided({
     "MT5_{s}": ("*FM5", "*MT5", "*MH5", "*MET5", "*M5", "*VM", "*VMH", "*FMT5", "*D5M"),
     "TOE_{s}": ("*FM2", "*MT2", "*MH2", "*TOE", "*SM", "*SMH"),
     "C7": ("C7", "CV7"), "T10": ("T8", "TV8", "T10", "TV10"),
-    "IJ": ("IJ", "SJN", "SNJ", "STER", "CLAV"), "PX": ("PX", "SXS", "STRN", "XP", "XPRO", "XYPH"),
+    "IJ": ("IJ", "SJN", "SNJ", "CLAV", "STER"), "PX": ("PX", "SXS", "STRN", "XP", "XPRO", "XYPH"),
     "ACROMION_{s}": ("*AC", "*ACR", "*ACRO", "*CAJ", "*SAE", "*SAJ", "*SHO", "*ACROMION",
                      "*ACROMIUM"),
     # Vicon upper-limb spellings ELL/ELM (lateral/medial); Rehazenter/Qualisys UHE (ulnar head).
@@ -227,7 +229,9 @@ _HH_ROLES = _sided({
 # WristOut on the distal radius, WristIn on the distal ulna, ToeIn/ToeOut) and Qualisys'
 # Animation set (QTM's skeleton solver: HeadL, SpineTop, LKneeOut, LAnkleOut, LHeelBack,
 # LForefootIn/Out, LToeTip; its sports variant LKneeIn, LAnkleIn, LElbowIn, LForefoot1/2/5).
-# The toe tip marks no joint: the toe comes from the forefoot markers. The head needs both
+# The toe tip marks no joint: the toe comes from the forefoot markers. Chest sits mid-sternum
+# and stands in for the jugular notch (IJ): it only orients the thorax with BackTop, and the
+# neck base is placed from the thorax frame. The head needs both
 # sides and the forehead (Qualisys' HeadL, HeadR, HeadFront; Motive marks one side only).
 _ANIMATION_ROLES = _sided({
     "ASIS_{s}": ("WAIST{S}FRONT",), "PSIS_{s}": ("WAIST{S}BACK",), "SACRUM": ("WAISTBACK",),
@@ -236,7 +240,7 @@ _ANIMATION_ROLES = _sided({
     "ANKLE_MED_{s}": ("{S}ANKLEIN",), "HEEL_{s}": ("{S}HEELBACK", "{S}HEEL"),
     "TOE_{s}": ("{S}FOREFOOT2",), "MT1_{s}": ("{S}FOREFOOTIN", "{S}FOREFOOT1", "{S}TOEIN"),
     "MT5_{s}": ("{S}FOREFOOTOUT", "{S}FOREFOOT5", "{S}TOEOUT"),
-    "C7": ("BACKTOP", "SPINETOP"), "IJ": ("CHEST",), "PX": ("CHESTLOW",),
+    "C7": ("BACKTOP", "SPINETOP"), "IJ": ("CHEST",),
     "ACROMION_{s}": ("{S}SHOULDERTOP",), "UPPER_ARM_{s}": ("{S}UARMHIGH",),
     "ELBOW_LAT_{s}": ("{S}ELBOWOUT",), "ELBOW_MED_{s}": ("{S}ELBOWIN",),
     "WRIST_RAD_{s}": ("{S}WRISTOUT",), "WRIST_ULN_{s}": ("{S}WRISTIN",),
@@ -500,9 +504,13 @@ def group_status(mmap: MarkerMap) -> tuple[list[str], list[str], dict[str, list[
             continue
         missing = [_describe(mmap, r) for r in required if r not in mmap.marker]
         if alternatives and not any(all(r in mmap.marker for r in alt) for alt in alternatives):
-            missing.append(" or ".join(
-                "+".join(_describe(mmap, r) for r in alt if r not in mmap.marker)
-                for alt in alternatives))
+            # The ways this preset can mark (the groups are shared: Plug-in Gait has no head side
+            # markers), each said once, and none that lacks more than a shorter way does.
+            markable = [alt for alt in alternatives if all(r in preset.roles for r in alt)]
+            lacking = [tuple(r for r in alt if r not in mmap.marker) for alt in markable or alternatives]
+            shortest = [alt for alt in dict.fromkeys(lacking)
+                        if not any(set(other) < set(alt) for other in lacking)]
+            missing.append(" or ".join("+".join(_describe(mmap, r) for r in alt) for alt in shortest))
         if missing:
             incomplete[group] = missing
         else:

@@ -300,7 +300,7 @@ ANIMATION_NAMES = _both_sides(**{
     "{S}TIB": "{S}Shin", "{S}ANK": "{S}AnkleOut", "{S}HEE": "{S}HeelBack", "{S}TOE": "{S}Forefoot2",
     "{S}MT5": "{S}ForefootOut", "{S}SHO": "{S}ShoulderTop", "{S}UPA": "{S}UArmHigh",
     "{S}ELB": "{S}ElbowOut", "{S}WRA": "{S}WristOut", "{S}WRB": "{S}WristIn", "{S}FHD": "Head{S}Front",
-    "{S}BHD": "Head{S}Back"}) | {"C7": "BackTop", "CLAV": "Chest", "STRN": "ChestLow", "T10": "BackLeft"}
+    "{S}BHD": "Head{S}Back"}) | {"C7": "BackTop", "CLAV": "Chest", "T10": "BackLeft"}
 #: Joints that those markers place as the Plug-in Gait ones do (the thorax's tilt needs T10, and
 #: the shoulders, elbows and spine follow it; the head and hands are not marked).
 ANIMATION_SAME = ("pelvis", "hip_l", "knee_l", "ankle_l", "toe_l", "hip_r", "knee_r", "ankle_r",

@@ -12,7 +12,7 @@ import pytest
 from conftest import MOCAP_DIR
 from ecs_anim.c3d_import import canonical_clip_c3d, import_c3d, read_c3d
 from ecs_anim.errors import InputError, MappingError
-from ecs_anim.marker_sets import check_usable, label_key, match_markers
+from ecs_anim.marker_sets import check_usable, group_status, label_key, match_markers
 from ecs_anim.skeleton import JOINT_INDEX as J
 
 VARIED = MOCAP_DIR / "varied"
@@ -113,6 +113,13 @@ def test_parts_not_computed_are_named_with_found_and_lacking():
     assert msg.startswith("left arm not computed: found LSHO; lacks LELB") and len(msg) < 300
     motion = import_c3d(_varied("vicon_pig_noclav_prefix_events_60hz.c3d"))
     assert motion.info["parts_not_computed"]["trunk"] == "trunk not computed: found Matt:C7; lacks CLAV"
+    # Only the markers this set could use, each way once: a Plug-in Gait head lacking its right
+    # back marker lacks RBHD, not the animation sets' side markers, and a leg lacking its knee
+    # and its thigh wand lacks the wand or the medial markers, not also those with metatarsals.
+    pig = list(read_c3d(_varied("qualisys_pig_yup_events_100hz.c3d")).labels)
+    _, _, incomplete = group_status(match_markers([f"X{label}" if label in ("RBHD", "LKNE", "LTHI")
+                                                   else label for label in pig]))
+    assert incomplete == {"head": ["RBHD"], "leg_l": ["LKNE", "LTHI or LKNM+LMMA"]}
 
 
 @pytest.mark.parametrize("labels", [
