@@ -201,6 +201,9 @@ _ISB_ROLES = _sided({
 # Cortex's POINT:DESCRIPTIONS spell the markers out (V.Sacral, R.Knee.Medial, R.Ankle.Medial);
 # Cortex exports (BMClab's walk) also mark R.MT1, R.MT2 and R.MT5, and OpenSim's example sets
 # (opensim-models: gait2392, Hamner) R.Knee.Lat, R.Ankle.Med, R.Toe.Tip, R.Acromium, R.Bicep.
+# OpenSim's sets have no metatarsal marker, so their toe tip is the toe when nothing nearer
+# the metatarsal heads is marked (its last candidate: the toe then sits some 5 cm forward of
+# the joint, where the animation sets' forefoot markers place it right).
 # Medial epicondyle and malleolus as Plug-in Gait spells them; Cortex writes RKNE / RANK for
 # the medial markers too (``c3d_import.split_same_label``: the medial one is nearer the other leg).
 _HH_ROLES = _sided({

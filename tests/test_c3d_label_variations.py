@@ -19,7 +19,7 @@ from conftest import MOCAP_DIR
 from ecs_anim.c3d_import import canonical_clip_c3d, import_c3d, read_c3d
 from ecs_anim.errors import InputError
 from ecs_anim.importing import CanonicalClip
-from ecs_anim.marker_sets import match_markers
+from ecs_anim.marker_sets import group_status, match_markers
 
 VARIED = MOCAP_DIR / "varied"
 CLUSTERS = MOCAP_DIR / "c3dorg_eb015pi_gait.c3d"
@@ -346,3 +346,59 @@ def test_an_animation_marker_set_imports_its_pelvis_legs_trunk_and_arms(tmp_path
     # frame: 0.7 mm off after the repair) and said so.
     rejected = extra["gaps"]["joint_centres_rejected"].get("toe_l", 0)
     assert rejected <= 1 and np.sum(off > BOUND_M) <= rejected
+
+
+def _each_side(names: list[str], unsided: tuple[str, ...] = ()) -> list[str]:
+    """A convention's whole label list: ``{S}`` names for L and R, then the unsided ones."""
+    return [name.format(S=s) for name in names for s in "LR"] + list(unsided)
+
+
+#: Whole marker sets as each convention lists them (no dev file behind them): the set the labels
+#: are read as, and the parts that come out (present, and incomplete with what they lack).
+PURE_SETS = {
+    # CMU's Vicon 41 (mocap.cs.cmu.edu's marker placement guide).
+    "cmu_vicon41": (_each_side(["{S}FHD", "{S}BHD", "{S}SHO", "{S}UPA", "{S}ELB", "{S}FRM", "{S}WRA",
+                                "{S}WRB", "{S}FIN", "{S}FWT", "{S}BWT", "{S}THI", "{S}KNE", "{S}SHN",
+                                "{S}ANK", "{S}HEE", "{S}TOE", "{S}MT5"],
+                               ("C7", "T10", "CLAV", "STRN", "RBAC")), "plug_in_gait", {}),
+    # MoSh/AMASS's layout: inner elbow and knee, wrist inner and outer, HEL heel.
+    "mosh_amass": (_each_side(["{S}FHD", "{S}BHD", "{S}SHO", "{S}UPA", "{S}ELB", "{S}ELBIN", "{S}FRM",
+                               "{S}IWR", "{S}OWR", "{S}FIN", "{S}FWT", "{S}BWT", "{S}THI", "{S}KNE",
+                               "{S}KNI", "{S}SHN", "{S}ANK", "{S}HEL", "{S}MT1", "{S}MT5", "{S}TOE"],
+                              ("C7", "T10", "CLAV", "STRN")), "plug_in_gait", {}),
+    # OptiTrack Motive's Baseline: one head side marker, so no head.
+    "motive_baseline": (_each_side(["Waist{S}Front", "Waist{S}Back", "{S}ShoulderBack",
+                                    "{S}ShoulderTop", "{S}ElbowOut", "{S}UArmHigh", "{S}HandOut",
+                                    "{S}WristOut", "{S}WristIn", "{S}KneeOut", "{S}Thigh",
+                                    "{S}AnkleOut", "{S}Shin", "{S}ToeOut", "{S}ToeIn", "{S}Heel"],
+                                   ("BackTop", "BackLeft", "BackRight", "Chest", "HeadTop",
+                                    "HeadFront", "HeadSide")),
+                        "animation", {"head": ["HEADL+HEADR"]}),
+    # Qualisys' Animation set: both head sides and the forehead.
+    "qualisys_animation": (_each_side(["Waist{S}Front", "Waist{S}Back", "{S}ShoulderTop",
+                                       "{S}ElbowOut", "{S}UArmHigh", "{S}HandOut", "{S}HandIn",
+                                       "{S}WristOut", "{S}WristIn", "{S}KneeOut", "{S}Thigh",
+                                       "{S}AnkleOut", "{S}Shin", "{S}ForefootIn", "{S}ForefootOut",
+                                       "{S}ToeTip", "{S}HeelBack"],
+                                      ("HeadL", "HeadR", "HeadFront", "HeadTop", "SpineTop",
+                                       "Chest", "BackL", "BackR")), "animation", {}),
+    # OpenSim's gait2354 set: legs and pelvis; no elbow or wrist, no C7.
+    "opensim_gait2354": (_each_side(["{S}.Acromium", "{S}.ASIS", "{S}.Thigh.Upper", "{S}.Thigh.Front",
+                                     "{S}.Thigh.Rear", "{S}.Knee.Lat", "{S}.Knee.Med",
+                                     "{S}.Shank.Upper", "{S}.Shank.Front", "{S}.Shank.Rear",
+                                     "{S}.Ankle.Lat", "{S}.Ankle.Med", "{S}.Heel",
+                                     "{S}.Midfoot.Sup", "{S}.Midfoot.Lat", "{S}.Toe.Tip"],
+                                    ("Sternum", "Top.Head", "V.Sacral")),
+                         "helen_hayes", {"arm_l": ["LELB", "LWRISTLAT+LWRISTMED or LWRI"],
+                                         "arm_r": ["RELB", "RWRISTLAT+RWRISTMED or RWRI"]}),
+}
+
+
+@pytest.mark.parametrize("convention", sorted(PURE_SETS))
+def test_a_whole_set_in_one_convention_is_read_as_its_preset(convention):
+    labels, preset, incomplete = PURE_SETS[convention]
+    mmap = match_markers(labels)
+    present, _, lacking = group_status(mmap)
+    assert mmap.preset.name == preset
+    assert lacking == incomplete
+    assert {"pelvis", "leg_l", "leg_r"} <= set(present)
