@@ -359,6 +359,13 @@ class _Tree:
                      if yardstick > 0 and self.branch(c) >= MAJOR_BRANCH_FRACTION * yardstick]
             if len(major) >= 3 and sum(self.is_limb(c) for c in major) >= 2:
                 return j, major
+            if len(major) == 2 and all(self.is_limb(c) for c in major):
+                # The limbs may leave a child whose sibling carries the rest (MikuMikuDance's
+                # lower body under the centre, its upper body beside it): that child is the hub.
+                for sub, rest in (major, major[::-1]):
+                    limbs = [c for c in self.children[sub] if self.is_limb(c)]
+                    if len(limbs) == 2:
+                        return sub, [*limbs, rest]
             j = int(self.onward[j])
         return None
 

@@ -513,14 +513,6 @@ XFAIL: dict[str, str] = {
         "DEF-thigh.R, knee_l DEF-thigh.R.001, ankle_l DEF-shin.R, shoulder_l DEF-forearm.R.001, "
         "elbow_l DEF-hand.R, wrist_l DEF-hand.R.end (one place down the chain and sides "
         "swapped)"),
-    "mmd_japanese": (
-        "import fails: 'cannot match the skeleton by its names (no preset fits) nor by its "
-        "structure (no joint where two legs and a spine branch off)': the legs leave 下半身, "
-        "the spine its sibling 上半身 (both under センター), and _Tree.hub_below wants all three "
-        "at one joint"),
-    "mmd_romanised": (
-        "import fails: 'cannot match ... (no joint where two legs and a spine branch off)': "
-        "legs under 'lower body', spine under its sibling 'upper body' (_Tree.hub_below)"),
 }
 
 
