@@ -1517,10 +1517,15 @@ def _functional_lower_body(mk: _Markers, present: list[str], build: _Build) -> N
     for s in "lr":
         # The foot's stance orientation (the slowest third of the frames): the toe (ball of the
         # foot) lies a foot length forward of the ankle and on the floor (z = 0) there.
-        foot_rot, foot_origin, _ = cluster("FOOT", s, 3)
+        foot_rot, foot_origin, foot_seen = cluster("FOOT", s, 3)
         ankle = build.positions[:, J[f"ankle_{s}"]]
         speed = np.linalg.norm(np.gradient(foot_origin, axis=0), axis=-1)
-        stance = speed <= np.percentile(speed, 33)
+        # Only frames whose pelvis frame (the forward) and foot cluster are trusted: where the
+        # pelvis cluster is half seen its frame can be upside down.
+        usable = build.root_trusted & foot_seen
+        if not usable.any():
+            usable = np.ones_like(usable)
+        stance = usable & (speed <= np.percentile(speed[usable], 33))
         up_local = normalize(np.einsum("fji,j->i", foot_rot[stance], np.array([0.0, 0.0, 1.0])))
         fwd_local = np.einsum("fji,fj->i", foot_rot[stance], forward_h[stance])
         fwd_local = normalize(fwd_local - (fwd_local @ up_local) * up_local)
