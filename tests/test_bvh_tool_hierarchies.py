@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
-from test_bvh_variants import euler_angles
+from test_bvh_variants import _axis_rotation, euler_angles
 from test_real_bvh import _errors_m, _import_and_export, reference_world
 
 MM = 1e-3
@@ -65,9 +65,9 @@ class Tool:
         def drive(canonical: str, axis: str, degrees: np.ndarray) -> None:
             name = e.get(canonical)
             if name is not None and not name.endswith(".end"):
-                rot[name] = _axis(axis, degrees)
+                rot[name] = _axis_rotation(axis, degrees)
 
-        rot[self.joints[0][0]] = _axis("Y", 5.0 * np.sin(phase))  # the root yaws a little
+        rot[self.joints[0][0]] = _axis_rotation("Y", 5.0 * np.sin(phase))  # the root yaws a little
         for side, shift in (("l", 0.0), ("r", np.pi)):
             p = phase + shift
             drive(f"hip_{side}", "X", -25.0 * np.sin(p))  # negative about X: the foot goes forward
@@ -128,16 +128,6 @@ class Tool:
         out += ["MOTION", f"Frames: {N_FRAMES}", f"Frame Time: {FRAME_TIME_S:.8f}"]
         out += [" ".join(f"{v:.6f}" for v in row) for row in values]
         return "\n".join(out) + "\n"
-
-
-def _axis(axis: str, degrees: np.ndarray) -> np.ndarray:
-    i = "XYZ".index(axis)
-    j, k = (i + 1) % 3, (i + 2) % 3
-    c, s = np.cos(np.radians(degrees)), np.sin(np.radians(degrees))
-    m = np.zeros(np.shape(degrees) + (3, 3))
-    m[..., i, i] = 1.0
-    m[..., j, j], m[..., k, k], m[..., j, k], m[..., k, j] = c, c, -s, s
-    return m
 
 
 def _sides(left: list[Joint], rename) -> list[Joint]:
