@@ -489,7 +489,7 @@ for _label, _names in (("mmd_japanese", _MMD_JA), ("mmd_romanised", _MMD_EN)):
                       _mmd_expected))
 
 
-#: Tools whose import is known to be wrong, with the measured result (see the report).
+#: Tools whose import is known to be wrong (open in issue 12), with the measured result.
 XFAIL: dict[str, str] = {
     "motionbuilder_humanik": (
         "structure: _head cuts the neck branch at the first joint with two children "
