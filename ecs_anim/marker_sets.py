@@ -162,7 +162,8 @@ _PIG_ROLES = _sided({
 # calcaneus, FM/SM/VM first, second and fifth metatarsal heads), the IOR foot model's and
 # pyCGM2's FMH/SMH/VMH, the Oxford foot model's D1M/D5M (distal first and fifth metatarsal),
 # RRIS40's STER/XPRO/FMT1/HMC2 (the two-letter keys CA, FM, SM, VM are read with the side
-# before them only, LCA or LEFT_CA: a side after them would collide, LE+L = L+EL), OpenSim's (Rajagopal; AddBiomechanics' XYPH, LEE/MEE elbows).
+# before them only, LCA or LEFT_CA: a side after them would collide, LE+L = L+EL), OpenSim's
+# (Rajagopal; AddBiomechanics' XYPH, LEE/MEE elbows).
 _ISB_ROLES = _sided({
     "ASIS_{s}": ("*ASIS", "*ASI", "*IAS"), "PSIS_{s}": ("*PSIS", "*PSI", "*IPS"),
     "SACRUM": ("SACR", "SACRUM", "S1"),
@@ -232,10 +233,11 @@ _HH_ROLES = _sided({
 # WristOut on the distal radius, WristIn on the distal ulna, ToeIn/ToeOut) and Qualisys'
 # Animation set (QTM's skeleton solver: HeadL, SpineTop, LKneeOut, LAnkleOut, LHeelBack,
 # LForefootIn/Out, LToeTip; its sports variant LKneeIn, LAnkleIn, LElbowIn, LForefoot1/2/5).
-# The toe tip marks no joint: the toe comes from the forefoot markers. Chest sits mid-sternum
-# and stands in for the jugular notch (IJ): it only orients the thorax with BackTop, and the
-# neck base is placed from the thorax frame. The head needs both
-# sides and the forehead (Qualisys' HeadL, HeadR, HeadFront; Motive marks one side only).
+# The toe tip marks no joint: the toe comes from the forefoot markers. Chest sits mid-sternum,
+# some 10 cm below the jugular notch (IJ) it stands in for, so the neck base (midway between it
+# and BackTop) comes out a few cm low and forward: an approximation, unmeasured on a real
+# Motive file. The head needs both sides and the forehead (Qualisys' HeadL, HeadR, HeadFront;
+# Motive marks one side only).
 _ANIMATION_ROLES = _sided({
     "ASIS_{s}": ("WAIST{S}FRONT",), "PSIS_{s}": ("WAIST{S}BACK",), "SACRUM": ("WAISTBACK",),
     "THIGH_{s}": ("{S}THIGH",), "KNEE_LAT_{s}": ("{S}KNEEOUT",), "KNEE_MED_{s}": ("{S}KNEEIN",),
