@@ -86,6 +86,7 @@ from numpy.typing import NDArray
 
 from .contacts import ContactThresholds, _intervals, frames_of, gait_event_kind
 from .errors import EcsAnimError, InputError, MappingError, listed, quoted
+from .force_plates import ForcePlate, PlateLayout, plate_contacts, plate_edges, plate_layout
 from .importing import (
     UNITS,
     UP_AXES,
@@ -93,6 +94,7 @@ from .importing import (
     FrameRange,
     ankle_height_or_typical,
     detect_unit,
+    event_agreement,
     leading_rest_frames,
     normalize_clip,
     trim_clip,
@@ -170,6 +172,10 @@ class C3dMarkers:
     descriptions: list[str] = field(default_factory=list)
     #: The lab's gait model the file names (:func:`lab_model_named`), '' where none.
     lab_model: str = ""
+    #: The force plates whose vertical signal was read (:mod:`ecs_anim.force_plates`).
+    force_plates: list[ForcePlate] = field(default_factory=list)
+    #: Why some or all of the file's force plates were not read, '' when none was left out.
+    force_plate_note: str = ""
 
 
 #: The subject's measurements labs store with a trial that place the hip, mm, as (group:
@@ -322,11 +328,18 @@ def read_c3d(path: str | Path) -> C3dMarkers:
             lab_model = lab_model_named(
                 labels + ([] if marker_sets is None else
                           [str(t) for t in np.atleast_1d(marker_sets.string_array)]))
+            analog_used = int(reader.analog_used)
+            layout = plate_layout(reader, analog_used) if analog_used > 0 else PlateLayout([], [], [])
             data_start = (int(reader.header.data_block) - 1) * C3D_BLOCK_BYTES
             frames, data_end = [], data_start
-            for _, points, _ in (reader.read_frames() if n_points > 0 else ()):
+            plate_samples: list[F64] = []
+            for _, points, analog in (reader.read_frames() if n_points > 0 else ()):
                 frames.append(points[:, :4].astype(np.float64))
+                if layout.channels:  # (n_plates, analog samples per frame)
+                    plate_samples.append(np.stack([analog[list(c)].sum(axis=0)
+                                                   for c in layout.channels]))
                 data_end = f.tell()  # here, not after the loop: the reader reads on at its end
+            analog_rate = float(reader.analog_rate)
             unread = os.fstat(f.fileno()).st_size - data_end
             frame_bytes = (data_end - data_start) / max(len(frames), 1)
         except InputError:
@@ -362,8 +375,14 @@ def read_c3d(path: str | Path) -> C3dMarkers:
     valid = finite & (data[:, :, 3] >= 0) & np.any(positions != 0, axis=-1)
     positions = np.where(finite[..., None], positions, 0.0)
     descriptions = (descriptions + [""] * n_points)[:n_points]
+    plates: list[ForcePlate] = []
+    if plate_samples and math.isfinite(analog_rate) and analog_rate > 0:
+        signals = np.concatenate(plate_samples, axis=1).astype(np.float64)  # (n_plates, samples)
+        plates = [ForcePlate(number, corners, signal, analog_rate) for number, corners, signal
+                  in zip(layout.numbers, layout.corners, signals, strict=True)
+                  if np.all(np.isfinite(signal))]
     return C3dMarkers(labels, positions, valid, rate, units, first, events, anthropometry,
-                      descriptions, lab_model)
+                      descriptions, lab_model, plates, layout.note)
 
 
 # --- gaps --------------------------------------------------------------------------------------
@@ -669,6 +688,7 @@ def import_c3d(path: str | Path, map_spec: str | None = None, unit: str | None =
                                 contacts)
         if events or raw.events:
             extra["gait_events"] = events
+        _check_against_plates(raw, clip, extra["first_file_frame"], motion, extra)
     except InputError:
         raise
     except EcsAnimError as exc:
@@ -684,6 +704,26 @@ def import_c3d(path: str | Path, map_spec: str | None = None, unit: str | None =
         motion = fill_absent_from(motion, _load_default(Path(fill_from)), Path(fill_from).name,
                                   thresholds)
     return motion
+
+
+def _check_against_plates(raw: C3dMarkers, clip: CanonicalClip, first_file_frame: int,
+                          motion: NormalizedMotion, extra: dict[str, Any]) -> None:
+    """The foot contacts the file's force plates measured (``extra["force_plates"]``) and how
+    far the motion's contacts lie from their touch-downs and lift-offs
+    (``motion.info["contacts"]["plates_check"]``, as ``events_check``)."""
+    plate2clip = UNITS[clip.unit] * UP_AXES[clip.up_axis]
+    measured, notes = plate_contacts(raw.force_plates, plate2clip, clip.positions, clip.fps,
+                                     first_file_frame / raw.rate)
+    notes = [raw.force_plate_note] * bool(raw.force_plate_note) + notes
+    if notes:
+        extra["force_plate_notes"] = notes
+    if not measured:
+        return
+    extra["force_plates"] = measured
+    edges = plate_edges(measured)
+    if edges and motion.planted is not None:
+        motion.info["contacts"]["plates_check"] = event_agreement(
+            motion.planted["on_ground"], edges, motion.fps)
 
 
 def gait_events(stored: list[tuple[str, str, float]], start_s: float) -> list[dict[str, Any]]:

@@ -238,6 +238,12 @@ def _events_and_treadmill(info: dict[str, Any]) -> str:
         text += f", {n} gait events"
         if check.get("worst_ms") is not None:
             text += f" (detected contacts within {check['worst_ms']:g} ms of them)"
+    plates = info.get("force_plates")
+    if plates:
+        text += f", {len(plates)} force-plate contact{'s' * (len(plates) != 1)}"
+        check = info.get("contacts", {}).get("plates_check") or {}
+        if check.get("worst_ms") is not None:
+            text += f" (contacts within {check['worst_ms']:g} ms of their measured edges)"
     centres = info.get("lab_joint_centres")
     if centres:
         joint, row = max(centres.items(), key=lambda kv: kv[1]["median_mm"])
@@ -352,6 +358,19 @@ def cmd_info(args: argparse.Namespace) -> int:
         print(f"  events     detected contacts within {check['worst_ms']:g} ms of the gait events"
               if check.get("worst_ms") is not None else
               "  events     some gait event has no detected contact edge")
+    for plate in info.get("force_plates") or []:
+        edges = [name for name, key in (("touch-down", "touch_down"), ("lift-off", "lift_off"))
+                 if plate[key]]
+        foot = f"{plate['side'].upper()} foot" if plate["side"] else plate.get("why", "")
+        print(f"  plate {plate['plate']:<4d} {plate['on_s']:8.3f}-{plate['off_s']:.3f} s  {foot}"
+              + (f" (measured {' and '.join(edges)})" if edges else " (no edge measured)"))
+    for note in info.get("force_plate_notes") or []:
+        print(f"  plates     {note}")
+    check = contacts_info.get("plates_check")
+    if check:
+        print(f"  plates     contacts within {check['worst_ms']:g} ms of the plates' touch-downs and"
+              " lift-offs" if check.get("worst_ms") is not None else
+              "  plates     some measured plate edge has no contact edge")
     belt = info.get("treadmill")
     if belt:
         print(f"  treadmill  in place, belt {belt['speed_mps']:g} m/s: "
