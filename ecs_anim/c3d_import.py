@@ -332,12 +332,12 @@ def read_c3d(path: str | Path) -> C3dMarkers:
             layout = plate_layout(reader, analog_used) if analog_used > 0 else PlateLayout([], [], [])
             data_start = (int(reader.header.data_block) - 1) * C3D_BLOCK_BYTES
             frames, data_end = [], data_start
-            plate_samples: list[F64] = []
+            plate_channels = sorted({c for chans in layout.channels for c in chans})
+            plate_samples: list[F64] = []  # (plate channels, analog samples per frame) a frame
             for _, points, analog in (reader.read_frames() if n_points > 0 else ()):
                 frames.append(points[:, :4].astype(np.float64))
-                if layout.channels:  # (n_plates, analog samples per frame)
-                    plate_samples.append(np.stack([analog[list(c)].sum(axis=0)
-                                                   for c in layout.channels]))
+                if plate_channels:
+                    plate_samples.append(analog[plate_channels])
                 data_end = f.tell()  # here, not after the loop: the reader reads on at its end
             analog_rate = float(reader.analog_rate)
             unread = os.fstat(f.fileno()).st_size - data_end
@@ -377,10 +377,12 @@ def read_c3d(path: str | Path) -> C3dMarkers:
     descriptions = (descriptions + [""] * n_points)[:n_points]
     plates: list[ForcePlate] = []
     if plate_samples and math.isfinite(analog_rate) and analog_rate > 0:
-        signals = np.concatenate(plate_samples, axis=1).astype(np.float64)  # (n_plates, samples)
-        plates = [ForcePlate(number, corners, signal, analog_rate) for number, corners, signal
-                  in zip(layout.numbers, layout.corners, signals, strict=True)
-                  if np.all(np.isfinite(signal))]
+        samples = np.concatenate(plate_samples, axis=1).astype(np.float64)  # (channels, samples)
+        row = {c: k for k, c in enumerate(plate_channels)}
+        for number, corners, chans in zip(layout.numbers, layout.corners, layout.channels, strict=True):
+            signal = samples[[row[c] for c in chans]].sum(axis=0)
+            if np.all(np.isfinite(signal)):
+                plates.append(ForcePlate(number, corners, signal, analog_rate))
     return C3dMarkers(labels, positions, valid, rate, units, first, events, anthropometry,
                       descriptions, lab_model, plates, layout.note)
 
