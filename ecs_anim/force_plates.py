@@ -2,9 +2,10 @@
 
 A force plate samples the force a foot puts on it at the analog rate (1000 Hz or more): its
 vertical signal leaves its unloaded level when the foot lands and returns to it when the foot
-leaves. Where the whole foot is over the plate at that instant, that is the foot's physical
-touch-down or lift-off, which gait labs' foot-strike events follow where a foot lands on a plate
-(Vicon Nexus and Qualisys mark them at a force threshold of 10-20 N). Import reports these
+leaves: the foot's physical touch-down and lift-off (where the whole foot is over the plate; a
+foot landing or leaving partly off it is not told apart), which gait labs' foot-strike events
+follow where a foot lands on a plate (Vicon Nexus and Qualisys mark them at a force threshold
+of 10-20 N). Import reports these
 contacts (``info.force_plates``) and how far the motion's contacts lie from them
 (``info.contacts.plates_check``); they never change the contacts.
 
@@ -36,9 +37,11 @@ VERTICAL_CHANNELS: dict[int, tuple[int, ...]] = {1: (2,), 2: (2,), 3: (4, 5, 6, 
 #: A plate is loaded while its vertical signal stands more than this share of its peak load away
 #: from the unloaded level: about 15-20 N for an adult's step, where labs place their events.
 LOAD_SHARE = 0.02
-#: ... and more than this many times the signal's noise while unloaded (a plate nobody stepped
-#: on has no contact, however its noise compares with its own peak).
-LOAD_OVER_NOISE = 20.0
+#: ... and more than this many times the signal's noise while unloaded ...
+LOAD_OVER_NOISE = 5.0
+#: ... on a plate whose peak load is at least this many times that noise (one nobody stepped on
+#: has no contact, however its noise compares with its own peak).
+PEAK_OVER_NOISE = 20.0
 #: A plate whose unloaded level lies further from zero than this share of its peak load was
 #: never unloaded: labs zero their plates before a trial, and an amplifier's offset stays well
 #: under a body's weight.
@@ -188,7 +191,8 @@ class LoadedSpan:
 
 
 def loaded_spans(plate: ForcePlate) -> tuple[list[LoadedSpan], str]:
-    """Each span the plate is loaded (:data:`LOAD_SHARE`, :data:`LOAD_OVER_NOISE`), gaps under
+    """Each span the plate is loaded (:data:`LOAD_SHARE`, :data:`LOAD_OVER_NOISE`,
+    :data:`PEAK_OVER_NOISE`), gaps under
     :data:`MIN_GAP_S` closed, spans under :data:`MIN_CONTACT_S` dropped. -> (spans, why there
     are none: '' when the plate was simply never stepped on).
 
@@ -200,11 +204,11 @@ def loaded_spans(plate: ForcePlate) -> tuple[list[LoadedSpan], str]:
     level, noise = unloaded_level(plate.vertical, plate.rate)
     load = np.abs(plate.vertical - level)
     peak = float(load.max())
-    if peak == 0.0 or peak <= LOAD_OVER_NOISE * noise:
+    if peak == 0.0 or peak <= PEAK_OVER_NOISE * noise:
         return [], ""
     if abs(level) > ZERO_SHARE * peak:
         return [], f"plate {plate.number}: never unloaded (its lowest load is not zero)"
-    threshold = max(LOAD_SHARE * peak, LOAD_OVER_NOISE * noise / 4)
+    threshold = max(LOAD_SHARE * peak, LOAD_OVER_NOISE * noise)
     merged: list[tuple[int, int]] = []
     for a, b in _intervals(load > threshold):
         if merged and a - merged[-1][1] - 1 < MIN_GAP_S * plate.rate:
@@ -230,10 +234,10 @@ def _inside(points_xy: F64, outline_xy: F64, margin: float = 0.0) -> NDArray[np.
     edges = np.roll(outline_xy, -1, axis=0) - outline_xy  # (4, 2)
     rel = points_xy[..., None, :] - outline_xy  # (..., 4, 2)
     cross = edges[:, 0] * rel[..., 1] - edges[:, 1] * rel[..., 0]
-    length = np.maximum(np.linalg.norm(edges, axis=-1), 1e-12)
-    signed = cross / length  # distance to each edge's line, positive on its left
-    orientation = 1.0 if float(np.sum(edges[:, 0] * np.roll(edges[:, 1], -1)
-                                      - edges[:, 1] * np.roll(edges[:, 0], -1))) >= 0 else -1.0
+    signed = cross / np.maximum(np.linalg.norm(edges, axis=-1), 1e-12)  # left of each edge: > 0
+    twice_area = float(np.sum(outline_xy[:, 0] * np.roll(outline_xy[:, 1], -1)
+                              - np.roll(outline_xy[:, 0], -1) * outline_xy[:, 1]))
+    orientation = 1.0 if twice_area >= 0 else -1.0  # corners anticlockwise: inside is left
     inside: NDArray[np.bool_] = np.all(signed * orientation >= margin, axis=-1)
     return inside
 

@@ -181,3 +181,8 @@ def test_a_damaged_plate_parameter_leaves_that_plate_out_and_says_why(tmp_path, 
     assert ", 2 force-plate contacts" in capsys.readouterr().out  # plates 2 and 3
     assert main(["info", str(tmp_path / "damaged_plate.nmo")]) == 0
     assert f"  plates     {note}" in capsys.readouterr().out
+
+
+def test_a_plate_nobody_stepped_on_has_no_contact_and_no_note():
+    rng = np.random.default_rng(8384)
+    assert loaded_spans(_plate(rng.normal(3.0, 0.4, 3000))) == ([], "")
