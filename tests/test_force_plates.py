@@ -5,6 +5,7 @@ spans read from its vertical signal, the foot on it, the measured touch-downs an
 from __future__ import annotations
 
 import struct
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,6 +25,7 @@ PLATE_FEET = {
     "varied/codamotion_dotted_gait_2015_200hz.c3d": (["r", "l", "r", "l"], 8),
     "varied/mac_helenhayes_events_vjc_60hz.c3d": (["l", "r"], 4),
     "varied/qualisys_pig_yup_events_100hz.c3d": (["r", "l", "r"], 5),  # the last runs on
+    "varied/qualisys_lowercase_underscore_240hz.c3d": (["r", "l"], 4),  # type 3: 4 Fz sensors
     "varied/rehazenter_isb_events_100hz.c3d": (["r", "l"], 0),  # zeroed below 50 N
     "varied/vicon_cgm24_events_jc_100hz.c3d": (["l"], 2),
     "varied/vicon_pig_noclav_prefix_events_60hz.c3d": (["r", "l"], 4),
@@ -44,9 +46,13 @@ DETECTED_VS_PLATES_MS = {
     "varied/codamotion_dotted_gait_2015_200hz.c3d": 42.0,
     "varied/mac_helenhayes_events_vjc_60hz.c3d": 34.3,
     "varied/qualisys_pig_yup_events_100hz.c3d": 22.0,
+    "varied/qualisys_lowercase_underscore_240hz.c3d": 16.7,
     "varied/vicon_cgm24_events_jc_100hz.c3d": 40.0,
     "varied/vicon_pig_noclav_prefix_events_60hz.c3d": 59.1,
 }
+#: The user map a file needs (the README's table).
+MAPS = {"varied/qualisys_lowercase_underscore_240hz.c3d":
+        str(Path(__file__).parent / "data" / "maps" / "qualisys_knee_joint_line.yaml")}
 _CACHE: dict[str, object] = {}
 
 
@@ -55,7 +61,7 @@ def _motion(name: str):
     if not path.exists():
         pytest.skip(f"{path} not available")
     if name not in _CACHE:
-        _CACHE[name] = import_c3d(path)
+        _CACHE[name] = import_c3d(path, MAPS.get(name))
     return _CACHE[name]
 
 
