@@ -339,7 +339,7 @@ def read_c3d(path: str | Path) -> C3dMarkers:
                 if plate_channels:
                     plate_samples.append(analog[plate_channels])
                 data_end = f.tell()  # here, not after the loop: the reader reads on at its end
-            analog_rate = float(reader.analog_rate)
+            analog_rate = float(reader.analog_rate) if plate_channels else 0.0
             unread = os.fstat(f.fileno()).st_size - data_end
             frame_bytes = (data_end - data_start) / max(len(frames), 1)
         except InputError:
