@@ -18,6 +18,7 @@ plate's peak load away from its unloaded level, which is the same instant in any
 
 from __future__ import annotations
 
+import struct
 import warnings
 from dataclasses import dataclass, field
 from typing import Any
@@ -127,7 +128,8 @@ def plate_layout(reader: Any, analog_used: int) -> PlateLayout:
             corners_param = group.get("CORNERS")
             corners = np.asarray(corners_param.float_array, dtype=np.float64).reshape(-1, 4, 3) \
                 if corners_param is not None else np.zeros((0, 4, 3))
-    except (AssertionError, ValueError, TypeError, AttributeError, IndexError):
+    except (AssertionError, ValueError, TypeError, AttributeError, IndexError, KeyError,
+            struct.error):  # what the c3d package raises on damaged parameters
         return PlateLayout([], [], [], "FORCE_PLATFORM cannot be read")
     n = len(types)
     if n == 0:
