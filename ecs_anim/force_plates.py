@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .contacts import _intervals
+from .contacts import HEEL_BEHIND_ANKLE, _intervals
 from .skeleton import JOINT_INDEX as J
 
 F64 = NDArray[np.float64]
@@ -50,9 +50,8 @@ ZERO_SHARE = 1.0
 #: Contacts shorter than this (s) are dropped (a knock); gaps shorter than this (s) are closed.
 MIN_CONTACT_S = 0.1
 MIN_GAP_S = 0.02
-#: The heel (this share of the ankle-to-toe length behind the ankle) and the toe tip (this
-#: share beyond the toe joint): the foot on a plate has either over it.
-HEEL_BEHIND_ANKLE = 0.3
+#: The toe tip: this share of the ankle-to-toe length beyond the toe joint (the heel point is
+#: contacts' :data:`~ecs_anim.contacts.HEEL_BEHIND_ANKLE`): the foot on a plate has either over it.
 TOE_TIP_BEYOND_TOE = 0.35
 #: A foot more than this (m) outside a plate's outline is not on it ...
 FOOT_NEAR_PLATE_M = 0.05
