@@ -60,8 +60,8 @@ BOUND_MS = 25.0
 #: on a plate lies within 10 ms of the plate's measured touch-down, but vicon_pig's right strike
 #: at 1.883 s lies 92 ms after its plate 1 measured that foot loading it, and the labs' foot
 #: offs lie 21 ms before to 40 ms after the plates' unloading. Against the plates' measured
-#: edges (8 files) the detected ones lie within 22-59 ms; a sweep of the edge thresholds (height
-#: 1.5-6 cm, rise 0.3-0.8 m/s, sink 0.05-0.16 m/s, filter 0.02-0.05 s) found none closer on the
+#: edges (7 files) the detected ones lie within 17-59 ms; a sweep of the edge thresholds (height
+#: 1-6 cm, rise 0.25-0.8 m/s, sink 0.05-0.16 m/s, filter 0.02-0.05 s) found none closer on the
 #: worst file, plates or events, than the defaults.
 OPEN_MS = {
     "vicon_cgm24_events_jc_100hz.c3d": 50,
