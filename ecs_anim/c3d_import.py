@@ -376,6 +376,7 @@ def read_c3d(path: str | Path) -> C3dMarkers:
     positions = np.where(finite[..., None], positions, 0.0)
     descriptions = (descriptions + [""] * n_points)[:n_points]
     plates: list[ForcePlate] = []
+    plate_notes = [layout.note] if layout.note else []
     if plate_samples and math.isfinite(analog_rate) and analog_rate > 0:
         samples = np.concatenate(plate_samples, axis=1).astype(np.float64)  # (channels, samples)
         row = {c: k for k, c in enumerate(plate_channels)}
@@ -383,8 +384,12 @@ def read_c3d(path: str | Path) -> C3dMarkers:
             signal = samples[[row[c] for c in chans]].sum(axis=0)
             if np.all(np.isfinite(signal)):
                 plates.append(ForcePlate(number, corners, signal, analog_rate))
+            else:
+                plate_notes.append(f"plate {number}: its vertical signal holds non-finite samples")
+    elif plate_samples:
+        plate_notes.append(f"the analog rate {analog_rate:g} Hz is not usable: no plate read")
     return C3dMarkers(labels, positions, valid, rate, units, first, events, anthropometry,
-                      descriptions, lab_model, plates, layout.note)
+                      descriptions, lab_model, plates, "; ".join(plate_notes))
 
 
 # --- gaps --------------------------------------------------------------------------------------
@@ -716,7 +721,7 @@ def _check_against_plates(raw: C3dMarkers, clip: CanonicalClip, first_file_frame
     plate2clip = UNITS[clip.unit] * UP_AXES[clip.up_axis]
     measured, notes = plate_contacts(raw.force_plates, plate2clip, clip.positions, clip.fps,
                                      first_file_frame / raw.rate)
-    notes = [raw.force_plate_note] * bool(raw.force_plate_note) + notes
+    notes = ([raw.force_plate_note] if raw.force_plate_note else []) + notes
     if notes:
         extra["force_plate_notes"] = notes
     if not measured:

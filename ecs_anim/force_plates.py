@@ -229,7 +229,7 @@ def loaded_spans(plate: ForcePlate) -> tuple[list[LoadedSpan], str]:
             for a, b in merged if (b - a + 1) >= MIN_CONTACT_S * plate.rate], ""
 
 
-def _inside(points_xy: F64, outline_xy: F64, margin: float = 0.0) -> NDArray[np.bool_]:
+def _inside(points_xy: F64, outline_xy: F64, margin: float) -> NDArray[np.bool_]:
     """Whether points (..., 2) lie within the convex outline (4, 2), at least ``margin`` inside
     (negative: that far outside still counts)."""
     edges = np.roll(outline_xy, -1, axis=0) - outline_xy  # (4, 2)
