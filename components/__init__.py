@@ -1,6 +1,6 @@
 """Data-only ECS components (installed as ``ecs_anim.components``)."""
 
-from .character import (
+from ecs_anim.components.character import (
     BodyBlend,
     CharacterRow,
     Constraint,
@@ -12,7 +12,7 @@ from .character import (
     Posture,
     QueuedClip,
 )
-from .environment import GroundQuery
+from ecs_anim.components.environment import GroundQuery
 
 __all__ = [
     "BodyBlend",

@@ -1,7 +1,7 @@
 """Per-character components. Data only; each field says its shape, frame and unit.
 
 A character's components decide which systems process it (DESIGN §7b): each system's
-:attr:`~ecs_anim.system_base.System.query` names the components it needs, and its rows are the
+:attr:`~ecs_anim.runtime.system_base.System.query` names the components it needs, and its rows are the
 characters that have them all. Specifications (Morphology, MotionPlayer, Placement, Constraint,
 a GroundQuery of the character's own) are frozen and replaced, never mutated; replacing one is a
 structural change (the systems' cached rows are recomputed once, not per tick).
@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from ecs_anim.morphology import Morphology
-from ecs_anim.normalized import NormalizedPoses
+from ecs_anim.core.morphology import Morphology
+from ecs_anim.core.normalized import NormalizedPoses
 
 __all__ = [
     "BodyBlend",
@@ -36,7 +36,7 @@ __all__ = [
     "QueuedClip",
 ]
 
-# ``Morphology`` (ecs_anim.morphology) is itself the component: the body spec, a frozen
+# ``Morphology`` (ecs_anim.core.morphology) is itself the component: the body spec, a frozen
 # dataclass of segment lengths (metres), total mass (kg) and sex (the de Leva mass table).
 # ``Simulation.set_body`` replaces it; MorphologyAdapt takes the new body into the store.
 
@@ -93,7 +93,7 @@ class CharacterRow:
 @dataclass(frozen=True)
 class NormalizedPose:
     """This tick's normalized pose of one character: views of ``Simulation.store.poses`` at its
-    row, batch shape (1,) (see :class:`ecs_anim.normalized.NormalizedPoses` for every field's
+    row, batch shape (1,) (see :class:`ecs_anim.core.normalized.NormalizedPoses` for every field's
     shape and frame). Not attached to the entity: ``Simulation.pose(entity)`` makes one."""
 
     row: int
@@ -104,7 +104,7 @@ class NormalizedPose:
 class Posture:
     """This tick's world posture of one character, views of the store at its row:
     ``positions`` (N_JOINTS, 3) metres, world Z up; ``local_rotations`` (n_export_joints, 3, 3)
-    local rotation matrices (BVH axes) of the export skeleton (:data:`ecs_anim.exporting.
+    local rotation matrices (BVH axes) of the export skeleton (:data:`ecs_anim.io.export.skeleton.
     EXPORT_NAMES`), empty (0, 3, 3) unless the simulation makes rotations. Not attached to the
     entity: ``Simulation.posture(entity)`` makes one."""
 

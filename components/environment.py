@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ecs_anim.ground import Ground
+from ecs_anim.core.ground import Ground
 
 
 @dataclass(frozen=True)

@@ -17,13 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ecs_anim.components import MotionPlayer
-from ecs_anim.ground import Bumps
-from ecs_anim.importing import import_bvh
-from ecs_anim.metrics import MetricsRecorder
-from ecs_anim.morphology import Morphology
-from ecs_anim.simulation import Simulation
-from ecs_anim.steering import GAITS
+from ecs_anim import GAITS, Bumps, MetricsRecorder, Morphology, MotionPlayer, Simulation, import_bvh
 
 #: The project's own motions, found beside this file so that the example runs from any folder.
 MOTIONS = Path(__file__).resolve().parents[1] / "scenarios" / "motions"

@@ -1,8 +1,8 @@
 """COMControl: where the centre of mass ended up, for the characters the solver moved.
 
 The paper's ``adaptRoot()`` runs inside the solver's loop, after the trunk in every iteration
-(:func:`ecs_anim.kernels.solve_root.solve_root`, mirroring
-:meth:`ecs_anim.solver_shell._Solve.root`: the root moves horizontally by the centre-of-mass
+(:func:`ecs_anim.runtime.kernels.solve_root.solve_root`, mirroring
+:meth:`ecs_anim.solver.shell._Solve.root`: the root moves horizontally by the centre-of-mass
 error, lowered if a planted leg could not reach its footprint), so it is a step of
 ConstraintSolve. This system checks its result every tick: the whole-body centre of mass (de Leva
 segment masses of each body) of the solved posture and its horizontal distance from the desired
@@ -12,7 +12,7 @@ error shows the drift the constraints cause.
 Rows: characters with a Constraint component.
 Reads: store.goals, solved (the solver's decoded result), com_desired, segment_mass_kg, segment_com_fraction.
 Writes: store.com, store.com_error_m (NaN for characters nothing constrained this tick), in
-place, by the compiled :mod:`ecs_anim.kernels.com`.
+place, by the compiled :mod:`ecs_anim.runtime.kernels.com`.
 """
 
 from __future__ import annotations
@@ -20,9 +20,9 @@ from __future__ import annotations
 import numpy as np
 
 from ecs_anim.components import Constraint
-from ecs_anim.kernels import LIGHT_ROWS_PER_THREAD, over_chunks
-from ecs_anim.kernels.com import centres_of_mass, horizontal_errors, segment_joints
-from ecs_anim.system_base import System
+from ecs_anim.runtime.kernels import LIGHT_ROWS_PER_THREAD, over_chunks
+from ecs_anim.runtime.kernels.com import centres_of_mass, horizontal_errors, segment_joints
+from ecs_anim.runtime.system_base import System
 
 _PROXIMAL, _DISTAL = segment_joints()
 

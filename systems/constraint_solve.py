@@ -1,9 +1,9 @@
 """ConstraintSolve: every active constraint of every character, by priority (paper §9).
 
-Gathers the store's arrays, calls the solver's tick (:func:`ecs_anim.solver_shell.constrain`:
+Gathers the store's arrays, calls the solver's tick (:func:`ecs_anim.solver.shell.constrain`:
 targets, the goals, the solve of the characters with an active constraint, each constraint's
-error on the result, all compiled: :mod:`ecs_anim.kernels.goals`,
-:func:`ecs_anim.kernels.solve.solve`) and writes the results back. The
+error on the result, all compiled: :mod:`ecs_anim.runtime.kernels.goals`,
+:func:`ecs_anim.runtime.kernels.solve.solve`) and writes the results back. The
 activation weights run on simulation time, or on the clip time of constraints stored with a
 motion; a point on another character is read from its posture of the previous tick (so every
 character sees the same world whatever their order), a point on the same character from this
@@ -15,7 +15,7 @@ com_control, com_target_xy, segment_mass_kg, segment_com_fraction; the constrain
 Writes: store.poses (solved characters), com_desired, goals, solved (the decoded result of
 the solved characters, which PostureConvert takes instead of decoding them again); table.held;
 table.enabled, table.weight, table.error (how far each active constraint is from being met on
-the result, :func:`~ecs_anim.solver_shell.constraint_errors`; NaN while inactive).
+the result, :func:`~ecs_anim.solver.shell.constraint_errors`; NaN while inactive).
 """
 
 from __future__ import annotations
@@ -26,26 +26,28 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.components import Constraint
-from ecs_anim.constraint_table import KIND_ORIENTATION
-from ecs_anim.kernels import over_chunks
-from ecs_anim.kernels.com import centres_of_mass, segment_joints
-from ecs_anim.kernels.decode import decode
-from ecs_anim.kernels.goals import constraint_errors as constraint_errors  # tests patch these
-from ecs_anim.kernels.goals import tick_goals as tick_goals
-from ecs_anim.kernels.solve import solve as solve
-from ecs_anim.solver_budget import SolverCostModel, SolverReport
-from ecs_anim.solver_shell import TickResult, TickSteps, constrain, scatter
-from ecs_anim.system_base import System
+from ecs_anim.motion.constraint_table import KIND_ORIENTATION
+from ecs_anim.runtime.kernels import over_chunks
+from ecs_anim.runtime.kernels.com import centres_of_mass, segment_joints
+from ecs_anim.runtime.kernels.decode import decode
+from ecs_anim.runtime.kernels.goals import (
+    constraint_errors as constraint_errors,  # tests patch these
+)
+from ecs_anim.runtime.kernels.goals import tick_goals as tick_goals
+from ecs_anim.runtime.kernels.solve import solve as solve
+from ecs_anim.runtime.system_base import System
+from ecs_anim.solver.budget import SolverCostModel, SolverReport
+from ecs_anim.solver.shell import TickResult, TickSteps, constrain, scatter
 
 if TYPE_CHECKING:
-    from ecs_anim.simulation import Simulation
+    from ecs_anim.runtime.simulation import Simulation
 
 _PROXIMAL, _DISTAL = segment_joints()
 
 
 def _centres(positions: NDArray[np.float64], masses: NDArray[np.float64],
              com_fraction: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The compiled :func:`ecs_anim.morphology.centres_of_mass` (same arguments, (n, 3))."""
+    """The compiled :func:`ecs_anim.core.morphology.centres_of_mass` (same arguments, (n, 3))."""
     n = positions.shape[0]
     out = np.empty((n, 3))
     every = np.arange(n, dtype=np.int64)
@@ -63,7 +65,7 @@ class ConstraintSolve(System):
 
     def __init__(self, sim: Simulation) -> None:
         super().__init__(sim)
-        #: This tick's :class:`~ecs_anim.solver_budget.SolverReport` (``sim.solver_report()``).
+        #: This tick's :class:`~ecs_anim.solver.budget.SolverReport` (``sim.solver_report()``).
         self.report: SolverReport | None = None
         # The last tick, for the frame budget's cost model: (structure version, iterations each
         # store row took (n,)), the systems' total seconds at the end of this system's last run
@@ -79,6 +81,8 @@ class ConstraintSolve(System):
         if table.m == 0:
             return
         weight = table.weights(sim.time_s, st.clip, st.clip_time_s)
+        if not self.all_rows():  # the characters without a Constraint component are not solved
+            weight = np.where(self.in_rows()[table.owner], weight, 0.0)
         settings = sim.solver_settings
         unconstrained = decode(st.poses, st.lengths) if (weight > 0).any() else None
         expected = None

@@ -23,23 +23,23 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ecs_anim.ground import Ground, GroundDescription, describe
-from ecs_anim.ground_adapt import (
+from ecs_anim.core.ground import Ground, GroundDescription, describe
+from ecs_anim.core.ground_adapt import (
     BALL_HEIGHT_PER_LEG,
     HEEL_TOLERANCE_M,
     MAX_LEG_EXTENSION,
     adapt_keeping_heels_up,
     heel_depth,
 )
-from ecs_anim.kernels import over_chunks
-from ecs_anim.kernels.decode import leg_pose_arrays, pose_arrays
-from ecs_anim.kernels.ground_adapt import ground_adapt_rows
-from ecs_anim.kernels.playback import writable_poses
-from ecs_anim.normalized import SIDE_LENGTHS, decode_legs
-from ecs_anim.system_base import System
+from ecs_anim.core.normalized import SIDE_LENGTHS, decode_legs
+from ecs_anim.runtime.kernels import over_chunks
+from ecs_anim.runtime.kernels.decode import leg_pose_arrays, pose_arrays
+from ecs_anim.runtime.kernels.ground_adapt import ground_adapt_rows
+from ecs_anim.runtime.kernels.playback import writable_poses
+from ecs_anim.runtime.system_base import System
 
 if TYPE_CHECKING:
-    from ecs_anim.simulation import Simulation
+    from ecs_anim.runtime.simulation import Simulation
 
 #: Time constant (s) with which the motion's floor follows the ground under the supporting feet.
 GROUND_SMOOTHING_S = 0.15
@@ -54,7 +54,7 @@ def _own(a: NDArray[Any]) -> NDArray[Any]:
 
 
 class GroundAdapt(System):
-    """Adapts with the compiled :mod:`ecs_anim.kernels.ground_adapt` on a built-in ground; a
+    """Adapts with the compiled :mod:`ecs_anim.runtime.kernels.ground_adapt` on a built-in ground; a
     ground of the user's own (only its numpy ``height``) goes through :meth:`run_numpy`."""
 
     reads = ("poses", "contact_weight", "lengths", "clip", "footprint", "locked",

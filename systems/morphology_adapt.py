@@ -2,8 +2,8 @@
 
 Rows: characters with a Morphology. A body replaced while playing (``Simulation.set_body``)
 is taken in on the next tick, before any system decodes the pose on it
-(:func:`ecs_anim.body_change.adopt_bodies`), or blended into over ``blend_s`` tick by tick
-(:func:`ecs_anim.body_change.blend_bodies`).
+(:func:`ecs_anim.runtime.body_change.adopt_bodies`), or blended into over ``blend_s`` tick by tick
+(:func:`ecs_anim.runtime.body_change.blend_bodies`).
 
 Reads: store.poses, store.lengths; on a body change the Morphology (and BodyBlend) components, segment_mass_kg,
 segment_com_fraction, placement_*, fade_placement_*, posture (whether the character has played).
@@ -19,9 +19,9 @@ no pass over every character decodes a pose only to hand it on.
 
 from __future__ import annotations
 
-from ecs_anim.body_change import adopt_bodies, blend_bodies
 from ecs_anim.components import Morphology
-from ecs_anim.system_base import System
+from ecs_anim.runtime.body_change import adopt_bodies, blend_bodies
+from ecs_anim.runtime.system_base import System
 
 
 class MorphologyAdapt(System):

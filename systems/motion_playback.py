@@ -3,12 +3,12 @@
 Rows: characters with a MotionPlayer.
 Reads: store.clip, clip_time_s, speed, fade_speed, loop, fade_*, queue_*, placement_*,
 fade_placement_*, lengths (leg length: the root path's unit); for steered characters
-(:func:`ecs_anim.steering.steer`) steer_mode, steer_heading_rad, steer_speed_m_s, path_xy,
+(:func:`ecs_anim.runtime.steering.steer`) steer_mode, steer_heading_rad, steer_speed_m_s, path_xy,
 path_len, path_cum_m, path_progress_m, gait, gait_clip, and the last tick's contact_weight,
 locked, footprint; the clip bank.
 Writes: store.poses (placed in the world; first writer each tick), store.contact_weight,
 store.clip_time_s, fade_time_s, fade_elapsed_s, fade_s; on a clip change (through
-:func:`ecs_anim.playback_queue.start_next_clips`) clip, loop, queue_head, placement_*, fade_*,
+:func:`ecs_anim.runtime.playback_queue.start_next_clips`) clip, loop, queue_head, placement_*, fade_*,
 fade_keeps_contacts, fade_speed, locked; steering writes speed (the playback rate), placement_*,
 fade_placement_*, steer_mode, steer_heading_rad, steer_speed_m_s, path_progress_m, gait.
 """
@@ -21,27 +21,28 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.components import MotionPlayer
-from ecs_anim.kernels import LIGHT_ROWS_PER_THREAD, over_chunks
-from ecs_anim.kernels.decode import PoseArrays, pose_arrays
-from ecs_anim.kernels.playback import (
+from ecs_anim.core.normalized import NormalizedPoses
+from ecs_anim.motion.sampling import ClipBank, blend, rotate_xy, sample, sample_table
+from ecs_anim.runtime.kernels import LIGHT_ROWS_PER_THREAD, over_chunks
+from ecs_anim.runtime.kernels.decode import PoseArrays, pose_arrays
+from ecs_anim.runtime.kernels.playback import (
     blend_rows,
     empty_poses,
     sample_placed_rows,
     sample_table_rows,
     writable_poses,
 )
-from ecs_anim.normalized import NormalizedPoses
-from ecs_anim.playback import ClipBank, blend, rotate_xy, sample, sample_table
-from ecs_anim.playback_queue import start_next_clips
-from ecs_anim.steering import steer
-from ecs_anim.system_base import System
+from ecs_anim.runtime.playback_queue import start_next_clips
+from ecs_anim.runtime.steering import steer
+from ecs_anim.runtime.system_base import System
+from ecs_anim.solver.shell import scatter
 
 if TYPE_CHECKING:
-    from ecs_anim.simulation import Simulation
+    from ecs_anim.runtime.simulation import Simulation
 
 
 class MotionPlayback(System):
-    """Samples with the compiled :mod:`ecs_anim.kernels.playback` (numpy reference:
+    """Samples with the compiled :mod:`ecs_anim.runtime.kernels.playback` (numpy reference:
     :meth:`run_numpy`), into the store's pose arrays in place."""
 
     query = (MotionPlayer,)
@@ -67,7 +68,7 @@ class MotionPlayback(System):
         self._start_queued_clips()
         self._steer(dt)
         release_step = dt / self.sim.steering_settings.contact_release_s
-        rows = np.arange(st.n, dtype=np.int64)
+        rows = self.rows()
         leg = self.sim.leg_length()
         out = pose_arrays(writable_poses(st.poses, st.n))
         bank_poses = self._bank_poses(bank)
@@ -76,7 +77,7 @@ class MotionPlayback(System):
                     st.placement_xy, st.placement_heading, leg, out, rows)
         if st.contact_weight.shape != (st.n, 2) or not st.contact_weight.flags.writeable:
             st.contact_weight = np.zeros((st.n, 2))
-        fading = np.flatnonzero(st.fade_s > 0.0)
+        fading = rows[st.fade_s[rows] > 0.0]
         previous = st.contact_weight[fading]  # the last tick's (a copy)
         over_chunks(sample_table_rows, rows.size, rows, bank.contact_weight, bank.start,
                     bank.n_frames, bank.fps, st.clip, st.clip_time_s, st.loop, st.contact_weight,
@@ -118,13 +119,18 @@ class MotionPlayback(System):
                                                 st.fade_keeps_contacts,
                                                 dt / self.sim.steering_settings.contact_release_s),
                            weights)
+        playing = self.in_rows()
         if np.any(fading):
             old = self._placed(sample(bank, st.fade_clip, st.fade_time_s, st.fade_loop),
                                st.fade_placement_xy, st.fade_placement_heading)
             poses = blend(old, poses, w)
-            st.fade_s = np.where(w >= 1.0, 0.0, st.fade_s)
-        st.poses = poses
-        st.contact_weight = weights
+            st.fade_s = np.where((w >= 1.0) & playing, 0.0, st.fade_s)
+        if self.all_rows():
+            st.poses, st.contact_weight = poses, weights
+        else:  # the characters without a MotionPlayer keep their pose and contacts
+            rows = self.rows()
+            st.poses = scatter(st.poses, rows, poses.take(rows))
+            st.contact_weight = np.where(playing[:, None], weights, st.contact_weight)
         self._advance_clocks(dt)
 
     @staticmethod
@@ -146,13 +152,20 @@ class MotionPlayback(System):
     def _steer(self, dt: float) -> None:
         """Steered characters' heading, speed and clip for this tick (:func:`steer`)."""
         sim = self.sim
-        steer(sim.store, sim.bank, sim.gait_table(), sim.steering_settings, dt)
+        steer(sim.store, sim.bank, sim.gait_table(), sim.steering_settings, dt,
+              None if self.all_rows() else self.in_rows())
 
     def _advance_clocks(self, dt: float) -> None:
         st = self.sim.store
-        st.clip_time_s += dt * st.speed
-        st.fade_time_s += dt * st.fade_speed
-        st.fade_elapsed_s += dt
+        if self.all_rows():
+            st.clip_time_s += dt * st.speed
+            st.fade_time_s += dt * st.fade_speed
+            st.fade_elapsed_s += dt
+            return
+        rows = self.rows()
+        st.clip_time_s[rows] += dt * st.speed[rows]
+        st.fade_time_s[rows] += dt * st.fade_speed[rows]
+        st.fade_elapsed_s[rows] += dt
 
     def _bank_poses(self, bank: ClipBank) -> PoseArrays:
         """The bank's poses as contiguous arrays (made once per bank)."""
@@ -181,5 +194,7 @@ class MotionPlayback(System):
         head = np.minimum(st.queue_head, st.queue_clip.shape[1] - 1)
         next_fade = st.queue_fade_s[np.arange(st.n), head]
         due = pending & (st.fade_s == 0.0) & (st.clip_time_s >= bank.duration_s(st.clip) - next_fade)
+        if not self.all_rows():
+            due &= self.in_rows()
         if due.any():
             start_next_clips(st, bank, np.flatnonzero(due))

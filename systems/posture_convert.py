@@ -4,25 +4,31 @@ Rows: every character.
 Reads: store.poses, store.lengths, frozen, and the last good positions, local_rotations and
 vertebrae (kept for a frozen character); store.goals and solved: the characters the solver moved
 are not decoded again, their pose as the solver decoded it is taken
-(:func:`ecs_anim.kernels.solved_posture.posture_solved_rows`).
+(:func:`ecs_anim.runtime.kernels.solved_posture.posture_solved_rows`).
 Writes: store.positions (world joint positions), store.posture (the same with the body frames,
 for next tick's targets on other characters), store.local_rotations (the BVH export skeleton's
 local joint rotation matrices, when the simulation asks for rotations), store.vertebrae (when
 it asks for a finer spine), store.frozen (a character whose pose went non-finite keeps its last
 good posture and is reported once). All in place, by the compiled
-:func:`ecs_anim.kernels.posture.posture_rows`.
+:func:`ecs_anim.runtime.kernels.posture.posture_rows`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ecs_anim.kernels import over_chunks
-from ecs_anim.kernels.decode import decoded_arrays, decoded_pose, empty_decoded, fits, pose_arrays
-from ecs_anim.kernels.posture import N_EXPORT, export_constants, posture_rows
-from ecs_anim.kernels.solved_posture import posture_solved_rows
-from ecs_anim.skeleton import N_JOINTS
-from ecs_anim.system_base import System
+from ecs_anim.core.skeleton import N_JOINTS
+from ecs_anim.runtime.kernels import over_chunks
+from ecs_anim.runtime.kernels.decode import (
+    decoded_arrays,
+    decoded_pose,
+    empty_decoded,
+    fits,
+    pose_arrays,
+)
+from ecs_anim.runtime.kernels.posture import N_EXPORT, export_constants, posture_rows
+from ecs_anim.runtime.kernels.solved_posture import posture_solved_rows
+from ecs_anim.runtime.system_base import System
 
 _EXPORT = export_constants()
 

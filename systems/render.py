@@ -2,13 +2,13 @@
 
 Reads: store.positions (and whatever the viewer draws). Writes: nothing in the simulation.
 The viewer plugs in as ``sim.renderer``: an object with ``draw(sim)``, called once per tick
-(``ecs_anim.viewer.window.SceneSource`` notes that a new posture is ready; the window draws it
+(``ecs_anim.apps.viewer.window.SceneSource`` notes that a new posture is ready; the window draws it
 at its own rate, reading the store: STYLE 8).
 """
 
 from __future__ import annotations
 
-from ecs_anim.system_base import System
+from ecs_anim.runtime.system_base import System
 
 
 class Render(System):

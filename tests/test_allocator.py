@@ -1,4 +1,4 @@
-"""The tick reuses the memory it frees (ecs_anim.allocator): no page is faulted in anew on a
+"""The tick reuses the memory it frees (ecs_anim.runtime.allocator): no page is faulted in anew on a
 steady tick of a large constrained scene (before, glibc handed the tick's large arrays back to
 the kernel: about 950 faults a tick at 3,200 characters)."""
 
@@ -9,8 +9,8 @@ import sys
 
 import pytest
 
-from ecs_anim.allocator import keep_freed_memory
-from ecs_anim.benchmark import BenchScene
+from ecs_anim.runtime.allocator import keep_freed_memory
+from ecs_anim.runtime.bench_scene import BenchScene
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's allocator: Linux only")

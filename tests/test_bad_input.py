@@ -18,13 +18,13 @@ import numpy as np
 import pytest
 
 from conftest import MOTIONS_DIR
-from ecs_anim.bvh import read_bvh
-from ecs_anim.cli import main
-from ecs_anim.errors import InputError
-from ecs_anim.importing import import_bvh
-from ecs_anim.joint_map import map_skeleton
-from ecs_anim.morphology import load_morphology_yaml
-from ecs_anim.motion import HEADER_KEY, load_nmo, save_nmo
+from ecs_anim.apps.cli.main import main
+from ecs_anim.core.errors import InputError
+from ecs_anim.core.morphology import load_morphology_yaml
+from ecs_anim.io.bvh import read_bvh
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.io.joint_map import map_skeleton
+from ecs_anim.motion.clip import HEADER_KEY, load_nmo, save_nmo
 
 BAD = Path(__file__).resolve().parent / "data" / "bad"
 WALK = MOTIONS_DIR / "walk.bvh"

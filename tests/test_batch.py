@@ -19,10 +19,10 @@ import numpy as np
 import pytest
 
 from conftest import MOCAP_DIR, MOTIONS_DIR, REPO, mocap_files, require_mocap
-from ecs_anim import batch
-from ecs_anim.cli import main as cli_main
-from ecs_anim.errors import EcsAnimError
-from ecs_anim.ground import Plane
+from ecs_anim.apps.batch import jobs as batch
+from ecs_anim.apps.cli.main import main as cli_main
+from ecs_anim.core.errors import EcsAnimError
+from ecs_anim.core.ground import Plane
 
 GROUNDS_YAML = """\
 grounds:
@@ -35,9 +35,9 @@ GROUND_SPECS = {"flat": {"type": "plane"},
 #: The command as the CLI registers it (the lead adds it to ecs_anim/cli.py's parser).
 RUNNER = """\
 import argparse, sys
-from ecs_anim import batch
-from ecs_anim.cli import error_line
-from ecs_anim.errors import EcsAnimError
+from ecs_anim.apps.batch import jobs as batch
+from ecs_anim.apps.cli.args import error_line
+from ecs_anim.core.errors import EcsAnimError
 parser = argparse.ArgumentParser(prog="ecs-anim")
 batch.add_parser(parser.add_subparsers(dest="command", required=True))
 try:
@@ -88,7 +88,7 @@ def test_foot_skate_counts_low_toes_moving_fast() -> None:
     it does not; at 60 Hz, 1.5 cm a frame is 3 cm per 1/30 s. (Floating is MetricsRecorder's.)"""
     frames, fps = 10, 30.0
     positions = np.zeros((frames, 22, 3))
-    from ecs_anim.metrics import TOES
+    from ecs_anim.runtime.metrics import TOES
 
     positions[:, TOES, 2] = 0.03  # under 5 cm
     positions[:, TOES[0], 0] = 0.03 * np.arange(frames)  # left toe: 3 cm a frame
@@ -106,10 +106,10 @@ def test_a_floating_planted_foot_is_reported_by_the_metrics(tmp_path) -> None:
     above the ground in the posture floats 7 mm."""
     from conftest import MOTIONS_DIR
     from ecs_anim.components import MotionPlayer
-    from ecs_anim.importing import import_bvh
-    from ecs_anim.metrics import ANKLES, TOES, MetricsRecorder
-    from ecs_anim.morphology import Morphology
-    from ecs_anim.simulation import Simulation
+    from ecs_anim.core.morphology import Morphology
+    from ecs_anim.io.importing import import_bvh
+    from ecs_anim.runtime.metrics import ANKLES, TOES, MetricsRecorder
+    from ecs_anim.runtime.simulation import Simulation
 
     sim = Simulation({"idle": import_bvh(MOTIONS_DIR / "idle.bvh")})
     sim.spawn("a", Morphology.preset("adult_male"), MotionPlayer("idle"))
@@ -479,15 +479,16 @@ def test_ray_writes_the_same_bytes_as_the_local_pool(tmp_path: Path, grounds_fil
 
 
 def test_the_readme_batch_example_runs(tmp_path) -> None:
-    """The README's batch example, as a shell runs it (out/ becomes a temporary folder)."""
+    """docs/batch.md's batch example (under "The report"), as a shell runs it (out/ becomes a
+    temporary folder)."""
     import shlex
     import subprocess
 
-    readme = (REPO / "README.md").read_text(encoding="utf-8")
-    block = readme.split("The report is rewritten on every run. For example", 1)[1]
+    page = (REPO / "docs" / "batch.md").read_text(encoding="utf-8")
+    block = page.split("The report is rewritten on every run. For example", 1)[1]
     lines = [line.strip() for line in block.splitlines()[1:6] if line.strip()][:2]
     assert lines[0].startswith("printf") and lines[1].startswith(".venv/bin/ecs-anim batch")
-    ecs_anim = f"{shlex.quote(sys.executable)} -c 'import sys; from ecs_anim.cli import main; sys.exit(main())'"
+    ecs_anim = f"{shlex.quote(sys.executable)} -c 'import sys; from ecs_anim.apps.cli.main import main; sys.exit(main())'"
     script = "\n".join(line.replace("out/", f"{tmp_path}/").replace(".venv/bin/ecs-anim", ecs_anim)
                        for line in lines)
     done = subprocess.run(["bash", "-euc", script], cwd=REPO, capture_output=True, text=True,
@@ -568,7 +569,7 @@ def test_a_job_killed_while_renaming_has_no_old_file_beside_a_new_one(tmp_path: 
             renamed.append(dst)
         return real_replace(src, dst)
 
-    monkeypatch.setattr("ecs_anim.files.os.replace", replace)
+    monkeypatch.setattr("ecs_anim.core.files.os.replace", replace)
     with pytest.raises(KeyboardInterrupt):
         run_batch_cli(*argv, "--seconds", "0.2")
     monkeypatch.undo()
@@ -602,7 +603,7 @@ def test_seconds_is_bounded_like_run(tmp_path: Path, seconds: str, expected: str
 def test_seconds_under_a_tick_of_an_nmo_clip_fails_its_jobs_not_one_tick(tmp_path: Path) -> None:
     """A clip whose rate is not read up front (.nmo, .c3d): its jobs fail with the same line."""
     nmo = tmp_path / "walk.nmo"
-    from ecs_anim.motion import save_nmo
+    from ecs_anim.motion.clip import save_nmo
 
     save_nmo(batch.import_clip(MOTIONS_DIR / "walk.bvh"), nmo)
     out = tmp_path / "out"
@@ -717,8 +718,8 @@ def test_pool_workers_tick_on_one_thread():
     between chunks, so two per process on shared cores would take turns spinning)."""
     import multiprocessing
 
-    from ecs_anim import kernels
-    from ecs_anim.batch import _set_started
+    from ecs_anim.apps.batch.jobs import _set_started
+    from ecs_anim.runtime import kernels
 
     context = multiprocessing.get_context("fork")
     with context.Pool(1, initializer=_set_started, initargs=(None,)) as pool:

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 from matplotlib import image as mpimg
 
-from ecs_anim import metrics
-from ecs_anim.batch_report import badness, figure_pngs, report_html, write_report
-from ecs_anim.ground import Plane
+from ecs_anim.apps.batch.report import badness, figure_pngs, report_html, write_report
+from ecs_anim.core.ground import Plane
+from ecs_anim.runtime import metrics
 
 MOTIONS = Path(__file__).resolve().parents[1] / "scenarios" / "motions"
 
@@ -164,13 +164,13 @@ def test_a_missing_figure_is_a_dash_not_a_crash():
 
 
 # ---------------------------------------------------------------------------------------------
-# From real runs: the batch's own jobs (ecs_anim.batch.run_job), records as metrics.json holds.
+# From real runs: the batch's own jobs (ecs_anim.apps.batch.jobs.run_job), records as metrics.json holds.
 
 GROUNDS = {"": "{type: plane}", "slope": "{type: slope, grade_x: 0.08}"}
 
 
 def real_jobs(tmp_path, seconds=2.0):
-    from ecs_anim import batch
+    from ecs_anim.apps.batch import jobs as batch
 
     (tmp_path / "grounds.yaml").write_text("grounds:\n" + "".join(
         f"  {name}: {spec}\n" for name, spec in GROUNDS.items() if name))

@@ -11,9 +11,10 @@ from typing import ClassVar
 import numpy as np
 import pytest
 
-from ecs_anim import kernels
-from ecs_anim.benchmark import BenchScene, capacity_fit, linear_fit
-from ecs_anim.cli import main
+from ecs_anim.apps.bench import capacity_fit, linear_fit
+from ecs_anim.apps.cli.main import main
+from ecs_anim.runtime import kernels
+from ecs_anim.runtime.bench_scene import BenchScene
 
 REPO = Path(__file__).resolve().parents[1]
 SCENARIO = str(REPO / "scenarios" / "reach_and_touch.yaml")
@@ -48,7 +49,7 @@ def test_bench_text_names_the_threads_and_every_size(capsys):
 
 
 def test_bench_sizes_default_to_four_and_bad_sizes_are_one_line_errors(capsys):
-    from ecs_anim.benchmark import bench_sizes
+    from ecs_anim.apps.bench import bench_sizes
 
     assert bench_sizes(400, None) == [50, 100, 200, 400]
     assert bench_sizes(8, None) == [1, 2, 4, 8]
@@ -221,8 +222,8 @@ class _FakeProcess:
 
 def test_a_first_run_compiles_the_solver_in_a_second_process_and_the_solve_waits_for_it(
         monkeypatch):
-    monkeypatch.setattr("ecs_anim.kernels.subprocess.Popen", _FakeProcess)
-    monkeypatch.setattr("ecs_anim.kernels.os.sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    monkeypatch.setattr("ecs_anim.runtime.kernels.subprocess.Popen", _FakeProcess)
+    monkeypatch.setattr("ecs_anim.runtime.kernels.os.sched_getaffinity", lambda pid: {0, 1}, raising=False)
     _FakeProcess.started = []
     monkeypatch.setattr(kernels, "_solver_compile", {})
     monkeypatch.setattr(kernels, "uncompiled_kernels", lambda: [])
@@ -231,11 +232,11 @@ def test_a_first_run_compiles_the_solver_in_a_second_process_and_the_solve_waits
     kernels.compile_solver_aside()
     assert _FakeProcess.started == []
     monkeypatch.setattr(kernels, "_solver_compile", {})
-    monkeypatch.setattr("ecs_anim.kernels.os.sched_getaffinity", lambda pid: {0}, raising=False)
+    monkeypatch.setattr("ecs_anim.runtime.kernels.os.sched_getaffinity", lambda pid: {0}, raising=False)
     kernels.compile_solver_aside()  # one core: this process compiles everything itself
     assert _FakeProcess.started == []
     monkeypatch.setattr(kernels, "_solver_compile", {})
-    monkeypatch.setattr("ecs_anim.kernels.os.sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    monkeypatch.setattr("ecs_anim.runtime.kernels.os.sched_getaffinity", lambda pid: {0, 1}, raising=False)
     kernels.compile_solver_aside()
     kernels.compile_solver_aside()  # once per process
     assert _FakeProcess.started == [kernels.SOLVER_COMMAND]
@@ -247,10 +248,10 @@ def test_a_first_run_compiles_the_solver_in_a_second_process_and_the_solve_waits
 
 
 def test_the_solver_compiled_aside_is_the_one_a_solve_runs():
-    """``python -m ecs_anim.kernels --solver`` (solving no character) compiles solve_rows for
+    """``python -m ecs_anim.runtime.kernels --solver`` (solving no character) compiles solve_rows for
     the argument types of a real solve: a real solve then finds it (no second compilation)."""
-    from ecs_anim.kernels.__main__ import compile_solver
-    from ecs_anim.kernels.solve import solve_rows
+    from ecs_anim.runtime.kernels.__main__ import compile_solver
+    from ecs_anim.runtime.kernels.solve import solve_rows
 
     scene = BenchScene(2, constrained=True)
     scene.tick()
@@ -259,10 +260,11 @@ def test_the_solver_compiled_aside_is_the_one_a_solve_runs():
     assert len(solve_rows.signatures) == 1
 
 
-def _readme_commands(section: str) -> list[list[str]]:
-    """The ``ecs-anim`` command lines of a README section (indented code), as argv."""
-    text = (REPO / "README.md").read_text(encoding="utf-8")
-    block = text.split(f"## {section}\n", 1)[1].split("\n## ", 1)[0]
+def _doc_commands(page: str, heading: str) -> list[list[str]]:
+    """The ``ecs-anim`` command lines of a docs page's section (indented code), as argv: from
+    the ``heading`` line (``## ...`` or ``### ...``) to the next heading of any level."""
+    text = (REPO / "docs" / page).read_text(encoding="utf-8")
+    block = text.split(f"\n{heading}\n", 1)[1].split("\n#", 1)[0]
     commands = []
     for line in block.splitlines():
         words = shlex.split(line.strip(), comments=True) if line.startswith("    ") else []
@@ -272,9 +274,10 @@ def _readme_commands(section: str) -> list[list[str]]:
 
 
 def test_the_readme_performance_commands_run(capsys):
-    """Every command of the README's Performance section, made quick (two small sizes, a few
-    ticks, no timed cold start); taskset is left out (the figures are not checked)."""
-    commands = _readme_commands("Performance")
+    """Every command of docs/performance.md's bench commands, made quick (two small sizes, a
+    few ticks, no timed cold start); taskset is left out (the figures are not checked)."""
+    commands = _doc_commands("performance.md", "### The bench commands")
+    assert len(commands) == 7, commands
     flags = {w for argv in commands for w in argv if w.startswith("--")}
     assert {"--constrained", "--threads", "--rotations", "--sizes", "--no-compile-timing",
             "--json", "--characters", "--seconds"} <= flags
@@ -288,9 +291,9 @@ def test_the_readme_performance_commands_run(capsys):
 
 
 def test_the_readme_threads_examples_run(tmp_path, capsys):
-    """The README's ``--threads`` examples of run and view (a screenshot: it needs headless
+    """docs/cli.md's ``--threads`` examples of run and view (a screenshot: it needs headless
     OpenGL, as tests/test_viewer.py's do), their outputs in a temporary folder."""
-    commands = [c for c in _readme_commands("Commands") if "--threads" in c]
+    commands = [c for c in _doc_commands("cli.md", "## Threads") if "--threads" in c]
     assert {c[0] for c in commands} >= {"run", "view"}
     for argv in commands:
         argv = [w.replace("out/", f"{tmp_path}/") for w in argv]
@@ -313,7 +316,7 @@ def _one_tick_in_a_child(n: int) -> tuple[int, ...]:
 
 def test_a_process_that_ran_the_kernels_can_fork_workers_that_run_them():
     """The batch's pool forks after the kernels ran on this process's threads, which a forked
-    child does not have: each process makes its own (:func:`ecs_anim.kernels.over_chunks`)."""
+    child does not have: each process makes its own (:func:`ecs_anim.runtime.kernels.over_chunks`)."""
     import multiprocessing
     import os
 

@@ -1,4 +1,4 @@
-"""A body changing while it plays (Simulation.set_body with blend_s, ecs_anim.body_change):
+"""A body changing while it plays (Simulation.set_body with blend_s, ecs_anim.runtime.body_change):
 blended over the given time, planted feet on their footprints, joints about as fast as the
 motion moves them on the faster body."""
 
@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from ecs_anim.components import MotionPlayer
-from ecs_anim.errors import EcsAnimError
-from ecs_anim.importing import import_bvh
-from ecs_anim.metrics import MetricsRecorder
-from ecs_anim.morphology import Morphology
-from ecs_anim.simulation import Simulation
-from ecs_anim.skeleton import JOINT_INDEX as J
+from ecs_anim.core.errors import EcsAnimError
+from ecs_anim.core.morphology import Morphology
+from ecs_anim.core.skeleton import JOINT_INDEX as J
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.runtime.metrics import MetricsRecorder
+from ecs_anim.runtime.simulation import Simulation
 
 MOTIONS = Path(__file__).resolve().parents[1] / "scenarios" / "motions"
 SMALL, TALL = Morphology.from_stature(1.2), Morphology.from_stature(2.0)

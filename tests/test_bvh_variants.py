@@ -23,10 +23,10 @@ import pytest
 from test_real_bvh import DOCUMENTED, _import_and_export, _lookup, reference_world
 
 from conftest import MOCAP_DIR
-from ecs_anim.bvh import read_bvh
-from ecs_anim.errors import listed
-from ecs_anim.motion import load_nmo
-from ecs_anim.skeleton import JOINT_INDEX, JOINTS
+from ecs_anim.core.errors import listed
+from ecs_anim.core.skeleton import JOINT_INDEX, JOINTS
+from ecs_anim.io.bvh import read_bvh
+from ecs_anim.motion.clip import load_nmo
 
 MM = 1e-3
 #: Frames of each dev file kept in a variant (the round trip is checked on every one of them).

@@ -18,7 +18,15 @@ import numpy as np
 import pytest
 
 from conftest import MOCAP_DIR, MOTIONS_DIR, mocap_params, require_mocap
-from ecs_anim.c3d_import import (
+from ecs_anim.apps.cli.main import main
+from ecs_anim.core.errors import EcsAnimError, InputError
+from ecs_anim.core.morphology import bone_lengths_of
+from ecs_anim.core.normalized import decode
+from ecs_anim.core.rotations import rot_axis
+from ecs_anim.core.skeleton import BONE_JOINTS, LENGTHS
+from ecs_anim.core.skeleton import JOINT_INDEX as J
+from ecs_anim.core.skeleton import LENGTH_INDEX as L
+from ecs_anim.io.c3d.importing import (
     canonical_clip_c3d,
     chord_centre,
     cluster_poses,
@@ -27,19 +35,11 @@ from ecs_anim.c3d_import import (
     read_c3d,
     score_centre,
 )
-from ecs_anim.cli import main
-from ecs_anim.errors import EcsAnimError, InputError
-from ecs_anim.importing import import_bvh
-from ecs_anim.marker_sets import check_usable, match_markers
-from ecs_anim.metrics import MetricsRecorder
-from ecs_anim.morphology import bone_lengths_of
-from ecs_anim.motion import load_nmo
-from ecs_anim.normalized import decode
-from ecs_anim.rotations import rot_axis
+from ecs_anim.io.c3d.marker_sets import check_usable, match_markers
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.motion.clip import load_nmo
+from ecs_anim.runtime.metrics import MetricsRecorder
 from ecs_anim.scenario import build_simulation, load_scenario
-from ecs_anim.skeleton import BONE_JOINTS, LENGTHS
-from ecs_anim.skeleton import JOINT_INDEX as J
-from ecs_anim.skeleton import LENGTH_INDEX as L
 
 MM = 1e-3
 TENNIS = MOCAP_DIR / "ktk_tennis_serve.c3d"
@@ -177,7 +177,7 @@ def test_every_c3d_imports_with_rigid_adult_bones(path, tmp_path, capsys):
             assert x.std() / x.mean() < SPREAD_BOUND, (name, x.std() / x.mean())
     # Every other marker-derived segment too: trunk, neck, head, hands and feet within 6 %; the
     # clavicles (neck base to shoulder centre) within 15 %, the acromion marker riding on the
-    # shoulder girdle as it elevates (14 % in the tennis serve, stated in the README).
+    # shoulder girdle as it elevates (14 % in the tennis serve, stated in docs/import.md).
     measured = np.array(clip.measured)
     for name, (a, b) in zip(LENGTHS, BONE_JOINTS, strict=True):
         if a < 0 or not (measured[a] and measured[b]) or name[:-2] in ADULT_RANGE_M:

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from conftest import MOCAP_DIR
-from ecs_anim.c3d_import import import_c3d, lab_model_hip, lab_model_named, read_c3d
-from ecs_anim.cli import main
+from ecs_anim.apps.cli.main import main
+from ecs_anim.io.c3d.importing import import_c3d, lab_model_hip, lab_model_named, read_c3d
 
 VARIED = MOCAP_DIR / "varied"
 BOUND_MM = {"hip": 25.0, "knee": 15.0, "ankle": 15.0}

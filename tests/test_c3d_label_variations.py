@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 
 from conftest import MOCAP_DIR
-from ecs_anim.c3d_import import canonical_clip_c3d, import_c3d, read_c3d
-from ecs_anim.errors import InputError
-from ecs_anim.importing import CanonicalClip
-from ecs_anim.marker_sets import group_status, match_markers
+from ecs_anim.core.errors import InputError
+from ecs_anim.io.c3d.importing import canonical_clip_c3d, import_c3d, read_c3d
+from ecs_anim.io.c3d.marker_sets import group_status, match_markers
+from ecs_anim.io.importing import CanonicalClip
 
 VARIED = MOCAP_DIR / "varied"
 CLUSTERS = MOCAP_DIR / "c3dorg_eb015pi_gait.c3d"
@@ -308,7 +308,7 @@ ANIMATION_SAME = ("pelvis", "hip_l", "knee_l", "ankle_l", "toe_l", "hip_r", "kne
 
 
 def test_an_animation_marker_set_imports_its_pelvis_legs_trunk_and_arms(tmp_path):
-    from ecs_anim.skeleton import JOINTS
+    from ecs_anim.core.skeleton import JOINTS
 
     renamed = _renamed(_labels(QUALISYS), **ANIMATION_NAMES)
     copy = rewrite_point_texts(QUALISYS, tmp_path / "animation.c3d", {"LABELS": renamed})

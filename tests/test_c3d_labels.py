@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 
 from conftest import MOCAP_DIR
-from ecs_anim.c3d_import import canonical_clip_c3d, import_c3d, read_c3d
-from ecs_anim.errors import InputError, MappingError
-from ecs_anim.marker_sets import check_usable, group_status, label_key, match_markers
-from ecs_anim.skeleton import JOINT_INDEX as J
+from ecs_anim.core.errors import InputError, MappingError
+from ecs_anim.core.skeleton import JOINT_INDEX as J
+from ecs_anim.io.c3d.importing import canonical_clip_c3d, import_c3d, read_c3d
+from ecs_anim.io.c3d.marker_sets import check_usable, group_status, label_key, match_markers
 
 VARIED = MOCAP_DIR / "varied"
 
-# file -> (marker set detected, parts present). Files a convention covers; see the README.
+# file -> (marker set detected, parts present). Files a convention covers; see docs/import.md.
 COVERED = {
     "codamotion_dotted_gait_2015_200hz.c3d": ("helen_hayes", {"pelvis", "leg_l", "leg_r"}),
     "mac_helenhayes_events_vjc_60hz.c3d": ("helen_hayes", {"pelvis", "leg_l", "leg_r", "arm_l",
@@ -62,7 +62,7 @@ def test_covered_files_import_with_no_flags(name):
 STEADY_OPEN: dict[str, str] = {}
 
 
-#: Every C3D of ../shared/mocap and varied/ (the README's table), with the map a file needs.
+#: Every C3D of ../shared/mocap and varied/ (docs/import.md's table), with the map a file needs.
 ALL_C3D = sorted(["c3dorg_eb015pi_gait.c3d", "ktk_tennis_serve.c3d"] +
                  [f"varied/{n}" for n in sorted({*COVERED, "bts_spaced_lowercase_nounits_yup.c3d",
                                                  "qualisys_lowercase_underscore_240hz.c3d",
@@ -85,7 +85,7 @@ def test_every_c3d_here_is_in_the_segment_check():
     else n for n in ALL_C3D])
 def test_limb_segment_lengths_are_steady(name):
     """Thigh, shank, upper arm and forearm: std under 5 % of the mean on every file (measured
-    worst 0.6-4.0 %, the README's table), and of adult length."""
+    worst 0.6-4.0 %, docs/import.md's table), and of adult length."""
     path = MOCAP_DIR / name
     if not path.exists():
         pytest.skip(f"{path} not available")

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from conftest import MOTIONS_DIR
-from ecs_anim.bvh import read_bvh
-from ecs_anim.cli import main
-from ecs_anim.importing import canonical_clip, detect_unit
+from ecs_anim.apps.cli.main import main
+from ecs_anim.io.bvh import read_bvh
+from ecs_anim.io.importing import canonical_clip, detect_unit
 
 
 def test_unit_detection_names_a_close_runner_up():
@@ -115,8 +115,8 @@ def test_more_user_mistakes_are_one_line_errors(tmp_path, capsys):
     from dataclasses import replace
     from pathlib import Path
 
-    from ecs_anim.importing import import_bvh
-    from ecs_anim.motion import save_nmo
+    from ecs_anim.io.importing import import_bvh
+    from ecs_anim.motion.clip import save_nmo
 
     walk = str(MOTIONS_DIR / "walk.bvh")
     scenario = str(Path(__file__).resolve().parents[1] / "scenarios" / "reach_and_touch.yaml")
@@ -156,8 +156,8 @@ def test_constrained_bench_runs_and_prints_json(capsys):
 
 def test_reports_are_strict_json():
     """A report never holds NaN or Infinity (strict JSON readers reject them): they become null."""
-    from ecs_anim.cli import _json_safe
+    from ecs_anim.apps.cli.args import json_safe
 
     report = {"a": float("inf"), "b": [1.0, float("nan")], "c": {"d": np.float64(2.0)}}
-    text = json.dumps(_json_safe(report), allow_nan=False)
+    text = json.dumps(json_safe(report), allow_nan=False)
     assert json.loads(text) == {"a": None, "b": [1.0, None], "c": {"d": 2.0}}

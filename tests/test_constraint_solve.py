@@ -7,13 +7,13 @@ import pytest
 
 from conftest import MOTIONS_DIR
 from ecs_anim.components import MotionPlayer, Placement
-from ecs_anim.constraints import Activation
-from ecs_anim.errors import EcsAnimError
-from ecs_anim.importing import import_bvh
-from ecs_anim.morphology import Morphology, bone_lengths_of
-from ecs_anim.simulation import Simulation
-from ecs_anim.skeleton import BONE_JOINTS
-from ecs_anim.skeleton import JOINT_INDEX as J
+from ecs_anim.core.errors import EcsAnimError
+from ecs_anim.core.morphology import Morphology, bone_lengths_of
+from ecs_anim.core.skeleton import BONE_JOINTS
+from ecs_anim.core.skeleton import JOINT_INDEX as J
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.motion.constraints import Activation
+from ecs_anim.runtime.simulation import Simulation
 
 IS_BONE = np.array([a >= 0 for a, _ in BONE_JOINTS])
 ALWAYS = Activation(0.0, 1e9)
@@ -106,7 +106,7 @@ def test_activation_ramp_has_no_jump_and_nan_target_disables_only_that_one(idle,
     """The weight follows the ramp tick by tick; at the activation's start and stop no joint
     moves further in a tick than the motion's own joints do (plus 1 mm), and between them the
     move is spread over the eases; a NaN target switches off only its own constraint."""
-    from ecs_anim.constraints import ramp_weight
+    from ecs_anim.motion.constraints import ramp_weight
 
     sim, (a, b, _twin) = _sim(idle, 3)  # the twin plays the same motion, unconstrained
     sim.step()
@@ -159,7 +159,7 @@ def test_scenario_constraints_are_wired_by_name():
 def test_scenario_constraint_errors(tmp_path):
     from pathlib import Path
 
-    from ecs_anim.errors import InputError
+    from ecs_anim.core.errors import InputError
     from ecs_anim.scenario import load_scenario
 
     repo = Path(__file__).resolve().parents[1]
@@ -183,7 +183,7 @@ def test_scenario_constraint_errors(tmp_path):
 
 @pytest.mark.parametrize("control", [True, False])
 def test_com_control_brings_the_centre_of_mass_back(idle, control):
-    from ecs_anim.morphology import centres_of_mass
+    from ecs_anim.core.morphology import centres_of_mass
 
     sim = Simulation({"idle": idle})
     e = sim.spawn("a", Morphology.preset("adult_male"), MotionPlayer("idle", speed=0.0),

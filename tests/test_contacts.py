@@ -10,17 +10,17 @@ import numpy as np
 import pytest
 
 from conftest import MOCAP_DIR
-from ecs_anim.bvh import read_bvh
-from ecs_anim.c3d_import import import_c3d
-from ecs_anim.cli import main
-from ecs_anim.contacts import horizontal_speed, local_ground
-from ecs_anim.importing import canonical_clip, import_bvh
-from ecs_anim.motion import load_nmo, save_nmo
-from ecs_anim.normalized import decode
-from ecs_anim.skeleton import JOINT_INDEX as J
+from ecs_anim.apps.cli.main import main
+from ecs_anim.core.normalized import decode
+from ecs_anim.core.skeleton import JOINT_INDEX as J
+from ecs_anim.io.bvh import read_bvh
+from ecs_anim.io.c3d.importing import import_c3d
+from ecs_anim.io.contacts import horizontal_speed, local_ground
+from ecs_anim.io.importing import canonical_clip, import_bvh
+from ecs_anim.motion.clip import load_nmo, save_nmo
 
 VARIED = MOCAP_DIR / "varied"
-#: Walks (over-ground, both feet), with the flags a file needs (see the README's table): the
+#: Walks (over-ground, both feet), with the flags a file needs (see docs/import.md's table): the
 #: child's unit (no proportion tells it). (The converters' rest-pose first frames of the CMU
 #: walks are dropped on import, with no flag.)
 WALKS = {
@@ -191,7 +191,7 @@ def test_the_treadmill_run_gets_its_belt_as_root_motion():
     motion = import_c3d(path)
     belt = motion.info["treadmill"]
     assert belt["converted"] and 2.9 < belt["speed_mps"] < 3.6
-    from ecs_anim.morphology import leg_length
+    from ecs_anim.core.morphology import leg_length
     root = motion.poses.root_position[:, :2] * float(leg_length(motion.source_morphology.lengths))
     assert np.linalg.norm(root[-1] - root[0]) > 25.0  # 10 s at 3.3 m/s, as over ground
     p = decode(motion.poses, motion.source_morphology.lengths, use_stretch=True).positions
@@ -257,14 +257,14 @@ def test_contact_speed_can_be_given(tmp_path):
 
 
 def test_the_readme_contacts_examples_run(tmp_path, monkeypatch, capsys):
-    """The README's foot-contact examples (--contacts events, info, --no-treadmill,
+    """docs/import.md's foot-contact examples (--contacts events, info, --no-treadmill,
     --contact-speed), as a shell runs them from the repository (out/ becomes a temporary
     folder)."""
     from pathlib import Path
 
     repo = Path(__file__).resolve().parents[1]
-    text = (repo / "README.md").read_text(encoding="utf-8")
-    block = text.split("- **Foot contacts** come", 1)[1].split("- **info** describes", 1)[0]
+    text = (repo / "docs" / "import.md").read_text(encoding="utf-8")
+    block = text.split("\n## Foot contacts\n", 1)[1].split("\n## ", 1)[0]
     commands = [line.strip().replace(".venv/bin/ecs-anim ", "") for line in block.splitlines()
                 if line.strip().startswith(".venv/bin/ecs-anim")]
     assert len(commands) == 3

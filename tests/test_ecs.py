@@ -25,11 +25,11 @@ from ecs_anim.components import (
     Placement,
     Posture,
 )
-from ecs_anim.constraint_table import ConstraintTable
-from ecs_anim.ground import Plane, Stairs
-from ecs_anim.importing import import_bvh
-from ecs_anim.simulation import Simulation
-from ecs_anim.store import SPEC_FIELDS, CharacterStore
+from ecs_anim.core.ground import Plane, Stairs
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.motion.constraint_table import ConstraintTable
+from ecs_anim.runtime.simulation import Simulation
+from ecs_anim.runtime.store import SPEC_FIELDS, CharacterStore
 from ecs_anim.systems import SCHEDULE
 
 #: Every store field's writers in tick order (DESIGN §6), derived from the declarations below.
@@ -58,7 +58,9 @@ EXPECTED_WRITERS = {
 }
 #: Fields a system reads as the previous tick left them, before this tick's writer.
 LAST_TICK = {"posture", "footprint"}
-STORE_FIELDS = {f.name for f in dataclasses.fields(CharacterStore) if not f.name.startswith("_")}
+#: The store's own fields (``columns`` holds the user's systems' columns, written by them).
+STORE_FIELDS = {f.name for f in dataclasses.fields(CharacterStore)
+                if not f.name.startswith("_") and f.name != "columns"}
 TABLE_FIELDS = {f.name for f in dataclasses.fields(ConstraintTable)}
 
 

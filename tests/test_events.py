@@ -1,4 +1,4 @@
-"""Events and triggers (ecs_anim.events): edges each tick, reactions wired in YAML or code, the
+"""Events and triggers (ecs_anim.runtime.events): edges each tick, reactions wired in YAML or code, the
 reactive fight, moving targets, characters removed and added while triggers watch them."""
 
 from __future__ import annotations
@@ -10,11 +10,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ecs_anim.body_points import body_point
 from ecs_anim.components import MotionPlayer, Placement, QueuedClip
-from ecs_anim.constraints import Activation
-from ecs_anim.errors import EcsAnimError
-from ecs_anim.events import (
+from ecs_anim.core.body_points import body_point
+from ecs_anim.core.errors import EcsAnimError
+from ecs_anim.core.morphology import Morphology
+from ecs_anim.core.skeleton import JOINT_INDEX as J
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.motion.constraints import Activation
+from ecs_anim.runtime.events import (
     AtTime,
     ClipEnded,
     ClipStarted,
@@ -30,11 +33,8 @@ from ecs_anim.events import (
     interpolate_keyframes,
     switched_off,
 )
-from ecs_anim.importing import import_bvh
-from ecs_anim.morphology import Morphology
+from ecs_anim.runtime.simulation import Simulation
 from ecs_anim.scenario import build_simulation, load_scenario
-from ecs_anim.simulation import Simulation
-from ecs_anim.skeleton import JOINT_INDEX as J
 
 REPO = Path(__file__).resolve().parents[1]
 SCENARIOS = REPO / "scenarios"

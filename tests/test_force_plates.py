@@ -12,9 +12,9 @@ import pytest
 from test_import_fuzz import _parameter_offset
 
 from conftest import MOCAP_DIR
-from ecs_anim.c3d_import import import_c3d, read_c3d
-from ecs_anim.cli import main
-from ecs_anim.force_plates import ForcePlate, loaded_spans, plate_contacts
+from ecs_anim.apps.cli.main import main
+from ecs_anim.io.c3d.force_plates import ForcePlate, loaded_spans, plate_contacts
+from ecs_anim.io.c3d.importing import import_c3d, read_c3d
 
 VARIED = MOCAP_DIR / "varied"
 #: Per file with force plates: the foot on each loaded span, in the order info lists them
@@ -50,7 +50,7 @@ DETECTED_VS_PLATES_MS = {
     "varied/vicon_cgm24_events_jc_100hz.c3d": 40.0,
     "varied/vicon_pig_noclav_prefix_events_60hz.c3d": 59.1,
 }
-#: The user map a file needs (the README's table).
+#: The user map a file needs (docs/import.md's table).
 MAPS = {"varied/qualisys_lowercase_underscore_240hz.c3d":
         str(Path(__file__).parent / "data" / "maps" / "qualisys_knee_joint_line.yaml")}
 _CACHE: dict[str, object] = {}
@@ -152,8 +152,8 @@ def test_a_signal_zeroed_below_a_threshold_has_no_measured_edge():
 def test_plate_contacts_name_the_foot_over_the_plate_and_the_clip_seconds():
     """Two feet 0.3 m apart, the left one over the plate (mm corners, 0.001 m per unit); the
     clip starts 0.2 s into the file."""
-    from ecs_anim.skeleton import JOINT_INDEX as J
-    from ecs_anim.skeleton import N_JOINTS
+    from ecs_anim.core.skeleton import JOINT_INDEX as J
+    from ecs_anim.core.skeleton import N_JOINTS
 
     fps, n = 100.0, 260
     positions = np.zeros((n, N_JOINTS, 3))

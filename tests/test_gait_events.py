@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from conftest import MOCAP_DIR
-from ecs_anim.c3d_import import import_c3d, read_c3d
-from ecs_anim.cli import main
-from ecs_anim.contacts import _intervals, contacts_from_events, gait_event_kind
+from ecs_anim.apps.cli.main import main
+from ecs_anim.io.c3d.importing import import_c3d, read_c3d
+from ecs_anim.io.contacts import contacts_from_events, gait_event_kind, true_runs
 
 VARIED = MOCAP_DIR / "varied"
 #: Files with gait events and how many foot strikes and foot offs each stores (varied/README.md).
@@ -119,7 +119,7 @@ def _worst_ms(name: str) -> float:
     fps = motion.fps
     for e in check["events"]:
         side = "lr".index(e["side"])
-        runs = _intervals(foot[:, side])
+        runs = true_runs(foot[:, side])
         edges = [a / fps for a, _ in runs if a > 0] if e["kind"] == "strike" \
             else [(b + 1) / fps for _, b in runs if b < len(foot) - 1]
         nearest = min(abs(t - e["time_s"]) for t in edges)
@@ -152,7 +152,7 @@ def test_contacts_events_uses_them_and_info_reports_them(tmp_path, capsys):
     assert main(["info", str(nmo), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)["info"]
     assert info["contacts"]["method"] == "gait events"
-    from ecs_anim.motion import load_nmo
+    from ecs_anim.motion.clip import load_nmo
     motion = load_nmo(nmo)
     events = [e for e in info["gait_events"] if e["kind"]]
     expected = contacts_from_events(events, motion.n_frames, motion.fps)

@@ -18,16 +18,16 @@ import pytest
 
 from conftest import MOTIONS_DIR
 from ecs_anim.components import MotionPlayer, Placement, QueuedClip
-from ecs_anim.contacts import _intervals
-from ecs_anim.importing import import_bvh
-from ecs_anim.library import main as library_main
-from ecs_anim.library_gestures import GESTURE_TIMINGS, GESTURES, NEUTRAL, sample_keys
-from ecs_anim.metrics import MetricsRecorder
-from ecs_anim.morphology import Morphology, bone_lengths_of
-from ecs_anim.normalized import decode
-from ecs_anim.simulation import Simulation
-from ecs_anim.skeleton import BONE_JOINTS, JOINTS
-from ecs_anim.skeleton import JOINT_INDEX as J
+from ecs_anim.core.morphology import Morphology, bone_lengths_of
+from ecs_anim.core.normalized import decode
+from ecs_anim.core.skeleton import BONE_JOINTS, JOINTS
+from ecs_anim.core.skeleton import JOINT_INDEX as J
+from ecs_anim.io.contacts import true_runs
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.io.library.gestures import GESTURE_TIMINGS, GESTURES, NEUTRAL, sample_keys
+from ecs_anim.io.library.shipped import main as library_main
+from ecs_anim.runtime.metrics import MetricsRecorder
+from ecs_anim.runtime.simulation import Simulation
 
 FPS = 30.0
 ADULT = Morphology.preset("adult_male")
@@ -134,7 +134,7 @@ def test_planted_feet_stand_still_on_the_ground(clips, name):
         assert slide.max() < 1e-3, (name, s, float(slide.max()))
         detected = contact[:, side]
         assert detected[stance].all(), (name, s, np.flatnonzero(stance & ~detected))
-        for a, b in _intervals(detected):
+        for a, b in true_runs(detected):
             extra = np.flatnonzero(~stance[a:b + 1])
             assert len(extra) <= 3 and (height[a:b + 1] < 0.08).all(), (name, s, a, b, extra)
 
@@ -262,7 +262,7 @@ def test_dance_steps_alternate(clips):
     tm = GESTURE_TIMINGS["dance"]
     contact = motion.contacts()
     assert contact.any(axis=1).all()  # never both feet in the air
-    flights = sorted((a, side) for side in (0, 1) for a, _ in _intervals(~contact[:, side]))
+    flights = sorted((a, side) for side in (0, 1) for a, _ in true_runs(~contact[:, side]))
     # A flight that wraps across the loop's seam counts once.
     wraps = [side for side in (0, 1) if not contact[0, side] and not contact[-1, side]]
     assert len(flights) - len(wraps) == tm["steps"]

@@ -22,9 +22,9 @@ import pygltflib
 import pytest
 
 from conftest import MOTIONS_DIR, REPO, mocap_files, mocap_params
-from ecs_anim.cli import main
-from ecs_anim.morphology import Morphology
-from ecs_anim.skeleton import JOINTS
+from ecs_anim.apps.cli.main import main
+from ecs_anim.core.morphology import Morphology
+from ecs_anim.core.skeleton import JOINTS
 
 MM = 1e-3
 VALIDATOR_DIR = REPO / "tests" / "gltf_validator"

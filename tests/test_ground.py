@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from ecs_anim.ground import Bumps, Combined, HeightGrid, Plane, Slope, Stairs
+from ecs_anim.core.ground import Bumps, Combined, HeightGrid, Plane, Slope, Stairs
 
 
 def test_plane_and_slope():

@@ -3,12 +3,12 @@
 import numpy as np
 
 from conftest import MOTIONS_DIR
-from ecs_anim.ground import Stairs
-from ecs_anim.ground_adapt import MAX_LEG_EXTENSION, adapt_to_ground
-from ecs_anim.importing import import_bvh
-from ecs_anim.morphology import Morphology, bone_lengths_of
-from ecs_anim.normalized import decode
-from ecs_anim.skeleton import BONE_JOINTS
+from ecs_anim.core.ground import Stairs
+from ecs_anim.core.ground_adapt import MAX_LEG_EXTENSION, adapt_to_ground
+from ecs_anim.core.morphology import Morphology, bone_lengths_of
+from ecs_anim.core.normalized import decode
+from ecs_anim.core.skeleton import BONE_JOINTS
+from ecs_anim.io.importing import import_bvh
 
 
 def test_feet_land_on_stairs_and_pelvis_obeys_the_min_rule():

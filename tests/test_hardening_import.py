@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from conftest import MOCAP_DIR, MOTIONS_DIR, require_mocap
-from ecs_anim.bvh import parse_bvh
-from ecs_anim.c3d_import import import_c3d
-from ecs_anim.errors import InputError
-from ecs_anim.importing import canonical_clip, import_bvh
-from ecs_anim.skeleton import JOINT_INDEX, JOINTS
+from ecs_anim.core.errors import InputError
+from ecs_anim.core.skeleton import JOINT_INDEX, JOINTS
+from ecs_anim.io.bvh import parse_bvh
+from ecs_anim.io.c3d.importing import import_c3d
+from ecs_anim.io.importing import canonical_clip, import_bvh
 
 WALK = MOTIONS_DIR / "walk.bvh"
 
@@ -302,7 +302,7 @@ def test_a_marker_map_with_an_unknown_role_lists_a_few_roles(tmp_path):
     message = _message(exc, f"{user_map}:2")
     assert message == ("markers.KNEE_LAT_x: unknown role for plug_in_gait (did you mean "
                        "'KNEE_LAT_r'?); roles: ASIS_l, ASIS_r, PSIS_l, PSIS_r, SACRUM, THIGH_l "
-                       "(+43 more) (all in the README's marker maps)")
+                       "(+43 more) (all in docs/import.md#marker-maps)")
 
 
 def mixamo_names(text: str) -> str:

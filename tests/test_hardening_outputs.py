@@ -19,10 +19,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ecs_anim import files
-from ecs_anim.cli import MAX_ERROR_CHARS, main
-from ecs_anim.errors import EcsAnimError
-from ecs_anim.files import MANIFEST_NAME, atomic_output, output_set
+from ecs_anim.apps.cli.args import MAX_ERROR_CHARS
+from ecs_anim.apps.cli.main import main
+from ecs_anim.core import files
+from ecs_anim.core.errors import EcsAnimError
+from ecs_anim.core.files import MANIFEST_NAME, atomic_output, output_set
 
 REPO = Path(__file__).resolve().parents[1]
 MOTIONS = REPO / "scenarios" / "motions"
@@ -261,7 +262,7 @@ def test_a_cli_run_killed_at_random_moments(old_and_new, tmp_path, capsys):
     for k, delay in enumerate(rng.uniform(0.2, 0.6, size=3)):
         work = tmp_path / f"try_{k}"
         old = with_old_set(work, old_folder)
-        process = subprocess.Popen([sys.executable, "-m", "ecs_anim.cli",
+        process = subprocess.Popen([sys.executable, "-m", "ecs_anim.apps.cli.main",
                                     *run_args(scenario, work, "0.2")],
                                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         time.sleep(delay)
@@ -462,8 +463,8 @@ def test_a_set_put_aside_by_a_killed_export_needs_force(tmp_path, capsys):
 def test_the_screenshot_writer_checks_its_output_with_the_shared_check(tmp_path, monkeypatch):
     """``write_screenshot`` refuses what ``output_problem`` refuses, as a user error, before
     rendering."""
+    from ecs_anim.apps.viewer import window
     from ecs_anim.scenario import load_scenario
-    from ecs_anim.viewer import window
 
     scenario = load_scenario(write_scenario(tmp_path, MOTIONS / "kick.bvh"))
 

@@ -11,16 +11,16 @@ import pytest
 from test_c3d import write_c3d
 
 from conftest import MOCAP_DIR, MOTIONS_DIR, require_mocap
-from ecs_anim.c3d_import import canonical_clip_c3d, import_c3d, read_c3d
 from ecs_anim.components import MotionPlayer, Placement
-from ecs_anim.ground import Stairs
-from ecs_anim.importing import import_bvh
-from ecs_anim.metrics import MetricsRecorder
-from ecs_anim.morphology import Morphology, bone_lengths_of
+from ecs_anim.core.ground import Stairs
+from ecs_anim.core.morphology import Morphology, bone_lengths_of
+from ecs_anim.core.skeleton import BONE_JOINTS
+from ecs_anim.core.skeleton import JOINT_INDEX as J
+from ecs_anim.io.c3d.importing import canonical_clip_c3d, import_c3d, read_c3d
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.runtime.metrics import MetricsRecorder
+from ecs_anim.runtime.simulation import Simulation
 from ecs_anim.scenario import build_simulation, load_scenario
-from ecs_anim.simulation import Simulation
-from ecs_anim.skeleton import BONE_JOINTS
-from ecs_anim.skeleton import JOINT_INDEX as J
 
 GAIT = MOCAP_DIR / "c3dorg_eb015pi_gait.c3d"
 TENNIS = MOCAP_DIR / "ktk_tennis_serve.c3d"
@@ -98,7 +98,7 @@ def test_neutral_filled_c3d_keeps_exact_bones_at_any_tick_rate(tmp_path, fps):
 
 
 def test_spine_joints_keep_their_lengths_on_a_folded_spline():
-    from ecs_anim.normalized import spine_joints
+    from ecs_anim.core.normalized import spine_joints
 
     rng = np.random.default_rng(1108)
     control = np.concatenate([np.zeros((200, 1, 3)), rng.normal(0.0, 0.05, (200, 3, 3))], axis=1)
@@ -130,7 +130,8 @@ def test_cluster_frames_without_three_pelvis_markers_are_trimmed():
 
 
 def test_absent_parts_follow_a_sane_pelvis_on_a_child(tmp_path):
-    """Item 3: the README's own example on a 1.25 m child: head_top dropped to -0.036 m."""
+    """Item 3: docs/import.md's own example (**Absent body parts.**) on a 1.25 m child:
+    head_top dropped to -0.036 m."""
     require_mocap()
     path = tmp_path / "absent.yaml"
     path.write_text(f"duration_s: 9.0\nfps: 30\nmotions:\n  gait: {{file: {GAIT}, absent_from: walk}}\n"
@@ -147,7 +148,7 @@ def test_absent_parts_follow_a_sane_pelvis_on_a_child(tmp_path):
 
 def test_fill_absent_from_at_import_keeps_the_head_up():
     require_mocap()
-    from ecs_anim.normalized import decode
+    from ecs_anim.core.normalized import decode
 
     motion = import_c3d(GAIT, fill_from=MOTIONS_DIR / "walk.bvh")
     positions = decode(motion.poses, motion.source_morphology.lengths, use_stretch=True).positions
@@ -268,7 +269,7 @@ def test_motions_handed_straight_to_a_simulation_are_checked():
     """Item 17: a NaN motion was accepted (and its characters' poses went NaN)."""
     from dataclasses import replace
 
-    from ecs_anim.errors import EcsAnimError
+    from ecs_anim.core.errors import EcsAnimError
 
     walk = import_bvh(MOTIONS_DIR / "walk.bvh")
     arrays = walk.poses.arrays()
@@ -285,7 +286,7 @@ def test_motions_handed_straight_to_a_simulation_are_checked():
 
 def test_import_and_info_say_which_frames_were_trimmed(tmp_path, capsys):
     require_mocap()
-    from ecs_anim.cli import main
+    from ecs_anim.apps.cli.main import main
 
     assert main(["import", str(GAIT), "-o", str(tmp_path)]) == 0
     out = capsys.readouterr().out
@@ -301,18 +302,19 @@ def test_import_and_info_say_which_frames_were_trimmed(tmp_path, capsys):
 
 
 def test_the_readme_python_examples_run(capsys, monkeypatch):
-    """The README's "From Python" examples, as written there."""
-    text = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    """docs/quickstart.md's "From Python" examples, as written there."""
+    text = (Path(__file__).resolve().parents[1] / "docs" / "quickstart.md").read_text(
+        encoding="utf-8")
     section = text.split("## From Python", 1)[1].split("\n## ", 1)[0]
     blocks = [part.split("```", 1)[0] for part in section.split("```python\n")[1:]]
     assert len(blocks) == 3  # the third, the frame budget: tests/test_solver_budget.py
     monkeypatch.chdir(Path(__file__).resolve().parents[1])
-    exec(compile(blocks[0], "README.md", "exec"), {})
+    exec(compile(blocks[0], "docs/quickstart.md", "exec"), {})
     captured = capsys.readouterr()
     assert "['tall'] (1, 22, 3)" in captured.out
     assert "character 'child' removed with its constraints touch" in captured.err
     scope: dict[str, object] = {}
-    exec(compile(blocks[1], "README.md", "exec"), scope)
+    exec(compile(blocks[1], "docs/quickstart.md", "exec"), scope)
     assert capsys.readouterr().out.splitlines() == ["100 (22, 3)", "(1, 3)"]
     sim = scope["sim"]
     assert isinstance(sim, Simulation)
@@ -322,7 +324,7 @@ def test_the_readme_python_examples_run(capsys, monkeypatch):
 
 def test_stall_fraction_zero_turns_the_share_test_off():
     """A review found 0.0 * inf = NaN on the first iteration marking every goal stalled."""
-    from ecs_anim.solver_shell import SolverSettings
+    from ecs_anim.solver.shell import SolverSettings
 
     idle = import_bvh(MOTIONS_DIR / "idle.bvh")
     errors = {}
@@ -374,8 +376,8 @@ def test_constraint_times_stay_on_the_file_after_a_trim(tmp_path):
     """A review: trimming the gait sample's first 19 frames moved --constraints times by 0.38 s
     (now its first 43: no pelvis, then too few left-foot markers)."""
     require_mocap()
-    from ecs_anim.cli import main
-    from ecs_anim.motion import load_nmo
+    from ecs_anim.apps.cli.main import main
+    from ecs_anim.motion.clip import load_nmo
 
     constraints = tmp_path / "c.yaml"
     constraints.write_text("constraints:\n  - name: hold\n    kind: distance\n    point: ankle_l\n"
@@ -405,7 +407,7 @@ def test_a_constraint_name_is_used_once_per_character():
     b = sim.spawn("b", Morphology.preset("child"), MotionPlayer("idle"), Placement((0.0, 1.0)))
     sim.add_constraint(a, "reach", "wrist_r", target_in_world=(0.3, 0.0, 1.0))
     sim.add_constraint(b, "reach", "wrist_r", target_in_world=(0.3, 1.0, 1.0))  # another body: fine
-    from ecs_anim.errors import EcsAnimError
+    from ecs_anim.core.errors import EcsAnimError
 
     with pytest.raises(EcsAnimError, match=r"^constraint 'reach': this character has one of that name already"):
         sim.add_constraint(a, "reach", "wrist_l", target_in_world=(0.3, 0.2, 1.0))

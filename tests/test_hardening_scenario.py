@@ -13,10 +13,8 @@ import pytest
 import yaml
 
 from conftest import mocap_files
-from ecs_anim import scenario as scenario_module
-from ecs_anim.c3d_import import import_c3d
-from ecs_anim.cli import main
-from ecs_anim.errors import (
+from ecs_anim.apps.cli.main import main
+from ecs_anim.core.errors import (
     NUMBER_LIST_MIN,
     EcsAnimError,
     InputError,
@@ -24,10 +22,19 @@ from ecs_anim.errors import (
     compose_yaml,
     expanded_size,
 )
-from ecs_anim.ground import HeightGrid
-from ecs_anim.importing import import_bvh
-from ecs_anim.motion import HEADER_KEY, load_nmo, save_nmo
-from ecs_anim.scenario import MAX_GRID_CELLS, MAX_GROUND_PARTS, MAX_YAML_VALUES, load_scenario
+from ecs_anim.core.ground import HeightGrid
+from ecs_anim.io.c3d.importing import import_c3d
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.motion.clip import HEADER_KEY, load_nmo, save_nmo
+from ecs_anim.scenario import (
+    MAX_GRID_CELLS,
+    MAX_GROUND_PARTS,
+    MAX_YAML_VALUES,
+    YamlReader,
+    grounds,
+    load_scenario,
+)
+from ecs_anim.scenario import loader as scenario_module
 
 REPO = Path(__file__).resolve().parents[1]
 WALK = REPO / "scenarios" / "motions" / "walk.bvh"
@@ -68,8 +75,8 @@ def test_a_1000_by_1000_grid_loads_without_building_a_node_per_height(tmp_path):
     assert isinstance(grid, HeightGrid)
     np.testing.assert_array_equal(grid._h, heights)
     # The work is one array per row: no scalar node is built for any of the million heights.
-    read = scenario_module._Reader(str(path))
-    np.testing.assert_array_equal(scenario_module._grid_heights(read, root.value[2][1].value[2][1], "h"),
+    read = YamlReader(str(path))
+    np.testing.assert_array_equal(grounds._grid_heights(read, root.value[2][1].value[2][1], "h"),
                                   heights)
     assert all(r._items is None for r in grid_rows)
     assert expanded_size(root, MAX_YAML_VALUES) == 1000 * 1001 + 24
@@ -194,7 +201,7 @@ def test_number_lists_read_in_one_go_equal_yaml_values(tmp_path):
     path = write(tmp_path, "v: [" + ", ".join(tokens) + "]\n")
     node = compose_yaml(path, "scenario", number_lists=True).value[0][1]
     assert isinstance(node, NumberList)
-    read = scenario_module._Reader(str(path))
+    read = YamlReader(str(path))
     assert node.numbers.tolist() == [read.number(item, "v") for item in node.value] \
         == [float(t) for t in tokens]
     # octal-looking 012 (YAML 1.1: 10), 1_000 and .nan are not plain: the list is read node by node

@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 
 from conftest import MOCAP_DIR, MOTIONS_DIR, mocap_params, require_mocap
-from ecs_anim.bvh import read_bvh
-from ecs_anim.cli import main
-from ecs_anim.contacts import _intervals, horizontal_speed
-from ecs_anim.importing import canonical_clip, import_bvh
-from ecs_anim.morphology import Morphology, bone_lengths_of
-from ecs_anim.skeleton import BONE_JOINTS, JOINT_INDEX, JOINTS, LENGTHS
+from ecs_anim.apps.cli.main import main
+from ecs_anim.core.morphology import Morphology, bone_lengths_of
+from ecs_anim.core.skeleton import BONE_JOINTS, JOINT_INDEX, JOINTS, LENGTHS
+from ecs_anim.io.bvh import read_bvh
+from ecs_anim.io.contacts import horizontal_speed, true_runs
+from ecs_anim.io.importing import canonical_clip, import_bvh
 
 MM = 1e-3
 # Units as documented in ../shared/mocap/README.md, independent of our detection.
@@ -144,7 +144,7 @@ def test_exported_bvh_reads_back_and_has_the_morphology_lengths(tmp_path, preset
     assert offsets["elbow_l"] == pytest.approx(morph["upper_arm_l"], abs=1e-6)
     assert offsets["wrist_l.end"] == pytest.approx(morph["hand_l"], abs=1e-6)
     # Its T-pose stands exactly the morphology's stature tall (sole to vertex, Y up).
-    from ecs_anim.bvh import rest_positions
+    from ecs_anim.io.bvh import rest_positions
     rest = rest_positions(skeleton)
     tpose_height = rest[skeleton.names.index("head.end"), 1] - rest[skeleton.names.index("ankle_l"), 1]
     assert tpose_height + morph["ankle_height_l"] == pytest.approx(stature, abs=1e-5)  # 6 decimals
@@ -192,8 +192,8 @@ def test_walk_contacts_cover_40_to_80_percent_alternate_and_hold_the_foot(name):
     fraction = contact.mean(axis=0)
     assert np.all((fraction >= 0.40) & (fraction <= 0.80)), fraction
     # Touchdowns (not counting feet already down on the first frame) alternate L, R, L, ...
-    downs = sorted([(a, "L") for a, _ in _intervals(contact[:, 0]) if a > 0]
-                   + [(a, "R") for a, _ in _intervals(contact[:, 1]) if a > 0])
+    downs = sorted([(a, "L") for a, _ in true_runs(contact[:, 0]) if a > 0]
+                   + [(a, "R") for a, _ in true_runs(contact[:, 1]) if a > 0])
     sides = "".join(s for _, s in downs)
     assert len(sides) >= 3 and "LL" not in sides and "RR" not in sides, sides
     # The stated bound: while in contact, the slower of ankle and toe moves at a median below

@@ -17,9 +17,9 @@ import pytest
 from test_c3d import write_c3d
 
 from conftest import MOCAP_DIR, require_mocap
-from ecs_anim.c3d_import import import_c3d, read_c3d
-from ecs_anim.errors import InputError
-from ecs_anim.importing import import_bvh
+from ecs_anim.core.errors import InputError
+from ecs_anim.io.c3d.importing import import_c3d, read_c3d
+from ecs_anim.io.importing import import_bvh
 
 WALK = MOCAP_DIR / "bandai_walk.bvh"  # 6 channels on every joint
 PIG = MOCAP_DIR / "varied" / "qualisys_pig_yup_events_100hz.c3d"  # Intel floats

@@ -15,14 +15,9 @@ import pytest
 from test_c3d import write_c3d
 
 from conftest import MOCAP_DIR
-from ecs_anim.bvh import parse_bvh
-from ecs_anim.c3d_import import import_c3d, read_c3d
-from ecs_anim.contacts import _intervals, horizontal_speed
-from ecs_anim.importing import import_bvh, unit_scale
-from ecs_anim.morphology import leg_length
-from ecs_anim.motion import NormalizedMotion, facing_and_travel
-from ecs_anim.normalized import decode
-from ecs_anim.rotations import (
+from ecs_anim.core.morphology import leg_length
+from ecs_anim.core.normalized import decode
+from ecs_anim.core.rotations import (
     euler_to_matrix,
     matrix_from_quat,
     matrix_to_euler,
@@ -30,7 +25,12 @@ from ecs_anim.rotations import (
     rot_axis,
     slerp,
 )
-from ecs_anim.skeleton import JOINT_INDEX as J
+from ecs_anim.core.skeleton import JOINT_INDEX as J
+from ecs_anim.io.bvh import parse_bvh
+from ecs_anim.io.c3d.importing import import_c3d, read_c3d
+from ecs_anim.io.contacts import horizontal_speed, true_runs
+from ecs_anim.io.importing import import_bvh, unit_scale
+from ecs_anim.motion.clip import NormalizedMotion, facing_and_travel
 
 UP_INDEX = {"x": 0, "y": 1, "z": 2}
 
@@ -129,7 +129,7 @@ def edges_s(flags: np.ndarray, fps: float) -> list[tuple[list[float], list[float
     """Per foot, the times (s) of its touch-downs and lift-offs inside the clip."""
     out = []
     for side in range(flags.shape[1]):
-        runs = _intervals(flags[:, side])
+        runs = true_runs(flags[:, side])
         out.append(([a / fps for a, _ in runs if a > 0],
                     [(b + 1) / fps for _, b in runs if b < len(flags) - 1]))
     return out

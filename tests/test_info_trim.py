@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from conftest import MOCAP_DIR, MOTIONS_DIR, require_mocap
-from ecs_anim.cli import main
-from ecs_anim.errors import EcsAnimError
-from ecs_anim.importing import FrameRange, import_bvh
-from ecs_anim.motion import facing_and_travel, load_nmo
+from ecs_anim.apps.cli.main import main
+from ecs_anim.core.errors import EcsAnimError
+from ecs_anim.io.importing import FrameRange, import_bvh
+from ecs_anim.motion.clip import facing_and_travel, load_nmo
 
 
 @pytest.fixture(scope="module")
@@ -86,7 +86,7 @@ def test_import_trim_drops_frames_and_says_where_the_clip_starts(tmp_path, capsy
 
 def test_import_trim_on_a_c3d_counts_the_files_frames(tmp_path):
     require_mocap()
-    from ecs_anim.c3d_import import import_c3d
+    from ecs_anim.io.c3d.importing import import_c3d
 
     gait = MOCAP_DIR / "c3dorg_eb015pi_gait.c3d"
     motion = import_c3d(gait, trim=FrameRange.parse("0:100"))
@@ -96,12 +96,12 @@ def test_import_trim_on_a_c3d_counts_the_files_frames(tmp_path):
 
 
 def test_the_readme_info_example_runs(tmp_path, monkeypatch, capsys):
-    """The README's info example (import the library into a folder, then info on the folder)."""
+    """docs/cli.md's info example (import the library into a folder, then info on the folder)."""
     from pathlib import Path
 
     repo = Path(__file__).resolve().parents[1]
-    text = (repo / "README.md").read_text(encoding="utf-8")
-    block = text.split("- **info** describes", 1)[1].split("- **import --trim", 1)[0]
+    text = (repo / "docs" / "cli.md").read_text(encoding="utf-8")
+    block = text.split("\n## info\n", 1)[1].split("\n## export\n", 1)[0]
     commands = [line.strip().replace(".venv/bin/ecs-anim ", "") for line in block.splitlines()
                 if line.strip().startswith(".venv/bin/ecs-anim")]
     assert len(commands) == 2
@@ -133,7 +133,7 @@ def test_import_face_turns_the_clip_rigidly_to_start_facing_the_way_asked(tmp_pa
     require_mocap()
     import math
 
-    from ecs_anim.normalized import decode
+    from ecs_anim.core.normalized import decode
 
     clip = MOCAP_DIR / "bandai_walk_turn_left.bvh"
     assert main(["import", str(clip), "-o", str(tmp_path / "as_is")]) == 0

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 from conftest import MOTIONS_DIR
-from ecs_anim.bvh import parse_bvh
-from ecs_anim.errors import MappingError
-from ecs_anim.importing import canonical_clip
-from ecs_anim.joint_map import PRESETS, map_skeleton
-from ecs_anim.skeleton import JOINTS
+from ecs_anim.core.errors import MappingError
+from ecs_anim.core.skeleton import JOINTS
+from ecs_anim.io.bvh import parse_bvh
+from ecs_anim.io.importing import canonical_clip
+from ecs_anim.io.joint_map import PRESETS, map_skeleton
 
 WALK_TEXT = (MOTIONS_DIR / "walk.bvh").read_text()
 HELPERS = ["pelvis_l", "pelvis_r", "lumbar", "cervical", "clavicle_l", "clavicle_r"]

@@ -1,4 +1,4 @@
-"""Compiled decode (ecs_anim.kernels.decode) equals the numpy reference (normalized.decode)."""
+"""Compiled decode (ecs_anim.runtime.kernels.decode) equals the numpy reference (normalized.decode)."""
 
 from __future__ import annotations
 
@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from conftest import MOCAP_DIR, MOTIONS_DIR, require_mocap
-from ecs_anim.importing import import_bvh
-from ecs_anim.kernels import decode as kd
-from ecs_anim.morphology import Morphology
-from ecs_anim.normalized import DecodedPose, NormalizedPoses, decode, decode_legs
-from ecs_anim.skeleton import N_LENGTHS
+from ecs_anim.core.morphology import Morphology
+from ecs_anim.core.normalized import DecodedPose, NormalizedPoses, decode, decode_legs
+from ecs_anim.core.skeleton import N_LENGTHS
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.runtime.kernels import decode as kd
 
 FIELDS = ("positions", "pelvis2world", "thorax2world", "head2world", "leg2world", "arm2world")
 TOL = 1e-9
@@ -157,8 +157,8 @@ def test_the_kernels_tuples_name_the_dataclasses_fields_in_order():
     tuples spelled out): a field added to one side only would shift every array after it."""
     from dataclasses import fields
 
-    from ecs_anim.kernels.decode import DecodedArrays, PoseArrays
-    from ecs_anim.normalized import DecodedPose, NormalizedPoses
+    from ecs_anim.core.normalized import DecodedPose, NormalizedPoses
+    from ecs_anim.runtime.kernels.decode import DecodedArrays, PoseArrays
 
     assert PoseArrays._fields == tuple(f.name for f in fields(NormalizedPoses))
     assert DecodedArrays._fields == tuple(f.name for f in fields(DecodedPose))

@@ -1,5 +1,5 @@
-"""The compiled clip and contact edges (ecs_anim.kernels.edges) equal the numpy reference
-(ecs_anim.events.clip_and_contact_edges): the edges, the clips seen before, and what is kept
+"""The compiled clip and contact edges (ecs_anim.runtime.kernels.edges) equal the numpy reference
+(ecs_anim.runtime.events.clip_and_contact_edges): the edges, the clips seen before, and what is kept
 per entity for the next tick, over ticks where clips start, loop, end, go back and are replaced,
 and contacts begin and end."""
 
@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ecs_anim.events import CONTACT_BEGAN_WEIGHT, TIME_SLACK_S, clip_and_contact_edges
-from ecs_anim.kernels.edges import clip_and_contact_edges as compiled
+from ecs_anim.runtime.events import CONTACT_BEGAN_WEIGHT, TIME_SLACK_S, clip_and_contact_edges
+from ecs_anim.runtime.kernels.edges import clip_and_contact_edges as compiled
 
 
 def _seen(n_entities: int) -> list[np.ndarray]:

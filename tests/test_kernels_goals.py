@@ -1,5 +1,5 @@
-"""The compiled goals and constraint errors (ecs_anim.kernels.goals) against the numpy ones
-(ecs_anim.solver_shell.tick_goals and constraint_errors, the references): every field of every
+"""The compiled goals and constraint errors (ecs_anim.runtime.kernels.goals) against the numpy ones
+(ecs_anim.solver.shell.tick_goals and constraint_errors, the references): every field of every
 tick's goals and every error equal to 1e-9, on the bench scene, on every shipped scenario and on
 a scene with every kind of constraint (box, sphere and half-space areas to stay in and to leave,
 a sphere sweeping past and letting go, a distance to another character, orientations along a
@@ -17,15 +17,15 @@ from test_scenarios import SCENARIOS, run
 
 import ecs_anim.systems.constraint_solve as system
 from conftest import MOTIONS_DIR
-from ecs_anim import solver_shell
 from ecs_anim.components import MotionPlayer, Placement
-from ecs_anim.constraint_table import Area
-from ecs_anim.constraints import Activation
-from ecs_anim.importing import import_bvh
-from ecs_anim.kernels import goals as compiled
-from ecs_anim.morphology import Morphology
-from ecs_anim.simulation import Simulation
-from ecs_anim.skeleton import JOINT_INDEX as J
+from ecs_anim.core.morphology import Morphology
+from ecs_anim.core.skeleton import JOINT_INDEX as J
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.motion.constraint_table import Area
+from ecs_anim.motion.constraints import Activation
+from ecs_anim.runtime.kernels import goals as compiled
+from ecs_anim.runtime.simulation import Simulation
+from ecs_anim.solver import shell as solver_shell
 
 ALWAYS = Activation(0.0, 1e9)
 ADULT = Morphology.preset("adult_male")

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from ecs_anim.components import MotionPlayer, Placement, QueuedClip
-from ecs_anim.ground import (
+from ecs_anim.core.ground import (
     Bumps,
     Combined,
     Ground,
@@ -17,12 +17,12 @@ from ecs_anim.ground import (
     Stairs,
     describe,
 )
-from ecs_anim.importing import import_bvh
-from ecs_anim.kernels.ground import height_at
-from ecs_anim.library import MOTIONS_DIR
-from ecs_anim.morphology import Morphology
-from ecs_anim.normalized import QUATERNION_FIELDS
-from ecs_anim.simulation import Simulation
+from ecs_anim.core.morphology import Morphology
+from ecs_anim.core.normalized import QUATERNION_FIELDS
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.io.library import MOTIONS_DIR
+from ecs_anim.runtime.kernels.ground import height_at
+from ecs_anim.runtime.simulation import Simulation
 from ecs_anim.systems import GroundAdapt
 
 

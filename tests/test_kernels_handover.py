@@ -1,4 +1,4 @@
-"""The threads over_chunks hands chunks to (ecs_anim.kernels.handover): each chunk run once,
+"""The threads over_chunks hands chunks to (ecs_anim.runtime.kernels.handover): each chunk run once,
 errors raised after every chunk is done, a sleeping thread woken, a second caller served."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from ecs_anim.kernels.handover import SpinningThreads, spin_while_equal
+from ecs_anim.runtime.kernels.handover import SpinningThreads, spin_while_equal
 
 
 def test_spin_returns_the_new_value_or_the_old_one_when_nothing_changed():

@@ -7,19 +7,19 @@ import numpy as np
 import pytest
 
 from ecs_anim.components import MotionPlayer, Placement, QueuedClip
-from ecs_anim.importing import import_bvh
-from ecs_anim.kernels.decode import pose_arrays
-from ecs_anim.kernels.playback import (
+from ecs_anim.core.morphology import Morphology
+from ecs_anim.core.normalized import QUATERNION_FIELDS, NormalizedPoses
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.io.library import MOTIONS_DIR
+from ecs_anim.motion.sampling import ClipBank, blend, rotate_xy, sample, sample_table
+from ecs_anim.runtime.kernels.decode import pose_arrays
+from ecs_anim.runtime.kernels.playback import (
     blend_rows,
     complex_power,
     sample_placed_rows,
     sample_table_rows,
 )
-from ecs_anim.library import MOTIONS_DIR
-from ecs_anim.morphology import Morphology
-from ecs_anim.normalized import QUATERNION_FIELDS, NormalizedPoses
-from ecs_anim.playback import ClipBank, blend, rotate_xy, sample, sample_table
-from ecs_anim.simulation import Simulation
+from ecs_anim.runtime.simulation import Simulation
 from ecs_anim.systems import MotionPlayback
 
 

@@ -1,4 +1,4 @@
-"""Compiled posture conversion and centre of mass (ecs_anim.kernels.posture, .com) equal the
+"""Compiled posture conversion and centre of mass (ecs_anim.runtime.kernels.posture, .com) equal the
 numpy references (exporting.local_rotations, normalized.vertebrae, morphology.centres_of_mass,
 and PostureConvert's numpy frozen rule).
 
@@ -16,14 +16,14 @@ import pytest
 from test_kernels_decode import random_bodies, random_poses
 
 from conftest import MOTIONS_DIR
-from ecs_anim.exporting import local_rotations
-from ecs_anim.importing import import_bvh
-from ecs_anim.kernels import com as kc
-from ecs_anim.kernels import decode as kd
-from ecs_anim.kernels import posture as kp
-from ecs_anim.morphology import Morphology, centres_of_mass, segment_mass_table
-from ecs_anim.normalized import decode, vertebrae
-from ecs_anim.skeleton import N_JOINTS
+from ecs_anim.core.morphology import Morphology, centres_of_mass, segment_mass_table
+from ecs_anim.core.normalized import decode, vertebrae
+from ecs_anim.core.skeleton import N_JOINTS
+from ecs_anim.io.export.skeleton import local_rotations
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.runtime.kernels import com as kc
+from ecs_anim.runtime.kernels import decode as kd
+from ecs_anim.runtime.kernels import posture as kp
 
 TOL = 1e-9
 

@@ -1,5 +1,5 @@
-"""The compiled solver (ecs_anim.kernels.solve and its step modules) against the numpy solver
-(ecs_anim.solver_shell.solve, the reference): the whole solve on the bench scene and on every
+"""The compiled solver (ecs_anim.runtime.kernels.solve and its step modules) against the numpy solver
+(ecs_anim.solver.shell.solve, the reference): the whole solve on the bench scene and on every
 shipped scenario, each step on real solve states, and each step's own behaviour on one to three
 characters."""
 
@@ -15,22 +15,22 @@ from test_scenarios import SCENARIOS, run
 
 import ecs_anim.systems.constraint_solve as system
 from conftest import MOTIONS_DIR
-from ecs_anim import solver_shell
-from ecs_anim.cli import walkers_on_bumps
 from ecs_anim.components import MotionPlayer, Placement
-from ecs_anim.constraints import Activation
-from ecs_anim.ground_adapt import MAX_LEG_EXTENSION
-from ecs_anim.importing import import_bvh
-from ecs_anim.kernels import solve as compiled
-from ecs_anim.kernels.solve_head import solve_head
-from ecs_anim.kernels.solve_limbs import solve_limbs
-from ecs_anim.kernels.solve_points import centre_of_mass, goal_error
-from ecs_anim.kernels.solve_root import solve_root
-from ecs_anim.kernels.solve_trunk import solve_trunk
-from ecs_anim.morphology import Morphology
-from ecs_anim.rotations import matrix_from_quat
-from ecs_anim.simulation import Simulation
-from ecs_anim.skeleton import JOINT_INDEX as J
+from ecs_anim.core.ground_adapt import MAX_LEG_EXTENSION
+from ecs_anim.core.morphology import Morphology
+from ecs_anim.core.rotations import matrix_from_quat
+from ecs_anim.core.skeleton import JOINT_INDEX as J
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.motion.constraints import Activation
+from ecs_anim.runtime.bench_scene import walkers_on_bumps
+from ecs_anim.runtime.kernels import solve as compiled
+from ecs_anim.runtime.kernels.solve_head import solve_head
+from ecs_anim.runtime.kernels.solve_limbs import solve_limbs
+from ecs_anim.runtime.kernels.solve_points import centre_of_mass, goal_error
+from ecs_anim.runtime.kernels.solve_root import solve_root
+from ecs_anim.runtime.kernels.solve_trunk import solve_trunk
+from ecs_anim.runtime.simulation import Simulation
+from ecs_anim.solver import shell as solver_shell
 
 ALWAYS = Activation(0.0, 1e9)
 ADULT = Morphology.preset("adult_male")

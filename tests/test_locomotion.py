@@ -9,16 +9,16 @@ import numpy as np
 import pytest
 
 from ecs_anim.components import MotionPlayer
-from ecs_anim.ground import Bumps
-from ecs_anim.importing import import_bvh
-from ecs_anim.library import MOTIONS_DIR
-from ecs_anim.library import main as library_main
-from ecs_anim.metrics import MetricsRecorder
-from ecs_anim.morphology import Morphology
-from ecs_anim.motion import NormalizedMotion
+from ecs_anim.core.ground import Bumps
+from ecs_anim.core.morphology import Morphology
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.io.library import MOTIONS_DIR
+from ecs_anim.io.library.shipped import main as library_main
+from ecs_anim.motion.clip import NormalizedMotion
+from ecs_anim.runtime.metrics import MetricsRecorder
+from ecs_anim.runtime.simulation import Simulation
+from ecs_anim.runtime.steering import IDLE, RUN, WALK
 from ecs_anim.scenario import build_simulation, load_scenario
-from ecs_anim.simulation import Simulation
-from ecs_anim.steering import IDLE, RUN, WALK
 
 STATURES = (1.20, 1.75, 2.00)
 BUMPS = Bumps(amplitude_m=0.03, wavelength_x_m=2.5, wavelength_y_m=3.0)

@@ -9,10 +9,10 @@ import pytest
 
 from conftest import MOTIONS_DIR, REPO
 from ecs_anim import EcsAnimError, Morphology, MotionPlayer, Placement, Simulation
-from ecs_anim.constraint_table import TARGET_BODY, TARGET_WORLD
-from ecs_anim.importing import import_bvh
+from ecs_anim.core.skeleton import JOINT_INDEX
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.motion.constraint_table import TARGET_BODY, TARGET_WORLD
 from ecs_anim.scenario import build_simulation, load_scenario
-from ecs_anim.skeleton import JOINT_INDEX
 
 
 def test_each_kickers_kick_torso_is_its_own_constraint_and_moves_its_own_ankle():

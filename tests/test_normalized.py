@@ -6,9 +6,7 @@ import numpy as np
 import pytest
 
 from conftest import MOTIONS_DIR
-from ecs_anim.bvh import read_bvh
-from ecs_anim.importing import canonical_clip, import_bvh
-from ecs_anim.morphology import (
+from ecs_anim.core.morphology import (
     DE_LEVA_1996,
     PRESET_SPECS,
     Morphology,
@@ -17,9 +15,11 @@ from ecs_anim.morphology import (
     load_morphology_yaml,
     segment_mass_table,
 )
-from ecs_anim.motion import load_nmo, save_nmo
-from ecs_anim.normalized import decode, encode, frames_from_positions, spine_joints
-from ecs_anim.skeleton import BONE_JOINTS, JOINT_INDEX, LENGTHS, PARENTS
+from ecs_anim.core.normalized import decode, encode, frames_from_positions, spine_joints
+from ecs_anim.core.skeleton import BONE_JOINTS, JOINT_INDEX, LENGTHS, PARENTS
+from ecs_anim.io.bvh import read_bvh
+from ecs_anim.io.importing import canonical_clip, import_bvh
+from ecs_anim.motion.clip import load_nmo, save_nmo
 
 
 @pytest.fixture(scope="module")
@@ -136,7 +136,7 @@ def test_morphology_yaml(tmp_path):
 
 
 def test_any_number_of_vertebrae_along_the_spine(walk):
-    from ecs_anim.normalized import vertebrae
+    from ecs_anim.core.normalized import vertebrae
 
     m = Morphology.preset("adult_male")
     pos = decode(walk.poses, m.lengths).positions

@@ -10,16 +10,16 @@ import numpy as np
 import pytest
 
 from conftest import MOCAP_DIR, MOTIONS_DIR, require_mocap
-from ecs_anim.cli import main
+from ecs_anim.apps.cli.main import main
 from ecs_anim.components import MotionPlayer, Placement, QueuedClip
-from ecs_anim.errors import InputError
-from ecs_anim.ground import Bumps, Combined, Stairs
-from ecs_anim.importing import import_bvh
-from ecs_anim.metrics import MetricsRecorder
-from ecs_anim.morphology import Morphology, bone_lengths_of
+from ecs_anim.core.errors import InputError
+from ecs_anim.core.ground import Bumps, Combined, Stairs
+from ecs_anim.core.morphology import Morphology, bone_lengths_of
+from ecs_anim.core.skeleton import BONE_JOINTS
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.runtime.metrics import MetricsRecorder
+from ecs_anim.runtime.simulation import Simulation
 from ecs_anim.scenario import build_simulation, load_scenario
-from ecs_anim.simulation import Simulation
-from ecs_anim.skeleton import BONE_JOINTS
 from ecs_anim.systems import SCHEDULE
 
 REPO = Path(__file__).resolve().parents[1]

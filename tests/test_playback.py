@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 from conftest import MOTIONS_DIR
-from ecs_anim.importing import import_bvh
-from ecs_anim.morphology import Morphology
-from ecs_anim.normalized import decode
-from ecs_anim.playback import ClipBank, sample
+from ecs_anim.core.morphology import Morphology
+from ecs_anim.core.normalized import decode
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.motion.sampling import ClipBank, sample
 
 
 @pytest.fixture(scope="module")

@@ -19,9 +19,9 @@ import pytest
 from test_import_export import reference_positions
 
 from conftest import MOCAP_DIR
-from ecs_anim.cli import main
-from ecs_anim.motion import load_nmo
-from ecs_anim.skeleton import JOINT_INDEX, JOINTS
+from ecs_anim.apps.cli.main import main
+from ecs_anim.core.skeleton import JOINT_INDEX, JOINTS
+from ecs_anim.motion.clip import load_nmo
 
 MM = 1e-3
 VARIED = MOCAP_DIR / "varied"

@@ -14,11 +14,11 @@ import pytest
 from test_c3d import write_c3d
 
 from conftest import MOCAP_DIR
-from ecs_anim.bvh import read_bvh
-from ecs_anim.c3d_import import canonical_clip_c3d, import_c3d, read_c3d
-from ecs_anim.cli import main
-from ecs_anim.importing import FrameRange, canonical_clip, import_bvh, leading_rest_frames
-from ecs_anim.motion import load_nmo
+from ecs_anim.apps.cli.main import main
+from ecs_anim.io.bvh import read_bvh
+from ecs_anim.io.c3d.importing import canonical_clip_c3d, import_c3d, read_c3d
+from ecs_anim.io.importing import FrameRange, canonical_clip, import_bvh, leading_rest_frames
+from ecs_anim.motion.clip import load_nmo
 
 VARIED = MOCAP_DIR / "varied"
 #: Files whose frame 0 is a rest pose (all rotations zero but the root's: the folders' READMEs
@@ -27,7 +27,7 @@ VARIED = MOCAP_DIR / "varied"
 REST_FRAME = {"cmu_01_01_playground_jumps.bvh": 1, "cmu_walk_120hz_adelaide.bvh": 1,
               "cmubiped_10_01_kick_30fps.bvh": 1, "cmudaz_03_01_uneven_terrain.bvh": 1,
               "cmudaz_03_02_uneven_terrain.bvh": 25}
-#: The --map a file needs (README's tables): labels no convention uses.
+#: The --map a file needs (docs/import.md's tables): labels no convention uses.
 MAPS = {"qualisys_lowercase_underscore_240hz.c3d":
         str(Path(__file__).parent / "data" / "maps" / "qualisys_knee_joint_line.yaml"),
         "rancho_wheelchair_rightarm_50hz.c3d":
@@ -148,12 +148,12 @@ def test_a_c3d_frame_0_from_another_moment_is_dropped_numbered_as_in_the_file(tm
 
 
 def test_the_readme_rest_frame_example_runs_and_prints_what_it_says(tmp_path, monkeypatch, capsys):
-    """The README's example under ``import --trim``, as a shell runs it from the repository
-    (out/ becomes a temporary folder): the line it quotes is printed, and ``--trim 0:`` keeps
-    the frame."""
+    """docs/cli.md's rest-pose example (under ``## import``), as a shell runs it from the
+    repository (out/ becomes a temporary folder): the line it quotes is printed, and
+    ``--trim 0:`` keeps the frame."""
     repo = Path(__file__).resolve().parents[1]
-    text = (repo / "README.md").read_text(encoding="utf-8")
-    block = text.split("Without `--trim`, a rest pose", 1)[1].split("- **export**", 1)[0]
+    text = (repo / "docs" / "cli.md").read_text(encoding="utf-8")
+    block = text.split("Without `--trim`, a rest pose", 1)[1].split("\n## ", 1)[0]
     lines = [line.strip() for line in block.splitlines()]
     commands = [line.replace(".venv/bin/ecs-anim ", "") for line in lines
                 if line.startswith(".venv/bin/ecs-anim")]

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from ecs_anim.rotations import (
+from ecs_anim.core.rotations import (
     axis_angle,
     cross_matrix,
     euler_to_matrix,

@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ecs_anim.metrics import MetricsRecorder
-from ecs_anim.morphology import centres_of_mass
+from ecs_anim.core.morphology import centres_of_mass
+from ecs_anim.core.skeleton import JOINT_INDEX as J
+from ecs_anim.runtime.metrics import MetricsRecorder
 from ecs_anim.scenario import build_simulation, load_scenario
-from ecs_anim.skeleton import JOINT_INDEX as J
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 
@@ -72,7 +72,7 @@ def test_fight_training_hits_and_ward_offs_are_met_and_heads_dodge_the_punches()
     # towards it, as far as a leg goes, at the kick's peak (0.70 s into the clip).
     peak = round((started(r, "kicker_4", "kick") + 0.70) * 30)
     p = r["positions"][peak, r["names"].index("kicker_4")]
-    from ecs_anim.ground_adapt import MAX_LEG_EXTENSION
+    from ecs_anim.core.ground_adapt import MAX_LEG_EXTENSION
     leg = np.linalg.norm(p[J["ankle_r"]] - p[J["hip_r"]])
     assert leg > 0.99 * MAX_LEG_EXTENSION * r["leg"][r["names"].index("kicker_4")]
     # The punches are within reach: without the dodge every fist touches the kicker's face (its
@@ -161,7 +161,7 @@ def test_dance_step_length_scales_with_the_legs():
 
 
 def test_camera_hints_are_read_and_checked(tmp_path):
-    from ecs_anim.errors import InputError
+    from ecs_anim.core.errors import InputError
 
     scenario = load_scenario(SCENARIOS / "fight_training.yaml")
     assert scenario.camera == {"yaw_deg": -65.0, "pitch_deg": 14.0}

@@ -13,9 +13,9 @@ import sys
 import numpy as np
 import pytest
 
-from ecs_anim.cli import walkers_on_bumps
-from ecs_anim.constraints import Activation
-from ecs_anim.metrics import MetricsRecorder
+from ecs_anim.motion.constraints import Activation
+from ecs_anim.runtime.bench_scene import walkers_on_bumps
+from ecs_anim.runtime.metrics import MetricsRecorder
 
 SOAK_TICKS = int(os.environ.get("ECS_ANIM_SOAK_TICKS", "3000"))
 

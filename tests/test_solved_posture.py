@@ -9,10 +9,10 @@ import numpy as np
 from test_scenarios import run
 
 import ecs_anim.systems.posture_convert as posture_convert
-from ecs_anim.benchmark import BenchScene
-from ecs_anim.exporting import local_rotations
-from ecs_anim.kernels.solved_posture import posture_solved_rows
-from ecs_anim.normalized import DecodedPose, decode
+from ecs_anim.core.normalized import DecodedPose, decode
+from ecs_anim.io.export.skeleton import local_rotations
+from ecs_anim.runtime.bench_scene import BenchScene
+from ecs_anim.runtime.kernels.solved_posture import posture_solved_rows
 
 
 def assert_posture_is_the_decoded_poses(sim):

@@ -14,18 +14,18 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from conftest import MOTIONS_DIR
-from ecs_anim.body_points import GROUPS, body_point
 from ecs_anim.components import MotionPlayer, Placement
-from ecs_anim.constraint_table import Area
-from ecs_anim.constraints import Activation
-from ecs_anim.errors import EcsAnimError
-from ecs_anim.importing import import_bvh
-from ecs_anim.morphology import Morphology, bone_lengths_of, centres_of_mass, with_lengths_m
-from ecs_anim.rotations import rot_axis
-from ecs_anim.simulation import Simulation
-from ecs_anim.skeleton import BONE_JOINTS, JOINTS
-from ecs_anim.skeleton import JOINT_INDEX as J
-from ecs_anim.solver_shell import DEFAULT_SETTINGS
+from ecs_anim.core.body_points import GROUPS, body_point
+from ecs_anim.core.errors import EcsAnimError
+from ecs_anim.core.morphology import Morphology, bone_lengths_of, centres_of_mass, with_lengths_m
+from ecs_anim.core.rotations import rot_axis
+from ecs_anim.core.skeleton import BONE_JOINTS, JOINTS
+from ecs_anim.core.skeleton import JOINT_INDEX as J
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.motion.constraint_table import Area
+from ecs_anim.motion.constraints import Activation
+from ecs_anim.runtime.simulation import Simulation
+from ecs_anim.solver.shell import DEFAULT_SETTINGS
 
 IS_BONE = np.array([a >= 0 for a, _ in BONE_JOINTS])
 ALWAYS = Activation(0.0, 1e9)
@@ -177,8 +177,8 @@ def test_points_on_every_bone_of_the_arms_and_head_reach_with_the_trunk(floating
 
 
 def point_positions_now(sim, point, fraction):
-    from ecs_anim.body_points import point_positions
-    from ecs_anim.normalized import decode
+    from ecs_anim.core.body_points import point_positions
+    from ecs_anim.core.normalized import decode
 
     bp = body_point(point, fraction)
     dec = decode(sim.store.poses, sim.store.lengths)
@@ -539,8 +539,8 @@ constraints:
 
 
 def test_constraints_given_at_import_play_with_the_motion_on_every_body(tmp_path, capsys):
-    from ecs_anim.cli import main
-    from ecs_anim.motion import load_nmo
+    from ecs_anim.apps.cli.main import main
+    from ecs_anim.motion.clip import load_nmo
 
     (tmp_path / "box.yaml").write_text(HOLD_BOX)
     assert main(["import", str(MOTIONS_DIR / "idle.bvh"), "-o", str(tmp_path),
@@ -564,7 +564,7 @@ def test_constraints_given_at_import_play_with_the_motion_on_every_body(tmp_path
 
 
 def test_a_bad_constraints_file_is_refused_before_importing(tmp_path, capsys):
-    from ecs_anim.cli import main
+    from ecs_anim.apps.cli.main import main
 
     bad = tmp_path / "bad.yaml"
     bad.write_text(HOLD_BOX.replace("target: {point: wrist_r}", "target: {world_m: [0, 0, 1]}"))
@@ -590,9 +590,9 @@ def test_a_stored_area_plays_and_a_stored_constraint_past_the_clip_is_refused(tm
     damaged stored constraint is refused when the .nmo is read, naming the file."""
     from dataclasses import replace as dc_replace
 
-    from ecs_anim.cli import main
-    from ecs_anim.errors import InputError
-    from ecs_anim.motion import load_nmo, save_nmo
+    from ecs_anim.apps.cli.main import main
+    from ecs_anim.core.errors import InputError
+    from ecs_anim.motion.clip import load_nmo, save_nmo
 
     (tmp_path / "keep.yaml").write_text(KEEP_OUT)
     assert main(["import", str(MOTIONS_DIR / "idle.bvh"), "-o", str(tmp_path),

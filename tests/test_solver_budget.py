@@ -11,13 +11,13 @@ from test_kernels_solve import Capture, assert_same_solve
 
 from conftest import MOTIONS_DIR
 from ecs_anim.components import MotionPlayer, Placement
-from ecs_anim.errors import EcsAnimError
-from ecs_anim.importing import import_bvh
-from ecs_anim.morphology import Morphology
-from ecs_anim.simulation import Simulation
-from ecs_anim.skeleton import JOINT_INDEX as J
-from ecs_anim.solver_budget import SolverCostModel
-from ecs_anim.solver_shell import SolverSettings
+from ecs_anim.core.errors import EcsAnimError
+from ecs_anim.core.morphology import Morphology
+from ecs_anim.core.skeleton import JOINT_INDEX as J
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.runtime.simulation import Simulation
+from ecs_anim.solver.budget import SolverCostModel
+from ecs_anim.solver.shell import SolverSettings
 
 ONE_MS = SolverCostModel(ms_per_iteration=1.0)
 ADULT = Morphology.preset("adult_male")
@@ -147,19 +147,21 @@ def test_bad_budget_settings_say_what():
 
 
 def test_the_readme_budget_example_runs(capsys, monkeypatch):
-    """The README's frame-budget example (the third "From Python" block), as written there."""
-    text = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    """docs/quickstart.md's frame-budget example (the third "From Python" block), as written
+    there."""
+    text = (Path(__file__).resolve().parents[1] / "docs" / "quickstart.md").read_text(
+        encoding="utf-8")
     section = text.split("## From Python", 1)[1].split("\n## ", 1)[0]
     block = section.split("```python\n")[3].split("```", 1)[0]
     monkeypatch.chdir(Path(__file__).resolve().parents[1])
-    exec(compile(block, "README.md", "exec"), {})
+    exec(compile(block, "docs/quickstart.md", "exec"), {})
     assert capsys.readouterr().out.splitlines() == [
         "expected 24 ms, cut to 14 ms; priorities cut {1.0: 1}; characters cut ['c3', 'c2']",
         "priority 10: 4 constraints, 2 cut, largest error under 1 mm: True"]
 
 
 def test_pelvis_is_where_distances_are_measured():
-    from ecs_anim.solver_shell import focus_distances
+    from ecs_anim.solver.shell import focus_distances
 
     positions = np.zeros((2, len(J), 3))
     positions[1, J["pelvis"]] = (3.0, 4.0, 1.0)

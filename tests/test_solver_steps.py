@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from ecs_anim.solver import bring_within_reach
+from ecs_anim.solver.steps import bring_within_reach
 
 
 def test_bring_within_reach_turns_the_limb_root_just_enough():

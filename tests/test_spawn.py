@@ -11,11 +11,11 @@ import pytest
 
 from conftest import MOTIONS_DIR
 from ecs_anim.components import CharacterRow, Morphology, MotionPlayer, Placement, QueuedClip
-from ecs_anim.errors import EcsAnimError
-from ecs_anim.importing import import_bvh
-from ecs_anim.normalized import NormalizedPoses
-from ecs_anim.simulation import Simulation
-from ecs_anim.store import CharacterStore
+from ecs_anim.core.errors import EcsAnimError
+from ecs_anim.core.normalized import NormalizedPoses
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.runtime.simulation import Simulation
+from ecs_anim.runtime.store import CharacterStore
 
 
 @pytest.fixture(scope="module")
@@ -121,7 +121,7 @@ def test_a_bad_character_in_a_bulk_spawn_adds_none(motions):
 
 
 def test_the_benchmark_scene_spawns_in_bulk():
-    from ecs_anim.cli import walkers_on_bumps
+    from ecs_anim.runtime.bench_scene import walkers_on_bumps
 
     sim, _ = walkers_on_bumps(500)
     assert sim.store.n == 500 and len(set(sim.names())) == 500

@@ -12,15 +12,15 @@ import numpy as np
 import pytest
 
 from ecs_anim.components import MotionPlayer, Placement
-from ecs_anim.errors import EcsAnimError, InputError
-from ecs_anim.ground import Bumps, Plane
-from ecs_anim.importing import import_bvh
-from ecs_anim.library import MOTIONS_DIR
-from ecs_anim.metrics import MetricsRecorder
-from ecs_anim.morphology import Morphology
-from ecs_anim.motion import NormalizedMotion
+from ecs_anim.core.errors import EcsAnimError, InputError
+from ecs_anim.core.ground import Bumps, Plane
+from ecs_anim.core.morphology import Morphology
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.io.library import MOTIONS_DIR
+from ecs_anim.motion.clip import NormalizedMotion
+from ecs_anim.runtime.metrics import MetricsRecorder
+from ecs_anim.runtime.simulation import Simulation
 from ecs_anim.scenario import build_simulation, load_scenario
-from ecs_anim.simulation import Simulation
 from ecs_anim.systems import MotionPlayback
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"

@@ -19,12 +19,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ecs_anim.cli import main
-from ecs_anim.scenario import build_simulation, load_scenario
-from ecs_anim.skeleton import JOINT_INDEX, N_JOINTS
-from ecs_anim.viewer.camera import OrbitCamera, frame_points, look_at, perspective, spread_yaw
-from ecs_anim.viewer.png import SIGNATURE, encode_png
-from ecs_anim.viewer.scene import (
+from ecs_anim.apps.cli.main import main
+from ecs_anim.apps.viewer.camera import OrbitCamera, frame_points, look_at, perspective, spread_yaw
+from ecs_anim.apps.viewer.png import SIGNATURE, encode_png
+from ecs_anim.apps.viewer.scene import (
     BODY_CAPSULES,
     INSTANCE_FLOATS,
     ground_mesh,
@@ -32,6 +30,8 @@ from ecs_anim.viewer.scene import (
     snapshot,
     team_colours,
 )
+from ecs_anim.core.skeleton import JOINT_INDEX, N_JOINTS
+from ecs_anim.scenario import build_simulation, load_scenario
 
 REPO = Path(__file__).resolve().parents[1]
 SCENARIOS = REPO / "scenarios"
@@ -140,7 +140,7 @@ def test_snapshot_has_one_capsule_row_per_body_part():
 
 
 def test_body_instances_batched_equal_one_character_at_a_time():
-    from ecs_anim.viewer.scene import body_instances
+    from ecs_anim.apps.viewer.scene import body_instances
 
     rng = np.random.default_rng(3)
     n = 7
@@ -156,8 +156,8 @@ def test_body_instances_batched_equal_one_character_at_a_time():
 
 def test_snapshot_of_a_crowd():
     from ecs_anim.components import MotionPlayer, Placement
-    from ecs_anim.morphology import Morphology
-    from ecs_anim.simulation import Simulation
+    from ecs_anim.core.morphology import Morphology
+    from ecs_anim.runtime.simulation import Simulation
 
     motions = _scenario("terrain_walk.yaml").motions
     with Simulation({"walk": motions["walk"]}) as sim:
@@ -202,7 +202,7 @@ class _FullTable:
 
 
 def _full_table() -> _FullTable:
-    from ecs_anim.skeleton import LENGTH_INDEX
+    from ecs_anim.core.skeleton import LENGTH_INDEX
 
     fa, lw = LENGTH_INDEX["forearm_r"], LENGTH_INDEX["head"]
     # 0: wrist_r -> world point (position); 1: wrist_r at the other's head top (distance);
@@ -225,8 +225,8 @@ def _full_table() -> _FullTable:
 
 
 def test_accessors_read_the_full_constraint_table():
-    from ecs_anim.viewer.constraint_view import constraint_marks, restricted_areas
-    from ecs_anim.viewer.scene import area_instances
+    from ecs_anim.apps.viewer.constraint_view import constraint_marks, restricted_areas
+    from ecs_anim.apps.viewer.scene import area_instances
 
     with build_simulation(_scenario("reach_and_touch.yaml")) as sim:
         sim.step()
@@ -308,7 +308,7 @@ def _unfilter(raw: bytes, h: int, w: int, channels: int) -> np.ndarray:
 
 def read_png(path: str | Path) -> np.ndarray:
     """(height, width, 3) uint8 of an 8-bit RGB or RGBA non-interlaced PNG (alpha dropped): what
-    :func:`ecs_anim.viewer.png.write_png` writes, read back to check it."""
+    :func:`ecs_anim.apps.viewer.png.write_png` writes, read back to check it."""
     data = Path(path).read_bytes()
     if not data.startswith(SIGNATURE):
         raise ValueError(f"{path}: not a PNG file")
@@ -351,7 +351,7 @@ def _headless_gl() -> str | None:
     """None if a headless OpenGL 3.3 context can be made, else why not (in a subprocess, so a
     crashing driver cannot take the test run with it)."""
     code = ("import pyglet; pyglet.options['headless'] = True; pyglet.options['shadow_window'] = False\n"
-            "from ecs_anim.viewer.window import _make_window, _pyglet\n"
+            "from ecs_anim.apps.viewer.window import _make_window, _pyglet\n"
             "w = _make_window(_pyglet(True), 16, 16, visible=False); print('ok'); w.close()")
     try:
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
@@ -393,7 +393,7 @@ def _check_characters_where_they_are(shot, colours: np.ndarray,
     all_px = shot.camera.project(drawn, w, h)
     saturated = (shot.rgb.max(axis=-1).astype(int) - shot.rgb.min(axis=-1)) > 40
     # Restricted areas are drawn where the scenario puts them, not on characters.
-    from ecs_anim.viewer.scene import AREA_COLOUR
+    from ecs_anim.apps.viewer.scene import AREA_COLOUR
     saturated &= ~_character_mask(shot.rgb, np.array(AREA_COLOUR) * 255)
     yy, xx = np.mgrid[0:h, 0:w]
     for i, (x, y) in enumerate(pelvis_px):
@@ -428,13 +428,13 @@ def test_screenshot_shows_the_characters_where_they_are(tmp_path, name, at_s, ca
     rgb = read_png(out)
     assert rgb.shape == (360, 640, 3)
     # the same frame rendered in-process gives the camera and joints to check against
-    from ecs_anim.viewer.window import render_screenshot
+    from ecs_anim.apps.viewer.window import render_screenshot
 
     scenario = _scenario(name)
     shot = render_screenshot(scenario, at_s, 640, 360)
     assert np.abs(shot.rgb.astype(int) - rgb).max() <= 2  # deterministic
     with build_simulation(scenario) as sim:
-        from ecs_anim.viewer.scene import character_teams
+        from ecs_anim.apps.viewer.scene import character_teams
 
         colours = team_colours(character_teams(sim))
         table = sim.constraints
@@ -447,7 +447,7 @@ def test_screenshot_shows_the_characters_where_they_are(tmp_path, name, at_s, ca
 
 def test_screenshot_without_targets_and_com_hides_them():
     _need_gl()
-    from ecs_anim.viewer.window import render_screenshot
+    from ecs_anim.apps.viewer.window import render_screenshot
 
     scenario = _scenario("reach_and_touch.yaml")
     shown = render_screenshot(scenario, 2.5, 320, 180)
@@ -465,7 +465,7 @@ def test_screenshot_without_targets_and_com_hides_them():
 
 def test_restricted_areas_are_drawn():
     _need_gl()
-    from ecs_anim.viewer.window import render_frame
+    from ecs_anim.apps.viewer.window import render_frame
 
     with build_simulation(_scenario("reach_and_touch.yaml")) as sim:
         sim.step()
@@ -487,7 +487,7 @@ def test_viewer_window_controls():
     _need_gl()
     import pyglet
 
-    from ecs_anim.viewer.window import open_viewer
+    from ecs_anim.apps.viewer.window import open_viewer
 
     app = open_viewer(_scenario("reach_and_touch.yaml"), 320, 180, headless=True)
     key, mouse = pyglet.window.key, pyglet.window.mouse
@@ -566,7 +566,7 @@ def test_view_errors_are_one_line(tmp_path, capsys, monkeypatch):
 def test_render_system_only_notes_the_tick():
     """STYLE 8: with a window the Render system hands the store over; the posture is the same
     as headless."""
-    from ecs_anim.viewer.window import SceneSource
+    from ecs_anim.apps.viewer.window import SceneSource
 
     scenario = _scenario("reach_and_touch.yaml")
     with build_simulation(scenario, window=True) as windowed, build_simulation(scenario) as headless:
@@ -584,7 +584,7 @@ def test_render_system_only_notes_the_tick():
 def test_tables_are_drawn_where_the_scenario_puts_them():
     """The table scene's two tables become capsules: a top of touching rods at the table's
     height, and four legs standing on the ground; they are unsaturated (never a character)."""
-    from ecs_anim.viewer.scene import TABLE_COLOUR, TABLE_TOP_RADIUS_M, snapshot
+    from ecs_anim.apps.viewer.scene import TABLE_COLOUR, TABLE_TOP_RADIUS_M, snapshot
 
     scenario = _scenario("wrists_above_table.yaml")
     assert len(scenario.tables) == 2
@@ -601,3 +601,26 @@ def test_tables_are_drawn_where_the_scenario_puts_them():
         near = np.linalg.norm(top[:, :2] - np.array(table.centre_m), axis=1) < 0.7
         assert near.any()
     assert max(TABLE_COLOUR) - min(TABLE_COLOUR) < 40 / 255
+
+
+FORK_AFTER_SCREENSHOT = """
+import gc, multiprocessing, sys
+gc.disable()  # the display of the screenshot below stays garbage until a child collects it
+from ecs_anim import load_scenario
+from ecs_anim.apps.viewer.window import write_screenshot
+write_screenshot(load_scenario(sys.argv[1]), sys.argv[2], 0.5, 64, 48, force=True)
+with multiprocessing.get_context("fork").Pool(1) as pool:
+    print("collected", pool.apply(gc.collect) >= 0)
+"""
+
+
+def test_a_process_forked_after_a_screenshot_can_collect_its_garbage(tmp_path):
+    """A batch worker forked after a screenshot used to hang forever in pyglet's
+    ``HeadlessDisplay.__del__`` (``eglTerminate`` of the parent's display) when it collected
+    the display left behind; now the child leaves the parent's display alone."""
+    _need_gl()
+    done = subprocess.run([sys.executable, "-c", FORK_AFTER_SCREENSHOT,
+                           str(REPO / "scenarios" / "reach_and_touch.yaml"),
+                           str(tmp_path / "shot.png")],
+                          capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 0 and "collected True" in done.stdout, done.stderr[-2000:]

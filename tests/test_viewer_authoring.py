@@ -18,11 +18,11 @@ import numpy as np
 import pytest
 from test_viewer import _need_gl
 
+from ecs_anim.apps.viewer.authoring import Timeline, drag_in_view_plane, pick_capsule
+from ecs_anim.apps.viewer.camera import OrbitCamera
+from ecs_anim.apps.viewer.edits import Edit, EditLog, spawn_copy
+from ecs_anim.core.skeleton import JOINT_INDEX
 from ecs_anim.scenario import build_simulation, load_scenario
-from ecs_anim.skeleton import JOINT_INDEX
-from ecs_anim.viewer.authoring import Timeline, drag_in_view_plane, pick_capsule
-from ecs_anim.viewer.camera import OrbitCamera
-from ecs_anim.viewer.edits import Edit, EditLog, spawn_copy
 
 REPO = Path(__file__).resolve().parents[1]
 SCENARIOS = REPO / "scenarios"
@@ -113,8 +113,8 @@ def test_edits_replay_to_the_same_postures():
 def test_a_copy_plays_in_step_beside_its_original():
     scenario = load_scenario(SCENARIOS / "terrain_walk.yaml")
     from ecs_anim.components import MotionPlayer, Placement
-    from ecs_anim.morphology import Morphology
-    from ecs_anim.simulation import Simulation
+    from ecs_anim.core.morphology import Morphology
+    from ecs_anim.runtime.simulation import Simulation
 
     with Simulation({"walk": scenario.motions["walk"]}) as sim:
         original = sim.spawn("a", Morphology.from_stature(1.7), MotionPlayer("walk"),
@@ -140,7 +140,7 @@ def test_a_copy_plays_in_step_beside_its_original():
 def viewer():
     """A headless viewer on reach_and_touch at 640x360, paused at t = 2.5 s, the camera fixed."""
     _need_gl()
-    from ecs_anim.viewer.window import open_viewer
+    from ecs_anim.apps.viewer.window import open_viewer
 
     apps = []
 
@@ -456,7 +456,7 @@ def test_the_timeline_scrubs_back_and_forth_deterministically(viewer):
 
 
 def test_help_lists_every_key_and_mouse_action_and_the_readme_documents_them(viewer):
-    from ecs_anim.viewer.window import CONTROLS, HELP
+    from ecs_anim.apps.viewer.window import CONTROLS, HELP
 
     app = viewer()
     without = app.screenshot()
@@ -465,7 +465,7 @@ def test_help_lists_every_key_and_mouse_action_and_the_readme_documents_them(vie
     assert _changed(without, shown)[H // 2:H - 30, :200].sum() > 2000  # the overlay is drawn
     _key(app, "H")
     assert not _changed(without, app.screenshot())[_status_rows(app):].any()
-    # every key the window handles is in the help, and each line of the help in the README
+    # every key the window handles is in the help, and each line of the help in docs/viewer.md
     handled = ["SPACE", "RIGHT", "UP", "DOWN", "EQUAL", "MINUS", "A", "DELETE", "BACKSPACE", "N",
                "R", "L", "T", "C", "F", "H"]
     import pyglet
@@ -478,9 +478,12 @@ def test_help_lists_every_key_and_mouse_action_and_the_readme_documents_them(vie
                  "right arrow", "up / down", "+ / -", "A", "Delete", "Backspace", "N", "R",
                  "Ctrl+R", "L", "T", "C", "F", "H", "Esc"):
         assert word in labels, word
-    readme = (REPO / "README.md").read_text()
-    view = readme[readme.index("- **view**"):readme.index("- **bench**")]
+    page = (REPO / "docs" / "viewer.md").read_text()
+    start = page.index("\n## Mouse and keys: an authoring tool\n")
+    end = page.find("\n## ", start + 1)
+    view = page[start:end if end >= 0 else len(page)]
     for keys, _ in CONTROLS:
         for key in re.split(r", | / ", keys):
-            assert key.strip("+ ") == "" or key in view, f"README's view section lacks {key!r}"
+            assert key.strip("+ ") == "" or key in view, (
+                f"docs/viewer.md's mouse and keys section lacks {key!r}")
     assert HELP.count("\n") == len(CONTROLS) - 1

@@ -1,0 +1,470 @@
+"""``ecs-anim bench``: performance figures, printed (tests never assert them).
+
+The pipeline benchmark runs the bench scene (:func:`walkers_on_bumps`) at several sizes, each in
+a process of its own, and fits ``t(N) = fixed + per_character * N`` by least squares to the
+wall time and to the CPU time per tick; each process also reports its peak memory
+(``ru_maxrss``), fitted the same way. Two more processes time a start from nothing: one with an
+empty kernel cache (numba compiles every kernel), one with that cache filled (numba loads
+them), each from the interpreter's start to the end of its first tick.
+
+``python -m ecs_anim.apps.bench size N ...`` and ``... first-tick`` are those child processes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ecs_anim.core.errors import EcsAnimError
+
+if TYPE_CHECKING:
+    pass
+from ecs_anim.runtime.bench_scene import BenchScene, first_tick
+
+#: ``bench --characters`` above this would take minutes to set up (and gigabytes).
+MAX_BENCH_CHARACTERS = 100_000
+#: The default sizes: N divided by these.
+SIZE_DIVISORS = (8, 4, 2, 1)
+#: A tick at 30 Hz, ms.
+TICK_BUDGET_MS = 1000.0 / 30.0
+#: Ticks run before timing (the first ones load the kernels, fill caches).
+WARM_UP_TICKS = 10
+#: The marker a child prints when its first tick is done.
+FIRST_TICK_DONE = "first tick done"
+#: Longest wait for one child process, s (a first compilation takes about half a minute).
+CHILD_TIMEOUT_S = 1800.0
+
+
+def time_size(n: int, seconds: float, rotations: bool = False,
+              constrained: bool = False, budget_ms: float | None = None) -> dict[str, Any]:
+    """One size, in this process: after :data:`WARM_UP_TICKS` ticks, ``seconds`` simulated at
+    30 Hz. Returns ms per tick per system (wall), of the whole step (wall and CPU: every
+    thread of the process), and the process's peak memory (MB); with ``budget_ms``, ``budget``:
+    how much further from its target the budget left the top priority than a twin scene solved
+    without a budget, stepped alongside (untimed; the largest difference of a constraint over
+    the timed ticks, mm: the error the cut cost), the characters cut per tick and the ticks that
+    cut anything."""
+    scene = BenchScene(n, rotations, constrained, budget_ms)
+    twin = None if budget_ms is None else BenchScene(n, rotations, constrained)
+    sim = scene.sim
+    for _ in range(WARM_UP_TICKS):
+        scene.tick()
+        if twin is not None:
+            twin.tick()
+    before = sim.system_seconds()
+    ticks = max(1, round(seconds * 30.0))
+    wall = cpu = 0.0
+    cost_m = 0.0
+    cut_characters = ticks_cut = 0
+    top = sim.constraints.priority == sim.constraints.priority.max(initial=0.0)
+    for _ in range(ticks):
+        scene.move_targets()
+        w0, c0 = time.perf_counter(), time.process_time()
+        sim.step()
+        wall += time.perf_counter() - w0
+        cpu += time.process_time() - c0
+        report = sim.solver_report()
+        if twin is not None and report is not None:
+            twin.tick()
+            extra = sim.constraints.error[top] - twin.sim.constraints.error[top]
+            cost_m = max(cost_m, float(np.nanmax(extra, initial=0.0)))
+            cut_characters += len(report.cut_characters)
+            ticks_cut += report.cut
+    after = sim.system_seconds()
+    sim.close()
+    if twin is not None:
+        twin.sim.close()
+    result: dict[str, Any] = {
+        "characters": n, "ticks": ticks,
+        "ms_per_tick": {k: (after[k] - before[k]) / ticks * 1e3 for k in after},
+        "wall_ms_per_tick": wall / ticks * 1e3, "cpu_ms_per_tick": cpu / ticks * 1e3,
+        "peak_memory_mb": peak_memory_mb()}
+    if budget_ms is not None:
+        result["budget"] = {"top_priority_cost_mm": cost_m * 1e3,
+                            "characters_cut_per_tick": cut_characters / ticks,
+                            "ticks_cut": ticks_cut}
+    return result
+
+
+def budget_capacity(budget_ms: float, runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """How many constrained characters a frame budget holds: the largest size whose ticks took
+    at most ``budget_ms`` on average (wall) with the top priority within 1 mm of where the
+    solve without a budget leaves it (0: none did); and the figures of each size."""
+    held = [r["characters"] for r in runs
+            if r["wall_ms_per_tick"] <= budget_ms and r["budget"]["top_priority_cost_mm"] <= 1.0]
+    return {"budget_ms": budget_ms, "characters_held": max(held, default=0),
+            "sizes": [{"characters": r["characters"], "wall_ms_per_tick": round(r["wall_ms_per_tick"], 3),
+                       **{k: round(v, 4) for k, v in r["budget"].items()}} for r in runs]}
+
+
+def peak_memory_mb() -> float:
+    """This process's peak resident memory so far, MB (``ru_maxrss``: kB on Linux)."""
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return float(peak) / (1024.0 * 1024.0 if sys.platform == "darwin" else 1024.0)
+
+
+# --- the parent: child processes, fits ------------------------------------------------------
+
+
+def _child_command(*args: str) -> list[str]:
+    return [sys.executable, "-m", "ecs_anim.apps.bench", *args]
+
+
+def _run_child(args: list[str], env: dict[str, str] | None = None) -> str:
+    """Run a child to its end; its stdout. A failure is an EcsAnimError with its last line."""
+    done = subprocess.run(_child_command(*args), capture_output=True, text=True, env=env,
+                          timeout=CHILD_TIMEOUT_S, check=False)
+    if done.returncode != 0:
+        last = (done.stderr.strip().splitlines() or ["no message"])[-1]
+        raise EcsAnimError(f"bench: the process timing {' '.join(args)} failed: {last}")
+    return done.stdout
+
+
+def timed_start(cache: str, threads: int) -> dict[str, float]:
+    """Seconds from launching a child (``python -m ecs_anim.apps.bench first-tick``) to the end
+    of its first tick, with ``NUMBA_CACHE_DIR=cache``; and its phases."""
+    env = os.environ | {"NUMBA_CACHE_DIR": cache}
+    start = time.perf_counter()
+    child = subprocess.Popen(_child_command("first-tick", "--threads", str(threads)),
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    assert child.stdout is not None
+    line = child.stdout.readline()
+    until_first_tick = time.perf_counter() - start
+    _, errors = child.communicate(timeout=CHILD_TIMEOUT_S)
+    if child.returncode != 0 or not line.startswith(FIRST_TICK_DONE):
+        last = (errors.strip().splitlines() or ["no message"])[-1]
+        raise EcsAnimError(f"bench: the process timing a first tick failed: {last}")
+    phases: dict[str, float] = json.loads(line[len(FIRST_TICK_DONE):])
+    return {"seconds": until_first_tick} | phases
+
+
+def compile_timing(threads: int) -> dict[str, float]:
+    """A first start with an empty kernel cache (numba compiles every kernel), then a second
+    one with the cache the first filled (numba loads them): seconds from the interpreter's
+    start to the end of the first tick, each."""
+    with tempfile.TemporaryDirectory(prefix="ecs_anim_numba_") as cache:
+        cold = timed_start(cache, threads)
+        warm = timed_start(cache, threads)
+    return {"first_compile_s": round(cold["seconds"], 3),
+            "cached_load_s": round(warm["seconds"], 3),
+            "cached_import_s": round(warm["import_s"], 3),
+            "cached_first_tick_s": round(warm["first_tick_s"], 3)}
+
+
+def warm_up(threads: int = 1) -> float:
+    """Compile (or load) every kernel the tick uses into the user's cache, in a child process;
+    the seconds it took."""
+    start = time.perf_counter()
+    _run_child(["first-tick", "--threads", str(threads)])
+    return time.perf_counter() - start
+
+
+def linear_fit(sizes: list[int], values: list[float]) -> tuple[float, float]:
+    """Least-squares ``value = fixed + slope * size``: (fixed, slope)."""
+    slope, fixed = np.polyfit(np.asarray(sizes, float), np.asarray(values, float), 1)
+    return float(fixed), float(slope)
+
+
+def capacity_fit(sizes: list[int], ms: list[float]) -> dict[str, float]:
+    """The fit of ms per tick over the sizes and the characters it says hold 30 Hz. Timing
+    noise can make the slope tiny or negative on small runs: it is never taken below a quarter
+    of the largest run's average cost per character, nor the fixed cost below 0."""
+    fixed, slope = linear_fit(sizes, ms)
+    largest = int(np.argmax(sizes))
+    per_char = max(slope, ms[largest] / sizes[largest] / 4)
+    fixed = max(fixed, 0.0)
+    return {"ms_fixed_per_tick": round(fixed, 4), "ms_per_character": round(per_char, 6),
+            "max_characters_at_30hz": int(max((TICK_BUDGET_MS - fixed) / per_char, 0))}
+
+
+def bench_sizes(n: int, given: list[int] | None) -> list[int]:
+    """The sizes timed: ``given``, else N/8, N/4, N/2, N."""
+    sizes = sorted(set(given)) if given else sorted({max(1, n // d) for d in SIZE_DIVISORS})
+    if len(sizes) < 2:
+        raise EcsAnimError(f"bench: --sizes {','.join(map(str, sizes))}: give two sizes or more "
+                           "(the figures are a fit over them)")
+    if sizes[-1] > MAX_BENCH_CHARACTERS:
+        raise EcsAnimError(f"bench: --characters {sizes[-1]}: at most {MAX_BENCH_CHARACTERS:,}")
+    return sizes
+
+
+def size_list(text: str) -> list[int]:
+    """argparse type of ``--sizes``: ``100,200,400,800``."""
+    try:
+        sizes = [int(word) for word in text.split(",") if word.strip()]
+    except ValueError:
+        sizes = []
+    if not sizes or min(sizes) < 1:
+        raise argparse.ArgumentTypeError(f"expected whole numbers >= 1 separated by commas "
+                                         f"(e.g. 100,200,400,800), got {text!r}")
+    return sizes
+
+
+def bench_pipeline(args: argparse.Namespace) -> dict[str, Any]:
+    """Run every size (each in a process of its own) and, unless ``no_compile_timing``, the two
+    timed starts; the figures as :func:`cmd_bench_pipeline` prints them."""
+    from ecs_anim.runtime import kernels
+
+    n = args.characters
+    if n < 8 and not args.sizes:
+        raise EcsAnimError("bench: give --characters 8 or more (the figures are a fit over "
+                           "N/8, N/4, N/2 and N)")
+    if not 0 < args.seconds <= 600:
+        raise EcsAnimError(f"bench: --seconds {args.seconds:g}: expected more than 0 and at "
+                           "most 600")
+    sizes = bench_sizes(n, args.sizes)
+    threads = args.threads
+    compiled = None if args.no_compile_timing else compile_timing(threads)
+    if kernels.uncompiled_kernels():  # so that no size's peak memory holds the compiler's
+        warm_up(threads)
+    budget_ms = getattr(args, "budget_ms", None)
+    if budget_ms is not None and not args.constrained:
+        raise EcsAnimError("bench: --budget-ms is the solver's frame budget: give --constrained too")
+    flags = [f for f, on in (("--rotations", args.rotations),
+                             ("--constrained", args.constrained)) if on]
+    if budget_ms is not None:
+        flags += ["--budget-ms", repr(budget_ms)]
+    runs = [json.loads(_run_child(["size", str(size), "--seconds", repr(args.seconds),
+                                   "--threads", str(threads), *flags]))
+            for size in sizes]
+    largest = runs[-1]
+    wall = capacity_fit(sizes, [r["wall_ms_per_tick"] for r in runs])
+    cpu = capacity_fit(sizes, [r["cpu_ms_per_tick"] for r in runs])
+    memory_fixed, memory_slope = linear_fit(sizes, [r["peak_memory_mb"] for r in runs])
+    systems = largest["ms_per_tick"]
+    return {
+        "characters": sizes[-1],
+        "rotations": bool(args.rotations),
+        "constrained": bool(args.constrained),
+        "threads": threads,
+        "ms_per_tick": {k: round(v, 3) for k, v in systems.items()},
+        "ms_per_tick_total": round(sum(systems.values()), 3),
+        # The fit of the wall time per tick (what holds 30 Hz):
+        "ms_per_character": wall["ms_per_character"],
+        "ms_fixed_per_tick": wall["ms_fixed_per_tick"],
+        "max_characters_at_30hz": wall["max_characters_at_30hz"],
+        # The fit of the CPU time per tick (every thread's; on one thread, what one core holds
+        # when nothing else runs on it):
+        "cpu_ms_per_character": cpu["ms_per_character"],
+        "cpu_ms_fixed_per_tick": cpu["ms_fixed_per_tick"],
+        "max_characters_at_30hz_cpu": cpu["max_characters_at_30hz"],
+        "wall_ms_per_tick": round(largest["wall_ms_per_tick"], 3),
+        "cpu_ms_per_tick": round(largest["cpu_ms_per_tick"], 3),
+        "sizes": [{"characters": r["characters"], "ticks": r["ticks"],
+                   "wall_ms_per_tick": round(r["wall_ms_per_tick"], 3),
+                   "cpu_ms_per_tick": round(r["cpu_ms_per_tick"], 3),
+                   "peak_memory_mb": round(r["peak_memory_mb"], 1)} for r in runs],
+        "peak_memory_mb": round(largest["peak_memory_mb"], 1),
+        "peak_memory_kb_per_character": round(memory_slope * 1024.0, 2),
+        "peak_memory_mb_fixed": round(memory_fixed, 1),
+        "compile": compiled,
+        "kernel_cache": str(kernels.cache_dir()),
+        "budget": None if budget_ms is None else budget_capacity(budget_ms, runs),
+    }
+
+
+def cmd_bench_pipeline(args: argparse.Namespace) -> int:
+    from ecs_anim.runtime import kernels
+
+    try:
+        kernels.set_threads(args.threads)
+    except ValueError as exc:
+        raise EcsAnimError(f"--threads {args.threads}: {exc}") from None
+    result = bench_pipeline(args)
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    sizes = result["sizes"]
+    n = result["characters"]
+    threads = result["threads"]
+    print(f"bench: {n} characters walking on bumps, {args.seconds:g} s simulated at 30 Hz, "
+          f"{threads} thread{'s' if threads > 1 else ''}, "
+          f"{'positions and joint rotations' if args.rotations else 'joint positions'}"
+          f"{', wrist + elbow targets moving every tick' if args.constrained else ''}")
+    for k, v in result["ms_per_tick"].items():
+        print(f"  {k:16s} {v:8.2f} ms/tick")
+    print(f"  {'total':16s} {result['ms_per_tick_total']:8.2f} ms/tick (the systems at {n})")
+    print(f"  {'characters':>10s} {'wall ms/tick':>13s} {'CPU ms/tick':>12s} {'peak MB':>8s}")
+    for s in sizes:
+        print(f"  {s['characters']:10d} {s['wall_ms_per_tick']:13.2f} {s['cpu_ms_per_tick']:12.2f} "
+              f"{s['peak_memory_mb']:8.1f}")
+    print(f"  => wall: about {result['max_characters_at_30hz']} characters hold 30 Hz "
+          f"(33.3 ms/tick): {result['ms_per_character'] * 1e3:.1f} us per character + "
+          f"{result['ms_fixed_per_tick']:.2f} ms per tick")
+    print(f"  => CPU:  about {result['max_characters_at_30hz_cpu']} characters: "
+          f"{result['cpu_ms_per_character'] * 1e3:.1f} us per character + "
+          f"{result['cpu_ms_fixed_per_tick']:.2f} ms per tick")
+    print(f"  peak memory {result['peak_memory_mb']:.0f} MB at {n}: "
+          f"{result['peak_memory_kb_per_character']:.1f} kB per character + "
+          f"{result['peak_memory_mb_fixed']:.0f} MB")
+    budget = result["budget"]
+    if budget is not None:
+        print(f"  frame budget {budget['budget_ms']:g} ms (the solver cuts iterations to hold it):")
+        print(f"  {'characters':>10s} {'wall ms/tick':>13s} {'top priority cost mm':>21s} "
+              f"{'characters cut/tick':>20s}")
+        for s in budget["sizes"]:
+            print(f"  {s['characters']:10d} {s['wall_ms_per_tick']:13.2f} "
+                  f"{s['top_priority_cost_mm']:21.3f} {s['characters_cut_per_tick']:20.1f}")
+        print(f"  => a {budget['budget_ms']:g} ms budget holds {budget['characters_held']} constrained "
+              "characters with the top priority within 1 mm of the unbudgeted solve (the largest "
+              "size timed that did)")
+    compiled = result["compile"]
+    if compiled is not None:
+        print(f"  start to first tick: {compiled['first_compile_s']:.1f} s compiling the "
+              f"kernels (empty cache), {compiled['cached_load_s']:.2f} s from the cache")
+    return 0
+
+
+# --- bench import ---------------------------------------------------------------------------
+
+
+def default_bench_files() -> list[Path]:
+    from ecs_anim.io.library import shipped_motion_paths
+
+    for candidate in (Path("../shared/mocap"),
+                      Path(__file__).resolve().parents[3] / "shared" / "mocap"):
+        files = sorted(candidate.glob("*.bvh")) + sorted(candidate.glob("*.c3d"))
+        if files:
+            return files
+    return shipped_motion_paths()
+
+
+def cmd_bench_import(args: argparse.Namespace) -> int:
+    files = [Path(f) for f in args.files] or default_bench_files()
+    if not files:
+        raise EcsAnimError("bench import: no clips found (give BVH or C3D files, or run from "
+                           "the repository next to ../shared/mocap)")
+    missing = [str(f) for f in files if not f.is_file()]
+    if missing:
+        raise EcsAnimError(f"bench import: no such file: {', '.join(missing)}")
+    other = [str(f) for f in files if f.suffix.lower() not in (".bvh", ".c3d")]
+    if other:
+        raise EcsAnimError(f"bench import: not a .bvh or .c3d file: {', '.join(other)}")
+    bvh_files = [f for f in files if f.suffix.lower() == ".bvh"]
+    result: dict[str, Any] = {}
+    if bvh_files:
+        result = _bench_bvh(max(bvh_files, key=lambda p: p.stat().st_size), args.repeat)
+    c3d = [_bench_c3d(f, args.repeat) for f in files if f.suffix.lower() == ".c3d"]
+    if c3d:
+        result["c3d"] = c3d
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    if bvh_files:
+        best = result["seconds"]
+        print(f"bench import: {Path(str(result['file'])).name}, {result['frames']} frames, "
+              f"best of {args.repeat}")
+        print(f"  parse {best['parse'] * 1e3:8.1f} ms")
+        print(f"  FK    {best['fk'] * 1e3:8.1f} ms")
+        print(f"  map + FK + encode + contacts {best['map_encode'] * 1e3:8.1f} ms")
+        print(f"  total {best['total'] * 1e3:8.1f} ms -> {result['frames_per_second']:.0f} "
+              "frames/s")
+    for one in c3d:
+        print(f"bench import: {Path(str(one['file'])).name}, {one['frames']} frames, best of "
+              f"{args.repeat}: read {one['seconds']['read'] * 1e3:.1f} ms, joint centres + "
+              f"encode + contacts {one['seconds']['centres_encode'] * 1e3:.1f} ms -> "
+              f"{one['frames_per_second']:.0f} frames/s")
+    return 0
+
+
+def _bench_bvh(path: Path, repeat: int) -> dict[str, Any]:
+    """Best-of-``repeat`` timings of one BVH import: parse, FK, map + FK + encode + contacts."""
+    from ecs_anim.io.bvh import forward_kinematics, read_bvh
+    from ecs_anim.io.importing import canonical_clip, normalize_clip
+
+    timings: dict[str, list[float]] = {"parse": [], "fk": [], "map_encode": []}
+    n_frames = 0
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        motion = read_bvh(path)
+        t1 = time.perf_counter()
+        forward_kinematics(motion)
+        t2 = time.perf_counter()
+        normalize_clip(canonical_clip(motion), path.stem, str(path))
+        t3 = time.perf_counter()
+        timings["parse"].append(t1 - t0)
+        timings["fk"].append(t2 - t1)
+        timings["map_encode"].append(t3 - t2)
+        n_frames = motion.n_frames
+    best = {k: min(v) for k, v in timings.items()}
+    # canonical_clip runs FK again internally; count the pipeline once: parse + (map + FK + encode).
+    total = best["parse"] + best["map_encode"]
+    return {
+        "file": str(path),
+        "frames": n_frames,
+        "seconds": {k: round(v, 5) for k, v in best.items()} | {"total": round(total, 5)},
+        "frames_per_second": round(n_frames / total, 1),
+    }
+
+
+def _bench_c3d(path: Path, repeat: int) -> dict[str, Any]:
+    """Best-of-``repeat`` timings of one C3D import: reading the markers, then joint centres,
+    encoding and contacts."""
+    from ecs_anim.io.c3d.importing import canonical_clip_c3d, read_c3d
+    from ecs_anim.io.importing import normalize_clip
+
+    reads, rest = [], []
+    n_frames = 0
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        raw = read_c3d(path)
+        t1 = time.perf_counter()
+        clip, _ = canonical_clip_c3d(raw)
+        motion = normalize_clip(clip, path.stem, str(path))
+        t2 = time.perf_counter()
+        reads.append(t1 - t0)
+        rest.append(t2 - t1)
+        n_frames = motion.n_frames
+    read_s, rest_s = min(reads), min(rest)
+    return {"file": str(path), "frames": n_frames,
+            "seconds": {"read": round(read_s, 5), "centres_encode": round(rest_s, 5),
+                        "total": round(read_s + rest_s, 5)},
+            "frames_per_second": round(n_frames / (read_s + rest_s), 1)}
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    if args.what == "pipeline":
+        return cmd_bench_pipeline(args)
+    return cmd_bench_import(args)
+
+
+# --- the child processes --------------------------------------------------------------------
+
+
+def child_main(argv: list[str] | None = None) -> int:
+    """``size N [--seconds S] [--threads T] [--rotations] [--constrained] [--budget-ms MS]``:
+    time one size and print JSON; ``first-tick [--threads T]``: print :data:`FIRST_TICK_DONE`
+    and the phases' seconds as soon as the first tick is done."""
+    from ecs_anim.runtime import kernels
+
+    parser = argparse.ArgumentParser(prog="python -m ecs_anim.apps.bench")
+    parser.add_argument("what", choices=["size", "first-tick"])
+    parser.add_argument("characters", nargs="?", type=int, default=8)
+    parser.add_argument("--seconds", type=float, default=1.0)
+    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--rotations", action="store_true")
+    parser.add_argument("--constrained", action="store_true")
+    parser.add_argument("--budget-ms", type=float)
+    args = parser.parse_args(argv)
+    if args.what == "first-tick":
+        phases = first_tick(args.threads)
+        print(FIRST_TICK_DONE + json.dumps(phases), flush=True)
+        return 0
+    kernels.set_threads(args.threads)
+    print(json.dumps(time_size(args.characters, args.seconds, args.rotations,
+                               args.constrained, args.budget_ms)))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(child_main())

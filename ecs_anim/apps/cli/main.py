@@ -1,0 +1,693 @@
+"""The ``ecs-anim`` command line.
+
+Every user error ends as one line on stderr and a non-zero exit status, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ecs_anim.apps.bench import cmd_bench, size_list
+from ecs_anim.apps.cli.args import (
+    error_line,
+    facing,
+    frame_range,
+    json_safe,
+    length_unit,
+    positive_float,
+    positive_int,
+)
+from ecs_anim.apps.viewer.command import add_arguments as add_view_arguments
+from ecs_anim.apps.viewer.command import cmd_view
+from ecs_anim.core.errors import EcsAnimError, listed
+from ecs_anim.core.files import folder_problem, input_problem, output_folder_problem, output_problem
+from ecs_anim.core.morphology import PRESET_SPECS
+from ecs_anim.io.c3d.marker_sets import preset_summary as marker_set_summary
+from ecs_anim.io.contacts import ContactThresholds
+from ecs_anim.io.joint_map import preset_summary
+from ecs_anim.motion.clip import turned_to_face
+from ecs_anim.motion.constraint_table import check_stored
+
+EXIT_FAILED = 1
+
+
+def _progress(done: int, total: int, label: str) -> None:
+    """A one-line progress bar on stderr (only drawn when several files are processed)."""
+    width = 30
+    filled = int(width * done / max(total, 1))
+    sys.stderr.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} {label[:40]:40s}")
+    if done == total:
+        sys.stderr.write("\n")
+    sys.stderr.flush()
+
+
+def cmd_import(args: argparse.Namespace) -> int:
+    from ecs_anim.io.c3d.importing import import_c3d
+    from ecs_anim.io.importing import import_bvh
+    from ecs_anim.motion.clip import save_nmo
+
+    outdir = Path(args.output)
+    problem = folder_problem(outdir)
+    if problem is not None:
+        raise EcsAnimError(f"-o {problem}")
+    thresholds = ContactThresholds(
+        height_m=args.contact_height, speed_mps=args.contact_speed,
+        min_duration_s=args.contact_min_duration,
+    )
+    extra = []
+    if args.constraints:
+        from ecs_anim.scenario import load_motion_constraints
+        extra = load_motion_constraints(args.constraints)  # a mistake stops before any import
+    sources = [Path(s) for s in args.sources]
+    inputs = [*sources, *(p for p in (args.map, args.constraints, args.fill_absent_from) if p)]
+    for src in sources:
+        problem = input_problem(outdir / f"{src.stem}.nmo", inputs)
+        if problem is not None:
+            raise EcsAnimError(f"-o {problem}")
+    if not any(s.suffix.lower() == ".c3d" for s in sources) and (
+            args.fill_absent_from or args.max_gap is not None):
+        raise EcsAnimError("--max-gap and --fill-absent-from are for .c3d files; none is given")
+    failed = 0
+    show_bar = len(sources) > 1 and sys.stderr.isatty()
+    stems: dict[str, Path] = {}
+    for k, src in enumerate(sources, start=1):
+        target = outdir / f"{src.stem}.nmo"
+        try:
+            if src.stem in stems:
+                raise EcsAnimError(f"{src}: has the same name as {stems[src.stem]}; both would be "
+                                   f"written to {target}")
+            stems[src.stem] = src
+            if target.exists() and not args.force:
+                raise EcsAnimError(f"{target}: already exists (use --force to overwrite)")
+            suffix = src.suffix.lower()
+            if src.is_dir():
+                raise EcsAnimError(f"{src}: a folder; give the .bvh or .c3d files in it "
+                                   f"(e.g. {src}/*.bvh)")
+            if suffix not in (".bvh", ".c3d"):
+                raise EcsAnimError(f"{src}: unsupported file type {src.suffix!r} (expected .bvh "
+                                   "or .c3d)")
+            if suffix == ".c3d" and args.stature is not None:
+                raise EcsAnimError(f"{src}: --stature applies to BVH files (a C3D's markers are "
+                                   "in the unit of POINT:UNITS)")
+            if suffix == ".c3d":
+                motion = import_c3d(src, args.map, args.unit, thresholds, args.up,
+                                    args.max_gap,
+                                    args.fill_absent_from, args.trim, not args.no_treadmill,
+                                    args.contacts)
+            else:
+                if args.contacts == "events":
+                    raise EcsAnimError(f"{src}: --contacts events needs a C3D file's gait events "
+                                       "(a BVH has none)")
+                motion = import_bvh(src, args.map, args.unit, thresholds, args.up, args.trim,
+                                    args.stature, not args.no_treadmill)
+                for warning in motion.info.get("warnings", []):
+                    print(f"warning: {warning}", file=sys.stderr)
+            if args.face is not None:
+                motion = turned_to_face(motion, args.face)
+            # A --constraints file times the file's frames; --trim or a C3D import may drop some.
+            shift_s = motion.info.get("first_file_frame", 0) / motion.fps
+            on_clip = [replace(c, activation=replace(c.activation, start_s=c.activation.start_s - shift_s,
+                                                     stop_s=c.activation.stop_s - shift_s))
+                       for c in extra] if shift_s else extra
+            motion.constraints.extend(on_clip)
+            try:
+                check_stored(on_clip, motion.duration_s)
+            except ValueError as exc:
+                raise EcsAnimError(f"{args.constraints}: with {src}: {exc}") from None
+            save_nmo(motion, target, force=args.force)
+            contacts = motion.contacts()
+            message = (f"{src} -> {target}: {motion.n_frames} frames at {motion.fps:g} fps, "
+                       f"{motion.info['joint_map']}, {motion.info['up_axis'].upper()} up"
+                       + (f" ({motion.info['up_reason']})" if motion.info.get("up_reason") else "")
+                       + ", unit "
+                       f"{motion.info['unit']} ({motion.info['unit_reason']}), "
+                       f"contacts L {contacts[:, 0].mean():.0%} "
+                       f"R {contacts[:, 1].mean():.0%}"
+                       + (" (from the gait events)" if motion.info.get("contacts", {}).get("method")
+                          == "gait events" else ""))
+            message += _events_and_treadmill(motion.info)
+            if motion.info["filled_in"]:
+                message += f", filled in: {', '.join(motion.info['filled_in'])}"
+            if motion.info.get("ignored_joints"):
+                message += f", ignored (no body part): {listed(motion.info['ignored_joints'])}"
+            if extra:
+                message += f", {len(extra)} stored constraint(s)"
+            if motion.info.get("absent"):
+                message += (f", absent ({motion.info['absent_fill']}): "
+                            f"{', '.join(motion.info['absent'])}")
+            gaps = motion.info.get("gaps")
+            if gaps:
+                message += f", {gaps['samples_filled']} marker samples filled"
+                if gaps["long_gap_frames"]:
+                    spans = ", ".join(f"{a}-{b}" for a, b in gaps["long_gap_frames"])
+                    message += (f"; frames {spans} had gaps longer than {gaps['max_gap_frames']} "
+                                "frames or markers not yet or no longer seen (interpolated or "
+                                "held, unreliable)")
+            if args.trim is not None:
+                message += f"; --trim kept frames from frame {motion.info.get('first_file_frame', 0)} of the file"
+            if motion.info.get("rest_frames_dropped"):
+                message += f"; {motion.info['rest_frames_dropped']}"
+            for key, what in (("root_frames_trimmed", "trimmed (of the file's frames)"),
+                              ("root_frames_repaired", "repaired")):
+                if motion.info.get(key):
+                    spans = ", ".join(f"{a}-{b}" for a, b in motion.info[key])
+                    message += f"; frames {spans} {what}: the pelvis markers could not place the pelvis"
+            for line in motion.info.get("parts_frames_trimmed") or []:
+                message += f"; {line}"
+            if show_bar:
+                sys.stderr.write("\r" + " " * 80 + "\r")
+            print(message)
+            for why in (motion.info.get("parts_not_computed") or {}).values():
+                print(f"  {why}")
+        except (EcsAnimError, OSError) as exc:  # one bad file must not stop the others
+            failed += 1
+            if show_bar:
+                sys.stderr.write("\r" + " " * 80 + "\r")
+            print(f"error: {error_line(exc)}", file=sys.stderr)
+        if show_bar:
+            _progress(k, len(sources), src.name)
+    if failed:
+        rest = "; the others were imported" if failed < len(sources) else ""
+        print(f"{failed} of {len(sources)} file(s) failed{rest}", file=sys.stderr)
+        return EXIT_FAILED
+    return 0
+
+
+def _events_and_treadmill(info: dict[str, Any]) -> str:
+    """The import line's part on gait events and an in-place (treadmill) stance."""
+    text = ""
+    events = info.get("gait_events")
+    if events:
+        check = info.get("contacts", {}).get("events_check") or {}
+        n = sum(e["kind"] in ("strike", "off") for e in events)
+        text += f", {n} gait events"
+        if check.get("worst_ms") is not None:
+            text += f" (detected contacts within {check['worst_ms']:g} ms of them)"
+    plates = info.get("force_plates")
+    if plates:
+        text += f", {len(plates)} force-plate contact{'s' * (len(plates) != 1)}"
+        check = info.get("contacts", {}).get("plates_check") or {}
+        if check.get("worst_ms") is not None:
+            text += f" (contacts within {check['worst_ms']:g} ms of their measured edges)"
+    centres = info.get("lab_joint_centres")
+    if centres:
+        joint, row = max(centres.items(), key=lambda kv: kv[1]["median_mm"])
+        text += (f", {len(centres)} lab joint centres in the file: ours within "
+                 f"{row['median_mm']:g} mm of them (median; farthest {joint})")
+    belt = info.get("treadmill")
+    if belt:
+        text += (f"; in place on a treadmill-like belt at {belt['speed_mps']:g} m/s: "
+                 + ("turned into root motion (--no-treadmill keeps it in place)"
+                    if belt["converted"] else "kept in place (--no-treadmill)"))
+    return text
+
+
+def motion_summary(path: str) -> dict[str, object]:
+    from ecs_anim.motion.clip import facing_and_travel, load_nmo
+
+    motion = load_nmo(path)
+    contacts = motion.contacts()
+    return {
+        "file": path,
+        "frames": motion.n_frames,
+        "fps": motion.fps,
+        "duration_s": round(motion.duration_s, 4),
+        "root": facing_and_travel(motion),
+        "source_morphology": motion.source_morphology.to_dict()
+        | {"stature_m": round(motion.source_morphology.stature, 4)},
+        "contacts": {
+            "left_fraction": float(contacts[:, 0].mean()),
+            "right_fraction": float(contacts[:, 1].mean()),
+            "constraints": [
+                {"name": c.name, "start_s": round(c.activation.start_s, 4),
+                 "stop_s": round(c.activation.stop_s, 4)}
+                for c in motion.constraints if c.kind == "foot_contact"
+            ],
+        },
+        "other_constraints": [c.to_dict() for c in motion.constraints if c.kind != "foot_contact"],
+        "info": motion.info,
+    }
+
+
+def _info_files(given: list[str]) -> list[str]:
+    """The .nmo files named, a folder standing for the .nmo files in it (sorted)."""
+    files: list[str] = []
+    for name in given:
+        if Path(name).is_dir():
+            found = sorted(str(p) for p in Path(name).glob("*.nmo"))
+            if not found:
+                raise EcsAnimError(f"{name}: a folder with no .nmo file (import clips first: "
+                                   f"ecs-anim import CLIP.bvh -o {name})")
+            files.extend(found)
+        else:
+            files.append(name)
+    return files
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    files = _info_files(args.file)
+    if len(files) > 1 or Path(args.file[0]).is_dir():
+        return _info_table(files, args.json)
+    summary = motion_summary(files[0])
+    if args.json:
+        print(json.dumps(summary, indent=2))
+        return 0
+    m = summary["source_morphology"]
+    c = summary["contacts"]
+    info = summary["info"]
+    root = summary["root"]
+    assert isinstance(m, dict) and isinstance(c, dict) and isinstance(info, dict) and isinstance(root, dict)
+    print(f"{files[0]}")
+    print(f"  frames     {summary['frames']} at {summary['fps']:g} fps ({summary['duration_s']} s)")
+    print(f"  facing     {root['facing_deg']:g} deg from +x at the first frame; the root travels "
+          f"{root['straight_m']:g} m towards {root['direction_deg']:g} deg ({root['path_m']:g} m "
+          "along its path)")
+    print(f"  source     {info.get('source', '?')} ({info.get('joint_map', '?')}, unit "
+          f"{info.get('unit', '?')})")
+    print(f"  body       stature {m['stature_m']:.3f} m, mass {m['mass_kg']:.1f} kg, "
+          f"leg (thigh+shank) {0.5 * (m['lengths_m']['thigh_l'] + m['lengths_m']['shank_l'] + m['lengths_m']['thigh_r'] + m['lengths_m']['shank_r']):.3f} m")
+    print(f"  contacts   left {c['left_fraction']:.0%} right {c['right_fraction']:.0%} of frames, "
+          f"{len(c['constraints'])} contact intervals")
+    filled = info.get("filled_in")
+    if filled:
+        print(f"  filled in  {', '.join(map(str, filled)) if isinstance(filled, list) else filled}")
+    absent = info.get("absent")
+    if absent and isinstance(absent, list):
+        print(f"  absent     {', '.join(map(str, absent))} (no markers: {info.get('absent_fill')})")
+    for key, what in (("root_frames_trimmed", "trimmed    frames {} of the file"),
+                      ("root_frames_repaired", "repaired   frames {}")):
+        spans = info.get(key)
+        if spans and isinstance(spans, list):
+            shown = ", ".join(f"{a}-{b}" for a, b in spans)
+            print(f"  {what.format(shown)} (the pelvis markers could not place the pelvis)")
+    for line in info.get("parts_frames_trimmed") or []:
+        print(f"  trimmed    {line}")
+    if info.get("first_file_frame"):
+        print(f"  starts at  frame {info['first_file_frame']} of the file (--trim, a rest pose "
+              "dropped, or frames the markers could not place)")
+    if info.get("rest_frames_dropped"):
+        print(f"  {info['rest_frames_dropped']}")
+    for why in (info.get("parts_not_computed") or {}).values():
+        print(f"  {why}")
+    contacts_info = info.get("contacts") or {}
+    if contacts_info:
+        print(f"  contacts   {contacts_info.get('method', 'detected')}"
+              + (f", still under {'/'.join(f'{v:g}' for v in contacts_info['speed_threshold_mps'])}"
+                 " m/s (heel/ball)" if contacts_info.get("speed_threshold_mps") else ""))
+    for event in info.get("gait_events") or []:
+        what = f"{event['side'].upper()} {'foot strike' if event['kind'] == 'strike' else 'foot off'}" \
+            if event.get("kind") else f"{event['label'] or '-'} ({event['context'] or '-'})"
+        print(f"  event      {event['time_s']:8.3f} s  {what}")
+    check = contacts_info.get("events_check")
+    if check:
+        print(f"  events     detected contacts within {check['worst_ms']:g} ms of the gait events"
+              if check.get("worst_ms") is not None else
+              "  events     some gait event has no detected contact edge")
+    for plate in info.get("force_plates") or []:
+        edges = [name for name, key in (("touch-down", "touch_down"), ("lift-off", "lift_off"))
+                 if plate[key]]
+        foot = f"{plate['side'].upper()} foot" if plate["side"] else plate.get("why", "")
+        print(f"  plate {plate['plate']:<4d} {plate['on_s']:8.3f}-{plate['off_s']:.3f} s  {foot}"
+              + (f" (measured {' and '.join(edges)})" if edges else " (no edge measured)"))
+    for note in info.get("force_plate_notes") or []:
+        print(f"  plates     {note}")
+    check = contacts_info.get("plates_check")
+    if check:
+        print(f"  plates     contacts within {check['worst_ms']:g} ms of the plates' touch-downs and"
+              " lift-offs" if check.get("worst_ms") is not None else
+              "  plates     some measured plate edge has no contact edge")
+    belt = info.get("treadmill")
+    if belt:
+        print(f"  treadmill  in place, belt {belt['speed_mps']:g} m/s: "
+              + ("turned into root motion" if belt["converted"] else "kept in place"))
+    centres = info.get("lab_joint_centres")
+    if centres:
+        for joint, row in centres.items():
+            print(f"  lab centre {joint:<8} ours {row['median_mm']:.0f} mm from {row['label']} "
+                  f"(median; 95th percentile {row['p95_mm']:.0f} mm)")
+    return 0
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from ecs_anim.io.export import export_motion
+    from ecs_anim.motion.clip import load_nmo
+
+    inputs = [args.file] if args.morphology == "source" or args.morphology in PRESET_SPECS \
+        else [args.file, args.morphology]
+    problem = input_problem(args.output, inputs)
+    if problem is not None:
+        raise EcsAnimError(problem)
+    motion = load_nmo(args.file)
+    morph, _ = export_motion(motion, args.morphology, args.output, force=args.force)
+    print(f"{args.file} on {morph.name} (stature {morph.stature:.3f} m) -> {args.output}: "
+          f"{motion.n_frames} frames")
+    return 0
+
+
+def _info_table(files: list[str], as_json: bool) -> int:
+    """``info`` on several files: one row each; a file that cannot be read is a row saying why,
+    and the others go on (exit status 1 if any failed)."""
+    rows: list[dict[str, Any]] = []
+    for name in files:
+        try:
+            rows.append(motion_summary(name))
+        except EcsAnimError as exc:
+            rows.append({"file": name, "error": str(exc)})
+    failed = sum("error" in r for r in rows)
+    if as_json:
+        print(json.dumps(rows, indent=2))
+        return EXIT_FAILED if failed else 0
+    print(f"{'file':<28} {'frames':>6} {'fps':>5} {'s':>6} {'facing':>7} {'travel m':>8} "
+          f"{'L %':>4} {'R %':>4}  parts filled in or absent")
+    for r in rows:
+        label = Path(str(r["file"])).name
+        label = label if len(label) <= 28 else label[:25] + "..."
+        if "error" in r:
+            print(f"{label:<28} error: {r['error']}")
+            continue
+        c, root, info = r["contacts"], r["root"], r["info"]
+        parts = list(info.get("absent") or []) + [f"{j} (filled)" for j in info.get("filled_in") or []]
+        print(f"{label:<28} {r['frames']:>6} {r['fps']:>5g} {r['duration_s']:>6.2f} "
+              f"{root['facing_deg']:>7g} {root['straight_m']:>8.2f} {c['left_fraction']:>4.0%} "
+              f"{c['right_fraction']:>4.0%}  {listed(parts, 4) or '-'}")
+    if failed:
+        print(f"{failed} of {len(rows)} file(s) could not be read", file=sys.stderr)
+        return EXIT_FAILED
+    return 0
+
+
+def use_threads(args: argparse.Namespace) -> None:
+    """``--threads N``: the kernels' threads (:func:`ecs_anim.runtime.kernels.set_threads`; None: all
+    cores)."""
+    from ecs_anim.runtime import kernels
+
+    try:
+        kernels.set_threads(args.threads)
+    except ValueError as exc:
+        raise EcsAnimError(f"--threads {args.threads}: {exc}") from None
+
+
+#: The commands that run ticks in other processes (batch workers, the bench's sizes): they say
+#: that the kernels compile before they start them. ``run`` and ``view`` say it on their first
+#: tick, after their input was checked (an error comes alone).
+EARLY_NOTICE_COMMANDS = ("batch", "bench")
+
+
+def say_if_compiling(args: argparse.Namespace) -> None:
+    """On a first run (the kernels not compiled yet): one line on stderr saying they are being
+    compiled (once; cached in the user's cache folder), before the first tick."""
+    from ecs_anim.runtime import kernels
+
+    def say(notice: str) -> None:
+        print(notice, file=sys.stderr, flush=True)
+
+    if args.command in ("run", "view"):
+        kernels.announce_compiling(say)
+    elif args.command in EARLY_NOTICE_COMMANDS and getattr(args, "what", "pipeline") == "pipeline":
+        notice = kernels.compile_notice()
+        if notice is not None:
+            say(notice)
+
+
+def cmd_view_threads(args: argparse.Namespace) -> int:
+    """``view`` on ``--threads`` threads."""
+    use_threads(args)
+    return cmd_view(args)
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from ecs_anim.runtime.simulation import MAX_DURATION_S
+    from ecs_anim.scenario import build_simulation, load_scenario
+
+    use_threads(args)
+
+    if args.report is not None and Path(args.report).suffix.lower() != ".json":
+        raise EcsAnimError(f"--report {args.report}: a report is JSON: name it .json")
+    scenario = load_scenario(args.scenario)
+    seconds = scenario.duration_s if args.seconds is None else args.seconds
+    problems: list[tuple[str, str | None]] = []
+    if args.export:
+        problems += [("--export", input_problem(args.export, scenario.input_files, folder=True)),
+                     ("--export", output_folder_problem(args.export, _export_names(scenario),
+                                                        args.force))]
+    if args.report:
+        problems += [("--report", input_problem(args.report, scenario.input_files)),
+                     ("--report", output_problem(args.report, args.force))]
+        if args.export and Path(os.path.realpath(args.report)).is_relative_to(
+                os.path.realpath(args.export)):
+            problems.append(("--report", (f"{args.report}: inside the --export folder, which an "
+                                          "export replaces as a whole; write it elsewhere")))
+    for flag, problem in problems:  # before any work: a run can last minutes
+        if problem is not None:
+            raise EcsAnimError(f"{flag} {problem}")
+    if seconds > MAX_DURATION_S:
+        raise EcsAnimError(f"--seconds {seconds:g}: at most {MAX_DURATION_S:g} s (a day) in one run")
+    ticks = round(seconds * scenario.fps)
+    if ticks < 1:
+        raise EcsAnimError(f"--seconds {seconds:g} is less than one tick at {scenario.fps:g} Hz")
+    with build_simulation(scenario, rotations=bool(args.export)) as sim:
+        return _run_and_write(args, scenario, sim, ticks, seconds)
+
+
+def _export_names(scenario) -> list[str]:  # type: ignore[no-untyped-def]
+    """The files ``run --export`` writes: a ``.bvh``, an ``.npz`` and a ``.glb`` per character."""
+    return [f"{c.name}.{ext}" for c in scenario.characters for ext in ("bvh", "npz", "glb")]
+
+
+def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type: ignore[no-untyped-def]
+                   seconds: float) -> int:
+    """Run, then write the export folder as one set (:func:`~ecs_anim.core.files.output_set`) and
+    after it the report, then print the metrics."""
+    from ecs_anim.core.files import atomic_output, output_set
+    from ecs_anim.io.export import bvh_from_rotations, write_npz
+    from ecs_anim.io.export.gltf import glb_bytes
+    from ecs_anim.runtime.metrics import MetricsRecorder
+
+    names = [c.name for c in scenario.characters]
+    metrics = MetricsRecorder(sim)
+    record = bool(args.export)
+    positions, rotations, contacts = [], [], []
+    for _ in range(ticks):
+        sim.step()
+        metrics.record()
+        if record:
+            positions.append(sim.store.positions.copy())
+            rotations.append(sim.store.local_rotations.copy())
+            contacts.append(sim.store.contact_weight >= 1.0)
+    report = metrics.report() | {"scenario": str(args.scenario)}
+    if record:
+        pos = np.stack(positions, axis=1)  # (n, frames, joints, 3)
+        rot = np.stack(rotations, axis=1)
+        con = np.stack(contacts, axis=1)
+        with output_set(args.export, _export_names(scenario), args.force) as export:
+            for i, c in enumerate(scenario.characters):
+                with export.file(f"{c.name}.bvh") as f:
+                    f.write(bvh_from_rotations(c.morphology, pos[i, :, 0], rot[i],
+                                               scenario.fps).encode("utf-8"))
+                with export.file(f"{c.name}.npz") as f:
+                    write_npz(f, pos[i], scenario.fps, con[i])
+                with export.file(f"{c.name}.glb") as f:
+                    f.write(glb_bytes(c.morphology, pos[i, :, 0], rot[i], scenario.fps))
+    if args.report:
+        with atomic_output(args.report, args.force) as f:
+            f.write(json.dumps(json_safe(report), indent=2, allow_nan=False).encode("utf-8"))
+    print(f"{args.scenario}: {ticks} ticks ({seconds:g} s at {scenario.fps:g} Hz), "
+          f"{len(names)} characters")
+    print(f"  {'character':14s} {'slide max mm/fr':>15s} {'penetr. mm':>10s} {'bone err m':>10s} "
+          f"{'stride/leg':>10s} {'COM err mm':>10s}")
+    for c in report["characters"]:
+        stride = "-" if c["stride_per_leg_length"] is None else f"{c['stride_per_leg_length']:.3f}"
+        com = "-" if c["com_error_mm_max"] is None else f"{c['com_error_mm_max']:.1f}"
+        print(f"  {c['name'][:14]:14s} {c['foot_sliding_mm_per_frame']['max']:15.3f} "
+              f"{c['ground_penetration_mm_max']:10.3f} {c['bone_length_error_m_max']:10.1e} "
+              f"{stride:>10s} {com:>10s}")
+    if report["constraints"]:
+        # While a constraint eases in or out its goal is a blend, so its error against the full
+        # target says nothing; the report's JSON has both.
+        print(f"  {'constraint':26s} {'max error mm while fully active':>32s}")
+        for k in report["constraints"]:
+            full = k["error_mm_max_fully_active"]
+            unit = " mrad" if k["unit"] == "mrad" else ""
+            text = "never fully active" if full is None else f"{full:.1f}{unit}"
+            print(f"  {(k['character'] + '.' + k['name'])[:26]:26s} {text:>32s}"
+                  + ("" if k["enabled"] else "  (switched off: non-finite target)"))
+    total = sum(report["ms_per_tick"].values())
+    print(f"  time per tick {total:.2f} ms: " + ", ".join(
+        f"{k} {v:.2f}" for k, v in report["ms_per_tick"].items()))
+    if args.export:
+        print(f"  wrote {len(names)} x (.bvh, .npz, .glb) to {args.export}")
+    if args.report:
+        print(f"  wrote report {args.report}")
+    return 0
+
+
+def add_threads_argument(p: argparse.ArgumentParser, default: int | None) -> None:
+    """``--threads N``: how many threads the kernels run on (None: every core)."""
+    p.add_argument("--threads", type=positive_int, default=default, metavar="N",
+                   help="threads the tick's kernels run on "
+                   + ("(default: every core)" if default is None
+                      else f"(default {default}: the figures per core)"))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from ecs_anim.io.c3d.importing import DEFAULT_MAX_GAP_S
+
+    parser = argparse.ArgumentParser(
+        prog="ecs-anim",
+        description="Morphology-independent motions for many characters (Kulpa et al. 2005).",
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("import", help="normalize captured clips (BVH, C3D) into .nmo files",
+                       formatter_class=argparse.RawDescriptionHelpFormatter,
+                       epilog="joint-name presets (BVH):\n" + preset_summary()
+                       + "\nmarker sets (C3D):\n" + marker_set_summary())
+    p.add_argument("sources", nargs="+", metavar="SRC", help="BVH or C3D files")
+    p.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="folder for .nmo files")
+    p.add_argument("--map", metavar="PRESET|FILE.yaml", help="joint-name preset or YAML map "
+                   "(BVH), marker-set preset or YAML marker map (C3D) (default: detect)")
+    p.add_argument("--unit", type=length_unit, metavar="m|cm|mm|inch|cmu|METRES",
+                   help="length unit of the file: a name, or for BVH metres per file unit "
+                   "(0.0254) (default: detected from the proportions)")
+    p.add_argument("--stature", type=positive_float, metavar="M",
+                   help="BVH: scale the source so that its body is M metres tall (a rig "
+                   "scaled by its tool, a child whose unit the proportions cannot tell)")
+    p.add_argument("--up", choices=["x", "y", "z"], default=None,
+                   help="the file's up axis (default: detected from the rest pose and the motion, "
+                   "head above the feet, for BVH; from the markers for C3D)")
+    p.add_argument("--face", type=facing, metavar="+x|-x|+y|-y|DEGREES",
+                   help="turn each clip about its origin so that it faces this way at its first "
+                   "frame (degrees anticlockwise from +x), as our motion library does; "
+                   "--constraints are then given in the turned clip's frame")
+    p.add_argument("--trim", type=frame_range, metavar="START:END",
+                   help="keep only these frames of each file: frame numbers (START included, END "
+                   "not; negative from the end; either may be left out, e.g. 1: drops a first "
+                   "frame) or seconds with s (0.5s:12s). Without it a rest pose (T-pose) before "
+                   "the motion is dropped, and said; 0: keeps it")
+    p.add_argument("--max-gap", type=positive_int, metavar="FRAMES",
+                   help="C3D: longest run of missing marker samples filled without a warning "
+                   f"(default: {DEFAULT_MAX_GAP_S:g} s at the file's rate, 10 at 100 Hz)")
+    p.add_argument("--fill-absent-from", metavar="MOTION.nmo|MOTION.bvh",
+                   help="C3D: take body parts with no markers from this motion (looped) instead "
+                   "of a neutral pose")
+    p.add_argument("--constraints", metavar="FILE.yaml",
+                   help="constraints to store with every imported motion (e.g. two hands in "
+                        "contact during a clap), times in the motion's own seconds; see "
+                        "docs/scenarios.md")
+    p.add_argument("--contact-height", type=positive_float, default=ContactThresholds.height_m,
+                   metavar="M", help="foot-contact height above the local ground under the foot, m, "
+                   "for a 0.8 m leg, scaled by the body's (default %(default)s)")
+    p.add_argument("--contact-speed", type=positive_float, default=None, metavar="M/S",
+                   help="foot-contact speed threshold, m/s (default: relative to the body and "
+                   "the clip's own motion)")
+    p.add_argument("--contacts", choices=["detect", "events"], default="detect",
+                   help="foot contacts detected from the feet's stillness (default), or C3D: "
+                   "taken from the file's gait events (EVENT group: foot strike to foot off)")
+    p.add_argument("--no-treadmill", action="store_true",
+                   help="keep an in-place clip in place: by default a stance foot sliding back "
+                   "under a still root, as on a treadmill, becomes root motion (reported)")
+    p.add_argument("--contact-min-duration", type=positive_float, default=ContactThresholds.min_duration_s,
+                   metavar="S", help="shortest contact kept, s (default %(default)s)")
+    p.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    p.set_defaults(func=cmd_import)
+
+    p = sub.add_parser("info", help="describe .nmo files (several, or a folder: a table)")
+    p.add_argument("file", metavar="FILE.nmo|FOLDER", nargs="+")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=cmd_info)
+
+    p = sub.add_parser("export", help="play a .nmo on a body and write BVH, glTF or joint positions")
+    p.add_argument("file", metavar="FILE.nmo")
+    p.add_argument("--morphology", default="source",
+                   help=f"source | {' | '.join(PRESET_SPECS)} | FILE.yaml | SKELETON.bvh "
+                        "(default: source)")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.bvh|OUT.npz|OUT.glb")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output")
+    p.set_defaults(func=cmd_export)
+
+    p = sub.add_parser("run", help="run a scenario headless; print metrics, optionally export")
+    p.add_argument("scenario", metavar="SCENARIO.yaml")
+    p.add_argument("--seconds", type=positive_float, help="run this long instead of duration_s")
+    p.add_argument("--export", metavar="DIR", help="write <character>.bvh, .npz and .glb per character")
+    p.add_argument("--report", metavar="FILE.json", help="write the metrics as JSON")
+    p.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    add_threads_argument(p, None)
+    p.set_defaults(func=cmd_run)
+
+    from ecs_anim.apps.batch.jobs import add_parser as add_batch_parser
+
+    add_batch_parser(sub)
+
+    p = sub.add_parser("bench", help="print performance figures (default: the pipeline)")
+    p.add_argument("what", nargs="?", choices=["pipeline", "import"], default="pipeline",
+                   help="pipeline: characters per tick; import: parse+FK+encode frames/s")
+    p.add_argument("files", nargs="*", help="import: clips (default: ../shared/mocap, else the "
+                   "shipped motions); the largest is measured")
+    p.add_argument("--characters", type=positive_int, default=400, metavar="N",
+                   help="pipeline: characters (default %(default)s)")
+    p.add_argument("--seconds", type=positive_float, default=3.0, metavar="S",
+                   help="pipeline: simulated seconds to time (default %(default)s)")
+    p.add_argument("--constrained", action="store_true",
+                   help="pipeline: each character also has a wrist and an elbow target (right arm), "
+                        "moving every tick")
+    p.add_argument("--rotations", action="store_true",
+                   help="pipeline: also compute local joint rotations every tick (as BVH export does)")
+    p.add_argument("--budget-ms", type=positive_float, metavar="MS",
+                   help="pipeline, with --constrained: the solver's frame budget (ms a tick); "
+                        "prints how many characters it holds with the top priority within 1 mm")
+    p.add_argument("--sizes", type=size_list, metavar="N,N,...",
+                   help="pipeline: the numbers of characters timed (default: N/8, N/4, N/2, N)")
+    p.add_argument("--no-compile-timing", action="store_true",
+                   help="pipeline: skip timing a start with an empty kernel cache and one with "
+                   "the cache filled (a fresh compile: docs/performance.md)")
+    add_threads_argument(p, 1)
+    p.add_argument("--repeat", type=positive_int, default=3, help="import: runs; the best is kept")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_bench)
+
+    p = sub.add_parser("view", help="watch a scenario in a window, or render one frame to a PNG")
+    add_view_arguments(p)
+    add_threads_argument(p, None)
+    p.set_defaults(func=cmd_view_threads)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        say_if_compiling(args)
+        return int(args.func(args))
+    except (EcsAnimError, FileExistsError) as exc:
+        print(f"error: {error_line(exc)}", file=sys.stderr)
+        return EXIT_FAILED
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:  # the reader went away (``| head``): stop quietly, as Unix tools do
+        # (Python's documented recipe: point stdout at devnull so the exit flush cannot fail.)
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_FAILED
+    except OSError as exc:  # an unreadable input, ...: say which file
+        print(f"error: {error_line(exc)}", file=sys.stderr)
+        return EXIT_FAILED
+    finally:
+        from ecs_anim.runtime import kernels
+
+        kernels.announce_compiling(None)  # a command that never ticked leaves nothing behind
+
+
+if __name__ == "__main__":
+    sys.exit(main())
+
+
+__all__ = ["build_parser", "main"]

@@ -1,0 +1,137 @@
+"""Ground adaptation of a scaled pose (paper §7), as a pure batched kernel.
+
+Given where each ankle must go (its footprint on the ground, weighted by the contact's
+activation), the pelvis is lowered to ``min(h_original, h_reach_left, h_reach_right)`` and each
+leg's half-plane frame is turned (smallest rotation, so the knee keeps its side) and its length
+fraction reset so the ankle lands on its target. Nothing here keeps state: locking footprints for
+the duration of a contact is the GroundAdapt system's job.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ecs_anim.core.ground import Ground
+from ecs_anim.core.morphology import leg_length
+from ecs_anim.core.normalized import (
+    SIDE_JOINTS,
+    SIDE_LENGTHS,
+    DecodedLegs,
+    DecodedPose,
+    NormalizedPoses,
+    decode_legs,
+)
+from ecs_anim.core.rotations import quat_from_matrix, rotation_between
+
+F64 = NDArray[np.float64]
+
+#: Height of the ball-of-foot joint above the sole, as a fraction of the leg (thigh + shank):
+#: the toe joint must stay this high above the ground (also used by the metrics).
+BALL_HEIGHT_PER_LEG = 0.025 / 0.86
+
+#: Legs are never stretched beyond this fraction of thigh + shank: a fully straight knee has an
+#: undefined bend direction and looks locked.
+MAX_LEG_EXTENSION = 0.995
+
+#: A heel this far under the ground (m) is lifted: well below the metrics' 1 mm, above rounding.
+HEEL_TOLERANCE_M = 1e-6
+
+
+def heel_depth(ground: Ground, ankles: F64, ankle_height: F64) -> F64:
+    """How far each heel (the sole under the ankle) is below the ground, metres: ``ankles``
+    (..., 3) world, ``ankle_height`` (...) the ankle's height above the sole; negative above."""
+    return ground.height(ankles[..., :2]) + ankle_height - ankles[..., 2]
+
+
+def vertical_slack_for_reach(hips: F64, ankle_targets: F64, reach: F64) -> F64:
+    """How far each hip may move vertically and still reach its ankle target.
+
+    ``hips`` (n, 2, 3) and ``ankle_targets`` (n, 2, 3) in metres, ``reach`` (n, 2) the longest
+    allowed hip-ankle distance. Returns (n, 2) metres: negative where the hip must come down by
+    that much; a target horizontally out of reach asks for the hip straight above it at ``0``
+    vertical distance (the leg then stretches towards it). The pelvis moves vertically with the
+    hips, so this is also how much the pelvis may move (paper §7's ``h2``, ``h3`` minus ``h1``).
+    """
+    horizontal = np.linalg.norm(hips[..., :2] - ankle_targets[..., :2], axis=-1)
+    vertical = np.sqrt(np.maximum(reach**2 - horizontal**2, 0.0))
+    lift: F64 = ankle_targets[..., 2] + vertical - hips[..., 2]
+    return lift
+
+
+def adapt_to_ground(poses: NormalizedPoses, lengths: F64, ankle_targets: F64,
+                    weights: F64, root_height: F64,
+                    decoded: DecodedPose | DecodedLegs | None = None) -> NormalizedPoses:
+    """Put the ankles on their targets, lowering the pelvis only as much as the legs in contact
+    need (paper §7: ``h = min(h1, h2, h3)``).
+
+    Parameters
+    ----------
+    poses : (n,) normalized poses (already sampled and placed for this tick).
+    lengths : (n, N_LENGTHS) each character's segment lengths.
+    ankle_targets : (n, 2, 3) where each ankle should go (world, metres): a footprint for a foot
+        in contact, wherever the caller wants a free foot (e.g. lifted clear of the ground).
+    weights : (n, 2) contact activation in [0, 1]: how much each leg's reach may lower the pelvis.
+    root_height : (n,) the pelvis height the motion wants here (``h1``), metres.
+    decoded : ``decode(poses, lengths)`` if the caller has it already.
+
+    Returns new poses (root height, leg frames and fractions changed; all else shared). A target
+    out of reach leaves the leg stretched (to :data:`MAX_LEG_EXTENSION`) towards it.
+    """
+    decoded = decode_legs(poses, lengths, lengths) if decoded is None else decoded
+    if isinstance(decoded, DecodedLegs):
+        hips, pelvis_now_z = decoded.hips, decoded.pelvis[:, 2]
+    else:
+        hips, pelvis_now_z = decoded.positions[:, list(SIDE_JOINTS["hip"])], decoded.positions[:, 0, 2]
+    w = np.clip(weights, 0.0, 1.0)
+    thigh, shank = lengths[:, SIDE_LENGTHS["thigh"]], lengths[:, SIDE_LENGTHS["shank"]]
+    reach = MAX_LEG_EXTENSION * (thigh + shank)
+    # Put the pelvis at h1 first; a leg lowers it in proportion to its contact weight.
+    up = np.zeros_like(hips[:, 0])
+    up[:, 2] = root_height - pelvis_now_z
+    needed = vertical_slack_for_reach(hips + up[:, None], ankle_targets, reach)
+    pelvis_z = root_height + np.min(w * np.minimum(needed, 0.0), axis=1)
+    shift = np.zeros_like(up)
+    shift[:, 2] = pelvis_z - pelvis_now_z
+    new_hips = hips + shift[:, None]
+    # Re-aim each leg: turn its half-plane frame so z points at the target, set the fraction.
+    to_target = ankle_targets - new_hips
+    turn = rotation_between(decoded.leg2world[..., :, 2], to_target)
+    new_leg2pelvis = np.swapaxes(decoded.pelvis2world, -1, -2)[:, None] @ (turn @ decoded.leg2world)
+    distance = np.minimum(np.linalg.norm(to_target, axis=-1), reach)
+    root_position = poses.root_position.copy()
+    root_position[:, 2] = pelvis_z / leg_length(lengths)
+    return replace(poses, root_position=root_position,
+                   leg_frame=quat_from_matrix(new_leg2pelvis),
+                   leg_fraction=distance / (thigh + shank))
+
+
+def adapt_keeping_heels_up(poses: NormalizedPoses, lengths: F64, ankle_targets: F64, weights: F64,
+                           root_height: F64, decoded: DecodedPose | DecodedLegs, ground: Ground,
+                           passes: int = 4) -> tuple[NormalizedPoses, DecodedLegs]:
+    """:func:`adapt_to_ground`, then lift each ankle target whose leg, stretched short of it,
+    would put the heel under the ground; returns the poses and their decoded legs.
+
+    A target out of the leg's reach (a contact ramping out while the pelvis rises, say) leaves
+    the ankle on the line from the hip towards it: over a step edge that point can be above the
+    higher step while the target is above the lower one (heels sank 12-31 mm on stairs).
+    Raising the target turns that line up and back, so a few passes suffice. Arguments as for
+    :func:`adapt_to_ground` (``decoded``: the pose the legs are re-aimed from).
+    """
+    ankle_height = lengths[:, SIDE_LENGTHS["ankle_height"]]
+    adapted = adapt_to_ground(poses, lengths, ankle_targets, weights, root_height, decoded)
+    legs = decode_legs(adapted, lengths, lengths)
+    for _ in range(passes):
+        deficit = heel_depth(ground, legs.ankles, ankle_height)
+        if not np.any(deficit > HEEL_TOLERANCE_M):
+            break
+        ankle_targets = ankle_targets.copy()
+        ankle_targets[..., 2] += np.maximum(deficit, 0.0)
+        adapted = adapt_to_ground(poses, lengths, ankle_targets, weights, root_height, decoded)
+        legs = decode_legs(adapted, lengths, lengths)
+    return adapted, legs
+
+
+__all__ = ["adapt_keeping_heels_up", "adapt_to_ground", "heel_depth", "vertical_slack_for_reach"]

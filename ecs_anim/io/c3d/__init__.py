@@ -1,0 +1,6 @@
+"""C3D in: labelled markers straight to joint centres (:mod:`.importing`), marker-set presets
+(:mod:`.marker_sets`) and the lab's force plates (:mod:`.force_plates`)."""
+
+from ecs_anim.io.c3d.importing import import_c3d
+
+__all__ = ["import_c3d"]

@@ -1,0 +1,500 @@
+"""Foot-contact detection at import (paper §3: foot height and speed below thresholds).
+
+Each foot is in contact while its ankle (heel strike, flat foot) or its toe joint (push-off) is
+near its ground level and nearly still. Hysteresis keeps the state from chattering, short
+contacts are dropped and short gaps filled. The contact's edges are then moved to the foot's
+touch-down (the heel lands) and lift-off (the ball leaves the ground), where gait events are.
+Everything is vectorized over frames but those edges (a loop over contacts).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ecs_anim.core.skeleton import JOINT_INDEX as J
+from ecs_anim.motion.constraints import Activation, ConstraintSpec
+
+F64 = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class ContactThresholds:
+    """Detection thresholds. ``ecs-anim import`` sets three: ``height_m``
+    (``--contact-height``), ``speed_mps`` (``--contact-speed``) and ``min_duration_s``
+    (``--contact-min-duration``); the others from Python (``import_bvh`` and ``import_c3d``:
+    ``thresholds=``).
+
+    height_m : a point (heel = ankle joint, ball = toe joint) is low when less than this above
+        the local ground under it, for a body of 0.8 m leg (scaled by the body's leg): the
+        lowest that point of either foot comes within ``ground_radius`` legs horizontally and
+        ``ground_window_s`` seconds.
+    speed_mps : ... and still when its speed (filtered over ``filter_s`` seconds) is below this;
+        None: relative to the body and the clip's own motion, ``SPEED_OF_MOTION`` times how fast
+        that point moves when it moves (its 90th percentile), kept between
+        ``SPEED_PER_LEG`` legs per second (each bound).
+    release : hysteresis factor: a part's contact ends only when its height or speed exceed
+        ``release`` times the thresholds.
+    min_duration_s : shorter contacts are dropped; min_gap_s : shorter gaps are filled.
+    ease_s : activation ramp added before and after each contact.
+    edge_height_m, edge_sink_mps, edge_rise_mps, edge_max_s : where a contact's touch-down and
+        lift-off lie (:func:`touch_down_to_lift_off`; for a 0.8 m leg, scaled by the body's):
+        the foot is down while its heel point or toe joint is within ``edge_height_m`` of its
+        ground, sinking slower than ``edge_sink_mps`` and rising slower than
+        ``edge_rise_mps``; each edge of a stillness contact moves at most ``edge_max_s``.
+        Those heights are first smoothed over ``edge_filter_s`` seconds (centred, no lag).
+    """
+
+    height_m: float = 0.05
+    speed_mps: float | None = None
+    release: float = 1.5
+    min_duration_s: float = 0.08
+    min_gap_s: float = 0.06
+    ease_s: float = 0.05
+    filter_s: float = 0.05
+    ground_window_s: float = 1.5
+    ground_radius: float = 0.15
+    edge_height_m: float = 0.015
+    edge_sink_mps: float = 0.08
+    edge_rise_mps: float = 0.4
+    edge_max_s: float = 0.1
+    edge_filter_s: float = 0.03
+
+    def __post_init__(self) -> None:
+        for name in ("height_m", "speed_mps", "min_duration_s", "min_gap_s", "ease_s",
+                     "filter_s", "ground_window_s", "ground_radius", "edge_height_m",
+                     "edge_sink_mps", "edge_rise_mps", "edge_max_s", "edge_filter_s"):
+            value = getattr(self, name)
+            if value is None and name == "speed_mps":
+                continue
+            if not (isinstance(value, (int, float)) and np.isfinite(value) and value >= 0):
+                raise ValueError(f"contact threshold {name} must be a finite number >= 0, got {value}")
+        if not (np.isfinite(self.release) and self.release >= 1):
+            raise ValueError(f"contact threshold release must be >= 1, got {self.release}")
+
+
+#: The automatic speed threshold: this fraction of the point's moving speed (90th percentile)...
+SPEED_OF_MOTION = 0.15
+#: ... kept between these many legs per second.
+SPEED_PER_LEG = (0.4, 0.45)
+#: A part's contact ends, whatever the hysteresis, above this many legs per second.
+RELEASE_PER_LEG = 0.55
+#: Leg length (m) the height threshold is given for.
+REFERENCE_LEG_M = 0.8
+
+
+def _box_filter(x: F64, width: int) -> F64:
+    """Centred moving average along axis 0 (edges use the available samples)."""
+    if width <= 1:
+        return x
+    pad = width // 2
+    padded = np.concatenate([np.repeat(x[:1], pad, axis=0), x, np.repeat(x[-1:], pad, axis=0)])
+    c = np.cumsum(np.concatenate([np.zeros((1,) + x.shape[1:]), padded]), axis=0)
+    mean: F64 = (c[width:] - c[:-width])[: x.shape[0]] / width
+    return mean
+
+
+def frames_of(seconds: float, fps: float) -> int:
+    """The number of frames (at least 1) spanning ``seconds`` at ``fps`` Hz (Python's rounding:
+    a half frame rounds to even, 0.05 s at 50 Hz is 2 frames)."""
+    return max(1, round(seconds * fps))
+
+
+def _width(seconds: float, fps: float) -> int:
+    """An odd number of frames spanning about ``seconds``."""
+    return frames_of(seconds, fps) | 1
+
+
+def horizontal_speed(points: F64, fps: float, filter_s: float = 0.05) -> F64:
+    """Horizontal speed (m/s) of points (n_frames, ..., 3), smoothed over ``filter_s``.
+    -> (n_frames, ...)."""
+    if points.shape[0] < 2:
+        return np.zeros(points.shape[:-1])
+    velocity = np.gradient(points[..., :2], axis=0) * fps
+    velocity = _box_filter(velocity, _width(filter_s, fps))
+    speed: F64 = np.linalg.norm(velocity, axis=-1)
+    return speed
+
+
+def speed(points: F64, fps: float, filter_s: float = 0.03) -> F64:
+    """Speed (m/s) of points (n_frames, ..., 3), velocity smoothed over ``filter_s`` seconds.
+    -> (n_frames, ...)."""
+    if points.shape[0] < 2:
+        return np.zeros(points.shape[:-1])
+    velocity = _box_filter(np.gradient(points, axis=0) * fps, _width(filter_s, fps))
+    speed: F64 = np.linalg.norm(velocity, axis=-1)
+    return speed
+
+
+def local_ground(points: F64, fps: float, window_s: float, radius_m: float,
+                 still: NDArray[np.bool_]) -> F64:
+    """The ground under each point at each frame: the lowest any of the points stood still
+    (``still``) within ``radius_m`` horizontally of it and ``window_s`` seconds before or after;
+    -inf where none did (a swing foot far from any footprint: no ground known under it).
+
+    points (n_frames, K, 3) metres, Z up (e.g. both heels), still (n_frames, K). Returns
+    (n_frames, K) heights. The loop runs over the window's frame offsets and the points, never
+    over frames."""
+    n, k = points.shape[:2]
+    reach = frames_of(window_s, fps)
+    ground = np.where(still, points[..., 2], np.inf)
+    z_still = np.where(still, points[..., 2], np.inf)
+    step = max(1, reach // 120)  # at most ~240 offsets, whatever the rate
+    for offset in range(-reach, reach + 1, step):
+        if offset == 0 or abs(offset) >= n:
+            continue
+        a = slice(max(0, -offset), n - max(0, offset))  # frames t
+        b = slice(max(0, offset), n - max(0, -offset))  # frames t + offset
+        for j in range(k):
+            near = np.linalg.norm(points[b, :, :2] - points[a, j:j + 1, :2], axis=-1) < radius_m
+            z = np.where(near, z_still[b], np.inf).min(axis=1)
+            ground[a, j] = np.minimum(ground[a, j], z)
+    ground[~np.isfinite(ground)] = -np.inf
+    return ground
+
+
+def true_runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:
+    """Runs of True as (first, last) frame indices."""
+    padded = np.concatenate([[False], mask, [False]]).astype(np.int8)
+    edges = np.flatnonzero(np.diff(padded))
+    return [(int(a), int(b) - 1) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+
+
+def _hysteresis(enter: NDArray[np.bool_], leave: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """On from a frame where ``enter`` holds until one where ``leave`` does (columns apart)."""
+    frames = np.arange(len(enter))[:, None]
+    last_enter = np.maximum.accumulate(np.where(enter, frames, -1), axis=0)
+    last_leave = np.maximum.accumulate(np.where(leave, frames, -1), axis=0)
+    on: NDArray[np.bool_] = last_enter > last_leave
+    return on
+
+
+def _clean(flags: NDArray[np.bool_], fps: float, th: ContactThresholds) -> NDArray[np.bool_]:
+    """Short gaps between two contacts filled, then short contacts dropped (per column). A
+    contact or gap at the clip's first or last frame is kept whatever its length: the clip
+    cuts it, so how long it lasts is not known (a clip starting late in a stance keeps it)."""
+    flags = flags.copy()
+    min_len = frames_of(th.min_duration_s, fps)
+    min_gap = frames_of(th.min_gap_s, fps)
+    for side in range(flags.shape[1]):
+        col = flags[:, side]
+        for a, b in true_runs(~col):
+            if a > 0 and b < len(col) - 1 and b - a + 1 < min_gap:
+                col[a:b + 1] = True
+        for a, b in true_runs(col):
+            if a > 0 and b < len(col) - 1 and b - a + 1 < min_len:
+                col[a:b + 1] = False
+    return flags
+
+
+@dataclass
+class FootContacts:
+    """Which part of each foot is planted, per frame: bool (n_frames, 2) each, left/right.
+
+    heel : the ankle joint still and low; ball : the toe joint still and low; foot : either
+    (the whole-foot contact the tick plants); on_ground : from touch-down (the heel lands) to
+    lift-off (the ball leaves the ground), :func:`touch_down_to_lift_off`: the foot's
+    stillness contacts with their edges moved to where gait events are. heel, ball and foot
+    hold only within on_ground. speed_threshold_mps : (2,) the heel's and the ball's threshold
+    used. Arrays ``height`` (n_frames, 4): heel l, heel r, ball l, ball r above their local
+    ground (m); ``speed`` (n_frames, 4) their speeds (m/s).
+    """
+
+    heel: NDArray[np.bool_]
+    ball: NDArray[np.bool_]
+    foot: NDArray[np.bool_]
+    on_ground: NDArray[np.bool_]
+    speed_threshold_mps: tuple[float, float]
+    height: F64
+    speed: F64
+
+
+def leg_of(positions: F64) -> float:
+    """Median thigh + shank (m), both sides averaged, of joint positions (n_frames, N_JOINTS, 3)."""
+    total = 0.0
+    for s in "lr":
+        hip, knee, ankle = (positions[:, J[f"{p}_{s}"]] for p in ("hip", "knee", "ankle"))
+        total += float(np.median(np.linalg.norm(knee - hip, axis=-1)
+                                 + np.linalg.norm(ankle - knee, axis=-1)))
+    return 0.5 * total
+
+
+def detect_foot_contacts(positions: F64, fps: float,
+                         thresholds: ContactThresholds = ContactThresholds()) -> FootContacts:
+    """Heel, ball and whole-foot contacts from the foot's own stillness over any ground.
+
+    ``positions`` (n_frames, N_JOINTS, 3) metres, Z up. A point (heel: ankle joint, ball: toe
+    joint) is planted while it is still (speed under the threshold, see
+    :class:`ContactThresholds`) and low (under ``height_m`` above :func:`local_ground`: the
+    lowest the points come nearby, so a step, a box or stairs are ground too), with hysteresis;
+    the foot is planted while either is. Vectorized over frames.
+    """
+    th = thresholds
+    points = positions[:, [J["ankle_l"], J["ankle_r"], J["toe_l"], J["toe_r"]], :]  # (F, 4, 3)
+    leg = leg_of(positions) if len(positions) else REFERENCE_LEG_M
+    radius = th.ground_radius * leg
+    v = horizontal_speed(points, fps, th.filter_s)  # rising or sinking, a low point stays put
+    if th.speed_mps is not None:
+        limit = np.array([th.speed_mps, th.speed_mps])
+    else:
+        moving = np.array([np.percentile(v[:, :2], 90), np.percentile(v[:, 2:], 90)]) \
+            if len(v) else np.zeros(2)
+        limit = np.clip(SPEED_OF_MOTION * moving, SPEED_PER_LEG[0] * leg, SPEED_PER_LEG[1] * leg)
+    limit4 = np.repeat(limit, 2)
+    still = v < limit4
+    ground = np.concatenate([
+        local_ground(points[:, :2], fps, th.ground_window_s, radius, still[:, :2]),
+        local_ground(points[:, 2:], fps, th.ground_window_s, radius, still[:, 2:])], axis=1)
+    above = points[..., 2] - ground
+    height = th.height_m * leg / REFERENCE_LEG_M
+    enter = (above < height) & (v < limit4)
+    leave = (above > height * th.release) | (v > np.minimum(limit4 * th.release,
+                                                           RELEASE_PER_LEG * leg))
+    # Hysteresis both ways in time: a contact starts where the point first drops under the
+    # release thresholds before it is still, as it ends where it rises over them after.
+    part = _clean(_hysteresis(enter, leave), fps, th)
+    part &= ~leave  # a filled gap plants no part that moves (the whole foot may bridge it)
+    heel, ball = part[:, :2], part[:, 2:]
+    planted = _clean(heel | ball, fps, th)
+    on_ground = touch_down_to_lift_off(points, planted, fps, leg, th)
+    return FootContacts(heel & planted & on_ground, ball & planted & on_ground,
+                        planted & on_ground, on_ground, (float(limit[0]), float(limit[1])),
+                        above, v)
+
+
+#: The heel point a touch-down is found on: this fraction of the ankle-to-toe vector behind the
+#: ankle joint, on the line through both (about over the heel's contact point for adult and
+#: child proportions). The foot rolls onto the heel and then about it, so that point stops
+#: sinking when the heel lands, while the ankle still sinks until the foot is flat.
+HEEL_BEHIND_ANKLE = 0.25
+
+
+def touch_down_to_lift_off(points: F64, planted: NDArray[np.bool_], fps: float, leg: float,
+                           thresholds: ContactThresholds) -> NDArray[np.bool_]:
+    """Each foot on the ground from touch-down to lift-off: its stillness contacts with their
+    edges moved to where the foot lands and leaves the ground. -> bool (n_frames, 2).
+
+    ``points`` (n_frames, 4, 3): ankle l, r, toe l, r; ``planted`` (n_frames, 2): the stillness
+    contacts. A point of the foot (the heel point, :data:`HEEL_BEHIND_ANKLE`, or the toe
+    joint) is *down* while it is within ``edge_height_m`` of the contact's ground (the lowest it
+    comes during the contact) and neither sinks faster than ``edge_sink_mps`` nor rises faster
+    than ``edge_rise_mps``; the foot is down while either point is. Touch-down: the heel point
+    stops sinking as the heel lands (a vertical-velocity rule like the foot velocity algorithm
+    of O'Connor et al. 2007, Gait Posture 25:469, which reads strikes off the foot centre's
+    vertical velocity; here the heel's), or the ball lands first. Lift-off: the toe joint rises
+    over ``edge_height_m`` or faster than ``edge_rise_mps`` (a threshold on the toe, as
+    Ghoussayni et al. 2004, Gait Posture 20:266, threshold its speed). Each edge moves by at
+    most ``edge_max_s``: out over down frames next to it, in over frames where heel and toe
+    both still sink (start) or both already rise (end). Stillness alone starts late at a
+    brisk walk, while the heel rolls in, and early at a slow one, while the ankle settles. A
+    moved edge never leaves both feet up where one was low (a stance foot sinking or rising
+    over uneven ground is not in the air)."""
+    th = thresholds
+    scale = leg / REFERENCE_LEG_M
+    ankle, toe = points[:, :2], points[:, 2:]
+    n = len(points)
+    z = np.stack([(ankle - HEEL_BEHIND_ANKLE * (toe - ankle))[..., 2], toe[..., 2]])  # (2, F, 2)
+    # Zero-phase smoothing over a few hundredths of a second, whatever the rate: a marker's
+    # jitter or a one-frame step (a toe marker jumping 8 mm) is no sink or rise.
+    z = _box_filter(z.transpose(1, 0, 2), _width(th.edge_filter_s, fps)).transpose(1, 0, 2)
+    vz = np.gradient(z, axis=1) * fps if n > 1 else np.zeros_like(z)
+    edge = th.edge_height_m * scale
+    sink, rise = th.edge_sink_mps * scale, th.edge_rise_mps * scale
+    settled = (vz > -sink) & (vz < rise)
+    # Heel point and toe both to sink over the next frame (the foot has not landed) / both
+    # risen over the previous one (it has left): one-sided, so that the frame where the foot
+    # arrives, and the last before it leaves, stay on the ground.
+    step = np.diff(z, axis=1) * fps
+    falling: NDArray[np.bool_] = np.zeros(planted.shape, dtype=bool)
+    leaving: NDArray[np.bool_] = np.zeros(planted.shape, dtype=bool)
+    falling[:-1] = np.all(step <= -sink, axis=0)
+    leaving[1:] = np.all(step >= rise, axis=0)
+    most = round(th.edge_max_s * fps)
+    out = np.zeros_like(planted)
+    widest = planted.copy()  # the contacts over every low frame next to them
+    nowhere = np.zeros(n, dtype=bool)
+    for side in range(planted.shape[1]):
+        col = planted[:, side]
+        for a, b in true_runs(col):
+            ground = z[:, a:b + 1, side].min(axis=1, keepdims=True)  # heel point, toe
+            low = z[:, :, side] < ground + edge
+            down = (low & settled[:, :, side]).any(axis=0)
+            start = _edge_back(col, a, b, down, falling[:, side], most)
+            end = _edge_on(col, a, b, down, leaving[:, side], most)
+            out[start:end + 1, side] = True
+            ankle_low = ankle[:, side, 2] < ankle[a:b + 1, side, 2].min() + edge
+            widest[_edge_back(col, a, b, ankle_low | col, nowhere, most):
+                   _edge_on(col, a, b, low[1] | col, nowhere, most) + 1, side] = True
+    airborne = ~out.any(axis=1)
+    out[airborne] |= widest[airborne]
+    return out
+
+
+def _edge_back(col: NDArray[np.bool_], a: int, b: int, down: NDArray[np.bool_],
+               moving: NDArray[np.bool_], most: int) -> int:
+    """Where the run ``a..b`` of ``col`` starts: back from ``a`` over the frames where
+    ``down`` holds without a break (not into another run), or, when ``down`` fails at ``a``,
+    on over the frames where ``moving`` holds; at most ``most`` frames, never past ``b``."""
+    k = a
+    if down[a]:
+        while k > 0 and a - k < most and down[k - 1] and not col[k - 1]:
+            k -= 1
+    else:
+        while k < b and k - a < most and moving[k]:
+            k += 1
+    return k
+
+
+def _edge_on(col: NDArray[np.bool_], a: int, b: int, down: NDArray[np.bool_],
+             moving: NDArray[np.bool_], most: int) -> int:
+    """Where the run ``a..b`` of ``col`` ends: :func:`_edge_back` mirrored in time."""
+    n = len(col)
+    m = b
+    if down[b]:
+        while m < n - 1 and m - b < most and down[m + 1] and not col[m + 1]:
+            m += 1
+    else:
+        while m > a and b - m < most and moving[m]:
+            m -= 1
+    return m
+
+
+def detect_contacts(positions: F64, fps: float,
+                    thresholds: ContactThresholds = ContactThresholds()) -> NDArray[np.bool_]:
+    """Per-frame whole-foot contact flags for the left and right foot (see
+    :func:`detect_foot_contacts`). ``positions`` (n_frames, N_JOINTS, 3). -> bool (n_frames, 2)."""
+    return detect_foot_contacts(positions, fps, thresholds).foot
+
+
+def contact_constraints(contact: NDArray[np.bool_], fps: float,
+                        thresholds: ContactThresholds = ContactThresholds()) -> list[ConstraintSpec]:
+    """Foot-contact constraints, one per contact interval, weight 1 on every contact frame."""
+    out: list[ConstraintSpec] = []
+    duration = (contact.shape[0] - 1) / fps
+    for side_i, side in enumerate("lr"):
+        for k, (a, b) in enumerate(true_runs(contact[:, side_i])):
+            t0, t1 = a / fps, b / fps
+            ease_in = min(thresholds.ease_s, t0)
+            ease_out = min(thresholds.ease_s, duration - t1)
+            out.append(ConstraintSpec(
+                name=f"contact_{side}_{k}", kind="foot_contact", segment=f"ankle_{side}",
+                activation=Activation(t0 - ease_in, t1 + ease_out, ease_in, ease_out),
+                chain=(f"leg_{side}", "root"), priority=100, fraction=0.0,
+            ))
+    return out
+
+
+# --- gait events (C3D ``EVENT`` group) ---------------------------------------------------------
+
+#: How labs spell a gait event, after lower-casing and dropping all but letters: Vicon Nexus
+#: ("Foot Strike", "Foot Off", context "Left"/"Right"), Motion Analysis Cortex (context "LHS",
+#: "RTO"), and the clinical names (heel strike, initial contact, toe off).
+EVENT_KINDS = {
+    "strike": ("footstrike", "heelstrike", "initialcontact", "footcontact", "hs", "fs", "ic"),
+    "off": ("footoff", "toeoff", "footlift", "to", "fo"),
+}
+
+
+def gait_event_kind(label: str, context: str) -> tuple[str, str] | None:
+    """(side ``"l"``/``"r"``, kind ``"strike"``/``"off"``) of a C3D event, or None for other
+    events (a force-plate mark, a "General" context).
+
+    The side is the context ("Left", "Right") or the first letter of an abbreviation that names
+    both ("LHS", "RTO"); the kind is the label, or the abbreviation's rest. Numbers in a label
+    ("Foot Strike1") are ignored."""
+    words = [re.sub(r"[^a-z]", "", w) for w in (label.lower(), context.lower())]
+    label_w, context_w = words
+    side = {"left": "l", "right": "r"}.get(context_w)
+    kind_text = label_w
+    for text in (context_w, label_w):
+        if side is None and len(text) > 1 and text[0] in "lr" and _kind(text[1:]):
+            side, kind_text = text[0], text[1:]
+    if side is None:
+        for text in (label_w, context_w):
+            for name, code in (("left", "l"), ("right", "r")):
+                if text.startswith(name) and _kind(text[len(name):]):
+                    side, kind_text = code, text[len(name):]
+    kind = _kind(kind_text) or (_kind(context_w) if side else None)
+    return (side, kind) if side and kind else None
+
+
+def _kind(text: str) -> str | None:
+    for kind, names in EVENT_KINDS.items():
+        if text in names:
+            return kind
+    return None
+
+
+def contacts_from_events(events: list[dict[str, Any]], n_frames: int, fps: float
+                         ) -> NDArray[np.bool_]:
+    """Per-frame contact flags (n_frames, 2) from gait events (``{"side", "kind", "time_s"}``,
+    times in the motion's seconds): a foot is down from each strike to the next foot off.
+    Before its first event a foot is in the state that event ends (down before a foot off), after
+    its last in the state that event begins."""
+    t = np.arange(n_frames) / fps
+    out = np.zeros((n_frames, 2), dtype=bool)
+    for side_i, side in enumerate("lr"):
+        mine = sorted((e["time_s"], e["kind"]) for e in events if e.get("side") == side
+                      and e.get("kind") in ("strike", "off"))
+        if not mine:
+            continue
+        state = np.full(n_frames, mine[0][1] == "off")
+        for time_s, kind in mine:
+            state[t >= time_s - 0.5 / fps] = kind == "strike"
+        out[:, side_i] = state
+    return out
+
+
+# --- in-place (treadmill) stance ---------------------------------------------------------------
+
+#: A clip is in place when its root travels horizontally (over a second) at a median below
+#: this many legs/s ...
+IN_PLACE_ROOT_PER_LEG = 0.15
+#: ... while the lower foot moves at a median of at least this many legs/s, and most of that
+#: motion (this share of its speed) goes one way: a belt carrying the stance foot backwards.
+BELT_MIN_PER_LEG = 0.4
+BELT_STEADINESS = 0.6
+
+
+def treadmill_belt(positions: F64, fps: float) -> F64 | None:
+    """The belt's horizontal velocity (2,) m/s of a treadmill-like, in-place clip, or None.
+
+    In place: the pelvis hardly moves while the stance foot (the lower ankle, on frames where
+    it is within a few centimetres of its lowest) slides steadily one way at walking or running
+    speed, as it does on a treadmill or in an in-place walk cycle. The belt velocity is the
+    velocity most of that foot's samples share. ``positions`` (n_frames, N_JOINTS, 3) metres, Z up."""
+    if len(positions) < max(3, int(fps)):
+        return None
+    leg = leg_of(positions)
+    # The root's travel over one second (its sway within a stride does not count).
+    root = positions[:, J["pelvis"], :2]
+    w = min(len(root) - 1, max(1, round(fps)))
+    travel = np.linalg.norm(root[w:] - root[:-w], axis=-1) * fps / w
+    if np.median(travel) > IN_PLACE_ROOT_PER_LEG * leg:
+        return None
+    ankles = positions[:, [J["ankle_l"], J["ankle_r"]]]
+    lower = np.argmin(ankles[..., 2], axis=1)
+    stance = ankles[np.arange(len(ankles)), lower]  # (F, 3)
+    velocity = _box_filter(np.gradient(ankles[..., :2], axis=0) * fps, _width(0.03, fps))
+    v = velocity[np.arange(len(ankles)), lower]
+    low = stance[:, 2] < np.percentile(stance[:, 2], 5) + 0.06 * leg  # 5 cm for a 0.8 m leg
+    if low.sum() < 3:
+        return None
+    samples = v[low]
+    speed_median = float(np.median(np.linalg.norm(samples, axis=-1)))
+    # The belt carries the stance foot at one velocity: the one most stance samples share
+    # (within a tenth of a leg per second), then their mean; heel-strike and push-off frames,
+    # where the foot rolls, fall outside it.
+    tolerance = 0.1 * leg
+    candidates = samples[:: max(1, len(samples) // 400)]
+    near = np.linalg.norm(samples[None] - candidates[:, None], axis=-1) < tolerance
+    best = candidates[int(np.argmax(near.sum(axis=1)))]
+    belt = samples[np.linalg.norm(samples - best, axis=-1) < tolerance].mean(axis=0)
+    if speed_median < BELT_MIN_PER_LEG * leg or np.linalg.norm(belt) < BELT_STEADINESS * speed_median:
+        return None
+    out: F64 = belt
+    return out

@@ -1,0 +1,58 @@
+"""A normalized motion played on a body and written to one file: BVH, glTF (``.glb``) or joint
+positions (``.npz``), chosen by the output's suffix."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import IO
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ecs_anim.core.errors import EcsAnimError
+from ecs_anim.core.files import atomic_output, output_problem
+from ecs_anim.core.morphology import Morphology
+from ecs_anim.core.normalized import DecodedPose
+from ecs_anim.core.skeleton import JOINTS
+from ecs_anim.io.export.bvh import bvh_text
+from ecs_anim.io.export.gltf import glb_from_pose
+from ecs_anim.io.export.skeleton import play_on, resolve_morphology
+from ecs_anim.motion.clip import NormalizedMotion
+
+F64 = NDArray[np.float64]
+
+
+def write_npz(f: IO[bytes], positions: F64, fps: float, contacts: np.ndarray) -> None:
+    """Joint positions for analysis, written to the binary file ``f``: ``positions`` (frames,
+    joints, 3) metres world Z up, ``joints`` names, ``fps``, ``contacts`` (frames, 2) bool
+    [left, right]."""
+    np.savez_compressed(f, positions=positions, joints=np.array(JOINTS), fps=np.float64(fps),
+                        contacts=contacts)
+
+
+def export_motion(motion: NormalizedMotion, morphology_spec: str, out: str | Path,
+                  force: bool = False) -> tuple[Morphology, DecodedPose]:
+    """Play ``motion`` on a body and write ``out`` (.bvh, .npz or .glb); an existing ``out``
+    without ``force``, or a path that cannot be written, is an :class:`EcsAnimError` before any
+    work."""
+    out = Path(out)
+    suffix = out.suffix.lower()
+    if suffix not in (".bvh", ".npz", ".glb"):
+        raise EcsAnimError(f"-o {out}: the output must end in .bvh, .npz or .glb")
+    problem = output_problem(out, force)
+    if problem is not None:
+        raise EcsAnimError(problem)
+    morph, is_source = resolve_morphology(morphology_spec, motion)
+    # BVH and glTF bones are rigid, so they get the rigid body even on the source morphology;
+    # the .npz on the source carries the measured stretch and reproduces the source exactly.
+    pose = play_on(motion, morph, is_source and suffix == ".npz")
+    if not np.all(np.isfinite(pose.positions)):
+        raise EcsAnimError(f"{out}: the decoded motion holds non-finite positions (bug); nothing written")
+    with atomic_output(out, force) as f:
+        if suffix == ".bvh":
+            f.write(bvh_text(pose, morph, motion.fps).encode("utf-8"))
+        elif suffix == ".glb":
+            f.write(glb_from_pose(pose, morph, motion.fps))
+        else:
+            write_npz(f, pose.positions, motion.fps, motion.contacts())
+    return morph, pose

@@ -1,0 +1,888 @@
+"""Events and triggers: what happened in a tick (edges), and the reactions scenarios wire to them.
+
+Events are edges (STYLE 8): a clip started or ended, a foot contact began, a character was
+removed, and the edges of the triggers' own conditions (a point came within a distance of
+another, a constraint was reached, a time came). :meth:`Simulation.events` returns the list of
+the last ``step()``; per-tick data stays in the store.
+
+A :class:`Trigger` is ``when`` (one condition) -> ``then`` (actions), fired once (or on every
+edge with ``repeat``), ``delay_s`` after its condition. Conditions are evaluated for all triggers
+at once as arrays (every ``Near``'s two points in one numpy computation over the store's
+posture); actions are applied between ticks, so their effect shows from the next posture on:
+
+* a condition seen in the posture of tick ``k`` (after ``step()``) fires its actions at once:
+  the posture of tick ``k + 1`` shows them (one tick later, the least an event can take);
+* ``AtTime(t)`` and a delayed action are applied before the tick whose posture time reaches
+  their time, so that posture already shows them;
+* an action whose effect is an event (:class:`Play`: a clip starts; :class:`Remove`) may fire
+  further triggers at once (chaining). A trigger fires at most once per tick: one that would
+  fire again in the same tick (a cycle of triggers firing each other) is skipped with a warning
+  and the others go on (a scenario refuses such a cycle at load).
+
+Triggers naming a character that is removed are dropped with one warning; the others go on. A
+trigger made with ``armed=False`` is not watched until an :class:`Arm` action names it.
+
+Moving targets (:class:`TargetTrack`): a constraint's world target given as keyframes
+``(t_s, at_m)``, interpolated linearly in simulation time (held before the first and after the
+last), set before every tick.
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ecs_anim.components import QueuedClip
+from ecs_anim.core.body_points import BodyPoint, point_positions
+from ecs_anim.core.errors import EcsAnimError, listed, quoted
+from ecs_anim.core.morphology import Morphology
+from ecs_anim.motion.constraints import Activation
+from ecs_anim.runtime.kernels.edges import clip_and_contact_edges as compiled_edges
+from ecs_anim.runtime.playback_queue import start_next_clips
+from ecs_anim.runtime.store import MAX_QUEUE
+
+if TYPE_CHECKING:
+    from ecs_anim.runtime.simulation import Simulation
+
+F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
+
+#: The kinds of :class:`Event`.
+EVENT_KINDS = ("clip_started", "clip_ended", "contact_began", "removed", "near", "reached", "time")
+#: A foot contact has begun when its weight rises through this.
+CONTACT_BEGAN_WEIGHT = 0.5
+FEET = ("left", "right")
+#: Slack on comparing times (s), against rounding of tick times.
+TIME_SLACK_S = 1e-9
+
+
+@dataclass(frozen=True)
+class Event:
+    """Something that happened once: ``kind`` (one of :data:`EVENT_KINDS`) to the character
+    ``entity`` (named ``character``; -1 and '' for a time), at simulation time ``time_s`` (the
+    posture where it shows), in ``tick`` (the ``step()`` it was produced in, counted from 0).
+    ``detail``: the clip (clip_started, clip_ended), the foot (``left`` / ``right``), the
+    constraint (reached), or the trigger whose condition this is (near, reached, time)."""
+
+    kind: str
+    entity: int
+    character: str
+    time_s: float
+    tick: int
+    detail: str = ""
+
+
+# --- conditions ---------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class ClipStarted:
+    """``entity`` starts playing ``clip`` (None: any clip), cross-fade included."""
+
+    entity: int
+    clip: str | None = None
+
+
+@dataclass(frozen=True)
+class ClipEnded:
+    """``entity``'s ``clip`` (None: any) ends: it reaches its end (not looping) or another
+    clip takes over."""
+
+    entity: int
+    clip: str | None = None
+
+
+@dataclass(frozen=True)
+class Near:
+    """``point`` of ``entity`` comes within ``within_m`` of ``other_point`` of ``other``
+    (their distance falls to ``within_m`` or below; world metres, each tick's posture)."""
+
+    entity: int
+    point: BodyPoint
+    other: int
+    other_point: BodyPoint
+    within_m: float
+
+
+@dataclass(frozen=True)
+class Reached:
+    """The constraint ``uid`` is reached: active and its error at most ``within_m`` (metres, or
+    radians for an orientation)."""
+
+    uid: int
+    within_m: float = 0.001
+
+
+@dataclass(frozen=True)
+class ContactBegan:
+    """A foot contact of ``entity`` begins: ``foot`` ``left`` / ``right`` (None: either)."""
+
+    entity: int
+    foot: str | None = None
+
+
+@dataclass(frozen=True)
+class AtTime:
+    """Simulation time reaches ``time_s``."""
+
+    time_s: float
+
+
+@dataclass(frozen=True)
+class Removed:
+    """``entity`` is taken out of the simulation."""
+
+    entity: int
+
+
+Condition = ClipStarted | ClipEnded | Near | Reached | ContactBegan | AtTime | Removed
+
+
+# --- actions ------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Play:
+    """``entity`` plays ``clip`` now, cross-faded over ``crossfade_s`` from what it plays,
+    starting ``from_s`` into the clip, then the clips of ``then``; it replaces the clips still
+    queued."""
+
+    entity: int
+    clip: str
+    crossfade_s: float = 0.3
+    loop: bool = False
+    from_s: float = 0.0
+    then: tuple[QueuedClip, ...] = ()
+
+
+@dataclass(frozen=True)
+class SwitchOn:
+    """Switch the constraint ``uid`` on now, easing in over its own ``ease_in_s``, for
+    ``for_s`` seconds (None: until switched off), then easing out over its ``ease_out_s``."""
+
+    uid: int
+    for_s: float | None = None
+
+
+@dataclass(frozen=True)
+class SwitchOff:
+    """Switch the constraint ``uid`` off now, easing out over its own ``ease_out_s``."""
+
+    uid: int
+
+
+@dataclass(frozen=True)
+class MoveTarget:
+    """Move the constraint ``uid``'s target to the world point ``target_in_world`` (m)."""
+
+    uid: int
+    target_in_world: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class SetBody:
+    """Give ``entity`` the body ``body``, blended over ``blend_s`` (``Simulation.set_body``)."""
+
+    entity: int
+    body: Morphology
+    blend_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class Remove:
+    """Take ``entity`` out of the simulation (``Simulation.remove``)."""
+
+    entity: int
+
+
+@dataclass(frozen=True)
+class Arm:
+    """Start watching the condition of the trigger named ``trigger`` (one made with
+    ``armed=False`` waits for this), e.g. a dodge watched only once the punch is coming."""
+
+    trigger: str
+
+
+Action = Play | SwitchOn | SwitchOff | MoveTarget | SetBody | Remove | Arm
+
+
+@dataclass(frozen=True)
+class Trigger:
+    """``when`` the condition holds (its edge), do ``then`` after ``delay_s``; once, or every
+    time with ``repeat``. ``name`` names it in events and warnings. ``armed`` False: its
+    condition is not watched until an :class:`Arm` action arms it."""
+
+    name: str
+    when: Condition
+    then: tuple[Action, ...]
+    delay_s: float = 0.0
+    repeat: bool = False
+    armed: bool = True
+
+
+@dataclass(frozen=True)
+class TargetTrack:
+    """A moving world target: the constraint ``uid``'s target at ``times_s`` (k,) is
+    ``points_m`` (k, 3), linearly interpolated between, held before the first and after the
+    last keyframe."""
+
+    uid: int
+    times_s: tuple[float, ...]
+    points_m: tuple[tuple[float, float, float], ...]
+
+
+def entities_named(item: Condition | Action) -> tuple[int, ...]:
+    """The characters a condition or an action names."""
+    if isinstance(item, Near):
+        return (item.entity, item.other)
+    entity = getattr(item, "entity", None)
+    return () if entity is None else (int(entity),)
+
+
+def constraints_named(item: Condition | Action) -> tuple[int, ...]:
+    """The constraints (ids) a condition or an action names."""
+    uid = getattr(item, "uid", None)
+    return () if uid is None else (int(uid),)
+
+
+def event_effects(action: Action) -> list[tuple[str, int, str | None]]:
+    """The events an action causes at once, as (kind, entity, clip or None): what may chain."""
+    if isinstance(action, Play):
+        return [("clip_started", action.entity, action.clip), ("clip_ended", action.entity, None)]
+    if isinstance(action, Remove):
+        return [("removed", action.entity, None)]
+    return []
+
+
+def listens_to(condition: Condition, kind: str, entity: int, clip: str | None) -> bool:
+    """Whether an event (kind, entity, clip; clip None: any) can match ``condition``."""
+    if isinstance(condition, ClipStarted):
+        wanted = "clip_started"
+    elif isinstance(condition, ClipEnded):
+        wanted = "clip_ended"
+    elif isinstance(condition, Removed):
+        wanted = "removed"
+    else:
+        return False
+    if kind != wanted or condition.entity != entity:
+        return False
+    own = getattr(condition, "clip", None)
+    return own is None or clip is None or own == clip
+
+
+def find_cycle(triggers: list[Trigger]) -> list[int]:
+    """Triggers that would fire each other forever in one tick: a cycle of repeating triggers
+    without delay, each one's actions causing an event the next one waits for. Returns the
+    cycle's indices (empty: none)."""
+    live = [i for i, t in enumerate(triggers) if t.delay_s <= 0.0 and t.repeat]
+    edges: dict[int, list[int]] = {i: [] for i in live}
+    for i in live:
+        effects = [e for a in triggers[i].then for e in event_effects(a)]
+        edges[i] = [j for j in live if any(listens_to(triggers[j].when, *e) for e in effects)]
+    state: dict[int, int] = {}  # 1: on the path, 2: done
+    path: list[int] = []
+
+    def visit(i: int) -> list[int]:
+        state[i] = 1
+        path.append(i)
+        for j in edges[i]:
+            if state.get(j) == 1:
+                return path[path.index(j):]
+            if j not in state:
+                found = visit(j)
+                if found:
+                    return found
+        path.pop()
+        state[i] = 2
+        return []
+
+    for i in live:
+        if i not in state:
+            cycle = visit(i)
+            if cycle:
+                return cycle
+    return []
+
+
+@dataclass
+class _Compiled:
+    """The triggers' conditions as arrays, rebuilt when triggers are added or dropped."""
+
+    near: I64 = field(default_factory=lambda: np.zeros(0, np.int64))  # trigger indices
+    near_entities: I64 = field(default_factory=lambda: np.zeros((0, 2), np.int64))
+    near_segments: I64 = field(default_factory=lambda: np.zeros((0, 2), np.int64))
+    near_fractions: F64 = field(default_factory=lambda: np.zeros((0, 2)))
+    near_offsets: F64 = field(default_factory=lambda: np.zeros((0, 2, 3)))
+    near_within_m: F64 = field(default_factory=lambda: np.zeros(0))
+    reached: I64 = field(default_factory=lambda: np.zeros(0, np.int64))
+    reached_uids: I64 = field(default_factory=lambda: np.zeros(0, np.int64))
+    reached_within: F64 = field(default_factory=lambda: np.zeros(0))
+    timed: I64 = field(default_factory=lambda: np.zeros(0, np.int64))
+    timed_at_s: F64 = field(default_factory=lambda: np.zeros(0))
+    #: (event kind, entity) -> the triggers waiting for such an event (clips, contacts, removal)
+    listeners: dict[tuple[str, int], list[int]] = field(default_factory=dict)
+    _listened: dict[str, I64] = field(default_factory=dict)
+
+    def listened(self, kind: str) -> I64:
+        """The entities some trigger waits on for events of ``kind`` (sorted; made once per
+        rebuild)."""
+        if kind not in self._listened:
+            self._listened[kind] = np.unique(np.array([e for k, e in self.listeners if k == kind],
+                                                      np.int64))
+        return self._listened[kind]
+
+
+#: Columns of :func:`clip_and_contact_edges`'s edges: the clip seen last tick was replaced
+#: before it ended, the clip ended this tick, a clip started, a foot's contact began (left,
+#: right: the last two).
+EDGE_REPLACED, EDGE_ENDED, EDGE_STARTED, EDGE_CONTACT = 0, 1, 2, 3
+
+
+def clip_and_contact_edges(entity: I64, clip: I64, clip_time_s: F64, speed: F64,
+                           loop: NDArray[np.bool_], duration_s: F64, contact_weight: F64,
+                           dt: float, slack_s: float, began_weight: float, seen_clip: I64,
+                           seen_time_s: F64, seen_ended: NDArray[np.bool_],
+                           seen_contact: F64) -> tuple[NDArray[np.bool_], I64]:
+    """The clip and contact edges of each store row in the tick just stepped (numpy; the
+    reference of the compiled :func:`ecs_anim.runtime.kernels.edges.clip_and_contact_edges`).
+
+    The store's ``entity``, ``clip``, ``clip_time_s``, ``speed``, ``loop`` (n,) and
+    ``contact_weight`` (n, 2); ``duration_s`` each clip's loop period; ``dt`` the tick (s). A
+    clip starts when it differs from the one seen or its time went back (beyond ``slack_s``);
+    it ends when the pose was sampled at its end and it does not loop; a contact begins when
+    its weight reaches ``began_weight``. ``seen_*`` (by entity id) hold what the last tick left
+    (clip -1: none seen) and are updated in place. Returns the edges (n, 5) bool, columns
+    :data:`EDGE_REPLACED` ... :data:`EDGE_CONTACT` + foot, and the clip seen before (n,)."""
+    seen_clip_now, seen_time_now = seen_clip[entity], seen_time_s[entity]
+    ended_before = seen_ended[entity]
+    new_clip = (clip != seen_clip_now) | (clip_time_s < seen_time_now - slack_s)
+    sampled = clip_time_s - dt * speed  # the clip time this tick's pose was at
+    at_end = ~loop & (sampled >= duration_s[clip] - slack_s)
+    edges = np.zeros((entity.shape[0], 5), bool)
+    edges[:, EDGE_REPLACED] = new_clip & (seen_clip_now >= 0) & ~ended_before
+    edges[:, EDGE_ENDED] = ~new_clip & at_end & ~ended_before
+    edges[:, EDGE_STARTED] = new_clip
+    edges[:, EDGE_CONTACT:] = (contact_weight >= began_weight) & \
+        (seen_contact[entity] < began_weight)
+    seen_ended[entity] = ~new_clip & (ended_before | at_end)
+    seen_clip[entity], seen_time_s[entity] = clip, clip_time_s
+    seen_contact[entity] = contact_weight
+    return edges, seen_clip_now
+
+
+@dataclass
+class _StoreEdges:
+    """The clip and contact events of one tick, kept as arrays until someone asks for them
+    (a crowd makes hundreds a tick, and usually no trigger waits on most): per kind, the store
+    rows, their entities and each one's detail as an index into ``detail_names``; ``names``
+    the characters' names by store row then; ``at`` where they go in the tick's event list."""
+
+    edges: list[tuple[str, I64, I64, list[str]]]
+    entity: I64
+    names: list[str]
+    time_s: float
+    tick: int
+    at: int
+
+    def events(self) -> list[Event]:
+        return [Event(kind, int(self.entity[r]), self.names[r], self.time_s, self.tick,
+                      detail_names[d])
+                for kind, rows, detail, detail_names in self.edges
+                for r, d in zip(rows.tolist(), detail.tolist(), strict=True)]
+
+
+class Reactions:
+    """A simulation's triggers, moving targets and the events of its last tick.
+
+    Owned by :class:`~ecs_anim.runtime.simulation.Simulation` (``sim.reactions``), which calls
+    :meth:`before_tick` and :meth:`after_tick` around each tick's systems. The previous tick's
+    clip, clip time and contact weights are kept per entity (arrays indexed by entity id), so
+    detecting an edge is a comparison of whole arrays."""
+
+    def __init__(self) -> None:
+        self.triggers: list[Trigger] = []
+        self.fired = np.zeros(0, bool)  # fired once already (a trigger without repeat)
+        self.dropped = np.zeros(0, bool)  # names a removed character or constraint
+        self.holds = np.zeros(0, bool)  # the condition held at the last evaluation (edges)
+        self.armed = np.zeros(0, bool)  # its condition is watched
+        self.tracks: list[TargetTrack] = []
+        self._compiled: _Compiled | None = None
+        self._pending: list[tuple[float, int]] = []  # (due time, trigger) delayed actions
+        self._events: list[Event] = []  # of the tick in progress
+        self._last: list[Event] = []  # of the last tick stepped
+        # the store edges of the tick in progress / of the last one when no trigger waited
+        # on any (made into events only when asked for)
+        self._edges_kept: _StoreEdges | None = None
+        self._last_edges: _StoreEdges | None = None
+        self._fired_this_tick: set[int] = set()
+        self._names_cache: list[str] = []
+        self._names_version = -1
+        # per entity id: the clip (-1: not seen yet), its time after the last tick, whether its
+        # end was reported, its contact weights
+        self._seen_clip = np.zeros(0, np.int64)
+        self._seen_time = np.zeros(0)
+        self._seen_ended = np.zeros(0, bool)
+        self._seen_contact = np.zeros((0, 2))
+
+    # --- adding ---------------------------------------------------------------------------------
+
+    def add(self, trigger: Trigger) -> int:
+        self.triggers.append(trigger)
+        self.fired = np.append(self.fired, False)
+        self.dropped = np.append(self.dropped, False)
+        self.holds = np.append(self.holds, False)
+        self.armed = np.append(self.armed, trigger.armed)
+        self._compiled = None
+        return len(self.triggers) - 1
+
+    @property
+    def events(self) -> list[Event]:
+        kept = self._last_edges
+        if kept is None:
+            return list(self._last)
+        return self._last[:kept.at] + kept.events() + self._last[kept.at:]
+
+    # --- the tick -------------------------------------------------------------------------------
+
+    def before_tick(self, sim: Simulation) -> None:
+        """Apply the moving targets, the time triggers and the delayed actions due at the
+        posture this tick makes (``sim.time_s``)."""
+        now = sim.time_s
+        if self.tracks:
+            self._set_track_targets(sim, now)
+        c = self._compile()
+        if c.timed.size:
+            due = c.timed[(c.timed_at_s <= now + TIME_SLACK_S) & ~self.holds[c.timed]]
+            self.holds[due] = True
+            for i in due:
+                self._emit(sim, Event("time", -1, "", now, sim.tick, self.triggers[i].name), i)
+        if self._pending:
+            ready = [p for p in self._pending if p[0] <= now + TIME_SLACK_S]
+            self._pending = [p for p in self._pending if p[0] > now + TIME_SLACK_S]
+            for _, i in sorted(ready):
+                if not self.dropped[i]:
+                    self._apply(sim, i)
+
+    def after_tick(self, sim: Simulation) -> None:
+        """Detect this tick's events in the store and fire the triggers they match."""
+        st = sim.store
+        self._grow(int(st.entity.max()) + 1 if st.n else 0)
+        now, tick = sim.posture_time_s, sim.tick - 1
+        edges = self._store_edges(sim)
+        c = self._compile()
+        if any(rows.size for _, rows, _, _ in edges):
+            kept = _StoreEdges(edges, st.entity.copy(), self._names(sim), now, tick,
+                               len(self._events))
+            if any(np.isin(kept.entity[rows], c.listened(kind)).any()
+                   for kind, rows, _, _ in edges):
+                # All made before any is emitted: an action may remove a character (and shift
+                # the rows).
+                for event in kept.events():
+                    self._emit(sim, event)
+            else:  # nothing to fire: the events are made if someone asks for them
+                self._edges_kept = kept
+        if c.near.size:
+            self._edges(sim, c.near, self._near_holds(sim, c), "near")
+        if c.reached.size:
+            self._edges(sim, c.reached, self._reached_holds(sim, c), "reached")
+        self._last, self._events = self._events, []
+        self._last_edges, self._edges_kept = self._edges_kept, None
+        self._fired_this_tick = set()
+
+    def character_removed(self, sim: Simulation, entity: int, name: str) -> None:
+        """After ``Simulation.remove``: the ``removed`` event (its triggers fire), then every
+        trigger still naming that character, or a constraint removed with it, is dropped."""
+        self._emit(sim, Event("removed", entity, name, sim.time_s, sim.tick, ""))
+        live = set(int(u) for u in sim.constraints.uid)
+        gone = []
+        for i, t in enumerate(self.triggers):
+            if self.dropped[i] or (self.fired[i] and not t.repeat):  # done already
+                continue
+            items: list[Condition | Action] = [t.when, *t.then]
+            if any(entity in entities_named(x) for x in items) or \
+                    any(u not in live for x in items for u in constraints_named(x)):
+                self.dropped[i] = True
+                gone.append(t.name)
+        self.tracks = [k for k in self.tracks if k.uid in live]
+        if gone:
+            self._compiled = None
+            warn(sim, f"character {name!r} removed: triggers {listed(gone)} name it (or its "
+                     "constraints) and are dropped; the others go on")
+
+    # --- edges ----------------------------------------------------------------------------------
+
+    def _grow(self, n_entities: int) -> None:
+        have = self._seen_clip.shape[0]
+        if n_entities <= have:
+            return
+        extra = n_entities - have
+        self._seen_clip = np.concatenate([self._seen_clip, np.full(extra, -1, np.int64)])
+        self._seen_time = np.concatenate([self._seen_time, np.zeros(extra)])
+        self._seen_ended = np.concatenate([self._seen_ended, np.zeros(extra, bool)])
+        self._seen_contact = np.concatenate([self._seen_contact, np.zeros((extra, 2))])
+
+    def _store_edges(self, sim: Simulation) -> list[tuple[str, I64, I64, list[str]]]:
+        """(kind, store rows, details, detail names) of the clip and contact edges of the tick
+        just stepped, from the store against the last tick's values (all characters at once:
+        :func:`clip_and_contact_edges`, compiled); each event's detail is
+        ``detail_names[detail]``."""
+        st, bank = sim.store, sim.bank
+        if st.n == 0:
+            return []
+        edges, previous_clip = compiled_edges(
+            st.entity, st.clip, st.clip_time_s, st.speed, st.loop,
+            bank.duration_s(np.arange(bank.n_frames.size)), st.contact_weight, sim.dt,
+            TIME_SLACK_S, CONTACT_BEGAN_WEIGHT, self._seen_clip, self._seen_time,
+            self._seen_ended, self._seen_contact)
+        clip_names = list(bank.names)
+        out: list[tuple[str, I64, I64, list[str]]] = []
+        rows = np.flatnonzero(edges[:, EDGE_REPLACED])
+        out.append(("clip_ended", rows, previous_clip[rows], clip_names))
+        rows = np.flatnonzero(edges[:, EDGE_ENDED])
+        out.append(("clip_ended", rows, st.clip[rows], clip_names))
+        rows = np.flatnonzero(edges[:, EDGE_STARTED])
+        out.append(("clip_started", rows, st.clip[rows], clip_names))
+        rows, feet = np.nonzero(edges[:, EDGE_CONTACT:])
+        out.append(("contact_began", rows, feet, list(FEET)))
+        return out
+
+    def _rows_of(self, sim: Simulation, entities: I64) -> I64:
+        """Store rows of entity ids (any shape); -1 where an entity is not in the simulation."""
+        st = sim.store
+        row_of = np.full(max(int(entities.max(initial=0)), int(st.entity.max(initial=0))) + 1,
+                         -1, np.int64)
+        row_of[st.entity] = np.arange(st.n)
+        return row_of[entities]
+
+    def _near_holds(self, sim: Simulation, c: _Compiled) -> NDArray[np.bool_]:
+        """Whether each Near condition holds in the posture just made: both points of every
+        trigger at once."""
+        posture = sim.store.posture
+        holds = np.zeros(c.near.size, bool)
+        if posture is None:
+            return holds
+        rows = self._rows_of(sim, c.near_entities)  # (k, 2)
+        ok = np.all(rows >= 0, axis=1)
+        rows = np.where(rows >= 0, rows, 0).reshape(-1)
+        points = point_positions(posture, rows, c.near_segments.reshape(-1),
+                                 c.near_fractions.reshape(-1), c.near_offsets.reshape(-1, 3))
+        points = points.reshape(-1, 2, 3)
+        distance = np.linalg.norm(points[:, 0] - points[:, 1], axis=-1)
+        near: NDArray[np.bool_] = ok & (distance <= c.near_within_m)  # NaN (no posture): False
+        return near
+
+    def _reached_holds(self, sim: Simulation, c: _Compiled) -> NDArray[np.bool_]:
+        table = sim.constraints
+        live = np.isin(c.reached_uids, table.uid)
+        holds = np.zeros(c.reached.size, bool)
+        if live.any():
+            rows = table.rows_of(c.reached_uids[live])
+            holds[live] = (table.weight[rows] > 0.0) & (table.error[rows] <= c.reached_within[live])
+        return holds
+
+    def _edges(self, sim: Simulation, triggers: I64, holds: NDArray[np.bool_], kind: str) -> None:
+        """Fire the triggers whose condition has just begun to hold."""
+        rising = holds & ~self.holds[triggers]
+        self.holds[triggers] = holds
+        for i in triggers[rising]:
+            t = self.triggers[i]
+            entity = self._subject(sim, t.when)
+            self._emit(sim, Event(kind, entity, self._name_of(sim, entity), sim.posture_time_s,
+                                  sim.tick - 1, t.name), i)
+
+    @staticmethod
+    def _subject(sim: Simulation, condition: Condition) -> int:
+        """The entity a condition's event is about: its (first) character, a constraint's
+        owner; -1 for a time."""
+        if isinstance(condition, Reached):
+            table = sim.constraints
+            return int(sim.store.entity[table.owner[table.rows_of(np.array([condition.uid]))[0]]])
+        who = entities_named(condition)
+        return who[0] if who else -1
+
+    def _name_of(self, sim: Simulation, entity: int) -> str:
+        if entity < 0:
+            return ""
+        rows = np.flatnonzero(sim.store.entity == entity)
+        return self._names(sim)[int(rows[0])] if rows.size else ""
+
+    def _names(self, sim: Simulation) -> list[str]:
+        """Every character's name by store row (an esper query once per structural change)."""
+        if self._names_version != sim.structure_version:
+            self._names_cache, self._names_version = sim.names(), sim.structure_version
+        return self._names_cache
+
+    # --- firing ---------------------------------------------------------------------------------
+
+    def _emit(self, sim: Simulation, event: Event, source: int | None = None) -> None:
+        """Record ``event``; fire the triggers it matches (``source``: the trigger whose own
+        condition's edge it is)."""
+        self._events.append(event)
+        if source is not None:
+            self._fire(sim, source, event.time_s)
+            return
+        for i in self._compile().listeners.get((event.kind, event.entity), []):
+            if self._matches(self.triggers[i].when, event):
+                self._fire(sim, i, event.time_s)
+
+    @staticmethod
+    def _matches(condition: Condition, event: Event) -> bool:
+        if isinstance(condition, ContactBegan):
+            return event.kind == "contact_began" and event.entity == condition.entity and \
+                condition.foot in (None, event.detail)
+        return listens_to(condition, event.kind, event.entity, event.detail or None)
+
+    def _fire(self, sim: Simulation, i: int, at_s: float) -> None:
+        """Fire trigger ``i``, whose condition came at ``at_s``: its actions now, or delayed."""
+        t = self.triggers[i]
+        if self.dropped[i] or not self.armed[i] or (self.fired[i] and not t.repeat):
+            return
+        if i in self._fired_this_tick:
+            warn(sim, f"trigger {t.name!r} would fire again in the same tick (triggers firing each "
+                     "other in a cycle): skipped; the others go on")
+            return
+        self._fired_this_tick.add(i)
+        self.fired[i] = True
+        if not t.repeat:
+            self._compiled = None  # its condition is no longer watched
+        if t.delay_s > 0.0:  # shown from the first posture at or after the condition + delay
+            self._pending.append((at_s + t.delay_s, i))
+        else:
+            self._apply(sim, i)
+
+    def _apply(self, sim: Simulation, i: int) -> None:
+        for action in self.triggers[i].then:
+            try:
+                self._do(sim, action)
+            except EcsAnimError as exc:
+                warn(sim, f"trigger {self.triggers[i].name!r}: {exc}; the others go on")
+
+    def _do(self, sim: Simulation, a: Action) -> None:
+        if isinstance(a, Play):
+            play_now(sim, a)
+            row = sim.row(a.entity)
+            name = sim.names()[row]
+            st = sim.store
+            self._grow(int(st.entity.max()) + 1)
+            ended = self._seen_clip[a.entity] >= 0 and not self._seen_ended[a.entity]
+            previous = int(self._seen_clip[a.entity])
+            self._seen_clip[a.entity] = st.clip[row]
+            self._seen_time[a.entity] = st.clip_time_s[row]
+            self._seen_ended[a.entity] = False
+            if ended:
+                self._emit(sim, Event("clip_ended", a.entity, name, sim.time_s, sim.tick,
+                                      sim.bank.names[previous]))
+            self._emit(sim, Event("clip_started", a.entity, name, sim.time_s, sim.tick, a.clip))
+        elif isinstance(a, SwitchOn):
+            switch_on(sim, a.uid, sim.time_s, a.for_s)
+        elif isinstance(a, SwitchOff):
+            switch_off(sim, a.uid, sim.time_s)
+        elif isinstance(a, MoveTarget):
+            sim.set_target(a.uid, a.target_in_world)
+        elif isinstance(a, SetBody):
+            sim.set_body(a.entity, a.body, blend_s=a.blend_s)
+        elif isinstance(a, Remove):
+            sim.remove(a.entity)
+        elif isinstance(a, Arm):
+            found = [i for i, t in enumerate(self.triggers) if t.name == a.trigger]
+            if not found:
+                raise EcsAnimError(f"no trigger named {quoted(a.trigger)} to arm")
+            self.armed[found[0]] = True
+            self.holds[found[0]] = False  # a condition already holding is an edge now
+            self._compiled = None
+
+    # --- compiled conditions, tracks ------------------------------------------------------------
+
+    def _compile(self) -> _Compiled:
+        if self._compiled is not None:
+            return self._compiled
+        c = _Compiled()
+        live = [(i, t.when) for i, t in enumerate(self.triggers) if self.armed[i]
+                and not self.dropped[i] and (t.repeat or not self.fired[i])]
+        near = [(i, w) for i, w in live if isinstance(w, Near)]
+        if near:
+            c.near = np.array([i for i, _ in near], np.int64)
+            c.near_entities = np.array([(w.entity, w.other) for _, w in near], np.int64)
+            c.near_segments = np.array([(w.point.segment, w.other_point.segment) for _, w in near],
+                                       np.int64)
+            c.near_fractions = np.array([(w.point.fraction, w.other_point.fraction)
+                                         for _, w in near])
+            c.near_offsets = np.array([(w.point.offset_m, w.other_point.offset_m) for _, w in near])
+            c.near_within_m = np.array([w.within_m for _, w in near])
+        reached = [(i, w) for i, w in live if isinstance(w, Reached)]
+        if reached:
+            c.reached = np.array([i for i, _ in reached], np.int64)
+            c.reached_uids = np.array([w.uid for _, w in reached], np.int64)
+            c.reached_within = np.array([w.within_m for _, w in reached])
+        kinds: dict[type, str] = {ClipStarted: "clip_started", ClipEnded: "clip_ended",
+                                  ContactBegan: "contact_began", Removed: "removed"}
+        for i, w in live:
+            if isinstance(w, ClipStarted | ClipEnded | ContactBegan | Removed):
+                c.listeners.setdefault((kinds[type(w)], w.entity), []).append(i)
+        timed = [(i, w) for i, w in live if isinstance(w, AtTime)]
+        if timed:
+            c.timed = np.array([i for i, _ in timed], np.int64)
+            c.timed_at_s = np.array([w.time_s for _, w in timed])
+        self._compiled = c
+        return c
+
+    def _set_track_targets(self, sim: Simulation, now: float) -> None:
+        """Every moving target at ``now``, interpolated for all tracks at once."""
+        uids = np.array([k.uid for k in self.tracks], np.int64)
+        most = max(len(k.times_s) for k in self.tracks)
+        times = np.full((len(self.tracks), most), np.inf)
+        points = np.zeros((len(self.tracks), most, 3))
+        for j, k in enumerate(self.tracks):
+            times[j, :len(k.times_s)] = k.times_s
+            points[j, :len(k.times_s)] = k.points_m
+            points[j, len(k.times_s):] = k.points_m[-1]
+        sim.set_targets(uids, interpolate_keyframes(times, points, now))
+
+
+def interpolate_keyframes(times_s: F64, points_m: F64, time_s: float) -> F64:
+    """Points (k, 3) at ``time_s`` of k keyframed tracks: ``times_s`` (k, m) increasing (padded
+    with inf), ``points_m`` (k, m, 3); linear between keyframes, held outside them."""
+    k = times_s.shape[0]
+    after = np.clip(np.sum(times_s <= time_s, axis=1), 1, times_s.shape[1] - 1) \
+        if times_s.shape[1] > 1 else np.zeros(k, np.int64)
+    if times_s.shape[1] == 1:
+        return points_m[:, 0].copy()
+    before = after - 1
+    ks = np.arange(k)
+    t0, t1 = times_s[ks, before], times_s[ks, after]
+    span = np.where(np.isfinite(t1), t1 - t0, 1.0)
+    u = np.where(np.isfinite(t1), np.clip((time_s - t0) / np.maximum(span, 1e-12), 0.0, 1.0), 0.0)
+    u = np.where(time_s <= times_s[:, 0], 0.0, u)
+    result: F64 = points_m[ks, before] + u[:, None] * (points_m[ks, after] - points_m[ks, before])
+    return result
+
+
+# --- what the actions do ------------------------------------------------------------------------
+
+def play_now(sim: Simulation, action: Play) -> None:
+    """Start ``action.clip`` on its character now (between ticks), cross-faded, from
+    ``action.from_s`` into the clip, followed by ``action.then`` (the rest of its queue is
+    replaced). Writes the store's queue, then :func:`start_next_clips` for that row."""
+    st, bank = sim.store, sim.bank
+    row = sim.row(action.entity)
+    clips = [QueuedClip(action.clip, action.crossfade_s, action.loop), *action.then]
+    if len(clips) > MAX_QUEUE:
+        raise EcsAnimError(f"play {quoted(action.clip)}: at most {MAX_QUEUE - 1} clips after it")
+    try:
+        indices = [bank.index(q.clip) for q in clips]
+    except KeyError as exc:
+        raise EcsAnimError(str(exc.args[0])) from None
+    st.queue_clip[row, :len(clips)] = indices
+    st.queue_fade_s[row, :len(clips)] = [max(q.crossfade_s, 0.0) for q in clips]
+    st.queue_loop[row, :len(clips)] = [q.loop for q in clips]
+    st.queue_head[row], st.queue_len[row] = 0, len(clips)
+    rows = np.array([row], np.int64)
+    start_next_clips(st, bank, rows, np.array([max(action.from_s, 0.0)]))
+
+
+def switch_on(sim: Simulation, uid: int, now_s: float, for_s: float | None) -> None:
+    """The constraint's activation from ``now_s``, in simulation time, with its own eases:
+    (now, now + for_s (None: for good), ease in, ease out); the shortest ``for_s`` is the two
+    eases."""
+    table = sim.constraints
+    row = _constraint_row(sim, uid)
+    ease_in, ease_out = table.activation[row, 2], table.activation[row, 3]
+    length = 1e9 if for_s is None else max(for_s, ease_in + ease_out)
+    start = now_s
+    if table.clock[row] < 0 and table.weight[row] > 0.0:  # on already: it stays on, longer
+        start = min(float(table.activation[row, 0]), now_s)
+    table.activation[row] = (start, now_s + length, ease_in, ease_out)
+    table.clock[row] = -1
+
+
+def switch_off(sim: Simulation, uid: int, now_s: float) -> None:
+    """Ease the constraint out from ``now_s`` over its own ease-out (simulation time)."""
+    table = sim.constraints
+    row = _constraint_row(sim, uid)
+    start, stop, _, ease_out = table.activation[row]
+    if table.clock[row] >= 0 or start > now_s:  # not begun (or on a clip's clock): off now
+        table.activation[row] = (now_s - 1.0, now_s - 1.0, 0.0, 0.0)
+    else:
+        table.activation[row, 1] = min(stop, now_s + ease_out)
+    table.clock[row] = -1
+
+
+def switched_off(ease_in_s: float, ease_out_s: float) -> Activation:
+    """The activation of a constraint off until a trigger switches it on (:class:`SwitchOn`):
+    it ended before the simulation began; its eases are those the switch uses."""
+    return Activation(-1.0 - ease_in_s - ease_out_s, -1.0, ease_in_s, ease_out_s)
+
+
+def _constraint_row(sim: Simulation, uid: int) -> int:
+    try:
+        return int(sim.constraints.rows_of(np.array([uid]))[0])
+    except ValueError as exc:
+        raise EcsAnimError(str(exc)) from None
+
+
+def warn(sim: Simulation, message: str) -> None:
+    """A run-time warning: kept in ``sim.messages`` and printed to stderr."""
+    line = f"warning: t={sim.time_s:.3f} s: {message}"
+    sim.messages.append(line)
+    print(line, file=sys.stderr)
+
+
+def check_trigger(sim: Simulation, trigger: Trigger) -> None:
+    """Raise EcsAnimError naming the trigger if anything it names is not in ``sim`` (a
+    character, a constraint id, a clip) or a number is out of range. At the boundary, not in
+    the tick."""
+    def fail(message: str) -> EcsAnimError:
+        return EcsAnimError(f"trigger {quoted(trigger.name)}: {message}")
+
+    if not (np.isfinite(trigger.delay_s) and trigger.delay_s >= 0.0):
+        raise fail(f"delay_s must be a number of seconds >= 0, got {trigger.delay_s}")
+    if not trigger.then:
+        raise fail("no actions (then)")
+    items: list[Condition | Action] = [trigger.when, *trigger.then]
+    for item in items:
+        for entity in entities_named(item):
+            try:
+                sim.row(entity)
+            except EcsAnimError as exc:
+                raise fail(str(exc)) from None
+        for uid in constraints_named(item):
+            try:
+                _constraint_row(sim, uid)
+            except EcsAnimError as exc:
+                raise fail(str(exc)) from None
+        for clip in [getattr(item, "clip", None)] + [q.clip for q in getattr(item, "then", ())]:
+            if clip is not None and clip not in sim.motions:
+                raise fail(f"unknown motion {quoted(clip)} (motions: {listed(sim.motions)})")
+    w = trigger.when
+    if isinstance(w, (Near, Reached)) and not (np.isfinite(w.within_m) and w.within_m >= 0.0):
+        raise fail(f"within_m must be a distance >= 0, got {w.within_m}")
+    if isinstance(w, AtTime) and not np.isfinite(w.time_s):
+        raise fail(f"the time must be finite, got {w.time_s}")
+    if isinstance(w, ContactBegan) and w.foot not in (None, *FEET):
+        raise fail(f"foot must be one of {', '.join(FEET)} (or None: either), got {w.foot!r}")
+    for a in trigger.then:
+        if isinstance(a, Play) and not all(np.isfinite(v) and v >= 0 for v in (a.crossfade_s, a.from_s)):
+            raise fail("crossfade_s and from_s must be >= 0")
+        if isinstance(a, SwitchOn) and a.for_s is not None and not (np.isfinite(a.for_s) and a.for_s > 0):
+            raise fail(f"for_s must be a duration > 0, got {a.for_s}")
+        if isinstance(a, MoveTarget) and not all(np.isfinite(a.target_in_world)):
+            raise fail("the target must be finite")
+    if any(t.name == trigger.name for t in sim.reactions.triggers):
+        raise fail("another trigger has this name (Arm names triggers)")
+
+
+def check_track(sim: Simulation, track: TargetTrack) -> None:
+    """Raise EcsAnimError if a moving target's keyframes are malformed or its constraint is
+    not in ``sim``."""
+    where = f"moving target of constraint id {track.uid}"
+    if not track.times_s or len(track.times_s) != len(track.points_m):
+        raise EcsAnimError(f"{where}: give one point (x, y, z) per keyframe time, at least one")
+    times = np.array(track.times_s)
+    if not (np.all(np.isfinite(times)) and np.all(np.diff(times) > 0)):
+        raise EcsAnimError(f"{where}: keyframe times must be finite and increasing, got "
+                           f"{listed(f'{t:g}' for t in track.times_s)}")
+    if not np.all(np.isfinite(np.array(track.points_m))):
+        raise EcsAnimError(f"{where}: keyframe points must be finite")
+    _constraint_row(sim, track.uid)

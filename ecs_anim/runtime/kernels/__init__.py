@@ -1,0 +1,284 @@
+"""The tick's compiled kernels (numba, DESIGN §7): one module per system, over the store's arrays.
+
+Each kernel writes its results in place and mirrors a numpy function of the package, which stays
+as the reference the tests compare it with (to 1e-9 m). ``vec`` holds the scalar helpers they
+share (3-vectors as tuples, frames as tuples of their three axes) and :data:`~.vec.jit`, the
+decorator of every kernel: compiled without numba's runtime, so a kernel allocates nothing and
+its caller passes every array it writes, scratch included.
+
+The kernels over characters are compiled ``nogil`` and take a range ``lo, hi`` of their loop's
+indices; :func:`over_chunks` runs one over all of them, split into contiguous chunks on
+:func:`threads` threads of this process (numba's ``parallel=True`` with ``prange``, used before,
+made the first compile half as long again).
+
+Compiled code is cached in the user's cache folder (``$XDG_CACHE_HOME/ecs_anim/numba``, else
+``~/.cache/ecs_anim/numba``) unless ``NUMBA_CACHE_DIR`` says where: the first run compiles (under
+a minute, the solver in a second process: :func:`compile_solver_aside`), later ones load in a
+fraction of a second. This must be set before numba is imported, so the package imports its
+kernels only through here.
+"""
+
+from __future__ import annotations
+
+import atexit
+import os
+import subprocess
+import sys
+import threading
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ecs_anim.runtime.kernels.handover import SpinningThreads
+
+
+def cache_dir() -> Path:
+    """Where numba keeps the compiled kernels."""
+    given = os.environ.get("NUMBA_CACHE_DIR")
+    if given:
+        return Path(given)
+    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return base / "ecs_anim" / "numba"
+
+
+os.environ.setdefault("NUMBA_CACHE_DIR", str(cache_dir()))
+
+
+def kernel_sources() -> list[Path]:
+    """The modules of this package whose functions numba compiles (``vec.py``, ``decode.py``,
+    ...), sorted."""
+    here = Path(__file__).resolve().parent
+    return sorted(p for p in here.glob("*.py") if p.name not in ("__init__.py", "__main__.py"))
+
+
+def _cache_subfolder() -> Path:
+    """The folder numba writes this package's compiled code into: ``<cache>/kernels_<sha1 of the
+    package folder>`` (numba's ``_CacheLocator.get_suitable_cache_subpath``)."""
+    import hashlib
+
+    here = str(Path(__file__).resolve().parent)
+    return cache_dir() / f"kernels_{hashlib.sha1(here.encode()).hexdigest()}"
+
+
+def sources_digest() -> str:
+    """sha256 of every kernel module's source together (hex)."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    for source in kernel_sources():
+        digest.update(source.name.encode() + b"\0" + source.read_bytes())
+    return digest.hexdigest()
+
+
+#: The file in the cache folder naming the kernel sources its compiled code was made from.
+SOURCES_MARKER = "ecs_anim_sources.sha256"
+
+
+def drop_stale_cache() -> bool:
+    """Delete this package's compiled code if any kernel module changed since it was compiled.
+
+    numba checks only the source file of each compiled function, not the helpers of other
+    modules compiled into it (a kernel of ``solve.py`` inlines ``vec.py``'s): after an update
+    that changed only ``vec.py``, the old code would run. So the cache is kept only for the same
+    sources, all of them, as a marker file records. Returns whether anything was dropped."""
+    folder = _cache_subfolder()
+    marker = folder / SOURCES_MARKER
+    digest = sources_digest()
+    try:
+        if marker.read_text().strip() == digest:
+            return False
+    except OSError:
+        pass
+    dropped = False
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        for stale in list(folder.glob("*.nbi")) + list(folder.glob("*.nbc")):
+            stale.unlink(missing_ok=True)
+            dropped = True
+        marker.write_text(digest + "\n")
+    except OSError:  # a read-only cache: numba then compiles in memory, as without a cache
+        pass
+    return dropped
+
+
+drop_stale_cache()
+
+
+def _compiled_from(index: Path, source_hash: bytes) -> bool:
+    """Whether a numba cache index (``.nbi``) was written for the source whose sha256 is
+    ``source_hash``: numba 0.68 stamps each index with that hash (``caching._CacheLocator.
+    get_source_stamp``) and recompiles when it differs, whatever the file times say."""
+    import pickle
+
+    try:
+        with open(index, "rb") as f:
+            pickle.load(f)  # numba's version
+            stamp, _ = pickle.loads(f.read())
+    except Exception:
+        return False
+    return bool(stamp == source_hash)
+
+
+def uncompiled_kernels() -> list[str]:
+    """Names of the kernel modules (those with a kernel over characters, ``nogil=True``) the
+    cache holds no compiled code for that matches their current source (not compiled yet, or
+    changed since)."""
+    import hashlib
+
+    folder = _cache_subfolder()
+    missing = []
+    for source in kernel_sources():
+        if "@jit(nogil=True)" not in source.read_text(encoding="utf-8"):
+            continue  # helpers only: compiled into the kernels that call them (often inlined)
+        if source.stem == "handover":
+            continue  # compiled in a fraction of a second when a tick first uses two threads
+        indexes = list(folder.glob(f"{source.stem}.*.nbi")) if folder.is_dir() else []
+        source_hash = hashlib.sha256(source.read_bytes()).digest()
+        if not any(_compiled_from(index, source_hash) for index in indexes):
+            missing.append(source.stem)
+    return missing
+
+
+def compile_notice() -> str | None:
+    """The line to show before the first tick when the kernels still have to be compiled (the
+    first run on a machine, or after an update), else None."""
+    if not uncompiled_kernels():
+        return None
+    return f"compiling the tick's kernels once (under a minute); cached in {cache_dir()}"
+
+
+_announcers: list[Callable[[str], None]] = []
+
+
+def announce_compiling(say: Callable[[str], None] | None) -> None:
+    """Have this process's next first simulation tick call ``say`` with :func:`compile_notice`
+    if the kernels still have to be compiled (the CLI prints it on stderr); None: no more."""
+    _announcers[:] = [] if say is None else [say]
+
+
+def before_first_tick() -> None:
+    """Called by :meth:`ecs_anim.runtime.simulation.Simulation.step` before a simulation's first tick:
+    says, once per process, what :func:`announce_compiling` asked for, and starts compiling the
+    solver aside if it has to be (:func:`compile_solver_aside`)."""
+    if _announcers:
+        say = _announcers.pop()
+        notice = compile_notice()
+        if notice is not None:
+            say(notice)
+    compile_solver_aside()
+
+
+#: The command of the process compiling the solver's kernel aside (``python -m ecs_anim.runtime.kernels
+#: --solver``): it calls :func:`ecs_anim.runtime.kernels.solve.solve` on no character.
+SOLVER_COMMAND = (sys.executable, "-m", "ecs_anim.runtime.kernels", "--solver")
+_solver_compile: dict[str, subprocess.Popen[bytes] | None] = {}
+
+
+def compile_solver_aside() -> None:
+    """Once per process: when the solver's kernel (about half of the compile time on its own)
+    is not compiled yet and this process may use two cores or more, compile it in a second
+    process while this one compiles the others; :func:`wait_for_solver` (the solve, before its
+    kernel) then waits for it and loads its code from the cache. A process that ends before
+    (a scene without constraints) stops it."""
+    if "process" in _solver_compile:
+        return
+    _solver_compile["process"] = None
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    if (cores or 1) < 2 or "solve" not in uncompiled_kernels():
+        return
+    try:
+        child = subprocess.Popen(SOLVER_COMMAND, stdout=subprocess.DEVNULL,
+                                 stderr=subprocess.DEVNULL)
+    except OSError:  # cannot start a process: this one compiles the solver itself
+        return
+    _solver_compile["process"] = child
+    atexit.register(_stop_solver_compile)
+
+
+def wait_for_solver() -> None:
+    """Called by :func:`ecs_anim.runtime.kernels.solve.solve` before its kernel: wait for the solver
+    compiling aside, if it is. Whatever became of it, the kernel then loads from the cache, or
+    compiles here (if the other process failed)."""
+    child = _solver_compile.get("process")
+    if child is not None:
+        child.wait()
+        _solver_compile["process"] = None
+
+
+def _stop_solver_compile() -> None:
+    child = _solver_compile.get("process")
+    if child is not None and child.poll() is None:
+        child.terminate()
+        child.wait()
+
+
+def available_threads() -> int:
+    """How many threads the kernels may use: the cores this process may run on
+    (``os.sched_getaffinity``, else ``os.cpu_count``)."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return max(1, os.cpu_count() or 1)
+
+
+_thread_count: list[int] = []  # set by set_threads; empty: all of available_threads()
+
+
+def set_threads(n: int | None) -> int:
+    """Run the kernels' loops over characters on ``n`` threads (:func:`over_chunks`); None: on
+    all of :func:`available_threads`. Returns the number set. Results never depend on it (each
+    character is computed by one thread, independently of the others)."""
+    most = available_threads()
+    if n is None:
+        n = most
+    if not 1 <= n <= most:
+        raise ValueError(f"expected 1 to {most} threads (the cores this process may use), got {n}")
+    _thread_count[:] = [n]
+    return n
+
+
+def threads() -> int:
+    """The number of threads the kernels run on now."""
+    return _thread_count[0] if _thread_count else available_threads()
+
+
+#: Fewest rows worth handing to another thread: below, waking it costs more than it saves.
+MIN_ROWS_PER_THREAD = 4
+#: The same for a light kernel (tens of ns a row: the winners, the feet's directions, a table
+#: sampled, the errors): a hand-over (16-20 µs, the threads taking the GIL in turn) costs more
+#: than half of a few thousand rows; measured on two threads at 3,200 characters, each of them
+#: ran 1.2-3.4x slower split than on one.
+LIGHT_ROWS_PER_THREAD = 8192
+_pools: dict[int, SpinningThreads] = {}  # by process id: a forked child makes its own
+_pools_lock = threading.Lock()
+
+
+def _pool() -> SpinningThreads:
+    """This process's threads for :func:`over_chunks`, one fewer than
+    :func:`available_threads` (made on first use: threads do not survive a fork, so the batch's
+    forked workers each make their own)."""
+    pid = os.getpid()
+    with _pools_lock:  # two threads ticking for the first time make one pool
+        pool = _pools.get(pid)
+        if pool is None:
+            from ecs_anim.runtime.kernels.handover import SpinningThreads
+
+            _pools.clear()
+            pool = _pools[pid] = SpinningThreads(available_threads() - 1)
+    return pool
+
+
+def over_chunks(kernel: Callable[..., None], n: int, *args: object,
+                rows_per_thread: int = MIN_ROWS_PER_THREAD) -> None:
+    """Run ``kernel(lo, hi, *args)``, a compiled kernel (``nogil=True``: it releases the GIL)
+    over the loop indices ``lo..hi-1``, on the whole of ``0..n`` split into :func:`threads`
+    contiguous chunks, one per thread (this one runs the first; the others wait for theirs
+    spinning, :mod:`ecs_anim.runtime.kernels.handover`), and wait for all of them; an error of any chunk
+    is raised once all are done. On one thread, or for fewer than ``rows_per_thread`` rows a
+    thread (:data:`LIGHT_ROWS_PER_THREAD` for a light kernel), it is one call here. The chunks
+    write disjoint rows, so the result does not depend on the split."""
+    count = min(threads(), n // rows_per_thread)
+    if count <= 1:
+        kernel(0, n, *args)
+        return
+    _pool().run(kernel, [n * i // count for i in range(count + 1)], args)

@@ -1,0 +1,397 @@
+"""Compiled decode: normalized poses on each character's body (paper eq. 2 and §8).
+
+Mirrors :func:`ecs_anim.core.normalized.decode` (the ``use_stretch=False`` path, what the tick uses)
+one store row at a time: :func:`decode_row` for one character, :func:`decode_rows` over a chunk
+of store rows (``rows[lo:hi]``: one chunk per thread), :func:`decode` the Python entry over
+every row. The poses are passed as :class:`PoseArrays` (the arrays of a
+:class:`~ecs_anim.core.normalized.NormalizedPoses`, no copies) and the result written into
+:class:`DecodedArrays` (the arrays of a :class:`~ecs_anim.core.normalized.DecodedPose`).
+
+Joint and length indices are written here as literals (numba's cache keys on this file's source,
+not on :mod:`ecs_anim.core.skeleton`'s); an import-time check pins them to the skeleton.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ecs_anim.core.normalized import DecodedPose, NormalizedPoses
+from ecs_anim.core.skeleton import JOINT_INDEX as J
+from ecs_anim.core.skeleton import LENGTH_INDEX as L
+from ecs_anim.core.skeleton import N_JOINTS, N_LENGTHS
+from ecs_anim.runtime.kernels import over_chunks
+from ecs_anim.runtime.kernels.vec import (
+    F64,
+    Frame,
+    Vec3,
+    add,
+    add_scaled,
+    dot,
+    frame_from_axes,
+    jit,
+    load3,
+    load4,
+    matmul,
+    matrix_from_quat,
+    norm,
+    normalize,
+    rot_z,
+    scale,
+    store3,
+    store_frame,
+    sub,
+    to_world,
+)
+
+# Joints (ecs_anim.core.skeleton.JOINTS); side s (0 left, 1 right) adds 4 * s to a limb joint.
+PELVIS, HIP, KNEE, ANKLE, TOE = 0, 1, 2, 3, 4
+SPINE_1, SPINE_2, NECK, HEAD, HEAD_TOP = 9, 10, 11, 12, 13
+SHOULDER, ELBOW, WRIST, HAND = 14, 15, 16, 17
+# Lengths (ecs_anim.core.skeleton.LENGTHS); side s adds s.
+L_PELVIS, L_THIGH, L_SHANK, L_FOOT = 0, 2, 4, 6
+L_SPINE_LOWER, L_NECK, L_HEAD = 10, 13, 14
+L_CLAVICLE, L_UPPER_ARM, L_FOREARM, L_HAND = 15, 17, 19, 21
+
+assert (J["pelvis"], J["hip_l"], J["knee_l"], J["ankle_l"], J["toe_l"], J["hip_r"], J["toe_r"]) \
+    == (PELVIS, HIP, KNEE, ANKLE, TOE, HIP + 4, TOE + 4)
+assert (J["spine_1"], J["spine_2"], J["neck"], J["head"], J["head_top"]) \
+    == (SPINE_1, SPINE_2, NECK, HEAD, HEAD_TOP)
+assert (J["shoulder_l"], J["elbow_l"], J["wrist_l"], J["hand_l"], J["shoulder_r"], J["hand_r"]) \
+    == (SHOULDER, ELBOW, WRIST, HAND, SHOULDER + 4, HAND + 4)
+assert (L["pelvis_l"], L["thigh_l"], L["shank_l"], L["foot_l"], L["foot_r"], L["thigh_r"]) \
+    == (L_PELVIS, L_THIGH, L_SHANK, L_FOOT, L_FOOT + 1, L_THIGH + 1)
+assert (L["spine_lower"], L["spine_middle"], L["spine_upper"], L["neck"], L["head"]) \
+    == (L_SPINE_LOWER, L_SPINE_LOWER + 1, L_SPINE_LOWER + 2, L_NECK, L_HEAD)
+assert (L["clavicle_l"], L["upper_arm_l"], L["forearm_l"], L["hand_l"], L["hand_r"]) \
+    == (L_CLAVICLE, L_UPPER_ARM, L_FOREARM, L_HAND, L_HAND + 1)
+assert N_JOINTS == 22 and N_LENGTHS == 23
+
+I64 = NDArray[np.int64]
+
+
+class PoseArrays(NamedTuple):
+    """The arrays of :class:`ecs_anim.core.normalized.NormalizedPoses` (same names, same order), as a
+    tuple numba can take. Leading axis: store rows (n,); see ``NormalizedPoses`` for shapes."""
+
+    root_position: F64
+    root_heading: F64
+    pelvis_local: F64
+    hip_dir: F64
+    leg_frame: F64
+    leg_fraction: F64
+    foot_dir: F64
+    spine_points: F64
+    thorax: F64
+    neck_dir: F64
+    head: F64
+    head_top_dir: F64
+    clavicle_dir: F64
+    arm_frame: F64
+    arm_fraction: F64
+    hand_dir: F64
+    stretch: F64
+
+
+class DecodedArrays(NamedTuple):
+    """The arrays of :class:`ecs_anim.core.normalized.DecodedPose` (same names and order).
+
+    positions (n, N_JOINTS, 3) metres; pelvis2world, thorax2world, head2world (n, 3, 3);
+    leg2world, arm2world (n, 2, 3, 3) [left, right]; frames hold their axes as columns.
+    """
+
+    positions: F64
+    pelvis2world: F64
+    thorax2world: F64
+    head2world: F64
+    leg2world: F64
+    arm2world: F64
+
+
+class LegPoseArrays(NamedTuple):
+    """The arrays of :class:`PoseArrays` that :func:`decode_legs_row` reads (same names), for
+    kernels that need only the legs."""
+
+    root_position: F64
+    root_heading: F64
+    pelvis_local: F64
+    hip_dir: F64
+    leg_frame: F64
+    leg_fraction: F64
+    foot_dir: F64
+
+
+def leg_pose_arrays(pose: PoseArrays) -> LegPoseArrays:
+    """The leg arrays of ``pose`` (the same arrays, no copies)."""
+    return LegPoseArrays(*(getattr(pose, name) for name in LegPoseArrays._fields))
+
+
+def pose_arrays(poses: NormalizedPoses) -> PoseArrays:
+    """The arrays of ``poses`` as a :class:`PoseArrays` (views, no copies)."""
+    return PoseArrays(*(np.asarray(getattr(poses, name), dtype=np.float64)
+                        for name in PoseArrays._fields))
+
+
+def decoded_arrays(decoded: DecodedPose) -> DecodedArrays:
+    """The arrays of ``decoded`` as a :class:`DecodedArrays` (no copies)."""
+    return DecodedArrays(decoded.positions, decoded.pelvis2world, decoded.thorax2world,
+                         decoded.head2world, decoded.leg2world, decoded.arm2world)
+
+
+def decoded_pose(arrays: DecodedArrays) -> DecodedPose:
+    """A :class:`DecodedPose` holding ``arrays`` (no copies)."""
+    return DecodedPose(*arrays)
+
+
+def empty_decoded(n: int) -> DecodedArrays:
+    """Uninitialized output arrays for ``n`` rows."""
+    return DecodedArrays(np.empty((n, N_JOINTS, 3)), np.empty((n, 3, 3)), np.empty((n, 3, 3)),
+                         np.empty((n, 3, 3)), np.empty((n, 2, 3, 3)), np.empty((n, 2, 3, 3)))
+
+
+def fits(arrays: DecodedArrays | DecodedPose | None, n: int) -> bool:
+    """Whether ``arrays`` has the shapes of ``n`` decoded rows (so it can be written again)."""
+    if arrays is None:
+        return False
+    shapes = ((n, N_JOINTS, 3), (n, 3, 3), (n, 3, 3), (n, 3, 3), (n, 2, 3, 3), (n, 2, 3, 3))
+    if isinstance(arrays, DecodedPose):
+        arrays = decoded_arrays(arrays)
+    return all(a.shape == s and a.dtype == np.float64 and a.flags.writeable
+               for a, s in zip(arrays, shapes, strict=True))
+
+
+@jit()
+def leg_length(lengths_row: F64) -> float:
+    """Mirrors :func:`ecs_anim.core.morphology.leg_length` for one (N_LENGTHS,) row (m)."""
+    total: float = 0.5 * (lengths_row[L_THIGH] + lengths_row[L_SHANK]
+                          + lengths_row[L_THIGH + 1] + lengths_row[L_SHANK + 1])
+    return total
+
+
+@jit()
+def two_bone_middle(limb2world: Frame, root: Vec3, upper: float, lower: float,
+                    reach: float) -> tuple[Vec3, Vec3]:
+    """Mirrors :func:`ecs_anim.core.normalized.two_bone_middle` for one limb: (middle, end) joints,
+    the root-end distance ``reach`` (m) clamped to what the two bones can span."""
+    reach = min(max(reach, abs(upper - lower)), upper + lower)
+    safe = max(reach, 1e-9)
+    z = (upper**2 - lower**2 + reach**2) / (2.0 * safe)
+    y = math.sqrt(max(upper**2 - z**2, 0.0))
+    middle = add(add(root, scale(limb2world[1], y)), scale(limb2world[2], z))
+    end = add(root, scale(limb2world[2], reach))
+    return middle, end
+
+
+@jit()
+def distal_frames(limb: Frame, mid: Vec3, end: Vec3) -> Frame:
+    """Mirrors :func:`ecs_anim.core.normalized.distal_frames`: z mid->end, x the limb frame's x."""
+    return frame_from_axes(sub(end, mid), limb[0], 2, 0, limb[1])
+
+
+@jit()
+def limb_frames(root: Vec3, mid: Vec3, end: Vec3, hint: Vec3) -> Frame:
+    """Mirrors :func:`ecs_anim.core.normalized.limb_frames`: z root->end, y towards ``mid``."""
+    return frame_from_axes(sub(end, root), sub(mid, root), 2, 1, hint)
+
+
+@jit(inline="always")
+def pelvis_frame(c: int, pose: PoseArrays | LegPoseArrays) -> Frame:
+    """``pelvis2world`` of row ``c``: heading about Z times the local pelvis rotation."""
+    return matmul(rot_z(pose.root_heading[c]), matrix_from_quat(load4(pose.pelvis_local[c])))
+
+
+@jit(inline="always")
+def decode_legs_row(c: int, pose: PoseArrays | LegPoseArrays, seg: F64, base: F64) -> tuple[
+        Vec3, Frame, tuple[Vec3, Vec3], tuple[Vec3, Vec3], tuple[Vec3, Vec3], tuple[Vec3, Vec3],
+        tuple[Frame, Frame], tuple[Frame, Frame]]:
+    """Mirrors :func:`ecs_anim.core.normalized.decode_legs` for store row ``c``.
+
+    ``seg`` (N_LENGTHS,) the segment lengths, ``base`` (N_LENGTHS,) the unstretched ones that
+    normalize the root (m). Returns (pelvis, pelvis2world, hips, knees, ankles, toes, leg2world,
+    shank2world), each pair [left, right].
+    """
+    pelvis2world = pelvis_frame(c, pose)
+    pelvis = scale(load3(pose.root_position[c]), leg_length(base))
+    hip_l, knee_l, ankle_l, toe_l, leg_l, shank_l = _leg(c, 0, pose, seg, pelvis, pelvis2world)
+    hip_r, knee_r, ankle_r, toe_r, leg_r, shank_r = _leg(c, 1, pose, seg, pelvis, pelvis2world)
+    return (pelvis, pelvis2world, (hip_l, hip_r), (knee_l, knee_r), (ankle_l, ankle_r),
+            (toe_l, toe_r), (leg_l, leg_r), (shank_l, shank_r))
+
+
+@jit(inline="always")
+def _leg(c: int, s: int, pose: PoseArrays | LegPoseArrays, seg: F64, pelvis: Vec3,
+         pelvis2world: Frame) -> tuple[Vec3, Vec3, Vec3, Vec3, Frame, Frame]:
+    """One leg of :func:`decode_legs_row` (side ``s``): hip, knee, ankle, toe, leg2world,
+    shank2world."""
+    hip = add(pelvis, scale(to_world(pelvis2world, load3(pose.hip_dir[c, s])), seg[L_PELVIS + s]))
+    leg2world = matmul(pelvis2world, matrix_from_quat(load4(pose.leg_frame[c, s])))
+    thigh, shank = seg[L_THIGH + s], seg[L_SHANK + s]
+    knee, ankle = two_bone_middle(leg2world, hip, thigh, shank,
+                                  pose.leg_fraction[c, s] * (thigh + shank))
+    shank2world = distal_frames(leg2world, knee, ankle)
+    toe = add(ankle, scale(to_world(shank2world, load3(pose.foot_dir[c, s])), seg[L_FOOT + s]))
+    return hip, knee, ankle, toe, leg2world, shank2world
+
+
+@jit()
+def _span(q0: Vec3, q1: Vec3, q2: Vec3, q3: Vec3, u: float) -> tuple[Vec3, Vec3]:
+    """Point and tangent of the Catmull-Rom span from ``q1`` to ``q2`` at ``u``, with the
+    coefficients of :func:`ecs_anim.core.normalized._span_coefficients` (same operation order)."""
+    c0 = q1
+    c1 = scale(sub(q2, q0), 0.5)
+    c2 = scale(sub(add(sub(scale(q0, 2.0), scale(q1, 5.0)), scale(q2, 4.0)), q3), 0.5)
+    c3 = scale(add(sub(sub(scale(q1, 3.0), q0), scale(q2, 3.0)), q3), 0.5)
+    point = add(c0, scale(add(c1, scale(add(c2, scale(c3, u)), u)), u))
+    tangent = add(c1, scale(add(scale(c2, 2.0), scale(c3, 3.0 * u)), u))
+    return point, tangent
+
+
+@jit()
+def curve_at(control: tuple[Vec3, Vec3, Vec3, Vec3], t: float) -> tuple[Vec3, Vec3]:
+    """Mirrors :func:`ecs_anim.core.normalized._curve_at` for one spline: point and tangent (d/dt)
+    at ``t`` (three spans through the four control points, then the straight extension)."""
+    q0, q1, q2, q3 = control
+    span = min(np.floor(max(t, 0.0)), 3.0)
+    u = t - span
+    if span == 3.0:
+        tangent = sub(q3, q2)
+        return add(q3, scale(tangent, u)), tangent
+    start = sub(scale(q0, 2.0), q1)
+    end = sub(scale(q3, 2.0), q2)
+    if span == 0.0:
+        return _span(start, q0, q1, q2, u)
+    if span == 1.0:
+        return _span(q0, q1, q2, q3, u)
+    return _span(q1, q2, q3, end, u)
+
+
+@jit()
+def at_distance(start: Vec3, point: Vec3, tangent: Vec3, length: float) -> Vec3:
+    """Mirrors :func:`ecs_anim.core.normalized._at_distance`: ``point`` moved along the ray from
+    ``start`` to exactly ``length`` (m) from it (the tangent, then z, where that is undefined)."""
+    offset = sub(point, start)
+    if norm(offset) > 1e-9:
+        direction = normalize(offset)
+    elif norm(tangent) > 1e-9:
+        direction = normalize(tangent)
+    else:
+        direction = (0.0, 0.0, 1.0)
+    return add_scaled(start, direction, length)
+
+
+@jit()
+def spine_joints(control: tuple[Vec3, Vec3, Vec3, Vec3], lower: float, middle: float,
+                 upper: float, iterations: int) -> tuple[Vec3, Vec3, Vec3]:
+    """Mirrors :func:`ecs_anim.core.normalized.spine_joints` for one spine of three segments: the
+    joints along the spline through ``control`` at exactly the chord lengths ``lower``,
+    ``middle``, ``upper`` (m) from one another, starting at the first control point.
+
+    Newton stops per spine (the numpy one stops when every spine of the batch has converged;
+    the extra steps move a converged joint by about 1e-13 m).
+    """
+    chords = (norm(sub(control[1], control[0])), norm(sub(control[2], control[1])),
+              norm(sub(control[3], control[2])))
+    t, first = spine_joint(control, chords[0], lower, 0.0, control[0], iterations)
+    t, second = spine_joint(control, chords[1], middle, t, first, iterations)
+    _, third = spine_joint(control, chords[2], upper, t, second, iterations)
+    return first, second, third
+
+
+@jit()
+def spine_joint(control: tuple[Vec3, Vec3, Vec3, Vec3], chord: float, length: float,
+                 prev_t: float, prev_p: Vec3, iterations: int) -> tuple[float, Vec3]:
+    """One step of :func:`spine_joints`: the curve parameter and the joint ``length`` (m) from
+    ``prev_p`` (at parameter ``prev_t``) along the spline, ``chord`` the control points' own."""
+    t = prev_t + length / max(chord, 1e-9)
+    point, tangent = curve_at(control, t)
+    for _ in range(iterations):
+        d = sub(point, prev_p)
+        g = dot(d, d) - length**2
+        if abs(g) <= 1e-13 * length**2:
+            break
+        slope = 2.0 * dot(d, tangent)
+        step = g / slope if abs(slope) > 1e-12 else 0.0
+        t = min(max(t - step, prev_t + 1e-6), 9.0)
+        point, tangent = curve_at(control, t)
+    return t, at_distance(prev_p, point, tangent, length)
+
+
+@jit(inline="always")
+def decode_row(c: int, pose: PoseArrays, lengths_row: F64, out: DecodedArrays) -> None:
+    """Mirrors :func:`ecs_anim.core.normalized.decode` (``use_stretch=False``) for store row ``c``
+    on the body ``lengths_row`` (N_LENGTHS,) (m): writes row ``c`` of every ``out`` array."""
+    seg = lengths_row
+    pelvis, pelvis2world, hips, knees, ankles, toes, legs, _ = decode_legs_row(
+        c, pose, seg, lengths_row)
+    positions = out.positions[c]
+    store3(positions[PELVIS], pelvis)
+    for s in range(2):
+        store3(positions[HIP + 4 * s], hips[s])
+        store3(positions[KNEE + 4 * s], knees[s])
+        store3(positions[ANKLE + 4 * s], ankles[s])
+        store3(positions[TOE + 4 * s], toes[s])
+        store_frame(out.leg2world[c, s], legs[s])
+    store_frame(out.pelvis2world[c], pelvis2world)
+
+    spine_len = seg[L_SPINE_LOWER] + seg[L_SPINE_LOWER + 1] + seg[L_SPINE_LOWER + 2]
+    points = pose.spine_points[c]
+    control = ((0.0, 0.0, 0.0), scale(load3(points[0]), spine_len),
+               scale(load3(points[1]), spine_len), scale(load3(points[2]), spine_len))
+    spine = spine_joints(control, seg[L_SPINE_LOWER], seg[L_SPINE_LOWER + 1],
+                         seg[L_SPINE_LOWER + 2], 6)
+    for k in range(3):
+        store3(positions[SPINE_1 + k], add(pelvis, to_world(pelvis2world, spine[k])))
+    neck = load3(positions[NECK])
+
+    thorax2world = matmul(pelvis2world, matrix_from_quat(load4(pose.thorax[c])))
+    head2world = matmul(thorax2world, matrix_from_quat(load4(pose.head[c])))
+    head = add(neck, scale(to_world(thorax2world, load3(pose.neck_dir[c])), seg[L_NECK]))
+    store3(positions[HEAD], head)
+    store3(positions[HEAD_TOP],
+           add(head, scale(to_world(head2world, load3(pose.head_top_dir[c])), seg[L_HEAD])))
+    store_frame(out.thorax2world[c], thorax2world)
+    store_frame(out.head2world[c], head2world)
+
+    for s in range(2):
+        shoulder = add(neck, scale(to_world(thorax2world, load3(pose.clavicle_dir[c, s])),
+                                   seg[L_CLAVICLE + s]))
+        arm2world = matmul(thorax2world, matrix_from_quat(load4(pose.arm_frame[c, s])))
+        upper, fore = seg[L_UPPER_ARM + s], seg[L_FOREARM + s]
+        elbow, wrist = two_bone_middle(arm2world, shoulder, upper, fore,
+                                       pose.arm_fraction[c, s] * (upper + fore))
+        forearm2world = distal_frames(arm2world, elbow, wrist)
+        hand = add(wrist, scale(to_world(forearm2world, load3(pose.hand_dir[c, s])),
+                                seg[L_HAND + s]))
+        store3(positions[SHOULDER + 4 * s], shoulder)
+        store3(positions[ELBOW + 4 * s], elbow)
+        store3(positions[WRIST + 4 * s], wrist)
+        store3(positions[HAND + 4 * s], hand)
+        store_frame(out.arm2world[c, s], arm2world)
+
+
+@jit(nogil=True)
+def decode_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64,
+                out: DecodedArrays) -> None:
+    """Mirrors :func:`ecs_anim.core.normalized.decode` over the store rows ``rows[lo:hi]``
+    (int64): row ``c`` of ``pose`` on the body ``lengths[c]`` ((n, N_LENGTHS), m) into row ``c``
+    of every ``out`` array (the other rows are left as they are)."""
+    for i in range(lo, hi):
+        c = rows[i]
+        decode_row(c, pose, lengths[c], out)
+
+
+def decode(poses: NormalizedPoses, lengths: F64, out: DecodedPose | None = None) -> DecodedPose:
+    """Compiled :func:`ecs_anim.core.normalized.decode` (``use_stretch=False``) of every row.
+
+    ``poses`` with one leading axis (n,); ``lengths`` (n, N_LENGTHS) or (N_LENGTHS,) (m);
+    ``out`` is written in place when given (and returned), else allocated.
+    """
+    pose = pose_arrays(poses)
+    n = pose.root_heading.shape[0]
+    lengths = np.ascontiguousarray(np.broadcast_to(lengths, (n, N_LENGTHS)), dtype=np.float64)
+    arrays = empty_decoded(n) if out is None else decoded_arrays(out)
+    over_chunks(decode_rows, n, np.arange(n, dtype=np.int64), pose, lengths, arrays)
+    return decoded_pose(arrays) if out is None else out

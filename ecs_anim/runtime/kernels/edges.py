@@ -1,0 +1,58 @@
+"""The clip and contact edges of a tick (``ecs_anim.runtime.events.Reactions.after_tick``), compiled over
+the characters: mirrors :func:`ecs_anim.runtime.events.clip_and_contact_edges`, the numpy reference.
+
+One pass over the store's rows that reads and updates what the last tick left per entity id:
+about 10 µs for 6,400 characters where the numpy one, a dozen gathers and scatters by entity,
+took 0.3 ms (the tick's largest piece of Python on one thread in an unconstrained crowd). It is
+called directly, not over threads: a hand-over would cost more than the pass."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ecs_anim.runtime.kernels.vec import F64, jit
+
+I64 = NDArray[np.int64]
+B = NDArray[np.bool_]
+
+
+@jit(nogil=True)
+def edge_rows(lo: int, hi: int, entity: I64, clip: I64, clip_time_s: F64, speed: F64, loop: B,
+              duration_s: F64, contact_weight: F64, dt: float, slack_s: float,
+              began_weight: float, seen_clip: I64, seen_time_s: F64, seen_ended: B,
+              seen_contact: F64, edges: B, previous_clip: I64) -> None:
+    """Rows ``lo..hi-1`` of :func:`ecs_anim.runtime.events.clip_and_contact_edges`: ``edges`` (n, 5)
+    and ``previous_clip`` (n,) written, the ``seen_*`` arrays (by entity id) updated."""
+    for r in range(lo, hi):
+        e = entity[r]
+        old_clip = seen_clip[e]
+        ended = seen_ended[e]
+        new_clip = clip[r] != old_clip or clip_time_s[r] < seen_time_s[e] - slack_s
+        sampled = clip_time_s[r] - dt * speed[r]
+        at_end = not loop[r] and sampled >= duration_s[clip[r]] - slack_s
+        edges[r, 0] = new_clip and old_clip >= 0 and not ended
+        edges[r, 1] = not new_clip and at_end and not ended
+        edges[r, 2] = new_clip
+        for foot in range(2):
+            edges[r, 3 + foot] = (contact_weight[r, foot] >= began_weight
+                                  and seen_contact[e, foot] < began_weight)
+            seen_contact[e, foot] = contact_weight[r, foot]
+        seen_ended[e] = not new_clip and (ended or at_end)
+        previous_clip[r] = old_clip
+        seen_clip[e] = clip[r]
+        seen_time_s[e] = clip_time_s[r]
+
+
+def clip_and_contact_edges(entity: I64, clip: I64, clip_time_s: F64, speed: F64, loop: B,
+                           duration_s: F64, contact_weight: F64, dt: float, slack_s: float,
+                           began_weight: float, seen_clip: I64, seen_time_s: F64, seen_ended: B,
+                           seen_contact: F64) -> tuple[B, I64]:
+    """:func:`ecs_anim.runtime.events.clip_and_contact_edges`, compiled (same arguments and results)."""
+    n = entity.shape[0]
+    edges = np.zeros((n, 5), np.bool_)
+    previous_clip = np.zeros(n, np.int64)
+    edge_rows(0, n, entity, clip, clip_time_s, speed, loop, duration_s, contact_weight, dt,
+              slack_s, began_weight, seen_clip, seen_time_s, seen_ended, seen_contact, edges,
+              previous_clip)
+    return edges, previous_clip

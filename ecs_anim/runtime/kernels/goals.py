@@ -1,0 +1,400 @@
+"""The compiled goals of a tick and the constraints' errors (ConstraintSolve's gather).
+
+:func:`tick_goals` and :func:`constraint_errors` mirror :func:`ecs_anim.solver.shell.tick_goals`
+and :func:`ecs_anim.solver.shell.constraint_errors` (same arguments, same results to 1e-9 m; the
+numpy functions stay as the reference the tests compare these with). The per-constraint work
+(its point, its goal from the target: a distance, an area's allowed region, a direction; the
+release of a point a sphere held; the activation ramp's blend) runs compiled over the active
+constraints (:func:`goal_rows`), and the goals are laid out by character, each character's two
+feet after its own goals, by :func:`layout_rows`; what lies between (which goals are kept, which
+characters they belong to) is a few numpy calls over the active constraints.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ecs_anim.core.body_points import LEG_L
+from ecs_anim.core.normalized import DecodedPose
+from ecs_anim.motion.constraint_table import (
+    AREA_BOX,
+    AREA_HALF_SPACE,
+    AREA_SPHERE,
+    KIND_AREA,
+    KIND_DISTANCE,
+    KIND_ORIENTATION,
+    TARGET_WORLD,
+    ConstraintTable,
+)
+from ecs_anim.runtime.kernels import LIGHT_ROWS_PER_THREAD, over_chunks
+from ecs_anim.runtime.kernels.decode import DecodedArrays
+from ecs_anim.runtime.kernels.solve_points import Tables, point_position, segment_frame, tables
+from ecs_anim.runtime.kernels.vec import (
+    F64,
+    Vec3,
+    add,
+    add_scaled,
+    dot,
+    jit,
+    load3,
+    norm,
+    normalize,
+    rotation_toward,
+    scale,
+    store3,
+    sub,
+    to_world,
+)
+from ecs_anim.solver.shell import CONTACT_PRIORITY, TickGoals
+
+I64 = NDArray[np.int64]
+B8 = NDArray[np.bool_]
+TABLES = tables()
+
+
+class Codes(NamedTuple):
+    """The constraint table's codes the kernels branch on (passed as an argument: numba's cache
+    would keep a module constant of another file as it was when compiled)."""
+
+    kind_distance: int
+    kind_area: int
+    kind_orientation: int
+    area_box: int
+    area_sphere: int
+    area_half_space: int
+    target_world: int
+    leg_l: int  # the left leg's group (the right one's is next)
+
+
+CODES = Codes(KIND_DISTANCE, KIND_AREA, KIND_ORIENTATION, AREA_BOX, AREA_SPHERE, AREA_HALF_SPACE,
+              TARGET_WORLD, LEG_L)
+
+
+class Columns(NamedTuple):
+    """The :class:`~ecs_anim.motion.constraint_table.ConstraintTable` columns the kernels read (same
+    names; (m,) or (m, 3))."""
+
+    owner: I64
+    kind: I64
+    segment: I64
+    fraction: F64
+    offset: F64
+    group: I64
+    bone: I64
+    chain: I64
+    priority: F64
+    target_kind: I64
+    distance_m: F64
+    area_shape: I64
+    area_low: F64
+    area_high: F64
+    area_radius: F64
+    area_normal: F64
+    area_inside: B8
+    axis: F64
+    held: B8
+
+
+def columns(table: ConstraintTable) -> Columns:
+    """The table's columns as the kernels take them (the arrays themselves when already
+    C-contiguous of the right type)."""
+    return Columns(*(np.ascontiguousarray(getattr(table, name)) for name in Columns._fields))
+
+
+class GoalArrays(NamedTuple):
+    """The k goals of :class:`~ecs_anim.solver.shell.TickGoals` the layout writes (same names
+    and shapes: (k,), (k, 3); footprint and in_contact (r, 2, 3), (r, 2); com_desired (r, 3),
+    com_on (r,))."""
+
+    owner: I64
+    table_index: I64
+    orientation: B8
+    group: I64
+    bone: I64
+    segment: I64
+    fraction: F64
+    offset: F64
+    chain: I64
+    priority: F64
+    goal: F64
+    weight: F64
+    axis: F64
+    held: B8
+    footprint: F64
+    in_contact: B8
+    com_desired: F64
+    com_on: B8
+
+
+@jit(inline="always")
+def area_goal(cols: Columns, i: int, point: Vec3, anchor: Vec3, side: Vec3, codes: Codes) -> Vec3:
+    """Mirrors ``ecs_anim.solver.shell._area_goal`` for constraint ``i``: the nearest point of
+    its allowed region to ``point``, the area sitting at ``anchor``; a point inside an area it
+    must leave goes out on the side of ``side``."""
+    shape, inside = cols.area_shape[i], cols.area_inside[i]
+    rel = sub(point, anchor)
+    rel_side = sub(side, anchor)
+    if shape == codes.area_box:
+        low, high = load3(cols.area_low[i]), load3(cols.area_high[i])
+        if inside:  # clamp into the box
+            return add(anchor, (min(max(rel[0], low[0]), high[0]),
+                                min(max(rel[1], low[1]), high[1]),
+                                min(max(rel[2], low[2]), high[2])))
+        if not (low[0] < rel[0] < high[0] and low[1] < rel[1] < high[1]
+                and low[2] < rel[2] < high[2]):
+            return add(anchor, rel)
+        # Out through the face nearest the side point (the first of equal ones, as argmin).
+        face, gap = 0, rel_side[0] - low[0]
+        for f in range(1, 6):
+            a = f % 3
+            g = rel_side[a] - low[a] if f < 3 else high[a] - rel_side[a]
+            if g < gap:
+                face, gap = f, g
+        a = face % 3
+        level = low[a] if face < 3 else high[a]
+        out = (level if a == 0 else rel[0], level if a == 1 else rel[1],
+               level if a == 2 else rel[2])
+        return add(anchor, out)
+    if shape == codes.area_sphere:
+        distance = norm(rel)
+        radius = cols.area_radius[i]
+        # Left on the side point's side; its far side not reached through it.
+        way = sub(rel, rel_side)
+        along = min(max(-dot(rel_side, way) / max(dot(way, way), 1e-18), 0.0), 1.0)
+        nearest_on_way = norm(add_scaled(rel_side, way, along))
+        leave = not inside and (distance < radius or nearest_on_way < radius)
+        toward = rel_side if leave and norm(rel_side) > 1e-12 else rel
+        toward_len = norm(toward)
+        direction = scale(toward, 1.0 / max(toward_len, 1e-12)) if toward_len > 1e-12 \
+            else (0.0, 0.0, 1.0)
+        if inside:
+            length = min(distance, radius)
+        else:
+            length = radius if leave else distance
+        return add(anchor, (direction[0] * length, direction[1] * length,
+                            direction[2] * length))
+    if shape == codes.area_half_space:
+        sign = 1.0 if inside else -1.0
+        n = load3(cols.area_normal[i])
+        normal = (n[0] * sign, n[1] * sign, n[2] * sign)
+        below = min(dot(rel, normal), 0.0)
+        return add(anchor, sub(rel, (below * normal[0], below * normal[1], below * normal[2])))
+    return add(anchor, rel)
+
+
+@jit(inline="always")
+def finite_or(a: Vec3, b: Vec3) -> Vec3:
+    """``a``, each element that is not finite taken from ``b``."""
+    return (a[0] if math.isfinite(a[0]) else b[0], a[1] if math.isfinite(a[1]) else b[1],
+            a[2] if math.isfinite(a[2]) else b[2])
+
+
+@jit(nogil=True)
+def goal_rows(lo: int, hi: int, idx: I64, cols: Columns, weight: F64, targets: F64,
+              dec: DecodedArrays, previous: DecodedArrays, has_previous: bool,
+              max_release_m: float, t: Tables, codes: Codes, weighted: F64, weight_out: F64,
+              held_out: B8) -> None:
+    """The goals of the active constraints ``idx[lo:hi]`` (of the a in ``idx``; ``weight``
+    (m,), ``targets`` (m, 3)): each one's weighted goal (a, 3) (a unit direction for an
+    orientation), its weight (a,) (0: an area the motion already keeps) and whether a sphere
+    keeps its point off the motion's place (a,). ``dec`` this tick's decoded pose of every
+    character, ``previous`` the last tick's posture (read only with ``has_previous``). Mirrors
+    the per-constraint part of :func:`ecs_anim.solver.shell.tick_goals`."""
+    for j in range(lo, hi):
+        i = idx[j]
+        c = cols.owner[i]
+        segment, fraction, offset = cols.segment[i], cols.fraction[i], load3(cols.offset[i])
+        p0 = point_position(dec, c, segment, fraction, offset, t)
+        # No last tick for this point (a character added since, a frozen pose): the motion's side.
+        was = p0
+        if has_previous:
+            was = finite_or(point_position(previous, c, segment, fraction, offset, t), p0)
+        kind = cols.kind[i]
+        target = load3(targets[i])
+        goal = target
+        if kind == codes.kind_distance:
+            away = sub(was, target)
+            away_len = norm(away)
+            away_dir = scale(away, 1.0 / max(away_len, 1e-12)) if away_len > 1e-9 \
+                else (0.0, 0.0, 1.0)
+            goal = add_scaled(target, away_dir, cols.distance_m[i])
+        held = False
+        w = weight[i]
+        if kind == codes.kind_area:
+            goal = area_goal(cols, i, p0, target, was, codes)
+            if not cols.area_inside[i] and cols.area_shape[i] == codes.area_sphere:
+                held = norm(sub(goal, p0)) > 1e-9
+                if cols.held[i] and not held:  # released: back toward the motion, at a speed
+                    back = sub(p0, was)
+                    gap = norm(back)
+                    goal = add_scaled(was, back, min(1.0, max_release_m / max(gap, 1e-12)))
+                    held = gap > max_release_m
+            # An area the motion already keeps needs nothing: it must not claim its limb.
+            if norm(sub(goal, p0)) < 1e-9:
+                w = 0.0
+        if kind == codes.kind_orientation:
+            axis0 = to_world(segment_frame(dec, c, segment, t), load3(cols.axis[i]))
+            look = cols.target_kind[i] != codes.target_world
+            goal = normalize(sub(target, p0) if look else target)
+            store3(weighted[j], normalize(to_world(rotation_toward(axis0, goal, math.pi, w),
+                                                   axis0)))
+        else:
+            store3(weighted[j], add_scaled(p0, sub(goal, p0), w))
+        weight_out[j] = w
+        held_out[j] = held
+
+
+@jit(nogil=True)
+def layout_rows(lo: int, hi: int, user_start: I64, kept: I64, cols: Columns, weighted: F64,
+                weight: F64, held: B8, rows: I64, positions: F64, contact_weight: F64,
+                com_control: B8, com_desired: F64, t: Tables, codes: Codes,
+                out: GoalArrays) -> None:
+    """Lay out the goals of the solved characters ``lo..hi-1`` (local rows; ``rows`` (r,) their
+    store rows): character ``c``'s kept goals ``user_start[c]:user_start[c + 1]`` (``kept``:
+    their table rows; ``weighted`` (a, 3), ``weight``, ``held`` as :func:`goal_rows` left them,
+    compacted), then its two feet, each a goal of its leg to stay where ground adaptation put
+    it (``positions`` (n, N_JOINTS, 3) the pose before constraints), above every priority while
+    in contact, below every one otherwise. Mirrors the layout of
+    :func:`ecs_anim.solver.shell.tick_goals`."""
+    for c in range(lo, hi):
+        row = rows[c]
+        for j in range(user_start[c], user_start[c + 1]):
+            i = kept[j]
+            at = j + 2 * c
+            out.owner[at] = c
+            out.table_index[at] = i
+            out.orientation[at] = cols.kind[i] == codes.kind_orientation
+            out.group[at] = cols.group[i]
+            out.bone[at] = cols.bone[i]
+            out.segment[at] = cols.segment[i]
+            out.fraction[at] = cols.fraction[i]
+            store3(out.offset[at], load3(cols.offset[i]))
+            out.chain[at] = cols.chain[i]
+            out.priority[at] = cols.priority[i]
+            store3(out.goal[at], load3(weighted[j]))
+            out.weight[at] = weight[j]
+            store3(out.axis[at], load3(cols.axis[i]))
+            out.held[at] = held[j]
+        for side in range(2):
+            at = user_start[c + 1] + 2 * c + side
+            ankle = load3(positions[row, t.ankle[side]])
+            in_contact = contact_weight[row, side] > 0
+            out.owner[at] = c
+            out.table_index[at] = -1
+            out.orientation[at] = False
+            out.group[at] = codes.leg_l + side
+            out.bone[at] = 1
+            out.segment[at] = t.shank[side]
+            out.fraction[at] = 1.0
+            store3(out.offset[at], (0.0, 0.0, 0.0))
+            out.chain[at] = 1 << (codes.leg_l + side)
+            out.priority[at] = math.inf if in_contact else -math.inf
+            store3(out.goal[at], ankle)
+            out.weight[at] = 1.0
+            store3(out.axis[at], (0.0, 0.0, 0.0))
+            out.held[at] = False
+            store3(out.footprint[c, side], ankle)
+            out.in_contact[c, side] = in_contact
+        store3(out.com_desired[c], load3(com_desired[row]))
+        out.com_on[c] = com_control[row]
+
+
+def _arrays(decoded: DecodedPose) -> DecodedArrays:
+    return DecodedArrays(*(np.ascontiguousarray(getattr(decoded, name), dtype=np.float64)
+                           for name in DecodedArrays._fields))
+
+
+def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained: DecodedPose,
+               contact_weight: F64, com_control: NDArray[np.bool_], com_desired: F64,
+               previous: DecodedPose | None = None, max_release_m: float = np.inf) -> TickGoals | None:
+    """Compiled :func:`ecs_anim.solver.shell.tick_goals`: the same arguments and result."""
+    active = np.flatnonzero(weight > 0)
+    if active.size == 0:
+        return None
+    idx = active[np.argsort(table.owner[active], kind="stable")]  # by character, then table order
+    cols = columns(table)
+    dec = _arrays(unconstrained)
+    a = idx.size
+    weighted, w, held = np.empty((a, 3)), np.empty(a), np.empty(a, np.bool_)
+    over_chunks(goal_rows, a, idx, cols, np.ascontiguousarray(weight, dtype=np.float64),
+                np.ascontiguousarray(targets, dtype=np.float64), dec,
+                dec if previous is None else _arrays(previous), previous is not None,
+                float(max_release_m), TABLES, CODES, weighted, w, held)
+    keep = w > 0
+    if not keep.all():
+        if not keep.any():
+            return None
+        idx, weighted, w, held = idx[keep], weighted[keep], w[keep], held[keep]
+    owner = cols.owner[idx]
+    first = np.ones(idx.size, np.bool_)  # the first goal of each character
+    first[1:] = owner[1:] != owner[:-1]
+    rows = owner[first]
+    r = rows.size
+    user_start = np.append(np.flatnonzero(first), idx.size)
+    k = idx.size + 2 * r
+    out = GoalArrays(
+        owner=np.empty(k, np.int64), table_index=np.empty(k, np.int64),
+        orientation=np.empty(k, np.bool_), group=np.empty(k, np.int64),
+        bone=np.empty(k, np.int64), segment=np.empty(k, np.int64), fraction=np.empty(k),
+        offset=np.empty((k, 3)), chain=np.empty(k, np.int64), priority=np.empty(k),
+        goal=np.empty((k, 3)), weight=np.empty(k), axis=np.empty((k, 3)),
+        held=np.empty(k, np.bool_), footprint=np.empty((r, 2, 3)),
+        in_contact=np.empty((r, 2), np.bool_), com_desired=np.empty((r, 3)),
+        com_on=np.empty(r, np.bool_))
+    over_chunks(layout_rows, r, user_start, idx, cols, weighted, w, held, rows, dec.positions,
+                np.ascontiguousarray(contact_weight, dtype=np.float64),
+                np.ascontiguousarray(com_control, dtype=np.bool_),
+                np.ascontiguousarray(com_desired, dtype=np.float64), TABLES, CODES, out)
+    # Goals aiming at a point of their own body (usually none: no target is on a body).
+    on_body = table.target_kind[idx] != TARGET_WORLD
+    on_self = np.flatnonzero(on_body & (table.target_row[idx] == owner)) if on_body.any() \
+        else np.zeros(0, np.int64)
+    return TickGoals(
+        rows=rows, **out._asdict(),
+        on_self=on_self + 2 * (np.cumsum(first)[on_self] - 1),
+        self_segment=table.target_segment[idx[on_self]],
+        self_fraction=table.target_fraction[idx[on_self]],
+        self_offset=table.target_offset[idx[on_self]],
+        self_start=targets[idx[on_self]])
+
+
+@jit(nogil=True)
+def error_rows(lo: int, hi: int, idx: I64, cols: Columns, dec: DecodedArrays, targets: F64,
+               t: Tables, codes: Codes, out: F64) -> None:
+    """``out[j]`` (a,): how far constraint ``idx[j]`` is from being met on ``dec``, for
+    ``j`` in ``lo..hi-1``. Mirrors :func:`ecs_anim.solver.shell.constraint_errors`."""
+    for j in range(lo, hi):
+        i = idx[j]
+        c = cols.owner[i]
+        segment = cols.segment[i]
+        point = point_position(dec, c, segment, cols.fraction[i], load3(cols.offset[i]), t)
+        target = load3(targets[i])
+        kind = cols.kind[i]
+        if kind == codes.kind_area:
+            out[j] = norm(sub(point, area_goal(cols, i, point, target, point, codes)))
+        elif kind == codes.kind_orientation:
+            axis = to_world(segment_frame(dec, c, segment, t), load3(cols.axis[i]))
+            look = cols.target_kind[i] != codes.target_world
+            direction = normalize(sub(target, point) if look else target)
+            out[j] = math.acos(min(max(dot(axis, direction), -1.0), 1.0))
+        else:
+            gap = norm(sub(point, target))
+            out[j] = abs(gap - cols.distance_m[i]) if kind == codes.kind_distance else gap
+
+
+def constraint_errors(table: ConstraintTable, idx: I64, decoded: DecodedPose, targets: F64) -> F64:
+    """Compiled :func:`ecs_anim.solver.shell.constraint_errors`: the same arguments and
+    result."""
+    idx = np.ascontiguousarray(idx, dtype=np.int64)
+    out = np.empty(idx.size)
+    over_chunks(error_rows, idx.size, idx, columns(table), _arrays(decoded),
+                np.ascontiguousarray(targets, dtype=np.float64), TABLES, CODES, out,
+                rows_per_thread=LIGHT_ROWS_PER_THREAD)
+    return out
+
+
+assert CONTACT_PRIORITY == math.inf  # the layout writes a planted foot's priority as inf

@@ -1,0 +1,286 @@
+"""Compiled ground adaptation (paper §7): the whole of ``GroundAdapt.run``, one character at a time.
+
+Mirrors ``systems.ground_adapt.GroundAdapt.run`` (footprints laid, locked and settled, the
+motion's floor following the supporting feet, free feet lifted clear of the ground, the toes
+pitched onto it) with :func:`ecs_anim.core.ground_adapt.adapt_keeping_heels_up`,
+:func:`~ecs_anim.core.ground_adapt.adapt_to_ground` and
+:func:`~ecs_anim.core.ground_adapt.vertical_slack_for_reach`, on a built-in ground given as its
+:class:`~ecs_anim.core.ground.GroundDescription` arrays.
+
+Every decision the numpy code takes for the whole batch (another heel pass, the toe passes) is
+taken here per character, so a character's result never depends on who else is in the batch.
+
+Length indices are literals (numba's cache keys on this file's source); an import-time
+check pins them to the skeleton.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ecs_anim.core.skeleton import LENGTH_INDEX as L
+from ecs_anim.runtime.kernels.decode import LegPoseArrays, decode_legs_row
+from ecs_anim.runtime.kernels.ground import height_at
+from ecs_anim.runtime.kernels.vec import (
+    F64,
+    Frame,
+    Vec3,
+    in_frame,
+    jit,
+    load3,
+    matmul,
+    norm,
+    quat_from_matrix,
+    rotation_between,
+    store3,
+    store4,
+    sub,
+    transpose,
+)
+
+I64 = NDArray[np.int64]
+B1 = NDArray[np.bool_]
+#: A ground's description: (kinds, params, grid) of :class:`ecs_anim.core.ground.GroundDescription`.
+GroundArrays = tuple[I64, F64, F64]
+
+# Lengths of side s (0 left, 1 right) are these plus s.
+_L_THIGH, _L_SHANK, _L_ANKLE_HEIGHT = 2, 4, 8
+assert (L["thigh_l"], L["shank_l"], L["ankle_height_l"], L["thigh_r"], L["ankle_height_r"]) \
+    == (_L_THIGH, _L_SHANK, _L_ANKLE_HEIGHT, _L_THIGH + 1, _L_ANKLE_HEIGHT + 1)
+
+
+@jit(inline="always")
+def _height(kinds: I64, params: F64, grid: F64, p: Vec3) -> float:
+    """The ground's height under the point ``p`` (m)."""
+    return height_at(p[0], p[1], kinds, params, grid)
+
+
+@jit()
+def vertical_slack_for_reach(hip: Vec3, ankle_target: Vec3, reach: float) -> float:
+    """Mirrors :func:`ecs_anim.core.ground_adapt.vertical_slack_for_reach` for one leg (m)."""
+    dx, dy = hip[0] - ankle_target[0], hip[1] - ankle_target[1]
+    horizontal = math.sqrt(dx * dx + dy * dy)
+    vertical = math.sqrt(max(reach**2 - horizontal**2, 0.0))
+    return ankle_target[2] + vertical - hip[2]
+
+
+@jit(inline="always")
+def adapt_to_ground(c: int, root_position: F64, leg_frame: F64, leg_fraction: F64,
+                    hips: tuple[Vec3, Vec3], pelvis_now_z: float, pelvis2world: Frame,
+                    leg2world: tuple[Frame, Frame], lengths: F64, leg: float,
+                    targets: tuple[Vec3, Vec3], weights: tuple[float, float],
+                    root_height: float, max_extension: float) -> None:
+    """Mirrors :func:`ecs_anim.core.ground_adapt.adapt_to_ground` for store row ``c`` (legs
+    re-aimed from the pose decoded before adaptation: its ``hips``, pelvis height
+    ``pelvis_now_z`` (m), ``pelvis2world`` and ``leg2world``; the pelvis lowered as the legs in
+    contact need), writing the root height, leg frames and fractions of row ``c`` of the poses
+    (``root_position``, ``leg_frame``, ``leg_fraction``).
+
+    ``targets``: each ankle's target (m, world); ``weights``: contact activations;
+    ``root_height`` (m): the pelvis height the motion wants; ``leg``: the leg length (m).
+    """
+    up = root_height - pelvis_now_z
+    lowest = 0.0
+    for s in range(2):
+        hip = hips[s]
+        reach = max_extension * (lengths[c, _L_THIGH + s] + lengths[c, _L_SHANK + s])
+        needed = vertical_slack_for_reach((hip[0] + 0.0, hip[1] + 0.0, hip[2] + up), targets[s],
+                                          reach)
+        w = min(max(weights[s], 0.0), 1.0)
+        drop = w * min(needed, 0.0)
+        lowest = drop if s == 0 else min(lowest, drop)
+    pelvis_z = root_height + lowest
+    shift = pelvis_z - pelvis_now_z
+    for s in range(2):
+        hip = hips[s]
+        thigh, shank = lengths[c, _L_THIGH + s], lengths[c, _L_SHANK + s]
+        reach = max_extension * (thigh + shank)
+        to_target = sub(targets[s], (hip[0] + 0.0, hip[1] + 0.0, hip[2] + shift))
+        turn = rotation_between(leg2world[s][2], to_target)
+        new_leg2pelvis = matmul(transpose(pelvis2world), matmul(turn, leg2world[s]))
+        store4(leg_frame[c, s], quat_from_matrix(new_leg2pelvis))
+        leg_fraction[c, s] = min(norm(to_target), reach) / (thigh + shank)
+    root_position[c, 2] = pelvis_z / leg
+
+
+@jit(inline="always")  # one call site
+def adapt_keeping_heels_up(c: int, pose: LegPoseArrays, hips: tuple[Vec3, Vec3],
+                           pelvis_now_z: float, pelvis2world: Frame,
+                           leg2world: tuple[Frame, Frame], lengths: F64, leg: float,
+                           targets: tuple[Vec3, Vec3], weights: tuple[float, float],
+                           root_height: float, kinds: I64, params: F64, grid: F64,
+                           ankle_height: Vec3, max_extension: float, heel_tolerance: float,
+                           passes: int
+                           ) -> tuple[tuple[Vec3, Vec3], tuple[Vec3, Vec3], tuple[Frame, Frame]]:
+    """Mirrors :func:`ecs_anim.core.ground_adapt.adapt_keeping_heels_up` for store row ``c``: the
+    ankle targets lifted (up to ``passes`` times) while a heel would be more than
+    ``heel_tolerance`` (m) under the ground. ``ankle_height`` (left, right, unused) m;
+    ``hips``, ``pelvis_now_z``, ``pelvis2world``, ``leg2world``: the pose decoded before
+    adaptation, as :func:`adapt_to_ground` takes them.
+
+    Writes row ``c`` of ``pose`` as :func:`adapt_to_ground`; returns the decoded (ankles, toes,
+    shank2world) of the result.
+    """
+    root_position, leg_frame, leg_fraction = pose.root_position, pose.leg_frame, pose.leg_fraction
+    lengths_row = lengths[c]
+    # One call site each for the two inlined steps (numba compiles an inlined body at each):
+    # the first pass adapts to the targets given, the next ones to the lifted targets.
+    for lift in range(passes + 1):
+        adapt_to_ground(c, root_position, leg_frame, leg_fraction, hips, pelvis_now_z,
+                        pelvis2world, leg2world, lengths, leg, targets, weights, root_height,
+                        max_extension)
+        legs = decode_legs_row(c, pose, lengths_row, lengths_row)
+        if lift == passes:
+            break
+        ankles = legs[4]
+        d0 = height_at(ankles[0][0], ankles[0][1], kinds, params, grid) + ankle_height[0] \
+            - ankles[0][2]
+        d1 = height_at(ankles[1][0], ankles[1][1], kinds, params, grid) + ankle_height[1] \
+            - ankles[1][2]
+        if not (d0 > heel_tolerance or d1 > heel_tolerance):
+            break
+        t0, t1 = targets
+        targets = ((t0[0], t0[1], t0[2] + max(d0, 0.0)), (t1[0], t1[1], t1[2] + max(d1, 0.0)))
+    return legs[4], legs[5], legs[7]
+
+
+@jit(inline="always")
+def toes_onto_ground(c: int, foot_dir: F64, ankles: tuple[Vec3, Vec3],
+                     toes: tuple[Vec3, Vec3], shank2world: tuple[Frame, Frame], ball: float,
+                     kinds: I64, params: F64, grid: F64, passes: int) -> None:
+    """Mirrors ``GroundAdapt._toes_onto_ground`` for store row ``c``: a foot whose toe joint
+    would be under the ground (by ``ball`` m, its height above the sole) is pitched up about
+    its ankle, ``passes`` times asking the ground (``kinds``, ``params``, ``grid``) again;
+    writes ``foot_dir[c]`` (``pose.foot_dir``)."""
+    d0 = height_at(toes[0][0], toes[0][1], kinds, params, grid) + ball - toes[0][2]
+    d1 = height_at(toes[1][0], toes[1][1], kinds, params, grid) + ball - toes[1][2]
+    if not (d0 > 0.0 or d1 > 0.0):
+        return
+    for s in range(2):
+        ankle, toe = ankles[s], toes[s]
+        deficit = d0 if s == 0 else d1
+        foot = max(norm(sub(toe, ankle)), 1e-9)
+        d = ((toe[0] - ankle[0]) / foot, (toe[1] - ankle[1]) / foot, (toe[2] - ankle[2]) / foot)
+        flat = max(math.sqrt(d[0] * d[0] + d[1] * d[1]), 1e-9)
+        hx, hy = d[0] / flat, d[1] / flat
+        dz = d[2]
+        moved = toe
+        for _ in range(passes):
+            dz = min(max(dz + max(deficit, 0.0) / foot, -1.0), 1.0)
+            along = math.sqrt(1.0 - dz**2)
+            moved = (ankle[0] + foot * (hx * along), ankle[1] + foot * (hy * along),
+                     ankle[2] + foot * dz)
+            deficit = height_at(moved[0], moved[1], kinds, params, grid) + ball - moved[2]
+            if not deficit > 0.0:
+                break  # the next passes would not move it (dz + 0, the same point)
+        new_d = ((moved[0] - ankle[0]) / foot, (moved[1] - ankle[1]) / foot,
+                 (moved[2] - ankle[2]) / foot)
+        if max(abs(new_d[0] - d[0]), abs(new_d[1] - d[1]), abs(new_d[2] - d[2])) > 0.0:
+            store3(foot_dir[c, s], in_frame(shank2world[s], new_d))
+
+
+@jit(inline="always")
+def _foot_target(ankle: Vec3, toe: Vec3, footprint: Vec3, w: float, ground_ref: float,
+                 ankle_height: float, ball: float, kinds: I64, params: F64, grid: F64) -> Vec3:
+    """One ankle's target in ``GroundAdapt.run``: the motion's free foot on the floor
+    ``ground_ref`` (m), lifted where its heel or toe would be under the ground, blended
+    towards its ``footprint`` by the contact weight ``w``, its heel kept above the ground."""
+    if w == 1.0:  # planted: where the free foot would be does not count (two queries fewer)
+        t = footprint
+    else:
+        free = (ankle[0], ankle[1], ankle[2] + ground_ref)
+        need_heel = _height(kinds, params, grid, free) + ankle_height - free[2]
+        need_toe = _height(kinds, params, grid, toe) + ball - (toe[2] + ground_ref)
+        free = (free[0], free[1], free[2] + max(0.0, max(need_heel, need_toe)))
+        t = (free[0] + w * (footprint[0] - free[0]), free[1] + w * (footprint[1] - free[1]),
+             free[2] + w * (footprint[2] - free[2]))
+    return (t[0], t[1], t[2] + max(_height(kinds, params, grid, t) + ankle_height - t[2], 0.0))
+
+
+@jit(inline="always")  # one call site: a call per row, handed its arrays, costs
+def ground_adapt_row(c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
+                     contact_weight: F64, clip: I64, source_ankle_height: F64, footprint: F64,
+                     locked: B1, footprint_settled: B1, ground_ref: F64, kinds: I64,
+                     params: F64, grid: F64, dt: float, smoothing_s: float, ball_per_leg: float,
+                     max_extension: float, heel_tolerance: float, heel_passes: int,
+                     toe_passes: int) -> None:
+    """Mirrors ``GroundAdapt.run`` for store row ``c``; arguments as for
+    :func:`ground_adapt_rows` (``kinds``, ``params``, ``grid``: the arrays of ``ground``)."""
+    # The pose on the character's body as the motion gives it (MorphologyAdapt's scaling,
+    # decoded here: ground adaptation reads only the pelvis and legs).
+    lengths_row = lengths[c]
+    pelvis, pelvis2world, hips, _, ankles, toes, leg2world, _ = decode_legs_row(
+        c, pose, lengths_row, lengths_row)
+    leg_c = leg[c]
+    ball = ball_per_leg * leg_c
+    ankle_height = (lengths[c, _L_ANKLE_HEIGHT], lengths[c, _L_ANKLE_HEIGHT + 1], 0.0)
+    w = (contact_weight[c, 0], contact_weight[c, 1])
+    # Footprints: where the motion's ankle is, standing on the ground under it (raised by as
+    # much as the motion's ankle is above its standing height); locked from the contact's
+    # start, going down with the motion's foot until its first fully planted tick.
+    for s in range(2):
+        ankle = ankles[s]
+        above_standing = max(ankle[2] - source_ankle_height[clip[c], s] * leg_c, 0.0)
+        starting = w[s] > 0.0 and not locked[c, s]
+        if starting:
+            footprint[c, s, 0], footprint[c, s, 1] = ankle[0], ankle[1]
+            footprint[c, s, 2] = (_height(kinds, params, grid, ankle) + ankle_height[s]
+                                  + above_standing)
+        elif w[s] > 0.0 and not footprint_settled[c, s]:
+            settled_z = (_height(kinds, params, grid, load3(footprint[c, s]))
+                         + ankle_height[s] + above_standing)
+            footprint[c, s, 2] = min(footprint[c, s, 2], settled_z)
+        locked[c, s] = w[s] > 0.0
+        footprint_settled[c, s] = locked[c, s] and (
+            (footprint_settled[c, s] and not starting) or w[s] >= 1.0)
+    # The motion's floor follows the ground under the supporting feet, smoothly.
+    support = w[0] + w[1]
+    under_feet = (w[0] * (footprint[c, 0, 2] - ankle_height[0])
+                  + w[1] * (footprint[c, 1, 2] - ankle_height[1])) / max(support, 1e-9)
+    target = under_feet if support > 0.0 else _height(kinds, params, grid, pelvis)
+    ground_ref[c] += (1.0 - math.exp(-dt / smoothing_s)) * (target - ground_ref[c])
+    g = ground_ref[c]
+    # Free feet ride on that floor, lifted where heel or toe would go under the ground; a
+    # contact ramping in blends towards its footprint, its heel kept above the ground.
+    targets = (_foot_target(ankles[0], toes[0], load3(footprint[c, 0]), w[0], g,
+                            ankle_height[0], ball, kinds, params, grid),
+               _foot_target(ankles[1], toes[1], load3(footprint[c, 1]), w[1], g,
+                            ankle_height[1], ball, kinds, params, grid))
+    root_height = pelvis[2] + g
+    new_ankles, new_toes, shank2world = adapt_keeping_heels_up(
+        c, pose, hips, pelvis[2], pelvis2world, leg2world, lengths, leg_c, targets, w,
+        root_height, kinds, params, grid, ankle_height, max_extension, heel_tolerance,
+        heel_passes)
+    toes_onto_ground(c, pose.foot_dir, new_ankles, new_toes, shank2world, ball, kinds, params,
+                     grid, toe_passes)
+
+
+@jit(nogil=True)
+def ground_adapt_rows(lo: int, hi: int, rows: I64, pose: LegPoseArrays, lengths: F64, leg: F64,
+                      contact_weight: F64, clip: I64, source_ankle_height: F64, footprint: F64,
+                      locked: B1, footprint_settled: B1, ground_ref: F64, ground: GroundArrays,
+                      dt: float, smoothing_s: float, ball_per_leg: float, max_extension: float,
+                      heel_tolerance: float, heel_passes: int, toe_passes: int) -> None:
+    """Mirrors ``systems.ground_adapt.GroundAdapt.run`` over the store rows
+    ``rows[lo:hi]``, in place.
+
+    Per row: ``pose`` the store's poses' leg arrays (:func:`.decode.leg_pose_arrays`; decoded
+    on the body here, then root height, leg frames and fractions, foot directions written);
+    ``lengths`` (n, N_LENGTHS) m; ``leg``
+    (n,) leg lengths m; ``contact_weight`` (n, 2); ``clip`` (n,) int64;
+    ``source_ankle_height`` (n_clips, 2) in leg lengths; ``footprint`` (n, 2, 3) m,
+    ``locked``, ``footprint_settled`` (n, 2) bool and ``ground_ref`` (n,) m, read and written.
+    ``ground``: (kinds, params, grid) of the ground's description. Settings: ``dt`` (s) the
+    tick, ``smoothing_s`` the floor's time constant, ``ball_per_leg`` the toe joint's height
+    above the sole per leg length, ``max_extension`` of a leg, ``heel_tolerance`` (m),
+    ``heel_passes``, ``toe_passes``.
+    """
+    kinds, params, grid = ground
+    for i in range(lo, hi):
+        ground_adapt_row(rows[i], pose, lengths, leg, contact_weight, clip, source_ankle_height,
+                         footprint, locked, footprint_settled, ground_ref, kinds, params, grid,
+                         dt, smoothing_s, ball_per_leg, max_extension, heel_tolerance,
+                         heel_passes, toe_passes)

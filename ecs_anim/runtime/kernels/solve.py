@@ -1,0 +1,347 @@
+"""The compiled constraint solver's shell (paper §9): the iteration loop of every character.
+
+Mirrors :func:`ecs_anim.solver.shell.solve` (the numpy reference, which stays in the package and
+which the tests compare this with to 1e-9 m). :func:`solve_rows` runs over the solved characters
+(a range of them per thread: :func:`ecs_anim.runtime.kernels.over_chunks`); per character,
+:func:`solve_character` owns the loop: follow the goals on its own body, the limbs
+(:mod:`.solve_limbs`), the head (:mod:`.solve_head`), the trunk (:mod:`.solve_trunk`, skipped
+when no goal's chain includes it; it decodes the row again when it turns), the root
+(:mod:`.solve_root`), then the stopping rule (every goal met or stalled and the centre of mass
+back; its budget of iterations), and the final re-plant of the limbs and the head. Each
+character stops on its own goals: its result does not depend on who else is solved, nor on the
+thread count.
+
+The goals come from :func:`ecs_anim.runtime.kernels.goals.tick_goals` (or its numpy reference),
+already sorted by character (then nothing is copied); :func:`character_winners` picks the goal
+each limb and the head serve, and the frame budget's caps (``Goals.iterations``, ``Bodies.iterations``) bound each
+goal's and each character's iterations.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ecs_anim.core.body_points import HEAD
+from ecs_anim.core.ground_adapt import MAX_LEG_EXTENSION
+from ecs_anim.core.normalized import DecodedPose, NormalizedPoses
+from ecs_anim.runtime.kernels import LIGHT_ROWS_PER_THREAD, over_chunks, wait_for_solver
+from ecs_anim.runtime.kernels.decode import DecodedArrays, PoseArrays
+from ecs_anim.runtime.kernels.solve_head import solve_head
+from ecs_anim.runtime.kernels.solve_limbs import solve_limbs
+from ecs_anim.runtime.kernels.solve_points import (
+    Bodies,
+    Goals,
+    Tables,
+    Winners,
+    goal_error,
+    plain_point,
+    point_position,
+    tables,
+)
+from ecs_anim.runtime.kernels.solve_root import root_step
+from ecs_anim.runtime.kernels.solve_trunk import solve_trunk
+from ecs_anim.runtime.kernels.vec import F64, dot, jit, load3, normalize, store3, sub
+from ecs_anim.solver.shell import (
+    CONTACT_PRIORITY,
+    DEFAULT_SETTINGS,
+    SolverSettings,
+    TickGoals,
+    iteration_caps,
+)
+
+I64 = NDArray[np.int64]
+B8 = NDArray[np.bool_]
+_TRUNK = 5
+TABLES = tables()
+
+
+@jit(inline="always")
+def follow_own_targets(c: int, dec: DecodedArrays, g: Goals, t: Tables) -> None:
+    """Mirrors ``ecs_anim.solver.shell._Solve.follow_own_targets`` for character ``c``: goals
+    aiming at a point of the same body move with that point."""
+    for j in range(g.start[c], g.start[c + 1]):
+        if g.on_self[j]:
+            now = point_position(dec, c, g.self_segment[j], g.self_fraction[j],
+                                 load3(g.self_offset[j]), t)
+            shift = sub(now, load3(g.self_at[j]))
+            store3(g.self_at[j], now)
+            if not g.orientation[j]:
+                for i in range(3):
+                    g.goal[j, i] += shift[i]
+
+
+@jit()
+def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners,
+                    b: Bodies, t: Tables, err: F64, stalled: B8, previous: F64, slow_before: B8,
+                    tolerance_m: float, tolerance_rad: float,
+                    com_tolerance_m: float, max_ccd_step_rad: float, root_gain: float,
+                    stall_fraction: float, leg_extension: float) -> int:
+    """Solve character ``c``'s goals (its rows of ``pose`` and ``dec`` in place; ``err``,
+    ``stalled``, ``previous``, ``slow_before`` (k,) per-goal scratch) in at most
+    ``b.iterations[c]`` iterations, each goal keeping the loop going for at most
+    ``g.iterations`` of them. Returns the iterations it used. Mirrors the loop of
+    :func:`ecs_anim.solver.shell.solve` for one character."""
+    start, stop = g.start[c], g.start[c + 1]
+    uses_trunk = False
+    on_self = False
+    for j in range(start, stop):
+        stalled[j] = False
+        previous[j] = math.inf
+        slow_before[j] = False
+        if (g.chain[j] & (1 << _TRUNK)) > 0:
+            uses_trunk = True
+        on_self = on_self or g.on_self[j]
+    # Steps with nothing to do are not called, and the errors of points without offset are
+    # measured on the arrays themselves (the same operations as goal_error).
+    uses_head = w.first_head[c] >= 0 or w.orient_head[c] >= 0
+    positions, seg_proximal, seg_distal = dec.positions, t.seg_proximal, t.seg_distal
+    orientation, segment, fraction, offset = g.orientation, g.segment, g.fraction, g.offset
+    goal, priority, goal_iterations = g.goal, g.priority, g.iterations
+    used = 0
+    iterations = b.iterations[c]
+    done = iterations <= 0
+    # Each pass follows the goals on the body, then the limbs and the head; the last pass (the
+    # budget used, or every goal done) is the final re-plant, as the last root move shifted the
+    # limbs. One call site each: numba inlines these steps' bodies at every site it compiles.
+    while True:
+        if on_self:
+            follow_own_targets(c, dec, g, t)
+        solve_limbs(c, pose, dec, g, w, b, t, tolerance_m, leg_extension)
+        if uses_head:
+            solve_head(c, pose, dec, g, w, b, t)
+        if done:
+            break
+        used += 1
+        if uses_trunk:
+            for j in range(start, stop):
+                err[j] = goal_error(dec, c, g, j, t)
+            solve_trunk(c, pose, dec, b.lengths[c], g, err, stalled, t, tolerance_m, tolerance_rad,
+                        max_ccd_step_rad)
+        com_error = root_step(c, pose.root_position, positions, b.lengths, b.masses,
+                              b.com_fraction, b.footprint, b.in_contact, b.com_desired, b.com_on,
+                              t.mass_proximal, t.mass_distal, t.hip, t.thigh, t.shank,
+                              com_tolerance_m, root_gain, leg_extension)
+        # Done where every goal is met or has stalled (unchanged, or falling by less than a
+        # share of itself twice running), and the centre of mass is back.
+        any_open = False
+        for j in range(start, stop):
+            if (not orientation[j] and offset[j, 0] == 0.0 and offset[j, 1] == 0.0
+                    and offset[j, 2] == 0.0):
+                d = sub(plain_point(positions, c, seg_proximal[segment[j]],
+                                    seg_distal[segment[j]], fraction[j]), load3(goal[j]))
+                e = math.sqrt(dot(d, d))
+            else:
+                e = goal_error(dec, c, g, j, t)
+            tol = tolerance_rad if orientation[j] else tolerance_m
+            first = math.isinf(previous[j])
+            unchanged = not first and abs(previous[j] - e) < tolerance_m
+            slow = not first and previous[j] - e < stall_fraction * previous[j]
+            planted = priority[j] == math.inf
+            cut = used >= goal_iterations[j]  # the frame budget gave it no more iterations
+            goal_open = (e > tol and not unchanged and not (slow and slow_before[j])
+                         and not stalled[j] and not planted and not cut)
+            if e > tol and not goal_open:
+                stalled[j] = True
+            previous[j] = e
+            slow_before[j] = slow
+            any_open = any_open or goal_open
+        done = used == iterations or (not any_open and com_error <= com_tolerance_m)
+    return used
+
+
+@jit(nogil=True)
+def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners,
+               b: Bodies, t: Tables, used: I64, err: F64, stalled: B8, previous: F64,
+               slow_before: B8, tolerance_m: float, tolerance_rad: float,
+               com_tolerance_m: float, max_ccd_step_rad: float, root_gain: float,
+               stall_fraction: float, leg_extension: float) -> None:
+    """Solve the characters ``lo..hi-1`` (rows of ``pose``, ``dec``, ``b``, ``used``; goals
+    ``g``) in place; ``used`` (r,) the iterations each one took. ``err``, ``stalled``,
+    ``previous``, ``slow_before`` (k,): per-goal scratch (each character uses its own goals'
+    entries, so the threads share them)."""
+    for c in range(lo, hi):
+        used[c] = solve_character(c, pose, dec, g, w, b, t, err,
+                                  stalled, previous, slow_before, tolerance_m, tolerance_rad,
+                                  com_tolerance_m, max_ccd_step_rad, root_gain, stall_fraction,
+                                  leg_extension)
+
+
+@jit(nogil=True)
+def foot_directions_rows(lo: int, hi: int, positions: F64, t: Tables, out: F64) -> None:
+    """``out[c, side]`` (r, 2, 3): the unit direction from ankle to toe of each foot of the
+    characters ``lo..hi-1`` (``positions`` (r, N_JOINTS, 3) m)."""
+    for c in range(lo, hi):
+        for side in range(2):
+            store3(out[c, side], normalize(sub(load3(positions[c, t.toe[side]]),
+                                               load3(positions[c, t.ankle[side]]))))
+
+
+@jit()
+def character_winners(c: int, g: Goals, w: Winners, limb_of_group: I64, head_group: int) -> None:
+    """Mirrors :func:`ecs_anim.motion.constraint_table.winners` as ``ecs_anim.solver.shell._Solve``
+    uses it, for character ``c``: per limb its highest-priority point goal (``first_limb``),
+    the next (``second_limb``) and its orientation goal; the head's point and orientation goal
+    (-1: none). Ties go to the goal added last (the later index: the goals are sorted stably)."""
+    first_limb, second_limb, orient_limb = w.first_limb, w.second_limb, w.orient_limb
+    first_head, orient_head = w.first_head, w.orient_head
+    group, orientation, priority = g.group, g.orientation, g.priority
+    for slot in range(4):
+        first_limb[c, slot] = -1
+        second_limb[c, slot] = -1
+        orient_limb[c, slot] = -1
+    first_head[c] = -1
+    orient_head[c] = -1
+    start, stop = g.start[c], g.start[c + 1]
+    for j in range(start, stop):
+        slot = limb_of_group[group[j]]
+        p = priority[j]
+        if slot >= 0:
+            if orientation[j]:
+                if orient_limb[c, slot] < 0 or p >= priority[orient_limb[c, slot]]:
+                    orient_limb[c, slot] = j
+            elif first_limb[c, slot] < 0 or p >= priority[first_limb[c, slot]]:
+                first_limb[c, slot] = j
+        elif group[j] == head_group:
+            if orientation[j]:
+                if orient_head[c] < 0 or p >= priority[orient_head[c]]:
+                    orient_head[c] = j
+            elif first_head[c] < 0 or p >= priority[first_head[c]]:
+                first_head[c] = j
+    for j in range(start, stop):
+        slot = limb_of_group[group[j]]
+        if (slot >= 0 and not orientation[j] and j != first_limb[c, slot]
+                and (second_limb[c, slot] < 0 or priority[j] >= priority[second_limb[c, slot]])):
+            second_limb[c, slot] = j
+
+
+@jit(nogil=True)
+def winners_rows(lo: int, hi: int, g: Goals, w: Winners, limb_of_group: I64,
+                 head_group: int) -> None:
+    """:func:`character_winners` of every character ``lo..hi-1``, in place."""
+    for c in range(lo, hi):
+        character_winners(c, g, w, limb_of_group, head_group)
+
+
+def sorted_goals(goals: TickGoals, goal_iterations: I64) -> tuple[Goals, Winners, I64]:
+    """The goals sorted by character (stable: ties between priorities still go to the goal
+    added last), their winners, and the order (k,) taking ``goals``' indices to the sorted;
+    ``goal_iterations`` (k,) each goal's cap (:func:`~ecs_anim.solver.shell.iteration_caps`).
+    :func:`ecs_anim.solver.shell.tick_goals` makes them sorted already: then nothing is
+    copied (``goal`` is the same array)."""
+    r, k = int(goals.rows.size), goals.k
+    already = bool(np.all(goals.owner[1:] >= goals.owner[:-1]))
+    order = np.arange(k) if already else np.argsort(goals.owner, kind="stable")
+    owner = goals.owner[order]
+    start = np.zeros(r + 1, np.int64)
+    np.cumsum(np.bincount(owner, minlength=r), out=start[1:])
+    on_self = np.zeros(k, bool)
+    self_segment = np.zeros(k, np.int64)
+    self_fraction = np.zeros(k)
+    self_offset = np.zeros((k, 3))
+    self_at = np.zeros((k, 3))
+    if goals.on_self.size:
+        on_self[goals.on_self] = True
+        self_segment[goals.on_self] = goals.self_segment
+        self_fraction[goals.on_self] = goals.self_fraction
+        self_offset[goals.on_self] = goals.self_offset
+        self_at[goals.on_self] = goals.self_start
+
+    def take(a: np.ndarray, dtype: type) -> np.ndarray:
+        return np.ascontiguousarray(a if already else a[order], dtype=dtype)
+
+    g = Goals(start=start, table_index=take(goals.table_index, np.int64),
+              orientation=take(goals.orientation, np.bool_), group=take(goals.group, np.int64),
+              bone=take(goals.bone, np.int64), segment=take(goals.segment, np.int64),
+              fraction=take(goals.fraction, np.float64), offset=take(goals.offset, np.float64),
+              chain=take(goals.chain, np.int64), priority=take(goals.priority, np.float64),
+              goal=take(goals.goal, np.float64), axis=take(goals.axis, np.float64),
+              on_self=take(on_self, np.bool_), self_segment=take(self_segment, np.int64),
+              self_fraction=take(self_fraction, np.float64),
+              self_offset=take(self_offset, np.float64), self_at=take(self_at, np.float64),
+              iterations=take(goal_iterations, np.int64))
+    w = Winners(first_limb=np.empty((r, 4), np.int64), second_limb=np.empty((r, 4), np.int64),
+                orient_limb=np.empty((r, 4), np.int64), first_head=np.empty(r, np.int64),
+                orient_head=np.empty(r, np.int64))
+    over_chunks(winners_rows, r, g, w, TABLES.limb_of_group, HEAD,
+                rows_per_thread=LIGHT_ROWS_PER_THREAD)
+    return g, w, order
+
+
+class SolveState(NamedTuple):
+    """What :func:`solve_rows` works on: the solved characters' pose and decoded rows
+    (written in place), their goals sorted by character (``order`` (k,) takes the
+    :class:`~ecs_anim.solver.shell.TickGoals` indices to the sorted ones), the winners and the
+    bodies."""
+
+    pose: PoseArrays
+    dec: DecodedArrays
+    goals: Goals
+    winners: Winners
+    bodies: Bodies
+    order: I64
+
+
+def prepare(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64,
+            com_fraction: F64, decoded: DecodedPose | None = None,
+            settings: SolverSettings = DEFAULT_SETTINGS, in_place: bool = False) -> SolveState:
+    """Gather the solve state of :func:`solve` (the arguments are the same): copies of
+    ``poses`` and ``decoded``, or with ``in_place`` those arrays themselves (when already
+    float64 and C-contiguous)."""
+    from ecs_anim.runtime.kernels.decode import decode as decode_compiled
+
+    goal_iterations, row_iterations = iteration_caps(goals, settings)
+    g, w, order = sorted_goals(goals, goal_iterations)
+
+    def own(a: np.ndarray) -> np.ndarray:
+        return (np.ascontiguousarray(a, dtype=np.float64) if in_place
+                else np.array(a, dtype=np.float64, order="C"))
+
+    pose = PoseArrays(*(own(getattr(poses, name)) for name in PoseArrays._fields))
+    lengths = np.ascontiguousarray(lengths, dtype=np.float64)
+    if decoded is None:
+        decoded = decode_compiled(poses, lengths)
+    dec = DecodedArrays(*(own(getattr(decoded, name)) for name in DecodedArrays._fields))
+    r = goals.rows.size
+    foot_in_world = np.empty((r, 2, 3))
+    over_chunks(foot_directions_rows, r, dec.positions, TABLES, foot_in_world,
+                rows_per_thread=LIGHT_ROWS_PER_THREAD)
+    b = Bodies(lengths=lengths, masses=np.ascontiguousarray(masses, dtype=np.float64),
+               com_fraction=np.ascontiguousarray(com_fraction, dtype=np.float64),
+               footprint=np.ascontiguousarray(goals.footprint, dtype=np.float64),
+               in_contact=np.ascontiguousarray(goals.in_contact, dtype=np.bool_),
+               com_desired=np.ascontiguousarray(goals.com_desired, dtype=np.float64),
+               com_on=np.ascontiguousarray(goals.com_on, dtype=np.bool_),
+               foot_in_world=foot_in_world,
+               iterations=np.ascontiguousarray(row_iterations, dtype=np.int64))
+    return SolveState(pose, dec, g, w, b, order)
+
+
+def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, com_fraction: F64,
+          settings: SolverSettings = DEFAULT_SETTINGS, decoded: DecodedPose | None = None,
+          in_place: bool = False) -> tuple[NormalizedPoses, I64, DecodedPose]:
+    """Compiled :func:`ecs_anim.solver.shell.solve`: the same arguments and results (the new
+    poses (r,), the iterations each character used (r,), the decoded result). ``goals.goal``
+    ends where goals following a point of their own body have moved, as there. With
+    ``in_place`` the given ``poses`` and ``decoded`` are the caller's scratch copies: they are
+    solved in place (and returned) instead of copied."""
+    state = prepare(poses, lengths, goals, masses, com_fraction, decoded, settings, in_place)
+    used = np.zeros(goals.rows.size, np.int64)
+    s = settings
+    wait_for_solver()  # a first run may be compiling solve_rows in another process
+    k = goals.k
+    over_chunks(solve_rows, used.shape[0], state.pose, state.dec, state.goals, state.winners,
+                state.bodies, TABLES, used, np.zeros(k), np.zeros(k, np.bool_), np.zeros(k),
+                np.zeros(k, np.bool_), float(s.tolerance_m), float(s.tolerance_rad),
+                float(s.com_tolerance_m), float(s.max_ccd_step_rad), float(s.root_gain),
+                float(s.stall_fraction), float(MAX_LEG_EXTENSION))
+    if state.goals.goal is not goals.goal:
+        goals.goal[state.order] = state.goals.goal
+    return (NormalizedPoses(**dict(zip(PoseArrays._fields, state.pose, strict=True))), used,
+            DecodedPose(*state.dec))
+
+
+assert CONTACT_PRIORITY == math.inf  # the kernel reads a planted foot's priority as inf

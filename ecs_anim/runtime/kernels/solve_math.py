@@ -1,0 +1,146 @@
+"""Scalar geometry of the compiled solver's steps, one limb or one point at a time.
+
+Each function mirrors the batched numpy function of :mod:`ecs_anim.solver.steps` (or of
+:mod:`ecs_anim.solver.shell`) with the same name, on tuples (3-vectors, frames as their three
+axes, :mod:`ecs_anim.runtime.kernels.vec`). Lengths in metres, angles in radians.
+
+The generic rotations they build on (``axis_angle``, ``rotation_toward``, ``axis_angle_of``) are
+in :mod:`ecs_anim.runtime.kernels.vec`.
+"""
+
+from __future__ import annotations
+
+import math
+
+from ecs_anim.runtime.kernels.vec import (
+    Frame,
+    Vec3,
+    add,
+    add_scaled,
+    axis_angle,
+    cross,
+    dot,
+    frame_from_axes,
+    jit,
+    norm,
+    normalize,
+    rotation_toward,
+    scale,
+    sub,
+    to_world,
+)
+
+
+@jit()
+def bring_within_reach(base: Vec3, limb_root: Vec3, goal: Vec3, reach: float,
+                       max_angle: float) -> Frame:
+    """Mirrors :func:`ecs_anim.solver.steps.bring_within_reach`: the smallest rotation about ``base``
+    bringing ``limb_root`` within ``reach`` of ``goal``, at most ``max_angle``."""
+    a_vec, b_vec = sub(limb_root, base), sub(goal, base)
+    a = norm(a_vec)
+    b = norm(b_vec)
+    angle_now = math.acos(min(max(dot(a_vec, b_vec) / max(a * b, 1e-12), -1.0), 1.0))
+    cos_enough = (a**2 + b**2 - reach**2) / max(2.0 * a * b, 1e-12)
+    angle_enough = math.acos(min(max(cos_enough, -1.0), 1.0))
+    turn = min(max(angle_now - angle_enough, 0.0), max_angle)
+    weight = turn / max(angle_now, 1e-12) if angle_now > 1e-12 else 0.0
+    return rotation_toward(a_vec, b_vec, math.pi, weight)
+
+
+@jit()
+def flexion(fraction: float, upper: float, lower: float) -> float:
+    """Mirrors :func:`ecs_anim.solver.steps.flexion`: middle-joint flexion (0 = straight)."""
+    span = fraction * (upper + lower)
+    return math.acos(min(max((span**2 - upper**2 - lower**2) / (2 * upper * lower), -1.0), 1.0))
+
+
+@jit()
+def point_in_limb(upper: float, lower: float, fraction: float, on_lower: bool, q: Vec3) -> Vec3:
+    """Mirrors :func:`ecs_anim.solver.steps.point_in_limb`: a limb point (bone coordinates ``q``) in
+    the half-plane frame, the root at the origin."""
+    span = min(max(fraction * (upper + lower), abs(upper - lower) + 1e-9), upper + lower)
+    z_e = (upper**2 - lower**2 + span**2) / (2.0 * span)
+    y_e = math.sqrt(max(upper**2 - z_e**2, 0.0))
+    if on_lower:
+        d = (0.0 / lower, -y_e / lower, (span - z_e) / lower)
+        origin = (0.0, y_e, z_e)
+    else:
+        d = (0.0 / upper, y_e / upper, z_e / upper)
+        origin = (0.0, 0.0, 0.0)
+    y_axis = (0.0, d[2], -d[1])
+    out = add(origin, (q[0] * 1.0, q[0] * 0.0, q[0] * 0.0))
+    out = add(out, scale(y_axis, q[1]))
+    return add(out, scale(d, q[2]))
+
+
+@jit()
+def reach_point(root: Vec3, limb2world: Frame, upper: float, lower: float, fraction: float,
+                on_lower: bool, q: Vec3, goal: Vec3,
+                max_extension: float) -> tuple[Frame, float, Vec3]:
+    """Mirrors :func:`ecs_anim.solver.steps.reach_point`: bring the limb point ``q`` onto ``goal``
+    (flexion first, the nearest to the current one, then the smallest turn about the root).
+    Returns (limb2world, fraction, the point's new position)."""
+    uu, ll = upper, lower
+    phi_now = flexion(fraction, uu, ll)
+    distance = norm(sub(goal, root))
+    wanted = (distance**2 - uu**2 - dot(q, q)) / (2.0 * uu)
+    r = math.hypot(q[1], q[2])
+    delta = math.atan2(q[1], q[2])
+    phi_lo = flexion(max_extension, uu, ll)
+    phi_hi = math.pi - 1e-3
+    spread = math.acos(min(max(wanted / max(r, 1e-12), -1.0), 1.0))
+    candidates = (delta + spread, delta - spread, delta, delta + math.pi, phi_lo, phi_hi, phi_now)
+    phi = phi_now
+    best = math.inf
+    two_pi = 2 * math.pi
+    for k in range(7):
+        wrapped = (candidates[k] + math.pi) % two_pi - math.pi
+        candidate = min(max(wrapped, phi_lo), phi_hi)
+        miss = abs(r * math.cos(candidate - delta) - wanted) + 1e-9 * abs(candidate - phi_now)
+        if miss < best:
+            best, phi = miss, candidate
+    new_fraction = fraction
+    if on_lower:
+        span = math.sqrt(max(uu**2 + ll**2 + 2 * uu * ll * math.cos(phi), 0.0))
+        new_fraction = span / (uu + ll)
+    local = point_in_limb(uu, ll, new_fraction, on_lower, q)
+    now = to_world(limb2world, local)
+    turn = rotation_toward(now, sub(goal, root), math.pi, 1.0)
+    frame = (to_world(turn, limb2world[0]), to_world(turn, limb2world[1]),
+             to_world(turn, limb2world[2]))
+    return frame, new_fraction, add(root, to_world(frame, local))
+
+
+@jit()
+def turn_about_axis(root: Vec3, axis_through: Vec3, point: Vec3, goal: Vec3) -> Frame:
+    """Mirrors :func:`ecs_anim.solver.steps.turn_about_axis`: the rotation about root ->
+    ``axis_through`` bringing ``point`` closest to ``goal`` (the identity on the axis)."""
+    k = normalize(sub(axis_through, root))
+    v, t = sub(point, root), sub(goal, root)
+    v = add_scaled(v, k, -dot(v, k))
+    t = add_scaled(t, k, -dot(t, k))
+    angle = math.atan2(dot(k, cross(v, t)), dot(v, t))
+    if not (norm(v) > 1e-9 and norm(t) > 1e-9):
+        angle = 0.0
+    return axis_angle(k, angle)
+
+
+@jit()
+def distal_in_lower(direction: Vec3) -> Frame:
+    """Mirrors ``solver_shell._distal_in_lower``: a foot / hand frame in its lower bone's frame
+    (z along ``direction``, x the limb normal)."""
+    return frame_from_axes(direction, (1.0, 0.0, 0.0), 2, 0, (0.0, 1.0, 0.0))
+
+
+@jit()
+def bone_coords(bone: int, fraction: float, offset: Vec3, upper: float, lower: float,
+                distal: float, distal_dir: Vec3) -> tuple[Vec3, bool]:
+    """Mirrors ``solver_shell._bone_coords`` for one point: its coordinates in its bone's frame
+    (a foot / hand point in the lower bone's, through ``distal_dir``) and whether it moves with
+    the lower bone. ``bone`` 0 upper, 1 lower, 2 distal."""
+    length = upper if bone == 0 else (lower if bone == 1 else distal)
+    q = (offset[0], offset[1], offset[2] + fraction * length)
+    if bone == 2:
+        q = to_world(distal_in_lower(distal_dir), q)
+        q = (q[0], q[1], q[2] + lower)
+    return q, bone >= 1

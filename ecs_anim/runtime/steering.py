@@ -1,0 +1,367 @@
+"""Steering: characters walk along paths, to goals, or at a heading and speed given each tick.
+
+Paper §4 splits the root into a *global* heading and a *local* oscillation. Steering turns only
+the global part: each tick the character's placement (the frame its motion's root path is laid
+out from) turns by a small angle about the foot it stands on, so from then on the motion's own
+root displacement is integrated rotated by the steered heading, while the pelvis keeps its own
+sway and the planted foot stays on its footprint (GroundAdapt keeps the locked footprint; the
+turn about it moves the motion's own ankle by nothing). A character with no foot down (a run's
+flight) turns about its root.
+
+The speed asked for is met by the playback rate (within :attr:`SteeringSettings.rate_min` ..
+``rate_max`` of the clip's own), then by the clip: a character with a locomotion set (``idle``,
+``walk``, ``run``) plays the one whose own speed covers the speed asked for, cross-faded at the
+middle of a stance of the same foot in both clips (that foot stays locked through the fade), or,
+to and from ``idle`` (both feet down), at any moment.
+
+Paths are followed by pure pursuit: the character heads for the point of its path a lookahead
+ahead of its progress along it; at the last waypoint it stops on its idle motion. A goal behind
+it (more than :attr:`SteeringSettings.behind_rad` off its heading) is turned to on the spot: the
+slowest steps and the fastest turn.
+
+All per-character state is in the store (``steer_*``, ``path_*``, ``gait*``); :func:`steer` works
+on every steered row at once (numpy over rows), called by MotionPlayback before it samples.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ecs_anim.core.morphology import leg_length
+from ecs_anim.motion.sampling import ClipBank, frame_position, loop_transform, rotate_xy, wrap_angle
+from ecs_anim.runtime.playback_queue import start_clips
+from ecs_anim.runtime.store import CharacterStore
+
+F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
+
+#: ``store.steer_mode``: not steered, heading and speed from code, following a path.
+STEER_OFF, STEER_HEADING, STEER_PATH = 0, 1, 2
+#: ``store.gait`` and the columns of ``store.gait_clip``.
+GAITS = ("idle", "walk", "run")
+IDLE, WALK, RUN = 0, 1, 2
+
+
+@dataclass(frozen=True)
+class SteeringSettings:
+    """How steered characters move (one set per simulation, ``Simulation.steering_settings``).
+
+    rate_min, rate_max : playback rates allowed (1 = the clip as captured); a speed outside
+        them picks another clip of the locomotion set, else is held at the limit.
+    rate_change_per_s : how fast the playback rate may change (per second).
+    max_turn_rad_s : fastest turn while walking or running (rad/s).
+    turn_in_place_rad_s : turn rate when the goal is behind (rad/s), at the slowest steps.
+    behind_rad : a heading error beyond this turns on the spot.
+    lookahead_s, lookahead_min_m : pure pursuit aims this far ahead along the path (seconds at
+        the current speed, at least ``lookahead_min_m`` metres).
+    gait_fade_s : cross-fade between clips of the locomotion set (s).
+    contact_release_s : during that fade, a foot that one of the clips lifts leaves its
+        footprint over this time (s), not at once.
+    run_hysteresis : a run goes back to a walk only below ``rate_max - run_hysteresis`` of the
+        walk's own speed (no switching back and forth at the threshold).
+    """
+
+    rate_min: float = 0.5
+    rate_max: float = 1.2
+    rate_change_per_s: float = 1.0
+    max_turn_rad_s: float = 1.5
+    turn_in_place_rad_s: float = 2.0
+    behind_rad: float = np.deg2rad(100.0)
+    lookahead_s: float = 0.5
+    lookahead_min_m: float = 0.4
+    gait_fade_s: float = 0.4
+    contact_release_s: float = 0.15
+    run_hysteresis: float = 0.15
+
+
+DEFAULT_STEERING = SteeringSettings()
+
+
+@dataclass(frozen=True)
+class GaitTable:
+    """What steering needs to know of each clip of a bank, from its root path and contacts.
+
+    travel_rad : (n_clips,) direction its root travels over a loop, in the clip's own frame
+        (radians from +x; the first frame's heading for a clip that stays in place).
+    speed_legs_s : (n_clips,) its own root speed over a loop, leg lengths per second.
+    mid_stance_s : (n_clips, 2) the middle of each foot's first contact [left, right] (s; NaN
+        for a foot never lifted or never down).
+    cycle_s : (n_clips,) its gait cycle (s): the clip's duration over the left foot's contacts.
+    """
+
+    travel_rad: F64
+    speed_legs_s: F64
+    mid_stance_s: F64
+    cycle_s: F64
+
+    @classmethod
+    def from_bank(cls, bank: ClipBank) -> GaitTable:
+        n_clips = bank.n_frames.shape[0]
+        shift = bank.loop_shift
+        duration = bank.duration_s(np.arange(n_clips))
+        moves = np.linalg.norm(shift, axis=1) > 1e-6
+        first_heading = bank.poses.root_heading[bank.start]
+        travel = np.where(moves, np.arctan2(shift[:, 1], shift[:, 0]), first_heading)
+        mid = np.full((n_clips, 2), np.nan)
+        cycle = np.full(n_clips, np.nan)
+        # Contact intervals per clip and foot (load time: a loop over clips is fine here).
+        for k in range(n_clips):
+            w = bank.contact_weight[bank.start[k]:bank.start[k] + bank.n_frames[k]] > 0.0
+            for side in range(2):
+                down = w[:, side]
+                if down.all() or not down.any():
+                    continue
+                # Rotate so the clip starts in the air; contacts are then whole runs of frames.
+                offset = int(np.argmin(down))
+                rolled = np.roll(down, -offset)
+                edges = np.diff(rolled.astype(np.int64))
+                starts = np.flatnonzero(edges == 1) + 1
+                ends = np.flatnonzero(edges == -1) + 1
+                if ends.size < starts.size:
+                    ends = np.append(ends, rolled.size)
+                first = ((starts[0] + ends[0] - 1) / 2 + offset) % bank.n_frames[k]
+                mid[k, side] = first / bank.fps[k]
+                if side == 0:
+                    cycle[k] = duration[k] / starts.size
+        return cls(travel, np.linalg.norm(shift, axis=1) / duration, mid, cycle)
+
+
+def motion_root_xy(bank: ClipBank, st: CharacterStore, rows: I64, fading: bool = False) -> F64:
+    """Where each character's motion puts its root this tick, before ground or COM adaptation
+    (world xy, metres (r, 2)): its clip's root at its clock, laid out from its placement (with
+    ``fading``: the clip being faded out, from its own placement)."""
+    if fading:
+        clip, time_s, loop = st.fade_clip[rows], st.fade_time_s[rows], st.fade_loop[rows]
+        xy, heading = st.fade_placement_xy[rows], st.fade_placement_heading[rows]
+    else:
+        clip, time_s, loop = st.clip[rows], st.clip_time_s[rows], st.loop[rows]
+        xy, heading = st.placement_xy[rows], st.placement_heading[rows]
+    i0, i1, w, loops, wraps = frame_position(bank, clip, time_s, loop)
+    first = bank.start[clip]
+    p0 = bank.poses.root_position[first, :2]
+
+    def at(frame: I64, n_loops: F64) -> F64:
+        angle, moved = loop_transform(bank, clip, n_loops)
+        return p0 + moved + rotate_xy(bank.poses.root_position[first + frame, :2] - p0, angle)
+
+    before = at(i0, loops)
+    root = before + w[:, None] * (at(i1, loops + wraps) - before)
+    leg = leg_length(st.lengths[rows])[:, None]
+    placed: F64 = rotate_xy(root * leg, heading) + xy
+    return placed
+
+
+def carry_fading_roots(st: CharacterStore, bank: ClipBank,
+                       playing: NDArray[np.bool_] | None = None) -> None:
+    """Blend root *velocities*, not positions, while a locomotion cross-fade runs: both clips'
+    placements are moved so that their roots are at the blend of the two this tick, so each
+    then moves on at its own speed and the blend's speed is the blend of theirs. (Blending
+    positions would bring a walk fading into idle back to where the fade began.)
+
+    Reads store.fade_s, fade_elapsed_s, fade_keeps_contacts, the clip and fade fields;
+    writes placement_xy, fade_placement_xy."""
+    carried = (st.fade_s > 0.0) & st.fade_keeps_contacts
+    rows = np.flatnonzero(carried if playing is None else carried & playing)
+    if rows.size == 0:
+        return
+    new, old = motion_root_xy(bank, st, rows), motion_root_xy(bank, st, rows, fading=True)
+    w = np.clip(st.fade_elapsed_s[rows] / np.maximum(st.fade_s[rows], 1e-9), 0.0, 1.0)[:, None]
+    blended = (1.0 - w) * old + w * new
+    st.placement_xy[rows] += blended - new
+    st.fade_placement_xy[rows] += blended - old
+
+
+#: Path segments searched each tick for the point nearest the character (from the one its
+#: progress, less half a metre, is on).
+NEAREST_SEGMENTS = 8
+
+
+def _path_progress(path: F64, cum_m: F64, rows: I64, count: I64, progress: F64,
+                   here: F64) -> tuple[F64, F64]:
+    """Arc length along each path of the point nearest ``here`` (r, 2), searched from half a
+    metre behind ``progress`` (r,) over :data:`NEAREST_SEGMENTS` segments and at most 2 m
+    ahead (so a path crossing itself is not cut short); never less than ``progress``. Returns
+    (that arc length (r,), the path's total length (r,)). ``path`` (n, M, 2) the store's paths
+    and ``cum_m`` (n, M) the arc length at each point, read at the store ``rows`` (r,), which
+    have ``count`` (r,) points (the first: where the character started)."""
+    r = rows[:, None]
+    last = (count - 2)[:, None]  # the last segment's index
+    first = np.sum(cum_m[rows, 1:] < (progress - 0.5)[:, None], axis=1)[:, None]
+    k = np.minimum(first + np.arange(NEAREST_SEGMENTS)[None], np.maximum(last, 0))
+    a, b = path[r, k], path[r, k + 1]
+    seg = b - a
+    seg_len = cum_m[r, k + 1] - cum_m[r, k]
+    t = np.clip(np.einsum("rmi,rmi->rm", here[:, None] - a, seg)
+                / np.maximum(seg_len**2, 1e-12), 0.0, 1.0)
+    s = cum_m[r, k] + t * seg_len
+    distance = np.linalg.norm(a + t[..., None] * seg - here[:, None], axis=-1)
+    distance = np.where(s <= progress[:, None] + 2.0, distance, np.inf)
+    best = np.argmin(distance, axis=1)
+    i = np.arange(best.size)
+    nearest = np.where(np.isfinite(distance[i, best]), s[i, best], progress)
+    return np.maximum(progress, nearest), cum_m[rows, count - 1]
+
+
+def _point_at(path: F64, cum_m: F64, rows: I64, count: I64, arc_m: F64) -> F64:
+    """The point (r, 2) at arc length ``arc_m`` (r,) along each path (clamped to its ends);
+    arguments as for :func:`_path_progress`."""
+    r = rows
+    k = np.minimum(np.sum(cum_m[rows, 1:] < arc_m[:, None], axis=1), np.maximum(count - 2, 0))
+    length = cum_m[r, k + 1] - cum_m[r, k]
+    u = np.clip((arc_m - cum_m[r, k]) / np.maximum(length, 1e-12), 0.0, 1.0)
+    point: F64 = path[r, k] + u[:, None] * (path[r, k + 1] - path[r, k])
+    return point
+
+
+def steer(st: CharacterStore, bank: ClipBank, gaits: GaitTable, settings: SteeringSettings,
+          dt: float, playing: NDArray[np.bool_] | None = None) -> None:
+    """One tick of steering for every steered character (``store.steer_mode > 0``), all at once:
+    path progress and the heading and speed wanted, the clip of the locomotion set to play (a
+    cross-fade started at matching foot phases), the playback rate, and the turn of the
+    placement about the planted foot.
+
+    Reads store.steer_*, path_* (path_cum_m the arc lengths), gait, gait_clip, clip, clip_time_s, loop, speed, fade_s,
+    placement_*, lengths, contact_weight, locked, footprint (the last tick's). Writes
+    steer_mode, steer_heading_rad, steer_speed_m_s (a path's end: stopped), path_progress_m,
+    gait, speed, placement_*, fade_placement_* (also :func:`carry_fading_roots`), and through
+    :func:`~ecs_anim.runtime.playback_queue.start_clips` the fade and clip fields.
+    ``playing`` (n,) bool: the characters MotionPlayback plays (None: all); the others are not
+    steered.
+    """
+    carry_fading_roots(st, bank, playing)
+    steered = st.steer_mode > STEER_OFF
+    rows = np.flatnonzero(steered if playing is None else steered & playing)
+    if rows.size == 0:
+        return
+    leg = leg_length(st.lengths[rows])
+    here = motion_root_xy(bank, st, rows)
+    clip = st.clip[rows]
+    travel = wrap_angle(st.placement_heading[rows] + gaits.travel_rad[clip])
+    own_walk = gaits.speed_legs_s[st.gait_clip[rows, WALK]] * leg
+    speed_now = st.speed[rows] * gaits.speed_legs_s[clip] * leg
+    wanted_speed = np.where(np.isnan(st.steer_speed_m_s[rows]), own_walk, st.steer_speed_m_s[rows])
+    wanted_heading = st.steer_heading_rad[rows].copy()
+
+    # Paths: progress, the lookahead point, the end.
+    on_path = st.steer_mode[rows] == STEER_PATH
+    if on_path.any():
+        p = rows[on_path]
+        count = st.path_len[p]
+        progress, total = _path_progress(st.path_xy, st.path_cum_m, p, count,
+                                         st.path_progress_m[p], here[on_path])
+        st.path_progress_m[p] = progress
+        lookahead = np.maximum(settings.lookahead_s * np.maximum(speed_now[on_path], 0.0),
+                               settings.lookahead_min_m)
+        aim = _point_at(st.path_xy, st.path_cum_m, p, count,
+                        np.minimum(progress + lookahead, total))
+        end = st.path_xy[p, count - 1]
+        to_end = np.linalg.norm(end - here[on_path], axis=1)
+        to_aim = aim - here[on_path]
+        wanted_heading[on_path] = np.where(np.linalg.norm(to_aim, axis=1) > 1e-6,
+                                           np.arctan2(to_aim[:, 1], to_aim[:, 0]), travel[on_path])
+        # Stop where a fade to idle, started now, ends on the last waypoint (the pelvis slows
+        # linearly over the fade: half the fade at the current speed).
+        remaining = np.minimum(total - progress, to_end)
+        arrived = (progress + lookahead >= total) & (
+            (remaining <= speed_now[on_path] * settings.gait_fade_s / 2) | (remaining < 0.05))
+        if arrived.any():
+            done = p[arrived]
+            st.steer_mode[done] = STEER_HEADING
+            st.steer_speed_m_s[done] = 0.0
+            st.steer_heading_rad[done] = travel[on_path][arrived]
+            wanted_heading[np.flatnonzero(on_path)[arrived]] = travel[on_path][arrived]
+            wanted_speed[np.flatnonzero(on_path)[arrived]] = 0.0
+    error = wrap_angle(wanted_heading - travel)
+    behind = (np.abs(error) > settings.behind_rad) & (wanted_speed > 0.0)
+    # The slowest steps while turning on the spot.
+    wanted_speed = np.where(behind, settings.rate_min * own_walk, wanted_speed)
+
+    _choose_gaits(st, bank, gaits, settings, rows, wanted_speed, leg, dt)
+
+    # Playback rate of the clip now playing, changed gradually.
+    clip = st.clip[rows]
+    own = gaits.speed_legs_s[clip] * leg
+    moving = st.gait[rows] != IDLE
+    rate = np.where(moving, np.clip(wanted_speed / np.maximum(own, 1e-9), settings.rate_min,
+                                    settings.rate_max), 1.0)
+    step = settings.rate_change_per_s * dt
+    st.speed[rows] = np.clip(rate, st.speed[rows] - step, st.speed[rows] + step)
+
+    # Turn: pure pursuit's curvature at the current speed, within the turn-rate limits; on the
+    # spot when the goal is behind. A standing character (idle) does not turn.
+    speed_now = st.speed[rows] * own
+    lookahead = np.maximum(settings.lookahead_s * speed_now, settings.lookahead_min_m)
+    turn_rate = np.clip(2.0 * speed_now * np.sin(error) / lookahead,
+                        -settings.max_turn_rad_s, settings.max_turn_rad_s)
+    turn_rate = np.where(behind, np.sign(error) * settings.turn_in_place_rad_s, turn_rate)
+    turn = np.where(moving, turn_rate * dt, 0.0)
+    turn = np.sign(turn) * np.minimum(np.abs(turn), np.abs(error))
+    _turn_placements(st, rows, turn, here)
+
+
+def _choose_gaits(st: CharacterStore, bank: ClipBank, gaits: GaitTable,
+                  settings: SteeringSettings, rows: I64, wanted_speed: F64, leg: F64,
+                  dt: float) -> None:
+    """Start the clip of the locomotion set that the speed asks for, where it differs from the
+    one playing, no fade is running, and the phase matches (see the module docstring)."""
+    clips = st.gait_clip[rows]
+    walk_own = gaits.speed_legs_s[clips[:, WALK]] * leg
+    has_idle, has_run = clips[:, IDLE] >= 0, clips[:, RUN] >= 0
+    current = st.gait[rows]
+    run_from = settings.rate_max * walk_own
+    run_until = (settings.rate_max - settings.run_hysteresis) * walk_own
+    wanted = np.where(has_run & ((wanted_speed > run_from)
+                                 | ((current == RUN) & (wanted_speed > run_until))), RUN, WALK)
+    wanted = np.where(has_idle & (wanted_speed <= 0.5 * settings.rate_min * walk_own), IDLE, wanted)
+    change = (wanted != current) & (st.fade_s[rows] == 0.0)
+    if not change.any():
+        return
+    r, old_gait, new_gait = rows[change], current[change], wanted[change]
+    old_clip = st.clip[r]
+    new_clip = clips[change][np.arange(r.size), new_gait]
+    time = st.clip_time_s[r]
+    step = dt * st.speed[r]
+    # Phase offset past each foot's middle of stance in the clip now playing.
+    cycle_old = gaits.cycle_s[old_clip]
+    past = (time[:, None] - gaits.mid_stance_s[old_clip]) % cycle_old[:, None]
+    crossed = past < step[:, None]  # that foot's mid-stance was passed during the last tick
+    foot = np.argmax(crossed, axis=1)
+    at_phase = crossed.any(axis=1)
+    # To or from idle (both feet down) any moment does; the walk starts at its left mid-stance.
+    free = (old_gait == IDLE) | (new_gait == IDLE)
+    go = at_phase | free
+    if not go.any():
+        return
+    pick = np.arange(r.size)
+    new_cycle = gaits.cycle_s[new_clip]
+    matched = (gaits.mid_stance_s[new_clip, foot]
+               + past[pick, foot] * new_cycle / np.where(np.isnan(cycle_old), 1.0, cycle_old))
+    start = np.where(new_gait == IDLE, 0.0,
+                     np.where(old_gait == IDLE, gaits.mid_stance_s[new_clip, 0], matched))
+    start = np.where(np.isfinite(start), start, 0.0)
+    r, start, new_clip, new_gait = r[go], start[go], new_clip[go], new_gait[go]
+    start_clips(st, bank, r, new_clip, start, np.full(r.size, settings.gait_fade_s),
+                np.ones(r.size, bool), keep_contacts=True)
+    # The new clip starts at the rate that keeps the root's speed (idle: as captured).
+    same_speed = st.speed[r] * gaits.speed_legs_s[old_clip[go]] / np.maximum(
+        gaits.speed_legs_s[new_clip], 1e-9)
+    st.speed[r] = np.where(new_gait == IDLE, 1.0,
+                           np.clip(same_speed, settings.rate_min, settings.rate_max))
+    st.gait[r] = new_gait
+
+
+def _turn_placements(st: CharacterStore, rows: I64, turn: F64, root_xy: F64) -> None:
+    """Turn each character's placement (and the fading clip's) by ``turn`` (r,) radians about
+    the feet it stands on (its locked footprints, weighted by their contact), or about its root
+    ``root_xy`` (r, 2) when no foot is down."""
+    w = st.contact_weight[rows] * st.locked[rows]
+    support = w.sum(axis=1)
+    feet = np.einsum("rs,rsi->ri", w, st.footprint[rows, :, :2]) / np.maximum(support, 1e-9)[:, None]
+    pivot = np.where((support > 0.0)[:, None], feet, root_xy)
+    for xy, heading in ((st.placement_xy, st.placement_heading),
+                        (st.fade_placement_xy, st.fade_placement_heading)):
+        xy[rows] = pivot + rotate_xy(xy[rows] - pivot, turn)
+        heading[rows] = heading[rows] + turn

@@ -1,0 +1,8 @@
+"""The constraint solver (paper §9): the shell that owns priorities, iterations, tolerance and
+the frame budget (:mod:`.shell`, :mod:`.budget`) and the analytic limb and CCD steps
+(:mod:`.steps`), as the numpy reference the compiled tick mirrors."""
+
+from ecs_anim.solver.budget import SolverCostModel, SolverReport
+from ecs_anim.solver.shell import SolverSettings, TickGoals, constrain
+
+__all__ = ["SolverCostModel", "SolverReport", "SolverSettings", "TickGoals", "constrain"]

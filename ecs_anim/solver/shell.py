@@ -1,0 +1,954 @@
+"""The constraint solver's shell (paper §9): goals, priorities, iterations, tolerance, budget.
+
+Per tick, :func:`tick_goals` turns the active constraints into fixed goals: each constraint's
+point as the motion has it (``P0``), its full goal (``G``: the target, the point at a distance
+from it, its projection into an area, a direction) and the goal blended by the activation
+weight (``P0 + w (G - P0)``: the ramp blends from the motion, so iterating never compounds it).
+Each foot becomes a goal of its leg (stay where ground adaptation put it, facing the same way):
+above every priority while in contact, below every priority while free. Goals aiming at a point
+of the same body follow that point as the body is solved.
+
+:func:`solve` then iterates, as the paper does, over the body's groups in the order legs, head,
+arms, trunk, then the root (``adaptRoot``: centre-of-mass control); each character stops when
+every goal of its own is within tolerance or has stalled and its centre of mass is back, or when
+the iteration budget is spent (so its result does not depend on who else is solved); a last pass over legs, head and
+arms leaves the feet on their footprints and the limbs on their goals after the final root move.
+Inside a group, the highest-priority goal is met analytically (limbs; neck and head as a
+two-segment chain) or by CCD rotations (trunk, about the spine's base, spread along the spine
+spline); a limb's second goal swivels the limb about the axis that keeps the first one. The trunk
+serves the highest-priority goal it can still improve, and a trunk move that would worsen a
+higher-priority goal is not made. The steps are pure functions over all characters at once
+(:mod:`ecs_anim.solver.steps`); this module owns the policy (:func:`constrain`: one tick of it). The
+solver works on the characters with an active constraint only.
+
+This numpy :func:`solve` is the reference: the tick runs the compiled
+:func:`ecs_anim.runtime.kernels.solve.solve` (same arguments, same results to 1e-9 m), which the tests
+compare with it.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ecs_anim.core.body_points import (
+    ABOVE_TRUNK,
+    HEAD,
+    LEG_L,
+    TRUNK,
+    point_positions,
+    segment_frames,
+)
+from ecs_anim.core.ground_adapt import MAX_LEG_EXTENSION, vertical_slack_for_reach
+from ecs_anim.core.morphology import centres_of_mass, leg_length
+from ecs_anim.core.normalized import (
+    SIDE_JOINTS,
+    SIDE_LENGTHS,
+    DecodedPose,
+    NormalizedPoses,
+    decode,
+    distal_frames,
+    two_bone_middle,
+)
+from ecs_anim.core.rotations import (
+    axis_angle,
+    frame_from_axes,
+    matrix_from_quat,
+    normalize,
+    quat_from_matrix,
+)
+from ecs_anim.core.skeleton import JOINT_INDEX as J
+from ecs_anim.core.skeleton import LENGTH_INDEX as L
+from ecs_anim.motion.constraint_table import (
+    AREA_BOX,
+    AREA_HALF_SPACE,
+    AREA_SPHERE,
+    KIND_AREA,
+    KIND_DISTANCE,
+    KIND_ORIENTATION,
+    TARGET_WORLD,
+    ConstraintTable,
+    winners,
+)
+from ecs_anim.solver.budget import BudgetCut, SolverCostModel, cut_to_budget
+from ecs_anim.solver.steps import (
+    bring_within_reach,
+    point_in_limb,
+    reach_point,
+    rotation_toward,
+    turn_about_axis,
+)
+
+F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """The shell's policy. ``iterations``: budget per tick; ``tolerance_m`` / ``tolerance_rad``:
+    a goal closer than this is met; ``com_tolerance_m``: the same for the horizontal centre of
+    mass; ``max_ccd_step_rad``: the largest turn one CCD step of the
+    trunk makes (spreads a lean over the iterations); ``root_gain``: how far past the
+    centre-of-mass error the root steps (the planted legs' mass does not follow it);
+    ``release_speed_m_s``: how fast a point a sphere held off the motion's place goes back to it
+    once the sphere lets it go (instead of in one tick); ``stall_fraction``: a goal has stalled
+    when its error no longer changes by the tolerance, or when it falls by less than this share
+    of itself in two iterations running (0 turns the second test off): an unreachable goal
+    creeping closer by a trunk step at a time no longer keeps the loop, and every character in
+    it, going.
+
+    The frame budget (:mod:`ecs_anim.solver.budget`): ``budget_ms`` the most a whole tick may
+    take, ms (None: no budget); when the tick would overrun it, the lowest priorities, then the
+    characters furthest from ``focus_in_world`` (a world point, m; None: the earlier rows are
+    cut first), get fewer iterations. ``cost_model``: the cost the cut is decided by (None:
+    calibrated every tick from the last tick's measured times)."""
+
+    iterations: int = 6
+    tolerance_m: float = 1e-4
+    tolerance_rad: float = 1e-3
+    com_tolerance_m: float = 1e-3
+    max_ccd_step_rad: float = np.radians(20.0)
+    root_gain: float = 1.25
+    release_speed_m_s: float = 1.5
+    stall_fraction: float = 0.05
+    budget_ms: float | None = None
+    focus_in_world: tuple[float, float, float] | None = None
+    cost_model: SolverCostModel | None = None
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.stall_fraction < 1.0:
+            raise ValueError(f"stall_fraction must be in [0, 1), got {self.stall_fraction}")
+        if self.budget_ms is not None and not (np.isfinite(self.budget_ms) and self.budget_ms > 0):
+            raise ValueError(f"budget_ms must be a positive number of milliseconds or None, "
+                             f"got {self.budget_ms}")
+        if self.focus_in_world is not None and not (
+                len(self.focus_in_world) == 3 and np.all(np.isfinite(self.focus_in_world))):
+            raise ValueError(f"focus_in_world must be a finite (x, y, z) point or None, "
+                             f"got {self.focus_in_world}")
+
+
+DEFAULT_SETTINGS = SolverSettings()
+CONTACT_PRIORITY = np.inf
+SHANK = (L["shank_l"], L["shank_r"])
+# The four limbs [leg_l, leg_r, arm_l, arm_r]: their group, joints (root, middle, end, distal
+# end), lengths (upper, lower, distal) and how far they may stretch.
+LIMB_OF_GROUP = np.array([0, 1, -1, 2, 3, -1])
+LIMB_J = tuple(np.array([J[f"{leg}_l"], J[f"{leg}_r"], J[f"{arm}_l"], J[f"{arm}_r"]])
+               for leg, arm in (("hip", "shoulder"), ("knee", "elbow"), ("ankle", "wrist"),
+                                ("toe", "hand")))
+LIMB_LENGTHS = tuple(np.array([L[f"{leg}_l"], L[f"{leg}_r"], L[f"{arm}_l"], L[f"{arm}_r"]])
+                     for leg, arm in (("thigh", "upper_arm"), ("shank", "forearm"), ("foot", "hand")))
+LIMB_EXTENSION = np.array([MAX_LEG_EXTENSION, MAX_LEG_EXTENSION, 1.0, 1.0])
+# Per group [leg_l, leg_r, head, arm_l, arm_r, trunk]: the root and middle joint of the limb the
+# trunk carries (-1: not carried), and the share of its length the trunk aims to bring a goal
+# within (a little bent, so the limb's own step then meets it).
+LIMB_ROOT_JOINT = np.array([-1, -1, J["neck"], J["shoulder_l"], J["shoulder_r"], -1])
+LIMB_MIDDLE_JOINT = np.array([-1, -1, J["head"], J["elbow_l"], J["elbow_r"], -1])
+LIMB_REACH_SHARE = 0.99
+
+
+@dataclass
+class TickGoals:
+    """The k goals of this tick for the r characters being solved (local rows 0..r-1).
+
+    Sorted by character (owner), each character's goals in the table's order, its two feet
+    last. rows (r,) store rows; owner (k,) local row; table_index (k,) (-1: a foot contact);
+    orientation (k,) bool; group, bone, segment, fraction, offset (k, 3), chain (bit mask),
+    priority; goal (k, 3): the weighted point goal, or the weighted unit direction of an
+    orientation; weight (k,); axis (k, 3) segment-frame axis of an orientation; footprint (r, 2, 3)
+    and in_contact (r, 2): the feet that must stay; com_desired (r, 3); com_on (r,) bool.
+    """
+
+    rows: I64
+    owner: I64
+    table_index: I64
+    orientation: NDArray[np.bool_]
+    group: I64
+    bone: I64
+    segment: I64
+    fraction: F64
+    offset: F64
+    chain: I64
+    priority: F64
+    goal: F64
+    weight: F64
+    axis: F64
+    footprint: F64
+    in_contact: NDArray[np.bool_]
+    com_desired: F64
+    com_on: NDArray[np.bool_]
+    on_self: I64  # (s,) goals aiming at a point of their own body: they follow it in the solve
+    self_segment: I64
+    self_fraction: F64
+    self_offset: F64
+    self_start: F64  # (s, 3) where that point was when the goals were made
+    held: NDArray[np.bool_]  # (k,) a sphere keeps this goal's point off the motion's place
+    # The frame budget's cut (None: the settings' iterations for every goal and character):
+    # (k,) the iterations after which a goal no longer keeps its character's loop going nor
+    # turns the trunk, (r,) the most iterations each character gets.
+    goal_iterations: I64 | None = None
+    row_iterations: I64 | None = None
+
+    @property
+    def k(self) -> int:
+        return int(self.owner.shape[0])
+
+
+def target_points(table: ConstraintTable, unconstrained: DecodedPose, previous: DecodedPose | None) -> F64:
+    """(m, 3) every constraint's target point this tick: world points as given; a point on the
+    constrained character itself from its pose before constraints (this tick); a point on
+    another character from that character's posture of the previous tick (this tick's
+    unconstrained pose on the first tick)."""
+    out = table.target_world.copy()
+    body = np.flatnonzero(table.target_kind != TARGET_WORLD)
+    if body.size:
+        rows = table.target_row[body]
+        seg, frac, off = table.target_segment[body], table.target_fraction[body], table.target_offset[body]
+        now = point_positions(unconstrained, rows, seg, frac, off)
+        before = now if previous is None else point_positions(previous, rows, seg, frac, off)
+        # A character added since the last tick has no posture there yet: its pose now.
+        before = np.where(np.isfinite(before), before, now)
+        out[body] = np.where((rows == table.owner[body])[:, None], now, before)
+    return out
+
+
+def _area_goal(table: ConstraintTable, idx: I64, point: F64, anchor: F64,
+               side: F64 | None = None) -> F64:
+    """Nearest point of each constraint's allowed region (inside or outside its area) to
+    ``point`` (k, 3); the area sits at ``anchor`` (k, 3). A point inside an area it must leave
+    goes out on the side of ``side`` (k, 3; default the point itself): through the box face,
+    or along the sphere's radius, nearest to it."""
+    shape, inside = table.area_shape[idx], table.area_inside[idx]
+    rel = point - anchor
+    rel_side = rel if side is None else side - anchor
+    low, high = table.area_low[idx], table.area_high[idx]
+    # Box: clamp inside; outside, push through the face nearest the side point.
+    in_box = np.clip(rel, low, high)
+    gaps = np.concatenate([rel_side - low, high - rel_side], axis=1)  # (k, 6) to each face
+    face = np.argmin(gaps, axis=1)
+    out_box = rel.copy()
+    axis = face % 3
+    k = np.arange(idx.size)
+    out_box[k, axis] = np.where(face < 3, low[k, axis], high[k, axis])
+    strictly_inside = np.all((rel > low) & (rel < high), axis=1)
+    box = np.where(inside[:, None], in_box, np.where(strictly_inside[:, None], out_box, rel))
+    # Sphere about the anchor.
+    distance = np.linalg.norm(rel, axis=1)
+    radius = table.area_radius[idx]
+    # A sphere to stay out of is left on the side point's side, and its far side is not reached
+    # through it: while the way from the side point to the point crosses the sphere, the goal
+    # stays on the surface facing the side point (a head behind a fist stays behind it).
+    way = rel - rel_side
+    along = np.clip(-np.sum(rel_side * way, axis=1) / np.maximum(np.sum(way * way, axis=1), 1e-18), 0.0, 1.0)
+    nearest_on_way = np.linalg.norm(rel_side + along[:, None] * way, axis=1)
+    leave = ~inside & ((distance < radius) | (nearest_on_way < radius))
+    side_len = np.linalg.norm(rel_side, axis=1)
+    toward = np.where((leave & (side_len > 1e-12))[:, None], rel_side, rel)
+    toward_len = np.linalg.norm(toward, axis=1)
+    direction = np.where((toward_len > 1e-12)[:, None], toward / np.maximum(toward_len, 1e-12)[:, None],
+                         [0.0, 0.0, 1.0])
+    sphere = direction * np.where(inside, np.minimum(distance, radius),
+                                  np.where(leave, radius, distance))[:, None]
+    # Half-space: the allowed side is where the normal points (the other side when outside).
+    normal = table.area_normal[idx] * np.where(inside, 1.0, -1.0)[:, None]
+    height = np.sum(rel * normal, axis=1)
+    half = rel - np.minimum(height, 0.0)[:, None] * normal
+    goal = np.select([(shape == AREA_BOX)[:, None], (shape == AREA_SPHERE)[:, None],
+                      (shape == AREA_HALF_SPACE)[:, None]], [box, sphere, half], rel)
+    allowed: F64 = anchor + goal
+    return allowed
+
+
+def constraint_errors(table: ConstraintTable, idx: I64, decoded: DecodedPose, targets: F64) -> F64:
+    """(k,) how far each constraint ``idx`` (k,) is from being met on ``decoded`` (every
+    character's pose), against this tick's ``targets`` (m, 3): position, the distance to the
+    target; distance, how far from ``distance_m`` of it; area, the distance to the allowed
+    region (0 anywhere in it); metres. Orientation: the angle (radians) from its direction.
+    The solver aims at one goal point per constraint, fixed for the tick; this is the measure a
+    user means (a point anywhere outside a sphere it must leave has met it)."""
+    owner = table.owner[idx]
+    seg, frac, off = table.segment[idx], table.fraction[idx], table.offset[idx]
+    point = point_positions(decoded, owner, seg, frac, off)
+    t = targets[idx]
+    kind = table.kind[idx]
+    gap = np.linalg.norm(point - t, axis=1)
+    err: F64 = np.where(kind == KIND_DISTANCE, np.abs(gap - table.distance_m[idx]), gap)
+    area = kind == KIND_AREA
+    if area.any():
+        allowed = _area_goal(table, idx[area], point[area], t[area])
+        err[area] = np.linalg.norm(point[area] - allowed, axis=1)
+    orient = kind == KIND_ORIENTATION
+    if orient.any():
+        o = np.flatnonzero(orient)
+        axis = np.einsum("kij,kj->ki", segment_frames(decoded, owner[o], seg[o]), table.axis[idx[o]])
+        look = table.target_kind[idx[o]] != TARGET_WORLD
+        direction = normalize(np.where(look[:, None], t[o] - point[o], t[o]))
+        err[o] = np.arccos(np.clip(np.sum(axis * direction, axis=1), -1.0, 1.0))
+    return err
+
+
+def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained: DecodedPose,
+               contact_weight: F64, com_control: NDArray[np.bool_], com_desired: F64,
+               previous: DecodedPose | None = None, max_release_m: float = np.inf) -> TickGoals | None:
+    """This tick's goals from the table, its weights (m,) and target points (m, 3) (all finite
+    where the weight is > 0), for the characters with an active constraint; None if there is
+    none. ``unconstrained`` is this tick's decoded pose of every character before constraints;
+    ``contact_weight`` (n, 2); ``com_control`` (n,); ``com_desired`` (n, 3); ``previous`` the
+    last tick's posture (None on the first tick).
+
+    A distance goal, and an area the point must leave, keep the point on the side of its target
+    where it was last tick: a head dodging a fist that has come past where the motion holds the
+    head goes on backwards instead of through the fist to its front. A point such a sphere held
+    off the motion's place last tick (``table.held``) and no longer holds goes back at most
+    ``max_release_m`` this tick."""
+    idx = np.flatnonzero(weight > 0)
+    if idx.size == 0:
+        return None
+    idx = idx[np.argsort(table.owner[idx], kind="stable")]  # by character, then table order
+    owner = table.owner[idx]
+    seg, frac, off = table.segment[idx], table.fraction[idx], table.offset[idx]
+    p0 = point_positions(unconstrained, owner, seg, frac, off)
+    was = p0 if previous is None else point_positions(previous, owner, seg, frac, off)
+    # No last tick for this point (a character added since, a frozen pose): the motion's side.
+    was = np.where(np.isfinite(was), was, p0)
+    kind = table.kind[idx]
+    t = targets[idx]
+    away = was - t
+    away_len = np.linalg.norm(away, axis=1, keepdims=True)
+    away_dir = np.where(away_len > 1e-9, away / np.maximum(away_len, 1e-12), [0.0, 0.0, 1.0])
+    goal = np.where((kind == KIND_DISTANCE)[:, None], t + table.distance_m[idx, None] * away_dir, t)
+    is_area = kind == KIND_AREA
+    if is_area.any():
+        goal[is_area] = _area_goal(table, idx[is_area], p0[is_area], t[is_area], was[is_area])
+    sphere_out = is_area & ~table.area_inside[idx] & (table.area_shape[idx] == AREA_SPHERE)
+    held = sphere_out & (np.linalg.norm(goal - p0, axis=1) > 1e-9)
+    released = sphere_out & table.held[idx] & ~held
+    if released.any():
+        back = p0[released] - was[released]
+        gap = np.linalg.norm(back, axis=1)
+        share = np.minimum(1.0, max_release_m / np.maximum(gap, 1e-12))
+        goal[released] = was[released] + share[:, None] * back
+        held[released] = gap > max_release_m
+    w = weight[idx]
+    # An area the motion already keeps (and a sphere it need not cross to get there) needs
+    # nothing: it must not claim its limb.
+    w = np.where(is_area & (np.linalg.norm(goal - p0, axis=1) < 1e-9), 0.0, w)
+    orient = kind == KIND_ORIENTATION
+    if orient.any():
+        frames = segment_frames(unconstrained, owner[orient], seg[orient])
+        axis0 = np.einsum("kij,kj->ki", frames, table.axis[idx[orient]])
+        look = table.target_kind[idx[orient]] != TARGET_WORLD
+        direction = normalize(np.where(look[:, None], t[orient] - p0[orient], t[orient]))
+        goal[orient] = direction
+    weighted = p0 + w[:, None] * (goal - p0)
+    if orient.any():
+        weighted[orient] = normalize(np.einsum(
+            "kij,kj->ki", rotation_toward(axis0, goal[orient], weight=w[orient]), axis0))
+    keep = w > 0
+    if not keep.any():
+        return None
+    idx, owner, w = idx[keep], owner[keep], w[keep]
+    rows, local = np.unique(owner, return_inverse=True)
+    r, n_user = rows.size, idx.size
+    # Each character's goals, then its two feet: where each user goal and each foot goes.
+    user_end = np.cumsum(np.bincount(local, minlength=r))
+    at_user = np.arange(n_user) + 2 * local
+    at_foot = (user_end + 2 * np.arange(r))[:, None] + np.arange(2)  # (r, 2)
+    at_foot = at_foot.reshape(-1)
+    k = n_user + 2 * r
+
+    def place(user: np.ndarray, foot: np.ndarray | float | int) -> np.ndarray:
+        out = np.empty((k, *user.shape[1:]), dtype=user.dtype)
+        out[at_user] = user
+        out[at_foot] = foot
+        return out
+
+    on_self = np.flatnonzero((table.target_kind[idx] != TARGET_WORLD) & (table.target_row[idx] == owner))
+    # Each foot keeps where ground adaptation put it: above every goal while in contact; below
+    # every goal otherwise (a free foot stays clear of the ground when the root moves, unless a
+    # constraint of that leg takes it).
+    ankles = unconstrained.positions[rows][:, list(SIDE_JOINTS["ankle"])]
+    in_contact = contact_weight[rows] > 0
+    sides = np.tile(np.arange(2), r)
+    foot_priority = np.where(in_contact.reshape(-1), CONTACT_PRIORITY, -CONTACT_PRIORITY)
+    return TickGoals(
+        rows=rows,
+        owner=place(local, np.repeat(np.arange(r), 2)),
+        table_index=place(idx, -1),
+        orientation=place(orient[keep], False),
+        group=place(table.group[idx], LEG_L + sides),
+        bone=place(table.bone[idx], 1),
+        segment=place(seg[keep], np.asarray(SHANK)[sides]),
+        fraction=place(frac[keep], 1.0),
+        offset=place(off[keep], 0.0),
+        chain=place(table.chain[idx], 1 << (LEG_L + sides)),
+        priority=place(table.priority[idx], foot_priority),
+        goal=place(weighted[keep], ankles.reshape(-1, 3)),
+        weight=place(w, 1.0),
+        axis=place(table.axis[idx], 0.0),
+        footprint=ankles,
+        in_contact=in_contact,
+        com_desired=com_desired[rows],
+        com_on=com_control[rows],
+        on_self=at_user[on_self],
+        self_segment=table.target_segment[idx[on_self]],
+        self_fraction=table.target_fraction[idx[on_self]],
+        self_offset=table.target_offset[idx[on_self]],
+        self_start=targets[idx[on_self]],
+        held=place(held[keep], False),
+    )
+
+
+def iteration_caps(goals: TickGoals, settings: SolverSettings) -> tuple[I64, I64]:
+    """(k,) the iterations each goal may keep its character's loop going, and (r,) the most
+    iterations each character gets: the frame budget's cut, or the settings' ``iterations``."""
+    full = int(settings.iterations)
+    goal_caps = (np.full(goals.k, full, np.int64) if goals.goal_iterations is None
+                 else goals.goal_iterations)
+    row_caps = (np.full(goals.rows.size, full, np.int64) if goals.row_iterations is None
+                else goals.row_iterations)
+    return goal_caps, row_caps
+
+
+def _errors(g: TickGoals, dec: DecodedPose) -> F64:
+    """(k,) distance of each point to its (weighted) goal of this tick (m), or the angle of each
+    orientation (rad): the solver's convergence measure (users see :func:`constraint_errors`)."""
+    point = point_positions(dec, g.owner, g.segment, g.fraction, g.offset)
+    goal = g.goal
+    err: F64 = np.linalg.norm(point - goal, axis=1)
+    if g.orientation.any():
+        o = np.flatnonzero(g.orientation)
+        axis = np.einsum("kij,kj->ki", segment_frames(dec, g.owner[o], g.segment[o]), g.axis[o])
+        err[o] = np.arccos(np.clip(np.sum(axis * goal[o], axis=1), -1.0, 1.0))
+    return err
+
+
+class _Solve:
+    """One tick's solve over r characters: the poses being changed and their decoded form,
+    kept in step by each group's update (a full decode happens once per iteration)."""
+
+    def __init__(self, poses: NormalizedPoses, lengths: F64, goals: TickGoals,
+                 masses: F64, com_fraction: F64, settings: SolverSettings,
+                 decoded: DecodedPose | None) -> None:
+        self.poses = NormalizedPoses(**{k: v.copy() for k, v in poses.arrays().items()})
+        self.lengths, self.g, self.s = lengths, goals, settings
+        self.masses, self.com_fraction = masses, com_fraction
+        self.r = int(goals.rows.size)
+        if decoded is None:
+            self.dec = decode(self.poses, lengths)
+        else:
+            self.dec = DecodedPose(**{k: getattr(decoded, k).copy() for k in (
+                "positions", "pelvis2world", "thorax2world", "head2world", "leg2world", "arm2world")})
+        g = goals
+        self.is_point = ~g.orientation
+        # Winners never change within a tick: computed once. Limbs by (row, limb), the head by row.
+        limb = LIMB_OF_GROUP[g.group]
+        on_limb = limb >= 0
+        self.first_limb = winners(g.owner, limb, g.priority, on_limb & self.is_point, self.r, 4)
+        taken = np.zeros(g.k, bool)
+        taken[self.first_limb[self.first_limb >= 0]] = True
+        self.second_limb = winners(g.owner, limb, g.priority, on_limb & self.is_point & ~taken, self.r, 4)
+        self.orient_limb = winners(g.owner, limb, g.priority, on_limb & g.orientation, self.r, 4)
+        zero = np.zeros(g.k, np.int64)
+        on_head = g.group == HEAD
+        self.first_head = winners(g.owner, zero, g.priority, on_head & self.is_point, self.r, 1)[:, 0]
+        self.orient_head = winners(g.owner, zero, g.priority, on_head & g.orientation, self.r, 1)[:, 0]
+        self.self_at = goals.self_start.copy()
+        p = self.dec.positions
+        self.foot_in_world = normalize(p[:, list(SIDE_JOINTS["toe"])] - p[:, list(SIDE_JOINTS["ankle"])])
+        # The characters still being solved: each stops when its own goals are met or stalled
+        # and its centre of mass is back (so its result does not depend on who else is solved).
+        self.active = np.ones(self.r, bool)
+        # Goals that stopped improving (unreachable): the trunk no longer turns for them, so an
+        # unreachable trunk goal ends where it stalled however long other goals keep the loop
+        # going (turning on, the bent spine would drift it by millimetres).
+        self.stalled = np.zeros(goals.k, bool)
+
+    def follow_own_targets(self) -> None:
+        """Goals aiming at a point of the same body move with that point as the body is solved
+        (the root and trunk move both hands when one holds the other)."""
+        g = self.g
+        if g.on_self.size == 0:
+            return
+        now = point_positions(self.dec, g.owner[g.on_self], g.self_segment, g.self_fraction, g.self_offset)
+        shift = now - self.self_at
+        self.self_at = now
+        orient = g.orientation[g.on_self]
+        g.goal[g.on_self[~orient]] += shift[~orient]
+
+    def _decode(self, rows: I64) -> None:
+        """Decode ``rows`` (local) again from their poses (after a trunk turn: a bent spine's
+        joints are exact once decoded); the others keep their decoded pose as their steps left
+        it."""
+        fresh = decode(self.poses.take(rows), self.lengths[rows])
+        for name in ("positions", "pelvis2world", "thorax2world", "head2world", "leg2world",
+                     "arm2world"):
+            getattr(self.dec, name)[rows] = getattr(fresh, name)
+
+    # --- limbs: analytic, all four at once (legs and arms do not move each other) ----------
+    def limbs(self) -> None:
+        """Each limb's highest-priority goal met analytically, its second by swivelling about
+        the axis that keeps the first; then the foot / hand orientation goal."""
+        dec, poses, g = self.dec, self.poses, self.g
+        frames = np.concatenate([dec.leg2world, dec.arm2world], axis=1)  # (r, 4, 3, 3)
+        fractions = np.concatenate([poses.leg_fraction, poses.arm_fraction], axis=1)
+        dirs = np.concatenate([poses.foot_dir, poses.hand_dir], axis=1)
+        rows, li = np.nonzero((self.first_limb >= 0) & self.active[:, None])
+        # Only limbs with something to do: a first goal not met, or a second one (which keeps
+        # the first exactly; a limb left alone keeps both as they are).
+        c = self.first_limb[rows, li]
+        met = np.linalg.norm(point_positions(dec, rows, g.segment[c], g.fraction[c], g.offset[c])
+                             - g.goal[c], axis=1) <= self.s.tolerance_m * 0.01
+        todo = ~met | (self.second_limb[rows, li] >= 0)
+        rows, li = rows[todo], li[todo]
+        if rows.size:
+            c = self.first_limb[rows, li]
+            u, ll, h = (self.lengths[rows, LIMB_LENGTHS[k][li]] for k in range(3))
+            root = dec.positions[rows, LIMB_J[0][li]]
+            q, on_lower = _bone_coords(g.bone[c], g.fraction[c], g.offset[c], u, ll, h, dirs[rows, li])
+            frame, new_fraction, point = reach_point(root, frames[rows, li], u, ll, fractions[rows, li],
+                                                     on_lower, q, g.goal[c], LIMB_EXTENSION[li])
+            two = np.flatnonzero(self.second_limb[rows, li] >= 0)
+            if two.size:
+                c2 = self.second_limb[rows[two], li[two]]
+                q2, lower2 = _bone_coords(g.bone[c2], g.fraction[c2], g.offset[c2], u[two], ll[two],
+                                          h[two], dirs[rows[two], li[two]])
+                local2 = point_in_limb(u[two], ll[two], new_fraction[two], lower2, q2)
+                p2 = root[two] + np.einsum("kij,kj->ki", frame[two], local2)
+                frame[two] = turn_about_axis(root[two], point[two], p2, g.goal[c2]) @ frame[two]
+            frames[rows, li] = frame
+            fractions[rows, li] = new_fraction
+            # A foot held where ground adaptation put it keeps its world direction too (its toes
+            # must not dip into the ground as the leg re-aims); a constrained leg's foot turns
+            # with the leg.
+            held = np.flatnonzero(g.table_index[c] < 0)
+            if held.size:
+                rh, lh = rows[held], li[held]
+                mid, end = two_bone_middle(frame[held], root[held], u[held], ll[held],
+                                           new_fraction[held] * (u[held] + ll[held]))
+                lower2world = distal_frames(frame[held], mid, end)
+                dirs[rh, lh] = np.einsum("kji,kj->ki", lower2world, self.foot_in_world[rh, lh])
+            self._limb_joints(rows, li, frames, fractions, dirs)
+        rows_o, li_o = np.nonzero((self.orient_limb >= 0) & self.active[:, None])
+        if rows_o.size:
+            # The foot / hand axis, in its lower bone's frame (the ankle / wrist stays).
+            mid = dec.positions[rows_o, LIMB_J[1][li_o]]
+            end = dec.positions[rows_o, LIMB_J[2][li_o]]
+            lower2world = distal_frames(frames[rows_o, li_o], mid, end)
+            goal = g.goal[self.orient_limb[rows_o, li_o]]
+            dirs[rows_o, li_o] = normalize(np.einsum("kji,kj->ki", lower2world, goal))
+            self._limb_joints(rows_o, li_o, frames, fractions, dirs)
+        if rows.size == 0 and rows_o.size == 0:
+            return
+        rows_c, li_c = np.concatenate([rows, rows_o]), np.concatenate([li, li_o])
+        parent = np.where((li_c < 2)[:, None, None], dec.pelvis2world[rows_c], dec.thorax2world[rows_c])
+        local = np.concatenate([poses.leg_frame, poses.arm_frame], axis=1)
+        local[rows_c, li_c] = quat_from_matrix(np.swapaxes(parent, -1, -2) @ frames[rows_c, li_c])
+        poses.leg_frame, poses.arm_frame = local[:, :2].copy(), local[:, 2:].copy()
+        poses.leg_fraction, poses.arm_fraction = fractions[:, :2].copy(), fractions[:, 2:].copy()
+        poses.foot_dir, poses.hand_dir = dirs[:, :2].copy(), dirs[:, 2:].copy()
+        dec.leg2world, dec.arm2world = frames[:, :2].copy(), frames[:, 2:].copy()
+
+    def _limb_joints(self, rows: I64, li: I64, frames: F64, fractions: F64, dirs: F64) -> None:
+        """Middle, end and distal joints of the given (row, limb) pairs, from their frames."""
+        dec = self.dec
+        u, ll, h = (self.lengths[rows, LIMB_LENGTHS[k][li]] for k in range(3))
+        frame = frames[rows, li]
+        mid, end = two_bone_middle(frame, dec.positions[rows, LIMB_J[0][li]], u, ll,
+                                   fractions[rows, li] * (u + ll))
+        lower2world = distal_frames(frame, mid, end)
+        dec.positions[rows, LIMB_J[1][li]] = mid
+        dec.positions[rows, LIMB_J[2][li]] = end
+        dec.positions[rows, LIMB_J[3][li]] = end + np.einsum(
+            "kij,kj->ki", lower2world, dirs[rows, li]) * h[:, None]
+
+    # --- head: neck and head as a two-segment chain; then its orientation ------------------
+    def head(self) -> None:
+        dec, poses, g = self.dec, self.poses, self.g
+        first, orient = self.first_head, self.orient_head
+        rows = np.flatnonzero(((first >= 0) | (orient >= 0)) & self.active)
+        if rows.size == 0:
+            return
+        neck, head = dec.positions[rows, J["neck"]], dec.positions[rows, J["head"]].copy()
+        head2world = dec.head2world[rows].copy()
+        has_point = first[rows] >= 0
+        p = np.flatnonzero(has_point)
+        if p.size:
+            # Neck and head are two segments from the neck's base, like a limb: the same
+            # analytic step (flexion at the skull base, then aim), exact where reachable.
+            c, rp = first[rows[p]], rows[p]
+            u, ll = self.lengths[rp, L["neck"]], self.lengths[rp, L["head"]]
+            top = dec.positions[rp, J["head_top"]]
+            thorax_forward = dec.thorax2world[rp][:, :, 0]
+            frame = frame_from_axes(top - neck[p], head[p] - neck[p], 2, 1,
+                                    fallback_secondary=thorax_forward)
+            lower = frame_from_axes(top - head[p], frame[:, :, 0], 2, 0,
+                                    fallback_secondary=frame[:, :, 1])
+            fraction = np.linalg.norm(top - neck[p], axis=1) / (u + ll)
+            on_head = g.bone[c] == 1
+            # The point in its bone's frame (offsets are given in the head's / thorax's frame).
+            along = g.fraction[c] * np.where(on_head, ll, u)
+            offset_world = np.einsum("kij,kj->ki", np.where(on_head[:, None, None], head2world[p],
+                                                            dec.thorax2world[rp]), g.offset[c])
+            upper_bone = frame_from_axes(head[p] - neck[p], frame[:, :, 0], 2, 0,
+                                         fallback_secondary=frame[:, :, 1])
+            bone = np.where(on_head[:, None, None], lower, upper_bone)
+            q = np.einsum("kji,kj->ki", bone, offset_world)
+            q[:, 2] += along
+            new_frame, new_fraction, _ = reach_point(neck[p], frame, u, ll, fraction, on_head, q, g.goal[c])
+            new_head, new_top = two_bone_middle(new_frame, neck[p], u, ll, new_fraction * (u + ll))
+            new_lower = frame_from_axes(new_top - new_head, new_frame[:, :, 0], 2, 0,
+                                        fallback_secondary=new_frame[:, :, 1])
+            # The head turns as its bone does (twist included, through the plane's normal).
+            head2world[p] = new_lower @ np.swapaxes(lower, -1, -2) @ head2world[p]
+            head[p] = new_head
+        o = np.flatnonzero(orient[rows] >= 0)
+        if o.size:
+            c = orient[rows[o]]
+            axis = np.einsum("kij,kj->ki", head2world[o], g.axis[c])
+            head2world[o] = rotation_toward(axis, g.goal[c]) @ head2world[o]
+        thorax_t = np.swapaxes(dec.thorax2world[rows], -1, -2)
+        neck_len = self.lengths[rows, L["neck"]]
+        poses.neck_dir[rows] = np.einsum("kij,kj->ki", thorax_t, (head - neck) / neck_len[:, None])
+        poses.head[rows] = quat_from_matrix(thorax_t @ head2world)
+        dec.head2world[rows] = head2world
+        dec.positions[rows, J["head"]] = head
+        dec.positions[rows, J["head_top"]] = head + np.einsum(
+            "kij,kj->ki", head2world, poses.head_top_dir[rows]) * self.lengths[rows, L["head"], None]
+
+    # --- trunk: CCD about the spine's base ----------------------------------------------------
+    def trunk(self) -> None:
+        dec, poses, g, s = self.dec, self.poses, self.g, self.s
+        carried = np.isin(g.group, ABOVE_TRUNK)
+        uses_trunk = (g.chain & (1 << TRUNK)) > 0
+        err = _errors(g, dec)
+        tol = np.where(g.orientation, s.tolerance_rad, s.tolerance_m)
+        candidates = uses_trunk & carried & (err > tol) & ~self.stalled & self.active[g.owner]
+        best = winners(g.owner, np.zeros(g.k, np.int64), g.priority, candidates, self.r, 1)[:, 0]
+        rows = np.flatnonzero(best >= 0)
+        if rows.size == 0:
+            return
+        c = best[rows]
+        base = dec.positions[rows, J["pelvis"]]
+        point = point_positions(dec, rows, g.segment[c], g.fraction[c], g.offset[c])
+        turn = rotation_toward(point - base, g.goal[c] - base, s.max_ccd_step_rad)
+        # A head or arm point its limb cannot reach from where the limb's root is: turn the trunk
+        # to bring that root (neck, shoulder) within reach rather than the point onto the goal.
+        limb_root = LIMB_ROOT_JOINT[g.group[c]]
+        far = (limb_root >= 0) & ~g.orientation[c]
+        if far.any():
+            f = np.flatnonzero(far)
+            root_at = dec.positions[rows[f], limb_root[f]]
+            middle_at = dec.positions[rows[f], LIMB_MIDDLE_JOINT[g.group[c[f]]]]
+            # A point on the limb's first bone (upper arm, neck) keeps its distance from the
+            # root: the root must come exactly that far from the goal. One further out reaches
+            # up to the first bone's length plus its distance from the middle joint.
+            first_bone = g.bone[c[f]] == 0
+            reach = np.where(
+                first_bone, np.linalg.norm(point[f] - root_at, axis=1),
+                LIMB_REACH_SHARE * (np.linalg.norm(middle_at - root_at, axis=1)
+                                    + np.linalg.norm(point[f] - middle_at, axis=1)))
+            short = np.linalg.norm(g.goal[c[f]] - root_at, axis=1) > reach
+            f = f[short]
+            turn[f] = bring_within_reach(base[f], root_at[short], g.goal[c[f]], reach[short],
+                                         s.max_ccd_step_rad)
+        o = g.orientation[c]
+        if o.any():
+            frames = segment_frames(dec, rows[o], g.segment[c[o]])
+            axis = np.einsum("kij,kj->ki", frames, g.axis[c[o]])
+            turn[o] = rotation_toward(axis, g.goal[c[o]], s.max_ccd_step_rad)
+        # Spread the turn along the spine (a third, two thirds, all of it at the neck); the thorax,
+        # and all it carries, turns by all of it.
+        spine_before, thorax_before = poses.spine_points[rows].copy(), poses.thorax[rows].copy()
+        pelvis_t = np.swapaxes(dec.pelvis2world[rows], -1, -2)
+        turn_in_pelvis = pelvis_t @ turn @ dec.pelvis2world[rows]
+        axis, angle = _axis_angle_of(turn_in_pelvis)
+        for k in range(3):  # the three spine control points
+            part = axis_angle(axis, angle * (k + 1) / 3.0)
+            poses.spine_points[rows, k] = np.einsum("kij,kj->ki", part, poses.spine_points[rows, k])
+        thorax = turn_in_pelvis @ matrix_from_quat(poses.thorax[rows])
+        poses.thorax[rows] = quat_from_matrix(thorax)
+        self._decode(rows)
+        # A move that worsens any higher-priority goal the trunk carries is undone. Measured on
+        # the decoded result: the vertebrae keep their lengths along the bent spline, so the
+        # neck, and all the trunk carries, does not end where a rigid turn about the pelvis
+        # would take it (a lower-priority goal's turns drifted an unreachable elbow's by 2.6 mm).
+        winner_priority = np.full(self.r, np.inf)
+        winner_priority[rows] = g.priority[c]
+        h = np.flatnonzero(carried & self.is_point & (g.priority > winner_priority[g.owner]))
+        if h.size:
+            point_h = point_positions(dec, g.owner[h], g.segment[h], g.fraction[h], g.offset[h])
+            worse = np.linalg.norm(point_h - g.goal[h], axis=1) > err[h] + s.tolerance_m
+            undo = np.isin(rows, g.owner[h][worse])
+            if undo.any():
+                back = rows[undo]
+                poses.spine_points[back], poses.thorax[back] = spine_before[undo], thorax_before[undo]
+                self._decode(back)
+
+    # --- root: adaptRoot, the centre of mass back over its desired place ----------------------
+    def root(self) -> F64:
+        """Move the root horizontally by the centre-of-mass error (times the gain); lower it if
+        a planted leg could no longer reach its footprint. Returns (r,) the error before (m)."""
+        dec, poses, g, s = self.dec, self.poses, self.g, self.s
+        com = centres_of_mass(dec.positions, self.masses, self.com_fraction)
+        error = g.com_desired[:, :2] - com[:, :2]
+        error[~g.com_on] = 0.0
+        size: F64 = np.linalg.norm(error, axis=1)
+        rows = np.flatnonzero((size > 0.1 * s.com_tolerance_m) & self.active)
+        if rows.size == 0:
+            return size
+        shift = np.zeros((rows.size, 3))
+        shift[:, :2] = error[rows] * s.root_gain
+        hips = dec.positions[rows][:, list(SIDE_JOINTS["hip"])] + shift[:, None]
+        lengths = self.lengths[rows]
+        reach = MAX_LEG_EXTENSION * (lengths[:, SIDE_LENGTHS["thigh"]] + lengths[:, SIDE_LENGTHS["shank"]])
+        needed = vertical_slack_for_reach(hips, g.footprint[rows], reach)
+        shift[:, 2] = np.min(np.where(g.in_contact[rows], np.minimum(needed, 0.0), 0.0), axis=1)
+        poses.root_position[rows] += shift / leg_length(lengths)[:, None]
+        # A translation of the root moves every joint by it (the legs re-aim next).
+        dec.positions[rows] += shift[:, None]
+        return size
+
+
+def _bone_coords(bone: I64, fraction: F64, offset: F64, upper: F64, lower: F64, distal: F64,
+                 distal_dir: F64) -> tuple[F64, NDArray[np.bool_]]:
+    """Limb points in their bone's frame (k, 3) (a foot / hand point in its lower bone's frame,
+    through the distal direction ``distal_dir`` (k, 3)), and whether they move with the lower
+    bone (k,). ``bone`` 0 upper, 1 lower, 2 distal; lengths (k,) metres."""
+    q = offset.copy()
+    q[:, 2] += fraction * np.where(bone == 0, upper, np.where(bone == 1, lower, distal))
+    on_distal = bone == 2
+    if on_distal.any():
+        frame = _distal_in_lower(distal_dir[on_distal])
+        q[on_distal] = np.einsum("kij,kj->ki", frame, q[on_distal])
+        q[on_distal, 2] += lower[on_distal]
+    return q, bone >= 1
+
+
+def _distal_in_lower(dirs: F64) -> F64:
+    """Frames (k, 3, 3) of a foot / hand in its lower bone's frame: z along ``dirs``, x the
+    limb normal (made orthogonal)."""
+    x = np.broadcast_to(np.array([1.0, 0.0, 0.0]), dirs.shape)
+    return frame_from_axes(dirs, x, 2, 0, fallback_secondary=np.broadcast_to([0.0, 1.0, 0.0], dirs.shape))
+
+
+def _axis_angle_of(rotation: F64) -> tuple[F64, F64]:
+    """Unit axis (k, 3) and angle (k,) of rotation matrices (angles below π)."""
+    axis = np.stack([rotation[:, 2, 1] - rotation[:, 1, 2], rotation[:, 0, 2] - rotation[:, 2, 0],
+                     rotation[:, 1, 0] - rotation[:, 0, 1]], axis=1)
+    sin2 = np.linalg.norm(axis, axis=1)
+    cos = np.trace(rotation, axis1=1, axis2=2) - 1.0
+    angle = np.arctan2(sin2, cos)
+    return normalize(axis), angle
+
+
+def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, com_fraction: F64,
+          settings: SolverSettings = DEFAULT_SETTINGS, decoded: DecodedPose | None = None,
+          in_place: bool = False) -> tuple[NormalizedPoses, I64, DecodedPose]:
+    """Solve this tick's goals for their characters (rows of ``poses``, ``lengths``, ``masses``
+    and ``com_fraction`` are ``goals.rows``; ``decoded`` is ``decode(poses, lengths)`` if the
+    caller has it). Returns the new poses, the iterations each character used (r,), and the
+    decoded result (joint positions (r, N_JOINTS, 3) and frames), on which :func:`constraint_errors` measures each
+    constraint. With ``in_place`` the given ``poses`` and ``decoded`` are the caller's scratch
+    copies, solved in place (as the compiled solve does; here they are copied all the same)."""
+    state = _Solve(poses, lengths, goals, masses, com_fraction, settings, decoded)
+    tol = np.where(goals.orientation, settings.tolerance_rad, settings.tolerance_m)
+    previous = np.full(goals.k, np.inf)
+    slow_before = np.zeros(goals.k, bool)
+    # Planted feet are re-planted after the loop: their error after a root move is not work left.
+    planted = goals.priority == CONTACT_PRIORITY
+    used = np.zeros(state.r, np.int64)
+    goal_caps, row_caps = iteration_caps(goals, settings)
+    for _ in range(int(row_caps.max(initial=0))):
+        used += state.active
+        # Legs, head, arms: the paper's order (legs and arms are independent, so one batch).
+        state.follow_own_targets()
+        state.limbs()
+        state.head()
+        state.trunk()
+        com_error = state.root()
+        err = _errors(goals, state.dec)
+        # A character is done where every goal of its own is met or has stalled (unchanged, or
+        # falling by less than a share of itself twice running: unreachable), and its centre of
+        # mass is back; done characters are no longer stepped. A stalled goal stays stalled.
+        first = np.isinf(previous)
+        unchanged = ~first & (np.abs(previous - err) < settings.tolerance_m)
+        slow = ~first & (previous - err < settings.stall_fraction * np.where(first, 0.0, previous))
+        cut = used[goals.owner] >= goal_caps  # the frame budget gave it no more iterations
+        goal_open = ((err > tol) & ~unchanged & ~(slow & slow_before) & ~state.stalled & ~planted
+                     & ~cut)
+        stepped = state.active[goals.owner]
+        state.stalled |= (err > tol) & ~goal_open & stepped
+        previous = np.where(stepped, err, previous)
+        slow_before = np.where(stepped, slow, slow_before)
+        open_rows = np.zeros(state.r, bool)
+        open_rows[goals.owner[goal_open]] = True
+        state.active &= (open_rows | (com_error > settings.com_tolerance_m)) & (used < row_caps)
+        if not state.active.any():
+            break
+    # The last root move shifted the limbs: re-plant the feet, re-aim the head and the arms
+    # (every character).
+    state.active[:] = True
+    state.follow_own_targets()
+    state.limbs()
+    state.head()
+    return state.poses, used, state.dec
+
+
+@dataclass
+class TickResult:
+    """What :func:`constrain` decided this tick, for the system to write back.
+
+    weight (m,) each constraint's activation (0 where switched off); broken (b,) constraints
+    whose target is not finite, to switch off; error (m,) how far each active constraint is from
+    being met on the result (:func:`constraint_errors`; NaN while inactive); held (m,) a sphere
+    kept the point off the motion's place; goals, rows (r,), poses (r,), solved (decoded
+    result (r,)) and iterations (r,) of the characters solved (None / empty when none); cut:
+    what the frame budget cut (None: nothing to decide: no budget, no model or no goal);
+    solve_s: the wall time the solve itself took (s), for the cost model's calibration."""
+
+    weight: F64
+    broken: I64
+    error: F64
+    held: NDArray[np.bool_]
+    goals: TickGoals | None = None
+    rows: I64 = field(default_factory=lambda: np.zeros(0, np.int64))
+    poses: NormalizedPoses | None = None
+    solved: DecodedPose | None = None
+    iterations: I64 | None = None
+    cut: BudgetCut | None = None
+    solve_s: float = 0.0
+
+
+class TickSteps(NamedTuple):
+    """The computations one tick of :func:`constrain` is made of, each a function of the
+    signature of its numpy reference here: ``goals`` (:func:`tick_goals`), ``solve``
+    (:func:`solve`), ``errors`` (:func:`constraint_errors`) and ``centres``
+    (:func:`ecs_anim.core.morphology.centres_of_mass`). :data:`NUMPY_STEPS` are those references;
+    ConstraintSolve runs the compiled ones (:mod:`ecs_anim.runtime.kernels.goals`,
+    :func:`ecs_anim.runtime.kernels.solve.solve`)."""
+
+    goals: Callable[..., TickGoals | None]
+    solve: Callable[..., tuple[NormalizedPoses, I64, DecodedPose]]
+    errors: Callable[[ConstraintTable, I64, DecodedPose, F64], F64]
+    centres: Callable[[F64, F64, F64], F64]
+
+
+NUMPY_STEPS = TickSteps(tick_goals, solve, constraint_errors, centres_of_mass)
+
+
+def focus_distances(positions: F64, focus_in_world: tuple[float, float, float] | None) -> F64:
+    """(r,) each character's pelvis distance from the focus point (m); zeros without one.
+    ``positions`` (r, N_JOINTS, 3)."""
+    if focus_in_world is None:
+        return np.zeros(positions.shape[0])
+    distance: F64 = np.linalg.norm(positions[:, J["pelvis"]] - np.asarray(focus_in_world), axis=1)
+    return distance
+
+
+def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
+              unconstrained: DecodedPose | None,
+              lengths: F64, contact_weight: F64, com_control: NDArray[np.bool_], com_target_xy: F64,
+              masses: F64, com_fraction: F64, previous: DecodedPose | None,
+              settings: SolverSettings, max_release_m: float, steps: TickSteps,
+              model: SolverCostModel | None = None,
+              expected_iterations: I64 | None = None) -> TickResult:
+    """One tick of ConstraintSolve's policy over every character (n rows): the targets, the
+    constraints switched off (a target not finite), the desired centre of mass (the motion's own,
+    or ``com_target_xy`` (n, 2) where finite), the goals, the frame budget's cut, the solve of
+    the characters with an active constraint, and every active constraint's error on the
+    result; ``steps`` computes the goals, the solve, the errors and the centres of mass (the
+    numpy references, :data:`NUMPY_STEPS`, or the compiled ones).
+
+    ``weight`` (m,) this tick's activations; ``poses`` (n,) this tick's, solved in place when
+    every character is solved; ``unconstrained`` the decoded ``poses`` (None only when no weight
+    is above 0), this call's own: its solved rows are overwritten with the result; masses and com_fraction (n, S); ``previous`` the last tick's posture (None on the
+    first). With ``settings.budget_ms`` and a ``model`` (the
+    settings' own ``cost_model`` first), :func:`ecs_anim.solver.budget.cut_to_budget` decides
+    the iterations; ``expected_iterations`` (n,) what each character took last tick (0: not
+    solved: the settings' ``iterations``)."""
+    m = table.m
+    error = np.full(m, np.nan)
+    held = np.zeros(m, bool)
+    none = np.zeros(0, np.int64)
+    if not np.any(weight > 0):
+        return TickResult(weight, none, error, held)
+    if unconstrained is None:
+        raise ValueError("constrain: the decoded poses are needed when a constraint is active")
+    targets = target_points(table, unconstrained, previous)
+    broken = none
+    if not np.isfinite(targets).all():  # (one test of the whole array first: the usual case)
+        broken = np.flatnonzero((weight > 0) & ~np.all(np.isfinite(targets), axis=1))
+    if broken.size:
+        weight = weight.copy()
+        weight[broken] = 0.0
+        targets[broken] = 0.0
+    own = steps.centres(unconstrained.positions, masses, com_fraction)
+    if np.isfinite(com_target_xy).any():  # (usually none is given: all NaN)
+        given = np.isfinite(com_target_xy).all(axis=1)
+        own[given, :2] = com_target_xy[given]
+    goals = steps.goals(table, weight, targets, unconstrained, contact_weight, com_control, own,
+                        previous, max_release_m)
+    active = np.flatnonzero(weight > 0)
+    if goals is None:  # only areas the motion already keeps
+        error[active] = steps.errors(table, active, unconstrained, targets)
+        return TickResult(weight, broken, error, held)
+    rows = goals.rows
+    every_row = rows.size == lengths.shape[0]
+    cut = None
+    model = settings.cost_model or model
+    if settings.budget_ms is not None and model is not None:
+        expected = (np.full(rows.size, settings.iterations, np.int64) if expected_iterations is None
+                    else expected_iterations[rows])
+        expected = np.where(expected > 0, expected, settings.iterations)
+        cut = cut_to_budget(goals, expected,
+                            focus_distances(unconstrained.positions[rows], settings.focus_in_world),
+                            settings.budget_ms, model, settings.iterations)
+        goals.goal_iterations, goals.row_iterations = cut.goal_iterations, cut.row_iterations
+    # The solve works on copies of its rows; when every character is solved, on the poses and
+    # the decoded poses themselves (the store's pose of this tick, which the result replaces
+    # anyway, and this call's own), and on the bodies as they are (it only reads them).
+    start = time.perf_counter()
+    if every_row:
+        solved_poses, iterations, solved = steps.solve(
+            poses, lengths, goals, masses, com_fraction, settings, unconstrained, True)
+    else:
+        solved_poses, iterations, solved = steps.solve(
+            poses.take(rows), lengths[rows], goals, masses[rows], com_fraction[rows], settings,
+            unconstrained.take(rows), True)
+    solve_s = time.perf_counter() - start
+    user = goals.table_index >= 0
+    held[goals.table_index[user]] = goals.held[user]
+    # Every active constraint's error on the result (an area the motion already kept was not a
+    # goal, but another constraint's move may have taken its point out).
+    result = unconstrained
+    if solved.positions is not result.positions:  # not solved in place
+        for name in fields(DecodedPose):
+            getattr(result, name.name)[rows] = getattr(solved, name.name)
+    # Targets on the character's own body moved with it during the solve: read them again.
+    on_body = table.target_kind != TARGET_WORLD
+    on_own_body = on_body & (table.target_row == table.owner) if on_body.any() else on_body
+    if on_own_body.any():
+        targets = np.where(on_own_body[:, None], target_points(table, result, previous), targets)
+    error[active] = steps.errors(table, active, result, targets)
+    return TickResult(weight, broken, error, held, goals, rows, solved_poses, solved, iterations,
+                      cut, solve_s)
+
+
+def scatter(all_poses: NormalizedPoses, rows: I64, part: NormalizedPoses) -> NormalizedPoses:
+    """``all_poses`` with ``rows`` replaced by ``part`` (new arrays)."""
+    arrays = {}
+    for name, value in all_poses.arrays().items():
+        new = value.copy()
+        new[rows] = getattr(part, name)
+        arrays[name] = new
+    return NormalizedPoses(**arrays)
+
+
+__all__ = ["SolverSettings", "TickGoals", "TickResult", "constrain", "iteration_caps", "scatter",
+           "solve", "target_points", "tick_goals"]
