@@ -3,10 +3,11 @@
 The blocks of one file run in order in one namespace (a page may build on its earlier blocks),
 with the repository root as the working folder, as a reader pastes them into Python there. A
 failure names the file and the line of the block's first code line; the traceback's lines are
-the Markdown file's own. Nothing is skipped silently: the README's "From Python" blocks are run,
-with their printed output checked, by ``tests/test_hardening_pipeline.py::
-test_the_readme_python_examples_run``, and this file checks that test is still there and that
-no other README block goes unrun.
+the Markdown file's own. Nothing is skipped silently: every block of the README (it has none
+now: its examples moved to docs/quickstart.md) runs here. docs/quickstart.md's "From Python"
+blocks run here with the other pages' and again, with their printed output checked, in
+``tests/test_hardening_pipeline.py::test_the_readme_python_examples_run``; this file checks
+that that test is still there and still reads that section.
 """
 
 from __future__ import annotations
@@ -18,8 +19,8 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 FENCE = re.compile(r"^```python[ \t]*\n(.*?)^```[ \t]*$", re.DOTALL | re.MULTILINE)
-#: The README's section whose blocks another test runs (and checks their output).
-README_SECTION_RUN_ELSEWHERE = "## From Python"
+#: The page and section whose blocks another test also runs (and checks their output).
+PAGE_RUN_ELSEWHERE, SECTION_RUN_ELSEWHERE = "docs/quickstart.md", "## From Python"
 RUN_ELSEWHERE_BY = ("tests/test_hardening_pipeline.py", "def test_the_readme_python_examples_run")
 
 
@@ -49,16 +50,14 @@ def run_blocks(path: Path, blocks: list[tuple[int, str]], monkeypatch: pytest.Mo
                                  f"{type(exc).__name__}: {exc}") from exc
 
 
-def readme_blocks() -> tuple[list[tuple[int, str]], list[tuple[int, str]]]:
-    """The README's blocks: (those run here, those of the section run elsewhere)."""
-    text = (REPO / "README.md").read_text(encoding="utf-8")
-    start = text.index(README_SECTION_RUN_ELSEWHERE)
+def section_blocks(path: Path, heading: str) -> list[tuple[int, str]]:
+    """The ```python blocks of ``path`` under ``heading``, up to the next ``## `` heading."""
+    text = path.read_text(encoding="utf-8")
+    start = text.index(f"\n{heading}\n")
     end = text.find("\n## ", start + 1)
     end = len(text) if end < 0 else end
-    blocks = python_blocks(text)
     start_line, end_line = text.count("\n", 0, start) + 1, text.count("\n", 0, end) + 1
-    elsewhere = [(line, code) for line, code in blocks if start_line <= line <= end_line]
-    return [b for b in blocks if b not in elsewhere], elsewhere
+    return [(line, code) for line, code in python_blocks(text) if start_line <= line <= end_line]
 
 
 def test_there_are_docs_with_python_blocks_and_none_is_missed():
@@ -97,12 +96,26 @@ def test_every_python_block_of_the_docs_runs(path: Path, monkeypatch: pytest.Mon
 
 def test_the_readmes_python_blocks_run_here_or_in_the_test_that_checks_their_output(
         monkeypatch: pytest.MonkeyPatch):
-    here, elsewhere = readme_blocks()
+    # The README's blocks (none since its examples moved to docs/), every one, run here.
+    run_blocks(REPO / "README.md", python_blocks((REPO / "README.md").read_text(encoding="utf-8")),
+               monkeypatch)
+    # The quickstart's "From Python" blocks: run by the docs-page test above, and by the test
+    # that checks their printed output, which must still be there and read that section.
+    page = REPO / PAGE_RUN_ELSEWHERE
+    assert page in DOCS, f"{PAGE_RUN_ELSEWHERE} has no ```python block"
+    elsewhere = section_blocks(page, SECTION_RUN_ELSEWHERE)
+    assert len(elsewhere) == 3, (
+        f"{PAGE_RUN_ELSEWHERE} {SECTION_RUN_ELSEWHERE!r}: {len(elsewhere)} ```python blocks, "
+        "3 expected (tests/test_hardening_pipeline.py and tests/test_solver_budget.py run them)")
     path, test = RUN_ELSEWHERE_BY
-    assert test in (REPO / path).read_text(encoding="utf-8"), (
-        f"{path} no longer runs the README's {README_SECTION_RUN_ELSEWHERE!r} blocks: run them here")
-    assert elsewhere, f"the README has no ```python block in {README_SECTION_RUN_ELSEWHERE!r}"
-    run_blocks(REPO / "README.md", here, monkeypatch)
+    source = (REPO / path).read_text(encoding="utf-8")
+    assert test in source, (
+        f"{path} no longer runs {PAGE_RUN_ELSEWHERE}'s {SECTION_RUN_ELSEWHERE!r} blocks: "
+        "check their output here")
+    body = source.split(test, 1)[1].split("\ndef ", 1)[0]
+    assert '"quickstart.md"' in body and f'"{SECTION_RUN_ELSEWHERE}"' in body, (
+        f"{path}::{test.removeprefix('def ')} no longer reads {PAGE_RUN_ELSEWHERE}'s "
+        f"{SECTION_RUN_ELSEWHERE!r}")
 
 
 def test_a_failing_block_is_named_by_file_and_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
