@@ -15,7 +15,7 @@ com_control, com_target_xy, segment_mass_kg, segment_com_fraction; the constrain
 Writes: store.poses (solved characters), com_desired, goals, solved (the decoded result of
 the solved characters, which PostureConvert takes instead of decoding them again); table.held;
 table.enabled, table.weight, table.error (how far each active constraint is from being met on
-the result, :func:`~ecs_anim.solver.shell.constraint_errors`; NaN while inactive).
+the result, :func:`~ecs_anim.solver.goals.constraint_errors`; NaN while inactive).
 """
 
 from __future__ import annotations

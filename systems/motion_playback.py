@@ -1,16 +1,14 @@
-"""MotionPlayback: steer, sample each character's clip(s) in normalized space, advance the clocks.
+"""MotionPlayback: sample each character's clip(s) in normalized space, advance the clocks.
+
+The clip each plays was chosen before it this tick (QueuedClips, Steering, ApplyReactions).
 
 Rows: characters with a MotionPlayer.
-Reads: store.clip, clip_time_s, speed, fade_speed, loop, fade_*, queue_*, placement_*,
-fade_placement_*, lengths (leg length: the root path's unit); for steered characters
-(:func:`ecs_anim.runtime.steering.steer`) steer_mode, steer_heading_rad, steer_speed_m_s, path_xy,
-path_len, path_cum_m, path_progress_m, gait, gait_clip, and the last tick's contact_weight,
-locked, footprint; the clip bank.
+Reads: store.clip, clip_time_s, speed, fade_speed, loop, fade_clip, fade_time_s, fade_loop,
+fade_s, fade_elapsed_s, fade_keeps_contacts, placement_*, fade_placement_*, lengths (leg
+length: the root path's unit), the last tick's contact_weight (through a cross-fade); the clip
+bank.
 Writes: store.poses (placed in the world; first writer each tick), store.contact_weight,
-store.clip_time_s, fade_time_s, fade_elapsed_s, fade_s; on a clip change (through
-:func:`ecs_anim.runtime.playback_queue.start_next_clips`) clip, loop, queue_head, placement_*, fade_*,
-fade_keeps_contacts, fade_speed, locked; steering writes speed (the playback rate), placement_*,
-fade_placement_*, steer_mode, steer_heading_rad, steer_speed_m_s, path_progress_m, gait.
+store.clip_time_s, fade_time_s, fade_elapsed_s, fade_s.
 """
 
 from __future__ import annotations
@@ -32,8 +30,6 @@ from ecs_anim.runtime.kernels.playback import (
     sample_table_rows,
     writable_poses,
 )
-from ecs_anim.runtime.playback_queue import start_next_clips
-from ecs_anim.runtime.steering import steer
 from ecs_anim.runtime.system_base import System
 from ecs_anim.solver.shell import scatter
 
@@ -46,18 +42,11 @@ class MotionPlayback(System):
     :meth:`run_numpy`), into the store's pose arrays in place."""
 
     query = (MotionPlayer,)
-    reads = ("clip", "clip_time_s", "speed", "fade_speed", "loop", "fade_clip", "fade_time_s", "fade_loop",
-             "fade_s", "fade_elapsed_s", "queue_clip", "queue_fade_s", "queue_loop", "queue_head",
-             "queue_len", "placement_xy", "placement_heading", "fade_placement_xy",
-             "fade_placement_heading", "lengths", "steer_mode", "steer_heading_rad",
-             "steer_speed_m_s", "path_xy", "path_len", "path_cum_m", "path_progress_m", "gait",
-             "gait_clip",
-             "contact_weight", "locked", "footprint")
-    writes = ("poses", "contact_weight", "clip_time_s", "fade_time_s", "fade_elapsed_s", "fade_s",
-              "clip", "loop", "queue_head", "placement_xy", "placement_heading",
-              "fade_placement_xy", "fade_placement_heading", "fade_clip", "fade_loop", "locked",
-              "fade_keeps_contacts", "fade_speed", "speed", "steer_mode", "steer_heading_rad",
-              "steer_speed_m_s", "path_progress_m", "gait")
+    reads = ("clip", "clip_time_s", "speed", "fade_speed", "loop", "fade_clip", "fade_time_s",
+             "fade_loop", "fade_s", "fade_elapsed_s", "fade_keeps_contacts", "placement_xy",
+             "placement_heading", "fade_placement_xy", "fade_placement_heading", "lengths",
+             "contact_weight")
+    writes = ("poses", "contact_weight", "clip_time_s", "fade_time_s", "fade_elapsed_s", "fade_s")
 
     def __init__(self, sim: Simulation):
         super().__init__(sim)
@@ -65,8 +54,6 @@ class MotionPlayback(System):
 
     def run(self, dt: float) -> None:
         st, bank = self.sim.store, self.sim.bank
-        self._start_queued_clips()
-        self._steer(dt)
         release_step = dt / self.sim.steering_settings.contact_release_s
         rows = self.rows()
         leg = self.sim.leg_length()
@@ -105,8 +92,6 @@ class MotionPlayback(System):
         """The numpy reference of :meth:`run` (the tests compare the two)."""
         st, bank = self.sim.store, self.sim.bank
         previous = st.contact_weight.copy()
-        self._start_queued_clips()
-        self._steer(dt)
         poses = self._placed(sample(bank, st.clip, st.clip_time_s, st.loop),
                              st.placement_xy, st.placement_heading)
         weights = sample_table(bank, bank.contact_weight, st.clip, st.clip_time_s, st.loop)
@@ -149,12 +134,6 @@ class MotionPlayback(System):
         weights: NDArray[np.float64] = np.where(keep[:, None], kept, 0.0)
         return weights
 
-    def _steer(self, dt: float) -> None:
-        """Steered characters' heading, speed and clip for this tick (:func:`steer`)."""
-        sim = self.sim
-        steer(sim.store, sim.bank, sim.gait_table(), sim.steering_settings, dt,
-              None if self.all_rows() else self.in_rows())
-
     def _advance_clocks(self, dt: float) -> None:
         st = self.sim.store
         if self.all_rows():
@@ -183,18 +162,3 @@ class MotionPlayback(System):
         poses.root_position = root
         poses.root_heading = poses.root_heading + heading
         return poses
-
-    def _start_queued_clips(self) -> None:
-        """Start the next queued clip ``crossfade_s`` before the current one ends (not while a
-        cross-fade is still running), for all characters due at once."""
-        st, bank = self.sim.store, self.sim.bank
-        pending = st.queue_head < st.queue_len
-        if not pending.any():
-            return
-        head = np.minimum(st.queue_head, st.queue_clip.shape[1] - 1)
-        next_fade = st.queue_fade_s[np.arange(st.n), head]
-        due = pending & (st.fade_s == 0.0) & (st.clip_time_s >= bank.duration_s(st.clip) - next_fade)
-        if not self.all_rows():
-            due &= self.in_rows()
-        if due.any():
-            start_next_clips(st, bank, np.flatnonzero(due))

@@ -2,7 +2,7 @@
 
 Reads: store.positions (and whatever the viewer draws). Writes: nothing in the simulation.
 The viewer plugs in as ``sim.renderer``: an object with ``draw(sim)``, called once per tick
-(``ecs_anim.apps.viewer.window.SceneSource`` notes that a new posture is ready; the window draws it
+(``ecs_anim.apps.viewer.scene_view.SceneSource`` notes that a new posture is ready; the window draws it
 at its own rate, reading the store: STYLE 8).
 """
 

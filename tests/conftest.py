@@ -1,15 +1,30 @@
-"""Shared fixtures: the real captured clips in ../shared/mocap (never copied into the repo)."""
+"""Shared paths and fixtures: the repository's folders, the real captured clips in
+../shared/mocap (never copied into the repo), and the shipped motions imported once per run.
+
+Test files live in folders mirroring the package (tests/core, tests/io/bvh, ...); pytest puts
+this folder on sys.path, so every test imports ``conftest`` and the helper modules of
+``tests/support`` by their top-level names. No test imports another test file.
+"""
 
 from __future__ import annotations
 
+import copy
 import os
+from functools import cache
 from pathlib import Path
 
 import pytest
 
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.motion.clip import NormalizedMotion, save_nmo
+
+#: The repository's root, and its folders the tests read.
 REPO = Path(__file__).resolve().parents[1]
+TESTS_DIR = REPO / "tests"
+DATA_DIR = TESTS_DIR / "data"
+SCENARIOS_DIR = REPO / "scenarios"
+MOTIONS_DIR = SCENARIOS_DIR / "motions"
 MOCAP_DIR = Path(os.environ.get("ECS_ANIM_MOCAP", REPO.parent / "shared" / "mocap"))
-MOTIONS_DIR = REPO / "scenarios" / "motions"
 
 
 def mocap_files(pattern: str = "*.bvh") -> list[Path]:
@@ -28,3 +43,43 @@ def mocap_params(pattern: str = "*.bvh") -> list[object]:
         return [pytest.param(None, marks=pytest.mark.skip(
             reason=f"real captured clips not found at {MOCAP_DIR} (../shared/mocap)"))]
     return [pytest.param(f, id=f.name) for f in files]
+
+
+# --- the shipped motions (scenarios/motions) ----------------------------------------------------
+
+
+@cache
+def _imported(name: str) -> NormalizedMotion:
+    return import_bvh(MOTIONS_DIR / f"{name}.bvh")
+
+
+def shipped_motion(name: str) -> NormalizedMotion:
+    """``scenarios/motions/<name>.bvh`` imported: a fresh copy each call (the import itself runs
+    once per session), so a test may change what it is given."""
+    return copy.deepcopy(_imported(name))
+
+
+@pytest.fixture(scope="module")
+def walk() -> NormalizedMotion:
+    """The shipped walk, one copy per test module (its tests share it)."""
+    return shipped_motion("walk")
+
+
+@pytest.fixture(scope="module")
+def idle() -> NormalizedMotion:
+    """The shipped idle, one copy per test module (its tests share it)."""
+    return shipped_motion("idle")
+
+
+@pytest.fixture(scope="module")
+def motions() -> dict[str, NormalizedMotion]:
+    """A locomotion set: the shipped idle, walk and run, one copy per test module."""
+    return {name: shipped_motion(name) for name in ("idle", "walk", "run")}
+
+
+@pytest.fixture(scope="session")
+def walk_nmo(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The shipped walk saved as ``walk.nmo`` (read only: a test edits a copy of it)."""
+    path = tmp_path_factory.mktemp("nmo") / "walk.nmo"
+    save_nmo(import_bvh(MOTIONS_DIR / "walk.bvh"), path)
+    return path

@@ -410,7 +410,8 @@ def _bench_bvh(path: Path, repeat: int) -> dict[str, Any]:
 def _bench_c3d(path: Path, repeat: int) -> dict[str, Any]:
     """Best-of-``repeat`` timings of one C3D import: reading the markers, then joint centres,
     encoding and contacts."""
-    from ecs_anim.io.c3d.importing import canonical_clip_c3d, read_c3d
+    from ecs_anim.io.c3d.importing import canonical_clip_c3d
+    from ecs_anim.io.c3d.reading import read_c3d
     from ecs_anim.io.importing import normalize_clip
 
     reads, rest = [], []
@@ -446,7 +447,9 @@ def child_main(argv: list[str] | None = None) -> int:
     time one size and print JSON; ``first-tick [--threads T]``: print :data:`FIRST_TICK_DONE`
     and the phases' seconds as soon as the first tick is done."""
     from ecs_anim.runtime import kernels
+    from ecs_anim.runtime.allocator import keep_freed_memory
 
+    keep_freed_memory()  # as the command line does: the tick's arrays reuse freed memory
     parser = argparse.ArgumentParser(prog="python -m ecs_anim.apps.bench")
     parser.add_argument("what", choices=["size", "first-tick"])
     parser.add_argument("characters", nargs="?", type=int, default=8)

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ecs_anim.core.errors import did_you_mean
+from ecs_anim.core.errors import UsageError, did_you_mean
 from ecs_anim.core.normalized import DecodedPose
 from ecs_anim.core.rotations import frame_from_axes
 from ecs_anim.core.skeleton import BONE_JOINTS, JOINTS, LENGTH_INDEX, LENGTHS
@@ -109,7 +109,7 @@ def body_point(name: str, fraction: float | None = None,
     given; a segment without one is its middle (0.5)."""
     if name in JOINT_AS_POINT and ((fraction is None and not segment) or name not in SEGMENTS):
         if fraction is not None:
-            raise ValueError(f"{name!r} is a joint; give fraction with a segment "
+            raise UsageError(f"{name!r} is a joint; give fraction with a segment "
                              f"(e.g. {JOINT_AS_POINT[name]!r})")
         seg, fraction = JOINT_AS_POINT[name], 1.0
     elif as_target and name in TARGET_ONLY_JOINTS and fraction is None:
@@ -118,17 +118,17 @@ def body_point(name: str, fraction: float | None = None,
         seg, fraction = name, 0.5 if fraction is None else fraction
     else:
         if name in LENGTH_INDEX or name in J:
-            raise ValueError(f"{name!r} belongs to the root (pelvis), which only centre-of-mass "
+            raise UsageError(f"{name!r} belongs to the root (pelvis), which only centre-of-mass "
                              f"control moves; constrain another point")
         names = sorted(set(SEGMENTS) | set(JOINT_AS_POINT)
                        | (set(TARGET_ONLY_JOINTS) | set(TARGET_ONLY_SEGMENTS) if as_target else set()))
         hint = did_you_mean(name, names)
-        raise ValueError(f"unknown body point {name!r}{hint} (segments: {', '.join(sorted(SEGMENTS))}; "
+        raise UsageError(f"unknown body point {name!r}{hint} (segments: {', '.join(sorted(SEGMENTS))}; "
                          f"or a joint: {', '.join(sorted(JOINT_AS_POINT))})")
     if not (np.isfinite(fraction) and 0.0 <= fraction <= 1.0):
-        raise ValueError(f"fraction along {seg!r} must be in [0, 1], got {fraction}")
+        raise UsageError(f"fraction along {seg!r} must be in [0, 1], got {fraction}")
     if not all(np.isfinite(v) and abs(v) <= 10.0 for v in offset_m):
-        raise ValueError(f"offset_m {offset_m} must be finite and within 10 m")
+        raise UsageError(f"offset_m {offset_m} must be finite and within 10 m")
     x, y, z = (float(v) for v in offset_m)
     return BodyPoint(LENGTH_INDEX[seg], float(fraction), (x, y, z))
 

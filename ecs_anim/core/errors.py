@@ -29,6 +29,12 @@ class EcsAnimError(Exception):
     """
 
 
+class UsageError(EcsAnimError, ValueError):
+    """A Python API call given a value it cannot take (an unknown preset, a stature out of
+    range, a negative duration): one line saying what was expected and what was found. Also a
+    ValueError, so code that checks values with ``except ValueError`` keeps working."""
+
+
 class InputError(EcsAnimError):
     """A malformed input file: ``path:line: message`` (line omitted when unknown)."""
 

@@ -12,6 +12,8 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from ecs_anim.core.errors import UsageError
+
 F64 = NDArray[np.float64]
 
 #: Kind codes of a ground part in a :class:`GroundDescription`.
@@ -33,7 +35,7 @@ class Ground(Protocol):
 
 def _finite(name: str, *values: float) -> None:
     if not all(np.isfinite(v) for v in values):
-        raise ValueError(f"{name}: values must be finite, got {values}")
+        raise UsageError(f"{name}: values must be finite, got {values}")
 
 
 @dataclass(frozen=True)
@@ -82,7 +84,7 @@ class Stairs:
     def __post_init__(self) -> None:
         _finite("stairs", self.rise_m, self.run_m, self.start_m, self.heading_deg, self.z_m)
         if self.run_m <= 0 or self.steps < 0:
-            raise ValueError(f"stairs: run_m must be > 0 and steps >= 0, got {self.run_m}, {self.steps}")
+            raise UsageError(f"stairs: run_m must be > 0 and steps >= 0, got {self.run_m}, {self.steps}")
 
     def height(self, xy: F64) -> F64:
         a = np.radians(self.heading_deg)
@@ -104,7 +106,7 @@ class Bumps:
     def __post_init__(self) -> None:
         _finite("bumps", self.amplitude_m, self.wavelength_x_m, self.wavelength_y_m, self.z_m)
         if self.wavelength_x_m <= 0 or self.wavelength_y_m <= 0:
-            raise ValueError("bumps: wavelengths must be > 0")
+            raise UsageError("bumps: wavelengths must be > 0")
 
     def height(self, xy: F64) -> F64:
         return self.z_m + self.amplitude_m * np.sin(2 * np.pi * xy[..., 0] / self.wavelength_x_m) \
@@ -128,13 +130,13 @@ class HeightGrid:
     def __post_init__(self) -> None:
         h = np.asarray(self.heights_m, dtype=np.float64)
         if h.ndim != 2 or h.shape[0] < 2 or h.shape[1] < 2:
-            raise ValueError(f"height grid: heights must be a 2-D array of at least 2x2 values "
+            raise UsageError(f"height grid: heights must be a 2-D array of at least 2x2 values "
                              f"(rows along y), got shape {h.shape}")
         if not np.all(np.isfinite(h)):
-            raise ValueError("height grid: heights must be finite")
+            raise UsageError("height grid: heights must be finite")
         _finite("height grid", self.cell_m, self.origin_x_m, self.origin_y_m)
         if self.cell_m <= 0:
-            raise ValueError(f"height grid: cell_m must be > 0, got {self.cell_m}")
+            raise UsageError(f"height grid: cell_m must be > 0, got {self.cell_m}")
         object.__setattr__(self, "_h", h)
 
     def height(self, xy: F64) -> F64:

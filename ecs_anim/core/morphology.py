@@ -22,7 +22,7 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
-from ecs_anim.core.errors import InputError, compose_yaml, did_you_mean
+from ecs_anim.core.errors import InputError, UsageError, compose_yaml, did_you_mean
 from ecs_anim.core.skeleton import (
     BONE_JOINTS,
     JOINT_INDEX,
@@ -135,14 +135,14 @@ class Morphology:
     def __post_init__(self) -> None:
         lengths = np.asarray(self.lengths, dtype=np.float64)
         if lengths.shape != (N_LENGTHS,):
-            raise ValueError(f"Morphology.lengths must have shape ({N_LENGTHS},), got {lengths.shape}")
+            raise UsageError(f"Morphology.lengths must have shape ({N_LENGTHS},), got {lengths.shape}")
         if not np.all(np.isfinite(lengths)) or np.any(lengths <= 0.0):
             bad = [n for n, v in zip(LENGTHS, lengths, strict=False) if not (np.isfinite(v) and v > 0)]
-            raise ValueError(f"Morphology {self.name!r}: lengths must be positive, not {bad}")
+            raise UsageError(f"Morphology {self.name!r}: lengths must be positive, not {bad}")
         if self.sex not in DE_LEVA_1996:
-            raise ValueError(f"Morphology sex must be 'male' or 'female', got {self.sex!r}")
+            raise UsageError(f"Morphology sex must be 'male' or 'female', got {self.sex!r}")
         if not (np.isfinite(self.mass_kg) and self.mass_kg > 0):
-            raise ValueError(f"Morphology mass_kg must be positive, got {self.mass_kg}")
+            raise UsageError(f"Morphology mass_kg must be positive, got {self.mass_kg}")
         object.__setattr__(self, "lengths", lengths)
 
     def __getitem__(self, name: str) -> float:
@@ -174,8 +174,14 @@ class Morphology:
         stays ``stature_m``. ``mass_kg`` defaults to a body-mass index of 22.
         """
         if not (np.isfinite(stature_m) and MIN_STATURE_M <= stature_m <= MAX_STATURE_M):
-            raise ValueError(f"stature must be between {MIN_STATURE_M:g} and {MAX_STATURE_M:g} m, "
-                             f"got {stature_m}")
+            hint = " (centimetres? statures are in metres)" if \
+                MIN_STATURE_M <= stature_m / 100 <= MAX_STATURE_M else ""
+            raise UsageError(f"stature must be between {MIN_STATURE_M:g} and {MAX_STATURE_M:g} m, "
+                             f"got {stature_m}{hint}")
+        if proportions not in ("adult", "child"):
+            raise UsageError(f"proportions must be 'adult' or 'child', got {proportions!r}")
+        if not (np.isfinite(leg_scale) and 0.5 <= leg_scale <= 1.5):
+            raise UsageError(f"leg_scale must be between 0.5 and 1.5, got {leg_scale}")
         table = CHILD_PROPORTIONS if proportions == "child" else ADULT_PROPORTIONS
         p = dict(table)
         if leg_scale != 1.0:
@@ -202,7 +208,7 @@ class Morphology:
         spec = PRESET_SPECS.get(name)
         if spec is None:
             hint = did_you_mean(name, list(PRESET_SPECS), parenthesized=True)
-            raise KeyError(f"unknown morphology preset {name!r}{hint}; presets: "
+            raise UsageError(f"unknown morphology preset {name!r}{hint}; presets: "
                            f"{', '.join(PRESET_SPECS)}")
         return cls.from_stature(name=name, **spec)
 
@@ -284,7 +290,7 @@ def with_lengths_m(base: Morphology, lengths_m: dict[str, float]) -> Morphology:
             lengths[LENGTH_INDEX[n]] = float(value)
     body = base.with_lengths(lengths)
     if not MIN_STATURE_M <= body.stature <= MAX_STATURE_M:
-        raise ValueError(f"these lengths make a body {body.stature:.2f} m tall; expected 0.3 to 3 m")
+        raise UsageError(f"these lengths make a body {body.stature:.2f} m tall; expected 0.3 to 3 m")
     return body
 
 

@@ -1,6 +1,6 @@
 """Batched rotation helpers.
 
-Conventions (pinned by ``tests/test_rotations.py``): rotation matrices act on column vectors
+Conventions (pinned by ``tests/core/test_rotations.py``): rotation matrices act on column vectors
 (``v_in_world = pelvis2world @ v_in_pelvis``); a frame's matrix holds its axes as columns;
 quaternions are unit, scalar-last ``(x, y, z, w)``; angles are radians unless a name says
 ``_deg``. Every function takes any number of leading batch axes.

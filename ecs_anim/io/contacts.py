@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ecs_anim.core.errors import UsageError
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.motion.constraints import Activation, ConstraintSpec
 
@@ -72,9 +73,9 @@ class ContactThresholds:
             if value is None and name == "speed_mps":
                 continue
             if not (isinstance(value, (int, float)) and np.isfinite(value) and value >= 0):
-                raise ValueError(f"contact threshold {name} must be a finite number >= 0, got {value}")
+                raise UsageError(f"contact threshold {name} must be a finite number >= 0, got {value}")
         if not (np.isfinite(self.release) and self.release >= 1):
-            raise ValueError(f"contact threshold release must be >= 1, got {self.release}")
+            raise UsageError(f"contact threshold release must be >= 1, got {self.release}")
 
 
 #: The automatic speed threshold: this fraction of the point's moving speed (90th percentile)...

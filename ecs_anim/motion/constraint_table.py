@@ -34,6 +34,7 @@ from ecs_anim.core.body_points import (
     BodyPoint,
     body_point,
 )
+from ecs_anim.core.errors import UsageError
 from ecs_anim.motion.constraints import Activation, ConstraintSpec, ramp_weight
 
 F64 = NDArray[np.float64]
@@ -69,23 +70,23 @@ class Area:
 
     def __post_init__(self) -> None:
         if self.shape not in AREA_NAMES:
-            raise ValueError(f"unknown area shape {self.shape!r}; shapes: {', '.join(AREA_NAMES)}")
+            raise UsageError(f"unknown area shape {self.shape!r}; shapes: {', '.join(AREA_NAMES)}")
         # Lists are welcome (an .nmo header is JSON): stored as 3-tuples of floats.
         for name in ("low_m", "high_m", "normal"):
             value = tuple(float(v) for v in getattr(self, name))
             if len(value) != 3:
-                raise ValueError(f"area {name} must have 3 values, got {len(value)}")
+                raise UsageError(f"area {name} must have 3 values, got {len(value)}")
             object.__setattr__(self, name, value)
         object.__setattr__(self, "radius_m", float(self.radius_m))
         values = self.low_m + self.high_m + self.normal + (self.radius_m,)
         if not all(np.isfinite(v) for v in values):
-            raise ValueError("area values must be finite")
+            raise UsageError("area values must be finite")
         if self.shape == "box" and any(lo > hi for lo, hi in zip(self.low_m, self.high_m, strict=False)):
-            raise ValueError(f"box low_m {self.low_m} must be below high_m {self.high_m}")
+            raise UsageError(f"box low_m {self.low_m} must be below high_m {self.high_m}")
         if self.shape == "sphere" and self.radius_m <= 0:
-            raise ValueError("sphere radius_m must be > 0")
+            raise UsageError("sphere radius_m must be > 0")
         if self.shape == "half_space" and np.linalg.norm(self.normal) < 1e-9:
-            raise ValueError("half_space normal must not be zero")
+            raise UsageError("half_space normal must not be zero")
 
 
 @dataclass(frozen=True)
@@ -99,11 +100,11 @@ class Target:
 
     def __post_init__(self) -> None:
         if (self.world_m is None) == (self.row is None):
-            raise ValueError("give either a world target or a character")
+            raise UsageError("give either a world target or a character")
         if self.row is not None and self.point is None:
-            raise ValueError("a character target needs the body point to aim at")
+            raise UsageError("a character target needs the body point to aim at")
         if self.world_m is not None and not all(np.isfinite(v) for v in self.world_m):
-            raise ValueError(f"target {self.world_m} must be finite")
+            raise UsageError(f"target {self.world_m} must be finite")
 
 
 def _empty(dtype: type, *trailing: int) -> Callable[[], NDArray[Any]]:

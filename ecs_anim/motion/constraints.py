@@ -13,6 +13,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ecs_anim.core.errors import UsageError
+
 KINDS = ("foot_contact", "position", "orientation", "distance", "area")
 
 
@@ -30,13 +32,13 @@ class Activation:
     def __post_init__(self) -> None:
         values = (self.start_s, self.stop_s, self.ease_in_s, self.ease_out_s)
         if not all(np.isfinite(v) for v in values):
-            raise ValueError(f"activation times must be finite, got {values}")
+            raise UsageError(f"activation times must be finite, got {values}")
         if self.stop_s < self.start_s:
-            raise ValueError(f"activation stop_s {self.stop_s} is before start_s {self.start_s}")
+            raise UsageError(f"activation stop_s {self.stop_s} is before start_s {self.start_s}")
         if self.ease_in_s < 0 or self.ease_out_s < 0:
-            raise ValueError("activation ease_in_s and ease_out_s must be >= 0")
+            raise UsageError("activation ease_in_s and ease_out_s must be >= 0")
         if self.ease_in_s + self.ease_out_s > self.stop_s - self.start_s + 1e-9:
-            raise ValueError("activation ease_in_s + ease_out_s is longer than stop_s - start_s")
+            raise UsageError("activation ease_in_s + ease_out_s is longer than stop_s - start_s")
 
     def weight(self, time_s: NDArray[np.float64] | float, smooth: bool = True) -> NDArray[np.float64]:
         """Weight in [0, 1] at the given times (any shape); see :func:`ramp_weight`."""
@@ -93,7 +95,7 @@ class ConstraintSpec:
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
-            raise ValueError(f"constraint {self.name!r}: unknown kind {self.kind!r}; kinds: "
+            raise UsageError(f"constraint {self.name!r}: unknown kind {self.kind!r}; kinds: "
                              f"{', '.join(KINDS)}")
 
     def to_dict(self) -> dict[str, Any]:

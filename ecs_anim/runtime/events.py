@@ -29,7 +29,6 @@ last), set before every tick.
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -439,10 +438,13 @@ class Reactions:
 
     @property
     def events(self) -> list[Event]:
+        """The last tick's events in time order (a sort that keeps the order they happened in
+        among those of one time: a character removed by an action is stamped with the time of
+        the posture it is first missing from, after the edges that made the action fire)."""
         kept = self._last_edges
-        if kept is None:
-            return list(self._last)
-        return self._last[:kept.at] + kept.events() + self._last[kept.at:]
+        made = list(self._last) if kept is None else \
+            self._last[:kept.at] + kept.events() + self._last[kept.at:]
+        return sorted(made, key=lambda event: event.time_s)
 
     # --- the tick -------------------------------------------------------------------------------
 
@@ -508,7 +510,7 @@ class Reactions:
         self.tracks = [k for k in self.tracks if k.uid in live]
         if gone:
             self._compiled = None
-            warn(sim, f"character {name!r} removed: triggers {listed(gone)} name it (or its "
+            sim.warn(f"character {name!r} removed: triggers {listed(gone)} name it (or its "
                      "constraints) and are dropped; the others go on")
 
     # --- edges ----------------------------------------------------------------------------------
@@ -640,7 +642,7 @@ class Reactions:
         if self.dropped[i] or not self.armed[i] or (self.fired[i] and not t.repeat):
             return
         if i in self._fired_this_tick:
-            warn(sim, f"trigger {t.name!r} would fire again in the same tick (triggers firing each "
+            sim.warn(f"trigger {t.name!r} would fire again in the same tick (triggers firing each "
                      "other in a cycle): skipped; the others go on")
             return
         self._fired_this_tick.add(i)
@@ -657,7 +659,7 @@ class Reactions:
             try:
                 self._do(sim, action)
             except EcsAnimError as exc:
-                warn(sim, f"trigger {self.triggers[i].name!r}: {exc}; the others go on")
+                sim.warn(f"trigger {self.triggers[i].name!r}: {exc}; the others go on")
 
     def _do(self, sim: Simulation, a: Action) -> None:
         if isinstance(a, Play):
@@ -822,11 +824,6 @@ def _constraint_row(sim: Simulation, uid: int) -> int:
         raise EcsAnimError(str(exc)) from None
 
 
-def warn(sim: Simulation, message: str) -> None:
-    """A run-time warning: kept in ``sim.messages`` and printed to stderr."""
-    line = f"warning: t={sim.time_s:.3f} s: {message}"
-    sim.messages.append(line)
-    print(line, file=sys.stderr)
 
 
 def check_trigger(sim: Simulation, trigger: Trigger) -> None:

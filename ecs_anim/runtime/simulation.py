@@ -8,7 +8,7 @@ two tests, never see each other's entities.
 from __future__ import annotations
 
 import itertools
-import sys
+import logging
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import replace
@@ -38,7 +38,6 @@ from ecs_anim.motion.constraint_table import Area, ConstraintTable, Target, add_
 from ecs_anim.motion.constraints import Activation
 from ecs_anim.motion.sampling import ClipBank
 from ecs_anim.runtime import kernels
-from ecs_anim.runtime.allocator import keep_freed_memory
 from ecs_anim.runtime.body_change import mass_tables
 from ecs_anim.runtime.events import Event, Reactions, TargetTrack, Trigger
 from ecs_anim.runtime.steering import DEFAULT_STEERING
@@ -54,6 +53,8 @@ ORIGIN = Placement()
 ALWAYS = Activation(0.0, 1e9)
 
 _counter = itertools.count()
+#: Run-time warnings (:meth:`Simulation.warn`) go to this logger.
+LOG = logging.getLogger("ecs_anim")
 #: Placements, speeds and start times beyond this are refused (metres / seconds).
 MAX_COORDINATE_M = 1e5
 #: The longest time a simulation takes in (s; a day): durations, delays and blends beyond it
@@ -83,7 +84,6 @@ class Simulation(SteeringCalls):
                  rotations: bool = False, solver_settings: SolverSettings = DEFAULT_SETTINGS):
         from ecs_anim.systems import HEADLESS, SCHEDULE
 
-        keep_freed_memory()  # the tick's arrays reuse memory instead of faulting it in anew
         if not motions:
             raise EcsAnimError("a simulation needs at least one motion")
         for name, motion in motions.items():
@@ -499,10 +499,7 @@ class Simulation(SteeringCalls):
         self.structure_version += 1
         self._update_constraint_components()
         if removed:
-            message = (f"warning: t={self.time_s:.3f} s: character {name!r} removed with its "
-                       f"constraints {listed(removed)}")
-            self.messages.append(message)
-            print(message, file=sys.stderr)
+            self.warn(f"character {name!r} removed with its constraints {listed(removed)}")
         self.reactions.character_removed(self, entity, name)
 
     # --- looking characters and constraints up by name ----------------------------------------
@@ -607,24 +604,27 @@ class Simulation(SteeringCalls):
         except ValueError as exc:
             raise EcsAnimError(str(exc)) from None
 
+    def warn(self, message: str) -> None:
+        """A run-time warning: ``"warning: t=<s> s: <message>"`` kept in :attr:`messages` and
+        logged (level WARNING) to the ``ecs_anim`` logger, which prints it on stderr unless the
+        application configured logging otherwise (the command line prints the line alone)."""
+        line = f"warning: t={self.time_s:.3f} s: {message}"
+        self.messages.append(line)
+        LOG.warning(line)
+
     def report_disabled(self, indices: NDArray[np.int64]) -> None:
-        """Warn once (stderr and :attr:`messages`) for each constraint switched off this tick
-        for a non-finite target: ``indices`` (k,) rows of :attr:`constraints`."""
+        """Warn once (:meth:`warn`) for each constraint switched off this tick for a non-finite
+        target: ``indices`` (k,) rows of :attr:`constraints`."""
         for i in indices:
-            message = (f"warning: t={self.time_s:.3f} s: constraint "
-                       f"{self.constraints.names[int(i)]!r} has a non-finite target and is "
-                       "switched off; the others go on")
-            self.messages.append(message)
-            print(message, file=sys.stderr)
+            self.warn(f"constraint {self.constraints.names[int(i)]!r} has a non-finite target "
+                      "and is switched off; the others go on")
 
     def report_frozen(self, rows: NDArray[np.int64]) -> None:
         """A character's pose went non-finite: it keeps its last good posture; say so once."""
         names = self.names()
         for r in rows:
-            message = (f"warning: t={self.time_s:.3f} s: character {names[int(r)]!r} got a "
-                       "non-finite pose and holds its last good posture; the others go on")
-            self.messages.append(message)
-            print(message, file=sys.stderr)
+            self.warn(f"character {names[int(r)]!r} got a non-finite pose and holds its last "
+                      "good posture; the others go on")
 
     # --- events and triggers (ecs_anim.runtime.events) -----------------------------------------------
 
@@ -658,14 +658,13 @@ class Simulation(SteeringCalls):
     # --- running ----------------------------------------------------------------------------
 
     def step(self) -> None:
-        """Advance one fixed tick through the schedule (triggers and moving targets around it)."""
+        """Advance one fixed tick through the schedule (``systems``, in order): triggers due,
+        clips chosen, played, adapted, solved and converted, then the clock moves and the
+        tick's events fire their triggers (DetectEvents)."""
         if self.tick == 0:
             kernels.before_first_tick()
-        self.reactions.before_tick(self)
         with self._active():
             esper.process(self.dt)
-        self.tick += 1
-        self.reactions.after_tick(self)
 
     def solver_report(self) -> SolverReport | None:
         """What the constraint solver did in the last tick and what the frame budget

@@ -3,7 +3,7 @@
 Gathering and scattering go through here only (STYLE 12): rows are added when characters spawn
 (load time, not in the tick), specification changes write one row, and each system reads and
 writes whole arrays. Each system declares the fields it reads and writes (``System.reads`` /
-``writes``, checked by tests/test_ecs.py); :data:`SPEC_FIELDS` are written outside the tick
+``writes``, checked by tests/ecs/test_ecs.py); :data:`SPEC_FIELDS` are written outside the tick
 (spawn, ``Simulation.set_*``) and read by the systems as their inputs.
 """
 
@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 from numpy.typing import NDArray
 
+from ecs_anim.core.errors import UsageError
 from ecs_anim.core.morphology import MASS_SEGMENTS
 from ecs_anim.core.normalized import TRAILING_SHAPES, DecodedPose, NormalizedPoses
 from ecs_anim.core.skeleton import N_JOINTS, N_LENGTHS
@@ -132,7 +133,7 @@ class CharacterStore:
     queue_len: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     poses: NormalizedPoses = field(default_factory=lambda: _empty_poses(0))
     vertebrae: F64 | None = None
-    goals: object | None = None  # this tick's constraint goals (ecs_anim.solver.shell.TickGoals)
+    goals: object | None = None  # this tick's constraint goals (ecs_anim.solver.goals.TickGoals)
     solved: DecodedPose | None = None  # (r, ...) the solver's decoded result for goals.rows
     posture: DecodedPose | None = None
     #: Columns of the user's own systems (:meth:`add_column`): name -> (n, ...) array, one row
@@ -158,9 +159,9 @@ class CharacterStore:
         ``fill`` until a system writes it; a removed character's row goes with it. Returns it.
         Raises ValueError when a column of that name exists or the name is a store field."""
         if not name.isidentifier():
-            raise ValueError(f"column {name!r}: a column's name is a Python identifier")
+            raise UsageError(f"column {name!r}: a column's name is a Python identifier")
         if name in self.columns or name in _ROW_FIELDS or name in NOT_ROWS:
-            raise ValueError(f"column {name!r}: the store has a column or field of that name already")
+            raise UsageError(f"column {name!r}: the store has a column or field of that name already")
         self._column_fill[name] = fill
         self.columns[name] = np.full((self.n,) + tuple(trailing_shape), fill, dtype)
         return self.columns[name]

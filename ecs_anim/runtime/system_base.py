@@ -14,7 +14,7 @@ numpy code over all rows.
 
 Declarations (STYLE 5, Bevy's system parameters): ``reads`` and ``writes`` are tuples of store
 field names (``"poses"``, ``"contact_weight"``; ``"constraints.weight"`` for a column of the
-constraint table), in the order of the system's docstring. ``tests/test_ecs.py`` derives each
+constraint table), in the order of the system's docstring. ``tests/ecs/test_ecs.py`` derives each
 field's ordered writers from ``SCHEDULE`` and checks them. ``on_structure_change`` are functions
 of the simulation run once, before :meth:`System.run`, on the first tick after a structural
 change (MorphologyAdapt takes replaced bodies into the store that way).
@@ -50,6 +50,8 @@ class System(esper.Processor):
     writes: ClassVar[tuple[str, ...]] = ()
     #: Run once before :meth:`run` on the first tick after a structural change.
     on_structure_change: ClassVar[tuple[Callable[[Simulation], None], ...]] = ()
+    #: Run even when the simulation has no character (the clock and time triggers go on).
+    runs_without_characters: ClassVar[bool] = False
 
     def __init__(self, sim: Simulation):
         super().__init__()
@@ -66,7 +68,7 @@ class System(esper.Processor):
 
     def process(self, dt: float) -> None:
         start = time.perf_counter()
-        if self.sim.store.n:
+        if self.sim.store.n or self.runs_without_characters:
             if self._hooks_version != self.sim.structure_version:
                 self._hooks_version = self.sim.structure_version
                 for hook in type(self).on_structure_change:

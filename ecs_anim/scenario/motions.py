@@ -53,7 +53,7 @@ def fill_absent(r: YamlReader, motions: dict[str, NormalizedMotion], name: str, 
     """``motions.NAME.absent_from: OTHER``: the body parts NAME's capture lacks (a lower-body
     C3D's trunk, head and arms) are played from motion OTHER, looped, instead of a neutral
     pose."""
-    from ecs_anim.io.c3d.importing import fill_absent_from
+    from ecs_anim.io.c3d.absent_fill import fill_absent_from
 
     where = f"motions.{name}.absent_from"
     other = r.string(node, where)

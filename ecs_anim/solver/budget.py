@@ -31,8 +31,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from ecs_anim.core.errors import UsageError
+
 if TYPE_CHECKING:
-    from ecs_anim.solver.shell import TickGoals
+    from ecs_anim.solver.goals import TickGoals
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -48,9 +50,9 @@ class SolverCostModel:
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.ms_per_iteration) and self.ms_per_iteration > 0.0):
-            raise ValueError(f"ms_per_iteration must be a positive number, got {self.ms_per_iteration}")
+            raise UsageError(f"ms_per_iteration must be a positive number, got {self.ms_per_iteration}")
         if not (np.isfinite(self.fixed_ms) and self.fixed_ms >= 0.0):
-            raise ValueError(f"fixed_ms must be a number >= 0, got {self.fixed_ms}")
+            raise UsageError(f"fixed_ms must be a number >= 0, got {self.fixed_ms}")
 
     def tick_ms(self, iterations: float) -> float:
         """The tick's cost for this many character-iterations, ms."""

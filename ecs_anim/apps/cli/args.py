@@ -1,5 +1,5 @@
-"""The command line's argument types and its one-line error and JSON helpers, shared by every
-command (``batch`` too)."""
+"""The command line's argument types, its one-line error and JSON helpers and the exit status of
+a failed command, shared by every command (``batch`` too)."""
 
 from __future__ import annotations
 
@@ -10,6 +10,9 @@ from typing import Any
 from ecs_anim.core.errors import EcsAnimError
 from ecs_anim.io.importing import FrameRange
 from ecs_anim.motion.clip import FACINGS
+
+#: The exit status of a command that failed (a user error, or some of its files).
+EXIT_FAILED = 1
 
 #: The longest error line printed: a last guard (messages cut their own lists with ``listed``).
 MAX_ERROR_CHARS = 300

@@ -1,4 +1,5 @@
-"""The ``ecs-anim`` command line.
+"""The ``ecs-anim`` command line: its parser and :func:`main` (``import`` and ``info`` are in
+:mod:`.import_cmd` and :mod:`.info`).
 
 Every user error ends as one line on stderr and a non-zero exit status, never a traceback.
 """
@@ -7,17 +8,17 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import os
 import sys
 from collections.abc import Sequence
-from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from ecs_anim.apps.bench import cmd_bench, size_list
 from ecs_anim.apps.cli.args import (
+    EXIT_FAILED,
     error_line,
     facing,
     frame_range,
@@ -26,315 +27,17 @@ from ecs_anim.apps.cli.args import (
     positive_float,
     positive_int,
 )
+from ecs_anim.apps.cli.import_cmd import cmd_import
+from ecs_anim.apps.cli.info import cmd_info
 from ecs_anim.apps.viewer.command import add_arguments as add_view_arguments
 from ecs_anim.apps.viewer.command import cmd_view
-from ecs_anim.core.errors import EcsAnimError, listed
-from ecs_anim.core.files import folder_problem, input_problem, output_folder_problem, output_problem
+from ecs_anim.core.errors import EcsAnimError
+from ecs_anim.core.files import input_problem, output_folder_problem, output_problem
 from ecs_anim.core.morphology import PRESET_SPECS
 from ecs_anim.io.c3d.marker_sets import preset_summary as marker_set_summary
 from ecs_anim.io.contacts import ContactThresholds
-from ecs_anim.io.joint_map import preset_summary
-from ecs_anim.motion.clip import turned_to_face
-from ecs_anim.motion.constraint_table import check_stored
-
-EXIT_FAILED = 1
-
-
-def _progress(done: int, total: int, label: str) -> None:
-    """A one-line progress bar on stderr (only drawn when several files are processed)."""
-    width = 30
-    filled = int(width * done / max(total, 1))
-    sys.stderr.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} {label[:40]:40s}")
-    if done == total:
-        sys.stderr.write("\n")
-    sys.stderr.flush()
-
-
-def cmd_import(args: argparse.Namespace) -> int:
-    from ecs_anim.io.c3d.importing import import_c3d
-    from ecs_anim.io.importing import import_bvh
-    from ecs_anim.motion.clip import save_nmo
-
-    outdir = Path(args.output)
-    problem = folder_problem(outdir)
-    if problem is not None:
-        raise EcsAnimError(f"-o {problem}")
-    thresholds = ContactThresholds(
-        height_m=args.contact_height, speed_mps=args.contact_speed,
-        min_duration_s=args.contact_min_duration,
-    )
-    extra = []
-    if args.constraints:
-        from ecs_anim.scenario import load_motion_constraints
-        extra = load_motion_constraints(args.constraints)  # a mistake stops before any import
-    sources = [Path(s) for s in args.sources]
-    inputs = [*sources, *(p for p in (args.map, args.constraints, args.fill_absent_from) if p)]
-    for src in sources:
-        problem = input_problem(outdir / f"{src.stem}.nmo", inputs)
-        if problem is not None:
-            raise EcsAnimError(f"-o {problem}")
-    if not any(s.suffix.lower() == ".c3d" for s in sources) and (
-            args.fill_absent_from or args.max_gap is not None):
-        raise EcsAnimError("--max-gap and --fill-absent-from are for .c3d files; none is given")
-    failed = 0
-    show_bar = len(sources) > 1 and sys.stderr.isatty()
-    stems: dict[str, Path] = {}
-    for k, src in enumerate(sources, start=1):
-        target = outdir / f"{src.stem}.nmo"
-        try:
-            if src.stem in stems:
-                raise EcsAnimError(f"{src}: has the same name as {stems[src.stem]}; both would be "
-                                   f"written to {target}")
-            stems[src.stem] = src
-            if target.exists() and not args.force:
-                raise EcsAnimError(f"{target}: already exists (use --force to overwrite)")
-            suffix = src.suffix.lower()
-            if src.is_dir():
-                raise EcsAnimError(f"{src}: a folder; give the .bvh or .c3d files in it "
-                                   f"(e.g. {src}/*.bvh)")
-            if suffix not in (".bvh", ".c3d"):
-                raise EcsAnimError(f"{src}: unsupported file type {src.suffix!r} (expected .bvh "
-                                   "or .c3d)")
-            if suffix == ".c3d" and args.stature is not None:
-                raise EcsAnimError(f"{src}: --stature applies to BVH files (a C3D's markers are "
-                                   "in the unit of POINT:UNITS)")
-            if suffix == ".c3d":
-                motion = import_c3d(src, args.map, args.unit, thresholds, args.up,
-                                    args.max_gap,
-                                    args.fill_absent_from, args.trim, not args.no_treadmill,
-                                    args.contacts)
-            else:
-                if args.contacts == "events":
-                    raise EcsAnimError(f"{src}: --contacts events needs a C3D file's gait events "
-                                       "(a BVH has none)")
-                motion = import_bvh(src, args.map, args.unit, thresholds, args.up, args.trim,
-                                    args.stature, not args.no_treadmill)
-                for warning in motion.info.get("warnings", []):
-                    print(f"warning: {warning}", file=sys.stderr)
-            if args.face is not None:
-                motion = turned_to_face(motion, args.face)
-            # A --constraints file times the file's frames; --trim or a C3D import may drop some.
-            shift_s = motion.info.get("first_file_frame", 0) / motion.fps
-            on_clip = [replace(c, activation=replace(c.activation, start_s=c.activation.start_s - shift_s,
-                                                     stop_s=c.activation.stop_s - shift_s))
-                       for c in extra] if shift_s else extra
-            motion.constraints.extend(on_clip)
-            try:
-                check_stored(on_clip, motion.duration_s)
-            except ValueError as exc:
-                raise EcsAnimError(f"{args.constraints}: with {src}: {exc}") from None
-            save_nmo(motion, target, force=args.force)
-            contacts = motion.contacts()
-            message = (f"{src} -> {target}: {motion.n_frames} frames at {motion.fps:g} fps, "
-                       f"{motion.info['joint_map']}, {motion.info['up_axis'].upper()} up"
-                       + (f" ({motion.info['up_reason']})" if motion.info.get("up_reason") else "")
-                       + ", unit "
-                       f"{motion.info['unit']} ({motion.info['unit_reason']}), "
-                       f"contacts L {contacts[:, 0].mean():.0%} "
-                       f"R {contacts[:, 1].mean():.0%}"
-                       + (" (from the gait events)" if motion.info.get("contacts", {}).get("method")
-                          == "gait events" else ""))
-            message += _events_and_treadmill(motion.info)
-            if motion.info["filled_in"]:
-                message += f", filled in: {', '.join(motion.info['filled_in'])}"
-            if motion.info.get("ignored_joints"):
-                message += f", ignored (no body part): {listed(motion.info['ignored_joints'])}"
-            if extra:
-                message += f", {len(extra)} stored constraint(s)"
-            if motion.info.get("absent"):
-                message += (f", absent ({motion.info['absent_fill']}): "
-                            f"{', '.join(motion.info['absent'])}")
-            gaps = motion.info.get("gaps")
-            if gaps:
-                message += f", {gaps['samples_filled']} marker samples filled"
-                if gaps["long_gap_frames"]:
-                    spans = ", ".join(f"{a}-{b}" for a, b in gaps["long_gap_frames"])
-                    message += (f"; frames {spans} had gaps longer than {gaps['max_gap_frames']} "
-                                "frames or markers not yet or no longer seen (interpolated or "
-                                "held, unreliable)")
-            if args.trim is not None:
-                message += f"; --trim kept frames from frame {motion.info.get('first_file_frame', 0)} of the file"
-            if motion.info.get("rest_frames_dropped"):
-                message += f"; {motion.info['rest_frames_dropped']}"
-            for key, what in (("root_frames_trimmed", "trimmed (of the file's frames)"),
-                              ("root_frames_repaired", "repaired")):
-                if motion.info.get(key):
-                    spans = ", ".join(f"{a}-{b}" for a, b in motion.info[key])
-                    message += f"; frames {spans} {what}: the pelvis markers could not place the pelvis"
-            for line in motion.info.get("parts_frames_trimmed") or []:
-                message += f"; {line}"
-            if show_bar:
-                sys.stderr.write("\r" + " " * 80 + "\r")
-            print(message)
-            for why in (motion.info.get("parts_not_computed") or {}).values():
-                print(f"  {why}")
-        except (EcsAnimError, OSError) as exc:  # one bad file must not stop the others
-            failed += 1
-            if show_bar:
-                sys.stderr.write("\r" + " " * 80 + "\r")
-            print(f"error: {error_line(exc)}", file=sys.stderr)
-        if show_bar:
-            _progress(k, len(sources), src.name)
-    if failed:
-        rest = "; the others were imported" if failed < len(sources) else ""
-        print(f"{failed} of {len(sources)} file(s) failed{rest}", file=sys.stderr)
-        return EXIT_FAILED
-    return 0
-
-
-def _events_and_treadmill(info: dict[str, Any]) -> str:
-    """The import line's part on gait events and an in-place (treadmill) stance."""
-    text = ""
-    events = info.get("gait_events")
-    if events:
-        check = info.get("contacts", {}).get("events_check") or {}
-        n = sum(e["kind"] in ("strike", "off") for e in events)
-        text += f", {n} gait events"
-        if check.get("worst_ms") is not None:
-            text += f" (detected contacts within {check['worst_ms']:g} ms of them)"
-    plates = info.get("force_plates")
-    if plates:
-        text += f", {len(plates)} force-plate contact{'s' * (len(plates) != 1)}"
-        check = info.get("contacts", {}).get("plates_check") or {}
-        if check.get("worst_ms") is not None:
-            text += f" (contacts within {check['worst_ms']:g} ms of their measured edges)"
-    centres = info.get("lab_joint_centres")
-    if centres:
-        joint, row = max(centres.items(), key=lambda kv: kv[1]["median_mm"])
-        text += (f", {len(centres)} lab joint centres in the file: ours within "
-                 f"{row['median_mm']:g} mm of them (median; farthest {joint})")
-    belt = info.get("treadmill")
-    if belt:
-        text += (f"; in place on a treadmill-like belt at {belt['speed_mps']:g} m/s: "
-                 + ("turned into root motion (--no-treadmill keeps it in place)"
-                    if belt["converted"] else "kept in place (--no-treadmill)"))
-    return text
-
-
-def motion_summary(path: str) -> dict[str, object]:
-    from ecs_anim.motion.clip import facing_and_travel, load_nmo
-
-    motion = load_nmo(path)
-    contacts = motion.contacts()
-    return {
-        "file": path,
-        "frames": motion.n_frames,
-        "fps": motion.fps,
-        "duration_s": round(motion.duration_s, 4),
-        "root": facing_and_travel(motion),
-        "source_morphology": motion.source_morphology.to_dict()
-        | {"stature_m": round(motion.source_morphology.stature, 4)},
-        "contacts": {
-            "left_fraction": float(contacts[:, 0].mean()),
-            "right_fraction": float(contacts[:, 1].mean()),
-            "constraints": [
-                {"name": c.name, "start_s": round(c.activation.start_s, 4),
-                 "stop_s": round(c.activation.stop_s, 4)}
-                for c in motion.constraints if c.kind == "foot_contact"
-            ],
-        },
-        "other_constraints": [c.to_dict() for c in motion.constraints if c.kind != "foot_contact"],
-        "info": motion.info,
-    }
-
-
-def _info_files(given: list[str]) -> list[str]:
-    """The .nmo files named, a folder standing for the .nmo files in it (sorted)."""
-    files: list[str] = []
-    for name in given:
-        if Path(name).is_dir():
-            found = sorted(str(p) for p in Path(name).glob("*.nmo"))
-            if not found:
-                raise EcsAnimError(f"{name}: a folder with no .nmo file (import clips first: "
-                                   f"ecs-anim import CLIP.bvh -o {name})")
-            files.extend(found)
-        else:
-            files.append(name)
-    return files
-
-
-def cmd_info(args: argparse.Namespace) -> int:
-    files = _info_files(args.file)
-    if len(files) > 1 or Path(args.file[0]).is_dir():
-        return _info_table(files, args.json)
-    summary = motion_summary(files[0])
-    if args.json:
-        print(json.dumps(summary, indent=2))
-        return 0
-    m = summary["source_morphology"]
-    c = summary["contacts"]
-    info = summary["info"]
-    root = summary["root"]
-    assert isinstance(m, dict) and isinstance(c, dict) and isinstance(info, dict) and isinstance(root, dict)
-    print(f"{files[0]}")
-    print(f"  frames     {summary['frames']} at {summary['fps']:g} fps ({summary['duration_s']} s)")
-    print(f"  facing     {root['facing_deg']:g} deg from +x at the first frame; the root travels "
-          f"{root['straight_m']:g} m towards {root['direction_deg']:g} deg ({root['path_m']:g} m "
-          "along its path)")
-    print(f"  source     {info.get('source', '?')} ({info.get('joint_map', '?')}, unit "
-          f"{info.get('unit', '?')})")
-    print(f"  body       stature {m['stature_m']:.3f} m, mass {m['mass_kg']:.1f} kg, "
-          f"leg (thigh+shank) {0.5 * (m['lengths_m']['thigh_l'] + m['lengths_m']['shank_l'] + m['lengths_m']['thigh_r'] + m['lengths_m']['shank_r']):.3f} m")
-    print(f"  contacts   left {c['left_fraction']:.0%} right {c['right_fraction']:.0%} of frames, "
-          f"{len(c['constraints'])} contact intervals")
-    filled = info.get("filled_in")
-    if filled:
-        print(f"  filled in  {', '.join(map(str, filled)) if isinstance(filled, list) else filled}")
-    absent = info.get("absent")
-    if absent and isinstance(absent, list):
-        print(f"  absent     {', '.join(map(str, absent))} (no markers: {info.get('absent_fill')})")
-    for key, what in (("root_frames_trimmed", "trimmed    frames {} of the file"),
-                      ("root_frames_repaired", "repaired   frames {}")):
-        spans = info.get(key)
-        if spans and isinstance(spans, list):
-            shown = ", ".join(f"{a}-{b}" for a, b in spans)
-            print(f"  {what.format(shown)} (the pelvis markers could not place the pelvis)")
-    for line in info.get("parts_frames_trimmed") or []:
-        print(f"  trimmed    {line}")
-    if info.get("first_file_frame"):
-        print(f"  starts at  frame {info['first_file_frame']} of the file (--trim, a rest pose "
-              "dropped, or frames the markers could not place)")
-    if info.get("rest_frames_dropped"):
-        print(f"  {info['rest_frames_dropped']}")
-    for why in (info.get("parts_not_computed") or {}).values():
-        print(f"  {why}")
-    contacts_info = info.get("contacts") or {}
-    if contacts_info:
-        print(f"  contacts   {contacts_info.get('method', 'detected')}"
-              + (f", still under {'/'.join(f'{v:g}' for v in contacts_info['speed_threshold_mps'])}"
-                 " m/s (heel/ball)" if contacts_info.get("speed_threshold_mps") else ""))
-    for event in info.get("gait_events") or []:
-        what = f"{event['side'].upper()} {'foot strike' if event['kind'] == 'strike' else 'foot off'}" \
-            if event.get("kind") else f"{event['label'] or '-'} ({event['context'] or '-'})"
-        print(f"  event      {event['time_s']:8.3f} s  {what}")
-    check = contacts_info.get("events_check")
-    if check:
-        print(f"  events     detected contacts within {check['worst_ms']:g} ms of the gait events"
-              if check.get("worst_ms") is not None else
-              "  events     some gait event has no detected contact edge")
-    for plate in info.get("force_plates") or []:
-        edges = [name for name, key in (("touch-down", "touch_down"), ("lift-off", "lift_off"))
-                 if plate[key]]
-        foot = f"{plate['side'].upper()} foot" if plate["side"] else plate.get("why", "")
-        print(f"  plate {plate['plate']:<4d} {plate['on_s']:8.3f}-{plate['off_s']:.3f} s  {foot}"
-              + (f" (measured {' and '.join(edges)})" if edges else " (no edge measured)"))
-    for note in info.get("force_plate_notes") or []:
-        print(f"  plates     {note}")
-    check = contacts_info.get("plates_check")
-    if check:
-        print(f"  plates     contacts within {check['worst_ms']:g} ms of the plates' touch-downs and"
-              " lift-offs" if check.get("worst_ms") is not None else
-              "  plates     some measured plate edge has no contact edge")
-    belt = info.get("treadmill")
-    if belt:
-        print(f"  treadmill  in place, belt {belt['speed_mps']:g} m/s: "
-              + ("turned into root motion" if belt["converted"] else "kept in place"))
-    centres = info.get("lab_joint_centres")
-    if centres:
-        for joint, row in centres.items():
-            print(f"  lab centre {joint:<8} ours {row['median_mm']:.0f} mm from {row['label']} "
-                  f"(median; 95th percentile {row['p95_mm']:.0f} mm)")
-    return 0
+from ecs_anim.io.joint_presets import preset_summary
+from ecs_anim.runtime.allocator import keep_freed_memory
 
 
 def cmd_export(args: argparse.Namespace) -> int:
@@ -350,38 +53,6 @@ def cmd_export(args: argparse.Namespace) -> int:
     morph, _ = export_motion(motion, args.morphology, args.output, force=args.force)
     print(f"{args.file} on {morph.name} (stature {morph.stature:.3f} m) -> {args.output}: "
           f"{motion.n_frames} frames")
-    return 0
-
-
-def _info_table(files: list[str], as_json: bool) -> int:
-    """``info`` on several files: one row each; a file that cannot be read is a row saying why,
-    and the others go on (exit status 1 if any failed)."""
-    rows: list[dict[str, Any]] = []
-    for name in files:
-        try:
-            rows.append(motion_summary(name))
-        except EcsAnimError as exc:
-            rows.append({"file": name, "error": str(exc)})
-    failed = sum("error" in r for r in rows)
-    if as_json:
-        print(json.dumps(rows, indent=2))
-        return EXIT_FAILED if failed else 0
-    print(f"{'file':<28} {'frames':>6} {'fps':>5} {'s':>6} {'facing':>7} {'travel m':>8} "
-          f"{'L %':>4} {'R %':>4}  parts filled in or absent")
-    for r in rows:
-        label = Path(str(r["file"])).name
-        label = label if len(label) <= 28 else label[:25] + "..."
-        if "error" in r:
-            print(f"{label:<28} error: {r['error']}")
-            continue
-        c, root, info = r["contacts"], r["root"], r["info"]
-        parts = list(info.get("absent") or []) + [f"{j} (filled)" for j in info.get("filled_in") or []]
-        print(f"{label:<28} {r['frames']:>6} {r['fps']:>5g} {r['duration_s']:>6.2f} "
-              f"{root['facing_deg']:>7g} {root['straight_m']:>8.2f} {c['left_fraction']:>4.0%} "
-              f"{c['right_fraction']:>4.0%}  {listed(parts, 4) or '-'}")
-    if failed:
-        print(f"{failed} of {len(rows)} file(s) could not be read", file=sys.stderr)
-        return EXIT_FAILED
     return 0
 
 
@@ -539,7 +210,7 @@ def add_threads_argument(p: argparse.ArgumentParser, default: int | None) -> Non
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from ecs_anim.io.c3d.importing import DEFAULT_MAX_GAP_S
+    from ecs_anim.io.c3d.repair import DEFAULT_MAX_GAP_S
 
     parser = argparse.ArgumentParser(
         prog="ecs-anim",
@@ -661,9 +332,26 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class WarningLines(logging.Handler):
+    """The command line's run-time warnings (the ``ecs_anim`` logger): each one line on the
+    standard error of the moment (a test's captured one too)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        print(record.getMessage(), file=sys.stderr)
+
+
+def show_warnings() -> None:
+    """Print the library's warnings as lines on stderr, once per process."""
+    log = logging.getLogger("ecs_anim")
+    if not any(isinstance(h, WarningLines) for h in log.handlers):
+        log.addHandler(WarningLines(logging.WARNING))  # Python's last resort then stays silent
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    show_warnings()
+    keep_freed_memory()  # an application's choice (it changes the process's allocator)
     try:
         say_if_compiling(args)
         return int(args.func(args))

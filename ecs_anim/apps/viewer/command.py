@@ -68,7 +68,7 @@ def cmd_view(args: argparse.Namespace) -> int:
         raise EcsAnimError(f"--screenshot {problem}")
     if args.at > scenario.duration_s:
         raise EcsAnimError(f"--at {args.at:g} is after the scenario's end ({scenario.duration_s:g} s)")
-    from ecs_anim.apps.viewer.window import write_screenshot
+    from ecs_anim.apps.viewer.screenshot import write_screenshot
 
     shot = write_screenshot(scenario, args.screenshot, args.at, width, height, args.force,
                             show_targets=not args.no_targets, show_com=not args.no_com)

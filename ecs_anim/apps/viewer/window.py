@@ -1,8 +1,9 @@
-"""The pyglet side of the viewer: an interactive window and one-frame screenshots.
+"""The viewer's interactive window: the simulation, the camera, toggles, the clock, picking and
+dragging targets, and saving the edits (one-frame screenshots are :mod:`.screenshot`).
 
 The simulation runs at its fixed step; the Render system (``systems/render.py``) only tells the
-:class:`SceneSource` that a new posture is in the store, and drawing reads that posture
-(STYLE 8: rendering never writes to the simulation).
+:class:`~ecs_anim.apps.viewer.scene_view.SceneSource` that a new posture is in the store, and
+drawing reads that posture (STYLE 8: rendering never writes to the simulation).
 """
 
 from __future__ import annotations
@@ -12,177 +13,26 @@ import os
 import sys
 import time
 from dataclasses import dataclass, replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.apps.viewer.authoring import Timeline, drag_in_view_plane, pick_capsule
-from ecs_anim.apps.viewer.camera import OrbitCamera, frame_points, spread_yaw
+from ecs_anim.apps.viewer.camera import OrbitCamera
 from ecs_anim.apps.viewer.edits import Edit, EditLog, apply_edit, copy_name
-from ecs_anim.apps.viewer.scene import (
-    BODY_CAPSULES,
-    NEAR_MARGIN_M,
-    SceneFrame,
-    character_teams,
-    ground_patches,
-    highlighted,
-    snapshot,
-    team_colours,
+from ecs_anim.apps.viewer.gl_setup import load_pyglet, make_window, text_label
+from ecs_anim.apps.viewer.scene import BODY_CAPSULES, NEAR_MARGIN_M, SceneFrame, ground_patches
+from ecs_anim.apps.viewer.scene_view import (
+    SceneSource,
+    default_camera,
+    ground_patch_half_m,
+    status_line,
 )
 from ecs_anim.core.errors import EcsAnimError
-from ecs_anim.core.files import output_problem
-from ecs_anim.core.ground import Ground
 from ecs_anim.core.skeleton import JOINT_INDEX
 from ecs_anim.runtime.simulation import Simulation
 from ecs_anim.scenario import Scenario, build_simulation, load_scenario
-
-INSTALL_HINT = ("on Debian/Ubuntu install libegl1 and libgl1-mesa-dri (headless EGL), "
-                "or run under xvfb-run (package xvfb)")
-#: Supersampling of screenshots: rendered this many times larger, then averaged down.
-SUPERSAMPLE = 2
-
-
-class SceneSource:
-    """The renderer the Render system hands the simulation to (``sim.renderer``).
-
-    ``draw(sim)`` is called once per tick and only notes that the store holds a new posture;
-    :meth:`latest` builds the drawable frame when someone draws (so ticks without a redraw
-    cost nothing). ``picked``: the name of a character to draw highlighted (render-only state,
-    kept here and never in a component).
-    """
-
-    def __init__(self) -> None:
-        self._sim: Simulation | None = None
-        self._frame: SceneFrame | None = None
-        self.picked: str | None = None
-        #: Characters added since the last tick (no posture yet): not drawn until it comes.
-        self.unposed: set[str] = set()
-
-    def draw(self, sim: Simulation) -> None:
-        self._sim, self._frame = sim, None
-        self.unposed.clear()
-
-    def changed(self) -> None:
-        """Something drawn changed between ticks (a target moved, a character picked): the
-        next :meth:`latest` builds the frame again."""
-        self._frame = None
-
-    def latest(self) -> SceneFrame | None:
-        if self._frame is None and self._sim is not None:
-            sim = self._sim
-            colours = team_colours(character_teams(sim))
-            names = sim.names()
-            if self.picked in names:
-                colours = highlighted(colours, np.array([names.index(str(self.picked))]))
-            hidden = np.array([i for i, name in enumerate(names) if name in self.unposed], np.int64)
-            self._frame = snapshot(sim, colours, hidden)
-        return self._frame
-
-
-def status_line(frame: SceneFrame, fps: float | None = None, speed: float = 1.0,
-                paused: bool = False) -> str:
-    """The on-screen line: time, frames per second, characters, max constraint error."""
-    error = "-" if frame.max_error_m is None else f"{frame.max_error_m * 1000:.1f} mm"
-    parts = [f"t {frame.time_s:6.2f} s"]
-    if fps is not None:
-        parts.append(f"{fps:5.1f} fps")
-    parts += [f"{frame.n_characters} characters", f"max constraint error {error}"]
-    if speed != 1.0:
-        parts.append(f"speed x{speed:g}")
-    if paused:
-        parts.append("paused")
-    return "  |  ".join(parts)
-
-
-def offscreen_mode() -> bool:
-    """Whether screenshots use pyglet's headless (EGL) mode: yes, unless ``PYGLET_HEADLESS``
-    says otherwise, or there is a display and no EGL library (then a hidden X window)."""
-    import ctypes.util
-
-    explicit = os.environ.get("PYGLET_HEADLESS")
-    if explicit:
-        return explicit in ("true", "TRUE", "True", "1")
-    has_display = bool(os.environ.get("DISPLAY"))
-    return not (has_display and ctypes.util.find_library("EGL") is None)
-
-
-def _keep_gl_out_of_forked_children() -> None:
-    """In a process forked from this one, pyglet's headless display must not be torn down: its
-    finaliser calls ``eglTerminate`` on the parent's EGL connection, which deadlocks in the
-    child (the driver's threads were not forked), as a batch worker collecting garbage left by
-    an earlier screenshot did. The display belongs to the parent, which ends it itself."""
-    headless = sys.modules.get("pyglet.display.headless")
-    if headless is not None:
-        headless.HeadlessDisplay.__del__ = _no_finaliser
-
-
-def _no_finaliser(self: object) -> None:
-    """A forked child's stand-in for pyglet's ``HeadlessDisplay.__del__``."""
-
-
-_FORK_HOOK: list[bool] = []  # registered once per process, when drawing first loads pyglet
-
-
-def _pyglet(headless: bool) -> Any:
-    """Import pyglet for drawing, headless (EGL, no screen) or not. One-line errors."""
-    if not _FORK_HOOK:
-        os.register_at_fork(after_in_child=_keep_gl_out_of_forked_children)
-        _FORK_HOOK.append(True)
-    try:
-        import pyglet
-    except ImportError as exc:  # pragma: no cover - a dependency
-        raise EcsAnimError(f"pyglet is not installed ({exc}); pip install 'pyglet>=2,<3'") from None
-    if "pyglet.window" not in sys.modules:  # the mode is fixed once pyglet.window is imported
-        pyglet.options["headless"] = headless
-        pyglet.options["shadow_window"] = False
-    try:
-        import pyglet.window
-        from pyglet import gl  # noqa: F401
-    except Exception as exc:
-        raise EcsAnimError(f"cannot load OpenGL ({type(exc).__name__}: {exc}); {INSTALL_HINT}") from None
-    return pyglet
-
-
-def _gl_config(pyglet: Any, samples: int) -> list[Any]:
-    gl = pyglet.gl
-    extra = {"sample_buffers": 1, "samples": samples} if samples else {}
-    return [gl.Config(major_version=3, minor_version=3, forward_compatible=True, depth_size=24,
-                      double_buffer=True, **extra),
-            gl.Config(major_version=3, minor_version=3, forward_compatible=True, depth_size=24),
-            None]
-
-
-def _make_window(pyglet: Any, width: int, height: int, visible: bool, samples: int = 0,
-                 cls: type | None = None, **kwargs: Any) -> Any:
-    """A window with an OpenGL >= 3.3 core context; the first config that works."""
-    window_cls = cls or pyglet.window.Window
-    last: Exception | None = None
-    for config in _gl_config(pyglet, samples):
-        try:
-            window = window_cls(width=width, height=height, visible=visible, config=config, **kwargs)
-        except Exception as exc:
-            last = exc
-            continue
-        version = tuple(int(v) for v in pyglet.gl.gl_info.get_version()[:2])
-        if version < (3, 3):
-            window.close()
-            raise EcsAnimError(f"OpenGL 3.3 is needed, this context offers {version[0]}.{version[1]} "
-                               f"({pyglet.gl.gl_info.get_renderer()}); {INSTALL_HINT}")
-        return window
-    raise EcsAnimError(f"cannot open an OpenGL 3.3 context ({type(last).__name__}: "
-                       f"{str(last).strip() or 'no details'}); {INSTALL_HINT}")
-
-
-def _label(pyglet: Any, text: str, x: float, y: float, size: float) -> Any:
-    return pyglet.text.Label(text, x=x, y=y, anchor_x="left", anchor_y="top", font_size=size,
-                             color=(25, 25, 30, 255))
-
-
-def _patch_half_m(camera: OrbitCamera) -> float:
-    """Half size of the ground patch to draw: out to where the fog hides it (capped)."""
-    return float(min(max(15.0, camera.distance * 4.0 + 10.0), 400.0))
 
 
 def _centroid(frame: SceneFrame) -> NDArray[np.float64]:
@@ -191,119 +41,6 @@ def _centroid(frame: SceneFrame) -> NDArray[np.float64]:
         return np.full(3, np.nan)
     return np.asarray(frame.joints[:, 0].mean(axis=0), dtype=np.float64)
 
-
-def default_camera(frame: SceneFrame, aspect: float,
-                   hints: dict[str, Any] | None = None) -> OrbitCamera:
-    """Auto-frame all characters (and their constraint targets) from the default direction, or
-    from the scenario's camera hints (``yaw_deg``, ``pitch_deg``: the direction; ``target_m``,
-    ``distance_m``: where it looks from; what a hint leaves out is framed automatically)."""
-    hints = hints or {}
-    points = [frame.joints.reshape(-1, 3)]
-    if frame.targets.shape[0]:
-        points.append(frame.targets[:, 0:3].astype(np.float64))
-    yaw = spread_yaw(frame.joints[:, 0, :2]) if frame.joints.shape[0] else OrbitCamera.yaw_rad
-    base = OrbitCamera(yaw_rad=math.radians(hints["yaw_deg"]) if "yaw_deg" in hints else yaw)
-    if "pitch_deg" in hints:
-        base = replace(base, pitch_rad=math.radians(hints["pitch_deg"]))
-    camera = frame_points(np.concatenate(points), aspect, base)
-    if "target_m" in hints:
-        x, y, z = (float(v) for v in hints["target_m"])  # a 3-vector (the scenario checks)
-        camera = replace(camera, target=(x, y, z))
-    if "distance_m" in hints:
-        camera = replace(camera, distance=float(hints["distance_m"]))
-    return camera
-
-
-# --- screenshots --------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Screenshot:
-    """One rendered frame: rgb (height, width, 3) uint8 (top row first), the camera and the
-    frame it shows (``camera.project(frame.joints, width, height)`` gives joint pixels)."""
-
-    rgb: NDArray[np.uint8]
-    camera: OrbitCamera
-    frame: SceneFrame
-
-
-def render_screenshot(scenario: Scenario, at_s: float, width: int = 1280, height: int = 720,
-                      camera: OrbitCamera | None = None, show_targets: bool = True,
-                      show_com: bool = True, status: bool = True) -> Screenshot:
-    """Simulate ``scenario`` up to ``at_s`` seconds and render that frame without a screen."""
-    if not (1 <= width <= 8192 and 1 <= height <= 8192):
-        raise EcsAnimError(f"--size: width and height must be 1-8192 pixels, got {width}x{height}")
-    ticks = max(round(at_s * scenario.fps), 0) + 1  # the posture at t = at_s
-    source = SceneSource()
-    with build_simulation(scenario, window=True) as sim:
-        sim.renderer = source
-        for _ in range(ticks):
-            sim.step()
-        frame = source.latest()
-        assert frame is not None
-        camera = camera or default_camera(frame, width / height, scenario.camera)
-        return render_frame(frame, sim.ground, width, height, camera, show_targets, show_com,
-                            status)
-
-
-def render_frame(frame: SceneFrame, ground: Ground, width: int, height: int,
-                 camera: OrbitCamera | None = None, show_targets: bool = True,
-                 show_com: bool = True, status: bool = True) -> Screenshot:
-    """Render one frame offscreen (no window shown); the camera frames it when not given."""
-    cam = camera or default_camera(frame, width / height)
-    near, far = ground_patches(ground, frame.joints, _patch_half_m(cam))
-    pyglet = _pyglet(headless=offscreen_mode())
-    from ecs_anim.apps.viewer.gl_render import OffscreenTarget, SceneRenderer
-
-    window = _make_window(pyglet, 16, 16, visible=False)
-    try:
-        window.switch_to()
-        big_w, big_h = width * SUPERSAMPLE, height * SUPERSAMPLE
-        target = OffscreenTarget(big_w, big_h)
-        renderer = SceneRenderer()
-        renderer.set_ground(near, far)
-        target.bind()
-        renderer.draw(frame, cam, big_w, big_h, show_targets, show_com)
-        if status:
-            _draw_status(pyglet, window, status_line(frame), width, height)
-        rgb = target.read_rgb()
-        target.release()
-    finally:
-        window.close()
-    small = rgb.reshape(height, SUPERSAMPLE, width, SUPERSAMPLE, 3).mean(axis=(1, 3))
-    return Screenshot(np.round(small).astype(np.uint8), cam, frame)
-
-
-def _draw_status(pyglet: Any, window: Any, text: str, width: int, height: int) -> None:
-    """The status line in the top-left corner, in ``width`` x ``height`` logical pixels.
-    Without fonts (a bare machine) the frame goes without it, with a warning."""
-    from pyglet.math import Mat4
-
-    try:
-        window.projection = Mat4.orthogonal_projection(0, width, 0, height, -255, 255)
-        label = _label(pyglet, text, 10, height - 8, 11)
-        label.draw()
-    except Exception as exc:
-        print(f"warning: no status line ({type(exc).__name__}: {exc})", file=sys.stderr)
-
-
-def write_screenshot(scenario: Scenario, out: str | Path, at_s: float, width: int, height: int,
-                     force: bool, show_targets: bool = True, show_com: bool = True) -> Screenshot:
-    """Render and write ``out`` (PNG). What :func:`~ecs_anim.core.files.output_problem` refuses (an
-    existing file without ``force``, a folder, an unwritable place, ...) is an
-    :class:`EcsAnimError` before rendering."""
-    from ecs_anim.apps.viewer.png import write_png
-
-    problem = output_problem(out, force)
-    if problem is not None:
-        raise EcsAnimError(problem)
-    shot = render_screenshot(scenario, at_s, width, height, show_targets=show_targets,
-                             show_com=show_com)
-    write_png(out, shot.rgb, force)
-    return shot
-
-
-# --- the interactive window ---------------------------------------------------------------
 
 #: Every key and mouse action of the window, as the help overlay (H) lists them.
 CONTROLS: tuple[tuple[str, str], ...] = (
@@ -376,13 +113,13 @@ def open_viewer(scenario: Scenario, width: int = 1280, height: int = 720,
                 headless: bool = False) -> ViewerApp:
     """Make the viewer's window and state (``pyglet.app.run()`` then runs it). ``headless``:
     an offscreen window, for tests."""
-    pyglet = _pyglet(headless=headless)
+    pyglet = load_pyglet(headless=headless)
     from ecs_anim.apps.viewer.gl_render import SceneRenderer
 
     app = ViewerApp(scenario, pyglet)
     app.show_targets, app.show_com = show_targets, show_com
-    window = _make_window(pyglet, width, height, visible=True, samples=0 if headless else 4,
-                          resizable=True, caption=f"ecs-anim view {scenario.path}")
+    window = make_window(pyglet, width, height, visible=True, samples=0 if headless else 4,
+                         resizable=True, caption=f"ecs-anim view {scenario.path}")
     app.attach(window, SceneRenderer())
     return app
 
@@ -633,7 +370,7 @@ class ViewerApp:
     def attach(self, window: Any, renderer: Any) -> None:
         self.window, self.renderer = window, renderer
         pyglet = self.pyglet
-        self.label = _label(pyglet, "", 10, window.height - 8, 11)
+        self.label = text_label(pyglet, "", 10, window.height - 8, 11)
         self.notice_label = pyglet.text.Label("", x=10, y=window.height - 26, anchor_y="top",
                                               font_size=10, color=NOTICE_COLOUR)
         self.help = pyglet.text.Label(HELP, x=10, y=self.timeline_top() + 8, anchor_y="bottom",
@@ -676,7 +413,7 @@ class ViewerApp:
 
     def _ground(self, frame: SceneFrame, force: bool = False) -> None:
         assert self.sim is not None and self.camera is not None
-        wanted = _patch_half_m(self.camera)
+        wanted = ground_patch_half_m(self.camera)
         xy = frame.joints[:, 0, :2] if frame.joints.size else np.zeros((0, 2))
         if not force and len(self.renderer.ground_bounds) == 2 and xy.size:
             (x0, y0, x1, y1), far = self.renderer.ground_bounds
@@ -908,6 +645,4 @@ class ViewerApp:
             self.sim.close()
 
 
-__all__ = ["CONTROLS", "SceneSource", "Screenshot", "ViewerApp", "default_camera", "file_stamps",
-           "open_viewer", "render_frame", "render_screenshot", "run_viewer", "status_line",
-           "write_screenshot"]
+__all__ = ["CONTROLS", "ViewerApp", "file_stamps", "open_viewer", "run_viewer"]

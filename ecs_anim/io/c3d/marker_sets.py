@@ -19,7 +19,7 @@ Presets:
   Motion Analysis Cortex (``VSAC``, ``RSHA``, ``R.TO``, ``RWRI``), BTS (``r bar 1``, ``r knee 1``,
   ``r mall``, ``r met``) and Codamotion (``R.ASIS``, ``R.Ant.Fem.``, ``R.Knee``, ``R.Ankle``) write them;
   a label that names both the lateral and the medial marker (Cortex's ``RKNE``) is split by
-  position (:func:`ecs_anim.io.c3d.importing.split_same_label`).
+  position (:func:`ecs_anim.io.c3d.label_roles.split_same_label`).
 * ``isb_anatomical`` — anatomical landmarks with ISB (Wu et al. 2002/2005) or CAST
   (Cappozzo et al. 1995) style names: iliac spines (ASIS/PSIS), femoral epicondyles (FLE/FME, LE/ME),
   malleoli (FAL/TAM, LM/MM), metatarsal heads (FM1/FM5, MT1/MT5), calcaneus, acromion (AC),
@@ -31,7 +31,7 @@ Presets:
 * ``cluster_gait`` — technical marker clusters (c3d.org sample ``Eb015pi``: ``PV1-4`` pelvis,
   ``RTH1-4`` thigh, ``RSK1-4`` shank, ``RFT1-3`` foot; Vicon's lettered ``PELA``, ``LFMA``,
   ``LTBA``, ``LFTA``): no landmarks, so joint centres are found functionally (see
-  :mod:`ecs_anim.io.c3d.importing`); optional greater-trochanter markers (``LGT``) fix a hip's axis.
+  :mod:`ecs_anim.io.c3d.clusters`); optional greater-trochanter markers (``LGT``) fix a hip's axis.
 
 The landmark presets also read other conventions' spellings of their markers (the Vicon
 41-marker set of the CMU captures, MoSh/AMASS, KIT, IOR, the Oxford foot model, RRIS40,

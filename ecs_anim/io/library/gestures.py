@@ -537,7 +537,7 @@ GESTURE_GENERATORS = {name: _generator(g) for name, g in GESTURES.items()}
 
 
 #: Key times of each gesture (seconds from the clip's start), for timing constraint activations;
-#: distances as in the module docstring. ``tests/test_gestures.py`` checks them on the files.
+#: distances as in the module docstring. ``tests/io/library/test_gestures.py`` checks them on the files.
 GESTURE_TIMINGS: dict[str, dict[str, Any]] = {
     "guard": {"duration_s": 2.4, "loop": True},
     "kick": {"duration_s": 1.5, "loop": False, "kicking_ankle": "ankle_r",

@@ -12,10 +12,10 @@ indices; :func:`over_chunks` runs one over all of them, split into contiguous ch
 made the first compile half as long again).
 
 Compiled code is cached in the user's cache folder (``$XDG_CACHE_HOME/ecs_anim/numba``, else
-``~/.cache/ecs_anim/numba``) unless ``NUMBA_CACHE_DIR`` says where: the first run compiles (under
-a minute, the solver in a second process: :func:`compile_solver_aside`), later ones load in a
-fraction of a second. This must be set before numba is imported, so the package imports its
-kernels only through here.
+``~/.cache/ecs_anim/numba``) unless ``NUMBA_CACHE_DIR`` says where: the first run compiles (the
+solver in a second process: :func:`compile_solver_aside`; figures in docs/performance.md), later
+ones load in a fraction of a second. The locator that says so is registered here, before any
+kernel module is compiled, so the package imports its kernels only through here.
 """
 
 from __future__ import annotations
@@ -28,6 +28,8 @@ import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
+
+from ecs_anim.core.errors import UsageError
 
 if TYPE_CHECKING:
     from ecs_anim.runtime.kernels.handover import SpinningThreads
@@ -42,7 +44,38 @@ def cache_dir() -> Path:
     return base / "ecs_anim" / "numba"
 
 
-os.environ.setdefault("NUMBA_CACHE_DIR", str(cache_dir()))
+def _cache_kernels_in_cache_dir() -> None:
+    """Have numba cache this package's kernels in :func:`cache_dir` (and only them: numba's
+    other users keep their own settings, and no environment variable is set). A locator class
+    put first in numba's list answers for the functions of this folder alone."""
+    from numba.core import caching
+
+    impl = vars(caching).get("CacheImpl") or vars(caching)["_CacheImpl"]  # older numba: _CacheImpl
+    if any(getattr(c, "ECS_ANIM_KERNELS", False) for c in impl._locator_classes):
+        return
+
+    class KernelCacheLocator(caching._SourceFileBackedLocatorMixin, caching._CacheLocator):
+        ECS_ANIM_KERNELS = True
+
+        def __init__(self, py_func: Callable[..., object], py_file: str) -> None:
+            self._py_file = py_file
+            self._lineno = py_func.__code__.co_firstlineno
+            subpath = self.get_suitable_cache_subpath(py_file)  # type: ignore[no-untyped-call]
+            self._cache_path = str(cache_dir() / subpath)
+
+        def get_cache_path(self) -> str:
+            return self._cache_path
+
+        @classmethod
+        def from_function(cls, py_func: Callable[..., object], py_file: str) -> object:
+            if Path(py_file).resolve().parent != Path(__file__).resolve().parent:
+                return None
+            return super().from_function(py_func, py_file)  # type: ignore[no-untyped-call]
+
+    impl._locator_classes.insert(0, KernelCacheLocator)
+
+
+_cache_kernels_in_cache_dir()
 
 
 def kernel_sources() -> list[Path]:
@@ -232,7 +265,7 @@ def set_threads(n: int | None) -> int:
     if n is None:
         n = most
     if not 1 <= n <= most:
-        raise ValueError(f"expected 1 to {most} threads (the cores this process may use), got {n}")
+        raise UsageError(f"expected 1 to {most} threads (the cores this process may use), got {n}")
     _thread_count[:] = [n]
     return n
 

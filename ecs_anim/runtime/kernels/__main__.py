@@ -25,7 +25,7 @@ def compile_solver() -> None:
     from ecs_anim.runtime.kernels.decode import decoded_pose, empty_decoded
     from ecs_anim.runtime.kernels.playback import empty_poses
     from ecs_anim.runtime.kernels.solve import solve
-    from ecs_anim.solver.shell import TickGoals
+    from ecs_anim.solver.goals import TickGoals
 
     ints, floats, flags = np.zeros(0, np.int64), np.zeros(0), np.zeros(0, bool)
     points = np.zeros((0, 3))

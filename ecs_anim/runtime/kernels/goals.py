@@ -1,7 +1,7 @@
 """The compiled goals of a tick and the constraints' errors (ConstraintSolve's gather).
 
-:func:`tick_goals` and :func:`constraint_errors` mirror :func:`ecs_anim.solver.shell.tick_goals`
-and :func:`ecs_anim.solver.shell.constraint_errors` (same arguments, same results to 1e-9 m; the
+:func:`tick_goals` and :func:`constraint_errors` mirror :func:`ecs_anim.solver.goals.tick_goals`
+and :func:`ecs_anim.solver.goals.constraint_errors` (same arguments, same results to 1e-9 m; the
 numpy functions stay as the reference the tests compare these with). The per-constraint work
 (its point, its goal from the target: a distance, an area's allowed region, a direction; the
 release of a point a sphere held; the activation ramp's blend) runs compiled over the active
@@ -49,7 +49,7 @@ from ecs_anim.runtime.kernels.vec import (
     sub,
     to_world,
 )
-from ecs_anim.solver.shell import CONTACT_PRIORITY, TickGoals
+from ecs_anim.solver.goals import CONTACT_PRIORITY, TickGoals
 
 I64 = NDArray[np.int64]
 B8 = NDArray[np.bool_]
@@ -106,7 +106,7 @@ def columns(table: ConstraintTable) -> Columns:
 
 
 class GoalArrays(NamedTuple):
-    """The k goals of :class:`~ecs_anim.solver.shell.TickGoals` the layout writes (same names
+    """The k goals of :class:`~ecs_anim.solver.goals.TickGoals` the layout writes (same names
     and shapes: (k,), (k, 3); footprint and in_contact (r, 2, 3), (r, 2); com_desired (r, 3),
     com_on (r,))."""
 
@@ -132,7 +132,7 @@ class GoalArrays(NamedTuple):
 
 @jit(inline="always")
 def area_goal(cols: Columns, i: int, point: Vec3, anchor: Vec3, side: Vec3, codes: Codes) -> Vec3:
-    """Mirrors ``ecs_anim.solver.shell._area_goal`` for constraint ``i``: the nearest point of
+    """Mirrors ``ecs_anim.solver.goals._area_goal`` for constraint ``i``: the nearest point of
     its allowed region to ``point``, the area sitting at ``anchor``; a point inside an area it
     must leave goes out on the side of ``side``."""
     shape, inside = cols.area_shape[i], cols.area_inside[i]
@@ -203,7 +203,7 @@ def goal_rows(lo: int, hi: int, idx: I64, cols: Columns, weight: F64, targets: F
     orientation), its weight (a,) (0: an area the motion already keeps) and whether a sphere
     keeps its point off the motion's place (a,). ``dec`` this tick's decoded pose of every
     character, ``previous`` the last tick's posture (read only with ``has_previous``). Mirrors
-    the per-constraint part of :func:`ecs_anim.solver.shell.tick_goals`."""
+    the per-constraint part of :func:`ecs_anim.solver.goals.tick_goals`."""
     for j in range(lo, hi):
         i = idx[j]
         c = cols.owner[i]
@@ -259,7 +259,7 @@ def layout_rows(lo: int, hi: int, user_start: I64, kept: I64, cols: Columns, wei
     compacted), then its two feet, each a goal of its leg to stay where ground adaptation put
     it (``positions`` (n, N_JOINTS, 3) the pose before constraints), above every priority while
     in contact, below every one otherwise. Mirrors the layout of
-    :func:`ecs_anim.solver.shell.tick_goals`."""
+    :func:`ecs_anim.solver.goals.tick_goals`."""
     for c in range(lo, hi):
         row = rows[c]
         for j in range(user_start[c], user_start[c + 1]):
@@ -311,7 +311,7 @@ def _arrays(decoded: DecodedPose) -> DecodedArrays:
 def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained: DecodedPose,
                contact_weight: F64, com_control: NDArray[np.bool_], com_desired: F64,
                previous: DecodedPose | None = None, max_release_m: float = np.inf) -> TickGoals | None:
-    """Compiled :func:`ecs_anim.solver.shell.tick_goals`: the same arguments and result."""
+    """Compiled :func:`ecs_anim.solver.goals.tick_goals`: the same arguments and result."""
     active = np.flatnonzero(weight > 0)
     if active.size == 0:
         return None
@@ -366,7 +366,7 @@ def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained:
 def error_rows(lo: int, hi: int, idx: I64, cols: Columns, dec: DecodedArrays, targets: F64,
                t: Tables, codes: Codes, out: F64) -> None:
     """``out[j]`` (a,): how far constraint ``idx[j]`` is from being met on ``dec``, for
-    ``j`` in ``lo..hi-1``. Mirrors :func:`ecs_anim.solver.shell.constraint_errors`."""
+    ``j`` in ``lo..hi-1``. Mirrors :func:`ecs_anim.solver.goals.constraint_errors`."""
     for j in range(lo, hi):
         i = idx[j]
         c = cols.owner[i]
@@ -387,7 +387,7 @@ def error_rows(lo: int, hi: int, idx: I64, cols: Columns, dec: DecodedArrays, ta
 
 
 def constraint_errors(table: ConstraintTable, idx: I64, decoded: DecodedPose, targets: F64) -> F64:
-    """Compiled :func:`ecs_anim.solver.shell.constraint_errors`: the same arguments and
+    """Compiled :func:`ecs_anim.solver.goals.constraint_errors`: the same arguments and
     result."""
     idx = np.ascontiguousarray(idx, dtype=np.int64)
     out = np.empty(idx.size)

@@ -45,13 +45,8 @@ from ecs_anim.runtime.kernels.solve_points import (
 from ecs_anim.runtime.kernels.solve_root import root_step
 from ecs_anim.runtime.kernels.solve_trunk import solve_trunk
 from ecs_anim.runtime.kernels.vec import F64, dot, jit, load3, normalize, store3, sub
-from ecs_anim.solver.shell import (
-    CONTACT_PRIORITY,
-    DEFAULT_SETTINGS,
-    SolverSettings,
-    TickGoals,
-    iteration_caps,
-)
+from ecs_anim.solver.goals import CONTACT_PRIORITY, TickGoals
+from ecs_anim.solver.shell import DEFAULT_SETTINGS, SolverSettings, iteration_caps
 
 I64 = NDArray[np.int64]
 B8 = NDArray[np.bool_]
@@ -230,7 +225,7 @@ def sorted_goals(goals: TickGoals, goal_iterations: I64) -> tuple[Goals, Winners
     """The goals sorted by character (stable: ties between priorities still go to the goal
     added last), their winners, and the order (k,) taking ``goals``' indices to the sorted;
     ``goal_iterations`` (k,) each goal's cap (:func:`~ecs_anim.solver.shell.iteration_caps`).
-    :func:`ecs_anim.solver.shell.tick_goals` makes them sorted already: then nothing is
+    :func:`ecs_anim.solver.goals.tick_goals` makes them sorted already: then nothing is
     copied (``goal`` is the same array)."""
     r, k = int(goals.rows.size), goals.k
     already = bool(np.all(goals.owner[1:] >= goals.owner[:-1]))
@@ -274,7 +269,7 @@ def sorted_goals(goals: TickGoals, goal_iterations: I64) -> tuple[Goals, Winners
 class SolveState(NamedTuple):
     """What :func:`solve_rows` works on: the solved characters' pose and decoded rows
     (written in place), their goals sorted by character (``order`` (k,) takes the
-    :class:`~ecs_anim.solver.shell.TickGoals` indices to the sorted ones), the winners and the
+    :class:`~ecs_anim.solver.goals.TickGoals` indices to the sorted ones), the winners and the
     bodies."""
 
     pose: PoseArrays

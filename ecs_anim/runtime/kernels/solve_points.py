@@ -107,7 +107,7 @@ class Goals(NamedTuple):
     """One tick's k goals sorted by character (the solved characters' local rows 0..r-1).
 
     start (r + 1,): character ``c``'s goals are ``start[c]:start[c + 1]``; the others as in
-    :class:`ecs_anim.solver.shell.TickGoals` (k,) / (k, 3); ``goal`` is moved by goals that
+    :class:`ecs_anim.solver.goals.TickGoals` (k,) / (k, 3); ``goal`` is moved by goals that
     follow a point of their own body: ``on_self`` (k,) bool, that point's ``self_segment``,
     ``self_fraction``, ``self_offset`` and where it is now, ``self_at`` (k, 3); ``iterations``
     (k,) the iterations after which a goal no longer keeps its character's loop going nor

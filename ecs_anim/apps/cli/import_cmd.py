@@ -1,0 +1,189 @@
+"""``ecs-anim import``: BVH and C3D files to normalized motions (.nmo), one line each."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from ecs_anim.apps.cli.args import EXIT_FAILED, error_line
+from ecs_anim.core.errors import EcsAnimError, listed
+from ecs_anim.core.files import folder_problem, input_problem
+from ecs_anim.io.contacts import ContactThresholds
+from ecs_anim.motion.clip import turned_to_face
+from ecs_anim.motion.constraint_table import check_stored
+
+
+def _progress(done: int, total: int, label: str) -> None:
+    """A one-line progress bar on stderr (only drawn when several files are processed)."""
+    width = 30
+    filled = int(width * done / max(total, 1))
+    sys.stderr.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} {label[:40]:40s}")
+    if done == total:
+        sys.stderr.write("\n")
+    sys.stderr.flush()
+
+
+def cmd_import(args: argparse.Namespace) -> int:
+    """``ecs-anim import``: each source to ``-o DIR/<stem>.nmo``; a bad file fails alone
+    (exit status :data:`~ecs_anim.apps.cli.args.EXIT_FAILED` when any did)."""
+    from ecs_anim.io.c3d.importing import import_c3d
+    from ecs_anim.io.importing import import_bvh
+    from ecs_anim.motion.clip import save_nmo
+
+    outdir = Path(args.output)
+    problem = folder_problem(outdir)
+    if problem is not None:
+        raise EcsAnimError(f"-o {problem}")
+    thresholds = ContactThresholds(
+        height_m=args.contact_height, speed_mps=args.contact_speed,
+        min_duration_s=args.contact_min_duration,
+    )
+    extra = []
+    if args.constraints:
+        from ecs_anim.scenario import load_motion_constraints
+        extra = load_motion_constraints(args.constraints)  # a mistake stops before any import
+    sources = [Path(s) for s in args.sources]
+    inputs = [*sources, *(p for p in (args.map, args.constraints, args.fill_absent_from) if p)]
+    for src in sources:
+        problem = input_problem(outdir / f"{src.stem}.nmo", inputs)
+        if problem is not None:
+            raise EcsAnimError(f"-o {problem}")
+    if not any(s.suffix.lower() == ".c3d" for s in sources) and (
+            args.fill_absent_from or args.max_gap is not None):
+        raise EcsAnimError("--max-gap and --fill-absent-from are for .c3d files; none is given")
+    failed = 0
+    show_bar = len(sources) > 1 and sys.stderr.isatty()
+    stems: dict[str, Path] = {}
+    for k, src in enumerate(sources, start=1):
+        target = outdir / f"{src.stem}.nmo"
+        try:
+            if src.stem in stems:
+                raise EcsAnimError(f"{src}: has the same name as {stems[src.stem]}; both would be "
+                                   f"written to {target}")
+            stems[src.stem] = src
+            if target.exists() and not args.force:
+                raise EcsAnimError(f"{target}: already exists (use --force to overwrite)")
+            suffix = src.suffix.lower()
+            if src.is_dir():
+                raise EcsAnimError(f"{src}: a folder; give the .bvh or .c3d files in it "
+                                   f"(e.g. {src}/*.bvh)")
+            if suffix not in (".bvh", ".c3d"):
+                raise EcsAnimError(f"{src}: unsupported file type {src.suffix!r} (expected .bvh "
+                                   "or .c3d)")
+            if suffix == ".c3d" and args.stature is not None:
+                raise EcsAnimError(f"{src}: --stature applies to BVH files (a C3D's markers are "
+                                   "in the unit of POINT:UNITS)")
+            if suffix == ".c3d":
+                motion = import_c3d(src, args.map, args.unit, thresholds, args.up,
+                                    args.max_gap,
+                                    args.fill_absent_from, args.trim, not args.no_treadmill,
+                                    args.contacts)
+            else:
+                if args.contacts == "events":
+                    raise EcsAnimError(f"{src}: --contacts events needs a C3D file's gait events "
+                                       "(a BVH has none)")
+                motion = import_bvh(src, args.map, args.unit, thresholds, args.up, args.trim,
+                                    args.stature, not args.no_treadmill)
+                for warning in motion.info.get("warnings", []):
+                    print(f"warning: {warning}", file=sys.stderr)
+            if args.face is not None:
+                motion = turned_to_face(motion, args.face)
+            # A --constraints file times the file's frames; --trim or a C3D import may drop some.
+            shift_s = motion.info.get("first_file_frame", 0) / motion.fps
+            on_clip = [replace(c, activation=replace(c.activation, start_s=c.activation.start_s - shift_s,
+                                                     stop_s=c.activation.stop_s - shift_s))
+                       for c in extra] if shift_s else extra
+            motion.constraints.extend(on_clip)
+            try:
+                check_stored(on_clip, motion.duration_s)
+            except ValueError as exc:
+                raise EcsAnimError(f"{args.constraints}: with {src}: {exc}") from None
+            save_nmo(motion, target, force=args.force)
+            contacts = motion.contacts()
+            message = (f"{src} -> {target}: {motion.n_frames} frames at {motion.fps:g} fps, "
+                       f"{motion.info['joint_map']}, {motion.info['up_axis'].upper()} up"
+                       + (f" ({motion.info['up_reason']})" if motion.info.get("up_reason") else "")
+                       + ", unit "
+                       f"{motion.info['unit']} ({motion.info['unit_reason']}), "
+                       f"contacts L {contacts[:, 0].mean():.0%} "
+                       f"R {contacts[:, 1].mean():.0%}"
+                       + (" (from the gait events)" if motion.info.get("contacts", {}).get("method")
+                          == "gait events" else ""))
+            message += _events_and_treadmill(motion.info)
+            if motion.info["filled_in"]:
+                message += f", filled in: {', '.join(motion.info['filled_in'])}"
+            if motion.info.get("ignored_joints"):
+                message += f", ignored (no body part): {listed(motion.info['ignored_joints'])}"
+            if extra:
+                message += f", {len(extra)} stored constraint(s)"
+            if motion.info.get("absent"):
+                message += (f", absent ({motion.info['absent_fill']}): "
+                            f"{', '.join(motion.info['absent'])}")
+            gaps = motion.info.get("gaps")
+            if gaps:
+                message += f", {gaps['samples_filled']} marker samples filled"
+                if gaps["long_gap_frames"]:
+                    spans = ", ".join(f"{a}-{b}" for a, b in gaps["long_gap_frames"])
+                    message += (f"; frames {spans} had gaps longer than {gaps['max_gap_frames']} "
+                                "frames or markers not yet or no longer seen (interpolated or "
+                                "held, unreliable)")
+            if args.trim is not None:
+                message += f"; --trim kept frames from frame {motion.info.get('first_file_frame', 0)} of the file"
+            if motion.info.get("rest_frames_dropped"):
+                message += f"; {motion.info['rest_frames_dropped']}"
+            for key, what in (("root_frames_trimmed", "trimmed (of the file's frames)"),
+                              ("root_frames_repaired", "repaired")):
+                if motion.info.get(key):
+                    spans = ", ".join(f"{a}-{b}" for a, b in motion.info[key])
+                    message += f"; frames {spans} {what}: the pelvis markers could not place the pelvis"
+            for line in motion.info.get("parts_frames_trimmed") or []:
+                message += f"; {line}"
+            if show_bar:
+                sys.stderr.write("\r" + " " * 80 + "\r")
+            print(message)
+            for why in (motion.info.get("parts_not_computed") or {}).values():
+                print(f"  {why}")
+        except (EcsAnimError, OSError) as exc:  # one bad file must not stop the others
+            failed += 1
+            if show_bar:
+                sys.stderr.write("\r" + " " * 80 + "\r")
+            print(f"error: {error_line(exc)}", file=sys.stderr)
+        if show_bar:
+            _progress(k, len(sources), src.name)
+    if failed:
+        rest = "; the others were imported" if failed < len(sources) else ""
+        print(f"{failed} of {len(sources)} file(s) failed{rest}", file=sys.stderr)
+        return EXIT_FAILED
+    return 0
+
+
+def _events_and_treadmill(info: dict[str, Any]) -> str:
+    """The import line's part on gait events and an in-place (treadmill) stance."""
+    text = ""
+    events = info.get("gait_events")
+    if events:
+        check = info.get("contacts", {}).get("events_check") or {}
+        n = sum(e["kind"] in ("strike", "off") for e in events)
+        text += f", {n} gait events"
+        if check.get("worst_ms") is not None:
+            text += f" (detected contacts within {check['worst_ms']:g} ms of them)"
+    plates = info.get("force_plates")
+    if plates:
+        text += f", {len(plates)} force-plate contact{'s' * (len(plates) != 1)}"
+        check = info.get("contacts", {}).get("plates_check") or {}
+        if check.get("worst_ms") is not None:
+            text += f" (contacts within {check['worst_ms']:g} ms of their measured edges)"
+    centres = info.get("lab_joint_centres")
+    if centres:
+        joint, row = max(centres.items(), key=lambda kv: kv[1]["median_mm"])
+        text += (f", {len(centres)} lab joint centres in the file: ours within "
+                 f"{row['median_mm']:g} mm of them (median; farthest {joint})")
+    belt = info.get("treadmill")
+    if belt:
+        text += (f"; in place on a treadmill-like belt at {belt['speed_mps']:g} m/s: "
+                 + ("turned into root motion (--no-treadmill keeps it in place)"
+                    if belt["converted"] else "kept in place (--no-treadmill)"))
+    return text

@@ -1,0 +1,46 @@
+"""The trial's gait events: the file's ``EVENT`` entries in the clip's time, and the contacts its
+force plates measured against the motion's."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from ecs_anim.io.c3d.force_plates import plate_contacts, plate_edges
+from ecs_anim.io.c3d.reading import C3dMarkers
+from ecs_anim.io.contacts import gait_event_kind
+from ecs_anim.io.importing import UNITS, UP_AXES, CanonicalClip, event_agreement
+from ecs_anim.motion.clip import NormalizedMotion
+
+
+def check_against_plates(raw: C3dMarkers, clip: CanonicalClip, first_file_frame: int,
+                         motion: NormalizedMotion, extra: dict[str, Any]) -> None:
+    """The foot contacts the file's force plates measured (``extra["force_plates"]``) and how
+    far the motion's contacts lie from their touch-downs and lift-offs
+    (``motion.info["contacts"]["plates_check"]``, as ``events_check``)."""
+    plate2clip = UNITS[clip.unit] * UP_AXES[clip.up_axis]
+    measured, notes = plate_contacts(raw.force_plates, plate2clip, clip.positions, clip.fps,
+                                     first_file_frame / raw.rate)
+    notes = ([raw.force_plate_note] if raw.force_plate_note else []) + notes
+    if notes:
+        extra["force_plate_notes"] = notes
+    if not measured:
+        return
+    extra["force_plates"] = measured
+    edges = plate_edges(measured)
+    if edges and motion.planted is not None:
+        motion.info["contacts"]["plates_check"] = event_agreement(
+            motion.planted["on_ground"], edges, motion.fps)
+
+
+def gait_events(stored: list[tuple[str, str, float]], start_s: float) -> list[dict[str, Any]]:
+    """A file's ``EVENT`` entries as gait events in the clip's seconds (``time_s``, from its
+    first frame at ``start_s`` of the capture), sorted by time: ``side`` ``"l"``/``"r"`` and
+    ``kind`` ``"strike"``/``"off"`` where the label and context say so
+    (:func:`~ecs_anim.io.contacts.gait_event_kind`), ``None`` for other events."""
+    out = []
+    for label, context, time_s in stored:
+        kind = gait_event_kind(label, context)
+        out.append({"label": label, "context": context, "side": kind[0] if kind else None,
+                    "kind": kind[1] if kind else None, "time_s": round(time_s - start_s, 6),
+                    "file_time_s": round(time_s, 6)})
+    return sorted(out, key=lambda e: e["time_s"])

@@ -1,0 +1,327 @@
+"""The benchmark command, ``--threads``, and the first run's compile notice (issue 13, items 6
+and 8). Figures are printed, never asserted: only their presence and consistency are checked."""
+
+from __future__ import annotations
+
+import json
+import shlex
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+import pytest
+
+from conftest import REPO
+from ecs_anim.apps.bench import capacity_fit, linear_fit
+from ecs_anim.apps.cli.main import main
+from ecs_anim.runtime import kernels
+from ecs_anim.runtime.bench_scene import BenchScene
+
+SCENARIO = str(REPO / "scenarios" / "reach_and_touch.yaml")
+#: Makes any bench example quick: two small sizes, a few ticks, no timed cold start.
+QUICK = ["--sizes", "4,8", "--seconds", "0.1", "--no-compile-timing"]
+#: Every key ``bench --json`` had before issue 13 (kept), then the new ones.
+OLD_KEYS = {"characters", "rotations", "constrained", "ms_per_tick", "ms_per_tick_total",
+            "ms_per_character", "ms_fixed_per_tick", "max_characters_at_30hz"}
+NEW_KEYS = {"threads", "cpu_ms_per_character", "cpu_ms_fixed_per_tick",
+            "max_characters_at_30hz_cpu", "wall_ms_per_tick", "cpu_ms_per_tick", "sizes",
+            "peak_memory_mb", "peak_memory_kb_per_character", "peak_memory_mb_fixed", "compile",
+            "kernel_cache"}
+
+
+def test_bench_json_keeps_its_keys_and_adds_cpu_wall_memory_and_threads(capsys):
+    assert main(["bench", "--constrained", "--json", *QUICK]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert OLD_KEYS | NEW_KEYS <= set(result)
+    assert result["characters"] == 8 and result["threads"] == 1 and result["constrained"]
+    assert [s["characters"] for s in result["sizes"]] == [4, 8]
+    assert all(s["ticks"] == 3 and s["peak_memory_mb"] > 0 for s in result["sizes"])
+    assert "ConstraintSolve" in result["ms_per_tick"] and result["compile"] is None
+    assert result["max_characters_at_30hz"] >= 0 and result["max_characters_at_30hz_cpu"] >= 0
+
+
+def test_bench_text_names_the_threads_and_every_size(capsys):
+    assert main(["bench", *QUICK]) == 0
+    out = capsys.readouterr().out
+    assert "1 thread," in out and "characters hold 30 Hz" in out and "kB per character" in out
+    rows = [line.split() for line in out.splitlines() if line.strip().split(" ")[0] in ("4", "8")]
+    assert [r[0] for r in rows] == ["4", "8"]
+
+
+def test_bench_sizes_default_to_four_and_bad_sizes_are_one_line_errors(capsys):
+    from ecs_anim.apps.bench import bench_sizes
+
+    assert bench_sizes(400, None) == [50, 100, 200, 400]
+    assert bench_sizes(8, None) == [1, 2, 4, 8]
+    cases = [(["bench", "--sizes", "8"], "give two sizes or more"),
+             (["bench", "--sizes", "8,200000"], "at most 100,000"),
+             (["bench", "--threads", "999", *QUICK], "--threads 999: expected 1 to")]
+    for argv, message in cases:
+        assert main(argv) == 1, argv
+        err = capsys.readouterr().err
+        assert message in err and "Traceback" not in err, (argv, err)
+    with pytest.raises(SystemExit):
+        main(["bench", "--sizes", "4,x"])
+    assert "expected whole numbers >= 1" in capsys.readouterr().err
+
+
+def test_the_fit_is_least_squares_over_every_size():
+    sizes = [10, 20, 40, 80]
+    fixed, slope = linear_fit(sizes, [2.0 + 0.5 * n for n in sizes])
+    np.testing.assert_allclose([fixed, slope], [2.0, 0.5], atol=1e-9)
+    fit = capacity_fit(sizes, [2.0 + 0.5 * n for n in sizes])
+    assert fit["max_characters_at_30hz"] == int((1000.0 / 30.0 - 2.0) / 0.5)
+
+
+def test_run_and_view_take_threads(tmp_path, capsys):
+    assert main(["run", SCENARIO, "--seconds", "0.1", "--threads", "1"]) == 0
+    assert kernels.threads() == 1
+    assert main(["run", SCENARIO, "--seconds", "0.1"]) == 0  # default: every core
+    assert kernels.threads() == kernels.available_threads()
+    shot = tmp_path / "v.png"
+    assert main(["view", SCENARIO, "--threads", "999", "--screenshot", str(shot)]) == 1
+    assert "--threads 999: expected 1 to" in capsys.readouterr().err and not shot.exists()
+
+
+def test_results_do_not_depend_on_the_thread_count():
+    """Each character is computed by one thread on its own: the bench scene, constrained, gives
+    the same joint positions on one thread as on all."""
+    if kernels.available_threads() < 2:
+        pytest.skip("one core available: nothing to compare")
+    positions = []
+    for n_threads in (1, kernels.available_threads()):
+        kernels.set_threads(n_threads)
+        scene = BenchScene(12, constrained=True)
+        for _ in range(5):
+            scene.tick()
+        positions.append(scene.sim.store.positions.copy())
+        scene.sim.close()
+    kernels.set_threads(None)
+    np.testing.assert_array_equal(positions[0], positions[1])
+
+
+def test_over_chunks_splits_the_rows_and_raises_what_a_chunk_raised():
+    """Contiguous chunks covering 0..n once, one per thread; a failing chunk's error is raised
+    after the others are done."""
+    chunks: list[tuple[int, int]] = []
+
+    def record(lo: int, hi: int, tag: str) -> None:
+        assert tag == "rows"
+        chunks.append((lo, hi))
+
+    kernels.set_threads(kernels.available_threads())
+    kernels.over_chunks(record, 101, "rows")
+    assert sorted(chunks) == [(101 * i // kernels.threads(), 101 * (i + 1) // kernels.threads())
+                              for i in range(kernels.threads())]
+    chunks.clear()
+    kernels.over_chunks(record, 3, "rows")  # too few rows to share
+    assert chunks == [(0, 3)]
+    kernels.set_threads(1)
+    chunks.clear()
+    kernels.over_chunks(record, 101, "rows")
+    assert chunks == [(0, 101)]
+    kernels.set_threads(None)
+
+    def fail_late(lo: int, hi: int) -> None:
+        if hi == 101:
+            raise ValueError(f"rows {lo}..{hi}")
+        chunks.append((lo, hi))
+
+    chunks.clear()
+    with pytest.raises(ValueError, match=r"\.\.101"):
+        kernels.over_chunks(fail_late, 101)
+    assert len(chunks) == kernels.threads() - 1
+
+
+def _fake_cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """An empty kernel cache folder of this package in ``tmp_path`` (NUMBA_CACHE_DIR)."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    folder = kernels._cache_subfolder()
+    assert folder.parent == tmp_path and folder.name.startswith("kernels_")
+    return folder
+
+
+def _index(path: Path, source: bytes) -> None:
+    """A numba cache index as numba 0.68 writes it: its version, then (stamp, overloads), the
+    stamp being the sha256 of the module's source."""
+    import hashlib
+    import pickle
+
+    with open(path, "wb") as f:
+        pickle.dump("0.68", f)
+        f.write(pickle.dumps((hashlib.sha256(source).digest(), {})))
+
+
+def test_uncompiled_kernels_reads_the_cache_folder(tmp_path, monkeypatch):
+    folder = _fake_cache(tmp_path, monkeypatch)
+    # The threads' hand-over is not waited for: a tick on one thread never compiles it.
+    modules = [p.stem for p in kernels.kernel_sources()
+               if "@jit(nogil=True)" in p.read_text(encoding="utf-8") and p.stem != "handover"]
+    assert {"decode", "playback", "ground_adapt", "solve", "posture", "com"} <= set(modules)
+    assert kernels.uncompiled_kernels() == modules  # nothing compiled yet
+    folder.mkdir()
+    for source in kernels.kernel_sources():
+        _index(folder / f"{source.stem}.some_kernel-10.py311.nbi", source.read_bytes())
+    assert kernels.uncompiled_kernels() == [] and kernels.compile_notice() is None
+    # A module whose source changed since it was compiled is compiled again (file times do not
+    # matter: a fresh checkout of the same source stays compiled).
+    first = kernels.kernel_sources()[0]
+    _index(folder / f"{first.stem}.some_kernel-10.py311.nbi", first.read_bytes() + b"# edited")
+    assert kernels.uncompiled_kernels() == [first.stem]
+    (folder / "vec.broken-1.py311.nbi").write_bytes(b"not an index")
+    assert kernels.uncompiled_kernels() == [first.stem]
+
+
+def test_compiled_code_of_other_kernel_sources_is_dropped(tmp_path, monkeypatch):
+    """numba checks only a compiled function's own file; a kernel inlining an updated helper
+    of another module must not keep running its old code."""
+    folder = _fake_cache(tmp_path, monkeypatch)
+    folder.mkdir()
+    stale = [folder / "solve.solve_rows-130.py311.nbi", folder / "solve.solve_rows-130.py311.1.nbc"]
+    for path in stale:
+        path.write_bytes(b"old")
+    (folder / kernels.SOURCES_MARKER).write_text("0" * 64 + "\n")  # made from other sources
+    assert kernels.drop_stale_cache()
+    assert not any(path.exists() for path in stale)
+    assert (folder / kernels.SOURCES_MARKER).read_text().strip() == kernels.sources_digest()
+    stale[0].write_bytes(b"compiled from these sources")
+    assert not kernels.drop_stale_cache() and stale[0].exists()  # same sources: kept
+
+
+def test_a_first_run_says_once_that_it_compiles(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(kernels, "uncompiled_kernels", lambda: ["decode"])
+    assert main(["run", SCENARIO, "--seconds", "0.1"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("compiling the tick's kernels once (under a minute); cached in ") == 1
+    assert str(kernels.cache_dir()) in err
+    assert main(["bench", "import", "nope.bvh"]) == 1  # no tick: nothing said
+    assert "compiling" not in capsys.readouterr().err
+    assert main(["run", str(tmp_path / "missing.yaml")]) == 1  # refused before a tick: the error alone
+    assert capsys.readouterr().err.count("\n") == 1
+    monkeypatch.setattr(kernels, "uncompiled_kernels", lambda: [])
+    assert main(["run", SCENARIO, "--seconds", "0.1"]) == 0
+    assert "compiling" not in capsys.readouterr().err
+
+
+class _FakeProcess:
+    """Stands for the process compiling the solver aside: records the command and the waits."""
+
+    started: ClassVar[list[tuple[str, ...]]] = []
+
+    def __init__(self, command, **_: object) -> None:
+        self.started.append(tuple(command))
+        self.waited = 0
+
+    def wait(self) -> int:
+        self.waited += 1
+        return 0
+
+    def poll(self) -> int:
+        return 0
+
+
+def test_a_first_run_compiles_the_solver_in_a_second_process_and_the_solve_waits_for_it(
+        monkeypatch):
+    monkeypatch.setattr("ecs_anim.runtime.kernels.subprocess.Popen", _FakeProcess)
+    monkeypatch.setattr("ecs_anim.runtime.kernels.os.sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    _FakeProcess.started = []
+    monkeypatch.setattr(kernels, "_solver_compile", {})
+    monkeypatch.setattr(kernels, "uncompiled_kernels", lambda: [])
+    kernels.compile_solver_aside()  # compiled already: nothing started, not asked again
+    monkeypatch.setattr(kernels, "uncompiled_kernels", lambda: ["posture", "solve"])
+    kernels.compile_solver_aside()
+    assert _FakeProcess.started == []
+    monkeypatch.setattr(kernels, "_solver_compile", {})
+    monkeypatch.setattr("ecs_anim.runtime.kernels.os.sched_getaffinity", lambda pid: {0}, raising=False)
+    kernels.compile_solver_aside()  # one core: this process compiles everything itself
+    assert _FakeProcess.started == []
+    monkeypatch.setattr(kernels, "_solver_compile", {})
+    monkeypatch.setattr("ecs_anim.runtime.kernels.os.sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    kernels.compile_solver_aside()
+    kernels.compile_solver_aside()  # once per process
+    assert _FakeProcess.started == [kernels.SOLVER_COMMAND]
+    child = kernels._solver_compile["process"]
+    assert isinstance(child, _FakeProcess)
+    BenchScene(2, constrained=True).tick()  # the solve waits for the other process, once
+    kernels.wait_for_solver()
+    assert child.waited == 1 and kernels._solver_compile["process"] is None
+
+
+def test_the_solver_compiled_aside_is_the_one_a_solve_runs():
+    """``python -m ecs_anim.runtime.kernels --solver`` (solving no character) compiles solve_rows for
+    the argument types of a real solve: a real solve then finds it (no second compilation)."""
+    from ecs_anim.runtime.kernels.__main__ import compile_solver
+    from ecs_anim.runtime.kernels.solve import solve_rows
+
+    scene = BenchScene(2, constrained=True)
+    scene.tick()
+    scene.sim.close()
+    compile_solver()
+    assert len(solve_rows.signatures) == 1
+
+
+def _doc_commands(page: str, heading: str) -> list[list[str]]:
+    """The ``ecs-anim`` command lines of a docs page's section (indented code), as argv: from
+    the ``heading`` line (``## ...`` or ``### ...``) to the next heading of any level."""
+    text = (REPO / "docs" / page).read_text(encoding="utf-8")
+    block = text.split(f"\n{heading}\n", 1)[1].split("\n#", 1)[0]
+    commands = []
+    for line in block.splitlines():
+        words = shlex.split(line.strip(), comments=True) if line.startswith("    ") else []
+        if ".venv/bin/ecs-anim" in words:  # an example (the synopsis lines say ecs-anim)
+            commands.append(words[words.index(".venv/bin/ecs-anim") + 1:])
+    return commands
+
+
+def test_the_readme_performance_commands_run(capsys):
+    """Every command of docs/performance.md's bench commands, made quick (two small sizes, a
+    few ticks, no timed cold start); taskset is left out (the figures are not checked)."""
+    commands = _doc_commands("performance.md", "### The bench commands")
+    assert len(commands) == 7, commands
+    flags = {w for argv in commands for w in argv if w.startswith("--")}
+    assert {"--constrained", "--threads", "--rotations", "--sizes", "--no-compile-timing",
+            "--json", "--characters", "--seconds"} <= flags
+    for argv in commands:
+        assert argv[0] == "bench", argv
+        if "--threads" in argv and int(argv[argv.index("--threads") + 1]) > \
+                kernels.available_threads():
+            continue  # a one-core machine cannot run the two-thread example
+        assert main([*argv, *QUICK]) == 0, argv  # the last --sizes, --seconds count
+        assert "characters hold 30 Hz" in capsys.readouterr().out or "--json" in argv
+
+
+def test_the_readme_threads_examples_run(tmp_path, capsys):
+    """docs/cli.md's ``--threads`` examples of run and view (a screenshot: it needs headless
+    OpenGL, as tests/apps/viewer/test_viewer.py's do), their outputs in a temporary folder."""
+    commands = [c for c in _doc_commands("cli.md", "## Threads") if "--threads" in c]
+    assert {c[0] for c in commands} >= {"run", "view"}
+    for argv in commands:
+        argv = [w.replace("out/", f"{tmp_path}/") for w in argv]
+        if "--screenshot" in argv:
+            from support.gl import need_gl
+
+            need_gl()
+            assert main(argv) == 0, argv
+            continue
+        assert main([*argv, "--seconds", "0.1"]) == 0, argv
+
+
+def _one_tick_in_a_child(n: int) -> tuple[int, ...]:
+    scene = BenchScene(n)
+    scene.tick()
+    shape = scene.sim.store.positions.shape
+    scene.sim.close()
+    return tuple(shape)
+
+
+def test_a_process_that_ran_the_kernels_can_fork_workers_that_run_them():
+    """The batch's pool forks after the kernels ran on this process's threads, which a forked
+    child does not have: each process makes its own (:func:`ecs_anim.runtime.kernels.over_chunks`)."""
+    import multiprocessing
+    import os
+
+    kernels.set_threads(None)
+    assert _one_tick_in_a_child(16)[0] == 16  # the kernels' threads start in this process
+    assert (os.getpid() in kernels._pools) == (kernels.available_threads() > 1)
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        assert pool.map(_one_tick_in_a_child, [12]) == [(12, 22, 3)]

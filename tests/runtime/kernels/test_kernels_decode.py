@@ -1,0 +1,128 @@
+"""Compiled decode (ecs_anim.runtime.kernels.decode) equals the numpy reference (normalized.decode)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from conftest import MOCAP_DIR, MOTIONS_DIR, require_mocap
+from ecs_anim.core.morphology import Morphology
+from ecs_anim.core.normalized import DecodedPose, NormalizedPoses, decode, decode_legs
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.runtime.kernels import decode as kd
+from support.solve import random_bodies, random_poses
+
+FIELDS = ("positions", "pelvis2world", "thorax2world", "head2world", "leg2world", "arm2world")
+TOL = 1e-9
+
+
+def assert_same(got: DecodedPose, ref: DecodedPose) -> None:
+    for name in FIELDS:
+        a, b = getattr(got, name), getattr(ref, name)
+        assert a.shape == b.shape, name
+        np.testing.assert_allclose(a, b, rtol=0, atol=TOL, err_msg=name)
+
+
+def test_random_poses_on_random_bodies_match_numpy():
+    rng = np.random.default_rng(1301)
+    poses = random_poses(rng, 300)
+    lengths = random_bodies(rng, 300)
+    assert_same(kd.decode(poses, lengths), decode(poses, lengths))
+
+
+def test_one_body_for_all_rows_and_out_written_in_place():
+    rng = np.random.default_rng(1302)
+    poses = random_poses(rng, 50)
+    body = Morphology.from_stature(1.62).lengths
+    out = DecodedPose(*(np.full_like(a, np.nan) for a in kd.empty_decoded(50)))
+    result = kd.decode(poses, body, out)
+    assert result is out
+    assert_same(out, decode(poses, body))
+
+
+def test_decode_rows_writes_only_its_rows():
+    rng = np.random.default_rng(1303)
+    poses = random_poses(rng, 40)
+    lengths = random_bodies(rng, 40)
+    arrays = kd.empty_decoded(40)
+    for a in arrays:
+        a.fill(np.nan)
+    rows = np.array([3, 17, 39, 0], dtype=np.int64)
+    kd.decode_rows(0, rows.size, rows, kd.pose_arrays(poses), lengths, arrays)
+    ref = decode(poses, lengths)
+    untouched = np.setdiff1d(np.arange(40), rows)
+    for name, a in zip(FIELDS, arrays, strict=True):
+        np.testing.assert_allclose(a[rows], getattr(ref, name)[rows], rtol=0, atol=TOL)
+        assert np.all(np.isnan(a[untouched]))
+
+
+def test_decode_legs_row_matches_numpy():
+    rng = np.random.default_rng(1304)
+    poses = random_poses(rng, 20)
+    seg = random_bodies(rng, 20)
+    base = random_bodies(rng, 20)
+    ref = decode_legs(poses, seg, base)
+    pose = kd.pose_arrays(poses)
+    for c in range(20):
+        pelvis, pelvis2world, hips, knees, ankles, toes, legs, shanks = kd.decode_legs_row(
+            c, pose, seg[c], base[c])
+        np.testing.assert_allclose(pelvis, ref.pelvis[c], rtol=0, atol=TOL)
+        # Frames as tuples of their axes (columns).
+        np.testing.assert_allclose(np.array(pelvis2world).T, ref.pelvis2world[c], rtol=0, atol=TOL)
+        for got, want in ((hips, ref.hips), (knees, ref.knees), (ankles, ref.ankles),
+                          (toes, ref.toes)):
+            np.testing.assert_allclose(np.array(got), want[c], rtol=0, atol=TOL)
+        for s in range(2):
+            np.testing.assert_allclose(np.array(legs[s]).T, ref.leg2world[c, s], rtol=0, atol=TOL)
+            np.testing.assert_allclose(np.array(shanks[s]).T, ref.shank2world[c, s], rtol=0,
+                                       atol=TOL)
+
+
+def test_leg_pose_arrays_are_the_poses_own():
+    pose = kd.pose_arrays(random_poses(np.random.default_rng(1308), 4))
+    legs = kd.leg_pose_arrays(pose)
+    assert set(legs._fields) <= set(pose._fields)
+    assert all(getattr(legs, k) is getattr(pose, k) for k in legs._fields)
+
+
+@pytest.mark.parametrize("clip", ["walk.bvh", "dance.bvh", "kick.bvh"])
+def test_shipped_clips_on_several_bodies_match_numpy(clip):
+    poses = import_bvh(MOTIONS_DIR / clip).poses
+    for name in ("child", "adult_female", "tall", "long_legs", "short_legs"):
+        body = Morphology.preset(name).lengths
+        assert_same(kd.decode(poses, body), decode(poses, body))
+
+
+def test_real_captured_clips_on_several_bodies_match_numpy():
+    require_mocap()
+    rng = np.random.default_rng(1305)
+    for path in sorted(MOCAP_DIR.glob("*.bvh"))[:4]:
+        poses = import_bvh(path).poses
+        n = poses.batch_shape[0]
+        lengths = random_bodies(rng, n)
+        assert_same(kd.decode(poses, lengths), decode(poses, lengths))
+
+
+def test_pose_arrays_and_decoded_pose_share_memory():
+    rng = np.random.default_rng(1306)
+    poses = random_poses(rng, 5)
+    pose = kd.pose_arrays(poses)
+    assert pose._fields == tuple(poses.arrays())
+    assert all(np.shares_memory(a, getattr(poses, k))
+               for k, a in zip(pose._fields, pose, strict=True))
+    arrays = kd.empty_decoded(5)
+    decoded = kd.decoded_pose(arrays)
+    assert all(a is b for a, b in zip(kd.decoded_arrays(decoded), arrays, strict=True))
+    assert kd.fits(decoded, 5) and not kd.fits(decoded, 6) and not kd.fits(None, 5)
+
+
+def test_the_kernels_tuples_name_the_dataclasses_fields_in_order():
+    """PoseArrays / DecodedArrays are built positionally from the dataclasses (numba needs the
+    tuples spelled out): a field added to one side only would shift every array after it."""
+    from dataclasses import fields
+
+    from ecs_anim.core.normalized import DecodedPose
+    from ecs_anim.runtime.kernels.decode import DecodedArrays, PoseArrays
+
+    assert PoseArrays._fields == tuple(f.name for f in fields(NormalizedPoses))
+    assert DecodedArrays._fields == tuple(f.name for f in fields(DecodedPose))

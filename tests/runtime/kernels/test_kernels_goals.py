@@ -1,0 +1,134 @@
+"""The compiled goals and constraint errors (ecs_anim.runtime.kernels.goals) against the numpy ones
+(ecs_anim.solver.shell.tick_goals and constraint_errors, the references): every field of every
+tick's goals and every error equal to 1e-9, on the bench scene, on every shipped scenario and on
+a scene with every kind of constraint (box, sphere and half-space areas to stay in and to leave,
+a sphere sweeping past and letting go, a distance to another character, orientations along a
+direction and looking at a point, a target on the same body, a character added mid-run)."""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import fields, replace
+
+import numpy as np
+import pytest
+
+import ecs_anim.systems.constraint_solve as system
+from conftest import MOTIONS_DIR, SCENARIOS_DIR
+from ecs_anim.components import MotionPlayer, Placement
+from ecs_anim.core.morphology import Morphology
+from ecs_anim.core.skeleton import JOINT_INDEX as J
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.motion.constraint_table import Area
+from ecs_anim.motion.constraints import Activation
+from ecs_anim.runtime.kernels import goals as compiled
+from ecs_anim.runtime.simulation import Simulation
+from ecs_anim.solver import goals as solver_shell
+from support.scenarios import run
+from support.solve import bench_run
+
+ALWAYS = Activation(0.0, 1e9)
+ADULT = Morphology.preset("adult_male")
+
+
+class Compare:
+    """Wraps the system's goals and errors: each call is made with the numpy reference (which
+    the tick then uses) and with the compiled one, on copies of the same arguments, and the
+    results are compared field by field."""
+
+    def __init__(self, monkeypatch: pytest.MonkeyPatch) -> None:
+        self.goals = self.errors = 0
+
+        def tick_goals(*args):
+            reference = solver_shell.tick_goals(*copy.deepcopy(args))
+            result = compiled.tick_goals(*copy.deepcopy(args))
+            if reference is None:
+                assert result is None
+                return None
+            assert result is not None
+            assert_same_goals(result, reference)
+            self.goals += 1
+            return reference
+
+        def constraint_errors(*args):
+            reference = solver_shell.constraint_errors(*args)
+            np.testing.assert_allclose(compiled.constraint_errors(*args), reference, rtol=0,
+                                       atol=1e-9)
+            self.errors += 1
+            return reference
+
+        monkeypatch.setattr(system, "tick_goals", tick_goals)
+        monkeypatch.setattr(system, "constraint_errors", constraint_errors)
+
+
+def assert_same_goals(result: solver_shell.TickGoals, reference: solver_shell.TickGoals) -> None:
+    for f in fields(reference):
+        expected, got = getattr(reference, f.name), getattr(result, f.name)
+        if expected is None:
+            assert got is None, f.name
+            continue
+        assert got.shape == expected.shape and got.dtype == expected.dtype, f.name
+        if expected.dtype == np.float64:
+            np.testing.assert_allclose(got, expected, rtol=0, atol=1e-9, err_msg=f.name)
+        else:
+            np.testing.assert_array_equal(got, expected, err_msg=f.name)
+
+
+def test_compiled_goals_equal_numpy_on_the_bench_scene(monkeypatch):
+    compare = Compare(monkeypatch)
+    bench_run(monkeypatch, n=6, ticks=12)
+    assert compare.goals == 12 and compare.errors == 12
+
+
+@pytest.mark.parametrize("name", sorted(p.stem for p in SCENARIOS_DIR.glob("*.yaml")))
+def test_compiled_goals_equal_numpy_on_every_scenario(monkeypatch, name):
+    compare = Compare(monkeypatch)
+    run(name)
+    assert compare.errors >= compare.goals
+
+
+def test_compiled_goals_equal_numpy_for_every_kind_of_constraint(monkeypatch):
+    compare = Compare(monkeypatch)
+    idle = import_bvh(MOTIONS_DIR / "idle.bvh")
+    sim = Simulation({"m": replace(idle, constraints=[])})
+    a = sim.spawn("a", ADULT, MotionPlayer("m", speed=0.0), Placement((0.0, 0.0)))
+    b = sim.spawn("b", Morphology.from_stature(1.4), MotionPlayer("m", speed=0.0),
+                  Placement((0.0, 1.0)), com_control=False)
+    sim.step()
+    p = sim.store.positions[0]
+    head = p[J["head"]]
+    forward = np.array([1.0, 0.0, 0.0])
+    fist = sim.add_constraint(a, "fist", "head", 1, ALWAYS, tuple(head + 0.5 * forward),
+                              kind="area", area=Area("sphere", radius_m=0.2, inside=False),
+                              chain=("head", "trunk"))
+    sim.add_constraint(a, "table", "wrist_r", 2, ALWAYS, tuple(p[J["wrist_r"]] + [0, 0, 0.1]),
+                       kind="area", area=Area("box", low_m=(-1, -1, 0), high_m=(1, 1, 1)))
+    sim.add_constraint(a, "out_of_box", "wrist_l", 2, ALWAYS, tuple(p[J["wrist_l"]]),
+                       kind="area", area=Area("box", low_m=(-0.1, -0.05, -0.2),
+                                              high_m=(0.1, 0.3, 0.05), inside=False))
+    sim.add_constraint(a, "in_ball", "ankle_l", 1, ALWAYS, tuple(p[J["ankle_l"]] + [0.3, 0, 0]),
+                       kind="area", area=Area("sphere", radius_m=0.1))
+    sim.add_constraint(a, "low", "head_top", 0, ALWAYS, (0.0, 0.0, p[J["head_top"], 2] - 0.02),
+                       kind="area", area=Area("half_space", normal=(0.0, 0.0, -1.0)),
+                       chain=("head", "trunk"))
+    sim.add_constraint(a, "palm", "hand_r", 1, ALWAYS, (0.0, 0.0, -1.0), kind="orientation")
+    sim.add_constraint(a, "clasp", "elbow_l", 0, ALWAYS, target_entity=a, target_point="knee_r",
+                       offset_m=(0.0, 0.05, 0.0))
+    sim.add_constraint(b, "look", "head", 1, ALWAYS, target_entity=a, target_point="head",
+                       kind="orientation", axis=(1.0, 0.0, 0.0))
+    sim.add_constraint(b, "apart", "wrist_l", 2, ALWAYS, target_entity=a, target_point="wrist_r",
+                       kind="distance", distance_m=0.25, chain=("arm_l", "trunk"))
+    held = []
+    for along in np.linspace(0.5, -1.0, 16):  # the fist sweeps past the head, then lets it go
+        sim.set_target(fist, tuple(head + along * forward))
+        if along < 0.0 and sim.store.n == 2:
+            late = sim.spawn("late", ADULT, MotionPlayer("m", speed=0.0), Placement((1.0, 0.0)))
+            sim.add_constraint(late, "touch", "wrist_r", 1, ALWAYS, target_entity=a,
+                               target_point="hand_l")
+        sim.step()
+        held.append(bool(sim.constraints.held.any()))
+    for _ in range(6):
+        sim.step()
+    sim.close()
+    assert compare.goals == 22 and compare.errors == 22
+    assert any(held) and not sim.constraints.held.any()  # the sphere held the head, let it go

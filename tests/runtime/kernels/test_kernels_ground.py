@@ -1,0 +1,157 @@
+"""Compiled ground heights equal the numpy grounds (every kind, and combinations), and the
+compiled GroundAdapt equals its numpy reference on terrain scenes."""
+
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from conftest import shipped_motion
+from ecs_anim.components import MotionPlayer, Placement, QueuedClip
+from ecs_anim.core.ground import (
+    Bumps,
+    Combined,
+    Ground,
+    HeightGrid,
+    Plane,
+    Slope,
+    Stairs,
+    describe,
+)
+from ecs_anim.core.morphology import Morphology
+from ecs_anim.core.normalized import QUATERNION_FIELDS
+from ecs_anim.runtime.kernels.ground import height_at
+from ecs_anim.runtime.simulation import Simulation
+from ecs_anim.systems import GroundAdapt
+
+
+def _grid(seed: int) -> HeightGrid:
+    rng = np.random.default_rng(seed)
+    return HeightGrid(rng.uniform(-0.2, 0.3, (7, 11)), 0.45, -1.3, 0.7)
+
+
+GROUNDS: dict[str, Ground] = {
+    "plane": Plane(0.12),
+    "slope": Slope(0.08, -0.05, 0.3),
+    "stairs": Stairs(rise_m=0.13, run_m=0.31, steps=5, start_m=0.4, heading_deg=37.0, z_m=0.02),
+    "bumps": Bumps(0.04, 2.3, 1.7, -0.01),
+    "grid": _grid(3),
+    "combined": Combined((Bumps(0.03, 2.5, 3.0), Stairs(0.12, 0.40, 6, 5.0))),
+    "nested": Combined((_grid(5), Combined((Slope(0.02, 0.01), _grid(6))), Plane(-0.1))),
+}
+
+
+def _compiled(ground: Ground, xy: np.ndarray) -> np.ndarray:
+    d = describe(ground)
+    assert d is not None
+    return np.array([height_at(x, y, d.kinds, d.params, d.grid) for x, y in xy])
+
+
+@pytest.mark.parametrize("name", list(GROUNDS))
+def test_compiled_height_equals_numpy(name: str) -> None:
+    rng = np.random.default_rng(1301)
+    ground = GROUNDS[name]
+    xy = rng.uniform(-4.0, 9.0, (500, 2))
+    np.testing.assert_allclose(_compiled(ground, xy), ground.height(xy), rtol=0, atol=1e-12)
+
+
+def test_grid_border_and_cell_corners_equal_numpy() -> None:
+    ground = _grid(7)
+    xs = -1.3 + 0.45 * np.arange(-2, 14)
+    ys = 0.7 + 0.45 * np.arange(-2, 10)
+    xy = np.stack(np.meshgrid(xs, ys), -1).reshape(-1, 2)
+    np.testing.assert_allclose(_compiled(ground, xy), ground.height(xy), rtol=0, atol=1e-12)
+
+
+def test_stair_edges_equal_numpy() -> None:
+    ground = Stairs(rise_m=0.15, run_m=0.30, steps=8, start_m=1.0)
+    x = 1.0 + 0.30 * np.arange(-2, 12)
+    xy = np.stack([np.concatenate([x, x - 1e-9, x + 1e-9]), np.zeros(3 * x.size)], -1)
+    np.testing.assert_allclose(_compiled(ground, xy), ground.height(xy), rtol=0, atol=1e-12)
+
+
+@dataclass(frozen=True)
+class _Ripples:
+    def height(self, xy: np.ndarray) -> np.ndarray:
+        return 0.01 * np.cos(xy[..., 0])
+
+
+def test_a_ground_of_ones_own_has_no_compiled_form() -> None:
+    assert describe(_Ripples()) is None
+    assert describe(Combined((Plane(), _Ripples()))) is None
+
+
+# --- GroundAdapt: the compiled system against its numpy reference ---------------------------
+
+TERRAINS: dict[str, Ground] = {
+    "bumps_and_stairs": Combined((Bumps(0.03, 2.5, 3.0), Stairs(0.12, 0.40, 6, 2.0))),
+    "steep_stairs": Stairs(rise_m=0.17, run_m=0.28, steps=10, start_m=0.8, heading_deg=15.0),
+    "slope": Combined((Slope(0.12, -0.05), Bumps(0.05, 1.5, 1.2))),
+    "grid": Combined((_grid(11), Plane(0.05))),
+}
+BODIES = [Morphology.preset("child"), Morphology.preset("adult_male"), Morphology.preset("tall"),
+          Morphology.from_stature(1.62, "female")]
+
+
+@pytest.fixture(scope="module")
+def motions() -> dict:
+    """The shipped walk, idle and kick (in place of conftest's locomotion set)."""
+    return {name: shipped_motion(name) for name in ("walk", "idle", "kick")}
+
+
+def _sim(motions: dict, ground: Ground, seed: int) -> Simulation:
+    rng = np.random.default_rng(seed)
+    sim = Simulation(motions, ground)
+    for k in range(8):
+        player = MotionPlayer("walk", speed=float(rng.uniform(0.8, 1.2)),
+                              start_s=float(rng.uniform(0, 2)),
+                              queue=(QueuedClip("idle", 0.4), QueuedClip("kick", 0.3)) if k % 3 == 2
+                              else ())
+        if k % 3 == 2:
+            player = MotionPlayer("walk", loop=False, queue=player.queue, speed=player.speed)
+        sim.spawn(f"c{k}", BODIES[k % len(BODIES)], player,
+                  Placement((float(rng.uniform(-1, 1)), 1.1 * k - 4.0),
+                            float(rng.uniform(-0.3, 0.3))))
+    return sim
+
+
+def _ground_adapt(sim: Simulation) -> GroundAdapt:
+    return next(s for s in sim.systems if isinstance(s, GroundAdapt))
+
+
+def _assert_same_state(a: Simulation, b: Simulation, tick: int) -> None:
+    for name, va in a.store.poses.arrays().items():
+        vb = getattr(b.store.poses, name)
+        if name in QUATERNION_FIELDS:  # q and -q are one rotation
+            vb = vb * np.where(np.sum(va * vb, axis=-1, keepdims=True) < 0.0, -1.0, 1.0)
+        np.testing.assert_allclose(va, vb, rtol=0, atol=1e-9, err_msg=f"{name} at tick {tick}")
+    for name in ("footprint", "ground_ref", "positions"):
+        np.testing.assert_allclose(getattr(a.store, name), getattr(b.store, name), rtol=0,
+                                   atol=1e-9, err_msg=f"{name} at tick {tick}")
+    for name in ("locked", "footprint_settled"):
+        np.testing.assert_array_equal(getattr(a.store, name), getattr(b.store, name),
+                                      err_msg=f"{name} at tick {tick}")
+
+
+@pytest.mark.parametrize("terrain", list(TERRAINS))
+def test_compiled_ground_adapt_equals_numpy(motions: dict, terrain: str) -> None:
+    compiled = _sim(motions, TERRAINS[terrain], 1321)
+    reference = _sim(motions, TERRAINS[terrain], 1321)
+    system = _ground_adapt(reference)
+    system.run = system.run_numpy  # type: ignore[method-assign]
+    for tick in range(240):
+        compiled.step()
+        reference.step()
+        _assert_same_state(compiled, reference, tick)
+
+
+def test_a_ground_of_ones_own_goes_through_numpy(motions: dict) -> None:
+    mine = _sim(motions, Combined((Bumps(0.03, 2.5, 3.0), _Ripples())), 1322)
+    assert _ground_adapt(mine)._description(mine.ground) is None
+    reference = _sim(motions, Combined((Bumps(0.03, 2.5, 3.0), _Ripples())), 1322)
+    system = _ground_adapt(reference)
+    system.run = system.run_numpy  # type: ignore[method-assign]
+    for tick in range(30):
+        mine.step()
+        reference.step()
+        _assert_same_state(mine, reference, tick)

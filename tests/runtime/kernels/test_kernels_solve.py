@@ -1,0 +1,315 @@
+"""The compiled solver (ecs_anim.runtime.kernels.solve and its step modules) against the numpy solver
+(ecs_anim.solver.shell.solve, the reference): the whole solve on the bench scene and on every
+shipped scenario, each step on real solve states, and each step's own behaviour on one to three
+characters."""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+import ecs_anim.systems.constraint_solve as system
+from conftest import SCENARIOS_DIR
+from ecs_anim.components import MotionPlayer, Placement
+from ecs_anim.core.ground_adapt import MAX_LEG_EXTENSION
+from ecs_anim.core.morphology import Morphology
+from ecs_anim.core.rotations import matrix_from_quat
+from ecs_anim.core.skeleton import JOINT_INDEX as J
+from ecs_anim.motion.constraints import Activation
+from ecs_anim.runtime.kernels import solve as compiled
+from ecs_anim.runtime.kernels.solve_head import solve_head
+from ecs_anim.runtime.kernels.solve_limbs import solve_limbs
+from ecs_anim.runtime.kernels.solve_points import centre_of_mass, goal_error
+from ecs_anim.runtime.kernels.solve_root import solve_root
+from ecs_anim.runtime.kernels.solve_trunk import solve_trunk
+from ecs_anim.runtime.simulation import Simulation
+from ecs_anim.solver import shell as solver_shell
+from support.scenarios import run
+from support.solve import Capture, assert_same_solve, bench_run
+
+ALWAYS = Activation(0.0, 1e9)
+ADULT = Morphology.preset("adult_male")
+S = solver_shell.DEFAULT_SETTINGS
+T = compiled.TABLES
+
+
+def test_compiled_solve_equals_numpy_on_the_bench_scene(monkeypatch):
+    calls = bench_run(monkeypatch)
+    assert len(calls) == 12
+    for args in calls:
+        assert_same_solve(args)
+
+
+@pytest.mark.parametrize("name", sorted(p.stem for p in SCENARIOS_DIR.glob("*.yaml")))
+def test_compiled_solve_equals_numpy_on_every_scenario(monkeypatch, name):
+    capture = Capture(monkeypatch)
+    run(name)
+    for args in capture.calls[::3]:
+        assert_same_solve(args)
+
+
+def test_the_scenarios_end_the_same_with_either_solver(monkeypatch):
+    """The whole tick, the goals, the solver and the errors swapped for the numpy ones: every
+    constraint's error and every joint within 1e-9 m on the scenario with the most
+    constraints."""
+    numpy = solver_shell.NUMPY_STEPS
+    monkeypatch.setattr(system, "tick_goals", numpy.goals)
+    monkeypatch.setattr(system, "solve", numpy.solve)
+    monkeypatch.setattr(system, "constraint_errors", numpy.errors)
+    reference = run("fight_training")
+    monkeypatch.undo()
+    result = run("fight_training")
+    np.testing.assert_allclose(result["positions"], reference["positions"], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result["errors"], reference["errors"], rtol=0, atol=1e-9)
+
+
+
+def test_compiled_solve_equals_numpy_where_the_trunk_undoes_a_turn(monkeypatch, idle):
+    """An unreachable elbow goal and a lower wrist goal at the same point, both with the trunk,
+    on a body without foot contacts nor centre-of-mass control: the trunk's turns for the wrist
+    are undone (they would take
+    the elbow further)."""
+    capture = Capture(monkeypatch)
+    sim = Simulation({"m": replace(idle, constraints=[])})
+    e = sim.spawn("c", Morphology.from_stature(1.0), MotionPlayer("m", speed=0.0), Placement((0.0, 0.0)),
+                  com_control=False)
+    sim.step()
+    target = tuple(sim.store.positions[0, J["pelvis"]] + [0.0, 1.0, 0.0])
+    sim.add_constraint(e, "elbow", "elbow_l", 100, ALWAYS, target, chain=("arm_l", "trunk"))
+    sim.add_constraint(e, "wrist", "wrist_l", 0, ALWAYS, target, chain=("arm_l", "trunk"))
+    sim.step()
+    sim.step()
+    sim.close()
+    assert len(capture.calls) == 2
+    for args in capture.calls:
+        assert_same_solve(args)
+
+# --- each step against its numpy counterpart, on real solve states -------------------------
+
+@pytest.fixture(scope="module")
+def states():
+    """Solve arguments of a few ticks of the bench scene and of the reach and fight scenarios."""
+    patch = pytest.MonkeyPatch()
+    try:
+        calls = bench_run(patch, n=3, ticks=4)
+        capture = Capture(patch)
+        run("reach_and_touch")
+        run("fight_training")
+        calls += capture.calls[::7]
+    finally:
+        patch.undo()
+    return calls
+
+
+def both_states(args):
+    poses, lengths, goals, masses, com_fraction, settings, decoded = copy.deepcopy(args)[:7]
+    reference = solver_shell._Solve(poses, lengths, goals, masses, com_fraction, settings, decoded)
+    state = compiled.prepare(*copy.deepcopy((poses, lengths, goals, masses, com_fraction)),
+                             decoded=copy.deepcopy(decoded))
+    return reference, state
+
+
+def assert_same_state(reference, state):
+    np.testing.assert_allclose(state.dec.positions, reference.dec.positions, rtol=0, atol=1e-9)
+    for name in ("leg_fraction", "arm_fraction", "root_position", "spine_points", "neck_dir"):
+        np.testing.assert_allclose(getattr(state.pose, name), getattr(reference.poses, name),
+                                   rtol=0, atol=1e-9)
+    for name in ("thorax", "head"):
+        np.testing.assert_allclose(matrix_from_quat(getattr(state.pose, name)),
+                                   matrix_from_quat(getattr(reference.poses, name)), rtol=0, atol=1e-9)
+    # A limb's frame where it is bent (a straight limb's twist is decided by rounding).
+    for name, fraction in (("leg_frame", "leg_fraction"), ("arm_frame", "arm_fraction")):
+        bent = (getattr(reference.poses, fraction) < 0.999)[..., None, None]
+        np.testing.assert_allclose(np.where(bent, matrix_from_quat(getattr(state.pose, name)), 0.0),
+                                   np.where(bent, matrix_from_quat(getattr(reference.poses, name)), 0.0),
+                                   rtol=0, atol=1e-9)
+
+
+def limbs(s):
+    for c in range(s.bodies.lengths.shape[0]):
+        solve_limbs(c, s.pose, s.dec, s.goals, s.winners, s.bodies, T, S.tolerance_m,
+                    MAX_LEG_EXTENSION)
+
+
+def test_limb_step_equals_numpy(states):
+    for args in states:
+        reference, s = both_states(args)
+        reference.limbs()
+        limbs(s)
+        assert_same_state(reference, s)
+
+
+def test_head_step_equals_numpy(states):
+    for args in states:
+        reference, s = both_states(args)
+        reference.head()
+        for c in range(s.bodies.lengths.shape[0]):
+            solve_head(c, s.pose, s.dec, s.goals, s.winners, s.bodies, T)
+        assert_same_state(reference, s)
+
+
+def goal_errors(s, c):
+    g = s.goals
+    err = np.zeros(g.priority.size)
+    for j in range(g.start[c], g.start[c + 1]):
+        err[j] = goal_error(s.dec, c, g, j, T)
+    return err
+
+
+def test_trunk_step_equals_numpy(states):
+    turned = 0
+    for args in states:
+        reference, s = both_states(args)
+        reference.trunk()
+        stalled = np.zeros(s.goals.priority.size, bool)
+        for c in range(s.bodies.lengths.shape[0]):
+            turned += solve_trunk(c, s.pose, s.dec, s.bodies.lengths[c], s.goals, goal_errors(s, c),
+                                  stalled, T, S.tolerance_m, S.tolerance_rad, S.max_ccd_step_rad)
+        assert_same_state(reference, s)
+    assert turned > 0
+
+
+def test_root_step_equals_numpy(states):
+    for args in states:
+        reference, s = both_states(args)
+        before = reference.root()
+        for c in range(s.bodies.lengths.shape[0]):
+            assert solve_root(c, s.pose, s.dec, s.bodies, T, S.com_tolerance_m, S.root_gain,
+                              MAX_LEG_EXTENSION) == pytest.approx(before[c], abs=1e-12)
+        assert_same_state(reference, s)
+
+
+# --- each step's behaviour on one to three characters ---------------------------------------
+
+def one_state(idle, add, n=1, com_control=False):
+    """The solve state of the first constrained tick of ``n`` still idle characters, after
+    ``add(sim, entities, positions)`` added their constraints."""
+    patch = pytest.MonkeyPatch()
+    try:
+        capture = Capture(patch)
+        sim = Simulation({"m": idle})
+        entities = [sim.spawn(f"c{i}", ADULT, MotionPlayer("m", speed=0.0), Placement((0.0, 2.0 * i)),
+                              com_control=com_control) for i in range(n)]
+        sim.step()
+        add(sim, entities, sim.store.positions.copy())
+        sim.step()
+        sim.close()
+    finally:
+        patch.undo()
+    args = capture.calls[0]
+    poses, lengths, goals, masses, com_fraction = args[:5]
+    return compiled.prepare(poses, lengths, goals, masses, com_fraction, decoded=args[6]), args
+
+
+def user_goal(s, table_index):
+    """Index in the sorted goals of the constraint added ``table_index``-th."""
+    return int(np.flatnonzero(s.goals.table_index == table_index)[0])
+
+
+def test_a_limb_reaches_a_reachable_goal_exactly_and_a_second_goal_swivels_it(idle):
+    def wrist(sim, entities, p):
+        for i, e in enumerate(entities):
+            sim.add_constraint(e, "wrist", "wrist_r", 5, ALWAYS,
+                               tuple(p[i, J["shoulder_r"]] + [0.3, -0.25 - 0.05 * i, 0.1]))
+
+    s, _ = one_state(idle, wrist, n=3)
+    limbs(s)
+    for c in range(3):
+        assert goal_error(s.dec, c, s.goals, user_goal(s, c), T) < 1e-9
+
+    def wrist_and_elbow(sim, entities, p):
+        wrist(sim, entities, p)
+        for i, e in enumerate(entities):
+            sim.add_constraint(e, "elbow", "elbow_r", 1, ALWAYS, tuple(p[i, J["elbow_r"]] + [0.0, -0.3, 0.0]))
+
+    s2, _ = one_state(idle, wrist_and_elbow, n=3)
+    limbs(s2)
+    closer = 0
+    for c in range(3):
+        # The wrist stays on its goal; the elbow swung toward its own, no further from it than
+        # where the wrist goal alone left it.
+        assert goal_error(s2.dec, c, s2.goals, user_goal(s2, c), T) < 1e-9
+        elbow_goal = s2.goals.goal[user_goal(s2, 3 + c)]
+        swivelled = np.linalg.norm(s2.dec.positions[c, J["elbow_r"]] - elbow_goal)
+        alone = np.linalg.norm(s.dec.positions[c, J["elbow_r"]] - elbow_goal)
+        assert swivelled <= alone + 1e-12
+        closer += swivelled < alone - 1e-3
+    assert closer >= 1
+
+
+def test_the_head_reaches_its_goal(idle):
+    def nod(sim, entities, p):
+        sim.add_constraint(entities[0], "nod", "head_top", 3, ALWAYS,
+                           tuple(p[0, J["head_top"]] + [0.08, 0.02, -0.04]))
+
+    s, _ = one_state(idle, nod)
+    before = s.dec.positions[0].copy()
+    solve_head(0, s.pose, s.dec, s.goals, s.winners, s.bodies, T)
+    assert goal_error(s.dec, 0, s.goals, user_goal(s, 0), T) < 1e-9
+    # Only the head moved.
+    moved = np.flatnonzero(np.linalg.norm(s.dec.positions[0] - before, axis=1) > 1e-12)
+    assert set(moved) <= {J["head"], J["head_top"]}
+
+
+def thorax_turn(before, after):
+    relative = matrix_from_quat(after) @ matrix_from_quat(before).T
+    return math.acos(np.clip((np.trace(relative) - 1.0) / 2.0, -1.0, 1.0))
+
+
+def test_the_trunk_turn_is_capped_and_vetoed_when_it_worsens_a_higher_goal(idle):
+    def low_reach(sim, entities, p):
+        sim.add_constraint(entities[0], "reach", "wrist_r", 1, ALWAYS,
+                           tuple(p[0, J["shoulder_r"]] + [0.6, -0.2, -0.9]), chain=("arm_r", "trunk"))
+
+    s, _ = one_state(idle, low_reach)
+    thorax = s.pose.thorax[0].copy()
+    err = goal_errors(s, 0)
+    stalled = np.zeros(err.size, bool)
+    cap = 0.05
+    assert solve_trunk(0, s.pose, s.dec, s.bodies.lengths[0], s.goals, err, stalled, T, S.tolerance_m,
+                       S.tolerance_rad, cap)
+    assert thorax_turn(thorax, s.pose.thorax[0]) == pytest.approx(cap, abs=1e-9)
+
+    def with_a_held_left_hand(sim, entities, p):
+        low_reach(sim, entities, p)
+        sim.add_constraint(entities[0], "hold", "wrist_l", 9, ALWAYS, tuple(p[0, J["wrist_l"]]))
+
+    s2, _ = one_state(idle, with_a_held_left_hand)
+    thorax, positions = s2.pose.thorax[0].copy(), s2.dec.positions[0].copy()
+    err = goal_errors(s2, 0)
+    assert not solve_trunk(0, s2.pose, s2.dec, s2.bodies.lengths[0], s2.goals, err,
+                           np.zeros(err.size, bool), T, S.tolerance_m, S.tolerance_rad, cap)
+    # The turn is undone: the pose as it was, and its joints decoded where they were.
+    np.testing.assert_array_equal(s2.pose.thorax[0], thorax)
+    np.testing.assert_allclose(s2.dec.positions[0], positions, rtol=0, atol=1e-12)
+
+
+def test_the_root_moves_the_centre_of_mass_back_and_lowers_for_reach(idle):
+    def hold(sim, entities, p):
+        for i, e in enumerate(entities):
+            sim.add_constraint(e, "hold", "wrist_r", 1, ALWAYS, tuple(p[i, J["wrist_r"]]))
+
+    s, _ = one_state(idle, hold, n=2, com_control=True)
+    b = s.bodies
+    com = [np.array(centre_of_mass(s.dec, c, b.masses[c], b.com_fraction[c], T)) for c in range(2)]
+    b.com_desired[0, :2] = com[0][:2] + [0.02, -0.01]  # a small step: no lowering
+    b.com_desired[1, :2] = com[1][:2] + [0.35, 0.0]  # too far for the planted legs
+    assert b.in_contact.all()
+    hips = s.dec.positions[:, [J["hip_l"], J["hip_r"]]].copy()
+    for c in range(2):
+        error = solve_root(c, s.pose, s.dec, b, T, S.com_tolerance_m, S.root_gain, MAX_LEG_EXTENSION)
+        after = np.array(centre_of_mass(s.dec, c, b.masses[c], b.com_fraction[c], T))
+        assert error == pytest.approx(np.linalg.norm(b.com_desired[c, :2] - com[c][:2]), abs=1e-12)
+        # Past the desired place by the gain's share (every joint moves with the root).
+        np.testing.assert_allclose(b.com_desired[c, :2] - after[:2],
+                                   (1 - S.root_gain) * (b.com_desired[c, :2] - com[c][:2]), atol=1e-12)
+    drop = s.dec.positions[:, [J["hip_l"], J["hip_r"]], 2] - hips[..., 2]
+    assert np.allclose(drop[0], 0.0) and np.all(drop[1] < -1e-3)
+    lengths = b.lengths[1]
+    reach = MAX_LEG_EXTENSION * (lengths[[T.thigh[0], T.thigh[1]]] + lengths[[T.shank[0], T.shank[1]]])
+    to_footprint = np.linalg.norm(s.dec.positions[1, [J["hip_l"], J["hip_r"]]] - b.footprint[1], axis=1)
+    assert np.all(to_footprint <= reach + 1e-9)

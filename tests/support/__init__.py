@@ -1,0 +1,1 @@
+"""Helpers shared by test files (no test imports another test file): each module one idea."""

@@ -1,0 +1,38 @@
+"""A shipped scenario run headless to its end, with what each tick left behind."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from conftest import SCENARIOS_DIR
+from ecs_anim.core.morphology import centres_of_mass
+from ecs_anim.runtime.metrics import MetricsRecorder
+from ecs_anim.scenario import build_simulation, load_scenario
+
+
+def run(name, drop=(), drop_triggers=""):
+    """Run a scenario to its end; per tick: positions (n, J, 3), constraint errors and weights;
+    the events. ``drop``: constraints left out; ``drop_triggers``: triggers whose name starts so."""
+    scenario = load_scenario(SCENARIOS_DIR / f"{name}.yaml")
+    for c in scenario.characters:
+        c.constraints = [k for k in c.constraints if k.name not in drop]
+    if drop_triggers:
+        scenario.triggers = [t for t in scenario.triggers if not t.name.startswith(drop_triggers)]
+    with build_simulation(scenario) as sim:
+        metrics = MetricsRecorder(sim)
+        ticks = round(scenario.duration_s * scenario.fps)
+        positions, errors, weights, com, events = [], [], [], [], []
+        for _ in range(ticks):
+            sim.step()
+            events += sim.events()
+            metrics.record()
+            st = sim.store
+            positions.append(st.positions.copy())
+            errors.append(sim.constraints.error.copy())
+            weights.append(sim.constraints.weight.copy())
+            com.append(centres_of_mass(st.positions, st.segment_mass_kg, st.segment_com_fraction))
+        index = {f"{sim.names()[o]}.{n}": k for k, (o, n) in
+                 enumerate(zip(sim.constraints.owner, sim.constraints.names, strict=True))}
+        return {"names": sim.names(), "positions": np.array(positions), "errors": np.array(errors),
+                "weights": np.array(weights), "com": np.array(com), "index": index,
+                "report": metrics.report(), "leg": sim.leg_length(), "events": events}
