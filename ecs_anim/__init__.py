@@ -18,8 +18,14 @@ from ecs_anim.io.importing import import_bvh
 from ecs_anim.motion.clip import NormalizedMotion, load_nmo, save_nmo
 from ecs_anim.motion.constraint_table import Area
 from ecs_anim.motion.constraints import Activation
+from ecs_anim.runtime.actions import switched_off
 from ecs_anim.runtime.allocator import keep_freed_memory
-from ecs_anim.runtime.events import (
+from ecs_anim.runtime.kernels import set_threads, threads
+from ecs_anim.runtime.metrics import MetricsRecorder
+from ecs_anim.runtime.simulation import Simulation
+from ecs_anim.runtime.steering import GAITS, SteeringSettings
+from ecs_anim.runtime.system_base import System
+from ecs_anim.runtime.triggers import (
     Arm,
     AtTime,
     ClipEnded,
@@ -36,13 +42,7 @@ from ecs_anim.runtime.events import (
     SwitchOff,
     SwitchOn,
     Trigger,
-    switched_off,
 )
-from ecs_anim.runtime.kernels import set_threads, threads
-from ecs_anim.runtime.metrics import MetricsRecorder
-from ecs_anim.runtime.simulation import Simulation
-from ecs_anim.runtime.steering import GAITS, SteeringSettings
-from ecs_anim.runtime.system_base import System
 from ecs_anim.scenario import Scenario, build_simulation, load_scenario
 from ecs_anim.solver.budget import SolverCostModel, SolverReport
 from ecs_anim.solver.shell import SolverSettings

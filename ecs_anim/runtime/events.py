@@ -1,4 +1,8 @@
-"""Events and triggers: what happened in a tick (edges), and the reactions scenarios wire to them.
+"""The reactions engine: finding a tick's events (edges) and firing the triggers they match.
+
+The triggers' parts are plain data in :mod:`ecs_anim.runtime.triggers`, what their actions do in
+:mod:`ecs_anim.runtime.actions`; the systems ApplyReactions and DetectEvents run this engine at
+the head and the tail of the schedule.
 
 Events are edges (STYLE 8): a clip started or ended, a foot contact began, a character was
 removed, and the edges of the triggers' own conditions (a point came within a distance of
@@ -8,7 +12,7 @@ the last ``step()``; per-tick data stays in the store.
 A :class:`Trigger` is ``when`` (one condition) -> ``then`` (actions), fired once (or on every
 edge with ``repeat``), ``delay_s`` after its condition. Conditions are evaluated for all triggers
 at once as arrays (every ``Near``'s two points in one numpy computation over the store's
-posture); actions are applied between ticks, so their effect shows from the next posture on:
+posture); an action acts from the next posture on:
 
 * a condition seen in the posture of tick ``k`` (after ``step()``) fires its actions at once:
   the posture of tick ``k + 1`` shows them (one tick later, the least an event can take);
@@ -35,274 +39,51 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from ecs_anim.components import QueuedClip
-from ecs_anim.core.body_points import BodyPoint, point_positions
+from ecs_anim.core.body_points import point_positions
 from ecs_anim.core.errors import EcsAnimError, listed, quoted
-from ecs_anim.core.morphology import Morphology
-from ecs_anim.motion.constraints import Activation
 from ecs_anim.runtime.kernels.edges import clip_and_contact_edges as compiled_edges
-from ecs_anim.runtime.playback_queue import start_next_clips
-from ecs_anim.runtime.store import MAX_QUEUE
 
 if TYPE_CHECKING:
     from ecs_anim.runtime.simulation import Simulation
+from ecs_anim.runtime.actions import interpolate_keyframes, play_now, switch_off, switch_on
+from ecs_anim.runtime.triggers import (
+    CONTACT_BEGAN_WEIGHT,
+    FEET,
+    Action,
+    Arm,
+    AtTime,
+    ClipEnded,
+    ClipStarted,
+    Condition,
+    ContactBegan,
+    Event,
+    MoveTarget,
+    Near,
+    Play,
+    Reached,
+    Remove,
+    Removed,
+    SetBody,
+    SwitchOff,
+    SwitchOn,
+    TargetTrack,
+    Trigger,
+    constraints_named,
+    entities_named,
+    listens_to,
+)
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 
-#: The kinds of :class:`Event`.
-EVENT_KINDS = ("clip_started", "clip_ended", "contact_began", "removed", "near", "reached", "time")
-#: A foot contact has begun when its weight rises through this.
-CONTACT_BEGAN_WEIGHT = 0.5
-FEET = ("left", "right")
 #: Slack on comparing times (s), against rounding of tick times.
 TIME_SLACK_S = 1e-9
 
 
-@dataclass(frozen=True)
-class Event:
-    """Something that happened once: ``kind`` (one of :data:`EVENT_KINDS`) to the character
-    ``entity`` (named ``character``; -1 and '' for a time), at simulation time ``time_s`` (the
-    posture where it shows), in ``tick`` (the ``step()`` it was produced in, counted from 0).
-    ``detail``: the clip (clip_started, clip_ended), the foot (``left`` / ``right``), the
-    constraint (reached), or the trigger whose condition this is (near, reached, time)."""
-
-    kind: str
-    entity: int
-    character: str
-    time_s: float
-    tick: int
-    detail: str = ""
-
-
 # --- conditions ---------------------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class ClipStarted:
-    """``entity`` starts playing ``clip`` (None: any clip), cross-fade included."""
-
-    entity: int
-    clip: str | None = None
-
-
-@dataclass(frozen=True)
-class ClipEnded:
-    """``entity``'s ``clip`` (None: any) ends: it reaches its end (not looping) or another
-    clip takes over."""
-
-    entity: int
-    clip: str | None = None
-
-
-@dataclass(frozen=True)
-class Near:
-    """``point`` of ``entity`` comes within ``within_m`` of ``other_point`` of ``other``
-    (their distance falls to ``within_m`` or below; world metres, each tick's posture)."""
-
-    entity: int
-    point: BodyPoint
-    other: int
-    other_point: BodyPoint
-    within_m: float
-
-
-@dataclass(frozen=True)
-class Reached:
-    """The constraint ``uid`` is reached: active and its error at most ``within_m`` (metres, or
-    radians for an orientation)."""
-
-    uid: int
-    within_m: float = 0.001
-
-
-@dataclass(frozen=True)
-class ContactBegan:
-    """A foot contact of ``entity`` begins: ``foot`` ``left`` / ``right`` (None: either)."""
-
-    entity: int
-    foot: str | None = None
-
-
-@dataclass(frozen=True)
-class AtTime:
-    """Simulation time reaches ``time_s``."""
-
-    time_s: float
-
-
-@dataclass(frozen=True)
-class Removed:
-    """``entity`` is taken out of the simulation."""
-
-    entity: int
-
-
-Condition = ClipStarted | ClipEnded | Near | Reached | ContactBegan | AtTime | Removed
 
 
 # --- actions ------------------------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class Play:
-    """``entity`` plays ``clip`` now, cross-faded over ``crossfade_s`` from what it plays,
-    starting ``from_s`` into the clip, then the clips of ``then``; it replaces the clips still
-    queued."""
-
-    entity: int
-    clip: str
-    crossfade_s: float = 0.3
-    loop: bool = False
-    from_s: float = 0.0
-    then: tuple[QueuedClip, ...] = ()
-
-
-@dataclass(frozen=True)
-class SwitchOn:
-    """Switch the constraint ``uid`` on now, easing in over its own ``ease_in_s``, for
-    ``for_s`` seconds (None: until switched off), then easing out over its ``ease_out_s``."""
-
-    uid: int
-    for_s: float | None = None
-
-
-@dataclass(frozen=True)
-class SwitchOff:
-    """Switch the constraint ``uid`` off now, easing out over its own ``ease_out_s``."""
-
-    uid: int
-
-
-@dataclass(frozen=True)
-class MoveTarget:
-    """Move the constraint ``uid``'s target to the world point ``target_in_world`` (m)."""
-
-    uid: int
-    target_in_world: tuple[float, float, float]
-
-
-@dataclass(frozen=True)
-class SetBody:
-    """Give ``entity`` the body ``body``, blended over ``blend_s`` (``Simulation.set_body``)."""
-
-    entity: int
-    body: Morphology
-    blend_s: float = 0.0
-
-
-@dataclass(frozen=True)
-class Remove:
-    """Take ``entity`` out of the simulation (``Simulation.remove``)."""
-
-    entity: int
-
-
-@dataclass(frozen=True)
-class Arm:
-    """Start watching the condition of the trigger named ``trigger`` (one made with
-    ``armed=False`` waits for this), e.g. a dodge watched only once the punch is coming."""
-
-    trigger: str
-
-
-Action = Play | SwitchOn | SwitchOff | MoveTarget | SetBody | Remove | Arm
-
-
-@dataclass(frozen=True)
-class Trigger:
-    """``when`` the condition holds (its edge), do ``then`` after ``delay_s``; once, or every
-    time with ``repeat``. ``name`` names it in events and warnings. ``armed`` False: its
-    condition is not watched until an :class:`Arm` action arms it."""
-
-    name: str
-    when: Condition
-    then: tuple[Action, ...]
-    delay_s: float = 0.0
-    repeat: bool = False
-    armed: bool = True
-
-
-@dataclass(frozen=True)
-class TargetTrack:
-    """A moving world target: the constraint ``uid``'s target at ``times_s`` (k,) is
-    ``points_m`` (k, 3), linearly interpolated between, held before the first and after the
-    last keyframe."""
-
-    uid: int
-    times_s: tuple[float, ...]
-    points_m: tuple[tuple[float, float, float], ...]
-
-
-def entities_named(item: Condition | Action) -> tuple[int, ...]:
-    """The characters a condition or an action names."""
-    if isinstance(item, Near):
-        return (item.entity, item.other)
-    entity = getattr(item, "entity", None)
-    return () if entity is None else (int(entity),)
-
-
-def constraints_named(item: Condition | Action) -> tuple[int, ...]:
-    """The constraints (ids) a condition or an action names."""
-    uid = getattr(item, "uid", None)
-    return () if uid is None else (int(uid),)
-
-
-def event_effects(action: Action) -> list[tuple[str, int, str | None]]:
-    """The events an action causes at once, as (kind, entity, clip or None): what may chain."""
-    if isinstance(action, Play):
-        return [("clip_started", action.entity, action.clip), ("clip_ended", action.entity, None)]
-    if isinstance(action, Remove):
-        return [("removed", action.entity, None)]
-    return []
-
-
-def listens_to(condition: Condition, kind: str, entity: int, clip: str | None) -> bool:
-    """Whether an event (kind, entity, clip; clip None: any) can match ``condition``."""
-    if isinstance(condition, ClipStarted):
-        wanted = "clip_started"
-    elif isinstance(condition, ClipEnded):
-        wanted = "clip_ended"
-    elif isinstance(condition, Removed):
-        wanted = "removed"
-    else:
-        return False
-    if kind != wanted or condition.entity != entity:
-        return False
-    own = getattr(condition, "clip", None)
-    return own is None or clip is None or own == clip
-
-
-def find_cycle(triggers: list[Trigger]) -> list[int]:
-    """Triggers that would fire each other forever in one tick: a cycle of repeating triggers
-    without delay, each one's actions causing an event the next one waits for. Returns the
-    cycle's indices (empty: none)."""
-    live = [i for i, t in enumerate(triggers) if t.delay_s <= 0.0 and t.repeat]
-    edges: dict[int, list[int]] = {i: [] for i in live}
-    for i in live:
-        effects = [e for a in triggers[i].then for e in event_effects(a)]
-        edges[i] = [j for j in live if any(listens_to(triggers[j].when, *e) for e in effects)]
-    state: dict[int, int] = {}  # 1: on the path, 2: done
-    path: list[int] = []
-
-    def visit(i: int) -> list[int]:
-        state[i] = 1
-        path.append(i)
-        for j in edges[i]:
-            if state.get(j) == 1:
-                return path[path.index(j):]
-            if j not in state:
-                found = visit(j)
-                if found:
-                    return found
-        path.pop()
-        state[i] = 2
-        return []
-
-    for i in live:
-        if i not in state:
-            cycle = visit(i)
-            if cycle:
-                return cycle
-    return []
 
 
 @dataclass
@@ -743,143 +524,6 @@ class Reactions:
         sim.set_targets(uids, interpolate_keyframes(times, points, now))
 
 
-def interpolate_keyframes(times_s: F64, points_m: F64, time_s: float) -> F64:
-    """Points (k, 3) at ``time_s`` of k keyframed tracks: ``times_s`` (k, m) increasing (padded
-    with inf), ``points_m`` (k, m, 3); linear between keyframes, held outside them."""
-    k = times_s.shape[0]
-    after = np.clip(np.sum(times_s <= time_s, axis=1), 1, times_s.shape[1] - 1) \
-        if times_s.shape[1] > 1 else np.zeros(k, np.int64)
-    if times_s.shape[1] == 1:
-        return points_m[:, 0].copy()
-    before = after - 1
-    ks = np.arange(k)
-    t0, t1 = times_s[ks, before], times_s[ks, after]
-    span = np.where(np.isfinite(t1), t1 - t0, 1.0)
-    u = np.where(np.isfinite(t1), np.clip((time_s - t0) / np.maximum(span, 1e-12), 0.0, 1.0), 0.0)
-    u = np.where(time_s <= times_s[:, 0], 0.0, u)
-    result: F64 = points_m[ks, before] + u[:, None] * (points_m[ks, after] - points_m[ks, before])
-    return result
-
-
 # --- what the actions do ------------------------------------------------------------------------
 
-def play_now(sim: Simulation, action: Play) -> None:
-    """Start ``action.clip`` on its character now (between ticks), cross-faded, from
-    ``action.from_s`` into the clip, followed by ``action.then`` (the rest of its queue is
-    replaced). Writes the store's queue, then :func:`start_next_clips` for that row."""
-    st, bank = sim.store, sim.bank
-    row = sim.row(action.entity)
-    clips = [QueuedClip(action.clip, action.crossfade_s, action.loop), *action.then]
-    if len(clips) > MAX_QUEUE:
-        raise EcsAnimError(f"play {quoted(action.clip)}: at most {MAX_QUEUE - 1} clips after it")
-    try:
-        indices = [bank.index(q.clip) for q in clips]
-    except KeyError as exc:
-        raise EcsAnimError(str(exc.args[0])) from None
-    st.queue_clip[row, :len(clips)] = indices
-    st.queue_fade_s[row, :len(clips)] = [max(q.crossfade_s, 0.0) for q in clips]
-    st.queue_loop[row, :len(clips)] = [q.loop for q in clips]
-    st.queue_head[row], st.queue_len[row] = 0, len(clips)
-    rows = np.array([row], np.int64)
-    start_next_clips(st, bank, rows, np.array([max(action.from_s, 0.0)]))
 
-
-def switch_on(sim: Simulation, uid: int, now_s: float, for_s: float | None) -> None:
-    """The constraint's activation from ``now_s``, in simulation time, with its own eases:
-    (now, now + for_s (None: for good), ease in, ease out); the shortest ``for_s`` is the two
-    eases."""
-    table = sim.constraints
-    row = _constraint_row(sim, uid)
-    ease_in, ease_out = table.activation[row, 2], table.activation[row, 3]
-    length = 1e9 if for_s is None else max(for_s, ease_in + ease_out)
-    start = now_s
-    if table.clock[row] < 0 and table.weight[row] > 0.0:  # on already: it stays on, longer
-        start = min(float(table.activation[row, 0]), now_s)
-    table.activation[row] = (start, now_s + length, ease_in, ease_out)
-    table.clock[row] = -1
-
-
-def switch_off(sim: Simulation, uid: int, now_s: float) -> None:
-    """Ease the constraint out from ``now_s`` over its own ease-out (simulation time)."""
-    table = sim.constraints
-    row = _constraint_row(sim, uid)
-    start, stop, _, ease_out = table.activation[row]
-    if table.clock[row] >= 0 or start > now_s:  # not begun (or on a clip's clock): off now
-        table.activation[row] = (now_s - 1.0, now_s - 1.0, 0.0, 0.0)
-    else:
-        table.activation[row, 1] = min(stop, now_s + ease_out)
-    table.clock[row] = -1
-
-
-def switched_off(ease_in_s: float, ease_out_s: float) -> Activation:
-    """The activation of a constraint off until a trigger switches it on (:class:`SwitchOn`):
-    it ended before the simulation began; its eases are those the switch uses."""
-    return Activation(-1.0 - ease_in_s - ease_out_s, -1.0, ease_in_s, ease_out_s)
-
-
-def _constraint_row(sim: Simulation, uid: int) -> int:
-    try:
-        return int(sim.constraints.rows_of(np.array([uid]))[0])
-    except ValueError as exc:
-        raise EcsAnimError(str(exc)) from None
-
-
-
-
-def check_trigger(sim: Simulation, trigger: Trigger) -> None:
-    """Raise EcsAnimError naming the trigger if anything it names is not in ``sim`` (a
-    character, a constraint id, a clip) or a number is out of range. At the boundary, not in
-    the tick."""
-    def fail(message: str) -> EcsAnimError:
-        return EcsAnimError(f"trigger {quoted(trigger.name)}: {message}")
-
-    if not (np.isfinite(trigger.delay_s) and trigger.delay_s >= 0.0):
-        raise fail(f"delay_s must be a number of seconds >= 0, got {trigger.delay_s}")
-    if not trigger.then:
-        raise fail("no actions (then)")
-    items: list[Condition | Action] = [trigger.when, *trigger.then]
-    for item in items:
-        for entity in entities_named(item):
-            try:
-                sim.row(entity)
-            except EcsAnimError as exc:
-                raise fail(str(exc)) from None
-        for uid in constraints_named(item):
-            try:
-                _constraint_row(sim, uid)
-            except EcsAnimError as exc:
-                raise fail(str(exc)) from None
-        for clip in [getattr(item, "clip", None)] + [q.clip for q in getattr(item, "then", ())]:
-            if clip is not None and clip not in sim.motions:
-                raise fail(f"unknown motion {quoted(clip)} (motions: {listed(sim.motions)})")
-    w = trigger.when
-    if isinstance(w, (Near, Reached)) and not (np.isfinite(w.within_m) and w.within_m >= 0.0):
-        raise fail(f"within_m must be a distance >= 0, got {w.within_m}")
-    if isinstance(w, AtTime) and not np.isfinite(w.time_s):
-        raise fail(f"the time must be finite, got {w.time_s}")
-    if isinstance(w, ContactBegan) and w.foot not in (None, *FEET):
-        raise fail(f"foot must be one of {', '.join(FEET)} (or None: either), got {w.foot!r}")
-    for a in trigger.then:
-        if isinstance(a, Play) and not all(np.isfinite(v) and v >= 0 for v in (a.crossfade_s, a.from_s)):
-            raise fail("crossfade_s and from_s must be >= 0")
-        if isinstance(a, SwitchOn) and a.for_s is not None and not (np.isfinite(a.for_s) and a.for_s > 0):
-            raise fail(f"for_s must be a duration > 0, got {a.for_s}")
-        if isinstance(a, MoveTarget) and not all(np.isfinite(a.target_in_world)):
-            raise fail("the target must be finite")
-    if any(t.name == trigger.name for t in sim.reactions.triggers):
-        raise fail("another trigger has this name (Arm names triggers)")
-
-
-def check_track(sim: Simulation, track: TargetTrack) -> None:
-    """Raise EcsAnimError if a moving target's keyframes are malformed or its constraint is
-    not in ``sim``."""
-    where = f"moving target of constraint id {track.uid}"
-    if not track.times_s or len(track.times_s) != len(track.points_m):
-        raise EcsAnimError(f"{where}: give one point (x, y, z) per keyframe time, at least one")
-    times = np.array(track.times_s)
-    if not (np.all(np.isfinite(times)) and np.all(np.diff(times) > 0)):
-        raise EcsAnimError(f"{where}: keyframe times must be finite and increasing, got "
-                           f"{listed(f'{t:g}' for t in track.times_s)}")
-    if not np.all(np.isfinite(np.array(track.points_m))):
-        raise EcsAnimError(f"{where}: keyframe points must be finite")
-    _constraint_row(sim, track.uid)

@@ -38,14 +38,17 @@ from ecs_anim.motion.constraint_table import Area, ConstraintTable, Target, add_
 from ecs_anim.motion.constraints import Activation
 from ecs_anim.motion.sampling import ClipBank
 from ecs_anim.runtime import kernels
-from ecs_anim.runtime.body_change import mass_tables
-from ecs_anim.runtime.events import Event, Reactions, TargetTrack, Trigger
+from ecs_anim.runtime.actions import check_track, check_trigger
+from ecs_anim.runtime.body_change import mass_tables, start_blend
+from ecs_anim.runtime.events import Reactions
 from ecs_anim.runtime.steering import DEFAULT_STEERING
 from ecs_anim.runtime.steering_api import SteeringCalls
 from ecs_anim.runtime.store import MAX_QUEUE, CharacterStore
 from ecs_anim.runtime.system_base import System
+from ecs_anim.runtime.triggers import Event, TargetTrack, Trigger
 from ecs_anim.solver.budget import SolverReport
 from ecs_anim.solver.shell import DEFAULT_SETTINGS, SolverSettings
+from ecs_anim.systems import HEADLESS, SCHEDULE, ConstraintSolve, PostureConvert
 
 C = TypeVar("C")
 #: Defaults: a character at the world origin heading along +x; a constraint always active.
@@ -82,8 +85,6 @@ class Simulation(SteeringCalls):
     def __init__(self, motions: dict[str, NormalizedMotion], ground: Ground | None = None,
                  fps: float = 30.0, window: bool = False, vertebrae: int = 0,
                  rotations: bool = False, solver_settings: SolverSettings = DEFAULT_SETTINGS):
-        from ecs_anim.systems import HEADLESS, SCHEDULE
-
         if not motions:
             raise EcsAnimError("a simulation needs at least one motion")
         for name, motion in motions.items():
@@ -412,8 +413,6 @@ class Simulation(SteeringCalls):
             raise EcsAnimError(f"add_system: {system.__name__} is in the schedule already")
         anchor = after if after is not None else before
         if anchor is None:
-            from ecs_anim.systems import PostureConvert
-
             anchor, after = PostureConvert, PostureConvert
         if anchor not in kinds:
             names = [k.__name__ for k in kinds]
@@ -456,8 +455,6 @@ class Simulation(SteeringCalls):
         character grows or shrinks where it stands. ``blend_s`` 0: at once, its feet re-plant;
         > 0: its segment lengths and masses blend into the new body's over ``blend_s`` seconds
         (a smoothstep), planted feet staying on their footprints (a BodyBlend component)."""
-        from ecs_anim.runtime.body_change import start_blend
-
         row = self.row(entity)
         if not (np.isfinite(blend_s) and 0.0 <= blend_s <= MAX_DURATION_S):
             raise EcsAnimError(f"blend_s must be a finite number of seconds >= 0, got {blend_s}")
@@ -635,11 +632,9 @@ class Simulation(SteeringCalls):
         return self.reactions.events
 
     def add_trigger(self, trigger: Trigger) -> int:
-        """Add a trigger (:class:`ecs_anim.runtime.events.Trigger`): ``when`` its condition begins to
+        """Add a trigger (:class:`ecs_anim.runtime.triggers.Trigger`): ``when`` its condition begins to
         hold, its actions run (``delay_s`` later). Everything it names is checked here; returns
         its index."""
-        from ecs_anim.runtime.events import check_trigger
-
         check_trigger(self, trigger)
         return self.reactions.add(trigger)
 
@@ -648,8 +643,6 @@ class Simulation(SteeringCalls):
         """Move the constraint ``uid``'s world target along keyframes: at ``times_s`` (k,)
         (increasing, simulation seconds) it is at ``points_m`` (k, 3), linearly interpolated
         between them, held before the first and after the last; set before every tick."""
-        from ecs_anim.runtime.events import check_track
-
         track = TargetTrack(int(uid), tuple(float(t) for t in times_s),
                             tuple((float(x), float(y), float(z)) for x, y, z in points_m))
         check_track(self, track)
@@ -670,8 +663,6 @@ class Simulation(SteeringCalls):
         """What the constraint solver did in the last tick and what the frame budget
         (``SolverSettings.budget_ms``) cut: :class:`ecs_anim.solver.budget.SolverReport`; None
         before the first tick or when no constraint was solved."""
-        from ecs_anim.systems import ConstraintSolve
-
         for system in self.systems:
             if isinstance(system, ConstraintSolve):
                 return system.report

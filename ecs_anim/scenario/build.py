@@ -5,8 +5,8 @@ from __future__ import annotations
 from ecs_anim.core.errors import (
     EcsAnimError,
 )
-from ecs_anim.runtime.events import constraints_named
 from ecs_anim.runtime.simulation import Simulation
+from ecs_anim.runtime.triggers import constraints_named
 from ecs_anim.scenario.spec import Scenario, SteeringSpec
 from ecs_anim.scenario.triggers import bind_trigger
 

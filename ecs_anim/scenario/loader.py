@@ -24,7 +24,7 @@ from ecs_anim.core.files import MAX_NAME_LENGTH, NAME_PATTERN
 from ecs_anim.core.ground import Plane
 from ecs_anim.motion.clip import NormalizedMotion
 from ecs_anim.motion.constraints import Activation, ConstraintSpec
-from ecs_anim.runtime.events import switched_off
+from ecs_anim.runtime.actions import switched_off
 from ecs_anim.runtime.simulation import MAX_COORDINATE_M, MAX_DURATION_S
 from ecs_anim.runtime.store import MAX_QUEUE, MAX_WAYPOINTS
 from ecs_anim.scenario.bodies import read_morphology

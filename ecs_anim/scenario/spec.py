@@ -11,7 +11,7 @@ from ecs_anim.core.ground import Ground
 from ecs_anim.core.morphology import Morphology
 from ecs_anim.motion.clip import NormalizedMotion
 from ecs_anim.motion.constraints import Activation, ConstraintSpec
-from ecs_anim.runtime.events import Trigger
+from ecs_anim.runtime.triggers import Trigger
 
 
 @dataclass

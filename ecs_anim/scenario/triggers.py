@@ -17,9 +17,9 @@ from ecs_anim.core.errors import (
     listed,
 )
 from ecs_anim.motion.clip import NormalizedMotion
-from ecs_anim.runtime.events import Action, Condition, Trigger
 from ecs_anim.runtime.simulation import MAX_DURATION_S
 from ecs_anim.runtime.store import MAX_QUEUE
+from ecs_anim.runtime.triggers import Action, Condition, Trigger
 from ecs_anim.scenario.bodies import read_morphology
 from ecs_anim.scenario.motions import motion_name, queued_clips
 from ecs_anim.scenario.reader import MAX_TARGET_DISTANCE_M, YamlReader
@@ -112,7 +112,7 @@ def _kind_of(r: YamlReader, node: Node, where: str, kinds: dict[str, Any], what:
 
 def _when(r: YamlReader, node: Node, where: str, characters: list[CharacterSpec],
           motions: dict[str, NormalizedMotion], refs: list[tuple[int, str]]) -> Condition:
-    from ecs_anim.runtime.events import (
+    from ecs_anim.runtime.triggers import (
         AtTime,
         ClipEnded,
         ClipStarted,
@@ -158,7 +158,15 @@ def _when(r: YamlReader, node: Node, where: str, characters: list[CharacterSpec]
 def _action(r: YamlReader, node: Node, where: str, characters: list[CharacterSpec],
             motions: dict[str, NormalizedMotion], queued: Any, refs: list[tuple[int, str]],
             trigger_names: list[str]) -> Action:
-    from ecs_anim.runtime.events import Arm, MoveTarget, Play, Remove, SetBody, SwitchOff, SwitchOn
+    from ecs_anim.runtime.triggers import (
+        Arm,
+        MoveTarget,
+        Play,
+        Remove,
+        SetBody,
+        SwitchOff,
+        SwitchOn,
+    )
 
     kind = _kind_of(r, node, where, ACTION_KEYS, "action")
     allowed = {kind: True} | {k: False for k in ACTION_KEYS[kind]}
@@ -204,7 +212,7 @@ def _triggers(r: YamlReader, node: Node, characters: list[CharacterSpec],
               refs: list[tuple[int, str]]) -> list[Trigger]:
     """The scenario's ``triggers:`` (docs/scenarios.md, Triggers); a cycle of triggers that
     would fire each other forever in one tick is refused here, at the first one's line."""
-    from ecs_anim.runtime.events import Trigger, find_cycle
+    from ecs_anim.runtime.triggers import Trigger, find_cycle
 
     triggers: list[Trigger] = []
     nodes = r.sequence(node, "triggers", MAX_TRIGGERS, "triggers")

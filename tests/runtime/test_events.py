@@ -17,7 +17,9 @@ from ecs_anim.core.morphology import Morphology
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.io.importing import import_bvh
 from ecs_anim.motion.constraints import Activation
-from ecs_anim.runtime.events import (
+from ecs_anim.runtime.actions import interpolate_keyframes, switched_off
+from ecs_anim.runtime.simulation import Simulation
+from ecs_anim.runtime.triggers import (
     AtTime,
     ClipEnded,
     ClipStarted,
@@ -30,10 +32,7 @@ from ecs_anim.runtime.events import (
     SwitchOff,
     SwitchOn,
     Trigger,
-    interpolate_keyframes,
-    switched_off,
 )
-from ecs_anim.runtime.simulation import Simulation
 from ecs_anim.scenario import build_simulation, load_scenario
 
 

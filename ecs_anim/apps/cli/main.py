@@ -294,7 +294,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_threads_argument(p, None)
     p.set_defaults(func=cmd_run)
 
-    from ecs_anim.apps.batch.jobs import add_parser as add_batch_parser
+    from ecs_anim.apps.batch.command import add_parser as add_batch_parser
 
     add_batch_parser(sub)
 

@@ -19,7 +19,15 @@ import numpy as np
 import pytest
 
 from conftest import MOCAP_DIR, MOTIONS_DIR, REPO, mocap_files, require_mocap
-from ecs_anim.apps.batch import jobs as batch
+from ecs_anim.apps.batch import driver, job_hash
+from ecs_anim.apps.batch import jobs as batch_jobs
+from ecs_anim.apps.batch.command import add_parser, cmd_batch, plan_from_args
+from ecs_anim.apps.batch.job_hash import job_digest
+from ecs_anim.apps.batch.jobs import foot_skate_ratio, import_clip
+from ecs_anim.apps.batch.local_engine import WORKER_DIED
+from ecs_anim.apps.batch.metrics_files import CSV_FIELDS
+from ecs_anim.apps.batch.plan import BATCH_MARKER, STAMP_SUFFIX, Job, NamedGround
+from ecs_anim.apps.batch.plan_parts import body_from_text, expand_clips
 from ecs_anim.apps.cli.main import main as cli_main
 from ecs_anim.core.errors import EcsAnimError
 from ecs_anim.core.ground import Plane
@@ -35,13 +43,13 @@ GROUND_SPECS = {"flat": {"type": "plane"},
 #: The command as the CLI registers it (the lead adds it to ecs_anim/cli.py's parser).
 RUNNER = """\
 import argparse, sys
-from ecs_anim.apps.batch import jobs as batch
+from ecs_anim.apps.batch.command import add_parser, cmd_batch
 from ecs_anim.apps.cli.args import error_line
 from ecs_anim.core.errors import EcsAnimError
 parser = argparse.ArgumentParser(prog="ecs-anim")
-batch.add_parser(parser.add_subparsers(dest="command", required=True))
+add_parser(parser.add_subparsers(dest="command", required=True))
 try:
-    sys.exit(batch.cmd_batch(parser.parse_args(["batch", *sys.argv[1:]])))
+    sys.exit(cmd_batch(parser.parse_args(["batch", *sys.argv[1:]])))
 except (EcsAnimError, FileExistsError) as exc:
     print("error: " + error_line(exc), file=sys.stderr)
     sys.exit(1)
@@ -50,12 +58,12 @@ except (EcsAnimError, FileExistsError) as exc:
 
 def parse(*argv: str) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="ecs-anim")
-    batch.add_parser(parser.add_subparsers(dest="command", required=True))
+    add_parser(parser.add_subparsers(dest="command", required=True))
     return parser.parse_args(["batch", *argv])
 
 
 def run_batch_cli(*argv: str) -> int:
-    return batch.cmd_batch(parse(*argv))
+    return cmd_batch(parse(*argv))
 
 
 def job_files(folder: Path) -> dict[str, bytes]:
@@ -92,13 +100,13 @@ def test_foot_skate_counts_low_toes_moving_fast() -> None:
 
     positions[:, TOES, 2] = 0.03  # under 5 cm
     positions[:, TOES[0], 0] = 0.03 * np.arange(frames)  # left toe: 3 cm a frame
-    assert batch.foot_skate_ratio(positions, Plane(), fps) == pytest.approx(9 / 10)
+    assert foot_skate_ratio(positions, Plane(), fps) == pytest.approx(9 / 10)
     positions[:, TOES[0], 0] = 0.02 * np.arange(frames)
-    assert batch.foot_skate_ratio(positions, Plane(), fps) == 0.0
+    assert foot_skate_ratio(positions, Plane(), fps) == 0.0
     positions[:, TOES[0], 0] = 0.015 * np.arange(frames)
-    assert batch.foot_skate_ratio(positions, Plane(), 60.0) == pytest.approx(0.9)
+    assert foot_skate_ratio(positions, Plane(), 60.0) == pytest.approx(0.9)
     positions[:, TOES, 2] = 0.06  # above 5 cm: a swing, not a skate
-    assert batch.foot_skate_ratio(positions, Plane(), 60.0) == 0.0
+    assert foot_skate_ratio(positions, Plane(), 60.0) == 0.0
 
 
 def test_a_floating_planted_foot_is_reported_by_the_metrics(tmp_path) -> None:
@@ -123,8 +131,8 @@ def test_a_floating_planted_foot_is_reported_by_the_metrics(tmp_path) -> None:
 
 def test_contact_intervals_are_first_and_last_planted_frame_times() -> None:
     planted = np.array([1, 1, 0, 0, 1, 1, 1, 0, 1], bool)
-    assert batch._intervals(planted, 10.0) == [[0.0, 0.1], [0.4, 0.6], [0.8, 0.8]]
-    assert batch._intervals(np.zeros(4, bool), 10.0) == []
+    assert batch_jobs._intervals(planted, 10.0) == [[0.0, 0.1], [0.4, 0.6], [0.8, 0.8]]
+    assert batch_jobs._intervals(np.zeros(4, bool), 10.0) == []
 
 
 def test_manifest_plan_bodies_statures_grounds(tmp_path: Path) -> None:
@@ -144,7 +152,7 @@ def test_manifest_plan_bodies_statures_grounds(tmp_path: Path) -> None:
         formats: [npz]
         out: results
         """))
-    plan = batch.plan_from_args(parse("--manifest", str(manifest)))
+    plan = plan_from_args(parse("--manifest", str(manifest)))
     assert [c.name for c in plan.clips] == ["walk.bvh", "kick.bvh"]
     assert [b.name for b in plan.bodies] == ["child", "wide", "stature_1.20", "stature_1.50",
                                              "stature_1.80", "stature_1.50_female_child"]
@@ -154,7 +162,7 @@ def test_manifest_plan_bodies_statures_grounds(tmp_path: Path) -> None:
     assert len(jobs) == 12 and jobs[0].stem == "walk/child_bumps"
     assert jobs[0].outputs() == ["walk/child_bumps.npz"]
     # the command line's --out and --formats win over the manifest's
-    plan = batch.plan_from_args(parse("--manifest", str(manifest), "--out", "x", "--formats", "bvh,glb"))
+    plan = plan_from_args(parse("--manifest", str(manifest), "--out", "x", "--formats", "bvh,glb"))
     assert plan.out == Path("x") and plan.formats == ("bvh", "glb")
 
 
@@ -175,7 +183,7 @@ def test_manifest_errors_name_file_and_line(tmp_path: Path, text: str, expected:
     manifest = tmp_path / "batch.yaml"
     manifest.write_text(text + "out: out\n")
     with pytest.raises(EcsAnimError) as info:
-        batch.plan_from_args(parse("--manifest", str(manifest)))
+        plan_from_args(parse("--manifest", str(manifest)))
     message = str(info.value)
     assert "\n" not in message
     assert message.startswith(str(tmp_path / expected.split(":", 1)[0]) + ":" + expected.split(":", 1)[1])
@@ -193,10 +201,10 @@ def test_command_line_errors(tmp_path: Path, grounds_file: Path) -> None:
     ]
     for argv, expected in cases:
         if expected is None:  # the same file twice counts once
-            assert len(batch.plan_from_args(parse(*argv)).clips) == 1
+            assert len(plan_from_args(parse(*argv)).clips) == 1
             continue
         with pytest.raises(EcsAnimError, match=expected.replace("(", r"\(").replace(")", r"\)")):
-            batch.plan_from_args(parse(*argv))
+            plan_from_args(parse(*argv))
     # a folder holding someone else's files is refused, never written into
     foreign = tmp_path / "mine"
     foreign.mkdir()
@@ -208,17 +216,17 @@ def test_command_line_errors(tmp_path: Path, grounds_file: Path) -> None:
 
 def test_digest_follows_every_input() -> None:
     walk = MOTIONS_DIR / "walk.bvh"
-    job = batch.Job(str(walk), "walk", batch.body_from_text("child"), batch.NamedGround("", Plane()),
+    job = Job(str(walk), "walk", body_from_text("child"), NamedGround("", Plane()),
                     ("bvh",))
-    base = batch.job_digest(job, "clip", "1.0")
+    base = job_digest(job, "clip", "1.0")
     from dataclasses import replace
-    changed = [replace(job, body=batch.body_from_text("tall")),
-               replace(job, ground=batch.NamedGround("", Plane(0.01))),
+    changed = [replace(job, body=body_from_text("tall")),
+               replace(job, ground=NamedGround("", Plane(0.01))),
                replace(job, formats=("bvh", "npz")), replace(job, seconds=2.0)]
-    digests = {batch.job_digest(j, "clip", "1.0") for j in changed}
-    digests |= {batch.job_digest(job, "other clip", "1.0"), batch.job_digest(job, "clip", "1.1")}
+    digests = {job_digest(j, "clip", "1.0") for j in changed}
+    digests |= {job_digest(job, "other clip", "1.0"), job_digest(job, "clip", "1.1")}
     assert base not in digests and len(digests) == 6
-    assert batch.job_digest(replace(job, body=batch.body_from_text("child")), "clip", "1.0") == base
+    assert job_digest(replace(job, body=body_from_text("child")), "clip", "1.0") == base
 
 
 # ---------------------------------------------------------------------------------------------
@@ -264,14 +272,14 @@ def test_mocap_batch_metrics_equal_ecs_anim_run(tmp_path: Path, grounds_file: Pa
         assert all((out / rel).stat().st_size > 0 for rel in j["outputs"])
     with open(out / "metrics.csv", newline="") as f:
         rows = list(csv.DictReader(f))
-    assert list(rows[0])[:len(batch.CSV_FIELDS)] == list(batch.CSV_FIELDS)
+    assert list(rows[0])[:len(CSV_FIELDS)] == list(CSV_FIELDS)
     assert [(r["clip"], r["body"], r["ground"]) for r in rows] == \
         [(j["clip"], j["body"], j["ground"]) for j in jobs]
-    numbers = [k for k in batch.CSV_FIELDS if k.endswith(("_mm", "_m", "_ratio"))]
+    numbers = [k for k in CSV_FIELDS if k.endswith(("_mm", "_m", "_ratio"))]
     for row, j in zip(rows, jobs, strict=False):
         assert [float(row[k]) if row[k] else None for k in numbers] == [j[k] for k in numbers]
     by_clip = {c.stem: c for c in clips}
-    fps_of = {c.stem: batch.import_clip(c).fps for c in clips}
+    fps_of = {c.stem: import_clip(c).fps for c in clips}
     for job in jobs:
         clip = by_clip[job["clip"]]
         scenario = _scenario_for(job, clip, fps_of[job["clip"]], tmp_path)
@@ -330,7 +338,7 @@ def test_template_gives_constraints_their_csv_columns(tmp_path: Path) -> None:
     errors = [j["constraint_errors_mm"]["reach"] for j in jobs]
     assert errors[1] < 1.0 < errors[0]  # the tall body reaches the target, the child cannot
     header = (out / "metrics.csv").read_text().splitlines()[0].split(",")
-    assert header[len(batch.CSV_FIELDS):] == ["constraint:reach_mm"]
+    assert header[len(CSV_FIELDS):] == ["constraint:reach_mm"]
 
 
 def test_bad_clip_fails_its_jobs_only(tmp_path: Path) -> None:
@@ -386,7 +394,7 @@ def test_killed_batch_resumes_to_the_same_outputs(tmp_path: Path, grounds_file: 
     temporary file left."""
     # the job hash holds the package's source as it is now, as the killed process reads it
     # (the digest this process cached earlier predates any edit made since)
-    batch._SOURCE_DIGEST = None
+    job_hash._SOURCE_DIGEST = None
     clips = [str(MOTIONS_DIR / n) for n in ("walk.bvh", "kick.bvh", "dodge.bvh")]
     argv = [*clips, "--bodies", "child,adult_male,tall", "--grounds", str(grounds_file),
             "--seconds", "0.25", "--formats", "bvh,npz"]
@@ -400,14 +408,14 @@ def test_killed_batch_resumes_to_the_same_outputs(tmp_path: Path, grounds_file: 
                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         deadline = time.monotonic() + 120
-        while len(list(killed.glob(f"*/.*{batch.STAMP_SUFFIX}"))) < 4:
+        while len(list(killed.glob(f"*/.*{STAMP_SUFFIX}"))) < 4:
             assert process.poll() is None, "the batch ended before it could be killed"
             assert time.monotonic() < deadline
             time.sleep(0.02)
     finally:
         os.killpg(process.pid, signal.SIGKILL)
         process.wait()
-    done_before = len(list(killed.glob(f"*/.*{batch.STAMP_SUFFIX}")))
+    done_before = len(list(killed.glob(f"*/.*{STAMP_SUFFIX}")))
     assert 4 <= done_before < 18
     assert not (killed / "metrics.json").exists()
     assert run_batch_cli(*argv, "--out", str(killed), "--jobs", "2") == 0
@@ -516,14 +524,14 @@ def test_the_readme_batch_example_runs(tmp_path) -> None:
 def test_a_dead_worker_fails_only_its_job(tmp_path: Path, monkeypatch) -> None:
     """A job whose worker process dies (SIGKILL, as the out-of-memory killer does) fails with a
     one-line reason; the pool is started again and every other job is done."""
-    real_run_job = batch.run_job
+    real_run_job = batch_jobs.run_job
 
     def run_job(job, motion):
         if job.clip == "kick" and job.body.name == "tall":
             os.kill(os.getpid(), signal.SIGKILL)
         return real_run_job(job, motion)
 
-    monkeypatch.setattr(batch, "run_job", run_job)  # the pool's workers are forked: they see it
+    monkeypatch.setattr(batch_jobs, "run_job", run_job)  # the pool's workers are forked: they see it
     out = tmp_path / "out"
     clips = [str(MOTIONS_DIR / n) for n in ("walk.bvh", "kick.bvh", "idle.bvh")]
     status = run_batch_cli(*clips, "--bodies", "child,tall,adult_male", "--out", str(out),
@@ -533,7 +541,7 @@ def test_a_dead_worker_fails_only_its_job(tmp_path: Path, monkeypatch) -> None:
     failed = [(j["clip"], j["body"]) for j in jobs if j["status"] == "failed"]
     assert failed == [("kick", "tall")]
     error = next(j["error"] for j in jobs if j["status"] == "failed")
-    assert error == batch.WORKER_DIED and "internal error" not in error
+    assert error == WORKER_DIED and "internal error" not in error
     assert sorted(job_files(out)) == sorted(f"{c}/{b}.npz" for c in ("walk", "kick", "idle")
                                             for b in ("child", "tall", "adult_male")
                                             if (c, b) != ("kick", "tall"))
@@ -550,7 +558,7 @@ def test_a_failed_or_reformatted_job_leaves_none_of_its_earlier_files(tmp_path: 
     assert sorted(job_files(out)) == ["walk/child.npz"]
     clip.write_text("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 zero\n")  # the input breaks
     assert run_batch_cli(*argv, "--formats", "npz") == 1
-    assert job_files(out) == {} and not list(out.glob(f"walk/.*{batch.STAMP_SUFFIX}"))
+    assert job_files(out) == {} and not list(out.glob(f"walk/.*{STAMP_SUFFIX}"))
 
 
 def test_a_job_killed_while_renaming_has_no_old_file_beside_a_new_one(tmp_path: Path,
@@ -578,7 +586,7 @@ def test_a_job_killed_while_renaming_has_no_old_file_beside_a_new_one(tmp_path: 
     monkeypatch.undo()
     left = job_files(out)
     assert len(left) == 1 and not set(left.items()) & set(old.items())  # only a new file
-    assert not list(out.glob(f"walk/.*{batch.STAMP_SUFFIX}"))  # not done: the next run redoes it
+    assert not list(out.glob(f"walk/.*{STAMP_SUFFIX}"))  # not done: the next run redoes it
     assert not [p for p in out.rglob("*") if p.name.endswith(".tmp")]
     assert run_batch_cli(*argv, "--seconds", "0.2") == 0
     assert [j["status"] for j in records(out)] == ["ok"]
@@ -589,7 +597,7 @@ def test_clips_named_as_the_batch_files_are_refused_up_front(tmp_path: Path, nam
     clip = tmp_path / f"{name}.bvh"
     clip.write_bytes((MOTIONS_DIR / "walk.bvh").read_bytes())
     with pytest.raises(EcsAnimError, match="the batch's own file") as info:
-        batch.expand_clips([str(clip)])
+        expand_clips([str(clip)])
     assert "\n" not in str(info.value)
     assert not (tmp_path / "out").exists()
 
@@ -598,7 +606,7 @@ def test_clips_named_as_the_batch_files_are_refused_up_front(tmp_path: Path, nam
                                                ("0.0001", "less than one tick at 30 Hz")])
 def test_seconds_is_bounded_like_run(tmp_path: Path, seconds: str, expected: str) -> None:
     with pytest.raises(EcsAnimError, match=expected) as info:
-        batch.plan_from_args(parse(str(MOTIONS_DIR / "walk.bvh"), "--bodies", "child", "--out",
+        plan_from_args(parse(str(MOTIONS_DIR / "walk.bvh"), "--bodies", "child", "--out",
                                    str(tmp_path / "o"), "--seconds", seconds))
     assert "\n" not in str(info.value)
 
@@ -608,7 +616,7 @@ def test_seconds_under_a_tick_of_an_nmo_clip_fails_its_jobs_not_one_tick(tmp_pat
     nmo = tmp_path / "walk.nmo"
     from ecs_anim.motion.clip import save_nmo
 
-    save_nmo(batch.import_clip(MOTIONS_DIR / "walk.bvh"), nmo)
+    save_nmo(import_clip(MOTIONS_DIR / "walk.bvh"), nmo)
     out = tmp_path / "out"
     assert run_batch_cli(str(nmo), "--bodies", "child", "--out", str(out), "--seconds", "0.0001",
                          "--jobs", "1") == 1
@@ -624,7 +632,7 @@ def test_missing_manifest_files_name_the_manifest_line(tmp_path: Path, text: str
     manifest = tmp_path / "batch.yaml"
     manifest.write_text("clips: [walk.bvh]\n" + text + "out: out\n")
     with pytest.raises(EcsAnimError) as info:
-        batch.plan_from_args(parse("--manifest", str(manifest)))
+        plan_from_args(parse("--manifest", str(manifest)))
     assert str(info.value).startswith(f"{tmp_path / expected.split(':', 1)[0]}:{expected.split(':', 1)[1]}")
     assert "\n" not in str(info.value)
 
@@ -635,8 +643,8 @@ def test_the_job_hash_follows_the_package_source() -> None:
     import hashlib
     import importlib
 
-    digest = batch.source_digest()
-    assert digest == batch.source_digest() and len(digest) == 64
+    digest = job_hash.source_digest()
+    assert digest == job_hash.source_digest() and len(digest) == 64
     systems = Path(str(importlib.import_module("ecs_anim.systems").__file__)).parent
     original = (systems / "ground_adapt.py").read_bytes()
     real_read = Path.read_bytes
@@ -646,20 +654,20 @@ def test_the_job_hash_follows_the_package_source() -> None:
         return data + b"# changed" if path.name == "ground_adapt.py" and path.parent == systems else data
 
     try:
-        batch._SOURCE_DIGEST = None
+        job_hash._SOURCE_DIGEST = None
         Path.read_bytes = read_bytes  # type: ignore[method-assign]
-        changed = batch.source_digest()
+        changed = job_hash.source_digest()
     finally:
         Path.read_bytes = real_read  # type: ignore[method-assign]
-        batch._SOURCE_DIGEST = None
-    assert changed != digest and batch.source_digest() == digest
+        job_hash._SOURCE_DIGEST = None
+    assert changed != digest and job_hash.source_digest() == digest
     assert (systems / "ground_adapt.py").read_bytes() == original
     assert hashlib.sha256(b"").hexdigest() not in (digest, changed)
     walk = MOTIONS_DIR / "walk.bvh"
-    job = batch.Job(str(walk), "walk", batch.body_from_text("child"), batch.NamedGround("", Plane()),
+    job = Job(str(walk), "walk", body_from_text("child"), NamedGround("", Plane()),
                     ("npz",))
-    assert batch.job_digest(job, "clip", f"0.1.0+{digest}") != \
-        batch.job_digest(job, "clip", f"0.1.0+{'0' * 64}")
+    assert job_digest(job, "clip", f"0.1.0+{digest}") != \
+        job_digest(job, "clip", f"0.1.0+{'0' * 64}")
 
 
 def test_outputs_never_overwrite_body_files_or_template_motions(tmp_path: Path) -> None:
@@ -667,7 +675,7 @@ def test_outputs_never_overwrite_body_files_or_template_motions(tmp_path: Path) 
     (here a hard link, the same file under another name) is refused before anything is run."""
     out = tmp_path / "out"
     (out / "walk").mkdir(parents=True)
-    (out / batch.BATCH_MARKER).write_text("{}")
+    (out / BATCH_MARKER).write_text("{}")
     body = tmp_path / "wide.yaml"
     body.write_text("stature_m: 1.7\nleg_scale: 0.9\n")
     os.link(body, out / "walk" / "wide.glb")  # a glb the job would delete, being another format
@@ -712,7 +720,7 @@ def test_a_source_change_redoes_the_jobs(tmp_path: Path, monkeypatch) -> None:
             "--seconds", "0.1", "--formats", "npz", "--jobs", "1")
     assert run_batch_cli(*argv) == 0
     assert run_batch_cli(*argv) == 0 and records(tmp_path / "out")[0]["status"] == "skipped"
-    monkeypatch.setattr(batch, "source_digest", lambda: "another source")
+    monkeypatch.setattr(driver, "source_digest", lambda: "another source")
     assert run_batch_cli(*argv) == 0 and records(tmp_path / "out")[0]["status"] == "ok"
 
 
@@ -721,7 +729,7 @@ def test_pool_workers_tick_on_one_thread():
     between chunks, so two per process on shared cores would take turns spinning)."""
     import multiprocessing
 
-    from ecs_anim.apps.batch.jobs import _set_started
+    from ecs_anim.apps.batch.local_engine import _set_started
     from ecs_anim.runtime import kernels
 
     context = multiprocessing.get_context("fork")

@@ -148,20 +148,21 @@ GROUNDS = {"": "{type: plane}", "slope": "{type: slope, grade_x: 0.08}"}
 
 
 def real_jobs(tmp_path, seconds=2.0):
-    from ecs_anim.apps.batch import jobs as batch
+    from ecs_anim.apps.batch.jobs import import_clip, run_job
+    from ecs_anim.apps.batch.plan import Job, NamedGround
+    from ecs_anim.apps.batch.plan_parts import body_from_text, load_grounds
 
     (tmp_path / "grounds.yaml").write_text("grounds:\n" + "".join(
         f"  {name}: {spec}\n" for name, spec in GROUNDS.items() if name))
-    grounds = [batch.NamedGround("", Plane()), *batch.load_grounds(tmp_path / "grounds.yaml")]
+    grounds = [NamedGround("", Plane()), *load_grounds(tmp_path / "grounds.yaml")]
     jobs = []
     for clip in ("walk", "dance"):
         path = MOTIONS_DIR / f"{clip}.bvh"
-        motion = batch.import_clip(path)
+        motion = import_clip(path)
         for body in ("child", "tall"):
             for ground in grounds:
-                job = batch.Job(str(path), clip, batch.body_from_text(body), ground, ("bvh",),
-                                seconds)
-                jobs.append(batch.run_job(job, motion).record)
+                job = Job(str(path), clip, body_from_text(body), ground, ("bvh",), seconds)
+                jobs.append(run_job(job, motion).record)
     return jobs
 
 

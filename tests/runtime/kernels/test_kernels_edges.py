@@ -7,8 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ecs_anim.runtime.events import CONTACT_BEGAN_WEIGHT, TIME_SLACK_S, clip_and_contact_edges
+from ecs_anim.runtime.events import TIME_SLACK_S, clip_and_contact_edges
 from ecs_anim.runtime.kernels.edges import clip_and_contact_edges as compiled
+from ecs_anim.runtime.triggers import CONTACT_BEGAN_WEIGHT
 
 
 def _seen(n_entities: int) -> list[np.ndarray]:

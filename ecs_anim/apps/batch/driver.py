@@ -1,0 +1,128 @@
+"""The batch's driver (:func:`run_batch`): many clips played on many bodies over many grounds.
+
+A batch is the product clips x bodies x grounds (:mod:`.plan`). Each job plays one clip on one
+body over one ground (:mod:`.jobs`) and writes ``DIR/<clip>/<body>[_<ground>].<format>``.
+
+Who does what:
+
+* the driver (this process) plans the jobs, skips those already done (a stamp beside the
+  outputs holds a content hash of clip, body, ground, template, formats and project version:
+  :mod:`.job_hash`), and writes every file, each atomically
+  (:func:`~ecs_anim.core.files.atomic_output`), the stamp last (:mod:`.job_outputs`): a job
+  killed half-way has no stamp and is done again, so its outputs end whole;
+* the workers (a local process pool, :mod:`.local_engine`, or Ray tasks, :mod:`.ray_engine`)
+  import each clip once and run jobs; they return the files' bytes, so workers on other
+  machines need no shared file system, and the local and Ray engines produce the same bytes
+  from the same function.
+
+Finally ``DIR/metrics.json``, ``DIR/metrics.csv`` (one row per job, the scalar fields of
+:data:`~ecs_anim.apps.batch.metrics_files.CSV_FIELDS` then one ``constraint:<name>_mm`` column
+per stored constraint: :mod:`.metrics_files`) and ``DIR/report.html``
+(:func:`ecs_anim.apps.batch.report.write_report`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+from ecs_anim.apps.batch.job_hash import job_digest, project_version, source_digest
+from ecs_anim.apps.batch.job_outputs import clear_outputs, commit_outputs, done_record
+from ecs_anim.apps.batch.jobs import Outcome, WorkList, failed_record
+from ecs_anim.apps.batch.local_engine import run_in_pool, run_in_process
+from ecs_anim.apps.batch.metrics_files import write_metrics
+from ecs_anim.apps.batch.plan import BATCH_MARKER, RESERVED, Job, Plan
+from ecs_anim.apps.batch.progress import Progress
+from ecs_anim.apps.batch.ray_engine import check_ray_address, run_on_ray
+from ecs_anim.core.errors import EcsAnimError
+
+
+def _check_folder(out: Path) -> None:
+    """Refuse a batch folder that cannot be written or holds files no batch wrote."""
+    from ecs_anim.core.files import folder_problem
+
+    problem = folder_problem(out)
+    if problem is not None:
+        raise EcsAnimError(f"--out {problem}")
+    if out.is_dir() and not (out / BATCH_MARKER).is_file() and any(out.iterdir()):
+        raise EcsAnimError(f"--out {out}: holds files ecs-anim batch did not write (no "
+                           f"{BATCH_MARKER}); give a new or empty folder")
+
+
+def _check_outputs(plan: Plan, jobs: list[Job]) -> None:
+    """Refuse outputs (every format a job may write or delete, its stamp, the metrics and the
+    report) that are one of the batch's inputs (by real path or, hard links, by inode)."""
+    from ecs_anim.core.files import input_problem
+
+    names = [rel for job in jobs for rel in (*job.all_outputs(), job.stamp)] + list(RESERVED)
+    for rel in names:
+        problem = input_problem(plan.out / rel, plan.inputs)
+        if problem is not None:
+            raise EcsAnimError(f"--out {problem.replace(' command', ' batch')}")
+
+
+def run_batch(plan: Plan, engine: str = "local", workers: int | None = None,
+              address: str | None = None, force: bool = False,
+              stream: Any = None) -> list[dict[str, Any]]:
+    """Run a plan: skip jobs done with the same inputs (unless ``force``), run the rest on
+    ``engine`` (``local`` or ``ray``) with ``workers`` processes (default: every core), write
+    each job's files, then the metrics and the report. Returns the records in plan order."""
+    from ecs_anim.core.files import atomic_output
+
+    start = time.perf_counter()
+    jobs = plan.jobs()
+    _check_folder(plan.out)
+    _check_outputs(plan, jobs)
+    if engine == "ray":
+        check_ray_address(address)
+    version = f"{project_version()}+{source_digest()}"
+    clip_digests = {str(c): hashlib.sha256(c.read_bytes()).hexdigest() for c in plan.clips}
+    digests = {job.stem: job_digest(job, clip_digests[job.clip_path], version) for job in jobs}
+    records: dict[str, dict[str, Any]] = {}
+    work: WorkList = {}
+    for job in jobs:
+        earlier = None if force else done_record(plan.out, job, digests[job.stem])
+        if earlier is not None:
+            records[job.stem] = earlier | {"status": "skipped"}
+        else:
+            work.setdefault(job.clip_path, []).append(job)
+    if not (plan.out / BATCH_MARKER).is_file():
+        with atomic_output(plan.out / BATCH_MARKER, force=True) as f:
+            f.write(json.dumps({"written_by": "ecs-anim batch",
+                                "version": project_version()}).encode("utf-8"))
+    n_work = sum(len(j) for j in work.values())
+    workers = max(1, min(workers or os.cpu_count() or 1, max(n_work, 1)))
+    progress = Progress(n_work, stream)
+    if len(records):
+        progress.write(f"{len(records)} of {len(jobs)} job(s) already done with the same inputs: "
+                       "skipped (--force redoes them)")
+    try:
+        if engine == "ray":
+            outcomes = run_on_ray(work, workers, address)
+        elif workers == 1:
+            outcomes = run_in_process(work)
+        else:
+            outcomes = run_in_pool(work, workers)
+        for job, outcome in outcomes:
+            if outcome.record["status"] == "ok":
+                try:
+                    commit_outputs(plan.out, job, outcome, digests[job.stem])
+                except EcsAnimError as exc:  # e.g. the disk is full: this job failed
+                    outcome = Outcome(failed_record(job, str(exc), outcome.record["seconds"]))
+                    clear_outputs(plan.out, job)
+            else:
+                clear_outputs(plan.out, job)
+            records[job.stem] = outcome.record
+            progress.update(job.stem, outcome.record)
+    finally:
+        progress.close()
+    ordered = [records[job.stem] for job in jobs]
+    write_metrics(plan.out, ordered, time.perf_counter() - start)
+    from ecs_anim.apps.batch.report import write_report
+
+    write_report(plan.out / "report.html", ordered)
+    return ordered
