@@ -37,7 +37,13 @@ def test_bench_json_keeps_its_keys_and_adds_cpu_wall_memory_and_threads(capsys):
     assert [s["characters"] for s in result["sizes"]] == [4, 8]
     assert all(s["ticks"] == 3 and s["peak_memory_mb"] > 0 for s in result["sizes"])
     assert "ConstraintSolve" in result["ms_per_tick"] and result["compile"] is None
-    assert result["max_characters_at_30hz"] >= 0 and result["max_characters_at_30hz_cpu"] >= 0
+    # Figures only (tests never assert speed), but they must be the fit's own: the characters
+    # that hold 33.3 ms a tick at the fitted cost.
+    for prefix, key in (("", "max_characters_at_30hz"), ("cpu_", "max_characters_at_30hz_cpu")):
+        fixed, per_character = result[f"{prefix}ms_fixed_per_tick"], result[f"{prefix}ms_per_character"]
+        assert per_character > 0 and fixed >= 0
+        assert result[key] == int(max((1000.0 / 30.0 - fixed) / per_character, 0)) or \
+            abs(result[key] - (1000.0 / 30.0 - fixed) / per_character) <= 1 + 1e-3 * result[key]
 
 
 def test_bench_text_names_the_threads_and_every_size(capsys):
