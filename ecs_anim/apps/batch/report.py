@@ -401,8 +401,8 @@ tr.failed td { background: #fff5f5; } img { max-width: 100%; border: 1px solid #
 
 #: The columns of the jobs table: (header, record field); ``constraint`` is the worst one.
 COLUMNS = (
+    ("floating mm", "floating_max_mm"), ("penetration mm", "penetration_max_mm"),
     ("slide max mm/frame", "slide_max_mm"), ("slide mean mm/frame", "slide_mean_mm"),
-    ("penetration mm", "penetration_max_mm"), ("floating mm", "floating_max_mm"),
     ("skate ratio", "foot_skate_ratio"), ("bone error m", "bone_error_m"),
     ("COM error mm", "com_error_mm"),
 )
