@@ -459,6 +459,30 @@ IN_PLACE_ROOT_PER_LEG = 0.15
 #: motion (this share of its speed) goes one way: a belt carrying the stance foot backwards.
 BELT_MIN_PER_LEG = 0.4
 BELT_STEADINESS = 0.6
+#: A belt must be one a treadmill runs at for the gait seen (issue 31, class 2): the fastest a
+#: body of leg ``L`` goes is ``sqrt(froude * g * L)``. A walk (a foot always low: no flight
+#: phase) tops out at a Froude number of 1 (the inverted pendulum leaves the ground: 2.8 m/s for
+#: a 0.8 m leg); a run at a sprint's, 6.25 (7 m/s for a 0.8 m leg).
+BELT_MAX_FROUDE_WALK = 1.0
+BELT_MAX_FROUDE_RUN = 6.25
+GRAVITY_MPS2 = 9.81
+#: The gait is a run when neither foot is low on at least this share of the frames.
+FLIGHT_SHARE_RUN = 0.1
+#: The belt carries the stance feet backwards: its direction within 45 degrees of the body's
+#: backward (the hips' forward, turned round) on average over the belt's samples ...
+BELT_BACKWARD_COS = 0.7
+#: ... and steadily while planted: each stance (a foot the lower and low for at least
+#: ``BELT_MIN_STANCE_S``) moves on net at the belt's velocity (within a quarter of its speed, or
+#: a tenth of a leg per second), over at least this share of the stance time and on both feet.
+BELT_MIN_STANCE_S = 0.08
+BELT_STANCE_SHARE = 0.5
+
+
+def max_belt_speed(leg_m: float, running: bool) -> float:
+    """The fastest plausible belt (m/s) for a body of thigh + shank ``leg_m`` (m), walking or
+    running (:data:`BELT_MAX_FROUDE_WALK`, :data:`BELT_MAX_FROUDE_RUN`)."""
+    froude = BELT_MAX_FROUDE_RUN if running else BELT_MAX_FROUDE_WALK
+    return float(np.sqrt(froude * GRAVITY_MPS2 * leg_m))
 
 
 def treadmill_belt(positions: F64, fps: float) -> F64 | None:
@@ -467,7 +491,10 @@ def treadmill_belt(positions: F64, fps: float) -> F64 | None:
     In place: the pelvis hardly moves while the stance foot (the lower ankle, on frames where
     it is within a few centimetres of its lowest) slides steadily one way at walking or running
     speed, as it does on a treadmill or in an in-place walk cycle. The belt velocity is the
-    velocity most of that foot's samples share. ``positions`` (n_frames, N_JOINTS, 3) metres, Z up."""
+    velocity most of that foot's samples share. It must be physically plausible, else there is
+    no belt (None): no faster than the gait seen goes (:func:`max_belt_speed`), carrying the
+    stance feet backwards, and each foot's stances moving at it while planted (the constants
+    above). ``positions`` (n_frames, N_JOINTS, 3) metres, Z up."""
     if len(positions) < max(3, int(fps)):
         return None
     leg = leg_of(positions)
@@ -479,10 +506,12 @@ def treadmill_belt(positions: F64, fps: float) -> F64 | None:
         return None
     ankles = positions[:, [J["ankle_l"], J["ankle_r"]]]
     lower = np.argmin(ankles[..., 2], axis=1)
-    stance = ankles[np.arange(len(ankles)), lower]  # (F, 3)
+    frames = np.arange(len(ankles))
+    stance = ankles[frames, lower]  # (F, 3)
     velocity = _box_filter(np.gradient(ankles[..., :2], axis=0) * fps, _width(0.03, fps))
-    v = velocity[np.arange(len(ankles)), lower]
-    low = stance[:, 2] < np.percentile(stance[:, 2], 5) + 0.06 * leg  # 5 cm for a 0.8 m leg
+    v = velocity[frames, lower]
+    ground = np.percentile(stance[:, 2], 5)
+    low = stance[:, 2] < ground + 0.06 * leg  # 5 cm for a 0.8 m leg
     if low.sum() < 3:
         return None
     samples = v[low]
@@ -495,7 +524,32 @@ def treadmill_belt(positions: F64, fps: float) -> F64 | None:
     near = np.linalg.norm(samples[None] - candidates[:, None], axis=-1) < tolerance
     best = candidates[int(np.argmax(near.sum(axis=1)))]
     belt = samples[np.linalg.norm(samples - best, axis=-1) < tolerance].mean(axis=0)
-    if speed_median < BELT_MIN_PER_LEG * leg or np.linalg.norm(belt) < BELT_STEADINESS * speed_median:
+    speed = float(np.linalg.norm(belt))
+    if speed_median < BELT_MIN_PER_LEG * leg or speed < BELT_STEADINESS * speed_median:
+        return None
+    # Plausible for the gait seen: a run has frames with neither foot low (flight).
+    running = float(np.mean(~np.any(ankles[..., 2] < ground + 0.06 * leg, axis=1))) >= FLIGHT_SHARE_RUN
+    if speed > max_belt_speed(leg, running):
+        return None
+    # Backwards: against the way the hips face (forward = left x up), on the belt's samples.
+    left = positions[:, J["hip_l"], :2] - positions[:, J["hip_r"], :2]
+    forward = np.stack([left[:, 1], -left[:, 0]], axis=-1)
+    forward /= np.maximum(np.linalg.norm(forward, axis=-1, keepdims=True), 1e-12)
+    if float(np.mean(forward[low] @ (belt / speed))) > -BELT_BACKWARD_COS:
+        return None
+    # Steadily while planted: each stance's net velocity is the belt's, on both feet.
+    agree = np.zeros(2)
+    total = 0.0
+    for side in (0, 1):
+        for a, b in true_runs(low & (lower == side)):
+            duration = (b - a) / fps
+            if duration < BELT_MIN_STANCE_S:
+                continue
+            total += duration
+            net = (ankles[b, side, :2] - ankles[a, side, :2]) / duration
+            if np.linalg.norm(net - belt) < max(tolerance, 0.25 * speed):
+                agree[side] += duration
+    if not (np.all(agree > 0) and agree.sum() >= BELT_STANCE_SHARE * total):
         return None
     out: F64 = belt
     return out

@@ -33,6 +33,7 @@ from ecs_anim.io.contacts import (
     contact_constraints,
     contacts_from_events,
     detect_foot_contacts,
+    leg_of,
     treadmill_belt,
 )
 from ecs_anim.io.joint_map import JointMap, map_skeleton, unused_joints
@@ -465,6 +466,64 @@ def source_morphology(positions: F64, name: str) -> Morphology:
     return Morphology(lengths, 22.0 * stature**2, "male", name)
 
 
+def measured_stature(positions: F64, measured: NDArray[np.bool_]) -> tuple[float, list[str]] | None:
+    """The stature (m) the measured bones alone give, with their names, or None when no bone is
+    measured: the median over bones whose both joints come from the source (``measured``,
+    (N_JOINTS,) bool) of each bone's mean length over its adult share of the stature
+    (:data:`~ecs_anim.core.morphology.ADULT_PROPORTIONS`). Parts filled in (a neutral pose at
+    adult proportions, interpolated spine joints) say nothing of the file's unit.
+
+    ``positions`` (n_frames, N_JOINTS, 3) metres."""
+    from ecs_anim.core.skeleton import BONE_JOINTS, LENGTHS
+
+    lengths = bone_lengths_of(positions).mean(axis=0)
+    implied, names = [], []
+    for k, (a, b) in enumerate(BONE_JOINTS):
+        share = ADULT_PROPORTIONS.get(LENGTHS[k].removesuffix("_l").removesuffix("_r"))
+        if a >= 0 and share and measured[a] and measured[b] and lengths[k] > 0:
+            implied.append(float(lengths[k]) / share)
+            names.append(LENGTHS[k])
+    return (float(np.median(implied)), names) if implied else None
+
+
+def check_measured_stature(clip: CanonicalClip, morph: Morphology) -> CanonicalClip:
+    """The clip, its filled-in legs resized where they alone make the body no human's size;
+    raises :class:`EcsAnimError` where the measured parts are no human's size, asking in one
+    line whether the unit is right (issue 31, class 7: only what was measured questions it).
+
+    With a leg measured (hip, knee and ankle from the source) the body's stature decides, as its
+    other parts are measured or filled in proportion to it. With no leg measured (absent legs,
+    filled in a neutral pose at adult proportions of another part) the measured bones alone
+    decide (:func:`measured_stature`); where they are plausible but the filled-in legs make the
+    body too tall or too short, those legs are resized about their hips to the legs of the
+    measured bones' stature (``info.filled_legs_resized`` says so)."""
+    legs = any(all(clip.measured[J[f"{p}_{s}"]] for p in ("hip", "knee", "ankle")) for s in "lr")
+    plausible = MIN_STATURE_M <= morph.stature <= MAX_STATURE_M
+    expected = f"expected {MIN_STATURE_M:g}-{MAX_STATURE_M:g} m: is the unit right? (--unit)"
+    if legs:
+        if not plausible:
+            raise EcsAnimError(f"the captured body comes out {morph.stature:.3g} m tall with the "
+                               f"length unit {clip.unit!r} ({clip.unit_reason}); {expected}")
+        return clip
+    found = measured_stature(clip.positions, clip.measured)
+    if found is not None and not MIN_STATURE_M <= found[0] <= MAX_STATURE_M:
+        raise EcsAnimError(f"the measured parts ({listed(found[1], 3)}) make a body "
+                           f"{found[0]:.3g} m tall with the length unit {clip.unit!r} "
+                           f"({clip.unit_reason}); {expected}")
+    if plausible or found is None:
+        return clip
+    # The filled legs hang straight from their hips: scale knee, ankle and toe about the hip.
+    target = found[0] * (ADULT_PROPORTIONS["thigh"] + ADULT_PROPORTIONS["shank"])
+    factor = target / leg_of(clip.positions)
+    positions = clip.positions.copy()
+    for s in "lr":
+        hip = positions[:, J[f"hip_{s}"]]
+        for part in ("knee", "ankle", "toe"):
+            if not clip.measured[J[f"{part}_{s}"]]:
+                positions[:, J[f"{part}_{s}"]] = hip + (positions[:, J[f"{part}_{s}"]] - hip) * factor
+    return replace(clip, positions=positions)
+
+
 def import_bvh(path: str | Path, map_spec: str | None = None, unit: str | None = None,
                thresholds: ContactThresholds = ContactThresholds(),
                up: str | None = None, trim: FrameRange | None = None,
@@ -532,10 +591,11 @@ def normalize_clip(clip: CanonicalClip, name: str, source: str,
             shift[:, :2] = -belt * (np.arange(len(clip.positions)) / clip.fps)[:, None]
             clip = replace(clip, positions=clip.positions + shift[:, None, :])
     morph = source_morphology(clip.positions, f"{name} (source)")
-    if not MIN_STATURE_M <= morph.stature <= MAX_STATURE_M:
-        raise EcsAnimError(f"the captured body comes out {morph.stature:.3g} m tall with the length "
-                           f"unit {clip.unit!r} ({clip.unit_reason}); expected "
-                           f"{MIN_STATURE_M:g}-{MAX_STATURE_M:g} m: is the unit right? (--unit)")
+    resized = check_measured_stature(clip, morph)
+    filled_stature: float | None = None
+    if resized is not clip:
+        filled_stature, clip = morph.stature, resized
+        morph = source_morphology(clip.positions, f"{name} (source)")
     poses = encode(clip.positions, clip.pelvis2world, clip.thorax2world, clip.head2world,
                    morph.lengths)
     found = detect_foot_contacts(clip.positions, clip.fps, thresholds)
@@ -570,6 +630,11 @@ def normalize_clip(clip: CanonicalClip, name: str, source: str,
     }
     if treadmill_info is not None:
         info["treadmill"] = treadmill_info
+    if filled_stature is not None:
+        info["filled_legs_resized"] = (
+            f"the absent legs, filled in at adult proportions, made the body {filled_stature:.3g} m "
+            f"tall; resized to the measured parts' {morph.stature:.3g} m (if the file has leg "
+            "markers, map them with --map FILE.yaml to measure the legs)")
     if clip.up_reason:
         info["up_reason"] = clip.up_reason
     if clip.warnings:

@@ -15,7 +15,8 @@ A source skeleton (BVH hierarchy, names in any convention) is matched to the can
 
 Canonical joints that a skeleton does not have are filled in by the importer: ``spine_1`` /
 ``spine_2`` between the pelvis and the neck, ``toe_*``, ``hand_*`` and ``head_top`` from the
-orientation of the joint they hang from (see :mod:`ecs_anim.io.importing`).
+orientation of the joint they hang from (see :mod:`ecs_anim.io.importing`), as are end parts too
+short to be one (a 0.1 mm End Site at the ankle is no toe: :data:`END_PARTS`).
 """
 
 from __future__ import annotations
@@ -133,6 +134,7 @@ def map_skeleton(skeleton: BvhSkeleton, map_spec: str | None = None,
         if source[f"toe_{side}"] is None:
             source[f"toe_{side}"] = _toe_end_site(skeleton, source[f"knee_{side}"],  # type: ignore[arg-type]
                                                   source[f"ankle_{side}"])  # type: ignore[arg-type]
+    _drop_degenerate_ends(skeleton, source, keep=set(user))
     if user_path is not None:
         check_user_map(skeleton, source, user_path, user_lines, how)
     thorax = common_ancestor(skeleton, [source["shoulder_l"], source["shoulder_r"], source["head"]])  # type: ignore[list-item]
@@ -152,6 +154,32 @@ def unused_joints(skeleton: BvhSkeleton, jmap: JointMap) -> list[str]:
             carries[parent] = True
     return [j.name for j, used in zip(skeleton.joints, carries, strict=True)
             if not used and not j.is_end_site]
+
+
+#: End parts and the joint each hangs from, with the shortest plausible length of that segment as
+#: a fraction of the leg (thigh + shank at rest). A foot (ankle to the ball) is 0.12-0.23 of it in
+#: the dev files; hands (CMU's wrist-to-knuckle bone: 0.03) and head tops (a Daz head End Site:
+#: 0.012) may be short, but not under 1 %.
+END_PARTS: dict[str, tuple[str, float]] = {
+    "toe_l": ("ankle_l", 0.05), "toe_r": ("ankle_r", 0.05), "hand_l": ("wrist_l", 0.01),
+    "hand_r": ("wrist_r", 0.01), "head_top": ("head", 0.01),
+}
+
+
+def _drop_degenerate_ends(skeleton: BvhSkeleton, source: dict[str, int | None],
+                          keep: set[str]) -> None:
+    """Set to None (to be filled in from the joint they hang from) the end parts in ``source``
+    closer to that joint at rest than a plausible fraction of the leg (:data:`END_PARTS`): a 0.1
+    mm End Site at the ankle marks no toe. Parts in ``keep`` (named by the user) stay."""
+    rest = rest_positions(skeleton)
+
+    def gap(a: str, b: str) -> float:
+        return float(np.linalg.norm(rest[source[a]] - rest[source[b]]))
+
+    leg = 0.5 * sum(gap(f"hip_{s}", f"knee_{s}") + gap(f"knee_{s}", f"ankle_{s}") for s in "lr")
+    for end, (parent, fraction) in END_PARTS.items():
+        if end not in keep and source[end] is not None and gap(end, parent) < fraction * leg:
+            source[end] = None
 
 
 def _toe_end_site(skeleton: BvhSkeleton, knee: int, ankle: int) -> int | None:

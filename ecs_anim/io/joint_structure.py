@@ -56,13 +56,15 @@ class _Tree:
 
     ``bone`` (n_joints,): distance from each joint to its parent at rest (0 for the root);
     ``is_end_site`` (n_joints,): End Sites, which mark where a chain ends rather than a joint;
-    ``reach`` (n_joints,): the longest path from a joint down to a leaf; ``onward``: the child on
-    that path (-1 at a leaf); ``size``: joints in each subtree. Joints at the place of their parent
+    ``rest`` (n_joints, 3): rest positions in file axes; ``reach`` (n_joints,): the longest path
+    from a joint down to a leaf; ``onward``: the child on that path (-1 at a leaf); ``size``:
+    joints in each subtree. Joints at the place of their parent
     (zero offsets, zero-length End Sites) are *at the same place*; a run of them is one place.
     """
 
     def __init__(self, skeleton: BvhSkeleton):
         rest = rest_positions(skeleton)
+        self.rest = rest
         n = len(skeleton.joints)
         self.parents = np.array([j.parent for j in skeleton.joints])
         self.is_end_site = [j.is_end_site for j in skeleton.joints]
@@ -148,14 +150,19 @@ class _Tree:
         return out
 
 
-def _limb_places(tree: _Tree, hub: int, branch: int) -> tuple[list[list[int]], list[float], int]:
+def _limb_places(tree: _Tree, hub: int, branch: int, lowest: int = 2
+                 ) -> tuple[list[list[int]], list[float], int]:
     """A leg or an arm leaving ``hub`` by ``branch``: its places from the hub on, the length of
     the segment reaching each (``lengths[k]`` from place k - 1 to k; k = 1 leaves the hub), and
     ``first``, the segment of the first long bone (0 when the path has too few places).
 
-    The two long bones are the path's longest segment and the longer of its neighbours, never
-    the segment leaving the hub (a pelvis offset, a clavicle: CMU's clavicle is longer than its
-    forearm, and an ASF thorax's clavicle joints sit 0.28 m up at the neck base).
+    The two long bones are the longest of the segments from ``lowest`` on and the longer of its
+    neighbours among them, never the segment leaving the hub (a pelvis offset, a clavicle:
+    CMU's clavicle is longer than its forearm, and an ASF thorax's clavicle joints sit 0.28 m up
+    at the neck base), nor the segment to the chain's end mark (an End Site, or a leaf joint named
+    as a chain's end, :data:`_CHAIN_END_NAME`) while two others remain: that end is the hand's or
+    the foot's tip, however long (3ds Max Biped's hand End Site repeats the forearm's OFFSET).
+    ``lowest`` is left at 2 unless the proximal joint must lie farther out (:func:`_limbs`).
     """
     places = tree.places(branch)
     if tree.same_place[branch]:
@@ -163,11 +170,20 @@ def _limb_places(tree: _Tree, hub: int, branch: int) -> tuple[list[list[int]], l
     else:
         places.insert(0, [hub])
     lengths = [0.0] + [float(tree.bone[p[0]]) for p in places[1:]]
-    if len(places) < 4:
+    last = places[-1][0]
+    marks_end = not tree.children[last] and (tree.is_end_site[last] or tree.named_end(last))
+
+    def usable_from(low: int) -> int:  # segments low .. usable - 1 may be long bones
+        return len(places) - 1 if marks_end and len(places) - 1 - low >= 2 else len(places)
+
+    if usable_from(lowest) - lowest < 2:
+        lowest = 2
+    usable = usable_from(lowest)
+    if usable - lowest < 2:
         return places, lengths, 0
-    longest = max(range(2, len(places)), key=lambda k: lengths[k])
-    before = lengths[longest - 1] if longest >= 3 else -1.0
-    after = lengths[longest + 1] if longest + 1 < len(places) else -1.0
+    longest = max(range(lowest, usable), key=lambda k: lengths[k])
+    before = lengths[longest - 1] if longest > lowest else -1.0
+    after = lengths[longest + 1] if longest + 1 < usable else -1.0
     return places, lengths, longest - 1 if before > after else longest
 
 
@@ -175,19 +191,37 @@ def _limb_places(tree: _Tree, hub: int, branch: int) -> tuple[list[list[int]], l
 MIRROR_TOLERANCE = 0.25
 
 
+#: Lengths within this fraction of each other are the same (as written: 25.4996 and 25.4996004).
+SAME_LENGTH = 1e-3
+
+
 #: A leg's or an arm's joints: "proximal", "middle", "distal" and "end" (None: not found).
 Limb = dict[str, int | None]
 
 
-def _limbs(tree: _Tree, hub: int, pair: tuple[int, int]) -> tuple[Limb, Limb]:
+def _limbs(tree: _Tree, hub: int, pair: tuple[int, int],
+           wider_than: float = 0.0) -> tuple[Limb, Limb]:
     """The two legs (or arms) leaving ``hub`` by the branches ``pair``: each one's proximal,
     middle and distal joints (hip, knee, ankle / shoulder, elbow, wrist) and the end beyond (toe /
-    hand). Where the two limbs' long bones (:func:`_limb_places`) are not at the same segment, a
-    bone on one side only (a sword held in one hand, longer than the arm) was taken for one: both
-    take the segment whose bones are alike on both sides. An end farther from the distal joint
-    than the bone before it is dropped (filled in instead)."""
+    hand). The proximal joints are the first places along the limbs farther apart at rest than
+    ``wider_than``, or beyond them: for the arms, the hips' width, as shoulders are farther apart
+    than hips and a collar joint at the sternum is not (the collar bone between is no long bone
+    however long). Where the two limbs' long bones (:func:`_limb_places`) are not at the same
+    segment, a bone on one side only (a sword held in one hand, longer than the arm) was taken
+    for one: both take the segment whose bones are alike on both sides. An end farther from the
+    distal joint than the bone before it is dropped (filled in instead)."""
+    lowest = [2, 2]
+    if wider_than > 0.0:
+        sides = [tree.places(b) for b in pair]
+        wide = [k for k in range(min(len(p) for p in sides))
+                if np.linalg.norm(tree.rest[sides[0][k][0]] - tree.rest[sides[1][k][0]])
+                > wider_than]
+        if wide:
+            # Place k of a branch is place k + 1 from the hub (k when the branch starts at the
+            # hub's place, :func:`_limb_places`); the segment leaving it is one more.
+            lowest = [max(2, wide[0] + (1 if tree.same_place[b] else 2)) for b in pair]
     (places_a, lengths_a, first_a), (places_b, lengths_b, first_b) = \
-        (_limb_places(tree, hub, b) for b in pair)
+        (_limb_places(tree, hub, b, low) for b, low in zip(pair, lowest, strict=True))
 
     def alike(first: int) -> bool:
         return all(first + d < min(len(lengths_a), len(lengths_b)) and
@@ -209,7 +243,7 @@ def _limbs(tree: _Tree, hub: int, pair: tuple[int, int]) -> tuple[Limb, Limb]:
         out.append({"proximal": places[first - 1][0], "middle": places[first][0],
                     "distal": places[first + 1][0], "end": end})
     for limb, lengths, first in zip(out, (lengths_a, lengths_b), firsts, strict=True):
-        if limb["end"] is not None and lengths[first + 2] > lengths[first + 1]:
+        if limb["end"] is not None and lengths[first + 2] > (1 + SAME_LENGTH) * lengths[first + 1]:
             limb["end"] = None  # farther than the forearm or shank: a prop, no hand or toe
     return out[0], out[1]
 
@@ -299,9 +333,10 @@ def structural_map(skeleton: BvhSkeleton, poses: F64 | None = None,
     The pelvis is the first joint below the root where three major branches leave: the two most
     alike are the legs, the largest other one the spine; the thorax is the first such joint up the
     spine, its two most alike branches the arms and the largest other one the neck and head.
-    Along each limb the two long bones give hip, knee, ankle (shoulder, elbow, wrist); spine joints
-    are picked evenly between pelvis and neck. Left is up x forward, forward being where the knees
-    bend and the toes point: in the rest pose when it is a stance that shows it, otherwise in
+    Along each limb the two long bones give hip, knee, ankle (shoulder, elbow, wrist; the shoulders
+    no nearer the thorax than the first joints farther apart than the hips, :func:`_limbs`); spine
+    joints are picked evenly between pelvis and neck. Left is up x forward, forward being where
+    the knees bend and the toes point: in the rest pose when it is a stance that shows it, else in
     ``poses`` ((n_poses, n_joints, 3) joint positions in file axes, e.g. every frame of the clip),
     and when those show no forward either (:data:`WEAK_FORWARD_CUE`), the joints' names if they
     say the sides (``LeftHip``, ``thigh_l``).
@@ -329,7 +364,10 @@ def structural_map(skeleton: BvhSkeleton, poses: F64 | None = None,
         neck, found["head"], found["head_top"] = _head(tree, thorax, neck_branch)
         found["neck"] = neck
         leg_parts = _limbs(tree, pelvis, legs)
-        arm_parts = _limbs(tree, thorax, arms)
+        hips = [leg["proximal"] for leg in leg_parts]
+        hip_width = 0.0 if None in hips else \
+            float(np.linalg.norm(tree.rest[hips[0]] - tree.rest[hips[1]]))
+        arm_parts = _limbs(tree, thorax, arms, hip_width)
         if all(limb["distal"] is not None for limb in leg_parts + arm_parts):
             # The rest pose tells the sides if it is a stance with feet or knees showing forward;
             # otherwise (Bandai's bones lie along X at rest; Biped's stand straight with a sole

@@ -134,6 +134,8 @@ def cmd_import(args: argparse.Namespace) -> int:
                 message += f"; --trim kept frames from frame {motion.info.get('first_file_frame', 0)} of the file"
             if motion.info.get("rest_frames_dropped"):
                 message += f"; {motion.info['rest_frames_dropped']}"
+            if motion.info.get("filled_legs_resized"):
+                message += f"; {motion.info['filled_legs_resized']}"
             for key, what in (("root_frames_trimmed", "trimmed (of the file's frames)"),
                               ("root_frames_repaired", "repaired")):
                 if motion.info.get(key):
