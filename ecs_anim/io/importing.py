@@ -189,6 +189,122 @@ class RestFrames:
                 f"{self.jump_m:.2f} m on average to frame {last + 1}; --trim {first}: keeps it")
 
 
+#: A glitch: the root further than this many leg lengths (thigh + shank) from where the frames
+#: around it put it (the running median of its position), or a joint this far from the root: no
+#: body moves so far in a few frames (on every dev file the pelvis keeps within 0.41 legs of that
+#: median, a run's, and a joint within 1.5 legs of the pelvis), so such frames are a capture's or
+#: converter's error.
+GLITCH_LEGS = 4.0
+#: Runs of glitch frames up to this long are found and repaired between the frames around
+#: them (seconds; at least :data:`GLITCH_MIN_FRAMES`): a longer jump that stays is motion cut
+#: together, not a glitch.
+GLITCH_MAX_S = 0.2
+GLITCH_MIN_FRAMES = 5
+
+
+@dataclass(frozen=True)
+class GlitchFrames:
+    """Frames where the clip jumps further than a body moves and back
+    (:func:`glitch_frames`): ``repaired`` runs (first, last) between good frames, replaced from
+    them; ``dropped_start`` / ``dropped_end`` frames at the clip's ends, with no good frame on
+    one side, cut; ``farthest_m`` the farthest a joint was put from its place."""
+
+    repaired: tuple[tuple[int, int], ...]
+    dropped_start: int
+    dropped_end: int
+    farthest_m: float
+
+    def report(self, n_frames: int, first_file_frame: int = 0) -> str:
+        """The import's line saying what was repaired or cut, frames numbered as in the file (the
+        clip's frame 0, before the cut, is the file's ``first_file_frame``)."""
+        def span(a: int, b: int) -> str:
+            a, b = a + first_file_frame, b + first_file_frame
+            return f"frame {a}" if a == b else f"frames {a}-{b}"
+        parts = []
+        if self.repaired:
+            parts.append("repaired " + ", ".join(
+                f"{span(a, b)} (from frames {a - 1 + first_file_frame} and "
+                f"{b + 1 + first_file_frame})" for a, b in self.repaired))
+        if self.dropped_start:
+            parts.append(f"dropped {span(0, self.dropped_start - 1)}")
+        if self.dropped_end:
+            parts.append(f"dropped {span(n_frames - self.dropped_end, n_frames - 1)}")
+        return (f"{' and '.join(parts)}: glitches, the body put up to {self.farthest_m:.4g} m "
+                f"from the frames around them (over {GLITCH_LEGS:g} leg lengths, which no body "
+                "moves in a few frames)")
+
+
+def glitch_frames(positions: F64, fps: float
+                  ) -> tuple[NDArray[np.bool_], NDArray[np.bool_], float]:
+    """Which frames are glitches, which of them tear the body apart, and how far (m) the worst
+    puts a joint from its place: the pelvis further than :data:`GLITCH_LEGS` legs from the
+    running median of its position over the :data:`GLITCH_MAX_S` on each side (a run up to that
+    long is outvoted by the frames around it; a jump that stays is not), or a joint that far
+    from the pelvis (the body torn apart).
+
+    ``positions`` (n_frames, N_JOINTS, 3): canonical joint positions, metres. Returns
+    ((n_frames,) bool glitch, (n_frames,) bool torn, metres)."""
+    n = len(positions)
+    leg = leg_of(positions) if n >= 3 else 0.0
+    if not leg > 0:  # too short to tell, or legs of no length (said by the import's checks)
+        return np.zeros(n, dtype=bool), np.zeros(n, dtype=bool), 0.0
+    half = max(GLITCH_MIN_FRAMES, math.ceil(GLITCH_MAX_S * fps))
+    pelvis = positions[:, J["pelvis"]]
+    padded = np.pad(pelvis, ((half, half), (0, 0)), mode="reflect" if n > half else "edge")
+    windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1, axis=0)  # (n, 3, w)
+    off_root = np.linalg.norm(pelvis - np.median(windows, axis=-1), axis=-1)  # (n,)
+    off_body = np.max(np.linalg.norm(positions - pelvis[:, None], axis=-1), axis=1)  # (n,)
+    far = np.maximum(off_root, off_body)
+    glitch = far > GLITCH_LEGS * leg
+    return glitch, off_body > GLITCH_LEGS * leg, float(far[glitch].max()) if glitch.any() else 0.0
+
+
+def repair_glitches(clip: CanonicalClip) -> tuple[CanonicalClip, GlitchFrames | None]:
+    """The clip with its glitch frames (:func:`glitch_frames`) repaired or cut: a run between
+    good frames is moved onto the straight line between them: the whole body with its pelvis
+    where only the root jumped (the pose kept), else each joint (each part's orientation from
+    the nearer good frame); a run at either end is cut. Returns the clip and what was done
+    (None: no glitch, the clip unchanged). Raises :class:`EcsAnimError` when fewer than two
+    frames are good."""
+    glitch, torn, farthest = glitch_frames(clip.positions, clip.fps)
+    if not glitch.any():
+        return clip, None
+    good = np.flatnonzero(~glitch)
+    if len(good) < 2:
+        raise EcsAnimError(f"{len(glitch) - len(good)} of {len(glitch)} frames put the body more "
+                           f"than {GLITCH_LEGS:g} leg lengths from the frames around them: no "
+                           "motion to import; check the file's root positions")
+    start, stop = int(good[0]), int(good[-1]) + 1
+    inside = np.flatnonzero(glitch[start:stop]) + start
+    positions = clip.positions.copy()
+    frames = {k: getattr(clip, k).copy() for k in ("pelvis2world", "thorax2world", "head2world")}
+    if len(inside):
+        after = good[np.searchsorted(good, inside)]  # the next good frame, (k,)
+        before = good[np.searchsorted(good, inside) - 1]
+        w = ((inside - before) / (after - before))[:, None, None]
+        line = (1 - w) * positions[before] + w * positions[after]  # (k, N_JOINTS, 3)
+        pelvis = positions[inside, J["pelvis"]][:, None]
+        moved = positions[inside] - pelvis + line[:, J["pelvis"]][:, None]
+        positions[inside] = np.where(torn[inside, None, None], line, moved)
+        nearer = np.where(w[:, 0, 0] <= 0.5, before, after)
+        for value in frames.values():
+            value[inside] = np.where(torn[inside, None, None], value[nearer], value[inside])
+    repaired = tuple((int(a), int(b)) for a, b in _runs(inside))
+    fixed = replace(clip, positions=positions, **frames)
+    report = GlitchFrames(repaired, start, len(glitch) - stop, farthest)
+    return trim_clip(fixed, slice(start, stop)), report
+
+
+def _runs(frames: NDArray[np.intp]) -> list[tuple[int, int]]:
+    """Sorted frame numbers as runs of consecutive ones, (first, last) each."""
+    if not len(frames):
+        return []
+    breaks = np.flatnonzero(np.diff(frames) > 1)
+    firsts = np.concatenate([[frames[0]], frames[breaks + 1]])
+    lasts = np.concatenate([frames[breaks], [frames[-1]]])
+    return list(zip(firsts.tolist(), lasts.tolist(), strict=True))
+
+
 def leading_rest_frames(positions: F64, fps: float) -> RestFrames | None:
     """The rest pose a converter put before the motion (CMU's T-pose frame 0, with any frames
     it then ramps or holds through), if any: a jump within the first second that is many times
@@ -201,6 +317,9 @@ def leading_rest_frames(positions: F64, fps: float) -> RestFrames | None:
     if len(positions) < 3:
         return None
     move = np.mean(np.linalg.norm(np.diff(positions, axis=0), axis=-1), axis=1)  # (n_frames - 1,)
+    # A glitch's jumps are no rest pose's (:func:`glitch_frames`; repaired before, on import).
+    glitch, _, _ = glitch_frames(positions, fps)
+    move[glitch[:-1] | glitch[1:]] = 0.0
     jump = int(np.argmax(move[:max(1, min(round(fps), len(move) - 1))]))
     fast_after = float(np.percentile(move[jump + 1:], 99))
     leg = 0.5 * sum(float(np.median(np.linalg.norm(positions[:, J[f"{upper}_{s}"]]
@@ -250,7 +369,23 @@ def _leg_rest_length(skeleton: BvhSkeleton, jmap: JointMap) -> float:
 #: Two joints closer than this fraction of the leg at rest are at the same place (no bone).
 SAME_PLACE_FRACTION = 1e-3
 
-UP_AXES = {"x": XUP_TO_ZUP, "y": YUP_TO_ZUP, "z": np.eye(3)}
+#: A file's up axis -> the rotation taking its axes to ours (Z up). A negative axis is a file
+#: upside down along the positive one (an image convention, Y down): first turned 180° about an
+#: axis across it, then as the positive one, so it is a rotation, never a mirror.
+UP_AXES = {"x": XUP_TO_ZUP, "y": YUP_TO_ZUP, "z": np.eye(3),
+           "-x": XUP_TO_ZUP @ np.diag([-1.0, -1.0, 1.0]),
+           "-y": YUP_TO_ZUP @ np.diag([1.0, -1.0, -1.0]),
+           "-z": np.diag([1.0, -1.0, -1.0])}
+
+
+def up_axis(text: str) -> str:
+    """``--up``'s value as a key of :data:`UP_AXES` (``+y`` -> ``y``, ``-Y`` -> ``-y``); raises
+    :class:`EcsAnimError` for anything else."""
+    key = text.strip().lower().removeprefix("+")
+    if key not in UP_AXES:
+        raise EcsAnimError(f"--up {text}: expected {', '.join(UP_AXES)} (the axis the head points "
+                           "along from the feet; -y for a file upside down, Y pointing down)")
+    return key
 
 
 def unit_scale(unit: str) -> float:
@@ -269,46 +404,73 @@ def unit_scale(unit: str) -> float:
 
 
 def detect_up(skeleton: BvhSkeleton, jmap: JointMap, pos_file: F64) -> tuple[str, str]:
-    """The file's up axis, ``"y"`` or ``"z"``, with a sentence saying why: the axis along which
-    the head stands above the feet, in the rest pose (the spine from pelvis to neck) and over
-    the clip's frames (the head above the lower ankle), each as a fraction of its length,
-    summed per axis; when the sums are within 0.2 of each other (the rest pose and the frames
-    disagree), the frames if they show it along one axis only (median over 0.5).
+    """The file's up axis, ``"y"``, ``"z"``, ``"-y"`` or ``"-z"``, with a sentence saying why: the
+    way along which the head stands above the feet, in the rest pose (the spine from pelvis to
+    neck) and over the clip's frames (the head above the lower ankle), each as a fraction of its
+    length, summed per way (a negative axis is a file upside down, as in an image's convention,
+    Y down: the head below the feet along the positive one). When the best way leads the other
+    axis's by under 0.2 (the rest pose and the frames disagree), the frames decide if they show
+    it along one way only (median over 0.5); and the head must stand above the feet in most
+    frames along the way chosen where another way has it so in two thirds of them.
 
-    ``pos_file`` (n_frames, n_joints, 3): joint positions in file axes. A tie or no axis showing
+    ``pos_file`` (n_frames, n_joints, 3): joint positions in file axes. A tie or no way showing
     the head above the feet keeps the BVH convention, Y up, and says so.
     """
     src = jmap.source
     rest = rest_positions(skeleton)
     spine = normalize(rest[src["neck"]] - rest[src["pelvis"]])
     head = pos_file[:, src["head"]]
-    rise = {}
+    # Per way: (the rest pose's spine along it, the frames' median rise of the head over the
+    # feet, the share of frames where the head is clearly above the feet along it).
+    rise: dict[str, tuple[float, float, float]] = {}
     for axis, k in (("y", 1), ("z", 2)):
-        feet = np.minimum(pos_file[:, src["ankle_l"], k], pos_file[:, src["ankle_r"], k])
-        above = (head[:, k] - feet) / np.maximum(
-            np.linalg.norm(head - 0.5 * (pos_file[:, src["ankle_l"]] + pos_file[:, src["ankle_r"]]),
-                           axis=-1), 1e-12)
+        feet_low = np.minimum(pos_file[:, src["ankle_l"], k], pos_file[:, src["ankle_r"], k])
+        feet_high = np.maximum(pos_file[:, src["ankle_l"], k], pos_file[:, src["ankle_r"], k])
+        reach = np.maximum(np.linalg.norm(
+            head - 0.5 * (pos_file[:, src["ankle_l"]] + pos_file[:, src["ankle_r"]]), axis=-1), 1e-12)
+        above = (head[:, k] - feet_low) / reach
+        below = (feet_high - head[:, k]) / reach  # the head's rise along -axis
         rise[axis] = (float(spine[k]), float(np.median(above)), float(np.mean(above > 0.5)))
-    score = {axis: r[0] + r[1] for axis, r in rise.items()}
-    up = max(score, key=lambda a: score[a])
-    if score[up] <= 0.5 or abs(score["y"] - score["z"]) < 0.2:
+        rise[f"-{axis}"] = (-float(spine[k]), float(np.median(below)), float(np.mean(below > 0.5)))
+    score = {way: r[0] + r[1] for way, r in rise.items()}
+
+    def rival(way: str) -> float:  # the best way along the other axis
+        return max(v for w, v in score.items() if w[-1] != way[-1])
+
+    up = max(score, key=lambda w: score[w])
+    if score[up] <= 0.5 or score[up] - rival(up) < 0.2:
         # The rest pose and the frames disagree (a Blender armature turns a Z-up rest pose to
-        # Y up in its channels): the frames are what is imported, so they decide if clear.
-        clear = [axis for axis, r in rise.items() if r[1] > 0.5]
+        # Y up in its channels; a converter turns only the frames upside down): the frames are
+        # what is imported, so they decide if clear.
+        clear = [way for way, r in rise.items() if r[1] > 0.5]
         if len(clear) != 1:
-            return "y", ("assumed (the BVH convention): neither Y nor Z shows the head clearly "
-                         "above the feet; give --up if wrong")
+            return "y", ("assumed (the BVH convention): no axis shows the head clearly above the "
+                         "feet; give --up (y, z, -y or -z) if wrong")
         up = clear[0]
-        rest_up = next(a for a in rise if a != up)
-        if abs(rise[rest_up][0]) > 0.5:
-            return up, (f"detected: the head is above the feet along +{up.upper()} in "
+        spine_way = max(rise, key=lambda w: rise[w][0])
+        if spine_way != up and rise[spine_way][0] > 0.5:
+            return up, (f"detected: the head is above the feet along {_way(up)} in "
                         f"{rise[up][2]:.0%} of frames, which decide over the rest pose's spine "
-                        f"pointing {rise[rest_up][0]:+.2f} along {rest_up.upper()}")
+                        f"pointing {rise[spine_way][0]:+.2f} along {spine_way.upper()}")
+    # The head above the feet in most frames is what up means: a way the frames clearly show it
+    # along (two thirds of them) overrides a rest pose that points elsewhere.
+    majority = [way for way, r in rise.items() if r[2] >= 2 / 3]
+    if rise[up][2] <= 0.5 and len(majority) == 1:
+        up = majority[0]
     spine_k, _, share = rise[up]
     rest_text = (f"the rest pose's spine points {spine_k:+.2f} along {up.upper()}"
                  if abs(spine_k) > 0.5 else "the rest pose shows no stance")
-    return up, (f"detected: the head is above the feet along +{up.upper()} in {share:.0%} of "
+    if share <= 0.5:
+        return up, (f"from the rest pose's spine ({spine_k:+.2f} along {up.upper()}): the head is "
+                    f"above the feet along it in only {share:.0%} of frames, and along no axis in "
+                    "two thirds of them (does the body tumble or lie?); give --up if wrong")
+    return up, (f"detected: the head is above the feet along {_way(up)} in {share:.0%} of "
                 f"frames and {rest_text}")
+
+
+def _way(up: str) -> str:
+    """``"y"`` -> ``"+Y"``, ``"-z"`` -> ``"-Z"``: an up axis as the reasons write it."""
+    return up.upper() if up.startswith("-") else f"+{up.upper()}"
 
 
 def canonical_clip(motion: BvhMotion, map_spec: str | None = None,
@@ -320,8 +482,8 @@ def canonical_clip(motion: BvhMotion, map_spec: str | None = None,
     ``unit``: a unit name or metres per file unit as text (:func:`unit_scale`); None detects it.
     ``stature_m``: scale the source so that its body is this tall (m) instead.
     """
-    if up is not None and up not in UP_AXES:
-        raise EcsAnimError(f"--up {up}: expected {', '.join(UP_AXES)}")
+    if up is not None:
+        up = up_axis(up)
     skeleton = motion.skeleton
     joint2file, pos_file = forward_kinematics(motion)
     jmap = map_skeleton(skeleton, map_spec, pos_file)
@@ -530,7 +692,8 @@ def import_bvh(path: str | Path, map_spec: str | None = None, unit: str | None =
                stature_m: float | None = None, treadmill: bool = True,
                contacts: str = "detect") -> NormalizedMotion:
     """Read a BVH file and normalize it (``trim``: only those frames, else a leading rest pose
-    is dropped, :func:`leading_rest_frames`, and ``info.rest_frames_dropped`` says so; ``up``,
+    is dropped, :func:`leading_rest_frames`, and ``info.rest_frames_dropped`` says so; glitch
+    frames are repaired or cut either way, :func:`repair_glitches`, ``info.glitch_frames``; ``up``,
     ``unit``, ``stature_m`` as in :func:`canonical_clip`; ``treadmill``, ``contacts`` as in
     :func:`normalize_clip`: a BVH has no gait events). Raises :class:`EcsAnimError` subclasses
     on bad input."""
@@ -542,16 +705,24 @@ def import_bvh(path: str | Path, map_spec: str | None = None, unit: str | None =
         if trim is not None:
             kept = trim.frames(len(clip.positions), clip.fps)
             clip, first_file_frame = trim_clip(clip, kept), kept.start
-        else:
+        n_before = len(clip.positions)
+        clip, glitches = repair_glitches(clip)
+        glitch_line = glitches.report(n_before, first_file_frame) if glitches else None
+        first_file_frame += glitches.dropped_start if glitches else 0
+        if trim is None:
             rest = leading_rest_frames(clip.positions, clip.fps)
             if rest is not None:
-                clip, first_file_frame = trim_clip(clip, slice(rest.count, None)), rest.count
+                clip = trim_clip(clip, slice(rest.count, None))
+                rest_line = rest.report(first_file_frame)
+                first_file_frame += rest.count
         normalized = normalize_clip(clip, path.stem, str(path), thresholds, treadmill,
                                     contacts=contacts)
         if first_file_frame:
             normalized.info["first_file_frame"] = first_file_frame
+        if glitch_line is not None:
+            normalized.info["glitch_frames"] = glitch_line
         if rest is not None:
-            normalized.info["rest_frames_dropped"] = rest.report()
+            normalized.info["rest_frames_dropped"] = rest_line
     except InputError:
         raise
     except EcsAnimError as exc:
@@ -614,6 +785,13 @@ def normalize_clip(clip: CanonicalClip, name: str, source: str,
                                "with foot strikes and foot offs)")
         foot = on_ground = contacts_from_events(strikes, len(clip.positions), clip.fps)
         contact_info["method"] = "gait events"
+    # No contact on a foot the source does not measure (a leg filled in a neutral pose): its
+    # stillness is the fill's, not a stance, and nothing can be checked against it.
+    unmeasured = ~clip.measured[[J["ankle_l"], J["ankle_r"]]]
+    if unmeasured.any():
+        foot, on_ground = foot & ~unmeasured, on_ground & ~unmeasured
+        contact_info["not_measured"] = [side for side, gone in zip(("left", "right"), unmeasured,
+                                                                   strict=True) if gone]
     constraints = contact_constraints(foot, clip.fps, thresholds)
     planted = {"heel": found.heel & foot, "ball": found.ball & foot, "foot": foot,
                "on_ground": on_ground}

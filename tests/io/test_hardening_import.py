@@ -298,11 +298,12 @@ def test_a_marker_map_with_an_unknown_role_lists_a_few_roles(tmp_path):
     user_map.write_text("markers:\n  KNEE_LAT_x: M0001\n")
     with pytest.raises(InputError) as exc:
         import_c3d(path, str(user_map))
-    # Before: all roles of Plug-in Gait (43 then, 557 characters; 49 now, with MT1 and MT5).
+    # Before: all roles of Plug-in Gait (43 then, 557 characters; 49 with MT1 and MT5, 53 with
+    # the front and back shoulder markers).
     message = _message(exc, f"{user_map}:2")
     assert message == ("markers.KNEE_LAT_x: unknown role for plug_in_gait (did you mean "
                        "'KNEE_LAT_r'?); roles: ASIS_l, ASIS_r, PSIS_l, PSIS_r, SACRUM, THIGH_l "
-                       "(+43 more) (all in docs/import.md#marker-maps)")
+                       "(+47 more) (all in docs/import.md#marker-maps)")
 
 
 def mixamo_names(text: str) -> str:

@@ -43,6 +43,37 @@ def facing(text: str) -> float:
     return math.radians(degrees)
 
 
+def up_axis(text: str) -> str:
+    """argparse type of ``--up``: ``x``, ``y``, ``z`` or a negative one (``-y``: the file is
+    upside down, Y pointing down), :func:`~ecs_anim.io.importing.up_axis`."""
+    from ecs_anim.io.importing import up_axis as parse_up
+    try:
+        return parse_up(text)
+    except EcsAnimError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix(f"--up {text}: ")) from None
+
+
+#: Flags whose value may be a negative axis (``--up -y``, ``--face -x``): argparse reads a word
+#: starting with "-" as a flag, so :func:`joined_axis_values` joins these to their flag.
+AXIS_FLAGS = ("--up", "--face")
+AXIS_WORDS = frozenset(f"{sign}{axis}" for sign in "-+" for axis in "xyzXYZ")
+
+
+def joined_axis_values(argv: list[str]) -> list[str]:
+    """``argv`` with ``--up -y`` written ``--up=-y`` (the same for :data:`AXIS_FLAGS`), so that
+    argparse takes a negative axis as the flag's value, not as a flag of its own."""
+    out: list[str] = []
+    k = 0
+    while k < len(argv):
+        if argv[k] in AXIS_FLAGS and k + 1 < len(argv) and argv[k + 1] in AXIS_WORDS:
+            out.append(f"{argv[k]}={argv[k + 1]}")
+            k += 2
+        else:
+            out.append(argv[k])
+            k += 1
+    return out
+
+
 def frame_range(text: str) -> FrameRange:
     """argparse type of ``--trim``: :meth:`FrameRange.parse`, its error as argparse's."""
     try:

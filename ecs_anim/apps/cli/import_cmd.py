@@ -132,6 +132,8 @@ def cmd_import(args: argparse.Namespace) -> int:
                                 "held, unreliable)")
             if args.trim is not None:
                 message += f"; --trim kept frames from frame {motion.info.get('first_file_frame', 0)} of the file"
+            if motion.info.get("glitch_frames"):
+                message += f"; {motion.info['glitch_frames']}"
             if motion.info.get("rest_frames_dropped"):
                 message += f"; {motion.info['rest_frames_dropped']}"
             if motion.info.get("filled_legs_resized"):

@@ -22,10 +22,12 @@ from ecs_anim.apps.cli.args import (
     error_line,
     facing,
     frame_range,
+    joined_axis_values,
     json_safe,
     length_unit,
     positive_float,
     positive_int,
+    up_axis,
 )
 from ecs_anim.apps.cli.import_cmd import cmd_import
 from ecs_anim.apps.cli.info import cmd_info
@@ -233,9 +235,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--stature", type=positive_float, metavar="M",
                    help="BVH: scale the source so that its body is M metres tall (a rig "
                    "scaled by its tool, a child whose unit the proportions cannot tell)")
-    p.add_argument("--up", choices=["x", "y", "z"], default=None,
-                   help="the file's up axis (default: detected from the rest pose and the motion, "
-                   "head above the feet, for BVH; from the markers for C3D)")
+    p.add_argument("--up", type=up_axis, default=None, metavar="x|y|z|-x|-y|-z",
+                   help="the file's up axis, the way from the feet to the head; -y for a file "
+                   "upside down (Y pointing down, as in images) (default: detected from the rest "
+                   "pose and the motion, head above the feet, for BVH; from the markers for C3D)")
     p.add_argument("--face", type=facing, metavar="+x|-x|+y|-y|DEGREES",
                    help="turn each clip about its origin so that it faces this way at its first "
                    "frame (degrees anticlockwise from +x), as our motion library does; "
@@ -350,7 +353,7 @@ def show_warnings() -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(joined_axis_values(list(sys.argv[1:] if argv is None else argv)))
     show_warnings()
     keep_freed_memory()  # an application's choice (it changes the process's allocator)
     try:

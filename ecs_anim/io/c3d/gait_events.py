@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.io.c3d.force_plates import plate_contacts, plate_edges
 from ecs_anim.io.c3d.reading import C3dMarkers
 from ecs_anim.io.contacts import gait_event_kind
@@ -26,7 +27,10 @@ def check_against_plates(raw: C3dMarkers, clip: CanonicalClip, first_file_frame:
     if not measured:
         return
     extra["force_plates"] = measured
-    edges = plate_edges(measured)
+    # Only the feet the markers measure: a foot filled in a neutral pose has no contacts to
+    # check (normalize_clip gives it none), and its plate's edges would read as all missed.
+    ankles = {"l": clip.measured[J["ankle_l"]], "r": clip.measured[J["ankle_r"]]}
+    edges = [edge for edge in plate_edges(measured) if ankles.get(edge["side"], False)]
     if edges and motion.planted is not None:
         motion.info["contacts"]["plates_check"] = event_agreement(
             motion.planted["on_ground"], edges, motion.fps)

@@ -71,11 +71,42 @@ BOOL = NDArray[np.bool_]
 # --- the importer ------------------------------------------------------------------------------
 
 
+#: The floor's level varies at most this share of the top's over a trial: a body's lowest
+#: markers stand on one plane frame after frame, its highest (the head) bob, bend and squat (on
+#: the dev files 0.004-0.69; a body not standing, seated or an arm alone, may not show it).
+FLOOR_STEADINESS = 0.75
+
+
+def _floor_sign(body: F64, axis: int) -> float:
+    """+1 when the floor lies at the low end of ``axis`` (up is +axis), -1 at the high end, 0
+    when the markers do not tell: the level of the markers' lowest point on each frame (the
+    soles on the floor) keeps to one plane while that of their highest moves, its spread over
+    frames (10th to 90th percentile) at most :data:`FLOOR_STEADINESS` of the other end's.
+
+    ``body`` (F, M, 3): the body's markers, NaN where not measured."""
+    h = body[..., axis]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN frames
+        ends = (np.nanmin(h, axis=1), np.nanmax(h, axis=1))
+        low, high = (float(np.subtract(*np.nanpercentile(e, [90, 10]))) for e in ends)
+    if not (np.isfinite(low) and np.isfinite(high)):
+        return 0.0
+    if low <= FLOOR_STEADINESS * high:
+        return 1.0
+    if high <= FLOOR_STEADINESS * low:
+        return -1.0
+    return 0.0
+
+
 def _detect_up(mk: MarkersByRole, present: list[str], mmap: MarkerMap) -> str:
-    """The file's up axis: the axis along which the body is tallest in a typical frame (the
-    median over frames of the markers' spread), pointing from the legs to the pelvis (or from
-    the pelvis to the trunk, the trunk to the head, or the sternum's and spine's lower markers
-    (PX, T10) to their upper ones (IJ, C7), when those are what is marked)."""
+    """The file's up axis (``"z"``, ``"-y"``, ...): the axis along which the body is tallest in a
+    typical frame (the median over frames of the markers' spread), pointing the way the body's
+    parts stand on one another, from each part's markers whether or not the part can be
+    computed (the legs' markers below the pelvis's, the pelvis's below the trunk's, the trunk's
+    below the head's, or the sternum's and spine's lower markers, PX and T10, below their upper
+    ones, IJ and C7), else away from the floor the markers' lowest points keep to
+    (:func:`_floor_sign`).
+    Raises :class:`EcsAnimError` naming what is missing when neither tells."""
     used = sorted(set(mk.found.values()))  # not other objects' markers
     # Measured samples only: a marker held over a long gap (seen in one frame, say) stays where
     # it was while the body walks on, and would stretch the spread along the walk.
@@ -94,9 +125,12 @@ def _detect_up(mk: MarkersByRole, present: list[str], mmap: MarkerMap) -> str:
         return np.mean([mk(r) for r in found], axis=0) if found else None
 
     def centre(group: str) -> F64 | None:
-        return mean_of(groups.get(group, ((), ()))[0])
+        """The mean of the group's markers found (a part lacking one to be computed still
+        shows where it is)."""
+        required, alternatives = groups.get(group, ((), ()))
+        return mean_of(tuple(dict.fromkeys((*required, *(r for alt in alternatives for r in alt)))))
 
-    legs = [c for c in (centre(g) for g in ("leg_l", "leg_r") if g in present) if c is not None]
+    legs = [c for c in (centre(g) for g in ("leg_l", "leg_r")) if c is not None]
     # The thorax's own markers last: an upper-body set (seated, in a wheelchair) has no pelvis.
     pairs = [(centre("pelvis"), np.mean(legs, axis=0) if legs else None),
              (centre("trunk"), centre("pelvis")), (centre("head"), centre("trunk")),
@@ -104,13 +138,18 @@ def _detect_up(mk: MarkersByRole, present: list[str], mmap: MarkerMap) -> str:
     sign = 0.0
     for high, low in pairs:
         if high is not None and low is not None:
-            sign = float(np.median((high - low)[:, axis]))
+            sign = float(np.sign(np.median((high - low)[:, axis])))
             break
+    if sign == 0.0:
+        sign = _floor_sign(body[seen], axis)
     name = "xyz"[axis]
-    if sign <= 0:
-        raise EcsAnimError(f"cannot tell the up axis (the body is tallest along {name}, "
-                           "downwards); give --up")
-    return name
+    if sign == 0.0:
+        marked = [g for g in ("pelvis", "leg_l", "leg_r", "trunk", "head") if centre(g) is not None]
+        raise EcsAnimError(
+            f"cannot tell which way is up along {name} (the body's tallest axis): the markers "
+            f"found mark {', '.join(marked) or 'no body part'}, no two parts one above the "
+            f"other, and no floor under the lowest markers; give --up {name} or --up -{name}")
+    return name if sign > 0 else f"-{name}"
 
 
 def import_c3d(path: str | Path, map_spec: str | None = None, unit: str | None = None,

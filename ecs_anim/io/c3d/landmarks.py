@@ -21,8 +21,8 @@
 * toes (ball of the foot): TOE (2nd metatarsal head) or the midpoint of MT1 and MT5;
 * neck base: midpoint of C7 and the jugular notch (CLAV / IJ); mid-thorax: midpoint of
   T10 (T8) and the xiphoid (STRN / PX) when both are marked, otherwise interpolated;
-* shoulders: 17 % of the acromion-acromion distance below the acromion marker, along the thorax
-  axis (after Rab et al. 2002);
+* shoulders: 17 % of the acromion-acromion distance below the acromion marker (or the midpoint
+  of a front and a back shoulder marker), along the thorax axis (after Rab et al. 2002);
 * elbows: midpoint of the humeral epicondyles, or the lateral marker moved medially by half an
   elbow width plus a marker radius along the flexion axis (the normal of the shoulder-elbow-wrist
   plane, averaged in an upper-arm frame over the most flexed frames, so a straight arm keeps
@@ -30,8 +30,9 @@
 * wrists: midpoint of the radial and ulnar styloid markers (WRA/WRB); hand end: FIN or the
   midpoint of the 2nd and 5th metacarpal heads;
 * head: the four head-band markers give the head frame (or a marker on each side of the head
-  and one on the forehead: their midpoint and the forehead's direction); skull base and vertex
-  lie half a head length below and above the markers' centre.
+  and one on the forehead or the back of the head: the sides' midpoint and the direction from
+  the back or to the forehead); skull base and vertex lie half a head length below and above
+  the markers' centre.
 """
 
 from __future__ import annotations
@@ -104,6 +105,14 @@ def _landmark_pelvis(mk: MarkersByRole, build: JointCentreBuild) -> None:
     build.pelvis2world = pelvis2world
 
 
+def _acromion(mk: MarkersByRole, s: str) -> F64:
+    """The acromion of side ``s`` (F, 3): its marker, or the midpoint of the markers in front
+    of it and behind it (MoSh's SehoonVSK FSH/BSH)."""
+    if mk.has(f"ACROMION_{s}"):
+        return mk(f"ACROMION_{s}")
+    return midpoint(mk(f"SHOULDER_FRONT_{s}"), mk(f"SHOULDER_BACK_{s}"))
+
+
 def _pelvis_under_trunk(mk: MarkersByRole, present: list[str], build: JointCentreBuild) -> None:
     """Upper-body trials: the pelvis (not marked) hangs a spine length below the neck base along
     the thorax axis, upright, facing the thorax' heading. The body's size comes from the
@@ -117,7 +126,7 @@ def _pelvis_under_trunk(mk: MarkersByRole, present: list[str], build: JointCentr
     roles = ["C7", "IJ"] + (["T10", "PX"] if mk.has("T10", "PX") else [])
     build.root_trusted = np.asarray(~mk.unreliable[:, [mk.found[r] for r in roles]].any(axis=1))
     if "arm_l" in present and "arm_r" in present:
-        width = float(np.median(np.linalg.norm(mk("ACROMION_l") - mk("ACROMION_r"), axis=-1)))
+        width = float(np.median(np.linalg.norm(_acromion(mk, "l") - _acromion(mk, "r"), axis=-1)))
         leg = width / (2 * ADULT_PROPORTIONS["clavicle"]) * ADULT_LEG_PROPORTION
     else:
         leg = 0.8
@@ -166,15 +175,16 @@ def landmark_body(mk: MarkersByRole, present: list[str], build: JointCentreBuild
     thorax = build.thorax2world
     acromion_width = None
     if "arm_l" in present and "arm_r" in present:
-        acromion_width = float(np.median(np.linalg.norm(mk("ACROMION_l") - mk("ACROMION_r"), axis=-1)))
+        acromion_width = float(np.median(np.linalg.norm(_acromion(mk, "l") - _acromion(mk, "r"), axis=-1)))
     for s, medial_sign in (("l", -1.0), ("r", 1.0)):
         if f"arm_{s}" not in present:
             continue
         down = -(thorax[..., :, 2] if thorax is not None else np.array([0.0, 0.0, 1.0]))
         aw = acromion_width if acromion_width is not None else 2 * adult_length("clavicle", leg) + 0.08
-        shoulder = mk(f"ACROMION_{s}") + SHOULDER_DROP * aw * down
+        shoulder = _acromion(mk, s) + SHOULDER_DROP * aw * down
+        marked = "" if mk.has(f"ACROMION_{s}") else " (midway between the front and back shoulder markers)"
         set_joint(build, f"shoulder_{s}", shoulder,
-                  f"{SHOULDER_DROP:.0%} of the acromion distance ({aw * 1000:.0f} mm) below the acromion")
+                  f"{SHOULDER_DROP:.0%} of the acromion distance ({aw * 1000:.0f} mm) below the acromion{marked}")
         if mk.has(f"WRIST_RAD_{s}", f"WRIST_ULN_{s}"):
             wrist = midpoint(mk(f"WRIST_RAD_{s}"), mk(f"WRIST_ULN_{s}"))
             set_joint(build, f"wrist_{s}", wrist, "midpoint of the wrist markers")
@@ -206,9 +216,10 @@ def landmark_body(mk: MarkersByRole, present: list[str], build: JointCentreBuild
                               (("FRONT", "l"), ("FRONT", "r"), ("BACK", "l"), ("BACK", "r")))
             centre = 0.25 * (fl + fr + bl + br)
             forward, left = midpoint(fl, fr) - midpoint(bl, br), midpoint(fl, bl) - midpoint(fr, br)
-        else:  # a marker on each side of the head, level with the forehead's
+        else:  # a marker on each side of the head, level with the forehead's (or the back's)
             centre = midpoint(mk("HEAD_SIDE_l"), mk("HEAD_SIDE_r"))
-            forward, left = mk("FOREHEAD") - centre, mk("HEAD_SIDE_l") - mk("HEAD_SIDE_r")
+            forward = mk("FOREHEAD") - centre if mk.has("FOREHEAD") else centre - mk("HEAD_REAR")
+            left = mk("HEAD_SIDE_l") - mk("HEAD_SIDE_r")
         head2world = frame_from_axes(forward, left, 0, 1)
         half = 0.5 * adult_length("head", leg)
         set_joint(build, "head", centre - half * head2world[..., :, 2], "half a head length below the head markers' centre")

@@ -25,6 +25,9 @@ Presets:
   malleoli (FAL/TAM, LM/MM), metatarsal heads (FM1/FM5, MT1/MT5), calcaneus, acromion (AC),
   humeral epicondyles (HLE/HME, EL/EM; Vicon upper limb ELL/ELM), styloids (RSP/USP, RS/US;
   ulnar head UHE as the Rehazenter/Qualisys set writes it), IJ (SJN), PX (SXS), C7 (CV7), T8.
+* ``xsens_mvn`` — the virtual anatomical markers Xsens MVN's C3D exporter writes
+  (``pLeftASI``, ``pSacrum``, ``pLeftKneeLatEpicondyle``, ``pLeftLatMalleolus``,
+  ``pLeftFirstMetatarsal``, ``pIJ``, ``pC7SpinalProcess``, ``pLeftAcromion``, ...).
 * ``animation`` — OptiTrack Motive (Baseline) and Qualisys (Animation) sets, markers near the
   landmarks rather than on them (``WaistLFront``, ``LKneeOut``, ``LToeOut``, ``BackTop``,
   ``LWristOut``, ``HeadL``): centres approximate.
@@ -41,8 +44,8 @@ Body parts (groups): ``pelvis``, ``leg_l``, ``leg_r``, ``trunk``, ``head``, ``ar
 A group whose markers are all missing is *absent* (filled with a neutral pose, recorded in the
 file); so is a group with only some of its markers, with one message (under 300 characters)
 naming the part, the markers found and those it lacks (``MarkerMap.not_computed``). An arm
-needs the acromion, the lateral elbow and the wrist (both styloids or one wrist marker); UPA
-and the medial epicondyle are optional. The file is refused only when neither the pelvis nor
+needs the acromion (or a marker in front of it and one behind), the lateral elbow and the
+wrist (both styloids or one wrist marker); UPA and the medial epicondyle are optional. The file is refused only when neither the pelvis nor
 the trunk can be computed.
 """
 
@@ -102,7 +105,8 @@ class MarkerSet:
 
 
 def _sided(table: dict[str, tuple[str, ...]]) -> dict[str, tuple[str, ...]]:
-    """Expand ``{"ASIS_{s}": ("{S}ASI",)}`` for both sides; ``{S}`` is L or R, and a label
+    """Expand ``{"ASIS_{s}": ("{S}ASI",)}`` for both sides; ``{S}`` is L or R, ``{SIDE}`` LEFT
+    or RIGHT (``P{SIDE}ASI``: Xsens' ``pLeftASI``), and a label
     written ``*X`` is tried with the side letter or word before and after (``LX``, ``XL``,
     ``LEFTX``, ``XLEFT``). A ``{S}X`` label of three or more letters after the side is also
     tried with the side after it (``ASI_L``: labs that put the side last), as ``*X`` is."""
@@ -118,7 +122,7 @@ def _sided(table: dict[str, tuple[str, ...]]) -> dict[str, tuple[str, ...]]:
                     if len(base) >= 3:  # short suffixed forms would collide (LE+L = L+EL)
                         cands += [base + letter, base + word]
                 else:
-                    cands.append(lab.format(S=letter))
+                    cands.append(lab.format(S=letter, SIDE=word))
                     base = lab.removeprefix("{S}")
                     if base != lab and len(base) >= 3 and "{S}" not in base:
                         cands.append(base + letter)
@@ -143,8 +147,9 @@ def _groups_sided(table: dict[str, tuple[tuple[str, ...], tuple[tuple[str, ...],
 # Besides Plug-in Gait's own labels, the Vicon-family spellings of the same markers: the older
 # Vicon 41-marker set of the CMU and HDM05 captures (FWT/BWT front and back waist at the
 # iliac spines, SHN shin for TIB; CMU mocap data definition), MoSh/AMASS (nghorbani/moshpp
-# marker layout: KNI inner knee, ELBIN/IEL inner elbow, IWR/OWR the thumb- and pinkie-side
-# wrist markers, HEL heel: in an ISB set LHE_L would be the lateral epicondyle, but a file
+# marker layout: KNI inner knee, ELBIN/IEL inner elbow, FSH/BSH front and back shoulder (its
+# SehoonVSK variant, which has no SHO: the acromion at their midpoint), IWR/OWR the thumb- and
+# pinkie-side wrist markers, HEL heel: in an ISB set LHE_L would be the lateral epicondyle, but a file
 # matches one preset, by its fit) and KIT's whole-body set (motion-database.humanoids.kit.edu:
 # AEL lateral epicondyle, WTS/WPS radial and ulnar styloids); MT1/MT5 metatarsal heads as
 # CMU's and MoSh's sets add them.
@@ -158,6 +163,7 @@ _PIG_ROLES = _sided({
     "C7": ("C7",), "T10": ("T10",), "IJ": ("CLAV",), "PX": ("STRN",),
     "ACROMION_{s}": ("{S}SHO",), "ELBOW_LAT_{s}": ("{S}ELB", "{S}AEL"),
     "ELBOW_MED_{s}": ("{S}MEL", "{S}ELBIN", "{S}IEL"),
+    "SHOULDER_FRONT_{s}": ("{S}FSH",), "SHOULDER_BACK_{s}": ("{S}BSH",),
     "UPPER_ARM_{s}": ("{S}UPA",), "WRIST_RAD_{s}": ("{S}WRA", "{S}IWR", "{S}WTS"),
     "WRIST_ULN_{s}": ("{S}WRB", "{S}OWR", "{S}WPS"),
     "WRIST_{s}": ("{S}WRI", "{S}WRS"), "HAND_{s}": ("{S}FIN",),
@@ -170,14 +176,16 @@ _PIG_ROLES = _sided({
 # pyCGM2's FMH/SMH/VMH, the Oxford foot model's D1M/D5M (distal first and fifth metatarsal),
 # RRIS40's STER/XPRO/FMT1/HMC2 (the two-letter keys CA, FM, SM, VM are read with the side
 # before them only, LCA or LEFT_CA: a side after them would collide, LE+L = L+EL), OpenSim's
-# (Rajagopal; AddBiomechanics' XYPH, LEE/MEE elbows).
+# (Rajagopal; AddBiomechanics' XYPH, LEE/MEE elbows), and a Vicon Nexus custom set's (nimble-
+# physics' lifting trials: KNEL/KNEM epicondyles, MALL/MALM malleoli lateral and medial,
+# CUBL/CUBM the elbow's, WRR/WRU the radial and ulnar wrist).
 _ISB_ROLES = _sided({
     "ASIS_{s}": ("*ASIS", "*ASI", "*IAS"), "PSIS_{s}": ("*PSIS", "*PSI", "*IPS"),
     "SACRUM": ("SACR", "SACRUM", "S1"),
     "KNEE_LAT_{s}": ("*FLE", "*LE", "*LFE", "*LEPI", "*LFC", "*KNEL", "*KNE"),
     "KNEE_MED_{s}": ("*FME", "*ME", "*MFE", "*MEPI", "*MFC", "*KNEM", "*KNM"),
-    "ANKLE_LAT_{s}": ("*FAL", "*LM", "*LMAL", "*LMA", "*ANKL", "*ANK"),
-    "ANKLE_MED_{s}": ("*TAM", "*MM", "*MMAL", "*MMA", "*ANKM"),
+    "ANKLE_LAT_{s}": ("*FAL", "*LM", "*LMAL", "*LMA", "*MALL", "*ANKL", "*ANK"),
+    "ANKLE_MED_{s}": ("*TAM", "*MM", "*MMAL", "*MMA", "*MALM", "*ANKM"),
     "HEEL_{s}": ("*FCC", "*CAL", "*HEE", "*HEEL", "*CA"),
     "MT1_{s}": ("*FM1", "*MT1", "*MH1", "*MET1", "*M1", "*FM", "*FMH", "*FMT1", "*D1M"),
     "MT5_{s}": ("*FM5", "*MT5", "*MH5", "*MET5", "*M5", "*VM", "*VMH", "*FMT5", "*D5M"),
@@ -187,11 +195,11 @@ _ISB_ROLES = _sided({
     "ACROMION_{s}": ("*AC", "*ACR", "*ACRO", "*CAJ", "*SAE", "*SAJ", "*SHO", "*ACROMION",
                      "*ACROMIUM"),
     # Vicon upper-limb spellings ELL/ELM (lateral/medial); Rehazenter/Qualisys UHE (ulnar head).
-    "ELBOW_LAT_{s}": ("*HLE", "*EL", "*LEL", "*LHE", "*ELB", "*ELL", "*LEE"),
-    "ELBOW_MED_{s}": ("*HME", "*EM", "*MEL", "*MHE", "*ELM", "*MEE"),
+    "ELBOW_LAT_{s}": ("*HLE", "*EL", "*LEL", "*LHE", "*ELB", "*ELL", "*LEE", "*CUBL"),
+    "ELBOW_MED_{s}": ("*HME", "*EM", "*MEL", "*MHE", "*ELM", "*MEE", "*CUBM"),
     # OpenSim's Rajagopal set marks the distal forearm on the radius and the ulna (FAradius).
-    "WRIST_RAD_{s}": ("*RSP", "*RS", "*RST", "*WRA", "*FARADIUS", "*RADIUSSTYLOID"),
-    "WRIST_ULN_{s}": ("*USP", "*US", "*UST", "*WRB", "*UHE", "*FAULNA", "*ULNASTYLOID"),
+    "WRIST_RAD_{s}": ("*RSP", "*RS", "*RST", "*WRA", "*WRR", "*FARADIUS", "*RADIUSSTYLOID"),
+    "WRIST_ULN_{s}": ("*USP", "*US", "*UST", "*WRB", "*WRU", "*UHE", "*FAULNA", "*ULNASTYLOID"),
     "WRIST_{s}": ("*WRI", "*WRIST"),
     "MC2_{s}": ("*HM2", "*MC2", "*MCP2", "*HMC2"), "MC5_{s}": ("*HM5", "*MC5", "*MCP5", "*HMC5"),
     # Roles that refine an arm (``_LANDMARK_REFINING``), as the other landmark sets have them:
@@ -272,6 +280,26 @@ _CLUSTER_ROLES = _sided({
     "TROCHANTER_{s}": ("{S}GT", "{S}GTR", "{S}TROC", "*TROCHANTER"),
 })
 
+# Xsens MVN's virtual anatomical markers, as its C3D exporter writes them (the MVN user manual's
+# point names: ``p`` + side + landmark): iliac spines (ASI anterior, SIPS posterior; CSI is the
+# iliac crest, not used), sacrum, femoral epicondyles, malleoli, heel, first and fifth
+# metatarsal heads (pToe is the toe tip, no joint), spinous processes (C7, T8), the sternum's
+# ends (IJ, PX), acromion, humeral epicondyles and styloids, and the head's sides at the ears
+# (auricularis) with the back of the head.
+_XSENS_ROLES = _sided({
+    "ASIS_{s}": ("P{SIDE}ASI",), "PSIS_{s}": ("P{SIDE}SIPS",), "SACRUM": ("PSACRUM",),
+    "KNEE_LAT_{s}": ("P{SIDE}KNEELATEPICONDYLE",), "KNEE_MED_{s}": ("P{SIDE}KNEEMEDEPICONDYLE",),
+    "ANKLE_LAT_{s}": ("P{SIDE}LATMALLEOLUS",), "ANKLE_MED_{s}": ("P{SIDE}MEDMALLEOLUS",),
+    "HEEL_{s}": ("P{SIDE}HEELFOOT", "P{SIDE}HEELCENTER"),
+    "MT1_{s}": ("P{SIDE}FIRSTMETATARSAL",), "MT5_{s}": ("P{SIDE}FIFTHMETATARSAL",),
+    "C7": ("PC7SPINALPROCESS",), "T10": ("PT8SPINALPROCESS", "PT12SPINALPROCESS"),
+    "IJ": ("PIJ",), "PX": ("PPX",),
+    "ACROMION_{s}": ("P{SIDE}ACROMION",),
+    "ELBOW_LAT_{s}": ("P{SIDE}ARMLATEPICONDYLE",), "ELBOW_MED_{s}": ("P{SIDE}ARMMEDEPICONDYLE",),
+    "WRIST_RAD_{s}": ("P{SIDE}RADIALSTYLOID",), "WRIST_ULN_{s}": ("P{SIDE}ULNARSTYLOID",),
+    "HEAD_SIDE_{s}": ("P{SIDE}AURICULARIS",), "HEAD_REAR": ("PBACKOFHEAD",),
+})
+
 _LANDMARK_GROUPS = _groups_sided({
     "pelvis": (("ASIS_l", "ASIS_r"), (("PSIS_l", "PSIS_r"), ("SACRUM",))),
     "leg_{s}": (("KNEE_LAT_{s}", "ANKLE_LAT_{s}"),
@@ -279,13 +307,18 @@ _LANDMARK_GROUPS = _groups_sided({
                  ("KNEE_MED_{s}", "ANKLE_MED_{s}", "MT1_{s}", "MT5_{s}"),
                  ("THIGH_{s}", "SHANK_{s}", "MT1_{s}", "MT5_{s}"))),
     "trunk": (("C7", "IJ"), ()),
-    # Four head-band markers, or a marker on each side of the head and one on the forehead.
+    # Four head-band markers, or a marker on each side of the head and one on the forehead
+    # (or the back of the head).
     "head": ((), (("HEAD_FRONT_l", "HEAD_FRONT_r", "HEAD_BACK_l", "HEAD_BACK_r"),
-                  ("HEAD_SIDE_l", "HEAD_SIDE_r", "FOREHEAD"))),
+                  ("HEAD_SIDE_l", "HEAD_SIDE_r", "FOREHEAD"), ("HEAD_SIDE_l", "HEAD_SIDE_r", "HEAD_REAR"))),
     # An arm needs shoulder, elbow and wrist landmarks; UPA and the medial epicondyle only
     # refine the elbow (without them the flexion axis comes from the arm's own plane).
-    "arm_{s}": (("ACROMION_{s}", "ELBOW_LAT_{s}"),
-                (("WRIST_RAD_{s}", "WRIST_ULN_{s}"), ("WRIST_{s}",))),
+    # The acromion may be marked by a pair either side of it (MoSh's SehoonVSK layout: front and
+    # back shoulder, LFSH/LBSH), which stands for it at their midpoint.
+    "arm_{s}": (("ELBOW_LAT_{s}",),
+                tuple((*wrist, *shoulder) for shoulder in (("ACROMION_{s}",),
+                                                           ("SHOULDER_FRONT_{s}", "SHOULDER_BACK_{s}"))
+                      for wrist in (("WRIST_RAD_{s}", "WRIST_ULN_{s}"), ("WRIST_{s}",)))),
 })
 
 #: Roles that refine a part where they are marked, though it is computed without them: the
@@ -323,6 +356,12 @@ PRESETS: dict[str, MarkerSet] = {
         MarkerSet("isb_anatomical", "anatomical landmarks, ISB/CAST names (ASIS, PSIS, FLE/FME, "
                   "FAL/TAM, FM1/FM5, AC, HLE/HME, RSP/USP, IJ, PX, C7)",
                   _ISB_ROLES, _LANDMARK_GROUPS,
+                  ("ASIS_l", "ASIS_r", "KNEE_LAT_l", "KNEE_MED_l", "ANKLE_LAT_l", "ANKLE_MED_l"),
+                  refining=_LANDMARK_REFINING),
+        MarkerSet("xsens_mvn", "Xsens MVN virtual anatomical markers (pLeftASI, pSacrum, "
+                  "pLeftKneeLatEpicondyle, pLeftLatMalleolus, pLeftFirstMetatarsal, pIJ, "
+                  "pC7SpinalProcess, pLeftAcromion, pLeftArmLatEpicondyle, pLeftRadialStyloid, ...)",
+                  _XSENS_ROLES, _LANDMARK_GROUPS,
                   ("ASIS_l", "ASIS_r", "KNEE_LAT_l", "KNEE_MED_l", "ANKLE_LAT_l", "ANKLE_MED_l"),
                   refining=_LANDMARK_REFINING),
         MarkerSet("animation", "animation sets, markers near the landmarks (OptiTrack Motive "

@@ -172,6 +172,36 @@ def _point_texts(reader: Any, base: str) -> list[str]:
     return labels
 
 
+#: Per-channel parameters the ``c3d`` package reads as arrays of the standard's type: name ->
+#: element type. A writer may store one as a single value or in another numeric type (Xsens
+#: MVN's exporter writes ``ANALOG:OFFSET`` and ``ANALOG:SCALE`` as single 16-bit integers, with
+#: no analog channel), which the package refuses, and with it the whole file.
+_PER_CHANNEL = {"ANALOG:OFFSET": "int16", "ANALOG:SCALE": "float32"}
+_STORED = {1: "int8", 2: "int16", 4: "float32"}
+
+
+def _per_channel_as_standard(reader: Any) -> None:
+    """Store each :data:`_PER_CHANNEL` parameter as the package reads it: with a dimension (a
+    single value stands for every channel) and in the standard's type, its values converted
+    (in the file's byte order; DEC floats, which need their own conversion, are left as
+    stored)."""
+    for name, kind in _PER_CHANNEL.items():
+        param = reader.get(name)
+        if param is None or not param.bytes or int(param.bytes_per_element) not in _STORED:
+            continue
+        dtypes = param._dtypes
+        stored = _STORED[int(param.bytes_per_element)]
+        if stored != kind and dtypes.is_dec and "float32" in (stored, kind):
+            continue
+        if not param.dimensions:
+            param.dimensions = [1]
+            param.bytes = param.bytes[:int(param.bytes_per_element)]
+        if stored != kind:
+            values = np.frombuffer(param.bytes, dtype=getattr(dtypes, stored))
+            param.bytes = values.astype(getattr(dtypes, kind)).tobytes()
+            param.bytes_per_element = np.dtype(getattr(dtypes, kind)).itemsize
+
+
 def read_c3d(path: str | Path) -> C3dMarkers:
     """Read marker data with the ``c3d`` package. Raises :class:`InputError` on a damaged,
     truncated or unlabelled file."""
@@ -186,6 +216,7 @@ def read_c3d(path: str | Path) -> C3dMarkers:
         warnings.simplefilter("ignore")
         try:
             reader = c3d.Reader(f)
+            _per_channel_as_standard(reader)
             n_points = int(reader.point_used)
             rate = float(reader.point_rate)
             if float(reader.point_scale) == 0.0:  # every sample would read 0: all "no sample"
