@@ -100,3 +100,18 @@ def test_the_compile_figures_live_on_one_page():
              for p in [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]}
     quoting = sorted(name for name, text in texts.items() if COMPILE_FIGURE.search(text))
     assert quoting == ["docs/performance.md"]
+
+
+#: A file of the repository a page names: a module, a test, an example, a scenario.
+NAMED_FILE = re.compile(r"\b((?:ecs_anim|components|systems|tests|examples|scenarios)/[\w/]*\.(?:py|yaml|bvh))\b")
+
+
+def test_every_file_the_docs_name_exists():
+    """The package moved into subpackages and the tests into folders: a page must not send a
+    reader to a file that is no longer there."""
+    pages = [REPO / "README.md", REPO / "examples" / "README.md",
+             *sorted((REPO / "docs").glob("*.md"))]
+    missing = sorted({f"{page.relative_to(REPO)}: {name}" for page in pages
+                      for name in NAMED_FILE.findall(page.read_text(encoding="utf-8"))
+                      if not (REPO / name).exists()})
+    assert missing == []
