@@ -19,9 +19,10 @@ A constraint is ``{point, kind, chain, priority, activation}`` plus its target:
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -51,6 +52,63 @@ TARGET_WORLD, TARGET_BODY = 0, 1
 ORIENTABLE = {"hand_l", "hand_r", "foot_l", "foot_r", "head", "spine_upper"}
 #: The default activation of :meth:`ConstraintTable.add`: on from the start, for good.
 ALWAYS = Activation(0.0, 1e9)
+
+
+def is_integer(value: object) -> bool:
+    """Whether ``value`` is an integer (a Python or numpy one; a bool is not)."""
+    return isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))
+
+
+def is_real(value: object) -> bool:
+    """Whether ``value`` is a real number (int, float or a numpy number; not a bool, a text or
+    an array)."""
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
+def real_number(value: object, what: str) -> float:
+    """``value`` as a float if :func:`is_real`; else a :class:`UsageError` naming ``what``.
+    Finite or not: callers say."""
+    if is_real(value):
+        return float(cast(float, value))
+    raise UsageError(f"{what} must be a number, got {_found(value)}")
+
+
+def real_array(value: object, shape: tuple[int | None, ...], what: str) -> F64:
+    """``value`` (a tuple, list or numpy array of real numbers) as a float64 array of ``shape``
+    (None: any length on that axis); else a :class:`UsageError` naming ``what`` and saying
+    what was found. Texts, booleans and objects are refused, not converted."""
+    if isinstance(value, (str, bytes)) or value is None:
+        raise UsageError(f"{what} must be numbers of shape {_shape(shape)}, got {_found(value)}")
+    try:
+        array = np.asarray(value)
+    except ValueError:  # a ragged list
+        raise UsageError(f"{what} must be numbers of shape {_shape(shape)}, got a ragged list") \
+            from None
+    if array.dtype.kind not in "iuf":
+        raise UsageError(f"{what} must be numbers of shape {_shape(shape)}, got {_found(value)}")
+    if array.ndim != len(shape) or any(n is not None and n != k for n, k in zip(shape, array.shape,
+                                                                                strict=True)):
+        raise UsageError(f"{what} must have shape {_shape(shape)}, got shape {array.shape}")
+    return array.astype(np.float64)
+
+
+def _is_point(value: object) -> bool:
+    return isinstance(value, BodyPoint)
+
+
+def _is_names(value: object) -> bool:
+    """Whether ``value`` is a tuple or list of texts (a bare text is not)."""
+    return isinstance(value, (tuple, list)) and all(isinstance(v, str) for v in value)
+
+
+def _shape(shape: tuple[int | None, ...]) -> str:
+    return "(" + ", ".join("k" if n is None else str(n) for n in shape) + ("," if len(shape) == 1 else "") + ")"
+
+
+def _found(value: object) -> str:
+    """A short description of a refused value: its type and (cut) repr."""
+    text = repr(value)
+    return f"{type(value).__name__} {text if len(text) <= 40 else text[:37] + '...'}"
 
 
 @dataclass(frozen=True)
@@ -103,8 +161,14 @@ class Target:
             raise UsageError("give either a world target or a character")
         if self.row is not None and self.point is None:
             raise UsageError("a character target needs the body point to aim at")
-        if self.world_m is not None and not all(np.isfinite(v) for v in self.world_m):
-            raise UsageError(f"target {self.world_m} must be finite")
+        if self.row is not None and not (is_integer(self.row) and _is_point(self.point)):
+            raise UsageError(f"a character target is a store row and a BodyPoint, got "
+                             f"{_found(self.row)} and {_found(self.point)}")
+        if self.world_m is not None:
+            x, y, z = real_array(self.world_m, (3,), "target_in_world")
+            if not all(np.isfinite((x, y, z))):
+                raise UsageError(f"target {self.world_m} must be finite")
+            object.__setattr__(self, "world_m", (float(x), float(y), float(z)))
 
 
 def _empty(dtype: type, *trailing: int) -> Callable[[], NDArray[Any]]:
@@ -178,9 +242,24 @@ class ConstraintTable:
         def fail(message: str) -> ValueError:
             return ValueError(f"constraint {name!r}: {message}")
 
-        if kind not in KIND_NAMES:
+        if not isinstance(point, BodyPoint) or not isinstance(target, Target):
+            raise fail(f"expected a BodyPoint and a Target, got {_found(point)} and {_found(target)}")
+        if not isinstance(activation, Activation):
+            raise fail(f"activation must be an Activation, got {_found(activation)}")
+        if area is not None and not isinstance(area, Area):
+            raise fail(f"area must be an Area (or None), got {_found(area)}")
+        if not is_integer(clock):
+            raise fail(f"clock must be a clip index (-1: simulation time), got {_found(clock)}")
+        if not isinstance(kind, str) or kind not in KIND_NAMES:
             raise fail(f"unknown kind {kind!r}; kinds: {', '.join(KIND_NAMES)}")
+        if chain is not None and not _is_names(chain):
+            raise fail(f"chain must be a list of body group names ({', '.join(GROUPS)}), got "
+                       f"{_found(chain)}")
         chain = (GROUPS[point.group],) if chain is None else tuple(chain)
+        priority = real_number(priority, f"constraint {name!r}: priority")
+        distance_m = real_number(distance_m, f"constraint {name!r}: distance_m")
+        axis_array = real_array(axis, (3,), f"constraint {name!r}: axis")
+        axis = (float(axis_array[0]), float(axis_array[1]), float(axis_array[2]))
         if not chain:
             raise fail("empty chain: name the body groups allowed to move "
                        f"({', '.join(GROUPS)})")
@@ -236,9 +315,17 @@ class ConstraintTable:
             "axis": tuple(np.asarray(axis, dtype=float) / np.linalg.norm(axis)),
             "enabled": True, "held": False, "error": np.nan, "weight": 0.0, "uid": self.next_uid,
         }
+        # Every new row is made before any column grows: a refused constraint leaves the table
+        # as it was (its columns all of one length).
+        new_rows = {}
         for key, value in values.items():
             current = getattr(self, key)
-            setattr(self, key, np.concatenate([current, np.asarray([value], dtype=current.dtype)]))
+            row = np.asarray([value], dtype=current.dtype)
+            if row.shape[1:] != current.shape[1:]:
+                raise fail(f"{key} must have shape {current.shape[1:]}, got {row.shape[1:]}")
+            new_rows[key] = row
+        for key, row in new_rows.items():
+            setattr(self, key, np.concatenate([getattr(self, key), row]))
         self.names.append(name)
         self.next_uid += 1
         return self.next_uid - 1
@@ -275,10 +362,15 @@ class ConstraintTable:
     def set_targets(self, uids: I64, targets_in_world: F64) -> None:
         """New world targets from code for constraints given by id: ``uids`` (k,),
         ``targets_in_world`` (k, 3), read at the next tick (a non-finite one switches its
-        constraint off then, with a warning)."""
-        rows = self.rows_of(uids)
+        constraint off then, with a warning). Shapes and types are checked before anything is
+        written (UsageError)."""
+        ids = np.asarray(uids)
+        if ids.ndim != 1 or not (ids.dtype.kind in "iu" or ids.size == 0):
+            raise UsageError(f"uids must be constraint ids of shape (k,), got {_found(uids)}")
+        targets = real_array(targets_in_world, (ids.shape[0], 3), "targets_in_world")
+        rows = self.rows_of(ids.astype(np.int64))
         self.target_kind[rows] = TARGET_WORLD
-        self.target_world[rows] = targets_in_world
+        self.target_world[rows] = targets
         self.enabled[rows] = True
 
     def weights(self, time_s: float, clip: I64 | None = None, clip_time_s: F64 | None = None) -> F64:
@@ -354,4 +446,5 @@ def check_stored(specs: list[ConstraintSpec], duration_s: float) -> None:
                              f"after the clip ends ({duration_s:g} s): it would never be active")
 
 
-__all__ = ["SEGMENTS", "Area", "ConstraintTable", "Target", "add_stored", "check_stored", "winners"]
+__all__ = ["SEGMENTS", "Area", "ConstraintTable", "Target", "add_stored", "check_stored", "is_integer",
+           "is_real", "real_array", "real_number", "winners"]

@@ -23,8 +23,19 @@ posture); an action acts from the next posture on:
   fire again in the same tick (a cycle of triggers firing each other) is skipped with a warning
   and the others go on (a scenario refuses such a cycle at load).
 
-Triggers naming a character that is removed are dropped with one warning; the others go on. A
-trigger made with ``armed=False`` is not watched until an :class:`Arm` action names it.
+The reactions of one tick see the world as it was when they began (before the tick's systems
+for the time triggers and delayed actions, after them for the edges): every condition is
+evaluated, and every event made, before any action is applied. They are then applied in a
+defined order: before the tick, the time triggers (by trigger index), then the delayed actions
+(by due time, then trigger index); after it, the clip and contact events (clips ended, started,
+contacts begun, each by store row), then the ``near`` triggers, then the ``reached`` ones (by
+trigger index); each action's own events at once, in between. A trigger's actions run in order.
+
+Triggers naming a character that is removed, or one of the constraints removed with it, are
+dropped with one warning once the reactions of that tick are done (a trigger whose condition
+held at their start still fires); the others go on. An action naming a character or constraint
+removed by then is skipped with one warning; the trigger's other actions go on. A trigger made
+with ``armed=False`` is not watched until an :class:`Arm` action names it.
 
 Moving targets (:class:`TargetTrack`): a constraint's world target given as keyframes
 ``(t_s, at_m)``, interpolated linearly in simulation time (held before the first and after the
@@ -33,6 +44,9 @@ last), set before every tick.
 
 from __future__ import annotations
 
+import re
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -197,6 +211,11 @@ class Reactions:
         self._edges_kept: _StoreEdges | None = None
         self._last_edges: _StoreEdges | None = None
         self._fired_this_tick: set[int] = set()
+        # while a tick's reactions are applied: the triggers to drop once they are done, and
+        # the names of the characters removed meanwhile (by entity, for warnings)
+        self._reacting = False
+        self._to_drop: dict[int, None] = {}
+        self._removed_names: dict[int, str] = {}
         self._names_cache: list[str] = []
         self._names_version = -1
         # per entity id: the clip (-1: not seen yet), its time after the last tick, whether its
@@ -236,14 +255,15 @@ class Reactions:
         if self.tracks:
             self._set_track_targets(sim, now)
         c = self._compile()
-        if c.timed.size:
-            due = c.timed[(c.timed_at_s <= now + TIME_SLACK_S) & ~self.holds[c.timed]]
-            self.holds[due] = True
+        due = c.timed[(c.timed_at_s <= now + TIME_SLACK_S) & ~self.holds[c.timed]]
+        ready = [p for p in self._pending if p[0] <= now + TIME_SLACK_S]
+        if not (due.size or ready):
+            return
+        self._pending = [p for p in self._pending if p[0] > now + TIME_SLACK_S]
+        self.holds[due] = True
+        with self._reactions():
             for i in due:
                 self._emit(sim, Event("time", -1, "", now, sim.tick, self.triggers[i].name), i)
-        if self._pending:
-            ready = [p for p in self._pending if p[0] <= now + TIME_SLACK_S]
-            self._pending = [p for p in self._pending if p[0] > now + TIME_SLACK_S]
             for _, i in sorted(ready):
                 if not self.dropped[i]:
                     self._apply(sim, i)
@@ -253,46 +273,68 @@ class Reactions:
         st = sim.store
         self._grow(int(st.entity.max()) + 1 if st.n else 0)
         now, tick = sim.posture_time_s, sim.tick - 1
+        # Everything seen before anything is done: an action may remove a character (shifting
+        # the store rows after it) or a constraint.
         edges = self._store_edges(sim)
         c = self._compile()
-        if any(rows.size for _, rows, _, _ in edges):
-            kept = _StoreEdges(edges, st.entity.copy(), self._names(sim), now, tick,
-                               len(self._events))
-            if any(np.isin(kept.entity[rows], c.listened(kind)).any()
-                   for kind, rows, _, _ in edges):
-                # All made before any is emitted: an action may remove a character (and shift
-                # the rows).
-                for event in kept.events():
-                    self._emit(sim, event)
-            else:  # nothing to fire: the events are made if someone asks for them
-                self._edges_kept = kept
-        if c.near.size:
-            self._edges(sim, c.near, self._near_holds(sim, c), "near")
-        if c.reached.size:
-            self._edges(sim, c.reached, self._reached_holds(sim, c), "reached")
+        names, entity = self._names(sim), st.entity.copy()
+        near = self._near_holds(sim, c) if c.near.size else None
+        reached = self._reached_holds(sim, c) if c.reached.size else None
+        with self._reactions():
+            if any(rows.size for _, rows, _, _ in edges):
+                kept = _StoreEdges(edges, entity, names, now, tick, len(self._events))
+                if any(np.isin(kept.entity[rows], c.listened(kind)).any()
+                       for kind, rows, _, _ in edges):
+                    for event in kept.events():
+                        self._emit(sim, event)
+                else:  # nothing to fire: the events are made if someone asks for them
+                    self._edges_kept = kept
+            if near is not None:
+                self._edges(sim, c.near, *near, entity, names, "near")
+            if reached is not None:
+                self._edges(sim, c.reached, *reached, entity, names, "reached")
         self._last, self._events = self._events, []
         self._last_edges, self._edges_kept = self._edges_kept, None
         self._fired_this_tick = set()
 
     def character_removed(self, sim: Simulation, entity: int, name: str) -> None:
         """After ``Simulation.remove``: the ``removed`` event (its triggers fire), then every
-        trigger still naming that character, or a constraint removed with it, is dropped."""
-        self._emit(sim, Event("removed", entity, name, sim.time_s, sim.tick, ""))
-        live = set(int(u) for u in sim.constraints.uid)
-        gone = []
-        for i, t in enumerate(self.triggers):
-            if self.dropped[i] or (self.fired[i] and not t.repeat):  # done already
-                continue
-            items: list[Condition | Action] = [t.when, *t.then]
-            if any(entity in entities_named(x) for x in items) or \
-                    any(u not in live for x in items for u in constraints_named(x)):
-                self.dropped[i] = True
-                gone.append(t.name)
-        self.tracks = [k for k in self.tracks if k.uid in live]
-        if gone:
-            self._compiled = None
-            sim.warn(f"character {name!r} removed: triggers {listed(gone)} name it (or its "
-                     "constraints) and are dropped; the others go on")
+        trigger still naming that character, or a constraint removed with it, is dropped (once
+        the reactions under way, if any, are done)."""
+        with self._reactions():
+            self._removed_names[entity] = name
+            self._emit(sim, Event("removed", entity, name, sim.time_s, sim.tick, ""))
+            live = set(int(u) for u in sim.constraints.uid)
+            gone = []
+            for i, t in enumerate(self.triggers):
+                if self.dropped[i] or i in self._to_drop or (self.fired[i] and not t.repeat):
+                    continue  # done already
+                items: list[Condition | Action] = [t.when, *t.then]
+                if any(entity in entities_named(x) for x in items) or \
+                        any(u not in live for x in items for u in constraints_named(x)):
+                    self._to_drop[i] = None
+                    gone.append(t.name)
+            self.tracks = [k for k in self.tracks if k.uid in live]
+            if gone:
+                sim.warn(f"character {name!r} removed: triggers {listed(gone)} name it (or its "
+                         "constraints) and are dropped; the others go on")
+
+    @contextmanager
+    def _reactions(self) -> Iterator[None]:
+        """Apply reactions inside (nested: the outermost counts); at its end the triggers
+        naming what they removed are dropped."""
+        if self._reacting:
+            yield
+            return
+        self._reacting = True
+        try:
+            yield
+        finally:
+            self._reacting = False
+            if self._to_drop:
+                self.dropped[list(self._to_drop)] = True
+                self._compiled = None
+            self._to_drop, self._removed_names = {}, {}
 
     # --- edges ----------------------------------------------------------------------------------
 
@@ -339,57 +381,48 @@ class Reactions:
         row_of[st.entity] = np.arange(st.n)
         return row_of[entities]
 
-    def _near_holds(self, sim: Simulation, c: _Compiled) -> NDArray[np.bool_]:
-        """Whether each Near condition holds in the posture just made: both points of every
-        trigger at once."""
+    def _near_holds(self, sim: Simulation, c: _Compiled) -> tuple[NDArray[np.bool_], I64]:
+        """Whether each Near condition holds in the posture just made (both points of every
+        trigger at once), and the store row of its (first) character, the event's subject."""
         posture = sim.store.posture
         holds = np.zeros(c.near.size, bool)
-        if posture is None:
-            return holds
         rows = self._rows_of(sim, c.near_entities)  # (k, 2)
+        if posture is None:
+            return holds, rows[:, 0]
         ok = np.all(rows >= 0, axis=1)
-        rows = np.where(rows >= 0, rows, 0).reshape(-1)
-        points = point_positions(posture, rows, c.near_segments.reshape(-1),
-                                 c.near_fractions.reshape(-1), c.near_offsets.reshape(-1, 3))
+        points = point_positions(posture, np.where(rows >= 0, rows, 0).reshape(-1),
+                                 c.near_segments.reshape(-1), c.near_fractions.reshape(-1),
+                                 c.near_offsets.reshape(-1, 3))
         points = points.reshape(-1, 2, 3)
         distance = np.linalg.norm(points[:, 0] - points[:, 1], axis=-1)
-        near: NDArray[np.bool_] = ok & (distance <= c.near_within_m)  # NaN (no posture): False
-        return near
+        holds = ok & (distance <= c.near_within_m)  # NaN (no posture): False
+        return holds, rows[:, 0]
 
-    def _reached_holds(self, sim: Simulation, c: _Compiled) -> NDArray[np.bool_]:
+    def _reached_holds(self, sim: Simulation, c: _Compiled) -> tuple[NDArray[np.bool_], I64]:
+        """Whether each Reached condition holds after the tick just stepped, and the store row
+        of its constraint's owner, the event's subject (-1: the constraint is gone)."""
         table = sim.constraints
         live = np.isin(c.reached_uids, table.uid)
         holds = np.zeros(c.reached.size, bool)
+        owner = np.full(c.reached.size, -1, np.int64)
         if live.any():
             rows = table.rows_of(c.reached_uids[live])
             holds[live] = (table.weight[rows] > 0.0) & (table.error[rows] <= c.reached_within[live])
-        return holds
+            owner[live] = table.owner[rows]
+        return holds, owner
 
-    def _edges(self, sim: Simulation, triggers: I64, holds: NDArray[np.bool_], kind: str) -> None:
-        """Fire the triggers whose condition has just begun to hold."""
+    def _edges(self, sim: Simulation, triggers: I64, holds: NDArray[np.bool_], subjects: I64,
+               entity: I64, names: list[str], kind: str) -> None:
+        """Fire the triggers whose condition has just begun to hold, in trigger order; each
+        event is about the character at store row ``subjects`` (a holding condition's are all
+        in the store), whose entities and names are ``entity`` and ``names``, all three as the
+        tick ended, before any reaction."""
         rising = holds & ~self.holds[triggers]
         self.holds[triggers] = holds
-        for i in triggers[rising]:
-            t = self.triggers[i]
-            entity = self._subject(sim, t.when)
-            self._emit(sim, Event(kind, entity, self._name_of(sim, entity), sim.posture_time_s,
-                                  sim.tick - 1, t.name), i)
-
-    @staticmethod
-    def _subject(sim: Simulation, condition: Condition) -> int:
-        """The entity a condition's event is about: its (first) character, a constraint's
-        owner; -1 for a time."""
-        if isinstance(condition, Reached):
-            table = sim.constraints
-            return int(sim.store.entity[table.owner[table.rows_of(np.array([condition.uid]))[0]]])
-        who = entities_named(condition)
-        return who[0] if who else -1
-
-    def _name_of(self, sim: Simulation, entity: int) -> str:
-        if entity < 0:
-            return ""
-        rows = np.flatnonzero(sim.store.entity == entity)
-        return self._names(sim)[int(rows[0])] if rows.size else ""
+        rows = subjects[rising].tolist()
+        for i, row in zip(triggers[rising].tolist(), rows, strict=True):
+            self._emit(sim, Event(kind, int(entity[row]), names[row], sim.posture_time_s,
+                                  sim.tick - 1, self.triggers[i].name), i)
 
     def _names(self, sim: Simulation) -> list[str]:
         """Every character's name by store row (an esper query once per structural change)."""
@@ -436,11 +469,26 @@ class Reactions:
             self._apply(sim, i)
 
     def _apply(self, sim: Simulation, i: int) -> None:
+        """Trigger ``i``'s actions, in order; one naming a character or constraint no longer in
+        the simulation is skipped, with a warning."""
         for action in self.triggers[i].then:
+            gone = self._gone(sim, action)
+            if gone:
+                sim.warn(f"trigger {self.triggers[i].name!r}: its {action_key(action)} action names "
+                         f"{gone}, removed from the simulation: skipped; the others go on")
+                continue
             try:
                 self._do(sim, action)
             except EcsAnimError as exc:
                 sim.warn(f"trigger {self.triggers[i].name!r}: {exc}; the others go on")
+
+    def _gone(self, sim: Simulation, action: Action) -> str:
+        """What ``action`` names that is no longer in the simulation ('' if nothing)."""
+        gone = [f"character {self._removed_names.get(e, f'with entity id {e}')!r}"
+                for e in entities_named(action) if not np.any(sim.store.entity == e)]
+        gone += [f"constraint id {u}" for u in constraints_named(action)
+                 if not np.isin(u, sim.constraints.uid)]
+        return listed(gone)
 
     def _do(self, sim: Simulation, a: Action) -> None:
         if isinstance(a, Play):
@@ -527,3 +575,6 @@ class Reactions:
 # --- what the actions do ------------------------------------------------------------------------
 
 
+def action_key(action: Action) -> str:
+    """An action's name as a scenario's ``then:`` gives it: ``switch_on`` for :class:`SwitchOn`."""
+    return re.sub(r"(?<!^)(?=[A-Z])", "_", type(action).__name__).lower()

@@ -15,8 +15,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
-from ecs_anim.core.errors import EcsAnimError
 from ecs_anim.core.ground_adapt import BALL_HEIGHT_PER_LEG, heel_depth
 from ecs_anim.core.morphology import bone_lengths_of
 from ecs_anim.core.normalized import SIDE_JOINTS, SIDE_LENGTHS
@@ -35,108 +35,195 @@ SLIDE_EVENT_MM = 1.0
 MAX_SLIDE_EVENTS = 100
 
 
+#: The recorder's per-character arrays (one row per character it has seen) and the value a
+#: character seen for the first time starts with.
+CHARACTER_FIGURES = (("prev_ankles", 0.0), ("prev_planted", False), ("prev_locked", False),
+                     ("slide_max", 0.0), ("slide_sum", 0.0), ("slide_count", 0.0),
+                     ("penetration_max", 0.0), ("floating_max", 0.0), ("bone_error_max", 0.0),
+                     ("com_error_max", np.nan), ("leg_length_m", 0.0), ("frozen", False),
+                     ("removed_at_s", np.nan))
+#: The same for the per-constraint arrays.
+CONSTRAINT_FIGURES = (("constraint_error_full", np.nan), ("constraint_error_any", np.nan),
+                      ("constraint_enabled", False))
+
+
 class MetricsRecorder:
-    """Call :meth:`record` after each :meth:`Simulation.step`; :meth:`report` at the end."""
+    """Call :meth:`record` after each :meth:`Simulation.step`; :meth:`report` at the end.
+
+    Figures are kept per character and per constraint, in the order they were first seen (the
+    store's and the constraint table's at first), keyed by entity and by constraint id, never
+    by row: a character removed mid-run keeps the figures it had until then (its row gone and
+    the rows after it moved down), one spawned mid-run has its own from its first tick, and
+    the report lists every character and constraint the run had."""
 
     def __init__(self, sim: Simulation):
-
         self.sim = sim
-        n = sim.store.n
-        self.prev_ankles: np.ndarray | None = None
-        self.prev_planted = np.zeros((n, 2), bool)
-        self.slide_max = np.zeros(n)
-        self.slide_sum = np.zeros(n)
-        self.slide_count = np.zeros(n)
+        # per character (k, ...): its entity and name, then :data:`CHARACTER_FIGURES`: the last
+        # tick's ankles (k, 2, 3) and planted and locked feet (k, 2), the figures, its last
+        # recorded leg length (m) and frozen flag, and the time of the first recorded posture
+        # it was missing from (NaN: still simulated)
+        self.entities = np.zeros(0, np.int64)
+        self.names: list[str] = []
+        self.prev_ankles = np.zeros((0, 2, 3))
+        self.prev_planted = np.zeros((0, 2), bool)
+        self.prev_locked = np.zeros((0, 2), bool)
+        self.slide_max = np.zeros(0)
+        self.slide_sum = np.zeros(0)
+        self.slide_count = np.zeros(0)
+        self.penetration_max = np.zeros(0)
+        self.floating_max = np.zeros(0)
+        self.bone_error_max = np.zeros(0)
+        self.com_error_max = np.zeros(0)
+        self.leg_length_m = np.zeros(0)
+        self.frozen = np.zeros(0, bool)
+        self.removed_at_s = np.zeros(0)
+        self.strides: list[list[float]] = []
+        self.last_print: list[list[np.ndarray | None]] = []
         self.slides: list[dict[str, Any]] = []
         self.slide_events = 0
-        self.penetration_max = np.zeros(n)
-        self.floating_max = np.zeros(n)
-        self.bone_error_max = np.zeros(n)
-        self.prev_locked = np.zeros((n, 2), bool)
-        self.strides: list[list[float]] = [[] for _ in range(n)]
-        self.last_print: list[list[np.ndarray | None]] = [[None, None] for _ in range(n)]
-        m = sim.constraints.m
-        self.constraint_error_full = np.full(m, np.nan)  # max while fully active (weight 1)
-        self.constraint_error_any = np.full(m, np.nan)  # max while active at all
-        self.com_error_max = np.full(n, np.nan)
+        # per constraint (c,): its id, name, owner's name and kind, then
+        # :data:`CONSTRAINT_FIGURES`: its largest error while fully active (weight 1) and while
+        # active at all, whether it was switched on at its last recorded tick
+        self.constraint_uids = np.zeros(0, np.int64)
+        self.constraint_names: list[str] = []
+        self.constraint_owners: list[str] = []
+        self.constraint_kinds = np.zeros(0, np.int64)
+        self.constraint_error_full = np.zeros(0)
+        self.constraint_error_any = np.zeros(0)
+        self.constraint_enabled = np.zeros(0, bool)
+        self._character_of = np.zeros(0, np.int64)  # entity id -> its index here (-1: unseen)
+        self._constraint_of = np.zeros(0, np.int64)  # constraint id -> its index here
         self.ticks = 0
+        self._characters()
+        self._constraints()
 
     def record(self) -> None:
         """Take this tick's figures from the store (all characters at once); call it after each
         :meth:`Simulation.step`."""
         sim, st = self.sim, self.sim.store
-        if st.n != self.slide_max.shape[0]:
-            raise EcsAnimError("MetricsRecorder: characters were added or removed after it was "
-                               "made; make a new recorder after changing who is simulated")
+        at = self._characters()  # (n,) each store row's index in the per-character arrays
+        gone = np.ones(self.entities.shape[0], bool)
+        gone[at] = False
+        self.removed_at_s[gone & np.isnan(self.removed_at_s)] = sim.posture_time_s
         p = st.positions
         ankles, toes = p[:, ANKLES], p[:, TOES]
         planted = st.contact_weight >= 1.0
-        if self.prev_ankles is not None:
-            both = planted & self.prev_planted
-            move_mm = np.linalg.norm(ankles - self.prev_ankles, axis=-1) * 1e3
-            move_mm = np.where(both, move_mm, 0.0)
-            self.slide_max = np.maximum(self.slide_max, move_mm.max(axis=1))
-            self.slide_sum += move_mm.sum(axis=1)
-            self.slide_count += both.sum(axis=1)
-            if np.any(move_mm > SLIDE_EVENT_MM):  # rare: only then are the rows visited
-                self._record_slides(move_mm)
-        self.prev_ankles, self.prev_planted = ankles.copy(), planted
+        # (a character's first tick has nothing planted before: no slide)
+        both = planted & self.prev_planted[at]
+        move_mm = np.linalg.norm(ankles - self.prev_ankles[at], axis=-1) * 1e3
+        move_mm = np.where(both, move_mm, 0.0)
+        self.slide_max[at] = np.maximum(self.slide_max[at], move_mm.max(axis=1))
+        self.slide_sum[at] += move_mm.sum(axis=1)
+        self.slide_count[at] += both.sum(axis=1)
+        if np.any(move_mm > SLIDE_EVENT_MM):  # rare: only then are the rows visited
+            self._record_slides(move_mm, at)
+        self.prev_ankles[at], self.prev_planted[at] = ankles, planted
+        legs = sim.leg_length()
+        self.leg_length_m[at], self.frozen[at] = legs, st.frozen
         ankle_height = st.lengths[:, SIDE_LENGTHS["ankle_height"]]
-        ball = BALL_HEIGHT_PER_LEG * sim.leg_length()[:, None]
+        ball = BALL_HEIGHT_PER_LEG * legs[:, None]
         toe_depth = sim.ground.height(toes[..., :2]) - (toes[..., 2] - ball)
         heel = heel_depth(sim.ground, ankles, ankle_height)
         depth_mm = np.maximum(heel, toe_depth).max(axis=1) * 1e3
-        self.penetration_max = np.maximum(self.penetration_max, depth_mm)
+        self.penetration_max[at] = np.maximum(self.penetration_max[at], depth_mm)
         # A fully planted foot floats by how far the lower of its heel and ball is above ground.
         float_mm = np.where(planted, -np.maximum(heel, toe_depth), 0.0).max(axis=1) * 1e3
-        self.floating_max = np.maximum(self.floating_max, float_mm)
+        self.floating_max[at] = np.maximum(self.floating_max[at], float_mm)
         error = np.abs(bone_lengths_of(p)[:, IS_BONE] - st.lengths[:, IS_BONE]).max(axis=1)
-        self.bone_error_max = np.maximum(self.bone_error_max, error)
+        self.bone_error_max[at] = np.maximum(self.bone_error_max[at], error)
         # Strides: a new footprint is laid (an event; only those feet are visited).
-        new = st.locked & ~self.prev_locked
+        new = st.locked & ~self.prev_locked[at]
         for row, side in zip(*np.nonzero(new), strict=False):
             here = st.footprint[row, side, :2].copy()
-            last = self.last_print[row][side]
+            last = self.last_print[at[row]][side]
             if last is not None:
-                self.strides[row].append(float(np.linalg.norm(here - last)))
-            self.last_print[row][side] = here
-        self.prev_locked = st.locked.copy()
+                self.strides[at[row]].append(float(np.linalg.norm(here - last)))
+            self.last_print[at[row]][side] = here
+        self.prev_locked[at] = st.locked
         table = sim.constraints
+        which = self._constraints()  # (m,) each table row's index in the per-constraint arrays
         if table.m:
             err = table.error
             full = (table.weight >= 1.0) & np.isfinite(err)
-            self.constraint_error_full = np.where(full, np.fmax(self.constraint_error_full, err),
-                                                  self.constraint_error_full)
-            self.constraint_error_any = np.fmax(self.constraint_error_any, err)
-            self.com_error_max = np.fmax(self.com_error_max, st.com_error_m)
+            before = self.constraint_error_full[which]
+            self.constraint_error_full[which] = np.where(full, np.fmax(before, err), before)
+            self.constraint_error_any[which] = np.fmax(self.constraint_error_any[which], err)
+            self.constraint_enabled[which] = table.enabled
+            self.com_error_max[at] = np.fmax(self.com_error_max[at], st.com_error_m)
         self.ticks += 1
 
-    def _record_slides(self, move_mm: np.ndarray) -> None:
+    def _characters(self) -> NDArray[np.int64]:
+        """(n,) each store row's index in the per-character arrays; a character not seen before
+        is added to them (its name read then: names are looked up only when someone is new)."""
+        st = self.sim.store
+        self._character_of = _id_table(self._character_of, st.entity)
+        at = self._character_of[st.entity]
+        new = np.flatnonzero(at < 0)
+        if new.size:
+            at[new] = self.entities.shape[0] + np.arange(new.size)
+            self._character_of[st.entity[new]] = at[new]
+            names = self.sim.names()
+            self.entities = np.concatenate([self.entities, st.entity[new]])
+            self.names += [names[r] for r in new.tolist()]
+            for name, fill in CHARACTER_FIGURES:
+                setattr(self, name, _grown(getattr(self, name), new.size, fill))
+            self.leg_length_m[at[new]] = self.sim.leg_length()[new]
+            self.frozen[at[new]] = st.frozen[new]
+            self.strides += [[] for _ in new]
+            self.last_print += [[None, None] for _ in new]
+        return at
+
+    def _constraints(self) -> NDArray[np.int64]:
+        """(m,) each constraint table row's index in the per-constraint arrays (a constraint not
+        seen before added to them)."""
+        table = self.sim.constraints
+        self._constraint_of = _id_table(self._constraint_of, table.uid)
+        which = self._constraint_of[table.uid]
+        new = np.flatnonzero(which < 0)
+        if new.size:
+            which[new] = self.constraint_uids.shape[0] + np.arange(new.size)
+            self._constraint_of[table.uid[new]] = which[new]
+            owners = self._characters()[table.owner[new]]
+            self.constraint_uids = np.concatenate([self.constraint_uids, table.uid[new]])
+            self.constraint_names += [table.names[k] for k in new.tolist()]
+            self.constraint_owners += [self.names[i] for i in owners.tolist()]
+            self.constraint_kinds = np.concatenate([self.constraint_kinds, table.kind[new]])
+            for name, fill in CONSTRAINT_FIGURES:
+                setattr(self, name, _grown(getattr(self, name), new.size, fill))
+            self.constraint_enabled[which[new]] = table.enabled[new]
+        return which
+
+    def _record_slides(self, move_mm: np.ndarray, at: NDArray[np.int64]) -> None:
         rows, sides = np.nonzero(move_mm > SLIDE_EVENT_MM)
         self.slide_events += rows.size
         room = MAX_SLIDE_EVENTS - len(self.slides)
         if room <= 0:
             return
-        names = self.sim.names()
         tick = self.sim.tick - 1  # the posture recorded is the last tick stepped
         for row, side in zip(rows[:room], sides[:room], strict=False):
             self.slides.append({"tick": tick, "time_s": round(self.sim.posture_time_s, 4),
-                                "character": names[row], "foot": "left" if side == 0 else "right",
+                                "character": self.names[at[row]],
+                                "foot": "left" if side == 0 else "right",
                                 "mm": round(float(move_mm[row, side]), 3)})
 
     def report(self) -> dict[str, Any]:
         """The figures so far, as ``ecs-anim run --report`` writes them: ``characters`` (per
         character: foot sliding mm per frame max/mean, penetration and floating mm, bone-length
-        error m, stride m and per leg length, COM error mm), ``constraints`` (per constraint: its
-        largest error while fully active and while active, mm, or mrad for an orientation),
-        ``ms_per_tick`` per system, ``slide_events``, ``messages``."""
+        error m, stride m and per leg length, COM error mm; ``removed_at_s``, only for one
+        removed mid-run: the time of the first recorded posture without it, its figures ending
+        there), ``constraints`` (per constraint, removed ones included: its largest error while
+        fully active and while active, mm, or mrad for an orientation), ``ms_per_tick`` per
+        system, ``slide_events``, ``messages``."""
         sim = self.sim
-        names = sim.names()
-        legs = sim.leg_length()
+        at, which = self._characters(), self._constraints()
+        legs, frozen = self.leg_length_m.copy(), self.frozen.copy()
+        legs[at], frozen[at] = sim.leg_length(), sim.store.frozen  # as they are now
+        enabled = self.constraint_enabled.copy()
+        enabled[which] = sim.constraints.enabled
         characters = []
-        for i, name in enumerate(names):
+        for i, name in enumerate(self.names):
             strides = np.array(self.strides[i])
-            characters.append({
+            figures = {
                 "name": name,
                 "leg_length_m": round(float(legs[i]), 4),
                 "foot_sliding_mm_per_frame": {
@@ -148,22 +235,24 @@ class MetricsRecorder:
                 "stride_m_median": None if strides.size == 0 else round(float(np.median(strides)), 4),
                 "stride_per_leg_length": None if strides.size == 0
                 else round(float(np.median(strides) / legs[i]), 4),
-                "frozen": bool(sim.store.frozen[i]),
+                "frozen": bool(frozen[i]),
                 "com_error_mm_max": None if np.isnan(self.com_error_max[i])
                 else round(float(self.com_error_max[i]) * 1e3, 3),
-            })
-        table = sim.constraints
+            }
+            if not np.isnan(self.removed_at_s[i]):
+                figures["removed_at_s"] = round(float(self.removed_at_s[i]), 4)
+            characters.append(figures)
         constraints = [{
-            "name": table.names[k], "character": names[int(table.owner[k])],
-            "kind": KIND_BY_NUMBER[int(table.kind[k])],
+            "name": self.constraint_names[k], "character": self.constraint_owners[k],
+            "kind": KIND_BY_NUMBER[int(self.constraint_kinds[k])],
             # an orientation's error is an angle: these figures are then milliradians
-            "unit": "mrad" if int(table.kind[k]) == KIND_ORIENTATION else "mm",
+            "unit": "mrad" if int(self.constraint_kinds[k]) == KIND_ORIENTATION else "mm",
             "error_mm_max_fully_active": None if np.isnan(self.constraint_error_full[k])
             else round(float(self.constraint_error_full[k]) * 1e3, 3),
             "error_mm_max_active": None if np.isnan(self.constraint_error_any[k])
             else round(float(self.constraint_error_any[k]) * 1e3, 3),
-            "enabled": bool(table.enabled[k]),
-        } for k in range(table.m)]
+            "enabled": bool(enabled[k]),
+        } for k in range(len(self.constraint_names))]
         ticks = max(self.ticks, 1)
         return {
             "seconds": round(sim.time_s, 4),
@@ -176,3 +265,16 @@ class MetricsRecorder:
                              "first": list(self.slides)},
             "messages": list(sim.messages),
         }
+
+
+def _id_table(table: NDArray[np.int64], ids: NDArray[np.int64]) -> NDArray[np.int64]:
+    """``table`` (id -> index, -1: none) long enough to look every one of ``ids`` up."""
+    size = int(ids.max(initial=-1)) + 1
+    if size <= table.shape[0]:
+        return table
+    return np.concatenate([table, np.full(size - table.shape[0], -1, np.int64)])
+
+
+def _grown(values: NDArray[Any], k: int, fill: float | bool) -> NDArray[Any]:
+    """``values`` with ``k`` more rows of ``fill`` (its dtype and trailing shape)."""
+    return np.concatenate([values, np.full((k, *values.shape[1:]), fill, values.dtype)])

@@ -7,12 +7,16 @@ two tests, never see each other's entities.
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import itertools
 import logging
+import types
+import typing
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import replace
-from typing import Any, Self, TypeVar, cast
+from typing import Any, Self, TypeVar, Union
 
 import esper
 import numpy as np
@@ -30,11 +34,20 @@ from ecs_anim.components import (
     Posture,
 )
 from ecs_anim.core.body_points import body_point
-from ecs_anim.core.errors import EcsAnimError, did_you_mean, listed, quoted
+from ecs_anim.core.errors import EcsAnimError, UsageError, did_you_mean, listed, quoted
 from ecs_anim.core.ground import Ground, Plane
 from ecs_anim.core.morphology import Morphology, leg_length
 from ecs_anim.motion.clip import NormalizedMotion, motion_problem
-from ecs_anim.motion.constraint_table import Area, ConstraintTable, Target, add_stored
+from ecs_anim.motion.constraint_table import (
+    Area,
+    ConstraintTable,
+    Target,
+    add_stored,
+    is_integer,
+    is_real,
+    real_array,
+    real_number,
+)
 from ecs_anim.motion.constraints import Activation
 from ecs_anim.motion.sampling import ClipBank
 from ecs_anim.runtime import kernels
@@ -63,6 +76,85 @@ MAX_COORDINATE_M = 1e5
 #: The longest time a simulation takes in (s; a day): durations, delays and blends beyond it
 #: are refused as typos.
 MAX_DURATION_S = 86400.0
+#: What a closed simulation answers to any use.
+CLOSED = "this simulation is closed (close() or the end of its with block deleted its world)"
+
+
+def _found(value: object) -> str:
+    """A refused value in an error message: its type and its repr, cut to one short line."""
+    return f"{type(value).__name__} {quoted(repr(value), 40)[1:-1]}"
+
+
+def _hint_name(hint: Any) -> str:
+    return " | ".join(_hint_name(a) for a in typing.get_args(hint)) \
+        if typing.get_origin(hint) in (Union, types.UnionType) else getattr(hint, "__name__", str(hint))
+
+
+@functools.cache
+def _field_hints(cls: type) -> dict[str, Any]:
+    return typing.get_type_hints(cls)
+
+
+def _conforms(value: object, hint: Any) -> bool:
+    """Whether ``value`` fits the type hint ``hint`` of a field of the package's plain-data
+    classes (numbers, texts, flags, tuples, unions, grounds, classes; a dataclass value has its
+    own fields checked too). Numbers may be numpy numbers and tuples lists or arrays; a bool
+    is not a number and a text is not a tuple. Hints not listed here (arrays) are the class's
+    own to check."""
+    if hint is type(None):
+        return value is None
+    if hint is float:
+        return is_real(value)
+    if hint is int:
+        return is_integer(value)
+    if hint is bool:
+        return isinstance(value, (bool, np.bool_))
+    if hint is str:
+        return isinstance(value, str)
+    if hint is Ground:
+        return callable(getattr(value, "height", None))
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (Union, types.UnionType):
+        return any(_conforms(value, a) for a in args)
+    if origin is tuple:
+        if not isinstance(value, (tuple, list, np.ndarray)):
+            return False
+        items = list(value)
+        if len(args) == 2 and args[1] is Ellipsis:
+            return all(_conforms(v, args[0]) for v in items)
+        return len(items) == len(args) and all(map(_conforms, items, args))
+    if isinstance(hint, type):
+        return isinstance(value, hint) and _fields_problem(value) is None
+    return True
+
+
+def _fields_problem(value: object) -> str | None:
+    """The first field of a dataclass ``value`` that does not fit its type hint, said in a few
+    words (``"Play.clip: expected str, got int 3"``), or None when every field fits (and for a
+    value that is not a dataclass)."""
+    if not dataclasses.is_dataclass(value) or isinstance(value, type):
+        return None
+    hints = _field_hints(type(value))
+    for f in dataclasses.fields(value):
+        item = getattr(value, f.name)
+        if not _conforms(item, hints[f.name]):
+            inner = _fields_problem(item) if isinstance(hints[f.name], type) else None
+            return inner or (f"{type(value).__name__}.{f.name}: expected "
+                             f"{_hint_name(hints[f.name])}, got {_found(item)}")
+    return None
+
+
+def _triple(values: NDArray[np.float64]) -> tuple[float, float, float]:
+    """A checked (3,) array as the 3-tuple of floats the plain-data classes hold."""
+    return float(values[0]), float(values[1]), float(values[2])
+
+
+def _check(value: object, hint: Any, what: str) -> None:
+    """Raise :class:`UsageError` naming ``what`` unless ``value`` fits ``hint``."""
+    if not _conforms(value, hint):
+        problem = _fields_problem(value) if isinstance(hint, type) and isinstance(value, hint) else None
+        raise UsageError(f"{what}: {problem}" if problem else
+                         f"{what}: expected {_hint_name(hint)}, got {_found(value)}")
 
 
 class Simulation(SteeringCalls):
@@ -94,6 +186,7 @@ class Simulation(SteeringCalls):
         if not (np.isfinite(fps) and fps > 0):
             raise EcsAnimError(f"fps must be a positive number, got {fps}")
         self.world = f"ecs_anim-{next(_counter)}-{id(self):x}"
+        self.closed = False
         if vertebrae < 0:
             raise EcsAnimError(f"vertebrae must be >= 0, got {vertebrae}")
         self.vertebrae = int(vertebrae)
@@ -150,8 +243,14 @@ class Simulation(SteeringCalls):
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+    def _check_open(self) -> None:
+        """Raise :class:`UsageError` if :meth:`close` deleted this simulation's world."""
+        if self.closed:
+            raise UsageError(CLOSED)
+
     @contextmanager
     def _active(self) -> Iterator[None]:
+        self._check_open()
         previous = esper.current_world
         esper.switch_world(self.world)
         try:
@@ -160,7 +259,9 @@ class Simulation(SteeringCalls):
             esper.switch_world(previous)
 
     def close(self) -> None:
-        """Delete this simulation's esper world."""
+        """Delete this simulation's esper world; any later use raises :class:`UsageError` (closing
+        again does nothing)."""
+        self.closed = True
         if self.world in esper.list_worlds():
             if esper.current_world == self.world:
                 esper.switch_world("default")
@@ -189,6 +290,11 @@ class Simulation(SteeringCalls):
         arguments are :meth:`spawn`'s, one per character (``None``: every character the
         default). Returns their entities (k,). All are validated before any is added (but a
         malformed constraint stored with a clip is reported once they are, naming it)."""
+        self._check_open()
+        for what, given_list in (("names", names), ("bodies", bodies), ("players", players)):
+            if isinstance(given_list, (str, bytes)) or not isinstance(given_list, (Sequence,
+                                                                                   np.ndarray)):
+                raise UsageError(f"spawn_many: {what} must be a list, got {_found(given_list)}")
         k = len(names)
         if k == 0:
             return np.zeros(0, np.int64)
@@ -198,9 +304,20 @@ class Simulation(SteeringCalls):
         com_target_xy = com_target_xy if com_target_xy is not None else [None] * k
         grounds = grounds if grounds is not None else [None] * k
         given = (bodies, players, placements, teams, com_control, com_target_xy, grounds)
+        if any(isinstance(g, (str, bytes)) or not isinstance(g, (Sequence, np.ndarray))
+               for g in given):
+            raise UsageError("spawn_many: bodies, players, placements, teams, com_control, "
+                             "com_target_xy and grounds must be lists, one item per name")
         if any(len(g) != k for g in given):
             raise EcsAnimError(f"spawn_many: {k} names but {[len(g) for g in given]} bodies, "
                                "players, placements, teams, com_control, com_target_xy, grounds")
+        hints: tuple[Any, ...] = (Morphology, MotionPlayer, Placement, str, bool,
+                                  tuple[float, float] | None, Ground | None)
+        for i, name in enumerate(names):
+            _check(name, str, f"character {i}: name")
+            for what, items, hint in zip(("body", "player", "placement", "team", "com_control",
+                                          "com_target_xy", "ground"), given, hints, strict=True):
+                _check(items[i], hint, f"character {quoted(name)}: {what}")
         queue_clip = np.zeros((k, MAX_QUEUE), np.int64)
         queue_fade, queue_loop = np.zeros((k, MAX_QUEUE)), np.zeros((k, MAX_QUEUE), bool)
         clip, queue_len = np.zeros(k, np.int64), np.zeros(k, np.int64)
@@ -230,12 +347,14 @@ class Simulation(SteeringCalls):
         if bad.any():
             raise EcsAnimError(f"character {names[int(np.argmax(bad))]!r}: placement, speed and "
                                f"start must be finite and within {MAX_COORDINATE_M:g}")
-        ground_index = np.array([self._ground_slot(g) for g in grounds], np.int64)
+        known = list(self.grounds)  # grown here, kept only once every check has passed
+        ground_index = np.array([self._ground_slot(g, known) for g in grounds], np.int64)
         ground_ref = np.zeros(k)
         for slot in np.unique(ground_index):
             mine = ground_index == slot
-            ground_ref[mine] = self.grounds[slot].height(xy[mine])
+            ground_ref[mine] = self._ground_heights(known[slot], xy[mine], "ground")
         masses, fractions = mass_tables(list(bodies))
+        self.grounds[:] = known
         store = self.store
         first = store.n
         with self._active():
@@ -266,15 +385,27 @@ class Simulation(SteeringCalls):
                 self._add_motion_constraints(int(entities[i]), names[i], clips)
         return entities
 
-    def _ground_slot(self, ground: Ground | None) -> int:
-        """The index of ``ground`` in :attr:`grounds` (0: the environment's), added if new."""
+    def _ground_slot(self, ground: Ground | None, grounds: list[Ground]) -> int:
+        """The index of ``ground`` in ``grounds`` (:attr:`grounds` or a copy; 0: the
+        environment's), appended to it if new."""
         if ground is None:
             return 0
-        for slot, known in enumerate(self.grounds):
+        for slot, known in enumerate(grounds):
             if known is ground:
                 return slot
-        self.grounds.append(ground)
-        return len(self.grounds) - 1
+        grounds.append(ground)
+        return len(grounds) - 1
+
+    @staticmethod
+    def _ground_heights(ground: Ground, xy: NDArray[np.float64], what: str) -> NDArray[np.float64]:
+        """``ground.height(xy)`` (k,) for points ``xy`` (k, 2), checked: a ground answering
+        something else than k finite heights is refused (UsageError) before it is used."""
+        heights = np.asarray(ground.height(xy))
+        if heights.shape != xy.shape[:-1] or heights.dtype.kind not in "iuf" \
+                or not np.all(np.isfinite(heights)):
+            raise UsageError(f"{what}: {type(ground).__name__}.height must give one finite height "
+                             f"per point, gave {_found(heights)}")
+        return heights.astype(np.float64)
 
     def _add_motion_constraints(self, entity: int, name: str, clips: list[str]) -> None:
         """The constraints stored with each clip a character plays (other than foot contacts,
@@ -360,6 +491,11 @@ class Simulation(SteeringCalls):
         if isinstance(component, (CharacterRow, Name)):
             raise EcsAnimError(f"add_component: {type(component).__name__} is the simulation's own "
                                "(spawn and remove set it)")
+        if type(component).__module__ == "builtins":
+            raise UsageError(f"add_component: expected a component object (an instance of a class "
+                             f"of its own, e.g. a dataclass), got {_found(component)}")
+        if isinstance(component, (GroundQuery, MotionPlayer, Placement)):
+            _check(component, type(component), "add_component")
         with self._active():
             esper.add_component(entity, component)
         self.structure_version += 1
@@ -369,6 +505,9 @@ class Simulation(SteeringCalls):
         needs it leave the character out from the next tick (without a ``MotionPlayer`` it
         plays nothing and holds its pose; without a ``Constraint`` it is not solved)."""
         self.row(entity)
+        if not isinstance(component_type, type):
+            raise UsageError(f"remove_component: expected a component type (a class), got "
+                             f"{_found(component_type)}")
         if component_type in (CharacterRow, Name):
             raise EcsAnimError(f"remove_component: {component_type.__name__} is the simulation's "
                                "own (use remove to take a character out)")
@@ -405,7 +544,21 @@ class Simulation(SteeringCalls):
         PostureConvert, before Render, where the tick's posture is complete). Returns the
         system made for this simulation; ``sim.systems`` is the schedule in order."""
         if not (isinstance(system, type) and issubclass(system, System)):
-            raise EcsAnimError(f"add_system: expected a System subclass, found {system!r}")
+            raise UsageError(f"add_system: expected a System subclass, found {system!r}")
+        self._check_open()
+        for what, declared, hint in (("query", system.query, tuple[type, ...]),
+                                     ("reads", system.reads, tuple[str, ...]),
+                                     ("writes", system.writes, tuple[str, ...])):
+            if not _conforms(declared, hint):
+                raise UsageError(f"add_system: {system.__name__}.{what} must be a tuple of "
+                                 f"{'component types' if what == 'query' else 'store field names'}"
+                                 f", got {_found(declared)}")
+        if not all(callable(hook) for hook in system.on_structure_change):
+            raise UsageError(f"add_system: {system.__name__}.on_structure_change must hold functions")
+        for what, anchor_given in (("after", after), ("before", before)):
+            if anchor_given is not None and not isinstance(anchor_given, type):
+                raise UsageError(f"add_system: {what} must be a System class of the schedule, got "
+                                 f"{_found(anchor_given)}")
         if after is not None and before is not None:
             raise EcsAnimError("add_system: give after or before, not both")
         kinds = [type(s) for s in self.systems]
@@ -456,6 +609,8 @@ class Simulation(SteeringCalls):
         > 0: its segment lengths and masses blend into the new body's over ``blend_s`` seconds
         (a smoothstep), planted feet staying on their footprints (a BodyBlend component)."""
         row = self.row(entity)
+        _check(body, Morphology, "set_body")
+        blend_s = real_number(blend_s, "set_body: blend_s")
         if not (np.isfinite(blend_s) and 0.0 <= blend_s <= MAX_DURATION_S):
             raise EcsAnimError(f"blend_s must be a finite number of seconds >= 0, got {blend_s}")
         with self._active():
@@ -470,13 +625,19 @@ class Simulation(SteeringCalls):
         """Give a character a ground of its own (its GroundQuery component), or ``None``: back
         to the environment's. GroundAdapt reads it from the next tick."""
         row = self.row(entity)
+        _check(ground, Ground | None, "set_ground")
+        known = list(self.grounds)
+        slot = self._ground_slot(ground, known)
+        if ground is not None:
+            self._ground_heights(ground, self.store.placement_xy[row:row + 1], "set_ground")
         with self._active():
             if ground is None:
                 if esper.has_component(entity, GroundQuery):
                     esper.remove_component(entity, GroundQuery)
             else:
                 esper.add_component(entity, GroundQuery(ground))
-        self.store.ground_index[row] = self._ground_slot(ground)
+        self.grounds[:] = known
+        self.store.ground_index[row] = slot
         self.structure_version += 1
 
     def remove(self, entity: int) -> None:
@@ -563,28 +724,41 @@ class Simulation(SteeringCalls):
         looking at the target point). ``chain``: the groups allowed to move (default the
         point's own). Returns its id for :meth:`set_target`. Validated here, never in the
         tick; errors are :class:`EcsAnimError` naming the constraint."""
-        values = [priority] + list(target_in_world or ())
-        if not all(np.isfinite(v) for v in values):
-            raise EcsAnimError(f"constraint {name!r}: priority and target must be finite")
+        _check(name, str, "add_constraint: name")
         table, row = self.constraints, self.row(entity)
+        for what, value, hint in (("point", point, str), ("kind", kind, str),
+                                  ("target_point", target_point, str | None),
+                                  ("target_entity", target_entity, int | None),
+                                  ("fraction", fraction, float | None),
+                                  ("target_fraction", target_fraction, float | None),
+                                  ("activation", activation, Activation),
+                                  ("area", area, Area | None), ("clock", clock, int)):
+            _check(value, hint, f"constraint {quoted(name)}: {what}")
+        world = None if target_in_world is None else real_array(
+            target_in_world, (3,), f"constraint {quoted(name)}: target_in_world")
+        if not np.isfinite(real_number(priority, f"constraint {quoted(name)}: priority")) or \
+                (world is not None and not np.all(np.isfinite(world))):
+            raise EcsAnimError(f"constraint {name!r}: priority and target must be finite")
+        offsets = [real_array(v, (3,), f"constraint {quoted(name)}: {what}") for what, v in
+                   (("offset_m", offset_m), ("target_offset_m", target_offset_m))]
         if any(table.names[k] == name for k in np.flatnonzero(table.owner == row)):
             raise EcsAnimError(f"constraint {quoted(name)}: this character has one of that name "
                                "already (constraint_index finds constraints by name)")
         try:
-            body = body_point(point, fraction, offset_m, segment=kind == "orientation")
+            body = body_point(point, fraction, _triple(offsets[0]), segment=kind == "orientation")
             if target_entity is not None:
                 target = Target(row=self.row(target_entity),
-                                point=body_point(target_point or "", target_fraction, target_offset_m,
-                                                 as_target=True))
+                                point=body_point(target_point or "", target_fraction,
+                                                 _triple(offsets[1]), as_target=True))
             else:
-                target = Target(world_m=target_in_world)
+                target = Target(world_m=None if world is None else _triple(world))
             uid = self.constraints.add(name, self.row(entity), kind, body, target, priority,
                                        activation, chain, distance_m, area, axis, clock)
         except ValueError as exc:
             message = str(exc)
             if not message.startswith("constraint "):
                 message = f"constraint {name!r}: {message}"
-            raise EcsAnimError(message) from None
+            raise UsageError(message) from None
         self._constraint_added(entity, uid, name)
         return uid
 
@@ -592,14 +766,18 @@ class Simulation(SteeringCalls):
         """Move a constraint's target (its id from :meth:`add_constraint` or
         :meth:`constraint_index`) from code; a non-finite target disables it at the next tick
         (with a warning) rather than reaching a pose."""
-        self.set_targets(np.array([uid]), np.asarray([target_in_world], dtype=np.float64))
+        _check(uid, int, "set_target: uid")
+        self.set_targets(np.array([uid], np.int64),
+                         real_array(target_in_world, (3,), "set_target: target_in_world")[None])
 
     def set_targets(self, uids: NDArray[np.int64], targets_in_world: NDArray[np.float64]) -> None:
-        """Move many constraints' targets at once: ``uids`` (k,) ids, ``targets_in_world`` (k, 3)."""
+        """Move many constraints' targets at once: ``uids`` (k,) ids, ``targets_in_world`` (k, 3).
+        Anything else (other shapes, texts) is refused with nothing moved."""
+        self._check_open()
         try:
             self.constraints.set_targets(uids, targets_in_world)
         except ValueError as exc:
-            raise EcsAnimError(str(exc)) from None
+            raise UsageError(str(exc)) from None
 
     def warn(self, message: str) -> None:
         """A run-time warning: ``"warning: t=<s> s: <message>"`` kept in :attr:`messages` and
@@ -635,6 +813,8 @@ class Simulation(SteeringCalls):
         """Add a trigger (:class:`ecs_anim.runtime.triggers.Trigger`): ``when`` its condition begins to
         hold, its actions run (``delay_s`` later). Everything it names is checked here; returns
         its index."""
+        self._check_open()
+        _check(trigger, Trigger, "add_trigger")
         check_trigger(self, trigger)
         return self.reactions.add(trigger)
 
@@ -643,8 +823,12 @@ class Simulation(SteeringCalls):
         """Move the constraint ``uid``'s world target along keyframes: at ``times_s`` (k,)
         (increasing, simulation seconds) it is at ``points_m`` (k, 3), linearly interpolated
         between them, held before the first and after the last; set before every tick."""
-        track = TargetTrack(int(uid), tuple(float(t) for t in times_s),
-                            tuple((float(x), float(y), float(z)) for x, y, z in points_m))
+        self._check_open()
+        _check(uid, int, "add_target_track: uid")
+        times = real_array(times_s, (None,), "add_target_track: times_s")
+        points = real_array(points_m, (times.shape[0], 3), "add_target_track: points_m")
+        track = TargetTrack(int(uid), tuple(float(t) for t in times),
+                            tuple(_triple(p) for p in points))
         check_track(self, track)
         self.reactions.tracks.append(track)
 
@@ -654,6 +838,7 @@ class Simulation(SteeringCalls):
         """Advance one fixed tick through the schedule (``systems``, in order): triggers due,
         clips chosen, played, adapted, solved and converted, then the clock moves and the
         tick's events fire their triggers (DetectEvents)."""
+        self._check_open()
         if self.tick == 0:
             kernels.before_first_tick()
         with self._active():
@@ -671,8 +856,8 @@ class Simulation(SteeringCalls):
     def set_solver_focus(self, focus_in_world: Sequence[float] | NDArray[np.float64] | None) -> None:
         """Where the frame budget keeps its iterations longest ((3,) m, world; the viewer gives
         its camera's eye): the characters furthest from it are cut first. None: no focus."""
-        focus = None if focus_in_world is None else cast(
-            tuple[float, float, float], tuple(float(v) for v in focus_in_world))
+        focus = None if focus_in_world is None else _triple(
+            real_array(focus_in_world, (3,), "set_solver_focus"))
         try:
             self.solver_settings = replace(self.solver_settings, focus_in_world=focus)
         except ValueError as exc:

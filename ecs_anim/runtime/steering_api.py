@@ -12,7 +12,8 @@ from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
-from ecs_anim.core.errors import EcsAnimError, quoted
+from ecs_anim.core.errors import EcsAnimError, UsageError, quoted
+from ecs_anim.motion.constraint_table import real_array, real_number
 from ecs_anim.runtime.playback_queue import start_clips
 from ecs_anim.runtime.steering import (
     GAITS,
@@ -55,6 +56,10 @@ class SteeringCalls:
         sim = cast("Simulation", self)
         row = sim.row(entity)
         names = {"idle": idle, "walk": walk, "run": run}
+        for gait, name in names.items():
+            if not (isinstance(name, str) or (name is None and gait != "walk")):
+                raise UsageError(f"locomotion {gait}: expected the name of a loaded motion, got "
+                                 f"{type(name).__name__} {quoted(repr(name))}")
         clips = np.full(3, -1, np.int64)
         gaits = self.gait_table()
         for k, gait in enumerate(GAITS):
@@ -87,6 +92,8 @@ class SteeringCalls:
         locomotion set); ``speed_m_s`` checked."""
         sim = cast("Simulation", self)
         row = sim.row(entity)
+        if speed_m_s is not None:
+            speed_m_s = real_number(speed_m_s, "speed_m_s")
         if speed_m_s is not None and not (np.isfinite(speed_m_s)
                                           and 0.0 <= speed_m_s <= MAX_SPEED_M_S):
             raise EcsAnimError(f"speed_m_s must be within 0-{MAX_SPEED_M_S:g} m/s, got {speed_m_s}")
@@ -110,14 +117,14 @@ class SteeringCalls:
         as fast as its steps allow and goes at ``speed_m_s`` (``None``: its walk's own speed;
         0 stops it on its idle motion). Cancels a path it was following."""
         sim = cast("Simulation", self)
+        if heading_rad is not None and not np.isfinite(real_number(heading_rad, "heading_rad")):
+            raise EcsAnimError(f"heading_rad must be finite, got {heading_rad}")
         row = self._steered_row(entity, speed_m_s)
         st = sim.store
         if heading_rad is None:
             heading_rad = float(st.placement_heading[row]
                                 + self.gait_table().travel_rad[st.clip[row]])
-        if not np.isfinite(heading_rad):
-            raise EcsAnimError(f"heading_rad must be finite, got {heading_rad}")
-        st.steer_heading_rad[row] = heading_rad
+        st.steer_heading_rad[row] = float(heading_rad)
         st.steer_mode[row] = STEER_HEADING
 
     def follow_path(self, entity: int, path_in_world: Sequence[Sequence[float]] | np.ndarray,
@@ -126,13 +133,13 @@ class SteeringCalls:
         metres; a z is ignored: the ground carries the feet), in order, from where it is, then
         stop on its idle motion at the last one. ``speed_m_s`` as for :meth:`steer`."""
         sim = cast("Simulation", self)
+        if isinstance(path_in_world, (list, tuple)) and len(path_in_world) == 0:
+            path_in_world = np.zeros((0, 2))
         try:
-            points = np.asarray(path_in_world, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise EcsAnimError("path: expected a list of [x, y] points, metres") from None
-        if points.size == 0:
-            points = points.reshape(0, 2)
-        if points.ndim != 2 or points.shape[1] not in (2, 3):
+            points = real_array(path_in_world, (None, None), "path")
+        except UsageError:
+            raise UsageError("path: expected a list of [x, y] points, metres") from None
+        if points.shape[1] not in (2, 3):
             raise EcsAnimError(f"path: expected a list of [x, y] points, got shape {points.shape}")
         if not 1 <= points.shape[0] <= MAX_WAYPOINTS - 1:
             raise EcsAnimError(f"path: expected 1 to {MAX_WAYPOINTS - 1} waypoints, got "
@@ -158,7 +165,8 @@ class SteeringCalls:
         """Walk a character to ``goal_in_world`` (x, y[, z]) metres and stop there on its idle
         motion: :meth:`follow_path` with one waypoint (a goal behind it is turned to on the
         spot first)."""
-        self.follow_path(entity, [list(goal_in_world)], speed_m_s)
+        goal = real_array(goal_in_world, (None,), "walk_to: goal_in_world")
+        self.follow_path(entity, goal[None], speed_m_s)
 
     def arrived(self, entity: int) -> bool:
         """Whether a character given a path or goal has reached its end (or was never given

@@ -13,8 +13,10 @@ import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ecs_anim.apps.bench import cmd_bench, size_list
 from ecs_anim.apps.cli.args import (
@@ -33,13 +35,16 @@ from ecs_anim.apps.cli.import_cmd import cmd_import
 from ecs_anim.apps.cli.info import cmd_info
 from ecs_anim.apps.viewer.command import add_arguments as add_view_arguments
 from ecs_anim.apps.viewer.command import cmd_view
-from ecs_anim.core.errors import EcsAnimError
+from ecs_anim.core.errors import EcsAnimError, listed
 from ecs_anim.core.files import input_problem, output_folder_problem, output_problem
 from ecs_anim.core.morphology import PRESET_SPECS
 from ecs_anim.io.c3d.marker_sets import preset_summary as marker_set_summary
 from ecs_anim.io.contacts import ContactThresholds
 from ecs_anim.io.joint_presets import preset_summary
 from ecs_anim.runtime.allocator import keep_freed_memory
+
+if TYPE_CHECKING:
+    from ecs_anim.runtime.store import CharacterStore
 
 
 def cmd_export(args: argparse.Namespace) -> int:
@@ -147,29 +152,29 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
 
     names = [c.name for c in scenario.characters]
     metrics = MetricsRecorder(sim)
-    record = bool(args.export)
-    positions, rotations, contacts = [], [], []
+    frames = _Frames([sim.entity(name) for name in names]) if args.export else None
     for _ in range(ticks):
         sim.step()
         metrics.record()
-        if record:
-            positions.append(sim.store.positions.copy())
-            rotations.append(sim.store.local_rotations.copy())
-            contacts.append(sim.store.contact_weight >= 1.0)
+        if frames is not None:
+            frames.record(sim.store)
     report = metrics.report() | {"scenario": str(args.scenario)}
-    if record:
-        pos = np.stack(positions, axis=1)  # (n, frames, joints, 3)
-        rot = np.stack(rotations, axis=1)
-        con = np.stack(contacts, axis=1)
+    unposed = []  # characters removed before their first posture: no files
+    if frames is not None:
         with output_set(args.export, _export_names(scenario), args.force) as export:
             for i, c in enumerate(scenario.characters):
+                # (frames, joints, 3), (frames, joints, 3, 3), (frames, 2): until its removal
+                pos, rot, con = frames.of(i)
+                if pos.shape[0] == 0:
+                    unposed.append(c.name)
+                    continue
                 with export.file(f"{c.name}.bvh") as f:
-                    f.write(bvh_from_rotations(c.morphology, pos[i, :, 0], rot[i],
+                    f.write(bvh_from_rotations(c.morphology, pos[:, 0], rot,
                                                scenario.fps).encode("utf-8"))
                 with export.file(f"{c.name}.npz") as f:
-                    write_npz(f, pos[i], scenario.fps, con[i])
+                    write_npz(f, pos, scenario.fps, con)
                 with export.file(f"{c.name}.glb") as f:
-                    f.write(glb_bytes(c.morphology, pos[i, :, 0], rot[i], scenario.fps))
+                    f.write(glb_bytes(c.morphology, pos[:, 0], rot, scenario.fps))
     if args.report:
         with atomic_output(args.report, args.force) as f:
             f.write(json.dumps(json_safe(report), indent=2, allow_nan=False).encode("utf-8"))
@@ -180,10 +185,11 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
     for c in report["characters"]:
         stride = "-" if c["stride_per_leg_length"] is None else f"{c['stride_per_leg_length']:.3f}"
         com = "-" if c["com_error_mm_max"] is None else f"{c['com_error_mm_max']:.1f}"
+        removed = "" if "removed_at_s" not in c else f"  (removed at {c['removed_at_s']:g} s)"
         # floating first: a planted foot held in the air slides nowhere and sinks nowhere
         print(f"  {c['name'][:14]:14s} {c['floating_mm_max']:8.3f} "
               f"{c['ground_penetration_mm_max']:10.3f} {c['foot_sliding_mm_per_frame']['max']:15.3f} "
-              f"{c['bone_length_error_m_max']:10.1e} {stride:>10s} {com:>10s}")
+              f"{c['bone_length_error_m_max']:10.1e} {stride:>10s} {com:>10s}{removed}")
     if report["constraints"]:
         # While a constraint eases in or out its goal is a blend, so its error against the full
         # target says nothing; the report's JSON has both.
@@ -198,10 +204,47 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
     print(f"  time per tick {total:.2f} ms: " + ", ".join(
         f"{k} {v:.2f}" for k, v in report["ms_per_tick"].items()))
     if args.export:
-        print(f"  wrote {len(names)} x (.bvh, .npz, .glb) to {args.export}")
+        print(f"  wrote {len(names) - len(unposed)} x (.bvh, .npz, .glb) to {args.export}"
+              + (f" (none for {listed(unposed)}: removed before the first tick's posture)"
+                 if unposed else ""))
     if args.report:
         print(f"  wrote report {args.report}")
     return 0
+
+
+class _Frames:
+    """Each tick's posture of some characters, kept by entity (rows move down when a character
+    is removed): stretches of ticks with the same characters in the store, each with the
+    store's entities and, per tick, the positions, local rotations and planted feet."""
+
+    def __init__(self, entities: list[int]):
+        self.entities = entities
+        self.stretches: list[tuple[NDArray[np.int64], list[list[NDArray[Any]]]]] = []
+        self._stacked: list[tuple[NDArray[np.int64], list[NDArray[Any]]]] | None = None
+
+    def record(self, store: CharacterStore) -> None:
+        """The posture just stepped (after :meth:`Simulation.step`)."""
+        if not self.stretches or not np.array_equal(self.stretches[-1][0], store.entity):
+            self.stretches.append((store.entity.copy(), [[], [], []]))
+        positions, rotations, contacts = self.stretches[-1][1]
+        positions.append(store.positions.copy())
+        rotations.append(store.local_rotations.copy())
+        contacts.append(store.contact_weight >= 1.0)
+
+    def of(self, i: int) -> list[NDArray[Any]]:
+        """Character ``i``'s positions (frames, joints, 3), local rotations (frames, joints, 3,
+        3) and planted feet (frames, 2) from the first tick to its removal (or the last). Call
+        it once the run is over."""
+        if self._stacked is None:  # each stretch's ticks as arrays (frames, n, ...), once
+            self._stacked = [(entities, [np.stack(values) for values in ticks])
+                             for entities, ticks in self.stretches]
+        columns: list[list[NDArray[Any]]] = [[], [], []]
+        for entities, stacked in self._stacked:
+            row = np.flatnonzero(entities == self.entities[i])
+            for column, values in zip(columns, stacked, strict=True):
+                column.append(values[:, row[0]] if row.size
+                              else values[:0].reshape(0, *values.shape[2:]))
+        return [np.concatenate(column) for column in columns]
 
 
 def add_threads_argument(p: argparse.ArgumentParser, default: int | None) -> None:
