@@ -19,10 +19,9 @@ A constraint is ``{point, kind, chain, priority, activation}`` plus its target:
 
 from __future__ import annotations
 
-import numbers
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -35,6 +34,7 @@ from ecs_anim.core.body_points import (
     BodyPoint,
     body_point,
 )
+from ecs_anim.core.checks import found, is_integer, is_real, real_array, real_number
 from ecs_anim.core.errors import UsageError
 from ecs_anim.motion.constraints import Activation, ConstraintSpec, ramp_weight
 
@@ -54,44 +54,6 @@ ORIENTABLE = {"hand_l", "hand_r", "foot_l", "foot_r", "head", "spine_upper"}
 ALWAYS = Activation(0.0, 1e9)
 
 
-def is_integer(value: object) -> bool:
-    """Whether ``value`` is an integer (a Python or numpy one; a bool is not)."""
-    return isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))
-
-
-def is_real(value: object) -> bool:
-    """Whether ``value`` is a real number (int, float or a numpy number; not a bool, a text or
-    an array)."""
-    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
-
-
-def real_number(value: object, what: str) -> float:
-    """``value`` as a float if :func:`is_real`; else a :class:`UsageError` naming ``what``.
-    Finite or not: callers say."""
-    if is_real(value):
-        return float(cast(float, value))
-    raise UsageError(f"{what} must be a number, got {_found(value)}")
-
-
-def real_array(value: object, shape: tuple[int | None, ...], what: str) -> F64:
-    """``value`` (a tuple, list or numpy array of real numbers) as a float64 array of ``shape``
-    (None: any length on that axis); else a :class:`UsageError` naming ``what`` and saying
-    what was found. Texts, booleans and objects are refused, not converted."""
-    if isinstance(value, (str, bytes)) or value is None:
-        raise UsageError(f"{what} must be numbers of shape {_shape(shape)}, got {_found(value)}")
-    try:
-        array = np.asarray(value)
-    except ValueError:  # a ragged list
-        raise UsageError(f"{what} must be numbers of shape {_shape(shape)}, got a ragged list") \
-            from None
-    if array.dtype.kind not in "iuf":
-        raise UsageError(f"{what} must be numbers of shape {_shape(shape)}, got {_found(value)}")
-    if array.ndim != len(shape) or any(n is not None and n != k for n, k in zip(shape, array.shape,
-                                                                                strict=True)):
-        raise UsageError(f"{what} must have shape {_shape(shape)}, got shape {array.shape}")
-    return array.astype(np.float64)
-
-
 def _is_point(value: object) -> bool:
     return isinstance(value, BodyPoint)
 
@@ -99,16 +61,6 @@ def _is_point(value: object) -> bool:
 def _is_names(value: object) -> bool:
     """Whether ``value`` is a tuple or list of texts (a bare text is not)."""
     return isinstance(value, (tuple, list)) and all(isinstance(v, str) for v in value)
-
-
-def _shape(shape: tuple[int | None, ...]) -> str:
-    return "(" + ", ".join("k" if n is None else str(n) for n in shape) + ("," if len(shape) == 1 else "") + ")"
-
-
-def _found(value: object) -> str:
-    """A short description of a refused value: its type and (cut) repr."""
-    text = repr(value)
-    return f"{type(value).__name__} {text if len(text) <= 40 else text[:37] + '...'}"
 
 
 @dataclass(frozen=True)
@@ -163,7 +115,7 @@ class Target:
             raise UsageError("a character target needs the body point to aim at")
         if self.row is not None and not (is_integer(self.row) and _is_point(self.point)):
             raise UsageError(f"a character target is a store row and a BodyPoint, got "
-                             f"{_found(self.row)} and {_found(self.point)}")
+                             f"{found(self.row)} and {found(self.point)}")
         if self.world_m is not None:
             x, y, z = real_array(self.world_m, (3,), "target_in_world")
             if not all(np.isfinite((x, y, z))):
@@ -243,18 +195,18 @@ class ConstraintTable:
             return ValueError(f"constraint {name!r}: {message}")
 
         if not isinstance(point, BodyPoint) or not isinstance(target, Target):
-            raise fail(f"expected a BodyPoint and a Target, got {_found(point)} and {_found(target)}")
+            raise fail(f"expected a BodyPoint and a Target, got {found(point)} and {found(target)}")
         if not isinstance(activation, Activation):
-            raise fail(f"activation must be an Activation, got {_found(activation)}")
+            raise fail(f"activation must be an Activation, got {found(activation)}")
         if area is not None and not isinstance(area, Area):
-            raise fail(f"area must be an Area (or None), got {_found(area)}")
+            raise fail(f"area must be an Area (or None), got {found(area)}")
         if not is_integer(clock):
-            raise fail(f"clock must be a clip index (-1: simulation time), got {_found(clock)}")
+            raise fail(f"clock must be a clip index (-1: simulation time), got {found(clock)}")
         if not isinstance(kind, str) or kind not in KIND_NAMES:
             raise fail(f"unknown kind {kind!r}; kinds: {', '.join(KIND_NAMES)}")
         if chain is not None and not _is_names(chain):
             raise fail(f"chain must be a list of body group names ({', '.join(GROUPS)}), got "
-                       f"{_found(chain)}")
+                       f"{found(chain)}")
         chain = (GROUPS[point.group],) if chain is None else tuple(chain)
         priority = real_number(priority, f"constraint {name!r}: priority")
         distance_m = real_number(distance_m, f"constraint {name!r}: distance_m")
@@ -366,7 +318,7 @@ class ConstraintTable:
         written (UsageError)."""
         ids = np.asarray(uids)
         if ids.ndim != 1 or not (ids.dtype.kind in "iu" or ids.size == 0):
-            raise UsageError(f"uids must be constraint ids of shape (k,), got {_found(uids)}")
+            raise UsageError(f"uids must be constraint ids of shape (k,), got {found(uids)}")
         targets = real_array(targets_in_world, (ids.shape[0], 3), "targets_in_world")
         rows = self.rows_of(ids.astype(np.int64))
         self.target_kind[rows] = TARGET_WORLD

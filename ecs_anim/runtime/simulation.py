@@ -7,16 +7,12 @@ two tests, never see each other's entities.
 
 from __future__ import annotations
 
-import dataclasses
-import functools
 import itertools
 import logging
-import types
-import typing
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import replace
-from typing import Any, Self, TypeVar, Union
+from typing import Any, Self, TypeVar
 
 import esper
 import numpy as np
@@ -34,20 +30,12 @@ from ecs_anim.components import (
     Posture,
 )
 from ecs_anim.core.body_points import body_point
+from ecs_anim.core.checks import as_triple, check_value, conforms, found, real_array, real_number
 from ecs_anim.core.errors import EcsAnimError, UsageError, did_you_mean, listed, quoted
 from ecs_anim.core.ground import Ground, Plane
 from ecs_anim.core.morphology import Morphology, leg_length
 from ecs_anim.motion.clip import NormalizedMotion, motion_problem
-from ecs_anim.motion.constraint_table import (
-    Area,
-    ConstraintTable,
-    Target,
-    add_stored,
-    is_integer,
-    is_real,
-    real_array,
-    real_number,
-)
+from ecs_anim.motion.constraint_table import Area, ConstraintTable, Target, add_stored
 from ecs_anim.motion.constraints import Activation
 from ecs_anim.motion.sampling import ClipBank
 from ecs_anim.runtime import kernels
@@ -78,83 +66,6 @@ MAX_COORDINATE_M = 1e5
 MAX_DURATION_S = 86400.0
 #: What a closed simulation answers to any use.
 CLOSED = "this simulation is closed (close() or the end of its with block deleted its world)"
-
-
-def _found(value: object) -> str:
-    """A refused value in an error message: its type and its repr, cut to one short line."""
-    return f"{type(value).__name__} {quoted(repr(value), 40)[1:-1]}"
-
-
-def _hint_name(hint: Any) -> str:
-    return " | ".join(_hint_name(a) for a in typing.get_args(hint)) \
-        if typing.get_origin(hint) in (Union, types.UnionType) else getattr(hint, "__name__", str(hint))
-
-
-@functools.cache
-def _field_hints(cls: type) -> dict[str, Any]:
-    return typing.get_type_hints(cls)
-
-
-def _conforms(value: object, hint: Any) -> bool:
-    """Whether ``value`` fits the type hint ``hint`` of a field of the package's plain-data
-    classes (numbers, texts, flags, tuples, unions, grounds, classes; a dataclass value has its
-    own fields checked too). Numbers may be numpy numbers and tuples lists or arrays; a bool
-    is not a number and a text is not a tuple. Hints not listed here (arrays) are the class's
-    own to check."""
-    if hint is type(None):
-        return value is None
-    if hint is float:
-        return is_real(value)
-    if hint is int:
-        return is_integer(value)
-    if hint is bool:
-        return isinstance(value, (bool, np.bool_))
-    if hint is str:
-        return isinstance(value, str)
-    if hint is Ground:
-        return callable(getattr(value, "height", None))
-    origin, args = typing.get_origin(hint), typing.get_args(hint)
-    if origin in (Union, types.UnionType):
-        return any(_conforms(value, a) for a in args)
-    if origin is tuple:
-        if not isinstance(value, (tuple, list, np.ndarray)):
-            return False
-        items = list(value)
-        if len(args) == 2 and args[1] is Ellipsis:
-            return all(_conforms(v, args[0]) for v in items)
-        return len(items) == len(args) and all(map(_conforms, items, args))
-    if isinstance(hint, type):
-        return isinstance(value, hint) and _fields_problem(value) is None
-    return True
-
-
-def _fields_problem(value: object) -> str | None:
-    """The first field of a dataclass ``value`` that does not fit its type hint, said in a few
-    words (``"Play.clip: expected str, got int 3"``), or None when every field fits (and for a
-    value that is not a dataclass)."""
-    if not dataclasses.is_dataclass(value) or isinstance(value, type):
-        return None
-    hints = _field_hints(type(value))
-    for f in dataclasses.fields(value):
-        item = getattr(value, f.name)
-        if not _conforms(item, hints[f.name]):
-            inner = _fields_problem(item) if isinstance(hints[f.name], type) else None
-            return inner or (f"{type(value).__name__}.{f.name}: expected "
-                             f"{_hint_name(hints[f.name])}, got {_found(item)}")
-    return None
-
-
-def _triple(values: NDArray[np.float64]) -> tuple[float, float, float]:
-    """A checked (3,) array as the 3-tuple of floats the plain-data classes hold."""
-    return float(values[0]), float(values[1]), float(values[2])
-
-
-def _check(value: object, hint: Any, what: str) -> None:
-    """Raise :class:`UsageError` naming ``what`` unless ``value`` fits ``hint``."""
-    if not _conforms(value, hint):
-        problem = _fields_problem(value) if isinstance(hint, type) and isinstance(value, hint) else None
-        raise UsageError(f"{what}: {problem}" if problem else
-                         f"{what}: expected {_hint_name(hint)}, got {_found(value)}")
 
 
 class Simulation(SteeringCalls):
@@ -294,7 +205,7 @@ class Simulation(SteeringCalls):
         for what, given_list in (("names", names), ("bodies", bodies), ("players", players)):
             if isinstance(given_list, (str, bytes)) or not isinstance(given_list, (Sequence,
                                                                                    np.ndarray)):
-                raise UsageError(f"spawn_many: {what} must be a list, got {_found(given_list)}")
+                raise UsageError(f"spawn_many: {what} must be a list, got {found(given_list)}")
         k = len(names)
         if k == 0:
             return np.zeros(0, np.int64)
@@ -314,10 +225,10 @@ class Simulation(SteeringCalls):
         hints: tuple[Any, ...] = (Morphology, MotionPlayer, Placement, str, bool,
                                   tuple[float, float] | None, Ground | None)
         for i, name in enumerate(names):
-            _check(name, str, f"character {i}: name")
+            check_value(name, str, f"character {i}: name")
             for what, items, hint in zip(("body", "player", "placement", "team", "com_control",
                                           "com_target_xy", "ground"), given, hints, strict=True):
-                _check(items[i], hint, f"character {quoted(name)}: {what}")
+                check_value(items[i], hint, f"character {quoted(name)}: {what}")
         queue_clip = np.zeros((k, MAX_QUEUE), np.int64)
         queue_fade, queue_loop = np.zeros((k, MAX_QUEUE)), np.zeros((k, MAX_QUEUE), bool)
         clip, queue_len = np.zeros(k, np.int64), np.zeros(k, np.int64)
@@ -404,7 +315,7 @@ class Simulation(SteeringCalls):
         if heights.shape != xy.shape[:-1] or heights.dtype.kind not in "iuf" \
                 or not np.all(np.isfinite(heights)):
             raise UsageError(f"{what}: {type(ground).__name__}.height must give one finite height "
-                             f"per point, gave {_found(heights)}")
+                             f"per point, gave {found(heights)}")
         return heights.astype(np.float64)
 
     def _add_motion_constraints(self, entity: int, name: str, clips: list[str]) -> None:
@@ -493,9 +404,9 @@ class Simulation(SteeringCalls):
                                "(spawn and remove set it)")
         if type(component).__module__ == "builtins":
             raise UsageError(f"add_component: expected a component object (an instance of a class "
-                             f"of its own, e.g. a dataclass), got {_found(component)}")
+                             f"of its own, e.g. a dataclass), got {found(component)}")
         if isinstance(component, (GroundQuery, MotionPlayer, Placement)):
-            _check(component, type(component), "add_component")
+            check_value(component, type(component), "add_component")
         with self._active():
             esper.add_component(entity, component)
         self.structure_version += 1
@@ -507,7 +418,7 @@ class Simulation(SteeringCalls):
         self.row(entity)
         if not isinstance(component_type, type):
             raise UsageError(f"remove_component: expected a component type (a class), got "
-                             f"{_found(component_type)}")
+                             f"{found(component_type)}")
         if component_type in (CharacterRow, Name):
             raise EcsAnimError(f"remove_component: {component_type.__name__} is the simulation's "
                                "own (use remove to take a character out)")
@@ -549,16 +460,16 @@ class Simulation(SteeringCalls):
         for what, declared, hint in (("query", system.query, tuple[type, ...]),
                                      ("reads", system.reads, tuple[str, ...]),
                                      ("writes", system.writes, tuple[str, ...])):
-            if not _conforms(declared, hint):
+            if not conforms(declared, hint):
                 raise UsageError(f"add_system: {system.__name__}.{what} must be a tuple of "
                                  f"{'component types' if what == 'query' else 'store field names'}"
-                                 f", got {_found(declared)}")
+                                 f", got {found(declared)}")
         if not all(callable(hook) for hook in system.on_structure_change):
             raise UsageError(f"add_system: {system.__name__}.on_structure_change must hold functions")
         for what, anchor_given in (("after", after), ("before", before)):
             if anchor_given is not None and not isinstance(anchor_given, type):
                 raise UsageError(f"add_system: {what} must be a System class of the schedule, got "
-                                 f"{_found(anchor_given)}")
+                                 f"{found(anchor_given)}")
         if after is not None and before is not None:
             raise EcsAnimError("add_system: give after or before, not both")
         kinds = [type(s) for s in self.systems]
@@ -609,7 +520,7 @@ class Simulation(SteeringCalls):
         > 0: its segment lengths and masses blend into the new body's over ``blend_s`` seconds
         (a smoothstep), planted feet staying on their footprints (a BodyBlend component)."""
         row = self.row(entity)
-        _check(body, Morphology, "set_body")
+        check_value(body, Morphology, "set_body")
         blend_s = real_number(blend_s, "set_body: blend_s")
         if not (np.isfinite(blend_s) and 0.0 <= blend_s <= MAX_DURATION_S):
             raise EcsAnimError(f"blend_s must be a finite number of seconds >= 0, got {blend_s}")
@@ -625,7 +536,7 @@ class Simulation(SteeringCalls):
         """Give a character a ground of its own (its GroundQuery component), or ``None``: back
         to the environment's. GroundAdapt reads it from the next tick."""
         row = self.row(entity)
-        _check(ground, Ground | None, "set_ground")
+        check_value(ground, Ground | None, "set_ground")
         known = list(self.grounds)
         slot = self._ground_slot(ground, known)
         if ground is not None:
@@ -724,7 +635,7 @@ class Simulation(SteeringCalls):
         looking at the target point). ``chain``: the groups allowed to move (default the
         point's own). Returns its id for :meth:`set_target`. Validated here, never in the
         tick; errors are :class:`EcsAnimError` naming the constraint."""
-        _check(name, str, "add_constraint: name")
+        check_value(name, str, "add_constraint: name")
         table, row = self.constraints, self.row(entity)
         for what, value, hint in (("point", point, str), ("kind", kind, str),
                                   ("target_point", target_point, str | None),
@@ -733,7 +644,7 @@ class Simulation(SteeringCalls):
                                   ("target_fraction", target_fraction, float | None),
                                   ("activation", activation, Activation),
                                   ("area", area, Area | None), ("clock", clock, int)):
-            _check(value, hint, f"constraint {quoted(name)}: {what}")
+            check_value(value, hint, f"constraint {quoted(name)}: {what}")
         world = None if target_in_world is None else real_array(
             target_in_world, (3,), f"constraint {quoted(name)}: target_in_world")
         if not np.isfinite(real_number(priority, f"constraint {quoted(name)}: priority")) or \
@@ -745,13 +656,13 @@ class Simulation(SteeringCalls):
             raise EcsAnimError(f"constraint {quoted(name)}: this character has one of that name "
                                "already (constraint_index finds constraints by name)")
         try:
-            body = body_point(point, fraction, _triple(offsets[0]), segment=kind == "orientation")
+            body = body_point(point, fraction, as_triple(offsets[0]), segment=kind == "orientation")
             if target_entity is not None:
                 target = Target(row=self.row(target_entity),
                                 point=body_point(target_point or "", target_fraction,
-                                                 _triple(offsets[1]), as_target=True))
+                                                 as_triple(offsets[1]), as_target=True))
             else:
-                target = Target(world_m=None if world is None else _triple(world))
+                target = Target(world_m=None if world is None else as_triple(world))
             uid = self.constraints.add(name, self.row(entity), kind, body, target, priority,
                                        activation, chain, distance_m, area, axis, clock)
         except ValueError as exc:
@@ -766,7 +677,7 @@ class Simulation(SteeringCalls):
         """Move a constraint's target (its id from :meth:`add_constraint` or
         :meth:`constraint_index`) from code; a non-finite target disables it at the next tick
         (with a warning) rather than reaching a pose."""
-        _check(uid, int, "set_target: uid")
+        check_value(uid, int, "set_target: uid")
         self.set_targets(np.array([uid], np.int64),
                          real_array(target_in_world, (3,), "set_target: target_in_world")[None])
 
@@ -814,7 +725,7 @@ class Simulation(SteeringCalls):
         hold, its actions run (``delay_s`` later). Everything it names is checked here; returns
         its index."""
         self._check_open()
-        _check(trigger, Trigger, "add_trigger")
+        check_value(trigger, Trigger, "add_trigger")
         check_trigger(self, trigger)
         return self.reactions.add(trigger)
 
@@ -824,11 +735,11 @@ class Simulation(SteeringCalls):
         (increasing, simulation seconds) it is at ``points_m`` (k, 3), linearly interpolated
         between them, held before the first and after the last; set before every tick."""
         self._check_open()
-        _check(uid, int, "add_target_track: uid")
+        check_value(uid, int, "add_target_track: uid")
         times = real_array(times_s, (None,), "add_target_track: times_s")
         points = real_array(points_m, (times.shape[0], 3), "add_target_track: points_m")
         track = TargetTrack(int(uid), tuple(float(t) for t in times),
-                            tuple(_triple(p) for p in points))
+                            tuple(as_triple(p) for p in points))
         check_track(self, track)
         self.reactions.tracks.append(track)
 
@@ -856,7 +767,7 @@ class Simulation(SteeringCalls):
     def set_solver_focus(self, focus_in_world: Sequence[float] | NDArray[np.float64] | None) -> None:
         """Where the frame budget keeps its iterations longest ((3,) m, world; the viewer gives
         its camera's eye): the characters furthest from it are cut first. None: no focus."""
-        focus = None if focus_in_world is None else _triple(
+        focus = None if focus_in_world is None else as_triple(
             real_array(focus_in_world, (3,), "set_solver_focus"))
         try:
             self.solver_settings = replace(self.solver_settings, focus_in_world=focus)

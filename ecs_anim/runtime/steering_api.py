@@ -12,8 +12,8 @@ from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
+from ecs_anim.core.checks import real_array, real_number
 from ecs_anim.core.errors import EcsAnimError, UsageError, quoted
-from ecs_anim.motion.constraint_table import real_array, real_number
 from ecs_anim.runtime.playback_queue import start_clips
 from ecs_anim.runtime.steering import (
     GAITS,

@@ -18,6 +18,7 @@ from ecs_anim.io.c3d.importing import import_c3d
 from ecs_anim.io.contacts import horizontal_speed, local_ground
 from ecs_anim.io.importing import canonical_clip, import_bvh
 from ecs_anim.motion.clip import load_nmo, save_nmo
+from support.bvh_reference import in_place_copy
 
 VARIED = MOCAP_DIR / "varied"
 #: Walks (over-ground, both feet), with the flags a file needs (see docs/import.md's table): the
@@ -138,27 +139,11 @@ def test_stance_on_a_box_is_a_contact(tmp_path):
 
 
 def _in_place_copy(tmp_path, name: str = "bandai_walk.bvh"):
-    """The walk on a treadmill: its root's mean horizontal velocity (first to last frame)
-    taken away from every frame, so the root stays in place, swaying, and the stance foot
-    slides back at that speed under it, as on a belt."""
+    """The walk on a treadmill (:func:`support.bvh_reference.in_place_copy`)."""
     path = MOCAP_DIR / name
     if not path.exists():
         pytest.skip(f"{path} not available")
-    text = path.read_text()
-    head, motion = text.split("MOTION", 1)
-    lines = motion.strip().splitlines()
-    first, last = lines[2].split(), lines[-1].split()
-    n = len(lines) - 2
-    rows = []
-    for k, line in enumerate(lines[2:]):
-        values = line.split()
-        for c in (6, 8):  # Hips' Xpos and Zpos
-            drift = (float(last[c]) - float(first[c])) * k / (n - 1)
-            values[c] = f"{float(values[c]) - drift:.4f}"
-        rows.append(" ".join(values))
-    copy = tmp_path / "walk_in_place.bvh"
-    copy.write_text(head + "MOTION\n" + "\n".join(lines[:2] + rows) + "\n")
-    return copy
+    return in_place_copy(path, tmp_path)
 
 
 def test_treadmill_stance_becomes_root_motion_and_the_foot_is_planted(tmp_path, capsys):

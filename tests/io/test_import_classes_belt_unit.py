@@ -19,6 +19,7 @@ from ecs_anim.io.c3d.importing import canonical_clip_c3d
 from ecs_anim.io.c3d.reading import read_c3d
 from ecs_anim.io.contacts import max_belt_speed, treadmill_belt
 from ecs_anim.io.importing import canonical_clip, import_bvh, normalize_clip
+from support.bvh_reference import in_place_copy
 
 # --- class 2: treadmill belts ------------------------------------------------------------------
 
@@ -46,27 +47,13 @@ def test_a_video_estimated_dance_gets_no_belt(tmp_path, capsys):
 
 
 def _in_place_walk(tmp_path, speedup: float):
-    """bandai_walk on a treadmill (its root's mean velocity taken away: the stance foot slides
-    back under a swaying root), played ``speedup`` times faster (its frame time divided)."""
+    """bandai_walk on a treadmill, played ``speedup`` times faster
+    (:func:`support.bvh_reference.in_place_copy`)."""
     require_mocap()
     path = MOCAP_DIR / "bandai_walk.bvh"
     if not path.exists():
         pytest.skip(f"{path} not available")
-    head, motion = path.read_text().split("MOTION", 1)
-    lines = motion.strip().splitlines()
-    first, last = lines[2].split(), lines[-1].split()
-    n = len(lines) - 2
-    rows = []
-    for k, line in enumerate(lines[2:]):
-        values = line.split()
-        for c in (6, 8):  # Hips' Xpos and Zpos
-            values[c] = f"{float(values[c]) - (float(last[c]) - float(first[c])) * k / (n - 1):.4f}"
-        rows.append(" ".join(values))
-    frame_time = float(lines[1].split()[-1]) / speedup
-    copy = tmp_path / f"walk_in_place_x{speedup:g}.bvh"
-    copy.write_text(head + "MOTION\n" + lines[0] + f"\nFrame Time: {frame_time:.6f}\n"
-                    + "\n".join(rows) + "\n")
-    return copy
+    return in_place_copy(path, tmp_path, speedup)
 
 
 def test_a_walk_too_fast_for_walking_gets_no_belt(tmp_path):

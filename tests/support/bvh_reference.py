@@ -8,6 +8,7 @@ round trip through the CLI, and numpy Euler angles for rewriting a file's channe
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 
@@ -121,3 +122,27 @@ def errors_m(info: dict, exported: np.ndarray, names: list[str], ref: np.ndarray
     mapped = {j: s for j, s in info["joints"].items() if s is not None and j not in info["filled_in"]}
     return {j: float(np.linalg.norm(exported[:, JOINT_INDEX[j]] - ref[:, names.index(s)],
                                     axis=-1).max()) for j, s in mapped.items()}
+
+
+def in_place_copy(source: Path, out_folder: Path, speedup: float = 1.0) -> Path:
+    """``source`` (a BVH whose root is its first joint, six channels, Xposition first) on a
+    treadmill: the root's mean horizontal velocity (first to last frame) taken away from every
+    frame, so the root stays in place, swaying, and the stance foot slides back under it as on a
+    belt; played ``speedup`` times faster (its frame time divided). Written to ``out_folder``."""
+    head, motion = source.read_text().split("MOTION", 1)
+    lines = motion.strip().splitlines()
+    first, last = lines[2].split(), lines[-1].split()
+    n = len(lines) - 2
+    rows = []
+    for k, line in enumerate(lines[2:]):
+        values = line.split()
+        for c in (6, 8):  # Hips' Xpos and Zpos
+            drift = (float(last[c]) - float(first[c])) * k / (n - 1)
+            values[c] = f"{float(values[c]) - drift:.4f}"
+        rows.append(" ".join(values))
+    frame_time = float(lines[1].split()[-1]) / speedup
+    stem = "walk_in_place" if speedup == 1.0 else f"walk_in_place_x{speedup:g}"
+    copy = out_folder / f"{stem}.bvh"
+    copy.write_text(head + "MOTION\n" + lines[0] + f"\nFrame Time: {frame_time:.6f}\n"
+                    + "\n".join(rows) + "\n")
+    return copy
