@@ -159,7 +159,7 @@ def load_nmo(path: str | Path) -> NormalizedMotion:
                 raise InputError(path, "not a readable .nmo file (damaged or truncated?): not a "
                                        "zip archive")
             hint = " (import it first: ecs-anim import FILE -o DIR)" \
-                if Path(path).suffix.lower() in (".bvh", ".c3d") else ""
+                if Path(path).suffix.lower() in (".bvh", ".c3d", ".fbx") else ""
             raise InputError(path, f"not an .nmo file{hint}")
     try:
         loaded = np.load(path, allow_pickle=False)

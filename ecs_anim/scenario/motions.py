@@ -35,6 +35,7 @@ def load_motion(r: YamlReader, node: Node, where: str, base_dir: Path,
 def read_motion(r: Fails, node: Node | None, where: str, path: Path,
                  rel: str) -> NormalizedMotion:
     from ecs_anim.io.c3d.importing import import_c3d
+    from ecs_anim.io.fbx import import_fbx
     from ecs_anim.io.importing import import_bvh
 
     try:
@@ -44,9 +45,11 @@ def read_motion(r: Fails, node: Node | None, where: str, path: Path,
             return import_bvh(path)
         if path.suffix.lower() == ".c3d":
             return import_c3d(path)
+        if path.suffix.lower() == ".fbx":
+            return import_fbx(path)  # its first take
     except EcsAnimError as exc:
         raise r.fail(node, where, f"cannot load motion: {exc}") from None
-    raise r.fail(node, where, f"expected a .bvh, .c3d or .nmo file, found {rel!r}")
+    raise r.fail(node, where, f"expected a .bvh, .c3d, .fbx or .nmo file, found {rel!r}")
 
 
 def fill_absent(r: YamlReader, motions: dict[str, NormalizedMotion], name: str, node: Node) -> None:

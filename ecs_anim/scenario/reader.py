@@ -201,6 +201,8 @@ def refuse_clip(path: Path) -> None:
         what, how = "a BVH clip", f"import it (ecs-anim import {name} -o motions/) or {where}"
     elif suffix == ".c3d" or (len(head) > 1 and head[0] < 0x20 and head[1] == 0x50):
         what, how = "a C3D capture", f"import it (ecs-anim import {name} -o motions/) or {where}"
+    elif suffix == ".fbx" or head.startswith(b"Kaydara FBX Binary") or head.startswith(b"; FBX"):
+        what, how = "an FBX scene", f"import it (ecs-anim import {name} -o motions/) or {where}"
     elif suffix == ".nmo":
         what, how = "an .nmo motion", where
     elif head.startswith(b"PK\x03\x04"):

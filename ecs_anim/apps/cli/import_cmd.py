@@ -1,4 +1,4 @@
-"""``ecs-anim import``: BVH and C3D files to normalized motions (.nmo), one line each."""
+"""``ecs-anim import``: BVH, C3D and FBX files to normalized motions (.nmo), one line each."""
 
 from __future__ import annotations
 
@@ -30,6 +30,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     """``ecs-anim import``: each source to ``-o DIR/<stem>.nmo``; a bad file fails alone
     (exit status :data:`~ecs_anim.apps.cli.args.EXIT_FAILED` when any did)."""
     from ecs_anim.io.c3d.importing import import_c3d
+    from ecs_anim.io.fbx import import_fbx
     from ecs_anim.io.importing import import_bvh
     from ecs_anim.motion.clip import save_nmo
 
@@ -54,6 +55,8 @@ def cmd_import(args: argparse.Namespace) -> int:
     if not any(s.suffix.lower() == ".c3d" for s in sources) and (
             args.fill_absent_from or args.max_gap is not None):
         raise EcsAnimError("--max-gap and --fill-absent-from are for .c3d files; none is given")
+    if args.take is not None and not any(s.suffix.lower() == ".fbx" for s in sources):
+        raise EcsAnimError("--take is for .fbx files; none is given")
     failed = 0
     show_bar = len(sources) > 1 and sys.stderr.isatty()
     stems: dict[str, Path] = {}
@@ -68,11 +71,11 @@ def cmd_import(args: argparse.Namespace) -> int:
                 raise EcsAnimError(f"{target}: already exists (use --force to overwrite)")
             suffix = src.suffix.lower()
             if src.is_dir():
-                raise EcsAnimError(f"{src}: a folder; give the .bvh or .c3d files in it "
+                raise EcsAnimError(f"{src}: a folder; give the .bvh, .c3d or .fbx files in it "
                                    f"(e.g. {src}/*.bvh)")
-            if suffix not in (".bvh", ".c3d"):
-                raise EcsAnimError(f"{src}: unsupported file type {src.suffix!r} (expected .bvh "
-                                   "or .c3d)")
+            if suffix not in (".bvh", ".c3d", ".fbx"):
+                raise EcsAnimError(f"{src}: unsupported file type {src.suffix!r} (expected .bvh, "
+                                   ".c3d or .fbx)")
             if suffix == ".c3d" and args.stature is not None:
                 raise EcsAnimError(f"{src}: --stature applies to BVH files (a C3D's markers are "
                                    "in the unit of POINT:UNITS)")
@@ -84,9 +87,13 @@ def cmd_import(args: argparse.Namespace) -> int:
             else:
                 if args.contacts == "events":
                     raise EcsAnimError(f"{src}: --contacts events needs a C3D file's gait events "
-                                       "(a BVH has none)")
-                motion = import_bvh(src, args.map, args.unit, thresholds, args.up, args.trim,
-                                    args.stature, not args.no_treadmill)
+                                       f"(a {suffix[1:].upper()} file has none)")
+                if suffix == ".fbx":
+                    motion = import_fbx(src, args.map, args.unit, thresholds, args.up, args.trim,
+                                        args.stature, not args.no_treadmill, args.take)
+                else:
+                    motion = import_bvh(src, args.map, args.unit, thresholds, args.up, args.trim,
+                                        args.stature, not args.no_treadmill)
                 for warning in motion.info.get("warnings", []):
                     print(f"warning: {warning}", file=sys.stderr)
             if args.face is not None:
@@ -113,6 +120,11 @@ def cmd_import(args: argparse.Namespace) -> int:
                        + (" (from the gait events)" if motion.info.get("contacts", {}).get("method")
                           == "gait events" else ""))
             message += _events_and_treadmill(motion.info)
+            if motion.info.get("fbx"):
+                message += f", take {motion.info['fbx']['take']!r}"
+                others = len(motion.info["fbx"]["takes"]) - 1
+                if others:
+                    message += f" (the file has {others} other{'s' * (others != 1)}: --take NAME)"
             if motion.info["filled_in"]:
                 message += f", filled in: {', '.join(motion.info['filled_in'])}"
             if motion.info.get("ignored_joints"):

@@ -264,11 +264,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True)
 
-    p = sub.add_parser("import", help="normalize captured clips (BVH, C3D) into .nmo files",
+    p = sub.add_parser("import", help="normalize captured clips (BVH, C3D, FBX) into .nmo files",
                        formatter_class=argparse.RawDescriptionHelpFormatter,
                        epilog="joint-name presets (BVH):\n" + preset_summary()
                        + "\nmarker sets (C3D):\n" + marker_set_summary())
-    p.add_argument("sources", nargs="+", metavar="SRC", help="BVH or C3D files")
+    p.add_argument("sources", nargs="+", metavar="SRC", help="BVH, C3D or FBX files")
     p.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="folder for .nmo files")
     p.add_argument("--map", metavar="PRESET|FILE.yaml", help="joint-name preset or YAML map "
                    "(BVH), marker-set preset or YAML marker map (C3D) (default: detect)")
@@ -291,6 +291,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "not; negative from the end; either may be left out, e.g. 1: drops a first "
                    "frame) or seconds with s (0.5s:12s). Without it a rest pose (T-pose) before "
                    "the motion is dropped, and said; 0: keeps it")
+    p.add_argument("--take", metavar="NAME",
+                   help="FBX: the animation stack (take) to import (default: the first; the "
+                   "import says which others the file has)")
     p.add_argument("--max-gap", type=positive_int, metavar="FRAMES",
                    help="C3D: longest run of missing marker samples filled without a warning "
                    f"(default: {DEFAULT_MAX_GAP_S:g} s at the file's rate, 10 at 100 Hz)")
