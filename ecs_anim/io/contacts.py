@@ -78,12 +78,19 @@ class ContactThresholds:
             raise UsageError(f"contact threshold release must be >= 1, got {self.release}")
 
 
-#: The automatic speed threshold: this fraction of the point's moving speed (90th percentile)...
+#: The automatic speed threshold: this fraction of the point's swing speed (its fastest within
+#: ``STRIDE_S`` either side) ...
 SPEED_OF_MOTION = 0.15
-#: ... kept between these many legs per second.
+STRIDE_S = 0.6
+#: ... kept between these many legs per second, the upper bound raised by that fraction of the
+#: swing speed above ``SPRINT_SWING_PER_LEG`` legs per second (a run faster than a jog: its
+#: stance foot rolls faster than a walker's slides).
 SPEED_PER_LEG = (0.4, 0.45)
+SPRINT_SWING_PER_LEG = 8.0
 #: A part's contact ends, whatever the hysteresis, above this many legs per second.
 RELEASE_PER_LEG = 0.55
+#: A leg that stays within this (m) of one pose relative to the pelvis is a fill, not a capture.
+RIGID_LEG_M = 0.0005
 #: Leg length (m) the height threshold is given for.
 REFERENCE_LEG_M = 0.8
 
@@ -224,6 +231,29 @@ def leg_of(positions: F64) -> float:
     return 0.5 * total
 
 
+def cycle_speed_limit(speed: F64, fps: float, leg: float) -> F64:
+    """The stillness threshold of each point at each frame, relative to its own cycle: the
+    stance is the slow phase of a stride, slow next to that stride's swing. -> (n_frames, K)
+    m/s.
+
+    ``speed`` (n_frames, K) m/s. :data:`SPEED_OF_MOTION` times the point's swing speed (its
+    fastest within :data:`STRIDE_S` seconds either side), kept within :data:`SPEED_PER_LEG`
+    legs per second, the upper bound raised for swings faster than
+    :data:`SPRINT_SWING_PER_LEG`: a sprint (swing over 15 m/s) keeps its short stances while
+    a walk keeps the walker's threshold, and a body standing or shuffling (no swing) the
+    floor's. The loop runs over offsets of the window, not frames."""
+    n = len(speed)
+    swing = speed.copy()
+    reach = min(n - 1, frames_of(STRIDE_S, fps)) if n else 0
+    step = max(1, reach // 60)
+    for offset in range(step, reach + 1, step):
+        swing[offset:] = np.maximum(swing[offset:], speed[:-offset])
+        swing[:-offset] = np.maximum(swing[:-offset], speed[offset:])
+    upper = SPEED_PER_LEG[1] * leg + SPEED_OF_MOTION * np.maximum(swing - SPRINT_SWING_PER_LEG * leg, 0.0)
+    limit: F64 = np.clip(SPEED_OF_MOTION * swing, SPEED_PER_LEG[0] * leg, upper)
+    return limit
+
+
 def detect_foot_contacts(positions: F64, fps: float,
                          thresholds: ContactThresholds = ContactThresholds()) -> FootContacts:
     """Heel, ball and whole-foot contacts from the foot's own stillness over any ground.
@@ -240,12 +270,9 @@ def detect_foot_contacts(positions: F64, fps: float,
     radius = th.ground_radius * leg
     v = horizontal_speed(points, fps, th.filter_s)  # rising or sinking, a low point stays put
     if th.speed_mps is not None:
-        limit = np.array([th.speed_mps, th.speed_mps])
+        limit4 = np.full(v.shape, float(th.speed_mps))
     else:
-        moving = np.array([np.percentile(v[:, :2], 90), np.percentile(v[:, 2:], 90)]) \
-            if len(v) else np.zeros(2)
-        limit = np.clip(SPEED_OF_MOTION * moving, SPEED_PER_LEG[0] * leg, SPEED_PER_LEG[1] * leg)
-    limit4 = np.repeat(limit, 2)
+        limit4 = cycle_speed_limit(v, fps, leg)
     still = v < limit4
     ground = np.concatenate([
         local_ground(points[:, :2], fps, th.ground_window_s, radius, still[:, :2]),
@@ -253,8 +280,8 @@ def detect_foot_contacts(positions: F64, fps: float,
     above = points[..., 2] - ground
     height = th.height_m * leg / REFERENCE_LEG_M
     enter = (above < height) & (v < limit4)
-    leave = (above > height * th.release) | (v > np.minimum(limit4 * th.release,
-                                                           RELEASE_PER_LEG * leg))
+    leave = (above > height * th.release) | (v > np.minimum(
+        limit4 * th.release, np.maximum(RELEASE_PER_LEG * leg, limit4)))
     # Hysteresis both ways in time: a contact starts where the point first drops under the
     # release thresholds before it is still, as it ends where it rises over them after.
     part = _clean(_hysteresis(enter, leave), fps, th)
@@ -262,9 +289,10 @@ def detect_foot_contacts(positions: F64, fps: float,
     heel, ball = part[:, :2], part[:, 2:]
     planted = _clean(heel | ball, fps, th)
     on_ground = touch_down_to_lift_off(points, planted, fps, leg, th)
+    limit = (float(np.median(limit4[:, :2])), float(np.median(limit4[:, 2:]))) if len(v) \
+        else (0.0, 0.0)
     return FootContacts(heel & planted & on_ground, ball & planted & on_ground,
-                        planted & on_ground, on_ground, (float(limit[0]), float(limit[1])),
-                        above, v)
+                        planted & on_ground, on_ground, limit, above, v)
 
 
 #: The heel point a touch-down is found on: this fraction of the ankle-to-toe vector behind the
@@ -373,19 +401,71 @@ def detect_contacts(positions: F64, fps: float,
 
 def contact_constraints(contact: NDArray[np.bool_], fps: float,
                         thresholds: ContactThresholds = ContactThresholds()) -> list[ConstraintSpec]:
-    """Foot-contact constraints, one per contact interval, weight 1 on every contact frame."""
+    """Foot-contact constraints, one per contact interval, weight 1 on every contact frame.
+
+    Each eases in and out over ``ease_s``, shortened where two contacts of one foot lie closer
+    than two ramps: each ramp takes at most half the gap, so one foot's activations, ramps
+    included, never overlap (the next starts no sooner than the previous stops)."""
     out: list[ConstraintSpec] = []
     duration = (contact.shape[0] - 1) / fps
     for side_i, side in enumerate("lr"):
-        for k, (a, b) in enumerate(true_runs(contact[:, side_i])):
+        runs = true_runs(contact[:, side_i])
+        for k, (a, b) in enumerate(runs):
             t0, t1 = a / fps, b / fps
-            ease_in = min(thresholds.ease_s, t0)
-            ease_out = min(thresholds.ease_s, duration - t1)
+            before = t0 - runs[k - 1][1] / fps if k > 0 else t0
+            after = runs[k + 1][0] / fps - t1 if k + 1 < len(runs) else duration - t1
+            ease_in = min(thresholds.ease_s, before if k == 0 else 0.5 * before)
+            ease_out = min(thresholds.ease_s, after if k + 1 == len(runs) else 0.5 * after)
             out.append(ConstraintSpec(
                 name=f"contact_{side}_{k}", kind="foot_contact", segment=f"ankle_{side}",
                 activation=Activation(t0 - ease_in, t1 + ease_out, ease_in, ease_out),
                 chain=(f"leg_{side}", "root"), priority=100, fraction=0.0,
             ))
+    return out
+
+
+def rolling_parts(heel: NDArray[np.bool_], ball: NDArray[np.bool_], foot: NDArray[np.bool_]
+                  ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """Heel and ball planted as a rolling foot plants them, within each contact of ``foot``:
+    each part planted over one interval (from its first planted frame to its last), the heel
+    lifting no later than the ball, and, where both are planted in a contact, at least one
+    frame with both (flat) between heel-only and ball-only frames (the heel held until the
+    ball lands). All bool (n_frames, 2). -> (heel, ball)."""
+    heel_out = np.zeros_like(heel)
+    ball_out = np.zeros_like(ball)
+    for side in range(foot.shape[1]):
+        for a, b in true_runs(foot[:, side]):
+            h = np.flatnonzero(heel[a:b + 1, side]) + a
+            k = np.flatnonzero(ball[a:b + 1, side]) + a
+            if len(h) and len(k):
+                h0, h1, k0, k1 = int(h[0]), int(h[-1]), int(k[0]), int(k[-1])
+                h1 = min(max(h1, k0), k1)  # held until the ball lands, lifted before it
+                h0 = min(h0, h1)
+                heel_out[h0:h1 + 1, side] = True
+                ball_out[k0:k1 + 1, side] = True
+            elif len(h):
+                heel_out[int(h[0]):int(h[-1]) + 1, side] = True
+            elif len(k):
+                ball_out[int(k[0]):int(k[-1]) + 1, side] = True
+    return heel_out, ball_out
+
+
+def rigid_legs(positions: F64, pelvis2world: F64, tolerance_m: float = RIGID_LEG_M
+               ) -> NDArray[np.bool_]:
+    """Which legs (left, right) never move in the pelvis's frame: knee, ankle and toe within
+    ``tolerance_m`` of one place relative to the pelvis over the whole clip, as a leg the
+    source filled in a neutral pose holds them. -> bool (2,). A captured leg, even standing,
+    moves by more (sway, breathing). ``positions`` (n_frames, N_JOINTS, 3),
+    ``pelvis2world`` (n_frames, 3, 3)."""
+    out = np.zeros(2, dtype=bool)
+    if len(positions) < 2:
+        return out
+    pelvis = positions[:, J["pelvis"]]
+    for i, s in enumerate("lr"):
+        joints = positions[:, [J[f"knee_{s}"], J[f"ankle_{s}"], J[f"toe_{s}"]]] - pelvis[:, None]
+        local = np.einsum("fji,fkj->fki", pelvis2world, joints)  # world -> pelvis frame
+        spread = np.linalg.norm(local - np.median(local, axis=0), axis=-1).max()
+        out[i] = bool(spread < tolerance_m)
     return out
 
 

@@ -34,6 +34,7 @@ from ecs_anim.io.contacts import (
     contacts_from_events,
     detect_foot_contacts,
     leg_of,
+    rigid_legs,
     treadmill_belt,
 )
 from ecs_anim.io.joint_map import JointMap, map_skeleton, unused_joints
@@ -785,16 +786,18 @@ def normalize_clip(clip: CanonicalClip, name: str, source: str,
                                "with foot strikes and foot offs)")
         foot = on_ground = contacts_from_events(strikes, len(clip.positions), clip.fps)
         contact_info["method"] = "gait events"
-    # No contact on a foot the source does not measure (a leg filled in a neutral pose): its
-    # stillness is the fill's, not a stance, and nothing can be checked against it.
-    unmeasured = ~clip.measured[[J["ankle_l"], J["ankle_r"]]]
+    # No contact on a foot the source does not measure (a leg filled in a neutral pose, by us
+    # or by the source: a leg that never moves in the pelvis's frame): its stillness is the
+    # fill's, not a stance, and nothing can be checked against it.
+    unmeasured = ~clip.measured[[J["ankle_l"], J["ankle_r"]]] \
+        | rigid_legs(clip.positions, clip.pelvis2world)
     if unmeasured.any():
         foot, on_ground = foot & ~unmeasured, on_ground & ~unmeasured
         contact_info["not_measured"] = [side for side, gone in zip(("left", "right"), unmeasured,
                                                                    strict=True) if gone]
     constraints = contact_constraints(foot, clip.fps, thresholds)
-    planted = {"heel": found.heel & foot, "ball": found.ball & foot, "foot": foot,
-               "on_ground": on_ground}
+    heel, ball = found.heel & foot, found.ball & foot
+    planted = {"heel": heel, "ball": ball, "foot": foot, "on_ground": on_ground}
     info = {
         "source": source,
         "joint_map": clip.joint_map.how,
@@ -826,8 +829,10 @@ def event_agreement(foot: NDArray[np.bool_], events: list[dict[str, Any]], fps: 
                     ) -> dict[str, Any]:
     """How far the detected contacts' edges lie from the file's gait events: for each event
     (``{"side", "kind", "time_s"}``, clip seconds), the nearest touch-down (strike) or lift-off
-    (off) of that foot, signed (detected minus event, ms). Events within the shortest contact
-    of the clip's ends cannot show an edge and are counted apart (``at_clip_ends``)."""
+    (off) of that foot, signed (detected minus event, ms), and the mean and worst of their
+    sizes (``mean_ms``, ``worst_ms``; None where an event has no edge of its kind). Events
+    within the shortest contact of the clip's ends cannot show an edge and are counted apart
+    (``at_clip_ends``)."""
     from ecs_anim.io.contacts import true_runs
 
     n = len(foot)
@@ -849,8 +854,9 @@ def event_agreement(foot: NDArray[np.bool_], events: list[dict[str, Any]], fps: 
             errors.append({"side": side, "kind": e["kind"], "time_s": round(e["time_s"], 4),
                            "error_ms": round(1000 * diff, 1) if math.isfinite(diff) else None})
     finite = [abs(x["error_ms"]) for x in errors if x["error_ms"] is not None]
-    return {"events": errors, "worst_ms": max(finite) if len(finite) == len(errors) and finite
-            else None, "at_clip_ends": at_ends}
+    complete = bool(finite) and len(finite) == len(errors)
+    return {"events": errors, "mean_ms": round(sum(finite) / len(finite), 1) if complete else None,
+            "worst_ms": max(finite) if complete else None, "at_clip_ends": at_ends}
 
 
 #: Events closer than this to a clip's ends are not compared (no contact edge can show there).

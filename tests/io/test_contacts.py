@@ -49,7 +49,7 @@ WALKS = {
 #: first). (The c3d.org walk, very slow, had its right foot planted 85.5 % of the time until
 #: the plant ended at the foot's lift-off.)
 OPEN = {
-    "varied/cmudaz_03_01_uneven_terrain.bvh": {"median": 0.211, "both_up": 0.1181},
+    "varied/cmudaz_03_01_uneven_terrain.bvh": {"median": 0.212, "both_up": 0.1181},
     "varied/cmudaz_03_02_uneven_terrain.bvh": {"both_up": 0.0499},
 }
 SHARE, MEDIAN_MPS, MAX_MPS = (0.30, 0.85), 0.15, 0.5

@@ -47,6 +47,9 @@ PEAK_OVER_NOISE = 20.0
 #: never unloaded: labs zero their plates before a trial, and an amplifier's offset stays well
 #: under a body's weight.
 ZERO_SHARE = 1.0
+#: A loaded span is a foot's step only when its load reaches this share of the plate's peak: a
+#: plate measurably loaded and unloaded, not a knock, a toe's graze or a standing body's sway.
+STEP_SHARE = 0.2
 #: Contacts shorter than this (s) are dropped (a knock); gaps shorter than this (s) are closed.
 MIN_CONTACT_S = 0.1
 MIN_GAP_S = 0.02
@@ -163,7 +166,8 @@ def unloaded_level(signal: F64, rate: float) -> tuple[float, float]:
 
     The signal is cut into 20 ms pieces; the unloaded ones sit at one end of its range (a load
     pushes it one way) and are the quiet majority there: of the two ends, the one more pieces
-    lie near (within a tenth of the range), then the median of those pieces."""
+    lie near (within a tenth of the range), unless only one of them lies at zero (labs zero
+    their plates), then the median of those pieces."""
     width = max(1, round(0.02 * rate))
     n = len(signal) // width
     if n == 0:
@@ -174,6 +178,12 @@ def unloaded_level(signal: F64, rate: float) -> tuple[float, float]:
     near = 0.1 * (high - low)
     at_low, at_high = level <= low + near, level >= high - near
     quiet = at_low if at_low.sum() >= at_high.sum() else at_high
+    # Labs zero their plates: where exactly one end lies at zero (within a tenth of the range),
+    # that is the unloaded one, however long a body stood loading the plate (a standing trial
+    # has more loaded pieces than unloaded ones).
+    zero_low, zero_high = abs(low) <= near, abs(high) <= near
+    if zero_low != zero_high:
+        quiet = at_low if zero_low else at_high
     noise = float(np.median(pieces[quiet].std(axis=1)))
     return float(np.median(level[quiet])), noise
 
@@ -194,7 +204,8 @@ class LoadedSpan:
 def loaded_spans(plate: ForcePlate) -> tuple[list[LoadedSpan], str]:
     """Each span the plate is loaded (:data:`LOAD_SHARE`, :data:`LOAD_OVER_NOISE`,
     :data:`PEAK_OVER_NOISE`), gaps under
-    :data:`MIN_GAP_S` closed, spans under :data:`MIN_CONTACT_S` dropped. -> (spans, why there
+    :data:`MIN_GAP_S` closed, spans under :data:`MIN_CONTACT_S` or whose load stays under
+    :data:`STEP_SHARE` of the plate's peak dropped. -> (spans, why there
     are none: '' when the plate was simply never stepped on).
 
     A plate whose unloaded level lies further from zero than its peak load
@@ -226,7 +237,8 @@ def loaded_spans(plate: ForcePlate) -> tuple[list[LoadedSpan], str]:
 
     return [LoadedSpan(a, b, a > 0 and measured(a, a - 1),
                        b < last_sample and measured(b, b + 1))
-            for a, b in merged if (b - a + 1) >= MIN_CONTACT_S * plate.rate], ""
+            for a, b in merged if (b - a + 1) >= MIN_CONTACT_S * plate.rate
+            and load[a:b + 1].max() >= STEP_SHARE * peak], ""
 
 
 def _inside(points_xy: F64, outline_xy: F64, margin: float) -> NDArray[np.bool_]:
@@ -295,9 +307,14 @@ def plate_contacts(plates: list[ForcePlate], plate2clip: F64, positions: F64, fp
 
 def plate_edges(contacts: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """The plates' measured touch-downs and lift-offs (``touch_down``, ``lift_off``) as gait
-    events (``{"side", "kind", "time_s"}``)."""
+    events (``{"side", "kind", "time_s"}``), on the plates measurably loaded and unloaded: with
+    a step whose touch-down and lift-off are both measured. A plate a body stepped on and stood
+    on to the end (a standing trial) has no step to check against."""
+    stepped = {c["plate"] for c in contacts if c["touch_down"] and c["lift_off"]}
     events: list[dict[str, Any]] = []
     for c in contacts:
+        if c["plate"] not in stepped:
+            continue
         if c["touch_down"]:
             events.append({"side": c["side"], "kind": "strike", "time_s": c["on_s"]})
         if c["lift_off"]:
