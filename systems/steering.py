@@ -10,9 +10,11 @@ Reads: store.steer_mode, steer_heading_rad, steer_speed_m_s, path_xy, path_len, 
 path_progress_m, gait, gait_clip, clip, clip_time_s, loop, speed, fade_s, fade_elapsed_s,
 fade_keeps_contacts, fade_clip, fade_time_s, fade_loop, fade_placement_xy,
 fade_placement_heading, placement_xy, placement_heading, lengths, and the last tick's
-contact_weight, locked, footprint; the clip bank.
+contact_weight, locked, footprint; entity (against the entities switched off by
+``Simulation.set_avoidance``); the clip bank.
 Writes: steer_mode, steer_heading_rad, steer_speed_m_s (a path's end: stopped),
-path_progress_m, gait, speed (the playback rate), and starting a gait's clip: clip,
+path_progress_m, gait, speed (the playback rate, after local avoidance: ORCA between the
+steered characters), and starting a gait's clip: clip,
 clip_time_s, loop, fade_clip, fade_time_s, fade_loop, fade_s, fade_elapsed_s,
 fade_keeps_contacts, fade_speed, placement_xy, placement_heading, fade_placement_xy,
 fade_placement_heading, locked.
@@ -33,11 +35,11 @@ class Steering(System):
              "speed", "fade_s", "fade_elapsed_s", "fade_keeps_contacts", "fade_clip",
              "fade_time_s", "fade_loop", "fade_placement_xy", "fade_placement_heading",
              "placement_xy", "placement_heading", "lengths", "contact_weight", "locked",
-             "footprint")
+             "footprint", "entity")
     writes = ("steer_mode", "steer_heading_rad", "steer_speed_m_s", "path_progress_m", "gait",
               "speed", *CLIP_START_WRITES)
 
     def run(self, dt: float) -> None:
         sim = self.sim
         steer(sim.store, sim.bank, sim.gait_table(), sim.steering_settings, dt,
-              None if self.all_rows() else self.in_rows())
+              None if self.all_rows() else self.in_rows(), sim.not_avoiding())

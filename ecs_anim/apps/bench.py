@@ -7,7 +7,11 @@ wall time and to the CPU time per tick; each process also reports its peak memor
 empty kernel cache (numba compiles every kernel), one with that cache filled (numba loads
 them), each from the interpreter's start to the end of its first tick.
 
-``python -m ecs_anim.apps.bench size N ...`` and ``... first-tick`` are those child processes.
+One more child times local avoidance alone (:func:`time_avoidance`: µs of CPU per agent per
+tick at 2,000 walkers).
+
+``python -m ecs_anim.apps.bench size N ...``, ``... first-tick`` and ``... avoidance`` are those
+child processes.
 """
 
 from __future__ import annotations
@@ -94,6 +98,44 @@ def time_size(n: int, seconds: float, rotations: bool = False,
                             "characters_cut_per_tick": cut_characters / ticks,
                             "ticks_cut": ticks_cut}
     return result
+
+
+#: Agents of the avoidance kernel's figure, and its ticks timed.
+AVOIDANCE_AGENTS = 2000
+AVOIDANCE_TICKS = 60
+
+
+def time_avoidance(n: int = AVOIDANCE_AGENTS, ticks: int = AVOIDANCE_TICKS,
+                   seed: int = 32) -> dict[str, Any]:
+    """CPU time (``process_time``) of local avoidance (ORCA: the grid and every agent's linear
+    program, :func:`ecs_anim.runtime.kernels.avoidance.orca_velocities`) over ``n`` walkers,
+    µs per agent per tick: walkers of the default radii and steering settings, 0.5 a square
+    metre, each heading for a random point across the square at 1.4 m/s and moved by the
+    velocity it chose, ``ticks`` ticks at 30 Hz after one untimed (compile or load)."""
+    from ecs_anim.runtime.kernels.avoidance import orca_velocities
+    from ecs_anim.runtime.steering import DEFAULT_STEERING as S
+
+    rng = np.random.default_rng(seed)
+    side = float(np.sqrt(n / 0.5))
+    position = rng.uniform(0.0, side, (n, 2))
+    goal = rng.uniform(0.0, side, (n, 2))
+    radius = rng.uniform(0.22, 0.33, n)
+    max_speed = np.full(n, 1.4)
+    velocity = np.zeros((n, 2))
+    active = np.ones(n, bool)
+    cpu = 0.0
+    for tick in range(ticks + 1):
+        to_goal = goal - position
+        preferred = to_goal * (1.4 / np.maximum(np.linalg.norm(to_goal, axis=1), 1e-9))[:, None]
+        c0 = time.process_time()
+        velocity = orca_velocities(position, velocity, preferred, radius, max_speed, active,
+                                   range_m=S.avoid_neighbour_m,
+                                   time_horizon_s=S.avoid_time_horizon_s,
+                                   max_neighbours=S.avoid_neighbours, dt=1.0 / 30.0)
+        if tick:
+            cpu += time.process_time() - c0
+        position += velocity / 30.0
+    return {"agents": n, "ticks": ticks, "us_per_agent_per_tick": cpu / ticks / n * 1e6}
 
 
 def budget_capacity(budget_ms: float, runs: list[dict[str, Any]]) -> dict[str, Any]:
@@ -237,6 +279,7 @@ def bench_pipeline(args: argparse.Namespace) -> dict[str, Any]:
     runs = [json.loads(_run_child(["size", str(size), "--seconds", repr(args.seconds),
                                    "--threads", str(threads), *flags]))
             for size in sizes]
+    avoidance = json.loads(_run_child(["avoidance", "--threads", str(threads)]))
     largest = runs[-1]
     wall = capacity_fit(sizes, [r["wall_ms_per_tick"] for r in runs])
     cpu = capacity_fit(sizes, [r["cpu_ms_per_tick"] for r in runs])
@@ -270,6 +313,8 @@ def bench_pipeline(args: argparse.Namespace) -> dict[str, Any]:
         "compile": compiled,
         "kernel_cache": str(kernels.cache_dir()),
         "budget": None if budget_ms is None else budget_capacity(budget_ms, runs),
+        "avoidance_us_per_agent_per_tick": round(avoidance["us_per_agent_per_tick"], 3),
+        "avoidance_agents": avoidance["agents"],
     }
 
 
@@ -307,6 +352,9 @@ def cmd_bench_pipeline(args: argparse.Namespace) -> int:
     print(f"  peak memory {result['peak_memory_mb']:.0f} MB at {n}: "
           f"{result['peak_memory_kb_per_character']:.1f} kB per character + "
           f"{result['peak_memory_mb_fixed']:.0f} MB")
+    print(f"  local avoidance (ORCA, grid + linear programs): "
+          f"{result['avoidance_us_per_agent_per_tick']:.2f} us CPU per agent per tick at "
+          f"{result['avoidance_agents']} agents")
     budget = result["budget"]
     if budget is not None:
         print(f"  frame budget {budget['budget_ms']:g} ms (the solver cuts iterations to hold it):")
@@ -445,13 +493,14 @@ def cmd_bench(args: argparse.Namespace) -> int:
 def child_main(argv: list[str] | None = None) -> int:
     """``size N [--seconds S] [--threads T] [--rotations] [--constrained] [--budget-ms MS]``:
     time one size and print JSON; ``first-tick [--threads T]``: print :data:`FIRST_TICK_DONE`
-    and the phases' seconds as soon as the first tick is done."""
+    and the phases' seconds as soon as the first tick is done; ``avoidance [--threads T]``:
+    :func:`time_avoidance` as JSON."""
     from ecs_anim.runtime import kernels
     from ecs_anim.runtime.allocator import keep_freed_memory
 
     keep_freed_memory()  # as the command line does: the tick's arrays reuse freed memory
     parser = argparse.ArgumentParser(prog="python -m ecs_anim.apps.bench")
-    parser.add_argument("what", choices=["size", "first-tick"])
+    parser.add_argument("what", choices=["size", "first-tick", "avoidance"])
     parser.add_argument("characters", nargs="?", type=int, default=8)
     parser.add_argument("--seconds", type=float, default=1.0)
     parser.add_argument("--threads", type=int, default=1)
@@ -464,6 +513,9 @@ def child_main(argv: list[str] | None = None) -> int:
         print(FIRST_TICK_DONE + json.dumps(phases), flush=True)
         return 0
     kernels.set_threads(args.threads)
+    if args.what == "avoidance":
+        print(json.dumps(time_avoidance()))
+        return 0
     print(json.dumps(time_size(args.characters, args.seconds, args.rotations,
                                args.constrained, args.budget_ms)))
     return 0

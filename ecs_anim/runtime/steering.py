@@ -31,7 +31,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.core.morphology import leg_length
+from ecs_anim.core.skeleton import LENGTH_INDEX
 from ecs_anim.motion.sampling import ClipBank, frame_position, loop_transform, rotate_xy, wrap_angle
+from ecs_anim.runtime.kernels.avoidance import orca_velocities
 from ecs_anim.runtime.playback_queue import start_clips
 from ecs_anim.runtime.store import CharacterStore
 
@@ -43,6 +45,7 @@ STEER_OFF, STEER_HEADING, STEER_PATH = 0, 1, 2
 #: ``store.gait`` and the columns of ``store.gait_clip``.
 GAITS = ("idle", "walk", "run")
 IDLE, WALK, RUN = 0, 1, 2
+CLAVICLE_L, CLAVICLE_R = LENGTH_INDEX["clavicle_l"], LENGTH_INDEX["clavicle_r"]
 
 
 @dataclass(frozen=True)
@@ -62,6 +65,16 @@ class SteeringSettings:
         footprint over this time (s), not at once.
     run_hysteresis : a run goes back to a walk only below ``rate_max - run_hysteresis`` of the
         walk's own speed (no switching back and forth at the threshold).
+    avoidance : steered characters avoid each other (ORCA, :func:`avoid`); False: none does
+        (one character is switched off by ``Simulation.set_avoidance``).
+    avoid_margin_m : a walker's avoidance radius is its shoulder half-width (its clavicle's
+        length: the neck base to the shoulder joint's centre) plus this margin (the arm's flesh
+        and swing, the pelvis's sway) (m).
+    avoid_time_horizon_s : collisions within this time are avoided (s).
+    avoid_neighbours : at most this many nearest walkers are avoided by each.
+    avoid_neighbour_m : walkers farther than this are not looked at (m).
+    avoid_cone_rad : a walker with neighbours keeps to velocities within this angle of the
+        way it goes (at most pi / 2 limits it; the default pi: any, as ORCA).
     """
 
     rate_min: float = 0.5
@@ -75,6 +88,12 @@ class SteeringSettings:
     gait_fade_s: float = 0.4
     contact_release_s: float = 0.15
     run_hysteresis: float = 0.15
+    avoidance: bool = True
+    avoid_margin_m: float = 0.1
+    avoid_time_horizon_s: float = 2.0
+    avoid_neighbours: int = 10
+    avoid_neighbour_m: float = 5.0
+    avoid_cone_rad: float = float(np.pi)
 
 
 DEFAULT_STEERING = SteeringSettings()
@@ -217,7 +236,8 @@ def _point_at(path: F64, cum_m: F64, rows: I64, count: I64, arc_m: F64) -> F64:
 
 
 def steer(st: CharacterStore, bank: ClipBank, gaits: GaitTable, settings: SteeringSettings,
-          dt: float, playing: NDArray[np.bool_] | None = None) -> None:
+          dt: float, playing: NDArray[np.bool_] | None = None,
+          not_avoiding: I64 | None = None) -> None:
     """One tick of steering for every steered character (``store.steer_mode > 0``), all at once:
     path progress and the heading and speed wanted, the clip of the locomotion set to play (a
     cross-fade started at matching foot phases), the playback rate, and the turn of the
@@ -229,7 +249,8 @@ def steer(st: CharacterStore, bank: ClipBank, gaits: GaitTable, settings: Steeri
     gait, speed, placement_*, fade_placement_* (also :func:`carry_fading_roots`), and through
     :func:`~ecs_anim.runtime.playback_queue.start_clips` the fade and clip fields.
     ``playing`` (n,) bool: the characters MotionPlayback plays (None: all); the others are not
-    steered.
+    steered. With ``settings.avoidance`` the heading and speed wanted are then those of
+    :func:`avoid`, but for the entities ``not_avoiding`` (entity ids).
     """
     carry_fading_roots(st, bank, playing)
     steered = st.steer_mode > STEER_OFF
@@ -274,6 +295,9 @@ def steer(st: CharacterStore, bank: ClipBank, gaits: GaitTable, settings: Steeri
             st.steer_heading_rad[done] = travel[on_path][arrived]
             wanted_heading[np.flatnonzero(on_path)[arrived]] = travel[on_path][arrived]
             wanted_speed[np.flatnonzero(on_path)[arrived]] = 0.0
+    if settings.avoidance:
+        wanted_heading, wanted_speed = avoid(st, settings, rows, here, travel, speed_now,
+                                             wanted_heading, wanted_speed, not_avoiding, dt)
     error = wrap_angle(wanted_heading - travel)
     behind = (np.abs(error) > settings.behind_rad) & (wanted_speed > 0.0)
     # The slowest steps while turning on the spot.
@@ -300,6 +324,47 @@ def steer(st: CharacterStore, bank: ClipBank, gaits: GaitTable, settings: Steeri
     turn = np.where(moving, turn_rate * dt, 0.0)
     turn = np.sign(turn) * np.minimum(np.abs(turn), np.abs(error))
     _turn_placements(st, rows, turn, here)
+
+
+def avoidance_radius(lengths: F64, settings: SteeringSettings) -> F64:
+    """Each body's avoidance radius (m): its shoulder half-width (the mean of its clavicles'
+    lengths, neck base to shoulder joint centre) plus ``settings.avoid_margin_m``.
+    ``lengths`` (..., N_LENGTHS) m -> (...)."""
+    shoulder: F64 = 0.5 * (lengths[..., CLAVICLE_L] + lengths[..., CLAVICLE_R])
+    return shoulder + settings.avoid_margin_m
+
+
+def avoid(st: CharacterStore, settings: SteeringSettings, rows: I64, here: F64, travel: F64,
+          speed_now: F64, wanted_heading: F64, wanted_speed: F64, not_avoiding: I64 | None,
+          dt: float) -> tuple[F64, F64]:
+    """Local avoidance between the steered characters ``rows`` (r,): the heading (rad) and speed
+    (m/s) (each (r,)) that keep them apart, by ORCA
+    (:func:`ecs_anim.runtime.kernels.avoidance.orca_velocities`) over all of them at once.
+
+    Each is an agent at its motion's root ``here`` (r, 2) m, moving at ``speed_now`` along
+    ``travel`` (r,), that would go at ``wanted_speed`` along ``wanted_heading`` (its path's pure
+    pursuit, or the heading and speed given), no faster, with the radius of
+    :func:`avoidance_radius`. A character asked to stand (speed 0: at its path's end) or among
+    the entities ``not_avoiding`` keeps what it wanted and is avoided by the others in full."""
+    heading_unit = np.stack([np.cos(wanted_heading), np.sin(wanted_heading)], axis=1)
+    travel_unit = np.stack([np.cos(travel), np.sin(travel)], axis=1)
+    active = wanted_speed > 0.0
+    if not_avoiding is not None and not_avoiding.size:
+        active &= ~np.isin(st.entity[rows], not_avoiding)
+    velocity = orca_velocities(
+        here, speed_now[:, None] * travel_unit, wanted_speed[:, None] * heading_unit,
+        avoidance_radius(st.lengths[rows], settings), wanted_speed, active,
+        range_m=settings.avoid_neighbour_m, time_horizon_s=settings.avoid_time_horizon_s,
+        max_neighbours=settings.avoid_neighbours, dt=dt, facing=travel_unit,
+        cone_rad=settings.avoid_cone_rad)
+    speed = np.hypot(velocity[:, 0], velocity[:, 1])
+    heading = np.where(speed > 1e-6, np.arctan2(velocity[:, 1], velocity[:, 0]), wanted_heading)
+    # A velocity behind it (away from a walker too close) would be turned to on the spot with
+    # steps forward, into the other: it waits instead (unless its own way is behind it).
+    behind = ((np.abs(wrap_angle(heading - travel)) > settings.behind_rad)
+              & (np.abs(wrap_angle(wanted_heading - travel)) <= settings.behind_rad))
+    speed = np.where(behind, 0.0, speed)
+    return np.where(active, heading, wanted_heading), np.where(active, speed, wanted_speed)
 
 
 def _choose_gaits(st: CharacterStore, bank: ClipBank, gaits: GaitTable,

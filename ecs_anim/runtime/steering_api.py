@@ -39,6 +39,8 @@ class SteeringCalls:
     """Mixed into :class:`~ecs_anim.runtime.simulation.Simulation`: the steering API."""
 
     _gaits: tuple[ClipBank, GaitTable] | None = None
+    #: Entities that do not avoid the others (:meth:`set_avoidance`); replaced, not mutated.
+    _not_avoiding: frozenset[int] = frozenset()
 
     def gait_table(self) -> GaitTable:
         """Each loaded clip's travel direction, own speed and foot phases (made once)."""
@@ -167,6 +169,29 @@ class SteeringCalls:
         spot first)."""
         goal = real_array(goal_in_world, (None,), "walk_to: goal_in_world")
         self.follow_path(entity, goal[None], speed_m_s)
+
+    def set_avoidance(self, entity: int, on: bool) -> None:
+        """Whether a steered character avoids the other steered characters (local avoidance,
+        ORCA: docs/steering.md; on by default, for every character, while
+        ``steering_settings.avoidance`` is True). A character switched off keeps to its path or
+        heading and speed, and the others avoid it in full."""
+        sim = cast("Simulation", self)
+        sim.row(entity)
+        if not isinstance(on, (bool, np.bool_)):
+            raise UsageError(f"set_avoidance: on: expected true or false, got "
+                             f"{type(on).__name__} {quoted(repr(on))}")
+        self._not_avoiding = (self._not_avoiding - {entity}) if on else (
+            self._not_avoiding | {entity})
+
+    def avoids(self, entity: int) -> bool:
+        """Whether a character avoids the others when steered (:meth:`set_avoidance`)."""
+        sim = cast("Simulation", self)
+        sim.row(entity)
+        return sim.steering_settings.avoidance and entity not in self._not_avoiding
+
+    def not_avoiding(self) -> np.ndarray:
+        """(k,) int64: the entities switched off by :meth:`set_avoidance`, sorted."""
+        return np.array(sorted(self._not_avoiding), np.int64)
 
     def arrived(self, entity: int) -> bool:
         """Whether a character given a path or goal has reached its end (or was never given

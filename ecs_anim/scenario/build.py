@@ -17,6 +17,8 @@ def apply_steering(sim: Simulation, entity: int, spec: SteeringSpec, heading_rad
     motion, or walks on at its own speed if it has none)."""
     loco = spec.locomotion
     sim.set_locomotion(entity, loco["walk"], loco.get("idle"), loco.get("run"))
+    if not spec.avoid:
+        sim.set_avoidance(entity, False)
     if spec.path_m:
         sim.follow_path(entity, spec.path_m, spec.speed_m_s)
     elif spec.speed_m_s is not None or "idle" not in loco:

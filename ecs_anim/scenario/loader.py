@@ -45,8 +45,8 @@ CHARACTER_KEYS = {"name": True, "morphology": True, "motion": False, "position_m
                   "heading_deg": False, "speed": False, "loop": False, "start_s": False,
                   "then": False, "team": False, "constraints": False, "com_control": False,
                   "com_target_m": False, "locomotion": False, "path_m": False,
-                  "speed_m_s": False}
-STEERING_KEYS = ("locomotion", "path_m", "speed_m_s")
+                  "speed_m_s": False, "avoid": False}
+STEERING_KEYS = ("locomotion", "path_m", "speed_m_s", "avoid")
 
 
 def _travels(motion: NormalizedMotion) -> bool:
@@ -57,7 +57,8 @@ def _travels(motion: NormalizedMotion) -> bool:
 
 def _steering(r: YamlReader, keys: dict[str, Node], where: str, motions: dict[str, NormalizedMotion],
               start_m: tuple[float, float]) -> SteeringSpec | None:
-    """A character's ``locomotion``, ``path_m`` and ``speed_m_s`` (None: none of them)."""
+    """A character's ``locomotion``, ``path_m``, ``speed_m_s`` and ``avoid`` (None: none of
+    them)."""
     if not any(k in keys for k in STEERING_KEYS):
         return None
     if "locomotion" not in keys:
@@ -92,7 +93,8 @@ def _steering(r: YamlReader, keys: dict[str, Node], where: str, motions: dict[st
                          "idle motion at the end: add idle: MOTION")
     speed = (r.number(keys["speed_m_s"], f"{where}.speed_m_s", 0.0, 20.0, "m/s")
              if "speed_m_s" in keys else None)
-    return SteeringSpec(locomotion, tuple(path), speed)
+    avoid = r.boolean(keys["avoid"], f"{where}.avoid") if "avoid" in keys else True
+    return SteeringSpec(locomotion, tuple(path), speed, avoid)
 
 
 def _constraint(r: YamlReader, node: Node, where: str, in_motion: bool = False,

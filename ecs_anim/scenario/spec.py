@@ -68,11 +68,13 @@ class SteeringSpec:
     """A character's locomotion set and steering from the scenario (docs/steering.md):
     ``locomotion`` gait -> motion name (``walk`` always, ``idle`` and ``run`` if given),
     ``path_m`` waypoints (x, y) metres walked in order (empty: none), ``speed_m_s`` the speed
-    asked for (None: the walk's own)."""
+    asked for (None: the walk's own), ``avoid`` whether it avoids the other steered
+    characters (local avoidance, ORCA)."""
 
     locomotion: dict[str, str]
     path_m: tuple[tuple[float, float], ...] = ()
     speed_m_s: float | None = None
+    avoid: bool = True
 
 
 @dataclass

@@ -40,6 +40,18 @@ def compile_solver() -> None:
           np.zeros((0, len(MASS_SEGMENTS))), decoded=decoded_pose(empty_decoded(0)))
 
 
+def compile_avoidance() -> None:
+    """Compile :mod:`ecs_anim.runtime.kernels.avoidance` (into the cache) on two walkers."""
+    import numpy as np
+
+    from ecs_anim.runtime.kernels.avoidance import orca_velocities
+
+    two = np.array([[0.0, 0.0], [1.0, 0.0]])
+    orca_velocities(two, np.zeros((2, 2)), np.array([[1.0, 0.0], [-1.0, 0.0]]), np.full(2, 0.3),
+                    np.ones(2), np.ones(2, bool), range_m=5.0, time_horizon_s=2.0,
+                    max_neighbours=10, dt=1.0 / 30.0)
+
+
 def main() -> int:
     if sys.argv[1:] == ["--solver"]:
         compile_solver()
@@ -51,6 +63,7 @@ def main() -> int:
     from ecs_anim.runtime.bench_scene import first_tick
 
     phases = first_tick()
+    compile_avoidance()  # the bench scene steers nobody
     spins_per_second()  # the threads' hand-over too (a tick on one thread does not compile it)
     print(f"kernels ready in {time.perf_counter() - start:.1f} s ({'compiled' if notice else 'loaded'}; "
           f"import {phases['import_s']:.1f} s, first tick {phases['first_tick_s']:.1f} s), "

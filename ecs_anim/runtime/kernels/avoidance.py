@@ -1,0 +1,364 @@
+"""Local avoidance between walkers, compiled: optimal reciprocal collision avoidance (ORCA).
+
+van den Berg, Guy, Lin, Manocha 2011, "Reciprocal n-body collision avoidance": each agent,
+given its neighbours' positions and velocities, keeps the velocities that avoid each of them
+for ``time_horizon_s`` with half of the effort (a half-plane of velocities per neighbour, the
+*ORCA line*), and takes the one of them nearest its preferred velocity, within its maximum
+speed: a 2D linear program, or, when the half-planes leave no room, the velocity that
+violates them least (a 3D linear program). The steps follow RVO2's ``Agent::computeNewVelocity``,
+``linearProgram1/2/3`` (the reference implementation; agents only, no polygon obstacles), with
+one addition: an agent that does not avoid (standing at its goal, or switched off) is a
+*passive* neighbour, whose ORCA line the other takes in full instead of half.
+
+Neighbours are found on a uniform grid hashed into a table (:func:`build_grid`, a counting sort
+of the agents by cell): each agent looks at the 3 x 3 cells about its own (a cell as wide as
+the neighbour distance) and keeps its ``max_neighbours`` nearest within that distance, the
+search radius shrinking to the farthest kept once the list is full (as RVO2's k-d tree query).
+
+2D vectors are tuples ``(x, y)``; lines are rows ``(point_x, point_y, direction_x,
+direction_y)`` of a caller's scratch array (the kernels allocate nothing). :func:`orca_velocities`
+is the numpy-facing call.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ecs_anim.runtime.kernels import over_chunks
+from ecs_anim.runtime.kernels.vec import F64, TINY, jit
+
+I64 = NDArray[np.int64]
+B = NDArray[np.bool_]
+Vec2 = tuple[float, float]
+
+#: RVO2's RVO_EPSILON: parallel lines, in the linear programs.
+EPSILON = 1e-5
+
+
+@jit()
+def det(a: Vec2, b: Vec2) -> float:
+    """The 2D cross product ``a.x b.y - a.y b.x``."""
+    return a[0] * b[1] - a[1] * b[0]
+
+
+@jit()
+def cell_hash(ix: int, iy: int, mask: int) -> int:
+    """The table slot of grid cell ``(ix, iy)`` (a table of ``mask + 1`` slots, a power of 2)."""
+    return ((ix * 73856093) ^ (iy * 19349663)) & mask
+
+
+@jit(nogil=True)
+def build_grid(position: F64, cell_m: float, mask: int, slot: I64, start: I64,
+               order: I64) -> None:
+    """Sort the agents by grid cell (a counting sort over the hash table's slots).
+
+    position : (k, 2) agents' positions, m.
+    cell_m : the cells' width, m.
+    mask : the table has ``mask + 1`` slots (a power of 2).
+    slot : (k,) written: each agent's slot.
+    start : (mask + 2,) written: the agents of slot ``s`` are ``order[start[s]:start[s + 1]]``.
+    order : (k,) written: agent indices sorted by slot.
+    """
+    n = position.shape[0]
+    for s in range(mask + 2):
+        start[s] = 0
+    for i in range(n):
+        ix = math.floor(position[i, 0] / cell_m)
+        iy = math.floor(position[i, 1] / cell_m)
+        slot[i] = cell_hash(ix, iy, mask)
+        start[slot[i] + 1] += 1
+    for s in range(mask + 1):
+        start[s + 1] += start[s]
+    # start[s] is now where slot s begins; fill, then shift back.
+    for i in range(n):
+        order[start[slot[i]]] = i
+        start[slot[i]] += 1
+    for s in range(mask, 0, -1):
+        start[s] = start[s - 1]
+    start[0] = 0
+
+
+@jit()
+def lp1(lines: F64, row: int, line: int, radius: float, opt: Vec2,
+        direction_opt: bool) -> tuple[bool, float, float]:
+    """RVO2's ``linearProgram1``: the best velocity on line ``line`` of ``lines[row]`` within
+    the speed ``radius`` and the lines before it (ok, x, y); not ok when there is none."""
+    px, py = lines[row, line, 0], lines[row, line, 1]
+    dx, dy = lines[row, line, 2], lines[row, line, 3]
+    dot_pd = px * dx + py * dy
+    discriminant = dot_pd * dot_pd + radius * radius - (px * px + py * py)
+    if discriminant < 0.0:
+        return False, 0.0, 0.0
+    root = math.sqrt(discriminant)
+    t_left, t_right = -dot_pd - root, -dot_pd + root
+    for j in range(line):
+        qx, qy = lines[row, j, 0], lines[row, j, 1]
+        ex, ey = lines[row, j, 2], lines[row, j, 3]
+        denominator = dx * ey - dy * ex
+        numerator = ex * (py - qy) - ey * (px - qx)
+        if abs(denominator) <= EPSILON:
+            if numerator < 0.0:
+                return False, 0.0, 0.0
+            continue
+        t = numerator / denominator
+        if denominator >= 0.0:
+            t_right = min(t_right, t)
+        else:
+            t_left = max(t_left, t)
+        if t_left > t_right:
+            return False, 0.0, 0.0
+    if direction_opt:
+        t = t_right if opt[0] * dx + opt[1] * dy > 0.0 else t_left
+    else:
+        t = min(max(dx * (opt[0] - px) + dy * (opt[1] - py), t_left), t_right)
+    return True, px + t * dx, py + t * dy
+
+
+@jit()
+def lp2(lines: F64, row: int, n_lines: int, radius: float, opt: Vec2,
+        direction_opt: bool) -> tuple[int, float, float]:
+    """RVO2's ``linearProgram2``: the velocity nearest ``opt`` (or furthest along it, with
+    ``direction_opt``) within the speed ``radius`` and left of the ``n_lines`` lines of
+    ``lines[row]``. Returns (the first line that could not be met, or ``n_lines``; x, y)."""
+    if direction_opt:
+        rx, ry = opt[0] * radius, opt[1] * radius
+    else:
+        speed_sq = opt[0] * opt[0] + opt[1] * opt[1]
+        if speed_sq > radius * radius:
+            s = radius / math.sqrt(speed_sq)
+            rx, ry = opt[0] * s, opt[1] * s
+        else:
+            rx, ry = opt
+    for i in range(n_lines):
+        if det((lines[row, i, 2], lines[row, i, 3]),
+               (lines[row, i, 0] - rx, lines[row, i, 1] - ry)) > 0.0:
+            ok, x, y = lp1(lines, row, i, radius, opt, direction_opt)
+            if not ok:
+                return i, rx, ry
+            rx, ry = x, y
+    return n_lines, rx, ry
+
+
+@jit()
+def lp3(lines: F64, projected: F64, row: int, n_hard: int, n_lines: int, begin: int,
+        radius: float, result: Vec2) -> Vec2:
+    """RVO2's ``linearProgram3``: from line ``begin`` on, where the 2D program failed, the
+    velocity that least violates the lines of ``lines[row]`` (the largest distance into a
+    forbidden side made smallest), never the first ``n_hard`` (RVO2's obstacle lines; here the
+    turn the walker can make); ``projected[row]`` is scratch."""
+    rx, ry = result
+    distance = 0.0
+    for i in range(begin, n_lines):
+        px, py = lines[row, i, 0], lines[row, i, 1]
+        dx, dy = lines[row, i, 2], lines[row, i, 3]
+        if det((dx, dy), (px - rx, py - ry)) <= distance:
+            continue
+        for j in range(n_hard):
+            for q in range(4):
+                projected[row, j, q] = lines[row, j, q]
+        n_projected = n_hard
+        for j in range(n_hard, i):
+            qx, qy = lines[row, j, 0], lines[row, j, 1]
+            ex, ey = lines[row, j, 2], lines[row, j, 3]
+            determinant = dx * ey - dy * ex
+            if abs(determinant) <= EPSILON:
+                if dx * ex + dy * ey > 0.0:
+                    continue  # same direction: line j is implied
+                ax, ay = 0.5 * (px + qx), 0.5 * (py + qy)
+            else:
+                t = (ex * (py - qy) - ey * (px - qx)) / determinant
+                ax, ay = px + t * dx, py + t * dy
+            ux, uy = ex - dx, ey - dy
+            length = max(math.sqrt(ux * ux + uy * uy), TINY)
+            projected[row, n_projected, 0], projected[row, n_projected, 1] = ax, ay
+            projected[row, n_projected, 2] = ux / length
+            projected[row, n_projected, 3] = uy / length
+            n_projected += 1
+        failed, x, y = lp2(projected, row, n_projected, radius, (-dy, dx), True)
+        if failed >= n_projected:  # else: a rounding failure; keep the last result
+            rx, ry = x, y
+        distance = det((dx, dy), (px - rx, py - ry))
+    return rx, ry
+
+
+@jit()
+def nearest_neighbours(i: int, position: F64, range_m: float, cell_m: float, mask: int,
+                       start: I64, order: I64, max_neighbours: int, neighbour: I64,
+                       neighbour_d2: F64) -> int:
+    """Agent ``i``'s nearest ``max_neighbours`` other agents within ``range_m`` (found in the
+    3 x 3 cells about its own), nearest first, into ``neighbour[i]`` and their squared distances
+    into ``neighbour_d2[i]``; returns how many."""
+    x, y = position[i, 0], position[i, 1]
+    ix, iy = math.floor(x / cell_m), math.floor(y / cell_m)
+    range_sq = range_m * range_m
+    count = 0
+    for cell in range(9):
+        s = cell_hash(ix + cell // 3 - 1, iy + cell % 3 - 1, mask)
+        # Two cells may share a slot: look at each slot once.
+        repeated = False
+        for earlier in range(cell):
+            repeated = repeated or s == cell_hash(ix + earlier // 3 - 1, iy + earlier % 3 - 1, mask)
+        if not repeated:
+            for a in range(start[s], start[s + 1]):
+                j = order[a]
+                if j == i:
+                    continue
+                dx, dy = position[j, 0] - x, position[j, 1] - y
+                d2 = dx * dx + dy * dy
+                if d2 >= range_sq:
+                    continue
+                # Insert, nearest first (RVO2's insertAgentNeighbor).
+                m = count if count < max_neighbours else max_neighbours - 1
+                while m > 0 and neighbour_d2[i, m - 1] > d2:
+                    neighbour[i, m] = neighbour[i, m - 1]
+                    neighbour_d2[i, m] = neighbour_d2[i, m - 1]
+                    m -= 1
+                neighbour[i, m] = j
+                neighbour_d2[i, m] = d2
+                if count < max_neighbours:
+                    count += 1
+                if count == max_neighbours:
+                    range_sq = neighbour_d2[i, count - 1]
+    return count
+
+
+@jit(nogil=True)
+def orca_rows(lo: int, hi: int, position: F64, velocity: F64, preferred: F64, radius: F64,
+              max_speed: F64, facing: F64, active: B, range_m: float, time_horizon_s: float,
+              dt: float, cone_rad: float, cell_m: float, mask: int, start: I64, order: I64,
+              neighbour: I64, neighbour_d2: F64, lines: F64, projected: F64, out: F64) -> None:
+    """The new velocity of agents ``lo..hi-1`` (RVO2's ``computeNewVelocity``) into ``out``
+    ((k, 2), m/s); a passive agent (``active`` false) gets its preferred velocity.
+
+    position, velocity, preferred : (k, 2) m, m/s: where each agent is, how it moves now, how
+        it would move with nobody about.
+    radius, max_speed : (k,) m, m/s.
+    facing, cone_rad : (k, 2) unit vectors, rad: an agent with neighbours keeps its velocity
+        within ``cone_rad`` (at most pi / 2) of ``facing`` (two hard lines, as RVO2's
+        obstacles': a walker does not step sideways); pi or more: no such limit.
+    range_m, time_horizon_s, dt : the neighbour distance, how far ahead collisions are avoided,
+        the tick (the time in which agents found overlapping are to separate).
+    cell_m, mask, start, order : the grid of :func:`build_grid`.
+    neighbour, neighbour_d2 : (k, max_neighbours) scratch (int64, float64).
+    lines, projected : (k, max_neighbours, 4) scratch.
+    """
+    max_neighbours = neighbour.shape[1] - 2
+    coned = cone_rad < math.pi
+    cone_cos, cone_sin = math.cos(cone_rad), math.sin(cone_rad)
+    inv_horizon = 1.0 / time_horizon_s
+    inv_dt = 1.0 / dt
+    for i in range(lo, hi):
+        if not active[i]:
+            out[i, 0], out[i, 1] = preferred[i, 0], preferred[i, 1]
+            continue
+        count = nearest_neighbours(i, position, range_m, cell_m, mask, start, order,
+                                   max_neighbours, neighbour, neighbour_d2)
+        vx, vy = velocity[i, 0], velocity[i, 1]
+        n_hard = 2 if coned and count > 0 else 0
+        if n_hard:
+            fx, fy = facing[i, 0], facing[i, 1]
+            # Left of the cone's right edge, right of its left edge (lines through 0).
+            lines[i, 0, 0] = lines[i, 0, 1] = lines[i, 1, 0] = lines[i, 1, 1] = 0.0
+            lines[i, 0, 2] = fx * cone_cos + fy * cone_sin
+            lines[i, 0, 3] = fy * cone_cos - fx * cone_sin
+            lines[i, 1, 2] = -(fx * cone_cos - fy * cone_sin)
+            lines[i, 1, 3] = -(fy * cone_cos + fx * cone_sin)
+        for n in range(count):
+            j = neighbour[i, n]
+            rel_x, rel_y = position[j, 0] - position[i, 0], position[j, 1] - position[i, 1]
+            rv_x, rv_y = vx - velocity[j, 0], vy - velocity[j, 1]
+            dist_sq = rel_x * rel_x + rel_y * rel_y
+            combined = radius[i] + radius[j]
+            combined_sq = combined * combined
+            if dist_sq > combined_sq:
+                # No collision: the velocity obstacle's cut-off circle or one of its legs.
+                w_x, w_y = rv_x - inv_horizon * rel_x, rv_y - inv_horizon * rel_y
+                w_len_sq = w_x * w_x + w_y * w_y
+                dot1 = w_x * rel_x + w_y * rel_y
+                if dot1 < 0.0 and dot1 * dot1 > combined_sq * w_len_sq:
+                    w_len = max(math.sqrt(w_len_sq), TINY)
+                    unit_x, unit_y = w_x / w_len, w_y / w_len
+                    dir_x, dir_y = unit_y, -unit_x
+                    scale = combined * inv_horizon - w_len
+                    u_x, u_y = scale * unit_x, scale * unit_y
+                else:
+                    leg = math.sqrt(dist_sq - combined_sq)
+                    if det((rel_x, rel_y), (w_x, w_y)) > 0.0:  # left leg
+                        dir_x = (rel_x * leg - rel_y * combined) / dist_sq
+                        dir_y = (rel_x * combined + rel_y * leg) / dist_sq
+                    else:  # right leg
+                        dir_x = -(rel_x * leg + rel_y * combined) / dist_sq
+                        dir_y = -(-rel_x * combined + rel_y * leg) / dist_sq
+                    dot2 = rv_x * dir_x + rv_y * dir_y
+                    u_x, u_y = dot2 * dir_x - rv_x, dot2 * dir_y - rv_y
+            else:
+                # Overlapping: separate within the tick (the cut-off circle of time dt).
+                w_x, w_y = rv_x - inv_dt * rel_x, rv_y - inv_dt * rel_y
+                w_len = math.sqrt(w_x * w_x + w_y * w_y)
+                if w_len > TINY:
+                    unit_x, unit_y = w_x / w_len, w_y / w_len
+                else:  # on top of each other, at the same velocity: the lower index goes -x
+                    unit_x, unit_y = (-1.0 if i < j else 1.0), 0.0
+                dir_x, dir_y = unit_y, -unit_x
+                scale = combined * inv_dt - w_len
+                u_x, u_y = scale * unit_x, scale * unit_y
+            share = 0.5 if active[j] else 1.0  # a passive neighbour leaves it all to this one
+            m = n_hard + n
+            lines[i, m, 0], lines[i, m, 1] = vx + share * u_x, vy + share * u_y
+            lines[i, m, 2], lines[i, m, 3] = dir_x, dir_y
+        opt = (preferred[i, 0], preferred[i, 1])
+        n_lines = n_hard + count
+        failed, rx, ry = lp2(lines, i, n_lines, max_speed[i], opt, False)
+        if failed < n_lines:
+            rx, ry = lp3(lines, projected, i, n_hard, n_lines, failed, max_speed[i], (rx, ry))
+        out[i, 0], out[i, 1] = rx, ry
+
+
+def table_mask(n_agents: int) -> int:
+    """The hash table's slots less one: the power of 2 at least twice the agents (at least 16)."""
+    return int(1 << max(4, int(2 * max(n_agents, 1) - 1).bit_length())) - 1
+
+
+def orca_velocities(position: F64, velocity: F64, preferred: F64, radius: F64, max_speed: F64,
+                    active: B, *, range_m: float, time_horizon_s: float, max_neighbours: int,
+                    dt: float, facing: F64 | None = None, cone_rad: float = math.pi) -> F64:
+    """Each agent's collision-avoiding velocity (k, 2) m/s (ORCA; see the module docstring):
+    the grid built, then :func:`orca_rows` over all agents, split over the kernels' threads.
+
+    position, velocity, preferred : (k, 2) float64, m and m/s.
+    radius, max_speed : (k,) float64, m and m/s.
+    active : (k,) bool: the agents that avoid (the others are passive neighbours and get their
+        preferred velocity back).
+    range_m : neighbours farther than this are not looked at (m); also the grid's cell width.
+    time_horizon_s : collisions within this time are avoided (s).
+    max_neighbours : at most this many nearest neighbours are avoided.
+    dt : the tick (s).
+    facing, cone_rad : (k, 2) unit vectors and rad: each agent with neighbours keeps within
+        ``cone_rad`` (at most pi / 2) of its ``facing`` (None, or pi: anywhere).
+    """
+    n = position.shape[0]
+    out = np.empty((n, 2))
+    if n == 0:
+        return out
+    mask = table_mask(n)
+    position = np.ascontiguousarray(position, np.float64)
+    slot, order = np.empty(n, np.int64), np.empty(n, np.int64)
+    start = np.empty(mask + 2, np.int64)
+    build_grid(position, range_m, mask, slot, start, order)
+    m = max(int(max_neighbours), 1) + 2  # and the cone's two lines
+    neighbour, neighbour_d2 = np.empty((n, m), np.int64), np.empty((n, m))
+    lines, projected = np.empty((n, m, 4)), np.empty((n, m, 4))
+    if facing is None:
+        facing, cone_rad = np.zeros((n, 2)), math.pi
+    over_chunks(orca_rows, n, position, np.ascontiguousarray(velocity, np.float64),
+                np.ascontiguousarray(preferred, np.float64),
+                np.ascontiguousarray(radius, np.float64),
+                np.ascontiguousarray(max_speed, np.float64),
+                np.ascontiguousarray(facing, np.float64),
+                np.ascontiguousarray(active, np.bool_), float(range_m), float(time_horizon_s),
+                float(dt), min(float(cone_rad), math.pi), float(range_m), mask, start, order,
+                neighbour, neighbour_d2, lines, projected, out)
+    return out
