@@ -3,6 +3,7 @@ speed asked for, cross-faded at matching foot phases, never with a foot sliding.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -57,6 +58,8 @@ def test_the_library_has_a_run_and_is_up_to_date(motions: dict[str, NormalizedMo
 
 def test_speed_ramp_idle_walk_run_walk_idle(motions: dict[str, NormalizedMotion]) -> None:
     sim = Simulation(motions, BUMPS)
+    # The bodies start on one spot: steering alone, without avoiding each other.
+    sim.steering_settings = replace(sim.steering_settings, avoidance=False)
     entities = [sim.spawn(f"s{stature}", Morphology.from_stature(stature), MotionPlayer("idle"))
                 for stature in STATURES]
     for e in entities:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import re
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -47,6 +48,8 @@ def distance_to_polyline(points: np.ndarray, line: np.ndarray) -> np.ndarray:
 def walkers(motions: dict[str, NormalizedMotion], statures: tuple[float, ...],
             ground: object = BUMPS) -> tuple[Simulation, list[int]]:
     sim = Simulation(motions, ground)  # type: ignore[arg-type]
+    # The bodies start on one spot: steering alone, without avoiding each other.
+    sim.steering_settings = replace(sim.steering_settings, avoidance=False)
     entities = [sim.spawn(f"s{stature:.2f}", Morphology.from_stature(stature),
                           MotionPlayer("idle")) for stature in statures]
     for e in entities:
