@@ -8,8 +8,8 @@ is taken in on the next tick, before any system decodes the pose on it
 Reads: store.poses, store.lengths; on a body change the Morphology (and BodyBlend) components, segment_mass_kg,
 segment_com_fraction, placement_*, fade_placement_*, posture (whether the character has played).
 Writes: on a body change lengths, segment_mass_kg, segment_com_fraction, placement_xy,
-fade_placement_xy (it stays where it stands), the root of poses, locked (its feet re-plant; or,
-while blending, footprint: a planted foot's height follows the ankle height).
+fade_placement_xy (it stays where it stands), the root of poses, locked (its feet re-plant; while
+blending, footprints stay: they lie on the ground whatever the body).
 
 The scaling itself (eq. 2: segment lengths, the root by the leg length) is not stored: the
 systems that need the pose on each body decode it in their own kernels, each what it reads
@@ -30,7 +30,7 @@ class MorphologyAdapt(System):
     reads = ("poses", "lengths", "segment_mass_kg", "segment_com_fraction", "placement_xy",
              "placement_heading", "fade_placement_xy", "fade_placement_heading", "posture")
     writes = ("lengths", "segment_mass_kg", "segment_com_fraction", "placement_xy",
-              "fade_placement_xy", "poses", "locked", "footprint")
+              "fade_placement_xy", "poses", "locked")
 
     def run(self, dt: float) -> None:
         blend_bodies(self.sim)  # a new body itself is taken in by ``on_structure_change``

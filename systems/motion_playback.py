@@ -8,6 +8,7 @@ fade_s, fade_elapsed_s, fade_keeps_contacts, placement_*, fade_placement_*, leng
 length: the root path's unit), the last tick's contact_weight (through a cross-fade); the clip
 bank.
 Writes: store.poses (placed in the world; first writer each tick), store.contact_weight,
+store.sole_roll (the part of each foot the clip plants),
 store.clip_time_s, fade_time_s, fade_elapsed_s, fade_s.
 """
 
@@ -46,7 +47,7 @@ class MotionPlayback(System):
              "fade_loop", "fade_s", "fade_elapsed_s", "fade_keeps_contacts", "placement_xy",
              "placement_heading", "fade_placement_xy", "fade_placement_heading", "lengths",
              "contact_weight")
-    writes = ("poses", "contact_weight", "clip_time_s", "fade_time_s", "fade_elapsed_s", "fade_s")
+    writes = ("poses", "contact_weight", "sole_roll", "clip_time_s", "fade_time_s", "fade_elapsed_s", "fade_s")
 
     def __init__(self, sim: Simulation):
         super().__init__(sim)
@@ -68,6 +69,11 @@ class MotionPlayback(System):
         previous = st.contact_weight[fading]  # the last tick's (a copy)
         over_chunks(sample_table_rows, rows.size, rows, bank.contact_weight, bank.start,
                     bank.n_frames, bank.fps, st.clip, st.clip_time_s, st.loop, st.contact_weight,
+                    rows_per_thread=LIGHT_ROWS_PER_THREAD)
+        if not st.sole_roll.flags.writeable:
+            st.sole_roll = st.sole_roll.copy()
+        over_chunks(sample_table_rows, rows.size, rows, bank.sole_roll, bank.start,
+                    bank.n_frames, bank.fps, st.clip, st.clip_time_s, st.loop, st.sole_roll,
                     rows_per_thread=LIGHT_ROWS_PER_THREAD)
         if fading.size:
             old_weight = np.zeros((st.n, 2))
@@ -95,6 +101,7 @@ class MotionPlayback(System):
         poses = self._placed(sample(bank, st.clip, st.clip_time_s, st.loop),
                              st.placement_xy, st.placement_heading)
         weights = sample_table(bank, bank.contact_weight, st.clip, st.clip_time_s, st.loop)
+        roll = sample_table(bank, bank.sole_roll, st.clip, st.clip_time_s, st.loop)
         fading = st.fade_s > 0.0
         w = np.where(fading, np.clip(st.fade_elapsed_s / np.maximum(st.fade_s, 1e-9), 0, 1), 1.0)
         old_weights = sample_table(bank, bank.contact_weight, st.fade_clip, st.fade_time_s,
@@ -111,11 +118,12 @@ class MotionPlayback(System):
             poses = blend(old, poses, w)
             st.fade_s = np.where((w >= 1.0) & playing, 0.0, st.fade_s)
         if self.all_rows():
-            st.poses, st.contact_weight = poses, weights
+            st.poses, st.contact_weight, st.sole_roll = poses, weights, roll
         else:  # the characters without a MotionPlayer keep their pose and contacts
             rows = self.rows()
             st.poses = scatter(st.poses, rows, poses.take(rows))
             st.contact_weight = np.where(playing[:, None], weights, st.contact_weight)
+            st.sole_roll = np.where(playing[:, None], roll, st.sole_roll)
         self._advance_clocks(dt)
 
     @staticmethod

@@ -39,6 +39,69 @@ MAX_LEG_EXTENSION = 0.995
 #: A heel this far under the ground (m) is lifted: well below the metrics' 1 mm, above rounding.
 HEEL_TOLERANCE_M = 1e-6
 
+#: Which part of a foot the motion plants, per frame, as a *sole roll*: 0 the heel (the toe
+#: free: heel strike), 1 the ball (the heel free: heel off), 0.5 both (flat, or not known).
+#: Sampled between frames, a roll under HEEL_ROLL plants the heel, over BALL_ROLL the ball.
+HEEL_ROLL, BALL_ROLL = 0.25, 0.75
+
+#: A foot moves its footprint onto the other sole point (heel to ball at heel off) only once
+#: that point is this close to the ground, per leg length (0.4 mm for a 0.86 m leg, under the
+#: metrics' 1 mm of sliding): it turns about the point
+#: it stands on and never jumps.
+SWITCH_PER_LEG = 0.0005
+
+
+def sole_roll(heel: NDArray[np.bool_], ball: NDArray[np.bool_]) -> F64:
+    """The sole roll (:data:`HEEL_ROLL`) of planted heel / ball flags (any shape): 0 where only
+    the heel is planted, 1 where only the ball is, 0.5 elsewhere."""
+    roll: F64 = np.where(heel & ~ball, 0.0, np.where(ball & ~heel, 1.0, 0.5))
+    return roll
+
+
+def pivot_wanted(roll: F64, current: NDArray[np.int64]) -> NDArray[np.int64]:
+    """The sole point (0 heel, 1 ball) a roll plants, else ``current`` (same shapes)."""
+    wanted: NDArray[np.int64] = np.where(roll < HEEL_ROLL, 0, np.where(roll > BALL_ROLL, 1, current))
+    return wanted
+
+
+def pitched(ground: Ground, origin: F64, d: F64, foot: F64, sign: float, clearance: F64,
+            passes: int) -> F64:
+    """Foot directions ``d`` (..., 3) unit, world, turned in their vertical planes, at most
+    ``passes`` times asking the ground again, until each foot's other end
+    ``origin + sign * foot * d`` is ``clearance`` (...) metres above the ground or higher;
+    ``sign`` +1 about the ankle (the toe end lifted), -1 about the ball (the ankle end).
+    ``origin`` (..., 3), ``foot`` (...) metres."""
+    flat = np.maximum(np.linalg.norm(d[..., :2], axis=-1), 1e-9)
+    heading = d[..., :2] / flat[..., None]
+    dz = d[..., 2]
+    end = origin + sign * foot[..., None] * d
+    deficit = ground.height(end[..., :2]) + clearance - end[..., 2]
+    for _ in range(passes):
+        if not np.any(deficit > 0.0):
+            break
+        dz = np.where(deficit > 0.0, np.clip(dz + sign * deficit / foot, -1.0, 1.0), dz)
+        turned = np.concatenate([heading * np.sqrt(1.0 - dz**2)[..., None], dz[..., None]], -1)
+        d = np.where((deficit > 0.0)[..., None], turned, d)
+        end = origin + sign * foot[..., None] * d
+        deficit = ground.height(end[..., :2]) + clearance - end[..., 2]
+    return d
+
+
+def planted_foot(ground: Ground, pivot: NDArray[np.int64], sole_point: F64, d: F64, foot: F64,
+                 ankle_height: F64, ball: F64, passes: int) -> tuple[F64, F64]:
+    """(ankle (..., 3), foot direction (..., 3)) of feet standing on ``sole_point`` (..., 3)
+    (world, on the ground) with the heel (``pivot`` 0) or the ball (1), pitched as the motion's
+    ``d`` unless that puts the foot's other end under the ground (:func:`pitched`).
+    ``foot``, ``ankle_height``, ``ball`` (...) metres: the ankle-to-toe length and the ankle's
+    and the toe joint's heights above the sole."""
+    on_heel = (pivot == 0)[..., None]
+    ankle = sole_point + np.stack([0 * ball, 0 * ball, ankle_height], -1)
+    toe = sole_point + np.stack([0 * ball, 0 * ball, ball], -1)
+    d_heel = pitched(ground, ankle, d, foot, 1.0, ball, passes)
+    d_ball = pitched(ground, toe, d, foot, -1.0, ankle_height, passes)
+    d_out = np.where(on_heel, d_heel, d_ball)
+    return np.where(on_heel, ankle, toe - foot[..., None] * d_ball), d_out
+
 
 def heel_depth(ground: Ground, ankles: F64, ankle_height: F64) -> F64:
     """How far each heel (the sole under the ankle) is below the ground, metres: ``ankles``
@@ -134,4 +197,6 @@ def adapt_keeping_heels_up(poses: NormalizedPoses, lengths: F64, ankle_targets: 
     return adapted, legs
 
 
-__all__ = ["adapt_keeping_heels_up", "adapt_to_ground", "heel_depth", "vertical_slack_for_reach"]
+__all__ = ["BALL_ROLL", "HEEL_ROLL", "SWITCH_PER_LEG", "adapt_keeping_heels_up", "adapt_to_ground",
+           "heel_depth", "pitched", "pivot_wanted", "planted_foot", "sole_roll",
+           "vertical_slack_for_reach"]

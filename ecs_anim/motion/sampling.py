@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ecs_anim.core.ground_adapt import sole_roll
 from ecs_anim.core.normalized import DIRECTION_FIELDS, QUATERNION_FIELDS, NormalizedPoses
 from ecs_anim.core.rotations import normalize, slerp
 from ecs_anim.motion.clip import NormalizedMotion
@@ -44,6 +45,8 @@ class ClipBank:
         clip's first-frame position frame (world xy of the clip).
     names : clip names.
     contact_weight : (total_frames, 2) foot-contact activation per frame [left, right].
+    sole_roll : (total_frames, 2) the part of each foot the clip plants per frame (0 heel, 1
+        ball, 0.5 both or not known: :func:`ecs_anim.core.ground_adapt.sole_roll`).
     source_ankle_height : (n_clips, 2) each source's ankle heights in its leg lengths.
     """
 
@@ -56,6 +59,7 @@ class ClipBank:
     names: list[str]
     contact_weight: F64
     source_ankle_height: F64
+    sole_roll: F64
 
     @classmethod
     def from_motions(cls, motions: dict[str, NormalizedMotion]) -> ClipBank:
@@ -86,12 +90,16 @@ class ClipBank:
                     side = 0 if c.segment.endswith("_l") else 1
                     w[:, side] = np.maximum(w[:, side], c.activation.weight(t, smooth=False))
             weights.append(w)
+        rolls = [np.full((motions[n].n_frames, 2), 0.5) if motions[n].planted is None
+                 else sole_roll(motions[n].planted_part("heel"), motions[n].planted_part("ball"))
+                 for n in names]
         ankle = np.array([np.array([motions[n].source_morphology["ankle_height_l"],
                                     motions[n].source_morphology["ankle_height_r"]])
                           / motions[n].source_morphology.leg_length for n in names])
         return cls(NormalizedPoses(**fields), start, counts,
                    np.array([motions[n].fps for n in names], dtype=np.float64),
-                   np.array(yaw), np.array(shift), names, np.concatenate(weights), ankle)
+                   np.array(yaw), np.array(shift), names, np.concatenate(weights), ankle,
+                   np.concatenate(rolls))
 
     def index(self, name: str) -> int:
         try:

@@ -115,8 +115,8 @@ def blend_bodies(sim: Simulation) -> None:
     ground, at most three times the blend's mean rate a tick, so a planted ankle does not move at all
     (its footprint holds); what is left :data:`SWING_WAIT_S` after the blend time follows then,
     planted or not (a character standing through the whole blend: its ankles rise as slowly). Writes
-    store.lengths, segment_mass_kg, segment_com_fraction, placement_xy, fade_placement_xy, the
-    root of this tick's poses, and the height of a locked footprint whose ankle height changed."""
+    store.lengths, segment_mass_kg, segment_com_fraction, placement_xy, fade_placement_xy and the
+    root of this tick's poses (footprints lie on the ground whatever the body: they stay)."""
     st = sim.store
     rows, blends = sim.rows_and_components(BodyBlend)
     if rows.size == 0:
@@ -147,6 +147,5 @@ def blend_bodies(sim: Simulation) -> None:
                      ankle_now + np.clip(lengths[:, ANKLE_HEIGHTS] - ankle_now, -limit, limit))
     lengths[:, ANKLE_HEIGHTS] = ankle
     keep_in_place(sim, rows, lengths, np.ones(rows.size, bool))
-    st.footprint[rows, :, 2] += np.where(st.locked[rows], ankle - ankle_now, 0.0)
     st.lengths[rows] = lengths
     st.segment_mass_kg[rows], st.segment_com_fraction[rows] = masses, fractions

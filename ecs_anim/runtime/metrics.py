@@ -1,7 +1,9 @@
 """Per-character quality figures of a run, recorded after every tick (all characters at once).
 
-* foot sliding: how far a fully planted ankle moves from one tick to the next (mm per frame),
-  and each slide beyond :data:`SLIDE_EVENT_MM` as an event naming the character, foot and tick;
+* foot sliding: how far the sole point a fully planted foot stood on (its heel under the ankle,
+  or its ball under the toe joint: ``store.pivot``) at one tick moves by the next (mm per frame;
+  a foot rolling from heel to ball turns about the one point, then stands on the other), and each slide beyond :data:`SLIDE_EVENT_MM` as an event naming the character, foot
+  and tick;
 * ground penetration: how far the heel (the sole under the ankle) or the sole under the ball of
   the foot goes below the ground (mm); floating: how far a fully planted foot's lower of the two
   stays above it (mm);
@@ -37,8 +39,8 @@ MAX_SLIDE_EVENTS = 100
 
 #: The recorder's per-character arrays (one row per character it has seen) and the value a
 #: character seen for the first time starts with.
-CHARACTER_FIGURES = (("prev_ankles", 0.0), ("prev_planted", False), ("prev_locked", False),
-                     ("slide_max", 0.0), ("slide_sum", 0.0), ("slide_count", 0.0),
+CHARACTER_FIGURES = (("prev_soles", 0.0), ("prev_pivot", 0), ("prev_planted", False),
+                     ("prev_locked", False), ("slide_max", 0.0), ("slide_sum", 0.0), ("slide_count", 0.0),
                      ("penetration_max", 0.0), ("floating_max", 0.0), ("bone_error_max", 0.0),
                      ("com_error_max", np.nan), ("leg_length_m", 0.0), ("frozen", False),
                      ("removed_at_s", np.nan))
@@ -59,12 +61,14 @@ class MetricsRecorder:
     def __init__(self, sim: Simulation):
         self.sim = sim
         # per character (k, ...): its entity and name, then :data:`CHARACTER_FIGURES`: the last
-        # tick's ankles (k, 2, 3) and planted and locked feet (k, 2), the figures, its last
+        # tick's sole points (k, 2, 2, 3: per foot its heel, its ball), the one each foot stood on
+        # (k, 2) and planted and locked feet (k, 2), the figures, its last
         # recorded leg length (m) and frozen flag, and the time of the first recorded posture
         # it was missing from (NaN: still simulated)
         self.entities = np.zeros(0, np.int64)
         self.names: list[str] = []
-        self.prev_ankles = np.zeros((0, 2, 3))
+        self.prev_soles = np.zeros((0, 2, 2, 3))
+        self.prev_pivot = np.zeros((0, 2), np.int64)
         self.prev_planted = np.zeros((0, 2), bool)
         self.prev_locked = np.zeros((0, 2), bool)
         self.slide_max = np.zeros(0)
@@ -107,21 +111,26 @@ class MetricsRecorder:
         self.removed_at_s[gone & np.isnan(self.removed_at_s)] = sim.posture_time_s
         p = st.positions
         ankles, toes = p[:, ANKLES], p[:, TOES]
+        legs = sim.leg_length()
+        ankle_height = st.lengths[:, SIDE_LENGTHS["ankle_height"]]
+        ball = BALL_HEIGHT_PER_LEG * legs[:, None]
+        soles = np.stack([ankles, toes], axis=2)  # (n, 2, 2, 3): per foot its heel, its ball
+        soles[..., 2] -= np.stack([ankle_height, ball.repeat(2, axis=1)], axis=2)
         planted = st.contact_weight >= 1.0
         # (a character's first tick has nothing planted before: no slide)
         both = planted & self.prev_planted[at]
-        move_mm = np.linalg.norm(ankles - self.prev_ankles[at], axis=-1) * 1e3
+        pivot = self.prev_pivot[at][..., None, None]
+        stands = np.take_along_axis(soles, pivot, axis=2)[:, :, 0]
+        stood = np.take_along_axis(self.prev_soles[at], pivot, axis=2)[:, :, 0]
+        move_mm = np.linalg.norm(stands - stood, axis=-1) * 1e3
         move_mm = np.where(both, move_mm, 0.0)
         self.slide_max[at] = np.maximum(self.slide_max[at], move_mm.max(axis=1))
         self.slide_sum[at] += move_mm.sum(axis=1)
         self.slide_count[at] += both.sum(axis=1)
         if np.any(move_mm > SLIDE_EVENT_MM):  # rare: only then are the rows visited
             self._record_slides(move_mm, at)
-        self.prev_ankles[at], self.prev_planted[at] = ankles, planted
-        legs = sim.leg_length()
+        self.prev_soles[at], self.prev_pivot[at], self.prev_planted[at] = soles, st.pivot, planted
         self.leg_length_m[at], self.frozen[at] = legs, st.frozen
-        ankle_height = st.lengths[:, SIDE_LENGTHS["ankle_height"]]
-        ball = BALL_HEIGHT_PER_LEG * legs[:, None]
         toe_depth = sim.ground.height(toes[..., :2]) - (toes[..., 2] - ball)
         heel = heel_depth(sim.ground, ankles, ankle_height)
         depth_mm = np.maximum(heel, toe_depth).max(axis=1) * 1e3

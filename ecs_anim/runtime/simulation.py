@@ -278,7 +278,7 @@ class Simulation(SteeringCalls):
                 queue_loop=queue_loop, queue_len=queue_len, ground_ref=ground_ref,
                 segment_mass_kg=masses, segment_com_fraction=fractions,
                 com_control=np.array(com_control, bool), com_target_xy=target,
-                com_error_m=np.nan, ground_index=ground_index, gait_clip=-1)
+                com_error_m=np.nan, ground_index=ground_index, gait_clip=-1, sole_roll=0.5)
             for i in range(k):
                 entity = int(entities[i])
                 esper.add_component(entity, Name(names[i], teams[i]))

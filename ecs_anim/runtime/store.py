@@ -59,8 +59,10 @@ class CharacterStore:
     placement_xy (n, 2) metres and placement_heading (n,) of each motion origin (fade_placement_*
     the same for the clip being faded out);
     poses: this tick's normalized poses (n,); contact_weight (n, 2) foot-contact activation;
-    footprint (n, 2, 3) locked ankle positions, locked (n, 2) bool, footprint_settled (n, 2) bool
-    (the contact has been fully planted: its footprint's height is fixed); ground_ref (n,) metres the
+    sole_roll (n, 2) the part of each foot the motion plants (0 heel, 1 ball, 0.5 both:
+    :data:`ecs_anim.core.ground_adapt.HEEL_ROLL`); footprint (n, 2, 3) the sole point each foot in
+    contact stands on (world metres, on the ground), pivot (n, 2) which (0 heel, 1 ball), locked
+    (n, 2) bool (a footprint is laid); ground_ref (n,) metres the
     motion's floor is raised to under the character (smoothed);
     positions (n, N_JOINTS, 3) and local_rotations (n, n_export, 3, 3): the output posture;
     vertebrae (n, k, 3) a finer spine when the simulation asks for one;
@@ -102,7 +104,8 @@ class CharacterStore:
     contact_weight: F64 = field(default_factory=lambda: np.zeros((0, 2)))
     footprint: F64 = field(default_factory=lambda: np.zeros((0, 2, 3)))
     locked: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, 2), bool))
-    footprint_settled: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, 2), bool))
+    pivot: NDArray[np.int64] = field(default_factory=lambda: np.zeros((0, 2), np.int64))
+    sole_roll: F64 = field(default_factory=lambda: np.full((0, 2), 0.5))
     ground_ref: F64 = field(default_factory=lambda: np.zeros(0))
     positions: F64 = field(default_factory=lambda: np.zeros((0, N_JOINTS, 3)))
     local_rotations: F64 = field(default_factory=lambda: np.zeros((0, 0, 3, 3)))

@@ -53,10 +53,11 @@ EXPECTED_WRITERS = {
         "speed", "steer_mode", "steer_heading_rad", "steer_speed_m_s", "path_progress_m", "gait")},
     "poses": ["MotionPlayback", "MorphologyAdapt", "GroundAdapt", "ConstraintSolve"],
     "contact_weight": ["MotionPlayback"],
+    "sole_roll": ["MotionPlayback"],
     **{name: ["MorphologyAdapt"] for name in (
         "lengths", "segment_mass_kg", "segment_com_fraction")},
-    **{name: ["GroundAdapt"] for name in ("footprint_settled", "ground_ref")},
-    "footprint": ["MorphologyAdapt", "GroundAdapt"],
+    **{name: ["GroundAdapt"] for name in ("pivot", "ground_ref")},
+    "footprint": ["GroundAdapt"],
     **{name: ["ConstraintSolve"] for name in (
         "goals", "solved", "com_desired", "constraints.error", "constraints.weight",
         "constraints.held")},

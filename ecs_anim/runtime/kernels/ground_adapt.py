@@ -1,8 +1,8 @@
 """Compiled ground adaptation (paper §7): the whole of ``GroundAdapt.run``, one character at a time.
 
-Mirrors ``systems.ground_adapt.GroundAdapt.run`` (footprints laid, locked and settled, the
-motion's floor following the supporting feet, free feet lifted clear of the ground, the toes
-pitched onto it) with :func:`ecs_anim.core.ground_adapt.adapt_keeping_heels_up`,
+Mirrors ``systems.ground_adapt.GroundAdapt.run`` (footprints laid on the sole point each foot
+stands on and moved as the foot rolls, the motion's floor following the supporting feet, free
+feet lifted clear of the ground, the toes pitched onto it) with :func:`ecs_anim.core.ground_adapt.adapt_keeping_heels_up`,
 :func:`~ecs_anim.core.ground_adapt.adapt_to_ground` and
 :func:`~ecs_anim.core.ground_adapt.vertical_slack_for_reach`, on a built-in ground given as its
 :class:`~ecs_anim.core.ground.GroundDescription` arrays.
@@ -21,6 +21,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from ecs_anim.core import ground_adapt as reference
 from ecs_anim.core.skeleton import LENGTH_INDEX as L
 from ecs_anim.runtime.kernels.decode import LegPoseArrays, decode_legs_row
 from ecs_anim.runtime.kernels.ground import height_at
@@ -28,6 +29,7 @@ from ecs_anim.runtime.kernels.vec import (
     F64,
     Frame,
     Vec3,
+    add_scaled,
     in_frame,
     jit,
     load3,
@@ -35,6 +37,7 @@ from ecs_anim.runtime.kernels.vec import (
     norm,
     quat_from_matrix,
     rotation_between,
+    scale,
     store3,
     store4,
     sub,
@@ -50,6 +53,9 @@ GroundArrays = tuple[I64, F64, F64]
 _L_THIGH, _L_SHANK, _L_ANKLE_HEIGHT = 2, 4, 8
 assert (L["thigh_l"], L["shank_l"], L["ankle_height_l"], L["thigh_r"], L["ankle_height_r"]) \
     == (_L_THIGH, _L_SHANK, _L_ANKLE_HEIGHT, _L_THIGH + 1, _L_ANKLE_HEIGHT + 1)
+#: The sole rolls of :mod:`ecs_anim.core.ground_adapt`, as literals for the same reason.
+HEEL_ROLL, BALL_ROLL = 0.25, 0.75
+assert (HEEL_ROLL, BALL_ROLL) == (reference.HEEL_ROLL, reference.BALL_ROLL)
 
 
 @jit(inline="always")
@@ -148,65 +154,119 @@ def adapt_keeping_heels_up(c: int, pose: LegPoseArrays, hips: tuple[Vec3, Vec3],
 
 
 @jit(inline="always")
-def toes_onto_ground(c: int, foot_dir: F64, ankles: tuple[Vec3, Vec3],
-                     toes: tuple[Vec3, Vec3], shank2world: tuple[Frame, Frame], ball: float,
-                     kinds: I64, params: F64, grid: F64, passes: int) -> None:
-    """Mirrors ``GroundAdapt._toes_onto_ground`` for store row ``c``: a foot whose toe joint
-    would be under the ground (by ``ball`` m, its height above the sole) is pitched up about
-    its ankle, ``passes`` times asking the ground (``kinds``, ``params``, ``grid``) again;
-    writes ``foot_dir[c]`` (``pose.foot_dir``)."""
-    d0 = height_at(toes[0][0], toes[0][1], kinds, params, grid) + ball - toes[0][2]
-    d1 = height_at(toes[1][0], toes[1][1], kinds, params, grid) + ball - toes[1][2]
-    if not (d0 > 0.0 or d1 > 0.0):
-        return
-    for s in range(2):
-        ankle, toe = ankles[s], toes[s]
-        deficit = d0 if s == 0 else d1
-        foot = max(norm(sub(toe, ankle)), 1e-9)
-        d = ((toe[0] - ankle[0]) / foot, (toe[1] - ankle[1]) / foot, (toe[2] - ankle[2]) / foot)
-        flat = max(math.sqrt(d[0] * d[0] + d[1] * d[1]), 1e-9)
-        hx, hy = d[0] / flat, d[1] / flat
-        dz = d[2]
-        moved = toe
-        for _ in range(passes):
-            dz = min(max(dz + max(deficit, 0.0) / foot, -1.0), 1.0)
-            along = math.sqrt(1.0 - dz**2)
-            moved = (ankle[0] + foot * (hx * along), ankle[1] + foot * (hy * along),
-                     ankle[2] + foot * dz)
-            deficit = height_at(moved[0], moved[1], kinds, params, grid) + ball - moved[2]
-            if not deficit > 0.0:
-                break  # the next passes would not move it (dz + 0, the same point)
-        new_d = ((moved[0] - ankle[0]) / foot, (moved[1] - ankle[1]) / foot,
-                 (moved[2] - ankle[2]) / foot)
-        if max(abs(new_d[0] - d[0]), abs(new_d[1] - d[1]), abs(new_d[2] - d[2])) > 0.0:
-            store3(foot_dir[c, s], in_frame(shank2world[s], new_d))
+def pitched(origin: Vec3, d: Vec3, foot: float, sign: float, clearance: float, kinds: I64,
+            params: F64, grid: F64, passes: int) -> Vec3:
+    """Mirrors :func:`ecs_anim.core.ground_adapt.pitched`: the foot direction ``d`` (unit, world)
+    turned in its vertical plane, at most ``passes`` times asking the ground again, until the
+    foot's other end ``origin + sign * foot * d`` is ``clearance`` (m) above the ground or
+    higher; ``sign`` +1 about the ankle (the toe end lifted), -1 about the ball (the ankle end)."""
+    flat = max(math.sqrt(d[0] * d[0] + d[1] * d[1]), 1e-9)
+    hx, hy = d[0] / flat, d[1] / flat
+    dz = d[2]
+    end = add_scaled(origin, d, sign * foot)
+    deficit = height_at(end[0], end[1], kinds, params, grid) + clearance - end[2]
+    for _ in range(passes):
+        if not deficit > 0.0:
+            break
+        dz = min(max(dz + sign * deficit / foot, -1.0), 1.0)
+        along = math.sqrt(1.0 - dz * dz)
+        d = (hx * along, hy * along, dz)
+        end = add_scaled(origin, d, sign * foot)
+        deficit = height_at(end[0], end[1], kinds, params, grid) + clearance - end[2]
+    return d
 
 
 @jit(inline="always")
-def _foot_target(ankle: Vec3, toe: Vec3, footprint: Vec3, w: float, ground_ref: float,
+def planted_foot(pivot: int, sole_point: Vec3, d: Vec3, foot: float, ankle_height: float,
+                 ball: float, kinds: I64, params: F64, grid: F64, passes: int
+                 ) -> tuple[Vec3, Vec3]:
+    """Mirrors :func:`ecs_anim.core.ground_adapt.planted_foot`: (ankle, foot direction) of a
+    foot standing on ``sole_point`` (world, on the ground) with its heel (``pivot`` 0) or its
+    ball (1), pitched as the motion's ``d`` unless that puts its other end under the ground."""
+    if pivot == 0:
+        ankle = (sole_point[0], sole_point[1], sole_point[2] + ankle_height)
+        return ankle, pitched(ankle, d, foot, 1.0, ball, kinds, params, grid, passes)
+    toe = (sole_point[0], sole_point[1], sole_point[2] + ball)
+    d = pitched(toe, d, foot, -1.0, ankle_height, kinds, params, grid, passes)
+    return add_scaled(toe, d, -foot), d
+
+
+@jit(inline="always")
+def _pivot_wanted(roll: float, current: int) -> int:
+    """The sole part the motion plants (``roll``: 0 heel, 1 ball, 0.5 both; see
+    :data:`ecs_anim.core.ground_adapt.HEEL_ROLL`), else ``current``."""
+    if roll < HEEL_ROLL:
+        return 0
+    if roll > BALL_ROLL:
+        return 1
+    return current
+
+
+@jit(inline="always")
+def _foot_target(ankle: Vec3, toe: Vec3, planted_ankle: Vec3, w: float, ground_ref: float,
                  ankle_height: float, ball: float, kinds: I64, params: F64, grid: F64) -> Vec3:
     """One ankle's target in ``GroundAdapt.run``: the motion's free foot on the floor
     ``ground_ref`` (m), lifted where its heel or toe would be under the ground, blended
-    towards its ``footprint`` by the contact weight ``w``, its heel kept above the ground."""
+    towards where the planted foot puts it (``planted_ankle``) by the contact weight ``w``,
+    its heel kept above the ground."""
     if w == 1.0:  # planted: where the free foot would be does not count (two queries fewer)
-        t = footprint
+        t = planted_ankle
     else:
         free = (ankle[0], ankle[1], ankle[2] + ground_ref)
         need_heel = _height(kinds, params, grid, free) + ankle_height - free[2]
         need_toe = _height(kinds, params, grid, toe) + ball - (toe[2] + ground_ref)
         free = (free[0], free[1], free[2] + max(0.0, max(need_heel, need_toe)))
-        t = (free[0] + w * (footprint[0] - free[0]), free[1] + w * (footprint[1] - free[1]),
-             free[2] + w * (footprint[2] - free[2]))
+        t = (free[0] + w * (planted_ankle[0] - free[0]),
+             free[1] + w * (planted_ankle[1] - free[1]),
+             free[2] + w * (planted_ankle[2] - free[2]))
     return (t[0], t[1], t[2] + max(_height(kinds, params, grid, t) + ankle_height - t[2], 0.0))
+
+
+@jit(inline="always")
+def _stand(c: int, s: int, ankle: Vec3, toe: Vec3, w: float, sole_roll: F64, clip: I64,
+           source_ankle_height: F64, footprint: F64, locked: B1, pivot: I64, leg: float,
+           ankle_height: float, ball: float, switch: float, kinds: I64, params: F64,
+           grid: F64, passes: int) -> tuple[Vec3, Vec3]:
+    """Foot ``s`` of row ``c`` in ``GroundAdapt.run``: its footprint laid, kept or moved
+    onto the other sole point, and (ankle, foot direction) standing on it; the motion's
+    (``ankle``, its direction) for a foot not in contact.
+
+    A contact's footprint is laid where the motion puts its planted point (the heel, the ball,
+    or the lower of the two where the motion plants both), on the ground under it; it moves to
+    the other point only once the foot has rolled onto it (within ``switch`` m of the ground),
+    so the foot turns about the point it stands on and never jumps."""
+    foot = max(norm(sub(toe, ankle)), 1e-9)
+    d = scale(sub(toe, ankle), 1.0 / foot)
+    if not w > 0.0:
+        locked[c, s] = False
+        return ankle, d
+    if not locked[c, s]:
+        heel_up = ankle[2] - source_ankle_height[clip[c], s] * leg
+        pivot[c, s] = _pivot_wanted(sole_roll[c, s], 0 if heel_up <= toe[2] - ball else 1)
+        point = ankle if pivot[c, s] == 0 else toe
+        store3(footprint[c, s], (point[0], point[1], _height(kinds, params, grid, point)))
+        locked[c, s] = True
+    a, d = planted_foot(pivot[c, s], load3(footprint[c, s]), d, foot, ankle_height, ball,
+                        kinds, params, grid, passes)
+    want = _pivot_wanted(sole_roll[c, s], pivot[c, s])
+    if want != pivot[c, s]:
+        other = add_scaled(a, d, foot) if want == 1 else a
+        ground = _height(kinds, params, grid, other)
+        if other[2] - (ball if want == 1 else ankle_height) - ground <= switch:
+            pivot[c, s] = want
+            store3(footprint[c, s], (other[0], other[1], ground))
+            a, d = planted_foot(want, load3(footprint[c, s]), d, foot, ankle_height, ball,
+                                kinds, params, grid, passes)
+    return a, d
 
 
 @jit(inline="always")  # one call site: a call per row, handed its arrays, costs
 def ground_adapt_row(c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
-                     contact_weight: F64, clip: I64, source_ankle_height: F64, footprint: F64,
-                     locked: B1, footprint_settled: B1, ground_ref: F64, kinds: I64,
+                     contact_weight: F64, sole_roll: F64, clip: I64, source_ankle_height: F64,
+                     footprint: F64, locked: B1, pivot: I64, ground_ref: F64, kinds: I64,
                      params: F64, grid: F64, dt: float, smoothing_s: float, ball_per_leg: float,
-                     max_extension: float, heel_tolerance: float, heel_passes: int,
-                     toe_passes: int) -> None:
+                     max_extension: float, heel_tolerance: float, switch_per_leg: float,
+                     heel_passes: int, toe_passes: int) -> None:
     """Mirrors ``GroundAdapt.run`` for store row ``c``; arguments as for
     :func:`ground_adapt_rows` (``kinds``, ``params``, ``grid``: the arrays of ``ground``)."""
     # The pose on the character's body as the motion gives it (MorphologyAdapt's scaling,
@@ -216,71 +276,76 @@ def ground_adapt_row(c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
         c, pose, lengths_row, lengths_row)
     leg_c = leg[c]
     ball = ball_per_leg * leg_c
+    switch = switch_per_leg * leg_c
     ankle_height = (lengths[c, _L_ANKLE_HEIGHT], lengths[c, _L_ANKLE_HEIGHT + 1], 0.0)
     w = (contact_weight[c, 0], contact_weight[c, 1])
-    # Footprints: where the motion's ankle is, standing on the ground under it (raised by as
-    # much as the motion's ankle is above its standing height); locked from the contact's
-    # start, going down with the motion's foot until its first fully planted tick.
-    for s in range(2):
-        ankle = ankles[s]
-        above_standing = max(ankle[2] - source_ankle_height[clip[c], s] * leg_c, 0.0)
-        starting = w[s] > 0.0 and not locked[c, s]
-        if starting:
-            footprint[c, s, 0], footprint[c, s, 1] = ankle[0], ankle[1]
-            footprint[c, s, 2] = (_height(kinds, params, grid, ankle) + ankle_height[s]
-                                  + above_standing)
-        elif w[s] > 0.0 and not footprint_settled[c, s]:
-            settled_z = (_height(kinds, params, grid, load3(footprint[c, s]))
-                         + ankle_height[s] + above_standing)
-            footprint[c, s, 2] = min(footprint[c, s, 2], settled_z)
-        locked[c, s] = w[s] > 0.0
-        footprint_settled[c, s] = locked[c, s] and (
-            (footprint_settled[c, s] and not starting) or w[s] >= 1.0)
+    # Each foot in contact stands on one sole point (its footprint, on the ground): the heel
+    # or the ball, as the motion plants it.
+    stance0 = _stand(c, 0, ankles[0], toes[0], w[0], sole_roll, clip, source_ankle_height,
+                     footprint, locked, pivot, leg_c, ankle_height[0], ball, switch, kinds,
+                     params, grid, toe_passes)
+    stance1 = _stand(c, 1, ankles[1], toes[1], w[1], sole_roll, clip, source_ankle_height,
+                     footprint, locked, pivot, leg_c, ankle_height[1], ball, switch, kinds,
+                     params, grid, toe_passes)
     # The motion's floor follows the ground under the supporting feet, smoothly.
     support = w[0] + w[1]
-    under_feet = (w[0] * (footprint[c, 0, 2] - ankle_height[0])
-                  + w[1] * (footprint[c, 1, 2] - ankle_height[1])) / max(support, 1e-9)
+    under_feet = (w[0] * footprint[c, 0, 2] + w[1] * footprint[c, 1, 2]) / max(support, 1e-9)
     target = under_feet if support > 0.0 else _height(kinds, params, grid, pelvis)
     ground_ref[c] += (1.0 - math.exp(-dt / smoothing_s)) * (target - ground_ref[c])
     g = ground_ref[c]
     # Free feet ride on that floor, lifted where heel or toe would go under the ground; a
-    # contact ramping in blends towards its footprint, its heel kept above the ground.
-    targets = (_foot_target(ankles[0], toes[0], load3(footprint[c, 0]), w[0], g,
-                            ankle_height[0], ball, kinds, params, grid),
-               _foot_target(ankles[1], toes[1], load3(footprint[c, 1]), w[1], g,
-                            ankle_height[1], ball, kinds, params, grid))
+    # contact ramping in blends towards its planted ankle, its heel kept above the ground.
+    targets = (_foot_target(ankles[0], toes[0], stance0[0], w[0], g, ankle_height[0], ball,
+                            kinds, params, grid),
+               _foot_target(ankles[1], toes[1], stance1[0], w[1], g, ankle_height[1], ball,
+                            kinds, params, grid))
     root_height = pelvis[2] + g
     new_ankles, new_toes, shank2world = adapt_keeping_heels_up(
         c, pose, hips, pelvis[2], pelvis2world, leg2world, lengths, leg_c, targets, w,
         root_height, kinds, params, grid, ankle_height, max_extension, heel_tolerance,
         heel_passes)
-    toes_onto_ground(c, pose.foot_dir, new_ankles, new_toes, shank2world, ball, kinds, params,
-                     grid, toe_passes)
+    # Feet: a planted one pitched as it stands (in the world, whatever the leg's new bend), a
+    # ramping one as the motion has it in the world, a free one as in its shank; none with
+    # its toe under the ground.
+    for s in range(2):
+        ankle, toe = new_ankles[s], new_toes[s]
+        foot = max(norm(sub(toe, ankle)), 1e-9)
+        if w[s] >= 1.0:
+            d = stance0[1] if s == 0 else stance1[1]
+        elif w[s] > 0.0:
+            d = scale(sub(toes[s], ankles[s]), 1.0 / max(norm(sub(toes[s], ankles[s])), 1e-9))
+        else:
+            d = scale(sub(toe, ankle), 1.0 / foot)
+        new_d = pitched(ankle, d, foot, 1.0, ball, kinds, params, grid, toe_passes)
+        if w[s] > 0.0 or new_d[2] != d[2]:
+            store3(pose.foot_dir[c, s], in_frame(shank2world[s], new_d))
 
 
 @jit(nogil=True)
 def ground_adapt_rows(lo: int, hi: int, rows: I64, pose: LegPoseArrays, lengths: F64, leg: F64,
-                      contact_weight: F64, clip: I64, source_ankle_height: F64, footprint: F64,
-                      locked: B1, footprint_settled: B1, ground_ref: F64, ground: GroundArrays,
-                      dt: float, smoothing_s: float, ball_per_leg: float, max_extension: float,
-                      heel_tolerance: float, heel_passes: int, toe_passes: int) -> None:
+                      contact_weight: F64, sole_roll: F64, clip: I64, source_ankle_height: F64,
+                      footprint: F64, locked: B1, pivot: I64, ground_ref: F64,
+                      ground: GroundArrays, dt: float, smoothing_s: float, ball_per_leg: float,
+                      max_extension: float, heel_tolerance: float, switch_per_leg: float,
+                      heel_passes: int, toe_passes: int) -> None:
     """Mirrors ``systems.ground_adapt.GroundAdapt.run`` over the store rows
     ``rows[lo:hi]``, in place.
 
     Per row: ``pose`` the store's poses' leg arrays (:func:`.decode.leg_pose_arrays`; decoded
     on the body here, then root height, leg frames and fractions, foot directions written);
-    ``lengths`` (n, N_LENGTHS) m; ``leg``
-    (n,) leg lengths m; ``contact_weight`` (n, 2); ``clip`` (n,) int64;
-    ``source_ankle_height`` (n_clips, 2) in leg lengths; ``footprint`` (n, 2, 3) m,
-    ``locked``, ``footprint_settled`` (n, 2) bool and ``ground_ref`` (n,) m, read and written.
-    ``ground``: (kinds, params, grid) of the ground's description. Settings: ``dt`` (s) the
-    tick, ``smoothing_s`` the floor's time constant, ``ball_per_leg`` the toe joint's height
-    above the sole per leg length, ``max_extension`` of a leg, ``heel_tolerance`` (m),
-    ``heel_passes``, ``toe_passes``.
+    ``lengths`` (n, N_LENGTHS) m; ``leg`` (n,) leg lengths m; ``contact_weight`` (n, 2);
+    ``sole_roll`` (n, 2) the part of each foot the motion plants (0 heel, 1 ball);
+    ``clip`` (n,) int64; ``source_ankle_height`` (n_clips, 2) in leg lengths; ``footprint``
+    (n, 2, 3) m, ``locked`` (n, 2) bool, ``pivot`` (n, 2) int64 and ``ground_ref`` (n,) m,
+    read and written. ``ground``: (kinds, params, grid) of the ground's description.
+    Settings: ``dt`` (s) the tick, ``smoothing_s`` the floor's time constant,
+    ``ball_per_leg`` the toe joint's height above the sole per leg length, ``max_extension``
+    of a leg, ``heel_tolerance`` (m), ``switch_per_leg`` how near the ground (per leg length)
+    a sole point must be for the foot to stand on it, ``heel_passes``, ``toe_passes``.
     """
     kinds, params, grid = ground
     for i in range(lo, hi):
-        ground_adapt_row(rows[i], pose, lengths, leg, contact_weight, clip, source_ankle_height,
-                         footprint, locked, footprint_settled, ground_ref, kinds, params, grid,
-                         dt, smoothing_s, ball_per_leg, max_extension, heel_tolerance,
-                         heel_passes, toe_passes)
+        ground_adapt_row(rows[i], pose, lengths, leg, contact_weight, sole_roll, clip,
+                         source_ankle_height, footprint, locked, pivot, ground_ref, kinds,
+                         params, grid, dt, smoothing_s, ball_per_leg, max_extension,
+                         heel_tolerance, switch_per_leg, heel_passes, toe_passes)

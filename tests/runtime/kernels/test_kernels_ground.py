@@ -128,7 +128,7 @@ def _assert_same_state(a: Simulation, b: Simulation, tick: int) -> None:
     for name in ("footprint", "ground_ref", "positions"):
         np.testing.assert_allclose(getattr(a.store, name), getattr(b.store, name), rtol=0,
                                    atol=1e-9, err_msg=f"{name} at tick {tick}")
-    for name in ("locked", "footprint_settled"):
+    for name in ("locked", "pivot"):
         np.testing.assert_array_equal(getattr(a.store, name), getattr(b.store, name),
                                       err_msg=f"{name} at tick {tick}")
 
