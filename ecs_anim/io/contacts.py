@@ -424,32 +424,6 @@ def contact_constraints(contact: NDArray[np.bool_], fps: float,
     return out
 
 
-def rolling_parts(heel: NDArray[np.bool_], ball: NDArray[np.bool_], foot: NDArray[np.bool_]
-                  ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
-    """Heel and ball planted as a rolling foot plants them, within each contact of ``foot``:
-    each part planted over one interval (from its first planted frame to its last), the heel
-    lifting no later than the ball, and, where both are planted in a contact, at least one
-    frame with both (flat) between heel-only and ball-only frames (the heel held until the
-    ball lands). All bool (n_frames, 2). -> (heel, ball)."""
-    heel_out = np.zeros_like(heel)
-    ball_out = np.zeros_like(ball)
-    for side in range(foot.shape[1]):
-        for a, b in true_runs(foot[:, side]):
-            h = np.flatnonzero(heel[a:b + 1, side]) + a
-            k = np.flatnonzero(ball[a:b + 1, side]) + a
-            if len(h) and len(k):
-                h0, h1, k0, k1 = int(h[0]), int(h[-1]), int(k[0]), int(k[-1])
-                h1 = min(max(h1, k0), k1)  # held until the ball lands, lifted before it
-                h0 = min(h0, h1)
-                heel_out[h0:h1 + 1, side] = True
-                ball_out[k0:k1 + 1, side] = True
-            elif len(h):
-                heel_out[int(h[0]):int(h[-1]) + 1, side] = True
-            elif len(k):
-                ball_out[int(k[0]):int(k[-1]) + 1, side] = True
-    return heel_out, ball_out
-
-
 def rigid_legs(positions: F64, pelvis2world: F64, tolerance_m: float = RIGID_LEG_M
                ) -> NDArray[np.bool_]:
     """Which legs (left, right) never move in the pelvis's frame: knee, ankle and toe within

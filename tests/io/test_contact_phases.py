@@ -12,7 +12,7 @@ import pytest
 
 from conftest import DATA_DIR, MOCAP_DIR
 from ecs_anim.io.c3d.importing import import_c3d
-from ecs_anim.io.contacts import contact_constraints, rigid_legs, rolling_parts, true_runs
+from ecs_anim.io.contacts import contact_constraints, rigid_legs, true_runs
 from ecs_anim.io.importing import import_bvh
 
 #: Gait kind of each walk and run of the dev set (their README files).
@@ -122,22 +122,6 @@ def test_close_contacts_share_the_gap_between_their_ramps():
     assert len(spans) == 2
     assert spans[0].stop_s == pytest.approx(0.415) and spans[1].start_s == pytest.approx(0.415)
     assert spans[0].ease_in_s == pytest.approx(0.05) and spans[1].ease_out_s == pytest.approx(0.05)
-
-
-def test_heel_and_ball_roll_heel_first_with_a_flat_frame_between():
-    foot = np.zeros((30, 2), dtype=bool)
-    foot[5:25] = True
-    heel = np.zeros_like(foot)
-    ball = np.zeros_like(foot)
-    heel[5:12, 0], ball[14:25, 0] = True, True  # a gap: no flat frame
-    heel[[5, 9], 1], ball[[7, 20], 1] = True, True  # scattered frames
-    heel[22:25, 1] = True  # the heel still planted after the ball left
-    h, b = rolling_parts(heel, ball, foot)
-    for side in range(2):
-        hs, bs = np.flatnonzero(h[:, side]), np.flatnonzero(b[:, side])
-        assert np.all(np.diff(hs) == 1) and np.all(np.diff(bs) == 1)  # one interval each
-        assert hs[-1] <= bs[-1] and bs[0] <= hs[-1]  # heel lifts first, one flat frame at least
-        assert not np.any((h | b)[:, side] & ~foot[:, side])
 
 
 def test_a_leg_that_never_moves_in_the_pelvis_frame_is_not_measured():

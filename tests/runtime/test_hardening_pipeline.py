@@ -350,8 +350,10 @@ def test_a_slide_event_names_the_character_foot_and_tick():
         sim.step()
         planted = np.flatnonzero(sim.store.contact_weight[1] >= 1.0)
         if kicked is None and tick > 5 and planted.size and metrics.prev_planted[1, planted[0]]:
-            kicked = (tick, int(planted[0]))  # push b's planted ankle 10 mm in this posture
-            sim.store.positions[1, J["ankle_l" if planted[0] == 0 else "ankle_r"], 0] += 0.01
+            kicked = (tick, int(planted[0]))  # push the point b's planted foot stood on 10 mm
+            on_ball = metrics.prev_pivot[1, planted[0]] == 1
+            joint = ("toe_" if on_ball else "ankle_") + ("l" if planted[0] == 0 else "r")
+            sim.store.positions[1, J[joint], 0] += 0.01
         metrics.record()
     assert kicked is not None
     first = metrics.report()["slide_events"]["first"][0]
