@@ -468,12 +468,18 @@ _NAME_OK = re.compile(r"^\S+$")
 
 
 def format_bvh(joints: list[BvhWriteJoint], root_positions: F64, euler_deg: F64,
-               frame_time_s: float, order: str = "ZXY", decimals: int = 6) -> str:
+               frame_time_s: float, order: str = "ZXY", decimals: int = 6,
+               translations: dict[int, F64] | None = None) -> str:
     """BVH text: root with 6 channels, every other joint 3 rotation channels in ``order``.
 
     ``root_positions`` (n_frames, 3) and offsets are in output units, already in BVH axes;
     ``euler_deg`` (n_frames, n_joints, 3) holds each joint's angles in ``order``.
+    ``translations``: joint index -> (n_frames, 3), the joint's offset from its parent on each
+    frame (output units, the parent's axes); those joints get three position channels before
+    their rotation channels, as the root has (readers take a non-root joint's position channels
+    as its offset in that frame). Joints are listed in the hierarchy's depth-first order.
     """
+    moving = translations or {}
     for j in joints:
         if not _NAME_OK.match(j.name):
             raise ValueError(f"BVH joint names cannot contain spaces: {j.name!r}")
@@ -493,7 +499,7 @@ def format_bvh(joints: list[BvhWriteJoint], root_positions: F64, euler_deg: F64,
         out.append(f"{pad}{'ROOT' if j.parent < 0 else 'JOINT'} {j.name}")
         out.append(f"{pad}{{")
         out.append(f"{pad}\tOFFSET {vec(j.offset)}")
-        if j.parent < 0:
+        if j.parent < 0 or i in moving:
             out.append(f"{pad}\tCHANNELS 6 Xposition Yposition Zposition {rot_names}")
         else:
             out.append(f"{pad}\tCHANNELS 3 {rot_names}")
@@ -511,7 +517,12 @@ def format_bvh(joints: list[BvhWriteJoint], root_positions: F64, euler_deg: F64,
     out.append("MOTION")
     out.append(f"Frames: {n_frames}")
     out.append(f"Frame Time: {frame_time_s:.12g}")
-    values = np.concatenate([root_positions, euler_deg.reshape(n_frames, -1)], axis=1)
+    if moving:  # each joint's channels in turn: its positions (if any), then its angles
+        values = np.concatenate([root_positions] + [
+            block for k in range(len(joints))
+            for block in ([moving[k]] if k in moving and k else []) + [euler_deg[:, k]]], axis=1)
+    else:
+        values = np.concatenate([root_positions, euler_deg.reshape(n_frames, -1)], axis=1)
     values = np.where(np.abs(values) < 0.5 * 10.0 ** (-decimals), 0.0, values)  # no "-0.000000"
     line_fmt = " ".join([fmt] * values.shape[1])
     out.extend(line_fmt.format(*row) for row in values.tolist())

@@ -14,6 +14,13 @@ file holds:
 - a mesh of capsules, one per bone, each skinned rigidly (weight 1) to the joint that carries
   it, so any viewer shows a body.
 
+A body that changed while the motion played (``lengths`` given, not every frame on ``morph``):
+the rest pose is ``morph``, the final body, and every node (joint or end site) whose offset from
+its parent differs on some frame gets a translation channel holding that offset on each frame,
+so the joints are exact on every frame; the capsules keep the final body's sizes (a bone shorter
+than its capsule earlier in the motion overlaps its neighbour). A body that never changed is
+written as before, byte for byte.
+
 Written with pygltflib: the JSON document is pygltflib's objects and the binary chunk is the
 accessors' arrays laid end to end, each on a 4-byte boundary.
 """
@@ -34,6 +41,7 @@ from ecs_anim.io.export.skeleton import (
     EXPORT_JOINTS,
     EXPORT_NAMES,
     EXPORT_PARENTS,
+    changing_offsets,
     local_rotations,
     rest_offsets,
 )
@@ -172,7 +180,8 @@ def _rest_world_positions(joint_offsets: F64, root: F64) -> F64:
     return out
 
 
-def glb_bytes(morph: Morphology, pelvis_in_world: F64, local: F64, fps: float) -> bytes:
+def glb_bytes(morph: Morphology, pelvis_in_world: F64, local: F64, fps: float,
+              lengths: F64 | None = None) -> bytes:
     """A ``.glb`` of the pelvis path and the export skeleton's local rotations.
 
     Parameters
@@ -182,6 +191,8 @@ def glb_bytes(morph: Morphology, pelvis_in_world: F64, local: F64, fps: float) -
     local : (frames, len(EXPORT_NAMES), 3, 3) local rotations in BVH axes, as
         :func:`ecs_anim.io.export.skeleton.local_rotations` gives them.
     fps : frames per second (> 0).
+    lengths : (frames, N_LENGTHS) metres, the body each frame was posed on, when it changed
+        (``morph`` is then the final body; see the module docstring); None: ``morph`` throughout.
 
     The same inputs as :func:`ecs_anim.io.export.skeleton.bvh_from_rotations`; see the module docstring
     for what the file holds.
@@ -273,6 +284,21 @@ def glb_bytes(morph: Morphology, pelvis_in_world: F64, local: F64, fps: float) -
         channels.append(gl.AnimationChannel(sampler=len(samplers) - 1,
                                             target=gl.AnimationChannelTarget(node=k,
                                                                              path="rotation")))
+    moving = changing_offsets(morph, lengths)
+    if moving is not None:  # a changed body: the offsets that change, animated per frame
+        frame_joints, frame_ends, joint_moves, end_moves = moving
+        targets = [(k, frame_joints[:, k]) for k in np.flatnonzero(joint_moves)] + \
+            [(n_joints + e, frame_ends[:, k]) for e, k in enumerate(ends) if end_moves[k]]
+        offsets = np.stack([values for _, values in targets]).astype(np.float32)  # node-major
+        offset_view = chunk.view(offsets)
+        for i, (node, _) in enumerate(targets):
+            output = chunk.accessor(offset_view, offsets[i], "VEC3", gl.FLOAT,
+                                    byte_offset=i * n_frames * 12)
+            samplers.append(gl.AnimationSampler(input=time_accessor, interpolation="LINEAR",
+                                                output=output))
+            channels.append(gl.AnimationChannel(sampler=len(samplers) - 1,
+                                                target=gl.AnimationChannelTarget(
+                                                    node=int(node), path="translation")))
 
     document = gl.GLTF2(
         asset=gl.Asset(version="2.0", generator=_generator()),

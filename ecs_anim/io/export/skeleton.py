@@ -22,7 +22,7 @@ from ecs_anim.core.morphology import PRESET_SPECS, Morphology, load_morphology_y
 from ecs_anim.core.normalized import DecodedPose, decode
 from ecs_anim.core.rotations import frame_from_axes, rotation_between
 from ecs_anim.core.skeleton import JOINT_INDEX as J
-from ecs_anim.core.skeleton import REST_HIP_DIR_LEFT
+from ecs_anim.core.skeleton import LENGTH_INDEX, REST_HIP_DIR_LEFT
 from ecs_anim.io.bvh import read_bvh
 from ecs_anim.io.importing import YUP_TO_ZUP, canonical_clip, source_morphology
 from ecs_anim.motion.clip import NormalizedMotion
@@ -221,3 +221,48 @@ def rest_offsets(morph: Morphology) -> tuple[F64, F64]:
                             else BODY_TO_BVH_REST @ _offset(j.end_site, morph)
                             for j in EXPORT_JOINTS])
     return joint_offsets, end_offsets
+
+
+def _offset_tables() -> tuple[NDArray[np.int64], F64, NDArray[np.int64], F64]:
+    """Per export joint: the index in LENGTHS of the length setting its offset and of the one
+    setting its end site's (0 where none), and the offset per metre of it in BVH axes (zero
+    where none): (E,), (E, 3), (E,), (E, 3)."""
+    def table(specs: list[tuple[str, Vec3, float] | None]) -> tuple[NDArray[np.int64], F64]:
+        index = np.array([LENGTH_INDEX[s[0]] if s is not None and s[0] else 0 for s in specs])
+        per_metre = np.array([np.zeros(3) if s is None or not s[0]
+                              else BODY_TO_BVH_REST @ (np.array(s[1]) * s[2]) for s in specs])
+        return index, per_metre
+
+    joints = table([j.rest_offset for j in EXPORT_JOINTS])
+    ends = table([j.end_site for j in EXPORT_JOINTS])
+    return joints[0], joints[1], ends[0], ends[1]
+
+
+_JOINT_LENGTH, _JOINT_PER_METRE, _END_LENGTH, _END_PER_METRE = _offset_tables()
+
+
+def rest_offsets_of(lengths: F64) -> tuple[F64, F64]:
+    """:func:`rest_offsets` for many bodies at once: ``lengths`` (..., N_LENGTHS) metres (e.g.
+    each frame's body, ``store.lengths`` recorded per tick) -> each export joint's offset from
+    its parent and its end site's offset from it, (..., len(EXPORT_NAMES), 3) each, BVH axes."""
+    joint_offsets: F64 = lengths[..., _JOINT_LENGTH, None] * _JOINT_PER_METRE
+    end_offsets: F64 = lengths[..., _END_LENGTH, None] * _END_PER_METRE
+    return joint_offsets, end_offsets
+
+
+def changing_offsets(morph: Morphology, lengths: F64 | None
+                     ) -> tuple[F64, F64, NDArray[np.bool_], NDArray[np.bool_]] | None:
+    """The export skeleton's offsets on each frame's body, ``lengths`` (frames, N_LENGTHS), and
+    which of them differ from ``morph``'s on some frame: (frames, E, 3) joint and end-site
+    offsets in BVH axes, (E,) bool each. None when no offset differs (or ``lengths`` is None):
+    the body never changed from ``morph``."""
+    if lengths is None:
+        return None
+    frame_joints, frame_ends = rest_offsets_of(np.asarray(lengths, dtype=np.float64))
+    rest_joints, rest_ends = rest_offsets_of(morph.lengths)
+    joint_moves = np.any(frame_joints != rest_joints, axis=(0, 2))
+    end_moves = np.any(frame_ends != rest_ends, axis=(0, 2))
+    if not (joint_moves.any() or end_moves.any()):
+        return None
+    return frame_joints, frame_ends, joint_moves, end_moves
+
