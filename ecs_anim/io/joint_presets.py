@@ -44,6 +44,9 @@ class Preset:
     description: str
     joints: dict[str, list[str]]
     signature: tuple[str, ...]
+    #: Names carry a character prefix up to the first underscore (HumanIK's ``Character1_Hips``,
+    #: any character name): matched with it removed, and only on names that have one.
+    prefixed: bool = False
 
 
 PRESETS: dict[str, Preset] = {
@@ -167,6 +170,56 @@ PRESETS: dict[str, Preset] = {
             ("Spine3",),
         ),
         Preset(
+            "humanik", "Autodesk HumanIK / MotionBuilder characters (Character1_Hips, "
+            "Character1_LeftUpLeg, ...: any character prefix)",
+            _sided({
+                "pelvis": ["Hips"], "hip_{s}": ["{S}UpLeg"], "knee_{s}": ["{S}Leg"],
+                "ankle_{s}": ["{S}Foot"], "toe_{s}": ["{S}ToeBase"], "spine_1": ["Spine"],
+                "spine_2": ["Spine2", "Spine1"], "neck": ["Neck"], "head": ["Head"],
+                "shoulder_{s}": ["{S}Arm"], "elbow_{s}": ["{S}ForeArm"], "wrist_{s}": ["{S}Hand"],
+                "hand_{s}": ["{S}HandMiddle1"],
+            }, "Left", "Right"),
+            ("Hips", "LeftUpLeg", "LeftForeArm"), prefixed=True,
+        ),
+        Preset(
+            "rigify", "Blender Rigify deform bones (DEF-spine, DEF-thigh.L, DEF-upper_arm.L, ...; "
+            "the .001 twist halves are not body parts)",
+            _sided({
+                "pelvis": ["DEF-spine"], "hip_{s}": ["DEF-thigh.{S}"], "knee_{s}": ["DEF-shin.{S}"],
+                "ankle_{s}": ["DEF-foot.{S}"], "toe_{s}": ["DEF-toe.{S}"],
+                "spine_1": ["DEF-spine.001"], "spine_2": ["DEF-spine.003", "DEF-spine.002"],
+                "neck": ["DEF-spine.004"], "head": ["DEF-spine.006", "DEF-spine.005"],
+                "shoulder_{s}": ["DEF-upper_arm.{S}"], "elbow_{s}": ["DEF-forearm.{S}"],
+                "wrist_{s}": ["DEF-hand.{S}"], "hand_{s}": ["DEF-f_middle.01.{S}"],
+            }, "L", "R"),
+            ("DEF-spine", "DEF-thigh.L"),
+        ),
+        Preset(
+            "unity_humanoid", "Unity Humanoid and VRM humanoid bone names (Hips, Chest, "
+            "LeftUpperLeg, LeftLowerArm, ...; leftUpperLeg in VRM)",
+            _sided({
+                "pelvis": ["Hips"], "hip_{s}": ["{S}UpperLeg"], "knee_{s}": ["{S}LowerLeg"],
+                "ankle_{s}": ["{S}Foot"], "toe_{s}": ["{S}Toes"], "spine_1": ["Spine"],
+                "spine_2": ["UpperChest", "Chest"], "neck": ["Neck"], "head": ["Head"],
+                "shoulder_{s}": ["{S}UpperArm"], "elbow_{s}": ["{S}LowerArm"],
+                "wrist_{s}": ["{S}Hand"], "hand_{s}": ["{S}MiddleProximal"],
+            }, "Left", "Right"),
+            ("Hips", "LeftUpperLeg", "LeftLowerArm"),
+        ),
+        Preset(
+            "vrm", "VRM models as VRoid Studio names their nodes (J_Bip_C_Hips, J_Bip_L_UpperLeg, ...)",
+            _sided({
+                "pelvis": ["J_Bip_C_Hips"], "hip_{s}": ["J_Bip_{S}_UpperLeg"],
+                "knee_{s}": ["J_Bip_{S}_LowerLeg"], "ankle_{s}": ["J_Bip_{S}_Foot"],
+                "toe_{s}": ["J_Bip_{S}_ToeBase"], "spine_1": ["J_Bip_C_Spine"],
+                "spine_2": ["J_Bip_C_UpperChest", "J_Bip_C_Chest"], "neck": ["J_Bip_C_Neck"],
+                "head": ["J_Bip_C_Head"], "shoulder_{s}": ["J_Bip_{S}_UpperArm"],
+                "elbow_{s}": ["J_Bip_{S}_LowerArm"], "wrist_{s}": ["J_Bip_{S}_Hand"],
+                "hand_{s}": ["J_Bip_{S}_Middle1"],
+            }, "L", "R"),
+            ("J_Bip_C_Hips", "J_Bip_L_UpperLeg"),
+        ),
+        Preset(
             "unreal", "Unreal Engine mannequin (pelvis, spine_01, thigh_l, calf_l, upperarm_l, ...)",
             {
                 "pelvis": ["pelvis"], "spine_1": ["spine_02"], "spine_2": ["spine_04", "spine_03"],
@@ -192,9 +245,21 @@ def name_key(name: str) -> str:
     return re.split(r"[:|]", name)[-1].strip().lower()
 
 
+_CHARACTER_PREFIX = re.compile(r"^[^_]+_(?=.)")
+
+
+def _keys(preset: Preset, skeleton: BvhSkeleton) -> dict[str, int]:
+    """The skeleton's names as the preset compares them -> joint index: :func:`name_key`, and
+    for a ``prefixed`` preset only the names with a character prefix, without it."""
+    keys = [name_key(n) for n in skeleton.names]
+    if not preset.prefixed:
+        return {k: i for i, k in enumerate(keys)}
+    return {_CHARACTER_PREFIX.sub("", k): i for i, k in enumerate(keys) if _CHARACTER_PREFIX.match(k)}
+
+
 def resolve_preset(preset: Preset, skeleton: BvhSkeleton) -> dict[str, int | None]:
     """Canonical joint -> the skeleton's joint the preset names first (None where none)."""
-    index = {name_key(n): i for i, n in enumerate(skeleton.names)}
+    index = _keys(preset, skeleton)
     out: dict[str, int | None] = {}
     for canonical, candidates in preset.joints.items():
         out[canonical] = next((index[name_key(c)] for c in candidates if name_key(c) in index), None)
@@ -207,9 +272,9 @@ def _complete(preset_map: dict[str, int | None]) -> bool:
 
 def detect_preset(skeleton: BvhSkeleton) -> Preset | None:
     """The preset whose signature is present and which names every required joint, if any."""
-    keys = {name_key(n) for n in skeleton.names}
     best: tuple[int, Preset] | None = None
     for preset in PRESETS.values():
+        keys = _keys(preset, skeleton)
         if not all(name_key(s) in keys for s in preset.signature):
             continue
         resolved = resolve_preset(preset, skeleton)

@@ -45,7 +45,7 @@ REFERENCE = canonical_clip(parse_bvh(WALK_TEXT, "walk.bvh")).positions
 
 @pytest.mark.parametrize("preset", [p for p in PRESETS if p != "ecs_anim"])
 def test_each_preset_is_detected_and_gives_the_same_motion(preset):
-    prefix = "mixamorig:" if preset == "mixamo" else ""
+    prefix = {"mixamo": "mixamorig:", "humanik": "Character1_"}.get(preset, "")
     text = renamed(WALK_TEXT, preset_names(preset, prefix))
     clip = canonical_clip(parse_bvh(text, f"{preset}.bvh"))
     assert clip.joint_map.how == f"preset {preset} (detected)"

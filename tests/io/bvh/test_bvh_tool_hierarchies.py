@@ -495,21 +495,9 @@ for _label, _names in (("mmd_japanese", _MMD_JA), ("mmd_romanised", _MMD_EN)):
                       _mmd_expected))
 
 
-#: Tools whose import is known to be wrong (open in issue 12), with the measured result.
-XFAIL: dict[str, str] = {
-    "motionbuilder_humanik": (
-        "structure: _head cuts the neck branch at the first joint with two children "
-        "(Character1_Neck has Character1_Head and the Neck_RIGMESH helper leaf): neck expected "
-        "Character1_Neck, got Character1_Spine1; head expected Character1_Head, got "
-        "Character1_Neck"),
-    "blender_rigify_def": (
-        "import fails with no flags: 'the captured body comes out 3.41 m tall with the length "
-        "unit 'inch' (thigh + shank = 44 units ...)': structural_map/_limbs take the twist "
-        "halves DEF-thigh.L.001 and DEF-shin.L for the long bones; with --unit cm hip_l is "
-        "DEF-thigh.R, knee_l DEF-thigh.R.001, ankle_l DEF-shin.R, shoulder_l DEF-forearm.R.001, "
-        "elbow_l DEF-hand.R, wrist_l DEF-hand.R.end (one place down the chain and sides "
-        "swapped)"),
-}
+#: Tools whose import is known to be wrong, with the measured result (none: MotionBuilder HumanIK
+#: and Blender Rigify, open in issue 12, map by their presets since issue 33).
+XFAIL: dict[str, str] = {}
 
 
 def _params():
