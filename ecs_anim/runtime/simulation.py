@@ -42,6 +42,7 @@ from ecs_anim.runtime import kernels
 from ecs_anim.runtime.actions import check_track, check_trigger
 from ecs_anim.runtime.body_change import mass_tables, start_blend
 from ecs_anim.runtime.events import Reactions
+from ecs_anim.runtime.recorder import Recorder
 from ecs_anim.runtime.steering import DEFAULT_STEERING
 from ecs_anim.runtime.steering_api import SteeringCalls
 from ecs_anim.runtime.store import MAX_QUEUE, CharacterStore
@@ -121,6 +122,8 @@ class Simulation(SteeringCalls):
         self.messages: list[str] = []
         #: Triggers, moving targets and the last tick's events (:mod:`ecs_anim.runtime.events`).
         self.reactions = Reactions()
+        #: The recorders collecting each tick (:meth:`record`), in the order made.
+        self.recorders: list[Recorder] = []
         schedule = SCHEDULE if window else HEADLESS
         self.systems: list[System] = []
         with self._active():
@@ -754,6 +757,21 @@ class Simulation(SteeringCalls):
             kernels.before_first_tick()
         with self._active():
             esper.process(self.dt)
+        for recorder in self.recorders:
+            recorder.collect()
+
+    def record(self, entities: Sequence[int] | None = None) -> Recorder:
+        """Start recording every tick for export (:class:`~ecs_anim.runtime.recorder.Recorder`):
+        each posture from the next :meth:`step` on (joint positions, local rotations, segment
+        lengths, planted feet) of the characters ``entities`` (None: every character, those
+        spawned later too), followed by entity across removals, and the ticks' events.
+        ``rec.save(folder)`` writes what ``ecs-anim run --export`` writes. Turns
+        :attr:`rotations` on (BVH and glTF need them)."""
+        self._check_open()
+        recorder = Recorder(self, entities)
+        self.rotations = True
+        self.recorders.append(recorder)
+        return recorder
 
     def solver_report(self) -> SolverReport | None:
         """What the constraint solver did in the last tick and what the frame budget

@@ -13,10 +13,6 @@ import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
-
-import numpy as np
-from numpy.typing import NDArray
 
 from ecs_anim.apps.bench import cmd_bench, size_list
 from ecs_anim.apps.cli.args import (
@@ -42,9 +38,6 @@ from ecs_anim.io.c3d.marker_sets import preset_summary as marker_set_summary
 from ecs_anim.io.contacts import ContactThresholds
 from ecs_anim.io.joint_presets import preset_summary
 from ecs_anim.runtime.allocator import keep_freed_memory
-
-if TYPE_CHECKING:
-    from ecs_anim.runtime.store import CharacterStore
 
 
 def cmd_export(args: argparse.Namespace) -> int:
@@ -143,38 +136,23 @@ def _export_names(scenario) -> list[str]:  # type: ignore[no-untyped-def]
 
 def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type: ignore[no-untyped-def]
                    seconds: float) -> int:
-    """Run, then write the export folder as one set (:func:`~ecs_anim.core.files.output_set`) and
-    after it the report, then print the metrics."""
-    from ecs_anim.core.files import atomic_output, output_set
-    from ecs_anim.io.export import bvh_from_rotations, write_npz
-    from ecs_anim.io.export.gltf import glb_bytes
+    """Run, then write the export folder as one set (the simulation's recorder,
+    :meth:`~ecs_anim.runtime.recorder.Recorder.save`) and after it the report, then print the
+    metrics."""
+    from ecs_anim.core.files import atomic_output
     from ecs_anim.runtime.metrics import MetricsRecorder
 
     names = [c.name for c in scenario.characters]
     metrics = MetricsRecorder(sim)
-    frames = _Frames([sim.entity(name) for name in names]) if args.export else None
+    recorder = sim.record() if args.export else None
     for _ in range(ticks):
         sim.step()
         metrics.record()
-        if frames is not None:
-            frames.record(sim.store)
     report = metrics.report() | {"scenario": str(args.scenario)}
     unposed = []  # characters removed before their first posture: no files
-    if frames is not None:
-        with output_set(args.export, _export_names(scenario), args.force) as export:
-            for i, c in enumerate(scenario.characters):
-                # (frames, joints, 3), (frames, joints, 3, 3), (frames, 2): until its removal
-                pos, rot, con = frames.of(i)
-                if pos.shape[0] == 0:
-                    unposed.append(c.name)
-                    continue
-                with export.file(f"{c.name}.bvh") as f:
-                    f.write(bvh_from_rotations(c.morphology, pos[:, 0], rot,
-                                               scenario.fps).encode("utf-8"))
-                with export.file(f"{c.name}.npz") as f:
-                    write_npz(f, pos, scenario.fps, con)
-                with export.file(f"{c.name}.glb") as f:
-                    f.write(glb_bytes(c.morphology, pos[:, 0], rot, scenario.fps))
+    if recorder is not None:
+        written = {path.name for path in recorder.save(args.export, force=args.force)}
+        unposed = [name for name in names if f"{name}.bvh" not in written]
     if args.report:
         with atomic_output(args.report, args.force) as f:
             f.write(json.dumps(json_safe(report), indent=2, allow_nan=False).encode("utf-8"))
@@ -210,41 +188,6 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
     if args.report:
         print(f"  wrote report {args.report}")
     return 0
-
-
-class _Frames:
-    """Each tick's posture of some characters, kept by entity (rows move down when a character
-    is removed): stretches of ticks with the same characters in the store, each with the
-    store's entities and, per tick, the positions, local rotations and planted feet."""
-
-    def __init__(self, entities: list[int]):
-        self.entities = entities
-        self.stretches: list[tuple[NDArray[np.int64], list[list[NDArray[Any]]]]] = []
-        self._stacked: list[tuple[NDArray[np.int64], list[NDArray[Any]]]] | None = None
-
-    def record(self, store: CharacterStore) -> None:
-        """The posture just stepped (after :meth:`Simulation.step`)."""
-        if not self.stretches or not np.array_equal(self.stretches[-1][0], store.entity):
-            self.stretches.append((store.entity.copy(), [[], [], []]))
-        positions, rotations, contacts = self.stretches[-1][1]
-        positions.append(store.positions.copy())
-        rotations.append(store.local_rotations.copy())
-        contacts.append(store.contact_weight >= 1.0)
-
-    def of(self, i: int) -> list[NDArray[Any]]:
-        """Character ``i``'s positions (frames, joints, 3), local rotations (frames, joints, 3,
-        3) and planted feet (frames, 2) from the first tick to its removal (or the last). Call
-        it once the run is over."""
-        if self._stacked is None:  # each stretch's ticks as arrays (frames, n, ...), once
-            self._stacked = [(entities, [np.stack(values) for values in ticks])
-                             for entities, ticks in self.stretches]
-        columns: list[list[NDArray[Any]]] = [[], [], []]
-        for entities, stacked in self._stacked:
-            row = np.flatnonzero(entities == self.entities[i])
-            for column, values in zip(columns, stacked, strict=True):
-                column.append(values[:, row[0]] if row.size
-                              else values[:0].reshape(0, *values.shape[2:]))
-        return [np.concatenate(column) for column in columns]
 
 
 def add_threads_argument(p: argparse.ArgumentParser, default: int | None) -> None:
