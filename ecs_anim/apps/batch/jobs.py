@@ -70,7 +70,8 @@ def failed_record(job: Job, error: str, seconds: float = 0.0) -> dict[str, Any]:
     return {"clip": job.clip, "body": job.body.name, "ground": job.ground.name,
             "stature_m": round(job.body.morphology.stature, 4), "frames": 0, "status": "failed",
             "error": error, "duration_s": None, "slide_max_mm": None, "slide_mean_mm": None, "penetration_max_mm": None,
-            "floating_max_mm": None, "bone_error_m": None, "com_error_mm": None,
+            "floating_max_mm": None, "overlap_max_mm": None, "bone_error_m": None,
+            "com_error_mm": None,
             "foot_skate_ratio": None, "seconds": round(seconds, 4), "outputs": [],
             "constraint_errors_mm": {}, "contacts": {"left": [], "right": []}}
 
@@ -184,6 +185,7 @@ def run_job(job: Job, motion: NormalizedMotion) -> Outcome:
         "slide_mean_mm": character["foot_sliding_mm_per_frame"]["mean"],
         "penetration_max_mm": character["ground_penetration_mm_max"],
         "floating_max_mm": character["floating_mm_max"],
+        "overlap_max_mm": max((c["overlap_mm_max"] for c in report["characters"]), default=0.0),
         "bone_error_m": character["bone_length_error_m_max"],
         "com_error_mm": character["com_error_mm_max"],
         "foot_skate_ratio": round(foot_skate_ratio(positions, ground, fps), 4),

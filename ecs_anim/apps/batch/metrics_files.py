@@ -13,8 +13,8 @@ from ecs_anim.apps.batch.job_hash import project_version
 
 #: The scalar columns of ``metrics.csv``, in order (then ``constraint:<name>_mm``).
 CSV_FIELDS = ("clip", "body", "ground", "stature_m", "frames", "status", "error", "slide_max_mm",
-              "slide_mean_mm", "penetration_max_mm", "floating_max_mm", "bone_error_m",
-              "com_error_mm", "foot_skate_ratio", "seconds")
+              "slide_mean_mm", "penetration_max_mm", "floating_max_mm", "overlap_max_mm",
+              "bone_error_m", "com_error_mm", "foot_skate_ratio", "seconds")
 
 
 def json_safe(value: Any) -> Any:
