@@ -1,6 +1,7 @@
 """ECS systems, one esper processor per file (installed as ``ecs_anim.systems``)."""
 
 from ecs_anim.systems.apply_reactions import ApplyReactions
+from ecs_anim.systems.collision_separate import CollisionSeparate
 from ecs_anim.systems.com_control import COMControl
 from ecs_anim.systems.constraint_solve import ConstraintSolve
 from ecs_anim.systems.detect_events import DetectEvents
@@ -13,10 +14,11 @@ from ecs_anim.systems.render import Render
 from ecs_anim.systems.steering import Steering
 
 #: The tick, declared once: the design card's seven (DESIGN §6) with what chooses the clips
-#: before MotionPlayback (triggers due, queued clips, steering) and the clock and the events
-#: after PostureConvert. esper priorities derive from this order.
+#: before MotionPlayback (triggers due, queued clips, steering), the bodies pushed apart on the
+#: posture (DESIGN §8b) and the clock and the events after PostureConvert. esper priorities
+#: derive from this order.
 SCHEDULE = (ApplyReactions, QueuedClips, Steering, MotionPlayback, MorphologyAdapt, GroundAdapt,
-            ConstraintSolve, COMControl, PostureConvert, DetectEvents, Render)
+            ConstraintSolve, COMControl, PostureConvert, CollisionSeparate, DetectEvents, Render)
 HEADLESS = SCHEDULE[:-1]
 
 __all__ = [
@@ -24,6 +26,7 @@ __all__ = [
     "SCHEDULE",
     "ApplyReactions",
     "COMControl",
+    "CollisionSeparate",
     "ConstraintSolve",
     "DetectEvents",
     "GroundAdapt",

@@ -8,6 +8,8 @@
   the foot goes below the ground (mm); floating: how far a fully planted foot's lower of the two
   stays above it (mm);
 * bone-length error: the largest difference between a bone and the morphology (m);
+* overlap: the deepest overlap of a character's collision capsules with another character's
+  after separation (mm; ``store.overlap_m``, CollisionSeparate), and the time it was deepest;
 * stride: distance between successive footprints of the same foot, also per leg length;
 * time per system per tick.
 """
@@ -42,7 +44,8 @@ MAX_SLIDE_EVENTS = 100
 CHARACTER_FIGURES = (("prev_soles", 0.0), ("prev_pivot", 0), ("prev_planted", False),
                      ("prev_locked", False), ("slide_max", 0.0), ("slide_sum", 0.0), ("slide_count", 0.0),
                      ("penetration_max", 0.0), ("floating_max", 0.0), ("bone_error_max", 0.0),
-                     ("com_error_max", np.nan), ("leg_length_m", 0.0), ("frozen", False),
+                     ("com_error_max", np.nan), ("overlap_max", 0.0), ("overlap_at_s", np.nan),
+                     ("leg_length_m", 0.0), ("frozen", False),
                      ("removed_at_s", np.nan))
 #: The same for the per-constraint arrays.
 CONSTRAINT_FIGURES = (("constraint_error_full", np.nan), ("constraint_error_any", np.nan),
@@ -78,6 +81,8 @@ class MetricsRecorder:
         self.floating_max = np.zeros(0)
         self.bone_error_max = np.zeros(0)
         self.com_error_max = np.zeros(0)
+        self.overlap_max = np.zeros(0)
+        self.overlap_at_s = np.zeros(0)
         self.leg_length_m = np.zeros(0)
         self.frozen = np.zeros(0, bool)
         self.removed_at_s = np.zeros(0)
@@ -140,6 +145,10 @@ class MetricsRecorder:
         self.floating_max[at] = np.maximum(self.floating_max[at], float_mm)
         error = np.abs(bone_lengths_of(p)[:, IS_BONE] - st.lengths[:, IS_BONE]).max(axis=1)
         self.bone_error_max[at] = np.maximum(self.bone_error_max[at], error)
+        if st.overlap_m.shape[0] == st.n:
+            deeper = st.overlap_m > self.overlap_max[at]
+            self.overlap_max[at] = np.where(deeper, st.overlap_m, self.overlap_max[at])
+            self.overlap_at_s[at[deeper]] = sim.posture_time_s
         # Strides: a new footprint is laid (an event; only those feet are visited).
         new = st.locked & ~self.prev_locked[at]
         for row, side in zip(*np.nonzero(new), strict=False):
@@ -218,7 +227,8 @@ class MetricsRecorder:
     def report(self) -> dict[str, Any]:
         """The figures so far, as ``ecs-anim run --report`` writes them: ``characters`` (per
         character: foot sliding mm per frame max/mean, penetration and floating mm, bone-length
-        error m, stride m and per leg length, COM error mm; ``removed_at_s``, only for one
+        error m, stride m and per leg length, COM error mm, deepest overlap with another character
+        mm and when (s; None: none); ``removed_at_s``, only for one
         removed mid-run: the time of the first recorded posture without it, its figures ending
         there), ``constraints`` (per constraint, removed ones included: its largest error while
         fully active and while active, mm, or mrad for an orientation), ``ms_per_tick`` per
@@ -247,6 +257,9 @@ class MetricsRecorder:
                 "frozen": bool(frozen[i]),
                 "com_error_mm_max": None if np.isnan(self.com_error_max[i])
                 else round(float(self.com_error_max[i]) * 1e3, 3),
+                "overlap_mm_max": round(float(self.overlap_max[i]) * 1e3, 3),
+                "overlap_at_s": None if np.isnan(self.overlap_at_s[i])
+                else round(float(self.overlap_at_s[i]), 4),
             }
             if not np.isnan(self.removed_at_s[i]):
                 figures["removed_at_s"] = round(float(self.removed_at_s[i]), 4)

@@ -18,6 +18,7 @@ from ecs_anim.core.errors import UsageError
 from ecs_anim.core.morphology import MASS_SEGMENTS
 from ecs_anim.core.normalized import TRAILING_SHAPES, DecodedPose, NormalizedPoses
 from ecs_anim.core.skeleton import N_JOINTS, N_LENGTHS
+from ecs_anim.solver.capsules import N_CAPSULES
 
 F64 = NDArray[np.float64]
 
@@ -84,6 +85,10 @@ class CharacterStore:
     one playing (index into those columns); fade_keeps_contacts (n,) bool: the running
     cross-fade keeps a foot down in both clips on its footprint; fade_speed (n,) the playback
     rate of the clip being faded out (its rate when the fade began).
+    Collisions (:mod:`ecs_anim.solver.capsules`, CollisionSeparate): capsule_ends
+    (n, N_CAPSULES, 2, 3) world metres, each capsule's axis (shank l/r, thigh l/r, pelvis, trunk,
+    head, upper arm l/r, forearm l/r, hand l/r) and capsule_radii (n, N_CAPSULES) m, as the
+    tick ends; overlap_m (n,) each character's deepest overlap with another after separation (m).
     """
 
     entity: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -129,6 +134,9 @@ class CharacterStore:
     gait: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     fade_keeps_contacts: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
     fade_speed: F64 = field(default_factory=lambda: np.zeros(0))
+    capsule_ends: F64 = field(default_factory=lambda: np.zeros((0, N_CAPSULES, 2, 3)))
+    capsule_radii: F64 = field(default_factory=lambda: np.zeros((0, N_CAPSULES)))
+    overlap_m: F64 = field(default_factory=lambda: np.zeros(0))
     queue_clip: NDArray[np.int64] = field(default_factory=lambda: np.zeros((0, MAX_QUEUE), np.int64))
     queue_fade_s: F64 = field(default_factory=lambda: np.zeros((0, MAX_QUEUE)))
     queue_loop: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, MAX_QUEUE), bool))

@@ -30,8 +30,17 @@ from ecs_anim.motion.constraint_table import (
     KIND_AREA,
     KIND_DISTANCE,
     KIND_ORIENTATION,
+    KIND_POSITION,
     TARGET_WORLD,
     ConstraintTable,
+)
+from ecs_anim.solver.capsules import (
+    CAPSULE_JOINTS,
+    CAPSULE_SPAN,
+    SEGMENT_CAPSULE,
+    capsule_radii,
+    point_radii,
+    surface_points,
 )
 from ecs_anim.solver.steps import rotation_toward
 
@@ -106,6 +115,46 @@ def target_points(table: ConstraintTable, unconstrained: DecodedPose, previous: 
         # A character added since the last tick has no posture there yet: its pose now.
         before = np.where(np.isfinite(before), before, now)
         out[body] = np.where((rows == table.owner[body])[:, None], now, before)
+    return out
+
+
+def on_other_surfaces(table: ConstraintTable, targets: F64, lengths: F64,
+                      unconstrained: DecodedPose, previous: DecodedPose | None) -> F64:
+    """``targets`` (m, 3) with every position constraint's target on *another* character's
+    body part moved onto that part's surface (DESIGN §8b): from the nearest point of the part's
+    capsule axis (:mod:`ecs_anim.solver.capsules`) to the target, out by the capsule's radius
+    and the constrained point's own (its segment's capsule), toward where the proximal joint of
+    the constrained point's segment was last tick (:func:`~ecs_anim.solver.capsules.
+    surface_points`: the segment then leaves the surface outward). A kick at the chest lands
+    on it, not in it; the errors, measured against these targets, are then to the surface.
+    The capsule is read from the other character's posture of the last tick (as the target
+    point: :func:`target_points`). Targets on a part without a capsule, on the constrained
+    character itself, in the world, and other kinds are left. A new array when any moves."""
+    other = np.flatnonzero((table.target_kind != TARGET_WORLD) & (table.target_row != table.owner)
+                           & (table.kind == KIND_POSITION)
+                           & (SEGMENT_CAPSULE[table.target_segment] >= 0))
+    if other.size == 0:
+        return targets
+    rows, owner = table.target_row[other], table.owner[other]
+    capsule = SEGMENT_CAPSULE[table.target_segment[other]]
+    source = unconstrained.positions if previous is None else previous.positions
+    joints = CAPSULE_JOINTS[capsule]
+    a, b = source[rows, joints[:, 0]], source[rows, joints[:, 1]]
+    span = CAPSULE_SPAN[capsule]
+    axis_a, axis_b = a + span[:, :1] * (b - a), a + span[:, 1:] * (b - a)
+    # Out toward where the point's segment comes from (its proximal joint, last tick): the
+    # segment then leaves the surface outward (a kick's shank does not cross the chest).
+    seg = table.segment[other]
+    base, zero = np.zeros(other.size), np.zeros((other.size, 3))
+    now = point_positions(unconstrained, owner, seg, base, zero)
+    was = now if previous is None else point_positions(previous, owner, seg, base, zero)
+    was = np.where(np.isfinite(was), was, now)
+    radius = (capsule_radii(lengths[rows])[np.arange(other.size), capsule]
+              + point_radii(lengths[owner], table.segment[other]))
+    moved = surface_points(targets[other], axis_a, axis_b, radius, was)
+    ok = np.isfinite(moved).all(axis=1)  # no capsule yet (a character just added): the point
+    out = targets.copy()
+    out[other[ok]] = moved[ok]
     return out
 
 

@@ -59,6 +59,7 @@ from ecs_anim.solver.goals import (
     CONTACT_PRIORITY,
     TickGoals,
     constraint_errors,
+    on_other_surfaces,
     target_points,
     tick_goals,
 )
@@ -612,7 +613,8 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
         return TickResult(weight, none, error, held)
     if unconstrained is None:
         raise ValueError("constrain: the decoded poses are needed when a constraint is active")
-    targets = target_points(table, unconstrained, previous)
+    targets = on_other_surfaces(table, target_points(table, unconstrained, previous), lengths,
+                                unconstrained, previous)
     broken = none
     if not np.isfinite(targets).all():  # (one test of the whole array first: the usual case)
         broken = np.flatnonzero((weight > 0) & ~np.all(np.isfinite(targets), axis=1))

@@ -51,7 +51,8 @@ EXPECTED_WRITERS = {
     "queue_head": ["ApplyReactions", "QueuedClips", "DetectEvents"],
     **{name: ["Steering"] for name in (
         "speed", "steer_mode", "steer_heading_rad", "steer_speed_m_s", "path_progress_m", "gait")},
-    "poses": ["MotionPlayback", "MorphologyAdapt", "GroundAdapt", "ConstraintSolve"],
+    "poses": ["MotionPlayback", "MorphologyAdapt", "GroundAdapt", "ConstraintSolve",
+              "CollisionSeparate"],
     "contact_weight": ["MotionPlayback"],
     "sole_roll": ["MotionPlayback"],
     **{name: ["MorphologyAdapt"] for name in (
@@ -64,8 +65,10 @@ EXPECTED_WRITERS = {
     "constraints.enabled": ["ApplyReactions", "ConstraintSolve", "DetectEvents"],
     "com": ["COMControl"],
     "com_error_m": ["COMControl"],
-    **{name: ["PostureConvert"] for name in (
-        "positions", "posture", "local_rotations", "vertebrae", "frozen")},
+    **{name: ["PostureConvert", "CollisionSeparate"] for name in (
+        "positions", "posture", "local_rotations", "vertebrae")},
+    "frozen": ["PostureConvert"],
+    **{name: ["CollisionSeparate"] for name in ("capsule_ends", "capsule_radii", "overlap_m")},
 }
 #: Fields a system reads as the previous tick left them, before this tick's writer.
 LAST_TICK = {"posture", "footprint", "contact_weight"}
@@ -80,7 +83,7 @@ def test_the_schedule_is_the_design_cards():
         "ApplyReactions", "QueuedClips", "Steering",  # what each plays this tick
         "MotionPlayback", "MorphologyAdapt", "GroundAdapt", "ConstraintSolve", "COMControl",
         "PostureConvert",  # the design card's seven (DESIGN §6)
-        "DetectEvents", "Render"]
+        "CollisionSeparate", "DetectEvents", "Render"]
 
 
 def test_every_declared_name_is_a_store_field_or_a_constraint_table_column():

@@ -35,4 +35,5 @@ def run(name, drop=(), drop_triggers=""):
                  enumerate(zip(sim.constraints.owner, sim.constraints.names, strict=True))}
         return {"names": sim.names(), "positions": np.array(positions), "errors": np.array(errors),
                 "weights": np.array(weights), "com": np.array(com), "index": index,
-                "report": metrics.report(), "leg": sim.leg_length(), "events": events}
+                "report": metrics.report(), "leg": sim.leg_length(), "events": events,
+                "lengths": sim.store.lengths.copy()}

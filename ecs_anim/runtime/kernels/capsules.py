@@ -1,0 +1,181 @@
+"""Collision capsules and the deepest overlap between characters, compiled (CollisionSeparate).
+
+:func:`capsule_rows` mirrors :func:`ecs_anim.solver.capsules.capsules_from_positions` (same
+results to 1e-9 m) and adds each character's bounding sphere; :func:`overlap_rows` finds, for
+each character, the deepest overlap of one of its capsules with a capsule of another character:
+neighbours on a uniform grid hashed into a table (:func:`ecs_anim.runtime.kernels.avoidance.
+build_grid`, the steering avoidance's), each looking at the 3 x 3 cells about its own (a cell as
+wide as the widest pair of bounding spheres can reach), every capsule pair of two characters
+whose bounding spheres meet tested by the nearest points of their axes (Ericson, Real-Time
+Collision Detection, 5.1.9; :func:`ecs_anim.solver.capsules.closest_between_segments`).
+:func:`overlaps` is the numpy-facing call.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ecs_anim.runtime.kernels import over_chunks
+from ecs_anim.runtime.kernels.avoidance import build_grid, cell_hash, table_mask
+from ecs_anim.runtime.kernels.vec import F64, Vec3, add_scaled, dot, jit, load3, norm, sub
+from ecs_anim.solver.capsules import CAPSULE_JOINTS, CAPSULE_SPAN, N_CAPSULES, RADIUS_WEIGHTS
+
+I64 = NDArray[np.int64]
+
+
+@jit(nogil=True)
+def capsule_rows(lo: int, hi: int, positions: F64, lengths: F64, joints: I64, span: F64,
+                 radius_weights: F64, ends: F64, radii: F64, centre: F64, reach: F64) -> None:
+    """Capsules of characters ``lo..hi-1``: ``ends`` (n, C, 2, 3) and ``radii`` (n, C) written
+    from ``positions`` (n, N_JOINTS, 3) and ``lengths`` (n, N_LENGTHS) (``joints`` (C, 2),
+    ``span`` (C, 2), ``radius_weights`` (C, N_LENGTHS): :mod:`ecs_anim.solver.capsules`'s
+    layout); ``centre`` (n, 3) the pelvis and ``reach`` (n,) how far from it any capsule's
+    surface lies. Mirrors :func:`ecs_anim.solver.capsules.capsules_from_positions`."""
+    n_caps, n_len = joints.shape[0], lengths.shape[1]
+    for c in range(lo, hi):
+        pelvis = load3(positions[c, 0])
+        far = 0.0
+        for k in range(n_caps):
+            a = load3(positions[c, joints[k, 0]])
+            ab = sub(load3(positions[c, joints[k, 1]]), a)
+            r = 0.0
+            for m in range(n_len):
+                r += lengths[c, m] * radius_weights[k, m]
+            radii[c, k] = r
+            for e in range(2):
+                p = add_scaled(a, ab, span[k, e])
+                ends[c, k, e, 0], ends[c, k, e, 1], ends[c, k, e, 2] = p
+                far = max(far, norm(sub(p, pelvis)) + r)
+        centre[c, 0], centre[c, 1], centre[c, 2] = pelvis
+        reach[c] = far
+
+
+@jit()
+def closest_between(p1: Vec3, q1: Vec3, p2: Vec3, q2: Vec3) -> tuple[Vec3, Vec3]:
+    """Mirrors :func:`ecs_anim.solver.capsules.closest_between_segments` for one pair."""
+    d1, d2, r = sub(q1, p1), sub(q2, p2), sub(p1, p2)
+    a, e, f = dot(d1, d1), dot(d2, d2), dot(d2, r)
+    c, b = dot(d1, r), dot(d1, d2)
+    denom = a * e - b * b
+    s = min(max((b * f - c * e) / max(denom, 1e-18), 0.0), 1.0) if denom > 1e-18 else 0.0
+    if not a > 1e-18:
+        s = 0.0
+    t = (b * s + f) / max(e, 1e-18) if e > 1e-18 else 0.0
+    t_clamped = min(max(t, 0.0), 1.0)
+    if t != t_clamped and a > 1e-18:
+        s = min(max((t_clamped * b - c) / max(a, 1e-18), 0.0), 1.0)
+    return add_scaled(p1, d1, s), add_scaled(p2, d2, t_clamped)
+
+
+@jit(nogil=True)
+def overlap_rows(lo: int, hi: int, ends: F64, radii: F64, centre: F64, reach: F64,
+                 plane: F64, cell_m: float, mask: int, start: I64, order: I64,
+                 depth: F64, other: I64, mine: I64, theirs: I64, normal: F64,
+                 point: F64) -> None:
+    """For each character ``i`` in ``lo..hi-1``, its deepest overlap with another character:
+    ``depth[i]`` m (0: none), ``other[i]`` that character's row (-1: none), ``mine[i]`` and
+    ``theirs[i]`` the two capsules, ``normal[i]`` (3,) the unit way out for ``i`` (from their
+    axis toward its own), ``point[i]`` (3,) the nearest point of its own capsule's axis.
+    ``plane`` (n, 2) the bounding spheres' centres on the grid (built on it with cells
+    ``cell_m`` wide: ``mask``, ``start``, ``order`` as :func:`~.avoidance.build_grid`)."""
+    n_caps = ends.shape[1]
+    for i in range(lo, hi):
+        depth[i], other[i], mine[i], theirs[i] = 0.0, -1, -1, -1
+        normal[i, 0], normal[i, 1], normal[i, 2] = 0.0, 0.0, 0.0
+        point[i, 0], point[i, 1], point[i, 2] = 0.0, 0.0, 0.0
+        ix, iy = math.floor(plane[i, 0] / cell_m), math.floor(plane[i, 1] / cell_m)
+        ci = load3(centre[i])
+        for cell in range(9):
+            s = cell_hash(ix + cell // 3 - 1, iy + cell % 3 - 1, mask)
+            repeated = False
+            for earlier in range(cell):
+                repeated = repeated or s == cell_hash(ix + earlier // 3 - 1,
+                                                      iy + earlier % 3 - 1, mask)
+            if repeated:
+                continue
+            for a in range(start[s], start[s + 1]):
+                j = order[a]
+                if j == i or not norm(sub(load3(centre[j]), ci)) < reach[i] + reach[j]:
+                    continue
+                for ki in range(n_caps):
+                    p1, q1 = load3(ends[i, ki, 0]), load3(ends[i, ki, 1])
+                    for kj in range(n_caps):
+                        p2, q2 = load3(ends[j, kj, 0]), load3(ends[j, kj, 1])
+                        on_i, on_j = closest_between(p1, q1, p2, q2)
+                        gap = sub(on_i, on_j)
+                        distance = norm(gap)
+                        d = radii[i, ki] + radii[j, kj] - distance
+                        if d > depth[i]:
+                            depth[i], other[i], mine[i], theirs[i] = d, j, ki, kj
+                            if distance > 1e-9:
+                                way = (gap[0] / distance, gap[1] / distance, gap[2] / distance)
+                            else:  # axes crossing: out horizontally, from their centre
+                                flat = sub(ci, load3(centre[j]))
+                                h = math.sqrt(flat[0] * flat[0] + flat[1] * flat[1])
+                                way = (flat[0] / h, flat[1] / h, 0.0) if h > 1e-9 \
+                                    else (1.0, 0.0, 0.0)
+                            normal[i, 0], normal[i, 1], normal[i, 2] = way
+                            point[i, 0], point[i, 1], point[i, 2] = on_i
+
+
+class Capsules(NamedTuple):
+    """Every character's capsules (:func:`capsules`): ends (n, C, 2, 3) m, radii (n, C) m,
+    centre (n, 3) the pelvis, reach (n,) m from it to the farthest capsule surface."""
+
+    ends: F64
+    radii: F64
+    centre: F64
+    reach: F64
+
+
+class Overlaps(NamedTuple):
+    """Each character's deepest overlap with another (:func:`overlaps`; see
+    :func:`overlap_rows`): depth (n,) m, other (n,) row or -1, mine, theirs (n,) capsules,
+    normal (n, 3) unit way out, point (n, 3) on its own capsule's axis."""
+
+    depth: F64
+    other: I64
+    mine: I64
+    theirs: I64
+    normal: F64
+    point: F64
+
+
+def capsules(positions: F64, lengths: F64, out: Capsules | None = None) -> Capsules:
+    """Every character's capsules from its posture (n, N_JOINTS, 3) and lengths
+    (n, N_LENGTHS), compiled over all of them (``out``: arrays to write, else new)."""
+    n = positions.shape[0]
+    if out is None:
+        out = Capsules(np.empty((n, N_CAPSULES, 2, 3)), np.empty((n, N_CAPSULES)),
+                       np.empty((n, 3)), np.empty(n))
+    over_chunks(capsule_rows, n, np.ascontiguousarray(positions, np.float64),
+                np.ascontiguousarray(lengths, np.float64), CAPSULE_JOINTS, CAPSULE_SPAN,
+                RADIUS_WEIGHTS, *out)
+    return out
+
+
+def overlaps(body: Capsules) -> Overlaps:
+    """Each character's deepest overlap with another (see :func:`overlap_rows`): the grid
+    built over the bounding spheres' centres (cells twice the widest reach), then
+    :func:`overlap_rows` over all characters, split over the kernels' threads."""
+    n = body.radii.shape[0]
+    out = Overlaps(np.zeros(n), np.full(n, -1, np.int64), np.full(n, -1, np.int64),
+                   np.full(n, -1, np.int64), np.zeros((n, 3)), np.zeros((n, 3)))
+    if n < 2:
+        return out
+    plane = np.ascontiguousarray(body.centre[:, :2])
+    finite = np.isfinite(plane).all(axis=1)
+    if not finite.all():  # a frozen or not yet posed body: far away from everyone
+        plane[~finite] = 1e9 + np.arange(int((~finite).sum()))[:, None] * 1e3
+    cell_m = max(2.0 * float(np.max(body.reach, initial=0.0, where=np.isfinite(body.reach))), 0.1)
+    mask = table_mask(n)
+    slot, order = np.empty(n, np.int64), np.empty(n, np.int64)
+    start = np.empty(mask + 2, np.int64)
+    build_grid(plane, cell_m, mask, slot, start, order)
+    over_chunks(overlap_rows, n, body.ends, body.radii, body.centre, body.reach, plane, cell_m,
+                mask, start, order, *out)
+    return out

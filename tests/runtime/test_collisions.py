@@ -1,0 +1,119 @@
+"""Bodies for collisions (issue 32, items 1-3): capsules, targets on the surface, overlaps."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ecs_anim.core.morphology import Morphology
+from ecs_anim.core.skeleton import JOINT_INDEX as J
+from ecs_anim.core.skeleton import N_JOINTS
+from ecs_anim.runtime.kernels.capsules import capsules, closest_between, overlaps
+from ecs_anim.solver.capsules import (
+    CAPSULE_INDEX,
+    N_CAPSULES,
+    capsule_radii,
+    capsules_from_positions,
+    closest_between_segments,
+    surface_points,
+)
+from support.scenarios import run
+
+
+def test_compiled_capsules_match_the_numpy_reference():
+    rng = np.random.default_rng(3201)
+    positions = rng.normal(size=(7, N_JOINTS, 3))
+    lengths = np.stack([Morphology.preset(p).lengths for p in
+                        ("child", "adult_female", "adult_male", "tall", "child", "tall",
+                         "adult_male")])
+    ends, radii = capsules_from_positions(positions, lengths)
+    body = capsules(positions, lengths)
+    np.testing.assert_allclose(body.ends, ends, atol=1e-12)
+    np.testing.assert_allclose(body.radii, radii, atol=1e-12)
+    assert body.ends.shape == (7, N_CAPSULES, 2, 3)
+    # An adult's girths (the module's table): trunk 106 mm, shank 51 mm.
+    adult = capsule_radii(Morphology.preset("adult_male").lengths)
+    assert adult[CAPSULE_INDEX["trunk"]] == pytest.approx(0.106, abs=2e-3)
+    assert adult[CAPSULE_INDEX["shank_r"]] == pytest.approx(0.051, abs=2e-3)
+
+
+def test_nearest_points_of_two_segments_batch_and_single_agree():
+    rng = np.random.default_rng(3202)
+    p1, q1, p2, q2 = rng.normal(size=(4, 50, 3))
+    q1[0] = p1[0]  # a degenerate segment: a point
+    a, b = closest_between_segments(p1, q1, p2, q2)
+    for k in range(50):
+        sa, sb = closest_between(tuple(p1[k]), tuple(q1[k]), tuple(p2[k]), tuple(q2[k]))
+        np.testing.assert_allclose(sa, a[k], atol=1e-12)
+        np.testing.assert_allclose(sb, b[k], atol=1e-12)
+    # Crossing segments: the nearest points are where they cross.
+    a, b = closest_between_segments(np.array([[-1.0, 0, 0]]), np.array([[1.0, 0, 0]]),
+                                    np.array([[0.0, -1, 0.2]]), np.array([[0.0, 1, 0.2]]))
+    np.testing.assert_allclose(a, [[0, 0, 0]], atol=1e-12)
+    np.testing.assert_allclose(b, [[0, 0, 0.2]], atol=1e-12)
+
+
+def test_a_target_on_a_capsule_goes_out_to_its_surface_square_to_the_axis():
+    axis_a, axis_b = np.array([[0.0, 0, 1.0]]), np.array([[0.0, 0, 1.5]])
+    target = np.array([[0.0, 0, 1.2]])
+    # The effector comes from in front and below: the goal is square to the axis, 0.16 m out.
+    goal = surface_points(target, axis_a, axis_b, np.array([0.16]), np.array([[0.8, 0, 0.9]]))
+    np.testing.assert_allclose(goal, [[0.16, 0, 1.2]], atol=1e-12)
+
+
+def _grid_free_overlap(ends, radii):
+    n = ends.shape[0]
+    depth = np.zeros(n)
+    for i in range(n):
+        for j in range(n):
+            if i == j:
+                continue
+            a, b = closest_between_segments(
+                np.repeat(ends[i, :, None, 0], N_CAPSULES, 1), np.repeat(ends[i, :, None, 1], N_CAPSULES, 1),
+                np.repeat(ends[j, None, :, 0], N_CAPSULES, 0), np.repeat(ends[j, None, :, 1], N_CAPSULES, 0))
+            d = radii[i, :, None] + radii[j, None, :] - np.linalg.norm(a - b, axis=-1)
+            depth[i] = max(depth[i], d.max())
+    return depth
+
+
+def test_the_grid_finds_every_overlap_a_search_of_all_pairs_finds():
+    rng = np.random.default_rng(3203)
+    n = 40
+    standing = np.zeros((N_JOINTS, 3))
+    lengths = np.tile(Morphology.preset("adult_male").lengths, (n, 1))
+    # A crude standing body: joints scattered about the pelvis within a body's size.
+    standing = rng.normal(scale=0.25, size=(n, N_JOINTS, 3))
+    standing[:, J["pelvis"]] = 0.0
+    spots = rng.uniform(0, 4.0, size=(n, 3)) * [1, 1, 0]
+    body = capsules(standing + spots[:, None], lengths)
+    found = overlaps(body)
+    np.testing.assert_allclose(found.depth, _grid_free_overlap(body.ends, body.radii), atol=1e-12)
+    assert (found.depth > 0).sum() > 5
+    hit = np.flatnonzero(found.depth > 0)
+    assert np.all(found.other[hit] >= 0) and np.all(found.other[hit] != hit)
+    np.testing.assert_allclose(np.linalg.norm(found.normal[hit], axis=1), 1.0)
+
+
+def test_the_fights_kicks_land_on_the_chest_not_in_it():
+    r = run("fight_training")
+    e, w, idx, pos = r["errors"], r["weights"], r["index"], r["positions"]
+    for pair in (1, 2, 3, 4):
+        k, d = r["names"].index(f"kicker_{pair}"), r["names"].index(f"defender_{pair}")
+        lengths = r["lengths"]
+        shank = capsule_radii(lengths[k])[CAPSULE_INDEX["shank_r"]]
+        trunk = capsule_radii(lengths[d])[CAPSULE_INDEX["trunk"]]
+        a, b = pos[:, d, J["pelvis"]], pos[:, d, J["neck"]]
+        ankle = pos[:, k, J["ankle_r"]]
+        t = np.clip(np.sum((ankle - a) * (b - a), 1) / np.sum((b - a) ** 2, 1), 0, 1)
+        to_axis = np.linalg.norm(ankle - (a + t[:, None] * (b - a)), axis=1)
+        # never closer than its own radius; while the kick is fully on, at the chest's surface
+        # (its shank's radius and the trunk's from the axis) as the defender stood last tick:
+        # within 30 mm of it as the defender stands now (its ward-off turns its trunk)
+        kick = idx[f"kicker_{pair}.kick_torso"]
+        full = w[:, kick] >= 1
+        assert to_axis.min() > shank, (pair, to_axis.min(), shank)
+        assert to_axis[full].min() > shank + trunk - 0.03, (pair, to_axis[full].min())
+        if pair < 4:  # pair 4's kicker cannot reach
+            assert np.nanmax(e[full, kick]) < 1e-4  # 0.0 mm to the surface
+    for c in r["report"]["characters"]:
+        assert "overlap_mm_max" in c and "overlap_at_s" in c
