@@ -22,6 +22,7 @@ from ecs_anim.runtime.actions import switched_off
 from ecs_anim.runtime.allocator import keep_freed_memory
 from ecs_anim.runtime.kernels import set_threads, threads
 from ecs_anim.runtime.metrics import MetricsRecorder
+from ecs_anim.runtime.recorder import RecordedCharacter, Recorder
 from ecs_anim.runtime.simulation import Simulation
 from ecs_anim.runtime.steering import GAITS, SteeringSettings
 from ecs_anim.runtime.system_base import System
@@ -78,6 +79,8 @@ __all__ = [
     "Play",
     "QueuedClip",
     "Reached",
+    "RecordedCharacter",
+    "Recorder",
     "Remove",
     "Removed",
     "Scenario",
