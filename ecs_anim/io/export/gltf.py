@@ -323,3 +323,10 @@ def glb_from_pose(pose: DecodedPose, morph: Morphology, fps: float) -> bytes:
     """A ``.glb`` of decoded poses (frames leading) on ``morph``: as
     :func:`ecs_anim.io.export.skeleton.bvh_text`, for glTF."""
     return glb_bytes(morph, pose.positions[:, J["pelvis"]], local_rotations(pose), fps)
+
+
+#: The binary chunk builder, the quaternion track smoother and the generator name, for the
+#: export onto a user's rig (:mod:`ecs_anim.io.export.onto`).
+BinaryChunk = _BinaryChunk
+continuous_quaternions = _continuous
+generator_name = _generator

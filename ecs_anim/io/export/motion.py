@@ -16,6 +16,8 @@ from ecs_anim.core.normalized import DecodedPose
 from ecs_anim.core.skeleton import JOINTS
 from ecs_anim.io.export.bvh import bvh_text
 from ecs_anim.io.export.gltf import glb_from_pose
+from ecs_anim.io.export.onto import bvh_onto_rig, glb_onto_rig, rig_of
+from ecs_anim.io.export.rig import Rig, rig_pose
 from ecs_anim.io.export.skeleton import play_on, resolve_morphology
 from ecs_anim.motion.clip import NormalizedMotion
 
@@ -31,10 +33,14 @@ def write_npz(f: IO[bytes], positions: F64, fps: float, contacts: np.ndarray) ->
 
 
 def export_motion(motion: NormalizedMotion, morphology_spec: str, out: str | Path,
-                  force: bool = False) -> tuple[Morphology, DecodedPose]:
+                  force: bool = False, onto: str | Path | Rig | None = None,
+                  rig_map: str | None = None) -> tuple[Morphology, DecodedPose]:
     """Play ``motion`` on a body and write ``out`` (.bvh, .npz or .glb); an existing ``out``
     without ``force``, or a path that cannot be written, is an :class:`EcsAnimError` before any
-    work."""
+    work. ``onto``: a rig (a .bvh, .glb or .gltf file, or a loaded :class:`Rig`; its joint map
+    ``rig_map``, a preset or a map YAML, as import's ``--map``) whose body the motion is played
+    on and whose hierarchy is written (:mod:`ecs_anim.io.export.onto`); ``morphology_spec``
+    must then be ``"source"`` (the rig is the body)."""
     out = Path(out)
     suffix = out.suffix.lower()
     if suffix not in (".bvh", ".npz", ".glb"):
@@ -42,14 +48,26 @@ def export_motion(motion: NormalizedMotion, morphology_spec: str, out: str | Pat
     problem = output_problem(out, force)
     if problem is not None:
         raise EcsAnimError(problem)
-    morph, is_source = resolve_morphology(morphology_spec, motion)
+    rig = None
+    if onto is not None:
+        if morphology_spec != "source":
+            raise EcsAnimError(f"--morphology {morphology_spec} and --onto {onto}: the rig is the "
+                               "body the motion is played on; give one of them")
+        rig = rig_of(onto, rig_map)
+        morph, is_source = rig.morphology, False
+    else:
+        morph, is_source = resolve_morphology(morphology_spec, motion)
     # BVH and glTF bones are rigid, so they get the rigid body even on the source morphology;
     # the .npz on the source carries the measured stretch and reproduces the source exactly.
     pose = play_on(motion, morph, is_source and suffix == ".npz")
     if not np.all(np.isfinite(pose.positions)):
         raise EcsAnimError(f"{out}: the decoded motion holds non-finite positions (bug); nothing written")
     with atomic_output(out, force) as f:
-        if suffix == ".bvh":
+        if rig is not None and suffix != ".npz":
+            posed = rig_pose(rig, pose)
+            f.write(bvh_onto_rig(rig, posed, motion.fps).encode("utf-8") if suffix == ".bvh"
+                    else glb_onto_rig(rig, posed, motion.fps))
+        elif suffix == ".bvh":
             f.write(bvh_text(pose, morph, motion.fps).encode("utf-8"))
         elif suffix == ".glb":
             f.write(glb_from_pose(pose, morph, motion.fps))
