@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ecs_anim.core.checks import check_value, found
+from ecs_anim.core.checks import found
 from ecs_anim.core.errors import UsageError, listed, quoted
 from ecs_anim.core.files import output_set
 from ecs_anim.core.morphology import Morphology
@@ -203,7 +203,8 @@ class Recorder:
 
     def character(self, entity: int) -> RecordedCharacter:
         """One character's recording, by its entity (valid after its removal too)."""
-        check_value(entity, int, "character: entity")
+        if isinstance(entity, bool) or not isinstance(entity, (int, np.integer)):
+            raise UsageError(f"character: expected an entity (int), got {found(entity)}")
         known = 0 <= entity < self._index_of.shape[0] and self._index_of[entity] >= 0
         if not known:
             raise UsageError(f"character: entity {entity!r} is not recorded by this recorder")
