@@ -46,12 +46,24 @@ def cmd_export(args: argparse.Namespace) -> int:
 
     inputs = [args.file] if args.morphology == "source" or args.morphology in PRESET_SPECS \
         else [args.file, args.morphology]
+    if args.onto is not None:
+        inputs.append(args.onto)
+        if args.map is not None and Path(args.map).suffix.lower() in (".yaml", ".yml"):
+            inputs.append(args.map)
+    elif args.map is not None:
+        raise EcsAnimError(f"--map {args.map}: matches the joints of an --onto rig; give --onto RIG")
     problem = input_problem(args.output, inputs)
     if problem is not None:
         raise EcsAnimError(problem)
     motion = load_nmo(args.file)
-    morph, _ = export_motion(motion, args.morphology, args.output, force=args.force)
-    print(f"{args.file} on {morph.name} (stature {morph.stature:.3f} m) -> {args.output}: "
+    rig = None
+    if args.onto is not None:
+        from ecs_anim.io.export.rig import load_rig
+
+        rig = load_rig(args.onto, args.map)
+    morph, _ = export_motion(motion, args.morphology, args.output, force=args.force, onto=rig)
+    onto = "" if rig is None else f" onto {args.onto} ({rig.n_joints} joints, {rig.joint_map.how})"
+    print(f"{args.file} on {morph.name} (stature {morph.stature:.3f} m){onto} -> {args.output}: "
           f"{motion.n_frames} frames")
     return 0
 
@@ -275,6 +287,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--morphology", default="source",
                    help=f"source | {' | '.join(PRESET_SPECS)} | FILE.yaml | SKELETON.bvh "
                         "(default: source)")
+    p.add_argument("--onto", metavar="RIG.bvh|RIG.glb",
+                   help="play the motion on this rig's body and write it in the rig's own "
+                        "hierarchy, names and rest pose (docs/export.md)")
+    p.add_argument("--map", metavar="PRESET|FILE.yaml",
+                   help="how the --onto rig's joints are our body parts, as import's --map "
+                        "(default: detected)")
     p.add_argument("-o", "--output", required=True, metavar="OUT.bvh|OUT.npz|OUT.glb")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     p.set_defaults(func=cmd_export)

@@ -51,7 +51,7 @@ def export_motion(motion: NormalizedMotion, morphology_spec: str, out: str | Pat
     rig = None
     if onto is not None:
         if morphology_spec != "source":
-            raise EcsAnimError(f"--morphology {morphology_spec} and --onto {onto}: the rig is the "
+            raise EcsAnimError(f"--morphology {morphology_spec} and --onto {getattr(onto, 'path', onto)}: the rig is the "
                                "body the motion is played on; give one of them")
         rig = rig_of(onto, rig_map)
         morph, is_source = rig.morphology, False

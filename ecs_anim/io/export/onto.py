@@ -55,6 +55,12 @@ def bvh_onto_rig(rig: Rig, posed: RigPose, fps: float, decimals: int = 6) -> str
     local[:, parents < 0] = joint2file[:, parents < 0]
     move = (posed.positions[:, rig.translated] - rig.rest_in_world[rig.translated]) \
         @ file2world / unit  # (F, 3) file units; the joints above it keep their rest pose
+    # The joint whose position channels carry the move: the translated one or, where it has none
+    # (a glTF rig's pelvis below its root), the lowest one above it that has them.
+    carrier = rig.translated
+    while carrier >= 0 and not any(c.lower().endswith("position")
+                                   for c in skeleton.joints[carrier].channels):
+        carrier = int(parents[carrier])
     fmt = f"{{:.{decimals}f}}"
     columns: list[F64] = []
     lines = ["HIERARCHY"]
@@ -83,7 +89,7 @@ def bvh_onto_rig(rig: Rig, posed: RigPose, fps: float, decimals: int = 6) -> str
             if key.endswith("position"):
                 axis = "xyz".index(key[0])
                 value = np.full(len(local), joint.offset[axis])
-                if i == rig.translated:
+                if i == carrier:
                     value = value + move[:, axis]
                 columns.append(value)
             else:

@@ -83,6 +83,8 @@ LIMBS: dict[str, tuple[str, str, str, int, bool]] = {
     **{f"shoulder_{s}": (f"elbow_{s}", f"wrist_{s}", f"hand_{s}", k, False)
        for k, s in enumerate("lr")},
 }
+#: Parts whose bone may hold twist joints (thigh, shank, upper arm, forearm).
+TWISTING = ("hip", "knee", "shoulder", "elbow")
 #: A joint lies on a bone when it is this close to the line, as a fraction of the bone's length.
 ON_BONE = 0.01
 
@@ -409,7 +411,7 @@ def _plan(rig: Rig) -> _Plan:
         below = parts_below(j)
         upper = part_above(j)
         next_part = NEXT_PART.get(upper[1], "") if upper is not None else ""
-        if upper is not None and next_part and below == [next_part] and next_part not in END_PARTS:
+        if upper is not None and upper[1][:-2] in TWISTING and below == [next_part]:
             a = rest[upper[0]]
             b = rest[rig.joint_map.source[next_part]]
             bone = b - a
@@ -425,7 +427,7 @@ def _plan(rig: Rig) -> _Plan:
                 aim[j] = next_part
                 continue
         if not below and upper is not None and "twist" in rig.names[j].lower() and \
-                upper[1] in NEXT_PART and int(parents[j]) == upper[0]:
+                upper[1][:-2] in TWISTING and int(parents[j]) == upper[0]:
             twist[j] = (upper[1], NEXT_PART[upper[1]], -1.0)  # a leaf: half the twist
             continue
         targets = [c for c in below if c in AIM_FIRST] or below
@@ -461,6 +463,12 @@ def _reach_with_rig_bones(rig: Rig, pose: DecodedPose, parts: F64, first: str, r
     parts[:, J[tip]] += at_end - target
     parts[:, J[middle]] = at_middle
     parts[:, J[end]] = at_end
+
+
+def twist_shares(rig: Rig) -> dict[str, float]:
+    """The rig's twist joints (see the module docstring) and the share of the twist each takes."""
+    plan = _plan(rig)
+    return {rig.names[j]: t[2] for j, t in enumerate(plan.twist) if t is not None}
 
 
 def _twist_angle(relative: F64, axis: F64) -> F64:
@@ -566,4 +574,4 @@ def rig_pose(rig: Rig, pose: DecodedPose) -> RigPose:
     return RigPose(delta, joint2world, where)
 
 
-__all__ = ["Rig", "RigPose", "load_rig", "rig_pose"]
+__all__ = ["Rig", "RigPose", "load_rig", "rig_pose", "twist_shares"]

@@ -103,6 +103,12 @@ CONVENTIONS.append(Convention("rigify", "Rigify metarig DEF- bones (find_string 
     ("DEF-thumb.02.L", "DEF-thumb.01.L", ("wrist_l", (0.06, 0.03, 0.0)))]), ".L", ".R"),
     order="XYZ"))
 
+# Rigify's twist halves sit in the chain: DEF-thigh.L > DEF-thigh.L.001 > DEF-shin.L > ...
+_halves = {f"DEF-{b}.{s}": f"DEF-{a}.{s}.001" for a, b in (
+    ("thigh", "shin"), ("shin", "foot"), ("upper_arm", "forearm"), ("forearm", "hand"))
+    for s in "LR"}
+CONVENTIONS[-1].joints = [(n, _halves.get(n, p), place) for n, p, place in CONVENTIONS[-1].joints]
+
 # --- MotionBuilder HumanIK (the HumanIK BVH template: Character1_Reference at the floor >
 # Character1_Hips > Spine > Spine1 > Spine2 > Neck > Head; Spine2 > *Shoulder > *Arm > *ForeArm
 # > *Hand > *HandMiddle1-3; Hips > *UpLeg > *Leg > *Foot > *ToeBase; and its *_RIGMESH helper
@@ -334,7 +340,7 @@ def bvh_text(convention: Convention, body: dict[str, np.ndarray]) -> str:
         offset = places[i] - (places[parent[i]] if parent[i] is not None else 0.0)
         lines.append(f"{pad}{'ROOT' if parent[i] is None else 'JOINT'} {names[i]}")
         lines.append(f"{pad}{{")
-        lines.append(f"{pad}\tOFFSET {' '.join(f'{v:.6f}' for v in offset)}")
+        lines.append(f"{pad}\tOFFSET {' '.join(f'{v + 0.0:.6f}' for v in np.round(offset, 6))}")
         if parent[i] is None:
             lines.append(f"{pad}\tCHANNELS 6 Xposition Yposition Zposition {rot}")
             channels.extend(offset.tolist() + [0.0] * 3)
@@ -367,12 +373,10 @@ def _frame_y_along(direction: np.ndarray, roll: float) -> np.ndarray:
 
 
 def _quat(m: np.ndarray) -> list[float]:
-    w = np.sqrt(max(1.0 + m[0, 0] + m[1, 1] + m[2, 2], 1e-12)) / 2.0
-    x = (m[2, 1] - m[1, 2]) / (4 * w)
-    y = (m[0, 2] - m[2, 0]) / (4 * w)
-    z = (m[1, 0] - m[0, 1]) / (4 * w)
-    q = np.array([x, y, z, w])
-    return (q / np.linalg.norm(q)).tolist()
+    """(x, y, z, w) of a rotation matrix (3, 3)."""
+    from ecs_anim.core.rotations import quat_from_matrix
+
+    return quat_from_matrix(m).tolist()
 
 
 def glb_bytes(convention: Convention, body: dict[str, np.ndarray], seed: int = 33) -> bytes:
