@@ -13,7 +13,15 @@ from ecs_anim.core.errors import EcsAnimError, InputError
 from ecs_anim.core.ground import Bumps, Combined, Ground, HeightGrid, Plane, Slope, Stairs
 from ecs_anim.core.morphology import Morphology, load_morphology_yaml, with_lengths_m
 from ecs_anim.core.skeleton import JOINT_INDEX, JOINTS, LENGTHS
-from ecs_anim.io.export import EXPORT_NAMES, bvh_from_rotations, export_motion, glb_bytes, write_npz
+from ecs_anim.io.export import (
+    EXPORT_NAMES,
+    Rig,
+    bvh_from_rotations,
+    export_motion,
+    glb_bytes,
+    load_rig,
+    write_npz,
+)
 from ecs_anim.io.importing import import_bvh
 from ecs_anim.motion.clip import NormalizedMotion, load_nmo, save_nmo
 from ecs_anim.motion.constraint_table import Area
@@ -83,6 +91,7 @@ __all__ = [
     "Recorder",
     "Remove",
     "Removed",
+    "Rig",
     "Scenario",
     "SetBody",
     "Simulation",
@@ -105,6 +114,7 @@ __all__ = [
     "keep_freed_memory",
     "load_morphology_yaml",
     "load_nmo",
+    "load_rig",
     "load_scenario",
     "save_nmo",
     "set_threads",

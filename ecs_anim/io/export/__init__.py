@@ -4,17 +4,25 @@
 from ecs_anim.io.export.bvh import bvh_from_rotations, bvh_text
 from ecs_anim.io.export.gltf import glb_bytes, glb_from_pose
 from ecs_anim.io.export.motion import export_motion, write_npz
+from ecs_anim.io.export.onto import bvh_onto_rig, glb_onto_rig
+from ecs_anim.io.export.rig import Rig, RigPose, load_rig, rig_pose
 from ecs_anim.io.export.skeleton import EXPORT_NAMES, local_rotations, play_on, resolve_morphology
 
 __all__ = [
     "EXPORT_NAMES",
+    "Rig",
+    "RigPose",
     "bvh_from_rotations",
+    "bvh_onto_rig",
     "bvh_text",
     "export_motion",
     "glb_bytes",
     "glb_from_pose",
+    "glb_onto_rig",
+    "load_rig",
     "local_rotations",
     "play_on",
     "resolve_morphology",
+    "rig_pose",
     "write_npz",
 ]

@@ -377,3 +377,25 @@ def test_a_rig_built_otherwise_than_the_capture_still_puts_feet_and_hands_where_
     hips = [names.index(rig.names[rig.joint_map.source[f"hip_{s}"]]) for s in "lr"]  # type: ignore[index]
     ours = reference.positions[:, [JOINT_INDEX["hip_l"], JOINT_INDEX["hip_r"]]].mean(axis=1)
     assert np.linalg.norm(positions[:, hips].mean(axis=1) - ours, axis=-1).max() < 1.0 * MM
+
+
+def test_the_export_page_commands_run_as_written(tmp_path, monkeypatch, capsys):
+    """docs/export.md's ``ecs-anim`` lines run as written (its ``out/`` put in a temporary
+    folder) and print what the page says; its Python block runs in tests/project/test_docs.py."""
+    from conftest import REPO
+
+    page = (REPO / "docs" / "export.md").read_text(encoding="utf-8")
+    commands = [line.strip() for line in page.splitlines()
+                if line.startswith("    ecs-anim ") and "CLIP.nmo" not in line]
+    assert len(commands) == 3
+    monkeypatch.chdir(REPO)
+    printed = []
+    for command in commands:
+        args = command.replace("out/", f"{tmp_path}/out/").split()[1:]
+        assert main(args) == 0, command
+        printed.append(capsys.readouterr().out.replace(f"{tmp_path}/", ""))
+    said = " ".join(page.split("The second prints `")[1].split("`")[0].split())
+    assert said in printed[1], (said, printed[1])
+    names, _ = reference_world(tmp_path / "out" / "onto" / "walk_on_mixamo.bvh", 0.01, "y")
+    assert "mixamorig:LeftHandMiddle1" in names
+    assert_valid([tmp_path / "out" / "onto" / "walk_on_mixamo.glb"])
