@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 from ecs_anim.core.ground import Ground, GroundDescription, describe
 from ecs_anim.core.ground_adapt import (
     BALL_HEIGHT_PER_LEG,
+    GROUND_SMOOTHING_S,
     HEEL_TOLERANCE_M,
     MAX_LEG_EXTENSION,
     SWITCH_PER_LEG,
@@ -47,9 +48,6 @@ from ecs_anim.runtime.system_base import System
 
 if TYPE_CHECKING:
     from ecs_anim.runtime.simulation import Simulation
-
-#: Time constant (s) with which the motion's floor follows the ground under the supporting feet.
-GROUND_SMOOTHING_S = 0.15
 
 #: Passes lifting heels (``adapt_keeping_heels_up``) and pitching toes onto the ground.
 HEEL_PASSES = 4

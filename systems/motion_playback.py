@@ -1,5 +1,9 @@
 """MotionPlayback: sample each character's clip(s) in normalized space, advance the clocks.
 
+Each clip's root height is played relative to the ground its capture stood on
+(:attr:`~ecs_anim.motion.clip.NormalizedMotion.capture_ground`); GroundAdapt puts the
+character's own ground under it.
+
 The clip each plays was chosen before it this tick (QueuedClips, Steering, ApplyReactions).
 
 Rows: characters with a MotionPlayer.
@@ -63,6 +67,8 @@ class MotionPlayback(System):
         over_chunks(sample_placed_rows, rows.size, rows, bank_poses, bank.start, bank.n_frames,
                     bank.fps, bank.loop_yaw, bank.loop_shift, st.clip, st.clip_time_s, st.loop,
                     st.placement_xy, st.placement_heading, leg, out, rows)
+        out.root_position[rows, 2] -= self._capture_ground(rows, st.clip, st.clip_time_s,
+                                                           st.loop)
         if st.contact_weight.shape != (st.n, 2) or not st.contact_weight.flags.writeable:
             st.contact_weight = np.zeros((st.n, 2))
         fading = rows[st.fade_s[rows] > 0.0]
@@ -89,6 +95,8 @@ class MotionPlayback(System):
                         st.fade_time_s, st.fade_loop, st.fade_placement_xy,
                         st.fade_placement_heading, leg, old,
                         np.arange(fading.size, dtype=np.int64))
+            old.root_position[:, 2] -= self._capture_ground(fading, st.fade_clip,
+                                                            st.fade_time_s, st.fade_loop)
             w = np.clip(st.fade_elapsed_s[fading] / np.maximum(st.fade_s[fading], 1e-9), 0, 1)
             over_chunks(blend_rows, fading.size, fading, old, w, out)
             st.fade_s[fading] = np.where(w >= 1.0, 0.0, st.fade_s[fading])
@@ -100,6 +108,8 @@ class MotionPlayback(System):
         previous = st.contact_weight.copy()
         poses = self._placed(sample(bank, st.clip, st.clip_time_s, st.loop),
                              st.placement_xy, st.placement_heading)
+        poses.root_position[:, 2] -= sample_table(bank, bank.capture_ground, st.clip,
+                                                  st.clip_time_s, st.loop)[:, 0]
         weights = sample_table(bank, bank.contact_weight, st.clip, st.clip_time_s, st.loop)
         roll = sample_table(bank, bank.sole_roll, st.clip, st.clip_time_s, st.loop)
         fading = st.fade_s > 0.0
@@ -115,6 +125,8 @@ class MotionPlayback(System):
         if np.any(fading):
             old = self._placed(sample(bank, st.fade_clip, st.fade_time_s, st.fade_loop),
                                st.fade_placement_xy, st.fade_placement_heading)
+            old.root_position[:, 2] -= sample_table(bank, bank.capture_ground, st.fade_clip,
+                                                    st.fade_time_s, st.fade_loop)[:, 0]
             poses = blend(old, poses, w)
             st.fade_s = np.where((w >= 1.0) & playing, 0.0, st.fade_s)
         if self.all_rows():
@@ -141,6 +153,17 @@ class MotionPlayback(System):
         kept = np.where(previous > both, np.maximum(both, previous - release_step), both)
         weights: NDArray[np.float64] = np.where(keep[:, None], kept, 0.0)
         return weights
+
+    def _capture_ground(self, rows: NDArray[np.int64], clip: NDArray[np.int64],
+                        time_s: NDArray[np.float64], loop: NDArray[np.bool_]) -> NDArray[np.float64]:
+        """(len(rows),) the ground each of ``rows``' captures stood on at its clip time, in leg
+        lengths (the root's unit): playback takes it out of the root's height."""
+        bank, ground = self.sim.bank, np.zeros((self.sim.store.n, 1))
+        over_chunks(sample_table_rows, rows.size, rows, bank.capture_ground, bank.start,
+                    bank.n_frames, bank.fps, clip, time_s, loop, ground,
+                    rows_per_thread=LIGHT_ROWS_PER_THREAD)
+        under: NDArray[np.float64] = ground[rows, 0]
+        return under
 
     def _advance_clocks(self, dt: float) -> None:
         st = self.sim.store

@@ -36,6 +36,10 @@ BALL_HEIGHT_PER_LEG = 0.025 / 0.86
 #: undefined bend direction and looks locked.
 MAX_LEG_EXTENSION = 0.995
 
+#: Time constant (s) with which the motion's floor follows the ground under the supporting feet
+#: (GroundAdapt), and with which import follows the ground the capture stood on.
+GROUND_SMOOTHING_S = 0.15
+
 #: A heel this far under the ground (m) is lifted: well below the metrics' 1 mm, above rounding.
 HEEL_TOLERANCE_M = 1e-6
 
@@ -197,6 +201,6 @@ def adapt_keeping_heels_up(poses: NormalizedPoses, lengths: F64, ankle_targets: 
     return adapted, legs
 
 
-__all__ = ["BALL_ROLL", "HEEL_ROLL", "SWITCH_PER_LEG", "adapt_keeping_heels_up", "adapt_to_ground",
+__all__ = ["BALL_ROLL", "GROUND_SMOOTHING_S", "HEEL_ROLL", "SWITCH_PER_LEG", "adapt_keeping_heels_up", "adapt_to_ground",
            "heel_depth", "pitched", "pivot_wanted", "planted_foot", "sole_roll",
            "vertical_slack_for_reach"]

@@ -95,7 +95,7 @@ RIGID_LEG_M = 0.0005
 REFERENCE_LEG_M = 0.8
 
 
-def _box_filter(x: F64, width: int) -> F64:
+def box_filter(x: F64, width: int) -> F64:
     """Centred moving average along axis 0 (edges use the available samples)."""
     if width <= 1:
         return x
@@ -123,7 +123,7 @@ def horizontal_speed(points: F64, fps: float, filter_s: float = 0.05) -> F64:
     if points.shape[0] < 2:
         return np.zeros(points.shape[:-1])
     velocity = np.gradient(points[..., :2], axis=0) * fps
-    velocity = _box_filter(velocity, _width(filter_s, fps))
+    velocity = box_filter(velocity, _width(filter_s, fps))
     speed: F64 = np.linalg.norm(velocity, axis=-1)
     return speed
 
@@ -133,7 +133,7 @@ def speed(points: F64, fps: float, filter_s: float = 0.03) -> F64:
     -> (n_frames, ...)."""
     if points.shape[0] < 2:
         return np.zeros(points.shape[:-1])
-    velocity = _box_filter(np.gradient(points, axis=0) * fps, _width(filter_s, fps))
+    velocity = box_filter(np.gradient(points, axis=0) * fps, _width(filter_s, fps))
     speed: F64 = np.linalg.norm(velocity, axis=-1)
     return speed
 
@@ -329,7 +329,7 @@ def touch_down_to_lift_off(points: F64, planted: NDArray[np.bool_], fps: float, 
     z = np.stack([(ankle - HEEL_BEHIND_ANKLE * (toe - ankle))[..., 2], toe[..., 2]])  # (2, F, 2)
     # Zero-phase smoothing over a few hundredths of a second, whatever the rate: a marker's
     # jitter or a one-frame step (a toe marker jumping 8 mm) is no sink or rise.
-    z = _box_filter(z.transpose(1, 0, 2), _width(th.edge_filter_s, fps)).transpose(1, 0, 2)
+    z = box_filter(z.transpose(1, 0, 2), _width(th.edge_filter_s, fps)).transpose(1, 0, 2)
     vz = np.gradient(z, axis=1) * fps if n > 1 else np.zeros_like(z)
     edge = th.edge_height_m * scale
     sink, rise = th.edge_sink_mps * scale, th.edge_rise_mps * scale
@@ -562,7 +562,7 @@ def treadmill_belt(positions: F64, fps: float) -> F64 | None:
     lower = np.argmin(ankles[..., 2], axis=1)
     frames = np.arange(len(ankles))
     stance = ankles[frames, lower]  # (F, 3)
-    velocity = _box_filter(np.gradient(ankles[..., :2], axis=0) * fps, _width(0.03, fps))
+    velocity = box_filter(np.gradient(ankles[..., :2], axis=0) * fps, _width(0.03, fps))
     v = velocity[frames, lower]
     ground = np.percentile(stance[:, 2], 5)
     low = stance[:, 2] < ground + 0.06 * leg  # 5 cm for a 0.8 m leg

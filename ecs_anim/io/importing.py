@@ -28,6 +28,7 @@ from ecs_anim.core.rotations import frame_from_axes, normalize
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import JOINTS, LENGTH_INDEX, N_JOINTS
 from ecs_anim.io.bvh import BvhMotion, BvhSkeleton, forward_kinematics, read_bvh, rest_positions
+from ecs_anim.io.capture_ground import capture_ground
 from ecs_anim.io.contacts import (
     ContactThresholds,
     contact_constraints,
@@ -768,8 +769,6 @@ def normalize_clip(clip: CanonicalClip, name: str, source: str,
     if resized is not clip:
         filled_stature, clip = morph.stature, resized
         morph = source_morphology(clip.positions, f"{name} (source)")
-    poses = encode(clip.positions, clip.pelvis2world, clip.thorax2world, clip.head2world,
-                   morph.lengths)
     found = detect_foot_contacts(clip.positions, clip.fps, thresholds)
     foot = found.foot
     contact_info: dict[str, Any] = {
@@ -798,6 +797,13 @@ def normalize_clip(clip: CanonicalClip, name: str, source: str,
     constraints = contact_constraints(foot, clip.fps, thresholds)
     heel, ball = found.heel & foot, found.ball & foot
     planted = {"heel": heel, "ball": ball, "foot": foot, "on_ground": on_ground}
+    # The ground the capture stood on, which playback takes out (a step in the capture is not
+    # a step on every ground); the poses keep it, so the source decodes back as it was.
+    ankle_height = np.array([morph["ankle_height_l"], morph["ankle_height_r"]])
+    ground, ground_how = capture_ground(clip.positions, clip.fps, foot, heel, ball,
+                                        ankle_height, morph.leg_length)
+    poses = encode(clip.positions, clip.pelvis2world, clip.thorax2world, clip.head2world,
+                   morph.lengths)
     info = {
         "source": source,
         "joint_map": clip.joint_map.how,
@@ -808,6 +814,8 @@ def normalize_clip(clip: CanonicalClip, name: str, source: str,
         "up_axis": clip.up_axis,
         "max_stretch": float(np.max(np.abs(poses.stretch - 1.0))),
         "contacts": contact_info,
+        "capture_ground": {"from": ground_how, "lowest_m": round(float(ground.min()), 4),
+                           "highest_m": round(float(ground.max()), 4)},
     }
     if treadmill_info is not None:
         info["treadmill"] = treadmill_info
@@ -822,7 +830,8 @@ def normalize_clip(clip: CanonicalClip, name: str, source: str,
         info["warnings"] = list(clip.warnings)
     if clip.ignored:
         info["ignored_joints"] = list(clip.ignored)
-    return NormalizedMotion(poses, clip.fps, morph, constraints, info, planted)
+    return NormalizedMotion(poses, clip.fps, morph, constraints, info, planted,
+                            ground / morph.leg_length)
 
 
 def event_agreement(foot: NDArray[np.bool_], events: list[dict[str, Any]], fps: float

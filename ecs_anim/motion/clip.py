@@ -59,6 +59,10 @@ class NormalizedMotion:
         version-1 file, a motion made by code); :meth:`planted_part` then answers with the
         foot contacts. The tick plants the whole foot from the contact constraints; these say
         which part is down, for a pipeline that pins the ball through toe-off.
+    capture_ground : (n_frames,) the height of the ground the capture stood on under the body
+        (import's estimate from its contacts), in the source's leg lengths like the root; the
+        poses keep it (decoding on the source body gives the source back) and playback takes
+        it out, so the motion stands on each character's own ground. None: level at 0.
     """
 
     poses: NormalizedPoses
@@ -67,6 +71,7 @@ class NormalizedMotion:
     constraints: list[ConstraintSpec] = field(default_factory=list)
     info: dict[str, Any] = field(default_factory=dict)
     planted: dict[str, NDArray[np.bool_]] | None = None
+    capture_ground: NDArray[np.float64] | None = None
 
     @property
     def n_frames(self) -> int:
@@ -131,6 +136,8 @@ def save_nmo(motion: NormalizedMotion, path: str | Path, force: bool = False) ->
                               for k, v in motion.poses.arrays().items()}
     for part, flags in (motion.planted or {}).items():
         arrays[f"planted/{part}"] = np.ascontiguousarray(flags, dtype=bool)
+    if motion.capture_ground is not None:
+        arrays["capture_ground"] = np.ascontiguousarray(motion.capture_ground, dtype=np.float64)
     header = {
         "format": FORMAT_NAME,
         "version": FORMAT_VERSION,
@@ -178,6 +185,8 @@ def load_nmo(path: str | Path) -> NormalizedMotion:
                 arrays[name] = np.asarray(data[key], dtype=np.float64)
             planted = {part: np.asarray(data[f"planted/{part}"]) for part in PLANTED_PARTS
                        if f"planted/{part}" in data.files}
+            ground = np.asarray(data["capture_ground"]) if "capture_ground" in data.files \
+                else None
     except InputError:
         raise
     except Exception as exc:  # zip, zlib, json, numpy: any failure to read means a damaged file
@@ -191,6 +200,10 @@ def load_nmo(path: str | Path) -> NormalizedMotion:
         if flags.dtype != np.bool_ or flags.shape != (n, 2):
             raise InputError(path, f"damaged .nmo file: planted/{part} must be bool ({n}, 2), "
                                    f"found {flags.dtype} {flags.shape}")
+    if ground is not None and (ground.shape != (n,) or ground.dtype != np.float64
+                               or not np.all(np.isfinite(ground))):
+        raise InputError(path, f"damaged .nmo file: capture_ground must be finite float64 ({n},), "
+                               f"found {ground.dtype} {ground.shape}")
     try:
         morph = Morphology.from_dict(header["source_morphology"])
         constraints = [ConstraintSpec.from_dict(c) for c in header.get("constraints", [])]
@@ -198,7 +211,7 @@ def load_nmo(path: str | Path) -> NormalizedMotion:
     except (KeyError, TypeError, ValueError) as exc:
         raise InputError(path, f"damaged .nmo header: {exc}") from None
     return NormalizedMotion(NormalizedPoses(**arrays), float(header["fps"]), morph, constraints,
-                            dict(header.get("info", {})), planted or None)
+                            dict(header.get("info", {})), planted or None, ground)
 
 
 def pose_arrays_problem(arrays: dict[str, np.ndarray], n_frames: int) -> str | None:

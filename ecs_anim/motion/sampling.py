@@ -45,6 +45,8 @@ class ClipBank:
         clip's first-frame position frame (world xy of the clip).
     names : clip names.
     contact_weight : (total_frames, 2) foot-contact activation per frame [left, right].
+    capture_ground : (total_frames, 1) the ground each capture stood on, in its leg lengths
+        (:attr:`~ecs_anim.motion.clip.NormalizedMotion.capture_ground`; 0 where not known).
     sole_roll : (total_frames, 2) the part of each foot the clip plants per frame (0 heel, 1
         ball, 0.5 both or not known: :func:`ecs_anim.core.ground_adapt.sole_roll`).
     source_ankle_height : (n_clips, 2) each source's ankle heights in its leg lengths.
@@ -60,6 +62,7 @@ class ClipBank:
     contact_weight: F64
     source_ankle_height: F64
     sole_roll: F64
+    capture_ground: F64
 
     @classmethod
     def from_motions(cls, motions: dict[str, NormalizedMotion]) -> ClipBank:
@@ -93,13 +96,15 @@ class ClipBank:
         rolls = [np.full((motions[n].n_frames, 2), 0.5) if motions[n].planted is None
                  else sole_roll(motions[n].planted_part("heel"), motions[n].planted_part("ball"))
                  for n in names]
+        grounds = [np.zeros(motions[n].n_frames) if motions[n].capture_ground is None
+                   else motions[n].capture_ground for n in names]
         ankle = np.array([np.array([motions[n].source_morphology["ankle_height_l"],
                                     motions[n].source_morphology["ankle_height_r"]])
                           / motions[n].source_morphology.leg_length for n in names])
         return cls(NormalizedPoses(**fields), start, counts,
                    np.array([motions[n].fps for n in names], dtype=np.float64),
                    np.array(yaw), np.array(shift), names, np.concatenate(weights), ankle,
-                   np.concatenate(rolls))
+                   np.concatenate(rolls), np.concatenate(grounds)[:, None])
 
     def index(self, name: str) -> int:
         try:

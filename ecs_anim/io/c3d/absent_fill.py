@@ -79,4 +79,4 @@ def fill_absent_from(motion: NormalizedMotion, default: NormalizedMotion, defaul
                    "on_ground": found.on_ground}
     info = dict(motion.info) | {"absent_fill": f"from {default_name}"}
     return NormalizedMotion(poses, motion.fps, motion.source_morphology, constraints, info,
-                            planted)
+                            planted, motion.capture_ground)
