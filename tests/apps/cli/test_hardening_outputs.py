@@ -33,9 +33,11 @@ SET = ["kick.bvh", "kick.glb", "kick.npz", "other.bvh", "other.glb", "other.npz"
 
 def write_scenario(folder: Path, kick: Path, names: tuple[str, ...] = ("kick", "other"),
                    file_name: str = "s.yaml") -> Path:
-    """A short scenario whose characters ``names`` play the clip ``kick``."""
+    """A short scenario whose characters ``names`` play the clip ``kick``, side by side 2 m
+    apart (not in each other, which CollisionSeparate would report on stderr)."""
     path = folder / file_name
-    people = "".join(f"  - {{name: {n}, morphology: adult_male, motion: kick}}\n" for n in names)
+    people = "".join(f"  - {{name: {n}, morphology: adult_male, motion: kick, "
+                     f"position_m: [0.0, {2.0 * i}]}}\n" for i, n in enumerate(names))
     path.write_text(f"{LENGTH_LINE}\nmotions:\n  kick: {kick}\ncharacters:\n{people}")
     return path
 
