@@ -87,6 +87,12 @@ class NormalizedMotion:
         """Bool (n_frames, 2): left/right foot in full contact."""
         return contacts_from_constraints(self.constraints, self.n_frames, self.fps)
 
+    def ground_under(self) -> NDArray[np.float64]:
+        """(n_frames,) :attr:`capture_ground`, zero where it is not known."""
+        if self.capture_ground is None:
+            return np.zeros(self.n_frames)
+        return self.capture_ground
+
     def planted_part(self, part: str) -> NDArray[np.bool_]:
         """Bool (n_frames, 2): frames where ``part`` (``"heel"``, ``"ball"``, ``"foot"``) of the
         left/right foot is planted; the foot contacts where the motion does not know."""

@@ -96,8 +96,7 @@ class ClipBank:
         rolls = [np.full((motions[n].n_frames, 2), 0.5) if motions[n].planted is None
                  else sole_roll(motions[n].planted_part("heel"), motions[n].planted_part("ball"))
                  for n in names]
-        grounds = [np.zeros(motions[n].n_frames) if motions[n].capture_ground is None
-                   else motions[n].capture_ground for n in names]
+        grounds = [motions[n].ground_under() for n in names]
         ankle = np.array([np.array([motions[n].source_morphology["ankle_height_l"],
                                     motions[n].source_morphology["ankle_height_r"]])
                           / motions[n].source_morphology.leg_length for n in names])

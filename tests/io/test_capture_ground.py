@@ -34,7 +34,7 @@ def _heel_soles(motion) -> np.ndarray:
     body."""
     body = motion.source_morphology
     positions = decode(motion.poses, body.lengths).positions
-    positions[..., 2] -= motion.capture_ground[:, None] * body.leg_length
+    positions[..., 2] -= motion.ground_under()[:, None] * body.leg_length
     heel = motion.planted_part("heel")
     soles = [positions[heel[:, side], J[f"ankle_{s}"], 2] - body[f"ankle_height_{s}"]
              for side, s in enumerate("lr")]
@@ -57,8 +57,8 @@ def test_a_walk_captured_on_a_ramp_is_stored_on_level_ground():
     assert ground["from"] == "contacts"
     assert ground["highest_m"] - ground["lowest_m"] > 0.8 * 0.1 * abs(travel[-1])
     assert np.abs(_heel_soles(motion)).max() < 0.02
-    root = motion.poses.root_position[:, 2] - motion.capture_ground \
-        - (level.poses.root_position[:, 2] - level.capture_ground)
+    root = motion.poses.root_position[:, 2] - motion.ground_under() \
+        - (level.poses.root_position[:, 2] - level.ground_under())
     assert np.abs(root).max() * motion.source_morphology.leg_length < 0.02
     leg = motion.source_morphology.leg_length
     assert np.allclose(motion.poses.root_position[:, 2] * leg, ramp[:, J["pelvis"], 2])
