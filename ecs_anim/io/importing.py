@@ -405,6 +405,46 @@ def unit_scale(unit: str) -> float:
     return scale
 
 
+#: A person's legs hang below the spine: hips-to-ankles against pelvis-to-neck at a cosine under
+#: this, in the rest pose or in most frames (a seated rider: -0.6; standing, walking: -0.99). A
+#: skeleton whose legs stand square to its spine in both (cosine about 0) is built on all fours.
+HUMAN_LEGS_TO_SPINE_COS = -0.3
+
+
+def legs_to_spine_cos(positions: F64, src: dict[str, int | None]) -> F64:
+    """Cosine between the legs (hips' middle to ankles' middle) and the spine (pelvis to neck)
+    of joint positions (..., n_joints, 3), ``src`` our joints' indices in them; NaN where either
+    has no length (a degenerate pose shows nothing) or a joint is not in them. -> (...)."""
+    ends = [src[j] for j in ("neck", "pelvis", "ankle_l", "ankle_r", "hip_l", "hip_r")]
+    if any(i is None for i in ends):
+        return np.full(positions.shape[:-2], np.nan)
+    spine = positions[..., src["neck"], :] - positions[..., src["pelvis"], :]
+    legs = 0.5 * (positions[..., src["ankle_l"], :] + positions[..., src["ankle_r"], :]
+                  - positions[..., src["hip_l"], :] - positions[..., src["hip_r"], :])
+    norms = np.linalg.norm(spine, axis=-1) * np.linalg.norm(legs, axis=-1)
+    shown = norms > 1e-12 * max(float(np.abs(positions).max(initial=0.0)), 1.0) ** 2
+    cos: F64 = np.where(shown, np.sum(spine * legs, axis=-1) / np.where(shown, norms, 1.0), np.nan)
+    return cos
+
+
+def check_human_build(skeleton: BvhSkeleton, jmap: JointMap, pos_file: F64) -> None:
+    """Refuse a skeleton that is not a person's (issue 31, class 4: a quadruped with
+    human-looking names): its legs stand square to its spine (:data:`HUMAN_LEGS_TO_SPINE_COS`)
+    both in the rest pose and in most frames. A person crawling has an upright rest pose; a
+    converter's degenerate rest pose still has upright frames."""
+    src = jmap.source
+    rest = float(legs_to_spine_cos(rest_positions(skeleton), src))
+    per_frame = legs_to_spine_cos(pos_file, src)
+    frames = float(np.median(per_frame[np.isfinite(per_frame)])) if np.isfinite(per_frame).any() \
+        else math.nan
+    # NaN compares False: a degenerate pose (every joint on one point) refuses nothing here.
+    if rest > HUMAN_LEGS_TO_SPINE_COS and frames > HUMAN_LEGS_TO_SPINE_COS:
+        angle = math.degrees(math.acos(min(max(frames, -1.0), 1.0)))
+        raise EcsAnimError(f"not a human skeleton: its legs stand at {angle:.0f} degrees to its "
+                           "spine in the rest pose and the frames, not below it (a four-legged "
+                           "animal?); ecs_anim animates people, nothing imported")
+
+
 def detect_up(skeleton: BvhSkeleton, jmap: JointMap, pos_file: F64) -> tuple[str, str]:
     """The file's up axis, ``"y"``, ``"z"``, ``"-y"`` or ``"-z"``, with a sentence saying why: the
     way along which the head stands above the feet, in the rest pose (the spine from pelvis to
@@ -489,6 +529,7 @@ def canonical_clip(motion: BvhMotion, map_spec: str | None = None,
     skeleton = motion.skeleton
     joint2file, pos_file = forward_kinematics(motion)
     jmap = map_skeleton(skeleton, map_spec, pos_file)
+    check_human_build(skeleton, jmap, pos_file)
     if up is None:
         up, up_reason = detect_up(skeleton, jmap, pos_file)
     else:

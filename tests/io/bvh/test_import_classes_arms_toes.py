@@ -8,6 +8,8 @@ antiphase, the knees and elbows bend).
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -241,3 +243,41 @@ def test_the_written_files_are_what_they_claim():
     knee = joint_order.index(names["knee"])
     knee_x = rows[:, 6 + 3 * (knee - 1) + 1]  # root: 6 channels; then Z X Y per joint
     assert 0.0 <= knee_x.min() < 1.0 and 38.0 < knee_x.max() <= 40.0 + 1e-6
+
+
+# --- class 4: not a human -----------------------------------------------------------------------
+
+def _four_legged() -> list[Joint]:
+    """A dog in metres with human joint names (Mixamo's, no prefix): hips 0.5 m up, the spine
+    and neck forward along +Z, hind legs (UpLeg/Leg/Foot) and front legs (Arm/ForeArm/Hand)
+    straight down to the ground."""
+    return [("Hips", None, (0.0, 0.5, 0.0), None), ("Spine", "Hips", (0.0, 0.0, 0.2), None),
+            ("Spine1", "Spine", (0.0, 0.0, 0.2), None), ("Neck", "Spine1", (0.0, 0.05, 0.1), None),
+            ("Head", "Neck", (0.0, 0.05, 0.1), (0.0, 0.0, 0.12))] + _mirrored([
+        ("LeftUpLeg", "Hips", (0.07, -0.03, 0.0), None),
+        ("LeftLeg", "LeftUpLeg", (0.0, -0.22, 0.0), None),
+        ("LeftFoot", "LeftLeg", (0.0, -0.22, 0.0), None),
+        ("LeftToeBase", "LeftFoot", (0.0, -0.03, 0.05), (0.0, 0.0, 0.03)),
+        ("LeftShoulder", "Spine1", (0.06, -0.02, 0.05), None),
+        ("LeftArm", "LeftShoulder", (0.02, -0.05, 0.0), None),
+        ("LeftForeArm", "LeftArm", (0.0, -0.2, 0.0), None),
+        ("LeftHand", "LeftForeArm", (0.0, -0.2, 0.0), (0.0, -0.03, 0.04))])
+
+
+def test_a_four_legged_skeleton_with_human_names_is_refused(tmp_path, capsys):
+    """Issue 31, class 4: a quadruped named like a person (it imported as a person before, its
+    spine taken for a short, lying trunk) is refused in one line that says why; nothing is
+    written. People pass, whatever they do: every dev BVH imports (the other tests), a seated
+    bike rider (legs at 127 degrees to the spine) among them."""
+    from ecs_anim.apps.cli.main import main
+
+    path = tmp_path / "dog.bvh"
+    drive = {"LeftUpLeg": "hip", "RightUpLeg": "hip", "LeftLeg": "knee", "RightLeg": "knee"}
+    path.write_text(_bvh(_four_legged(), drive, 0.01))
+    assert main(["import", str(path), "-o", str(tmp_path / "out")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    said = re.match(rf"error: {re.escape(str(path))}: not a human skeleton: its legs stand at "
+                    r"(\d+) degrees to its spine", err[0])
+    assert said is not None and 60 < int(said.group(1)) < 120, err
+    assert "a four-legged animal?" in err[0] and len(err) == 2  # and the count line
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
