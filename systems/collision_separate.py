@@ -11,7 +11,8 @@ a planted leg swivels about its hip-ankle axis (its foot stays), a trunk or pelv
 no foot down steps aside. Equal priorities share the way; where the lower one's chain may not
 move, the other's moves all of it; where neither may, the pair is reported once (a warning). A
 moved character's posture is made again from its pose (the compiled PostureConvert kernel, only
-its rows), and the search runs again, at most :data:`PASSES` times.
+its rows), and the search runs again, at most :data:`PASSES` times, while a round still takes
+off :data:`STALL_SHARE` of the overlap left.
 
 Rows: every character.
 Reads: store.positions, lengths, poses, posture, contact_weight, frozen, local_rotations,
@@ -34,7 +35,7 @@ from ecs_anim.core.rotations import axis_angle, normalize, quat_from_matrix
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import N_JOINTS
 from ecs_anim.runtime.kernels import over_chunks
-from ecs_anim.runtime.kernels.capsules import Capsules, Overlaps, capsules, overlaps
+from ecs_anim.runtime.kernels.capsules import Capsules, Overlaps, capsules, grid_of, overlaps
 from ecs_anim.runtime.kernels.decode import decoded_arrays, fits, pose_arrays
 from ecs_anim.runtime.kernels.posture import N_EXPORT, export_constants, posture_rows
 from ecs_anim.runtime.system_base import System
@@ -53,6 +54,8 @@ SEPARATE_FROM_M = 0.5e-3
 MARGIN_M = 0.5e-3
 #: Most rounds of search and separation per tick.
 PASSES = 8
+#: A round that takes off less than this share of the overlap left ends the rounds.
+STALL_SHARE = 0.1
 #: The largest turn of a limb in one round (rad).
 MAX_TURN_RAD = 0.25
 #: A pinned limb whose point moves less than this per radian of swivel does not swivel (m).
@@ -90,22 +93,33 @@ class CollisionSeparate(System):
             st.capsule_radii = np.empty((n, N_CAPSULES))
         body = capsules(st.positions, st.lengths,
                         Capsules(st.capsule_ends, st.capsule_radii, np.empty((n, 3)),
-                                 np.empty(n)))
-        found = overlaps(body)
+                                 np.empty(n), np.empty((n, 2, 3))))
+        grid = grid_of(body)
+        found = overlaps(body, grid)
         if n < 2 or not (found.depth > SEPARATE_FROM_M).any():
             st.overlap_m = found.depth
             return
         priority, claimed, pin = self._claims()
+        left = float(found.depth.sum())
         for _ in range(PASSES):
             moved = self._separate(found, priority, claimed, pin)
             if moved.size == 0:
                 break
             self._posture(moved)
-            capsules(st.positions, st.lengths, body)
-            found = overlaps(body)
-            if not (found.depth > SEPARATE_FROM_M).any():
+            # Only the moved bodies' capsules change; the overlaps found again are theirs and
+            # those of the bodies that touched them (the grid holds: a turn or a step of a few
+            # centimetres leaves every body within its cell's reach).
+            capsules(st.positions, st.lengths, body, moved)
+            touched = np.union1d(moved, np.flatnonzero(np.isin(found.other, moved)))
+            overlaps(body, grid, touched, found)
+            # Done when nothing overlaps, or a pass took off less than STALL_SHARE of what was
+            # left (the rest is pairs that may not move, or limbs already at their turn).
+            was, left = left, float(found.depth.sum())
+            if not (found.depth > SEPARATE_FROM_M).any() or left > (1.0 - STALL_SHARE) * was:
                 break
-        st.overlap_m = found.depth
+        # Every body's deepest overlap as the tick ends, for the metrics (a body the passes did
+        # not look at again may touch one that moved into it).
+        st.overlap_m = overlaps(body, grid_of(body)).depth
 
     def _claims(self) -> tuple[F64, NDArray[np.bool_], F64]:
         """(n,) each character's priority (its active constraints' highest; -inf: none),

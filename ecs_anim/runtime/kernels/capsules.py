@@ -6,7 +6,8 @@ each character, the deepest overlap of one of its capsules with a capsule of ano
 neighbours on a uniform grid hashed into a table (:func:`ecs_anim.runtime.kernels.avoidance.
 build_grid`, the steering avoidance's), each looking at the 3 x 3 cells about its own (a cell as
 wide as the widest pair of bounding spheres can reach), every capsule pair of two characters
-whose bounding spheres meet tested by the nearest points of their axes (Ericson, Real-Time
+whose bounding spheres and bounds meet (each capsule first against the other body's bounds)
+tested by the nearest points of their axes (Ericson, Real-Time
 Collision Detection, 5.1.9; :func:`ecs_anim.solver.capsules.closest_between_segments`).
 :func:`overlaps` is the numpy-facing call.
 """
@@ -28,17 +29,22 @@ I64 = NDArray[np.int64]
 
 
 @jit(nogil=True)
-def capsule_rows(lo: int, hi: int, positions: F64, lengths: F64, joints: I64, span: F64,
-                 radius_weights: F64, ends: F64, radii: F64, centre: F64, reach: F64) -> None:
-    """Capsules of characters ``lo..hi-1``: ``ends`` (n, C, 2, 3) and ``radii`` (n, C) written
+def capsule_rows(lo: int, hi: int, rows: I64, positions: F64, lengths: F64, joints: I64,
+                 span: F64, radius_weights: F64, ends: F64, radii: F64, centre: F64, reach: F64,
+                 box: F64) -> None:
+    """Capsules of characters ``rows[lo:hi]``: ``ends`` (n, C, 2, 3) and ``radii`` (n, C) written
     from ``positions`` (n, N_JOINTS, 3) and ``lengths`` (n, N_LENGTHS) (``joints`` (C, 2),
     ``span`` (C, 2), ``radius_weights`` (C, N_LENGTHS): :mod:`ecs_anim.solver.capsules`'s
     layout); ``centre`` (n, 3) the pelvis and ``reach`` (n,) how far from it any capsule's
-    surface lies. Mirrors :func:`ecs_anim.solver.capsules.capsules_from_positions`."""
+    surface lies; ``box`` (n, 2, 3) the body's bounds (lowest, highest corner). Mirrors
+    :func:`ecs_anim.solver.capsules.capsules_from_positions`."""
     n_caps, n_len = joints.shape[0], lengths.shape[1]
-    for c in range(lo, hi):
+    for row in range(lo, hi):
+        c = rows[row]
         pelvis = load3(positions[c, 0])
         far = 0.0
+        for x in range(3):
+            box[c, 0, x], box[c, 1, x] = math.inf, -math.inf
         for k in range(n_caps):
             a = load3(positions[c, joints[k, 0]])
             ab = sub(load3(positions[c, joints[k, 1]]), a)
@@ -50,6 +56,9 @@ def capsule_rows(lo: int, hi: int, positions: F64, lengths: F64, joints: I64, sp
                 p = add_scaled(a, ab, span[k, e])
                 ends[c, k, e, 0], ends[c, k, e, 1], ends[c, k, e, 2] = p
                 far = max(far, norm(sub(p, pelvis)) + r)
+                for x in range(3):
+                    box[c, 0, x] = min(box[c, 0, x], p[x] - r)
+                    box[c, 1, x] = max(box[c, 1, x], p[x] + r)
         centre[c, 0], centre[c, 1], centre[c, 2] = pelvis
         reach[c] = far
 
@@ -71,19 +80,38 @@ def closest_between(p1: Vec3, q1: Vec3, p2: Vec3, q2: Vec3) -> tuple[Vec3, Vec3]
     return add_scaled(p1, d1, s), add_scaled(p2, d2, t_clamped)
 
 
+@jit(inline="always")
+def _apart(box: F64, i: int, j: int) -> bool:
+    """Whether the bounds of characters ``i`` and ``j`` (``box`` (n, 2, 3)) do not meet."""
+    for x in range(3):
+        if box[i, 1, x] < box[j, 0, x] or box[j, 1, x] < box[i, 0, x]:
+            return True
+    return False
+
+
+@jit(inline="always")
+def _capsule_apart(p: Vec3, q: Vec3, r: float, box: F64, j: int) -> bool:
+    """Whether the capsule ``p``-``q`` of radius ``r`` lies outside character ``j``'s bounds."""
+    for x in range(3):
+        if max(p[x], q[x]) + r < box[j, 0, x] or box[j, 1, x] < min(p[x], q[x]) - r:
+            return True
+    return False
+
+
 @jit(nogil=True)
-def overlap_rows(lo: int, hi: int, ends: F64, radii: F64, centre: F64, reach: F64,
-                 plane: F64, cell_m: float, mask: int, start: I64, order: I64,
+def overlap_rows(lo: int, hi: int, rows: I64, ends: F64, radii: F64, centre: F64, reach: F64,
+                 box: F64, plane: F64, cell_m: float, mask: int, start: I64, order: I64,
                  depth: F64, other: I64, mine: I64, theirs: I64, normal: F64,
                  point: F64) -> None:
-    """For each character ``i`` in ``lo..hi-1``, its deepest overlap with another character:
+    """For each character ``i`` in ``rows[lo:hi]``, its deepest overlap with another character:
     ``depth[i]`` m (0: none), ``other[i]`` that character's row (-1: none), ``mine[i]`` and
     ``theirs[i]`` the two capsules, ``normal[i]`` (3,) the unit way out for ``i`` (from their
     axis toward its own), ``point[i]`` (3,) the nearest point of its own capsule's axis.
     ``plane`` (n, 2) the bounding spheres' centres on the grid (built on it with cells
     ``cell_m`` wide: ``mask``, ``start``, ``order`` as :func:`~.avoidance.build_grid`)."""
     n_caps = ends.shape[1]
-    for i in range(lo, hi):
+    for row in range(lo, hi):
+        i = rows[row]
         depth[i], other[i], mine[i], theirs[i] = 0.0, -1, -1, -1
         normal[i, 0], normal[i, 1], normal[i, 2] = 0.0, 0.0, 0.0
         point[i, 0], point[i, 1], point[i, 2] = 0.0, 0.0, 0.0
@@ -99,10 +127,13 @@ def overlap_rows(lo: int, hi: int, ends: F64, radii: F64, centre: F64, reach: F6
                 continue
             for a in range(start[s], start[s + 1]):
                 j = order[a]
-                if j == i or not norm(sub(load3(centre[j]), ci)) < reach[i] + reach[j]:
+                if j == i or not norm(sub(load3(centre[j]), ci)) < reach[i] + reach[j] \
+                        or _apart(box, i, j):
                     continue
                 for ki in range(n_caps):
                     p1, q1 = load3(ends[i, ki, 0]), load3(ends[i, ki, 1])
+                    if _capsule_apart(p1, q1, radii[i, ki], box, j):
+                        continue  # (two walkers side by side: most of their capsule pairs)
                     for kj in range(n_caps):
                         p2, q2 = load3(ends[j, kj, 0]), load3(ends[j, kj, 1])
                         on_i, on_j = closest_between(p1, q1, p2, q2)
@@ -124,12 +155,14 @@ def overlap_rows(lo: int, hi: int, ends: F64, radii: F64, centre: F64, reach: F6
 
 class Capsules(NamedTuple):
     """Every character's capsules (:func:`capsules`): ends (n, C, 2, 3) m, radii (n, C) m,
-    centre (n, 3) the pelvis, reach (n,) m from it to the farthest capsule surface."""
+    centre (n, 3) the pelvis, reach (n,) m from it to the farthest capsule surface, box
+    (n, 2, 3) the body's bounds (lowest, highest corner), m."""
 
     ends: F64
     radii: F64
     centre: F64
     reach: F64
+    box: F64
 
 
 class Overlaps(NamedTuple):
@@ -145,28 +178,38 @@ class Overlaps(NamedTuple):
     point: F64
 
 
-def capsules(positions: F64, lengths: F64, out: Capsules | None = None) -> Capsules:
+class Grid(NamedTuple):
+    """The bodies hashed on a uniform grid (:func:`grid_of`): ``plane`` (n, 2) each bounding
+    sphere's centre on it, cells ``cell_m`` wide, ``mask``, ``start``, ``order`` as
+    :func:`~.avoidance.build_grid` makes them."""
+
+    plane: F64
+    cell_m: float
+    mask: int
+    start: I64
+    order: I64
+
+
+def capsules(positions: F64, lengths: F64, out: Capsules | None = None,
+             rows: I64 | None = None) -> Capsules:
     """Every character's capsules from its posture (n, N_JOINTS, 3) and lengths
-    (n, N_LENGTHS), compiled over all of them (``out``: arrays to write, else new)."""
+    (n, N_LENGTHS), compiled over all of them (``out``: arrays to write, else new; ``rows``:
+    only those characters', the others' kept)."""
     n = positions.shape[0]
     if out is None:
         out = Capsules(np.empty((n, N_CAPSULES, 2, 3)), np.empty((n, N_CAPSULES)),
-                       np.empty((n, 3)), np.empty(n))
-    over_chunks(capsule_rows, n, np.ascontiguousarray(positions, np.float64),
+                       np.empty((n, 3)), np.empty(n), np.empty((n, 2, 3)))
+    rows = np.arange(n, dtype=np.int64) if rows is None else rows
+    over_chunks(capsule_rows, rows.size, rows, np.ascontiguousarray(positions, np.float64),
                 np.ascontiguousarray(lengths, np.float64), CAPSULE_JOINTS, CAPSULE_SPAN,
                 RADIUS_WEIGHTS, *out)
     return out
 
 
-def overlaps(body: Capsules) -> Overlaps:
-    """Each character's deepest overlap with another (see :func:`overlap_rows`): the grid
-    built over the bounding spheres' centres (cells twice the widest reach), then
-    :func:`overlap_rows` over all characters, split over the kernels' threads."""
+def grid_of(body: Capsules) -> Grid:
+    """The bodies' bounding spheres' centres hashed on a grid of cells twice the widest reach
+    (a body moved by less than its reach still finds every body it can touch)."""
     n = body.radii.shape[0]
-    out = Overlaps(np.zeros(n), np.full(n, -1, np.int64), np.full(n, -1, np.int64),
-                   np.full(n, -1, np.int64), np.zeros((n, 3)), np.zeros((n, 3)))
-    if n < 2:
-        return out
     plane = np.ascontiguousarray(body.centre[:, :2])
     finite = np.isfinite(plane).all(axis=1)
     if not finite.all():  # a frozen or not yet posed body: far away from everyone
@@ -176,6 +219,22 @@ def overlaps(body: Capsules) -> Overlaps:
     slot, order = np.empty(n, np.int64), np.empty(n, np.int64)
     start = np.empty(mask + 2, np.int64)
     build_grid(plane, cell_m, mask, slot, start, order)
-    over_chunks(overlap_rows, n, body.ends, body.radii, body.centre, body.reach, plane, cell_m,
-                mask, start, order, *out)
+    return Grid(plane, cell_m, mask, start, order)
+
+
+def overlaps(body: Capsules, grid: Grid | None = None, rows: I64 | None = None,
+             out: Overlaps | None = None) -> Overlaps:
+    """Each character's deepest overlap with another (see :func:`overlap_rows`) on ``grid``
+    (:func:`grid_of`, made here if None), over all characters split over the kernels' threads;
+    ``rows``: only those characters' found again, into ``out`` (the others' kept)."""
+    n = body.radii.shape[0]
+    if out is None:
+        out = Overlaps(np.zeros(n), np.full(n, -1, np.int64), np.full(n, -1, np.int64),
+                       np.full(n, -1, np.int64), np.zeros((n, 3)), np.zeros((n, 3)))
+    if n < 2:
+        return out
+    grid = grid_of(body) if grid is None else grid
+    rows = np.arange(n, dtype=np.int64) if rows is None else rows
+    over_chunks(overlap_rows, rows.size, rows, body.ends, body.radii, body.centre, body.reach,
+                body.box, *grid, *out)
     return out
