@@ -200,13 +200,14 @@ class CollisionSeparate(System):
         share = np.where(can_them, share, 1.0) * can_me
         stuck = ~can_me & ~can_them
         if stuck.any():
-            names = sim.names()
+            names: list[str] | None = None  # made only when a pair is new (a list of every name)
             for i, j, a, b in zip(rows[stuck], them[stuck], mine[rows[stuck]],
                                   theirs[rows[stuck]], strict=True):
                 key = (int(st.entity[min(i, j)]), int(st.entity[max(i, j)]),
                        CAPSULES[a if i < j else b], CAPSULES[b if i < j else a])
                 if key not in self.reported:
                     self.reported.add(key)
+                    names = sim.names() if names is None else names
                     sim.warn(f"{names[i]}'s {CAPSULES[a]} and {names[j]}'s {CAPSULES[b]} overlap "
                              f"by {depth[i] * 1e3:.0f} mm and neither may move")
         go = share > 0
