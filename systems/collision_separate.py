@@ -30,10 +30,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.core.body_points import ARM_L, HEAD, LEG_L, TRUNK, point_positions
+from ecs_anim.core.ground_adapt import BALL_HEIGHT_PER_LEG, HEEL_TOLERANCE_M
 from ecs_anim.core.morphology import leg_length
+from ecs_anim.core.normalized import NormalizedPoses, decode_legs
 from ecs_anim.core.rotations import axis_angle, normalize, quat_from_matrix
 from ecs_anim.core.skeleton import JOINT_INDEX as J
-from ecs_anim.core.skeleton import N_JOINTS
+from ecs_anim.core.skeleton import LENGTH_INDEX, N_JOINTS
 from ecs_anim.runtime.kernels import over_chunks
 from ecs_anim.runtime.kernels.capsules import Capsules, Overlaps, capsules, grid_of, overlaps
 from ecs_anim.runtime.kernels.decode import decoded_arrays, fits, pose_arrays
@@ -71,6 +73,9 @@ CHAIN_GROUP = np.array([LEG_L, LEG_L + 1, ARM_L, ARM_L + 1, HEAD, TRUNK], np.int
 LIMB_OF_GROUP = np.array([0, 1, -1, 2, 3, -1], np.int64)  # group -> limb (-1: none)
 LIMB_ROOT = np.array([J["hip_l"], J["hip_r"], J["shoulder_l"], J["shoulder_r"]], np.int64)
 LIMB_END = np.array([J["ankle_l"], J["ankle_r"], J["wrist_l"], J["wrist_r"]], np.int64)
+TOE = np.array([J["toe_l"], J["toe_r"]], np.int64)
+ANKLE_HEIGHT = np.array([LENGTH_INDEX["ankle_height_l"], LENGTH_INDEX["ankle_height_r"]],
+                        np.int64)
 _EXPORT = export_constants()
 
 
@@ -101,10 +106,20 @@ class CollisionSeparate(System):
             return
         priority, claimed, pin = self._claims()
         left = float(found.depth.sum())
+        # Only overlapping bodies move: their poses as the solve left them, kept (each the
+        # first time it overlaps) to go back to.
+        kept = np.zeros(n, bool)
+        snapshots: list[tuple[I64, NormalizedPoses]] = []
+        ever = np.zeros(n, bool)
         for _ in range(PASSES):
+            fresh = np.flatnonzero((found.depth > SEPARATE_FROM_M) & ~kept)
+            if fresh.size:
+                kept[fresh] = True
+                snapshots.append((fresh, st.poses.take(fresh)))
             moved = self._separate(found, priority, claimed, pin)
             if moved.size == 0:
                 break
+            ever[moved] = True
             self._posture(moved)
             # Only the moved bodies' capsules change; the overlaps found again are theirs and
             # those of the bodies that touched them (the grid holds: a turn or a step of a few
@@ -117,6 +132,7 @@ class CollisionSeparate(System):
             was, left = left, float(found.depth.sum())
             if not (found.depth > SEPARATE_FROM_M).any() or left > (1.0 - STALL_SHARE) * was:
                 break
+        self._undo_feet_in_ground(np.flatnonzero(ever), snapshots)
         # Every body's deepest overlap as the tick ends, for the metrics (a body the passes did
         # not look at again may touch one that moved into it).
         st.overlap_m = overlaps(body, grid_of(body)).depth
@@ -168,6 +184,10 @@ class CollisionSeparate(System):
             turn[limb] = rotation_toward(arm, arm + way[limb] * distance[limb, None],
                                          MAX_TURN_RAD)
             can[limb] = np.linalg.norm(arm, axis=1) > 1e-3
+            free_leg = limb[(li < 2) & ~np.isfinite(pin[r, li]).all(axis=1)]
+            if free_leg.size:  # a swinging leg turned about its hip keeps its foot above ground
+                can[free_leg] &= self._foot_clear(rows[free_leg], chain[free_leg],
+                                                  turn[free_leg])
             pinned = np.isfinite(pin[r, li]).all(axis=1)
             if pinned.any():
                 p = np.flatnonzero(pinned)
@@ -182,6 +202,24 @@ class CollisionSeparate(System):
         can[core] = ~claimed[rows[core], TRUNK] & ~(st.contact_weight[rows[core]] > 0).any(axis=1)
         can &= ~st.frozen[rows]
         return turn, can
+
+    def _foot_clear(self, rows: I64, side: I64, turn: F64) -> NDArray[np.bool_]:
+        """Whether each of ``rows``' leg ``side`` (0 left, 1 right), turned by ``turn``
+        (k, 3, 3) about its hip, keeps its ankle and toe above the ground (its heel and ball
+        not under it: the metrics' penetration). -> (k,)."""
+        st = self.sim.store
+        hip = st.positions[rows, LIMB_ROOT[side]]
+        ends = np.stack([st.positions[rows, LIMB_END[side]],
+                         st.positions[rows, TOE[side]]], axis=1)  # (k, 2, 3)
+        moved = hip[:, None] + np.einsum("kij,kej->kei", turn, ends - hip[:, None])
+        clearance = np.stack([st.lengths[rows, ANKLE_HEIGHT[side]],
+                              BALL_HEIGHT_PER_LEG * leg_length(st.lengths[rows])], axis=1)
+        # The ground answers for every store row at once: the others' own feet stand in.
+        xy = np.repeat(st.positions[:, LIMB_END[:1], :2], 2, axis=1)
+        xy[rows] = moved[..., :2]
+        under = self.row_ground().height(xy)[rows]
+        clear: NDArray[np.bool_] = np.all(moved[..., 2] >= under + clearance, axis=1)
+        return clear
 
     def _separate(self, found: Overlaps, priority: F64, claimed: NDArray[np.bool_],
                   pin: F64) -> I64:
@@ -227,6 +265,8 @@ class CollisionSeparate(System):
             if not sel.any():
                 continue
             rs, side = rows[sel], chain[sel] - side_of[0]
+            if side_of == (0, 1):  # a planted leg's foot stays as it stands in the world
+                self._keep_feet(rs, side, turn[sel], pin)
             world = turn[sel] @ frames[rs, side]
             q = quat_from_matrix(np.swapaxes(parent[rs], -1, -2) @ world)
             local[rs, side] = q / np.linalg.norm(q, axis=-1, keepdims=True)
@@ -241,6 +281,47 @@ class CollisionSeparate(System):
                 * distance[core, None]
             st.poses.root_position[r] += step / leg_length(st.lengths[r])[:, None]
         return np.unique(rows)
+
+    def _undo_feet_in_ground(self, moved: I64,
+                             snapshots: list[tuple[I64, NormalizedPoses]]) -> None:
+        """A moved body whose heel or ball ended under the ground (a turn of a leg the checks
+        did not foresee, several rounds adding up) goes back to its pose before the separation
+        (``snapshots``: (rows, their poses) as each first overlapped): it may overlap, it never
+        stands in the ground."""
+        if moved.size == 0:
+            return
+        st = self.sim.store
+        p = st.positions
+        leg = leg_length(st.lengths)
+        heel = p[:, LIMB_END[:2], 2] - st.lengths[:, ANKLE_HEIGHT]
+        ball = p[:, TOE, 2] - BALL_HEIGHT_PER_LEG * leg[:, None]
+        under = self.row_ground().height(np.concatenate([p[:, LIMB_END[:2], :2],
+                                                         p[:, TOE, :2]], axis=1))
+        sunk: NDArray[np.bool_] = np.any(np.concatenate([heel, ball], axis=1)
+                                         < under - HEEL_TOLERANCE_M, axis=1)
+        back = moved[sunk[moved]]
+        if back.size == 0:
+            return
+        for rows, poses in snapshots:
+            mine = np.isin(rows, back)
+            for name, value in poses.take(np.flatnonzero(mine)).arrays().items():
+                getattr(st.poses, name)[rows[mine]] = value
+        self._posture(back)
+
+    def _keep_feet(self, rows: I64, side: I64, turn: F64, pin: F64) -> None:
+        """A pinned leg (its foot down) of ``rows`` turned by ``turn`` (k, 3, 3) about its
+        hip-ankle axis keeps its foot's direction in the world (the ball it may stand on stays):
+        the foot's direction in the shank frame is turned back. Call before the leg's frame is
+        changed."""
+        st = self.sim.store
+        pinned = np.isfinite(pin[rows, side]).all(axis=1)
+        if not pinned.any():
+            return
+        rs, sd, tn = rows[pinned], side[pinned], turn[pinned]
+        legs = decode_legs(st.poses.take(rs), st.lengths[rs], st.lengths[rs])
+        shank = legs.shank2world[np.arange(rs.size), sd]  # (k, 3, 3)
+        foot_in_world = np.einsum("kij,kj->ki", shank, st.poses.foot_dir[rs, sd])
+        st.poses.foot_dir[rs, sd] = np.einsum("kji,kj->ki", tn @ shank, foot_in_world)
 
     def _posture(self, rows: I64) -> None:
         """PostureConvert again for ``rows`` (the compiled kernel, only those rows)."""

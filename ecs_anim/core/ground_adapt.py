@@ -37,7 +37,7 @@ BALL_HEIGHT_PER_LEG = 0.025 / 0.86
 MAX_LEG_EXTENSION = 0.995
 
 #: Time constant (s) with which the motion's floor follows the ground under the supporting feet
-#: (GroundAdapt), and with which import follows the ground the capture stood on.
+#: (GroundAdapt); import smooths the ground a capture stood on over twice it, centred.
 GROUND_SMOOTHING_S = 0.15
 
 #: A heel this far under the ground (m) is lifted: well below the metrics' 1 mm, above rounding.
@@ -50,8 +50,7 @@ HEEL_ROLL, BALL_ROLL = 0.25, 0.75
 
 #: A foot moves its footprint onto the other sole point (heel to ball at heel off) only once
 #: that point is this close to the ground, per leg length (0.4 mm for a 0.86 m leg, under the
-#: metrics' 1 mm of sliding): it turns about the point
-#: it stands on and never jumps.
+#: metrics' 1 mm of sliding): it turns about the point it stands on and never jumps.
 SWITCH_PER_LEG = 0.0005
 
 
@@ -201,6 +200,6 @@ def adapt_keeping_heels_up(poses: NormalizedPoses, lengths: F64, ankle_targets: 
     return adapted, legs
 
 
-__all__ = ["BALL_ROLL", "GROUND_SMOOTHING_S", "HEEL_ROLL", "SWITCH_PER_LEG", "adapt_keeping_heels_up", "adapt_to_ground",
-           "heel_depth", "pitched", "pivot_wanted", "planted_foot", "sole_roll",
-           "vertical_slack_for_reach"]
+__all__ = ["BALL_ROLL", "GROUND_SMOOTHING_S", "HEEL_ROLL", "SWITCH_PER_LEG",
+           "adapt_keeping_heels_up", "adapt_to_ground", "heel_depth", "pitched", "pivot_wanted",
+           "planted_foot", "sole_roll", "vertical_slack_for_reach"]
