@@ -11,7 +11,7 @@ import pytest
 
 from conftest import MOTIONS_DIR, REPO, SCENARIOS_DIR
 from ecs_anim.components import MotionPlayer, Placement, QueuedClip
-from ecs_anim.core.body_points import body_point
+from ecs_anim.core.body_points import SEG_DISTAL, SEG_PROXIMAL, body_point
 from ecs_anim.core.errors import EcsAnimError
 from ecs_anim.core.morphology import Morphology
 from ecs_anim.core.skeleton import JOINT_INDEX as J
@@ -73,8 +73,12 @@ def test_every_ward_off_starts_within_one_tick_of_its_trigger_condition(spacing_
     for pair in (1, 2, 3, 4):
         k, d = names.index(f"kicker_{pair}"), names.index(f"defender_{pair}")
         # The condition, measured here from the joints: the kicker's right ankle within 0.9 m
-        # of the defender's torso (spine_upper at 0: the spine_2 joint).
-        distance = np.linalg.norm(p[:, k, J["ankle_r"]] - p[:, d, J["spine_2"]], axis=-1)
+        # of the defender's torso, the trigger's own point (spine_upper at its default
+        # fraction: along the segment from its proximal joint, spine_2, to the neck).
+        torso = body_point("spine_upper")
+        base, tip = p[:, d, SEG_PROXIMAL[torso.segment]], p[:, d, SEG_DISTAL[torso.segment]]
+        distance = np.linalg.norm(p[:, k, J["ankle_r"]] - (base + torso.fraction * (tip - base)),
+                                  axis=-1)
         condition = int(np.argmax(distance <= 0.9))
         assert distance[condition] <= 0.9, (pair, distance.min())
         # Its clip_started event gives the time of the first posture playing the ward-off.
