@@ -42,10 +42,7 @@ from ecs_anim.io.importing import (
     CanonicalClip,
     FrameRange,
     canonical_clip,
-    leading_rest_frames,
-    normalize_clip,
-    repair_glitches,
-    trim_clip,
+    import_canonical,
 )
 from ecs_anim.motion.clip import NormalizedMotion
 
@@ -361,43 +358,11 @@ def import_fbx(path: str | Path, map_spec: str | None = None, unit: str | None =
     states. Raises :class:`EcsAnimError` subclasses on bad input."""
     path = Path(path)
     fbx = read_fbx(path, take)
-    motion = fbx.motion
-    try:
-        clip = _canonical(fbx, map_spec, unit, up, stature_m)
-        first_file_frame, rest = 0, None
-        if trim is not None:
-            kept = trim.frames(len(clip.positions), clip.fps)
-            clip, first_file_frame = trim_clip(clip, kept), kept.start
-        n_before = len(clip.positions)
-        clip, glitches = repair_glitches(clip)
-        glitch_line = glitches.report(n_before, first_file_frame) if glitches else None
-        first_file_frame += glitches.dropped_start if glitches else 0
-        if trim is None:
-            rest = leading_rest_frames(clip.positions, clip.fps)
-            if rest is not None:
-                clip = trim_clip(clip, slice(rest.count, None))
-                rest_line = rest.report(first_file_frame)
-                first_file_frame += rest.count
-        normalized = normalize_clip(clip, path.stem, str(path), thresholds, treadmill)
-    except InputError:
-        raise
-    except EcsAnimError as exc:
-        raise InputError(path, str(exc)) from None
-    except ValueError as exc:  # e.g. a mapped bone of zero length
-        raise InputError(path, f"cannot normalize this skeleton: {exc}") from None
-    if first_file_frame:
-        normalized.info["first_file_frame"] = first_file_frame
-    if glitch_line is not None:
-        normalized.info["glitch_frames"] = glitch_line
-    if rest is not None:
-        normalized.info["rest_frames_dropped"] = rest_line
+    normalized = import_canonical(path, lambda: _canonical(fbx, map_spec, unit, up, stature_m),
+                                  trim, thresholds, treadmill)
     normalized.info["fbx"] = {"take": fbx.take, "takes": fbx.takes,
                               "stated_unit_m": fbx.unit_m, "stated_up": fbx.up,
-                              "joints": len(motion.skeleton.joints)}
-    bad = [k for k, v in normalized.poses.arrays().items() if not np.all(np.isfinite(v))]
-    if bad:
-        raise InputError(path, f"normalizing gave non-finite values in {', '.join(bad)} "
-                               "(degenerate skeleton or motion?); nothing written")
+                              "joints": len(fbx.motion.skeleton.joints)}
     return normalized
 
 

@@ -7,6 +7,7 @@ parse -> map joints -> detect units -> forward kinematics (all frames at once) -
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from itertools import pairwise
 from pathlib import Path
@@ -742,8 +743,20 @@ def import_bvh(path: str | Path, map_spec: str | None = None, unit: str | None =
     on bad input."""
     path = Path(path)
     motion = read_bvh(path)
+    return import_canonical(path, lambda: canonical_clip(motion, map_spec, unit, up, stature_m),
+                            trim, thresholds, treadmill, contacts)
+
+
+def import_canonical(path: Path, make_clip: Callable[[], CanonicalClip],
+                     trim: FrameRange | None, thresholds: ContactThresholds, treadmill: bool,
+                     contacts: str = "detect") -> NormalizedMotion:
+    """The import of a file read as a skeleton (BVH, FBX) from its canonical clip on
+    (``make_clip``: maps, scales and turns it): ``trim``, or a leading rest pose dropped
+    (:func:`leading_rest_frames`), glitch frames repaired or cut (:func:`repair_glitches`), then
+    :func:`normalize_clip`; ``info`` says what was dropped. A user's mistake anywhere in it is
+    one :class:`InputError` naming ``path``; a non-finite result is refused."""
     try:
-        clip = canonical_clip(motion, map_spec, unit, up, stature_m)
+        clip = make_clip()
         first_file_frame, rest = 0, None
         if trim is not None:
             kept = trim.frames(len(clip.positions), clip.fps)
