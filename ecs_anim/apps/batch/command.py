@@ -96,7 +96,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
                     "DIR/<clip>/<body>[_<ground>].{bvh,npz,glb}, DIR/metrics.csv, metrics.json "
                     "and report.html. A second run skips jobs done with the same inputs.")
     p.add_argument("clips", nargs="*", metavar="CLIP",
-                   help="clips: .bvh, .c3d or .nmo files, globs ('mocap/*.bvh') or folders")
+                   help="clips: .bvh, .c3d, .fbx or .nmo files, globs ('mocap/*.bvh') or folders")
     p.add_argument("--manifest", metavar="FILE.yaml",
                    help="clips, bodies, grounds, template, formats, out from a YAML file")
     p.add_argument("--bodies", metavar="B,B,...",
