@@ -11,14 +11,13 @@ import pytest
 from conftest import MOCAP_DIR, require_mocap
 from ecs_anim import Plane
 from ecs_anim.apps.batch.jobs import import_clip
-from ecs_anim.apps.batch.plan_parts import body_from_text
-from ecs_anim.components import MotionPlayer, Placement
 from ecs_anim.core.normalized import decode
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.io.bvh import read_bvh
 from ecs_anim.io.importing import canonical_clip, normalize_clip
 from ecs_anim.runtime.metrics import MetricsRecorder
-from ecs_anim.scenario import CharacterSpec, Scenario, build_simulation
+from ecs_anim.scenario import build_simulation
+from support.scenarios import clip_on_body
 
 
 def _mocap(name: str):
@@ -72,10 +71,7 @@ def test_an_uneven_terrain_capture_walks_on_flat_ground():
     ground = motion.info["capture_ground"]
     assert ground["from"].startswith("contacts")
     assert ground["lowest_m"] < -0.12
-    body = body_from_text("stature_1.75")
-    scenario = Scenario("uneven", motion.n_frames / motion.fps, motion.fps, {"c": motion},
-                        Plane(), [CharacterSpec("b", body.morphology,
-                                                MotionPlayer("c", loop=False), Placement())])
+    scenario = clip_on_body(motion, 1.75, Plane())
     pelvis = []
     with build_simulation(scenario) as sim:
         recorder = MetricsRecorder(sim)

@@ -18,13 +18,12 @@ import pytest
 from conftest import MOCAP_DIR, require_mocap
 from ecs_anim import Plane, Stairs
 from ecs_anim.apps.batch.jobs import import_clip
-from ecs_anim.apps.batch.plan_parts import body_from_text
-from ecs_anim.components import MotionPlayer, Placement
 from ecs_anim.core.ground import Ground
 from ecs_anim.core.ground_adapt import BALL_HEIGHT_PER_LEG
 from ecs_anim.core.normalized import SIDE_JOINTS, SIDE_LENGTHS
 from ecs_anim.runtime.metrics import MetricsRecorder
-from ecs_anim.scenario import CharacterSpec, Scenario, build_simulation
+from ecs_anim.scenario import build_simulation
+from support.scenarios import clip_on_body
 
 #: A walk whose heel hung 50-85 mm up on a 2.0 m body, and a two-feet jump landing on its toes.
 CLIPS = ("varied/cmu_walk_120hz_adelaide.bvh", "varied2/sfu_0005_2feetjump_cm_xyz_120hz.bvh")
@@ -39,10 +38,7 @@ def _play(clip: str, stature_m: float, ground: Ground) -> tuple[dict, np.ndarray
     if not path.is_file():
         pytest.skip(f"{path} not found")
     motion = import_clip(Path(path))
-    body = body_from_text(f"stature_{stature_m}")
-    scenario = Scenario(str(path), motion.n_frames / motion.fps, motion.fps, {"clip": motion},
-                        ground, [CharacterSpec("body", body.morphology,
-                                               MotionPlayer("clip", loop=False), Placement())])
+    scenario = clip_on_body(motion, stature_m, ground)
     ankles, toes = list(SIDE_JOINTS["ankle"]), list(SIDE_JOINTS["toe"])
     rows = []
     with build_simulation(scenario) as sim:

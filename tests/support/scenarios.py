@@ -37,3 +37,16 @@ def run(name, drop=(), drop_triggers=""):
                 "weights": np.array(weights), "com": np.array(com), "index": index,
                 "report": metrics.report(), "leg": sim.leg_length(), "events": events,
                 "lengths": sim.store.lengths.copy()}
+
+
+def clip_on_body(motion, stature_m: float, ground):
+    """A scenario of one character (adult proportions, ``stature_m`` tall) playing ``motion``
+    once from the origin over ``ground``, at the clip's rate for its length (a batch job's)."""
+    from ecs_anim.apps.batch.plan_parts import body_from_text
+    from ecs_anim.components import MotionPlayer, Placement
+    from ecs_anim.scenario import CharacterSpec, Scenario
+
+    body = body_from_text(f"stature_{stature_m}")
+    return Scenario("clip_on_body", motion.n_frames / motion.fps, motion.fps, {"clip": motion},
+                    ground, [CharacterSpec("body", body.morphology,
+                                           MotionPlayer("clip", loop=False), Placement())])
