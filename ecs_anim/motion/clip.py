@@ -206,10 +206,9 @@ def load_nmo(path: str | Path) -> NormalizedMotion:
         if flags.dtype != np.bool_ or flags.shape != (n, 2):
             raise InputError(path, f"damaged .nmo file: planted/{part} must be bool ({n}, 2), "
                                    f"found {flags.dtype} {flags.shape}")
-    if ground is not None and (ground.shape != (n,) or ground.dtype != np.float64
-                               or not np.all(np.isfinite(ground))):
-        raise InputError(path, f"damaged .nmo file: capture_ground must be finite float64 ({n},), "
-                               f"found {ground.dtype} {ground.shape}")
+    problem = capture_ground_problem(ground, n)
+    if problem:
+        raise InputError(path, f"damaged .nmo file: {problem}")
     try:
         morph = Morphology.from_dict(header["source_morphology"])
         constraints = [ConstraintSpec.from_dict(c) for c in header.get("constraints", [])]
@@ -247,6 +246,21 @@ def pose_arrays_problem(arrays: dict[str, np.ndarray], n_frames: int) -> str | N
     return None
 
 
+def capture_ground_problem(ground: object, n_frames: int) -> str | None:
+    """What is wrong with a motion's :attr:`~NormalizedMotion.capture_ground`, or None (None
+    itself is fine: level at 0)."""
+    if ground is None:
+        return None
+    if not (isinstance(ground, np.ndarray) and ground.dtype == np.float64
+            and ground.shape == (n_frames,)):
+        found = f"{ground.dtype} {ground.shape}" if isinstance(ground, np.ndarray) \
+            else type(ground).__name__
+        return f"capture_ground must be float64 ({n_frames},), found {found}"
+    if not np.all(np.isfinite(ground)):
+        return "capture_ground has non-finite values"
+    return None
+
+
 def motion_problem(motion: object) -> str | None:
     """What is wrong with a motion handed over by code (not read from a file), or None: a
     :class:`NormalizedMotion` with at least one frame, a frame rate of 0.1-10,000 fps, pose
@@ -257,7 +271,8 @@ def motion_problem(motion: object) -> str | None:
         return f"fps must be a number from {MIN_FPS:g} to {MAX_FPS:g}, got {motion.fps!r}"
     if motion.n_frames < 1:
         return "no frames"
-    problem = pose_arrays_problem(motion.poses.arrays(), motion.n_frames)
+    problem = pose_arrays_problem(motion.poses.arrays(), motion.n_frames) \
+        or capture_ground_problem(motion.capture_ground, motion.n_frames)
     if problem:
         return problem
     body = _source_body_problem(motion.source_morphology.to_dict())

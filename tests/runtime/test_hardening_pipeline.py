@@ -278,6 +278,13 @@ def test_motions_handed_straight_to_a_simulation_are_checked():
         Simulation({"slow": replace(walk, fps=0.0)})
     with pytest.raises(EcsAnimError, match=r"^motion 'x': expected a NormalizedMotion, got str$"):
         Simulation({"x": "walk.bvh"})  # type: ignore[dict-item]
+    ground = walk.ground_under().copy()
+    ground[3] = np.nan  # the capture's ground, which playback takes out of the root's height
+    with pytest.raises(EcsAnimError, match=r"^motion 'g': capture_ground has non-finite values$"):
+        Simulation({"g": replace(walk, capture_ground=ground)})
+    with pytest.raises(EcsAnimError, match=r"^motion 'g': capture_ground must be float64 \(\d+,\), "
+                                           r"found float64 \(2,\)$"):
+        Simulation({"g": replace(walk, capture_ground=np.zeros(2))})
 
 
 def test_import_and_info_say_which_frames_were_trimmed(tmp_path, capsys):
