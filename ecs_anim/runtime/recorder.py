@@ -15,7 +15,9 @@ characters' bodies.
 A body changed while the character played (``set_body``) is exported as it changed: the rest
 skeleton of its ``.bvh`` and ``.glb`` is its final body and the offsets that changed are
 animated (:mod:`ecs_anim.io.export.bvh`, :mod:`ecs_anim.io.export.gltf`), so every file agrees
-with the ``.npz`` on every frame.
+with the ``.npz`` on every frame. Saved ``onto=`` a user's rig, every character is retargeted
+onto the rig's body (:func:`~ecs_anim.io.export.onto.recorded_on_rig`) and written in its
+hierarchy.
 """
 
 from __future__ import annotations
@@ -35,7 +37,16 @@ from ecs_anim.core.errors import UsageError, listed, quoted
 from ecs_anim.core.files import output_set
 from ecs_anim.core.morphology import Morphology
 from ecs_anim.core.skeleton import JOINTS, N_LENGTHS
-from ecs_anim.io.export import EXPORT_NAMES, bvh_from_rotations, glb_bytes, write_npz
+from ecs_anim.io.export import (
+    EXPORT_NAMES,
+    Rig,
+    bvh_from_rotations,
+    glb_bytes,
+    onto_rig_bytes,
+    recorded_on_rig,
+    rig_of,
+    write_npz,
+)
 from ecs_anim.runtime.triggers import Event
 
 if TYPE_CHECKING:
@@ -46,8 +57,6 @@ I64 = NDArray[np.int64]
 
 #: The files :meth:`Recorder.save` can write per character, in the order it writes them.
 EXPORT_FORMATS = ("bvh", "npz", "glb")
-#: What :meth:`Recorder.save` says to ``onto=`` until export onto a user's rig is wired in.
-ONTO_NOT_YET = "onto= is not supported by the recorder yet"
 _FILE_NAME = re.compile(r"^(?!\.\.?$)[^/\\\x00]+$")
 
 
@@ -239,7 +248,8 @@ class Recorder:
     # --- writing ----------------------------------------------------------------------------
 
     def save(self, folder: str | Path, formats: Sequence[str] = EXPORT_FORMATS,
-             onto: object = None, force: bool = False) -> list[Path]:
+             onto: str | Path | Rig | None = None, force: bool = False,
+             rig_map: str | None = None) -> list[Path]:
         """Write ``<character>.bvh``, ``.npz`` and ``.glb`` (those of ``formats``) for every
         recorded character with at least one posture into ``folder``, as one set: the files go
         into a hidden sibling folder and replace ``folder`` in one atomic rename
@@ -247,10 +257,14 @@ class Recorder:
         ``folder`` holds the old set or the new one, never a mix. An existing ``folder`` is
         replaced only with ``force``, and only if it holds nothing but export files.
 
-        ``onto``: a user's rig to write onto (not supported yet: refused). Returns the files
-        written, in order."""
-        if onto is not None:
-            raise UsageError(ONTO_NOT_YET)
+        ``onto``: a user's rig (a .bvh, .glb, .gltf or .fbx file, or a loaded
+        :class:`~ecs_anim.io.export.rig.Rig`; its joint map ``rig_map``, a preset or a map YAML,
+        as import's ``--map``): every character is retargeted onto the rig's body
+        (:func:`~ecs_anim.io.export.onto.recorded_on_rig`) and its ``.bvh`` and ``.glb`` written
+        in the rig's hierarchy, its ``.npz`` our joints on that body, as ``export --onto``
+        writes a clip. Returns the files written, in order."""
+        if onto is not None and not isinstance(onto, (str, Path, Rig)):
+            raise UsageError(f"save: onto must be a rig file's path or a Rig, got {found(onto)}")
         if isinstance(formats, str) or not isinstance(formats, Sequence):
             raise UsageError(f"save: formats must be a list of {listed(EXPORT_FORMATS)}, got "
                              f"{found(formats)}")
@@ -259,6 +273,7 @@ class Recorder:
             raise UsageError(f"save: formats must be some of {listed(EXPORT_FORMATS)}, got "
                              f"{found(list(formats))}")
         kinds = [f for f in EXPORT_FORMATS if f in formats]
+        rig = None if onto is None else rig_of(onto, rig_map)
         characters = [c for c in self.characters() if c.frames]
         bad = [c.name for c in characters if not _FILE_NAME.match(c.name)]
         if bad:
@@ -273,6 +288,12 @@ class Recorder:
         fps = self.sim.fps
         with output_set(folder, names, force) as export:
             for c in characters:
+                if rig is not None:
+                    pose = recorded_on_rig(rig, c.positions, c.local_rotations, c.lengths)
+                    for kind in kinds:
+                        with export.file(f"{c.name}.{kind}") as f:
+                            f.write(onto_rig_bytes(rig, pose, kind, fps, c.contacts))
+                    continue
                 # (A body that never changed gives the same bytes as without lengths.)
                 for kind in kinds:
                     with export.file(f"{c.name}.{kind}") as f:

@@ -218,8 +218,10 @@ def test_save_refuses_onto_unknown_formats_and_names_that_collide(tmp_path, walk
         sim.spawn("twin", Morphology.preset("child"), MotionPlayer("walk"), Placement((0.0, y)))
     rec = sim.record()
     sim.step()
-    with pytest.raises(UsageError, match=r"^onto= is not supported by the recorder yet$"):
-        rec.save(tmp_path / "out", onto="rig.bvh")
+    with pytest.raises(UsageError, match=r"^save: onto must be a rig file's path or a Rig, got "):
+        rec.save(tmp_path / "out", onto=3)
+    with pytest.raises(EcsAnimError, match=r"rig\.bvh: no such rig file"):
+        rec.save(tmp_path / "out", onto=tmp_path / "rig.bvh")
     for formats in (("fbx",), (), "bvh"):
         with pytest.raises(UsageError, match="formats"):
             rec.save(tmp_path / "out", formats=formats)

@@ -16,8 +16,8 @@ from ecs_anim.core.normalized import DecodedPose
 from ecs_anim.core.skeleton import JOINTS
 from ecs_anim.io.export.bvh import bvh_text
 from ecs_anim.io.export.gltf import glb_from_pose
-from ecs_anim.io.export.onto import bvh_onto_rig, glb_onto_rig, rig_of
-from ecs_anim.io.export.rig import Rig, rig_pose
+from ecs_anim.io.export.onto import onto_rig_bytes, rig_of
+from ecs_anim.io.export.rig import Rig
 from ecs_anim.io.export.skeleton import play_on, resolve_morphology
 from ecs_anim.motion.clip import NormalizedMotion
 
@@ -63,10 +63,8 @@ def export_motion(motion: NormalizedMotion, morphology_spec: str, out: str | Pat
     if not np.all(np.isfinite(pose.positions)):
         raise EcsAnimError(f"{out}: the decoded motion holds non-finite positions (bug); nothing written")
     with atomic_output(out, force) as f:
-        if rig is not None and suffix != ".npz":
-            posed = rig_pose(rig, pose)
-            f.write(bvh_onto_rig(rig, posed, motion.fps).encode("utf-8") if suffix == ".bvh"
-                    else glb_onto_rig(rig, posed, motion.fps))
+        if rig is not None:
+            f.write(onto_rig_bytes(rig, pose, suffix[1:], motion.fps, motion.contacts()))
         elif suffix == ".bvh":
             f.write(bvh_text(pose, morph, motion.fps).encode("utf-8"))
         elif suffix == ".glb":

@@ -4,12 +4,15 @@ materials when the rig is a GLB).
 
 The motion is decoded on the rig's body (its measured segment lengths, as ``--morphology
 RIG.bvh`` does) and every rig joint turned as :func:`~ecs_anim.io.export.rig.rig_pose` says.
-FBX is not written (no maintained writer): convert the BVH or GLB in a DCC tool.
+A simulated run (``run --export DIR --onto RIG``, ``rec.save(..., onto=rig)``, ``batch
+--onto``) is retargeted first: :func:`recorded_on_rig`. FBX is not written (no maintained
+writer): convert the BVH or GLB in a DCC tool.
 """
 
 from __future__ import annotations
 
 import copy
+import io
 from pathlib import Path
 
 import numpy as np
@@ -17,14 +20,18 @@ import pygltflib as gl
 from numpy.typing import NDArray
 
 from ecs_anim.core.errors import EcsAnimError
+from ecs_anim.core.morphology import leg_length
+from ecs_anim.core.normalized import DecodedPose, decode, encode, frames_from_positions
 from ecs_anim.core.rotations import matrix_to_euler, quat_from_matrix
+from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.io.export.gltf import (
     BinaryChunk,
     capsule,
     continuous_quaternions,
     generator_name,
 )
-from ecs_anim.io.export.rig import Rig, RigPose
+from ecs_anim.io.export.rig import Rig, RigPose, rig_pose
+from ecs_anim.io.export.skeleton import body_frames
 from ecs_anim.io.importing import YUP_TO_ZUP
 
 F64 = NDArray[np.float64]
@@ -274,3 +281,50 @@ def rig_of(onto: str | Path | Rig, map_spec: str | None = None) -> Rig:
     from ecs_anim.io.export.rig import load_rig
 
     return onto if isinstance(onto, Rig) else load_rig(onto, map_spec)
+
+
+def recorded_on_rig(rig: Rig, positions: F64, local_rotations: F64, lengths: F64) -> DecodedPose:
+    """A simulated character's recorded postures retargeted onto the rig's body.
+
+    Each frame is normalized on the body it was simulated on (paper eq. 1: its own segment
+    lengths, so a body changed during the run too), with the simulation's pelvis and thorax
+    frames, and decoded on ``rig.morphology``, as ``export --onto`` decodes a clip. The path
+    is then the recording's, scaled by the ratio of leg lengths from where the character
+    started (each frame's step times that frame's ratio): the rig starts where the character
+    did, its feet step as far as its legs reach (no sliding) and its height above z = 0 scales
+    with its legs.
+
+    positions : (frames, N_JOINTS, 3) the recorded joints, metres, world Z up.
+    local_rotations : (frames, len(EXPORT_NAMES), 3, 3) the export skeleton's, BVH axes.
+    lengths : (frames, N_LENGTHS) the segment lengths each posture was made on, metres.
+    Returns the pose (frames leading) on the rig's body, for
+    :func:`~ecs_anim.io.export.rig.rig_pose`.
+    """
+    pelvis2world, thorax2world = body_frames(local_rotations)
+    _, _, head2world = frames_from_positions(positions)
+    poses = encode(positions, pelvis2world, thorax2world, head2world, lengths)
+    pose = decode(poses, rig.morphology.lengths)
+    ratio = leg_length(rig.morphology.lengths) / leg_length(lengths)  # (frames,)
+    pelvis = positions[:, J["pelvis"]]
+    steps = np.diff(pelvis[:, :2], axis=0) * ratio[1:, None]
+    path = pelvis[0, :2] + np.concatenate([np.zeros((1, 2)), np.cumsum(steps, axis=0)])
+    # decode put the pelvis at the recorded one times the ratio: move each frame onto the path.
+    pose.positions[..., :2] += (path - pose.positions[:, J["pelvis"], :2])[:, None, :]
+    return pose
+
+
+def onto_rig_bytes(rig: Rig, pose: DecodedPose, kind: str, fps: float,
+                   contacts: NDArray[np.bool_]) -> bytes:
+    """One file of ``pose`` (decoded on ``rig.morphology``) onto the rig: ``kind`` ``"bvh"``
+    (:func:`bvh_onto_rig`), ``"glb"`` (:func:`glb_onto_rig`) or ``"npz"`` (our joints on the
+    rig's body, with ``contacts`` (frames, 2) bool, as without a rig)."""
+    if kind == "npz":
+        from ecs_anim.io.export.motion import write_npz
+
+        buffer = io.BytesIO()
+        write_npz(buffer, pose.positions, fps, contacts)
+        return buffer.getvalue()
+    posed = rig_pose(rig, pose)
+    if kind == "bvh":
+        return bvh_onto_rig(rig, posed, fps).encode("utf-8")
+    return glb_onto_rig(rig, posed, fps)

@@ -210,6 +210,20 @@ def local_rotations(pose: DecodedPose) -> F64:
     return local
 
 
+def body_frames(local: F64) -> tuple[F64, F64]:
+    """The pelvis and thorax frames of export-skeleton local rotations (as
+    :func:`local_rotations` gives them): its inverse for those two joints.
+
+    ``local`` (*B, len(EXPORT_NAMES), 3, 3) BVH axes -> ``pelvis2world``, ``thorax2world``
+    (*B, 3, 3) in our world axes."""
+    joint2bvh = local[..., _E["pelvis"], :, :]
+    pelvis2world: F64 = YUP_TO_ZUP @ joint2bvh @ BODY_TO_BVH_REST
+    for name in ("lumbar", "spine_1", "spine_2", "neck"):  # the chain from the pelvis to the neck
+        joint2bvh = joint2bvh @ local[..., _E[name], :, :]
+    thorax2world: F64 = YUP_TO_ZUP @ joint2bvh @ BODY_TO_BVH_REST
+    return pelvis2world, thorax2world
+
+
 def rest_offsets(morph: Morphology) -> tuple[F64, F64]:
     """The export skeleton's rest pose (a T-pose) on ``morph``, in BVH axes, metres: each
     joint's offset from its parent (the root's is zero) and its end site's offset from it (zero
