@@ -512,6 +512,7 @@ class Reactions:
             switch_off(sim, a.uid, sim.time_s)
         elif isinstance(a, MoveTarget):
             sim.set_target(a.uid, a.target_in_world)
+            sim.say_unreachable()
         elif isinstance(a, SetBody):
             sim.set_body(a.entity, a.body, blend_s=a.blend_s)
         elif isinstance(a, Remove):

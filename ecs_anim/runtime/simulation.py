@@ -42,6 +42,7 @@ from ecs_anim.runtime import kernels
 from ecs_anim.runtime.actions import check_track, check_trigger
 from ecs_anim.runtime.body_change import mass_tables, start_blend
 from ecs_anim.runtime.events import Reactions
+from ecs_anim.runtime.feasibility import Feasibility, feasibility
 from ecs_anim.runtime.recorder import Recorder
 from ecs_anim.runtime.steering import DEFAULT_STEERING
 from ecs_anim.runtime.steering_api import SteeringCalls
@@ -120,6 +121,8 @@ class Simulation(SteeringCalls):
         self.renderer: object | None = None
         self.tables: tuple[Any, ...] = ()  # props for a renderer (scenario ``tables``); never simulated
         self.messages: list[str] = []
+        #: The constraints the last feasibility estimate found out of reach (ids).
+        self._unreachable: frozenset[int] = frozenset()
         #: Triggers, moving targets and the last tick's events (:mod:`ecs_anim.runtime.events`).
         self.reactions = Reactions()
         #: The recorders collecting each tick (:meth:`record`), in the order made.
@@ -534,6 +537,7 @@ class Simulation(SteeringCalls):
                 esper.remove_component(entity, BodyBlend)
             esper.add_component(entity, body)
         self.structure_version += 1
+        self.say_unreachable()
 
     def set_ground(self, entity: int, ground: Ground | None) -> None:
         """Give a character a ground of its own (its GroundQuery component), or ``None``: back
@@ -714,6 +718,27 @@ class Simulation(SteeringCalls):
         for r in rows:
             self.warn(f"character {names[int(r)]!r} got a non-finite pose and holds its last "
                       "good posture; the others go on")
+
+    # --- feasibility (ecs_anim.runtime.feasibility) -------------------------------------------
+
+    def feasibility(self) -> list[Feasibility]:
+        """Whether each constraint's body can reach its target at all, estimated now from the
+        bodies, their stances and clips, and the ground (:mod:`ecs_anim.runtime.feasibility`):
+        one :class:`~ecs_anim.runtime.feasibility.Feasibility` per constraint, in the order
+        they were added; ``.line`` says it in one line, ``.reachable`` whether it can."""
+        self._check_open()
+        estimates = feasibility(self)
+        self._unreachable = frozenset(f.uid for f in estimates if not f.reachable)
+        return estimates
+
+    def say_unreachable(self) -> None:
+        """Estimate again (:meth:`feasibility`) and warn (:meth:`warn`) once for each constraint
+        that is out of reach now and was not at the last estimate: after a body change
+        (:meth:`set_body`) or a target a trigger moves (``MoveTarget``)."""
+        known = self._unreachable
+        for estimate in self.feasibility():
+            if not estimate.reachable and estimate.uid not in known:
+                self.warn(estimate.line)
 
     # --- events and triggers (ecs_anim.runtime.events) -----------------------------------------------
 

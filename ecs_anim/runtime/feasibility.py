@@ -1,0 +1,391 @@
+"""Can each constraint's body reach its target at all? A feasibility pass (issue 32, item 6).
+
+Before a run, and when a body or a target changes, each constraint gets one estimate: the
+longest its chain can stretch (its *reach*: the bones from the chain's anchor to the
+constrained point, the spine's length too when the trunk is in the chain) against the
+distance from that anchor to the target's surface, in the poses the character and its
+target's character may take (:func:`pose_library`). A constraint whose nearest approach is
+still beyond its reach *cannot reach* its target, by so much; the others *can*, with so much to
+spare. The estimate errs on the side of reach (the chain stretched straight, the nearest of the
+poses): a constraint said short is short, one said within reach may still be kept off by
+higher priorities or joint limits.
+
+Where the bodies stand: each character's poses are its clips decoded on its body, laid out
+from its placement (a clip it does not play now as if it started now, continuing its root path,
+as :func:`~ecs_anim.runtime.playback_queue.start_clips` does), on the ground it stands on
+(``store.ground_ref``): the stance's root height and the ground are in the anchor's height.
+A constraint active in a clip's own time is looked at in that clip over its activation; any
+other in every pose of the character's clips. Its target's character is looked at in every
+pose of the clips it may play: the one it plays, those queued, its locomotion set's, and those
+a trigger's ``Play`` gives it. Targets on another character's body part are on that part's
+surface (the capsule's, out by the constrained point's own radius, as the solver aims:
+:func:`ecs_anim.solver.goals.on_other_surfaces`).
+
+Estimated: ``position`` and ``distance`` constraints, ``area`` constraints that keep a point
+*inside* a sphere or a box. Not a question of reach (left out, ``checked`` False): orientations,
+areas to stay out of, half-spaces, and targets not finite (a target your code has not set).
+
+Batched over constraints and poses (numpy); a Python loop only over the joints of a chain
+(at most six). Not part of the tick: :meth:`Simulation.feasibility` runs it when asked.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ecs_anim.core.body_points import (
+    ABOVE_TRUNK,
+    GROUPS,
+    JOINT_AS_POINT,
+    SEG_DISTAL,
+    SEG_PROXIMAL,
+    TRUNK,
+    point_positions,
+)
+from ecs_anim.core.morphology import Morphology, leg_length
+from ecs_anim.core.normalized import DecodedPose, decode
+from ecs_anim.core.skeleton import BONE_JOINTS, JOINT_INDEX, JOINTS, LENGTHS, N_JOINTS, PARENTS
+from ecs_anim.motion.constraint_table import (
+    AREA_BOX,
+    AREA_SPHERE,
+    KIND_AREA,
+    KIND_DISTANCE,
+    KIND_POSITION,
+    TARGET_WORLD,
+    ConstraintTable,
+)
+from ecs_anim.motion.sampling import rotate_xy, sample, sample_table, wrap_angle
+from ecs_anim.runtime.triggers import Play
+from ecs_anim.solver.capsules import (
+    CAPSULE_JOINTS,
+    CAPSULE_SPAN,
+    SEGMENT_CAPSULE,
+    capsule_radii,
+    point_radii,
+    surface_points,
+)
+
+if TYPE_CHECKING:
+    from ecs_anim.runtime.simulation import Simulation
+
+F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
+
+#: Poses looked at per clip (evenly over the clip, or over a constraint's activation in it).
+POSES_PER_CLIP = 9
+#: A constraint is said to fall short when its target is beyond its reach by more than this
+#: (m): the estimate's own slack (the centre-of-mass control and ground adaptation move the
+#: root by a few centimetres either way).
+SHORT_TOLERANCE_M = 0.02
+
+#: The joint each length's bone ends at, and back: the bone (length index) ending at a joint.
+_BONE_ENDING_AT = np.full(N_JOINTS, -1, np.int64)
+for _index, (_a, _b) in enumerate(BONE_JOINTS):
+    if _b >= 0:
+        _BONE_ENDING_AT[_b] = _index
+_PARENT = np.array(PARENTS, np.int64)
+#: The joint a group's chain hangs from when the trunk does not move for it.
+_GROUP_ANCHOR = np.array([JOINT_INDEX[j] for j in ("hip_l", "hip_r", "neck", "shoulder_l",
+                                                    "shoulder_r", "pelvis")], np.int64)
+_PELVIS = JOINT_INDEX["pelvis"]
+
+
+@dataclass(frozen=True)
+class Feasibility:
+    """One constraint's estimate (:func:`feasibility`).
+
+    uid, character, constraint : the constraint's id, its character's name, its name.
+    target : what it aims at, as a line says it (``defender_4's spine_upper``, ``(x, y, z)``).
+    chain : the groups allowed to move for it (``leg_r``, ``arm_l+trunk``).
+    stature_m : its character's stature (m).
+    reach_m : the longest its chain stretches, anchor to point (m).
+    short_m : by how much its target stays beyond that reach at the nearest (m; negative: to
+        spare; NaN when not checked).
+    checked : whether reach is the question (False: an orientation, a keep-out area, a
+        half-space, a target not finite).
+    reachable : not checked, or short by at most :data:`SHORT_TOLERANCE_M`.
+    """
+
+    uid: int
+    character: str
+    constraint: str
+    target: str
+    chain: str
+    stature_m: float
+    reach_m: float
+    short_m: float
+    checked: bool
+
+    @property
+    def reachable(self) -> bool:
+        return not self.checked or self.short_m <= SHORT_TOLERANCE_M
+
+    @property
+    def line(self) -> str:
+        """The estimate in one line: ``kick of kicker_4 (1.20 m, leg_r 0.56 m) cannot reach
+        defender_4's spine_upper: 0.31 m short``."""
+        who = f"{self.constraint} of {self.character} ({self.stature_m:.2f} m, {self.chain} "
+        if not self.checked:
+            return f"{who}{self.reach_m:.2f} m): {self.target}: not a question of reach"
+        if self.reachable:
+            spare = max(-self.short_m, 0.0)
+            return f"{who}{self.reach_m:.2f} m) can reach {self.target}: {spare:.2f} m to spare"
+        return f"{who}{self.reach_m:.2f} m) cannot reach {self.target}: {self.short_m:.2f} m short"
+
+    def as_dict(self) -> dict[str, object]:
+        """As the run report's JSON has it (``feasibility``)."""
+        return {"character": self.character, "constraint": self.constraint,
+                "target": self.target, "chain": self.chain,
+                "stature_m": round(self.stature_m, 4), "reach_m": round(self.reach_m, 4),
+                "short_m": None if not self.checked else round(self.short_m, 4),
+                "checked": self.checked, "reachable": self.reachable, "line": self.line}
+
+
+def feasibility_lines(estimates: list[Feasibility]) -> list[str]:
+    """What ``run`` prints before the first tick: ``feasibility: <line>`` for each constraint
+    that cannot reach its target, then how many can (none when there is no constraint)."""
+    checked = [e for e in estimates if e.checked]
+    lines = [f"feasibility: {e.line}" for e in checked if not e.reachable]
+    if estimates:
+        within = sum(e.reachable for e in checked)
+        rest = len(estimates) - len(checked)
+        lines.append(f"feasibility: {within} of {len(checked)} constraints can reach their "
+                     f"targets" + (f"; {rest} are not a question of reach" if rest else ""))
+    return lines
+
+
+def chain_reach(lengths: F64, segment: I64, fraction: F64, offset: F64,
+                chain: I64) -> tuple[F64, I64]:
+    """How far each constrained point can be from its chain's anchor, the chain stretched
+    straight (m (k,)), and that anchor joint (k,).
+
+    ``lengths`` (k, N_LENGTHS) each constraint's body; ``segment`` (k,) length index of the
+    point, ``fraction`` (k,) along it, ``offset`` (k, 3) m in its frame; ``chain`` (k,) bit
+    mask of :data:`~ecs_anim.core.body_points.GROUPS`. The anchor is the group's root joint
+    (hip, shoulder, neck base), or the pelvis when the trunk moves for a point above it."""
+    from ecs_anim.core.body_points import SEGMENTS
+
+    group = np.array([SEGMENTS[LENGTHS[s]][0] for s in segment.tolist()], np.int64)
+    with_trunk = ((chain >> TRUNK) & 1).astype(bool) & np.isin(group, ABOVE_TRUNK)
+    anchor = np.where(with_trunk | (group == TRUNK), _PELVIS, _GROUP_ANCHOR[group])
+    k = np.arange(segment.size)
+    reach = fraction * lengths[k, segment] + np.linalg.norm(offset, axis=1)
+    joint = SEG_PROXIMAL[segment]
+    # Up the skeleton from the point's segment to the anchor (a chain is at most six bones).
+    for _ in range(N_JOINTS):
+        climbing = joint != anchor
+        if not climbing.any():
+            break
+        bone = _BONE_ENDING_AT[np.where(climbing, joint, anchor)]
+        reach = reach + np.where(climbing & (bone >= 0), lengths[k, np.maximum(bone, 0)], 0.0)
+        joint = np.where(climbing, _PARENT[joint], joint)
+    return reach, anchor
+
+
+def _point_name(segment: int, fraction: float) -> str:
+    """A target point as a scenario names it: the joint a segment ends at (fraction 1), else
+    the segment."""
+    joint = int(SEG_DISTAL[segment])
+    if fraction == 1.0 and joint >= 0 and JOINTS[joint] in JOINT_AS_POINT:
+        return JOINTS[joint]
+    return LENGTHS[segment]
+
+
+def _chain_text(mask: int) -> str:
+    return "+".join(g for i, g in enumerate(GROUPS) if mask >> i & 1) or "none"
+
+
+def playable_clips(sim: Simulation) -> list[list[int]]:
+    """Per store row, the clips the character may play (bank indices): the one it plays, those
+    queued, its locomotion set's, and those a trigger's ``Play`` (and its ``then``) gives it."""
+    st, bank = sim.store, sim.bank
+    row_of = {int(e): r for r, e in enumerate(st.entity.tolist())}
+    clips: list[list[int]] = [[int(st.clip[r])] for r in range(st.n)]
+    for r in range(st.n):
+        clips[r] += st.queue_clip[r, :st.queue_len[r]].tolist() + \
+            [int(c) for c in st.gait_clip[r] if c >= 0]
+    for trigger in sim.reactions.triggers:
+        for action in trigger.then:
+            if isinstance(action, Play) and action.entity in row_of:
+                names = [action.clip] + [q.clip for q in action.then]
+                clips[row_of[action.entity]] += [bank.index(n) for n in names]
+    return [list(dict.fromkeys(c)) for c in clips]
+
+
+def pose_library(sim: Simulation, lengths: F64, rows: I64, clips: I64,
+                 times_s: F64) -> DecodedPose:
+    """Poses (q,) of characters ``rows`` (q,) playing ``clips`` (q,) at ``times_s`` (q,) of
+    each clip, decoded on their bodies ``lengths`` (n, N_LENGTHS) by store row: the clip a character plays now laid out from its
+    placement; another as if started now, its root continuing the one now played (with its
+    heading, as :func:`~ecs_anim.runtime.playback_queue.start_clips`); feet on the ground the
+    character stands on (its ``ground_ref``)."""
+    st, bank = sim.store, sim.bank
+    leg = leg_length(lengths[rows])
+    now = sample(bank, st.clip[rows], st.clip_time_s[rows], st.loop[rows])
+    begun = sample(bank, clips, np.zeros(rows.size), np.zeros(rows.size, bool))
+    heading = st.placement_heading[rows]
+    root_now = rotate_xy(now.root_position[:, :2] * leg[:, None], heading) + st.placement_xy[rows]
+    playing = clips == st.clip[rows]
+    new_heading = wrap_angle(now.root_heading + heading - begun.root_heading)
+    new_xy = root_now - rotate_xy(begun.root_position[:, :2] * leg[:, None], new_heading)
+    heading = np.where(playing, heading, new_heading)
+    xy = np.where(playing[:, None], st.placement_xy[rows], new_xy)
+    loop = np.where(playing, st.loop[rows], False)
+    poses = sample(bank, clips, times_s, loop)
+    root = poses.root_position.copy()
+    root[:, :2] = (rotate_xy(root[:, :2] * leg[:, None], heading) + xy) / leg[:, None]
+    root[:, 2] += (st.ground_ref[rows] / leg
+                   - sample_table(bank, bank.capture_ground, clips, times_s, loop)[:, 0])
+    poses.root_position = root
+    poses.root_heading = poses.root_heading + heading
+    return decode(poses, lengths[rows])
+
+
+def _even(start: F64, stop: F64) -> F64:
+    """(k, POSES_PER_CLIP) times evenly from ``start`` to ``stop`` (k,)."""
+    u = np.linspace(0.0, 1.0, POSES_PER_CLIP)
+    times: F64 = start[:, None] + u[None] * (stop - start)[:, None]
+    return times
+
+
+def feasibility(sim: Simulation) -> list[Feasibility]:
+    """Every constraint's estimate (the module docstring), in the constraint table's order, on
+    the bodies the characters have or are blending into (their Morphology components)."""
+    table, st, bank = sim.constraints, sim.store, sim.bank
+    m = table.m
+    if m == 0 or st.n == 0:
+        return []
+    lengths = st.lengths.copy()
+    body_rows, bodies = sim.rows_and_components(Morphology)
+    lengths[body_rows] = [b.lengths for b in bodies]
+    names = sim.names()
+    duration = bank.duration_s(np.arange(bank.n_frames.size))
+    # Every character's library: each playable clip at POSES_PER_CLIP times over it.
+    playable = playable_clips(sim)
+    width = max(len(c) for c in playable) * POSES_PER_CLIP
+    lib_clip = np.full((st.n, width), -1, np.int64)
+    for r, clips in enumerate(playable):
+        lib_clip[r, :len(clips) * POSES_PER_CLIP] = np.repeat(clips, POSES_PER_CLIP)
+    in_library = lib_clip >= 0
+    lib_clip = np.where(in_library, lib_clip, st.clip[:, None])
+    phase = np.tile(np.linspace(0.0, 1.0, POSES_PER_CLIP), width // POSES_PER_CLIP)
+    lib_time = phase[None] * duration[lib_clip]
+
+    # The constraint's own poses: its clock's clip over its activation, or the whole library.
+    owner = table.owner
+    clocked = table.clock >= 0
+    clock = np.maximum(table.clock, 0)
+    start = np.clip(table.activation[:, 0], 0.0, duration[clock])
+    stop = np.clip(table.activation[:, 1], start, duration[clock])
+    own_clip = np.where(clocked[:, None], np.pad(np.repeat(clock[:, None], POSES_PER_CLIP, 1),
+                                                 ((0, 0), (0, width - POSES_PER_CLIP)), "edge"),
+                        lib_clip[owner])
+    own_time = np.where(clocked[:, None],
+                        np.pad(_even(start, stop), ((0, 0), (0, width - POSES_PER_CLIP)), "edge"),
+                        lib_time[owner])
+    own_ok = np.where(clocked[:, None], True, in_library[owner])
+    own = pose_library(sim, lengths, np.repeat(owner, width), own_clip.reshape(-1), own_time.reshape(-1))
+
+    reach, anchor_joint = chain_reach(lengths[owner], table.segment, table.fraction,
+                                      table.offset, table.chain)
+    anchor = own.positions[np.arange(m * width), np.repeat(anchor_joint, width)].reshape(m, width, 3)
+
+    # Targets: (m, width) points (a world target repeated), and their capsule's axis.
+    body = table.target_kind != TARGET_WORLD
+    target_row = np.where(body, table.target_row, owner)
+    self_target = body & (target_row == owner)
+    lib = pose_library(sim, lengths, np.repeat(np.arange(st.n), width), lib_clip.reshape(-1),
+                       lib_time.reshape(-1))
+    segment = np.repeat(table.target_segment, width)
+    fraction = np.repeat(table.target_fraction, width)
+    offset = np.repeat(table.target_offset, width, axis=0)
+    on_other = point_positions(lib, (target_row[:, None] * width + np.arange(width)[None]).reshape(-1),
+                               segment, fraction, offset)
+    on_self = point_positions(own, np.arange(m * width), segment, fraction, offset)
+    target_points = np.where(np.repeat(self_target, width)[:, None], on_self, on_other)
+    target_points = np.where(np.repeat(body, width)[:, None], target_points,
+                             np.repeat(table.target_world, width, axis=0)).reshape(m, width, 3)
+    target_ok = np.where(self_target[:, None], own_ok, in_library[target_row]) | ~body[:, None]
+
+    # Distances from every own pose's anchor to every target pose (self targets: same pose).
+    gap = _needed(lengths, table, target_row, target_points, anchor, lib, width)
+    pair_ok = own_ok[:, :, None] & target_ok[:, None, :]
+    pair_ok &= np.where(self_target[:, None, None], np.eye(width, dtype=bool)[None], True)
+    nearest = np.min(np.where(pair_ok, gap, np.inf), axis=(1, 2))
+    checked = np.isfinite(nearest) & (
+        (table.kind == KIND_POSITION) | (table.kind == KIND_DISTANCE)
+        | ((table.kind == KIND_AREA) & table.area_inside
+           & np.isin(table.area_shape, (AREA_SPHERE, AREA_BOX))))
+    short = np.where(checked, nearest - reach, np.nan)
+    stature = np.array([Morphology(lengths[r]).stature for r in owner.tolist()])
+    out = []
+    for k in range(m):
+        r = int(owner[k])
+        if body[k]:
+            point = _point_name(int(table.target_segment[k]), float(table.target_fraction[k]))
+            whose = "its own" if self_target[k] else f"{names[int(target_row[k])]}'s"
+            target = f"{whose} {point}"
+        else:
+            x, y, z = table.target_world[k]
+            target = f"({x:.2f}, {y:.2f}, {z:.2f})"
+        out.append(Feasibility(int(table.uid[k]), names[r], table.names[k], target,
+                               _chain_text(int(table.chain[k])), float(stature[k]),
+                               float(reach[k]), float(short[k]), bool(checked[k])))
+    return out
+
+
+def _needed(lengths: F64, table: ConstraintTable, target_row: I64, target_points: F64, anchor: F64,
+            lib: DecodedPose, width: int) -> F64:
+    """(m, width, width) how far each constraint's point must get from its anchor (own pose,
+    target pose): to the target's surface (position on another character's capsule), to the
+    target less the distance kept (distance), to the area's nearest point (inside areas)."""
+    a = anchor[:, :, None, :]  # (m, own, 1, 3)
+    t = target_points[:, None, :, :]  # (m, 1, target, 3)
+    straight = np.linalg.norm(t - a, axis=-1)
+    needed = straight.copy()
+    # Onto another character's body part: its capsule's surface, toward the anchor.
+    capsule = SEGMENT_CAPSULE[table.target_segment]
+    on_surface = ((table.target_kind != TARGET_WORLD) & (target_row != table.owner)
+                  & (table.kind == KIND_POSITION) & (capsule >= 0))
+    k = np.flatnonzero(on_surface)
+    if k.size:
+        joints = CAPSULE_JOINTS[np.maximum(capsule[k], 0)]
+        pose = target_row[k][:, None] * width + np.arange(width)[None]  # (s, width)
+        ends_a = lib.positions[pose, joints[:, None, 0]]
+        ends_b = lib.positions[pose, joints[:, None, 1]]
+        span = CAPSULE_SPAN[np.maximum(capsule[k], 0)][:, None]
+        axis_a = ends_a + span[..., :1] * (ends_b - ends_a)
+        axis_b = ends_a + span[..., 1:] * (ends_b - ends_a)
+        radius = (capsule_radii(lengths[target_row[k]])[np.arange(k.size), capsule[k]]
+                  + point_radii(lengths[table.owner[k]], table.segment[k]))
+        shape = (k.size, width, width)
+
+        def pairs(v: F64, own_axis: bool) -> F64:
+            """(s, width, 3) -> (s * width * width, 3) over (own, target) pairs."""
+            spread = v[:, :, None] if own_axis else v[:, None, :]
+            return np.broadcast_to(spread, shape + (3,)).reshape(-1, 3)
+
+        surface = surface_points(pairs(target_points[k], False), pairs(axis_a, False),
+                                 pairs(axis_b, False),
+                                 np.repeat(radius, width * width), pairs(anchor[k], True))
+        needed[k] = np.linalg.norm(surface - pairs(anchor[k], True), axis=-1).reshape(shape)
+    distance = table.kind == KIND_DISTANCE
+    needed = np.where(distance[:, None, None], straight - table.distance_m[:, None, None], needed)
+    sphere = (table.kind == KIND_AREA) & (table.area_shape == AREA_SPHERE)
+    needed = np.where(sphere[:, None, None], straight - table.area_radius[:, None, None], needed)
+    box = (table.kind == KIND_AREA) & (table.area_shape == AREA_BOX)
+    if box.any():
+        rel = a - t  # the anchor from the box's placement point
+        low, high = table.area_low[:, None, None, :], table.area_high[:, None, None, :]
+        outside = np.linalg.norm(rel - np.clip(rel, low, high), axis=-1)
+        needed = np.where(box[:, None, None], outside, needed)
+    out: F64 = np.maximum(needed, 0.0)
+    return out
+
+
+__all__ = ["POSES_PER_CLIP", "SHORT_TOLERANCE_M", "Feasibility", "chain_reach", "feasibility",
+           "feasibility_lines", "playable_clips", "pose_library"]
