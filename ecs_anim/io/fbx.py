@@ -113,11 +113,15 @@ class FbxMotion:
     up: str
 
 
-def read_fbx(path: str | Path, take: str | None = None) -> FbxMotion:
+def read_fbx(path: str | Path, take: str | None = None, rest_only: bool = False) -> FbxMotion:
     """Read an FBX file's skeleton and one take (``take``: its name; None: the first, with a
     warning naming the others when there are several). Raises :class:`InputError` naming the
     file (a damaged or truncated file, no skeleton, no take, an unknown take), and
-    :class:`EcsAnimError` when ufbx is not installed."""
+    :class:`EcsAnimError` when ufbx is not installed.
+
+    ``rest_only``: the skeleton alone, as a rig is read (``export --onto RIG.fbx``): one frame,
+    its rest pose (the nodes' own transforms), from a file with or without takes (``take``
+    "")."""
     ufbx = _ufbx()
     path = Path(path)
     if not path.is_file():
@@ -129,7 +133,7 @@ def read_fbx(path: str | Path, take: str | None = None) -> FbxMotion:
         raise InputError(path, f"not a readable FBX file ({what}; damaged or truncated?)") from None
     held = _Elements()
     try:
-        return _read_scene(ufbx, scene, held, path, take)
+        return _read_scene(ufbx, scene, held, path, take, rest_only)
     except (ufbx.UfbxError, ValueError, RuntimeError) as exc:
         raise InputError(path, f"cannot read the FBX scene: {exc}") from None
     finally:
@@ -138,7 +142,7 @@ def read_fbx(path: str | Path, take: str | None = None) -> FbxMotion:
 
 
 def _read_scene(ufbx: Any, scene: Any, held: _Elements, path: Path,
-                take: str | None) -> FbxMotion:
+                take: str | None, rest_only: bool) -> FbxMotion:
     settings = scene.settings
     fps = float(settings.frames_per_second)
     unit_m = float(settings.unit_meters)
@@ -147,10 +151,17 @@ def _read_scene(ufbx: Any, scene: Any, held: _Elements, path: Path,
     stacks_list = scene.anim_stacks
     stacks = [held(stacks_list[i]) for i in range(len(stacks_list))]
     names = [str(s.name) for s in stacks]
+    if rest_only:
+        warnings: list[str] = []
+        joint_names, parents, rest, _ = _skeleton(scene, held, path, warnings)
+        motion = bvh_motion_from_transforms(joint_names, parents, rest, rest,
+                                            1.0 / fps if math.isfinite(fps) and fps > 0 else 1.0 / 30,
+                                            str(path), warnings)
+        return FbxMotion(motion, "", names, unit_m, up)
     if not stacks:
         raise InputError(path, "no animation in the file (no take, AnimationStack): nothing to "
                                "import")
-    warnings: list[str] = []
+    warnings = []
     if take is None:
         index = 0
         if len(stacks) > 1:
@@ -170,7 +181,27 @@ def _read_scene(ufbx: Any, scene: Any, held: _Elements, path: Path,
         raise InputError(path, f"take {quoted(names[index])} runs from {begin:g} s to {end:g} s "
                                f"at {fps:g} fps: no frame range that can be read")
     n_frames = math.floor(span + 1e-6) + 1
+    joint_names, parents, rest, joint_nodes = _skeleton(scene, held, path, warnings)
+    anim = stack.anim
+    n_joints = len(joint_nodes)
+    translation = np.empty((n_frames, n_joints, 3))
+    rotation = np.empty((n_frames, n_joints, 4))
+    scale = np.empty((n_frames, n_joints, 3))
+    for f in range(n_frames):
+        t = begin + f / fps
+        for j, node in enumerate(joint_nodes):
+            tr = ufbx.evaluate_transform(anim, node, t)
+            translation[f, j], rotation[f, j], scale[f, j] = tr.translation, tr.rotation, tr.scale
+    motion = bvh_motion_from_transforms(joint_names, parents, rest, (translation, rotation, scale),
+                                        1.0 / fps, str(path), warnings)
+    return FbxMotion(motion, names[index], names, unit_m, up)
 
+
+def _skeleton(scene: Any, held: _Elements, path: Path, warnings: list[str]
+              ) -> tuple[list[str], NDArray[np.intp], tuple[F64, F64, F64], list[Any]]:
+    """The scene's skeleton (:func:`_skeleton_nodes`): its joints' unique names, parents
+    (n_joints,), rest transforms (translation, quaternion, scale: (1, n_joints, 3 / 4 / 3),
+    each in its parent's frame) and ufbx nodes."""
     node_list = scene.nodes
     nodes = [held(node_list[i]) for i in range(len(node_list))]
     by_id = {int(n.typed_id): k for k, n in enumerate(nodes)}
@@ -187,27 +218,13 @@ def _read_scene(ufbx: Any, scene: Any, held: _Elements, path: Path,
         warnings.append(f"{path}: {note}")
     joint_nodes = [nodes[k] for k in chosen]
     slot = {k: i for i, k in enumerate(chosen)}
-    parents = np.array([slot.get(parent[k], -1) for k in chosen])
-
-    rest = [n.local_transform for n in joint_nodes]
-    anim = stack.anim
-    n_joints = len(joint_nodes)
-    translation = np.empty((n_frames, n_joints, 3))
-    rotation = np.empty((n_frames, n_joints, 4))
-    scale = np.empty((n_frames, n_joints, 3))
-    for f in range(n_frames):
-        t = begin + f / fps
-        for j, node in enumerate(joint_nodes):
-            tr = ufbx.evaluate_transform(anim, node, t)
-            translation[f, j], rotation[f, j], scale[f, j] = tr.translation, tr.rotation, tr.scale
-    rest_t = np.array([[r.translation for r in rest]], dtype=np.float64)
-    rest_q = np.array([[r.rotation for r in rest]], dtype=np.float64)
-    rest_s = np.array([[r.scale for r in rest]], dtype=np.float64)
-    joint_names = _unique([str(n.name) for n in joint_nodes], path, warnings)
-    motion = bvh_motion_from_transforms(
-        joint_names, parents, (rest_t, rest_q, rest_s), (translation, rotation, scale),
-        1.0 / fps, str(path), warnings)
-    return FbxMotion(motion, names[index], names, unit_m, up)
+    parents = np.array([slot.get(parent[k], -1) for k in chosen], dtype=np.intp)
+    local = [n.local_transform for n in joint_nodes]
+    rest = (np.array([[r.translation for r in local]], dtype=np.float64),
+            np.array([[r.rotation for r in local]], dtype=np.float64),
+            np.array([[r.scale for r in local]], dtype=np.float64))
+    names = _unique([str(n.name) for n in joint_nodes], path, warnings)
+    return names, parents, rest, joint_nodes
 
 
 def _skeleton_nodes(parent: list[int], kinds: list[int], is_root: list[bool],
@@ -358,7 +375,7 @@ def import_fbx(path: str | Path, map_spec: str | None = None, unit: str | None =
     states. Raises :class:`EcsAnimError` subclasses on bad input."""
     path = Path(path)
     fbx = read_fbx(path, take)
-    normalized = import_canonical(path, lambda: _canonical(fbx, map_spec, unit, up, stature_m),
+    normalized = import_canonical(path, lambda: fbx_canonical_clip(fbx, map_spec, unit, up, stature_m),
                                   trim, thresholds, treadmill)
     normalized.info["fbx"] = {"take": fbx.take, "takes": fbx.takes,
                               "stated_unit_m": fbx.unit_m, "stated_up": fbx.up,
@@ -366,8 +383,8 @@ def import_fbx(path: str | Path, map_spec: str | None = None, unit: str | None =
     return normalized
 
 
-def _canonical(fbx: FbxMotion, map_spec: str | None, unit: str | None, up: str | None,
-               stature_m: float | None) -> CanonicalClip:
+def fbx_canonical_clip(fbx: FbxMotion, map_spec: str | None = None, unit: str | None = None,
+                       up: str | None = None, stature_m: float | None = None) -> CanonicalClip:
     """:func:`~ecs_anim.io.importing.canonical_clip` of the FBX motion, in the unit the file
     states where no ``unit`` or ``stature_m`` is given and that unit makes a human leg; the up
     axis detected as for BVH, its reason saying when the file states another."""

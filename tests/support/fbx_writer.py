@@ -40,6 +40,17 @@ class Take:
     motion: BvhMotion
 
 
+def turned_joint_frames(n_joints: int, seed: int = 2005) -> np.ndarray:
+    """A turned frame per joint (n_joints, 3, 3), as rigs with bones along their own axes
+    have: ``joint_frames`` for :func:`fbx_text`."""
+    from ecs_anim.core.rotations import axis_angle
+
+    rng = np.random.default_rng(seed)
+    axes = rng.normal(size=(n_joints, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    return axis_angle(axes, rng.uniform(0.1, np.pi, n_joints))
+
+
 def fbx_angles(matrices: np.ndarray, order: str) -> np.ndarray:
     """FBX ``Lcl Rotation`` values (n, 3): degrees about X, Y, Z, of rotation matrices
     (n, 3, 3) for the FBX rotation ``order`` (``"XYZ"``: R = Rz Ry Rx)."""
@@ -61,8 +72,10 @@ def _numbers(values) -> str:
 
 def fbx_text(takes: list[Take], names: list[str] | None = None, order: str = "XYZ",
              joint_frames: np.ndarray | None = None, pre_rotation: bool = False,
-             unit_scale_factor: float = 1.0, up_axis: int = 1, fps: float | None = None) -> str:
-    """The ASCII FBX text of ``takes`` (their clips share the first one's skeleton).
+             unit_scale_factor: float = 1.0, up_axis: int = 1, fps: float | None = None,
+             animated: bool = True) -> str:
+    """The ASCII FBX text of ``takes`` (their clips share the first one's skeleton); with
+    ``animated`` False, the skeleton alone, with no animation stack (a rig).
 
     ``names``: the joints' names in the FBX (default: the BVH's); ``order``: the FBX
     ``RotationOrder`` of every joint; ``unit_scale_factor``: centimetres per file unit as FBX
@@ -110,7 +123,7 @@ def fbx_text(takes: list[Take], names: list[str] | None = None, order: str = "XY
         connections += [f'\tC: "OO",{ids["model"](j)},{ids["model"](joint.parent) if joint.parent >= 0 else 0}',
                         f'\tC: "OO",{ids["attr"](j)},{ids["model"](j)}']
     next_id = 10_000_000
-    for take in takes:
+    for take in takes if animated else []:
         rotations, translations = joint_local_transforms(take.motion)
         n_frames = take.motion.n_frames
         ticks = [round(k * KTIME_PER_S / fps) for k in range(n_frames)]

@@ -5,14 +5,16 @@ manifest), and the run with its summary line.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
 from ecs_anim.apps.batch.driver import run_batch
+from ecs_anim.apps.batch.job_hash import files_digest
 from ecs_anim.apps.batch.manifest import load_manifest
-from ecs_anim.apps.batch.plan import DEFAULT_FORMATS, Body, Plan, make_plan
+from ecs_anim.apps.batch.plan import DEFAULT_FORMATS, Body, OntoRig, Plan, make_plan
 from ecs_anim.apps.batch.plan_parts import (
     body_from_text,
     expand_clips,
@@ -26,7 +28,7 @@ from ecs_anim.core.morphology import PRESET_SPECS
 
 def plan_from_args(args: argparse.Namespace) -> Plan:
     """The plan from the command line, or from ``--manifest`` (the command line's ``--out``,
-    ``--formats`` and ``--seconds`` override the manifest's)."""
+    ``--formats``, ``--seconds`` and ``--onto`` with its ``--map`` override the manifest's)."""
     inputs: list[str] = []
     if args.manifest:
         given = [flag for flag, value in (("CLIP", args.clips), ("--bodies", args.bodies),
@@ -63,9 +65,29 @@ def plan_from_args(args: argparse.Namespace) -> Plan:
         parts["formats"] = parse_formats(args.formats)
     if args.seconds is not None:
         parts["seconds"] = args.seconds
+    if args.onto is not None:
+        parts["onto"] = (args.onto, args.map)
+    elif args.map is not None:
+        raise EcsAnimError(f"--map {args.map}: matches the joints of an --onto rig; give --onto RIG")
+    onto = None
+    if "onto" in parts:
+        from ecs_anim.io.export.rig import rig_input_files
+
+        onto = onto_rig(*parts["onto"])
+        inputs += rig_input_files(onto.path, onto.map_spec)
     return make_plan(parts["clips"], parts["bodies"], parts["out"], parts.get("grounds"),
                      parts.get("formats", DEFAULT_FORMATS), parts.get("template"),
-                     parts.get("seconds"), inputs)
+                     parts.get("seconds"), inputs, onto)
+
+
+def onto_rig(path: str, map_spec: str | None) -> OntoRig:
+    """The ``--onto`` rig of a batch, loaded once here so that a rig no job could use is said
+    before any job runs; its hash is of its files' bytes and the map."""
+    from ecs_anim.io.export.rig import load_rig, rig_input_files
+
+    load_rig(path, map_spec)
+    files = files_digest(rig_input_files(path, map_spec))
+    return OntoRig(str(path), map_spec, hashlib.sha256(f"{files}\0{map_spec}".encode()).hexdigest())
 
 
 def cmd_batch(args: argparse.Namespace) -> int:
@@ -110,6 +132,12 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
                         "constraints and COM settings for every job")
     p.add_argument("--out", metavar="DIR", help="the batch folder")
     p.add_argument("--formats", metavar="F,F", help="of bvh, npz, glb (default bvh,npz)")
+    p.add_argument("--onto", metavar="RIG.bvh|RIG.glb|RIG.fbx",
+                   help="every job retargeted onto this rig's body and written in its own "
+                        "hierarchy, names and rest pose (docs/export.md)")
+    p.add_argument("--map", metavar="PRESET|FILE.yaml",
+                   help="how the --onto rig's joints are our body parts, as import's --map "
+                        "(default: detected)")
     p.add_argument("--seconds", type=positive_float, metavar="S",
                    help="simulate S seconds per job instead of the clip's length")
     p.add_argument("--engine", choices=["local", "ray"], default="local",

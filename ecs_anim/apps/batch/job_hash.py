@@ -78,11 +78,12 @@ def files_digest(paths: Sequence[str | Path]) -> str:
 
 
 def job_digest(job: Job, clip_digest: str, version: str) -> str:
-    """The hash a job's stamp holds: its clip's bytes, body, ground, template, formats, length
-    and ``version`` (the project version and :func:`source_digest`). Equal hashes mean equal
-    outputs."""
+    """The hash a job's stamp holds: its clip's bytes, body, ground, template, formats, length,
+    rig and ``version`` (the project version and :func:`source_digest`). Equal hashes mean
+    equal outputs."""
     data = {"version": version, "clip": clip_digest, "body": _canonical(job.body),
             "ground": _canonical(job.ground), "formats": list(job.formats),
             "seconds": _canonical(job.seconds),
-            "template": None if job.template is None else job.template.digest}
+            "template": None if job.template is None else job.template.digest,
+            "onto": None if job.onto is None else job.onto.digest}
     return hashlib.sha256(json.dumps(data, sort_keys=True).encode("utf-8")).hexdigest()

@@ -9,19 +9,23 @@ the same bytes.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import io
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ecs_anim.apps.batch.plan import Job
+from ecs_anim.apps.batch.plan import Job, OntoRig
 from ecs_anim.core.errors import EcsAnimError
 from ecs_anim.core.ground import Ground
 from ecs_anim.motion.clip import NormalizedMotion
+
+if TYPE_CHECKING:
+    from ecs_anim.io.export import Rig
 
 F64 = NDArray[np.float64]
 
@@ -126,10 +130,49 @@ def foot_skate_ratio(positions: F64, ground: Ground, fps: float) -> float:
     return float(np.count_nonzero(skating.any(axis=1)) / max(positions.shape[0], 1))
 
 
+@functools.lru_cache(maxsize=4)
+def loaded_rig(onto: OntoRig) -> Rig:
+    """The rig of ``onto``, loaded once per worker process (every job of a batch shares it)."""
+    from ecs_anim.io.export import load_rig
+
+    return load_rig(onto.path, onto.map_spec)
+
+
+def job_files(job: Job, positions: F64, local: F64 | None, planted: NDArray[np.bool_],
+              fps: float) -> dict[str, bytes]:
+    """A job's files by path relative to the batch folder: each of its formats from the
+    recorded ``positions`` (ticks, N_JOINTS, 3), export-skeleton ``local`` rotations (ticks, E,
+    3, 3; None when no format needs them) and ``planted`` feet (ticks, 2), on the job's body,
+    or retargeted onto its rig (:func:`~ecs_anim.io.export.recorded_on_rig`) with ``--onto``."""
+    from ecs_anim.io.export import bvh_from_rotations, glb_bytes, write_npz
+
+    morph = job.body.morphology
+    files: dict[str, bytes] = {}
+    if job.onto is not None:
+        from ecs_anim.io.export import onto_rig_bytes, recorded_on_rig
+
+        assert local is not None
+        rig = loaded_rig(job.onto)
+        lengths = np.broadcast_to(morph.lengths, (positions.shape[0], morph.lengths.shape[0]))
+        pose = recorded_on_rig(rig, positions, local, lengths)
+        return {f"{job.stem}.{ext}": onto_rig_bytes(rig, pose, ext, fps, planted)
+                for ext in job.formats}
+    for ext in job.formats:
+        name = f"{job.stem}.{ext}"
+        if ext == "npz":
+            buffer = io.BytesIO()
+            write_npz(buffer, positions, fps, planted)
+            files[name] = buffer.getvalue()
+            continue
+        assert local is not None
+        files[name] = bvh_from_rotations(morph, positions[:, 0], local, fps).encode("utf-8") \
+            if ext == "bvh" else glb_bytes(morph, positions[:, 0], local, fps)
+    return files
+
+
 def run_job(job: Job, motion: NormalizedMotion) -> Outcome:
     """Play ``motion`` for ``job`` and return its record and files (nothing is written here).
     The simulation, metrics and encoders are those ``ecs-anim run --export`` uses."""
-    from ecs_anim.io.export import bvh_from_rotations, write_npz
     from ecs_anim.runtime.metrics import MetricsRecorder
     from ecs_anim.scenario import build_simulation
 
@@ -139,7 +182,8 @@ def run_job(job: Job, motion: NormalizedMotion) -> Outcome:
     if ticks < 1:
         raise EcsAnimError(f"--seconds {scenario.duration_s:g} is less than one tick at "
                            f"{scenario.fps:g} Hz")
-    rotations = any(f in ("bvh", "glb") for f in job.formats)
+    # (Onto a rig, the pelvis and thorax frames come from the rotations.)
+    rotations = job.onto is not None or any(f in ("bvh", "glb") for f in job.formats)
     with build_simulation(scenario, rotations=rotations) as sim:
         recorder = MetricsRecorder(sim)
         n_joints = sim.store.positions.shape[1]
@@ -161,21 +205,7 @@ def run_job(job: Job, motion: NormalizedMotion) -> Outcome:
         raise EcsAnimError(f"{job.stem}: the simulation gave non-finite positions (bug); nothing "
                            "written")
     morph, fps = job.body.morphology, scenario.fps
-    files: dict[str, bytes] = {}
-    for ext in job.formats:
-        name = f"{job.stem}.{ext}"
-        if ext == "bvh":
-            assert local is not None
-            files[name] = bvh_from_rotations(morph, positions[:, 0], local, fps).encode("utf-8")
-        elif ext == "npz":
-            buffer = io.BytesIO()
-            write_npz(buffer, positions, fps, planted)
-            files[name] = buffer.getvalue()
-        else:
-            from ecs_anim.io.export.gltf import glb_bytes
-
-            assert local is not None
-            files[name] = glb_bytes(morph, positions[:, 0], local, fps)
+    files = job_files(job, positions, local, planted, fps)
     character = report["characters"][0]
     record = {
         "clip": job.clip, "body": job.body.name, "ground": job.ground.name,

@@ -1,5 +1,6 @@
 """A batch manifest (``--manifest FILE.yaml``): clips, bodies (a stature range among them),
-grounds, template, formats, out and seconds, validated with ``file:line:`` errors.
+grounds, template, formats, out, seconds and the rig the files go onto, validated with
+``file:line:`` errors.
 """
 
 from __future__ import annotations
@@ -71,13 +72,14 @@ def _manifest_body(r: Any, node: yaml.Node, where: str, base: Path,
 
 
 MANIFEST_KEYS = {"clips": True, "bodies": True, "grounds": False, "template": False,
-                 "formats": False, "out": False, "seconds": False}
+                 "formats": False, "out": False, "seconds": False, "onto": False}
 
 
 def load_manifest(path: str | Path) -> dict[str, Any]:
     """A manifest (``--manifest``), validated with ``file:line:`` errors; paths in it are
     relative to its folder. Returns the plan's parts: clips, bodies, grounds, template, formats,
-    out, seconds (absent keys absent), and inputs (the morphology files read)."""
+    out, seconds, onto ((rig path, map)) (absent keys absent), and inputs (the morphology files
+    read)."""
     from ecs_anim.scenario import read_tree
 
     path = Path(path)
@@ -121,4 +123,25 @@ def load_manifest(path: str | Path) -> dict[str, Any]:
             raise r.fail(top["formats"], "formats", str(exc).split(": ", 1)[1]) from None
     if "seconds" in top:
         parts["seconds"] = r.number(top["seconds"], "seconds", 1e-3, 86400.0, "s")
+    if "onto" in top:
+        parts["onto"] = _manifest_onto(r, top["onto"], base)
     return parts
+
+
+def _manifest_onto(r: Any, node: yaml.Node, base: Path) -> tuple[str, str | None]:
+    """``onto:`` a rig file, or ``{rig: FILE, map: PRESET|FILE.yaml}``: (rig path, map), files
+    relative to the manifest's folder."""
+    def relative(text: str) -> str:
+        return text if Path(text).is_absolute() else str(base / text)
+
+    if isinstance(node, yaml.ScalarNode):
+        rig, map_spec = r.string(node, "onto"), None
+    else:
+        keys = r.mapping(node, "onto", {"rig": True, "map": False})
+        rig = r.string(keys["rig"], "onto.rig")
+        map_spec = r.string(keys["map"], "onto.map") if "map" in keys else None
+        if map_spec is not None and Path(map_spec).suffix.lower() in (".yaml", ".yml"):
+            map_spec = relative(map_spec)
+    if not Path(relative(rig)).is_file():
+        raise r.fail(node, "onto", f"no such rig file {quoted(relative(rig))}")
+    return relative(rig), map_spec

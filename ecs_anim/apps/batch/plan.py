@@ -64,6 +64,17 @@ class Template:
 
 
 @dataclass(frozen=True)
+class OntoRig:
+    """The user's rig every job is written onto (``--onto RIG``, ``onto:``): its file, its
+    joint map (``--map``: a preset, a map YAML or None to detect) and a hash of both files'
+    bytes and the map (part of every job's hash)."""
+
+    path: str
+    map_spec: str | None
+    digest: str
+
+
+@dataclass(frozen=True)
 class Job:
     """One clip on one body over one ground. ``stem`` is the outputs' path relative to the
     batch folder without the extension (``<clip>/<body>[_<ground>]``)."""
@@ -75,6 +86,7 @@ class Job:
     formats: tuple[str, ...]
     seconds: float | None = None  # simulate this long instead of the clip's (template's) length
     template: Template | None = None
+    onto: OntoRig | None = None  # the files retargeted onto this rig
 
     @property
     def stem(self) -> str:
@@ -107,19 +119,21 @@ class Plan:
     template: Template | None = None
     seconds: float | None = None
     inputs: list[str] = field(default_factory=list)  # every file read: never an output
+    onto: OntoRig | None = None
 
     def jobs(self) -> list[Job]:
-        return [Job(str(c), c.stem, b, g, self.formats, self.seconds, self.template)
+        return [Job(str(c), c.stem, b, g, self.formats, self.seconds, self.template, self.onto)
                 for c in self.clips for b in self.bodies for g in self.grounds]
 
 
 def make_plan(clips: list[Path], bodies: list[Body], out: Path,
               grounds: list[NamedGround] | None = None,
               formats: tuple[str, ...] = DEFAULT_FORMATS, template: Template | None = None,
-              seconds: float | None = None, inputs: Sequence[str] = ()) -> Plan:
+              seconds: float | None = None, inputs: Sequence[str] = (),
+              onto: OntoRig | None = None) -> Plan:
     """A checked plan. ``grounds`` default to the template's ground, or else the plane z = 0
     (no suffix on the files); ``inputs`` are the files read besides the clips and the template
-    (the plan adds those). Refuses ``seconds`` out of bounds (:func:`_check_seconds`), two
+    (the plan adds those); ``onto``: the rig every job is written onto. Refuses ``seconds`` out of bounds (:func:`_check_seconds`), two
     body-ground pairs that would write the same files, and more than :data:`MAX_JOBS` jobs."""
     if seconds is not None:
         _check_seconds(seconds, clips, template)
@@ -135,7 +149,7 @@ def make_plan(clips: list[Path], bodies: list[Body], out: Path,
     read = [*inputs, *(str(c) for c in clips)]
     if template is not None:
         read += [template.path, *template.input_files]
-    plan = Plan(clips, bodies, grounds, formats, out, template, seconds, read)
+    plan = Plan(clips, bodies, grounds, formats, out, template, seconds, read, onto)
     n_jobs = len(plan.clips) * len(bodies) * len(grounds)
     if n_jobs > MAX_JOBS:
         raise EcsAnimError(f"batch: {n_jobs:,} jobs; at most {MAX_JOBS:,} in one batch")

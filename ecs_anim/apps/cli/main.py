@@ -13,6 +13,7 @@ import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ecs_anim.apps.bench import cmd_bench, size_list
 from ecs_anim.apps.cli.args import (
@@ -39,6 +40,34 @@ from ecs_anim.io.contacts import ContactThresholds
 from ecs_anim.io.joint_presets import preset_summary
 from ecs_anim.runtime.allocator import keep_freed_memory
 
+if TYPE_CHECKING:
+    from ecs_anim.io.export.rig import Rig
+
+
+def rig_inputs(args: argparse.Namespace) -> list[str]:
+    """The files ``--onto RIG`` and ``--map FILE.yaml`` read (none without ``--onto``); a
+    ``--map`` without ``--onto`` is refused."""
+    from ecs_anim.io.export.rig import rig_input_files
+
+    if args.onto is None:
+        if args.map is not None:
+            raise EcsAnimError(f"--map {args.map}: matches the joints of an --onto rig; give "
+                               "--onto RIG")
+        return []
+    return rig_input_files(args.onto, args.map)
+
+
+def onto_rig(args: argparse.Namespace) -> Rig | None:
+    """The ``--onto`` rig with its ``--map``, loaded (None without ``--onto``)."""
+    from ecs_anim.io.export import load_rig
+
+    return None if args.onto is None else load_rig(args.onto, args.map)
+
+
+def rig_summary(args: argparse.Namespace, rig: Rig | None) -> str:
+    """`` onto RIG (N joints, how its joints were matched)``, or "" without a rig."""
+    return "" if rig is None else f" onto {args.onto} ({rig.n_joints} joints, {rig.joint_map.how})"
+
 
 def cmd_export(args: argparse.Namespace) -> int:
     from ecs_anim.io.export import export_motion
@@ -46,23 +75,14 @@ def cmd_export(args: argparse.Namespace) -> int:
 
     inputs = [args.file] if args.morphology == "source" or args.morphology in PRESET_SPECS \
         else [args.file, args.morphology]
-    if args.onto is not None:
-        inputs.append(args.onto)
-        if args.map is not None and Path(args.map).suffix.lower() in (".yaml", ".yml"):
-            inputs.append(args.map)
-    elif args.map is not None:
-        raise EcsAnimError(f"--map {args.map}: matches the joints of an --onto rig; give --onto RIG")
+    inputs += rig_inputs(args)
     problem = input_problem(args.output, inputs)
     if problem is not None:
         raise EcsAnimError(problem)
     motion = load_nmo(args.file)
-    rig = None
-    if args.onto is not None:
-        from ecs_anim.io.export.rig import load_rig
-
-        rig = load_rig(args.onto, args.map)
+    rig = onto_rig(args)
     morph, _ = export_motion(motion, args.morphology, args.output, force=args.force, onto=rig)
-    onto = "" if rig is None else f" onto {args.onto} ({rig.n_joints} joints, {rig.joint_map.how})"
+    onto = rig_summary(args, rig)
     print(f"{args.file} on {morph.name} (stature {morph.stature:.3f} m){onto} -> {args.output}: "
           f"{motion.n_frames} frames")
     return 0
@@ -118,8 +138,13 @@ def cmd_run(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     seconds = scenario.duration_s if args.seconds is None else args.seconds
     problems: list[tuple[str, str | None]] = []
+    rig_files = rig_inputs(args)
+    if rig_files and not args.export:
+        raise EcsAnimError(f"--onto {args.onto}: the rig the export is written onto; give "
+                           "--export DIR")
     if args.export:
-        problems += [("--export", input_problem(args.export, scenario.input_files, folder=True)),
+        problems += [("--export", input_problem(args.export, [*scenario.input_files, *rig_files],
+                                                folder=True)),
                      ("--export", output_folder_problem(args.export, _export_names(scenario),
                                                         args.force))]
     if args.report:
@@ -137,8 +162,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     ticks = round(seconds * scenario.fps)
     if ticks < 1:
         raise EcsAnimError(f"--seconds {seconds:g} is less than one tick at {scenario.fps:g} Hz")
+    rig = onto_rig(args)  # before the run: a rig it cannot use is said at once
     with build_simulation(scenario, rotations=bool(args.export)) as sim:
-        return _run_and_write(args, scenario, sim, ticks, seconds)
+        return _run_and_write(args, scenario, sim, ticks, seconds, rig)
 
 
 def _export_names(scenario) -> list[str]:  # type: ignore[no-untyped-def]
@@ -147,10 +173,10 @@ def _export_names(scenario) -> list[str]:  # type: ignore[no-untyped-def]
 
 
 def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type: ignore[no-untyped-def]
-                   seconds: float) -> int:
+                   seconds: float, rig: Rig | None) -> int:
     """Run, then write the export folder as one set (the simulation's recorder,
-    :meth:`~ecs_anim.runtime.recorder.Recorder.save`) and after it the report, then print the
-    metrics."""
+    :meth:`~ecs_anim.runtime.recorder.Recorder.save`, onto ``rig`` if given) and after it the
+    report, then print the metrics."""
     from ecs_anim.core.files import atomic_output
     from ecs_anim.runtime.feasibility import feasibility_lines
     from ecs_anim.runtime.metrics import MetricsRecorder
@@ -168,7 +194,7 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
                                  "feasibility": [estimate.as_dict() for estimate in reach]}
     unposed = []  # characters removed before their first posture: no files
     if recorder is not None:
-        written = {path.name for path in recorder.save(args.export, force=args.force)}
+        written = {path.name for path in recorder.save(args.export, force=args.force, onto=rig)}
         unposed = [name for name in names if f"{name}.bvh" not in written]
     if args.report:
         with atomic_output(args.report, args.force) as f:
@@ -200,7 +226,8 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
     print(f"  time per tick {total:.2f} ms: " + ", ".join(
         f"{k} {v:.2f}" for k, v in report["ms_per_tick"].items()))
     if args.export:
-        print(f"  wrote {len(names) - len(unposed)} x (.bvh, .npz, .glb) to {args.export}"
+        print(f"  wrote {len(names) - len(unposed)} x (.bvh, .npz, .glb){rig_summary(args, rig)} "
+              f"to {args.export}"
               + (f" (none for {listed(unposed)}: removed before the first tick's posture)"
                  if unposed else ""))
     if args.report:
@@ -292,7 +319,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--morphology", default="source",
                    help=f"source | {' | '.join(PRESET_SPECS)} | FILE.yaml | SKELETON.bvh "
                         "(default: source)")
-    p.add_argument("--onto", metavar="RIG.bvh|RIG.glb",
+    p.add_argument("--onto", metavar="RIG.bvh|RIG.glb|RIG.fbx",
                    help="play the motion on this rig's body and write it in the rig's own "
                         "hierarchy, names and rest pose (docs/export.md)")
     p.add_argument("--map", metavar="PRESET|FILE.yaml",
@@ -306,6 +333,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenario", metavar="SCENARIO.yaml")
     p.add_argument("--seconds", type=positive_float, help="run this long instead of duration_s")
     p.add_argument("--export", metavar="DIR", help="write <character>.bvh, .npz and .glb per character")
+    p.add_argument("--onto", metavar="RIG.bvh|RIG.glb|RIG.fbx",
+                   help="with --export: each character retargeted onto this rig's body and "
+                        "written in its own hierarchy, names and rest pose (docs/export.md)")
+    p.add_argument("--map", metavar="PRESET|FILE.yaml",
+                   help="how the --onto rig's joints are our body parts, as import's --map "
+                        "(default: detected)")
     p.add_argument("--report", metavar="FILE.json", help="write the metrics as JSON")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
     add_threads_argument(p, None)

@@ -2,7 +2,7 @@
 and segment lengths (:func:`load_rig`), and the rotation of every one of its joints in each
 frame of a decoded motion (:func:`rig_pose`).
 
-A rig is a BVH skeleton or a glTF/GLB skin. Its joints are matched to our body parts as import
+A rig is a BVH skeleton, a glTF/GLB skin or an FBX skeleton (read through ufbx). Its joints are matched to our body parts as import
 matches a source skeleton (presets, structure, a user map YAML: :func:`~ecs_anim.io.joint_map.map_skeleton`),
 and its rest pose measured as import measures a source (:func:`~ecs_anim.io.importing.canonical_clip`,
 :func:`~ecs_anim.io.importing.source_morphology`), so its segment lengths are the body the
@@ -104,8 +104,9 @@ class Rig:
         rig lacks filled in as import fills them; ``body_at_rest`` (3, 3) its body axes
         (forward, left, up) at rest.
     translated : the joint that carries the root motion.
-    kind : ``"bvh"`` or ``"glb"``; ``bvh`` the parsed skeleton (BVH rigs), ``gltf`` the
-        document and ``nodes`` the node of each joint (glTF rigs).
+    kind : ``"bvh"``, ``"fbx"`` (written as a BVH rig) or ``"glb"``; ``bvh`` the skeleton as
+        the BVH reader gives it, ``gltf`` the document and ``nodes`` the node of each joint
+        (glTF rigs).
     """
 
     name: str
@@ -169,17 +170,41 @@ def _translated(parents: NDArray[np.int64], pelvis: int, can_translate: list[boo
 
 def load_bvh_rig(path: str | Path, map_spec: str | None = None) -> Rig:
     """A BVH skeleton as a rig: its rest pose is its OFFSETs (every rotation zero)."""
-    path = Path(path)
-    motion = read_bvh(path)
+    return _skeleton_rig(Path(path), "bvh", read_bvh(path), map_spec)
+
+
+def load_fbx_rig(path: str | Path, map_spec: str | None = None) -> Rig:
+    """An FBX skeleton as a rig, read through ufbx as FBX import reads one
+    (:func:`~ecs_anim.io.fbx.read_fbx`, with or without takes): its nodes' own transforms are
+    its rest pose, their bone axes (joint orients, pre-rotations) taken out as a BVH has none,
+    in the unit and up axis the file states where they make a human leg (else detected as for
+    BVH). It is written as a BVH rig is: the BVH in its hierarchy, names and unit; the GLB its
+    joints as nodes with a capsule on each bone."""
+    from ecs_anim.io.fbx import fbx_canonical_clip, read_fbx
+
+    fbx = read_fbx(path, rest_only=True)
+    try:
+        clip = fbx_canonical_clip(fbx, map_spec)
+    except InputError:
+        raise
+    except (EcsAnimError, ValueError) as exc:
+        raise InputError(path, f"cannot use this skeleton as a rig: {exc}") from None
+    return _skeleton_rig(Path(path), "fbx", fbx.motion, map_spec, clip.unit, clip.up_axis)
+
+
+def _skeleton_rig(path: Path, kind: str, motion: BvhMotion, map_spec: str | None,
+                  unit: str | None = None, up: str | None = None) -> Rig:
+    """A rig of a skeleton read as the BVH reader gives it (its rest pose its OFFSETs), in
+    ``unit`` and with ``up`` (None: detected)."""
     skeleton = motion.skeleton
-    morph, jmap, parts, body, file2world, scale = _measure(skeleton, motion, map_spec, None, None,
-                                               str(path))
+    morph, jmap, parts, body, file2world, scale = _measure(skeleton, motion, map_spec, unit, up,
+                                                           str(path))
     parents = np.array([j.parent for j in skeleton.joints], dtype=np.int64)
     rest = rest_positions(skeleton) @ file2world.T * scale
     can_translate = [any(c.lower().endswith("position") for c in j.channels) for j in skeleton.joints]
     pelvis = jmap.source["pelvis"]
     assert pelvis is not None
-    return Rig(name=path.stem, path=str(path), kind="bvh", names=tuple(skeleton.names),
+    return Rig(name=path.stem, path=str(path), kind=kind, names=tuple(skeleton.names),
                parents=parents, rest_in_world=rest,
                rest2world=np.broadcast_to(file2world, (len(parents), 3, 3)).copy(),
                file2world=file2world, metres_per_unit=scale, joint_map=jmap, morphology=morph,
@@ -295,8 +320,8 @@ def load_gltf_rig(path: str | Path, map_spec: str | None = None) -> Rig:
 
 
 def load_rig(path: str | Path, map_spec: str | None = None) -> Rig:
-    """A ``.bvh``, ``.glb`` or ``.gltf`` rig (see :class:`Rig`); ``map_spec`` as import's
-    ``--map`` (a preset name or a user map YAML)."""
+    """A ``.bvh``, ``.glb``, ``.gltf`` or ``.fbx`` rig (see :class:`Rig`); ``map_spec`` as
+    import's ``--map`` (a preset name or a user map YAML)."""
     path = Path(path)
     if not path.exists():
         raise InputError(path, "no such rig file")
@@ -305,8 +330,16 @@ def load_rig(path: str | Path, map_spec: str | None = None) -> Rig:
         return load_bvh_rig(path, map_spec)
     if suffix in (".glb", ".gltf"):
         return load_gltf_rig(path, map_spec)
-    raise EcsAnimError(f"--onto {path}: a rig is a .bvh, .glb or .gltf file (FBX rigs are not "
-                       "read: convert to glTF first)")
+    if suffix == ".fbx":
+        return load_fbx_rig(path, map_spec)
+    raise EcsAnimError(f"--onto {path}: a rig is a .bvh, .glb, .gltf or .fbx file")
+
+
+def rig_input_files(path: str | Path, map_spec: str | None = None) -> list[str]:
+    """The files a rig reads (for commands that must not write over them): the rig and, when
+    ``map_spec`` is one, its map YAML."""
+    return [str(path)] + ([map_spec] if map_spec is not None and
+                          Path(map_spec).suffix.lower() in (".yaml", ".yml") else [])
 
 
 # --- the rig's joints in every frame -----------------------------------------------------------
@@ -574,4 +607,4 @@ def rig_pose(rig: Rig, pose: DecodedPose) -> RigPose:
     return RigPose(delta, joint2world, where)
 
 
-__all__ = ["Rig", "RigPose", "load_rig", "rig_pose", "twist_shares"]
+__all__ = ["Rig", "RigPose", "load_rig", "rig_input_files", "rig_pose", "twist_shares"]

@@ -22,7 +22,6 @@ from conftest import MOCAP_DIR, REPO, require_mocap
 from ecs_anim.apps.cli.main import main
 from ecs_anim.core.errors import EcsAnimError, InputError
 from ecs_anim.core.normalized import decode
-from ecs_anim.core.rotations import axis_angle
 from ecs_anim.io.bvh import BvhMotion, read_bvh
 from ecs_anim.io.importing import import_bvh
 from ecs_anim.motion.clip import NormalizedMotion, load_nmo
@@ -30,7 +29,7 @@ from ecs_anim.motion.clip import NormalizedMotion, load_nmo
 pytest.importorskip("ufbx", reason="FBX import needs the fbx extra (pip install 'ecs_anim[fbx]')")
 
 from ecs_anim.io.fbx import import_fbx, read_fbx
-from support.fbx_writer import Take, write_fbx
+from support.fbx_writer import Take, turned_joint_frames, write_fbx
 
 MM = 1e-3
 WALK, RUN = "bandai_walk.bvh", "bandai_run.bvh"
@@ -49,14 +48,6 @@ MIXAMO = {"joint_Root": "Armature", "Hips": "Hips", "Spine": "Spine1", "Chest": 
 def bvh(name: str) -> BvhMotion:
     require_mocap()
     return read_bvh(MOCAP_DIR / name)
-
-
-def joint_frames(n_joints: int) -> np.ndarray:
-    """A turned frame per joint (n_joints, 3, 3), as rigs with bones along their own axes have."""
-    rng = np.random.default_rng(2005)
-    axes = rng.normal(size=(n_joints, 3))
-    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
-    return axis_angle(axes, rng.uniform(0.1, np.pi, n_joints))
 
 
 def joints_of(motion: NormalizedMotion) -> np.ndarray:
@@ -81,7 +72,7 @@ def test_the_fbx_of_a_bvh_clip_imports_to_the_same_joints_and_contacts(rig: str,
     motion = bvh(WALK)
     options = dict(RIGS[rig])
     if options.pop("turned", False):
-        options["joint_frames"] = joint_frames(len(motion.skeleton.joints))
+        options["joint_frames"] = turned_joint_frames(len(motion.skeleton.joints))
     path = write_fbx(tmp_path / "walk.fbx", [Take("Take 001", motion)], **options)
     from_bvh = import_bvh(MOCAP_DIR / WALK)
     from_fbx = import_fbx(path)
@@ -101,7 +92,7 @@ def test_the_fbx_reader_gives_the_bvh_readers_structure(tmp_path: Path):
 
     motion = bvh(WALK)
     path = write_fbx(tmp_path / "walk.fbx", [Take("Walk", motion)],
-                     joint_frames=joint_frames(len(motion.skeleton.joints)))
+                     joint_frames=turned_joint_frames(len(motion.skeleton.joints)))
     fbx = read_fbx(path)
     skeleton = fbx.motion.skeleton
     assert skeleton.names == motion.skeleton.names
@@ -119,7 +110,7 @@ def test_mixamo_names_map_through_the_mixamo_preset(tmp_path: Path):
     names = ["mixamorig:" + MIXAMO[n] if n != "joint_Root" else MIXAMO[n]
              for n in motion.skeleton.names]
     path = write_fbx(tmp_path / "mixamo_walk.fbx", [Take("mixamo.com", motion)], names=names,
-                     joint_frames=joint_frames(len(names)), pre_rotation=True)
+                     joint_frames=turned_joint_frames(len(names)), pre_rotation=True)
     from_fbx = import_fbx(path)
     from_bvh = import_bvh(MOCAP_DIR / WALK)
     assert from_fbx.info["joint_map"] == "preset mixamo (detected)"
