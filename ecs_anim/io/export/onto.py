@@ -81,7 +81,8 @@ def bvh_onto_rig(rig: Rig, posed: RigPose, fps: float, decimals: int = 6) -> str
     def emit(i: int, depth: int) -> None:
         pad = "\t" * depth
         joint = skeleton.joints[i]
-        offset = " ".join(fmt.format(float(x) + 0.0) for x in joint.offset)
+        # (Rounded first: an offset a hair below zero is written 0, not -0.)
+        offset = " ".join(fmt.format(round(float(x), decimals) + 0.0) for x in joint.offset)
         if joint.is_end_site:
             lines.extend([f"{pad}End Site", f"{pad}{{", f"{pad}\tOFFSET {offset}", f"{pad}}}"])
             return

@@ -26,6 +26,7 @@ from ecs_anim.io.export.rig import load_rig, twist_shares
 from ecs_anim.motion.clip import save_nmo
 from support import onto_rigs as rigs
 from support.bvh_reference import reference_world
+from support.export_readback import GLTF_TO_OURS, glb_world, quat_matrix
 from support.gltf_validator import assert_valid
 
 MM = 1e-3
@@ -35,67 +36,9 @@ CASES = [(c, pose) for c in rigs.CONVENTIONS for pose in "TA"]
 IDS = [f"{c.name}-{pose}" for c, pose in CASES]
 #: (rig file, output file): every rig format onto every output format.
 FORMATS = [(".bvh", ".bvh"), (".glb", ".glb"), (".bvh", ".glb"), (".glb", ".bvh")]
-GLTF_TO_OURS = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 
 
 # --- an independent reading of the outputs -------------------------------------------------------
-
-
-def _quat_matrix(q: np.ndarray) -> np.ndarray:
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    x, y, z, w = np.moveaxis(q, -1, 0)
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1)], -2)
-
-
-def glb_world(path: Path) -> tuple[list[str], np.ndarray]:
-    """(node names, (frames, nodes, 4, 4) node-to-world transforms in glTF axes) of a GLB's one
-    animation: each node's TRS (or matrix) with the animated channels replacing theirs, composed
-    down the node tree."""
-    doc = pygltflib.GLTF2.load_from_bytes(path.read_bytes())
-    blob = doc.binary_blob()
-    widths = {"SCALAR": 1, "VEC3": 3, "VEC4": 4}
-
-    def accessor(k: int) -> np.ndarray:
-        a = doc.accessors[k]
-        view = doc.bufferViews[a.bufferView]
-        assert a.componentType == 5126
-        data = np.frombuffer(blob, np.float32, a.count * widths[a.type],
-                             (view.byteOffset or 0) + (a.byteOffset or 0))
-        return data.reshape(a.count, -1).astype(np.float64)
-
-    (animation,) = doc.animations
-    frames = len(accessor(animation.samplers[0].input))
-    nodes = doc.nodes
-    t = np.array([[n.translation or [0.0, 0.0, 0.0] for n in nodes]] * frames, dtype=float)
-    q = np.array([[n.rotation or [0.0, 0.0, 0.0, 1.0] for n in nodes]] * frames, dtype=float)
-    s = np.array([[n.scale or [1.0, 1.0, 1.0] for n in nodes]] * frames, dtype=float)
-    for channel in animation.channels:
-        target = {"translation": t, "rotation": q}[channel.target.path]
-        target[:, channel.target.node] = accessor(animation.samplers[channel.sampler].output)
-    local = np.tile(np.eye(4), (frames, len(nodes), 1, 1))
-    local[..., :3, :3] = _quat_matrix(q) * s[..., None, :]
-    local[..., :3, 3] = t
-    for k, node in enumerate(nodes):
-        if node.matrix is not None:
-            local[:, k] = np.array(node.matrix, float).reshape(4, 4).T
-    parent = {c: p for p, n in enumerate(nodes) for c in (n.children or [])}
-    world = np.full_like(local, np.nan)
-
-    def place(k: int) -> None:
-        if not np.isnan(world[0, k, 0, 0]):
-            return
-        if k in parent:
-            place(parent[k])
-            world[:, k] = world[:, parent[k]] @ local[:, k]
-        else:
-            world[:, k] = local[:, k]
-
-    for k in range(len(nodes)):
-        place(k)
-    return [n.name for n in nodes], world
 
 
 def read_back(path: Path, convention: rigs.Convention) -> tuple[list[str], np.ndarray]:
@@ -280,7 +223,7 @@ def _rest_matrices(doc) -> list[np.ndarray]:
     local = []
     for n in nodes:
         m = np.eye(4)
-        m[:3, :3] = _quat_matrix(np.array(n.rotation or [0.0, 0.0, 0.0, 1.0], float)) * \
+        m[:3, :3] = quat_matrix(np.array(n.rotation or [0.0, 0.0, 0.0, 1.0], float)) * \
             np.array(n.scale or [1.0, 1.0, 1.0], float)
         m[:3, 3] = n.translation or [0.0, 0.0, 0.0]
         local.append(m)
@@ -386,7 +329,8 @@ def test_the_export_page_commands_run_as_written(tmp_path, monkeypatch, capsys):
 
     page = (REPO / "docs" / "export.md").read_text(encoding="utf-8")
     commands = [line.strip() for line in page.splitlines()
-                if line.startswith("    ecs-anim ") and "CLIP.nmo" not in line]
+                if line.startswith(("    ecs-anim import ", "    ecs-anim export "))
+                and "CLIP.nmo" not in line]
     assert len(commands) == 3
     monkeypatch.chdir(REPO)
     printed = []
