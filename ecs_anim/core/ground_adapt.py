@@ -40,6 +40,15 @@ MAX_LEG_EXTENSION = 0.995
 #: (GroundAdapt); import smooths the ground a capture stood on over twice it, centred.
 GROUND_SMOOTHING_S = 0.15
 
+#: A planted leg out of reach lowers the pelvis only until it leans this far from the vertical
+#: (sine of 60 degrees); beyond that, and where the pelvis cannot come lower (a body lying on the
+#: ground), the root moves horizontally towards the footprint instead (paper §9: the root follows
+#: what the limbs cannot reach), so the foot stays where it was planted ...
+MAX_LOWERING_LEAN_SIN = 0.8660254037844386
+#: ... by at most this share of the leg's reach: a footprint further away is no foot left where
+#: it stood but a glitch, and the leg stretches towards it rather than the body jumping.
+MAX_ROOT_FOLLOW_PER_REACH = 0.25
+
 #: A heel this far under the ground (m) is lifted: well below the metrics' 1 mm, above rounding.
 HEEL_TOLERANCE_M = 1e-6
 
@@ -127,6 +136,28 @@ def vertical_slack_for_reach(hips: F64, ankle_targets: F64, reach: F64) -> F64:
     return lift
 
 
+def horizontal_reach_excess(hips: F64, ankle_targets: F64, reach: F64) -> F64:
+    """How far each hip must move horizontally towards its ankle target for the leg to reach
+    it once the pelvis has come down, leaning at most :data:`MAX_LOWERING_LEAN_SIN` (or
+    further where the hip already is that low).
+
+    ``hips`` (n, 2, 3) and ``ankle_targets`` (n, 2, 3) in metres, ``reach`` (n, 2) the longest
+    allowed hip-ankle distance. Returns (n, 2, 3) metres, horizontal, at most
+    :data:`MAX_ROOT_FOLLOW_PER_REACH` of the reach: zero for a leg that can reach by lowering
+    the pelvis.
+    """
+    towards = ankle_targets[..., :2] - hips[..., :2]
+    horizontal = np.linalg.norm(towards, axis=-1)
+    vertical = hips[..., 2] - ankle_targets[..., 2]
+    at_this_height = np.sqrt(np.maximum(reach**2 - vertical**2, 0.0))
+    allowed = np.maximum(MAX_LOWERING_LEAN_SIN * reach, at_this_height)
+    excess = np.clip(horizontal - allowed, 0.0, MAX_ROOT_FOLLOW_PER_REACH * reach) \
+        / np.maximum(horizontal, 1e-12)
+    out = np.zeros_like(hips)
+    out[..., :2] = excess[..., None] * towards
+    return out
+
+
 def adapt_to_ground(poses: NormalizedPoses, lengths: F64, ankle_targets: F64,
                     weights: F64, root_height: F64,
                     decoded: DecodedPose | DecodedLegs | None = None) -> NormalizedPoses:
@@ -143,8 +174,8 @@ def adapt_to_ground(poses: NormalizedPoses, lengths: F64, ankle_targets: F64,
     root_height : (n,) the pelvis height the motion wants here (``h1``), metres.
     decoded : ``decode(poses, lengths)`` if the caller has it already.
 
-    Returns new poses (root height, leg frames and fractions changed; all else shared). A target
-    out of reach leaves the leg stretched (to :data:`MAX_LEG_EXTENSION`) towards it.
+    Returns new poses (root position, leg frames and fractions changed; all else shared). A
+    target still out of reach leaves the leg stretched (to :data:`MAX_LEG_EXTENSION`) towards it.
     """
     decoded = decode_legs(poses, lengths, lengths) if decoded is None else decoded
     if isinstance(decoded, DecodedLegs):
@@ -154,12 +185,15 @@ def adapt_to_ground(poses: NormalizedPoses, lengths: F64, ankle_targets: F64,
     w = np.clip(weights, 0.0, 1.0)
     thigh, shank = lengths[:, SIDE_LENGTHS["thigh"]], lengths[:, SIDE_LENGTHS["shank"]]
     reach = MAX_LEG_EXTENSION * (thigh + shank)
-    # Put the pelvis at h1 first; a leg lowers it in proportion to its contact weight.
+    # Put the pelvis at h1 first; a leg horizontally out of reach moves it towards its target,
+    # then a leg lowers it, each in proportion to its contact weight.
     up = np.zeros_like(hips[:, 0])
     up[:, 2] = root_height - pelvis_now_z
+    up += np.sum(w[..., None] * horizontal_reach_excess(hips + up[:, None], ankle_targets, reach),
+                 axis=1)
     needed = vertical_slack_for_reach(hips + up[:, None], ankle_targets, reach)
     pelvis_z = root_height + np.min(w * np.minimum(needed, 0.0), axis=1)
-    shift = np.zeros_like(up)
+    shift = up.copy()
     shift[:, 2] = pelvis_z - pelvis_now_z
     new_hips = hips + shift[:, None]
     # Re-aim each leg: turn its half-plane frame so z points at the target, set the fraction.
@@ -168,6 +202,7 @@ def adapt_to_ground(poses: NormalizedPoses, lengths: F64, ankle_targets: F64,
     new_leg2pelvis = np.swapaxes(decoded.pelvis2world, -1, -2)[:, None] @ (turn @ decoded.leg2world)
     distance = np.minimum(np.linalg.norm(to_target, axis=-1), reach)
     root_position = poses.root_position.copy()
+    root_position[:, :2] += shift[:, :2] / leg_length(lengths)[:, None]
     root_position[:, 2] = pelvis_z / leg_length(lengths)
     return replace(poses, root_position=root_position,
                    leg_frame=quat_from_matrix(new_leg2pelvis),
@@ -200,6 +235,7 @@ def adapt_keeping_heels_up(poses: NormalizedPoses, lengths: F64, ankle_targets: 
     return adapted, legs
 
 
-__all__ = ["BALL_ROLL", "GROUND_SMOOTHING_S", "HEEL_ROLL", "SWITCH_PER_LEG",
-           "adapt_keeping_heels_up", "adapt_to_ground", "heel_depth", "pitched", "pivot_wanted",
-           "planted_foot", "sole_roll", "vertical_slack_for_reach"]
+__all__ = ["BALL_ROLL", "GROUND_SMOOTHING_S", "HEEL_ROLL", "MAX_LOWERING_LEAN_SIN",
+           "MAX_ROOT_FOLLOW_PER_REACH", "SWITCH_PER_LEG", "adapt_keeping_heels_up", "adapt_to_ground", "heel_depth",
+           "horizontal_reach_excess", "pitched", "pivot_wanted", "planted_foot", "sole_roll",
+           "vertical_slack_for_reach"]

@@ -1,10 +1,15 @@
 """Paper §7 on stairs: ankles land on their footprints, the pelvis only drops as needed."""
 
 import numpy as np
+import pytest
 
 from conftest import MOTIONS_DIR
 from ecs_anim.core.ground import Stairs
-from ecs_anim.core.ground_adapt import MAX_LEG_EXTENSION, adapt_to_ground
+from ecs_anim.core.ground_adapt import (
+    MAX_LEG_EXTENSION,
+    MAX_ROOT_FOLLOW_PER_REACH,
+    adapt_to_ground,
+)
 from ecs_anim.core.morphology import Morphology, bone_lengths_of
 from ecs_anim.core.normalized import decode
 from ecs_anim.core.skeleton import BONE_JOINTS
@@ -46,7 +51,7 @@ def test_unreachable_target_stretches_the_leg_towards_it():
     lengths = morph.lengths[None]
     before = decode(poses, lengths).positions
     target = before[:, [3, 7]].copy()
-    target[0, 0, :2] += [3.0, 0.0]  # 3 m ahead: no pelvis height reaches it
+    target[0, 0, :2] += [3.0, 0.0]  # 3 m ahead: neither the pelvis nor the root reaches it
     after = decode(adapt_to_ground(poses, lengths, target, np.ones((1, 2)),
                                    before[:, 0, 2]), lengths).positions
     hip, ankle = after[0, 1], after[0, 3]
@@ -54,6 +59,28 @@ def test_unreachable_target_stretches_the_leg_towards_it():
     assert abs(np.linalg.norm(ankle - hip) - MAX_LEG_EXTENSION * leg) < 1e-9
     direction = (target[0, 0] - hip) / np.linalg.norm(target[0, 0] - hip)
     assert np.dot((ankle - hip) / np.linalg.norm(ankle - hip), direction) > 1 - 1e-9
+    # the root follows by at most its bound (a glitch, not a footprint: the body never jumps)
+    moved = np.linalg.norm(after[0, 0, :2] - before[0, 0, :2])
+    assert moved == pytest.approx(MAX_ROOT_FOLLOW_PER_REACH * MAX_LEG_EXTENSION * leg, abs=1e-9)
+
+
+def test_a_footprint_left_behind_by_a_body_lying_down_moves_the_root_not_the_foot():
+    """A body lying on the ground (pelvis 0.18 m up, the legs along the floor) whose planted
+    ankle is 0.1 m beyond the leg's reach: the pelvis cannot come lower, so the root moves
+    towards the footprint (paper §9) by what the leg lacks, and the ankle lands on it."""
+    walk = import_bvh(MOTIONS_DIR / "idle.bvh")
+    morph = Morphology.preset("adult_male")
+    poses = walk.poses.take(slice(0, 1))
+    lengths = morph.lengths[None]
+    before = decode(poses, lengths).positions
+    leg = morph["thigh_l"] + morph["shank_l"]
+    hip = before[0, 1]
+    target = before[:, [3, 7]].copy()
+    target[0, 0] = hip + [MAX_LEG_EXTENSION * leg + 0.1, 0.0, 0.0]
+    after = decode(adapt_to_ground(poses, lengths, target, np.array([[1.0, 0.0]]),
+                                   before[:, 0, 2]), lengths).positions
+    np.testing.assert_allclose(after[0, 3], target[0, 0], atol=1e-9)
+    np.testing.assert_allclose(after[0, 0] - before[0, 0], [0.1, 0.0, 0.0], atol=1e-9)
 
 
 def test_legs_without_contact_go_to_their_targets_and_do_not_lower_the_pelvis():

@@ -56,6 +56,9 @@ assert (L["thigh_l"], L["shank_l"], L["ankle_height_l"], L["thigh_r"], L["ankle_
 #: The sole rolls of :mod:`ecs_anim.core.ground_adapt`, as literals for the same reason.
 HEEL_ROLL, BALL_ROLL = 0.25, 0.75
 assert (HEEL_ROLL, BALL_ROLL) == (reference.HEEL_ROLL, reference.BALL_ROLL)
+MAX_LOWERING_LEAN_SIN, MAX_ROOT_FOLLOW_PER_REACH = 0.8660254037844386, 0.25
+assert (MAX_LOWERING_LEAN_SIN, MAX_ROOT_FOLLOW_PER_REACH) \
+    == (reference.MAX_LOWERING_LEAN_SIN, reference.MAX_ROOT_FOLLOW_PER_REACH)
 
 
 @jit(inline="always")
@@ -74,47 +77,73 @@ def vertical_slack_for_reach(hip: Vec3, ankle_target: Vec3, reach: float) -> flo
 
 
 @jit(inline="always")
+def horizontal_reach_excess(hip: Vec3, ankle_target: Vec3, reach: float) -> tuple[float, float]:
+    """Mirrors :func:`ecs_anim.core.ground_adapt.horizontal_reach_excess` for one leg: (x, y)
+    m."""
+    dx, dy = ankle_target[0] - hip[0], ankle_target[1] - hip[1]
+    horizontal = math.sqrt(dx * dx + dy * dy)
+    vertical = hip[2] - ankle_target[2]
+    at_this_height = math.sqrt(max(reach**2 - vertical**2, 0.0))
+    allowed = max(MAX_LOWERING_LEAN_SIN * reach, at_this_height)
+    excess = min(max(horizontal - allowed, 0.0), MAX_ROOT_FOLLOW_PER_REACH * reach) \
+        / max(horizontal, 1e-12)
+    return excess * dx, excess * dy
+
+
+@jit(inline="always")
 def adapt_to_ground(c: int, root_position: F64, leg_frame: F64, leg_fraction: F64,
-                    hips: tuple[Vec3, Vec3], pelvis_now_z: float, pelvis2world: Frame,
+                    hips: tuple[Vec3, Vec3], pelvis_now: Vec3, pelvis2world: Frame,
                     leg2world: tuple[Frame, Frame], lengths: F64, leg: float,
                     targets: tuple[Vec3, Vec3], weights: tuple[float, float],
                     root_height: float, max_extension: float) -> None:
     """Mirrors :func:`ecs_anim.core.ground_adapt.adapt_to_ground` for store row ``c`` (legs
-    re-aimed from the pose decoded before adaptation: its ``hips``, pelvis height
-    ``pelvis_now_z`` (m), ``pelvis2world`` and ``leg2world``; the pelvis lowered as the legs in
-    contact need), writing the root height, leg frames and fractions of row ``c`` of the poses
-    (``root_position``, ``leg_frame``, ``leg_fraction``).
+    re-aimed from the pose decoded before adaptation: its ``hips``, ``pelvis2world`` and
+    ``leg2world``; the pelvis lowered as the legs in contact need, moved horizontally where a
+    leg cannot reach by that), writing the root
+    position, leg frames and fractions of row ``c`` of the poses (``root_position``,
+    ``leg_frame``, ``leg_fraction``). ``pelvis_now`` (m, world): the pelvis before adaptation.
 
     ``targets``: each ankle's target (m, world); ``weights``: contact activations;
     ``root_height`` (m): the pelvis height the motion wants; ``leg``: the leg length (m).
     """
-    up = root_height - pelvis_now_z
+    up = root_height - pelvis_now[2]
+    shift_x, shift_y = 0.0, 0.0
+    for s in range(2):
+        hip = hips[s]
+        reach = max_extension * (lengths[c, _L_THIGH + s] + lengths[c, _L_SHANK + s])
+        w = min(max(weights[s], 0.0), 1.0)
+        ex, ey = horizontal_reach_excess((hip[0] + 0.0, hip[1] + 0.0, hip[2] + up), targets[s],
+                                         reach)
+        shift_x += w * ex
+        shift_y += w * ey
     lowest = 0.0
     for s in range(2):
         hip = hips[s]
         reach = max_extension * (lengths[c, _L_THIGH + s] + lengths[c, _L_SHANK + s])
-        needed = vertical_slack_for_reach((hip[0] + 0.0, hip[1] + 0.0, hip[2] + up), targets[s],
-                                          reach)
+        needed = vertical_slack_for_reach((hip[0] + shift_x, hip[1] + shift_y, hip[2] + up),
+                                          targets[s], reach)
         w = min(max(weights[s], 0.0), 1.0)
         drop = w * min(needed, 0.0)
         lowest = drop if s == 0 else min(lowest, drop)
     pelvis_z = root_height + lowest
-    shift = pelvis_z - pelvis_now_z
+    shift = pelvis_z - pelvis_now[2]
     for s in range(2):
         hip = hips[s]
         thigh, shank = lengths[c, _L_THIGH + s], lengths[c, _L_SHANK + s]
         reach = max_extension * (thigh + shank)
-        to_target = sub(targets[s], (hip[0] + 0.0, hip[1] + 0.0, hip[2] + shift))
+        to_target = sub(targets[s], (hip[0] + shift_x, hip[1] + shift_y, hip[2] + shift))
         turn = rotation_between(leg2world[s][2], to_target)
         new_leg2pelvis = matmul(transpose(pelvis2world), matmul(turn, leg2world[s]))
         store4(leg_frame[c, s], quat_from_matrix(new_leg2pelvis))
         leg_fraction[c, s] = min(norm(to_target), reach) / (thigh + shank)
+    root_position[c, 0] = (pelvis_now[0] + shift_x) / leg
+    root_position[c, 1] = (pelvis_now[1] + shift_y) / leg
     root_position[c, 2] = pelvis_z / leg
 
 
 @jit(inline="always")  # one call site
 def adapt_keeping_heels_up(c: int, pose: LegPoseArrays, hips: tuple[Vec3, Vec3],
-                           pelvis_now_z: float, pelvis2world: Frame,
+                           pelvis_now: Vec3, pelvis2world: Frame,
                            leg2world: tuple[Frame, Frame], lengths: F64, leg: float,
                            targets: tuple[Vec3, Vec3], weights: tuple[float, float],
                            root_height: float, kinds: I64, params: F64, grid: F64,
@@ -124,7 +153,7 @@ def adapt_keeping_heels_up(c: int, pose: LegPoseArrays, hips: tuple[Vec3, Vec3],
     """Mirrors :func:`ecs_anim.core.ground_adapt.adapt_keeping_heels_up` for store row ``c``: the
     ankle targets lifted (up to ``passes`` times) while a heel would be more than
     ``heel_tolerance`` (m) under the ground. ``ankle_height`` (left, right, unused) m;
-    ``hips``, ``pelvis_now_z``, ``pelvis2world``, ``leg2world``: the pose decoded before
+    ``hips``, ``pelvis_now``, ``pelvis2world``, ``leg2world``: the pose decoded before
     adaptation, as :func:`adapt_to_ground` takes them.
 
     Writes row ``c`` of ``pose`` as :func:`adapt_to_ground`; returns the decoded (ankles, toes,
@@ -135,7 +164,7 @@ def adapt_keeping_heels_up(c: int, pose: LegPoseArrays, hips: tuple[Vec3, Vec3],
     # One call site each for the two inlined steps (numba compiles an inlined body at each):
     # the first pass adapts to the targets given, the next ones to the lifted targets.
     for lift in range(passes + 1):
-        adapt_to_ground(c, root_position, leg_frame, leg_fraction, hips, pelvis_now_z,
+        adapt_to_ground(c, root_position, leg_frame, leg_fraction, hips, pelvis_now,
                         pelvis2world, leg2world, lengths, leg, targets, weights, root_height,
                         max_extension)
         legs = decode_legs_row(c, pose, lengths_row, lengths_row)
@@ -301,7 +330,7 @@ def ground_adapt_row(c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
                             kinds, params, grid))
     root_height = pelvis[2] + g
     new_ankles, new_toes, shank2world = adapt_keeping_heels_up(
-        c, pose, hips, pelvis[2], pelvis2world, leg2world, lengths, leg_c, targets, w,
+        c, pose, hips, pelvis, pelvis2world, leg2world, lengths, leg_c, targets, w,
         root_height, kinds, params, grid, ankle_height, max_extension, heel_tolerance,
         heel_passes)
     # Feet: a planted one pitched as it stands (in the world, whatever the leg's new bend), a
