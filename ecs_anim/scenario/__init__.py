@@ -16,7 +16,14 @@ from ecs_anim.scenario.reader import (
     YamlReader,
     read_tree,
 )
-from ecs_anim.scenario.spec import CharacterSpec, ConstraintEntry, Scenario, SteeringSpec, Table
+from ecs_anim.scenario.spec import (
+    CharacterSpec,
+    ConstraintEntry,
+    Scenario,
+    SteeringSpec,
+    Table,
+    clip_scenario,
+)
 
 __all__ = [
     "MAX_GRID_CELLS",
@@ -30,6 +37,7 @@ __all__ = [
     "YamlReader",
     "apply_steering",
     "build_simulation",
+    "clip_scenario",
     "load_motion_constraints",
     "load_scenario",
     "read_ground",

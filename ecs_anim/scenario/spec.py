@@ -122,3 +122,13 @@ class Scenario:
     triggers: list[Trigger] = field(default_factory=list)
     #: The constraints triggers name: (character index, constraint name) by placeholder id.
     trigger_constraints: list[tuple[int, str]] = field(default_factory=list)
+
+
+def clip_scenario(motion: NormalizedMotion, morphology: Morphology, ground: Ground,
+                  clip: str = "clip", character: str = "body", path: str = "") -> Scenario:
+    """A scenario of one character, ``character``, with ``morphology``, playing ``motion``
+    (named ``clip``) once from the origin facing +x over ``ground``, at the clip's rate for its
+    length: a batch job's (docs/batch.md) and ``info``'s check (docs/cli.md)."""
+    spec = CharacterSpec(character, morphology, MotionPlayer(clip, loop=False), Placement())
+    return Scenario(path or clip, motion.n_frames / motion.fps, motion.fps, {clip: motion},
+                    ground, [spec])

@@ -43,10 +43,7 @@ def clip_on_body(motion, stature_m: float, ground):
     """A scenario of one character (adult proportions, ``stature_m`` tall) playing ``motion``
     once from the origin over ``ground``, at the clip's rate for its length (a batch job's)."""
     from ecs_anim.apps.batch.plan_parts import body_from_text
-    from ecs_anim.components import MotionPlayer, Placement
-    from ecs_anim.scenario import CharacterSpec, Scenario
+    from ecs_anim.scenario import clip_scenario
 
-    body = body_from_text(f"stature_{stature_m}")
-    return Scenario("clip_on_body", motion.n_frames / motion.fps, motion.fps, {"clip": motion},
-                    ground, [CharacterSpec("body", body.morphology,
-                                           MotionPlayer("clip", loop=False), Placement())])
+    return clip_scenario(motion, body_from_text(f"stature_{stature_m}").morphology, ground,
+                         path="clip_on_body")

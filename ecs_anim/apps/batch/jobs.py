@@ -84,17 +84,14 @@ def job_scenario(job: Job, motion: NormalizedMotion) -> Any:
     """The in-memory scenario of a job: the clip (motion name = the clip's name) on the body at
     the origin, facing +x, not looping, at the clip's rate for its length; or, with a template,
     the template's character, rate and length with the clip and body swapped in."""
-    from ecs_anim.components import MotionPlayer, Placement
-    from ecs_anim.scenario import CharacterSpec, Scenario
+    from ecs_anim.scenario import Scenario, clip_scenario
 
     t = job.template
     if t is None:
-        fps = motion.fps
-        duration = motion.n_frames / motion.fps if job.seconds is None else job.seconds
-        character = CharacterSpec(job.body.name, job.body.morphology,
-                                  MotionPlayer(job.clip, loop=False), Placement())
-        return Scenario(job.clip_path, duration, fps, {job.clip: motion}, job.ground.ground,
-                        [character])
+        scenario = clip_scenario(motion, job.body.morphology, job.ground.ground, job.clip,
+                                 job.body.name, job.clip_path)
+        return scenario if job.seconds is None else dataclasses.replace(scenario,
+                                                                       duration_s=job.seconds)
     base = t.character
     motions = dict(t.motions) | {job.clip: motion}
     character = dataclasses.replace(base, name=job.body.name, morphology=job.body.morphology,
