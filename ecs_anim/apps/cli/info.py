@@ -10,10 +10,32 @@ from typing import Any
 
 from ecs_anim.apps.cli.args import EXIT_FAILED
 from ecs_anim.core.errors import EcsAnimError, listed
+from ecs_anim.motion.clip import NormalizedMotion
+
+
+def played_on_own_body(motion: NormalizedMotion) -> dict[str, float]:
+    """How the clip's planted feet fare played once through ``run``'s pipeline on its own
+    (source) body on flat ground: the metrics of ``run``'s table (mm), so a clip whose planted
+    soles float or slide is seen before it is used."""
+    from ecs_anim.core.ground import Plane
+    from ecs_anim.runtime.metrics import MetricsRecorder
+    from ecs_anim.scenario import build_simulation, clip_scenario
+
+    scenario = clip_scenario(motion, motion.source_morphology, Plane())
+    with build_simulation(scenario) as sim:
+        metrics = MetricsRecorder(sim)
+        for _ in range(motion.n_frames):
+            sim.step()
+            metrics.record()
+        character = metrics.report()["characters"][0]
+    return {"floating_mm_max": character["floating_mm_max"],
+            "penetration_mm_max": character["ground_penetration_mm_max"],
+            "sliding_mm_per_frame_max": character["foot_sliding_mm_per_frame"]["max"]}
 
 
 def motion_summary(path: str) -> dict[str, object]:
-    """What the .nmo file at ``path`` holds, as JSON-able data (``info --json``)."""
+    """What the .nmo file at ``path`` holds, as JSON-able data (``info --json``), with how its
+    planted feet fare played on its own body (:func:`played_on_own_body`)."""
     from ecs_anim.motion.clip import facing_and_travel, load_nmo
 
     motion = load_nmo(path)
@@ -36,6 +58,7 @@ def motion_summary(path: str) -> dict[str, object]:
             ],
         },
         "other_constraints": [c.to_dict() for c in motion.constraints if c.kind != "foot_contact"],
+        "played_on_own_body": played_on_own_body(motion),
         "info": motion.info,
     }
 
@@ -80,6 +103,11 @@ def cmd_info(args: argparse.Namespace) -> int:
           f"leg (thigh+shank) {0.5 * (m['lengths_m']['thigh_l'] + m['lengths_m']['shank_l'] + m['lengths_m']['thigh_r'] + m['lengths_m']['shank_r']):.3f} m")
     print(f"  contacts   left {c['left_fraction']:.0%} right {c['right_fraction']:.0%} of frames, "
           f"{len(c['constraints'])} contact intervals")
+    played = summary["played_on_own_body"]
+    assert isinstance(played, dict)
+    print(f"  played     on its own body, flat ground: planted feet floating "
+          f"{played['floating_mm_max']:.1f} mm, penetration {played['penetration_mm_max']:.1f} mm,"
+          f" sliding {played['sliding_mm_per_frame_max']:.1f} mm per frame (max)")
     filled = info.get("filled_in")
     if filled:
         print(f"  filled in  {', '.join(map(str, filled)) if isinstance(filled, list) else filled}")
@@ -154,18 +182,20 @@ def _info_table(files: list[str], as_json: bool) -> int:
         print(json.dumps(rows, indent=2))
         return EXIT_FAILED if failed else 0
     print(f"{'file':<28} {'frames':>6} {'fps':>5} {'s':>6} {'facing':>7} {'travel m':>8} "
-          f"{'L %':>4} {'R %':>4}  parts filled in or absent")
+          f"{'L %':>4} {'R %':>4} {'float':>6} {'pen':>6} {'slide':>6}  parts filled in or absent")
     for r in rows:
         label = Path(str(r["file"])).name
         label = label if len(label) <= 28 else label[:25] + "..."
         if "error" in r:
             print(f"{label:<28} error: {r['error']}")
             continue
-        c, root, info = r["contacts"], r["root"], r["info"]
+        c, root, info, played = r["contacts"], r["root"], r["info"], r["played_on_own_body"]
         parts = list(info.get("absent") or []) + [f"{j} (filled)" for j in info.get("filled_in") or []]
         print(f"{label:<28} {r['frames']:>6} {r['fps']:>5g} {r['duration_s']:>6.2f} "
               f"{root['facing_deg']:>7g} {root['straight_m']:>8.2f} {c['left_fraction']:>4.0%} "
-              f"{c['right_fraction']:>4.0%}  {listed(parts, 4) or '-'}")
+              f"{c['right_fraction']:>4.0%} {played['floating_mm_max']:>6.1f} "
+              f"{played['penetration_mm_max']:>6.1f} {played['sliding_mm_per_frame_max']:>6.1f}  "
+              f"{listed(parts, 4) or '-'}")
     if failed:
         print(f"{failed} of {len(rows)} file(s) could not be read", file=sys.stderr)
         return EXIT_FAILED

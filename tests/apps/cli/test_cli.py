@@ -42,8 +42,13 @@ def test_info_json_and_text(tmp_path, capsys):
     info = json.loads(capsys.readouterr().out)
     assert info["frames"] == 132 and info["fps"] == 30.0
     assert 0.4 < info["contacts"]["left_fraction"] < 0.8
+    played = info["played_on_own_body"]  # run's figures, on the walk's own body, flat ground
+    assert played["floating_mm_max"] <= 1.0 and played["penetration_mm_max"] <= 1.0
+    assert played["sliding_mm_per_frame_max"] <= 1.0
     assert main(["info", str(tmp_path / "walk.nmo")]) == 0
-    assert "contacts   left" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "contacts   left" in out
+    assert "planted feet floating 0.0 mm, penetration 0.0 mm, sliding 0.0 mm per frame" in out
 
 
 def test_bench_rejects_missing_files(capsys):
