@@ -3,7 +3,8 @@
 
 from ecs_anim.io.export.bvh import bvh_from_rotations, bvh_text
 from ecs_anim.io.export.gltf import glb_bytes, glb_from_pose
-from ecs_anim.io.export.motion import export_motion, write_npz
+from ecs_anim.io.export.motion import export_motion
+from ecs_anim.io.export.npz import write_npz
 from ecs_anim.io.export.onto import (
     bvh_onto_rig,
     glb_onto_rig,

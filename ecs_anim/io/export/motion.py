@@ -4,32 +4,20 @@ positions (``.npz``), chosen by the output's suffix."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import IO
 
 import numpy as np
-from numpy.typing import NDArray
 
 from ecs_anim.core.errors import EcsAnimError
 from ecs_anim.core.files import atomic_output, output_problem
 from ecs_anim.core.morphology import Morphology
 from ecs_anim.core.normalized import DecodedPose
-from ecs_anim.core.skeleton import JOINTS
 from ecs_anim.io.export.bvh import bvh_text
 from ecs_anim.io.export.gltf import glb_from_pose
+from ecs_anim.io.export.npz import write_npz
 from ecs_anim.io.export.onto import onto_rig_bytes, rig_of
 from ecs_anim.io.export.rig import Rig
 from ecs_anim.io.export.skeleton import play_on, resolve_morphology
 from ecs_anim.motion.clip import NormalizedMotion
-
-F64 = NDArray[np.float64]
-
-
-def write_npz(f: IO[bytes], positions: F64, fps: float, contacts: np.ndarray) -> None:
-    """Joint positions for analysis, written to the binary file ``f``: ``positions`` (frames,
-    joints, 3) metres world Z up, ``joints`` names, ``fps``, ``contacts`` (frames, 2) bool
-    [left, right]."""
-    np.savez_compressed(f, positions=positions, joints=np.array(JOINTS), fps=np.float64(fps),
-                        contacts=contacts)
 
 
 def export_motion(motion: NormalizedMotion, morphology_spec: str, out: str | Path,

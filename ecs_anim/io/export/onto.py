@@ -30,6 +30,7 @@ from ecs_anim.io.export.gltf import (
     continuous_quaternions,
     generator_name,
 )
+from ecs_anim.io.export.npz import write_npz
 from ecs_anim.io.export.rig import Rig, RigPose, rig_pose
 from ecs_anim.io.export.skeleton import body_frames
 from ecs_anim.io.importing import YUP_TO_ZUP
@@ -320,8 +321,6 @@ def onto_rig_bytes(rig: Rig, pose: DecodedPose, kind: str, fps: float,
     (:func:`bvh_onto_rig`), ``"glb"`` (:func:`glb_onto_rig`) or ``"npz"`` (our joints on the
     rig's body, with ``contacts`` (frames, 2) bool, as without a rig)."""
     if kind == "npz":
-        from ecs_anim.io.export.motion import write_npz
-
         buffer = io.BytesIO()
         write_npz(buffer, pose.positions, fps, contacts)
         return buffer.getvalue()
