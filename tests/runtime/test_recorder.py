@@ -219,7 +219,7 @@ def test_save_refuses_onto_unknown_formats_and_names_that_collide(tmp_path, walk
     rec = sim.record()
     sim.step()
     with pytest.raises(UsageError, match=r"^save: onto must be a rig file's path or a Rig, got "):
-        rec.save(tmp_path / "out", onto=3)
+        rec.save(tmp_path / "out", onto=3)  # type: ignore[arg-type]
     with pytest.raises(EcsAnimError, match=r"rig\.bvh: no such rig file"):
         rec.save(tmp_path / "out", onto=tmp_path / "rig.bvh")
     for formats in (("fbx",), (), "bvh"):

@@ -237,11 +237,15 @@ def test_bodies_of_every_size_go_onto_the_rigs_own_body(several_bodies, name):
     np.testing.assert_allclose(pelvis[:, 2], simulated[:, 2] * ratio, atol=1e-9)
 
 
-def test_a_character_not_recorded_onto_a_rig_is_written_as_before(several_bodies):
-    """Without ``onto`` nothing changed: the plain set is still our skeleton."""
-    text = (several_bodies["folder"] / "plain" / "adult.bvh").read_text()
-    assert "ROOT pelvis" in text
-    assert "ROOT pelvis" not in (several_bodies["folder"] / "onto" / "adult.bvh").read_text()
+def test_the_rigs_own_document_moves_and_passes_the_validator(several_bodies):
+    """Onto a GLB rig each character's ``.glb`` is the rig's document (its nodes) with the
+    retargeted animation, valid; without ``onto`` the set is our skeleton, as before."""
+    folder = several_bodies["folder"]
+    assert_valid(sorted((folder / "onto").glob("*.glb")))
+    names, _ = glb_world(folder / "onto" / "kid.glb")
+    assert set(several_bodies["rig"].names) <= set(names) and "upperarm_twist_01_l" in names
+    assert "ROOT pelvis" in (folder / "plain" / "adult.bvh").read_text()
+    assert "ROOT pelvis" not in (folder / "onto" / "adult.bvh").read_text()
 
 
 # --- the command line ----------------------------------------------------------------------------
