@@ -215,8 +215,8 @@ def detect_layout(positions: F64, names: tuple[str, ...] | None = None) -> tuple
         if np.isfinite(ratio):
             layout = COCO17 if ratio < COCO_EYES_RATIO else H36M
             what = "the eyes" if layout is COCO17 else "a thigh"
-            return layout, (f"detected: 17 joints, joints 1 and 2 {ratio:.2f} of the body's "
-                            f"span apart ({what})")
+            return layout, (f"detected: 17 joints, joints 1 and 2 apart {ratio:.2f} times joints "
+                            f"0 and 16 ({what})")
     choices = " or ".join(layout.name for layout in have)
     raise EcsAnimError(f"{count} joints per frame could be {choices} (the same count"
                        + (", the same joints in the same order" if count == 22 else "")

@@ -1,4 +1,5 @@
-"""``ecs-anim import``: BVH, C3D and FBX files to normalized motions (.nmo), one line each."""
+"""``ecs-anim import``: BVH, C3D, FBX and joint-position files to normalized motions (.nmo),
+one line each."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from ecs_anim.apps.cli.args import EXIT_FAILED, error_line
 from ecs_anim.core.errors import EcsAnimError, listed
 from ecs_anim.core.files import folder_problem, input_problem
 from ecs_anim.io.contacts import ContactThresholds
+from ecs_anim.io.position_files import POSITION_SUFFIXES
 from ecs_anim.motion.clip import turned_to_face
 from ecs_anim.motion.constraint_table import check_stored
 
@@ -32,6 +34,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     from ecs_anim.io.c3d.importing import import_c3d
     from ecs_anim.io.fbx import import_fbx
     from ecs_anim.io.importing import import_bvh
+    from ecs_anim.io.positions import PositionOptions, import_positions
     from ecs_anim.motion.clip import save_nmo
 
     outdir = Path(args.output)
@@ -57,6 +60,13 @@ def cmd_import(args: argparse.Namespace) -> int:
         raise EcsAnimError("--max-gap and --fill-absent-from are for .c3d files; none is given")
     if args.take is not None and not any(s.suffix.lower() == ".fbx" for s in sources):
         raise EcsAnimError("--take is for .fbx files; none is given")
+    positions = [s for s in sources if s.suffix.lower() in POSITION_SUFFIXES]
+    if not positions and (args.layout or args.fps or args.lowpass):
+        raise EcsAnimError("--layout, --fps and --lowpass are for joint positions (.npy, .npz, "
+                           ".json, .csv); none is given")
+    if positions and args.map:
+        raise EcsAnimError(f"--map is for BVH, C3D and FBX files; the joints of {positions[0]} "
+                           "are named by --layout")
     failed = 0
     show_bar = len(sources) > 1 and sys.stderr.isatty()
     stems: dict[str, Path] = {}
@@ -73,12 +83,15 @@ def cmd_import(args: argparse.Namespace) -> int:
             if src.is_dir():
                 raise EcsAnimError(f"{src}: a folder; give the .bvh, .c3d or .fbx files in it "
                                    f"(e.g. {src}/*.bvh)")
-            if suffix not in (".bvh", ".c3d", ".fbx"):
+            if suffix not in (".bvh", ".c3d", ".fbx", *POSITION_SUFFIXES):
                 raise EcsAnimError(f"{src}: unsupported file type {src.suffix!r} (expected .bvh, "
-                                   ".c3d or .fbx)")
+                                   f".c3d, .fbx or joint positions {', '.join(POSITION_SUFFIXES)})")
             if suffix == ".c3d" and args.stature is not None:
                 raise EcsAnimError(f"{src}: --stature applies to BVH files (a C3D's markers are "
                                    "in the unit of POINT:UNITS)")
+            if suffix in POSITION_SUFFIXES and args.stature is not None:
+                raise EcsAnimError(f"{src}: --stature applies to BVH files (joint positions: "
+                                   "--unit)")
             if suffix == ".c3d":
                 motion = import_c3d(src, args.map, args.unit, thresholds, args.up,
                                     args.max_gap,
@@ -91,6 +104,11 @@ def cmd_import(args: argparse.Namespace) -> int:
                 if suffix == ".fbx":
                     motion = import_fbx(src, args.map, args.unit, thresholds, args.up, args.trim,
                                         args.stature, not args.no_treadmill, args.take)
+                elif suffix in POSITION_SUFFIXES:
+                    options = PositionOptions(args.layout, args.fps, args.up, args.unit,
+                                              args.lowpass)
+                    motion = import_positions(src, options, thresholds, args.trim,
+                                              not args.no_treadmill)
                 else:
                     motion = import_bvh(src, args.map, args.unit, thresholds, args.up, args.trim,
                                         args.stature, not args.no_treadmill)
@@ -119,7 +137,7 @@ def cmd_import(args: argparse.Namespace) -> int:
                        f"R {contacts[:, 1].mean():.0%}"
                        + (" (from the gait events)" if motion.info.get("contacts", {}).get("method")
                           == "gait events" else ""))
-            message += _events_and_treadmill(motion.info)
+            message += _events_and_treadmill(motion.info) + _positions_read(motion.info)
             if motion.info.get("fbx"):
                 message += f", take {motion.info['fbx']['take']!r}"
                 others = len(motion.info["fbx"]["takes"]) - 1
@@ -174,6 +192,21 @@ def cmd_import(args: argparse.Namespace) -> int:
         print(f"{failed} of {len(sources)} file(s) failed{rest}", file=sys.stderr)
         return EXIT_FAILED
     return 0
+
+
+def _positions_read(info: dict[str, Any]) -> str:
+    """The import line's part on how a joint-positions file was read."""
+    read = info.get("positions")
+    if not read:
+        return ""
+    text = f", {read['read_as']}, fps from {read['fps_from']}"
+    if read["samples_filled"]:
+        text += f", {read['samples_filled']} missing joint samples interpolated"
+    if read["absent_joints"]:
+        text += f", missing in every frame (filled in): {', '.join(read['absent_joints'])}"
+    if read["lowpass_hz"]:
+        text += f", low-pass at {read['lowpass_hz']:g} Hz (jitter about {read['jitter_mm']:g} mm)"
+    return text
 
 
 def _events_and_treadmill(info: dict[str, Any]) -> str:

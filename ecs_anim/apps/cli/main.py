@@ -38,6 +38,7 @@ from ecs_anim.core.morphology import PRESET_SPECS
 from ecs_anim.io.c3d.marker_sets import preset_summary as marker_set_summary
 from ecs_anim.io.contacts import ContactThresholds
 from ecs_anim.io.joint_presets import preset_summary
+from ecs_anim.io.position_layouts import LAYOUTS
 from ecs_anim.runtime.allocator import keep_freed_memory
 
 if TYPE_CHECKING:
@@ -81,7 +82,8 @@ def cmd_export(args: argparse.Namespace) -> int:
         raise EcsAnimError(problem)
     motion = load_nmo(args.file)
     rig = onto_rig(args)
-    morph, _ = export_motion(motion, args.morphology, args.output, force=args.force, onto=rig)
+    morph, _ = export_motion(motion, args.morphology, args.output, force=args.force, onto=rig,
+                             layout=args.layout)
     onto = rig_summary(args, rig)
     print(f"{args.file} on {morph.name} (stature {morph.stature:.3f} m){onto} -> {args.output}: "
           f"{motion.n_frames} frames")
@@ -252,11 +254,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True)
 
-    p = sub.add_parser("import", help="normalize captured clips (BVH, C3D, FBX) into .nmo files",
+    p = sub.add_parser("import", help="normalize captured clips (BVH, C3D, FBX, joint positions) "
+                       "into .nmo files",
                        formatter_class=argparse.RawDescriptionHelpFormatter,
                        epilog="joint-name presets (BVH):\n" + preset_summary()
                        + "\nmarker sets (C3D):\n" + marker_set_summary())
-    p.add_argument("sources", nargs="+", metavar="SRC", help="BVH, C3D or FBX files")
+    p.add_argument("sources", nargs="+", metavar="SRC", help="BVH, C3D or FBX files, or joint "
+                   "positions (.npy, .npz, MediaPipe .json or .csv)")
     p.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="folder for .nmo files")
     p.add_argument("--map", metavar="PRESET|FILE.yaml", help="joint-name preset or YAML map "
                    "(BVH), marker-set preset or YAML marker map (C3D) (default: detect)")
@@ -279,6 +283,15 @@ def build_parser() -> argparse.ArgumentParser:
                    "not; negative from the end; either may be left out, e.g. 1: drops a first "
                    "frame) or seconds with s (0.5s:12s). Without it a rest pose (T-pose) before "
                    "the motion is dropped, and said; 0: keeps it")
+    p.add_argument("--layout", metavar="|".join(LAYOUTS),
+                   help="joint positions (.npy, .npz, .json, .csv): the layout of the joints "
+                   "(default: detected from the joint count or names; 22 joints need it)")
+    p.add_argument("--fps", type=positive_float, metavar="F",
+                   help="joint positions: frames per second (default: the file's, else the "
+                   "layout's dataset rate: humanml3d 20, kit 12.5)")
+    p.add_argument("--lowpass", type=positive_float, metavar="HZ",
+                   help="joint positions: smooth jitter with a zero-lag low-pass at this "
+                   "cut-off (default: off, for mocap-grade data; 6 for a video estimator's)")
     p.add_argument("--take", metavar="NAME",
                    help="FBX: the animation stack (take) to import (default: the first; the "
                    "import says which others the file has)")
@@ -325,7 +338,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--map", metavar="PRESET|FILE.yaml",
                    help="how the --onto rig's joints are our body parts, as import's --map "
                         "(default: detected)")
-    p.add_argument("-o", "--output", required=True, metavar="OUT.bvh|OUT.npz|OUT.glb")
+    p.add_argument("--layout", metavar="|".join(LAYOUTS),
+                   help="write the joints of this research layout, in its order, axes and unit, "
+                        "to OUT.npy or OUT.npz (docs/export.md)")
+    p.add_argument("-o", "--output", required=True, metavar="OUT.bvh|OUT.npz|OUT.glb|OUT.npy")
     p.add_argument("--force", action="store_true", help="overwrite an existing output")
     p.set_defaults(func=cmd_export)
 
