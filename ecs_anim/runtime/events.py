@@ -56,6 +56,7 @@ from numpy.typing import NDArray
 from ecs_anim.core.body_points import point_positions
 from ecs_anim.core.errors import EcsAnimError, listed, quoted
 from ecs_anim.runtime.kernels.edges import clip_and_contact_edges as compiled_edges
+from ecs_anim.runtime.steering import STEER_PATH
 
 if TYPE_CHECKING:
     from ecs_anim.runtime.simulation import Simulation
@@ -65,6 +66,7 @@ from ecs_anim.runtime.triggers import (
     FEET,
     Action,
     Arm,
+    Arrived,
     AtTime,
     ClipEnded,
     ClipStarted,
@@ -224,6 +226,8 @@ class Reactions:
         self._seen_time = np.zeros(0)
         self._seen_ended = np.zeros(0, bool)
         self._seen_contact = np.zeros((0, 2))
+        # per entity id: following a path when the tick began (an arrival is its end)
+        self._seen_on_path = np.zeros(0, bool)
 
     # --- adding ---------------------------------------------------------------------------------
 
@@ -297,6 +301,12 @@ class Reactions:
         self._last_edges, self._edges_kept = self._edges_kept, None
         self._fired_this_tick = set()
 
+    def path_given(self, entity: int) -> None:
+        """``entity`` was given a path between two ticks (``Simulation.follow_path``): its
+        arrival is an event even in the next tick."""
+        self._grow(entity + 1)
+        self._seen_on_path[entity] = True
+
     def character_removed(self, sim: Simulation, entity: int, name: str) -> None:
         """After ``Simulation.remove``: the ``removed`` event (its triggers fire), then every
         trigger still naming that character, or a constraint removed with it, is dropped (once
@@ -347,6 +357,7 @@ class Reactions:
         self._seen_time = np.concatenate([self._seen_time, np.zeros(extra)])
         self._seen_ended = np.concatenate([self._seen_ended, np.zeros(extra, bool)])
         self._seen_contact = np.concatenate([self._seen_contact, np.zeros((extra, 2))])
+        self._seen_on_path = np.concatenate([self._seen_on_path, np.zeros(extra, bool)])
 
     def _store_edges(self, sim: Simulation) -> list[tuple[str, I64, I64, list[str]]]:
         """(kind, store rows, details, detail names) of the clip and contact edges of the tick
@@ -371,6 +382,15 @@ class Reactions:
         out.append(("clip_started", rows, st.clip[rows], clip_names))
         rows, feet = np.nonzero(edges[:, EDGE_CONTACT:])
         out.append(("contact_began", rows, feet, list(FEET)))
+        # Steering stops a path at its end (its progress there); steer() cancels one short of it.
+        end = st.path_cum_m[np.arange(st.n), np.maximum(st.path_len - 1, 0)]
+        on_path = st.steer_mode == STEER_PATH
+        rows = np.flatnonzero(self._seen_on_path[st.entity] & ~on_path
+                              & (st.path_progress_m >= end))
+        self._seen_on_path[st.entity] = on_path
+        last = st.path_xy[rows, st.path_len[rows] - 1]
+        out.append(("arrived", rows, np.arange(rows.size),
+                    [f"({x:.2f}, {y:.2f})" for x, y in last.tolist()]))
         return out
 
     def _rows_of(self, sim: Simulation, entities: I64) -> I64:
@@ -549,9 +569,10 @@ class Reactions:
             c.reached_uids = np.array([w.uid for _, w in reached], np.int64)
             c.reached_within = np.array([w.within_m for _, w in reached])
         kinds: dict[type, str] = {ClipStarted: "clip_started", ClipEnded: "clip_ended",
-                                  ContactBegan: "contact_began", Removed: "removed"}
+                                  ContactBegan: "contact_began", Arrived: "arrived",
+                                  Removed: "removed"}
         for i, w in live:
-            if isinstance(w, ClipStarted | ClipEnded | ContactBegan | Removed):
+            if isinstance(w, ClipStarted | ClipEnded | ContactBegan | Arrived | Removed):
                 c.listeners.setdefault((kinds[type(w)], w.entity), []).append(i)
         timed = [(i, w) for i, w in live if isinstance(w, AtTime)]
         if timed:

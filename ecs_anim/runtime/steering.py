@@ -94,6 +94,7 @@ class SteeringSettings:
     avoid_neighbours: int = 10
     avoid_neighbour_m: float = 5.0
     avoid_cone_rad: float = float(np.pi)
+    corner_tolerance_m: float = 0.15
 
 
 DEFAULT_STEERING = SteeringSettings()
@@ -235,6 +236,49 @@ def _point_at(path: F64, cum_m: F64, rows: I64, count: I64, arc_m: F64) -> F64:
     return point
 
 
+#: A corner turning more than this is sharp: the aim does not go past its rounding arc (a
+#: smooth curve given as many waypoints, a circle's, is followed by pure pursuit alone).
+SHARP_CORNER_RAD = np.deg2rad(30.0)
+#: Waypoints looked at ahead of a character's progress for corners to slow down for.
+CORNERS_AHEAD = 4
+
+
+def _corners_ahead(path: F64, cum_m: F64, rows: I64, count: I64, progress: F64) -> tuple[F64, F64]:
+    """The next :data:`CORNERS_AHEAD` corners of each path past ``progress`` (r,) m: how far
+    along the path each is (r, K) m, and how much the path turns there (r, K) rad, 0 to pi
+    (0 past the last waypoint); arguments as for :func:`_path_progress`."""
+    r = rows[:, None]
+    after = np.sum(cum_m[rows, 1:] <= progress[:, None], axis=1)  # the segment progress is on
+    k = (after + 1)[:, None] + np.arange(CORNERS_AHEAD)[None]  # its end, and the next ones
+    inner = k <= (count - 2)[:, None]
+    k = np.minimum(k, np.maximum(count - 2, 1)[:, None])
+    before, at, beyond = path[r, k - 1], path[r, k], path[r, np.minimum(k + 1, path.shape[1] - 1)]
+    come, go = at - before, beyond - at
+    cos_turn = np.einsum("rki,rki->rk", come, go) / np.maximum(
+        np.linalg.norm(come, axis=-1) * np.linalg.norm(go, axis=-1), 1e-12)
+    turn = np.where(inner, np.arccos(np.clip(cos_turn, -1.0, 1.0)), 0.0)
+    return cum_m[r, k] - progress[:, None], turn
+
+
+def corner_speed(turn_rad: F64, settings: SteeringSettings) -> F64:
+    """The fastest a walker may take a corner turning ``turn_rad`` (...) and stay within
+    ``settings.corner_tolerance_m`` of its path (m/s): turning at most ``max_turn_rad_s`` its
+    smallest turn has the radius speed / turn rate, and a circle of radius R rounding a corner
+    of that turn strays R (1 - cos(turn / 2)) from the path."""
+    stray = np.maximum(1.0 - np.cos(0.5 * turn_rad), 1e-9)
+    fastest: F64 = settings.max_turn_rad_s * settings.corner_tolerance_m / stray
+    return fastest
+
+
+def turn_rate_limit(rate: F64, settings: SteeringSettings) -> F64:
+    """The fastest a walker may turn (rad/s) at playback ``rate`` (...): ``max_turn_rad_s`` at
+    the clip's own rate and above, rising to ``turn_in_place_rad_s`` at the slowest steps
+    (``rate_min``), as for a goal behind."""
+    limit: F64 = np.interp(rate, [settings.rate_min, 1.0],
+                           [settings.turn_in_place_rad_s, settings.max_turn_rad_s])
+    return limit
+
+
 def steer(st: CharacterStore, bank: ClipBank, gaits: GaitTable, settings: SteeringSettings,
           dt: float, playing: NDArray[np.bool_] | None = None,
           not_avoiding: I64 | None = None) -> None:
@@ -265,6 +309,8 @@ def steer(st: CharacterStore, bank: ClipBank, gaits: GaitTable, settings: Steeri
     speed_now = st.speed[rows] * gaits.speed_legs_s[clip] * leg
     wanted_speed = np.where(np.isnan(st.steer_speed_m_s[rows]), own_walk, st.steer_speed_m_s[rows])
     wanted_heading = st.steer_heading_rad[rows].copy()
+    # How far ahead pure pursuit aims (m; NaN: at the current speed's lookahead).
+    pursuit_m = np.full(rows.size, np.nan)
 
     # Paths: progress, the lookahead point, the end.
     on_path = st.steer_mode[rows] == STEER_PATH
@@ -274,15 +320,47 @@ def steer(st: CharacterStore, bank: ClipBank, gaits: GaitTable, settings: Steeri
         progress, total = _path_progress(st.path_xy, st.path_cum_m, p, count,
                                          st.path_progress_m[p], here[on_path])
         st.path_progress_m[p] = progress
+        # Corners: each is rounded on the arc of the turn rate at the speed it is taken at
+        # (slow enough to stray at most corner_tolerance_m), tangent length ``rounding`` m
+        # before and after it. The walker brakes (as fast as the playback rate may change) to
+        # be at that speed when its aim reaches that arc, and its aim does not go past it.
+        ahead_m, turn = _corners_ahead(st.path_xy, st.path_cum_m, p, count, progress)
+        walk_own = own_walk[on_path][:, None]
+        at_corner = np.clip(corner_speed(turn, settings), settings.rate_min * walk_own,
+                            wanted_speed[on_path][:, None])
+        radius = at_corner / turn_rate_limit(at_corner / walk_own, settings)
+        rounding = radius * np.tan(0.5 * np.minimum(turn, np.deg2rad(150.0)))
+        brake = settings.rate_change_per_s * walk_own
+        slack = np.maximum(ahead_m - rounding - settings.lookahead_min_m, 0.0)
+        allowed = np.sqrt(at_corner**2 + 2.0 * brake * slack)
+        wanted_speed[on_path] = np.minimum(wanted_speed[on_path], allowed.min(axis=1))
         lookahead = np.maximum(settings.lookahead_s * np.maximum(speed_now[on_path], 0.0),
                                settings.lookahead_min_m)
+        sharp = turn[:, 0] > SHARP_CORNER_RAD
+        near = ahead_m[:, 0] <= rounding[:, 0]
+        lookahead = np.where(sharp, np.where(near, ahead_m[:, 0], np.minimum(
+            lookahead, ahead_m[:, 0])) + np.where(near, rounding[:, 0], 0.0), lookahead)
         aim = _point_at(st.path_xy, st.path_cum_m, p, count,
                         np.minimum(progress + lookahead, total))
         end = st.path_xy[p, count - 1]
         to_end = np.linalg.norm(end - here[on_path], axis=1)
         to_aim = aim - here[on_path]
+        # Rounding a corner, the turn follows the circle through the aim (pure pursuit's own
+        # curvature, 2 sin(error) / distance to the aim).
+        pursuit_m[on_path] = np.where(sharp & near, np.linalg.norm(to_aim, axis=1), np.nan)
         wanted_heading[on_path] = np.where(np.linalg.norm(to_aim, axis=1) > 1e-6,
                                            np.arctan2(to_aim[:, 1], to_aim[:, 0]), travel[on_path])
+        # A walker still turning (a corner just passed) goes as slow as that turn asks: from on
+        # its path, turning by a (its heading against the way its path goes where it is) strays
+        # as far as rounding a corner of 2 a.
+        way = (_point_at(st.path_xy, st.path_cum_m, p, count, np.minimum(progress + 0.05, total))
+               - _point_at(st.path_xy, st.path_cum_m, p, count, progress))
+        still_to_turn = np.where(np.linalg.norm(way, axis=1) > 1e-6, np.abs(wrap_angle(
+            np.arctan2(way[:, 1], way[:, 0]) - travel[on_path])), 0.0)
+        # (never below the slowest steps: a walker standing would not turn).
+        turning = np.maximum(corner_speed(2.0 * still_to_turn, settings),
+                             settings.rate_min * own_walk[on_path])
+        wanted_speed[on_path] = np.minimum(wanted_speed[on_path], turning)
         # Stop where a fade to idle, started now, ends on the last waypoint (the pelvis slows
         # linearly over the fade: half the fade at the current speed).
         remaining = np.minimum(total - progress, to_end)
@@ -290,6 +368,7 @@ def steer(st: CharacterStore, bank: ClipBank, gaits: GaitTable, settings: Steeri
             (remaining <= speed_now[on_path] * settings.gait_fade_s / 2) | (remaining < 0.05))
         if arrived.any():
             done = p[arrived]
+            st.path_progress_m[done] = total[arrived]  # at its end: arrived (an event)
             st.steer_mode[done] = STEER_HEADING
             st.steer_speed_m_s[done] = 0.0
             st.steer_heading_rad[done] = travel[on_path][arrived]
@@ -317,9 +396,10 @@ def steer(st: CharacterStore, bank: ClipBank, gaits: GaitTable, settings: Steeri
     # Turn: pure pursuit's curvature at the current speed, within the turn-rate limits; on the
     # spot when the goal is behind. A standing character (idle) does not turn.
     speed_now = st.speed[rows] * own
-    lookahead = np.maximum(settings.lookahead_s * speed_now, settings.lookahead_min_m)
-    turn_rate = np.clip(2.0 * speed_now * np.sin(error) / lookahead,
-                        -settings.max_turn_rad_s, settings.max_turn_rad_s)
+    lookahead = np.where(np.isnan(pursuit_m), np.maximum(
+        settings.lookahead_s * speed_now, settings.lookahead_min_m), np.maximum(pursuit_m, 0.05))
+    fastest = turn_rate_limit(st.speed[rows] * own / np.maximum(own_walk, 1e-9), settings)
+    turn_rate = np.clip(2.0 * speed_now * np.sin(error) / lookahead, -fastest, fastest)
     turn_rate = np.where(behind, np.sign(error) * settings.turn_in_place_rad_s, turn_rate)
     turn = np.where(moving, turn_rate * dt, 0.0)
     turn = np.sign(turn) * np.minimum(np.abs(turn), np.abs(error))

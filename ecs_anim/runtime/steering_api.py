@@ -161,6 +161,7 @@ class SteeringCalls:
         st.path_cum_m[row, points.shape[0] + 1:] = st.path_cum_m[row, points.shape[0]]
         st.path_progress_m[row] = 0.0
         st.steer_mode[row] = STEER_PATH
+        sim.reactions.path_given(entity)
 
     def walk_to(self, entity: int, goal_in_world: Sequence[float],
                 speed_m_s: float | None = None) -> None:
@@ -195,6 +196,6 @@ class SteeringCalls:
 
     def arrived(self, entity: int) -> bool:
         """Whether a character given a path or goal has reached its end (or was never given
-        one)."""
+        one). The tick it reaches it has an ``arrived`` event (docs/events.md)."""
         sim = cast("Simulation", self)
         return bool(sim.store.steer_mode[sim.row(entity)] != STEER_PATH)

@@ -5,18 +5,14 @@ each names (characters, constraints) and sets off (the events an action makes)."
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 from ecs_anim.components import QueuedClip
 from ecs_anim.core.body_points import BodyPoint
 from ecs_anim.core.morphology import Morphology
 
-if TYPE_CHECKING:
-    pass
-
-
 #: The kinds of :class:`Event`.
-EVENT_KINDS = ("clip_started", "clip_ended", "contact_began", "removed", "near", "reached", "time")
+EVENT_KINDS = ("clip_started", "clip_ended", "contact_began", "arrived", "removed", "near",
+               "reached", "time")
 
 
 #: A foot contact has begun when its weight rises through this.
@@ -31,8 +27,9 @@ class Event:
     """Something that happened once: ``kind`` (one of :data:`EVENT_KINDS`) to the character
     ``entity`` (named ``character``; -1 and '' for a time), at simulation time ``time_s`` (the
     posture where it shows), in ``tick`` (the ``step()`` it was produced in, counted from 0).
-    ``detail``: the clip (clip_started, clip_ended), the foot (``left`` / ``right``), the
-    constraint (reached), or the trigger whose condition this is (near, reached, time)."""
+    ``detail``: the clip (clip_started, clip_ended), the foot (``left`` / ``right``), the last
+    waypoint ``(x, y)`` in metres (arrived), or the trigger whose condition this is (near,
+    reached, time)."""
 
     kind: str
     entity: int
@@ -89,6 +86,15 @@ class ContactBegan:
 
 
 @dataclass(frozen=True)
+class Arrived:
+    """``entity`` reaches the last waypoint of its path (``Simulation.follow_path``,
+    ``walk_to``, a scenario's ``path_m``): steering stops it there (``Simulation.arrived``
+    turns true in that tick)."""
+
+    entity: int
+
+
+@dataclass(frozen=True)
 class AtTime:
     """Simulation time reaches ``time_s``."""
 
@@ -102,7 +108,7 @@ class Removed:
     entity: int
 
 
-Condition = ClipStarted | ClipEnded | Near | Reached | ContactBegan | AtTime | Removed
+Condition = ClipStarted | ClipEnded | Near | Reached | ContactBegan | Arrived | AtTime | Removed
 
 
 @dataclass(frozen=True)
@@ -226,6 +232,8 @@ def listens_to(condition: Condition, kind: str, entity: int, clip: str | None) -
         wanted = "clip_ended"
     elif isinstance(condition, Removed):
         wanted = "removed"
+    elif isinstance(condition, Arrived):
+        wanted = "arrived"
     else:
         return False
     if kind != wanted or condition.entity != entity:

@@ -34,6 +34,7 @@ WHEN_KEYS = {"clip_started": ("character.motion or character",),
              "near": ("character.point", "to", "within_m", "fraction", "to_fraction"),
              "reached": ("character.constraint", "within_m"),
              "contact_began": ("character", "foot"),
+             "arrived": ("character",),
              "at_s": ("seconds",),
              "removed": ("character",)}
 
@@ -113,6 +114,7 @@ def _kind_of(r: YamlReader, node: Node, where: str, kinds: dict[str, Any], what:
 def _when(r: YamlReader, node: Node, where: str, characters: list[CharacterSpec],
           motions: dict[str, NormalizedMotion], refs: list[tuple[int, str]]) -> Condition:
     from ecs_anim.runtime.triggers import (
+        Arrived,
         AtTime,
         ClipEnded,
         ClipStarted,
@@ -152,6 +154,12 @@ def _when(r: YamlReader, node: Node, where: str, characters: list[CharacterSpec]
     if kind == "at_s":
         return AtTime(r.number(keys[kind], w, 0.0, MAX_DURATION_S, "s"))
     who, _ = _split_ref(r, keys[kind], w, characters, "", optional=True)
+    if kind == "arrived":
+        if characters[who].steering is None or not characters[who].steering.path_m:
+            raise r.fail(keys[kind], w, f"{characters[who].name!r} has no path_m: it would "
+                         "never arrive (give it one; a path given from code takes a trigger "
+                         "from code, Arrived)")
+        return Arrived(who)
     return Removed(who)
 
 
