@@ -3,9 +3,9 @@
 
 read (:mod:`.position_files`) -> the layout (:mod:`.position_layouts`, detected or given) ->
 missing samples filled -> metres (unit detected from the legs) -> Z up (the head above the
-feet) -> canonical joints, the parts a layout lacks filled in from proportions -> optionally a
-zero-lag low-pass -> each bone at its robust median length (the motion keeping its
-directions) -> the canonical clip that BVH and C3D import end in, encoded and its contacts
+feet) -> canonical joints, the parts a layout lacks filled in from proportions -> optionally (``--lowpass``,
+for noisy data) a zero-lag low-pass and each bone at its robust length (the motion
+keeping its directions) -> the canonical clip that BVH and C3D import end in, encoded and its contacts
 found by the same :func:`~ecs_anim.io.importing.import_canonical`.
 No joint angle is computed: the representation is built from positions.
 """
@@ -42,10 +42,13 @@ from ecs_anim.motion.clip import NormalizedMotion
 
 F64 = NDArray[np.float64]
 
-#: Canonical joints a layout may lack, filled in from proportions (as BVH import fills them).
+#: Canonical joints a layout may lack, filled in (as BVH import fills them): the ends from
+#: proportions (after any low-pass, so their lengths stay the proportions'), the spine between
+#: its neighbours.
 FILLABLE = ("toe_l", "toe_r", "hand_l", "hand_r", "head_top", "spine_1", "spine_2")
-#: A foot filled in points the way the pelvis faces, square to the shank and tipped down by the
-#: ankle's height over the foot's length (an adult's flat foot, the ball on the floor).
+#: A foot filled in lies flat the way the pelvis faces, tipped down by the ankle's height over
+#: the foot's length (an adult's foot, the ball on the floor): planted where the ankle stands
+#: still, as a stance foot is (a foot turning with the shank moved its ball through the stance).
 FOOT_DROP = FILL_FRACTION["ankle_height"] / FILL_FRACTION["toe"]
 #: The head is above the feet along the up axis when their offset points at least this much
 #: along it (cos 60°): in most frames, or the body tumbles.
@@ -128,24 +131,27 @@ def canonical_clip_positions(read: PositionFile, options: PositionOptions
     measured = np.array([j in layout.canonical and len(layout.canonical[j]) == 1
                          and j not in absent for j in JOINTS])
     provided = {j for j in layout.canonical if j not in absent}
-    world = fill_parts(world, provided, face)
+    world = fill_spine(world, provided)
     warnings: list[str] = []
-    noise = np.zeros(len(JOINTS))
     probe_hz = min(JITTER_PROBE_HZ, fps / 4)
-    jitter_mm = 1000.0 * float(np.median(np.sqrt(residual_variance(world, fps, probe_hz)[0] / 3)))
+    jitter_mm = 1000.0 * float(np.nanmedian(np.sqrt(residual_variance(world[:, measured], fps,
+                                                                       probe_hz)[0] / 3)))
     if options.lowpass_hz is not None:
         if not options.lowpass_hz < fps / 2:
             raise EcsAnimError(f"--lowpass {options.lowpass_hz:g}: the cut-off must be under "
                                f"half the frame rate ({fps / 2:g} Hz)")
+        # Noisy data: each bone at its robust length (the source body's), from the smoothed
+        # joints; mocap-grade data keeps its own bones, whose mean import takes as for BVH.
         noise = bone_noise_variance(world, fps, options.lowpass_hz)
         world = zero_lag_lowpass(world, fps, options.lowpass_hz)[0]
+        world = bones_to_lengths(world, robust_bone_lengths(world, noise))
         if face is not None:
             face = zero_lag_lowpass(face, fps, options.lowpass_hz)[0]
     elif jitter_mm > JITTER_WARN_MM:
         warnings.append(f"the joints jitter by about {jitter_mm:.0f} mm (their motion above "
                         f"{probe_hz:g} Hz, median over joints and axes): a pose estimator's noise? "
                         f"--lowpass {probe_hz:g} smooths it")
-    world = bones_to_lengths(world, robust_bone_lengths(world, noise))
+    world = fill_ends(world, provided, face)
     pelvis2world, thorax2world, head2world = frames_from_positions(world)
     if face is not None:
         head2world = face_frame(face)
@@ -231,14 +237,10 @@ def detect_up_axis(positions: F64) -> tuple[str, str]:
     return up, f"detected: the head is above the feet along {way} in {share[up]:.0%} of frames"
 
 
-def fill_parts(positions: F64, provided: set[str], face: F64 | None) -> F64:
-    """Canonical joints the layout lacks, filled in from proportions of the leg: the spine's
-    joints evenly on the pelvis-neck line, a hand along the forearm, a toe ahead of the ankle
-    (:data:`FOOT_DROP`), the head top above the head (along the face's up, else the neck-head
-    line). ``positions`` (n_frames, N_JOINTS, 3) metres, NaN where lacking; ``face`` (n_frames,
-    3, 3): nose, left ear, right ear, or None."""
+def fill_spine(positions: F64, provided: set[str]) -> F64:
+    """The spine's joints a layout lacks evenly on the line between its neighbours (as BVH
+    import places them); ``positions`` (n_frames, N_JOINTS, 3), NaN where lacking."""
     p = positions.copy()
-    leg = leg_length(p)
     chain = ["pelvis", "spine_1", "spine_2", "neck"]
     known = [k for k, name in enumerate(chain) if name in provided]
     for k, name in enumerate(chain):
@@ -247,18 +249,26 @@ def fill_parts(positions: F64, provided: set[str], face: F64 | None) -> F64:
             hi = min(b for b in known if b > k)
             w = (k - lo) / (hi - lo)
             p[:, J[name]] = (1 - w) * p[:, J[chain[lo]]] + w * p[:, J[chain[hi]]]
+    return p
+
+
+def fill_ends(positions: F64, provided: set[str], face: F64 | None) -> F64:
+    """The end parts a layout lacks, filled in from proportions of the leg: a hand along the
+    forearm, a toe ahead of the ankle (:data:`FOOT_DROP`), the head top above the head (along
+    the face's up, else the neck-head line). ``positions`` (n_frames, N_JOINTS, 3) metres, NaN
+    where lacking; ``face`` (n_frames, 3, 3): nose, left ear, right ear, or None."""
+    p = positions.copy()
+    leg = leg_length(p)
     pelvis2world = frame_from_axes(p[:, J["hip_l"]] - p[:, J["hip_r"]],
                                    p[:, J["neck"]] - p[:, J["pelvis"]], 1, 2)
+    heading = normalize(pelvis2world[:, :, 0] * [1.0, 1.0, 0.0])
+    flat_foot = normalize(heading - [0.0, 0.0, FOOT_DROP])
     for s in "lr":
         if f"hand_{s}" not in provided:
             forearm = normalize(p[:, J[f"wrist_{s}"]] - p[:, J[f"elbow_{s}"]])
             p[:, J[f"hand_{s}"]] = p[:, J[f"wrist_{s}"]] + forearm * FILL_FRACTION["hand"] * leg
         if f"toe_{s}" not in provided:
-            shank = normalize(p[:, J[f"ankle_{s}"]] - p[:, J[f"knee_{s}"]])
-            forward = pelvis2world[:, :, 0]
-            ahead = normalize(forward - np.sum(forward * shank, axis=-1, keepdims=True) * shank)
-            p[:, J[f"toe_{s}"]] = p[:, J[f"ankle_{s}"]] + normalize(ahead + FOOT_DROP * shank) \
-                * FILL_FRACTION["toe"] * leg
+            p[:, J[f"toe_{s}"]] = p[:, J[f"ankle_{s}"]] + flat_foot * FILL_FRACTION["toe"] * leg
     if "head_top" not in provided:
         up = face_frame(face)[:, :, 2] if face is not None else \
             normalize(p[:, J["head"]] - p[:, J["neck"]])
@@ -312,13 +322,17 @@ def bone_noise_variance(positions: F64, fps: float, cutoff_hz: float) -> F64:
 
 
 def robust_bone_lengths(positions: F64, noise: F64) -> F64:
-    """Each canonical bone's length (N_JOINTS,), 0 for the root: the median over frames of its
-    squared length, less the noise's share ``noise`` (N_JOINTS,) m² (a noisy bone vector's
-    squared length exceeds the bone's by the noise's variance), as a root; a breathing bone's
-    median is its mean length. ``positions`` (n_frames, N_JOINTS, 3)."""
+    """Each canonical bone's length (N_JOINTS,), 0 for the root: the mean over frames of its
+    squared length, outliers (beyond 5 median absolute deviations of the median: a glitch)
+    clipped, less the noise's share ``noise`` (N_JOINTS,) m², as a root. A noisy bone
+    vector's squared length exceeds the bone's by the noise's variance on average (its median
+    by less: the excess is skewed, which made a 7 cm bone 1.6 % short); a breathing bone's
+    mean is its length. ``positions`` (n_frames, N_JOINTS, 3)."""
     squared = np.sum(bone_vectors(positions) ** 2, axis=-1)  # (n_frames, N_JOINTS)
     median = np.median(squared, axis=0)
-    lengths: F64 = np.sqrt(np.maximum(median - noise, 0.25 * median))
+    spread = 5.0 * np.median(np.abs(squared - median), axis=0)
+    mean = np.clip(squared, median - spread, median + spread).mean(axis=0)
+    lengths: F64 = np.sqrt(np.maximum(mean - noise, 0.25 * mean))
     return lengths
 
 
