@@ -31,10 +31,13 @@ def _progress(done: int, total: int, label: str) -> None:
 def cmd_import(args: argparse.Namespace) -> int:
     """``ecs-anim import``: each source to ``-o DIR/<stem>.nmo``; a bad file fails alone
     (exit status :data:`~ecs_anim.apps.cli.args.EXIT_FAILED` when any did)."""
+    from ecs_anim.io.acclaim import import_amc
     from ecs_anim.io.c3d.importing import import_c3d
     from ecs_anim.io.fbx import import_fbx
     from ecs_anim.io.importing import import_bvh
     from ecs_anim.io.positions import PositionOptions, import_positions
+    from ecs_anim.io.smpl import import_amass, is_amass
+    from ecs_anim.io.trc import import_trc
     from ecs_anim.motion.clip import save_nmo
 
     outdir = Path(args.output)
@@ -55,13 +58,21 @@ def cmd_import(args: argparse.Namespace) -> int:
         problem = input_problem(outdir / f"{src.stem}.nmo", inputs)
         if problem is not None:
             raise EcsAnimError(f"-o {problem}")
-    if not any(s.suffix.lower() == ".c3d" for s in sources) and (
+    if not any(s.suffix.lower() in (".c3d", ".trc") for s in sources) and (
             args.fill_absent_from or args.max_gap is not None):
-        raise EcsAnimError("--max-gap and --fill-absent-from are for .c3d files; none is given")
+        raise EcsAnimError("--max-gap and --fill-absent-from are for .c3d and .trc files; none "
+                           "is given")
+    if args.body_model and not any(s.suffix.lower() in (".amc", ".npz") for s in sources):
+        raise EcsAnimError("--body-model is for AMASS .npz motions (a SMPL body model) and .amc "
+                           "motions (their .asf skeleton); none is given")
+    # The ASF skeleton of .amc files, or the SMPL body model of AMASS files.
+    asf = args.body_model if args.body_model and args.body_model.lower().endswith(".asf") else None
+    body_model = args.body_model if args.body_model and asf is None else None
     if args.take is not None and not any(s.suffix.lower() == ".fbx" for s in sources):
         raise EcsAnimError("--take is for .fbx files; none is given")
     positions = [s for s in sources if s.suffix.lower() in POSITION_SUFFIXES]
-    if not positions and (args.layout or args.fps or args.lowpass):
+    amc = any(s.suffix.lower() == ".amc" for s in sources)  # an AMC stores no rate: --fps
+    if not positions and (args.layout or (args.fps and not amc) or args.lowpass):
         raise EcsAnimError("--layout, --fps and --lowpass are for joint positions (.npy, .npz, "
                            ".json, .csv); none is given")
     if positions and args.map:
@@ -83,12 +94,17 @@ def cmd_import(args: argparse.Namespace) -> int:
             if src.is_dir():
                 raise EcsAnimError(f"{src}: a folder; give the .bvh, .c3d or .fbx files in it "
                                    f"(e.g. {src}/*.bvh)")
-            if suffix not in (".bvh", ".c3d", ".fbx", *POSITION_SUFFIXES):
+            if suffix == ".asf":
+                raise EcsAnimError(f"{src}: an ASF holds a skeleton only; import its .amc "
+                                   "motions (the .asf beside them is found, or give it with "
+                                   "--body-model)")
+            if suffix not in (".bvh", ".c3d", ".fbx", ".trc", ".amc", *POSITION_SUFFIXES):
                 raise EcsAnimError(f"{src}: unsupported file type {src.suffix!r} (expected .bvh, "
-                                   f".c3d, .fbx or joint positions {', '.join(POSITION_SUFFIXES)})")
-            if suffix == ".c3d" and args.stature is not None:
-                raise EcsAnimError(f"{src}: --stature applies to BVH files (a C3D's markers are "
-                                   "in the unit of POINT:UNITS)")
+                                   f".c3d, .fbx, .trc, .amc, AMASS .npz or joint positions "
+                                   f"{', '.join(POSITION_SUFFIXES)})")
+            if suffix in (".c3d", ".trc") and args.stature is not None:
+                raise EcsAnimError(f"{src}: --stature applies to BVH files (markers are in the "
+                                   "file's unit: a C3D's POINT:UNITS, a TRC's Units)")
             if suffix in POSITION_SUFFIXES and args.stature is not None:
                 raise EcsAnimError(f"{src}: --stature applies to BVH files (joint positions: "
                                    "--unit)")
@@ -97,6 +113,12 @@ def cmd_import(args: argparse.Namespace) -> int:
                                     args.max_gap,
                                     args.fill_absent_from, args.trim, not args.no_treadmill,
                                     args.contacts)
+            elif suffix == ".trc":
+                if args.contacts == "events":
+                    raise EcsAnimError(f"{src}: --contacts events needs a C3D file's gait events "
+                                       "(a TRC file has none)")
+                motion = import_trc(src, args.map, args.unit, thresholds, args.up, args.max_gap,
+                                    args.fill_absent_from, args.trim, not args.no_treadmill)
             else:
                 if args.contacts == "events":
                     raise EcsAnimError(f"{src}: --contacts events needs a C3D file's gait events "
@@ -104,6 +126,17 @@ def cmd_import(args: argparse.Namespace) -> int:
                 if suffix == ".fbx":
                     motion = import_fbx(src, args.map, args.unit, thresholds, args.up, args.trim,
                                         args.stature, not args.no_treadmill, args.take)
+                elif suffix == ".amc":
+                    motion = import_amc(src, asf, args.map, args.unit, thresholds, args.up,
+                                        args.trim, args.stature, not args.no_treadmill, args.fps)
+                elif suffix == ".npz" and (body_model or is_amass(src)):
+                    if body_model is None:
+                        raise EcsAnimError(f"{src}: an AMASS/SMPL motion (poses, trans): its "
+                                           "joints come from a body model; give --body-model "
+                                           "MODEL.npz (SMPL, SMPL-H or SMPL-X: docs/import.md "
+                                           "says where to get one)")
+                    motion = import_amass(src, body_model, thresholds, args.up, args.trim,
+                                          not args.no_treadmill, args.fps)
                 elif suffix in POSITION_SUFFIXES:
                     options = PositionOptions(args.layout, args.fps, args.up, args.unit,
                                               args.lowpass)
