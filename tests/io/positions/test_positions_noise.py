@@ -87,7 +87,7 @@ def test_mocap_grade_positions_keep_their_bones(tmp_path):
     """Without --lowpass nothing is smoothed or rescaled (the clean file's bones are the BVH
     import's), and the import line's warning names jitter only where there is some."""
     require_mocap()
-    clean, noisy_unfiltered = clean_and_noisy("bandai_walk.bvh", tmp_path, seed=36)
+    clean, _ = clean_and_noisy("bandai_walk.bvh", tmp_path, seed=36)
     source = import_bvh(MOCAP_DIR / "bandai_walk.bvh")
     assert np.allclose(clean.source_morphology.lengths[MEASURED],
                        source.source_morphology.lengths[MEASURED], atol=1e-9)

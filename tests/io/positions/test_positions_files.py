@@ -1,0 +1,100 @@
+"""Issue 34: joint-position files as users bring them (MediaPipe JSON and CSV, .npz), the
+layout detected or asked for, and malformed files refused in one line naming file and place;
+the commands of docs/import.md's and docs/export.md's positions sections run as written."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from conftest import MOCAP_DIR, require_mocap
+from ecs_anim.apps.cli.main import main
+from ecs_anim.io.export import export_motion
+from ecs_anim.io.importing import import_bvh
+from ecs_anim.io.position_layouts import MEDIAPIPE33
+
+BAD = {
+    "shape.npy": lambda p: np.save(p, np.zeros((10, 22, 2))),
+    "empty.npy": lambda p: np.save(p, np.zeros((0, 22, 3))),
+    "nan.npy": lambda p: np.save(p, np.full((10, 22, 3), np.nan)),
+    "text.npy": lambda p: np.save(p, np.array([["a"] * 3] * 4)),
+    "count.npy": lambda p: np.save(p, np.zeros((10, 19, 3))),
+    "ambiguous.npy": lambda p: np.save(p, np.random.default_rng(1).normal(size=(10, 22, 3))),
+    "smpl.npz": lambda p: np.savez(p, poses=np.zeros((5, 72)), betas=np.zeros(10)),
+    "bad.json": lambda p: p.write_text('[[{"x": 1, "y": 2}]]'),
+    "broken.json": lambda p: p.write_text('[[{"x": 1,'),
+    "word.csv": lambda p: p.write_text("x0,y0,z0\n1,2,oops\n"),
+    "ragged.csv": lambda p: p.write_text("x0,y0,z0\n1,2,3\n1,2\n"),
+    "truncated.npy": lambda p: p.write_bytes(b"\x93NUMPY\x01\x00v\x00{'descr': '<f8', 'fortran_"),
+}
+PLACES = {"shape.npy": "shape (10, 22, 2)", "empty.npy": "0 frame", "nan.npy": "NaN everywhere",
+          "text.npy": "expected numbers", "count.npy": "19 joints", "ambiguous.npy": "--layout",
+          "smpl.npz": "SMPL parameters", "bad.json": "frame 0, landmark 0",
+          "broken.json": "not JSON", "word.csv": "word.csv:2", "ragged.csv": "ragged.csv:3",
+          "truncated.npy": "truncated.npy"}
+
+
+@pytest.mark.parametrize("name", list(BAD))
+def test_a_malformed_positions_file_is_one_line_naming_it(name, tmp_path, capsys):
+    path = tmp_path / name
+    BAD[name](path)
+    assert main(["import", str(path), "-o", str(tmp_path / "out")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and err[0].startswith(f"error: {path}"), err  # and the count line
+    assert PLACES[name] in err[0], err[0]
+    assert "Traceback" not in err[0]
+
+
+def mediapipe_frames(tmp_path):
+    """A walk's MediaPipe landmarks, as the export writes them (metres, Y down, hips at 0)."""
+    require_mocap()
+    motion = import_bvh(MOCAP_DIR / "bandai_walk.bvh")
+    path = tmp_path / "walk.npy"
+    export_motion(motion, "source", path, layout="mediapipe33")
+    return motion, np.load(path).astype(np.float64)
+
+
+def test_mediapipe_json_and_csv_read_like_the_array(tmp_path, capsys):
+    motion, frames = mediapipe_frames(tmp_path)
+    as_json = [{"timestamp_ms": 1000 * k / motion.fps,
+                "pose_world_landmarks": [{"x": x, "y": y, "z": z, "visibility": 0.9}
+                                         for x, y, z in frame]} for k, frame in enumerate(frames)]
+    as_json[5] = {"timestamp_ms": 1000 * 5 / motion.fps, "pose_world_landmarks": []}  # no pose
+    (tmp_path / "walk.json").write_text(json.dumps(as_json))
+    header = ",".join(f"{n}_{a}" for n in MEDIAPIPE33.joints for a in "xyz")
+    rows = [f"{k / motion.fps:.6f}," + ",".join(f"{v:.6f}" for v in frame.reshape(-1))
+            for k, frame in enumerate(frames)]
+    (tmp_path / "walk.csv").write_text("time," + header + "\n" + "\n".join(rows) + "\n")
+    for name, filled in (("walk.json", "33 missing joint samples interpolated"),
+                         ("walk.csv", "")):
+        assert main(["import", str(tmp_path / name), "-o", str(tmp_path / name[5:])]) == 0
+        line = capsys.readouterr().out
+        assert "layout mediapipe33" in line and "-Y up" in line and "fps from the file" in line
+        assert filled in line and (filled or "interpolated" not in line)
+
+
+def test_an_export_npz_names_its_layout(tmp_path, capsys):
+    require_mocap()
+    motion = import_bvh(MOCAP_DIR / "bandai_walk.bvh")
+    export_motion(motion, "source", tmp_path / "walk.npz", layout="smplx22")
+    assert main(["import", str(tmp_path / "walk.npz"), "-o", str(tmp_path / "out")]) == 0
+    line = capsys.readouterr().out
+    assert "layout smplx22 (named in the file)" in line and "fps from the file" in line
+
+
+def test_docs_positions_commands_run(tmp_path, capsys, monkeypatch):
+    """docs/import.md's and docs/export.md's joint-positions examples, in a scratch folder."""
+    require_mocap()
+    monkeypatch.chdir(tmp_path)
+    src = str(MOCAP_DIR / "bandai_walk.bvh")
+    assert main(["import", src, "-o", "out/joints"]) == 0
+    assert main(["export", "out/joints/bandai_walk.nmo", "-o", "out/joints/walk.npy",
+                 "--layout", "humanml3d"]) == 0
+    assert main(["import", "out/joints/walk.npy", "--layout", "humanml3d", "--fps", "30", "-o",
+                 "out/joints/back"]) == 0
+    assert main(["export", "out/joints/back/walk.nmo", "--morphology", "child", "-o",
+                 "out/joints/child_h36m.npy", "--layout", "h36m"]) == 0
+    assert np.load("out/joints/child_h36m.npy").shape[1:] == (17, 3)
+    capsys.readouterr()
