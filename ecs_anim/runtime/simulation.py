@@ -121,8 +121,9 @@ class Simulation(SteeringCalls):
         self.renderer: object | None = None
         self.tables: tuple[Any, ...] = ()  # props for a renderer (scenario ``tables``); never simulated
         self.messages: list[str] = []
-        #: The constraints the last feasibility estimate found out of reach (ids).
-        self._unreachable: frozenset[int] = frozenset()
+        #: The constraints the last feasibility estimate found out of reach (ids; None: none
+        #: made yet).
+        self._unreachable: frozenset[int] | None = None
         #: Triggers, moving targets and the last tick's events (:mod:`ecs_anim.runtime.events`).
         self.reactions = Reactions()
         #: The recorders collecting each tick (:meth:`record`), in the order made.
@@ -731,11 +732,18 @@ class Simulation(SteeringCalls):
         self._unreachable = frozenset(f.uid for f in estimates if not f.reachable)
         return estimates
 
+    def unreachable(self) -> frozenset[int]:
+        """The ids of the constraints the last estimate (:meth:`feasibility`, made now if none
+        was) found out of reach: what the viewer marks."""
+        if self._unreachable is None:
+            self.feasibility()
+        return self._unreachable or frozenset()
+
     def say_unreachable(self) -> None:
         """Estimate again (:meth:`feasibility`) and warn (:meth:`warn`) once for each constraint
         that is out of reach now and was not at the last estimate: after a body change
         (:meth:`set_body`) or a target a trigger moves (``MoveTarget``)."""
-        known = self._unreachable
+        known = self._unreachable or frozenset()
         for estimate in self.feasibility():
             if not estimate.reachable and estimate.uid not in known:
                 self.warn(estimate.line)

@@ -166,3 +166,12 @@ def restricted_areas(sim: Simulation) -> RestrictedAreas:
                            anchor[b] + np.asarray(table.area_low, np.float64)[b],
                            anchor[b] + np.asarray(table.area_high, np.float64)[b],
                            anchor[h], np.asarray(table.area_normal, np.float64)[h])
+
+
+def unreachable_uids(sim: Simulation) -> frozenset[int]:
+    """The constraints (ids) whose bodies cannot reach their targets, by the simulation's last
+    feasibility estimate (``Simulation.unreachable``); none for a table without the full
+    columns the estimate reads."""
+    if not hasattr(sim.constraints, "clock"):
+        return frozenset()
+    return sim.unreachable()

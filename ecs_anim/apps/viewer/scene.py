@@ -23,6 +23,7 @@ from ecs_anim.apps.viewer.constraint_view import (
     constraint_marks,
     max_constraint_error_m,
     restricted_areas,
+    unreachable_uids,
 )
 from ecs_anim.core.ground import Combined, Ground, HeightGrid, Stairs
 from ecs_anim.core.morphology import centres_of_mass, leg_length
@@ -146,6 +147,27 @@ def target_instances(marks: ConstraintMarks, scale_m: float = 1.0) -> F32:
     spheres = pack_instances(marks.target, marks.target, scale_m * (0.025 + 0.025 * marks.weight), rgba)
     rods = pack_instances(marks.point, marks.target, np.full(m, 0.006 * scale_m), rgba)
     return np.concatenate([spheres, rods])
+
+
+#: A constraint whose target its body cannot reach (``Simulation.feasibility``): a dark pin
+#: standing on the target, its head this high above it (m).
+UNREACHABLE_COLOUR = (0.08, 0.08, 0.08)
+UNREACHABLE_PIN_M = 0.3
+
+
+def unreachable_instances(marks: ConstraintMarks, unreachable: frozenset[int],
+                          scale_m: float = 1.0) -> F32:
+    """A pin (a rod up from the target, a ball on top) on every drawn target its body cannot
+    reach (``unreachable``: constraint ids): (2 k, INSTANCE_FLOATS)."""
+    out = np.isin(marks.uid, np.fromiter(unreachable, np.int64, len(unreachable)))
+    k = int(out.sum())
+    if k == 0:
+        return np.zeros((0, INSTANCE_FLOATS), np.float32)
+    foot = marks.target[out]
+    head = foot + np.array([0.0, 0.0, UNREACHABLE_PIN_M * scale_m])
+    rgba = np.tile([*UNREACHABLE_COLOUR, 1.0], (k, 1))
+    return np.concatenate([pack_instances(foot, head, np.full(k, 0.008 * scale_m), rgba),
+                           pack_instances(head, head, np.full(k, 0.035 * scale_m), rgba)])
 
 
 _BOX_CORNERS = np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], dtype=np.float64)
@@ -281,7 +303,8 @@ def snapshot(sim: Simulation, colours: F64 | None = None,
         ok[hidden_rows] = False
     bodies = body_instances(positions[ok], st.lengths[ok], colours[ok])
     marks = constraint_marks(sim)
-    targets = target_instances(marks)
+    targets = np.concatenate([target_instances(marks),
+                              unreachable_instances(marks, unreachable_uids(sim))])
     if ok.any():
         com = centres_of_mass(positions[ok], st.segment_mass_kg[ok], st.segment_com_fraction[ok])
         com_rows = com_instances(com, 0.06 * leg_length(st.lengths[ok]))

@@ -26,6 +26,8 @@ from ecs_anim.apps.viewer.png import SIGNATURE, encode_png
 from ecs_anim.apps.viewer.scene import (
     BODY_CAPSULES,
     INSTANCE_FLOATS,
+    UNREACHABLE_COLOUR,
+    UNREACHABLE_PIN_M,
     ground_mesh,
     priority_colours,
     snapshot,
@@ -132,8 +134,15 @@ def test_snapshot_has_one_capsule_row_per_body_part():
         assert frame.bodies.shape == (n * len(BODY_CAPSULES), INSTANCE_FLOATS)
         assert frame.bodies.dtype == np.float32 and np.all(np.isfinite(frame.bodies))
         assert frame.com.shape == (n, INSTANCE_FLOATS)
-        # the 3 constraints are active at t = 1.3 s: a sphere and a rod each
-        assert frame.targets.shape == (6, INSTANCE_FLOATS)
+        # the 3 constraints are active at t = 1.3 s: a sphere and a rod each, and a pin (a rod
+        # and a ball) on the 2 their bodies cannot reach (elbow_out, pat_head)
+        assert frame.targets.shape == (6 + 4, INSTANCE_FLOATS)
+        assert {sim.constraints.names[int(k)] for k in
+                sim.constraints.rows_of(np.array(sorted(sim.unreachable())))} == {
+                    "elbow_out", "pat_head"}
+        pins = frame.targets[6:]
+        assert np.allclose(pins[:, 7:10], UNREACHABLE_COLOUR)
+        assert np.allclose(pins[:2, 5] - pins[:2, 2], UNREACHABLE_PIN_M)  # rods stand up
         assert frame.joints.shape == (n, N_JOINTS, 3)
         assert frame.time_s == pytest.approx(39 / 30)
         # the status line's figure: the largest error (m) of the fully active constraints
