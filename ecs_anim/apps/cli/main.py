@@ -287,8 +287,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="joint positions (.npy, .npz, .json, .csv): the layout of the joints "
                    "(default: detected from the joint count or names; 22 joints need it)")
     p.add_argument("--fps", type=positive_float, metavar="F",
-                   help="joint positions: frames per second (default: the file's, else the "
-                   "layout's dataset rate: humanml3d 20, kit 12.5)")
+                   help="frames per second where a file may give none: joint positions "
+                   "(default: the file's, else the layout's dataset rate: humanml3d 20, kit "
+                   "12.5), .amc and AMASS files (docs/import.md)")
     p.add_argument("--lowpass", type=positive_float, metavar="HZ",
                    help="joint positions: smooth jitter with a zero-lag low-pass at this "
                    "cut-off (default: off, for mocap-grade data; 6 for a video estimator's)")
