@@ -5,11 +5,12 @@ the commands of docs/import.md's and docs/export.md's positions sections run as 
 from __future__ import annotations
 
 import json
+import shlex
 
 import numpy as np
 import pytest
 
-from conftest import MOCAP_DIR, require_mocap
+from conftest import MOCAP_DIR, REPO, require_mocap
 from ecs_anim.apps.cli.main import main
 from ecs_anim.io.export import export_motion
 from ecs_anim.io.importing import import_bvh
@@ -84,17 +85,40 @@ def test_an_export_npz_names_its_layout(tmp_path, capsys):
     assert "layout smplx22 (named in the file)" in line and "fps from the file" in line
 
 
+def doc_commands(page: str, heading: str) -> list[list[str]]:
+    """The ``.venv/bin/ecs-anim`` command lines under ``heading`` of ``docs/<page>``, as argv,
+    up to the next heading of that level."""
+    text = (REPO / "docs" / page).read_text(encoding="utf-8")
+    start = text.index(f"\n{heading}\n")
+    level = heading.split(" ")[0]
+    end = text.find(f"\n{level} ", start + 1)
+    section = text[start:end if end > 0 else len(text)]
+    return [shlex.split(line.strip())[1:] for line in section.splitlines()
+            if line.strip().startswith(".venv/bin/ecs-anim ")]
+
+
 def test_docs_positions_commands_run(tmp_path, capsys, monkeypatch):
-    """docs/import.md's and docs/export.md's joint-positions examples, in a scratch folder."""
+    """docs/import.md's joint-positions commands, then docs/export.md's and docs/cli.md's
+    export --layout examples on their result, as written (from a scratch folder, with
+    ../shared/mocap where the tests find it)."""
     require_mocap()
     monkeypatch.chdir(tmp_path)
-    src = str(MOCAP_DIR / "bandai_walk.bvh")
-    assert main(["import", src, "-o", "out/joints"]) == 0
-    assert main(["export", "out/joints/bandai_walk.nmo", "-o", "out/joints/walk.npy",
-                 "--layout", "humanml3d"]) == 0
-    assert main(["import", "out/joints/walk.npy", "--layout", "humanml3d", "--fps", "30", "-o",
-                 "out/joints/back"]) == 0
-    assert main(["export", "out/joints/back/walk.nmo", "--morphology", "child", "-o",
-                 "out/joints/child_h36m.npy", "--layout", "h36m"]) == 0
+    commands = (doc_commands("import.md", "## Joint positions: datasets and pose estimators")
+                + doc_commands("export.md", "## Joint positions in a research layout: "
+                                            "`export --layout`")
+                + [c for c in doc_commands("cli.md", "## export") if "--layout" in c])
+    assert len(commands) == 5, commands
+    for argv in commands:
+        argv = [str(MOCAP_DIR / a.removeprefix("../shared/mocap/"))
+                if a.startswith("../shared/mocap/") else a for a in argv]
+        assert main([*argv, "--force"]) == 0, argv
+    line = capsys.readouterr().out.splitlines()[2]
+    assert "layout humanml3d (given with --layout)" in line and "fps from --fps" in line
     assert np.load("out/joints/child_h36m.npy").shape[1:] == (17, 3)
-    capsys.readouterr()
+
+
+def test_every_positions_flag_is_in_the_cli_docs():
+    text = (REPO / "docs" / "cli.md").read_text(encoding="utf-8")
+    for flag in ("--layout NAME", "--fps F", "--lowpass HZ"):
+        assert f"| `{flag}` |" in text, flag
+    assert "-o OUT.bvh|OUT.npz|OUT.glb|OUT.npy [--layout NAME]" in text
