@@ -34,9 +34,11 @@ def load_motion(r: YamlReader, node: Node, where: str, base_dir: Path,
 
 def read_motion(r: Fails, node: Node | None, where: str, path: Path,
                  rel: str) -> NormalizedMotion:
+    from ecs_anim.io.acclaim import import_amc
     from ecs_anim.io.c3d.importing import import_c3d
     from ecs_anim.io.fbx import import_fbx
     from ecs_anim.io.importing import import_bvh
+    from ecs_anim.io.trc import import_trc
 
     try:
         if path.suffix.lower() == ".nmo":
@@ -47,9 +49,14 @@ def read_motion(r: Fails, node: Node | None, where: str, path: Path,
             return import_c3d(path)
         if path.suffix.lower() == ".fbx":
             return import_fbx(path)  # its first take
+        if path.suffix.lower() == ".trc":
+            return import_trc(path)
+        if path.suffix.lower() == ".amc":
+            return import_amc(path)  # the .asf beside it, at CMU's 120 fps
     except EcsAnimError as exc:
         raise r.fail(node, where, f"cannot load motion: {exc}") from None
-    raise r.fail(node, where, f"expected a .bvh, .c3d, .fbx or .nmo file, found {rel!r}")
+    raise r.fail(node, where, f"expected a .bvh, .c3d, .fbx, .trc, .amc or .nmo file, found "
+                              f"{rel!r}")
 
 
 def fill_absent(r: YamlReader, motions: dict[str, NormalizedMotion], name: str, node: Node) -> None:

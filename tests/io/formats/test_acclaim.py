@@ -18,6 +18,7 @@ from ecs_anim.core.normalized import decode
 from ecs_anim.io.acclaim import import_amc, read_amc, read_asf
 from ecs_anim.io.bvh import BvhMotion, forward_kinematics, read_bvh
 from ecs_anim.io.importing import import_bvh
+from ecs_anim.scenario import load_scenario
 from support.bvh_reference import euler_angles, euler_matrix
 
 MM = 1e-3
@@ -209,3 +210,14 @@ def test_a_folder_with_no_skeleton_is_one_line_naming_the_flag(tmp_path):
     amc.write_text(":FULLY-SPECIFIED\n:DEGREES\n1\nroot 0 0 0 0 0 0\n")
     with pytest.raises(EcsAnimError, match=r"looked for 07_01\.asf and 07\.asf .*--body-model"):
         import_amc(amc)
+
+
+def test_a_scenario_plays_an_amc_named_under_motions(tmp_path):
+    require_mocap()
+    write_acclaim(read_bvh(MOCAP_DIR / "cmu_01_01_playground_jumps.bvh"), tmp_path / "01.asf",
+                  tmp_path / "01_02.amc", 0.45, scale=1.0)
+    (tmp_path / "s.yaml").write_text(
+        "duration_s: 1\nmotions:\n  jumps: 01_02.amc\ncharacters:\n"
+        "  - {name: b, morphology: {stature_m: 1.8}, motion: jumps}\n")
+    jumps = load_scenario(tmp_path / "s.yaml").motions["jumps"]
+    assert jumps.info["acclaim"]["skeleton"] == str(tmp_path / "01.asf") and jumps.fps == 120.0

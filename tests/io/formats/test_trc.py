@@ -18,6 +18,7 @@ from ecs_anim.core.normalized import decode
 from ecs_anim.io.c3d.importing import import_c3d
 from ecs_anim.io.c3d.reading import C3dMarkers, read_c3d
 from ecs_anim.io.trc import import_trc, read_trc
+from ecs_anim.scenario import load_scenario
 
 MM = 1e-3
 #: Millimetres per unit of POINT:UNITS.
@@ -114,3 +115,13 @@ def test_a_malformed_trc_is_refused_naming_file_and_line(text, expected, tmp_pat
     path.write_text(text)
     with pytest.raises(InputError, match=expected):
         read_trc(path)
+
+
+
+def test_a_scenario_plays_a_trc_named_under_motions(tmp_path):
+    require_mocap()
+    write_trc(tmp_path / "gait.trc", read_c3d(MOCAP_DIR / "varied/mac_helenhayes_events_vjc_60hz.c3d"))
+    (tmp_path / "s.yaml").write_text(
+        "duration_s: 1\nmotions:\n  gait: gait.trc\ncharacters:\n"
+        "  - {name: a, morphology: {stature_m: 1.2}, motion: gait}\n")
+    assert load_scenario(tmp_path / "s.yaml").motions["gait"].info["format_in"] == "trc"
