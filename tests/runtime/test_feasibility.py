@@ -1,0 +1,139 @@
+"""The feasibility pass (issue 32, item 6): before a run, and when a body or a target changes,
+each constraint is said in one line to reach its target or not, by how much
+(``sim.feasibility()``, ``run``'s output and report, the viewer's pins)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import MOTIONS_DIR, SCENARIOS_DIR
+from ecs_anim.apps.cli.main import main
+from ecs_anim.core.body_points import GROUP_INDEX, body_point
+from ecs_anim.core.morphology import Morphology
+from ecs_anim.core.skeleton import LENGTH_INDEX as L
+from ecs_anim.runtime.feasibility import SHORT_TOLERANCE_M, chain_reach
+from ecs_anim.scenario import build_simulation, load_scenario
+
+#: A 1.0 m kicker kicks at a 1.75 m defender 1.5 m away: its 0.48 m legs cannot reach.
+FAR_KICK = f"""\
+duration_s: 1.5
+fps: 30
+motions:
+  guard: {MOTIONS_DIR / "guard.bvh"}
+  kick: {MOTIONS_DIR / "kick.bvh"}
+characters:
+  - name: kicker
+    morphology: {{stature_m: 1.0}}
+    motion: guard
+    constraints:
+      - name: kick
+        point: ankle_r
+        chain: [leg_r]
+        target: {{character: defender, point: spine_upper, fraction: 0.0}}
+        activation: {{motion: kick, start_s: 0.45, stop_s: 0.95, ease_in_s: 0.2, ease_out_s: 0.2}}
+  - name: defender
+    morphology: adult_male
+    position_m: [1.5, 0.0]
+    heading_deg: 180
+    motion: guard
+triggers:
+  - name: go
+    when: {{at_s: 0.2}}
+    then: [{{play: kicker.kick}}]
+"""
+
+
+def far_kick(tmp_path: Path) -> Path:
+    path = tmp_path / "far_kick.yaml"
+    path.write_text(FAR_KICK)
+    return path
+
+
+def test_run_says_an_unreachable_kick_before_the_first_tick(tmp_path: Path, capsys) -> None:
+    report = tmp_path / "report.json"
+    assert main(["run", str(far_kick(tmp_path)), "--report", str(report)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    first, summary, table = out[0], out[1], out[2]
+    assert first.startswith("feasibility: kick of kicker (1.00 m, leg_r 0.48 m) cannot reach "
+                            "defender's spine_upper: "), first
+    short_m = float(first.split(": ")[-1].removesuffix(" m short"))
+    assert 0.5 < short_m < 1.0
+    assert summary == "feasibility: 0 of 1 constraints can reach their targets"
+    assert table.startswith(f"{far_kick(tmp_path)}: 45 ticks")  # the run's table comes after
+    written = json.loads(report.read_text())["feasibility"]
+    assert len(written) == 1 and written[0]["line"] == first.removeprefix("feasibility: ")
+    assert written[0]["reachable"] is False and written[0]["short_m"] == pytest.approx(short_m,
+                                                                                      abs=0.006)
+
+
+def test_an_estimated_shortfall_is_no_more_than_the_run_shows(tmp_path: Path) -> None:
+    """The estimate errs on the side of reach: the kick, solved, stays at least that far off."""
+    with build_simulation(load_scenario(far_kick(tmp_path))) as sim:
+        (estimate,) = sim.feasibility()
+        table, closest = sim.constraints, np.inf
+        for _ in range(45):
+            sim.step()
+            if table.weight[0] >= 1.0:
+                closest = min(closest, float(table.error[0]))
+    assert estimate.short_m - SHORT_TOLERANCE_M <= closest < estimate.short_m + 0.15
+
+
+def test_the_shipped_fight_has_no_false_alarm() -> None:
+    """Every kick, ward-off and punch of the fight is within reach (its kicks reach the chest's
+    surface within 3 mm in the run); the dodges' keep-out areas are not a question of reach."""
+    with build_simulation(load_scenario(SCENARIOS_DIR / "fight_training.yaml")) as sim:
+        estimates = sim.feasibility()
+    assert len(estimates) == 16
+    assert all(e.reachable for e in estimates), [e.line for e in estimates if not e.reachable]
+    assert sorted(e.constraint for e in estimates if not e.checked) == ["lean_back"] * 4
+    kick_4 = next(e for e in estimates if e.character == "kicker_4" and e.constraint == "kick_torso")
+    assert kick_4.line == ("kick_torso of kicker_4 (1.65 m, leg_r 0.70 m) can reach defender_4's "
+                           f"spine_upper: {-kick_4.short_m:.2f} m to spare")
+
+
+@pytest.mark.parametrize("name, out_of_reach", [
+    ("grasp_com.yaml", {"out_of_reach.grasp"}),
+    ("reach_and_touch.yaml", {"reacher.elbow_out", "friend.pat_head"}),
+    ("wrist_elbow_priority.yaml", {"elbow_unreachable.elbow"}),
+    ("wrists_above_table.yaml", set()),
+])
+def test_the_shipped_scenarios_say_what_their_comments_say(name: str, out_of_reach: set[str]) -> None:
+    """The constraints each scenario's comment calls out of reach, and only those."""
+    with build_simulation(load_scenario(SCENARIOS_DIR / name)) as sim:
+        said = {f"{e.character}.{e.constraint}" for e in sim.feasibility() if not e.reachable}
+        assert said == out_of_reach
+        assert sim.unreachable() == {e.uid for e in sim.feasibility() if not e.reachable}
+
+
+def test_a_body_change_that_puts_a_target_out_of_reach_warns_once() -> None:
+    with build_simulation(load_scenario(SCENARIOS_DIR / "fight_training.yaml")) as sim:
+        sim.feasibility()
+        kicker = sim.entity("kicker_1")
+        sim.set_body(kicker, Morphology.from_stature(1.0))
+        sim.set_body(kicker, Morphology.from_stature(0.98))  # still out: said once
+        said = [m for m in sim.messages if "kick_torso of kicker_1" in m]
+        assert len(said) == 1 and "(1.00 m, leg_r 0.48 m) cannot reach defender_1's spine_upper" \
+            in said[0], sim.messages
+        assert sim.constraint_index(kicker, "kick_torso") in sim.unreachable()
+
+
+def test_chain_reach_is_the_bones_from_the_anchor() -> None:
+    lengths = Morphology.preset("adult_male").lengths
+    points = [("ankle_r", ("leg_r",)), ("wrist_l", ("arm_l",)), ("wrist_l", ("arm_l", "trunk")),
+              ("head", ("head",)), ("forearm_r", ("arm_r",))]
+    bodies = [body_point(name) for name, _ in points]
+    masks = np.array([sum(1 << GROUP_INDEX[g] for g in chain) for _, chain in points])
+    reach, _ = chain_reach(np.tile(lengths, (len(points), 1)),
+                           np.array([b.segment for b in bodies]),
+                           np.array([b.fraction for b in bodies]),
+                           np.array([b.offset_m for b in bodies]), masks)
+    arm = lengths[L["upper_arm_l"]] + lengths[L["forearm_l"]]
+    spine = lengths[L["spine_lower"]] + lengths[L["spine_middle"]] + lengths[L["spine_upper"]]
+    np.testing.assert_allclose(reach, [
+        lengths[L["thigh_r"]] + lengths[L["shank_r"]], arm,
+        spine + lengths[L["clavicle_l"]] + arm, lengths[L["neck"]],
+        lengths[L["upper_arm_r"]] + 0.5 * lengths[L["forearm_r"]]], rtol=0, atol=1e-12)
