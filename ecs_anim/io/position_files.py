@@ -256,12 +256,12 @@ def _read_csv(path: Path) -> PositionFile:
         xyz = [header.index(a) for a in "xyz"]
         keys = [(int(number(r, frame_col, k + 2)), int(number(r, joint_col, k + 2)))
                 for k, r in enumerate(rows)]
-        frames_seen = sorted({f for f, _ in keys})
+        frames_seen = sorted({frame for frame, _ in keys})
         n_joints = max(j for _, j in keys) + 1 if keys else 0
         array = np.full((len(frames_seen), n_joints, 3), np.nan)
-        where = {f: i for i, f in enumerate(frames_seen)}
-        for k, ((f, j), row) in enumerate(zip(keys, rows, strict=True)):
-            array[where[f], j] = [number(row, c, k + 2) for c in xyz]
+        where = {frame: i for i, frame in enumerate(frames_seen)}
+        for k, ((frame, joint), row) in enumerate(zip(keys, rows, strict=True)):
+            array[where[frame], joint] = [number(row, c, k + 2) for c in xyz]
         form = "CSV, one landmark a row"
     else:
         triples = [k for k in range(len(header) - 2)

@@ -181,7 +181,7 @@ def fill_missing(raw: F64, layout: PositionLayout) -> tuple[F64, int, set[str]]:
     filled in from proportions (:data:`FILLABLE`).
 
     ``raw`` (n_frames, n_joints, 3)."""
-    seen = np.isfinite(raw).all(axis=-1)  # (n_frames, n_joints)
+    seen: NDArray[np.bool_] = np.asarray(np.isfinite(raw).all(axis=-1))  # (n_frames, n_joints)
     never = {layout.joints[k] for k in np.flatnonzero(~seen.any(axis=0))}
     absent = {j for j, sources in layout.canonical.items() if never & set(sources)}
     lost = [j for j in absent if j not in FILLABLE]
@@ -195,7 +195,8 @@ def fill_missing(raw: F64, layout: PositionLayout) -> tuple[F64, int, set[str]]:
         good = seen[:, k]
         for a in range(3):
             out[:, k, a] = np.interp(frames, frames[good], raw[good, k, a])
-    return out, int((~seen[:, sorted(layout.index(j) for j in set(layout.joints) - never)]).sum()), absent
+    present = [k for k, joint in enumerate(layout.joints) if joint not in never]
+    return out, int((~seen[:, present]).sum()), absent
 
 
 def canonical_from_layout(positions: F64, layout: PositionLayout, absent: set[str]) -> F64:
