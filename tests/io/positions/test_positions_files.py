@@ -12,9 +12,11 @@ import pytest
 
 from conftest import MOCAP_DIR, REPO, require_mocap
 from ecs_anim.apps.cli.main import main
+from ecs_anim.core.errors import EcsAnimError
 from ecs_anim.io.export import export_motion
 from ecs_anim.io.importing import import_bvh
 from ecs_anim.io.position_layouts import MEDIAPIPE33
+from ecs_anim.io.positions import PositionOptions, import_positions
 
 BAD = {
     "shape.npy": lambda p: np.save(p, np.zeros((10, 22, 2))),
@@ -122,3 +124,56 @@ def test_every_positions_flag_is_in_the_cli_docs():
     for flag in ("--layout NAME", "--fps F", "--lowpass HZ"):
         assert f"| `{flag}` |" in text, flag
     assert "-o OUT.bvh|OUT.npz|OUT.glb|OUT.npy [--layout NAME]" in text
+
+
+def exported(tmp_path, layout):
+    """bandai_walk's BVH import as ``layout``'s joints, in a .npy."""
+    require_mocap()
+    path = tmp_path / f"{layout}.npy"
+    export_motion(import_bvh(MOCAP_DIR / "bandai_walk.bvh"), "source", path, layout=layout)
+    return path
+
+
+@pytest.mark.parametrize("layout", ["smpl24", "kit", "h36m", "coco17", "mediapipe33"])
+def test_the_layout_is_detected_without_a_flag(layout, tmp_path, capsys):
+    path = exported(tmp_path, layout)
+    assert main(["import", str(path), "-o", str(tmp_path / "out"), "--fps", "30"]) == 0
+    assert f"layout {layout} (detected: " in capsys.readouterr().out
+
+
+def test_missing_samples_are_interpolated_and_absent_end_parts_filled(tmp_path):
+    path = exported(tmp_path, "mediapipe33")
+    joints = np.load(path).astype(np.float64)
+    whole = import_positions(path, PositionOptions(fps=30))
+    gappy = joints.copy()
+    gappy[40:44, MEDIAPIPE33.index("left_knee")] = np.nan  # a 4-frame gap
+    gappy[:, [MEDIAPIPE33.index("left_foot_index"), MEDIAPIPE33.index("right_foot_index")]] = np.nan
+    np.save(tmp_path / "gappy.npy", gappy)
+    got = import_positions(tmp_path / "gappy.npy", PositionOptions(fps=30))
+    assert got.info["positions"]["samples_filled"] == 4
+    assert got.info["positions"]["absent_joints"] == ["toe_l", "toe_r"]
+    assert {"toe_l", "toe_r"} <= set(got.info["filled_in"])
+    assert got.n_frames == whole.n_frames
+    knee_less = joints.copy()
+    knee_less[:, MEDIAPIPE33.index("left_knee")] = np.nan
+    np.save(tmp_path / "knee_less.npy", knee_less)
+    with pytest.raises(EcsAnimError, match=r"knee_less.npy: joint\(s\) left_knee missing \(NaN\) "
+                                        r"in every frame: knee_l cannot be placed"):
+        import_positions(tmp_path / "knee_less.npy", PositionOptions(fps=30))
+
+
+@pytest.mark.parametrize("layout", ["mediapipe33", "h36m"])
+def test_a_tumbling_body_is_refused_in_one_line_and_imported_with_up(layout, tmp_path, capsys):
+    """The video dance of varied2 (MediaPipe's estimate, the body tumbling), as joints."""
+    require_mocap()
+    motion = import_bvh(MOCAP_DIR / "varied2" / "mediapipe_16joints_notoes_dance_30fps.bvh")
+    path = tmp_path / f"dance_{layout}.npy"
+    export_motion(motion, "source", path, layout=layout)
+    assert main(["import", str(path), "-o", str(tmp_path / "out"), "--fps", "30"]) == 1
+    err = capsys.readouterr().err.splitlines()[0]
+    assert "the head is above the feet along no axis in most frames" in err and "--up" in err
+    up = {"mediapipe33": "-y", "h36m": "z"}[layout]  # the axis the export wrote our Z up along
+    assert main(["import", str(path), "-o", str(tmp_path / "out"), "--fps", "30", "--up", up]) == 0
+    line = capsys.readouterr().out
+    assert "up (given with --up)" in line
+    assert "treadmill" not in line  # no root motion invented for a tumbling dance
