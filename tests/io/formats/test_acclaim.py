@@ -120,7 +120,7 @@ def write_acclaim(motion: BvhMotion, asf: Path, amc: Path, length_factor: float 
     amc.write_text("\n".join(lines) + "\n")
 
 
-def _joints(motion) -> np.ndarray:  # type: ignore[no-untyped-def]
+def _joints(motion) -> np.ndarray:
     """The motion's joints on its source body (F, J, 3), metres."""
     return decode(motion.poses, motion.source_morphology.lengths, use_stretch=True).positions
 

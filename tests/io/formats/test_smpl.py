@@ -8,6 +8,7 @@ and the key.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -106,17 +107,17 @@ def forward_kinematics(model: Path, motion: Path) -> np.ndarray:
 
 
 def write_motion(path: Path, n_frames: int = 180, n_joints: int = 24, n_betas: int = 10,
-                 fps: float = 60.0, **replace: object) -> Path:
+                 fps: float = 60.0, **replace: np.ndarray | None) -> Path:
     """An AMASS .npz of :func:`walk_poses` (keys replaced by ``replace``)."""
     poses, trans = walk_poses(n_frames, n_joints, fps)
     betas = np.random.default_rng(5).normal(0.0, 1.0, n_betas)
-    keys = {"poses": poses, "trans": trans, "betas": betas, "mocap_framerate": np.array(fps),
-            "gender": np.array("neutral")} | replace
+    keys: dict[str, Any] = {"poses": poses, "trans": trans, "betas": betas, "mocap_framerate": np.array(fps),
+                            "gender": np.array("neutral")} | replace
     np.savez(path, **{k: v for k, v in keys.items() if v is not None})
     return path
 
 
-def _errors(motion, reference: np.ndarray) -> dict[str, float]:  # type: ignore[no-untyped-def]
+def _errors(motion, reference: np.ndarray) -> dict[str, float]:
     """Each measured joint's worst distance (m) from the reference joint it is measured from."""
     joints = decode(motion.poses, motion.source_morphology.lengths, use_stretch=True).positions
     return {j: float(np.linalg.norm(joints[:, JOINT_INDEX[j]] - reference[:, i], axis=-1).max())

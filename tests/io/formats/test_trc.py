@@ -53,7 +53,7 @@ def write_trc(path: Path, raw: C3dMarkers, turn: np.ndarray | None = None) -> Pa
     return path
 
 
-def _joints(motion) -> np.ndarray:  # type: ignore[no-untyped-def]
+def _joints(motion) -> np.ndarray:
     """The motion's joints on its source body (F, J, 3), metres."""
     return decode(motion.poses, motion.source_morphology.lengths, use_stretch=True).positions
 
