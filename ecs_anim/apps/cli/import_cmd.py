@@ -35,6 +35,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     from ecs_anim.io.c3d.importing import import_c3d
     from ecs_anim.io.fbx import import_fbx
     from ecs_anim.io.importing import import_bvh
+    from ecs_anim.io.opensim_mot import refuse_mot
     from ecs_anim.io.positions import PositionOptions, import_positions
     from ecs_anim.io.smpl import import_amass, is_amass
     from ecs_anim.io.trc import import_trc
@@ -94,6 +95,8 @@ def cmd_import(args: argparse.Namespace) -> int:
             if src.is_dir():
                 raise EcsAnimError(f"{src}: a folder; give the .bvh, .c3d or .fbx files in it "
                                    f"(e.g. {src}/*.bvh)")
+            if suffix in (".mot", ".sto"):
+                raise refuse_mot(src)
             if suffix == ".asf":
                 raise EcsAnimError(f"{src}: an ASF holds a skeleton only; import its .amc "
                                    "motions (the .asf beside them is found, or give it with "
