@@ -39,10 +39,12 @@ def _fixed_axes_angles(names: tuple[str, ...], matrix: np.ndarray) -> np.ndarray
 
 
 def write_acclaim(motion: BvhMotion, asf: Path, amc: Path, length_factor: float = 1.0,
-                  radians: bool = False, seed: int = 1, scale: float | None = None) -> None:
-    """``motion`` as an ASF skeleton and AMC motion. A BVH joint with one child is a bone of
-    its name from it to the child (turning as the joint does); one with several children (or
-    none) a bone of length 0 of its name, with a bone ``<joint>-<child>`` to each child that
+                  radians: bool = False, seed: int = 1, scale: float | None = None,
+                  names: dict[str, str] | None = None) -> None:
+    """``motion`` as an ASF skeleton and AMC motion. A BVH joint whose children all sit at one
+    place is a bone of its name (or ``names[name]``) from it to there (turning as the joint
+    does), its children's bones hanging at its end, as CMU lays its skeletons out; one whose
+    children sit apart is a bone of length 0, with a bone ``<joint>-<child>`` to each child that
     does not turn. Every bone gets a random ``axis`` (its AMC values are about that frame) and a
     dof order from :data:`DOF_ORDERS`; ``length_factor`` is the ASF's ``:units length``, by which
     lengths are multiplied (``scale`` instead, where given: CMU's BVH numbers are its ASF's)."""
@@ -77,11 +79,13 @@ def write_acclaim(motion: BvhMotion, asf: Path, amc: Path, length_factor: float 
 
     def bone_for(joint: int, parent: str) -> None:
         kids = sk.children(joint)
-        name = sk.joints[joint].name
-        if len(kids) == 1:
+        name = (names or {}).get(sk.joints[joint].name, sk.joints[joint].name)
+        ends = {tuple(sk.joints[k].offset) for k in kids}
+        if len(ends) == 1:
             add(name, parent, sk.joints[kids[0]].offset, joint)
-            if not sk.joints[kids[0]].is_end_site:
-                bone_for(kids[0], name)
+            for kid in kids:
+                if not sk.joints[kid].is_end_site:
+                    bone_for(kid, name)
             return
         add(name, parent, np.zeros(3), joint)
         for kid in kids:
@@ -118,6 +122,35 @@ def write_acclaim(motion: BvhMotion, asf: Path, amc: Path, length_factor: float 
         lines.append("root " + " ".join(f"{v:.10f}" for v in root[f]))
         lines += [f"{name} " + " ".join(f"{v:.10f}" for v in v_[f]) for name, v_ in values.items()]
     amc.write_text("\n".join(lines) + "\n")
+
+
+#: CMU's own ASF bone names of the joints of its MotionBuilder conversions (the bone that starts
+#: at each: ``lfemur`` at the hip), so the written ASF is laid out and named as CMU's 01.asf.
+CMU_BONES = {
+    "LowerBack": "lowerback", "Spine": "upperback", "Spine1": "thorax", "Neck": "lowerneck",
+    "Neck1": "upperneck", "Head": "head",
+    **{f"{s}{mb}": f"{s.lower()}{cmu}" for s, side in (("L", "Left"), ("R", "Right"))
+       for mb, cmu in (("HipJoint", "hipjoint"), ("Thumb", "thumb"), ("Fingers", "fingers"))},
+    **{f"{side}{mb}": f"{side[0].lower()}{cmu}" for side in ("Left", "Right")
+       for mb, cmu in (("UpLeg", "femur"), ("Leg", "tibia"), ("Foot", "foot"), ("ToeBase", "toes"),
+                       ("Shoulder", "clavicle"), ("Arm", "humerus"), ("ForeArm", "radius"),
+                       ("Hand", "wrist"), ("FingerBase", "hand"))},
+}
+
+
+def test_cmu_s_own_layout_and_names_import_with_no_flag_like_its_bvh(tmp_path):
+    require_mocap()
+    bvh = MOCAP_DIR / "cmu_01_01_playground_jumps.bvh"
+    source = read_bvh(bvh)
+    asf, amc = tmp_path / "01.asf", tmp_path / "01_01.amc"
+    write_acclaim(source, asf, amc, 0.45, scale=1.0, names=CMU_BONES)
+    assert "name lfemur" in asf.read_text() and "lhipjoint lfemur" in asf.read_text()
+    from_bvh, from_amc = import_bvh(bvh), import_amc(amc)
+    assert from_amc.info["joint_map"] == "structure (no preset matched)"
+    assert from_amc.info["joints"]["hip_l"] == "lfemur" and from_amc.info["joints"]["wrist_r"] == "rwrist"
+    assert from_amc.info["filled_in"] == from_bvh.info["filled_in"]
+    error = np.linalg.norm(_joints(from_amc) - _joints(from_bvh), axis=-1)
+    assert error.max() < 1 * MM, f"{error.max() * 1e3:.4f} mm"
 
 
 def _joints(motion) -> np.ndarray:
