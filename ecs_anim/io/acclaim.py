@@ -339,7 +339,8 @@ def skeleton_for(amc: Path, asf: Path | None = None) -> Path:
     if asf is not None:
         return asf
     folder = amc.parent
-    candidates = [folder / f"{amc.stem}.asf", folder / f"{amc.stem.split('_')[0]}.asf"]
+    candidates = list(dict.fromkeys([folder / f"{amc.stem}.asf",
+                                     folder / f"{amc.stem.split('_')[0]}.asf"]))
     for candidate in candidates:
         if candidate.is_file():
             return candidate
@@ -347,9 +348,9 @@ def skeleton_for(amc: Path, asf: Path | None = None) -> Path:
     if len(others) == 1:
         return others[0]
     found = f"the folder has {len(others)} .asf files" if others else "the folder has none"
-    raise EcsAnimError(f"{amc}: no skeleton for this motion: looked for {candidates[0].name} and "
-                       f"{candidates[1].name} beside it ({found}); give it with "
-                       "--body-model SKELETON.asf")
+    raise EcsAnimError(f"{amc}: no skeleton for this motion: looked for "
+                       f"{' and '.join(c.name for c in candidates)} beside it ({found}); give it "
+                       "with --body-model SKELETON.asf")
 
 
 def import_amc(path: str | Path, asf: str | Path | None = None, map_spec: str | None = None,

@@ -254,3 +254,14 @@ def test_a_scenario_plays_an_amc_named_under_motions(tmp_path):
         "  - {name: b, morphology: {stature_m: 1.8}, motion: jumps}\n")
     jumps = load_scenario(tmp_path / "s.yaml").motions["jumps"]
     assert jumps.info["acclaim"]["skeleton"] == str(tmp_path / "01.asf") and jumps.fps == 120.0
+
+
+def test_an_asf_alone_and_a_body_model_with_nothing_to_take_it_are_one_line_each(tmp_path, capsys):
+    asf = tmp_path / "01.asf"
+    asf.write_text(":version 1.10\n")
+    assert main(["import", str(asf), "-o", str(tmp_path / "out")]) == 1
+    assert "an ASF holds a skeleton only; import its .amc motions" in capsys.readouterr().err
+    bvh = tmp_path / "x.bvh"
+    bvh.write_text("HIERARCHY\n")
+    assert main(["import", str(bvh), "--body-model", str(asf), "-o", str(tmp_path / "out")]) == 1
+    assert "--body-model is for AMASS .npz motions" in capsys.readouterr().err
