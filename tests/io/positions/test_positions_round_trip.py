@@ -19,9 +19,11 @@ from ecs_anim.io.positions import PositionOptions, import_positions
 
 CLIPS = ("bandai_walk.bvh", "bandai_run.bvh", "varied/cmu_walk_120hz_adelaide.bvh",
          "cmumax_131_02_start_walk_stop_m.bvh")
-#: Layouts with no toe joint: the toe filled in flat ahead of the ankle. Their contacts' onsets
-#: lie further from the BVH import's (measured: 1 frame on bandai_walk, 3 on the 120 Hz CMU
-#: walk, a contact missed on cmumax_131_02), so only the layouts with toes are held to a frame.
+#: Layouts with no toe joint: the toe filled in flat ahead of the ankle, rising with it, so the
+#: ball's stance after heel-off is lost and their contacts' onsets lie further from the BVH
+#: import's (measured: 1 frame on bandai_walk, 3 on the 120 Hz CMU walk, a contact missed on
+#: cmumax_131_02; within 3 frames on 7 of the 21 dev BVH files): only the layouts with toes are
+#: held to a frame.
 TOELESS = ("h36m", "coco17")
 
 
