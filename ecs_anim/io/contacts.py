@@ -42,12 +42,13 @@ class ContactThresholds:
         ``release`` times the thresholds.
     min_duration_s : shorter contacts are dropped; min_gap_s : shorter gaps are filled.
     ease_s : activation ramp added before and after each contact.
-    edge_height_m, edge_sink_mps, edge_rise_mps, edge_max_s : where a contact's touch-down and
-        lift-off lie (:func:`touch_down_to_lift_off`; for a 0.8 m leg, scaled by the body's):
-        the foot is down while its heel point or toe joint is within ``edge_height_m`` of its
-        ground, sinking slower than ``edge_sink_mps`` and rising slower than
-        ``edge_rise_mps``; each edge of a stillness contact moves at most ``edge_max_s``.
-        Those heights are first smoothed over ``edge_filter_s`` seconds (centred, no lag).
+    edge_height_m, edge_swing_share, edge_max_s : where a contact's touch-down and lift-off lie
+        (:func:`touch_down_to_lift_off`): the heel point (or the toe joint, landing on the
+        ball) has come down to within ``edge_height_m`` (for a 0.8 m leg, scaled by the body's)
+        of the lowest it comes as the foot lands; the toe joint (or the heel point, the last to
+        leave) moves horizontally faster than ``edge_swing_share`` of its swing speed. Each
+        edge of a stillness contact moves at most ``edge_max_s``. Heights and speeds are first
+        smoothed over ``edge_filter_s`` seconds (centred, no lag).
     """
 
     height_m: float = 0.05
@@ -59,16 +60,15 @@ class ContactThresholds:
     filter_s: float = 0.05
     ground_window_s: float = 1.5
     ground_radius: float = 0.15
-    edge_height_m: float = 0.015
-    edge_sink_mps: float = 0.08
-    edge_rise_mps: float = 0.4
+    edge_height_m: float = 0.0025
+    edge_swing_share: float = 0.28
     edge_max_s: float = 0.1
     edge_filter_s: float = 0.03
 
     def __post_init__(self) -> None:
         for name in ("height_m", "speed_mps", "min_duration_s", "min_gap_s", "ease_s",
                      "filter_s", "ground_window_s", "ground_radius", "edge_height_m",
-                     "edge_sink_mps", "edge_rise_mps", "edge_max_s", "edge_filter_s"):
+                     "edge_swing_share", "edge_max_s", "edge_filter_s"):
             value = getattr(self, name)
             if value is None and name == "speed_mps":
                 continue
@@ -231,17 +231,10 @@ def leg_of(positions: F64) -> float:
     return 0.5 * total
 
 
-def cycle_speed_limit(speed: F64, fps: float, leg: float) -> F64:
-    """The stillness threshold of each point at each frame, relative to its own cycle: the
-    stance is the slow phase of a stride, slow next to that stride's swing. -> (n_frames, K)
-    m/s.
-
-    ``speed`` (n_frames, K) m/s. :data:`SPEED_OF_MOTION` times the point's swing speed (its
-    fastest within :data:`STRIDE_S` seconds either side), kept within :data:`SPEED_PER_LEG`
-    legs per second, the upper bound raised for swings faster than
-    :data:`SPRINT_SWING_PER_LEG`: a sprint (swing over 15 m/s) keeps its short stances while
-    a walk keeps the walker's threshold, and a body standing or shuffling (no swing) the
-    floor's. The loop runs over offsets of the window, not frames."""
+def stride_peak(speed: F64, fps: float) -> F64:
+    """How fast each point moves when it swings: its fastest within :data:`STRIDE_S` seconds
+    either side of each frame. ``speed`` (n_frames, ...) -> (n_frames, ...). The loop runs over
+    offsets of the window, not frames."""
     n = len(speed)
     swing = speed.copy()
     reach = min(n - 1, frames_of(STRIDE_S, fps)) if n else 0
@@ -249,6 +242,20 @@ def cycle_speed_limit(speed: F64, fps: float, leg: float) -> F64:
     for offset in range(step, reach + 1, step):
         swing[offset:] = np.maximum(swing[offset:], speed[:-offset])
         swing[:-offset] = np.maximum(swing[:-offset], speed[offset:])
+    return swing
+
+
+def cycle_speed_limit(speed: F64, fps: float, leg: float) -> F64:
+    """The stillness threshold of each point at each frame, relative to its own cycle: the
+    stance is the slow phase of a stride, slow next to that stride's swing. -> (n_frames, K)
+    m/s.
+
+    ``speed`` (n_frames, K) m/s. :data:`SPEED_OF_MOTION` times the point's swing speed
+    (:func:`stride_peak`), kept within :data:`SPEED_PER_LEG` legs per second, the upper bound
+    raised for swings faster than :data:`SPRINT_SWING_PER_LEG`: a sprint (swing over 15 m/s)
+    keeps its short stances while a walk keeps the walker's threshold, and a body standing or
+    shuffling (no swing) the floor's."""
+    swing = stride_peak(speed, fps)
     upper = SPEED_PER_LEG[1] * leg + SPEED_OF_MOTION * np.maximum(swing - SPRINT_SWING_PER_LEG * leg, 0.0)
     limit: F64 = np.clip(SPEED_OF_MOTION * swing, SPEED_PER_LEG[0] * leg, upper)
     return limit
@@ -297,70 +304,128 @@ def detect_foot_contacts(positions: F64, fps: float,
 
 #: The heel point a touch-down is found on: this fraction of the ankle-to-toe vector behind the
 #: ankle joint, on the line through both (about over the heel's contact point for adult and
-#: child proportions). The foot rolls onto the heel and then about it, so that point stops
-#: sinking when the heel lands, while the ankle still sinks until the foot is flat.
+#: child proportions). The foot rolls onto the heel and then about it, so that point comes down
+#: to the ground when the heel lands, while the ankle still sinks until the foot is flat.
 HEEL_BEHIND_ANKLE = 0.25
+#: A stillness contact's frames next to it that are low (within this of the contact's lowest, m
+#: for a 0.8 m leg) stay on the ground where moving its edges would leave both feet up.
+LOW_M = 0.015
 
 
 def touch_down_to_lift_off(points: F64, planted: NDArray[np.bool_], fps: float, leg: float,
                            thresholds: ContactThresholds) -> NDArray[np.bool_]:
     """Each foot on the ground from touch-down to lift-off: its stillness contacts with their
-    edges moved to where the foot lands and leaves the ground. -> bool (n_frames, 2).
+    edges moved to where the foot lands and leaves the ground (:func:`contact_edges`): a frame
+    is on the ground where its instant lies from touch-down up to lift-off, so each edge lies
+    between the last frame off and the first on. -> bool (n_frames, 2).
 
     ``points`` (n_frames, 4, 3): ankle l, r, toe l, r; ``planted`` (n_frames, 2): the stillness
-    contacts. A point of the foot (the heel point, :data:`HEEL_BEHIND_ANKLE`, or the toe
-    joint) is *down* while it is within ``edge_height_m`` of the contact's ground (the lowest it
-    comes during the contact) and neither sinks faster than ``edge_sink_mps`` nor rises faster
-    than ``edge_rise_mps``; the foot is down while either point is. Touch-down: the heel point
-    stops sinking as the heel lands (a vertical-velocity rule like the foot velocity algorithm
-    of O'Connor et al. 2007, Gait Posture 25:469, which reads strikes off the foot centre's
-    vertical velocity; here the heel's), or the ball lands first. Lift-off: the toe joint rises
-    over ``edge_height_m`` or faster than ``edge_rise_mps`` (a threshold on the toe, as
-    Ghoussayni et al. 2004, Gait Posture 20:266, threshold its speed). Each edge moves by at
-    most ``edge_max_s``: out over down frames next to it, in over frames where heel and toe
-    both still sink (start) or both already rise (end). Stillness alone starts late at a
-    brisk walk, while the heel rolls in, and early at a slow one, while the ankle settles. A
-    moved edge never leaves both feet up where one was low (a stance foot sinking or rising
-    over uneven ground is not in the air)."""
+    contacts. A moved edge never leaves both feet up where one was low (a stance foot sinking
+    or rising over uneven ground is not in the air): there the stillness contact, extended over
+    the frames next to it where the ankle (before it) or the toe joint (after it) is within
+    :data:`LOW_M` of its lowest in the contact, stays on the ground."""
     th = thresholds
-    scale = leg / REFERENCE_LEG_M
-    ankle, toe = points[:, :2], points[:, 2:]
     n = len(points)
-    z = np.stack([(ankle - HEEL_BEHIND_ANKLE * (toe - ankle))[..., 2], toe[..., 2]])  # (2, F, 2)
-    # Zero-phase smoothing over a few hundredths of a second, whatever the rate: a marker's
-    # jitter or a one-frame step (a toe marker jumping 8 mm) is no sink or rise.
-    z = box_filter(z.transpose(1, 0, 2), _width(th.edge_filter_s, fps)).transpose(1, 0, 2)
-    vz = np.gradient(z, axis=1) * fps if n > 1 else np.zeros_like(z)
-    edge = th.edge_height_m * scale
-    sink, rise = th.edge_sink_mps * scale, th.edge_rise_mps * scale
-    settled = (vz > -sink) & (vz < rise)
-    # Heel point and toe both to sink over the next frame (the foot has not landed) / both
-    # risen over the previous one (it has left): one-sided, so that the frame where the foot
-    # arrives, and the last before it leaves, stay on the ground.
-    step = np.diff(z, axis=1) * fps
-    falling: NDArray[np.bool_] = np.zeros(planted.shape, dtype=bool)
-    leaving: NDArray[np.bool_] = np.zeros(planted.shape, dtype=bool)
-    falling[:-1] = np.all(step <= -sink, axis=0)
-    leaving[1:] = np.all(step >= rise, axis=0)
     most = round(th.edge_max_s * fps)
+    low_m = LOW_M * leg / REFERENCE_LEG_M
     out = np.zeros_like(planted)
     widest = planted.copy()  # the contacts over every low frame next to them
     nowhere = np.zeros(n, dtype=bool)
+    edges = contact_edges(points, planted, fps, leg, th)
     for side in range(planted.shape[1]):
         col = planted[:, side]
-        for a, b in true_runs(col):
-            ground = z[:, a:b + 1, side].min(axis=1, keepdims=True)  # heel point, toe
-            low = z[:, :, side] < ground + edge
-            down = (low & settled[:, :, side]).any(axis=0)
-            start = _edge_back(col, a, b, down, falling[:, side], most)
-            end = _edge_on(col, a, b, down, leaving[:, side], most)
-            out[start:end + 1, side] = True
-            ankle_low = ankle[:, side, 2] < ankle[a:b + 1, side, 2].min() + edge
+        ankle_z, toe_z = points[:, side, 2], points[:, 2 + side, 2]
+        for (a, b), (start, stop) in zip(true_runs(col), edges[side], strict=True):
+            out[int(np.ceil(start)):int(np.ceil(stop)), side] = True
+            ankle_low = ankle_z < ankle_z[a:b + 1].min() + low_m
+            toe_low = toe_z < toe_z[a:b + 1].min() + low_m
             widest[_edge_back(col, a, b, ankle_low | col, nowhere, most):
-                   _edge_on(col, a, b, low[1] | col, nowhere, most) + 1, side] = True
+                   _edge_on(col, a, b, toe_low | col, nowhere, most) + 1, side] = True
     airborne = ~out.any(axis=1)
     out[airborne] |= widest[airborne]
     return out
+
+
+def contact_edges(points: F64, planted: NDArray[np.bool_], fps: float, leg: float,
+                  thresholds: ContactThresholds) -> list[list[tuple[float, float]]]:
+    """Per foot (left, right), each stillness contact's touch-down and lift-off, in frames
+    (fractional: interpolated between frames; the lift-off is the first instant off the
+    ground, ``n_frames`` where the contact lasts to the clip's end).
+
+    ``points`` (n_frames, 4, 3): ankle l, r, toe l, r; ``planted`` (n_frames, 2): the stillness
+    contacts. Touch-down (:func:`touch_down_time`): the heel point (:data:`HEEL_BEHIND_ANKLE`)
+    comes down to within ``edge_height_m`` of the lowest it comes as the foot lands, or the toe
+    joint does first (a landing on the ball): a heel-height rule like the heel-marker height
+    methods of gait analysis, on the contact's own ground, so a step or a ramp is ground too.
+    Lift-off (:func:`lift_off_time`): the toe joint, or the heel point if it leaves later,
+    moves horizontally faster than ``edge_swing_share`` of its own swing speed
+    (:func:`stride_peak`): relative to the clip's own motion, like Ghoussayni et al.'s 2004
+    (Gait Posture 20:266) threshold on the toe's speed, so a sprint and a shuffle leave at the
+    same phase. Each edge moves by at most ``edge_max_s``, not into the next or previous
+    contact and not past the contact's other end; a contact the clip cuts (at its first or last
+    frame) keeps that edge: its touch-down or lift-off is not in the clip. Stillness alone
+    starts late at a brisk walk, while the heel rolls in, and early at a slow one, while the
+    ankle settles."""
+    th = thresholds
+    n = len(points)
+    ankle, toe = points[:, :2], points[:, 2:]
+    foot = np.stack([ankle - HEEL_BEHIND_ANKLE * (toe - ankle), toe], axis=2)  # (F, 2, 2, 3)
+    # Zero-phase smoothing over a few hundredths of a second, whatever the rate: a marker's
+    # jitter or a one-frame step (a toe marker jumping 8 mm) is no landing or leaving.
+    z = box_filter(foot[..., 2], _width(th.edge_filter_s, fps))  # (F, 2 sides, heel / toe)
+    moving = horizontal_speed(foot, fps, th.edge_filter_s)
+    leaving = th.edge_swing_share * stride_peak(moving, fps)
+    within = th.edge_height_m * leg / REFERENCE_LEG_M
+    most = round(th.edge_max_s * fps)
+    out: list[list[tuple[float, float]]] = []
+    for side in range(planted.shape[1]):
+        runs = true_runs(planted[:, side])
+        mine = []
+        for k, (a, b) in enumerate(runs):
+            before = runs[k - 1][1] + 1 if k > 0 else 0
+            after = runs[k + 1][0] - 1 if k + 1 < len(runs) else n - 1
+            start, stop = float(a), float(n)
+            if a > 0:
+                landing = slice(max(before, a - most), min(b, a + most) + 1)
+                start = landing.start + min(touch_down_time(z[landing, side, p], within)
+                                            for p in range(2))
+            if b < n - 1:
+                leave = slice(max(a, b - most), min(after, b + most) + 1)
+                stop = leave.start + max(lift_off_time(moving[leave, side, p],
+                                                       leaving[leave, side, p])
+                                         for p in range(2))
+            # Never past the contact's other end: its frames were still and low, and at least
+            # one of them stays on the ground (a foot leaving at once from a clip's first frame).
+            mine.append((min(start, float(b)), max(stop, a + 1.0)))
+        out.append(mine)
+    return out
+
+
+def touch_down_time(height: F64, within_m: float) -> float:
+    """When a point lands, in frames from the first of ``height`` (m, a landing's frames):
+    the last time before its lowest that it comes down to within ``within_m`` of that lowest,
+    interpolated between frames; 0 where it is that low from the first frame on."""
+    lowest = int(np.argmin(height))
+    level = height[lowest] + within_m
+    higher = np.flatnonzero(height[:lowest] > level)
+    if len(higher) == 0:
+        return 0.0
+    k = int(higher[-1]) + 1  # the first frame of the last stretch within reach of the lowest
+    return k - 1 + float((height[k - 1] - level) / (height[k - 1] - height[k]))
+
+
+def lift_off_time(speed_mps: F64, limit_mps: F64) -> float:
+    """When a point leaves, in frames from the first of ``speed_mps`` (a contact's last frames
+    and those after it): the first time its speed rises over ``limit_mps``, interpolated
+    between frames; the last frame where it never does, 0 where it is over it from the first."""
+    over = np.flatnonzero(speed_mps > limit_mps)
+    if len(over) == 0:
+        return float(len(speed_mps) - 1)
+    k = int(over[0])
+    if k == 0:
+        return 0.0
+    below = limit_mps[k - 1] - speed_mps[k - 1]
+    return k - 1 + float(below / (below + speed_mps[k] - limit_mps[k]))
 
 
 def _edge_back(col: NDArray[np.bool_], a: int, b: int, down: NDArray[np.bool_],
@@ -484,13 +549,20 @@ def _kind(text: str) -> str | None:
     return None
 
 
+#: Event times are written rounded (to the microsecond, or a float's precision): an event this
+#: close after a frame's instant is at that frame.
+EVENT_TIME_TOLERANCE_S = 1e-6
+
+
 def contacts_from_events(events: list[dict[str, Any]], n_frames: int, fps: float
                          ) -> NDArray[np.bool_]:
     """Per-frame contact flags (n_frames, 2) from gait events (``{"side", "kind", "time_s"}``,
-    times in the motion's seconds): a foot is down from each strike to the next foot off.
+    times in the motion's seconds): a foot is down from each strike to the next foot off, on
+    the frames whose instant lies from the strike up to the foot off (as detected contacts,
+    :func:`touch_down_to_lift_off`; a microsecond's tolerance for times written rounded).
     Before its first event a foot is in the state that event ends (down before a foot off), after
     its last in the state that event begins."""
-    t = np.arange(n_frames) / fps
+    t = np.arange(n_frames) / fps + EVENT_TIME_TOLERANCE_S
     out = np.zeros((n_frames, 2), dtype=bool)
     for side_i, side in enumerate("lr"):
         mine = sorted((e["time_s"], e["kind"]) for e in events if e.get("side") == side
@@ -499,7 +571,7 @@ def contacts_from_events(events: list[dict[str, Any]], n_frames: int, fps: float
             continue
         state = np.full(n_frames, mine[0][1] == "off")
         for time_s, kind in mine:
-            state[t >= time_s - 0.5 / fps] = kind == "strike"
+            state[t >= time_s] = kind == "strike"
         out[:, side_i] = state
     return out
 

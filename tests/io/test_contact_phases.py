@@ -39,13 +39,20 @@ GAITS = {
 #: Stance share of the gait cycle per kind. A slow walk (0.25-0.4 m/s) stands longer: the
 #: c3d.org walk's own plates measure its right stances at 85 % of the cycle (2.27 s of 2.67 s).
 DUTY = {"walk": (0.50, 0.70), "slow walk": (0.60, 0.88), "run": (0.25, 0.45)}
-#: Measured where the bound does not hold yet (open in issue 31, item 3), per foot: the
-#: uneven-terrain walks (one foot's stance cut where it steps down 16-22 cm, or lifts 5 cm while
-#: its toe skates), the treadmill run's left foot (its cluster-model toe is filled in).
+#: Measured where the bound does not hold (open in issue 31, item 3), per foot, and why:
+#: - cmudaz_03_02 (right foot): its one whole cycle (touch-down 0.008 s, stance to 0.59 s, next
+#:   touch-down 1.283 s) starts on a platform (toe 0.19-0.23 m up) and steps down off it: the
+#:   toe lands 0.25 m lower at -0.025 m, after a 0.69 s swing while the left foot alone lowers
+#:   the body (pelvis 0.998 -> 0.776 m). A stance of 46 % is that cycle's, not level walking's.
+#: - vicon_pig_noclav (left foot): its plate measures that stance at 0.9875 s (0.9225-1.91 s)
+#:   and the contact lasts 1.0 s (0.95-1.95 s), the plate's edges read 24 and 28 ms late (see
+#:   OPEN_PLATES: this file's plates lead its markers); the next touch-down (no plate under it)
+#:   is read at 2.333 s, a frame before the lab's strike (2.35 s), where the heel point has come
+#:   down to within 2.5 mm of its lowest: 72 % of a 1.383 s cycle. With the lab's strikes (0.924 s,
+#:   on its plate, and 2.35 s) the plate's stance is 69.2 % of the cycle, at the bound itself: a
+#:   frame (17 ms at 60 Hz) at either edge moves the share by 1.2 points.
 OPEN_DUTY = {
-    "varied/cmudaz_03_01_uneven_terrain.bvh": (0.52, 0.47),
-    "varied/cmudaz_03_02_uneven_terrain.bvh": (0.53, 0.37),
-    "varied/vicon_treadmill_run_clusters_240hz.c3d": (0.19, 0.33),
+    "varied/cmudaz_03_02_uneven_terrain.bvh": (0.60, 0.46),
     "varied/vicon_pig_noclav_prefix_events_60hz.c3d": (0.72, 0.68),
 }
 MAPS = {"varied/qualisys_lowercase_underscore_240hz.c3d":
@@ -53,16 +60,32 @@ MAPS = {"varied/qualisys_lowercase_underscore_240hz.c3d":
 UNITS = {"varied/fair_zup_child_walk_120hz.bvh": "inch"}
 #: Contacts against the plates' measured edges: mean and worst |error| (ms) ...
 PLATES_MEAN_MS, PLATES_WORST_MS = 10.0, 25.0
-#: ... measured where they do not hold yet (open): (mean, worst).
+#: ... measured where they do not hold (open in issue 31, item 3): (mean, worst), and why. An
+#: edge is measured halfway between the last frame off and the first on (gait_events.
+#: between_frames_agreement); the estimates between frames are given first.
+#: - c3dorg_eb015pi (a very slow walk, 0.25-0.4 m/s, 50 Hz, plates at 200 Hz): both touch-downs
+#:   are estimated 27 and 35 ms (frames: 35 and 25 ms) before the plate's load reaches 2 % of its
+#:   peak; the heel point sinks only 2-3 mm over those 35 ms (0.03-0.08 m/s) while the load
+#:   creeps at 0.7-1.6 % of its peak (at 4.525 s it leaves zero 35 ms before): a soft landing
+#:   whose 2 % instant no height or speed of these joints resolves to 10 ms. Lift-offs +5 and
+#:   -10 ms (0 and -10).
+#: - vicon_cgm24 (one plate, 100 Hz): touch-down -6 ms, lift-off +13 ms (frames: -7 and +15):
+#:   a mean of 9.5 ms before the frames, 11 ms after; each other plate file holds at these thresholds.
+#: - vicon_pig_noclav (60 Hz, no heel marker): at plate 1's touch-down the right heel point is
+#:   23 mm above its stance level and moves at 2.7 m/s (89 % of its swing speed), the lab's
+#:   own strike is 92 ms later (that edge is held 42 ms late, the most an edge moves); at plate
+#:   2's the left heel point is 6 mm up at 1.47 m/s (52 % of its swing; read 24 ms late): the
+#:   plates load while the markers' feet still swing. Lift-offs -5 and +28 ms.
 OPEN_PLATES = {
-    "c3dorg_eb015pi_gait.c3d": (22.5, 35.0),
-    "varied/codamotion_dotted_gait_2015_200hz.c3d": (20.4, 42.0),
-    "varied/mac_helenhayes_events_vjc_60hz.c3d": (16.6, 34.3),
-    "varied/qualisys_lowercase_underscore_240hz.c3d": (12.5, 16.7),
-    "varied/qualisys_pig_yup_events_100hz.c3d": (11.7, 22.0),
-    "varied/vicon_cgm24_events_jc_100hz.c3d": (24.0, 40.0),
-    "varied/vicon_pig_noclav_prefix_events_60hz.c3d": (46.2, 59.1),
+    "c3dorg_eb015pi_gait.c3d": (17.5, 35.0),
+    "varied/vicon_cgm24_events_jc_100hz.c3d": (11.0, 15.0),
+    "varied/vicon_pig_noclav_prefix_events_60hz.c3d": (21.2, 34.1),
 }
+#: Every dev file with force plates measurably loaded and unloaded.
+WITH_PLATES = sorted({*OPEN_PLATES, "varied/codamotion_dotted_gait_2015_200hz.c3d",
+                      "varied/mac_helenhayes_events_vjc_60hz.c3d",
+                      "varied/qualisys_lowercase_underscore_240hz.c3d",
+                      "varied/qualisys_pig_yup_events_100hz.c3d"})
 _CACHE: dict[str, object] = {}
 
 
@@ -137,16 +160,18 @@ def test_a_leg_that_never_moves_in_the_pelvis_frame_is_not_measured():
     assert rigid_legs(positions, pelvis2world).tolist() == [True, False]
 
 
-@pytest.mark.parametrize("name", sorted(OPEN_PLATES))
+@pytest.mark.parametrize("name", WITH_PLATES)
 def test_contacts_lie_within_10_ms_mean_and_25_ms_worst_of_the_plates(name):
     check = _motion(name).info["contacts"]["plates_check"]
     assert check["mean_ms"] is not None and check["worst_ms"] is not None, check
-    mean, worst = OPEN_PLATES[name]
-    assert check["mean_ms"] <= max(mean, PLATES_MEAN_MS) + 0.1, check
-    assert check["worst_ms"] <= max(worst, PLATES_WORST_MS) + 0.1, check
-    if check["mean_ms"] > PLATES_MEAN_MS or check["worst_ms"] > PLATES_WORST_MS:
+    if name in OPEN_PLATES:
+        # No worse than measured; the bound is still open.
+        mean, worst = OPEN_PLATES[name]
+        assert check["mean_ms"] <= max(mean, PLATES_MEAN_MS) + 0.1, check
+        assert check["worst_ms"] <= max(worst, PLATES_WORST_MS) + 0.1, check
         pytest.xfail(f"plates mean {check['mean_ms']} ms, worst {check['worst_ms']} ms "
                      "(open in issue 31, item 3)")
+    assert check["mean_ms"] <= PLATES_MEAN_MS and check["worst_ms"] <= PLATES_WORST_MS, check
 
 
 def test_a_plate_stood_on_to_the_end_is_not_checked():

@@ -259,9 +259,11 @@ def test_the_readme_contacts_examples_run(tmp_path, monkeypatch, capsys):
         assert main(command.replace("out/", f"{tmp_path}/").split()) == 0
     out = capsys.readouterr().out
     assert "(from the gait events)" in out and "event         0.924 s  L foot strike" in out
-    # --contacts events: the lab's events against its plates (its left strike made on plate 2).
+    # --contacts events: the lab's events against its plates (its left strike made on plate 2;
+    # its right strike, on frame 106, lies 92.5 ms after plate 1's touch-down: 84.1 ms from
+    # halfway between frames 105 and 106, where the plate check takes a contact's edge).
     assert "  plate 2       0.922-1.910 s  L foot (measured touch-down and lift-off)" in out
-    assert "  plates     contacts within 92.5 ms of the plates' touch-downs and lift-offs" in out
+    assert "  plates     contacts within 84.1 ms of the plates' touch-downs and lift-offs" in out
     motion = load_nmo(tmp_path / "gait" / "bandai_walk.nmo")
     assert motion.info["contacts"]["speed_threshold_mps"] == [0.3, 0.3]
     assert "treadmill" not in motion.info  # over ground: --no-treadmill changes nothing

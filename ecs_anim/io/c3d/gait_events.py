@@ -5,6 +5,9 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+from numpy.typing import NDArray
+
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.io.c3d.force_plates import plate_contacts, plate_edges
 from ecs_anim.io.c3d.reading import C3dMarkers
@@ -32,8 +35,23 @@ def check_against_plates(raw: C3dMarkers, clip: CanonicalClip, first_file_frame:
     ankles = {"l": clip.measured[J["ankle_l"]], "r": clip.measured[J["ankle_r"]]}
     edges = [edge for edge in plate_edges(measured) if ankles.get(edge["side"], False)]
     if edges and motion.planted is not None:
-        motion.info["contacts"]["plates_check"] = event_agreement(
+        motion.info["contacts"]["plates_check"] = between_frames_agreement(
             motion.planted["on_ground"], edges, motion.fps)
+
+
+def between_frames_agreement(on_ground: NDArray[np.bool_], edges: list[dict[str, Any]],
+                             fps: float) -> dict[str, Any]:
+    """:func:`~ecs_anim.io.importing.event_agreement` of per-frame contacts (n_frames, 2) with
+    measured edges (``{"side", "kind", "time_s"}``), each contact edge taken halfway between
+    the last frame on one side of it and the first on the other: a frame is on the ground
+    where its instant is, so an edge lies somewhere between those two frames, and halfway is
+    its best estimate (the first frame on, as ``event_agreement`` takes it, lies up to a frame
+    after the edge). The reported times are the edges' own."""
+    half = 0.5 / fps
+    check = event_agreement(on_ground, [{**e, "time_s": e["time_s"] + half} for e in edges], fps)
+    for e in check["events"]:
+        e["time_s"] = round(e["time_s"] - half, 4)
+    return check
 
 
 def gait_events(stored: list[tuple[str, str, float]], start_s: float) -> list[dict[str, Any]]:
