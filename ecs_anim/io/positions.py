@@ -137,16 +137,8 @@ def canonical_clip_positions(read: PositionFile, options: PositionOptions
     jitter_mm = 1000.0 * float(np.nanmedian(np.sqrt(residual_variance(world[:, measured], fps,
                                                                        probe_hz)[0] / 3)))
     if options.lowpass_hz is not None:
-        if not options.lowpass_hz < fps / 2:
-            raise EcsAnimError(f"--lowpass {options.lowpass_hz:g}: the cut-off must be under "
-                               f"half the frame rate ({fps / 2:g} Hz)")
-        # Noisy data: each bone at its robust length (the source body's), from the smoothed
-        # joints; mocap-grade data keeps its own bones, whose mean import takes as for BVH.
-        noise = bone_noise_variance(world, fps, options.lowpass_hz)
-        world = zero_lag_lowpass(world, fps, options.lowpass_hz)[0]
-        world = bones_to_lengths(world, robust_bone_lengths(world, noise))
-        if face is not None:
-            face = zero_lag_lowpass(face, fps, options.lowpass_hz)[0]
+        # Mocap-grade data (no --lowpass) keeps its own bones, whose mean import takes as BVH's.
+        world, face = denoised(world, face, fps, options.lowpass_hz)
     elif jitter_mm > JITTER_WARN_MM:
         warnings.append(f"the joints jitter by about {jitter_mm:.0f} mm (their motion above "
                         f"{probe_hz:g} Hz, median over joints and axes): a pose estimator's noise? "
@@ -172,6 +164,22 @@ def canonical_clip_positions(read: PositionFile, options: PositionOptions
                            names=names),
         up_axis=up, up_reason=up_reason, warnings=tuple(warnings))
     return clip, details
+
+
+def denoised(world: F64, face: F64 | None, fps: float, lowpass_hz: float
+             ) -> tuple[F64, F64 | None]:
+    """Noisy joints (``--lowpass``) smoothed by :func:`zero_lag_lowpass` and each bone set to
+    its robust length (:func:`robust_bone_lengths`, the noise the filter leaves taken out), the
+    motion keeping its directions; the face's points smoothed alike. ``world`` (n_frames,
+    N_JOINTS, 3) metres, NaN for the end parts filled in after; ``face`` (n_frames, 3, 3) or
+    None. Raises :class:`EcsAnimError` for a cut-off at or over half the frame rate."""
+    if not lowpass_hz < fps / 2:
+        raise EcsAnimError(f"--lowpass {lowpass_hz:g}: the cut-off must be under half the frame "
+                           f"rate ({fps / 2:g} Hz)")
+    noise = bone_noise_variance(world, fps, lowpass_hz)
+    smooth = zero_lag_lowpass(world, fps, lowpass_hz)[0]
+    smooth_face = None if face is None else zero_lag_lowpass(face, fps, lowpass_hz)[0]
+    return bones_to_lengths(smooth, robust_bone_lengths(smooth, noise)), smooth_face
 
 
 def fill_missing(raw: F64, layout: PositionLayout) -> tuple[F64, int, set[str]]:
