@@ -683,8 +683,8 @@ class Simulation(SteeringCalls):
 
     def set_target(self, uid: int, target_in_world: tuple[float, float, float]) -> None:
         """Move a constraint's target (its id from :meth:`add_constraint` or
-        :meth:`constraint_index`) from code; a non-finite target disables it at the next tick
-        (with a warning) rather than reaching a pose."""
+        :meth:`constraint_index`) from code; a target that is not finite or beyond 1,000 km
+        disables it at the next tick (with a warning) rather than reaching a pose."""
         check_value(uid, int, "set_target: uid")
         self.set_targets(np.array([uid], np.int64),
                          real_array(target_in_world, (3,), "set_target: target_in_world")[None])
@@ -707,18 +707,21 @@ class Simulation(SteeringCalls):
         LOG.warning(line)
 
     def report_disabled(self, indices: NDArray[np.int64]) -> None:
-        """Warn once (:meth:`warn`) for each constraint switched off this tick for a non-finite
-        target: ``indices`` (k,) rows of :attr:`constraints`."""
+        """Warn once (:meth:`warn`) for each constraint switched off this tick for a target that
+        is not finite or beyond 1,000 km (:data:`ecs_anim.solver.shell.MAX_TARGET_M`): ``indices``
+        (k,) rows of :attr:`constraints`. A new target (:meth:`set_target`) switches it on."""
         for i in indices:
-            self.warn(f"constraint {self.constraints.names[int(i)]!r} has a non-finite target "
-                      "and is switched off; the others go on")
+            self.warn(f"constraint {self.constraints.names[int(i)]!r} has a target that is not "
+                      "finite or beyond 1,000 km and is switched off until a new target is set; "
+                      "the others go on")
 
     def report_frozen(self, rows: NDArray[np.int64]) -> None:
-        """A character's pose went non-finite: it keeps its last good posture; say so once."""
+        """A character's pose went non-finite: it keeps its last good posture until its pose is
+        finite again; say so once."""
         names = self.names()
         for r in rows:
             self.warn(f"character {names[int(r)]!r} got a non-finite pose and holds its last "
-                      "good posture; the others go on")
+                      "good posture until its pose is finite again; the others go on")
 
     # --- feasibility (ecs_anim.runtime.feasibility) -------------------------------------------
 

@@ -120,6 +120,11 @@ class SolverSettings:
 
 
 DEFAULT_SETTINGS = SolverSettings()
+
+#: A target with a coordinate beyond this (m, 1,000 km) is a mistake, not a place: its squares
+#: lose the solver's precision (and overflow beyond 1e154 m, giving a non-finite pose), so its
+#: constraint is switched off as a non-finite one is.
+MAX_TARGET_M = 1e6
 # The four limbs [leg_l, leg_r, arm_l, arm_r]: their group, joints (root, middle, end, distal
 # end), lengths (upper, lower, distal) and how far they may stretch.
 LIMB_OF_GROUP = np.array([0, 1, -1, 2, 3, -1])
@@ -538,7 +543,7 @@ class TickResult:
     """What :func:`constrain` decided this tick, for the system to write back.
 
     weight (m,) each constraint's activation (0 where switched off); broken (b,) constraints
-    whose target is not finite, to switch off; error (m,) how far each active constraint is from
+    whose target is not finite or beyond :data:`MAX_TARGET_M`, to switch off; error (m,) how far each active constraint is from
     being met on the result (:func:`constraint_errors`; NaN while inactive); held (m,) a sphere
     kept the point off the motion's place; goals, rows (r,), poses (r,), solved (decoded
     result (r,)) and iterations (r,) of the characters solved (None / empty when none); cut:
@@ -616,8 +621,9 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
     targets = on_other_surfaces(table, target_points(table, unconstrained, previous), lengths,
                                 unconstrained, previous)
     broken = none
-    if not np.isfinite(targets).all():  # (one test of the whole array first: the usual case)
-        broken = np.flatnonzero((weight > 0) & ~np.all(np.isfinite(targets), axis=1))
+    # (one test of the whole array first: the usual case; NaN fails it too)
+    if not np.all(np.abs(targets) <= MAX_TARGET_M):
+        broken = np.flatnonzero((weight > 0) & ~np.all(np.abs(targets) <= MAX_TARGET_M, axis=1))
     if broken.size:
         weight = weight.copy()
         weight[broken] = 0.0

@@ -82,5 +82,6 @@ def test_a_warning_reaches_stderr_through_logging_when_nothing_configured_it():
         "k = sim.add_constraint(e, 'reach', 'wrist_r', 1.0, target_in_world=(0.3, -0.2, 0.9))\n"
         "sim.step(); sim.set_target(k, (np.nan, 0.0, 1.0)); sim.step()\n")
     assert done.returncode == 0, done.stderr
-    assert done.stderr.strip() == ("warning: t=0.033 s: constraint 'reach' has a non-finite "
-                                   "target and is switched off; the others go on")
+    assert done.stderr.strip() == ("warning: t=0.033 s: constraint 'reach' has a target that is "
+                                   "not finite or beyond 1,000 km and is switched off until a "
+                                   "new target is set; the others go on")

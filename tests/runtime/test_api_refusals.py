@@ -266,7 +266,7 @@ def test_a_non_finite_target_from_code_still_switches_its_constraint_off_then_on
     w = _world(motions)
     w.sim.set_target(w.reach, (np.nan, 0.0, 1.0))  # documented (docs/api.md): off, with a warning
     w.sim.step()
-    assert not w.sim.constraints.enabled[0] and "non-finite target" in w.sim.messages[-1]
+    assert not w.sim.constraints.enabled[0] and "not finite or beyond 1,000 km" in w.sim.messages[-1]
     w.sim.set_target(w.reach, (2.3, 0.8, 1.2))
     w.sim.step()
     assert w.sim.constraints.enabled[0]

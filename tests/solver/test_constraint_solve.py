@@ -127,7 +127,7 @@ def test_activation_ramp_has_no_jump_and_nan_target_disables_only_that_one(idle,
     assert steps[:, 0, J["wrist_r"]].max() < 1.875 * distance / 30 + own
     sim.set_target(other, (np.nan, 0.0, 0.0))
     sim.step()
-    assert "'other' has a non-finite target" in sim.messages[-1]  # and logged (ecs_anim)
+    assert "'other' has a target that is not finite" in sim.messages[-1]  # and logged (ecs_anim)
     assert np.all(np.isfinite(sim.store.positions))
     with pytest.raises(EcsAnimError, match="unknown body point 'knee_x'; did you mean"):
         sim.add_constraint(a, "bad", "knee_x", 1, ALWAYS, (0.0, 0.0, 0.0))

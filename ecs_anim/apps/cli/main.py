@@ -223,7 +223,7 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
             unit = " mrad" if k["unit"] == "mrad" else ""
             text = "never fully active" if full is None else f"{full:.1f}{unit}"
             print(f"  {(k['character'] + '.' + k['name'])[:26]:26s} {text:>32s}"
-                  + ("" if k["enabled"] else "  (switched off: non-finite target)"))
+                  + ("" if k["enabled"] else "  (switched off: target not finite or beyond 1,000 km)"))
     total = sum(report["ms_per_tick"].values())
     print(f"  time per tick {total:.2f} ms: " + ", ".join(
         f"{k} {v:.2f}" for k, v in report["ms_per_tick"].items()))

@@ -252,8 +252,7 @@ def posture_of_decoded_row(c: int, pose: PoseArrays, lengths: F64, decoded: Deco
         bvh_globals_row(world[c], bvh_from_world, rest2body)
         good = good and all_finite(world[c])
     newly_bad[c] = not good and not frozen[c]
-    if not good:
-        frozen[c] = True
+    frozen[c] = not good  # a pose finite again (a sane body or target) is published again
     if not frozen[c]:
         copy_row(positions, c, decoded.positions, c)
         if rotations:
@@ -272,8 +271,8 @@ def posture_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64,
     Each row ``c``: decode on ``lengths[c]`` into ``decoded`` (all of it: the posture frames,
     and positions used as scratch); with ``rotations``, the export joints' joint2bvh into the
     scratch ``world`` (n, N_EXPORT, 3, 3). A row whose positions (or rotations) are not finite
-    becomes ``frozen`` (``newly_bad[c]`` set when it was not before, else cleared). A row that
-    is not frozen gets ``positions[c]`` (n, N_JOINTS, 3), ``local[c]`` (n, N_EXPORT, 3, 3) with
+    becomes ``frozen`` (``newly_bad[c]`` set when it was not before, else cleared), and stops
+    being frozen once they are finite again. A row that is not frozen gets ``positions[c]`` (n, N_JOINTS, 3), ``local[c]`` (n, N_EXPORT, 3, 3) with
     ``rotations`` and ``vertebrae[c]`` (n, count, 3) when ``count > 0``; a frozen row keeps them
     (its vertebrae are written anyway without ``have_previous``). Mirrors
     ``systems.posture_convert`` on :func:`ecs_anim.core.normalized.decode`,
