@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from test_steering import distance_to_polyline
 
-from conftest import MOTIONS_DIR
+from conftest import MOTIONS_DIR, REPO
 from ecs_anim.components import MotionPlayer
 from ecs_anim.core.errors import EcsAnimError
 from ecs_anim.core.ground import Plane
@@ -135,3 +135,27 @@ def test_an_arrived_trigger_in_yaml(tmp_path: Path) -> None:
     with pytest.raises(EcsAnimError,
                        match=r"arrive.yaml:16: triggers\[0\].when.arrived: 'waiter' has no path_m"):
         load_scenario(path)
+
+
+def test_the_documented_arrival_and_contact_scenario(tmp_path: Path) -> None:
+    """docs/scenarios.md, Arrivals and foot contacts: the courier arrives, the partner kicks,
+    the courier wards off one tick after the kicking foot lands."""
+    text = (REPO / "docs" / "scenarios.md").read_text()
+    section = text[text.index("### Arrivals and foot contacts"):]
+    start = section.index("```yaml\n") + 8
+    path = tmp_path / "spar.yaml"
+    path.write_text(section[start:section.index("```\n", start)].replace(
+        "motions/", f"{MOTIONS_DIR}/"))
+    with build_simulation(load_scenario(path)) as sim:
+        seen = []
+        for _ in range(int(6 * sim.fps)):
+            sim.step()
+            seen += [(e.time_s, e.kind, e.character, e.detail) for e in sim.events()]
+    arrived = next(e for e in seen if e[1] == "arrived")
+    kick = next(e for e in seen if e[1:] == ("clip_started", "partner", "kick"))
+    ward_off = next(e for e in seen if e[1:] == ("clip_started", "courier", "ward_off_punch"))
+    landing = max(e[0] for e in seen if e[1:] == ("contact_began", "partner", "right")
+                  and e[0] < ward_off[0])
+    assert arrived[2:] == ("courier", "(3.00, 0.00)")
+    assert kick[0] == pytest.approx(arrived[0] + 1 / 30)
+    assert kick[0] + 0.6 < landing and ward_off[0] == pytest.approx(landing + 1 / 30)
