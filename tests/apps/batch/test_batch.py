@@ -729,9 +729,12 @@ def test_pool_workers_tick_on_one_thread():
     between chunks, so two per process on shared cores would take turns spinning)."""
     import multiprocessing
 
-    from ecs_anim.apps.batch.local_engine import _set_started
+    from ecs_anim.apps.batch.local_engine import _Worker
     from ecs_anim.runtime import kernels
 
-    context = multiprocessing.get_context("fork")
-    with context.Pool(1, initializer=_set_started, initargs=(None,)) as pool:
-        assert pool.apply(kernels.threads) == 1
+    worker = _Worker(multiprocessing.get_context("fork"), [])
+    try:
+        worker.give("threads", kernels.threads)
+        assert worker.conn.recv() == (1, "")
+    finally:
+        worker.stop()
