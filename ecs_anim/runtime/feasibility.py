@@ -43,6 +43,7 @@ from ecs_anim.core.body_points import (
     JOINT_AS_POINT,
     SEG_DISTAL,
     SEG_PROXIMAL,
+    SEGMENTS,
     TRUNK,
     point_positions,
 )
@@ -92,6 +93,10 @@ _PARENT = np.array(PARENTS, np.int64)
 _GROUP_ANCHOR = np.array([JOINT_INDEX[j] for j in ("hip_l", "hip_r", "neck", "shoulder_l",
                                                     "shoulder_r", "pelvis")], np.int64)
 _PELVIS = JOINT_INDEX["pelvis"]
+#: The solver group of each length's points (-1: the root's, which takes no constraint).
+_SEGMENT_GROUP = np.array([SEGMENTS[n][0] if n in SEGMENTS else -1 for n in LENGTHS], np.int64)
+#: Constraints estimated in one pass (each pass holds (own poses x target poses) pairs of each).
+CONSTRAINTS_PER_PASS = 256
 
 
 @dataclass(frozen=True)
@@ -167,9 +172,7 @@ def chain_reach(lengths: F64, segment: I64, fraction: F64, offset: F64,
     point, ``fraction`` (k,) along it, ``offset`` (k, 3) m in its frame; ``chain`` (k,) bit
     mask of :data:`~ecs_anim.core.body_points.GROUPS`. The anchor is the group's root joint
     (hip, shoulder, neck base), or the pelvis when the trunk moves for a point above it."""
-    from ecs_anim.core.body_points import SEGMENTS
-
-    group = np.array([SEGMENTS[LENGTHS[s]][0] for s in segment.tolist()], np.int64)
+    group = _SEGMENT_GROUP[segment]
     with_trunk = ((chain >> TRUNK) & 1).astype(bool) & np.isin(group, ABOVE_TRUNK)
     anchor = np.where(with_trunk | (group == TRUNK), _PELVIS, _GROUP_ANCHOR[group])
     k = np.arange(segment.size)
@@ -311,17 +314,22 @@ def feasibility(sim: Simulation) -> list[Feasibility]:
                              np.repeat(table.target_world, width, axis=0)).reshape(m, width, 3)
     target_ok = np.where(self_target[:, None], own_ok, in_library[target_row]) | ~body[:, None]
 
-    # Distances from every own pose's anchor to every target pose (self targets: same pose).
-    gap = _needed(lengths, table, target_row, target_points, anchor, lib, width)
-    pair_ok = own_ok[:, :, None] & target_ok[:, None, :]
-    pair_ok &= np.where(self_target[:, None, None], np.eye(width, dtype=bool)[None], True)
-    nearest = np.min(np.where(pair_ok, gap, np.inf), axis=(1, 2))
+    # Distances from every own pose's anchor to every target pose (self targets: same pose),
+    # a pass of constraints at a time.
+    nearest = np.empty(m)
+    for first in range(0, m, CONSTRAINTS_PER_PASS):
+        ks = np.arange(first, min(first + CONSTRAINTS_PER_PASS, m))
+        gap = _needed(lengths, table, ks, target_row[ks], target_points[ks], anchor[ks], lib,
+                      width)
+        pair_ok = own_ok[ks, :, None] & target_ok[ks, None, :]
+        pair_ok &= np.where(self_target[ks, None, None], np.eye(width, dtype=bool)[None], True)
+        nearest[ks] = np.min(np.where(pair_ok, gap, np.inf), axis=(1, 2))
     checked = np.isfinite(nearest) & (
         (table.kind == KIND_POSITION) | (table.kind == KIND_DISTANCE)
         | ((table.kind == KIND_AREA) & table.area_inside
            & np.isin(table.area_shape, (AREA_SPHERE, AREA_BOX))))
     short = np.where(checked, nearest - reach, np.nan)
-    stature = np.array([Morphology(lengths[r]).stature for r in owner.tolist()])
+    stature = np.array([Morphology(body).stature for body in lengths])[owner]
     out = []
     for k in range(m):
         r = int(owner[k])
@@ -338,49 +346,52 @@ def feasibility(sim: Simulation) -> list[Feasibility]:
     return out
 
 
-def _needed(lengths: F64, table: ConstraintTable, target_row: I64, target_points: F64, anchor: F64,
-            lib: DecodedPose, width: int) -> F64:
-    """(m, width, width) how far each constraint's point must get from its anchor (own pose,
-    target pose): to the target's surface (position on another character's capsule), to the
-    target less the distance kept (distance), to the area's nearest point (inside areas)."""
-    a = anchor[:, :, None, :]  # (m, own, 1, 3)
-    t = target_points[:, None, :, :]  # (m, 1, target, 3)
+def _needed(lengths: F64, table: ConstraintTable, ks: I64, target_row: I64, target_points: F64,
+            anchor: F64, lib: DecodedPose, width: int) -> F64:
+    """(k, width, width) how far each constraint ``ks`` (k,) (rows of ``table``) must take its
+    point from its anchor (own pose, target pose): to the target's surface (a position on
+    another character's capsule), to the target less the distance kept (distance), to the
+    area (inside areas), else to the target. ``target_row`` (k,), ``target_points`` (k, width,
+    3) and ``anchor`` (k, width, 3) are theirs; ``lib`` the characters' poses, ``width`` each."""
+    a = anchor[:, :, None, :]  # (k, own, 1, 3)
+    t = target_points[:, None, :, :]  # (k, 1, target, 3)
     straight = np.linalg.norm(t - a, axis=-1)
     needed = straight.copy()
+    owner, kind, shape_of_area = table.owner[ks], table.kind[ks], table.area_shape[ks]
     # Onto another character's body part: its capsule's surface, toward the anchor.
-    capsule = SEGMENT_CAPSULE[table.target_segment]
-    on_surface = ((table.target_kind != TARGET_WORLD) & (target_row != table.owner)
-                  & (table.kind == KIND_POSITION) & (capsule >= 0))
-    k = np.flatnonzero(on_surface)
-    if k.size:
-        joints = CAPSULE_JOINTS[np.maximum(capsule[k], 0)]
-        pose = target_row[k][:, None] * width + np.arange(width)[None]  # (s, width)
+    capsule = SEGMENT_CAPSULE[table.target_segment[ks]]
+    on_surface = ((table.target_kind[ks] != TARGET_WORLD) & (target_row != owner)
+                  & (kind == KIND_POSITION) & (capsule >= 0))
+    s = np.flatnonzero(on_surface)
+    if s.size:
+        joints = CAPSULE_JOINTS[capsule[s]]
+        pose = target_row[s][:, None] * width + np.arange(width)[None]  # (s, width)
         ends_a = lib.positions[pose, joints[:, None, 0]]
         ends_b = lib.positions[pose, joints[:, None, 1]]
-        span = CAPSULE_SPAN[np.maximum(capsule[k], 0)][:, None]
+        span = CAPSULE_SPAN[capsule[s]][:, None]
         axis_a = ends_a + span[..., :1] * (ends_b - ends_a)
         axis_b = ends_a + span[..., 1:] * (ends_b - ends_a)
-        radius = (capsule_radii(lengths[target_row[k]])[np.arange(k.size), capsule[k]]
-                  + point_radii(lengths[table.owner[k]], table.segment[k]))
-        shape = (k.size, width, width)
+        radius = (capsule_radii(lengths[target_row[s]])[np.arange(s.size), capsule[s]]
+                  + point_radii(lengths[owner[s]], table.segment[ks[s]]))
+        shape = (s.size, width, width)
 
         def pairs(v: F64, own_axis: bool) -> F64:
             """(s, width, 3) -> (s * width * width, 3) over (own, target) pairs."""
             spread = v[:, :, None] if own_axis else v[:, None, :]
             return np.broadcast_to(spread, shape + (3,)).reshape(-1, 3)
 
-        surface = surface_points(pairs(target_points[k], False), pairs(axis_a, False),
+        surface = surface_points(pairs(target_points[s], False), pairs(axis_a, False),
                                  pairs(axis_b, False),
-                                 np.repeat(radius, width * width), pairs(anchor[k], True))
-        needed[k] = np.linalg.norm(surface - pairs(anchor[k], True), axis=-1).reshape(shape)
-    distance = table.kind == KIND_DISTANCE
-    needed = np.where(distance[:, None, None], straight - table.distance_m[:, None, None], needed)
-    sphere = (table.kind == KIND_AREA) & (table.area_shape == AREA_SPHERE)
-    needed = np.where(sphere[:, None, None], straight - table.area_radius[:, None, None], needed)
-    box = (table.kind == KIND_AREA) & (table.area_shape == AREA_BOX)
+                                 np.repeat(radius, width * width), pairs(anchor[s], True))
+        needed[s] = np.linalg.norm(surface - pairs(anchor[s], True), axis=-1).reshape(shape)
+    distance = kind == KIND_DISTANCE
+    needed = np.where(distance[:, None, None], straight - table.distance_m[ks, None, None], needed)
+    sphere = (kind == KIND_AREA) & (shape_of_area == AREA_SPHERE)
+    needed = np.where(sphere[:, None, None], straight - table.area_radius[ks, None, None], needed)
+    box = (kind == KIND_AREA) & (shape_of_area == AREA_BOX)
     if box.any():
         rel = a - t  # the anchor from the box's placement point
-        low, high = table.area_low[:, None, None, :], table.area_high[:, None, None, :]
+        low, high = table.area_low[ks, None, None, :], table.area_high[ks, None, None, :]
         outside = np.linalg.norm(rel - np.clip(rel, low, high), axis=-1)
         needed = np.where(box[:, None, None], outside, needed)
     out: F64 = np.maximum(needed, 0.0)

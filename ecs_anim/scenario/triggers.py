@@ -155,7 +155,8 @@ def _when(r: YamlReader, node: Node, where: str, characters: list[CharacterSpec]
         return AtTime(r.number(keys[kind], w, 0.0, MAX_DURATION_S, "s"))
     who, _ = _split_ref(r, keys[kind], w, characters, "", optional=True)
     if kind == "arrived":
-        if characters[who].steering is None or not characters[who].steering.path_m:
+        steering = characters[who].steering
+        if steering is None or not steering.path_m:
             raise r.fail(keys[kind], w, f"{characters[who].name!r} has no path_m: it would "
                          "never arrive (give it one; a path given from code takes a trigger "
                          "from code, Arrived)")

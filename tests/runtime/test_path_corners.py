@@ -9,7 +9,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_steering import distance_to_polyline
 
 from conftest import MOTIONS_DIR, REPO
 from ecs_anim.components import MotionPlayer
@@ -21,6 +20,7 @@ from ecs_anim.runtime.simulation import Simulation
 from ecs_anim.runtime.steering import motion_root_xy
 from ecs_anim.runtime.triggers import Arrived, Play, Trigger
 from ecs_anim.scenario import build_simulation, load_scenario
+from support.paths import distance_to_polyline
 
 
 def corner_walk(motions: dict[str, NormalizedMotion], stature_m: float, turn_deg: float,
@@ -34,7 +34,7 @@ def corner_walk(motions: dict[str, NormalizedMotion], stature_m: float, turn_deg
     turn = np.deg2rad(turn_deg)
     corner = np.array([4.0, 0.0])
     end = corner + 4.0 * np.array([np.cos(turn), np.sin(turn)])
-    sim.follow_path(walker, [corner, end], speed_m_s)
+    sim.follow_path(walker, np.array([corner, end]), speed_m_s)
     path = np.array([sim.store.path_xy[0, 0], corner, end])
     root, pelvis = [], []
     for _ in range(int(20 * sim.fps)):

@@ -23,6 +23,7 @@ from ecs_anim.runtime.metrics import MetricsRecorder
 from ecs_anim.runtime.simulation import Simulation
 from ecs_anim.scenario import build_simulation, load_scenario
 from ecs_anim.systems import MotionPlayback
+from support.paths import distance_to_polyline
 
 BUMPS = Bumps(amplitude_m=0.03, wavelength_x_m=2.5, wavelength_y_m=3.0)
 
@@ -34,15 +35,6 @@ def figure_eight(radius_m: float = 1.5, per_loop: int = 32) -> np.ndarray:
     above = np.stack([radius_m * np.sin(a), radius_m * (1 - np.cos(a))], axis=1)
     below = np.stack([radius_m * np.sin(a), -radius_m * (1 - np.cos(a))], axis=1)
     return np.concatenate([above, below])
-
-
-def distance_to_polyline(points: np.ndarray, line: np.ndarray) -> np.ndarray:
-    """Each point's (k, 2) distance to the polyline ``line`` (m, 2), metres."""
-    a, b = line[:-1], line[1:]
-    d = b - a
-    t = np.clip(np.einsum("kmi,mi->km", points[:, None] - a, d) / np.einsum("mi,mi->m", d, d),
-                0.0, 1.0)
-    return np.linalg.norm(a + t[..., None] * d - points[:, None], axis=-1).min(axis=1)
 
 
 def walkers(motions: dict[str, NormalizedMotion], statures: tuple[float, ...],
