@@ -10,12 +10,14 @@
 * bone-length error: the largest difference between a bone and the morphology (m);
 * overlap: the deepest overlap of a character's collision capsules with another character's
   after separation (mm; ``store.overlap_m``, CollisionSeparate), and the time it was deepest;
-* stride: distance between successive footprints of the same foot, also per leg length;
+* stride: distance between successive footprints of the same foot, also per leg length (the
+  median of the latest :data:`STRIDES_KEPT`);
 * time per system per tick.
 """
 
 from __future__ import annotations
 
+from collections import deque
 from typing import Any
 
 import numpy as np
@@ -37,6 +39,9 @@ KIND_BY_NUMBER = {number: name for name, number in KIND_NAMES.items()}
 SLIDE_EVENT_MM = 1.0
 #: Slide events kept (the first ones; the count goes on).
 MAX_SLIDE_EVENTS = 100
+#: Strides kept per character for its median stride (the latest ones): the recorder's memory
+#: stays flat however long the run (it grew with every footstep: 194 to 224 MB over 30 minutes).
+STRIDES_KEPT = 256
 
 
 #: The recorder's per-character arrays (one row per character it has seen) and the value a
@@ -86,7 +91,7 @@ class MetricsRecorder:
         self.leg_length_m = np.zeros(0)
         self.frozen = np.zeros(0, bool)
         self.removed_at_s = np.zeros(0)
-        self.strides: list[list[float]] = []
+        self.strides: list[deque[float]] = []
         self.last_print: list[list[np.ndarray | None]] = []
         self.slides: list[dict[str, Any]] = []
         self.slide_events = 0
@@ -187,7 +192,7 @@ class MetricsRecorder:
                 setattr(self, name, _grown(getattr(self, name), new.size, fill))
             self.leg_length_m[at[new]] = self.sim.leg_length()[new]
             self.frozen[at[new]] = st.frozen[new]
-            self.strides += [[] for _ in new]
+            self.strides += [deque(maxlen=STRIDES_KEPT) for _ in new]
             self.last_print += [[None, None] for _ in new]
         return at
 
