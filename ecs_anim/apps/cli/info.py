@@ -33,6 +33,18 @@ def played_on_own_body(motion: NormalizedMotion) -> dict[str, float]:
             "sliding_mm_per_frame_max": character["foot_sliding_mm_per_frame"]["max"]}
 
 
+def reach_on_own_body(motion: NormalizedMotion) -> list[dict[str, object]]:
+    """Whether each constraint stored with the clip (not its foot contacts) can reach its
+    target on the clip's own body (``Simulation.feasibility``; none stored: empty)."""
+    from ecs_anim.core.ground import Plane
+    from ecs_anim.scenario import build_simulation, clip_scenario
+
+    if all(c.kind == "foot_contact" for c in motion.constraints):
+        return []
+    with build_simulation(clip_scenario(motion, motion.source_morphology, Plane())) as sim:
+        return [estimate.as_dict() for estimate in sim.feasibility()]
+
+
 def motion_summary(path: str) -> dict[str, object]:
     """What the .nmo file at ``path`` holds, as JSON-able data (``info --json``), with how its
     planted feet fare played on its own body (:func:`played_on_own_body`)."""
@@ -58,6 +70,7 @@ def motion_summary(path: str) -> dict[str, object]:
             ],
         },
         "other_constraints": [c.to_dict() for c in motion.constraints if c.kind != "foot_contact"],
+        "feasibility": reach_on_own_body(motion),
         "played_on_own_body": played_on_own_body(motion),
         "info": motion.info,
     }
@@ -108,6 +121,8 @@ def cmd_info(args: argparse.Namespace) -> int:
     print(f"  played     on its own body, flat ground: planted feet floating "
           f"{played['floating_mm_max']:.1f} mm, penetration {played['penetration_mm_max']:.1f} mm,"
           f" sliding {played['sliding_mm_per_frame_max']:.1f} mm per frame (max)")
+    for estimate in summary["feasibility"]:  # type: ignore[attr-defined]
+        print(f"  reach      {estimate['line']}")
     filled = info.get("filled_in")
     if filled:
         print(f"  filled in  {', '.join(map(str, filled)) if isinstance(filled, list) else filled}")
