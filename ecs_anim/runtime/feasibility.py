@@ -105,7 +105,8 @@ class Feasibility:
 
     uid, character, constraint : the constraint's id, its character's name, its name.
     target : what it aims at, as a line says it (``defender_4's spine_upper``, ``(x, y, z)``).
-    chain : the groups allowed to move for it (``leg_r``, ``arm_l+trunk``).
+    chain : the groups allowed to move for it that bring its point nearer (``leg_r``,
+        ``arm_l+trunk``; not the trunk for a target on the body that the trunk carries).
     stature_m : its character's stature (m).
     reach_m : the longest its chain stretches, anchor to point (m).
     short_m : by how much its target stays beyond that reach at the nearest (m; negative: to
@@ -293,14 +294,18 @@ def feasibility(sim: Simulation) -> list[Feasibility]:
     own_ok = np.where(clocked[:, None], True, in_library[owner])
     own = pose_library(sim, lengths, np.repeat(owner, width), own_clip.reshape(-1), own_time.reshape(-1))
 
-    reach, anchor_joint = chain_reach(lengths[owner], table.segment, table.fraction,
-                                      table.offset, table.chain)
-    anchor = own.positions[np.arange(m * width), np.repeat(anchor_joint, width)].reshape(m, width, 3)
-
-    # Targets: (m, width) points (a world target repeated), and their capsule's axis.
+    # A target on the body itself that the trunk carries moves with the trunk: the trunk
+    # brings the point no nearer to it.
     body = table.target_kind != TARGET_WORLD
     target_row = np.where(body, table.target_row, owner)
     self_target = body & (target_row == owner)
+    carried = self_target & np.isin(_SEGMENT_GROUP[table.target_segment], ABOVE_TRUNK)
+    chain = np.where(carried, table.chain & ~(1 << TRUNK), table.chain)
+    reach, anchor_joint = chain_reach(lengths[owner], table.segment, table.fraction,
+                                      table.offset, chain)
+    anchor = own.positions[np.arange(m * width), np.repeat(anchor_joint, width)].reshape(m, width, 3)
+
+    # Targets: (m, width) points (a world target repeated).
     lib = pose_library(sim, lengths, np.repeat(np.arange(st.n), width), lib_clip.reshape(-1),
                        lib_time.reshape(-1))
     segment = np.repeat(table.target_segment, width)
@@ -341,7 +346,7 @@ def feasibility(sim: Simulation) -> list[Feasibility]:
             x, y, z = table.target_world[k]
             target = f"({x:.2f}, {y:.2f}, {z:.2f})"
         out.append(Feasibility(int(table.uid[k]), names[r], table.names[k], target,
-                               _chain_text(int(table.chain[k])), float(stature[k]),
+                               _chain_text(int(chain[k])), float(stature[k]),
                                float(reach[k]), float(short[k]), bool(checked[k])))
     return out
 
