@@ -104,15 +104,18 @@ def load_grounds(path: str | Path) -> list[NamedGround]:
 
 
 def load_template(path: str | Path) -> Template:
-    """A scenario with exactly one character: every job takes its fps, duration, ground (when
-    the batch names none), queued motions, placement, constraints and COM settings; the clip
-    and the body replace the character's motion and morphology."""
+    """A scenario with exactly one character and no triggers: every job takes its fps,
+    duration, ground (when the batch names none), queued motions, placement, constraints and
+    COM settings; the clip and the body replace the character's motion and morphology."""
     from ecs_anim.scenario import load_scenario
 
     scenario = load_scenario(path)
     if len(scenario.characters) != 1:
         raise InputError(path, f"a batch template has exactly one character, found "
                                f"{len(scenario.characters)}")
+    if scenario.triggers:
+        raise InputError(path, "a batch template's triggers: are not supported (a job plays one "
+                               "clip on one body); remove them")
     character = scenario.characters[0]
     if any(k.target_character not in (None, character.name) for k in character.constraints):
         raise InputError(path, "a batch template's constraints aim at the world or its own body")

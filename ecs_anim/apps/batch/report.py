@@ -362,14 +362,16 @@ def figure_pngs(jobs: Sequence[Job]) -> dict[str, bytes]:
         "contacts": lambda: plot_contact_timeline(jobs),
     }
     pngs = {}
-    for name, make in makers.items():
-        fig = make()
-        try:
-            buffer = io.BytesIO()
-            fig.savefig(buffer, format="png", dpi=DPI)
-            pngs[name] = buffer.getvalue()
-        finally:
-            plt.close(fig)  # a long batch makes many reports: free each figure
+    # names are text, never math: a clip named "a $b$" would be parsed as math text, and fail
+    with matplotlib.rc_context({"text.parse_math": False}):
+        for name, make in makers.items():
+            fig = make()
+            try:
+                buffer = io.BytesIO()
+                fig.savefig(buffer, format="png", dpi=DPI)
+                pngs[name] = buffer.getvalue()
+            finally:
+                plt.close(fig)  # a long batch makes many reports: free each figure
     return pngs
 
 
