@@ -36,6 +36,7 @@ from ecs_anim.runtime.steering import GAITS, SteeringSettings
 from ecs_anim.runtime.system_base import System
 from ecs_anim.runtime.triggers import (
     Arm,
+    Arrived,
     AtTime,
     ClipEnded,
     ClipStarted,
@@ -65,6 +66,7 @@ __all__ = [
     "Activation",
     "Area",
     "Arm",
+    "Arrived",
     "AtTime",
     "Bumps",
     "ClipEnded",
