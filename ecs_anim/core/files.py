@@ -23,7 +23,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import IO
 
-from ecs_anim.core.errors import EcsAnimError, listed, quoted
+from ecs_anim.core.errors import EcsAnimError, InputError, listed, quoted
 
 #: Written last into every export folder: the names of the files of the set, so that a later
 #: ``--force`` knows which files it may replace (and refuses a folder holding anything else).
@@ -32,6 +32,16 @@ MANIFEST_NAME = ".ecs-anim-export.json"
 #: dot, at most :data:`MAX_NAME_LENGTH` characters.
 NAME_PATTERN = re.compile(r"[A-Za-z0-9_\-][A-Za-z0-9_.\-]*")
 MAX_NAME_LENGTH = 64
+
+
+def read_text(path: str | Path) -> str:
+    """The text of the input file at ``path`` (UTF-8, undecodable bytes replaced, a leading
+    byte-order mark dropped), or :class:`InputError` saying why it cannot be read."""
+    try:
+        with open(path, encoding="utf-8", errors="replace") as f:
+            return f.read().lstrip("\ufeff")
+    except OSError as exc:
+        raise InputError(str(path), f"cannot read file: {exc.strerror or exc}") from None
 
 
 def _umask() -> int:

@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.core.errors import EcsAnimError, InputError, quoted
+from ecs_anim.core.files import read_text
 from ecs_anim.core.rotations import quat_from_matrix, rot_axis
 from ecs_anim.io.bvh import BvhMotion
 from ecs_anim.io.contacts import ContactThresholds
@@ -99,13 +100,8 @@ class _Text:
 
     def __init__(self, path: str) -> None:
         self.path = path
-        try:
-            with open(path, encoding="utf-8", errors="replace") as f:
-                text = f.read()
-        except OSError as exc:
-            raise InputError(path, f"cannot read file: {exc.strerror or exc}") from None
         self.lines = [(k, re.sub(r"[,()]", " ", line.split("#", 1)[0]).split())
-                      for k, line in enumerate(text.lstrip("\ufeff").splitlines(), start=1)]
+                      for k, line in enumerate(read_text(path).splitlines(), start=1)]
         self.lines = [(k, tokens) for k, tokens in self.lines if tokens]
 
     def numbers(self, tokens: list[str], count: int, line: int, what: str) -> F64:

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.core.errors import InputError, quoted
+from ecs_anim.core.files import read_text
 from ecs_anim.core.rotations import euler_to_matrix
 
 F64 = NDArray[np.float64]
@@ -162,13 +163,7 @@ def _require_plain(tokens: list[str], path: str, line: int, what: str) -> None:
 
 def read_bvh(path: str | Path) -> BvhMotion:
     """Read a BVH file. Raises :class:`InputError` (with file and line) on any malformation."""
-    path = str(path)
-    try:
-        with open(path, encoding="utf-8", errors="replace") as f:
-            text = f.read()
-    except OSError as exc:
-        raise InputError(path, f"cannot read file: {exc.strerror or exc}") from None
-    return parse_bvh(text, path)
+    return parse_bvh(read_text(path), str(path))
 
 
 def parse_bvh(text: str, path: str = "<bvh>") -> BvhMotion:

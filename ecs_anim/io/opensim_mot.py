@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.core.errors import EcsAnimError, InputError, listed, quoted
+from ecs_anim.core.files import read_text
 
 F64 = NDArray[np.float64]
 
@@ -41,11 +42,7 @@ def read_mot(path: str | Path) -> MotCoordinates:
     no ``endheader``, no ``time`` column, a row whose count of values is not the labels', a value
     that is no number, no frame, a column with no finite value."""
     path = str(path)
-    try:
-        with open(path, encoding="utf-8", errors="replace") as f:
-            lines = f.read().lstrip("\ufeff").splitlines()
-    except OSError as exc:
-        raise InputError(path, f"cannot read file: {exc.strerror or exc}") from None
+    lines = read_text(path).splitlines()
     end = next((k for k, line in enumerate(lines) if line.strip().lower() == "endheader"), None)
     if end is None:
         raise InputError(path, "no 'endheader' line: not an OpenSim .mot/.sto file", len(lines) or 1)

@@ -7,27 +7,25 @@ values, a line ``Frame# Time <marker> <marker> ...`` (each name over its three c
 an empty cell or ``NaN`` where a marker was not seen (a short row leaves its last markers
 unseen). :func:`read_trc` gives the same :class:`~ecs_anim.io.c3d.reading.C3dMarkers` a C3D
 file does, so labels, marker sets, units, up axis and joint centres are found as for C3D
-(:func:`~ecs_anim.io.c3d.importing.canonical_clip_c3d`); :func:`import_trc` is
-:func:`~ecs_anim.io.c3d.importing.import_c3d` without what a TRC cannot hold (gait events,
+(:func:`~ecs_anim.io.c3d.importing.canonical_clip_c3d`); :func:`import_trc` is the C3D import
+(:func:`~ecs_anim.io.c3d.importing.import_markers`) without what a TRC cannot hold (gait events,
 force plates, the subject's measurements).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ecs_anim.core.errors import EcsAnimError, InputError, quoted
-from ecs_anim.io.c3d.absent_fill import fill_absent_from, load_default_motion
-from ecs_anim.io.c3d.importing import canonical_clip_c3d
+from ecs_anim.core.errors import InputError, quoted
+from ecs_anim.core.files import read_text
+from ecs_anim.io.c3d.importing import import_markers
 from ecs_anim.io.c3d.reading import C3dMarkers
 from ecs_anim.io.contacts import ContactThresholds
-from ecs_anim.io.importing import CanonicalClip, FrameRange, leading_rest_frames, normalize_clip
+from ecs_anim.io.importing import FrameRange
 from ecs_anim.motion.clip import NormalizedMotion
 
 F64 = NDArray[np.float64]
@@ -53,11 +51,7 @@ def read_trc(path: str | Path) -> C3dMarkers:
     matching ``NumMarkers``, a frame row with too many cells or a cell that is no number, no
     frame, or no marker seen in any frame."""
     path = str(path)
-    try:
-        with open(path, encoding="utf-8", errors="replace") as f:
-            lines = f.read().lstrip("\ufeff").splitlines()
-    except OSError as exc:
-        raise InputError(path, f"cannot read file: {exc.strerror or exc}") from None
+    lines = read_text(path).splitlines()
     if not lines or not lines[0].startswith("PathFileType"):
         raise InputError(path, "expected a TRC file starting with 'PathFileType', found "
                                f"{quoted(lines[0] if lines else '', 60)}", 1)
@@ -139,51 +133,10 @@ def import_trc(path: str | Path, map_spec: str | None = None, unit: str | None =
     C3D file (same arguments; a TRC holds no gait events, so contacts are always detected).
     Raises :class:`EcsAnimError` subclasses on bad input."""
     path = Path(path)
-    raw = read_trc(path)
-    try:
-        # Frames are cut from the markers, before joint centres, so every frame span the C3D
-        # path reports counts from the kept frames.
-        if trim is not None:
-            kept = trim.frames(len(raw.positions), raw.rate)
-            clip, extra = _canonical_from(raw, kept.start, kept.stop, map_spec, unit, up, max_gap)
-        else:
-            clip, extra = _canonical_from(raw, 0, len(raw.positions), map_spec, unit, up, max_gap)
-            rest = leading_rest_frames(clip.positions, clip.fps)
-            if rest is not None:
-                line = rest.report(extra["first_file_frame"])
-                clip, extra = _canonical_from(raw, extra["first_file_frame"] + rest.count,
-                                              len(raw.positions), map_spec, unit, up, max_gap)
-                extra["rest_frames_dropped"] = line
-        motion = normalize_clip(clip, path.stem, str(path), thresholds, treadmill)
-    except InputError:
-        raise
-    except EcsAnimError as exc:
-        raise InputError(path, str(exc)) from None
-    except (ValueError, np.linalg.LinAlgError) as exc:
-        raise InputError(path, f"cannot compute joint centres from these markers: {exc}") from None
-    bad = [k for k, v in motion.poses.arrays().items() if not np.all(np.isfinite(v))]
-    if bad:
-        raise InputError(path, f"normalizing gave non-finite values in {', '.join(bad)} "
-                               "(degenerate marker data?); nothing written")
-    motion.info.update(extra)
-    if fill_from is not None:
-        motion = fill_absent_from(motion, load_default_motion(Path(fill_from)), Path(fill_from).name,
-                                  thresholds)
+    motion = import_markers(path, read_trc(path), map_spec, unit, thresholds, up, max_gap,
+                            fill_from, trim, treadmill)
+    motion.info["format_in"] = "trc"
     return motion
-
-
-def _canonical_from(raw: C3dMarkers, start: int, stop: int, map_spec: str | None,
-                    unit: str | None, up: str | None, max_gap: int | None
-                    ) -> tuple[CanonicalClip, dict[str, Any]]:
-    """:func:`~ecs_anim.io.c3d.importing.canonical_clip_c3d` of the file's frames ``start`` to
-    ``stop`` (0-based), its frame numbers of the file (``first_file_frame``,
-    ``root_frames_trimmed``) counted from the file's first frame."""
-    part = replace(raw, positions=raw.positions[start:stop], valid=raw.valid[start:stop])
-    clip, extra = canonical_clip_c3d(part, map_spec, unit, up, max_gap)
-    extra["format_in"] = "trc"
-    extra["first_file_frame"] += start
-    extra["root_frames_trimmed"] = [[a + start, b + start] for a, b in extra["root_frames_trimmed"]]
-    return clip, extra
 
 
 __all__ = ["import_trc", "read_trc"]

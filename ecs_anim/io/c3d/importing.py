@@ -168,7 +168,17 @@ def import_c3d(path: str | Path, map_spec: str | None = None, unit: str | None =
     :func:`~ecs_anim.io.importing.normalize_clip`.
     """
     path = Path(path)
-    raw = read_c3d(path)
+    return import_markers(path, read_c3d(path), map_spec, unit, thresholds, up, max_gap,
+                          fill_from, trim, treadmill, contacts)
+
+
+def import_markers(path: Path, raw: C3dMarkers, map_spec: str | None = None,
+                   unit: str | None = None, thresholds: ContactThresholds = ContactThresholds(),
+                   up: str | None = None, max_gap: int | None = None,
+                   fill_from: str | Path | None = None, trim: FrameRange | None = None,
+                   treadmill: bool = True, contacts: str = "detect") -> NormalizedMotion:
+    """:func:`import_c3d` of markers already read from the file at ``path`` (a C3D, or a TRC:
+    :func:`ecs_anim.io.trc.read_trc`, which holds no events or plates); arguments as there."""
     try:
         clip, extra = canonical_clip_c3d(raw, map_spec, unit, up, max_gap)
         if trim is not None:
