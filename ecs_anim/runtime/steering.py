@@ -15,7 +15,9 @@ middle of a stance of the same foot in both clips (that foot stays locked throug
 to and from ``idle`` (both feet down), at any moment.
 
 Paths are followed by pure pursuit: the character heads for the point of its path a lookahead
-ahead of its progress along it; at the last waypoint it stops on its idle motion. A goal behind
+ahead of its progress along it; at the last waypoint it stops on its idle motion. It slows down
+for the corners ahead (:func:`corner_speed`) and rounds a sharp one on the arc its turn rate
+allows at that speed (the lookahead held short of the corner until the arc begins). A goal behind
 it (more than :attr:`SteeringSettings.behind_rad` off its heading) is turned to on the spot: the
 slowest steps and the fastest turn.
 
@@ -60,6 +62,8 @@ class SteeringSettings:
     behind_rad : a heading error beyond this turns on the spot.
     lookahead_s, lookahead_min_m : pure pursuit aims this far ahead along the path (seconds at
         the current speed, at least ``lookahead_min_m`` metres).
+    corner_tolerance_m : a path's corner is taken slow enough for the turn to stray at most
+        this far from the path (m; :func:`corner_speed`), no slower than the slowest steps.
     gait_fade_s : cross-fade between clips of the locomotion set (s).
     contact_release_s : during that fade, a foot that one of the clips lifts leaves its
         footprint over this time (s), not at once.
@@ -329,6 +333,7 @@ def steer(st: CharacterStore, bank: ClipBank, gaits: GaitTable, settings: Steeri
         at_corner = np.clip(corner_speed(turn, settings), settings.rate_min * walk_own,
                             wanted_speed[on_path][:, None])
         radius = at_corner / turn_rate_limit(at_corner / walk_own, settings)
+        # (A U-turn's arc would start infinitely far ahead: 150 degrees at most.)
         rounding = radius * np.tan(0.5 * np.minimum(turn, np.deg2rad(150.0)))
         brake = settings.rate_change_per_s * walk_own
         slack = np.maximum(ahead_m - rounding - settings.lookahead_min_m, 0.0)
@@ -336,10 +341,13 @@ def steer(st: CharacterStore, bank: ClipBank, gaits: GaitTable, settings: Steeri
         wanted_speed[on_path] = np.minimum(wanted_speed[on_path], allowed.min(axis=1))
         lookahead = np.maximum(settings.lookahead_s * np.maximum(speed_now[on_path], 0.0),
                                settings.lookahead_min_m)
+        # Before a sharp corner's arc the aim stays short of the corner; on the arc it sits at
+        # the arc's far end.
         sharp = turn[:, 0] > SHARP_CORNER_RAD
-        near = ahead_m[:, 0] <= rounding[:, 0]
-        lookahead = np.where(sharp, np.where(near, ahead_m[:, 0], np.minimum(
-            lookahead, ahead_m[:, 0])) + np.where(near, rounding[:, 0], 0.0), lookahead)
+        to_corner = ahead_m[:, 0]
+        near = to_corner <= rounding[:, 0]
+        held = np.where(near, to_corner + rounding[:, 0], np.minimum(lookahead, to_corner))
+        lookahead = np.where(sharp, held, lookahead)
         aim = _point_at(st.path_xy, st.path_cum_m, p, count,
                         np.minimum(progress + lookahead, total))
         end = st.path_xy[p, count - 1]
@@ -351,13 +359,13 @@ def steer(st: CharacterStore, bank: ClipBank, gaits: GaitTable, settings: Steeri
         wanted_heading[on_path] = np.where(np.linalg.norm(to_aim, axis=1) > 1e-6,
                                            np.arctan2(to_aim[:, 1], to_aim[:, 0]), travel[on_path])
         # A walker still turning (a corner just passed) goes as slow as that turn asks: from on
-        # its path, turning by a (its heading against the way its path goes where it is) strays
-        # as far as rounding a corner of 2 a.
+        # its path, turning by a (its heading against the way its path goes where it is, over
+        # the next 5 cm) strays as far as rounding a corner of 2 a, never below the slowest
+        # steps (a walker standing would not turn).
         way = (_point_at(st.path_xy, st.path_cum_m, p, count, np.minimum(progress + 0.05, total))
                - _point_at(st.path_xy, st.path_cum_m, p, count, progress))
         still_to_turn = np.where(np.linalg.norm(way, axis=1) > 1e-6, np.abs(wrap_angle(
             np.arctan2(way[:, 1], way[:, 0]) - travel[on_path])), 0.0)
-        # (never below the slowest steps: a walker standing would not turn).
         turning = np.maximum(corner_speed(2.0 * still_to_turn, settings),
                              settings.rate_min * own_walk[on_path])
         wanted_speed[on_path] = np.minimum(wanted_speed[on_path], turning)
