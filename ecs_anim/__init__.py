@@ -23,6 +23,7 @@ from ecs_anim.io.export import (
     write_npz,
 )
 from ecs_anim.io.importing import import_bvh
+from ecs_anim.io.positions import PositionOptions, import_positions
 from ecs_anim.motion.clip import NormalizedMotion, load_nmo, save_nmo
 from ecs_anim.motion.constraint_table import Area
 from ecs_anim.motion.constraints import Activation
@@ -87,6 +88,7 @@ __all__ = [
     "Placement",
     "Plane",
     "Play",
+    "PositionOptions",
     "QueuedClip",
     "Reached",
     "RecordedCharacter",
@@ -113,6 +115,7 @@ __all__ = [
     "export_motion",
     "glb_bytes",
     "import_bvh",
+    "import_positions",
     "keep_freed_memory",
     "load_morphology_yaml",
     "load_nmo",
