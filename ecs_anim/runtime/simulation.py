@@ -35,7 +35,13 @@ from ecs_anim.core.errors import EcsAnimError, UsageError, did_you_mean, listed,
 from ecs_anim.core.ground import Ground, Plane
 from ecs_anim.core.morphology import Morphology, leg_length
 from ecs_anim.motion.clip import NormalizedMotion, motion_problem
-from ecs_anim.motion.constraint_table import Area, ConstraintTable, Target, add_stored
+from ecs_anim.motion.constraint_table import (
+    TARGET_WORLD,
+    Area,
+    ConstraintTable,
+    Target,
+    add_stored,
+)
 from ecs_anim.motion.constraints import Activation
 from ecs_anim.motion.sampling import ClipBank
 from ecs_anim.runtime import kernels
@@ -538,7 +544,10 @@ class Simulation(SteeringCalls):
                 esper.remove_component(entity, BodyBlend)
             esper.add_component(entity, body)
         self.structure_version += 1
-        self.say_unreachable()
+        table = self.constraints
+        if np.any((table.owner == row) | ((table.target_kind != TARGET_WORLD)
+                                          & (table.target_row == row))):
+            self.say_unreachable()
 
     def set_ground(self, entity: int, ground: Ground | None) -> None:
         """Give a character a ground of its own (its GroundQuery component), or ``None``: back
