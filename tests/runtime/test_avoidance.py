@@ -67,8 +67,7 @@ def test_the_shipped_crowd_keeps_walker_1_and_walker_6_apart() -> None:
         names = sim.names()
         radius = avoidance_radius(sim.store.lengths, sim.steering_settings)
         worst = np.full((len(names), len(names)), np.inf)
-        # 22 s: the runner slows to a walk for its corners (tests/runtime/test_steering.py).
-        for _ in range(round(22.0 * scenario.fps)):
+        for _ in range(round(scenario.duration_s * scenario.fps)):
             sim.step()
             worst = np.minimum(worst, closest_pairs(sim.store.positions[:, 0, :2], radius))
         w1, w6 = names.index("walker_1"), names.index("walker_6")

@@ -230,8 +230,8 @@ def test_steered_crowd_reaches_its_waypoints() -> None:
     with build_simulation(scenario) as sim:
         gaits = set()
         # The runner slows to a walk for each of its three right-angle corners (to stay within
-        # 0.25 m of its path): it arrives at 20.9 s, the walkers by 16 s.
-        for _ in range(round(22.0 * scenario.fps)):
+        # 0.25 m of its path): it arrives at 20.9 s, the walkers by 16 s, within the scenario.
+        for _ in range(round(scenario.duration_s * scenario.fps)):
             sim.step()
             gaits |= set(sim.store.gait.tolist())
         assert gaits == {0, 1, 2}  # stands, walks and runs
