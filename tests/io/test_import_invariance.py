@@ -248,16 +248,11 @@ HEADING_DEG = {"bvh": 0.01, "c3d": 0.5}
 TRAVEL_M = {"bvh": 2e-3, "c3d": 5e-3}
 #: Measured where an invariance does not hold yet: the cluster set's functional joint centres
 #: (SCoRE) fitted on a 2 s cut differ from the whole trial's (a hinge's axis is fitted on
-#: what the cut's frames move it through); at 25 Hz its left touch-down at 0.66 s comes two
-#: frames late, and at 50 Hz cgm24's left lift-off at 2.71 s 1.5 frames late: the contacts'
-#: filters are an odd number of frames (0.05 s is one frame at 25 Hz, three at 50 Hz: 0.06 s;
-#: 0.03 s is three at 50 Hz). A fractional window spanning the same time at any rate closes
-#: cgm24 (20 ms) but not c3dorg (80 ms) and opens the uneven-terrain walks further
-#: (test_contacts.OPEN: 03_01's median 0.211 -> 0.215 m/s, 03_02 both up 4.4 -> 5.7 %).
+#: what the cut's frames move it through). (At half the rate, cgm24's lift-off and c3dorg's
+#: touch-down came 1.5 and 2 frames late until the contact edges were interpolated between
+#: frames: they now hold.)
 OPEN = {
-    ("varied/vicon_cgm24_events_jc_100hz.c3d", "half_rate"): "a lift-off 30 ms (1.5 frames) late",
     ("c3dorg_eb015pi_gait.c3d", "2s_from_1s"): "joints 42 mm, heading 5.8 deg off",
-    ("c3dorg_eb015pi_gait.c3d", "half_rate"): "a touch-down 80 ms (2 frames) late",
 }
 
 
