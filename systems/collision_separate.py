@@ -24,7 +24,7 @@ character's deepest overlap with another after the separation, m).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -36,6 +36,7 @@ from ecs_anim.core.normalized import NormalizedPoses, decode_legs
 from ecs_anim.core.rotations import axis_angle, normalize, quat_from_matrix
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import LENGTH_INDEX, N_JOINTS
+from ecs_anim.motion.constraint_table import TARGET_BODY
 from ecs_anim.runtime.kernels import over_chunks
 from ecs_anim.runtime.kernels.capsules import Capsules, Overlaps, capsules, grid_of, overlaps
 from ecs_anim.runtime.kernels.decode import decoded_arrays, fits, pose_arrays
@@ -55,13 +56,24 @@ SEPARATE_FROM_M = 0.5e-3
 #: How far past touching a separated pair is pushed (m): the next tick's motion starts apart.
 MARGIN_M = 0.5e-3
 #: Most rounds of search and separation per tick.
-PASSES = 8
+PASSES = 16
 #: A round that takes off less than this share of the overlap left ends the rounds.
 STALL_SHARE = 0.1
+#: A body whose overlap did not shrink by STALL_SHARE in this many rounds in a row stops
+#: trying this tick.
+PATIENCE = 3
 #: The largest turn of a limb in one round (rad).
 MAX_TURN_RAD = 0.25
 #: A pinned limb whose point moves less than this per radian of swivel does not swivel (m).
 MIN_LEVER_M = 0.03
+#: A limb folds (its end toward its root) down to this share of its length at most, and
+#: unfolds up to MAX_REACH_SHARE of it (short of straight: a straight limb's bend is
+#: undefined).
+MIN_FOLD_SHARE = 0.3
+MAX_REACH_SHARE = 0.95
+#: A push that keeps off an earlier one of the same round's chain goes at most this many times
+#: its depth (two pushes nearly opposed: a limb between two others).
+MAX_DEFLECTION = 3.0
 
 # Per capsule: the chain that moves it: 0-3 a limb (leg_l, leg_r, arm_l, arm_r), 4 the head,
 # 5 the root (trunk and pelvis); the group its claim is read from.
@@ -74,9 +86,47 @@ LIMB_OF_GROUP = np.array([0, 1, -1, 2, 3, -1], np.int64)  # group -> limb (-1: n
 LIMB_ROOT = np.array([J["hip_l"], J["hip_r"], J["shoulder_l"], J["shoulder_r"]], np.int64)
 LIMB_END = np.array([J["ankle_l"], J["ankle_r"], J["wrist_l"], J["wrist_r"]], np.int64)
 TOE = np.array([J["toe_l"], J["toe_r"]], np.int64)
+#: Per limb, its two segments' LENGTHS indices (root's, end's).
+LIMB_SEGMENTS = np.array([[LENGTH_INDEX[f"{a}_{s}"], LENGTH_INDEX[f"{b}_{s}"]]
+                          for a, b, s in (("thigh", "shank", "l"), ("thigh", "shank", "r"),
+                                          ("upper_arm", "forearm", "l"),
+                                          ("upper_arm", "forearm", "r"))], np.int64)
+#: Per capsule: whether it lies past a limb's middle joint (a fold brings it toward the root).
+DISTAL = np.array([c.startswith(("shank", "forearm", "hand")) for c in CAPSULES])
 ANKLE_HEIGHT = np.array([LENGTH_INDEX["ankle_height_l"], LENGTH_INDEX["ankle_height_r"]],
                         np.int64)
 _EXPORT = export_constants()
+
+
+class Claims(NamedTuple):
+    """What the active constraints hold, per character: ``priority`` (n,) their highest (-inf:
+    none); ``claimed`` (n, 6) the groups their chains claim; ``pin`` (n, 4, 3) each limb's pin
+    (NaN: none): the point of its highest-priority active constraint, else a planted foot's
+    ankle; ``aims_at`` (n, 4) the row of the character that constraint's target lies on (-1:
+    none, the world, itself)."""
+
+    priority: F64
+    claimed: NDArray[np.bool_]
+    pin: F64
+    aims_at: I64
+
+
+class Pushes(NamedTuple):
+    """Each row's last push this tick: ``way`` (n, 3) its unit direction, ``chain`` (n,) the
+    chain it moved (-1: none yet)."""
+
+    way: F64
+    chain: I64
+
+
+def held(claims: Claims, rows: I64, limb: I64, partner: I64) -> NDArray[np.bool_]:
+    """Whether each of ``rows``' ``limb`` (k,) is held by its pin against the ``partner`` row
+    (k,) it overlaps: it has a pin, and the pin is not a constraint aiming at ``partner`` (a
+    limb reaching for a body goes out of it to its surface, pin and all: that surface is its
+    constraint's target, so its error measured to the surface does not grow). -> (k,)."""
+    pinned: NDArray[np.bool_] = np.isfinite(claims.pin[rows, limb]).all(axis=1) \
+        & (claims.aims_at[rows, limb] != partner)
+    return pinned
 
 
 class CollisionSeparate(System):
@@ -104,21 +154,26 @@ class CollisionSeparate(System):
         if n < 2 or not (found.depth > SEPARATE_FROM_M).any():
             st.overlap_m = found.depth
             return
-        priority, claimed, pin = self._claims()
-        left = float(found.depth.sum())
+        claims = self._claims()
+        pushed = Pushes(np.zeros((n, 3)), np.full(n, -1, np.int64))
         # Only overlapping bodies move: their poses as the solve left them, kept (each the
         # first time it overlaps) to go back to.
         kept = np.zeros(n, bool)
         snapshots: list[tuple[I64, NormalizedPoses]] = []
         ever = np.zeros(n, bool)
+        # Rounds in a row in which each body's overlap did not shrink by STALL_SHARE; a body
+        # at PATIENCE stops trying this tick (limbs at their turn, pairs that may not move):
+        # the others go on.
+        stalled = np.zeros(n, np.int64)
         for _ in range(PASSES):
             fresh = np.flatnonzero((found.depth > SEPARATE_FROM_M) & ~kept)
             if fresh.size:
                 kept[fresh] = True
                 snapshots.append((fresh, st.poses.take(fresh)))
-            moved = self._separate(found, priority, claimed, pin)
+            moved = self._separate(found, claims, pushed, stalled < PATIENCE)
             if moved.size == 0:
                 break
+            was = found.depth[moved]
             ever[moved] = True
             self._posture(moved)
             # Only the moved bodies' capsules change; the overlaps found again are theirs and
@@ -127,26 +182,22 @@ class CollisionSeparate(System):
             capsules(st.positions, st.lengths, body, moved)
             touched = np.union1d(moved, np.flatnonzero(np.isin(found.other, moved)))
             overlaps(body, grid, touched, found)
-            # Done when nothing overlaps, or a pass took off less than STALL_SHARE of what was
-            # left (the rest is pairs that may not move, or limbs already at their turn).
-            was, left = left, float(found.depth.sum())
-            if not (found.depth > SEPARATE_FROM_M).any() or left > (1.0 - STALL_SHARE) * was:
-                break
+            shrank = found.depth[moved] <= (1.0 - STALL_SHARE) * was
+            stalled[moved] = np.where(shrank, 0, stalled[moved] + 1)
         self._undo_feet_in_ground(np.flatnonzero(ever), snapshots)
         # Every body's deepest overlap as the tick ends, for the metrics (a body the passes did
         # not look at again may touch one that moved into it).
         st.overlap_m = overlaps(body, grid_of(body)).depth
 
-    def _claims(self) -> tuple[F64, NDArray[np.bool_], F64]:
-        """(n,) each character's priority (its active constraints' highest; -inf: none),
-        (n, 6) which of its groups an active constraint's chain claims, and (n, 4, 3) each
-        limb's pin (NaN: none): the point of the limb's highest-priority active constraint, else
-        a planted foot's ankle: a limb with a pin swivels about its root-pin axis."""
+    def _claims(self) -> Claims:
+        """Each character's priority, claimed groups, limbs' pins and whom each pin aims at
+        (see :class:`Claims`)."""
         st, table = self.sim.store, self.sim.constraints
         n = st.n
         priority = np.full(n, -np.inf)
         claimed = np.zeros((n, 6), bool)
         pin = np.full((n, 4, 3), np.nan)
+        aims_at = np.full((n, 4), -1, np.int64)
         planted = st.contact_weight > 0
         pin[:, :2][planted] = st.positions[:, LIMB_END[:2]][planted]
         if table.m:
@@ -163,14 +214,18 @@ class CollisionSeparate(System):
                 pin[table.owner[on], limb] = point_positions(
                     st.posture, table.owner[on], table.segment[on], table.fraction[on],
                     table.offset[on])
-        return priority, claimed, pin
+                aims_at[table.owner[on], limb] = np.where(
+                    (table.target_kind[on] == TARGET_BODY)
+                    & (table.target_row[on] != table.owner[on]), table.target_row[on], -1)
+        return Claims(priority, claimed, pin, aims_at)
 
-    def _turns(self, rows: I64, capsule: I64, at: F64, way: F64, distance: F64,
-               claimed: NDArray[np.bool_], pin: F64) -> tuple[F64, NDArray[np.bool_]]:
+    def _turns(self, rows: I64, partner: I64, capsule: I64, at: F64, way: F64, distance: F64,
+               claims: Claims) -> tuple[F64, NDArray[np.bool_]]:
         """The turn (k, 3, 3) that moves each row's limb of ``capsule`` so that its point ``at``
-        (k, 3) goes ``distance`` (k,) along ``way`` (k, 3): about the limb's root, or, with a pin,
-        about the root-pin axis (the pin stays); and whether it can (k,) (a limb; a trunk or
-        pelvis: with no foot down and no claim on the trunk, by a step, not a turn)."""
+        (k, 3) goes ``distance`` (k,) along ``way`` (k, 3), away from the ``partner`` row (k,)
+        it overlaps: about the limb's root, or, held by a pin (:func:`held`), about the
+        root-pin axis (the pin stays); and whether it can (k,) (a limb; a trunk or pelvis: with
+        no foot down and no claim on the trunk, by a step, not a turn)."""
         st = self.sim.store
         chain = CAPSULE_CHAIN[capsule]
         k = rows.size
@@ -184,14 +239,14 @@ class CollisionSeparate(System):
             turn[limb] = rotation_toward(arm, arm + way[limb] * distance[limb, None],
                                          MAX_TURN_RAD)
             can[limb] = np.linalg.norm(arm, axis=1) > 1e-3
-            free_leg = limb[(li < 2) & ~np.isfinite(pin[r, li]).all(axis=1)]
+            pinned = held(claims, r, li, partner[limb])
+            free_leg = limb[(li < 2) & ~pinned]
             if free_leg.size:  # a swinging leg turned about its hip keeps its foot above ground
                 can[free_leg] &= self._foot_clear(rows[free_leg], chain[free_leg],
                                                   turn[free_leg])
-            pinned = np.isfinite(pin[r, li]).all(axis=1)
             if pinned.any():
                 p = np.flatnonzero(pinned)
-                axis = normalize(pin[r[p], li[p]] - root[p])
+                axis = normalize(claims.pin[r[p], li[p]] - root[p])
                 rate = np.sum(np.cross(axis, arm[p]) * way[limb[p]], axis=1)
                 lever = np.abs(rate) > MIN_LEVER_M
                 angle = np.clip(distance[limb[p]] / np.where(lever, rate, np.inf),
@@ -199,9 +254,55 @@ class CollisionSeparate(System):
                 turn[limb[p]] = axis_angle(axis, angle)
                 can[limb[p]] = lever
         core = chain == 5
-        can[core] = ~claimed[rows[core], TRUNK] & ~(st.contact_weight[rows[core]] > 0).any(axis=1)
+        can[core] = ~claims.claimed[rows[core], TRUNK] \
+            & ~(st.contact_weight[rows[core]] > 0).any(axis=1)
         can &= ~st.frozen[rows]
         return turn, can
+
+    @staticmethod
+    def _deflect(rows: I64, chain: I64, way: F64, distance: F64, pushed: Pushes) -> F64:
+        """Each row's push (k, 3) m: ``distance`` (k,) along ``way`` (k, 3), unless it goes
+        back against the last push of the same chain this tick (a limb between two others,
+        pushed from one into the other): then square to that one, as far as it takes to go
+        ``distance`` along ``way``, at most :data:`MAX_DEFLECTION` times it. Writes ``pushed``
+        for the rows."""
+        last = pushed.way[rows]
+        back = np.sum(way * last, axis=1)
+        back = np.where((pushed.chain[rows] == chain) & (back < 0.0), back, 0.0)
+        aside = way - back[:, None] * last
+        square = np.sum(aside * aside, axis=1)  # 1 - back^2: how much of way it keeps
+        scale = np.minimum(distance / np.maximum(square, 1e-12), MAX_DEFLECTION * distance)
+        push: F64 = aside * scale[:, None]
+        pushed.way[rows] = aside / np.sqrt(np.maximum(square, 1e-24))[:, None]
+        pushed.chain[rows] = chain
+        return push
+
+    def _fold(self, rows: I64, partner: I64, capsule: I64, push: F64,
+              claims: Claims) -> tuple[F64, F64]:
+        """How far (k,) m each row's limb folds (its end toward its root: the knee or elbow
+        bends; negative: it unfolds) for ``push`` (k, 3) m of a point on its shank, forearm or
+        hand: the part of the push along the root-end line, its root-end distance kept within
+        :data:`MIN_FOLD_SHARE` and :data:`MAX_REACH_SHARE` of the limb's length; none for a
+        limb held by its pin or any other chain. And the move that makes (k, 3) m (the end's;
+        a point nearer the knee or elbow moves less: the next round sees it)."""
+        st = self.sim.store
+        chain = CAPSULE_CHAIN[capsule]
+        k = rows.size
+        fold, moved = np.zeros(k), np.zeros((k, 3))
+        limb = np.flatnonzero(DISTAL[capsule] & ~st.frozen[rows])
+        limb = limb[~held(claims, rows[limb], chain[limb], partner[limb])]
+        if limb.size == 0:
+            return fold, moved
+        r, li = rows[limb], chain[limb]
+        root_to_end = st.positions[r, LIMB_END[li]] - st.positions[r, LIMB_ROOT[li]]
+        reach = np.linalg.norm(root_to_end, axis=1)
+        inward = -root_to_end / np.maximum(reach, 1e-12)[:, None]
+        length = st.lengths[r[:, None], LIMB_SEGMENTS[li]].sum(axis=1)
+        fold[limb] = np.clip(np.sum(push[limb] * inward, axis=1),
+                             np.minimum(reach - MAX_REACH_SHARE * length, 0.0),
+                             np.maximum(reach - MIN_FOLD_SHARE * length, 0.0))
+        moved[limb] = inward * fold[limb, None]
+        return fold, moved
 
     def _foot_clear(self, rows: I64, side: I64, turn: F64) -> NDArray[np.bool_]:
         """Whether each of ``rows``' leg ``side`` (0 left, 1 right), turned by ``turn``
@@ -221,21 +322,23 @@ class CollisionSeparate(System):
         clear: NDArray[np.bool_] = np.all(moved[..., 2] >= under + clearance, axis=1)
         return clear
 
-    def _separate(self, found: Overlaps, priority: F64, claimed: NDArray[np.bool_],
-                  pin: F64) -> I64:
-        """Move the chains of this round's overlapping characters (see the module docstring);
-        returns the rows moved."""
+    def _separate(self, found: Overlaps, claims: Claims, pushed: Pushes,
+                  trying: NDArray[np.bool_]) -> I64:
+        """Move the chains of this round's overlapping characters (see the module docstring)
+        that are still ``trying`` (n,); returns the rows moved. ``pushed``: each row's last
+        push this tick (read, then written)."""
         st, sim = self.sim.store, self.sim
         depth, other, mine, theirs, normal, point = found
-        rows = np.flatnonzero(depth > SEPARATE_FROM_M)
+        rows = np.flatnonzero((depth > SEPARATE_FROM_M) & trying)
         them = other[rows]
         way, at = normal[rows], point[rows]
         full = depth[rows] + MARGIN_M
-        _, can_me = self._turns(rows, mine[rows], at, way, full, claimed, pin)
-        _, can_them = self._turns(them, theirs[rows], at, -way, full, claimed, pin)
+        _, can_me = self._turns(rows, them, mine[rows], at, way, full, claims)
+        _, can_them = self._turns(them, rows, theirs[rows], at, -way, full, claims)
+        priority = claims.priority
         share = np.where(priority[rows] < priority[them], 1.0,
                          np.where(priority[rows] == priority[them], 0.5, 0.0))
-        share = np.where(can_them, share, 1.0) * can_me
+        share = np.where(can_them & trying[them], share, 1.0) * can_me
         stuck = ~can_me & ~can_them
         if stuck.any():
             names: list[str] | None = None  # made only when a pair is new (a list of every name)
@@ -249,13 +352,27 @@ class CollisionSeparate(System):
                     sim.warn(f"{names[i]}'s {CAPSULES[a]} and {names[j]}'s {CAPSULES[b]} overlap "
                              f"by {depth[i] * 1e3:.0f} mm and neither may move")
         go = share > 0
-        rows, share, way, at = rows[go], share[go], way[go], at[go]
+        rows, them, share, way, at = rows[go], them[go], share[go], way[go], at[go]
         if rows.size == 0:
             return rows
-        distance = depth[rows] * share + MARGIN_M
         capsule = mine[rows]
-        turn, _ = self._turns(rows, capsule, at, way, distance, claimed, pin)
         chain = CAPSULE_CHAIN[capsule]
+        push = self._deflect(rows, chain, way, depth[rows] * share + MARGIN_M, pushed)
+        fold, folded = self._fold(rows, them, capsule, push, claims)
+        push -= folded
+        distance = np.linalg.norm(push, axis=1)
+        way = push / np.maximum(distance, 1e-12)[:, None]
+        turn, _ = self._turns(rows, them, capsule, at, way, distance, claims)
+        limb = np.flatnonzero(fold != 0.0)
+        if limb.size:
+            r, li = rows[limb], chain[limb]
+            total = st.lengths[r[:, None], LIMB_SEGMENTS[li]].sum(axis=1)
+            fraction = np.where((li < 2)[:, None], st.poses.leg_fraction[r],
+                                st.poses.arm_fraction[r])[np.arange(limb.size), li % 2]
+            is_leg = li < 2
+            st.poses.leg_fraction[r[is_leg], li[is_leg]] = (fraction - fold[limb] / total)[is_leg]
+            st.poses.arm_fraction[r[~is_leg], li[~is_leg] - 2] = \
+                (fraction - fold[limb] / total)[~is_leg]
         posture = st.posture
         assert posture is not None
         for side_of, parent, frames, local in (
@@ -266,7 +383,7 @@ class CollisionSeparate(System):
                 continue
             rs, side = rows[sel], chain[sel] - side_of[0]
             if side_of == (0, 1):  # a planted leg's foot stays as it stands in the world
-                self._keep_feet(rs, side, turn[sel], pin)
+                self._keep_feet(rs, side, turn[sel], held(claims, rs, side, them[sel]))
             world = turn[sel] @ frames[rs, side]
             q = quat_from_matrix(np.swapaxes(parent[rs], -1, -2) @ world)
             local[rs, side] = q / np.linalg.norm(q, axis=-1, keepdims=True)
@@ -308,13 +425,12 @@ class CollisionSeparate(System):
                 getattr(st.poses, name)[rows[mine]] = value
         self._posture(back)
 
-    def _keep_feet(self, rows: I64, side: I64, turn: F64, pin: F64) -> None:
-        """A pinned leg (its foot down) of ``rows`` turned by ``turn`` (k, 3, 3) about its
-        hip-ankle axis keeps its foot's direction in the world (the ball it may stand on stays):
-        the foot's direction in the shank frame is turned back. Call before the leg's frame is
-        changed."""
+    def _keep_feet(self, rows: I64, side: I64, turn: F64, pinned: NDArray[np.bool_]) -> None:
+        """A leg of ``rows`` held by its pin (``pinned`` (k,): its foot down, or its constraint
+        met) turned by ``turn`` (k, 3, 3) about its hip-ankle axis keeps its foot's direction in
+        the world (the ball it may stand on stays): the foot's direction in the shank frame is
+        turned back. Call before the leg's frame is changed."""
         st = self.sim.store
-        pinned = np.isfinite(pin[rows, side]).all(axis=1)
         if not pinned.any():
             return
         rs, sd, tn = rows[pinned], side[pinned], turn[pinned]
