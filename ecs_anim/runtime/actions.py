@@ -155,7 +155,7 @@ def check_trigger(sim: Simulation, trigger: Trigger) -> None:
             raise fail(f"for_s must be a duration > 0, got {a.for_s}")
         if isinstance(a, MoveTarget) and not all(np.isfinite(a.target_in_world)):
             raise fail("the target must be finite")
-    if any(t.name == trigger.name for t in sim.reactions.triggers):
+    if trigger.name in sim.reactions.by_name:
         raise fail("another trigger has this name (Arm names triggers)")
 
 

@@ -224,19 +224,19 @@ def event_effects(action: Action) -> list[tuple[str, int, str | None]]:
     return []
 
 
+def listened(condition: Condition) -> tuple[str, int] | None:
+    """The (event kind, entity) an action's event must have to match ``condition``; None for a
+    condition no action's event can match (a distance, a time, a contact)."""
+    for kind, type_ in (("clip_started", ClipStarted), ("clip_ended", ClipEnded),
+                        ("removed", Removed), ("arrived", Arrived)):
+        if isinstance(condition, type_):
+            return kind, condition.entity
+    return None
+
+
 def listens_to(condition: Condition, kind: str, entity: int, clip: str | None) -> bool:
     """Whether an event (kind, entity, clip; clip None: any) can match ``condition``."""
-    if isinstance(condition, ClipStarted):
-        wanted = "clip_started"
-    elif isinstance(condition, ClipEnded):
-        wanted = "clip_ended"
-    elif isinstance(condition, Removed):
-        wanted = "removed"
-    elif isinstance(condition, Arrived):
-        wanted = "arrived"
-    else:
-        return False
-    if kind != wanted or condition.entity != entity:
+    if listened(condition) != (kind, entity):
         return False
     own = getattr(condition, "clip", None)
     return own is None or clip is None or own == clip
@@ -247,30 +247,40 @@ def find_cycle(triggers: list[Trigger]) -> list[int]:
     without delay, each one's actions causing an event the next one waits for. Returns the
     cycle's indices (empty: none)."""
     live = [i for i, t in enumerate(triggers) if t.delay_s <= 0.0 and t.repeat]
+    # Who listens to what, so each action's events look up their listeners (linear in the
+    # triggers: comparing every pair took minutes at 30,000).
+    listeners: dict[tuple[str, int], list[int]] = {}
+    for j in live:
+        key = listened(triggers[j].when)
+        if key is not None:
+            listeners.setdefault(key, []).append(j)
     edges: dict[int, list[int]] = {i: [] for i in live}
     for i in live:
         effects = [e for a in triggers[i].then for e in event_effects(a)]
-        edges[i] = [j for j in live if any(listens_to(triggers[j].when, *e) for e in effects)]
+        edges[i] = list(dict.fromkeys(
+            j for e in effects for j in listeners.get((e[0], e[1]), [])
+            if listens_to(triggers[j].when, *e)))
+    # A depth-first search with its own stack (a chain of thousands of triggers is deeper than
+    # Python's recursion allows): each entry is a trigger on the path and its next edge to try.
     state: dict[int, int] = {}  # 1: on the path, 2: done
-    path: list[int] = []
-
-    def visit(i: int) -> list[int]:
-        state[i] = 1
-        path.append(i)
-        for j in edges[i]:
+    for root in live:
+        if root in state:
+            continue
+        state[root] = 1
+        path, stack = [root], [(root, 0)]
+        while stack:
+            i, k = stack[-1]
+            if k == len(edges[i]):
+                stack.pop()
+                path.pop()
+                state[i] = 2
+                continue
+            stack[-1] = (i, k + 1)
+            j = edges[i][k]
             if state.get(j) == 1:
                 return path[path.index(j):]
             if j not in state:
-                found = visit(j)
-                if found:
-                    return found
-        path.pop()
-        state[i] = 2
-        return []
-
-    for i in live:
-        if i not in state:
-            cycle = visit(i)
-            if cycle:
-                return cycle
+                state[j] = 1
+                path.append(j)
+                stack.append((j, 0))
     return []

@@ -226,14 +226,16 @@ def _triggers(r: YamlReader, node: Node, characters: list[CharacterSpec],
     triggers: list[Trigger] = []
     nodes = r.sequence(node, "triggers", MAX_TRIGGERS, "triggers")
     names: list[str] = []  # every trigger's, first (an arm: action may name a later one)
+    seen: set[str] = set()
     for i, tn in enumerate(nodes):
         keys = r.mapping(tn, f"triggers[{i}]", {"name": False, "when": True, "then": True,
                                                  "delay_s": False, "repeat": False, "armed": False})
         name = r.string(keys["name"], f"triggers[{i}].name") if "name" in keys else f"triggers[{i}]"
-        if name in names:
+        if name in seen:
             raise r.fail(keys.get("name", tn), f"triggers[{i}].name",
                          f"another trigger is named {name!r}")
         names.append(name)
+        seen.add(name)
     for i, tn in enumerate(nodes):
         where = f"triggers[{i}]"
         keys = r.mapping(tn, where, {"name": False, "when": True, "then": True, "delay_s": False,

@@ -238,6 +238,54 @@ def test_a_cycle_of_triggers_at_run_time_warns_and_the_others_go_on(clips):
     assert walked > 0.5  # the walker went on (about 1.3 m/s)
 
 
+def test_both_feet_landing_in_one_tick_fire_a_repeating_trigger_twice_and_no_cycle(clips):
+    """A character's first tick plants both feet: two contact_began events, each firing the
+    repeating trigger once (a 'cycle' was warned, and the second firing skipped)."""
+    sim, (a, b) = one(clips, MotionPlayer("idle"), MotionPlayer("walk"))
+    sim.add_trigger(Trigger("landed", ContactBegan(a), (Play(b, "walk", from_s=0.5),),
+                            repeat=True))
+    events, _ = steps(sim, 1)
+    assert [e.detail for e in events if e.kind == "contact_began" and e.entity == a] == [
+        "left", "right"]
+    started = [e for e in events if e.kind == "clip_started" and e.entity == b]
+    assert len(started) == 1 + 2 and not sim.messages  # its own first clip, then one per foot
+
+
+def test_finding_a_cycle_looks_only_at_the_triggers_an_action_can_fire(monkeypatch):
+    """A chain of 5,000 triggers, each playing a clip the next one waits for: no cycle, found
+    by looking up each action's listeners, not by comparing every pair (which took minutes at
+    30,000 triggers)."""
+    import ecs_anim.runtime.triggers as triggers_module
+
+    calls = []
+    real = triggers_module.listens_to
+
+    def counted(*args):
+        calls.append(1)
+        return real(*args)
+
+    monkeypatch.setattr(triggers_module, "listens_to", counted)
+    n = 5000
+    chain = [Trigger(f"t{k}", ClipStarted(k, "kick"), (Play(k + 1, "kick"),), repeat=True)
+             for k in range(n)]
+    assert triggers_module.find_cycle(chain) == []
+    assert len(calls) <= 2 * n
+    assert triggers_module.find_cycle(
+        [*chain, Trigger("back", ClipStarted(n, "kick"), (Play(0, "kick"),), repeat=True)])
+
+
+def test_thousands_of_triggers_load_build_and_fire_without_a_false_cycle(tmp_path):
+    from support.many_triggers import many_triggers_yaml
+
+    path = tmp_path / "many.yaml"
+    path.write_text(many_triggers_yaml(3000), encoding="utf-8")
+    with build_simulation(load_scenario(path)) as sim:
+        assert len(sim.reactions.triggers) == 3000
+        for _ in range(3):
+            sim.step()
+        assert not sim.messages
+
+
 def test_reached_is_the_first_tick_a_constraint_is_met(clips):
     sim, (a,) = one(clips, MotionPlayer("idle"))
     uid = sim.add_constraint(a, "touch", "wrist_r", activation=Activation(0.2, 1e9, 0.3, 0.0),
