@@ -223,3 +223,26 @@ def describe(ground: Ground) -> GroundDescription | None:
     kinds = np.array([p[0] for p in parts], dtype=np.int64)
     grid = np.concatenate(grids) if grids else np.zeros(1)
     return GroundDescription(kinds, params, np.ascontiguousarray(grid, dtype=np.float64))
+
+
+def sheerest(ground: Ground) -> tuple[float, float]:
+    """(the tallest rise a step meets on ``ground`` (m), its steepest grade (rise over run)),
+    an upper bound from its parts, summed where :class:`Combined` adds them: a stairs' riser, a
+    height grid's largest difference between neighbouring cells (and as a grade over its cell),
+    a slope's grade, bumps' steepest flank (``2π amplitude / wavelength``); (0, 0) for a plane
+    or a ground that is not built in (only its heights are known)."""
+    if isinstance(ground, Stairs):
+        return abs(ground.rise_m), 0.0
+    if isinstance(ground, Slope):
+        return 0.0, float(np.hypot(ground.grade_x, ground.grade_y))
+    if isinstance(ground, Bumps):
+        shortest = min(ground.wavelength_x_m, ground.wavelength_y_m)
+        return 0.0, float(2 * np.pi * abs(ground.amplitude_m) / shortest)
+    if isinstance(ground, HeightGrid):
+        h = np.asarray(ground.heights_m)
+        step = max(float(np.abs(np.diff(h, axis=0)).max()), float(np.abs(np.diff(h, axis=1)).max()))
+        return step, step / ground.cell_m
+    if isinstance(ground, Combined):
+        parts = [sheerest(part) for part in ground.parts]
+        return sum(p[0] for p in parts), sum(p[1] for p in parts)
+    return 0.0, 0.0

@@ -13,9 +13,10 @@ import pytest
 from conftest import MOTIONS_DIR, SCENARIOS_DIR
 from ecs_anim.apps.cli.main import main
 from ecs_anim.core.body_points import GROUP_INDEX, body_point
+from ecs_anim.core.ground import Bumps, Combined, HeightGrid, Slope, Stairs, sheerest
 from ecs_anim.core.morphology import Morphology
 from ecs_anim.core.skeleton import LENGTH_INDEX as L
-from ecs_anim.runtime.feasibility import SHORT_TOLERANCE_M, chain_reach
+from ecs_anim.runtime.feasibility import SHORT_TOLERANCE_M, chain_reach, ground_lines
 from ecs_anim.scenario import build_simulation, load_scenario
 
 #: A 1.0 m kicker kicks at a 1.75 m defender 1.5 m away: its 0.48 m legs cannot reach.
@@ -137,3 +138,50 @@ def test_chain_reach_is_the_bones_from_the_anchor() -> None:
         lengths[L["thigh_r"]] + lengths[L["shank_r"]], arm,
         spine + lengths[L["clavicle_l"]] + arm, lengths[L["neck"]],
         lengths[L["upper_arm_r"]] + 0.5 * lengths[L["forearm_r"]]], rtol=0, atol=1e-12)
+
+
+#: A 0.95 m step 2 m ahead of a 1.2 m child and an adult (issue 35: a rise of metres was
+#: accepted silently).
+WALL = f"""\
+duration_s: 0.2
+fps: 30
+motions:
+  walk: {MOTIONS_DIR / "walk.bvh"}
+ground: {{type: stairs, rise_m: 0.95, run_m: 0.4, steps: 1, start_m: 2.0}}
+characters:
+  - name: child
+    morphology: child
+    motion: walk
+  - name: adult
+    morphology: adult_male
+    position_m: [0.0, 1.0]
+    motion: walk
+"""
+
+
+def test_run_says_a_rise_no_leg_can_step_up_before_the_first_tick(tmp_path: Path, capsys) -> None:
+    path = tmp_path / "wall.yaml"
+    path.write_text(WALL)
+    report = tmp_path / "wall.json"
+    assert main(["run", str(path), "--report", str(report)]) == 0
+    first = capsys.readouterr().out.splitlines()[0]
+    assert first == ("ground: a rise of 0.95 m, more than child can step up (0.26 m, half its "
+                     "leg): a character walking into it is not stopped")
+    assert json.loads(report.read_text())["ground_problems"] == [first]
+
+
+@pytest.mark.parametrize(("ground", "sheer"), [
+    (Stairs(rise_m=0.15, run_m=0.3), (0.15, 0.0)),
+    (Slope(grade_x=0.6, grade_y=0.8), (0.0, 1.0)),
+    (Bumps(amplitude_m=0.04, wavelength_x_m=2.0, wavelength_y_m=4.0), (0.0, 0.04 * np.pi)),
+    (HeightGrid(np.array([[0.0, 0.1], [0.5, 0.2]]), cell_m=0.25), (0.5, 2.0)),
+    (Combined((Stairs(rise_m=-0.2), Slope(grade_x=0.5))), (0.2, 0.5)),
+])
+def test_the_sheerest_rise_and_grade_of_each_ground(ground, sheer) -> None:
+    assert sheerest(ground) == pytest.approx(sheer)
+
+
+@pytest.mark.parametrize("name", sorted(p.stem for p in SCENARIOS_DIR.glob("*.yaml")))
+def test_the_shipped_grounds_can_be_walked_by_their_characters(name: str) -> None:
+    with build_simulation(load_scenario(SCENARIOS_DIR / f"{name}.yaml")) as sim:
+        assert ground_lines(sim) == []

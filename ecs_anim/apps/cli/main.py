@@ -180,20 +180,22 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
     :meth:`~ecs_anim.runtime.recorder.Recorder.save`, onto ``rig`` if given) and after it the
     report, then print the metrics."""
     from ecs_anim.core.files import atomic_output
-    from ecs_anim.runtime.feasibility import feasibility_lines
+    from ecs_anim.runtime.feasibility import feasibility_lines, ground_lines
     from ecs_anim.runtime.metrics import MetricsRecorder
 
     names = [c.name for c in scenario.characters]
     metrics = MetricsRecorder(sim)
     recorder = sim.record() if args.export else None
     reach = sim.feasibility()
-    for line in feasibility_lines(reach):  # before the first tick: a run can last minutes
+    ground = ground_lines(sim)
+    for line in ground + feasibility_lines(reach):  # before the first tick: a run can last minutes
         print(line, flush=True)
     for _ in range(ticks):
         sim.step()
         metrics.record()
     report = metrics.report() | {"scenario": str(args.scenario),
-                                 "feasibility": [estimate.as_dict() for estimate in reach]}
+                                 "feasibility": [estimate.as_dict() for estimate in reach],
+                                 "ground_problems": ground}
     unposed = []  # characters removed before their first posture: no files
     if recorder is not None:
         written = {path.name for path in recorder.save(args.export, force=args.force, onto=rig)}
