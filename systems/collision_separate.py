@@ -5,14 +5,27 @@ of them: :func:`ecs_anim.runtime.kernels.capsules.capsules`; the layout and radi
 :mod:`ecs_anim.solver.capsules`), and each one's deepest overlap with another character
 (neighbours on a uniform grid: :func:`ecs_anim.runtime.kernels.capsules.overlaps`). Where two
 characters overlap by more than :data:`SEPARATE_FROM_M`, the one of lower priority (the highest
-priority of its active constraints; none: lowest) moves its chain that overlaps, if that chain is
-free (no active constraint of its own claims it): a swinging limb turns about its hip or shoulder,
-a planted leg swivels about its hip-ankle axis (its foot stays), a trunk or pelvis of a body with
-no foot down steps aside. Equal priorities share the way; where the lower one's chain may not
-move, the other's moves all of it; where neither may, the pair is reported once (a warning). A
-moved character's posture is made again from its pose (the compiled PostureConvert kernel, only
-its rows), and the search runs again, at most :data:`PASSES` times, while a round still takes
-off :data:`STALL_SHARE` of the overlap left.
+priority of its active constraints; none: lowest) moves the chain that overlaps:
+
+- a free limb turns about its hip or shoulder, and a shank, forearm or hand folds or unfolds
+  its limb for the part of the way along its root-end line (a kick's ankle in a chest comes
+  back by bending the knee: no turn about the hip moves it that way);
+- a limb held by a pin swivels about its root-pin axis, the pin staying: the ankle of a foot
+  planted in full (a foot still rising or landing, contact weight below 1, is free: two
+  walkers' feet, one lifting, would otherwise stay in each other), or the point of its
+  constraint; but a limb whose constraint aims at the very body it
+  overlaps is not held against it: it goes out to that body's surface, pin and all, which is
+  what its target is (a kick at the chest, a ward-off at the shank: DESIGN §8b), so its error
+  measured to the surface does not grow (the errors reported are the solve's);
+- a trunk or pelvis of a body with no foot down steps aside.
+
+Equal priorities share the way; where the lower one's chain may not move, the other's moves
+all of it; where neither may, the pair is reported once (a warning). A push that would undo the
+same chain's last one this tick (a limb between two others) goes square to it instead. A moved
+character's posture is made again from its pose (the compiled PostureConvert kernel, only its
+rows), and the search runs again, at most :data:`PASSES` times; a body whose overlap did not
+shrink by :data:`STALL_SHARE` in :data:`PATIENCE` rounds in a row stops trying this tick (pairs
+that may not move do not end the others' rounds).
 
 Rows: every character.
 Reads: store.positions, lengths, poses, posture, contact_weight, frozen, local_rotations,
@@ -101,8 +114,8 @@ _EXPORT = export_constants()
 class Claims(NamedTuple):
     """What the active constraints hold, per character: ``priority`` (n,) their highest (-inf:
     none); ``claimed`` (n, 6) the groups their chains claim; ``pin`` (n, 4, 3) each limb's pin
-    (NaN: none): the point of its highest-priority active constraint, else a planted foot's
-    ankle; ``aims_at`` (n, 4) the row of the character that constraint's target lies on (-1:
+    (NaN: none): the point of its highest-priority active constraint, else the ankle of a foot
+    planted in full (contact weight 1); ``aims_at`` (n, 4) the row of the character that constraint's target lies on (-1:
     none, the world, itself)."""
 
     priority: F64
@@ -198,7 +211,7 @@ class CollisionSeparate(System):
         claimed = np.zeros((n, 6), bool)
         pin = np.full((n, 4, 3), np.nan)
         aims_at = np.full((n, 4), -1, np.int64)
-        planted = st.contact_weight > 0
+        planted = st.contact_weight >= 1.0  # a foot rising or landing may be moved
         pin[:, :2][planted] = st.positions[:, LIMB_END[:2]][planted]
         if table.m:
             on = np.flatnonzero(table.weight > 0)
