@@ -12,11 +12,15 @@ step is lifted.
 
 Rows: every character, grouped by ground (``System.ground_groups``: its own GroundQuery or the
 environment's).
+A character walking into a rise taller than it can step up stops in front of it
+(:meth:`GroundAdapt.stop_at_rises`).
+
 Reads: store.poses (the pelvis and legs, decoded here on each body: MorphologyAdapt's scaling),
 contact_weight, sole_roll, lengths, clip, footprint, locked, pivot, ground_ref (the last
-tick's), ground_index; the ground; the bank's ankle heights.
-Writes: store.poses (root height, leg frames and fractions, foot directions), footprint, locked,
-pivot, ground_ref.
+tick's), ground_index, positions (the last posture's pelvis), placement_xy, fade_placement_xy;
+the ground; the bank's ankle heights.
+Writes: store.poses (root position, leg frames and fractions, foot directions), footprint,
+locked, pivot, ground_ref, placement_xy and fade_placement_xy (held back at a rise).
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ from ecs_anim.core.ground_adapt import (
     GROUND_SMOOTHING_S,
     HEEL_TOLERANCE_M,
     MAX_LEG_EXTENSION,
+    STEP_UP_PER_LEG,
     SWITCH_PER_LEG,
     adapt_keeping_heels_up,
     heel_depth,
@@ -49,6 +54,16 @@ from ecs_anim.runtime.system_base import System
 if TYPE_CHECKING:
     from ecs_anim.runtime.simulation import Simulation
 
+#: How far ahead of the pelvis, along the way it goes, a rise too tall to step up stops a
+#: character (per leg length): past the toes of a walking stride's front foot ...
+STOP_AHEAD_PER_LEG = 1.0
+#: ... looked at every this far (per leg length: 8.5 cm for a 0.85 m leg), closer than a stair's
+#: run, so a rise is one riser's height, not a flight's.
+STOP_SAMPLE_PER_LEG = 0.1
+#: A root moving more than this since the last posture (per leg length) is no walk into a rise
+#: (a first tick, a character placed anew): nothing is held back.
+MAX_ADVANCE_PER_LEG = 0.2
+
 #: Passes lifting heels (``adapt_keeping_heels_up``) and pitching toes onto the ground.
 HEEL_PASSES = 4
 TOE_PASSES = 4
@@ -63,8 +78,10 @@ class GroundAdapt(System):
     ground of the user's own (only its numpy ``height``) goes through :meth:`run_numpy`."""
 
     reads = ("poses", "contact_weight", "sole_roll", "lengths", "clip", "footprint", "locked",
-             "pivot", "ground_ref", "ground_index")
-    writes = ("footprint", "locked", "pivot", "ground_ref", "poses")
+             "pivot", "ground_ref", "ground_index", "positions", "placement_xy",
+             "fade_placement_xy")
+    writes = ("footprint", "locked", "pivot", "ground_ref", "poses", "placement_xy",
+              "fade_placement_xy")
 
     def __init__(self, sim: Simulation):
         super().__init__(sim)
@@ -79,6 +96,7 @@ class GroundAdapt(System):
 
     def run(self, dt: float) -> None:
         sim, st = self.sim, self.sim.store
+        self.stop_at_rises()
         groups = [(rows, self._description(ground)) for ground, rows in self.ground_groups()]
         if any(description is None for _, description in groups):
             self.run_numpy(dt)
@@ -97,6 +115,36 @@ class GroundAdapt(System):
                         st.footprint, st.locked, st.pivot, st.ground_ref, ground, dt,
                         GROUND_SMOOTHING_S, BALL_HEIGHT_PER_LEG, MAX_LEG_EXTENSION,
                         HEEL_TOLERANCE_M, SWITCH_PER_LEG, HEEL_PASSES, TOE_PASSES)
+
+    def stop_at_rises(self) -> None:
+        """Hold back each character walking into a rise taller than it can step up
+        (:data:`~ecs_anim.core.ground_adapt.STEP_UP_PER_LEG` of its leg, between two points
+        :data:`STOP_SAMPLE_PER_LEG` apart) within :data:`STOP_AHEAD_PER_LEG` ahead of its
+        pelvis: its root does not advance this
+        tick, nor its motion's origin (``placement_xy``, ``fade_placement_xy``) after it, so it
+        treads where it is, its feet outside the rise, until its motion turns away. All
+        characters at once (numpy); the advance is since the last posture."""
+        st = self.sim.store
+        if st.n == 0 or st.positions.shape[0] != st.n:
+            return
+        leg = self.sim.leg_length()
+        root_xy = st.poses.root_position[:, :2] * leg[:, None]  # the pelvis, world m
+        advance = root_xy - st.positions[:, 0, :2]
+        step = np.linalg.norm(advance, axis=1)
+        walking = (step > 1e-9) & (step < MAX_ADVANCE_PER_LEG * leg)
+        if not walking.any():
+            return
+        way = advance / np.maximum(step, 1e-9)[:, None]
+        reach = np.arange(0.0, STOP_AHEAD_PER_LEG + 1e-9, STOP_SAMPLE_PER_LEG)  # (k,) per leg
+        ahead = root_xy[:, None] + way[:, None] * (reach[None] * leg[:, None])[..., None]
+        heights = self.row_ground().height(ahead)  # (n, k)
+        rise = np.diff(heights, axis=1).max(axis=1)
+        stopped = walking & (rise > STEP_UP_PER_LEG * leg)
+        if stopped.any():
+            back = advance[stopped]
+            writable_poses(st.poses, st.n).root_position[stopped, :2] -= back / leg[stopped, None]
+            st.placement_xy[stopped] -= back
+            st.fade_placement_xy[stopped] -= back
 
     def run_numpy(self, dt: float) -> None:
         """The numpy reference of :meth:`run` (any ground with a ``height``; each character on

@@ -49,6 +49,11 @@ MAX_LOWERING_LEAN_SIN = 0.8660254037844386
 #: it stood but a glitch, and the leg stretches towards it rather than the body jumping.
 MAX_ROOT_FOLLOW_PER_REACH = 0.25
 
+#: The tallest rise a body steps up, as a share of its leg (thigh + shank): a knee-high step.
+#: GroundAdapt stops a character walking into a taller one; ``run`` says so before the first
+#: tick (:func:`ecs_anim.runtime.feasibility.ground_lines`).
+STEP_UP_PER_LEG = 0.5
+
 #: A heel this far under the ground (m) is lifted: well below the metrics' 1 mm, above rounding.
 HEEL_TOLERANCE_M = 1e-6
 
@@ -236,6 +241,6 @@ def adapt_keeping_heels_up(poses: NormalizedPoses, lengths: F64, ankle_targets: 
 
 
 __all__ = ["BALL_ROLL", "GROUND_SMOOTHING_S", "HEEL_ROLL", "MAX_LOWERING_LEAN_SIN",
-           "MAX_ROOT_FOLLOW_PER_REACH", "SWITCH_PER_LEG", "adapt_keeping_heels_up", "adapt_to_ground", "heel_depth",
+           "MAX_ROOT_FOLLOW_PER_REACH", "STEP_UP_PER_LEG", "SWITCH_PER_LEG", "adapt_keeping_heels_up", "adapt_to_ground", "heel_depth",
            "horizontal_reach_excess", "pitched", "pivot_wanted", "planted_foot", "sole_roll",
            "vertical_slack_for_reach"]

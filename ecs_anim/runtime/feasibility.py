@@ -48,6 +48,7 @@ from ecs_anim.core.body_points import (
     point_positions,
 )
 from ecs_anim.core.ground import sheerest
+from ecs_anim.core.ground_adapt import STEP_UP_PER_LEG
 from ecs_anim.core.morphology import Morphology, leg_length
 from ecs_anim.core.normalized import DecodedPose, decode
 from ecs_anim.core.skeleton import BONE_JOINTS, JOINT_INDEX, JOINTS, LENGTHS, N_JOINTS, PARENTS
@@ -165,8 +166,6 @@ def feasibility_lines(estimates: list[Feasibility]) -> list[str]:
     return lines
 
 
-#: The tallest step a body can step up, as a share of its leg (thigh + shank): a knee-high step.
-STEP_UP_PER_LEG = 0.5
 #: The steepest grade a foot can stand on (rise over run: 45 degrees).
 MAX_GRADE = 1.0
 
@@ -175,8 +174,8 @@ def ground_lines(sim: Simulation) -> list[str]:
     """What ``run`` prints before the first tick about the ground (one line each, none when
     every body can walk it): a rise taller than the shortest-legged character can step up
     (:data:`STEP_UP_PER_LEG` of its leg), a grade steeper than a foot can stand on
-    (:data:`MAX_GRADE`). Such a ground is walked into, not climbed: the characters are not
-    stopped at it."""
+    (:data:`MAX_GRADE`). A character walking into such a rise stops at it (GroundAdapt); a
+    grade is walked onto."""
     step_m, grade = sheerest(sim.ground)
     lines = []
     legs = sim.leg_length()
@@ -184,7 +183,7 @@ def ground_lines(sim: Simulation) -> list[str]:
         who = sim.names()[int(np.argmin(legs))]
         lines.append(f"ground: a rise of {step_m:.2f} m, more than {who} can step up "
                      f"({STEP_UP_PER_LEG * legs.min():.2f} m, half its leg): a character walking "
-                     "into it is not stopped")
+                     "into it stops there")
     if grade > MAX_GRADE:
         lines.append(f"ground: a grade of {np.degrees(np.arctan(grade)):.0f} degrees, steeper "
                      f"than a foot can stand on ({np.degrees(np.arctan(MAX_GRADE)):.0f}): a "

@@ -40,9 +40,8 @@ EXPECTED_WRITERS = {
     **{name: ["ApplyReactions", "QueuedClips", "Steering", "DetectEvents"] for name in CLIP_START},
     **{name: ["ApplyReactions", "QueuedClips", "Steering", "MotionPlayback", "DetectEvents"]
        for name in ("clip_time_s", "fade_time_s", "fade_s", "fade_elapsed_s")},
-    "placement_xy": ["ApplyReactions", "QueuedClips", "Steering", "MorphologyAdapt", "DetectEvents"],
-    "fade_placement_xy": ["ApplyReactions", "QueuedClips", "Steering", "MorphologyAdapt",
-                          "DetectEvents"],
+    **{name: ["ApplyReactions", "QueuedClips", "Steering", "MorphologyAdapt", "GroundAdapt",
+              "DetectEvents"] for name in ("placement_xy", "fade_placement_xy")},
     "locked": ["ApplyReactions", "QueuedClips", "Steering", "MorphologyAdapt", "GroundAdapt",
                "DetectEvents"],
     **{name: ["ApplyReactions", "DetectEvents"] for name in (
@@ -71,7 +70,7 @@ EXPECTED_WRITERS = {
     **{name: ["CollisionSeparate"] for name in ("capsule_ends", "capsule_radii", "overlap_m")},
 }
 #: Fields a system reads as the previous tick left them, before this tick's writer.
-LAST_TICK = {"posture", "footprint", "contact_weight"}
+LAST_TICK = {"posture", "footprint", "contact_weight", "positions"}
 #: The store's own fields (``columns`` holds the user's systems' columns, written by them).
 STORE_FIELDS = {f.name for f in dataclasses.fields(CharacterStore)
                 if not f.name.startswith("_") and f.name != "columns"}

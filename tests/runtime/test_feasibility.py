@@ -141,9 +141,9 @@ def test_chain_reach_is_the_bones_from_the_anchor() -> None:
 
 
 #: A 0.95 m step 2 m ahead of a 1.2 m child and an adult (issue 35: a rise of metres was
-#: accepted silently).
+#: accepted silently, and walked into: penetration up to 25 m).
 WALL = f"""\
-duration_s: 0.2
+duration_s: 5.0
 fps: 30
 motions:
   walk: {MOTIONS_DIR / "walk.bvh"}
@@ -166,8 +166,24 @@ def test_run_says_a_rise_no_leg_can_step_up_before_the_first_tick(tmp_path: Path
     assert main(["run", str(path), "--report", str(report)]) == 0
     first = capsys.readouterr().out.splitlines()[0]
     assert first == ("ground: a rise of 0.95 m, more than child can step up (0.26 m, half its "
-                     "leg): a character walking into it is not stopped")
-    assert json.loads(report.read_text())["ground_problems"] == [first]
+                     "leg): a character walking into it stops there")
+    figures = json.loads(report.read_text())
+    assert figures["ground_problems"] == [first]
+    for character in figures["characters"]:  # they stop in front of it: nothing sinks
+        assert character["floating_mm_max"] <= 1.0 and character["ground_penetration_mm_max"] <= 1.0
+        assert character["foot_sliding_mm_per_frame"]["max"] <= 1.0
+
+
+def test_walkers_stop_in_front_of_a_rise_they_cannot_step_up(tmp_path: Path) -> None:
+    path = tmp_path / "wall.yaml"
+    path.write_text(WALL)
+    scenario = load_scenario(path)
+    with build_simulation(scenario) as sim:
+        front = np.zeros(2)
+        for _ in range(round(scenario.duration_s * scenario.fps)):
+            sim.step()
+            front = np.maximum(front, sim.store.positions[:, :, 0].max(axis=1))
+        assert np.all(front < 2.0) and np.all(front > 1.5), front  # at the riser, x = 2 m
 
 
 @pytest.mark.parametrize(("ground", "sheer"), [
