@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ecs_anim.core.ground import Ground, GroundDescription, describe
+from ecs_anim.core.ground import Ground, GroundDescription, describe, sheerest
 from ecs_anim.core.ground_adapt import (
     BALL_HEIGHT_PER_LEG,
     GROUND_SMOOTHING_S,
@@ -128,6 +128,8 @@ class GroundAdapt(System):
         if st.n == 0 or st.positions.shape[0] != st.n:
             return
         leg = self.sim.leg_length()
+        if all(self._walkable(ground, float(leg.min())) for ground, _ in self.ground_groups()):
+            return  # (the usual case: nothing to look at every tick)
         root_xy = st.poses.root_position[:, :2] * leg[:, None]  # the pelvis, world m
         advance = root_xy - st.positions[:, 0, :2]
         step = np.linalg.norm(advance, axis=1)
@@ -145,6 +147,16 @@ class GroundAdapt(System):
             writable_poses(st.poses, st.n).root_position[stopped, :2] -= back / leg[stopped, None]
             st.placement_xy[stopped] -= back
             st.fade_placement_xy[stopped] -= back
+
+    def _walkable(self, ground: Ground, shortest_leg_m: float) -> bool:
+        """Whether no two points :data:`STOP_SAMPLE_PER_LEG` apart on a built-in ``ground`` can
+        rise more than the shortest leg steps up (its :func:`~ecs_anim.core.ground.sheerest`
+        bounds it; a ground of one's own may rise anywhere)."""
+        if self._description(ground) is None:
+            return False
+        step_m, grade = sheerest(ground)
+        return step_m + grade * STOP_SAMPLE_PER_LEG * shortest_leg_m \
+            <= STEP_UP_PER_LEG * shortest_leg_m
 
     def run_numpy(self, dt: float) -> None:
         """The numpy reference of :meth:`run` (any ground with a ``height``; each character on
