@@ -133,18 +133,22 @@ def test_two_hundred_walkers_cross_without_touching(motions: dict[str, Normalize
         sim.set_locomotion(int(e), walk="walk", idle="idle")
         sim.follow_path(int(e), [goal])
     radius = avoidance_radius(sim.store.lengths, sim.steering_settings)
-    worst = np.inf
+    worst, deepest = np.inf, 0.0
     for _ in range(round(45 * sim.fps)):
         sim.step()
         worst = min(worst, float(closest_pairs(sim.store.positions[:, 0, :2], radius).min()))
+        deepest = max(deepest, float(sim.store.overlap_m.max()))
     ends = np.array([np.linalg.norm(sim.posture(int(e)).positions[0, :2] - g)
                      for e, g in zip(entities, goals, strict=True)])
     sim.close()
-    print(f"closest: {worst:.3f} m from the radii; ends max {ends.max():.3f} m, "
-          f"{np.sum(ends < 0.3)} within 0.3 m")
+    print(f"closest: {worst:.3f} m from the radii; bodies {deepest * 1e3:.0f} mm into each "
+          f"other; ends max {ends.max():.3f} m, {np.sum(ends < 0.3)} within 0.3 m")
     # Within half of each margin (the motion's lag behind ORCA's velocity): shoulders clear
     # of each other by 0.1 m at least.
     assert worst > -DEFAULT_STEERING.avoid_margin_m, worst
+    # The bodies: up to 105 mm, two walkers of a file both standing on their feet in full, the
+    # one behind on the other's heels (issue 32 asks 10 mm: docs/steering.md, Limits).
+    assert deepest < 0.12, deepest
     # Most get through in 45 s (25 s walking alone); a few stay stuck behind the others'
     # ends (local avoidance plans no route: docs/steering.md, Limits).
     assert np.mean(ends < 0.3) >= 0.8, np.sort(ends)[-45:]

@@ -5,10 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from conftest import SCENARIOS_DIR
 from ecs_anim.core.morphology import Morphology
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import N_JOINTS
 from ecs_anim.runtime.kernels.capsules import capsules, closest_between, overlaps
+from ecs_anim.runtime.metrics import MetricsRecorder
+from ecs_anim.scenario import build_simulation, load_scenario
 from ecs_anim.solver.capsules import (
     CAPSULE_INDEX,
     N_CAPSULES,
@@ -116,4 +119,33 @@ def test_the_fights_kicks_land_on_the_chest_not_in_it():
         if pair < 4:  # pair 4's kicker cannot reach
             assert np.nanmax(e[full, kick]) < 1e-4  # 0.0 mm to the surface
     for c in r["report"]["characters"]:
-        assert "overlap_mm_max" in c and "overlap_at_s" in c
+        # kick, ward-off and punch meet on the surfaces: 44-93 mm deep before each chain that
+        # aims at a body could go out to its surface
+        assert c["overlap_mm_max"] <= 10.0, c
+
+
+def test_a_two_against_two_fight_of_a_small_and_a_tall_body_touches_without_overlap():
+    """The fight's first two pairs, its first kicker 1.1 m tall (a child's proportions), its
+    second defender 2.1 m: the kicks, ward-offs and punches meet on the surfaces (before, 61 and
+    102 mm deep), the feet stay planted."""
+    scenario = load_scenario(SCENARIOS_DIR / "fight_training.yaml")
+    scenario.characters = scenario.characters[:4]
+    scenario.characters[0].morphology = Morphology.from_stature(1.1, proportions="child")
+    scenario.characters[3].morphology = Morphology.from_stature(2.1)
+    scenario.triggers = [t for t in scenario.triggers if t.name.endswith(("_1", "_2"))]
+    with build_simulation(scenario) as sim:
+        metrics = MetricsRecorder(sim)
+        for _ in range(round(scenario.duration_s * scenario.fps)):
+            sim.step()
+            metrics.record()
+        report = metrics.report()
+    for c in report["characters"]:
+        assert c["overlap_mm_max"] <= 10.0, c
+        assert c["foot_sliding_mm_per_frame"]["max"] < 1.0, c
+        assert c["ground_penetration_mm_max"] < 1.0, c
+        assert c["floating_mm_max"] < 1.0, c
+    errors = {(k["character"], k["name"]): k["error_mm_max_fully_active"]
+              for k in report["constraints"]}
+    # the 1.1 m kicker cannot reach; the 1.75 m one lands on the 2.1 m chest
+    assert errors[("kicker_2", "kick_torso")] < 0.1
+    assert errors[("defender_1", "ward_off")] < 0.1 and errors[("defender_2", "ward_off")] < 0.1

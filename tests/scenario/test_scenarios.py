@@ -25,6 +25,7 @@ def test_every_scenario_runs_clean(name):
         assert c["foot_sliding_mm_per_frame"]["max"] < 1.0, c
         assert c["ground_penetration_mm_max"] < 1.0, c
         assert c["bone_length_error_m_max"] < 1e-6, c
+        assert c["overlap_mm_max"] <= 10.0, c  # bodies touch, never 10 mm into each other
 
 
 def test_fight_training_hits_and_ward_offs_are_met_and_heads_dodge_the_punches():
@@ -37,12 +38,13 @@ def test_fight_training_hits_and_ward_offs_are_met_and_heads_dodge_the_punches()
         kick = idx[f"kicker_{pair}.kick_torso"]
         assert np.nanmax(e[w[:, kick] >= 1, kick]) < 0.01  # the ankle on the torso
     # Pair 4's short-legged kicker cannot reach the 1.85 m defender's chest: its leg is stretched
-    # towards it, as far as a leg goes, at the kick's peak (0.70 s into the clip).
+    # towards it, as far as a leg goes, at the kick's peak (0.70 s into the clip), but for the
+    # defender's ward-off: the forearm it meets there bends the knee a little (9 mm).
     peak = round((started(r, "kicker_4", "kick") + 0.70) * 30)
     p = r["positions"][peak, r["names"].index("kicker_4")]
     from ecs_anim.core.ground_adapt import MAX_LEG_EXTENSION
     leg = np.linalg.norm(p[J["ankle_r"]] - p[J["hip_r"]])
-    assert leg > 0.99 * MAX_LEG_EXTENSION * r["leg"][r["names"].index("kicker_4")]
+    assert leg > 0.97 * MAX_LEG_EXTENSION * r["leg"][r["names"].index("kicker_4")]
     # The punches are within reach: without the dodge every fist touches the kicker's face (its
     # knuckles 10 cm from the head's centre) while the punch is fully active; in its first such
     # tick the kicker, just landing its kick, may still be up to 5 cm out of reach (34 mm seen).
@@ -61,9 +63,10 @@ def test_fight_training_hits_and_ward_offs_are_met_and_heads_dodge_the_punches()
         return head, knuckles
 
     # The dodge: the kicker's head leans back and keeps at least 17 cm from the knuckles through
-    # the punch (1.0-1.5 s of ward_off_punch, which the defender plays from 0.4 s), twice as far
-    # as without it, and moves smoothly: no tick moves it further than the fist itself moves in
-    # a tick.
+    # the punch (1.0-1.5 s of ward_off_punch, which the defender plays from 0.4 s), at least
+    # 4 cm further than without it, where the fist stops on the face (the hand's and the head's
+    # capsules touching: 13-17 cm; it went 10 cm in before bodies were kept apart), and moves
+    # smoothly: no tick moves it further than the fist itself moves in a tick.
     for pair in (1, 2, 3, 4):
         begun = started(r, f"defender_{pair}", "ward_off_punch")
         assert begun == started(without, f"defender_{pair}", "ward_off_punch")
@@ -72,7 +75,8 @@ def test_fight_training_hits_and_ward_offs_are_met_and_heads_dodge_the_punches()
         head_without, knuckles_without = head_and_knuckles(without, pair)
         gap = np.linalg.norm(head - knuckles, axis=1)[punch_window].min()
         gap_without = np.linalg.norm(head_without - knuckles_without, axis=1)[punch_window].min()
-        assert gap > 0.17 and gap > 2 * gap_without, (pair, gap, gap_without)
+        assert gap_without < 0.18 and gap > 0.17 and gap > gap_without + 0.04, \
+            (pair, gap, gap_without)
         head_step = np.linalg.norm(np.diff(head, axis=0), axis=1).max()
         fist_step = np.linalg.norm(np.diff(knuckles_without, axis=0), axis=1).max()
         assert head_step <= fist_step + 0.01, (pair, head_step, fist_step)
