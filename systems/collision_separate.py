@@ -25,7 +25,8 @@ same chain's last one this tick (a limb between two others) goes square to it in
 character's posture is made again from its pose (the compiled PostureConvert kernel, only its
 rows), and the search runs again, at most :data:`PASSES` times; a body whose overlap did not
 shrink by :data:`STALL_SHARE` in :data:`PATIENCE` rounds in a row stops trying this tick (pairs
-that may not move do not end the others' rounds).
+that may not move do not end the others' rounds), and the rounds end when the bodies still
+trying, together, went no lower in as many.
 
 Rows: every character.
 Reads: store.positions, lengths, poses, posture, contact_weight, frozen, local_rotations,
@@ -176,8 +177,11 @@ class CollisionSeparate(System):
         ever = np.zeros(n, bool)
         # Rounds in a row in which each body's overlap did not shrink by STALL_SHARE; a body
         # at PATIENCE stops trying this tick (limbs at their turn, pairs that may not move):
-        # the others go on.
+        # the others go on. And rounds in a row in which the overlap of all the bodies still
+        # trying, together, did not go STALL_SHARE below its least: at PATIENCE the rounds end
+        # (a crowd whose moves mostly push its bodies into others: the bench's walkers).
         stalled = np.zeros(n, np.int64)
+        stalled_all, least_all = 0, np.inf
         for _ in range(PASSES):
             fresh = np.flatnonzero((found.depth > SEPARATE_FROM_M) & ~kept)
             if fresh.size:
@@ -197,6 +201,11 @@ class CollisionSeparate(System):
             overlaps(body, grid, touched, found)
             shrank = found.depth[moved] <= (1.0 - STALL_SHARE) * was
             stalled[moved] = np.where(shrank, 0, stalled[moved] + 1)
+            left = float(found.depth[stalled < PATIENCE].sum())
+            stalled_all = 0 if left <= (1.0 - STALL_SHARE) * least_all else stalled_all + 1
+            least_all = min(least_all, left)
+            if stalled_all >= PATIENCE:
+                break
         self._undo_feet_in_ground(np.flatnonzero(ever), snapshots)
         # Every body's deepest overlap as the tick ends, for the metrics (a body the passes did
         # not look at again may touch one that moved into it).
