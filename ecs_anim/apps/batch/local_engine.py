@@ -144,6 +144,9 @@ def run_in_pool(work: WorkList, workers: int) -> Iterator[tuple[Job, Outcome]]:
     pool: list[_Worker] = []
 
     def send(key: str) -> None:
+        for gone in [w for w in pool if w.task is None and not w.process.is_alive()]:
+            gone.stop()  # killed while idle: it held no task
+            pool.remove(gone)
         worker = next((w for w in pool if w.task is None), None)
         if worker is None:
             worker = _Worker(context, [w.conn for w in pool])
@@ -215,4 +218,4 @@ def _failed(key: str, work: WorkList, jobs: dict[str, Job]) -> Iterator[tuple[Jo
         yield jobs[name], Outcome(failed_record(jobs[name], WORKER_DIED))
         return
     for job in work[name]:
-        yield job, Outcome(failed_record(job, f"{name}: the import's {WORKER_DIED}"))
+        yield job, Outcome(failed_record(job, f"{name}: its import failed: {WORKER_DIED}"))

@@ -92,13 +92,13 @@ def compiled_kernels(tmp_path: Path) -> None:
 def test_workers_killed_at_random_moments_never_hang_the_batch(tmp_path: Path,
                                                                compiled_kernels: None) -> None:
     """Real SIGKILLs of real pool workers, at random moments (importing, running, reading a
-    task, writing a result) while the driver hands out 5 clips x 3 bodies: the batch ends
+    task, writing a result) while the driver hands out 6 clips x 3 bodies: the batch ends
     (bounded), each job is ok with its file or failed because its worker died, and a second
     run ends the work. (Whether the second run skips the first's jobs depends on the package's
     source not changing between the two: the job hash holds it.)"""
     rng = random.Random(35)
     out = tmp_path / "out"
-    argv = [*clips(5), "--bodies", "child,adult_male,tall", "--seconds", "0.5", "--formats",
+    argv = [*clips(6), "--bodies", "child,adult_male,tall", "--seconds", "1.0", "--formats",
             "npz", "--jobs", "2", "--out", str(out)]
     driver = start_driver(tmp_path, *argv)
     kills, started = 0, time.monotonic()
@@ -121,13 +121,13 @@ def test_workers_killed_at_random_moments_never_hang_the_batch(tmp_path: Path,
     print(f"{kills} workers killed; the batch ended in {time.monotonic() - started:.1f} s")
     assert kills >= 6, f"the batch ended after {kills} kills: give it more jobs\n{log}"
     jobs = records(out)
-    assert len(jobs) == 15 and driver.returncode == (0 if all(
+    assert len(jobs) == 18 and driver.returncode == (0 if all(
         j["status"] == "ok" for j in jobs) else 1), log
     assert all(j["status"] == "ok" or WORKER_DIED in j["error"] for j in jobs), log
     assert sorted(job_files(out)) == sorted(f"{j['clip']}/{j['body']}.npz" for j in jobs
                                             if j["status"] == "ok")
     assert run_batch_cli(*argv) == 0  # the failed ones redone, whole
-    assert len(job_files(out)) == 15 and {j["status"] for j in records(out)} <= {"ok", "skipped"}
+    assert len(job_files(out)) == 18 and {j["status"] for j in records(out)} <= {"ok", "skipped"}
 
 
 # ---------------------------------------------------------------------------------------------
