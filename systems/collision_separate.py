@@ -239,6 +239,7 @@ class CollisionSeparate(System):
                 aims_at[table.owner[on], limb] = np.where(
                     (table.target_kind[on] == TARGET_BODY)
                     & (table.target_row[on] != table.owner[on]), table.target_row[on], -1)
+        aims_at[:, :2][planted] = -1  # a foot down stays, whatever its leg aims at
         return Claims(priority, claimed, pin, aims_at)
 
     def _turns(self, rows: I64, partner: I64, capsule: I64, at: F64, way: F64, distance: F64,
