@@ -137,7 +137,7 @@ def test_more_user_mistakes_are_one_line_errors(tmp_path, capsys):
         (["import", walk, "-o", str(tmp_path / "mm"), "--unit", "mm"], "m tall with the length unit 'mm'"),
         (["info", walk], "not an .nmo file (import it first"),
         (["view", scenario, "--screenshot", str(tmp_path / "v.jpg")], "screenshots are PNG files"),
-        (["import", walk, "-o", str(tmp_path / "g"), "--max-gap", "3"], "are for .c3d files"),
+        (["import", walk, "-o", str(tmp_path / "g"), "--max-gap", "3"], "are for .c3d and .trc files"),
         (["import", str(huge), "-o", str(tmp_path / "h")], f"{huge}:{first_frame + 1}: value beyond 1e+07"),
         (["info", str(tmp_path / "bent.nmo")], "leg_fraction holds values outside 0-1"),
     ]
