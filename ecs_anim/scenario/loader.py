@@ -275,7 +275,7 @@ def load_scenario(path: str | Path) -> Scenario:
     duration = r.number(top["duration_s"], "duration_s", 1.0 / fps, MAX_DURATION_S, "s")
     motion_nodes = top["motions"]
     if not isinstance(motion_nodes, yaml.MappingNode) or not motion_nodes.value:
-        raise r.fail(motion_nodes, "motions", "expected a mapping name: file (.bvh, .c3d, .fbx or .nmo)")
+        raise r.fail(motion_nodes, "motions", "expected a mapping name: file (.bvh, .c3d, .fbx, .trc, .amc or .nmo)")
     motions: dict[str, NormalizedMotion] = {}
     fills: list[tuple[str, Node]] = []
     read: dict[Path, NormalizedMotion] = {}

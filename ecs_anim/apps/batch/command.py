@@ -16,6 +16,7 @@ from ecs_anim.apps.batch.job_hash import files_digest
 from ecs_anim.apps.batch.manifest import load_manifest
 from ecs_anim.apps.batch.plan import DEFAULT_FORMATS, Body, OntoRig, Plan, make_plan
 from ecs_anim.apps.batch.plan_parts import (
+    CLIP_TYPES,
     body_from_text,
     expand_clips,
     load_grounds,
@@ -118,7 +119,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
                     "DIR/<clip>/<body>[_<ground>].{bvh,npz,glb}, DIR/metrics.csv, metrics.json "
                     "and report.html. A second run skips jobs done with the same inputs.")
     p.add_argument("clips", nargs="*", metavar="CLIP",
-                   help="clips: .bvh, .c3d, .fbx or .nmo files, globs ('mocap/*.bvh') or folders")
+                   help=f"clips: {CLIP_TYPES} files, globs ('mocap/*.bvh') or folders")
     p.add_argument("--manifest", metavar="FILE.yaml",
                    help="clips, bodies, grounds, template, formats, out from a YAML file")
     p.add_argument("--bodies", metavar="B,B,...",

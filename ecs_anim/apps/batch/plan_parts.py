@@ -21,7 +21,9 @@ from ecs_anim.core.files import MAX_NAME_LENGTH, NAME_PATTERN
 from ecs_anim.core.morphology import PRESET_SPECS, Morphology, load_morphology_yaml
 
 #: Clip files a batch reads, and what a folder given as a clip contributes.
-CLIP_SUFFIXES = (".bvh", ".c3d", ".fbx", ".nmo")
+CLIP_SUFFIXES = (".bvh", ".c3d", ".fbx", ".trc", ".amc", ".nmo")
+#: The clip types, as messages name them.
+CLIP_TYPES = ", ".join(CLIP_SUFFIXES[:-1]) + " or " + CLIP_SUFFIXES[-1]
 
 
 def _check_name(name: str, what: str) -> str | None:
@@ -125,8 +127,8 @@ def load_template(path: str | Path) -> Template:
 
 
 def expand_clips(patterns: Sequence[str], base: Path = Path(".")) -> list[Path]:
-    """Clip files from names, globs and folders (a folder gives its .bvh, .c3d, .fbx and .nmo files),
-    in the order given, each once; a pattern matching no clip is an error, and so are two clips
+    """Clip files from names, globs and folders (a folder gives its files of the
+    :data:`CLIP_SUFFIXES`: an .amc's skeleton is found beside it), in the order given, each once; a pattern matching no clip is an error, and so are two clips
     with one stem (their outputs would share a folder)."""
     found: list[Path] = []
     for pattern in patterns:
@@ -135,19 +137,19 @@ def expand_clips(patterns: Sequence[str], base: Path = Path(".")) -> list[Path]:
             matches = sorted(Path(p) for p in glob.glob(full, recursive=True))
             matches = [p for p in matches if p.suffix.lower() in CLIP_SUFFIXES and p.is_file()]
             if not matches:
-                raise EcsAnimError(f"{pattern}: matches no .bvh, .c3d, .fbx or .nmo file")
+                raise EcsAnimError(f"{pattern}: matches no {CLIP_TYPES} file")
         elif Path(full).is_dir():
             matches = sorted(p for p in Path(full).iterdir()
                              if p.suffix.lower() in CLIP_SUFFIXES and p.is_file())
             if not matches:
-                raise EcsAnimError(f"{pattern}: a folder with no .bvh, .c3d, .fbx or .nmo file")
+                raise EcsAnimError(f"{pattern}: a folder with no {CLIP_TYPES} file")
         else:
             path = Path(full)
             if not path.is_file():
                 raise EcsAnimError(f"{pattern}: no such clip")
             if path.suffix.lower() not in CLIP_SUFFIXES:
                 raise EcsAnimError(f"{pattern}: unsupported clip type {path.suffix!r} (expected "
-                                   ".bvh, .c3d, .fbx or .nmo)")
+                                   f"{CLIP_TYPES})")
             matches = [path]
         for path in matches:
             if any(os.path.realpath(path) == os.path.realpath(p) for p in found):

@@ -738,3 +738,9 @@ def test_pool_workers_tick_on_one_thread():
         assert worker.conn.recv() == (1, "")
     finally:
         worker.stop()
+
+
+def test_a_folder_gives_its_trc_and_amc_captures_too(tmp_path: Path) -> None:
+    for name in ("gait.trc", "walk.amc", "walk.asf", "notes.txt"):
+        (tmp_path / name).write_text("")
+    assert [p.name for p in expand_clips([str(tmp_path)])] == ["gait.trc", "walk.amc"]
