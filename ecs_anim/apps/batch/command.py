@@ -111,7 +111,7 @@ def cmd_batch(args: argparse.Namespace) -> int:
 
 def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     """Add ``batch`` to the CLI's subparsers; returns its parser (``func`` is :func:`cmd_batch`)."""
-    from ecs_anim.apps.cli.args import positive_float, positive_int
+    from ecs_anim.apps.cli.args import add_rig_arguments, positive_float, positive_int
 
     p = subparsers.add_parser(
         "batch", help="play many clips on many bodies over many grounds; metrics and a report",
@@ -133,12 +133,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
                         "constraints and COM settings for every job")
     p.add_argument("--out", metavar="DIR", help="the batch folder")
     p.add_argument("--formats", metavar="F,F", help="of bvh, npz, glb (default bvh,npz)")
-    p.add_argument("--onto", metavar="RIG.bvh|RIG.glb|RIG.fbx",
-                   help="every job retargeted onto this rig's body and written in its own "
-                        "hierarchy, names and rest pose (docs/export.md)")
-    p.add_argument("--map", metavar="PRESET|FILE.yaml",
-                   help="how the --onto rig's joints are our body parts, as import's --map "
-                        "(default: detected)")
+    add_rig_arguments(p, "every job")
     p.add_argument("--seconds", type=positive_float, metavar="S",
                    help="simulate S seconds per job instead of the clip's length")
     p.add_argument("--engine", choices=["local", "ray"], default="local",

@@ -18,6 +18,17 @@ EXIT_FAILED = 1
 MAX_ERROR_CHARS = 300
 
 
+def add_rig_arguments(parser: argparse.ArgumentParser, what: str) -> None:
+    """``--onto RIG`` (``what`` says what goes onto the rig) and ``--map``, alike in every
+    command that writes onto a user's rig (docs/export.md)."""
+    parser.add_argument("--onto", metavar="RIG.bvh|RIG.glb|RIG.fbx",
+                        help=f"{what} retargeted onto this rig's body and written in its own "
+                             "hierarchy, names and rest pose (docs/export.md)")
+    parser.add_argument("--map", metavar="PRESET|FILE.yaml",
+                        help="how the --onto rig's joints are our body parts, as import's --map "
+                             "(default: detected)")
+
+
 def positive_float(text: str) -> float:
     """argparse type: a finite number > 0."""
     try:

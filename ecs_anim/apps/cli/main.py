@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 from ecs_anim.apps.bench import cmd_bench, size_list
 from ecs_anim.apps.cli.args import (
     EXIT_FAILED,
+    add_rig_arguments,
     error_line,
     facing,
     frame_range,
@@ -339,12 +340,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--morphology", default="source",
                    help=f"source | {' | '.join(PRESET_SPECS)} | FILE.yaml | SKELETON.bvh "
                         "(default: source)")
-    p.add_argument("--onto", metavar="RIG.bvh|RIG.glb|RIG.fbx",
-                   help="play the motion on this rig's body and write it in the rig's own "
-                        "hierarchy, names and rest pose (docs/export.md)")
-    p.add_argument("--map", metavar="PRESET|FILE.yaml",
-                   help="how the --onto rig's joints are our body parts, as import's --map "
-                        "(default: detected)")
+    add_rig_arguments(p, "the motion")
     p.add_argument("--layout", metavar="|".join(LAYOUTS),
                    help="write the joints of this research layout, in its order, axes and unit, "
                         "to OUT.npy or OUT.npz (docs/export.md)")
@@ -356,12 +352,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenario", metavar="SCENARIO.yaml")
     p.add_argument("--seconds", type=positive_float, help="run this long instead of duration_s")
     p.add_argument("--export", metavar="DIR", help="write <character>.bvh, .npz and .glb per character")
-    p.add_argument("--onto", metavar="RIG.bvh|RIG.glb|RIG.fbx",
-                   help="with --export: each character retargeted onto this rig's body and "
-                        "written in its own hierarchy, names and rest pose (docs/export.md)")
-    p.add_argument("--map", metavar="PRESET|FILE.yaml",
-                   help="how the --onto rig's joints are our body parts, as import's --map "
-                        "(default: detected)")
+    add_rig_arguments(p, "with --export: each character")
     p.add_argument("--report", metavar="FILE.json", help="write the metrics as JSON")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
     add_threads_argument(p, None)
