@@ -120,10 +120,10 @@ class GroundAdapt(System):
         """Hold back each character walking into a rise taller than it can step up
         (:data:`~ecs_anim.core.ground_adapt.STEP_UP_PER_LEG` of its leg, between two points
         :data:`STOP_SAMPLE_PER_LEG` apart) within :data:`STOP_AHEAD_PER_LEG` ahead of its
-        pelvis: its root does not advance this
-        tick, nor its motion's origin (``placement_xy``, ``fade_placement_xy``) after it, so it
-        treads where it is, its feet outside the rise, until its motion turns away. All
-        characters at once (numpy); the advance is since the last posture."""
+        pelvis: its root does not advance this tick, nor its motion's origin (``placement_xy``,
+        ``fade_placement_xy``) after it, so it treads where it is, its feet outside the rise,
+        until its motion turns away. All characters at once (numpy); the advance is since the
+        last posture."""
         st = self.sim.store
         if st.n == 0 or st.positions.shape[0] != st.n:
             return
