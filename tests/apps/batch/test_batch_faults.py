@@ -98,7 +98,9 @@ def test_workers_killed_at_random_moments_never_hang_the_batch(tmp_path: Path,
     source not changing between the two: the job hash holds it.)"""
     rng = random.Random(35)
     out = tmp_path / "out"
-    argv = [*clips(6), "--bodies", "child,adult_male,tall", "--seconds", "1.0", "--formats",
+    # 30 s simulated a job (0.6 s of CPU on an idle machine: 1 s ones all ended in 1.6 s, after
+    # 3 kills), so the killer has time for its kills on any machine
+    argv = [*clips(6), "--bodies", "child,adult_male,tall", "--seconds", "30.0", "--formats",
             "npz", "--jobs", "2", "--out", str(out)]
     driver = start_driver(tmp_path, *argv)
     kills, started = 0, time.monotonic()
@@ -154,7 +156,9 @@ def test_second_batch_refused_then_killed_driver_takes_its_workers_and_frees_the
     its workers are gone within 2 s (PR_SET_PDEATHSIG), and batch C takes A's lock over,
     saying whose it was, and ends the work."""
     out = tmp_path / "out"
-    argv = [*clips(6), "--bodies", "child,adult_male,tall", "--seconds", "0.3", "--formats",
+    # 30 s simulated a job (0.6 s of CPU on an idle machine), so A is still running when B and
+    # the kill come, however fast the machine
+    argv = [*clips(6), "--bodies", "child,adult_male,tall", "--seconds", "30.0", "--formats",
             "npz", "--out", str(out)]
     driver = start_driver(tmp_path, *argv, "--jobs", "2")
     try:
