@@ -161,6 +161,40 @@ class _BinaryChunk:
         return b"".join(self.parts)
 
 
+def capsule_mesh(chunk: _BinaryChunk, bones: list[tuple[F64, F64, float, int]],
+                 n_joints: int) -> gl.Mesh:
+    """The body drawn as a capsule on each bone, rigidly skinned: ``bones`` (start, end (3,) m,
+    radius m, the skin joint that carries it), of a skin of ``n_joints`` joints; its vertices,
+    normals, joints, weights and indices added to ``chunk`` in that order. One mesh, "body",
+    with material 0 (the glTF writer's and the writer onto a rig's)."""
+    positions, normals, triangles, owners = [], [], [], []
+    count = 0
+    for start, end, radius, joint in bones:
+        v, nrm, t = capsule(start, end, radius)
+        positions.append(v)
+        normals.append(nrm)
+        triangles.append(t + count)
+        owners.append(np.full(len(v), joint))
+        count += len(v)
+    joint_type = (np.uint8, gl.UNSIGNED_BYTE) if n_joints <= 256 else (np.uint16, gl.UNSIGNED_SHORT)
+    vertex_joints = np.zeros((count, 4), dtype=joint_type[0])
+    vertex_joints[:, 0] = np.concatenate(owners)
+    weights = np.zeros((count, 4), dtype=np.float32)
+    weights[:, 0] = 1.0
+    index_type = (np.uint16, gl.UNSIGNED_SHORT) if count < 65535 else (np.uint32, gl.UNSIGNED_INT)
+    attributes = gl.Attributes(
+        POSITION=chunk.array(np.concatenate(positions).astype(np.float32), "VEC3", gl.FLOAT,
+                             gl.ARRAY_BUFFER, bounds=True),
+        NORMAL=chunk.array(np.concatenate(normals).astype(np.float32), "VEC3", gl.FLOAT,
+                           gl.ARRAY_BUFFER),
+        JOINTS_0=chunk.array(vertex_joints, "VEC4", joint_type[1], gl.ARRAY_BUFFER),
+        WEIGHTS_0=chunk.array(weights, "VEC4", gl.FLOAT, gl.ARRAY_BUFFER))
+    indices = chunk.array(np.concatenate(triangles).reshape(-1).astype(index_type[0]), "SCALAR",
+                          index_type[1], gl.ELEMENT_ARRAY_BUFFER)
+    return gl.Mesh(name="body", primitives=[gl.Primitive(attributes=attributes, indices=indices,
+                                                         material=0, mode=gl.TRIANGLES)])
+
+
 def _continuous(quats: F64) -> F64:
     """Flip signs along the frame axis so neighbouring frames' quaternions (frames, ..., 4) lie
     in one hemisphere: a player's slerp between samples then takes the short way."""
@@ -237,32 +271,9 @@ def glb_bytes(morph: Morphology, pelvis_in_world: F64, local: F64, fps: float,
             bones.append((int(EXPORT_PARENTS[k]), joint_offsets[k], j.rest_offset[0]))
         if j.end_site is not None:
             bones.append((k, end_offsets[k], j.end_site[0]))
-    positions, normals, triangles, owners = [], [], [], []
-    count = 0
-    for joint, offset, length_name in bones:
-        start = rest_joints[joint]
-        p, n, t = capsule(start, start + offset, _radius(length_name, morph))
-        positions.append(p)
-        normals.append(n)
-        triangles.append(t + count)
-        owners.append(np.full(len(p), joint))
-        count += len(p)
-    vertex_positions = np.concatenate(positions).astype(np.float32)
-    vertex_joints = np.zeros((count, 4), dtype=np.uint8)
-    vertex_joints[:, 0] = np.concatenate(owners)
-    vertex_weights = np.zeros((count, 4), dtype=np.float32)
-    vertex_weights[:, 0] = 1.0
-    index_type = (np.uint16, gl.UNSIGNED_SHORT) if count < 65535 else (np.uint32, gl.UNSIGNED_INT)
-    attributes = gl.Attributes(
-        POSITION=chunk.array(vertex_positions, "VEC3", gl.FLOAT, gl.ARRAY_BUFFER, bounds=True),
-        NORMAL=chunk.array(np.concatenate(normals).astype(np.float32), "VEC3", gl.FLOAT,
-                           gl.ARRAY_BUFFER),
-        JOINTS_0=chunk.array(vertex_joints, "VEC4", gl.UNSIGNED_BYTE, gl.ARRAY_BUFFER),
-        WEIGHTS_0=chunk.array(vertex_weights, "VEC4", gl.FLOAT, gl.ARRAY_BUFFER))
-    indices = chunk.array(np.concatenate(triangles).reshape(-1).astype(index_type[0]), "SCALAR",
-                          index_type[1], gl.ELEMENT_ARRAY_BUFFER)
-    mesh = gl.Mesh(name="body", primitives=[gl.Primitive(attributes=attributes, indices=indices,
-                                                          material=0, mode=gl.TRIANGLES)])
+    mesh = capsule_mesh(chunk, [(rest_joints[joint], rest_joints[joint] + offset,
+                                 _radius(length_name, morph), joint)
+                                for joint, offset, length_name in bones], len(skin_joints))
     nodes.append(gl.Node(name="body", mesh=0, skin=0))
 
     # The animation: one time track shared by every sampler.

@@ -26,7 +26,7 @@ from ecs_anim.core.rotations import matrix_to_euler, quat_from_matrix
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.io.export.gltf import (
     BinaryChunk,
-    capsule,
+    capsule_mesh,
     continuous_quaternions,
     generator_name,
 )
@@ -216,35 +216,10 @@ def _glb_onto_bvh_rig(rig: Rig, posed: RigPose, fps: float) -> bytes:
     inverse_bind[:, :3, 3] = -rest
     ibm = chunk.array(np.swapaxes(inverse_bind, 1, 2).astype(np.float32), "MAT4", gl.FLOAT)
     radius = RIG_BONE_RADIUS_M * rig.morphology.stature / 1.75
-    positions, normals, triangles, owners = [], [], [], []
-    count = 0
-    for j in range(n):
-        p = int(parents[j])
-        if p < 0 or np.linalg.norm(offsets[j]) < 1e-6:
-            continue
-        v, nrm, t = capsule(rest[p], rest[j], min(radius, 0.3 * float(np.linalg.norm(offsets[j]))))
-        positions.append(v)
-        normals.append(nrm)
-        triangles.append(t + count)
-        owners.append(np.full(len(v), p))
-        count += len(v)
-    joint_type = (np.uint8, gl.UNSIGNED_BYTE) if n <= 256 else (np.uint16, gl.UNSIGNED_SHORT)
-    vertex_joints = np.zeros((count, 4), dtype=joint_type[0])
-    vertex_joints[:, 0] = np.concatenate(owners)
-    weights = np.zeros((count, 4), dtype=np.float32)
-    weights[:, 0] = 1.0
-    index_type = (np.uint16, gl.UNSIGNED_SHORT) if count < 65535 else (np.uint32, gl.UNSIGNED_INT)
-    attributes = gl.Attributes(
-        POSITION=chunk.array(np.concatenate(positions).astype(np.float32), "VEC3", gl.FLOAT,
-                             gl.ARRAY_BUFFER, bounds=True),
-        NORMAL=chunk.array(np.concatenate(normals).astype(np.float32), "VEC3", gl.FLOAT,
-                           gl.ARRAY_BUFFER),
-        JOINTS_0=chunk.array(vertex_joints, "VEC4", joint_type[1], gl.ARRAY_BUFFER),
-        WEIGHTS_0=chunk.array(weights, "VEC4", gl.FLOAT, gl.ARRAY_BUFFER))
-    indices = chunk.array(np.concatenate(triangles).reshape(-1).astype(index_type[0]), "SCALAR",
-                          index_type[1], gl.ELEMENT_ARRAY_BUFFER)
-    mesh = gl.Mesh(name="body", primitives=[gl.Primitive(attributes=attributes, indices=indices,
-                                                          material=0, mode=gl.TRIANGLES)])
+    lengths = np.linalg.norm(offsets, axis=1)
+    mesh = capsule_mesh(chunk, [(rest[parents[j]], rest[j], min(radius, 0.3 * float(lengths[j])),
+                                 int(parents[j]))
+                                for j in range(n) if parents[j] >= 0 and lengths[j] >= 1e-6], n)
     nodes.append(gl.Node(name="body", mesh=0, skin=0))
     world = _gltf_world_rotations(rig, posed)
     parent_world = world[:, np.maximum(parents, 0)]
