@@ -5,7 +5,7 @@
 schema is documented in ``docs/scenarios.md``.
 """
 
-from ecs_anim.scenario.build import apply_steering, build_simulation
+from ecs_anim.scenario.build import apply_steering, build_simulation, measured_run
 from ecs_anim.scenario.grounds import read_ground
 from ecs_anim.scenario.loader import load_motion_constraints, load_scenario
 from ecs_anim.scenario.motions import read_motion
@@ -40,6 +40,7 @@ __all__ = [
     "clip_scenario",
     "load_motion_constraints",
     "load_scenario",
+    "measured_run",
     "read_ground",
     "read_motion",
     "read_tree",

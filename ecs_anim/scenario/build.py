@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from ecs_anim.core.errors import (
     EcsAnimError,
 )
@@ -60,3 +62,16 @@ def build_simulation(scenario: Scenario, window: bool = False,
                                f"{scenario.characters[who].name}.{name}, which is not in the scenario")
         sim.add_trigger(bind_trigger(trigger, order, uids))
     return sim
+
+
+def measured_run(scenario: Scenario) -> dict[str, Any]:
+    """The scenario played headless to its end (``duration_s`` at ``fps``), and ``run``'s
+    figures of it: :meth:`~ecs_anim.runtime.metrics.MetricsRecorder.report`."""
+    from ecs_anim.runtime.metrics import MetricsRecorder
+
+    with build_simulation(scenario) as sim:
+        metrics = MetricsRecorder(sim)
+        for _ in range(round(scenario.duration_s * scenario.fps)):
+            sim.step()
+            metrics.record()
+        return metrics.report()

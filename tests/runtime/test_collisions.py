@@ -10,8 +10,7 @@ from ecs_anim.core.morphology import Morphology
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import N_JOINTS
 from ecs_anim.runtime.kernels.capsules import capsules, closest_between, overlaps
-from ecs_anim.runtime.metrics import MetricsRecorder
-from ecs_anim.scenario import build_simulation, load_scenario
+from ecs_anim.scenario import load_scenario, measured_run
 from ecs_anim.solver.capsules import (
     CAPSULE_INDEX,
     N_CAPSULES,
@@ -133,12 +132,7 @@ def test_a_two_against_two_fight_of_a_small_and_a_tall_body_touches_without_over
     scenario.characters[0].morphology = Morphology.from_stature(1.1, proportions="child")
     scenario.characters[3].morphology = Morphology.from_stature(2.1)
     scenario.triggers = [t for t in scenario.triggers if t.name.endswith(("_1", "_2"))]
-    with build_simulation(scenario) as sim:
-        metrics = MetricsRecorder(sim)
-        for _ in range(round(scenario.duration_s * scenario.fps)):
-            sim.step()
-            metrics.record()
-        report = metrics.report()
+    report = measured_run(scenario)
     for c in report["characters"]:
         assert c["overlap_mm_max"] <= 10.0, c
         assert c["foot_sliding_mm_per_frame"]["max"] < 1.0, c

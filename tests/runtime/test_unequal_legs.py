@@ -9,8 +9,7 @@ import pytest
 
 from conftest import SCENARIOS_DIR
 from ecs_anim.core.morphology import with_lengths_m
-from ecs_anim.runtime.metrics import MetricsRecorder
-from ecs_anim.scenario import build_simulation, load_scenario
+from ecs_anim.scenario import load_scenario, measured_run
 
 
 @pytest.mark.parametrize("shorter", [0.05, 0.5])
@@ -23,13 +22,7 @@ def test_unequal_legs_keep_both_soles_planted(scenario, shorter):
     for character in loaded.characters:
         body = character.morphology
         character.morphology = with_lengths_m(body, {"thigh_l": (1 - shorter) * body["thigh_l"]})
-    with build_simulation(loaded) as sim:
-        metrics = MetricsRecorder(sim)
-        for _ in range(round(loaded.duration_s * loaded.fps)):
-            sim.step()
-            metrics.record()
-        report = metrics.report()
-    for character in report["characters"]:
+    for character in measured_run(loaded)["characters"]:
         assert character["floating_mm_max"] <= 1.0, character["name"]
         assert character["ground_penetration_mm_max"] <= 1.0, character["name"]
         assert character["foot_sliding_mm_per_frame"]["max"] <= 1.0, character["name"]

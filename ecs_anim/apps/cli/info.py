@@ -18,16 +18,10 @@ def played_on_own_body(motion: NormalizedMotion) -> dict[str, float]:
     (source) body on flat ground: the metrics of ``run``'s table (mm), so a clip whose planted
     soles float or slide is seen before it is used."""
     from ecs_anim.core.ground import Plane
-    from ecs_anim.runtime.metrics import MetricsRecorder
-    from ecs_anim.scenario import build_simulation, clip_scenario
+    from ecs_anim.scenario import clip_scenario, measured_run
 
-    scenario = clip_scenario(motion, motion.source_morphology, Plane())
-    with build_simulation(scenario) as sim:
-        metrics = MetricsRecorder(sim)
-        for _ in range(motion.n_frames):
-            sim.step()
-            metrics.record()
-        character = metrics.report()["characters"][0]
+    character = measured_run(clip_scenario(motion, motion.source_morphology,
+                                           Plane()))["characters"][0]
     return {"floating_mm_max": character["floating_mm_max"],
             "penetration_mm_max": character["ground_penetration_mm_max"],
             "sliding_mm_per_frame_max": character["foot_sliding_mm_per_frame"]["max"]}
