@@ -34,11 +34,11 @@ def joint_centres(mk: MarkersByRole, mmap: MarkerMap, present: list[str]
         landmark_body(mk, present, build)
     root, kept = kept_frames(build.root_trusted, parts_placed(mk, mmap, present), n)
     repaired = trust_root(build, kept)
-    _fill_absent(build, present)
+    fill_absent(build, present)
     return build, root, kept, repaired
 
 
-def _fill_absent(build: JointCentreBuild, present: list[str]) -> None:
+def fill_absent(build: JointCentreBuild, present: list[str]) -> None:
     """Neutral pose for absent body parts (upright trunk and head, arms hanging, legs straight),
     adult proportions of the measured leg length. Also spine_1/spine_2 and hand ends that the
     markers do not give."""
