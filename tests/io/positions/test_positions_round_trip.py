@@ -19,11 +19,15 @@ from ecs_anim.io.positions import PositionOptions, import_positions
 
 CLIPS = ("bandai_walk.bvh", "bandai_run.bvh", "varied/cmu_walk_120hz_adelaide.bvh",
          "cmumax_131_02_start_walk_stop_m.bvh")
-#: Layouts with no toe joint: the toe filled in flat ahead of the ankle, rising with it, so the
-#: ball's stance after heel-off is lost and their contacts' onsets lie further from the BVH
-#: import's (measured: 1 frame on bandai_walk, 3 on the 120 Hz CMU walk, a contact missed on
-#: cmumax_131_02; within 3 frames on 7 of the 21 dev BVH files): only the layouts with toes are
-#: held to a frame.
+#: Layouts with no toe joint: the toe is filled in flat ahead of the ankle and moves with it, so
+#: the foot's pitch is not known and a touch-down, which BVH import finds by the heel point (the
+#: ankle-to-toe line behind the ankle) coming down, is found by the ankle alone. Measured on the
+#: 21 dev BVH files (h36m / coco17): 437 / 433 of 760 touch-downs within one frame of the BVH
+#: import's, every one on 4 files. The data does not allow one frame: at the BVH's touch-downs the
+#: ankle stands 0-29 mm (10-90 %) above its lowest in the stance, and no ankle height or speed
+#: threshold puts more than 54 % of them within a frame (docs/import.md, "Contacts without toe
+#: joints"). They are held to a frame where a walk's heel strike is clear: ``bandai_walk``.
+TOELESS_HELD = ("bandai_walk.bvh",)
 TOELESS = ("h36m", "coco17")
 
 
@@ -71,7 +75,7 @@ def test_layout_round_trip_within_a_millimetre(clip, layout_name, tmp_path):
     assert back.shape == array.shape
     error_mm = np.linalg.norm(back - array, axis=-1) * layout.export_unit_m * 1000
     assert error_mm.max() < 1.0, (clip, layout_name, float(error_mm.max()))
-    if layout_name not in TOELESS:
+    if layout_name not in TOELESS or clip in TOELESS_HELD:
         assert worst_onset_frames(onsets(source.contacts()), onsets(motion.contacts())) <= 1
 
 
