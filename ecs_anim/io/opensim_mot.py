@@ -191,9 +191,10 @@ def canonical_clip_mot(mot: MotCoordinates, model: OsimModel
     """The canonical clip (metres, Z up) of ``mot`` posed on ``model``, and how it was read.
 
     The pelvis is the body the ground's joint moves; its chains of bodies (each body followed
-    into its child with the deepest subtree) that end below it at the model's default pose are
-    the legs, left and right by the side their hip lies on (OpenSim's z is right), the other
-    the trunk. Along a leg the joints of its first three bodies are the hip, knee and ankle,
+    into its child with the deepest subtree) whose first joint lies below the pelvis's origin
+    at the model's default pose and that go down from it are the legs, left and right by the
+    side their hip lies on (OpenSim's z is right); one whose first joint lies above is the
+    trunk (its arms may hang lower). Along a leg the joints of its first three bodies are the hip, knee and ankle,
     that of its fifth (the toes' joint, after the calcaneus) the toe; a leg of four bodies
     gets its toe ahead of the ankle at adult proportions. The trunk's first joint is the lumbar
     (spine_1), its first body's frame the thorax's, the spine above it at adult proportions of
@@ -254,8 +255,7 @@ def canonical_clip_mot(mot: MotCoordinates, model: OsimModel
         "model": model.path, "model_name": model.name, "coordinates_read": read,
         "coordinates_at_default": defaulted,
         "legs": {s: list(c) for s, c in legs.items()}, "trunk": list(trunk),
-        "neutral_pose": [part for part in ("head", "arms") if part == "arms" or not trunk]
-        + ([] if trunk else ["trunk"]),
+        "neutral_pose": ["head", "arms"] + ([] if trunk else ["trunk"]),
     }
     return clip, details
 
@@ -293,14 +293,16 @@ def _chains(model: OsimModel, rest: dict[str, tuple[F64, F64, F64]]
             chain.append(max(children, key=lambda body: len(_below(model, body))))
         end = pelvis_r[0].T @ (rest[chain[-1]][2][0] - pelvis_p[0])  # in the pelvis's frame
         hip = pelvis_r[0].T @ (rest[chain[0]][2][0] - pelvis_p[0])
-        if end[1] < 0 and len(chain) >= 3:
+        # A leg hangs from below the pelvis's origin and goes down; the trunk starts above it
+        # (its arms, hanging, may end lower).
+        if hip[1] < 0 and end[1] < hip[1] and len(chain) >= 3:
             side = "r" if hip[2] > 0 else "l"
             if side in legs:
                 raise InputError(model.path, f"two legs on the {'right' if side == 'r' else 'left'} "
                                              f"of body {quoted(pelvis)} ({legs[side][0]}, "
                                              f"{chain[0]}): which is the leg?")
             legs[side] = chain
-        elif end[1] > 0 and len(chain) > len(trunk):
+        elif hip[1] >= 0 and len(chain) > len(trunk):
             trunk = chain
     if set(legs) != {"l", "r"}:
         raise InputError(model.path, f"expected a left and a right leg (three or more bodies "

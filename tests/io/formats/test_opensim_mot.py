@@ -82,6 +82,13 @@ MODEL = [
          p_off=((-0.1007, 0.0815, 0), (0, 0, 0)), c_off=((0, 0, 0), (0, 0, 0)),
          axes=[("rotation", Z, "lumbar_extension", None), ("rotation", X, "lumbar_bending", None),
                ("rotation", Y, "lumbar_rotation", None)]),
+    # Rajagopal's arms hang from the torso lower than the pelvis's origin: still the trunk.
+    *(dict(name=f"{name}_r", kind="WeldJoint", parent=parent, child=f"{child}_r",
+           p_off=(offset, (0, 0, 0)), c_off=((0, 0, 0), (0, 0, 0)), axes=[])
+      for name, parent, child, offset in (
+          ("acromial", "torso", "humerus", (0.003, 0.372, 0.17)),
+          ("elbow", "humerus_r", "ulna", (0.013, -0.286, -0.0096)),
+          ("radius_lunate", "ulna_r", "hand", (-0.0087, -0.231, 0.0235)))),
 ]
 TRANSLATIONAL = {"pelvis_tx", "pelvis_ty", "pelvis_tz"}
 
@@ -272,7 +279,8 @@ def test_a_mot_on_its_osim_places_the_joints_within_a_millimetre(tmp_path, versi
     assert max(errors.values()) < 0.001, errors
     info = motion.info["opensim"]
     assert info["legs"]["r"] == ["femur_r", "tibia_r", "talus_r", "calcn_r", "toes_r"]
-    assert info["trunk"] == ["torso"] and info["coordinates_at_default"] == []
+    assert info["trunk"] == ["torso", "humerus_r", "ulna_r", "hand_r"]
+    assert info["coordinates_at_default"] == []
 
 
 def test_the_cli_imports_a_mot_with_its_model_and_refuses_one_without(tmp_path, capsys):
