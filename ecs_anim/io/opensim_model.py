@@ -232,7 +232,11 @@ def read_osim(path: str | Path) -> OsimModel:
         raise InputError(path, f"expected an OpenSim model (<OpenSimDocument><Model>), found "
                                f"<{root.tag}>", root.line)
     if any(n.tag == "JointSet" for n in model.walk()):
-        joints = [_joint_v4(path, n) for n in _joint_elements(model, "JointSet")]
+        # Offset frames a body declares (its components): their socket_parent ".." is the body.
+        offsets = {f.name: (f, body.name or GROUND) for body in model.walk()
+                   if body.tag in ("Body", "Ground") for f in body.walk()
+                   if f.tag == "PhysicalOffsetFrame"}
+        joints = [_joint_v4(path, n, offsets) for n in _joint_elements(model, "JointSet")]
     else:
         joints = [_joint_v3(path, n, body) for body in model.walk() if body.tag == "Body"
                   for n in _joint_elements(body, "joint")]
@@ -274,22 +278,26 @@ def _joint_elements(parent: XmlNode, holder: str) -> list[XmlNode]:
     return out
 
 
-def _joint_v4(path: str, node: XmlNode) -> OsimJoint:
+def _joint_v4(path: str, node: XmlNode, offsets: dict[str, tuple[XmlNode, str]]) -> OsimJoint:
     """An OpenSim 4 joint: its frames named by ``socket_parent_frame``/``socket_child_frame``
-    (one of its ``frames``, else a body's path)."""
-    frames = {f.name: f for f in (node.child("frames") or XmlNode("", {}, 0)).children}
+    (one of its ``frames``, else an offset frame a body declares, ``offsets``: name -> (frame,
+    the body), else a body's path)."""
+    own = {f.name: (f, node.name) for f in (node.child("frames") or XmlNode("", {}, 0)).children}
+    frames = {**offsets, **own}
 
     def side(socket: str) -> tuple[str, tuple[F64, F64]]:
         ref = node.child(socket)
         if ref is None or not ref.text:
             raise InputError(path, f"joint {quoted(node.name)}: no <{socket}>", node.line)
-        frame = frames.get(ref.text.split("/")[-1])
-        if frame is None:
+        found = frames.get(ref.text.split("/")[-1])
+        if found is None:
             return ref.text.split("/")[-1], (np.eye(3), np.zeros(3))
+        frame, owner = found
         body = frame.child("socket_parent")
         if body is None or not body.text:
             raise InputError(path, f"frame {quoted(frame.name)}: no <socket_parent>", frame.line)
-        return body.text.split("/")[-1], _offset(path, frame, "translation", "orientation")
+        name = body.text.rstrip("/").split("/")[-1]
+        return owner if name == ".." else name, _offset(path, frame, "translation", "orientation")
 
     parent, parent_offset = side("socket_parent_frame")
     child, child_offset = side("socket_child_frame")

@@ -393,3 +393,22 @@ def test_splines_match_their_points_and_slopes():
     assert np.allclose(cubic[k] + t * (b[k] + t * (c[k] + t * d[k])), 0.3 * u**3 - u**2 + 0.5)
     b, c, d = spline_coefficients(x, 2 * x + 1, natural=True)
     assert np.allclose(b, 2) and np.allclose(c, 0) and np.allclose(d, 0)
+
+
+def test_an_offset_frame_declared_on_a_body_is_found(tmp_path):
+    """OpenSim 4 lets a joint name a frame the model declares elsewhere (a body's components)."""
+    from ecs_anim.io.opensim_model import body_frames
+
+    moved = broken(osim_v4(), "<CustomJoint name=\"back\"><socket_parent_frame>pelvis_offset",
+                   "<CustomJoint name=\"back\"><socket_parent_frame>/bodyset/pelvis/lumbar_base")
+    moved = broken(moved, "<Body name=\"pelvis\"><mass>1</mass></Body>",
+                   "<Body name=\"pelvis\"><mass>1</mass><components><PhysicalOffsetFrame "
+                   "name=\"lumbar_base\"><socket_parent>..</socket_parent><translation>-0.1007 "
+                   "0.0815 0</translation><orientation>0 0 0</orientation></PhysicalOffsetFrame>"
+                   "</components></Body>")
+    q = known_motion()
+    centres = []
+    for name, text in (("a.osim", osim_v4()), ("b.osim", moved)):
+        (tmp_path / name).write_text(text)
+        centres.append(body_frames(read_osim(tmp_path / name), q.__getitem__, N_FRAMES)["torso"][2])
+    assert np.abs(centres[0] - centres[1]).max() < 1e-12
