@@ -139,6 +139,14 @@ def cmd_import(args: argparse.Namespace) -> int:
                                         args.stature, not args.no_treadmill, args.take)
                 elif suffix in (".mot", ".sto"):
                     assert osim is not None
+                    given = [flag for flag, value in (("--map", args.map), ("--unit", args.unit),
+                                                      ("--up", args.up),
+                                                      ("--stature", args.stature)) if value]
+                    if given:
+                        verb = "does" if len(given) == 1 else "do"
+                        raise EcsAnimError(f"{src}: {', '.join(given)} {verb} not apply to OpenSim "
+                                           "joint angles (the model is in metres, Y up, and its "
+                                           "bodies are the joints)")
                     motion = import_mot(src, osim, thresholds, args.trim, not args.no_treadmill)
                 elif suffix == ".amc":
                     motion = import_amc(src, asf, args.map, args.unit, thresholds, args.up,

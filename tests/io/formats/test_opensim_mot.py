@@ -289,6 +289,10 @@ def test_the_cli_imports_a_mot_with_its_model_and_refuses_one_without(tmp_path, 
     write_mot(mot, known_motion())
     assert main(["import", str(mot), "--body-model", str(osim), "-o", str(tmp_path / "a")]) == 0
     assert (tmp_path / "a" / "walk.nmo").exists()
+    capsys.readouterr()
+    assert main(["import", str(mot), "--body-model", str(osim), "--up", "z", "-o",
+                 str(tmp_path / "c")]) == 1
+    assert "--up does not apply to OpenSim joint angles" in capsys.readouterr().err
     assert main(["import", str(mot), "-o", str(tmp_path / "b")]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert err[0].startswith(f"error: {mot}: OpenSim joint angles (23 coordinates: pelvis_tx, "
