@@ -250,7 +250,8 @@ def canonical_clip_mot(mot: MotCoordinates, model: OsimModel
         unit_reason="an OpenSim model is in metres",
         joint_map=JointMap(source={}, thorax=-1, how=f"OpenSim model {model.name or model.path}",
                            names=names),
-        up_axis="y", up_reason="OpenSim's ground is Y up")
+        up_axis="y", up_reason="OpenSim's ground is Y up",
+        toes_follow_ankle=any(len(chain) < 5 for chain in legs.values()))
     details: dict[str, object] = {
         "model": model.path, "model_name": model.name, "coordinates_read": read,
         "coordinates_at_default": defaulted,
