@@ -416,3 +416,21 @@ def test_an_offset_frame_declared_on_a_body_is_found(tmp_path):
         (tmp_path / name).write_text(text)
         centres.append(body_frames(read_osim(tmp_path / name), q.__getitem__, N_FRAMES)["torso"][2])
     assert np.abs(centres[0] - centres[1]).max() < 1e-12
+
+
+def test_a_leg_without_toes_gets_its_toe_ahead_of_the_ankle(tmp_path):
+    """A model whose feet end at the calcaneus: the toe is filled ahead of the ankle (a foot's
+    length at adult proportions, the way the pelvis faces), hips to ankles still exact."""
+    no_toes = [j for j in MODEL if not j["name"].startswith("mtp_")]
+    osim, mot = tmp_path / "no_toes.osim", tmp_path / "walk.mot"
+    osim.write_text(osim_v4(no_toes))
+    q = {k: v for k, v in known_motion().items() if not k.startswith("mtp_")}
+    write_mot(mot, q)
+    motion = import_mot(mot, osim)
+    assert motion.info["opensim"]["legs"]["l"] == ["femur_l", "tibia_l", "talus_l", "calcn_l"]
+    pose = play_on(motion, motion.source_morphology, True).positions
+    expected = joint_centres(known_motion())["talus_r"] @ UP_AXES["y"].T
+    assert np.linalg.norm(pose[:, J["ankle_r"]] - expected, axis=-1).max() < 0.001
+    foot = np.linalg.norm(pose[:, J["toe_r"]] - pose[:, J["ankle_r"]], axis=-1)
+    leg = motion.source_morphology.leg_length
+    assert np.all((foot > 0.15 * leg) & (foot < 0.3 * leg))
