@@ -29,7 +29,7 @@ from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import JOINTS, N_JOINTS
 from ecs_anim.io.bvh import rate_of_step
 from ecs_anim.io.c3d.centre_build import JointCentreBuild, adult_length, heading_frame, set_joint
-from ecs_anim.io.c3d.joint_centres import fill_absent
+from ecs_anim.io.c3d.joint_centres import fill_absent, flat_toe
 from ecs_anim.io.contacts import ContactThresholds
 from ecs_anim.io.importing import UP_AXES, CanonicalClip, FrameRange, import_canonical
 from ecs_anim.io.joint_map import JointMap
@@ -194,9 +194,9 @@ def canonical_clip_mot(mot: MotCoordinates, model: OsimModel
     into its child with the deepest subtree) whose first joint lies below the pelvis's origin
     at the model's default pose and that go down from it are the legs, left and right by the
     side their hip lies on (OpenSim's z is right); one whose first joint lies above is the
-    trunk (its arms may hang lower). Along a leg the joints of its first three bodies are the hip, knee and ankle,
-    that of its fifth (the toes' joint, after the calcaneus) the toe; a leg of four bodies
-    gets its toe ahead of the ankle at adult proportions. The trunk's first joint is the lumbar
+    trunk (its arms may hang lower). Along a leg the joints of its first three bodies are the
+    hip, knee and ankle, that of its fifth (the toes' joint, after the calcaneus) the toe; a
+    leg of four bodies gets a foot lying flat (:func:`~ecs_anim.io.c3d.joint_centres.flat_toe`). The trunk's first joint is the lumbar
     (spine_1), its first body's frame the thorax's, the spine above it at adult proportions of
     the legs. Head and arms take the neutral pose (as a C3D's absent parts)."""
     fps = frame_rate(mot)
@@ -224,12 +224,10 @@ def canonical_clip_mot(mot: MotCoordinates, model: OsimModel
     build.pelvis2world = frame_from_axes(p[:, J["hip_l"]] - p[:, J["hip_r"]], pelvis_forward, 1, 0)
     leg = float(np.median(np.linalg.norm(p[:, J["knee_l"]] - p[:, J["hip_l"]], axis=-1)
                           + np.linalg.norm(p[:, J["ankle_l"]] - p[:, J["knee_l"]], axis=-1)))
-    up = np.array([0.0, 0.0, 1.0])
     for side, chain in legs.items():
-        if len(chain) < 5:  # no toes' joint: ahead of the ankle, as a filled foot lies
-            forward = heading_frame(build.pelvis2world)[:, :, 0]
-            p[:, J[f"toe_{side}"]] = p[:, J[f"ankle_{side}"]] + forward * adult_length(
-                "foot", leg) * 0.95 - up * adult_length("ankle_height", leg)
+        if len(chain) < 5:  # no toes' joint: a foot lying flat, as a filled one does
+            p[:, J[f"toe_{side}"]] = flat_toe(p[:, J[f"ankle_{side}"]],
+                                              heading_frame(build.pelvis2world), leg)
     present = ["leg_l", "leg_r"]
     if trunk:
         place("spine_1", trunk[0])
