@@ -296,10 +296,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lowpass", type=positive_float, metavar="HZ",
                    help="joint positions: smooth jitter with a zero-lag low-pass at this "
                    "cut-off (default: off, for mocap-grade data; 6 for a video estimator's)")
-    p.add_argument("--body-model", metavar="MODEL.npz|SKELETON.asf",
+    p.add_argument("--body-model", metavar="MODEL.npz|SKELETON.asf|MODEL.osim",
                    help="AMASS .npz: your SMPL, SMPL-H or SMPL-X body model (.npz; licensed, not "
                    "shipped: docs/import.md says where to get it); .amc: its ASF skeleton "
-                   "(default: the .asf beside it)")
+                   "(default: the .asf beside it); OpenSim .mot/.sto joint angles: the .osim "
+                   "model they were computed on")
     p.add_argument("--take", metavar="NAME",
                    help="FBX: the animation stack (take) to import (default: the first; the "
                    "import says which others the file has)")
