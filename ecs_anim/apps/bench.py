@@ -77,8 +77,9 @@ def time_size(n: int, seconds: float, rotations: bool = False,
         scene.move_targets()
         w0, c0 = time.perf_counter(), time.process_time()
         sim.step()
-        wall += time.perf_counter() - w0
-        cpu += time.process_time() - c0
+        wall_s, cpu_s = time.perf_counter() - w0, time.process_time() - c0
+        wall += wall_s
+        cpu += cpu_s
         report = sim.solver_report()
         if twin is not None and report is not None:
             twin.tick()
@@ -86,7 +87,7 @@ def time_size(n: int, seconds: float, rotations: bool = False,
             cost_m = max(cost_m, float(np.nanmax(extra, initial=0.0)))
             cut_characters += len(report.cut_characters)
             ticks_cut += report.cut
-            per_tick.add(report, time.perf_counter() - w0, time.process_time() - c0)
+            per_tick.add(report, wall_s, cpu_s)
     after = sim.system_seconds()
     sim.close()
     if twin is not None:
@@ -133,8 +134,7 @@ class BudgetTicks:
         cpu, wall = np.array(self.cpu_ms), np.array(self.wall_ms)
 
         def spread(a: NDArray[Any]) -> list[float]:
-            return [float(a.min(initial=0)), float(np.median(a)) if a.size else 0.0,
-                    float(a.max(initial=0))]
+            return [float(a.min()), float(np.median(a)), float(a.max())] if a.size else [0.0] * 3
         both = cut + dropped
         return {"cut_per_tick": spread(cut), "dropped_per_tick": spread(dropped),
                 "largest_change_of_cut": int(np.abs(np.diff(both)).max(initial=0)),
@@ -410,8 +410,9 @@ def cmd_bench_pipeline(args: argparse.Namespace) -> int:
             print(f"  {s['characters']:10d} {s['wall_ms_per_tick']:13.2f} "
                   f"{s['top_priority_cost_mm']:21.3f} {s['characters_cut_per_tick']:20.1f}")
         print(f"  => a {budget['budget_ms']:g} ms budget holds {budget['characters_held']} constrained "
-              "characters: no tick over it (CPU time) and the top priority of those solved within "
-              "1 mm of the unbudgeted solve (the largest size timed that did)")
+              "characters: no tick over it (CPU time) and the top priority of those it solved "
+              "within 1 mm of the unbudgeted solve (the largest size timed that did; how many it "
+              "dropped to do so: below)")
         print_budget_ticks(budget)
     compiled = result["compile"]
     if compiled is not None:
