@@ -378,8 +378,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rotations", action="store_true",
                    help="pipeline: also compute local joint rotations every tick (as BVH export does)")
     p.add_argument("--budget-ms", type=positive_float, metavar="MS",
-                   help="pipeline, with --constrained: the solver's frame budget (ms a tick); "
-                        "prints how many characters it holds with the top priority within 1 mm")
+                   help="pipeline, with --constrained: the tick's frame budget (CPU ms a tick); "
+                        "prints the cut tick by tick and how many characters it holds")
     p.add_argument("--sizes", type=size_list, metavar="N,N,...",
                    help="pipeline: the numbers of characters timed (default: N/8, N/4, N/2, N)")
     p.add_argument("--no-compile-timing", action="store_true",
