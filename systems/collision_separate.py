@@ -161,8 +161,7 @@ class CollisionSeparate(System):
             st.capsule_ends = np.empty((n, N_CAPSULES, 2, 3))
             st.capsule_radii = np.empty((n, N_CAPSULES))
         body = capsules(st.positions, st.lengths,
-                        Capsules(st.capsule_ends, st.capsule_radii, np.empty((n, 3)),
-                                 np.empty(n), np.empty((n, 2, 3))))
+                        Capsules.empty(n)._replace(ends=st.capsule_ends, radii=st.capsule_radii))
         grid = grid_of(body)
         found = overlaps(body, grid)
         if n < 2 or not (found.depth > SEPARATE_FROM_M).any():
