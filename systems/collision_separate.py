@@ -52,9 +52,17 @@ from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import LENGTH_INDEX, N_JOINTS
 from ecs_anim.motion.constraint_table import TARGET_BODY
 from ecs_anim.runtime.kernels import over_chunks
-from ecs_anim.runtime.kernels.capsules import Capsules, Overlaps, capsules, grid_of, overlaps
+from ecs_anim.runtime.kernels.capsules import (
+    Capsules,
+    Overlaps,
+    capsules,
+    grid_of,
+    near_rows,
+    overlaps,
+)
 from ecs_anim.runtime.kernels.decode import decoded_arrays, fits, pose_arrays
 from ecs_anim.runtime.kernels.posture import N_EXPORT, export_constants, posture_rows
+from ecs_anim.runtime.kernels.separate import push_rows, turn_rows
 from ecs_anim.runtime.system_base import System
 from ecs_anim.solver.capsules import CAPSULES, N_CAPSULES
 from ecs_anim.solver.steps import rotation_toward
@@ -98,6 +106,7 @@ CAPSULE_CHAIN = np.array([_CHAIN[c] for c in CAPSULES], np.int64)
 CHAIN_GROUP = np.array([LEG_L, LEG_L + 1, ARM_L, ARM_L + 1, HEAD, TRUNK], np.int64)
 LIMB_OF_GROUP = np.array([0, 1, -1, 2, 3, -1], np.int64)  # group -> limb (-1: none)
 LIMB_ROOT = np.array([J["hip_l"], J["hip_r"], J["shoulder_l"], J["shoulder_r"]], np.int64)
+LIMB_MIDDLE = np.array([J["knee_l"], J["knee_r"], J["elbow_l"], J["elbow_r"]], np.int64)
 LIMB_END = np.array([J["ankle_l"], J["ankle_r"], J["wrist_l"], J["wrist_r"]], np.int64)
 TOE = np.array([J["toe_l"], J["toe_r"]], np.int64)
 #: Per limb, its two segments' LENGTHS indices (root's, end's).
@@ -153,6 +162,8 @@ class CollisionSeparate(System):
         super().__init__(sim)
         #: Pairs reported as stuck (neither may move): (entity, entity, capsule, capsule).
         self.reported: set[tuple[int, int, str, str]] = set()
+        #: The rounds compiled (off: the numpy methods, their reference, for the tests).
+        self.compiled = True
 
     def run(self, dt: float) -> None:
         st = self.sim.store
@@ -169,6 +180,9 @@ class CollisionSeparate(System):
             return
         claims = self._claims()
         pushed = Pushes(np.zeros((n, 3)), np.full(n, -1, np.int64))
+        # The rows any round looks at: those overlapping anyone (a row outside has depth 0 and
+        # stays so unless a round searches it again: then it joins).
+        watch = np.flatnonzero(found.depth > 0.0)
         # Only overlapping bodies move: their poses as the solve left them, kept (each the
         # first time it overlaps) to go back to.
         kept = np.zeros(n, bool)
@@ -181,12 +195,13 @@ class CollisionSeparate(System):
         # (a crowd whose moves mostly push its bodies into others: the bench's walkers).
         stalled = np.zeros(n, np.int64)
         stalled_all, least_all = 0, np.inf
+        leg = leg_length(st.lengths)
         for _ in range(PASSES):
-            fresh = np.flatnonzero((found.depth > SEPARATE_FROM_M) & ~kept)
+            fresh = watch[(found.depth[watch] > SEPARATE_FROM_M) & ~kept[watch]]
             if fresh.size:
                 kept[fresh] = True
                 snapshots.append((fresh, st.poses.take(fresh)))
-            moved = self._separate(found, claims, pushed, stalled < PATIENCE)
+            moved = self._separate(found, claims, pushed, stalled, watch, leg)
             if moved.size == 0:
                 break
             was = found.depth[moved]
@@ -196,19 +211,23 @@ class CollisionSeparate(System):
             # those of the bodies that touched them (the grid holds: a turn or a step of a few
             # centimetres leaves every body within its cell's reach).
             capsules(st.positions, st.lengths, body, moved)
-            touched = np.union1d(moved, np.flatnonzero(np.isin(found.other, moved)))
+            touched = np.union1d(moved, watch[np.isin(found.other[watch], moved)])
             overlaps(body, grid, touched, found)
+            watch = np.union1d(watch, touched[found.depth[touched] > 0.0])
             shrank = found.depth[moved] <= (1.0 - STALL_SHARE) * was
             stalled[moved] = np.where(shrank, 0, stalled[moved] + 1)
-            left = float(found.depth[stalled < PATIENCE].sum())
+            left = float(found.depth[watch[stalled[watch] < PATIENCE]].sum())
             stalled_all = 0 if left <= (1.0 - STALL_SHARE) * least_all else stalled_all + 1
             least_all = min(least_all, left)
             if stalled_all >= PATIENCE:
                 break
-        self._undo_feet_in_ground(np.flatnonzero(ever), snapshots)
-        # Every body's deepest overlap as the tick ends, for the metrics (a body the passes did
-        # not look at again may touch one that moved into it).
-        st.overlap_m = overlaps(body, grid_of(body)).depth
+        moved_ever = np.flatnonzero(ever)
+        self._undo_feet_in_ground(moved_ever, snapshots)
+        # Every body's deepest overlap as the tick ends, for the metrics: the moved bodies' and
+        # those of every body whose bounds meet one of theirs (it may touch one that moved into
+        # it); the others' are as found.
+        overlaps(body, grid, np.union1d(moved_ever, near_rows(body, grid, moved_ever)), found)
+        st.overlap_m = found.depth
 
     def _claims(self) -> Claims:
         """Each character's priority, claimed groups, limbs' pins and whom each pin aims at
@@ -344,23 +363,33 @@ class CollisionSeparate(System):
         clear: NDArray[np.bool_] = np.all(moved[..., 2] >= under + clearance, axis=1)
         return clear
 
-    def _separate(self, found: Overlaps, claims: Claims, pushed: Pushes,
-                  trying: NDArray[np.bool_]) -> I64:
+    def _separate(self, found: Overlaps, claims: Claims, pushed: Pushes, stalled: I64,
+                  watch: I64, leg: F64) -> I64:
         """Move the chains of this round's overlapping characters (see the module docstring)
-        that are still ``trying`` (n,); returns the rows moved. ``pushed``: each row's last
-        push this tick (read, then written)."""
+        among ``watch`` (k,) that are still trying (``stalled`` (n,) below :data:`PATIENCE`);
+        returns the rows moved. ``pushed``: each row's last push this tick (read, then
+        written); ``leg`` (n,) each body's leg length, m. Compiled
+        (:mod:`ecs_anim.runtime.kernels.separate`) unless ``self.compiled`` is off: then the
+        numpy methods here, its reference."""
         st, sim = self.sim.store, self.sim
         depth, other, mine, theirs, normal, point = found
-        rows = np.flatnonzero((depth > SEPARATE_FROM_M) & trying)
+        rows = watch[(depth[watch] > SEPARATE_FROM_M) & (stalled[watch] < PATIENCE)]
         them = other[rows]
         way, at = normal[rows], point[rows]
         full = depth[rows] + MARGIN_M
-        _, can_me = self._turns(rows, them, mine[rows], at, way, full, claims)
-        _, can_them = self._turns(them, rows, theirs[rows], at, -way, full, claims)
+        if self.compiled:
+            can = self._can(np.concatenate([rows, them]), np.concatenate([them, rows]),
+                            np.concatenate([mine[rows], theirs[rows]]), np.concatenate([at, at]),
+                            np.concatenate([way, -way]), np.concatenate([full, full]), claims,
+                            leg)
+            can_me, can_them = can[:rows.size], can[rows.size:]
+        else:
+            _, can_me = self._turns(rows, them, mine[rows], at, way, full, claims)
+            _, can_them = self._turns(them, rows, theirs[rows], at, -way, full, claims)
         priority = claims.priority
         share = np.where(priority[rows] < priority[them], 1.0,
                          np.where(priority[rows] == priority[them], 0.5, 0.0))
-        share = np.where(can_them & trying[them], share, 1.0) * can_me
+        share = np.where(can_them & (stalled[them] < PATIENCE), share, 1.0) * can_me
         stuck = ~can_me & ~can_them
         if stuck.any():
             names: list[str] | None = None  # made only when a pair is new (a list of every name)
@@ -378,8 +407,12 @@ class CollisionSeparate(System):
         if rows.size == 0:
             return rows
         capsule = mine[rows]
+        distance = depth[rows] * share + MARGIN_M
+        if self.compiled:
+            self._push(rows, them, capsule, at, way, distance, claims, pushed, leg)
+            return np.unique(rows)
         chain = CAPSULE_CHAIN[capsule]
-        push = self._deflect(rows, chain, way, depth[rows] * share + MARGIN_M, pushed)
+        push = self._deflect(rows, chain, way, distance, pushed)
         fold, folded = self._fold(rows, them, capsule, push, claims)
         push -= folded
         distance = np.linalg.norm(push, axis=1)
@@ -420,6 +453,45 @@ class CollisionSeparate(System):
                 * distance[core, None]
             st.poses.root_position[r] += step / leg_length(st.lengths[r])[:, None]
         return np.unique(rows)
+
+    def _can(self, rows: I64, partner: I64, capsule: I64, at: F64, way: F64, distance: F64,
+             claims: Claims, leg: F64) -> NDArray[np.bool_]:
+        """Whether each row's chain of ``capsule`` may move (k,): :meth:`_turns`' second
+        result, compiled (:func:`~ecs_anim.runtime.kernels.separate.turn_rows`), the ground
+        asked about the free legs' feet only."""
+        st = self.sim.store
+        k = rows.size
+        can, ask_ground = np.empty(k, bool), np.empty(k, bool)
+        feet, clearance = np.empty((k, 2, 3)), np.empty((k, 2))
+        over_chunks(turn_rows, k, rows, partner, capsule, at, way, distance, st.positions,
+                    st.lengths, leg, claims.pin, claims.aims_at,
+                    np.ascontiguousarray(claims.claimed[:, TRUNK]), st.contact_weight,
+                    st.frozen, CAPSULE_CHAIN, LIMB_ROOT, LIMB_END, TOE, ANKLE_HEIGHT,
+                    BALL_HEIGHT_PER_LEG, MAX_TURN_RAD, MIN_LEVER_M, can, feet, clearance,
+                    ask_ground)
+        legs = np.flatnonzero(ask_ground)
+        if legs.size:
+            under = self.row_ground().height_of(rows[legs], feet[legs, :, :2])
+            can[legs] &= np.all(feet[legs, :, 2] >= under + clearance[legs], axis=1)
+        return can
+
+    def _push(self, rows: I64, partner: I64, capsule: I64, at: F64, way: F64, distance: F64,
+              claims: Claims, pushed: Pushes, leg: F64) -> None:
+        """Move each row's chain of ``capsule``, ``distance`` (k,) m along ``way`` (k, 3) from
+        ``at`` (k, 3), away from ``partner``: the rest of :meth:`_separate`, compiled
+        (:func:`~ecs_anim.runtime.kernels.separate.push_rows`). Writes the rows' poses and
+        ``pushed``."""
+        st = self.sim.store
+        posture, poses = st.posture, st.poses
+        assert posture is not None
+        over_chunks(push_rows, rows.size, rows, partner, capsule, at, way, distance,
+                    st.positions, st.lengths, leg, claims.pin, claims.aims_at, st.frozen,
+                    pushed.way, pushed.chain, posture.pelvis2world, posture.thorax2world,
+                    posture.leg2world, posture.arm2world, poses.leg_fraction,
+                    poses.arm_fraction, poses.leg_frame, poses.arm_frame, poses.foot_dir,
+                    poses.root_position, CAPSULE_CHAIN, DISTAL, LIMB_ROOT, LIMB_MIDDLE, LIMB_END,
+                    LIMB_SEGMENTS, MAX_TURN_RAD, MIN_LEVER_M, MAX_DEFLECTION, MIN_FOLD_SHARE,
+                    MAX_REACH_SHARE)
 
     def _undo_feet_in_ground(self, moved: I64,
                              snapshots: list[tuple[I64, NormalizedPoses]]) -> None:

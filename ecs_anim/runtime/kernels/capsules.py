@@ -162,6 +162,22 @@ def overlap_rows(lo: int, hi: int, rows: I64, ends: F64, radii: F64, centre: F64
                             point[i, 0], point[i, 1], point[i, 2] = on_i
 
 
+@jit(nogil=True)
+def near_kernel(rows: I64, box: F64, plane: F64, cell_m: float, mask: int, start: I64,
+                order: I64, near: NDArray[np.bool_]) -> None:
+    """Mark ``near[j]`` (n,) for every other character ``j`` whose bounds ``box`` (n, 2, 3)
+    meet those of one of ``rows`` (on the grid as :func:`overlap_rows`'s)."""
+    for row in range(rows.size):
+        i = rows[row]
+        ix, iy = math.floor(plane[i, 0] / cell_m), math.floor(plane[i, 1] / cell_m)
+        for cell in range(9):
+            s = cell_hash(ix + cell // 3 - 1, iy + cell % 3 - 1, mask)
+            for a in range(start[s], start[s + 1]):
+                j = order[a]
+                if j != i and not _apart(box[i], box[j]):
+                    near[j] = True
+
+
 class Capsules(NamedTuple):
     """Every character's capsules (:func:`capsules`): ends (n, C, 2, 3) m, radii (n, C) m,
     centre (n, 3) the pelvis, reach (n,) m from it to the farthest capsule surface, box
@@ -254,3 +270,12 @@ def overlaps(body: Capsules, grid: Grid | None = None, rows: I64 | None = None,
     rows = np.arange(n, dtype=np.int64) if rows is None else rows
     over_chunks(overlap_rows, rows.size, rows, *body, *grid, *out)
     return out
+
+
+def near_rows(body: Capsules, grid: Grid, rows: I64) -> I64:
+    """The characters other than ``rows`` (k,) whose bounds meet one of theirs, on ``grid``."""
+    near = np.zeros(body.radii.shape[0], bool)
+    near_kernel(rows, body.box, grid.plane, grid.cell_m, grid.mask, grid.start, grid.order, near)
+    near[rows] = False
+    found: I64 = np.flatnonzero(near)
+    return found
