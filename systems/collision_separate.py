@@ -56,6 +56,7 @@ from ecs_anim.runtime.kernels.capsules import (
     Capsules,
     Overlaps,
     capsules,
+    grid_holds,
     grid_of,
     near_rows,
     overlaps,
@@ -160,8 +161,11 @@ class CollisionSeparate(System):
 
     def __init__(self, sim: Simulation) -> None:
         super().__init__(sim)
-        #: Pairs reported as stuck (neither may move): (entity, entity, capsule, capsule).
+        #: Pairs reported as stuck (neither may move): (entity, entity, capsule, capsule);
+        #: and the same as the codes of :meth:`_stuck_codes`, sorted.
         self.reported: set[tuple[int, int, str, str]] = set()
+        self._reported_codes = np.zeros(0, np.int64)
+        self._names: tuple[int, list[str]] = (-1, [])
         #: The rounds compiled (off: the numpy methods, their reference, for the tests).
         self.compiled = True
 
@@ -208,9 +212,10 @@ class CollisionSeparate(System):
             ever[moved] = True
             self._posture(moved)
             # Only the moved bodies' capsules change; the overlaps found again are theirs and
-            # those of the bodies that touched them (the grid holds: a turn or a step of a few
-            # centimetres leaves every body within its cell's reach).
+            # those of the bodies that touched them.
             capsules(st.positions, st.lengths, body, moved)
+            if not grid_holds(body, grid, moved):  # limbs reach out further sideways
+                grid = grid_of(body)
             touched = np.union1d(moved, watch[np.isin(found.other[watch], moved)])
             overlaps(body, grid, touched, found)
             watch = np.union1d(watch, touched[found.depth[touched] > 0.0])
@@ -371,7 +376,7 @@ class CollisionSeparate(System):
         written); ``leg`` (n,) each body's leg length, m. Compiled
         (:mod:`ecs_anim.runtime.kernels.separate`) unless ``self.compiled`` is off: then the
         numpy methods here, its reference."""
-        st, sim = self.sim.store, self.sim
+        st = self.sim.store
         depth, other, mine, theirs, normal, point = found
         rows = watch[(depth[watch] > SEPARATE_FROM_M) & (stalled[watch] < PATIENCE)]
         them = other[rows]
@@ -392,16 +397,8 @@ class CollisionSeparate(System):
         share = np.where(can_them & (stalled[them] < PATIENCE), share, 1.0) * can_me
         stuck = ~can_me & ~can_them
         if stuck.any():
-            names: list[str] | None = None  # made only when a pair is new (a list of every name)
-            for i, j, a, b in zip(rows[stuck], them[stuck], mine[rows[stuck]],
-                                  theirs[rows[stuck]], strict=True):
-                key = (int(st.entity[min(i, j)]), int(st.entity[max(i, j)]),
-                       CAPSULES[a if i < j else b], CAPSULES[b if i < j else a])
-                if key not in self.reported:
-                    self.reported.add(key)
-                    names = sim.names() if names is None else names
-                    sim.warn(f"{names[i]}'s {CAPSULES[a]} and {names[j]}'s {CAPSULES[b]} overlap "
-                             f"by {depth[i] * 1e3:.0f} mm and neither may move")
+            self._report_stuck(rows[stuck], them[stuck], mine[rows[stuck]],
+                               theirs[rows[stuck]], depth)
         go = share > 0
         rows, them, share, way, at = rows[go], them[go], share[go], way[go], at[go]
         if rows.size == 0:
@@ -492,6 +489,40 @@ class CollisionSeparate(System):
                     poses.root_position, CAPSULE_CHAIN, DISTAL, LIMB_ROOT, LIMB_MIDDLE, LIMB_END,
                     LIMB_SEGMENTS, MAX_TURN_RAD, MIN_LEVER_M, MAX_DEFLECTION, MIN_FOLD_SHARE,
                     MAX_REACH_SHARE)
+
+    @staticmethod
+    def _stuck_codes(entity_lo: I64, entity_hi: I64, capsule_lo: I64, capsule_hi: I64) -> I64:
+        """One int64 (k,) per pair of bodies' capsules (entities below 2**23, capsules below
+        2**8): the pairs reported are told apart in numpy, not one by one."""
+        codes: I64 = (entity_lo << 40) | (entity_hi << 16) | (capsule_lo << 8) | capsule_hi
+        return codes
+
+    def _report_stuck(self, rows: I64, them: I64, mine: I64, theirs: I64, depth: F64) -> None:
+        """Warn once about each pair of ``rows``' capsule ``mine`` and ``them``'s ``theirs``
+        (k,) that overlap (``depth`` (n,) m) where neither may move."""
+        st, sim = self.sim.store, self.sim
+        first = rows < them
+        lo, hi = np.where(first, rows, them), np.where(first, them, rows)
+        cap_lo, cap_hi = np.where(first, mine, theirs), np.where(first, theirs, mine)
+        codes = self._stuck_codes(st.entity[lo], st.entity[hi], cap_lo, cap_hi)
+        reported = self._reported_codes
+        at = np.minimum(np.searchsorted(reported, codes), max(reported.size - 1, 0))
+        new = np.flatnonzero(reported[at] != codes) if reported.size \
+            else np.arange(codes.size)
+        if new.size == 0:
+            return
+        self._reported_codes = np.union1d(self._reported_codes, codes[new])
+        if self._names[0] != sim.structure_version:  # (a list of every name)
+            self._names = (sim.structure_version, sim.names())
+        names = self._names[1]
+        for i, j, a, b, k in zip(rows[new], them[new], mine[new], theirs[new], new,
+                                 strict=True):
+            key = (int(st.entity[lo[k]]), int(st.entity[hi[k]]), CAPSULES[cap_lo[k]],
+                   CAPSULES[cap_hi[k]])
+            if key not in self.reported:  # (a pair twice in one round: reported once)
+                self.reported.add(key)
+                sim.warn(f"{names[i]}'s {CAPSULES[a]} and {names[j]}'s {CAPSULES[b]} overlap "
+                         f"by {depth[i] * 1e3:.0f} mm and neither may move")
 
     def _undo_feet_in_ground(self, moved: I64,
                              snapshots: list[tuple[I64, NormalizedPoses]]) -> None:

@@ -5,7 +5,7 @@ results to 1e-9 m) and adds each character's bounding sphere and bounds, and eac
 each character, the deepest overlap of one of its capsules with a capsule of another character:
 neighbours on a uniform grid hashed into a table (:func:`ecs_anim.runtime.kernels.avoidance.
 build_grid`, the steering avoidance's), each looking at the 3 x 3 cells about its own (a cell as
-wide as the widest pair of bounding spheres can reach), every capsule pair of two characters
+wide as the widest pair of bounds can reach sideways), every capsule pair of two characters
 whose bounds meet (each capsule first against the other body's bounds, then against the other
 capsule's) tested by the nearest points of their axes (Ericson, Real-Time
 Collision Detection, 5.1.9; :func:`ecs_anim.solver.capsules.closest_between_segments`).
@@ -27,19 +27,26 @@ from ecs_anim.solver.capsules import CAPSULE_JOINTS, CAPSULE_SPAN, N_CAPSULES, R
 
 I64 = NDArray[np.int64]
 
+#: (C, 3) per capsule the lengths its radius weighs (:data:`~ecs_anim.solver.capsules.
+#: RADIUS_WEIGHTS`' non-zero columns, in order; -1: none): three terms a capsule, not a row of
+#: every length (that loop was most of a body's capsules' cost).
+RADIUS_TERMS = np.full((N_CAPSULES, 3), -1, np.int64)
+for _k, _row in enumerate(RADIUS_WEIGHTS):
+    RADIUS_TERMS[_k, :np.count_nonzero(_row)] = np.flatnonzero(_row)
+
 
 @jit(nogil=True)
 def capsule_rows(lo: int, hi: int, rows: I64, positions: F64, lengths: F64, joints: I64,
-                 span: F64, radius_weights: F64, ends: F64, radii: F64, centre: F64, reach: F64,
+                 span: F64, radius_weights: F64, radius_terms: I64, ends: F64, radii: F64, centre: F64, reach: F64,
                  box: F64, capsule_box: F64) -> None:
     """Capsules of characters ``rows[lo:hi]``: ``ends`` (n, C, 2, 3) and ``radii`` (n, C) written
     from ``positions`` (n, N_JOINTS, 3) and ``lengths`` (n, N_LENGTHS) (``joints`` (C, 2),
     ``span`` (C, 2), ``radius_weights`` (C, N_LENGTHS): :mod:`ecs_anim.solver.capsules`'s
-    layout); ``centre`` (n, 3) the pelvis and ``reach`` (n,) how far from it any capsule's
+    layout, ``radius_terms`` (C, 3) :data:`RADIUS_TERMS`); ``centre`` (n, 3) the pelvis and ``reach`` (n,) how far from it any capsule's
     surface lies; ``capsule_box`` (n, C, 2, 3) each capsule's bounds and ``box`` (n, 2, 3) the
     body's (lowest, highest corner). Mirrors
     :func:`ecs_anim.solver.capsules.capsules_from_positions`."""
-    n_caps, n_len = joints.shape[0], lengths.shape[1]
+    n_caps, n_terms = joints.shape[0], radius_terms.shape[1]
     for row in range(lo, hi):
         c = rows[row]
         pelvis = load3(positions[c, 0])
@@ -50,8 +57,10 @@ def capsule_rows(lo: int, hi: int, rows: I64, positions: F64, lengths: F64, join
             a = load3(positions[c, joints[k, 0]])
             ab = sub(load3(positions[c, joints[k, 1]]), a)
             r = 0.0
-            for m in range(n_len):
-                r += lengths[c, m] * radius_weights[k, m]
+            for t in range(n_terms):
+                m = radius_terms[k, t]
+                if m >= 0:
+                    r += lengths[c, m] * radius_weights[k, m]
             radii[c, k] = r
             for x in range(3):
                 capsule_box[c, k, 0, x], capsule_box[c, k, 1, x] = math.inf, -math.inf
@@ -88,11 +97,24 @@ def closest_between(p1: Vec3, q1: Vec3, p2: Vec3, q2: Vec3) -> tuple[Vec3, Vec3]
 
 @jit(inline="always")
 def _apart(a: F64, b: F64) -> bool:
-    """Whether the bounds ``a`` and ``b`` (2, 3: lowest, highest corner) do not meet."""
+    """Whether the bounds ``a`` and ``b`` (2, 3: lowest, highest corner) do not meet (the six
+    tests at once, one branch: mostly they do not, and a branch a test mispredicted half the
+    search's time)."""
+    return bool((a[1, 0] < b[0, 0]) | (b[1, 0] < a[0, 0]) | (a[1, 1] < b[0, 1])
+                | (b[1, 1] < a[0, 1]) | (a[1, 2] < b[0, 2]) | (b[1, 2] < a[0, 2]))
+
+
+@jit(inline="always")
+def _gap(a: F64, b: F64, radius_a: float, radius_b: float) -> float:
+    """How far apart (m) at least the axes of two capsules lie whose bounds are ``a`` and ``b``
+    (2, 3), their radii ``radius_a`` and ``radius_b`` (the bounds of their axes' apart; less a
+    hair for rounding)."""
+    gap = 0.0
     for x in range(3):
-        if a[1, x] < b[0, x] or b[1, x] < a[0, x]:
-            return True
-    return False
+        d = max(b[0, x] + radius_b - (a[1, x] - radius_a),
+                a[0, x] + radius_a - (b[1, x] - radius_b), 0.0)
+        gap += d * d
+    return math.sqrt(gap) - 1e-9
 
 
 @jit(nogil=True)
@@ -142,8 +164,10 @@ def overlap_rows(lo: int, hi: int, rows: I64, ends: F64, radii: F64, centre: F64
                         continue  # (two walkers side by side: most of their capsule pairs)
                     p1, q1 = load3(ends[i, ki, 0]), load3(ends[i, ki, 1])
                     for kj in range(n_caps):
-                        if not (near >> kj) & 1 or _apart(box_ki, capsule_box[j, kj]):
-                            continue
+                        if not (near >> kj) & 1 or _apart(box_ki, capsule_box[j, kj]) \
+                                or _gap(box_ki, capsule_box[j, kj], radii[i, ki],
+                                        radii[j, kj]) > radii[i, ki] + radii[j, kj] - depth[i]:
+                            continue  # (its axes too far apart to be deeper than one found)
                         p2, q2 = load3(ends[j, kj, 0]), load3(ends[j, kj, 1])
                         on_i, on_j = closest_between(p1, q1, p2, q2)
                         gap = sub(on_i, on_j)
@@ -235,24 +259,49 @@ def capsules(positions: F64, lengths: F64, out: Capsules | None = None,
     rows = np.arange(n, dtype=np.int64) if rows is None else rows
     over_chunks(capsule_rows, rows.size, rows, np.ascontiguousarray(positions, np.float64),
                 np.ascontiguousarray(lengths, np.float64), CAPSULE_JOINTS, CAPSULE_SPAN,
-                RADIUS_WEIGHTS, *out)
+                RADIUS_WEIGHTS, RADIUS_TERMS, *out)
     return out
 
 
+#: A grid's cells are this many times as wide as two bodies' bounds reach sideways from their
+#: centres at most: limbs turned by the rounds may reach a little further before it is built
+#: again (:func:`grid_holds`).
+CELL_SLACK = 1.25
+
+
+def _spread(body: Capsules, rows: I64 | slice) -> F64:
+    """How far (m, (k,)) each of ``rows``' bounds reach sideways (x or y) from its centre."""
+    centre = body.centre[rows, None, :2]
+    spread: F64 = np.abs(body.box[rows, :, :2] - centre).max(axis=(1, 2))
+    return spread
+
+
 def grid_of(body: Capsules) -> Grid:
-    """The bodies' bounding spheres' centres hashed on a grid of cells twice the widest reach
-    (a body moved by less than its reach still finds every body it can touch)."""
+    """The bodies' centres hashed on a grid of cells :data:`CELL_SLACK` times as wide as two
+    bodies' bounds reach sideways from their centres: the 3 x 3 cells about a body's own hold
+    every body whose bounds can meet its bounds (:func:`grid_holds` tells when that no longer
+    holds)."""
     n = body.radii.shape[0]
     plane = np.ascontiguousarray(body.centre[:, :2])
     finite = np.isfinite(plane).all(axis=1)
     if not finite.all():  # a frozen or not yet posed body: far away from everyone
         plane[~finite] = 1e9 + np.arange(int((~finite).sum()))[:, None] * 1e3
-    cell_m = max(2.0 * float(np.max(body.reach, initial=0.0, where=np.isfinite(body.reach))), 0.1)
+    spread = _spread(body, slice(None))
+    cell_m = max(2.0 * CELL_SLACK * float(np.max(spread, initial=0.0,
+                                                 where=np.isfinite(spread))), 0.1)
     mask = table_mask(n)
     slot, order = np.empty(n, np.int64), np.empty(n, np.int64)
     start = np.empty(mask + 2, np.int64)
     build_grid(plane, cell_m, mask, slot, start, order)
     return Grid(plane, cell_m, mask, start, order)
+
+
+def grid_holds(body: Capsules, grid: Grid, rows: I64) -> bool:
+    """Whether ``grid`` still finds every pair that can meet after ``rows`` (k,) moved: each
+    one's bounds reach sideways from where it was hashed no further than half a cell (two
+    bodies' bounds that meet then lie in neighbouring cells)."""
+    drift = np.abs(body.centre[rows, :2] - grid.plane[rows]).max(axis=1, initial=0.0)
+    return bool(np.all(_spread(body, rows) + drift <= 0.5 * grid.cell_m))
 
 
 def overlaps(body: Capsules, grid: Grid | None = None, rows: I64 | None = None,
