@@ -533,15 +533,14 @@ class CollisionSeparate(System):
         if moved.size == 0:
             return
         st = self.sim.store
-        p = st.positions
-        leg = leg_length(st.lengths)
-        heel = p[:, LIMB_END[:2], 2] - st.lengths[:, ANKLE_HEIGHT]
-        ball = p[:, TOE, 2] - BALL_HEIGHT_PER_LEG * leg[:, None]
-        under = self.row_ground().height(np.concatenate([p[:, LIMB_END[:2], :2],
-                                                         p[:, TOE, :2]], axis=1))
+        p, lengths = st.positions[moved], st.lengths[moved]
+        heel = p[:, LIMB_END[:2], 2] - lengths[:, ANKLE_HEIGHT]
+        ball = p[:, TOE, 2] - BALL_HEIGHT_PER_LEG * leg_length(lengths)[:, None]
+        under = self.row_ground().height_of(moved, np.concatenate([p[:, LIMB_END[:2], :2],
+                                                                   p[:, TOE, :2]], axis=1))
         sunk: NDArray[np.bool_] = np.any(np.concatenate([heel, ball], axis=1)
                                          < under - HEEL_TOLERANCE_M, axis=1)
-        back = moved[sunk[moved]]
+        back = moved[sunk]
         if back.size == 0:
             return
         for rows, poses in snapshots:

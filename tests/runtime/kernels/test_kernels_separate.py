@@ -12,8 +12,10 @@ import numpy as np
 import pytest
 
 from conftest import SCENARIOS_DIR
+from ecs_anim.core.ground import Bumps, Plane, Slope
 from ecs_anim.runtime.bench_scene import BenchScene
 from ecs_anim.runtime.simulation import Simulation
+from ecs_anim.runtime.system_base import RowGrounds
 from ecs_anim.scenario import build_simulation, load_scenario
 
 TOL = 1e-9
@@ -64,3 +66,15 @@ def test_compiled_rounds_match_numpy_in_the_fight(name):
     scenario = load_scenario(SCENARIOS_DIR / f"{name}.yaml")
     with build_simulation(scenario) as compiled, build_simulation(scenario) as reference:
         assert assert_same_ticks(compiled, reference, round(scenario.duration_s * scenario.fps)) > 0
+
+
+def test_the_ground_of_some_rows_is_the_ground_of_all_rows_taken_at_them():
+    """RowGrounds.height_of (the free legs' feet, the moved bodies' soles) answers for a few rows
+    what RowGrounds.height answers for every row."""
+    rng = np.random.default_rng(3601)
+    grounds = RowGrounds([Plane(0.1), Bumps(0.05, 2.0, 3.0), Slope(0.1, -0.2)],
+                         rng.integers(0, 3, 50))
+    xy = rng.uniform(-5, 5, (50, 2, 2))
+    rows = np.array([3, 7, 8, 20, 41, 49])
+    np.testing.assert_allclose(grounds.height_of(rows, xy[rows]), grounds.height(xy)[rows],
+                               atol=1e-12)
