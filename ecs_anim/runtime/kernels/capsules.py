@@ -1,15 +1,16 @@
 """Collision capsules and the deepest overlap between characters, compiled (CollisionSeparate).
 
 :func:`capsule_rows` mirrors :func:`ecs_anim.solver.capsules.capsules_from_positions` (same
-results to 1e-9 m) and adds each character's bounding sphere and bounds, and each capsule's; :func:`overlap_rows` finds, for
-each character, the deepest overlap of one of its capsules with a capsule of another character:
-neighbours on a uniform grid hashed into a table (:func:`ecs_anim.runtime.kernels.avoidance.
-build_grid`, the steering avoidance's), each looking at the 3 x 3 cells about its own (a cell as
-wide as the widest pair of bounds can reach sideways), every capsule pair of two characters
-whose bounds meet (each capsule first against the other body's bounds, then against the other
-capsule's) tested by the nearest points of their axes (Ericson, Real-Time
-Collision Detection, 5.1.9; :func:`ecs_anim.solver.capsules.closest_between_segments`).
-:func:`overlaps` is the numpy-facing call.
+results to 1e-9 m) and adds each character's bounding sphere and bounds, and each capsule's
+bounds; :func:`overlap_rows` finds, for each character, the deepest overlap of one of its
+capsules with a capsule of another character: neighbours on a uniform grid hashed into a table
+(:func:`ecs_anim.runtime.kernels.avoidance.build_grid`, the steering avoidance's), each looking
+at the 3 x 3 cells about its own (a cell as wide as two bodies' bounds reach sideways), every
+capsule pair of two characters whose bounds meet (each capsule first against the other body's
+bounds, then against the other capsule's) tested by the nearest points of their axes (Ericson,
+Real-Time Collision Detection, 5.1.9;
+:func:`ecs_anim.solver.capsules.closest_between_segments`). :func:`overlaps` is the
+numpy-facing call.
 """
 
 from __future__ import annotations
