@@ -136,6 +136,7 @@ class RowGrounds:
         used = np.unique(index)
         self.groups = [(grounds[int(k)], np.flatnonzero(index == k)) for k in used]
         self.n = int(index.shape[0])
+        self.used, self.index = used, index
 
     def height(self, xy: NDArray[np.float64]) -> NDArray[np.float64]:
         if len(self.groups) <= 1:
@@ -144,5 +145,17 @@ class RowGrounds:
         out = np.empty(xy.shape[:-1])
         for ground, rows in self.groups:
             out[rows] = ground.height(xy[rows])
+        return out
+
+    def height_of(self, rows: I64, xy: NDArray[np.float64]) -> NDArray[np.float64]:
+        """As :meth:`height`, for the store ``rows`` (k,) only: ``xy`` (k, ..., 2) -> (k, ...)
+        metres (the ground asked about those points alone)."""
+        if len(self.groups) <= 1:
+            return self.height(xy)
+        out = np.empty(xy.shape[:-1])
+        index = self.index[rows]
+        for key, (ground, _) in zip(self.used, self.groups, strict=True):
+            mine = index == key
+            out[mine] = ground.height(xy[mine])
         return out
 
