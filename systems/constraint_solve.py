@@ -109,6 +109,10 @@ class ConstraintSolve(System):
             st.clip_positions = unconstrained.positions.copy()
             if limited:
                 self._clip_now = pack(st.poses)
+                # A character with no last tick kept (its first, or none solved since) was at its
+                # motion's pose: a constraint switched on at once is then met over a few ticks.
+                fresh = ~np.any(st.last_pose_values != 0.0, axis=1)
+                st.last_clip_values[fresh] = st.last_pose_values[fresh] = self._clip_now[fresh]
         expected = None
         if self._last_iterations is not None and self._last_iterations[0] == sim.structure_version:
             expected = self._last_iterations[1]

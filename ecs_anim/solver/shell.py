@@ -95,9 +95,10 @@ class SolverSettings:
     cut first), get fewer iterations. ``cost_model``: the cost the cut is decided by (None:
     calibrated every tick from the last tick's measured times).
 
-    ``max_joint_speed_rad_s``: how fast the solver's correction of a segment may change, rad/s
-    (None: as fast as the solver likes); a trunk the solve folds in one tick then bends over
-    several (:mod:`ecs_anim.solver.joint_speed`)."""
+    ``max_joint_speed_rad_s``: how much faster than the motion's own segment a segment the
+    solver sets may turn in a second, rad/s (None, the default: as fast as the solve likes); a
+    trunk the solve folds in one tick then bends over several
+    (:mod:`ecs_anim.solver.joint_speed`)."""
 
     iterations: int = 6
     tolerance_m: float = 1e-4
@@ -110,7 +111,7 @@ class SolverSettings:
     budget_ms: float | None = None
     focus_in_world: tuple[float, float, float] | None = None
     cost_model: SolverCostModel | None = None
-    max_joint_speed_rad_s: float | None = 4.0
+    max_joint_speed_rad_s: float | None = None
 
     def __post_init__(self) -> None:
         if self.max_joint_speed_rad_s is not None and not (
