@@ -80,7 +80,8 @@ def _quat_mul(a: F64, b: F64) -> F64:
 
 
 def _conj(q: F64) -> F64:
-    return q * np.array([-1.0, -1.0, -1.0, 1.0])
+    conjugate: F64 = q * np.array([-1.0, -1.0, -1.0, 1.0])
+    return conjugate
 
 
 def _rotvec_of(q: F64) -> F64:
@@ -204,7 +205,8 @@ def limit_motion(poses: NormalizedPoses, clip_now: F64, clip_before: F64, pose_b
             a = pose_before[rows, at].reshape(to.shape)
             share = need[rows, group].reshape((-1,) + (1,) * (to.ndim - 1))
             _set(out, field, index, rows, a + share * (to - a))
-    return out, held.any(axis=1)
+    any_held: B8 = np.any(held, axis=1)
+    return out, any_held
 
 
 def contact_goals(goals: TickGoals, rows: I64) -> TickGoals:
