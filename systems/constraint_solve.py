@@ -8,11 +8,18 @@ activation weights run on simulation time, or on the clip time of constraints st
 motion; a point on another character is read from its posture of the previous tick (so every
 character sees the same world whatever their order), a point on the same character from this
 tick's pose. A constraint whose target is not finite is switched off with one warning.
+No pops (``SolverSettings.max_joint_speed_rad_s``, :mod:`ecs_anim.solver.joint_speed`): each
+segment the solver sets turns from the last tick's result at most that much faster than the
+motion's own segment (the compiled :mod:`ecs_anim.runtime.kernels.joint_speed`), and a character
+no longer solved goes back to its motion's pose no faster.
 
 Rows: characters with a Constraint component.
 Reads: store.poses, lengths, posture (the previous tick's), contact_weight, clip, clip_time_s,
-com_control, com_target_xy, segment_mass_kg, segment_com_fraction; the constraints table.
-Writes: store.poses (solved characters), com_desired, goals, solved (the decoded result of
+com_control, com_target_xy, segment_mass_kg, segment_com_fraction, last_clip_values,
+last_pose_values; the constraints table.
+Writes: store.poses (solved characters, and those going back), com_desired, last_clip_values,
+last_pose_values, clip_positions (the motion's own joints, None when nothing was solved), goals,
+solved (the decoded result of
 the solved characters, which PostureConvert takes instead of decoding them again); table.held;
 table.enabled, table.weight, table.error (how far each active constraint is from being met on
 the result, :func:`~ecs_anim.solver.goals.constraint_errors`; NaN while inactive).
@@ -27,6 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.components import Constraint
+from ecs_anim.core.normalized import DecodedPose, NormalizedPoses
 from ecs_anim.motion.constraint_table import KIND_ORIENTATION
 from ecs_anim.runtime.kernels import over_chunks, threads
 from ecs_anim.runtime.kernels.com import centres_of_mass, segment_joints
@@ -35,10 +43,20 @@ from ecs_anim.runtime.kernels.goals import (
     constraint_errors as constraint_errors,  # tests patch these
 )
 from ecs_anim.runtime.kernels.goals import tick_goals as tick_goals
+from ecs_anim.runtime.kernels.joint_speed import limit_motion, pack
 from ecs_anim.runtime.kernels.solve import solve as solve
 from ecs_anim.runtime.system_base import System
 from ecs_anim.solver.budget import FrameBudget, SolverReport, effective_caps
-from ecs_anim.solver.shell import TickResult, TickSteps, constrain, iteration_caps, scatter
+from ecs_anim.solver.goals import TickGoals
+from ecs_anim.solver.joint_speed import SpeedSteps, solve_within_speed
+from ecs_anim.solver.shell import (
+    SolverSettings,
+    TickResult,
+    TickSteps,
+    constrain,
+    iteration_caps,
+    scatter,
+)
 
 if TYPE_CHECKING:
     from ecs_anim.runtime.simulation import Simulation
@@ -60,9 +78,11 @@ def _centres(positions: NDArray[np.float64], masses: NDArray[np.float64],
 class ConstraintSolve(System):
     query = (Constraint,)
     reads = ("constraints", "clip", "clip_time_s", "poses", "lengths", "posture", "contact_weight",
-             "com_control", "com_target_xy", "segment_mass_kg", "segment_com_fraction")
+             "com_control", "com_target_xy", "segment_mass_kg", "segment_com_fraction",
+             "last_clip_values", "last_pose_values")
     writes = ("goals", "solved", "constraints.error", "constraints.weight",
-              "constraints.enabled", "constraints.held", "poses", "com_desired")
+              "constraints.enabled", "constraints.held", "poses", "com_desired",
+              "last_clip_values", "last_pose_values", "clip_positions")
 
     def __init__(self, sim: Simulation) -> None:
         super().__init__(sim)
@@ -71,19 +91,27 @@ class ConstraintSolve(System):
         #: The frame budget's model and state between ticks.
         self.budget = FrameBudget()
         self._solve_cpu_s = 0.0
+        # No pops: this tick's motion pose, packed (n, N_VALUES; None: not packed), and whether
+        # the store's last_*_values hold the last tick's (else they are zeros: none).
+        self._clip_now: NDArray[np.float64] | None = None
+        self._values_kept = False
 
     def _timed_solve(self, *args: Any) -> Any:
-        """The compiled solve, its CPU time kept for the frame budget's model."""
+        """The compiled solve (within the speed bound when one is set), its CPU time kept for
+        the frame budget's model."""
         start = time.process_time()
-        out = solve(*args)
+        bounded = self.sim.solver_settings.max_joint_speed_rad_s is not None
+        out = self._solve_within_speed(*args) if bounded else solve(*args)
         self._solve_cpu_s = time.process_time() - start
         return out
 
     def run(self, dt: float) -> None:
         sim, st, table = self.sim, self.sim.store, self.sim.constraints
-        st.goals, st.solved = None, None
+        st.goals, st.solved, st.clip_positions = None, None, None
         self.report = None
+        self._clip_now = None
         if table.m == 0:
+            self._go_back(np.zeros(0, np.int64))
             return
         self.budget.start_tick(sum(system.cpu_seconds for system in sim.systems), threads(),
                                sim.structure_version, st.n)
@@ -97,6 +125,14 @@ class ConstraintSolve(System):
                                          st.poses.root_position * sim.leg_length()[:, None],
                                          settings, sim.dt)
         unconstrained = decode(st.poses, st.lengths) if (weight > 0).any() else None
+        if unconstrained is not None:
+            st.clip_positions = unconstrained.positions.copy()
+            if settings.max_joint_speed_rad_s is not None:
+                self._clip_now = pack(st.poses)
+                # A character with no last tick kept (its first, or none solved since) was at its
+                # motion's pose: a constraint switched on at once is then met over a few ticks.
+                fresh = ~np.any(st.last_pose_values != 0.0, axis=1)
+                st.last_clip_values[fresh] = st.last_pose_values[fresh] = self._clip_now[fresh]
         model = settings.cost_model or self.budget.model
         if settings.budget_ms is not None and model is not None:
             model = self.budget.for_cut(model, table.owner[weight > 0])
@@ -122,11 +158,56 @@ class ConstraintSolve(System):
         table.held[:] = result.held
         self._report(result, dropped)
         if result.goals is None or result.poses is None or result.solved is None:
+            self._go_back(np.zeros(0, np.int64))
             return
         every_row = result.rows.size == st.n
         st.poses = result.poses if every_row else scatter(st.poses, result.rows, result.poses)
         st.com_desired[result.rows] = result.goals.com_desired
         st.goals, st.solved = result.goals, result.solved
+        self._go_back(result.rows)
+
+    def _solve_within_speed(self, poses: NormalizedPoses, lengths: NDArray[np.float64],
+                            goals: TickGoals, masses: NDArray[np.float64],
+                            com_fraction: NDArray[np.float64], settings: SolverSettings,
+                            decoded: DecodedPose | None = None, in_place: bool = False
+                            ) -> tuple[NormalizedPoses, NDArray[np.int64], DecodedPose]:
+        """The compiled solve (its signature), each segment then turning no more than
+        ``settings.max_joint_speed_rad_s`` faster than the motion's (:func:`solve_within_speed`)."""
+        st, rows = self.sim.store, goals.rows
+        assert self._clip_now is not None  # packed before the solve
+        max_step = float(settings.max_joint_speed_rad_s or np.inf) * self.sim.dt
+        return solve_within_speed(
+            SpeedSteps(solve, limit_motion, decode), self._clip_now[rows],
+            st.last_clip_values[rows], st.last_pose_values[rows], max_step, poses, lengths,
+            goals, masses, com_fraction, settings, decoded, in_place)
+
+    def _go_back(self, solved_rows: NDArray[np.int64]) -> None:
+        """The characters no longer solved whose last result was not their motion's pose (their
+        constraints over) go back to it no faster than ``max_joint_speed_rad_s`` allows (their
+        planted feet's legs at once: the motion has those on their footprints); then this
+        tick's motion poses and results are kept for the next tick."""
+        st, speed = self.sim.store, self.sim.solver_settings.max_joint_speed_rad_s
+        if speed is None or (self._clip_now is None and not self._values_kept):
+            return
+        clip_now = pack(st.poses) if self._clip_now is None else self._clip_now
+        corrected = np.any(st.last_pose_values != st.last_clip_values, axis=1)
+        corrected[solved_rows] = False
+        rows = np.flatnonzero(corrected)
+        if rows.size:
+            if st.clip_positions is None:  # nothing solved: every pose is the motion's
+                st.clip_positions = decode(st.poses, st.lengths).positions
+            back, _ = limit_motion(st.poses.take(rows), clip_now[rows], st.last_clip_values[rows],
+                                   st.last_pose_values[rows], st.contact_weight[rows] > 0.0,
+                                   speed * self.sim.dt)
+            for name, value in back.arrays().items():
+                getattr(st.poses, name)[rows] = value
+        if self._clip_now is None and rows.size == 0:  # nothing solved nor going back
+            st.last_clip_values[:], st.last_pose_values[:] = 0.0, 0.0
+            self._values_kept = False
+            return
+        st.last_clip_values = clip_now
+        st.last_pose_values = pack(st.poses)
+        self._values_kept = True
 
     def _report(self, result: TickResult, dropped: NDArray[np.int64]) -> None:
         """This tick's report (``dropped``: the store rows the budget switched off)."""

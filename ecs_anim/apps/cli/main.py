@@ -207,7 +207,8 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
     print(f"{args.scenario}: {ticks} ticks ({seconds:g} s at {scenario.fps:g} Hz), "
           f"{len(names)} characters")
     print(f"  {'character':14s} {'float mm':>8s} {'penetr. mm':>10s} {'slide max mm/fr':>15s} "
-          f"{'bone err m':>10s} {'stride/leg':>10s} {'COM err mm':>10s} {'overlap mm':>10s}")
+          f"{'bone err m':>10s} {'stride/leg':>10s} {'COM err mm':>10s} {'overlap mm':>10s} "
+          f"{'joint m/s (clip)':>16s}")
     for c in report["characters"]:
         stride = "-" if c["stride_per_leg_length"] is None else f"{c['stride_per_leg_length']:.3f}"
         com = "-" if c["com_error_mm_max"] is None else f"{c['com_error_mm_max']:.1f}"
@@ -216,7 +217,8 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
         print(f"  {c['name'][:14]:14s} {c['floating_mm_max']:8.3f} "
               f"{c['ground_penetration_mm_max']:10.3f} {c['foot_sliding_mm_per_frame']['max']:15.3f} "
               f"{c['bone_length_error_m_max']:10.1e} {stride:>10s} {com:>10s} "
-              f"{c['overlap_mm_max']:10.1f}{removed}")
+              f"{c['overlap_mm_max']:10.1f} "
+              f"{c['joint_speed_m_s_max']:7.2f} ({c['clip_joint_speed_m_s_max']:5.2f}){removed}")
     if report["constraints"]:
         # While a constraint eases in or out its goal is a blend, so its error against the full
         # target says nothing; the report's JSON has both.
