@@ -87,6 +87,25 @@ def test_a_held_back_segment_turns_by_the_step_plus_the_motions_own():
         np.testing.assert_array_equal(getattr(same, name), value)
 
 
+def test_a_scenario_sets_the_bound_and_a_bad_one_is_one_line(tmp_path):
+    """``solver: {max_joint_speed_rad_s: 4}`` reaches the simulation's settings; a typo or a
+    speed out of range names the file, the line and the key."""
+    from ecs_anim.core.errors import InputError
+
+    for bound in (4, None):
+        with build_simulation(punch_with_trunk(tmp_path, bound)) as sim:
+            assert sim.solver_settings.max_joint_speed_rad_s == bound
+    for text, message in (("solver: {max_joint_speed: 4}", r"solver.max_joint_speed: unknown key"),
+                          ("solver: {max_joint_speed_rad_s: 0}", r"solver.max_joint_speed_rad_s")):
+        path = tmp_path / "bad.yaml"
+        good = punch_with_trunk(tmp_path, 4).path
+        lines = open(good).read().splitlines()
+        lines[-1] = text
+        path.write_text("\n".join(lines) + "\n")
+        with pytest.raises(InputError, match=rf"bad.yaml:{len(lines)}: {message}"):
+            load_scenario(path)
+
+
 def test_settings_refuse_a_speed_that_is_not_positive():
     for bad in (0.0, -1.0, float("nan"), float("inf")):
         with pytest.raises(UsageError, match="max_joint_speed_rad_s"):
@@ -94,15 +113,19 @@ def test_settings_refuse_a_speed_that_is_not_positive():
     assert SolverSettings(max_joint_speed_rad_s=None).max_joint_speed_rad_s is None
 
 
-def punch_with_trunk():
+def punch_with_trunk(tmp_path, bound=None):
     """The fight (scenarios/fight_training.yaml) with ``trunk`` in every punch's chain, as the
-    docs allow: without a bound, the trunk folds in a tick as the punch eases out."""
-    scenario = load_scenario(SCENARIOS_DIR / "fight_training.yaml")
-    for character in scenario.characters:
-        for constraint in character.constraints:
-            if constraint.name == "punch":
-                constraint.options["chain"] = ("arm_r", "trunk")
-    return scenario
+    docs allow (without a bound the trunk folds in a tick as the punch eases out), and with
+    ``bound`` the scenario's ``solver: {max_joint_speed_rad_s: bound}`` (docs/scenarios.md)."""
+    text = (SCENARIOS_DIR / "fight_training.yaml").read_text()
+    assert text.count("chain: [arm_r]") == 4  # the punches'
+    text = text.replace("chain: [arm_r]", "chain: [arm_r, trunk]")
+    text = text.replace(": motions/", f": {SCENARIOS_DIR / 'motions'}/")
+    if bound is not None:
+        text += f"solver: {{max_joint_speed_rad_s: {bound}}}\n"
+    path = tmp_path / f"punch_with_trunk_{bound}.yaml"
+    path.write_text(text)
+    return load_scenario(path)
 
 
 #: The bound the tests run with (rad/s; the settings' default is none).
@@ -110,9 +133,11 @@ BOUND = 4.0
 
 
 def run_report(scenario, speed=None, ticks=None):
-    """Run ``scenario`` (``speed``: the bound, rad/s, None for none) and return its report."""
+    """Run ``scenario`` (``speed``: the bound, rad/s, None for the scenario's) and return its
+    report."""
     with build_simulation(scenario) as sim:
-        sim.solver_settings = replace(sim.solver_settings, max_joint_speed_rad_s=speed)
+        if speed is not None:
+            sim.solver_settings = replace(sim.solver_settings, max_joint_speed_rad_s=speed)
         metrics = MetricsRecorder(sim)
         for _ in range(ticks or round(scenario.duration_s * scenario.fps)):
             sim.step()
@@ -125,10 +150,11 @@ def speeds(report):
             for c in report["characters"]}
 
 
-def test_a_trunk_in_the_punch_chain_bends_over_several_ticks():
-    scenario = punch_with_trunk()
-    popped = speeds(run_report(scenario))
-    bounded = run_report(scenario, speed=BOUND)
+def test_a_trunk_in_the_punch_chain_bends_over_several_ticks(tmp_path):
+    popped = speeds(run_report(punch_with_trunk(tmp_path)))
+    scenario = punch_with_trunk(tmp_path, BOUND)
+    assert scenario.solver == {"max_joint_speed_rad_s": BOUND}
+    bounded = run_report(scenario)
     held = speeds(bounded)
     for name in ("defender_1", "defender_2", "defender_3", "defender_4"):
         fastest, own = held[name]
@@ -148,11 +174,11 @@ def test_a_trunk_in_the_punch_chain_bends_over_several_ticks():
     assert max(errors[(f"defender_{pair}", "ward_off")] for pair in range(1, 5)) < 40.0
 
 
-def test_the_fight_with_numpy_steps_ends_as_with_the_compiled_ones(monkeypatch):
+def test_the_fight_with_numpy_steps_ends_as_with_the_compiled_ones(monkeypatch, tmp_path):
     """The whole tick with the goals, the solver, the errors, the limit and the decode swapped
     for their numpy references: every joint and error within 1e-9 m, on the fight with the
     trunk in the punches' chains (where the bound holds segments back), 1.8 s of it."""
-    scenario = punch_with_trunk()
+    scenario = punch_with_trunk(tmp_path)
     numpy = solver_shell.NUMPY_STEPS
 
     def run_positions():
