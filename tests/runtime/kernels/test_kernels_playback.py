@@ -16,6 +16,7 @@ from ecs_anim.runtime.kernels.decode import pose_arrays
 from ecs_anim.runtime.kernels.playback import (
     blend_rows,
     complex_power,
+    playback_scratch,
     sample_placed_rows,
     sample_table_rows,
 )
@@ -75,7 +76,7 @@ def test_sample_placed_rows_equals_numpy(bank: ClipBank) -> None:
     rows = np.arange(n, dtype=np.int64)
     sample_placed_rows(0, n, rows, pose_arrays(bank.poses), bank.start, bank.n_frames, bank.fps,
                        bank.loop_yaw, bank.loop_shift, clip, time_s, loop, xy, heading, leg,
-                       pose_arrays(got), rows)
+                       pose_arrays(got), rows, playback_scratch(n))
     _assert_poses_equal(got, want)
 
 
@@ -88,7 +89,8 @@ def test_only_the_given_rows_are_written(bank: ClipBank) -> None:
     got = _empty(rows.size, want)
     sample_placed_rows(0, rows.size, rows, pose_arrays(bank.poses), bank.start, bank.n_frames,
                        bank.fps, bank.loop_yaw, bank.loop_shift, clip, time_s, loop, xy, heading,
-                       leg, pose_arrays(got), np.arange(rows.size, dtype=np.int64))
+                       leg, pose_arrays(got), np.arange(rows.size, dtype=np.int64),
+                       playback_scratch(rows.size))
     _assert_poses_equal(got, want.take(rows))
 
 
@@ -104,7 +106,7 @@ def test_long_loops_carry_root_motion_as_numpy(bank: ClipBank) -> None:
     rows = np.arange(n, dtype=np.int64)
     sample_placed_rows(0, n, rows, pose_arrays(bank.poses), bank.start, bank.n_frames, bank.fps,
                        bank.loop_yaw, bank.loop_shift, clip, time_s, loop, xy, heading, leg,
-                       pose_arrays(got), rows)
+                       pose_arrays(got), rows, playback_scratch(n))
     np.testing.assert_allclose(got.root_position * 0.9, want.root_position * 0.9, rtol=0,
                                atol=1e-9)
     _assert_poses_equal(got, want)
