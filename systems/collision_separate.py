@@ -53,7 +53,7 @@ from ecs_anim.core.skeleton import LENGTH_INDEX, N_JOINTS
 from ecs_anim.motion.constraint_table import TARGET_BODY
 from ecs_anim.runtime.kernels import over_chunks
 from ecs_anim.runtime.kernels.capsules import Capsules, Overlaps, capsules, grid_of, overlaps
-from ecs_anim.runtime.kernels.decode import decoded_arrays, fits, pose_arrays
+from ecs_anim.runtime.kernels.decode import decoded_arrays, fits, pose_arrays, spine_scratch
 from ecs_anim.runtime.kernels.posture import N_EXPORT, export_constants, posture_rows
 from ecs_anim.runtime.system_base import System
 from ecs_anim.solver.capsules import CAPSULES, N_CAPSULES
@@ -478,6 +478,7 @@ class CollisionSeparate(System):
                     st.frozen, newly_bad, st.positions, rotations,
                     np.empty((n if rotations else 0, N_EXPORT, 3, 3)),
                     st.local_rotations if rotations else np.empty((0, N_EXPORT, 3, 3)),
-                    k.rest_hips, k.bvh_from_world, k.rest2body, k.parents, spine, True)
+                    k.rest_hips, k.bvh_from_world, k.rest2body, k.parents, spine, True,
+                    spine_scratch(rows.size))
         if newly_bad.any():
             sim.report_frozen(np.flatnonzero(newly_bad))
