@@ -199,9 +199,10 @@ def _frame_root(bank: PoseArrays, first: int, frame: int, angle: float, moved_x:
 
 
 #: Scratch rows of :func:`sample_placed_rows` (one column per character of its chunk): the dot
-#: products of the seven slerped quaternion pairs, their weights w0 and w1, the frames' weight.
-_COS, _W0, _W1, _T = 0, 7, 14, 21
-PLAYBACK_SCRATCH_ROWS = 22
+#: products of the seven slerped quaternion pairs, their weights w0 and w1, the frames' weight,
+#: the bank rows of the two frames (whole numbers, exact in float64).
+_COS, _W0, _W1, _T, _R0, _R1 = 0, 7, 14, 21, 22, 23
+PLAYBACK_SCRATCH_ROWS = 24
 
 
 def playback_scratch(n: int) -> F64:
@@ -260,10 +261,11 @@ def _sampled_frames(c: int, start: I64, n_frames: I64, fps: F64, clip: I64, time
 def _placed_root_row(c: int, bank: PoseArrays, start: I64, n_frames: I64, fps: F64,
                      loop_yaw: F64, loop_shift: F64, clip: I64, time_s: F64, loop: B1,
                      placement_xy: F64, placement_heading: F64, leg: F64, out: PoseArrays,
-                     o: int) -> None:
+                     o: int) -> tuple[int, int, float]:
     """The root of ``MotionPlayback._placed(sample(...))`` for store row ``c`` (root motion
     carried across loops, then placed), into row ``o`` of ``out``. Arguments as for
-    :func:`sample_placed_rows`."""
+    :func:`sample_placed_rows`. Returns the bank rows of the two frames and the second's
+    weight."""
     r0, r1, w, loops, wraps = _sampled_frames(c, start, n_frames, fps, clip, time_s, loop)
     k = clip[c]
     first = start[k]
@@ -280,6 +282,7 @@ def _placed_root_row(c: int, bank: PoseArrays, start: I64, n_frames: I64, fps: F
     store3(out.root_position[o], ((x + placement_xy[c, 0]) / scale,
                                   (y + placement_xy[c, 1]) / scale, p[2]))
     out.root_heading[o] = h + heading
+    return r0, r1, w
 
 
 @jit(nogil=True)
@@ -304,11 +307,10 @@ def sample_placed_rows(lo: int, hi: int, rows: I64, bank: PoseArrays, start: I64
     for block in range(lo, hi, BLOCK):
         stop = min(block + BLOCK, hi)
         for i in range(block, stop):
-            c = rows[i]
-            _placed_root_row(c, bank, start, n_frames, fps, loop_yaw, loop_shift, clip, time_s,
-                             loop, placement_xy, placement_heading, leg, out, out_rows[i])
-            r0, r1, w, _, _ = _sampled_frames(c, start, n_frames, fps, clip, time_s, loop)
-            scratch[_T, i] = w
+            r0, r1, w = _placed_root_row(rows[i], bank, start, n_frames, fps, loop_yaw,
+                                         loop_shift, clip, time_s, loop, placement_xy,
+                                         placement_heading, leg, out, out_rows[i])
+            scratch[_T, i], scratch[_R0, i], scratch[_R1, i] = w, r0, r1
             scratch[_COS, i] = _cos_half(bank.pelvis_local, r0, r1)
             scratch[_COS + 1, i] = _cos_half(bank.thorax, r0, r1)
             scratch[_COS + 2, i] = _cos_half(bank.head, r0, r1)
@@ -323,8 +325,8 @@ def sample_placed_rows(lo: int, hi: int, rows: I64, bank: PoseArrays, start: I64
             for j in range(t.shape[0]):
                 w0[j], w1[j] = slerp_weights(cos_half[j], t[j])
         for i in range(block, stop):
-            c, o = rows[i], out_rows[i]
-            r0, r1, w, _, _ = _sampled_frames(c, start, n_frames, fps, clip, time_s, loop)
+            o, w = out_rows[i], scratch[_T, i]
+            r0, r1 = int(scratch[_R0, i]), int(scratch[_R1, i])
             _weighted_quat(bank.pelvis_local, r0, r1, scratch[_W0, i], scratch[_W1, i],
                            out.pelvis_local, o)
             _weighted_quat(bank.thorax, r0, r1, scratch[_W0 + 1, i], scratch[_W1 + 1, i],
