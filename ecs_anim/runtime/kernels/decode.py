@@ -1,9 +1,9 @@
 """Compiled decode: normalized poses on each character's body (paper eq. 2 and §8).
 
 Mirrors :func:`ecs_anim.core.normalized.decode` (the ``use_stretch=False`` path, what the tick uses)
-one store row at a time: :func:`decode_row` for one character, :func:`decode_rows` over a chunk
-of store rows (``rows[lo:hi]``: one chunk per thread), :func:`decode` the Python entry over
-every row. The poses are passed as :class:`PoseArrays` (the arrays of a
+:func:`decode_row` for one character, :func:`decode_rows` over a chunk of store rows
+(``rows[lo:hi]``: one chunk per thread; by blocks of characters, the spines on the vector units:
+:func:`spine_block`), :func:`decode` the Python entry over every row. The poses are passed as :class:`PoseArrays` (the arrays of a
 :class:`~ecs_anim.core.normalized.NormalizedPoses`, no copies) and the result written into
 :class:`DecodedArrays` (the arrays of a :class:`~ecs_anim.core.normalized.DecodedPose`).
 

@@ -2,8 +2,9 @@
 
 Mirrors :func:`ecs_anim.motion.sampling.sample` (frames interpolated in normalized space, root motion
 carried across loops), :func:`ecs_anim.motion.sampling.sample_table`, the placement of
-``MotionPlayback._placed`` and :func:`ecs_anim.motion.sampling.blend`, one store row at a time, writing
-the store's pose arrays in place. The clip bank's poses and the store's are passed as
+``MotionPlayback._placed`` and :func:`ecs_anim.motion.sampling.blend`, one store row at a time (the
+sampling's slerps by blocks of characters on the vector units), writing the store's pose arrays
+in place. The clip bank's poses and the store's are passed as
 :class:`~ecs_anim.runtime.kernels.decode.PoseArrays`.
 """
 
@@ -213,14 +214,17 @@ def playback_scratch(n: int) -> F64:
 @jit(inline="always")
 def _cos_half(a: F64, ra: int, rb: int) -> float:
     """Dot product of the quaternions ``a[ra]`` and ``a[rb]`` ((n, 4))."""
-    return a[ra, 0] * a[rb, 0] + a[ra, 1] * a[rb, 1] + a[ra, 2] * a[rb, 2] + a[ra, 3] * a[rb, 3]
+    cos_half: float = (a[ra, 0] * a[rb, 0] + a[ra, 1] * a[rb, 1] + a[ra, 2] * a[rb, 2]
+                       + a[ra, 3] * a[rb, 3])
+    return cos_half
 
 
 @jit(inline="always")
 def _cos_half2(a: F64, ra: int, rb: int, s: int) -> float:
     """As :func:`_cos_half` for side ``s`` of (n, 2, 4) quaternions."""
-    return (a[ra, s, 0] * a[rb, s, 0] + a[ra, s, 1] * a[rb, s, 1] + a[ra, s, 2] * a[rb, s, 2]
-            + a[ra, s, 3] * a[rb, s, 3])
+    cos_half: float = (a[ra, s, 0] * a[rb, s, 0] + a[ra, s, 1] * a[rb, s, 1]
+                       + a[ra, s, 2] * a[rb, s, 2] + a[ra, s, 3] * a[rb, s, 3])
+    return cos_half
 
 
 @jit(inline="always")

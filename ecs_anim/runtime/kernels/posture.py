@@ -1,5 +1,6 @@
 """Compiled posture conversion (PostureConvert's work, paper §8): decode, the frozen check, the
-export skeleton's local joint rotations and the resampled spine, one store row at a time.
+export skeleton's local joint rotations and the resampled spine: the decode by blocks
+(:func:`.decode.decode_rows`), the rest one store row at a time.
 
 Mirrors :func:`ecs_anim.core.normalized.decode`, :func:`ecs_anim.io.export.skeleton.export_rotations`,
 :func:`ecs_anim.io.export.skeleton.local_rotations` and :func:`ecs_anim.core.normalized.vertebrae`. On one
