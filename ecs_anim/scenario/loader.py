@@ -383,7 +383,7 @@ def load_scenario(path: str | Path) -> Scenario:
             camera["distance_m"] = r.number(ck["distance_m"], "camera.distance_m", 0.1, 1e4, "m")
         if "target_m" in ck:
             camera["target_m"] = r.vector3(ck["target_m"], "camera.target_m", "m", 1e5)
-    solver: dict[str, float] = {}
+    solver: dict[str, Any] = {}
     if "solver" in top:
         sk = r.mapping(top["solver"], "solver", {"max_joint_speed_rad_s": False})
         if "max_joint_speed_rad_s" in sk:
