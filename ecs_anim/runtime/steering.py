@@ -98,6 +98,8 @@ class SteeringSettings:
     avoid_neighbours: int = 10
     avoid_neighbour_m: float = 5.0
     avoid_cone_rad: float = float(np.pi)
+    avoid_stride_legs: float = 0.6
+    avoid_feet_legs: float = 0.21
     corner_tolerance_m: float = 0.15
 
 
@@ -384,7 +386,8 @@ def steer(st: CharacterStore, bank: ClipBank, gaits: GaitTable, settings: Steeri
             wanted_speed[np.flatnonzero(on_path)[arrived]] = 0.0
     if settings.avoidance:
         wanted_heading, wanted_speed = avoid(st, settings, rows, here, travel, speed_now,
-                                             wanted_heading, wanted_speed, not_avoiding, dt)
+                                             own_walk, wanted_heading, wanted_speed,
+                                             not_avoiding, dt)
     error = wrap_angle(wanted_heading - travel)
     behind = (np.abs(error) > settings.behind_rad) & (wanted_speed > 0.0)
     # The slowest steps while turning on the spot.
@@ -423,8 +426,8 @@ def avoidance_radius(lengths: F64, settings: SteeringSettings) -> F64:
 
 
 def avoid(st: CharacterStore, settings: SteeringSettings, rows: I64, here: F64, travel: F64,
-          speed_now: F64, wanted_heading: F64, wanted_speed: F64, not_avoiding: I64 | None,
-          dt: float) -> tuple[F64, F64]:
+          speed_now: F64, own_walk: F64, wanted_heading: F64, wanted_speed: F64,
+          not_avoiding: I64 | None, dt: float) -> tuple[F64, F64]:
     """Local avoidance between the steered characters ``rows`` (r,): the heading (rad) and speed
     (m/s) (each (r,)) that keep them apart, by ORCA
     (:func:`ecs_anim.runtime.kernels.avoidance.orca_velocities`) over all of them at once.
@@ -439,12 +442,15 @@ def avoid(st: CharacterStore, settings: SteeringSettings, rows: I64, here: F64, 
     active = wanted_speed > 0.0
     if not_avoiding is not None and not_avoiding.size:
         active &= ~np.isin(st.entity[rows], not_avoiding)
+    leg = leg_length(st.lengths[rows])
+    striding = np.clip(speed_now / np.maximum(settings.rate_min * own_walk, 1e-9), 0.0, 1.0)
     velocity = orca_velocities(
         here, speed_now[:, None] * travel_unit, wanted_speed[:, None] * heading_unit,
         avoidance_radius(st.lengths[rows], settings), wanted_speed, active,
         range_m=settings.avoid_neighbour_m, time_horizon_s=settings.avoid_time_horizon_s,
         max_neighbours=settings.avoid_neighbours, dt=dt, facing=travel_unit,
-        cone_rad=settings.avoid_cone_rad)
+        cone_rad=settings.avoid_cone_rad, stride_m=settings.avoid_stride_legs * leg * striding,
+        feet_m=settings.avoid_feet_legs * leg)
     speed = np.hypot(velocity[:, 0], velocity[:, 1])
     heading = np.where(speed > 1e-6, np.arctan2(velocity[:, 1], velocity[:, 0]), wanted_heading)
     # A velocity behind it (away from a walker too close) would be turned to on the spot with

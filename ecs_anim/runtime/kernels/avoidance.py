@@ -185,6 +185,21 @@ def lp3(lines: F64, projected: F64, row: int, n_hard: int, n_lines: int, begin: 
 
 
 @jit()
+def legs_apart(stride_m: float, feet_m: float, along_m: float, dist_sq: float) -> float:
+    """How far apart two walkers one behind the other must be, in the direction they are now
+    from each other, for their legs not to meet (m): their legs swept over a stride are a
+    stadium (the points within ``feet_m`` of a segment ``stride_m`` either side of the one
+    behind, along its facing; the sum of both bodies'), and this is its boundary's distance
+    from its centre in the direction ``along_m`` m along that facing of ``sqrt(dist_sq)``."""
+    dist = math.sqrt(max(dist_sq, TINY))
+    along = abs(along_m) / dist
+    across = math.sqrt(max(1.0 - along * along, 0.0))
+    if feet_m * along <= stride_m * across:  # out through a flat side
+        return feet_m / across
+    return stride_m * along + math.sqrt(max(feet_m * feet_m - (stride_m * across) ** 2, 0.0))
+
+
+@jit()
 def nearest_neighbours(i: int, position: F64, range_m: float, cell_m: float, mask: int,
                        start: I64, order: I64, max_neighbours: int, neighbour: I64,
                        neighbour_d2: F64) -> int:
@@ -227,7 +242,8 @@ def nearest_neighbours(i: int, position: F64, range_m: float, cell_m: float, mas
 
 @jit(nogil=True)
 def orca_rows(lo: int, hi: int, position: F64, velocity: F64, preferred: F64, radius: F64,
-              max_speed: F64, facing: F64, active: B, range_m: float, time_horizon_s: float,
+              stride_m: F64, feet_m: F64, max_speed: F64, facing: F64, active: B, range_m: float,
+              time_horizon_s: float,
               dt: float, cone_rad: float, cell_m: float, mask: int, start: I64, order: I64,
               neighbour: I64, neighbour_d2: F64, lines: F64, projected: F64, out: F64) -> None:
     """The new velocity of agents ``lo..hi-1`` (RVO2's ``computeNewVelocity``) into ``out``
@@ -258,20 +274,32 @@ def orca_rows(lo: int, hi: int, position: F64, velocity: F64, preferred: F64, ra
                                    max_neighbours, neighbour, neighbour_d2)
         vx, vy = velocity[i, 0], velocity[i, 1]
         n_hard = 2 if coned and count > 0 else 0
+        fx, fy = facing[i, 0], facing[i, 1]
         if n_hard:
-            fx, fy = facing[i, 0], facing[i, 1]
             # Left of the cone's right edge, right of its left edge (lines through 0).
             lines[i, 0, 0] = lines[i, 0, 1] = lines[i, 1, 0] = lines[i, 1, 1] = 0.0
             lines[i, 0, 2] = fx * cone_cos + fy * cone_sin
             lines[i, 0, 3] = fy * cone_cos - fx * cone_sin
             lines[i, 1, 2] = -(fx * cone_cos - fy * cone_sin)
             lines[i, 1, 3] = -(fy * cone_cos + fx * cone_sin)
+        m = n_hard
         for n in range(count):
             j = neighbour[i, n]
             rel_x, rel_y = position[j, 0] - position[i, 0], position[j, 1] - position[i, 1]
             rv_x, rv_y = vx - velocity[j, 0], vy - velocity[j, 1]
             dist_sq = rel_x * rel_x + rel_y * rel_y
             combined = radius[i] + radius[j]
+            share = 0.5 if active[j] else 1.0  # a passive neighbour leaves it all to this one
+            # One walking behind the other, both the same way: the one behind avoids it all,
+            # the one ahead not at all, and their bodies are as long as their strides.
+            gx, gy = facing[j, 0], facing[j, 1]
+            ahead_of_i, behind_j = fx * rel_x + fy * rel_y, gx * rel_x + gy * rel_y
+            if fx * gx + fy * gy > 0.0 and ahead_of_i * behind_j > 0.0:
+                if ahead_of_i < 0.0:
+                    continue  # j follows i: j keeps clear
+                share = 1.0
+                combined = max(combined, legs_apart(
+                    stride_m[i] + stride_m[j], feet_m[i] + feet_m[j], ahead_of_i, dist_sq))
             combined_sq = combined * combined
             if dist_sq > combined_sq:
                 # No collision: the velocity obstacle's cut-off circle or one of its legs.
@@ -305,12 +333,11 @@ def orca_rows(lo: int, hi: int, position: F64, velocity: F64, preferred: F64, ra
                 dir_x, dir_y = unit_y, -unit_x
                 scale = combined * inv_dt - w_len
                 u_x, u_y = scale * unit_x, scale * unit_y
-            share = 0.5 if active[j] else 1.0  # a passive neighbour leaves it all to this one
-            m = n_hard + n
             lines[i, m, 0], lines[i, m, 1] = vx + share * u_x, vy + share * u_y
             lines[i, m, 2], lines[i, m, 3] = dir_x, dir_y
+            m += 1
         opt = (preferred[i, 0], preferred[i, 1])
-        n_lines = n_hard + count
+        n_lines = m
         failed, rx, ry = lp2(lines, i, n_lines, max_speed[i], opt, False)
         if failed < n_lines:
             rx, ry = lp3(lines, projected, i, n_hard, n_lines, failed, max_speed[i], (rx, ry))
@@ -324,7 +351,8 @@ def table_mask(n_agents: int) -> int:
 
 def orca_velocities(position: F64, velocity: F64, preferred: F64, radius: F64, max_speed: F64,
                     active: B, *, range_m: float, time_horizon_s: float, max_neighbours: int,
-                    dt: float, facing: F64 | None = None, cone_rad: float = math.pi) -> F64:
+                    dt: float, facing: F64 | None = None, cone_rad: float = math.pi,
+                    stride_m: F64 | None = None, feet_m: F64 | None = None) -> F64:
     """Each agent's collision-avoiding velocity (k, 2) m/s (ORCA; see the module docstring):
     the grid built, then :func:`orca_rows` over all agents, split over the kernels' threads.
 
@@ -343,6 +371,8 @@ def orca_velocities(position: F64, velocity: F64, preferred: F64, radius: F64, m
     out = np.empty((n, 2))
     if n == 0:
         return out
+    if stride_m is None or feet_m is None:
+        stride_m = feet_m = np.zeros(n)
     mask = table_mask(n)
     position = np.ascontiguousarray(position, np.float64)
     slot, order = np.empty(n, np.int64), np.empty(n, np.int64)
@@ -356,6 +386,8 @@ def orca_velocities(position: F64, velocity: F64, preferred: F64, radius: F64, m
     over_chunks(orca_rows, n, position, np.ascontiguousarray(velocity, np.float64),
                 np.ascontiguousarray(preferred, np.float64),
                 np.ascontiguousarray(radius, np.float64),
+                np.ascontiguousarray(stride_m, np.float64),
+                np.ascontiguousarray(feet_m, np.float64),
                 np.ascontiguousarray(max_speed, np.float64),
                 np.ascontiguousarray(facing, np.float64),
                 np.ascontiguousarray(active, np.bool_), float(range_m), float(time_horizon_s),
