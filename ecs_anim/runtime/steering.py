@@ -373,7 +373,7 @@ def steer(st: CharacterStore, bank: ClipBank, gaits: GaitTable, settings: Steeri
         wanted_speed[on_path] = np.minimum(wanted_speed[on_path], turning)
         # Stop where a fade to idle, started now, ends on the last waypoint (the pelvis slows
         # linearly over the fade: half the fade at the current speed).
-        remaining = np.minimum(total - progress, to_end)
+        remaining = np.maximum(total - progress, to_end)
         arrived = (progress + lookahead >= total) & (
             (remaining <= speed_now[on_path] * settings.gait_fade_s / 2) | (remaining < 0.05))
         if arrived.any():

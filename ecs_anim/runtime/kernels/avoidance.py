@@ -290,11 +290,12 @@ def orca_rows(lo: int, hi: int, position: F64, velocity: F64, preferred: F64, ra
             dist_sq = rel_x * rel_x + rel_y * rel_y
             combined = radius[i] + radius[j]
             share = 0.5 if active[j] else 1.0  # a passive neighbour leaves it all to this one
-            # One walking behind the other, both the same way: the one behind avoids it all,
-            # the one ahead not at all, and their bodies are as long as their strides.
-            gx, gy = facing[j, 0], facing[j, 1]
-            ahead_of_i, behind_j = fx * rel_x + fy * rel_y, gx * rel_x + gy * rel_y
-            if fx * gx + fy * gy > 0.0 and ahead_of_i * behind_j > 0.0:
+            # One behind the other (within 45 degrees of both facings, the same way): the one
+            # behind avoids it all, the one ahead not at all, and their legs need their strides.
+            ahead_of_i = fx * rel_x + fy * rel_y
+            behind_j = facing[j, 0] * rel_x + facing[j, 1] * rel_y
+            if (ahead_of_i * behind_j > 0.0
+                    and min(ahead_of_i * ahead_of_i, behind_j * behind_j) > 0.5 * dist_sq):
                 if ahead_of_i < 0.0:
                     continue  # j follows i: j keeps clear
                 share = 1.0
