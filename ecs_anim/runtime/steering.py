@@ -450,7 +450,8 @@ def avoid(st: CharacterStore, settings: SteeringSettings, rows: I64, here: F64, 
         range_m=settings.avoid_neighbour_m, time_horizon_s=settings.avoid_time_horizon_s,
         max_neighbours=settings.avoid_neighbours, dt=dt, facing=travel_unit,
         cone_rad=settings.avoid_cone_rad, stride_m=settings.avoid_stride_legs * leg * striding,
-        feet_m=settings.avoid_feet_legs * leg)
+        feet_m=settings.avoid_feet_legs * leg,
+        min_speed=np.minimum(settings.rate_min * own_walk, wanted_speed))
     speed = np.hypot(velocity[:, 0], velocity[:, 1])
     heading = np.where(speed > 1e-6, np.arctan2(velocity[:, 1], velocity[:, 0]), wanted_heading)
     # A velocity behind it (away from a walker too close) would be turned to on the spot with

@@ -185,6 +185,33 @@ def lp3(lines: F64, projected: F64, row: int, n_hard: int, n_lines: int, begin: 
 
 
 @jit()
+def at_least(lines: F64, row: int, n_lines: int, max_speed: float, min_speed: float, opt: Vec2,
+             result: Vec2) -> Vec2:
+    """A velocity of speed ``min_speed`` that the lines of ``lines[row]`` allow, between
+    ``result`` (allowed, slower) and the fastest allowed one in its direction (or ``opt``'s,
+    when ``result`` is 0), where there is one; else ``result``. A walker steps no slower than
+    its slowest steps: where ORCA's nearest velocity is slower, it walks that slowly round
+    what is in its way rather than stand behind it."""
+    rx, ry = result
+    speed = math.sqrt(rx * rx + ry * ry)
+    if speed > TINY:
+        ux, uy = rx / speed, ry / speed
+    else:
+        length = max(math.sqrt(opt[0] * opt[0] + opt[1] * opt[1]), TINY)
+        ux, uy = opt[0] / length, opt[1] / length
+    failed, fx, fy = lp2(lines, row, n_lines, max_speed, (ux, uy), True)
+    if failed < n_lines or fx * fx + fy * fy < min_speed * min_speed:
+        return result
+    # |result + t (far - result)| = min_speed, t in [0, 1]: allowed, the lines being convex.
+    dx, dy = fx - rx, fy - ry
+    a = dx * dx + dy * dy
+    b = rx * dx + ry * dy
+    c = speed * speed - min_speed * min_speed
+    t = (-b + math.sqrt(max(b * b - a * c, 0.0))) / max(a, TINY)
+    return rx + t * dx, ry + t * dy
+
+
+@jit()
 def legs_apart(stride_m: float, feet_m: float, along_m: float, dist_sq: float) -> float:
     """How far apart two walkers one behind the other must be, in the direction they are now
     from each other, for their legs not to meet (m): their legs swept over a stride are a
@@ -242,7 +269,7 @@ def nearest_neighbours(i: int, position: F64, range_m: float, cell_m: float, mas
 
 @jit(nogil=True)
 def orca_rows(lo: int, hi: int, position: F64, velocity: F64, preferred: F64, radius: F64,
-              stride_m: F64, feet_m: F64, max_speed: F64, facing: F64, active: B, range_m: float,
+              stride_m: F64, feet_m: F64, max_speed: F64, min_speed: F64, facing: F64, active: B, range_m: float,
               time_horizon_s: float,
               dt: float, cone_rad: float, cell_m: float, mask: int, start: I64, order: I64,
               neighbour: I64, neighbour_d2: F64, lines: F64, projected: F64, out: F64) -> None:
@@ -301,6 +328,10 @@ def orca_rows(lo: int, hi: int, position: F64, velocity: F64, preferred: F64, ra
                 share = 1.0
                 combined = max(combined, legs_apart(
                     stride_m[i] + stride_m[j], feet_m[i] + feet_m[j], ahead_of_i, dist_sq))
+            else:  # each one's stride against the other's feet
+                feet = feet_m[i] + feet_m[j]
+                combined = max(combined, legs_apart(stride_m[i], feet, ahead_of_i, dist_sq),
+                               legs_apart(stride_m[j], feet, behind_j, dist_sq))
             combined_sq = combined * combined
             if dist_sq > combined_sq:
                 # No collision: the velocity obstacle's cut-off circle or one of its legs.
@@ -342,6 +373,8 @@ def orca_rows(lo: int, hi: int, position: F64, velocity: F64, preferred: F64, ra
         failed, rx, ry = lp2(lines, i, n_lines, max_speed[i], opt, False)
         if failed < n_lines:
             rx, ry = lp3(lines, projected, i, n_hard, n_lines, failed, max_speed[i], (rx, ry))
+        elif rx * rx + ry * ry < min_speed[i] * min_speed[i]:
+            rx, ry = at_least(lines, i, n_lines, max_speed[i], min_speed[i], opt, (rx, ry))
         out[i, 0], out[i, 1] = rx, ry
 
 
@@ -353,7 +386,8 @@ def table_mask(n_agents: int) -> int:
 def orca_velocities(position: F64, velocity: F64, preferred: F64, radius: F64, max_speed: F64,
                     active: B, *, range_m: float, time_horizon_s: float, max_neighbours: int,
                     dt: float, facing: F64 | None = None, cone_rad: float = math.pi,
-                    stride_m: F64 | None = None, feet_m: F64 | None = None) -> F64:
+                    stride_m: F64 | None = None, feet_m: F64 | None = None,
+                    min_speed: F64 | None = None) -> F64:
     """Each agent's collision-avoiding velocity (k, 2) m/s (ORCA; see the module docstring):
     the grid built, then :func:`orca_rows` over all agents, split over the kernels' threads.
 
@@ -374,6 +408,8 @@ def orca_velocities(position: F64, velocity: F64, preferred: F64, radius: F64, m
         return out
     if stride_m is None or feet_m is None:
         stride_m = feet_m = np.zeros(n)
+    if min_speed is None:
+        min_speed = np.zeros(n)
     mask = table_mask(n)
     position = np.ascontiguousarray(position, np.float64)
     slot, order = np.empty(n, np.int64), np.empty(n, np.int64)
@@ -390,6 +426,7 @@ def orca_velocities(position: F64, velocity: F64, preferred: F64, radius: F64, m
                 np.ascontiguousarray(stride_m, np.float64),
                 np.ascontiguousarray(feet_m, np.float64),
                 np.ascontiguousarray(max_speed, np.float64),
+                np.ascontiguousarray(min_speed, np.float64),
                 np.ascontiguousarray(facing, np.float64),
                 np.ascontiguousarray(active, np.bool_), float(range_m), float(time_horizon_s),
                 float(dt), min(float(cone_rad), math.pi), float(range_m), mask, start, order,
