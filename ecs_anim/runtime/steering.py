@@ -99,7 +99,7 @@ class SteeringSettings:
     avoid_neighbour_m: float = 5.0
     avoid_cone_rad: float = float(np.pi)
     avoid_stride_legs: float = 0.6
-    avoid_feet_legs: float = 0.21
+    avoid_feet_legs: float = 0.25
     corner_tolerance_m: float = 0.15
 
 

@@ -237,12 +237,17 @@ def nearest_neighbours(i: int, position: F64, range_m: float, cell_m: float, mas
     ix, iy = math.floor(x / cell_m), math.floor(y / cell_m)
     range_sq = range_m * range_m
     count = 0
+    # Its own cell first: the nearest found first shrink the range soonest (fewer insertions).
+    slots = (cell_hash(ix, iy, mask), cell_hash(ix - 1, iy, mask), cell_hash(ix + 1, iy, mask),
+             cell_hash(ix, iy - 1, mask), cell_hash(ix, iy + 1, mask),
+             cell_hash(ix - 1, iy - 1, mask), cell_hash(ix + 1, iy - 1, mask),
+             cell_hash(ix - 1, iy + 1, mask), cell_hash(ix + 1, iy + 1, mask))
     for cell in range(9):
-        s = cell_hash(ix + cell // 3 - 1, iy + cell % 3 - 1, mask)
+        s = slots[cell]
         # Two cells may share a slot: look at each slot once.
         repeated = False
         for earlier in range(cell):
-            repeated = repeated or s == cell_hash(ix + earlier // 3 - 1, iy + earlier % 3 - 1, mask)
+            repeated = repeated or s == slots[earlier]
         if not repeated:
             for a in range(start[s], start[s + 1]):
                 j = order[a]
