@@ -95,7 +95,7 @@ class SteeringSettings:
     avoidance: bool = True
     avoid_margin_m: float = 0.1
     avoid_time_horizon_s: float = 2.0
-    avoid_neighbours: int = 10
+    avoid_neighbours: int = 6
     avoid_neighbour_m: float = 5.0
     avoid_cone_rad: float = float(np.pi)
     avoid_stride_legs: float = 0.6

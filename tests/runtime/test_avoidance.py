@@ -113,7 +113,8 @@ def test_avoidance_can_be_switched_off(motions: dict[str, NormalizedMotion]) -> 
 
 
 def test_two_hundred_walkers_cross_without_touching(motions: dict[str, NormalizedMotion]) -> None:
-    """Two blocks of 100 walkers (4 deep, 25 wide, 3 m apart) walk through each other."""
+    """Two blocks of 100 walkers (4 deep, 25 wide, 3 m apart) walk through each other, 36 m
+    each: 47 s alone for the child (0.77 m/s), so 70 s."""
     rng = np.random.default_rng(32)
     sim = Simulation(motions, Plane())
     names, bodies, players, places, goals = [], [], [], [], []
@@ -134,7 +135,7 @@ def test_two_hundred_walkers_cross_without_touching(motions: dict[str, Normalize
         sim.follow_path(int(e), [goal])
     radius = avoidance_radius(sim.store.lengths, sim.steering_settings)
     worst, deepest = np.inf, 0.0
-    for _ in range(round(45 * sim.fps)):
+    for _ in range(round(70 * sim.fps)):
         sim.step()
         worst = min(worst, float(closest_pairs(sim.store.positions[:, 0, :2], radius).min()))
         deepest = max(deepest, float(sim.store.overlap_m.max()))
@@ -143,12 +144,11 @@ def test_two_hundred_walkers_cross_without_touching(motions: dict[str, Normalize
     sim.close()
     print(f"closest: {worst:.3f} m from the radii; bodies {deepest * 1e3:.0f} mm into each "
           f"other; ends max {ends.max():.3f} m, {np.sum(ends < 0.3)} within 0.3 m")
-    # Within half of each margin (the motion's lag behind ORCA's velocity): shoulders clear
-    # of each other by 0.1 m at least.
+    # Shoulders clear of each other by half of each margin at least.
     assert worst > -DEFAULT_STEERING.avoid_margin_m, worst
-    # The bodies: up to 105 mm, two walkers of a file both standing on their feet in full, the
-    # one behind on the other's heels (issue 32 asks 10 mm: docs/steering.md, Limits).
-    assert deepest < 0.12, deepest
-    # Most get through in 45 s (25 s walking alone); a few stay stuck behind the others'
-    # ends (local avoidance plans no route: docs/steering.md, Limits).
-    assert np.mean(ends < 0.3) >= 0.8, np.sort(ends)[-45:]
+    # Bodies (issue 32: 10 mm): a walker behind another keeps both strides from it
+    # (docs/steering.md; 105 mm before, the shanks of walkers one behind the other).
+    assert deepest <= 0.010, deepest
+    # Every walker ends on its last waypoint (162 of 200 in 45 s before, 38 still walking or
+    # standing behind one at its goal).
+    assert np.all(ends < 0.3), np.sort(ends)[-5:]

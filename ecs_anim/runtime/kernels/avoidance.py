@@ -7,8 +7,12 @@ for ``time_horizon_s`` with half of the effort (a half-plane of velocities per n
 speed: a 2D linear program, or, when the half-planes leave no room, the velocity that
 violates them least (a 3D linear program). The steps follow RVO2's ``Agent::computeNewVelocity``,
 ``linearProgram1/2/3`` (the reference implementation; agents only, no polygon obstacles), with
-one addition: an agent that does not avoid (standing at its goal, or switched off) is a
-*passive* neighbour, whose ORCA line the other takes in full instead of half.
+these additions, for walkers: an agent that does not avoid (standing at its goal, or switched
+off) is a *passive* neighbour, whose ORCA line the other takes in full instead of half; an
+agent behind another going the same way takes its line in full and the one ahead none (a
+file); two agents' combined radius is at least what their legs' strides need in the direction
+they are from each other (:func:`legs_apart`); and an agent slowed below its slowest steps
+walks them where the lines allow (:func:`at_least`).
 
 Neighbours are found on a uniform grid hashed into a table (:func:`build_grid`, a counting sort
 of the agents by cell): each agent looks at the 3 x 3 cells about its own (a cell as wide as
@@ -274,9 +278,9 @@ def nearest_neighbours(i: int, position: F64, range_m: float, cell_m: float, mas
 
 @jit(nogil=True)
 def orca_rows(lo: int, hi: int, position: F64, velocity: F64, preferred: F64, radius: F64,
-              stride_m: F64, feet_m: F64, max_speed: F64, min_speed: F64, facing: F64, active: B, range_m: float,
-              time_horizon_s: float,
-              dt: float, cone_rad: float, cell_m: float, mask: int, start: I64, order: I64,
+              stride_m: F64, feet_m: F64, legs: bool, max_speed: F64, min_speed: F64,
+              facing: F64, active: B, range_m: float, time_horizon_s: float, dt: float,
+              cone_rad: float, cell_m: float, mask: int, start: I64, order: I64,
               neighbour: I64, neighbour_d2: F64, lines: F64, projected: F64, out: F64) -> None:
     """The new velocity of agents ``lo..hi-1`` (RVO2's ``computeNewVelocity``) into ``out``
     ((k, 2), m/s); a passive agent (``active`` false) gets its preferred velocity.
@@ -284,7 +288,14 @@ def orca_rows(lo: int, hi: int, position: F64, velocity: F64, preferred: F64, ra
     position, velocity, preferred : (k, 2) m, m/s: where each agent is, how it moves now, how
         it would move with nobody about.
     radius, max_speed : (k,) m, m/s.
-    facing, cone_rad : (k, 2) unit vectors, rad: an agent with neighbours keeps its velocity
+    stride_m, feet_m, legs : (k,) m, and whether to use them: each agent's legs, a stadium
+        (:func:`legs_apart`) of half-length ``stride_m`` along its ``facing`` and radius
+        ``feet_m``; without ``legs``, only the files below (whose stadium is then ``feet_m``).
+    min_speed : (k,) m/s: an agent that the lines slow below this goes this fast where they
+        allow it (:func:`at_least`); 0: none.
+    facing, cone_rad : (k, 2) unit vectors, rad: which way each agent faces; an agent within
+        45 degrees of behind another, both facing the same way, avoids it in full and the one
+        ahead not at all (a file). With ``cone_rad``, an agent with neighbours keeps its velocity
         within ``cone_rad`` (at most pi / 2) of ``facing`` (two hard lines, as RVO2's
         obstacles': a walker does not step sideways); pi or more: no such limit.
     range_m, time_horizon_s, dt : the neighbour distance, how far ahead collisions are avoided,
@@ -333,7 +344,7 @@ def orca_rows(lo: int, hi: int, position: F64, velocity: F64, preferred: F64, ra
                 share = 1.0
                 combined = max(combined, legs_apart(
                     stride_m[i] + stride_m[j], feet_m[i] + feet_m[j], ahead_of_i, dist_sq))
-            else:  # each one's stride against the other's feet
+            elif legs:  # each one's stride against the other's legs
                 feet = feet_m[i] + feet_m[j]
                 combined = max(combined, legs_apart(stride_m[i], feet, ahead_of_i, dist_sq),
                                legs_apart(stride_m[j], feet, behind_j, dist_sq))
@@ -404,13 +415,17 @@ def orca_velocities(position: F64, velocity: F64, preferred: F64, radius: F64, m
     time_horizon_s : collisions within this time are avoided (s).
     max_neighbours : at most this many nearest neighbours are avoided.
     dt : the tick (s).
-    facing, cone_rad : (k, 2) unit vectors and rad: each agent with neighbours keeps within
-        ``cone_rad`` (at most pi / 2) of its ``facing`` (None, or pi: anywhere).
+    facing, cone_rad : (k, 2) unit vectors and rad: which way each agent faces (None: no
+        files, see :func:`orca_rows`), and each agent with neighbours keeps within
+        ``cone_rad`` (at most pi / 2) of it (pi: anywhere).
+    stride_m, feet_m : (k,) m: each agent's legs (:func:`orca_rows`; None: discs only).
+    min_speed : (k,) m/s: the slowest an agent goes but standing (:func:`at_least`; None: 0).
     """
     n = position.shape[0]
     out = np.empty((n, 2))
     if n == 0:
         return out
+    legs = stride_m is not None and feet_m is not None
     if stride_m is None or feet_m is None:
         stride_m = feet_m = np.zeros(n)
     if min_speed is None:
@@ -429,7 +444,7 @@ def orca_velocities(position: F64, velocity: F64, preferred: F64, radius: F64, m
                 np.ascontiguousarray(preferred, np.float64),
                 np.ascontiguousarray(radius, np.float64),
                 np.ascontiguousarray(stride_m, np.float64),
-                np.ascontiguousarray(feet_m, np.float64),
+                np.ascontiguousarray(feet_m, np.float64), legs,
                 np.ascontiguousarray(max_speed, np.float64),
                 np.ascontiguousarray(min_speed, np.float64),
                 np.ascontiguousarray(facing, np.float64),
