@@ -6,13 +6,14 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from conftest import SCENARIOS_DIR
 from ecs_anim.components import MotionPlayer, Placement
 from ecs_anim.core.ground import Plane
 from ecs_anim.core.morphology import Morphology
 from ecs_anim.motion.clip import NormalizedMotion
-from ecs_anim.runtime.kernels.avoidance import orca_velocities
+from ecs_anim.runtime.kernels.avoidance import legs_apart, orca_velocities
 from ecs_anim.runtime.simulation import Simulation
 from ecs_anim.runtime.steering import DEFAULT_STEERING, avoidance_radius
 from ecs_anim.scenario import build_simulation, load_scenario
@@ -59,6 +60,65 @@ def test_a_passive_agent_keeps_its_velocity_and_alone_one_keeps_its_preferred() 
     assert np.array_equal(out[1], preferred[1])  # passive
     assert np.allclose(out[2], preferred[2])  # nobody about
     assert abs(out[0, 1]) > 0.05  # turns aside from the one standing ahead
+
+
+def test_legs_apart_is_the_stadium_of_the_strides() -> None:
+    stride, feet = 0.9, 0.35
+    assert legs_apart(stride, feet, 2.0, 4.0) == pytest.approx(stride + feet)  # straight behind
+    assert legs_apart(stride, feet, -2.0, 4.0) == pytest.approx(stride + feet)  # straight ahead
+    assert legs_apart(stride, feet, 0.0, 4.0) == pytest.approx(feet)  # beside
+    # 30 degrees off the facing: the stadium's flat side (feet / sin 30), not its cap.
+    d = 2.0
+    assert legs_apart(stride, feet, d * np.cos(np.pi / 6), d * d) == pytest.approx(2 * feet)
+    # The boundary point found is on the stadium: feet from the segment.
+    for angle in np.linspace(0.0, np.pi / 2, 7):
+        r = legs_apart(stride, feet, np.cos(angle), 1.0)
+        x, y = r * np.cos(angle), r * np.sin(angle)
+        assert np.hypot(max(x - stride, 0.0), y) == pytest.approx(feet)
+
+
+def test_a_file_is_kept_by_the_one_behind_at_both_strides() -> None:
+    """A walker 3 m behind a slower one, both facing +x: the one ahead keeps its way; the one
+    behind stays the strides and feet behind it while in its file, and passes it beside it
+    no nearer than the radii."""
+    position = np.array([[0.0, 0.0], [3.0, 0.02]])
+    preferred = np.array([[1.4, 0.0], [0.6, 0.0]])
+    facing = np.array([[1.0, 0.0], [1.0, 0.0]])
+    stride, feet = np.full(2, 0.5), np.full(2, 0.2)
+    velocity = preferred.copy()
+    closest, closest_in_file = np.inf, np.inf
+    for _ in range(300):
+        velocity = orca_velocities(position, velocity, preferred, np.full(2, 0.3),
+                                   np.array([1.4, 0.6]), np.ones(2, bool), range_m=5.0,
+                                   time_horizon_s=2.0, max_neighbours=6, dt=1.0 / 30.0,
+                                   facing=facing, stride_m=stride, feet_m=feet)
+        assert np.array_equal(velocity[1], preferred[1])  # the one ahead ignores it
+        position = position + velocity / 30.0
+        rel = position[1] - position[0]
+        closest = min(closest, float(np.linalg.norm(rel)))
+        if rel[0] > 0.0 and abs(rel[1]) < 0.1:  # straight behind it
+            closest_in_file = min(closest_in_file, float(np.linalg.norm(rel)))
+    assert closest_in_file > 2 * 0.5 + 2 * 0.2, closest_in_file  # both strides and feet
+    assert closest > 0.6 - 0.01, closest
+    assert position[0, 0] > position[1, 0]  # and it got past
+
+
+def test_a_walker_slowed_below_its_slowest_steps_goes_round() -> None:
+    """One standing (passive) just off the line ahead: ORCA's nearest velocity is slow; with
+    a slowest speed the walker takes one that fast, still clear of the other."""
+    position = np.array([[0.0, 0.0], [0.9, -0.1]])
+    preferred = np.array([[1.2, 0.0], [0.0, 0.0]])
+    args = (position, np.zeros((2, 2)), preferred, np.full(2, 0.3), np.array([1.2, 0.0]),
+            np.array([True, False]))
+    kw = dict(range_m=5.0, time_horizon_s=2.0, max_neighbours=6, dt=1.0 / 30.0)
+    slow = orca_velocities(*args, **kw)[0]
+    round_ = orca_velocities(*args, **kw, min_speed=np.array([0.6, 0.0]))[0]
+    assert np.linalg.norm(slow) < 0.6
+    assert np.linalg.norm(round_) == pytest.approx(0.6)
+    # Clear of the one standing for the horizon: its closest approach at that velocity.
+    rel = position[1] - position[0]
+    t = np.clip(rel @ round_ / (round_ @ round_), 0.0, 2.0)
+    assert np.linalg.norm(rel - t * round_) >= 0.6 - 1e-6
 
 
 def test_the_shipped_crowd_keeps_walker_1_and_walker_6_apart() -> None:
