@@ -79,6 +79,12 @@ class SteeringSettings:
     avoid_neighbour_m : walkers farther than this are not looked at (m).
     avoid_cone_rad : a walker with neighbours keeps to velocities within this angle of the
         way it goes (at most pi / 2 limits it; the default pi: any, as ORCA).
+    avoid_stride_legs, avoid_feet_legs : a walking body's legs sweep a stadium, the points
+        within ``avoid_feet_legs`` leg lengths of a segment ``avoid_stride_legs`` leg lengths
+        fore and aft of its root along the way it goes (the ankle reaches 0.54 ahead at heel
+        strike and 0.57 behind at toe-off; knees and ankles 0.15 to the side, a thigh's
+        radius); the segment shrinks to nothing from the slowest steps to standing. Walkers
+        keep their stadiums apart as well as their radii (:func:`avoid`).
     """
 
     rate_min: float = 0.5
@@ -435,8 +441,11 @@ def avoid(st: CharacterStore, settings: SteeringSettings, rows: I64, here: F64, 
     Each is an agent at its motion's root ``here`` (r, 2) m, moving at ``speed_now`` along
     ``travel`` (r,), that would go at ``wanted_speed`` along ``wanted_heading`` (its path's pure
     pursuit, or the heading and speed given), no faster, with the radius of
-    :func:`avoidance_radius`. A character asked to stand (speed 0: at its path's end) or among
-    the entities ``not_avoiding`` keeps what it wanted and is avoided by the others in full."""
+    :func:`avoidance_radius`, its legs the stadium of ``settings.avoid_stride_legs`` and
+    ``avoid_feet_legs`` (``own_walk`` (r,) m/s, the walk's own speed: the stride shrinks below
+    the slowest steps), and no slower than its slowest steps but standing. A character asked
+    to stand (speed 0: at its path's end) or among the entities ``not_avoiding`` keeps what
+    it wanted and is avoided by the others in full."""
     heading_unit = np.stack([np.cos(wanted_heading), np.sin(wanted_heading)], axis=1)
     travel_unit = np.stack([np.cos(travel), np.sin(travel)], axis=1)
     active = wanted_speed > 0.0
