@@ -2,11 +2,13 @@
 
 The goals of a tick come from :func:`~ecs_anim.solver.goals.tick_goals`.
 :func:`solve` then iterates, as the paper does, over the body's groups in the order legs, head,
-arms, trunk, then the root (``adaptRoot``: centre-of-mass control); each character stops when
-every goal of its own is within tolerance or has stalled and its centre of mass is back, or when
-the iteration budget is spent (so its result does not depend on who else is solved); a last pass
-over legs, head and arms leaves the feet on their footprints and the limbs on their goals after
-the final root move.
+arms, trunk, then the root (``adaptRoot``: centre-of-mass control). Each iteration starts with a
+pass over legs, head and arms (the analytic steps, which leave the feet on their footprints and
+the limbs on their goals after the last root move); a character stops at the pass after which
+no iteration would change anything (no goal that the trunk turns for, or that follows its own
+body, left within reach of improving, and its centre of mass so close that the root would not
+move), or when the iteration budget is spent: that pass is its result (so its result does not
+depend on who else is solved).
 Inside a group, the highest-priority goal is met analytically (limbs; neck and head as a
 two-segment chain) or by CCD rotations (trunk, about the spine's base, spread along the spine
 spline); a limb's second goal swivels the limb about the axis that keeps the first one. The trunk
@@ -56,7 +58,6 @@ from ecs_anim.core.skeleton import LENGTH_INDEX as L
 from ecs_anim.motion.constraint_table import TARGET_WORLD, ConstraintTable, winners
 from ecs_anim.solver.budget import BudgetCut, SolverCostModel, cut_to_budget
 from ecs_anim.solver.goals import (
-    CONTACT_PRIORITY,
     TickGoals,
     constraint_errors,
     on_other_surfaces,
@@ -429,13 +430,19 @@ class _Solve:
                 self._decode(back)
 
     # --- root: adaptRoot, the centre of mass back over its desired place ----------------------
+    def com_shortfall(self) -> F64:
+        """(r, 2) the horizontal way from each centre of mass to its desired place (m; 0 without
+        COM control)."""
+        com = centres_of_mass(self.dec.positions, self.masses, self.com_fraction)
+        error: F64 = self.g.com_desired[:, :2] - com[:, :2]
+        error[~self.g.com_on] = 0.0
+        return error
+
     def root(self) -> F64:
         """Move the root horizontally by the centre-of-mass error (times the gain); lower it if
         a planted leg could no longer reach its footprint. Returns (r,) the error before (m)."""
         dec, poses, g, s = self.dec, self.poses, self.g, self.s
-        com = centres_of_mass(dec.positions, self.masses, self.com_fraction)
-        error = g.com_desired[:, :2] - com[:, :2]
-        error[~g.com_on] = 0.0
+        error = self.com_shortfall()
         size: F64 = np.linalg.norm(error, axis=1)
         rows = np.flatnonzero((size > 0.1 * s.com_tolerance_m) & self.active)
         if rows.size == 0:
@@ -498,43 +505,50 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
     tol = np.where(goals.orientation, settings.tolerance_rad, settings.tolerance_m)
     previous = np.full(goals.k, np.inf)
     slow_before = np.zeros(goals.k, bool)
-    # Planted feet are re-planted after the loop: their error after a root move is not work left.
-    planted = goals.priority == CONTACT_PRIORITY
+    # Only goals an iteration still moves can keep a character's loop going: the trunk's (it
+    # turns a step at a time) and those following their own body; the passes (limbs and head,
+    # analytic) meet the others as well as they can be met.
+    iterative = ((goals.chain & (1 << TRUNK)) > 0)
+    iterative[goals.on_self] = True
     used = np.zeros(state.r, np.int64)
     goal_caps, row_caps = iteration_caps(goals, settings)
-    for _ in range(int(row_caps.max(initial=0))):
-        used += state.active
-        # Legs, head, arms: the paper's order (legs and arms are independent, so one batch).
+    # Characters with a goal left open at the last measure (before the first: any iterative).
+    open_rows = np.zeros(state.r, bool)
+    open_rows[goals.owner[iterative]] = True
+    while True:
+        # A pass: legs, head, arms (the paper's order; legs and arms are independent, so one
+        # batch) re-planted and re-aimed after the last root move and trunk turn.
         state.follow_own_targets()
         state.limbs()
         state.head()
+        # The pass is the result where no iteration would change anything: no goal left open,
+        # and the centre of mass so close that the root step would not move (a tenth of its
+        # tolerance); or the budget spent. Finished characters are no longer stepped.
+        state.active &= used < row_caps
+        com_error = np.linalg.norm(state.com_shortfall(), axis=1)
+        state.active &= open_rows | (com_error > 0.1 * settings.com_tolerance_m)
+        if not state.active.any():
+            break
+        # An iteration: the trunk turns for the open goals it carries, the root moves the centre
+        # of mass back.
+        used += state.active
         state.trunk()
-        com_error = state.root()
+        state.root()
+        # A goal is open where not met nor stalled (unchanged, or falling by less than a share
+        # of itself twice running: unreachable; a stalled goal stays stalled).
         err = _errors(goals, state.dec)
-        # A character is done where every goal of its own is met or has stalled (unchanged, or
-        # falling by less than a share of itself twice running: unreachable), and its centre of
-        # mass is back; done characters are no longer stepped. A stalled goal stays stalled.
         first = np.isinf(previous)
         unchanged = ~first & (np.abs(previous - err) < settings.tolerance_m)
         slow = ~first & (previous - err < settings.stall_fraction * np.where(first, 0.0, previous))
         cut = used[goals.owner] >= goal_caps  # the frame budget gave it no more iterations
-        goal_open = ((err > tol) & ~unchanged & ~(slow & slow_before) & ~state.stalled & ~planted
+        goal_open = ((err > tol) & iterative & ~unchanged & ~(slow & slow_before) & ~state.stalled
                      & ~cut)
-        stepped = state.active[goals.owner]
+        stepped = state.active[goals.owner] & iterative
         state.stalled |= (err > tol) & ~goal_open & stepped
         previous = np.where(stepped, err, previous)
         slow_before = np.where(stepped, slow, slow_before)
-        open_rows = np.zeros(state.r, bool)
+        open_rows[:] = False
         open_rows[goals.owner[goal_open]] = True
-        state.active &= (open_rows | (com_error > settings.com_tolerance_m)) & (used < row_caps)
-        if not state.active.any():
-            break
-    # The last root move shifted the limbs: re-plant the feet, re-aim the head and the arms
-    # (every character).
-    state.active[:] = True
-    state.follow_own_targets()
-    state.limbs()
-    state.head()
     return state.poses, used, state.dec
 
 

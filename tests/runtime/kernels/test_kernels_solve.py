@@ -16,7 +16,7 @@ import ecs_anim.systems.constraint_solve as system
 from conftest import SCENARIOS_DIR
 from ecs_anim.components import MotionPlayer, Placement
 from ecs_anim.core.ground_adapt import MAX_LEG_EXTENSION
-from ecs_anim.core.morphology import Morphology
+from ecs_anim.core.morphology import Morphology, centres_of_mass
 from ecs_anim.core.rotations import matrix_from_quat
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.motion.constraints import Activation
@@ -87,6 +87,40 @@ def test_compiled_solve_equals_numpy_where_the_trunk_undoes_a_turn(monkeypatch, 
     assert len(capture.calls) == 2
     for args in capture.calls:
         assert_same_solve(args)
+
+def test_a_solve_stops_at_the_first_pass_that_leaves_nothing_to_do(idle):
+    """Goals the limbs meet, no centre-of-mass control: the first pass is the result (no
+    iteration); with the centre of mass held, iterations only until the root stays, the
+    wrist met after each."""
+    def wrist_and_elbow(sim, entities, p):
+        for e in entities:
+            sim.add_constraint(e, "wrist", "wrist_r", 5, ALWAYS,
+                               tuple(p[0, J["shoulder_r"]] + [0.3, -0.25, 0.1]))
+            sim.add_constraint(e, "elbow", "elbow_r", 1, ALWAYS,
+                               tuple(p[0, J["elbow_r"]] + [0.0, -0.3, 0.0]))
+
+    for com_control, most in ((False, 0), (True, 3)):
+        _, args = one_state(idle, wrist_and_elbow, com_control=com_control)
+        for solve in (solver_shell.solve, compiled.solve):
+            _, used, dec = solve(*copy.deepcopy(args))
+            assert 0 < used[0] <= most if com_control else used[0] == 0
+            goals = args[2]
+            assert solver_shell._errors(goals, dec)[goals.table_index == 0][0] < 1e-9
+            com = centres_of_mass(dec.positions, args[3], args[4])[0]
+            assert not com_control or (np.hypot(*(com[:2] - goals.com_desired[0, :2]))
+                                       <= 0.1 * S.com_tolerance_m)
+
+
+def test_the_bench_characters_stop_once_the_root_stays(monkeypatch):
+    """The bench's walkers (feet planted, centre of mass held, a wrist and an unreachable
+    elbow goal on the arm): no limb goal keeps the loop going, only the centre of mass, which
+    the root brings within a tenth of its tolerance in two or three iterations (the loop took
+    three or four when the limbs' goals, moved by each root step, kept it going)."""
+    used = np.concatenate([solver_shell.solve(*copy.deepcopy(args))[1]
+                           for args in bench_run(monkeypatch, n=6, ticks=6)])
+    assert used.max() <= 3
+    assert used.mean() < 2.5
+
 
 # --- each step against its numpy counterpart, on real solve states -------------------------
 
