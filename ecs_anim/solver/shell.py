@@ -33,7 +33,14 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from ecs_anim.core.body_points import ABOVE_TRUNK, HEAD, TRUNK, point_positions, segment_frames
+from ecs_anim.core.body_points import (
+    ABOVE_TRUNK,
+    HEAD,
+    SEGMENTS,
+    TRUNK,
+    point_positions,
+    segment_frames,
+)
 from ecs_anim.core.errors import UsageError
 from ecs_anim.core.ground_adapt import MAX_LEG_EXTENSION, vertical_slack_for_reach
 from ecs_anim.core.morphology import centres_of_mass, leg_length
@@ -55,6 +62,7 @@ from ecs_anim.core.rotations import (
 )
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import LENGTH_INDEX as L
+from ecs_anim.core.skeleton import LENGTHS
 from ecs_anim.motion.constraint_table import TARGET_WORLD, ConstraintTable, winners
 from ecs_anim.solver.budget import BudgetCut, SolverCostModel, cut_to_budget
 from ecs_anim.solver.goals import (
@@ -141,6 +149,12 @@ LIMB_EXTENSION = np.array([MAX_LEG_EXTENSION, MAX_LEG_EXTENSION, 1.0, 1.0])
 LIMB_ROOT_JOINT = np.array([-1, -1, J["neck"], J["shoulder_l"], J["shoulder_r"], -1])
 LIMB_MIDDLE_JOINT = np.array([-1, -1, J["head"], J["elbow_l"], J["elbow_r"], -1])
 LIMB_REACH_SHARE = 0.99
+#: Per segment (N_LENGTHS,): whether a pass of the solve (limbs, head) moves it. A goal whose
+#: target follows such a point of its own body is met by the pass's limb only as the point
+#: stood before the pass moved it: it needs iterations. A target on the trunk or the pelvis
+#: moves only with the trunk and the root, and each pass follows it before meeting it.
+SEGMENT_MOVED_BY_PASS = np.array([name in SEGMENTS and SEGMENTS[name][0] != TRUNK
+                                  for name in LENGTHS])
 
 
 def iteration_caps(goals: TickGoals, settings: SolverSettings) -> tuple[I64, I64]:
@@ -197,6 +211,10 @@ class _Solve:
         on_head = g.group == HEAD
         self.first_head = winners(g.owner, zero, g.priority, on_head & self.is_point, self.r, 1)[:, 0]
         self.orient_head = winners(g.owner, zero, g.priority, on_head & g.orientation, self.r, 1)[:, 0]
+        # The goals a limb or the head meets first (analytically, on every pass).
+        self.is_first = np.zeros(g.k, bool)
+        self.is_first[self.first_limb[self.first_limb >= 0]] = True
+        self.is_first[self.first_head[self.first_head >= 0]] = True
         self.self_at = goals.self_start.copy()
         p = self.dec.positions
         self.foot_in_world = normalize(p[:, list(SIDE_JOINTS["toe"])] - p[:, list(SIDE_JOINTS["ankle"])])
@@ -422,7 +440,21 @@ class _Solve:
         h = np.flatnonzero(carried & self.is_point & (g.priority > winner_priority[g.owner]))
         if h.size:
             point_h = point_positions(dec, g.owner[h], g.segment[h], g.fraction[h], g.offset[h])
-            worse = np.linalg.norm(point_h - g.goal[h], axis=1) > err[h] + s.tolerance_m
+            after = np.linalg.norm(point_h - g.goal[h], axis=1)
+            # A goal its limb (or the neck and head) meets first is met again by the next pass
+            # wherever the turn carried it: what the pass cannot make up is how far the goal
+            # is beyond the limb's reach from where the turn left its root.
+            first = self.is_first[h]
+            if first.any():
+                f, owner = h[first], g.owner[h[first]]
+                root_at = dec.positions[owner, LIMB_ROOT_JOINT[g.group[f]]]
+                middle_at = dec.positions[owner, LIMB_MIDDLE_JOINT[g.group[f]]]
+                on_first_bone = g.bone[f] == 0
+                reach = np.where(on_first_bone, np.linalg.norm(point_h[first] - root_at, axis=1),
+                                 np.linalg.norm(middle_at - root_at, axis=1)
+                                 + np.linalg.norm(point_h[first] - middle_at, axis=1))
+                after[first] = np.maximum(np.linalg.norm(g.goal[f] - root_at, axis=1) - reach, 0.0)
+            worse = after > err[h] + s.tolerance_m
             undo = np.isin(rows, g.owner[h][worse])
             if undo.any():
                 back = rows[undo]
@@ -506,10 +538,10 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
     previous = np.full(goals.k, np.inf)
     slow_before = np.zeros(goals.k, bool)
     # Only goals an iteration still moves can keep a character's loop going: the trunk's (it
-    # turns a step at a time) and those following their own body; the passes (limbs and head,
-    # analytic) meet the others as well as they can be met.
+    # turns a step at a time) and those following a point of their own body that the passes
+    # move; the passes (limbs and head, analytic) meet the others as well as they can be met.
     iterative = ((goals.chain & (1 << TRUNK)) > 0)
-    iterative[goals.on_self] = True
+    iterative[goals.on_self] |= SEGMENT_MOVED_BY_PASS[goals.self_segment]
     used = np.zeros(state.r, np.int64)
     goal_caps, row_caps = iteration_caps(goals, settings)
     # Characters with a goal left open at the last measure (before the first: any iterative).

@@ -69,6 +69,15 @@ def follow_own_targets(c: int, dec: DecodedArrays, g: Goals, t: Tables) -> None:
                     g.goal[j, i] += shift[i]
 
 
+@jit(inline="always")
+def _iterative(g: Goals, t: Tables, j: int) -> bool:
+    """Whether goal ``j`` needs iterations: the trunk turns for it (a step at a time), or it
+    follows a point of its own body that a pass moves (``ecs_anim.solver.shell.solve``'s
+    ``iterative``)."""
+    return ((g.chain[j] & (1 << _TRUNK)) > 0
+            or (g.on_self[j] and t.seg_moved_by_pass[g.self_segment[j]] > 0))
+
+
 @jit()
 def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners,
                     b: Bodies, t: Tables, err: F64, stalled: B8, previous: F64, slow_before: B8,
@@ -83,6 +92,7 @@ def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: W
     start, stop = g.start[c], g.start[c + 1]
     uses_trunk = False
     on_self = False
+    iterates = False  # a goal an iteration moves: the trunk's, or one following what a pass moves
     for j in range(start, stop):
         stalled[j] = False
         previous[j] = math.inf
@@ -90,6 +100,7 @@ def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: W
         if (g.chain[j] & (1 << _TRUNK)) > 0:
             uses_trunk = True
         on_self = on_self or g.on_self[j]
+        iterates = iterates or _iterative(g, t, j)
     # Steps with nothing to do are not called, and the errors of points without offset are
     # measured on the arrays themselves (the same operations as goal_error).
     uses_head = w.first_head[c] >= 0 or w.orient_head[c] >= 0
@@ -106,7 +117,7 @@ def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: W
     # the budget spent. It is then the result. Otherwise an iteration: a trunk turn and a root
     # move, then the next pass. One call site each: numba inlines these steps' bodies at every
     # site it compiles.
-    any_open = uses_trunk or on_self
+    any_open = iterates
     while True:
         if on_self:
             follow_own_targets(c, dec, g, t)
@@ -124,20 +135,19 @@ def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: W
         if uses_trunk:
             for j in range(start, stop):
                 err[j] = goal_error(dec, c, g, j, t)
-            solve_trunk(c, pose, dec, b.lengths[c], g, err, stalled, t, tolerance_m,
+            solve_trunk(c, pose, dec, b.lengths[c], g, w, err, stalled, t, tolerance_m,
                         tolerance_rad, max_ccd_step_rad)
         root_step(c, pose.root_position, positions, b.lengths, b.masses, b.com_fraction,
                   b.footprint, b.in_contact, b.com_desired, b.com_on, t.mass_proximal,
                   t.mass_distal, t.hip, t.thigh, t.shank, com_tolerance_m, root_gain,
                   leg_extension)
-        # Only goals an iteration still moves can keep the loop going: the trunk's (it turns a
-        # step at a time) and those following the body; the passes meet the others as well as
-        # they can be met. Open where not met nor stalled (unchanged, or falling by less than a
-        # share of itself twice running).
+        # Only goals an iteration still moves can keep the loop going (:func:`_iterative`; the
+        # passes meet the others as well as they can be met): open where not met nor stalled
+        # (unchanged, or falling by less than a share of itself twice running).
         any_open = False
-        if uses_trunk or on_self:
+        if iterates:
             for j in range(start, stop):
-                if (g.chain[j] & (1 << _TRUNK)) == 0 and not g.on_self[j]:
+                if not _iterative(g, t, j):
                     continue
                 if (not orientation[j] and offset[j, 0] == 0.0 and offset[j, 1] == 0.0
                         and offset[j, 2] == 0.0):

@@ -19,6 +19,7 @@ from ecs_anim.core.ground_adapt import MAX_LEG_EXTENSION
 from ecs_anim.core.morphology import Morphology, centres_of_mass
 from ecs_anim.core.rotations import matrix_from_quat
 from ecs_anim.core.skeleton import JOINT_INDEX as J
+from ecs_anim.core.skeleton import LENGTH_INDEX as L
 from ecs_anim.motion.constraints import Activation
 from ecs_anim.runtime.kernels import solve as compiled
 from ecs_anim.runtime.kernels.solve_head import solve_head
@@ -201,7 +202,8 @@ def test_trunk_step_equals_numpy(states):
         reference.trunk()
         stalled = np.zeros(s.goals.priority.size, bool)
         for c in range(s.bodies.lengths.shape[0]):
-            turned += solve_trunk(c, s.pose, s.dec, s.bodies.lengths[c], s.goals, goal_errors(s, c),
+            turned += solve_trunk(c, s.pose, s.dec, s.bodies.lengths[c], s.goals, s.winners,
+                                  goal_errors(s, c),
                                   stalled, T, S.tolerance_m, S.tolerance_rad, S.max_ccd_step_rad)
         assert_same_state(reference, s)
     assert turned > 0
@@ -304,18 +306,26 @@ def test_the_trunk_turn_is_capped_and_vetoed_when_it_worsens_a_higher_goal(idle)
     err = goal_errors(s, 0)
     stalled = np.zeros(err.size, bool)
     cap = 0.05
-    assert solve_trunk(0, s.pose, s.dec, s.bodies.lengths[0], s.goals, err, stalled, T, S.tolerance_m,
-                       S.tolerance_rad, cap)
+    assert solve_trunk(0, s.pose, s.dec, s.bodies.lengths[0], s.goals, s.winners, err, stalled, T,
+                       S.tolerance_m, S.tolerance_rad, cap)
     assert thorax_turn(thorax, s.pose.thorax[0]) == pytest.approx(cap, abs=1e-9)
 
     def with_a_held_left_hand(sim, entities, p):
         low_reach(sim, entities, p)
-        sim.add_constraint(entities[0], "hold", "wrist_l", 9, ALWAYS, tuple(p[0, J["wrist_l"]]))
+        # Held back, at the left arm's full reach: the turn takes the shoulder forward, and the
+        # hand out of the arm's reach (a hand the arm could still reach would not veto it).
+        arm = ADULT.lengths[L["upper_arm_l"]] + ADULT.lengths[L["forearm_l"]]
+        back = np.array([-1.0, 0.3, 0.0]) / np.linalg.norm([-1.0, 0.3, 0.0])
+        sim.add_constraint(entities[0], "hold", "wrist_l", 9, ALWAYS,
+                           tuple(p[0, J["shoulder_l"]] + 0.999 * arm * back))
 
     s2, _ = one_state(idle, with_a_held_left_hand)
+    # As in the solve: the turn comes after a pass has met the held hand.
+    solve_limbs(0, s2.pose, s2.dec, s2.goals, s2.winners, s2.bodies, T, S.tolerance_m,
+                MAX_LEG_EXTENSION)
     thorax, positions = s2.pose.thorax[0].copy(), s2.dec.positions[0].copy()
     err = goal_errors(s2, 0)
-    assert not solve_trunk(0, s2.pose, s2.dec, s2.bodies.lengths[0], s2.goals, err,
+    assert not solve_trunk(0, s2.pose, s2.dec, s2.bodies.lengths[0], s2.goals, s2.winners, err,
                            np.zeros(err.size, bool), T, S.tolerance_m, S.tolerance_rad, cap)
     # The turn is undone: the pose as it was, and its joints decoded where they were.
     np.testing.assert_array_equal(s2.pose.thorax[0], thorax)
