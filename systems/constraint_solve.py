@@ -20,14 +20,15 @@ the result, :func:`~ecs_anim.solver.goals.constraint_errors`; NaN while inactive
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+import time
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.components import Constraint
 from ecs_anim.motion.constraint_table import KIND_ORIENTATION
-from ecs_anim.runtime.kernels import over_chunks
+from ecs_anim.runtime.kernels import over_chunks, threads
 from ecs_anim.runtime.kernels.com import centres_of_mass, segment_joints
 from ecs_anim.runtime.kernels.decode import decode
 from ecs_anim.runtime.kernels.goals import (
@@ -36,8 +37,8 @@ from ecs_anim.runtime.kernels.goals import (
 from ecs_anim.runtime.kernels.goals import tick_goals as tick_goals
 from ecs_anim.runtime.kernels.solve import solve as solve
 from ecs_anim.runtime.system_base import System
-from ecs_anim.solver.budget import SolverCostModel, SolverReport
-from ecs_anim.solver.shell import TickResult, TickSteps, constrain, scatter
+from ecs_anim.solver.budget import FrameBudget, SolverReport, effective_caps
+from ecs_anim.solver.shell import TickResult, TickSteps, constrain, iteration_caps, scatter
 
 if TYPE_CHECKING:
     from ecs_anim.runtime.simulation import Simulation
@@ -67,12 +68,16 @@ class ConstraintSolve(System):
         super().__init__(sim)
         #: This tick's :class:`~ecs_anim.solver.budget.SolverReport` (``sim.solver_report()``).
         self.report: SolverReport | None = None
-        # The last tick, for the frame budget's cost model: (structure version, iterations each
-        # store row took (n,)), the systems' total seconds at the end of this system's last run
-        # (one whole tick lies between two such marks), and the model measured on it.
-        self._last_iterations: tuple[int, NDArray[np.int64]] | None = None
-        self._last_mark_s: float | None = None
-        self._model: SolverCostModel | None = None
+        #: The frame budget's model and state between ticks.
+        self.budget = FrameBudget()
+        self._solve_cpu_s = 0.0
+
+    def _timed_solve(self, *args: Any) -> Any:
+        """The compiled solve, its CPU time kept for the frame budget's model."""
+        start = time.process_time()
+        out = solve(*args)
+        self._solve_cpu_s = time.process_time() - start
+        return out
 
     def run(self, dt: float) -> None:
         sim, st, table = self.sim, self.sim.store, self.sim.constraints
@@ -80,27 +85,42 @@ class ConstraintSolve(System):
         self.report = None
         if table.m == 0:
             return
+        self.budget.start_tick(sum(system.cpu_seconds for system in sim.systems), threads(),
+                               sim.structure_version, st.n)
         weight = table.weights(sim.time_s, st.clip, st.clip_time_s)
         if not self.all_rows():  # the characters without a Constraint component are not solved
             weight = np.where(self.in_rows()[table.owner], weight, 0.0)
         settings = sim.solver_settings
+        wanted = weight
+        if settings.budget_ms is not None:
+            weight = self.budget.weights(weight, table.owner, table.priority,
+                                         st.poses.root_position * sim.leg_length()[:, None],
+                                         settings, sim.dt)
         unconstrained = decode(st.poses, st.lengths) if (weight > 0).any() else None
-        expected = None
-        if self._last_iterations is not None and self._last_iterations[0] == sim.structure_version:
-            expected = self._last_iterations[1]
+        model = settings.cost_model or self.budget.model
+        if settings.budget_ms is not None and model is not None:
+            model = self.budget.for_cut(model, table.owner[weight > 0])
+        self._solve_cpu_s = 0.0
         result = constrain(table, weight, st.poses, unconstrained, st.lengths,
                            st.contact_weight, st.com_control, st.com_target_xy, st.segment_mass_kg,
-                           st.segment_com_fraction, st.posture, settings,
+                           st.segment_com_fraction, st.posture, self.budget.aimed(settings, model),
                            settings.release_speed_m_s * sim.dt,
-                           TickSteps(tick_goals, solve, constraint_errors, _centres),
-                           self._model, expected)
+                           TickSteps(tick_goals, self._timed_solve, constraint_errors, _centres),
+                           model, self.budget.expected())
+        used, caps = np.zeros(0, np.int64), np.zeros(0, np.int64)
+        if result.goals is not None and result.iterations is not None:
+            g, used = result.goals, result.iterations
+            caps = effective_caps(g, *iteration_caps(g, settings), settings.iterations)
+        self.budget.solved(result.rows, used, caps, self._solve_cpu_s)
+        dropped = self.budget.dropped(wanted, table.owner) if settings.budget_ms is not None \
+            else np.zeros(0, np.int64)
         if result.broken.size:
             sim.report_disabled(result.broken)
             table.enabled[result.broken] = False
         table.weight = result.weight
         table.error[:] = result.error
         table.held[:] = result.held
-        self._report(result)
+        self._report(result, dropped)
         if result.goals is None or result.poses is None or result.solved is None:
             return
         every_row = result.rows.size == st.n
@@ -108,38 +128,33 @@ class ConstraintSolve(System):
         st.com_desired[result.rows] = result.goals.com_desired
         st.goals, st.solved = result.goals, result.solved
 
-    def _report(self, result: TickResult) -> None:
-        """This tick's report, and the cost model the next tick's budget decides by (the
-        systems' time over one whole tick, this solve's share of it)."""
+    def _report(self, result: TickResult, dropped: NDArray[np.int64]) -> None:
+        """This tick's report (``dropped``: the store rows the budget switched off)."""
         sim, table = self.sim, self.sim.constraints
-        cut_by = None if result.cut is None else (sim.solver_settings.cost_model or self._model)
-        now_s = sum(system.seconds for system in sim.systems)
+        settings = sim.solver_settings
+        model = settings.cost_model or self.budget.model
+        cut_by = None if result.cut is None else model
         used = 0 if result.iterations is None else int(result.iterations.sum())
-        if self._last_mark_s is not None:
-            self._model = SolverCostModel.calibrated((now_s - self._last_mark_s) * 1e3,
-                                                     result.solve_s * 1e3, used) or self._model
-        self._last_mark_s = now_s
-        by_row = np.zeros(sim.store.n, np.int64)
-        if result.iterations is not None:
-            by_row[result.rows] = result.iterations
-        self._last_iterations = (sim.structure_version, by_row)
         cut = result.cut
         cut_constraint = np.zeros(table.m, bool)
         cut_entities: tuple[int, ...] = ()
         if cut is not None and result.goals is not None:
             g = result.goals
             user = g.table_index >= 0
-            lowered = user & ((cut.goal_iterations < sim.solver_settings.iterations)
+            lowered = user & ((cut.goal_iterations < settings.iterations)
                               | np.isin(g.owner, cut.cut_rows))
             cut_constraint[g.table_index[lowered]] = True
             cut_entities = tuple(int(e) for e in sim.store.entity[result.rows[cut.cut_rows]])
         self.report = SolverReport(
             tick=sim.tick, characters=int(result.rows.size), iterations=used,
-            budget_ms=sim.solver_settings.budget_ms,
+            budget_ms=settings.budget_ms,
             model=cut_by,
             expected_ms=float("nan") if cut is None else cut.expected_ms,
             cut_ms=float("nan") if cut is None else cut.cut_ms,
             priority_iterations={} if cut is None else dict(cut.priority_iterations),
             cut_characters=cut_entities,
             constraint_errors=(table.priority.copy(), result.error,
-                               table.kind == KIND_ORIENTATION, cut_constraint))
+                               table.kind == KIND_ORIENTATION, cut_constraint),
+            dropped_characters=tuple(int(e) for e in sim.store.entity[dropped]),
+            floor_ms=float("nan") if model is None or settings.budget_ms is None
+            else model.fixed_ms)

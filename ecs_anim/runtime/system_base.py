@@ -40,7 +40,8 @@ I64 = NDArray[np.int64]
 class System(esper.Processor):
     """An esper processor bound to one simulation. Subclasses implement :meth:`run`.
 
-    ``seconds`` accumulates the wall time spent in :meth:`run` (for reports and the benchmark).
+    ``seconds`` accumulates the wall time spent in :meth:`run` (for reports and the benchmark),
+    ``cpu_seconds`` the process's CPU time (every thread's; the frame budget's clock).
     """
 
     #: Components (beyond CharacterRow) a character needs to be in this system's rows.
@@ -57,6 +58,7 @@ class System(esper.Processor):
         super().__init__()
         self.sim = sim
         self.seconds = 0.0
+        self.cpu_seconds = 0.0
         self.ticks = 0
         self._rows_version = -1
         self._rows: I64 = np.zeros(0, np.int64)
@@ -67,7 +69,7 @@ class System(esper.Processor):
         self._row_ground: RowGrounds
 
     def process(self, dt: float) -> None:
-        start = time.perf_counter()
+        start, cpu_start = time.perf_counter(), time.process_time()
         if self.sim.store.n or self.runs_without_characters:
             if self._hooks_version != self.sim.structure_version:
                 self._hooks_version = self.sim.structure_version
@@ -75,6 +77,7 @@ class System(esper.Processor):
                     hook(self.sim)
             self.run(dt)
         self.seconds += time.perf_counter() - start
+        self.cpu_seconds += time.process_time() - cpu_start
         self.ticks += 1
 
     def rows(self) -> I64:

@@ -296,10 +296,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lowpass", type=positive_float, metavar="HZ",
                    help="joint positions: smooth jitter with a zero-lag low-pass at this "
                    "cut-off (default: off, for mocap-grade data; 6 for a video estimator's)")
-    p.add_argument("--body-model", metavar="MODEL.npz|SKELETON.asf",
+    p.add_argument("--body-model", metavar="MODEL.npz|SKELETON.asf|MODEL.osim",
                    help="AMASS .npz: your SMPL, SMPL-H or SMPL-X body model (.npz; licensed, not "
                    "shipped: docs/import.md says where to get it); .amc: its ASF skeleton "
-                   "(default: the .asf beside it)")
+                   "(default: the .asf beside it); OpenSim .mot/.sto joint angles: the .osim "
+                   "model they were computed on")
     p.add_argument("--take", metavar="NAME",
                    help="FBX: the animation stack (take) to import (default: the first; the "
                    "import says which others the file has)")
@@ -380,8 +381,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rotations", action="store_true",
                    help="pipeline: also compute local joint rotations every tick (as BVH export does)")
     p.add_argument("--budget-ms", type=positive_float, metavar="MS",
-                   help="pipeline, with --constrained: the solver's frame budget (ms a tick); "
-                        "prints how many characters it holds with the top priority within 1 mm")
+                   help="pipeline, with --constrained: the tick's frame budget (CPU ms a tick); "
+                        "prints the cut tick by tick and how many characters it holds")
     p.add_argument("--sizes", type=size_list, metavar="N,N,...",
                    help="pipeline: the numbers of characters timed (default: N/8, N/4, N/2, N)")
     p.add_argument("--no-compile-timing", action="store_true",
