@@ -74,8 +74,8 @@ def _iterative(g: Goals, t: Tables, j: int) -> bool:
     """Whether goal ``j`` needs iterations: the trunk turns for it (a step at a time), or it
     follows a point of its own body that a pass moves (``ecs_anim.solver.shell.solve``'s
     ``iterative``)."""
-    return ((g.chain[j] & (1 << _TRUNK)) > 0
-            or (g.on_self[j] and t.seg_moved_by_pass[g.self_segment[j]] > 0))
+    return bool((g.chain[j] & (1 << _TRUNK)) > 0
+                or (g.on_self[j] and t.seg_moved_by_pass[g.self_segment[j]] > 0))
 
 
 @jit()
