@@ -34,7 +34,7 @@ from ecs_anim.core.errors import EcsAnimError
 
 if TYPE_CHECKING:
     pass
-from ecs_anim.runtime.bench_scene import BenchScene, first_tick
+from ecs_anim.runtime.bench_scene import BenchScene, first_tick, peer_task
 
 #: ``bench --characters`` above this would take minutes to set up (and gigabytes).
 MAX_BENCH_CHARACTERS = 100_000
@@ -58,7 +58,8 @@ def time_size(n: int, seconds: float, rotations: bool = False,
     how much further from its target the budget left the top priority than a twin scene solved
     without a budget, stepped alongside (untimed; the largest difference of a constraint over
     the timed ticks, mm: the error the cut cost), the characters cut per tick and the ticks that
-    cut anything."""
+    cut anything; with ``constrained``, ``errors_mm``: the errors the solve reached
+    (:meth:`BenchScene.errors_mm`; the means over the timed ticks, and the largest)."""
     scene = BenchScene(n, rotations, constrained, budget_ms)
     twin = None if budget_ms is None else BenchScene(n, rotations, constrained)
     sim = scene.sim
@@ -72,14 +73,16 @@ def time_size(n: int, seconds: float, rotations: bool = False,
     cost_m = 0.0
     cut_characters = ticks_cut = 0
     top = sim.constraints.priority == sim.constraints.priority.max(initial=0.0)
+    reached: list[dict[str, float]] = []
     per_tick = BudgetTicks()
     for _ in range(ticks):
-        scene.move_targets()
         w0, c0 = time.perf_counter(), time.process_time()
         sim.step()
         wall_s, cpu_s = time.perf_counter() - w0, time.process_time() - c0
         wall += wall_s
         cpu += cpu_s
+        if constrained:
+            reached.append(scene.errors_mm())
         report = sim.solver_report()
         if twin is not None and report is not None:
             twin.tick()
@@ -97,6 +100,9 @@ def time_size(n: int, seconds: float, rotations: bool = False,
         "ms_per_tick": {k: (after[k] - before[k]) / ticks * 1e3 for k in after},
         "wall_ms_per_tick": wall / ticks * 1e3, "cpu_ms_per_tick": cpu / ticks * 1e3,
         "peak_memory_mb": peak_memory_mb()}
+    if reached:
+        result["errors_mm"] = {k: (max(r[k] for r in reached) if k.endswith("_max")
+                                   else float(np.mean([r[k] for r in reached]))) for k in reached[0]}
     if budget_ms is not None:
         result["budget"] = {"top_priority_cost_mm": cost_m * 1e3,
                             "characters_cut_per_tick": cut_characters / ticks,
@@ -359,9 +365,27 @@ def bench_pipeline(args: argparse.Namespace) -> dict[str, Any]:
         "compile": compiled,
         "kernel_cache": str(kernels.cache_dir()),
         "budget": None if budget_ms is None else budget_capacity(budget_ms, runs),
+        "errors_mm": ({k: round(v, 4) for k, v in largest["errors_mm"].items()}
+                      if "errors_mm" in largest else None),
         "avoidance_us_per_agent_per_tick": round(avoidance["us_per_agent_per_tick"], 3),
         "avoidance_agents": avoidance["agents"],
     }
+
+
+def cmd_bench_peer_task(args: argparse.Namespace) -> int:
+    """``bench --peer-task``: :func:`~ecs_anim.runtime.bench_scene.peer_task`'s errors."""
+    result = peer_task()
+    if args.json:
+        print(json.dumps({k: round(v, 4) for k, v in result.items()}, indent=2))
+        return 0
+    print("bench --peer-task: one standing adult, a wrist and an elbow target its right arm takes "
+          "exactly, feet planted, centre of mass held (the IK comparisons' task)")
+    print(f"  wrist {result['wrist_mm']:.3f} mm, elbow {result['elbow_mm']:.3f} mm from their "
+          f"targets; shoulder moved {result['shoulder_moved_mm']:.2f} mm "
+          f"({result['shoulder_off_sphere_mm']:.3f} mm off the sphere the elbow target allows)")
+    print(f"  centre of mass {result['com_mm']:.3f} mm from its place, feet moved "
+          f"{result['feet_moved_mm']:.3f} mm, {result['iterations']:.0f} solver iterations")
+    return 0
 
 
 def cmd_bench_pipeline(args: argparse.Namespace) -> int:
@@ -371,6 +395,8 @@ def cmd_bench_pipeline(args: argparse.Namespace) -> int:
         kernels.set_threads(args.threads)
     except ValueError as exc:
         raise EcsAnimError(f"--threads {args.threads}: {exc}") from None
+    if getattr(args, "peer_task", False):
+        return cmd_bench_peer_task(args)
     result = bench_pipeline(args)
     if args.json:
         print(json.dumps(result, indent=2))
@@ -381,7 +407,7 @@ def cmd_bench_pipeline(args: argparse.Namespace) -> int:
     print(f"bench: {n} characters walking on bumps, {args.seconds:g} s simulated at 30 Hz, "
           f"{threads} thread{'s' if threads > 1 else ''}, "
           f"{'positions and joint rotations' if args.rotations else 'joint positions'}"
-          f"{', wrist + elbow targets moving every tick' if args.constrained else ''}")
+          f"{', wrist + elbow targets the arm takes, on the walker' if args.constrained else ''}")
     for k, v in result["ms_per_tick"].items():
         print(f"  {k:16s} {v:8.2f} ms/tick")
     print(f"  {'total':16s} {result['ms_per_tick_total']:8.2f} ms/tick (the systems at {n})")
@@ -398,6 +424,12 @@ def cmd_bench_pipeline(args: argparse.Namespace) -> int:
     print(f"  peak memory {result['peak_memory_mb']:.0f} MB at {n}: "
           f"{result['peak_memory_kb_per_character']:.1f} kB per character + "
           f"{result['peak_memory_mb_fixed']:.0f} MB")
+    reached = result["errors_mm"]
+    if reached is not None:
+        print(f"  errors reached at {n}: wrist {reached['wrist_mean']:.3f} mm mean, "
+              f"{reached['wrist_max']:.3f} max; elbow {reached['elbow_mean']:.3f} mean, "
+              f"{reached['elbow_max']:.3f} max; centre of mass {reached['com_mean']:.3f} mean, "
+              f"{reached['com_max']:.3f} max")
     print(f"  local avoidance (ORCA, grid + linear programs): "
           f"{result['avoidance_us_per_agent_per_tick']:.2f} us CPU per agent per tick at "
           f"{result['avoidance_agents']} agents")

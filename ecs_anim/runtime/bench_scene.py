@@ -42,10 +42,42 @@ def walkers_on_bumps(n: int, rotations: bool = False,
     return sim, rng
 
 
+#: The bench's wrist target in the thorax frame (x forward, y left, z up) from the right
+#: shoulder: this direction, at :data:`WRIST_REACH_SHARE` of the arm's length.
+WRIST_DIRECTION = (0.7, -0.3, -0.4)
+WRIST_REACH_SHARE = 0.8
+#: The side the elbow falls to (thorax frame): down and out, made normal to shoulder-wrist.
+ELBOW_SIDE = (0.0, -0.5, -1.0)
+
+
+def arm_targets(upper_arm_m: np.ndarray, forearm_m: np.ndarray,
+                direction: tuple[float, float, float] = WRIST_DIRECTION,
+                reach_share: float = WRIST_REACH_SHARE,
+                elbow_side: tuple[float, float, float] = ELBOW_SIDE) -> tuple[np.ndarray, np.ndarray]:
+    """A wrist and an elbow target an arm takes exactly, as offsets (n, 3) from its shoulder
+    (in the frame ``direction`` and ``elbow_side`` are given in), for arms of ``upper_arm_m``
+    and ``forearm_m`` (n,) m: the wrist ``reach_share`` of the arm's length along
+    ``direction``; the elbow where the upper arm from the shoulder meets the forearm from the
+    wrist (the circle of elbows that keep the wrist), on its ``elbow_side``."""
+    u, f = np.asarray(upper_arm_m, float), np.asarray(forearm_m, float)
+    along = np.asarray(direction, float) / np.linalg.norm(direction)
+    d = reach_share * (u + f)
+    centre = (u * u - f * f + d * d) / (2.0 * d)  # the circle's centre along shoulder-wrist
+    radius = np.sqrt(np.maximum(u * u - centre * centre, 0.0))
+    side = np.asarray(elbow_side, float)
+    side = side - side @ along * along
+    side /= np.linalg.norm(side)
+    return d[:, None] * along, centre[:, None] * along + radius[:, None] * side
+
+
 class BenchScene:
     """:func:`walkers_on_bumps`, and with ``constrained`` a wrist target (high priority) and an
-    elbow target (low) on each character's right arm, both moving every tick (foot contacts
-    come from the walk itself); ``budget_ms`` the solver's frame budget (None: none)."""
+    elbow target (low) on each character's right arm that the arm takes exactly (foot contacts
+    come from the walk itself, and the centre of mass is held): both are points of its own
+    body, fixed to its right shoulder in its thorax's frame (:func:`arm_targets`), so they move
+    with the walker every tick and stay within the arm's reach and consistent with each other
+    however the walk and the centre-of-mass control carry the shoulder. ``budget_ms`` the
+    solver's frame budget (None: none)."""
 
     def __init__(self, n: int, rotations: bool = False, constrained: bool = False,
                  budget_ms: float | None = None) -> None:
@@ -54,33 +86,36 @@ class BenchScene:
         self.sim, _ = walkers_on_bumps(n, rotations)
         sim = self.sim
         sim.solver_settings = SolverSettings(budget_ms=budget_ms)
-        self.moving = np.zeros(0, np.int64)
-        self.owners = np.zeros(0, np.int64)
-        self.offsets = np.zeros((0, 3))
+        self.wrists = self.elbows = np.zeros(0, np.int64)
         if constrained:
+            from ecs_anim.core.skeleton import LENGTH_INDEX
             from ecs_anim.motion.constraints import Activation
 
             always = Activation(0.0, 1e9)
             entities = sim.store.entity.tolist()
-            self.moving = np.array(
-                [sim.add_constraint(e, f"w{i}", "wrist_r", 10, always, (0.0, 0.0, 1.2))
-                 for i, e in enumerate(entities)]
-                + [sim.add_constraint(e, f"e{i}", "elbow_r", 1, always, (0.0, 0.0, 1.0))
-                   for i, e in enumerate(entities)])
-            self.owners = sim.constraints.owner[sim.constraints.rows_of(self.moving)]
-            self.offsets = np.where((np.arange(self.moving.size) < n)[:, None],
-                                    [0.45, -0.3, 1.2], [0.0, -0.5, 1.0])
+            lengths = sim.store.lengths
+            wrist, elbow = arm_targets(lengths[:, LENGTH_INDEX["upper_arm_r"]],
+                                       lengths[:, LENGTH_INDEX["forearm_r"]])
+            self.wrists = np.array([sim.add_constraint(
+                e, f"w{i}", "wrist_r", 10, always, target_entity=e, target_point="shoulder_r",
+                target_offset_m=tuple(wrist[i])) for i, e in enumerate(entities)], np.int64)
+            self.elbows = np.array([sim.add_constraint(
+                e, f"e{i}", "elbow_r", 1, always, target_entity=e, target_point="shoulder_r",
+                target_offset_m=tuple(elbow[i])) for i, e in enumerate(entities)], np.int64)
 
-    def move_targets(self) -> None:
-        """The targets follow each pelvis, wobbling 0.1 m at 0.5 Hz."""
-        if self.moving.size:
-            sim = self.sim
-            pelvis = sim.store.positions[self.owners, 0]
-            wobble = 0.1 * np.sin(2 * np.pi * 0.5 * sim.time_s + self.owners)[:, None]
-            sim.set_targets(self.moving, pelvis * [1, 1, 0] + self.offsets + wobble)
+    def errors_mm(self) -> dict[str, float]:
+        """This tick's errors of the constrained scene (mm): mean and max of the wrists'
+        and the elbows' distances from their targets, and of the centres of mass from where
+        they should be (horizontal)."""
+        sim = self.sim
+        wrist = sim.constraints.error[sim.constraints.rows_of(self.wrists)] * 1e3
+        elbow = sim.constraints.error[sim.constraints.rows_of(self.elbows)] * 1e3
+        com = sim.store.com_error_m * 1e3
+        return {"wrist_mean": float(np.nanmean(wrist)), "wrist_max": float(np.nanmax(wrist)),
+                "elbow_mean": float(np.nanmean(elbow)), "elbow_max": float(np.nanmax(elbow)),
+                "com_mean": float(np.nanmean(com)), "com_max": float(np.nanmax(com))}
 
     def tick(self) -> None:
-        self.move_targets()
         self.sim.step()
 
 
@@ -108,3 +143,67 @@ def first_tick(threads: int = 1) -> dict[str, float]:
     t3 = time.perf_counter()
     scene.sim.close()
     return {"import_s": t1 - t0, "setup_s": t2 - t1, "first_tick_s": t3 - t2}
+
+
+#: The peer task's arm reach: forward, a little out and up, at 0.8 of the arm's length.
+PEER_WRIST_DIRECTION = (0.8, -0.3, 0.1)
+#: Ticks the peer task runs with its targets on (each solved from the motion's pose again).
+PEER_TICKS = 10
+
+
+def peer_task(ticks: int = PEER_TICKS) -> dict[str, float]:
+    """The wrist-elbow-feet-centre-of-mass task of the published IK comparisons (pinocchio,
+    mink): one standing adult (the shipped idle, held still), a wrist target and an elbow
+    target the right arm takes exactly from where its shoulder stands (:func:`arm_targets`,
+    fixed in the world), both allowed to move the trunk; the feet stay planted and the
+    centre of mass is held over its place. Solved ``ticks`` ticks; returns the last one's
+    wrist and elbow errors (mm), how far the shoulder moved from where the motion has it
+    (mm), how far the shoulder ended from the sphere of elbows the target leaves it (mm:
+    0 wherever the elbow target can be met), the centre of mass's horizontal error and the
+    largest foot move (mm), and the solver's iterations."""
+    from ecs_anim.components import MotionPlayer, Placement
+    from ecs_anim.core.morphology import Morphology
+    from ecs_anim.core.normalized import frames_from_positions
+    from ecs_anim.core.skeleton import JOINT_INDEX, LENGTH_INDEX
+    from ecs_anim.io.importing import import_bvh
+    from ecs_anim.io.library import MOTIONS_DIR
+    from ecs_anim.motion.constraints import Activation
+    from ecs_anim.runtime.simulation import Simulation
+
+    sim = Simulation({"idle": import_bvh(MOTIONS_DIR / "idle.bvh")})
+    body = sim.spawn("peer", Morphology.preset("adult_male"), MotionPlayer("idle", speed=0.0),
+                     Placement((0.0, 0.0)))
+    sim.step()
+    start = sim.store.positions[0].copy()
+    lengths = sim.store.lengths[0]
+    upper_arm = lengths[LENGTH_INDEX["upper_arm_r"]]
+    wrist, elbow = arm_targets(np.array([upper_arm]),
+                               np.array([lengths[LENGTH_INDEX["forearm_r"]]]),
+                               PEER_WRIST_DIRECTION)
+    shoulder = start[JOINT_INDEX["shoulder_r"]]
+    _, thorax2world, _ = frames_from_positions(start)
+    wrist_in_world = shoulder + thorax2world @ wrist[0]
+    elbow_in_world = shoulder + thorax2world @ elbow[0]
+    always = Activation(0.0, 1e9)
+    chain = ("arm_r", "trunk")
+    uids = [sim.add_constraint(body, "wrist", "wrist_r", 10, always, tuple(wrist_in_world),
+                               chain=chain),
+            sim.add_constraint(body, "elbow", "elbow_r", 1, always, tuple(elbow_in_world),
+                               chain=chain)]
+    for _ in range(ticks):
+        sim.step()
+    end = sim.store.positions[0]
+    error = sim.constraints.error[sim.constraints.rows_of(np.array(uids))]
+    ankles = [JOINT_INDEX["ankle_l"], JOINT_INDEX["ankle_r"]]
+    shoulder_now = end[JOINT_INDEX["shoulder_r"]]
+    report = sim.solver_report()
+    result = {
+        "wrist_mm": float(error[0]) * 1e3, "elbow_mm": float(error[1]) * 1e3,
+        "shoulder_moved_mm": float(np.linalg.norm(shoulder_now - shoulder)) * 1e3,
+        "shoulder_off_sphere_mm": abs(float(np.linalg.norm(elbow_in_world - shoulder_now))
+                                      - upper_arm) * 1e3,
+        "com_mm": float(sim.store.com_error_m[0]) * 1e3,
+        "feet_moved_mm": float(np.linalg.norm(end[ankles] - start[ankles], axis=1).max()) * 1e3,
+        "iterations": float(report.iterations) if report is not None else 0.0}
+    sim.close()
+    return result

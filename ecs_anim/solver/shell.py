@@ -2,11 +2,13 @@
 
 The goals of a tick come from :func:`~ecs_anim.solver.goals.tick_goals`.
 :func:`solve` then iterates, as the paper does, over the body's groups in the order legs, head,
-arms, trunk, then the root (``adaptRoot``: centre-of-mass control); each character stops when
-every goal of its own is within tolerance or has stalled and its centre of mass is back, or when
-the iteration budget is spent (so its result does not depend on who else is solved); a last pass
-over legs, head and arms leaves the feet on their footprints and the limbs on their goals after
-the final root move.
+arms, trunk, then the root (``adaptRoot``: centre-of-mass control). Each iteration starts with a
+pass over legs, head and arms (the analytic steps, which leave the feet on their footprints and
+the limbs on their goals after the last root move); a character stops at the pass after which
+no iteration would change anything (no goal that the trunk turns for, or that follows its own
+body, left within reach of improving, and its centre of mass so close that the root would not
+move), or when the iteration budget is spent: that pass is its result (so its result does not
+depend on who else is solved).
 Inside a group, the highest-priority goal is met analytically (limbs; neck and head as a
 two-segment chain) or by CCD rotations (trunk, about the spine's base, spread along the spine
 spline); a limb's second goal swivels the limb about the axis that keeps the first one. The trunk
@@ -31,7 +33,14 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from ecs_anim.core.body_points import ABOVE_TRUNK, HEAD, TRUNK, point_positions, segment_frames
+from ecs_anim.core.body_points import (
+    ABOVE_TRUNK,
+    HEAD,
+    SEGMENTS,
+    TRUNK,
+    point_positions,
+    segment_frames,
+)
 from ecs_anim.core.errors import UsageError
 from ecs_anim.core.ground_adapt import MAX_LEG_EXTENSION, vertical_slack_for_reach
 from ecs_anim.core.morphology import centres_of_mass, leg_length
@@ -53,10 +62,10 @@ from ecs_anim.core.rotations import (
 )
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import LENGTH_INDEX as L
+from ecs_anim.core.skeleton import LENGTHS
 from ecs_anim.motion.constraint_table import TARGET_WORLD, ConstraintTable, winners
 from ecs_anim.solver.budget import BudgetCut, SolverCostModel, cut_to_budget
 from ecs_anim.solver.goals import (
-    CONTACT_PRIORITY,
     TickGoals,
     constraint_errors,
     on_other_surfaces,
@@ -150,6 +159,12 @@ LIMB_EXTENSION = np.array([MAX_LEG_EXTENSION, MAX_LEG_EXTENSION, 1.0, 1.0])
 LIMB_ROOT_JOINT = np.array([-1, -1, J["neck"], J["shoulder_l"], J["shoulder_r"], -1])
 LIMB_MIDDLE_JOINT = np.array([-1, -1, J["head"], J["elbow_l"], J["elbow_r"], -1])
 LIMB_REACH_SHARE = 0.99
+#: Per segment (N_LENGTHS,): whether a pass of the solve (limbs, head) moves it. A goal whose
+#: target follows such a point of its own body is met by the pass's limb only as the point
+#: stood before the pass moved it: it needs iterations. A target on the trunk or the pelvis
+#: moves only with the trunk and the root, and each pass follows it before meeting it.
+SEGMENT_MOVED_BY_PASS = np.array([name in SEGMENTS and SEGMENTS[name][0] != TRUNK
+                                  for name in LENGTHS])
 
 
 def iteration_caps(goals: TickGoals, settings: SolverSettings) -> tuple[I64, I64]:
@@ -206,6 +221,10 @@ class _Solve:
         on_head = g.group == HEAD
         self.first_head = winners(g.owner, zero, g.priority, on_head & self.is_point, self.r, 1)[:, 0]
         self.orient_head = winners(g.owner, zero, g.priority, on_head & g.orientation, self.r, 1)[:, 0]
+        # The goals a limb or the head meets first (analytically, on every pass).
+        self.is_first = np.zeros(g.k, bool)
+        self.is_first[self.first_limb[self.first_limb >= 0]] = True
+        self.is_first[self.first_head[self.first_head >= 0]] = True
         self.self_at = goals.self_start.copy()
         p = self.dec.positions
         self.foot_in_world = normalize(p[:, list(SIDE_JOINTS["toe"])] - p[:, list(SIDE_JOINTS["ankle"])])
@@ -431,7 +450,21 @@ class _Solve:
         h = np.flatnonzero(carried & self.is_point & (g.priority > winner_priority[g.owner]))
         if h.size:
             point_h = point_positions(dec, g.owner[h], g.segment[h], g.fraction[h], g.offset[h])
-            worse = np.linalg.norm(point_h - g.goal[h], axis=1) > err[h] + s.tolerance_m
+            after = np.linalg.norm(point_h - g.goal[h], axis=1)
+            # A goal its limb (or the neck and head) meets first is met again by the next pass
+            # wherever the turn carried it: what the pass cannot make up is how far the goal
+            # is beyond the limb's reach from where the turn left its root.
+            first = self.is_first[h]
+            if first.any():
+                f, owner = h[first], g.owner[h[first]]
+                root_at = dec.positions[owner, LIMB_ROOT_JOINT[g.group[f]]]
+                middle_at = dec.positions[owner, LIMB_MIDDLE_JOINT[g.group[f]]]
+                on_first_bone = g.bone[f] == 0
+                reach = np.where(on_first_bone, np.linalg.norm(point_h[first] - root_at, axis=1),
+                                 np.linalg.norm(middle_at - root_at, axis=1)
+                                 + np.linalg.norm(point_h[first] - middle_at, axis=1))
+                after[first] = np.maximum(np.linalg.norm(g.goal[f] - root_at, axis=1) - reach, 0.0)
+            worse = after > err[h] + s.tolerance_m
             undo = np.isin(rows, g.owner[h][worse])
             if undo.any():
                 back = rows[undo]
@@ -439,13 +472,19 @@ class _Solve:
                 self._decode(back)
 
     # --- root: adaptRoot, the centre of mass back over its desired place ----------------------
+    def com_shortfall(self) -> F64:
+        """(r, 2) the horizontal way from each centre of mass to its desired place (m; 0 without
+        COM control)."""
+        com = centres_of_mass(self.dec.positions, self.masses, self.com_fraction)
+        error: F64 = self.g.com_desired[:, :2] - com[:, :2]
+        error[~self.g.com_on] = 0.0
+        return error
+
     def root(self) -> F64:
         """Move the root horizontally by the centre-of-mass error (times the gain); lower it if
         a planted leg could no longer reach its footprint. Returns (r,) the error before (m)."""
         dec, poses, g, s = self.dec, self.poses, self.g, self.s
-        com = centres_of_mass(dec.positions, self.masses, self.com_fraction)
-        error = g.com_desired[:, :2] - com[:, :2]
-        error[~g.com_on] = 0.0
+        error = self.com_shortfall()
         size: F64 = np.linalg.norm(error, axis=1)
         rows = np.flatnonzero((size > 0.1 * s.com_tolerance_m) & self.active)
         if rows.size == 0:
@@ -508,43 +547,50 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
     tol = np.where(goals.orientation, settings.tolerance_rad, settings.tolerance_m)
     previous = np.full(goals.k, np.inf)
     slow_before = np.zeros(goals.k, bool)
-    # Planted feet are re-planted after the loop: their error after a root move is not work left.
-    planted = goals.priority == CONTACT_PRIORITY
+    # Only goals an iteration still moves can keep a character's loop going: the trunk's (it
+    # turns a step at a time) and those following a point of their own body that the passes
+    # move; the passes (limbs and head, analytic) meet the others as well as they can be met.
+    iterative = ((goals.chain & (1 << TRUNK)) > 0)
+    iterative[goals.on_self] |= SEGMENT_MOVED_BY_PASS[goals.self_segment]
     used = np.zeros(state.r, np.int64)
     goal_caps, row_caps = iteration_caps(goals, settings)
-    for _ in range(int(row_caps.max(initial=0))):
-        used += state.active
-        # Legs, head, arms: the paper's order (legs and arms are independent, so one batch).
+    # Characters with a goal left open at the last measure (before the first: any iterative).
+    open_rows = np.zeros(state.r, bool)
+    open_rows[goals.owner[iterative]] = True
+    while True:
+        # A pass: legs, head, arms (the paper's order; legs and arms are independent, so one
+        # batch) re-planted and re-aimed after the last root move and trunk turn.
         state.follow_own_targets()
         state.limbs()
         state.head()
+        # The pass is the result where no iteration would change anything: no goal left open,
+        # and the centre of mass so close that the root step would not move (a tenth of its
+        # tolerance); or the budget spent. Finished characters are no longer stepped.
+        state.active &= used < row_caps
+        com_error = np.linalg.norm(state.com_shortfall(), axis=1)
+        state.active &= open_rows | (com_error > 0.1 * settings.com_tolerance_m)
+        if not state.active.any():
+            break
+        # An iteration: the trunk turns for the open goals it carries, the root moves the centre
+        # of mass back.
+        used += state.active
         state.trunk()
-        com_error = state.root()
+        state.root()
+        # A goal is open where not met nor stalled (unchanged, or falling by less than a share
+        # of itself twice running: unreachable; a stalled goal stays stalled).
         err = _errors(goals, state.dec)
-        # A character is done where every goal of its own is met or has stalled (unchanged, or
-        # falling by less than a share of itself twice running: unreachable), and its centre of
-        # mass is back; done characters are no longer stepped. A stalled goal stays stalled.
         first = np.isinf(previous)
         unchanged = ~first & (np.abs(previous - err) < settings.tolerance_m)
         slow = ~first & (previous - err < settings.stall_fraction * np.where(first, 0.0, previous))
         cut = used[goals.owner] >= goal_caps  # the frame budget gave it no more iterations
-        goal_open = ((err > tol) & ~unchanged & ~(slow & slow_before) & ~state.stalled & ~planted
+        goal_open = ((err > tol) & iterative & ~unchanged & ~(slow & slow_before) & ~state.stalled
                      & ~cut)
-        stepped = state.active[goals.owner]
+        stepped = state.active[goals.owner] & iterative
         state.stalled |= (err > tol) & ~goal_open & stepped
         previous = np.where(stepped, err, previous)
         slow_before = np.where(stepped, slow, slow_before)
-        open_rows = np.zeros(state.r, bool)
+        open_rows[:] = False
         open_rows[goals.owner[goal_open]] = True
-        state.active &= (open_rows | (com_error > settings.com_tolerance_m)) & (used < row_caps)
-        if not state.active.any():
-            break
-    # The last root move shifted the limbs: re-plant the feet, re-aim the head and the arms
-    # (every character).
-    state.active[:] = True
-    state.follow_own_targets()
-    state.limbs()
-    state.head()
     return state.poses, used, state.dec
 
 

@@ -15,7 +15,7 @@ from conftest import REPO
 from ecs_anim.apps.bench import capacity_fit, linear_fit
 from ecs_anim.apps.cli.main import main
 from ecs_anim.runtime import kernels
-from ecs_anim.runtime.bench_scene import BenchScene
+from ecs_anim.runtime.bench_scene import BenchScene, arm_targets, peer_task
 
 SCENARIO = str(REPO / "scenarios" / "reach_and_touch.yaml")
 #: Makes any bench example quick: two small sizes, a few ticks, no timed cold start.
@@ -347,3 +347,39 @@ def test_a_process_that_ran_the_kernels_can_fork_workers_that_run_them():
     assert (os.getpid() in kernels._pools) == (kernels.available_threads() > 1)
     with multiprocessing.get_context("fork").Pool(1) as pool:
         assert pool.map(_one_tick_in_a_child, [12]) == [(12, 22, 3)]
+
+
+def test_the_constrained_bench_reaches_its_targets_and_prints_the_errors(capsys):
+    """The constrained bench's wrist and elbow targets are ones the arm takes (points of the
+    walker's own body, fixed to its shoulder): both met, the centre of mass held within the
+    tenth of its tolerance the solve stops at."""
+    assert main(["bench", "--constrained", "--json", *QUICK]) == 0
+    errors = json.loads(capsys.readouterr().out)["errors_mm"]
+    assert errors["wrist_max"] < 1e-6 and errors["elbow_max"] < 1e-6
+    assert 0.0 <= errors["com_mean"] <= errors["com_max"] <= 0.1
+    assert main(["bench", "--constrained", *QUICK]) == 0
+    assert "errors reached at 8: wrist 0.000 mm mean" in capsys.readouterr().out
+
+
+def test_the_bench_arm_targets_are_ones_the_arm_takes():
+    rng = np.random.default_rng(36)
+    upper, fore = rng.uniform(0.15, 0.4, 20), rng.uniform(0.15, 0.4, 20)
+    wrist, elbow = arm_targets(upper, fore)
+    np.testing.assert_allclose(np.linalg.norm(elbow, axis=1), upper, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(wrist - elbow, axis=1), fore, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(wrist, axis=1), 0.8 * (upper + fore), rtol=0,
+                               atol=1e-12)
+
+
+def test_the_peer_task_meets_the_elbow_without_moving_the_feet(capsys):
+    """The IK comparisons' task: wrist and elbow targets the arm takes from where its shoulder
+    stands, feet planted, centre of mass held. The root's move for the centre of mass carries
+    the shoulder off the sphere on which the elbow target can be met (17 mm off, and the elbow
+    with it, before the trunk could turn it back); the trunk brings it back."""
+    result = peer_task()
+    assert result["wrist_mm"] < 1e-6 and result["elbow_mm"] < 1.0
+    assert result["shoulder_off_sphere_mm"] < 1.0 and result["shoulder_moved_mm"] < 10.0
+    assert result["feet_moved_mm"] < 1e-6 and result["com_mm"] <= 0.1
+    assert main(["bench", "--peer-task"]) == 0
+    out = capsys.readouterr().out
+    assert "elbow" in out and "shoulder moved" in out

@@ -375,8 +375,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seconds", type=positive_float, default=3.0, metavar="S",
                    help="pipeline: simulated seconds to time (default %(default)s)")
     p.add_argument("--constrained", action="store_true",
-                   help="pipeline: each character also has a wrist and an elbow target (right arm), "
-                        "moving every tick")
+                   help="pipeline: each character also has a wrist and an elbow target its right "
+                        "arm takes, moving with it; prints the errors reached")
+    p.add_argument("--peer-task", action="store_true",
+                   help="pipeline: instead, the IK comparisons' wrist-elbow-feet-COM task on one "
+                        "body: its errors and how far the shoulder moved")
     p.add_argument("--rotations", action="store_true",
                    help="pipeline: also compute local joint rotations every tick (as BVH export does)")
     p.add_argument("--budget-ms", type=positive_float, metavar="MS",

@@ -3,13 +3,13 @@
 Mirrors :func:`ecs_anim.solver.shell.solve` (the numpy reference, which stays in the package and
 which the tests compare this with to 1e-9 m). :func:`solve_rows` runs over the solved characters
 (a range of them per thread: :func:`ecs_anim.runtime.kernels.over_chunks`); per character,
-:func:`solve_character` owns the loop: follow the goals on its own body, the limbs
-(:mod:`.solve_limbs`), the head (:mod:`.solve_head`), the trunk (:mod:`.solve_trunk`, skipped
-when no goal's chain includes it; it decodes the row again when it turns), the root
-(:mod:`.solve_root`), then the stopping rule (every goal met or stalled and the centre of mass
-back; its budget of iterations), and the final re-plant of the limbs and the head. Each
-character stops on its own goals: its result does not depend on who else is solved, nor on the
-thread count.
+:func:`solve_character` owns the loop: a pass (follow the goals on its own body, the limbs
+(:mod:`.solve_limbs`), the head (:mod:`.solve_head`)), then the stopping rule (no goal the trunk
+or the body still moves left open, and the centre of mass so close that the root would not move;
+or its budget of iterations spent: the pass is the result), else an iteration: the trunk
+(:mod:`.solve_trunk`, skipped when no goal's chain includes it; it decodes the row again when it
+turns) and the root (:mod:`.solve_root`), and the next pass. Each character stops on its own
+goals: its result does not depend on who else is solved, nor on the thread count.
 
 The goals come from :func:`ecs_anim.runtime.kernels.goals.tick_goals` (or its numpy reference),
 already sorted by character (then nothing is copied); :func:`character_winners` picks the goal
@@ -42,10 +42,10 @@ from ecs_anim.runtime.kernels.solve_points import (
     point_position,
     tables,
 )
-from ecs_anim.runtime.kernels.solve_root import root_step
+from ecs_anim.runtime.kernels.solve_root import com_shortfall, root_step
 from ecs_anim.runtime.kernels.solve_trunk import solve_trunk
 from ecs_anim.runtime.kernels.vec import F64, dot, jit, load3, normalize, store3, sub
-from ecs_anim.solver.goals import CONTACT_PRIORITY, TickGoals
+from ecs_anim.solver.goals import TickGoals
 from ecs_anim.solver.shell import DEFAULT_SETTINGS, SolverSettings, iteration_caps
 
 I64 = NDArray[np.int64]
@@ -69,6 +69,15 @@ def follow_own_targets(c: int, dec: DecodedArrays, g: Goals, t: Tables) -> None:
                     g.goal[j, i] += shift[i]
 
 
+@jit(inline="always")
+def _iterative(g: Goals, t: Tables, j: int) -> bool:
+    """Whether goal ``j`` needs iterations: the trunk turns for it (a step at a time), or it
+    follows a point of its own body that a pass moves (``ecs_anim.solver.shell.solve``'s
+    ``iterative``)."""
+    return bool((g.chain[j] & (1 << _TRUNK)) > 0
+                or (g.on_self[j] and t.seg_moved_by_pass[g.self_segment[j]] > 0))
+
+
 @jit()
 def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners,
                     b: Bodies, t: Tables, err: F64, stalled: B8, previous: F64, slow_before: B8,
@@ -83,6 +92,7 @@ def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: W
     start, stop = g.start[c], g.start[c + 1]
     uses_trunk = False
     on_self = False
+    iterates = False  # a goal an iteration moves: the trunk's, or one following what a pass moves
     for j in range(start, stop):
         stalled[j] = False
         previous[j] = math.inf
@@ -90,61 +100,74 @@ def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: W
         if (g.chain[j] & (1 << _TRUNK)) > 0:
             uses_trunk = True
         on_self = on_self or g.on_self[j]
+        iterates = iterates or _iterative(g, t, j)
     # Steps with nothing to do are not called, and the errors of points without offset are
     # measured on the arrays themselves (the same operations as goal_error).
     uses_head = w.first_head[c] >= 0 or w.orient_head[c] >= 0
     positions, seg_proximal, seg_distal = dec.positions, t.seg_proximal, t.seg_distal
     orientation, segment, fraction, offset = g.orientation, g.segment, g.fraction, g.offset
-    goal, priority, goal_iterations = g.goal, g.priority, g.iterations
+    goal, goal_iterations = g.goal, g.iterations
     used = 0
     iterations = b.iterations[c]
-    done = iterations <= 0
-    # Each pass follows the goals on the body, then the limbs and the head; the last pass (the
-    # budget used, or every goal done) is the final re-plant, as the last root move shifted the
-    # limbs. One call site each: numba inlines these steps' bodies at every site it compiles.
+    # Each pass follows the goals on the body, then re-plants the limbs and re-aims the head
+    # (exact, analytic steps: a limb or head goal is where they leave it). The pass ends the
+    # solve where no iteration would change anything: no goal left that the trunk still turns
+    # for or that follows the body (open at the last measure; before the first, any), and the
+    # centre of mass so close that the root step would not move (a tenth of its tolerance); or
+    # the budget spent. It is then the result. Otherwise an iteration: a trunk turn and a root
+    # move, then the next pass. One call site each: numba inlines these steps' bodies at every
+    # site it compiles.
+    any_open = iterates
     while True:
         if on_self:
             follow_own_targets(c, dec, g, t)
         solve_limbs(c, pose, dec, g, w, b, t, tolerance_m, leg_extension)
         if uses_head:
             solve_head(c, pose, dec, g, w, b, t)
-        if done:
+        if used >= iterations:
             break
+        if not any_open:
+            ex, ey = com_shortfall(c, positions, b.masses, b.com_fraction, b.com_desired,
+                                   b.com_on, t.mass_proximal, t.mass_distal)
+            if math.sqrt(ex * ex + ey * ey) <= 0.1 * com_tolerance_m:  # the root stays
+                break
         used += 1
         if uses_trunk:
             for j in range(start, stop):
                 err[j] = goal_error(dec, c, g, j, t)
-            solve_trunk(c, pose, dec, b.lengths[c], g, err, stalled, t, tolerance_m, tolerance_rad,
-                        max_ccd_step_rad)
-        com_error = root_step(c, pose.root_position, positions, b.lengths, b.masses,
-                              b.com_fraction, b.footprint, b.in_contact, b.com_desired, b.com_on,
-                              t.mass_proximal, t.mass_distal, t.hip, t.thigh, t.shank,
-                              com_tolerance_m, root_gain, leg_extension)
-        # Done where every goal is met or has stalled (unchanged, or falling by less than a
-        # share of itself twice running), and the centre of mass is back.
+            solve_trunk(c, pose, dec, b.lengths[c], g, w, err, stalled, t, tolerance_m,
+                        tolerance_rad, max_ccd_step_rad)
+        root_step(c, pose.root_position, positions, b.lengths, b.masses, b.com_fraction,
+                  b.footprint, b.in_contact, b.com_desired, b.com_on, t.mass_proximal,
+                  t.mass_distal, t.hip, t.thigh, t.shank, com_tolerance_m, root_gain,
+                  leg_extension)
+        # Only goals an iteration still moves can keep the loop going (:func:`_iterative`; the
+        # passes meet the others as well as they can be met): open where not met nor stalled
+        # (unchanged, or falling by less than a share of itself twice running).
         any_open = False
-        for j in range(start, stop):
-            if (not orientation[j] and offset[j, 0] == 0.0 and offset[j, 1] == 0.0
-                    and offset[j, 2] == 0.0):
-                d = sub(plain_point(positions, c, seg_proximal[segment[j]],
-                                    seg_distal[segment[j]], fraction[j]), load3(goal[j]))
-                e = math.sqrt(dot(d, d))
-            else:
-                e = goal_error(dec, c, g, j, t)
-            tol = tolerance_rad if orientation[j] else tolerance_m
-            first = math.isinf(previous[j])
-            unchanged = not first and abs(previous[j] - e) < tolerance_m
-            slow = not first and previous[j] - e < stall_fraction * previous[j]
-            planted = priority[j] == math.inf
-            cut = used >= goal_iterations[j]  # the frame budget gave it no more iterations
-            goal_open = (e > tol and not unchanged and not (slow and slow_before[j])
-                         and not stalled[j] and not planted and not cut)
-            if e > tol and not goal_open:
-                stalled[j] = True
-            previous[j] = e
-            slow_before[j] = slow
-            any_open = any_open or goal_open
-        done = used == iterations or (not any_open and com_error <= com_tolerance_m)
+        if iterates:
+            for j in range(start, stop):
+                if not _iterative(g, t, j):
+                    continue
+                if (not orientation[j] and offset[j, 0] == 0.0 and offset[j, 1] == 0.0
+                        and offset[j, 2] == 0.0):
+                    d = sub(plain_point(positions, c, seg_proximal[segment[j]],
+                                        seg_distal[segment[j]], fraction[j]), load3(goal[j]))
+                    e = math.sqrt(dot(d, d))
+                else:
+                    e = goal_error(dec, c, g, j, t)
+                tol = tolerance_rad if orientation[j] else tolerance_m
+                first = math.isinf(previous[j])
+                unchanged = not first and abs(previous[j] - e) < tolerance_m
+                slow = not first and previous[j] - e < stall_fraction * previous[j]
+                cut = used >= goal_iterations[j]  # the frame budget gave it no more iterations
+                goal_open = (e > tol and not unchanged and not (slow and slow_before[j])
+                             and not stalled[j] and not cut)
+                if e > tol and not goal_open:
+                    stalled[j] = True
+                previous[j] = e
+                slow_before[j] = slow
+                any_open = any_open or goal_open
     return used
 
 
@@ -338,5 +361,3 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
     return (NormalizedPoses(**dict(zip(PoseArrays._fields, state.pose, strict=True))), used,
             DecodedPose(*state.dec))
 
-
-assert CONTACT_PRIORITY == math.inf  # the kernel reads a planted foot's priority as inf

@@ -36,6 +36,7 @@ from ecs_anim.runtime.kernels.vec import (
     sub,
     to_world,
 )
+from ecs_anim.solver.shell import SEGMENT_MOVED_BY_PASS
 
 I64 = NDArray[np.int64]
 B8 = NDArray[np.bool_]
@@ -51,7 +52,8 @@ class Tables(NamedTuple):
     root and middle joint of the limb the trunk carries (-1: none); limb_of_group (6,) per
     group its limb slot (-1: not a limb); mass_proximal, mass_distal (n_segments,) the joints
     bounding each mass segment; hip, ankle, toe (2,) joints; thigh, shank (2,) lengths; then
-    single joints and lengths."""
+    single joints and lengths; seg_moved_by_pass (N_LENGTHS,) 1 where a pass of the solve (limbs,
+    head) moves the segment (:data:`ecs_anim.solver.shell.SEGMENT_MOVED_BY_PASS`)."""
 
     seg_proximal: I64
     seg_distal: I64
@@ -74,6 +76,7 @@ class Tables(NamedTuple):
     head_top: int
     neck_length: int
     head_length: int
+    seg_moved_by_pass: I64
 
 
 def _ints(values: object) -> I64:
@@ -100,6 +103,7 @@ def tables() -> Tables:
         shank=_ints([L["shank_l"], L["shank_r"]]),
         pelvis=J["pelvis"], neck=J["neck"], head=J["head"], head_top=J["head_top"],
         neck_length=L["neck"], head_length=L["head"],
+        seg_moved_by_pass=_ints(SEGMENT_MOVED_BY_PASS),
     )
 
 

@@ -28,6 +28,26 @@ def solve_root(c: int, pose: PoseArrays, dec: DecodedArrays, b: Bodies, t: Table
 
 
 @jit(inline="always")
+def com_shortfall(c: int, positions: F64, masses: F64, com_fraction: F64, com_desired: F64,
+                  com_on: B8, mass_proximal: I64, mass_distal: I64) -> tuple[float, float]:
+    """The horizontal way (x, y) from character ``c``'s centre of mass to its desired place
+    (m; 0 without COM control). Mirrors ``ecs_anim.solver.shell._Solve.com_shortfall``."""
+    if not com_on[c]:
+        return 0.0, 0.0
+    # Mirrors solve_points.centre_of_mass (the same operations).
+    total = 0.0
+    x = y = 0.0
+    for s in range(masses.shape[1]):
+        a = load3(positions[c, mass_proximal[s]])
+        bb = load3(positions[c, mass_distal[s]])
+        seg_com = add_scaled(a, sub(bb, a), com_fraction[c, s])
+        x += masses[c, s] * seg_com[0]
+        y += masses[c, s] * seg_com[1]
+        total += masses[c, s]
+    return com_desired[c, 0] - x / total, com_desired[c, 1] - y / total
+
+
+@jit(inline="always")
 def root_step(c: int, root_position: F64, positions: F64, lengths: F64, masses: F64,
               com_fraction: F64, footprint: F64, in_contact: B8, com_desired: F64, com_on: B8,
               mass_proximal: I64, mass_distal: I64, hip: I64, thigh: I64, shank: I64,
@@ -35,22 +55,8 @@ def root_step(c: int, root_position: F64, positions: F64, lengths: F64, masses: 
     """:func:`solve_root` on the arrays it reads and writes (the fields of the same names of
     the pose, the decoded rows, the bodies and the tables), which the shell passes rather than
     the state tuples."""
-    if not com_on[c]:
-        return 0.0
-    # Mirrors solve_points.centre_of_mass (the same operations).
-    total = 0.0
-    x = y = z = 0.0
-    for s in range(masses.shape[1]):
-        a = load3(positions[c, mass_proximal[s]])
-        bb = load3(positions[c, mass_distal[s]])
-        seg_com = add_scaled(a, sub(bb, a), com_fraction[c, s])
-        x += masses[c, s] * seg_com[0]
-        y += masses[c, s] * seg_com[1]
-        z += masses[c, s] * seg_com[2]
-        total += masses[c, s]
-    com = (x / total, y / total, z / total)
-    ex = com_desired[c, 0] - com[0]
-    ey = com_desired[c, 1] - com[1]
+    ex, ey = com_shortfall(c, positions, masses, com_fraction, com_desired, com_on,
+                           mass_proximal, mass_distal)
     size = math.sqrt(ex * ex + ey * ey)
     if not size > 0.1 * com_tolerance_m:
         return size

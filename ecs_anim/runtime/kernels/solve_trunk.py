@@ -13,7 +13,13 @@ from numpy.typing import NDArray
 
 from ecs_anim.runtime.kernels.decode import DecodedArrays, PoseArrays, decode_row
 from ecs_anim.runtime.kernels.solve_math import bring_within_reach
-from ecs_anim.runtime.kernels.solve_points import Goals, Tables, goal_point, segment_frame
+from ecs_anim.runtime.kernels.solve_points import (
+    Goals,
+    Tables,
+    Winners,
+    goal_point,
+    segment_frame,
+)
 from ecs_anim.runtime.kernels.vec import (
     F64,
     axis_angle,
@@ -42,10 +48,11 @@ _LIMB_REACH_SHARE = 0.99
 
 @jit(inline="always")
 def solve_trunk(c: int, pose: PoseArrays, dec: DecodedArrays, lengths_row: F64, g: Goals,
-                err: F64, stalled: NDArray[np.bool_], t: Tables, tolerance_m: float,
+                w: Winners, err: F64, stalled: NDArray[np.bool_], t: Tables, tolerance_m: float,
                 tolerance_rad: float, max_ccd_step_rad: float) -> bool:
     """Mirrors ``ecs_anim.solver.shell._Solve.trunk`` for character ``c`` (in place) on its body
-    ``lengths_row`` (N_LENGTHS,) (m); ``err`` (k,) each goal's error now (:func:`~ecs_anim.runtime.kernels.solve_points.goal_error`), ``stalled``
+    ``lengths_row`` (N_LENGTHS,) (m); ``w`` the goals each limb and the head meet;
+    ``err`` (k,) each goal's error now (:func:`~ecs_anim.runtime.kernels.solve_points.goal_error`), ``stalled``
     (k,) goals that stopped improving. Returns whether the trunk turned."""
     start, stop = g.start[c], g.start[c + 1]
     best = -1
@@ -97,7 +104,23 @@ def solve_trunk(c: int, pose: PoseArrays, dec: DecodedArrays, lengths_row: F64, 
     # decoded result (the bent spine does not carry the neck where a rigid turn would).
     for j in range(start, stop):
         if g.group[j] >= _HEAD and not g.orientation[j] and g.priority[j] > g.priority[best]:
-            if norm(sub(goal_point(dec, c, g, j, t), load3(g.goal[j]))) > err[j] + tolerance_m:
+            point = goal_point(dec, c, g, j, t)
+            goal = load3(g.goal[j])
+            slot = t.limb_of_group[g.group[j]]
+            if (w.first_limb[c, slot] == j) if slot >= 0 else (
+                    g.group[j] == _HEAD and w.first_head[c] == j):
+                # Met first by its limb (or the neck and head) on the next pass wherever the
+                # turn carried it: what counts is how far it is beyond the limb's reach.
+                root_at = load3(p[t.group_limb_root[g.group[j]]])
+                if g.bone[j] == 0:
+                    reach = norm(sub(point, root_at))
+                else:
+                    middle_at = load3(p[t.group_limb_middle[g.group[j]]])
+                    reach = norm(sub(middle_at, root_at)) + norm(sub(point, middle_at))
+                after = max(norm(sub(goal, root_at)) - reach, 0.0)
+            else:
+                after = norm(sub(point, goal))
+            if after > err[j] + tolerance_m:
                 for k in range(3):
                     store3(pose.spine_points[c, k], spine_before[k])
                 store4(pose.thorax[c], thorax_before)

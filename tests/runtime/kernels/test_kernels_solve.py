@@ -16,9 +16,10 @@ import ecs_anim.systems.constraint_solve as system
 from conftest import SCENARIOS_DIR
 from ecs_anim.components import MotionPlayer, Placement
 from ecs_anim.core.ground_adapt import MAX_LEG_EXTENSION
-from ecs_anim.core.morphology import Morphology
+from ecs_anim.core.morphology import Morphology, centres_of_mass
 from ecs_anim.core.rotations import matrix_from_quat
 from ecs_anim.core.skeleton import JOINT_INDEX as J
+from ecs_anim.core.skeleton import LENGTH_INDEX as L
 from ecs_anim.motion.constraints import Activation
 from ecs_anim.runtime.kernels import solve as compiled
 from ecs_anim.runtime.kernels.solve_head import solve_head
@@ -87,6 +88,40 @@ def test_compiled_solve_equals_numpy_where_the_trunk_undoes_a_turn(monkeypatch, 
     assert len(capture.calls) == 2
     for args in capture.calls:
         assert_same_solve(args)
+
+def test_a_solve_stops_at_the_first_pass_that_leaves_nothing_to_do(idle):
+    """Goals the limbs meet, no centre-of-mass control: the first pass is the result (no
+    iteration); with the centre of mass held, iterations only until the root stays, the
+    wrist met after each."""
+    def wrist_and_elbow(sim, entities, p):
+        for e in entities:
+            sim.add_constraint(e, "wrist", "wrist_r", 5, ALWAYS,
+                               tuple(p[0, J["shoulder_r"]] + [0.3, -0.25, 0.1]))
+            sim.add_constraint(e, "elbow", "elbow_r", 1, ALWAYS,
+                               tuple(p[0, J["elbow_r"]] + [0.0, -0.3, 0.0]))
+
+    for com_control, most in ((False, 0), (True, 3)):
+        _, args = one_state(idle, wrist_and_elbow, com_control=com_control)
+        for solve in (solver_shell.solve, compiled.solve):
+            _, used, dec = solve(*copy.deepcopy(args))
+            assert 0 < used[0] <= most if com_control else used[0] == 0
+            goals = args[2]
+            assert solver_shell._errors(goals, dec)[goals.table_index == 0][0] < 1e-9
+            com = centres_of_mass(dec.positions, args[3], args[4])[0]
+            assert not com_control or (np.hypot(*(com[:2] - goals.com_desired[0, :2]))
+                                       <= 0.1 * S.com_tolerance_m)
+
+
+def test_the_bench_characters_stop_once_the_root_stays(monkeypatch):
+    """The bench's walkers (feet planted, centre of mass held, a wrist and an unreachable
+    elbow goal on the arm): no limb goal keeps the loop going, only the centre of mass, which
+    the root brings within a tenth of its tolerance in two or three iterations (the loop took
+    three or four when the limbs' goals, moved by each root step, kept it going)."""
+    used = np.concatenate([solver_shell.solve(*copy.deepcopy(args))[1]
+                           for args in bench_run(monkeypatch, n=6, ticks=6)])
+    assert used.max() <= 3
+    assert used.mean() < 2.5
+
 
 # --- each step against its numpy counterpart, on real solve states -------------------------
 
@@ -167,7 +202,8 @@ def test_trunk_step_equals_numpy(states):
         reference.trunk()
         stalled = np.zeros(s.goals.priority.size, bool)
         for c in range(s.bodies.lengths.shape[0]):
-            turned += solve_trunk(c, s.pose, s.dec, s.bodies.lengths[c], s.goals, goal_errors(s, c),
+            turned += solve_trunk(c, s.pose, s.dec, s.bodies.lengths[c], s.goals, s.winners,
+                                  goal_errors(s, c),
                                   stalled, T, S.tolerance_m, S.tolerance_rad, S.max_ccd_step_rad)
         assert_same_state(reference, s)
     assert turned > 0
@@ -270,18 +306,26 @@ def test_the_trunk_turn_is_capped_and_vetoed_when_it_worsens_a_higher_goal(idle)
     err = goal_errors(s, 0)
     stalled = np.zeros(err.size, bool)
     cap = 0.05
-    assert solve_trunk(0, s.pose, s.dec, s.bodies.lengths[0], s.goals, err, stalled, T, S.tolerance_m,
-                       S.tolerance_rad, cap)
+    assert solve_trunk(0, s.pose, s.dec, s.bodies.lengths[0], s.goals, s.winners, err, stalled, T,
+                       S.tolerance_m, S.tolerance_rad, cap)
     assert thorax_turn(thorax, s.pose.thorax[0]) == pytest.approx(cap, abs=1e-9)
 
     def with_a_held_left_hand(sim, entities, p):
         low_reach(sim, entities, p)
-        sim.add_constraint(entities[0], "hold", "wrist_l", 9, ALWAYS, tuple(p[0, J["wrist_l"]]))
+        # Held back, at the left arm's full reach: the turn takes the shoulder forward, and the
+        # hand out of the arm's reach (a hand the arm could still reach would not veto it).
+        arm = ADULT.lengths[L["upper_arm_l"]] + ADULT.lengths[L["forearm_l"]]
+        back = np.array([-1.0, 0.3, 0.0]) / np.linalg.norm([-1.0, 0.3, 0.0])
+        sim.add_constraint(entities[0], "hold", "wrist_l", 9, ALWAYS,
+                           tuple(p[0, J["shoulder_l"]] + 0.999 * arm * back))
 
     s2, _ = one_state(idle, with_a_held_left_hand)
+    # As in the solve: the turn comes after a pass has met the held hand.
+    solve_limbs(0, s2.pose, s2.dec, s2.goals, s2.winners, s2.bodies, T, S.tolerance_m,
+                MAX_LEG_EXTENSION)
     thorax, positions = s2.pose.thorax[0].copy(), s2.dec.positions[0].copy()
     err = goal_errors(s2, 0)
-    assert not solve_trunk(0, s2.pose, s2.dec, s2.bodies.lengths[0], s2.goals, err,
+    assert not solve_trunk(0, s2.pose, s2.dec, s2.bodies.lengths[0], s2.goals, s2.winners, err,
                            np.zeros(err.size, bool), T, S.tolerance_m, S.tolerance_rad, cap)
     # The turn is undone: the pose as it was, and its joints decoded where they were.
     np.testing.assert_array_equal(s2.pose.thorax[0], thorax)
