@@ -51,7 +51,8 @@ CHILD_TIMEOUT_S = 1800.0
 
 
 def time_size(n: int, seconds: float, rotations: bool = False,
-              constrained: bool = False, budget_ms: float | None = None) -> dict[str, Any]:
+              constrained: bool = False, budget_ms: float | None = None,
+              crossing: bool = False) -> dict[str, Any]:
     """One size, in this process: after :data:`WARM_UP_TICKS` ticks, ``seconds`` simulated at
     30 Hz. Returns ms per tick per system (wall), of the whole step (wall and CPU: every
     thread of the process), and the process's peak memory (MB); with ``budget_ms``, ``budget``:
@@ -60,8 +61,8 @@ def time_size(n: int, seconds: float, rotations: bool = False,
     the timed ticks, mm: the error the cut cost), the characters cut per tick and the ticks that
     cut anything; with ``constrained``, ``errors_mm``: the errors the solve reached
     (:meth:`BenchScene.errors_mm`; the means over the timed ticks, and the largest)."""
-    scene = BenchScene(n, rotations, constrained, budget_ms)
-    twin = None if budget_ms is None else BenchScene(n, rotations, constrained)
+    scene = BenchScene(n, rotations, constrained, budget_ms, crossing)
+    twin = None if budget_ms is None else BenchScene(n, rotations, constrained, crossing=crossing)
     sim = scene.sim
     for _ in range(WARM_UP_TICKS):
         scene.tick()
@@ -158,10 +159,11 @@ AVOIDANCE_TICKS = 60
 def time_avoidance(n: int = AVOIDANCE_AGENTS, ticks: int = AVOIDANCE_TICKS,
                    seed: int = 32) -> dict[str, Any]:
     """CPU time (``process_time``) of local avoidance (ORCA: the grid and every agent's linear
-    program, :func:`ecs_anim.runtime.kernels.avoidance.orca_velocities`) over ``n`` walkers,
-    µs per agent per tick: walkers of the default radii and steering settings, 0.5 a square
-    metre, each heading for a random point across the square at 1.4 m/s and moved by the
-    velocity it chose, ``ticks`` ticks at 30 Hz after one untimed (compile or load)."""
+    program, :func:`ecs_anim.runtime.kernels.avoidance.orca_velocities`, called as Steering
+    calls it: facings, legs' stadiums, slowest steps) over ``n`` walkers, µs per agent per
+    tick: walkers of the default radii and steering settings, legs of 0.75-1.0 m walking at
+    1.4 m/s, 0.5 a square metre, each heading for a random point across the square and moved
+    by the velocity it chose, ``ticks`` ticks at 30 Hz after one untimed (compile or load)."""
     from ecs_anim.runtime.kernels.avoidance import orca_velocities
     from ecs_anim.runtime.steering import DEFAULT_STEERING as S
 
@@ -170,18 +172,28 @@ def time_avoidance(n: int = AVOIDANCE_AGENTS, ticks: int = AVOIDANCE_TICKS,
     position = rng.uniform(0.0, side, (n, 2))
     goal = rng.uniform(0.0, side, (n, 2))
     radius = rng.uniform(0.22, 0.33, n)
-    max_speed = np.full(n, 1.4)
+    leg = rng.uniform(0.75, 1.0, n)
+    walk_m_s = 1.4
+    max_speed = np.full(n, walk_m_s)
     velocity = np.zeros((n, 2))
     active = np.ones(n, bool)
     cpu = 0.0
     for tick in range(ticks + 1):
         to_goal = goal - position
-        preferred = to_goal * (1.4 / np.maximum(np.linalg.norm(to_goal, axis=1), 1e-9))[:, None]
+        preferred = to_goal * (walk_m_s / np.maximum(np.linalg.norm(to_goal, axis=1), 1e-9))[:, None]
+        speed = np.linalg.norm(velocity, axis=1)
+        facing = np.where((speed > 1e-6)[:, None], velocity / np.maximum(speed, 1e-9)[:, None],
+                          preferred / walk_m_s)
+        striding = np.clip(speed / (S.rate_min * walk_m_s), 0.0, 1.0)
         c0 = time.process_time()
         velocity = orca_velocities(position, velocity, preferred, radius, max_speed, active,
                                    range_m=S.avoid_neighbour_m,
                                    time_horizon_s=S.avoid_time_horizon_s,
-                                   max_neighbours=S.avoid_neighbours, dt=1.0 / 30.0)
+                                   max_neighbours=S.avoid_neighbours, dt=1.0 / 30.0,
+                                   facing=facing, cone_rad=S.avoid_cone_rad,
+                                   stride_m=S.avoid_stride_legs * leg * striding,
+                                   feet_m=S.avoid_feet_legs * leg,
+                                   min_speed=np.full(n, S.rate_min * walk_m_s))
         if tick:
             cpu += time.process_time() - c0
         position += velocity / 30.0
@@ -324,8 +336,9 @@ def bench_pipeline(args: argparse.Namespace) -> dict[str, Any]:
     budget_ms = getattr(args, "budget_ms", None)
     if budget_ms is not None and not args.constrained:
         raise EcsAnimError("bench: --budget-ms is the solver's frame budget: give --constrained too")
+    crossing = bool(getattr(args, "crossing", False))
     flags = [f for f, on in (("--rotations", args.rotations),
-                             ("--constrained", args.constrained)) if on]
+                             ("--constrained", args.constrained), ("--crossing", crossing)) if on]
     if budget_ms is not None:
         flags += ["--budget-ms", repr(budget_ms)]
     runs = [json.loads(_run_child(["size", str(size), "--seconds", repr(args.seconds),
@@ -341,6 +354,7 @@ def bench_pipeline(args: argparse.Namespace) -> dict[str, Any]:
         "characters": sizes[-1],
         "rotations": bool(args.rotations),
         "constrained": bool(args.constrained),
+        "crossing": crossing,
         "threads": threads,
         "ms_per_tick": {k: round(v, 3) for k, v in systems.items()},
         "ms_per_tick_total": round(sum(systems.values()), 3),
@@ -404,7 +418,8 @@ def cmd_bench_pipeline(args: argparse.Namespace) -> int:
     sizes = result["sizes"]
     n = result["characters"]
     threads = result["threads"]
-    print(f"bench: {n} characters walking on bumps, {args.seconds:g} s simulated at 30 Hz, "
+    crowd = "crossing each other" if result["crossing"] else "in lanes"
+    print(f"bench: {n} characters walking on bumps {crowd}, {args.seconds:g} s simulated at 30 Hz, "
           f"{threads} thread{'s' if threads > 1 else ''}, "
           f"{'positions and joint rotations' if args.rotations else 'joint positions'}"
           f"{', wrist + elbow targets the arm takes, on the walker' if args.constrained else ''}")
@@ -590,7 +605,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 
 def child_main(argv: list[str] | None = None) -> int:
-    """``size N [--seconds S] [--threads T] [--rotations] [--constrained] [--budget-ms MS]``:
+    """``size N [--seconds S] [--threads T] [--rotations] [--constrained] [--crossing]
+    [--budget-ms MS]``:
     time one size and print JSON; ``first-tick [--threads T]``: print :data:`FIRST_TICK_DONE`
     and the phases' seconds as soon as the first tick is done; ``avoidance [--threads T]``:
     :func:`time_avoidance` as JSON."""
@@ -605,6 +621,7 @@ def child_main(argv: list[str] | None = None) -> int:
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--rotations", action="store_true")
     parser.add_argument("--constrained", action="store_true")
+    parser.add_argument("--crossing", action="store_true")
     parser.add_argument("--budget-ms", type=float)
     args = parser.parse_args(argv)
     if args.what == "first-tick":
@@ -616,7 +633,7 @@ def child_main(argv: list[str] | None = None) -> int:
         print(json.dumps(time_avoidance()))
         return 0
     print(json.dumps(time_size(args.characters, args.seconds, args.rotations,
-                               args.constrained, args.budget_ms)))
+                               args.constrained, args.budget_ms, args.crossing)))
     return 0
 
 

@@ -1,5 +1,5 @@
-"""The benchmark's scene (and the soak test's, and the kernels' warm-up): walkers on bumps, with
-moving wrist and elbow targets when constrained."""
+"""The benchmark's scene (and the soak test's, and the kernels' warm-up): walkers on bumps, in
+lanes or crossing each other, with wrist and elbow targets when constrained."""
 
 from __future__ import annotations
 
@@ -12,12 +12,16 @@ if TYPE_CHECKING:
     from ecs_anim.runtime.simulation import Simulation
 
 
-def walkers_on_bumps(n: int, rotations: bool = False,
-                     seed: int = 0) -> tuple[Simulation, np.random.Generator]:
-    """The benchmark's scene (and the soak test's): ``n`` characters walking on bumps on a
-    1.5 m grid, every other one a preset body and the rest random statures of 1.10-2.05 m, each
-    starting at a random time of the walk and heading within 0.3 rad of +x. Returns
-    (simulation, the seeded generator, for the caller's further draws)."""
+def walkers_on_bumps(n: int, rotations: bool = False, seed: int = 0,
+                     crossing: bool = True) -> tuple[Simulation, np.random.Generator]:
+    """``n`` characters walking on bumps from a 1.5 m grid, every other one a preset body and
+    the rest random statures of 1.10-2.05 m. With ``crossing`` (the soak test's and the
+    collision tests' crowd) each starts at a random time of the walk (its clip's origin on its
+    grid point, so it starts up to 5 m further along) heading within 0.3 rad of +x: a crowd
+    that ignores itself, about a tenth of it in someone else's body every tick. Without it
+    (the benchmark's crowd) each row along +x is a lane of one body starting at one time of
+    the walk, heading +x: walkers 1.5 m apart that never meet. Returns (simulation, the
+    seeded generator, for the caller's further draws)."""
     from ecs_anim.components import MotionPlayer, Placement
     from ecs_anim.core.ground import Bumps
     from ecs_anim.core.morphology import PRESET_SPECS, Morphology
@@ -32,12 +36,24 @@ def walkers_on_bumps(n: int, rotations: bool = False,
     side = int(np.ceil(np.sqrt(n)))
     preset_bodies = [Morphology.preset(p) for p in presets]  # frozen: shared by many
     bodies, players, placements = [], [], []
-    for i in range(n):
-        bodies.append(preset_bodies[i % len(presets)] if i % 2 == 0 else
-                      Morphology.from_stature(float(rng.uniform(1.1, 2.05))))
-        players.append(MotionPlayer("walk", start_s=float(rng.uniform(0, 4))))
-        placements.append(Placement((1.5 * (i // side), 1.5 * (i % side)),
-                                    float(rng.uniform(-0.3, 0.3))))
+    if crossing:
+        for i in range(n):
+            bodies.append(preset_bodies[i % len(presets)] if i % 2 == 0 else
+                          Morphology.from_stature(float(rng.uniform(1.1, 2.05))))
+            players.append(MotionPlayer("walk", start_s=float(rng.uniform(0, 4))))
+            placements.append(Placement((1.5 * (i // side), 1.5 * (i % side)),
+                                        float(rng.uniform(-0.3, 0.3))))
+    else:
+        # One body and one start a lane: its walkers go at one speed, the same distance apart.
+        lane_bodies = [preset_bodies[lane // 2 % len(presets)] if lane % 2 == 0 else
+                       Morphology.from_stature(float(rng.uniform(1.1, 2.05)))
+                       for lane in range(side)]
+        lane_starts = rng.uniform(0, 4, side)
+        for i in range(n):
+            lane = i % side
+            bodies.append(lane_bodies[lane])
+            players.append(MotionPlayer("walk", start_s=float(lane_starts[lane])))
+            placements.append(Placement((1.5 * (i // side), 1.5 * lane), 0.0))
     sim.spawn_many([f"c{i}" for i in range(n)], bodies, players, placements)
     return sim, rng
 
@@ -77,13 +93,14 @@ class BenchScene:
     body, fixed to its right shoulder in its thorax's frame (:func:`arm_targets`), so they move
     with the walker every tick and stay within the arm's reach and consistent with each other
     however the walk and the centre-of-mass control carry the shoulder. ``budget_ms`` the
-    solver's frame budget (None: none)."""
+    solver's frame budget (None: none); ``crossing``: the walkers cross each other instead of
+    walking in lanes (:func:`walkers_on_bumps`)."""
 
     def __init__(self, n: int, rotations: bool = False, constrained: bool = False,
-                 budget_ms: float | None = None) -> None:
+                 budget_ms: float | None = None, crossing: bool = False) -> None:
         from ecs_anim.solver.shell import SolverSettings
 
-        self.sim, _ = walkers_on_bumps(n, rotations)
+        self.sim, _ = walkers_on_bumps(n, rotations, crossing=crossing)
         sim = self.sim
         sim.solver_settings = SolverSettings(budget_ms=budget_ms)
         self.wrists = self.elbows = np.zeros(0, np.int64)

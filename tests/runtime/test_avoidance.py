@@ -110,9 +110,10 @@ def test_a_walker_slowed_below_its_slowest_steps_goes_round() -> None:
     preferred = np.array([[1.2, 0.0], [0.0, 0.0]])
     args = (position, np.zeros((2, 2)), preferred, np.full(2, 0.3), np.array([1.2, 0.0]),
             np.array([True, False]))
-    kw = dict(range_m=5.0, time_horizon_s=2.0, max_neighbours=6, dt=1.0 / 30.0)
-    slow = orca_velocities(*args, **kw)[0]
-    round_ = orca_velocities(*args, **kw, min_speed=np.array([0.6, 0.0]))[0]
+    slow = orca_velocities(*args, range_m=5.0, time_horizon_s=2.0, max_neighbours=6,
+                           dt=1.0 / 30.0)[0]
+    round_ = orca_velocities(*args, range_m=5.0, time_horizon_s=2.0, max_neighbours=6,
+                             dt=1.0 / 30.0, min_speed=np.array([0.6, 0.0]))[0]
     assert np.linalg.norm(slow) < 0.6
     assert np.linalg.norm(round_) == pytest.approx(0.6)
     # Clear of the one standing for the horizon: its closest approach at that velocity.

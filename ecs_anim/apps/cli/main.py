@@ -377,6 +377,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--constrained", action="store_true",
                    help="pipeline: each character also has a wrist and an elbow target its right "
                         "arm takes, moving with it; prints the errors reached")
+    p.add_argument("--crossing", action="store_true",
+                   help="pipeline: the walkers cross each other (about a tenth of them in "
+                        "someone's body every tick: CollisionSeparate's worst case) instead of "
+                        "walking in lanes")
     p.add_argument("--peer-task", action="store_true",
                    help="pipeline: instead, the IK comparisons' wrist-elbow-feet-COM task on one "
                         "body: its errors and how far the shoulder moved")

@@ -53,7 +53,7 @@ def assert_same_ticks(compiled: Simulation, reference: Simulation, ticks: int) -
 
 
 def test_compiled_rounds_match_numpy_on_the_bench_walkers():
-    compiled, reference = BenchScene(150).sim, BenchScene(150).sim
+    compiled, reference = BenchScene(150, crossing=True).sim, BenchScene(150, crossing=True).sim
     try:
         assert assert_same_ticks(compiled, reference, 8) > 20
     finally:
