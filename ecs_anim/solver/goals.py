@@ -111,10 +111,12 @@ def target_points(table: ConstraintTable, unconstrained: DecodedPose, previous: 
         rows = table.target_row[body]
         seg, frac, off = table.target_segment[body], table.target_fraction[body], table.target_offset[body]
         now = point_positions(unconstrained, rows, seg, frac, off)
-        before = now if previous is None else point_positions(previous, rows, seg, frac, off)
-        # A character added since the last tick has no posture there yet: its pose now.
-        before = np.where(np.isfinite(before), before, now)
-        out[body] = np.where((rows == table.owner[body])[:, None], now, before)
+        other = np.flatnonzero(rows != table.owner[body])
+        if previous is not None and other.size:
+            before = point_positions(previous, rows[other], seg[other], frac[other], off[other])
+            # A character added since the last tick has no posture there yet: its pose now.
+            now[other] = np.where(np.isfinite(before), before, now[other])
+        out[body] = now
     return out
 
 
