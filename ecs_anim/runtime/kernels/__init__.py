@@ -25,9 +25,10 @@ import os
 import subprocess
 import sys
 import threading
+import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ecs_anim.core.errors import UsageError
 
@@ -44,10 +45,12 @@ def cache_dir() -> Path:
     return base / "ecs_anim" / "numba"
 
 
-def _cache_kernels_in_cache_dir() -> None:
+def cache_kernels_in_cache_dir() -> None:
     """Have numba cache this package's kernels in :func:`cache_dir` (and only them: numba's
     other users keep their own settings, and no environment variable is set). A locator class
-    put first in numba's list answers for the functions of this folder alone."""
+    put first in numba's list answers for the functions of this folder alone. Called by
+    :func:`ecs_anim.runtime.kernels.vec.with_numba` as numba is imported, before any kernel
+    is compiled."""
     from numba.core import caching
 
     impl = vars(caching).get("CacheImpl") or vars(caching)["_CacheImpl"]  # older numba: _CacheImpl
@@ -73,9 +76,6 @@ def _cache_kernels_in_cache_dir() -> None:
             return super().from_function(py_func, py_file)  # type: ignore[no-untyped-call]
 
     impl._locator_classes.insert(0, KernelCacheLocator)
-
-
-_cache_kernels_in_cache_dir()
 
 
 def kernel_sources() -> list[Path]:
@@ -185,21 +185,137 @@ _announcers: list[Callable[[str], None]] = []
 
 
 def announce_compiling(say: Callable[[str], None] | None) -> None:
-    """Have this process's next first simulation tick call ``say`` with :func:`compile_notice`
-    if the kernels still have to be compiled (the CLI prints it on stderr); None: no more."""
+    """Have this process's next simulation built (:func:`load_kernels`) call ``say`` with
+    :func:`compile_notice` if the kernels still have to be compiled (the CLI prints it on
+    stderr); None: no more."""
     _announcers[:] = [] if say is None else [say]
 
 
-def before_first_tick() -> None:
-    """Called by :meth:`ecs_anim.runtime.simulation.Simulation.step` before a simulation's first tick:
-    says, once per process, what :func:`announce_compiling` asked for, and starts compiling the
-    solver aside if it has to be (:func:`compile_solver_aside`)."""
+#: What :func:`load_kernels` did in this process: seconds (wall and CPU) and whether it compiled.
+load_figures: dict[str, float | bool] = {}
+_load_lock = threading.RLock()
+
+
+def load_kernels() -> None:
+    """Called by :class:`ecs_anim.runtime.simulation.Simulation` when it is built: has every
+    kernel a tick calls in memory before the first tick, so that no tick loads one (loading the
+    solver's lazily cost the tick its first constraint switched on 95-117 ms of CPU). Says what
+    :func:`announce_compiling` asked for. Once per process: where the cache lacks kernels (the
+    first run on a machine, or after an update) it compiles them all by one tick of a small
+    scene using every kernel (the solver in a second process, :func:`compile_solver_aside`),
+    else it loads each kernel's every compiled specialisation from the cache. Its figures:
+    :data:`load_figures`."""
     if _announcers:
         say = _announcers.pop()
         notice = compile_notice()
         if notice is not None:
             say(notice)
+    with _load_lock:
+        if load_figures or _loading:
+            return  # done, or the warm-up scene's own simulation
+        _loading.append(True)
+        try:
+            start, cpu = time.perf_counter(), time.process_time()
+            compiled = bool(uncompiled_kernels())
+            if compiled:
+                compile_every_kernel()
+            for kernel in called_kernels():
+                load_cached(kernel)
+            load_figures.update(seconds=time.perf_counter() - start,
+                                cpu_seconds=time.process_time() - cpu, compiled=compiled)
+        finally:
+            _loading.clear()
+
+
+_loading: list[bool] = []
+_told: list[bool] = []
+
+
+def new_load_figures() -> dict[str, float | bool]:
+    """:data:`load_figures` the first time it is asked after :func:`load_kernels` did its work
+    in this process, else empty (the kernels were in memory already)."""
+    if not load_figures or _told:
+        return {}
+    _told.append(True)
+    return dict(load_figures)
+
+
+def called_kernels() -> list[Any]:
+    """The numba dispatchers of the kernels Python calls (those compiled ``nogil``), in every
+    kernel module (imported here)."""
+    import importlib
+
+    from ecs_anim.runtime.kernels.vec import with_numba
+
+    modules = [importlib.import_module(f"{__name__}.{source.stem}") for source in kernel_sources()]
+    with_numba()
+    return [value for module in modules for value in vars(module).values()
+            if getattr(value, "targetoptions", {}).get("nogil")
+            and value.py_func.__module__ == module.__name__]
+
+
+def load_cached(kernel: Any) -> None:
+    """Load every specialisation of ``kernel`` (a numba dispatcher) its cache index holds for
+    this source and machine (numba's ``Cache._index_key``); nothing is compiled."""
+    cache = kernel._cache
+    codegen = kernel.targetctx.codegen()
+    try:
+        index = cache._cache_file._load_index()
+    except Exception:  # an unreadable index: the kernel compiles on its first call
+        return
+    for key in index:
+        signature = key[0]
+        if cache._index_key(signature, codegen) == key:
+            kernel.compile(signature)
+
+
+def compile_every_kernel() -> None:
+    """Compile every kernel a tick uses into the cache: one tick of the smallest scene that runs
+    them all (:func:`ecs_anim.runtime.bench_scene.first_tick`), the solver in a second process
+    where there are two cores (:func:`compile_solver_aside`), and local avoidance."""
+    from ecs_anim.runtime.bench_scene import first_tick
+
     compile_solver_aside()
+    first_tick()  # a tick and the cross-fade's blend of no character
+    compile_avoidance()  # the bench scene steers nobody
+
+
+def compile_solver() -> None:
+    """Compile :func:`ecs_anim.runtime.kernels.solve.solve_rows` (into the cache) by solving no
+    character: the arguments have the types of a real solve (``solve`` makes every array it
+    hands the kernel a contiguous float64, int64 or bool one), so a real solve loads it."""
+    import numpy as np
+
+    from ecs_anim.core.morphology import MASS_SEGMENTS
+    from ecs_anim.core.skeleton import N_LENGTHS
+    from ecs_anim.runtime.kernels.decode import decoded_pose, empty_decoded
+    from ecs_anim.runtime.kernels.playback import empty_poses
+    from ecs_anim.runtime.kernels.solve import solve
+    from ecs_anim.solver.goals import TickGoals
+
+    ints, floats, flags = np.zeros(0, np.int64), np.zeros(0), np.zeros(0, bool)
+    points = np.zeros((0, 3))
+    no_goals = TickGoals(
+        rows=ints, owner=ints, table_index=ints, orientation=flags, group=ints, bone=ints,
+        segment=ints, fraction=floats, offset=points, chain=ints, priority=floats, goal=points,
+        weight=floats, axis=points, footprint=np.zeros((0, 2, 3)),
+        in_contact=np.zeros((0, 2), bool),
+        com_desired=points, com_on=flags, on_self=ints, self_segment=ints, self_fraction=floats,
+        self_offset=points, self_start=points, held=flags)
+    solve(empty_poses(0), np.zeros((0, N_LENGTHS)), no_goals, np.zeros((0, len(MASS_SEGMENTS))),
+          np.zeros((0, len(MASS_SEGMENTS))), decoded=decoded_pose(empty_decoded(0)))
+
+
+def compile_avoidance() -> None:
+    """Compile :mod:`ecs_anim.runtime.kernels.avoidance` (into the cache) on two walkers."""
+    import numpy as np
+
+    from ecs_anim.runtime.kernels.avoidance import orca_velocities
+
+    two = np.array([[0.0, 0.0], [1.0, 0.0]])
+    orca_velocities(two, np.zeros((2, 2)), np.array([[1.0, 0.0], [-1.0, 0.0]]), np.full(2, 0.3),
+                    np.ones(2), np.ones(2, bool), range_m=5.0, time_horizon_s=2.0,
+                    max_neighbours=10, dt=1.0 / 30.0)
 
 
 #: The command of the process compiling the solver's kernel aside (``python -m ecs_anim.runtime.kernels
