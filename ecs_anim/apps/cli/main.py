@@ -95,8 +95,8 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 def use_threads(args: argparse.Namespace) -> None:
-    """``--threads N``: the kernels' threads (:func:`ecs_anim.runtime.kernels.set_threads`; None: all
-    cores)."""
+    """``--threads N``: the kernels' threads (:func:`ecs_anim.runtime.kernels.set_threads`; None:
+    the idle cores, at least one: :func:`ecs_anim.runtime.kernels.default_threads`)."""
     from ecs_anim.runtime import kernels
 
     try:
@@ -299,10 +299,12 @@ class TickTimes:
 
 
 def add_threads_argument(p: argparse.ArgumentParser, default: int | None) -> None:
-    """``--threads N``: how many threads the kernels run on (None: every core)."""
+    """``--threads N``: how many threads the kernels run on (None: the idle cores, at least
+    one)."""
     p.add_argument("--threads", type=positive_int, default=default, metavar="N",
                    help="threads the tick's kernels run on "
-                   + ("(default: every core)" if default is None
+                   + ("(default: the cores the machine leaves idle, at least one)"
+                      if default is None
                       else f"(default {default}: the figures per core)"))
 
 

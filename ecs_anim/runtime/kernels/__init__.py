@@ -370,16 +370,29 @@ def available_threads() -> int:
     return max(1, os.cpu_count() or 1)
 
 
-_thread_count: list[int] = []  # set by set_threads; empty: all of available_threads()
+def default_threads() -> int:
+    """The threads the kernels run on unless told (``run``, ``view``): the cores left idle by
+    the rest of the machine, ``available_threads() - os.getloadavg()[0]`` rounded, at least one.
+    On a loaded machine two threads were 1.3-1.9x slower than one (each hand-over waits for a
+    core another process holds)."""
+    most = available_threads()
+    try:
+        busy = os.getloadavg()[0]
+    except (AttributeError, OSError):  # no load average (Windows): one thread, the safe side
+        return 1
+    return max(1, min(most, round(most - busy)))
+
+
+_thread_count: list[int] = []  # set by set_threads; empty: not yet (default_threads, once)
 
 
 def set_threads(n: int | None) -> int:
-    """Run the kernels' loops over characters on ``n`` threads (:func:`over_chunks`); None: on
-    all of :func:`available_threads`. Returns the number set. Results never depend on it (each
-    character is computed by one thread, independently of the others)."""
+    """Run the kernels' loops over characters on ``n`` threads (:func:`over_chunks`); None:
+    :func:`default_threads`. Returns the number set. Results never depend on it (each character
+    is computed by one thread, independently of the others)."""
     most = available_threads()
     if n is None:
-        n = most
+        n = default_threads()
     if not 1 <= n <= most:
         raise UsageError(f"expected 1 to {most} threads (the cores this process may use), got {n}")
     _thread_count[:] = [n]
@@ -387,8 +400,34 @@ def set_threads(n: int | None) -> int:
 
 
 def threads() -> int:
-    """The number of threads the kernels run on now."""
-    return _thread_count[0] if _thread_count else available_threads()
+    """The number of threads the kernels run on now (unless set: :func:`default_threads`, as
+    the machine is when first asked)."""
+    return _thread_count[0] if _thread_count else set_threads(None)
+
+
+def thread_comparison(tick: Callable[[], None], threads_n: int, ticks: int) -> dict[str, float]:
+    """Time ``tick`` (one tick of a scene) on one thread and on ``threads_n``, alternating tick
+    by tick so both see the same machine load (the bench's ``--threads N``): ``ticks`` ticks
+    each. Returns the mean wall and CPU ms per tick of each (``wall_ms_1``, ``cpu_ms_1``,
+    ``wall_ms_N``, ``cpu_ms_N``) and ``speedup`` (one thread's wall time over N's). Leaves the
+    thread count as it found it."""
+    before = threads()
+    totals = {1: [0.0, 0.0], threads_n: [0.0, 0.0]}
+    try:
+        for _ in range(ticks):
+            for count in (1, threads_n):
+                set_threads(count)
+                wall, cpu = time.perf_counter(), time.process_time()
+                tick()
+                totals[count][0] += time.perf_counter() - wall
+                totals[count][1] += time.process_time() - cpu
+    finally:
+        set_threads(before)
+    out = {f"{kind}_ms_{count}": value / max(ticks, 1) * 1e3
+           for count, pair in totals.items()
+           for kind, value in zip(("wall", "cpu"), pair, strict=True)}
+    out["speedup"] = out["wall_ms_1"] / max(out[f"wall_ms_{threads_n}"], 1e-12)
+    return out
 
 
 #: Fewest rows worth handing to another thread: below, waking it costs more than it saves.
