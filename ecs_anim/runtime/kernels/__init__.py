@@ -178,7 +178,7 @@ def compile_notice() -> str | None:
     first run on a machine, or after an update), else None."""
     if not uncompiled_kernels():
         return None
-    return f"compiling the tick's kernels once (under a minute); cached in {cache_dir()}"
+    return f"compiling the tick's kernels once (1-2 minutes of CPU); cached in {cache_dir()}"
 
 
 _announcers: list[Callable[[str], None]] = []
