@@ -12,10 +12,12 @@ indices; :func:`over_chunks` runs one over all of them, split into contiguous ch
 made the first compile half as long again).
 
 Compiled code is cached in the user's cache folder (``$XDG_CACHE_HOME/ecs_anim/numba``, else
-``~/.cache/ecs_anim/numba``) unless ``NUMBA_CACHE_DIR`` says where: the first run compiles (the
-solver in a second process: :func:`compile_solver_aside`; figures in docs/performance.md), later
-ones load in a fraction of a second. The locator that says so is registered here, before any
-kernel module is compiled, so the package imports its kernels only through here.
+``~/.cache/ecs_anim/numba``) unless ``NUMBA_CACHE_DIR`` says where. A simulation being built
+has every kernel put in memory (:func:`load_kernels`): the first run compiles them there (the
+solver in a second process: :func:`compile_solver_aside`; figures in docs/performance.md),
+later ones load them in about half a second. numba is imported only then
+(:func:`ecs_anim.runtime.kernels.vec.with_numba`, which registers the locator that says where the
+cache is, :func:`cache_kernels_in_cache_dir`, before any kernel is compiled).
 """
 
 from __future__ import annotations
@@ -174,8 +176,8 @@ def uncompiled_kernels() -> list[str]:
 
 
 def compile_notice() -> str | None:
-    """The line to show before the first tick when the kernels still have to be compiled (the
-    first run on a machine, or after an update), else None."""
+    """The line to show before compiling when the kernels still have to be compiled (the first
+    run on a machine, or after an update), else None."""
     if not uncompiled_kernels():
         return None
     return f"compiling the tick's kernels once (1-2 minutes of CPU); cached in {cache_dir()}"
