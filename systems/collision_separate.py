@@ -52,9 +52,18 @@ from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import LENGTH_INDEX, N_JOINTS
 from ecs_anim.motion.constraint_table import TARGET_BODY
 from ecs_anim.runtime.kernels import over_chunks
-from ecs_anim.runtime.kernels.capsules import Capsules, Overlaps, capsules, grid_of, overlaps
-from ecs_anim.runtime.kernels.decode import decoded_arrays, fits, pose_arrays
+from ecs_anim.runtime.kernels.capsules import (
+    Capsules,
+    Overlaps,
+    capsules,
+    grid_holds,
+    grid_of,
+    near_rows,
+    overlaps,
+)
+from ecs_anim.runtime.kernels.decode import decoded_arrays, fits, pose_arrays, spine_scratch
 from ecs_anim.runtime.kernels.posture import N_EXPORT, export_constants, posture_rows
+from ecs_anim.runtime.kernels.separate import push_rows, turn_rows
 from ecs_anim.runtime.system_base import System
 from ecs_anim.solver.capsules import CAPSULES, N_CAPSULES
 from ecs_anim.solver.steps import rotation_toward
@@ -76,6 +85,8 @@ STALL_SHARE = 0.1
 #: A body whose overlap did not shrink by STALL_SHARE in this many rounds in a row stops
 #: trying this tick.
 PATIENCE = 3
+#: How many new stuck pairs a warning names (the rest are counted).
+STUCK_NAMED = 3
 #: The largest turn of a limb in one round (rad).
 MAX_TURN_RAD = 0.25
 #: A pinned limb whose point moves less than this per radian of swivel does not swivel (m).
@@ -98,6 +109,7 @@ CAPSULE_CHAIN = np.array([_CHAIN[c] for c in CAPSULES], np.int64)
 CHAIN_GROUP = np.array([LEG_L, LEG_L + 1, ARM_L, ARM_L + 1, HEAD, TRUNK], np.int64)
 LIMB_OF_GROUP = np.array([0, 1, -1, 2, 3, -1], np.int64)  # group -> limb (-1: none)
 LIMB_ROOT = np.array([J["hip_l"], J["hip_r"], J["shoulder_l"], J["shoulder_r"]], np.int64)
+LIMB_MIDDLE = np.array([J["knee_l"], J["knee_r"], J["elbow_l"], J["elbow_r"]], np.int64)
 LIMB_END = np.array([J["ankle_l"], J["ankle_r"], J["wrist_l"], J["wrist_r"]], np.int64)
 TOE = np.array([J["toe_l"], J["toe_r"]], np.int64)
 #: Per limb, its two segments' LENGTHS indices (root's, end's).
@@ -151,8 +163,13 @@ class CollisionSeparate(System):
 
     def __init__(self, sim: Simulation) -> None:
         super().__init__(sim)
-        #: Pairs reported as stuck (neither may move): (entity, entity, capsule, capsule).
+        #: Pairs reported as stuck (neither may move): (entity, entity, capsule, capsule);
+        #: and the same as the codes of :meth:`_stuck_codes`, sorted.
         self.reported: set[tuple[int, int, str, str]] = set()
+        self._reported_codes = np.zeros(0, np.int64)
+        self._names: tuple[int, list[str]] = (-1, [])
+        #: The rounds compiled (off: the numpy methods, their reference, for the tests).
+        self.compiled = True
 
     def run(self, dt: float) -> None:
         st = self.sim.store
@@ -161,8 +178,7 @@ class CollisionSeparate(System):
             st.capsule_ends = np.empty((n, N_CAPSULES, 2, 3))
             st.capsule_radii = np.empty((n, N_CAPSULES))
         body = capsules(st.positions, st.lengths,
-                        Capsules(st.capsule_ends, st.capsule_radii, np.empty((n, 3)),
-                                 np.empty(n), np.empty((n, 2, 3))))
+                        Capsules.empty(n)._replace(ends=st.capsule_ends, radii=st.capsule_radii))
         grid = grid_of(body)
         found = overlaps(body, grid)
         if n < 2 or not (found.depth > SEPARATE_FROM_M).any():
@@ -170,6 +186,9 @@ class CollisionSeparate(System):
             return
         claims = self._claims()
         pushed = Pushes(np.zeros((n, 3)), np.full(n, -1, np.int64))
+        # The rows any round looks at: those overlapping anyone (a row outside has depth 0 and
+        # stays so unless a round searches it again: then it joins).
+        watch = np.flatnonzero(found.depth > 0.0)
         # Only overlapping bodies move: their poses as the solve left them, kept (each the
         # first time it overlaps) to go back to.
         kept = np.zeros(n, bool)
@@ -182,34 +201,40 @@ class CollisionSeparate(System):
         # (a crowd whose moves mostly push its bodies into others: the bench's walkers).
         stalled = np.zeros(n, np.int64)
         stalled_all, least_all = 0, np.inf
+        leg = leg_length(st.lengths)
         for _ in range(PASSES):
-            fresh = np.flatnonzero((found.depth > SEPARATE_FROM_M) & ~kept)
+            fresh = watch[(found.depth[watch] > SEPARATE_FROM_M) & ~kept[watch]]
             if fresh.size:
                 kept[fresh] = True
                 snapshots.append((fresh, st.poses.take(fresh)))
-            moved = self._separate(found, claims, pushed, stalled < PATIENCE)
+            moved = self._separate(found, claims, pushed, stalled, watch, leg)
             if moved.size == 0:
                 break
             was = found.depth[moved]
             ever[moved] = True
             self._posture(moved)
             # Only the moved bodies' capsules change; the overlaps found again are theirs and
-            # those of the bodies that touched them (the grid holds: a turn or a step of a few
-            # centimetres leaves every body within its cell's reach).
+            # those of the bodies that touched them.
             capsules(st.positions, st.lengths, body, moved)
-            touched = np.union1d(moved, np.flatnonzero(np.isin(found.other, moved)))
+            if not grid_holds(body, grid, moved):  # limbs reach out further sideways
+                grid = grid_of(body)
+            touched = np.union1d(moved, watch[np.isin(found.other[watch], moved)])
             overlaps(body, grid, touched, found)
+            watch = np.union1d(watch, touched[found.depth[touched] > 0.0])
             shrank = found.depth[moved] <= (1.0 - STALL_SHARE) * was
             stalled[moved] = np.where(shrank, 0, stalled[moved] + 1)
-            left = float(found.depth[stalled < PATIENCE].sum())
+            left = float(found.depth[watch[stalled[watch] < PATIENCE]].sum())
             stalled_all = 0 if left <= (1.0 - STALL_SHARE) * least_all else stalled_all + 1
             least_all = min(least_all, left)
             if stalled_all >= PATIENCE:
                 break
-        self._undo_feet_in_ground(np.flatnonzero(ever), snapshots)
-        # Every body's deepest overlap as the tick ends, for the metrics (a body the passes did
-        # not look at again may touch one that moved into it).
-        st.overlap_m = overlaps(body, grid_of(body)).depth
+        moved_ever = np.flatnonzero(ever)
+        self._undo_feet_in_ground(moved_ever, snapshots)
+        # Every body's deepest overlap as the tick ends, for the metrics: the moved bodies' and
+        # those of every body whose bounds meet one of theirs (it may touch one that moved into
+        # it); the others' are as found.
+        overlaps(body, grid, np.union1d(moved_ever, near_rows(body, grid, moved_ever)), found)
+        st.overlap_m = found.depth
 
     def _claims(self) -> Claims:
         """Each character's priority, claimed groups, limbs' pins and whom each pin aims at
@@ -345,42 +370,48 @@ class CollisionSeparate(System):
         clear: NDArray[np.bool_] = np.all(moved[..., 2] >= under + clearance, axis=1)
         return clear
 
-    def _separate(self, found: Overlaps, claims: Claims, pushed: Pushes,
-                  trying: NDArray[np.bool_]) -> I64:
+    def _separate(self, found: Overlaps, claims: Claims, pushed: Pushes, stalled: I64,
+                  watch: I64, leg: F64) -> I64:
         """Move the chains of this round's overlapping characters (see the module docstring)
-        that are still ``trying`` (n,); returns the rows moved. ``pushed``: each row's last
-        push this tick (read, then written)."""
-        st, sim = self.sim.store, self.sim
+        among ``watch`` (k,) that are still trying (``stalled`` (n,) below :data:`PATIENCE`);
+        returns the rows moved. ``pushed``: each row's last push this tick (read, then
+        written); ``leg`` (n,) each body's leg length, m. Compiled
+        (:mod:`ecs_anim.runtime.kernels.separate`) unless ``self.compiled`` is off: then the
+        numpy methods here, its reference."""
+        st = self.sim.store
         depth, other, mine, theirs, normal, point = found
-        rows = np.flatnonzero((depth > SEPARATE_FROM_M) & trying)
+        rows = watch[(depth[watch] > SEPARATE_FROM_M) & (stalled[watch] < PATIENCE)]
         them = other[rows]
         way, at = normal[rows], point[rows]
         full = depth[rows] + MARGIN_M
-        _, can_me = self._turns(rows, them, mine[rows], at, way, full, claims)
-        _, can_them = self._turns(them, rows, theirs[rows], at, -way, full, claims)
+        if self.compiled:
+            can = self._can(np.concatenate([rows, them]), np.concatenate([them, rows]),
+                            np.concatenate([mine[rows], theirs[rows]]), np.concatenate([at, at]),
+                            np.concatenate([way, -way]), np.concatenate([full, full]), claims,
+                            leg)
+            can_me, can_them = can[:rows.size], can[rows.size:]
+        else:
+            _, can_me = self._turns(rows, them, mine[rows], at, way, full, claims)
+            _, can_them = self._turns(them, rows, theirs[rows], at, -way, full, claims)
         priority = claims.priority
         share = np.where(priority[rows] < priority[them], 1.0,
                          np.where(priority[rows] == priority[them], 0.5, 0.0))
-        share = np.where(can_them & trying[them], share, 1.0) * can_me
+        share = np.where(can_them & (stalled[them] < PATIENCE), share, 1.0) * can_me
         stuck = ~can_me & ~can_them
         if stuck.any():
-            names: list[str] | None = None  # made only when a pair is new (a list of every name)
-            for i, j, a, b in zip(rows[stuck], them[stuck], mine[rows[stuck]],
-                                  theirs[rows[stuck]], strict=True):
-                key = (int(st.entity[min(i, j)]), int(st.entity[max(i, j)]),
-                       CAPSULES[a if i < j else b], CAPSULES[b if i < j else a])
-                if key not in self.reported:
-                    self.reported.add(key)
-                    names = sim.names() if names is None else names
-                    sim.warn(f"{names[i]}'s {CAPSULES[a]} and {names[j]}'s {CAPSULES[b]} overlap "
-                             f"by {depth[i] * 1e3:.0f} mm and neither may move")
+            self._report_stuck(rows[stuck], them[stuck], mine[rows[stuck]],
+                               theirs[rows[stuck]], depth)
         go = share > 0
         rows, them, share, way, at = rows[go], them[go], share[go], way[go], at[go]
         if rows.size == 0:
             return rows
         capsule = mine[rows]
+        distance = depth[rows] * share + MARGIN_M
+        if self.compiled:
+            self._push(rows, them, capsule, at, way, distance, claims, pushed, leg)
+            return np.unique(rows)
         chain = CAPSULE_CHAIN[capsule]
-        push = self._deflect(rows, chain, way, depth[rows] * share + MARGIN_M, pushed)
+        push = self._deflect(rows, chain, way, distance, pushed)
         fold, folded = self._fold(rows, them, capsule, push, claims)
         push -= folded
         distance = np.linalg.norm(push, axis=1)
@@ -422,6 +453,89 @@ class CollisionSeparate(System):
             st.poses.root_position[r] += step / leg_length(st.lengths[r])[:, None]
         return np.unique(rows)
 
+    def _can(self, rows: I64, partner: I64, capsule: I64, at: F64, way: F64, distance: F64,
+             claims: Claims, leg: F64) -> NDArray[np.bool_]:
+        """Whether each row's chain of ``capsule`` may move (k,): :meth:`_turns`' second
+        result, compiled (:func:`~ecs_anim.runtime.kernels.separate.turn_rows`), the ground
+        asked about the free legs' feet only."""
+        st = self.sim.store
+        k = rows.size
+        can, ask_ground = np.empty(k, bool), np.empty(k, bool)
+        feet, clearance = np.empty((k, 2, 3)), np.empty((k, 2))
+        over_chunks(turn_rows, k, rows, partner, capsule, at, way, distance, st.positions,
+                    st.lengths, leg, claims.pin, claims.aims_at,
+                    np.ascontiguousarray(claims.claimed[:, TRUNK]), st.contact_weight,
+                    st.frozen, CAPSULE_CHAIN, LIMB_ROOT, LIMB_END, TOE, ANKLE_HEIGHT,
+                    BALL_HEIGHT_PER_LEG, MAX_TURN_RAD, MIN_LEVER_M, can, feet, clearance,
+                    ask_ground)
+        legs = np.flatnonzero(ask_ground)
+        if legs.size:
+            under = self.row_ground().height_of(rows[legs], feet[legs, :, :2])
+            can[legs] &= np.all(feet[legs, :, 2] >= under + clearance[legs], axis=1)
+        return can
+
+    def _push(self, rows: I64, partner: I64, capsule: I64, at: F64, way: F64, distance: F64,
+              claims: Claims, pushed: Pushes, leg: F64) -> None:
+        """Move each row's chain of ``capsule``, ``distance`` (k,) m along ``way`` (k, 3) from
+        ``at`` (k, 3), away from ``partner``: the rest of :meth:`_separate`, compiled
+        (:func:`~ecs_anim.runtime.kernels.separate.push_rows`). Writes the rows' poses and
+        ``pushed``."""
+        st = self.sim.store
+        posture, poses = st.posture, st.poses
+        assert posture is not None
+        over_chunks(push_rows, rows.size, rows, partner, capsule, at, way, distance,
+                    st.positions, st.lengths, leg, claims.pin, claims.aims_at, st.frozen,
+                    pushed.way, pushed.chain, posture.pelvis2world, posture.thorax2world,
+                    posture.leg2world, posture.arm2world, poses.leg_fraction,
+                    poses.arm_fraction, poses.leg_frame, poses.arm_frame, poses.foot_dir,
+                    poses.root_position, CAPSULE_CHAIN, DISTAL, LIMB_ROOT, LIMB_MIDDLE, LIMB_END,
+                    LIMB_SEGMENTS, MAX_TURN_RAD, MIN_LEVER_M, MAX_DEFLECTION, MIN_FOLD_SHARE,
+                    MAX_REACH_SHARE)
+
+    @staticmethod
+    def _stuck_codes(entity_lo: I64, entity_hi: I64, capsule_lo: I64, capsule_hi: I64) -> I64:
+        """One int64 (k,) per pair of bodies' capsules (entities below 2**23, capsules below
+        2**8): the pairs reported are told apart in numpy, not one by one."""
+        codes: I64 = (entity_lo << 40) | (entity_hi << 16) | (capsule_lo << 8) | capsule_hi
+        return codes
+
+    def _report_stuck(self, rows: I64, them: I64, mine: I64, theirs: I64, depth: F64) -> None:
+        """Warn once about each pair of ``rows``' capsule ``mine`` and ``them``'s ``theirs``
+        (k,) that overlap (``depth`` (n,) m) where neither may move."""
+        st, sim = self.sim.store, self.sim
+        first = rows < them
+        lo, hi = np.where(first, rows, them), np.where(first, them, rows)
+        cap_lo, cap_hi = np.where(first, mine, theirs), np.where(first, theirs, mine)
+        codes = self._stuck_codes(st.entity[lo], st.entity[hi], cap_lo, cap_hi)
+        reported = self._reported_codes
+        at = np.minimum(np.searchsorted(reported, codes), max(reported.size - 1, 0))
+        new = np.flatnonzero(reported[at] != codes) if reported.size \
+            else np.arange(codes.size)
+        if new.size == 0:
+            return
+        self._reported_codes = np.union1d(self._reported_codes, codes[new])
+        if self._names[0] != sim.structure_version:  # (a list of every name)
+            self._names = (sim.structure_version, sim.names())
+        names = self._names[1]
+        pairs = []
+        for i, j, a, b, k in zip(rows[new], them[new], mine[new], theirs[new], new,
+                                 strict=True):
+            key = (int(st.entity[lo[k]]), int(st.entity[hi[k]]), CAPSULES[cap_lo[k]],
+                   CAPSULES[cap_hi[k]])
+            if key not in self.reported:  # (a pair twice in one round: reported once)
+                self.reported.add(key)
+                pairs.append((f"{names[i]}'s {CAPSULES[a]} and {names[j]}'s {CAPSULES[b]}",
+                              f"{depth[i] * 1e3:.0f} mm"))
+        # One line a round, its first pairs named: a crowd that ignores itself (the bench's)
+        # meets tens of new pairs a tick, and a line each cost 4 ms a tick at 4,000 and
+        # buried the output.
+        if len(pairs) == 1:
+            sim.warn(f"{pairs[0][0]} overlap by {pairs[0][1]} and neither may move")
+        elif pairs:
+            more = f" and {len(pairs) - STUCK_NAMED} more" if len(pairs) > STUCK_NAMED else ""
+            named = "; ".join(f"{who} by {depth}" for who, depth in pairs[:STUCK_NAMED])
+            sim.warn(f"{len(pairs)} pairs overlap where neither may move: {named}{more}")
+
     def _undo_feet_in_ground(self, moved: I64,
                              snapshots: list[tuple[I64, NormalizedPoses]]) -> None:
         """A moved body whose heel or ball ended under the ground (a turn of a leg the checks
@@ -431,15 +545,14 @@ class CollisionSeparate(System):
         if moved.size == 0:
             return
         st = self.sim.store
-        p = st.positions
-        leg = leg_length(st.lengths)
-        heel = p[:, LIMB_END[:2], 2] - st.lengths[:, ANKLE_HEIGHT]
-        ball = p[:, TOE, 2] - BALL_HEIGHT_PER_LEG * leg[:, None]
-        under = self.row_ground().height(np.concatenate([p[:, LIMB_END[:2], :2],
-                                                         p[:, TOE, :2]], axis=1))
+        p, lengths = st.positions[moved], st.lengths[moved]
+        heel = p[:, LIMB_END[:2], 2] - lengths[:, ANKLE_HEIGHT]
+        ball = p[:, TOE, 2] - BALL_HEIGHT_PER_LEG * leg_length(lengths)[:, None]
+        under = self.row_ground().height_of(moved, np.concatenate([p[:, LIMB_END[:2], :2],
+                                                                   p[:, TOE, :2]], axis=1))
         sunk: NDArray[np.bool_] = np.any(np.concatenate([heel, ball], axis=1)
                                          < under - HEEL_TOLERANCE_M, axis=1)
-        back = moved[sunk[moved]]
+        back = moved[sunk]
         if back.size == 0:
             return
         for rows, poses in snapshots:
@@ -478,6 +591,7 @@ class CollisionSeparate(System):
                     st.frozen, newly_bad, st.positions, rotations,
                     np.empty((n if rotations else 0, N_EXPORT, 3, 3)),
                     st.local_rotations if rotations else np.empty((0, N_EXPORT, 3, 3)),
-                    k.rest_hips, k.bvh_from_world, k.rest2body, k.parents, spine, True)
+                    k.rest_hips, k.bvh_from_world, k.rest2body, k.parents, spine, True,
+                    spine_scratch(rows.size))
         if newly_bad.any():
             sim.report_frozen(np.flatnonzero(newly_bad))

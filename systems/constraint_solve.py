@@ -8,11 +8,18 @@ activation weights run on simulation time, or on the clip time of constraints st
 motion; a point on another character is read from its posture of the previous tick (so every
 character sees the same world whatever their order), a point on the same character from this
 tick's pose. A constraint whose target is not finite is switched off with one warning.
+No pops (``SolverSettings.max_joint_speed_rad_s``, :mod:`ecs_anim.solver.joint_speed`): each
+segment the solver sets turns from the last tick's result at most that much faster than the
+motion's own segment (the compiled :mod:`ecs_anim.runtime.kernels.joint_speed`), and a character
+no longer solved goes back to its motion's pose no faster.
 
 Rows: characters with a Constraint component.
 Reads: store.poses, lengths, posture (the previous tick's), contact_weight, clip, clip_time_s,
-com_control, com_target_xy, segment_mass_kg, segment_com_fraction; the constraints table.
-Writes: store.poses (solved characters), com_desired, goals, solved (the decoded result of
+com_control, com_target_xy, segment_mass_kg, segment_com_fraction, last_clip_values,
+last_pose_values; the constraints table.
+Writes: store.poses (solved characters, and those going back), com_desired, last_clip_values,
+last_pose_values, clip_positions (the motion's own joints, None when nothing was solved), goals,
+solved (the decoded result of
 the solved characters, which PostureConvert takes instead of decoding them again); table.held;
 table.enabled, table.weight, table.error (how far each active constraint is from being met on
 the result, :func:`~ecs_anim.solver.goals.constraint_errors`; NaN while inactive).
@@ -20,24 +27,36 @@ the result, :func:`~ecs_anim.solver.goals.constraint_errors`; NaN while inactive
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+import time
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.components import Constraint
+from ecs_anim.core.normalized import DecodedPose, NormalizedPoses
 from ecs_anim.motion.constraint_table import KIND_ORIENTATION
-from ecs_anim.runtime.kernels import over_chunks
+from ecs_anim.runtime.kernels import over_chunks, threads
 from ecs_anim.runtime.kernels.com import centres_of_mass, segment_joints
 from ecs_anim.runtime.kernels.decode import decode
 from ecs_anim.runtime.kernels.goals import (
     constraint_errors as constraint_errors,  # tests patch these
 )
 from ecs_anim.runtime.kernels.goals import tick_goals as tick_goals
+from ecs_anim.runtime.kernels.joint_speed import limit_motion, pack
 from ecs_anim.runtime.kernels.solve import solve as solve
 from ecs_anim.runtime.system_base import System
-from ecs_anim.solver.budget import SolverCostModel, SolverReport
-from ecs_anim.solver.shell import TickResult, TickSteps, constrain, scatter
+from ecs_anim.solver.budget import FrameBudget, SolverReport, effective_caps
+from ecs_anim.solver.goals import TickGoals
+from ecs_anim.solver.joint_speed import SpeedSteps, solve_within_speed
+from ecs_anim.solver.shell import (
+    SolverSettings,
+    TickResult,
+    TickSteps,
+    constrain,
+    iteration_caps,
+    scatter,
+)
 
 if TYPE_CHECKING:
     from ecs_anim.runtime.simulation import Simulation
@@ -59,87 +78,164 @@ def _centres(positions: NDArray[np.float64], masses: NDArray[np.float64],
 class ConstraintSolve(System):
     query = (Constraint,)
     reads = ("constraints", "clip", "clip_time_s", "poses", "lengths", "posture", "contact_weight",
-             "com_control", "com_target_xy", "segment_mass_kg", "segment_com_fraction")
+             "com_control", "com_target_xy", "segment_mass_kg", "segment_com_fraction",
+             "last_clip_values", "last_pose_values")
     writes = ("goals", "solved", "constraints.error", "constraints.weight",
-              "constraints.enabled", "constraints.held", "poses", "com_desired")
+              "constraints.enabled", "constraints.held", "poses", "com_desired",
+              "last_clip_values", "last_pose_values", "clip_positions")
 
     def __init__(self, sim: Simulation) -> None:
         super().__init__(sim)
         #: This tick's :class:`~ecs_anim.solver.budget.SolverReport` (``sim.solver_report()``).
         self.report: SolverReport | None = None
-        # The last tick, for the frame budget's cost model: (structure version, iterations each
-        # store row took (n,)), the systems' total seconds at the end of this system's last run
-        # (one whole tick lies between two such marks), and the model measured on it.
-        self._last_iterations: tuple[int, NDArray[np.int64]] | None = None
-        self._last_mark_s: float | None = None
-        self._model: SolverCostModel | None = None
+        #: The frame budget's model and state between ticks.
+        self.budget = FrameBudget()
+        self._solve_cpu_s = 0.0
+        # No pops: this tick's motion pose, packed (n, N_VALUES; None: not packed), and whether
+        # the store's last_*_values hold the last tick's (else they are zeros: none).
+        self._clip_now: NDArray[np.float64] | None = None
+        self._values_kept = False
+
+    def _timed_solve(self, *args: Any) -> Any:
+        """The compiled solve (within the speed bound when one is set), its CPU time kept for
+        the frame budget's model."""
+        start = time.process_time()
+        bounded = self.sim.solver_settings.max_joint_speed_rad_s is not None
+        out = self._solve_within_speed(*args) if bounded else solve(*args)
+        self._solve_cpu_s = time.process_time() - start
+        return out
 
     def run(self, dt: float) -> None:
         sim, st, table = self.sim, self.sim.store, self.sim.constraints
-        st.goals, st.solved = None, None
+        st.goals, st.solved, st.clip_positions = None, None, None
         self.report = None
+        self._clip_now = None
         if table.m == 0:
+            self._go_back(np.zeros(0, np.int64))
             return
+        self.budget.start_tick(sum(system.cpu_seconds for system in sim.systems), threads(),
+                               sim.structure_version, st.n)
         weight = table.weights(sim.time_s, st.clip, st.clip_time_s)
         if not self.all_rows():  # the characters without a Constraint component are not solved
             weight = np.where(self.in_rows()[table.owner], weight, 0.0)
         settings = sim.solver_settings
+        wanted = weight
+        if settings.budget_ms is not None:
+            weight = self.budget.weights(weight, table.owner, table.priority,
+                                         st.poses.root_position * sim.leg_length()[:, None],
+                                         settings, sim.dt)
         unconstrained = decode(st.poses, st.lengths) if (weight > 0).any() else None
-        expected = None
-        if self._last_iterations is not None and self._last_iterations[0] == sim.structure_version:
-            expected = self._last_iterations[1]
+        if unconstrained is not None:
+            st.clip_positions = unconstrained.positions.copy()
+            if settings.max_joint_speed_rad_s is not None:
+                self._clip_now = pack(st.poses)
+                # A character with no last tick kept (its first, or none solved since) was at its
+                # motion's pose: a constraint switched on at once is then met over a few ticks.
+                fresh = ~np.any(st.last_pose_values != 0.0, axis=1)
+                st.last_clip_values[fresh] = st.last_pose_values[fresh] = self._clip_now[fresh]
+        model = settings.cost_model or self.budget.model
+        if settings.budget_ms is not None and model is not None:
+            model = self.budget.for_cut(model, table.owner[weight > 0])
+        self._solve_cpu_s = 0.0
         result = constrain(table, weight, st.poses, unconstrained, st.lengths,
                            st.contact_weight, st.com_control, st.com_target_xy, st.segment_mass_kg,
-                           st.segment_com_fraction, st.posture, settings,
+                           st.segment_com_fraction, st.posture, self.budget.aimed(settings, model),
                            settings.release_speed_m_s * sim.dt,
-                           TickSteps(tick_goals, solve, constraint_errors, _centres),
-                           self._model, expected)
+                           TickSteps(tick_goals, self._timed_solve, constraint_errors, _centres),
+                           model, self.budget.expected())
+        used, caps = np.zeros(0, np.int64), np.zeros(0, np.int64)
+        if result.goals is not None and result.iterations is not None:
+            g, used = result.goals, result.iterations
+            caps = effective_caps(g, *iteration_caps(g, settings), settings.iterations)
+        self.budget.solved(result.rows, used, caps, self._solve_cpu_s)
+        dropped = self.budget.dropped(wanted, table.owner) if settings.budget_ms is not None \
+            else np.zeros(0, np.int64)
         if result.broken.size:
             sim.report_disabled(result.broken)
             table.enabled[result.broken] = False
         table.weight = result.weight
         table.error[:] = result.error
         table.held[:] = result.held
-        self._report(result)
+        self._report(result, dropped)
         if result.goals is None or result.poses is None or result.solved is None:
+            self._go_back(np.zeros(0, np.int64))
             return
         every_row = result.rows.size == st.n
         st.poses = result.poses if every_row else scatter(st.poses, result.rows, result.poses)
         st.com_desired[result.rows] = result.goals.com_desired
         st.goals, st.solved = result.goals, result.solved
+        self._go_back(result.rows)
 
-    def _report(self, result: TickResult) -> None:
-        """This tick's report, and the cost model the next tick's budget decides by (the
-        systems' time over one whole tick, this solve's share of it)."""
+    def _solve_within_speed(self, poses: NormalizedPoses, lengths: NDArray[np.float64],
+                            goals: TickGoals, masses: NDArray[np.float64],
+                            com_fraction: NDArray[np.float64], settings: SolverSettings,
+                            decoded: DecodedPose | None = None, in_place: bool = False
+                            ) -> tuple[NormalizedPoses, NDArray[np.int64], DecodedPose]:
+        """The compiled solve (its signature), each segment then turning no more than
+        ``settings.max_joint_speed_rad_s`` faster than the motion's (:func:`solve_within_speed`)."""
+        st, rows = self.sim.store, goals.rows
+        assert self._clip_now is not None  # packed before the solve
+        max_step = float(settings.max_joint_speed_rad_s or np.inf) * self.sim.dt
+        return solve_within_speed(
+            SpeedSteps(solve, limit_motion, decode), self._clip_now[rows],
+            st.last_clip_values[rows], st.last_pose_values[rows], max_step, poses, lengths,
+            goals, masses, com_fraction, settings, decoded, in_place)
+
+    def _go_back(self, solved_rows: NDArray[np.int64]) -> None:
+        """The characters no longer solved whose last result was not their motion's pose (their
+        constraints over) go back to it no faster than ``max_joint_speed_rad_s`` allows (their
+        planted feet's legs at once: the motion has those on their footprints); then this
+        tick's motion poses and results are kept for the next tick."""
+        st, speed = self.sim.store, self.sim.solver_settings.max_joint_speed_rad_s
+        if speed is None or (self._clip_now is None and not self._values_kept):
+            return
+        clip_now = pack(st.poses) if self._clip_now is None else self._clip_now
+        corrected = np.any(st.last_pose_values != st.last_clip_values, axis=1)
+        corrected[solved_rows] = False
+        rows = np.flatnonzero(corrected)
+        if rows.size:
+            if st.clip_positions is None:  # nothing solved: every pose is the motion's
+                st.clip_positions = decode(st.poses, st.lengths).positions
+            back, _ = limit_motion(st.poses.take(rows), clip_now[rows], st.last_clip_values[rows],
+                                   st.last_pose_values[rows], st.contact_weight[rows] > 0.0,
+                                   speed * self.sim.dt)
+            for name, value in back.arrays().items():
+                getattr(st.poses, name)[rows] = value
+        if self._clip_now is None and rows.size == 0:  # nothing solved nor going back
+            st.last_clip_values[:], st.last_pose_values[:] = 0.0, 0.0
+            self._values_kept = False
+            return
+        st.last_clip_values = clip_now
+        st.last_pose_values = pack(st.poses)
+        self._values_kept = True
+
+    def _report(self, result: TickResult, dropped: NDArray[np.int64]) -> None:
+        """This tick's report (``dropped``: the store rows the budget switched off)."""
         sim, table = self.sim, self.sim.constraints
-        cut_by = None if result.cut is None else (sim.solver_settings.cost_model or self._model)
-        now_s = sum(system.seconds for system in sim.systems)
+        settings = sim.solver_settings
+        model = settings.cost_model or self.budget.model
+        cut_by = None if result.cut is None else model
         used = 0 if result.iterations is None else int(result.iterations.sum())
-        if self._last_mark_s is not None:
-            self._model = SolverCostModel.calibrated((now_s - self._last_mark_s) * 1e3,
-                                                     result.solve_s * 1e3, used) or self._model
-        self._last_mark_s = now_s
-        by_row = np.zeros(sim.store.n, np.int64)
-        if result.iterations is not None:
-            by_row[result.rows] = result.iterations
-        self._last_iterations = (sim.structure_version, by_row)
         cut = result.cut
         cut_constraint = np.zeros(table.m, bool)
         cut_entities: tuple[int, ...] = ()
         if cut is not None and result.goals is not None:
             g = result.goals
             user = g.table_index >= 0
-            lowered = user & ((cut.goal_iterations < sim.solver_settings.iterations)
+            lowered = user & ((cut.goal_iterations < settings.iterations)
                               | np.isin(g.owner, cut.cut_rows))
             cut_constraint[g.table_index[lowered]] = True
             cut_entities = tuple(int(e) for e in sim.store.entity[result.rows[cut.cut_rows]])
         self.report = SolverReport(
             tick=sim.tick, characters=int(result.rows.size), iterations=used,
-            budget_ms=sim.solver_settings.budget_ms,
+            budget_ms=settings.budget_ms,
             model=cut_by,
             expected_ms=float("nan") if cut is None else cut.expected_ms,
             cut_ms=float("nan") if cut is None else cut.cut_ms,
             priority_iterations={} if cut is None else dict(cut.priority_iterations),
             cut_characters=cut_entities,
             constraint_errors=(table.priority.copy(), result.error,
-                               table.kind == KIND_ORIENTATION, cut_constraint))
+                               table.kind == KIND_ORIENTATION, cut_constraint),
+            dropped_characters=tuple(int(e) for e in sim.store.entity[dropped]),
+            floor_ms=float("nan") if model is None or settings.budget_ms is None
+            else model.fixed_ms)

@@ -31,6 +31,7 @@ from ecs_anim.runtime.kernels.decode import PoseArrays, pose_arrays
 from ecs_anim.runtime.kernels.playback import (
     blend_rows,
     empty_poses,
+    playback_scratch,
     sample_placed_rows,
     sample_table_rows,
     writable_poses,
@@ -66,7 +67,8 @@ class MotionPlayback(System):
         bank_poses = self._bank_poses(bank)
         over_chunks(sample_placed_rows, rows.size, rows, bank_poses, bank.start, bank.n_frames,
                     bank.fps, bank.loop_yaw, bank.loop_shift, st.clip, st.clip_time_s, st.loop,
-                    st.placement_xy, st.placement_heading, leg, out, rows)
+                    st.placement_xy, st.placement_heading, leg, out, rows,
+                    playback_scratch(rows.size))
         out.root_position[rows, 2] -= self._capture_ground(rows, st.clip, st.clip_time_s,
                                                            st.loop)
         if st.contact_weight.shape != (st.n, 2) or not st.contact_weight.flags.writeable:
@@ -94,7 +96,8 @@ class MotionPlayback(System):
             over_chunks(sample_placed_rows, fading.size, fading, bank_poses, bank.start,
                         bank.n_frames, bank.fps, bank.loop_yaw, bank.loop_shift, st.fade_clip,
                         st.fade_time_s, st.fade_loop, st.fade_placement_xy,
-                        st.fade_placement_heading, leg, old, self.rows_of_old(fading.size))
+                        st.fade_placement_heading, leg, old, self.rows_of_old(fading.size),
+                        playback_scratch(fading.size))
             old.root_position[:, 2] -= self._capture_ground(fading, st.fade_clip,
                                                             st.fade_time_s, st.fade_loop)
             w = np.clip(st.fade_elapsed_s[fading] / np.maximum(st.fade_s[fading], 1e-9), 0, 1)

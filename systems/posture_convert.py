@@ -25,6 +25,7 @@ from ecs_anim.runtime.kernels.decode import (
     empty_decoded,
     fits,
     pose_arrays,
+    spine_scratch,
 )
 from ecs_anim.runtime.kernels.posture import N_EXPORT, export_constants, posture_rows
 from ecs_anim.runtime.kernels.solved_posture import posture_solved_rows
@@ -76,7 +77,8 @@ class PostureConvert(System):
             decode_rows = np.delete(decode_rows, solved_rows)
             over_chunks(posture_solved_rows, solved_rows.size, solved_rows,
                         decoded_arrays(st.solved), pose, st.lengths, decoded, *rest)
-        over_chunks(posture_rows, decode_rows.size, decode_rows, pose, st.lengths, decoded, *rest)
+        over_chunks(posture_rows, decode_rows.size, decode_rows, pose, st.lengths, decoded, *rest,
+                    spine_scratch(decode_rows.size))
         if newly_bad.any():
             sim.report_frozen(np.flatnonzero(newly_bad))
         # Next tick's targets on other characters read this posture, frames included.

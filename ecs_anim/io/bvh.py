@@ -66,6 +66,14 @@ class BvhSkeleton:
         return sum(len(j.channels) for j in self.joints)
 
 
+def rate_of_step(frame_time_s: float) -> float:
+    """Frames per second of a frame time (s): a rate within 0.05 % of a whole number is taken
+    as it (writers round the frame time: ``0.008333`` for 120 Hz)."""
+    rate = 1.0 / frame_time_s
+    whole = round(rate)
+    return float(whole) if whole > 0 and abs(rate - whole) <= 5e-4 * whole else rate
+
+
 @dataclass
 class BvhMotion:
     """A BVH file's content: skeleton, per-frame channel values (file units, degrees), timing."""
@@ -85,9 +93,7 @@ class BvhMotion:
     def fps(self) -> float:
         """Frames per second. Writers round the frame time (``0.008333`` for 120 Hz,
         ``0.03333333`` for 30 Hz), so a rate within 0.05 % of a whole number is taken as it."""
-        rate = 1.0 / self.frame_time_s
-        whole = round(rate)
-        return float(whole) if whole > 0 and abs(rate - whole) <= 5e-4 * whole else rate
+        return rate_of_step(self.frame_time_s)
 
 
 class _Lines:

@@ -95,6 +95,10 @@ class CanonicalClip:
     warnings: tuple[str, ...] = ()
     #: Source joints no canonical part uses (:func:`~ecs_anim.io.joint_map.unused_joints`).
     ignored: tuple[str, ...] = ()
+    #: The toe joints were filled in rigidly with the ankles (a joint-positions layout without
+    #: toes): contact detection finds touch-downs by the ankle
+    #: (:func:`~ecs_anim.io.contacts.detect_foot_contacts`).
+    toes_follow_ankle: bool = False
 
 
 #: The largest frame number or seconds ``--trim`` takes (a day at 10,000 fps is under 1e9).
@@ -823,7 +827,8 @@ def normalize_clip(clip: CanonicalClip, name: str, source: str,
     if resized is not clip:
         filled_stature, clip = morph.stature, resized
         morph = source_morphology(clip.positions, f"{name} (source)")
-    found = detect_foot_contacts(clip.positions, clip.fps, thresholds)
+    found = detect_foot_contacts(clip.positions, clip.fps, thresholds,
+                                 toes_follow_ankle=clip.toes_follow_ankle)
     foot = found.foot
     contact_info: dict[str, Any] = {
         "method": "detected",

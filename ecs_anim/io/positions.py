@@ -162,7 +162,8 @@ def canonical_clip_positions(read: PositionFile, options: PositionOptions
         unit_reason=unit_reason,
         joint_map=JointMap(source={}, thorax=-1, how=f"layout {layout.name} ({layout_how})",
                            names=names),
-        up_axis=up, up_reason=up_reason, warnings=tuple(warnings))
+        up_axis=up, up_reason=up_reason, warnings=tuple(warnings),
+        toes_follow_ankle=not {"toe_l", "toe_r"} <= provided)
     return clip, details
 
 

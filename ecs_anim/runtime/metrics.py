@@ -10,6 +10,9 @@
 * bone-length error: the largest difference between a bone and the morphology (m);
 * overlap: the deepest overlap of a character's collision capsules with another character's
   after separation (mm; ``store.overlap_m``, CollisionSeparate), and the time it was deepest;
+* joint speed: each character's fastest joint (m/s, between two ticks) and the fastest joint of
+  its motion's own pose (before the solver: ``store.clip_positions``), and when: a joint much
+  faster than the motion's own is a pop (``SolverSettings.max_joint_speed_rad_s`` bounds them);
 * stride: distance between successive footprints of the same foot, also per leg length (the
   median of the latest :data:`STRIDES_KEPT`);
 * time per system per tick.
@@ -26,7 +29,7 @@ from numpy.typing import NDArray
 from ecs_anim.core.ground_adapt import BALL_HEIGHT_PER_LEG, heel_depth
 from ecs_anim.core.morphology import bone_lengths_of
 from ecs_anim.core.normalized import SIDE_JOINTS, SIDE_LENGTHS
-from ecs_anim.core.skeleton import BONE_JOINTS
+from ecs_anim.core.skeleton import BONE_JOINTS, N_JOINTS
 from ecs_anim.motion.constraint_table import KIND_NAMES, KIND_ORIENTATION
 from ecs_anim.runtime.simulation import Simulation
 
@@ -51,7 +54,9 @@ CHARACTER_FIGURES = (("prev_soles", 0.0), ("prev_pivot", 0), ("prev_planted", Fa
                      ("penetration_max", 0.0), ("floating_max", 0.0), ("bone_error_max", 0.0),
                      ("com_error_max", np.nan), ("overlap_max", 0.0), ("overlap_at_s", np.nan),
                      ("leg_length_m", 0.0), ("frozen", False),
-                     ("removed_at_s", np.nan))
+                     ("removed_at_s", np.nan), ("prev_joints", np.nan), ("prev_clip_joints", np.nan),
+                     ("joint_speed_max", 0.0), ("clip_joint_speed_max", 0.0),
+                     ("joint_speed_at_s", np.nan))
 #: The same for the per-constraint arrays.
 CONSTRAINT_FIGURES = (("constraint_error_full", np.nan), ("constraint_error_any", np.nan),
                       ("constraint_enabled", False))
@@ -91,6 +96,13 @@ class MetricsRecorder:
         self.leg_length_m = np.zeros(0)
         self.frozen = np.zeros(0, bool)
         self.removed_at_s = np.zeros(0)
+        # the last tick's joints of the posture and of the motion's own pose (k, N_JOINTS, 3;
+        # NaN: none yet), the fastest joint of each (m/s) and when the posture's was fastest
+        self.prev_joints = np.zeros((0, N_JOINTS, 3))
+        self.prev_clip_joints = np.zeros((0, N_JOINTS, 3))
+        self.joint_speed_max = np.zeros(0)
+        self.clip_joint_speed_max = np.zeros(0)
+        self.joint_speed_at_s = np.zeros(0)
         self.strides: list[deque[float]] = []
         self.last_print: list[list[np.ndarray | None]] = []
         self.slides: list[dict[str, Any]] = []
@@ -148,6 +160,7 @@ class MetricsRecorder:
         # A fully planted foot floats by how far the lower of its heel and ball is above ground.
         float_mm = np.where(planted, -np.maximum(heel, toe_depth), 0.0).max(axis=1) * 1e3
         self.floating_max[at] = np.maximum(self.floating_max[at], float_mm)
+        self._record_speeds(at)
         error = np.abs(bone_lengths_of(p)[:, IS_BONE] - st.lengths[:, IS_BONE]).max(axis=1)
         self.bone_error_max[at] = np.maximum(self.bone_error_max[at], error)
         if st.overlap_m.shape[0] == st.n:
@@ -174,6 +187,19 @@ class MetricsRecorder:
             self.constraint_enabled[which] = table.enabled
             self.com_error_max[at] = np.fmax(self.com_error_max[at], st.com_error_m)
         self.ticks += 1
+
+    def _record_speeds(self, at: NDArray[np.int64]) -> None:
+        """The fastest joint of each character's posture and of its motion's own pose since the
+        last tick (m/s; a character's first tick has none: NaN, ignored)."""
+        st, dt = self.sim.store, self.sim.dt
+        clip = st.positions if st.clip_positions is None else st.clip_positions
+        speed = np.linalg.norm(st.positions - self.prev_joints[at], axis=-1).max(axis=1) / dt
+        clip_speed = np.linalg.norm(clip - self.prev_clip_joints[at], axis=-1).max(axis=1) / dt
+        faster = speed > self.joint_speed_max[at]  # (NaN: False)
+        self.joint_speed_max[at[faster]] = speed[faster]
+        self.joint_speed_at_s[at[faster]] = self.sim.posture_time_s
+        self.clip_joint_speed_max[at] = np.fmax(self.clip_joint_speed_max[at], clip_speed)
+        self.prev_joints[at], self.prev_clip_joints[at] = st.positions, clip
 
     def _characters(self) -> NDArray[np.int64]:
         """(n,) each store row's index in the per-character arrays; a character not seen before
@@ -233,7 +259,8 @@ class MetricsRecorder:
         """The figures so far, as ``ecs-anim run --report`` writes them: ``characters`` (per
         character: foot sliding mm per frame max/mean, penetration and floating mm, bone-length
         error m, stride m and per leg length, COM error mm, deepest overlap with another character
-        mm and when (s; None: none); ``removed_at_s``, only for one
+        mm and when (s; None: none), fastest joint m/s and when, and the motion's own fastest
+        joint m/s; ``removed_at_s``, only for one
         removed mid-run: the time of the first recorded posture without it, its figures ending
         there), ``constraints`` (per constraint, removed ones included: its largest error while
         fully active and while active, mm, or mrad for an orientation), ``ms_per_tick`` per
@@ -265,6 +292,10 @@ class MetricsRecorder:
                 "overlap_mm_max": round(float(self.overlap_max[i]) * 1e3, 3),
                 "overlap_at_s": None if np.isnan(self.overlap_at_s[i])
                 else round(float(self.overlap_at_s[i]), 4),
+                "joint_speed_m_s_max": round(float(self.joint_speed_max[i]), 3),
+                "clip_joint_speed_m_s_max": round(float(self.clip_joint_speed_max[i]), 3),
+                "joint_speed_at_s": None if np.isnan(self.joint_speed_at_s[i])
+                else round(float(self.joint_speed_at_s[i]), 4),
             }
             if not np.isnan(self.removed_at_s[i]):
                 figures["removed_at_s"] = round(float(self.removed_at_s[i]), 4)

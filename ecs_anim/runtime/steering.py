@@ -79,6 +79,12 @@ class SteeringSettings:
     avoid_neighbour_m : walkers farther than this are not looked at (m).
     avoid_cone_rad : a walker with neighbours keeps to velocities within this angle of the
         way it goes (at most pi / 2 limits it; the default pi: any, as ORCA).
+    avoid_stride_legs, avoid_feet_legs : a walking body's legs sweep a stadium, the points
+        within ``avoid_feet_legs`` leg lengths of a segment ``avoid_stride_legs`` leg lengths
+        fore and aft of its root along the way it goes (the ankle reaches 0.54 ahead at heel
+        strike and 0.57 behind at toe-off; knees and ankles 0.15 to the side, a thigh's
+        radius); the segment shrinks to nothing from the slowest steps to standing. Walkers
+        keep their stadiums apart as well as their radii (:func:`avoid`).
     """
 
     rate_min: float = 0.5
@@ -95,9 +101,11 @@ class SteeringSettings:
     avoidance: bool = True
     avoid_margin_m: float = 0.1
     avoid_time_horizon_s: float = 2.0
-    avoid_neighbours: int = 10
+    avoid_neighbours: int = 6
     avoid_neighbour_m: float = 5.0
     avoid_cone_rad: float = float(np.pi)
+    avoid_stride_legs: float = 0.6
+    avoid_feet_legs: float = 0.25
     corner_tolerance_m: float = 0.15
 
 
@@ -371,7 +379,7 @@ def steer(st: CharacterStore, bank: ClipBank, gaits: GaitTable, settings: Steeri
         wanted_speed[on_path] = np.minimum(wanted_speed[on_path], turning)
         # Stop where a fade to idle, started now, ends on the last waypoint (the pelvis slows
         # linearly over the fade: half the fade at the current speed).
-        remaining = np.minimum(total - progress, to_end)
+        remaining = np.maximum(total - progress, to_end)
         arrived = (progress + lookahead >= total) & (
             (remaining <= speed_now[on_path] * settings.gait_fade_s / 2) | (remaining < 0.05))
         if arrived.any():
@@ -384,7 +392,8 @@ def steer(st: CharacterStore, bank: ClipBank, gaits: GaitTable, settings: Steeri
             wanted_speed[np.flatnonzero(on_path)[arrived]] = 0.0
     if settings.avoidance:
         wanted_heading, wanted_speed = avoid(st, settings, rows, here, travel, speed_now,
-                                             wanted_heading, wanted_speed, not_avoiding, dt)
+                                             own_walk, wanted_heading, wanted_speed,
+                                             not_avoiding, dt)
     error = wrap_angle(wanted_heading - travel)
     behind = (np.abs(error) > settings.behind_rad) & (wanted_speed > 0.0)
     # The slowest steps while turning on the spot.
@@ -423,8 +432,8 @@ def avoidance_radius(lengths: F64, settings: SteeringSettings) -> F64:
 
 
 def avoid(st: CharacterStore, settings: SteeringSettings, rows: I64, here: F64, travel: F64,
-          speed_now: F64, wanted_heading: F64, wanted_speed: F64, not_avoiding: I64 | None,
-          dt: float) -> tuple[F64, F64]:
+          speed_now: F64, own_walk: F64, wanted_heading: F64, wanted_speed: F64,
+          not_avoiding: I64 | None, dt: float) -> tuple[F64, F64]:
     """Local avoidance between the steered characters ``rows`` (r,): the heading (rad) and speed
     (m/s) (each (r,)) that keep them apart, by ORCA
     (:func:`ecs_anim.runtime.kernels.avoidance.orca_velocities`) over all of them at once.
@@ -432,19 +441,26 @@ def avoid(st: CharacterStore, settings: SteeringSettings, rows: I64, here: F64, 
     Each is an agent at its motion's root ``here`` (r, 2) m, moving at ``speed_now`` along
     ``travel`` (r,), that would go at ``wanted_speed`` along ``wanted_heading`` (its path's pure
     pursuit, or the heading and speed given), no faster, with the radius of
-    :func:`avoidance_radius`. A character asked to stand (speed 0: at its path's end) or among
-    the entities ``not_avoiding`` keeps what it wanted and is avoided by the others in full."""
+    :func:`avoidance_radius`, its legs the stadium of ``settings.avoid_stride_legs`` and
+    ``avoid_feet_legs`` (``own_walk`` (r,) m/s, the walk's own speed: the stride shrinks below
+    the slowest steps), and no slower than its slowest steps but standing. A character asked
+    to stand (speed 0: at its path's end) or among the entities ``not_avoiding`` keeps what
+    it wanted and is avoided by the others in full."""
     heading_unit = np.stack([np.cos(wanted_heading), np.sin(wanted_heading)], axis=1)
     travel_unit = np.stack([np.cos(travel), np.sin(travel)], axis=1)
     active = wanted_speed > 0.0
     if not_avoiding is not None and not_avoiding.size:
         active &= ~np.isin(st.entity[rows], not_avoiding)
+    leg = leg_length(st.lengths[rows])
+    striding = np.clip(speed_now / np.maximum(settings.rate_min * own_walk, 1e-9), 0.0, 1.0)
     velocity = orca_velocities(
         here, speed_now[:, None] * travel_unit, wanted_speed[:, None] * heading_unit,
         avoidance_radius(st.lengths[rows], settings), wanted_speed, active,
         range_m=settings.avoid_neighbour_m, time_horizon_s=settings.avoid_time_horizon_s,
         max_neighbours=settings.avoid_neighbours, dt=dt, facing=travel_unit,
-        cone_rad=settings.avoid_cone_rad)
+        cone_rad=settings.avoid_cone_rad, stride_m=settings.avoid_stride_legs * leg * striding,
+        feet_m=settings.avoid_feet_legs * leg,
+        min_speed=np.minimum(settings.rate_min * own_walk, wanted_speed))
     speed = np.hypot(velocity[:, 0], velocity[:, 1])
     heading = np.where(speed > 1e-6, np.arctan2(velocity[:, 1], velocity[:, 0]), wanted_heading)
     # A velocity behind it (away from a walker too close) would be turned to on the spot with

@@ -19,6 +19,7 @@ from ecs_anim.core.morphology import MASS_SEGMENTS
 from ecs_anim.core.normalized import TRAILING_SHAPES, DecodedPose, NormalizedPoses
 from ecs_anim.core.skeleton import N_JOINTS, N_LENGTHS
 from ecs_anim.solver.capsules import N_CAPSULES
+from ecs_anim.solver.joint_speed import N_VALUES
 
 F64 = NDArray[np.float64]
 
@@ -30,7 +31,7 @@ MAX_QUEUE = 16
 MAX_WAYPOINTS = 128
 #: Fields that are not one array row per character: the poses (arrays of their own) and what the
 #: tick derives from them.
-NOT_ROWS = ("poses", "vertebrae", "goals", "solved", "posture", "columns")
+NOT_ROWS = ("poses", "vertebrae", "goals", "solved", "posture", "columns", "clip_positions")
 #: Fields set when a character spawns or a specification component is replaced, between ticks:
 #: the systems' inputs (a system may also write one, e.g. MorphologyAdapt takes a new body in).
 SPEC_FIELDS = ("entity", "lengths", "speed", "queue_clip", "queue_fade_s", "queue_loop",
@@ -89,6 +90,12 @@ class CharacterStore:
     (n, N_CAPSULES, 2, 3) world metres, each capsule's axis (shank l/r, thigh l/r, pelvis, trunk,
     head, upper arm l/r, forearm l/r, hand l/r) and capsule_radii (n, N_CAPSULES) m, as the
     tick ends; overlap_m (n,) each character's deepest overlap with another after separation (m).
+    No pops (:mod:`ecs_anim.solver.joint_speed`, ConstraintSolve): last_clip_values and
+    last_pose_values (n, N_VALUES) the segments the solver sets (frames, directions, fractions,
+    spine points, packed) of the last tick's motion pose and of its result (zeros: none), which
+    this tick's result may move away from only so much faster than the motion;
+    clip_positions (n, N_JOINTS, 3) world m, the motion's own joints this tick, before the solve
+    (None when nothing was solved: the posture is the motion's own).
     """
 
     entity: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -137,6 +144,8 @@ class CharacterStore:
     capsule_ends: F64 = field(default_factory=lambda: np.zeros((0, N_CAPSULES, 2, 3)))
     capsule_radii: F64 = field(default_factory=lambda: np.zeros((0, N_CAPSULES)))
     overlap_m: F64 = field(default_factory=lambda: np.zeros(0))
+    last_clip_values: F64 = field(default_factory=lambda: np.zeros((0, N_VALUES)))
+    last_pose_values: F64 = field(default_factory=lambda: np.zeros((0, N_VALUES)))
     queue_clip: NDArray[np.int64] = field(default_factory=lambda: np.zeros((0, MAX_QUEUE), np.int64))
     queue_fade_s: F64 = field(default_factory=lambda: np.zeros((0, MAX_QUEUE)))
     queue_loop: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, MAX_QUEUE), bool))
@@ -147,6 +156,7 @@ class CharacterStore:
     goals: object | None = None  # this tick's constraint goals (ecs_anim.solver.goals.TickGoals)
     solved: DecodedPose | None = None  # (r, ...) the solver's decoded result for goals.rows
     posture: DecodedPose | None = None
+    clip_positions: F64 | None = None
     #: Columns of the user's own systems (:meth:`add_column`): name -> (n, ...) array, one row
     #: per character like every field above, grown and shrunk with the characters.
     columns: dict[str, np.ndarray] = field(default_factory=dict)
@@ -199,7 +209,7 @@ class CharacterStore:
             self._grow(self.poses, name, f"poses.{name}", count, 0.0, identity)
         for name, fill in self._column_fill.items():
             self.columns[name] = self._grown(self.columns[name], f"columns.{name}", count, fill)
-        self.vertebrae = None
+        self.vertebrae = self.clip_positions = None
         if self.posture is not None:  # no last tick for the new rows: NaN, read as "none"
             for f in fields(DecodedPose):
                 self._grow(self.posture, f.name, f"posture.{f.name}", count, np.nan)
@@ -240,7 +250,7 @@ class CharacterStore:
         self.poses = self.poses.take(keep)
         self.posture = None if self.posture is None else self.posture.take(keep)
         self.columns = {name: column[keep] for name, column in self.columns.items()}
-        self.vertebrae = self.goals = self.solved = None
+        self.vertebrae = self.goals = self.solved = self.clip_positions = None
         self._buffers.clear()
 
 

@@ -40,7 +40,8 @@ I64 = NDArray[np.int64]
 class System(esper.Processor):
     """An esper processor bound to one simulation. Subclasses implement :meth:`run`.
 
-    ``seconds`` accumulates the wall time spent in :meth:`run` (for reports and the benchmark).
+    ``seconds`` accumulates the wall time spent in :meth:`run` (for reports and the benchmark),
+    ``cpu_seconds`` the process's CPU time (every thread's; the frame budget's clock).
     """
 
     #: Components (beyond CharacterRow) a character needs to be in this system's rows.
@@ -57,6 +58,7 @@ class System(esper.Processor):
         super().__init__()
         self.sim = sim
         self.seconds = 0.0
+        self.cpu_seconds = 0.0
         self.ticks = 0
         self._rows_version = -1
         self._rows: I64 = np.zeros(0, np.int64)
@@ -67,7 +69,7 @@ class System(esper.Processor):
         self._row_ground: RowGrounds
 
     def process(self, dt: float) -> None:
-        start = time.perf_counter()
+        start, cpu_start = time.perf_counter(), time.process_time()
         if self.sim.store.n or self.runs_without_characters:
             if self._hooks_version != self.sim.structure_version:
                 self._hooks_version = self.sim.structure_version
@@ -75,6 +77,7 @@ class System(esper.Processor):
                     hook(self.sim)
             self.run(dt)
         self.seconds += time.perf_counter() - start
+        self.cpu_seconds += time.process_time() - cpu_start
         self.ticks += 1
 
     def rows(self) -> I64:
@@ -133,6 +136,7 @@ class RowGrounds:
         used = np.unique(index)
         self.groups = [(grounds[int(k)], np.flatnonzero(index == k)) for k in used]
         self.n = int(index.shape[0])
+        self.used, self.index = used, index
 
     def height(self, xy: NDArray[np.float64]) -> NDArray[np.float64]:
         if len(self.groups) <= 1:
@@ -141,5 +145,17 @@ class RowGrounds:
         out = np.empty(xy.shape[:-1])
         for ground, rows in self.groups:
             out[rows] = ground.height(xy[rows])
+        return out
+
+    def height_of(self, rows: I64, xy: NDArray[np.float64]) -> NDArray[np.float64]:
+        """As :meth:`height`, for the store ``rows`` (k,) only: ``xy`` (k, ..., 2) -> (k, ...)
+        metres (the ground asked about those points alone)."""
+        if len(self.groups) <= 1:
+            return self.height(xy)
+        out = np.empty(xy.shape[:-1])
+        index = self.index[rows]
+        for key, (ground, _) in zip(self.used, self.groups, strict=True):
+            mine = index == key
+            out[mine] = ground.height(xy[mine])
         return out
 

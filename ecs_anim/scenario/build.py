@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 from ecs_anim.core.errors import (
@@ -33,6 +34,8 @@ def build_simulation(scenario: Scenario, window: bool = False,
     sim = Simulation(scenario.motions, scenario.ground, scenario.fps, window=window,
                      rotations=rotations)
     sim.tables = tuple(scenario.tables)
+    if scenario.solver:
+        sim.solver_settings = dataclasses.replace(sim.solver_settings, **scenario.solver)
     entities = {c.name: sim.spawn(c.name, c.morphology, c.player, c.placement, c.team,
                                   c.com_control, c.com_target_xy)
                 for c in scenario.characters}

@@ -270,7 +270,8 @@ def load_scenario(path: str | Path) -> Scenario:
     root = read_tree(path, "scenario", "the scenario")
     top = r.mapping(root, "", {"duration_s": True, "fps": False, "motions": True,
                                "ground": False, "characters": True, "description": False,
-                               "camera": False, "tables": False, "triggers": False})
+                               "camera": False, "tables": False, "triggers": False,
+                               "solver": False})
     fps = r.number(top["fps"], "fps", 1.0, 1000.0, "Hz") if "fps" in top else 30.0
     duration = r.number(top["duration_s"], "duration_s", 1.0 / fps, MAX_DURATION_S, "s")
     motion_nodes = top["motions"]
@@ -382,13 +383,19 @@ def load_scenario(path: str | Path) -> Scenario:
             camera["distance_m"] = r.number(ck["distance_m"], "camera.distance_m", 0.1, 1e4, "m")
         if "target_m" in ck:
             camera["target_m"] = r.vector3(ck["target_m"], "camera.target_m", "m", 1e5)
+    solver: dict[str, Any] = {}
+    if "solver" in top:
+        sk = r.mapping(top["solver"], "solver", {"max_joint_speed_rad_s": False})
+        if "max_joint_speed_rad_s" in sk:
+            solver["max_joint_speed_rad_s"] = r.number(
+                sk["max_joint_speed_rad_s"], "solver.max_joint_speed_rad_s", 0.01, 1000.0, "rad/s")
     starts = np.array([c.placement.position_m for c in characters])
     tables = [_table(r, node, f"tables[{i}]", starts) for i, node in
               enumerate(r.sequence(top["tables"], "tables", MAX_TABLES, "tables") if "tables" in top else [])]
     refs: list[tuple[int, str]] = []
     triggers = scenario_triggers(r, top, characters, motions, refs)
     return Scenario(str(path), duration, fps, motions, ground, characters, camera, tables,
-                    (str(path),) + tuple(str(p) for p in read), triggers, refs)
+                    (str(path),) + tuple(str(p) for p in read), triggers, refs, solver)
 
 
 def _table(r: YamlReader, node: Node, where: str, starts: np.ndarray) -> Table:

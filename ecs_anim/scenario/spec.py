@@ -122,6 +122,8 @@ class Scenario:
     triggers: list[Trigger] = field(default_factory=list)
     #: The constraints triggers name: (character index, constraint name) by placeholder id.
     trigger_constraints: list[tuple[int, str]] = field(default_factory=list)
+    #: The solver's settings the scenario gives (``SolverSettings`` fields by name).
+    solver: dict[str, Any] = field(default_factory=dict)
 
 
 def clip_scenario(motion: NormalizedMotion, morphology: Morphology, ground: Ground,

@@ -1,21 +1,33 @@
-"""The solver's frame budget (``SolverSettings.budget_ms``): fewer iterations where they matter least.
+"""The frame budget (``SolverSettings.budget_ms``): the whole tick held within it, the solve degraded where it matters least.
 
 The decision is made from a cost model, not from a clock, so that it is deterministic given the
-model: a tick costs ``fixed_ms`` (every system but the solver's iterations) plus
-``ms_per_iteration`` for each iteration of each solved character. The simulation calibrates the
-model every tick from the last tick's measured times (``SolverSettings.cost_model`` fixes it
-instead: tests do, and the figures then no longer depend on the machine). Each solved character
-is expected to take as many iterations as it took last tick (the settings' ``iterations`` when
-it was not solved then).
+model: a tick costs ``fixed_ms`` (every system but the constraint solve's characters), plus
+``ms_per_character`` for each solved character (its goals, errors and final re-plant), plus
+``ms_per_iteration`` for each iteration of each solved character. :class:`FrameBudget` (held by
+ConstraintSolve) calibrates the model from the process's CPU time of every tick (per kernel
+thread), smoothed over ticks (:data:`MODEL_SMOOTHING`): one slow tick does not swing the cut
+(``SolverSettings.cost_model`` fixes it instead: tests do, and the figures then no longer depend
+on the machine). Each solved character is expected to take the iterations it needed when last
+solved uncut (the settings' ``iterations`` before that): a character the budget stopped at its
+cap does not look cheap on the next tick, so the cut does not alternate between all and none.
 
-When the expected tick would overrun the budget, :func:`cut_to_budget` cuts, in this order:
+The budget is aimed at :data:`TARGET_SHARE` of ``budget_ms`` (the model's error and the tick's
+noise fit in the rest). When the tick would overrun it, in this order:
 
 1. the lowest-priority constraints, one priority at a time from the lowest, one iteration at a
-   time down to one: a cut goal no longer keeps its character's loop going nor turns the trunk
-   (its limb still serves it analytically on every iteration the character makes); the highest
-   priority is never cut here;
+   time down to one (:func:`cut_to_budget`): a cut goal no longer keeps its character's loop
+   going nor turns the trunk (its limb still serves it analytically on every iteration the
+   character makes); the highest priority is never cut here;
 2. then whole characters, the furthest from the focus point (``SolverSettings.focus_in_world``;
-   the viewer sets its camera's eye) first, down to one iteration each.
+   the viewer sets its camera's eye) first, down to one iteration each (:func:`cut_to_budget`);
+3. and when even one iteration of every character does not fit, characters are *dropped*: their
+   constraints are switched off for the tick (:func:`kept_characters`), those whose highest
+   priority is lowest first, then the furthest from the focus; a dropped character plays and
+   stands on the ground as every unconstrained one. Dropped characters come back only once
+   the tick with them fits in :data:`RESTORE_SHARE` of the budget (hysteresis: between the two
+   shares nothing changes), their constraints fading in over :data:`RESTORE_RAMP_S`. When
+   even dropping every character leaves the tick over its budget (the model's ``fixed_ms``),
+   the report says so (``SolverReport.floor_ms``).
 
 A character whose goals are all cut stops when the last of them does, so the expected cost of a
 character is ``min(expected, its own cap, the largest cap of its goals)``. Feet are not goals
@@ -24,6 +36,7 @@ here (they are planted after the loop whatever the budget).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
@@ -35,36 +48,81 @@ from ecs_anim.core.errors import UsageError
 
 if TYPE_CHECKING:
     from ecs_anim.solver.goals import TickGoals
+    from ecs_anim.solver.shell import SolverSettings
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 
 
+#: The share of the budget the cut aims at: the model's error and the tick's noise fit in the rest.
+TARGET_SHARE = 0.85
+#: Dropped characters come back once the tick with them fits in this share of the budget.
+RESTORE_SHARE = 0.75
+#: How far each measured tick moves the model (the weight of an exponential moving average).
+MODEL_SMOOTHING = 0.2
+#: Seconds a restored character's constraints take to fade back in.
+RESTORE_RAMP_S = 0.25
+#: The solve's last pass over a character (feet re-planted, limbs and head re-aimed after the
+#: loop) costs about one iteration, whatever the character's iterations.
+FINAL_PASS_ITERATIONS = 1.0
+#: A kept character's distance counts as this share of itself when choosing whom to drop, so
+#: that two characters at nearly the same distance do not swap places every tick.
+KEEP_PREFERENCE = 0.9
+
+
 @dataclass(frozen=True)
 class SolverCostModel:
-    """What a tick costs, ms: ``fixed_ms`` (everything but the solver's iterations) plus
-    ``ms_per_iteration`` for each iteration of each solved character."""
+    """What a tick costs, ms: ``fixed_ms`` (everything but the constraint solve's characters),
+    plus ``ms_per_character`` for each solved character (its goals, errors, final re-plant),
+    plus ``ms_per_iteration`` for each iteration of each solved character."""
 
     ms_per_iteration: float
     fixed_ms: float = 0.0
+    ms_per_character: float = 0.0
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.ms_per_iteration) and self.ms_per_iteration > 0.0):
             raise UsageError(f"ms_per_iteration must be a positive number, got {self.ms_per_iteration}")
         if not (np.isfinite(self.fixed_ms) and self.fixed_ms >= 0.0):
             raise UsageError(f"fixed_ms must be a number >= 0, got {self.fixed_ms}")
+        if not (np.isfinite(self.ms_per_character) and self.ms_per_character >= 0.0):
+            raise UsageError(f"ms_per_character must be a number >= 0, got {self.ms_per_character}")
 
-    def tick_ms(self, iterations: float) -> float:
-        """The tick's cost for this many character-iterations, ms."""
-        return self.fixed_ms + self.ms_per_iteration * float(iterations)
+    def tick_ms(self, iterations: float, characters: int = 0) -> float:
+        """The tick's cost for this many character-iterations of this many solved characters,
+        ms."""
+        return self.fixed_ms + self.ms_per_character * characters \
+            + self.ms_per_iteration * float(iterations)
+
+    def with_characters(self, characters: int) -> SolverCostModel:
+        """The same model with ``characters`` solved characters' own cost in ``fixed_ms`` (what
+        :func:`cut_to_budget` decides by: it changes only iterations)."""
+        return SolverCostModel(self.ms_per_iteration,
+                               self.fixed_ms + self.ms_per_character * characters)
 
     @staticmethod
-    def calibrated(tick_ms: float, solve_ms: float, iterations: int) -> SolverCostModel | None:
-        """The model of a measured tick: ``tick_ms`` in all, ``solve_ms`` of it in the solver's
-        iterations, which made ``iterations`` character-iterations (None if it made none)."""
+    def calibrated(tick_ms: float, solve_ms: float, iterations: int, characters: int = 0
+                   ) -> SolverCostModel | None:
+        """The model of a measured tick: ``tick_ms`` in all, ``solve_ms`` of it in the solve
+        of ``characters`` characters, which made ``iterations`` character-iterations (None if
+        it made none). The solve's last pass (the re-plant after the loop) counts as
+        :data:`FINAL_PASS_ITERATIONS` more iterations of each character, its own cost; all but
+        the solve is ``fixed_ms`` (the constraint solve's gather runs over every character,
+        solved or not)."""
         if iterations <= 0 or not solve_ms > 0.0:
             return None
-        return SolverCostModel(solve_ms / iterations, max(tick_ms - solve_ms, 0.0))
+        per_iteration = solve_ms / (iterations + FINAL_PASS_ITERATIONS * characters)
+        return SolverCostModel(per_iteration, max(tick_ms - solve_ms, 0.0),
+                               FINAL_PASS_ITERATIONS * per_iteration if characters else 0.0)
+
+    def smoothed(self, measured: SolverCostModel, weight: float = MODEL_SMOOTHING
+                 ) -> SolverCostModel:
+        """This model moved ``weight`` of the way towards ``measured`` (each cost alike)."""
+        def blend(old: float, new: float) -> float:
+            return old + weight * (new - old)
+        return SolverCostModel(blend(self.ms_per_iteration, measured.ms_per_iteration),
+                               blend(self.fixed_ms, measured.fixed_ms),
+                               blend(self.ms_per_character, measured.ms_per_character))
 
 
 @dataclass(frozen=True)
@@ -137,6 +195,169 @@ def cut_to_budget(goals: TickGoals, expected: I64, distance_m: F64, budget_ms: f
     return BudgetCut(goal_caps, row_caps, before, tick_ms(), cut_priorities, cut_rows)
 
 
+def uncut_need(previous: I64, used: I64, caps: I64) -> I64:
+    """(r,) the iterations each solved character is expected to need when next solved: what it
+    ``used`` (r,) where it stopped before its ``caps`` (r,: the budget's cut,
+    :func:`effective_caps`), else the larger of that and its ``previous`` need (r,; 0: not
+    known): the budget stopped it, so what it needs is not known."""
+    need: I64 = np.where(used < caps, used, np.maximum(previous, used))
+    return need
+
+
+def effective_caps(goals: TickGoals, goal_caps: I64, row_caps: I64, iterations: int) -> I64:
+    """(r,) the most iterations each character could take under these caps (its own, and the
+    largest of its goals')."""
+    return _expected_cost(goals, np.full(goals.rows.size, iterations, np.int64), goal_caps,
+                          row_caps)
+
+
+def kept_characters(model: SolverCostModel, candidates: int, kept_now: int, target_ms: float,
+                    restore_ms: float) -> int:
+    """How many of ``candidates`` characters with an active constraint to solve: as many as
+    fit in ``target_ms`` at one iteration each by ``model``; ``kept_now`` of them were solved
+    last tick, and the dropped ones come back only as far as the tick with them fits in
+    ``restore_ms`` (<= ``target_ms``; in between, ``kept_now`` stays)."""
+    least = model.ms_per_character + model.ms_per_iteration  # a character at one iteration
+
+    def fitting(ms: float) -> int:
+        return int(min(max((ms - model.fixed_ms) // least, 0), candidates))
+
+    most = fitting(target_ms)
+    return most if kept_now > most else max(kept_now, min(fitting(restore_ms), most))
+
+
+def rows_kept(top_priority: F64, distance_m: F64, kept_before: NDArray[np.bool_], count: int
+              ) -> NDArray[np.bool_]:
+    """(c,) which ``count`` of c candidate characters to solve: those whose highest active
+    priority ``top_priority`` (c,) is highest, then the nearest the focus (``distance_m`` (c,),
+    a character solved last tick (``kept_before`` (c,)) counting :data:`KEEP_PREFERENCE` of its
+    distance), then the earliest rows."""
+    order = np.lexsort((np.arange(top_priority.size),
+                        np.where(kept_before, KEEP_PREFERENCE * distance_m, distance_m),
+                        -top_priority))
+    keep = np.zeros(top_priority.size, bool)
+    keep[order[:count]] = True
+    return keep
+
+
+class FrameBudget:
+    """The frame budget's state between ticks (ConstraintSolve holds one, per simulation): the
+    cost model calibrated from the measured ticks (``model``), what each store row needed
+    when last solved uncut, and each row's presence (n,): 1 solved, 0 dropped, in between its
+    constraints fading back in. Reset when the store's rows change."""
+
+    def __init__(self) -> None:
+        self.model: SolverCostModel | None = None
+        self.presence: F64 = np.ones(0)
+        self._need: I64 = np.zeros(0, np.int64)
+        self._version = -1
+        self._mark_cpu_s: float | None = None
+        self._marks = 0
+        # The last tick's solve: (its CPU s, iterations, characters), calibrated against the
+        # whole tick at the next mark; the character-iterations the cut allowed last tick.
+        self._last_solve: tuple[float, int, int] | None = None
+        self._allowance: float | None = None
+
+    def start_tick(self, cpu_s: float, threads: int, version: int, n: int) -> None:
+        """At the start of ConstraintSolve's run: ``cpu_s`` every system's CPU time so far
+        (s), over ``threads`` kernel threads; a whole tick lies between two marks, and the
+        model moves towards it. ``version``/``n``: the store's structure and rows."""
+        if version != self._version or self._need.size != n:
+            self._version = version
+            self._need = np.zeros(n, np.int64)
+            self.presence = np.ones(n)
+            self._allowance = None
+        # (the first tick is not measured: it loads the kernels)
+        if self._mark_cpu_s is not None and self._last_solve is not None and self._marks > 1:
+            solve_s, iterations, characters = self._last_solve
+            scale = 1e3 / max(threads, 1)
+            tick_ms = (cpu_s - self._mark_cpu_s) * scale
+            measured = SolverCostModel.calibrated(tick_ms, solve_s * scale, iterations, characters)
+            if measured is not None:
+                self.model = measured if self.model is None else self.model.smoothed(measured)
+            elif self.model is not None:  # nothing solved: all of the tick is the fixed part
+                self.model = dataclasses.replace(self.model, fixed_ms=self.model.fixed_ms
+                                                 + MODEL_SMOOTHING * (tick_ms - self.model.fixed_ms))
+        self._mark_cpu_s = cpu_s
+        self._marks += 1
+        self._last_solve = None
+
+    def aimed(self, settings: SolverSettings, model: SolverCostModel | None) -> SolverSettings:
+        """The settings the cut decides by, ``model`` the solved characters' (:meth:`for_cut`):
+        the budget aimed at :data:`TARGET_SHARE` of itself when the model is measured (a given
+        ``cost_model`` is taken as exact), as the character-iterations it allows: fewer as soon
+        as the model says so, more only once :data:`RESTORE_SHARE` of the budget allows more
+        than last tick (in between, last tick's), so the cut does not follow the measurements'
+        noise from tick to tick."""
+        if settings.budget_ms is None or model is None:
+            return settings
+        share = 1.0 if settings.cost_model is not None else TARGET_SHARE
+
+        def allowed(ms: float) -> float:
+            return max((ms - model.fixed_ms) / model.ms_per_iteration, 0.0)
+
+        most = allowed(settings.budget_ms * share)
+        back = allowed(settings.budget_ms * share * RESTORE_SHARE / TARGET_SHARE)
+        self._allowance = most if self._allowance is None else min(most, max(self._allowance, back))
+        return dataclasses.replace(
+            settings, budget_ms=max(model.tick_ms(self._allowance), 1e-9),
+            cost_model=None if settings.cost_model is None else model)
+
+    def for_cut(self, model: SolverCostModel, solved_owners: I64) -> SolverCostModel:
+        """``model`` with the solved characters' own cost in its fixed part
+        (:meth:`SolverCostModel.with_characters`); ``solved_owners``: the rows of the
+        constraints solved this tick (repeats allowed)."""
+        solved = np.zeros(self.presence.size, bool)
+        solved[solved_owners] = True
+        return model.with_characters(int(solved.sum()))
+
+    def expected(self) -> I64:
+        """(n,) what each row is expected to take when solved (0: not known)."""
+        return self._need
+
+    def weights(self, weight: F64, owner: I64, priority: F64, pelvis_in_world: F64,
+                settings: SolverSettings, dt: float) -> F64:
+        """The constraints' ``weight`` (m,) with the dropped characters' switched off and the
+        restored ones' fading in (``owner`` (m,) their store rows, ``priority`` (m,),
+        ``pelvis_in_world`` (n, 3) m), as :func:`kept_characters` and :func:`rows_kept`
+        decide by the model (the settings' own first)."""
+        model = settings.cost_model or self.model
+        if settings.budget_ms is None or model is None:
+            return weight
+        wants = weight > 0
+        top = np.full(self.presence.size, -np.inf)
+        np.maximum.at(top, owner[wants], priority[wants])
+        candidate = np.flatnonzero(np.isfinite(top))
+        kept_before = self.presence[candidate] > 0
+        share = 1.0 if settings.cost_model is not None else TARGET_SHARE
+        count = kept_characters(model, candidate.size, int(kept_before.sum()),
+                                settings.budget_ms * share,
+                                settings.budget_ms * share * RESTORE_SHARE / TARGET_SHARE)
+        distance = (np.zeros(candidate.size) if settings.focus_in_world is None else
+                    np.linalg.norm(pelvis_in_world[candidate] - settings.focus_in_world, axis=1))
+        keep = rows_kept(top[candidate], distance, kept_before, count)
+        step = dt / RESTORE_RAMP_S
+        self.presence[candidate] = np.where(keep, np.minimum(self.presence[candidate] + step, 1.0),
+                                            0.0)
+        if keep.all() and self.presence.min(initial=1.0) >= 1.0:
+            return weight
+        return weight * self.presence[owner]
+
+    def dropped(self, weight: F64, owner: I64) -> I64:
+        """The store rows whose constraints (``weight`` (m,) before the budget, ``owner``
+        (m,)) the budget switched off this tick, sorted."""
+        wanted = np.zeros(self.presence.size, bool)
+        wanted[owner[weight > 0]] = True
+        return np.flatnonzero(wanted & (self.presence <= 0.0))
+
+    def solved(self, rows: I64, used: I64, caps: I64, solve_cpu_s: float) -> None:
+        """After the solve: ``rows`` (r,) solved, each having ``used`` (r,) iterations under
+        ``caps`` (r,, :func:`effective_caps`); the solve's CPU time (s), for the next mark's
+        calibration."""
+        self._need[rows] = uncut_need(self._need[rows], used, caps)
+        self._last_solve = (solve_cpu_s, int(used.sum()), int(rows.size))
+
+
 @dataclass(frozen=True)
 class PriorityError:
     """The active constraints of one priority after this tick's solve: how many, how many the
@@ -160,7 +381,10 @@ class SolverReport:
     tick); expected_ms / cut_ms: the tick's cost by that model before and after the cut (NaN
     without a model); priority_iterations: each cut priority and the iterations its goals kept;
     cut_characters: the entities whose own iterations were cut (to one; furthest from the focus
-    first); errors: per priority of the active constraints, :class:`PriorityError` (made from
+    first); dropped_characters: the entities whose constraints the budget switched off this
+    tick (:class:`FrameBudget`), sorted; floor_ms: what the tick costs by the model with every
+    character dropped (NaN without a model): over ``budget_ms``, nothing the budget cuts can
+    hold it; errors: per priority of the active constraints, :class:`PriorityError` (made from
     ``constraint_errors`` (priority, error, orientation, cut) (m,) each, this tick's table
     columns: :func:`errors_by_priority`, when first asked for)."""
 
@@ -175,6 +399,8 @@ class SolverReport:
     cut_characters: tuple[int, ...]
     constraint_errors: tuple[F64, F64, NDArray[np.bool_], NDArray[np.bool_]] = field(
         repr=False, compare=False)
+    dropped_characters: tuple[int, ...] = ()
+    floor_ms: float = float("nan")
 
     @functools.cached_property
     def errors(self) -> dict[float, PriorityError]:
@@ -184,7 +410,12 @@ class SolverReport:
     @property
     def cut(self) -> bool:
         """Whether the budget cut anything this tick."""
-        return bool(self.priority_iterations or self.cut_characters)
+        return bool(self.priority_iterations or self.cut_characters or self.dropped_characters)
+
+    @property
+    def characters_cut(self) -> int:
+        """How many characters the budget cut this tick: iterations cut to one, or dropped."""
+        return len(self.cut_characters) + len(self.dropped_characters)
 
 
 def errors_by_priority(priority: F64, error: F64, orientation: NDArray[np.bool_],
@@ -205,5 +436,6 @@ def errors_by_priority(priority: F64, error: F64, orientation: NDArray[np.bool_]
     return out
 
 
-__all__ = ["BudgetCut", "PriorityError", "SolverCostModel", "SolverReport", "cut_to_budget",
-           "errors_by_priority"]
+__all__ = ["BudgetCut", "FrameBudget", "PriorityError", "SolverCostModel", "SolverReport",
+           "cut_to_budget", "effective_caps", "errors_by_priority", "kept_characters", "rows_kept",
+           "uncut_need"]

@@ -93,7 +93,12 @@ class SolverSettings:
     take, ms (None: no budget); when the tick would overrun it, the lowest priorities, then the
     characters furthest from ``focus_in_world`` (a world point, m; None: the earlier rows are
     cut first), get fewer iterations. ``cost_model``: the cost the cut is decided by (None:
-    calibrated every tick from the last tick's measured times)."""
+    calibrated every tick from the last tick's measured times).
+
+    ``max_joint_speed_rad_s``: how much faster than the motion's own segment a segment the
+    solver sets may turn in a second, rad/s (None, the default: as fast as the solve likes); a
+    trunk the solve folds in one tick then bends over several
+    (:mod:`ecs_anim.solver.joint_speed`)."""
 
     iterations: int = 6
     tolerance_m: float = 1e-4
@@ -106,8 +111,13 @@ class SolverSettings:
     budget_ms: float | None = None
     focus_in_world: tuple[float, float, float] | None = None
     cost_model: SolverCostModel | None = None
+    max_joint_speed_rad_s: float | None = None
 
     def __post_init__(self) -> None:
+        if self.max_joint_speed_rad_s is not None and not (
+                np.isfinite(self.max_joint_speed_rad_s) and self.max_joint_speed_rad_s > 0):
+            raise UsageError(f"max_joint_speed_rad_s must be a positive number of radians a "
+                             f"second or None, got {self.max_joint_speed_rad_s}")
         if not 0.0 <= self.stall_fraction < 1.0:
             raise UsageError(f"stall_fraction must be in [0, 1), got {self.stall_fraction}")
         if self.budget_ms is not None and not (np.isfinite(self.budget_ms) and self.budget_ms > 0):

@@ -54,6 +54,22 @@ def test_bench_text_names_the_threads_and_every_size(capsys):
     assert [r[0] for r in rows] == ["4", "8"]
 
 
+def test_bench_budget_prints_the_cut_tick_by_tick(capsys):
+    """A budget nothing could overrun (8 characters, 1 s a tick): nothing cut or dropped, no
+    tick over it; the spread of each figure over the timed ticks, per size."""
+    assert main(["bench", "--constrained", "--budget-ms", "1000", "--json", *QUICK]) == 0
+    budget = json.loads(capsys.readouterr().out)["budget"]
+    assert budget["characters_held"] == 8
+    for size in budget["sizes"]:
+        assert size["cut_per_tick"] == [0, 0, 0] and size["dropped_per_tick"] == [0, 0, 0]
+        assert size["ticks_over_budget_cpu"] == 0 and size["largest_change_of_cut"] == 0
+        low, median, high = size["cpu_ms_per_tick_spread"]
+        assert 0 < low <= median <= high < 1000 and size["floor_ms"] < 1000
+    assert main(["bench", "--constrained", "--budget-ms", "1000", *QUICK]) == 0
+    text = capsys.readouterr().out
+    assert "cut to 1 it." in text and "over (CPU/wall)" in text and "cannot hold" not in text
+
+
 def test_bench_sizes_default_to_four_and_bad_sizes_are_one_line_errors(capsys):
     from ecs_anim.apps.bench import bench_sizes
 

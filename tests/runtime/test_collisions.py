@@ -143,3 +143,34 @@ def test_a_two_against_two_fight_of_a_small_and_a_tall_body_touches_without_over
     # the 1.1 m kicker cannot reach; the 1.75 m one lands on the 2.1 m chest
     assert errors[("kicker_2", "kick_torso")] < 0.1
     assert errors[("defender_1", "ward_off")] < 0.1 and errors[("defender_2", "ward_off")] < 0.1
+
+
+def test_stuck_pairs_are_reported_once_each_a_line_a_round_naming_the_first_three():
+    """Walkers on the bench's grid ignore each other: many pairs end in each other with both
+    feet planted (neither may move). Each pair is reported once; a round's new pairs make one
+    line naming at most three and counting the rest (a line each buried the output)."""
+    import re
+
+    from ecs_anim.runtime.bench_scene import walkers_on_bumps
+    from ecs_anim.systems.collision_separate import STUCK_NAMED, CollisionSeparate
+
+    sim, _ = walkers_on_bumps(200)
+    with sim:
+        for _ in range(30):
+            sim.step()
+        separate = next(s for s in sim.systems if isinstance(s, CollisionSeparate))
+        lines = [m for m in sim.messages if "neither may move" in m]
+    counted = 0
+    for line in lines:
+        many = re.search(r": (\d+) pairs overlap where neither may move: (.*)$", line)
+        if many is None:
+            assert re.search(r"'s \w+ and .*'s \w+ overlap by \d+ mm and neither may move$", line)
+            counted += 1
+            continue
+        k = int(many.group(1))
+        named = many.group(2).split("; ")
+        assert len(named) == min(k, STUCK_NAMED), line
+        assert (k > STUCK_NAMED) == named[-1].endswith(f"and {k - STUCK_NAMED} more"), line
+        counted += k
+    assert counted == len(separate.reported) > STUCK_NAMED
+    assert len(lines) < counted  # some lines name several pairs

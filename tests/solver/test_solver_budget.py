@@ -12,7 +12,7 @@ from ecs_anim.core.errors import EcsAnimError
 from ecs_anim.core.morphology import Morphology
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.runtime.simulation import Simulation
-from ecs_anim.solver.budget import SolverCostModel
+from ecs_anim.solver.budget import SolverCostModel, kept_characters, rows_kept, uncut_need
 from ecs_anim.solver.shell import SolverSettings
 from support.solve import Capture, assert_same_solve
 
@@ -117,18 +117,64 @@ def test_the_model_is_calibrated_from_measured_times():
     assert model == SolverCostModel(ms_per_iteration=0.1, fixed_ms=20.0)
     assert model.tick_ms(50) == pytest.approx(25.0)
     assert SolverCostModel.calibrated(30.0, 10.0, 0) is None
+    # 10 characters: their last passes count as 10 more iterations, their own cost.
+    model = SolverCostModel.calibrated(tick_ms=30.0, solve_ms=11.0, iterations=100, characters=10)
+    assert model == SolverCostModel(ms_per_iteration=0.1, fixed_ms=19.0, ms_per_character=0.1)
+    assert model.tick_ms(100, 10) == pytest.approx(30.0)
+    assert model.with_characters(10) == SolverCostModel(ms_per_iteration=0.1, fixed_ms=20.0)
+    # A measured tick moves the model a fifth of the way (MODEL_SMOOTHING).
+    moved = model.smoothed(SolverCostModel(ms_per_iteration=0.2, fixed_ms=29.0))
+    assert moved.ms_per_iteration == pytest.approx(0.12) and moved.fixed_ms == pytest.approx(21.0)
+
+
+def test_a_character_the_budget_stopped_keeps_its_need():
+    """Stopped before its cap: it needed what it used; stopped at its cap: at least that and what
+    it needed before (the cut's iterations are not a need: the next tick does not expect it cheap)."""
+    need = uncut_need(previous=np.array([0, 5, 5, 2]), used=np.array([3, 1, 2, 4]),
+                      caps=np.array([6, 1, 6, 4]))
+    assert need.tolist() == [3, 5, 2, 4]
+
+
+def test_characters_are_dropped_at_once_and_restored_with_hysteresis():
+    """1 ms fixed, 1 ms a character at one iteration (0.5 + 0.5): a 10 ms target holds 9; the
+    dropped ones come back only as far as 8 ms holds them (7), never back and forth."""
+    model = SolverCostModel(ms_per_iteration=0.5, fixed_ms=1.0, ms_per_character=0.5)
+    assert kept_characters(model, 20, 20, 10.0, 8.0) == 9   # over: drop to what fits
+    assert kept_characters(model, 20, 9, 10.0, 8.0) == 9    # within the band: stays
+    assert kept_characters(model, 20, 5, 10.0, 8.0) == 7    # room: back to the restore level
+    assert kept_characters(model, 4, 2, 10.0, 8.0) == 4     # all fit
+    assert kept_characters(SolverCostModel(0.5, fixed_ms=12.0), 20, 20, 10.0, 8.0) == 0
+
+
+def test_the_highest_priority_then_the_nearest_are_kept():
+    priority = np.array([1.0, 10.0, 10.0, 10.0, 1.0])
+    distance = np.array([0.0, 9.0, 3.0, 5.0, 1.0])
+    kept_before = np.array([False, False, False, False, False])
+    assert rows_kept(priority, distance, kept_before, 3).tolist() == [False, True, True, True,
+                                                                       False]
+    assert rows_kept(priority, distance, kept_before, 2).tolist() == [False, False, True, True,
+                                                                       False]
+    # One kept last tick counts 0.9 of its distance: 9 m kept beats 8.5 m new.
+    distance[3] = 8.5
+    kept_before[1] = True
+    assert rows_kept(priority, distance, kept_before, 2).tolist() == [False, True, True, False,
+                                                                       False]
 
 
 def test_without_a_given_model_the_first_tick_cuts_nothing(idle):
-    """Nothing measured yet: no model, no cut; a whole tick measured between the first two
-    solves, the third tick cuts by that model."""
-    sim, _ = four_reachers(idle, SolverSettings(budget_ms=1e-6), ticks=2)
+    """Nothing measured yet: no model, no cut; the first tick (it loads the kernels) is not
+    measured; the second, measured whole, gives the third tick's model. A budget nothing can
+    hold (1e-6 ms) drops every character and says so: its floor (the tick with every character
+    dropped) is over it."""
+    sim, entities = four_reachers(idle, SolverSettings(budget_ms=1e-6), ticks=2)
     second = sim.solver_report()
     assert second is not None and second.model is None and not second.cut
+    assert np.isnan(second.floor_ms)
     sim.step()
     third = sim.solver_report()
-    assert third is not None and third.model is not None and third.cut
-    assert third.model.ms_per_iteration > 0 and third.cut_ms < third.expected_ms
+    assert third is not None and third.cut and third.characters == 0
+    assert third.dropped_characters == tuple(entities) and third.floor_ms > 1e-6
+    assert third.errors == {}  # a dropped character's constraints are off for the tick
 
 
 def test_bad_budget_settings_say_what():

@@ -35,7 +35,7 @@ def cmd_import(args: argparse.Namespace) -> int:
     from ecs_anim.io.c3d.importing import import_c3d
     from ecs_anim.io.fbx import import_fbx
     from ecs_anim.io.importing import import_bvh
-    from ecs_anim.io.opensim_mot import refuse_mot
+    from ecs_anim.io.opensim_mot import import_mot, refuse_mot
     from ecs_anim.io.positions import PositionOptions, import_positions
     from ecs_anim.io.smpl import import_amass, is_amass
     from ecs_anim.io.trc import import_trc
@@ -63,12 +63,16 @@ def cmd_import(args: argparse.Namespace) -> int:
             args.fill_absent_from or args.max_gap is not None):
         raise EcsAnimError("--max-gap and --fill-absent-from are for .c3d and .trc files; none "
                            "is given")
-    if args.body_model and not any(s.suffix.lower() in (".amc", ".npz") for s in sources):
-        raise EcsAnimError("--body-model is for AMASS .npz motions (a SMPL body model) and .amc "
-                           "motions (their .asf skeleton); none is given")
+    if args.body_model and not any(s.suffix.lower() in (".amc", ".npz", ".mot", ".sto")
+                                   for s in sources):
+        raise EcsAnimError("--body-model is for AMASS .npz motions (a SMPL body model), .amc "
+                           "motions (their .asf skeleton) and OpenSim .mot/.sto joint angles "
+                           "(their .osim model); none is given")
     # The ASF skeleton of .amc files, or the SMPL body model of AMASS files.
     asf = args.body_model if args.body_model and args.body_model.lower().endswith(".asf") else None
-    body_model = args.body_model if args.body_model and asf is None else None
+    osim = args.body_model if args.body_model and args.body_model.lower().endswith(".osim") \
+        else None
+    body_model = args.body_model if args.body_model and asf is None and osim is None else None
     if args.take is not None and not any(s.suffix.lower() == ".fbx" for s in sources):
         raise EcsAnimError("--take is for .fbx files; none is given")
     positions = [s for s in sources if s.suffix.lower() in POSITION_SUFFIXES]
@@ -95,15 +99,19 @@ def cmd_import(args: argparse.Namespace) -> int:
             if src.is_dir():
                 raise EcsAnimError(f"{src}: a folder; give the .bvh, .c3d or .fbx files in it "
                                    f"(e.g. {src}/*.bvh)")
-            if suffix in (".mot", ".sto"):
+            if suffix in (".mot", ".sto") and osim is None:
                 raise refuse_mot(src)
+            if suffix == ".osim":
+                raise EcsAnimError(f"{src}: an OpenSim model holds no motion; import its .mot "
+                                   f"joint angles with --body-model {src}")
             if suffix == ".asf":
                 raise EcsAnimError(f"{src}: an ASF holds a skeleton only; import its .amc "
                                    "motions (the .asf beside them is found, or give it with "
                                    "--body-model)")
-            if suffix not in (".bvh", ".c3d", ".fbx", ".trc", ".amc", *POSITION_SUFFIXES):
+            if suffix not in (".bvh", ".c3d", ".fbx", ".trc", ".amc", ".mot", ".sto",
+                              *POSITION_SUFFIXES):
                 raise EcsAnimError(f"{src}: unsupported file type {src.suffix!r} (expected .bvh, "
-                                   f".c3d, .fbx, .trc, .amc, AMASS .npz or joint positions "
+                                   f".c3d, .fbx, .trc, .amc, .mot, AMASS .npz or joint positions "
                                    f"{', '.join(POSITION_SUFFIXES)})")
             if suffix in (".c3d", ".trc") and args.stature is not None:
                 raise EcsAnimError(f"{src}: --stature applies to BVH files (markers are in the "
@@ -129,6 +137,17 @@ def cmd_import(args: argparse.Namespace) -> int:
                 if suffix == ".fbx":
                     motion = import_fbx(src, args.map, args.unit, thresholds, args.up, args.trim,
                                         args.stature, not args.no_treadmill, args.take)
+                elif suffix in (".mot", ".sto"):
+                    assert osim is not None
+                    given = [flag for flag, value in (("--map", args.map), ("--unit", args.unit),
+                                                      ("--up", args.up),
+                                                      ("--stature", args.stature)) if value]
+                    if given:
+                        verb = "does" if len(given) == 1 else "do"
+                        raise EcsAnimError(f"{src}: {', '.join(given)} {verb} not apply to OpenSim "
+                                           "joint angles (the model is in metres, Y up, and its "
+                                           "bodies are the joints)")
+                    motion = import_mot(src, osim, thresholds, args.trim, not args.no_treadmill)
                 elif suffix == ".amc":
                     motion = import_amc(src, asf, args.map, args.unit, thresholds, args.up,
                                         args.trim, args.stature, not args.no_treadmill, args.fps)

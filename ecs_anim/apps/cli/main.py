@@ -212,7 +212,8 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
     print(f"{args.scenario}: {ticks} ticks ({seconds:g} s at {scenario.fps:g} Hz), "
           f"{len(names)} characters")
     print(f"  {'character':14s} {'float mm':>8s} {'penetr. mm':>10s} {'slide max mm/fr':>15s} "
-          f"{'bone err m':>10s} {'stride/leg':>10s} {'COM err mm':>10s} {'overlap mm':>10s}")
+          f"{'bone err m':>10s} {'stride/leg':>10s} {'COM err mm':>10s} {'overlap mm':>10s} "
+          f"{'joint m/s (clip)':>16s}")
     for c in report["characters"]:
         stride = "-" if c["stride_per_leg_length"] is None else f"{c['stride_per_leg_length']:.3f}"
         com = "-" if c["com_error_mm_max"] is None else f"{c['com_error_mm_max']:.1f}"
@@ -221,7 +222,8 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
         print(f"  {c['name'][:14]:14s} {c['floating_mm_max']:8.3f} "
               f"{c['ground_penetration_mm_max']:10.3f} {c['foot_sliding_mm_per_frame']['max']:15.3f} "
               f"{c['bone_length_error_m_max']:10.1e} {stride:>10s} {com:>10s} "
-              f"{c['overlap_mm_max']:10.1f}{removed}")
+              f"{c['overlap_mm_max']:10.1f} "
+              f"{c['joint_speed_m_s_max']:7.2f} ({c['clip_joint_speed_m_s_max']:5.2f}){removed}")
     if report["constraints"]:
         # While a constraint eases in or out its goal is a blend, so its error against the full
         # target says nothing; the report's JSON has both.
@@ -356,10 +358,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lowpass", type=positive_float, metavar="HZ",
                    help="joint positions: smooth jitter with a zero-lag low-pass at this "
                    "cut-off (default: off, for mocap-grade data; 6 for a video estimator's)")
-    p.add_argument("--body-model", metavar="MODEL.npz|SKELETON.asf",
+    p.add_argument("--body-model", metavar="MODEL.npz|SKELETON.asf|MODEL.osim",
                    help="AMASS .npz: your SMPL, SMPL-H or SMPL-X body model (.npz; licensed, not "
                    "shipped: docs/import.md says where to get it); .amc: its ASF skeleton "
-                   "(default: the .asf beside it)")
+                   "(default: the .asf beside it); OpenSim .mot/.sto joint angles: the .osim "
+                   "model they were computed on")
     p.add_argument("--take", metavar="NAME",
                    help="FBX: the animation stack (take) to import (default: the first; the "
                    "import says which others the file has)")
@@ -437,8 +440,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rotations", action="store_true",
                    help="pipeline: also compute local joint rotations every tick (as BVH export does)")
     p.add_argument("--budget-ms", type=positive_float, metavar="MS",
-                   help="pipeline, with --constrained: the solver's frame budget (ms a tick); "
-                        "prints how many characters it holds with the top priority within 1 mm")
+                   help="pipeline, with --constrained: the tick's frame budget (CPU ms a tick); "
+                        "prints the cut tick by tick and how many characters it holds")
     p.add_argument("--sizes", type=size_list, metavar="N,N,...",
                    help="pipeline: the numbers of characters timed (default: N/8, N/4, N/2, N)")
     p.add_argument("--no-compile-timing", action="store_true",

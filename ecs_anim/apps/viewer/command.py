@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import re
+from collections.abc import Callable
 
 from ecs_anim.core.errors import EcsAnimError
 from ecs_anim.core.files import input_problem, output_problem
@@ -31,6 +33,33 @@ def seconds(text: str) -> float:
     return value
 
 
+def degrees(low: float, high: float) -> Callable[[str], float]:
+    """An argparse type: an angle in degrees from ``low`` to ``high``."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected degrees, got {text!r}") from None
+        if not (math.isfinite(value) and low <= value <= high):
+            raise argparse.ArgumentTypeError(f"expected {low:g} to {high:g} degrees, got {text!r}")
+        return value
+
+    return parse
+
+
+def only_names(text: str | None, names: list[str]) -> frozenset[str] | None:
+    """``--only``'s comma-separated names, each checked against the scenario's characters."""
+    if text is None:
+        return None
+    wanted = [n.strip() for n in text.split(",") if n.strip()]
+    unknown = [n for n in wanted if n not in names]
+    if unknown or not wanted:
+        raise EcsAnimError(f"--only {text!r}: no character named {', '.join(unknown) or '(none given)'}; "
+                           f"the scenario has {', '.join(names)}")
+    return frozenset(wanted)
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", metavar="SCENARIO.yaml")
     p.add_argument("--screenshot", metavar="OUT.png",
@@ -39,6 +68,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="with --screenshot: the simulation time of the frame (default 0)")
     p.add_argument("--size", type=window_size, default=(1280, 720), metavar="WxH",
                    help="window or image size in pixels (default 1280x720)")
+    p.add_argument("--yaw-deg", type=degrees(-360, 360), metavar="DEG",
+                   help="the eye's direction about Z from +x (overrides the scenario's camera)")
+    p.add_argument("--pitch-deg", type=degrees(-89, 89), metavar="DEG",
+                   help="the eye's elevation (overrides the scenario's camera)")
+    p.add_argument("--only", metavar="NAME,NAME",
+                   help="with --screenshot: draw and frame only these characters (all are "
+                        "simulated)")
     p.add_argument("--no-targets", action="store_true", help="hide constraint targets")
     p.add_argument("--no-com", action="store_true", help="hide the centres of mass")
     p.add_argument("--force", action="store_true", help="overwrite an existing screenshot")
@@ -54,10 +90,14 @@ def cmd_view(args: argparse.Namespace) -> int:
         if problem is not None:
             raise EcsAnimError(f"--screenshot {problem}")
     scenario = load_scenario(args.scenario)
+    looks = {key: value for key, value in (("yaw_deg", args.yaw_deg), ("pitch_deg", args.pitch_deg))
+             if value is not None}
+    if looks:
+        scenario = dataclasses.replace(scenario, camera={**scenario.camera, **looks})
     width, height = args.size
     if args.screenshot is None:
-        if args.at or args.force:
-            raise EcsAnimError("--at and --force go with --screenshot OUT.png")
+        if args.at or args.force or args.only is not None:
+            raise EcsAnimError("--at, --only and --force go with --screenshot OUT.png")
         from ecs_anim.apps.viewer.window import run_viewer
 
         run_viewer(scenario, width, height, show_targets=not args.no_targets,
@@ -68,10 +108,12 @@ def cmd_view(args: argparse.Namespace) -> int:
         raise EcsAnimError(f"--screenshot {problem}")
     if args.at > scenario.duration_s:
         raise EcsAnimError(f"--at {args.at:g} is after the scenario's end ({scenario.duration_s:g} s)")
+    only = only_names(args.only, [c.name for c in scenario.characters])
     from ecs_anim.apps.viewer.screenshot import write_screenshot
 
     shot = write_screenshot(scenario, args.screenshot, args.at, width, height, args.force,
-                            show_targets=not args.no_targets, show_com=not args.no_com)
+                            show_targets=not args.no_targets, show_com=not args.no_com,
+                            only=only)
     print(f"wrote {args.screenshot}: {width}x{height}, t = {shot.frame.time_s:.3f} s, "
           f"{shot.frame.n_characters} characters")
     return 0

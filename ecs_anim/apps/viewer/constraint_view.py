@@ -115,8 +115,16 @@ def _kinds(table: Any) -> I64:
     return np.asarray(getattr(table, "kind", np.zeros(table.m, np.int64)), dtype=np.int64)
 
 
-def constraint_marks(sim: Simulation) -> ConstraintMarks:
-    """The active point constraints (not orientations or areas) for the posture in the store."""
+def _owner_shown(table: Any, shown: NDArray[np.bool_] | None) -> NDArray[np.bool_]:
+    """(m,) whether each constraint's owner is drawn (``shown`` (n,) per store row; None: all)."""
+    if shown is None:
+        return np.ones(table.m, bool)
+    return np.asarray(shown[np.asarray(table.owner, dtype=np.int64)], dtype=bool)
+
+
+def constraint_marks(sim: Simulation, shown: NDArray[np.bool_] | None = None) -> ConstraintMarks:
+    """The active point constraints (not orientations or areas) for the posture in the store,
+    of the characters ``shown`` (n,) per store row (None: every character)."""
     table, positions = sim.constraints, sim.store.positions
     if table.m == 0 or positions.shape[0] != sim.store.n or positions.shape[0] == 0:
         e3 = np.zeros((0, 3))
@@ -128,7 +136,7 @@ def constraint_marks(sim: Simulation) -> ConstraintMarks:
     if hasattr(table, "error"):  # as ConstraintSolve measured it on its result (any kind)
         solver_error = np.asarray(table.error, dtype=np.float64)
         error = np.where(np.isfinite(solver_error), solver_error, error)
-    keep = ((weight > 0) & (kind != KIND_ORIENTATION) & (kind != KIND_AREA)
+    keep = ((weight > 0) & (kind != KIND_ORIENTATION) & (kind != KIND_AREA) & _owner_shown(table, shown)
             & np.all(np.isfinite(target), axis=1) & np.all(np.isfinite(point), axis=1))
     uid = np.asarray(getattr(table, "uid", np.arange(table.m)), dtype=np.int64)
     in_world = np.asarray(table.target_kind) == TARGET_WORLD
@@ -148,15 +156,15 @@ def max_constraint_error_m(sim: Simulation) -> float | None:
     return float(error[full].max()) if full.any() else None
 
 
-def restricted_areas(sim: Simulation) -> RestrictedAreas:
-    """The active restricted areas, placed at their targets (none with a table that has no
-    ``area_shape`` column)."""
+def restricted_areas(sim: Simulation, shown: NDArray[np.bool_] | None = None) -> RestrictedAreas:
+    """The active restricted areas of the characters ``shown`` (n,) per store row (None: every
+    character), placed at their targets (none with a table that has no ``area_shape`` column)."""
     table: Any = sim.constraints
     positions = sim.store.positions
     if (table.m == 0 or not hasattr(table, "area_shape") or positions.shape[0] != sim.store.n
             or positions.shape[0] == 0):
         return RestrictedAreas.none()
-    active = (_weights(sim, table) > 0) & (_kinds(table) == KIND_AREA)
+    active = (_weights(sim, table) > 0) & (_kinds(table) == KIND_AREA) & _owner_shown(table, shown)
     if not active.any():
         return RestrictedAreas.none()
     anchor = _targets(table, positions)

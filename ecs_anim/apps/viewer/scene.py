@@ -302,7 +302,9 @@ def snapshot(sim: Simulation, colours: F64 | None = None,
     if hidden_rows is not None:
         ok[hidden_rows] = False
     bodies = body_instances(positions[ok], st.lengths[ok], colours[ok])
-    marks = constraint_marks(sim)
+    # the constraints of hidden characters are hidden with them (--only)
+    shown = None if hidden_rows is None or hidden_rows.size == 0 else ok
+    marks = constraint_marks(sim, shown)
     targets = np.concatenate([target_instances(marks),
                               unreachable_instances(marks, unreachable_uids(sim))])
     if ok.any():
@@ -310,7 +312,7 @@ def snapshot(sim: Simulation, colours: F64 | None = None,
         com_rows = com_instances(com, 0.06 * leg_length(st.lengths[ok]))
     else:
         com_rows = np.zeros((0, INSTANCE_FLOATS), np.float32)
-    return SceneFrame(bodies, targets, com_rows, area_instances(restricted_areas(sim)),
+    return SceneFrame(bodies, targets, com_rows, area_instances(restricted_areas(sim, shown)),
                       positions[ok].copy(),
                       sim.posture_time_s, max_constraint_error_m(sim), int(ok.sum()),
                       table_instances(getattr(sim, "tables", ()), sim.ground),

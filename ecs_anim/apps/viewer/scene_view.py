@@ -27,13 +27,15 @@ class SceneSource:
     ``draw(sim)`` is called once per tick and only notes that the store holds a new posture;
     :meth:`latest` builds the drawable frame when someone draws (so ticks without a redraw
     cost nothing). ``picked``: the name of a character to draw highlighted (render-only state,
-    kept here and never in a component).
+    kept here and never in a component); ``only``: the names of the characters drawn (None:
+    all; the others are still simulated, as a pair's opponent must be).
     """
 
-    def __init__(self) -> None:
+    def __init__(self, only: frozenset[str] | None = None) -> None:
         self._sim: Simulation | None = None
         self._frame: SceneFrame | None = None
         self.picked: str | None = None
+        self.only = only
         #: Characters added since the last tick (no posture yet): not drawn until it comes.
         self.unposed: set[str] = set()
 
@@ -53,7 +55,8 @@ class SceneSource:
             names = sim.names()
             if self.picked in names:
                 colours = highlighted(colours, np.array([names.index(str(self.picked))]))
-            hidden = np.array([i for i, name in enumerate(names) if name in self.unposed], np.int64)
+            hidden = np.array([i for i, name in enumerate(names) if name in self.unposed
+                               or (self.only is not None and name not in self.only)], np.int64)
             self._frame = snapshot(sim, colours, hidden)
         return self._frame
 

@@ -54,12 +54,14 @@ class Screenshot:
 
 def render_screenshot(scenario: Scenario, at_s: float, width: int = 1280, height: int = 720,
                       camera: OrbitCamera | None = None, show_targets: bool = True,
-                      show_com: bool = True, status: bool = True) -> Screenshot:
-    """Simulate ``scenario`` up to ``at_s`` seconds and render that frame without a screen."""
+                      show_com: bool = True, status: bool = True,
+                      only: frozenset[str] | None = None) -> Screenshot:
+    """Simulate ``scenario`` up to ``at_s`` seconds and render that frame without a screen;
+    ``only``: the names of the characters drawn and framed (None: all; every one is simulated)."""
     if not (1 <= width <= 8192 and 1 <= height <= 8192):
         raise EcsAnimError(f"--size: width and height must be 1-8192 pixels, got {width}x{height}")
     ticks = max(round(at_s * scenario.fps), 0) + 1  # the posture at t = at_s
-    source = SceneSource()
+    source = SceneSource(only)
     with build_simulation(scenario, window=True) as sim:
         sim.renderer = source
         for _ in range(ticks):
@@ -113,7 +115,8 @@ def _draw_status(pyglet: Any, window: Any, text: str, width: int, height: int) -
 
 
 def write_screenshot(scenario: Scenario, out: str | Path, at_s: float, width: int, height: int,
-                     force: bool, show_targets: bool = True, show_com: bool = True) -> Screenshot:
+                     force: bool, show_targets: bool = True, show_com: bool = True,
+                     only: frozenset[str] | None = None) -> Screenshot:
     """Render and write ``out`` (PNG). What :func:`~ecs_anim.core.files.output_problem` refuses (an
     existing file without ``force``, a folder, an unwritable place, ...) is an
     :class:`EcsAnimError` before rendering."""
@@ -123,6 +126,6 @@ def write_screenshot(scenario: Scenario, out: str | Path, at_s: float, width: in
     if problem is not None:
         raise EcsAnimError(problem)
     shot = render_screenshot(scenario, at_s, width, height, show_targets=show_targets,
-                             show_com=show_com)
+                             show_com=show_com, only=only)
     write_png(out, shot.rgb, force)
     return shot

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import N_JOINTS, REST_HIP_DIR_LEFT
@@ -18,6 +19,8 @@ from ecs_anim.io.c3d.clusters import functional_lower_body
 from ecs_anim.io.c3d.landmarks import landmark_body
 from ecs_anim.io.c3d.marker_sets import MarkerMap
 from ecs_anim.io.c3d.trimming import kept_frames, parts_placed, trust_root
+
+F64 = NDArray[np.float64]
 
 
 def joint_centres(mk: MarkersByRole, mmap: MarkerMap, present: list[str]
@@ -34,11 +37,20 @@ def joint_centres(mk: MarkersByRole, mmap: MarkerMap, present: list[str]
         landmark_body(mk, present, build)
     root, kept = kept_frames(build.root_trusted, parts_placed(mk, mmap, present), n)
     repaired = trust_root(build, kept)
-    _fill_absent(build, present)
+    fill_absent(build, present)
     return build, root, kept, repaired
 
 
-def _fill_absent(build: JointCentreBuild, present: list[str]) -> None:
+def flat_toe(ankle: F64, heading: F64, leg: float) -> F64:
+    """The toe (n_frames, 3) of a foot lying flat the way ``heading`` (n_frames, 3, 3: an
+    upright frame) faces, from its ``ankle`` (n_frames, 3): adult proportions of ``leg`` (m)."""
+    up = np.array([0.0, 0.0, 1.0])
+    toe: F64 = ankle + heading[..., :, 0] * adult_length("foot", leg) * 0.95 \
+        - up * adult_length("ankle_height", leg)
+    return toe
+
+
+def fill_absent(build: JointCentreBuild, present: list[str]) -> None:
     """Neutral pose for absent body parts (upright trunk and head, arms hanging, legs straight),
     adult proportions of the measured leg length. Also spine_1/spine_2 and hand ends that the
     markers do not give."""
@@ -56,8 +68,7 @@ def _fill_absent(build: JointCentreBuild, present: list[str]) -> None:
             p[:, J[f"hip_{s}"]] = pelvis + build.pelvis2world @ (np.array([x, sign * y, z]) * adult_length("pelvis", leg))
         p[:, J[f"knee_{s}"]] = p[:, J[f"hip_{s}"]] - up * adult_length("thigh", leg)
         p[:, J[f"ankle_{s}"]] = p[:, J[f"knee_{s}"]] - up * adult_length("shank", leg)
-        p[:, J[f"toe_{s}"]] = p[:, J[f"ankle_{s}"]] + heading[..., :, 0] * adult_length("foot", leg) * 0.95 \
-            - up * adult_length("ankle_height", leg)
+        p[:, J[f"toe_{s}"]] = flat_toe(p[:, J[f"ankle_{s}"]], heading, leg)
     if "trunk" not in present:
         p[:, J["spine_1"]] = pelvis + up * adult_length("spine_lower", leg)
         p[:, J["spine_2"]] = p[:, J["spine_1"]] + up * adult_length("spine_middle", leg)

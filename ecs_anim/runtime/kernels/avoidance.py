@@ -7,8 +7,12 @@ for ``time_horizon_s`` with half of the effort (a half-plane of velocities per n
 speed: a 2D linear program, or, when the half-planes leave no room, the velocity that
 violates them least (a 3D linear program). The steps follow RVO2's ``Agent::computeNewVelocity``,
 ``linearProgram1/2/3`` (the reference implementation; agents only, no polygon obstacles), with
-one addition: an agent that does not avoid (standing at its goal, or switched off) is a
-*passive* neighbour, whose ORCA line the other takes in full instead of half.
+these additions, for walkers: an agent that does not avoid (standing at its goal, or switched
+off) is a *passive* neighbour, whose ORCA line the other takes in full instead of half; an
+agent behind another going the same way takes its line in full and the one ahead none (a
+file); two agents' combined radius is at least what their legs' strides need in the direction
+they are from each other (:func:`legs_apart`); and an agent slowed below its slowest steps
+walks them where the lines allow (:func:`at_least`).
 
 Neighbours are found on a uniform grid hashed into a table (:func:`build_grid`, a counting sort
 of the agents by cell): each agent looks at the 3 x 3 cells about its own (a cell as wide as
@@ -185,6 +189,48 @@ def lp3(lines: F64, projected: F64, row: int, n_hard: int, n_lines: int, begin: 
 
 
 @jit()
+def at_least(lines: F64, row: int, n_lines: int, max_speed: float, min_speed: float, opt: Vec2,
+             result: Vec2) -> Vec2:
+    """A velocity of speed ``min_speed`` that the lines of ``lines[row]`` allow, between
+    ``result`` (allowed, slower) and the fastest allowed one in its direction (or ``opt``'s,
+    when ``result`` is 0), where there is one; else ``result``. A walker steps no slower than
+    its slowest steps: where ORCA's nearest velocity is slower, it walks that slowly round
+    what is in its way rather than stand behind it."""
+    rx, ry = result
+    speed = math.sqrt(rx * rx + ry * ry)
+    if speed > TINY:
+        ux, uy = rx / speed, ry / speed
+    else:
+        length = max(math.sqrt(opt[0] * opt[0] + opt[1] * opt[1]), TINY)
+        ux, uy = opt[0] / length, opt[1] / length
+    failed, fx, fy = lp2(lines, row, n_lines, max_speed, (ux, uy), True)
+    if failed < n_lines or fx * fx + fy * fy < min_speed * min_speed:
+        return result
+    # |result + t (far - result)| = min_speed, t in [0, 1]: allowed, the lines being convex.
+    dx, dy = fx - rx, fy - ry
+    a = dx * dx + dy * dy
+    b = rx * dx + ry * dy
+    c = speed * speed - min_speed * min_speed
+    t = (-b + math.sqrt(max(b * b - a * c, 0.0))) / max(a, TINY)
+    return rx + t * dx, ry + t * dy
+
+
+@jit()
+def legs_apart(stride_m: float, feet_m: float, along_m: float, dist_sq: float) -> float:
+    """How far apart two walkers one behind the other must be, in the direction they are now
+    from each other, for their legs not to meet (m): their legs swept over a stride are a
+    stadium (the points within ``feet_m`` of a segment ``stride_m`` either side of the one
+    behind, along its facing; the sum of both bodies'), and this is its boundary's distance
+    from its centre in the direction ``along_m`` m along that facing of ``sqrt(dist_sq)``."""
+    dist = math.sqrt(max(dist_sq, TINY))
+    along = abs(along_m) / dist
+    across = math.sqrt(max(1.0 - along * along, 0.0))
+    if feet_m * along <= stride_m * across:  # out through a flat side
+        return feet_m / across
+    return stride_m * along + math.sqrt(max(feet_m * feet_m - (stride_m * across) ** 2, 0.0))
+
+
+@jit()
 def nearest_neighbours(i: int, position: F64, range_m: float, cell_m: float, mask: int,
                        start: I64, order: I64, max_neighbours: int, neighbour: I64,
                        neighbour_d2: F64) -> int:
@@ -195,12 +241,17 @@ def nearest_neighbours(i: int, position: F64, range_m: float, cell_m: float, mas
     ix, iy = math.floor(x / cell_m), math.floor(y / cell_m)
     range_sq = range_m * range_m
     count = 0
+    # Its own cell first: the nearest found first shrink the range soonest (fewer insertions).
+    slots = (cell_hash(ix, iy, mask), cell_hash(ix - 1, iy, mask), cell_hash(ix + 1, iy, mask),
+             cell_hash(ix, iy - 1, mask), cell_hash(ix, iy + 1, mask),
+             cell_hash(ix - 1, iy - 1, mask), cell_hash(ix + 1, iy - 1, mask),
+             cell_hash(ix - 1, iy + 1, mask), cell_hash(ix + 1, iy + 1, mask))
     for cell in range(9):
-        s = cell_hash(ix + cell // 3 - 1, iy + cell % 3 - 1, mask)
+        s = slots[cell]
         # Two cells may share a slot: look at each slot once.
         repeated = False
         for earlier in range(cell):
-            repeated = repeated or s == cell_hash(ix + earlier // 3 - 1, iy + earlier % 3 - 1, mask)
+            repeated = repeated or s == slots[earlier]
         if not repeated:
             for a in range(start[s], start[s + 1]):
                 j = order[a]
@@ -227,8 +278,9 @@ def nearest_neighbours(i: int, position: F64, range_m: float, cell_m: float, mas
 
 @jit(nogil=True)
 def orca_rows(lo: int, hi: int, position: F64, velocity: F64, preferred: F64, radius: F64,
-              max_speed: F64, facing: F64, active: B, range_m: float, time_horizon_s: float,
-              dt: float, cone_rad: float, cell_m: float, mask: int, start: I64, order: I64,
+              stride_m: F64, feet_m: F64, legs: bool, max_speed: F64, min_speed: F64,
+              facing: F64, active: B, range_m: float, time_horizon_s: float, dt: float,
+              cone_rad: float, cell_m: float, mask: int, start: I64, order: I64,
               neighbour: I64, neighbour_d2: F64, lines: F64, projected: F64, out: F64) -> None:
     """The new velocity of agents ``lo..hi-1`` (RVO2's ``computeNewVelocity``) into ``out``
     ((k, 2), m/s); a passive agent (``active`` false) gets its preferred velocity.
@@ -236,7 +288,14 @@ def orca_rows(lo: int, hi: int, position: F64, velocity: F64, preferred: F64, ra
     position, velocity, preferred : (k, 2) m, m/s: where each agent is, how it moves now, how
         it would move with nobody about.
     radius, max_speed : (k,) m, m/s.
-    facing, cone_rad : (k, 2) unit vectors, rad: an agent with neighbours keeps its velocity
+    stride_m, feet_m, legs : (k,) m, and whether to use them: each agent's legs, a stadium
+        (:func:`legs_apart`) of half-length ``stride_m`` along its ``facing`` and radius
+        ``feet_m``; without ``legs``, only the files below (whose stadium is then ``feet_m``).
+    min_speed : (k,) m/s: an agent that the lines slow below this goes this fast where they
+        allow it (:func:`at_least`); 0: none.
+    facing, cone_rad : (k, 2) unit vectors, rad: which way each agent faces; an agent within
+        45 degrees of behind another, both facing the same way, avoids it in full and the one
+        ahead not at all (a file). With ``cone_rad``, an agent with neighbours keeps its velocity
         within ``cone_rad`` (at most pi / 2) of ``facing`` (two hard lines, as RVO2's
         obstacles': a walker does not step sideways); pi or more: no such limit.
     range_m, time_horizon_s, dt : the neighbour distance, how far ahead collisions are avoided,
@@ -258,20 +317,37 @@ def orca_rows(lo: int, hi: int, position: F64, velocity: F64, preferred: F64, ra
                                    max_neighbours, neighbour, neighbour_d2)
         vx, vy = velocity[i, 0], velocity[i, 1]
         n_hard = 2 if coned and count > 0 else 0
+        fx, fy = facing[i, 0], facing[i, 1]
         if n_hard:
-            fx, fy = facing[i, 0], facing[i, 1]
             # Left of the cone's right edge, right of its left edge (lines through 0).
             lines[i, 0, 0] = lines[i, 0, 1] = lines[i, 1, 0] = lines[i, 1, 1] = 0.0
             lines[i, 0, 2] = fx * cone_cos + fy * cone_sin
             lines[i, 0, 3] = fy * cone_cos - fx * cone_sin
             lines[i, 1, 2] = -(fx * cone_cos - fy * cone_sin)
             lines[i, 1, 3] = -(fy * cone_cos + fx * cone_sin)
+        m = n_hard
         for n in range(count):
             j = neighbour[i, n]
             rel_x, rel_y = position[j, 0] - position[i, 0], position[j, 1] - position[i, 1]
             rv_x, rv_y = vx - velocity[j, 0], vy - velocity[j, 1]
             dist_sq = rel_x * rel_x + rel_y * rel_y
             combined = radius[i] + radius[j]
+            share = 0.5 if active[j] else 1.0  # a passive neighbour leaves it all to this one
+            # One behind the other (within 45 degrees of both facings, the same way): the one
+            # behind avoids it all, the one ahead not at all, and their legs need their strides.
+            ahead_of_i = fx * rel_x + fy * rel_y
+            behind_j = facing[j, 0] * rel_x + facing[j, 1] * rel_y
+            if (ahead_of_i * behind_j > 0.0
+                    and min(ahead_of_i * ahead_of_i, behind_j * behind_j) > 0.5 * dist_sq):
+                if ahead_of_i < 0.0:
+                    continue  # j follows i: j keeps clear
+                share = 1.0
+                combined = max(combined, legs_apart(
+                    stride_m[i] + stride_m[j], feet_m[i] + feet_m[j], ahead_of_i, dist_sq))
+            elif legs:  # each one's stride against the other's legs
+                feet = feet_m[i] + feet_m[j]
+                combined = max(combined, legs_apart(stride_m[i], feet, ahead_of_i, dist_sq),
+                               legs_apart(stride_m[j], feet, behind_j, dist_sq))
             combined_sq = combined * combined
             if dist_sq > combined_sq:
                 # No collision: the velocity obstacle's cut-off circle or one of its legs.
@@ -305,15 +381,16 @@ def orca_rows(lo: int, hi: int, position: F64, velocity: F64, preferred: F64, ra
                 dir_x, dir_y = unit_y, -unit_x
                 scale = combined * inv_dt - w_len
                 u_x, u_y = scale * unit_x, scale * unit_y
-            share = 0.5 if active[j] else 1.0  # a passive neighbour leaves it all to this one
-            m = n_hard + n
             lines[i, m, 0], lines[i, m, 1] = vx + share * u_x, vy + share * u_y
             lines[i, m, 2], lines[i, m, 3] = dir_x, dir_y
+            m += 1
         opt = (preferred[i, 0], preferred[i, 1])
-        n_lines = n_hard + count
+        n_lines = m
         failed, rx, ry = lp2(lines, i, n_lines, max_speed[i], opt, False)
         if failed < n_lines:
             rx, ry = lp3(lines, projected, i, n_hard, n_lines, failed, max_speed[i], (rx, ry))
+        elif rx * rx + ry * ry < min_speed[i] * min_speed[i]:
+            rx, ry = at_least(lines, i, n_lines, max_speed[i], min_speed[i], opt, (rx, ry))
         out[i, 0], out[i, 1] = rx, ry
 
 
@@ -324,7 +401,9 @@ def table_mask(n_agents: int) -> int:
 
 def orca_velocities(position: F64, velocity: F64, preferred: F64, radius: F64, max_speed: F64,
                     active: B, *, range_m: float, time_horizon_s: float, max_neighbours: int,
-                    dt: float, facing: F64 | None = None, cone_rad: float = math.pi) -> F64:
+                    dt: float, facing: F64 | None = None, cone_rad: float = math.pi,
+                    stride_m: F64 | None = None, feet_m: F64 | None = None,
+                    min_speed: F64 | None = None) -> F64:
     """Each agent's collision-avoiding velocity (k, 2) m/s (ORCA; see the module docstring):
     the grid built, then :func:`orca_rows` over all agents, split over the kernels' threads.
 
@@ -336,13 +415,21 @@ def orca_velocities(position: F64, velocity: F64, preferred: F64, radius: F64, m
     time_horizon_s : collisions within this time are avoided (s).
     max_neighbours : at most this many nearest neighbours are avoided.
     dt : the tick (s).
-    facing, cone_rad : (k, 2) unit vectors and rad: each agent with neighbours keeps within
-        ``cone_rad`` (at most pi / 2) of its ``facing`` (None, or pi: anywhere).
+    facing, cone_rad : (k, 2) unit vectors and rad: which way each agent faces (None: no
+        files, see :func:`orca_rows`), and each agent with neighbours keeps within
+        ``cone_rad`` (at most pi / 2) of it (pi: anywhere).
+    stride_m, feet_m : (k,) m: each agent's legs (:func:`orca_rows`; None: discs only).
+    min_speed : (k,) m/s: the slowest an agent goes but standing (:func:`at_least`; None: 0).
     """
     n = position.shape[0]
     out = np.empty((n, 2))
     if n == 0:
         return out
+    legs = stride_m is not None and feet_m is not None
+    if stride_m is None or feet_m is None:
+        stride_m = feet_m = np.zeros(n)
+    if min_speed is None:
+        min_speed = np.zeros(n)
     mask = table_mask(n)
     position = np.ascontiguousarray(position, np.float64)
     slot, order = np.empty(n, np.int64), np.empty(n, np.int64)
@@ -356,7 +443,10 @@ def orca_velocities(position: F64, velocity: F64, preferred: F64, radius: F64, m
     over_chunks(orca_rows, n, position, np.ascontiguousarray(velocity, np.float64),
                 np.ascontiguousarray(preferred, np.float64),
                 np.ascontiguousarray(radius, np.float64),
+                np.ascontiguousarray(stride_m, np.float64),
+                np.ascontiguousarray(feet_m, np.float64), legs,
                 np.ascontiguousarray(max_speed, np.float64),
+                np.ascontiguousarray(min_speed, np.float64),
                 np.ascontiguousarray(facing, np.float64),
                 np.ascontiguousarray(active, np.bool_), float(range_m), float(time_horizon_s),
                 float(dt), min(float(cone_rad), math.pi), float(range_m), mask, start, order,

@@ -1,15 +1,16 @@
 """Collision capsules and the deepest overlap between characters, compiled (CollisionSeparate).
 
 :func:`capsule_rows` mirrors :func:`ecs_anim.solver.capsules.capsules_from_positions` (same
-results to 1e-9 m) and adds each character's bounding sphere; :func:`overlap_rows` finds, for
-each character, the deepest overlap of one of its capsules with a capsule of another character:
-neighbours on a uniform grid hashed into a table (:func:`ecs_anim.runtime.kernels.avoidance.
-build_grid`, the steering avoidance's), each looking at the 3 x 3 cells about its own (a cell as
-wide as the widest pair of bounding spheres can reach), every capsule pair of two characters
-whose bounding spheres and bounds meet (each capsule first against the other body's bounds)
-tested by the nearest points of their axes (Ericson, Real-Time
-Collision Detection, 5.1.9; :func:`ecs_anim.solver.capsules.closest_between_segments`).
-:func:`overlaps` is the numpy-facing call.
+results to 1e-9 m) and adds each character's bounding sphere and bounds, and each capsule's
+bounds; :func:`overlap_rows` finds, for each character, the deepest overlap of one of its
+capsules with a capsule of another character: neighbours on a uniform grid hashed into a table
+(:func:`ecs_anim.runtime.kernels.avoidance.build_grid`, the steering avoidance's), each looking
+at the 3 x 3 cells about its own (a cell as wide as two bodies' bounds reach sideways), every
+capsule pair of two characters whose bounds meet (each capsule first against the other body's
+bounds, then against the other capsule's) tested by the nearest points of their axes (Ericson,
+Real-Time Collision Detection, 5.1.9;
+:func:`ecs_anim.solver.capsules.closest_between_segments`). :func:`overlaps` is the
+numpy-facing call.
 """
 
 from __future__ import annotations
@@ -27,18 +28,26 @@ from ecs_anim.solver.capsules import CAPSULE_JOINTS, CAPSULE_SPAN, N_CAPSULES, R
 
 I64 = NDArray[np.int64]
 
+#: (C, 3) per capsule the lengths its radius weighs (:data:`~ecs_anim.solver.capsules.
+#: RADIUS_WEIGHTS`' non-zero columns, in order; -1: none): three terms a capsule, not a row of
+#: every length (that loop was most of a body's capsules' cost).
+RADIUS_TERMS = np.full((N_CAPSULES, 3), -1, np.int64)
+for _k, _row in enumerate(RADIUS_WEIGHTS):
+    RADIUS_TERMS[_k, :np.count_nonzero(_row)] = np.flatnonzero(_row)
+
 
 @jit(nogil=True)
 def capsule_rows(lo: int, hi: int, rows: I64, positions: F64, lengths: F64, joints: I64,
-                 span: F64, radius_weights: F64, ends: F64, radii: F64, centre: F64, reach: F64,
-                 box: F64) -> None:
+                 span: F64, radius_weights: F64, radius_terms: I64, ends: F64, radii: F64, centre: F64, reach: F64,
+                 box: F64, capsule_box: F64) -> None:
     """Capsules of characters ``rows[lo:hi]``: ``ends`` (n, C, 2, 3) and ``radii`` (n, C) written
     from ``positions`` (n, N_JOINTS, 3) and ``lengths`` (n, N_LENGTHS) (``joints`` (C, 2),
     ``span`` (C, 2), ``radius_weights`` (C, N_LENGTHS): :mod:`ecs_anim.solver.capsules`'s
-    layout); ``centre`` (n, 3) the pelvis and ``reach`` (n,) how far from it any capsule's
-    surface lies; ``box`` (n, 2, 3) the body's bounds (lowest, highest corner). Mirrors
+    layout, ``radius_terms`` (C, 3) :data:`RADIUS_TERMS`); ``centre`` (n, 3) the pelvis and ``reach`` (n,) how far from it any capsule's
+    surface lies; ``capsule_box`` (n, C, 2, 3) each capsule's bounds and ``box`` (n, 2, 3) the
+    body's (lowest, highest corner). Mirrors
     :func:`ecs_anim.solver.capsules.capsules_from_positions`."""
-    n_caps, n_len = joints.shape[0], lengths.shape[1]
+    n_caps, n_terms = joints.shape[0], radius_terms.shape[1]
     for row in range(lo, hi):
         c = rows[row]
         pelvis = load3(positions[c, 0])
@@ -49,16 +58,23 @@ def capsule_rows(lo: int, hi: int, rows: I64, positions: F64, lengths: F64, join
             a = load3(positions[c, joints[k, 0]])
             ab = sub(load3(positions[c, joints[k, 1]]), a)
             r = 0.0
-            for m in range(n_len):
-                r += lengths[c, m] * radius_weights[k, m]
+            for t in range(n_terms):
+                m = radius_terms[k, t]
+                if m >= 0:
+                    r += lengths[c, m] * radius_weights[k, m]
             radii[c, k] = r
+            for x in range(3):
+                capsule_box[c, k, 0, x], capsule_box[c, k, 1, x] = math.inf, -math.inf
             for e in range(2):
                 p = add_scaled(a, ab, span[k, e])
                 ends[c, k, e, 0], ends[c, k, e, 1], ends[c, k, e, 2] = p
                 far = max(far, norm(sub(p, pelvis)) + r)
                 for x in range(3):
-                    box[c, 0, x] = min(box[c, 0, x], p[x] - r)
-                    box[c, 1, x] = max(box[c, 1, x], p[x] + r)
+                    capsule_box[c, k, 0, x] = min(capsule_box[c, k, 0, x], p[x] - r)
+                    capsule_box[c, k, 1, x] = max(capsule_box[c, k, 1, x], p[x] + r)
+            for x in range(3):
+                box[c, 0, x] = min(box[c, 0, x], capsule_box[c, k, 0, x])
+                box[c, 1, x] = max(box[c, 1, x], capsule_box[c, k, 1, x])
         centre[c, 0], centre[c, 1], centre[c, 2] = pelvis
         reach[c] = far
 
@@ -81,34 +97,40 @@ def closest_between(p1: Vec3, q1: Vec3, p2: Vec3, q2: Vec3) -> tuple[Vec3, Vec3]
 
 
 @jit(inline="always")
-def _apart(box: F64, i: int, j: int) -> bool:
-    """Whether the bounds of characters ``i`` and ``j`` (``box`` (n, 2, 3)) do not meet."""
-    for x in range(3):
-        if box[i, 1, x] < box[j, 0, x] or box[j, 1, x] < box[i, 0, x]:
-            return True
-    return False
+def _apart(a: F64, b: F64) -> bool:
+    """Whether the bounds ``a`` and ``b`` (2, 3: lowest, highest corner) do not meet (the six
+    tests at once, one branch: mostly they do not, and a branch a test mispredicted half the
+    search's time)."""
+    return bool((a[1, 0] < b[0, 0]) | (b[1, 0] < a[0, 0]) | (a[1, 1] < b[0, 1])
+                | (b[1, 1] < a[0, 1]) | (a[1, 2] < b[0, 2]) | (b[1, 2] < a[0, 2]))
 
 
 @jit(inline="always")
-def _capsule_apart(p: Vec3, q: Vec3, r: float, box: F64, j: int) -> bool:
-    """Whether the capsule ``p``-``q`` of radius ``r`` lies outside character ``j``'s bounds."""
+def _gap(a: F64, b: F64, radius_a: float, radius_b: float) -> float:
+    """How far apart (m) at least the axes of two capsules lie whose bounds are ``a`` and ``b``
+    (2, 3), their radii ``radius_a`` and ``radius_b`` (the bounds of their axes' apart; less a
+    hair for rounding)."""
+    gap = 0.0
     for x in range(3):
-        if max(p[x], q[x]) + r < box[j, 0, x] or box[j, 1, x] < min(p[x], q[x]) - r:
-            return True
-    return False
+        d = max(b[0, x] + radius_b - (a[1, x] - radius_a),
+                a[0, x] + radius_a - (b[1, x] - radius_b), 0.0)
+        gap += d * d
+    return math.sqrt(gap) - 1e-9
 
 
 @jit(nogil=True)
 def overlap_rows(lo: int, hi: int, rows: I64, ends: F64, radii: F64, centre: F64, reach: F64,
-                 box: F64, plane: F64, cell_m: float, mask: int, start: I64, order: I64,
-                 depth: F64, other: I64, mine: I64, theirs: I64, normal: F64,
+                 box: F64, capsule_box: F64, plane: F64, cell_m: float, mask: int, start: I64,
+                 order: I64, depth: F64, other: I64, mine: I64, theirs: I64, normal: F64,
                  point: F64) -> None:
     """For each character ``i`` in ``rows[lo:hi]``, its deepest overlap with another character:
     ``depth[i]`` m (0: none), ``other[i]`` that character's row (-1: none), ``mine[i]`` and
     ``theirs[i]`` the two capsules, ``normal[i]`` (3,) the unit way out for ``i`` (from their
     axis toward its own), ``point[i]`` (3,) the nearest point of its own capsule's axis.
-    ``plane`` (n, 2) the bounding spheres' centres on the grid (built on it with cells
-    ``cell_m`` wide: ``mask``, ``start``, ``order`` as :func:`~.avoidance.build_grid`)."""
+    ``plane`` (n, 2) the bodies' centres on the grid (built on it with cells ``cell_m`` wide:
+    ``mask``, ``start``, ``order`` as :func:`~.avoidance.build_grid`). Only bodies whose bounds
+    ``box`` (n, 2, 3) meet are looked at further, and of those only the capsules whose bounds
+    ``capsule_box`` (n, C, 2, 3) meet the other body's, then each other's, are tested."""
     n_caps = ends.shape[1]
     for row in range(lo, hi):
         i = rows[row]
@@ -116,7 +138,7 @@ def overlap_rows(lo: int, hi: int, rows: I64, ends: F64, radii: F64, centre: F64
         normal[i, 0], normal[i, 1], normal[i, 2] = 0.0, 0.0, 0.0
         point[i, 0], point[i, 1], point[i, 2] = 0.0, 0.0, 0.0
         ix, iy = math.floor(plane[i, 0] / cell_m), math.floor(plane[i, 1] / cell_m)
-        ci = load3(centre[i])
+        box_i = box[i]
         for cell in range(9):
             s = cell_hash(ix + cell // 3 - 1, iy + cell % 3 - 1, mask)
             repeated = False
@@ -127,14 +149,26 @@ def overlap_rows(lo: int, hi: int, rows: I64, ends: F64, radii: F64, centre: F64
                 continue
             for a in range(start[s], start[s + 1]):
                 j = order[a]
-                if j == i or not norm(sub(load3(centre[j]), ci)) < reach[i] + reach[j] \
-                        or _apart(box, i, j):
+                if j == i or _apart(box_i, box[j]):
+                    continue
+                # j's capsules within i's bounds (bits of ``near``): the only ones any of i's
+                # can reach
+                near = 0
+                for kj in range(n_caps):
+                    if not _apart(capsule_box[j, kj], box_i):
+                        near |= 1 << kj
+                if near == 0:
                     continue
                 for ki in range(n_caps):
-                    p1, q1 = load3(ends[i, ki, 0]), load3(ends[i, ki, 1])
-                    if _capsule_apart(p1, q1, radii[i, ki], box, j):
+                    box_ki = capsule_box[i, ki]
+                    if _apart(box_ki, box[j]):
                         continue  # (two walkers side by side: most of their capsule pairs)
+                    p1, q1 = load3(ends[i, ki, 0]), load3(ends[i, ki, 1])
                     for kj in range(n_caps):
+                        if not (near >> kj) & 1 or _apart(box_ki, capsule_box[j, kj]) \
+                                or _gap(box_ki, capsule_box[j, kj], radii[i, ki],
+                                        radii[j, kj]) > radii[i, ki] + radii[j, kj] - depth[i]:
+                            continue  # (its axes too far apart to be deeper than one found)
                         p2, q2 = load3(ends[j, kj, 0]), load3(ends[j, kj, 1])
                         on_i, on_j = closest_between(p1, q1, p2, q2)
                         gap = sub(on_i, on_j)
@@ -145,7 +179,7 @@ def overlap_rows(lo: int, hi: int, rows: I64, ends: F64, radii: F64, centre: F64
                             if distance > 1e-9:
                                 way = (gap[0] / distance, gap[1] / distance, gap[2] / distance)
                             else:  # axes crossing: out horizontally, from their centre
-                                flat = sub(ci, load3(centre[j]))
+                                flat = sub(load3(centre[i]), load3(centre[j]))
                                 h = math.sqrt(flat[0] * flat[0] + flat[1] * flat[1])
                                 way = (flat[0] / h, flat[1] / h, 0.0) if h > 1e-9 \
                                     else (1.0, 0.0, 0.0)
@@ -153,16 +187,41 @@ def overlap_rows(lo: int, hi: int, rows: I64, ends: F64, radii: F64, centre: F64
                             point[i, 0], point[i, 1], point[i, 2] = on_i
 
 
+@jit(nogil=True)
+def near_kernel(rows: I64, box: F64, plane: F64, cell_m: float, mask: int, start: I64,
+                order: I64, near: NDArray[np.bool_]) -> None:
+    """Mark ``near[j]`` (n,) for every other character ``j`` whose bounds ``box`` (n, 2, 3)
+    meet those of one of ``rows`` (on the grid as :func:`overlap_rows`'s)."""
+    for row in range(rows.size):
+        i = rows[row]
+        ix, iy = math.floor(plane[i, 0] / cell_m), math.floor(plane[i, 1] / cell_m)
+        for cell in range(9):
+            s = cell_hash(ix + cell // 3 - 1, iy + cell % 3 - 1, mask)
+            for a in range(start[s], start[s + 1]):
+                j = order[a]
+                if j != i and not _apart(box[i], box[j]):
+                    near[j] = True
+
+
 class Capsules(NamedTuple):
     """Every character's capsules (:func:`capsules`): ends (n, C, 2, 3) m, radii (n, C) m,
     centre (n, 3) the pelvis, reach (n,) m from it to the farthest capsule surface, box
-    (n, 2, 3) the body's bounds (lowest, highest corner), m."""
+    (n, 2, 3) the body's bounds (lowest, highest corner), m, capsule_box (n, C, 2, 3) each
+    capsule's."""
 
     ends: F64
     radii: F64
     centre: F64
     reach: F64
     box: F64
+    capsule_box: F64
+
+    @staticmethod
+    def empty(n: int) -> Capsules:
+        """Arrays for ``n`` characters' capsules, to be written."""
+        return Capsules(np.empty((n, N_CAPSULES, 2, 3)), np.empty((n, N_CAPSULES)),
+                        np.empty((n, 3)), np.empty(n), np.empty((n, 2, 3)),
+                        np.empty((n, N_CAPSULES, 2, 3)))
 
 
 class Overlaps(NamedTuple):
@@ -197,29 +256,53 @@ def capsules(positions: F64, lengths: F64, out: Capsules | None = None,
     only those characters', the others' kept)."""
     n = positions.shape[0]
     if out is None:
-        out = Capsules(np.empty((n, N_CAPSULES, 2, 3)), np.empty((n, N_CAPSULES)),
-                       np.empty((n, 3)), np.empty(n), np.empty((n, 2, 3)))
+        out = Capsules.empty(n)
     rows = np.arange(n, dtype=np.int64) if rows is None else rows
     over_chunks(capsule_rows, rows.size, rows, np.ascontiguousarray(positions, np.float64),
                 np.ascontiguousarray(lengths, np.float64), CAPSULE_JOINTS, CAPSULE_SPAN,
-                RADIUS_WEIGHTS, *out)
+                RADIUS_WEIGHTS, RADIUS_TERMS, *out)
     return out
 
 
+#: A grid's cells are this many times as wide as two bodies' bounds reach sideways from their
+#: centres at most: limbs turned by the rounds may reach a little further before it is built
+#: again (:func:`grid_holds`).
+CELL_SLACK = 1.25
+
+
+def _spread(body: Capsules, rows: I64 | slice) -> F64:
+    """How far (m, (k,)) each of ``rows``' bounds reach sideways (x or y) from its centre."""
+    centre = body.centre[rows, None, :2]
+    spread: F64 = np.abs(body.box[rows, :, :2] - centre).max(axis=(1, 2))
+    return spread
+
+
 def grid_of(body: Capsules) -> Grid:
-    """The bodies' bounding spheres' centres hashed on a grid of cells twice the widest reach
-    (a body moved by less than its reach still finds every body it can touch)."""
+    """The bodies' centres hashed on a grid of cells :data:`CELL_SLACK` times as wide as two
+    bodies' bounds reach sideways from their centres: the 3 x 3 cells about a body's own hold
+    every body whose bounds can meet its bounds (:func:`grid_holds` tells when that no longer
+    holds)."""
     n = body.radii.shape[0]
     plane = np.ascontiguousarray(body.centre[:, :2])
     finite = np.isfinite(plane).all(axis=1)
     if not finite.all():  # a frozen or not yet posed body: far away from everyone
         plane[~finite] = 1e9 + np.arange(int((~finite).sum()))[:, None] * 1e3
-    cell_m = max(2.0 * float(np.max(body.reach, initial=0.0, where=np.isfinite(body.reach))), 0.1)
+    spread = _spread(body, slice(None))
+    cell_m = max(2.0 * CELL_SLACK * float(np.max(spread, initial=0.0,
+                                                 where=np.isfinite(spread))), 0.1)
     mask = table_mask(n)
     slot, order = np.empty(n, np.int64), np.empty(n, np.int64)
     start = np.empty(mask + 2, np.int64)
     build_grid(plane, cell_m, mask, slot, start, order)
     return Grid(plane, cell_m, mask, start, order)
+
+
+def grid_holds(body: Capsules, grid: Grid, rows: I64) -> bool:
+    """Whether ``grid`` still finds every pair that can meet after ``rows`` (k,) moved: each
+    one's bounds reach sideways from where it was hashed no further than half a cell (two
+    bodies' bounds that meet then lie in neighbouring cells)."""
+    drift = np.abs(body.centre[rows, :2] - grid.plane[rows]).max(axis=1, initial=0.0)
+    return bool(np.all(_spread(body, rows) + drift <= 0.5 * grid.cell_m))
 
 
 def overlaps(body: Capsules, grid: Grid | None = None, rows: I64 | None = None,
@@ -235,6 +318,14 @@ def overlaps(body: Capsules, grid: Grid | None = None, rows: I64 | None = None,
         return out
     grid = grid_of(body) if grid is None else grid
     rows = np.arange(n, dtype=np.int64) if rows is None else rows
-    over_chunks(overlap_rows, rows.size, rows, body.ends, body.radii, body.centre, body.reach,
-                body.box, *grid, *out)
+    over_chunks(overlap_rows, rows.size, rows, *body, *grid, *out)
     return out
+
+
+def near_rows(body: Capsules, grid: Grid, rows: I64) -> I64:
+    """The characters other than ``rows`` (k,) whose bounds meet one of theirs, on ``grid``."""
+    near = np.zeros(body.radii.shape[0], bool)
+    near_kernel(rows, body.box, grid.plane, grid.cell_m, grid.mask, grid.start, grid.order, near)
+    near[rows] = False
+    found: I64 = np.flatnonzero(near)
+    return found

@@ -1,9 +1,9 @@
 """Compiled decode: normalized poses on each character's body (paper eq. 2 and §8).
 
 Mirrors :func:`ecs_anim.core.normalized.decode` (the ``use_stretch=False`` path, what the tick uses)
-one store row at a time: :func:`decode_row` for one character, :func:`decode_rows` over a chunk
-of store rows (``rows[lo:hi]``: one chunk per thread), :func:`decode` the Python entry over
-every row. The poses are passed as :class:`PoseArrays` (the arrays of a
+:func:`decode_row` for one character, :func:`decode_rows` over a chunk of store rows
+(``rows[lo:hi]``: one chunk per thread; by blocks of characters, the spines on the vector units:
+:func:`spine_block`), :func:`decode` the Python entry over every row. The poses are passed as :class:`PoseArrays` (the arrays of a
 :class:`~ecs_anim.core.normalized.NormalizedPoses`, no copies) and the result written into
 :class:`DecodedArrays` (the arrays of a :class:`~ecs_anim.core.normalized.DecodedPose`).
 
@@ -24,6 +24,7 @@ from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import LENGTH_INDEX as L
 from ecs_anim.core.skeleton import N_JOINTS, N_LENGTHS
 from ecs_anim.runtime.kernels import over_chunks
+from ecs_anim.runtime.kernels.lanes import BLOCK
 from ecs_anim.runtime.kernels.vec import (
     F64,
     Frame,
@@ -35,6 +36,7 @@ from ecs_anim.runtime.kernels.vec import (
     jit,
     load3,
     load4,
+    load_frame,
     matmul,
     matrix_from_quat,
     norm,
@@ -324,8 +326,28 @@ def decode_row(c: int, pose: PoseArrays, lengths_row: F64, out: DecodedArrays) -
     """Mirrors :func:`ecs_anim.core.normalized.decode` (``use_stretch=False``) for store row ``c``
     on the body ``lengths_row`` (N_LENGTHS,) (m): writes row ``c`` of every ``out`` array."""
     seg = lengths_row
-    pelvis, pelvis2world, hips, knees, ankles, toes, legs, _ = decode_legs_row(
-        c, pose, seg, lengths_row)
+    control = decode_lower_row(c, pose, seg, out)
+    spine = spine_joints(control, seg[L_SPINE_LOWER], seg[L_SPINE_LOWER + 1],
+                         seg[L_SPINE_LOWER + 2], 6)
+    decode_upper_row(c, pose, seg, spine, out)
+
+
+@jit(inline="always")
+def spine_control(c: int, pose: PoseArrays, seg: F64) -> tuple[Vec3, Vec3, Vec3, Vec3]:
+    """The spine's control points of store row ``c`` in the pelvis frame (m): the origin and
+    ``spine_points`` scaled by the spine's length."""
+    spine_len = seg[L_SPINE_LOWER] + seg[L_SPINE_LOWER + 1] + seg[L_SPINE_LOWER + 2]
+    points = pose.spine_points[c]
+    return ((0.0, 0.0, 0.0), scale(load3(points[0]), spine_len),
+            scale(load3(points[1]), spine_len), scale(load3(points[2]), spine_len))
+
+
+@jit(inline="always")
+def decode_lower_row(c: int, pose: PoseArrays, seg: F64,
+                     out: DecodedArrays) -> tuple[Vec3, Vec3, Vec3, Vec3]:
+    """The first part of :func:`decode_row`: the pelvis and the legs into row ``c`` of ``out``;
+    returns the spine's control points (:func:`spine_control`)."""
+    pelvis, pelvis2world, hips, knees, ankles, toes, legs, _ = decode_legs_row(c, pose, seg, seg)
     positions = out.positions[c]
     store3(positions[PELVIS], pelvis)
     for s in range(2):
@@ -335,13 +357,18 @@ def decode_row(c: int, pose: PoseArrays, lengths_row: F64, out: DecodedArrays) -
         store3(positions[TOE + 4 * s], toes[s])
         store_frame(out.leg2world[c, s], legs[s])
     store_frame(out.pelvis2world[c], pelvis2world)
+    return spine_control(c, pose, seg)
 
-    spine_len = seg[L_SPINE_LOWER] + seg[L_SPINE_LOWER + 1] + seg[L_SPINE_LOWER + 2]
-    points = pose.spine_points[c]
-    control = ((0.0, 0.0, 0.0), scale(load3(points[0]), spine_len),
-               scale(load3(points[1]), spine_len), scale(load3(points[2]), spine_len))
-    spine = spine_joints(control, seg[L_SPINE_LOWER], seg[L_SPINE_LOWER + 1],
-                         seg[L_SPINE_LOWER + 2], 6)
+
+@jit(inline="always")
+def decode_upper_row(c: int, pose: PoseArrays, seg: F64, spine: tuple[Vec3, Vec3, Vec3],
+                     out: DecodedArrays) -> None:
+    """The last part of :func:`decode_row`, once :func:`decode_lower_row` has written row ``c``
+    of ``out``: the ``spine`` joints (pelvis frame, m) placed in the world, then the thorax, the
+    head and the arms."""
+    positions = out.positions[c]
+    pelvis = load3(positions[PELVIS])
+    pelvis2world = load_frame(out.pelvis2world[c])
     for k in range(3):
         store3(positions[SPINE_1 + k], add(pelvis, to_world(pelvis2world, spine[k])))
     neck = load3(positions[NECK])
@@ -372,15 +399,152 @@ def decode_row(c: int, pose: PoseArrays, lengths_row: F64, out: DecodedArrays) -
         store_frame(out.arm2world[c, s], arm2world)
 
 
+#: Scratch rows of the spines of a block of characters (one column a character): the four
+#: control points (the first the origin), the three segment lengths, the curve parameter and the
+#: previous joint's, the origin and the three joints (pelvis frame, m). The origins are stored
+#: so that each joint's loops differ only in the rows they read (one compiled loop for all).
+_S_CONTROL, _S_LENGTH, _S_T, _S_PREV_T, _S_JOINT = 0, 12, 15, 16, 17
+SPINE_SCRATCH_ROWS = 29
+
+
+def spine_scratch(n: int) -> F64:
+    """The scratch :func:`decode_rows` (and ``posture_rows``) need for ``n`` rows:
+    (SPINE_SCRATCH_ROWS, n)."""
+    return np.empty((SPINE_SCRATCH_ROWS, n))
+
+
+@jit(inline="always")
+def store_spine_column(scratch: F64, i: int, control: tuple[Vec3, Vec3, Vec3, Vec3],
+                       seg: F64) -> None:
+    """Column ``i`` of a spine scratch: the control points and segment lengths of one spine,
+    the origin its first joint starts from."""
+    for k in range(4):
+        for a in range(3):
+            scratch[_S_CONTROL + 3 * k + a, i] = control[k][a]
+    for k in range(3):
+        scratch[_S_LENGTH + k, i] = seg[L_SPINE_LOWER + k]
+        scratch[_S_JOINT + k, i] = 0.0
+    scratch[_S_PREV_T, i] = 0.0
+
+
+@jit(inline="always")
+def spine_column(scratch: F64, i: int) -> tuple[Vec3, Vec3, Vec3]:
+    """The three spine joints of column ``i`` of a spine scratch (pelvis frame, m)."""
+    j = _S_JOINT + 3
+    return ((scratch[j, i], scratch[j + 1, i], scratch[j + 2, i]),
+            (scratch[j + 3, i], scratch[j + 4, i], scratch[j + 5, i]),
+            (scratch[j + 6, i], scratch[j + 7, i], scratch[j + 8, i]))
+
+
+@jit(inline="always")
+def _lane_vec(scratch: F64, row: int, j: int) -> Vec3:
+    """The 3-vector in rows ``row:row + 3`` of column ``j``."""
+    return (scratch[row, j], scratch[row + 1, j], scratch[row + 2, j])
+
+
+@jit(inline="always")
+def _lane_control(scratch: F64, j: int) -> tuple[Vec3, Vec3, Vec3, Vec3]:
+    """The control points of column ``j``."""
+    return (_lane_vec(scratch, _S_CONTROL, j), _lane_vec(scratch, _S_CONTROL + 3, j),
+            _lane_vec(scratch, _S_CONTROL + 6, j), _lane_vec(scratch, _S_CONTROL + 9, j))
+
+
+@jit(inline="always")
+def curve_at_lanes(control: tuple[Vec3, Vec3, Vec3, Vec3], t: float) -> tuple[Vec3, Vec3]:
+    """:func:`curve_at` (the same operations, so the same result) without branches: each
+    span's points are chosen, not jumped to, so that a loop of it over characters is
+    vectorized."""
+    q0, q1, q2, q3 = control
+    span = min(np.floor(max(t, 0.0)), 3.0)
+    u = t - span
+    start = sub(scale(q0, 2.0), q1)
+    end = sub(scale(q3, 2.0), q2)
+    first, second = span == 0.0, span == 1.0
+    point, tangent = _span(start if first else (q0 if second else q1),
+                           q0 if first else (q1 if second else q2),
+                           q1 if first else (q2 if second else q3),
+                           q2 if first else (q3 if second else end), u)
+    beyond = sub(q3, q2)
+    straight = span == 3.0
+    return (add(q3, scale(beyond, u)) if straight else point), (beyond if straight else tangent)
+
+
+# A call, not inlined into decode_rows: inlined, its loops made the row loops so long that LLVM
+# stopped inlining their small helpers (matmul, matrix_from_quat): 20 % slower.
+@jit()
+def spine_block(scratch: F64, start: int, stop: int, iterations: int) -> None:
+    """:func:`spine_joints` of the columns ``start:stop`` of a spine scratch (control points and
+    lengths in, :func:`store_spine_column`; joints out, :func:`spine_column`), in loops over
+    those characters that run on the vector units.
+
+    Each column's result is :func:`spine_joints`' own: a spine whose Newton iteration has
+    converged keeps its parameter while the others go on (its joint, recomputed from it, is
+    the same), and the block stops once all have converged or after ``iterations``.
+    """
+    for k in range(3):
+        spine_joint_lanes(scratch, start, stop, k, iterations)
+
+
+# Not inlined (one compiled body for the three joints: inlined, decode_rows took twice as long
+# to compile, and its row loops' small helpers were no longer inlined).
+@jit()
+def spine_joint_lanes(scratch: F64, start: int, stop: int, k: int, iterations: int) -> None:
+    """:func:`spine_joint` for joint ``k`` of the spines in the columns ``start:stop`` of a
+    spine scratch (see :func:`spine_block`)."""
+    # Unsigned column indices: numba adds no wrap-around of negative indices, which would stop
+    # LLVM from vectorizing (so would a view of the block: its strides are not known).
+    lanes = range(np.uint64(start), np.uint64(stop))
+    below, above = _S_CONTROL + 3 * k, _S_CONTROL + 3 * (k + 1)
+    prev_row, joint_row = _S_JOINT + 3 * k, _S_JOINT + 3 * (k + 1)
+    length_row = _S_LENGTH + k
+    for j in lanes:
+        chord = norm(sub(_lane_vec(scratch, above, j), _lane_vec(scratch, below, j)))
+        scratch[_S_T, j] = scratch[_S_PREV_T, j] + scratch[length_row, j] / max(chord, 1e-9)
+    for _ in range(iterations):
+        moving = 0
+        for j in lanes:
+            prev_p = _lane_vec(scratch, prev_row, j)
+            length, t = scratch[length_row, j], scratch[_S_T, j]
+            point, tangent = curve_at_lanes(_lane_control(scratch, j), t)
+            d = sub(point, prev_p)
+            g = dot(d, d) - length**2
+            done = abs(g) <= 1e-13 * length**2
+            slope = 2.0 * dot(d, tangent)
+            step = g / slope if abs(slope) > 1e-12 else 0.0
+            stepped = min(max(t - step, scratch[_S_PREV_T, j] + 1e-6), 9.0)
+            scratch[_S_T, j] = t if done else stepped
+            moving += 0 if done else 1
+        if moving == 0:
+            break
+    for j in lanes:
+        t = scratch[_S_T, j]
+        point, tangent = curve_at_lanes(_lane_control(scratch, j), t)
+        joint = at_distance(_lane_vec(scratch, prev_row, j), point, tangent,
+                            scratch[length_row, j])
+        scratch[joint_row, j], scratch[joint_row + 1, j], scratch[joint_row + 2, j] = joint
+        scratch[_S_PREV_T, j] = t
+
+
 @jit(nogil=True)
-def decode_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64,
-                out: DecodedArrays) -> None:
+def decode_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64, out: DecodedArrays,
+                scratch: F64) -> None:
     """Mirrors :func:`ecs_anim.core.normalized.decode` over the store rows ``rows[lo:hi]``
     (int64): row ``c`` of ``pose`` on the body ``lengths[c]`` ((n, N_LENGTHS), m) into row ``c``
-    of every ``out`` array (the other rows are left as they are)."""
-    for i in range(lo, hi):
-        c = rows[i]
-        decode_row(c, pose, lengths[c], out)
+    of every ``out`` array (the other rows are left as they are). ``scratch``
+    (SPINE_SCRATCH_ROWS, len(rows)): :func:`spine_scratch`.
+
+    By blocks of :data:`.lanes.BLOCK` rows: the pelvis and legs row by row, the spines (most of
+    the work) in loops over the block's characters that run on the vector units, then the upper
+    body row by row; the same result as :func:`decode_row` on each row."""
+    for start in range(lo, hi, BLOCK):
+        stop = min(start + BLOCK, hi)
+        for i in range(start, stop):
+            c = rows[i]
+            store_spine_column(scratch, i, decode_lower_row(c, pose, lengths[c], out), lengths[c])
+        spine_block(scratch, start, stop, 6)
+        for i in range(start, stop):
+            c = rows[i]
+            decode_upper_row(c, pose, lengths[c], spine_column(scratch, i), out)
 
 
 def decode(poses: NormalizedPoses, lengths: F64, out: DecodedPose | None = None) -> DecodedPose:
@@ -393,5 +557,6 @@ def decode(poses: NormalizedPoses, lengths: F64, out: DecodedPose | None = None)
     n = pose.root_heading.shape[0]
     lengths = np.ascontiguousarray(np.broadcast_to(lengths, (n, N_LENGTHS)), dtype=np.float64)
     arrays = empty_decoded(n) if out is None else decoded_arrays(out)
-    over_chunks(decode_rows, n, np.arange(n, dtype=np.int64), pose, lengths, arrays)
+    over_chunks(decode_rows, n, np.arange(n, dtype=np.int64), pose, lengths, arrays,
+                spine_scratch(n))
     return decoded_pose(arrays) if out is None else out

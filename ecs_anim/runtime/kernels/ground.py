@@ -75,3 +75,31 @@ def height_at(x: float, y: float, kinds: I64, params: F64, grid: F64) -> float:
                                                      params[k, 3], params[k, 4], params[k, 5],
                                                      params[k, 6]))
     return out
+
+
+#: A point this close (m, in x and in y) to one whose height is already known takes that height
+#: on a smooth ground (:func:`smooth`): they differ by at most its grade times this, far under
+#: the 1e-9 m the kernels keep to their numpy references. The ground adaptation's points
+#: decoded onto a target they reached land this close to it (rounding: 1e-15 m).
+NEAR_M = 1e-10
+
+
+@jit(inline="always")
+def smooth(kinds: I64) -> bool:
+    """Whether a described ground has no step or kink: planes, slopes and bumps only (a height
+    grid's cell borders and a stairs' risers change heights or grades at once)."""
+    for k in range(kinds.shape[0]):
+        if kinds[k] != _PLANE and kinds[k] != _SLOPE and kinds[k] != _BUMPS:
+            return False
+    return True
+
+
+@jit(inline="always")
+def height_near(x: float, y: float, known: tuple[float, float, float], is_smooth: bool,
+                kinds: I64, params: F64, grid: F64) -> float:
+    """:func:`height_at` (``x``, ``y``), or the height ``known`` (x, y, height; NaN: none) of a
+    point within :data:`NEAR_M` of it on a smooth ground (``is_smooth``: :func:`smooth`), without
+    asking the ground again. Metres."""
+    if is_smooth and abs(x - known[0]) <= NEAR_M and abs(y - known[1]) <= NEAR_M:
+        return known[2]
+    return height_at(x, y, kinds, params, grid)

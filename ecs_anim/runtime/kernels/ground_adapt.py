@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 from ecs_anim.core import ground_adapt as reference
 from ecs_anim.core.skeleton import LENGTH_INDEX as L
 from ecs_anim.runtime.kernels.decode import LegPoseArrays, decode_legs_row
-from ecs_anim.runtime.kernels.ground import height_at
+from ecs_anim.runtime.kernels.ground import height_at, height_near, smooth
 from ecs_anim.runtime.kernels.vec import (
     F64,
     Frame,
@@ -59,6 +59,10 @@ assert (HEEL_ROLL, BALL_ROLL) == (reference.HEEL_ROLL, reference.BALL_ROLL)
 MAX_LOWERING_LEAN_SIN, MAX_ROOT_FOLLOW_PER_REACH = 0.8660254037844386, 0.25
 assert (MAX_LOWERING_LEAN_SIN, MAX_ROOT_FOLLOW_PER_REACH) \
     == (reference.MAX_LOWERING_LEAN_SIN, reference.MAX_ROOT_FOLLOW_PER_REACH)
+
+
+#: No point whose ground is known (:func:`.ground.height_near`).
+_UNKNOWN = (math.nan, math.nan, math.nan)
 
 
 @jit(inline="always")
@@ -145,14 +149,17 @@ def adapt_to_ground(c: int, root_position: F64, leg_frame: F64, leg_fraction: F6
 def adapt_keeping_heels_up(c: int, pose: LegPoseArrays, hips: tuple[Vec3, Vec3],
                            pelvis_now: Vec3, pelvis2world: Frame,
                            leg2world: tuple[Frame, Frame], lengths: F64, leg: float,
-                           targets: tuple[Vec3, Vec3], weights: tuple[float, float],
-                           root_height: float, kinds: I64, params: F64, grid: F64,
-                           ankle_height: Vec3, max_extension: float, heel_tolerance: float,
-                           passes: int
+                           targets: tuple[Vec3, Vec3], under_targets: tuple[float, float],
+                           weights: tuple[float, float], root_height: float, kinds: I64,
+                           params: F64, grid: F64, is_smooth: bool, ankle_height: Vec3,
+                           max_extension: float, heel_tolerance: float, passes: int
                            ) -> tuple[tuple[Vec3, Vec3], tuple[Vec3, Vec3], tuple[Frame, Frame]]:
     """Mirrors :func:`ecs_anim.core.ground_adapt.adapt_keeping_heels_up` for store row ``c``: the
     ankle targets lifted (up to ``passes`` times) while a heel would be more than
-    ``heel_tolerance`` (m) under the ground. ``ankle_height`` (left, right, unused) m;
+    ``heel_tolerance`` (m) under the ground. ``under_targets``: the ground's height under each
+    target (m; lifting a target keeps its x, y): an ankle that reached its target is not asked
+    about again on a smooth ground (``is_smooth``, :func:`.ground.height_near`).
+    ``ankle_height`` (left, right, unused) m;
     ``hips``, ``pelvis_now``, ``pelvis2world``, ``leg2world``: the pose decoded before
     adaptation, as :func:`adapt_to_ground` takes them.
 
@@ -171,29 +178,35 @@ def adapt_keeping_heels_up(c: int, pose: LegPoseArrays, hips: tuple[Vec3, Vec3],
         if lift == passes:
             break
         ankles = legs[4]
-        d0 = height_at(ankles[0][0], ankles[0][1], kinds, params, grid) + ankle_height[0] \
-            - ankles[0][2]
-        d1 = height_at(ankles[1][0], ankles[1][1], kinds, params, grid) + ankle_height[1] \
-            - ankles[1][2]
+        t0, t1 = targets
+        d0 = height_near(ankles[0][0], ankles[0][1], (t0[0], t0[1], under_targets[0]), is_smooth,
+                         kinds, params, grid) + ankle_height[0] - ankles[0][2]
+        d1 = height_near(ankles[1][0], ankles[1][1], (t1[0], t1[1], under_targets[1]), is_smooth,
+                         kinds, params, grid) + ankle_height[1] - ankles[1][2]
         if not (d0 > heel_tolerance or d1 > heel_tolerance):
             break
-        t0, t1 = targets
         targets = ((t0[0], t0[1], t0[2] + max(d0, 0.0)), (t1[0], t1[1], t1[2] + max(d1, 0.0)))
     return legs[4], legs[5], legs[7]
 
 
 @jit(inline="always")
 def pitched(origin: Vec3, d: Vec3, foot: float, sign: float, clearance: float, kinds: I64,
-            params: F64, grid: F64, passes: int) -> Vec3:
+            params: F64, grid: F64, passes: int, known: Vec3, is_smooth: bool
+            ) -> tuple[Vec3, float]:
     """Mirrors :func:`ecs_anim.core.ground_adapt.pitched`: the foot direction ``d`` (unit, world)
     turned in its vertical plane, at most ``passes`` times asking the ground again, until the
     foot's other end ``origin + sign * foot * d`` is ``clearance`` (m) above the ground or
-    higher; ``sign`` +1 about the ankle (the toe end lifted), -1 about the ball (the ankle end)."""
+    higher; ``sign`` +1 about the ankle (the toe end lifted), -1 about the ball (the ankle end).
+    Returns (that direction, the ground's height under the other end it puts the foot's at, m:
+    asked once here, so the caller need not ask again). ``known`` (x, y, height; NaN: none):
+    a point whose height is known, taken for the first end if that is within
+    :data:`.ground.NEAR_M` of it on a smooth ground (``is_smooth``)."""
     flat = max(math.sqrt(d[0] * d[0] + d[1] * d[1]), 1e-9)
     hx, hy = d[0] / flat, d[1] / flat
     dz = d[2]
     end = add_scaled(origin, d, sign * foot)
-    deficit = height_at(end[0], end[1], kinds, params, grid) + clearance - end[2]
+    ground = height_near(end[0], end[1], known, is_smooth, kinds, params, grid)
+    deficit = ground + clearance - end[2]
     for _ in range(passes):
         if not deficit > 0.0:
             break
@@ -201,23 +214,30 @@ def pitched(origin: Vec3, d: Vec3, foot: float, sign: float, clearance: float, k
         along = math.sqrt(1.0 - dz * dz)
         d = (hx * along, hy * along, dz)
         end = add_scaled(origin, d, sign * foot)
-        deficit = height_at(end[0], end[1], kinds, params, grid) + clearance - end[2]
-    return d
+        ground = height_at(end[0], end[1], kinds, params, grid)
+        deficit = ground + clearance - end[2]
+    return d, ground
 
 
 @jit(inline="always")
 def planted_foot(pivot: int, sole_point: Vec3, d: Vec3, foot: float, ankle_height: float,
                  ball: float, kinds: I64, params: F64, grid: F64, passes: int
-                 ) -> tuple[Vec3, Vec3]:
+                 ) -> tuple[Vec3, Vec3, tuple[float, float]]:
     """Mirrors :func:`ecs_anim.core.ground_adapt.planted_foot`: (ankle, foot direction) of a
     foot standing on ``sole_point`` (world, on the ground) with its heel (``pivot`` 0) or its
-    ball (1), pitched as the motion's ``d`` unless that puts its other end under the ground."""
+    ball (1), pitched as the motion's ``d`` unless that puts its other end under the ground;
+    and the ground's heights (m) under its ankle and under its toe end (``ankle + foot * d``):
+    the sole point's own under the end it stands on, the last one :func:`pitched` asked for
+    under the other, so that nobody asks for them again."""
     if pivot == 0:
         ankle = (sole_point[0], sole_point[1], sole_point[2] + ankle_height)
-        return ankle, pitched(ankle, d, foot, 1.0, ball, kinds, params, grid, passes)
+        d, under_toe = pitched(ankle, d, foot, 1.0, ball, kinds, params, grid, passes, _UNKNOWN,
+                               False)
+        return ankle, d, (sole_point[2], under_toe)
     toe = (sole_point[0], sole_point[1], sole_point[2] + ball)
-    d = pitched(toe, d, foot, -1.0, ankle_height, kinds, params, grid, passes)
-    return add_scaled(toe, d, -foot), d
+    d, under_ankle = pitched(toe, d, foot, -1.0, ankle_height, kinds, params, grid, passes,
+                             _UNKNOWN, False)
+    return add_scaled(toe, d, -foot), d, (under_ankle, sole_point[2])
 
 
 @jit(inline="always")
@@ -232,33 +252,42 @@ def _pivot_wanted(roll: float, current: int) -> int:
 
 
 @jit(inline="always")
-def _foot_target(ankle: Vec3, toe: Vec3, planted_ankle: Vec3, w: float, ground_ref: float,
-                 ankle_height: float, ball: float, kinds: I64, params: F64, grid: F64) -> Vec3:
-    """One ankle's target in ``GroundAdapt.run``: the motion's free foot on the floor
+def _foot_target(ankle: Vec3, toe: Vec3, planted_ankle: Vec3, under_planted: float, w: float,
+                 ground_ref: float, ankle_height: float, ball: float, kinds: I64, params: F64,
+                 grid: F64) -> tuple[Vec3, float]:
+    """One ankle's target in ``GroundAdapt.run`` and the ground's height under it (m): the motion's free foot on the floor
     ``ground_ref`` (m), lifted where its heel or toe would be under the ground, blended
-    towards where the planted foot puts it (``planted_ankle``) by the contact weight ``w``,
-    its heel kept above the ground."""
-    if w == 1.0:  # planted: where the free foot would be does not count (two queries fewer)
-        t = planted_ankle
+    towards where the planted foot puts it (``planted_ankle``, the ground ``under_planted``
+    it, m) by the contact weight ``w``, its heel kept above the ground.
+
+    The ground is asked only where nobody has: a planted foot's target is its ankle (two
+    queries fewer: where the free foot would be does not count), a free foot's is where the
+    heel was asked about."""
+    if w == 1.0:
+        t, under = planted_ankle, under_planted
     else:
         free = (ankle[0], ankle[1], ankle[2] + ground_ref)
-        need_heel = _height(kinds, params, grid, free) + ankle_height - free[2]
+        under_free = _height(kinds, params, grid, free)
+        need_heel = under_free + ankle_height - free[2]
         need_toe = _height(kinds, params, grid, toe) + ball - (toe[2] + ground_ref)
         free = (free[0], free[1], free[2] + max(0.0, max(need_heel, need_toe)))
         t = (free[0] + w * (planted_ankle[0] - free[0]),
              free[1] + w * (planted_ankle[1] - free[1]),
              free[2] + w * (planted_ankle[2] - free[2]))
-    return (t[0], t[1], t[2] + max(_height(kinds, params, grid, t) + ankle_height - t[2], 0.0))
+        # (w == 0 leaves the point where it was asked about: (x + 0 * ...) is x)
+        under = under_free if w == 0.0 else _height(kinds, params, grid, t)
+    return (t[0], t[1], t[2] + max(under + ankle_height - t[2], 0.0)), under
 
 
 @jit(inline="always")
 def _stand(c: int, s: int, ankle: Vec3, toe: Vec3, w: float, sole_roll: F64, clip: I64,
            source_ankle_height: F64, footprint: F64, locked: B1, pivot: I64, leg: float,
            ankle_height: float, ball: float, switch: float, kinds: I64, params: F64,
-           grid: F64, passes: int) -> tuple[Vec3, Vec3]:
+           grid: F64, passes: int) -> tuple[Vec3, Vec3, tuple[float, float]]:
     """Foot ``s`` of row ``c`` in ``GroundAdapt.run``: its footprint laid, kept or moved
-    onto the other sole point, and (ankle, foot direction) standing on it; the motion's
-    (``ankle``, its direction) for a foot not in contact.
+    onto the other sole point, and (ankle, foot direction, the ground's heights under that
+    ankle and under the toe end (m), as :func:`planted_foot`) standing on it; the motion's
+    (``ankle``, its direction, NaN: not asked) for a foot not in contact.
 
     A contact's footprint is laid where the motion puts its planted point (the heel, the ball,
     or the lower of the two where the motion plants both), on the ground under it; it moves to
@@ -268,25 +297,26 @@ def _stand(c: int, s: int, ankle: Vec3, toe: Vec3, w: float, sole_roll: F64, cli
     d = scale(sub(toe, ankle), 1.0 / foot)
     if not w > 0.0:
         locked[c, s] = False
-        return ankle, d
+        return ankle, d, (math.nan, math.nan)
     if not locked[c, s]:
         heel_up = ankle[2] - source_ankle_height[clip[c], s] * leg
         pivot[c, s] = _pivot_wanted(sole_roll[c, s], 0 if heel_up <= toe[2] - ball else 1)
         point = ankle if pivot[c, s] == 0 else toe
         store3(footprint[c, s], (point[0], point[1], _height(kinds, params, grid, point)))
         locked[c, s] = True
-    a, d = planted_foot(pivot[c, s], load3(footprint[c, s]), d, foot, ankle_height, ball,
-                        kinds, params, grid, passes)
+    a, d, under = planted_foot(pivot[c, s], load3(footprint[c, s]), d, foot, ankle_height,
+                               ball, kinds, params, grid, passes)
     want = _pivot_wanted(sole_roll[c, s], pivot[c, s])
     if want != pivot[c, s]:
+        # The other sole point, and the ground under it as planted_foot asked for it.
         other = add_scaled(a, d, foot) if want == 1 else a
-        ground = _height(kinds, params, grid, other)
+        ground = under[want]
         if other[2] - (ball if want == 1 else ankle_height) - ground <= switch:
             pivot[c, s] = want
             store3(footprint[c, s], (other[0], other[1], ground))
-            a, d = planted_foot(want, load3(footprint[c, s]), d, foot, ankle_height, ball,
-                                kinds, params, grid, passes)
-    return a, d
+            a, d, under = planted_foot(want, load3(footprint[c, s]), d, foot, ankle_height,
+                                       ball, kinds, params, grid, passes)
+    return a, d, under
 
 
 @jit(inline="always")  # one call site: a call per row, handed its arrays, costs
@@ -324,28 +354,35 @@ def ground_adapt_row(c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
     g = ground_ref[c]
     # Free feet ride on that floor, lifted where heel or toe would go under the ground; a
     # contact ramping in blends towards its planted ankle, its heel kept above the ground.
-    targets = (_foot_target(ankles[0], toes[0], stance0[0], w[0], g, ankle_height[0], ball,
-                            kinds, params, grid),
-               _foot_target(ankles[1], toes[1], stance1[0], w[1], g, ankle_height[1], ball,
-                            kinds, params, grid))
+    target0, under0 = _foot_target(ankles[0], toes[0], stance0[0], stance0[2][0], w[0], g,
+                                   ankle_height[0], ball, kinds, params, grid)
+    target1, under1 = _foot_target(ankles[1], toes[1], stance1[0], stance1[2][0], w[1], g,
+                                   ankle_height[1], ball, kinds, params, grid)
     root_height = pelvis[2] + g
+    is_smooth = smooth(kinds)
     new_ankles, new_toes, shank2world = adapt_keeping_heels_up(
-        c, pose, hips, pelvis, pelvis2world, leg2world, lengths, leg_c, targets, w,
-        root_height, kinds, params, grid, ankle_height, max_extension, heel_tolerance,
-        heel_passes)
+        c, pose, hips, pelvis, pelvis2world, leg2world, lengths, leg_c, (target0, target1),
+        (under0, under1), w, root_height, kinds, params, grid, is_smooth, ankle_height,
+        max_extension, heel_tolerance, heel_passes)
     # Feet: a planted one pitched as it stands (in the world, whatever the leg's new bend), a
     # ramping one as the motion has it in the world, a free one as in its shank; none with
-    # its toe under the ground.
+    # its toe under the ground. A planted foot whose ankle reached its footing has its toe
+    # end where it stood, whose ground is known.
     for s in range(2):
         ankle, toe = new_ankles[s], new_toes[s]
         foot = max(norm(sub(toe, ankle)), 1e-9)
+        known = _UNKNOWN
         if w[s] >= 1.0:
-            d = stance0[1] if s == 0 else stance1[1]
+            stance = stance0 if s == 0 else stance1
+            d = stance[1]
+            stood = add_scaled(stance[0], d, max(norm(sub(toes[s], ankles[s])), 1e-9))
+            known = (stood[0], stood[1], stance[2][1])
         elif w[s] > 0.0:
             d = scale(sub(toes[s], ankles[s]), 1.0 / max(norm(sub(toes[s], ankles[s])), 1e-9))
         else:
             d = scale(sub(toe, ankle), 1.0 / foot)
-        new_d = pitched(ankle, d, foot, 1.0, ball, kinds, params, grid, toe_passes)
+        new_d = pitched(ankle, d, foot, 1.0, ball, kinds, params, grid, toe_passes, known,
+                        is_smooth)[0]
         if w[s] > 0.0 or new_d[2] != d[2]:
             store3(pose.foot_dir[c, s], in_frame(shank2world[s], new_d))
 

@@ -2,8 +2,9 @@
 
 Mirrors :func:`ecs_anim.motion.sampling.sample` (frames interpolated in normalized space, root motion
 carried across loops), :func:`ecs_anim.motion.sampling.sample_table`, the placement of
-``MotionPlayback._placed`` and :func:`ecs_anim.motion.sampling.blend`, one store row at a time, writing
-the store's pose arrays in place. The clip bank's poses and the store's are passed as
+``MotionPlayback._placed`` and :func:`ecs_anim.motion.sampling.blend`, one store row at a time (the
+sampling's slerps by blocks of characters on the vector units), writing the store's pose arrays
+in place. The clip bank's poses and the store's are passed as
 :class:`~ecs_anim.runtime.kernels.decode.PoseArrays`.
 """
 
@@ -16,8 +17,10 @@ from numpy.typing import NDArray
 
 from ecs_anim.core.normalized import TRAILING_SHAPES, NormalizedPoses
 from ecs_anim.runtime.kernels.decode import PoseArrays
+from ecs_anim.runtime.kernels.lanes import BLOCK, slerp_weights
 from ecs_anim.runtime.kernels.vec import (
     F64,
+    TINY,
     Vec3,
     jit,
     load3,
@@ -98,6 +101,13 @@ def blend_parts(a: PoseArrays, ra: int, b: PoseArrays, rb: int, w: float, out: P
     _blend_quat(a.head, ra, b.head, rb, w, out.head, ro)
     _blend_quat2(a.leg_frame, ra, b.leg_frame, rb, w, out.leg_frame, ro)
     _blend_quat2(a.arm_frame, ra, b.arm_frame, rb, w, out.arm_frame, ro)
+    _blend_unslerped(a, ra, b, rb, w, out, ro)
+
+
+@jit(inline="always")
+def _blend_unslerped(a: PoseArrays, ra: int, b: PoseArrays, rb: int, w: float, out: PoseArrays,
+                     ro: int) -> None:
+    """The directions and lengths of :func:`blend_parts` (all but its quaternions)."""
     _blend_dir(a.neck_dir, ra, b.neck_dir, rb, w, out.neck_dir, ro)
     _blend_dir(a.head_top_dir, ra, b.head_top_dir, rb, w, out.head_top_dir, ro)
     _blend_dir2(a.hip_dir, ra, b.hip_dir, rb, w, out.hip_dir, ro)
@@ -189,17 +199,80 @@ def _frame_root(bank: PoseArrays, first: int, frame: int, angle: float, moved_x:
     return (p0x + moved_x + rx, p0y + moved_y + ry, p[2]), bank.root_heading[frame] + angle
 
 
-@jit(inline="always")  # one call site: a call per row, handed its arrays, costs
-def sample_placed_row(c: int, bank: PoseArrays, start: I64, n_frames: I64, fps: F64,
-                      loop_yaw: F64, loop_shift: F64, clip: I64, time_s: F64, loop: B1,
-                      placement_xy: F64, placement_heading: F64, leg: F64, out: PoseArrays,
-                      o: int) -> None:
-    """Mirrors ``MotionPlayback._placed(sample(...))`` for store row ``c``, into row ``o`` of
-    ``out``. Arguments as for :func:`sample_placed_rows`."""
+#: Scratch rows of :func:`sample_placed_rows` (one column per character of its chunk): the dot
+#: products of the seven slerped quaternion pairs, their weights w0 and w1, the frames' weight,
+#: the bank rows of the two frames (whole numbers, exact in float64).
+_COS, _W0, _W1, _T, _R0, _R1 = 0, 7, 14, 21, 22, 23
+PLAYBACK_SCRATCH_ROWS = 24
+
+
+def playback_scratch(n: int) -> F64:
+    """The scratch :func:`sample_placed_rows` needs for ``n`` rows: (PLAYBACK_SCRATCH_ROWS, n)."""
+    return np.empty((PLAYBACK_SCRATCH_ROWS, n))
+
+
+@jit(inline="always")
+def _cos_half(a: F64, ra: int, rb: int) -> float:
+    """Dot product of the quaternions ``a[ra]`` and ``a[rb]`` ((n, 4))."""
+    cos_half: float = (a[ra, 0] * a[rb, 0] + a[ra, 1] * a[rb, 1] + a[ra, 2] * a[rb, 2]
+                       + a[ra, 3] * a[rb, 3])
+    return cos_half
+
+
+@jit(inline="always")
+def _cos_half2(a: F64, ra: int, rb: int, s: int) -> float:
+    """As :func:`_cos_half` for side ``s`` of (n, 2, 4) quaternions."""
+    cos_half: float = (a[ra, s, 0] * a[rb, s, 0] + a[ra, s, 1] * a[rb, s, 1]
+                       + a[ra, s, 2] * a[rb, s, 2] + a[ra, s, 3] * a[rb, s, 3])
+    return cos_half
+
+
+@jit(inline="always")
+def _weighted_quat(a: F64, ra: int, rb: int, w0: float, w1: float, out: F64, ro: int) -> None:
+    """Row ``ro`` of the (n, 4) ``out``: ``normalize(w0 a[ra] + w1 a[rb])`` (a slerp given its
+    weights, :func:`.lanes.slerp_weights`)."""
+    x = w0 * a[ra, 0] + w1 * a[rb, 0]
+    y = w0 * a[ra, 1] + w1 * a[rb, 1]
+    z = w0 * a[ra, 2] + w1 * a[rb, 2]
+    w = w0 * a[ra, 3] + w1 * a[rb, 3]
+    n = max(math.sqrt(x * x + y * y + z * z + w * w), TINY)
+    out[ro, 0], out[ro, 1], out[ro, 2], out[ro, 3] = x / n, y / n, z / n, w / n
+
+
+@jit(inline="always")
+def _weighted_quat2(a: F64, ra: int, rb: int, s: int, w0: float, w1: float, out: F64,
+                    ro: int) -> None:
+    """As :func:`_weighted_quat` for side ``s`` of (n, 2, 4) quaternions."""
+    x = w0 * a[ra, s, 0] + w1 * a[rb, s, 0]
+    y = w0 * a[ra, s, 1] + w1 * a[rb, s, 1]
+    z = w0 * a[ra, s, 2] + w1 * a[rb, s, 2]
+    w = w0 * a[ra, s, 3] + w1 * a[rb, s, 3]
+    n = max(math.sqrt(x * x + y * y + z * z + w * w), TINY)
+    out[ro, s, 0], out[ro, s, 1], out[ro, s, 2], out[ro, s, 3] = x / n, y / n, z / n, w / n
+
+
+@jit(inline="always")
+def _sampled_frames(c: int, start: I64, n_frames: I64, fps: F64, clip: I64, time_s: F64,
+                    loop: B1) -> tuple[int, int, float, float, bool]:
+    """Bank rows (r0, r1) of the frames store row ``c`` falls between, the weight of r1, the
+    whole loops done and whether r1 wraps (:func:`frame_position` in bank rows)."""
     k = clip[c]
     i0, i1, w, loops, wraps = frame_position(n_frames[k], fps[k], time_s[c], loop[c])
+    return start[k] + i0, start[k] + i1, w, loops, wraps
+
+
+@jit(inline="always")
+def _placed_root_row(c: int, bank: PoseArrays, start: I64, n_frames: I64, fps: F64,
+                     loop_yaw: F64, loop_shift: F64, clip: I64, time_s: F64, loop: B1,
+                     placement_xy: F64, placement_heading: F64, leg: F64, out: PoseArrays,
+                     o: int) -> tuple[int, int, float]:
+    """The root of ``MotionPlayback._placed(sample(...))`` for store row ``c`` (root motion
+    carried across loops, then placed), into row ``o`` of ``out``. Arguments as for
+    :func:`sample_placed_rows`. Returns the bank rows of the two frames and the second's
+    weight."""
+    r0, r1, w, loops, wraps = _sampled_frames(c, start, n_frames, fps, clip, time_s, loop)
+    k = clip[c]
     first = start[k]
-    r0, r1 = first + i0, first + i1
     angle, mx, my = loop_transform(loop_yaw[k], loop_shift[k, 0], loop_shift[k, 1], loops)
     pa, ha = _frame_root(bank, first, r0, angle, mx, my)
     if wraps:
@@ -207,20 +280,20 @@ def sample_placed_row(c: int, bank: PoseArrays, start: I64, n_frames: I64, fps: 
                                        loops + 1.0)
     pb, hb = _frame_root(bank, first, r1, angle, mx, my)
     p, h = blend_root(pa, ha, pb, hb, w)
-    blend_parts(bank, r0, bank, r1, w, out, o)
     # MotionPlayback._placed: rotate the root path about the motion origin, then shift it.
     heading, scale = placement_heading[c], leg[c]
     x, y = rotate_xy(p[0] * scale, p[1] * scale, heading)
     store3(out.root_position[o], ((x + placement_xy[c, 0]) / scale,
                                   (y + placement_xy[c, 1]) / scale, p[2]))
     out.root_heading[o] = h + heading
+    return r0, r1, w
 
 
 @jit(nogil=True)
 def sample_placed_rows(lo: int, hi: int, rows: I64, bank: PoseArrays, start: I64, n_frames: I64,
                        fps: F64, loop_yaw: F64, loop_shift: F64, clip: I64, time_s: F64, loop: B1,
                        placement_xy: F64, placement_heading: F64, leg: F64, out: PoseArrays,
-                       out_rows: I64) -> None:
+                       out_rows: I64, scratch: F64) -> None:
     """Mirrors ``MotionPlayback._placed(sample(bank, clip, time_s, loop), placement_xy,
     placement_heading)`` over the store rows ``rows[lo:hi]``, into rows ``out_rows`` of
     ``out``.
@@ -229,11 +302,47 @@ def sample_placed_rows(lo: int, hi: int, rows: I64, bank: PoseArrays, start: I64
     ``fps``, ``loop_yaw`` (n_clips,), ``loop_shift`` (n_clips, 2): as in
     :class:`ecs_anim.motion.sampling.ClipBank`. Per store row: ``clip`` (n,) int64, ``time_s`` (n,) s,
     ``loop`` (n,) bool, ``placement_xy`` (n, 2) m, ``placement_heading`` (n,) rad, ``leg`` (n,)
-    leg length (m).
+    leg length (m). ``scratch`` (PLAYBACK_SCRATCH_ROWS, len(rows)): :func:`playback_scratch`.
+
+    By blocks of :data:`.lanes.BLOCK` rows: the roots and the quaternions' dot products row by
+    row, the slerps' weights (their arc cosines and sines, most of the work) in a loop over the
+    block's characters that runs on the vector units, then the weighted sums row by row.
     """
-    for i in range(lo, hi):
-        sample_placed_row(rows[i], bank, start, n_frames, fps, loop_yaw, loop_shift, clip,
-                          time_s, loop, placement_xy, placement_heading, leg, out, out_rows[i])
+    for block in range(lo, hi, BLOCK):
+        stop = min(block + BLOCK, hi)
+        for i in range(block, stop):
+            r0, r1, w = _placed_root_row(rows[i], bank, start, n_frames, fps, loop_yaw,
+                                         loop_shift, clip, time_s, loop, placement_xy,
+                                         placement_heading, leg, out, out_rows[i])
+            scratch[_T, i], scratch[_R0, i], scratch[_R1, i] = w, r0, r1
+            scratch[_COS, i] = _cos_half(bank.pelvis_local, r0, r1)
+            scratch[_COS + 1, i] = _cos_half(bank.thorax, r0, r1)
+            scratch[_COS + 2, i] = _cos_half(bank.head, r0, r1)
+            for s in range(2):
+                scratch[_COS + 3 + s, i] = _cos_half2(bank.leg_frame, r0, r1, s)
+                scratch[_COS + 5 + s, i] = _cos_half2(bank.arm_frame, r0, r1, s)
+        t = scratch[_T, block:stop]
+        for q in range(_W0 - _COS):
+            cos_half = scratch[_COS + q, block:stop]
+            w0, w1 = scratch[_W0 + q, block:stop], scratch[_W1 + q, block:stop]
+            # The vectorized loop (indices from 0: LLVM knows they need no wrapping around).
+            for j in range(t.shape[0]):
+                w0[j], w1[j] = slerp_weights(cos_half[j], t[j])
+        for i in range(block, stop):
+            o, w = out_rows[i], scratch[_T, i]
+            r0, r1 = int(scratch[_R0, i]), int(scratch[_R1, i])
+            _weighted_quat(bank.pelvis_local, r0, r1, scratch[_W0, i], scratch[_W1, i],
+                           out.pelvis_local, o)
+            _weighted_quat(bank.thorax, r0, r1, scratch[_W0 + 1, i], scratch[_W1 + 1, i],
+                           out.thorax, o)
+            _weighted_quat(bank.head, r0, r1, scratch[_W0 + 2, i], scratch[_W1 + 2, i],
+                           out.head, o)
+            for s in range(2):
+                _weighted_quat2(bank.leg_frame, r0, r1, s, scratch[_W0 + 3 + s, i],
+                                scratch[_W1 + 3 + s, i], out.leg_frame, o)
+                _weighted_quat2(bank.arm_frame, r0, r1, s, scratch[_W0 + 5 + s, i],
+                                scratch[_W1 + 5 + s, i], out.arm_frame, o)
+            _blend_unslerped(bank, r0, bank, r1, w, out, o)
 
 
 @jit(nogil=True)

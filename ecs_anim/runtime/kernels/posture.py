@@ -1,5 +1,6 @@
 """Compiled posture conversion (PostureConvert's work, paper §8): decode, the frozen check, the
-export skeleton's local joint rotations and the resampled spine, one store row at a time.
+export skeleton's local joint rotations and the resampled spine: the decode by blocks
+(:func:`.decode.decode_rows`), the rest one store row at a time.
 
 Mirrors :func:`ecs_anim.core.normalized.decode`, :func:`ecs_anim.io.export.skeleton.export_rotations`,
 :func:`ecs_anim.io.export.skeleton.local_rotations` and :func:`ecs_anim.core.normalized.vertebrae`. On one
@@ -43,7 +44,7 @@ from ecs_anim.runtime.kernels.decode import (
     WRIST,
     DecodedArrays,
     PoseArrays,
-    decode_row,
+    decode_rows,
     decoded_arrays,
     leg_length,
     pelvis_frame,
@@ -265,7 +266,7 @@ def posture_of_decoded_row(c: int, pose: PoseArrays, lengths: F64, decoded: Deco
 def posture_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64,
                  decoded: DecodedArrays, frozen: B8, newly_bad: B8, positions: F64, rotations: bool,
                  world: F64, local: F64, rest_hips: F64, bvh_from_world: F64, rest2body: F64,
-                 parents: I64, vertebrae: F64, have_previous: bool) -> None:
+                 parents: I64, vertebrae: F64, have_previous: bool, scratch: F64) -> None:
     """PostureConvert over the store rows ``rows[lo:hi]`` (int64), in place.
 
     Each row ``c``: decode on ``lengths[c]`` into ``decoded`` (all of it: the posture frames,
@@ -277,13 +278,15 @@ def posture_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64,
     (its vertebrae are written anyway without ``have_previous``). Mirrors
     ``systems.posture_convert`` on :func:`ecs_anim.core.normalized.decode`,
     :func:`ecs_anim.io.export.skeleton.local_rotations` and :func:`ecs_anim.core.normalized.vertebrae`.
+    ``scratch`` (SPINE_SCRATCH_ROWS, len(rows)): :func:`.decode.spine_scratch`, for
+    :func:`.decode.decode_rows` (the decode of all the rows first, by blocks on the vector
+    units, then the rest row by row).
     """
+    decode_rows(lo, hi, rows, pose, lengths, decoded, scratch)
     for i in range(lo, hi):
-        c = rows[i]
-        decode_row(c, pose, lengths[c], decoded)
-        posture_of_decoded_row(c, pose, lengths, decoded, frozen, newly_bad, positions, rotations,
-                               world, local, rest_hips, bvh_from_world, rest2body, parents,
-                               vertebrae, have_previous)
+        posture_of_decoded_row(rows[i], pose, lengths, decoded, frozen, newly_bad, positions,
+                               rotations, world, local, rest_hips, bvh_from_world, rest2body,
+                               parents, vertebrae, have_previous)
 
 
 @jit(nogil=True)

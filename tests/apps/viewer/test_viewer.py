@@ -525,6 +525,33 @@ def test_viewer_window_controls():
         app.window.close()
 
 
+def test_a_side_view_of_one_pair_draws_and_frames_only_that_pair(tmp_path, capsys):
+    """docs/viewer.md's side view of the fight's pair 2 at its kick (docs/images/fight_pair2_side.png):
+    two characters drawn, the other six (still simulated, as the triggers need them) and their
+    targets hidden, seen from the kicker's right; an unknown name is one line."""
+    need_gl()
+    out = tmp_path / "pair2.png"
+    assert main(["view", str(SCENARIOS_DIR / "fight_training.yaml"), "--screenshot", str(out),
+                 "--at", "1.2", "--only", "kicker_2,defender_2", "--yaw-deg", "-100",
+                 "--pitch-deg", "6", "--size", "320x240"]) == 0
+    assert "t = 1.200 s, 2 characters" in capsys.readouterr().out
+    from ecs_anim.apps.viewer.screenshot import render_screenshot
+
+    scenario = _scenario("fight_training.yaml")
+    scenario.camera = {"yaw_deg": -100.0, "pitch_deg": 6.0}
+    shot = render_screenshot(scenario, 1.2, 320, 240, only=frozenset({"kicker_2", "defender_2"}))
+    assert np.abs(shot.rgb.astype(int) - read_png(out)).max() <= 2
+    assert shot.frame.n_characters == 2 and shot.frame.joints.shape[0] == 2
+    assert np.allclose(shot.frame.joints[:, 0, 1], 2.0, atol=0.3)  # pair 2 stands at y = 2 m
+    assert shot.frame.marks is not None and shot.frame.marks.target.shape[0] >= 1
+    assert np.all(np.abs(shot.frame.marks.target[:, 1] - 2.0) < 0.5)  # its own targets only
+    assert math.isclose(math.degrees(shot.camera.yaw_rad), -100.0)
+    assert main(["view", str(SCENARIOS_DIR / "fight_training.yaml"), "--screenshot",
+                 str(tmp_path / "x.png"), "--only", "kicker_9"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no character named kicker_9" in err
+
+
 def test_screenshot_refuses_to_overwrite(tmp_path, capsys):
     out = tmp_path / "x.png"
     out.write_bytes(b"keep")

@@ -10,12 +10,18 @@ import pytest
 
 from conftest import MOCAP_DIR, require_mocap
 from ecs_anim.core.ground import Plane
-from ecs_anim.core.skeleton import LENGTHS
+from ecs_anim.core.skeleton import JOINT_INDEX, LENGTHS, N_JOINTS
 from ecs_anim.io.export import play_on
 from ecs_anim.io.export.positions import in_layout_axes, layout_positions
 from ecs_anim.io.importing import import_bvh
 from ecs_anim.io.position_layouts import HUMANML3D
-from ecs_anim.io.positions import PositionOptions, import_positions
+from ecs_anim.io.positions import (
+    PositionOptions,
+    bone_noise_variance,
+    import_positions,
+    robust_bone_lengths,
+    zero_lag_lowpass,
+)
 from ecs_anim.runtime.metrics import MetricsRecorder
 from ecs_anim.scenario import build_simulation
 from support.scenarios import clip_on_body
@@ -25,9 +31,11 @@ SMPL_PARENTS = (-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17
 JITTER_M = 0.02
 BREATH = 0.03
 #: Bones the file measures (HumanML3D has no hands or head top) at least this long are held
-#: to 1 %: shorter ones are within the jitter's statistics (measured on the 63 s dance: neck
-#: 6.5 cm -1.3 %, pelvis half-width 6.8 cm -0.8 %); the ankle heights are no bone but the
-#: ankles' low height over the floor, which jitter lowers (-8 to -10 %).
+#: to 1 %: shorter ones are within the jitter's statistics, which no estimator beats
+#: (:func:`test_a_short_bone_is_as_exact_as_its_jitter_allows`; measured on the 63 s dance, 1,890
+#: frames: neck 6.5 cm -1.33 % at seed 34, over 12 seeds -0.13 % on average with a spread of
+#: 0.80 %, 3 of 12 beyond 1 %); the ankle heights are no bone but the ankles' low height over the
+#: floor, which jitter lowers (-8 to -10 %).
 HELD_M = 0.1
 MEASURED = [k for k, name in enumerate(LENGTHS)
             if not name.startswith(("ankle_height", "hand", "head"))]
@@ -94,3 +102,33 @@ def test_mocap_grade_positions_keep_their_bones(tmp_path):
     assert "warnings" not in clean.info
     again = import_positions(tmp_path / "noisy.npy", PositionOptions("humanml3d", clean.fps))
     assert "--lowpass" in again.info["warnings"][0]
+
+
+def test_a_short_bone_is_as_exact_as_its_jitter_allows():
+    """Issue 34's 1 % on a 6.5 cm neck under 2 cm of jitter is beyond what the data holds: each
+    frame tells the bone's length only through the jitter along it (2.8 cm on a bone vector, two
+    joints' worth), so over N frames no estimator does better than 2.8 cm / sqrt(N): 1.0 % of
+    6.5 cm over the dance's 1,890 frames. Over 200 jitters of one motion, the import's estimate
+    (low-pass, mean squared length less the noise it leaves) is unbiased (mean within 0.3 %) and
+    as exact as that bound allows (spread within 20 % of it), and an estimator told the bone's
+    true direction in every frame misses 1 % as often (over a quarter of the jitters)."""
+    fps, n, neck_m = 30.0, 1890, 0.0646
+    sigma_bone = JITTER_M * np.sqrt(2.0)  # per axis, on head - neck
+    t = np.arange(n) / fps
+    direction = np.stack([0.3 * np.cos(t), 0.3 * np.sin(t), np.ones(n)], axis=-1)
+    direction /= np.linalg.norm(direction, axis=-1, keepdims=True)
+    head = JOINT_INDEX["head"]
+    ours, told = [], []
+    for seed in range(200):
+        jitter = np.random.default_rng(seed).normal(0.0, sigma_bone, (n, 3))
+        positions = np.zeros((n, N_JOINTS, 3))
+        positions[:, head] = neck_m * direction + jitter  # the neck joint at the origin
+        noise = bone_noise_variance(positions, fps, 6.0)
+        smooth = zero_lag_lowpass(positions, fps, 6.0)[0]
+        ours.append(robust_bone_lengths(smooth, noise)[head] / neck_m - 1)
+        told.append(np.mean(np.sum((neck_m * direction + jitter) * direction, axis=-1)) / neck_m - 1)
+    bound = sigma_bone / np.sqrt(n) / neck_m
+    assert abs(bound - 0.01) < 0.0005
+    assert abs(np.mean(ours)) < 0.003, np.mean(ours)
+    assert np.std(ours) < 1.2 * bound, (np.std(ours), bound)
+    assert np.mean(np.abs(told) > 0.01) > 0.25

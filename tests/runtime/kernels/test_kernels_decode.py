@@ -10,6 +10,7 @@ from ecs_anim.core.morphology import Morphology
 from ecs_anim.core.normalized import DecodedPose, NormalizedPoses, decode, decode_legs
 from ecs_anim.io.importing import import_bvh
 from ecs_anim.runtime.kernels import decode as kd
+from ecs_anim.runtime.kernels.lanes import BLOCK
 from support.solve import random_bodies, random_poses
 
 FIELDS = ("positions", "pelvis2world", "thorax2world", "head2world", "leg2world", "arm2world")
@@ -48,7 +49,8 @@ def test_decode_rows_writes_only_its_rows():
     for a in arrays:
         a.fill(np.nan)
     rows = np.array([3, 17, 39, 0], dtype=np.int64)
-    kd.decode_rows(0, rows.size, rows, kd.pose_arrays(poses), lengths, arrays)
+    kd.decode_rows(0, rows.size, rows, kd.pose_arrays(poses), lengths, arrays,
+                   kd.spine_scratch(rows.size))
     ref = decode(poses, lengths)
     untouched = np.setdiff1d(np.arange(40), rows)
     for name, a in zip(FIELDS, arrays, strict=True):
@@ -126,3 +128,36 @@ def test_the_kernels_tuples_name_the_dataclasses_fields_in_order():
 
     assert PoseArrays._fields == tuple(f.name for f in fields(NormalizedPoses))
     assert DecodedArrays._fields == tuple(f.name for f in fields(DecodedPose))
+
+
+def test_decode_rows_by_blocks_does_not_depend_on_the_chunks_and_equals_the_row_decode():
+    """decode_rows decodes the spines of a block of characters together (lanes.BLOCK at a time,
+    stopping the block's Newton iteration once all its spines have converged): any split of
+    the rows into chunks, none a multiple of the block, gives the same bits, and so does the
+    decode of one row at a time (decode_row, the solver's)."""
+    from numba import njit
+
+    rng = np.random.default_rng(1309)
+    n = 3 * BLOCK + 5
+    poses = random_poses(rng, n)
+    lengths = random_bodies(rng, n)
+    rows = rng.permutation(n).astype(np.int64)
+    pose = kd.pose_arrays(poses)
+    whole = kd.empty_decoded(n)
+    kd.decode_rows(0, n, rows, pose, lengths, whole, kd.spine_scratch(n))
+    chunked = kd.empty_decoded(n)
+    scratch = kd.spine_scratch(n)
+    for lo, hi in ((0, 7), (7, 40), (40, 41), (41, n)):
+        kd.decode_rows(lo, hi, rows, pose, lengths, chunked, scratch)
+
+    @njit(error_model="numpy")
+    def one_row_at_a_time(pose, lengths, out):
+        for c in range(lengths.shape[0]):
+            kd.decode_row(c, pose, lengths[c], out)
+
+    by_row = kd.empty_decoded(n)
+    one_row_at_a_time(pose, lengths, by_row)
+    for name, a, b, c in zip(FIELDS, whole, chunked, by_row, strict=True):
+        np.testing.assert_array_equal(a, b, err_msg=name)
+        np.testing.assert_array_equal(a, c, err_msg=name)
+    assert_same(kd.decoded_pose(whole), decode(poses, lengths))

@@ -20,7 +20,7 @@ from ecs_anim.core.ground import (
 )
 from ecs_anim.core.morphology import Morphology
 from ecs_anim.core.normalized import QUATERNION_FIELDS
-from ecs_anim.runtime.kernels.ground import height_at
+from ecs_anim.runtime.kernels.ground import NEAR_M, height_at, height_near, smooth
 from ecs_anim.runtime.simulation import Simulation
 from ecs_anim.systems import GroundAdapt
 
@@ -74,6 +74,26 @@ def test_stair_edges_equal_numpy() -> None:
 class _Ripples:
     def height(self, xy: np.ndarray) -> np.ndarray:
         return 0.01 * np.cos(xy[..., 0])
+
+
+def test_a_known_height_is_reused_only_near_it_on_a_smooth_ground() -> None:
+    """Planes, slopes and bumps are smooth (a point 1e-10 m off takes the known height: they
+    differ by the grade times that); stairs and grids are not (an edge may lie in between)."""
+    assert [smooth(describe(g).kinds) for g in GROUNDS.values()] == [  # type: ignore[union-attr]
+        True, True, False, True, False, False, False]
+    d = describe(GROUNDS["bumps"])
+    assert d is not None
+    x, y = 0.37, -0.81
+    exact = height_at(x, y, d.kinds, d.params, d.grid)
+    off = x + NEAR_M / 2
+    near = height_near(off, y, (x, y, exact), True, d.kinds, d.params, d.grid)
+    assert near == exact and abs(height_at(off, y, d.kinds, d.params, d.grid) - near) < NEAR_M
+    far = height_near(x + 1e-3, y, (x, y, exact), True, d.kinds, d.params, d.grid)
+    assert far == height_at(x + 1e-3, y, d.kinds, d.params, d.grid)
+    # Not smooth, or nothing known (NaN): asked.
+    assert height_near(off, y, (x, y, 99.0), False, d.kinds, d.params, d.grid) != 99.0
+    nothing = (float("nan"),) * 3
+    assert height_near(x, y, nothing, True, d.kinds, d.params, d.grid) == exact
 
 
 def test_a_ground_of_ones_own_has_no_compiled_form() -> None:

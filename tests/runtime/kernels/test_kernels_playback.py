@@ -13,9 +13,11 @@ from ecs_anim.io.importing import import_bvh
 from ecs_anim.io.library import MOTIONS_DIR
 from ecs_anim.motion.sampling import ClipBank, blend, rotate_xy, sample, sample_table
 from ecs_anim.runtime.kernels.decode import pose_arrays
+from ecs_anim.runtime.kernels.lanes import BLOCK
 from ecs_anim.runtime.kernels.playback import (
     blend_rows,
     complex_power,
+    playback_scratch,
     sample_placed_rows,
     sample_table_rows,
 )
@@ -75,7 +77,7 @@ def test_sample_placed_rows_equals_numpy(bank: ClipBank) -> None:
     rows = np.arange(n, dtype=np.int64)
     sample_placed_rows(0, n, rows, pose_arrays(bank.poses), bank.start, bank.n_frames, bank.fps,
                        bank.loop_yaw, bank.loop_shift, clip, time_s, loop, xy, heading, leg,
-                       pose_arrays(got), rows)
+                       pose_arrays(got), rows, playback_scratch(n))
     _assert_poses_equal(got, want)
 
 
@@ -88,7 +90,8 @@ def test_only_the_given_rows_are_written(bank: ClipBank) -> None:
     got = _empty(rows.size, want)
     sample_placed_rows(0, rows.size, rows, pose_arrays(bank.poses), bank.start, bank.n_frames,
                        bank.fps, bank.loop_yaw, bank.loop_shift, clip, time_s, loop, xy, heading,
-                       leg, pose_arrays(got), np.arange(rows.size, dtype=np.int64))
+                       leg, pose_arrays(got), np.arange(rows.size, dtype=np.int64),
+                       playback_scratch(rows.size))
     _assert_poses_equal(got, want.take(rows))
 
 
@@ -104,10 +107,30 @@ def test_long_loops_carry_root_motion_as_numpy(bank: ClipBank) -> None:
     rows = np.arange(n, dtype=np.int64)
     sample_placed_rows(0, n, rows, pose_arrays(bank.poses), bank.start, bank.n_frames, bank.fps,
                        bank.loop_yaw, bank.loop_shift, clip, time_s, loop, xy, heading, leg,
-                       pose_arrays(got), rows)
+                       pose_arrays(got), rows, playback_scratch(n))
     np.testing.assert_allclose(got.root_position * 0.9, want.root_position * 0.9, rtol=0,
                                atol=1e-9)
     _assert_poses_equal(got, want)
+
+
+def test_sample_placed_rows_does_not_depend_on_the_chunks(bank: ClipBank) -> None:
+    """The slerps' weights are computed by blocks of lanes.BLOCK characters on the vector
+    units: any split of the rows into chunks, none a multiple of the block, gives the same
+    bits."""
+    rng = np.random.default_rng(1319)
+    n = 3 * BLOCK + 5
+    clip, time_s, loop, xy, heading, leg = _scene(bank, rng, n)
+    rows = rng.permutation(n).astype(np.int64)
+    like = sample(bank, clip[:1], time_s[:1], loop[:1])
+    whole, chunked = _empty(n, like), _empty(n, like)
+    args = (rows, pose_arrays(bank.poses), bank.start, bank.n_frames, bank.fps, bank.loop_yaw,
+            bank.loop_shift, clip, time_s, loop, xy, heading, leg)
+    sample_placed_rows(0, n, *args, pose_arrays(whole), rows, playback_scratch(n))
+    scratch = playback_scratch(n)
+    for lo, hi in ((0, 7), (7, 40), (40, 41), (41, n)):
+        sample_placed_rows(lo, hi, *args, pose_arrays(chunked), rows, scratch)
+    for name, a in whole.arrays().items():
+        np.testing.assert_array_equal(getattr(chunked, name), a, err_msg=name)
 
 
 def test_complex_power_equals_numpy() -> None:

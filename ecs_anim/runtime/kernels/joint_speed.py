@@ -1,0 +1,305 @@
+"""Compiled :mod:`ecs_anim.solver.joint_speed`: how much faster than its motion a solved
+segment may turn from one tick to the next (no pops).
+
+:func:`limit_motion` and :func:`pack` take the arguments of their numpy references and give the
+same results (to 1e-9); the per-character loops are :func:`limit_rows` and :func:`pack_rows`.
+Values are packed as the reference's: frames 0-5 (legs, arms, thorax, head) as quaternions,
+directions 0-4 (feet, hands, neck), shifts 0-12 (leg fractions, arm fractions, the spine's
+three points).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ecs_anim.core.normalized import NormalizedPoses
+from ecs_anim.runtime.kernels import over_chunks
+from ecs_anim.runtime.kernels.decode import PoseArrays, pose_arrays
+from ecs_anim.runtime.kernels.vec import (
+    F64,
+    Quat,
+    Vec3,
+    cross,
+    dot,
+    jit,
+    load3,
+    load4,
+    store3,
+    store4,
+)
+from ecs_anim.solver.joint_speed import (
+    DIRECTION_GROUP,
+    DIRECTIONS_AT,
+    FRAME_GROUP,
+    N_GROUPS,
+    N_VALUES,
+    SHIFT_GROUP,
+    SHIFTS_AT,
+)
+
+B8 = NDArray[np.bool_]
+I64 = NDArray[np.int64]
+_N_FRAMES, _N_DIRECTIONS, _N_SHIFTS = 6, 5, 13
+
+
+@jit(inline="always")
+def quat_mul(a: Quat, b: Quat) -> Quat:
+    """Mirrors the reference's ``_quat_mul``: the Hamilton product ``a b`` (scalar last)."""
+    return (a[3] * b[0] + a[0] * b[3] + a[1] * b[2] - a[2] * b[1],
+            a[3] * b[1] - a[0] * b[2] + a[1] * b[3] + a[2] * b[0],
+            a[3] * b[2] + a[0] * b[1] - a[1] * b[0] + a[2] * b[3],
+            a[3] * b[3] - a[0] * b[0] - a[1] * b[1] - a[2] * b[2])
+
+
+@jit(inline="always")
+def conj(q: Quat) -> Quat:
+    return (-q[0], -q[1], -q[2], q[3])
+
+
+@jit()
+def rotvec_of(q: Quat) -> Vec3:
+    """Mirrors ``_rotvec_of``: the rotation vector (rad) of a unit quaternion."""
+    if q[3] < 0.0:
+        q = (-q[0], -q[1], -q[2], -q[3])
+    s = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2])
+    per = 2.0 if s < 1e-12 else 2.0 * math.atan2(s, q[3]) / s
+    return (q[0] * per, q[1] * per, q[2] * per)
+
+
+@jit()
+def quat_of(r: Vec3) -> Quat:
+    """Mirrors ``_quat_of``: the unit quaternion of a rotation vector (rad)."""
+    angle = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+    per = 0.5 if angle < 1e-12 else math.sin(0.5 * angle) / angle
+    return (r[0] * per, r[1] * per, r[2] * per, math.cos(0.5 * angle))
+
+
+@jit()
+def quat_between(a: Vec3, b: Vec3) -> Quat:
+    """Mirrors ``_quat_between``: the smallest turn taking unit ``a`` onto unit ``b``."""
+    c = dot(a, b)
+    if c < -1.0 + 1e-9:
+        helper = (1.0, 0.0, 0.0) if abs(a[0]) < 0.9 else (0.0, 1.0, 0.0)
+        k = cross(a, helper)
+        q = (k[0], k[1], k[2], 0.0)
+    else:
+        k = cross(a, b)
+        q = (k[0], k[1], k[2], 1.0 + c)
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
+
+
+@jit()
+def rotate(q: Quat, v: Vec3) -> Vec3:
+    """Mirrors ``_rotate``: ``v`` turned by the unit quaternion ``q``."""
+    u = (q[0], q[1], q[2])
+    c = cross(u, v)
+    t = (2.0 * c[0], 2.0 * c[1], 2.0 * c[2])
+    ut = cross(u, t)
+    return (v[0] + q[3] * t[0] + ut[0], v[1] + q[3] * t[1] + ut[1], v[2] + q[3] * t[2] + ut[2])
+
+
+@jit(inline="always")
+def _frame(p: PoseArrays, c: int, k: int) -> Quat:
+    """Frame ``k`` of row ``c`` (legs, arms, thorax, head)."""
+    if k < 2:
+        return load4(p.leg_frame[c, k])
+    if k < 4:
+        return load4(p.arm_frame[c, k - 2])
+    if k == 4:
+        return load4(p.thorax[c])
+    return load4(p.head[c])
+
+
+@jit(inline="always")
+def _set_frame(p: PoseArrays, c: int, k: int, q: Quat) -> None:
+    if k < 2:
+        store4(p.leg_frame[c, k], q)
+    elif k < 4:
+        store4(p.arm_frame[c, k - 2], q)
+    elif k == 4:
+        store4(p.thorax[c], q)
+    else:
+        store4(p.head[c], q)
+
+
+@jit(inline="always")
+def _direction(p: PoseArrays, c: int, k: int) -> Vec3:
+    """Direction ``k`` of row ``c`` (feet, hands, neck)."""
+    if k < 2:
+        return load3(p.foot_dir[c, k])
+    if k < 4:
+        return load3(p.hand_dir[c, k - 2])
+    return load3(p.neck_dir[c])
+
+
+@jit(inline="always")
+def _set_direction(p: PoseArrays, c: int, k: int, v: Vec3) -> None:
+    if k < 2:
+        store3(p.foot_dir[c, k], v)
+    elif k < 4:
+        store3(p.hand_dir[c, k - 2], v)
+    else:
+        store3(p.neck_dir[c], v)
+
+
+@jit(inline="always")
+def _shift(p: PoseArrays, c: int, j: int) -> float:
+    """Shifted value ``j`` of row ``c`` (leg fractions, arm fractions, spine coordinates)."""
+    if j < 2:
+        return float(p.leg_fraction[c, j])
+    if j < 4:
+        return float(p.arm_fraction[c, j - 2])
+    return float(p.spine_points[c, (j - 4) // 3, (j - 4) % 3])
+
+
+@jit(inline="always")
+def _set_shift(p: PoseArrays, c: int, j: int, value: float) -> None:
+    if j < 2:
+        p.leg_fraction[c, j] = value
+    elif j < 4:
+        p.arm_fraction[c, j - 2] = value
+    else:
+        p.spine_points[c, (j - 4) // 3, (j - 4) % 3] = value
+
+
+@jit(inline="always")
+def _shift_group(j: int) -> int:
+    """The index into the reference's ``SHIFTS`` of shifted value ``j``."""
+    return j if j < 4 else 4 + (j - 4) // 3
+
+
+@jit(nogil=True)
+def pack_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, out: F64) -> None:
+    """Mirrors :func:`ecs_anim.solver.joint_speed.pack` for the rows ``rows[lo:hi]`` of ``pose``
+    into the same rows of ``out`` (n, N_VALUES)."""
+    for i in range(lo, hi):
+        c = rows[i]
+        for k in range(_N_FRAMES):
+            store4(out[c, 4 * k:4 * k + 4], _frame(pose, c, k))
+        for k in range(_N_DIRECTIONS):
+            store3(out[c, DIRECTIONS_AT + 3 * k:DIRECTIONS_AT + 3 * k + 3], _direction(pose, c, k))
+        for j in range(_N_SHIFTS):
+            out[c, SHIFTS_AT + j] = _shift(pose, c, j)
+
+
+@jit(inline="always")
+def _angle(a: Vec3, b: Vec3) -> float:
+    """The angle between unit directions (rad), as the reference's ``arctan2(|a x b|, a.b)``."""
+    k = cross(a, b)
+    return math.atan2(math.sqrt(k[0] * k[0] + k[1] * k[1] + k[2] * k[2]), dot(a, b))
+
+
+@jit(inline="always")
+def _frame_turn(a: Quat, b: Quat) -> Vec3:
+    """The rotation vector (rad) from quaternion ``a`` to ``b``."""
+    return rotvec_of(quat_mul(b, conj(a)))
+
+
+@jit(inline="always")
+def _size(v: Vec3) -> float:
+    return math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+
+
+@jit(inline="always")
+def _share(moved: float, allowed: float) -> float:
+    return allowed / max(moved, 1e-300) if moved > allowed else 1.0
+
+
+@jit(nogil=True)
+def limit_rows(lo: int, hi: int, pose: PoseArrays, clip_now: F64, clip_before: F64,
+               pose_before: F64, planted: B8, max_step: float, frame_group: I64,
+               direction_group: I64, shift_group: I64, need: F64, held: B8) -> None:
+    """Mirrors :func:`ecs_anim.solver.joint_speed.limit_motion` over rows ``lo..hi-1`` of
+    ``pose`` (limited in place); ``held`` (r,) whether anything was held back; ``need``
+    (r, N_GROUPS) scratch: each group's share of its way."""
+    for c in range(lo, hi):
+        for g in range(N_GROUPS):
+            need[c, g] = 1.0
+        for k in range(_N_FRAMES):
+            at = 4 * k
+            moved = _size(_frame_turn(load4(pose_before[c, at:at + 4]), _frame(pose, c, k)))
+            own = _size(_frame_turn(load4(clip_before[c, at:at + 4]), load4(clip_now[c, at:at + 4])))
+            g = frame_group[k]
+            need[c, g] = min(need[c, g], _share(moved, max_step + own))
+        for k in range(_N_DIRECTIONS):
+            at = DIRECTIONS_AT + 3 * k
+            moved = _angle(load3(pose_before[c, at:at + 3]), _direction(pose, c, k))
+            own = _angle(load3(clip_before[c, at:at + 3]), load3(clip_now[c, at:at + 3]))
+            g = direction_group[k]
+            need[c, g] = min(need[c, g], _share(moved, max_step + own))
+        j = 0
+        while j < _N_SHIFTS:
+            width = 1 if j < 4 else 3
+            moved2 = 0.0
+            own2 = 0.0
+            for i in range(j, j + width):
+                d = _shift(pose, c, i) - pose_before[c, SHIFTS_AT + i]
+                e = clip_now[c, SHIFTS_AT + i] - clip_before[c, SHIFTS_AT + i]
+                moved2 += d * d
+                own2 += e * e
+            g = shift_group[_shift_group(j)]
+            need[c, g] = min(need[c, g], _share(math.sqrt(moved2), max_step + math.sqrt(own2)))
+            j += width
+        for s in range(2):  # the legs' groups are 0 and 1
+            if planted[c, s]:
+                need[c, s] = 1.0
+        first = False
+        for i in range(N_VALUES):
+            first = first or pose_before[c, i] != 0.0
+        held[c] = False
+        for g in range(N_GROUPS):
+            if not first:
+                need[c, g] = 1.0
+            held[c] = held[c] or need[c, g] < 1.0
+        if not held[c]:
+            continue
+        for k in range(_N_FRAMES):
+            share = need[c, frame_group[k]]
+            if share < 1.0:
+                a = load4(pose_before[c, 4 * k:4 * k + 4])
+                t = _frame_turn(a, _frame(pose, c, k))
+                _set_frame(pose, c, k, quat_mul(quat_of((t[0] * share, t[1] * share, t[2] * share)), a))
+        for k in range(_N_DIRECTIONS):
+            share = need[c, direction_group[k]]
+            if share < 1.0:
+                at = DIRECTIONS_AT + 3 * k
+                was = load3(pose_before[c, at:at + 3])
+                t = rotvec_of(quat_between(was, _direction(pose, c, k)))
+                _set_direction(pose, c, k, rotate(quat_of((t[0] * share, t[1] * share,
+                                                            t[2] * share)), was))
+        for j in range(_N_SHIFTS):
+            share = need[c, shift_group[_shift_group(j)]]
+            if share < 1.0:
+                a_j = pose_before[c, SHIFTS_AT + j]
+                _set_shift(pose, c, j, a_j + share * (_shift(pose, c, j) - a_j))
+
+
+def pack(poses: NormalizedPoses) -> F64:
+    """Compiled :func:`ecs_anim.solver.joint_speed.pack` (same argument and result)."""
+    r = poses.root_heading.shape[0]
+    out = np.empty((r, N_VALUES))
+    over_chunks(pack_rows, r, np.arange(r, dtype=np.int64), pose_arrays(poses), out)
+    return out
+
+
+def pack_into(poses: NormalizedPoses, rows: I64, out: F64) -> None:
+    """``out[rows] = pack(poses)[rows]`` in place (``out`` (n, N_VALUES), C-contiguous)."""
+    over_chunks(pack_rows, rows.size, np.ascontiguousarray(rows, dtype=np.int64),
+                pose_arrays(poses), out)
+
+
+def limit_motion(poses: NormalizedPoses, clip_now: F64, clip_before: F64, pose_before: F64,
+                 planted: B8, max_step: float) -> tuple[NormalizedPoses, B8]:
+    """Compiled :func:`ecs_anim.solver.joint_speed.limit_motion` (same arguments and results),
+    except that ``poses`` is limited in place and returned."""
+    r = poses.root_heading.shape[0]
+    held, need = np.empty(r, bool), np.empty((r, N_GROUPS))
+    floats = [np.ascontiguousarray(a, dtype=np.float64) for a in (clip_now, clip_before, pose_before)]
+    over_chunks(limit_rows, r, pose_arrays(poses), *floats,
+                np.ascontiguousarray(planted, dtype=np.bool_), float(max_step), FRAME_GROUP,
+                DIRECTION_GROUP, SHIFT_GROUP, need, held)
+    return poses, held

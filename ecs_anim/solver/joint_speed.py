@@ -1,0 +1,279 @@
+"""No pops: how much faster than its motion a solved segment may turn from one tick to the next.
+
+The solver may change a pose a lot between two ticks while its goals hardly move: a trunk that
+a chain may bend folds 60° in one tick once a punch's target is out of the arm's reach, a leg
+twists about its hip-ankle axis as a kick's goal eases in (the toe at 14-17 m/s where the
+clip's moves at 3). :func:`limit_motion` lets each segment the solver sets (the legs', arms',
+thorax's and head's frames, the feet's, hands' and neck's directions, the limbs' fractions, the
+spine's points, all in the normalized form, relative to their parents) move from where it was
+at the last tick toward where the solve put it by at most ``max_step`` more than the motion's
+own segment moved (radians a tick, ``max_joint_speed_rad_s * dt``; a fraction of a limb's
+length or a spine point, in spine lengths, counts as radians). Each group of the solver (a leg,
+an arm, the head, the trunk) goes the same share of its way, the share of its most held-back
+segment, so a limb keeps its shape along the way. So:
+
+* the motion's own fast moves (a kick) and a correction that keeps a point on a target while
+  the motion sweeps past it are not touched: only what the solver adds beyond the motion's own
+  speed is bounded, and a fold of the trunk is spread over several ticks;
+* a leg standing on a footprint (contact) is not limited; the characters held back are solved
+  again on their limited pose with the feet's goals alone (:func:`contact_goals`), which
+  re-plants the feet and moves the root so that the centre of mass is back.
+
+Segment values are packed per character into :data:`N_VALUES` floats (:func:`pack`): the six
+frames' quaternions, the five directions, the thirteen fractions and spine coordinates. A row
+of zeros means "no last tick" (no quaternion is zero): nothing to limit. This module is the
+numpy reference of :mod:`ecs_anim.runtime.kernels.joint_speed` (same arguments, same results
+to 1e-9).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import fields
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ecs_anim.core.body_points import ARM_L, ARM_R, HEAD, LEG_L, LEG_R, TRUNK
+from ecs_anim.core.normalized import DecodedPose, NormalizedPoses, decode
+from ecs_anim.solver.goals import CONTACT_PRIORITY, TickGoals
+from ecs_anim.solver.shell import SolverSettings, solve
+
+F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
+B8 = NDArray[np.bool_]
+
+#: The frames the solver turns (pose field, side or -1, group): quaternions at
+#: ``values[:, 4 k:4 k + 4]``.
+FRAMES = (("leg_frame", 0, LEG_L), ("leg_frame", 1, LEG_R), ("arm_frame", 0, ARM_L),
+          ("arm_frame", 1, ARM_R), ("thorax", -1, TRUNK), ("head", -1, HEAD))
+#: The directions it turns: unit vectors at ``values[:, DIRECTIONS_AT + 3 k:...]``.
+DIRECTIONS = (("foot_dir", 0, LEG_L), ("foot_dir", 1, LEG_R), ("hand_dir", 0, ARM_L),
+              ("hand_dir", 1, ARM_R), ("neck_dir", -1, HEAD))
+#: The values it shifts (pose field, index or -1, width, group): the limbs' fractions and the
+#: spine's three points, at ``values[:, SHIFTS_AT + ...]``.
+SHIFTS = (("leg_fraction", 0, 1, LEG_L), ("leg_fraction", 1, 1, LEG_R),
+          ("arm_fraction", 0, 1, ARM_L), ("arm_fraction", 1, 1, ARM_R),
+          ("spine_points", 0, 3, TRUNK), ("spine_points", 1, 3, TRUNK),
+          ("spine_points", 2, 3, TRUNK))
+DIRECTIONS_AT = 4 * len(FRAMES)
+SHIFTS_AT = DIRECTIONS_AT + 3 * len(DIRECTIONS)
+N_VALUES = SHIFTS_AT + sum(w for _, _, w, _ in SHIFTS)
+N_GROUPS = 6
+#: Each shift's start (len(SHIFTS) + 1,) in ``values[:, SHIFTS_AT:]``.
+SHIFT_START = np.concatenate([[0], np.cumsum([w for _, _, w, _ in SHIFTS])]).astype(np.int64)
+#: The group of each frame, direction and shift (for the compiled kernel).
+FRAME_GROUP = np.array([g for *_, g in FRAMES], np.int64)
+DIRECTION_GROUP = np.array([g for *_, g in DIRECTIONS], np.int64)
+SHIFT_GROUP = np.array([g for *_, g in SHIFTS], np.int64)
+
+
+def _quat_mul(a: F64, b: F64) -> F64:
+    """Hamilton products ``a b`` of quaternions (..., 4), scalar last."""
+    ax, ay, az, aw = np.moveaxis(a, -1, 0)
+    bx, by, bz, bw = np.moveaxis(b, -1, 0)
+    return np.stack([aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw,
+                     aw * bw - ax * bx - ay * by - az * bz], axis=-1)
+
+
+def _conj(q: F64) -> F64:
+    conjugate: F64 = q * np.array([-1.0, -1.0, -1.0, 1.0])
+    return conjugate
+
+
+def _rotvec_of(q: F64) -> F64:
+    """Rotation vectors (..., 3), rad, of unit quaternions (..., 4) (the turn up to π)."""
+    q = np.where(q[..., 3:] < 0.0, -q, q)
+    s = np.linalg.norm(q[..., :3], axis=-1)
+    per = np.where(s < 1e-12, 2.0, 2.0 * np.arctan2(s, q[..., 3]) / np.maximum(s, 1e-300))
+    out: F64 = q[..., :3] * per[..., None]
+    return out
+
+
+def _quat_of(rotvec: F64) -> F64:
+    """Unit quaternions (..., 4) of rotation vectors (..., 3), rad."""
+    angle = np.linalg.norm(rotvec, axis=-1)
+    per = np.where(angle < 1e-12, 0.5, np.sin(0.5 * angle) / np.maximum(angle, 1e-300))
+    return np.concatenate([rotvec * per[..., None], np.cos(0.5 * angle)[..., None]], axis=-1)
+
+
+def _quat_between(a: F64, b: F64) -> F64:
+    """The smallest turns (..., 4) taking unit directions ``a`` onto ``b`` (..., 3) (a half
+    turn about an axis perpendicular to ``a`` for opposite ones)."""
+    c = np.sum(a * b, axis=-1)
+    q = np.concatenate([np.cross(a, b), (1.0 + c)[..., None]], axis=-1)
+    opposite = c < -1.0 + 1e-9
+    if np.any(opposite):
+        helper = np.where(np.abs(a[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+        half = np.concatenate([np.cross(a, helper), np.zeros_like(c)[..., None]], axis=-1)
+        q = np.where(opposite[..., None], half, q)
+    out: F64 = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return out
+
+
+def _rotate(q: F64, v: F64) -> F64:
+    """``v`` (..., 3) turned by the unit quaternions ``q`` (..., 4)."""
+    u, w = q[..., :3], q[..., 3:]
+    t = 2.0 * np.cross(u, v)
+    out: F64 = v + w * t + np.cross(u, t)
+    return out
+
+
+def _get(poses: NormalizedPoses, field: str, index: int) -> F64:
+    value: F64 = getattr(poses, field)
+    return value if index < 0 else value[:, index]
+
+
+def _set(poses: NormalizedPoses, field: str, index: int, rows: I64, value: F64) -> None:
+    if index < 0:
+        getattr(poses, field)[rows] = value
+    else:
+        getattr(poses, field)[rows, index] = value
+
+
+def pack(poses: NormalizedPoses) -> F64:
+    """(r, N_VALUES) the values of ``poses`` (r,) the solver sets, packed."""
+    parts = [_get(poses, f, i) for f, i, _ in FRAMES] + [_get(poses, f, i) for f, i, _ in DIRECTIONS]
+    parts += [_get(poses, f, i).reshape(-1, w) for f, i, w, _ in SHIFTS]
+    return np.concatenate(parts, axis=1)
+
+
+def _frame_turns(a: F64, b: F64) -> F64:
+    """Rotation vectors (r, 3) of the turns from quaternions ``a`` to ``b`` (r, 4)."""
+    return _rotvec_of(_quat_mul(b, _conj(a)))
+
+
+def _steps(before: F64, after: NormalizedPoses | F64) -> tuple[list[F64], list[F64], list[F64]]:
+    """How far each frame, direction (rad) and shift moved from the packed ``before`` (r,
+    N_VALUES) to ``after`` (poses, or packed too): lists of (r,) per frame, direction, shift."""
+    now = after if isinstance(after, np.ndarray) else pack(after)
+    frames = [np.linalg.norm(_frame_turns(before[:, 4 * k:4 * k + 4], now[:, 4 * k:4 * k + 4]),
+                             axis=-1) for k in range(len(FRAMES))]
+    directions = []
+    for k in range(len(DIRECTIONS)):
+        at = slice(DIRECTIONS_AT + 3 * k, DIRECTIONS_AT + 3 * k + 3)
+        a, b = before[:, at], now[:, at]
+        directions.append(np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1)))
+    shifts = [np.linalg.norm(now[:, SHIFTS_AT + SHIFT_START[k]:SHIFTS_AT + SHIFT_START[k + 1]]
+                             - before[:, SHIFTS_AT + SHIFT_START[k]:SHIFTS_AT + SHIFT_START[k + 1]],
+                             axis=-1) for k in range(len(SHIFTS))]
+    return frames, directions, shifts
+
+
+def limit_motion(poses: NormalizedPoses, clip_now: F64, clip_before: F64, pose_before: F64,
+                 planted: B8, max_step: float) -> tuple[NormalizedPoses, B8]:
+    """``poses`` (r,), as the solve left them, with each group's segments moved from
+    ``pose_before`` (r, N_VALUES: the last tick's result, packed; a row of zeros: none) toward
+    them by the share of the way that keeps every segment's turn within ``max_step`` (rad) plus
+    how far the motion's own moved (``clip_before`` to ``clip_now``, packed). The legs of
+    ``planted`` (r, 2) are left as solved. Returns the poses (new arrays) and (r,) whether
+    anything was held back."""
+    r = poses.root_heading.shape[0]
+    moved = _steps(pose_before, poses)
+    own = _steps(clip_before, clip_now)
+    need = np.ones((r, N_GROUPS))
+    for groups, moved_by, own_by in zip((FRAME_GROUP, DIRECTION_GROUP, SHIFT_GROUP), moved, own,
+                                        strict=True):
+        for k, group in enumerate(groups):
+            allowed = max_step + own_by[k]
+            share = np.where(moved_by[k] > allowed, allowed / np.maximum(moved_by[k], 1e-300), 1.0)
+            need[:, group] = np.minimum(need[:, group], share)
+    need[:, [LEG_L, LEG_R]] = np.where(planted, 1.0, need[:, [LEG_L, LEG_R]])
+    need[~np.any(pose_before != 0.0, axis=1)] = 1.0  # no last tick
+    held = need < 1.0
+    out = NormalizedPoses(**{k: v.copy() for k, v in poses.arrays().items()})
+    for k, (field, index, group) in enumerate(FRAMES):
+        rows = np.flatnonzero(held[:, group])
+        if rows.size:
+            a = pose_before[rows, 4 * k:4 * k + 4]
+            turn = _frame_turns(a, _get(poses, field, index)[rows]) * need[rows, group, None]
+            _set(out, field, index, rows, _quat_mul(_quat_of(turn), a))
+    for k, (field, index, group) in enumerate(DIRECTIONS):
+        rows = np.flatnonzero(held[:, group])
+        if rows.size:
+            a = pose_before[rows, DIRECTIONS_AT + 3 * k:DIRECTIONS_AT + 3 * k + 3]
+            turn = _rotvec_of(_quat_between(a, _get(poses, field, index)[rows]))
+            _set(out, field, index, rows, _rotate(_quat_of(turn * need[rows, group, None]), a))
+    for k, (field, index, _, group) in enumerate(SHIFTS):
+        rows = np.flatnonzero(held[:, group])
+        if rows.size:
+            at = slice(SHIFTS_AT + SHIFT_START[k], SHIFTS_AT + SHIFT_START[k + 1])
+            to = _get(poses, field, index)[rows]
+            a = pose_before[rows, at].reshape(to.shape)
+            share = need[rows, group].reshape((-1,) + (1,) * (to.ndim - 1))
+            _set(out, field, index, rows, a + share * (to - a))
+    any_held: B8 = np.any(held, axis=1)
+    return out, any_held
+
+
+def contact_goals(goals: TickGoals, rows: I64) -> TickGoals:
+    """The goals of ``goals``' characters ``rows`` (local indices, sorted) that keep a planted
+    foot on its footprint (priority :data:`~ecs_anim.solver.goals.CONTACT_PRIORITY`), with their
+    centre-of-mass control: solved again on a limited pose, they re-plant the feet and move the
+    root so the centre of mass is back, and turn nothing else."""
+    local = np.full(goals.rows.size, -1, np.int64)
+    local[rows] = np.arange(rows.size)
+    keep = (goals.priority == CONTACT_PRIORITY) & (local[goals.owner] >= 0)
+    no_ints = np.zeros(0, np.int64)
+    return TickGoals(
+        rows=goals.rows[rows], owner=local[goals.owner[keep]], table_index=goals.table_index[keep],
+        orientation=goals.orientation[keep], group=goals.group[keep], bone=goals.bone[keep],
+        segment=goals.segment[keep], fraction=goals.fraction[keep], offset=goals.offset[keep],
+        chain=goals.chain[keep], priority=goals.priority[keep], goal=goals.goal[keep].copy(),
+        weight=goals.weight[keep], axis=goals.axis[keep], footprint=goals.footprint[rows],
+        in_contact=goals.in_contact[rows], com_desired=goals.com_desired[rows],
+        com_on=goals.com_on[rows], on_self=no_ints, self_segment=no_ints,
+        self_fraction=np.zeros(0), self_offset=np.zeros((0, 3)), self_start=np.zeros((0, 3)),
+        held=goals.held[keep])
+
+
+class SpeedSteps(NamedTuple):
+    """The computations :func:`solve_within_speed` is made of, each with the signature of its
+    numpy reference: ``solve`` (:func:`ecs_anim.solver.shell.solve`), ``limit``
+    (:func:`limit_motion`) and ``decode`` (:func:`ecs_anim.core.normalized.decode`).
+    :data:`NUMPY_SPEED_STEPS` are the references; ConstraintSolve runs the compiled ones."""
+
+    solve: Callable[..., tuple[NormalizedPoses, I64, DecodedPose]]
+    limit: Callable[..., tuple[NormalizedPoses, B8]]
+    decode: Callable[[NormalizedPoses, F64], DecodedPose]
+
+
+NUMPY_SPEED_STEPS = SpeedSteps(solve, limit_motion, decode)
+
+
+def solve_within_speed(steps: SpeedSteps, clip_now: F64, clip_before: F64, pose_before: F64,
+                       max_step: float, poses: NormalizedPoses, lengths: F64, goals: TickGoals,
+                       masses: F64, com_fraction: F64, settings: SolverSettings,
+                       decoded: DecodedPose | None = None, in_place: bool = False
+                       ) -> tuple[NormalizedPoses, I64, DecodedPose]:
+    """The solve of ``goals`` (the arguments from ``poses`` on are ``steps.solve``'s), then
+    :func:`limit_motion` (``clip_now``, ``clip_before``, ``pose_before``: (r, N_VALUES) of the
+    rows ``goals.rows``); the characters held back are solved again on their limited pose with
+    their feet's goals alone (:func:`contact_goals`: the feet re-planted, the centre of mass
+    back). Returns what the solve does: the poses, the iterations each character used (both
+    solves) and the decoded result."""
+    solved, iterations, result = steps.solve(poses, lengths, goals, masses, com_fraction, settings,
+                                             decoded, in_place)
+    limited, held = steps.limit(solved, clip_now, clip_before, pose_before, goals.in_contact,
+                                max_step)
+    rows = np.flatnonzero(held)
+    if rows.size == 0:
+        return limited, iterations, result
+    part = limited.take(rows)
+    again, more, part_decoded = steps.solve(
+        part, lengths[rows], contact_goals(goals, rows), masses[rows], com_fraction[rows],
+        settings, steps.decode(part, lengths[rows]), True)
+    for name, value in again.arrays().items():
+        getattr(limited, name)[rows] = value
+    for f in fields(DecodedPose):
+        getattr(result, f.name)[rows] = getattr(part_decoded, f.name)
+    iterations = iterations.copy()
+    iterations[rows] += more
+    return limited, iterations, result
+
+
+__all__ = ["NUMPY_SPEED_STEPS", "N_VALUES", "SpeedSteps", "contact_goals", "limit_motion", "pack",
+           "solve_within_speed"]
