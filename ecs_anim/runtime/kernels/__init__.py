@@ -23,6 +23,7 @@ cache is, :func:`cache_kernels_in_cache_dir`, before any kernel is compiled).
 from __future__ import annotations
 
 import atexit
+import logging
 import os
 import subprocess
 import sys
@@ -274,12 +275,36 @@ def load_cached(kernel: Any) -> None:
 def compile_every_kernel() -> None:
     """Compile every kernel a tick uses into the cache: one tick of the smallest scene that runs
     them all (:func:`ecs_anim.runtime.bench_scene.first_tick`), the solver in a second process
-    where there are two cores (:func:`compile_solver_aside`), and local avoidance."""
+    where there are two cores (:func:`compile_solver_aside`), local avoidance and bodies kept
+    apart."""
     from ecs_anim.runtime.bench_scene import first_tick
 
     compile_solver_aside()
     first_tick()  # a tick and the cross-fade's blend of no character
     compile_avoidance()  # the bench scene steers nobody
+    compile_separation()  # nor do its walkers meet
+
+
+def compile_separation() -> None:
+    """Compile :mod:`ecs_anim.runtime.kernels.separate` (into the cache): two ticks of two
+    walkers started in each other, which CollisionSeparate pushes apart."""
+    from ecs_anim.components import MotionPlayer, Placement
+    from ecs_anim.core.morphology import Morphology
+    from ecs_anim.io.importing import import_bvh
+    from ecs_anim.io.library import MOTIONS_DIR
+    from ecs_anim.runtime.simulation import Simulation
+
+    log = logging.getLogger("ecs_anim")  # the scene's own overlap warnings are no one's
+    was_disabled, log.disabled = log.disabled, True
+    try:
+        with Simulation({"walk": import_bvh(MOTIONS_DIR / "walk.bvh")}, rotations=True) as sim:
+            for i in range(2):
+                sim.spawn(f"c{i}", Morphology.from_stature(1.7), MotionPlayer("walk"),
+                          Placement((0.0, 0.15 * i)))
+            sim.step()
+            sim.step()
+    finally:
+        log.disabled = was_disabled
 
 
 def compile_solver() -> None:
