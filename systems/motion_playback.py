@@ -74,6 +74,7 @@ class MotionPlayback(System):
         if st.contact_weight.shape != (st.n, 2) or not st.contact_weight.flags.writeable:
             st.contact_weight = np.zeros((st.n, 2))
         fading = rows[st.fade_s[rows] > 0.0]
+        fading.setflags(write=False)  # as ``rows``: the samplers' one compiled specialisation
         previous = st.contact_weight[fading]  # the last tick's (a copy)
         over_chunks(sample_table_rows, rows.size, rows, bank.contact_weight, bank.start,
                     bank.n_frames, bank.fps, st.clip, st.clip_time_s, st.loop, st.contact_weight,
@@ -95,14 +96,21 @@ class MotionPlayback(System):
             over_chunks(sample_placed_rows, fading.size, fading, bank_poses, bank.start,
                         bank.n_frames, bank.fps, bank.loop_yaw, bank.loop_shift, st.fade_clip,
                         st.fade_time_s, st.fade_loop, st.fade_placement_xy,
-                        st.fade_placement_heading, leg, old,
-                        np.arange(fading.size, dtype=np.int64), playback_scratch(fading.size))
+                        st.fade_placement_heading, leg, old, self.rows_of_old(fading.size),
+                        playback_scratch(fading.size))
             old.root_position[:, 2] -= self._capture_ground(fading, st.fade_clip,
                                                             st.fade_time_s, st.fade_loop)
             w = np.clip(st.fade_elapsed_s[fading] / np.maximum(st.fade_s[fading], 1e-9), 0, 1)
             over_chunks(blend_rows, fading.size, fading, old, w, out)
             st.fade_s[fading] = np.where(w >= 1.0, 0.0, st.fade_s[fading])
         self._advance_clocks(dt)
+
+    @staticmethod
+    def rows_of_old(n: int) -> NDArray[np.int64]:
+        """``0..n-1``, read-only as :meth:`rows` (the type the sampler was compiled for)."""
+        rows = np.arange(n, dtype=np.int64)
+        rows.setflags(write=False)
+        return rows
 
     def run_numpy(self, dt: float) -> None:
         """The numpy reference of :meth:`run` (the tests compare the two)."""

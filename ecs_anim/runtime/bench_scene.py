@@ -148,14 +148,16 @@ def first_tick(threads: int = 1) -> dict[str, float]:
     )
     from ecs_anim.runtime.kernels.decode import pose_arrays
     from ecs_anim.runtime.kernels.playback import blend_rows, empty_poses
+    from ecs_anim.systems import MotionPlayback
 
     kernels.set_threads(threads)
     t1 = time.perf_counter()
     scene = BenchScene(8, rotations=True, constrained=True)
     t2 = time.perf_counter()
     scene.tick()
-    # the arguments MotionPlayback passes: rows, the old clip's poses, weights, the store's poses
-    kernels.over_chunks(blend_rows, 0, np.zeros(0, np.int64), pose_arrays(empty_poses(0)),
+    # the arguments MotionPlayback passes: rows (read-only), the old clip's poses, weights, the
+    # store's poses
+    kernels.over_chunks(blend_rows, 0, MotionPlayback.rows_of_old(0), pose_arrays(empty_poses(0)),
                         np.zeros(0), pose_arrays(empty_poses(0)))
     t3 = time.perf_counter()
     scene.sim.close()

@@ -134,6 +134,7 @@ class Simulation(SteeringCalls):
         self.reactions = Reactions()
         #: The recorders collecting each tick (:meth:`record`), in the order made.
         self.recorders: list[Recorder] = []
+        kernels.load_kernels()  # every kernel in memory before the first tick: no tick loads one
         schedule = SCHEDULE if window else HEADLESS
         self.systems: list[System] = []
         with self._active():
@@ -798,8 +799,6 @@ class Simulation(SteeringCalls):
         clips chosen, played, adapted, solved and converted, then the clock moves and the
         tick's events fire their triggers (DetectEvents)."""
         self._check_open()
-        if self.tick == 0:
-            kernels.before_first_tick()
         with self._active():
             esper.process(self.dt)
         for recorder in self.recorders:

@@ -95,14 +95,32 @@ def test_the_fit_is_least_squares_over_every_size():
     assert fit["max_characters_at_30hz"] == int((1000.0 / 30.0 - 2.0) / 0.5)
 
 
-def test_run_and_view_take_threads(tmp_path, capsys):
+def test_run_and_view_take_threads(tmp_path, capsys, monkeypatch):
     assert main(["run", SCENARIO, "--seconds", "0.1", "--threads", "1"]) == 0
     assert kernels.threads() == 1
-    assert main(["run", SCENARIO, "--seconds", "0.1"]) == 0  # default: every core
-    assert kernels.threads() == kernels.available_threads()
+    monkeypatch.setattr(kernels, "available_threads", lambda: 4)
+    monkeypatch.setattr("ecs_anim.runtime.kernels.os.getloadavg", lambda: (2.6, 1.0, 1.0))
+    assert kernels.default_threads() == 1  # a loaded machine: one thread
+    monkeypatch.setattr("ecs_anim.runtime.kernels.os.getloadavg", lambda: (0.2, 1.0, 1.0))
+    assert kernels.default_threads() == 4  # idle cores: all of them
+    monkeypatch.setattr("ecs_anim.runtime.kernels.os.getloadavg", lambda: (9.0, 1.0, 1.0))
+    assert kernels.default_threads() == 1
+    monkeypatch.undo()
+    assert main(["run", SCENARIO, "--seconds", "0.1"]) == 0  # default: the idle cores
+    assert 1 <= kernels.threads() <= kernels.available_threads()
     shot = tmp_path / "v.png"
     assert main(["view", SCENARIO, "--threads", "999", "--screenshot", str(shot)]) == 1
     assert "--threads 999: expected 1 to" in capsys.readouterr().err and not shot.exists()
+
+
+def test_thread_comparison_times_one_thread_and_n_in_the_same_run():
+    ticks: list[int] = []
+    kernels.set_threads(1)
+    figures = kernels.thread_comparison(lambda: ticks.append(kernels.threads()),
+                                        kernels.available_threads(), 3)
+    assert ticks == [1, kernels.available_threads()] * 3  # alternating, tick by tick
+    assert kernels.threads() == 1  # as it was
+    assert {"wall_ms_1", "cpu_ms_1", "speedup"} <= set(figures) and figures["wall_ms_1"] >= 0
 
 
 def test_results_do_not_depend_on_the_thread_count():
@@ -214,7 +232,7 @@ def test_a_first_run_says_once_that_it_compiles(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(kernels, "uncompiled_kernels", lambda: ["decode"])
     assert main(["run", SCENARIO, "--seconds", "0.1"]) == 0
     err = capsys.readouterr().err
-    assert err.count("compiling the tick's kernels once (under a minute); cached in ") == 1
+    assert err.count("compiling the tick's kernels once (1-2 minutes of CPU); cached in ") == 1
     assert str(kernels.cache_dir()) in err
     assert main(["bench", "import", "nope.bvh"]) == 1  # no tick: nothing said
     assert "compiling" not in capsys.readouterr().err

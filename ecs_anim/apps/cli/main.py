@@ -10,8 +10,11 @@ import argparse
 import json
 import logging
 import os
+import statistics
 import sys
-from collections.abc import Sequence
+import time
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -92,8 +95,8 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 def use_threads(args: argparse.Namespace) -> None:
-    """``--threads N``: the kernels' threads (:func:`ecs_anim.runtime.kernels.set_threads`; None: all
-    cores)."""
+    """``--threads N``: the kernels' threads (:func:`ecs_anim.runtime.kernels.set_threads`; None:
+    the idle cores, at least one: :func:`ecs_anim.runtime.kernels.default_threads`)."""
     from ecs_anim.runtime import kernels
 
     try:
@@ -191,12 +194,14 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
     ground = ground_lines(sim)
     for line in ground + feasibility_lines(reach):  # before the first tick: a run can last minutes
         print(line, flush=True)
+    timing = TickTimes(sim)
     for _ in range(ticks):
-        sim.step()
+        with timing.tick():
+            sim.step()
         metrics.record()
     report = metrics.report() | {"scenario": str(args.scenario),
                                  "feasibility": [estimate.as_dict() for estimate in reach],
-                                 "ground_problems": ground}
+                                 "ground_problems": ground, "timing": timing.as_dict()}
     unposed = []  # characters removed before their first posture: no files
     if recorder is not None:
         written = {path.name for path in recorder.save(args.export, force=args.force, onto=rig)}
@@ -229,9 +234,8 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
             text = "never fully active" if full is None else f"{full:.1f}{unit}"
             print(f"  {(k['character'] + '.' + k['name'])[:26]:26s} {text:>32s}"
                   + ("" if k["enabled"] else "  (switched off: target not finite or beyond 1,000 km)"))
-    total = sum(report["ms_per_tick"].values())
-    print(f"  time per tick {total:.2f} ms: " + ", ".join(
-        f"{k} {v:.2f}" for k, v in report["ms_per_tick"].items()))
+    for line in timing.lines():
+        print(f"  {line}")
     if args.export:
         print(f"  wrote {len(names) - len(unposed)} x (.bvh, .npz, .glb){rig_summary(args, rig)} "
               f"to {args.export}"
@@ -242,11 +246,67 @@ def _run_and_write(args: argparse.Namespace, scenario, sim, ticks: int,  # type:
     return 0
 
 
+class TickTimes:
+    """``run``'s timing: each tick's wall time, the systems' time once warm (every tick after
+    the first), and what building the simulation spent on the kernels
+    (:data:`ecs_anim.runtime.kernels.load_figures`: compiled on a first run, else loaded)."""
+
+    def __init__(self, sim) -> None:  # type: ignore[no-untyped-def]
+        from ecs_anim.runtime import kernels
+
+        self.sim = sim
+        self.kernels = kernels.new_load_figures()
+        self.tick_ms: list[float] = []
+        self._after_first: dict[str, float] = {}
+
+    @contextmanager
+    def tick(self) -> Iterator[None]:
+        start = time.perf_counter()
+        yield
+        self.tick_ms.append((time.perf_counter() - start) * 1e3)
+        if len(self.tick_ms) == 1:
+            self._after_first = self.sim.system_seconds()
+
+    def warm_ms_per_tick(self) -> dict[str, float]:
+        """Each system's mean ms per tick after the first (empty for one tick)."""
+        warm = len(self.tick_ms) - 1
+        if warm < 1:
+            return {}
+        return {k: (v - self._after_first[k]) / warm * 1e3
+                for k, v in self.sim.system_seconds().items()}
+
+    def as_dict(self) -> dict[str, object]:
+        """The report's ``timing``: ms (wall) of the first tick, the median and slowest of the
+        others, each system's mean over the others, and the kernels' load (or compile) s."""
+        warm = self.tick_ms[1:]
+        return {"first_tick_ms": round(self.tick_ms[0], 3) if self.tick_ms else None,
+                "warm_tick_ms_median": round(statistics.median(warm), 3) if warm else None,
+                "warm_tick_ms_max": round(max(warm), 3) if warm else None,
+                "warm_ms_per_tick": {k: round(v, 4) for k, v in self.warm_ms_per_tick().items()},
+                "kernels_s": round(float(self.kernels["seconds"]), 3) if self.kernels else 0.0,
+                "kernels_compiled": bool(self.kernels.get("compiled", False))}
+
+    def lines(self) -> list[str]:
+        d = self.as_dict()
+        kernels = "" if not self.kernels else (
+            f"; kernels {'compiled' if d['kernels_compiled'] else 'loaded'} in "
+            f"{d['kernels_s']:.1f} s before it")
+        out = [f"first tick {d['first_tick_ms']:.2f} ms{kernels}"]
+        systems = self.warm_ms_per_tick()
+        if systems:
+            out.append(f"time per tick once warm {sum(systems.values()):.2f} ms (median tick "
+                       f"{d['warm_tick_ms_median']:.2f} ms, slowest {d['warm_tick_ms_max']:.2f} ms): "
+                       + ", ".join(f"{k} {v:.2f}" for k, v in systems.items()))
+        return out
+
+
 def add_threads_argument(p: argparse.ArgumentParser, default: int | None) -> None:
-    """``--threads N``: how many threads the kernels run on (None: every core)."""
+    """``--threads N``: how many threads the kernels run on (None: the idle cores, at least
+    one)."""
     p.add_argument("--threads", type=positive_int, default=default, metavar="N",
                    help="threads the tick's kernels run on "
-                   + ("(default: every core)" if default is None
+                   + ("(default: the cores the machine leaves idle, at least one)"
+                      if default is None
                       else f"(default {default}: the figures per core)"))
 
 

@@ -12,22 +12,26 @@ indices; :func:`over_chunks` runs one over all of them, split into contiguous ch
 made the first compile half as long again).
 
 Compiled code is cached in the user's cache folder (``$XDG_CACHE_HOME/ecs_anim/numba``, else
-``~/.cache/ecs_anim/numba``) unless ``NUMBA_CACHE_DIR`` says where: the first run compiles (the
-solver in a second process: :func:`compile_solver_aside`; figures in docs/performance.md), later
-ones load in a fraction of a second. The locator that says so is registered here, before any
-kernel module is compiled, so the package imports its kernels only through here.
+``~/.cache/ecs_anim/numba``) unless ``NUMBA_CACHE_DIR`` says where. A simulation being built
+has every kernel put in memory (:func:`load_kernels`): the first run compiles them there (the
+solver in a second process: :func:`compile_solver_aside`; figures in docs/performance.md),
+later ones load them in about half a second. numba is imported only then
+(:func:`ecs_anim.runtime.kernels.vec.with_numba`, which registers the locator that says where the
+cache is, :func:`cache_kernels_in_cache_dir`, before any kernel is compiled).
 """
 
 from __future__ import annotations
 
 import atexit
+import logging
 import os
 import subprocess
 import sys
 import threading
+import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ecs_anim.core.errors import UsageError
 
@@ -44,10 +48,12 @@ def cache_dir() -> Path:
     return base / "ecs_anim" / "numba"
 
 
-def _cache_kernels_in_cache_dir() -> None:
+def cache_kernels_in_cache_dir() -> None:
     """Have numba cache this package's kernels in :func:`cache_dir` (and only them: numba's
     other users keep their own settings, and no environment variable is set). A locator class
-    put first in numba's list answers for the functions of this folder alone."""
+    put first in numba's list answers for the functions of this folder alone. Called by
+    :func:`ecs_anim.runtime.kernels.vec.with_numba` as numba is imported, before any kernel
+    is compiled."""
     from numba.core import caching
 
     impl = vars(caching).get("CacheImpl") or vars(caching)["_CacheImpl"]  # older numba: _CacheImpl
@@ -73,9 +79,6 @@ def _cache_kernels_in_cache_dir() -> None:
             return super().from_function(py_func, py_file)  # type: ignore[no-untyped-call]
 
     impl._locator_classes.insert(0, KernelCacheLocator)
-
-
-_cache_kernels_in_cache_dir()
 
 
 def kernel_sources() -> list[Path]:
@@ -174,32 +177,172 @@ def uncompiled_kernels() -> list[str]:
 
 
 def compile_notice() -> str | None:
-    """The line to show before the first tick when the kernels still have to be compiled (the
-    first run on a machine, or after an update), else None."""
+    """The line to show before compiling when the kernels still have to be compiled (the first
+    run on a machine, or after an update), else None."""
     if not uncompiled_kernels():
         return None
-    return f"compiling the tick's kernels once (under a minute); cached in {cache_dir()}"
+    return f"compiling the tick's kernels once (1-2 minutes of CPU); cached in {cache_dir()}"
 
 
 _announcers: list[Callable[[str], None]] = []
 
 
 def announce_compiling(say: Callable[[str], None] | None) -> None:
-    """Have this process's next first simulation tick call ``say`` with :func:`compile_notice`
-    if the kernels still have to be compiled (the CLI prints it on stderr); None: no more."""
+    """Have this process's next simulation built (:func:`load_kernels`) call ``say`` with
+    :func:`compile_notice` if the kernels still have to be compiled (the CLI prints it on
+    stderr); None: no more."""
     _announcers[:] = [] if say is None else [say]
 
 
-def before_first_tick() -> None:
-    """Called by :meth:`ecs_anim.runtime.simulation.Simulation.step` before a simulation's first tick:
-    says, once per process, what :func:`announce_compiling` asked for, and starts compiling the
-    solver aside if it has to be (:func:`compile_solver_aside`)."""
+#: What :func:`load_kernels` did in this process: seconds (wall and CPU) and whether it compiled.
+load_figures: dict[str, float | bool] = {}
+_load_lock = threading.RLock()
+
+
+def load_kernels() -> None:
+    """Called by :class:`ecs_anim.runtime.simulation.Simulation` when it is built: has every
+    kernel a tick calls in memory before the first tick, so that no tick loads one (loading the
+    solver's lazily cost the tick its first constraint switched on 95-117 ms of CPU). Says what
+    :func:`announce_compiling` asked for. Once per process: where the cache lacks kernels (the
+    first run on a machine, or after an update) it compiles them all by one tick of a small
+    scene using every kernel (the solver in a second process, :func:`compile_solver_aside`),
+    else it loads each kernel's every compiled specialisation from the cache. Its figures:
+    :data:`load_figures`."""
     if _announcers:
         say = _announcers.pop()
         notice = compile_notice()
         if notice is not None:
             say(notice)
+    with _load_lock:
+        if load_figures or _loading:
+            return  # done, or the warm-up scene's own simulation
+        _loading.append(True)
+        try:
+            start, cpu = time.perf_counter(), time.process_time()
+            compiled = bool(uncompiled_kernels())
+            if compiled:
+                compile_every_kernel()
+            for kernel in called_kernels():
+                load_cached(kernel)
+            load_figures.update(seconds=time.perf_counter() - start,
+                                cpu_seconds=time.process_time() - cpu, compiled=compiled)
+        finally:
+            _loading.clear()
+
+
+_loading: list[bool] = []
+_told: list[bool] = []
+
+
+def new_load_figures() -> dict[str, float | bool]:
+    """:data:`load_figures` the first time it is asked after :func:`load_kernels` did its work
+    in this process, else empty (the kernels were in memory already)."""
+    if not load_figures or _told:
+        return {}
+    _told.append(True)
+    return dict(load_figures)
+
+
+def called_kernels() -> list[Any]:
+    """The numba dispatchers of the kernels Python calls (those compiled ``nogil``), in every
+    kernel module (imported here)."""
+    import importlib
+
+    from ecs_anim.runtime.kernels.vec import with_numba
+
+    modules = [importlib.import_module(f"{__name__}.{source.stem}") for source in kernel_sources()]
+    with_numba()
+    return [value for module in modules for value in vars(module).values()
+            if getattr(value, "targetoptions", {}).get("nogil")
+            and value.py_func.__module__ == module.__name__]
+
+
+def load_cached(kernel: Any) -> None:
+    """Load every specialisation of ``kernel`` (a numba dispatcher) its cache index holds for
+    this source and machine (numba's ``Cache._index_key``); nothing is compiled."""
+    cache = kernel._cache
+    codegen = kernel.targetctx.codegen()
+    try:
+        index = cache._cache_file._load_index()
+    except Exception:  # an unreadable index: the kernel compiles on its first call
+        return
+    for key in index:
+        signature = key[0]
+        if cache._index_key(signature, codegen) == key:
+            kernel.compile(signature)
+
+
+def compile_every_kernel() -> None:
+    """Compile every kernel a tick uses into the cache: one tick of the smallest scene that runs
+    them all (:func:`ecs_anim.runtime.bench_scene.first_tick`), the solver in a second process
+    where there are two cores (:func:`compile_solver_aside`), local avoidance and bodies kept
+    apart."""
+    from ecs_anim.runtime.bench_scene import first_tick
+
     compile_solver_aside()
+    first_tick()  # a tick and the cross-fade's blend of no character
+    compile_avoidance()  # the bench scene steers nobody
+    compile_separation()  # nor do its walkers meet
+
+
+def compile_separation() -> None:
+    """Compile :mod:`ecs_anim.runtime.kernels.separate` (into the cache): two ticks of two
+    walkers started in each other, which CollisionSeparate pushes apart."""
+    from ecs_anim.components import MotionPlayer, Placement
+    from ecs_anim.core.morphology import Morphology
+    from ecs_anim.io.importing import import_bvh
+    from ecs_anim.io.library import MOTIONS_DIR
+    from ecs_anim.runtime.simulation import Simulation
+
+    log = logging.getLogger("ecs_anim")  # the scene's own overlap warnings are no one's
+    was_disabled, log.disabled = log.disabled, True
+    try:
+        with Simulation({"walk": import_bvh(MOTIONS_DIR / "walk.bvh")}, rotations=True) as sim:
+            for i in range(2):
+                sim.spawn(f"c{i}", Morphology.from_stature(1.7), MotionPlayer("walk"),
+                          Placement((0.0, 0.15 * i)))
+            sim.step()
+            sim.step()
+    finally:
+        log.disabled = was_disabled
+
+
+def compile_solver() -> None:
+    """Compile :func:`ecs_anim.runtime.kernels.solve.solve_rows` (into the cache) by solving no
+    character: the arguments have the types of a real solve (``solve`` makes every array it
+    hands the kernel a contiguous float64, int64 or bool one), so a real solve loads it."""
+    import numpy as np
+
+    from ecs_anim.core.morphology import MASS_SEGMENTS
+    from ecs_anim.core.skeleton import N_LENGTHS
+    from ecs_anim.runtime.kernels.decode import decoded_pose, empty_decoded
+    from ecs_anim.runtime.kernels.playback import empty_poses
+    from ecs_anim.runtime.kernels.solve import solve
+    from ecs_anim.solver.goals import TickGoals
+
+    ints, floats, flags = np.zeros(0, np.int64), np.zeros(0), np.zeros(0, bool)
+    points = np.zeros((0, 3))
+    no_goals = TickGoals(
+        rows=ints, owner=ints, table_index=ints, orientation=flags, group=ints, bone=ints,
+        segment=ints, fraction=floats, offset=points, chain=ints, priority=floats, goal=points,
+        weight=floats, axis=points, footprint=np.zeros((0, 2, 3)),
+        in_contact=np.zeros((0, 2), bool),
+        com_desired=points, com_on=flags, on_self=ints, self_segment=ints, self_fraction=floats,
+        self_offset=points, self_start=points, held=flags)
+    solve(empty_poses(0), np.zeros((0, N_LENGTHS)), no_goals, np.zeros((0, len(MASS_SEGMENTS))),
+          np.zeros((0, len(MASS_SEGMENTS))), decoded=decoded_pose(empty_decoded(0)))
+
+
+def compile_avoidance() -> None:
+    """Compile :mod:`ecs_anim.runtime.kernels.avoidance` (into the cache) on two walkers."""
+    import numpy as np
+
+    from ecs_anim.runtime.kernels.avoidance import orca_velocities
+
+    two = np.array([[0.0, 0.0], [1.0, 0.0]])
+    orca_velocities(two, np.zeros((2, 2)), np.array([[1.0, 0.0], [-1.0, 0.0]]), np.full(2, 0.3),
+                    np.ones(2), np.ones(2, bool), range_m=5.0, time_horizon_s=2.0,
+                    max_neighbours=10, dt=1.0 / 30.0)
 
 
 #: The command of the process compiling the solver's kernel aside (``python -m ecs_anim.runtime.kernels
@@ -254,16 +397,29 @@ def available_threads() -> int:
     return max(1, os.cpu_count() or 1)
 
 
-_thread_count: list[int] = []  # set by set_threads; empty: all of available_threads()
+def default_threads() -> int:
+    """The threads the kernels run on unless told (``run``, ``view``): the cores left idle by
+    the rest of the machine, ``available_threads() - os.getloadavg()[0]`` rounded, at least one.
+    On a loaded machine two threads were 1.3-1.9x slower than one (each hand-over waits for a
+    core another process holds)."""
+    most = available_threads()
+    try:
+        busy = os.getloadavg()[0]
+    except (AttributeError, OSError):  # no load average (Windows): one thread, the safe side
+        return 1
+    return max(1, min(most, round(most - busy)))
+
+
+_thread_count: list[int] = []  # set by set_threads; empty: not yet (default_threads, once)
 
 
 def set_threads(n: int | None) -> int:
-    """Run the kernels' loops over characters on ``n`` threads (:func:`over_chunks`); None: on
-    all of :func:`available_threads`. Returns the number set. Results never depend on it (each
-    character is computed by one thread, independently of the others)."""
+    """Run the kernels' loops over characters on ``n`` threads (:func:`over_chunks`); None:
+    :func:`default_threads`. Returns the number set. Results never depend on it (each character
+    is computed by one thread, independently of the others)."""
     most = available_threads()
     if n is None:
-        n = most
+        n = default_threads()
     if not 1 <= n <= most:
         raise UsageError(f"expected 1 to {most} threads (the cores this process may use), got {n}")
     _thread_count[:] = [n]
@@ -271,8 +427,34 @@ def set_threads(n: int | None) -> int:
 
 
 def threads() -> int:
-    """The number of threads the kernels run on now."""
-    return _thread_count[0] if _thread_count else available_threads()
+    """The number of threads the kernels run on now (unless set: :func:`default_threads`, as
+    the machine is when first asked)."""
+    return _thread_count[0] if _thread_count else set_threads(None)
+
+
+def thread_comparison(tick: Callable[[], None], threads_n: int, ticks: int) -> dict[str, float]:
+    """Time ``tick`` (one tick of a scene) on one thread and on ``threads_n``, alternating tick
+    by tick so both see the same machine load (the bench's ``--threads N``): ``ticks`` ticks
+    each. Returns the mean wall and CPU ms per tick of each (``wall_ms_1``, ``cpu_ms_1``,
+    ``wall_ms_N``, ``cpu_ms_N``) and ``speedup`` (one thread's wall time over N's). Leaves the
+    thread count as it found it."""
+    before = threads()
+    totals = {1: [0.0, 0.0], threads_n: [0.0, 0.0]}
+    try:
+        for _ in range(ticks):
+            for count in (1, threads_n):
+                set_threads(count)
+                wall, cpu = time.perf_counter(), time.process_time()
+                tick()
+                totals[count][0] += time.perf_counter() - wall
+                totals[count][1] += time.process_time() - cpu
+    finally:
+        set_threads(before)
+    out = {f"{kind}_ms_{count}": value / max(ticks, 1) * 1e3
+           for count, pair in totals.items()
+           for kind, value in zip(("wall", "cpu"), pair, strict=True)}
+    out["speedup"] = out["wall_ms_1"] / max(out[f"wall_ms_{threads_n}"], 1e-12)
+    return out
 
 
 #: Fewest rows worth handing to another thread: below, waking it costs more than it saves.

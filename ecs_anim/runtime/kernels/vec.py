@@ -9,10 +9,12 @@ function of :mod:`ecs_anim.core.rotations` or :mod:`ecs_anim.core.normalized` it
 from __future__ import annotations
 
 import math
-from functools import partial
+import sys
+import threading
+from collections.abc import Callable
+from typing import Any, TypeVar, cast
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 
 F64 = NDArray[np.float64]
@@ -26,15 +28,90 @@ Frame = tuple[Vec3, Vec3, Vec3]
 TINY = 1e-12
 
 
-#: numba's ``njit`` as every kernel of this package is compiled (``jit()``, ``jit(nogil=True)``,
-#: ``jit(inline="always")``): cached on disk; numpy's error model (a division by zero gives inf
-#: or nan, as in the numpy reference, instead of a test and a raise at every division); never
-#: fastmath (it broke the 1e-9 m agreement with numpy); and without numba's runtime (``_nrt``).
-#: The kernels allocate nothing (their callers pass every array, scratch included) and the
-#: callers hold the arrays while they run, so the runtime's reference counts bought nothing and
-#: cost an atomic operation at every array a step was handed or a view taken: a third of
-#: playback's time and about 40 % of the solver's (perf samples, 2026-12-02).
-jit = partial(njit, cache=True, error_model="numpy", _nrt=False)
+#: numba's ``njit`` options of every kernel of this package: cached on disk; numpy's error model
+#: (a division by zero gives inf or nan, as in the numpy reference, instead of a test and a
+#: raise at every division); never fastmath (it broke the 1e-9 m agreement with numpy); and
+#: without numba's runtime (``_nrt``). The kernels allocate nothing (their callers pass every
+#: array, scratch included) and the callers hold the arrays while they run, so the runtime's
+#: reference counts bought nothing and cost an atomic operation at every array a step was
+#: handed or a view taken: a third of playback's time and about 40 % of the solver's (perf
+#: samples, 2026-12-02).
+NJIT_OPTIONS: dict[str, Any] = {"cache": True, "error_model": "numpy", "_nrt": False}
+
+KernelFunction = TypeVar("KernelFunction", bound=Callable[..., Any])
+_waiting: list[PendingKernel] = []  # made before numba was imported, in the order made
+_numba_lock = threading.RLock()
+_njit: list[Callable[..., Any]] = []  # numba's njit once imported (:func:`with_numba`)
+
+
+class PendingKernel:
+    """A kernel decorated before numba was imported: ``import ecs_anim`` costs no numba (0.6-0.8 s
+    of CPU). The first call, attribute read or :func:`with_numba` imports numba, makes every
+    pending kernel's dispatcher and puts them in place of their placeholders in the kernel
+    modules (numba resolves a kernel's callees from its module's globals when it compiles);
+    a placeholder kept elsewhere (``from ... import kernel`` in a system) forwards to it."""
+
+    def __init__(self, py_func: Callable[..., Any], options: dict[str, Any]) -> None:
+        self.py_func = py_func
+        self.options = options
+        self.dispatcher: Any = None
+        self.__doc__ = py_func.__doc__
+        self.__name__ = py_func.__name__
+        self.__module__ = py_func.__module__
+        self.__wrapped__ = py_func
+
+    def __call__(self, *args: Any) -> Any:
+        if self.dispatcher is None:
+            with_numba()
+        return self.dispatcher(*args)
+
+    def __getattr__(self, name: str) -> Any:  # numba's Dispatcher's attributes (signatures, ...)
+        if name == "dispatcher":
+            raise AttributeError(name)
+        with_numba()
+        return getattr(self.dispatcher, name)
+
+
+def with_numba() -> None:
+    """Import numba (once), have it cache this package's kernels
+    (:func:`ecs_anim.runtime.kernels.cache_kernels_in_cache_dir`) and make the dispatchers of the
+    kernels decorated before (:class:`PendingKernel`)."""
+    if _njit and not _waiting:
+        return
+    with _numba_lock:
+        if not _njit:
+            from numba import njit
+
+            from ecs_anim.runtime.kernels import cache_kernels_in_cache_dir
+
+            cache_kernels_in_cache_dir()
+            _njit.append(njit)
+        pending = {id(p): p for p in _waiting}
+        for kernel in _waiting:
+            kernel.dispatcher = _njit[0](**NJIT_OPTIONS, **kernel.options)(kernel.py_func)
+        _waiting.clear()
+        for name, module in list(sys.modules.items()):
+            if name.startswith("ecs_anim.runtime.kernels.") and module is not None:
+                names = vars(module)
+                for key, value in list(names.items()):
+                    if id(value) in pending:
+                        names[key] = value.dispatcher
+
+
+def jit(**options: Any) -> Callable[[KernelFunction], KernelFunction]:
+    """The decorator of every kernel: numba's ``njit`` with :data:`NJIT_OPTIONS` and ``options``
+    (``jit()``, ``jit(nogil=True)``, ``jit(inline="always")``); a :class:`PendingKernel` until
+    numba is imported."""
+
+    def decorate(py_func: KernelFunction) -> KernelFunction:
+        with _numba_lock:
+            if _njit:
+                return cast("KernelFunction", _njit[0](**NJIT_OPTIONS, **options)(py_func))
+            kernel = PendingKernel(py_func, options)
+            _waiting.append(kernel)
+            return cast("KernelFunction", kernel)
+
+    return decorate
 
 
 @jit()
