@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 import shlex
 from pathlib import Path
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 import pytest
@@ -290,13 +290,14 @@ def test_a_first_run_compiles_the_solver_in_a_second_process_and_the_solve_waits
 def test_the_solver_compiled_aside_is_the_one_a_solve_runs():
     """``python -m ecs_anim.runtime.kernels --solver`` (solving no character) compiles solve_rows for
     the argument types of a real solve: a real solve then finds it (no second compilation)."""
-    from ecs_anim.runtime.kernels.__main__ import compile_solver
-    from ecs_anim.runtime.kernels.solve import solve_rows
+    from ecs_anim.runtime.kernels import compile_solver
+    from ecs_anim.runtime.kernels import solve as solve_module
 
     scene = BenchScene(2, constrained=True)
     scene.tick()
     scene.sim.close()
     compile_solver()
+    solve_rows: Any = solve_module.solve_rows  # numba's dispatcher, once a simulation is built
     assert len(solve_rows.signatures) == 1
 
 
