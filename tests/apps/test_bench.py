@@ -290,7 +290,7 @@ def test_a_first_run_compiles_the_solver_in_a_second_process_and_the_solve_waits
 def test_the_solver_compiled_aside_is_the_one_a_solve_runs():
     """``python -m ecs_anim.runtime.kernels --solver`` (solving no character) compiles solve_rows for
     the argument types of a real solve: a real solve then finds it (no second compilation)."""
-    from ecs_anim.runtime.kernels import compile_solver
+    from ecs_anim.runtime.kernels.__main__ import compile_solver
     from ecs_anim.runtime.kernels import solve as solve_module
 
     scene = BenchScene(2, constrained=True)

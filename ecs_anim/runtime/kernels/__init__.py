@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ecs_anim.core.errors import UsageError
+from ecs_anim.runtime.kernels.vec import on_numba_import
 
 if TYPE_CHECKING:
     from ecs_anim.runtime.kernels.handover import SpinningThreads
@@ -79,6 +80,9 @@ def cache_kernels_in_cache_dir() -> None:
             return super().from_function(py_func, py_file)  # type: ignore[no-untyped-call]
 
     impl._locator_classes.insert(0, KernelCacheLocator)
+
+
+on_numba_import(cache_kernels_in_cache_dir)
 
 
 def kernel_sources() -> list[Path]:
@@ -204,10 +208,10 @@ def load_kernels() -> None:
     kernel a tick calls in memory before the first tick, so that no tick loads one (loading the
     solver's lazily cost the tick its first constraint switched on 95-117 ms of CPU). Says what
     :func:`announce_compiling` asked for. Once per process: where the cache lacks kernels (the
-    first run on a machine, or after an update) it compiles them all by one tick of a small
-    scene using every kernel (the solver in a second process, :func:`compile_solver_aside`),
-    else it loads each kernel's every compiled specialisation from the cache. Its figures:
-    :data:`load_figures`."""
+    first run on a machine, or after an update) a child process compiles them all into the
+    cache (:func:`compile_in_child`: small scenes using every kernel, the solver in a process
+    of its own), then, as on any later run, each kernel's every compiled specialisation is
+    loaded from the cache. Its figures: :data:`load_figures` (the child's CPU included)."""
     if _announcers:
         say = _announcers.pop()
         notice = compile_notice()
@@ -220,18 +224,24 @@ def load_kernels() -> None:
         try:
             start, cpu = time.perf_counter(), time.process_time()
             compiled = bool(uncompiled_kernels())
-            if compiled:
-                compile_every_kernel()
+            child_cpu = compile_in_child() if compiled else 0.0
             for kernel in called_kernels():
                 load_cached(kernel)
             load_figures.update(seconds=time.perf_counter() - start,
-                                cpu_seconds=time.process_time() - cpu, compiled=compiled)
+                                cpu_seconds=time.process_time() - cpu + child_cpu,
+                                compiled=compiled)
         finally:
             _loading.clear()
 
 
 _loading: list[bool] = []
 _told: list[bool] = []
+
+
+def compiling_by_calls() -> None:
+    """Mark this process as the one compiling the kernels by calling them
+    (:data:`COMPILE_COMMAND`): the simulations it builds neither load nor compile ahead."""
+    _loading.append(True)
 
 
 def new_load_figures() -> dict[str, float | bool]:
@@ -272,77 +282,25 @@ def load_cached(kernel: Any) -> None:
             kernel.compile(signature)
 
 
-def compile_every_kernel() -> None:
-    """Compile every kernel a tick uses into the cache: one tick of the smallest scene that runs
-    them all (:func:`ecs_anim.runtime.bench_scene.first_tick`), the solver in a second process
-    where there are two cores (:func:`compile_solver_aside`), local avoidance and bodies kept
-    apart."""
-    from ecs_anim.runtime.bench_scene import first_tick
-
-    compile_solver_aside()
-    first_tick()  # a tick and the cross-fade's blend of no character
-    compile_avoidance()  # the bench scene steers nobody
-    compile_separation()  # nor do its walkers meet
+#: The command of the process compiling every kernel into the cache on a first run
+#: (``python -m ecs_anim.runtime.kernels --compile``): the scenes it runs them on sit above this
+#: package (a simulation, the shipped walk), so they are run there, not imported here.
+COMPILE_COMMAND = (sys.executable, "-m", "ecs_anim.runtime.kernels", "--compile")
 
 
-def compile_separation() -> None:
-    """Compile :mod:`ecs_anim.runtime.kernels.separate` (into the cache): two ticks of two
-    walkers started in each other, which CollisionSeparate pushes apart."""
-    from ecs_anim.components import MotionPlayer, Placement
-    from ecs_anim.core.morphology import Morphology
-    from ecs_anim.io.importing import import_bvh
-    from ecs_anim.io.library import MOTIONS_DIR
-    from ecs_anim.runtime.simulation import Simulation
+def compile_in_child() -> float:
+    """Run :data:`COMPILE_COMMAND` and wait for it; returns the CPU seconds it (and its own
+    children: the solver compiled aside) took. A child that fails leaves the kernels to
+    compile where they are first called."""
+    import resource
 
-    log = logging.getLogger("ecs_anim")  # the scene's own overlap warnings are no one's
-    was_disabled, log.disabled = log.disabled, True
-    try:
-        with Simulation({"walk": import_bvh(MOTIONS_DIR / "walk.bvh")}, rotations=True) as sim:
-            for i in range(2):
-                sim.spawn(f"c{i}", Morphology.from_stature(1.7), MotionPlayer("walk"),
-                          Placement((0.0, 0.15 * i)))
-            sim.step()
-            sim.step()
-    finally:
-        log.disabled = was_disabled
-
-
-def compile_solver() -> None:
-    """Compile :func:`ecs_anim.runtime.kernels.solve.solve_rows` (into the cache) by solving no
-    character: the arguments have the types of a real solve (``solve`` makes every array it
-    hands the kernel a contiguous float64, int64 or bool one), so a real solve loads it."""
-    import numpy as np
-
-    from ecs_anim.core.morphology import MASS_SEGMENTS
-    from ecs_anim.core.skeleton import N_LENGTHS
-    from ecs_anim.runtime.kernels.decode import decoded_pose, empty_decoded
-    from ecs_anim.runtime.kernels.playback import empty_poses
-    from ecs_anim.runtime.kernels.solve import solve
-    from ecs_anim.solver.goals import TickGoals
-
-    ints, floats, flags = np.zeros(0, np.int64), np.zeros(0), np.zeros(0, bool)
-    points = np.zeros((0, 3))
-    no_goals = TickGoals(
-        rows=ints, owner=ints, table_index=ints, orientation=flags, group=ints, bone=ints,
-        segment=ints, fraction=floats, offset=points, chain=ints, priority=floats, goal=points,
-        weight=floats, axis=points, footprint=np.zeros((0, 2, 3)),
-        in_contact=np.zeros((0, 2), bool),
-        com_desired=points, com_on=flags, on_self=ints, self_segment=ints, self_fraction=floats,
-        self_offset=points, self_start=points, held=flags)
-    solve(empty_poses(0), np.zeros((0, N_LENGTHS)), no_goals, np.zeros((0, len(MASS_SEGMENTS))),
-          np.zeros((0, len(MASS_SEGMENTS))), decoded=decoded_pose(empty_decoded(0)))
-
-
-def compile_avoidance() -> None:
-    """Compile :mod:`ecs_anim.runtime.kernels.avoidance` (into the cache) on two walkers."""
-    import numpy as np
-
-    from ecs_anim.runtime.kernels.avoidance import orca_velocities
-
-    two = np.array([[0.0, 0.0], [1.0, 0.0]])
-    orca_velocities(two, np.zeros((2, 2)), np.array([[1.0, 0.0], [-1.0, 0.0]]), np.full(2, 0.3),
-                    np.ones(2), np.ones(2, bool), range_m=5.0, time_horizon_s=2.0,
-                    max_neighbours=10, dt=1.0 / 30.0)
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    done = subprocess.run(COMPILE_COMMAND, check=False)
+    if done.returncode != 0:
+        logging.getLogger("ecs_anim").warning("compiling the kernels in a child process failed (exit %d): each compiles "
+                    "where it is first called", done.returncode)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
 #: The command of the process compiling the solver's kernel aside (``python -m ecs_anim.runtime.kernels

@@ -42,6 +42,16 @@ KernelFunction = TypeVar("KernelFunction", bound=Callable[..., Any])
 _waiting: list[PendingKernel] = []  # made before numba was imported, in the order made
 _numba_lock = threading.RLock()
 _njit: list[Callable[..., Any]] = []  # numba's njit once imported (:func:`with_numba`)
+#: Called as numba is imported, before any kernel is compiled (:func:`on_numba_import`).
+_on_numba_import: list[Callable[[], None]] = []
+
+
+def on_numba_import(hook: Callable[[], None]) -> None:
+    """Have :func:`with_numba` call ``hook`` as it imports numba, before any kernel compiles:
+    the package registers where numba caches its kernels
+    (:func:`ecs_anim.runtime.kernels.cache_kernels_in_cache_dir`), so this module, which every
+    kernel imports, imports nothing of the package."""
+    _on_numba_import.append(hook)
 
 
 class PendingKernel:
@@ -73,18 +83,17 @@ class PendingKernel:
 
 
 def with_numba() -> None:
-    """Import numba (once), have it cache this package's kernels
-    (:func:`ecs_anim.runtime.kernels.cache_kernels_in_cache_dir`) and make the dispatchers of the
-    kernels decorated before (:class:`PendingKernel`)."""
+    """Import numba (once), call the hooks of :func:`on_numba_import` (the package's: numba then
+    caches its kernels in :func:`ecs_anim.runtime.kernels.cache_dir`) and make the dispatchers
+    of the kernels decorated before (:class:`PendingKernel`)."""
     if _njit and not _waiting:
         return
     with _numba_lock:
         if not _njit:
             from numba import njit
 
-            from ecs_anim.runtime.kernels import cache_kernels_in_cache_dir
-
-            cache_kernels_in_cache_dir()
+            for hook in _on_numba_import:
+                hook()
             _njit.append(njit)
         pending = {id(p): p for p in _waiting}
         for kernel in _waiting:
