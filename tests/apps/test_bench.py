@@ -54,6 +54,25 @@ def test_bench_text_names_the_threads_and_every_size(capsys):
     assert [r[0] for r in rows] == ["4", "8"]
 
 
+def test_the_bench_walkers_keep_to_their_lanes_and_crossing_ones_meet(capsys):
+    """The bench's crowd walks in lanes (one body and one start a lane, 1.5 m apart): nobody
+    is in another's body; with ``--crossing`` a tenth of the crowd is, every tick."""
+    lanes, crossing = BenchScene(100), BenchScene(100, crossing=True)
+    deepest = {}
+    for name, scene in (("lanes", lanes), ("crossing", crossing)):
+        worst = 0.0
+        for _ in range(30):
+            scene.tick()
+            worst = max(worst, float(scene.sim.store.overlap_m.max()))
+        scene.sim.close()
+        deepest[name] = worst
+    assert deepest["lanes"] == 0.0 and deepest["crossing"] > 0.01, deepest
+    assert main(["bench", "--crossing", "--json", *QUICK]) == 0
+    assert json.loads(capsys.readouterr().out)["crossing"] is True
+    assert main(["bench", "--crossing", *QUICK]) == 0
+    assert "walking on bumps crossing each other" in capsys.readouterr().out
+
+
 def test_bench_budget_prints_the_cut_tick_by_tick(capsys):
     """A budget nothing could overrun (8 characters, 1 s a tick): nothing cut or dropped, no
     tick over it; the spread of each figure over the timed ticks, per size."""
@@ -290,8 +309,8 @@ def test_a_first_run_compiles_the_solver_in_a_second_process_and_the_solve_waits
 def test_the_solver_compiled_aside_is_the_one_a_solve_runs():
     """``python -m ecs_anim.runtime.kernels --solver`` (solving no character) compiles solve_rows for
     the argument types of a real solve: a real solve then finds it (no second compilation)."""
-    from ecs_anim.runtime.kernels.__main__ import compile_solver
     from ecs_anim.runtime.kernels import solve as solve_module
+    from ecs_anim.runtime.kernels.__main__ import compile_solver
 
     scene = BenchScene(2, constrained=True)
     scene.tick()
