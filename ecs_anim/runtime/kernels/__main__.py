@@ -119,7 +119,7 @@ def main() -> int:
     load_kernels()
     spins_per_second()  # the threads' hand-over too (a tick on one thread does not compile it)
     print(f"kernels ready in {load_figures['seconds']:.1f} s, {load_figures['cpu_seconds']:.1f} s "
-          f"of CPU in this process ({'compiled' if load_figures['compiled'] else 'loaded'}), "
+          f"of CPU, its compiling processes included ({'compiled' if load_figures['compiled'] else 'loaded'}), "
           f"cached in {cache_dir()}")
     return 0
 
