@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from ecs_anim.runtime.kernels.vec import jit
+from ecs_anim.runtime.kernels.vec import F64, jit
 
 #: Characters a block loop runs over at a time: its scratch columns stay in the first-level
 #: cache (22 rows of 32 float64 are 5.6 kB) and it is a whole number of 8-wide AVX-512 vectors.
@@ -35,14 +35,20 @@ _ASIN_TAYLOR = np.array([math.factorial(2 * k) / (4**k * math.factorial(k) ** 2 
 _SIN_TAYLOR = np.array([(-1.0) ** k / math.factorial(2 * k + 1) for k in range(11)])
 
 
-@jit()
-def asin_small(x: float) -> float:
-    """``asin x`` for ``|x| <= 0.5`` (Horner on the Taylor series: no library call)."""
+@jit(inline="always")
+def odd_series(x: float, coefficients: F64) -> float:
+    """``sum c_k x^(2k+1)`` by Horner's rule in ``x^2`` (no library call)."""
     x2 = x * x
     acc = 0.0
-    for k in range(_ASIN_TAYLOR.shape[0] - 1, -1, -1):
-        acc = acc * x2 + _ASIN_TAYLOR[k]
+    for k in range(coefficients.shape[0] - 1, -1, -1):
+        acc = acc * x2 + coefficients[k]
     return x * acc
+
+
+@jit()
+def asin_small(x: float) -> float:
+    """``asin x`` for ``|x| <= 0.5`` (its Taylor series: :func:`odd_series`)."""
+    return odd_series(x, _ASIN_TAYLOR)
 
 
 @jit()
@@ -57,11 +63,7 @@ def acos_unit(c: float) -> float:
 @jit()
 def sin_quarter(x: float) -> float:
     """``sin x`` for ``x`` in [-pi/2, pi/2], within 3e-16 relative of ``np.sin``."""
-    x2 = x * x
-    acc = 0.0
-    for k in range(_SIN_TAYLOR.shape[0] - 1, -1, -1):
-        acc = acc * x2 + _SIN_TAYLOR[k]
-    return x * acc
+    return odd_series(x, _SIN_TAYLOR)
 
 
 # Inlined by numba: as a call LLVM finds it too long to inline, and a loop with a call in it
