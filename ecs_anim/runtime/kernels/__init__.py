@@ -203,7 +203,7 @@ load_figures: dict[str, float | bool] = {}
 _load_lock = threading.RLock()
 
 
-def load_kernels() -> None:
+def load_kernels() -> bool:
     """Called by :class:`ecs_anim.runtime.simulation.Simulation` when it is built: has every
     kernel a tick calls in memory before the first tick, so that no tick loads one (loading the
     solver's lazily cost the tick its first constraint switched on 95-117 ms of CPU). Says what
@@ -211,27 +211,164 @@ def load_kernels() -> None:
     first run on a machine, or after an update) a child process compiles them all into the
     cache (:func:`compile_in_child`: small scenes using every kernel, the solver in a process
     of its own), then, as on any later run, each kernel's every compiled specialisation is
-    loaded from the cache. Its figures: :data:`load_figures` (the child's CPU included)."""
+    loaded from the cache. Its figures: :data:`load_figures` (the child's CPU included).
+
+    After :func:`compile_aside` (``run`` and ``view``) the child is started and not waited for:
+    returns False, and the simulation ticks on the numpy references until
+    :func:`poll_kernels` finds the child done (between two ticks). Returns whether the kernels
+    are in memory."""
     if _announcers:
         say = _announcers.pop()
         notice = compile_notice()
         if notice is not None:
-            say(notice)
+            say(notice if not _aside else aside_notice())
     with _load_lock:
         if load_figures or _loading:
-            return  # done, or the warm-up scene's own simulation
+            return True  # done, or the warm-up scene's own simulation (it compiles by calling)
+        if _background:
+            return poll_kernels()
         _loading.append(True)
         try:
             start, cpu = time.perf_counter(), time.process_time()
             compiled = bool(uncompiled_kernels())
+            if compiled and _aside and _start_compiling_aside(start):
+                return False
+            if compiled and compiling_elsewhere() is not None:  # another run's child: wait
+                while compiling_elsewhere() is not None:
+                    time.sleep(0.2)
+                compiled = bool(uncompiled_kernels())
             child_cpu = compile_in_child() if compiled else 0.0
-            for kernel in called_kernels():
-                load_cached(kernel)
-            load_figures.update(seconds=time.perf_counter() - start,
-                                cpu_seconds=time.process_time() - cpu + child_cpu,
-                                compiled=compiled)
+            _load_every_kernel(start, cpu, child_cpu, compiled)
+            return True
         finally:
             _loading.clear()
+
+
+def _load_every_kernel(start: float, cpu: float, child_cpu: float, compiled: bool) -> None:
+    """Load every kernel's specialisations from the cache; record :data:`load_figures`: wall
+    seconds since ``start``, CPU seconds since ``cpu`` plus ``child_cpu`` (the compiling
+    processes')."""
+    for kernel in called_kernels():
+        load_cached(kernel)
+    load_figures.update(seconds=time.perf_counter() - start,
+                        cpu_seconds=time.process_time() - cpu + child_cpu,
+                        compiled=compiled)
+
+
+_aside: list[bool] = []
+#: The child compiling the kernels aside (:func:`compile_aside`): its process (None: another
+#: run's), when it was started (wall seconds) and this process's children's CPU then.
+_background: dict[str, Any] = {}
+
+
+def compile_aside(on: bool = True) -> None:
+    """Have this process's simulations, when the kernels still have to be compiled, tick on
+    the numpy references while a child process compiles them (``run`` and ``view``: the first
+    frame comes in seconds, not after the 1-2 minutes of CPU compiling takes); False: wait for
+    the child (the default: the bench, the batch and API users tick on the kernels from the
+    first tick)."""
+    _aside[:] = [True] if on else []
+
+
+def aside_notice() -> str:
+    """What :func:`announce_compiling` says when the kernels compile aside."""
+    return (f"compiling the tick's kernels once, in the background (1-2 minutes of CPU; cached "
+            f"in {cache_dir()}): the first ticks run on numpy")
+
+
+#: The file in the cache folder holding the process id of the child compiling the kernels
+#: aside (written as it starts, removed by it as it ends): a run started meanwhile waits for
+#: it instead of compiling them again.
+COMPILING_MARKER = "ecs_anim_compiling.pid"
+
+
+def compiling_elsewhere() -> int | None:
+    """The process id of the child compiling the kernels aside (this run's or another's) while
+    it runs, else None."""
+    try:
+        pid = int((_cache_subfolder() / COMPILING_MARKER).read_text())
+    except (OSError, ValueError):
+        return None
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:  # ended without removing it (killed)
+        return None
+    except OSError:  # another user's process: alive
+        pass
+    return pid
+
+
+def compiled_aside() -> None:
+    """Called by the child compiling aside as it ends: remove :data:`COMPILING_MARKER` (if it
+    still names this process)."""
+    if compiling_elsewhere() == os.getpid():
+        (_cache_subfolder() / COMPILING_MARKER).unlink(missing_ok=True)
+
+
+def _start_compiling_aside(start: float) -> bool:
+    """Start :data:`COMPILE_COMMAND` in a process of its own session (it goes on compiling into
+    the cache if this process ends first, and a Ctrl-C here does not stop it), or follow the
+    one another run started; False if no process could be started."""
+    import resource
+
+    elsewhere = compiling_elsewhere()
+    if elsewhere is not None:
+        _background.update(process=None, start=start)
+        return True
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    try:
+        child = subprocess.Popen(COMPILE_COMMAND, stdout=subprocess.DEVNULL,
+                                 stderr=subprocess.DEVNULL, start_new_session=True)
+        (_cache_subfolder() / COMPILING_MARKER).write_text(f"{child.pid}\n")
+    except OSError:  # cannot start a process (or write the cache): compile where first called
+        return False
+    _background.update(process=child, start=start, rusage=before)
+    return True
+
+
+def poll_kernels(wait: bool = False) -> bool:
+    """Whether the kernels are in memory; called between two ticks by a simulation ticking on
+    the numpy references (:func:`compile_aside`). When the child compiling them is done (or,
+    with ``wait``, once it is), loads them all from the cache, here, and returns True."""
+    import resource
+
+    with _load_lock:
+        if load_figures or _loading:
+            return True
+        if not _background:
+            return load_kernels()
+        child = _background["process"]
+        if child is None:  # another run's child: its CPU is not ours to count
+            if compiling_elsewhere() is not None and not wait:
+                return False
+            while compiling_elsewhere() is not None:
+                time.sleep(0.2)
+            child_cpu = 0.0
+        else:
+            if child.poll() is None and not wait:
+                return False
+            if child.wait() != 0:
+                logging.getLogger("ecs_anim").warning(
+                    "compiling the kernels in a child process failed (exit %d): each compiles "
+                    "where it is first called", child.returncode)
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
+            before = _background["rusage"]
+            child_cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+        _loading.append(True)
+        try:
+            # the compile's wall time (since the child started), its CPU and this load's
+            compiled_s = time.perf_counter() - _background["start"]
+            _load_every_kernel(time.perf_counter(), time.process_time(), child_cpu, True)
+            load_figures.update(seconds=compiled_s, aside=True, ours=child is not None)
+        finally:
+            _loading.clear()
+            _background.clear()
+        return True
+
+
+def kernels_pending() -> bool:
+    """Whether a child is compiling the kernels aside and they are not in memory yet."""
+    return bool(_background) and not load_figures
 
 
 _loading: list[bool] = []

@@ -18,6 +18,7 @@ from ecs_anim.runtime.kernels import (
     cache_dir,
     compile_notice,
     compile_solver_aside,
+    compiled_aside,
     compiling_by_calls,
     load_figures,
     load_kernels,
@@ -111,7 +112,10 @@ def main() -> int:
         compile_solver()
         return 0
     if sys.argv[1:] == ["--compile"]:
-        compile_every_kernel()
+        try:
+            compile_every_kernel()
+        finally:
+            compiled_aside()  # a run compiling aside, and any started meanwhile, load them now
         return 0
     notice = compile_notice()
     if notice is not None:
