@@ -12,6 +12,7 @@ import pytest
 
 from conftest import REPO
 from ecs_anim.runtime import capsule_overlaps as reference
+from ecs_anim.runtime import kernels
 from ecs_anim.runtime.kernels import capsules as compiled
 from support.scenarios import run
 
@@ -118,3 +119,36 @@ def test_numpy_ticks_call_no_kernel():
                           timeout=600, check=False)
     assert done.returncode == 0, done.stderr
     assert done.stdout.split() == ["False", str(FIGHT_TICKS), "None"]
+
+
+def test_a_first_run_ticks_on_numpy_until_the_child_is_done(monkeypatch, tmp_path):
+    """With the kernels to compile and ``compile_aside`` on: the simulation is built at once,
+    ticks on numpy while the child runs (its marker names it), and from the first tick after
+    it ended, on the kernels (loaded between the two ticks); a child standing in for the
+    compile, ended when the test says."""
+    from ecs_anim.scenario import build_simulation, load_scenario
+
+    done = tmp_path / "done"
+    monkeypatch.setattr(kernels, "load_figures", {})
+    monkeypatch.setattr(kernels, "_background", {})
+    monkeypatch.setattr(kernels, "_cache_subfolder", lambda: tmp_path)
+    monkeypatch.setattr(kernels, "uncompiled_kernels", lambda: ["decode"])
+    monkeypatch.setattr(kernels, "COMPILE_COMMAND", (
+        sys.executable, "-c",
+        f"import pathlib, time\nwhile not pathlib.Path({str(done)!r}).exists(): time.sleep(0.02)"))
+    kernels.compile_aside()
+    try:
+        scenario = load_scenario(REPO / "scenarios" / "fight_training.yaml")
+        with build_simulation(scenario) as sim:
+            for _ in range(3):
+                sim.step()
+                assert not sim.compiled
+            child = kernels._background["process"]
+            assert kernels.compiling_elsewhere() == child.pid and kernels.kernels_pending()
+            done.touch()
+            child.wait()
+            sim.step()
+            assert sim.compiled and kernels.load_figures["aside"]
+            assert not kernels.kernels_pending()
+    finally:
+        kernels.compile_aside(False)

@@ -221,7 +221,7 @@ def load_kernels() -> bool:
         say = _announcers.pop()
         notice = compile_notice()
         if notice is not None:
-            say(notice if not _aside else aside_notice())
+            say(notice + ASIDE_NOTICE if _aside else notice)
     with _load_lock:
         if load_figures or _loading:
             return True  # done, or the warm-up scene's own simulation (it compiles by calling)
@@ -270,10 +270,8 @@ def compile_aside(on: bool = True) -> None:
     _aside[:] = [True] if on else []
 
 
-def aside_notice() -> str:
-    """What :func:`announce_compiling` says when the kernels compile aside."""
-    return (f"compiling the tick's kernels once, in the background (1-2 minutes of CPU; cached "
-            f"in {cache_dir()}): the first ticks run on numpy")
+#: What :func:`announce_compiling` adds to :func:`compile_notice` when they compile aside.
+ASIDE_NOTICE = "; meanwhile the ticks run on numpy"
 
 
 #: The file in the cache folder holding the process id of the child compiling the kernels
