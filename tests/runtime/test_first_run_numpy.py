@@ -123,9 +123,9 @@ def test_numpy_ticks_call_no_kernel():
 
 def test_a_first_run_ticks_on_numpy_until_the_child_is_done(monkeypatch, tmp_path):
     """With the kernels to compile and ``compile_aside`` on: the simulation is built at once,
-    ticks on numpy while the child runs (its marker names it), and from the first tick after
-    it ended, on the kernels (loaded between the two ticks); a child standing in for the
-    compile, ended when the test says."""
+    ticks on numpy while the child runs (its marker names it) and while a thread loads the
+    kernels once it ended, then on the kernels (switched between two ticks); a child standing
+    in for the compile, ended when the test says."""
     from ecs_anim.scenario import build_simulation, load_scenario
 
     done = tmp_path / "done"
@@ -147,6 +147,8 @@ def test_a_first_run_ticks_on_numpy_until_the_child_is_done(monkeypatch, tmp_pat
             assert kernels.compiling_elsewhere() == child.pid and kernels.kernels_pending()
             done.touch()
             child.wait()
+            sim.step()  # a thread loads the kernels from the cache while the ticks go on
+            kernels._background["loader"].join()
             sim.step()
             assert sim.compiled and kernels.load_figures["aside"]
             assert not kernels.kernels_pending()

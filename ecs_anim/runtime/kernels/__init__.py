@@ -326,42 +326,68 @@ def _start_compiling_aside(start: float) -> bool:
 
 def poll_kernels(wait: bool = False) -> bool:
     """Whether the kernels are in memory; called between two ticks by a simulation ticking on
-    the numpy references (:func:`compile_aside`). When the child compiling them is done (or,
-    with ``wait``, once it is), loads them all from the cache, here, and returns True."""
-    import resource
-
+    the numpy references (:func:`compile_aside`). Once the child compiling them is done, a
+    thread of this process loads them all from the cache (:func:`_load_aside`) while the ticks
+    go on on numpy (loading them in one tick took it 0.5-1 s); True from the first call after
+    it finished. With ``wait``: waits for the child and the load, then True."""
     with _load_lock:
         if load_figures or _loading:
             return True
         if not _background:
             return load_kernels()
-        child = _background["process"]
-        if child is None:  # another run's child: its CPU is not ours to count
-            if compiling_elsewhere() is not None and not wait:
+        loader = _background.get("loader")
+        if loader is None:
+            child_cpu = _compiled_aside_cpu(wait)
+            if child_cpu is None:
                 return False
-            while compiling_elsewhere() is not None:
-                time.sleep(0.2)
-            child_cpu = 0.0
-        else:
-            if child.poll() is None and not wait:
-                return False
-            if child.wait() != 0:
-                logging.getLogger("ecs_anim").warning(
-                    "compiling the kernels in a child process failed (exit %d): each compiles "
-                    "where it is first called", child.returncode)
-            after = resource.getrusage(resource.RUSAGE_CHILDREN)
-            before = _background["rusage"]
-            child_cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-        _loading.append(True)
-        try:
-            # the compile's wall time (since the child started), its CPU and this load's
-            compiled_s = time.perf_counter() - _background["start"]
-            _load_every_kernel(time.perf_counter(), time.process_time(), child_cpu, True)
-            load_figures.update(seconds=compiled_s, aside=True, ours=child is not None)
-        finally:
-            _loading.clear()
-            _background.clear()
+            loader = threading.Thread(target=_load_aside, args=(child_cpu,), daemon=True,
+                                      name="ecs_anim kernels loader")
+            _background["loader"] = loader
+            loader.start()
+        if wait:
+            loader.join()
+        if loader.is_alive():
+            return False
+        _background.clear()
         return True
+
+
+def _compiled_aside_cpu(wait: bool) -> float | None:
+    """None while the child compiling aside runs (unless ``wait``: then once it ended); then
+    the CPU seconds it took (0 for another run's child: not ours to count)."""
+    import resource
+
+    child = _background["process"]
+    if child is None:
+        if compiling_elsewhere() is not None and not wait:
+            return None
+        while compiling_elsewhere() is not None:
+            time.sleep(0.2)
+        return 0.0
+    if child.poll() is None and not wait:
+        return None
+    if child.wait() != 0:
+        logging.getLogger("ecs_anim").warning(
+            "compiling the kernels in a child process failed (exit %d): each compiles where it "
+            "is first called", child.returncode)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    before = _background["rusage"]
+    return float((after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime))
+
+
+def _load_aside(child_cpu: float) -> None:
+    """The loader thread of :func:`poll_kernels`: every kernel's specialisations from the
+    cache, then :data:`load_figures` (whatever became of the load: a kernel not loaded
+    compiles where it is first called): the compile's wall seconds since the child started,
+    its CPU seconds and this thread's."""
+    compiled_s = time.perf_counter() - _background["start"]
+    cpu = time.thread_time()
+    try:
+        for kernel in called_kernels():
+            load_cached(kernel)
+    finally:
+        load_figures.update(seconds=compiled_s, cpu_seconds=child_cpu + time.thread_time() - cpu,
+                            compiled=True, aside=True, ours=_background["process"] is not None)
 
 
 def kernels_pending() -> bool:
