@@ -804,7 +804,8 @@ class Simulation(SteeringCalls):
         tick's events fire their triggers (DetectEvents)."""
         self._check_open()
         if not self.compiled:
-            # Local avoidance has no numpy reference: steered characters wait for the kernels.
+            # Steered characters wait for the kernels: local avoidance has no numpy reference,
+            # and a crowd's paths part on the references' 1e-15 differences (docs/performance.md).
             self.compiled = kernels.poll_kernels(wait=bool(np.any(self.store.steer_mode != 0)))
         with self._active():
             esper.process(self.dt)
