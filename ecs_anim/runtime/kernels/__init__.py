@@ -344,6 +344,7 @@ def poll_kernels(wait: bool = False) -> bool:
                                       name="ecs_anim kernels loader")
             _background["loader"] = loader
             loader.start()
+            atexit.register(loader.join)  # numba loading as the interpreter ends could crash
         if wait:
             loader.join()
         if loader.is_alive():
