@@ -148,7 +148,8 @@ def test_a_first_run_ticks_on_numpy_until_the_child_is_done(monkeypatch, tmp_pat
     monkeypatch.setattr(kernels, "uncompiled_kernels", lambda: ["decode"])
     monkeypatch.setattr(kernels, "COMPILE_COMMAND", (
         sys.executable, "-c",
-        f"import pathlib, time\nwhile not pathlib.Path({str(done)!r}).exists(): time.sleep(0.02)"))
+        f"import pathlib, time\nwhile not pathlib.Path({str(done)!r}).exists(): time.sleep(0.02)",
+        "ecs_anim.runtime.kernels"))  # (in its command line: the marker's check reads it)
     kernels.compile_aside()
     try:
         scenario = load_scenario(REPO / "scenarios" / "fight_training.yaml")
@@ -190,3 +191,24 @@ def test_a_first_run_steering_characters_waits_for_the_kernels(monkeypatch, tmp_
             assert sim.compiled and kernels.load_figures["aside"]
     finally:
         kernels.compile_aside(False)
+
+
+def test_the_compiling_marker_names_a_running_compiler_only(monkeypatch, tmp_path):
+    """The marker a compiling child leaves names it while it runs, and nothing once it ended
+    (a zombie too) or when its id is another program's: no run waits for a child long gone."""
+    import os
+
+    monkeypatch.setattr(kernels, "_cache_subfolder", lambda: tmp_path)
+    marker = tmp_path / kernels.COMPILING_MARKER
+    assert kernels.compiling_elsewhere() is None  # no marker
+    marker.write_text(f"{os.getpid()}\n")  # this test's process: no compiler
+    assert kernels.compiling_elsewhere() is None
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)",
+                              "ecs_anim.runtime.kernels"])
+    try:
+        marker.write_text(f"{child.pid}\n")
+        assert kernels.compiling_elsewhere() == child.pid
+    finally:
+        child.kill()
+        child.wait()
+    assert kernels.compiling_elsewhere() is None

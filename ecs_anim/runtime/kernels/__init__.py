@@ -293,7 +293,14 @@ def compiling_elsewhere() -> int | None:
         return None
     except OSError:  # another user's process: alive
         pass
-    return pid
+    try:  # where /proc tells: not ended yet (a zombie), nor its id taken by another program
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            ended = f.read().rsplit(b")", 1)[1].split()[0] == b"Z"
+        with open(f"/proc/{pid}/cmdline", "rb") as f:
+            ours = b"ecs_anim.runtime.kernels" in f.read()
+    except (OSError, IndexError):
+        return pid
+    return pid if ours and not ended else None
 
 
 def compiled_aside() -> None:
