@@ -34,21 +34,34 @@ def capsules(positions: F64, lengths: F64, out: Capsules, rows: I64 | None = Non
     return out
 
 
+#: Characters whose bounds are compared with everyone's together (memory: n bytes x 12 each).
+ROWS_PER_BLOCK = 512
+
+
 def meeting(body: Capsules, rows: I64) -> NDArray[np.bool_]:
     """(k, n) whether each of ``rows``' bounds meets each character's (itself excluded); bounds
-    not finite (a body frozen or not yet posed) meet, as in the kernel (no test fails)."""
-    a, b = body.box[rows][:, None], body.box[None]  # (k, 1, 2, 3), (1, n, 2, 3)
-    apart = ((a[..., 1, :] < b[..., 0, :]) | (b[..., 1, :] < a[..., 0, :])).any(axis=-1)
-    meet: NDArray[np.bool_] = np.logical_not(apart)
+    not finite (a body frozen or not yet posed) meet, as in the kernel (no test fails).
+    :data:`ROWS_PER_BLOCK` rows at a time."""
+    meet = np.empty((rows.size, body.box.shape[0]), bool)
+    low, high = body.box[None, :, 0], body.box[None, :, 1]  # (1, n, 3) each
+    for lo in range(0, rows.size, ROWS_PER_BLOCK):
+        a = body.box[rows[lo:lo + ROWS_PER_BLOCK], None]  # (b, 1, 2, 3)
+        apart = ((a[..., 1, :] < low) | (high < a[..., 0, :])).any(axis=-1)
+        meet[lo:lo + ROWS_PER_BLOCK] = ~apart
     meet[np.arange(rows.size), rows] = False
     return meet
+
+
+#: Pairs of characters whose capsule pairs are looked at together (memory: each pair's
+#: C x C capsule pairs' nearest points, about 10 KB).
+PAIRS_PER_BLOCK = 1024
 
 
 def overlaps(body: Capsules, rows: I64 | None = None, out: Overlaps | None = None) -> Overlaps:
     """:func:`ecs_anim.runtime.kernels.capsules.overlaps` in numpy: each of ``rows``' (None:
     every character's) deepest overlap with another character, into ``out`` (new if None; the
     other rows' kept): of every pair of characters whose bounds meet, every pair of capsules,
-    the nearest points of their axes."""
+    the nearest points of their axes (:data:`PAIRS_PER_BLOCK` pairs of characters at a time)."""
     n = body.radii.shape[0]
     if out is None:
         out = Overlaps(np.zeros(n), np.full(n, -1, np.int64), np.full(n, -1, np.int64),
@@ -64,33 +77,45 @@ def overlaps(body: Capsules, rows: I64 | None = None, out: Overlaps | None = Non
         return out
     i = rows[pair_row]
     c = body.radii.shape[1]
-    ends_i = body.ends[i][:, :, None]  # (p, C, 1, 2, 3)
-    ends_j = body.ends[j][:, None, :]  # (p, 1, C, 2, 3)
-    on_i, on_j = closest_between_segments(ends_i[..., 0, :], ends_i[..., 1, :],
-                                          ends_j[..., 0, :], ends_j[..., 1, :])  # (p, C, C, 3)
-    gap = on_i - on_j
-    distance = np.linalg.norm(gap, axis=-1)
-    d = body.radii[i][:, :, None] + body.radii[j][:, None, :] - distance  # (p, C, C)
-    d = np.where(np.isnan(d), -np.inf, d).reshape(pair_row.size, c * c)
-    best = np.argmax(d, axis=1)  # the first deepest capsule pair of each pair of characters
-    deepest = d[np.arange(pair_row.size), best]
+    best = np.empty(i.size, np.int64)  # each pair's first deepest capsule pair (ki * C + kj)
+    deepest = np.empty(i.size)
+    for lo in range(0, i.size, PAIRS_PER_BLOCK):
+        block = slice(lo, lo + PAIRS_PER_BLOCK)
+        d = _depths(body, i[block], j[block]).reshape(-1, c * c)
+        best[block] = np.argmax(d, axis=1)
+        deepest[block] = d[np.arange(d.shape[0]), best[block]]
     # each row's deepest pair of characters (the first found of equal ones), if it overlaps
     order = np.lexsort((-deepest, pair_row))
     first = order[np.r_[True, pair_row[order][1:] != pair_row[order][:-1]]]
     first = first[deepest[first] > 0.0]
-    r, k = i[first], best[first]
-    ki, kj = k // c, k % c
-    depth[r], other[r], mine[r], theirs[r] = deepest[first], j[first], ki, kj
-    dist = distance[first, ki, kj]
-    way = gap[first, ki, kj] / np.maximum(dist, 1e-300)[:, None]
-    flat = body.centre[r, :2] - body.centre[j[first], :2]
+    r, them, ki, kj = i[first], j[first], best[first] // c, best[first] % c
+    on_i, on_j = closest_between_segments(body.ends[r, ki, 0], body.ends[r, ki, 1],
+                                          body.ends[them, kj, 0], body.ends[them, kj, 1])
+    gap = on_i - on_j
+    dist = np.linalg.norm(gap, axis=-1)
+    depth[r], other[r], mine[r], theirs[r] = deepest[first], them, ki, kj
+    flat = body.centre[r, :2] - body.centre[them, :2]
     h = np.hypot(flat[:, 0], flat[:, 1])
     sideways = np.where((h > 1e-9)[:, None],
                         np.column_stack([flat / np.maximum(h, 1e-300)[:, None], np.zeros(h.size)]),
                         np.array([1.0, 0.0, 0.0]))
+    way = gap / np.maximum(dist, 1e-300)[:, None]
     normal[r] = np.where((dist > 1e-9)[:, None], way, sideways)  # axes crossing: horizontally
-    point[r] = on_i[first, ki, kj]
+    point[r] = on_i
     return out
+
+
+def _depths(body: Capsules, i: I64, j: I64) -> F64:
+    """(p, C, C) how deep each capsule of character ``i`` (p,) is in each of ``j``'s (the sum
+    of their radii less their axes' distance; -inf where not finite)."""
+    ends_i = body.ends[i][:, :, None]  # (p, C, 1, 2, 3)
+    ends_j = body.ends[j][:, None, :]  # (p, 1, C, 2, 3)
+    on_i, on_j = closest_between_segments(ends_i[..., 0, :], ends_i[..., 1, :],
+                                          ends_j[..., 0, :], ends_j[..., 1, :])  # (p, C, C, 3)
+    d = body.radii[i][:, :, None] + body.radii[j][:, None, :] \
+        - np.linalg.norm(on_i - on_j, axis=-1)
+    depths: F64 = np.where(np.isnan(d), -np.inf, d)
+    return depths
 
 
 def near_rows(body: Capsules, rows: I64) -> I64:

@@ -82,10 +82,14 @@ def crowded_postures(on_kernels, seed=3):
         yield positions, on_kernels["lengths"]
 
 
-def test_capsules_and_overlaps_in_numpy_equal_the_kernels(on_kernels):
+@pytest.mark.parametrize("block", [None, 3])
+def test_capsules_and_overlaps_in_numpy_equal_the_kernels(on_kernels, monkeypatch, block):
     """Capsules (ends, radii, centre, reach, bounds), each body's deepest overlap (depth, whom,
     which capsules, the way out, the point) and the bodies near some: within 1e-9 m, on bodies
-    in each other, for every row and for some rows."""
+    in each other, for every row and for some rows; also a few rows and pairs at a time."""
+    if block is not None:
+        monkeypatch.setattr(reference, "ROWS_PER_BLOCK", block)
+        monkeypatch.setattr(reference, "PAIRS_PER_BLOCK", block)
     checked = 0
     for positions, lengths in crowded_postures(on_kernels):
         n = positions.shape[0]
