@@ -51,9 +51,11 @@ from ecs_anim.core.rotations import axis_angle, normalize, quat_from_matrix
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import LENGTH_INDEX, N_JOINTS
 from ecs_anim.motion.constraint_table import TARGET_BODY
+from ecs_anim.runtime import capsule_overlaps as numpy_capsules
 from ecs_anim.runtime.kernels import over_chunks
 from ecs_anim.runtime.kernels.capsules import (
     Capsules,
+    Grid,
     Overlaps,
     capsules,
     grid_holds,
@@ -67,6 +69,7 @@ from ecs_anim.runtime.kernels.separate import push_rows, turn_rows
 from ecs_anim.runtime.system_base import System
 from ecs_anim.solver.capsules import CAPSULES, N_CAPSULES
 from ecs_anim.solver.steps import rotation_toward
+from ecs_anim.systems.posture_convert import posture_numpy
 
 if TYPE_CHECKING:
     from ecs_anim.runtime.simulation import Simulation
@@ -177,10 +180,14 @@ class CollisionSeparate(System):
         if st.capsule_ends.shape != (n, N_CAPSULES, 2, 3):
             st.capsule_ends = np.empty((n, N_CAPSULES, 2, 3))
             st.capsule_radii = np.empty((n, N_CAPSULES))
-        body = capsules(st.positions, st.lengths,
-                        Capsules.empty(n)._replace(ends=st.capsule_ends, radii=st.capsule_radii))
-        grid = grid_of(body)
-        found = overlaps(body, grid)
+        # The kernels, or while they compile aside (a first run) their numpy references, which
+        # need no grid (grid None).
+        on_kernels = self.sim.compiled
+        make = capsules if on_kernels else numpy_capsules.capsules
+        body = make(st.positions, st.lengths,
+                    Capsules.empty(n)._replace(ends=st.capsule_ends, radii=st.capsule_radii))
+        grid = grid_of(body) if on_kernels else None
+        found = self._overlaps(body, grid)
         if n < 2 or not (found.depth > SEPARATE_FROM_M).any():
             st.overlap_m = found.depth
             return
@@ -215,11 +222,11 @@ class CollisionSeparate(System):
             self._posture(moved)
             # Only the moved bodies' capsules change; the overlaps found again are theirs and
             # those of the bodies that touched them.
-            capsules(st.positions, st.lengths, body, moved)
-            if not grid_holds(body, grid, moved):  # limbs reach out further sideways
+            make(st.positions, st.lengths, body, moved)
+            if grid is not None and not grid_holds(body, grid, moved):  # limbs reach further
                 grid = grid_of(body)
             touched = np.union1d(moved, watch[np.isin(found.other[watch], moved)])
-            overlaps(body, grid, touched, found)
+            self._overlaps(body, grid, touched, found)
             watch = np.union1d(watch, touched[found.depth[touched] > 0.0])
             shrank = found.depth[moved] <= (1.0 - STALL_SHARE) * was
             stalled[moved] = np.where(shrank, 0, stalled[moved] + 1)
@@ -233,8 +240,19 @@ class CollisionSeparate(System):
         # Every body's deepest overlap as the tick ends, for the metrics: the moved bodies' and
         # those of every body whose bounds meet one of theirs (it may touch one that moved into
         # it); the others' are as found.
-        overlaps(body, grid, np.union1d(moved_ever, near_rows(body, grid, moved_ever)), found)
+        near = near_rows(body, grid, moved_ever) if grid is not None \
+            else numpy_capsules.near_rows(body, moved_ever)
+        self._overlaps(body, grid, np.union1d(moved_ever, near), found)
         st.overlap_m = found.depth
+
+    @staticmethod
+    def _overlaps(body: Capsules, grid: Grid | None, rows: I64 | None = None,
+                  out: Overlaps | None = None) -> Overlaps:
+        """:func:`~ecs_anim.runtime.kernels.capsules.overlaps` on ``grid``, or without one (None)
+        its numpy reference (:func:`ecs_anim.runtime.capsule_overlaps.overlaps`)."""
+        if grid is None:
+            return numpy_capsules.overlaps(body, rows, out)
+        return overlaps(body, grid, rows, out)
 
     def _claims(self) -> Claims:
         """Each character's priority, claimed groups, limbs' pins and whom each pin aims at
@@ -377,14 +395,15 @@ class CollisionSeparate(System):
         returns the rows moved. ``pushed``: each row's last push this tick (read, then
         written); ``leg`` (n,) each body's leg length, m. Compiled
         (:mod:`ecs_anim.runtime.kernels.separate`) unless ``self.compiled`` is off: then the
-        numpy methods here, its reference."""
+        numpy methods here, its reference (and while the kernels compile aside)."""
         st = self.sim.store
         depth, other, mine, theirs, normal, point = found
         rows = watch[(depth[watch] > SEPARATE_FROM_M) & (stalled[watch] < PATIENCE)]
         them = other[rows]
         way, at = normal[rows], point[rows]
         full = depth[rows] + MARGIN_M
-        if self.compiled:
+        on_kernels = self.compiled and self.sim.compiled
+        if on_kernels:
             can = self._can(np.concatenate([rows, them]), np.concatenate([them, rows]),
                             np.concatenate([mine[rows], theirs[rows]]), np.concatenate([at, at]),
                             np.concatenate([way, -way]), np.concatenate([full, full]), claims,
@@ -407,7 +426,7 @@ class CollisionSeparate(System):
             return rows
         capsule = mine[rows]
         distance = depth[rows] * share + MARGIN_M
-        if self.compiled:
+        if on_kernels:
             self._push(rows, them, capsule, at, way, distance, claims, pushed, leg)
             return np.unique(rows)
         chain = CAPSULE_CHAIN[capsule]
@@ -587,11 +606,14 @@ class CollisionSeparate(System):
         spine = st.vertebrae if count and st.vertebrae is not None else np.empty((n, 0, 3))
         k = _EXPORT
         newly_bad = np.zeros(n, bool)
-        over_chunks(posture_rows, rows.size, rows, pose_arrays(st.poses), st.lengths, decoded,
-                    st.frozen, newly_bad, st.positions, rotations,
-                    np.empty((n if rotations else 0, N_EXPORT, 3, 3)),
-                    st.local_rotations if rotations else np.empty((0, N_EXPORT, 3, 3)),
-                    k.rest_hips, k.bvh_from_world, k.rest2body, k.parents, spine, True,
-                    spine_scratch(rows.size))
+        if not sim.compiled:  # the kernels compile aside (a first run)
+            posture_numpy(sim, rows, decoded, newly_bad, True)
+        else:
+            over_chunks(posture_rows, rows.size, rows, pose_arrays(st.poses), st.lengths,
+                        decoded, st.frozen, newly_bad, st.positions, rotations,
+                        np.empty((n if rotations else 0, N_EXPORT, 3, 3)),
+                        st.local_rotations if rotations else np.empty((0, N_EXPORT, 3, 3)),
+                        k.rest_hips, k.bvh_from_world, k.rest2body, k.parents, spine, True,
+                        spine_scratch(rows.size))
         if newly_bad.any():
             sim.report_frozen(np.flatnonzero(newly_bad))

@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from ecs_anim.components import Constraint
+from ecs_anim.core.morphology import centres_of_mass as numpy_centres
 from ecs_anim.runtime.kernels import LIGHT_ROWS_PER_THREAD, over_chunks
 from ecs_anim.runtime.kernels.com import centres_of_mass, horizontal_errors, segment_joints
 from ecs_anim.runtime.system_base import System
@@ -41,6 +42,12 @@ class COMControl(System):
         if st.goals is None or st.solved is None:
             return
         rows = np.asarray(st.goals.rows, dtype=np.int64)  # type: ignore[attr-defined]
+        if not self.sim.compiled:  # the kernels' numpy references, while they compile aside
+            st.com[rows] = numpy_centres(st.solved.positions, st.segment_mass_kg[rows],
+                                         st.segment_com_fraction[rows])
+            st.com_error_m[rows] = np.linalg.norm(st.com[rows, :2] - st.com_desired[rows, :2],
+                                                  axis=1)
+            return
         over_chunks(centres_of_mass, rows.size, rows, np.arange(rows.size, dtype=np.int64),
                     st.solved.positions, st.segment_mass_kg, st.segment_com_fraction, _PROXIMAL,
                     _DISTAL, st.com)

@@ -28,13 +28,16 @@ the result, :func:`~ecs_anim.solver.goals.constraint_errors`; NaN while inactive
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.components import Constraint
+from ecs_anim.core.morphology import centres_of_mass as numpy_centres
 from ecs_anim.core.normalized import DecodedPose, NormalizedPoses
+from ecs_anim.core.normalized import decode as numpy_decode
 from ecs_anim.motion.constraint_table import KIND_ORIENTATION
 from ecs_anim.runtime.kernels import over_chunks, threads
 from ecs_anim.runtime.kernels.com import centres_of_mass, segment_joints
@@ -46,10 +49,12 @@ from ecs_anim.runtime.kernels.goals import tick_goals as tick_goals
 from ecs_anim.runtime.kernels.joint_speed import limit_motion, pack
 from ecs_anim.runtime.kernels.solve import solve as solve
 from ecs_anim.runtime.system_base import System
+from ecs_anim.solver import joint_speed as numpy_speed
 from ecs_anim.solver.budget import FrameBudget, SolverReport, effective_caps
 from ecs_anim.solver.goals import TickGoals
 from ecs_anim.solver.joint_speed import SpeedSteps, solve_within_speed
 from ecs_anim.solver.shell import (
+    NUMPY_STEPS,
     SolverSettings,
     TickResult,
     TickSteps,
@@ -73,6 +78,28 @@ def _centres(positions: NDArray[np.float64], masses: NDArray[np.float64],
     over_chunks(centres_of_mass, n, every, every, positions, masses, com_fraction, _PROXIMAL,
                 _DISTAL, out)
     return out
+
+
+class Steps(NamedTuple):
+    """The functions one tick of the solve calls: the compiled ones, or their numpy references
+    while the kernels compile aside (``Simulation.compiled``)."""
+
+    goals: Callable[..., TickGoals | None]
+    solve: Callable[..., tuple[NormalizedPoses, NDArray[np.int64], DecodedPose]]
+    errors: Callable[..., NDArray[np.float64]]
+    centres: Callable[..., NDArray[np.float64]]
+    decode: Callable[..., DecodedPose]
+    limit_motion: Callable[..., tuple[NormalizedPoses, Any]]
+    pack: Callable[[NormalizedPoses], NDArray[np.float64]]
+
+
+def steps(compiled: bool) -> Steps:
+    """The compiled steps (this module's names, read at each call: tests patch them), or their
+    numpy references."""
+    if compiled:
+        return Steps(tick_goals, solve, constraint_errors, _centres, decode, limit_motion, pack)
+    return Steps(NUMPY_STEPS.goals, NUMPY_STEPS.solve, NUMPY_STEPS.errors, numpy_centres,
+                 numpy_decode, numpy_speed.limit_motion, numpy_speed.pack)
 
 
 class ConstraintSolve(System):
@@ -101,12 +128,13 @@ class ConstraintSolve(System):
         the frame budget's model."""
         start = time.process_time()
         bounded = self.sim.solver_settings.max_joint_speed_rad_s is not None
-        out = self._solve_within_speed(*args) if bounded else solve(*args)
+        out = self._solve_within_speed(*args) if bounded else steps(self.sim.compiled).solve(*args)
         self._solve_cpu_s = time.process_time() - start
         return out
 
     def run(self, dt: float) -> None:
         sim, st, table = self.sim, self.sim.store, self.sim.constraints
+        step = steps(sim.compiled)
         st.goals, st.solved, st.clip_positions = None, None, None
         self.report = None
         self._clip_now = None
@@ -124,11 +152,11 @@ class ConstraintSolve(System):
             weight = self.budget.weights(weight, table.owner, table.priority,
                                          st.poses.root_position * sim.leg_length()[:, None],
                                          settings, sim.dt)
-        unconstrained = decode(st.poses, st.lengths) if (weight > 0).any() else None
+        unconstrained = step.decode(st.poses, st.lengths) if (weight > 0).any() else None
         if unconstrained is not None:
             st.clip_positions = unconstrained.positions.copy()
             if settings.max_joint_speed_rad_s is not None:
-                self._clip_now = pack(st.poses)
+                self._clip_now = step.pack(st.poses)
                 # A character with no last tick kept (its first, or none solved since) was at its
                 # motion's pose: a constraint switched on at once is then met over a few ticks.
                 fresh = ~np.any(st.last_pose_values != 0.0, axis=1)
@@ -141,7 +169,7 @@ class ConstraintSolve(System):
                            st.contact_weight, st.com_control, st.com_target_xy, st.segment_mass_kg,
                            st.segment_com_fraction, st.posture, self.budget.aimed(settings, model),
                            settings.release_speed_m_s * sim.dt,
-                           TickSteps(tick_goals, self._timed_solve, constraint_errors, _centres),
+                           TickSteps(step.goals, self._timed_solve, step.errors, step.centres),
                            model, self.budget.expected())
         used, caps = np.zeros(0, np.int64), np.zeros(0, np.int64)
         if result.goals is not None and result.iterations is not None:
@@ -176,8 +204,9 @@ class ConstraintSolve(System):
         st, rows = self.sim.store, goals.rows
         assert self._clip_now is not None  # packed before the solve
         max_step = float(settings.max_joint_speed_rad_s or np.inf) * self.sim.dt
+        step = steps(self.sim.compiled)
         return solve_within_speed(
-            SpeedSteps(solve, limit_motion, decode), self._clip_now[rows],
+            SpeedSteps(step.solve, step.limit_motion, step.decode), self._clip_now[rows],
             st.last_clip_values[rows], st.last_pose_values[rows], max_step, poses, lengths,
             goals, masses, com_fraction, settings, decoded, in_place)
 
@@ -189,14 +218,15 @@ class ConstraintSolve(System):
         st, speed = self.sim.store, self.sim.solver_settings.max_joint_speed_rad_s
         if speed is None or (self._clip_now is None and not self._values_kept):
             return
-        clip_now = pack(st.poses) if self._clip_now is None else self._clip_now
+        step = steps(self.sim.compiled)
+        clip_now = step.pack(st.poses) if self._clip_now is None else self._clip_now
         corrected = np.any(st.last_pose_values != st.last_clip_values, axis=1)
         corrected[solved_rows] = False
         rows = np.flatnonzero(corrected)
         if rows.size:
             if st.clip_positions is None:  # nothing solved: every pose is the motion's
-                st.clip_positions = decode(st.poses, st.lengths).positions
-            back, _ = limit_motion(st.poses.take(rows), clip_now[rows], st.last_clip_values[rows],
+                st.clip_positions = step.decode(st.poses, st.lengths).positions
+            back, _ = step.limit_motion(st.poses.take(rows), clip_now[rows], st.last_clip_values[rows],
                                    st.last_pose_values[rows], st.contact_weight[rows] > 0.0,
                                    speed * self.sim.dt)
             for name, value in back.arrays().items():
@@ -206,7 +236,7 @@ class ConstraintSolve(System):
             self._values_kept = False
             return
         st.last_clip_values = clip_now
-        st.last_pose_values = pack(st.poses)
+        st.last_pose_values = step.pack(st.poses)
         self._values_kept = True
 
     def _report(self, result: TickResult, dropped: NDArray[np.int64]) -> None:

@@ -75,7 +75,8 @@ def _own(a: NDArray[Any]) -> NDArray[Any]:
 
 class GroundAdapt(System):
     """Adapts with the compiled :mod:`ecs_anim.runtime.kernels.ground_adapt` on a built-in ground; a
-    ground of the user's own (only its numpy ``height``) goes through :meth:`run_numpy`."""
+    ground of the user's own (only its numpy ``height``), or any while the kernels compile
+    aside, goes through :meth:`run_numpy`."""
 
     reads = ("poses", "contact_weight", "sole_roll", "lengths", "clip", "footprint", "locked",
              "pivot", "ground_ref", "ground_index", "positions", "placement_xy",
@@ -98,7 +99,7 @@ class GroundAdapt(System):
         sim, st = self.sim, self.sim.store
         self.stop_at_rises()
         groups = [(rows, self._description(ground)) for ground, rows in self.ground_groups()]
-        if any(description is None for _, description in groups):
+        if not sim.compiled or any(description is None for _, description in groups):
             self.run_numpy(dt)
             return
         pose = leg_pose_arrays(pose_arrays(writable_poses(st.poses, st.n)))

@@ -45,7 +45,8 @@ if TYPE_CHECKING:
 
 class MotionPlayback(System):
     """Samples with the compiled :mod:`ecs_anim.runtime.kernels.playback` (numpy reference:
-    :meth:`run_numpy`), into the store's pose arrays in place."""
+    :meth:`run_numpy`, which runs while the kernels compile aside), into the store's pose
+    arrays in place."""
 
     query = (MotionPlayer,)
     reads = ("clip", "clip_time_s", "speed", "fade_speed", "loop", "fade_clip", "fade_time_s",
@@ -59,6 +60,9 @@ class MotionPlayback(System):
         self._bank: tuple[ClipBank, PoseArrays] | None = None
 
     def run(self, dt: float) -> None:
+        if not self.sim.compiled:  # the kernels compile aside (a first run)
+            self.run_numpy(dt)
+            return
         st, bank = self.sim.store, self.sim.bank
         release_step = dt / self.sim.steering_settings.contact_release_s
         rows = self.rows()

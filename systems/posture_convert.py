@@ -10,16 +10,23 @@ for next tick's targets on other characters), store.local_rotations (the BVH exp
 local joint rotation matrices, when the simulation asks for rotations), store.vertebrae (when
 it asks for a finer spine), store.frozen (a character whose pose went non-finite keeps its last
 good posture and is reported once). All in place, by the compiled
-:func:`ecs_anim.runtime.kernels.posture.posture_rows`.
+:func:`ecs_anim.runtime.kernels.posture.posture_rows`, or while the kernels compile aside by its
+numpy reference (:func:`posture_numpy`).
 """
 
 from __future__ import annotations
 
-import numpy as np
+from typing import TYPE_CHECKING
 
+import numpy as np
+from numpy.typing import NDArray
+
+from ecs_anim.core.normalized import decode, vertebrae
 from ecs_anim.core.skeleton import N_JOINTS
+from ecs_anim.io.export.skeleton import local_rotations
 from ecs_anim.runtime.kernels import over_chunks
 from ecs_anim.runtime.kernels.decode import (
+    DecodedArrays,
     decoded_arrays,
     decoded_pose,
     empty_decoded,
@@ -31,7 +38,42 @@ from ecs_anim.runtime.kernels.posture import N_EXPORT, export_constants, posture
 from ecs_anim.runtime.kernels.solved_posture import posture_solved_rows
 from ecs_anim.runtime.system_base import System
 
+if TYPE_CHECKING:
+    from ecs_anim.runtime.simulation import Simulation
+
 _EXPORT = export_constants()
+
+
+def posture_numpy(sim: Simulation, rows: NDArray[np.int64], decoded: DecodedArrays,
+                  newly_bad: NDArray[np.bool_], have_previous: bool,
+                  solved: DecodedArrays | None = None) -> None:
+    """The numpy reference of :func:`~ecs_anim.runtime.kernels.posture.posture_rows` (with
+    ``solved``, (r, ...) the solver's decoded rows: of
+    :func:`~ecs_anim.runtime.kernels.solved_posture.posture_solved_rows`) over the store rows
+    ``rows`` (r,), all at once, in place: ``decoded`` (n, ...) gets their decoded pose; the
+    store's frozen, positions, local_rotations (with ``sim.rotations``) and vertebrae (with
+    ``sim.vertebrae``; a frozen row's only without ``have_previous``); ``newly_bad`` (n,) the
+    rows frozen now that were not."""
+    st = sim.store
+    poses, lengths = st.poses.take(rows), st.lengths[rows]
+    fresh = decoded_arrays(decode(poses, lengths)) if solved is None else solved
+    for target, value in zip(decoded, fresh, strict=True):
+        target[rows] = value
+    good = np.isfinite(fresh.positions).all(axis=(1, 2))
+    rotations = bool(sim.rotations) and st.local_rotations.shape == (st.n, N_EXPORT, 3, 3)
+    if rotations:
+        local = local_rotations(decoded_pose(fresh))
+        good &= np.isfinite(local).all(axis=(1, 2, 3))
+    newly_bad[rows] = ~good & ~st.frozen[rows]
+    st.frozen[rows] = ~good
+    st.positions[rows[good]] = fresh.positions[good]
+    if rotations:
+        st.local_rotations[rows[good]] = local[good]
+    count = int(sim.vertebrae)
+    if count and st.vertebrae is not None:
+        write = np.flatnonzero(good | (not have_previous))
+        if write.size:
+            st.vertebrae[rows[write]] = vertebrae(poses.take(write), lengths[write], count)
 
 
 def _writable(a: np.ndarray, shape: tuple[int, ...]) -> bool:
@@ -75,10 +117,17 @@ class PostureConvert(System):
         if st.goals is not None and st.solved is not None:  # decoded once, by the solver
             solved_rows = np.asarray(st.goals.rows, dtype=np.int64)  # type: ignore[attr-defined]
             decode_rows = np.delete(decode_rows, solved_rows)
-            over_chunks(posture_solved_rows, solved_rows.size, solved_rows,
-                        decoded_arrays(st.solved), pose, st.lengths, decoded, *rest)
-        over_chunks(posture_rows, decode_rows.size, decode_rows, pose, st.lengths, decoded, *rest,
-                    spine_scratch(decode_rows.size))
+            if sim.compiled:
+                over_chunks(posture_solved_rows, solved_rows.size, solved_rows,
+                            decoded_arrays(st.solved), pose, st.lengths, decoded, *rest)
+            else:
+                posture_numpy(sim, solved_rows, decoded, newly_bad, have_previous,
+                              decoded_arrays(st.solved))
+        if sim.compiled:
+            over_chunks(posture_rows, decode_rows.size, decode_rows, pose, st.lengths, decoded,
+                        *rest, spine_scratch(decode_rows.size))
+        else:  # the kernels compile aside (a first run)
+            posture_numpy(sim, decode_rows, decoded, newly_bad, have_previous)
         if newly_bad.any():
             sim.report_frozen(np.flatnonzero(newly_bad))
         # Next tick's targets on other characters read this posture, frames included.

@@ -391,7 +391,8 @@ class Reactions:
         st, bank = sim.store, sim.bank
         if st.n == 0:
             return []
-        edges, previous_clip = compiled_edges(
+        # the numpy reference while the kernels compile aside (a first run)
+        edges, previous_clip = (compiled_edges if sim.compiled else clip_and_contact_edges)(
             st.entity, st.clip, st.clip_time_s, st.speed, st.loop,
             bank.duration_s(np.arange(bank.n_frames.size)), st.contact_weight, sim.dt,
             TIME_SLACK_S, CONTACT_BEGAN_WEIGHT, self._seen_clip, self._seen_time,

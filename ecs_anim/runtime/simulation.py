@@ -134,7 +134,11 @@ class Simulation(SteeringCalls):
         self.reactions = Reactions()
         #: The recorders collecting each tick (:meth:`record`), in the order made.
         self.recorders: list[Recorder] = []
-        kernels.load_kernels()  # every kernel in memory before the first tick: no tick loads one
+        #: Whether the systems tick on the compiled kernels (every one in memory before the
+        #: first tick: no tick loads one); False while they compile aside on a first run
+        #: (``kernels.compile_aside``): the systems run their numpy references, and
+        #: :meth:`step` switches to the kernels between two ticks once they are in the cache.
+        self.compiled = kernels.load_kernels()
         schedule = SCHEDULE if window else HEADLESS
         self.systems: list[System] = []
         with self._active():
@@ -799,6 +803,10 @@ class Simulation(SteeringCalls):
         clips chosen, played, adapted, solved and converted, then the clock moves and the
         tick's events fire their triggers (DetectEvents)."""
         self._check_open()
+        if not self.compiled:
+            # Steered characters wait for the kernels: local avoidance has no numpy reference,
+            # and a crowd's paths part on the references' 1e-15 differences (docs/performance.md).
+            self.compiled = kernels.poll_kernels(wait=bool(np.any(self.store.steer_mode != 0)))
         with self._active():
             esper.process(self.dt)
         for recorder in self.recorders:

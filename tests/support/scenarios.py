@@ -2,17 +2,22 @@
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 import numpy as np
 
 from conftest import SCENARIOS_DIR
 from ecs_anim.core.morphology import centres_of_mass
+from ecs_anim.runtime import kernels
 from ecs_anim.runtime.metrics import MetricsRecorder
 from ecs_anim.scenario import build_simulation, load_scenario
 
 
-def run(name, drop=(), drop_triggers=""):
+def run(name, drop=(), drop_triggers="", numpy_ticks=0):
     """Run a scenario to its end; per tick: positions (n, J, 3), constraint errors and weights;
-    the events. ``drop``: constraints left out; ``drop_triggers``: triggers whose name starts so."""
+    the events. ``drop``: constraints left out; ``drop_triggers``: triggers whose name starts so;
+    ``numpy_ticks``: the first ticks on the systems' numpy references (as while the kernels
+    compile aside on a first run), the others on the kernels."""
     scenario = load_scenario(SCENARIOS_DIR / f"{name}.yaml")
     for c in scenario.characters:
         c.constraints = [k for k in c.constraints if k.name not in drop]
@@ -22,8 +27,10 @@ def run(name, drop=(), drop_triggers=""):
         metrics = MetricsRecorder(sim)
         ticks = round(scenario.duration_s * scenario.fps)
         positions, errors, weights, com, events = [], [], [], [], []
-        for _ in range(ticks):
-            sim.step()
+        for tick in range(ticks):
+            sim.compiled = tick >= numpy_ticks
+            with on_numpy_until_told(tick < numpy_ticks):
+                sim.step()
             events += sim.events()
             metrics.record()
             st = sim.store
@@ -37,6 +44,21 @@ def run(name, drop=(), drop_triggers=""):
                 "weights": np.array(weights), "com": np.array(com), "index": index,
                 "report": metrics.report(), "leg": sim.leg_length(), "events": events,
                 "lengths": sim.store.lengths.copy()}
+
+
+@contextmanager
+def on_numpy_until_told(on: bool):
+    """While ``on``: a simulation with ``compiled`` off stays on its numpy references (no
+    kernels found ready between two ticks)."""
+    if not on:
+        yield
+        return
+    saved = kernels.poll_kernels
+    kernels.poll_kernels = lambda wait=False: False
+    try:
+        yield
+    finally:
+        kernels.poll_kernels = saved
 
 
 def clip_on_body(motion, stature_m: float, ground):

@@ -203,7 +203,7 @@ load_figures: dict[str, float | bool] = {}
 _load_lock = threading.RLock()
 
 
-def load_kernels() -> None:
+def load_kernels() -> bool:
     """Called by :class:`ecs_anim.runtime.simulation.Simulation` when it is built: has every
     kernel a tick calls in memory before the first tick, so that no tick loads one (loading the
     solver's lazily cost the tick its first constraint switched on 95-117 ms of CPU). Says what
@@ -211,27 +211,196 @@ def load_kernels() -> None:
     first run on a machine, or after an update) a child process compiles them all into the
     cache (:func:`compile_in_child`: small scenes using every kernel, the solver in a process
     of its own), then, as on any later run, each kernel's every compiled specialisation is
-    loaded from the cache. Its figures: :data:`load_figures` (the child's CPU included)."""
+    loaded from the cache. Its figures: :data:`load_figures` (the child's CPU included).
+
+    After :func:`compile_aside` (``run`` and ``view``) the child is started and not waited for:
+    returns False, and the simulation ticks on the numpy references until
+    :func:`poll_kernels` finds the child done (between two ticks). Returns whether the kernels
+    are in memory."""
     if _announcers:
         say = _announcers.pop()
         notice = compile_notice()
         if notice is not None:
-            say(notice)
+            say(notice + ASIDE_NOTICE if _aside else notice)
     with _load_lock:
         if load_figures or _loading:
-            return  # done, or the warm-up scene's own simulation
+            return True  # done, or the warm-up scene's own simulation (it compiles by calling)
+        if _background:
+            return poll_kernels()
         _loading.append(True)
         try:
             start, cpu = time.perf_counter(), time.process_time()
             compiled = bool(uncompiled_kernels())
+            if compiled and _aside and _start_compiling_aside(start):
+                return False
+            if compiled and compiling_elsewhere() is not None:  # another run's child: wait
+                while compiling_elsewhere() is not None:
+                    time.sleep(0.2)
+                compiled = bool(uncompiled_kernels())
             child_cpu = compile_in_child() if compiled else 0.0
-            for kernel in called_kernels():
-                load_cached(kernel)
-            load_figures.update(seconds=time.perf_counter() - start,
-                                cpu_seconds=time.process_time() - cpu + child_cpu,
-                                compiled=compiled)
+            _load_every_kernel(start, cpu, child_cpu, compiled)
+            return True
         finally:
             _loading.clear()
+
+
+def _load_every_kernel(start: float, cpu: float, child_cpu: float, compiled: bool) -> None:
+    """Load every kernel's specialisations from the cache; record :data:`load_figures`: wall
+    seconds since ``start``, CPU seconds since ``cpu`` plus ``child_cpu`` (the compiling
+    processes')."""
+    for kernel in called_kernels():
+        load_cached(kernel)
+    load_figures.update(seconds=time.perf_counter() - start,
+                        cpu_seconds=time.process_time() - cpu + child_cpu,
+                        compiled=compiled)
+
+
+_aside: list[bool] = []
+#: The child compiling the kernels aside (:func:`compile_aside`): its process (None: another
+#: run's), when it was started (wall seconds) and this process's children's CPU then.
+_background: dict[str, Any] = {}
+
+
+def compile_aside(on: bool = True) -> None:
+    """Have this process's simulations, when the kernels still have to be compiled, tick on
+    the numpy references while a child process compiles them (``run`` and ``view``: the first
+    frame comes in seconds, not after the 1-2 minutes of CPU compiling takes); False: wait for
+    the child (the default: the bench, the batch and API users tick on the kernels from the
+    first tick)."""
+    _aside[:] = [True] if on else []
+
+
+#: What :func:`announce_compiling` adds to :func:`compile_notice` when they compile aside.
+ASIDE_NOTICE = "; meanwhile the ticks run on numpy"
+
+
+#: The file in the cache folder holding the process id of the child compiling the kernels
+#: aside (written as it starts, removed by it as it ends): a run started meanwhile waits for
+#: it instead of compiling them again.
+COMPILING_MARKER = "ecs_anim_compiling.pid"
+
+
+def compiling_elsewhere() -> int | None:
+    """The process id of the child compiling the kernels aside (this run's or another's) while
+    it runs, else None."""
+    try:
+        pid = int((_cache_subfolder() / COMPILING_MARKER).read_text())
+    except (OSError, ValueError):
+        return None
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:  # ended without removing it (killed)
+        return None
+    except OSError:  # another user's process: alive
+        pass
+    try:  # where /proc tells: not ended yet (a zombie), nor its id taken by another program
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            ended = f.read().rsplit(b")", 1)[1].split()[0] == b"Z"
+        with open(f"/proc/{pid}/cmdline", "rb") as f:
+            ours = b"ecs_anim.runtime.kernels" in f.read()
+    except (OSError, IndexError):
+        return pid
+    return pid if ours and not ended else None
+
+
+def compiled_aside() -> None:
+    """Called by the child compiling aside as it ends: remove :data:`COMPILING_MARKER` (if it
+    still names this process)."""
+    if compiling_elsewhere() == os.getpid():
+        (_cache_subfolder() / COMPILING_MARKER).unlink(missing_ok=True)
+
+
+def _start_compiling_aside(start: float) -> bool:
+    """Start :data:`COMPILE_COMMAND` in a process of its own session (it goes on compiling into
+    the cache if this process ends first, and a Ctrl-C here does not stop it), or follow the
+    one another run started; False if no process could be started."""
+    import resource
+
+    elsewhere = compiling_elsewhere()
+    if elsewhere is not None:
+        _background.update(process=None, start=start)
+        return True
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    try:
+        child = subprocess.Popen(COMPILE_COMMAND, stdout=subprocess.DEVNULL,
+                                 stderr=subprocess.DEVNULL, start_new_session=True)
+        (_cache_subfolder() / COMPILING_MARKER).write_text(f"{child.pid}\n")
+    except OSError:  # cannot start a process (or write the cache): compile where first called
+        return False
+    _background.update(process=child, start=start, rusage=before)
+    return True
+
+
+def poll_kernels(wait: bool = False) -> bool:
+    """Whether the kernels are in memory; called between two ticks by a simulation ticking on
+    the numpy references (:func:`compile_aside`). Once the child compiling them is done, a
+    thread of this process loads them all from the cache (:func:`_load_aside`) while the ticks
+    go on on numpy (loading them in one tick took it 0.5-1 s); True from the first call after
+    it finished. With ``wait``: waits for the child and the load, then True."""
+    with _load_lock:
+        if load_figures or _loading:
+            return True
+        if not _background:
+            return load_kernels()
+        loader = _background.get("loader")
+        if loader is None:
+            child_cpu = _compiled_aside_cpu(wait)
+            if child_cpu is None:
+                return False
+            loader = threading.Thread(target=_load_aside, args=(child_cpu,), daemon=True,
+                                      name="ecs_anim kernels loader")
+            _background["loader"] = loader
+            loader.start()
+            atexit.register(loader.join)  # numba loading as the interpreter ends could crash
+        if wait:
+            loader.join()
+        if loader.is_alive():
+            return False
+        _background.clear()
+        return True
+
+
+def _compiled_aside_cpu(wait: bool) -> float | None:
+    """None while the child compiling aside runs (unless ``wait``: then once it ended); then
+    the CPU seconds it took (0 for another run's child: not ours to count)."""
+    import resource
+
+    child = _background["process"]
+    if child is None:
+        if compiling_elsewhere() is not None and not wait:
+            return None
+        while compiling_elsewhere() is not None:
+            time.sleep(0.2)
+        return 0.0
+    if child.poll() is None and not wait:
+        return None
+    if child.wait() != 0:
+        logging.getLogger("ecs_anim").warning(
+            "compiling the kernels in a child process failed (exit %d): each compiles where it "
+            "is first called", child.returncode)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    before = _background["rusage"]
+    return float((after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime))
+
+
+def _load_aside(child_cpu: float) -> None:
+    """The loader thread of :func:`poll_kernels`: every kernel's specialisations from the
+    cache, then :data:`load_figures` (whatever became of the load: a kernel not loaded
+    compiles where it is first called): the compile's wall seconds since the child started,
+    its CPU seconds and this thread's."""
+    compiled_s = time.perf_counter() - _background["start"]
+    cpu = time.thread_time()
+    try:
+        for kernel in called_kernels():
+            load_cached(kernel)
+    finally:
+        load_figures.update(seconds=compiled_s, cpu_seconds=child_cpu + time.thread_time() - cpu,
+                            compiled=True, aside=True, ours=_background["process"] is not None)
+
+
+def kernels_pending() -> bool:
+    """Whether a child is compiling the kernels aside and they are not in memory yet."""
+    return bool(_background) and not load_figures
 
 
 _loading: list[bool] = []

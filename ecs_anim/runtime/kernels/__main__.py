@@ -18,6 +18,7 @@ from ecs_anim.runtime.kernels import (
     cache_dir,
     compile_notice,
     compile_solver_aside,
+    compiled_aside,
     compiling_by_calls,
     load_figures,
     load_kernels,
@@ -42,8 +43,9 @@ def compile_every_kernel() -> None:
 def compile_separation() -> None:
     """Compile :mod:`ecs_anim.runtime.kernels.separate` and
     :mod:`ecs_anim.runtime.kernels.joint_speed` (into the cache): two ticks of two walkers
-    started in each other, which CollisionSeparate pushes apart, one reaching out under the
-    solver's speed bound."""
+    started side by side 0.4 m apart, one reaching out under the solver's speed bound, 5 cm
+    in each other, which CollisionSeparate pushes apart (started 0.15 m apart, neither body
+    could move: ``push_rows`` was not compiled, and the fight compiled it mid-run)."""
     from dataclasses import replace
 
     from ecs_anim.components import MotionPlayer, Placement
@@ -59,7 +61,7 @@ def compile_separation() -> None:
         with Simulation({"walk": import_bvh(MOTIONS_DIR / "walk.bvh")}, rotations=True) as sim:
             sim.solver_settings = replace(sim.solver_settings, max_joint_speed_rad_s=4.0)
             walkers = [sim.spawn(f"c{i}", Morphology.from_stature(1.7), MotionPlayer("walk"),
-                                 Placement((0.0, 0.15 * i))) for i in range(2)]
+                                 Placement((0.0, 0.4 * i))) for i in range(2)]
             sim.add_constraint(walkers[0], "reach", "wrist_r", 1.0, Activation(0.0, 1e9),
                                (0.5, -0.5, 1.2))
             sim.step()
@@ -111,7 +113,10 @@ def main() -> int:
         compile_solver()
         return 0
     if sys.argv[1:] == ["--compile"]:
-        compile_every_kernel()
+        try:
+            compile_every_kernel()
+        finally:
+            compiled_aside()  # a run compiling aside, and any started meanwhile, load them now
         return 0
     notice = compile_notice()
     if notice is not None:
