@@ -42,6 +42,7 @@ from ecs_anim.runtime.kernels.decode import decode
 from ecs_anim.runtime.kernels.goals import (
     constraint_errors as constraint_errors,  # tests patch these
 )
+from ecs_anim.runtime.kernels.goals import target_points as target_points
 from ecs_anim.runtime.kernels.goals import tick_goals as tick_goals
 from ecs_anim.runtime.kernels.joint_speed import limit_motion, pack
 from ecs_anim.runtime.kernels.solve import solve as solve
@@ -141,7 +142,8 @@ class ConstraintSolve(System):
                            st.contact_weight, st.com_control, st.com_target_xy, st.segment_mass_kg,
                            st.segment_com_fraction, st.posture, self.budget.aimed(settings, model),
                            settings.release_speed_m_s * sim.dt,
-                           TickSteps(tick_goals, self._timed_solve, constraint_errors, _centres),
+                           TickSteps(tick_goals, self._timed_solve, constraint_errors, _centres,
+                                     target_points),
                            model, self.budget.expected())
         used, caps = np.zeros(0, np.int64), np.zeros(0, np.int64)
         if result.goals is not None and result.iterations is not None:

@@ -622,18 +622,19 @@ class TickResult:
 class TickSteps(NamedTuple):
     """The computations one tick of :func:`constrain` is made of, each a function of the
     signature of its numpy reference here: ``goals`` (:func:`tick_goals`), ``solve``
-    (:func:`solve`), ``errors`` (:func:`constraint_errors`) and ``centres``
-    (:func:`ecs_anim.core.morphology.centres_of_mass`). :data:`NUMPY_STEPS` are those references;
-    ConstraintSolve runs the compiled ones (:mod:`ecs_anim.runtime.kernels.goals`,
-    :func:`ecs_anim.runtime.kernels.solve.solve`)."""
+    (:func:`solve`), ``errors`` (:func:`constraint_errors`), ``centres``
+    (:func:`ecs_anim.core.morphology.centres_of_mass`) and ``targets`` (:func:`target_points`).
+    :data:`NUMPY_STEPS` are those references; ConstraintSolve runs the compiled ones
+    (:mod:`ecs_anim.runtime.kernels.goals`, :func:`ecs_anim.runtime.kernels.solve.solve`)."""
 
     goals: Callable[..., TickGoals | None]
     solve: Callable[..., tuple[NormalizedPoses, I64, DecodedPose]]
     errors: Callable[[ConstraintTable, I64, DecodedPose, F64], F64]
     centres: Callable[[F64, F64, F64], F64]
+    targets: Callable[[ConstraintTable, DecodedPose, DecodedPose | None], F64] = target_points
 
 
-NUMPY_STEPS = TickSteps(tick_goals, solve, constraint_errors, centres_of_mass)
+NUMPY_STEPS = TickSteps(tick_goals, solve, constraint_errors, centres_of_mass, target_points)
 
 
 def focus_distances(positions: F64, focus_in_world: tuple[float, float, float] | None) -> F64:
@@ -674,7 +675,7 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
         return TickResult(weight, none, error, held)
     if unconstrained is None:
         raise ValueError("constrain: the decoded poses are needed when a constraint is active")
-    targets = on_other_surfaces(table, target_points(table, unconstrained, previous), lengths,
+    targets = on_other_surfaces(table, steps.targets(table, unconstrained, previous), lengths,
                                 unconstrained, previous)
     broken = none
     # (one test of the whole array first: the usual case; NaN fails it too)
@@ -730,7 +731,7 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
     on_body = table.target_kind != TARGET_WORLD
     on_own_body = on_body & (table.target_row == table.owner) if on_body.any() else on_body
     if on_own_body.any():
-        targets = np.where(on_own_body[:, None], target_points(table, result, previous), targets)
+        targets = np.where(on_own_body[:, None], steps.targets(table, result, previous), targets)
     error[active] = steps.errors(table, active, result, targets)
     return TickResult(weight, broken, error, held, goals, rows, solved_poses, solved, iterations,
                       cut, solve_s)

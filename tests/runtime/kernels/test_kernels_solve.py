@@ -22,6 +22,7 @@ from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import LENGTH_INDEX as L
 from ecs_anim.motion.constraints import Activation
 from ecs_anim.runtime.kernels import solve as compiled
+from ecs_anim.runtime.kernels import solve_math as compiled_math
 from ecs_anim.runtime.kernels.solve_head import solve_head
 from ecs_anim.runtime.kernels.solve_limbs import solve_limbs
 from ecs_anim.runtime.kernels.solve_points import centre_of_mass, goal_error
@@ -61,6 +62,7 @@ def test_the_scenarios_end_the_same_with_either_solver(monkeypatch):
     monkeypatch.setattr(system, "tick_goals", numpy.goals)
     monkeypatch.setattr(system, "solve", numpy.solve)
     monkeypatch.setattr(system, "constraint_errors", numpy.errors)
+    monkeypatch.setattr(system, "target_points", numpy.targets)
     reference = run("fight_training")
     monkeypatch.undo()
     result = run("fight_training")
@@ -168,6 +170,21 @@ def limbs(s):
     for c in range(s.bodies.lengths.shape[0]):
         solve_limbs(c, s.pose, s.dec, s.goals, s.winners, s.bodies, T, S.tolerance_m,
                     MAX_LEG_EXTENSION)
+
+
+def test_the_limb_steps_angle_wrap_is_numpys_modulo_to_the_bit():
+    """``wrap_angle`` (the flexion candidates' wrap into [-pi, pi), its modulo replaced by one
+    exact step where one is enough) gives numpy's ``(a + pi) % (2 pi) - pi`` bit for bit, at
+    the edges of each of its ranges and on either side of them too."""
+    rng = np.random.default_rng(7)
+    edges = np.array([-5.0, -3.0, -1.0, 0.0, 1.0, 3.0, 5.0]) * np.pi
+    near = np.concatenate([edges, np.nextafter(edges, np.inf), np.nextafter(edges, -np.inf)])
+    angles = np.concatenate([near, -near, rng.uniform(-30.0, 30.0, 20_000),
+                             rng.uniform(-4.0, 4.0, 20_000), [0.0, -0.0, 1e-300, -1e-300]])
+    expected = (angles + np.pi) % (2 * np.pi) - np.pi
+    got = np.array([compiled_math.wrap_angle(float(a)) for a in angles])
+    mismatched = np.flatnonzero(got.view(np.int64) != expected.view(np.int64))
+    assert mismatched.size == 0, angles[mismatched[:5]]
 
 
 def test_limb_step_equals_numpy(states):
