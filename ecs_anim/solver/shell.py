@@ -266,12 +266,20 @@ class _Solve:
         fractions = np.concatenate([poses.leg_fraction, poses.arm_fraction], axis=1)
         dirs = np.concatenate([poses.foot_dir, poses.hand_dir], axis=1)
         rows, li = np.nonzero((self.first_limb >= 0) & self.active[:, None])
-        # Only limbs with something to do: a first goal not met, or a second one (which keeps
-        # the first exactly; a limb left alone keeps both as they are).
+        # Only limbs with something to do: a first goal not met, or a second one not met (the
+        # swivel for it keeps the first exactly; a limb left alone keeps both as they are: an
+        # arm the root carried with both its goals, on the body, is not solved again).
         c = self.first_limb[rows, li]
         met = np.linalg.norm(point_positions(dec, rows, g.segment[c], g.fraction[c], g.offset[c])
                              - g.goal[c], axis=1) <= self.s.tolerance_m * 0.01
-        todo = ~met | (self.second_limb[rows, li] >= 0)
+        second = self.second_limb[rows, li]
+        two = np.flatnonzero(met & (second >= 0))
+        if two.size:
+            c2 = second[two]
+            met[two] = np.linalg.norm(
+                point_positions(dec, rows[two], g.segment[c2], g.fraction[c2], g.offset[c2])
+                - g.goal[c2], axis=1) <= self.s.tolerance_m * 0.01
+        todo = ~met
         rows, li = rows[todo], li[todo]
         if rows.size:
             c = self.first_limb[rows, li]
