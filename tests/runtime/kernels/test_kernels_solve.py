@@ -294,6 +294,29 @@ def test_a_limb_reaches_a_reachable_goal_exactly_and_a_second_goal_swivels_it(id
     assert closer >= 1
 
 
+def test_a_limb_with_both_its_goals_met_is_left_alone(idle):
+    """An arm meeting its wrist goal and its elbow goal is not solved again (its frame,
+    fraction, hand and joints stay to the bit): the bench's arms, carried by the root with both
+    their goals on the body, were re-solved on every pass."""
+    def wrist_and_elbow(sim, entities, p):
+        for i, e in enumerate(entities):
+            sim.add_constraint(e, "wrist", "wrist_r", 5, ALWAYS,
+                               tuple(p[i, J["shoulder_r"]] + [0.3, -0.25 - 0.05 * i, 0.1]))
+        for i, e in enumerate(entities):
+            sim.add_constraint(e, "elbow", "elbow_r", 1, ALWAYS, tuple(p[i, J["elbow_r"]]))
+
+    s, _ = one_state(idle, wrist_and_elbow, n=3)
+    limbs(s)
+    for c in range(3):  # the elbow's goal where the wrist's reach left it: both met
+        s.goals.goal[user_goal(s, 3 + c)] = s.dec.positions[c, J["elbow_r"]]
+    arm = (s.pose.arm_frame, s.pose.arm_fraction, s.pose.hand_dir, s.dec.arm2world,
+           s.dec.positions)
+    before = [a.copy() for a in arm]
+    limbs(s)
+    for was, now in zip(before, arm, strict=True):
+        np.testing.assert_array_equal(now, was)
+
+
 def test_the_head_reaches_its_goal(idle):
     def nod(sim, entities, p):
         sim.add_constraint(entities[0], "nod", "head_top", 3, ALWAYS,
