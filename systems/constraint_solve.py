@@ -45,6 +45,7 @@ from ecs_anim.runtime.kernels.decode import decode
 from ecs_anim.runtime.kernels.goals import (
     constraint_errors as constraint_errors,  # tests patch these
 )
+from ecs_anim.runtime.kernels.goals import target_points as target_points
 from ecs_anim.runtime.kernels.goals import tick_goals as tick_goals
 from ecs_anim.runtime.kernels.joint_speed import limit_motion, pack
 from ecs_anim.runtime.kernels.solve import solve as solve
@@ -88,6 +89,7 @@ class Steps(NamedTuple):
     solve: Callable[..., tuple[NormalizedPoses, NDArray[np.int64], DecodedPose]]
     errors: Callable[..., NDArray[np.float64]]
     centres: Callable[..., NDArray[np.float64]]
+    targets: Callable[..., NDArray[np.float64]]
     decode: Callable[..., DecodedPose]
     limit_motion: Callable[..., tuple[NormalizedPoses, Any]]
     pack: Callable[[NormalizedPoses], NDArray[np.float64]]
@@ -97,9 +99,10 @@ def steps(compiled: bool) -> Steps:
     """The compiled steps (this module's names, read at each call: tests patch them), or their
     numpy references."""
     if compiled:
-        return Steps(tick_goals, solve, constraint_errors, _centres, decode, limit_motion, pack)
+        return Steps(tick_goals, solve, constraint_errors, _centres, target_points, decode,
+                     limit_motion, pack)
     return Steps(NUMPY_STEPS.goals, NUMPY_STEPS.solve, NUMPY_STEPS.errors, numpy_centres,
-                 numpy_decode, numpy_speed.limit_motion, numpy_speed.pack)
+                 NUMPY_STEPS.targets, numpy_decode, numpy_speed.limit_motion, numpy_speed.pack)
 
 
 class ConstraintSolve(System):
@@ -169,7 +172,8 @@ class ConstraintSolve(System):
                            st.contact_weight, st.com_control, st.com_target_xy, st.segment_mass_kg,
                            st.segment_com_fraction, st.posture, self.budget.aimed(settings, model),
                            settings.release_speed_m_s * sim.dt,
-                           TickSteps(step.goals, self._timed_solve, step.errors, step.centres),
+                           TickSteps(step.goals, self._timed_solve, step.errors, step.centres,
+                                     step.targets),
                            model, self.budget.expected())
         used, caps = np.zeros(0, np.int64), np.zeros(0, np.int64)
         if result.goals is not None and result.iterations is not None:

@@ -266,12 +266,20 @@ class _Solve:
         fractions = np.concatenate([poses.leg_fraction, poses.arm_fraction], axis=1)
         dirs = np.concatenate([poses.foot_dir, poses.hand_dir], axis=1)
         rows, li = np.nonzero((self.first_limb >= 0) & self.active[:, None])
-        # Only limbs with something to do: a first goal not met, or a second one (which keeps
-        # the first exactly; a limb left alone keeps both as they are).
+        # Only limbs with something to do: a first goal not met, or a second one not met (the
+        # swivel for it keeps the first exactly; a limb left alone keeps both as they are: an
+        # arm the root carried with both its goals, on the body, is not solved again).
         c = self.first_limb[rows, li]
         met = np.linalg.norm(point_positions(dec, rows, g.segment[c], g.fraction[c], g.offset[c])
                              - g.goal[c], axis=1) <= self.s.tolerance_m * 0.01
-        todo = ~met | (self.second_limb[rows, li] >= 0)
+        second = self.second_limb[rows, li]
+        two = np.flatnonzero(met & (second >= 0))
+        if two.size:
+            c2 = second[two]
+            met[two] = np.linalg.norm(
+                point_positions(dec, rows[two], g.segment[c2], g.fraction[c2], g.offset[c2])
+                - g.goal[c2], axis=1) <= self.s.tolerance_m * 0.01
+        todo = ~met
         rows, li = rows[todo], li[todo]
         if rows.size:
             c = self.first_limb[rows, li]
@@ -622,18 +630,19 @@ class TickResult:
 class TickSteps(NamedTuple):
     """The computations one tick of :func:`constrain` is made of, each a function of the
     signature of its numpy reference here: ``goals`` (:func:`tick_goals`), ``solve``
-    (:func:`solve`), ``errors`` (:func:`constraint_errors`) and ``centres``
-    (:func:`ecs_anim.core.morphology.centres_of_mass`). :data:`NUMPY_STEPS` are those references;
-    ConstraintSolve runs the compiled ones (:mod:`ecs_anim.runtime.kernels.goals`,
-    :func:`ecs_anim.runtime.kernels.solve.solve`)."""
+    (:func:`solve`), ``errors`` (:func:`constraint_errors`), ``centres``
+    (:func:`ecs_anim.core.morphology.centres_of_mass`) and ``targets`` (:func:`target_points`).
+    :data:`NUMPY_STEPS` are those references; ConstraintSolve runs the compiled ones
+    (:mod:`ecs_anim.runtime.kernels.goals`, :func:`ecs_anim.runtime.kernels.solve.solve`)."""
 
     goals: Callable[..., TickGoals | None]
     solve: Callable[..., tuple[NormalizedPoses, I64, DecodedPose]]
     errors: Callable[[ConstraintTable, I64, DecodedPose, F64], F64]
     centres: Callable[[F64, F64, F64], F64]
+    targets: Callable[[ConstraintTable, DecodedPose, DecodedPose | None], F64] = target_points
 
 
-NUMPY_STEPS = TickSteps(tick_goals, solve, constraint_errors, centres_of_mass)
+NUMPY_STEPS = TickSteps(tick_goals, solve, constraint_errors, centres_of_mass, target_points)
 
 
 def focus_distances(positions: F64, focus_in_world: tuple[float, float, float] | None) -> F64:
@@ -674,7 +683,7 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
         return TickResult(weight, none, error, held)
     if unconstrained is None:
         raise ValueError("constrain: the decoded poses are needed when a constraint is active")
-    targets = on_other_surfaces(table, target_points(table, unconstrained, previous), lengths,
+    targets = on_other_surfaces(table, steps.targets(table, unconstrained, previous), lengths,
                                 unconstrained, previous)
     broken = none
     # (one test of the whole array first: the usual case; NaN fails it too)
@@ -730,7 +739,7 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
     on_body = table.target_kind != TARGET_WORLD
     on_own_body = on_body & (table.target_row == table.owner) if on_body.any() else on_body
     if on_own_body.any():
-        targets = np.where(on_own_body[:, None], target_points(table, result, previous), targets)
+        targets = np.where(on_own_body[:, None], steps.targets(table, result, previous), targets)
     error[active] = steps.errors(table, active, result, targets)
     return TickResult(weight, broken, error, held, goals, rows, solved_poses, solved, iterations,
                       cut, solve_s)

@@ -303,6 +303,42 @@ def layout_rows(lo: int, hi: int, user_start: I64, kept: I64, cols: Columns, wei
         out.com_on[c] = com_control[row]
 
 
+@jit(nogil=True)
+def target_rows(lo: int, hi: int, body: I64, owner: I64, target_row: I64, target_segment: I64,
+                target_fraction: F64, target_offset: F64, dec: DecodedArrays,
+                previous: DecodedArrays, has_previous: bool, t: Tables, out: F64) -> None:
+    """``out[body[i]]`` ((m, 3), m) for ``i`` in ``lo..hi-1``: the target point of the
+    constraint ``body[i]`` on a body, on ``dec`` (this tick's pose) when the body is its own,
+    else on ``previous`` (the last tick's posture) where finite. Mirrors the body targets of
+    :func:`ecs_anim.solver.goals.target_points`."""
+    for i in range(lo, hi):
+        j = body[i]
+        row, segment = target_row[j], target_segment[j]
+        offset = load3(target_offset[j])
+        now = point_position(dec, row, segment, target_fraction[j], offset, t)
+        if has_previous and row != owner[j]:
+            now = finite_or(point_position(previous, row, segment, target_fraction[j], offset, t),
+                            now)
+        store3(out[j], now)
+
+
+def target_points(table: ConstraintTable, unconstrained: DecodedPose,
+                  previous: DecodedPose | None) -> F64:
+    """Compiled :func:`ecs_anim.solver.goals.target_points`: the same arguments and result."""
+    out = table.target_world.copy()
+    body = np.flatnonzero(table.target_kind != TARGET_WORLD)
+    if body.size:
+        dec = _arrays(unconstrained)
+        over_chunks(target_rows, body.size, body, np.ascontiguousarray(table.owner),
+                    np.ascontiguousarray(table.target_row),
+                    np.ascontiguousarray(table.target_segment),
+                    np.ascontiguousarray(table.target_fraction, dtype=np.float64),
+                    np.ascontiguousarray(table.target_offset, dtype=np.float64), dec,
+                    dec if previous is None else _arrays(previous), previous is not None,
+                    TABLES, out, rows_per_thread=LIGHT_ROWS_PER_THREAD)
+    return out
+
+
 def _arrays(decoded: DecodedPose) -> DecodedArrays:
     return DecodedArrays(*(np.ascontiguousarray(getattr(decoded, name), dtype=np.float64)
                            for name in DecodedArrays._fields))

@@ -113,7 +113,10 @@ def solve_limbs(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winne
                 now = goal_point(dec, c, g, first, t)
             miss = sub(now, load3(goal[first]))
             met = math.sqrt(miss[0] ** 2 + miss[1] ** 2 + miss[2] ** 2) <= tolerance_m * 0.01
-            if not met or second >= 0:
+            if met and second >= 0:  # a limb left alone keeps both its goals as they are
+                miss = sub(goal_point(dec, c, g, second, t), load3(goal[second]))
+                met = math.sqrt(miss[0] ** 2 + miss[1] ** 2 + miss[2] ** 2) <= tolerance_m * 0.01
+            if not met:
                 changed = True
                 u = lengths_row[limb_length[li, 0]]
                 ll = lengths_row[limb_length[li, 1]]

@@ -74,6 +74,25 @@ def point_in_limb(upper: float, lower: float, fraction: float, on_lower: bool, q
 
 
 @jit()
+def wrap_angle(angle: float) -> float:
+    """``(angle + pi) % (2 pi) - pi`` to the bit (Python's and numpy's float modulo), without
+    the modulo's call (a tenth of the solve's time) where it is one exact step: for
+    ``x = angle + pi`` in ``[0, 4 pi)``, ``fmod`` is ``x`` or ``x - 2 pi`` (exact: Sterbenz), and
+    in ``(-2 pi, 0)`` the modulo is ``fmod``'s ``x`` plus 2 pi, the same addition."""
+    two_pi = 2 * math.pi
+    x = angle + math.pi
+    if 0.0 <= x < two_pi:
+        wrapped = x
+    elif two_pi <= x < 2.0 * two_pi:
+        wrapped = x - two_pi
+    elif -two_pi < x < 0.0:
+        wrapped = x + two_pi
+    else:
+        wrapped = x % two_pi
+    return wrapped - math.pi
+
+
+@jit()
 def reach_point(root: Vec3, limb2world: Frame, upper: float, lower: float, fraction: float,
                 on_lower: bool, q: Vec3, goal: Vec3,
                 max_extension: float) -> tuple[Frame, float, Vec3]:
@@ -92,11 +111,14 @@ def reach_point(root: Vec3, limb2world: Frame, upper: float, lower: float, fract
     candidates = (delta + spread, delta - spread, delta, delta + math.pi, phi_lo, phi_hi, phi_now)
     phi = phi_now
     best = math.inf
-    two_pi = 2 * math.pi
     for k in range(7):
-        wrapped = (candidates[k] + math.pi) % two_pi - math.pi
-        candidate = min(max(wrapped, phi_lo), phi_hi)
-        miss = abs(r * math.cos(candidate - delta) - wanted) + 1e-9 * abs(candidate - phi_now)
+        candidate = min(max(wrap_angle(candidates[k]), phi_lo), phi_hi)
+        # A candidate whose tie-break term alone is no less than the best miss cannot be
+        # strictly below it (the other term is not negative): its cosine is not needed.
+        tie_break = 1e-9 * abs(candidate - phi_now)
+        if tie_break >= best:
+            continue
+        miss = abs(r * math.cos(candidate - delta) - wanted) + tie_break
         if miss < best:
             best, phi = miss, candidate
     new_fraction = fraction

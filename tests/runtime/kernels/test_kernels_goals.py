@@ -1,9 +1,10 @@
-"""The compiled goals and constraint errors (ecs_anim.runtime.kernels.goals) against the numpy ones
-(ecs_anim.solver.shell.tick_goals and constraint_errors, the references): every field of every
-tick's goals and every error equal to 1e-9, on the bench scene, on every shipped scenario and on
-a scene with every kind of constraint (box, sphere and half-space areas to stay in and to leave,
-a sphere sweeping past and letting go, a distance to another character, orientations along a
-direction and looking at a point, a target on the same body, a character added mid-run)."""
+"""The compiled goals, targets and constraint errors (ecs_anim.runtime.kernels.goals) against the
+numpy ones (ecs_anim.solver.goals' tick_goals, target_points and constraint_errors, the
+references): every field of every tick's goals, every target and every error equal to 1e-9, on
+the bench scene, on every shipped scenario and on a scene with every kind of constraint (box,
+sphere and half-space areas to stay in and to leave, a sphere sweeping past and letting go, a
+distance to another character, orientations along a direction and looking at a point, a target
+on the same body, a character added mid-run)."""
 
 from __future__ import annotations
 
@@ -37,7 +38,7 @@ class Compare:
     results are compared field by field."""
 
     def __init__(self, monkeypatch: pytest.MonkeyPatch) -> None:
-        self.goals = self.errors = 0
+        self.goals = self.errors = self.targets = 0
 
         def tick_goals(*args):
             reference = solver_shell.tick_goals(*copy.deepcopy(args))
@@ -57,7 +58,15 @@ class Compare:
             self.errors += 1
             return reference
 
+        def target_points(*args):
+            reference = solver_shell.target_points(*args)
+            np.testing.assert_allclose(compiled.target_points(*args), reference, rtol=0,
+                                       atol=1e-9)
+            self.targets += 1
+            return reference
+
         monkeypatch.setattr(system, "tick_goals", tick_goals)
+        monkeypatch.setattr(system, "target_points", target_points)
         monkeypatch.setattr(system, "constraint_errors", constraint_errors)
 
 
@@ -78,6 +87,7 @@ def test_compiled_goals_equal_numpy_on_the_bench_scene(monkeypatch):
     compare = Compare(monkeypatch)
     bench_run(monkeypatch, n=6, ticks=12)
     assert compare.goals == 12 and compare.errors == 12
+    assert compare.targets == 12  # world targets: once a tick (none on a body to read again)
 
 
 @pytest.mark.parametrize("name", sorted(p.stem for p in SCENARIOS_DIR.glob("*.yaml")))
@@ -130,5 +140,5 @@ def test_compiled_goals_equal_numpy_for_every_kind_of_constraint(monkeypatch):
     for _ in range(6):
         sim.step()
     sim.close()
-    assert compare.goals == 22 and compare.errors == 22
+    assert compare.goals == 22 and compare.errors == 22 and compare.targets >= 22
     assert any(held) and not sim.constraints.held.any()  # the sphere held the head, let it go

@@ -22,6 +22,7 @@ from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import LENGTH_INDEX as L
 from ecs_anim.motion.constraints import Activation
 from ecs_anim.runtime.kernels import solve as compiled
+from ecs_anim.runtime.kernels import solve_math as compiled_math
 from ecs_anim.runtime.kernels.solve_head import solve_head
 from ecs_anim.runtime.kernels.solve_limbs import solve_limbs
 from ecs_anim.runtime.kernels.solve_points import centre_of_mass, goal_error
@@ -61,6 +62,7 @@ def test_the_scenarios_end_the_same_with_either_solver(monkeypatch):
     monkeypatch.setattr(system, "tick_goals", numpy.goals)
     monkeypatch.setattr(system, "solve", numpy.solve)
     monkeypatch.setattr(system, "constraint_errors", numpy.errors)
+    monkeypatch.setattr(system, "target_points", numpy.targets)
     reference = run("fight_training")
     monkeypatch.undo()
     result = run("fight_training")
@@ -170,6 +172,21 @@ def limbs(s):
                     MAX_LEG_EXTENSION)
 
 
+def test_the_limb_steps_angle_wrap_is_numpys_modulo_to_the_bit():
+    """``wrap_angle`` (the flexion candidates' wrap into [-pi, pi), its modulo replaced by one
+    exact step where one is enough) gives numpy's ``(a + pi) % (2 pi) - pi`` bit for bit, at
+    the edges of each of its ranges and on either side of them too."""
+    rng = np.random.default_rng(7)
+    edges = np.array([-5.0, -3.0, -1.0, 0.0, 1.0, 3.0, 5.0]) * np.pi
+    near = np.concatenate([edges, np.nextafter(edges, np.inf), np.nextafter(edges, -np.inf)])
+    angles = np.concatenate([near, -near, rng.uniform(-30.0, 30.0, 20_000),
+                             rng.uniform(-4.0, 4.0, 20_000), [0.0, -0.0, 1e-300, -1e-300]])
+    expected = (angles + np.pi) % (2 * np.pi) - np.pi
+    got = np.array([compiled_math.wrap_angle(float(a)) for a in angles])
+    mismatched = np.flatnonzero(got.view(np.int64) != expected.view(np.int64))
+    assert mismatched.size == 0, angles[mismatched[:5]]
+
+
 def test_limb_step_equals_numpy(states):
     for args in states:
         reference, s = both_states(args)
@@ -275,6 +292,29 @@ def test_a_limb_reaches_a_reachable_goal_exactly_and_a_second_goal_swivels_it(id
         assert swivelled <= alone + 1e-12
         closer += swivelled < alone - 1e-3
     assert closer >= 1
+
+
+def test_a_limb_with_both_its_goals_met_is_left_alone(idle):
+    """An arm meeting its wrist goal and its elbow goal is not solved again (its frame,
+    fraction, hand and joints stay to the bit): the bench's arms, carried by the root with both
+    their goals on the body, were re-solved on every pass."""
+    def wrist_and_elbow(sim, entities, p):
+        for i, e in enumerate(entities):
+            sim.add_constraint(e, "wrist", "wrist_r", 5, ALWAYS,
+                               tuple(p[i, J["shoulder_r"]] + [0.3, -0.25 - 0.05 * i, 0.1]))
+        for i, e in enumerate(entities):
+            sim.add_constraint(e, "elbow", "elbow_r", 1, ALWAYS, tuple(p[i, J["elbow_r"]]))
+
+    s, _ = one_state(idle, wrist_and_elbow, n=3)
+    limbs(s)
+    for c in range(3):  # the elbow's goal where the wrist's reach left it: both met
+        s.goals.goal[user_goal(s, 3 + c)] = s.dec.positions[c, J["elbow_r"]]
+    arm = (s.pose.arm_frame, s.pose.arm_fraction, s.pose.hand_dir, s.dec.arm2world,
+           s.dec.positions)
+    before = [a.copy() for a in arm]
+    limbs(s)
+    for was, now in zip(before, arm, strict=True):
+        np.testing.assert_array_equal(now, was)
 
 
 def test_the_head_reaches_its_goal(idle):
