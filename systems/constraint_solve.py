@@ -48,6 +48,7 @@ from ecs_anim.runtime.kernels.solve import solve as solve
 from ecs_anim.runtime.system_base import System
 from ecs_anim.solver.budget import FrameBudget, SolverReport, effective_caps
 from ecs_anim.solver.goals import TickGoals
+from ecs_anim.solver.held_pose import HeldCorrections
 from ecs_anim.solver.joint_speed import SpeedSteps, solve_within_speed
 from ecs_anim.solver.shell import (
     SolverSettings,
@@ -90,6 +91,8 @@ class ConstraintSolve(System):
         self.report: SolverReport | None = None
         #: The frame budget's model and state between ticks.
         self.budget = FrameBudget()
+        #: The last solve's correction of each character the budget solves every few ticks.
+        self.corrections = HeldCorrections()
         self._solve_cpu_s = 0.0
         # No pops: this tick's motion pose, packed (n, N_VALUES; None: not packed), and whether
         # the store's last_*_values hold the last tick's (else they are zeros: none).
@@ -120,10 +123,16 @@ class ConstraintSolve(System):
             weight = np.where(self.in_rows()[table.owner], weight, 0.0)
         settings = sim.solver_settings
         wanted = weight
+        solving = clip_values = clip_root = np.zeros(0, np.int64)
         if settings.budget_ms is not None:
             weight = self.budget.weights(weight, table.owner, table.priority,
                                          st.poses.root_position * sim.leg_length()[:, None],
-                                         settings, sim.dt)
+                                         settings, sim.dt, sim.tick)
+            # the motion's pose of the characters solved now, for their correction to be held
+            self.corrections.start_tick(sim.structure_version, st.n)
+            solving = np.unique(table.owner[weight > 0])
+            clip_values = pack(st.poses.take(solving))
+            clip_root = st.poses.root_position[solving]
         unconstrained = decode(st.poses, st.lengths) if (weight > 0).any() else None
         if unconstrained is not None:
             st.clip_positions = unconstrained.positions.copy()
@@ -158,13 +167,29 @@ class ConstraintSolve(System):
         table.held[:] = result.held
         self._report(result, dropped)
         if result.goals is None or result.poses is None or result.solved is None:
-            self._go_back(np.zeros(0, np.int64))
+            self._go_back(self._hold())
             return
         every_row = result.rows.size == st.n
+        if settings.budget_ms is not None:
+            at = np.searchsorted(solving, result.rows)
+            self.corrections.keep(result.rows, clip_values[at], pack(result.poses),
+                                  clip_root[at], result.poses.root_position,
+                                  st.poses.root_heading[result.rows])
         st.poses = result.poses if every_row else scatter(st.poses, result.rows, result.poses)
         st.com_desired[result.rows] = result.goals.com_desired
         st.goals, st.solved = result.goals, result.solved
-        self._go_back(result.rows)
+        self._go_back(np.union1d(result.rows, self._hold()))
+
+    def _hold(self) -> NDArray[np.int64]:
+        """Put their last solve's correction on the characters the budget solves every few
+        ticks and did not solve this tick (those solved before); returns their rows."""
+        if self.sim.solver_settings.budget_ms is None:
+            return np.zeros(0, np.int64)
+        st = self.sim.store
+        rows = self.budget.held[self.corrections.known[self.budget.held]]
+        if rows.size:
+            self.corrections.put_on(st.poses, rows, pack(st.poses.take(rows)))
+        return rows
 
     def _solve_within_speed(self, poses: NormalizedPoses, lengths: NDArray[np.float64],
                             goals: TickGoals, masses: NDArray[np.float64],
@@ -238,4 +263,7 @@ class ConstraintSolve(System):
                                table.kind == KIND_ORIENTATION, cut_constraint),
             dropped_characters=tuple(int(e) for e in sim.store.entity[dropped]),
             floor_ms=float("nan") if model is None or settings.budget_ms is None
-            else model.fixed_ms)
+            else model.fixed_ms,
+            intervals={} if settings.budget_ms is None else self.budget.intervals(),
+            held_characters=0 if settings.budget_ms is None
+            else int(self.corrections.known[self.budget.held].sum()))
