@@ -18,7 +18,8 @@ Reads: store.poses, lengths, posture (the previous tick's), contact_weight, clip
 com_control, com_target_xy, segment_mass_kg, segment_com_fraction, last_clip_values,
 last_pose_values; the constraints table.
 Writes: store.poses (solved characters, and those going back), com_desired, last_clip_values,
-last_pose_values, clip_positions (the motion's own joints, None when nothing was solved), goals,
+last_pose_values, clip_positions (the motion's own joints, None when nothing was solved; with a
+frame budget, NaN but for the characters solved this tick), goals,
 solved (the decoded result of
 the solved characters, which PostureConvert takes instead of decoding them again); table.held;
 table.enabled, table.weight, table.error (how far each active constraint is from being met on
@@ -38,7 +39,14 @@ from ecs_anim.core.normalized import DecodedPose, NormalizedPoses
 from ecs_anim.motion.constraint_table import KIND_ORIENTATION
 from ecs_anim.runtime.kernels import over_chunks, threads
 from ecs_anim.runtime.kernels.com import centres_of_mass, segment_joints
-from ecs_anim.runtime.kernels.decode import decode
+from ecs_anim.runtime.kernels.decode import (
+    decode,
+    decode_rows,
+    decoded_pose,
+    empty_decoded,
+    pose_arrays,
+    spine_scratch,
+)
 from ecs_anim.runtime.kernels.goals import (
     constraint_errors as constraint_errors,  # tests patch these
 )
@@ -63,6 +71,18 @@ if TYPE_CHECKING:
     from ecs_anim.runtime.simulation import Simulation
 
 _PROXIMAL, _DISTAL = segment_joints()
+
+
+def _decode_some(poses: NormalizedPoses, lengths: NDArray[np.float64], rows: NDArray[np.int64]
+                 ) -> DecodedPose:
+    """The compiled decode of ``rows`` (r,) of ``poses`` (n,) only, into n rows: the other
+    rows' positions NaN (the frame budget solves a few of many characters; the others'
+    motion poses are decoded by PostureConvert)."""
+    arrays = empty_decoded(poses.root_heading.shape[0])
+    arrays.positions[:] = np.nan
+    over_chunks(decode_rows, rows.size, rows, pose_arrays(poses), lengths, arrays,
+                spine_scratch(rows.size))
+    return decoded_pose(arrays)
 
 
 def _centres(positions: NDArray[np.float64], masses: NDArray[np.float64],
@@ -123,17 +143,20 @@ class ConstraintSolve(System):
             weight = np.where(self.in_rows()[table.owner], weight, 0.0)
         settings = sim.solver_settings
         wanted = weight
-        solving = clip_values = clip_root = np.zeros(0, np.int64)
+        solving, motion = np.zeros(0, np.int64), None
         if settings.budget_ms is not None:
             weight = self.budget.weights(weight, table.owner, table.priority,
                                          st.poses.root_position * sim.leg_length()[:, None],
                                          settings, sim.dt, sim.tick)
             # the motion's pose of the characters solved now, for their correction to be held
-            self.corrections.start_tick(sim.structure_version, st.n)
+            self.corrections.start_tick(st.poses, sim.structure_version)
             solving = np.unique(table.owner[weight > 0])
-            clip_values = pack(st.poses.take(solving))
-            clip_root = st.poses.root_position[solving]
-        unconstrained = decode(st.poses, st.lengths) if (weight > 0).any() else None
+            motion = st.poses.take(solving)
+        unconstrained = None
+        if motion is not None and solving.size:
+            unconstrained = _decode_some(st.poses, st.lengths, solving)
+        elif (weight > 0).any():
+            unconstrained = decode(st.poses, st.lengths)
         if unconstrained is not None:
             st.clip_positions = unconstrained.positions.copy()
             if settings.max_joint_speed_rad_s is not None:
@@ -170,11 +193,9 @@ class ConstraintSolve(System):
             self._go_back(self._hold())
             return
         every_row = result.rows.size == st.n
-        if settings.budget_ms is not None:
-            at = np.searchsorted(solving, result.rows)
-            self.corrections.keep(result.rows, clip_values[at], pack(result.poses),
-                                  clip_root[at], result.poses.root_position,
-                                  st.poses.root_heading[result.rows])
+        if motion is not None:
+            self.corrections.keep(result.rows, motion.take(np.searchsorted(solving, result.rows)),
+                                  result.poses)
         st.poses = result.poses if every_row else scatter(st.poses, result.rows, result.poses)
         st.com_desired[result.rows] = result.goals.com_desired
         st.goals, st.solved = result.goals, result.solved
@@ -188,7 +209,7 @@ class ConstraintSolve(System):
         st = self.sim.store
         rows = self.budget.held[self.corrections.known[self.budget.held]]
         if rows.size:
-            self.corrections.put_on(st.poses, rows, pack(st.poses.take(rows)))
+            self.corrections.put_on(st.poses, rows)
         return rows
 
     def _solve_within_speed(self, poses: NormalizedPoses, lengths: NDArray[np.float64],
@@ -250,7 +271,7 @@ class ConstraintSolve(System):
             lowered = user & ((cut.goal_iterations < settings.iterations)
                               | np.isin(g.owner, cut.cut_rows))
             cut_constraint[g.table_index[lowered]] = True
-            cut_entities = tuple(int(e) for e in sim.store.entity[result.rows[cut.cut_rows]])
+            cut_entities = tuple(sim.store.entity[result.rows[cut.cut_rows]].tolist())
         self.report = SolverReport(
             tick=sim.tick, characters=int(result.rows.size), iterations=used,
             budget_ms=settings.budget_ms,
@@ -261,7 +282,7 @@ class ConstraintSolve(System):
             cut_characters=cut_entities,
             constraint_errors=(table.priority.copy(), result.error,
                                table.kind == KIND_ORIENTATION, cut_constraint),
-            dropped_characters=tuple(int(e) for e in sim.store.entity[dropped]),
+            dropped_characters=tuple(sim.store.entity[dropped].tolist()),
             floor_ms=float("nan") if model is None or settings.budget_ms is None
             else model.fixed_ms,
             intervals={} if settings.budget_ms is None else self.budget.intervals(),

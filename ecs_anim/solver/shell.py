@@ -674,7 +674,8 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
         return TickResult(weight, none, error, held)
     if unconstrained is None:
         raise ValueError("constrain: the decoded poses are needed when a constraint is active")
-    targets = on_other_surfaces(table, target_points(table, unconstrained, previous), lengths,
+    targets = on_other_surfaces(table, target_points(table, unconstrained, previous, weight > 0),
+                                lengths,
                                 unconstrained, previous)
     broken = none
     # (one test of the whole array first: the usual case; NaN fails it too)
@@ -730,7 +731,9 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
     on_body = table.target_kind != TARGET_WORLD
     on_own_body = on_body & (table.target_row == table.owner) if on_body.any() else on_body
     if on_own_body.any():
-        targets = np.where(on_own_body[:, None], target_points(table, result, previous), targets)
+        targets = np.where(on_own_body[:, None],
+                           target_points(table, result, previous, on_own_body & (weight > 0)),
+                           targets)
     error[active] = steps.errors(table, active, result, targets)
     return TickResult(weight, broken, error, held, goals, rows, solved_poses, solved, iterations,
                       cut, solve_s)
