@@ -137,7 +137,7 @@ class ConstraintSolve(System):
             self._go_back(np.zeros(0, np.int64))
             return
         self.budget.start_tick(sum(system.cpu_seconds for system in sim.systems), threads(),
-                               sim.structure_version, st.n)
+                               sim.structure_version, st.n, self.last_cpu_seconds)
         weight = table.weights(sim.time_s, st.clip, st.clip_time_s)
         if not self.all_rows():  # the characters without a Constraint component are not solved
             weight = np.where(self.in_rows()[table.owner], weight, 0.0)
@@ -199,7 +199,8 @@ class ConstraintSolve(System):
         st.poses = result.poses if every_row else scatter(st.poses, result.rows, result.poses)
         st.com_desired[result.rows] = result.goals.com_desired
         st.goals, st.solved = result.goals, result.solved
-        self._go_back(np.union1d(result.rows, self._hold()))
+        held = self._hold()
+        self._go_back(np.union1d(result.rows, held) if held.size else result.rows)
 
     def _hold(self) -> NDArray[np.int64]:
         """Put their last solve's correction on the characters the budget solves every few

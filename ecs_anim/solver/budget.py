@@ -319,10 +319,15 @@ class FrameBudget:
         self._last_solve: tuple[float, int, int] | None = None
         self._allowance: float | None = None
 
-    def start_tick(self, cpu_s: float, threads: int, version: int, n: int) -> None:
+    def start_tick(self, cpu_s: float, threads: int, version: int, n: int,
+                   last_run_s: float | None = None) -> None:
         """At the start of ConstraintSolve's run: ``cpu_s`` every system's CPU time so far
         (s), over ``threads`` kernel threads; a whole tick lies between two marks, and the
-        model moves towards it. ``version``/``n``: the store's structure and rows."""
+        model moves towards it. ``version``/``n``: the store's structure and rows.
+        ``last_run_s``: the CPU time of ConstraintSolve's whole last run (s), counted as the
+        solve's (None: the solve's own, :meth:`solved`): what it costs around the solve (the
+        goals, the targets, the errors, the held corrections) grows with the characters it
+        solves and holds, and is theirs, not the fixed part's."""
         if version != self._version or self._need.size != n:
             self._version = version
             self._need = np.zeros(n, np.int64)
@@ -332,6 +337,7 @@ class FrameBudget:
         # (the first tick is not measured: it loads the kernels)
         if self._mark_cpu_s is not None and self._last_solve is not None and self._marks > 1:
             solve_s, iterations, characters = self._last_solve
+            solve_s = solve_s if last_run_s is None else last_run_s
             scale = 1e3 / max(threads, 1)
             tick_ms = (cpu_s - self._mark_cpu_s) * scale
             measured = SolverCostModel.calibrated(tick_ms, solve_s * scale, iterations, characters)
