@@ -115,8 +115,8 @@ def time_size(n: int, seconds: float, rotations: bool = False,
     if comparison is not None:
         result["thread_comparison"] = comparison
     if reached:
-        result["errors_mm"] = {k: (max(r[k] for r in reached) if k.endswith("_max")
-                                   else float(np.mean([r[k] for r in reached]))) for k in reached[0]}
+        result["errors_mm"] = {k: float(np.nanmax([r[k] for r in reached])) if k.endswith("_max")
+                               else float(np.nanmean([r[k] for r in reached])) for k in reached[0]}
     if budget_ms is not None:
         result["budget"] = {"top_priority_cost_mm": cost_m * 1e3,
                             "characters_cut_per_tick": cut_characters / ticks,

@@ -154,17 +154,19 @@ def test_the_solves_a_tick_go_down_at_once_and_up_with_hysteresis():
 
 
 def test_the_level_of_detail_solves_the_first_ranked_most_often():
-    """100 characters, 20 solves a tick: the first 4 every tick, then 6 every 2nd, 14 every
-    4th, 76 every 8th (4 + 3 + 3.5 + 9.5 = 20); below every 8th tick (12.5) the last dropped."""
+    """100 characters, 20 solves a tick: the first 5 every tick, then 8 every 2nd, 18 every
+    4th, 34 every 8th, 35 every 16th (5 + 4 + 4.5 + 4.25 + 2.19 = 19.94: the tiers grow as 1,
+    3, 7, 15 times the first, to whole characters); below every 16th tick (6.25 solves) the
+    last are dropped."""
     assert solve_intervals(100, 100.0).tolist() == [1] * 100
     twenty = solve_intervals(100, 20.0)
-    assert twenty.tolist() == [1] * 4 + [2] * 6 + [4] * 14 + [8] * 76
-    assert (1.0 / twenty).sum() == 20.0
-    assert solve_intervals(100, 12.0).tolist() == [8] * 96 + [0] * 4
+    assert twenty.tolist() == [1] * 5 + [2] * 8 + [4] * 18 + [8] * 34 + [16] * 35
+    assert 19.5 < (1.0 / twenty).sum() <= 20.0
+    assert solve_intervals(100, 6.0).tolist() == [16] * 96 + [0] * 4
     assert solve_intervals(100, 0.0).tolist() == [0] * 100
     # A little more room moves only the characters at the tiers' edges.
     changed = solve_intervals(100, 21.0) != twenty
-    assert 0 < changed.sum() <= 6 and not changed[:3].any()
+    assert 0 < changed.sum() <= 10 and not changed[:4].any()  # 2 at most at each edge
 
 
 def test_the_rows_of_one_interval_take_turns():
