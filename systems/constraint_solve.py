@@ -196,7 +196,13 @@ class ConstraintSolve(System):
         if motion is not None:
             self.corrections.keep(result.rows, motion.take(np.searchsorted(solving, result.rows)),
                                   result.poses)
-        st.poses = result.poses if every_row else scatter(st.poses, result.rows, result.poses)
+        if every_row:
+            st.poses = result.poses
+        elif motion is not None:  # (the store's poses are this tick's, written whole by playback)
+            for name, value in result.poses.arrays().items():
+                getattr(st.poses, name)[result.rows] = value
+        else:
+            st.poses = scatter(st.poses, result.rows, result.poses)
         st.com_desired[result.rows] = result.goals.com_desired
         st.goals, st.solved = result.goals, result.solved
         held = self._hold()
