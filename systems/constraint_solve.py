@@ -87,12 +87,13 @@ def _decode_some(poses: NormalizedPoses, lengths: NDArray[np.float64], rows: NDA
 
 def _centres(positions: NDArray[np.float64], masses: NDArray[np.float64],
              com_fraction: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The compiled :func:`ecs_anim.core.morphology.centres_of_mass` (same arguments, (n, 3))."""
+    """The compiled :func:`ecs_anim.core.morphology.centres_of_mass` (same arguments, (n, 3)),
+    of the rows decoded (NaN elsewhere: :func:`_decode_some`)."""
     n = positions.shape[0]
-    out = np.empty((n, 3))
-    every = np.arange(n, dtype=np.int64)
-    over_chunks(centres_of_mass, n, every, every, positions, masses, com_fraction, _PROXIMAL,
-                _DISTAL, out)
+    out = np.full((n, 3), np.nan)
+    rows = np.flatnonzero(np.isfinite(positions[:, 0, 0]))
+    over_chunks(centres_of_mass, rows.size, rows, rows, positions, masses, com_fraction,
+                _PROXIMAL, _DISTAL, out)
     return out
 
 
