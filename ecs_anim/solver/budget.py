@@ -250,7 +250,7 @@ def _tier_sizes(nearest: float, candidates: int) -> list[int]:
     4th, and so on; the last interval the rest."""
     ends = [min(int(np.ceil(nearest * (2 * every - 1) - 1e-9)), candidates)
             for every in SOLVE_INTERVALS[:-1]] + [candidates]
-    return np.diff([0, *ends]).tolist()
+    return [end - start for start, end in zip([0, *ends[:-1]], ends, strict=True)]
 
 
 def _solves_per_tick(nearest: float, candidates: int) -> float:
