@@ -23,7 +23,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.core.normalized import NormalizedPoses
-from ecs_anim.solver.joint_speed import _conj, _quat_between, _quat_mul, _rotate
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -39,6 +38,38 @@ def _to_heading(offset_xy: F64, heading: F64) -> F64:
     c, s = np.cos(heading), np.sin(heading)
     return np.stack([c * offset_xy[:, 0] + s * offset_xy[:, 1],
                      -s * offset_xy[:, 0] + c * offset_xy[:, 1]], axis=1)
+
+
+def _quat_mul(a: F64, b: F64) -> F64:
+    """Hamilton products ``a b`` of quaternions (..., 4), scalar last."""
+    ax, ay, az, aw = np.moveaxis(a, -1, 0)
+    bx, by, bz, bw = np.moveaxis(b, -1, 0)
+    return np.stack([aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw,
+                     aw * bw - ax * bx - ay * by - az * bz], axis=-1)
+
+
+def _conj(q: F64) -> F64:
+    conjugate: F64 = q * np.array([-1.0, -1.0, -1.0, 1.0])
+    return conjugate
+
+
+def _quat_between(a: F64, b: F64) -> F64:
+    """The smallest turns (..., 4) taking unit directions ``a`` onto ``b`` (..., 3); none for
+    opposite ones (the solve never turns a foot half round; no NaN either way)."""
+    q = np.concatenate([np.cross(a, b), (1.0 + np.sum(a * b, axis=-1))[..., None]], axis=-1)
+    size = np.sqrt(np.sum(q * q, axis=-1, keepdims=True))
+    out: F64 = np.where(size > 1e-12, q / np.maximum(size, 1e-300), [0.0, 0.0, 0.0, 1.0])
+    return out
+
+
+def _rotate(q: F64, v: F64) -> F64:
+    """``v`` (..., 3) turned by the unit quaternions ``q`` (..., 4)."""
+    u, w = q[..., :3], q[..., 3:]
+    t = 2.0 * np.cross(u, v)
+    out: F64 = v + w * t + np.cross(u, t)
+    return out
 
 
 def _unit(v: F64) -> F64:

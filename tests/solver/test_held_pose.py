@@ -7,9 +7,16 @@ import numpy as np
 import pytest
 
 from ecs_anim.solver.held_pose import HELD_FIELDS, HeldCorrections
-from ecs_anim.solver.joint_speed import _quat_mul
 
 HALF_TURN_Z = np.array([0.0, 0.0, np.sin(0.2), np.cos(0.2)])  # 0.4 rad = 22.918° about z
+
+
+def _turned_by_z(q):
+    """Quaternions (r, 4) left-multiplied by :data:`HALF_TURN_Z`."""
+    x, y, z, w = HALF_TURN_Z
+    qx, qy, qz, qw = q.T
+    return np.stack([w * qx + x * qw + y * qz - z * qy, w * qy - x * qz + y * qw + z * qx,
+                     w * qz + x * qy - y * qx + z * qw, w * qw - x * qx - y * qy - z * qz], axis=1)
 
 
 def _turn_deg(a, b):
@@ -22,8 +29,8 @@ def _kept(idle):
     the spine and the left leg's fraction shifted, the root moved 22 mm), kept for row 0."""
     motion = idle.poses.take(np.array([0]))
     solved = idle.poses.take(np.array([0]))
-    solved.arm_frame[:, 1] = _quat_mul(HALF_TURN_Z, solved.arm_frame[:, 1])
-    solved.leg_frame[:, 0] = _quat_mul(HALF_TURN_Z, solved.leg_frame[:, 0])
+    solved.arm_frame[:, 1] = _turned_by_z(solved.arm_frame[:, 1])
+    solved.leg_frame[:, 0] = _turned_by_z(solved.leg_frame[:, 0])
     solved.leg_fraction[:, 0] -= 0.02
     solved.spine_points[:, 1] += 0.01
     solved.root_position[:, :2] += (0.02, -0.01)
