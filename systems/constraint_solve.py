@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 
 from ecs_anim.components import Constraint
 from ecs_anim.core.normalized import DecodedPose, NormalizedPoses
-from ecs_anim.motion.constraint_table import KIND_ORIENTATION
+from ecs_anim.motion.constraint_table import KIND_ORIENTATION, TARGET_WORLD
 from ecs_anim.runtime.kernels import over_chunks, threads
 from ecs_anim.runtime.kernels.com import centres_of_mass, segment_joints
 from ecs_anim.runtime.kernels.decode import (
@@ -155,7 +155,11 @@ class ConstraintSolve(System):
             motion = st.poses.take(solving)
         unconstrained = None
         if motion is not None and solving.size:
-            unconstrained = _decode_some(st.poses, st.lengths, solving)
+            # (and the characters their targets lie on: read from this tick's pose on the
+            # first tick, or for a character new since the last)
+            on_body = (weight > 0) & (table.target_kind != TARGET_WORLD)
+            unconstrained = _decode_some(st.poses, st.lengths,
+                                         np.union1d(solving, table.target_row[on_body]))
         elif (weight > 0).any():
             unconstrained = decode(st.poses, st.lengths)
         if unconstrained is not None:

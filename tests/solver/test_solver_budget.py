@@ -285,3 +285,20 @@ def test_the_lowest_priority_is_solved_least_often_even_nearest(idle):
     interval = budget.interval[[sim.row(e) for e in entities]]
     assert interval.tolist() == [4, 1, 2, 4]
     assert reports[-1].intervals == {1: 1, 2: 1, 4: 2}
+
+
+def test_a_target_on_another_body_is_read_under_a_budget(idle):
+    """c0 reaches for c1's head, c1 has no constraint: on the first tick (no posture yet) the
+    target is read from c1's pose this tick, which the budget decodes too though it solves
+    only c0 (it was NaN, and the constraint switched off for good)."""
+    sim = Simulation({"idle": idle}, solver_settings=SolverSettings(budget_ms=100.0,
+                                                                    cost_model=ONE_MS))
+    c0 = sim.spawn("c0", ADULT, MotionPlayer("idle"), Placement((0.0, 0.0)))
+    c1 = sim.spawn("c1", ADULT, MotionPlayer("idle"), Placement((0.6, 0.0)))
+    sim.add_constraint(c0, "touch", "wrist_r", 10, target_entity=c1, target_point="head")
+    for _ in range(3):
+        sim.step()
+    report = sim.solver_report()
+    assert report is not None and report.characters == 1
+    assert not any("target that is not" in m for m in sim.messages)
+    assert report.errors[10.0].count == 1 and np.isfinite(report.errors[10.0].max_error_m)
