@@ -28,6 +28,13 @@ shrink by :data:`STALL_SHARE` in :data:`PATIENCE` rounds in a row stops trying t
 that may not move do not end the others' rounds), and the rounds end when the bodies still
 trying, together, went no lower in as many.
 
+With a frame budget (``SolverSettings.budget_ms``), the rounds also end before one that would
+take the tick past the budget's aim (:data:`~ecs_anim.solver.budget.TARGET_SHARE` of it): the
+CPU time the systems before this one took this tick, the rounds so far and one more at their
+mean cost, and what the systems after it took last tick (:attr:`clock`, the process's CPU
+clock per kernel thread; a test may set another). The first round always runs. ``rounds`` and
+``rounds_cut`` say what this tick made and whether the budget ended the rounds.
+
 Rows: every character.
 Reads: store.positions, lengths, poses, posture, contact_weight, frozen, local_rotations,
 vertebrae; constraints.weight (which chains are claimed, and each character's priority).
@@ -38,6 +45,8 @@ character's deepest overlap with another after the separation, m).
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
@@ -52,7 +61,7 @@ from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import LENGTH_INDEX, N_JOINTS
 from ecs_anim.motion.constraint_table import TARGET_BODY
 from ecs_anim.runtime import capsule_overlaps as numpy_capsules
-from ecs_anim.runtime.kernels import over_chunks
+from ecs_anim.runtime.kernels import over_chunks, threads
 from ecs_anim.runtime.kernels.capsules import (
     Capsules,
     Grid,
@@ -67,6 +76,7 @@ from ecs_anim.runtime.kernels.decode import decoded_arrays, fits, pose_arrays, s
 from ecs_anim.runtime.kernels.posture import N_EXPORT, export_constants, posture_rows
 from ecs_anim.runtime.kernels.separate import push_rows, turn_rows
 from ecs_anim.runtime.system_base import System
+from ecs_anim.solver.budget import TARGET_SHARE
 from ecs_anim.solver.capsules import CAPSULES, N_CAPSULES
 from ecs_anim.solver.steps import rotation_toward
 from ecs_anim.systems.posture_convert import posture_numpy
@@ -173,10 +183,30 @@ class CollisionSeparate(System):
         self._names: tuple[int, list[str]] = (-1, [])
         #: The rounds compiled (off: the numpy methods, their reference, for the tests).
         self.compiled = True
+        #: The frame budget's clock for the rounds (s of CPU; a test may give its own).
+        self.clock: Callable[[], float] = time.process_time
+        #: This tick's rounds of search and separation, and whether the budget ended them.
+        self.rounds = 0
+        self.rounds_cut = False
+
+    def _rounds_allowed_s(self) -> float:
+        """The CPU seconds the rounds may take this tick by the frame budget (inf: none):
+        its aim less what the systems before this one took this tick and what those after it
+        took last tick, per kernel thread."""
+        budget_ms = self.sim.solver_settings.budget_ms
+        if budget_ms is None:
+            return np.inf
+        systems = self.sim.systems
+        mine = systems.index(self)
+        others = sum(s.last_cpu_seconds for s in systems[:mine]) \
+            + sum(s.last_cpu_seconds for s in systems[mine + 1:])
+        return budget_ms * 1e-3 * TARGET_SHARE - others / max(threads(), 1)
 
     def run(self, dt: float) -> None:
         st = self.sim.store
         n = st.n
+        self.rounds, self.rounds_cut = 0, False
+        start_s, allowed_s = self.clock(), self._rounds_allowed_s()
         if st.capsule_ends.shape != (n, N_CAPSULES, 2, 3):
             st.capsule_ends = np.empty((n, N_CAPSULES, 2, 3))
             st.capsule_radii = np.empty((n, N_CAPSULES))
@@ -209,7 +239,12 @@ class CollisionSeparate(System):
         stalled = np.zeros(n, np.int64)
         stalled_all, least_all = 0, np.inf
         leg = leg_length(st.lengths)
-        for _ in range(PASSES):
+        for done in range(PASSES):
+            spent_s = (self.clock() - start_s) / max(threads(), 1)
+            if done and spent_s * (done + 1) / done > allowed_s:
+                self.rounds_cut = True
+                break
+            self.rounds = done + 1
             fresh = watch[(found.depth[watch] > SEPARATE_FROM_M) & ~kept[watch]]
             if fresh.size:
                 kept[fresh] = True

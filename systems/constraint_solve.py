@@ -18,7 +18,8 @@ Reads: store.poses, lengths, posture (the previous tick's), contact_weight, clip
 com_control, com_target_xy, segment_mass_kg, segment_com_fraction, last_clip_values,
 last_pose_values; the constraints table.
 Writes: store.poses (solved characters, and those going back), com_desired, last_clip_values,
-last_pose_values, clip_positions (the motion's own joints, None when nothing was solved), goals,
+last_pose_values, clip_positions (the motion's own joints, None when nothing was solved; with a
+frame budget, NaN but for the characters solved this tick), goals,
 solved (the decoded result of
 the solved characters, which PostureConvert takes instead of decoding them again); table.held;
 table.enabled, table.weight, table.error (how far each active constraint is from being met on
@@ -38,10 +39,17 @@ from ecs_anim.components import Constraint
 from ecs_anim.core.morphology import centres_of_mass as numpy_centres
 from ecs_anim.core.normalized import DecodedPose, NormalizedPoses
 from ecs_anim.core.normalized import decode as numpy_decode
-from ecs_anim.motion.constraint_table import KIND_ORIENTATION
+from ecs_anim.motion.constraint_table import KIND_ORIENTATION, TARGET_WORLD
 from ecs_anim.runtime.kernels import over_chunks, threads
 from ecs_anim.runtime.kernels.com import centres_of_mass, segment_joints
-from ecs_anim.runtime.kernels.decode import decode
+from ecs_anim.runtime.kernels.decode import (
+    decode,
+    decode_rows,
+    decoded_pose,
+    empty_decoded,
+    pose_arrays,
+    spine_scratch,
+)
 from ecs_anim.runtime.kernels.goals import (
     constraint_errors as constraint_errors,  # tests patch these
 )
@@ -53,6 +61,7 @@ from ecs_anim.runtime.system_base import System
 from ecs_anim.solver import joint_speed as numpy_speed
 from ecs_anim.solver.budget import FrameBudget, SolverReport, effective_caps
 from ecs_anim.solver.goals import TickGoals
+from ecs_anim.solver.held_pose import HeldCorrections
 from ecs_anim.solver.joint_speed import SpeedSteps, solve_within_speed
 from ecs_anim.solver.shell import (
     NUMPY_STEPS,
@@ -70,14 +79,40 @@ if TYPE_CHECKING:
 _PROXIMAL, _DISTAL = segment_joints()
 
 
+def _decode_some(poses: NormalizedPoses, lengths: NDArray[np.float64], rows: NDArray[np.int64]
+                 ) -> DecodedPose:
+    """The compiled decode of ``rows`` (r,) of ``poses`` (n,) only, into n rows: the other
+    rows' positions NaN (the frame budget solves a few of many characters; the others'
+    motion poses are decoded by PostureConvert)."""
+    arrays = empty_decoded(poses.root_heading.shape[0])
+    arrays.positions[:] = np.nan
+    over_chunks(decode_rows, rows.size, rows, pose_arrays(poses), lengths, arrays,
+                spine_scratch(rows.size))
+    return decoded_pose(arrays)
+
+
+def _numpy_decode_some(poses: NormalizedPoses, lengths: NDArray[np.float64],
+                       rows: NDArray[np.int64]) -> DecodedPose:
+    """:func:`_decode_some`'s numpy reference: ``rows`` decoded, every other row NaN."""
+    part = numpy_decode(poses.take(rows), lengths[rows])
+    out = DecodedPose(*(np.full((lengths.shape[0],) + field.shape[1:], np.nan)
+                        for field in (part.positions, part.pelvis2world, part.thorax2world,
+                                      part.head2world, part.leg2world, part.arm2world)))
+    for name in ("positions", "pelvis2world", "thorax2world", "head2world", "leg2world",
+                 "arm2world"):
+        getattr(out, name)[rows] = getattr(part, name)
+    return out
+
+
 def _centres(positions: NDArray[np.float64], masses: NDArray[np.float64],
              com_fraction: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The compiled :func:`ecs_anim.core.morphology.centres_of_mass` (same arguments, (n, 3))."""
+    """The compiled :func:`ecs_anim.core.morphology.centres_of_mass` (same arguments, (n, 3)),
+    of the rows decoded (NaN elsewhere: :func:`_decode_some`)."""
     n = positions.shape[0]
-    out = np.empty((n, 3))
-    every = np.arange(n, dtype=np.int64)
-    over_chunks(centres_of_mass, n, every, every, positions, masses, com_fraction, _PROXIMAL,
-                _DISTAL, out)
+    out = np.full((n, 3), np.nan)
+    rows = np.flatnonzero(np.isfinite(positions[:, 0, 0]))
+    over_chunks(centres_of_mass, rows.size, rows, rows, positions, masses, com_fraction,
+                _PROXIMAL, _DISTAL, out)
     return out
 
 
@@ -91,6 +126,7 @@ class Steps(NamedTuple):
     centres: Callable[..., NDArray[np.float64]]
     targets: Callable[..., NDArray[np.float64]]
     decode: Callable[..., DecodedPose]
+    decode_some: Callable[..., DecodedPose]
     limit_motion: Callable[..., tuple[NormalizedPoses, Any]]
     pack: Callable[[NormalizedPoses], NDArray[np.float64]]
 
@@ -100,9 +136,10 @@ def steps(compiled: bool) -> Steps:
     numpy references."""
     if compiled:
         return Steps(tick_goals, solve, constraint_errors, _centres, target_points, decode,
-                     limit_motion, pack)
+                     _decode_some, limit_motion, pack)
     return Steps(NUMPY_STEPS.goals, NUMPY_STEPS.solve, NUMPY_STEPS.errors, numpy_centres,
-                 NUMPY_STEPS.targets, numpy_decode, numpy_speed.limit_motion, numpy_speed.pack)
+                 NUMPY_STEPS.targets, numpy_decode, _numpy_decode_some, numpy_speed.limit_motion,
+                 numpy_speed.pack)
 
 
 class ConstraintSolve(System):
@@ -120,6 +157,8 @@ class ConstraintSolve(System):
         self.report: SolverReport | None = None
         #: The frame budget's model and state between ticks.
         self.budget = FrameBudget()
+        #: The last solve's correction of each character the budget solves every few ticks.
+        self.corrections = HeldCorrections()
         self._solve_cpu_s = 0.0
         # No pops: this tick's motion pose, packed (n, N_VALUES; None: not packed), and whether
         # the store's last_*_values hold the last tick's (else they are zeros: none).
@@ -145,17 +184,30 @@ class ConstraintSolve(System):
             self._go_back(np.zeros(0, np.int64))
             return
         self.budget.start_tick(sum(system.cpu_seconds for system in sim.systems), threads(),
-                               sim.structure_version, st.n)
+                               sim.structure_version, st.n, self.last_cpu_seconds)
         weight = table.weights(sim.time_s, st.clip, st.clip_time_s)
         if not self.all_rows():  # the characters without a Constraint component are not solved
             weight = np.where(self.in_rows()[table.owner], weight, 0.0)
         settings = sim.solver_settings
         wanted = weight
+        solving, motion = np.zeros(0, np.int64), None
         if settings.budget_ms is not None:
             weight = self.budget.weights(weight, table.owner, table.priority,
                                          st.poses.root_position * sim.leg_length()[:, None],
-                                         settings, sim.dt)
-        unconstrained = step.decode(st.poses, st.lengths) if (weight > 0).any() else None
+                                         settings, sim.dt, sim.tick)
+            # the motion's pose of the characters solved now, for their correction to be held
+            self.corrections.start_tick(st.poses, sim.structure_version)
+            solving = np.unique(table.owner[weight > 0])
+            motion = st.poses.take(solving)
+        unconstrained = None
+        if motion is not None and solving.size:
+            # (and the characters their targets lie on: read from this tick's pose on the
+            # first tick, or for a character new since the last)
+            on_body = (weight > 0) & (table.target_kind != TARGET_WORLD)
+            unconstrained = step.decode_some(st.poses, st.lengths,
+                                             np.union1d(solving, table.target_row[on_body]))
+        elif (weight > 0).any():
+            unconstrained = step.decode(st.poses, st.lengths)
         if unconstrained is not None:
             st.clip_positions = unconstrained.positions.copy()
             if settings.max_joint_speed_rad_s is not None:
@@ -190,13 +242,34 @@ class ConstraintSolve(System):
         table.held[:] = result.held
         self._report(result, dropped)
         if result.goals is None or result.poses is None or result.solved is None:
-            self._go_back(np.zeros(0, np.int64))
+            self._go_back(self._hold())
             return
         every_row = result.rows.size == st.n
-        st.poses = result.poses if every_row else scatter(st.poses, result.rows, result.poses)
+        if motion is not None:
+            self.corrections.keep(result.rows, motion.take(np.searchsorted(solving, result.rows)),
+                                  result.poses)
+        if every_row:
+            st.poses = result.poses
+        elif motion is not None:  # (the store's poses are this tick's, written whole by playback)
+            for name, value in result.poses.arrays().items():
+                getattr(st.poses, name)[result.rows] = value
+        else:
+            st.poses = scatter(st.poses, result.rows, result.poses)
         st.com_desired[result.rows] = result.goals.com_desired
         st.goals, st.solved = result.goals, result.solved
-        self._go_back(result.rows)
+        held = self._hold()
+        self._go_back(np.union1d(result.rows, held) if held.size else result.rows)
+
+    def _hold(self) -> NDArray[np.int64]:
+        """Put their last solve's correction on the characters the budget solves every few
+        ticks and did not solve this tick (those solved before); returns their rows."""
+        if self.sim.solver_settings.budget_ms is None:
+            return np.zeros(0, np.int64)
+        st = self.sim.store
+        rows = self.budget.held[self.corrections.known[self.budget.held]]
+        if rows.size:
+            self.corrections.put_on(st.poses, rows)
+        return rows
 
     def _solve_within_speed(self, poses: NormalizedPoses, lengths: NDArray[np.float64],
                             goals: TickGoals, masses: NDArray[np.float64],
@@ -259,7 +332,7 @@ class ConstraintSolve(System):
             lowered = user & ((cut.goal_iterations < settings.iterations)
                               | np.isin(g.owner, cut.cut_rows))
             cut_constraint[g.table_index[lowered]] = True
-            cut_entities = tuple(int(e) for e in sim.store.entity[result.rows[cut.cut_rows]])
+            cut_entities = tuple(sim.store.entity[result.rows[cut.cut_rows]].tolist())
         self.report = SolverReport(
             tick=sim.tick, characters=int(result.rows.size), iterations=used,
             budget_ms=settings.budget_ms,
@@ -270,6 +343,9 @@ class ConstraintSolve(System):
             cut_characters=cut_entities,
             constraint_errors=(table.priority.copy(), result.error,
                                table.kind == KIND_ORIENTATION, cut_constraint),
-            dropped_characters=tuple(int(e) for e in sim.store.entity[dropped]),
+            dropped_characters=tuple(sim.store.entity[dropped].tolist()),
             floor_ms=float("nan") if model is None or settings.budget_ms is None
-            else model.fixed_ms)
+            else model.fixed_ms,
+            intervals={} if settings.budget_ms is None else self.budget.intervals(),
+            held_characters=0 if settings.budget_ms is None
+            else int(self.corrections.known[self.budget.held].sum()))

@@ -52,15 +52,20 @@ CHILD_TIMEOUT_S = 1800.0
 
 def time_size(n: int, seconds: float, rotations: bool = False,
               constrained: bool = False, budget_ms: float | None = None,
-              crossing: bool = False) -> dict[str, Any]:
+              crossing: bool = False, threads: int = 1) -> dict[str, Any]:
     """One size, in this process: after :data:`WARM_UP_TICKS` ticks, ``seconds`` simulated at
     30 Hz. Returns ms per tick per system (wall), of the whole step (wall and CPU: every
     thread of the process), and the process's peak memory (MB); with ``budget_ms``, ``budget``:
     how much further from its target the budget left the top priority than a twin scene solved
     without a budget, stepped alongside (untimed; the largest difference of a constraint over
-    the timed ticks, mm: the error the cut cost), the characters cut per tick and the ticks that
-    cut anything; with ``constrained``, ``errors_mm``: the errors the solve reached
-    (:meth:`BenchScene.errors_mm`; the means over the timed ticks, and the largest)."""
+    the timed ticks, mm: the error the cut cost, measured only over the constraints both solved
+    at the same weight this tick: neither held between two solves, dropped nor fading back in),
+    the characters cut per tick and the ticks that cut anything, and each tick's figures
+    (:class:`BudgetTicks`); with ``constrained``, ``errors_mm``: the errors the solve reached
+    (:meth:`BenchScene.errors_mm`; the means over the timed ticks, and the largest). With
+    ``threads`` above 1 (the kernels already on that many), ``thread_comparison``: the same
+    scene then ticked on one thread and on ``threads`` in turn, as many ticks each
+    (:func:`ecs_anim.runtime.kernels.thread_comparison`)."""
     scene = BenchScene(n, rotations, constrained, budget_ms, crossing)
     twin = None if budget_ms is None else BenchScene(n, rotations, constrained, crossing=crossing)
     sim = scene.sim
@@ -87,12 +92,18 @@ def time_size(n: int, seconds: float, rotations: bool = False,
         report = sim.solver_report()
         if twin is not None and report is not None:
             twin.tick()
-            extra = sim.constraints.error[top] - twin.sim.constraints.error[top]
+            same = top & (sim.constraints.weight == twin.sim.constraints.weight)
+            extra = sim.constraints.error[same] - twin.sim.constraints.error[same]
             cost_m = max(cost_m, float(np.nanmax(extra, initial=0.0)))
             cut_characters += len(report.cut_characters)
             ticks_cut += report.cut
-            per_tick.add(report, wall_s, cpu_s)
+            per_tick.add(report, wall_s, cpu_s, separate_cut(sim))
     after = sim.system_seconds()
+    comparison = None
+    if threads > 1:
+        from ecs_anim.runtime import kernels
+
+        comparison = kernels.thread_comparison(scene.tick, threads, ticks)
     sim.close()
     if twin is not None:
         twin.sim.close()
@@ -101,9 +112,11 @@ def time_size(n: int, seconds: float, rotations: bool = False,
         "ms_per_tick": {k: (after[k] - before[k]) / ticks * 1e3 for k in after},
         "wall_ms_per_tick": wall / ticks * 1e3, "cpu_ms_per_tick": cpu / ticks * 1e3,
         "peak_memory_mb": peak_memory_mb()}
+    if comparison is not None:
+        result["thread_comparison"] = comparison
     if reached:
-        result["errors_mm"] = {k: (max(r[k] for r in reached) if k.endswith("_max")
-                                   else float(np.mean([r[k] for r in reached]))) for k in reached[0]}
+        result["errors_mm"] = {k: float(np.nanmax([r[k] for r in reached])) if k.endswith("_max")
+                               else float(np.nanmean([r[k] for r in reached])) for k in reached[0]}
     if budget_ms is not None:
         result["budget"] = {"top_priority_cost_mm": cost_m * 1e3,
                             "characters_cut_per_tick": cut_characters / ticks,
@@ -114,40 +127,63 @@ def time_size(n: int, seconds: float, rotations: bool = False,
 # --- the frame budget, tick by tick (issue 36 item 4) ---------------------------------------
 
 
+def separate_cut(sim: Any) -> bool:
+    """Whether the frame budget ended CollisionSeparate's rounds this tick."""
+    from ecs_anim.systems import CollisionSeparate
+
+    return any(s.rounds_cut for s in sim.systems if isinstance(s, CollisionSeparate))
+
+
 class BudgetTicks:
-    """Each timed tick of a budgeted run: the characters the budget cut to one iteration and
-    those it dropped, and the tick's CPU and wall time (the step alone: the twin scene
-    stepped beside it is not counted)."""
+    """Each timed tick of a budgeted run: the characters the budget cut to one iteration, those
+    it solves every 2nd tick or less often (the level of detail) and those it dropped, whether
+    it ended the rounds of separation, and the tick's CPU and wall time (the step alone: the
+    twin scene stepped beside it is not counted)."""
 
     def __init__(self) -> None:
         self.cut: list[int] = []
         self.dropped: list[int] = []
+        self.slowed: list[int] = []
+        self.intervals: list[dict[int, int]] = []
+        self.separate_cut: list[bool] = []
         self.cpu_ms: list[float] = []
         self.wall_ms: list[float] = []
         self.floor_ms = float("nan")
 
-    def add(self, report: Any, wall_s: float, cpu_s: float) -> None:
+    def add(self, report: Any, wall_s: float, cpu_s: float, separate_cut: bool = False) -> None:
         self.cut.append(len(report.cut_characters))
         self.dropped.append(len(report.dropped_characters))
+        self.slowed.append(report.characters_slowed)
+        self.intervals.append(dict(report.intervals))
+        self.separate_cut.append(separate_cut)
         self.wall_ms.append(wall_s * 1e3)
         self.cpu_ms.append(cpu_s * 1e3)
         self.floor_ms = report.floor_ms
 
     def figures(self, budget_ms: float) -> dict[str, Any]:
-        """min / median / max of the characters cut (to one iteration, and dropped) and of the
-        tick's CPU ms; how many ticks went over ``budget_ms`` (CPU, and wall); the largest
-        change of the characters cut (cut + dropped) from one tick to the next."""
-        cut, dropped = np.array(self.cut), np.array(self.dropped)
+        """min / median / max of the characters cut (to one iteration, solved less often than
+        every tick, and dropped); the median number at each solve interval; the tick's CPU ms
+        (min, median, 95th percentile, max); how many ticks went over ``budget_ms`` (CPU, and
+        wall); the largest change of the characters cut (cut + slowed + dropped) from one tick
+        to the next; the ticks whose separation the budget ended."""
+        cut, dropped, slowed = np.array(self.cut), np.array(self.dropped), np.array(self.slowed)
         cpu, wall = np.array(self.cpu_ms), np.array(self.wall_ms)
 
         def spread(a: NDArray[Any]) -> list[float]:
             return [float(a.min()), float(np.median(a)), float(a.max())] if a.size else [0.0] * 3
-        both = cut + dropped
+        both = cut + dropped + slowed
+        every = sorted({k for ticks in self.intervals for k in ticks})
         return {"cut_per_tick": spread(cut), "dropped_per_tick": spread(dropped),
+                "slowed_per_tick": spread(slowed),
+                "characters_at_interval": {str(k): float(np.median([t.get(k, 0)
+                                                                    for t in self.intervals]))
+                                           for k in every},
                 "largest_change_of_cut": int(np.abs(np.diff(both)).max(initial=0)),
                 "cpu_ms_per_tick_spread": spread(cpu),
+                "cpu_ms_per_tick_p95": float(np.percentile(cpu, 95)) if cpu.size else 0.0,
                 "ticks_over_budget_cpu": int((cpu > budget_ms).sum()),
                 "ticks_over_budget_wall": int((wall > budget_ms).sum()),
+                "ticks_separation_cut": int(np.sum(self.separate_cut)),
                 "floor_ms": self.floor_ms}
 
 
@@ -372,7 +408,10 @@ def bench_pipeline(args: argparse.Namespace) -> dict[str, Any]:
         "sizes": [{"characters": r["characters"], "ticks": r["ticks"],
                    "wall_ms_per_tick": round(r["wall_ms_per_tick"], 3),
                    "cpu_ms_per_tick": round(r["cpu_ms_per_tick"], 3),
-                   "peak_memory_mb": round(r["peak_memory_mb"], 1)} for r in runs],
+                   "peak_memory_mb": round(r["peak_memory_mb"], 1),
+                   **({"thread_comparison": {k: round(v, 3)
+                                             for k, v in r["thread_comparison"].items()}}
+                      if "thread_comparison" in r else {})} for r in runs],
         "peak_memory_mb": round(largest["peak_memory_mb"], 1),
         "peak_memory_kb_per_character": round(memory_slope * 1024.0, 2),
         "peak_memory_mb_fixed": round(memory_fixed, 1),
@@ -430,6 +469,7 @@ def cmd_bench_pipeline(args: argparse.Namespace) -> int:
     for s in sizes:
         print(f"  {s['characters']:10d} {s['wall_ms_per_tick']:13.2f} {s['cpu_ms_per_tick']:12.2f} "
               f"{s['peak_memory_mb']:8.1f}")
+    print_thread_comparison(sizes, threads)
     print(f"  => wall: about {result['max_characters_at_30hz']} characters hold 30 Hz "
           f"(33.3 ms/tick): {result['ms_per_character'] * 1e3:.1f} us per character + "
           f"{result['ms_fixed_per_tick']:.2f} ms per tick")
@@ -468,22 +508,48 @@ def cmd_bench_pipeline(args: argparse.Namespace) -> int:
     return 0
 
 
+def print_thread_comparison(sizes: list[dict[str, Any]], threads: int) -> None:
+    """With ``--threads N`` above 1: each size's scene ticked on one thread and on N in turn,
+    in the same process after its timed ticks (same machine load for both)."""
+    if threads <= 1:
+        return
+    print(f"  {threads} threads against one, the same scene ticked on each in turn:")
+    print(f"  {'characters':>10s} {'1 thread ms (wall/CPU)':>24s} "
+          f"{f'{threads} threads ms (wall/CPU)':>25s} {'speed-up (wall)':>16s}")
+    for s in sizes:
+        c = s.get("thread_comparison")
+        if c is None:
+            continue
+        print(f"  {s['characters']:10d} {c['wall_ms_1']:12.2f}/{c['cpu_ms_1']:<11.2f} "
+              f"{c[f'wall_ms_{threads}']:13.2f}/{c[f'cpu_ms_{threads}']:<11.2f} "
+              f"{c['speedup']:15.2f}x")
+
+
 def print_budget_ticks(budget: dict[str, Any]) -> None:
-    """The frame budget tick by tick, per size: the cut (min / median / max), the CPU ms, the
-    ticks over the budget."""
-    print(f"  {'characters':>10s} {'cut to 1 it.':>14s} {'dropped':>18s} {'largest step':>12s} "
-          f"{'CPU ms/tick':>18s} {'over (CPU/wall)':>15s}")
+    """The frame budget tick by tick, per size: the cut (min / median / max), the level of
+    detail (median characters at each solve interval), the CPU ms, the ticks over the budget."""
+    print(f"  {'characters':>10s} {'cut to 1 it.':>14s} {'solved less often':>18s} "
+          f"{'dropped':>14s} {'largest step':>12s} {'CPU ms/tick':>18s} {'95th %':>7s} "
+          f"{'over (CPU/wall)':>15s}")
+
     def spread(values: list[float], digits: int) -> str:
         return "/".join(f"{v:.{digits}f}" for v in values)
     for s in budget["sizes"]:
         print(f"  {s['characters']:10d} {spread(s['cut_per_tick'], 0):>14s} "
-              f"{spread(s['dropped_per_tick'], 0):>18s} {s['largest_change_of_cut']:12d} "
-              f"{spread(s['cpu_ms_per_tick_spread'], 1):>18s} "
+              f"{spread(s['slowed_per_tick'], 0):>18s} "
+              f"{spread(s['dropped_per_tick'], 0):>14s} {s['largest_change_of_cut']:12d} "
+              f"{spread(s['cpu_ms_per_tick_spread'], 1):>18s} {s['cpu_ms_per_tick_p95']:7.1f} "
               f"{s['ticks_over_budget_cpu']:>7d}/{s['ticks_over_budget_wall']:<7d}")
+        levels = ", ".join(f"{v:.0f} every {k}" if k != "1" else f"{v:.0f} every tick"
+                           for k, v in s["characters_at_interval"].items())
+        if levels:
+            print(f"  {'':10s} solved (median a tick): {levels}"
+                  + (f"; separation cut short on {s['ticks_separation_cut']} ticks"
+                     if s["ticks_separation_cut"] else ""))
         if s["floor_ms"] > budget["budget_ms"]:
             print(f"  {'':10s} even with every character dropped the tick costs "
                   f"{s['floor_ms']:.1f} ms: the budget cannot hold at {s['characters']}")
-    print("  (characters cut per tick min/median/max; ticks over the budget by CPU time, the "
+    print("  (characters per tick min/median/max; ticks over the budget by CPU time, the "
           "budget's clock, and by wall time, which other processes on the core also take)")
 
 
@@ -633,7 +699,7 @@ def child_main(argv: list[str] | None = None) -> int:
         print(json.dumps(time_avoidance()))
         return 0
     print(json.dumps(time_size(args.characters, args.seconds, args.rotations,
-                               args.constrained, args.budget_ms, args.crossing)))
+                               args.constrained, args.budget_ms, args.crossing, args.threads)))
     return 0
 
 

@@ -192,7 +192,9 @@ class MetricsRecorder:
         """The fastest joint of each character's posture and of its motion's own pose since the
         last tick (m/s; a character's first tick has none: NaN, ignored)."""
         st, dt = self.sim.store, self.sim.dt
-        clip = st.positions if st.clip_positions is None else st.clip_positions
+        # (rows the frame budget did not solve are NaN there: their motion's pose is the posture's)
+        clip = st.positions if st.clip_positions is None else \
+            np.where(np.isnan(st.clip_positions), st.positions, st.clip_positions)
         speed = np.linalg.norm(st.positions - self.prev_joints[at], axis=-1).max(axis=1) / dt
         clip_speed = np.linalg.norm(clip - self.prev_clip_joints[at], axis=-1).max(axis=1) / dt
         faster = speed > self.joint_speed_max[at]  # (NaN: False)

@@ -95,7 +95,8 @@ class CharacterStore:
     spine points, packed) of the last tick's motion pose and of its result (zeros: none), which
     this tick's result may move away from only so much faster than the motion;
     clip_positions (n, N_JOINTS, 3) world m, the motion's own joints this tick, before the solve
-    (None when nothing was solved: the posture is the motion's own).
+    (None when nothing was solved: the posture is the motion's own; with a frame budget, NaN
+    in the rows not solved this tick).
     """
 
     entity: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))

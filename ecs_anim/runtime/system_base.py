@@ -41,7 +41,8 @@ class System(esper.Processor):
     """An esper processor bound to one simulation. Subclasses implement :meth:`run`.
 
     ``seconds`` accumulates the wall time spent in :meth:`run` (for reports and the benchmark),
-    ``cpu_seconds`` the process's CPU time (every thread's; the frame budget's clock).
+    ``cpu_seconds`` the process's CPU time (every thread's; the frame budget's clock),
+    ``last_cpu_seconds`` that of the last run alone.
     """
 
     #: Components (beyond CharacterRow) a character needs to be in this system's rows.
@@ -59,6 +60,7 @@ class System(esper.Processor):
         self.sim = sim
         self.seconds = 0.0
         self.cpu_seconds = 0.0
+        self.last_cpu_seconds = 0.0
         self.ticks = 0
         self._rows_version = -1
         self._rows: I64 = np.zeros(0, np.int64)
@@ -77,7 +79,8 @@ class System(esper.Processor):
                     hook(self.sim)
             self.run(dt)
         self.seconds += time.perf_counter() - start
-        self.cpu_seconds += time.process_time() - cpu_start
+        self.last_cpu_seconds = time.process_time() - cpu_start
+        self.cpu_seconds += self.last_cpu_seconds
         self.ticks += 1
 
     def rows(self) -> I64:

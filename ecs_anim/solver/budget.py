@@ -20,12 +20,22 @@ noise fit in the rest). When the tick would overrun it, in this order:
    character makes); the highest priority is never cut here;
 2. then whole characters, the furthest from the focus point (``SolverSettings.focus_in_world``;
    the viewer sets its camera's eye) first, down to one iteration each (:func:`cut_to_budget`);
-3. and when even one iteration of every character does not fit, characters are *dropped*: their
-   constraints are switched off for the tick (:func:`kept_characters`), those whose highest
-   priority is lowest first, then the furthest from the focus; a dropped character plays and
-   stands on the ground as every unconstrained one. Dropped characters come back only once
-   the tick with them fits in :data:`RESTORE_SHARE` of the budget (hysteresis: between the two
-   shares nothing changes), their constraints fading in over :data:`RESTORE_RAMP_S`. When
+3. and when even one iteration of every character does not fit, a level of detail: characters
+   are solved every 2nd, 4th, 8th or 16th tick (:data:`SOLVE_INTERVALS`,
+   :func:`solve_intervals`), ranked by their highest priority, then by distance from the focus
+   (:func:`ranked_rows`): the most that fit solved every tick, twice as many after them every
+   2nd tick, four times as many every 4th, eight times every 8th, the rest every 16th; the
+   rows of one interval take turns (:func:`due`), so each tick solves about as many. Between
+   two solves a character keeps its last solve's correction (:mod:`ecs_anim.solver.held_pose`:
+   the trunk, arms and head as solved, the legs' and the root's correction on the motion's):
+   its constraints stay about met (they move with the pelvis for up to 15 ticks) instead of
+   switching off;
+4. and when even every character every 16th tick does not fit, the last ranked are *dropped*:
+   their constraints are switched off, and they play and stand on the ground as every
+   unconstrained character. Dropped characters come back only once the tick with them fits in
+   :data:`RESTORE_SHARE` of the budget (hysteresis: between the two shares nothing changes;
+   the same holds the level of detail: it goes down at once and up only past that share,
+   :func:`solve_capacity`), their constraints fading in over :data:`RESTORE_RAMP_S`. When
    even dropping every character leaves the tick over its budget (the model's ``fixed_ms``),
    the report says so (``SolverReport.floor_ms``).
 
@@ -65,9 +75,14 @@ RESTORE_RAMP_S = 0.25
 #: The solve's last pass over a character (feet re-planted, limbs and head re-aimed after the
 #: loop) costs about one iteration, whatever the character's iterations.
 FINAL_PASS_ITERATIONS = 1.0
-#: A kept character's distance counts as this share of itself when choosing whom to drop, so
-#: that two characters at nearly the same distance do not swap places every tick.
+#: A kept character's distance counts as this share of itself when ranking whom to solve less
+#: often, so that two characters at nearly the same distance do not swap places every tick.
 KEEP_PREFERENCE = 0.9
+#: Every how many ticks the budget solves a character (level of detail): every tick, every 2nd,
+#: 4th, 8th, 16th (about twice a second at 30 Hz); a character between two solves keeps its
+#: last solve's correction (:class:`~ecs_anim.solver.held_pose.HeldCorrections`). (With 8 the
+#: slowest, 7,000 walkers under 33 ms kept 3,660 and dropped the rest.)
+SOLVE_INTERVALS = (1, 2, 4, 8, 16)
 
 
 @dataclass(frozen=True)
@@ -211,33 +226,77 @@ def effective_caps(goals: TickGoals, goal_caps: I64, row_caps: I64, iterations: 
                           row_caps)
 
 
-def kept_characters(model: SolverCostModel, candidates: int, kept_now: int, target_ms: float,
-                    restore_ms: float) -> int:
-    """How many of ``candidates`` characters with an active constraint to solve: as many as
-    fit in ``target_ms`` at one iteration each by ``model``; ``kept_now`` of them were solved
-    last tick, and the dropped ones come back only as far as the tick with them fits in
-    ``restore_ms`` (<= ``target_ms``; in between, ``kept_now`` stays)."""
-    least = model.ms_per_character + model.ms_per_iteration  # a character at one iteration
+def solve_capacity(model: SolverCostModel, capacity_now: float | None, target_ms: float,
+                   restore_ms: float) -> float:
+    """How many character solves a tick may make (a character solved every 4th tick counts a
+    quarter): as many as fit in ``target_ms`` by ``model`` at one iteration each (fewer
+    iterations come first: :func:`cut_to_budget`); more than last tick's ``capacity_now``
+    (None: none yet) only as far as ``restore_ms`` (<= ``target_ms``) allows, so that the
+    measurements' noise does not move it every tick."""
+    per_solve = model.ms_per_character + model.ms_per_iteration
 
-    def fitting(ms: float) -> int:
-        return int(min(max((ms - model.fixed_ms) // least, 0), candidates))
+    def fitting(ms: float) -> float:
+        return max((ms - model.fixed_ms) / per_solve, 0.0)
 
     most = fitting(target_ms)
-    return most if kept_now > most else max(kept_now, min(fitting(restore_ms), most))
+    if capacity_now is None or capacity_now > most:
+        return most
+    return max(capacity_now, min(fitting(restore_ms), most))
 
 
-def rows_kept(top_priority: F64, distance_m: F64, kept_before: NDArray[np.bool_], count: int
-              ) -> NDArray[np.bool_]:
-    """(c,) which ``count`` of c candidate characters to solve: those whose highest active
-    priority ``top_priority`` (c,) is highest, then the nearest the focus (``distance_m`` (c,),
-    a character solved last tick (``kept_before`` (c,)) counting :data:`KEEP_PREFERENCE` of its
-    distance), then the earliest rows."""
-    order = np.lexsort((np.arange(top_priority.size),
-                        np.where(kept_before, KEEP_PREFERENCE * distance_m, distance_m),
-                        -top_priority))
-    keep = np.zeros(top_priority.size, bool)
-    keep[order[:count]] = True
-    return keep
+def _tier_sizes(nearest: float, candidates: int) -> list[int]:
+    """How many of ``candidates`` ranked characters get each of :data:`SOLVE_INTERVALS`: the
+    ranks below ``nearest`` every tick, below 3 x ``nearest`` every 2nd tick, below 7 x every
+    4th, and so on; the last interval the rest."""
+    ends = [min(int(np.ceil(nearest * (2 * every - 1) - 1e-9)), candidates)
+            for every in SOLVE_INTERVALS[:-1]] + [candidates]
+    return [end - start for start, end in zip([0, *ends[:-1]], ends, strict=True)]
+
+
+def _solves_per_tick(nearest: float, candidates: int) -> float:
+    return sum(size / every for size, every in zip(_tier_sizes(nearest, candidates),
+                                                   SOLVE_INTERVALS, strict=True))
+
+
+def solve_intervals(candidates: int, capacity: float) -> I64:
+    """(c,) every how many ticks each of ``candidates`` characters, in rank order (the first
+    the most important), is solved, 0: dropped: the most characters solved every tick such
+    that the solves a tick fit in ``capacity`` with twice as many after them solved every 2nd
+    tick, four times as many every 4th, the rest every :data:`SOLVE_INTERVALS`' last; when even
+    all at the last do not fit, the last ranked are dropped. A small change of ``capacity``
+    moves only the characters at the tiers' edges."""
+    slowest = SOLVE_INTERVALS[-1]
+    out = np.zeros(candidates, np.int64)
+    if candidates / slowest > capacity:
+        out[:int(capacity * slowest + 1e-9)] = slowest
+        return out
+    lo, hi = 0.0, float(candidates)  # the largest tier size that fits, to a 1e-3 character
+    while hi - lo > 1e-3:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if _solves_per_tick(mid, candidates) <= capacity + 1e-9 else (lo, mid)
+    out[:] = np.repeat(np.array(SOLVE_INTERVALS, np.int64), _tier_sizes(lo, candidates))
+    return out
+
+
+def ranked_rows(top_priority: F64, distance_m: F64, kept_before: NDArray[np.bool_]) -> I64:
+    """(c,) the indices of c candidate characters, the most important first: the highest
+    active priority ``top_priority`` (c,) first, then the nearest the focus (``distance_m``
+    (c,); a character solved last tick (``kept_before`` (c,)) counting
+    :data:`KEEP_PREFERENCE` of its distance, so that two at nearly the same distance do not
+    swap every tick), then the earliest."""
+    order: I64 = np.lexsort((np.arange(top_priority.size),
+                             np.where(kept_before, KEEP_PREFERENCE * distance_m, distance_m),
+                             -top_priority))
+    return order
+
+
+def due(rows: I64, interval: I64, tick: int) -> NDArray[np.bool_]:
+    """(r,) whether each of ``rows`` (r,: store rows) is solved at ``tick`` at its ``interval``
+    (r,; 0: dropped, never): the rows of one interval take turns (by row), so each tick solves
+    about the same number."""
+    every = np.maximum(interval, 1)
+    out: NDArray[np.bool_] = (interval > 0) & ((tick + rows) % every == 0)
+    return out
 
 
 class FrameBudget:
@@ -249,6 +308,11 @@ class FrameBudget:
     def __init__(self) -> None:
         self.model: SolverCostModel | None = None
         self.presence: F64 = np.ones(0)
+        #: (n,) every how many ticks each row is solved (0: dropped or no constraint).
+        self.interval: I64 = np.zeros(0, np.int64)
+        #: This tick's rows kept but not solved: between two solves at their interval.
+        self.held: I64 = np.zeros(0, np.int64)
+        self._capacity: float | None = None
         self._need: I64 = np.zeros(0, np.int64)
         self._version = -1
         self._mark_cpu_s: float | None = None
@@ -258,18 +322,25 @@ class FrameBudget:
         self._last_solve: tuple[float, int, int] | None = None
         self._allowance: float | None = None
 
-    def start_tick(self, cpu_s: float, threads: int, version: int, n: int) -> None:
+    def start_tick(self, cpu_s: float, threads: int, version: int, n: int,
+                   last_run_s: float | None = None) -> None:
         """At the start of ConstraintSolve's run: ``cpu_s`` every system's CPU time so far
         (s), over ``threads`` kernel threads; a whole tick lies between two marks, and the
-        model moves towards it. ``version``/``n``: the store's structure and rows."""
+        model moves towards it. ``version``/``n``: the store's structure and rows.
+        ``last_run_s``: the CPU time of ConstraintSolve's whole last run (s), counted as the
+        solve's (None: the solve's own, :meth:`solved`): what it costs around the solve (the
+        goals, the targets, the errors, the held corrections) grows with the characters it
+        solves and holds, and is theirs, not the fixed part's."""
         if version != self._version or self._need.size != n:
             self._version = version
             self._need = np.zeros(n, np.int64)
             self.presence = np.ones(n)
+            self.interval = np.zeros(n, np.int64)
             self._allowance = None
         # (the first tick is not measured: it loads the kernels)
         if self._mark_cpu_s is not None and self._last_solve is not None and self._marks > 1:
             solve_s, iterations, characters = self._last_solve
+            solve_s = solve_s if last_run_s is None else last_run_s
             scale = 1e3 / max(threads, 1)
             tick_ms = (cpu_s - self._mark_cpu_s) * scale
             measured = SolverCostModel.calibrated(tick_ms, solve_s * scale, iterations, characters)
@@ -316,12 +387,14 @@ class FrameBudget:
         return self._need
 
     def weights(self, weight: F64, owner: I64, priority: F64, pelvis_in_world: F64,
-                settings: SolverSettings, dt: float) -> F64:
-        """The constraints' ``weight`` (m,) with the dropped characters' switched off and the
+                settings: SolverSettings, dt: float, tick: int) -> F64:
+        """The constraints' ``weight`` (m,) with those of the characters not solved at ``tick``
+        switched off (dropped, or between two solves at their interval: :attr:`held`) and the
         restored ones' fading in (``owner`` (m,) their store rows, ``priority`` (m,),
-        ``pelvis_in_world`` (n, 3) m), as :func:`kept_characters` and :func:`rows_kept`
-        decide by the model (the settings' own first)."""
+        ``pelvis_in_world`` (n, 3) m): :func:`solve_capacity`, :func:`ranked_rows` and
+        :func:`solve_intervals` decide by the model (the settings' own first)."""
         model = settings.cost_model or self.model
+        self.held = np.zeros(0, np.int64)
         if settings.budget_ms is None or model is None:
             return weight
         wants = weight > 0
@@ -330,18 +403,27 @@ class FrameBudget:
         candidate = np.flatnonzero(np.isfinite(top))
         kept_before = self.presence[candidate] > 0
         share = 1.0 if settings.cost_model is not None else TARGET_SHARE
-        count = kept_characters(model, candidate.size, int(kept_before.sum()),
-                                settings.budget_ms * share,
-                                settings.budget_ms * share * RESTORE_SHARE / TARGET_SHARE)
+        self._capacity = solve_capacity(model, self._capacity,
+                                        settings.budget_ms * share,
+                                        settings.budget_ms * share * RESTORE_SHARE / TARGET_SHARE)
         distance = (np.zeros(candidate.size) if settings.focus_in_world is None else
                     np.linalg.norm(pelvis_in_world[candidate] - settings.focus_in_world, axis=1))
-        keep = rows_kept(top[candidate], distance, kept_before, count)
+        order = ranked_rows(top[candidate], distance, kept_before)
+        interval = np.zeros(candidate.size, np.int64)
+        interval[order] = solve_intervals(candidate.size, self._capacity)
+        self.interval[:] = 0
+        self.interval[candidate] = interval
+        keep = interval > 0
         step = dt / RESTORE_RAMP_S
         self.presence[candidate] = np.where(keep, np.minimum(self.presence[candidate] + step, 1.0),
                                             0.0)
-        if keep.all() and self.presence.min(initial=1.0) >= 1.0:
+        now = due(candidate, interval, tick)
+        self.held = candidate[keep & ~now]
+        if now.all() and self.presence.min(initial=1.0) >= 1.0:
             return weight
-        return weight * self.presence[owner]
+        solved_now = np.zeros(self.presence.size)
+        solved_now[candidate[now]] = 1.0
+        return weight * (self.presence * solved_now)[owner]
 
     def dropped(self, weight: F64, owner: I64) -> I64:
         """The store rows whose constraints (``weight`` (m,) before the budget, ``owner``
@@ -349,6 +431,12 @@ class FrameBudget:
         wanted = np.zeros(self.presence.size, bool)
         wanted[owner[weight > 0]] = True
         return np.flatnonzero(wanted & (self.presence <= 0.0))
+
+    def intervals(self) -> dict[int, int]:
+        """How many characters the budget solves at each interval (ticks; those dropped are
+        not counted): this tick's level of detail."""
+        every, count = np.unique(self.interval[self.interval > 0], return_counts=True)
+        return {int(e): int(c) for e, c in zip(every, count, strict=True)}
 
     def solved(self, rows: I64, used: I64, caps: I64, solve_cpu_s: float) -> None:
         """After the solve: ``rows`` (r,) solved, each having ``used`` (r,) iterations under
@@ -384,7 +472,11 @@ class SolverReport:
     first); dropped_characters: the entities whose constraints the budget switched off this
     tick (:class:`FrameBudget`), sorted; floor_ms: what the tick costs by the model with every
     character dropped (NaN without a model): over ``budget_ms``, nothing the budget cuts can
-    hold it; errors: per priority of the active constraints, :class:`PriorityError` (made from
+    hold it; intervals: how many characters are solved at each interval (ticks: 1 every tick,
+    8 every 8th; the level of detail, :func:`solve_intervals`; dropped ones not counted);
+    held_characters: how many of them were not solved this tick and kept their last solve's
+    correction (:mod:`ecs_anim.solver.held_pose`; their constraints' errors are NaN in
+    ``errors``, which measures only the characters solved this tick); errors: per priority of the active constraints, :class:`PriorityError` (made from
     ``constraint_errors`` (priority, error, orientation, cut) (m,) each, this tick's table
     columns: :func:`errors_by_priority`, when first asked for)."""
 
@@ -401,6 +493,8 @@ class SolverReport:
         repr=False, compare=False)
     dropped_characters: tuple[int, ...] = ()
     floor_ms: float = float("nan")
+    intervals: dict[int, int] = field(default_factory=dict)
+    held_characters: int = 0
 
     @functools.cached_property
     def errors(self) -> dict[float, PriorityError]:
@@ -410,7 +504,13 @@ class SolverReport:
     @property
     def cut(self) -> bool:
         """Whether the budget cut anything this tick."""
-        return bool(self.priority_iterations or self.cut_characters or self.dropped_characters)
+        return bool(self.priority_iterations or self.cut_characters or self.dropped_characters
+                    or self.characters_slowed)
+
+    @property
+    def characters_slowed(self) -> int:
+        """How many characters the budget solves less often than every tick."""
+        return sum(count for every, count in self.intervals.items() if every > 1)
 
     @property
     def characters_cut(self) -> int:
@@ -437,5 +537,6 @@ def errors_by_priority(priority: F64, error: F64, orientation: NDArray[np.bool_]
 
 
 __all__ = ["BudgetCut", "FrameBudget", "PriorityError", "SolverCostModel", "SolverReport",
-           "cut_to_budget", "effective_caps", "errors_by_priority", "kept_characters", "rows_kept",
+           "cut_to_budget", "due", "effective_caps", "errors_by_priority", "ranked_rows",
+           "solve_capacity", "solve_intervals",
            "uncut_need"]

@@ -100,13 +100,17 @@ class TickGoals:
         return int(self.owner.shape[0])
 
 
-def target_points(table: ConstraintTable, unconstrained: DecodedPose, previous: DecodedPose | None) -> F64:
+def target_points(table: ConstraintTable, unconstrained: DecodedPose, previous: DecodedPose | None,
+                  wanted: NDArray[np.bool_] | None = None) -> F64:
     """(m, 3) every constraint's target point this tick: world points as given; a point on the
     constrained character itself from its pose before constraints (this tick); a point on
     another character from that character's posture of the previous tick (this tick's
-    unconstrained pose on the first tick)."""
+    unconstrained pose on the first tick). ``wanted`` (m,): only those points on a body are
+    computed (the others' rows are ``target_world``'s: the frame budget solves a few of many
+    characters)."""
     out = table.target_world.copy()
-    body = np.flatnonzero(table.target_kind != TARGET_WORLD)
+    on_body = table.target_kind != TARGET_WORLD
+    body = np.flatnonzero(on_body if wanted is None else on_body & wanted)
     if body.size:
         rows = table.target_row[body]
         seg, frac, off = table.target_segment[body], table.target_fraction[body], table.target_offset[body]

@@ -639,7 +639,7 @@ class TickSteps(NamedTuple):
     solve: Callable[..., tuple[NormalizedPoses, I64, DecodedPose]]
     errors: Callable[[ConstraintTable, I64, DecodedPose, F64], F64]
     centres: Callable[[F64, F64, F64], F64]
-    targets: Callable[[ConstraintTable, DecodedPose, DecodedPose | None], F64] = target_points
+    targets: Callable[..., F64] = target_points
 
 
 NUMPY_STEPS = TickSteps(tick_goals, solve, constraint_errors, centres_of_mass, target_points)
@@ -683,7 +683,8 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
         return TickResult(weight, none, error, held)
     if unconstrained is None:
         raise ValueError("constrain: the decoded poses are needed when a constraint is active")
-    targets = on_other_surfaces(table, steps.targets(table, unconstrained, previous), lengths,
+    targets = on_other_surfaces(table, steps.targets(table, unconstrained, previous, weight > 0),
+                                lengths,
                                 unconstrained, previous)
     broken = none
     # (one test of the whole array first: the usual case; NaN fails it too)
@@ -739,7 +740,9 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
     on_body = table.target_kind != TARGET_WORLD
     on_own_body = on_body & (table.target_row == table.owner) if on_body.any() else on_body
     if on_own_body.any():
-        targets = np.where(on_own_body[:, None], steps.targets(table, result, previous), targets)
+        targets = np.where(on_own_body[:, None],
+                           steps.targets(table, result, previous, on_own_body & (weight > 0)),
+                           targets)
     error[active] = steps.errors(table, active, result, targets)
     return TickResult(weight, broken, error, held, goals, rows, solved_poses, solved, iterations,
                       cut, solve_s)

@@ -81,12 +81,31 @@ def test_bench_budget_prints_the_cut_tick_by_tick(capsys):
     assert budget["characters_held"] == 8
     for size in budget["sizes"]:
         assert size["cut_per_tick"] == [0, 0, 0] and size["dropped_per_tick"] == [0, 0, 0]
+        assert size["slowed_per_tick"] == [0, 0, 0] and size["ticks_separation_cut"] == 0
+        assert size["characters_at_interval"] == {"1": float(size["characters"])}
         assert size["ticks_over_budget_cpu"] == 0 and size["largest_change_of_cut"] == 0
         low, median, high = size["cpu_ms_per_tick_spread"]
         assert 0 < low <= median <= high < 1000 and size["floor_ms"] < 1000
+        assert low <= size["cpu_ms_per_tick_p95"] <= high
     assert main(["bench", "--constrained", "--budget-ms", "1000", *QUICK]) == 0
     text = capsys.readouterr().out
     assert "cut to 1 it." in text and "over (CPU/wall)" in text and "cannot hold" not in text
+    assert "solved less often" in text and "solved (median a tick): 8 every tick" in text
+
+
+def test_bench_threads_prints_them_against_one_thread_in_the_same_run(capsys):
+    assert main(["bench", "--threads", "2", "--json", *QUICK]) == 0
+    result = json.loads(capsys.readouterr().out)
+    for size in result["sizes"]:
+        figures = size["thread_comparison"]
+        assert {"wall_ms_1", "cpu_ms_1", "wall_ms_2", "cpu_ms_2", "speedup"} == set(figures)
+    assert main(["bench", "--threads", "2", *QUICK]) == 0
+    text = capsys.readouterr().out
+    assert "2 threads against one, the same scene ticked on each in turn:" in text
+    rows = [line.split() for line in text.splitlines() if line.strip().endswith("x")]
+    assert [r[0] for r in rows] == ["4", "8"]
+    assert main(["bench", *QUICK]) == 0
+    assert "against one" not in capsys.readouterr().out
 
 
 def test_bench_sizes_default_to_four_and_bad_sizes_are_one_line_errors(capsys):

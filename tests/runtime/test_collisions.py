@@ -174,3 +174,31 @@ def test_stuck_pairs_are_reported_once_each_a_line_a_round_naming_the_first_thre
         counted += k
     assert counted == len(separate.reported) > STUCK_NAMED
     assert len(lines) < counted  # some lines name several pairs
+
+
+def test_the_frame_budget_ends_the_rounds_of_separation():
+    """The bench's crossing walkers overlap: without a budget the rounds go on while they help
+    (several a tick); with one, a clock that says every round costs a second ends them after
+    the first (which always runs), and says so."""
+    from itertools import count
+
+    from ecs_anim.runtime.bench_scene import walkers_on_bumps
+    from ecs_anim.solver.shell import SolverSettings
+    from ecs_anim.systems.collision_separate import CollisionSeparate
+
+    sim, _ = walkers_on_bumps(200)
+    with sim:
+        separate = next(s for s in sim.systems if isinstance(s, CollisionSeparate))
+        free = []
+        for _ in range(10):
+            sim.step()
+            free.append((separate.rounds, separate.rounds_cut))
+        assert max(r for r, _ in free) > 1 and not any(cut for _, cut in free)
+        sim.solver_settings = SolverSettings(budget_ms=33.0)
+        seconds = count()
+        separate.clock = lambda: float(next(seconds))
+        capped = []
+        for _ in range(10):
+            sim.step()
+            capped.append((separate.rounds, separate.rounds_cut))
+        assert {r for r, _ in capped} == {1} and all(cut for _, cut in capped)

@@ -12,7 +12,14 @@ from ecs_anim.core.errors import EcsAnimError
 from ecs_anim.core.morphology import Morphology
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.runtime.simulation import Simulation
-from ecs_anim.solver.budget import SolverCostModel, kept_characters, rows_kept, uncut_need
+from ecs_anim.solver.budget import (
+    SolverCostModel,
+    due,
+    ranked_rows,
+    solve_capacity,
+    solve_intervals,
+    uncut_need,
+)
 from ecs_anim.solver.shell import SolverSettings
 from support.solve import Capture, assert_same_solve
 
@@ -135,30 +142,51 @@ def test_a_character_the_budget_stopped_keeps_its_need():
     assert need.tolist() == [3, 5, 2, 4]
 
 
-def test_characters_are_dropped_at_once_and_restored_with_hysteresis():
-    """1 ms fixed, 1 ms a character at one iteration (0.5 + 0.5): a 10 ms target holds 9; the
-    dropped ones come back only as far as 8 ms holds them (7), never back and forth."""
+def test_the_solves_a_tick_go_down_at_once_and_up_with_hysteresis():
+    """1 ms fixed, 1 ms a character at one iteration (0.5 + 0.5): a 10 ms target holds 9
+    solves a tick; more come back only as far as 8 ms holds them (7), never back and forth."""
     model = SolverCostModel(ms_per_iteration=0.5, fixed_ms=1.0, ms_per_character=0.5)
-    assert kept_characters(model, 20, 20, 10.0, 8.0) == 9   # over: drop to what fits
-    assert kept_characters(model, 20, 9, 10.0, 8.0) == 9    # within the band: stays
-    assert kept_characters(model, 20, 5, 10.0, 8.0) == 7    # room: back to the restore level
-    assert kept_characters(model, 4, 2, 10.0, 8.0) == 4     # all fit
-    assert kept_characters(SolverCostModel(0.5, fixed_ms=12.0), 20, 20, 10.0, 8.0) == 0
+    assert solve_capacity(model, None, 10.0, 8.0) == 9.0   # first: what fits
+    assert solve_capacity(model, 12.0, 10.0, 8.0) == 9.0   # over: down at once
+    assert solve_capacity(model, 8.5, 10.0, 8.0) == 8.5    # within the band: stays
+    assert solve_capacity(model, 5.0, 10.0, 8.0) == 7.0    # room: up to the restore level
+    assert solve_capacity(SolverCostModel(0.5, fixed_ms=12.0), None, 10.0, 8.0) == 0.0
 
 
-def test_the_highest_priority_then_the_nearest_are_kept():
+def test_the_level_of_detail_solves_the_first_ranked_most_often():
+    """100 characters, 20 solves a tick: the first 5 every tick, then 8 every 2nd, 18 every
+    4th, 34 every 8th, 35 every 16th (5 + 4 + 4.5 + 4.25 + 2.19 = 19.94: the tiers grow as 1,
+    3, 7, 15 times the first, to whole characters); below every 16th tick (6.25 solves) the
+    last are dropped."""
+    assert solve_intervals(100, 100.0).tolist() == [1] * 100
+    twenty = solve_intervals(100, 20.0)
+    assert twenty.tolist() == [1] * 5 + [2] * 8 + [4] * 18 + [8] * 34 + [16] * 35
+    assert 19.5 < (1.0 / twenty).sum() <= 20.0
+    assert solve_intervals(100, 6.0).tolist() == [16] * 96 + [0] * 4
+    assert solve_intervals(100, 0.0).tolist() == [0] * 100
+    # A little more room moves only the characters at the tiers' edges.
+    changed = solve_intervals(100, 21.0) != twenty
+    assert 0 < changed.sum() <= 10 and not changed[:4].any()  # 2 at most at each edge
+
+
+def test_the_rows_of_one_interval_take_turns():
+    rows = np.arange(16)
+    interval = np.array([1] * 4 + [2] * 4 + [4] * 4 + [0] * 4)
+    solved = np.array([due(rows, interval, tick) for tick in range(8)])
+    assert solved[:, :4].all() and not solved[:, 12:].any()
+    assert (solved[:, 4:8].sum(axis=0) == 4).all() and (solved[:, 8:12].sum(axis=0) == 2).all()
+    assert solved[:, 4:12].sum(axis=1).tolist() == [3] * 8  # 2 + 1: as many each tick
+
+
+def test_the_highest_priority_then_the_nearest_rank_first():
     priority = np.array([1.0, 10.0, 10.0, 10.0, 1.0])
     distance = np.array([0.0, 9.0, 3.0, 5.0, 1.0])
     kept_before = np.array([False, False, False, False, False])
-    assert rows_kept(priority, distance, kept_before, 3).tolist() == [False, True, True, True,
-                                                                       False]
-    assert rows_kept(priority, distance, kept_before, 2).tolist() == [False, False, True, True,
-                                                                       False]
+    assert ranked_rows(priority, distance, kept_before).tolist() == [2, 3, 1, 0, 4]
     # One kept last tick counts 0.9 of its distance: 9 m kept beats 8.5 m new.
     distance[3] = 8.5
     kept_before[1] = True
-    assert rows_kept(priority, distance, kept_before, 2).tolist() == [False, True, True, False,
-                                                                       False]
+    assert ranked_rows(priority, distance, kept_before).tolist() == [2, 1, 3, 0, 4]
 
 
 def test_without_a_given_model_the_first_tick_cuts_nothing(idle):
@@ -205,3 +233,72 @@ def test_pelvis_is_where_distances_are_measured():
     positions[1, J["pelvis"]] = (3.0, 4.0, 1.0)
     np.testing.assert_allclose(focus_distances(positions, (0.0, 0.0, 1.0)), [1.0, 5.0])
     np.testing.assert_array_equal(focus_distances(positions, None), [0.0, 0.0])
+
+
+def four_at_two_solves_a_tick(idle, ticks, elbow_only=()):
+    """:func:`four_reachers` under a budget that holds two solves a tick at 1 ms each, the focus
+    beside c0; returns the simulation, the entities and each tick's report."""
+    settings = SolverSettings(budget_ms=2.0, cost_model=ONE_MS, focus_in_world=(0.0, 0.0, 1.0))
+    sim, entities = four_reachers(idle, settings, elbow_only, ticks=0)
+    reports = []
+    for _ in range(ticks):
+        sim.step()
+        reports.append(sim.solver_report())
+    return sim, entities, reports
+
+
+def test_far_characters_are_solved_less_often_and_keep_their_correction(idle):
+    """Two solves a tick for four characters: c0 (nearest the focus) every tick, c1 every 2nd,
+    c2 and c3 every 4th (1 + 1/2 + 2/4 = 2). Between two solves a character keeps its last
+    solve's correction: its wrist stays within 5 mm of its target (the motion's own is 0.5 m
+    off), its arm held as solved while the idle's pelvis sways."""
+    sim, entities, reports = four_at_two_solves_a_tick(idle, ticks=12)
+    assert all(r.intervals == {1: 1, 2: 1, 4: 2} for r in reports)
+    assert all(r.dropped_characters == () and r.cut for r in reports)
+    # Over 8 ticks 8 + 4 + 2 + 2 solves (the rows take turns: 1 to 3 a tick here); once each was
+    # solved, every character not solved holds its correction.
+    assert sum(r.characters for r in reports[4:]) == 16
+    assert all(r.characters + r.held_characters == 4 for r in reports[4:])
+    row = sim.row(entities[3])
+    target = np.array([0.4, 2.0 * 3 - 0.3, 1.1])
+    wrist = sim.store.positions[row, J["wrist_r"]]
+    assert np.isnan(sim.store.clip_positions[row]).all()  # not solved: not decoded before
+    plain = Simulation({"idle": idle})
+    walker = plain.spawn("c3", ADULT, MotionPlayer("idle"), Placement((0.0, 6.0)))
+    for _ in range(12):
+        plain.step()
+    motion_wrist = plain.store.positions[plain.row(walker), J["wrist_r"]]
+    held_now = reports[-1].constraint_errors[1][
+        sim.constraints.rows_of(np.array([sim.constraint_index(entities[3], "reach")]))]
+    assert np.isnan(held_now)  # not solved this tick: its error is not measured
+    assert np.linalg.norm(wrist - target) < 5e-3
+    assert np.linalg.norm(motion_wrist - target) > 0.5
+    # The top priority's errors are measured over the characters solved this tick only.
+    assert all(r.errors[10.0].count == r.characters and r.errors[10.0].max_error_m < 1e-3
+               for r in reports[4:])
+
+
+def test_the_lowest_priority_is_solved_least_often_even_nearest(idle):
+    """c0 is nearest the focus but its only goal is an elbow (priority 1): it ranks last."""
+    sim, entities, reports = four_at_two_solves_a_tick(idle, ticks=4, elbow_only=(0,))
+    budget = sim.systems[[type(s).__name__ for s in sim.systems].index("ConstraintSolve")].budget
+    interval = budget.interval[[sim.row(e) for e in entities]]
+    assert interval.tolist() == [4, 1, 2, 4]
+    assert reports[-1].intervals == {1: 1, 2: 1, 4: 2}
+
+
+def test_a_target_on_another_body_is_read_under_a_budget(idle):
+    """c0 reaches for c1's head, c1 has no constraint: on the first tick (no posture yet) the
+    target is read from c1's pose this tick, which the budget decodes too though it solves
+    only c0 (it was NaN, and the constraint switched off for good)."""
+    sim = Simulation({"idle": idle}, solver_settings=SolverSettings(budget_ms=100.0,
+                                                                    cost_model=ONE_MS))
+    c0 = sim.spawn("c0", ADULT, MotionPlayer("idle"), Placement((0.0, 0.0)))
+    c1 = sim.spawn("c1", ADULT, MotionPlayer("idle"), Placement((0.6, 0.0)))
+    sim.add_constraint(c0, "touch", "wrist_r", 10, target_entity=c1, target_point="head")
+    for _ in range(3):
+        sim.step()
+    report = sim.solver_report()
+    assert report is not None and report.characters == 1
+    assert not any("target that is not" in m for m in sim.messages)
+    assert report.errors[10.0].count == 1 and np.isfinite(report.errors[10.0].max_error_m)

@@ -323,10 +323,11 @@ def target_rows(lo: int, hi: int, body: I64, owner: I64, target_row: I64, target
 
 
 def target_points(table: ConstraintTable, unconstrained: DecodedPose,
-                  previous: DecodedPose | None) -> F64:
+                  previous: DecodedPose | None, wanted: NDArray[np.bool_] | None = None) -> F64:
     """Compiled :func:`ecs_anim.solver.goals.target_points`: the same arguments and result."""
     out = table.target_world.copy()
-    body = np.flatnonzero(table.target_kind != TARGET_WORLD)
+    on_body = table.target_kind != TARGET_WORLD
+    body = np.flatnonzero(on_body if wanted is None else on_body & wanted)
     if body.size:
         dec = _arrays(unconstrained)
         over_chunks(target_rows, body.size, body, np.ascontiguousarray(table.owner),
