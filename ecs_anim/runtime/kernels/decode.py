@@ -415,7 +415,14 @@ SPINE_SCRATCH_ROWS = 29
 _L_PARENT, _L_ORIGIN, _L_ROOT_DIR, _L_ROOT_LEN, _L_QUAT, _L_FRACTION = 0, 9, 12, 15, 16, 20
 _L_UPPER, _L_LOWER, _L_TIP_DIR, _L_TIP_LEN = 21, 22, 23, 26
 _L_ROOT, _L_MIDDLE, _L_END, _L_TIP, _L_FRAME = 27, 30, 33, 36, 39
-LIMB_SCRATCH_ROWS = 48
+#: The same rows for the trunk of a block (:func:`trunk_lanes`): pelvis2world's axes, the pelvis,
+#: the three spine joints (pelvis frame), the thorax's and the head's quaternions, the neck's
+#: and the head top's directions and lengths in; the spine joints, neck, head and head top
+#: (world), thorax2world's and head2world's axes out.
+_T_PELVIS2WORLD, _T_PELVIS, _T_SPINE, _T_THORAX, _T_HEAD = 0, 9, 12, 21, 25
+_T_NECK_DIR, _T_NECK_LEN, _T_HEAD_TOP_DIR, _T_HEAD_LEN = 29, 32, 33, 36
+_T_JOINTS, _T_THORAX2WORLD, _T_HEAD2WORLD = 37, 52, 61
+LIMB_SCRATCH_ROWS = 70
 #: Floats of one window of the limb scratch: the rows of :data:`.lanes.BLOCK` characters.
 _LIMB_WINDOW = LIMB_SCRATCH_ROWS * BLOCK
 
@@ -652,24 +659,80 @@ def pelvis_row(c: int, pose: PoseArrays, seg: F64,
 
 
 @jit(inline="always")
-def trunk_row(c: int, pose: PoseArrays, seg: F64, spine: tuple[Vec3, Vec3, Vec3],
-              out: DecodedArrays) -> None:
-    """:func:`decode_upper_row` without the arms: the ``spine`` joints (pelvis frame, m) placed
-    in the world, the thorax, the head, into row ``c`` of ``out``."""
-    positions = out.positions[c]
-    pelvis = load3(positions[PELVIS])
-    pelvis2world = load_frame(out.pelvis2world[c])
+def _limb_frame(limbs: F64, window: int, row: int, j: np.uint64) -> Frame:
+    """The frame whose axes are in rows ``row:row + 9`` of column ``j`` of a window."""
+    return (_limb3(limbs, window, row, j), _limb3(limbs, window, row + 3, j),
+            _limb3(limbs, window, row + 6, j))
+
+
+@jit(inline="always")
+def _store_limb_frame(limbs: F64, window: int, row: int, j: np.uint64, m: Frame) -> None:
     for k in range(3):
-        store3(positions[SPINE_1 + k], add(pelvis, to_world(pelvis2world, spine[k])))
-    neck = load3(positions[NECK])
-    thorax2world = matmul(pelvis2world, matrix_from_quat(load4(pose.thorax[c])))
-    head2world = matmul(thorax2world, matrix_from_quat(load4(pose.head[c])))
-    head = add(neck, scale(to_world(thorax2world, load3(pose.neck_dir[c])), seg[L_NECK]))
-    store3(positions[HEAD], head)
-    store3(positions[HEAD_TOP],
-           add(head, scale(to_world(head2world, load3(pose.head_top_dir[c])), seg[L_HEAD])))
-    store_frame(out.thorax2world[c], thorax2world)
-    store_frame(out.head2world[c], head2world)
+        _store_limb3(limbs, window, row + 3 * k, j, m[k])
+
+
+@jit(inline="always")
+def _limb4(limbs: F64, window: int, row: int, j: np.uint64) -> tuple[float, float, float, float]:
+    return (limbs[_at(window, row, j)], limbs[_at(window, row + 1, j)],
+            limbs[_at(window, row + 2, j)], limbs[_at(window, row + 3, j)])
+
+
+@jit(inline="always")
+def store_trunk_column(limbs: F64, window: int, j: np.uint64, c: int, pose: PoseArrays,
+                       seg: F64, out: DecodedArrays, spine: tuple[Vec3, Vec3, Vec3]) -> None:
+    """Column ``j`` of a window: the trunk's inputs of store row ``c`` (see
+    :func:`trunk_lanes`), its pelvis from ``out`` and its ``spine`` joints (pelvis frame, m)."""
+    _store_limb_frame(limbs, window, _T_PELVIS2WORLD, j, load_frame(out.pelvis2world[c]))
+    _store_limb3(limbs, window, _T_PELVIS, j, load3(out.positions[c, PELVIS]))
+    for k in range(3):
+        _store_limb3(limbs, window, _T_SPINE + 3 * k, j, spine[k])
+    for k in range(4):
+        limbs[_at(window, _T_THORAX + k, j)] = pose.thorax[c, k]
+        limbs[_at(window, _T_HEAD + k, j)] = pose.head[c, k]
+    _store_limb3(limbs, window, _T_NECK_DIR, j, load3(pose.neck_dir[c]))
+    _store_limb3(limbs, window, _T_HEAD_TOP_DIR, j, load3(pose.head_top_dir[c]))
+    limbs[_at(window, _T_NECK_LEN, j)] = seg[L_NECK]
+    limbs[_at(window, _T_HEAD_LEN, j)] = seg[L_HEAD]
+
+
+# A call, not inlined into decode_rows, as limb_lanes.
+@jit()
+def trunk_lanes(limbs: F64, window: int, first: int, stop: int) -> None:
+    """What :func:`decode_upper_row` does before the arms, for the characters in the columns
+    ``first:stop`` of ``window`` of a limb scratch (:func:`store_trunk_column`), in a loop over
+    them that runs on the vector units (the same operations, so the same bits): the spine joints
+    placed in the world, the thorax and head frames, the head and the head top."""
+    for j in range(np.uint64(first), np.uint64(stop)):
+        pelvis2world = _limb_frame(limbs, window, _T_PELVIS2WORLD, j)
+        pelvis = _limb3(limbs, window, _T_PELVIS, j)
+        for k in range(3):
+            _store_limb3(limbs, window, _T_JOINTS + 3 * k, j,
+                         add(pelvis, to_world(pelvis2world,
+                                              _limb3(limbs, window, _T_SPINE + 3 * k, j))))
+        neck = _limb3(limbs, window, _T_JOINTS + 6, j)
+        thorax2world = matmul(pelvis2world,
+                              matrix_from_quat(_limb4(limbs, window, _T_THORAX, j)))
+        head2world = matmul(thorax2world, matrix_from_quat(_limb4(limbs, window, _T_HEAD, j)))
+        head = add(neck, scale(to_world(thorax2world, _limb3(limbs, window, _T_NECK_DIR, j)),
+                               limbs[_at(window, _T_NECK_LEN, j)]))
+        head_top = add(head, scale(to_world(head2world,
+                                            _limb3(limbs, window, _T_HEAD_TOP_DIR, j)),
+                                   limbs[_at(window, _T_HEAD_LEN, j)]))
+        _store_limb3(limbs, window, _T_JOINTS + 9, j, head)
+        _store_limb3(limbs, window, _T_JOINTS + 12, j, head_top)
+        _store_limb_frame(limbs, window, _T_THORAX2WORLD, j, thorax2world)
+        _store_limb_frame(limbs, window, _T_HEAD2WORLD, j, head2world)
+
+
+@jit(inline="always")
+def trunk_result(limbs: F64, window: int, j: np.uint64, c: int, out: DecodedArrays) -> None:
+    """Column ``j``'s result of :func:`trunk_lanes` into row ``c`` of ``out``: the spine joints,
+    neck, head and head top (consecutive joints), thorax2world and head2world."""
+    positions = out.positions[c]
+    for k in range(5):
+        store3(positions[SPINE_1 + k], _limb3(limbs, window, _T_JOINTS + 3 * k, j))
+    store_frame(out.thorax2world[c], _limb_frame(limbs, window, _T_THORAX2WORLD, j))
+    store_frame(out.head2world[c], _limb_frame(limbs, window, _T_HEAD2WORLD, j))
 
 
 @jit(nogil=True)
@@ -681,9 +744,9 @@ def decode_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64, out
     :func:`decode_scratch` of len(rows).
 
     By windows of :data:`.lanes.BLOCK` rows (``rows[BLOCK * w:BLOCK * (w + 1)]``, cut at ``lo``
-    and ``hi``): the pelvis row by row, the legs (:func:`limb_lanes`) and the spines
-    (:func:`spine_block`) in loops over the window's characters that run on the vector units,
-    the thorax and head row by row, then the arms on the vector units; the same bits as
+    and ``hi``): the pelvis row by row, then in loops over the window's characters that run on the vector
+    units the legs (:func:`limb_lanes`), the spines (:func:`spine_block`), the trunk
+    (:func:`trunk_lanes`) and the arms; the same bits as
     :func:`decode_row` on each row."""
     spines, limbs = scratch
     start = lo
@@ -710,7 +773,11 @@ def decode_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64, out
         spine_block(spines, start, stop, 6)
         for i in range(start, stop):
             c = rows[i]
-            trunk_row(c, pose, lengths[c], spine_column(spines, i), out)
+            store_trunk_column(limbs, window, np.uint64(i - window * BLOCK), c, pose, lengths[c],
+                               out, spine_column(spines, i))
+        trunk_lanes(limbs, window, first, last)
+        for i in range(start, stop):
+            trunk_result(limbs, window, np.uint64(i - window * BLOCK), rows[i], out)
         for s in range(2):
             for i in range(start, stop):
                 c, seg = rows[i], lengths[rows[i]]
