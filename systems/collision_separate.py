@@ -61,7 +61,7 @@ from ecs_anim.runtime.kernels.capsules import (
     near_rows,
     overlaps,
 )
-from ecs_anim.runtime.kernels.decode import decode_scratch, decoded_arrays, fits, pose_arrays
+from ecs_anim.runtime.kernels.decode import decoded_arrays, fits, pose_arrays, spine_scratch
 from ecs_anim.runtime.kernels.posture import N_EXPORT, export_constants, posture_rows
 from ecs_anim.runtime.kernels.separate import push_rows, turn_rows
 from ecs_anim.runtime.system_base import System
@@ -592,6 +592,6 @@ class CollisionSeparate(System):
                     np.empty((n if rotations else 0, N_EXPORT, 3, 3)),
                     st.local_rotations if rotations else np.empty((0, N_EXPORT, 3, 3)),
                     k.rest_hips, k.bvh_from_world, k.rest2body, k.parents, spine, True,
-                    decode_scratch(rows.size))
+                    spine_scratch(rows.size))
         if newly_bad.any():
             sim.report_frozen(np.flatnonzero(newly_bad))

@@ -20,12 +20,12 @@ import numpy as np
 from ecs_anim.core.skeleton import N_JOINTS
 from ecs_anim.runtime.kernels import over_chunks
 from ecs_anim.runtime.kernels.decode import (
-    decode_scratch,
     decoded_arrays,
     decoded_pose,
     empty_decoded,
     fits,
     pose_arrays,
+    spine_scratch,
 )
 from ecs_anim.runtime.kernels.posture import N_EXPORT, export_constants, posture_rows
 from ecs_anim.runtime.kernels.solved_posture import posture_solved_rows
@@ -78,7 +78,7 @@ class PostureConvert(System):
             over_chunks(posture_solved_rows, solved_rows.size, solved_rows,
                         decoded_arrays(st.solved), pose, st.lengths, decoded, *rest)
         over_chunks(posture_rows, decode_rows.size, decode_rows, pose, st.lengths, decoded, *rest,
-                    decode_scratch(decode_rows.size))
+                    spine_scratch(decode_rows.size))
         if newly_bad.any():
             sim.report_frozen(np.flatnonzero(newly_bad))
         # Next tick's targets on other characters read this posture, frames included.

@@ -24,7 +24,7 @@ from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import LENGTH_INDEX as L
 from ecs_anim.core.skeleton import N_JOINTS, N_LENGTHS
 from ecs_anim.runtime.kernels import over_chunks
-from ecs_anim.runtime.kernels.lanes import BLOCK, distal_frame_select
+from ecs_anim.runtime.kernels.lanes import BLOCK
 from ecs_anim.runtime.kernels.vec import (
     F64,
     Frame,
@@ -407,45 +407,10 @@ _S_CONTROL, _S_LENGTH, _S_T, _S_PREV_T, _S_JOINT = 0, 12, 15, 16, 17
 SPINE_SCRATCH_ROWS = 29
 
 
-#: Scratch rows of one limb of a block of characters (legs and arms alike), one column a
-#: character: its inputs (the parent frame's axes, the origin the root joint hangs from, the
-#: root joint's direction in the parent frame and distance, the limb's quaternion, its reach
-#: as a fraction, the two bones' lengths, the distal segment's direction in the distal frame
-#: and length) and its outputs (the root, middle, end and tip joints, limb2world's axes).
-_L_PARENT, _L_ORIGIN, _L_ROOT_DIR, _L_ROOT_LEN, _L_QUAT, _L_FRACTION = 0, 9, 12, 15, 16, 20
-_L_UPPER, _L_LOWER, _L_TIP_DIR, _L_TIP_LEN = 21, 22, 23, 26
-_L_ROOT, _L_MIDDLE, _L_END, _L_TIP, _L_FRAME = 27, 30, 33, 36, 39
-#: The same rows for the trunk of a block (:func:`trunk_lanes`): pelvis2world's axes, the pelvis,
-#: the three spine joints (pelvis frame), the thorax's and the head's quaternions, the neck's
-#: and the head top's directions and lengths in; the spine joints, neck, head and head top
-#: (world), thorax2world's and head2world's axes out.
-_T_PELVIS2WORLD, _T_PELVIS, _T_SPINE, _T_THORAX, _T_HEAD = 0, 9, 12, 21, 25
-_T_NECK_DIR, _T_NECK_LEN, _T_HEAD_TOP_DIR, _T_HEAD_LEN = 29, 32, 33, 36
-_T_JOINTS, _T_THORAX2WORLD, _T_HEAD2WORLD = 37, 52, 61
-LIMB_SCRATCH_ROWS = 70
-#: Floats of one window of the limb scratch: the rows of :data:`.lanes.BLOCK` characters.
-_LIMB_WINDOW = LIMB_SCRATCH_ROWS * BLOCK
-
-
-class DecodeScratch(NamedTuple):
-    """The scratch :func:`decode_rows` needs (:func:`decode_scratch`), one column for each of
-    its ``rows`` (threads write disjoint columns).
-
-    spines (SPINE_SCRATCH_ROWS, n): see :func:`store_spine_column`. limbs
-    (ceil(n / BLOCK) * LIMB_SCRATCH_ROWS * BLOCK,): for each window of :data:`.lanes.BLOCK`
-    rows, (LIMB_SCRATCH_ROWS, BLOCK) in C order, flat, so that the distance between two of its
-    rows is a constant of the compiled code (LLVM then knows they do not overlap and vectorizes
-    :func:`limb_lanes` without run-time checks).
-    """
-
-    spines: F64
-    limbs: F64
-
-
-def decode_scratch(n: int) -> DecodeScratch:
-    """The scratch :func:`decode_rows` (and ``posture_rows``) need for ``n`` rows."""
-    return DecodeScratch(np.empty((SPINE_SCRATCH_ROWS, n)),
-                         np.empty(-(-n // BLOCK) * _LIMB_WINDOW))
+def spine_scratch(n: int) -> F64:
+    """The scratch :func:`decode_rows` (and ``posture_rows``) need for ``n`` rows:
+    (SPINE_SCRATCH_ROWS, n)."""
+    return np.empty((SPINE_SCRATCH_ROWS, n))
 
 
 @jit(inline="always")
@@ -560,239 +525,26 @@ def spine_joint_lanes(scratch: F64, start: int, stop: int, k: int, iterations: i
         scratch[_S_PREV_T, j] = t
 
 
-@jit(inline="always")
-def _at(window: int, row: int, column: np.uint64) -> np.uint64:
-    """The index in a limb scratch of ``row`` of ``column`` (0..BLOCK-1) of ``window``:
-    unsigned (numba adds no wrap-around test, which would stop LLVM from vectorizing)."""
-    return np.uint64(window * _LIMB_WINDOW + row * BLOCK) + column
-
-
-@jit(inline="always")
-def _limb3(limbs: F64, window: int, row: int, j: np.uint64) -> Vec3:
-    """The 3-vector in rows ``row:row + 3`` of column ``j`` of a limb scratch window."""
-    return (limbs[_at(window, row, j)], limbs[_at(window, row + 1, j)],
-            limbs[_at(window, row + 2, j)])
-
-
-@jit(inline="always")
-def _store_limb3(limbs: F64, window: int, row: int, j: np.uint64, v: Vec3) -> None:
-    limbs[_at(window, row, j)] = v[0]
-    limbs[_at(window, row + 1, j)] = v[1]
-    limbs[_at(window, row + 2, j)] = v[2]
-
-
-@jit(inline="always")
-def store_limb_column(limbs: F64, window: int, j: np.uint64, parent: Frame, origin: Vec3,
-                      root_dir: Vec3, root_len: float, quat: F64, fraction: float,
-                      upper: float, lower: float, tip_dir: Vec3, tip_len: float) -> None:
-    """Column ``j`` of a limb scratch window: one limb's inputs (see :func:`limb_lanes`);
-    ``quat`` (4,) the array row it is read from."""
-    for k in range(3):
-        _store_limb3(limbs, window, _L_PARENT + 3 * k, j, parent[k])
-    _store_limb3(limbs, window, _L_ORIGIN, j, origin)
-    _store_limb3(limbs, window, _L_ROOT_DIR, j, root_dir)
-    _store_limb3(limbs, window, _L_TIP_DIR, j, tip_dir)
-    for k in range(4):
-        limbs[_at(window, _L_QUAT + k, j)] = quat[k]
-    limbs[_at(window, _L_ROOT_LEN, j)] = root_len
-    limbs[_at(window, _L_FRACTION, j)] = fraction
-    limbs[_at(window, _L_UPPER, j)] = upper
-    limbs[_at(window, _L_LOWER, j)] = lower
-    limbs[_at(window, _L_TIP_LEN, j)] = tip_len
-
-
-# A call, not inlined into decode_rows (one compiled body for the four limbs, and decode_rows'
-# row loops stay short enough for LLVM to inline their small helpers).
-@jit()
-def limb_lanes(limbs: F64, window: int, first: int, stop: int) -> None:
-    """One limb of the characters in the columns ``first:stop`` of ``window`` of a limb scratch,
-    in a loop over those characters that runs on the vector units: what :func:`decode_row` does
-    for a leg (:func:`_leg`) or an arm (:func:`decode_upper_row`), the same operations, so the
-    same bits. The root joint hangs from the origin (the pelvis, the neck) along its direction
-    in the parent frame (pelvis2world, thorax2world); limb2world is the parent frame times the
-    limb's quaternion; the middle and end joints (:func:`two_bone_middle`) and the tip (toe,
-    hand) along its direction in the distal frame (:func:`.lanes.distal_frame_select`)."""
-    for j in range(np.uint64(first), np.uint64(stop)):
-        parent = (_limb3(limbs, window, _L_PARENT, j), _limb3(limbs, window, _L_PARENT + 3, j),
-                  _limb3(limbs, window, _L_PARENT + 6, j))
-        root = add(_limb3(limbs, window, _L_ORIGIN, j),
-                   scale(to_world(parent, _limb3(limbs, window, _L_ROOT_DIR, j)),
-                         limbs[_at(window, _L_ROOT_LEN, j)]))
-        quat = (limbs[_at(window, _L_QUAT, j)], limbs[_at(window, _L_QUAT + 1, j)],
-                limbs[_at(window, _L_QUAT + 2, j)], limbs[_at(window, _L_QUAT + 3, j)])
-        limb2world = matmul(parent, matrix_from_quat(quat))
-        upper, lower = limbs[_at(window, _L_UPPER, j)], limbs[_at(window, _L_LOWER, j)]
-        middle, end = two_bone_middle(limb2world, root, upper, lower,
-                                      limbs[_at(window, _L_FRACTION, j)] * (upper + lower))
-        distal2world = distal_frame_select(limb2world, middle, end)
-        tip = add(end, scale(to_world(distal2world, _limb3(limbs, window, _L_TIP_DIR, j)),
-                             limbs[_at(window, _L_TIP_LEN, j)]))
-        _store_limb3(limbs, window, _L_ROOT, j, root)
-        _store_limb3(limbs, window, _L_MIDDLE, j, middle)
-        _store_limb3(limbs, window, _L_END, j, end)
-        _store_limb3(limbs, window, _L_TIP, j, tip)
-        for k in range(3):
-            _store_limb3(limbs, window, _L_FRAME + 3 * k, j, limb2world[k])
-
-
-@jit(inline="always")
-def limb_result(limbs: F64, window: int, j: np.uint64, positions: F64, root: int,
-                limb2world: F64) -> None:
-    """Column ``j``'s result of :func:`limb_lanes` into a decoded row: the joints into
-    ``positions[root:root + 4]`` (root, middle, end, tip: a limb's four joints are consecutive),
-    the frame into ``limb2world`` (3, 3)."""
-    for k in range(4):
-        store3(positions[root + k], _limb3(limbs, window, _L_ROOT + 3 * k, j))
-    for k in range(3):
-        for a in range(3):
-            limb2world[a, k] = limbs[_at(window, _L_FRAME + 3 * k + a, j)]
-
-
-@jit(inline="always")
-def pelvis_row(c: int, pose: PoseArrays, seg: F64,
-               out: DecodedArrays) -> tuple[Vec3, Vec3, Vec3, Vec3]:
-    """The pelvis (position and frame) of :func:`decode_lower_row` into row ``c`` of ``out``;
-    returns the spine's control points (:func:`spine_control`)."""
-    store_frame(out.pelvis2world[c], pelvis_frame(c, pose))
-    store3(out.positions[c, PELVIS], scale(load3(pose.root_position[c]), leg_length(seg)))
-    return spine_control(c, pose, seg)
-
-
-@jit(inline="always")
-def _limb_frame(limbs: F64, window: int, row: int, j: np.uint64) -> Frame:
-    """The frame whose axes are in rows ``row:row + 9`` of column ``j`` of a window."""
-    return (_limb3(limbs, window, row, j), _limb3(limbs, window, row + 3, j),
-            _limb3(limbs, window, row + 6, j))
-
-
-@jit(inline="always")
-def _store_limb_frame(limbs: F64, window: int, row: int, j: np.uint64, m: Frame) -> None:
-    for k in range(3):
-        _store_limb3(limbs, window, row + 3 * k, j, m[k])
-
-
-@jit(inline="always")
-def _limb4(limbs: F64, window: int, row: int, j: np.uint64) -> tuple[float, float, float, float]:
-    return (limbs[_at(window, row, j)], limbs[_at(window, row + 1, j)],
-            limbs[_at(window, row + 2, j)], limbs[_at(window, row + 3, j)])
-
-
-@jit(inline="always")
-def store_trunk_column(limbs: F64, window: int, j: np.uint64, c: int, pose: PoseArrays,
-                       seg: F64, out: DecodedArrays, spine: tuple[Vec3, Vec3, Vec3]) -> None:
-    """Column ``j`` of a window: the trunk's inputs of store row ``c`` (see
-    :func:`trunk_lanes`), its pelvis from ``out`` and its ``spine`` joints (pelvis frame, m)."""
-    _store_limb_frame(limbs, window, _T_PELVIS2WORLD, j, load_frame(out.pelvis2world[c]))
-    _store_limb3(limbs, window, _T_PELVIS, j, load3(out.positions[c, PELVIS]))
-    for k in range(3):
-        _store_limb3(limbs, window, _T_SPINE + 3 * k, j, spine[k])
-    for k in range(4):
-        limbs[_at(window, _T_THORAX + k, j)] = pose.thorax[c, k]
-        limbs[_at(window, _T_HEAD + k, j)] = pose.head[c, k]
-    _store_limb3(limbs, window, _T_NECK_DIR, j, load3(pose.neck_dir[c]))
-    _store_limb3(limbs, window, _T_HEAD_TOP_DIR, j, load3(pose.head_top_dir[c]))
-    limbs[_at(window, _T_NECK_LEN, j)] = seg[L_NECK]
-    limbs[_at(window, _T_HEAD_LEN, j)] = seg[L_HEAD]
-
-
-# A call, not inlined into decode_rows, as limb_lanes.
-@jit()
-def trunk_lanes(limbs: F64, window: int, first: int, stop: int) -> None:
-    """What :func:`decode_upper_row` does before the arms, for the characters in the columns
-    ``first:stop`` of ``window`` of a limb scratch (:func:`store_trunk_column`), in a loop over
-    them that runs on the vector units (the same operations, so the same bits): the spine joints
-    placed in the world, the thorax and head frames, the head and the head top."""
-    for j in range(np.uint64(first), np.uint64(stop)):
-        pelvis2world = _limb_frame(limbs, window, _T_PELVIS2WORLD, j)
-        pelvis = _limb3(limbs, window, _T_PELVIS, j)
-        for k in range(3):
-            _store_limb3(limbs, window, _T_JOINTS + 3 * k, j,
-                         add(pelvis, to_world(pelvis2world,
-                                              _limb3(limbs, window, _T_SPINE + 3 * k, j))))
-        neck = _limb3(limbs, window, _T_JOINTS + 6, j)
-        thorax2world = matmul(pelvis2world,
-                              matrix_from_quat(_limb4(limbs, window, _T_THORAX, j)))
-        head2world = matmul(thorax2world, matrix_from_quat(_limb4(limbs, window, _T_HEAD, j)))
-        head = add(neck, scale(to_world(thorax2world, _limb3(limbs, window, _T_NECK_DIR, j)),
-                               limbs[_at(window, _T_NECK_LEN, j)]))
-        head_top = add(head, scale(to_world(head2world,
-                                            _limb3(limbs, window, _T_HEAD_TOP_DIR, j)),
-                                   limbs[_at(window, _T_HEAD_LEN, j)]))
-        _store_limb3(limbs, window, _T_JOINTS + 9, j, head)
-        _store_limb3(limbs, window, _T_JOINTS + 12, j, head_top)
-        _store_limb_frame(limbs, window, _T_THORAX2WORLD, j, thorax2world)
-        _store_limb_frame(limbs, window, _T_HEAD2WORLD, j, head2world)
-
-
-@jit(inline="always")
-def trunk_result(limbs: F64, window: int, j: np.uint64, c: int, out: DecodedArrays) -> None:
-    """Column ``j``'s result of :func:`trunk_lanes` into row ``c`` of ``out``: the spine joints,
-    neck, head and head top (consecutive joints), thorax2world and head2world."""
-    positions = out.positions[c]
-    for k in range(5):
-        store3(positions[SPINE_1 + k], _limb3(limbs, window, _T_JOINTS + 3 * k, j))
-    store_frame(out.thorax2world[c], _limb_frame(limbs, window, _T_THORAX2WORLD, j))
-    store_frame(out.head2world[c], _limb_frame(limbs, window, _T_HEAD2WORLD, j))
-
-
 @jit(nogil=True)
 def decode_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64, out: DecodedArrays,
-                scratch: DecodeScratch) -> None:
+                scratch: F64) -> None:
     """Mirrors :func:`ecs_anim.core.normalized.decode` over the store rows ``rows[lo:hi]``
     (int64): row ``c`` of ``pose`` on the body ``lengths[c]`` ((n, N_LENGTHS), m) into row ``c``
-    of every ``out`` array (the other rows are left as they are). ``scratch``:
-    :func:`decode_scratch` of len(rows).
+    of every ``out`` array (the other rows are left as they are). ``scratch``
+    (SPINE_SCRATCH_ROWS, len(rows)): :func:`spine_scratch`.
 
-    By windows of :data:`.lanes.BLOCK` rows (``rows[BLOCK * w:BLOCK * (w + 1)]``, cut at ``lo``
-    and ``hi``): the pelvis row by row, then in loops over the window's characters that run on the vector
-    units the legs (:func:`limb_lanes`), the spines (:func:`spine_block`), the trunk
-    (:func:`trunk_lanes`) and the arms; the same bits as
-    :func:`decode_row` on each row."""
-    spines, limbs = scratch
-    start = lo
-    while start < hi:
-        window = start // BLOCK
-        stop = min((window + 1) * BLOCK, hi)
-        first, last = start - window * BLOCK, stop - window * BLOCK
+    By blocks of :data:`.lanes.BLOCK` rows: the pelvis and legs row by row, the spines (most of
+    the work) in loops over the block's characters that run on the vector units, then the upper
+    body row by row; the same result as :func:`decode_row` on each row."""
+    for start in range(lo, hi, BLOCK):
+        stop = min(start + BLOCK, hi)
         for i in range(start, stop):
             c = rows[i]
-            store_spine_column(spines, i, pelvis_row(c, pose, lengths[c], out), lengths[c])
-        for s in range(2):
-            for i in range(start, stop):
-                c, seg = rows[i], lengths[rows[i]]
-                store_limb_column(limbs, window, np.uint64(i - window * BLOCK),
-                                  load_frame(out.pelvis2world[c]), load3(out.positions[c, PELVIS]),
-                                  load3(pose.hip_dir[c, s]), seg[L_PELVIS + s], pose.leg_frame[c, s],
-                                  pose.leg_fraction[c, s], seg[L_THIGH + s], seg[L_SHANK + s],
-                                  load3(pose.foot_dir[c, s]), seg[L_FOOT + s])
-            limb_lanes(limbs, window, first, last)
-            for i in range(start, stop):
-                c = rows[i]
-                limb_result(limbs, window, np.uint64(i - window * BLOCK), out.positions[c],
-                            HIP + 4 * s, out.leg2world[c, s])
-        spine_block(spines, start, stop, 6)
+            store_spine_column(scratch, i, decode_lower_row(c, pose, lengths[c], out), lengths[c])
+        spine_block(scratch, start, stop, 6)
         for i in range(start, stop):
             c = rows[i]
-            store_trunk_column(limbs, window, np.uint64(i - window * BLOCK), c, pose, lengths[c],
-                               out, spine_column(spines, i))
-        trunk_lanes(limbs, window, first, last)
-        for i in range(start, stop):
-            trunk_result(limbs, window, np.uint64(i - window * BLOCK), rows[i], out)
-        for s in range(2):
-            for i in range(start, stop):
-                c, seg = rows[i], lengths[rows[i]]
-                store_limb_column(limbs, window, np.uint64(i - window * BLOCK),
-                                  load_frame(out.thorax2world[c]), load3(out.positions[c, NECK]),
-                                  load3(pose.clavicle_dir[c, s]), seg[L_CLAVICLE + s],
-                                  pose.arm_frame[c, s], pose.arm_fraction[c, s],
-                                  seg[L_UPPER_ARM + s], seg[L_FOREARM + s],
-                                  load3(pose.hand_dir[c, s]), seg[L_HAND + s])
-            limb_lanes(limbs, window, first, last)
-            for i in range(start, stop):
-                c = rows[i]
-                limb_result(limbs, window, np.uint64(i - window * BLOCK), out.positions[c],
-                            SHOULDER + 4 * s, out.arm2world[c, s])
-        start = stop
+            decode_upper_row(c, pose, lengths[c], spine_column(scratch, i), out)
 
 
 def decode(poses: NormalizedPoses, lengths: F64, out: DecodedPose | None = None) -> DecodedPose:
@@ -806,5 +558,5 @@ def decode(poses: NormalizedPoses, lengths: F64, out: DecodedPose | None = None)
     lengths = np.ascontiguousarray(np.broadcast_to(lengths, (n, N_LENGTHS)), dtype=np.float64)
     arrays = empty_decoded(n) if out is None else decoded_arrays(out)
     over_chunks(decode_rows, n, np.arange(n, dtype=np.int64), pose, lengths, arrays,
-                decode_scratch(n))
+                spine_scratch(n))
     return decoded_pose(arrays) if out is None else out

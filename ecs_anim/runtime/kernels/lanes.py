@@ -20,18 +20,7 @@ import math
 
 import numpy as np
 
-from ecs_anim.runtime.kernels.vec import (
-    F64,
-    Frame,
-    Vec3,
-    add_scaled,
-    cross,
-    dot,
-    jit,
-    norm,
-    normalize,
-    sub,
-)
+from ecs_anim.runtime.kernels.vec import F64, jit
 
 #: Characters a block loop runs over at a time: its scratch columns stay in the first-level
 #: cache (22 rows of 32 float64 are 5.6 kB) and it is a whole number of 8-wide AVX-512 vectors.
@@ -96,17 +85,3 @@ def slerp_weights(cos_half: float, t: float) -> tuple[float, float]:
     w0 = 1.0 - t if near else arc0
     w1 = t if near else arc1
     return w0, sign * w1
-
-
-# Inlined by numba, as slerp_weights: a loop over characters calling it is vectorized.
-@jit(inline="always")
-def distal_frame_select(limb2world: Frame, middle: Vec3, end: Vec3) -> Frame:
-    """:func:`.decode.distal_frames` (the same operations, so the same bits) with its fallback
-    chosen, not branched to: z middle->end, x the limb frame's x made normal to it (its y where
-    they are parallel), y = z x x."""
-    p = normalize(sub(end, middle))
-    x, fallback = limb2world[0], limb2world[1]
-    s = add_scaled(x, p, -dot(x, p))
-    f = add_scaled(fallback, p, -dot(fallback, p))
-    s = normalize(f if norm(s) < 1e-9 else s)
-    return (s, cross(p, s), p)

@@ -43,7 +43,6 @@ from ecs_anim.runtime.kernels.decode import (
     TOE,
     WRIST,
     DecodedArrays,
-    DecodeScratch,
     PoseArrays,
     decode_rows,
     decoded_arrays,
@@ -267,7 +266,7 @@ def posture_of_decoded_row(c: int, pose: PoseArrays, lengths: F64, decoded: Deco
 def posture_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64,
                  decoded: DecodedArrays, frozen: B8, newly_bad: B8, positions: F64, rotations: bool,
                  world: F64, local: F64, rest_hips: F64, bvh_from_world: F64, rest2body: F64,
-                 parents: I64, vertebrae: F64, have_previous: bool, scratch: DecodeScratch) -> None:
+                 parents: I64, vertebrae: F64, have_previous: bool, scratch: F64) -> None:
     """PostureConvert over the store rows ``rows[lo:hi]`` (int64), in place.
 
     Each row ``c``: decode on ``lengths[c]`` into ``decoded`` (all of it: the posture frames,
@@ -279,7 +278,7 @@ def posture_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64,
     (its vertebrae are written anyway without ``have_previous``). Mirrors
     ``systems.posture_convert`` on :func:`ecs_anim.core.normalized.decode`,
     :func:`ecs_anim.io.export.skeleton.local_rotations` and :func:`ecs_anim.core.normalized.vertebrae`.
-    ``scratch``: :func:`.decode.decode_scratch` of len(rows), for
+    ``scratch`` (SPINE_SCRATCH_ROWS, len(rows)): :func:`.decode.spine_scratch`, for
     :func:`.decode.decode_rows` (the decode of all the rows first, by blocks on the vector
     units, then the rest row by row).
     """

@@ -50,7 +50,7 @@ def test_decode_rows_writes_only_its_rows():
         a.fill(np.nan)
     rows = np.array([3, 17, 39, 0], dtype=np.int64)
     kd.decode_rows(0, rows.size, rows, kd.pose_arrays(poses), lengths, arrays,
-                   kd.decode_scratch(rows.size))
+                   kd.spine_scratch(rows.size))
     ref = decode(poses, lengths)
     untouched = np.setdiff1d(np.arange(40), rows)
     for name, a in zip(FIELDS, arrays, strict=True):
@@ -144,9 +144,9 @@ def test_decode_rows_by_blocks_does_not_depend_on_the_chunks_and_equals_the_row_
     rows = rng.permutation(n).astype(np.int64)
     pose = kd.pose_arrays(poses)
     whole = kd.empty_decoded(n)
-    kd.decode_rows(0, n, rows, pose, lengths, whole, kd.decode_scratch(n))
+    kd.decode_rows(0, n, rows, pose, lengths, whole, kd.spine_scratch(n))
     chunked = kd.empty_decoded(n)
-    scratch = kd.decode_scratch(n)
+    scratch = kd.spine_scratch(n)
     for lo, hi in ((0, 7), (7, 40), (40, 41), (41, n)):
         kd.decode_rows(lo, hi, rows, pose, lengths, chunked, scratch)
 

@@ -118,7 +118,7 @@ def test_posture_rows_keeps_the_last_good_posture_like_numpy():
                         decoded, got_frozen, newly_bad, got_positions, True,
                         np.empty((n, kp.N_EXPORT, 3, 3)), got_local, k.rest_hips,
                         k.bvh_from_world, k.rest2body, k.parents, got_spine, spine is not None,
-                        kd.decode_scratch(n))
+                        kd.spine_scratch(n))
         np.testing.assert_array_equal(got_frozen, ref[0])
         np.testing.assert_array_equal(newly_bad, ref[1])
         np.testing.assert_allclose(got_positions, ref[2], rtol=0, atol=TOL)
@@ -144,7 +144,7 @@ def test_posture_rows_without_rotations_or_vertebrae_writes_positions_only():
                     np.zeros(n, bool), np.zeros(n, bool), positions, False,
                     np.empty((0, kp.N_EXPORT, 3, 3)), np.empty((0, kp.N_EXPORT, 3, 3)),
                     k.rest_hips, k.bvh_from_world, k.rest2body, k.parents, np.empty((n, 0, 3)),
-                    False, kd.decode_scratch(rows.size))
+                    False, kd.spine_scratch(rows.size))
     np.testing.assert_allclose(positions[rows], decode(poses, lengths).positions[rows], rtol=0,
                                atol=TOL)
     assert np.all(positions[np.setdiff1d(np.arange(n), rows)] == 0.0)
