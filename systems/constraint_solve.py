@@ -201,16 +201,23 @@ class ConstraintSolve(System):
 
     def _goal_steps(self, goals: TickGoals) -> NDArray[np.float64]:
         """(r,) how far each solved character's fastest point goal fully active this tick and
-        the last moved since (m; 0: none; a ramp's move is the bound's to spread); this tick's
-        such goals kept for the next."""
+        the last moved since (m; 0: none; a ramp's move is the bound's to spread; infinite for
+        a character with a constraint switched on at once); this tick's such goals kept for the
+        next."""
         table = self.sim.constraints
         if self._last_goals.shape[0] != table.m or self._last_goals_tick != self.sim.tick - 1:
             self._last_goals = np.full((table.m, 3), np.nan)  # none kept, or not the last tick's
-        full = (goals.table_index >= 0) & (goals.weight >= 1.0) & ~goals.orientation
+        user = goals.table_index >= 0
+        full = user & (goals.weight >= 1.0) & ~goals.orientation
         index = goals.table_index[full]
         moved = np.linalg.norm(goals.goal[full] - self._last_goals[index], axis=1)
         steps = np.zeros(goals.rows.size)
         np.maximum.at(steps, goals.owner[full], np.nan_to_num(moved, nan=0.0))
+        # A constraint switched on at once (no ease: fully active, off at the last tick) asks
+        # for the jump: its character is met at once this tick.
+        at_once = np.zeros(goals.k, bool)
+        at_once[user] = (goals.weight[user] >= 1.0) & (table.weight[goals.table_index[user]] <= 0.0)
+        steps[goals.owner[at_once]] = np.inf
         self._last_goals[:] = np.nan
         self._last_goals[index] = goals.goal[full]
         self._last_goals_tick = self.sim.tick

@@ -16,6 +16,8 @@ steps further in a tick than the motion's own joint steps plus ``max_step_m``
   forearm warding off a kicking ankle: a character's bound grows by its fastest such goal's
   step): only a joint faster than its motion's by more than that is. A ramp (a constraint
   easing in or out, where the solve may flip a knee or fold a trunk) is the bound's to spread;
+  a constraint switched on at once (no ease) asks for the jump and gets it (its character's
+  goal step is infinite on that tick);
 * such a character's correction goes only a share of its way from the last tick's to this
   tick's solve, the same share in every segment the solver sets (:func:`step_shares`,
   :func:`limit_motion`): the share that brings its fastest joint to the bound, so the body keeps
@@ -317,6 +319,14 @@ def solve_within_speed(steps: SpeedSteps, before: MotionBefore, max_step_m: floa
     if rows.size == 0:
         return limited, iterations, result
     part = limited.take(rows)
+    # The joints' move is not linear in the share (segments turn): measured on the limited
+    # pose, the share is taken once more of what is left over (a turn's share composes).
+    closer = step_shares(from_pelvis(steps.decode(part, lengths[rows]).positions),
+                         before.clip_joints[rows], before.pose_joints_before[rows],
+                         before.clip_joints_before[rows], goals.in_contact[rows], max_step_m,
+                         before.goal_steps_m[rows])
+    part, _ = steps.limit(part, before.clip_now[rows], before.clip_before[rows],
+                          before.pose_before[rows], goals.in_contact[rows], closer)
     again, more, part_decoded = steps.solve(
         part, lengths[rows], contact_goals(goals, rows), masses[rows], com_fraction[rows],
         settings, steps.decode(part, lengths[rows]), True)
