@@ -191,7 +191,8 @@ def step_shares(pose_joints: F64, clip_joints: F64, pose_joints_before: F64,
     cd = np.sum(clip_step * change, axis=-1)
     # |c + s d|^2 = |c|^2 + 2 s c.d + s^2 |d|^2 <= allowed^2: the larger root (|c| < allowed)
     room = allowed * allowed - np.sum(clip_step * clip_step, axis=-1)
-    largest = (-cd + np.sqrt(cd * cd + dd * room)) / np.maximum(dd, 1e-300)
+    # (a character whose goal jumped has an infinite room: no 0 * inf where nothing changes)
+    largest = (-cd + np.sqrt(cd * cd + np.where(dd > 0.0, dd, 1.0) * room)) / np.maximum(dd, 1e-300)
     share = np.where(dd > 0.0, np.minimum(largest, 1.0), 1.0)
     for side, joints in enumerate(LEG_JOINTS):
         share[:, list(joints)] = np.where(planted[:, side, None], 1.0, share[:, list(joints)])
