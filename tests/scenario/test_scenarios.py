@@ -94,11 +94,13 @@ def test_fight_training_hits_and_ward_offs_are_met_and_heads_dodge_the_punches()
         knuckles = pos[:, d, J["wrist_r"]] + 0.6 * (pos[:, d, J["hand_r"]] - pos[:, d, J["wrist_r"]])
         return head, knuckles
 
-    # The dodge: the kicker's head leans back and keeps at least 17 cm from the knuckles through
-    # the punch (1.0-1.5 s of ward_off_punch, which the defender plays from 0.4 s), at least
-    # 4 cm further than without it, where the fist stops on the face (the hand's and the head's
-    # capsules touching: 13-17 cm; it went 10 cm in before bodies were kept apart), and moves
-    # smoothly: no tick moves it further than the fist itself moves in a tick.
+    # The dodge: the kicker's head leans back and keeps at least 19 cm (pair 4: 16 cm) from the
+    # knuckles through the punch (1.0-1.5 s of ward_off_punch, which the defender plays from
+    # 0.4 s), at least 3 cm further than without it, where the fist stops on the face (the
+    # hand's and the head's capsules touching: 13-17 cm; it went 10 cm in before bodies were
+    # kept apart), and moves smoothly: no tick moves it further than the fist itself moves in a
+    # tick. The solver's speed bound (no pops, docs/api.md) spreads the lean's 0.1 s ease: 19.7-
+    # 20.7 cm (pair 4: 16.5), where without the bound the head leaned to 27.1-27.7 (17.9).
     for pair in (1, 2, 3, 4):
         begun = started(r, f"defender_{pair}", "ward_off_punch")
         assert begun == started(without, f"defender_{pair}", "ward_off_punch")
@@ -107,8 +109,8 @@ def test_fight_training_hits_and_ward_offs_are_met_and_heads_dodge_the_punches()
         head_without, knuckles_without = head_and_knuckles(without, pair)
         gap = np.linalg.norm(head - knuckles, axis=1)[punch_window].min()
         gap_without = np.linalg.norm(head_without - knuckles_without, axis=1)[punch_window].min()
-        assert gap_without < 0.18 and gap > 0.17 and gap > gap_without + 0.04, \
-            (pair, gap, gap_without)
+        assert gap_without < 0.18 and gap > (0.16 if pair == 4 else 0.19), (pair, gap)
+        assert gap > gap_without + 0.03, (pair, gap, gap_without)
         head_step = np.linalg.norm(np.diff(head, axis=0), axis=1).max()
         fist_step = np.linalg.norm(np.diff(knuckles_without, axis=0), axis=1).max()
         assert head_step <= fist_step + 0.01, (pair, head_step, fist_step)
