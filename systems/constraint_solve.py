@@ -143,7 +143,7 @@ class ConstraintSolve(System):
             if settings.max_joint_speed_m_s is not None:
                 self._clip_now = pack(st.poses)
                 # A character with no last tick kept (its first, or none solved since) was at its
-                # motion's pose: a constraint switched on at once is then met over a few ticks.
+                # motion's pose: a constraint easing in is paced from there.
                 fresh = ~np.any(st.last_pose_values != 0.0, axis=1)
                 st.last_clip_values[fresh] = st.last_pose_values[fresh] = self._clip_now[fresh]
                 st.last_pose_joints_m[fresh] = st.last_clip_joints_m[fresh] = from_pelvis(
