@@ -3,8 +3,8 @@
 The solver may change a pose a lot between two ticks while its goals hardly move: a trunk that
 a chain may bend folds 60° in one tick once a punch's target is out of the arm's reach, a leg
 twists about its hip-ankle axis as a kick's goal eases in (the knee's correction changing at
-14.5 m/s, the toe at 16.8 m/s where the clip's moves at 3), a constraint switched on at once
-snaps the arm to its goal. What the solver adds to the motion is each joint's *correction*: how
+14.5 m/s, the toe at 16.8 m/s where the clip's moves at 3), a short ease snaps the arm to its
+goal. What the solver adds to the motion is each joint's *correction*: how
 far it puts the joint from where the motion has it. The bound: no joint, measured from its
 pelvis (:func:`from_pelvis`: the root's own move and the centre of mass's count for nothing),
 steps further in a tick than the motion's own joint steps plus ``max_step_m``
