@@ -45,18 +45,12 @@ from ecs_anim.runtime.kernels.goals import (
     constraint_errors as constraint_errors,  # tests patch these
 )
 from ecs_anim.runtime.kernels.goals import tick_goals as tick_goals
-from ecs_anim.runtime.kernels.joint_speed import limit_motion, pack
+from ecs_anim.runtime.kernels.joint_speed import limit_motion, pack, step_shares
 from ecs_anim.runtime.kernels.solve import solve as solve
 from ecs_anim.runtime.system_base import System
 from ecs_anim.solver.budget import FrameBudget, SolverReport, effective_caps
 from ecs_anim.solver.goals import TickGoals
-from ecs_anim.solver.joint_speed import (
-    MotionBefore,
-    SpeedSteps,
-    from_pelvis,
-    solve_within_speed,
-    step_shares,
-)
+from ecs_anim.solver.joint_speed import MotionBefore, SpeedSteps, from_pelvis, solve_within_speed
 from ecs_anim.solver.shell import (
     SolverSettings,
     TickResult,
@@ -104,6 +98,8 @@ class ConstraintSolve(System):
         # the store's last_*_values hold the last tick's (else they are zeros: none).
         self._clip_now: NDArray[np.float64] | None = None
         self._values_kept = False
+        # This tick's motion joints from the pelvis (n, N_JOINTS, 3; None: not made).
+        self._clip_joints: NDArray[np.float64] | None = None
         # Each constraint's goal point at the last tick if it was fully active then (m, 3; NaN:
         # it was not), so a joint may follow a goal that moves faster than the bound.
         self._last_goals = np.zeros((0, 3))
@@ -122,7 +118,7 @@ class ConstraintSolve(System):
         sim, st, table = self.sim, self.sim.store, self.sim.constraints
         st.goals, st.solved, st.clip_positions = None, None, None
         self.report = None
-        self._clip_now = None
+        self._clip_now = self._clip_joints = None
         if table.m == 0:
             self._go_back(np.zeros(0, np.int64))
             return
@@ -142,12 +138,13 @@ class ConstraintSolve(System):
             st.clip_positions = unconstrained.positions.copy()
             if settings.max_joint_speed_m_s is not None:
                 self._clip_now = pack(st.poses)
+                self._clip_joints = from_pelvis(st.clip_positions)
                 # A character with no last tick kept (its first, or none solved since) was at its
                 # motion's pose: a constraint easing in is paced from there.
                 fresh = ~np.any(st.last_pose_values != 0.0, axis=1)
                 st.last_clip_values[fresh] = st.last_pose_values[fresh] = self._clip_now[fresh]
-                st.last_pose_joints_m[fresh] = st.last_clip_joints_m[fresh] = from_pelvis(
-                    st.clip_positions[fresh])
+                st.last_pose_joints_m[fresh] = st.last_clip_joints_m[fresh] = \
+                    self._clip_joints[fresh]
         model = settings.cost_model or self.budget.model
         if settings.budget_ms is not None and model is not None:
             model = self.budget.for_cut(model, table.owner[weight > 0])
@@ -189,12 +186,16 @@ class ConstraintSolve(System):
         """The compiled solve (its signature), then no joint faster than the motion's by more
         than ``settings.max_joint_speed_m_s`` (:func:`solve_within_speed`)."""
         st, rows = self.sim.store, goals.rows
-        assert self._clip_now is not None and st.clip_positions is not None  # before the solve
-        before = MotionBefore(self._clip_now[rows], st.last_clip_values[rows],
-                              st.last_pose_values[rows], from_pelvis(st.clip_positions[rows]),
-                              st.last_clip_joints_m[rows], st.last_pose_joints_m[rows],
-                              self._goal_steps(goals))
-        return solve_within_speed(SpeedSteps(solve, limit_motion, decode), before,
+        assert self._clip_now is not None and self._clip_joints is not None  # before the solve
+        every = rows.size == st.n  # (rows are sorted and distinct: all of them, in order)
+
+        def of(values: NDArray[np.float64]) -> NDArray[np.float64]:
+            return values if every else values[rows]
+
+        before = MotionBefore(of(self._clip_now), of(st.last_clip_values), of(st.last_pose_values),
+                              of(self._clip_joints), of(st.last_clip_joints_m),
+                              of(st.last_pose_joints_m), self._goal_steps(goals))
+        return solve_within_speed(SpeedSteps(solve, step_shares, limit_motion, decode), before,
                                   float(settings.max_joint_speed_m_s or np.inf) * self.sim.dt,
                                   poses, lengths, goals, masses, com_fraction, settings, decoded,
                                   in_place)
@@ -263,10 +264,15 @@ class ConstraintSolve(System):
         the others' the motion's), from the pelvis."""
         st = self.sim.store
         assert st.clip_positions is not None  # decoded when anything was solved or goes back
-        st.last_clip_joints_m = from_pelvis(st.clip_positions)
-        st.last_pose_joints_m = st.last_clip_joints_m.copy()
-        if solved_rows.size and st.solved is not None:
-            st.last_pose_joints_m[solved_rows] = from_pelvis(st.solved.positions)
+        clip_joints = from_pelvis(st.clip_positions) if self._clip_joints is None \
+            else self._clip_joints
+        st.last_clip_joints_m = clip_joints
+        if solved_rows.size == st.n and st.solved is not None:
+            st.last_pose_joints_m = from_pelvis(st.solved.positions)
+        else:
+            st.last_pose_joints_m = clip_joints.copy()
+            if solved_rows.size and st.solved is not None:
+                st.last_pose_joints_m[solved_rows] = from_pelvis(st.solved.positions)
         if back_rows.size:
             back = decode(st.poses.take(back_rows), st.lengths[back_rows]).positions
             st.last_pose_joints_m[back_rows] = from_pelvis(back)

@@ -268,16 +268,18 @@ def contact_goals(goals: TickGoals, rows: I64) -> TickGoals:
 
 class SpeedSteps(NamedTuple):
     """The computations :func:`solve_within_speed` is made of, each with the signature of its
-    numpy reference: ``solve`` (:func:`ecs_anim.solver.shell.solve`), ``limit``
-    (:func:`limit_motion`) and ``decode`` (:func:`ecs_anim.core.normalized.decode`).
-    :data:`NUMPY_SPEED_STEPS` are the references; ConstraintSolve runs the compiled ones."""
+    numpy reference: ``solve`` (:func:`ecs_anim.solver.shell.solve`), ``shares``
+    (:func:`step_shares`), ``limit`` (:func:`limit_motion`) and ``decode``
+    (:func:`ecs_anim.core.normalized.decode`). :data:`NUMPY_SPEED_STEPS` are the references;
+    ConstraintSolve runs the compiled ones."""
 
     solve: Callable[..., tuple[NormalizedPoses, I64, DecodedPose]]
+    shares: Callable[..., F64]
     limit: Callable[..., tuple[NormalizedPoses, B8]]
     decode: Callable[[NormalizedPoses, F64], DecodedPose]
 
 
-NUMPY_SPEED_STEPS = SpeedSteps(solve, limit_motion, decode)
+NUMPY_SPEED_STEPS = SpeedSteps(solve, step_shares, limit_motion, decode)
 
 
 class MotionBefore(NamedTuple):
@@ -311,7 +313,7 @@ def solve_within_speed(steps: SpeedSteps, before: MotionBefore, max_step_m: floa
     used (both solves) and the decoded result."""
     solved, iterations, result = steps.solve(poses, lengths, goals, masses, com_fraction, settings,
                                              decoded, in_place)
-    share = step_shares(from_pelvis(result.positions), before.clip_joints,
+    share = steps.shares(from_pelvis(result.positions), before.clip_joints,
                         before.pose_joints_before, before.clip_joints_before, goals.in_contact,
                         max_step_m, before.goal_steps_m)
     limited, held = steps.limit(solved, before.clip_now, before.clip_before, before.pose_before,
@@ -322,7 +324,7 @@ def solve_within_speed(steps: SpeedSteps, before: MotionBefore, max_step_m: floa
     part = limited.take(rows)
     # The joints' move is not linear in the share (segments turn): measured on the limited
     # pose, the share is taken once more of what is left over (a turn's share composes).
-    closer = step_shares(from_pelvis(steps.decode(part, lengths[rows]).positions),
+    closer = steps.shares(from_pelvis(steps.decode(part, lengths[rows]).positions),
                          before.clip_joints[rows], before.pose_joints_before[rows],
                          before.clip_joints_before[rows], goals.in_contact[rows], max_step_m,
                          before.goal_steps_m[rows])

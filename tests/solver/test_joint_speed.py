@@ -50,6 +50,26 @@ def test_compiled_limit_equals_numpy(share):
     assert held[5:].sum() == (0 if share == 1.0 else np.sum(shares[5:] < 1.0))
 
 
+def test_compiled_shares_equal_numpy():
+    """The share each character may go (compiled ``share_rows``) equals the numpy reference to
+    1e-12, planted legs, a goal's step and a character whose goal jumped (infinite) included."""
+    rng = np.random.default_rng(23)
+    n = 80
+    clip_before = rng.normal(size=(n, N_JOINTS, 3))
+    clip_now = clip_before + rng.normal(scale=0.05, size=(n, N_JOINTS, 3))
+    pose_before = clip_before + rng.normal(scale=0.1, size=(n, N_JOINTS, 3))
+    pose = clip_now + rng.normal(scale=0.3, size=(n, N_JOINTS, 3))
+    pose[:5] = pose_before[:5] + (clip_now - clip_before)[:5]  # nothing changes: share 1
+    planted = rng.uniform(size=(n, 2)) < 0.4
+    goal_steps = np.where(rng.uniform(size=n) < 0.3, rng.uniform(0.0, 0.3, n), 0.0)
+    goal_steps[-3:] = np.inf
+    args = (pose, clip_now, pose_before, clip_before, planted, 0.1, goal_steps)
+    expected = reference.step_shares(*args)
+    np.testing.assert_allclose(compiled.step_shares(*args), expected, rtol=0, atol=1e-12)
+    assert (expected[:5] == 1.0).all() and (expected[-3:] == 1.0).all()
+    assert (expected[5:-3] < 1.0).sum() > n // 2
+
+
 def corrections_of(values, clip):
     """Each packed segment's correction: frames and directions as the turn (rotation vector,
     rad) from the motion's, shifts as the difference: (r, 6 + 5, 3) turns and (r, 13) shifts."""
@@ -283,6 +303,7 @@ def test_the_fight_with_numpy_steps_ends_as_with_the_compiled_ones(monkeypatch, 
     monkeypatch.setattr(system, "solve", numpy.solve)
     monkeypatch.setattr(system, "constraint_errors", numpy.errors)
     monkeypatch.setattr(system, "limit_motion", reference.limit_motion)
+    monkeypatch.setattr(system, "step_shares", reference.step_shares)
     monkeypatch.setattr(system, "pack", reference.pack)
     monkeypatch.setattr(system, "decode", numpy_decode)
     expected = run_positions()

@@ -1,8 +1,9 @@
 """Compiled :mod:`ecs_anim.solver.joint_speed`: each segment's correction (its turn or shift
 away from the motion's own) going only a share of its way from the last tick's (no pops).
 
-:func:`limit_motion` and :func:`pack` take the arguments of their numpy references and give the
-same results (to 1e-9); the per-character loops are :func:`limit_rows` and :func:`pack_rows`.
+:func:`step_shares`, :func:`limit_motion` and :func:`pack` take the arguments of their numpy
+references and give the same results (to 1e-9); the per-character loops are
+:func:`share_rows`, :func:`limit_rows` and :func:`pack_rows`.
 Values are packed as the reference's: frames 0-5 (legs, arms, thorax, head) as quaternions,
 directions 0-4 (feet, hands, neck), shifts 0-12 (leg fractions, arm fractions, the spine's
 three points).
@@ -16,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.core.normalized import NormalizedPoses
+from ecs_anim.core.skeleton import N_JOINTS
 from ecs_anim.runtime.kernels import over_chunks
 from ecs_anim.runtime.kernels.decode import PoseArrays, pose_arrays
 from ecs_anim.runtime.kernels.vec import (
@@ -34,6 +36,7 @@ from ecs_anim.solver.joint_speed import (
     DIRECTION_GROUP,
     DIRECTIONS_AT,
     FRAME_GROUP,
+    LEG_JOINTS,
     N_GROUPS,
     N_VALUES,
     SHIFT_GROUP,
@@ -43,6 +46,10 @@ from ecs_anim.solver.joint_speed import (
 B8 = NDArray[np.bool_]
 I64 = NDArray[np.int64]
 _N_FRAMES, _N_DIRECTIONS, _N_SHIFTS = 6, 5, 13
+#: (N_JOINTS,) the leg each joint is below the hip of (0 left, 1 right; -1: none).
+LEG_OF_JOINT = np.full(N_JOINTS, -1, np.int64)
+for _side, _joints in enumerate(LEG_JOINTS):
+    LEG_OF_JOINT[list(_joints)] = _side
 
 
 @jit(inline="always")
@@ -243,6 +250,49 @@ def limit_rows(lo: int, hi: int, pose: PoseArrays, clip_now: F64, clip_before: F
                 was_j = pose_before[c, SHIFTS_AT + j] - clip_before[c, SHIFTS_AT + j]
                 now_j = _shift(pose, c, j) - clip_now[c, SHIFTS_AT + j]
                 _set_shift(pose, c, j, clip_now[c, SHIFTS_AT + j] + was_j + part * (now_j - was_j))
+
+
+@jit(nogil=True)
+def share_rows(lo: int, hi: int, pose_joints: F64, clip_joints: F64, pose_joints_before: F64,
+               clip_joints_before: F64, planted: B8, max_step_m: float, goal_steps_m: F64,
+               leg_of_joint: I64, out: F64) -> None:
+    """Mirrors :func:`ecs_anim.solver.joint_speed.step_shares` over rows ``lo..hi-1`` into
+    ``out`` (r,)."""
+    for c in range(lo, hi):
+        share = 1.0
+        for j in range(N_JOINTS):
+            side = leg_of_joint[j]
+            if side >= 0 and planted[c, side]:
+                continue
+            cc = 0.0
+            dd = 0.0
+            cd = 0.0
+            for i in range(3):
+                step = clip_joints[c, j, i] - clip_joints_before[c, j, i]
+                change = ((pose_joints[c, j, i] - clip_joints[c, j, i])
+                          - (pose_joints_before[c, j, i] - clip_joints_before[c, j, i]))
+                cc += step * step
+                dd += change * change
+                cd += step * change
+            if dd > 0.0:
+                allowed = math.sqrt(cc) + (max_step_m + goal_steps_m[c])
+                room = allowed * allowed - cc
+                share = min(share, (-cd + math.sqrt(cd * cd + dd * room)) / max(dd, 1e-300))
+        out[c] = share
+
+
+def step_shares(pose_joints: F64, clip_joints: F64, pose_joints_before: F64,
+                clip_joints_before: F64, planted: B8, max_step_m: float, goal_steps_m: F64
+                ) -> F64:
+    """Compiled :func:`ecs_anim.solver.joint_speed.step_shares` (same arguments and result)."""
+    r = pose_joints.shape[0]
+    out = np.empty(r)
+    joints = [np.ascontiguousarray(a, dtype=np.float64)
+              for a in (pose_joints, clip_joints, pose_joints_before, clip_joints_before)]
+    over_chunks(share_rows, r, *joints, np.ascontiguousarray(planted, dtype=np.bool_),
+                float(max_step_m), np.ascontiguousarray(goal_steps_m, dtype=np.float64),
+                LEG_OF_JOINT, out)
+    return out
 
 
 def pack(poses: NormalizedPoses) -> F64:
