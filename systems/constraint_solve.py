@@ -8,18 +8,20 @@ activation weights run on simulation time, or on the clip time of constraints st
 motion; a point on another character is read from its posture of the previous tick (so every
 character sees the same world whatever their order), a point on the same character from this
 tick's pose. A constraint whose target is not finite is switched off with one warning.
-No pops (``SolverSettings.max_joint_speed_rad_s``, :mod:`ecs_anim.solver.joint_speed`): each
-segment the solver sets turns from the last tick's result at most that much faster than the
-motion's own segment (the compiled :mod:`ecs_anim.runtime.kernels.joint_speed`), and a character
-no longer solved goes back to its motion's pose no faster.
+No pops (``SolverSettings.max_joint_speed_m_s``, on by default, :mod:`ecs_anim.solver.joint_speed`):
+no joint moves more than that many m/s faster than the motion's own (from the pelvis), each
+character's correction going the share of its way that keeps it so (the compiled
+:mod:`ecs_anim.runtime.kernels.joint_speed`), and a character no longer solved goes back to its
+motion's pose no faster.
 
 Rows: characters with a Constraint component.
 Reads: store.poses, lengths, posture (the previous tick's), contact_weight, clip, clip_time_s,
 com_control, com_target_xy, segment_mass_kg, segment_com_fraction, last_clip_values,
-last_pose_values; the constraints table.
+last_pose_values, last_pose_joints_m, last_clip_joints_m; the constraints table.
 Writes: store.poses (solved characters, and those going back), com_desired, last_clip_values,
-last_pose_values, clip_positions (the motion's own joints, None when nothing was solved; with a
-frame budget, NaN but for the characters solved this tick), goals,
+last_pose_values, last_pose_joints_m, last_clip_joints_m, clip_positions (the motion's own
+joints, None when nothing was solved; with a frame budget, NaN but for the characters solved
+this tick), goals,
 solved (the decoded result of
 the solved characters, which PostureConvert takes instead of decoding them again); table.held;
 table.enabled, table.weight, table.error (how far each active constraint is from being met on
@@ -55,14 +57,14 @@ from ecs_anim.runtime.kernels.goals import (
 )
 from ecs_anim.runtime.kernels.goals import target_points as target_points
 from ecs_anim.runtime.kernels.goals import tick_goals as tick_goals
-from ecs_anim.runtime.kernels.joint_speed import limit_motion, pack
+from ecs_anim.runtime.kernels.joint_speed import limit_motion, pack, step_shares
 from ecs_anim.runtime.kernels.solve import solve as solve
 from ecs_anim.runtime.system_base import System
 from ecs_anim.solver import joint_speed as numpy_speed
 from ecs_anim.solver.budget import FrameBudget, SolverReport, effective_caps
 from ecs_anim.solver.goals import TickGoals
 from ecs_anim.solver.held_pose import HeldCorrections
-from ecs_anim.solver.joint_speed import SpeedSteps, solve_within_speed
+from ecs_anim.solver.joint_speed import MotionBefore, SpeedSteps, from_pelvis, solve_within_speed
 from ecs_anim.solver.shell import (
     NUMPY_STEPS,
     SolverSettings,
@@ -127,6 +129,7 @@ class Steps(NamedTuple):
     targets: Callable[..., NDArray[np.float64]]
     decode: Callable[..., DecodedPose]
     decode_some: Callable[..., DecodedPose]
+    shares: Callable[..., NDArray[np.float64]]
     limit_motion: Callable[..., tuple[NormalizedPoses, Any]]
     pack: Callable[[NormalizedPoses], NDArray[np.float64]]
 
@@ -136,20 +139,21 @@ def steps(compiled: bool) -> Steps:
     numpy references."""
     if compiled:
         return Steps(tick_goals, solve, constraint_errors, _centres, target_points, decode,
-                     _decode_some, limit_motion, pack)
+                     _decode_some, step_shares, limit_motion, pack)
     return Steps(NUMPY_STEPS.goals, NUMPY_STEPS.solve, NUMPY_STEPS.errors, numpy_centres,
-                 NUMPY_STEPS.targets, numpy_decode, _numpy_decode_some, numpy_speed.limit_motion,
-                 numpy_speed.pack)
+                 NUMPY_STEPS.targets, numpy_decode, _numpy_decode_some, numpy_speed.step_shares,
+                 numpy_speed.limit_motion, numpy_speed.pack)
 
 
 class ConstraintSolve(System):
     query = (Constraint,)
     reads = ("constraints", "clip", "clip_time_s", "poses", "lengths", "posture", "contact_weight",
              "com_control", "com_target_xy", "segment_mass_kg", "segment_com_fraction",
-             "last_clip_values", "last_pose_values")
+             "last_clip_values", "last_pose_values", "last_pose_joints_m", "last_clip_joints_m")
     writes = ("goals", "solved", "constraints.error", "constraints.weight",
               "constraints.enabled", "constraints.held", "poses", "com_desired",
-              "last_clip_values", "last_pose_values", "clip_positions")
+              "last_clip_values", "last_pose_values", "last_pose_joints_m", "last_clip_joints_m",
+              "clip_positions")
 
     def __init__(self, sim: Simulation) -> None:
         super().__init__(sim)
@@ -164,12 +168,18 @@ class ConstraintSolve(System):
         # the store's last_*_values hold the last tick's (else they are zeros: none).
         self._clip_now: NDArray[np.float64] | None = None
         self._values_kept = False
+        # This tick's motion joints from the pelvis (n, N_JOINTS, 3; None: not made).
+        self._clip_joints: NDArray[np.float64] | None = None
+        # Each constraint's goal point at the last tick if it was fully active then (m, 3; NaN:
+        # it was not), so a joint may follow a goal that moves faster than the bound.
+        self._last_goals = np.zeros((0, 3))
+        self._last_goals_tick = -2
 
     def _timed_solve(self, *args: Any) -> Any:
         """The compiled solve (within the speed bound when one is set), its CPU time kept for
         the frame budget's model."""
         start = time.process_time()
-        bounded = self.sim.solver_settings.max_joint_speed_rad_s is not None
+        bounded = self.sim.solver_settings.max_joint_speed_m_s is not None
         out = self._solve_within_speed(*args) if bounded else steps(self.sim.compiled).solve(*args)
         self._solve_cpu_s = time.process_time() - start
         return out
@@ -179,7 +189,7 @@ class ConstraintSolve(System):
         step = steps(sim.compiled)
         st.goals, st.solved, st.clip_positions = None, None, None
         self.report = None
-        self._clip_now = None
+        self._clip_now = self._clip_joints = None
         if table.m == 0:
             self._go_back(np.zeros(0, np.int64))
             return
@@ -210,12 +220,15 @@ class ConstraintSolve(System):
             unconstrained = step.decode(st.poses, st.lengths)
         if unconstrained is not None:
             st.clip_positions = unconstrained.positions.copy()
-            if settings.max_joint_speed_rad_s is not None:
+            if settings.max_joint_speed_m_s is not None:
                 self._clip_now = step.pack(st.poses)
+                self._clip_joints = from_pelvis(st.clip_positions)
                 # A character with no last tick kept (its first, or none solved since) was at its
-                # motion's pose: a constraint switched on at once is then met over a few ticks.
+                # motion's pose: a constraint easing in is paced from there.
                 fresh = ~np.any(st.last_pose_values != 0.0, axis=1)
                 st.last_clip_values[fresh] = st.last_pose_values[fresh] = self._clip_now[fresh]
+                st.last_pose_joints_m[fresh] = st.last_clip_joints_m[fresh] = \
+                    self._clip_joints[fresh]
         model = settings.cost_model or self.budget.model
         if settings.budget_ms is not None and model is not None:
             model = self.budget.for_cut(model, table.owner[weight > 0])
@@ -276,23 +289,55 @@ class ConstraintSolve(System):
                             com_fraction: NDArray[np.float64], settings: SolverSettings,
                             decoded: DecodedPose | None = None, in_place: bool = False
                             ) -> tuple[NormalizedPoses, NDArray[np.int64], DecodedPose]:
-        """The compiled solve (its signature), each segment then turning no more than
-        ``settings.max_joint_speed_rad_s`` faster than the motion's (:func:`solve_within_speed`)."""
+        """The compiled solve (its signature), then no joint faster than the motion's by more
+        than ``settings.max_joint_speed_m_s`` (:func:`solve_within_speed`)."""
         st, rows = self.sim.store, goals.rows
-        assert self._clip_now is not None  # packed before the solve
-        max_step = float(settings.max_joint_speed_rad_s or np.inf) * self.sim.dt
+        assert self._clip_now is not None and self._clip_joints is not None  # before the solve
+        every = rows.size == st.n  # (rows are sorted and distinct: all of them, in order)
+
+        def of(values: NDArray[np.float64]) -> NDArray[np.float64]:
+            return values if every else values[rows]
+
+        before = MotionBefore(of(self._clip_now), of(st.last_clip_values), of(st.last_pose_values),
+                              of(self._clip_joints), of(st.last_clip_joints_m),
+                              of(st.last_pose_joints_m), self._goal_steps(goals))
         step = steps(self.sim.compiled)
-        return solve_within_speed(
-            SpeedSteps(step.solve, step.limit_motion, step.decode), self._clip_now[rows],
-            st.last_clip_values[rows], st.last_pose_values[rows], max_step, poses, lengths,
-            goals, masses, com_fraction, settings, decoded, in_place)
+        return solve_within_speed(SpeedSteps(step.solve, step.shares, step.limit_motion,
+                                             step.decode), before,
+                                  float(settings.max_joint_speed_m_s or np.inf) * self.sim.dt,
+                                  poses, lengths, goals, masses, com_fraction, settings, decoded,
+                                  in_place)
+
+    def _goal_steps(self, goals: TickGoals) -> NDArray[np.float64]:
+        """(r,) how far each solved character's fastest point goal fully active this tick and
+        the last moved since (m; 0: none; a ramp's move is the bound's to spread; infinite for
+        a character with a constraint switched on at once); this tick's such goals kept for the
+        next."""
+        table = self.sim.constraints
+        if self._last_goals.shape[0] != table.m or self._last_goals_tick != self.sim.tick - 1:
+            self._last_goals = np.full((table.m, 3), np.nan)  # none kept, or not the last tick's
+        user = goals.table_index >= 0
+        full = user & (goals.weight >= 1.0) & ~goals.orientation
+        index = goals.table_index[full]
+        moved = np.linalg.norm(goals.goal[full] - self._last_goals[index], axis=1)
+        steps = np.zeros(goals.rows.size)
+        np.maximum.at(steps, goals.owner[full], np.nan_to_num(moved, nan=0.0))
+        # A constraint switched on at once (no ease: fully active, off at the last tick) asks
+        # for the jump: its character is met at once this tick.
+        at_once = np.zeros(goals.k, bool)
+        at_once[user] = (goals.weight[user] >= 1.0) & (table.weight[goals.table_index[user]] <= 0.0)
+        steps[goals.owner[at_once]] = np.inf
+        self._last_goals[:] = np.nan
+        self._last_goals[index] = goals.goal[full]
+        self._last_goals_tick = self.sim.tick
+        return steps
 
     def _go_back(self, solved_rows: NDArray[np.int64]) -> None:
         """The characters no longer solved whose last result was not their motion's pose (their
-        constraints over) go back to it no faster than ``max_joint_speed_rad_s`` allows (their
+        constraints over) go back to it no faster than ``max_joint_speed_m_s`` allows (their
         planted feet's legs at once: the motion has those on their footprints); then this
-        tick's motion poses and results are kept for the next tick."""
-        st, speed = self.sim.store, self.sim.solver_settings.max_joint_speed_rad_s
+        tick's motion poses, results and corrections are kept for the next tick."""
+        st, speed = self.sim.store, self.sim.solver_settings.max_joint_speed_m_s
         if speed is None or (self._clip_now is None and not self._values_kept):
             return
         step = steps(self.sim.compiled)
@@ -303,18 +348,47 @@ class ConstraintSolve(System):
         if rows.size:
             if st.clip_positions is None:  # nothing solved: every pose is the motion's
                 st.clip_positions = step.decode(st.poses, st.lengths).positions
+            planted = st.contact_weight[rows] > 0.0
+            clip_joints = from_pelvis(st.clip_positions[rows])
+            share = step.shares(clip_joints, clip_joints, st.last_pose_joints_m[rows],
+                                st.last_clip_joints_m[rows], planted, speed * self.sim.dt,
+                                np.zeros(rows.size))
             back, _ = step.limit_motion(st.poses.take(rows), clip_now[rows], st.last_clip_values[rows],
-                                   st.last_pose_values[rows], st.contact_weight[rows] > 0.0,
-                                   speed * self.sim.dt)
+                                   st.last_pose_values[rows], planted, share)
             for name, value in back.arrays().items():
                 getattr(st.poses, name)[rows] = value
         if self._clip_now is None and rows.size == 0:  # nothing solved nor going back
             st.last_clip_values[:], st.last_pose_values[:] = 0.0, 0.0
+            st.last_pose_joints_m[:], st.last_clip_joints_m[:] = 0.0, 0.0
             self._values_kept = False
             return
         st.last_clip_values = clip_now
         st.last_pose_values = step.pack(st.poses)
+        self._keep_joints(rows)
         self._values_kept = True
+
+    def _keep_joints(self, back_rows: NDArray[np.int64]) -> None:
+        """``store.last_clip_joints_m`` and ``last_pose_joints_m``: this tick's motion's joints
+        and result's (the solved characters' ``store.solved``, those going back decoded here,
+        the others' the motion's: NaN for those a frame budget held, which the next tick's bound
+        then leaves free), from the pelvis."""
+        st = self.sim.store
+        solved_rows = st.goals.rows if st.solved is not None and st.goals is not None \
+            else np.zeros(0, np.int64)
+        assert st.clip_positions is not None  # decoded when anything was solved or goes back
+        clip_joints = from_pelvis(st.clip_positions) if self._clip_joints is None \
+            else self._clip_joints
+        st.last_clip_joints_m = clip_joints
+        if solved_rows.size == st.n and st.solved is not None:
+            st.last_pose_joints_m = from_pelvis(st.solved.positions)
+        else:
+            st.last_pose_joints_m = clip_joints.copy()
+            if solved_rows.size and st.solved is not None:
+                st.last_pose_joints_m[solved_rows] = from_pelvis(st.solved.positions)
+        if back_rows.size:
+            back = steps(self.sim.compiled).decode(st.poses.take(back_rows),
+                                                   st.lengths[back_rows]).positions
+            st.last_pose_joints_m[back_rows] = from_pelvis(back)
 
     def _report(self, result: TickResult, dropped: NDArray[np.int64]) -> None:
         """This tick's report (``dropped``: the store rows the budget switched off)."""

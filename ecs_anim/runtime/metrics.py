@@ -12,7 +12,7 @@
   after separation (mm; ``store.overlap_m``, CollisionSeparate), and the time it was deepest;
 * joint speed: each character's fastest joint (m/s, between two ticks) and the fastest joint of
   its motion's own pose (before the solver: ``store.clip_positions``), and when: a joint much
-  faster than the motion's own is a pop (``SolverSettings.max_joint_speed_rad_s`` bounds them);
+  faster than the motion's own is a pop (``SolverSettings.max_joint_speed_m_s`` bounds them);
 * stride: distance between successive footprints of the same foot, also per leg length (the
   median of the latest :data:`STRIDES_KEPT`);
 * time per system per tick.

@@ -385,10 +385,11 @@ def load_scenario(path: str | Path) -> Scenario:
             camera["target_m"] = r.vector3(ck["target_m"], "camera.target_m", "m", 1e5)
     solver: dict[str, Any] = {}
     if "solver" in top:
-        sk = r.mapping(top["solver"], "solver", {"max_joint_speed_rad_s": False})
-        if "max_joint_speed_rad_s" in sk:
-            solver["max_joint_speed_rad_s"] = r.number(
-                sk["max_joint_speed_rad_s"], "solver.max_joint_speed_rad_s", 0.01, 1000.0, "rad/s")
+        sk = r.mapping(top["solver"], "solver", {"max_joint_speed_m_s": False})
+        if "max_joint_speed_m_s" in sk:  # null: no bound
+            node = sk["max_joint_speed_m_s"]
+            solver["max_joint_speed_m_s"] = None if r.scalar(node, "solver.max_joint_speed_m_s") \
+                is None else r.number(node, "solver.max_joint_speed_m_s", 0.01, 1000.0, "m/s")
     starts = np.array([c.placement.position_m for c in characters])
     tables = [_table(r, node, f"tables[{i}]", starts) for i, node in
               enumerate(r.sequence(top["tables"], "tables", MAX_TABLES, "tables") if "tables" in top else [])]

@@ -1,23 +1,34 @@
-"""No pops: how much faster than its motion a solved segment may turn from one tick to the next.
+"""No pops: how much faster than its motion the solver may move a joint from one tick to the next.
 
 The solver may change a pose a lot between two ticks while its goals hardly move: a trunk that
 a chain may bend folds 60° in one tick once a punch's target is out of the arm's reach, a leg
-twists about its hip-ankle axis as a kick's goal eases in (the toe at 14-17 m/s where the
-clip's moves at 3). :func:`limit_motion` lets each segment the solver sets (the legs', arms',
-thorax's and head's frames, the feet's, hands' and neck's directions, the limbs' fractions, the
-spine's points, all in the normalized form, relative to their parents) move from where it was
-at the last tick toward where the solve put it by at most ``max_step`` more than the motion's
-own segment moved (radians a tick, ``max_joint_speed_rad_s * dt``; a fraction of a limb's
-length or a spine point, in spine lengths, counts as radians). Each group of the solver (a leg,
-an arm, the head, the trunk) goes the same share of its way, the share of its most held-back
-segment, so a limb keeps its shape along the way. So:
+twists about its hip-ankle axis as a kick's goal eases in (the knee's correction changing at
+14.5 m/s, the toe at 16.8 m/s where the clip's moves at 3), a short ease snaps the arm to its
+goal. What the solver adds to the motion is each joint's *correction*: how
+far it puts the joint from where the motion has it. The bound: no joint, measured from its
+pelvis (:func:`from_pelvis`: the root's own move and the centre of mass's count for nothing),
+steps further in a tick than the motion's own joint steps plus ``max_step_m``
+(``SolverSettings.max_joint_speed_m_s * dt``). So:
 
-* the motion's own fast moves (a kick) and a correction that keeps a point on a target while
-  the motion sweeps past it are not touched: only what the solver adds beyond the motion's own
-  speed is bounded, and a fold of the trunk is spread over several ticks;
-* a leg standing on a footprint (contact) is not limited; the characters held back are solved
-  again on their limited pose with the feet's goals alone (:func:`contact_goals`), which
-  re-plants the feet and moves the root so that the centre of mass is back.
+* the motion's own fast moves (a kick) and a correction that keeps a point on a target while the
+  motion sweeps past it (the correction changing as fast as the motion, the joint standing
+  still) are not touched, nor a point following a fully active goal that moves fast (a
+  forearm warding off a kicking ankle: a character's bound grows by its fastest such goal's
+  step): only a joint faster than its motion's by more than that is. A ramp (a constraint
+  easing in or out, where the solve may flip a knee or fold a trunk) is the bound's to spread;
+  a constraint switched on at once (no ease) asks for the jump and gets it (its character's
+  goal step is infinite on that tick);
+* such a character's correction goes only a share of its way from the last tick's to this
+  tick's solve, the same share in every segment the solver sets (:func:`step_shares`,
+  :func:`limit_motion`): the share that brings its fastest joint to the bound, so the body keeps
+  the solved shape along the way and a fold of the trunk is spread over several ticks. The
+  share is taken in each segment's correction (its turn or shift away from the motion's own
+  segment), so the motion plays on at its own speed while the correction catches up, never
+  faster than the bound allows;
+* a leg standing on a footprint (contact) is not limited and its joints do not count; the
+  characters held back are solved again on their limited pose with the feet's goals alone
+  (:func:`contact_goals`), which re-plants the feet and moves the root so that the centre of
+  mass is back.
 
 Segment values are packed per character into :data:`N_VALUES` floats (:func:`pack`): the six
 frames' quaternions, the five directions, the thirteen fractions and spine coordinates. A row
@@ -37,6 +48,7 @@ from numpy.typing import NDArray
 
 from ecs_anim.core.body_points import ARM_L, ARM_R, HEAD, LEG_L, LEG_R, TRUNK
 from ecs_anim.core.normalized import DecodedPose, NormalizedPoses, decode
+from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.solver.goals import CONTACT_PRIORITY, TickGoals
 from ecs_anim.solver.shell import SolverSettings, solve
 
@@ -146,41 +158,57 @@ def _frame_turns(a: F64, b: F64) -> F64:
     return _rotvec_of(_quat_mul(b, _conj(a)))
 
 
-def _steps(before: F64, after: NormalizedPoses | F64) -> tuple[list[F64], list[F64], list[F64]]:
-    """How far each frame, direction (rad) and shift moved from the packed ``before`` (r,
-    N_VALUES) to ``after`` (poses, or packed too): lists of (r,) per frame, direction, shift."""
-    now = after if isinstance(after, np.ndarray) else pack(after)
-    frames = [np.linalg.norm(_frame_turns(before[:, 4 * k:4 * k + 4], now[:, 4 * k:4 * k + 4]),
-                             axis=-1) for k in range(len(FRAMES))]
-    directions = []
-    for k in range(len(DIRECTIONS)):
-        at = slice(DIRECTIONS_AT + 3 * k, DIRECTIONS_AT + 3 * k + 3)
-        a, b = before[:, at], now[:, at]
-        directions.append(np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1)))
-    shifts = [np.linalg.norm(now[:, SHIFTS_AT + SHIFT_START[k]:SHIFTS_AT + SHIFT_START[k + 1]]
-                             - before[:, SHIFTS_AT + SHIFT_START[k]:SHIFTS_AT + SHIFT_START[k + 1]],
-                             axis=-1) for k in range(len(SHIFTS))]
-    return frames, directions, shifts
+#: Each leg's joints below the hip (knee, ankle, toe), [left, right]: a planted leg's do not
+#: count in :func:`step_shares`.
+LEG_JOINTS = ((J["knee_l"], J["ankle_l"], J["toe_l"]), (J["knee_r"], J["ankle_r"], J["toe_r"]))
+
+
+def from_pelvis(positions: F64) -> F64:
+    """(r, N_JOINTS, 3) m: the joints ``positions`` (r, N_JOINTS, 3, world m) from their own
+    character's pelvis (so the root's own move, and the one the centre of mass asks, count for
+    nothing in a joint's step)."""
+    out: F64 = positions - positions[:, :1]
+    return out
+
+
+def step_shares(pose_joints: F64, clip_joints: F64, pose_joints_before: F64,
+                clip_joints_before: F64, planted: B8, max_step_m: float, goal_steps_m: F64
+                ) -> F64:
+    """(r,) the share of its way each character's correction may go, from the last tick's to
+    this tick's solve, so that no joint steps more than ``max_step_m`` (m) plus how far the
+    character's fastest fully active goal stepped (``goal_steps_m`` (r,), m: a joint may follow
+    its goal) further than the motion's own joint does: the largest ``s`` in [0, 1] with
+    ``|c + s d| <= |c| + max_step_m + goal_step`` for every joint, ``c`` the motion's step and
+    ``d`` the correction's change (the joints' move is taken as linear in ``s``). All joints
+    (r, N_JOINTS, 3) from the pelvis (:func:`from_pelvis`): this tick's solve ``pose_joints``
+    and motion ``clip_joints``, the last tick's result and motion (``..._before``; the pose's
+    equal to the motion's where it was the motion's). The joints of the legs ``planted`` (r, 2)
+    do not count."""
+    clip_step = clip_joints - clip_joints_before
+    change = (pose_joints - clip_joints) - (pose_joints_before - clip_joints_before)
+    allowed = np.linalg.norm(clip_step, axis=-1) + (max_step_m + goal_steps_m)[:, None]
+    dd = np.sum(change * change, axis=-1)
+    cd = np.sum(clip_step * change, axis=-1)
+    # |c + s d|^2 = |c|^2 + 2 s c.d + s^2 |d|^2 <= allowed^2: the larger root (|c| < allowed)
+    room = allowed * allowed - np.sum(clip_step * clip_step, axis=-1)
+    # (a character whose goal jumped has an infinite room: no 0 * inf where nothing changes)
+    largest = (-cd + np.sqrt(cd * cd + np.where(dd > 0.0, dd, 1.0) * room)) / np.maximum(dd, 1e-300)
+    share = np.where(dd > 0.0, np.minimum(largest, 1.0), 1.0)
+    for side, joints in enumerate(LEG_JOINTS):
+        share[:, list(joints)] = np.where(planted[:, side, None], 1.0, share[:, list(joints)])
+    out: F64 = share.min(axis=1, initial=1.0)
+    return out
 
 
 def limit_motion(poses: NormalizedPoses, clip_now: F64, clip_before: F64, pose_before: F64,
-                 planted: B8, max_step: float) -> tuple[NormalizedPoses, B8]:
-    """``poses`` (r,), as the solve left them, with each group's segments moved from
-    ``pose_before`` (r, N_VALUES: the last tick's result, packed; a row of zeros: none) toward
-    them by the share of the way that keeps every segment's turn within ``max_step`` (rad) plus
-    how far the motion's own moved (``clip_before`` to ``clip_now``, packed). The legs of
-    ``planted`` (r, 2) are left as solved. Returns the poses (new arrays) and (r,) whether
-    anything was held back."""
-    r = poses.root_heading.shape[0]
-    moved = _steps(pose_before, poses)
-    own = _steps(clip_before, clip_now)
-    need = np.ones((r, N_GROUPS))
-    for groups, moved_by, own_by in zip((FRAME_GROUP, DIRECTION_GROUP, SHIFT_GROUP), moved, own,
-                                        strict=True):
-        for k, group in enumerate(groups):
-            allowed = max_step + own_by[k]
-            share = np.where(moved_by[k] > allowed, allowed / np.maximum(moved_by[k], 1e-300), 1.0)
-            need[:, group] = np.minimum(need[:, group], share)
+                 planted: B8, share: F64) -> tuple[NormalizedPoses, B8]:
+    """``poses`` (r,), as the solve left them, with each segment's correction (its turn or
+    shift away from the motion's own: ``clip_now`` for ``poses``, ``clip_before`` for
+    ``pose_before``, the last tick's result; all (r, N_VALUES), packed; a row of zeros in
+    ``pose_before``: no last tick) going only ``share`` (r,) of its way from the last tick's to
+    this tick's, on the motion's segment of this tick. The legs of ``planted`` (r, 2) are left
+    as solved. Returns the poses (new arrays) and (r,) whether anything was held back."""
+    need = np.repeat(np.minimum(share, 1.0)[:, None], N_GROUPS, axis=1)
     need[:, [LEG_L, LEG_R]] = np.where(planted, 1.0, need[:, [LEG_L, LEG_R]])
     need[~np.any(pose_before != 0.0, axis=1)] = 1.0  # no last tick
     held = need < 1.0
@@ -188,23 +216,31 @@ def limit_motion(poses: NormalizedPoses, clip_now: F64, clip_before: F64, pose_b
     for k, (field, index, group) in enumerate(FRAMES):
         rows = np.flatnonzero(held[:, group])
         if rows.size:
-            a = pose_before[rows, 4 * k:4 * k + 4]
-            turn = _frame_turns(a, _get(poses, field, index)[rows]) * need[rows, group, None]
-            _set(out, field, index, rows, _quat_mul(_quat_of(turn), a))
+            at = slice(4 * k, 4 * k + 4)
+            was = _quat_mul(pose_before[rows, at], _conj(clip_before[rows, at]))
+            now = _quat_mul(_get(poses, field, index)[rows], _conj(clip_now[rows, at]))
+            turn = _frame_turns(was, now) * need[rows, group, None]
+            _set(out, field, index, rows, _quat_mul(_quat_mul(_quat_of(turn), was),
+                                                    clip_now[rows, at]))
     for k, (field, index, group) in enumerate(DIRECTIONS):
         rows = np.flatnonzero(held[:, group])
         if rows.size:
-            a = pose_before[rows, DIRECTIONS_AT + 3 * k:DIRECTIONS_AT + 3 * k + 3]
-            turn = _rotvec_of(_quat_between(a, _get(poses, field, index)[rows]))
-            _set(out, field, index, rows, _rotate(_quat_of(turn * need[rows, group, None]), a))
+            at = slice(DIRECTIONS_AT + 3 * k, DIRECTIONS_AT + 3 * k + 3)
+            was = _quat_between(clip_before[rows, at], pose_before[rows, at])
+            now = _quat_between(clip_now[rows, at], _get(poses, field, index)[rows])
+            turn = _frame_turns(was, now) * need[rows, group, None]
+            _set(out, field, index, rows,
+                 _rotate(_quat_mul(_quat_of(turn), was), clip_now[rows, at]))
     for k, (field, index, _, group) in enumerate(SHIFTS):
         rows = np.flatnonzero(held[:, group])
         if rows.size:
             at = slice(SHIFTS_AT + SHIFT_START[k], SHIFTS_AT + SHIFT_START[k + 1])
             to = _get(poses, field, index)[rows]
-            a = pose_before[rows, at].reshape(to.shape)
-            share = need[rows, group].reshape((-1,) + (1,) * (to.ndim - 1))
-            _set(out, field, index, rows, a + share * (to - a))
+            shape = to.shape
+            was = (pose_before[rows, at] - clip_before[rows, at]).reshape(shape)
+            now = to - clip_now[rows, at].reshape(shape)
+            part = need[rows, group].reshape((-1,) + (1,) * (to.ndim - 1))
+            _set(out, field, index, rows, clip_now[rows, at].reshape(shape) + was + part * (now - was))
     any_held: B8 = np.any(held, axis=1)
     return out, any_held
 
@@ -232,37 +268,68 @@ def contact_goals(goals: TickGoals, rows: I64) -> TickGoals:
 
 class SpeedSteps(NamedTuple):
     """The computations :func:`solve_within_speed` is made of, each with the signature of its
-    numpy reference: ``solve`` (:func:`ecs_anim.solver.shell.solve`), ``limit``
-    (:func:`limit_motion`) and ``decode`` (:func:`ecs_anim.core.normalized.decode`).
-    :data:`NUMPY_SPEED_STEPS` are the references; ConstraintSolve runs the compiled ones."""
+    numpy reference: ``solve`` (:func:`ecs_anim.solver.shell.solve`), ``shares``
+    (:func:`step_shares`), ``limit`` (:func:`limit_motion`) and ``decode``
+    (:func:`ecs_anim.core.normalized.decode`). :data:`NUMPY_SPEED_STEPS` are the references;
+    ConstraintSolve runs the compiled ones."""
 
     solve: Callable[..., tuple[NormalizedPoses, I64, DecodedPose]]
+    shares: Callable[..., F64]
     limit: Callable[..., tuple[NormalizedPoses, B8]]
     decode: Callable[[NormalizedPoses, F64], DecodedPose]
 
 
-NUMPY_SPEED_STEPS = SpeedSteps(solve, limit_motion, decode)
+NUMPY_SPEED_STEPS = SpeedSteps(solve, step_shares, limit_motion, decode)
 
 
-def solve_within_speed(steps: SpeedSteps, clip_now: F64, clip_before: F64, pose_before: F64,
-                       max_step: float, poses: NormalizedPoses, lengths: F64, goals: TickGoals,
-                       masses: F64, com_fraction: F64, settings: SolverSettings,
+class MotionBefore(NamedTuple):
+    """What :func:`solve_within_speed` compares this tick's solve with, for the rows it solves:
+    ``clip_now`` and ``clip_before`` (r, N_VALUES) the motion's segments this tick and the
+    last, ``pose_before`` (r, N_VALUES) the last tick's result (all packed); ``clip_joints``
+    (r, N_JOINTS, 3) the motion's joints this tick, ``clip_joints_before`` and
+    ``pose_joints_before`` the last tick's motion's and result's (all :func:`from_pelvis`, m);
+    ``goal_steps_m`` (r,) how far each character's fastest goal fully active at both ticks
+    moved since the last (m; 0: none)."""
+
+    clip_now: F64
+    clip_before: F64
+    pose_before: F64
+    clip_joints: F64
+    clip_joints_before: F64
+    pose_joints_before: F64
+    goal_steps_m: F64
+
+
+def solve_within_speed(steps: SpeedSteps, before: MotionBefore, max_step_m: float,
+                       poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64,
+                       com_fraction: F64, settings: SolverSettings,
                        decoded: DecodedPose | None = None, in_place: bool = False
                        ) -> tuple[NormalizedPoses, I64, DecodedPose]:
     """The solve of ``goals`` (the arguments from ``poses`` on are ``steps.solve``'s), then
-    :func:`limit_motion` (``clip_now``, ``clip_before``, ``pose_before``: (r, N_VALUES) of the
-    rows ``goals.rows``); the characters held back are solved again on their limited pose with
-    their feet's goals alone (:func:`contact_goals`: the feet re-planted, the centre of mass
-    back). Returns what the solve does: the poses, the iterations each character used (both
-    solves) and the decoded result."""
+    :func:`limit_motion` by the :func:`step_shares` that keep every joint's step within
+    ``max_step_m`` (m) of the motion's own (plus its fastest goal's step); the characters held back are solved again on their
+    limited pose with their feet's goals alone (:func:`contact_goals`: the feet re-planted, the
+    centre of mass back). Returns what the solve does: the poses, the iterations each character
+    used (both solves) and the decoded result."""
     solved, iterations, result = steps.solve(poses, lengths, goals, masses, com_fraction, settings,
                                              decoded, in_place)
-    limited, held = steps.limit(solved, clip_now, clip_before, pose_before, goals.in_contact,
-                                max_step)
+    share = steps.shares(from_pelvis(result.positions), before.clip_joints,
+                        before.pose_joints_before, before.clip_joints_before, goals.in_contact,
+                        max_step_m, before.goal_steps_m)
+    limited, held = steps.limit(solved, before.clip_now, before.clip_before, before.pose_before,
+                                goals.in_contact, share)
     rows = np.flatnonzero(held)
     if rows.size == 0:
         return limited, iterations, result
     part = limited.take(rows)
+    # The joints' move is not linear in the share (segments turn): measured on the limited
+    # pose, the share is taken once more of what is left over (a turn's share composes).
+    closer = steps.shares(from_pelvis(steps.decode(part, lengths[rows]).positions),
+                         before.clip_joints[rows], before.pose_joints_before[rows],
+                         before.clip_joints_before[rows], goals.in_contact[rows], max_step_m,
+                         before.goal_steps_m[rows])
+    part, _ = steps.limit(part, before.clip_now[rows], before.clip_before[rows],
+                          before.pose_before[rows], goals.in_contact[rows], closer)
     again, more, part_decoded = steps.solve(
         part, lengths[rows], contact_goals(goals, rows), masses[rows], com_fraction[rows],
         settings, steps.decode(part, lengths[rows]), True)
@@ -275,5 +342,5 @@ def solve_within_speed(steps: SpeedSteps, clip_now: F64, clip_before: F64, pose_
     return limited, iterations, result
 
 
-__all__ = ["NUMPY_SPEED_STEPS", "N_VALUES", "SpeedSteps", "contact_goals", "limit_motion", "pack",
-           "solve_within_speed"]
+__all__ = ["NUMPY_SPEED_STEPS", "N_VALUES", "MotionBefore", "SpeedSteps", "contact_goals",
+           "from_pelvis", "limit_motion", "pack", "solve_within_speed", "step_shares"]

@@ -83,6 +83,14 @@ from ecs_anim.solver.steps import (
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 
+#: The default bound on how much faster than the motion a joint may move because of the solver
+#: (m/s, ``SolverSettings.max_joint_speed_m_s``): a deliberate reach's speed. Captured people
+#: raising a hand move the wrist at 2.7 m/s (``bandai_raise_left_hand``, played on an adult at
+#: 30 Hz; the hand 3.8), where a punch or a kick reach 5-11 m/s at the wrist or ankle
+#: (docs/api.md, No pops). A correction up to this speed (the 1 s ease of a 0.85 m reach peaks
+#: at 2.4 m/s) is not touched; what goes faster was a pop.
+MAX_JOINT_SPEED_M_S = 3.0
+
 
 @dataclass(frozen=True)
 class SolverSettings:
@@ -104,9 +112,11 @@ class SolverSettings:
     cut first), get fewer iterations. ``cost_model``: the cost the cut is decided by (None:
     calibrated every tick from the last tick's measured times).
 
-    ``max_joint_speed_rad_s``: how much faster than the motion's own segment a segment the
-    solver sets may turn in a second, rad/s (None, the default: as fast as the solve likes); a
-    trunk the solve folds in one tick then bends over several
+    ``max_joint_speed_m_s``: how much faster than the motion's own a joint may move because of
+    the solver, m/s: each joint's correction (how far the solve puts it from the motion's, from
+    the pelvis) changes by at most this much a second (:data:`MAX_JOINT_SPEED_M_S` by default,
+    a person's deliberate reach; None: as fast as the solve likes). A trunk the solve folds in
+    one tick then bends over several, a constraint switched on at once is met over a few ticks
     (:mod:`ecs_anim.solver.joint_speed`)."""
 
     iterations: int = 6
@@ -120,13 +130,13 @@ class SolverSettings:
     budget_ms: float | None = None
     focus_in_world: tuple[float, float, float] | None = None
     cost_model: SolverCostModel | None = None
-    max_joint_speed_rad_s: float | None = None
+    max_joint_speed_m_s: float | None = MAX_JOINT_SPEED_M_S
 
     def __post_init__(self) -> None:
-        if self.max_joint_speed_rad_s is not None and not (
-                np.isfinite(self.max_joint_speed_rad_s) and self.max_joint_speed_rad_s > 0):
-            raise UsageError(f"max_joint_speed_rad_s must be a positive number of radians a "
-                             f"second or None, got {self.max_joint_speed_rad_s}")
+        if self.max_joint_speed_m_s is not None and not (
+                np.isfinite(self.max_joint_speed_m_s) and self.max_joint_speed_m_s > 0):
+            raise UsageError(f"max_joint_speed_m_s must be a positive number of metres a "
+                             f"second or None, got {self.max_joint_speed_m_s}")
         if not 0.0 <= self.stall_fraction < 1.0:
             raise UsageError(f"stall_fraction must be in [0, 1), got {self.stall_fraction}")
         if self.budget_ms is not None and not (np.isfinite(self.budget_ms) and self.budget_ms > 0):

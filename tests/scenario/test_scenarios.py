@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from conftest import SCENARIOS_DIR
+from conftest import MOCAP_DIR, SCENARIOS_DIR, require_mocap
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.scenario import load_scenario
 from support.scenarios import run
@@ -17,11 +17,39 @@ def started(run_result, character, clip):
                 if e.kind == "clip_started" and e.character == character and e.detail == clip)
 
 
+#: No pops (docs/api.md): no joint faster than 1.5x its clip's fastest, or, where the clip
+#: hardly moves (a reach over a still clip, which "1.5x" would keep still), than a captured
+#: punch's fastest joint: bandai_punch's hand, 6.3 m/s on an adult at 30 Hz
+#: (test_the_pop_floor_is_a_captured_punchs_fastest_joint).
+POP_FLOOR_M_S = 6.3
+
+
+def test_the_pop_floor_is_a_captured_punchs_fastest_joint():
+    from ecs_anim.components import MotionPlayer
+    from ecs_anim.core.morphology import Morphology
+    from ecs_anim.io.importing import import_bvh
+    from ecs_anim.runtime.simulation import Simulation
+
+    require_mocap()
+    punch = import_bvh(MOCAP_DIR / "bandai_punch.bvh")
+    sim = Simulation({"punch": punch})
+    sim.spawn("boxer", Morphology.preset("adult_male"), MotionPlayer("punch", loop=False))
+    positions = []
+    for _ in range(round(punch.n_frames / punch.fps * sim.fps)):
+        sim.step()
+        positions.append(sim.store.positions[0].copy())
+    speeds = np.linalg.norm(np.diff(np.array(positions), axis=0), axis=-1)[2:] * sim.fps
+    assert abs(speeds.max() - POP_FLOOR_M_S) < 0.05 * POP_FLOOR_M_S
+    assert np.unravel_index(speeds.argmax(), speeds.shape)[1] == J["hand_l"]
+
+
 @pytest.mark.parametrize("name", sorted(p.stem for p in SCENARIOS_DIR.glob("*.yaml")))
 def test_every_scenario_runs_clean(name):
     r = run(name)
     assert np.all(np.isfinite(r["positions"]))
     for c in r["report"]["characters"]:
+        assert c["joint_speed_m_s_max"] <= max(1.5 * c["clip_joint_speed_m_s_max"],
+                                               POP_FLOOR_M_S), c  # no pops
         assert c["foot_sliding_mm_per_frame"]["max"] < 1.0, c
         assert c["ground_penetration_mm_max"] < 1.0, c
         assert c["bone_length_error_m_max"] < 1e-6, c
@@ -33,7 +61,11 @@ def test_fight_training_hits_and_ward_offs_are_met_and_heads_dodge_the_punches()
     e, w, idx = r["errors"], r["weights"], r["index"]
     for pair in (1, 2, 3, 4):
         ward = idx[f"defender_{pair}.ward_off"]
-        assert np.nanmax(e[w[:, ward] >= 1, ward]) < 0.01  # the forearm meets the ankle
+        full = np.flatnonzero(w[:, ward] >= 1)
+        assert np.nanmax(e[full[1:], ward]) < 0.01  # the forearm meets the ankle
+        # its first fully active tick too, but for pair 3, where the 0.15 s ease outruns the
+        # solver's speed bound (no pops, docs/api.md) by a tick: 20 mm there (0 without)
+        assert e[full[0], ward] < (0.025 if pair == 3 else 0.01)
     for pair in (1, 2, 3):
         kick = idx[f"kicker_{pair}.kick_torso"]
         assert np.nanmax(e[w[:, kick] >= 1, kick]) < 0.01  # the ankle on the torso
@@ -62,11 +94,13 @@ def test_fight_training_hits_and_ward_offs_are_met_and_heads_dodge_the_punches()
         knuckles = pos[:, d, J["wrist_r"]] + 0.6 * (pos[:, d, J["hand_r"]] - pos[:, d, J["wrist_r"]])
         return head, knuckles
 
-    # The dodge: the kicker's head leans back and keeps at least 17 cm from the knuckles through
-    # the punch (1.0-1.5 s of ward_off_punch, which the defender plays from 0.4 s), at least
-    # 4 cm further than without it, where the fist stops on the face (the hand's and the head's
-    # capsules touching: 13-17 cm; it went 10 cm in before bodies were kept apart), and moves
-    # smoothly: no tick moves it further than the fist itself moves in a tick.
+    # The dodge: the kicker's head leans back and keeps at least 19 cm (pair 4: 16 cm) from the
+    # knuckles through the punch (1.0-1.5 s of ward_off_punch, which the defender plays from
+    # 0.4 s), at least 3 cm further than without it, where the fist stops on the face (the
+    # hand's and the head's capsules touching: 13-17 cm; it went 10 cm in before bodies were
+    # kept apart), and moves smoothly: no tick moves it further than the fist itself moves in a
+    # tick. The solver's speed bound (no pops, docs/api.md) spreads the lean's 0.1 s ease: 19.7-
+    # 20.7 cm (pair 4: 16.5), where without the bound the head leaned to 27.1-27.7 (17.9).
     for pair in (1, 2, 3, 4):
         begun = started(r, f"defender_{pair}", "ward_off_punch")
         assert begun == started(without, f"defender_{pair}", "ward_off_punch")
@@ -75,8 +109,8 @@ def test_fight_training_hits_and_ward_offs_are_met_and_heads_dodge_the_punches()
         head_without, knuckles_without = head_and_knuckles(without, pair)
         gap = np.linalg.norm(head - knuckles, axis=1)[punch_window].min()
         gap_without = np.linalg.norm(head_without - knuckles_without, axis=1)[punch_window].min()
-        assert gap_without < 0.18 and gap > 0.17 and gap > gap_without + 0.04, \
-            (pair, gap, gap_without)
+        assert gap_without < 0.18 and gap > (0.16 if pair == 4 else 0.19), (pair, gap)
+        assert gap > gap_without + 0.03, (pair, gap, gap_without)
         head_step = np.linalg.norm(np.diff(head, axis=0), axis=1).max()
         fist_step = np.linalg.norm(np.diff(knuckles_without, axis=0), axis=1).max()
         assert head_step <= fist_step + 0.01, (pair, head_step, fist_step)

@@ -43,11 +43,9 @@ def compile_every_kernel() -> None:
 def compile_separation() -> None:
     """Compile :mod:`ecs_anim.runtime.kernels.separate` and
     :mod:`ecs_anim.runtime.kernels.joint_speed` (into the cache): two ticks of two walkers
-    started side by side 0.4 m apart, one reaching out under the solver's speed bound, 5 cm
-    in each other, which CollisionSeparate pushes apart (started 0.15 m apart, neither body
-    could move: ``push_rows`` was not compiled, and the fight compiled it mid-run)."""
-    from dataclasses import replace
-
+    started side by side 0.4 m apart, one reaching out under the solver's speed bound (on by
+    default), 5 cm in each other, which CollisionSeparate pushes apart (started 0.15 m apart,
+    neither body could move: ``push_rows`` was not compiled, and the fight compiled it mid-run)."""
     from ecs_anim.components import MotionPlayer, Placement
     from ecs_anim.core.morphology import Morphology
     from ecs_anim.io.importing import import_bvh
@@ -59,7 +57,6 @@ def compile_separation() -> None:
     was_disabled, log.disabled = log.disabled, True
     try:
         with Simulation({"walk": import_bvh(MOTIONS_DIR / "walk.bvh")}, rotations=True) as sim:
-            sim.solver_settings = replace(sim.solver_settings, max_joint_speed_rad_s=4.0)
             walkers = [sim.spawn(f"c{i}", Morphology.from_stature(1.7), MotionPlayer("walk"),
                                  Placement((0.0, 0.4 * i))) for i in range(2)]
             sim.add_constraint(walkers[0], "reach", "wrist_r", 1.0, Activation(0.0, 1e9),

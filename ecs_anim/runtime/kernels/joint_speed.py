@@ -1,8 +1,9 @@
-"""Compiled :mod:`ecs_anim.solver.joint_speed`: how much faster than its motion a solved
-segment may turn from one tick to the next (no pops).
+"""Compiled :mod:`ecs_anim.solver.joint_speed`: each segment's correction (its turn or shift
+away from the motion's own) going only a share of its way from the last tick's (no pops).
 
-:func:`limit_motion` and :func:`pack` take the arguments of their numpy references and give the
-same results (to 1e-9); the per-character loops are :func:`limit_rows` and :func:`pack_rows`.
+:func:`step_shares`, :func:`limit_motion` and :func:`pack` take the arguments of their numpy
+references and give the same results (to 1e-9); the per-character loops are
+:func:`share_rows`, :func:`limit_rows` and :func:`pack_rows`.
 Values are packed as the reference's: frames 0-5 (legs, arms, thorax, head) as quaternions,
 directions 0-4 (feet, hands, neck), shifts 0-12 (leg fractions, arm fractions, the spine's
 three points).
@@ -16,6 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.core.normalized import NormalizedPoses
+from ecs_anim.core.skeleton import N_JOINTS
 from ecs_anim.runtime.kernels import over_chunks
 from ecs_anim.runtime.kernels.decode import PoseArrays, pose_arrays
 from ecs_anim.runtime.kernels.vec import (
@@ -34,6 +36,7 @@ from ecs_anim.solver.joint_speed import (
     DIRECTION_GROUP,
     DIRECTIONS_AT,
     FRAME_GROUP,
+    LEG_JOINTS,
     N_GROUPS,
     N_VALUES,
     SHIFT_GROUP,
@@ -43,6 +46,10 @@ from ecs_anim.solver.joint_speed import (
 B8 = NDArray[np.bool_]
 I64 = NDArray[np.int64]
 _N_FRAMES, _N_DIRECTIONS, _N_SHIFTS = 6, 5, 13
+#: (N_JOINTS,) the leg each joint is below the hip of (0 left, 1 right; -1: none).
+LEG_OF_JOINT = np.full(N_JOINTS, -1, np.int64)
+for _side, _joints in enumerate(LEG_JOINTS):
+    LEG_OF_JOINT[list(_joints)] = _side
 
 
 @jit(inline="always")
@@ -187,95 +194,105 @@ def pack_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, out: F64) -> None:
 
 
 @jit(inline="always")
-def _angle(a: Vec3, b: Vec3) -> float:
-    """The angle between unit directions (rad), as the reference's ``arctan2(|a x b|, a.b)``."""
-    k = cross(a, b)
-    return math.atan2(math.sqrt(k[0] * k[0] + k[1] * k[1] + k[2] * k[2]), dot(a, b))
-
-
-@jit(inline="always")
 def _frame_turn(a: Quat, b: Quat) -> Vec3:
     """The rotation vector (rad) from quaternion ``a`` to ``b``."""
     return rotvec_of(quat_mul(b, conj(a)))
 
 
 @jit(inline="always")
-def _size(v: Vec3) -> float:
-    return math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-
-
-@jit(inline="always")
-def _share(moved: float, allowed: float) -> float:
-    return allowed / max(moved, 1e-300) if moved > allowed else 1.0
+def _scaled(t: Vec3, share: float) -> Quat:
+    """The quaternion of ``share`` of the turn ``t`` (a rotation vector, rad)."""
+    return quat_of((t[0] * share, t[1] * share, t[2] * share))
 
 
 @jit(nogil=True)
 def limit_rows(lo: int, hi: int, pose: PoseArrays, clip_now: F64, clip_before: F64,
-               pose_before: F64, planted: B8, max_step: float, frame_group: I64,
+               pose_before: F64, planted: B8, share: F64, frame_group: I64,
                direction_group: I64, shift_group: I64, need: F64, held: B8) -> None:
     """Mirrors :func:`ecs_anim.solver.joint_speed.limit_motion` over rows ``lo..hi-1`` of
     ``pose`` (limited in place); ``held`` (r,) whether anything was held back; ``need``
     (r, N_GROUPS) scratch: each group's share of its way."""
     for c in range(lo, hi):
-        for g in range(N_GROUPS):
-            need[c, g] = 1.0
-        for k in range(_N_FRAMES):
-            at = 4 * k
-            moved = _size(_frame_turn(load4(pose_before[c, at:at + 4]), _frame(pose, c, k)))
-            own = _size(_frame_turn(load4(clip_before[c, at:at + 4]), load4(clip_now[c, at:at + 4])))
-            g = frame_group[k]
-            need[c, g] = min(need[c, g], _share(moved, max_step + own))
-        for k in range(_N_DIRECTIONS):
-            at = DIRECTIONS_AT + 3 * k
-            moved = _angle(load3(pose_before[c, at:at + 3]), _direction(pose, c, k))
-            own = _angle(load3(clip_before[c, at:at + 3]), load3(clip_now[c, at:at + 3]))
-            g = direction_group[k]
-            need[c, g] = min(need[c, g], _share(moved, max_step + own))
-        j = 0
-        while j < _N_SHIFTS:
-            width = 1 if j < 4 else 3
-            moved2 = 0.0
-            own2 = 0.0
-            for i in range(j, j + width):
-                d = _shift(pose, c, i) - pose_before[c, SHIFTS_AT + i]
-                e = clip_now[c, SHIFTS_AT + i] - clip_before[c, SHIFTS_AT + i]
-                moved2 += d * d
-                own2 += e * e
-            g = shift_group[_shift_group(j)]
-            need[c, g] = min(need[c, g], _share(math.sqrt(moved2), max_step + math.sqrt(own2)))
-            j += width
-        for s in range(2):  # the legs' groups are 0 and 1
-            if planted[c, s]:
-                need[c, s] = 1.0
         first = False
         for i in range(N_VALUES):
             first = first or pose_before[c, i] != 0.0
         held[c] = False
         for g in range(N_GROUPS):
-            if not first:
-                need[c, g] = 1.0
+            need[c, g] = min(share[c], 1.0) if first else 1.0
+        for s in range(2):  # the legs' groups are 0 and 1
+            if planted[c, s]:
+                need[c, s] = 1.0
+        for g in range(N_GROUPS):
             held[c] = held[c] or need[c, g] < 1.0
         if not held[c]:
             continue
         for k in range(_N_FRAMES):
-            share = need[c, frame_group[k]]
-            if share < 1.0:
-                a = load4(pose_before[c, 4 * k:4 * k + 4])
-                t = _frame_turn(a, _frame(pose, c, k))
-                _set_frame(pose, c, k, quat_mul(quat_of((t[0] * share, t[1] * share, t[2] * share)), a))
+            part = need[c, frame_group[k]]
+            if part < 1.0:
+                at = 4 * k
+                now_clip = load4(clip_now[c, at:at + 4])
+                was = quat_mul(load4(pose_before[c, at:at + 4]), conj(load4(clip_before[c, at:at + 4])))
+                now = quat_mul(_frame(pose, c, k), conj(now_clip))
+                turn = _scaled(_frame_turn(was, now), part)
+                _set_frame(pose, c, k, quat_mul(quat_mul(turn, was), now_clip))
         for k in range(_N_DIRECTIONS):
-            share = need[c, direction_group[k]]
-            if share < 1.0:
+            part = need[c, direction_group[k]]
+            if part < 1.0:
                 at = DIRECTIONS_AT + 3 * k
-                was = load3(pose_before[c, at:at + 3])
-                t = rotvec_of(quat_between(was, _direction(pose, c, k)))
-                _set_direction(pose, c, k, rotate(quat_of((t[0] * share, t[1] * share,
-                                                            t[2] * share)), was))
+                now_clip3 = load3(clip_now[c, at:at + 3])
+                was = quat_between(load3(clip_before[c, at:at + 3]), load3(pose_before[c, at:at + 3]))
+                now = quat_between(now_clip3, _direction(pose, c, k))
+                turn = _scaled(_frame_turn(was, now), part)
+                _set_direction(pose, c, k, rotate(quat_mul(turn, was), now_clip3))
         for j in range(_N_SHIFTS):
-            share = need[c, shift_group[_shift_group(j)]]
-            if share < 1.0:
-                a_j = pose_before[c, SHIFTS_AT + j]
-                _set_shift(pose, c, j, a_j + share * (_shift(pose, c, j) - a_j))
+            part = need[c, shift_group[_shift_group(j)]]
+            if part < 1.0:
+                was_j = pose_before[c, SHIFTS_AT + j] - clip_before[c, SHIFTS_AT + j]
+                now_j = _shift(pose, c, j) - clip_now[c, SHIFTS_AT + j]
+                _set_shift(pose, c, j, clip_now[c, SHIFTS_AT + j] + was_j + part * (now_j - was_j))
+
+
+@jit(nogil=True)
+def share_rows(lo: int, hi: int, pose_joints: F64, clip_joints: F64, pose_joints_before: F64,
+               clip_joints_before: F64, planted: B8, max_step_m: float, goal_steps_m: F64,
+               leg_of_joint: I64, out: F64) -> None:
+    """Mirrors :func:`ecs_anim.solver.joint_speed.step_shares` over rows ``lo..hi-1`` into
+    ``out`` (r,)."""
+    for c in range(lo, hi):
+        share = 1.0
+        for j in range(N_JOINTS):
+            side = leg_of_joint[j]
+            if side >= 0 and planted[c, side]:
+                continue
+            cc = 0.0
+            dd = 0.0
+            cd = 0.0
+            for i in range(3):
+                step = clip_joints[c, j, i] - clip_joints_before[c, j, i]
+                change = ((pose_joints[c, j, i] - clip_joints[c, j, i])
+                          - (pose_joints_before[c, j, i] - clip_joints_before[c, j, i]))
+                cc += step * step
+                dd += change * change
+                cd += step * change
+            if dd > 0.0:
+                allowed = math.sqrt(cc) + (max_step_m + goal_steps_m[c])
+                room = allowed * allowed - cc
+                share = min(share, (-cd + math.sqrt(cd * cd + dd * room)) / max(dd, 1e-300))
+        out[c] = share
+
+
+def step_shares(pose_joints: F64, clip_joints: F64, pose_joints_before: F64,
+                clip_joints_before: F64, planted: B8, max_step_m: float, goal_steps_m: F64
+                ) -> F64:
+    """Compiled :func:`ecs_anim.solver.joint_speed.step_shares` (same arguments and result)."""
+    r = pose_joints.shape[0]
+    out = np.empty(r)
+    joints = [np.ascontiguousarray(a, dtype=np.float64)
+              for a in (pose_joints, clip_joints, pose_joints_before, clip_joints_before)]
+    over_chunks(share_rows, r, *joints, np.ascontiguousarray(planted, dtype=np.bool_),
+                float(max_step_m), np.ascontiguousarray(goal_steps_m, dtype=np.float64),
+                LEG_OF_JOINT, out)
+    return out
 
 
 def pack(poses: NormalizedPoses) -> F64:
@@ -293,13 +310,14 @@ def pack_into(poses: NormalizedPoses, rows: I64, out: F64) -> None:
 
 
 def limit_motion(poses: NormalizedPoses, clip_now: F64, clip_before: F64, pose_before: F64,
-                 planted: B8, max_step: float) -> tuple[NormalizedPoses, B8]:
+                 planted: B8, share: F64) -> tuple[NormalizedPoses, B8]:
     """Compiled :func:`ecs_anim.solver.joint_speed.limit_motion` (same arguments and results),
     except that ``poses`` is limited in place and returned."""
     r = poses.root_heading.shape[0]
     held, need = np.empty(r, bool), np.empty((r, N_GROUPS))
     floats = [np.ascontiguousarray(a, dtype=np.float64) for a in (clip_now, clip_before, pose_before)]
     over_chunks(limit_rows, r, pose_arrays(poses), *floats,
-                np.ascontiguousarray(planted, dtype=np.bool_), float(max_step), FRAME_GROUP,
+                np.ascontiguousarray(planted, dtype=np.bool_),
+                np.ascontiguousarray(share, dtype=np.float64), FRAME_GROUP,
                 DIRECTION_GROUP, SHIFT_GROUP, need, held)
     return poses, held
