@@ -283,41 +283,62 @@ def insert_neighbours_of_cell(i: int, x: float, y: float, cx: int, cy: int, rang
     return count, range_sq
 
 
+def ring_order(rings: int) -> tuple[I64, I64, I64]:
+    """The cells about an agent's own, ring by ring outward, each ring's nearest first for an
+    agent in the low quarter of its cell (the search flips them to the agent's own quarter):
+    (dx (c,), dy (c,), where ring r begins (rings + 2,)), c = (2 rings + 1)^2 cells."""
+    offsets = [(dx, dy) for dx in range(-rings, rings + 1) for dy in range(-rings, rings + 1)]
+
+    def gap(d: int) -> float:  # from a point a quarter into its cell, in cells
+        return d - 0.25 if d > 0 else (-d - 1) + 0.25 if d < 0 else 0.0
+
+    offsets.sort(key=lambda o: (max(abs(o[0]), abs(o[1])), gap(o[0]) ** 2 + gap(o[1]) ** 2))
+    ring_of = np.array([max(abs(dx), abs(dy)) for dx, dy in offsets])
+    begins = np.searchsorted(ring_of, np.arange(rings + 2))
+    return (np.array([o[0] for o in offsets], np.int64), np.array([o[1] for o in offsets], np.int64),
+            begins.astype(np.int64))
+
+
+#: :func:`ring_order` for the grid's :data:`CELLS_PER_RANGE` rings (constants in the kernels).
+RING_DX, RING_DY, RING_BEGINS = ring_order(CELLS_PER_RANGE)
+
+
 @jit()
 def nearest_neighbours(i: int, position: F64, range_m: float, cell_m: float, mask: int,
                        start: I64, order: I64, sorted_xy: F64, sorted_cell: I64,
                        max_neighbours: int, row: int, neighbour: I64, neighbour_d2: F64) -> int:
     """Agent ``i``'s nearest ``max_neighbours`` other agents within ``range_m``, nearest first,
     into ``neighbour[row]`` and their squared distances into ``neighbour_d2[row]``; returns how
-    many. The cells (``range_m / cell_m`` rings of them about its own cover the range) are
-    looked at ring by ring outward, a cell only while the nearest point of it is in range (the
+    many. The :data:`CELLS_PER_RANGE` rings of cells (of ``cell_m = range_m /
+    CELLS_PER_RANGE``) about its own cover the range; they are looked at ring by ring outward,
+    each ring's nearest cells first, a cell only while the nearest point of it is in range (the
     range shrinks as the nearest are found), the rings while the nearest of each is."""
     x, y = position[i, 0], position[i, 1]
     ix, iy = math.floor(x / cell_m), math.floor(y / cell_m)
-    # Where it is in its cell (m from the cell's low edges); a hair less to each farther
-    # cell than measured, so that floor's rounding at a cell's edge never skips an agent.
+    # Where it is in its cell (m from the cell's low edges), and which quarter: the ring
+    # order's offsets are flipped to it. A cell's gap is taken a hair short, so that floor's
+    # rounding at a cell's edge never skips an agent.
     in_x, in_y = x - ix * cell_m, y - iy * cell_m
-    edge = min(in_x, cell_m - in_x, in_y, cell_m - in_y) - 1e-9 * cell_m
+    flip_x = 1 if in_x < 0.5 * cell_m else -1
+    flip_y = 1 if in_y < 0.5 * cell_m else -1
+    hair = 1e-9 * cell_m
+    edge = min(in_x, cell_m - in_x, in_y, cell_m - in_y) - hair
     range_sq = range_m * range_m
     count = 0
-    rings = math.ceil(range_m / cell_m - 1e-9)
-    for ring in range(rings + 1):
+    for ring in range(RING_BEGINS.shape[0] - 1):
         if ring > 0:
             ring_gap = max(edge + (ring - 1) * cell_m, 0.0)
             if ring_gap * ring_gap >= range_sq:
                 break
-        for dy in range(-ring, ring + 1):
-            gap_y = max((dy * cell_m - in_y if dy > 0 else in_y + (-dy - 1) * cell_m)
-                        - 1e-9 * cell_m, 0.0) if dy else 0.0
-            step = 1 if dy == ring or dy == -ring else 2 * ring
-            for dx in range(-ring, ring + 1, step):
-                gap_x = max((dx * cell_m - in_x if dx > 0 else in_x + (-dx - 1) * cell_m)
-                            - 1e-9 * cell_m, 0.0) if dx else 0.0
-                if gap_x * gap_x + gap_y * gap_y >= range_sq:
-                    continue
-                count, range_sq = insert_neighbours_of_cell(
-                    i, x, y, ix + dx, iy + dy, range_sq, count, max_neighbours, mask, start,
-                    order, sorted_xy, sorted_cell, row, neighbour, neighbour_d2)
+        for t in range(RING_BEGINS[ring], RING_BEGINS[ring + 1]):
+            dx, dy = flip_x * RING_DX[t], flip_y * RING_DY[t]
+            gap_x = max(max(dx * cell_m - in_x, in_x - (dx + 1) * cell_m) - hair, 0.0)
+            gap_y = max(max(dy * cell_m - in_y, in_y - (dy + 1) * cell_m) - hair, 0.0)
+            if gap_x * gap_x + gap_y * gap_y >= range_sq:
+                continue
+            count, range_sq = insert_neighbours_of_cell(
+                i, x, y, ix + dx, iy + dy, range_sq, count, max_neighbours, mask, start, order,
+                sorted_xy, sorted_cell, row, neighbour, neighbour_d2)
     return count
 
 
