@@ -15,9 +15,11 @@ they are from each other (:func:`legs_apart`); and an agent slowed below its slo
 walks them where the lines allow (:func:`at_least`).
 
 Neighbours are found on a uniform grid hashed into a table (:func:`build_grid`, a counting sort
-of the agents by cell): each agent looks at the 3 x 3 cells about its own (a cell as wide as
-the neighbour distance) and keeps its ``max_neighbours`` nearest within that distance, the
-search radius shrinking to the farthest kept once the list is full (as RVO2's k-d tree query).
+of the agents by cell; :func:`sort_by_cell` lays their positions out in that order): each
+agent keeps its ``max_neighbours`` nearest within the neighbour distance, the search radius
+shrinking to the farthest kept once the list is full (as RVO2's k-d tree query), looking at
+the cells (half that distance wide) ring by ring about its own, nearest first, while they are
+in range (:func:`nearest_neighbours`).
 
 2D vectors are tuples ``(x, y)``; lines are rows ``(point_x, point_y, direction_x,
 direction_y)`` of a caller's scratch array (the kernels allocate nothing). :func:`orca_velocities`
@@ -234,7 +236,8 @@ def legs_apart(stride_m: float, feet_m: float, along_m: float, dist_sq: float) -
 
 
 @jit(nogil=True)
-def sort_by_cell(position: F64, cell_m: float, order: I64, sorted_xy: F64, sorted_cell: I64) -> None:
+def sort_by_cell(position: F64, cell_m: float, order: I64, sorted_xy: F64,
+                 sorted_cell: I64) -> None:
     """The agents' positions and grid cells in the order of :func:`build_grid` (read in a row
     by the search, not gathered agent by agent).
 
@@ -295,8 +298,9 @@ def ring_order(rings: int) -> tuple[I64, I64, I64]:
     offsets.sort(key=lambda o: (max(abs(o[0]), abs(o[1])), gap(o[0]) ** 2 + gap(o[1]) ** 2))
     ring_of = np.array([max(abs(dx), abs(dy)) for dx, dy in offsets])
     begins = np.searchsorted(ring_of, np.arange(rings + 2))
-    return (np.array([o[0] for o in offsets], np.int64), np.array([o[1] for o in offsets], np.int64),
-            begins.astype(np.int64))
+    dx = np.array([o[0] for o in offsets], np.int64)
+    dy = np.array([o[1] for o in offsets], np.int64)
+    return dx, dy, begins.astype(np.int64)
 
 
 #: :func:`ring_order` for the grid's :data:`CELLS_PER_RANGE` rings (constants in the kernels).
@@ -343,12 +347,12 @@ def nearest_neighbours(i: int, position: F64, range_m: float, cell_m: float, mas
 
 
 @jit(nogil=True)
-def orca_chunks(lo: int, hi: int, bounds: I64, position: F64, velocity: F64, preferred: F64, radius: F64,
-              stride_m: F64, feet_m: F64, legs: bool, max_speed: F64, min_speed: F64,
-              facing: F64, active: B, range_m: float, time_horizon_s: float, dt: float,
-              cone_rad: float, cell_m: float, mask: int, start: I64, order: I64,
-              sorted_xy: F64, sorted_cell: I64, neighbour: I64, neighbour_d2: F64, lines: F64,
-              projected: F64, out: F64) -> None:
+def orca_chunks(lo: int, hi: int, bounds: I64, position: F64, velocity: F64, preferred: F64,
+                radius: F64, stride_m: F64, feet_m: F64, legs: bool, max_speed: F64,
+                min_speed: F64, facing: F64, active: B, range_m: float, time_horizon_s: float,
+                dt: float, cone_rad: float, cell_m: float, mask: int, start: I64, order: I64,
+                sorted_xy: F64, sorted_cell: I64, neighbour: I64, neighbour_d2: F64, lines: F64,
+                projected: F64, out: F64) -> None:
     """The new velocity (RVO2's ``computeNewVelocity``) of the agents of chunks ``lo..hi-1``
     into ``out`` ((k, 2), m/s), chunk ``c`` the agents ``bounds[c]..bounds[c + 1]-1``, worked
     out in the chunk's own row of the scratch arrays (a few lines' worth, kept in the
@@ -392,7 +396,8 @@ def orca_chunks(lo: int, hi: int, bounds: I64, position: F64, velocity: F64, pre
             fx, fy = facing[i, 0], facing[i, 1]
             if n_hard:
                 # Left of the cone's right edge, right of its left edge (lines through 0).
-                lines[chunk, 0, 0] = lines[chunk, 0, 1] = lines[chunk, 1, 0] = lines[chunk, 1, 1] = 0.0
+                lines[chunk, 0, 0] = lines[chunk, 0, 1] = 0.0
+                lines[chunk, 1, 0] = lines[chunk, 1, 1] = 0.0
                 lines[chunk, 0, 2] = fx * cone_cos + fy * cone_sin
                 lines[chunk, 0, 3] = fy * cone_cos - fx * cone_sin
                 lines[chunk, 1, 2] = -(fx * cone_cos - fy * cone_sin)
@@ -460,7 +465,8 @@ def orca_chunks(lo: int, hi: int, bounds: I64, position: F64, velocity: F64, pre
             n_lines = m
             failed, rx, ry = lp2(lines, chunk, n_lines, max_speed[i], opt, False)
             if failed < n_lines:
-                rx, ry = lp3(lines, projected, chunk, n_hard, n_lines, failed, max_speed[i], (rx, ry))
+                rx, ry = lp3(lines, projected, chunk, n_hard, n_lines, failed, max_speed[i],
+                             (rx, ry))
             elif rx * rx + ry * ry < min_speed[i] * min_speed[i]:
                 rx, ry = at_least(lines, chunk, n_lines, max_speed[i], min_speed[i], opt, (rx, ry))
             out[i, 0], out[i, 1] = rx, ry
@@ -483,7 +489,8 @@ def orca_velocities(position: F64, velocity: F64, preferred: F64, radius: F64, m
     radius, max_speed : (k,) float64, m and m/s.
     active : (k,) bool: the agents that avoid (the others are passive neighbours and get their
         preferred velocity back).
-    range_m : neighbours farther than this are not looked at (m); also the grid's cell width.
+    range_m : neighbours farther than this are not looked at (m); the grid's cells are
+        ``range_m / CELLS_PER_RANGE`` wide.
     time_horizon_s : collisions within this time are avoided (s).
     max_neighbours : at most this many nearest neighbours are avoided.
     dt : the tick (s).
