@@ -13,7 +13,15 @@ from ecs_anim.components import MotionPlayer, Placement
 from ecs_anim.core.ground import Plane
 from ecs_anim.core.morphology import Morphology
 from ecs_anim.motion.clip import NormalizedMotion
-from ecs_anim.runtime.kernels.avoidance import legs_apart, orca_velocities
+from ecs_anim.runtime.kernels.avoidance import (
+    CELLS_PER_RANGE,
+    build_grid,
+    legs_apart,
+    nearest_neighbours,
+    orca_velocities,
+    sort_by_cell,
+    table_mask,
+)
 from ecs_anim.runtime.simulation import Simulation
 from ecs_anim.runtime.steering import DEFAULT_STEERING, avoidance_radius
 from ecs_anim.scenario import build_simulation, load_scenario
@@ -49,6 +57,42 @@ def test_agents_moved_at_their_velocities_never_overlap() -> None:
         position = position + velocity / 30.0
         worst = min(worst, float(closest_pairs(position, radius).min()))
     assert worst > -0.01
+
+
+def test_the_grid_finds_each_agents_nearest_as_a_search_of_all_pairs() -> None:
+    """The grid's search (cells half the range wide, looked at while in range) against numpy
+    over every pair: the same neighbours in the same order, with their squared distances, for
+    a crowd of clusters and sparse walkers, negative coordinates, agents on cells' edges and
+    a table small enough that cells share slots."""
+    rng = np.random.default_rng(3201)
+    range_m, k = 5.0, 6
+    cell_m = range_m / CELLS_PER_RANGE
+    position = np.concatenate([
+        rng.normal(0.0, 1.5, (150, 2)),  # a dense cluster across the origin
+        rng.uniform(-60.0, 40.0, (150, 2)),  # sparse: some with fewer than k in range
+        cell_m * rng.integers(-8, 8, (40, 2)) + rng.uniform(-1e-12, 1e-12, (40, 2)),  # edges
+    ])
+    n = len(position)
+    for mask in (table_mask(n), 15):
+        slot, order = np.empty(n, np.int64), np.empty(n, np.int64)
+        start = np.empty(mask + 2, np.int64)
+        build_grid(position, cell_m, mask, slot, start, order)
+        sorted_xy, sorted_cell = np.empty((n, 2)), np.empty((n, 2), np.int64)
+        sort_by_cell(position, cell_m, order, sorted_xy, sorted_cell)
+        neighbour, neighbour_d2 = np.empty((1, k + 2), np.int64), np.empty((1, k + 2))
+        d2 = np.sum((position[None] - position[:, None]) ** 2, axis=-1)
+        np.fill_diagonal(d2, np.inf)
+        few = 0
+        for i in range(n):
+            count = nearest_neighbours(i, position, range_m, cell_m, mask, start, order,
+                                       sorted_xy, sorted_cell, k, 0, neighbour, neighbour_d2)
+            nearest = np.argsort(d2[i], kind="stable")[:k]
+            nearest = nearest[d2[i, nearest] < range_m**2]
+            assert count == len(nearest), i
+            np.testing.assert_array_equal(neighbour[0, :count], nearest)
+            np.testing.assert_array_equal(neighbour_d2[0, :count], d2[i, nearest])
+            few += count < k
+        assert few > 20  # the sparse ones were searched to the full range
 
 
 def test_a_passive_agent_keeps_its_velocity_and_alone_one_keeps_its_preferred() -> None:
