@@ -60,6 +60,7 @@ from ecs_anim.runtime.kernels.capsules import (
     grid_of,
     near_rows,
     overlaps,
+    touching,
 )
 from ecs_anim.runtime.kernels.decode import decoded_arrays, fits, pose_arrays, spine_scratch
 from ecs_anim.runtime.kernels.posture import N_EXPORT, export_constants, posture_rows
@@ -170,6 +171,8 @@ class CollisionSeparate(System):
         self._names: tuple[int, list[str]] = (-1, [])
         #: The rounds compiled (off: the numpy methods, their reference, for the tests).
         self.compiled = True
+        #: The capsules' arrays, kept from tick to tick (the store's ends and radii among them).
+        self._body = Capsules.empty(0)
 
     def run(self, dt: float) -> None:
         st = self.sim.store
@@ -177,11 +180,22 @@ class CollisionSeparate(System):
         if st.capsule_ends.shape != (n, N_CAPSULES, 2, 3):
             st.capsule_ends = np.empty((n, N_CAPSULES, 2, 3))
             st.capsule_radii = np.empty((n, N_CAPSULES))
-        body = capsules(st.positions, st.lengths,
-                        Capsules.empty(n)._replace(ends=st.capsule_ends, radii=st.capsule_radii))
+        if self._body.ends is not st.capsule_ends or self._body.radii is not st.capsule_radii:
+            self._body = Capsules.empty(n)._replace(ends=st.capsule_ends, radii=st.capsule_radii)
+        # Every body's capsules and bounds; each capsule's bounds (what the search reads) and
+        # the search only for the bodies whose bounds meet another's: a crowd that keeps apart
+        # costs the capsules and the grid alone.
+        body = capsules(st.positions, st.lengths, self._body, each_capsule=False)
         grid = grid_of(body)
-        found = overlaps(body, grid)
-        if n < 2 or not (found.depth > SEPARATE_FROM_M).any():
+        near = touching(body, grid)
+        if near.size == 0:
+            st.overlap_m = np.zeros(n)
+            return
+        capsules(st.positions, st.lengths, body, near)
+        complete = np.zeros(n, bool)
+        complete[near] = True
+        found = overlaps(body, grid, near)
+        if not (found.depth > SEPARATE_FROM_M).any():
             st.overlap_m = found.depth
             return
         claims = self._claims()
@@ -218,6 +232,7 @@ class CollisionSeparate(System):
             capsules(st.positions, st.lengths, body, moved)
             if not grid_holds(body, grid, moved):  # limbs reach out further sideways
                 grid = grid_of(body)
+            self._complete(near_rows(body, grid, moved), complete)
             touched = np.union1d(moved, watch[np.isin(found.other[watch], moved)])
             overlaps(body, grid, touched, found)
             watch = np.union1d(watch, touched[found.depth[touched] > 0.0])
@@ -235,6 +250,16 @@ class CollisionSeparate(System):
         # it); the others' are as found.
         overlaps(body, grid, np.union1d(moved_ever, near_rows(body, grid, moved_ever)), found)
         st.overlap_m = found.depth
+
+    def _complete(self, rows: I64, complete: NDArray[np.bool_]) -> None:
+        """Each capsule's bounds for those of ``rows`` (k,) that have none yet this tick
+        (``complete`` (n,), updated): bodies a moved one now reaches, which the search is
+        about to look at."""
+        st = self.sim.store
+        new = rows[~complete[rows]]
+        if new.size:
+            capsules(st.positions, st.lengths, self._body, new)
+            complete[new] = True
 
     def _claims(self) -> Claims:
         """Each character's priority, claimed groups, limbs' pins and whom each pin aims at
