@@ -2,8 +2,11 @@
 
 Each tick, after PostureConvert: every character's capsules from its posture (compiled over all
 of them: :func:`ecs_anim.runtime.kernels.capsules.capsules`; the layout and radii in
-:mod:`ecs_anim.solver.capsules`), and each one's deepest overlap with another character
-(neighbours on a uniform grid: :func:`ecs_anim.runtime.kernels.capsules.overlaps`). Where two
+:mod:`ecs_anim.solver.capsules`) and its bounds, and each one's deepest overlap with another
+character (neighbours on a uniform grid: :func:`ecs_anim.runtime.kernels.capsules.overlaps`),
+searched only among the bodies whose bounds meet another's
+(:func:`ecs_anim.runtime.kernels.capsules.touching`: a crowd that keeps apart costs the
+capsules and the grid); a body a round moves searches again with those it then reaches. Where two
 characters overlap by more than :data:`SEPARATE_FROM_M`, the one of lower priority (the highest
 priority of its active constraints; none: lowest) moves the chain that overlaps:
 

@@ -10,7 +10,9 @@ capsule pair of two characters whose bounds meet (each capsule first against the
 bounds, then against the other capsule's) tested by the nearest points of their axes (Ericson,
 Real-Time Collision Detection, 5.1.9;
 :func:`ecs_anim.solver.capsules.closest_between_segments`). :func:`overlaps` is the
-numpy-facing call.
+numpy-facing call. :func:`touching` finds first, on the same grid, the bodies whose bounds meet
+another's: only those can overlap anyone, so each capsule's bounds are made for them alone
+(:func:`capsules` with ``each_capsule``) and only they are searched.
 """
 
 from __future__ import annotations
@@ -201,27 +203,36 @@ def near_kernel(rows: I64, box: F64, plane: F64, cell_m: float, mask: int, start
                     near[j] = True
 
 
-#: The grid cells a search about a cell looks at for a pair met once (:func:`touching_kernel`):
-#: its own and the four after it (the other four are the cells before theirs).
-_FORWARD_CELLS = ((0, 0), (1, -1), (1, 0), (1, 1), (0, 1))
+#: The grid cells a search about a body's cell looks at besides its own, for a pair met once
+#: (:func:`touching_kernel`): the four after it (the other four are the cells before theirs).
+_FORWARD_CELLS = ((1, -1), (1, 0), (1, 1), (0, 1))
 
 
 @jit(nogil=True)
 def touching_kernel(box: F64, plane: F64, cell_m: float, mask: int, start: I64, order: I64,
                     touching: NDArray[np.bool_]) -> None:
     """Mark ``touching[i]`` (n,) for every character whose bounds ``box`` (n, 2, 3) meet
-    another's (on the grid as :func:`overlap_rows`'s). Each pair is met from one of its two
-    bodies' cells (:data:`_FORWARD_CELLS`): half the cells :func:`near_kernel` looks at; a
-    slot two cells share is looked at twice, which marks nothing more."""
-    for i in range(box.shape[0]):
+    another's (on the grid as :func:`overlap_rows`'s). Each pair is met once: in a body's own
+    slot, with the bodies after it there; in the four cells after its own
+    (:data:`_FORWARD_CELLS`), with every body (half the cells :func:`near_kernel` looks at; a
+    slot two cells share is looked at twice, which marks nothing more)."""
+    for a in range(order.shape[0]):
+        i = order[a]
+        box_i = box[i]
         ix, iy = math.floor(plane[i, 0] / cell_m), math.floor(plane[i, 1] / cell_m)
+        own = cell_hash(ix, iy, mask)
+        for b in range(a + 1, start[own + 1]):
+            j = order[b]
+            if not _apart(box_i, box[j]):
+                touching[i] = touching[j] = True
         for dx, dy in _FORWARD_CELLS:
             s = cell_hash(ix + dx, iy + dy, mask)
-            for a in range(start[s], start[s + 1]):
-                j = order[a]
-                if j != i and not _apart(box[i], box[j]):
-                    touching[i] = True
-                    touching[j] = True
+            if s == own:
+                continue  # (its bodies met above)
+            for b in range(start[s], start[s + 1]):
+                j = order[b]
+                if not _apart(box_i, box[j]):
+                    touching[i] = touching[j] = True
 
 
 @jit(nogil=True)
