@@ -2,8 +2,11 @@
 
 Each tick, after PostureConvert: every character's capsules from its posture (compiled over all
 of them: :func:`ecs_anim.runtime.kernels.capsules.capsules`; the layout and radii in
-:mod:`ecs_anim.solver.capsules`), and each one's deepest overlap with another character
-(neighbours on a uniform grid: :func:`ecs_anim.runtime.kernels.capsules.overlaps`). Where two
+:mod:`ecs_anim.solver.capsules`) and its bounds, and each one's deepest overlap with another
+character (neighbours on a uniform grid: :func:`ecs_anim.runtime.kernels.capsules.overlaps`),
+searched only among the bodies whose bounds meet another's
+(:func:`ecs_anim.runtime.kernels.capsules.touching`: a crowd that keeps apart costs the
+capsules and the grid); a body a round moves searches again with those it then reaches. Where two
 characters overlap by more than :data:`SEPARATE_FROM_M`, the one of lower priority (the highest
 priority of its active constraints; none: lowest) moves the chain that overlaps:
 
@@ -71,6 +74,7 @@ from ecs_anim.runtime.kernels.capsules import (
     grid_of,
     near_rows,
     overlaps,
+    touching,
 )
 from ecs_anim.runtime.kernels.decode import decoded_arrays, fits, pose_arrays, spine_scratch
 from ecs_anim.runtime.kernels.posture import N_EXPORT, export_constants, posture_rows
@@ -201,6 +205,8 @@ class CollisionSeparate(System):
         others = sum(s.last_cpu_seconds for s in systems[:mine]) \
             + sum(s.last_cpu_seconds for s in systems[mine + 1:])
         return budget_ms * 1e-3 * TARGET_SHARE - others / max(threads(), 1)
+        #: The capsules' arrays, kept from tick to tick (the store's ends and radii among them).
+        self._body = Capsules.empty(0)
 
     def run(self, dt: float) -> None:
         st = self.sim.store
@@ -210,14 +216,29 @@ class CollisionSeparate(System):
         if st.capsule_ends.shape != (n, N_CAPSULES, 2, 3):
             st.capsule_ends = np.empty((n, N_CAPSULES, 2, 3))
             st.capsule_radii = np.empty((n, N_CAPSULES))
+        if self._body.ends is not st.capsule_ends or self._body.radii is not st.capsule_radii:
+            self._body = Capsules.empty(n)._replace(ends=st.capsule_ends, radii=st.capsule_radii)
         # The kernels, or while they compile aside (a first run) their numpy references, which
-        # need no grid (grid None).
+        # need no grid (grid None). On the kernels, every body's capsules and bounds; each
+        # capsule's bounds (what the search reads) and the search only for the bodies whose
+        # bounds meet another's: a crowd that keeps apart costs the capsules and the grid alone.
         on_kernels = self.sim.compiled
-        make = capsules if on_kernels else numpy_capsules.capsules
-        body = make(st.positions, st.lengths,
-                    Capsules.empty(n)._replace(ends=st.capsule_ends, radii=st.capsule_radii))
-        grid = grid_of(body) if on_kernels else None
-        found = self._overlaps(body, grid)
+        complete = np.ones(n, bool)
+        grid: Grid | None = None
+        if on_kernels:
+            body = capsules(st.positions, st.lengths, self._body, each_capsule=False)
+            grid = grid_of(body)
+            near = touching(body, grid)
+            if near.size == 0:
+                st.overlap_m = np.zeros(n)
+                return
+            capsules(st.positions, st.lengths, body, near)
+            complete[:] = False
+            complete[near] = True
+            found = overlaps(body, grid, near)
+        else:
+            body = numpy_capsules.capsules(st.positions, st.lengths, self._body)
+            found = numpy_capsules.overlaps(body)
         if n < 2 or not (found.depth > SEPARATE_FROM_M).any():
             st.overlap_m = found.depth
             return
@@ -257,9 +278,12 @@ class CollisionSeparate(System):
             self._posture(moved)
             # Only the moved bodies' capsules change; the overlaps found again are theirs and
             # those of the bodies that touched them.
+            make = capsules if on_kernels else numpy_capsules.capsules
             make(st.positions, st.lengths, body, moved)
-            if grid is not None and not grid_holds(body, grid, moved):  # limbs reach further
-                grid = grid_of(body)
+            if grid is not None:
+                if not grid_holds(body, grid, moved):  # limbs reach out further sideways
+                    grid = grid_of(body)
+                self._complete(near_rows(body, grid, moved), complete)
             touched = np.union1d(moved, watch[np.isin(found.other[watch], moved)])
             self._overlaps(body, grid, touched, found)
             watch = np.union1d(watch, touched[found.depth[touched] > 0.0])
@@ -288,6 +312,16 @@ class CollisionSeparate(System):
         if grid is None:
             return numpy_capsules.overlaps(body, rows, out)
         return overlaps(body, grid, rows, out)
+
+    def _complete(self, rows: I64, complete: NDArray[np.bool_]) -> None:
+        """Each capsule's bounds for those of ``rows`` (k,) that have none yet this tick
+        (``complete`` (n,), updated): bodies a moved one now reaches, which the search is
+        about to look at."""
+        st = self.sim.store
+        new = rows[~complete[rows]]
+        if new.size:
+            capsules(st.positions, st.lengths, self._body, new)
+            complete[new] = True
 
     def _claims(self) -> Claims:
         """Each character's priority, claimed groups, limbs' pins and whom each pin aims at

@@ -1,6 +1,6 @@
 """The numpy references of :mod:`ecs_anim.runtime.kernels.capsules`' calls (CollisionSeparate
 runs them while the kernels compile aside on a first run; the tests compare them to 1e-9 m):
-:func:`capsules` (every character's capsules, bounds and reach), :func:`overlaps` (each
+:func:`capsules` (every character's capsules and bounds), :func:`overlaps` (each
 character's deepest overlap with another) and :func:`near_rows`. All characters at once: no
 grid, the pairs whose bounds meet found from every pair's bounds (``(k, n)`` of them), then
 every capsule pair of those at once."""
@@ -24,11 +24,9 @@ def capsules(positions: F64, lengths: F64, out: Capsules, rows: I64 | None = Non
     rows = np.arange(positions.shape[0], dtype=np.int64) if rows is None else rows
     ends, radii = capsules_from_positions(positions[rows], lengths[rows])  # (k, C, 2, 3), (k, C)
     centre = positions[rows, 0]
-    reach = (np.linalg.norm(ends - centre[:, None, None], axis=-1) + radii[..., None]).max(
-        axis=(1, 2), initial=0.0)
     low = (ends - radii[..., None, None]).min(axis=2)  # (k, C, 3)
     high = (ends + radii[..., None, None]).max(axis=2)
-    out.ends[rows], out.radii[rows], out.centre[rows], out.reach[rows] = ends, radii, centre, reach
+    out.ends[rows], out.radii[rows], out.centre[rows] = ends, radii, centre
     out.capsule_box[rows] = np.stack([low, high], axis=2)
     out.box[rows] = np.stack([low.min(axis=1), high.max(axis=1)], axis=1)
     return out

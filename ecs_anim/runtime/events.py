@@ -60,6 +60,7 @@ from ecs_anim.runtime.steering import STEER_PATH
 
 if TYPE_CHECKING:
     from ecs_anim.runtime.simulation import Simulation
+    from ecs_anim.runtime.store import CharacterStore
 from ecs_anim.runtime.actions import interpolate_keyframes, play_now, switch_off, switch_on
 from ecs_anim.runtime.triggers import (
     CONTACT_BEGAN_WEIGHT,
@@ -166,6 +167,14 @@ def clip_and_contact_edges(entity: I64, clip: I64, clip_time_s: F64, speed: F64,
     seen_clip[entity], seen_time_s[entity] = clip, clip_time_s
     seen_contact[entity] = contact_weight
     return edges, seen_clip_now
+
+
+def edges_listed(edges: NDArray[np.bool_]) -> list[I64]:
+    """The edges of :func:`clip_and_contact_edges` (n, 5) listed by kind, as the compiled one
+    lists them: the rows of each of the first three columns, then each contact's
+    ``2 * row + foot`` in row order."""
+    rows, feet = np.nonzero(edges[:, EDGE_CONTACT:])
+    return [np.flatnonzero(edges[:, k]) for k in range(EDGE_CONTACT)] + [2 * rows + feet]
 
 
 @dataclass
@@ -311,7 +320,8 @@ class Reactions:
         with self._reactions():
             if any(rows.size for _, rows, _, _ in edges):
                 kept = _StoreEdges(edges, entity, names, now, tick, len(self._events))
-                if any(np.isin(kept.entity[rows], c.listened(kind)).any()
+                if any(c.listened(kind).size > 0  # (isin costs 10 µs even with no one listening)
+                       and np.isin(kept.entity[rows], c.listened(kind)).any()
                        for kind, rows, _, _ in edges):
                     for event in kept.events():
                         self._emit(sim, event)
@@ -391,32 +401,42 @@ class Reactions:
         st, bank = sim.store, sim.bank
         if st.n == 0:
             return []
-        # the numpy reference while the kernels compile aside (a first run)
-        edges, previous_clip = (compiled_edges if sim.compiled else clip_and_contact_edges)(
-            st.entity, st.clip, st.clip_time_s, st.speed, st.loop,
-            bank.duration_s(np.arange(bank.n_frames.size)), st.contact_weight, sim.dt,
-            TIME_SLACK_S, CONTACT_BEGAN_WEIGHT, self._seen_clip, self._seen_time,
-            self._seen_ended, self._seen_contact)
+        args = (st.entity, st.clip, st.clip_time_s, st.speed, st.loop,
+                bank.duration_s(np.arange(bank.n_frames.size)), st.contact_weight, sim.dt,
+                TIME_SLACK_S, CONTACT_BEGAN_WEIGHT, self._seen_clip, self._seen_time,
+                self._seen_ended, self._seen_contact)
+        if sim.compiled:
+            _, previous_clip, listed = compiled_edges(*args)
+        else:  # the numpy reference while the kernels compile aside (a first run)
+            edges, previous_clip = clip_and_contact_edges(*args)
+            listed = edges_listed(edges)
         clip_names = list(bank.names)
         out: list[tuple[str, I64, I64, list[str]]] = []
-        rows = np.flatnonzero(edges[:, EDGE_REPLACED])
+        rows = listed[EDGE_REPLACED]
         out.append(("clip_ended", rows, previous_clip[rows], clip_names))
-        rows = np.flatnonzero(edges[:, EDGE_ENDED])
+        rows = listed[EDGE_ENDED]
         out.append(("clip_ended", rows, st.clip[rows], clip_names))
-        rows = np.flatnonzero(edges[:, EDGE_STARTED])
+        rows = listed[EDGE_STARTED]
         out.append(("clip_started", rows, st.clip[rows], clip_names))
-        rows, feet = np.nonzero(edges[:, EDGE_CONTACT:])
-        out.append(("contact_began", rows, feet, list(FEET)))
-        # Steering stops a path at its end (its progress there); steer() cancels one short of it.
-        end = st.path_cum_m[np.arange(st.n), np.maximum(st.path_len - 1, 0)]
+        feet = listed[EDGE_CONTACT]  # 2 * row + foot
+        out.append(("contact_began", feet >> 1, feet & 1, list(FEET)))
+        out.append(self._arrived(st))
+        return out
+
+    def _arrived(self, st: CharacterStore) -> tuple[str, I64, I64, list[str]]:
+        """The ``arrived`` edges of the tick just stepped: the rows whose path steering
+        stopped at its end (its progress there; steer() cancels one short of it)."""
         on_path = st.steer_mode == STEER_PATH
-        rows = np.flatnonzero(self._seen_on_path[st.entity] & ~on_path
-                              & (st.path_progress_m >= end))
+        if not (self._seen_on_path.any() or on_path.any()):  # no path then or now: no edge
+            return ("arrived", np.zeros(0, np.int64), np.zeros(0, np.int64), [])
+        seen = self._seen_on_path[st.entity]
+        rows = np.flatnonzero(seen & ~on_path)
+        end = st.path_cum_m[rows, np.maximum(st.path_len[rows] - 1, 0)]
+        rows = rows[st.path_progress_m[rows] >= end]
         self._seen_on_path[st.entity] = on_path
         last = st.path_xy[rows, st.path_len[rows] - 1]
-        out.append(("arrived", rows, np.arange(rows.size),
-                    [f"({x:.2f}, {y:.2f})" for x, y in last.tolist()]))
-        return out
+        return ("arrived", rows, np.arange(rows.size),
+                [f"({x:.2f}, {y:.2f})" for x, y in last.tolist()])
 
     def _rows_of(self, sim: Simulation, entities: I64) -> I64:
         """Store rows of entity ids (any shape); -1 where an entity is not in the simulation."""

@@ -9,7 +9,13 @@ from conftest import SCENARIOS_DIR
 from ecs_anim.core.morphology import Morphology
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import N_JOINTS
-from ecs_anim.runtime.kernels.capsules import capsules, closest_between, overlaps
+from ecs_anim.runtime.kernels.capsules import (
+    capsules,
+    closest_between,
+    grid_of,
+    overlaps,
+    touching,
+)
 from ecs_anim.scenario import load_scenario, measured_run
 from ecs_anim.solver.capsules import (
     CAPSULE_INDEX,
@@ -94,6 +100,30 @@ def test_the_grid_finds_every_overlap_a_search_of_all_pairs_finds():
     hit = np.flatnonzero(found.depth > 0)
     assert np.all(found.other[hit] >= 0) and np.all(found.other[hit] != hit)
     np.testing.assert_allclose(np.linalg.norm(found.normal[hit], axis=1), 1.0)
+
+
+def test_the_search_over_the_bodies_that_touch_finds_what_a_search_of_all_finds():
+    """CollisionSeparate searches only the bodies whose bounds meet another's, each capsule's
+    bounds made for those alone: the same overlaps as a search of every body with every
+    capsule's bounds, and the bodies left out overlap no one."""
+    rng = np.random.default_rng(3204)
+    n = 60
+    lengths = np.tile(Morphology.preset("adult_male").lengths, (n, 1))
+    standing = rng.normal(scale=0.25, size=(n, N_JOINTS, 3))
+    standing[:, J["pelvis"]] = 0.0
+    spots = rng.uniform(0, 9.0, size=(n, 3)) * [1, 1, 0]
+    positions = standing + spots[:, None]
+    every = overlaps(capsules(positions, lengths))
+    body = capsules(positions, lengths, each_capsule=False)
+    body.capsule_box[:] = np.nan  # never read for a body that touches no one
+    grid = grid_of(body)
+    near = touching(body, grid)
+    capsules(positions, lengths, body, near)
+    found = overlaps(body, grid, near)
+    assert 5 < near.size < n, near.size
+    assert (every.depth > 0).sum() > 3
+    for name in every._fields:
+        np.testing.assert_array_equal(getattr(found, name), getattr(every, name), err_msg=name)
 
 
 def test_the_fights_kicks_land_on_the_chest_not_in_it():

@@ -84,7 +84,7 @@ def crowded_postures(on_kernels, seed=3):
 
 @pytest.mark.parametrize("block", [None, 3])
 def test_capsules_and_overlaps_in_numpy_equal_the_kernels(on_kernels, monkeypatch, block):
-    """Capsules (ends, radii, centre, reach, bounds), each body's deepest overlap (depth, whom,
+    """Capsules (ends, radii, centre, bounds), each body's deepest overlap (depth, whom,
     which capsules, the way out, the point) and the bodies near some: within 1e-9 m, on bodies
     in each other, for every row and for some rows; also a few rows and pairs at a time."""
     if block is not None:

@@ -10,7 +10,9 @@ capsule pair of two characters whose bounds meet (each capsule first against the
 bounds, then against the other capsule's) tested by the nearest points of their axes (Ericson,
 Real-Time Collision Detection, 5.1.9;
 :func:`ecs_anim.solver.capsules.closest_between_segments`). :func:`overlaps` is the
-numpy-facing call.
+numpy-facing call. :func:`touching` finds first, on the same grid, the bodies whose bounds meet
+another's: only those can overlap anyone, so each capsule's bounds are made for them alone
+(:func:`capsules` with ``each_capsule``) and only they are searched.
 """
 
 from __future__ import annotations
@@ -37,21 +39,20 @@ for _k, _row in enumerate(RADIUS_WEIGHTS):
 
 
 @jit(nogil=True)
-def capsule_rows(lo: int, hi: int, rows: I64, positions: F64, lengths: F64, joints: I64,
-                 span: F64, radius_weights: F64, radius_terms: I64, ends: F64, radii: F64, centre: F64, reach: F64,
-                 box: F64, capsule_box: F64) -> None:
+def capsule_rows(lo: int, hi: int, rows: I64, each_capsule: bool, positions: F64, lengths: F64,
+                 joints: I64, span: F64, radius_weights: F64, radius_terms: I64, ends: F64,
+                 radii: F64, centre: F64, box: F64, capsule_box: F64) -> None:
     """Capsules of characters ``rows[lo:hi]``: ``ends`` (n, C, 2, 3) and ``radii`` (n, C) written
     from ``positions`` (n, N_JOINTS, 3) and ``lengths`` (n, N_LENGTHS) (``joints`` (C, 2),
     ``span`` (C, 2), ``radius_weights`` (C, N_LENGTHS): :mod:`ecs_anim.solver.capsules`'s
-    layout, ``radius_terms`` (C, 3) :data:`RADIUS_TERMS`); ``centre`` (n, 3) the pelvis and ``reach`` (n,) how far from it any capsule's
-    surface lies; ``capsule_box`` (n, C, 2, 3) each capsule's bounds and ``box`` (n, 2, 3) the
-    body's (lowest, highest corner). Mirrors
+    layout, ``radius_terms`` (C, 3) :data:`RADIUS_TERMS`); ``centre`` (n, 3) the pelvis and
+    ``box`` (n, 2, 3) the body's bounds (lowest, highest corner); with ``each_capsule``,
+    ``capsule_box`` (n, C, 2, 3) each capsule's bounds too (the search's, needed only for the
+    bodies whose bounds meet another's: :func:`touching`). Mirrors
     :func:`ecs_anim.solver.capsules.capsules_from_positions`."""
     n_caps, n_terms = joints.shape[0], radius_terms.shape[1]
     for row in range(lo, hi):
         c = rows[row]
-        pelvis = load3(positions[c, 0])
-        far = 0.0
         for x in range(3):
             box[c, 0, x], box[c, 1, x] = math.inf, -math.inf
         for k in range(n_caps):
@@ -63,20 +64,19 @@ def capsule_rows(lo: int, hi: int, rows: I64, positions: F64, lengths: F64, join
                 if m >= 0:
                     r += lengths[c, m] * radius_weights[k, m]
             radii[c, k] = r
-            for x in range(3):
-                capsule_box[c, k, 0, x], capsule_box[c, k, 1, x] = math.inf, -math.inf
+            low = (math.inf, math.inf, math.inf)
+            high = (-math.inf, -math.inf, -math.inf)
             for e in range(2):
                 p = add_scaled(a, ab, span[k, e])
                 ends[c, k, e, 0], ends[c, k, e, 1], ends[c, k, e, 2] = p
-                far = max(far, norm(sub(p, pelvis)) + r)
-                for x in range(3):
-                    capsule_box[c, k, 0, x] = min(capsule_box[c, k, 0, x], p[x] - r)
-                    capsule_box[c, k, 1, x] = max(capsule_box[c, k, 1, x], p[x] + r)
+                low = (min(low[0], p[0] - r), min(low[1], p[1] - r), min(low[2], p[2] - r))
+                high = (max(high[0], p[0] + r), max(high[1], p[1] + r), max(high[2], p[2] + r))
             for x in range(3):
-                box[c, 0, x] = min(box[c, 0, x], capsule_box[c, k, 0, x])
-                box[c, 1, x] = max(box[c, 1, x], capsule_box[c, k, 1, x])
-        centre[c, 0], centre[c, 1], centre[c, 2] = pelvis
-        reach[c] = far
+                box[c, 0, x] = min(box[c, 0, x], low[x])
+                box[c, 1, x] = max(box[c, 1, x], high[x])
+                if each_capsule:
+                    capsule_box[c, k, 0, x], capsule_box[c, k, 1, x] = low[x], high[x]
+        centre[c, 0], centre[c, 1], centre[c, 2] = load3(positions[c, 0])
 
 
 @jit()
@@ -119,9 +119,9 @@ def _gap(a: F64, b: F64, radius_a: float, radius_b: float) -> float:
 
 
 @jit(nogil=True)
-def overlap_rows(lo: int, hi: int, rows: I64, ends: F64, radii: F64, centre: F64, reach: F64,
-                 box: F64, capsule_box: F64, plane: F64, cell_m: float, mask: int, start: I64,
-                 order: I64, depth: F64, other: I64, mine: I64, theirs: I64, normal: F64,
+def overlap_rows(lo: int, hi: int, rows: I64, ends: F64, radii: F64, centre: F64, box: F64,
+                 capsule_box: F64, plane: F64, cell_m: float, mask: int, start: I64, order: I64,
+                 depth: F64, other: I64, mine: I64, theirs: I64, normal: F64,
                  point: F64) -> None:
     """For each character ``i`` in ``rows[lo:hi]``, its deepest overlap with another character:
     ``depth[i]`` m (0: none), ``other[i]`` that character's row (-1: none), ``mine[i]`` and
@@ -203,16 +203,72 @@ def near_kernel(rows: I64, box: F64, plane: F64, cell_m: float, mask: int, start
                     near[j] = True
 
 
+#: The grid cells a search about a body's cell looks at besides its own, for a pair met once
+#: (:func:`touching_kernel`): the four after it (the other four are the cells before theirs).
+_FORWARD_CELLS = ((1, -1), (1, 0), (1, 1), (0, 1))
+
+
+@jit(nogil=True)
+def touching_kernel(box: F64, plane: F64, cell_m: float, mask: int, start: I64, order: I64,
+                    touching: NDArray[np.bool_]) -> None:
+    """Mark ``touching[i]`` (n,) for every character whose bounds ``box`` (n, 2, 3) meet
+    another's (on the grid as :func:`overlap_rows`'s). Each pair is met once: in a body's own
+    slot, with the bodies after it there; in the four cells after its own
+    (:data:`_FORWARD_CELLS`), with every body (half the cells :func:`near_kernel` looks at; a
+    slot two cells share is looked at twice, which marks nothing more)."""
+    for a in range(order.shape[0]):
+        i = order[a]
+        box_i = box[i]
+        ix, iy = math.floor(plane[i, 0] / cell_m), math.floor(plane[i, 1] / cell_m)
+        own = cell_hash(ix, iy, mask)
+        for b in range(a + 1, start[own + 1]):
+            j = order[b]
+            if not _apart(box_i, box[j]):
+                touching[i] = touching[j] = True
+        for dx, dy in _FORWARD_CELLS:
+            s = cell_hash(ix + dx, iy + dy, mask)
+            if s == own:
+                continue  # (its bodies met above)
+            for b in range(start[s], start[s + 1]):
+                j = order[b]
+                if not _apart(box_i, box[j]):
+                    touching[i] = touching[j] = True
+
+
+@jit(nogil=True)
+def plane_and_spread(centre: F64, box: F64, plane: F64) -> float:
+    """Write ``plane`` (n, 2), each body's centre (n, 3) on the grid (a frozen or not yet posed
+    body's, not finite: far away from everyone, 1 km apart in the order of the rows); returns
+    how far sideways (x or y) the bounds ``box`` (n, 2, 3) reach from their centres at most,
+    over the bodies whose reach is finite (0: none)."""
+    far, widest = 0, 0.0
+    for i in range(centre.shape[0]):
+        x, y = centre[i, 0], centre[i, 1]
+        if math.isfinite(x) and math.isfinite(y):
+            plane[i, 0], plane[i, 1] = x, y
+        else:
+            plane[i, 0] = plane[i, 1] = 1e9 + far * 1e3
+            far += 1
+        spread = 0.0
+        finite = True
+        for corner in range(2):
+            for axis in range(2):
+                d = abs(box[i, corner, axis] - centre[i, axis])
+                finite = finite and math.isfinite(d)
+                spread = max(spread, d)
+        if finite:
+            widest = max(widest, spread)
+    return widest
+
+
 class Capsules(NamedTuple):
     """Every character's capsules (:func:`capsules`): ends (n, C, 2, 3) m, radii (n, C) m,
-    centre (n, 3) the pelvis, reach (n,) m from it to the farthest capsule surface, box
-    (n, 2, 3) the body's bounds (lowest, highest corner), m, capsule_box (n, C, 2, 3) each
-    capsule's."""
+    centre (n, 3) the pelvis, box (n, 2, 3) the body's bounds (lowest, highest corner), m,
+    capsule_box (n, C, 2, 3) each capsule's (written only for the bodies asked)."""
 
     ends: F64
     radii: F64
     centre: F64
-    reach: F64
     box: F64
     capsule_box: F64
 
@@ -220,8 +276,7 @@ class Capsules(NamedTuple):
     def empty(n: int) -> Capsules:
         """Arrays for ``n`` characters' capsules, to be written."""
         return Capsules(np.empty((n, N_CAPSULES, 2, 3)), np.empty((n, N_CAPSULES)),
-                        np.empty((n, 3)), np.empty(n), np.empty((n, 2, 3)),
-                        np.empty((n, N_CAPSULES, 2, 3)))
+                        np.empty((n, 3)), np.empty((n, 2, 3)), np.empty((n, N_CAPSULES, 2, 3)))
 
 
 class Overlaps(NamedTuple):
@@ -250,15 +305,17 @@ class Grid(NamedTuple):
 
 
 def capsules(positions: F64, lengths: F64, out: Capsules | None = None,
-             rows: I64 | None = None) -> Capsules:
+             rows: I64 | None = None, each_capsule: bool = True) -> Capsules:
     """Every character's capsules from its posture (n, N_JOINTS, 3) and lengths
     (n, N_LENGTHS), compiled over all of them (``out``: arrays to write, else new; ``rows``:
-    only those characters', the others' kept)."""
+    only those characters', the others' kept; ``each_capsule`` off: each capsule's bounds not
+    written, the body's are)."""
     n = positions.shape[0]
     if out is None:
         out = Capsules.empty(n)
     rows = np.arange(n, dtype=np.int64) if rows is None else rows
-    over_chunks(capsule_rows, rows.size, rows, np.ascontiguousarray(positions, np.float64),
+    over_chunks(capsule_rows, rows.size, rows, each_capsule,
+                np.ascontiguousarray(positions, np.float64),
                 np.ascontiguousarray(lengths, np.float64), CAPSULE_JOINTS, CAPSULE_SPAN,
                 RADIUS_WEIGHTS, RADIUS_TERMS, *out)
     return out
@@ -283,13 +340,8 @@ def grid_of(body: Capsules) -> Grid:
     every body whose bounds can meet its bounds (:func:`grid_holds` tells when that no longer
     holds)."""
     n = body.radii.shape[0]
-    plane = np.ascontiguousarray(body.centre[:, :2])
-    finite = np.isfinite(plane).all(axis=1)
-    if not finite.all():  # a frozen or not yet posed body: far away from everyone
-        plane[~finite] = 1e9 + np.arange(int((~finite).sum()))[:, None] * 1e3
-    spread = _spread(body, slice(None))
-    cell_m = max(2.0 * CELL_SLACK * float(np.max(spread, initial=0.0,
-                                                 where=np.isfinite(spread))), 0.1)
+    plane = np.empty((n, 2))
+    cell_m = max(2.0 * CELL_SLACK * plane_and_spread(body.centre, body.box, plane), 0.1)
     mask = table_mask(n)
     slot, order = np.empty(n, np.int64), np.empty(n, np.int64)
     start = np.empty(mask + 2, np.int64)
@@ -328,4 +380,13 @@ def near_rows(body: Capsules, grid: Grid, rows: I64) -> I64:
     near_kernel(rows, body.box, grid.plane, grid.cell_m, grid.mask, grid.start, grid.order, near)
     near[rows] = False
     found: I64 = np.flatnonzero(near)
+    return found
+
+
+def touching(body: Capsules, grid: Grid) -> I64:
+    """The characters whose bounds meet another's (k,), on ``grid``: the only ones that may
+    overlap someone (each capsule's bounds lie within its body's)."""
+    marked = np.zeros(body.radii.shape[0], bool)
+    touching_kernel(body.box, grid.plane, grid.cell_m, grid.mask, grid.start, grid.order, marked)
+    found: I64 = np.flatnonzero(marked)
     return found

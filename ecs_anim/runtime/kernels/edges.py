@@ -21,9 +21,16 @@ B = NDArray[np.bool_]
 def edge_rows(lo: int, hi: int, entity: I64, clip: I64, clip_time_s: F64, speed: F64, loop: B,
               duration_s: F64, contact_weight: F64, dt: float, slack_s: float,
               began_weight: float, seen_clip: I64, seen_time_s: F64, seen_ended: B,
-              seen_contact: F64, edges: B, previous_clip: I64) -> None:
+              seen_contact: F64, edges: B, previous_clip: I64, listed: I64,
+              counts: I64) -> None:
     """Rows ``lo..hi-1`` of :func:`ecs_anim.runtime.events.clip_and_contact_edges`: ``edges`` (n, 5)
-    and ``previous_clip`` (n,) written, the ``seen_*`` arrays (by entity id) updated."""
+    and ``previous_clip`` (n,) written, the ``seen_*`` arrays (by entity id) updated; and the
+    edges listed (what the caller reads: no pass over ``edges`` per kind), in the order of the
+    rows: ``listed[k, :counts[k]]`` the rows of edge column ``k`` < 3, ``listed[3, :counts[3]]``
+    ``2 * row + foot`` of each contact begun (``listed`` (4, 2 n), ``counts`` (4,) written;
+    called over all rows at once)."""
+    for k in range(4):
+        counts[k] = 0
     for r in range(lo, hi):
         e = entity[r]
         old_clip = seen_clip[e]
@@ -34,10 +41,17 @@ def edge_rows(lo: int, hi: int, entity: I64, clip: I64, clip_time_s: F64, speed:
         edges[r, 0] = new_clip and old_clip >= 0 and not ended
         edges[r, 1] = not new_clip and at_end and not ended
         edges[r, 2] = new_clip
+        for k in range(3):
+            if edges[r, k]:
+                listed[k, counts[k]] = r
+                counts[k] += 1
         for foot in range(2):
             edges[r, 3 + foot] = (contact_weight[r, foot] >= began_weight
                                   and seen_contact[e, foot] < began_weight)
             seen_contact[e, foot] = contact_weight[r, foot]
+            if edges[r, 3 + foot]:
+                listed[3, counts[3]] = 2 * r + foot
+                counts[3] += 1
         seen_ended[e] = not new_clip and (ended or at_end)
         previous_clip[r] = old_clip
         seen_clip[e] = clip[r]
@@ -47,12 +61,15 @@ def edge_rows(lo: int, hi: int, entity: I64, clip: I64, clip_time_s: F64, speed:
 def clip_and_contact_edges(entity: I64, clip: I64, clip_time_s: F64, speed: F64, loop: B,
                            duration_s: F64, contact_weight: F64, dt: float, slack_s: float,
                            began_weight: float, seen_clip: I64, seen_time_s: F64, seen_ended: B,
-                           seen_contact: F64) -> tuple[B, I64]:
-    """:func:`ecs_anim.runtime.events.clip_and_contact_edges`, compiled (same arguments and results)."""
+                           seen_contact: F64) -> tuple[B, I64, list[I64]]:
+    """:func:`ecs_anim.runtime.events.clip_and_contact_edges`, compiled (same arguments and
+    results), and the edges listed: the rows of each of the first three columns, and
+    ``2 * row + foot`` of the contacts begun, each in the order of the rows."""
     n = entity.shape[0]
-    edges = np.zeros((n, 5), np.bool_)
-    previous_clip = np.zeros(n, np.int64)
+    edges = np.empty((n, 5), np.bool_)  # every entry written
+    previous_clip = np.empty(n, np.int64)
+    listed, counts = np.empty((4, 2 * n), np.int64), np.empty(4, np.int64)
     edge_rows(0, n, entity, clip, clip_time_s, speed, loop, duration_s, contact_weight, dt,
               slack_s, began_weight, seen_clip, seen_time_s, seen_ended, seen_contact, edges,
-              previous_clip)
-    return edges, previous_clip
+              previous_clip, listed, counts)
+    return edges, previous_clip, [listed[k, :counts[k]] for k in range(4)]
