@@ -100,13 +100,14 @@ def test_legs_without_contact_go_to_their_targets_and_do_not_lower_the_pelvis():
 
 
 @pytest.mark.parametrize(("ground", "passes"), [
-    (Plane(0.02), 1), (Slope(0.15, -0.1), 2), (Bumps(0.04, 2.5, 3.0), 2),
-    (Combined((Bumps(0.04, 2.5, 3.0), Slope(0.05, 0.02))), 2), (Bumps(0.06, 1.2, 0.9), 3)],
+    (Plane(0.02), 1), (Slope(0.15, -0.1), 2), (Bumps(0.04, 2.5, 3.0), 3),
+    (Combined((Bumps(0.04, 2.5, 3.0), Slope(0.05, 0.02))), 3), (Bumps(0.06, 1.2, 0.9), 3)],
     ids=["plane", "slope", "bench_bumps", "bumps_on_slope", "steep_bumps"])
 def test_a_toe_under_the_ground_is_pitched_onto_it_in_a_few_passes(ground, passes):
-    """The secant steps of ``pitched``: one pass on a plane, two on a slope or the bench's
-    bumps, three on bumps of grade 0.42 put every toe end of 500 feet (toes up to 15 cm under
-    the ground) within TOE_TOLERANCE_M of its clearance."""
+    """The secant steps of ``pitched``: one pass on a plane, two on a slope, three on bumps
+    (the bench's, or of grade 0.42) put every toe end of 500 feet (toes up to 15 cm under the
+    ground) within TOE_TOLERANCE_M of its clearance (a fixed point ignoring how the ground
+    moves under the end left 6 um after three passes on the bench's bumps)."""
     rng = np.random.default_rng(3607)
     n = 500
     ankle = np.column_stack([rng.uniform(-3.0, 3.0, (n, 2)), np.zeros(n)])
