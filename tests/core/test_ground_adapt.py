@@ -4,11 +4,13 @@ import numpy as np
 import pytest
 
 from conftest import MOTIONS_DIR
-from ecs_anim.core.ground import Stairs
+from ecs_anim.core.ground import Bumps, Combined, Plane, Slope, Stairs
 from ecs_anim.core.ground_adapt import (
     MAX_LEG_EXTENSION,
     MAX_ROOT_FOLLOW_PER_REACH,
+    TOE_TOLERANCE_M,
     adapt_to_ground,
+    pitched,
 )
 from ecs_anim.core.morphology import Morphology, bone_lengths_of
 from ecs_anim.core.normalized import decode
@@ -95,3 +97,31 @@ def test_legs_without_contact_go_to_their_targets_and_do_not_lower_the_pelvis():
                    lengths).positions
     np.testing.assert_allclose(after[:, 0, 2], raised, atol=1e-12)
     np.testing.assert_allclose(after[:, [3, 7]], targets, atol=1e-9)
+
+
+@pytest.mark.parametrize(("ground", "passes"), [
+    (Plane(0.02), 1), (Slope(0.15, -0.1), 2), (Bumps(0.04, 2.5, 3.0), 3),
+    (Combined((Bumps(0.04, 2.5, 3.0), Slope(0.05, 0.02))), 3), (Bumps(0.06, 1.2, 0.9), 3)],
+    ids=["plane", "slope", "bench_bumps", "bumps_on_slope", "steep_bumps"])
+def test_a_toe_under_the_ground_is_pitched_onto_it_in_a_few_passes(ground, passes):
+    """The secant steps of ``pitched``: one pass on a plane, two on a slope, three on bumps
+    (the bench's, or of grade 0.42) put every toe end of 500 feet (toes up to 15 cm under the
+    ground) within TOE_TOLERANCE_M of its clearance (a fixed point ignoring how the ground
+    moves under the end left 6 um after three passes on the bench's bumps)."""
+    rng = np.random.default_rng(3607)
+    n = 500
+    ankle = np.column_stack([rng.uniform(-3.0, 3.0, (n, 2)), np.zeros(n)])
+    ankle[:, 2] = ground.height(ankle[:, :2]) + rng.uniform(0.06, 0.10, n)
+    heading = rng.uniform(-np.pi, np.pi, n)
+    pitch = rng.uniform(-0.9, -0.2, n)  # the toe well under the ankle: most toes go under
+    d = np.column_stack([np.cos(heading) * np.cos(pitch), np.sin(heading) * np.cos(pitch),
+                         np.sin(pitch)])
+    foot, clearance = rng.uniform(0.12, 0.2, n), np.full(n, 0.025)
+
+    def deficit(direction):
+        toe = ankle + foot[:, None] * direction
+        return ground.height(toe[:, :2]) + clearance - toe[:, 2]
+
+    assert (deficit(d) > 0.01).sum() > n // 4
+    assert deficit(pitched(ground, ankle, d, foot, 1.0, clearance, passes)).max() \
+        <= TOE_TOLERANCE_M

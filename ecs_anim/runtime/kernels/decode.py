@@ -230,12 +230,22 @@ def _leg(c: int, s: int, pose: PoseArrays | LegPoseArrays, seg: F64, pelvis: Vec
     shank2world."""
     hip = add(pelvis, scale(to_world(pelvis2world, load3(pose.hip_dir[c, s])), seg[L_PELVIS + s]))
     leg2world = matmul(pelvis2world, matrix_from_quat(load4(pose.leg_frame[c, s])))
+    knee, ankle, toe, shank2world = leg_below_hip(c, s, pose, seg, hip, leg2world)
+    return hip, knee, ankle, toe, leg2world, shank2world
+
+
+@jit(inline="always")
+def leg_below_hip(c: int, s: int, pose: PoseArrays | LegPoseArrays, seg: F64, hip: Vec3,
+                  leg2world: Frame) -> tuple[Vec3, Vec3, Vec3, Frame]:
+    """The rest of leg ``s`` of row ``c`` as :func:`decode_legs_row` decodes it, from its
+    ``hip`` (m, world) and ``leg2world``: knee, ankle, toe, shank2world (for a caller that
+    has the leg's frame as a matrix already)."""
     thigh, shank = seg[L_THIGH + s], seg[L_SHANK + s]
     knee, ankle = two_bone_middle(leg2world, hip, thigh, shank,
                                   pose.leg_fraction[c, s] * (thigh + shank))
     shank2world = distal_frames(leg2world, knee, ankle)
     toe = add(ankle, scale(to_world(shank2world, load3(pose.foot_dir[c, s])), seg[L_FOOT + s]))
-    return hip, knee, ankle, toe, leg2world, shank2world
+    return knee, ankle, toe, shank2world
 
 
 @jit()

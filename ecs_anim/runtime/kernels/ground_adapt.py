@@ -23,12 +23,13 @@ from numpy.typing import NDArray
 
 from ecs_anim.core import ground_adapt as reference
 from ecs_anim.core.skeleton import LENGTH_INDEX as L
-from ecs_anim.runtime.kernels.decode import LegPoseArrays, decode_legs_row
+from ecs_anim.runtime.kernels.decode import LegPoseArrays, decode_legs_row, leg_below_hip
 from ecs_anim.runtime.kernels.ground import height_at, height_near, smooth
 from ecs_anim.runtime.kernels.vec import (
     F64,
     Frame,
     Vec3,
+    add,
     add_scaled,
     in_frame,
     jit,
@@ -59,6 +60,9 @@ assert (HEEL_ROLL, BALL_ROLL) == (reference.HEEL_ROLL, reference.BALL_ROLL)
 MAX_LOWERING_LEAN_SIN, MAX_ROOT_FOLLOW_PER_REACH = 0.8660254037844386, 0.25
 assert (MAX_LOWERING_LEAN_SIN, MAX_ROOT_FOLLOW_PER_REACH) \
     == (reference.MAX_LOWERING_LEAN_SIN, reference.MAX_ROOT_FOLLOW_PER_REACH)
+TOE_TOLERANCE_M, MIN_SECANT_RATIO, MAX_SECANT_RATIO = 1e-9, 0.5, 2.0
+assert (TOE_TOLERANCE_M, MIN_SECANT_RATIO, MAX_SECANT_RATIO) \
+    == (reference.TOE_TOLERANCE_M, reference.MIN_SECANT_RATIO, reference.MAX_SECANT_RATIO)
 
 
 #: No point whose ground is known (:func:`.ground.height_near`).
@@ -99,13 +103,16 @@ def adapt_to_ground(c: int, root_position: F64, leg_frame: F64, leg_fraction: F6
                     hips: tuple[Vec3, Vec3], pelvis_now: Vec3, pelvis2world: Frame,
                     leg2world: tuple[Frame, Frame], lengths: F64, leg: float,
                     targets: tuple[Vec3, Vec3], weights: tuple[float, float],
-                    root_height: float, max_extension: float) -> None:
+                    root_height: float, max_extension: float
+                    ) -> tuple[tuple[Vec3, Vec3], tuple[Frame, Frame]]:
     """Mirrors :func:`ecs_anim.core.ground_adapt.adapt_to_ground` for store row ``c`` (legs
     re-aimed from the pose decoded before adaptation: its ``hips``, ``pelvis2world`` and
     ``leg2world``; the pelvis lowered as the legs in contact need, moved horizontally where a
     leg cannot reach by that), writing the root
     position, leg frames and fractions of row ``c`` of the poses (``root_position``,
     ``leg_frame``, ``leg_fraction``). ``pelvis_now`` (m, world): the pelvis before adaptation.
+    Returns the new hips (m, world) and leg2world (what decoding the row would give, within
+    rounding: the rest of the legs is decoded from them, :func:`.decode.leg_below_hip`).
 
     ``targets``: each ankle's target (m, world); ``weights``: contact activations;
     ``root_height`` (m): the pelvis height the motion wants; ``leg``: the leg length (m).
@@ -131,18 +138,21 @@ def adapt_to_ground(c: int, root_position: F64, leg_frame: F64, leg_fraction: F6
         lowest = drop if s == 0 else min(lowest, drop)
     pelvis_z = root_height + lowest
     shift = pelvis_z - pelvis_now[2]
+    world2pelvis = transpose(pelvis2world)
+    new_hips = (add(hips[0], (shift_x, shift_y, shift)), add(hips[1], (shift_x, shift_y, shift)))
+    new_leg2world = (leg2world[0], leg2world[1])
     for s in range(2):
-        hip = hips[s]
         thigh, shank = lengths[c, _L_THIGH + s], lengths[c, _L_SHANK + s]
         reach = max_extension * (thigh + shank)
-        to_target = sub(targets[s], (hip[0] + shift_x, hip[1] + shift_y, hip[2] + shift))
-        turn = rotation_between(leg2world[s][2], to_target)
-        new_leg2pelvis = matmul(transpose(pelvis2world), matmul(turn, leg2world[s]))
-        store4(leg_frame[c, s], quat_from_matrix(new_leg2pelvis))
+        to_target = sub(targets[s], new_hips[s])
+        turned = matmul(rotation_between(leg2world[s][2], to_target), leg2world[s])
+        store4(leg_frame[c, s], quat_from_matrix(matmul(world2pelvis, turned)))
         leg_fraction[c, s] = min(norm(to_target), reach) / (thigh + shank)
+        new_leg2world = (turned, new_leg2world[1]) if s == 0 else (new_leg2world[0], turned)
     root_position[c, 0] = (pelvis_now[0] + shift_x) / leg
     root_position[c, 1] = (pelvis_now[1] + shift_y) / leg
     root_position[c, 2] = pelvis_z / leg
+    return new_hips, new_leg2world
 
 
 @jit(inline="always")  # one call site
@@ -164,20 +174,24 @@ def adapt_keeping_heels_up(c: int, pose: LegPoseArrays, hips: tuple[Vec3, Vec3],
     adaptation, as :func:`adapt_to_ground` takes them.
 
     Writes row ``c`` of ``pose`` as :func:`adapt_to_ground`; returns the decoded (ankles, toes,
-    shank2world) of the result.
+    shank2world) of the result (decoded from the hips and leg frames the adaptation gives, as
+    :func:`.decode.decode_legs_row` would within rounding, without decoding the pelvis again).
     """
     root_position, leg_frame, leg_fraction = pose.root_position, pose.leg_frame, pose.leg_fraction
     lengths_row = lengths[c]
     # One call site each for the two inlined steps (numba compiles an inlined body at each):
     # the first pass adapts to the targets given, the next ones to the lifted targets.
     for lift in range(passes + 1):
-        adapt_to_ground(c, root_position, leg_frame, leg_fraction, hips, pelvis_now,
-                        pelvis2world, leg2world, lengths, leg, targets, weights, root_height,
-                        max_extension)
-        legs = decode_legs_row(c, pose, lengths_row, lengths_row)
+        new_hips, new_leg2world = adapt_to_ground(
+            c, root_position, leg_frame, leg_fraction, hips, pelvis_now, pelvis2world,
+            leg2world, lengths, leg, targets, weights, root_height, max_extension)
+        _, ankle0, toe0, shank0 = leg_below_hip(c, 0, pose, lengths_row, new_hips[0],
+                                                new_leg2world[0])
+        _, ankle1, toe1, shank1 = leg_below_hip(c, 1, pose, lengths_row, new_hips[1],
+                                                new_leg2world[1])
+        ankles, toes, shank2world = (ankle0, ankle1), (toe0, toe1), (shank0, shank1)
         if lift == passes:
             break
-        ankles = legs[4]
         t0, t1 = targets
         d0 = height_near(ankles[0][0], ankles[0][1], (t0[0], t0[1], under_targets[0]), is_smooth,
                          kinds, params, grid) + ankle_height[0] - ankles[0][2]
@@ -186,17 +200,21 @@ def adapt_keeping_heels_up(c: int, pose: LegPoseArrays, hips: tuple[Vec3, Vec3],
         if not (d0 > heel_tolerance or d1 > heel_tolerance):
             break
         targets = ((t0[0], t0[1], t0[2] + max(d0, 0.0)), (t1[0], t1[1], t1[2] + max(d1, 0.0)))
-    return legs[4], legs[5], legs[7]
+    return ankles, toes, shank2world
 
 
-@jit(inline="always")
+# Not inlined (nor planted_foot): a row calls them from nine places, and inlining each copy
+# tripled ground_adapt_rows's compile time (14 s of CPU, 43 s inlined) for 1-5 % of its run.
+@jit()
 def pitched(origin: Vec3, d: Vec3, foot: float, sign: float, clearance: float, kinds: I64,
             params: F64, grid: F64, passes: int, known: Vec3, is_smooth: bool
             ) -> tuple[Vec3, float]:
     """Mirrors :func:`ecs_anim.core.ground_adapt.pitched`: the foot direction ``d`` (unit, world)
     turned in its vertical plane, at most ``passes`` times asking the ground again, until the
     foot's other end ``origin + sign * foot * d`` is ``clearance`` (m) above the ground or
-    higher; ``sign`` +1 about the ankle (the toe end lifted), -1 about the ball (the ankle end).
+    less than :data:`~ecs_anim.core.ground_adapt.TOE_TOLERANCE_M` under that; ``sign`` +1
+    about the ankle (the toe end lifted), -1 about the ball (the ankle end). Each pass is a
+    secant step (:func:`~ecs_anim.core.ground_adapt.pitch_slope`).
     Returns (that direction, the ground's height under the other end it puts the foot's at, m:
     asked once here, so the caller need not ask again). ``known`` (x, y, height; NaN: none):
     a point whose height is known, taken for the first end if that is within
@@ -207,10 +225,13 @@ def pitched(origin: Vec3, d: Vec3, foot: float, sign: float, clearance: float, k
     end = add_scaled(origin, d, sign * foot)
     ground = height_near(end[0], end[1], known, is_smooth, kinds, params, grid)
     deficit = ground + clearance - end[2]
+    last_dz, last_deficit = dz, deficit
     for _ in range(passes):
-        if not deficit > 0.0:
+        if not deficit > TOE_TOLERANCE_M:
             break
-        dz = min(max(dz + sign * deficit / foot, -1.0), 1.0)
+        slope = pitch_slope(dz, deficit, last_dz, last_deficit, sign * foot)
+        last_dz, last_deficit = dz, deficit
+        dz = min(max(dz - deficit / slope, -1.0), 1.0)
         along = math.sqrt(1.0 - dz * dz)
         d = (hx * along, hy * along, dz)
         end = add_scaled(origin, d, sign * foot)
@@ -220,6 +241,20 @@ def pitched(origin: Vec3, d: Vec3, foot: float, sign: float, clearance: float, k
 
 
 @jit(inline="always")
+def pitch_slope(dz: float, deficit: float, last_dz: float, last_deficit: float,
+                rise: float) -> float:
+    """Mirrors :func:`ecs_anim.core.ground_adapt.pitch_slope` for one foot (m of deficit per
+    unit of the direction's z)."""
+    flat = -rise
+    step = dz - last_dz
+    if step == 0.0:
+        return flat
+    secant = (deficit - last_deficit) / step
+    ratio = secant / flat
+    return secant if MIN_SECANT_RATIO < ratio < MAX_SECANT_RATIO else flat
+
+
+@jit()
 def planted_foot(pivot: int, sole_point: Vec3, d: Vec3, foot: float, ankle_height: float,
                  ball: float, kinds: I64, params: F64, grid: F64, passes: int
                  ) -> tuple[Vec3, Vec3, tuple[float, float]]:
