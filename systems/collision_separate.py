@@ -192,6 +192,8 @@ class CollisionSeparate(System):
         #: This tick's rounds of search and separation, and whether the budget ended them.
         self.rounds = 0
         self.rounds_cut = False
+        #: The capsules' arrays, kept from tick to tick (the store's ends and radii among them).
+        self._body = Capsules.empty(0)
 
     def _rounds_allowed_s(self) -> float:
         """The CPU seconds the rounds may take this tick by the frame budget (inf: none):
@@ -205,8 +207,6 @@ class CollisionSeparate(System):
         others = sum(s.last_cpu_seconds for s in systems[:mine]) \
             + sum(s.last_cpu_seconds for s in systems[mine + 1:])
         return budget_ms * 1e-3 * TARGET_SHARE - others / max(threads(), 1)
-        #: The capsules' arrays, kept from tick to tick (the store's ends and radii among them).
-        self._body = Capsules.empty(0)
 
     def run(self, dt: float) -> None:
         st = self.sim.store
