@@ -373,7 +373,8 @@ class ConstraintSolve(System):
         the others' the motion's: NaN for those a frame budget held, which the next tick's bound
         then leaves free), from the pelvis."""
         st = self.sim.store
-        solved_rows = st.goals.rows if st.solved is not None and st.goals is not None \
+        goals = st.goals
+        solved_rows = goals.rows if st.solved is not None and isinstance(goals, TickGoals) \
             else np.zeros(0, np.int64)
         assert st.clip_positions is not None  # decoded when anything was solved or goes back
         clip_joints = from_pelvis(st.clip_positions) if self._clip_joints is None \
