@@ -127,6 +127,22 @@ def quat_from_matrix(matrix: F64) -> F64:
     return positive_w
 
 
+def quat_mul(a: F64, b: F64) -> F64:
+    """Hamilton products ``a b`` of quaternions (..., 4), (x, y, z, w)."""
+    ax, ay, az, aw = np.moveaxis(a, -1, 0)
+    bx, by, bz, bw = np.moveaxis(b, -1, 0)
+    return np.stack([aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw,
+                     aw * bw - ax * bx - ay * by - az * bz], axis=-1)
+
+
+def quat_conj(q: F64) -> F64:
+    """Conjugates (..., 4) of quaternions (x, y, z, w): the inverse turns of unit ones."""
+    conjugate: F64 = q * np.array([-1.0, -1.0, -1.0, 1.0])
+    return conjugate
+
+
 def matrix_from_quat(quat: F64) -> F64:
     """Rotation matrices from quaternions (x, y, z, w); normalizes first. (..., 4) -> (..., 3, 3)."""
     q = quat / np.maximum(np.linalg.norm(quat, axis=-1, keepdims=True), TINY)

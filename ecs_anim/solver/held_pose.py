@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.core.normalized import NormalizedPoses
+from ecs_anim.core.rotations import quat_conj, quat_mul
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -38,21 +39,6 @@ def _to_heading(offset_xy: F64, heading: F64) -> F64:
     c, s = np.cos(heading), np.sin(heading)
     return np.stack([c * offset_xy[:, 0] + s * offset_xy[:, 1],
                      -s * offset_xy[:, 0] + c * offset_xy[:, 1]], axis=1)
-
-
-def _quat_mul(a: F64, b: F64) -> F64:
-    """Hamilton products ``a b`` of quaternions (..., 4), scalar last."""
-    ax, ay, az, aw = np.moveaxis(a, -1, 0)
-    bx, by, bz, bw = np.moveaxis(b, -1, 0)
-    return np.stack([aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw,
-                     aw * bw - ax * bx - ay * by - az * bz], axis=-1)
-
-
-def _conj(q: F64) -> F64:
-    conjugate: F64 = q * np.array([-1.0, -1.0, -1.0, 1.0])
-    return conjugate
 
 
 def _quat_between(a: F64, b: F64) -> F64:
@@ -110,7 +96,7 @@ class HeldCorrections:
         """The solve of ``rows`` (r,): the motion's poses (r,) and the solved ones (r,)."""
         for name in HELD_FIELDS:
             self.held[name][rows] = getattr(solved, name)
-        self.leg_turn[rows] = _quat_mul(solved.leg_frame, _conj(motion.leg_frame))
+        self.leg_turn[rows] = quat_mul(solved.leg_frame, quat_conj(motion.leg_frame))
         self.foot_turn[rows] = _quat_between(motion.foot_dir, solved.foot_dir)
         self.leg_fraction_change[rows] = solved.leg_fraction - motion.leg_fraction
         move = solved.root_position - motion.root_position
@@ -123,7 +109,7 @@ class HeldCorrections:
         tick's motion poses, changed in place)."""
         for name in HELD_FIELDS:
             getattr(poses, name)[rows] = self.held[name][rows]
-        poses.leg_frame[rows] = _unit(_quat_mul(self.leg_turn[rows], poses.leg_frame[rows]))
+        poses.leg_frame[rows] = _unit(quat_mul(self.leg_turn[rows], poses.leg_frame[rows]))
         poses.foot_dir[rows] = _unit(_rotate(self.foot_turn[rows], poses.foot_dir[rows]))
         poses.leg_fraction[rows] += self.leg_fraction_change[rows]
         move = self.root_move[rows]

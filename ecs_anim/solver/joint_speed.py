@@ -48,6 +48,7 @@ from numpy.typing import NDArray
 
 from ecs_anim.core.body_points import ARM_L, ARM_R, HEAD, LEG_L, LEG_R, TRUNK
 from ecs_anim.core.normalized import DecodedPose, NormalizedPoses, decode
+from ecs_anim.core.rotations import quat_conj, quat_mul
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.solver.goals import CONTACT_PRIORITY, TickGoals
 from ecs_anim.solver.shell import SolverSettings, solve
@@ -79,21 +80,6 @@ SHIFT_START = np.concatenate([[0], np.cumsum([w for _, _, w, _ in SHIFTS])]).ast
 FRAME_GROUP = np.array([g for *_, g in FRAMES], np.int64)
 DIRECTION_GROUP = np.array([g for *_, g in DIRECTIONS], np.int64)
 SHIFT_GROUP = np.array([g for *_, g in SHIFTS], np.int64)
-
-
-def _quat_mul(a: F64, b: F64) -> F64:
-    """Hamilton products ``a b`` of quaternions (..., 4), scalar last."""
-    ax, ay, az, aw = np.moveaxis(a, -1, 0)
-    bx, by, bz, bw = np.moveaxis(b, -1, 0)
-    return np.stack([aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw,
-                     aw * bw - ax * bx - ay * by - az * bz], axis=-1)
-
-
-def _conj(q: F64) -> F64:
-    conjugate: F64 = q * np.array([-1.0, -1.0, -1.0, 1.0])
-    return conjugate
 
 
 def _rotvec_of(q: F64) -> F64:
@@ -155,7 +141,7 @@ def pack(poses: NormalizedPoses) -> F64:
 
 def _frame_turns(a: F64, b: F64) -> F64:
     """Rotation vectors (r, 3) of the turns from quaternions ``a`` to ``b`` (r, 4)."""
-    return _rotvec_of(_quat_mul(b, _conj(a)))
+    return _rotvec_of(quat_mul(b, quat_conj(a)))
 
 
 #: Each leg's joints below the hip (knee, ankle, toe), [left, right]: a planted leg's do not
@@ -217,10 +203,10 @@ def limit_motion(poses: NormalizedPoses, clip_now: F64, clip_before: F64, pose_b
         rows = np.flatnonzero(held[:, group])
         if rows.size:
             at = slice(4 * k, 4 * k + 4)
-            was = _quat_mul(pose_before[rows, at], _conj(clip_before[rows, at]))
-            now = _quat_mul(_get(poses, field, index)[rows], _conj(clip_now[rows, at]))
+            was = quat_mul(pose_before[rows, at], quat_conj(clip_before[rows, at]))
+            now = quat_mul(_get(poses, field, index)[rows], quat_conj(clip_now[rows, at]))
             turn = _frame_turns(was, now) * need[rows, group, None]
-            _set(out, field, index, rows, _quat_mul(_quat_mul(_quat_of(turn), was),
+            _set(out, field, index, rows, quat_mul(quat_mul(_quat_of(turn), was),
                                                     clip_now[rows, at]))
     for k, (field, index, group) in enumerate(DIRECTIONS):
         rows = np.flatnonzero(held[:, group])
@@ -230,7 +216,7 @@ def limit_motion(poses: NormalizedPoses, clip_now: F64, clip_before: F64, pose_b
             now = _quat_between(clip_now[rows, at], _get(poses, field, index)[rows])
             turn = _frame_turns(was, now) * need[rows, group, None]
             _set(out, field, index, rows,
-                 _rotate(_quat_mul(_quat_of(turn), was), clip_now[rows, at]))
+                 _rotate(quat_mul(_quat_of(turn), was), clip_now[rows, at]))
     for k, (field, index, _, group) in enumerate(SHIFTS):
         rows = np.flatnonzero(held[:, group])
         if rows.size:

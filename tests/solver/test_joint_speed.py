@@ -10,6 +10,7 @@ import ecs_anim.systems.constraint_solve as system
 from conftest import SCENARIOS_DIR
 from ecs_anim.core.errors import UsageError
 from ecs_anim.core.normalized import decode as numpy_decode
+from ecs_anim.core.rotations import quat_conj, quat_mul
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import N_JOINTS
 from ecs_anim.runtime.kernels import joint_speed as compiled
@@ -73,8 +74,8 @@ def test_compiled_shares_equal_numpy():
 def corrections_of(values, clip):
     """Each packed segment's correction: frames and directions as the turn (rotation vector,
     rad) from the motion's, shifts as the difference: (r, 6 + 5, 3) turns and (r, 13) shifts."""
-    frames = [reference._rotvec_of(reference._quat_mul(values[:, 4 * k:4 * k + 4],
-                                                       reference._conj(clip[:, 4 * k:4 * k + 4])))
+    frames = [reference._rotvec_of(quat_mul(values[:, 4 * k:4 * k + 4],
+                                                       quat_conj(clip[:, 4 * k:4 * k + 4])))
               for k in range(len(reference.FRAMES))]
     at = reference.DIRECTIONS_AT
     directions = [reference._rotvec_of(reference._quat_between(clip[:, at + 3 * k:at + 3 * k + 3],
@@ -104,11 +105,11 @@ def test_a_held_back_character_keeps_a_share_of_its_corrections_change_on_its_mo
     np.testing.assert_allclose(shifts[:, 4:], shifts_was[:, 4:] + share[:, None] * (
         shifts_now[:, 4:] - shifts_was[:, 4:]), atol=1e-12)  # the arms and the spine
     arm = 3  # the right arm's frame (never planted): its correction turned by the share
-    step = np.linalg.norm(reference._rotvec_of(reference._quat_mul(
-        reference._quat_of(turns[:, arm]), reference._conj(reference._quat_of(turns_was[:, arm])))),
+    step = np.linalg.norm(reference._rotvec_of(quat_mul(
+        reference._quat_of(turns[:, arm]), quat_conj(reference._quat_of(turns_was[:, arm])))),
         axis=1)
-    whole = np.linalg.norm(reference._rotvec_of(reference._quat_mul(
-        reference._quat_of(turns_now[:, arm]), reference._conj(reference._quat_of(turns_was[:, arm])))),
+    whole = np.linalg.norm(reference._rotvec_of(quat_mul(
+        reference._quat_of(turns_now[:, arm]), quat_conj(reference._quat_of(turns_was[:, arm])))),
         axis=1)
     np.testing.assert_allclose(step, share * whole, atol=1e-9)
     np.testing.assert_array_equal(limited.leg_frame[:10, 0], poses.leg_frame[:10, 0])
