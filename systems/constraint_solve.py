@@ -21,9 +21,8 @@ last_pose_values, last_pose_joints_m, last_clip_joints_m; the constraints table.
 Writes: store.poses (solved characters, and those going back), com_desired, last_clip_values,
 last_pose_values, last_pose_joints_m, last_clip_joints_m, clip_positions (the motion's own
 joints, None when nothing was solved; with a frame budget, NaN but for the characters solved
-this tick), goals,
-solved (the decoded result of
-the solved characters, which PostureConvert takes instead of decoding them again); table.held;
+this tick), goals, solved (the decoded result of the solved characters, which PostureConvert
+takes instead of decoding them again); table.held;
 table.enabled, table.weight, table.error (how far each active constraint is from being met on
 the result, :func:`~ecs_anim.solver.goals.constraint_errors`; NaN while inactive).
 """

@@ -62,8 +62,7 @@ def overlaps(body: Capsules, rows: I64 | None = None, out: Overlaps | None = Non
     the nearest points of their axes (:data:`PAIRS_PER_BLOCK` pairs of characters at a time)."""
     n = body.radii.shape[0]
     if out is None:
-        out = Overlaps(np.zeros(n), np.full(n, -1, np.int64), np.full(n, -1, np.int64),
-                       np.full(n, -1, np.int64), np.zeros((n, 3)), np.zeros((n, 3)))
+        out = Overlaps.none(n)
     if n < 2:
         return out
     rows = np.arange(n, dtype=np.int64) if rows is None else rows

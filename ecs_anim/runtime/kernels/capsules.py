@@ -291,6 +291,12 @@ class Overlaps(NamedTuple):
     normal: F64
     point: F64
 
+    @staticmethod
+    def none(n: int) -> Overlaps:
+        """``n`` characters overlapping no one (depth 0, rows and capsules -1)."""
+        return Overlaps(np.zeros(n), np.full(n, -1, np.int64), np.full(n, -1, np.int64),
+                        np.full(n, -1, np.int64), np.zeros((n, 3)), np.zeros((n, 3)))
+
 
 class Grid(NamedTuple):
     """The bodies hashed on a uniform grid (:func:`grid_of`): ``plane`` (n, 2) each bounding
@@ -364,8 +370,7 @@ def overlaps(body: Capsules, grid: Grid | None = None, rows: I64 | None = None,
     ``rows``: only those characters' found again, into ``out`` (the others' kept)."""
     n = body.radii.shape[0]
     if out is None:
-        out = Overlaps(np.zeros(n), np.full(n, -1, np.int64), np.full(n, -1, np.int64),
-                       np.full(n, -1, np.int64), np.zeros((n, 3)), np.zeros((n, 3)))
+        out = Overlaps.none(n)
     if n < 2:
         return out
     grid = grid_of(body) if grid is None else grid
