@@ -143,6 +143,28 @@ def quat_conj(q: F64) -> F64:
     return conjugate
 
 
+def quat_between(a: F64, b: F64) -> F64:
+    """Quaternions (..., 4), (x, y, z, w), of the smallest turns taking unit directions ``a``
+    onto ``b`` (..., 3) (a half turn about an axis perpendicular to ``a`` for opposite ones)."""
+    c = np.sum(a * b, axis=-1)
+    q = np.concatenate([np.cross(a, b), (1.0 + c)[..., None]], axis=-1)
+    opposite = c < -1.0 + 1e-9
+    if np.any(opposite):
+        helper = np.where(np.abs(a[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+        half = np.concatenate([np.cross(a, helper), np.zeros_like(c)[..., None]], axis=-1)
+        q = np.where(opposite[..., None], half, q)
+    out: F64 = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return out
+
+
+def quat_rotate(q: F64, v: F64) -> F64:
+    """``v`` (..., 3) turned by the unit quaternions ``q`` (..., 4)."""
+    u, w = q[..., :3], q[..., 3:]
+    t = 2.0 * np.cross(u, v)
+    out: F64 = v + w * t + np.cross(u, t)
+    return out
+
+
 def matrix_from_quat(quat: F64) -> F64:
     """Rotation matrices from quaternions (x, y, z, w); normalizes first. (..., 4) -> (..., 3, 3)."""
     q = quat / np.maximum(np.linalg.norm(quat, axis=-1, keepdims=True), TINY)

@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.core.normalized import NormalizedPoses
-from ecs_anim.core.rotations import quat_conj, quat_mul
+from ecs_anim.core.rotations import normalize, quat_between, quat_conj, quat_mul, quat_rotate
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -40,27 +40,6 @@ def _to_heading(offset_xy: F64, heading: F64) -> F64:
     return np.stack([c * offset_xy[:, 0] + s * offset_xy[:, 1],
                      -s * offset_xy[:, 0] + c * offset_xy[:, 1]], axis=1)
 
-
-def _quat_between(a: F64, b: F64) -> F64:
-    """The smallest turns (..., 4) taking unit directions ``a`` onto ``b`` (..., 3); none for
-    opposite ones (the solve never turns a foot half round; no NaN either way)."""
-    q = np.concatenate([np.cross(a, b), (1.0 + np.sum(a * b, axis=-1))[..., None]], axis=-1)
-    size = np.sqrt(np.sum(q * q, axis=-1, keepdims=True))
-    out: F64 = np.where(size > 1e-12, q / np.maximum(size, 1e-300), [0.0, 0.0, 0.0, 1.0])
-    return out
-
-
-def _rotate(q: F64, v: F64) -> F64:
-    """``v`` (..., 3) turned by the unit quaternions ``q`` (..., 4)."""
-    u, w = q[..., :3], q[..., 3:]
-    t = 2.0 * np.cross(u, v)
-    out: F64 = v + w * t + np.cross(u, t)
-    return out
-
-
-def _unit(v: F64) -> F64:
-    out: F64 = v / np.linalg.norm(v, axis=-1, keepdims=True)
-    return out
 
 
 class HeldCorrections:
@@ -97,7 +76,7 @@ class HeldCorrections:
         for name in HELD_FIELDS:
             self.held[name][rows] = getattr(solved, name)
         self.leg_turn[rows] = quat_mul(solved.leg_frame, quat_conj(motion.leg_frame))
-        self.foot_turn[rows] = _quat_between(motion.foot_dir, solved.foot_dir)
+        self.foot_turn[rows] = quat_between(motion.foot_dir, solved.foot_dir)
         self.leg_fraction_change[rows] = solved.leg_fraction - motion.leg_fraction
         move = solved.root_position - motion.root_position
         self.root_move[rows, :2] = _to_heading(move[:, :2], motion.root_heading)
@@ -109,8 +88,8 @@ class HeldCorrections:
         tick's motion poses, changed in place)."""
         for name in HELD_FIELDS:
             getattr(poses, name)[rows] = self.held[name][rows]
-        poses.leg_frame[rows] = _unit(quat_mul(self.leg_turn[rows], poses.leg_frame[rows]))
-        poses.foot_dir[rows] = _unit(_rotate(self.foot_turn[rows], poses.foot_dir[rows]))
+        poses.leg_frame[rows] = normalize(quat_mul(self.leg_turn[rows], poses.leg_frame[rows]))
+        poses.foot_dir[rows] = normalize(quat_rotate(self.foot_turn[rows], poses.foot_dir[rows]))
         poses.leg_fraction[rows] += self.leg_fraction_change[rows]
         move = self.root_move[rows]
         poses.root_position[rows, :2] += _to_heading(move[:, :2], -poses.root_heading[rows])

@@ -48,7 +48,7 @@ from numpy.typing import NDArray
 
 from ecs_anim.core.body_points import ARM_L, ARM_R, HEAD, LEG_L, LEG_R, TRUNK
 from ecs_anim.core.normalized import DecodedPose, NormalizedPoses, decode
-from ecs_anim.core.rotations import quat_conj, quat_mul
+from ecs_anim.core.rotations import quat_between, quat_conj, quat_mul, quat_rotate
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.solver.goals import CONTACT_PRIORITY, TickGoals
 from ecs_anim.solver.shell import SolverSettings, solve
@@ -96,28 +96,6 @@ def _quat_of(rotvec: F64) -> F64:
     angle = np.linalg.norm(rotvec, axis=-1)
     per = np.where(angle < 1e-12, 0.5, np.sin(0.5 * angle) / np.maximum(angle, 1e-300))
     return np.concatenate([rotvec * per[..., None], np.cos(0.5 * angle)[..., None]], axis=-1)
-
-
-def _quat_between(a: F64, b: F64) -> F64:
-    """The smallest turns (..., 4) taking unit directions ``a`` onto ``b`` (..., 3) (a half
-    turn about an axis perpendicular to ``a`` for opposite ones)."""
-    c = np.sum(a * b, axis=-1)
-    q = np.concatenate([np.cross(a, b), (1.0 + c)[..., None]], axis=-1)
-    opposite = c < -1.0 + 1e-9
-    if np.any(opposite):
-        helper = np.where(np.abs(a[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-        half = np.concatenate([np.cross(a, helper), np.zeros_like(c)[..., None]], axis=-1)
-        q = np.where(opposite[..., None], half, q)
-    out: F64 = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    return out
-
-
-def _rotate(q: F64, v: F64) -> F64:
-    """``v`` (..., 3) turned by the unit quaternions ``q`` (..., 4)."""
-    u, w = q[..., :3], q[..., 3:]
-    t = 2.0 * np.cross(u, v)
-    out: F64 = v + w * t + np.cross(u, t)
-    return out
 
 
 def _get(poses: NormalizedPoses, field: str, index: int) -> F64:
@@ -212,11 +190,11 @@ def limit_motion(poses: NormalizedPoses, clip_now: F64, clip_before: F64, pose_b
         rows = np.flatnonzero(held[:, group])
         if rows.size:
             at = slice(DIRECTIONS_AT + 3 * k, DIRECTIONS_AT + 3 * k + 3)
-            was = _quat_between(clip_before[rows, at], pose_before[rows, at])
-            now = _quat_between(clip_now[rows, at], _get(poses, field, index)[rows])
+            was = quat_between(clip_before[rows, at], pose_before[rows, at])
+            now = quat_between(clip_now[rows, at], _get(poses, field, index)[rows])
             turn = _frame_turns(was, now) * need[rows, group, None]
             _set(out, field, index, rows,
-                 _rotate(quat_mul(_quat_of(turn), was), clip_now[rows, at]))
+                 quat_rotate(quat_mul(_quat_of(turn), was), clip_now[rows, at]))
     for k, (field, index, _, group) in enumerate(SHIFTS):
         rows = np.flatnonzero(held[:, group])
         if rows.size:

@@ -85,9 +85,9 @@ I64 = NDArray[np.int64]
 
 #: The default bound on how much faster than the motion a joint may move because of the solver
 #: (m/s, ``SolverSettings.max_joint_speed_m_s``): a deliberate reach's speed. Captured people
-#: raising a hand move the wrist at 2.7 m/s (``bandai_raise_left_hand``, played on an adult at
-#: 30 Hz; the hand 3.8), where a punch or a kick reach 5-11 m/s at the wrist or ankle
-#: (docs/api.md, No pops). A correction up to this speed (the 1 s ease of a 0.85 m reach peaks
+#: raising a hand move the wrist at about 2.7 m/s (played on an adult at 30 Hz; the hand 3.8),
+#: where a punch or a kick reach 5-11 m/s at the wrist or ankle (docs/api.md, No pops, names the
+#: captures). A correction up to this speed (the 1 s ease of a 0.85 m reach peaks
 #: at 2.4 m/s) is not touched; what goes faster was a pop.
 MAX_JOINT_SPEED_M_S = 3.0
 

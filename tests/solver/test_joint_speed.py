@@ -10,7 +10,7 @@ import ecs_anim.systems.constraint_solve as system
 from conftest import SCENARIOS_DIR
 from ecs_anim.core.errors import UsageError
 from ecs_anim.core.normalized import decode as numpy_decode
-from ecs_anim.core.rotations import quat_conj, quat_mul
+from ecs_anim.core.rotations import quat_between, quat_conj, quat_mul
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import N_JOINTS
 from ecs_anim.runtime.kernels import joint_speed as compiled
@@ -78,7 +78,7 @@ def corrections_of(values, clip):
                                                        quat_conj(clip[:, 4 * k:4 * k + 4])))
               for k in range(len(reference.FRAMES))]
     at = reference.DIRECTIONS_AT
-    directions = [reference._rotvec_of(reference._quat_between(clip[:, at + 3 * k:at + 3 * k + 3],
+    directions = [reference._rotvec_of(quat_between(clip[:, at + 3 * k:at + 3 * k + 3],
                                                                values[:, at + 3 * k:at + 3 * k + 3]))
                   for k in range(len(reference.DIRECTIONS))]
     return (np.stack(frames + directions, axis=1),
