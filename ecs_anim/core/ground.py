@@ -109,13 +109,13 @@ class Bumps:
             raise UsageError("bumps: wavelengths must be > 0")
 
     @property
-    def wavenumbers(self) -> tuple[float, float]:
+    def _wavenumbers(self) -> tuple[float, float]:
         """(2π/λx, 2π/λy) rad/m: the sines' arguments are these times x and y (a product: no
         division at each point, here as in the compiled query)."""
         return 2 * np.pi / self.wavelength_x_m, 2 * np.pi / self.wavelength_y_m
 
     def height(self, xy: F64) -> F64:
-        kx, ky = self.wavenumbers
+        kx, ky = self._wavenumbers
         return self.z_m + self.amplitude_m * np.sin(kx * xy[..., 0]) * np.sin(ky * xy[..., 1])
 
 
@@ -197,7 +197,7 @@ def _parts(ground: Ground, grids: list[F64]) -> list[list[float]] | None:
         return [[STAIRS, ground.z_m, ground.rise_m, ground.run_m, float(ground.steps),
                  ground.start_m, float(np.cos(a)), float(np.sin(a))]]
     if isinstance(ground, Bumps):
-        return [[BUMPS, ground.z_m, ground.amplitude_m, *ground.wavenumbers]]
+        return [[BUMPS, ground.z_m, ground.amplitude_m, *ground._wavenumbers]]
     if isinstance(ground, HeightGrid):
         h = ground._h
         offset = sum(g.size for g in grids)
