@@ -56,7 +56,7 @@ def part_height(kind: int, x: float, y: float, p: GroundParams) -> float:
         along = x * p[5] + y * p[6] - p[4]
         step = min(max(math.floor(along / p[2]) + 1.0, 0.0), p[3])
         return float(p[0] + p[1] * step)
-    return float(p[0] + p[1] * math.sin(2 * np.pi * x / p[2]) * math.sin(2 * np.pi * y / p[3]))
+    return float(p[0] + p[1] * math.sin(p[2] * x) * math.sin(p[3] * y))  # p[2:4]: wavenumbers
 
 
 # Inlined: small, and ground adaptation asks it about ten times a character.

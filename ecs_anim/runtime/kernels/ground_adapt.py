@@ -219,16 +219,18 @@ def pitched(origin: Vec3, d: Vec3, foot: float, sign: float, clearance: float, k
     asked once here, so the caller need not ask again). ``known`` (x, y, height; NaN: none):
     a point whose height is known, taken for the first end if that is within
     :data:`.ground.NEAR_M` of it on a smooth ground (``is_smooth``)."""
-    flat = max(math.sqrt(d[0] * d[0] + d[1] * d[1]), 1e-9)
-    hx, hy = d[0] / flat, d[1] / flat
     dz = d[2]
     end = add_scaled(origin, d, sign * foot)
     ground = height_near(end[0], end[1], known, is_smooth, kinds, params, grid)
     deficit = ground + clearance - end[2]
     last_dz, last_deficit = dz, deficit
-    for _ in range(passes):
+    hx, hy = 0.0, 0.0  # the horizontal heading, once a pass needs it (most feet need none)
+    for turn in range(passes):
         if not deficit > TOE_TOLERANCE_M:
             break
+        if turn == 0:
+            flat = max(math.sqrt(d[0] * d[0] + d[1] * d[1]), 1e-9)
+            hx, hy = d[0] / flat, d[1] / flat
         slope = pitch_slope(dz, deficit, last_dz, last_deficit, sign * foot)
         last_dz, last_deficit = dz, deficit
         dz = min(max(dz - deficit / slope, -1.0), 1.0)
@@ -315,21 +317,21 @@ def _foot_target(ankle: Vec3, toe: Vec3, planted_ankle: Vec3, under_planted: flo
 
 
 @jit(inline="always")
-def _stand(c: int, s: int, ankle: Vec3, toe: Vec3, w: float, sole_roll: F64, clip: I64,
-           source_ankle_height: F64, footprint: F64, locked: B1, pivot: I64, leg: float,
-           ankle_height: float, ball: float, switch: float, kinds: I64, params: F64,
-           grid: F64, passes: int) -> tuple[Vec3, Vec3, tuple[float, float]]:
+def _stand(c: int, s: int, ankle: Vec3, toe: Vec3, foot: float, d: Vec3, w: float,
+           sole_roll: F64, clip: I64, source_ankle_height: F64, footprint: F64, locked: B1,
+           pivot: I64, leg: float, ankle_height: float, ball: float, switch: float,
+           kinds: I64, params: F64, grid: F64, passes: int
+           ) -> tuple[Vec3, Vec3, tuple[float, float]]:
     """Foot ``s`` of row ``c`` in ``GroundAdapt.run``: its footprint laid, kept or moved
     onto the other sole point, and (ankle, foot direction, the ground's heights under that
     ankle and under the toe end (m), as :func:`planted_foot`) standing on it; the motion's
-    (``ankle``, its direction, NaN: not asked) for a foot not in contact.
+    (``ankle``, ``d``, NaN: not asked) for a foot not in contact. ``foot`` (m), ``d`` (unit):
+    the motion's ankle-to-toe length and direction (:func:`_foot_axis`).
 
     A contact's footprint is laid where the motion puts its planted point (the heel, the ball,
     or the lower of the two where the motion plants both), on the ground under it; it moves to
     the other point only once the foot has rolled onto it (within ``switch`` m of the ground),
     so the foot turns about the point it stands on and never jumps."""
-    foot = max(norm(sub(toe, ankle)), 1e-9)
-    d = scale(sub(toe, ankle), 1.0 / foot)
     if not w > 0.0:
         locked[c, s] = False
         return ankle, d, (math.nan, math.nan)
@@ -354,15 +356,24 @@ def _stand(c: int, s: int, ankle: Vec3, toe: Vec3, w: float, sole_roll: F64, cli
     return a, d, under
 
 
+@jit(inline="always")
+def _foot_axis(ankle: Vec3, toe: Vec3) -> tuple[float, Vec3]:
+    """A foot's ankle-to-toe length (m, at least 1e-9) and direction (unit)."""
+    foot = max(norm(sub(toe, ankle)), 1e-9)
+    return foot, scale(sub(toe, ankle), 1.0 / foot)
+
+
 @jit(inline="always")  # one call site: a call per row, handed its arrays, costs
 def ground_adapt_row(c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
                      contact_weight: F64, sole_roll: F64, clip: I64, source_ankle_height: F64,
                      footprint: F64, locked: B1, pivot: I64, ground_ref: F64, kinds: I64,
-                     params: F64, grid: F64, dt: float, smoothing_s: float, ball_per_leg: float,
-                     max_extension: float, heel_tolerance: float, switch_per_leg: float,
-                     heel_passes: int, toe_passes: int) -> None:
+                     params: F64, grid: F64, is_smooth: bool, follow: float,
+                     ball_per_leg: float, max_extension: float, heel_tolerance: float,
+                     switch_per_leg: float, heel_passes: int, toe_passes: int) -> None:
     """Mirrors ``GroundAdapt.run`` for store row ``c``; arguments as for
-    :func:`ground_adapt_rows` (``kinds``, ``params``, ``grid``: the arrays of ``ground``)."""
+    :func:`ground_adapt_rows` (``kinds``, ``params``, ``grid``: the arrays of ``ground``;
+    ``is_smooth``: :func:`.ground.smooth` of it; ``follow``: the share of the way to the ground
+    under the feet the floor moves this tick, the same for every row)."""
     # The pose on the character's body as the motion gives it (MorphologyAdapt's scaling,
     # decoded here: ground adaptation reads only the pelvis and legs).
     lengths_row = lengths[c]
@@ -375,17 +386,19 @@ def ground_adapt_row(c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
     w = (contact_weight[c, 0], contact_weight[c, 1])
     # Each foot in contact stands on one sole point (its footprint, on the ground): the heel
     # or the ball, as the motion plants it.
-    stance0 = _stand(c, 0, ankles[0], toes[0], w[0], sole_roll, clip, source_ankle_height,
-                     footprint, locked, pivot, leg_c, ankle_height[0], ball, switch, kinds,
-                     params, grid, toe_passes)
-    stance1 = _stand(c, 1, ankles[1], toes[1], w[1], sole_roll, clip, source_ankle_height,
-                     footprint, locked, pivot, leg_c, ankle_height[1], ball, switch, kinds,
-                     params, grid, toe_passes)
+    foot0, d0 = _foot_axis(ankles[0], toes[0])
+    foot1, d1 = _foot_axis(ankles[1], toes[1])
+    stance0 = _stand(c, 0, ankles[0], toes[0], foot0, d0, w[0], sole_roll, clip,
+                     source_ankle_height, footprint, locked, pivot, leg_c, ankle_height[0],
+                     ball, switch, kinds, params, grid, toe_passes)
+    stance1 = _stand(c, 1, ankles[1], toes[1], foot1, d1, w[1], sole_roll, clip,
+                     source_ankle_height, footprint, locked, pivot, leg_c, ankle_height[1],
+                     ball, switch, kinds, params, grid, toe_passes)
     # The motion's floor follows the ground under the supporting feet, smoothly.
     support = w[0] + w[1]
     under_feet = (w[0] * footprint[c, 0, 2] + w[1] * footprint[c, 1, 2]) / max(support, 1e-9)
     target = under_feet if support > 0.0 else _height(kinds, params, grid, pelvis)
-    ground_ref[c] += (1.0 - math.exp(-dt / smoothing_s)) * (target - ground_ref[c])
+    ground_ref[c] += follow * (target - ground_ref[c])
     g = ground_ref[c]
     # Free feet ride on that floor, lifted where heel or toe would go under the ground; a
     # contact ramping in blends towards its planted ankle, its heel kept above the ground.
@@ -394,7 +407,6 @@ def ground_adapt_row(c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
     target1, under1 = _foot_target(ankles[1], toes[1], stance1[0], stance1[2][0], w[1], g,
                                    ankle_height[1], ball, kinds, params, grid)
     root_height = pelvis[2] + g
-    is_smooth = smooth(kinds)
     new_ankles, new_toes, shank2world = adapt_keeping_heels_up(
         c, pose, hips, pelvis, pelvis2world, leg2world, lengths, leg_c, (target0, target1),
         (under0, under1), w, root_height, kinds, params, grid, is_smooth, ankle_height,
@@ -410,10 +422,10 @@ def ground_adapt_row(c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
         if w[s] >= 1.0:
             stance = stance0 if s == 0 else stance1
             d = stance[1]
-            stood = add_scaled(stance[0], d, max(norm(sub(toes[s], ankles[s])), 1e-9))
+            stood = add_scaled(stance[0], d, foot0 if s == 0 else foot1)
             known = (stood[0], stood[1], stance[2][1])
         elif w[s] > 0.0:
-            d = scale(sub(toes[s], ankles[s]), 1.0 / max(norm(sub(toes[s], ankles[s])), 1e-9))
+            d = d0 if s == 0 else d1
         else:
             d = scale(sub(toe, ankle), 1.0 / foot)
         new_d = pitched(ankle, d, foot, 1.0, ball, kinds, params, grid, toe_passes, known,
@@ -445,8 +457,10 @@ def ground_adapt_rows(lo: int, hi: int, rows: I64, pose: LegPoseArrays, lengths:
     a sole point must be for the foot to stand on it, ``heel_passes``, ``toe_passes``.
     """
     kinds, params, grid = ground
+    is_smooth = smooth(kinds)
+    follow = 1.0 - math.exp(-dt / smoothing_s)
     for i in range(lo, hi):
         ground_adapt_row(rows[i], pose, lengths, leg, contact_weight, sole_roll, clip,
                          source_ankle_height, footprint, locked, pivot, ground_ref, kinds,
-                         params, grid, dt, smoothing_s, ball_per_leg, max_extension,
+                         params, grid, is_smooth, follow, ball_per_leg, max_extension,
                          heel_tolerance, switch_per_leg, heel_passes, toe_passes)
