@@ -26,14 +26,15 @@ from numpy.typing import NDArray
 from ecs_anim.components import MotionPlayer
 from ecs_anim.core.normalized import NormalizedPoses
 from ecs_anim.motion.sampling import ClipBank, blend, rotate_xy, sample, sample_table
-from ecs_anim.runtime.kernels import LIGHT_ROWS_PER_THREAD, over_chunks
-from ecs_anim.runtime.kernels.decode import PoseArrays, pose_arrays
+from ecs_anim.runtime.kernels import over_chunks
+from ecs_anim.runtime.kernels.decode import pose_arrays
 from ecs_anim.runtime.kernels.playback import (
+    PlaybackBank,
+    PlaybackWork,
     blend_rows,
     empty_poses,
-    playback_scratch,
-    sample_placed_rows,
-    sample_table_rows,
+    playback_bank,
+    sample_placed,
     writable_poses,
 )
 from ecs_anim.runtime.system_base import System
@@ -57,53 +58,37 @@ class MotionPlayback(System):
 
     def __init__(self, sim: Simulation):
         super().__init__(sim)
-        self._bank: tuple[ClipBank, PoseArrays] | None = None
+        self._bank: tuple[ClipBank, PlaybackBank] | None = None
+        self._work, self._fade_work = PlaybackWork(), PlaybackWork()
 
     def run(self, dt: float) -> None:
         if not self.sim.compiled:  # the kernels compile aside (a first run)
             self.run_numpy(dt)
             return
-        st, bank = self.sim.store, self.sim.bank
+        st = self.sim.store
         release_step = dt / self.sim.steering_settings.contact_release_s
         rows = self.rows()
-        leg = self.sim.leg_length()
         out = pose_arrays(writable_poses(st.poses, st.n))
-        bank_poses = self._bank_poses(bank)
-        over_chunks(sample_placed_rows, rows.size, rows, bank_poses, bank.start, bank.n_frames,
-                    bank.fps, bank.loop_yaw, bank.loop_shift, st.clip, st.clip_time_s, st.loop,
-                    st.placement_xy, st.placement_heading, leg, out, rows,
-                    playback_scratch(rows.size))
-        out.root_position[rows, 2] -= self._capture_ground(rows, st.clip, st.clip_time_s,
-                                                           st.loop)
+        bank = self._playback_bank(self.sim.bank)
         if st.contact_weight.shape != (st.n, 2) or not st.contact_weight.flags.writeable:
             st.contact_weight = np.zeros((st.n, 2))
+        if not st.sole_roll.flags.writeable:
+            st.sole_roll = st.sole_roll.copy()
         fading = rows[st.fade_s[rows] > 0.0]
         fading.setflags(write=False)  # as ``rows``: the samplers' one compiled specialisation
         previous = st.contact_weight[fading]  # the last tick's (a copy)
-        over_chunks(sample_table_rows, rows.size, rows, bank.contact_weight, bank.start,
-                    bank.n_frames, bank.fps, st.clip, st.clip_time_s, st.loop, st.contact_weight,
-                    rows_per_thread=LIGHT_ROWS_PER_THREAD)
-        if not st.sole_roll.flags.writeable:
-            st.sole_roll = st.sole_roll.copy()
-        over_chunks(sample_table_rows, rows.size, rows, bank.sole_roll, bank.start,
-                    bank.n_frames, bank.fps, st.clip, st.clip_time_s, st.loop, st.sole_roll,
-                    rows_per_thread=LIGHT_ROWS_PER_THREAD)
+        sample_placed(bank, rows, st.clip, st.clip_time_s, st.loop, st.placement_xy,
+                      st.placement_heading, st.lengths, out, rows, st.contact_weight,
+                      st.sole_roll, self._work)
         if fading.size:
-            old_weight = np.zeros((st.n, 2))
-            over_chunks(sample_table_rows, fading.size, fading, bank.contact_weight, bank.start,
-                        bank.n_frames, bank.fps, st.fade_clip, st.fade_time_s, st.fade_loop,
-                        old_weight, rows_per_thread=LIGHT_ROWS_PER_THREAD)
+            old_weight, old_roll = np.zeros((st.n, 2)), np.zeros((st.n, 2))
+            old = pose_arrays(empty_poses(fading.size))
+            sample_placed(bank, fading, st.fade_clip, st.fade_time_s, st.fade_loop,
+                          st.fade_placement_xy, st.fade_placement_heading, st.lengths, old,
+                          self.rows_of_old(fading.size), old_weight, old_roll, self._fade_work)
             st.contact_weight[fading] = self._fading_weights(
                 st.contact_weight[fading], old_weight[fading], previous,
                 st.fade_keeps_contacts[fading], release_step)
-            old = pose_arrays(empty_poses(fading.size))
-            over_chunks(sample_placed_rows, fading.size, fading, bank_poses, bank.start,
-                        bank.n_frames, bank.fps, bank.loop_yaw, bank.loop_shift, st.fade_clip,
-                        st.fade_time_s, st.fade_loop, st.fade_placement_xy,
-                        st.fade_placement_heading, leg, old, self.rows_of_old(fading.size),
-                        playback_scratch(fading.size))
-            old.root_position[:, 2] -= self._capture_ground(fading, st.fade_clip,
-                                                            st.fade_time_s, st.fade_loop)
             w = np.clip(st.fade_elapsed_s[fading] / np.maximum(st.fade_s[fading], 1e-9), 0, 1)
             over_chunks(blend_rows, fading.size, fading, old, w, out)
             st.fade_s[fading] = np.where(w >= 1.0, 0.0, st.fade_s[fading])
@@ -168,17 +153,6 @@ class MotionPlayback(System):
         weights: NDArray[np.float64] = np.where(keep[:, None], kept, 0.0)
         return weights
 
-    def _capture_ground(self, rows: NDArray[np.int64], clip: NDArray[np.int64],
-                        time_s: NDArray[np.float64], loop: NDArray[np.bool_]) -> NDArray[np.float64]:
-        """(len(rows),) the ground each of ``rows``' captures stood on at its clip time, in leg
-        lengths (the root's unit): playback takes it out of the root's height."""
-        bank, ground = self.sim.bank, np.zeros((self.sim.store.n, 1))
-        over_chunks(sample_table_rows, rows.size, rows, bank.capture_ground, bank.start,
-                    bank.n_frames, bank.fps, clip, time_s, loop, ground,
-                    rows_per_thread=LIGHT_ROWS_PER_THREAD)
-        under: NDArray[np.float64] = ground[rows, 0]
-        return under
-
     def _advance_clocks(self, dt: float) -> None:
         st = self.sim.store
         if self.all_rows():
@@ -191,10 +165,10 @@ class MotionPlayback(System):
         st.fade_time_s[rows] += dt * st.fade_speed[rows]
         st.fade_elapsed_s[rows] += dt
 
-    def _bank_poses(self, bank: ClipBank) -> PoseArrays:
-        """The bank's poses as contiguous arrays (made once per bank)."""
+    def _playback_bank(self, bank: ClipBank) -> PlaybackBank:
+        """The bank as the kernels read it (made once per bank)."""
         if self._bank is None or self._bank[0] is not bank:
-            self._bank = bank, PoseArrays(*(np.ascontiguousarray(a) for a in pose_arrays(bank.poses)))
+            self._bank = bank, playback_bank(bank)
         return self._bank[1]
 
     def _placed(self, poses: NormalizedPoses, xy: NDArray[np.float64],

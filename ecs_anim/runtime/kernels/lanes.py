@@ -66,21 +66,28 @@ def sin_quarter(x: float) -> float:
     return odd_series(x, _SIN_TAYLOR)
 
 
+@jit(inline="always")
+def slerp_angle(cos_half: float) -> float:
+    """The angle of :func:`ecs_anim.core.rotations.slerp` between quaternions whose dot product
+    is ``cos_half``, by the shorter arc (:func:`acos_unit` of its size, at most pi/2)."""
+    return acos_unit(min(abs(cos_half), 1.0))
+
+
 # Inlined by numba: as a call LLVM finds it too long to inline, and a loop with a call in it
 # is not vectorized.
 @jit(inline="always")
-def slerp_weights(cos_half: float, t: float) -> tuple[float, float]:
+def slerp_weights(cos_half: float, theta: float, t: float) -> tuple[float, float]:
     """The weights (w0, w1) of :func:`ecs_anim.core.rotations.slerp` for quaternions whose dot
-    product is ``cos_half`` at ``t`` in [0, 1]: the slerp is ``normalize(w0 q0 + w1 q1)``
-    (``w1`` negative where the dot is: the shorter arc). As :func:`.vec.slerp`, with
-    :func:`acos_unit` and :func:`sin_quarter` for the library's ``acos`` and ``sin`` (the angle
-    is at most pi/2), so that a loop of it over characters is vectorized."""
+    product is ``cos_half`` and angle ``theta`` (:func:`slerp_angle`: a pair's own, so callers
+    may compute it once for every ``t``) at ``t`` in [0, 1]: the slerp is ``normalize(w0 q0 +
+    w1 q1)`` (``w1`` negative where the dot is: the shorter arc). As :func:`.vec.slerp`, with
+    :func:`acos_unit` and :func:`sin_quarter` for the library's ``acos`` and ``sin``, so that
+    a loop of it over characters is vectorized."""
     # Both weights are computed and then chosen (a branch around a polynomial stops LLVM
     # from vectorizing the loop).
     sign = -1.0 if cos_half < 0.0 else 1.0
     c = min(abs(cos_half), 1.0)
     near = (1.0 - c) * (1.0 + c) < 1e-12
-    theta = acos_unit(c)
     arc0, arc1 = sin_quarter((1.0 - t) * theta), sin_quarter(t * theta)
     w0 = 1.0 - t if near else arc0
     w1 = t if near else arc1

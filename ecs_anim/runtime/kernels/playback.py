@@ -2,22 +2,29 @@
 
 Mirrors :func:`ecs_anim.motion.sampling.sample` (frames interpolated in normalized space, root motion
 carried across loops), :func:`ecs_anim.motion.sampling.sample_table`, the placement of
-``MotionPlayback._placed`` and :func:`ecs_anim.motion.sampling.blend`, one store row at a time (the
-sampling's slerps by blocks of characters on the vector units), writing the store's pose arrays
-in place. The clip bank's poses and the store's are passed as
-:class:`~ecs_anim.runtime.kernels.decode.PoseArrays`.
+``MotionPlayback._placed`` and :func:`ecs_anim.motion.sampling.blend`, writing the store's pose
+arrays in place. The clip bank is read as a :class:`PlaybackBank`, made once per bank (the
+slerps' angles between each frame and the next, and the loops' turns, computed there and not
+every tick); the poses as :class:`~ecs_anim.runtime.kernels.decode.PoseArrays`.
+
+:func:`sample_placed` samples each (clip, time, loop) the characters play once: characters
+that play the same clip from the same time (a crowd started in step) share one sampled pose,
+copied to each of them; only their placement is their own.
 """
 
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.core.normalized import TRAILING_SHAPES, NormalizedPoses
-from ecs_anim.runtime.kernels.decode import PoseArrays
-from ecs_anim.runtime.kernels.lanes import BLOCK, slerp_weights
+from ecs_anim.core.skeleton import N_LENGTHS
+from ecs_anim.runtime.kernels import over_chunks
+from ecs_anim.runtime.kernels.decode import PoseArrays, leg_length, pose_arrays
+from ecs_anim.runtime.kernels.lanes import BLOCK, slerp_angle, slerp_weights
 from ecs_anim.runtime.kernels.vec import (
     F64,
     TINY,
@@ -29,6 +36,9 @@ from ecs_anim.runtime.kernels.vec import (
     store3,
     wrap,
 )
+
+if TYPE_CHECKING:
+    from ecs_anim.motion.sampling import ClipBank
 
 I64 = NDArray[np.int64]
 B1 = NDArray[np.bool_]
@@ -172,13 +182,14 @@ def complex_power(re: float, im: float, exponent: float) -> tuple[float, float]:
     return e * math.cos(b), e * math.sin(b)
 
 
-@jit()
-def loop_transform(yaw: float, shift_x: float, shift_y: float,
+@jit(inline="always")
+def loop_transform(yaw: float, cos_yaw: float, sin_yaw: float, shift_x: float, shift_y: float,
                    loops: float) -> tuple[float, float, float]:
     """Mirrors ``ecs_anim.motion.sampling.loop_transform`` for one character: (angle, moved x, moved
-    y) of the root after ``loops`` whole loops of a clip gaining ``yaw`` and ``shift`` each."""
+    y) of the root after ``loops`` whole loops of a clip gaining ``yaw`` (of cosine ``cos_yaw``
+    and sine ``sin_yaw``: :class:`PlaybackBank`) and ``shift`` each."""
     shift = complex(shift_x, shift_y)
-    step = complex(math.cos(yaw), math.sin(yaw))
+    step = complex(cos_yaw, sin_yaw)
     if abs(yaw) < 1e-9:
         series = complex(loops, 0.0)
     else:
@@ -189,26 +200,76 @@ def loop_transform(yaw: float, shift_x: float, shift_y: float,
 
 
 @jit(inline="always")
-def _frame_root(bank: PoseArrays, first: int, frame: int, angle: float, moved_x: float,
-                moved_y: float) -> tuple[Vec3, float]:
+def _turned(x: float, y: float, cos_angle: float, sin_angle: float) -> tuple[float, float]:
+    """:func:`rotate_xy` given the angle's cosine and sine (computed once for two points)."""
+    return cos_angle * x - sin_angle * y, sin_angle * x + cos_angle * y
+
+
+@jit(inline="always")
+def _frame_root(bank: PoseArrays, first: int, frame: int, angle: float, cos_angle: float,
+                sin_angle: float, moved_x: float, moved_y: float) -> tuple[Vec3, float]:
     """Root position and heading of bank row ``frame`` after the loop transform (mirrors
-    ``ecs_anim.motion.sampling._frame``); ``first`` the clip's first row."""
+    ``ecs_anim.motion.sampling._frame``); ``first`` the clip's first row; the transform's
+    ``angle`` given with its cosine and sine."""
     p0x, p0y = bank.root_position[first, 0], bank.root_position[first, 1]
     p = bank.root_position[frame]
-    rx, ry = rotate_xy(p[0] - p0x, p[1] - p0y, angle)
+    rx, ry = _turned(p[0] - p0x, p[1] - p0y, cos_angle, sin_angle)
     return (p0x + moved_x + rx, p0y + moved_y + ry, p[2]), bank.root_heading[frame] + angle
 
 
-#: Scratch rows of :func:`sample_placed_rows` (one column per character of its chunk): the dot
-#: products of the seven slerped quaternion pairs, their weights w0 and w1, the frames' weight,
-#: the bank rows of the two frames (whole numbers, exact in float64).
-_COS, _W0, _W1, _T, _R0, _R1 = 0, 7, 14, 21, 22, 23
-PLAYBACK_SCRATCH_ROWS = 24
+#: The quaternions a pose slerps, in the order of :class:`PlaybackBank`'s pair columns:
+#: pelvis_local, thorax, head, leg_frame [left, right], arm_frame [left, right].
+N_SLERPED = 7
 
 
-def playback_scratch(n: int) -> F64:
-    """The scratch :func:`sample_placed_rows` needs for ``n`` rows: (PLAYBACK_SCRATCH_ROWS, n)."""
-    return np.empty((PLAYBACK_SCRATCH_ROWS, n))
+class PlaybackBank(NamedTuple):
+    """A clip bank as the playback kernels read it, made once per bank (:func:`playback_bank`).
+
+    ``poses`` the bank's poses (total_frames,), contiguous; ``start``, ``n_frames`` (n_clips,)
+    int64, ``fps``, ``loop_yaw`` (n_clips,) rad, ``loop_shift`` (n_clips, 2): as in
+    :class:`ecs_anim.motion.sampling.ClipBank`; ``loop_cos``, ``loop_sin`` (n_clips,) the
+    cosine and sine of ``loop_yaw``. ``next_row`` (total_frames,) int64: the bank row a frame
+    is interpolated towards when its clip plays on (the next frame; a loop's first after its
+    last); ``pair_cos`` (total_frames, N_SLERPED) the dot product of each slerped quaternion
+    of a row with the same of its ``next_row`` and ``pair_angle`` their slerp's angle
+    (:func:`.lanes.slerp_angle`). ``capture_ground`` (total_frames,) leg lengths,
+    ``contact_weight``, ``sole_roll`` (total_frames, 2): the bank's per-frame tables."""
+
+    poses: PoseArrays
+    start: I64
+    n_frames: I64
+    fps: F64
+    loop_yaw: F64
+    loop_shift: F64
+    loop_cos: F64
+    loop_sin: F64
+    next_row: I64
+    pair_cos: F64
+    pair_angle: F64
+    capture_ground: F64
+    contact_weight: F64
+    sole_roll: F64
+
+
+def playback_bank(bank: ClipBank) -> PlaybackBank:
+    """``bank`` as :class:`PlaybackBank` (its arrays contiguous, its pairs' slerp angles and
+    its loops' turns computed here, once)."""
+    poses = PoseArrays(*(np.ascontiguousarray(a, np.float64) for a in pose_arrays(bank.poses)))
+    start = np.ascontiguousarray(bank.start, np.int64)
+    n_frames = np.ascontiguousarray(bank.n_frames, np.int64)
+    total = int(poses.root_heading.shape[0])
+    next_row = np.arange(1, total + 1, dtype=np.int64)
+    next_row[start + n_frames - 1] = start
+    pair_cos, pair_angle = np.empty((total, N_SLERPED)), np.empty((total, N_SLERPED))
+    pair_tables(poses, next_row, pair_cos, pair_angle)
+    loop_yaw = np.ascontiguousarray(bank.loop_yaw, np.float64)
+    # np.cos and np.sin are math.cos and math.sin bit for bit (both call the C library's).
+    return PlaybackBank(poses, start, n_frames, np.ascontiguousarray(bank.fps, np.float64),
+                        loop_yaw, np.ascontiguousarray(bank.loop_shift, np.float64),
+                        np.cos(loop_yaw), np.sin(loop_yaw), next_row, pair_cos, pair_angle,
+                        np.ascontiguousarray(bank.capture_ground[:, 0], np.float64),
+                        np.ascontiguousarray(bank.contact_weight, np.float64),
+                        np.ascontiguousarray(bank.sole_roll, np.float64))
 
 
 @jit(inline="always")
@@ -225,6 +286,102 @@ def _cos_half2(a: F64, ra: int, rb: int, s: int) -> float:
     cos_half: float = (a[ra, s, 0] * a[rb, s, 0] + a[ra, s, 1] * a[rb, s, 1]
                        + a[ra, s, 2] * a[rb, s, 2] + a[ra, s, 3] * a[rb, s, 3])
     return cos_half
+
+
+@jit(inline="always")
+def _slerped_cos(poses: PoseArrays, r0: int, r1: int, q: int) -> float:
+    """Dot product of slerped quaternion ``q`` (:data:`N_SLERPED` order) of bank rows ``r0``
+    and ``r1``."""
+    if q == 0:
+        return _cos_half(poses.pelvis_local, r0, r1)
+    if q == 1:
+        return _cos_half(poses.thorax, r0, r1)
+    if q == 2:
+        return _cos_half(poses.head, r0, r1)
+    if q < 5:
+        return _cos_half2(poses.leg_frame, r0, r1, q - 3)
+    return _cos_half2(poses.arm_frame, r0, r1, q - 5)
+
+
+@jit(nogil=True)
+def pair_tables(poses: PoseArrays, next_row: I64, pair_cos: F64, pair_angle: F64) -> None:
+    """Fill :class:`PlaybackBank`'s ``pair_cos`` and ``pair_angle`` (total_frames, N_SLERPED)
+    for the bank ``poses`` and its ``next_row``."""
+    for r in range(next_row.shape[0]):
+        for q in range(N_SLERPED):
+            cos_half = _slerped_cos(poses, r, next_row[r], q)
+            pair_cos[r, q] = cos_half
+            pair_angle[r, q] = slerp_angle(cos_half)
+
+
+@jit(nogil=True)
+def first_of_each_sample(rows: I64, clip: I64, time_bits: I64, loop: B1, table: I64,
+                         first: I64, unique: I64) -> int:
+    """Group the store rows ``rows`` (r,) by what they sample: characters playing the same
+    clip from the same time (bit for bit) with the same loop flag sample the same pose. For
+    each position i of ``rows``, ``first[i]`` becomes the first position with the same
+    (``clip``, ``time_bits``, ``loop``) (i itself for the first); ``unique`` (m,) those first
+    positions in order. Returns m. ``time_bits`` (n,) the clip times' bits
+    (``time_s.view(np.int64)``); ``table`` scratch, a power of two >= 2 r long (a hash table
+    by open addressing, filled here)."""
+    table[:] = -1
+    mask = table.shape[0] - 1
+    m = 0
+    for i in range(rows.shape[0]):
+        c = rows[i]
+        k, bits, lp = clip[c], time_bits[c], loop[c]
+        key = bits + k * 1099511628211 + (1 if lp else 0)
+        # Fibonacci hashing: the product's middle bits depend on every bit of the key (a time
+        # on a whole frame has zero low bits).
+        h = ((key * -7046029254386353131) >> 29) & mask
+        while True:
+            j = table[h]
+            if j < 0:
+                table[h] = first[i] = unique[m] = i
+                m += 1
+                break
+            d = rows[j]
+            if time_bits[d] == bits and clip[d] == k and loop[d] == lp:
+                first[i] = j
+                break
+            h = (h + 1) & mask
+    return m
+
+
+#: Scratch rows of :func:`sample_rows` and :func:`place_rows` (one column per position of their
+#: ``rows``; threads write disjoint columns): for the slerps of a block of samples, the dot
+#: products and angles of the seven slerped pairs, their weights w0 and w1, the frames' weight
+#: and bank rows (whole numbers, exact in float64); then each sample's root before its
+#: placement (x, y, z, heading), its contact weights and its sole rolls.
+_COS = 0
+_ANGLE = _COS + N_SLERPED
+_W0 = _ANGLE + N_SLERPED
+_W1 = _W0 + N_SLERPED
+_T = _W1 + N_SLERPED
+_R0, _R1 = _T + 1, _T + 2
+_ROOT = _T + 3
+_CONTACT = _ROOT + 4
+_ROLL = _CONTACT + 2
+PLAYBACK_SCRATCH_ROWS = _ROLL + 2
+
+
+class PlaybackWork:
+    """The arrays :func:`sample_placed` works in, kept from tick to tick (grown when the rows
+    outnumber them): a tick neither allocates them nor touches fresh memory."""
+
+    def __init__(self) -> None:
+        self._size = -1
+        self.table = self.first = self.unique = np.zeros(0, np.int64)
+        self.scratch = np.zeros((PLAYBACK_SCRATCH_ROWS, 0))
+
+    def ensure(self, n: int) -> None:
+        """Room for ``n`` rows."""
+        if n > self._size:
+            size = max(n, 2 * self._size, 16)
+            self.table = np.empty(1 << (2 * size - 1).bit_length(), np.int64)
+            self.first, self.unique = np.empty(size, np.int64), np.empty(size, np.int64)
+            self.scratch = np.empty((PLAYBACK_SCRATCH_ROWS, size))
+            self._size = size
 
 
 @jit(inline="always")
@@ -252,112 +409,186 @@ def _weighted_quat2(a: F64, ra: int, rb: int, s: int, w0: float, w1: float, out:
 
 
 @jit(inline="always")
-def _sampled_frames(c: int, start: I64, n_frames: I64, fps: F64, clip: I64, time_s: F64,
-                    loop: B1) -> tuple[int, int, float, float, bool]:
-    """Bank rows (r0, r1) of the frames store row ``c`` falls between, the weight of r1, the
-    whole loops done and whether r1 wraps (:func:`frame_position` in bank rows)."""
-    k = clip[c]
-    i0, i1, w, loops, wraps = frame_position(n_frames[k], fps[k], time_s[c], loop[c])
-    return start[k] + i0, start[k] + i1, w, loops, wraps
+def _sampled_root(bank: PlaybackBank, k: int, r0: int, r1: int, w: float, loops: float,
+                  wraps: bool) -> tuple[Vec3, float]:
+    """Root position and heading of clip ``k`` between bank rows ``r0`` and ``r1`` (weight
+    ``w`` of r1) after ``loops`` whole loops, r1 in the next loop if it ``wraps`` (mirrors
+    ``sample``'s root)."""
+    first, yaw, cos_yaw, sin_yaw = bank.start[k], bank.loop_yaw[k], bank.loop_cos[k], bank.loop_sin[k]
+    shift_x, shift_y = bank.loop_shift[k, 0], bank.loop_shift[k, 1]
+    angle, mx, my = loop_transform(yaw, cos_yaw, sin_yaw, shift_x, shift_y, loops)
+    c, s = math.cos(angle), math.sin(angle)
+    pa, ha = _frame_root(bank.poses, first, r0, angle, c, s, mx, my)
+    if wraps:
+        angle, mx, my = loop_transform(yaw, cos_yaw, sin_yaw, shift_x, shift_y, loops + 1.0)
+        c, s = math.cos(angle), math.sin(angle)
+    pb, hb = _frame_root(bank.poses, first, r1, angle, c, s, mx, my)
+    return blend_root(pa, ha, pb, hb, w)
+
+
+@jit(nogil=True)
+def sample_rows(lo: int, hi: int, unique: I64, rows: I64, bank: PlaybackBank, clip: I64,
+                time_s: F64, loop: B1, out: PoseArrays, out_rows: I64, scratch: F64) -> None:
+    """Mirrors ``sample(bank, clip, time_s, loop)`` for the store rows ``rows[unique[lo:hi]]``:
+    every field but the root's into rows ``out_rows[unique[j]]`` of ``out``; into the scratch
+    column ``unique[j]``, the root before its placement (capture ground taken out, as
+    ``MotionPlayback`` does) and the contact weights and sole rolls
+    (:func:`ecs_anim.motion.sampling.sample_table`), which :func:`place_rows` then places.
+
+    Per store row: ``clip`` (n,) int64, ``time_s`` (n,) s, ``loop`` (n,) bool. ``scratch``
+    (PLAYBACK_SCRATCH_ROWS, len(rows)). By blocks of :data:`.lanes.BLOCK` samples: frames,
+    roots and tables row by row, the slerps' weights (sines: their angles come from the
+    bank) in a loop over the block that runs on the vector units, then the weighted sums row
+    by row."""
+    poses = bank.poses
+    for block in range(lo, hi, BLOCK):
+        stop = min(block + BLOCK, hi)
+        for j in range(block, stop):
+            i = unique[j]
+            c = rows[i]
+            k = clip[c]
+            i0, i1, w, loops, wraps = frame_position(bank.n_frames[k], bank.fps[k], time_s[c],
+                                                     loop[c])
+            r0, r1 = bank.start[k] + i0, bank.start[k] + i1
+            p, h = _sampled_root(bank, k, r0, r1, w, loops, wraps)
+            ground = bank.capture_ground[r0] + w * (bank.capture_ground[r1]
+                                                    - bank.capture_ground[r0])
+            scratch[_ROOT, i], scratch[_ROOT + 1, i] = p[0], p[1]
+            scratch[_ROOT + 2, i], scratch[_ROOT + 3, i] = p[2] - ground, h
+            for s in range(2):
+                a, b = bank.contact_weight[r0, s], bank.contact_weight[r1, s]
+                scratch[_CONTACT + s, i] = a + w * (b - a)
+                a, b = bank.sole_roll[r0, s], bank.sole_roll[r1, s]
+                scratch[_ROLL + s, i] = a + w * (b - a)
+            scratch[_T, j], scratch[_R0, j], scratch[_R1, j] = w, r0, r1
+            if r1 == bank.next_row[r0]:
+                for q in range(N_SLERPED):
+                    scratch[_COS + q, j] = bank.pair_cos[r0, q]
+                    scratch[_ANGLE + q, j] = bank.pair_angle[r0, q]
+            else:  # a clip held on its last frame: r1 is r0
+                for q in range(N_SLERPED):
+                    cos_half = _slerped_cos(poses, r0, r1, q)
+                    scratch[_COS + q, j] = cos_half
+                    scratch[_ANGLE + q, j] = slerp_angle(cos_half)
+        t = scratch[_T, block:stop]
+        for q in range(N_SLERPED):
+            dots, angles = scratch[_COS + q, block:stop], scratch[_ANGLE + q, block:stop]
+            w0, w1 = scratch[_W0 + q, block:stop], scratch[_W1 + q, block:stop]
+            # The vectorized loop (indices from 0: LLVM knows they need no wrapping around).
+            for b in range(t.shape[0]):
+                w0[b], w1[b] = slerp_weights(dots[b], angles[b], t[b])
+        for j in range(block, stop):
+            o, w = out_rows[unique[j]], scratch[_T, j]
+            r0, r1 = int(scratch[_R0, j]), int(scratch[_R1, j])
+            _weighted_quat(poses.pelvis_local, r0, r1, scratch[_W0, j], scratch[_W1, j],
+                           out.pelvis_local, o)
+            _weighted_quat(poses.thorax, r0, r1, scratch[_W0 + 1, j], scratch[_W1 + 1, j],
+                           out.thorax, o)
+            _weighted_quat(poses.head, r0, r1, scratch[_W0 + 2, j], scratch[_W1 + 2, j],
+                           out.head, o)
+            for s in range(2):
+                _weighted_quat2(poses.leg_frame, r0, r1, s, scratch[_W0 + 3 + s, j],
+                                scratch[_W1 + 3 + s, j], out.leg_frame, o)
+                _weighted_quat2(poses.arm_frame, r0, r1, s, scratch[_W0 + 5 + s, j],
+                                scratch[_W1 + 5 + s, j], out.arm_frame, o)
+            _blend_unslerped(poses, r0, poses, r1, w, out, o)
+
+
+# The copies take their row length as a constant: LLVM unrolls them (twice as fast as a loop
+# over the array's shape). They go field by field: one array written at a time, where a row at
+# a time wrote fifteen (12-15 % less of MotionPlayback's time in the bench's tick, its arrays
+# out of the caches).
+@jit(inline="always")
+def _copy_shared(a: F64, lo: int, hi: int, first: I64, out_rows: I64, size: int) -> None:
+    """For each position i in ``lo..hi`` whose sample is another's (``first[i]``), row
+    ``out_rows[first[i]]`` of ``a`` (n, size) copied into row ``out_rows[i]``."""
+    for i in range(lo, hi):
+        f = first[i]
+        if f != i:
+            ra, rb = out_rows[f], out_rows[i]
+            for k in range(size):
+                a[rb, k] = a[ra, k]
 
 
 @jit(inline="always")
-def _placed_root_row(c: int, bank: PoseArrays, start: I64, n_frames: I64, fps: F64,
-                     loop_yaw: F64, loop_shift: F64, clip: I64, time_s: F64, loop: B1,
-                     placement_xy: F64, placement_heading: F64, leg: F64, out: PoseArrays,
-                     o: int) -> tuple[int, int, float]:
-    """The root of ``MotionPlayback._placed(sample(...))`` for store row ``c`` (root motion
-    carried across loops, then placed), into row ``o`` of ``out``. Arguments as for
-    :func:`sample_placed_rows`. Returns the bank rows of the two frames and the second's
-    weight."""
-    r0, r1, w, loops, wraps = _sampled_frames(c, start, n_frames, fps, clip, time_s, loop)
-    k = clip[c]
-    first = start[k]
-    angle, mx, my = loop_transform(loop_yaw[k], loop_shift[k, 0], loop_shift[k, 1], loops)
-    pa, ha = _frame_root(bank, first, r0, angle, mx, my)
-    if wraps:
-        angle, mx, my = loop_transform(loop_yaw[k], loop_shift[k, 0], loop_shift[k, 1],
-                                       loops + 1.0)
-    pb, hb = _frame_root(bank, first, r1, angle, mx, my)
-    p, h = blend_root(pa, ha, pb, hb, w)
-    # MotionPlayback._placed: rotate the root path about the motion origin, then shift it.
-    heading, scale = placement_heading[c], leg[c]
-    x, y = rotate_xy(p[0] * scale, p[1] * scale, heading)
-    store3(out.root_position[o], ((x + placement_xy[c, 0]) / scale,
-                                  (y + placement_xy[c, 1]) / scale, p[2]))
-    out.root_heading[o] = h + heading
-    return r0, r1, w
-
-
-@jit(nogil=True)
-def sample_placed_rows(lo: int, hi: int, rows: I64, bank: PoseArrays, start: I64, n_frames: I64,
-                       fps: F64, loop_yaw: F64, loop_shift: F64, clip: I64, time_s: F64, loop: B1,
-                       placement_xy: F64, placement_heading: F64, leg: F64, out: PoseArrays,
-                       out_rows: I64, scratch: F64) -> None:
-    """Mirrors ``MotionPlayback._placed(sample(bank, clip, time_s, loop), placement_xy,
-    placement_heading)`` over the store rows ``rows[lo:hi]``, into rows ``out_rows`` of
-    ``out``.
-
-    ``bank``: the clip bank's poses (total_frames,); ``start``, ``n_frames`` (n_clips,) int64,
-    ``fps``, ``loop_yaw`` (n_clips,), ``loop_shift`` (n_clips, 2): as in
-    :class:`ecs_anim.motion.sampling.ClipBank`. Per store row: ``clip`` (n,) int64, ``time_s`` (n,) s,
-    ``loop`` (n,) bool, ``placement_xy`` (n, 2) m, ``placement_heading`` (n,) rad, ``leg`` (n,)
-    leg length (m). ``scratch`` (PLAYBACK_SCRATCH_ROWS, len(rows)): :func:`playback_scratch`.
-
-    By blocks of :data:`.lanes.BLOCK` rows: the roots and the quaternions' dot products row by
-    row, the slerps' weights (their arc cosines and sines, most of the work) in a loop over the
-    block's characters that runs on the vector units, then the weighted sums row by row.
-    """
-    for block in range(lo, hi, BLOCK):
-        stop = min(block + BLOCK, hi)
-        for i in range(block, stop):
-            r0, r1, w = _placed_root_row(rows[i], bank, start, n_frames, fps, loop_yaw,
-                                         loop_shift, clip, time_s, loop, placement_xy,
-                                         placement_heading, leg, out, out_rows[i])
-            scratch[_T, i], scratch[_R0, i], scratch[_R1, i] = w, r0, r1
-            scratch[_COS, i] = _cos_half(bank.pelvis_local, r0, r1)
-            scratch[_COS + 1, i] = _cos_half(bank.thorax, r0, r1)
-            scratch[_COS + 2, i] = _cos_half(bank.head, r0, r1)
-            for s in range(2):
-                scratch[_COS + 3 + s, i] = _cos_half2(bank.leg_frame, r0, r1, s)
-                scratch[_COS + 5 + s, i] = _cos_half2(bank.arm_frame, r0, r1, s)
-        t = scratch[_T, block:stop]
-        for q in range(_W0 - _COS):
-            cos_half = scratch[_COS + q, block:stop]
-            w0, w1 = scratch[_W0 + q, block:stop], scratch[_W1 + q, block:stop]
-            # The vectorized loop (indices from 0: LLVM knows they need no wrapping around).
-            for j in range(t.shape[0]):
-                w0[j], w1[j] = slerp_weights(cos_half[j], t[j])
-        for i in range(block, stop):
-            o, w = out_rows[i], scratch[_T, i]
-            r0, r1 = int(scratch[_R0, i]), int(scratch[_R1, i])
-            _weighted_quat(bank.pelvis_local, r0, r1, scratch[_W0, i], scratch[_W1, i],
-                           out.pelvis_local, o)
-            _weighted_quat(bank.thorax, r0, r1, scratch[_W0 + 1, i], scratch[_W1 + 1, i],
-                           out.thorax, o)
-            _weighted_quat(bank.head, r0, r1, scratch[_W0 + 2, i], scratch[_W1 + 2, i],
-                           out.head, o)
-            for s in range(2):
-                _weighted_quat2(bank.leg_frame, r0, r1, s, scratch[_W0 + 3 + s, i],
-                                scratch[_W1 + 3 + s, i], out.leg_frame, o)
-                _weighted_quat2(bank.arm_frame, r0, r1, s, scratch[_W0 + 5 + s, i],
-                                scratch[_W1 + 5 + s, i], out.arm_frame, o)
-            _blend_unslerped(bank, r0, bank, r1, w, out, o)
-
-
-@jit(nogil=True)
-def sample_table_rows(lo: int, hi: int, rows: I64, table: F64, start: I64, n_frames: I64, fps: F64,
-                      clip: I64, time_s: F64, loop: B1, out: F64) -> None:
-    """Mirrors :func:`ecs_anim.motion.sampling.sample_table` over the store rows
-    ``rows[lo:hi]``: ``table`` (total_frames, k) interpolated at each row's clip time into
-    ``out[c]`` ((n, k)). Bank and row arguments as for :func:`sample_placed_rows`."""
+def _copy_shared2(a: F64, lo: int, hi: int, first: I64, out_rows: I64, sides: int,
+                  size: int) -> None:
+    """As :func:`_copy_shared` for ``a`` (n, sides, size)."""
     for i in range(lo, hi):
-        c = rows[i]
-        k = clip[c]
-        i0, i1, w, _, _ = frame_position(n_frames[k], fps[k], time_s[c], loop[c])
-        a, b = table[start[k] + i0], table[start[k] + i1]
-        for j in range(table.shape[1]):
-            out[c, j] = a[j] + w * (b[j] - a[j])
+        f = first[i]
+        if f != i:
+            ra, rb = out_rows[f], out_rows[i]
+            for s in range(sides):
+                for k in range(size):
+                    a[rb, s, k] = a[ra, s, k]
+
+
+@jit(inline="always")
+def copy_shared_parts(out: PoseArrays, lo: int, hi: int, first: I64, out_rows: I64) -> None:
+    """:func:`_copy_shared` of every field of ``out`` but the root's."""
+    _copy_shared(out.pelvis_local, lo, hi, first, out_rows, 4)
+    _copy_shared2(out.hip_dir, lo, hi, first, out_rows, 2, 3)
+    _copy_shared2(out.leg_frame, lo, hi, first, out_rows, 2, 4)
+    _copy_shared(out.leg_fraction, lo, hi, first, out_rows, 2)
+    _copy_shared2(out.foot_dir, lo, hi, first, out_rows, 2, 3)
+    _copy_shared2(out.spine_points, lo, hi, first, out_rows, 3, 3)
+    _copy_shared(out.thorax, lo, hi, first, out_rows, 4)
+    _copy_shared(out.neck_dir, lo, hi, first, out_rows, 3)
+    _copy_shared(out.head, lo, hi, first, out_rows, 4)
+    _copy_shared(out.head_top_dir, lo, hi, first, out_rows, 3)
+    _copy_shared2(out.clavicle_dir, lo, hi, first, out_rows, 2, 3)
+    _copy_shared2(out.arm_frame, lo, hi, first, out_rows, 2, 4)
+    _copy_shared(out.arm_fraction, lo, hi, first, out_rows, 2)
+    _copy_shared2(out.hand_dir, lo, hi, first, out_rows, 2, 3)
+    _copy_shared(out.stretch, lo, hi, first, out_rows, N_LENGTHS)
+
+
+@jit(nogil=True)
+def place_rows(lo: int, hi: int, rows: I64, first: I64, placement_xy: F64,
+               placement_heading: F64, lengths: F64, out: PoseArrays, out_rows: I64,
+               scratch: F64, contact_weight: F64, sole_roll: F64) -> None:
+    """For each position i in ``lo..hi`` of the store rows ``rows``: row ``out_rows[i]`` of
+    ``out`` becomes the pose :func:`sample_rows` sampled for position ``first[i]`` (copied
+    unless it is i's own), its root placed as ``MotionPlayback._placed`` does (rotated about
+    the motion's origin by ``placement_heading`` (n,) rad in metres of the leg length of
+    ``lengths`` (n, N_LENGTHS) m, then shifted by ``placement_xy`` (n, 2) m);
+    ``contact_weight`` and ``sole_roll`` (n, 2) of store row ``rows[i]`` its sample's."""
+    copy_shared_parts(out, lo, hi, first, out_rows)
+    for i in range(lo, hi):
+        c, o, f = rows[i], out_rows[i], first[i]
+        heading, scale = placement_heading[c], leg_length(lengths[c])
+        x, y = rotate_xy(scratch[_ROOT, f] * scale, scratch[_ROOT + 1, f] * scale, heading)
+        out.root_position[o, 0] = (x + placement_xy[c, 0]) / scale
+        out.root_position[o, 1] = (y + placement_xy[c, 1]) / scale
+        out.root_position[o, 2] = scratch[_ROOT + 2, f]
+        out.root_heading[o] = scratch[_ROOT + 3, f] + heading
+        for s in range(2):
+            contact_weight[c, s] = scratch[_CONTACT + s, f]
+            sole_roll[c, s] = scratch[_ROLL + s, f]
+
+
+def sample_placed(bank: PlaybackBank, rows: I64, clip: I64, time_s: F64, loop: B1,
+                  placement_xy: F64, placement_heading: F64, lengths: F64, out: PoseArrays,
+                  out_rows: I64, contact_weight: F64, sole_roll: F64,
+                  work: PlaybackWork) -> None:
+    """Mirrors ``MotionPlayback._placed(sample(bank, clip, time_s, loop), placement_xy,
+    placement_heading)`` less the capture ground (``sample_table(bank, bank.capture_ground,
+    ...)``) for the store rows ``rows`` (r,), into rows ``out_rows`` (r,) of ``out``, and
+    their contact weights and sole rolls (``sample_table`` of the bank's) into rows ``rows``
+    of ``contact_weight`` and ``sole_roll`` (n, 2).
+
+    Per store row: ``clip`` (n,) int64, ``time_s`` (n,) s (contiguous float64), ``loop``
+    (n,) bool, ``placement_xy`` (n, 2) m, ``placement_heading`` (n,) rad, ``lengths`` (n,
+    N_LENGTHS) m (the leg length is the root path's unit). Each (clip, time, loop) is sampled
+    once (:func:`first_of_each_sample`, :func:`sample_rows`), then every row placed
+    (:func:`place_rows`); ``work`` holds the scratch."""
+    work.ensure(rows.size)
+    m = first_of_each_sample(rows, clip, time_s.view(np.int64), loop, work.table, work.first,
+                             work.unique)
+    over_chunks(sample_rows, m, work.unique, rows, bank, clip, time_s, loop, out, out_rows,
+                work.scratch)
+    over_chunks(place_rows, rows.size, rows, work.first, placement_xy, placement_heading,
+                lengths, out, out_rows, work.scratch, contact_weight, sole_roll)
 
 
 @jit(nogil=True)

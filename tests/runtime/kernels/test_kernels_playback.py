@@ -7,19 +7,23 @@ import numpy as np
 import pytest
 
 from ecs_anim.components import MotionPlayer, Placement, QueuedClip
-from ecs_anim.core.morphology import Morphology
+from ecs_anim.core.morphology import Morphology, leg_length
 from ecs_anim.core.normalized import QUATERNION_FIELDS, NormalizedPoses
+from ecs_anim.core.skeleton import N_LENGTHS
 from ecs_anim.io.importing import import_bvh
 from ecs_anim.io.library import MOTIONS_DIR
 from ecs_anim.motion.sampling import ClipBank, blend, rotate_xy, sample, sample_table
 from ecs_anim.runtime.kernels.decode import pose_arrays
 from ecs_anim.runtime.kernels.lanes import BLOCK
 from ecs_anim.runtime.kernels.playback import (
+    PlaybackWork,
     blend_rows,
     complex_power,
-    playback_scratch,
-    sample_placed_rows,
-    sample_table_rows,
+    first_of_each_sample,
+    place_rows,
+    playback_bank,
+    sample_placed,
+    sample_rows,
 )
 from ecs_anim.runtime.simulation import Simulation
 from ecs_anim.systems import MotionPlayback
@@ -58,41 +62,68 @@ def _assert_poses_equal(got: NormalizedPoses, want: NormalizedPoses) -> None:
 def _scene(bank: ClipBank, rng: np.random.Generator, n: int):
     clip = rng.integers(0, len(bank.names), n).astype(np.int64)
     period = bank.duration_s(clip)
-    # Inside the clip, past its end (loops, or held), before its start, and exactly on frames.
+    # Inside the clip, past its end (loops, or held), before its start, and exactly on frames;
+    # a quarter of the characters in step with another (the same clip, time and loop).
     time_s = period * rng.choice([rng.uniform(0, 1), rng.uniform(1, 40), rng.uniform(-3, 0)], n)
+    time_s[n // 2:] = period[n // 2:] * rng.uniform(-3, 40, n - n // 2)
     time_s[: n // 8] = np.round(time_s[: n // 8] * 30.0) / 30.0
     loop = rng.random(n) < 0.6
+    in_step = rng.choice(n, n // 4)
+    clip[-(n // 4):], time_s[-(n // 4):], loop[-(n // 4):] = (clip[in_step], time_s[in_step],
+                                                               loop[in_step])
     xy = rng.uniform(-20.0, 20.0, (n, 2))
     heading = rng.uniform(-7.0, 7.0, n)
-    leg = rng.uniform(0.5, 1.1, n)
-    return clip, time_s, loop, xy, heading, leg
+    lengths = rng.uniform(0.15, 0.55, (n, N_LENGTHS))
+    return clip, time_s, loop, xy, heading, lengths
 
 
-def test_sample_placed_rows_equals_numpy(bank: ClipBank) -> None:
+def _reference(bank: ClipBank, clip: np.ndarray, time_s: np.ndarray, loop: np.ndarray,
+               xy: np.ndarray, heading: np.ndarray, lengths: np.ndarray):
+    """MotionPlayback.run_numpy's poses (the capture ground taken out), contact weights and
+    sole rolls."""
+    poses = _placed(sample(bank, clip, time_s, loop), xy, heading, leg_length(lengths))
+    poses.root_position[:, 2] -= sample_table(bank, bank.capture_ground, clip, time_s, loop)[:, 0]
+    return (poses, sample_table(bank, bank.contact_weight, clip, time_s, loop),
+            sample_table(bank, bank.sole_roll, clip, time_s, loop))
+
+
+def _compiled(bank: ClipBank, rows: np.ndarray, clip: np.ndarray, time_s: np.ndarray,
+              loop: np.ndarray, xy: np.ndarray, heading: np.ndarray, lengths: np.ndarray,
+              out: NormalizedPoses, out_rows: np.ndarray):
+    """sample_placed of ``rows`` into ``out_rows`` of ``out``: (contact weights, sole rolls),
+    NaN outside ``rows``."""
+    n = clip.shape[0]
+    weights, rolls = np.full((n, 2), np.nan), np.full((n, 2), np.nan)
+    sample_placed(playback_bank(bank), rows, clip, time_s, loop, xy, heading, lengths,
+                  pose_arrays(out), out_rows, weights, rolls, PlaybackWork())
+    return weights, rolls
+
+
+def test_sample_placed_equals_numpy(bank: ClipBank) -> None:
     rng = np.random.default_rng(1311)
     n = 400
-    clip, time_s, loop, xy, heading, leg = _scene(bank, rng, n)
-    want = _placed(sample(bank, clip, time_s, loop), xy, heading, leg)
+    clip, time_s, loop, xy, heading, lengths = _scene(bank, rng, n)
+    want, want_weights, want_rolls = _reference(bank, clip, time_s, loop, xy, heading, lengths)
     got = _empty(n, want)
     rows = np.arange(n, dtype=np.int64)
-    sample_placed_rows(0, n, rows, pose_arrays(bank.poses), bank.start, bank.n_frames, bank.fps,
-                       bank.loop_yaw, bank.loop_shift, clip, time_s, loop, xy, heading, leg,
-                       pose_arrays(got), rows, playback_scratch(n))
+    weights, rolls = _compiled(bank, rows, clip, time_s, loop, xy, heading, lengths, got, rows)
     _assert_poses_equal(got, want)
+    np.testing.assert_allclose(weights, want_weights, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(rolls, want_rolls, rtol=0, atol=1e-12)
 
 
 def test_only_the_given_rows_are_written(bank: ClipBank) -> None:
     rng = np.random.default_rng(1312)
     n = 50
-    clip, time_s, loop, xy, heading, leg = _scene(bank, rng, n)
-    want = _placed(sample(bank, clip, time_s, loop), xy, heading, leg)
+    clip, time_s, loop, xy, heading, lengths = _scene(bank, rng, n)
+    want, want_weights, _ = _reference(bank, clip, time_s, loop, xy, heading, lengths)
     rows = np.flatnonzero(rng.random(n) < 0.5).astype(np.int64)
     got = _empty(rows.size, want)
-    sample_placed_rows(0, rows.size, rows, pose_arrays(bank.poses), bank.start, bank.n_frames,
-                       bank.fps, bank.loop_yaw, bank.loop_shift, clip, time_s, loop, xy, heading,
-                       leg, pose_arrays(got), np.arange(rows.size, dtype=np.int64),
-                       playback_scratch(rows.size))
+    weights, _ = _compiled(bank, rows, clip, time_s, loop, xy, heading, lengths, got,
+                           np.arange(rows.size, dtype=np.int64))
     _assert_poses_equal(got, want.take(rows))
+    np.testing.assert_allclose(weights[rows], want_weights[rows], rtol=0, atol=1e-12)
+    assert np.isnan(np.delete(weights, rows, axis=0)).all()
 
 
 def test_long_loops_carry_root_motion_as_numpy(bank: ClipBank) -> None:
@@ -101,34 +132,68 @@ def test_long_loops_carry_root_motion_as_numpy(bank: ClipBank) -> None:
     clip = np.full(n, bank.index("walk"), dtype=np.int64)
     time_s = bank.duration_s(clip) * rng.uniform(0, 5000, n)  # up to 5000 loops
     loop = np.ones(n, bool)
-    xy, heading, leg = np.zeros((n, 2)), np.zeros(n), np.full(n, 0.9)
-    want = _placed(sample(bank, clip, time_s, loop), xy, heading, leg)
+    xy, heading = np.zeros((n, 2)), np.zeros(n)
+    lengths = np.full((n, N_LENGTHS), 0.45)  # legs of 0.9 m
+    want, _, _ = _reference(bank, clip, time_s, loop, xy, heading, lengths)
     got = _empty(n, want)
     rows = np.arange(n, dtype=np.int64)
-    sample_placed_rows(0, n, rows, pose_arrays(bank.poses), bank.start, bank.n_frames, bank.fps,
-                       bank.loop_yaw, bank.loop_shift, clip, time_s, loop, xy, heading, leg,
-                       pose_arrays(got), rows, playback_scratch(n))
+    _compiled(bank, rows, clip, time_s, loop, xy, heading, lengths, got, rows)
     np.testing.assert_allclose(got.root_position * 0.9, want.root_position * 0.9, rtol=0,
                                atol=1e-9)
     _assert_poses_equal(got, want)
 
 
-def test_sample_placed_rows_does_not_depend_on_the_chunks(bank: ClipBank) -> None:
-    """The slerps' weights are computed by blocks of lanes.BLOCK characters on the vector
-    units: any split of the rows into chunks, none a multiple of the block, gives the same
-    bits."""
+def test_characters_in_step_share_one_sample(bank: ClipBank) -> None:
+    """Characters playing the same clip from the same time with the same loop flag are
+    sampled once: the groups are those of the keys, and each character's pose is the bits it
+    gets sampled alone."""
+    rng = np.random.default_rng(1320)
+    n = 300
+    clip, time_s, loop, xy, heading, lengths = _scene(bank, rng, n)
+    rows = rng.permutation(n).astype(np.int64)
+    work = PlaybackWork()
+    work.ensure(n)
+    m = first_of_each_sample(rows, clip, time_s.view(np.int64), loop, work.table, work.first,
+                             work.unique)
+    keys = [(int(clip[c]), float(time_s[c]), bool(loop[c])) for c in rows]
+    assert m == len(set(keys)) < n
+    first = work.first[:n]
+    assert [keys[f] for f in first] == keys
+    assert all(keys.index(keys[i]) == f for i, f in enumerate(first))
+    together = _empty(n, sample(bank, clip[:1], time_s[:1], loop[:1]))
+    _compiled(bank, rows, clip, time_s, loop, xy, heading, lengths, together, rows)
+    alone = _empty(n, together)
+    for c in rows[:40]:
+        one = np.array([c], dtype=np.int64)
+        _compiled(bank, one, clip, time_s, loop, xy, heading, lengths, alone, one)
+    for name, a in together.arrays().items():
+        np.testing.assert_array_equal(getattr(alone, name)[rows[:40]], a[rows[:40]],
+                                      err_msg=name)
+
+
+def test_sample_placed_does_not_depend_on_the_chunks(bank: ClipBank) -> None:
+    """The slerps' weights are computed by blocks of lanes.BLOCK samples on the vector
+    units: any split of the samples and of the rows into chunks, none a multiple of the block,
+    gives the same bits."""
     rng = np.random.default_rng(1319)
-    n = 3 * BLOCK + 5
-    clip, time_s, loop, xy, heading, leg = _scene(bank, rng, n)
+    n = 8 * BLOCK + 5
+    clip, time_s, loop, xy, heading, lengths = _scene(bank, rng, n)
     rows = rng.permutation(n).astype(np.int64)
     like = sample(bank, clip[:1], time_s[:1], loop[:1])
     whole, chunked = _empty(n, like), _empty(n, like)
-    args = (rows, pose_arrays(bank.poses), bank.start, bank.n_frames, bank.fps, bank.loop_yaw,
-            bank.loop_shift, clip, time_s, loop, xy, heading, leg)
-    sample_placed_rows(0, n, *args, pose_arrays(whole), rows, playback_scratch(n))
-    scratch = playback_scratch(n)
-    for lo, hi in ((0, 7), (7, 40), (40, 41), (41, n)):
-        sample_placed_rows(lo, hi, *args, pose_arrays(chunked), rows, scratch)
+    _compiled(bank, rows, clip, time_s, loop, xy, heading, lengths, whole, rows)
+    pbank, work = playback_bank(bank), PlaybackWork()
+    work.ensure(n)
+    m = first_of_each_sample(rows, clip, time_s.view(np.int64), loop, work.table, work.first,
+                             work.unique)
+    assert m > 3 * BLOCK
+    for lo, hi in ((0, 7), (7, 40), (40, 41), (41, m)):
+        sample_rows(lo, hi, work.unique, rows, pbank, clip, time_s, loop, pose_arrays(chunked),
+                    rows, work.scratch)
+    weights, rolls = np.zeros((n, 2)), np.zeros((n, 2))
+    for lo, hi in ((0, 33), (33, 34), (34, n)):
+        place_rows(lo, hi, rows, work.first, xy, heading, lengths, pose_arrays(chunked), rows,
+                   work.scratch, weights, rolls)
     for name, a in whole.arrays().items():
         np.testing.assert_array_equal(getattr(chunked, name), a, err_msg=name)
 
@@ -142,21 +207,11 @@ def test_complex_power_equals_numpy() -> None:
             assert abs(complex(re, im) - step**exponent) < 1e-12
 
 
-def test_contact_weights_equal_numpy(bank: ClipBank) -> None:
-    rng = np.random.default_rng(1315)
-    n = 300
-    clip, time_s, loop, _, _, _ = _scene(bank, rng, n)
-    want = sample_table(bank, bank.contact_weight, clip, time_s, loop)
-    got = np.full((n, 2), np.nan)
-    sample_table_rows(0, n, np.arange(n, dtype=np.int64), bank.contact_weight, bank.start,
-                      bank.n_frames, bank.fps, clip, time_s, loop, got)
-    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
-
-
 def test_fade_blend_equals_numpy(bank: ClipBank) -> None:
     rng = np.random.default_rng(1316)
     n = 300
-    clip, time_s, loop, xy, heading, leg = _scene(bank, rng, n)
+    clip, time_s, loop, xy, heading, lengths = _scene(bank, rng, n)
+    leg = leg_length(lengths)
     old_clip, old_time, old_loop, old_xy, old_heading, _ = _scene(bank, rng, n)
     new = _placed(sample(bank, clip, time_s, loop), xy, heading, leg)
     old = _placed(sample(bank, old_clip, old_time, old_loop), old_xy, old_heading, leg)
