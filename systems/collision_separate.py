@@ -1,12 +1,13 @@
 """CollisionSeparate: every character's collision capsules, and bodies pushed apart (DESIGN §8b).
 
-Each tick, after PostureConvert: every character's capsules from its posture (compiled over all
-of them: :func:`ecs_anim.runtime.kernels.capsules.capsules`; the layout and radii in
-:mod:`ecs_anim.solver.capsules`) and its bounds, and each one's deepest overlap with another
-character (neighbours on a uniform grid: :func:`ecs_anim.runtime.kernels.capsules.overlaps`),
-searched only among the bodies whose bounds meet another's
-(:func:`ecs_anim.runtime.kernels.capsules.touching`: a crowd that keeps apart costs the
-capsules and the grid); a body a round moves searches again with those it then reaches. Where two
+Each tick, after PostureConvert: every character's bounds from its joints
+(:func:`ecs_anim.runtime.kernels.capsules.bounds`), the bodies whose bounds meet another's
+(:func:`ecs_anim.runtime.kernels.capsules.touching`, on a uniform grid: a crowd that keeps apart
+costs the bounds and the grid), their capsules from their postures (compiled:
+:func:`ecs_anim.runtime.kernels.capsules.capsules`; the layout and radii in
+:mod:`ecs_anim.solver.capsules`) and each one's deepest overlap with another character
+(:func:`ecs_anim.runtime.kernels.capsules.overlaps`); a body a round moves searches again with
+those it then reaches. Where two
 characters overlap by more than :data:`SEPARATE_FROM_M`, the one of lower priority (the highest
 priority of its active constraints; none: lowest) moves the chain that overlaps:
 
@@ -42,8 +43,9 @@ Rows: every character.
 Reads: store.positions, lengths, poses, posture, contact_weight, frozen, local_rotations,
 vertebrae; constraints.weight (which chains are claimed, and each character's priority).
 Writes: store.poses, positions, posture, local_rotations, vertebrae (the moved characters);
-capsule_ends, capsule_radii (every character's capsules, as they end), overlap_m (each
-character's deepest overlap with another after the separation, m).
+capsule_ends, capsule_radii (the capsules, as they end, of the characters whose bounds meet
+another's, the only ones that can overlap; the other rows NaN), overlap_m (each character's
+deepest overlap with another after the separation, m).
 """
 
 from __future__ import annotations
@@ -69,6 +71,7 @@ from ecs_anim.runtime.kernels.capsules import (
     Capsules,
     Grid,
     Overlaps,
+    bounds,
     capsules,
     grid_holds,
     grid_of,
@@ -199,8 +202,10 @@ class CollisionSeparate(System):
         #: This tick's rounds of search and separation, and whether the budget ended them.
         self.rounds = 0
         self.rounds_cut = False
-        #: The capsules' arrays, kept from tick to tick (the store's ends and radii among them).
+        #: The capsules' arrays, kept from tick to tick (the store's ends and radii among them),
+        #: and the rows whose capsules they hold (the others': NaN).
         self._body = Capsules.empty(0)
+        self._made = np.zeros(0, np.int64)
 
     def _rounds_allowed_s(self) -> float:
         """The CPU seconds the rounds may take this tick by the frame budget (inf: none):
@@ -221,33 +226,39 @@ class CollisionSeparate(System):
         self.rounds, self.rounds_cut = 0, False
         start_s, allowed_s = self.clock(), self._rounds_allowed_s()
         if st.capsule_ends.shape != (n, N_CAPSULES, 2, 3):
-            st.capsule_ends = np.empty((n, N_CAPSULES, 2, 3))
-            st.capsule_radii = np.empty((n, N_CAPSULES))
+            st.capsule_ends = np.full((n, N_CAPSULES, 2, 3), np.nan)
+            st.capsule_radii = np.full((n, N_CAPSULES), np.nan)
+            self._made = np.zeros(0, np.int64)
         if self._body.ends is not st.capsule_ends or self._body.radii is not st.capsule_radii:
             self._body = Capsules.empty(n)._replace(ends=st.capsule_ends, radii=st.capsule_radii)
+            if not np.isnan(st.capsule_radii).all():  # (arrays given from outside)
+                self._made = np.arange(n, dtype=np.int64)
         # The kernels, or while they compile aside (a first run) their numpy references, which
-        # need no grid (grid None). On the kernels, every body's capsules and bounds; each
-        # capsule's bounds (what the search reads) and the search only for the bodies whose
-        # bounds meet another's: a crowd that keeps apart costs the capsules and the grid alone.
+        # need no grid (grid None). On the kernels, every body's bounds from its joints (no
+        # capsule made); the capsules, each capsule's bounds (what the search reads) and the
+        # search only for the bodies whose bounds meet another's: a crowd that keeps apart costs
+        # the bounds and the grid alone.
         on_kernels = self.sim.compiled
-        complete = np.ones(n, bool)
         grid: Grid | None = None
         if on_kernels:
-            body = capsules(st.positions, st.lengths, self._body, each_capsule=False)
+            body = bounds(st.positions, st.lengths, self._body)
             grid = grid_of(body)
             near = touching(body, grid)
+            complete = np.zeros(n, bool)
             if near.size == 0:
                 st.overlap_m = np.zeros(n)
+                self._forget(complete)
                 return
             capsules(st.positions, st.lengths, body, near)
-            complete[:] = False
             complete[near] = True
             found = overlaps(body, grid, near)
         else:
             body = numpy_capsules.capsules(st.positions, st.lengths, self._body)
+            complete = np.ones(n, bool)
             found = numpy_capsules.overlaps(body)
         if n < 2 or not (found.depth > SEPARATE_FROM_M).any():
             st.overlap_m = found.depth
+            self._forget(complete)
             return
         claims = self._claims()
         pushed = Pushes(np.zeros((n, 3)), np.full(n, -1, np.int64))
@@ -315,6 +326,18 @@ class CollisionSeparate(System):
             else numpy_capsules.near_rows(body, moved_ever)
         self._overlaps(body, grid, np.union1d(moved_ever, near), found)
         st.overlap_m = found.depth
+        self._forget(complete)
+
+    def _forget(self, complete: NDArray[np.bool_]) -> None:
+        """The store's capsules NaN for the rows made last tick and not this one (``complete``
+        (n,): made this tick): the store holds the capsules of this tick's bodies or none."""
+        made = np.flatnonzero(complete) if complete.any() else np.zeros(0, np.int64)
+        stale = np.setdiff1d(self._made, made, assume_unique=True) if self._made.size \
+            else self._made
+        if stale.size:
+            self._body.ends[stale] = np.nan
+            self._body.radii[stale] = np.nan
+        self._made = made
 
     @staticmethod
     def _overlaps(body: Capsules, grid: Grid | None, rows: I64 | None = None,

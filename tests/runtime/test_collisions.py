@@ -10,6 +10,8 @@ from ecs_anim.core.morphology import Morphology
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import N_JOINTS
 from ecs_anim.runtime.kernels.capsules import (
+    Capsules,
+    bounds,
     capsules,
     closest_between,
     grid_of,
@@ -103,9 +105,10 @@ def test_the_grid_finds_every_overlap_a_search_of_all_pairs_finds():
 
 
 def test_the_search_over_the_bodies_that_touch_finds_what_a_search_of_all_finds():
-    """CollisionSeparate searches only the bodies whose bounds meet another's, each capsule's
-    bounds made for those alone: the same overlaps as a search of every body with every
-    capsule's bounds, and the bodies left out overlap no one."""
+    """CollisionSeparate searches only the bodies whose bounds meet another's (bounds from the
+    joints, no capsule made: wider than the capsules'), the capsules made for those alone: the
+    same overlaps as a search of every body with every capsule's bounds, and the bodies left
+    out overlap no one."""
     rng = np.random.default_rng(3204)
     n = 60
     lengths = np.tile(Morphology.preset("adult_male").lengths, (n, 1))
@@ -114,8 +117,11 @@ def test_the_search_over_the_bodies_that_touch_finds_what_a_search_of_all_finds(
     spots = rng.uniform(0, 9.0, size=(n, 3)) * [1, 1, 0]
     positions = standing + spots[:, None]
     every = overlaps(capsules(positions, lengths))
-    body = capsules(positions, lengths, each_capsule=False)
-    body.capsule_box[:] = np.nan  # never read for a body that touches no one
+    body = bounds(positions, lengths, Capsules.empty(n))
+    every_box = capsules(positions, lengths).box
+    assert np.all(body.box[:, 0] <= every_box[:, 0]) and np.all(body.box[:, 1] >= every_box[:, 1])
+    for unmade in (body.ends, body.radii, body.capsule_box):  # never read for a body that
+        unmade[:] = np.nan  # touches no one
     grid = grid_of(body)
     near = touching(body, grid)
     capsules(positions, lengths, body, near)
