@@ -52,7 +52,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -172,6 +172,22 @@ class Pushes(NamedTuple):
     chain: I64
 
 
+def marked(n: int, *rows: I64) -> NDArray[np.bool_]:
+    """(n + 1,) whether each row (of ``n``) is in any of ``rows`` (each (k,)); the last, row -1
+    (none), in none."""
+    marks = np.zeros(n + 1, bool)
+    for some in rows:
+        marks[some] = True
+    return marks
+
+
+def rows_in(n: int, *rows: I64) -> I64:
+    """The rows (of ``n``) in any of ``rows`` (each (k,)), sorted, each once: ``np.union1d`` of
+    them by marks (a round's sets are a few rows: union1d's sorts were a tenth of a round)."""
+    found: I64 = marked(n, *rows)[:n].nonzero()[0]
+    return found
+
+
 def held(claims: Claims, rows: I64, limb: I64, partner: I64) -> NDArray[np.bool_]:
     """Whether each of ``rows``' ``limb`` (k,) is held by its pin against the ``partner`` row
     (k,) it overlaps: it has a pin, and the pin is not a constraint aiming at ``partner`` (a
@@ -206,6 +222,8 @@ class CollisionSeparate(System):
         #: and the rows whose capsules they hold (the others': NaN).
         self._body = Capsules.empty(0)
         self._made = np.zeros(0, np.int64)
+        #: :meth:`_posture`'s arrays this tick (made at its first call).
+        self._posture_args: tuple[Any, ...] | None = None
 
     def _rounds_allowed_s(self) -> float:
         """The CPU seconds the rounds may take this tick by the frame budget (inf: none):
@@ -224,6 +242,7 @@ class CollisionSeparate(System):
         st = self.sim.store
         n = st.n
         self.rounds, self.rounds_cut = 0, False
+        self._posture_args = None
         start_s, allowed_s = self.clock(), self._rounds_allowed_s()
         if st.capsule_ends.shape != (n, N_CAPSULES, 2, 3):
             st.capsule_ends = np.full((n, N_CAPSULES, 2, 3), np.nan)
@@ -302,9 +321,9 @@ class CollisionSeparate(System):
                 if not grid_holds(body, grid, moved):  # limbs reach out further sideways
                     grid = grid_of(body)
                 self._complete(near_rows(body, grid, moved), complete)
-            touched = np.union1d(moved, watch[np.isin(found.other[watch], moved)])
+            touched = rows_in(n, moved, watch[marked(n, moved)[found.other[watch]]])
             self._overlaps(body, grid, touched, found)
-            watch = np.union1d(watch, touched[found.depth[touched] > 0.0])
+            watch = rows_in(n, watch, touched[found.depth[touched] > 0.0])
             shrank = found.depth[moved] <= (1.0 - STALL_SHARE) * was
             stalled[moved] = np.where(shrank, 0, stalled[moved] + 1)
             left = float(found.depth[watch[stalled[watch] < PATIENCE]].sum())
@@ -324,7 +343,7 @@ class CollisionSeparate(System):
         # it); the others' are as found.
         near = near_rows(body, grid, moved_ever) if grid is not None \
             else numpy_capsules.near_rows(body, moved_ever)
-        self._overlaps(body, grid, np.union1d(moved_ever, near), found)
+        self._overlaps(body, grid, rows_in(n, moved_ever, near), found)
         st.overlap_m = found.depth
         self._forget(complete)
 
@@ -503,6 +522,8 @@ class CollisionSeparate(System):
         st = self.sim.store
         depth, other, mine, theirs, normal, point = found
         rows = watch[(depth[watch] > SEPARATE_FROM_M) & (stalled[watch] < PATIENCE)]
+        if rows.size == 0:  # (the round after the last that moved anyone)
+            return rows
         them = other[rows]
         way, at = normal[rows], point[rows]
         full = depth[rows] + MARGIN_M
@@ -532,7 +553,7 @@ class CollisionSeparate(System):
         distance = depth[rows] * share + MARGIN_M
         if on_kernels:
             self._push(rows, them, capsule, at, way, distance, claims, pushed, leg)
-            return np.unique(rows)
+            return rows_in(st.n, rows)
         chain = CAPSULE_CHAIN[capsule]
         push = self._deflect(rows, chain, way, distance, pushed)
         fold, folded = self._fold(rows, them, capsule, push, claims)
@@ -701,6 +722,28 @@ class CollisionSeparate(System):
 
     def _posture(self, rows: I64) -> None:
         """PostureConvert again for ``rows`` (the compiled kernel, only those rows)."""
+        sim = self.sim
+        newly_bad = np.zeros(sim.store.n, bool)
+        if not sim.compiled:  # the kernels compile aside (a first run)
+            st = sim.store
+            assert st.posture is not None and fits(st.posture, st.n)
+            decoded = decoded_arrays(st.posture)._replace(positions=np.empty(st.positions.shape))
+            posture_numpy(sim, rows, decoded, newly_bad, True)
+        else:
+            if self._posture_args is None:
+                self._posture_args = self._posture_arrays()
+            (poses, lengths, decoded, frozen, positions, rotations, scratch, local, k,
+             spine) = self._posture_args
+            over_chunks(posture_rows, rows.size, rows, poses, lengths, decoded, frozen,
+                        newly_bad, positions, rotations, scratch, local, k.rest_hips,
+                        k.bvh_from_world, k.rest2body, k.parents, spine, True,
+                        spine_scratch(rows.size))
+        if newly_bad.any():
+            sim.report_frozen(np.flatnonzero(newly_bad))
+
+    def _posture_arrays(self) -> tuple[Any, ...]:
+        """:func:`~ecs_anim.runtime.kernels.posture.posture_rows`' arrays but the rows' own,
+        made once a tick (the store's arrays do not change during the rounds)."""
         st, sim = self.sim.store, self.sim
         n = st.n
         posture = st.posture
@@ -709,16 +752,7 @@ class CollisionSeparate(System):
         rotations = bool(sim.rotations) and st.local_rotations.shape == (n, N_EXPORT, 3, 3)
         count = int(sim.vertebrae)
         spine = st.vertebrae if count and st.vertebrae is not None else np.empty((n, 0, 3))
-        k = _EXPORT
-        newly_bad = np.zeros(n, bool)
-        if not sim.compiled:  # the kernels compile aside (a first run)
-            posture_numpy(sim, rows, decoded, newly_bad, True)
-        else:
-            over_chunks(posture_rows, rows.size, rows, pose_arrays(st.poses), st.lengths,
-                        decoded, st.frozen, newly_bad, st.positions, rotations,
-                        np.empty((n if rotations else 0, N_EXPORT, 3, 3)),
-                        st.local_rotations if rotations else np.empty((0, N_EXPORT, 3, 3)),
-                        k.rest_hips, k.bvh_from_world, k.rest2body, k.parents, spine, True,
-                        spine_scratch(rows.size))
-        if newly_bad.any():
-            sim.report_frozen(np.flatnonzero(newly_bad))
+        return (pose_arrays(st.poses), st.lengths, decoded, st.frozen, st.positions, rotations,
+                np.empty((n if rotations else 0, N_EXPORT, 3, 3)),
+                st.local_rotations if rotations else np.empty((0, N_EXPORT, 3, 3)), _EXPORT,
+                spine)
