@@ -238,3 +238,33 @@ def test_the_frame_budget_ends_the_rounds_of_separation():
             sim.step()
             capped.append((separate.rounds, separate.rounds_cut))
         assert {r for r, _ in capped} == {1} and all(cut for _, cut in capped)
+
+
+
+def test_the_store_holds_the_capsules_of_the_bodies_that_touch_and_nan_for_the_others():
+    """CollisionSeparate makes capsules only for the bodies whose bounds meet another's: their
+    rows of ``store.capsule_ends`` and ``capsule_radii`` are the capsules of their postures as
+    the tick ends; the rows of a body whose bounds meet no one's are NaN, every tick (a crowd
+    that ignores itself: bodies meet and part)."""
+    from ecs_anim.runtime.bench_scene import walkers_on_bumps
+
+    sim, _ = walkers_on_bumps(30, crossing=True)
+    made_ever = set()
+    with sim:
+        st = sim.store
+        for _ in range(12):
+            sim.step()
+            made = np.isfinite(st.capsule_radii).all(axis=1)
+            assert np.array_equal(np.isnan(st.capsule_ends).all(axis=(1, 2, 3)), ~made)
+            ends, radii = capsules_from_positions(st.positions[made], st.lengths[made])
+            np.testing.assert_allclose(st.capsule_ends[made], ends, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(st.capsule_radii[made], radii, rtol=0, atol=1e-12)
+            # a body left out: its capsules' bounds meet no other body's capsules' bounds
+            every = capsules(st.positions, st.lengths)
+            low, high = every.box[:, 0], every.box[:, 1]
+            meets = ~((high[:, None] < low[None]) | (high[None] < low[:, None])).any(axis=-1)
+            np.fill_diagonal(meets, False)
+            assert not meets[~made].any()
+            assert not (st.overlap_m[~made] > 0).any()
+            made_ever |= set(np.flatnonzero(made).tolist())
+    assert 0 < len(made_ever) < 30, made_ever
