@@ -3,7 +3,9 @@
 Each tick, after PostureConvert: every character's bounds from its joints
 (:func:`ecs_anim.runtime.kernels.capsules.bounds`), the bodies whose bounds meet another's
 (:func:`ecs_anim.runtime.kernels.capsules.touching`, on a uniform grid: a crowd that keeps apart
-costs the bounds and the grid), their capsules from their postures (compiled:
+costs the bounds and the grid; while no two meet, a tick whose bounds each moved less than
+half its clearance then, :func:`~ecs_anim.runtime.kernels.capsules.drifted`, costs the bounds
+alone), their capsules from their postures (compiled:
 :func:`ecs_anim.runtime.kernels.capsules.capsules`; the layout and radii in
 :mod:`ecs_anim.solver.capsules`) and each one's deepest overlap with another character
 (:func:`ecs_anim.runtime.kernels.capsules.overlaps`); a body a round moves searches again with
@@ -73,6 +75,7 @@ from ecs_anim.runtime.kernels.capsules import (
     Overlaps,
     bounds,
     capsules,
+    drifted,
     grid_holds,
     grid_of,
     near_rows,
@@ -222,6 +225,10 @@ class CollisionSeparate(System):
         #: and the rows whose capsules they hold (the others': NaN).
         self._body = Capsules.empty(0)
         self._made = np.zeros(0, np.int64)
+        #: When the bodies' bounds last met none (the kernels' search): (the structure version
+        #: and rows then, their bounds (n, 2, 3), each one's slack: half its clearance (n,) m);
+        #: while none has moved by its slack, none meet (None: some met).
+        self._apart: tuple[tuple[int, int], F64, F64] | None = None
         #: :meth:`_posture`'s arrays this tick (made at its first call).
         self._posture_args: tuple[Any, ...] | None = None
 
@@ -261,17 +268,29 @@ class CollisionSeparate(System):
         grid: Grid | None = None
         if on_kernels:
             body = bounds(st.positions, st.lengths, self._body)
+            apart = self._apart
+            if apart is not None and apart[0] == (self.sim.structure_version, n) \
+                    and not drifted(body.box, apart[1], apart[2]):
+                # every body's bounds within half its clearance of where they were when no
+                # two met: none meet now either (the grid would find none)
+                st.overlap_m = np.zeros(n)
+                self._forget(np.zeros(n, bool))
+                return
             grid = grid_of(body)
-            near = touching(body, grid)
+            clearance = np.empty(n)
+            near = touching(body, grid, clearance)
             complete = np.zeros(n, bool)
             if near.size == 0:
+                self._apart = ((self.sim.structure_version, n), body.box.copy(), 0.5 * clearance)
                 st.overlap_m = np.zeros(n)
                 self._forget(complete)
                 return
+            self._apart = None
             capsules(st.positions, st.lengths, body, near)
             complete[near] = True
             found = overlaps(body, grid, near)
         else:
+            self._apart = None
             body = numpy_capsules.capsules(st.positions, st.lengths, self._body)
             complete = np.ones(n, bool)
             found = numpy_capsules.overlaps(body)
