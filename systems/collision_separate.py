@@ -1,12 +1,15 @@
 """CollisionSeparate: every character's collision capsules, and bodies pushed apart (DESIGN §8b).
 
-Each tick, after PostureConvert: every character's capsules from its posture (compiled over all
-of them: :func:`ecs_anim.runtime.kernels.capsules.capsules`; the layout and radii in
-:mod:`ecs_anim.solver.capsules`) and its bounds, and each one's deepest overlap with another
-character (neighbours on a uniform grid: :func:`ecs_anim.runtime.kernels.capsules.overlaps`),
-searched only among the bodies whose bounds meet another's
-(:func:`ecs_anim.runtime.kernels.capsules.touching`: a crowd that keeps apart costs the
-capsules and the grid); a body a round moves searches again with those it then reaches. Where two
+Each tick, after PostureConvert: every character's bounds from its joints
+(:func:`ecs_anim.runtime.kernels.capsules.bounds`), the bodies whose bounds meet another's
+(:func:`ecs_anim.runtime.kernels.capsules.touching`, on a uniform grid: a crowd that keeps apart
+costs the bounds and the grid; while no two meet, a tick whose bounds each moved less than
+half its clearance then, :func:`~ecs_anim.runtime.kernels.capsules.drifted`, costs the bounds
+alone), their capsules from their postures (compiled:
+:func:`ecs_anim.runtime.kernels.capsules.capsules`; the layout and radii in
+:mod:`ecs_anim.solver.capsules`) and each one's deepest overlap with another character
+(:func:`ecs_anim.runtime.kernels.capsules.overlaps`); a body a round moves searches again with
+those it then reaches. Where two
 characters overlap by more than :data:`SEPARATE_FROM_M`, the one of lower priority (the highest
 priority of its active constraints; none: lowest) moves the chain that overlaps:
 
@@ -42,15 +45,16 @@ Rows: every character.
 Reads: store.positions, lengths, poses, posture, contact_weight, frozen, local_rotations,
 vertebrae; constraints.weight (which chains are claimed, and each character's priority).
 Writes: store.poses, positions, posture, local_rotations, vertebrae (the moved characters);
-capsule_ends, capsule_radii (every character's capsules, as they end), overlap_m (each
-character's deepest overlap with another after the separation, m).
+capsule_ends, capsule_radii (the capsules, as they end, of the characters whose bounds meet
+another's, the only ones that can overlap; the other rows NaN), overlap_m (each character's
+deepest overlap with another after the separation, m).
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -69,7 +73,9 @@ from ecs_anim.runtime.kernels.capsules import (
     Capsules,
     Grid,
     Overlaps,
+    bounds,
     capsules,
+    drifted,
     grid_holds,
     grid_of,
     near_rows,
@@ -169,6 +175,22 @@ class Pushes(NamedTuple):
     chain: I64
 
 
+def marked(n: int, *rows: I64) -> NDArray[np.bool_]:
+    """(n + 1,) whether each row (of ``n``) is in any of ``rows`` (each (k,)); the last, row -1
+    (none), in none."""
+    marks = np.zeros(n + 1, bool)
+    for some in rows:
+        marks[some] = True
+    return marks
+
+
+def rows_in(n: int, *rows: I64) -> I64:
+    """The rows (of ``n``) in any of ``rows`` (each (k,)), sorted, each once: ``np.union1d`` of
+    them by marks (a round's sets are a few rows: union1d's sorts were a tenth of a round)."""
+    found: I64 = marked(n, *rows)[:n].nonzero()[0]
+    return found
+
+
 def held(claims: Claims, rows: I64, limb: I64, partner: I64) -> NDArray[np.bool_]:
     """Whether each of ``rows``' ``limb`` (k,) is held by its pin against the ``partner`` row
     (k,) it overlaps: it has a pin, and the pin is not a constraint aiming at ``partner`` (a
@@ -199,8 +221,16 @@ class CollisionSeparate(System):
         #: This tick's rounds of search and separation, and whether the budget ended them.
         self.rounds = 0
         self.rounds_cut = False
-        #: The capsules' arrays, kept from tick to tick (the store's ends and radii among them).
+        #: The capsules' arrays, kept from tick to tick (the store's ends and radii among them),
+        #: and the rows whose capsules they hold (the others': NaN).
         self._body = Capsules.empty(0)
+        self._made = np.zeros(0, np.int64)
+        #: When the bodies' bounds last met none (the kernels' search): (the structure version
+        #: and rows then, their bounds (n, 2, 3), each one's slack: half its clearance (n,) m);
+        #: while none has moved by its slack, none meet (None: some met).
+        self._apart: tuple[tuple[int, int], F64, F64] | None = None
+        #: :meth:`_posture`'s arrays this tick (made at its first call).
+        self._posture_args: tuple[Any, ...] | None = None
 
     def _rounds_allowed_s(self) -> float:
         """The CPU seconds the rounds may take this tick by the frame budget (inf: none):
@@ -219,35 +249,54 @@ class CollisionSeparate(System):
         st = self.sim.store
         n = st.n
         self.rounds, self.rounds_cut = 0, False
+        self._posture_args = None
         start_s, allowed_s = self.clock(), self._rounds_allowed_s()
         if st.capsule_ends.shape != (n, N_CAPSULES, 2, 3):
-            st.capsule_ends = np.empty((n, N_CAPSULES, 2, 3))
-            st.capsule_radii = np.empty((n, N_CAPSULES))
+            st.capsule_ends = np.full((n, N_CAPSULES, 2, 3), np.nan)
+            st.capsule_radii = np.full((n, N_CAPSULES), np.nan)
+            self._made = np.zeros(0, np.int64)
         if self._body.ends is not st.capsule_ends or self._body.radii is not st.capsule_radii:
             self._body = Capsules.empty(n)._replace(ends=st.capsule_ends, radii=st.capsule_radii)
+            if not np.isnan(st.capsule_radii).all():  # (arrays given from outside)
+                self._made = np.arange(n, dtype=np.int64)
         # The kernels, or while they compile aside (a first run) their numpy references, which
-        # need no grid (grid None). On the kernels, every body's capsules and bounds; each
-        # capsule's bounds (what the search reads) and the search only for the bodies whose
-        # bounds meet another's: a crowd that keeps apart costs the capsules and the grid alone.
+        # need no grid (grid None). On the kernels, every body's bounds from its joints (no
+        # capsule made); the capsules, each capsule's bounds (what the search reads) and the
+        # search only for the bodies whose bounds meet another's: a crowd that keeps apart costs
+        # the bounds and the grid alone.
         on_kernels = self.sim.compiled
-        complete = np.ones(n, bool)
         grid: Grid | None = None
         if on_kernels:
-            body = capsules(st.positions, st.lengths, self._body, each_capsule=False)
-            grid = grid_of(body)
-            near = touching(body, grid)
-            if near.size == 0:
+            body = bounds(st.positions, st.lengths, self._body)
+            apart = self._apart
+            if apart is not None and apart[0] == (self.sim.structure_version, n) \
+                    and not drifted(body.box, apart[1], apart[2]):
+                # every body's bounds within half its clearance of where they were when no
+                # two met: none meet now either (the grid would find none)
                 st.overlap_m = np.zeros(n)
+                self._forget(np.zeros(n, bool))
                 return
+            grid = grid_of(body)
+            clearance = np.empty(n)
+            near = touching(body, grid, clearance)
+            complete = np.zeros(n, bool)
+            if near.size == 0:
+                self._apart = ((self.sim.structure_version, n), body.box.copy(), 0.5 * clearance)
+                st.overlap_m = np.zeros(n)
+                self._forget(complete)
+                return
+            self._apart = None
             capsules(st.positions, st.lengths, body, near)
-            complete[:] = False
             complete[near] = True
             found = overlaps(body, grid, near)
         else:
+            self._apart = None
             body = numpy_capsules.capsules(st.positions, st.lengths, self._body)
+            complete = np.ones(n, bool)
             found = numpy_capsules.overlaps(body)
         if n < 2 or not (found.depth > SEPARATE_FROM_M).any():
             st.overlap_m = found.depth
+            self._forget(complete)
             return
         claims = self._claims()
         pushed = Pushes(np.zeros((n, 3)), np.full(n, -1, np.int64))
@@ -291,9 +340,9 @@ class CollisionSeparate(System):
                 if not grid_holds(body, grid, moved):  # limbs reach out further sideways
                     grid = grid_of(body)
                 self._complete(near_rows(body, grid, moved), complete)
-            touched = np.union1d(moved, watch[np.isin(found.other[watch], moved)])
+            touched = rows_in(n, moved, watch[marked(n, moved)[found.other[watch]]])
             self._overlaps(body, grid, touched, found)
-            watch = np.union1d(watch, touched[found.depth[touched] > 0.0])
+            watch = rows_in(n, watch, touched[found.depth[touched] > 0.0])
             shrank = found.depth[moved] <= (1.0 - STALL_SHARE) * was
             stalled[moved] = np.where(shrank, 0, stalled[moved] + 1)
             left = float(found.depth[watch[stalled[watch] < PATIENCE]].sum())
@@ -313,8 +362,20 @@ class CollisionSeparate(System):
         # it); the others' are as found.
         near = near_rows(body, grid, moved_ever) if grid is not None \
             else numpy_capsules.near_rows(body, moved_ever)
-        self._overlaps(body, grid, np.union1d(moved_ever, near), found)
+        self._overlaps(body, grid, rows_in(n, moved_ever, near), found)
         st.overlap_m = found.depth
+        self._forget(complete)
+
+    def _forget(self, complete: NDArray[np.bool_]) -> None:
+        """The store's capsules NaN for the rows made last tick and not this one (``complete``
+        (n,): made this tick): the store holds the capsules of this tick's bodies or none."""
+        made = np.flatnonzero(complete) if complete.any() else np.zeros(0, np.int64)
+        stale = np.setdiff1d(self._made, made, assume_unique=True) if self._made.size \
+            else self._made
+        if stale.size:
+            self._body.ends[stale] = np.nan
+            self._body.radii[stale] = np.nan
+        self._made = made
 
     @staticmethod
     def _overlaps(body: Capsules, grid: Grid | None, rows: I64 | None = None,
@@ -480,6 +541,8 @@ class CollisionSeparate(System):
         st = self.sim.store
         depth, other, mine, theirs, normal, point = found
         rows = watch[(depth[watch] > SEPARATE_FROM_M) & (stalled[watch] < PATIENCE)]
+        if rows.size == 0:  # (the round after the last that moved anyone)
+            return rows
         them = other[rows]
         way, at = normal[rows], point[rows]
         full = depth[rows] + MARGIN_M
@@ -509,7 +572,7 @@ class CollisionSeparate(System):
         distance = depth[rows] * share + MARGIN_M
         if on_kernels:
             self._push(rows, them, capsule, at, way, distance, claims, pushed, leg)
-            return np.unique(rows)
+            return rows_in(st.n, rows)
         chain = CAPSULE_CHAIN[capsule]
         push = self._deflect(rows, chain, way, distance, pushed)
         fold, folded = self._fold(rows, them, capsule, push, claims)
@@ -678,6 +741,28 @@ class CollisionSeparate(System):
 
     def _posture(self, rows: I64) -> None:
         """PostureConvert again for ``rows`` (the compiled kernel, only those rows)."""
+        sim = self.sim
+        newly_bad = np.zeros(sim.store.n, bool)
+        if not sim.compiled:  # the kernels compile aside (a first run)
+            st = sim.store
+            assert st.posture is not None and fits(st.posture, st.n)
+            decoded = decoded_arrays(st.posture)._replace(positions=np.empty(st.positions.shape))
+            posture_numpy(sim, rows, decoded, newly_bad, True)
+        else:
+            if self._posture_args is None:
+                self._posture_args = self._posture_arrays()
+            (poses, lengths, decoded, frozen, positions, rotations, scratch, local, k,
+             spine) = self._posture_args
+            over_chunks(posture_rows, rows.size, rows, poses, lengths, decoded, frozen,
+                        newly_bad, positions, rotations, scratch, local, k.rest_hips,
+                        k.bvh_from_world, k.rest2body, k.parents, spine, True,
+                        spine_scratch(rows.size))
+        if newly_bad.any():
+            sim.report_frozen(np.flatnonzero(newly_bad))
+
+    def _posture_arrays(self) -> tuple[Any, ...]:
+        """:func:`~ecs_anim.runtime.kernels.posture.posture_rows`' arrays but the rows' own,
+        made once a tick (the store's arrays do not change during the rounds)."""
         st, sim = self.sim.store, self.sim
         n = st.n
         posture = st.posture
@@ -686,16 +771,7 @@ class CollisionSeparate(System):
         rotations = bool(sim.rotations) and st.local_rotations.shape == (n, N_EXPORT, 3, 3)
         count = int(sim.vertebrae)
         spine = st.vertebrae if count and st.vertebrae is not None else np.empty((n, 0, 3))
-        k = _EXPORT
-        newly_bad = np.zeros(n, bool)
-        if not sim.compiled:  # the kernels compile aside (a first run)
-            posture_numpy(sim, rows, decoded, newly_bad, True)
-        else:
-            over_chunks(posture_rows, rows.size, rows, pose_arrays(st.poses), st.lengths,
-                        decoded, st.frozen, newly_bad, st.positions, rotations,
-                        np.empty((n if rotations else 0, N_EXPORT, 3, 3)),
-                        st.local_rotations if rotations else np.empty((0, N_EXPORT, 3, 3)),
-                        k.rest_hips, k.bvh_from_world, k.rest2body, k.parents, spine, True,
-                        spine_scratch(rows.size))
-        if newly_bad.any():
-            sim.report_frozen(np.flatnonzero(newly_bad))
+        return (pose_arrays(st.poses), st.lengths, decoded, st.frozen, st.positions, rotations,
+                np.empty((n if rotations else 0, N_EXPORT, 3, 3)),
+                st.local_rotations if rotations else np.empty((0, N_EXPORT, 3, 3)), _EXPORT,
+                spine)

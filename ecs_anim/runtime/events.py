@@ -55,6 +55,7 @@ from numpy.typing import NDArray
 
 from ecs_anim.core.body_points import point_positions
 from ecs_anim.core.errors import EcsAnimError, listed, quoted
+from ecs_anim.runtime.kernels.edges import EdgeScratch
 from ecs_anim.runtime.kernels.edges import clip_and_contact_edges as compiled_edges
 from ecs_anim.runtime.steering import STEER_PATH
 
@@ -222,6 +223,7 @@ class Reactions:
         # on any (made into events only when asked for)
         self._edges_kept: _StoreEdges | None = None
         self._last_edges: _StoreEdges | None = None
+        self._edge_scratch = EdgeScratch()  # the compiled edges' arrays, kept tick to tick
         self._fired_this_tick: set[tuple[int, str, int, str]] = set()  # (trigger, event)
         # while a tick's reactions are applied: the triggers to drop once they are done, and
         # the names of the characters removed meanwhile (by entity, for warnings)
@@ -238,6 +240,8 @@ class Reactions:
         self._seen_contact = np.zeros((0, 2))
         # per entity id: following a path when the tick began (an arrival is its end)
         self._seen_on_path = np.zeros(0, bool)
+        self._paths_seen = False  # any of _seen_on_path of a character still there
+        self._grown_version = -1  # the structure version the seen arrays were grown for
 
     # --- adding ---------------------------------------------------------------------------------
 
@@ -308,12 +312,17 @@ class Reactions:
     def after_tick(self, sim: Simulation) -> None:
         """Detect this tick's events in the store and fire the triggers they match."""
         st = sim.store
-        self._grow(int(st.entity.max()) + 1 if st.n else 0)
+        if self._grown_version != sim.structure_version:  # (ids come with new characters)
+            self._grow(int(st.entity.max()) + 1 if st.n else 0)
+            self._grown_version = sim.structure_version
         now, tick = sim.posture_time_s, sim.tick - 1
         # Everything seen before anything is done: an action may remove a character (shifting
         # the store rows after it) or a constraint.
         edges = self._store_edges(sim)
         c = self._compile()
+        if not (edges or c.near.size or c.reached.size):  # no event, no condition to evaluate
+            self._end_tick()
+            return
         names, entity = self._names(sim), st.entity.copy()
         near = self._near_holds(sim, c) if c.near.size else None
         reached = self._reached_holds(sim, c) if c.reached.size else None
@@ -331,6 +340,10 @@ class Reactions:
                 self._edges(sim, c.near, *near, entity, names, "near")
             if reached is not None:
                 self._edges(sim, c.reached, *reached, entity, names, "reached")
+        self._end_tick()
+
+    def _end_tick(self) -> None:
+        """The tick's events become the last tick's."""
         self._last, self._events = self._events, []
         self._last_edges, self._edges_kept = self._edges_kept, None
         self._fired_this_tick = set()
@@ -340,6 +353,7 @@ class Reactions:
         arrival is an event even in the next tick."""
         self._grow(entity + 1)
         self._seen_on_path[entity] = True
+        self._paths_seen = True
 
     def character_removed(self, sim: Simulation, entity: int, name: str) -> None:
         """After ``Simulation.remove``: the ``removed`` event (its triggers fire), then every
@@ -397,19 +411,22 @@ class Reactions:
         """(kind, store rows, details, detail names) of the clip and contact edges of the tick
         just stepped, from the store against the last tick's values (all characters at once:
         :func:`clip_and_contact_edges`, compiled); each event's detail is
-        ``detail_names[detail]``."""
+        ``detail_names[detail]``. None at all (an empty list) when there is no edge."""
         st, bank = sim.store, sim.bank
         if st.n == 0:
             return []
         args = (st.entity, st.clip, st.clip_time_s, st.speed, st.loop,
-                bank.duration_s(np.arange(bank.n_frames.size)), st.contact_weight, sim.dt,
+                bank.n_frames / bank.fps, st.contact_weight, sim.dt,
                 TIME_SLACK_S, CONTACT_BEGAN_WEIGHT, self._seen_clip, self._seen_time,
                 self._seen_ended, self._seen_contact)
         if sim.compiled:
-            _, previous_clip, listed = compiled_edges(*args)
+            _, previous_clip, listed = compiled_edges(*args, scratch=self._edge_scratch)
         else:  # the numpy reference while the kernels compile aside (a first run)
             edges, previous_clip = clip_and_contact_edges(*args)
             listed = edges_listed(edges)
+        arrived = self._arrived(st)
+        if not (arrived[1].size or any(rows.size for rows in listed)):
+            return []
         clip_names = list(bank.names)
         out: list[tuple[str, I64, I64, list[str]]] = []
         rows = listed[EDGE_REPLACED]
@@ -420,20 +437,21 @@ class Reactions:
         out.append(("clip_started", rows, st.clip[rows], clip_names))
         feet = listed[EDGE_CONTACT]  # 2 * row + foot
         out.append(("contact_began", feet >> 1, feet & 1, list(FEET)))
-        out.append(self._arrived(st))
+        out.append(arrived)
         return out
 
     def _arrived(self, st: CharacterStore) -> tuple[str, I64, I64, list[str]]:
         """The ``arrived`` edges of the tick just stepped: the rows whose path steering
         stopped at its end (its progress there; steer() cancels one short of it)."""
         on_path = st.steer_mode == STEER_PATH
-        if not (self._seen_on_path.any() or on_path.any()):  # no path then or now: no edge
+        if not (self._paths_seen or on_path.any()):  # no path then or now: no edge
             return ("arrived", np.zeros(0, np.int64), np.zeros(0, np.int64), [])
         seen = self._seen_on_path[st.entity]
         rows = np.flatnonzero(seen & ~on_path)
         end = st.path_cum_m[rows, np.maximum(st.path_len[rows] - 1, 0)]
         rows = rows[st.path_progress_m[rows] >= end]
         self._seen_on_path[st.entity] = on_path
+        self._paths_seen = bool(on_path.any())  # (the others' flags are never read again)
         last = st.path_xy[rows, st.path_len[rows] - 1]
         return ("arrived", rows, np.arange(rows.size),
                 [f"({x:.2f}, {y:.2f})" for x, y in last.tolist()])

@@ -89,7 +89,8 @@ class CharacterStore:
     Collisions (:mod:`ecs_anim.solver.capsules`, CollisionSeparate): capsule_ends
     (n, N_CAPSULES, 2, 3) world metres, each capsule's axis (shank l/r, thigh l/r, pelvis, trunk,
     head, upper arm l/r, forearm l/r, hand l/r) and capsule_radii (n, N_CAPSULES) m, as the
-    tick ends; overlap_m (n,) each character's deepest overlap with another after separation (m).
+    tick ends, for the characters whose bounds meet another's (the others' rows NaN);
+    overlap_m (n,) each character's deepest overlap with another after separation (m).
     No pops (:mod:`ecs_anim.solver.joint_speed`, ConstraintSolve): last_clip_values and
     last_pose_values (n, N_VALUES) the segments the solver sets (frames, directions, fractions,
     spine points, packed) of the last tick's motion pose and of its result (zeros: none), which

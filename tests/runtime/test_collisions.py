@@ -10,6 +10,8 @@ from ecs_anim.core.morphology import Morphology
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import N_JOINTS
 from ecs_anim.runtime.kernels.capsules import (
+    Capsules,
+    bounds,
     capsules,
     closest_between,
     grid_of,
@@ -103,9 +105,10 @@ def test_the_grid_finds_every_overlap_a_search_of_all_pairs_finds():
 
 
 def test_the_search_over_the_bodies_that_touch_finds_what_a_search_of_all_finds():
-    """CollisionSeparate searches only the bodies whose bounds meet another's, each capsule's
-    bounds made for those alone: the same overlaps as a search of every body with every
-    capsule's bounds, and the bodies left out overlap no one."""
+    """CollisionSeparate searches only the bodies whose bounds meet another's (bounds from the
+    joints, no capsule made: wider than the capsules'), the capsules made for those alone: the
+    same overlaps as a search of every body with every capsule's bounds, and the bodies left
+    out overlap no one."""
     rng = np.random.default_rng(3204)
     n = 60
     lengths = np.tile(Morphology.preset("adult_male").lengths, (n, 1))
@@ -114,8 +117,11 @@ def test_the_search_over_the_bodies_that_touch_finds_what_a_search_of_all_finds(
     spots = rng.uniform(0, 9.0, size=(n, 3)) * [1, 1, 0]
     positions = standing + spots[:, None]
     every = overlaps(capsules(positions, lengths))
-    body = capsules(positions, lengths, each_capsule=False)
-    body.capsule_box[:] = np.nan  # never read for a body that touches no one
+    body = bounds(positions, lengths, Capsules.empty(n))
+    every_box = capsules(positions, lengths).box
+    assert np.all(body.box[:, 0] <= every_box[:, 0]) and np.all(body.box[:, 1] >= every_box[:, 1])
+    for unmade in (body.ends, body.radii, body.capsule_box):  # never read for a body that
+        unmade[:] = np.nan  # touches no one
     grid = grid_of(body)
     near = touching(body, grid)
     capsules(positions, lengths, body, near)
@@ -232,3 +238,61 @@ def test_the_frame_budget_ends_the_rounds_of_separation():
             sim.step()
             capped.append((separate.rounds, separate.rounds_cut))
         assert {r for r, _ in capped} == {1} and all(cut for _, cut in capped)
+
+
+
+def test_the_store_holds_the_capsules_of_the_bodies_that_touch_and_nan_for_the_others():
+    """CollisionSeparate makes capsules only for the bodies whose bounds meet another's: their
+    rows of ``store.capsule_ends`` and ``capsule_radii`` are the capsules of their postures as
+    the tick ends; the rows of a body whose bounds meet no one's are NaN, every tick (a crowd
+    that ignores itself: bodies meet and part)."""
+    from ecs_anim.runtime.bench_scene import walkers_on_bumps
+
+    sim, _ = walkers_on_bumps(30, crossing=True)
+    made_ever = set()
+    with sim:
+        st = sim.store
+        for _ in range(12):
+            sim.step()
+            made = np.isfinite(st.capsule_radii).all(axis=1)
+            assert np.array_equal(np.isnan(st.capsule_ends).all(axis=(1, 2, 3)), ~made)
+            ends, radii = capsules_from_positions(st.positions[made], st.lengths[made])
+            np.testing.assert_allclose(st.capsule_ends[made], ends, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(st.capsule_radii[made], radii, rtol=0, atol=1e-12)
+            # a body left out: its capsules' bounds meet no other body's capsules' bounds
+            every = capsules(st.positions, st.lengths)
+            low, high = every.box[:, 0], every.box[:, 1]
+            meets = np.logical_not(((high[:, None] < low[None])
+                                    | (high[None] < low[:, None])).any(axis=-1))
+            np.fill_diagonal(meets, False)
+            assert not meets[~made].any()
+            assert not (st.overlap_m[~made] > 0).any()
+            made_ever |= set(np.flatnonzero(made).tolist())
+    assert 0 < len(made_ever) < 30, made_ever
+
+
+@pytest.mark.parametrize(("crossing", "least_skips"), [(False, 5), (True, 1)])
+def test_the_ticks_that_skip_the_grid_while_no_bounds_meet_end_as_a_search_would(crossing,
+                                                                                  least_skips):
+    """While no two bodies' bounds meet, a tick whose bounds each moved less than half their
+    clearance skips the grid: postures, overlaps and the store's capsules equal those of the
+    same crowd searched on the grid every tick, walkers in lanes (that never meet) and
+    crossing (that meet and part), and the skip is tried."""
+    from ecs_anim.runtime.bench_scene import walkers_on_bumps
+    from ecs_anim.systems.collision_separate import CollisionSeparate
+
+    (skipping, _), (searching, _) = (walkers_on_bumps(16, crossing=crossing) for _ in range(2))
+    with skipping, searching:
+        mine, every = (next(s for s in sim.systems if isinstance(s, CollisionSeparate))
+                       for sim in (skipping, searching))
+        skipped = 0
+        for _ in range(40):
+            skipped += mine._apart is not None
+            every._apart = None
+            skipping.step()
+            searching.step()
+            a, b = skipping.store, searching.store
+            np.testing.assert_array_equal(a.positions, b.positions)
+            np.testing.assert_array_equal(a.overlap_m, b.overlap_m)
+            np.testing.assert_array_equal(a.capsule_ends, b.capsule_ends)
+    assert skipped >= least_skips, skipped

@@ -11,8 +11,8 @@ bounds, then against the other capsule's) tested by the nearest points of their 
 Real-Time Collision Detection, 5.1.9;
 :func:`ecs_anim.solver.capsules.closest_between_segments`). :func:`overlaps` is the
 numpy-facing call. :func:`touching` finds first, on the same grid, the bodies whose bounds meet
-another's: only those can overlap anyone, so each capsule's bounds are made for them alone
-(:func:`capsules` with ``each_capsule``) and only they are searched.
+another's (bounds from the joints, no capsule made: :func:`bounds`): only those can overlap
+anyone, so their capsules are made for them alone and only they are searched.
 """
 
 from __future__ import annotations
@@ -36,19 +36,23 @@ I64 = NDArray[np.int64]
 RADIUS_TERMS = np.full((N_CAPSULES, 3), -1, np.int64)
 for _k, _row in enumerate(RADIUS_WEIGHTS):
     RADIUS_TERMS[_k, :np.count_nonzero(_row)] = np.flatnonzero(_row)
+#: :data:`RADIUS_TERMS` with every term a length (the first where there is none) and its weight
+#: (0 there): each radius as three products, no test (:func:`bound_rows`).
+WIDEST_TERMS = np.maximum(RADIUS_TERMS, 0)
+WIDEST_WEIGHTS = np.where(RADIUS_TERMS >= 0, np.take_along_axis(RADIUS_WEIGHTS, WIDEST_TERMS, 1),
+                          0.0)
 
 
 @jit(nogil=True)
-def capsule_rows(lo: int, hi: int, rows: I64, each_capsule: bool, positions: F64, lengths: F64,
-                 joints: I64, span: F64, radius_weights: F64, radius_terms: I64, ends: F64,
-                 radii: F64, centre: F64, box: F64, capsule_box: F64) -> None:
+def capsule_rows(lo: int, hi: int, rows: I64, positions: F64, lengths: F64, joints: I64,
+                 span: F64, radius_weights: F64, radius_terms: I64, ends: F64, radii: F64,
+                 centre: F64, box: F64, capsule_box: F64) -> None:
     """Capsules of characters ``rows[lo:hi]``: ``ends`` (n, C, 2, 3) and ``radii`` (n, C) written
     from ``positions`` (n, N_JOINTS, 3) and ``lengths`` (n, N_LENGTHS) (``joints`` (C, 2),
     ``span`` (C, 2), ``radius_weights`` (C, N_LENGTHS): :mod:`ecs_anim.solver.capsules`'s
-    layout, ``radius_terms`` (C, 3) :data:`RADIUS_TERMS`); ``centre`` (n, 3) the pelvis and
-    ``box`` (n, 2, 3) the body's bounds (lowest, highest corner); with ``each_capsule``,
-    ``capsule_box`` (n, C, 2, 3) each capsule's bounds too (the search's, needed only for the
-    bodies whose bounds meet another's: :func:`touching`). Mirrors
+    layout, ``radius_terms`` (C, 3) :data:`RADIUS_TERMS`); ``centre`` (n, 3) the pelvis,
+    ``box`` (n, 2, 3) the body's bounds (lowest, highest corner) and ``capsule_box``
+    (n, C, 2, 3) each capsule's. Mirrors
     :func:`ecs_anim.solver.capsules.capsules_from_positions`."""
     n_caps, n_terms = joints.shape[0], radius_terms.shape[1]
     for row in range(lo, hi):
@@ -74,9 +78,44 @@ def capsule_rows(lo: int, hi: int, rows: I64, each_capsule: bool, positions: F64
             for x in range(3):
                 box[c, 0, x] = min(box[c, 0, x], low[x])
                 box[c, 1, x] = max(box[c, 1, x], high[x])
-                if each_capsule:
-                    capsule_box[c, k, 0, x], capsule_box[c, k, 1, x] = low[x], high[x]
+                capsule_box[c, k, 0, x], capsule_box[c, k, 1, x] = low[x], high[x]
         centre[c, 0], centre[c, 1], centre[c, 2] = load3(positions[c, 0])
+
+
+#: How far (m) :func:`bound_rows`' bounds reach past every joint besides the widest radius: a
+#: capsule's far end, ``a + (b - a) * 1``, may lie a rounding past its joint ``b``.
+BOUND_HAIR_M = 1e-9
+
+
+@jit(nogil=True)
+def bound_rows(lo: int, hi: int, positions: F64, lengths: F64, widest_terms: I64,
+               widest_weights: F64, centre: F64, box: F64) -> None:
+    """Bounds of characters ``lo..hi-1`` that hold every capsule without making one (the broad
+    phase's, :func:`touching`): ``box`` (n, 2, 3) the lowest and highest corner of every joint
+    of ``positions`` (n, N_JOINTS, 3) widened by the body's widest capsule radius (from
+    ``lengths`` (n, N_LENGTHS): ``widest_terms``, ``widest_weights`` (C, 3) each capsule's
+    radius's :data:`RADIUS_TERMS` and their weights, 0 past its last) and :data:`BOUND_HAIR_M`
+    (each capsule's axis lies between two joints); ``centre`` (n, 3) the pelvis. One contiguous
+    pass over each body's joints, no capsule made."""
+    n_joints, n_caps = positions.shape[1], widest_terms.shape[0]
+    for c in range(lo, hi):
+        widest = 0.0
+        for k in range(n_caps):
+            widest = max(widest, lengths[c, widest_terms[k, 0]] * widest_weights[k, 0]
+                         + lengths[c, widest_terms[k, 1]] * widest_weights[k, 1]
+                         + lengths[c, widest_terms[k, 2]] * widest_weights[k, 2])
+        widest += BOUND_HAIR_M
+        low_x = low_y = low_z = math.inf
+        high_x = high_y = high_z = -math.inf
+        for j in range(n_joints):
+            x, y, z = positions[c, j, 0], positions[c, j, 1], positions[c, j, 2]
+            low_x, low_y, low_z = min(low_x, x), min(low_y, y), min(low_z, z)
+            high_x, high_y, high_z = max(high_x, x), max(high_y, y), max(high_z, z)
+        box[c, 0, 0], box[c, 0, 1], box[c, 0, 2] = low_x - widest, low_y - widest, low_z - widest
+        box[c, 1, 0], box[c, 1, 1], box[c, 1, 2] = \
+            high_x + widest, high_y + widest, high_z + widest
+        centre[c, 0], centre[c, 1], centre[c, 2] = positions[c, 0, 0], positions[c, 0, 1], \
+            positions[c, 0, 2]
 
 
 @jit()
@@ -210,29 +249,71 @@ _FORWARD_CELLS = ((1, -1), (1, 0), (1, 1), (0, 1))
 
 @jit(nogil=True)
 def touching_kernel(box: F64, plane: F64, cell_m: float, mask: int, start: I64, order: I64,
-                    touching: NDArray[np.bool_]) -> None:
+                    box_in_order: F64, touching: NDArray[np.bool_], clearance: F64) -> None:
     """Mark ``touching[i]`` (n,) for every character whose bounds ``box`` (n, 2, 3) meet
     another's (on the grid as :func:`overlap_rows`'s). Each pair is met once: in a body's own
     slot, with the bodies after it there; in the four cells after its own
     (:data:`_FORWARD_CELLS`), with every body (half the cells :func:`near_kernel` looks at; a
-    slot two cells share is looked at twice, which marks nothing more)."""
-    for a in range(order.shape[0]):
+    slot two cells share is looked at twice, which marks nothing more). The bounds are read in
+    the grid's order (copied first into ``box_in_order`` (n, 2, 3): a slot's bodies side by
+    side), and the four cells' slots made once for the bodies of one cell in a row.
+    ``clearance`` (n,), given as the least gap of two bodies in cells not side by side, is
+    lowered to each body's least gap (m: the largest of the three axes' gaps between two
+    bounds) to a body met whose bounds do not meet its own."""
+    n = order.shape[0]
+    for a in range(n):
         i = order[a]
-        box_i = box[i]
+        for e in range(2):
+            for x in range(3):
+                box_in_order[a, e, x] = box[i, e, x]
+    last_x, last_y = 0, 0
+    forward = (-1, -1, -1, -1)
+    for a in range(n):
+        i = order[a]
+        box_i = box_in_order[a]
         ix, iy = math.floor(plane[i, 0] / cell_m), math.floor(plane[i, 1] / cell_m)
         own = cell_hash(ix, iy, mask)
         for b in range(a + 1, start[own + 1]):
-            j = order[b]
-            if not _apart(box_i, box[j]):
-                touching[i] = touching[j] = True
-        for dx, dy in _FORWARD_CELLS:
-            s = cell_hash(ix + dx, iy + dy, mask)
+            _meet(box_i, box_in_order[b], i, order[b], touching, clearance)
+        if a == 0 or ix != last_x or iy != last_y:
+            last_x, last_y = ix, iy
+            forward = (cell_hash(ix + _FORWARD_CELLS[0][0], iy + _FORWARD_CELLS[0][1], mask),
+                       cell_hash(ix + _FORWARD_CELLS[1][0], iy + _FORWARD_CELLS[1][1], mask),
+                       cell_hash(ix + _FORWARD_CELLS[2][0], iy + _FORWARD_CELLS[2][1], mask),
+                       cell_hash(ix + _FORWARD_CELLS[3][0], iy + _FORWARD_CELLS[3][1], mask))
+        for s in forward:
             if s == own:
                 continue  # (its bodies met above)
             for b in range(start[s], start[s + 1]):
-                j = order[b]
-                if not _apart(box_i, box[j]):
-                    touching[i] = touching[j] = True
+                _meet(box_i, box_in_order[b], i, order[b], touching, clearance)
+
+
+@jit(inline="always")
+def _meet(box_i: F64, box_j: F64, i: int, j: int, touching: NDArray[np.bool_],
+          clearance: F64) -> None:
+    """:func:`touching_kernel`'s test of bodies ``i`` and ``j`` (bounds ``box_i``, ``box_j``
+    (2, 3)): both marked if their bounds meet, else each one's clearance lowered to their gap."""
+    if not _apart(box_i, box_j):
+        touching[i] = touching[j] = True
+        return
+    gap = 0.0
+    for x in range(3):
+        gap = max(gap, box_j[0, x] - box_i[1, x], box_i[0, x] - box_j[1, x])
+    clearance[i] = min(clearance[i], gap)
+    clearance[j] = min(clearance[j], gap)
+
+
+@jit(nogil=True)
+def drifted(box: F64, since: F64, slack: F64) -> bool:
+    """Whether any body's bounds ``box`` (n, 2, 3) moved (a corner, along an axis) by its
+    ``slack`` (n,) m or more from ``since`` (n, 2, 3), or are not finite. While none has, two
+    bounds apart by both bodies' slacks twice then still are (each moved less than half)."""
+    for c in range(box.shape[0]):
+        for e in range(2):
+            for x in range(3):
+                if not abs(box[c, e, x] - since[c, e, x]) < slack[c]:
+                    return True
+    return False
 
 
 @jit(nogil=True)
@@ -311,19 +392,28 @@ class Grid(NamedTuple):
 
 
 def capsules(positions: F64, lengths: F64, out: Capsules | None = None,
-             rows: I64 | None = None, each_capsule: bool = True) -> Capsules:
+             rows: I64 | None = None) -> Capsules:
     """Every character's capsules from its posture (n, N_JOINTS, 3) and lengths
     (n, N_LENGTHS), compiled over all of them (``out``: arrays to write, else new; ``rows``:
-    only those characters', the others' kept; ``each_capsule`` off: each capsule's bounds not
-    written, the body's are)."""
+    only those characters', the others' kept)."""
     n = positions.shape[0]
     if out is None:
         out = Capsules.empty(n)
     rows = np.arange(n, dtype=np.int64) if rows is None else rows
-    over_chunks(capsule_rows, rows.size, rows, each_capsule,
-                np.ascontiguousarray(positions, np.float64),
+    over_chunks(capsule_rows, rows.size, rows, np.ascontiguousarray(positions, np.float64),
                 np.ascontiguousarray(lengths, np.float64), CAPSULE_JOINTS, CAPSULE_SPAN,
                 RADIUS_WEIGHTS, RADIUS_TERMS, *out)
+    return out
+
+
+def bounds(positions: F64, lengths: F64, out: Capsules) -> Capsules:
+    """Every character's centre and bounds in ``out`` (:func:`bound_rows`: wider than its
+    capsules', none of them made; its ends, radii and each capsule's bounds left as they
+    are), compiled over all of them: enough for :func:`grid_of` and :func:`touching`, which
+    pick the bodies whose capsules are worth making."""
+    over_chunks(bound_rows, positions.shape[0], np.ascontiguousarray(positions, np.float64),
+                np.ascontiguousarray(lengths, np.float64), WIDEST_TERMS, WIDEST_WEIGHTS,
+                out.centre, out.box)
     return out
 
 
@@ -388,10 +478,19 @@ def near_rows(body: Capsules, grid: Grid, rows: I64) -> I64:
     return found
 
 
-def touching(body: Capsules, grid: Grid) -> I64:
+def touching(body: Capsules, grid: Grid, clearance: F64 | None = None) -> I64:
     """The characters whose bounds meet another's (k,), on ``grid``: the only ones that may
-    overlap someone (each capsule's bounds lie within its body's)."""
-    marked = np.zeros(body.radii.shape[0], bool)
-    touching_kernel(body.box, grid.plane, grid.cell_m, grid.mask, grid.start, grid.order, marked)
+    overlap someone (each capsule's bounds lie within its body's). ``clearance`` (n,): written,
+    each body's least gap (m, along the axis the bounds are furthest apart) to the bounds of
+    any other body whose bounds do not meet its own."""
+    n = body.radii.shape[0]
+    marked = np.zeros(n, bool)
+    if clearance is None:
+        clearance = np.empty(n)
+    # Bodies in cells not side by side: their centres more than a cell apart along an axis,
+    # each one's bounds within half a cell over CELL_SLACK of its centre (grid_of).
+    clearance[:] = grid.cell_m * (1.0 - 1.0 / CELL_SLACK)
+    touching_kernel(body.box, grid.plane, grid.cell_m, grid.mask, grid.start, grid.order,
+                    np.empty((n, 2, 3)), marked, clearance)
     found: I64 = np.flatnonzero(marked)
     return found

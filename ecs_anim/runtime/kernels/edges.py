@@ -58,18 +58,40 @@ def edge_rows(lo: int, hi: int, entity: I64, clip: I64, clip_time_s: F64, speed:
         seen_time_s[e] = clip_time_s[r]
 
 
+class EdgeScratch:
+    """The arrays :func:`clip_and_contact_edges` writes, kept from tick to tick (the lists
+    alone are ``(4, 2 n)`` int64: 256 KB at 4,000 characters, fresh pages every tick when
+    allocated anew)."""
+
+    def __init__(self) -> None:
+        self.edges = np.empty((0, 5), np.bool_)
+        self.previous_clip = np.empty(0, np.int64)
+        self.listed = np.empty((4, 0), np.int64)
+        self.counts = np.empty(4, np.int64)
+
+    def fit(self, n: int) -> EdgeScratch:
+        """These arrays for ``n`` rows (made anew when the rows change)."""
+        if self.previous_clip.shape[0] != n:
+            self.edges = np.empty((n, 5), np.bool_)
+            self.previous_clip = np.empty(n, np.int64)
+            self.listed = np.empty((4, 2 * n), np.int64)
+        return self
+
+
 def clip_and_contact_edges(entity: I64, clip: I64, clip_time_s: F64, speed: F64, loop: B,
                            duration_s: F64, contact_weight: F64, dt: float, slack_s: float,
                            began_weight: float, seen_clip: I64, seen_time_s: F64, seen_ended: B,
-                           seen_contact: F64) -> tuple[B, I64, list[I64]]:
+                           seen_contact: F64, *, scratch: EdgeScratch | None = None
+                           ) -> tuple[B, I64, list[I64]]:
     """:func:`ecs_anim.runtime.events.clip_and_contact_edges`, compiled (same arguments and
     results), and the edges listed: the rows of each of the first three columns, and
-    ``2 * row + foot`` of the contacts begun, each in the order of the rows."""
+    ``2 * row + foot`` of the contacts begun, each in the order of the rows (their own arrays).
+    ``scratch``: the arrays to write (new if None); the edges and clips seen before are views
+    of them, good until its next call."""
     n = entity.shape[0]
-    edges = np.empty((n, 5), np.bool_)  # every entry written
-    previous_clip = np.empty(n, np.int64)
-    listed, counts = np.empty((4, 2 * n), np.int64), np.empty(4, np.int64)
+    out = (EdgeScratch() if scratch is None else scratch).fit(n)  # every entry written
     edge_rows(0, n, entity, clip, clip_time_s, speed, loop, duration_s, contact_weight, dt,
-              slack_s, began_weight, seen_clip, seen_time_s, seen_ended, seen_contact, edges,
-              previous_clip, listed, counts)
-    return edges, previous_clip, [listed[k, :counts[k]] for k in range(4)]
+              slack_s, began_weight, seen_clip, seen_time_s, seen_ended, seen_contact, out.edges,
+              out.previous_clip, out.listed, out.counts)
+    counts = out.counts.tolist()
+    return out.edges, out.previous_clip, [out.listed[k, :counts[k]].copy() for k in range(4)]

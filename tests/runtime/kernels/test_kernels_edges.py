@@ -1,13 +1,14 @@
 """The compiled clip and contact edges (ecs_anim.runtime.kernels.edges) equal the numpy reference
 (ecs_anim.runtime.events.clip_and_contact_edges): the edges, the clips seen before, what is kept
 per entity for the next tick, and the edges listed by kind, over ticks where clips start, loop,
-end, go back and are replaced, and contacts begin and end."""
+end, go back and are replaced, and contacts begin and end; its arrays kept from tick to tick."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from ecs_anim.runtime.events import TIME_SLACK_S, clip_and_contact_edges
+from ecs_anim.runtime.kernels.edges import EdgeScratch
 from ecs_anim.runtime.kernels.edges import clip_and_contact_edges as compiled
 from ecs_anim.runtime.triggers import CONTACT_BEGAN_WEIGHT
 
@@ -29,13 +30,14 @@ def test_compiled_edges_equal_numpy_over_ticks():
     weights = rng.random((n, 2))
     seen_numpy, seen_compiled = _seen(n_entities), _seen(n_entities)
     kinds = np.zeros(5, np.int64)
+    scratch = EdgeScratch()  # its arrays written again every tick, as Reactions does
     for _ in range(60):
         edges, previous = clip_and_contact_edges(
             entity, clip, clip_time_s, speed, loop, duration_s, weights, dt, TIME_SLACK_S,
             CONTACT_BEGAN_WEIGHT, *seen_numpy)
         got_edges, got_previous, listed = compiled(
             entity, clip, clip_time_s, speed, loop, duration_s, weights, dt, TIME_SLACK_S,
-            CONTACT_BEGAN_WEIGHT, *seen_compiled)
+            CONTACT_BEGAN_WEIGHT, *seen_compiled, scratch=scratch)
         np.testing.assert_array_equal(got_edges, edges)
         np.testing.assert_array_equal(got_previous, previous)
         # the edges listed: each clip column's rows, the contacts' (row, foot) in row order
