@@ -27,6 +27,7 @@ from ecs_anim.runtime.kernels import over_chunks
 from ecs_anim.runtime.kernels.lanes import BLOCK
 from ecs_anim.runtime.kernels.vec import (
     F64,
+    TINY,
     Frame,
     Vec3,
     add,
@@ -41,12 +42,12 @@ from ecs_anim.runtime.kernels.vec import (
     matrix_from_quat,
     norm,
     normalize,
-    rot_z,
     scale,
     store3,
     store_frame,
     sub,
     to_world,
+    turned_about_z,
 )
 
 # Joints (ecs_anim.core.skeleton.JOINTS); side s (0 left, 1 right) adds 4 * s to a limb joint.
@@ -174,17 +175,46 @@ def leg_length(lengths_row: F64) -> float:
 
 
 @jit()
-def two_bone_middle(limb2world: Frame, root: Vec3, upper: float, lower: float,
-                    reach: float) -> tuple[Vec3, Vec3]:
-    """Mirrors :func:`ecs_anim.core.normalized.two_bone_middle` for one limb: (middle, end) joints,
-    the root-end distance ``reach`` (m) clamped to what the two bones can span."""
+def half_plane(upper: float, lower: float, reach: float) -> tuple[float, float, float]:
+    """Mirrors :func:`ecs_anim.core.normalized.two_sphere_middle` as ``two_bone_middle`` uses
+    it: the root-end distance ``reach`` (m) clamped to what the two bones can span, and the
+    middle joint's (y, z) in the limb's half-plane (m). Returns (y, z, reach)."""
     reach = min(max(reach, abs(upper - lower)), upper + lower)
     safe = max(reach, 1e-9)
     z = (upper**2 - lower**2 + reach**2) / (2.0 * safe)
     y = math.sqrt(max(upper**2 - z**2, 0.0))
+    return y, z, reach
+
+
+@jit()
+def two_bone_middle(limb2world: Frame, root: Vec3, upper: float, lower: float,
+                    reach: float) -> tuple[Vec3, Vec3]:
+    """Mirrors :func:`ecs_anim.core.normalized.two_bone_middle` for one limb: (middle, end) joints,
+    the root-end distance ``reach`` (m) clamped to what the two bones can span."""
+    y, z, reach = half_plane(upper, lower, reach)
     middle = add(add(root, scale(limb2world[1], y)), scale(limb2world[2], z))
     end = add(root, scale(limb2world[2], reach))
     return middle, end
+
+
+@jit()
+def limb_from_root(limb2world: Frame, root: Vec3, upper: float, lower: float,
+                   reach: float) -> tuple[Vec3, Vec3, Frame]:
+    """:func:`two_bone_middle` and :func:`distal_frames` of one limb (the decode's): (middle,
+    end, lower2world). The lower bone runs from (y, z) to (0, reach) in the limb's half-plane,
+    so its frame is the limb frame turned about its x axis by that direction: no world vector
+    normalized, nor x made normal to it (the limb frame, from a quaternion, is orthonormal).
+    The same frame as ``distal_frames`` to rounding (a zero-length bone's too: (x, 0, 0))."""
+    y, z, reach = half_plane(upper, lower, reach)
+    x_axis, y_axis, z_axis = limb2world
+    middle = add(add(root, scale(y_axis, y)), scale(z_axis, z))
+    end = add(root, scale(z_axis, reach))
+    a, b = -y, reach - z  # end - middle in the half-plane (y, z)
+    inv = 1.0 / max(math.sqrt(a * a + b * b), TINY)
+    a, b = a * inv, b * inv
+    lower2world = (x_axis, sub(scale(y_axis, b), scale(z_axis, a)),
+                   add(scale(y_axis, a), scale(z_axis, b)))
+    return middle, end, lower2world
 
 
 @jit()
@@ -202,7 +232,7 @@ def limb_frames(root: Vec3, mid: Vec3, end: Vec3, hint: Vec3) -> Frame:
 @jit(inline="always")
 def pelvis_frame(c: int, pose: PoseArrays | LegPoseArrays) -> Frame:
     """``pelvis2world`` of row ``c``: heading about Z times the local pelvis rotation."""
-    return matmul(rot_z(pose.root_heading[c]), matrix_from_quat(load4(pose.pelvis_local[c])))
+    return turned_about_z(pose.root_heading[c], matrix_from_quat(load4(pose.pelvis_local[c])))
 
 
 @jit(inline="always")
@@ -241,9 +271,8 @@ def leg_below_hip(c: int, s: int, pose: PoseArrays | LegPoseArrays, seg: F64, hi
     ``hip`` (m, world) and ``leg2world``: knee, ankle, toe, shank2world (for a caller that
     has the leg's frame as a matrix already)."""
     thigh, shank = seg[L_THIGH + s], seg[L_SHANK + s]
-    knee, ankle = two_bone_middle(leg2world, hip, thigh, shank,
-                                  pose.leg_fraction[c, s] * (thigh + shank))
-    shank2world = distal_frames(leg2world, knee, ankle)
+    knee, ankle, shank2world = limb_from_root(leg2world, hip, thigh, shank,
+                                              pose.leg_fraction[c, s] * (thigh + shank))
     toe = add(ankle, scale(to_world(shank2world, load3(pose.foot_dir[c, s])), seg[L_FOOT + s]))
     return knee, ankle, toe, shank2world
 
@@ -397,9 +426,8 @@ def decode_upper_row(c: int, pose: PoseArrays, seg: F64, spine: tuple[Vec3, Vec3
                                    seg[L_CLAVICLE + s]))
         arm2world = matmul(thorax2world, matrix_from_quat(load4(pose.arm_frame[c, s])))
         upper, fore = seg[L_UPPER_ARM + s], seg[L_FOREARM + s]
-        elbow, wrist = two_bone_middle(arm2world, shoulder, upper, fore,
-                                       pose.arm_fraction[c, s] * (upper + fore))
-        forearm2world = distal_frames(arm2world, elbow, wrist)
+        elbow, wrist, forearm2world = limb_from_root(arm2world, shoulder, upper, fore,
+                                                     pose.arm_fraction[c, s] * (upper + fore))
         hand = add(wrist, scale(to_world(forearm2world, load3(pose.hand_dir[c, s])),
                                 seg[L_HAND + s]))
         store3(positions[SHOULDER + 4 * s], shoulder)
