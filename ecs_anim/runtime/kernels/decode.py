@@ -29,6 +29,7 @@ from ecs_anim.runtime.kernels.vec import (
     F64,
     TINY,
     Frame,
+    Quat,
     Vec3,
     add,
     add_scaled,
@@ -38,16 +39,15 @@ from ecs_anim.runtime.kernels.vec import (
     load3,
     load4,
     load_frame,
-    matmul,
     matrix_from_quat,
     norm,
     normalize,
+    quat_mul,
     scale,
     store3,
     store_frame,
     sub,
     to_world,
-    turned_about_z,
 )
 
 # Joints (ecs_anim.core.skeleton.JOINTS); side s (0 left, 1 right) adds 4 * s to a limb joint.
@@ -229,10 +229,31 @@ def limb_frames(root: Vec3, mid: Vec3, end: Vec3, hint: Vec3) -> Frame:
     return frame_from_axes(sub(end, root), sub(mid, root), 2, 1, hint)
 
 
+@jit()
+def world_quat(parent2world: Quat, local: Quat) -> Quat:
+    """The turn ``local`` (in its parent's frame) in the world, ``parent2world local``: the
+    frame ``matmul(matrix_from_quat(parent2world), matrix_from_quat(local))`` to rounding, as a
+    quaternion, so that a frame's children cost a quaternion product, not a matrix product.
+    Neither is normalized (:func:`.vec.matrix_from_quat` divides by the square of the norm);
+    a zero ``local`` is the identity, as ``matrix_from_quat`` makes it."""
+    if local[0] * local[0] + local[1] * local[1] + local[2] * local[2] + local[3] * local[3] \
+            < TINY * TINY:
+        return parent2world
+    return quat_mul(parent2world, local)
+
+
+@jit(inline="always")
+def pelvis_quat(c: int, pose: PoseArrays | LegPoseArrays) -> Quat:
+    """``pelvis2world`` of row ``c`` as a quaternion (see :func:`world_quat`): the heading
+    about Z (half-angle sine and cosine) times the local pelvis rotation."""
+    half = 0.5 * pose.root_heading[c]
+    return world_quat((0.0, 0.0, math.sin(half), math.cos(half)), load4(pose.pelvis_local[c]))
+
+
 @jit(inline="always")
 def pelvis_frame(c: int, pose: PoseArrays | LegPoseArrays) -> Frame:
     """``pelvis2world`` of row ``c``: heading about Z times the local pelvis rotation."""
-    return turned_about_z(pose.root_heading[c], matrix_from_quat(load4(pose.pelvis_local[c])))
+    return matrix_from_quat(pelvis_quat(c, pose))
 
 
 @jit(inline="always")
@@ -245,21 +266,33 @@ def decode_legs_row(c: int, pose: PoseArrays | LegPoseArrays, seg: F64, base: F6
     normalize the root (m). Returns (pelvis, pelvis2world, hips, knees, ankles, toes, leg2world,
     shank2world), each pair [left, right].
     """
-    pelvis2world = pelvis_frame(c, pose)
+    return _legs_row(c, pose, seg, base)[1:]
+
+
+@jit(inline="always")
+def _legs_row(c: int, pose: PoseArrays | LegPoseArrays, seg: F64, base: F64) -> tuple[
+        Quat, Vec3, Frame, tuple[Vec3, Vec3], tuple[Vec3, Vec3], tuple[Vec3, Vec3],
+        tuple[Vec3, Vec3], tuple[Frame, Frame], tuple[Frame, Frame]]:
+    """:func:`decode_legs_row` with ``pelvis2world`` as a quaternion first (for the trunk)."""
+    pelvis2world_q = pelvis_quat(c, pose)
+    pelvis2world = matrix_from_quat(pelvis2world_q)
     pelvis = scale(load3(pose.root_position[c]), leg_length(base))
-    hip_l, knee_l, ankle_l, toe_l, leg_l, shank_l = _leg(c, 0, pose, seg, pelvis, pelvis2world)
-    hip_r, knee_r, ankle_r, toe_r, leg_r, shank_r = _leg(c, 1, pose, seg, pelvis, pelvis2world)
-    return (pelvis, pelvis2world, (hip_l, hip_r), (knee_l, knee_r), (ankle_l, ankle_r),
-            (toe_l, toe_r), (leg_l, leg_r), (shank_l, shank_r))
+    hip_l, knee_l, ankle_l, toe_l, leg_l, shank_l = _leg(c, 0, pose, seg, pelvis, pelvis2world,
+                                                         pelvis2world_q)
+    hip_r, knee_r, ankle_r, toe_r, leg_r, shank_r = _leg(c, 1, pose, seg, pelvis, pelvis2world,
+                                                         pelvis2world_q)
+    return (pelvis2world_q, pelvis, pelvis2world, (hip_l, hip_r), (knee_l, knee_r),
+            (ankle_l, ankle_r), (toe_l, toe_r), (leg_l, leg_r), (shank_l, shank_r))
 
 
 @jit(inline="always")
 def _leg(c: int, s: int, pose: PoseArrays | LegPoseArrays, seg: F64, pelvis: Vec3,
-         pelvis2world: Frame) -> tuple[Vec3, Vec3, Vec3, Vec3, Frame, Frame]:
+         pelvis2world: Frame, pelvis2world_q: Quat) -> tuple[Vec3, Vec3, Vec3, Vec3, Frame,
+                                                             Frame]:
     """One leg of :func:`decode_legs_row` (side ``s``): hip, knee, ankle, toe, leg2world,
     shank2world."""
     hip = add(pelvis, scale(to_world(pelvis2world, load3(pose.hip_dir[c, s])), seg[L_PELVIS + s]))
-    leg2world = matmul(pelvis2world, matrix_from_quat(load4(pose.leg_frame[c, s])))
+    leg2world = matrix_from_quat(world_quat(pelvis2world_q, load4(pose.leg_frame[c, s])))
     knee, ankle, toe, shank2world = leg_below_hip(c, s, pose, seg, hip, leg2world)
     return hip, knee, ankle, toe, leg2world, shank2world
 
@@ -365,10 +398,10 @@ def decode_row(c: int, pose: PoseArrays, lengths_row: F64, out: DecodedArrays) -
     """Mirrors :func:`ecs_anim.core.normalized.decode` (``use_stretch=False``) for store row ``c``
     on the body ``lengths_row`` (N_LENGTHS,) (m): writes row ``c`` of every ``out`` array."""
     seg = lengths_row
-    control = decode_lower_row(c, pose, seg, out)
+    control, pelvis2world_q = decode_lower_row(c, pose, seg, out)
     spine = spine_joints(control, seg[L_SPINE_LOWER], seg[L_SPINE_LOWER + 1],
                          seg[L_SPINE_LOWER + 2], 6)
-    decode_upper_row(c, pose, seg, spine, out)
+    decode_upper_row(c, pose, seg, spine, pelvis2world_q, out)
 
 
 @jit(inline="always")
@@ -383,10 +416,12 @@ def spine_control(c: int, pose: PoseArrays, seg: F64) -> tuple[Vec3, Vec3, Vec3,
 
 @jit(inline="always")
 def decode_lower_row(c: int, pose: PoseArrays, seg: F64,
-                     out: DecodedArrays) -> tuple[Vec3, Vec3, Vec3, Vec3]:
+                     out: DecodedArrays) -> tuple[tuple[Vec3, Vec3, Vec3, Vec3], Quat]:
     """The first part of :func:`decode_row`: the pelvis and the legs into row ``c`` of ``out``;
-    returns the spine's control points (:func:`spine_control`)."""
-    pelvis, pelvis2world, hips, knees, ankles, toes, legs, _ = decode_legs_row(c, pose, seg, seg)
+    returns the spine's control points (:func:`spine_control`) and ``pelvis2world`` as a
+    quaternion (:func:`world_quat`)."""
+    pelvis2world_q, pelvis, pelvis2world, hips, knees, ankles, toes, legs, _ = _legs_row(
+        c, pose, seg, seg)
     positions = out.positions[c]
     store3(positions[PELVIS], pelvis)
     for s in range(2):
@@ -396,15 +431,15 @@ def decode_lower_row(c: int, pose: PoseArrays, seg: F64,
         store3(positions[TOE + 4 * s], toes[s])
         store_frame(out.leg2world[c, s], legs[s])
     store_frame(out.pelvis2world[c], pelvis2world)
-    return spine_control(c, pose, seg)
+    return spine_control(c, pose, seg), pelvis2world_q
 
 
 @jit(inline="always")
 def decode_upper_row(c: int, pose: PoseArrays, seg: F64, spine: tuple[Vec3, Vec3, Vec3],
-                     out: DecodedArrays) -> None:
+                     pelvis2world_q: Quat, out: DecodedArrays) -> None:
     """The last part of :func:`decode_row`, once :func:`decode_lower_row` has written row ``c``
-    of ``out``: the ``spine`` joints (pelvis frame, m) placed in the world, then the thorax, the
-    head and the arms."""
+    of ``out`` (and returned ``pelvis2world_q``): the ``spine`` joints (pelvis frame, m) placed
+    in the world, then the thorax, the head and the arms."""
     positions = out.positions[c]
     pelvis = load3(positions[PELVIS])
     pelvis2world = load_frame(out.pelvis2world[c])
@@ -412,8 +447,9 @@ def decode_upper_row(c: int, pose: PoseArrays, seg: F64, spine: tuple[Vec3, Vec3
         store3(positions[SPINE_1 + k], add(pelvis, to_world(pelvis2world, spine[k])))
     neck = load3(positions[NECK])
 
-    thorax2world = matmul(pelvis2world, matrix_from_quat(load4(pose.thorax[c])))
-    head2world = matmul(thorax2world, matrix_from_quat(load4(pose.head[c])))
+    thorax2world_q = world_quat(pelvis2world_q, load4(pose.thorax[c]))
+    thorax2world = matrix_from_quat(thorax2world_q)
+    head2world = matrix_from_quat(world_quat(thorax2world_q, load4(pose.head[c])))
     head = add(neck, scale(to_world(thorax2world, load3(pose.neck_dir[c])), seg[L_NECK]))
     store3(positions[HEAD], head)
     store3(positions[HEAD_TOP],
@@ -424,7 +460,7 @@ def decode_upper_row(c: int, pose: PoseArrays, seg: F64, spine: tuple[Vec3, Vec3
     for s in range(2):
         shoulder = add(neck, scale(to_world(thorax2world, load3(pose.clavicle_dir[c, s])),
                                    seg[L_CLAVICLE + s]))
-        arm2world = matmul(thorax2world, matrix_from_quat(load4(pose.arm_frame[c, s])))
+        arm2world = matrix_from_quat(world_quat(thorax2world_q, load4(pose.arm_frame[c, s])))
         upper, fore = seg[L_UPPER_ARM + s], seg[L_FOREARM + s]
         elbow, wrist, forearm2world = limb_from_root(arm2world, shoulder, upper, fore,
                                                      pose.arm_fraction[c, s] * (upper + fore))
@@ -439,10 +475,11 @@ def decode_upper_row(c: int, pose: PoseArrays, seg: F64, spine: tuple[Vec3, Vec3
 
 #: Scratch rows of the spines of a block of characters (one column a character): the four
 #: control points (the first the origin), the three segment lengths, the curve parameter and the
-#: previous joint's, the origin and the three joints (pelvis frame, m). The origins are stored
-#: so that each joint's loops differ only in the rows they read (one compiled loop for all).
-_S_CONTROL, _S_LENGTH, _S_T, _S_PREV_T, _S_JOINT = 0, 12, 15, 16, 17
-SPINE_SCRATCH_ROWS = 29
+#: previous joint's, the origin and the three joints (pelvis frame, m); then the pelvis2world
+#: quaternion, for the trunk. The origins are stored so that each joint's loops differ only in
+#: the rows they read (one compiled loop for all).
+_S_CONTROL, _S_LENGTH, _S_T, _S_PREV_T, _S_JOINT, _S_PELVIS = 0, 12, 15, 16, 17, 29
+SPINE_SCRATCH_ROWS = 33
 
 
 def spine_scratch(n: int) -> F64:
@@ -452,10 +489,14 @@ def spine_scratch(n: int) -> F64:
 
 
 @jit(inline="always")
-def store_spine_column(scratch: F64, i: int, control: tuple[Vec3, Vec3, Vec3, Vec3],
+def store_spine_column(scratch: F64, i: int, lower: tuple[tuple[Vec3, Vec3, Vec3, Vec3], Quat],
                        seg: F64) -> None:
-    """Column ``i`` of a spine scratch: the control points and segment lengths of one spine,
-    the origin its first joint starts from."""
+    """Column ``i`` of a spine scratch: from ``lower`` (:func:`decode_lower_row`'s result) the
+    control points, and the segment lengths of one spine, the origin its first joint starts
+    from; and the pelvis2world quaternion."""
+    control, pelvis2world_q = lower
+    for a in range(4):
+        scratch[_S_PELVIS + a, i] = pelvis2world_q[a]
     for k in range(4):
         for a in range(3):
             scratch[_S_CONTROL + 3 * k + a, i] = control[k][a]
@@ -472,6 +513,13 @@ def spine_column(scratch: F64, i: int) -> tuple[Vec3, Vec3, Vec3]:
     return ((scratch[j, i], scratch[j + 1, i], scratch[j + 2, i]),
             (scratch[j + 3, i], scratch[j + 4, i], scratch[j + 5, i]),
             (scratch[j + 6, i], scratch[j + 7, i], scratch[j + 8, i]))
+
+
+@jit(inline="always")
+def pelvis_column(scratch: F64, i: int) -> Quat:
+    """The pelvis2world quaternion of column ``i`` of a spine scratch."""
+    return (scratch[_S_PELVIS, i], scratch[_S_PELVIS + 1, i], scratch[_S_PELVIS + 2, i],
+            scratch[_S_PELVIS + 3, i])
 
 
 @jit(inline="always")
@@ -582,7 +630,8 @@ def decode_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64, out
         spine_block(scratch, start, stop, 6)
         for i in range(start, stop):
             c = rows[i]
-            decode_upper_row(c, pose, lengths[c], spine_column(scratch, i), out)
+            decode_upper_row(c, pose, lengths[c], spine_column(scratch, i),
+                             pelvis_column(scratch, i), out)
 
 
 def decode(poses: NormalizedPoses, lengths: F64, out: DecodedPose | None = None) -> DecodedPose:

@@ -197,16 +197,6 @@ def transpose(m: Frame) -> Frame:
 
 
 @jit()
-def turned_about_z(angle: float, m: Frame) -> Frame:
-    """``rot_axis(2, angle) @ m`` (mirrors ``rotations.rot_axis``): only the x and y rows of
-    ``m`` mix, so a third of a matrix product."""
-    c, s = math.cos(angle), math.sin(angle)
-    return ((c * m[0][0] - s * m[0][1], s * m[0][0] + c * m[0][1], m[0][2]),
-            (c * m[1][0] - s * m[1][1], s * m[1][0] + c * m[1][1], m[1][2]),
-            (c * m[2][0] - s * m[2][1], s * m[2][0] + c * m[2][1], m[2][2]))
-
-
-@jit()
 def matrix_from_quat(q: Quat) -> Frame:
     """Mirrors :func:`ecs_anim.core.rotations.matrix_from_quat` (normalizes first): the same
     matrix to rounding, the norm folded into one factor ``2 / |q|^2`` (one division and no
@@ -220,6 +210,17 @@ def matrix_from_quat(q: Quat) -> Frame:
     return ((1.0 - (yy + zz), xy + wz, xz - wy),
             (xy - wz, 1.0 - (xx + zz), yz + wx),
             (xz + wy, yz - wx, 1.0 - (xx + yy)))
+
+
+@jit()
+def quat_mul(a: Quat, b: Quat) -> Quat:
+    """Mirrors :func:`ecs_anim.core.rotations.quat_mul`: the Hamilton product ``a b``."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return (aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz)
 
 
 @jit()
