@@ -39,10 +39,13 @@ from ecs_anim.runtime.kernels.vec import (
     load3,
     load4,
     load_frame,
+    matmul,
     matrix_from_quat,
     norm,
     normalize,
     quat_mul,
+    rot_z,
+    rotation_from_quat,
     scale,
     store3,
     store_frame,
@@ -233,9 +236,9 @@ def limb_frames(root: Vec3, mid: Vec3, end: Vec3, hint: Vec3) -> Frame:
 def world_quat(parent2world: Quat, local: Quat) -> Quat:
     """The turn ``local`` (in its parent's frame) in the world, ``parent2world local``: the
     frame ``matmul(matrix_from_quat(parent2world), matrix_from_quat(local))`` to rounding, as a
-    quaternion, so that a frame's children cost a quaternion product, not a matrix product.
-    Neither is normalized (:func:`.vec.matrix_from_quat` divides by the square of the norm);
-    a zero ``local`` is the identity, as ``matrix_from_quat`` makes it."""
+    quaternion, so that a frame's children in the decode cost a quaternion product, not a
+    matrix product. Neither is normalized (:func:`.vec.rotation_from_quat` divides by the
+    square of the norm); a zero ``local`` is the identity, as ``matrix_from_quat`` makes it."""
     if local[0] * local[0] + local[1] * local[1] + local[2] * local[2] + local[3] * local[3] \
             < TINY * TINY:
         return parent2world
@@ -243,17 +246,9 @@ def world_quat(parent2world: Quat, local: Quat) -> Quat:
 
 
 @jit(inline="always")
-def pelvis_quat(c: int, pose: PoseArrays | LegPoseArrays) -> Quat:
-    """``pelvis2world`` of row ``c`` as a quaternion (see :func:`world_quat`): the heading
-    about Z (half-angle sine and cosine) times the local pelvis rotation."""
-    half = 0.5 * pose.root_heading[c]
-    return world_quat((0.0, 0.0, math.sin(half), math.cos(half)), load4(pose.pelvis_local[c]))
-
-
-@jit(inline="always")
 def pelvis_frame(c: int, pose: PoseArrays | LegPoseArrays) -> Frame:
     """``pelvis2world`` of row ``c``: heading about Z times the local pelvis rotation."""
-    return matrix_from_quat(pelvis_quat(c, pose))
+    return matmul(rot_z(pose.root_heading[c]), matrix_from_quat(load4(pose.pelvis_local[c])))
 
 
 @jit(inline="always")
@@ -266,35 +261,58 @@ def decode_legs_row(c: int, pose: PoseArrays | LegPoseArrays, seg: F64, base: F6
     normalize the root (m). Returns (pelvis, pelvis2world, hips, knees, ankles, toes, leg2world,
     shank2world), each pair [left, right].
     """
-    return _legs_row(c, pose, seg, base)[1:]
-
-
-@jit(inline="always")
-def _legs_row(c: int, pose: PoseArrays | LegPoseArrays, seg: F64, base: F64) -> tuple[
-        Quat, Vec3, Frame, tuple[Vec3, Vec3], tuple[Vec3, Vec3], tuple[Vec3, Vec3],
-        tuple[Vec3, Vec3], tuple[Frame, Frame], tuple[Frame, Frame]]:
-    """:func:`decode_legs_row` with ``pelvis2world`` as a quaternion first (for the trunk)."""
-    pelvis2world_q = pelvis_quat(c, pose)
-    pelvis2world = matrix_from_quat(pelvis2world_q)
+    pelvis2world = pelvis_frame(c, pose)
     pelvis = scale(load3(pose.root_position[c]), leg_length(base))
-    hip_l, knee_l, ankle_l, toe_l, leg_l, shank_l = _leg(c, 0, pose, seg, pelvis, pelvis2world,
-                                                         pelvis2world_q)
-    hip_r, knee_r, ankle_r, toe_r, leg_r, shank_r = _leg(c, 1, pose, seg, pelvis, pelvis2world,
-                                                         pelvis2world_q)
-    return (pelvis2world_q, pelvis, pelvis2world, (hip_l, hip_r), (knee_l, knee_r),
-            (ankle_l, ankle_r), (toe_l, toe_r), (leg_l, leg_r), (shank_l, shank_r))
+    hip_l, knee_l, ankle_l, toe_l, leg_l, shank_l = _leg(c, 0, pose, seg, pelvis, pelvis2world)
+    hip_r, knee_r, ankle_r, toe_r, leg_r, shank_r = _leg(c, 1, pose, seg, pelvis, pelvis2world)
+    return (pelvis, pelvis2world, (hip_l, hip_r), (knee_l, knee_r), (ankle_l, ankle_r),
+            (toe_l, toe_r), (leg_l, leg_r), (shank_l, shank_r))
 
 
 @jit(inline="always")
 def _leg(c: int, s: int, pose: PoseArrays | LegPoseArrays, seg: F64, pelvis: Vec3,
-         pelvis2world: Frame, pelvis2world_q: Quat) -> tuple[Vec3, Vec3, Vec3, Vec3, Frame,
-                                                             Frame]:
+         pelvis2world: Frame) -> tuple[Vec3, Vec3, Vec3, Vec3, Frame, Frame]:
     """One leg of :func:`decode_legs_row` (side ``s``): hip, knee, ankle, toe, leg2world,
     shank2world."""
     hip = add(pelvis, scale(to_world(pelvis2world, load3(pose.hip_dir[c, s])), seg[L_PELVIS + s]))
-    leg2world = matrix_from_quat(world_quat(pelvis2world_q, load4(pose.leg_frame[c, s])))
+    leg2world = matmul(pelvis2world, matrix_from_quat(load4(pose.leg_frame[c, s])))
     knee, ankle, toe, shank2world = leg_below_hip(c, s, pose, seg, hip, leg2world)
     return hip, knee, ankle, toe, leg2world, shank2world
+
+
+@jit(inline="always")
+def _decoded_legs_row(c: int, pose: PoseArrays, seg: F64) -> tuple[
+        Quat, Vec3, Frame, tuple[Vec3, Vec3], tuple[Vec3, Vec3], tuple[Vec3, Vec3],
+        tuple[Vec3, Vec3], tuple[Frame, Frame]]:
+    """The pelvis and legs of row ``c`` as the decode makes them: :func:`decode_legs_row`'s
+    result to rounding (on ``seg`` both ways), cheaper (frames as quaternion products,
+    :func:`world_quat`; each shank's frame from its half-plane, :func:`limb_from_root`).
+    Returns (pelvis2world as a quaternion, pelvis, pelvis2world, hips, knees, ankles, toes,
+    leg2world); the ground adaptation keeps :func:`decode_legs_row`'s bits."""
+    half = 0.5 * pose.root_heading[c]
+    pelvis2world_q = world_quat((0.0, 0.0, math.sin(half), math.cos(half)),
+                                load4(pose.pelvis_local[c]))
+    pelvis2world = rotation_from_quat(pelvis2world_q)
+    pelvis = scale(load3(pose.root_position[c]), leg_length(seg))
+    hip_l, knee_l, ankle_l, toe_l, leg_l = _decoded_leg(c, 0, pose, seg, pelvis, pelvis2world,
+                                                        pelvis2world_q)
+    hip_r, knee_r, ankle_r, toe_r, leg_r = _decoded_leg(c, 1, pose, seg, pelvis, pelvis2world,
+                                                        pelvis2world_q)
+    return (pelvis2world_q, pelvis, pelvis2world, (hip_l, hip_r), (knee_l, knee_r),
+            (ankle_l, ankle_r), (toe_l, toe_r), (leg_l, leg_r))
+
+
+@jit(inline="always")
+def _decoded_leg(c: int, s: int, pose: PoseArrays, seg: F64, pelvis: Vec3, pelvis2world: Frame,
+                 pelvis2world_q: Quat) -> tuple[Vec3, Vec3, Vec3, Vec3, Frame]:
+    """Leg ``s`` of :func:`_decoded_legs_row`: hip, knee, ankle, toe, leg2world."""
+    hip = add(pelvis, scale(to_world(pelvis2world, load3(pose.hip_dir[c, s])), seg[L_PELVIS + s]))
+    leg2world = rotation_from_quat(world_quat(pelvis2world_q, load4(pose.leg_frame[c, s])))
+    thigh, shank = seg[L_THIGH + s], seg[L_SHANK + s]
+    knee, ankle, shank2world = limb_from_root(leg2world, hip, thigh, shank,
+                                              pose.leg_fraction[c, s] * (thigh + shank))
+    toe = add(ankle, scale(to_world(shank2world, load3(pose.foot_dir[c, s])), seg[L_FOOT + s]))
+    return hip, knee, ankle, toe, leg2world
 
 
 @jit(inline="always")
@@ -304,8 +322,9 @@ def leg_below_hip(c: int, s: int, pose: PoseArrays | LegPoseArrays, seg: F64, hi
     ``hip`` (m, world) and ``leg2world``: knee, ankle, toe, shank2world (for a caller that
     has the leg's frame as a matrix already)."""
     thigh, shank = seg[L_THIGH + s], seg[L_SHANK + s]
-    knee, ankle, shank2world = limb_from_root(leg2world, hip, thigh, shank,
-                                              pose.leg_fraction[c, s] * (thigh + shank))
+    knee, ankle = two_bone_middle(leg2world, hip, thigh, shank,
+                                  pose.leg_fraction[c, s] * (thigh + shank))
+    shank2world = distal_frames(leg2world, knee, ankle)
     toe = add(ankle, scale(to_world(shank2world, load3(pose.foot_dir[c, s])), seg[L_FOOT + s]))
     return knee, ankle, toe, shank2world
 
@@ -420,8 +439,8 @@ def decode_lower_row(c: int, pose: PoseArrays, seg: F64,
     """The first part of :func:`decode_row`: the pelvis and the legs into row ``c`` of ``out``;
     returns the spine's control points (:func:`spine_control`) and ``pelvis2world`` as a
     quaternion (:func:`world_quat`)."""
-    pelvis2world_q, pelvis, pelvis2world, hips, knees, ankles, toes, legs, _ = _legs_row(
-        c, pose, seg, seg)
+    pelvis2world_q, pelvis, pelvis2world, hips, knees, ankles, toes, legs = _decoded_legs_row(
+        c, pose, seg)
     positions = out.positions[c]
     store3(positions[PELVIS], pelvis)
     for s in range(2):
@@ -448,8 +467,8 @@ def decode_upper_row(c: int, pose: PoseArrays, seg: F64, spine: tuple[Vec3, Vec3
     neck = load3(positions[NECK])
 
     thorax2world_q = world_quat(pelvis2world_q, load4(pose.thorax[c]))
-    thorax2world = matrix_from_quat(thorax2world_q)
-    head2world = matrix_from_quat(world_quat(thorax2world_q, load4(pose.head[c])))
+    thorax2world = rotation_from_quat(thorax2world_q)
+    head2world = rotation_from_quat(world_quat(thorax2world_q, load4(pose.head[c])))
     head = add(neck, scale(to_world(thorax2world, load3(pose.neck_dir[c])), seg[L_NECK]))
     store3(positions[HEAD], head)
     store3(positions[HEAD_TOP],
@@ -460,7 +479,7 @@ def decode_upper_row(c: int, pose: PoseArrays, seg: F64, spine: tuple[Vec3, Vec3
     for s in range(2):
         shoulder = add(neck, scale(to_world(thorax2world, load3(pose.clavicle_dir[c, s])),
                                    seg[L_CLAVICLE + s]))
-        arm2world = matrix_from_quat(world_quat(thorax2world_q, load4(pose.arm_frame[c, s])))
+        arm2world = rotation_from_quat(world_quat(thorax2world_q, load4(pose.arm_frame[c, s])))
         upper, fore = seg[L_UPPER_ARM + s], seg[L_FOREARM + s]
         elbow, wrist, forearm2world = limb_from_root(arm2world, shoulder, upper, fore,
                                                      pose.arm_fraction[c, s] * (upper + fore))

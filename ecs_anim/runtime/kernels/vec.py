@@ -197,10 +197,28 @@ def transpose(m: Frame) -> Frame:
 
 
 @jit()
+def rot_z(angle: float) -> Frame:
+    """Mirrors ``rotations.rot_axis(2, angle)``."""
+    c, s = math.cos(angle), math.sin(angle)
+    return ((c, s, 0.0), (-s, c, 0.0), (0.0, 0.0, 1.0))
+
+
+@jit()
 def matrix_from_quat(q: Quat) -> Frame:
-    """Mirrors :func:`ecs_anim.core.rotations.matrix_from_quat` (normalizes first): the same
-    matrix to rounding, the norm folded into one factor ``2 / |q|^2`` (one division and no
-    square root where the normalization took four and one: they were a tenth of the decode)."""
+    """Mirrors :func:`ecs_anim.core.rotations.matrix_from_quat` (normalizes first)."""
+    n = max(math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]), TINY)
+    x, y, z, w = q[0] / n, q[1] / n, q[2] / n, q[3] / n
+    return ((1 - 2 * (y * y + z * z), 2 * (x * y + z * w), 2 * (x * z - y * w)),
+            (2 * (x * y - z * w), 1 - 2 * (x * x + z * z), 2 * (y * z + x * w)),
+            (2 * (x * z + y * w), 2 * (y * z - x * w), 1 - 2 * (x * x + y * y)))
+
+
+@jit()
+def rotation_from_quat(q: Quat) -> Frame:
+    """:func:`matrix_from_quat` to rounding, for the decode: the norm folded into one factor
+    ``2 / |q|^2`` (one division and no square root where the normalization takes four and
+    one). Not the same bits: the ground adaptation's legs keep ``matrix_from_quat`` (its
+    footprints steer crowds, where a last bit changed moves a walker's path)."""
     x, y, z, w = q
     s = 2.0 / max(x * x + y * y + z * z + w * w, TINY * TINY)
     xs, ys, zs = x * s, y * s, z * s
