@@ -85,16 +85,31 @@ class PostureConvert(System):
              "solved")
     writes = ("frozen", "positions", "posture", "local_rotations", "vertebrae")
 
+    def __init__(self, sim: Simulation) -> None:
+        super().__init__(sim)
+        # The decode's scratch, kept from tick to tick (3 MB at 4,000 characters, allocated and
+        # first touched again every tick otherwise): positions (n, N_JOINTS, 3), the spines'.
+        self._positions = np.empty((0, N_JOINTS, 3))
+        self._spines = spine_scratch(0)
+
+    def _scratch(self, n: int, rows: int) -> tuple[np.ndarray, np.ndarray]:
+        """The decoded positions' scratch for ``n`` store rows and the spine scratch for
+        ``rows`` rows decoded (:func:`~ecs_anim.runtime.kernels.decode.spine_scratch`)."""
+        if self._positions.shape[0] != n:
+            self._positions = np.empty((n, N_JOINTS, 3))
+        if self._spines.shape[1] < rows:
+            self._spines = spine_scratch(rows)
+        return self._positions, self._spines
+
     def run(self, dt: float) -> None:
         st, sim = self.sim.store, self.sim
         n = st.n
         if not _writable(st.positions, (n, N_JOINTS, 3)):
             st.positions = np.array(st.positions, dtype=np.float64)
         frames = decoded_arrays(st.posture) if fits(st.posture, n) else None  # type: ignore[arg-type]
-        if frames is None:
-            decoded = empty_decoded(n)
-        else:  # the posture's frames are written again; positions need a scratch of their own
-            decoded = frames._replace(positions=np.empty((n, N_JOINTS, 3)))
+        positions, spines = self._scratch(n, n)
+        # The posture's frames are written again; positions need a scratch of their own.
+        decoded = (empty_decoded(n) if frames is None else frames)._replace(positions=positions)
         # Joint rotations cost more than the positions; they are made when something uses them
         # (BVH export, a viewer drawing skinned meshes): ``Simulation(rotations=True)``.
         rotations = bool(sim.rotations)
@@ -125,7 +140,7 @@ class PostureConvert(System):
                               decoded_arrays(st.solved))
         if sim.compiled:
             over_chunks(posture_rows, decode_rows.size, decode_rows, pose, st.lengths, decoded,
-                        *rest, spine_scratch(decode_rows.size))
+                        *rest, spines)
         else:  # the kernels compile aside (a first run)
             posture_numpy(sim, decode_rows, decoded, newly_bad, have_previous)
         if newly_bad.any():

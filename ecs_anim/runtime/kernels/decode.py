@@ -27,7 +27,9 @@ from ecs_anim.runtime.kernels import over_chunks
 from ecs_anim.runtime.kernels.lanes import BLOCK
 from ecs_anim.runtime.kernels.vec import (
     F64,
+    TINY,
     Frame,
+    Quat,
     Vec3,
     add,
     add_scaled,
@@ -41,7 +43,9 @@ from ecs_anim.runtime.kernels.vec import (
     matrix_from_quat,
     norm,
     normalize,
+    quat_mul,
     rot_z,
+    rotation_from_quat,
     scale,
     store3,
     store_frame,
@@ -174,17 +178,46 @@ def leg_length(lengths_row: F64) -> float:
 
 
 @jit()
-def two_bone_middle(limb2world: Frame, root: Vec3, upper: float, lower: float,
-                    reach: float) -> tuple[Vec3, Vec3]:
-    """Mirrors :func:`ecs_anim.core.normalized.two_bone_middle` for one limb: (middle, end) joints,
-    the root-end distance ``reach`` (m) clamped to what the two bones can span."""
+def half_plane(upper: float, lower: float, reach: float) -> tuple[float, float, float]:
+    """Mirrors :func:`ecs_anim.core.normalized.two_sphere_middle` as ``two_bone_middle`` uses
+    it: the root-end distance ``reach`` (m) clamped to what the two bones can span, and the
+    middle joint's (y, z) in the limb's half-plane (m). Returns (y, z, reach)."""
     reach = min(max(reach, abs(upper - lower)), upper + lower)
     safe = max(reach, 1e-9)
     z = (upper**2 - lower**2 + reach**2) / (2.0 * safe)
     y = math.sqrt(max(upper**2 - z**2, 0.0))
+    return y, z, reach
+
+
+@jit()
+def two_bone_middle(limb2world: Frame, root: Vec3, upper: float, lower: float,
+                    reach: float) -> tuple[Vec3, Vec3]:
+    """Mirrors :func:`ecs_anim.core.normalized.two_bone_middle` for one limb: (middle, end) joints,
+    the root-end distance ``reach`` (m) clamped to what the two bones can span."""
+    y, z, reach = half_plane(upper, lower, reach)
     middle = add(add(root, scale(limb2world[1], y)), scale(limb2world[2], z))
     end = add(root, scale(limb2world[2], reach))
     return middle, end
+
+
+@jit()
+def limb_from_root(limb2world: Frame, root: Vec3, upper: float, lower: float,
+                   reach: float) -> tuple[Vec3, Vec3, Frame]:
+    """:func:`two_bone_middle` and :func:`distal_frames` of one limb (the decode's): (middle,
+    end, lower2world). The lower bone runs from (y, z) to (0, reach) in the limb's half-plane,
+    so its frame is the limb frame turned about its x axis by that direction: no world vector
+    normalized, nor x made normal to it (the limb frame, from a quaternion, is orthonormal).
+    The same frame as ``distal_frames`` to rounding (a zero-length bone's too: (x, 0, 0))."""
+    y, z, reach = half_plane(upper, lower, reach)
+    x_axis, y_axis, z_axis = limb2world
+    middle = add(add(root, scale(y_axis, y)), scale(z_axis, z))
+    end = add(root, scale(z_axis, reach))
+    a, b = -y, reach - z  # end - middle in the half-plane (y, z)
+    inv = 1.0 / max(math.sqrt(a * a + b * b), TINY)
+    a, b = a * inv, b * inv
+    lower2world = (x_axis, sub(scale(y_axis, b), scale(z_axis, a)),
+                   add(scale(y_axis, a), scale(z_axis, b)))
+    return middle, end, lower2world
 
 
 @jit()
@@ -197,6 +230,19 @@ def distal_frames(limb: Frame, mid: Vec3, end: Vec3) -> Frame:
 def limb_frames(root: Vec3, mid: Vec3, end: Vec3, hint: Vec3) -> Frame:
     """Mirrors :func:`ecs_anim.core.normalized.limb_frames`: z root->end, y towards ``mid``."""
     return frame_from_axes(sub(end, root), sub(mid, root), 2, 1, hint)
+
+
+@jit()
+def world_quat(parent2world: Quat, local: Quat) -> Quat:
+    """The turn ``local`` (in its parent's frame) in the world, ``parent2world local``: the
+    frame ``matmul(matrix_from_quat(parent2world), matrix_from_quat(local))`` to rounding, as a
+    quaternion, so that a frame's children in the decode cost a quaternion product, not a
+    matrix product. Neither is normalized (:func:`.vec.rotation_from_quat` divides by the
+    square of the norm); a zero ``local`` is the identity, as ``matrix_from_quat`` makes it."""
+    if local[0] * local[0] + local[1] * local[1] + local[2] * local[2] + local[3] * local[3] \
+            < TINY * TINY:
+        return parent2world
+    return quat_mul(parent2world, local)
 
 
 @jit(inline="always")
@@ -232,6 +278,41 @@ def _leg(c: int, s: int, pose: PoseArrays | LegPoseArrays, seg: F64, pelvis: Vec
     leg2world = matmul(pelvis2world, matrix_from_quat(load4(pose.leg_frame[c, s])))
     knee, ankle, toe, shank2world = leg_below_hip(c, s, pose, seg, hip, leg2world)
     return hip, knee, ankle, toe, leg2world, shank2world
+
+
+@jit(inline="always")
+def _decoded_legs_row(c: int, pose: PoseArrays, seg: F64) -> tuple[
+        Quat, Vec3, Frame, tuple[Vec3, Vec3], tuple[Vec3, Vec3], tuple[Vec3, Vec3],
+        tuple[Vec3, Vec3], tuple[Frame, Frame]]:
+    """The pelvis and legs of row ``c`` as the decode makes them: :func:`decode_legs_row`'s
+    result to rounding (on ``seg`` both ways), cheaper (frames as quaternion products,
+    :func:`world_quat`; each shank's frame from its half-plane, :func:`limb_from_root`).
+    Returns (pelvis2world as a quaternion, pelvis, pelvis2world, hips, knees, ankles, toes,
+    leg2world); the ground adaptation keeps :func:`decode_legs_row`'s bits."""
+    half = 0.5 * pose.root_heading[c]
+    pelvis2world_q = world_quat((0.0, 0.0, math.sin(half), math.cos(half)),
+                                load4(pose.pelvis_local[c]))
+    pelvis2world = rotation_from_quat(pelvis2world_q)
+    pelvis = scale(load3(pose.root_position[c]), leg_length(seg))
+    hip_l, knee_l, ankle_l, toe_l, leg_l = _decoded_leg(c, 0, pose, seg, pelvis, pelvis2world,
+                                                        pelvis2world_q)
+    hip_r, knee_r, ankle_r, toe_r, leg_r = _decoded_leg(c, 1, pose, seg, pelvis, pelvis2world,
+                                                        pelvis2world_q)
+    return (pelvis2world_q, pelvis, pelvis2world, (hip_l, hip_r), (knee_l, knee_r),
+            (ankle_l, ankle_r), (toe_l, toe_r), (leg_l, leg_r))
+
+
+@jit(inline="always")
+def _decoded_leg(c: int, s: int, pose: PoseArrays, seg: F64, pelvis: Vec3, pelvis2world: Frame,
+                 pelvis2world_q: Quat) -> tuple[Vec3, Vec3, Vec3, Vec3, Frame]:
+    """Leg ``s`` of :func:`_decoded_legs_row`: hip, knee, ankle, toe, leg2world."""
+    hip = add(pelvis, scale(to_world(pelvis2world, load3(pose.hip_dir[c, s])), seg[L_PELVIS + s]))
+    leg2world = rotation_from_quat(world_quat(pelvis2world_q, load4(pose.leg_frame[c, s])))
+    thigh, shank = seg[L_THIGH + s], seg[L_SHANK + s]
+    knee, ankle, shank2world = limb_from_root(leg2world, hip, thigh, shank,
+                                              pose.leg_fraction[c, s] * (thigh + shank))
+    toe = add(ankle, scale(to_world(shank2world, load3(pose.foot_dir[c, s])), seg[L_FOOT + s]))
+    return hip, knee, ankle, toe, leg2world
 
 
 @jit(inline="always")
@@ -336,10 +417,10 @@ def decode_row(c: int, pose: PoseArrays, lengths_row: F64, out: DecodedArrays) -
     """Mirrors :func:`ecs_anim.core.normalized.decode` (``use_stretch=False``) for store row ``c``
     on the body ``lengths_row`` (N_LENGTHS,) (m): writes row ``c`` of every ``out`` array."""
     seg = lengths_row
-    control = decode_lower_row(c, pose, seg, out)
+    control, pelvis2world_q = decode_lower_row(c, pose, seg, out)
     spine = spine_joints(control, seg[L_SPINE_LOWER], seg[L_SPINE_LOWER + 1],
                          seg[L_SPINE_LOWER + 2], 6)
-    decode_upper_row(c, pose, seg, spine, out)
+    decode_upper_row(c, pose, seg, spine, pelvis2world_q, out)
 
 
 @jit(inline="always")
@@ -354,10 +435,12 @@ def spine_control(c: int, pose: PoseArrays, seg: F64) -> tuple[Vec3, Vec3, Vec3,
 
 @jit(inline="always")
 def decode_lower_row(c: int, pose: PoseArrays, seg: F64,
-                     out: DecodedArrays) -> tuple[Vec3, Vec3, Vec3, Vec3]:
+                     out: DecodedArrays) -> tuple[tuple[Vec3, Vec3, Vec3, Vec3], Quat]:
     """The first part of :func:`decode_row`: the pelvis and the legs into row ``c`` of ``out``;
-    returns the spine's control points (:func:`spine_control`)."""
-    pelvis, pelvis2world, hips, knees, ankles, toes, legs, _ = decode_legs_row(c, pose, seg, seg)
+    returns the spine's control points (:func:`spine_control`) and ``pelvis2world`` as a
+    quaternion (:func:`world_quat`)."""
+    pelvis2world_q, pelvis, pelvis2world, hips, knees, ankles, toes, legs = _decoded_legs_row(
+        c, pose, seg)
     positions = out.positions[c]
     store3(positions[PELVIS], pelvis)
     for s in range(2):
@@ -367,15 +450,15 @@ def decode_lower_row(c: int, pose: PoseArrays, seg: F64,
         store3(positions[TOE + 4 * s], toes[s])
         store_frame(out.leg2world[c, s], legs[s])
     store_frame(out.pelvis2world[c], pelvis2world)
-    return spine_control(c, pose, seg)
+    return spine_control(c, pose, seg), pelvis2world_q
 
 
 @jit(inline="always")
 def decode_upper_row(c: int, pose: PoseArrays, seg: F64, spine: tuple[Vec3, Vec3, Vec3],
-                     out: DecodedArrays) -> None:
+                     pelvis2world_q: Quat, out: DecodedArrays) -> None:
     """The last part of :func:`decode_row`, once :func:`decode_lower_row` has written row ``c``
-    of ``out``: the ``spine`` joints (pelvis frame, m) placed in the world, then the thorax, the
-    head and the arms."""
+    of ``out`` (and returned ``pelvis2world_q``): the ``spine`` joints (pelvis frame, m) placed
+    in the world, then the thorax, the head and the arms."""
     positions = out.positions[c]
     pelvis = load3(positions[PELVIS])
     pelvis2world = load_frame(out.pelvis2world[c])
@@ -383,8 +466,9 @@ def decode_upper_row(c: int, pose: PoseArrays, seg: F64, spine: tuple[Vec3, Vec3
         store3(positions[SPINE_1 + k], add(pelvis, to_world(pelvis2world, spine[k])))
     neck = load3(positions[NECK])
 
-    thorax2world = matmul(pelvis2world, matrix_from_quat(load4(pose.thorax[c])))
-    head2world = matmul(thorax2world, matrix_from_quat(load4(pose.head[c])))
+    thorax2world_q = world_quat(pelvis2world_q, load4(pose.thorax[c]))
+    thorax2world = rotation_from_quat(thorax2world_q)
+    head2world = rotation_from_quat(world_quat(thorax2world_q, load4(pose.head[c])))
     head = add(neck, scale(to_world(thorax2world, load3(pose.neck_dir[c])), seg[L_NECK]))
     store3(positions[HEAD], head)
     store3(positions[HEAD_TOP],
@@ -395,11 +479,10 @@ def decode_upper_row(c: int, pose: PoseArrays, seg: F64, spine: tuple[Vec3, Vec3
     for s in range(2):
         shoulder = add(neck, scale(to_world(thorax2world, load3(pose.clavicle_dir[c, s])),
                                    seg[L_CLAVICLE + s]))
-        arm2world = matmul(thorax2world, matrix_from_quat(load4(pose.arm_frame[c, s])))
+        arm2world = rotation_from_quat(world_quat(thorax2world_q, load4(pose.arm_frame[c, s])))
         upper, fore = seg[L_UPPER_ARM + s], seg[L_FOREARM + s]
-        elbow, wrist = two_bone_middle(arm2world, shoulder, upper, fore,
-                                       pose.arm_fraction[c, s] * (upper + fore))
-        forearm2world = distal_frames(arm2world, elbow, wrist)
+        elbow, wrist, forearm2world = limb_from_root(arm2world, shoulder, upper, fore,
+                                                     pose.arm_fraction[c, s] * (upper + fore))
         hand = add(wrist, scale(to_world(forearm2world, load3(pose.hand_dir[c, s])),
                                 seg[L_HAND + s]))
         store3(positions[SHOULDER + 4 * s], shoulder)
@@ -411,10 +494,11 @@ def decode_upper_row(c: int, pose: PoseArrays, seg: F64, spine: tuple[Vec3, Vec3
 
 #: Scratch rows of the spines of a block of characters (one column a character): the four
 #: control points (the first the origin), the three segment lengths, the curve parameter and the
-#: previous joint's, the origin and the three joints (pelvis frame, m). The origins are stored
-#: so that each joint's loops differ only in the rows they read (one compiled loop for all).
-_S_CONTROL, _S_LENGTH, _S_T, _S_PREV_T, _S_JOINT = 0, 12, 15, 16, 17
-SPINE_SCRATCH_ROWS = 29
+#: previous joint's, the origin and the three joints (pelvis frame, m); then the pelvis2world
+#: quaternion, for the trunk. The origins are stored so that each joint's loops differ only in
+#: the rows they read (one compiled loop for all).
+_S_CONTROL, _S_LENGTH, _S_T, _S_PREV_T, _S_JOINT, _S_PELVIS = 0, 12, 15, 16, 17, 29
+SPINE_SCRATCH_ROWS = 33
 
 
 def spine_scratch(n: int) -> F64:
@@ -424,10 +508,14 @@ def spine_scratch(n: int) -> F64:
 
 
 @jit(inline="always")
-def store_spine_column(scratch: F64, i: int, control: tuple[Vec3, Vec3, Vec3, Vec3],
+def store_spine_column(scratch: F64, i: int, lower: tuple[tuple[Vec3, Vec3, Vec3, Vec3], Quat],
                        seg: F64) -> None:
-    """Column ``i`` of a spine scratch: the control points and segment lengths of one spine,
-    the origin its first joint starts from."""
+    """Column ``i`` of a spine scratch: from ``lower`` (:func:`decode_lower_row`'s result) the
+    control points, and the segment lengths of one spine, the origin its first joint starts
+    from; and the pelvis2world quaternion."""
+    control, pelvis2world_q = lower
+    for a in range(4):
+        scratch[_S_PELVIS + a, i] = pelvis2world_q[a]
     for k in range(4):
         for a in range(3):
             scratch[_S_CONTROL + 3 * k + a, i] = control[k][a]
@@ -444,6 +532,13 @@ def spine_column(scratch: F64, i: int) -> tuple[Vec3, Vec3, Vec3]:
     return ((scratch[j, i], scratch[j + 1, i], scratch[j + 2, i]),
             (scratch[j + 3, i], scratch[j + 4, i], scratch[j + 5, i]),
             (scratch[j + 6, i], scratch[j + 7, i], scratch[j + 8, i]))
+
+
+@jit(inline="always")
+def pelvis_column(scratch: F64, i: int) -> Quat:
+    """The pelvis2world quaternion of column ``i`` of a spine scratch."""
+    return (scratch[_S_PELVIS, i], scratch[_S_PELVIS + 1, i], scratch[_S_PELVIS + 2, i],
+            scratch[_S_PELVIS + 3, i])
 
 
 @jit(inline="always")
@@ -554,7 +649,8 @@ def decode_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64, out
         spine_block(scratch, start, stop, 6)
         for i in range(start, stop):
             c = rows[i]
-            decode_upper_row(c, pose, lengths[c], spine_column(scratch, i), out)
+            decode_upper_row(c, pose, lengths[c], spine_column(scratch, i),
+                             pelvis_column(scratch, i), out)
 
 
 def decode(poses: NormalizedPoses, lengths: F64, out: DecodedPose | None = None) -> DecodedPose:

@@ -214,6 +214,34 @@ def matrix_from_quat(q: Quat) -> Frame:
 
 
 @jit()
+def rotation_from_quat(q: Quat) -> Frame:
+    """:func:`matrix_from_quat` to rounding, for the decode: the norm folded into one factor
+    ``2 / |q|^2`` (one division and no square root where the normalization takes four and
+    one). Not the same bits: the ground adaptation's legs keep ``matrix_from_quat`` (its
+    footprints steer crowds, where a last bit changed moves a walker's path)."""
+    x, y, z, w = q
+    s = 2.0 / max(x * x + y * y + z * z + w * w, TINY * TINY)
+    xs, ys, zs = x * s, y * s, z * s
+    xx, xy, xz = x * xs, x * ys, x * zs
+    yy, yz, zz = y * ys, y * zs, z * zs
+    wx, wy, wz = w * xs, w * ys, w * zs
+    return ((1.0 - (yy + zz), xy + wz, xz - wy),
+            (xy - wz, 1.0 - (xx + zz), yz + wx),
+            (xz + wy, yz - wx, 1.0 - (xx + yy)))
+
+
+@jit()
+def quat_mul(a: Quat, b: Quat) -> Quat:
+    """Mirrors :func:`ecs_anim.core.rotations.quat_mul`: the Hamilton product ``a b``."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return (aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz)
+
+
+@jit()
 def quat_from_matrix(m: Frame) -> Quat:
     """Mirrors :func:`ecs_anim.core.rotations.quat_from_matrix` (w >= 0)."""
     # m[col][row]: element (row i, column j) is m[j][i].

@@ -161,3 +161,20 @@ def test_decode_rows_by_blocks_does_not_depend_on_the_chunks_and_equals_the_row_
         np.testing.assert_array_equal(a, b, err_msg=name)
         np.testing.assert_array_equal(a, c, err_msg=name)
     assert_same(kd.decoded_pose(whole), decode(poses, lengths))
+
+
+def test_zero_quaternions_decode_as_no_turn_like_numpy():
+    """A zero quaternion is no turn in numpy's matrix_from_quat (normalized by at least TINY):
+    the decode's frames composed as quaternion products (decode.world_quat) keep the parent's
+    frame there too, whichever rotation is zero."""
+    rng = np.random.default_rng(1310)
+    poses = random_poses(rng, 6)
+    lengths = random_bodies(rng, 6)
+    poses.pelvis_local[0] = 0.0
+    poses.leg_frame[1, 0] = 0.0
+    poses.thorax[2] = 0.0
+    poses.head[3] = 0.0
+    poses.arm_frame[4, 1] = 0.0
+    poses.leg_frame[5] = 0.0
+    poses.arm_frame[5] = 0.0
+    assert_same(kd.decode(poses, lengths), decode(poses, lengths))
