@@ -2,8 +2,8 @@
 
 Mirrors :func:`ecs_anim.solver.shell.solve` (the numpy reference, which stays in the package and
 which the tests compare this with to 1e-9 m). :func:`solve_rows` runs over the solved characters
-(a range of them per thread: :func:`ecs_anim.runtime.kernels.over_chunks`); per character,
-:func:`solve_character` owns the loop: a pass (follow the goals on its own body, the limbs
+(a range of them per thread: :func:`ecs_anim.runtime.kernels.over_chunks`) and, per character,
+owns the loop: a pass (follow the goals on its own body, the limbs
 (:mod:`.solve_limbs`), the head (:mod:`.solve_head`)), then the stopping rule (no goal the trunk
 or the body still moves left open, and the centre of mass so close that the root would not move;
 or its budget of iterations spent: the pass is the result), else an iteration: the trunk
@@ -78,114 +78,104 @@ def _iterative(g: Goals, t: Tables, j: int) -> bool:
                 or (g.on_self[j] and t.seg_moved_by_pass[g.self_segment[j]] > 0))
 
 
-@jit()
-def solve_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners,
-                    b: Bodies, t: Tables, err: F64, stalled: B8, previous: F64, slow_before: B8,
-                    tolerance_m: float, tolerance_rad: float,
-                    com_tolerance_m: float, max_ccd_step_rad: float, root_gain: float,
-                    stall_fraction: float, leg_extension: float) -> int:
-    """Solve character ``c``'s goals (its rows of ``pose`` and ``dec`` in place; ``err``,
-    ``stalled``, ``previous``, ``slow_before`` (k,) per-goal scratch) in at most
-    ``b.iterations[c]`` iterations, each goal keeping the loop going for at most
-    ``g.iterations`` of them. Returns the iterations it used. Mirrors the loop of
-    :func:`ecs_anim.solver.shell.solve` for one character."""
-    start, stop = g.start[c], g.start[c + 1]
-    uses_trunk = False
-    on_self = False
-    iterates = False  # a goal an iteration moves: the trunk's, or one following what a pass moves
-    for j in range(start, stop):
-        stalled[j] = False
-        previous[j] = math.inf
-        slow_before[j] = False
-        if (g.chain[j] & (1 << _TRUNK)) > 0:
-            uses_trunk = True
-        on_self = on_self or g.on_self[j]
-        iterates = iterates or _iterative(g, t, j)
-    # Steps with nothing to do are not called, and the errors of points without offset are
-    # measured on the arrays themselves (the same operations as goal_error).
-    uses_head = w.first_head[c] >= 0 or w.orient_head[c] >= 0
-    positions, seg_proximal, seg_distal = dec.positions, t.seg_proximal, t.seg_distal
-    orientation, segment, fraction, offset = g.orientation, g.segment, g.fraction, g.offset
-    goal, goal_iterations = g.goal, g.iterations
-    used = 0
-    iterations = b.iterations[c]
-    # Each pass follows the goals on the body, then re-plants the limbs and re-aims the head
-    # (exact, analytic steps: a limb or head goal is where they leave it). The pass ends the
-    # solve where no iteration would change anything: no goal left that the trunk still turns
-    # for or that follows the body (open at the last measure; before the first, any), and the
-    # centre of mass so close that the root step would not move (a tenth of its tolerance); or
-    # the budget spent. It is then the result. Otherwise an iteration: a trunk turn and a root
-    # move, then the next pass. One call site each: numba inlines these steps' bodies at every
-    # site it compiles.
-    any_open = iterates
-    while True:
-        if on_self:
-            follow_own_targets(c, dec, g, t)
-        solve_limbs(c, pose, dec, g, w, b, t, tolerance_m, leg_extension)
-        if uses_head:
-            solve_head(c, pose, dec, g, w, b, t)
-        if used >= iterations:
-            break
-        if not any_open:
-            ex, ey = com_shortfall(c, positions, b.masses, b.com_fraction, b.com_desired,
-                                   b.com_on, t.mass_proximal, t.mass_distal)
-            if math.sqrt(ex * ex + ey * ey) <= 0.1 * com_tolerance_m:  # the root stays
-                break
-        used += 1
-        if uses_trunk:
-            for j in range(start, stop):
-                err[j] = goal_error(dec, c, g, j, t)
-            solve_trunk(c, pose, dec, b.lengths[c], g, w, err, stalled, t, tolerance_m,
-                        tolerance_rad, max_ccd_step_rad)
-        root_step(c, pose.root_position, positions, b.lengths, b.masses, b.com_fraction,
-                  b.footprint, b.in_contact, b.com_desired, b.com_on, t.mass_proximal,
-                  t.mass_distal, t.hip, t.thigh, t.shank, com_tolerance_m, root_gain,
-                  leg_extension)
-        # Only goals an iteration still moves can keep the loop going (:func:`_iterative`; the
-        # passes meet the others as well as they can be met): open where not met nor stalled
-        # (unchanged, or falling by less than a share of itself twice running).
-        any_open = False
-        if iterates:
-            for j in range(start, stop):
-                if not _iterative(g, t, j):
-                    continue
-                if (not orientation[j] and offset[j, 0] == 0.0 and offset[j, 1] == 0.0
-                        and offset[j, 2] == 0.0):
-                    d = sub(plain_point(positions, c, seg_proximal[segment[j]],
-                                        seg_distal[segment[j]], fraction[j]), load3(goal[j]))
-                    e = math.sqrt(dot(d, d))
-                else:
-                    e = goal_error(dec, c, g, j, t)
-                tol = tolerance_rad if orientation[j] else tolerance_m
-                first = math.isinf(previous[j])
-                unchanged = not first and abs(previous[j] - e) < tolerance_m
-                slow = not first and previous[j] - e < stall_fraction * previous[j]
-                cut = used >= goal_iterations[j]  # the frame budget gave it no more iterations
-                goal_open = (e > tol and not unchanged and not (slow and slow_before[j])
-                             and not stalled[j] and not cut)
-                if e > tol and not goal_open:
-                    stalled[j] = True
-                previous[j] = e
-                slow_before[j] = slow
-                any_open = any_open or goal_open
-    return used
 
 
 @jit(nogil=True)
 def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners,
-               b: Bodies, t: Tables, used: I64, err: F64, stalled: B8, previous: F64,
+               b: Bodies, t: Tables, iterations_used: I64, err: F64, stalled: B8, previous: F64,
                slow_before: B8, tolerance_m: float, tolerance_rad: float,
                com_tolerance_m: float, max_ccd_step_rad: float, root_gain: float,
                stall_fraction: float, leg_extension: float) -> None:
-    """Solve the characters ``lo..hi-1`` (rows of ``pose``, ``dec``, ``b``, ``used``; goals
-    ``g``) in place; ``used`` (r,) the iterations each one took. ``err``, ``stalled``,
-    ``previous``, ``slow_before`` (k,): per-goal scratch (each character uses its own goals'
-    entries, so the threads share them)."""
+    """Solve the goals of each character ``c`` in ``lo..hi-1`` (its rows of ``pose`` and
+    ``dec`` in place) in at most ``b.iterations[c]`` iterations, each goal keeping the loop
+    going for at most ``g.iterations`` of them; ``iterations_used`` (r,) the iterations each one
+    took. ``err``, ``stalled``, ``previous``, ``slow_before`` (k,): per-goal scratch (each
+    character uses its own goals' entries, so the threads share them). Mirrors the loop of
+    :func:`ecs_anim.solver.shell.solve`, one character at a time."""
+    # The characters' loop is here, not in a call per character: a call passes the state
+    # tuples on, a reference count up and down for each of their 74 arrays (0.25 us a
+    # character); numba's inlining of such a call costs 14 s more of compile.
     for c in range(lo, hi):
-        used[c] = solve_character(c, pose, dec, g, w, b, t, err,
-                                  stalled, previous, slow_before, tolerance_m, tolerance_rad,
-                                  com_tolerance_m, max_ccd_step_rad, root_gain, stall_fraction,
-                                  leg_extension)
+        start, stop = g.start[c], g.start[c + 1]
+        uses_trunk = False
+        on_self = False
+        iterates = False  # a goal an iteration moves: the trunk's, or one following what a pass moves
+        for j in range(start, stop):
+            stalled[j] = False
+            previous[j] = math.inf
+            slow_before[j] = False
+            if (g.chain[j] & (1 << _TRUNK)) > 0:
+                uses_trunk = True
+            on_self = on_self or g.on_self[j]
+            iterates = iterates or _iterative(g, t, j)
+        # Steps with nothing to do are not called, and the errors of points without offset are
+        # measured on the arrays themselves (the same operations as goal_error).
+        uses_head = w.first_head[c] >= 0 or w.orient_head[c] >= 0
+        positions, seg_proximal, seg_distal = dec.positions, t.seg_proximal, t.seg_distal
+        orientation, segment, fraction, offset = g.orientation, g.segment, g.fraction, g.offset
+        goal, goal_iterations = g.goal, g.iterations
+        used = 0
+        iterations = b.iterations[c]
+        # Each pass follows the goals on the body, then re-plants the limbs and re-aims the head
+        # (exact, analytic steps: a limb or head goal is where they leave it). The pass ends the
+        # solve where no iteration would change anything: no goal left that the trunk still turns
+        # for or that follows the body (open at the last measure; before the first, any), and the
+        # centre of mass so close that the root step would not move (a tenth of its tolerance); or
+        # the budget spent. It is then the result. Otherwise an iteration: a trunk turn and a root
+        # move, then the next pass. One call site each: numba inlines these steps' bodies at every
+        # site it compiles.
+        any_open = iterates
+        while True:
+            if on_self:
+                follow_own_targets(c, dec, g, t)
+            solve_limbs(c, pose, dec, g, w, b, t, tolerance_m, leg_extension)
+            if uses_head:
+                solve_head(c, pose, dec, g, w, b, t)
+            if used >= iterations:
+                break
+            if not any_open:
+                ex, ey = com_shortfall(c, positions, b.masses, b.com_fraction, b.com_desired,
+                                       b.com_on, t.mass_proximal, t.mass_distal)
+                if math.sqrt(ex * ex + ey * ey) <= 0.1 * com_tolerance_m:  # the root stays
+                    break
+            used += 1
+            if uses_trunk:
+                for j in range(start, stop):
+                    err[j] = goal_error(dec, c, g, j, t)
+                solve_trunk(c, pose, dec, b.lengths[c], g, w, err, stalled, t, tolerance_m,
+                            tolerance_rad, max_ccd_step_rad)
+            root_step(c, pose.root_position, positions, b.lengths, b.masses, b.com_fraction,
+                      b.footprint, b.in_contact, b.com_desired, b.com_on, t.mass_proximal,
+                      t.mass_distal, t.hip, t.thigh, t.shank, com_tolerance_m, root_gain,
+                      leg_extension)
+            # Only goals an iteration still moves can keep the loop going (:func:`_iterative`; the
+            # passes meet the others as well as they can be met): open where not met nor stalled
+            # (unchanged, or falling by less than a share of itself twice running).
+            any_open = False
+            if iterates:
+                for j in range(start, stop):
+                    if not _iterative(g, t, j):
+                        continue
+                    if (not orientation[j] and offset[j, 0] == 0.0 and offset[j, 1] == 0.0
+                            and offset[j, 2] == 0.0):
+                        d = sub(plain_point(positions, c, seg_proximal[segment[j]],
+                                            seg_distal[segment[j]], fraction[j]), load3(goal[j]))
+                        e = math.sqrt(dot(d, d))
+                    else:
+                        e = goal_error(dec, c, g, j, t)
+                    tol = tolerance_rad if orientation[j] else tolerance_m
+                    first = math.isinf(previous[j])
+                    unchanged = not first and abs(previous[j] - e) < tolerance_m
+                    slow = not first and previous[j] - e < stall_fraction * previous[j]
+                    cut = used >= goal_iterations[j]  # the frame budget gave it no more iterations
+                    goal_open = (e > tol and not unchanged and not (slow and slow_before[j])
+                                 and not stalled[j] and not cut)
+                    if e > tol and not goal_open:
+                        stalled[j] = True
+                    previous[j] = e
+                    slow_before[j] = slow
+                    any_open = any_open or goal_open
+        iterations_used[c] = used
 
 
 @jit(nogil=True)
