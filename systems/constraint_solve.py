@@ -60,6 +60,7 @@ from ecs_anim.runtime.kernels.joint_speed import (
     goal_steps,
     limit_motion,
     pack,
+    rows_differ,
     step_shares,
 )
 from ecs_anim.runtime.kernels.solve import solve as solve
@@ -137,6 +138,7 @@ class Steps(NamedTuple):
     limit_motion: Callable[..., tuple[NormalizedPoses, Any]]
     pack: Callable[[NormalizedPoses], NDArray[np.float64]]
     goal_steps: Callable[..., NDArray[np.float64]]
+    rows_differ: Callable[..., NDArray[np.bool_]]
 
 
 def steps(compiled: bool) -> Steps:
@@ -144,10 +146,11 @@ def steps(compiled: bool) -> Steps:
     numpy references."""
     if compiled:
         return Steps(tick_goals, solve, constraint_errors, _centres, target_points, decode,
-                     _decode_some, step_shares, limit_motion, pack, goal_steps)
+                     _decode_some, step_shares, limit_motion, pack, goal_steps, rows_differ)
     return Steps(NUMPY_STEPS.goals, NUMPY_STEPS.solve, NUMPY_STEPS.errors, numpy_centres,
                  NUMPY_STEPS.targets, numpy_decode, _numpy_decode_some, numpy_speed.step_shares,
-                 numpy_speed.limit_motion, numpy_speed.pack, numpy_speed.goal_steps)
+                 numpy_speed.limit_motion, numpy_speed.pack, numpy_speed.goal_steps,
+                 numpy_speed.rows_differ)
 
 
 class ConstraintSolve(System):
@@ -222,13 +225,15 @@ class ConstraintSolve(System):
         elif (weight > 0).any():
             unconstrained = step.decode(st.poses, st.lengths)
         if unconstrained is not None:
-            st.clip_positions = unconstrained.positions.copy()
-            if settings.max_joint_speed_m_s is not None:
+            if settings.max_joint_speed_m_s is not None:  # (the poses still in cache: the decode's)
                 self._clip_now = step.pack(st.poses)
+            st.clip_positions = unconstrained.positions.copy()
+            if self._clip_now is not None:
                 # A character with no last tick kept (its first, or none solved since) was at its
                 # motion's pose: a constraint easing in is paced from there. (New arrays: the
                 # last positions may be the arrays of the last tick's result, kept as they were.)
-                fresh = ~np.any(st.last_pose_values != 0.0, axis=1)
+                # A row kept is zeros or packed unit quaternions first: its first one tells.
+                fresh = ~np.any(st.last_pose_values[:, :4] != 0.0, axis=1)
                 if fresh.any():
                     st.last_clip_values[fresh] = st.last_pose_values[fresh] = self._clip_now[fresh]
                     for name in ("last_pose_positions", "last_clip_positions"):
@@ -335,7 +340,7 @@ class ConstraintSolve(System):
             return
         step = steps(self.sim.compiled)
         clip_now = step.pack(st.poses) if self._clip_now is None else self._clip_now
-        corrected = np.any(st.last_pose_values != st.last_clip_values, axis=1)
+        corrected = step.rows_differ(st.last_pose_values, st.last_clip_values)
         corrected[solved_rows] = False
         rows = np.flatnonzero(corrected)
         if rows.size:

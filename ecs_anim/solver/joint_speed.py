@@ -117,6 +117,13 @@ def pack(poses: NormalizedPoses) -> F64:
     return np.concatenate(parts, axis=1)
 
 
+def rows_differ(values: F64, other: F64) -> B8:
+    """(r,) whether each row of ``values`` (r, N_VALUES) differs from the same row of ``other``
+    anywhere (a result whose segments are not the motion's own: a correction kept)."""
+    out: B8 = np.any(values != other, axis=1)
+    return out
+
+
 def _frame_turns(a: F64, b: F64) -> F64:
     """Rotation vectors (r, 3) of the turns from quaternions ``a`` to ``b`` (r, 4)."""
     return _rotvec_of(quat_mul(b, quat_conj(a)))
@@ -330,4 +337,5 @@ def solve_within_speed(steps: SpeedSteps, before: MotionBefore, max_step_m: floa
 
 
 __all__ = ["NUMPY_SPEED_STEPS", "N_VALUES", "MotionBefore", "SpeedSteps", "contact_goals",
-           "from_pelvis", "goal_steps", "limit_motion", "pack", "solve_within_speed", "step_shares"]
+           "from_pelvis", "goal_steps", "limit_motion", "pack", "rows_differ", "solve_within_speed",
+           "step_shares"]

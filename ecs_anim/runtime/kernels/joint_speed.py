@@ -1,9 +1,10 @@
 """Compiled :mod:`ecs_anim.solver.joint_speed`: each segment's correction (its turn or shift
 away from the motion's own) going only a share of its way from the last tick's (no pops).
 
-:func:`step_shares`, :func:`limit_motion`, :func:`pack` and :func:`goal_steps` take the arguments
-of their numpy references and give the same results (to 1e-9); the per-character loops are
-:func:`share_rows`, :func:`limit_rows`, :func:`pack_rows` and :func:`goal_steps_rows`.
+:func:`step_shares`, :func:`limit_motion`, :func:`pack`, :func:`goal_steps` and :func:`rows_differ`
+take the arguments of their numpy references and give the same results (to 1e-9); the
+per-character loops are :func:`share_rows`, :func:`limit_rows`, :func:`pack_rows`,
+:func:`goal_steps_rows` and :func:`differing_rows`.
 Values are packed as the reference's: frames 0-5 (legs, arms, thorax, head) as quaternions,
 directions 0-4 (feet, hands, neck), shifts 0-12 (leg fractions, arm fractions, the spine's
 three points).
@@ -374,3 +375,23 @@ def goal_steps(goals: TickGoals, last_goals: F64, weight_before: F64) -> F64:
                     np.ascontiguousarray(goals.weight, dtype=np.float64),
                     np.ascontiguousarray(weight_before, dtype=np.float64), last_goals, steps)
     return steps
+
+
+@jit(nogil=True)
+def differing_rows(lo: int, hi: int, values: F64, other: F64, out: B8) -> None:
+    """Mirrors :func:`ecs_anim.solver.joint_speed.rows_differ` over rows ``lo..hi-1`` into
+    ``out`` (r,), each row read only up to its first difference."""
+    for c in range(lo, hi):
+        out[c] = False
+        for i in range(values.shape[1]):
+            if values[c, i] != other[c, i]:
+                out[c] = True
+                break
+
+
+def rows_differ(values: F64, other: F64) -> B8:
+    """Compiled :func:`ecs_anim.solver.joint_speed.rows_differ` (same arguments and result)."""
+    out = np.empty(values.shape[0], np.bool_)
+    over_chunks(differing_rows, values.shape[0], np.ascontiguousarray(values, dtype=np.float64),
+                np.ascontiguousarray(other, dtype=np.float64), out)
+    return out
