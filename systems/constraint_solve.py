@@ -54,6 +54,7 @@ from ecs_anim.runtime.kernels.decode import (
 from ecs_anim.runtime.kernels.goals import (
     constraint_errors as constraint_errors,  # tests patch these
 )
+from ecs_anim.runtime.kernels.goals import errors_on_result as errors_on_result
 from ecs_anim.runtime.kernels.goals import target_points as target_points
 from ecs_anim.runtime.kernels.goals import tick_goals as tick_goals
 from ecs_anim.runtime.kernels.joint_speed import (
@@ -130,6 +131,7 @@ class Steps(NamedTuple):
     goals: Callable[..., TickGoals | None]
     solve: Callable[..., tuple[NormalizedPoses, NDArray[np.int64], DecodedPose]]
     errors: Callable[..., NDArray[np.float64]]
+    result_errors: Callable[..., NDArray[np.float64]]
     centres: Callable[..., NDArray[np.float64]]
     targets: Callable[..., NDArray[np.float64]]
     decode: Callable[..., DecodedPose]
@@ -145,12 +147,13 @@ def steps(compiled: bool) -> Steps:
     """The compiled steps (this module's names, read at each call: tests patch them), or their
     numpy references."""
     if compiled:
-        return Steps(tick_goals, solve, constraint_errors, _centres, target_points, decode,
-                     _decode_some, step_shares, limit_motion, pack, goal_steps, rows_differ)
-    return Steps(NUMPY_STEPS.goals, NUMPY_STEPS.solve, NUMPY_STEPS.errors, numpy_centres,
-                 NUMPY_STEPS.targets, numpy_decode, _numpy_decode_some, numpy_speed.step_shares,
-                 numpy_speed.limit_motion, numpy_speed.pack, numpy_speed.goal_steps,
-                 numpy_speed.rows_differ)
+        return Steps(tick_goals, solve, constraint_errors, errors_on_result, _centres,
+                     target_points, decode, _decode_some, step_shares, limit_motion, pack,
+                     goal_steps, rows_differ)
+    return Steps(NUMPY_STEPS.goals, NUMPY_STEPS.solve, NUMPY_STEPS.errors,
+                 NUMPY_STEPS.result_errors, numpy_centres, NUMPY_STEPS.targets, numpy_decode,
+                 _numpy_decode_some, numpy_speed.step_shares, numpy_speed.limit_motion,
+                 numpy_speed.pack, numpy_speed.goal_steps, numpy_speed.rows_differ)
 
 
 class ConstraintSolve(System):
@@ -233,7 +236,9 @@ class ConstraintSolve(System):
                 # motion's pose: a constraint easing in is paced from there. (New arrays: the
                 # last positions may be the arrays of the last tick's result, kept as they were.)
                 # A row kept is zeros or packed unit quaternions first: its first one tells.
-                fresh = ~np.any(st.last_pose_values[:, :4] != 0.0, axis=1)
+                first = st.last_pose_values[:, :4]
+                fresh = ((first[:, 0] == 0.0) & (first[:, 1] == 0.0) & (first[:, 2] == 0.0)
+                         & (first[:, 3] == 0.0))
                 if fresh.any():
                     st.last_clip_values[fresh] = st.last_pose_values[fresh] = self._clip_now[fresh]
                     for name in ("last_pose_positions", "last_clip_positions"):
@@ -249,7 +254,7 @@ class ConstraintSolve(System):
                            st.segment_com_fraction, st.posture, self.budget.aimed(settings, model),
                            settings.release_speed_m_s * sim.dt,
                            TickSteps(step.goals, self._timed_solve, step.errors, step.centres,
-                                     step.targets),
+                                     step.targets, step.result_errors),
                            model, self.budget.expected())
         used, caps = np.zeros(0, np.int64), np.zeros(0, np.int64)
         if result.goals is not None and result.iterations is not None:

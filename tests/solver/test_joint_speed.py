@@ -73,6 +73,21 @@ def test_compiled_shares_equal_numpy():
     assert (expected[5:-3] < 1.0).sum() > n // 2
 
 
+def test_compiled_rows_differ_equals_numpy():
+    """Whether each packed row differs from another's anywhere (compiled ``differing_rows``,
+    each row read up to its first difference) equals numpy's, NaN differing as in numpy."""
+    rng = np.random.default_rng(37)
+    values = packed_random(rng, 30)
+    other = values.copy()
+    other[3, -1] += 1e-12
+    other[7, 0] = -other[7, 0]
+    other[11, 20] = np.nan
+    other[12] = values[12] = np.nan
+    expected = reference.rows_differ(values, other)
+    np.testing.assert_array_equal(compiled.rows_differ(values, other), expected)
+    assert np.flatnonzero(expected).tolist() == [3, 7, 11, 12]
+
+
 def random_goals(rng, r, k):
     """TickGoals of ``r`` characters and ``k`` goals with only what :func:`goal_steps` reads:
     table rows (feet: -1), owners, orientations, goals and weights (some easing, some full)."""
@@ -350,6 +365,8 @@ def test_the_fight_with_numpy_steps_ends_as_with_the_compiled_ones(monkeypatch, 
     monkeypatch.setattr(system, "step_shares", reference.step_shares)
     monkeypatch.setattr(system, "pack", reference.pack)
     monkeypatch.setattr(system, "goal_steps", reference.goal_steps)
+    monkeypatch.setattr(system, "rows_differ", reference.rows_differ)
+    monkeypatch.setattr(system, "errors_on_result", numpy.result_errors)
     monkeypatch.setattr(system, "decode", numpy_decode)
     expected = run_positions()
     np.testing.assert_allclose(result[0], expected[0], rtol=0, atol=1e-9)

@@ -1,7 +1,8 @@
 """The compiled goals of a tick and the constraints' errors (ConstraintSolve's gather).
 
-:func:`tick_goals` and :func:`constraint_errors` mirror :func:`ecs_anim.solver.goals.tick_goals`
-and :func:`ecs_anim.solver.goals.constraint_errors` (same arguments, same results to 1e-9 m; the
+:func:`tick_goals`, :func:`constraint_errors` and :func:`errors_on_result` mirror
+:func:`ecs_anim.solver.goals.tick_goals`, :func:`ecs_anim.solver.goals.constraint_errors` and
+:func:`ecs_anim.solver.goals.errors_on_result` (same arguments, same results to 1e-9 m; the
 numpy functions stay as the reference the tests compare these with). The per-constraint work
 (its point, its goal from the target: a distance, an area's allowed region, a direction; the
 release of a point a sphere held; the activation ramp's blend) runs compiled over the active
@@ -413,17 +414,43 @@ def _without_dropped(out: GoalArrays, rows: I64, user: B8, kept: B8) -> tuple[Go
     return GoalArrays(**arrays), rows[has]
 
 
+class OwnTargets(NamedTuple):
+    """The table's columns of a target on a body (same names; (m,) or (m, 3)), and whether
+    :func:`error_rows` reads the targets on their own character's body again on the pose it
+    measures (``again``)."""
+
+    target_row: I64
+    target_segment: I64
+    target_fraction: F64
+    target_offset: F64
+    again: bool
+
+
+def own_targets(table: ConstraintTable, again: bool) -> OwnTargets:
+    """The table's body-target columns as :func:`error_rows` takes them."""
+    return OwnTargets(np.ascontiguousarray(table.target_row),
+                      np.ascontiguousarray(table.target_segment),
+                      np.ascontiguousarray(table.target_fraction, dtype=np.float64),
+                      np.ascontiguousarray(table.target_offset, dtype=np.float64), again)
+
+
 @jit(nogil=True)
 def error_rows(lo: int, hi: int, idx: I64, cols: Columns, dec: DecodedArrays, targets: F64,
-               t: Tables, codes: Codes, out: F64) -> None:
+               own: OwnTargets, t: Tables, codes: Codes, out: F64) -> None:
     """``out[j]`` (a,): how far constraint ``idx[j]`` is from being met on ``dec``, for
-    ``j`` in ``lo..hi-1``. Mirrors :func:`ecs_anim.solver.goals.constraint_errors`."""
+    ``j`` in ``lo..hi-1``; with ``own.again`` a target on the constraint's own character's
+    body read on ``dec`` (as :func:`target_rows` does), not from ``targets``. Mirrors
+    :func:`ecs_anim.solver.goals.constraint_errors` (with ``again``,
+    :func:`ecs_anim.solver.goals.errors_on_result`)."""
     for j in range(lo, hi):
         i = idx[j]
         c = cols.owner[i]
         segment = cols.segment[i]
         point = point_position(dec, c, segment, cols.fraction[i], load3(cols.offset[i]), t)
         target = load3(targets[i])
+        if own.again and cols.target_kind[i] != codes.target_world and own.target_row[i] == c:
+            target = point_position(dec, c, own.target_segment[i], own.target_fraction[i],
+                                    load3(own.target_offset[i]), t)
         kind = cols.kind[i]
         if kind == codes.kind_area:
             out[j] = norm(sub(point, area_goal(cols, i, point, target, point, codes)))
@@ -437,15 +464,26 @@ def error_rows(lo: int, hi: int, idx: I64, cols: Columns, dec: DecodedArrays, ta
             out[j] = abs(gap - cols.distance_m[i]) if kind == codes.kind_distance else gap
 
 
-def constraint_errors(table: ConstraintTable, idx: I64, decoded: DecodedPose, targets: F64) -> F64:
-    """Compiled :func:`ecs_anim.solver.goals.constraint_errors`: the same arguments and
-    result."""
+def _errors(table: ConstraintTable, idx: I64, decoded: DecodedPose, targets: F64,
+            again: bool) -> F64:
     idx = np.ascontiguousarray(idx, dtype=np.int64)
     out = np.empty(idx.size)
     over_chunks(error_rows, idx.size, idx, columns(table), _arrays(decoded),
-                np.ascontiguousarray(targets, dtype=np.float64), TABLES, CODES, out,
-                rows_per_thread=LIGHT_ROWS_PER_THREAD)
+                np.ascontiguousarray(targets, dtype=np.float64), own_targets(table, again),
+                TABLES, CODES, out, rows_per_thread=LIGHT_ROWS_PER_THREAD)
     return out
+
+
+def constraint_errors(table: ConstraintTable, idx: I64, decoded: DecodedPose, targets: F64) -> F64:
+    """Compiled :func:`ecs_anim.solver.goals.constraint_errors`: the same arguments and
+    result."""
+    return _errors(table, idx, decoded, targets, False)
+
+
+def errors_on_result(table: ConstraintTable, idx: I64, decoded: DecodedPose, targets: F64) -> F64:
+    """Compiled :func:`ecs_anim.solver.goals.errors_on_result`: the same arguments and result
+    (the targets on the own body read in the errors' loop, not in a pass of their own)."""
+    return _errors(table, idx, decoded, targets, True)
 
 
 assert CONTACT_PRIORITY == math.inf  # the layout writes a planted foot's priority as inf
