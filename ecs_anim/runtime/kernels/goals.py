@@ -207,11 +207,13 @@ def constraint_goal(i: int, cols: Columns, weight: F64, targets: F64, dec: Decod
     c = cols.owner[i]
     segment, fraction, offset = cols.segment[i], cols.fraction[i], load3(cols.offset[i])
     p0 = point_position(dec, c, segment, fraction, offset, t)
-    # No last tick for this point (a character added since, a frozen pose): the motion's side.
-    was = p0
-    if has_previous:
-        was = finite_or(point_position(previous, c, segment, fraction, offset, t), p0)
     kind = cols.kind[i]
+    # Where the point was at the last tick (a distance's side, an area's way in), read only
+    # for those (the last posture is cold memory); none for this point (a character added
+    # since, a frozen pose): the motion's side.
+    was = p0
+    if has_previous and (kind == codes.kind_distance or kind == codes.kind_area):
+        was = finite_or(point_position(previous, c, segment, fraction, offset, t), p0)
     target = load3(targets[i])
     goal = target
     if kind == codes.kind_distance:
