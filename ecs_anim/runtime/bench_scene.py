@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
+    from ecs_anim.motion.clip import NormalizedMotion
     from ecs_anim.runtime.simulation import Simulation
 
 
@@ -20,8 +21,9 @@ def walkers_on_bumps(n: int, rotations: bool = False, seed: int = 0,
     collision tests' crowd) each starts at a random time of the walk (its clip's origin on its
     grid point, so it starts up to 5 m further along) heading within 0.3 rad of +x: a crowd
     that ignores itself, about a tenth of it in someone else's body every tick. Without it
-    (the benchmark's crowd) each row along +x is a lane of one body starting at one time of
-    the walk, heading +x: walkers 1.5 m apart that never meet. Returns (simulation, the
+    (the benchmark's crowd) each row along +x is a lane of one body heading +x, each walker
+    starting on its grid point at its own time of the walk: walkers 1.5 m apart that never
+    meet, no two in step. Returns (simulation, the
     seeded generator, for the caller's further draws)."""
     from ecs_anim.components import MotionPlayer, Placement
     from ecs_anim.core.ground import Bumps
@@ -45,18 +47,36 @@ def walkers_on_bumps(n: int, rotations: bool = False, seed: int = 0,
             placements.append(Placement((1.5 * (i // side), 1.5 * (i % side)),
                                         float(rng.uniform(-0.3, 0.3))))
     else:
-        # One body and one start a lane: its walkers go at one speed, the same distance apart.
+        # One body a lane: its walkers go at one speed, the same distance apart. Each starts
+        # at its own time of the walk (no two in step, as in a real crowd), its clip's origin
+        # set back by the way the walk has come by then, so it starts on its grid point.
         lane_bodies = [preset_bodies[lane // 2 % len(presets)] if lane % 2 == 0 else
                        Morphology.from_stature(float(rng.uniform(1.1, 2.05)))
                        for lane in range(side)]
-        lane_starts = rng.uniform(0, 4, side)
+        starts_s = rng.uniform(0, 4, n)
         for i in range(n):
             lane = i % side
-            bodies.append(lane_bodies[lane])
-            players.append(MotionPlayer("walk", start_s=float(lane_starts[lane])))
-            placements.append(Placement((1.5 * (i // side), 1.5 * lane), 0.0))
+            body = lane_bodies[lane]
+            come_x, come_y = walked_m(walk, float(starts_s[i]), body.leg_length)
+            bodies.append(body)
+            players.append(MotionPlayer("walk", start_s=float(starts_s[i])))
+            placements.append(Placement((1.5 * (i // side) - come_x, 1.5 * lane - come_y), 0.0))
     sim.spawn_many([f"c{i}" for i in range(n)], bodies, players, placements)
     return sim, rng
+
+
+def walked_m(motion: NormalizedMotion, time_s: float, leg_length_m: float
+             ) -> tuple[float, float]:
+    """How far (x, y, m) the root of ``motion`` looped from its start has come at ``time_s``
+    on a body of ``leg_length_m``: the frames' root positions interpolated, each loop adding
+    the way from the first frame to the one after the last (extrapolated, as playback does)."""
+    root_xy = motion.poses.root_position[:, :2]
+    after_last = 2 * root_xy[-1] - root_xy[-2] if len(root_xy) >= 2 else root_xy[-1]
+    path = np.vstack([root_xy, after_last]) - root_xy[0]
+    loops, frame = divmod(time_s * motion.fps, float(motion.n_frames))
+    at = np.arange(motion.n_frames + 1)
+    xy = loops * path[-1] + np.array([np.interp(frame, at, path[:, k]) for k in (0, 1)])
+    return float(xy[0] * leg_length_m), float(xy[1] * leg_length_m)
 
 
 #: The bench's wrist target in the thorax frame (x forward, y left, z up) from the right

@@ -55,9 +55,17 @@ def test_bench_text_names_the_threads_and_every_size(capsys):
 
 
 def test_the_bench_walkers_keep_to_their_lanes_and_crossing_ones_meet(capsys):
-    """The bench's crowd walks in lanes (one body and one start a lane, 1.5 m apart): nobody
-    is in another's body; with ``--crossing`` a tenth of the crowd is, every tick."""
+    """The bench's crowd walks in lanes (one body a lane, 1.5 m apart, each walker at its own
+    time of the walk, starting on its grid point): nobody is in another's body; with
+    ``--crossing`` a tenth of the crowd is, every tick."""
     lanes, crossing = BenchScene(100), BenchScene(100, crossing=True)
+    starts = lanes.sim.store.clip_time_s.copy()
+    assert np.unique(np.round(starts, 9)).size == 100  # no two walkers in step
+    lanes.tick()
+    grid_xy = np.stack([1.5 * (np.arange(100) // 10), 1.5 * (np.arange(100) % 10)], axis=1)
+    pelvis_xy = lanes.sim.store.posture.positions[:, 0, :2]
+    # along the lane exactly (the walk's own path set back), across it the walk's sway
+    assert np.abs(pelvis_xy - grid_xy).max(axis=0) == pytest.approx([0.0, 0.008], abs=0.005)
     deepest = {}
     for name, scene in (("lanes", lanes), ("crossing", crossing)):
         worst = 0.0
