@@ -17,9 +17,9 @@ motion's pose no faster.
 Rows: characters with a Constraint component.
 Reads: store.poses, lengths, posture (the previous tick's), contact_weight, clip, clip_time_s,
 com_control, com_target_xy, segment_mass_kg, segment_com_fraction, last_clip_values,
-last_pose_values, last_pose_joints_m, last_clip_joints_m; the constraints table.
+last_pose_values, last_pose_positions, last_clip_positions; the constraints table.
 Writes: store.poses (solved characters, and those going back), com_desired, last_clip_values,
-last_pose_values, last_pose_joints_m, last_clip_joints_m, clip_positions (the motion's own
+last_pose_values, last_pose_positions, last_clip_positions, clip_positions (the motion's own
 joints, None when nothing was solved; with a frame budget, NaN but for the characters solved
 this tick), goals, solved (the decoded result of the solved characters, which PostureConvert
 takes instead of decoding them again); table.held;
@@ -54,16 +54,23 @@ from ecs_anim.runtime.kernels.decode import (
 from ecs_anim.runtime.kernels.goals import (
     constraint_errors as constraint_errors,  # tests patch these
 )
+from ecs_anim.runtime.kernels.goals import errors_on_result as errors_on_result
 from ecs_anim.runtime.kernels.goals import target_points as target_points
 from ecs_anim.runtime.kernels.goals import tick_goals as tick_goals
-from ecs_anim.runtime.kernels.joint_speed import limit_motion, pack, step_shares
+from ecs_anim.runtime.kernels.joint_speed import (
+    goal_steps,
+    limit_motion,
+    pack,
+    rows_differ,
+    step_shares,
+)
 from ecs_anim.runtime.kernels.solve import solve as solve
 from ecs_anim.runtime.system_base import System
 from ecs_anim.solver import joint_speed as numpy_speed
 from ecs_anim.solver.budget import FrameBudget, SolverReport, effective_caps
 from ecs_anim.solver.goals import TickGoals
 from ecs_anim.solver.held_pose import HeldCorrections
-from ecs_anim.solver.joint_speed import MotionBefore, SpeedSteps, from_pelvis, solve_within_speed
+from ecs_anim.solver.joint_speed import MotionBefore, SpeedSteps, solve_within_speed
 from ecs_anim.solver.shell import (
     NUMPY_STEPS,
     SolverSettings,
@@ -124,6 +131,7 @@ class Steps(NamedTuple):
     goals: Callable[..., TickGoals | None]
     solve: Callable[..., tuple[NormalizedPoses, NDArray[np.int64], DecodedPose]]
     errors: Callable[..., NDArray[np.float64]]
+    result_errors: Callable[..., NDArray[np.float64]]
     centres: Callable[..., NDArray[np.float64]]
     targets: Callable[..., NDArray[np.float64]]
     decode: Callable[..., DecodedPose]
@@ -131,27 +139,31 @@ class Steps(NamedTuple):
     shares: Callable[..., NDArray[np.float64]]
     limit_motion: Callable[..., tuple[NormalizedPoses, Any]]
     pack: Callable[[NormalizedPoses], NDArray[np.float64]]
+    goal_steps: Callable[..., NDArray[np.float64]]
+    rows_differ: Callable[..., NDArray[np.bool_]]
 
 
 def steps(compiled: bool) -> Steps:
     """The compiled steps (this module's names, read at each call: tests patch them), or their
     numpy references."""
     if compiled:
-        return Steps(tick_goals, solve, constraint_errors, _centres, target_points, decode,
-                     _decode_some, step_shares, limit_motion, pack)
-    return Steps(NUMPY_STEPS.goals, NUMPY_STEPS.solve, NUMPY_STEPS.errors, numpy_centres,
-                 NUMPY_STEPS.targets, numpy_decode, _numpy_decode_some, numpy_speed.step_shares,
-                 numpy_speed.limit_motion, numpy_speed.pack)
+        return Steps(tick_goals, solve, constraint_errors, errors_on_result, _centres,
+                     target_points, decode, _decode_some, step_shares, limit_motion, pack,
+                     goal_steps, rows_differ)
+    return Steps(NUMPY_STEPS.goals, NUMPY_STEPS.solve, NUMPY_STEPS.errors,
+                 NUMPY_STEPS.result_errors, numpy_centres, NUMPY_STEPS.targets, numpy_decode,
+                 _numpy_decode_some, numpy_speed.step_shares, numpy_speed.limit_motion,
+                 numpy_speed.pack, numpy_speed.goal_steps, numpy_speed.rows_differ)
 
 
 class ConstraintSolve(System):
     query = (Constraint,)
     reads = ("constraints", "clip", "clip_time_s", "poses", "lengths", "posture", "contact_weight",
              "com_control", "com_target_xy", "segment_mass_kg", "segment_com_fraction",
-             "last_clip_values", "last_pose_values", "last_pose_joints_m", "last_clip_joints_m")
+             "last_clip_values", "last_pose_values", "last_pose_positions", "last_clip_positions")
     writes = ("goals", "solved", "constraints.error", "constraints.weight",
               "constraints.enabled", "constraints.held", "poses", "com_desired",
-              "last_clip_values", "last_pose_values", "last_pose_joints_m", "last_clip_joints_m",
+              "last_clip_values", "last_pose_values", "last_pose_positions", "last_clip_positions",
               "clip_positions")
 
     def __init__(self, sim: Simulation) -> None:
@@ -167,8 +179,6 @@ class ConstraintSolve(System):
         # the store's last_*_values hold the last tick's (else they are zeros: none).
         self._clip_now: NDArray[np.float64] | None = None
         self._values_kept = False
-        # This tick's motion joints from the pelvis (n, N_JOINTS, 3; None: not made).
-        self._clip_joints: NDArray[np.float64] | None = None
         # Each constraint's goal point at the last tick if it was fully active then (m, 3; NaN:
         # it was not), so a joint may follow a goal that moves faster than the bound.
         self._last_goals = np.zeros((0, 3))
@@ -188,7 +198,7 @@ class ConstraintSolve(System):
         step = steps(sim.compiled)
         st.goals, st.solved, st.clip_positions = None, None, None
         self.report = None
-        self._clip_now = self._clip_joints = None
+        self._clip_now = None
         if table.m == 0:
             self._go_back(np.zeros(0, np.int64))
             return
@@ -218,16 +228,23 @@ class ConstraintSolve(System):
         elif (weight > 0).any():
             unconstrained = step.decode(st.poses, st.lengths)
         if unconstrained is not None:
-            st.clip_positions = unconstrained.positions.copy()
-            if settings.max_joint_speed_m_s is not None:
+            if settings.max_joint_speed_m_s is not None:  # (the poses still in cache: the decode's)
                 self._clip_now = step.pack(st.poses)
-                self._clip_joints = from_pelvis(st.clip_positions)
+            st.clip_positions = unconstrained.positions.copy()
+            if self._clip_now is not None:
                 # A character with no last tick kept (its first, or none solved since) was at its
-                # motion's pose: a constraint easing in is paced from there.
-                fresh = ~np.any(st.last_pose_values != 0.0, axis=1)
-                st.last_clip_values[fresh] = st.last_pose_values[fresh] = self._clip_now[fresh]
-                st.last_pose_joints_m[fresh] = st.last_clip_joints_m[fresh] = \
-                    self._clip_joints[fresh]
+                # motion's pose: a constraint easing in is paced from there. (New arrays: the
+                # last positions may be the arrays of the last tick's result, kept as they were.)
+                # A row kept is zeros or packed unit quaternions first: its first one tells.
+                first = st.last_pose_values[:, :4]
+                fresh = ((first[:, 0] == 0.0) & (first[:, 1] == 0.0) & (first[:, 2] == 0.0)
+                         & (first[:, 3] == 0.0))
+                if fresh.any():
+                    st.last_clip_values[fresh] = st.last_pose_values[fresh] = self._clip_now[fresh]
+                    for name in ("last_pose_positions", "last_clip_positions"):
+                        kept = getattr(st, name).copy()
+                        kept[fresh] = st.clip_positions[fresh]
+                        setattr(st, name, kept)
         model = settings.cost_model or self.budget.model
         if settings.budget_ms is not None and model is not None:
             model = self.budget.for_cut(model, table.owner[weight > 0])
@@ -237,7 +254,7 @@ class ConstraintSolve(System):
                            st.segment_com_fraction, st.posture, self.budget.aimed(settings, model),
                            settings.release_speed_m_s * sim.dt,
                            TickSteps(step.goals, self._timed_solve, step.errors, step.centres,
-                                     step.targets),
+                                     step.targets, step.result_errors),
                            model, self.budget.expected())
         used, caps = np.zeros(0, np.int64), np.zeros(0, np.int64)
         if result.goals is not None and result.iterations is not None:
@@ -291,45 +308,32 @@ class ConstraintSolve(System):
         """The compiled solve (its signature), then no joint faster than the motion's by more
         than ``settings.max_joint_speed_m_s`` (:func:`solve_within_speed`)."""
         st, rows = self.sim.store, goals.rows
-        assert self._clip_now is not None and self._clip_joints is not None  # before the solve
+        assert self._clip_now is not None and st.clip_positions is not None  # before the solve
         every = rows.size == st.n  # (rows are sorted and distinct: all of them, in order)
 
         def of(values: NDArray[np.float64]) -> NDArray[np.float64]:
             return values if every else values[rows]
 
-        before = MotionBefore(of(self._clip_now), of(st.last_clip_values), of(st.last_pose_values),
-                              of(self._clip_joints), of(st.last_clip_joints_m),
-                              of(st.last_pose_joints_m), self._goal_steps(goals))
         step = steps(self.sim.compiled)
+        before = MotionBefore(of(self._clip_now), of(st.last_clip_values), of(st.last_pose_values),
+                              of(st.clip_positions), of(st.last_clip_positions),
+                              of(st.last_pose_positions), self._goal_steps(goals, step))
         return solve_within_speed(SpeedSteps(step.solve, step.shares, step.limit_motion,
                                              step.decode), before,
                                   float(settings.max_joint_speed_m_s or np.inf) * self.sim.dt,
                                   poses, lengths, goals, masses, com_fraction, settings, decoded,
                                   in_place)
 
-    def _goal_steps(self, goals: TickGoals) -> NDArray[np.float64]:
+    def _goal_steps(self, goals: TickGoals, step: Steps) -> NDArray[np.float64]:
         """(r,) how far each solved character's fastest point goal fully active this tick and
-        the last moved since (m; 0: none; a ramp's move is the bound's to spread; infinite for
-        a character with a constraint switched on at once); this tick's such goals kept for the
-        next."""
+        the last moved since (:func:`~ecs_anim.solver.joint_speed.goal_steps`, against the
+        table's weights of the last tick); this tick's such goals kept for the next."""
         table = self.sim.constraints
         if self._last_goals.shape[0] != table.m or self._last_goals_tick != self.sim.tick - 1:
             self._last_goals = np.full((table.m, 3), np.nan)  # none kept, or not the last tick's
-        user = goals.table_index >= 0
-        full = user & (goals.weight >= 1.0) & ~goals.orientation
-        index = goals.table_index[full]
-        moved = np.linalg.norm(goals.goal[full] - self._last_goals[index], axis=1)
-        steps = np.zeros(goals.rows.size)
-        np.maximum.at(steps, goals.owner[full], np.nan_to_num(moved, nan=0.0))
-        # A constraint switched on at once (no ease: fully active, off at the last tick) asks
-        # for the jump: its character is met at once this tick.
-        at_once = np.zeros(goals.k, bool)
-        at_once[user] = (goals.weight[user] >= 1.0) & (table.weight[goals.table_index[user]] <= 0.0)
-        steps[goals.owner[at_once]] = np.inf
-        self._last_goals[:] = np.nan
-        self._last_goals[index] = goals.goal[full]
         self._last_goals_tick = self.sim.tick
-        return steps
+        out: NDArray[np.float64] = step.goal_steps(goals, self._last_goals, table.weight)
+        return out
 
     def _go_back(self, solved_rows: NDArray[np.int64]) -> None:
         """The characters no longer solved whose last result was not their motion's pose (their
@@ -341,16 +345,16 @@ class ConstraintSolve(System):
             return
         step = steps(self.sim.compiled)
         clip_now = step.pack(st.poses) if self._clip_now is None else self._clip_now
-        corrected = np.any(st.last_pose_values != st.last_clip_values, axis=1)
+        corrected = step.rows_differ(st.last_pose_values, st.last_clip_values)
         corrected[solved_rows] = False
         rows = np.flatnonzero(corrected)
         if rows.size:
             if st.clip_positions is None:  # nothing solved: every pose is the motion's
                 st.clip_positions = step.decode(st.poses, st.lengths).positions
             planted = st.contact_weight[rows] > 0.0
-            clip_joints = from_pelvis(st.clip_positions[rows])
-            share = step.shares(clip_joints, clip_joints, st.last_pose_joints_m[rows],
-                                st.last_clip_joints_m[rows], planted, speed * self.sim.dt,
+            clip_positions = st.clip_positions[rows]
+            share = step.shares(clip_positions, clip_positions, st.last_pose_positions[rows],
+                                st.last_clip_positions[rows], planted, speed * self.sim.dt,
                                 np.zeros(rows.size))
             back, _ = step.limit_motion(st.poses.take(rows), clip_now[rows], st.last_clip_values[rows],
                                    st.last_pose_values[rows], planted, share)
@@ -358,37 +362,36 @@ class ConstraintSolve(System):
                 getattr(st.poses, name)[rows] = value
         if self._clip_now is None and rows.size == 0:  # nothing solved nor going back
             st.last_clip_values[:], st.last_pose_values[:] = 0.0, 0.0
-            st.last_pose_joints_m[:], st.last_clip_joints_m[:] = 0.0, 0.0
+            st.last_pose_positions = np.zeros_like(st.last_pose_positions)
+            st.last_clip_positions = np.zeros_like(st.last_clip_positions)
             self._values_kept = False
             return
         st.last_clip_values = clip_now
         st.last_pose_values = step.pack(st.poses)
-        self._keep_joints(rows)
+        self._keep_positions(rows)
         self._values_kept = True
 
-    def _keep_joints(self, back_rows: NDArray[np.int64]) -> None:
-        """``store.last_clip_joints_m`` and ``last_pose_joints_m``: this tick's motion's joints
+    def _keep_positions(self, back_rows: NDArray[np.int64]) -> None:
+        """``store.last_clip_positions`` and ``last_pose_positions``: this tick's motion's joints
         and result's (the solved characters' ``store.solved``, those going back decoded here,
         the others' the motion's: NaN for those a frame budget held, which the next tick's bound
-        then leaves free), from the pelvis."""
+        then leaves free). This tick's arrays themselves when whole (no copy: nothing writes
+        them after the tick; the next tick's fresh rows go into copies)."""
         st = self.sim.store
         goals = st.goals
         solved_rows = goals.rows if st.solved is not None and isinstance(goals, TickGoals) \
             else np.zeros(0, np.int64)
         assert st.clip_positions is not None  # decoded when anything was solved or goes back
-        clip_joints = from_pelvis(st.clip_positions) if self._clip_joints is None \
-            else self._clip_joints
-        st.last_clip_joints_m = clip_joints
-        if solved_rows.size == st.n and st.solved is not None:
-            st.last_pose_joints_m = from_pelvis(st.solved.positions)
-        else:
-            st.last_pose_joints_m = clip_joints.copy()
-            if solved_rows.size and st.solved is not None:
-                st.last_pose_joints_m[solved_rows] = from_pelvis(st.solved.positions)
+        st.last_clip_positions = st.clip_positions
+        if solved_rows.size == st.n and st.solved is not None and back_rows.size == 0:
+            st.last_pose_positions = st.solved.positions
+            return
+        st.last_pose_positions = st.clip_positions.copy()
+        if solved_rows.size and st.solved is not None:
+            st.last_pose_positions[solved_rows] = st.solved.positions
         if back_rows.size:
-            back = steps(self.sim.compiled).decode(st.poses.take(back_rows),
-                                                   st.lengths[back_rows]).positions
-            st.last_pose_joints_m[back_rows] = from_pelvis(back)
+            st.last_pose_positions[back_rows] = steps(self.sim.compiled).decode(
+                st.poses.take(back_rows), st.lengths[back_rows]).positions
 
     def _report(self, result: TickResult, dropped: NDArray[np.int64]) -> None:
         """This tick's report (``dropped``: the store rows the budget switched off)."""

@@ -95,8 +95,8 @@ class CharacterStore:
     last_pose_values (n, N_VALUES) the segments the solver sets (frames, directions, fractions,
     spine points, packed) of the last tick's motion pose and of its result (zeros: none), which
     this tick's result may move away from only so much faster than the motion;
-    last_pose_joints_m and last_clip_joints_m (n, N_JOINTS, 3) m, the last tick's result's and
-    motion's joints from the pelvis (``joint_speed.from_pelvis``; all zeros: none kept);
+    last_pose_positions and last_clip_positions (n, N_JOINTS, 3) world m, the last tick's
+    result's and motion's joints (all zeros: none kept; the bound measures them from the pelvis);
     clip_positions (n, N_JOINTS, 3) world m, the motion's own joints this tick, before the solve
     (None when nothing was solved: the posture is the motion's own; with a frame budget, NaN
     in the rows not solved this tick).
@@ -150,8 +150,8 @@ class CharacterStore:
     overlap_m: F64 = field(default_factory=lambda: np.zeros(0))
     last_clip_values: F64 = field(default_factory=lambda: np.zeros((0, N_VALUES)))
     last_pose_values: F64 = field(default_factory=lambda: np.zeros((0, N_VALUES)))
-    last_pose_joints_m: F64 = field(default_factory=lambda: np.zeros((0, N_JOINTS, 3)))
-    last_clip_joints_m: F64 = field(default_factory=lambda: np.zeros((0, N_JOINTS, 3)))
+    last_pose_positions: F64 = field(default_factory=lambda: np.zeros((0, N_JOINTS, 3)))
+    last_clip_positions: F64 = field(default_factory=lambda: np.zeros((0, N_JOINTS, 3)))
     queue_clip: NDArray[np.int64] = field(default_factory=lambda: np.zeros((0, MAX_QUEUE), np.int64))
     queue_fade_s: F64 = field(default_factory=lambda: np.zeros((0, MAX_QUEUE)))
     queue_loop: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, MAX_QUEUE), bool))

@@ -161,7 +161,10 @@ def _expected_cost(goals: TickGoals, expected: I64, goal_caps: I64, row_caps: I6
     """(r,) the iterations each character is expected to take under these caps."""
     user = goals.table_index >= 0
     largest_goal_cap = np.zeros(goals.rows.size, np.int64)
-    np.maximum.at(largest_goal_cap, goals.owner[user], goal_caps[user])
+    owner = goals.owner[user]
+    if owner.size:  # (goals sorted by character: each one's largest over its run)
+        starts = np.flatnonzero(np.concatenate(([True], owner[1:] != owner[:-1])))
+        largest_goal_cap[owner[starts]] = np.maximum.reduceat(goal_caps[user], starts)
     cost: I64 = np.minimum(np.minimum(expected, row_caps), largest_goal_cap)
     return cost
 

@@ -239,6 +239,20 @@ def constraint_errors(table: ConstraintTable, idx: I64, decoded: DecodedPose, ta
     return err
 
 
+def errors_on_result(table: ConstraintTable, idx: I64, decoded: DecodedPose, targets: F64) -> F64:
+    """:func:`constraint_errors` of the constraints ``idx`` on a solve's result ``decoded``, the
+    targets on their own character's body read again on it (they moved with the body as it was
+    solved); the others' ``targets`` (m, 3) as they were."""
+    on_body = table.target_kind != TARGET_WORLD
+    on_own_body = on_body & (table.target_row == table.owner) if on_body.any() else on_body
+    if on_own_body.any():
+        wanted = np.zeros(table.m, bool)
+        wanted[idx] = True
+        targets = np.where(on_own_body[:, None],
+                           target_points(table, decoded, None, on_own_body & wanted), targets)
+    return constraint_errors(table, idx, decoded, targets)
+
+
 def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained: DecodedPose,
                contact_weight: F64, com_control: NDArray[np.bool_], com_desired: F64,
                previous: DecodedPose | None = None, max_release_m: float = np.inf) -> TickGoals | None:

@@ -117,6 +117,13 @@ def pack(poses: NormalizedPoses) -> F64:
     return np.concatenate(parts, axis=1)
 
 
+def rows_differ(values: F64, other: F64) -> B8:
+    """(r,) whether each row of ``values`` (r, N_VALUES) differs from the same row of ``other``
+    anywhere (a result whose segments are not the motion's own: a correction kept)."""
+    out: B8 = np.any(values != other, axis=1)
+    return out
+
+
 def _frame_turns(a: F64, b: F64) -> F64:
     """Rotation vectors (r, 3) of the turns from quaternions ``a`` to ``b`` (r, 4)."""
     return _rotvec_of(quat_mul(b, quat_conj(a)))
@@ -135,21 +142,44 @@ def from_pelvis(positions: F64) -> F64:
     return out
 
 
-def step_shares(pose_joints: F64, clip_joints: F64, pose_joints_before: F64,
-                clip_joints_before: F64, planted: B8, max_step_m: float, goal_steps_m: F64
+def goal_steps(goals: TickGoals, last_goals: F64, weight_before: F64) -> F64:
+    """(r,) how far each of ``goals``' characters' fastest point goal fully active this tick and
+    the last moved since (m; 0: none; a ramp's move is the bound's to spread), infinite for a
+    character with a constraint switched on at once (fully active now, its weight at the last
+    tick ``weight_before`` (m,) 0: its jump is asked for). ``last_goals`` (m, 3) each
+    constraint's goal at the last tick if it was fully active then (NaN: it was not), made this
+    tick's in place, for the next."""
+    user = goals.table_index >= 0
+    full = user & (goals.weight >= 1.0) & ~goals.orientation
+    index = goals.table_index[full]
+    moved = np.linalg.norm(goals.goal[full] - last_goals[index], axis=1)
+    steps = np.zeros(goals.rows.size)
+    np.maximum.at(steps, goals.owner[full], np.nan_to_num(moved, nan=0.0))
+    at_once = np.zeros(goals.k, bool)
+    at_once[user] = (goals.weight[user] >= 1.0) & (weight_before[goals.table_index[user]] <= 0.0)
+    steps[goals.owner[at_once]] = np.inf
+    last_goals[:] = np.nan
+    last_goals[index] = goals.goal[full]
+    return steps
+
+
+def step_shares(pose_positions: F64, clip_positions: F64, pose_positions_before: F64,
+                clip_positions_before: F64, planted: B8, max_step_m: float, goal_steps_m: F64
                 ) -> F64:
     """(r,) the share of its way each character's correction may go, from the last tick's to
     this tick's solve, so that no joint steps more than ``max_step_m`` (m) plus how far the
     character's fastest fully active goal stepped (``goal_steps_m`` (r,), m: a joint may follow
     its goal) further than the motion's own joint does: the largest ``s`` in [0, 1] with
     ``|c + s d| <= |c| + max_step_m + goal_step`` for every joint, ``c`` the motion's step and
-    ``d`` the correction's change (the joints' move is taken as linear in ``s``). All joints
-    (r, N_JOINTS, 3) from the pelvis (:func:`from_pelvis`): this tick's solve ``pose_joints``
-    and motion ``clip_joints``, the last tick's result and motion (``..._before``; the pose's
-    equal to the motion's where it was the motion's). The joints of the legs ``planted`` (r, 2)
-    do not count."""
+    ``d`` the correction's change (the joints' move is taken as linear in ``s``), both measured
+    from the pelvis (:func:`from_pelvis`). All joints (r, N_JOINTS, 3) world m: this tick's
+    solve ``pose_positions`` and motion ``clip_positions``, the last tick's result and motion
+    (``..._before``; the pose's equal to the motion's where it was the motion's). The joints of
+    the legs ``planted`` (r, 2) do not count."""
+    clip_joints, clip_joints_before = from_pelvis(clip_positions), from_pelvis(clip_positions_before)
     clip_step = clip_joints - clip_joints_before
-    change = (pose_joints - clip_joints) - (pose_joints_before - clip_joints_before)
+    change = ((from_pelvis(pose_positions) - clip_joints)
+              - (from_pelvis(pose_positions_before) - clip_joints_before))
     allowed = np.linalg.norm(clip_step, axis=-1) + (max_step_m + goal_steps_m)[:, None]
     dd = np.sum(change * change, axis=-1)
     cd = np.sum(clip_step * change, axis=-1)
@@ -249,18 +279,18 @@ NUMPY_SPEED_STEPS = SpeedSteps(solve, step_shares, limit_motion, decode)
 class MotionBefore(NamedTuple):
     """What :func:`solve_within_speed` compares this tick's solve with, for the rows it solves:
     ``clip_now`` and ``clip_before`` (r, N_VALUES) the motion's segments this tick and the
-    last, ``pose_before`` (r, N_VALUES) the last tick's result (all packed); ``clip_joints``
-    (r, N_JOINTS, 3) the motion's joints this tick, ``clip_joints_before`` and
-    ``pose_joints_before`` the last tick's motion's and result's (all :func:`from_pelvis`, m);
+    last, ``pose_before`` (r, N_VALUES) the last tick's result (all packed); ``clip_positions``
+    (r, N_JOINTS, 3) the motion's joints this tick, ``clip_positions_before`` and
+    ``pose_positions_before`` the last tick's motion's and result's (all world m);
     ``goal_steps_m`` (r,) how far each character's fastest goal fully active at both ticks
     moved since the last (m; 0: none)."""
 
     clip_now: F64
     clip_before: F64
     pose_before: F64
-    clip_joints: F64
-    clip_joints_before: F64
-    pose_joints_before: F64
+    clip_positions: F64
+    clip_positions_before: F64
+    pose_positions_before: F64
     goal_steps_m: F64
 
 
@@ -277,9 +307,9 @@ def solve_within_speed(steps: SpeedSteps, before: MotionBefore, max_step_m: floa
     used (both solves) and the decoded result."""
     solved, iterations, result = steps.solve(poses, lengths, goals, masses, com_fraction, settings,
                                              decoded, in_place)
-    share = steps.shares(from_pelvis(result.positions), before.clip_joints,
-                        before.pose_joints_before, before.clip_joints_before, goals.in_contact,
-                        max_step_m, before.goal_steps_m)
+    share = steps.shares(result.positions, before.clip_positions, before.pose_positions_before,
+                         before.clip_positions_before, goals.in_contact, max_step_m,
+                         before.goal_steps_m)
     limited, held = steps.limit(solved, before.clip_now, before.clip_before, before.pose_before,
                                 goals.in_contact, share)
     rows = np.flatnonzero(held)
@@ -288,10 +318,10 @@ def solve_within_speed(steps: SpeedSteps, before: MotionBefore, max_step_m: floa
     part = limited.take(rows)
     # The joints' move is not linear in the share (segments turn): measured on the limited
     # pose, the share is taken once more of what is left over (a turn's share composes).
-    closer = steps.shares(from_pelvis(steps.decode(part, lengths[rows]).positions),
-                         before.clip_joints[rows], before.pose_joints_before[rows],
-                         before.clip_joints_before[rows], goals.in_contact[rows], max_step_m,
-                         before.goal_steps_m[rows])
+    closer = steps.shares(steps.decode(part, lengths[rows]).positions,
+                          before.clip_positions[rows], before.pose_positions_before[rows],
+                          before.clip_positions_before[rows], goals.in_contact[rows], max_step_m,
+                          before.goal_steps_m[rows])
     part, _ = steps.limit(part, before.clip_now[rows], before.clip_before[rows],
                           before.pose_before[rows], goals.in_contact[rows], closer)
     again, more, part_decoded = steps.solve(
@@ -307,4 +337,5 @@ def solve_within_speed(steps: SpeedSteps, before: MotionBefore, max_step_m: floa
 
 
 __all__ = ["NUMPY_SPEED_STEPS", "N_VALUES", "MotionBefore", "SpeedSteps", "contact_goals",
-           "from_pelvis", "limit_motion", "pack", "solve_within_speed", "step_shares"]
+           "from_pelvis", "goal_steps", "limit_motion", "pack", "rows_differ", "solve_within_speed",
+           "step_shares"]

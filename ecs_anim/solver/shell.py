@@ -63,11 +63,12 @@ from ecs_anim.core.rotations import (
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import LENGTH_INDEX as L
 from ecs_anim.core.skeleton import LENGTHS
-from ecs_anim.motion.constraint_table import TARGET_WORLD, ConstraintTable, winners
+from ecs_anim.motion.constraint_table import ConstraintTable, winners
 from ecs_anim.solver.budget import BudgetCut, SolverCostModel, cut_to_budget
 from ecs_anim.solver.goals import (
     TickGoals,
     constraint_errors,
+    errors_on_result,
     on_other_surfaces,
     target_points,
     tick_goals,
@@ -641,7 +642,8 @@ class TickSteps(NamedTuple):
     """The computations one tick of :func:`constrain` is made of, each a function of the
     signature of its numpy reference here: ``goals`` (:func:`tick_goals`), ``solve``
     (:func:`solve`), ``errors`` (:func:`constraint_errors`), ``centres``
-    (:func:`ecs_anim.core.morphology.centres_of_mass`) and ``targets`` (:func:`target_points`).
+    (:func:`ecs_anim.core.morphology.centres_of_mass`), ``targets`` (:func:`target_points`)
+    and ``result_errors`` (:func:`errors_on_result`: the errors on the solve's result).
     :data:`NUMPY_STEPS` are those references; ConstraintSolve runs the compiled ones
     (:mod:`ecs_anim.runtime.kernels.goals`, :func:`ecs_anim.runtime.kernels.solve.solve`)."""
 
@@ -650,9 +652,11 @@ class TickSteps(NamedTuple):
     errors: Callable[[ConstraintTable, I64, DecodedPose, F64], F64]
     centres: Callable[[F64, F64, F64], F64]
     targets: Callable[..., F64] = target_points
+    result_errors: Callable[[ConstraintTable, I64, DecodedPose, F64], F64] = errors_on_result
 
 
-NUMPY_STEPS = TickSteps(tick_goals, solve, constraint_errors, centres_of_mass, target_points)
+NUMPY_STEPS = TickSteps(tick_goals, solve, constraint_errors, centres_of_mass, target_points,
+                        errors_on_result)
 
 
 def focus_distances(positions: F64, focus_in_world: tuple[float, float, float] | None) -> F64:
@@ -746,14 +750,8 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
     if solved.positions is not result.positions:  # not solved in place
         for name in fields(DecodedPose):
             getattr(result, name.name)[rows] = getattr(solved, name.name)
-    # Targets on the character's own body moved with it during the solve: read them again.
-    on_body = table.target_kind != TARGET_WORLD
-    on_own_body = on_body & (table.target_row == table.owner) if on_body.any() else on_body
-    if on_own_body.any():
-        targets = np.where(on_own_body[:, None],
-                           steps.targets(table, result, previous, on_own_body & (weight > 0)),
-                           targets)
-    error[active] = steps.errors(table, active, result, targets)
+    # (targets on the character's own body moved with it during the solve: read again)
+    error[active] = steps.result_errors(table, active, result, targets)
     return TickResult(weight, broken, error, held, goals, rows, solved_poses, solved, iterations,
                       cut, solve_s)
 

@@ -60,8 +60,8 @@ EXPECTED_WRITERS = {
     "footprint": ["GroundAdapt"],
     **{name: ["ConstraintSolve"] for name in (
         "goals", "solved", "com_desired", "constraints.error", "constraints.weight",
-        "constraints.held", "last_clip_values", "last_pose_values", "last_pose_joints_m",
-        "last_clip_joints_m", "clip_positions")},
+        "constraints.held", "last_clip_values", "last_pose_values", "last_pose_positions",
+        "last_clip_positions", "clip_positions")},
     "constraints.enabled": ["ApplyReactions", "ConstraintSolve", "DetectEvents"],
     "com": ["COMControl"],
     "com_error_m": ["COMControl"],

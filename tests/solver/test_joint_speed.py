@@ -18,6 +18,7 @@ from ecs_anim.runtime.metrics import MetricsRecorder
 from ecs_anim.scenario import build_simulation, load_scenario
 from ecs_anim.solver import joint_speed as reference
 from ecs_anim.solver import shell as solver_shell
+from ecs_anim.solver.goals import TickGoals
 from ecs_anim.solver.shell import MAX_JOINT_SPEED_M_S, SolverSettings
 from support.solve import random_poses
 
@@ -52,8 +53,9 @@ def test_compiled_limit_equals_numpy(share):
 
 
 def test_compiled_shares_equal_numpy():
-    """The share each character may go (compiled ``share_rows``) equals the numpy reference to
-    1e-12, planted legs, a goal's step and a character whose goal jumped (infinite) included."""
+    """The share each character may go (compiled ``share_rows``, the joints taken from their
+    pelvis in the loop) equals the numpy reference to 1e-12, planted legs, a goal's step and a
+    character whose goal jumped (infinite) included."""
     rng = np.random.default_rng(23)
     n = 80
     clip_before = rng.normal(size=(n, N_JOINTS, 3))
@@ -69,6 +71,60 @@ def test_compiled_shares_equal_numpy():
     np.testing.assert_allclose(compiled.step_shares(*args), expected, rtol=0, atol=1e-12)
     assert (expected[:5] == 1.0).all() and (expected[-3:] == 1.0).all()
     assert (expected[5:-3] < 1.0).sum() > n // 2
+
+
+def test_compiled_rows_differ_equals_numpy():
+    """Whether each packed row differs from another's anywhere (compiled ``differing_rows``,
+    each row read up to its first difference) equals numpy's, NaN differing as in numpy."""
+    rng = np.random.default_rng(37)
+    values = packed_random(rng, 30)
+    other = values.copy()
+    other[3, -1] += 1e-12
+    other[7, 0] = -other[7, 0]
+    other[11, 20] = np.nan
+    other[12] = values[12] = np.nan
+    expected = reference.rows_differ(values, other)
+    np.testing.assert_array_equal(compiled.rows_differ(values, other), expected)
+    assert np.flatnonzero(expected).tolist() == [3, 7, 11, 12]
+
+
+def random_goals(rng, r, k):
+    """TickGoals of ``r`` characters and ``k`` goals with only what :func:`goal_steps` reads:
+    table rows (feet: -1), owners, orientations, goals and weights (some easing, some full)."""
+    owner = np.sort(rng.integers(0, r, k))
+    table_index = rng.permutation(k).astype(np.int64)
+    table_index[rng.uniform(size=k) < 0.3] = -1
+    ints, zeros3 = np.zeros(k, np.int64), np.zeros((k, 3))
+    no_ints = np.zeros(0, np.int64)
+    return TickGoals(
+        rows=np.arange(r, dtype=np.int64), owner=owner, table_index=table_index,
+        orientation=rng.uniform(size=k) < 0.2, group=ints, bone=ints, segment=ints,
+        fraction=np.zeros(k), offset=zeros3, chain=ints, priority=np.zeros(k),
+        goal=rng.normal(size=(k, 3)),
+        weight=np.where(rng.uniform(size=k) < 0.7, 1.0, rng.uniform(0.0, 1.0, k)), axis=zeros3,
+        footprint=np.zeros((r, 2, 3)), in_contact=np.zeros((r, 2), bool),
+        com_desired=np.zeros((r, 3)), com_on=np.zeros(r, bool), on_self=no_ints,
+        self_segment=no_ints, self_fraction=np.zeros(0), self_offset=np.zeros((0, 3)),
+        self_start=np.zeros((0, 3)), held=np.zeros(k, bool))
+
+
+def test_compiled_goal_steps_equal_numpy():
+    """Each character's fastest fully active goal's step (compiled ``goal_steps_rows``) equals
+    the numpy reference: goals not kept at the last tick (NaN) step 0, a constraint off at the
+    last tick makes its character's step infinite; both keep the same goals for the next."""
+    rng = np.random.default_rng(31)
+    r, k = 30, 90
+    goals = random_goals(rng, r, k)
+    last_goals = rng.normal(size=(k, 3))
+    last_goals[rng.uniform(size=k) < 0.2] = np.nan
+    weight_before = np.where(rng.uniform(size=k) < 0.1, 0.0, 1.0)
+    kept_numpy, kept_compiled = last_goals.copy(), last_goals.copy()
+    expected = reference.goal_steps(goals, kept_numpy, weight_before)
+    np.testing.assert_allclose(compiled.goal_steps(goals, kept_compiled, weight_before), expected,
+                               rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(kept_compiled, kept_numpy)
+    assert np.isinf(expected).sum() > 0 and (expected == 0.0).sum() > 0
+    assert np.isfinite(expected).sum() > r // 3
 
 
 def corrections_of(values, clip):
@@ -134,6 +190,8 @@ def test_the_share_brings_the_fastest_joint_to_the_bound_and_lets_a_held_point_b
     clip_now = clip_before + rng.normal(scale=0.05, size=(n, N_JOINTS, 3))
     pose_before = clip_before + rng.normal(scale=0.1, size=(n, N_JOINTS, 3))
     pose = clip_now + rng.normal(scale=0.3, size=(n, N_JOINTS, 3))
+    for positions in (clip_before, clip_now, pose_before, pose):
+        positions[:, 0] = 0.0  # the pelvis at the origin: the joints are their own from it
     planted = np.zeros((n, 2), bool)
     goal_steps = np.where(np.arange(n) < 10, 0.2, 0.0)
     share = reference.step_shares(pose, clip_now, pose_before, clip_before, planted, step,
@@ -306,6 +364,9 @@ def test_the_fight_with_numpy_steps_ends_as_with_the_compiled_ones(monkeypatch, 
     monkeypatch.setattr(system, "limit_motion", reference.limit_motion)
     monkeypatch.setattr(system, "step_shares", reference.step_shares)
     monkeypatch.setattr(system, "pack", reference.pack)
+    monkeypatch.setattr(system, "goal_steps", reference.goal_steps)
+    monkeypatch.setattr(system, "rows_differ", reference.rows_differ)
+    monkeypatch.setattr(system, "errors_on_result", numpy.result_errors)
     monkeypatch.setattr(system, "decode", numpy_decode)
     expected = run_positions()
     np.testing.assert_allclose(result[0], expected[0], rtol=0, atol=1e-9)

@@ -1,13 +1,14 @@
 """The compiled goals of a tick and the constraints' errors (ConstraintSolve's gather).
 
-:func:`tick_goals` and :func:`constraint_errors` mirror :func:`ecs_anim.solver.goals.tick_goals`
-and :func:`ecs_anim.solver.goals.constraint_errors` (same arguments, same results to 1e-9 m; the
+:func:`tick_goals`, :func:`constraint_errors` and :func:`errors_on_result` mirror
+:func:`ecs_anim.solver.goals.tick_goals`, :func:`ecs_anim.solver.goals.constraint_errors` and
+:func:`ecs_anim.solver.goals.errors_on_result` (same arguments, same results to 1e-9 m; the
 numpy functions stay as the reference the tests compare these with). The per-constraint work
 (its point, its goal from the target: a distance, an area's allowed region, a direction; the
 release of a point a sphere held; the activation ramp's blend) runs compiled over the active
-constraints (:func:`goal_rows`), and the goals are laid out by character, each character's two
-feet after its own goals, by :func:`layout_rows`; what lies between (which goals are kept, which
-characters they belong to) is a few numpy calls over the active constraints.
+constraints, laid out by character, each character's two feet after its own goals, in one pass
+(:func:`goal_layout_rows`); which characters the active constraints belong to, and the areas
+the motion already keeps (rarely any) dropped after, are a few numpy calls.
 """
 
 from __future__ import annotations
@@ -193,77 +194,77 @@ def finite_or(a: Vec3, b: Vec3) -> Vec3:
             a[2] if math.isfinite(a[2]) else b[2])
 
 
-@jit(nogil=True)
-def goal_rows(lo: int, hi: int, idx: I64, cols: Columns, weight: F64, targets: F64,
-              dec: DecodedArrays, previous: DecodedArrays, has_previous: bool,
-              max_release_m: float, t: Tables, codes: Codes, weighted: F64, weight_out: F64,
-              held_out: B8) -> None:
-    """The goals of the active constraints ``idx[lo:hi]`` (of the a in ``idx``; ``weight``
-    (m,), ``targets`` (m, 3)): each one's weighted goal (a, 3) (a unit direction for an
-    orientation), its weight (a,) (0: an area the motion already keeps) and whether a sphere
-    keeps its point off the motion's place (a,). ``dec`` this tick's decoded pose of every
-    character, ``previous`` the last tick's posture (read only with ``has_previous``). Mirrors
-    the per-constraint part of :func:`ecs_anim.solver.goals.tick_goals`."""
-    for j in range(lo, hi):
-        i = idx[j]
-        c = cols.owner[i]
-        segment, fraction, offset = cols.segment[i], cols.fraction[i], load3(cols.offset[i])
-        p0 = point_position(dec, c, segment, fraction, offset, t)
-        # No last tick for this point (a character added since, a frozen pose): the motion's side.
-        was = p0
-        if has_previous:
-            was = finite_or(point_position(previous, c, segment, fraction, offset, t), p0)
-        kind = cols.kind[i]
-        target = load3(targets[i])
-        goal = target
-        if kind == codes.kind_distance:
-            away = sub(was, target)
-            away_len = norm(away)
-            away_dir = scale(away, 1.0 / max(away_len, 1e-12)) if away_len > 1e-9 \
-                else (0.0, 0.0, 1.0)
-            goal = add_scaled(target, away_dir, cols.distance_m[i])
-        held = False
-        w = weight[i]
-        if kind == codes.kind_area:
-            goal = area_goal(cols, i, p0, target, was, codes)
-            if not cols.area_inside[i] and cols.area_shape[i] == codes.area_sphere:
-                held = norm(sub(goal, p0)) > 1e-9
-                if cols.held[i] and not held:  # released: back toward the motion, at a speed
-                    back = sub(p0, was)
-                    gap = norm(back)
-                    goal = add_scaled(was, back, min(1.0, max_release_m / max(gap, 1e-12)))
-                    held = gap > max_release_m
-            # An area the motion already keeps needs nothing: it must not claim its limb.
-            if norm(sub(goal, p0)) < 1e-9:
-                w = 0.0
-        if kind == codes.kind_orientation:
-            axis0 = to_world(segment_frame(dec, c, segment, t), load3(cols.axis[i]))
-            look = cols.target_kind[i] != codes.target_world
-            goal = normalize(sub(target, p0) if look else target)
-            store3(weighted[j], normalize(to_world(rotation_toward(axis0, goal, math.pi, w),
-                                                   axis0)))
-        else:
-            store3(weighted[j], add_scaled(p0, sub(goal, p0), w))
-        weight_out[j] = w
-        held_out[j] = held
-
-
-@jit(nogil=True)
-def layout_rows(lo: int, hi: int, user_start: I64, kept: I64, cols: Columns, weighted: F64,
-                weight: F64, held: B8, rows: I64, positions: F64, contact_weight: F64,
-                com_control: B8, com_desired: F64, t: Tables, codes: Codes,
-                out: GoalArrays) -> None:
-    """Lay out the goals of the solved characters ``lo..hi-1`` (local rows; ``rows`` (r,) their
-    store rows): character ``c``'s kept goals ``user_start[c]:user_start[c + 1]`` (``kept``:
-    their table rows; ``weighted`` (a, 3), ``weight``, ``held`` as :func:`goal_rows` left them,
-    compacted), then its two feet, each a goal of its leg to stay where ground adaptation put
-    it (``positions`` (n, N_JOINTS, 3) the pose before constraints), above every priority while
-    in contact, below every one otherwise. Mirrors the layout of
+@jit(inline="always")
+def constraint_goal(i: int, cols: Columns, weight: F64, targets: F64, dec: DecodedArrays,
+                    previous: DecodedArrays, has_previous: bool, max_release_m: float, t: Tables,
+                    codes: Codes) -> tuple[Vec3, float, bool]:
+    """The goal of the active constraint ``i`` (``weight`` (m,), ``targets`` (m, 3)): its
+    weighted goal (a unit direction for an orientation), its weight (0: an area the motion
+    already keeps) and whether a sphere keeps its point off the motion's place. ``dec`` this
+    tick's decoded pose of every character, ``previous`` the last tick's posture (read only
+    with ``has_previous``). Mirrors the per-constraint part of
     :func:`ecs_anim.solver.goals.tick_goals`."""
+    c = cols.owner[i]
+    segment, fraction, offset = cols.segment[i], cols.fraction[i], load3(cols.offset[i])
+    p0 = point_position(dec, c, segment, fraction, offset, t)
+    kind = cols.kind[i]
+    # Where the point was at the last tick (a distance's side, an area's way in), read only
+    # for those (the last posture is cold memory); none for this point (a character added
+    # since, a frozen pose): the motion's side.
+    was = p0
+    if has_previous and (kind == codes.kind_distance or kind == codes.kind_area):
+        was = finite_or(point_position(previous, c, segment, fraction, offset, t), p0)
+    target = load3(targets[i])
+    goal = target
+    if kind == codes.kind_distance:
+        away = sub(was, target)
+        away_len = norm(away)
+        away_dir = scale(away, 1.0 / max(away_len, 1e-12)) if away_len > 1e-9 \
+            else (0.0, 0.0, 1.0)
+        goal = add_scaled(target, away_dir, cols.distance_m[i])
+    held = False
+    w = weight[i]
+    if kind == codes.kind_area:
+        goal = area_goal(cols, i, p0, target, was, codes)
+        if not cols.area_inside[i] and cols.area_shape[i] == codes.area_sphere:
+            held = norm(sub(goal, p0)) > 1e-9
+            if cols.held[i] and not held:  # released: back toward the motion, at a speed
+                back = sub(p0, was)
+                gap = norm(back)
+                goal = add_scaled(was, back, min(1.0, max_release_m / max(gap, 1e-12)))
+                held = gap > max_release_m
+        # An area the motion already keeps needs nothing: it must not claim its limb.
+        if norm(sub(goal, p0)) < 1e-9:
+            w = 0.0
+    if kind == codes.kind_orientation:
+        axis0 = to_world(segment_frame(dec, c, segment, t), load3(cols.axis[i]))
+        look = cols.target_kind[i] != codes.target_world
+        goal = normalize(sub(target, p0) if look else target)
+        return normalize(to_world(rotation_toward(axis0, goal, math.pi, w), axis0)), w, held
+    return add_scaled(p0, sub(goal, p0), w), w, held
+
+
+@jit(nogil=True)
+def goal_layout_rows(lo: int, hi: int, user_start: I64, idx: I64, cols: Columns, weight: F64,
+                     targets: F64, dec: DecodedArrays, previous: DecodedArrays,
+                     has_previous: bool, max_release_m: float, rows: I64, contact_weight: F64,
+                     com_control: B8, com_desired: F64, t: Tables, codes: Codes,
+                     out: GoalArrays) -> None:
+    """The goals of the characters ``lo..hi-1`` (local rows; ``rows`` (r,) their store rows),
+    laid out: character ``c``'s active constraints ``idx[user_start[c]:user_start[c + 1]]``
+    (table rows, in the table's order) each one's goal (:func:`constraint_goal`; its weight 0
+    where the motion already keeps an area: the caller drops those), then its two feet, each a
+    goal of its leg to stay where ground adaptation put it (``dec.positions``, the pose before
+    constraints), above every priority while in contact, below every one otherwise. Mirrors
+    :func:`ecs_anim.solver.goals.tick_goals` where no goal is dropped (one pass over each
+    character's constraints and pose, where computing the goals and laying them out took
+    two)."""
     for c in range(lo, hi):
         row = rows[c]
         for j in range(user_start[c], user_start[c + 1]):
-            i = kept[j]
+            i = idx[j]
+            goal, w, held = constraint_goal(i, cols, weight, targets, dec, previous,
+                                            has_previous, max_release_m, t, codes)
             at = j + 2 * c
             out.owner[at] = c
             out.table_index[at] = i
@@ -275,13 +276,13 @@ def layout_rows(lo: int, hi: int, user_start: I64, kept: I64, cols: Columns, wei
             store3(out.offset[at], load3(cols.offset[i]))
             out.chain[at] = cols.chain[i]
             out.priority[at] = cols.priority[i]
-            store3(out.goal[at], load3(weighted[j]))
-            out.weight[at] = weight[j]
+            store3(out.goal[at], goal)
+            out.weight[at] = w
             store3(out.axis[at], load3(cols.axis[i]))
-            out.held[at] = held[j]
+            out.held[at] = held
         for side in range(2):
             at = user_start[c + 1] + 2 * c + side
-            ankle = load3(positions[row, t.ankle[side]])
+            ankle = load3(dec.positions[row, t.ankle[side]])
             in_contact = contact_weight[row, side] > 0
             out.owner[at] = c
             out.table_index[at] = -1
@@ -353,20 +354,7 @@ def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained:
     if active.size == 0:
         return None
     idx = active[np.argsort(table.owner[active], kind="stable")]  # by character, then table order
-    cols = columns(table)
-    dec = _arrays(unconstrained)
-    a = idx.size
-    weighted, w, held = np.empty((a, 3)), np.empty(a), np.empty(a, np.bool_)
-    over_chunks(goal_rows, a, idx, cols, np.ascontiguousarray(weight, dtype=np.float64),
-                np.ascontiguousarray(targets, dtype=np.float64), dec,
-                dec if previous is None else _arrays(previous), previous is not None,
-                float(max_release_m), TABLES, CODES, weighted, w, held)
-    keep = w > 0
-    if not keep.all():
-        if not keep.any():
-            return None
-        idx, weighted, w, held = idx[keep], weighted[keep], w[keep], held[keep]
-    owner = cols.owner[idx]
+    owner = table.owner[idx]
     first = np.ones(idx.size, np.bool_)  # the first goal of each character
     first[1:] = owner[1:] != owner[:-1]
     rows = owner[first]
@@ -382,34 +370,89 @@ def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained:
         held=np.empty(k, np.bool_), footprint=np.empty((r, 2, 3)),
         in_contact=np.empty((r, 2), np.bool_), com_desired=np.empty((r, 3)),
         com_on=np.empty(r, np.bool_))
-    over_chunks(layout_rows, r, user_start, idx, cols, weighted, w, held, rows, dec.positions,
-                np.ascontiguousarray(contact_weight, dtype=np.float64),
+    dec = _arrays(unconstrained)
+    over_chunks(goal_layout_rows, r, user_start, idx, columns(table),
+                np.ascontiguousarray(weight, dtype=np.float64),
+                np.ascontiguousarray(targets, dtype=np.float64), dec,
+                dec if previous is None else _arrays(previous), previous is not None,
+                float(max_release_m), rows, np.ascontiguousarray(contact_weight, dtype=np.float64),
                 np.ascontiguousarray(com_control, dtype=np.bool_),
                 np.ascontiguousarray(com_desired, dtype=np.float64), TABLES, CODES, out)
+    user = out.table_index >= 0
+    kept = out.weight[user] > 0
+    if not kept.all():  # areas the motion already keeps (rare): not goals
+        if not kept.any():
+            return None
+        out, rows = _without_dropped(out, rows, user, kept)
+        idx = idx[kept]
     # Goals aiming at a point of their own body (usually none: no target is on a body).
     on_body = table.target_kind[idx] != TARGET_WORLD
-    on_self = np.flatnonzero(on_body & (table.target_row[idx] == owner)) if on_body.any() \
-        else np.zeros(0, np.int64)
+    if on_body.any():
+        on_self = np.flatnonzero(on_body & (table.target_row[idx] == table.owner[idx]))
+    else:
+        on_self = np.zeros(0, np.int64)
+    self_idx = idx[on_self]
     return TickGoals(
-        rows=rows, **out._asdict(),
-        on_self=on_self + 2 * (np.cumsum(first)[on_self] - 1),
-        self_segment=table.target_segment[idx[on_self]],
-        self_fraction=table.target_fraction[idx[on_self]],
-        self_offset=table.target_offset[idx[on_self]],
-        self_start=targets[idx[on_self]])
+        rows=rows, **out._asdict(), on_self=np.flatnonzero(out.table_index >= 0)[on_self],
+        self_segment=table.target_segment[self_idx],
+        self_fraction=table.target_fraction[self_idx],
+        self_offset=table.target_offset[self_idx], self_start=targets[self_idx])
+
+
+def _without_dropped(out: GoalArrays, rows: I64, user: B8, kept: B8) -> tuple[GoalArrays, I64]:
+    """``out`` and ``rows`` without the goals not ``kept`` (of the ``user`` goals, (k,)), nor the
+    characters left with none (their feet and rows go with them; the others' local rows
+    renumbered)."""
+    keep_user = np.zeros(user.size, np.bool_)
+    keep_user[np.flatnonzero(user)[kept]] = True
+    has = np.zeros(rows.size, np.bool_)
+    has[out.owner[keep_user]] = True
+    keep = np.where(user, keep_user, has[out.owner])
+    local = np.cumsum(has) - 1
+    per_row = ("footprint", "in_contact", "com_desired", "com_on")
+    arrays = {name: value[has] if name in per_row else value[keep]
+              for name, value in out._asdict().items()}
+    arrays["owner"] = local[arrays["owner"]]
+    return GoalArrays(**arrays), rows[has]
+
+
+class OwnTargets(NamedTuple):
+    """The table's columns of a target on a body (same names; (m,) or (m, 3)), and whether
+    :func:`error_rows` reads the targets on their own character's body again on the pose it
+    measures (``again``)."""
+
+    target_row: I64
+    target_segment: I64
+    target_fraction: F64
+    target_offset: F64
+    again: bool
+
+
+def own_targets(table: ConstraintTable, again: bool) -> OwnTargets:
+    """The table's body-target columns as :func:`error_rows` takes them."""
+    return OwnTargets(np.ascontiguousarray(table.target_row),
+                      np.ascontiguousarray(table.target_segment),
+                      np.ascontiguousarray(table.target_fraction, dtype=np.float64),
+                      np.ascontiguousarray(table.target_offset, dtype=np.float64), again)
 
 
 @jit(nogil=True)
 def error_rows(lo: int, hi: int, idx: I64, cols: Columns, dec: DecodedArrays, targets: F64,
-               t: Tables, codes: Codes, out: F64) -> None:
+               own: OwnTargets, t: Tables, codes: Codes, out: F64) -> None:
     """``out[j]`` (a,): how far constraint ``idx[j]`` is from being met on ``dec``, for
-    ``j`` in ``lo..hi-1``. Mirrors :func:`ecs_anim.solver.goals.constraint_errors`."""
+    ``j`` in ``lo..hi-1``; with ``own.again`` a target on the constraint's own character's
+    body read on ``dec`` (as :func:`target_rows` does), not from ``targets``. Mirrors
+    :func:`ecs_anim.solver.goals.constraint_errors` (with ``again``,
+    :func:`ecs_anim.solver.goals.errors_on_result`)."""
     for j in range(lo, hi):
         i = idx[j]
         c = cols.owner[i]
         segment = cols.segment[i]
         point = point_position(dec, c, segment, cols.fraction[i], load3(cols.offset[i]), t)
         target = load3(targets[i])
+        if own.again and cols.target_kind[i] != codes.target_world and own.target_row[i] == c:
+            target = point_position(dec, c, own.target_segment[i], own.target_fraction[i],
+                                    load3(own.target_offset[i]), t)
         kind = cols.kind[i]
         if kind == codes.kind_area:
             out[j] = norm(sub(point, area_goal(cols, i, point, target, point, codes)))
@@ -423,15 +466,26 @@ def error_rows(lo: int, hi: int, idx: I64, cols: Columns, dec: DecodedArrays, ta
             out[j] = abs(gap - cols.distance_m[i]) if kind == codes.kind_distance else gap
 
 
-def constraint_errors(table: ConstraintTable, idx: I64, decoded: DecodedPose, targets: F64) -> F64:
-    """Compiled :func:`ecs_anim.solver.goals.constraint_errors`: the same arguments and
-    result."""
+def _errors(table: ConstraintTable, idx: I64, decoded: DecodedPose, targets: F64,
+            again: bool) -> F64:
     idx = np.ascontiguousarray(idx, dtype=np.int64)
     out = np.empty(idx.size)
     over_chunks(error_rows, idx.size, idx, columns(table), _arrays(decoded),
-                np.ascontiguousarray(targets, dtype=np.float64), TABLES, CODES, out,
-                rows_per_thread=LIGHT_ROWS_PER_THREAD)
+                np.ascontiguousarray(targets, dtype=np.float64), own_targets(table, again),
+                TABLES, CODES, out, rows_per_thread=LIGHT_ROWS_PER_THREAD)
     return out
+
+
+def constraint_errors(table: ConstraintTable, idx: I64, decoded: DecodedPose, targets: F64) -> F64:
+    """Compiled :func:`ecs_anim.solver.goals.constraint_errors`: the same arguments and
+    result."""
+    return _errors(table, idx, decoded, targets, False)
+
+
+def errors_on_result(table: ConstraintTable, idx: I64, decoded: DecodedPose, targets: F64) -> F64:
+    """Compiled :func:`ecs_anim.solver.goals.errors_on_result`: the same arguments and result
+    (the targets on the own body read in the errors' loop, not in a pass of their own)."""
+    return _errors(table, idx, decoded, targets, True)
 
 
 assert CONTACT_PRIORITY == math.inf  # the layout writes a planted foot's priority as inf

@@ -1,9 +1,10 @@
 """Compiled :mod:`ecs_anim.solver.joint_speed`: each segment's correction (its turn or shift
 away from the motion's own) going only a share of its way from the last tick's (no pops).
 
-:func:`step_shares`, :func:`limit_motion` and :func:`pack` take the arguments of their numpy
-references and give the same results (to 1e-9); the per-character loops are
-:func:`share_rows`, :func:`limit_rows` and :func:`pack_rows`.
+:func:`step_shares`, :func:`limit_motion`, :func:`pack`, :func:`goal_steps` and :func:`rows_differ`
+take the arguments of their numpy references and give the same results (to 1e-9); the
+per-character loops are :func:`share_rows`, :func:`limit_rows`, :func:`pack_rows`,
+:func:`goal_steps_rows` and :func:`differing_rows`.
 Values are packed as the reference's: frames 0-5 (legs, arms, thorax, head) as quaternions,
 directions 0-4 (feet, hands, neck), shifts 0-12 (leg fractions, arm fractions, the spine's
 three points).
@@ -32,6 +33,7 @@ from ecs_anim.runtime.kernels.vec import (
     store3,
     store4,
 )
+from ecs_anim.solver.goals import TickGoals
 from ecs_anim.solver.joint_speed import (
     DIRECTION_GROUP,
     DIRECTIONS_AT,
@@ -253,11 +255,12 @@ def limit_rows(lo: int, hi: int, pose: PoseArrays, clip_now: F64, clip_before: F
 
 
 @jit(nogil=True)
-def share_rows(lo: int, hi: int, pose_joints: F64, clip_joints: F64, pose_joints_before: F64,
-               clip_joints_before: F64, planted: B8, max_step_m: float, goal_steps_m: F64,
-               leg_of_joint: I64, out: F64) -> None:
+def share_rows(lo: int, hi: int, pose_positions: F64, clip_positions: F64,
+               pose_positions_before: F64, clip_positions_before: F64, planted: B8,
+               max_step_m: float, goal_steps_m: F64, leg_of_joint: I64, out: F64) -> None:
     """Mirrors :func:`ecs_anim.solver.joint_speed.step_shares` over rows ``lo..hi-1`` into
-    ``out`` (r,)."""
+    ``out`` (r,); each joint measured from its pelvis here (the same subtraction as
+    ``from_pelvis``, so the same bits), not in arrays of their own."""
     for c in range(lo, hi):
         share = 1.0
         for j in range(N_JOINTS):
@@ -268,9 +271,12 @@ def share_rows(lo: int, hi: int, pose_joints: F64, clip_joints: F64, pose_joints
             dd = 0.0
             cd = 0.0
             for i in range(3):
-                step = clip_joints[c, j, i] - clip_joints_before[c, j, i]
-                change = ((pose_joints[c, j, i] - clip_joints[c, j, i])
-                          - (pose_joints_before[c, j, i] - clip_joints_before[c, j, i]))
+                clip = clip_positions[c, j, i] - clip_positions[c, 0, i]
+                clip_before = clip_positions_before[c, j, i] - clip_positions_before[c, 0, i]
+                pose = pose_positions[c, j, i] - pose_positions[c, 0, i]
+                pose_before = pose_positions_before[c, j, i] - pose_positions_before[c, 0, i]
+                step = clip - clip_before
+                change = (pose - clip) - (pose_before - clip_before)
                 cc += step * step
                 dd += change * change
                 cd += step * change
@@ -281,15 +287,15 @@ def share_rows(lo: int, hi: int, pose_joints: F64, clip_joints: F64, pose_joints
         out[c] = share
 
 
-def step_shares(pose_joints: F64, clip_joints: F64, pose_joints_before: F64,
-                clip_joints_before: F64, planted: B8, max_step_m: float, goal_steps_m: F64
+def step_shares(pose_positions: F64, clip_positions: F64, pose_positions_before: F64,
+                clip_positions_before: F64, planted: B8, max_step_m: float, goal_steps_m: F64
                 ) -> F64:
     """Compiled :func:`ecs_anim.solver.joint_speed.step_shares` (same arguments and result)."""
-    r = pose_joints.shape[0]
+    r = pose_positions.shape[0]
     out = np.empty(r)
-    joints = [np.ascontiguousarray(a, dtype=np.float64)
-              for a in (pose_joints, clip_joints, pose_joints_before, clip_joints_before)]
-    over_chunks(share_rows, r, *joints, np.ascontiguousarray(planted, dtype=np.bool_),
+    positions = [np.ascontiguousarray(a, dtype=np.float64) for a in (
+        pose_positions, clip_positions, pose_positions_before, clip_positions_before)]
+    over_chunks(share_rows, r, *positions, np.ascontiguousarray(planted, dtype=np.bool_),
                 float(max_step_m), np.ascontiguousarray(goal_steps_m, dtype=np.float64),
                 LEG_OF_JOINT, out)
     return out
@@ -321,3 +327,71 @@ def limit_motion(poses: NormalizedPoses, clip_now: F64, clip_before: F64, pose_b
                 np.ascontiguousarray(share, dtype=np.float64), FRAME_GROUP,
                 DIRECTION_GROUP, SHIFT_GROUP, need, held)
     return poses, held
+
+
+#: What :func:`ecs_anim.solver.joint_speed.goal_steps` makes of a step that is not finite
+#: (``np.nan_to_num``: NaN 0, an overflow the largest float).
+_LARGEST = float(np.finfo(np.float64).max)
+
+
+@jit(nogil=True)
+def goal_steps_rows(table_index: I64, owner: I64, orientation: B8, goal: F64, weight: F64,
+                    weight_before: F64, last_goals: F64, steps: F64) -> None:
+    """Mirrors :func:`ecs_anim.solver.joint_speed.goal_steps` over the k goals (``table_index``,
+    ``owner``, ``orientation``, ``goal``, ``weight`` as in ``TickGoals``): each character's
+    step into ``steps`` (r,), zeros on entry; ``last_goals`` (m, 3) read, then made this tick's."""
+    for j in range(table_index.shape[0]):
+        i = table_index[j]
+        if i < 0 or not weight[j] >= 1.0:
+            continue
+        c = owner[j]
+        if weight_before[i] <= 0.0:  # switched on at once
+            steps[c] = math.inf
+        elif not orientation[j]:
+            dx = goal[j, 0] - last_goals[i, 0]
+            dy = goal[j, 1] - last_goals[i, 1]
+            dz = goal[j, 2] - last_goals[i, 2]
+            moved = math.sqrt(dx * dx + dy * dy + dz * dz)
+            if math.isnan(moved):
+                moved = 0.0
+            elif math.isinf(moved):
+                moved = _LARGEST
+            steps[c] = max(steps[c], moved)
+    last_goals[:] = math.nan
+    for j in range(table_index.shape[0]):
+        i = table_index[j]
+        if i >= 0 and weight[j] >= 1.0 and not orientation[j]:
+            last_goals[i, 0], last_goals[i, 1], last_goals[i, 2] = goal[j, 0], goal[j, 1], goal[j, 2]
+
+
+def goal_steps(goals: TickGoals, last_goals: F64, weight_before: F64) -> F64:
+    """Compiled :func:`ecs_anim.solver.joint_speed.goal_steps` (same arguments and result;
+    ``last_goals`` C-contiguous, updated in place)."""
+    steps = np.zeros(goals.rows.size)
+    goal_steps_rows(np.ascontiguousarray(goals.table_index, dtype=np.int64),
+                    np.ascontiguousarray(goals.owner, dtype=np.int64),
+                    np.ascontiguousarray(goals.orientation, dtype=np.bool_),
+                    np.ascontiguousarray(goals.goal, dtype=np.float64),
+                    np.ascontiguousarray(goals.weight, dtype=np.float64),
+                    np.ascontiguousarray(weight_before, dtype=np.float64), last_goals, steps)
+    return steps
+
+
+@jit(nogil=True)
+def differing_rows(lo: int, hi: int, values: F64, other: F64, out: B8) -> None:
+    """Mirrors :func:`ecs_anim.solver.joint_speed.rows_differ` over rows ``lo..hi-1`` into
+    ``out`` (r,), each row read only up to its first difference."""
+    for c in range(lo, hi):
+        out[c] = False
+        for i in range(values.shape[1]):
+            if values[c, i] != other[c, i]:
+                out[c] = True
+                break
+
+
+def rows_differ(values: F64, other: F64) -> B8:
+    """Compiled :func:`ecs_anim.solver.joint_speed.rows_differ` (same arguments and result)."""
+    out = np.empty(values.shape[0], np.bool_)
+    over_chunks(differing_rows, values.shape[0], np.ascontiguousarray(values, dtype=np.float64),
+                np.ascontiguousarray(other, dtype=np.float64), out)
+    return out

@@ -1,6 +1,6 @@
 """The compiled goals, targets and constraint errors (ecs_anim.runtime.kernels.goals) against the
-numpy ones (ecs_anim.solver.goals' tick_goals, target_points and constraint_errors, the
-references): every field of every tick's goals, every target and every error equal to 1e-9, on
+numpy ones (ecs_anim.solver.goals' tick_goals, target_points, constraint_errors and
+errors_on_result, the references): every field of every tick's goals, every target and every error equal to 1e-9, on
 the bench scene, on every shipped scenario and on a scene with every kind of constraint (box,
 sphere and half-space areas to stay in and to leave, a sphere sweeping past and letting go, a
 distance to another character, orientations along a direction and looking at a point, a target
@@ -58,6 +58,13 @@ class Compare:
             self.errors += 1
             return reference
 
+        def errors_on_result(*args):
+            reference = solver_shell.errors_on_result(*args)
+            np.testing.assert_allclose(compiled.errors_on_result(*args), reference, rtol=0,
+                                       atol=1e-9)
+            self.errors += 1
+            return reference
+
         def target_points(*args):
             reference = solver_shell.target_points(*args)
             np.testing.assert_allclose(compiled.target_points(*args), reference, rtol=0,
@@ -68,6 +75,7 @@ class Compare:
         monkeypatch.setattr(system, "tick_goals", tick_goals)
         monkeypatch.setattr(system, "target_points", target_points)
         monkeypatch.setattr(system, "constraint_errors", constraint_errors)
+        monkeypatch.setattr(system, "errors_on_result", errors_on_result)
 
 
 def assert_same_goals(result: solver_shell.TickGoals, reference: solver_shell.TickGoals) -> None:
