@@ -63,7 +63,9 @@ def test_the_bench_walkers_keep_to_their_lanes_and_crossing_ones_meet(capsys):
     assert np.unique(np.round(starts, 9)).size == 100  # no two walkers in step
     lanes.tick()
     grid_xy = np.stack([1.5 * (np.arange(100) // 10), 1.5 * (np.arange(100) % 10)], axis=1)
-    pelvis_xy = lanes.sim.store.posture.positions[:, 0, :2]
+    posture = lanes.sim.store.posture
+    assert posture is not None
+    pelvis_xy = posture.positions[:, 0, :2]
     # along the lane exactly (the walk's own path set back), across it the walk's sway
     assert np.abs(pelvis_xy - grid_xy).max(axis=0) == pytest.approx([0.0, 0.008], abs=0.005)
     deepest = {}
