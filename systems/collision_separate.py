@@ -257,8 +257,9 @@ class CollisionSeparate(System):
             self._made = np.zeros(0, np.int64)
         if self._body.ends is not st.capsule_ends or self._body.radii is not st.capsule_radii:
             self._body = Capsules.empty(n)._replace(ends=st.capsule_ends, radii=st.capsule_radii)
-            if not np.isnan(st.capsule_radii).all():  # (arrays given from outside)
-                self._made = np.arange(n, dtype=np.int64)
+            # Arrays given from outside, or the rows a removal kept (renumbered): the rows made
+            # are those holding capsules.
+            self._made = np.flatnonzero(np.isfinite(st.capsule_radii[:, 0]))
         # The kernels, or while they compile aside (a first run) their numpy references, which
         # need no grid (grid None). On the kernels, every body's bounds from its joints (no
         # capsule made); the capsules, each capsule's bounds (what the search reads) and the

@@ -241,6 +241,25 @@ def test_the_frame_budget_ends_the_rounds_of_separation():
 
 
 
+def _assert_capsules_of_the_bodies_that_touch(st) -> np.ndarray:
+    """The store's capsules are those of the bodies whose bounds meet another's (to 1e-12 m),
+    NaN for the others, which overlap nobody; returns the rows made (n,) bool."""
+    made = np.isfinite(st.capsule_radii).all(axis=1)
+    assert np.array_equal(np.isnan(st.capsule_ends).all(axis=(1, 2, 3)), ~made)
+    ends, radii = capsules_from_positions(st.positions[made], st.lengths[made])
+    np.testing.assert_allclose(st.capsule_ends[made], ends, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(st.capsule_radii[made], radii, rtol=0, atol=1e-12)
+    # a body left out: its capsules' bounds meet no other body's capsules' bounds
+    every = capsules(st.positions, st.lengths)
+    low, high = every.box[:, 0], every.box[:, 1]
+    meets = np.logical_not(((high[:, None] < low[None])
+                            | (high[None] < low[:, None])).any(axis=-1))
+    np.fill_diagonal(meets, False)
+    assert not meets[~made].any()
+    assert not (st.overlap_m[~made] > 0).any()
+    return made
+
+
 def test_the_store_holds_the_capsules_of_the_bodies_that_touch_and_nan_for_the_others():
     """CollisionSeparate makes capsules only for the bodies whose bounds meet another's: their
     rows of ``store.capsule_ends`` and ``capsule_radii`` are the capsules of their postures as
@@ -251,24 +270,35 @@ def test_the_store_holds_the_capsules_of_the_bodies_that_touch_and_nan_for_the_o
     sim, _ = walkers_on_bumps(30, crossing=True)
     made_ever = set()
     with sim:
-        st = sim.store
         for _ in range(12):
             sim.step()
-            made = np.isfinite(st.capsule_radii).all(axis=1)
-            assert np.array_equal(np.isnan(st.capsule_ends).all(axis=(1, 2, 3)), ~made)
-            ends, radii = capsules_from_positions(st.positions[made], st.lengths[made])
-            np.testing.assert_allclose(st.capsule_ends[made], ends, rtol=0, atol=1e-12)
-            np.testing.assert_allclose(st.capsule_radii[made], radii, rtol=0, atol=1e-12)
-            # a body left out: its capsules' bounds meet no other body's capsules' bounds
-            every = capsules(st.positions, st.lengths)
-            low, high = every.box[:, 0], every.box[:, 1]
-            meets = np.logical_not(((high[:, None] < low[None])
-                                    | (high[None] < low[:, None])).any(axis=-1))
-            np.fill_diagonal(meets, False)
-            assert not meets[~made].any()
-            assert not (st.overlap_m[~made] > 0).any()
+            made = _assert_capsules_of_the_bodies_that_touch(sim.store)
             made_ever |= set(np.flatnonzero(made).tolist())
     assert 0 < len(made_ever) < 30, made_ever
+
+
+def test_the_capsules_kept_follow_their_bodies_when_characters_are_removed():
+    """Removing characters renumbers the rows: the capsules kept from the last tick are those of
+    the bodies that stay (the viewer's Delete, a removal mid-run), never a row that is gone."""
+    from ecs_anim.runtime.bench_scene import walkers_on_bumps
+
+    sim, _ = walkers_on_bumps(30, crossing=True)
+    with sim:
+        st = sim.store
+        for _ in range(4):
+            sim.step()
+        made = _assert_capsules_of_the_bodies_that_touch(st)
+        # every body with capsules goes, and the last half of the others: the rows kept hold
+        # none, and fewer rows stay than the highest row that had capsules
+        apart = np.flatnonzero(~made)
+        gone = np.concatenate([np.flatnonzero(made), apart[apart.size // 2:]])
+        for entity in st.entity[gone].tolist():
+            sim.remove(entity)
+        assert 0 < st.n <= np.flatnonzero(made).max()
+        assert np.isnan(st.capsule_radii).all()
+        for _ in range(4):
+            sim.step()
+            _assert_capsules_of_the_bodies_that_touch(sim.store)
 
 
 @pytest.mark.parametrize(("crossing", "least_skips"), [(False, 5), (True, 1)])
