@@ -133,16 +133,21 @@ def loop_transform(bank: ClipBank, clip: I64, loops: F64) -> tuple[F64, F64]:
     return loops * yaw, np.stack([moved.real, moved.imag], axis=-1)
 
 
-def _frame(bank: ClipBank, clip: I64, local: I64, loops: F64) -> NormalizedPoses:
-    """Stored frames ``local`` of ``clip`` after ``loops`` whole loops of root motion."""
+def _root_frame(bank: ClipBank, clip: I64, local: I64, loops: F64) -> tuple[F64, F64]:
+    """The root's ground position (n, 2) (normalized) and heading (n,) at stored frames
+    ``local`` of ``clip`` after ``loops`` whole loops of root motion."""
     rows = bank.start[clip] + local
-    out = bank.poses.take(rows)
     angle, moved = loop_transform(bank, clip, loops)
     p0 = bank.poses.root_position[bank.start[clip], :2]
-    rel = out.root_position[:, :2] - p0
+    rel = bank.poses.root_position[rows, :2] - p0
+    return p0 + moved + rotate_xy(rel, angle), bank.poses.root_heading[rows] + angle
+
+
+def _frame(bank: ClipBank, clip: I64, local: I64, loops: F64) -> NormalizedPoses:
+    """Stored frames ``local`` of ``clip`` after ``loops`` whole loops of root motion."""
+    out = bank.poses.take(bank.start[clip] + local)
     out.root_position = out.root_position.copy()
-    out.root_position[:, :2] = p0 + moved + rotate_xy(rel, angle)
-    out.root_heading = out.root_heading + angle
+    out.root_position[:, :2], out.root_heading = _root_frame(bank, clip, local, loops)
     return out
 
 
@@ -196,3 +201,18 @@ def sample(bank: ClipBank, clip: I64, time_s: F64, loop: NDArray[np.bool_]) -> N
     a = _frame(bank, clip, i0, loops)
     b = _frame(bank, clip, i1, loops + wraps)
     return blend(a, b, w)
+
+
+def sample_root(bank: ClipBank, clip: I64, time_s: F64,
+                loop: NDArray[np.bool_]) -> tuple[F64, F64]:
+    """The root's ground position (n, 2) (normalized units) and heading (n,) of what
+    :func:`sample` returns, bit for bit, without the rest of the pose: starting a clip places
+    it by its root alone, and blending a whole pose (every slerp) cost most of a trigger's
+    tick."""
+    i0, i1, w, loops, wraps = frame_position(bank, clip, time_s, loop)
+    n = clip.shape[0]
+    # Both frames of every row in one pass (elementwise: each row's numbers are its own).
+    xy, heading = _root_frame(bank, np.concatenate([clip, clip]), np.concatenate([i0, i1]),
+                              np.concatenate([loops, loops + wraps]))
+    ww = w[:, None]
+    return (1 - ww) * xy[:n] + ww * xy[n:], heading[:n] + w * wrap_angle(heading[n:] - heading[:n])

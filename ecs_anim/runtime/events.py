@@ -123,6 +123,28 @@ class _Compiled:
     listeners: dict[tuple[str, int], list[int]] = field(default_factory=dict)
     _listened: dict[str, I64] = field(default_factory=dict)
 
+    def unwatch(self, trigger: int, listened_as: tuple[str, int] | None) -> None:
+        """Stop watching ``trigger``'s condition (it fired, once): its row out of the arrays and
+        out of the ``listened_as`` listeners, leaving what a rebuild would make (a rebuild goes
+        over every trigger: a spike on the tick one fires, 30,000 triggers or 16)."""
+        for indices_name, column_names in _CONDITION_COLUMNS:
+            indices = getattr(self, indices_name)
+            keep = indices != trigger
+            if keep.all():
+                continue
+            setattr(self, indices_name, indices[keep])
+            for name in column_names:
+                setattr(self, name, getattr(self, name)[keep])
+        waiting = self.listeners.get(listened_as) if listened_as is not None else None
+        if waiting is not None and trigger in waiting:
+            assert listened_as is not None
+            rest = [i for i in waiting if i != trigger]  # a new list: an _emit may be going over it
+            if rest:
+                self.listeners[listened_as] = rest
+            else:
+                del self.listeners[listened_as]
+                self._listened.pop(listened_as[0], None)
+
     def listened(self, kind: str) -> I64:
         """The entities some trigger waits on for events of ``kind`` (sorted; made once per
         rebuild)."""
@@ -130,6 +152,28 @@ class _Compiled:
             self._listened[kind] = np.unique(np.array([e for k, e in self.listeners if k == kind],
                                                       np.int64))
         return self._listened[kind]
+
+
+#: Each condition array of :class:`_Compiled` (trigger indices) and its columns, row for row.
+_CONDITION_COLUMNS = (
+    ("near", ("near_entities", "near_segments", "near_fractions", "near_offsets",
+              "near_within_m")),
+    ("reached", ("reached_uids", "reached_within")),
+    ("timed", ("timed_at_s",)),
+)
+
+#: The event kind each condition waiting on one character's events listens for.
+_LISTENED_KINDS: dict[type, str] = {ClipStarted: "clip_started", ClipEnded: "clip_ended",
+                                    ContactBegan: "contact_began", Arrived: "arrived",
+                                    Removed: "removed"}
+
+
+def _listened_as(condition: Condition) -> tuple[str, int] | None:
+    """The (event kind, entity) key of :attr:`_Compiled.listeners` ``condition`` waits under
+    (None: a condition of its own, near, reached or a time)."""
+    if isinstance(condition, ClipStarted | ClipEnded | ContactBegan | Arrived | Removed):
+        return _LISTENED_KINDS[type(condition)], condition.entity
+    return None
 
 
 #: Columns of :func:`clip_and_contact_edges`'s edges: the clip seen last tick was replaced
@@ -324,6 +368,8 @@ class Reactions:
             self._end_tick()
             return
         names, entity = self._names(sim), st.entity.copy()
+        # (the triggers watched as the tick ended: a firing one stops being watched meanwhile)
+        near_triggers, reached_triggers = c.near, c.reached
         near = self._near_holds(sim, c) if c.near.size else None
         reached = self._reached_holds(sim, c) if c.reached.size else None
         with self._reactions():
@@ -337,9 +383,9 @@ class Reactions:
                 else:  # nothing to fire: the events are made if someone asks for them
                     self._edges_kept = kept
             if near is not None:
-                self._edges(sim, c.near, *near, entity, names, "near")
+                self._edges(sim, near_triggers, *near, entity, names, "near")
             if reached is not None:
-                self._edges(sim, c.reached, *reached, entity, names, "reached")
+                self._edges(sim, reached_triggers, *reached, entity, names, "reached")
         self._end_tick()
 
     def _end_tick(self) -> None:
@@ -547,8 +593,8 @@ class Reactions:
             return
         self._fired_this_tick.add(once)
         self.fired[i] = True
-        if not t.repeat:
-            self._compiled = None  # its condition is no longer watched
+        if not t.repeat and self._compiled is not None:  # its condition is no longer watched
+            self._compiled.unwatch(i, _listened_as(t.when))
         if t.delay_s > 0.0:  # shown from the first posture at or after the condition + delay
             self._pending.append((event.time_s + t.delay_s, i))
         else:
@@ -580,7 +626,7 @@ class Reactions:
         if isinstance(a, Play):
             play_now(sim, a)
             row = sim.row(a.entity)
-            name = sim.names()[row]
+            name = self._names(sim)[row]
             st = sim.store
             self._grow(int(st.entity.max()) + 1)
             ended = self._seen_clip[a.entity] >= 0 and not self._seen_ended[a.entity]
@@ -634,12 +680,10 @@ class Reactions:
             c.reached = np.array([i for i, _ in reached], np.int64)
             c.reached_uids = np.array([w.uid for _, w in reached], np.int64)
             c.reached_within = np.array([w.within_m for _, w in reached])
-        kinds: dict[type, str] = {ClipStarted: "clip_started", ClipEnded: "clip_ended",
-                                  ContactBegan: "contact_began", Arrived: "arrived",
-                                  Removed: "removed"}
         for i, w in live:
-            if isinstance(w, ClipStarted | ClipEnded | ContactBegan | Arrived | Removed):
-                c.listeners.setdefault((kinds[type(w)], w.entity), []).append(i)
+            key = _listened_as(w)
+            if key is not None:
+                c.listeners.setdefault(key, []).append(i)
         timed = [(i, w) for i, w in live if isinstance(w, AtTime)]
         if timed:
             c.timed = np.array([i for i, _ in timed], np.int64)

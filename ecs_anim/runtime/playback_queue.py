@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.core.morphology import leg_length
-from ecs_anim.motion.sampling import ClipBank, rotate_xy, sample, wrap_angle
+from ecs_anim.motion.sampling import ClipBank, rotate_xy, sample_root, wrap_angle
 from ecs_anim.runtime.store import CharacterStore
 
 
@@ -46,16 +46,22 @@ def start_clips(st: CharacterStore, bank: ClipBank, rows: NDArray[np.int64],
     Reads store.clip, clip_time_s, loop, lengths, placement_*; writes fade_* (the outgoing clip,
     its placement and rate), fade_keeps_contacts, clip, clip_time_s, loop, placement_*, locked.
     """
-    old = sample(bank, st.clip[rows], st.clip_time_s[rows], st.loop[rows])
-    new = sample(bank, new_clip, new_time_s, new_loop)
+    # The outgoing and the incoming clips' roots in one call (a trigger starts one clip).
+    root_xy, root_heading = sample_root(
+        bank, np.concatenate([st.clip[rows], new_clip]),
+        np.concatenate([st.clip_time_s[rows], new_time_s]),
+        np.concatenate([st.loop[rows], new_loop]))
+    r = rows.size
+    old_root_xy, old_root_heading = root_xy[:r], root_heading[:r]
+    new_root_xy, new_root_heading = root_xy[r:], root_heading[r:]
     leg = leg_length(st.lengths[rows])[:, None]
     heading = st.placement_heading[rows]
-    old_xy = rotate_xy(old.root_position[:, :2] * leg, heading) + st.placement_xy[rows]
-    new_heading = wrap_angle(old.root_heading + heading - new.root_heading)
+    old_xy = rotate_xy(old_root_xy * leg, heading) + st.placement_xy[rows]
+    new_heading = wrap_angle(old_root_heading + heading - new_root_heading)
     st.fade_placement_xy[rows] = st.placement_xy[rows]
     st.fade_placement_heading[rows] = heading
     st.placement_heading[rows] = new_heading
-    st.placement_xy[rows] = old_xy - rotate_xy(new.root_position[:, :2] * leg, new_heading)
+    st.placement_xy[rows] = old_xy - rotate_xy(new_root_xy * leg, new_heading)
     st.fade_clip[rows], st.fade_time_s[rows] = st.clip[rows], st.clip_time_s[rows]
     st.fade_loop[rows] = st.loop[rows]
     st.fade_s[rows], st.fade_elapsed_s[rows] = np.maximum(fade_s, 0.0), 0.0

@@ -7,7 +7,10 @@ from conftest import MOTIONS_DIR
 from ecs_anim.core.morphology import Morphology
 from ecs_anim.core.normalized import decode
 from ecs_anim.io.importing import import_bvh
-from ecs_anim.motion.sampling import ClipBank, sample
+from ecs_anim.motion import sampling
+from ecs_anim.motion.sampling import ClipBank, sample, sample_root
+from ecs_anim.runtime.playback_queue import start_clips
+from ecs_anim.runtime.store import CharacterStore
 
 
 @pytest.fixture(scope="module")
@@ -57,3 +60,28 @@ def test_batch_of_mixed_clips_equals_single_samples(bank):
         single = sample(bank, clips[i:i + 1], times[i:i + 1], loop[i:i + 1])
         for k, v in single.arrays().items():
             np.testing.assert_allclose(getattr(batched, k)[i], v[0], atol=1e-12)
+
+
+def test_root_sample_is_the_whole_samples_root_bit_for_bit(bank):
+    rng = np.random.default_rng(5)
+    clips = rng.integers(0, 2, 30)
+    times = rng.uniform(0, 20, 30)
+    loop = rng.random(30) < 0.5
+    whole = sample(bank, clips, times, loop)
+    root_xy, root_heading = sample_root(bank, clips, times, loop)
+    np.testing.assert_array_equal(root_xy, whole.root_position[:, :2])
+    np.testing.assert_array_equal(root_heading, whole.root_heading)
+
+
+def test_starting_a_clip_blends_no_whole_pose(bank, monkeypatch):
+    """A trigger's clip start places the clip by its root: no pose is blended (no slerp) for it."""
+    store = CharacterStore()
+    store.add_rows(2, entity=np.arange(2))
+    store.lengths[:] = Morphology.preset("adult_male").lengths
+    blended = []
+    monkeypatch.setattr(sampling, "blend", lambda *args: blended.append(args))
+    rows = np.array([1])
+    start_clips(store, bank, rows, np.array([bank.index("walk")]), np.array([0.4]),
+                np.array([0.3]), np.array([True]))
+    assert blended == []
+    assert store.clip[1] == bank.index("walk") and store.fade_s[1] == pytest.approx(0.3)

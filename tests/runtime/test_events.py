@@ -529,3 +529,29 @@ def test_the_documented_trigger_scenario_loads_and_reacts(tmp_path):
     assert ("clip_started", "blue", "dodge") in happened
     assert happened.index(("clip_started", "red", "kick")) < happened.index(("clip_started", "blue", "dodge"))
     assert np.all(np.isfinite(p))
+
+
+def _conditions(compiled):
+    """A compiled set of conditions as plain values, to compare two."""
+    return {k: (v.tolist() if isinstance(v, np.ndarray) else v)
+            for k, v in vars(compiled).items() if k != "_listened"}
+
+
+def test_a_trigger_fired_once_stops_being_watched_without_a_rebuild_of_every_condition():
+    """The fight's 16 triggers all fire in its first 2.5 s: only its 4 Arm actions (a trigger
+    watched anew) rebuild the conditions; a trigger done firing is taken out of them, leaving
+    what a rebuild would make."""
+    with build_simulation(load_scenario(SCENARIOS_DIR / "fight_training.yaml")) as sim:
+        reactions = sim.reactions
+        built = [reactions._compile()]
+        for _ in range(75):
+            sim.step()
+            kept = reactions._compile()
+            if kept is not built[-1]:
+                built.append(kept)
+            reactions._compiled = None
+            assert _conditions(reactions._compile()) == _conditions(kept)
+            reactions._compiled = kept
+        fired = int(reactions.fired.sum())
+    assert fired == 16
+    assert len(built) == 1 + 4
