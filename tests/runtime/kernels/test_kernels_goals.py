@@ -51,31 +51,23 @@ class Compare:
             self.goals += 1
             return reference
 
-        def constraint_errors(*args):
-            reference = solver_shell.constraint_errors(*args)
-            np.testing.assert_allclose(compiled.constraint_errors(*args), reference, rtol=0,
-                                       atol=1e-9)
-            self.errors += 1
-            return reference
+        def compared(name: str, counter: str):
+            """The system's ``name``: the numpy reference's result, the compiled one's equal to
+            it within 1e-9 m; the call counted in ``counter``."""
 
-        def errors_on_result(*args):
-            reference = solver_shell.errors_on_result(*args)
-            np.testing.assert_allclose(compiled.errors_on_result(*args), reference, rtol=0,
-                                       atol=1e-9)
-            self.errors += 1
-            return reference
+            def call(*args):
+                reference = getattr(solver_shell, name)(*args)
+                np.testing.assert_allclose(getattr(compiled, name)(*args), reference, rtol=0,
+                                           atol=1e-9)
+                setattr(self, counter, getattr(self, counter) + 1)
+                return reference
 
-        def target_points(*args):
-            reference = solver_shell.target_points(*args)
-            np.testing.assert_allclose(compiled.target_points(*args), reference, rtol=0,
-                                       atol=1e-9)
-            self.targets += 1
-            return reference
+            return call
 
         monkeypatch.setattr(system, "tick_goals", tick_goals)
-        monkeypatch.setattr(system, "target_points", target_points)
-        monkeypatch.setattr(system, "constraint_errors", constraint_errors)
-        monkeypatch.setattr(system, "errors_on_result", errors_on_result)
+        monkeypatch.setattr(system, "target_points", compared("target_points", "targets"))
+        monkeypatch.setattr(system, "constraint_errors", compared("constraint_errors", "errors"))
+        monkeypatch.setattr(system, "errors_on_result", compared("errors_on_result", "errors"))
 
 
 def assert_same_goals(result: solver_shell.TickGoals, reference: solver_shell.TickGoals) -> None:
