@@ -30,6 +30,7 @@ from ecs_anim.runtime.kernels.vec import (
     jit,
     load3,
     load4,
+    quat_mul,
     store3,
     store4,
 )
@@ -52,15 +53,6 @@ _N_FRAMES, _N_DIRECTIONS, _N_SHIFTS = 6, 5, 13
 LEG_OF_JOINT = np.full(N_JOINTS, -1, np.int64)
 for _side, _joints in enumerate(LEG_JOINTS):
     LEG_OF_JOINT[list(_joints)] = _side
-
-
-@jit(inline="always")
-def quat_mul(a: Quat, b: Quat) -> Quat:
-    """Mirrors the reference's ``_quat_mul``: the Hamilton product ``a b`` (scalar last)."""
-    return (a[3] * b[0] + a[0] * b[3] + a[1] * b[2] - a[2] * b[1],
-            a[3] * b[1] - a[0] * b[2] + a[1] * b[3] + a[2] * b[0],
-            a[3] * b[2] + a[0] * b[1] - a[1] * b[0] + a[2] * b[3],
-            a[3] * b[3] - a[0] * b[0] - a[1] * b[1] - a[2] * b[2])
 
 
 @jit(inline="always")
