@@ -92,13 +92,13 @@ class PostureConvert(System):
         self._positions = np.empty((0, N_JOINTS, 3))
         self._spines = spine_scratch(0)
 
-    def _scratch(self, n: int, rows: int) -> tuple[np.ndarray, np.ndarray]:
-        """The decoded positions' scratch for ``n`` store rows and the spine scratch for
-        ``rows`` rows decoded (:func:`~ecs_anim.runtime.kernels.decode.spine_scratch`)."""
+    def _scratch(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """The decoded positions' scratch for ``n`` store rows and the spine scratch for as
+        many rows decoded (:func:`~ecs_anim.runtime.kernels.decode.spine_scratch`)."""
         if self._positions.shape[0] != n:
             self._positions = np.empty((n, N_JOINTS, 3))
-        if self._spines.shape[1] < rows:
-            self._spines = spine_scratch(rows)
+        if self._spines.shape[1] < n:
+            self._spines = spine_scratch(n)
         return self._positions, self._spines
 
     def run(self, dt: float) -> None:
@@ -107,7 +107,7 @@ class PostureConvert(System):
         if not _writable(st.positions, (n, N_JOINTS, 3)):
             st.positions = np.array(st.positions, dtype=np.float64)
         frames = decoded_arrays(st.posture) if fits(st.posture, n) else None  # type: ignore[arg-type]
-        positions, spines = self._scratch(n, n)
+        positions, spines = self._scratch(n)
         # The posture's frames are written again; positions need a scratch of their own.
         decoded = (empty_decoded(n) if frames is None else frames)._replace(positions=positions)
         # Joint rotations cost more than the positions; they are made when something uses them
