@@ -16,6 +16,7 @@ from ecs_anim.core.body_points import GROUP_INDEX, body_point
 from ecs_anim.core.ground import Bumps, Combined, HeightGrid, Slope, Stairs, sheerest
 from ecs_anim.core.morphology import Morphology
 from ecs_anim.core.skeleton import LENGTH_INDEX as L
+from ecs_anim.motion.constraint_table import TARGET_WORLD
 from ecs_anim.runtime.feasibility import SHORT_TOLERANCE_M, chain_reach, feasibility, ground_lines
 from ecs_anim.scenario import build_simulation, load_scenario
 
@@ -259,3 +260,26 @@ def test_the_estimate_of_some_constraints_is_the_full_ones() -> None:
                 assert [e.line for e in some] == [full[k].line for k in rows]
                 np.testing.assert_allclose([e.short_m for e in some],
                                            [full[k].short_m for k in rows], rtol=0, atol=1e-12)
+
+
+def test_a_body_change_estimates_again_the_constraints_on_or_at_that_body(monkeypatch) -> None:
+    """set_body: the constraints its character owns or aims at are estimated again, the others
+    keep their estimate; a second say with nothing changed estimates nothing."""
+    asked: list[list[int]] = []
+
+    def counted(sim, constraints=None):
+        asked.append(list(constraints) if constraints is not None else [-1])
+        return feasibility(sim, constraints)
+
+    monkeypatch.setattr("ecs_anim.runtime.simulation.feasibility", counted)
+    with build_simulation(load_scenario(SCENARIOS_DIR / "fight_training.yaml")) as sim:
+        sim.feasibility()
+        kicker = sim.entity("kicker_2")
+        row, table = sim.row(kicker), sim.constraints
+        involved = np.flatnonzero((table.owner == row) | ((table.target_kind != TARGET_WORLD)
+                                                          & (table.target_row == row)))
+        asked.clear()
+        sim.set_body(kicker, Morphology.from_stature(1.2))
+        sim.say_unreachable()
+        assert asked == [involved.tolist(), []] and 0 < involved.size < table.m
+        assert sim.unreachable() == {e.uid for e in feasibility(sim) if not e.reachable}
