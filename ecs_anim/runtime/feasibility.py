@@ -230,20 +230,23 @@ def _chain_text(mask: int) -> str:
     return "+".join(g for i, g in enumerate(GROUPS) if mask >> i & 1) or "none"
 
 
-def playable_clips(sim: Simulation) -> list[list[int]]:
-    """Per store row, the clips the character may play (bank indices): the one it plays, those
-    queued, its locomotion set's, and those a trigger's ``Play`` (and its ``then``) gives it."""
+def playable_clips(sim: Simulation, rows: I64 | None = None) -> list[list[int]]:
+    """Per store row (or per one of ``rows`` (k,), in that order), the clips the character may
+    play (bank indices): the one it plays, those queued, its locomotion set's, and those a
+    trigger's ``Play`` (and its ``then``) gives it."""
     st, bank = sim.store, sim.bank
+    picked = list(range(st.n)) if rows is None else [int(r) for r in rows]
+    at = {r: i for i, r in enumerate(picked)}
     row_of = {int(e): r for r, e in enumerate(st.entity.tolist())}
-    clips: list[list[int]] = [[int(st.clip[r])] for r in range(st.n)]
-    for r in range(st.n):
-        clips[r] += st.queue_clip[r, :st.queue_len[r]].tolist() + \
+    clips: list[list[int]] = [[int(st.clip[r])] for r in picked]
+    for i, r in enumerate(picked):
+        clips[i] += st.queue_clip[r, :st.queue_len[r]].tolist() + \
             [int(c) for c in st.gait_clip[r] if c >= 0]
     for trigger in sim.reactions.triggers:
         for action in trigger.then:
-            if isinstance(action, Play) and action.entity in row_of:
+            if isinstance(action, Play) and row_of.get(action.entity, -1) in at:
                 names = [action.clip] + [q.clip for q in action.then]
-                clips[row_of[action.entity]] += [bank.index(n) for n in names]
+                clips[at[row_of[action.entity]]] += [bank.index(n) for n in names]
     return [list(dict.fromkeys(c)) for c in clips]
 
 
@@ -308,11 +311,17 @@ def feasibility(sim: Simulation, constraints: I64 | None = None) -> list[Feasibi
     lengths = body_lengths(sim)
     names = sim.names()
     duration = bank.duration_s(np.arange(bank.n_frames.size))
-    # Every character's library: each playable clip at POSES_PER_CLIP times over it.
-    playable = playable_clips(sim)
+    owner = table.owner[ks]
+    body = table.target_kind[ks] != TARGET_WORLD
+    target_row = np.where(body, table.target_row[ks], owner)
+    # The library of every character these constraints involve: each playable clip at
+    # POSES_PER_CLIP times over it (as wide as the one that plays the most; the rest padded,
+    # left out of every minimum).
+    involved = np.unique(np.concatenate([owner, target_row]))
+    playable = playable_clips(sim, involved)
     width = max(len(c) for c in playable) * POSES_PER_CLIP
     lib_clip = np.full((st.n, width), -1, np.int64)
-    for r, clips in enumerate(playable):
+    for r, clips in zip(involved.tolist(), playable, strict=True):
         lib_clip[r, :len(clips) * POSES_PER_CLIP] = np.repeat(clips, POSES_PER_CLIP)
     in_library = lib_clip >= 0
     lib_clip = np.where(in_library, lib_clip, st.clip[:, None])
@@ -320,7 +329,6 @@ def feasibility(sim: Simulation, constraints: I64 | None = None) -> list[Feasibi
     lib_time = phase[None] * duration[lib_clip]
 
     # The constraint's own poses: its clock's clip over its activation, or the whole library.
-    owner = table.owner[ks]
     clocked = table.clock[ks] >= 0
     clock = np.maximum(table.clock[ks], 0)
     start = np.clip(table.activation[ks, 0], 0.0, duration[clock])
@@ -336,8 +344,6 @@ def feasibility(sim: Simulation, constraints: I64 | None = None) -> list[Feasibi
 
     # A target on the body itself that the trunk carries moves with the trunk: the trunk
     # brings the point no nearer to it.
-    body = table.target_kind[ks] != TARGET_WORLD
-    target_row = np.where(body, table.target_row[ks], owner)
     self_target = body & (target_row == owner)
     carried = self_target & np.isin(_SEGMENT_GROUP[table.target_segment[ks]], ABOVE_TRUNK)
     chain = np.where(carried, table.chain[ks] & ~(1 << TRUNK), table.chain[ks])

@@ -782,10 +782,11 @@ class Simulation(SteeringCalls):
         for estimate in estimates:
             if not estimate.reachable and estimate.uid not in known:
                 self.warn(estimate.line)
-        estimated = {int(u) for u in table.uid[again]}
-        still = {int(u) for u in table.uid} - estimated
-        self._unreachable = frozenset((known & still)
-                                      | {f.uid for f in estimates if not f.reachable})
+        # Those not estimated again keep theirs; a constraint removed since is gone.
+        kept_uids = np.delete(table.uid, again)
+        before = np.fromiter(known, np.int64, len(known))
+        self._unreachable = frozenset(before[np.isin(before, kept_uids)].tolist()) \
+            | {f.uid for f in estimates if not f.reachable}
         self._estimated = (table.uid.copy(), keys)
 
     def _reach_keys(self) -> NDArray[np.float64]:
