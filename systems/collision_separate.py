@@ -84,7 +84,7 @@ from ecs_anim.runtime.kernels.capsules import (
 )
 from ecs_anim.runtime.kernels.decode import decoded_arrays, fits, pose_arrays, spine_scratch
 from ecs_anim.runtime.kernels.posture import N_EXPORT, export_constants, posture_rows
-from ecs_anim.runtime.kernels.separate import push_rows, turn_rows
+from ecs_anim.runtime.kernels.separate import share_and_push, try_rows
 from ecs_anim.runtime.system_base import System
 from ecs_anim.solver.budget import TARGET_SHARE
 from ecs_anim.solver.capsules import CAPSULES, N_CAPSULES
@@ -537,8 +537,10 @@ class CollisionSeparate(System):
         among ``watch`` (k,) that are still trying (``stalled`` (n,) below :data:`PATIENCE`);
         returns the rows moved. ``pushed``: each row's last push this tick (read, then
         written); ``leg`` (n,) each body's leg length, m. Compiled
-        (:mod:`ecs_anim.runtime.kernels.separate`) unless ``self.compiled`` is off: then the
-        numpy methods here, its reference (and while the kernels compile aside)."""
+        (:meth:`_separate_compiled`) unless ``self.compiled`` is off: then the numpy methods
+        here, its reference (and while the kernels compile aside)."""
+        if self.compiled and self.sim.compiled:
+            return self._separate_compiled(found, claims, pushed, stalled, watch, leg)
         st = self.sim.store
         depth, other, mine, theirs, normal, point = found
         rows = watch[(depth[watch] > SEPARATE_FROM_M) & (stalled[watch] < PATIENCE)]
@@ -547,16 +549,8 @@ class CollisionSeparate(System):
         them = other[rows]
         way, at = normal[rows], point[rows]
         full = depth[rows] + MARGIN_M
-        on_kernels = self.compiled and self.sim.compiled
-        if on_kernels:
-            can = self._can(np.concatenate([rows, them]), np.concatenate([them, rows]),
-                            np.concatenate([mine[rows], theirs[rows]]), np.concatenate([at, at]),
-                            np.concatenate([way, -way]), np.concatenate([full, full]), claims,
-                            leg)
-            can_me, can_them = can[:rows.size], can[rows.size:]
-        else:
-            _, can_me = self._turns(rows, them, mine[rows], at, way, full, claims)
-            _, can_them = self._turns(them, rows, theirs[rows], at, -way, full, claims)
+        _, can_me = self._turns(rows, them, mine[rows], at, way, full, claims)
+        _, can_them = self._turns(them, rows, theirs[rows], at, -way, full, claims)
         priority = claims.priority
         share = np.where(priority[rows] < priority[them], 1.0,
                          np.where(priority[rows] == priority[them], 0.5, 0.0))
@@ -571,9 +565,6 @@ class CollisionSeparate(System):
             return rows
         capsule = mine[rows]
         distance = depth[rows] * share + MARGIN_M
-        if on_kernels:
-            self._push(rows, them, capsule, at, way, distance, claims, pushed, leg)
-            return rows_in(st.n, rows)
         chain = CAPSULE_CHAIN[capsule]
         push = self._deflect(rows, chain, way, distance, pushed)
         fold, folded = self._fold(rows, them, capsule, push, claims)
@@ -617,44 +608,49 @@ class CollisionSeparate(System):
             st.poses.root_position[r] += step / leg_length(st.lengths[r])[:, None]
         return np.unique(rows)
 
-    def _can(self, rows: I64, partner: I64, capsule: I64, at: F64, way: F64, distance: F64,
-             claims: Claims, leg: F64) -> NDArray[np.bool_]:
-        """Whether each row's chain of ``capsule`` may move (k,): :meth:`_turns`' second
-        result, compiled (:func:`~ecs_anim.runtime.kernels.separate.turn_rows`), the ground
-        asked about the free legs' feet only."""
-        st = self.sim.store
-        k = rows.size
-        can, ask_ground = np.empty(k, bool), np.empty(k, bool)
-        feet, clearance = np.empty((k, 2, 3)), np.empty((k, 2))
-        over_chunks(turn_rows, k, rows, partner, capsule, at, way, distance, st.positions,
-                    st.lengths, leg, claims.pin, claims.aims_at,
-                    np.ascontiguousarray(claims.claimed[:, TRUNK]), st.contact_weight,
-                    st.frozen, CAPSULE_CHAIN, LIMB_ROOT, LIMB_END, TOE, ANKLE_HEIGHT,
-                    BALL_HEIGHT_PER_LEG, MAX_TURN_RAD, MIN_LEVER_M, can, feet, clearance,
-                    ask_ground)
-        legs = np.flatnonzero(ask_ground)
-        if legs.size:
-            under = self.row_ground().height_of(rows[legs], feet[legs, :, :2])
-            can[legs] &= np.all(feet[legs, :, 2] >= under + clearance[legs], axis=1)
-        return can
-
-    def _push(self, rows: I64, partner: I64, capsule: I64, at: F64, way: F64, distance: F64,
-              claims: Claims, pushed: Pushes, leg: F64) -> None:
-        """Move each row's chain of ``capsule``, ``distance`` (k,) m along ``way`` (k, 3) from
-        ``at`` (k, 3), away from ``partner``: the rest of :meth:`_separate`, compiled
-        (:func:`~ecs_anim.runtime.kernels.separate.push_rows`). Writes the rows' poses and
-        ``pushed``."""
+    def _separate_compiled(self, found: Overlaps, claims: Claims, pushed: Pushes,
+                           stalled: I64, watch: I64, leg: F64) -> I64:
+        """:meth:`_separate` on the kernels: the pairs and whether each side may move
+        (:func:`~ecs_anim.runtime.kernels.separate.try_rows`, :meth:`_turns`' second result),
+        the ground asked about the free legs' feet only, then the shares and the moves
+        (:func:`~ecs_anim.runtime.kernels.separate.share_and_push`, the rest of the numpy
+        methods). Two calls a round: the numpy between them was half a round's cost."""
         st = self.sim.store
         posture, poses = st.posture, st.poses
         assert posture is not None
-        over_chunks(push_rows, rows.size, rows, partner, capsule, at, way, distance,
-                    st.positions, st.lengths, leg, claims.pin, claims.aims_at, st.frozen,
-                    pushed.way, pushed.chain, posture.pelvis2world, posture.thorax2world,
-                    posture.leg2world, posture.arm2world, poses.leg_fraction,
-                    poses.arm_fraction, poses.leg_frame, poses.arm_frame, poses.foot_dir,
-                    poses.root_position, CAPSULE_CHAIN, DISTAL, LIMB_ROOT, LIMB_MIDDLE, LIMB_END,
-                    LIMB_SEGMENTS, MAX_TURN_RAD, MIN_LEVER_M, MAX_DEFLECTION, MIN_FOLD_SHARE,
-                    MAX_REACH_SHARE)
+        depth, other, mine, theirs, normal, point = found
+        w = 2 * watch.size
+        rows, partner, capsule = (np.empty(w, np.int64) for _ in range(3))
+        at, way, distance = np.empty((w, 3)), np.empty((w, 3)), np.empty(w)
+        can, ask_ground = np.empty(w, bool), np.empty(w, bool)
+        feet, clearance = np.empty((w, 2, 3)), np.empty((w, 2))
+        k = try_rows(watch, depth, other, mine, theirs, normal, point, stalled,
+                     SEPARATE_FROM_M, MARGIN_M, PATIENCE, st.positions, st.lengths, leg,
+                     claims.pin, claims.aims_at,
+                     np.ascontiguousarray(claims.claimed[:, TRUNK]), st.contact_weight,
+                     st.frozen, CAPSULE_CHAIN, LIMB_ROOT, LIMB_END, TOE, ANKLE_HEIGHT,
+                     BALL_HEIGHT_PER_LEG, MAX_TURN_RAD, MIN_LEVER_M, rows, partner, capsule, at,
+                     way, distance, can, feet, clearance, ask_ground)
+        if k == 0:  # (the round after the last that moved anyone)
+            return rows[:0]
+        legs = np.flatnonzero(ask_ground[:2 * k])
+        if legs.size:
+            under = self.row_ground().height_of(rows[legs], feet[legs, :, :2])
+            can[legs] &= np.all(feet[legs, :, 2] >= under + clearance[legs], axis=1)
+        stuck = np.empty(k, bool)
+        moving = share_and_push(
+            k, rows, partner, capsule, at, way, can, claims.priority, stalled, depth, PATIENCE,
+            MARGIN_M, stuck, st.positions, st.lengths, leg, claims.pin, claims.aims_at,
+            st.frozen, pushed.way, pushed.chain, posture.pelvis2world, posture.thorax2world,
+            posture.leg2world, posture.arm2world, poses.leg_fraction, poses.arm_fraction,
+            poses.leg_frame, poses.arm_frame, poses.foot_dir, poses.root_position,
+            CAPSULE_CHAIN, DISTAL, LIMB_ROOT, LIMB_MIDDLE, LIMB_END, LIMB_SEGMENTS,
+            MAX_TURN_RAD, MIN_LEVER_M, MAX_DEFLECTION, MIN_FOLD_SHARE, MAX_REACH_SHARE,
+            distance)
+        if stuck.any():  # (entries 0..k-1 as try_rows made them)
+            s = np.flatnonzero(stuck)
+            self._report_stuck(rows[s], partner[s], mine[rows[s]], theirs[rows[s]], depth)
+        return rows_in(st.n, rows[k:k + moving])
 
     @staticmethod
     def _stuck_codes(entity_lo: I64, entity_hi: I64, capsule_lo: I64, capsule_hi: I64) -> I64:

@@ -230,20 +230,23 @@ def _chain_text(mask: int) -> str:
     return "+".join(g for i, g in enumerate(GROUPS) if mask >> i & 1) or "none"
 
 
-def playable_clips(sim: Simulation) -> list[list[int]]:
-    """Per store row, the clips the character may play (bank indices): the one it plays, those
-    queued, its locomotion set's, and those a trigger's ``Play`` (and its ``then``) gives it."""
+def playable_clips(sim: Simulation, rows: I64 | None = None) -> list[list[int]]:
+    """Per store row (or per one of ``rows`` (k,), in that order), the clips the character may
+    play (bank indices): the one it plays, those queued, its locomotion set's, and those a
+    trigger's ``Play`` (and its ``then``) gives it."""
     st, bank = sim.store, sim.bank
+    picked = list(range(st.n)) if rows is None else [int(r) for r in rows]
+    at = {r: i for i, r in enumerate(picked)}
     row_of = {int(e): r for r, e in enumerate(st.entity.tolist())}
-    clips: list[list[int]] = [[int(st.clip[r])] for r in range(st.n)]
-    for r in range(st.n):
-        clips[r] += st.queue_clip[r, :st.queue_len[r]].tolist() + \
+    clips: list[list[int]] = [[int(st.clip[r])] for r in picked]
+    for i, r in enumerate(picked):
+        clips[i] += st.queue_clip[r, :st.queue_len[r]].tolist() + \
             [int(c) for c in st.gait_clip[r] if c >= 0]
     for trigger in sim.reactions.triggers:
         for action in trigger.then:
-            if isinstance(action, Play) and action.entity in row_of:
+            if isinstance(action, Play) and row_of.get(action.entity, -1) in at:
                 names = [action.clip] + [q.clip for q in action.then]
-                clips[row_of[action.entity]] += [bank.index(n) for n in names]
+                clips[at[row_of[action.entity]]] += [bank.index(n) for n in names]
     return [list(dict.fromkeys(c)) for c in clips]
 
 
@@ -283,23 +286,42 @@ def _even(start: F64, stop: F64) -> F64:
     return times
 
 
-def feasibility(sim: Simulation) -> list[Feasibility]:
-    """Every constraint's estimate (the module docstring), in the constraint table's order, on
-    the bodies the characters have or are blending into (their Morphology components)."""
-    table, st, bank = sim.constraints, sim.store, sim.bank
-    m = table.m
-    if m == 0 or st.n == 0:
-        return []
-    lengths = st.lengths.copy()
+def body_lengths(sim: Simulation) -> F64:
+    """(n, N_LENGTHS) each character's body as the estimate takes it: its Morphology
+    component's (while a blend runs, the body it blends into)."""
+    lengths = sim.store.lengths.copy()
     body_rows, bodies = sim.rows_and_components(Morphology)
     lengths[body_rows] = [b.lengths for b in bodies]
+    return lengths
+
+
+def feasibility(sim: Simulation, constraints: I64 | None = None) -> list[Feasibility]:
+    """Every constraint's estimate (the module docstring), in the constraint table's order, on
+    the bodies the characters have or are blending into (their Morphology components); or those
+    of the table rows ``constraints`` (k,) alone, in that order: the same estimates (each
+    constraint's own poses and its target's, nothing shared), made from those characters'
+    poses only."""
+    table, st, bank = sim.constraints, sim.store, sim.bank
+    if table.m == 0 or st.n == 0:
+        return []
+    ks = np.arange(table.m) if constraints is None else np.asarray(constraints, np.int64)
+    m = ks.size
+    if m == 0:
+        return []
+    lengths = body_lengths(sim)
     names = sim.names()
     duration = bank.duration_s(np.arange(bank.n_frames.size))
-    # Every character's library: each playable clip at POSES_PER_CLIP times over it.
-    playable = playable_clips(sim)
+    owner = table.owner[ks]
+    body = table.target_kind[ks] != TARGET_WORLD
+    target_row = np.where(body, table.target_row[ks], owner)
+    # The library of every character these constraints involve: each playable clip at
+    # POSES_PER_CLIP times over it (as wide as the one that plays the most; the rest padded,
+    # left out of every minimum).
+    involved = np.unique(np.concatenate([owner, target_row]))
+    playable = playable_clips(sim, involved)
     width = max(len(c) for c in playable) * POSES_PER_CLIP
     lib_clip = np.full((st.n, width), -1, np.int64)
-    for r, clips in enumerate(playable):
+    for r, clips in zip(involved.tolist(), playable, strict=True):
         lib_clip[r, :len(clips) * POSES_PER_CLIP] = np.repeat(clips, POSES_PER_CLIP)
     in_library = lib_clip >= 0
     lib_clip = np.where(in_library, lib_clip, st.clip[:, None])
@@ -307,11 +329,10 @@ def feasibility(sim: Simulation) -> list[Feasibility]:
     lib_time = phase[None] * duration[lib_clip]
 
     # The constraint's own poses: its clock's clip over its activation, or the whole library.
-    owner = table.owner
-    clocked = table.clock >= 0
-    clock = np.maximum(table.clock, 0)
-    start = np.clip(table.activation[:, 0], 0.0, duration[clock])
-    stop = np.clip(table.activation[:, 1], start, duration[clock])
+    clocked = table.clock[ks] >= 0
+    clock = np.maximum(table.clock[ks], 0)
+    start = np.clip(table.activation[ks, 0], 0.0, duration[clock])
+    stop = np.clip(table.activation[ks, 1], start, duration[clock])
     own_clip = np.where(clocked[:, None], np.pad(np.repeat(clock[:, None], POSES_PER_CLIP, 1),
                                                  ((0, 0), (0, width - POSES_PER_CLIP)), "edge"),
                         lib_clip[owner])
@@ -323,63 +344,73 @@ def feasibility(sim: Simulation) -> list[Feasibility]:
 
     # A target on the body itself that the trunk carries moves with the trunk: the trunk
     # brings the point no nearer to it.
-    body = table.target_kind != TARGET_WORLD
-    target_row = np.where(body, table.target_row, owner)
     self_target = body & (target_row == owner)
-    carried = self_target & np.isin(_SEGMENT_GROUP[table.target_segment], ABOVE_TRUNK)
-    chain = np.where(carried, table.chain & ~(1 << TRUNK), table.chain)
-    reach, anchor_joint = chain_reach(lengths[owner], table.segment, table.fraction,
-                                      table.offset, chain)
+    carried = self_target & np.isin(_SEGMENT_GROUP[table.target_segment[ks]], ABOVE_TRUNK)
+    chain = np.where(carried, table.chain[ks] & ~(1 << TRUNK), table.chain[ks])
+    reach, anchor_joint = chain_reach(lengths[owner], table.segment[ks], table.fraction[ks],
+                                      table.offset[ks], chain)
     anchor = own.positions[np.arange(m * width), np.repeat(anchor_joint, width)].reshape(m, width, 3)
 
-    # Targets: (m, width) points (a world target repeated).
-    lib = pose_library(sim, lengths, np.repeat(np.arange(st.n), width), lib_clip.reshape(-1),
-                       lib_time.reshape(-1))
-    segment = np.repeat(table.target_segment, width)
-    fraction = np.repeat(table.target_fraction, width)
-    offset = np.repeat(table.target_offset, width, axis=0)
-    on_other = point_positions(lib, (target_row[:, None] * width + np.arange(width)[None]).reshape(-1),
-                               segment, fraction, offset)
-    on_self = point_positions(own, np.arange(m * width), segment, fraction, offset)
-    target_points = np.where(np.repeat(self_target, width)[:, None], on_self, on_other)
-    target_points = np.where(np.repeat(body, width)[:, None], target_points,
-                             np.repeat(table.target_world, width, axis=0)).reshape(m, width, 3)
+    # Targets: (m, width) points (a world target repeated); the library of the characters
+    # another's target lies on (``lib_row``: each constraint's target's block in it).
+    targeted = np.unique(target_row[body & ~self_target])
+    lib = pose_library(sim, lengths, np.repeat(targeted, width), lib_clip[targeted].reshape(-1),
+                       lib_time[targeted].reshape(-1)) if targeted.size else None
+    lib_row = np.zeros(st.n, np.int64)
+    lib_row[targeted] = np.arange(targeted.size)
+    lib_row = lib_row[target_row]
+    segment = np.repeat(table.target_segment[ks], width)
+    fraction = np.repeat(table.target_fraction[ks], width)
+    offset = np.repeat(table.target_offset[ks], width, axis=0)
+    target_points = np.repeat(table.target_world[ks], width, axis=0)
+    on_other = np.flatnonzero(np.repeat(body & ~self_target, width))
+    if on_other.size:
+        assert lib is not None
+        pose = (lib_row[:, None] * width + np.arange(width)[None]).reshape(-1)[on_other]
+        target_points[on_other] = point_positions(lib, pose, segment[on_other],
+                                                  fraction[on_other], offset[on_other])
+    on_self = np.flatnonzero(np.repeat(self_target, width))
+    if on_self.size:
+        target_points[on_self] = point_positions(own, on_self, segment[on_self],
+                                                 fraction[on_self], offset[on_self])
+    target_points = target_points.reshape(m, width, 3)
     target_ok = np.where(self_target[:, None], own_ok, in_library[target_row]) | ~body[:, None]
 
     # Distances from every own pose's anchor to every target pose (self targets: same pose),
     # a pass of constraints at a time.
     nearest = np.empty(m)
     for first in range(0, m, CONSTRAINTS_PER_PASS):
-        ks = np.arange(first, min(first + CONSTRAINTS_PER_PASS, m))
-        gap = _needed(lengths, table, ks, target_row[ks], target_points[ks], anchor[ks], lib,
-                      width)
-        pair_ok = own_ok[ks, :, None] & target_ok[ks, None, :]
-        pair_ok &= np.where(self_target[ks, None, None], np.eye(width, dtype=bool)[None], True)
-        nearest[ks] = np.min(np.where(pair_ok, gap, np.inf), axis=(1, 2))
+        some = np.arange(first, min(first + CONSTRAINTS_PER_PASS, m))
+        gap = _needed(lengths, table, ks[some], target_row[some], lib_row[some],
+                      target_points[some], anchor[some], lib, width)
+        pair_ok = own_ok[some, :, None] & target_ok[some, None, :]
+        pair_ok &= np.where(self_target[some, None, None], np.eye(width, dtype=bool)[None], True)
+        nearest[some] = np.min(np.where(pair_ok, gap, np.inf), axis=(1, 2))
+    kind = table.kind[ks]
     checked = np.isfinite(nearest) & (
-        (table.kind == KIND_POSITION) | (table.kind == KIND_DISTANCE)
-        | ((table.kind == KIND_AREA) & table.area_inside
-           & np.isin(table.area_shape, (AREA_SPHERE, AREA_BOX))))
+        (kind == KIND_POSITION) | (kind == KIND_DISTANCE)
+        | ((kind == KIND_AREA) & table.area_inside[ks]
+           & np.isin(table.area_shape[ks], (AREA_SPHERE, AREA_BOX))))
     short = np.where(checked, nearest - reach, np.nan)
-    stature = np.array([Morphology(body).stature for body in lengths])[owner]
+    stature = [Morphology(lengths[r]).stature for r in owner]
     out = []
-    for k in range(m):
-        r = int(owner[k])
-        if body[k]:
+    for i, k in enumerate(ks.tolist()):
+        r = int(owner[i])
+        if body[i]:
             point = _point_name(int(table.target_segment[k]), float(table.target_fraction[k]))
-            whose = "its own" if self_target[k] else f"{names[int(target_row[k])]}'s"
+            whose = "its own" if self_target[i] else f"{names[int(target_row[i])]}'s"
             target = f"{whose} {point}"
         else:
             x, y, z = table.target_world[k]
             target = f"({x:.2f}, {y:.2f}, {z:.2f})"
         out.append(Feasibility(int(table.uid[k]), names[r], table.names[k], target,
-                               _chain_text(int(chain[k])), float(stature[k]),
-                               float(reach[k]), float(short[k]), bool(checked[k])))
+                               _chain_text(int(chain[i])), float(stature[i]),
+                               float(reach[i]), float(short[i]), bool(checked[i])))
     return out
 
 
-def _needed(lengths: F64, table: ConstraintTable, ks: I64, target_row: I64, target_points: F64,
-            anchor: F64, lib: DecodedPose, width: int) -> F64:
+def _needed(lengths: F64, table: ConstraintTable, ks: I64, target_row: I64, lib_row: I64,
+            target_points: F64, anchor: F64, lib: DecodedPose | None, width: int) -> F64:
     """(k, width, width) how far each constraint ``ks`` (k,) (rows of ``table``) must take its
     point from its anchor (own pose, target pose): to the target's surface (a position on
     another character's capsule), to the target less the distance kept (distance), to the
@@ -396,8 +427,9 @@ def _needed(lengths: F64, table: ConstraintTable, ks: I64, target_row: I64, targ
                   & (kind == KIND_POSITION) & (capsule >= 0))
     s = np.flatnonzero(on_surface)
     if s.size:
+        assert lib is not None
         joints = CAPSULE_JOINTS[capsule[s]]
-        pose = target_row[s][:, None] * width + np.arange(width)[None]  # (s, width)
+        pose = lib_row[s][:, None] * width + np.arange(width)[None]  # (s, width)
         ends_a = lib.positions[pose, joints[:, None, 0]]
         ends_b = lib.positions[pose, joints[:, None, 1]]
         span = CAPSULE_SPAN[capsule[s]][:, None]
@@ -430,5 +462,5 @@ def _needed(lengths: F64, table: ConstraintTable, ks: I64, target_row: I64, targ
     return out
 
 
-__all__ = ["POSES_PER_CLIP", "SHORT_TOLERANCE_M", "Feasibility", "chain_reach", "feasibility",
-           "feasibility_lines", "playable_clips", "pose_library"]
+__all__ = ["POSES_PER_CLIP", "SHORT_TOLERANCE_M", "Feasibility", "body_lengths", "chain_reach",
+           "feasibility", "feasibility_lines", "playable_clips", "pose_library"]

@@ -16,7 +16,8 @@ from ecs_anim.core.body_points import GROUP_INDEX, body_point
 from ecs_anim.core.ground import Bumps, Combined, HeightGrid, Slope, Stairs, sheerest
 from ecs_anim.core.morphology import Morphology
 from ecs_anim.core.skeleton import LENGTH_INDEX as L
-from ecs_anim.runtime.feasibility import SHORT_TOLERANCE_M, chain_reach, ground_lines
+from ecs_anim.motion.constraint_table import TARGET_WORLD
+from ecs_anim.runtime.feasibility import SHORT_TOLERANCE_M, chain_reach, feasibility, ground_lines
 from ecs_anim.scenario import build_simulation, load_scenario
 
 #: A 1.0 m kicker kicks at a 1.75 m defender 1.5 m away: its 0.48 m legs cannot reach.
@@ -201,3 +202,84 @@ def test_the_sheerest_rise_and_grade_of_each_ground(ground, sheer) -> None:
 def test_the_shipped_grounds_can_be_walked_by_their_characters(name: str) -> None:
     with build_simulation(load_scenario(SCENARIOS_DIR / f"{name}.yaml")) as sim:
         assert ground_lines(sim) == []
+
+
+def test_say_unreachable_estimates_again_only_what_changed(monkeypatch) -> None:
+    """A moved target is estimated again alone, and said once when it goes out of reach; back
+    in reach it leaves ``unreachable()``, and out again it is said again. Nothing changed:
+    nothing is estimated."""
+    asked: list[list[int]] = []
+    estimate = feasibility
+
+    def counted(sim, constraints=None):
+        asked.append(list(constraints) if constraints is not None else [-1])
+        return estimate(sim, constraints)
+
+    monkeypatch.setattr("ecs_anim.runtime.simulation.feasibility", counted)
+    with build_simulation(load_scenario(SCENARIOS_DIR / "grasp_com.yaml")) as sim:
+        before = {e.uid: e for e in sim.feasibility()}
+        for _ in range(3):
+            sim.step()
+        table = sim.constraints
+        reachable = next(uid for uid, e in before.items() if e.reachable and e.checked)
+        row = int(table.rows_of(np.array([reachable]))[0])
+        owner = int(table.owner[row])
+        near = tuple(table.target_world[row])
+        far = tuple(sim.store.positions[owner, 0] + (5.0, 0.0, 0.0))
+        asked.clear()
+        sim.say_unreachable()  # nothing changed since the estimate: nothing estimated again
+        assert asked == [[]]
+        sim.set_target(reachable, far)
+        sim.say_unreachable()
+        sim.say_unreachable()
+        assert asked[1:] == [[row], []]
+        said = [m for m in sim.messages if before[reachable].constraint in m]
+        (full,) = [e for e in estimate(sim) if e.uid == reachable]
+        assert len(said) == 1 and said[0].endswith(full.line) and "cannot reach" in full.line
+        assert reachable in sim.unreachable()
+        assert sim.unreachable() == {e.uid for e in estimate(sim) if not e.reachable}
+        sim.set_target(reachable, near)
+        sim.say_unreachable()
+        assert reachable not in sim.unreachable()
+        sim.set_target(reachable, far)
+        sim.say_unreachable()
+        assert len([m for m in sim.messages if before[reachable].constraint in m]) == 2
+
+
+def test_the_estimate_of_some_constraints_is_the_full_ones() -> None:
+    """``feasibility(sim, rows)`` (what say_unreachable asks) gives, for those rows, what every
+    constraint's estimate gives them: body targets, self targets and keep-out areas of the
+    fight, at the start and mid-kick (to 1e-12 m; the same lines)."""
+    with build_simulation(load_scenario(SCENARIOS_DIR / "fight_training.yaml")) as sim:
+        for ticks in (0, 30):
+            for _ in range(ticks):
+                sim.step()
+            full = feasibility(sim)
+            for rows in [np.array([k]) for k in range(len(full))] + [np.arange(len(full))[::-3]]:
+                some = feasibility(sim, rows)
+                assert [e.line for e in some] == [full[k].line for k in rows]
+                np.testing.assert_allclose([e.short_m for e in some],
+                                           [full[k].short_m for k in rows], rtol=0, atol=1e-12)
+
+
+def test_a_body_change_estimates_again_the_constraints_on_or_at_that_body(monkeypatch) -> None:
+    """set_body: the constraints its character owns or aims at are estimated again, the others
+    keep their estimate; a second say with nothing changed estimates nothing."""
+    asked: list[list[int]] = []
+
+    def counted(sim, constraints=None):
+        asked.append(list(constraints) if constraints is not None else [-1])
+        return feasibility(sim, constraints)
+
+    monkeypatch.setattr("ecs_anim.runtime.simulation.feasibility", counted)
+    with build_simulation(load_scenario(SCENARIOS_DIR / "fight_training.yaml")) as sim:
+        sim.feasibility()
+        kicker = sim.entity("kicker_2")
+        row, table = sim.row(kicker), sim.constraints
+        involved = np.flatnonzero((table.owner == row) | ((table.target_kind != TARGET_WORLD)
+                                                          & (table.target_row == row)))
+        asked.clear()
+        sim.set_body(kicker, Morphology.from_stature(1.2))
+        sim.say_unreachable()
+        assert asked == [involved.tolist(), []] and 0 < involved.size < table.m
+        assert sim.unreachable() == {e.uid for e in feasibility(sim) if not e.reachable}

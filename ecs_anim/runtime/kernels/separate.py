@@ -7,8 +7,11 @@ only. :func:`push_rows` mirrors the rest of ``CollisionSeparate._separate`` for 
 move: the push kept off the chain's last one (``_deflect``), the fold of a limb (``_fold``), the
 limb's turn, the foot of a held leg kept (``_keep_feet``), the new limb frames and the step of
 a body with no foot down. Each entry is one row's own (the rows are distinct), so the entries'
-order does not matter. The numpy methods of :class:`ecs_anim.systems.collision_separate.
-CollisionSeparate` are the reference (same results to 1e-9 m: tests/runtime/kernels/
+order does not matter. A round calls them through :func:`try_rows` (its pairs picked, then
+:func:`turn_rows` for both sides of each) and :func:`share_and_push` (each pair's shares, then
+:func:`push_rows`), the ground asked between the two: the numpy that gathered and scattered the
+entries between the kernels was half a round's cost. The numpy methods of
+:class:`ecs_anim.systems.collision_separate.CollisionSeparate` are the reference (same results to 1e-9 m: tests/runtime/kernels/
 test_kernels_separate.py).
 """
 
@@ -191,3 +194,89 @@ def push_rows(lo: int, hi: int, rows: I64, partner: I64, capsule: I64, at: F64, 
                 step = moved / max(h, 1e-12) / leg_length[r]
                 root_position[r, 0] += toward[0] * step
                 root_position[r, 1] += toward[1] * step
+
+
+@jit(nogil=True)
+def try_rows(watch: I64, depth: F64, other: I64, mine: I64, theirs: I64, normal: F64,
+             point: F64, stalled: I64, separate_from_m: float, margin_m: float, patience: int,
+             positions: F64, lengths: F64, leg_length: F64, pin: F64, aims_at: I64,
+             trunk_claimed: B, contact_weight: F64, frozen: B, capsule_chain: I64,
+             limb_root: I64, limb_end: I64, toe: I64, ankle_height: I64,
+             ball_height_per_leg: float, max_turn_rad: float, min_lever_m: float, rows: I64,
+             partner: I64, capsule: I64, at: F64, way: F64, distance: F64, can: B, feet: F64,
+             clearance: F64, ask_ground: B) -> int:
+    """A round's pairs and whether each side may move (``CollisionSeparate._separate`` up to
+    its shares, compiled): the ``k`` rows of ``watch`` (w,) overlapping deeper than
+    ``separate_from_m`` m that still try (``stalled`` below ``patience``), in ``watch``'s
+    order, as entries ``0..k-1`` (their capsule ``mine``, point ``point``, way ``normal``,
+    ``depth`` + ``margin_m``) and their partners (``other``) as entries ``k..2k-1`` (capsule
+    ``theirs``, the same point, the opposite way); then :func:`turn_rows` over the ``2k``
+    entries (``can``, ``feet``, ``clearance``, ``ask_ground``: the caller asks the ground).
+    The entry arrays (2w, ...) are written; returns ``k``."""
+    k = 0
+    for w in watch:
+        if depth[w] > separate_from_m and stalled[w] < patience:
+            rows[k] = w
+            k += 1
+    for e in range(k):
+        r = rows[e]
+        t = other[r]
+        rows[k + e], partner[e], partner[k + e] = t, t, r
+        capsule[e], capsule[k + e] = mine[r], theirs[r]
+        full = depth[r] + margin_m
+        distance[e], distance[k + e] = full, full
+        for x in range(3):
+            at[e, x], at[k + e, x] = point[r, x], point[r, x]
+            way[e, x], way[k + e, x] = normal[r, x], -normal[r, x]
+    turn_rows(0, 2 * k, rows, partner, capsule, at, way, distance, positions, lengths,
+              leg_length, pin, aims_at, trunk_claimed, contact_weight, frozen, capsule_chain,
+              limb_root, limb_end, toe, ankle_height, ball_height_per_leg, max_turn_rad,
+              min_lever_m, can, feet, clearance, ask_ground)
+    return k
+
+
+@jit(nogil=True)
+def share_and_push(k: int, rows: I64, partner: I64, capsule: I64, at: F64, way: F64,
+                   can: B, priority: F64, stalled: I64, depth: F64, patience: int,
+                   margin_m: float, stuck: B, positions: F64, lengths: F64, leg_length: F64,
+                   pin: F64, aims_at: I64, frozen: B, pushed_way: F64, pushed_chain: I64,
+                   pelvis2world: F64, thorax2world: F64, leg2world: F64, arm2world: F64,
+                   leg_fraction: F64, arm_fraction: F64, leg_frame: F64, arm_frame: F64,
+                   foot_dir: F64, root_position: F64, capsule_chain: I64, distal: B,
+                   limb_root: I64, limb_middle: I64, limb_end: I64, limb_segments: I64,
+                   max_turn_rad: float, min_lever_m: float, max_deflection: float,
+                   min_fold_share: float, max_reach_share: float, distance: F64) -> int:
+    """The rest of ``CollisionSeparate._separate`` for :func:`try_rows`' ``k`` pairs, compiled:
+    each pair's share of the way (the lower priority moves; equal ones halve it; all of it
+    when the partner may not move or stopped trying), ``stuck`` (k,) the pairs where neither
+    may move (the caller warns; entries ``0..k-1`` are left as they are), and
+    :func:`push_rows` over the rows that move, gathered in their order into the entries
+    ``k..k+g-1`` of ``rows``, ``partner``, ``capsule``, ``at``, ``way`` and ``distance`` (their
+    depth times the share, plus ``margin_m``). Returns ``g``."""
+    g = 0
+    for e in range(k):
+        r, t = rows[e], partner[e]
+        if priority[r] < priority[t]:
+            share = 1.0
+        elif priority[r] == priority[t]:
+            share = 0.5
+        else:
+            share = 0.0
+        if not (can[k + e] and stalled[t] < patience):
+            share = 1.0
+        share = share * can[e]
+        stuck[e] = not can[e] and not can[k + e]
+        if share > 0:  # (entry k + e, the partner's, is read: entries up to it are free)
+            m = k + g
+            rows[m], partner[m], capsule[m] = r, t, capsule[e]
+            for x in range(3):
+                at[m, x], way[m, x] = at[e, x], way[e, x]
+            distance[m] = depth[r] * share + margin_m
+            g += 1
+    push_rows(k, k + g, rows, partner, capsule, at, way, distance, positions, lengths, leg_length,
+              pin, aims_at, frozen, pushed_way, pushed_chain, pelvis2world, thorax2world,
+              leg2world, arm2world, leg_fraction, arm_fraction, leg_frame, arm_frame, foot_dir,
+              root_position, capsule_chain, distal, limb_root, limb_middle, limb_end,
+              limb_segments, max_turn_rad, min_lever_m, max_deflection, min_fold_share,
+              max_reach_share)
+    return g

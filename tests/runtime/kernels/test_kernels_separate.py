@@ -30,15 +30,16 @@ def chains_moved_alike(compiled: Simulation, reference: Simulation, steps: int) 
     overlaps and poses after every step; returns how many chains the compiled rounds moved."""
     separate_of(reference).compiled = False
     system = separate_of(compiled)
-    pushes = system._push
+    rounds = system._separate_compiled
     moved = 0
 
-    def counted(rows, *args):
+    def counted(*args):
         nonlocal moved
+        rows = rounds(*args)
         moved += rows.size
-        pushes(rows, *args)
+        return rows
 
-    system._push = counted
+    system._separate_compiled = counted
     for _ in range(steps):
         compiled.step()
         reference.step()
