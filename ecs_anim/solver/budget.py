@@ -406,7 +406,9 @@ class FrameBudget:
             solve_s = solve_s if last_run_s is None else last_run_s
             tick_ms = (cpu_s - self._mark_cpu_s) * scale
             if self._calibrations >= MARGIN_AFTER:
-                self._measure_margin(tick_ms - before_ms)
+                kept = self._measure_margin(tick_ms - before_ms)
+                solve_s *= kept
+                tick_ms = before_ms + kept * (tick_ms - before_ms)
             measured = SolverCostModel.calibrated(tick_ms, solve_s * scale, iterations, characters)
             self._calibrations += 1
             if measured is not None:
@@ -421,22 +423,30 @@ class FrameBudget:
         self._marks += 1
         self._last_solve = None
         usual_before = before_ms if self._usual_before_ms is None else self._usual_before_ms
-        if not first:
+        if not first:  # (smoothed as the model's fixed part, which holds this tick's too)
             self._usual_before_ms = usual_before + MODEL_SMOOTHING * (before_ms - usual_before)
+        self._tick_usual_before_ms = self._usual_before_ms or 0.0
         self.model, self.margin_factor = self.calibrated, 1.0
         if self.calibrated is not None:
             stall = before_ms / usual_before if usual_before >= STALL_MIN_MS else 1.0
             self.margin_factor = min(max(self.margin, stall), MARGIN_CEILING)
-            self.model = self.calibrated.with_margin(before_ms, usual_before, self.margin_factor)
-        self._tick_usual_before_ms = usual_before
+            self.model = self.calibrated.with_margin(before_ms, self._tick_usual_before_ms,
+                                                     self.margin_factor)
         self._rest_expected_ms = None
 
-    def _measure_margin(self, rest_ms: float) -> None:
+    def _measure_margin(self, rest_ms: float) -> float:
         """The last tick's rest (ConstraintSolve and the systems after it) took ``rest_ms``: the
-        margin is the larger of its ratio to the model's cost of it and the margin decayed."""
+        margin is the larger of its ratio to the model's cost of it and the margin decayed.
+        Returns the share of the rest the model is calibrated on: a rest beyond the margin it
+        had is the spread's (the margin's), not the mean's, so it is counted only up to it."""
         decayed = 1.0 + (self.margin - 1.0) * MARGIN_DECAY
-        ratio = 0.0 if not self._rest_expected_ms else rest_ms / self._rest_expected_ms
+        if not self._rest_expected_ms or rest_ms <= 0.0:
+            self.margin = max(decayed, MARGIN_FLOOR)
+            return 1.0
+        ratio = rest_ms / self._rest_expected_ms
+        kept = min(1.0, self.margin / ratio)
         self.margin = min(max(decayed, ratio, MARGIN_FLOOR), MARGIN_CEILING)
+        return kept
 
     def aimed(self, settings: SolverSettings, model: SolverCostModel | None) -> SolverSettings:
         """The settings the cut decides by, ``model`` the solved characters' (:meth:`for_cut`):
