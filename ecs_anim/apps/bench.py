@@ -134,8 +134,8 @@ def separate_cut(sim: Any) -> bool:
     return any(s.rounds_cut for s in sim.systems if isinstance(s, CollisionSeparate))
 
 
-#: A tick over the budget was the machine's when each of its parts (the systems before the
-#: solve, ConstraintSolve, the systems after it) took at least this times its median.
+#: A tick over the budget was the machine's when the systems before the solve and those after
+#: it (which the budget does not change) each took at least this times their median.
 SLOWED_ALIKE = 1.15
 
 
@@ -189,15 +189,15 @@ class BudgetTicks:
         (min, median, 95th percentile, max); how many ticks went over ``budget_ms`` (CPU, and
         wall); the largest change of the characters cut (cut + slowed + dropped) from one tick
         to the next; the ticks whose separation the budget ended; the budget's margin factor
-        (min, median, max); of the ticks over by CPU, those whose every part took at least
-        :data:`SLOWED_ALIKE` times its median (the machine slowed: other processes on the
-        core, or on the other one sharing its memory)."""
+        (min, median, max); of the ticks over by CPU, those whose systems before the solve and
+        after it both took at least :data:`SLOWED_ALIKE` times their median (the machine
+        slowed: other processes on the core, or on the other one sharing its memory)."""
         cut, dropped, slowed = np.array(self.cut), np.array(self.dropped), np.array(self.slowed)
         cpu, wall = np.array(self.cpu_ms), np.array(self.wall_ms)
         parts = np.array(self.parts).reshape(-1, 4)
-        timed = parts[:, :3]
-        alike = (timed >= SLOWED_ALIKE * np.median(timed, axis=0)).all(axis=1) if cpu.size \
-            else np.zeros(0, bool)
+        unbudgeted = parts[:, [0, 2]]  # (before the solve, after it)
+        alike = (unbudgeted >= SLOWED_ALIKE * np.median(unbudgeted, axis=0)).all(axis=1) \
+            if cpu.size else np.zeros(0, bool)
 
         def spread(a: NDArray[Any]) -> list[float]:
             return [float(a.min()), float(np.median(a)), float(a.max())] if a.size else [0.0] * 3
@@ -580,15 +580,15 @@ def print_budget_ticks(budget: dict[str, Any]) -> None:
                      if s["ticks_separation_cut"] else ""))
         print(f"  {'':10s} margin on the model x{spread(s['margin_factor_spread'], 2)}"
               + (f"; of the {s['ticks_over_budget_cpu']} ticks over, "
-                 f"{s['ticks_over_slowed_alike']} slowed in every part alike (the machine)"
+                 f"{s['ticks_over_slowed_alike']} slowed alike (the machine)"
                  if s["ticks_over_budget_cpu"] else ""))
         if s["floor_ms"] > budget["budget_ms"]:
             print(f"  {'':10s} even with every character dropped the tick costs "
                   f"{s['floor_ms']:.1f} ms: the budget cannot hold at {s['characters']}")
     print("  (characters per tick min/median/max; ticks over the budget by CPU time, the "
           "budget's clock, and by wall time, which other processes on the core also take; "
-          f"slowed alike: the systems before the solve, the solve and those after it each at "
-          f"{SLOWED_ALIKE:g} x its median or more)")
+          f"slowed alike: the systems before the solve and those after it both at "
+          f"{SLOWED_ALIKE:g} x their median or more)")
 
 
 # --- bench import ---------------------------------------------------------------------------

@@ -107,8 +107,8 @@ def test_bench_budget_prints_the_cut_tick_by_tick(capsys):
 
 
 def test_bench_budget_tells_the_ticks_over_the_machine_slowed():
-    """Of the ticks over the budget, those whose every part (the systems before the solve,
-    the solve, those after it) took SLOWED_ALIKE times its median or more: here one of two."""
+    """Of the ticks over the budget, those whose systems before the solve and after it (which
+    the budget does not change) took SLOWED_ALIKE times their median or more: one of two."""
     from ecs_anim.apps.bench import BudgetTicks
 
     class Report:

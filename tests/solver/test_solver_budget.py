@@ -349,10 +349,11 @@ def test_the_margin_is_the_largest_recent_ratio_decaying():
     budget = ticks.tick()  # (a tick is measured at the next one's mark)
     assert budget.margin == pytest.approx(1.5) and budget.margin_factor == pytest.approx(1.5)
     # The model's mean learnt that tick only up to the margin it had (the rest is the spread's).
-    assert budget.calibrated.tick_ms(100, 100) == pytest.approx(
+    calibrated, model = budget.calibrated, budget.model
+    assert calibrated is not None and model is not None
+    assert calibrated.tick_ms(100, 100) == pytest.approx(
         4.0 + 16.0 * (1.0 + 0.2 * (MARGIN_FLOOR - 1.0)))
-    assert budget.model.tick_ms(100, 100) == pytest.approx(
-        4.0 + 1.5 * (budget.calibrated.tick_ms(100, 100) - 4.0))
+    assert model.tick_ms(100, 100) == pytest.approx(4.0 + 1.5 * (calibrated.tick_ms(100, 100) - 4.0))
     for k in range(1, 6):
         budget = ticks.tick()
         assert budget.margin == pytest.approx(1.0 + 0.5 * MARGIN_DECAY ** k, abs=0.02)
