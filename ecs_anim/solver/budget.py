@@ -11,8 +11,17 @@ on the machine). Each solved character is expected to take the iterations it nee
 solved uncut (the settings' ``iterations`` before that): a character the budget stopped at its
 cap does not look cheap on the next tick, so the cut does not alternate between all and none.
 
-The budget is aimed at :data:`TARGET_SHARE` of ``budget_ms`` (the model's error and the tick's
-noise fit in the rest). When the tick would overrun it, in this order:
+A tick is held within :data:`HOLD_SHARE` of ``budget_ms`` by this tick's model
+(:attr:`FrameBudget.model`): what the systems before ConstraintSolve took this tick, as
+measured, plus the calibrated cost of the rest of the tick (the solve, the systems after it)
+times a margin taken from the machine's observed spread (:attr:`FrameBudget.margin_factor`): the
+largest recent ratio of a tick's rest to the model's cost of it, decaying by
+:data:`MARGIN_DECAY` a tick (between :data:`MARGIN_FLOOR` and :data:`MARGIN_CEILING`), or, if
+larger, how much slower than usual the systems before the solve ran this tick (a machine slowed
+by other processes slows the whole tick, and for a few ticks at a time). A tick beyond the margin
+moves the model's mean only up to it: the spread is the margin's, not counted twice. (On a
+shared machine the margin is the price of holding every tick: a margin of 1.3 keeps 1.3 times
+fewer solves' worth of the budget.) When the tick would overrun it, in this order:
 
 1. the lowest-priority constraints, one priority at a time from the lowest, one iteration at a
    time down to one (:func:`cut_to_budget`): a cut goal no longer keeps its character's loop
@@ -33,7 +42,8 @@ noise fit in the rest). When the tick would overrun it, in this order:
 4. and when even every character every 16th tick does not fit, the last ranked are *dropped*:
    their constraints are switched off, and they play and stand on the ground as every
    unconstrained character. Dropped characters come back only once the tick with them fits in
-   :data:`RESTORE_SHARE` of the budget (hysteresis: between the two shares nothing changes;
+   :data:`RESTORE_SHARE` / :data:`TARGET_SHARE` of the held share (hysteresis: between the two
+   nothing changes;
    the same holds the level of detail: it goes down at once and up only past that share,
    :func:`solve_capacity`), their constraints fading in over :data:`RESTORE_RAMP_S`. When
    even dropping every character leaves the tick over its budget (the model's ``fixed_ms``),
@@ -450,11 +460,12 @@ class FrameBudget:
 
     def aimed(self, settings: SolverSettings, model: SolverCostModel | None) -> SolverSettings:
         """The settings the cut decides by, ``model`` the solved characters' (:meth:`for_cut`):
-        the budget aimed at :data:`TARGET_SHARE` of itself when the model is measured (a given
-        ``cost_model`` is taken as exact), as the character-iterations it allows: fewer as soon
-        as the model says so, more only once :data:`RESTORE_SHARE` of the budget allows more
-        than last tick (in between, last tick's), so the cut does not follow the measurements'
-        noise from tick to tick."""
+        the budget held at :data:`HOLD_SHARE` of itself when the model is measured (this
+        tick's, with its margin; a given ``cost_model`` is taken as exact), as the
+        character-iterations it allows: fewer as soon as the model says so, more only once
+        :data:`RESTORE_SHARE` / :data:`TARGET_SHARE` of that allows more than last tick (in
+        between, last tick's), so the cut does not follow the measurements' noise from tick
+        to tick."""
         if settings.budget_ms is None or model is None:
             return settings
         share = 1.0 if settings.cost_model is not None else HOLD_SHARE
