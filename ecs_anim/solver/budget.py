@@ -19,9 +19,10 @@ largest recent ratio of a tick's rest to the model's cost of it, decaying by
 :data:`MARGIN_DECAY` a tick (between :data:`MARGIN_FLOOR` and :data:`MARGIN_CEILING`), or, if
 larger, how much slower than usual the systems before the solve ran this tick (a machine slowed
 by other processes slows the whole tick, and for a few ticks at a time). A tick beyond the margin
-moves the model's mean only up to it: the spread is the margin's, not counted twice. (On a
-shared machine the margin is the price of holding every tick: a margin of 1.3 keeps 1.3 times
-fewer solves' worth of the budget.) When the tick would overrun it, in this order:
+moves the model's mean only up to it: the spread is the margin's, not counted twice. (The
+margin is the price of holding every tick on a shared machine: the rest of the tick is given
+1 / margin of what the systems before the solve leave of the budget.) When the tick would
+overrun it, in this order:
 
 1. the lowest-priority constraints, one priority at a time from the lowest, one iteration at a
    time down to one (:func:`cut_to_budget`): a cut goal no longer keeps its character's loop
