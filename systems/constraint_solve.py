@@ -202,8 +202,10 @@ class ConstraintSolve(System):
         if table.m == 0:
             self._go_back(np.zeros(0, np.int64))
             return
+        before = sim.systems[:sim.systems.index(self)]  # (this tick's runs: known to the budget)
         self.budget.start_tick(sum(system.cpu_seconds for system in sim.systems), threads(),
-                               sim.structure_version, st.n, self.last_cpu_seconds)
+                               sim.structure_version, st.n, self.last_cpu_seconds,
+                               sum(system.last_cpu_seconds for system in before))
         weight = table.weights(sim.time_s, st.clip, st.clip_time_s)
         if not self.all_rows():  # the characters without a Constraint component are not solved
             weight = np.where(self.in_rows()[table.owner], weight, 0.0)

@@ -97,7 +97,7 @@ def time_size(n: int, seconds: float, rotations: bool = False,
             cost_m = max(cost_m, float(np.nanmax(extra, initial=0.0)))
             cut_characters += len(report.cut_characters)
             ticks_cut += report.cut
-            per_tick.add(report, wall_s, cpu_s, separate_cut(sim))
+            per_tick.add(report, wall_s, cpu_s, separate_cut(sim), tick_parts(sim))
     after = sim.system_seconds()
     comparison = None
     if threads > 1:
@@ -134,11 +134,31 @@ def separate_cut(sim: Any) -> bool:
     return any(s.rounds_cut for s in sim.systems if isinstance(s, CollisionSeparate))
 
 
+#: A tick over the budget was the machine's when the systems before the solve and those after
+#: it (which the budget does not change) each took at least this times their median.
+SLOWED_ALIKE = 1.15
+
+
+def tick_parts(sim: Any) -> tuple[float, float, float, float]:
+    """This tick's CPU ms of the systems before ConstraintSolve, of ConstraintSolve, of the
+    systems after it, and the frame budget's margin factor on the model's cost of the last two
+    (:attr:`~ecs_anim.solver.budget.FrameBudget.margin_factor`)."""
+    from ecs_anim.systems import ConstraintSolve
+
+    systems = sim.systems
+    solve = next(s for s in systems if isinstance(s, ConstraintSolve))
+    mine = systems.index(solve)
+    return (sum(s.last_cpu_seconds for s in systems[:mine]) * 1e3,
+            solve.last_cpu_seconds * 1e3,
+            sum(s.last_cpu_seconds for s in systems[mine + 1:]) * 1e3,
+            solve.budget.margin_factor)
+
+
 class BudgetTicks:
     """Each timed tick of a budgeted run: the characters the budget cut to one iteration, those
     it solves every 2nd tick or less often (the level of detail) and those it dropped, whether
-    it ended the rounds of separation, and the tick's CPU and wall time (the step alone: the
-    twin scene stepped beside it is not counted)."""
+    it ended the rounds of separation, the tick's CPU and wall time (the step alone: the twin
+    scene stepped beside it is not counted), and its parts (:func:`tick_parts`)."""
 
     def __init__(self) -> None:
         self.cut: list[int] = []
@@ -149,8 +169,10 @@ class BudgetTicks:
         self.cpu_ms: list[float] = []
         self.wall_ms: list[float] = []
         self.floor_ms = float("nan")
+        self.parts: list[tuple[float, float, float, float]] = []
 
-    def add(self, report: Any, wall_s: float, cpu_s: float, separate_cut: bool = False) -> None:
+    def add(self, report: Any, wall_s: float, cpu_s: float, separate_cut: bool = False,
+            parts: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)) -> None:
         self.cut.append(len(report.cut_characters))
         self.dropped.append(len(report.dropped_characters))
         self.slowed.append(report.characters_slowed)
@@ -159,15 +181,23 @@ class BudgetTicks:
         self.wall_ms.append(wall_s * 1e3)
         self.cpu_ms.append(cpu_s * 1e3)
         self.floor_ms = report.floor_ms
+        self.parts.append(parts)
 
     def figures(self, budget_ms: float) -> dict[str, Any]:
         """min / median / max of the characters cut (to one iteration, solved less often than
         every tick, and dropped); the median number at each solve interval; the tick's CPU ms
         (min, median, 95th percentile, max); how many ticks went over ``budget_ms`` (CPU, and
         wall); the largest change of the characters cut (cut + slowed + dropped) from one tick
-        to the next; the ticks whose separation the budget ended."""
+        to the next; the ticks whose separation the budget ended; the budget's margin factor
+        (min, median, max); of the ticks over by CPU, those whose systems before the solve and
+        after it both took at least :data:`SLOWED_ALIKE` times their median (the machine
+        slowed: other processes on the core, or on the other one sharing its memory)."""
         cut, dropped, slowed = np.array(self.cut), np.array(self.dropped), np.array(self.slowed)
         cpu, wall = np.array(self.cpu_ms), np.array(self.wall_ms)
+        parts = np.array(self.parts).reshape(-1, 4)
+        unbudgeted = parts[:, [0, 2]]  # (before the solve, after it)
+        alike = (unbudgeted >= SLOWED_ALIKE * np.median(unbudgeted, axis=0)).all(axis=1) \
+            if cpu.size else np.zeros(0, bool)
 
         def spread(a: NDArray[Any]) -> list[float]:
             return [float(a.min()), float(np.median(a)), float(a.max())] if a.size else [0.0] * 3
@@ -184,7 +214,9 @@ class BudgetTicks:
                 "ticks_over_budget_cpu": int((cpu > budget_ms).sum()),
                 "ticks_over_budget_wall": int((wall > budget_ms).sum()),
                 "ticks_separation_cut": int(np.sum(self.separate_cut)),
-                "floor_ms": self.floor_ms}
+                "floor_ms": self.floor_ms,
+                "margin_factor_spread": spread(parts[:, 3]),
+                "ticks_over_slowed_alike": int((alike & (cpu > budget_ms)).sum())}
 
 
 #: Agents of the avoidance kernel's figure, and its ticks timed.
@@ -546,11 +578,17 @@ def print_budget_ticks(budget: dict[str, Any]) -> None:
             print(f"  {'':10s} solved (median a tick): {levels}"
                   + (f"; separation cut short on {s['ticks_separation_cut']} ticks"
                      if s["ticks_separation_cut"] else ""))
+        print(f"  {'':10s} margin on the model x{spread(s['margin_factor_spread'], 2)}"
+              + (f"; of the {s['ticks_over_budget_cpu']} ticks over, "
+                 f"{s['ticks_over_slowed_alike']} slowed alike (the machine)"
+                 if s["ticks_over_budget_cpu"] else ""))
         if s["floor_ms"] > budget["budget_ms"]:
             print(f"  {'':10s} even with every character dropped the tick costs "
                   f"{s['floor_ms']:.1f} ms: the budget cannot hold at {s['characters']}")
     print("  (characters per tick min/median/max; ticks over the budget by CPU time, the "
-          "budget's clock, and by wall time, which other processes on the core also take)")
+          "budget's clock, and by wall time, which other processes on the core also take; "
+          f"slowed alike: the systems before the solve and those after it both at "
+          f"{SLOWED_ALIKE:g} x their median or more)")
 
 
 # --- bench import ---------------------------------------------------------------------------

@@ -11,8 +11,18 @@ on the machine). Each solved character is expected to take the iterations it nee
 solved uncut (the settings' ``iterations`` before that): a character the budget stopped at its
 cap does not look cheap on the next tick, so the cut does not alternate between all and none.
 
-The budget is aimed at :data:`TARGET_SHARE` of ``budget_ms`` (the model's error and the tick's
-noise fit in the rest). When the tick would overrun it, in this order:
+A tick is held within :data:`HOLD_SHARE` of ``budget_ms`` by this tick's model
+(:attr:`FrameBudget.model`): what the systems before ConstraintSolve took this tick, as
+measured, plus the calibrated cost of the rest of the tick (the solve, the systems after it)
+times a margin taken from the machine's observed spread (:attr:`FrameBudget.margin_factor`): the
+largest recent ratio of a tick's rest to the model's cost of it, decaying by
+:data:`MARGIN_DECAY` a tick (between :data:`MARGIN_FLOOR` and :data:`MARGIN_CEILING`), or, if
+larger, how much slower than usual the systems before the solve ran this tick (a machine slowed
+by other processes slows the whole tick, and for a few ticks at a time). A tick beyond the margin
+moves the model's mean only up to it: the spread is the margin's, not counted twice. (The
+margin is the price of holding every tick on a shared machine: the rest of the tick is given
+1 / margin of what the systems before the solve leave of the budget.) When the tick would
+overrun it, in this order:
 
 1. the lowest-priority constraints, one priority at a time from the lowest, one iteration at a
    time down to one (:func:`cut_to_budget`): a cut goal no longer keeps its character's loop
@@ -33,7 +43,8 @@ noise fit in the rest). When the tick would overrun it, in this order:
 4. and when even every character every 16th tick does not fit, the last ranked are *dropped*:
    their constraints are switched off, and they play and stand on the ground as every
    unconstrained character. Dropped characters come back only once the tick with them fits in
-   :data:`RESTORE_SHARE` of the budget (hysteresis: between the two shares nothing changes;
+   :data:`RESTORE_SHARE` / :data:`TARGET_SHARE` of the held share (hysteresis: between the two
+   nothing changes;
    the same holds the level of detail: it goes down at once and up only past that share,
    :func:`solve_capacity`), their constraints fading in over :data:`RESTORE_RAMP_S`. When
    even dropping every character leaves the tick over its budget (the model's ``fixed_ms``),
@@ -64,8 +75,35 @@ F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 
 
-#: The share of the budget the cut aims at: the model's error and the tick's noise fit in the rest.
+#: The share of the budget CollisionSeparate's rounds aim at (what the systems before it took
+#: this tick, what those after it took last tick and its rounds); the ratio of
+#: :data:`RESTORE_SHARE` to it is the solve's hysteresis.
 TARGET_SHARE = 0.85
+#: The share of the budget the solve's cut holds a tick in by the model with its margin: what
+#: the systems before ConstraintSolve took this tick (measured) plus the model's cost of the
+#: rest of the tick times :attr:`FrameBudget.margin_factor` (the rest of the budget: the clock's
+#: reads and what the systems' timers do not see).
+HOLD_SHARE = 0.95
+#: The least margin on the model's cost of the rest of the tick (ConstraintSolve and the systems
+#: after it): the model's own error on a quiet machine.
+MARGIN_FLOOR = 1.1
+#: The most margin: past it, a slow machine's tick is not held by cutting the solve.
+MARGIN_CEILING = 2.0
+#: A margin raised by a slow tick keeps this share of its excess over 1 each tick (half of it
+#: after 14 ticks, about half a second at 30 Hz): a machine slowed by other processes stays so
+#: for a few ticks at a time, and the solves come back in steps, not at the next tick.
+MARGIN_DECAY = 0.95
+#: The margin is measured once the model has been calibrated this many times (a young model's
+#: errors are its own, not the machine's: 1 / :data:`MODEL_SMOOTHING`), and only on a tick
+#: whose solves are within :data:`STEADY_SHARE` of the last tick's, both solving every
+#: candidate or both not: the model, an average, errs when the solves change much (solving some
+#: rows costs more a row than solving every row: the level of detail setting in), and the
+#: calibration corrects that, not the margin.
+MARGIN_AFTER = 5
+STEADY_SHARE = 0.25
+#: The systems before the solve tell a slowed machine within the tick only when they take at
+#: least this (ms, smoothed): shorter, their own noise is larger than a slowdown.
+STALL_MIN_MS = 1.0
 #: Dropped characters come back once the tick with them fits in this share of the budget.
 RESTORE_SHARE = 0.75
 #: How far each measured tick moves the model (the weight of an exponential moving average).
@@ -114,6 +152,16 @@ class SolverCostModel:
         :func:`cut_to_budget` decides by: it changes only iterations)."""
         return SolverCostModel(self.ms_per_iteration,
                                self.fixed_ms + self.ms_per_character * characters)
+
+    def with_margin(self, before_ms: float, usual_before_ms: float, factor: float
+                    ) -> SolverCostModel:
+        """This model for a tick whose systems before the solve took ``before_ms`` where they
+        usually take ``usual_before_ms`` (part of ``fixed_ms``): the rest of the tick (the
+        solve's costs and the fixed part's remainder, the systems after the solve) times
+        ``factor``."""
+        after_ms = max(self.fixed_ms - usual_before_ms, 0.0)
+        return SolverCostModel(self.ms_per_iteration * factor, before_ms + after_ms * factor,
+                               self.ms_per_character * factor)
 
     @staticmethod
     def calibrated(tick_ms: float, solve_ms: float, iterations: int, characters: int = 0
@@ -304,12 +352,22 @@ def due(rows: I64, interval: I64, tick: int) -> NDArray[np.bool_]:
 
 class FrameBudget:
     """The frame budget's state between ticks (ConstraintSolve holds one, per simulation): the
-    cost model calibrated from the measured ticks (``model``), what each store row needed
-    when last solved uncut, and each row's presence (n,): 1 solved, 0 dropped, in between its
-    constraints fading back in. Reset when the store's rows change."""
+    cost model calibrated from the measured ticks (``calibrated``) and this tick's (``model``:
+    with what the systems before the solve took this tick and the margin), what each store row
+    needed when last solved uncut, and each row's presence (n,): 1 solved, 0 dropped, in between
+    its constraints fading back in. Reset when the store's rows change."""
 
     def __init__(self) -> None:
+        #: The model calibrated from the measured ticks (smoothed; None: none yet).
+        self.calibrated: SolverCostModel | None = None
+        #: This tick's model, the cut's (:meth:`start_tick`; None: none yet).
         self.model: SolverCostModel | None = None
+        #: The largest recent ratio of the rest of a tick (ConstraintSolve and the systems after
+        #: it) to the calibrated model's cost of it, decaying (:data:`MARGIN_DECAY`).
+        self.margin = MARGIN_FLOOR
+        #: This tick's factor on the model's cost of the rest of the tick: :attr:`margin`, or how
+        #: much slower than usual the systems before the solve ran this tick if more (1: no model).
+        self.margin_factor = 1.0
         self.presence: F64 = np.ones(0)
         #: (n,) every how many ticks each row is solved (0: dropped or no constraint).
         self.interval: I64 = np.zeros(0, np.int64)
@@ -320,52 +378,98 @@ class FrameBudget:
         self._version = -1
         self._mark_cpu_s: float | None = None
         self._marks = 0
+        self._calibrations = 0
         # The last tick's solve: (its CPU s, iterations, characters), calibrated against the
         # whole tick at the next mark; the character-iterations the cut allowed last tick.
         self._last_solve: tuple[float, int, int] | None = None
         self._allowance: float | None = None
+        # The systems before the solve, ms a tick (smoothed; this tick's before it moved), and
+        # the calibrated model's cost of the rest of the last tick, ms (None: not known), against
+        # which the margin is measured.
+        self._usual_before_ms: float | None = None
+        self._tick_usual_before_ms = 0.0
+        self._rest_expected_ms: float | None = None
+        # The last tick's solves: how many, and whether some candidates were not solved.
+        self._last_solves: tuple[int, bool] | None = None
 
     def start_tick(self, cpu_s: float, threads: int, version: int, n: int,
-                   last_run_s: float | None = None) -> None:
+                   last_run_s: float | None = None, before_s: float = 0.0) -> None:
         """At the start of ConstraintSolve's run: ``cpu_s`` every system's CPU time so far
         (s), over ``threads`` kernel threads; a whole tick lies between two marks, and the
         model moves towards it. ``version``/``n``: the store's structure and rows.
         ``last_run_s``: the CPU time of ConstraintSolve's whole last run (s), counted as the
         solve's (None: the solve's own, :meth:`solved`): what it costs around the solve (the
         goals, the targets, the errors, the held corrections) grows with the characters it
-        solves and holds, and is theirs, not the fixed part's."""
+        solves and holds, and is theirs, not the fixed part's. ``before_s``: what the systems
+        before ConstraintSolve took this tick (s): this tick's :attr:`model` counts it as it
+        was, the rest of the tick at the calibrated model's cost times :attr:`margin_factor`."""
         if version != self._version or self._need.size != n:
             self._version = version
             self._need = np.zeros(n, np.int64)
             self.presence = np.ones(n)
             self.interval = np.zeros(n, np.int64)
             self._allowance = None
+        scale = 1e3 / max(threads, 1)
+        before_ms = before_s * scale
         # (the first tick is not measured: it loads the kernels)
         if self._mark_cpu_s is not None and self._last_solve is not None and self._marks > 1:
             solve_s, iterations, characters = self._last_solve
             solve_s = solve_s if last_run_s is None else last_run_s
-            scale = 1e3 / max(threads, 1)
             tick_ms = (cpu_s - self._mark_cpu_s) * scale
+            if self._calibrations >= MARGIN_AFTER:
+                kept = self._measure_margin(tick_ms - before_ms)
+                solve_s *= kept
+                tick_ms = before_ms + kept * (tick_ms - before_ms)
             measured = SolverCostModel.calibrated(tick_ms, solve_s * scale, iterations, characters)
+            self._calibrations += 1
             if measured is not None:
-                self.model = measured if self.model is None else self.model.smoothed(measured)
-            elif self.model is not None:  # nothing solved: all of the tick is the fixed part
-                self.model = dataclasses.replace(self.model, fixed_ms=self.model.fixed_ms
-                                                 + MODEL_SMOOTHING * (tick_ms - self.model.fixed_ms))
+                self.calibrated = measured if self.calibrated is None \
+                    else self.calibrated.smoothed(measured)
+            elif self.calibrated is not None:  # nothing solved: all of the tick is the fixed part
+                self.calibrated = dataclasses.replace(
+                    self.calibrated, fixed_ms=self.calibrated.fixed_ms
+                    + MODEL_SMOOTHING * (tick_ms - self.calibrated.fixed_ms))
+        first = self._marks == 0  # (its systems load their kernels: not their usual time)
         self._mark_cpu_s = cpu_s
         self._marks += 1
         self._last_solve = None
+        usual_before = before_ms if self._usual_before_ms is None else self._usual_before_ms
+        if not first:  # (smoothed as the model's fixed part, which holds this tick's too)
+            self._usual_before_ms = usual_before + MODEL_SMOOTHING * (before_ms - usual_before)
+        self._tick_usual_before_ms = self._usual_before_ms or 0.0
+        self.model, self.margin_factor = self.calibrated, 1.0
+        if self.calibrated is not None:
+            stall = before_ms / usual_before if usual_before >= STALL_MIN_MS else 1.0
+            self.margin_factor = min(max(self.margin, stall), MARGIN_CEILING)
+            self.model = self.calibrated.with_margin(before_ms, self._tick_usual_before_ms,
+                                                     self.margin_factor)
+        self._rest_expected_ms = None
+
+    def _measure_margin(self, rest_ms: float) -> float:
+        """The last tick's rest (ConstraintSolve and the systems after it) took ``rest_ms``: the
+        margin is the larger of its ratio to the model's cost of it and the margin decayed.
+        Returns the share of the rest the model is calibrated on: a rest beyond the margin it
+        had is the spread's (the margin's), not the mean's, so it is counted only up to it."""
+        decayed = 1.0 + (self.margin - 1.0) * MARGIN_DECAY
+        if not self._rest_expected_ms or rest_ms <= 0.0:
+            self.margin = max(decayed, MARGIN_FLOOR)
+            return 1.0
+        ratio = rest_ms / self._rest_expected_ms
+        kept = min(1.0, self.margin / ratio)
+        self.margin = min(max(decayed, ratio, MARGIN_FLOOR), MARGIN_CEILING)
+        return kept
 
     def aimed(self, settings: SolverSettings, model: SolverCostModel | None) -> SolverSettings:
         """The settings the cut decides by, ``model`` the solved characters' (:meth:`for_cut`):
-        the budget aimed at :data:`TARGET_SHARE` of itself when the model is measured (a given
-        ``cost_model`` is taken as exact), as the character-iterations it allows: fewer as soon
-        as the model says so, more only once :data:`RESTORE_SHARE` of the budget allows more
-        than last tick (in between, last tick's), so the cut does not follow the measurements'
-        noise from tick to tick."""
+        the budget held at :data:`HOLD_SHARE` of itself when the model is measured (this
+        tick's, with its margin; a given ``cost_model`` is taken as exact), as the
+        character-iterations it allows: fewer as soon as the model says so, more only once
+        :data:`RESTORE_SHARE` / :data:`TARGET_SHARE` of that allows more than last tick (in
+        between, last tick's), so the cut does not follow the measurements' noise from tick
+        to tick."""
         if settings.budget_ms is None or model is None:
             return settings
-        share = 1.0 if settings.cost_model is not None else TARGET_SHARE
+        share = 1.0 if settings.cost_model is not None else HOLD_SHARE
 
         def allowed(ms: float) -> float:
             return max((ms - model.fixed_ms) / model.ms_per_iteration, 0.0)
@@ -405,7 +509,7 @@ class FrameBudget:
         np.maximum.at(top, owner[wants], priority[wants])
         candidate = np.flatnonzero(np.isfinite(top))
         kept_before = self.presence[candidate] > 0
-        share = 1.0 if settings.cost_model is not None else TARGET_SHARE
+        share = 1.0 if settings.cost_model is not None else HOLD_SHARE
         self._capacity = solve_capacity(model, self._capacity,
                                         settings.budget_ms * share,
                                         settings.budget_ms * share * RESTORE_SHARE / TARGET_SHARE)
@@ -447,6 +551,13 @@ class FrameBudget:
         calibration."""
         self._need[rows] = uncut_need(self._need[rows], used, caps)
         self._last_solve = (solve_cpu_s, int(used.sum()), int(rows.size))
+        solves = (int(rows.size), bool(self.held.size or (self.presence < 1.0).any()))
+        last, self._last_solves = self._last_solves, solves
+        if self.calibrated is not None and last is not None and last[1] == solves[1] \
+                and abs(solves[0] - last[0]) <= STEADY_SHARE * max(last[0], 1):
+            rest_ms = self.calibrated.tick_ms(int(used.sum()), int(rows.size)) \
+                - self._tick_usual_before_ms
+            self._rest_expected_ms = rest_ms if rest_ms > 0.0 else None
 
 
 @dataclass(frozen=True)

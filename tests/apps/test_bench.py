@@ -97,10 +97,32 @@ def test_bench_budget_prints_the_cut_tick_by_tick(capsys):
         low, median, high = size["cpu_ms_per_tick_spread"]
         assert 0 < low <= median <= high < 1000 and size["floor_ms"] < 1000
         assert low <= size["cpu_ms_per_tick_p95"] <= high
+        least, middle, most = size["margin_factor_spread"]
+        assert 1.0 <= least <= middle <= most <= 2.0 and size["ticks_over_slowed_alike"] == 0
     assert main(["bench", "--constrained", "--budget-ms", "1000", *QUICK]) == 0
     text = capsys.readouterr().out
     assert "cut to 1 it." in text and "over (CPU/wall)" in text and "cannot hold" not in text
     assert "solved less often" in text and "solved (median a tick): 8 every tick" in text
+    assert "margin on the model x" in text and "slowed alike" in text
+
+
+def test_bench_budget_tells_the_ticks_over_the_machine_slowed():
+    """Of the ticks over the budget, those whose systems before the solve and after it (which
+    the budget does not change) took SLOWED_ALIKE times their median or more: one of two."""
+    from ecs_anim.apps.bench import BudgetTicks
+
+    class Report:
+        cut_characters = dropped_characters = ()
+        characters_slowed, intervals, floor_ms = 0, {1: 8}, 1.0
+
+    ticks = BudgetTicks()
+    for _ in range(10):
+        ticks.add(Report(), 0.02, 0.02, parts=(4.0, 10.0, 6.0, 1.1))
+    ticks.add(Report(), 0.03, 0.03, parts=(6.0, 15.0, 9.0, 1.5))  # the machine
+    ticks.add(Report(), 0.03, 0.03, parts=(4.0, 20.0, 6.0, 1.5))  # the solve alone
+    figures = ticks.figures(25.0)
+    assert figures["ticks_over_budget_cpu"] == 2 and figures["ticks_over_slowed_alike"] == 1
+    assert figures["margin_factor_spread"] == [1.1, 1.1, 1.5]
 
 
 def test_bench_threads_prints_them_against_one_thread_in_the_same_run(capsys):

@@ -13,6 +13,11 @@ from ecs_anim.core.morphology import Morphology
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.runtime.simulation import Simulation
 from ecs_anim.solver.budget import (
+    MARGIN_AFTER,
+    MARGIN_CEILING,
+    MARGIN_DECAY,
+    MARGIN_FLOOR,
+    FrameBudget,
     SolverCostModel,
     due,
     ranked_rows,
@@ -302,3 +307,92 @@ def test_a_target_on_another_body_is_read_under_a_budget(idle):
     assert report is not None and report.characters == 1
     assert not any("target that is not" in m for m in sim.messages)
     assert report.errors[10.0].count == 1 and np.isfinite(report.errors[10.0].max_error_m)
+
+
+class MeasuredTicks:
+    """A :class:`FrameBudget` fed ticks of given costs (ms of CPU, never the clock's): the
+    systems before the solve, ConstraintSolve's run (``characters`` solved at one iteration
+    each) and the systems after it, as ConstraintSolve marks them."""
+
+    def __init__(self, characters: int = 100) -> None:
+        self.budget = FrameBudget()
+        self.characters = characters
+        self.cpu_ms = 0.0
+        self.last_solve_ms = 0.0
+
+    def tick(self, before_ms: float = 4.0, solve_ms: float = 10.0, after_ms: float = 6.0,
+             characters: int | None = None) -> FrameBudget:
+        count = self.characters if characters is None else characters
+        self.cpu_ms += before_ms
+        self.budget.start_tick(self.cpu_ms * 1e-3, 1, version=0, n=self.characters,
+                               last_run_s=self.last_solve_ms * 1e-3, before_s=before_ms * 1e-3)
+        rows = np.arange(count)
+        self.budget.solved(rows, np.ones(count, np.int64), np.full(count, 4), solve_ms * 1e-3)
+        self.cpu_ms += solve_ms + after_ms
+        self.last_solve_ms = solve_ms
+        return self.budget
+
+
+def test_the_margin_is_the_largest_recent_ratio_decaying():
+    """Steady ticks (4 + 10 + 6 ms): the model is exact and the margin its floor. A tick whose
+    solve and systems after it take 1.5 times as long raises it to 1.5 at once; it then comes
+    back down by MARGIN_DECAY of its excess a tick. The cut's model counts this tick's systems
+    before the solve as measured and the rest at the calibrated cost times the margin."""
+    ticks = MeasuredTicks()
+    for _ in range(MARGIN_AFTER + 10):
+        budget = ticks.tick()
+    assert budget.margin == pytest.approx(MARGIN_FLOOR)
+    assert budget.calibrated is not None and budget.model is not None
+    assert budget.calibrated.tick_ms(100, 100) == pytest.approx(20.0)
+    assert budget.model.tick_ms(100, 100) == pytest.approx(4.0 + MARGIN_FLOOR * 16.0)
+    ticks.tick(solve_ms=15.0, after_ms=9.0)
+    budget = ticks.tick()  # (a tick is measured at the next one's mark)
+    assert budget.margin == pytest.approx(1.5) and budget.margin_factor == pytest.approx(1.5)
+    # The model's mean learnt that tick only up to the margin it had (the rest is the spread's).
+    calibrated, model = budget.calibrated, budget.model
+    assert calibrated is not None and model is not None
+    assert calibrated.tick_ms(100, 100) == pytest.approx(
+        4.0 + 16.0 * (1.0 + 0.2 * (MARGIN_FLOOR - 1.0)))
+    assert model.tick_ms(100, 100) == pytest.approx(4.0 + 1.5 * (calibrated.tick_ms(100, 100) - 4.0))
+    for k in range(1, 6):
+        budget = ticks.tick()
+        assert budget.margin == pytest.approx(1.0 + 0.5 * MARGIN_DECAY ** k, abs=0.02)
+    # A tick twice as slow as the model and more: the margin stops at its ceiling.
+    ticks.tick(solve_ms=40.0, after_ms=30.0)
+    assert ticks.tick().margin == MARGIN_CEILING
+
+
+def test_a_slow_start_of_the_tick_raises_this_ticks_margin():
+    """The systems before the solve taking 1.6 times their usual time this tick: the machine
+    is slow now, the rest of this tick is expected 1.6 times its cost (the margin itself moves
+    only with what the rest measured)."""
+    ticks = MeasuredTicks()
+    for _ in range(MARGIN_AFTER + 10):
+        ticks.tick()
+    budget = ticks.tick(before_ms=6.4)
+    assert budget.margin_factor == pytest.approx(1.6, abs=0.01)
+    assert budget.margin == pytest.approx(MARGIN_FLOOR)
+    assert budget.model is not None and budget.model.fixed_ms == pytest.approx(
+        6.4 + 1.6 * 6.0, abs=0.05)
+    assert ticks.tick().margin_factor == pytest.approx(MARGIN_FLOOR, abs=0.05)
+
+
+def test_the_margin_measures_the_machine_not_the_model_when_the_solves_change():
+    """The margin does not move on a tick whose solves changed by more than a quarter (the
+    model, an average, errs there: the calibration corrects it), nor while the model is
+    young."""
+    ticks = MeasuredTicks()
+    for _ in range(MARGIN_AFTER):
+        ticks.tick(solve_ms=30.0)  # young: slow ticks do not move the margin
+    assert ticks.budget.margin == MARGIN_FLOOR
+    for _ in range(20):
+        ticks.tick()
+    ticks.tick(solve_ms=9.0, after_ms=12.0, characters=50)  # half the solves, and slow
+    assert ticks.tick().margin == pytest.approx(MARGIN_FLOOR)
+
+
+def test_a_given_cost_model_takes_no_margin(idle):
+    """``cost_model`` fixed (the tests' figures): the cut decides by it exactly."""
+    sim, _ = four_reachers(idle, SolverSettings(budget_ms=14.0, cost_model=ONE_MS), ticks=3)
+    report = sim.solver_report()
+    assert report is not None and report.model == ONE_MS and report.cut_ms <= 14.0
