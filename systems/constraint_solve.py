@@ -51,11 +51,13 @@ from ecs_anim.runtime.kernels.decode import (
     pose_arrays,
     spine_scratch,
 )
+from ecs_anim.runtime.kernels.goals import GoalLayouts
 from ecs_anim.runtime.kernels.goals import (
     constraint_errors as constraint_errors,  # tests patch these
 )
 from ecs_anim.runtime.kernels.goals import errors_on_result as errors_on_result
 from ecs_anim.runtime.kernels.goals import target_points as target_points
+from ecs_anim.runtime.kernels.goals import tick_goals as _compiled_tick_goals
 from ecs_anim.runtime.kernels.goals import tick_goals as tick_goals
 from ecs_anim.runtime.kernels.joint_speed import (
     goal_steps,
@@ -183,6 +185,8 @@ class ConstraintSolve(System):
         # it was not), so a joint may follow a goal that moves faster than the bound.
         self._last_goals = np.zeros((0, 3))
         self._last_goals_tick = -2
+        # The compiled goals' layout, kept while the same constraints are active.
+        self._goal_layouts = GoalLayouts()
 
     def _timed_solve(self, *args: Any) -> Any:
         """The compiled solve (within the speed bound when one is set), its CPU time kept for
@@ -249,11 +253,13 @@ class ConstraintSolve(System):
         if settings.budget_ms is not None and model is not None:
             model = self.budget.for_cut(model, table.owner[weight > 0])
         self._solve_cpu_s = 0.0
+        # the compiled goals with their layout kept from tick to tick (unless a test patched them)
+        goal_step = self._goal_layouts if step.goals is _compiled_tick_goals else step.goals
         result = constrain(table, weight, st.poses, unconstrained, st.lengths,
                            st.contact_weight, st.com_control, st.com_target_xy, st.segment_mass_kg,
                            st.segment_com_fraction, st.posture, self.budget.aimed(settings, model),
                            settings.release_speed_m_s * sim.dt,
-                           TickSteps(step.goals, self._timed_solve, step.errors, step.centres,
+                           TickSteps(goal_step, self._timed_solve, step.errors, step.centres,
                                      step.targets, step.result_errors),
                            model, self.budget.expected())
         used, caps = np.zeros(0, np.int64), np.zeros(0, np.int64)
