@@ -265,7 +265,12 @@ class ConstraintSolve(System):
         used, caps = np.zeros(0, np.int64), np.zeros(0, np.int64)
         if result.goals is not None and result.iterations is not None:
             g, used = result.goals, result.iterations
-            caps = effective_caps(g, *iteration_caps(g, settings), settings.iterations)
+            if g.goal_iterations is None and g.row_iterations is None:
+                # no cut: every goal and character has the settings' iterations, and every
+                # character solved has a goal of its own (what effective_caps gives then)
+                caps = np.full(used.size, int(settings.iterations), np.int64)
+            else:
+                caps = effective_caps(g, *iteration_caps(g, settings), settings.iterations)
         self.budget.solved(result.rows, used, caps, self._solve_cpu_s)
         dropped = self.budget.dropped(wanted, table.owner) if settings.budget_ms is not None \
             else np.zeros(0, np.int64)
@@ -345,15 +350,19 @@ class ConstraintSolve(System):
         """The characters no longer solved whose last result was not their motion's pose (their
         constraints over) go back to it no faster than ``max_joint_speed_m_s`` allows (their
         planted feet's legs at once: the motion has those on their footprints); then this
-        tick's motion poses, results and corrections are kept for the next tick."""
+        tick's motion poses, results and corrections are kept for the next tick.
+        ``solved_rows`` (sorted, distinct): the rows solved or held this tick."""
         st, speed = self.sim.store, self.sim.solver_settings.max_joint_speed_m_s
         if speed is None or (self._clip_now is None and not self._values_kept):
             return
         step = steps(self.sim.compiled)
         clip_now = step.pack(st.poses) if self._clip_now is None else self._clip_now
-        corrected = step.rows_differ(st.last_pose_values, st.last_clip_values)
-        corrected[solved_rows] = False
-        rows = np.flatnonzero(corrected)
+        if solved_rows.size == st.n:  # (sorted and distinct: every row) none goes back
+            rows = np.zeros(0, np.int64)
+        else:
+            corrected = step.rows_differ(st.last_pose_values, st.last_clip_values)
+            corrected[solved_rows] = False
+            rows = np.flatnonzero(corrected)
         if rows.size:
             if st.clip_positions is None:  # nothing solved: every pose is the motion's
                 st.clip_positions = step.decode(st.poses, st.lengths).positions
