@@ -487,9 +487,10 @@ class GoalLayouts:
         self._columns: tuple[NDArray[np.generic], ...] = ()
 
     def _same(self, table: ConstraintTable, active: B8) -> bool:
-        """Whether the kept layout is that of ``active`` (m,) in ``table``."""
+        """Whether the kept layout is that of ``active`` (m,) in ``table`` (its columns the
+        same to the bit: a 0.0 that became -0.0 is a change)."""
         return (self._kept is not None and np.array_equal(self._active, active)
-                and all(np.array_equal(column, getattr(table, name))
+                and all(np.array_equal(column, _bits(getattr(table, name)))
                         for name, column in zip(LAYOUT_COLUMNS, self._columns, strict=True)))
 
     def __call__(self, table: ConstraintTable, weight: F64, targets: F64,
@@ -511,8 +512,13 @@ class GoalLayouts:
                                 contact_weight, com_control, com_desired, previous, max_release_m)
         if not written:
             self._kept, self._active = kept, active
-            self._columns = tuple(getattr(table, name).copy() for name in LAYOUT_COLUMNS)
+            self._columns = tuple(_bits(getattr(table, name)).copy() for name in LAYOUT_COLUMNS)
         return goals
+
+
+def _bits(column: NDArray[np.generic]) -> NDArray[np.generic]:
+    """A table column as compared: float64 as the int64 of its bits (no copy), else itself."""
+    return column.view(np.int64) if column.dtype == np.float64 else column
 
 
 def _without_dropped(out: GoalArrays, rows: I64, user: B8, kept: B8) -> tuple[GoalArrays, I64]:

@@ -165,7 +165,8 @@ def test_kept_goal_layout_gives_the_goals_made_afresh(monkeypatch):
     """ConstraintSolve's goals with their layout kept from tick to tick (GoalLayouts) are those
     made afresh every tick, to the bit, while the table changes under them: a priority and a
     chain changed in place, a target moved from a body into the world (in place), a constraint
-    switched off at once and on again, one added mid-run, a character removed."""
+    switched off at once and on again, one added mid-run, a character removed, a zero offset
+    made -0.0."""
     kept = compiled.GoalLayouts()
     calls = {"ticks": 0}
     made: list[int] = []  # the ticks whose layout was made afresh
@@ -196,6 +197,8 @@ def test_kept_goal_layout_gives_the_goals_made_afresh(monkeypatch):
             table.chain[table.rows_of(np.array(wrists[1:2]))] |= 1 << TRUNK
         if tick == 7:
             sim.set_target(wrists[2], (0.5, 0.0, 1.2))
+        if tick == 8:
+            table.offset[table.rows_of(np.array(wrists[2:3])), 0] *= -1.0  # 0.0 to -0.0
         if tick == 9:
             table.enabled[table.rows_of(np.array(wrists[3:4]))] = False
         if tick == 11:
@@ -206,4 +209,4 @@ def test_kept_goal_layout_gives_the_goals_made_afresh(monkeypatch):
         sim.step()
     sim.close()
     # made afresh on the first tick and after each change but the priority's (not kept)
-    assert calls["ticks"] == 16 and made == [0, 5, 7, 9, 11, 13]
+    assert calls["ticks"] == 16 and made == [0, 5, 7, 8, 9, 11, 13]
