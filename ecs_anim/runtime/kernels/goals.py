@@ -263,7 +263,7 @@ def goal_layout_rows(lo: int, hi: int, user_start: I64, idx: I64, cols: Columns,
     character's constraints and pose, where computing the goals and laying them out took
     two). Without ``layout`` the columns that depend on the table and the active constraints
     alone (owner, table_index, orientation, group, bone, segment, fraction, offset, chain,
-    axis: :data:`LAYOUT_FIELDS`) are not written: ``out`` holds them from an earlier tick
+    axis: :class:`LayoutArrays`) are not written: ``out`` holds them from an earlier tick
     with the same active constraints (:class:`GoalLayouts`)."""
     for c in range(lo, hi):
         row = rows[c]
@@ -354,10 +354,23 @@ def _arrays(decoded: DecodedPose) -> DecodedArrays:
                            for name in DecodedArrays._fields))
 
 
-#: The goals' columns that depend on the table and on which of its constraints are active
-#: alone (with the feet's, which are always the same): :class:`GoalLayouts` keeps them.
-LAYOUT_FIELDS = ("owner", "table_index", "orientation", "group", "bone", "segment", "fraction",
-                 "offset", "chain", "axis")
+class LayoutArrays(NamedTuple):
+    """The goals' columns that depend on the table and on which of its constraints are active
+    alone (with the feet's, which are always the same): :class:`GoalLayouts` keeps them. Same
+    names and shapes as in :class:`GoalArrays`."""
+
+    owner: I64
+    table_index: I64
+    orientation: B8
+    group: I64
+    bone: I64
+    segment: I64
+    fraction: F64
+    offset: F64
+    chain: I64
+    axis: F64
+
+
 #: The table's columns a layout is made of (those fields, the order, the goals aiming at a point
 #: of their own body and where that point is).
 LAYOUT_COLUMNS = ("owner", "kind", "group", "bone", "segment", "fraction", "offset", "chain",
@@ -368,7 +381,7 @@ LAYOUT_COLUMNS = ("owner", "kind", "group", "bone", "segment", "fraction", "offs
 class Layout(NamedTuple):
     """Where a tick's goals go: ``idx`` (a,) the active constraints by character, then in the
     table's order; ``rows`` (r,) their characters' store rows, ``user_start`` (r + 1,) each
-    one's first in ``idx``; ``fields`` the :data:`LAYOUT_FIELDS` arrays ((k,) or (k, 3), k = a
+    one's first in ``idx``; ``fields`` the :class:`LayoutArrays` ((k,) or (k, 3), k = a
     + 2 r; written by the first :func:`goal_layout_rows` on them); the goals aiming at a point
     of their own body: ``on_self`` (s,) their goal indices, ``self_idx`` (s,) their table rows,
     ``self_segment``, ``self_fraction``, ``self_offset`` that point."""
@@ -376,7 +389,7 @@ class Layout(NamedTuple):
     idx: I64
     rows: I64
     user_start: I64
-    fields: dict[str, NDArray[np.generic]]
+    fields: LayoutArrays
     on_self: I64
     self_idx: I64
     self_segment: I64
@@ -396,11 +409,11 @@ def layout(table: ConstraintTable, active: B8) -> Layout | None:
     rows = owner[first]
     user_start = np.append(np.flatnonzero(first), idx.size)
     k = idx.size + 2 * rows.size
-    fields = {"owner": np.empty(k, np.int64), "table_index": np.empty(k, np.int64),
-              "orientation": np.empty(k, np.bool_), "group": np.empty(k, np.int64),
-              "bone": np.empty(k, np.int64), "segment": np.empty(k, np.int64),
-              "fraction": np.empty(k), "offset": np.empty((k, 3)), "chain": np.empty(k, np.int64),
-              "axis": np.empty((k, 3))}
+    fields = LayoutArrays(
+        owner=np.empty(k, np.int64), table_index=np.empty(k, np.int64),
+        orientation=np.empty(k, np.bool_), group=np.empty(k, np.int64),
+        bone=np.empty(k, np.int64), segment=np.empty(k, np.int64), fraction=np.empty(k),
+        offset=np.empty((k, 3)), chain=np.empty(k, np.int64), axis=np.empty((k, 3)))
     # each user goal's place: its index in idx, after two feet per character before it
     user_at = np.arange(idx.size) + 2 * np.cumsum(first) - 2
     on_self = _aiming_at_own_body(table, idx)
@@ -424,13 +437,13 @@ def goals_on_layout(kept: Layout, written: bool, table: ConstraintTable, weight:
                     com_control: NDArray[np.bool_], com_desired: F64,
                     previous: DecodedPose | None, max_release_m: float) -> TickGoals | None:
     """:func:`tick_goals` (the arguments from ``table`` on are its) on the layout ``kept`` of
-    the constraints active in ``weight``; ``written``: its :data:`LAYOUT_FIELDS` hold this
+    the constraints active in ``weight``; ``written``: its :class:`LayoutArrays` hold this
     table's already (not written again). The goals share those arrays with every other tick's
     goals on the same layout: nothing writes them (the solve moves ``goal`` alone)."""
     idx, rows, user_start = kept.idx, kept.rows, kept.user_start
     r = rows.size
     k = idx.size + 2 * r
-    out = GoalArrays(**kept.fields, priority=np.empty(k), goal=np.empty((k, 3)),
+    out = GoalArrays(**kept.fields._asdict(), priority=np.empty(k), goal=np.empty((k, 3)),
                      weight=np.empty(k), held=np.empty(k, np.bool_), footprint=np.empty((r, 2, 3)),
                      in_contact=np.empty((r, 2), np.bool_), com_desired=np.empty((r, 3)),
                      com_on=np.empty(r, np.bool_))
@@ -478,7 +491,7 @@ class GoalLayouts:
     """:func:`tick_goals` from tick to tick (ConstraintSolve's): the :class:`Layout` is kept
     while the same constraints are active and the table's :data:`LAYOUT_COLUMNS` are the same
     (compared with copies kept, every tick: the table may be changed in place), so the sort of
-    the active constraints and the :data:`LAYOUT_FIELDS` columns (about 1.7 MB at 4,000
+    the active constraints and the :class:`LayoutArrays` columns (about 1.7 MB at 4,000
     characters with two constraints each) are not made again; the same goals, bit for bit."""
 
     def __init__(self) -> None:
