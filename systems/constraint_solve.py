@@ -51,11 +51,13 @@ from ecs_anim.runtime.kernels.decode import (
     pose_arrays,
     spine_scratch,
 )
+from ecs_anim.runtime.kernels.goals import GoalLayouts
 from ecs_anim.runtime.kernels.goals import (
     constraint_errors as constraint_errors,  # tests patch these
 )
 from ecs_anim.runtime.kernels.goals import errors_on_result as errors_on_result
 from ecs_anim.runtime.kernels.goals import target_points as target_points
+from ecs_anim.runtime.kernels.goals import tick_goals as _compiled_tick_goals
 from ecs_anim.runtime.kernels.goals import tick_goals as tick_goals
 from ecs_anim.runtime.kernels.joint_speed import (
     goal_steps,
@@ -183,6 +185,8 @@ class ConstraintSolve(System):
         # it was not), so a joint may follow a goal that moves faster than the bound.
         self._last_goals = np.zeros((0, 3))
         self._last_goals_tick = -2
+        # The compiled goals' layout, kept while the same constraints are active.
+        self._goal_layouts = GoalLayouts()
 
     def _timed_solve(self, *args: Any) -> Any:
         """The compiled solve (within the speed bound when one is set), its CPU time kept for
@@ -251,17 +255,24 @@ class ConstraintSolve(System):
         if settings.budget_ms is not None and model is not None:
             model = self.budget.for_cut(model, table.owner[weight > 0])
         self._solve_cpu_s = 0.0
+        # the compiled goals with their layout kept from tick to tick (unless a test patched them)
+        goal_step = self._goal_layouts if step.goals is _compiled_tick_goals else step.goals
         result = constrain(table, weight, st.poses, unconstrained, st.lengths,
                            st.contact_weight, st.com_control, st.com_target_xy, st.segment_mass_kg,
                            st.segment_com_fraction, st.posture, self.budget.aimed(settings, model),
                            settings.release_speed_m_s * sim.dt,
-                           TickSteps(step.goals, self._timed_solve, step.errors, step.centres,
+                           TickSteps(goal_step, self._timed_solve, step.errors, step.centres,
                                      step.targets, step.result_errors),
                            model, self.budget.expected())
         used, caps = np.zeros(0, np.int64), np.zeros(0, np.int64)
         if result.goals is not None and result.iterations is not None:
             g, used = result.goals, result.iterations
-            caps = effective_caps(g, *iteration_caps(g, settings), settings.iterations)
+            if g.goal_iterations is None and g.row_iterations is None:
+                # no cut: every goal and character has the settings' iterations, and every
+                # character solved has a goal of its own (what effective_caps gives then)
+                caps = np.full(used.size, int(settings.iterations), np.int64)
+            else:
+                caps = effective_caps(g, *iteration_caps(g, settings), settings.iterations)
         self.budget.solved(result.rows, used, caps, self._solve_cpu_s)
         dropped = self.budget.dropped(wanted, table.owner) if settings.budget_ms is not None \
             else np.zeros(0, np.int64)
@@ -341,15 +352,19 @@ class ConstraintSolve(System):
         """The characters no longer solved whose last result was not their motion's pose (their
         constraints over) go back to it no faster than ``max_joint_speed_m_s`` allows (their
         planted feet's legs at once: the motion has those on their footprints); then this
-        tick's motion poses, results and corrections are kept for the next tick."""
+        tick's motion poses, results and corrections are kept for the next tick.
+        ``solved_rows`` (sorted, distinct): the rows solved or held this tick."""
         st, speed = self.sim.store, self.sim.solver_settings.max_joint_speed_m_s
         if speed is None or (self._clip_now is None and not self._values_kept):
             return
         step = steps(self.sim.compiled)
         clip_now = step.pack(st.poses) if self._clip_now is None else self._clip_now
-        corrected = step.rows_differ(st.last_pose_values, st.last_clip_values)
-        corrected[solved_rows] = False
-        rows = np.flatnonzero(corrected)
+        if solved_rows.size == st.n:  # (sorted and distinct: every row) none goes back
+            rows = np.zeros(0, np.int64)
+        else:
+            corrected = step.rows_differ(st.last_pose_values, st.last_clip_values)
+            corrected[solved_rows] = False
+            rows = np.flatnonzero(corrected)
         if rows.size:
             if st.clip_positions is None:  # nothing solved: every pose is the motion's
                 st.clip_positions = step.decode(st.poses, st.lengths).positions

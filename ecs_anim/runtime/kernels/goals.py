@@ -8,7 +8,10 @@ numpy functions stay as the reference the tests compare these with). The per-con
 release of a point a sphere held; the activation ramp's blend) runs compiled over the active
 constraints, laid out by character, each character's two feet after its own goals, in one pass
 (:func:`goal_layout_rows`); which characters the active constraints belong to, and the areas
-the motion already keeps (rarely any) dropped after, are a few numpy calls.
+the motion already keeps (rarely any) dropped after, are a few numpy calls. ConstraintSolve
+keeps that layout from tick to tick while the same constraints are active
+(:class:`GoalLayouts`): the kernel then writes each goal and its weight, not the columns that
+stay the same.
 """
 
 from __future__ import annotations
@@ -249,7 +252,7 @@ def goal_layout_rows(lo: int, hi: int, user_start: I64, idx: I64, cols: Columns,
                      targets: F64, dec: DecodedArrays, previous: DecodedArrays,
                      has_previous: bool, max_release_m: float, rows: I64, contact_weight: F64,
                      com_control: B8, com_desired: F64, t: Tables, codes: Codes,
-                     out: GoalArrays) -> None:
+                     out: GoalArrays, layout: bool) -> None:
     """The goals of the characters ``lo..hi-1`` (local rows; ``rows`` (r,) their store rows),
     laid out: character ``c``'s active constraints ``idx[user_start[c]:user_start[c + 1]]``
     (table rows, in the table's order) each one's goal (:func:`constraint_goal`; its weight 0
@@ -258,7 +261,10 @@ def goal_layout_rows(lo: int, hi: int, user_start: I64, idx: I64, cols: Columns,
     constraints), above every priority while in contact, below every one otherwise. Mirrors
     :func:`ecs_anim.solver.goals.tick_goals` where no goal is dropped (one pass over each
     character's constraints and pose, where computing the goals and laying them out took
-    two)."""
+    two). Without ``layout`` the columns that depend on the table and the active constraints
+    alone (owner, table_index, orientation, group, bone, segment, fraction, offset, chain,
+    axis: :class:`LayoutArrays`) are not written: ``out`` holds them from an earlier tick
+    with the same active constraints (:class:`GoalLayouts`)."""
     for c in range(lo, hi):
         row = rows[c]
         for j in range(user_start[c], user_start[c + 1]):
@@ -266,37 +272,39 @@ def goal_layout_rows(lo: int, hi: int, user_start: I64, idx: I64, cols: Columns,
             goal, w, held = constraint_goal(i, cols, weight, targets, dec, previous,
                                             has_previous, max_release_m, t, codes)
             at = j + 2 * c
-            out.owner[at] = c
-            out.table_index[at] = i
-            out.orientation[at] = cols.kind[i] == codes.kind_orientation
-            out.group[at] = cols.group[i]
-            out.bone[at] = cols.bone[i]
-            out.segment[at] = cols.segment[i]
-            out.fraction[at] = cols.fraction[i]
-            store3(out.offset[at], load3(cols.offset[i]))
-            out.chain[at] = cols.chain[i]
+            if layout:
+                out.owner[at] = c
+                out.table_index[at] = i
+                out.orientation[at] = cols.kind[i] == codes.kind_orientation
+                out.group[at] = cols.group[i]
+                out.bone[at] = cols.bone[i]
+                out.segment[at] = cols.segment[i]
+                out.fraction[at] = cols.fraction[i]
+                store3(out.offset[at], load3(cols.offset[i]))
+                out.chain[at] = cols.chain[i]
+                store3(out.axis[at], load3(cols.axis[i]))
             out.priority[at] = cols.priority[i]
             store3(out.goal[at], goal)
             out.weight[at] = w
-            store3(out.axis[at], load3(cols.axis[i]))
             out.held[at] = held
         for side in range(2):
             at = user_start[c + 1] + 2 * c + side
             ankle = load3(dec.positions[row, t.ankle[side]])
             in_contact = contact_weight[row, side] > 0
-            out.owner[at] = c
-            out.table_index[at] = -1
-            out.orientation[at] = False
-            out.group[at] = codes.leg_l + side
-            out.bone[at] = 1
-            out.segment[at] = t.shank[side]
-            out.fraction[at] = 1.0
-            store3(out.offset[at], (0.0, 0.0, 0.0))
-            out.chain[at] = 1 << (codes.leg_l + side)
+            if layout:
+                out.owner[at] = c
+                out.table_index[at] = -1
+                out.orientation[at] = False
+                out.group[at] = codes.leg_l + side
+                out.bone[at] = 1
+                out.segment[at] = t.shank[side]
+                out.fraction[at] = 1.0
+                store3(out.offset[at], (0.0, 0.0, 0.0))
+                out.chain[at] = 1 << (codes.leg_l + side)
+                store3(out.axis[at], (0.0, 0.0, 0.0))
             out.priority[at] = math.inf if in_contact else -math.inf
             store3(out.goal[at], ankle)
             out.weight[at] = 1.0
-            store3(out.axis[at], (0.0, 0.0, 0.0))
             out.held[at] = False
             store3(out.footprint[c, side], ankle)
             out.in_contact[c, side] = in_contact
@@ -346,30 +354,99 @@ def _arrays(decoded: DecodedPose) -> DecodedArrays:
                            for name in DecodedArrays._fields))
 
 
-def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained: DecodedPose,
-               contact_weight: F64, com_control: NDArray[np.bool_], com_desired: F64,
-               previous: DecodedPose | None = None, max_release_m: float = np.inf) -> TickGoals | None:
-    """Compiled :func:`ecs_anim.solver.goals.tick_goals`: the same arguments and result."""
-    active = np.flatnonzero(weight > 0)
-    if active.size == 0:
+class LayoutArrays(NamedTuple):
+    """The goals' columns that depend on the table and on which of its constraints are active
+    alone (with the feet's, which are always the same): :class:`GoalLayouts` keeps them. Same
+    names and shapes as in :class:`GoalArrays`."""
+
+    owner: I64
+    table_index: I64
+    orientation: B8
+    group: I64
+    bone: I64
+    segment: I64
+    fraction: F64
+    offset: F64
+    chain: I64
+    axis: F64
+
+
+#: The table's columns a layout is made of (those fields, the order, the goals aiming at a point
+#: of their own body and where that point is).
+LAYOUT_COLUMNS = ("owner", "kind", "group", "bone", "segment", "fraction", "offset", "chain",
+                  "axis", "target_kind", "target_row", "target_segment", "target_fraction",
+                  "target_offset")
+
+
+class Layout(NamedTuple):
+    """Where a tick's goals go: ``idx`` (a,) the active constraints by character, then in the
+    table's order; ``rows`` (r,) their characters' store rows, ``user_start`` (r + 1,) each
+    one's first in ``idx``; ``fields`` the :class:`LayoutArrays` ((k,) or (k, 3), k = a
+    + 2 r; written by the first :func:`goal_layout_rows` on them); the goals aiming at a point
+    of their own body: ``on_self`` (s,) their goal indices, ``self_idx`` (s,) their table rows,
+    ``self_segment``, ``self_fraction``, ``self_offset`` that point."""
+
+    idx: I64
+    rows: I64
+    user_start: I64
+    fields: LayoutArrays
+    on_self: I64
+    self_idx: I64
+    self_segment: I64
+    self_fraction: F64
+    self_offset: F64
+
+
+def layout(table: ConstraintTable, active: B8) -> Layout | None:
+    """The :class:`Layout` of the constraints ``active`` (m,) of ``table`` (None: none is)."""
+    idx = np.flatnonzero(active)
+    if idx.size == 0:
         return None
-    idx = active[np.argsort(table.owner[active], kind="stable")]  # by character, then table order
+    idx = idx[np.argsort(table.owner[idx], kind="stable")]  # by character, then table order
     owner = table.owner[idx]
     first = np.ones(idx.size, np.bool_)  # the first goal of each character
     first[1:] = owner[1:] != owner[:-1]
     rows = owner[first]
-    r = rows.size
     user_start = np.append(np.flatnonzero(first), idx.size)
-    k = idx.size + 2 * r
-    out = GoalArrays(
+    k = idx.size + 2 * rows.size
+    fields = LayoutArrays(
         owner=np.empty(k, np.int64), table_index=np.empty(k, np.int64),
         orientation=np.empty(k, np.bool_), group=np.empty(k, np.int64),
         bone=np.empty(k, np.int64), segment=np.empty(k, np.int64), fraction=np.empty(k),
-        offset=np.empty((k, 3)), chain=np.empty(k, np.int64), priority=np.empty(k),
-        goal=np.empty((k, 3)), weight=np.empty(k), axis=np.empty((k, 3)),
-        held=np.empty(k, np.bool_), footprint=np.empty((r, 2, 3)),
-        in_contact=np.empty((r, 2), np.bool_), com_desired=np.empty((r, 3)),
-        com_on=np.empty(r, np.bool_))
+        offset=np.empty((k, 3)), chain=np.empty(k, np.int64), axis=np.empty((k, 3)))
+    # each user goal's place: its index in idx, after two feet per character before it
+    user_at = np.arange(idx.size) + 2 * np.cumsum(first) - 2
+    on_self = _aiming_at_own_body(table, idx)
+    self_idx = idx[on_self]
+    return Layout(idx, rows, user_start, fields, user_at[on_self], self_idx,
+                  table.target_segment[self_idx], table.target_fraction[self_idx],
+                  table.target_offset[self_idx])
+
+
+def _aiming_at_own_body(table: ConstraintTable, idx: I64) -> I64:
+    """The positions in ``idx`` (table rows) of the constraints whose target is a point of their
+    own character's body (usually none: no target is on a body)."""
+    on_body = table.target_kind[idx] != TARGET_WORLD
+    if not on_body.any():
+        return np.zeros(0, np.int64)
+    return np.flatnonzero(on_body & (table.target_row[idx] == table.owner[idx]))
+
+
+def goals_on_layout(kept: Layout, written: bool, table: ConstraintTable, weight: F64, targets: F64,
+                    unconstrained: DecodedPose, contact_weight: F64,
+                    com_control: NDArray[np.bool_], com_desired: F64,
+                    previous: DecodedPose | None, max_release_m: float) -> TickGoals | None:
+    """:func:`tick_goals` (the arguments from ``table`` on are its) on the layout ``kept`` of
+    the constraints active in ``weight``; ``written``: its :class:`LayoutArrays` hold this
+    table's already (not written again). The goals share those arrays with every other tick's
+    goals on the same layout: nothing writes them (the solve moves ``goal`` alone)."""
+    idx, rows, user_start = kept.idx, kept.rows, kept.user_start
+    r = rows.size
+    k = idx.size + 2 * r
+    out = GoalArrays(**kept.fields._asdict(), priority=np.empty(k), goal=np.empty((k, 3)),
+                     weight=np.empty(k), held=np.empty(k, np.bool_), footprint=np.empty((r, 2, 3)),
+                     in_contact=np.empty((r, 2), np.bool_), com_desired=np.empty((r, 3)),
+                     com_on=np.empty(r, np.bool_))
     dec = _arrays(unconstrained)
     over_chunks(goal_layout_rows, r, user_start, idx, columns(table),
                 np.ascontiguousarray(weight, dtype=np.float64),
@@ -377,26 +454,84 @@ def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained:
                 dec if previous is None else _arrays(previous), previous is not None,
                 float(max_release_m), rows, np.ascontiguousarray(contact_weight, dtype=np.float64),
                 np.ascontiguousarray(com_control, dtype=np.bool_),
-                np.ascontiguousarray(com_desired, dtype=np.float64), TABLES, CODES, out)
-    user = out.table_index >= 0
-    kept = out.weight[user] > 0
-    if not kept.all():  # areas the motion already keeps (rare): not goals
-        if not kept.any():
+                np.ascontiguousarray(com_desired, dtype=np.float64), TABLES, CODES, out,
+                not written)
+    on_self, self_idx = kept.on_self, kept.self_idx
+    self_segment, self_fraction, self_offset = (kept.self_segment, kept.self_fraction,
+                                                kept.self_offset)
+    if not (out.weight > 0).all():  # areas the motion already keeps (rare): not goals
+        user = out.table_index >= 0
+        kept_goals = out.weight[user] > 0
+        if not kept_goals.any():
             return None
-        out, rows = _without_dropped(out, rows, user, kept)
-        idx = idx[kept]
-    # Goals aiming at a point of their own body (usually none: no target is on a body).
-    on_body = table.target_kind[idx] != TARGET_WORLD
-    if on_body.any():
-        on_self = np.flatnonzero(on_body & (table.target_row[idx] == table.owner[idx]))
-    else:
-        on_self = np.zeros(0, np.int64)
-    self_idx = idx[on_self]
+        out, rows = _without_dropped(out, rows, user, kept_goals)
+        idx = idx[kept_goals]
+        at_self = _aiming_at_own_body(table, idx)
+        on_self, self_idx = np.flatnonzero(out.table_index >= 0)[at_self], idx[at_self]
+        self_segment, self_fraction, self_offset = (table.target_segment[self_idx],
+                                                    table.target_fraction[self_idx],
+                                                    table.target_offset[self_idx])
     return TickGoals(
-        rows=rows, **out._asdict(), on_self=np.flatnonzero(out.table_index >= 0)[on_self],
-        self_segment=table.target_segment[self_idx],
-        self_fraction=table.target_fraction[self_idx],
-        self_offset=table.target_offset[self_idx], self_start=targets[self_idx])
+        rows=rows, **out._asdict(), on_self=on_self, self_segment=self_segment,
+        self_fraction=self_fraction, self_offset=self_offset, self_start=targets[self_idx])
+
+
+def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained: DecodedPose,
+               contact_weight: F64, com_control: NDArray[np.bool_], com_desired: F64,
+               previous: DecodedPose | None = None, max_release_m: float = np.inf) -> TickGoals | None:
+    """Compiled :func:`ecs_anim.solver.goals.tick_goals`: the same arguments and result."""
+    kept = layout(table, weight > 0)
+    if kept is None:
+        return None
+    return goals_on_layout(kept, False, table, weight, targets, unconstrained, contact_weight,
+                           com_control, com_desired, previous, max_release_m)
+
+
+class GoalLayouts:
+    """:func:`tick_goals` from tick to tick (ConstraintSolve's): the :class:`Layout` is kept
+    while the same constraints are active and the table's :data:`LAYOUT_COLUMNS` are the same
+    (compared with copies kept, every tick: the table may be changed in place), so the sort of
+    the active constraints and the :class:`LayoutArrays` columns (about 1.7 MB at 4,000
+    characters with two constraints each) are not made again; the same goals, bit for bit."""
+
+    def __init__(self) -> None:
+        self._kept: Layout | None = None
+        self._active: B8 = np.zeros(0, np.bool_)
+        self._columns: tuple[NDArray[np.generic], ...] = ()
+
+    def _same(self, table: ConstraintTable, active: B8) -> bool:
+        """Whether the kept layout is that of ``active`` (m,) in ``table`` (its columns the
+        same to the bit: a 0.0 that became -0.0 is a change)."""
+        return (self._kept is not None and np.array_equal(self._active, active)
+                and all(np.array_equal(column, _bits(getattr(table, name)))
+                        for name, column in zip(LAYOUT_COLUMNS, self._columns, strict=True)))
+
+    def __call__(self, table: ConstraintTable, weight: F64, targets: F64,
+                 unconstrained: DecodedPose, contact_weight: F64,
+                 com_control: NDArray[np.bool_], com_desired: F64,
+                 previous: DecodedPose | None = None,
+                 max_release_m: float = np.inf) -> TickGoals | None:
+        active = weight > 0
+        written = self._same(table, active)
+        if not written:
+            self._kept = None  # (kept again once its fields are written)
+            kept = layout(table, active)
+            if kept is None:
+                return None
+        else:
+            assert self._kept is not None
+            kept = self._kept
+        goals = goals_on_layout(kept, written, table, weight, targets, unconstrained,
+                                contact_weight, com_control, com_desired, previous, max_release_m)
+        if not written:
+            self._kept, self._active = kept, active
+            self._columns = tuple(_bits(getattr(table, name)).copy() for name in LAYOUT_COLUMNS)
+        return goals
+
+
+def _bits(column: NDArray[np.generic]) -> NDArray[np.generic]:
+    """A table column as compared: float64 as the int64 of its bits (no copy), else itself."""
+    return column.view(np.int64) if column.dtype == np.float64 else column
 
 
 def _without_dropped(out: GoalArrays, rows: I64, user: B8, kept: B8) -> tuple[GoalArrays, I64]:

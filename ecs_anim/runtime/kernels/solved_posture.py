@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.runtime.kernels.decode import DecodedArrays, PoseArrays
-from ecs_anim.runtime.kernels.posture import posture_of_decoded_row
+from ecs_anim.runtime.kernels.posture import all_finite, posture_of_decoded_row
 from ecs_anim.runtime.kernels.vec import copy_row, jit
 
 F64 = NDArray[np.float64]
@@ -29,18 +29,27 @@ def posture_solved_rows(lo: int, hi: int, rows: I64, solved: DecodedArrays, pose
                         have_previous: bool) -> None:
     """:func:`ecs_anim.runtime.kernels.posture.posture_rows` over the store rows ``rows`` (r,) that the
     solver moved (``rows[lo:hi]``), in place: row ``rows[i]`` of ``decoded`` is row ``i`` of
-    ``solved`` (the solver's decoded result, (r, ...)) instead of a decode of ``pose``; the
-    other arguments and results as there."""
+    ``solved`` (the solver's decoded result, (r, ...)) instead of a decode of ``pose`` (its
+    positions row in ``decoded`` only for a result that is not finite); the other arguments
+    and results as there."""
     joints, pelvis2world, thorax2world = decoded.positions, decoded.pelvis2world, decoded.thorax2world
     head2world, leg2world, arm2world = decoded.head2world, decoded.leg2world, decoded.arm2world
     for i in range(lo, hi):
         c = rows[i]
-        copy_row(joints, c, solved.positions, i)
+        # A finite result is published as it is: its joints go straight into ``positions``
+        # (the row then copied onto itself), not through the decode's scratch (2 MB written
+        # and read back at 4,000 characters). One that may be frozen instead (the last
+        # published joints kept: joints not finite, or rotations, which may not be) goes into
+        # the scratch, as a decode's would.
+        into = positions if not rotations and all_finite(solved.positions[i]) else joints
+        copy_row(into, c, solved.positions, i)
         copy_row(pelvis2world, c, solved.pelvis2world, i)
         copy_row(thorax2world, c, solved.thorax2world, i)
         copy_row(head2world, c, solved.head2world, i)
         copy_row(leg2world, c, solved.leg2world, i)
         copy_row(arm2world, c, solved.arm2world, i)
-        posture_of_decoded_row(c, pose, lengths, decoded, frozen, newly_bad, positions, rotations,
-                               world, local, rest_hips, bvh_from_world, rest2body, parents,
-                               vertebrae, have_previous)
+        posture_of_decoded_row(c, pose, lengths,
+                               DecodedArrays(into, pelvis2world, thorax2world, head2world,
+                                             leg2world, arm2world),
+                               frozen, newly_bad, positions, rotations, world, local, rest_hips,
+                               bvh_from_world, rest2body, parents, vertebrae, have_previous)

@@ -17,11 +17,13 @@ import pytest
 import ecs_anim.systems.constraint_solve as system
 from conftest import MOTIONS_DIR, SCENARIOS_DIR
 from ecs_anim.components import MotionPlayer, Placement
+from ecs_anim.core.body_points import TRUNK
 from ecs_anim.core.morphology import Morphology
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.io.importing import import_bvh
 from ecs_anim.motion.constraint_table import Area
 from ecs_anim.motion.constraints import Activation
+from ecs_anim.runtime.bench_scene import walkers_on_bumps
 from ecs_anim.runtime.kernels import goals as compiled
 from ecs_anim.runtime.simulation import Simulation
 from ecs_anim.solver import goals as solver_shell
@@ -142,3 +144,69 @@ def test_compiled_goals_equal_numpy_for_every_kind_of_constraint(monkeypatch):
     sim.close()
     assert compare.goals == 22 and compare.errors == 22 and compare.targets >= 22
     assert any(held) and not sim.constraints.held.any()  # the sphere held the head, let it go
+
+
+def assert_identical_goals(result: solver_shell.TickGoals | None,
+                           expected: solver_shell.TickGoals | None) -> None:
+    """Every field of two ticks' goals the same to the bit (shape, type and values)."""
+    assert (result is None) == (expected is None)
+    if result is None or expected is None:
+        return
+    for f in fields(expected):
+        want, got = getattr(expected, f.name), getattr(result, f.name)
+        if want is None:
+            assert got is None, f.name
+            continue
+        assert got.dtype == want.dtype, f.name
+        np.testing.assert_array_equal(got, want, err_msg=f.name)
+
+
+def test_kept_goal_layout_gives_the_goals_made_afresh(monkeypatch):
+    """ConstraintSolve's goals with their layout kept from tick to tick (GoalLayouts) are those
+    made afresh every tick, to the bit, while the table changes under them: a priority and a
+    chain changed in place, a target moved from a body into the world (in place), a constraint
+    switched off at once and on again, one added mid-run, a character removed, a zero offset
+    made -0.0."""
+    kept = compiled.GoalLayouts()
+    calls = {"ticks": 0}
+    made: list[int] = []  # the ticks whose layout was made afresh
+
+    def tick_goals(*args):
+        expected = compiled.tick_goals(*copy.deepcopy(args))
+        same_layout = kept._same(args[0], args[1] > 0)
+        result = kept(*args)
+        assert_identical_goals(result, expected)
+        calls["ticks"] += 1
+        if not same_layout:
+            made.append(calls["ticks"] - 1)
+        return result
+
+    monkeypatch.setattr(system, "tick_goals", tick_goals)
+    sim, _ = walkers_on_bumps(6, crossing=False)
+    entities = sim.store.entity.tolist()
+    wrists = [sim.add_constraint(e, f"w{i}", "wrist_r", 10, ALWAYS, target_entity=e,
+                                 target_point="shoulder_r", target_offset_m=(0.3, -0.1, -0.2))
+              for i, e in enumerate(entities)]
+    for i, e in enumerate(entities[::2]):
+        sim.add_constraint(e, f"e{i}", "elbow_r", 1, ALWAYS, (0.0, 0.0, 1.0))
+    table = sim.constraints
+    for tick in range(16):
+        if tick == 3:
+            table.priority[table.rows_of(np.array(wrists[:1]))] = 0.5
+        if tick == 5:
+            table.chain[table.rows_of(np.array(wrists[1:2]))] |= 1 << TRUNK
+        if tick == 7:
+            sim.set_target(wrists[2], (0.5, 0.0, 1.2))
+        if tick == 8:
+            table.offset[table.rows_of(np.array(wrists[2:3])), 0] *= -1.0  # 0.0 to -0.0
+        if tick == 9:
+            table.enabled[table.rows_of(np.array(wrists[3:4]))] = False
+        if tick == 11:
+            table.enabled[:] = True
+            sim.add_constraint(entities[4], "late", "wrist_l", 2, ALWAYS, (0.3, 0.3, 1.0))
+        if tick == 13:
+            sim.remove(entities[0])
+        sim.step()
+    sim.close()
+    # made afresh on the first tick and after each change but the priority's (not kept)
+    assert calls["ticks"] == 16 and made == [0, 5, 7, 8, 9, 11, 13]
