@@ -167,9 +167,12 @@ LIMB_J = tuple(np.array([J[f"{leg}_l"], J[f"{leg}_r"], J[f"{arm}_l"], J[f"{arm}_
 LIMB_LENGTHS = tuple(np.array([L[f"{leg}_l"], L[f"{leg}_r"], L[f"{arm}_l"], L[f"{arm}_r"]])
                      for leg, arm in (("thigh", "upper_arm"), ("shank", "forearm"), ("foot", "hand")))
 LIMB_EXTENSION = np.array([MAX_LEG_EXTENSION, MAX_LEG_EXTENSION, 1.0, 1.0])
-#: The joints bounding each mass segment (:data:`ecs_anim.core.morphology.MASS_SEGMENTS`).
-MASS_PROXIMAL = np.array([J[segment[1]] for segment in MASS_SEGMENTS])
-MASS_DISTAL = np.array([J[segment[2]] for segment in MASS_SEGMENTS])
+#: Per limb (4, 3): the mass segments (:data:`ecs_anim.core.morphology.MASS_SEGMENTS`) of its
+#: upper, lower and distal bones.
+LIMB_MASS = np.array([[[segment[0] for segment in MASS_SEGMENTS].index(f"{bone}_{side}")
+                       for bone in bones]
+                      for bones in (("thigh", "shank", "foot"), ("upper_arm", "forearm", "hand"))
+                      for side in ("l", "r")])
 #: The root step's probe (m): how far along x and y it moves the root in its prediction to
 #: measure how the centre of mass follows (its Jacobian).
 ROOT_PROBE_M = 1e-3
@@ -548,8 +551,8 @@ class _Solve:
         whose end the pass keeps on a world goal (:meth:`held_limbs`; the planted feet) re-bend
         (:func:`middle_after_root_move`), the rest of the body moves with the root. Newton's
         step on that prediction (its Jacobian by a 1 mm probe along x and y), corrected once by
-        the prediction at the step. Where no step can be predicted (a held limb's end beyond
-        its reach after it, or a degenerate Jacobian) the root moves by the error times
+        the prediction at that step. Where no step can be predicted (a held limb's end beyond
+        its reach from there, or a degenerate Jacobian) the root moves by the error times
         ``root_gain``."""
         dec, s = self.dec, self.s
         held = self.held_limbs(rows)
@@ -558,17 +561,14 @@ class _Solve:
         frames = np.concatenate([dec.leg2world[rows], dec.arm2world[rows]], axis=1)
         upper, lower = (self.lengths[rows][:, LIMB_LENGTHS[k]] for k in range(2))  # (n, 4)
         masses, fraction = self.masses[rows], self.com_fraction[rows]
-        total = masses.sum(axis=1)
-
-        def share(joints: I64) -> F64:
-            # (n, 4) the share of the body's mass that moves with each limb's given joint
-            at = ((1.0 - fraction)[:, None, :] * (MASS_PROXIMAL == joints[:, None])
-                  + fraction[:, None, :] * (MASS_DISTAL == joints[:, None]))
-            moving: F64 = np.einsum("ns,nls->nl", masses, at) / total[:, None]
-            return moving
-
-        middle_share = np.where(held, share(LIMB_J[1]), 0.0)
-        end_share = np.where(held, share(LIMB_J[2]) + share(LIMB_J[3]), 0.0)
+        total = masses.sum(axis=1)[:, None]
+        upper_m, lower_m, distal_m = (masses[:, LIMB_MASS[:, k]] / total for k in range(3))
+        upper_f, lower_f = fraction[:, LIMB_MASS[:, 0]], fraction[:, LIMB_MASS[:, 1]]
+        # (n, 4) the shares of the body's mass that move with each held limb's middle joint
+        # (its bones' centres of mass weighted by how near to it each lies) and that stay with
+        # its end (the rest of its lower bone, its foot or hand)
+        middle_share = np.where(held, upper_m * upper_f + lower_m * (1.0 - lower_f), 0.0)
+        end_share = np.where(held, lower_m * lower_f + distal_m, 0.0)
         rigid = 1.0 - np.sum(middle_share + end_share, axis=1)
 
         def com_move(move: F64) -> F64:
@@ -595,12 +595,11 @@ class _Solve:
             return np.stack([(along_y[:, 1] * e[:, 0] - along_y[:, 0] * e[:, 1]) / safe,
                              (along_x[:, 0] * e[:, 1] - along_x[:, 1] * e[:, 0]) / safe], axis=1)
 
-        step = newton(error)
-        step = step + newton(error - com_move(self._with_lowering(rows, step)))
-        shift = self._with_lowering(rows, step)
-        beyond = np.linalg.norm(end - root - shift[:, None], axis=2) > (
+        step = self._with_lowering(rows, newton(error))
+        beyond = np.linalg.norm(end - root - step[:, None], axis=2) > (
             LIMB_EXTENSION * (upper + lower) * (1.0 + 1e-9))
-        ok &= ~np.any(held & beyond, axis=1)
+        ok &= ~np.any(held & beyond, axis=1)  # the prediction holds while the ends stay in reach
+        shift = self._with_lowering(rows, step[:, :2] + newton(error - com_move(step)))
         if not ok.all():
             fallback = np.flatnonzero(~ok)
             shift[fallback] = self._with_lowering(rows[fallback], error[fallback] * s.root_gain)
