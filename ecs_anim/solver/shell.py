@@ -100,9 +100,9 @@ class SolverSettings:
     a goal closer than this is met; ``com_tolerance_m``: the same for the horizontal centre of
     mass; ``max_ccd_step_rad``: the largest turn one CCD step of the
     trunk makes (spreads a lean over the iterations); ``root_gain``: how far past the
-    centre-of-mass error the root steps where its step cannot be predicted (a held limb would
-    leave its reach; elsewhere the step is the one that puts the centre of mass back once the
-    planted feet and the held hands re-plant: ``_Solve.root_move``);
+    centre-of-mass error the root steps where its step is not predicted (a planted leg would
+    leave its reach, or a goal keeps the character iterating anyway; elsewhere the step is the
+    one that puts the centre of mass back once the planted feet re-plant: ``_Solve.root_move``);
     ``release_speed_m_s``: how fast a point a sphere held off the motion's place goes back to it
     once the sphere lets it go (instead of in one tick); ``stall_fraction``: a goal has stalled
     when its error no longer changes by the tolerance, or when it falls by less than this share
@@ -254,6 +254,9 @@ class _Solve:
         self.self_at = goals.self_start.copy()
         self.follows_body = np.zeros(g.k, bool)  # (k,) the goals following a point of the body
         self.follows_body[g.on_self] = True
+        # (r,) the characters whose root step is predicted (:meth:`root_move`): those without
+        # a goal that keeps iterating (the trunk's, or one following what a pass moves)
+        self.predicted = np.ones(self.r, bool)
         p = self.dec.positions
         self.foot_in_world = normalize(p[:, list(SIDE_JOINTS["toe"])] - p[:, list(SIDE_JOINTS["ankle"])])
         # The characters still being solved: each stops when its own goals are met or stalled
@@ -547,36 +550,39 @@ class _Solve:
 
     def root_move(self, rows: I64, error: F64) -> F64:
         """(n, 3) the root's move (m) that brings the centre of mass of ``rows`` (n,) by
-        ``error`` (n, 2) once the next pass has put the limbs back on their goals: the limbs
-        whose end the pass keeps on a world goal (:meth:`held_limbs`; the planted feet) re-bend
+        ``error`` (n, 2) once the next pass has put the legs back on their goals: the legs
+        whose ankle the pass keeps where it is (:meth:`held_legs`: the planted feet) re-bend
         (:func:`middle_after_root_move`), the rest of the body moves with the root. Newton's
         step on that prediction (its Jacobian by a 1 mm probe along x and y), corrected once by
-        the prediction at that step. Where no step can be predicted (a held limb's end beyond
-        its reach from there, or a degenerate Jacobian) the root moves by the error times
-        ``root_gain``."""
+        the prediction at that step. Where no step can be predicted (a held ankle beyond its
+        leg's reach from there, or a degenerate Jacobian) the root moves by the error times
+        ``root_gain``; so it does for a character with a goal that keeps it iterating anyway
+        (not :attr:`predicted`): where such a goal stalls (its error unchanged from one
+        iteration to the next) depends on the root's moves, and predicted ones changed where
+        an unreachable elbow stopped by 14 mm (``reach_and_touch.yaml``)."""
         dec, s = self.dec, self.s
-        held = self.held_limbs(rows)
+        held = self.held_legs(rows)
         p = dec.positions[rows]
-        root, middle, end = (p[:, LIMB_J[k]] for k in range(3))  # (n, 4, 3)
-        frames = np.concatenate([dec.leg2world[rows], dec.arm2world[rows]], axis=1)
-        upper, lower = (self.lengths[rows][:, LIMB_LENGTHS[k]] for k in range(2))  # (n, 4)
+        hip, knee, ankle = (p[:, LIMB_J[k][:2]] for k in range(3))  # (n, 2, 3)
+        lengths = self.lengths[rows]
+        thigh, shank = (lengths[:, LIMB_LENGTHS[k][:2]] for k in range(2))  # (n, 2)
         masses, fraction = self.masses[rows], self.com_fraction[rows]
         total = masses.sum(axis=1)[:, None]
-        upper_m, lower_m, distal_m = (masses[:, LIMB_MASS[:, k]] / total for k in range(3))
-        upper_f, lower_f = fraction[:, LIMB_MASS[:, 0]], fraction[:, LIMB_MASS[:, 1]]
-        # (n, 4) the shares of the body's mass that move with each held limb's middle joint
-        # (its bones' centres of mass weighted by how near to it each lies) and that stay with
-        # its end (the rest of its lower bone, its foot or hand)
-        middle_share = np.where(held, upper_m * upper_f + lower_m * (1.0 - lower_f), 0.0)
-        end_share = np.where(held, lower_m * lower_f + distal_m, 0.0)
-        rigid = 1.0 - np.sum(middle_share + end_share, axis=1)
+        thigh_m, shank_m, foot_m = (masses[:, LIMB_MASS[:2, k]] / total for k in range(3))
+        thigh_f, shank_f = fraction[:, LIMB_MASS[:2, 0]], fraction[:, LIMB_MASS[:2, 1]]
+        # (n, 2) the shares of the body's mass that move with each held leg's knee (its
+        # bones' centres of mass weighted by how near to it each lies) and that stay with its
+        # ankle (the rest of the shank, the foot)
+        knee_share = np.where(held, thigh_m * thigh_f + shank_m * (1.0 - shank_f), 0.0)
+        ankle_share = np.where(held, shank_m * shank_f + foot_m, 0.0)
+        rigid = 1.0 - np.sum(knee_share + ankle_share, axis=1)
 
         def com_move(move: F64) -> F64:
-            # (n, 2) the centre of mass's move once the held limbs re-bend after the root's move
-            moved = middle_after_root_move(root, end, frames, upper, lower,
-                                           np.broadcast_to(move[:, None], root.shape))
-            bend = np.einsum("nl,nlc->nc", middle_share,
-                             np.where(held[..., None], moved[..., :2] - middle[..., :2], 0.0))
+            # (n, 2) the centre of mass's move once the held legs re-bend after the root's move
+            moved = middle_after_root_move(hip, ankle, dec.leg2world[rows], thigh, shank,
+                                           np.broadcast_to(move[:, None], hip.shape))
+            bend = np.einsum("nl,nlc->nc", knee_share,
+                             np.where(held[..., None], moved[..., :2] - knee[..., :2], 0.0))
             out: F64 = move[:, :2] * rigid[:, None] + bend
             return out
 
@@ -596,28 +602,29 @@ class _Solve:
                              (along_x[:, 0] * e[:, 1] - along_x[:, 1] * e[:, 0]) / safe], axis=1)
 
         step = self._with_lowering(rows, newton(error))
-        beyond = np.linalg.norm(end - root - step[:, None], axis=2) > (
-            LIMB_EXTENSION * (upper + lower) * (1.0 + 1e-9))
-        ok &= ~np.any(held & beyond, axis=1)  # the prediction holds while the ends stay in reach
+        beyond = np.linalg.norm(ankle - hip - step[:, None], axis=2) > (
+            MAX_LEG_EXTENSION * (thigh + shank) * (1.0 + 1e-9))
+        ok &= ~np.any(held & beyond, axis=1)  # the prediction holds while the ankles stay in reach
+        ok &= self.predicted[rows]
         shift = self._with_lowering(rows, step[:, :2] + newton(error - com_move(step)))
         if not ok.all():
             fallback = np.flatnonzero(~ok)
             shift[fallback] = self._with_lowering(rows[fallback], error[fallback] * s.root_gain)
         return shift
 
-    def held_limbs(self, rows: I64) -> NDArray[np.bool_]:
-        """(n, 4) the limbs of ``rows`` whose end (ankle, wrist) the next pass keeps where it
-        is: the limb's goal is a world point at its end (a planted foot's), met now, and it has
-        no second goal."""
+    def held_legs(self, rows: I64) -> NDArray[np.bool_]:
+        """(n, 2) the legs of ``rows`` whose ankle the next pass keeps where it is: the leg's
+        goal is a world point at the ankle (a planted foot's), met now, and it has no second
+        goal."""
         g = self.g
-        first = self.first_limb[rows]
+        first = self.first_limb[rows, :2]
         j = np.maximum(first, 0)
-        end_now = self.dec.positions[rows[:, None], LIMB_J[2]]
-        at_end = ((first >= 0) & (self.second_limb[rows] < 0) & ~g.orientation[j]
-                  & ~self.follows_body[j] & (g.bone[j] == 1) & (g.fraction[j] == 1.0)
-                  & np.all(g.offset[j] == 0.0, axis=2))
-        held: NDArray[np.bool_] = at_end & (
-            np.linalg.norm(end_now - g.goal[j], axis=2) <= self.s.tolerance_m * 0.01)
+        ankle_now = self.dec.positions[rows[:, None], LIMB_J[2][:2]]
+        at_ankle = ((first >= 0) & (self.second_limb[rows, :2] < 0) & ~g.orientation[j]
+                    & ~self.follows_body[j] & (g.bone[j] == 1) & (g.fraction[j] == 1.0)
+                    & np.all(g.offset[j] == 0.0, axis=2))
+        held: NDArray[np.bool_] = at_ankle & (
+            np.linalg.norm(ankle_now - g.goal[j], axis=2) <= self.s.tolerance_m * 0.01)
         return held
 
 
@@ -671,6 +678,7 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
     # move; the passes (limbs and head, analytic) meet the others as well as they can be met.
     iterative = ((goals.chain & (1 << TRUNK)) > 0)
     iterative[goals.on_self] |= SEGMENT_MOVED_BY_PASS[goals.self_segment]
+    state.predicted[goals.owner[iterative]] = False
     used = np.zeros(state.r, np.int64)
     goal_caps, row_caps = iteration_caps(goals, settings)
     # Characters with a goal left open at the last measure (before the first: any iterative).

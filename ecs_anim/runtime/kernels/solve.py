@@ -145,7 +145,7 @@ def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
                 solve_trunk(c, pose, dec, b.lengths[c], g, w, err, stalled, t, tolerance_m,
                             tolerance_rad, max_ccd_step_rad)
             solve_root(c, pose, dec, g, w, b, t, com_tolerance_m, tolerance_m, root_gain,
-                       leg_extension)
+                       leg_extension, not iterates)
             # Only goals an iteration still moves can keep the loop going (:func:`_iterative`; the
             # passes meet the others as well as they can be met): open where not met nor stalled
             # (unchanged, or falling by less than a share of itself twice running).

@@ -1,6 +1,6 @@
 """The solver's root step (``adaptRoot``), compiled, for one character: the root moves
 horizontally by the step that brings the centre of mass back once the next pass has re-planted
-the limbs (predicted), and down where a planted leg could no longer reach its footprint (paper
+the legs (predicted), and down where a planted leg could no longer reach its footprint (paper
 §9).
 
 Mirrors ``ecs_anim.solver.shell._Solve.root`` for one character's row of the solve state,
@@ -19,7 +19,6 @@ from ecs_anim.runtime.kernels.solve_points import (
     Goals,
     Tables,
     Winners,
-    limb_frame,
 )
 from ecs_anim.runtime.kernels.vec import (
     F64,
@@ -31,6 +30,7 @@ from ecs_anim.runtime.kernels.vec import (
     dot,
     jit,
     load3,
+    load_frame,
     scale,
     sub,
 )
@@ -102,27 +102,27 @@ def middle_after_root_move(root: Vec3, end: Vec3, frame: Frame, upper: float, lo
 
 
 @jit(inline="always")
-def held_limbs(c: int, positions: F64, g: Goals, w: Winners, t: Tables,
-               tolerance_m: float) -> int:
-    """Bit ``li`` set for each limb whose end the next pass keeps where it is: its goal a world
-    point at its end, met now, and no second goal. Mirrors ``_Solve.held_limbs``."""
+def held_legs(c: int, positions: F64, g: Goals, w: Winners, t: Tables, tolerance_m: float) -> int:
+    """Bit ``side`` set for each leg whose ankle the next pass keeps where it is: its goal a
+    world point at the ankle (a planted foot's), met now, and no second goal. Mirrors
+    ``_Solve.held_legs``."""
     held = 0
-    for li in range(4):
-        j = w.first_limb[c, li]
-        if (j < 0 or w.second_limb[c, li] >= 0 or g.orientation[j] or g.on_self[j]
+    for side in range(2):
+        j = w.first_limb[c, side]
+        if (j < 0 or w.second_limb[c, side] >= 0 or g.orientation[j] or g.on_self[j]
                 or g.bone[j] != 1 or g.fraction[j] != 1.0 or g.offset[j, 0] != 0.0
                 or g.offset[j, 1] != 0.0 or g.offset[j, 2] != 0.0):
             continue
-        off = sub(load3(positions[c, t.limb_joint[li, 2]]), load3(g.goal[j]))
+        off = sub(load3(positions[c, t.ankle[side]]), load3(g.goal[j]))
         if math.sqrt(dot(off, off)) <= tolerance_m * 0.01:
-            held |= 1 << li
+            held |= 1 << side
     return held
 
 
 @jit(inline="always")
-def limb_shares(c: int, b: Bodies, t: Tables, li: int, total: float) -> tuple[float, float]:
-    """The shares of character ``c``'s mass (``total`` kg) that move with limb ``li``'s middle
-    joint and that stay with its end (mirrors ``_Solve.root_move``)."""
+def leg_shares(c: int, b: Bodies, t: Tables, li: int, total: float) -> tuple[float, float]:
+    """The shares of character ``c``'s mass (``total`` kg) that move with leg ``li``'s knee
+    and that stay with its ankle (mirrors ``_Solve.root_move``)."""
     upper, lower, distal = t.limb_mass[li, 0], t.limb_mass[li, 1], t.limb_mass[li, 2]
     upper_m, lower_m = b.masses[c, upper] / total, b.masses[c, lower] / total
     lower_f = b.com_fraction[c, lower]
@@ -131,77 +131,58 @@ def limb_shares(c: int, b: Bodies, t: Tables, li: int, total: float) -> tuple[fl
 
 
 @jit(inline="always")
-def middle_move(c: int, dec: DecodedArrays, lengths_row: F64, t: Tables, li: int,
-                move: Vec3) -> Vec3:
-    """How far limb ``li``'s middle joint goes when the root moves by ``move`` and its end
-    stays (:func:`middle_after_root_move`)."""
+def knee_move(c: int, dec: DecodedArrays, lengths_row: F64, t: Tables, li: int,
+              move: Vec3) -> Vec3:
+    """How far leg ``li``'s knee goes when the root moves by ``move`` and its ankle stays
+    (:func:`middle_after_root_move`)."""
     joints = t.limb_joint[li]
     p = dec.positions[c]
     middle = load3(p[joints[1]])
     moved = middle_after_root_move(load3(p[joints[0]]), load3(p[joints[2]]),
-                                   limb_frame(dec, c, li), lengths_row[t.limb_length[li, 0]],
+                                   load_frame(dec.leg2world[c, li]), lengths_row[t.limb_length[li, 0]],
                                    lengths_row[t.limb_length[li, 1]], move)
     return sub(moved, middle)
 
 
 @jit(inline="always")
-def jacobian_terms(c: int, dec: DecodedArrays, b: Bodies, t: Tables, held: int, total: float,
-                   lo: int, hi: int) -> tuple[float, float, float, float]:
-    """What the held limbs ``lo..hi-1`` of character ``c`` add to the Jacobian times the probe
-    (x along x, y along x, x along y, y along y): their middle joints' shares follow the joints,
-    their ends' stay."""
+def jacobian_terms(c: int, dec: DecodedArrays, b: Bodies, t: Tables, held: int,
+                   total: float) -> tuple[float, float, float, float]:
+    """What the held legs of character ``c`` add to the Jacobian times the probe (x along x,
+    y along x, x along y, y along y): their knees' shares follow the knees, their ankles' stay."""
     h = ROOT_PROBE_M
     lengths_row = b.lengths[c]
     ax = ay = bx = by = 0.0
-    for li in range(lo, hi):
+    for li in range(2):
         if (held >> li) & 1:
-            middle_share, end_share = limb_shares(c, b, t, li, total)
-            along_x = middle_move(c, dec, lengths_row, t, li, (h, 0.0, 0.0))
-            along_y = middle_move(c, dec, lengths_row, t, li, (0.0, h, 0.0))
-            ax += middle_share * along_x[0] - (middle_share + end_share) * h
-            ay += middle_share * along_x[1]
-            bx += middle_share * along_y[0]
-            by += middle_share * along_y[1] - (middle_share + end_share) * h
+            knee_share, ankle_share = leg_shares(c, b, t, li, total)
+            along_x = knee_move(c, dec, lengths_row, t, li, (h, 0.0, 0.0))
+            along_y = knee_move(c, dec, lengths_row, t, li, (0.0, h, 0.0))
+            ax += knee_share * along_x[0] - (knee_share + ankle_share) * h
+            ay += knee_share * along_x[1]
+            bx += knee_share * along_y[0]
+            by += knee_share * along_y[1] - (knee_share + ankle_share) * h
     return ax, ay, bx, by
 
 
 @jit(inline="always")
 def step_terms(c: int, dec: DecodedArrays, b: Bodies, t: Tables, held: int, total: float,
-               lo: int, hi: int, step: Vec3, leg_extension: float) -> tuple[float, float, bool]:
-    """What the held limbs ``lo..hi-1`` of character ``c`` add to the centre of mass's move for
-    the root's ``step`` (x, y), and whether their ends stay within reach from there."""
+               step: Vec3, leg_extension: float) -> tuple[float, float, bool]:
+    """What the held legs of character ``c`` add to the centre of mass's move for the root's
+    ``step`` (x, y), and whether their ankles stay within reach from there."""
     lengths_row = b.lengths[c]
     p = dec.positions
     mx = my = 0.0
     within = True
-    for li in range(lo, hi):
+    for li in range(2):
         if (held >> li) & 1:
-            middle_share, end_share = limb_shares(c, b, t, li, total)
-            bend = middle_move(c, dec, lengths_row, t, li, step)
-            mx += middle_share * bend[0] - (middle_share + end_share) * step[0]
-            my += middle_share * bend[1] - (middle_share + end_share) * step[1]
-            joints = t.limb_joint[li]
-            to_end = sub(sub(load3(p[c, joints[2]]), load3(p[c, joints[0]])), step)
-            reach = ((leg_extension if li < 2 else 1.0)
-                     * (lengths_row[t.limb_length[li, 0]] + lengths_row[t.limb_length[li, 1]]))
-            within = within and math.sqrt(dot(to_end, to_end)) <= reach * (1.0 + 1e-9)
+            knee_share, ankle_share = leg_shares(c, b, t, li, total)
+            bend = knee_move(c, dec, lengths_row, t, li, step)
+            mx += knee_share * bend[0] - (knee_share + ankle_share) * step[0]
+            my += knee_share * bend[1] - (knee_share + ankle_share) * step[1]
+            to_ankle = sub(sub(load3(p[c, t.ankle[li]]), load3(p[c, t.hip[li]])), step)
+            reach = leg_extension * (lengths_row[t.thigh[li]] + lengths_row[t.shank[li]])
+            within = within and math.sqrt(dot(to_ankle, to_ankle)) <= reach * (1.0 + 1e-9)
     return mx, my, within
-
-
-# The arms' terms in a call of their own, made only for a character with a held hand (rare):
-# inlined beside the legs', they made every root step 2.5 times slower, held hand or not.
-@jit()
-def arm_jacobian_terms(c: int, dec: DecodedArrays, b: Bodies, t: Tables, held: int,
-                       total: float) -> tuple[float, float, float, float]:
-    """:func:`jacobian_terms` of the arms."""
-    return jacobian_terms(c, dec, b, t, held, total, 2, 4)
-
-
-@jit()
-def arm_step_terms(c: int, dec: DecodedArrays, b: Bodies, t: Tables, held: int, total: float,
-                   step: Vec3) -> tuple[float, float, bool]:
-    """:func:`step_terms` of the arms."""
-    return step_terms(c, dec, b, t, held, total, 2, 4, step, 1.0)
 
 
 @jit(inline="always")
@@ -209,31 +190,25 @@ def root_move(c: int, dec: DecodedArrays, g: Goals, w: Winners, b: Bodies, t: Ta
               ex: float, ey: float, tolerance_m: float, root_gain: float,
               leg_extension: float) -> Vec3:
     """The root's move (m) bringing character ``c``'s centre of mass by (``ex``, ``ey``) once
-    the next pass has re-planted its limbs. Mirrors ``_Solve.root_move`` (the centre of mass
-    moves with the root but for the held limbs: their middle joints' shares follow the joints,
-    their ends' stay)."""
-    held = held_limbs(c, dec.positions, g, w, t, tolerance_m)
+    the next pass has re-planted its legs. Mirrors ``_Solve.root_move`` (the centre of mass
+    moves with the root but for the held legs: their knees' shares follow the knees, their
+    ankles' stay)."""
+    held = held_legs(c, dec.positions, g, w, t, tolerance_m)
     p = dec.positions
     total = 0.0
     for s in range(b.masses.shape[1]):
         total += b.masses[c, s]
     # The Jacobian: the centre of mass's move for a probe along x, along y, over the probe.
     h = ROOT_PROBE_M
-    ax, ay, bx, by = jacobian_terms(c, dec, b, t, held, total, 0, 2)
-    if held >= 4:
-        arms = arm_jacobian_terms(c, dec, b, t, held, total)
-        ax, ay, bx, by = ax + arms[0], ay + arms[1], bx + arms[2], by + arms[3]
+    ax, ay, bx, by = jacobian_terms(c, dec, b, t, held, total)
     ax, ay, bx, by = (h + ax) / h, ay / h, bx / h, (h + by) / h
     det = ax * by - bx * ay
     if det > MIN_ROOT_JACOBIAN:
         # Newton's step (Cramer's rule), then corrected once by the prediction at that step,
-        # while every held end stays within its limb's reach.
+        # while every held ankle stays within its leg's reach.
         sx, sy = (by * ex - bx * ey) / det, (ax * ey - ay * ex) / det
         step = (sx, sy, lowering(c, p, b, t, sx, sy, leg_extension))
-        mx, my, within = step_terms(c, dec, b, t, held, total, 0, 2, step, leg_extension)
-        if held >= 4:
-            arms_x, arms_y, arms_within = arm_step_terms(c, dec, b, t, held, total, step)
-            mx, my, within = mx + arms_x, my + arms_y, within and arms_within
+        mx, my, within = step_terms(c, dec, b, t, held, total, step, leg_extension)
         if within:
             rx, ry = ex - (sx + mx), ey - (sy + my)
             sx, sy = sx + (by * rx - bx * ry) / det, sy + (ax * ry - ay * rx) / det
@@ -245,17 +220,23 @@ def root_move(c: int, dec: DecodedArrays, g: Goals, w: Winners, b: Bodies, t: Ta
 @jit(inline="always")
 def solve_root(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners, b: Bodies,
                t: Tables, com_tolerance_m: float, tolerance_m: float, root_gain: float,
-               leg_extension: float) -> float:
+               leg_extension: float, predicted: bool) -> float:
     """Mirrors ``ecs_anim.solver.shell._Solve.root`` for character ``c`` (in place): returns
     the horizontal centre-of-mass error before the move (m; 0 without COM control).
-    ``leg_extension``: the longest a planted leg stretches, as a share of thigh + shank."""
+    ``leg_extension``: the longest a planted leg stretches, as a share of thigh + shank;
+    ``predicted``: the character has no goal that keeps it iterating (``_Solve.predicted``:
+    else the root moves by the error times ``root_gain``)."""
     positions = dec.positions
     ex, ey = com_shortfall(c, positions, b.masses, b.com_fraction, b.com_desired, b.com_on,
                            t.mass_proximal, t.mass_distal)
     size = math.sqrt(ex * ex + ey * ey)
     if not size > 0.1 * com_tolerance_m:
         return size
-    sx, sy, sz = root_move(c, dec, g, w, b, t, ex, ey, tolerance_m, root_gain, leg_extension)
+    if predicted:
+        sx, sy, sz = root_move(c, dec, g, w, b, t, ex, ey, tolerance_m, root_gain, leg_extension)
+    else:
+        sx, sy = ex * root_gain, ey * root_gain
+        sz = lowering(c, positions, b, t, sx, sy, leg_extension)
     unit = leg_length(b.lengths[c])
     pose.root_position[c, 0] += sx / unit
     pose.root_position[c, 1] += sy / unit
