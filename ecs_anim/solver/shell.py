@@ -101,8 +101,9 @@ class SolverSettings:
     mass; ``max_ccd_step_rad``: the largest turn one CCD step of the
     trunk makes (spreads a lean over the iterations); ``root_gain``: how far past the
     centre-of-mass error the root steps where its step is not predicted (a planted leg would
-    leave its reach, or a goal keeps the character iterating anyway; elsewhere the step is the
-    one that puts the centre of mass back once the planted feet re-plant: ``_Solve.root_move``);
+    leave its reach; a goal keeps the character iterating anyway, or aims at the world or at
+    another character; elsewhere the step is the one that puts the centre of mass back once the
+    planted feet re-plant: ``_Solve.root_move``);
     ``release_speed_m_s``: how fast a point a sphere held off the motion's place goes back to it
     once the sphere lets it go (instead of in one tick); ``stall_fraction``: a goal has stalled
     when its error no longer changes by the tolerance, or when it falls by less than this share
@@ -255,7 +256,8 @@ class _Solve:
         self.follows_body = np.zeros(g.k, bool)  # (k,) the goals following a point of the body
         self.follows_body[g.on_self] = True
         # (r,) the characters whose root step is predicted (:meth:`root_move`): those without
-        # a goal that keeps iterating (the trunk's, or one following what a pass moves)
+        # a goal that keeps iterating (the trunk's, or one following what a pass moves) and
+        # whose every user goal follows their own body (set by :func:`solve`)
         self.predicted = np.ones(self.r, bool)
         p = self.dec.positions
         self.foot_in_world = normalize(p[:, list(SIDE_JOINTS["toe"])] - p[:, list(SIDE_JOINTS["ankle"])])
@@ -557,9 +559,11 @@ class _Solve:
         the prediction at that step. Where no step can be predicted (a held ankle beyond its
         leg's reach from there, or a degenerate Jacobian) the root moves by the error times
         ``root_gain``; so it does for a character with a goal that keeps it iterating anyway
-        (not :attr:`predicted`): where such a goal stalls (its error unchanged from one
-        iteration to the next) depends on the root's moves, and predicted ones changed where
-        an unreachable elbow stopped by 14 mm (``reach_and_touch.yaml``)."""
+        or a goal aiming at the world or at another character (not :attr:`predicted`): where
+        such goals stall (an error unchanged from one iteration to the next) depends on the
+        root's moves, and predicted ones changed, directly or through the next ticks, where
+        an unreachable elbow stopped by 14 mm (``reach_and_touch.yaml``) and how far a head
+        stayed from its area by 8 mm (``fight_training.yaml``)."""
         dec, s = self.dec, self.s
         held = self.held_legs(rows)
         p = dec.positions[rows]
@@ -678,7 +682,7 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
     # move; the passes (limbs and head, analytic) meet the others as well as they can be met.
     iterative = ((goals.chain & (1 << TRUNK)) > 0)
     iterative[goals.on_self] |= SEGMENT_MOVED_BY_PASS[goals.self_segment]
-    state.predicted[goals.owner[iterative]] = False
+    state.predicted[goals.owner[iterative | ((goals.table_index >= 0) & ~state.follows_body)]] = False
     used = np.zeros(state.r, np.int64)
     goal_caps, row_caps = iteration_caps(goals, settings)
     # Characters with a goal left open at the last measure (before the first: any iterative).

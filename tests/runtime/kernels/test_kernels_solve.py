@@ -21,6 +21,7 @@ from ecs_anim.core.rotations import matrix_from_quat
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import LENGTH_INDEX as L
 from ecs_anim.motion.constraints import Activation
+from ecs_anim.runtime.bench_scene import BenchScene
 from ecs_anim.runtime.kernels import solve as compiled
 from ecs_anim.runtime.kernels import solve_math as compiled_math
 from ecs_anim.runtime.kernels.solve_head import solve_head
@@ -121,8 +122,23 @@ def test_the_bench_characters_stop_once_the_root_stays(monkeypatch):
     three or four when the limbs' goals, moved by each root step, kept it going)."""
     used = np.concatenate([solver_shell.solve(*copy.deepcopy(args))[1]
                            for args in bench_run(monkeypatch, n=6, ticks=6)])
-    assert used.max() <= 2
-    assert used.mean() < 1.7
+    assert used.max() <= 3
+    assert used.mean() < 2.5
+
+
+def test_the_root_step_lands_for_walkers_with_targets_on_their_body(monkeypatch):
+    """The bench's walkers now (feet planted, centre of mass held, wrist and elbow targets on
+    their own shoulder): the root's predicted step lands the centre of mass within the tenth
+    of its tolerance once the legs re-plant, so one iteration is all but every solve takes
+    (two or three each before the prediction)."""
+    capture = Capture(monkeypatch)
+    scene = BenchScene(6, constrained=True)
+    for _ in range(6):
+        scene.tick()
+    scene.sim.close()
+    used = np.concatenate([solver_shell.solve(*copy.deepcopy(args))[1] for args in capture.calls])
+    assert used.size == 36 and used.max() <= 2
+    assert np.mean(used == 1) > 0.9
 
 
 # --- each step against its numpy counterpart, on real solve states -------------------------
