@@ -145,75 +145,59 @@ def knee_move(c: int, dec: DecodedArrays, lengths_row: F64, t: Tables, li: int,
 
 
 @jit(inline="always")
-def jacobian_terms(c: int, dec: DecodedArrays, b: Bodies, t: Tables, held: int,
-                   total: float) -> tuple[float, float, float, float]:
-    """What the held legs of character ``c`` add to the Jacobian times the probe (x along x,
-    y along x, x along y, y along y): their knees' shares follow the knees, their ankles' stay."""
-    h = ROOT_PROBE_M
-    lengths_row = b.lengths[c]
-    ax = ay = bx = by = 0.0
-    for li in range(2):
-        if (held >> li) & 1:
-            knee_share, ankle_share = leg_shares(c, b, t, li, total)
-            along_x = knee_move(c, dec, lengths_row, t, li, (h, 0.0, 0.0))
-            along_y = knee_move(c, dec, lengths_row, t, li, (0.0, h, 0.0))
-            ax += knee_share * along_x[0] - (knee_share + ankle_share) * h
-            ay += knee_share * along_x[1]
-            bx += knee_share * along_y[0]
-            by += knee_share * along_y[1] - (knee_share + ankle_share) * h
-    return ax, ay, bx, by
-
-
-@jit(inline="always")
-def step_terms(c: int, dec: DecodedArrays, b: Bodies, t: Tables, held: int, total: float,
-               step: Vec3, leg_extension: float) -> tuple[float, float, bool]:
-    """What the held legs of character ``c`` add to the centre of mass's move for the root's
-    ``step`` (x, y), and whether their ankles stay within reach from there."""
-    lengths_row = b.lengths[c]
-    p = dec.positions
-    mx = my = 0.0
-    within = True
-    for li in range(2):
-        if (held >> li) & 1:
-            knee_share, ankle_share = leg_shares(c, b, t, li, total)
-            bend = knee_move(c, dec, lengths_row, t, li, step)
-            mx += knee_share * bend[0] - (knee_share + ankle_share) * step[0]
-            my += knee_share * bend[1] - (knee_share + ankle_share) * step[1]
-            to_ankle = sub(sub(load3(p[c, t.ankle[li]]), load3(p[c, t.hip[li]])), step)
-            reach = leg_extension * (lengths_row[t.thigh[li]] + lengths_row[t.shank[li]])
-            within = within and math.sqrt(dot(to_ankle, to_ankle)) <= reach * (1.0 + 1e-9)
-    return mx, my, within
-
-
-@jit(inline="always")
 def root_move(c: int, dec: DecodedArrays, g: Goals, w: Winners, b: Bodies, t: Tables,
               ex: float, ey: float, tolerance_m: float, root_gain: float,
-              leg_extension: float) -> Vec3:
+              leg_extension: float, predicted: bool) -> Vec3:
     """The root's move (m) bringing character ``c``'s centre of mass by (``ex``, ``ey``) once
-    the next pass has re-planted its legs. Mirrors ``_Solve.root_move`` (the centre of mass
-    moves with the root but for the held legs: their knees' shares follow the knees, their
-    ankles' stay)."""
-    held = held_legs(c, dec.positions, g, w, t, tolerance_m)
+    the next pass has re-planted its legs, where ``predicted`` (else the error times
+    ``root_gain``). Mirrors ``_Solve.root_move`` (the centre of mass moves with the root but
+    for the held legs: their knees' shares follow the knees, their ankles' stay)."""
     p = dec.positions
-    total = 0.0
-    for s in range(b.masses.shape[1]):
-        total += b.masses[c, s]
-    # The Jacobian: the centre of mass's move for a probe along x, along y, over the probe.
-    h = ROOT_PROBE_M
-    ax, ay, bx, by = jacobian_terms(c, dec, b, t, held, total)
-    ax, ay, bx, by = (h + ax) / h, ay / h, bx / h, (h + by) / h
-    det = ax * by - bx * ay
-    if det > MIN_ROOT_JACOBIAN:
-        # Newton's step (Cramer's rule), then corrected once by the prediction at that step,
-        # while every held ankle stays within its leg's reach.
-        sx, sy = (by * ex - bx * ey) / det, (ax * ey - ay * ex) / det
-        step = (sx, sy, lowering(c, p, b, t, sx, sy, leg_extension))
-        mx, my, within = step_terms(c, dec, b, t, held, total, step, leg_extension)
-        if within:
-            rx, ry = ex - (sx + mx), ey - (sy + my)
-            sx, sy = sx + (by * rx - bx * ry) / det, sy + (ax * ry - ay * rx) / det
-            return sx, sy, lowering(c, p, b, t, sx, sy, leg_extension)
     sx, sy = ex * root_gain, ey * root_gain
+    if predicted:
+        held = held_legs(c, p, g, w, t, tolerance_m)
+        lengths_row = b.lengths[c]
+        total = 0.0
+        for s in range(b.masses.shape[1]):
+            total += b.masses[c, s]
+        h = ROOT_PROBE_M
+        # Three moves of the root, the knees re-bent for each (one call site: numba inlines
+        # a copy of the knee's arithmetic at each, and the kernels' compile is counted): a
+        # probe along x and one along y (the Jacobian, over the probe), then Newton's step,
+        # whose predicted move corrects it once while every held ankle stays within reach.
+        ax, ay, bx, by = h, 0.0, 0.0, h
+        det = 0.0
+        nx = ny = nz = 0.0
+        mx = my = 0.0
+        within = True
+        for k in range(3):
+            if k == 2:
+                ax, ay, bx, by = ax / h, ay / h, bx / h, by / h
+                det = ax * by - bx * ay
+                if not det > MIN_ROOT_JACOBIAN:
+                    break
+                nx, ny = (by * ex - bx * ey) / det, (ax * ey - ay * ex) / det
+                nz = lowering(c, p, b, t, nx, ny, leg_extension)
+                mx, my = nx, ny
+            move = (h, 0.0, 0.0) if k == 0 else ((0.0, h, 0.0) if k == 1 else (nx, ny, nz))
+            for li in range(2):
+                if (held >> li) & 1:
+                    knee_share, ankle_share = leg_shares(c, b, t, li, total)
+                    bend = knee_move(c, dec, lengths_row, t, li, move)
+                    x = knee_share * bend[0] - (knee_share + ankle_share) * move[0]
+                    y = knee_share * bend[1] - (knee_share + ankle_share) * move[1]
+                    if k == 0:
+                        ax, ay = ax + x, ay + y
+                    elif k == 1:
+                        bx, by = bx + x, by + y
+                    else:
+                        mx, my = mx + x, my + y
+                        to_ankle = sub(sub(load3(p[c, t.ankle[li]]), load3(p[c, t.hip[li]])), move)
+                        reach = leg_extension * (lengths_row[t.thigh[li]] + lengths_row[t.shank[li]])
+                        within = within and math.sqrt(dot(to_ankle, to_ankle)) <= reach * (1.0 + 1e-9)
+        if det > MIN_ROOT_JACOBIAN and within:
+            rx, ry = ex - mx, ey - my
+            sx, sy = nx + (by * rx - bx * ry) / det, ny + (ax * ry - ay * rx) / det
     return sx, sy, lowering(c, p, b, t, sx, sy, leg_extension)
 
 
@@ -232,11 +216,8 @@ def solve_root(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winner
     size = math.sqrt(ex * ex + ey * ey)
     if not size > 0.1 * com_tolerance_m:
         return size
-    if predicted:
-        sx, sy, sz = root_move(c, dec, g, w, b, t, ex, ey, tolerance_m, root_gain, leg_extension)
-    else:
-        sx, sy = ex * root_gain, ey * root_gain
-        sz = lowering(c, positions, b, t, sx, sy, leg_extension)
+    sx, sy, sz = root_move(c, dec, g, w, b, t, ex, ey, tolerance_m, root_gain, leg_extension,
+                           predicted)
     unit = leg_length(b.lengths[c])
     pose.root_position[c, 0] += sx / unit
     pose.root_position[c, 1] += sy / unit
