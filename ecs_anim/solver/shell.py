@@ -43,7 +43,7 @@ from ecs_anim.core.body_points import (
 )
 from ecs_anim.core.errors import UsageError
 from ecs_anim.core.ground_adapt import MAX_LEG_EXTENSION, vertical_slack_for_reach
-from ecs_anim.core.morphology import centres_of_mass, leg_length
+from ecs_anim.core.morphology import MASS_SEGMENTS, centres_of_mass, leg_length
 from ecs_anim.core.normalized import (
     SIDE_JOINTS,
     SIDE_LENGTHS,
@@ -75,6 +75,7 @@ from ecs_anim.solver.goals import (
 )
 from ecs_anim.solver.steps import (
     bring_within_reach,
+    middle_after_root_move,
     point_in_limb,
     reach_point,
     rotation_toward,
@@ -99,7 +100,10 @@ class SolverSettings:
     a goal closer than this is met; ``com_tolerance_m``: the same for the horizontal centre of
     mass; ``max_ccd_step_rad``: the largest turn one CCD step of the
     trunk makes (spreads a lean over the iterations); ``root_gain``: how far past the
-    centre-of-mass error the root steps (the planted legs' mass does not follow it);
+    centre-of-mass error the root steps where its step is not predicted (a planted leg would
+    leave its reach; a goal keeps the character iterating anyway, or aims at the world or at
+    another character; elsewhere the step is the one that puts the centre of mass back once the
+    planted feet re-plant: ``_Solve.root_move``);
     ``release_speed_m_s``: how fast a point a sphere held off the motion's place goes back to it
     once the sphere lets it go (instead of in one tick); ``stall_fraction``: a goal has stalled
     when its error no longer changes by the tolerance, or when it falls by less than this share
@@ -164,6 +168,18 @@ LIMB_J = tuple(np.array([J[f"{leg}_l"], J[f"{leg}_r"], J[f"{arm}_l"], J[f"{arm}_
 LIMB_LENGTHS = tuple(np.array([L[f"{leg}_l"], L[f"{leg}_r"], L[f"{arm}_l"], L[f"{arm}_r"]])
                      for leg, arm in (("thigh", "upper_arm"), ("shank", "forearm"), ("foot", "hand")))
 LIMB_EXTENSION = np.array([MAX_LEG_EXTENSION, MAX_LEG_EXTENSION, 1.0, 1.0])
+#: Per limb (4, 3): the mass segments (:data:`ecs_anim.core.morphology.MASS_SEGMENTS`) of its
+#: upper, lower and distal bones.
+LIMB_MASS = np.array([[[segment[0] for segment in MASS_SEGMENTS].index(f"{bone}_{side}")
+                       for bone in bones]
+                      for bones in (("thigh", "shank", "foot"), ("upper_arm", "forearm", "hand"))
+                      for side in ("l", "r")])
+#: The root step's probe (m): how far along x and y it moves the root in its prediction to
+#: measure how the centre of mass follows (its Jacobian).
+ROOT_PROBE_M = 1e-3
+#: The least determinant of that Jacobian for which the step is predicted (the body moves
+#: the centre of mass by about 0.6-1 times the root's move; below this it is no prediction).
+MIN_ROOT_JACOBIAN = 0.1
 # Per group [leg_l, leg_r, head, arm_l, arm_r, trunk]: the root and middle joint of the limb the
 # trunk carries (-1: not carried), and the share of its length the trunk aims to bring a goal
 # within (a little bent, so the limb's own step then meets it).
@@ -237,6 +253,12 @@ class _Solve:
         self.is_first[self.first_limb[self.first_limb >= 0]] = True
         self.is_first[self.first_head[self.first_head >= 0]] = True
         self.self_at = goals.self_start.copy()
+        self.follows_body = np.zeros(g.k, bool)  # (k,) the goals following a point of the body
+        self.follows_body[g.on_self] = True
+        # (r,) the characters whose root step is predicted (:meth:`root_move`): those without
+        # a goal that keeps iterating (the trunk's, or one following what a pass moves) and
+        # whose every user goal follows their own body (set by :func:`solve`)
+        self.predicted = np.ones(self.r, bool)
         p = self.dec.positions
         self.foot_in_world = normalize(p[:, list(SIDE_JOINTS["toe"])] - p[:, list(SIDE_JOINTS["ankle"])])
         # The characters still being solved: each stops when its own goals are met or stalled
@@ -500,25 +522,114 @@ class _Solve:
         return error
 
     def root(self) -> F64:
-        """Move the root horizontally by the centre-of-mass error (times the gain); lower it if
-        a planted leg could no longer reach its footprint. Returns (r,) the error before (m)."""
-        dec, poses, g, s = self.dec, self.poses, self.g, self.s
+        """Move the root horizontally to bring the centre of mass back (:meth:`root_move`);
+        lower it if a planted leg could no longer reach its footprint. Returns (r,) the error
+        before (m)."""
+        dec, poses, s = self.dec, self.poses, self.s
         error = self.com_shortfall()
         size: F64 = np.linalg.norm(error, axis=1)
         rows = np.flatnonzero((size > 0.1 * s.com_tolerance_m) & self.active)
         if rows.size == 0:
             return size
+        shift = self.root_move(rows, error[rows])
+        poses.root_position[rows] += shift / leg_length(self.lengths[rows])[:, None]
+        # A translation of the root moves every joint by it (the legs re-aim next).
+        dec.positions[rows] += shift[:, None]
+        return size
+
+    def _with_lowering(self, rows: I64, horizontal: F64) -> F64:
+        """(n, 3) the root's move for a horizontal one (n, 2) m: lowered where a planted leg
+        could no longer reach its footprint from the moved hip."""
+        g = self.g
         shift = np.zeros((rows.size, 3))
-        shift[:, :2] = error[rows] * s.root_gain
-        hips = dec.positions[rows][:, list(SIDE_JOINTS["hip"])] + shift[:, None]
+        shift[:, :2] = horizontal
+        hips = self.dec.positions[rows][:, list(SIDE_JOINTS["hip"])] + shift[:, None]
         lengths = self.lengths[rows]
         reach = MAX_LEG_EXTENSION * (lengths[:, SIDE_LENGTHS["thigh"]] + lengths[:, SIDE_LENGTHS["shank"]])
         needed = vertical_slack_for_reach(hips, g.footprint[rows], reach)
         shift[:, 2] = np.min(np.where(g.in_contact[rows], np.minimum(needed, 0.0), 0.0), axis=1)
-        poses.root_position[rows] += shift / leg_length(lengths)[:, None]
-        # A translation of the root moves every joint by it (the legs re-aim next).
-        dec.positions[rows] += shift[:, None]
-        return size
+        return shift
+
+    def root_move(self, rows: I64, error: F64) -> F64:
+        """(n, 3) the root's move (m) that brings the centre of mass of ``rows`` (n,) by
+        ``error`` (n, 2) once the next pass has put the legs back on their goals: the legs
+        whose ankle the pass keeps where it is (:meth:`held_legs`: the planted feet) re-bend
+        (:func:`middle_after_root_move`), the rest of the body moves with the root. Newton's
+        step on that prediction (its Jacobian by a 1 mm probe along x and y), corrected once by
+        the prediction at that step. Where no step can be predicted (a held ankle beyond its
+        leg's reach from there, or a degenerate Jacobian) the root moves by the error times
+        ``root_gain``; so it does for a character with a goal that keeps it iterating anyway
+        or a goal aiming at the world or at another character (not :attr:`predicted`): where
+        such goals stall (an error unchanged from one iteration to the next) depends on the
+        root's moves, and predicted ones changed, directly or through the next ticks, where
+        an unreachable elbow stopped by 14 mm (``reach_and_touch.yaml``) and how far a head
+        stayed from its area by 8 mm (``fight_training.yaml``)."""
+        dec, s = self.dec, self.s
+        held = self.held_legs(rows)
+        p = dec.positions[rows]
+        hip, knee, ankle = (p[:, LIMB_J[k][:2]] for k in range(3))  # (n, 2, 3)
+        lengths = self.lengths[rows]
+        thigh, shank = (lengths[:, LIMB_LENGTHS[k][:2]] for k in range(2))  # (n, 2)
+        masses, fraction = self.masses[rows], self.com_fraction[rows]
+        total = masses.sum(axis=1)[:, None]
+        thigh_m, shank_m, foot_m = (masses[:, LIMB_MASS[:2, k]] / total for k in range(3))
+        thigh_f, shank_f = fraction[:, LIMB_MASS[:2, 0]], fraction[:, LIMB_MASS[:2, 1]]
+        # (n, 2) the shares of the body's mass that move with each held leg's knee (its
+        # bones' centres of mass weighted by how near to it each lies) and that stay with its
+        # ankle (the rest of the shank, the foot)
+        knee_share = np.where(held, thigh_m * thigh_f + shank_m * (1.0 - shank_f), 0.0)
+        ankle_share = np.where(held, shank_m * shank_f + foot_m, 0.0)
+        rigid = 1.0 - np.sum(knee_share + ankle_share, axis=1)
+
+        def com_move(move: F64) -> F64:
+            # (n, 2) the centre of mass's move once the held legs re-bend after the root's move
+            moved = middle_after_root_move(hip, ankle, dec.leg2world[rows], thigh, shank,
+                                           np.broadcast_to(move[:, None], hip.shape))
+            bend = np.einsum("nl,nlc->nc", knee_share,
+                             np.where(held[..., None], moved[..., :2] - knee[..., :2], 0.0))
+            out: F64 = move[:, :2] * rigid[:, None] + bend
+            return out
+
+        probe = np.zeros((rows.size, 3))
+        probe[:, 0] = ROOT_PROBE_M
+        along_x = com_move(probe) / ROOT_PROBE_M
+        probe[:, :] = 0.0
+        probe[:, 1] = ROOT_PROBE_M
+        along_y = com_move(probe) / ROOT_PROBE_M
+        det = along_x[:, 0] * along_y[:, 1] - along_y[:, 0] * along_x[:, 1]
+        ok = det > MIN_ROOT_JACOBIAN
+
+        def newton(e: F64) -> F64:
+            # (n, 2) the Jacobian's inverse applied to e (Cramer's rule)
+            safe = np.where(ok, det, 1.0)
+            return np.stack([(along_y[:, 1] * e[:, 0] - along_y[:, 0] * e[:, 1]) / safe,
+                             (along_x[:, 0] * e[:, 1] - along_x[:, 1] * e[:, 0]) / safe], axis=1)
+
+        step = self._with_lowering(rows, newton(error))
+        beyond = np.linalg.norm(ankle - hip - step[:, None], axis=2) > (
+            MAX_LEG_EXTENSION * (thigh + shank) * (1.0 + 1e-9))
+        ok &= ~np.any(held & beyond, axis=1)  # the prediction holds while the ankles stay in reach
+        ok &= self.predicted[rows]
+        shift = self._with_lowering(rows, step[:, :2] + newton(error - com_move(step)))
+        if not ok.all():
+            fallback = np.flatnonzero(~ok)
+            shift[fallback] = self._with_lowering(rows[fallback], error[fallback] * s.root_gain)
+        return shift
+
+    def held_legs(self, rows: I64) -> NDArray[np.bool_]:
+        """(n, 2) the legs of ``rows`` whose ankle the next pass keeps where it is: the leg's
+        goal is a world point at the ankle (a planted foot's), met now, and it has no second
+        goal."""
+        g = self.g
+        first = self.first_limb[rows, :2]
+        j = np.maximum(first, 0)
+        ankle_now = self.dec.positions[rows[:, None], LIMB_J[2][:2]]
+        at_ankle = ((first >= 0) & (self.second_limb[rows, :2] < 0) & ~g.orientation[j]
+                    & ~self.follows_body[j] & (g.bone[j] == 1) & (g.fraction[j] == 1.0)
+                    & np.all(g.offset[j] == 0.0, axis=2))
+        held: NDArray[np.bool_] = at_ankle & (
+            np.linalg.norm(ankle_now - g.goal[j], axis=2) <= self.s.tolerance_m * 0.01)
+        return held
 
 
 def _bone_coords(bone: I64, fraction: F64, offset: F64, upper: F64, lower: F64, distal: F64,
@@ -571,6 +682,7 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
     # move; the passes (limbs and head, analytic) meet the others as well as they can be met.
     iterative = ((goals.chain & (1 << TRUNK)) > 0)
     iterative[goals.on_self] |= SEGMENT_MOVED_BY_PASS[goals.self_segment]
+    state.predicted[goals.owner[iterative | ((goals.table_index >= 0) & ~state.follows_body)]] = False
     used = np.zeros(state.r, np.int64)
     goal_caps, row_caps = iteration_caps(goals, settings)
     # Characters with a goal left open at the last measure (before the first: any iterative).

@@ -7,6 +7,8 @@ solver shell (the constraint issue's ConstraintSolve) owns priorities, iteration
 * :func:`reach_point` — the analytic step: put any point of the limb (its end, mid-forearm, a
   point on the shank) on a goal; out of reach, as near as the limb allows (the error is then the
   geometric minimum).
+* :func:`middle_after_root_move` — where a limb's middle joint goes when its root moves and its end
+  stays (the root step's prediction of the pass after it).
 * :func:`turn_about_axis` — a lower-priority step: turn about the line through a
   higher-priority point (which stays exactly where it is) to bring another point as close as
   possible to its goal: the best point on the circle of solutions (fig. 11 b).
@@ -140,3 +142,27 @@ def turn_about_axis(root: F64, axis_through: F64, point: F64, goal: F64) -> F64:
     angle = np.arctan2(np.sum(k * np.cross(v, t), axis=-1), np.sum(v * t, axis=-1))
     ok = (np.linalg.norm(v, axis=-1) > 1e-9) & (np.linalg.norm(t, axis=-1) > 1e-9)
     return axis_angle(k, np.where(ok, angle, 0.0))
+
+
+def middle_after_root_move(root: F64, end: F64, limb2world: F64, upper: F64, lower: F64,
+                           move: F64) -> F64:
+    """Where the middle joint (knee, elbow) of a limb goes when its root moves by ``move`` and
+    :func:`reach_point` puts its end back on ``end``: the flexion for the new root-end span,
+    and the half-plane turned by the smallest rotation of its ``z`` axis (root -> end) onto the
+    new root-end direction. ``root``, ``end``, ``move`` (n, 3) m; ``limb2world`` (n, 3, 3)
+    the half-plane frame now; ``upper``, ``lower`` (n,) m; the span must be within reach.
+    Returns (n, 3)."""
+    z_now, y_now = limb2world[..., :, 2], limb2world[..., :, 1]
+    moved = root + move
+    to_end = end - moved
+    span = np.linalg.norm(to_end, axis=-1)
+    z_new = to_end / span[..., None]
+    y_middle, z_middle = two_sphere_middle(upper, lower, span)
+    # The smallest rotation taking z_now onto z_new (Rodrigues' formula with sin and cos
+    # given by the cross and dot products), applied to the half-plane's y axis.
+    axis = np.cross(z_now, z_new)
+    cos = np.sum(z_now * z_new, axis=-1)
+    y_new = (y_now * cos[..., None] + np.cross(axis, y_now)
+             + axis * (np.sum(axis * y_now, axis=-1) / (1.0 + cos))[..., None])
+    middle: F64 = moved + y_new * y_middle[..., None] + z_new * z_middle[..., None]
+    return middle

@@ -42,7 +42,7 @@ from ecs_anim.runtime.kernels.solve_points import (
     point_position,
     tables,
 )
-from ecs_anim.runtime.kernels.solve_root import com_shortfall, root_step
+from ecs_anim.runtime.kernels.solve_root import com_shortfall, solve_root
 from ecs_anim.runtime.kernels.solve_trunk import solve_trunk
 from ecs_anim.runtime.kernels.vec import F64, dot, jit, load3, normalize, store3, sub
 from ecs_anim.solver.goals import TickGoals
@@ -100,6 +100,9 @@ def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
         uses_trunk = False
         on_self = False
         iterates = False  # a goal an iteration moves: the trunk's, or one following what a pass moves
+        # the root's step is predicted (``_Solve.predicted``): no goal iterates, and every user
+        # goal follows the own body (none aims at the world or at another character)
+        predicted = True
         for j in range(start, stop):
             stalled[j] = False
             previous[j] = math.inf
@@ -108,6 +111,7 @@ def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
                 uses_trunk = True
             on_self = on_self or g.on_self[j]
             iterates = iterates or _iterative(g, t, j)
+            predicted = predicted and (g.on_self[j] or g.table_index[j] < 0)
         # Steps with nothing to do are not called, and the errors of points without offset are
         # measured on the arrays themselves (the same operations as goal_error).
         uses_head = w.first_head[c] >= 0 or w.orient_head[c] >= 0
@@ -144,10 +148,8 @@ def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
                     err[j] = goal_error(dec, c, g, j, t)
                 solve_trunk(c, pose, dec, b.lengths[c], g, w, err, stalled, t, tolerance_m,
                             tolerance_rad, max_ccd_step_rad)
-            root_step(c, pose.root_position, positions, b.lengths, b.masses, b.com_fraction,
-                      b.footprint, b.in_contact, b.com_desired, b.com_on, t.mass_proximal,
-                      t.mass_distal, t.hip, t.thigh, t.shank, com_tolerance_m, root_gain,
-                      leg_extension)
+            solve_root(c, pose, dec, g, w, b, t, com_tolerance_m, tolerance_m, root_gain,
+                       leg_extension, predicted and not iterates)
             # Only goals an iteration still moves can keep the loop going (:func:`_iterative`; the
             # passes meet the others as well as they can be met): open where not met nor stalled
             # (unchanged, or falling by less than a share of itself twice running).

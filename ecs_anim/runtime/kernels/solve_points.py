@@ -36,7 +36,7 @@ from ecs_anim.runtime.kernels.vec import (
     sub,
     to_world,
 )
-from ecs_anim.solver.shell import SEGMENT_MOVED_BY_PASS
+from ecs_anim.solver.shell import LIMB_MASS, SEGMENT_MOVED_BY_PASS
 
 I64 = NDArray[np.int64]
 B8 = NDArray[np.bool_]
@@ -65,6 +65,7 @@ class Tables(NamedTuple):
     limb_of_group: I64
     mass_proximal: I64
     mass_distal: I64
+    limb_mass: I64
     hip: I64
     ankle: I64
     toe: I64
@@ -98,6 +99,7 @@ def tables() -> Tables:
         limb_of_group=_ints([0, 1, -1, 2, 3, -1]),
         mass_proximal=_ints([J[s[1]] for s in MASS_SEGMENTS]),
         mass_distal=_ints([J[s[2]] for s in MASS_SEGMENTS]),
+        limb_mass=_ints(LIMB_MASS),
         hip=_ints([J["hip_l"], J["hip_r"]]), ankle=_ints([J["ankle_l"], J["ankle_r"]]),
         toe=_ints([J["toe_l"], J["toe_r"]]), thigh=_ints([L["thigh_l"], L["thigh_r"]]),
         shank=_ints([L["shank_l"], L["shank_r"]]),
