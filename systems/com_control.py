@@ -2,8 +2,9 @@
 
 The paper's ``adaptRoot()`` runs inside the solver's loop, after the trunk in every iteration
 (:func:`ecs_anim.runtime.kernels.solve_root.solve_root`, mirroring
-:meth:`ecs_anim.solver.shell._Solve.root`: the root moves horizontally by the centre-of-mass
-error, lowered if a planted leg could not reach its footprint), so it is a step of
+:meth:`ecs_anim.solver.shell._Solve.root`: the root moves horizontally by the step that puts
+the centre of mass back once the planted legs re-bend, or by the error times ``root_gain`` where
+that is not predicted, lowered if a planted leg could not reach its footprint), so it is a step of
 ConstraintSolve. This system checks its result every tick: the whole-body centre of mass (de Leva
 segment masses of each body) of the solved posture and its horizontal distance from the desired
 one, which metrics, tests and the viewer read. Switched off per character (``com_control``), the
