@@ -350,6 +350,16 @@ def due(rows: I64, interval: I64, tick: int) -> NDArray[np.bool_]:
     return out
 
 
+def _held_and_restore_ms(settings: SolverSettings) -> tuple[float, float]:
+    """The tick's cost (ms) the cut holds the tick within (:data:`HOLD_SHARE` of
+    ``settings.budget_ms`` for a measured model; all of it for a given ``cost_model``, taken as
+    exact) and the cost under which what was cut comes back (that times :data:`RESTORE_SHARE` /
+    :data:`TARGET_SHARE`: the hysteresis)."""
+    assert settings.budget_ms is not None
+    hold_ms = settings.budget_ms * (1.0 if settings.cost_model is not None else HOLD_SHARE)
+    return hold_ms, hold_ms * RESTORE_SHARE / TARGET_SHARE
+
+
 class FrameBudget:
     """The frame budget's state between ticks (ConstraintSolve holds one, per simulation): the
     cost model calibrated from the measured ticks (``calibrated``) and this tick's (``model``:
@@ -469,13 +479,13 @@ class FrameBudget:
         to tick."""
         if settings.budget_ms is None or model is None:
             return settings
-        share = 1.0 if settings.cost_model is not None else HOLD_SHARE
+        hold_ms, restore_ms = _held_and_restore_ms(settings)
 
         def allowed(ms: float) -> float:
             return max((ms - model.fixed_ms) / model.ms_per_iteration, 0.0)
 
-        most = allowed(settings.budget_ms * share)
-        back = allowed(settings.budget_ms * share * RESTORE_SHARE / TARGET_SHARE)
+        most = allowed(hold_ms)
+        back = allowed(restore_ms)
         self._allowance = most if self._allowance is None else min(most, max(self._allowance, back))
         return dataclasses.replace(
             settings, budget_ms=max(model.tick_ms(self._allowance), 1e-9),
@@ -509,10 +519,7 @@ class FrameBudget:
         np.maximum.at(top, owner[wants], priority[wants])
         candidate = np.flatnonzero(np.isfinite(top))
         kept_before = self.presence[candidate] > 0
-        share = 1.0 if settings.cost_model is not None else HOLD_SHARE
-        self._capacity = solve_capacity(model, self._capacity,
-                                        settings.budget_ms * share,
-                                        settings.budget_ms * share * RESTORE_SHARE / TARGET_SHARE)
+        self._capacity = solve_capacity(model, self._capacity, *_held_and_restore_ms(settings))
         distance = (np.zeros(candidate.size) if settings.focus_in_world is None else
                     np.linalg.norm(pelvis_in_world[candidate] - settings.focus_in_world, axis=1))
         order = ranked_rows(top[candidate], distance, kept_before)
