@@ -1,10 +1,15 @@
 """The tick reuses the memory it frees (ecs_anim.runtime.allocator): no page is faulted in anew on a
 steady tick of a large constrained scene (before, glibc handed the tick's large arrays back to
-the kernel: about 950 faults a tick at 3,200 characters)."""
+the kernel: about 950 faults a tick at 3,200 characters, every tick).
+
+The median tick is judged, not the mean: inside the full suite a tick now and then grows
+Python's own heap by a few dozen pages (CI once saw 24.7 a tick averaged over three, one tick
+carrying most), which is not the tick's arrays and is not what this guards."""
 
 from __future__ import annotations
 
 import resource
+import statistics
 import sys
 
 import pytest
@@ -19,9 +24,10 @@ def test_a_steady_constrained_tick_faults_no_page_in():
     scene = BenchScene(3200, constrained=True)  # at 1,600 glibc faulted little already
     for _ in range(3):
         scene.tick()
-    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
-    for _ in range(3):
+    faults_per_tick = []
+    for _ in range(9):
+        before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
         scene.tick()
-    faults_per_tick = (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before) / 3
+        faults_per_tick.append(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
     scene.sim.close()
-    assert faults_per_tick < 20, faults_per_tick
+    assert statistics.median(faults_per_tick) < 20, faults_per_tick
