@@ -1,15 +1,15 @@
 """The tick reuses the memory it frees (ecs_anim.runtime.allocator): no page is faulted in anew on a
 steady tick of a large constrained scene (before, glibc handed the tick's large arrays back to
-the kernel: about 950 faults a tick at 3,200 characters, every tick).
+the kernel: about 1,000 faults on every other warm tick at 3,200 characters, measured again
+2026-12-07).
 
-The median tick is judged, not the mean: inside the full suite a tick now and then grows
-Python's own heap by a few dozen pages (CI once saw 24.7 a tick averaged over three, one tick
-carrying most), which is not the tick's arrays and is not what this guards."""
+Each tick is judged against a tenth of that: inside the full suite a tick now and then grows
+Python's own heap by a few dozen pages (CI once saw 24.7 a tick averaged over three, against 5-14
+alone), which is not the tick's arrays and is not what this guards."""
 
 from __future__ import annotations
 
 import resource
-import statistics
 import sys
 
 import pytest
@@ -30,4 +30,4 @@ def test_a_steady_constrained_tick_faults_no_page_in():
         scene.tick()
         faults_per_tick.append(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
     scene.sim.close()
-    assert statistics.median(faults_per_tick) < 20, faults_per_tick
+    assert max(faults_per_tick) < 100, faults_per_tick
