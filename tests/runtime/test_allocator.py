@@ -3,7 +3,7 @@ steady tick of a large constrained scene (before, glibc handed the tick's large 
 the kernel: about 1,000 faults on every other warm tick at 3,200 characters, measured again
 2026-12-07).
 
-Each tick is judged against a tenth of that: inside the full suite a tick now and then grows
+Each tick is judged against under a third of that: inside the full suite a tick now and then grows
 Python's own heap by a few dozen pages (CI once saw 24.7 a tick averaged over three, against 5-14
 alone), which is not the tick's arrays and is not what this guards."""
 
@@ -30,4 +30,4 @@ def test_a_steady_constrained_tick_faults_no_page_in():
         scene.tick()
         faults_per_tick.append(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
     scene.sim.close()
-    assert max(faults_per_tick) < 100, faults_per_tick
+    assert max(faults_per_tick) < 300, faults_per_tick
