@@ -487,6 +487,17 @@ def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained:
                            com_control, com_desired, previous, max_release_m)
 
 
+#: An array's type, shape and bytes: equal for arrays the same to the bit.
+Contents = tuple[np.dtype[np.generic], tuple[int, ...], bytes]
+
+
+def _contents(column: NDArray[np.generic]) -> Contents:
+    """``column``'s :data:`Contents`. Bytes compare faster than ``np.array_equal`` (a
+    comparison array, then its reduction: 6.5 us a column at a few rows, against 0.1; the
+    14 columns of 8,000 constraints out of cache 0.22 ms against 0.17)."""
+    return column.dtype, column.shape, column.tobytes()
+
+
 class GoalLayouts:
     """:func:`tick_goals` from tick to tick (ConstraintSolve's): the :class:`Layout` is kept
     while the same constraints are active and the table's :data:`LAYOUT_COLUMNS` are the same
@@ -496,14 +507,14 @@ class GoalLayouts:
 
     def __init__(self) -> None:
         self._kept: Layout | None = None
-        self._active: B8 = np.zeros(0, np.bool_)
-        self._columns: tuple[NDArray[np.generic], ...] = ()
+        self._active = _contents(np.zeros(0, np.bool_))
+        self._columns: tuple[Contents, ...] = ()
 
     def _same(self, table: ConstraintTable, active: B8) -> bool:
         """Whether the kept layout is that of ``active`` (m,) in ``table`` (its columns the
         same to the bit: a 0.0 that became -0.0 is a change)."""
-        return (self._kept is not None and np.array_equal(self._active, active)
-                and all(np.array_equal(column, _bits(getattr(table, name)))
+        return (self._kept is not None and _contents(active) == self._active
+                and all(_contents(getattr(table, name)) == column
                         for name, column in zip(LAYOUT_COLUMNS, self._columns, strict=True)))
 
     def __call__(self, table: ConstraintTable, weight: F64, targets: F64,
@@ -524,14 +535,9 @@ class GoalLayouts:
         goals = goals_on_layout(kept, written, table, weight, targets, unconstrained,
                                 contact_weight, com_control, com_desired, previous, max_release_m)
         if not written:
-            self._kept, self._active = kept, active
-            self._columns = tuple(_bits(getattr(table, name)).copy() for name in LAYOUT_COLUMNS)
+            self._kept, self._active = kept, _contents(active)
+            self._columns = tuple(_contents(getattr(table, name)) for name in LAYOUT_COLUMNS)
         return goals
-
-
-def _bits(column: NDArray[np.generic]) -> NDArray[np.generic]:
-    """A table column as compared: float64 as the int64 of its bits (no copy), else itself."""
-    return column.view(np.int64) if column.dtype == np.float64 else column
 
 
 def _without_dropped(out: GoalArrays, rows: I64, user: B8, kept: B8) -> tuple[GoalArrays, I64]:

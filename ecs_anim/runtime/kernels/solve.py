@@ -30,6 +30,7 @@ from ecs_anim.core.ground_adapt import MAX_LEG_EXTENSION
 from ecs_anim.core.normalized import DecodedPose, NormalizedPoses
 from ecs_anim.runtime.kernels import LIGHT_ROWS_PER_THREAD, over_chunks, wait_for_solver
 from ecs_anim.runtime.kernels.decode import DecodedArrays, PoseArrays
+from ecs_anim.runtime.kernels.decode import decode as decode_compiled
 from ecs_anim.runtime.kernels.solve_head import solve_head
 from ecs_anim.runtime.kernels.solve_limbs import solve_limbs
 from ecs_anim.runtime.kernels.solve_points import (
@@ -236,32 +237,82 @@ def winners_rows(lo: int, hi: int, g: Goals, w: Winners, limb_of_group: I64,
         character_winners(c, g, w, limb_of_group, head_group)
 
 
+@jit(nogil=True)
+def goal_starts(owner: I64, on_self: I64, self_segment: I64, self_fraction: F64,
+                self_offset: F64, self_start: F64, start: I64, dense_on_self: B8,
+                dense_segment: I64, dense_fraction: F64, dense_offset: F64,
+                dense_at: F64) -> bool:
+    """The goals following a point of their own body (``on_self`` (s,) their indices in
+    ``owner`` (k,), that point ``self_segment``, ``self_fraction``, ``self_offset`` (s, 3),
+    where it is ``self_start`` (s, 3)) laid out by goal: ``dense_on_self`` (k,),
+    ``dense_segment``, ``dense_fraction``, ``dense_offset``, ``dense_at`` (k, 3), zero for the
+    others; and whether ``owner`` is sorted (by character, each in ``0..r-1``; r + 1 =
+    ``start``'s size), then ``start`` (r + 1,) where each character's goals begin
+    (``np.cumsum(np.bincount(owner, minlength=r))`` after a 0; else not written). One pass
+    where numpy took a call for each."""
+    k, r = owner.shape[0], start.shape[0] - 1
+    for j in range(k):
+        dense_on_self[j] = False
+        dense_segment[j] = 0
+        dense_fraction[j] = 0.0
+        for a in range(3):
+            dense_offset[j, a] = 0.0
+            dense_at[j, a] = 0.0
+    for i in range(on_self.shape[0]):
+        j = on_self[i]
+        dense_on_self[j] = True
+        dense_segment[j] = self_segment[i]
+        dense_fraction[j] = self_fraction[i]
+        for a in range(3):
+            dense_offset[j, a] = self_offset[i, a]
+            dense_at[j, a] = self_start[i, a]
+    for j in range(k):
+        if owner[j] < 0 or owner[j] >= r or (j > 0 and owner[j] < owner[j - 1]):
+            return False
+    c = 0
+    start[0] = 0
+    for j in range(k):
+        while c < owner[j]:  # the characters after the last goal's, up to this one's, begin here
+            c += 1
+            start[c] = j
+    while c < r:
+        c += 1
+        start[c] = k
+    return True
+
+
 def sorted_goals(goals: TickGoals, goal_iterations: I64) -> tuple[Goals, Winners, I64]:
     """The goals sorted by character (stable: ties between priorities still go to the goal
     added last), their winners, and the order (k,) taking ``goals``' indices to the sorted;
     ``goal_iterations`` (k,) each goal's cap (:func:`~ecs_anim.solver.shell.iteration_caps`).
     :func:`ecs_anim.solver.goals.tick_goals` makes them sorted already: then nothing is
-    copied (``goal`` is the same array)."""
+    copied (``goal`` is the same array), and the characters' ranges come with the goals
+    following their own body from one compiled pass (:func:`goal_starts`)."""
     r, k = int(goals.rows.size), goals.k
-    already = bool(np.all(goals.owner[1:] >= goals.owner[:-1]))
-    order = np.arange(k) if already else np.argsort(goals.owner, kind="stable")
-    owner = goals.owner[order]
-    start = np.zeros(r + 1, np.int64)
-    np.cumsum(np.bincount(owner, minlength=r), out=start[1:])
-    on_self = np.zeros(k, bool)
-    self_segment = np.zeros(k, np.int64)
-    self_fraction = np.zeros(k)
-    self_offset = np.zeros((k, 3))
-    self_at = np.zeros((k, 3))
-    if goals.on_self.size:
-        on_self[goals.on_self] = True
-        self_segment[goals.on_self] = goals.self_segment
-        self_fraction[goals.on_self] = goals.self_fraction
-        self_offset[goals.on_self] = goals.self_offset
-        self_at[goals.on_self] = goals.self_start
+    start = np.empty(r + 1, np.int64)
+    on_self = np.empty(k, np.bool_)
+    self_segment = np.empty(k, np.int64)
+    self_fraction = np.empty(k)
+    self_offset = np.empty((k, 3))
+    self_at = np.empty((k, 3))
+    owner = np.ascontiguousarray(goals.owner, np.int64)
+    already = goal_starts(owner, np.ascontiguousarray(goals.on_self, np.int64),
+                          np.ascontiguousarray(goals.self_segment, np.int64),
+                          np.ascontiguousarray(goals.self_fraction, np.float64),
+                          np.ascontiguousarray(goals.self_offset, np.float64),
+                          np.ascontiguousarray(goals.self_start, np.float64), start, on_self,
+                          self_segment, self_fraction, self_offset, self_at)
+    order = np.arange(k)
+    if not already:  # (the numpy reference's goals)
+        order = np.argsort(owner, kind="stable")
+        start[0] = 0
+        np.cumsum(np.bincount(owner[order], minlength=r), out=start[1:])
+        on_self, self_segment, self_fraction, self_offset, self_at = (
+            on_self[order], self_segment[order], self_fraction[order], self_offset[order],
+            self_at[order])
 
     def take(a: np.ndarray, dtype: type) -> np.ndarray:
-        return np.ascontiguousarray(a if already else a[order], dtype=dtype)
+        return np.ascontiguousarray(a if already else a[order], dtype)
 
     g = Goals(start=start, table_index=take(goals.table_index, np.int64),
               orientation=take(goals.orientation, np.bool_), group=take(goals.group, np.int64),
@@ -269,9 +320,8 @@ def sorted_goals(goals: TickGoals, goal_iterations: I64) -> tuple[Goals, Winners
               fraction=take(goals.fraction, np.float64), offset=take(goals.offset, np.float64),
               chain=take(goals.chain, np.int64), priority=take(goals.priority, np.float64),
               goal=take(goals.goal, np.float64), axis=take(goals.axis, np.float64),
-              on_self=take(on_self, np.bool_), self_segment=take(self_segment, np.int64),
-              self_fraction=take(self_fraction, np.float64),
-              self_offset=take(self_offset, np.float64), self_at=take(self_at, np.float64),
+              on_self=on_self, self_segment=self_segment, self_fraction=self_fraction,
+              self_offset=self_offset, self_at=self_at,
               iterations=take(goal_iterations, np.int64))
     w = Winners(first_limb=np.empty((r, 4), np.int64), second_limb=np.empty((r, 4), np.int64),
                 orient_limb=np.empty((r, 4), np.int64), first_head=np.empty(r, np.int64),
@@ -301,8 +351,6 @@ def prepare(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64,
     """Gather the solve state of :func:`solve` (the arguments are the same): copies of
     ``poses`` and ``decoded``, or with ``in_place`` those arrays themselves (when already
     float64 and C-contiguous)."""
-    from ecs_anim.runtime.kernels.decode import decode as decode_compiled
-
     goal_iterations, row_iterations = iteration_caps(goals, settings)
     g, w, order = sorted_goals(goals, goal_iterations)
 

@@ -458,3 +458,83 @@ def test_the_root_stays_without_centre_of_mass_control(idle):
     assert reference.root()[0] == 0.0 and root(s, 0) == 0.0
     np.testing.assert_array_equal(s.dec.positions, positions)
     assert_same_state(reference, s)
+
+
+def _numpy_sorted_goals(goals, goal_iterations):
+    """What :func:`compiled.sorted_goals` gives, in numpy calls (its code before
+    :func:`compiled.goal_starts`): the goals (all but ``start``'s and the winners'), ``start``
+    and the order."""
+    r, k = goals.rows.size, goals.k
+    order = np.argsort(goals.owner, kind="stable")
+    start = np.zeros(r + 1, np.int64)
+    np.cumsum(np.bincount(goals.owner[order], minlength=r), out=start[1:])
+    dense = {"on_self": np.zeros(k, bool), "self_segment": np.zeros(k, np.int64),
+             "self_fraction": np.zeros(k), "self_offset": np.zeros((k, 3)),
+             "self_at": np.zeros((k, 3))}
+    dense["on_self"][goals.on_self] = True
+    for name, given in (("self_segment", goals.self_segment),
+                        ("self_fraction", goals.self_fraction),
+                        ("self_offset", goals.self_offset), ("self_at", goals.self_start)):
+        dense[name][goals.on_self] = given
+    fields = {name: getattr(goals, name)[order] for name in compiled.Goals._fields
+              if name not in dense and name not in ("start", "iterations")}
+    fields.update({name: value[order] for name, value in dense.items()},
+                  iterations=goal_iterations[order])
+    return fields, start, order
+
+
+def _random_goals(rng, r):
+    """TickGoals of ``r`` characters with 0-4 user goals each (two feet after them), sorted by
+    character, some following their own body (their offsets' zeros -0.0 for some)."""
+    from ecs_anim.solver.goals import TickGoals
+
+    per = rng.integers(0, 5, r) + 2
+    owner = np.repeat(np.arange(r), per)
+    k = owner.size
+    offset = rng.normal(size=(k, 3)) * (rng.random((k, 1)) < 0.5)
+    offset[rng.random((k, 3)) < 0.2] = -0.0
+    on_self = np.flatnonzero(rng.random(k) < 0.3)
+    s = on_self.size
+    self_offset = rng.normal(size=(s, 3))
+    self_offset[rng.random((s, 3)) < 0.3] = -0.0
+    return TickGoals(
+        rows=np.arange(r) * 2, owner=owner, table_index=rng.integers(-1, 50, k),
+        orientation=rng.random(k) < 0.2, group=rng.integers(0, 6, k), bone=rng.integers(0, 3, k),
+        segment=rng.integers(0, 20, k), fraction=rng.random(k), offset=offset,
+        chain=rng.integers(1, 64, k), priority=rng.integers(0, 3, k).astype(float),
+        goal=rng.normal(size=(k, 3)), weight=rng.random(k), axis=rng.normal(size=(k, 3)),
+        footprint=rng.normal(size=(r, 2, 3)), in_contact=rng.random((r, 2)) < 0.5,
+        com_desired=rng.normal(size=(r, 3)), com_on=rng.random(r) < 0.5, on_self=on_self,
+        self_segment=rng.integers(0, 20, s), self_fraction=rng.random(s),
+        self_offset=self_offset, self_start=rng.normal(size=(s, 3)),
+        held=np.zeros(k, bool))
+
+
+@pytest.mark.parametrize("r", [0, 1, 7, 300])
+def test_sorted_goals_compiled_pass_gives_numpys_layout_to_the_bit(r):
+    """:func:`compiled.sorted_goals`' compiled pass (:func:`compiled.goal_starts`: each
+    character's range, the goals following their own body laid out by goal) gives what the
+    numpy calls gave, to the bit (-0.0 kept), on goals sorted by character and on the same goals
+    shuffled (the numpy path's)."""
+    rng = np.random.default_rng(3601 + r)
+    goals = _random_goals(rng, r)
+    caps = rng.integers(1, 4, goals.k)
+    shuffle = rng.permutation(goals.k)
+    back = np.argsort(shuffle)
+    shuffled = replace(goals, **{name: getattr(goals, name)[shuffle] for name in
+                                 ("owner", "table_index", "orientation", "group", "bone",
+                                  "segment", "fraction", "offset", "chain", "priority", "goal",
+                                  "weight", "axis", "held")},
+                       on_self=back[goals.on_self])
+    for given, given_caps in ((goals, caps), (shuffled, caps[shuffle])):
+        g, _, order = compiled.sorted_goals(given, given_caps)
+        fields, start, want_order = _numpy_sorted_goals(given, given_caps)
+        np.testing.assert_array_equal(order, want_order)
+        np.testing.assert_array_equal(g.start, start)
+        for name, want in fields.items():
+            got = getattr(g, name)
+            assert got.dtype == want.dtype, name
+            np.testing.assert_array_equal(got.view(np.uint8), want.view(np.uint8), err_msg=name)
+    # sorted: the goals' own arrays, not copies (the solve moves ``goal`` in place)
+    g, _, _ = compiled.sorted_goals(goals, caps)
+    assert g.goal is goals.goal and g.offset is goals.offset
