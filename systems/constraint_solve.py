@@ -365,6 +365,7 @@ class ConstraintSolve(System):
             corrected = step.rows_differ(st.last_pose_values, st.last_clip_values)
             corrected[solved_rows] = False
             rows = np.flatnonzero(corrected)
+        back: NormalizedPoses | None = None
         if rows.size:
             if st.clip_positions is None:  # nothing solved: every pose is the motion's
                 st.clip_positions = step.decode(st.poses, st.lengths).positions
@@ -385,15 +386,16 @@ class ConstraintSolve(System):
             return
         st.last_clip_values = clip_now
         st.last_pose_values = step.pack(st.poses)
-        self._keep_positions(rows)
+        self._keep_positions(rows, back)
         self._values_kept = True
 
-    def _keep_positions(self, back_rows: NDArray[np.int64]) -> None:
+    def _keep_positions(self, back_rows: NDArray[np.int64], back: NormalizedPoses | None) -> None:
         """``store.last_clip_positions`` and ``last_pose_positions``: this tick's motion's joints
-        and result's (the solved characters' ``store.solved``, those going back decoded here,
-        the others' the motion's: NaN for those a frame budget held, which the next tick's bound
-        then leaves free). This tick's arrays themselves when whole (no copy: nothing writes
-        them after the tick; the next tick's fresh rows go into copies)."""
+        and result's (the solved characters' ``store.solved``, those going back, ``back_rows``,
+        their poses ``back`` (None: none) decoded here, the others' the motion's: NaN for those
+        a frame budget held, which the next tick's bound then leaves free). This tick's arrays
+        themselves when whole (no copy: nothing writes them after the tick; the next tick's
+        fresh rows go into copies)."""
         st = self.sim.store
         goals = st.goals
         solved_rows = goals.rows if st.solved is not None and isinstance(goals, TickGoals) \
@@ -406,9 +408,9 @@ class ConstraintSolve(System):
         st.last_pose_positions = st.clip_positions.copy()
         if solved_rows.size and st.solved is not None:
             st.last_pose_positions[solved_rows] = st.solved.positions
-        if back_rows.size:
+        if back is not None:
             st.last_pose_positions[back_rows] = steps(self.sim.compiled).decode(
-                st.poses.take(back_rows), st.lengths[back_rows]).positions
+                back, st.lengths[back_rows]).positions
 
     def _report(self, result: TickResult, dropped: NDArray[np.int64]) -> None:
         """This tick's report (``dropped``: the store rows the budget switched off)."""

@@ -26,7 +26,7 @@ from ecs_anim.runtime.kernels import solve as compiled
 from ecs_anim.runtime.kernels import solve_math as compiled_math
 from ecs_anim.runtime.kernels.solve_head import solve_head
 from ecs_anim.runtime.kernels.solve_limbs import solve_limbs
-from ecs_anim.runtime.kernels.solve_points import centre_of_mass, goal_error
+from ecs_anim.runtime.kernels.solve_points import Goals, centre_of_mass, goal_error
 from ecs_anim.runtime.kernels.solve_root import solve_root
 from ecs_anim.runtime.kernels.solve_trunk import solve_trunk
 from ecs_anim.runtime.simulation import Simulation
@@ -476,7 +476,7 @@ def _numpy_sorted_goals(goals, goal_iterations):
                         ("self_fraction", goals.self_fraction),
                         ("self_offset", goals.self_offset), ("self_at", goals.self_start)):
         dense[name][goals.on_self] = given
-    fields = {name: getattr(goals, name)[order] for name in compiled.Goals._fields
+    fields = {name: getattr(goals, name)[order] for name in Goals._fields
               if name not in dense and name not in ("start", "iterations")}
     fields.update({name: value[order] for name, value in dense.items()},
                   iterations=goal_iterations[order])
