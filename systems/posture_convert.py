@@ -9,7 +9,8 @@ Writes: store.positions (world joint positions), store.posture (the same with th
 for next tick's targets on other characters), store.local_rotations (the BVH export skeleton's
 local joint rotation matrices, when the simulation asks for rotations), store.vertebrae (when
 it asks for a finer spine), store.frozen (a character whose pose went non-finite keeps its last
-good posture and is reported once). All in place, by the compiled
+good posture and is reported once). All in place (but store.posture's frames, which are the
+solver's arrays when it solved every character), by the compiled
 :func:`ecs_anim.runtime.kernels.posture.posture_rows`, or while the kernels compile aside by its
 numpy reference (:func:`posture_numpy`).
 """
@@ -108,20 +109,23 @@ class PostureConvert(System):
         n = st.n
         if not _writable(st.positions, (n, N_JOINTS, 3)):
             st.positions = np.array(st.positions, dtype=np.float64)
-        solved = None if st.goals is None or st.solved is None else decoded_arrays(st.solved)
-        solved_rows = (np.zeros(0, np.int64) if solved is None
-                       else np.asarray(st.goals.rows, dtype=np.int64))  # type: ignore[union-attr]
+        solved, solved_rows = None, np.zeros(0, np.int64)
+        if st.goals is not None and st.solved is not None:  # decoded once, by the solver
+            solved = decoded_arrays(st.solved)
+            solved_rows = np.asarray(st.goals.rows, dtype=np.int64)  # type: ignore[attr-defined]
         # Every row solved (the rows sorted and distinct: all of them, in order): the posture's
         # frames are the solver's arrays themselves, not copied (2 MB at 4,000 characters; the
         # solver makes new ones every tick, and nothing else keeps these).
         frames_shared = solved is not None and solved_rows.size == n and fits(solved, n)
-        if frames_shared:
-            frames: DecodedArrays | None = solved
+        if solved is not None and frames_shared:
+            frames = solved
+        elif fits(st.posture, n):
+            frames = decoded_arrays(st.posture)  # type: ignore[arg-type]
         else:
-            frames = decoded_arrays(st.posture) if fits(st.posture, n) else None  # type: ignore[arg-type]
+            frames = empty_decoded(n)
         positions, spines = self._scratch(n)
         # The kernels write the store's positions; the positions in ``decoded`` are scratch.
-        decoded = (empty_decoded(n) if frames is None else frames)._replace(positions=positions)
+        decoded = frames._replace(positions=positions)
         # Joint rotations cost more than the positions; they are made when something uses them
         # (BVH export, a viewer drawing skinned meshes): ``Simulation(rotations=True)``.
         rotations = bool(sim.rotations)
@@ -141,7 +145,7 @@ class PostureConvert(System):
                 st.local_rotations if rotations else np.empty((0, N_EXPORT, 3, 3)),
                 k.rest_hips, k.bvh_from_world, k.rest2body, k.parents, spine, have_previous)
         decode_rows = np.arange(n, dtype=np.int64)
-        if solved is not None:  # decoded once, by the solver
+        if solved is not None:
             decode_rows = np.delete(decode_rows, solved_rows)
             if sim.compiled:
                 over_chunks(posture_solved_rows, solved_rows.size, solved_rows, solved, pose,
