@@ -237,8 +237,8 @@ def all_finite(a: F64) -> bool:
     return True
 
 
-# Inlined at its two call sites: as a call, handing it its sixteen arguments cost about a fifth
-# of posture_rows' time.
+# Inlined at its two call sites: as a call, handing it its arguments (sixteen then) cost about a
+# fifth of posture_rows' time.
 @jit(inline="always")
 def posture_of_decoded_row(c: int, pose: PoseArrays, lengths: F64, posture: DecodedArrays,
                            previous: F64, slot: int, frozen: B8, newly_bad: B8, rotations: bool,
@@ -289,8 +289,8 @@ def posture_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64,
     :func:`ecs_anim.core.normalized.decode`, :func:`ecs_anim.io.export.skeleton.local_rotations`
     and :func:`ecs_anim.core.normalized.vertebrae`. ``scratch`` (SPINE_SCRATCH_ROWS,
     len(rows)): :func:`.decode.spine_scratch`, for :func:`.decode.decode_rows`;
-    ``decoded.positions`` (at least len(rows), N_JOINTS, 3) is scratch too, of which this
-    chunk uses rows ``lo`` to ``lo + BLOCK``.
+    ``decoded.positions`` (at least len(rows), N_JOINTS, 3; not ``positions``) is scratch too,
+    of which this chunk uses rows ``lo`` to ``lo + BLOCK``.
 
     By blocks of :data:`.lanes.BLOCK` rows: their positions set aside, their decode (the
     spines on the vector units), then the rest row by row.

@@ -31,8 +31,9 @@ def posture_solved_rows(lo: int, hi: int, rows: I64, solved: DecodedArrays, pose
     solver moved (``rows[lo:hi]``), in place: row ``rows[i]`` of the frames of ``decoded`` and
     of ``positions`` is row ``i`` of ``solved`` (the solver's decoded result, (r, ...)) instead
     of a decode of ``pose``; the frames are not copied when ``frames_shared`` (those of
-    ``decoded`` are ``solved``'s arrays: every row solved). ``decoded.positions`` is scratch of
-    which this chunk uses row ``lo``; the other arguments and results as there."""
+    ``decoded`` are ``solved``'s arrays: every row solved). ``decoded.positions`` (not
+    ``positions``) is scratch, of which this chunk uses row ``lo``; the other arguments and
+    results as there."""
     posture = with_positions(decoded, positions)
     previous = decoded.positions
     for i in range(lo, hi):
