@@ -9,7 +9,8 @@ Writes: store.positions (world joint positions), store.posture (the same with th
 for next tick's targets on other characters), store.local_rotations (the BVH export skeleton's
 local joint rotation matrices, when the simulation asks for rotations), store.vertebrae (when
 it asks for a finer spine), store.frozen (a character whose pose went non-finite keeps its last
-good posture and is reported once). All in place, by the compiled
+good posture and is reported once). All in place (but store.posture's frames, which are the
+solver's arrays when it solved every character), by the compiled
 :func:`ecs_anim.runtime.kernels.posture.posture_rows`, or while the kernels compile aside by its
 numpy reference (:func:`posture_numpy`).
 """
@@ -87,14 +88,16 @@ class PostureConvert(System):
 
     def __init__(self, sim: Simulation) -> None:
         super().__init__(sim)
-        # The decode's scratch, kept from tick to tick (3 MB at 4,000 characters, allocated and
-        # first touched again every tick otherwise): positions (n, N_JOINTS, 3), the spines'.
+        # The kernels' scratch, kept from tick to tick (allocated and first touched again every
+        # tick otherwise): positions (n, N_JOINTS, 3), of which each thread's chunk uses its
+        # first BLOCK rows (a block's positions before its decode; the pages after them are
+        # never touched), the spines' (SPINE_SCRATCH_ROWS, n).
         self._positions = np.empty((0, N_JOINTS, 3))
         self._spines = spine_scratch(0)
 
     def _scratch(self, n: int) -> tuple[np.ndarray, np.ndarray]:
-        """The decoded positions' scratch for ``n`` store rows and the spine scratch for as
-        many rows decoded (:func:`~ecs_anim.runtime.kernels.decode.spine_scratch`)."""
+        """The positions' scratch for ``n`` store rows and the spine scratch for as many rows
+        decoded (:func:`~ecs_anim.runtime.kernels.decode.spine_scratch`)."""
         if self._positions.shape[0] != n:
             self._positions = np.empty((n, N_JOINTS, 3))
         if self._spines.shape[1] < n:
@@ -106,10 +109,23 @@ class PostureConvert(System):
         n = st.n
         if not _writable(st.positions, (n, N_JOINTS, 3)):
             st.positions = np.array(st.positions, dtype=np.float64)
-        frames = decoded_arrays(st.posture) if fits(st.posture, n) else None  # type: ignore[arg-type]
+        solved, solved_rows = None, np.zeros(0, np.int64)
+        if st.goals is not None and st.solved is not None:  # decoded once, by the solver
+            solved = decoded_arrays(st.solved)
+            solved_rows = np.asarray(st.goals.rows, dtype=np.int64)  # type: ignore[attr-defined]
+        # Every row solved (the rows sorted and distinct: all of them, in order): the posture's
+        # frames are the solver's arrays themselves, not copied (2 MB at 4,000 characters; the
+        # solver makes new ones every tick, and nothing else keeps these).
+        frames_shared = solved is not None and solved_rows.size == n and fits(solved, n)
+        if solved is not None and frames_shared:
+            frames = solved
+        elif fits(st.posture, n):
+            frames = decoded_arrays(st.posture)  # type: ignore[arg-type]
+        else:
+            frames = empty_decoded(n)
         positions, spines = self._scratch(n)
-        # The posture's frames are written again; positions need a scratch of their own.
-        decoded = (empty_decoded(n) if frames is None else frames)._replace(positions=positions)
+        # The kernels write the store's positions; the positions in ``decoded`` are scratch.
+        decoded = frames._replace(positions=positions)
         # Joint rotations cost more than the positions; they are made when something uses them
         # (BVH export, a viewer drawing skinned meshes): ``Simulation(rotations=True)``.
         rotations = bool(sim.rotations)
@@ -129,15 +145,13 @@ class PostureConvert(System):
                 st.local_rotations if rotations else np.empty((0, N_EXPORT, 3, 3)),
                 k.rest_hips, k.bvh_from_world, k.rest2body, k.parents, spine, have_previous)
         decode_rows = np.arange(n, dtype=np.int64)
-        if st.goals is not None and st.solved is not None:  # decoded once, by the solver
-            solved_rows = np.asarray(st.goals.rows, dtype=np.int64)  # type: ignore[attr-defined]
+        if solved is not None:
             decode_rows = np.delete(decode_rows, solved_rows)
             if sim.compiled:
-                over_chunks(posture_solved_rows, solved_rows.size, solved_rows,
-                            decoded_arrays(st.solved), pose, st.lengths, decoded, *rest)
+                over_chunks(posture_solved_rows, solved_rows.size, solved_rows, solved, pose,
+                            st.lengths, decoded, *rest, frames_shared)
             else:
-                posture_numpy(sim, solved_rows, decoded, newly_bad, have_previous,
-                              decoded_arrays(st.solved))
+                posture_numpy(sim, solved_rows, decoded, newly_bad, have_previous, solved)
         if sim.compiled:
             over_chunks(posture_rows, decode_rows.size, decode_rows, pose, st.lengths, decoded,
                         *rest, spines)

@@ -51,6 +51,7 @@ from ecs_anim.runtime.kernels.decode import (
     pose_arrays,
     spine_joint,
 )
+from ecs_anim.runtime.kernels.lanes import BLOCK
 from ecs_anim.runtime.kernels.vec import (
     F64,
     Frame,
@@ -236,30 +237,38 @@ def all_finite(a: F64) -> bool:
     return True
 
 
-# Inlined at its two call sites: as a call, handing it its sixteen arguments cost about a fifth
-# of posture_rows' time.
+# Inlined at its two call sites: as a call, handing it its arguments (sixteen then) cost about a
+# fifth of posture_rows' time.
 @jit(inline="always")
-def posture_of_decoded_row(c: int, pose: PoseArrays, lengths: F64, decoded: DecodedArrays,
-                           frozen: B8, newly_bad: B8, positions: F64, rotations: bool,
+def posture_of_decoded_row(c: int, pose: PoseArrays, lengths: F64, posture: DecodedArrays,
+                           previous: F64, slot: int, frozen: B8, newly_bad: B8, rotations: bool,
                            world: F64, local: F64, rest_hips: F64, bvh_from_world: F64,
                            rest2body: F64, parents: I64, vertebrae: F64,
                            have_previous: bool) -> None:
-    """What :func:`posture_rows` does with store row ``c`` once ``decoded`` holds its decoded
-    pose: the finite check (``frozen``, ``newly_bad``), ``positions[c]``, ``local[c]`` with
-    ``rotations`` and ``vertebrae[c]``; arguments as there."""
-    good = all_finite(decoded.positions[c])
+    """What :func:`posture_rows` does with store row ``c`` once ``posture`` holds its decoded
+    pose (its positions the store's, written over): the finite check (``frozen``,
+    ``newly_bad``), ``previous[slot]`` (N_JOINTS, 3) (the row's positions before) put back if
+    it is frozen, ``local[c]`` with ``rotations`` and ``vertebrae[c]``; arguments as there."""
+    good = all_finite(posture.positions[c])
     if rotations:
-        export_rotations_row(c, decoded, rest_hips, world[c])
+        export_rotations_row(c, posture, rest_hips, world[c])
         bvh_globals_row(world[c], bvh_from_world, rest2body)
         good = good and all_finite(world[c])
     newly_bad[c] = not good and not frozen[c]
     frozen[c] = not good  # a pose finite again (a sane body or target) is published again
-    if not frozen[c]:
-        copy_row(positions, c, decoded.positions, c)
-        if rotations:
-            local_from_globals_row(world[c], parents, local[c])
+    if frozen[c]:
+        copy_row(posture.positions, c, previous, slot)
+    elif rotations:
+        local_from_globals_row(world[c], parents, local[c])
     if vertebrae.shape[1] > 0 and (not frozen[c] or not have_previous):
         vertebrae_row(c, pose, lengths[c], vertebrae[c])
+
+
+@jit(inline="always")
+def with_positions(decoded: DecodedArrays, positions: F64) -> DecodedArrays:
+    """``decoded``'s frames with ``positions`` (n, N_JOINTS, 3) for its joints."""
+    return DecodedArrays(positions, decoded.pelvis2world, decoded.thorax2world,
+                         decoded.head2world, decoded.leg2world, decoded.arm2world)
 
 
 @jit(nogil=True)
@@ -269,24 +278,38 @@ def posture_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64,
                  parents: I64, vertebrae: F64, have_previous: bool, scratch: F64) -> None:
     """PostureConvert over the store rows ``rows[lo:hi]`` (int64), in place.
 
-    Each row ``c``: decode on ``lengths[c]`` into ``decoded`` (all of it: the posture frames,
-    and positions used as scratch); with ``rotations``, the export joints' joint2bvh into the
-    scratch ``world`` (n, N_EXPORT, 3, 3). A row whose positions (or rotations) are not finite
-    becomes ``frozen`` (``newly_bad[c]`` set when it was not before, else cleared), and stops
-    being frozen once they are finite again. A row that is not frozen gets ``positions[c]`` (n, N_JOINTS, 3), ``local[c]`` (n, N_EXPORT, 3, 3) with
-    ``rotations`` and ``vertebrae[c]`` (n, count, 3) when ``count > 0``; a frozen row keeps them
-    (its vertebrae are written anyway without ``have_previous``). Mirrors
-    ``systems.posture_convert`` on :func:`ecs_anim.core.normalized.decode`,
-    :func:`ecs_anim.io.export.skeleton.local_rotations` and :func:`ecs_anim.core.normalized.vertebrae`.
-    ``scratch`` (SPINE_SCRATCH_ROWS, len(rows)): :func:`.decode.spine_scratch`, for
-    :func:`.decode.decode_rows` (the decode of all the rows first, by blocks on the vector
-    units, then the rest row by row).
+    Each row ``c``: decode on ``lengths[c]`` into the frames of ``decoded`` and ``positions[c]``
+    (n, N_JOINTS, 3); with ``rotations``, the export joints' joint2bvh into the scratch
+    ``world`` (n, N_EXPORT, 3, 3). A row whose positions (or rotations) are not finite becomes
+    ``frozen`` (``newly_bad[c]`` set when it was not before, else cleared), and stops being
+    frozen once they are finite again. A frozen row keeps ``positions[c]``, ``local[c]`` (n,
+    N_EXPORT, 3, 3) and ``vertebrae[c]`` (n, count, 3) (its vertebrae are written anyway
+    without ``have_previous``); the others get new ones (``local`` with ``rotations``,
+    ``vertebrae`` when ``count > 0``). Mirrors ``systems.posture_convert`` on
+    :func:`ecs_anim.core.normalized.decode`, :func:`ecs_anim.io.export.skeleton.local_rotations`
+    and :func:`ecs_anim.core.normalized.vertebrae`. ``scratch`` (SPINE_SCRATCH_ROWS,
+    len(rows)): :func:`.decode.spine_scratch`, for :func:`.decode.decode_rows`;
+    ``decoded.positions`` (at least len(rows), N_JOINTS, 3; not ``positions``) is scratch too,
+    of which this chunk uses rows ``lo`` to ``lo + BLOCK``.
+
+    By blocks of :data:`.lanes.BLOCK` rows: their positions set aside, their decode (the
+    spines on the vector units), then the rest row by row.
     """
-    decode_rows(lo, hi, rows, pose, lengths, decoded, scratch)
-    for i in range(lo, hi):
-        posture_of_decoded_row(rows[i], pose, lengths, decoded, frozen, newly_bad, positions,
-                               rotations, world, local, rest_hips, bvh_from_world, rest2body,
-                               parents, vertebrae, have_previous)
+    posture = with_positions(decoded, positions)
+    previous = decoded.positions
+    for start in range(lo, hi, BLOCK):
+        stop = min(start + BLOCK, hi)
+        # The decode writes the store's positions (each row once, not into a scratch copied
+        # after: 2 MB written and read back at 4,000 characters); the block's positions before
+        # it wait in rows lo.. of ``previous`` (in the first-level cache; no other chunk's rows)
+        # for a row that turns out frozen.
+        for i in range(start, stop):
+            copy_row(previous, lo + i - start, positions, rows[i])
+        decode_rows(start, stop, rows, pose, lengths, posture, scratch)
+        for i in range(start, stop):
+            posture_of_decoded_row(rows[i], pose, lengths, posture, previous, lo + i - start,
+                                   frozen, newly_bad, rotations, world, local, rest_hips,
+                                   bvh_from_world, rest2body, parents, vertebrae, have_previous)
 
 
 @jit(nogil=True)

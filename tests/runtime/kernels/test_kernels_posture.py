@@ -11,6 +11,8 @@ from its joint positions: there the twist is decided by rounding and frames may 
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -177,3 +179,31 @@ def test_centres_of_mass_match_numpy_for_some_rows():
     np.testing.assert_allclose(error[rows], np.linalg.norm(ref[rows, :2] - desired[rows, :2],
                                                            axis=1), rtol=0, atol=TOL)
     assert np.all(np.isnan(np.delete(error, rows)))
+
+
+def test_posture_rows_puts_back_frozen_rows_in_any_block_and_chunk():
+    """The decode writes the store's positions; a row that turns out frozen gets its positions
+    before back, whichever block of a chunk it is in (each chunk sets a block aside in its own
+    first rows of the scratch)."""
+    rng = np.random.default_rng(1316)
+    n = 3 * 32 + 5
+    poses = bent_poses(rng, n)
+    lengths = random_bodies(rng, n)
+    bad = [3, 40, 77, 99]
+    poses.thorax[bad] = np.nan
+    k = kp.export_constants()
+    before = rng.normal(size=(n, N_JOINTS, 3))
+    fresh = decode(poses, lengths).positions
+    rows = np.arange(n, dtype=np.int64)
+    for bounds in ((0, n), (0, 37, 70, n)):  # one chunk, three
+        positions, frozen, newly_bad = before.copy(), np.zeros(n, bool), np.zeros(n, bool)
+        scratch, decoded = kd.spine_scratch(n), kd.empty_decoded(n)
+        for lo, hi in itertools.pairwise(bounds):
+            kp.posture_rows(lo, hi, rows, kd.pose_arrays(poses), lengths, decoded, frozen,
+                            newly_bad, positions, False, np.empty((0, kp.N_EXPORT, 3, 3)),
+                            np.empty((0, kp.N_EXPORT, 3, 3)), k.rest_hips, k.bvh_from_world,
+                            k.rest2body, k.parents, np.empty((n, 0, 3)), False, scratch)
+        assert list(np.flatnonzero(frozen)) == bad and list(np.flatnonzero(newly_bad)) == bad
+        np.testing.assert_array_equal(positions[bad], before[bad])
+        good = ~frozen
+        np.testing.assert_allclose(positions[good], fresh[good], rtol=0, atol=TOL)

@@ -6,13 +6,18 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pytest
 
 import ecs_anim.systems.posture_convert as posture_convert
 from ecs_anim.core.normalized import DecodedPose, decode
+from ecs_anim.core.skeleton import N_JOINTS
 from ecs_anim.io.export.skeleton import local_rotations
 from ecs_anim.runtime.bench_scene import BenchScene
+from ecs_anim.runtime.kernels import decode as kd
+from ecs_anim.runtime.kernels import posture as kp
 from ecs_anim.runtime.kernels.solved_posture import posture_solved_rows
 from support.scenarios import run
+from support.solve import random_bodies, random_poses
 
 
 def assert_posture_is_the_decoded_poses(sim):
@@ -59,3 +64,31 @@ def test_a_scenario_with_some_characters_unconstrained(monkeypatch):
     monkeypatch.setattr(posture_convert.PostureConvert, "run", checking)
     run("fight_training")
     assert len(checked) > 30
+
+
+@pytest.mark.parametrize("frames_shared", [False, True])
+def test_a_solved_row_not_finite_keeps_its_last_positions(frames_shared):
+    """posture_solved_rows publishes the solver's rows (frames copied, or shared when the
+    posture's frames are the solver's arrays) and freezes one that is not finite, its
+    positions before kept."""
+    rng = np.random.default_rng(1317)
+    n = 40
+    poses, lengths = random_poses(rng, n), random_bodies(rng, n)
+    solved = kd.decoded_arrays(kd.decode(poses, lengths))
+    solved.positions[[5, 33]] = np.nan
+    before = rng.normal(size=(n, N_JOINTS, 3))
+    positions, frozen, newly_bad = before.copy(), np.zeros(n, bool), np.zeros(n, bool)
+    frames = solved if frames_shared else kd.empty_decoded(n)
+    decoded = frames._replace(positions=np.empty((n, N_JOINTS, 3)))
+    k = kp.export_constants()
+    posture_solved_rows(0, n, np.arange(n, dtype=np.int64), solved, kd.pose_arrays(poses),
+                        lengths, decoded, frozen, newly_bad, positions, False,
+                        np.empty((0, kp.N_EXPORT, 3, 3)), np.empty((0, kp.N_EXPORT, 3, 3)),
+                        k.rest_hips, k.bvh_from_world, k.rest2body, k.parents,
+                        np.empty((n, 0, 3)), False, frames_shared)
+    assert list(np.flatnonzero(frozen)) == [5, 33] and list(np.flatnonzero(newly_bad)) == [5, 33]
+    np.testing.assert_array_equal(positions[[5, 33]], before[[5, 33]])
+    good = ~frozen
+    np.testing.assert_array_equal(positions[good], solved.positions[good])
+    for got, want in zip(decoded[1:], solved[1:], strict=True):
+        np.testing.assert_array_equal(got, want)
