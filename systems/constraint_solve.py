@@ -220,9 +220,9 @@ class ConstraintSolve(System):
             self.corrections.start_tick(st.poses, sim.structure_version)
             solving = np.unique(table.owner[weight > 0])
             motion = st.poses.take(solving)
-        elif settings.budget_ms is not None:
-            # (every one solved, none held: no correction kept, 1.4 us a character; one held
-            # before it is solved again goes back to its motion at the speed bound instead)
+        elif settings.budget_ms is not None and not self.budget.probing:
+            # (every one solved, none held: no correction kept, 1.4 us a character; the first
+            # tick of a level of detail solves every one again, to keep theirs)
             self.corrections.known[:] = False
         unconstrained = None
         if motion is not None and solving.size:

@@ -128,7 +128,9 @@ SOLVE_INTERVALS = (1, 2, 4, 8, 16)
 EVERY_CANDIDATE_TICKS = 8
 #: While fewer than every candidate are solved, every this many ticks (a second at 30 Hz)
 #: every one is solved once if the least such a tick ever cost fits in the budget (a probe):
-#: what it costs may have fallen since it was last measured (a slowed machine's ticks).
+#: what it costs may have fallen since it was last measured (a slowed machine's ticks). Twice
+#: as long after each probe that did not bring them back (on a slowed machine a probe cost
+#: 40-45 ms where the ticks solving some took 20-30), back to this once they came back.
 PROBE_TICKS = 30
 
 
@@ -414,9 +416,9 @@ class FrameBudget:
         self.interval: I64 = np.zeros(0, np.int64)
         #: This tick's rows kept but not solved: between two solves at their interval.
         self.held: I64 = np.zeros(0, np.int64)
-        #: Whether the level of detail holds characters this tick or starts to at the next: the
-        #: solved characters' corrections are kept (:meth:`weights`; when every candidate is
-        #: solved every tick they are not: 1.4 us a character).
+        #: Whether the level of detail holds characters this tick, starts to at the next or
+        #: probes: the solved characters' corrections are kept (:meth:`weights`; when every
+        #: candidate is solved every tick they are not: 1.4 us a character).
         self.holding = False
         self._capacity: float | None = None
         self._need: I64 = np.zeros(0, np.int64)
@@ -448,6 +450,12 @@ class FrameBudget:
         self._every_rest_ms: list[float] = []
         self._every_run = False  # (whether the last tick measured solved every one)
         self._every_least_ms = np.inf
+        #: Whether this tick solves every candidate to measure it (a probe,
+        #: :meth:`_every_candidate_or`): the corrections kept before are kept, not renewed.
+        self.probing = False
+        self._corrections_current = False  # (kept on the last tick that held, none forgotten)
+        self._probe_ticks = PROBE_TICKS
+        self._probed = False
         self._ticks_since_every = 0
         self._tick_before_ms = 0.0
 
@@ -570,9 +578,10 @@ class FrameBudget:
         :func:`solve_intervals` decide by the model (the settings' own first)."""
         model = settings.cost_model or self.model
         self.held = np.zeros(0, np.int64)
-        held_before, self.holding = self.holding, False
+        self.holding = self.probing = False
         self._every_due = True
         if settings.budget_ms is None or model is None:
+            self._corrections_current = False
             return weight
         wants = weight > 0
         top = np.full(self.presence.size, -np.inf)
@@ -597,7 +606,9 @@ class FrameBudget:
         self.holding = self._capacity < candidate.size
         # The first tick of the level of detail solves every one kept, their corrections kept
         # to be held from the next (none were while every one was solved every tick).
-        now = keep if self.holding and not held_before else due(candidate, interval, tick)
+        current = self._corrections_current
+        now = keep if self.holding and not current else due(candidate, interval, tick)
+        self._corrections_current = self.holding or (self.probing and current)
         self.held = candidate[keep & ~now]
         self._every_due = bool(now.all())
         if now.all() and self.presence.min(initial=1.0) >= 1.0:
@@ -615,23 +626,30 @@ class FrameBudget:
         back). The median rest of the tick of the last such ticks
         (:data:`EVERY_CANDIDATE_TICKS`) times :data:`MARGIN_FLOOR` plus this tick's systems
         before the solve: every one while that fits in the budget, again once it fits in the
-        restore share (the hysteresis of :func:`solve_capacity`), or for one tick (a probe)
-        every :data:`PROBE_TICKS` if the least such a tick ever cost fits in the budget; else
-        fewer than every one. Not the :attr:`margin`: the ticks that solve some have the machine's spread too,
-        and no fewer over the budget (measured: the bench's at 3,500 solving 700 a tick took
-        20-29 ms against 24-28 solving all 3,500), and leaving costs a tick of its own (every
-        correction kept)."""
+        restore share (the hysteresis of :func:`solve_capacity`), or for one tick (a probe,
+        :attr:`probing`) after :data:`PROBE_TICKS` if the least such a tick ever cost fits in
+        the budget; else fewer than every one. Not the :attr:`margin`: the ticks that solve
+        some have the machine's spread too, and no fewer over the budget (measured: the
+        bench's at 3,500 solving 700 a tick took 20-29 ms against 24-28 solving all 3,500), and
+        leaving costs a tick of its own (every correction kept)."""
+        self.probing = False
         if settings.cost_model is not None or not self._every_rest_ms or candidates == 0:
             return capacity
         assert settings.budget_ms is not None
         rest_ms = float(np.median(self._every_rest_ms)) * candidates
-        solving_every = self._capacity is None or self._capacity >= candidates
+        solving_every = (self._capacity is None or self._capacity >= candidates) \
+            and not self._probed
         self._ticks_since_every = 0 if solving_every else self._ticks_since_every + 1
         fits = self._tick_before_ms + MARGIN_FLOOR * rest_ms \
             <= (settings.budget_ms if solving_every else _held_and_restore_ms(settings)[1])
-        probe = self._ticks_since_every >= PROBE_TICKS \
+        if fits:
+            self._probe_ticks = PROBE_TICKS
+        elif self._probed:  # (the last tick probed, and they did not come back)
+            self._probe_ticks *= 2
+        self.probing = self._probed = not fits \
+            and self._ticks_since_every >= self._probe_ticks \
             and self._tick_before_ms + self._every_least_ms * candidates <= settings.budget_ms
-        if fits or probe:
+        if fits or self.probing:
             return float(max(capacity, candidates))
         return min(capacity, candidates - 1.0)
 

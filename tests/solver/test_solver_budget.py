@@ -504,3 +504,15 @@ def test_a_given_model_with_held_characters_and_a_floor_solves_every_one_when_th
     assert all(r.intervals == {1: 1, 2: 1, 4: 2} for r in reports[3:7])
     assert sum(r.characters for r in reports[3:7]) == 4 + 6  # (the rows take turns: 1 to 3)
     assert all(r.characters == 4 and r.held_characters == 0 and not r.cut for r in reports[7:])
+
+
+def test_probes_that_bring_none_back_come_twice_as_late():
+    """A machine slowed 1.4 times for good: every one solved every tick does not fit; the
+    probes come PROBE_TICKS, then 2 and 4 times that after the level of detail set in."""
+    ticks = LevelOfDetailTicks()
+    for i in range(250):
+        ticks.tick(slow=1.4 if i >= 10 else 1.0)
+    every = [i for i, solved in enumerate(ticks.solved) if solved == 1000]
+    start = max(i for i in every if i < 30)  # (the first tick of the level of detail)
+    assert [i - start for i in every if i > start] == [PROBE_TICKS, 2 * PROBE_TICKS,
+                                                       4 * PROBE_TICKS]
