@@ -1,9 +1,10 @@
 """The frame budget (``SolverSettings.budget_ms``): the whole tick held within it, the solve degraded where it matters least.
 
 The decision is made from a cost model, not from a clock, so that it is deterministic given the
-model: a tick costs ``fixed_ms`` (every system but the constraint solve's characters), plus
-``ms_per_character`` for each solved character (its goals, errors and final re-plant), plus
-``ms_per_iteration`` for each iteration of each solved character. :class:`FrameBudget` (held by
+model: a tick costs ``fixed_ms`` (every system but the constraint solve's characters, and
+ConstraintSolve's own work over every row), plus ``ms_per_character`` for each solved
+character (its goals, errors and final re-plant), plus ``ms_per_iteration`` for each iteration
+of each solved character, plus ``ms_per_held`` for each character held between two solves. :class:`FrameBudget` (held by
 ConstraintSolve) calibrates the model from the process's CPU time of every tick (per kernel
 thread), smoothed over ticks (:data:`MODEL_SMOOTHING`): one slow tick does not swing the cut
 (``SolverSettings.cost_model`` fixes it instead: tests do, and the figures then no longer depend
@@ -39,7 +40,10 @@ overrun it, in this order:
    two solves a character keeps its last solve's correction (:mod:`ecs_anim.solver.held_pose`:
    the trunk, arms and head as solved, the legs' and the root's correction on the motion's):
    its constraints stay about met (they move with the pelvis for up to 15 ticks) instead of
-   switching off;
+   switching off. Whether every character is solved every tick is decided by what such ticks
+   measured, not by the model (:meth:`FrameBudget._every_candidate_or`: solving every row, in
+   place and holding none, costs less a row than solving some, on which the model is mostly
+   calibrated), with a probe now and then while they are not;
 4. and when even every character every 16th tick does not fit, the last ranked are *dropped*:
    their constraints are switched off, and they play and stand on the ground as every
    unconstrained character. Dropped characters come back only once the tick with them fits in
@@ -442,13 +446,13 @@ class FrameBudget:
         # or dropped; one fading back in is solved); whether every one is solved this tick.
         self._last_solves: tuple[int, bool] | None = None
         self._every_due = True
-        # The rest of a tick (ConstraintSolve and the systems after it) that solved every
-        # candidate, ms per candidate (smoothed; None: none measured), and this tick's systems
-        # before the solve, ms: whether solving every candidate fits is decided by what it
-        # measured, not by the model (calibrated mostly on ticks that solved some: solving
-        # some rows costs more a row than solving every row, which the solve does in place).
+        # The rest of the ticks (ConstraintSolve and the systems after it) of the last run that
+        # solved every candidate, ms per candidate (the last EVERY_CANDIDATE_TICKS), whether
+        # the last tick measured was one, the least such a tick ever cost, and this tick's
+        # systems before the solve, ms (:meth:`_every_candidate_or`); the ticks since every
+        # one was last solved, and those a probe waits.
         self._every_rest_ms: list[float] = []
-        self._every_run = False  # (whether the last tick measured solved every one)
+        self._every_run = False
         self._every_least_ms = np.inf
         #: Whether this tick solves every candidate to measure it (a probe,
         #: :meth:`_every_candidate_or`): the corrections kept before are kept, not renewed.
