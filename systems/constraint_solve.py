@@ -176,7 +176,6 @@ class ConstraintSolve(System):
         self.budget = FrameBudget()
         #: The last solve's correction of each character the budget solves every few ticks.
         self.corrections = HeldCorrections()
-        self._solve_cpu_s = 0.0
         # No pops: this tick's motion pose, packed (n, N_VALUES; None: not packed), and whether
         # the store's last_*_values hold the last tick's (else they are zeros: none).
         self._clip_now: NDArray[np.float64] | None = None
@@ -188,14 +187,10 @@ class ConstraintSolve(System):
         # The compiled goals' layout, kept while the same constraints are active.
         self._goal_layouts = GoalLayouts()
 
-    def _timed_solve(self, *args: Any) -> Any:
-        """The compiled solve (within the speed bound when one is set), its CPU time kept for
-        the frame budget's model."""
-        start = time.process_time()
+    def _solve(self, *args: Any) -> Any:
+        """The compiled solve (within the speed bound when one is set)."""
         bounded = self.sim.solver_settings.max_joint_speed_m_s is not None
-        out = self._solve_within_speed(*args) if bounded else steps(self.sim.compiled).solve(*args)
-        self._solve_cpu_s = time.process_time() - start
-        return out
+        return self._solve_within_speed(*args) if bounded else steps(self.sim.compiled).solve(*args)
 
     def run(self, dt: float) -> None:
         sim, st, table = self.sim, self.sim.store, self.sim.constraints
@@ -208,7 +203,7 @@ class ConstraintSolve(System):
             return
         before = sim.systems[:sim.systems.index(self)]  # (this tick's runs: known to the budget)
         self.budget.start_tick(sum(system.cpu_seconds for system in sim.systems), threads(),
-                               sim.structure_version, st.n, self.last_cpu_seconds,
+                               sim.structure_version, st.n,
                                sum(system.last_cpu_seconds for system in before))
         weight = table.weights(sim.time_s, st.clip, st.clip_time_s)
         if not self.all_rows():  # the characters without a Constraint component are not solved
@@ -220,10 +215,15 @@ class ConstraintSolve(System):
             weight = self.budget.weights(weight, table.owner, table.priority,
                                          st.poses.root_position * sim.leg_length()[:, None],
                                          settings, sim.dt, sim.tick)
+        if settings.budget_ms is not None and self.budget.holding:
             # the motion's pose of the characters solved now, for their correction to be held
             self.corrections.start_tick(st.poses, sim.structure_version)
             solving = np.unique(table.owner[weight > 0])
             motion = st.poses.take(solving)
+        elif settings.budget_ms is not None and not self.budget.probing:
+            # (every one solved, none held: no correction kept, 1.4 us a character; the first
+            # tick of a level of detail solves every one again, to keep theirs)
+            self.corrections.known[:] = False
         unconstrained = None
         if motion is not None and solving.size:
             # (and the characters their targets lie on: read from this tick's pose on the
@@ -254,16 +254,17 @@ class ConstraintSolve(System):
         model = settings.cost_model or self.budget.model
         if settings.budget_ms is not None and model is not None:
             model = self.budget.for_cut(model, table.owner[weight > 0])
-        self._solve_cpu_s = 0.0
         # the compiled goals with their layout kept from tick to tick (unless a test patched them)
         goal_step = self._goal_layouts if step.goals is _compiled_tick_goals else step.goals
+        start = time.process_time()  # (the solved characters' cost, for the frame budget's model)
         result = constrain(table, weight, st.poses, unconstrained, st.lengths,
                            st.contact_weight, st.com_control, st.com_target_xy, st.segment_mass_kg,
                            st.segment_com_fraction, st.posture, self.budget.aimed(settings, model),
                            settings.release_speed_m_s * sim.dt,
-                           TickSteps(goal_step, self._timed_solve, step.errors, step.centres,
+                           TickSteps(goal_step, self._solve, step.errors, step.centres,
                                      step.targets, step.result_errors),
                            model, self.budget.expected())
+        solve_cpu_s = time.process_time() - start
         used, caps = np.zeros(0, np.int64), np.zeros(0, np.int64)
         if result.goals is not None and result.iterations is not None:
             g, used = result.goals, result.iterations
@@ -273,7 +274,7 @@ class ConstraintSolve(System):
                 caps = np.full(used.size, int(settings.iterations), np.int64)
             else:
                 caps = effective_caps(g, *iteration_caps(g, settings), settings.iterations)
-        self.budget.solved(result.rows, used, caps, self._solve_cpu_s)
+        self.budget.solved(result.rows, used, caps, solve_cpu_s)
         dropped = self.budget.dropped(wanted, table.owner) if settings.budget_ms is not None \
             else np.zeros(0, np.int64)
         if result.broken.size:
@@ -304,13 +305,16 @@ class ConstraintSolve(System):
 
     def _hold(self) -> NDArray[np.int64]:
         """Put their last solve's correction on the characters the budget solves every few
-        ticks and did not solve this tick (those solved before); returns their rows."""
+        ticks and did not solve this tick (those solved before); returns their rows. Timed on its
+        own: the frame budget's cost of a held character."""
         if self.sim.solver_settings.budget_ms is None:
             return np.zeros(0, np.int64)
+        start = time.process_time()
         st = self.sim.store
         rows = self.budget.held[self.corrections.known[self.budget.held]]
         if rows.size:
             self.corrections.put_on(st.poses, rows)
+        self.budget.held_step(int(rows.size), time.process_time() - start)
         return rows
 
     def _solve_within_speed(self, poses: NormalizedPoses, lengths: NDArray[np.float64],

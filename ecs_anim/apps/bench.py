@@ -155,12 +155,14 @@ def tick_parts(sim: Any) -> tuple[float, float, float, float]:
 
 
 class BudgetTicks:
-    """Each timed tick of a budgeted run: the characters the budget cut to one iteration, those
-    it solves every 2nd tick or less often (the level of detail) and those it dropped, whether
+    """Each timed tick of a budgeted run: the characters solved, those the budget cut to one
+    iteration, those it solves every 2nd tick or less often (the level of detail) and those it
+    dropped, whether
     it ended the rounds of separation, the tick's CPU and wall time (the step alone: the twin
     scene stepped beside it is not counted), and its parts (:func:`tick_parts`)."""
 
     def __init__(self) -> None:
+        self.solved: list[int] = []
         self.cut: list[int] = []
         self.dropped: list[int] = []
         self.slowed: list[int] = []
@@ -173,6 +175,7 @@ class BudgetTicks:
 
     def add(self, report: Any, wall_s: float, cpu_s: float, separate_cut: bool = False,
             parts: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)) -> None:
+        self.solved.append(report.characters)
         self.cut.append(len(report.cut_characters))
         self.dropped.append(len(report.dropped_characters))
         self.slowed.append(report.characters_slowed)
@@ -184,8 +187,9 @@ class BudgetTicks:
         self.parts.append(parts)
 
     def figures(self, budget_ms: float) -> dict[str, Any]:
-        """min / median / max of the characters cut (to one iteration, solved less often than
-        every tick, and dropped); the median number at each solve interval; the tick's CPU ms
+        """The characters solved each tick, and their min / median / max and largest change from
+        one tick to the next; min / median / max of the characters cut (to one iteration, solved
+        less often than every tick, and dropped); the median number at each solve interval; the tick's CPU ms
         (min, median, 95th percentile, max); how many ticks went over ``budget_ms`` (CPU, and
         wall); the largest change of the characters cut (cut + slowed + dropped) from one tick
         to the next; the ticks whose separation the budget ended; the budget's margin factor
@@ -203,7 +207,10 @@ class BudgetTicks:
             return [float(a.min()), float(np.median(a)), float(a.max())] if a.size else [0.0] * 3
         both = cut + dropped + slowed
         every = sorted({k for ticks in self.intervals for k in ticks})
-        return {"cut_per_tick": spread(cut), "dropped_per_tick": spread(dropped),
+        solved = np.array(self.solved)
+        return {"solved_each_tick": self.solved, "solved_per_tick": spread(solved),
+                "largest_change_of_solved": int(np.abs(np.diff(solved)).max(initial=0)),
+                "cut_per_tick": spread(cut), "dropped_per_tick": spread(dropped),
                 "slowed_per_tick": spread(slowed),
                 "characters_at_interval": {str(k): float(np.median([t.get(k, 0)
                                                                     for t in self.intervals]))
@@ -572,6 +579,8 @@ def print_budget_ticks(budget: dict[str, Any]) -> None:
               f"{spread(s['dropped_per_tick'], 0):>14s} {s['largest_change_of_cut']:12d} "
               f"{spread(s['cpu_ms_per_tick_spread'], 1):>18s} {s['cpu_ms_per_tick_p95']:7.1f} "
               f"{s['ticks_over_budget_cpu']:>7d}/{s['ticks_over_budget_wall']:<7d}")
+        print(f"  {'':10s} solved a tick {spread(s['solved_per_tick'], 0)}, at most "
+              f"{s['largest_change_of_solved']} more or fewer than the tick before")
         levels = ", ".join(f"{v:.0f} every {k}" if k != "1" else f"{v:.0f} every tick"
                            for k, v in s["characters_at_interval"].items())
         if levels:

@@ -1,9 +1,10 @@
 """The frame budget (``SolverSettings.budget_ms``): the whole tick held within it, the solve degraded where it matters least.
 
 The decision is made from a cost model, not from a clock, so that it is deterministic given the
-model: a tick costs ``fixed_ms`` (every system but the constraint solve's characters), plus
-``ms_per_character`` for each solved character (its goals, errors and final re-plant), plus
-``ms_per_iteration`` for each iteration of each solved character. :class:`FrameBudget` (held by
+model: a tick costs ``fixed_ms`` (every system but the constraint solve's characters, and
+ConstraintSolve's own work over every row), plus ``ms_per_character`` for each solved
+character (its goals, errors and final re-plant), plus ``ms_per_iteration`` for each iteration
+of each solved character, plus ``ms_per_held`` for each character held between two solves. :class:`FrameBudget` (held by
 ConstraintSolve) calibrates the model from the process's CPU time of every tick (per kernel
 thread), smoothed over ticks (:data:`MODEL_SMOOTHING`): one slow tick does not swing the cut
 (``SolverSettings.cost_model`` fixes it instead: tests do, and the figures then no longer depend
@@ -39,7 +40,10 @@ overrun it, in this order:
    two solves a character keeps its last solve's correction (:mod:`ecs_anim.solver.held_pose`:
    the trunk, arms and head as solved, the legs' and the root's correction on the motion's):
    its constraints stay about met (they move with the pelvis for up to 15 ticks) instead of
-   switching off;
+   switching off. Whether every character is solved every tick is decided by what such ticks
+   measured, not by the model (:meth:`FrameBudget._every_candidate_or`: solving every row, in
+   place and holding none, costs less a row than solving some, on which the model is mostly
+   calibrated), with a probe now and then while they are not;
 4. and when even every character every 16th tick does not fit, the last ranked are *dropped*:
    their constraints are switched off, and they play and stand on the ground as every
    unconstrained character. Dropped characters come back only once the tick with them fits in
@@ -121,37 +125,52 @@ KEEP_PREFERENCE = 0.9
 #: last solve's correction (:class:`~ecs_anim.solver.held_pose.HeldCorrections`). (With 8 the
 #: slowest, 7,000 walkers under 33 ms kept 3,660 and dropped the rest.)
 SOLVE_INTERVALS = (1, 2, 4, 8, 16)
+#: Whether every candidate is solved every tick is decided by the median rest of the tick
+#: (ConstraintSolve and the systems after it, per candidate) of the last this many ticks of
+#: the last run of ticks that solved every one: a slow tick among them, the first ones' above
+#: all (they load kernels), does not cut them.
+EVERY_CANDIDATE_TICKS = 8
+#: While fewer than every candidate are solved, every this many ticks (a second at 30 Hz)
+#: every one is solved once if the least such a tick ever cost fits in the budget (a probe):
+#: what it costs may have fallen since it was last measured (a slowed machine's ticks). Twice
+#: as long after each probe that did not bring them back (on a slowed machine a probe cost
+#: 40-45 ms where the ticks solving some took 20-30), back to this once they came back.
+PROBE_TICKS = 30
 
 
 @dataclass(frozen=True)
 class SolverCostModel:
-    """What a tick costs, ms: ``fixed_ms`` (everything but the constraint solve's characters),
-    plus ``ms_per_character`` for each solved character (its goals, errors, final re-plant),
-    plus ``ms_per_iteration`` for each iteration of each solved character."""
+    """What a tick costs, ms: ``fixed_ms`` (everything but the constraint solve's characters:
+    the other systems and ConstraintSolve's own floor, its work over every row), plus
+    ``ms_per_character`` for each solved character (its goals, errors, final re-plant), plus
+    ``ms_per_iteration`` for each iteration of each solved character, plus ``ms_per_held``
+    for each character held between two solves (its held-pose step)."""
 
     ms_per_iteration: float
     fixed_ms: float = 0.0
     ms_per_character: float = 0.0
+    ms_per_held: float = 0.0
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.ms_per_iteration) and self.ms_per_iteration > 0.0):
             raise UsageError(f"ms_per_iteration must be a positive number, got {self.ms_per_iteration}")
-        if not (np.isfinite(self.fixed_ms) and self.fixed_ms >= 0.0):
-            raise UsageError(f"fixed_ms must be a number >= 0, got {self.fixed_ms}")
-        if not (np.isfinite(self.ms_per_character) and self.ms_per_character >= 0.0):
-            raise UsageError(f"ms_per_character must be a number >= 0, got {self.ms_per_character}")
+        for name in ("fixed_ms", "ms_per_character", "ms_per_held"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0.0):
+                raise UsageError(f"{name} must be a number >= 0, got {value}")
 
-    def tick_ms(self, iterations: float, characters: int = 0) -> float:
+    def tick_ms(self, iterations: float, characters: int = 0, held: int = 0) -> float:
         """The tick's cost for this many character-iterations of this many solved characters,
-        ms."""
+        with ``held`` characters held between two solves, ms."""
         return self.fixed_ms + self.ms_per_character * characters \
-            + self.ms_per_iteration * float(iterations)
+            + self.ms_per_iteration * float(iterations) + self.ms_per_held * held
 
-    def with_characters(self, characters: int) -> SolverCostModel:
-        """The same model with ``characters`` solved characters' own cost in ``fixed_ms`` (what
-        :func:`cut_to_budget` decides by: it changes only iterations)."""
-        return SolverCostModel(self.ms_per_iteration,
-                               self.fixed_ms + self.ms_per_character * characters)
+    def with_characters(self, characters: int, held: int = 0) -> SolverCostModel:
+        """The same model with ``characters`` solved characters' own cost and ``held``
+        characters' held-pose step in ``fixed_ms`` (what :func:`cut_to_budget` decides by: it
+        changes only iterations)."""
+        return SolverCostModel(self.ms_per_iteration, self.fixed_ms
+                               + self.ms_per_character * characters + self.ms_per_held * held)
 
     def with_margin(self, before_ms: float, usual_before_ms: float, factor: float
                     ) -> SolverCostModel:
@@ -161,31 +180,37 @@ class SolverCostModel:
         ``factor``."""
         after_ms = max(self.fixed_ms - usual_before_ms, 0.0)
         return SolverCostModel(self.ms_per_iteration * factor, before_ms + after_ms * factor,
-                               self.ms_per_character * factor)
+                               self.ms_per_character * factor, self.ms_per_held * factor)
 
     @staticmethod
-    def calibrated(tick_ms: float, solve_ms: float, iterations: int, characters: int = 0
-                   ) -> SolverCostModel | None:
+    def calibrated(tick_ms: float, solve_ms: float, iterations: int, characters: int = 0,
+                   held: int = 0, hold_ms: float = 0.0) -> SolverCostModel | None:
         """The model of a measured tick: ``tick_ms`` in all, ``solve_ms`` of it in the solve
         of ``characters`` characters, which made ``iterations`` character-iterations (None if
-        it made none). The solve's last pass (the re-plant after the loop) counts as
-        :data:`FINAL_PASS_ITERATIONS` more iterations of each character, its own cost; all but
-        the solve is ``fixed_ms`` (the constraint solve's gather runs over every character,
-        solved or not)."""
+        it made none), ``hold_ms`` in the held-pose step of ``held`` characters. The solve's
+        last pass (the re-plant after the loop) counts as :data:`FINAL_PASS_ITERATIONS` more
+        iterations of each character, its own cost; all the rest is ``fixed_ms`` (the
+        constraint solve's gathers and its going back run over every character, solved or
+        not: its floor)."""
         if iterations <= 0 or not solve_ms > 0.0:
             return None
         per_iteration = solve_ms / (iterations + FINAL_PASS_ITERATIONS * characters)
-        return SolverCostModel(per_iteration, max(tick_ms - solve_ms, 0.0),
-                               FINAL_PASS_ITERATIONS * per_iteration if characters else 0.0)
+        return SolverCostModel(per_iteration, max(tick_ms - solve_ms - hold_ms, 0.0),
+                               FINAL_PASS_ITERATIONS * per_iteration if characters else 0.0,
+                               hold_ms / held if held else 0.0)
 
     def smoothed(self, measured: SolverCostModel, weight: float = MODEL_SMOOTHING
                  ) -> SolverCostModel:
-        """This model moved ``weight`` of the way towards ``measured`` (each cost alike)."""
+        """This model moved ``weight`` of the way towards ``measured`` (each cost alike; the
+        held characters' only when ``measured`` held some: a tick that held none did not
+        measure it)."""
         def blend(old: float, new: float) -> float:
             return old + weight * (new - old)
         return SolverCostModel(blend(self.ms_per_iteration, measured.ms_per_iteration),
                                blend(self.fixed_ms, measured.fixed_ms),
-                               blend(self.ms_per_character, measured.ms_per_character))
+                               blend(self.ms_per_character, measured.ms_per_character),
+                               blend(self.ms_per_held, measured.ms_per_held)
+                               if measured.ms_per_held > 0.0 else self.ms_per_held)
 
 
 @dataclass(frozen=True)
@@ -278,16 +303,28 @@ def effective_caps(goals: TickGoals, goal_caps: I64, row_caps: I64, iterations: 
 
 
 def solve_capacity(model: SolverCostModel, capacity_now: float | None, target_ms: float,
-                   restore_ms: float) -> float:
+                   restore_ms: float, candidates: int) -> float:
     """How many character solves a tick may make (a character solved every 4th tick counts a
-    quarter): as many as fit in ``target_ms`` by ``model`` at one iteration each (fewer
-    iterations come first: :func:`cut_to_budget`); more than last tick's ``capacity_now``
-    (None: none yet) only as far as ``restore_ms`` (<= ``target_ms``) allows, so that the
+    quarter) among ``candidates`` characters: as many as fit in ``target_ms`` by ``model`` at
+    one iteration each (fewer iterations come first: :func:`cut_to_budget`), the characters
+    kept but not solved this tick at ``model.ms_per_held`` each (all the candidates but those
+    solved, or, when even every candidate at the slowest interval does not fit, those kept
+    at it but not due: :func:`solve_intervals`); more than last tick's ``capacity_now`` (None:
+    none yet) only as far as ``restore_ms`` (<= ``target_ms``) allows, so that the
     measurements' noise does not move it every tick."""
     per_solve = model.ms_per_character + model.ms_per_iteration
+    slowest = SOLVE_INTERVALS[-1]
+    # below every candidate kept at the slowest interval, each solve keeps slowest - 1 held
+    per_solve_kept_slowest = per_solve + (slowest - 1) * model.ms_per_held
+    every_kept = candidates / slowest
+    every_kept_ms = model.fixed_ms + per_solve_kept_slowest * every_kept
 
     def fitting(ms: float) -> float:
-        return max((ms - model.fixed_ms) / per_solve, 0.0)
+        if ms < every_kept_ms:
+            return max((ms - model.fixed_ms) / per_solve_kept_slowest, 0.0)
+        # above, each solve more is a held character fewer
+        rise = per_solve - model.ms_per_held
+        return float(candidates) if rise <= 0.0 else every_kept + (ms - every_kept_ms) / rise
 
     most = fitting(target_ms)
     if capacity_now is None or capacity_now > most:
@@ -383,15 +420,21 @@ class FrameBudget:
         self.interval: I64 = np.zeros(0, np.int64)
         #: This tick's rows kept but not solved: between two solves at their interval.
         self.held: I64 = np.zeros(0, np.int64)
+        #: Whether the level of detail holds characters this tick, starts to at the next or
+        #: probes: the solved characters' corrections are kept (:meth:`weights`; when every
+        #: candidate is solved every tick they are not: 1.4 us a character).
+        self.holding = False
         self._capacity: float | None = None
         self._need: I64 = np.zeros(0, np.int64)
         self._version = -1
         self._mark_cpu_s: float | None = None
         self._marks = 0
         self._calibrations = 0
-        # The last tick's solve: (its CPU s, iterations, characters), calibrated against the
-        # whole tick at the next mark; the character-iterations the cut allowed last tick.
+        # The last tick's solve: (its CPU s, iterations, characters), and its held-pose step:
+        # (characters, CPU s), calibrated against the whole tick at the next mark; the
+        # character-iterations the cut allowed last tick.
         self._last_solve: tuple[float, int, int] | None = None
+        self._last_hold: tuple[int, float] = (0, 0.0)
         self._allowance: float | None = None
         # The systems before the solve, ms a tick (smoothed; this tick's before it moved), and
         # the calibrated model's cost of the rest of the last tick, ms (None: not known), against
@@ -399,20 +442,39 @@ class FrameBudget:
         self._usual_before_ms: float | None = None
         self._tick_usual_before_ms = 0.0
         self._rest_expected_ms: float | None = None
-        # The last tick's solves: how many, and whether some candidates were not solved.
+        # The last tick's solves: how many, and whether some candidates were not solved (held
+        # or dropped; one fading back in is solved); whether every one is solved this tick.
         self._last_solves: tuple[int, bool] | None = None
+        self._every_due = True
+        # The rest of the ticks (ConstraintSolve and the systems after it) of the last run that
+        # solved every candidate, ms per candidate (the last EVERY_CANDIDATE_TICKS), whether
+        # the last tick measured was one, the least such a tick ever cost, and this tick's
+        # systems before the solve, ms (:meth:`_every_candidate_or`); the ticks since every
+        # one was last solved, and those a probe waits.
+        self._every_rest_ms: list[float] = []
+        self._every_run = False
+        self._every_least_ms = np.inf
+        #: Whether this tick solves every candidate to measure it (a probe,
+        #: :meth:`_every_candidate_or`): the corrections kept before are kept, not renewed.
+        self.probing = False
+        self._corrections_current = False  # (kept on the last tick that held, none forgotten)
+        self._probe_ticks = PROBE_TICKS
+        self._probed = False
+        self._ticks_since_every = 0
+        self._tick_before_ms = 0.0
 
     def start_tick(self, cpu_s: float, threads: int, version: int, n: int,
-                   last_run_s: float | None = None, before_s: float = 0.0) -> None:
+                   before_s: float = 0.0) -> None:
         """At the start of ConstraintSolve's run: ``cpu_s`` every system's CPU time so far
         (s), over ``threads`` kernel threads; a whole tick lies between two marks, and the
-        model moves towards it. ``version``/``n``: the store's structure and rows.
-        ``last_run_s``: the CPU time of ConstraintSolve's whole last run (s), counted as the
-        solve's (None: the solve's own, :meth:`solved`): what it costs around the solve (the
-        goals, the targets, the errors, the held corrections) grows with the characters it
-        solves and holds, and is theirs, not the fixed part's. ``before_s``: what the systems
-        before ConstraintSolve took this tick (s): this tick's :attr:`model` counts it as it
-        was, the rest of the tick at the calibrated model's cost times :attr:`margin_factor`."""
+        model moves towards it: the solve's own CPU time (:meth:`solved`) is the solved
+        characters', the held-pose step's (:meth:`held_step`) the held ones', all the rest
+        the fixed part's (ConstraintSolve's floor among it: its gathers over every row). The
+        first two ticks are not measured (they load the kernels and take the solve's first
+        paths: 1.5-2 x a later tick). ``version``/``n``: the store's structure and rows.
+        ``before_s``: what the systems before ConstraintSolve took this tick (s): this tick's
+        :attr:`model` counts it as it was, the rest of the tick at the calibrated model's cost
+        times :attr:`margin_factor`."""
         if version != self._version or self._need.size != n:
             self._version = version
             self._need = np.zeros(n, np.int64)
@@ -421,28 +483,36 @@ class FrameBudget:
             self._allowance = None
         scale = 1e3 / max(threads, 1)
         before_ms = before_s * scale
-        # (the first tick is not measured: it loads the kernels)
-        if self._mark_cpu_s is not None and self._last_solve is not None and self._marks > 1:
+        if self._mark_cpu_s is not None and self._last_solve is not None and self._marks > 2:
             solve_s, iterations, characters = self._last_solve
-            solve_s = solve_s if last_run_s is None else last_run_s
+            held, hold_s = self._last_hold
             tick_ms = (cpu_s - self._mark_cpu_s) * scale
             if self._calibrations >= MARGIN_AFTER:
                 kept = self._measure_margin(tick_ms - before_ms)
                 solve_s *= kept
+                hold_s *= kept
                 tick_ms = before_ms + kept * (tick_ms - before_ms)
-            measured = SolverCostModel.calibrated(tick_ms, solve_s * scale, iterations, characters)
+            if self._last_solves is not None and self._last_solves[0] and not self._last_solves[1]:
+                run = self._every_rest_ms[1 - EVERY_CANDIDATE_TICKS:] if self._every_run else []
+                self._every_rest_ms = [*run, (tick_ms - before_ms) / self._last_solves[0]]
+                self._every_least_ms = min(self._every_least_ms, self._every_rest_ms[-1])
+            self._every_run = self._last_solves is not None and not self._last_solves[1]
+            measured = SolverCostModel.calibrated(tick_ms, solve_s * scale, iterations, characters,
+                                                  held, hold_s * scale)
             self._calibrations += 1
             if measured is not None:
                 self.calibrated = measured if self.calibrated is None \
                     else self.calibrated.smoothed(measured)
-            elif self.calibrated is not None:  # nothing solved: all of the tick is the fixed part
-                self.calibrated = dataclasses.replace(
-                    self.calibrated, fixed_ms=self.calibrated.fixed_ms
-                    + MODEL_SMOOTHING * (tick_ms - self.calibrated.fixed_ms))
+            elif self.calibrated is not None:  # nothing solved: all but the holding is fixed
+                self.calibrated = self.calibrated.smoothed(dataclasses.replace(
+                    self.calibrated, fixed_ms=max(tick_ms - hold_s * scale, 0.0),
+                    ms_per_held=hold_s * scale / held if held else 0.0))
         first = self._marks == 0  # (its systems load their kernels: not their usual time)
         self._mark_cpu_s = cpu_s
         self._marks += 1
         self._last_solve = None
+        self._last_hold = (0, 0.0)
+        self._tick_before_ms = before_ms
         usual_before = before_ms if self._usual_before_ms is None else self._usual_before_ms
         if not first:  # (smoothed as the model's fixed part, which holds this tick's too)
             self._usual_before_ms = usual_before + MODEL_SMOOTHING * (before_ms - usual_before)
@@ -492,12 +562,12 @@ class FrameBudget:
             cost_model=None if settings.cost_model is None else model)
 
     def for_cut(self, model: SolverCostModel, solved_owners: I64) -> SolverCostModel:
-        """``model`` with the solved characters' own cost in its fixed part
-        (:meth:`SolverCostModel.with_characters`); ``solved_owners``: the rows of the
-        constraints solved this tick (repeats allowed)."""
+        """``model`` with the solved characters' own cost and the held ones' (:attr:`held`)
+        in its fixed part (:meth:`SolverCostModel.with_characters`); ``solved_owners``: the
+        rows of the constraints solved this tick (repeats allowed)."""
         solved = np.zeros(self.presence.size, bool)
         solved[solved_owners] = True
-        return model.with_characters(int(solved.sum()))
+        return model.with_characters(int(solved.sum()), int(self.held.size))
 
     def expected(self) -> I64:
         """(n,) what each row is expected to take when solved (0: not known)."""
@@ -512,32 +582,85 @@ class FrameBudget:
         :func:`solve_intervals` decide by the model (the settings' own first)."""
         model = settings.cost_model or self.model
         self.held = np.zeros(0, np.int64)
+        self.holding = self.probing = False
+        self._every_due = True
         if settings.budget_ms is None or model is None:
+            self._corrections_current = False
             return weight
         wants = weight > 0
         top = np.full(self.presence.size, -np.inf)
         np.maximum.at(top, owner[wants], priority[wants])
         candidate = np.flatnonzero(np.isfinite(top))
         kept_before = self.presence[candidate] > 0
-        self._capacity = solve_capacity(model, self._capacity, *_held_and_restore_ms(settings))
-        distance = (np.zeros(candidate.size) if settings.focus_in_world is None else
-                    np.linalg.norm(pelvis_in_world[candidate] - settings.focus_in_world, axis=1))
-        order = ranked_rows(top[candidate], distance, kept_before)
-        interval = np.zeros(candidate.size, np.int64)
-        interval[order] = solve_intervals(candidate.size, self._capacity)
+        self._capacity = self._every_candidate_or(
+            solve_capacity(model, self._capacity, *_held_and_restore_ms(settings), candidate.size),
+            candidate.size, settings)
+        interval = np.ones(candidate.size, np.int64)
+        if self._capacity < candidate.size:
+            distance = (np.zeros(candidate.size) if settings.focus_in_world is None else
+                        np.linalg.norm(pelvis_in_world[candidate] - settings.focus_in_world, axis=1))
+            order = ranked_rows(top[candidate], distance, kept_before)
+            interval[order] = solve_intervals(candidate.size, self._capacity)
         self.interval[:] = 0
         self.interval[candidate] = interval
         keep = interval > 0
         step = dt / RESTORE_RAMP_S
         self.presence[candidate] = np.where(keep, np.minimum(self.presence[candidate] + step, 1.0),
                                             0.0)
-        now = due(candidate, interval, tick)
+        self.holding = self._capacity < candidate.size
+        # The first tick of the level of detail solves every one kept, their corrections kept
+        # to be held from the next (none were while every one was solved every tick).
+        current = self._corrections_current
+        now = keep if self.holding and not current else due(candidate, interval, tick)
+        self._corrections_current = self.holding or (self.probing and current)
         self.held = candidate[keep & ~now]
+        self._every_due = bool(now.all())
         if now.all() and self.presence.min(initial=1.0) >= 1.0:
             return weight
         solved_now = np.zeros(self.presence.size)
         solved_now[candidate[now]] = 1.0
         return weight * (self.presence * solved_now)[owner]
+
+    def _every_candidate_or(self, capacity: float, candidates: int, settings: SolverSettings
+                            ) -> float:
+        """``capacity`` (:func:`solve_capacity`, by the model), or every one of ``candidates``
+        every tick, decided by what such ticks measured (with a measured model: a tick that
+        solves every row does it in place and holds none, and costs less a row than one that
+        solves some, on which the model is calibrated: by the model, they would not come
+        back). The median rest of the tick of the last such ticks
+        (:data:`EVERY_CANDIDATE_TICKS`) times :data:`MARGIN_FLOOR` plus this tick's systems
+        before the solve: every one while that fits in the budget, again once it fits in the
+        restore share (the hysteresis of :func:`solve_capacity`), or for one tick (a probe,
+        :attr:`probing`) after :data:`PROBE_TICKS` if the least such a tick ever cost fits in
+        the budget; else fewer than every one. Not the :attr:`margin`: the ticks that solve
+        some have the machine's spread too, and no fewer over the budget (measured: the
+        bench's at 3,500 solving 700 a tick took 20-29 ms against 24-28 solving all 3,500), and
+        leaving costs a tick of its own (every correction kept)."""
+        self.probing = False
+        if settings.cost_model is not None or not self._every_rest_ms or candidates == 0:
+            return capacity
+        assert settings.budget_ms is not None
+        rest_ms = float(np.median(self._every_rest_ms)) * candidates
+        solving_every = (self._capacity is None or self._capacity >= candidates) \
+            and not self._probed
+        self._ticks_since_every = 0 if solving_every else self._ticks_since_every + 1
+        fits = self._tick_before_ms + MARGIN_FLOOR * rest_ms \
+            <= (settings.budget_ms if solving_every else _held_and_restore_ms(settings)[1])
+        if fits:
+            self._probe_ticks = PROBE_TICKS
+        elif self._probed:  # (the last tick probed, and they did not come back)
+            self._probe_ticks *= 2
+        self.probing = self._probed = not fits \
+            and self._ticks_since_every >= self._probe_ticks \
+            and self._tick_before_ms + self._every_least_ms * candidates <= settings.budget_ms
+        if fits or self.probing:
+            return float(max(capacity, candidates))
+        return min(capacity, candidates - 1.0)
+
+    def held_step(self, characters: int, cpu_s: float) -> None:
+        """ConstraintSolve's held-pose step this tick: ``characters`` held between two solves
+        took ``cpu_s`` (s), for the next mark's calibration (:attr:`SolverCostModel.ms_per_held`)."""
+        self._last_hold = (characters, cpu_s)
 
     def dropped(self, weight: F64, owner: I64) -> I64:
         """The store rows whose constraints (``weight`` (m,) before the budget, ``owner``
@@ -554,15 +677,18 @@ class FrameBudget:
 
     def solved(self, rows: I64, used: I64, caps: I64, solve_cpu_s: float) -> None:
         """After the solve: ``rows`` (r,) solved, each having ``used`` (r,) iterations under
-        ``caps`` (r,, :func:`effective_caps`); the solve's CPU time (s), for the next mark's
+        ``caps`` (r,, :func:`effective_caps`); the solve's CPU time (s: its goals, targets,
+        iterations and errors, :func:`~ecs_anim.solver.shell.constrain`), for the next mark's
         calibration."""
         self._need[rows] = uncut_need(self._need[rows], used, caps)
         self._last_solve = (solve_cpu_s, int(used.sum()), int(rows.size))
-        solves = (int(rows.size), bool(self.held.size or (self.presence < 1.0).any()))
+        solves = (int(rows.size), not self._every_due)
         last, self._last_solves = self._last_solves, solves
         if self.calibrated is not None and last is not None and last[1] == solves[1] \
                 and abs(solves[0] - last[0]) <= STEADY_SHARE * max(last[0], 1):
-            rest_ms = self.calibrated.tick_ms(int(used.sum()), int(rows.size)) \
+            every = min(self._every_rest_ms, default=None)
+            rest_ms = every * rows.size if every is not None and not solves[1] \
+                else self.calibrated.tick_ms(int(used.sum()), int(rows.size), int(self.held.size)) \
                 - self._tick_usual_before_ms
             self._rest_expected_ms = rest_ms if rest_ms > 0.0 else None
 

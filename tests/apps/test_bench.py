@@ -113,7 +113,7 @@ def test_bench_budget_tells_the_ticks_over_the_machine_slowed():
 
     class Report:
         cut_characters = dropped_characters = ()
-        characters_slowed, intervals, floor_ms = 0, {1: 8}, 1.0
+        characters, characters_slowed, intervals, floor_ms = 8, 0, {1: 8}, 1.0
 
     ticks = BudgetTicks()
     for _ in range(10):
@@ -123,6 +123,7 @@ def test_bench_budget_tells_the_ticks_over_the_machine_slowed():
     figures = ticks.figures(25.0)
     assert figures["ticks_over_budget_cpu"] == 2 and figures["ticks_over_slowed_alike"] == 1
     assert figures["margin_factor_spread"] == [1.1, 1.1, 1.5]
+    assert figures["solved_each_tick"] == [8] * 12 and figures["largest_change_of_solved"] == 0
 
 
 def test_bench_threads_prints_them_against_one_thread_in_the_same_run(capsys):

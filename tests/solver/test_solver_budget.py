@@ -3,6 +3,8 @@ the model's, never the clock's; the cut solve equals the numpy reference's."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -17,6 +19,7 @@ from ecs_anim.solver.budget import (
     MARGIN_CEILING,
     MARGIN_DECAY,
     MARGIN_FLOOR,
+    PROBE_TICKS,
     FrameBudget,
     SolverCostModel,
     due,
@@ -137,6 +140,15 @@ def test_the_model_is_calibrated_from_measured_times():
     # A measured tick moves the model a fifth of the way (MODEL_SMOOTHING).
     moved = model.smoothed(SolverCostModel(ms_per_iteration=0.2, fixed_ms=29.0))
     assert moved.ms_per_iteration == pytest.approx(0.12) and moved.fixed_ms == pytest.approx(21.0)
+    # 200 characters held between two solves took 0.4 ms: their own cost, not the fixed part's.
+    held = SolverCostModel.calibrated(tick_ms=30.4, solve_ms=11.0, iterations=100, characters=10,
+                                      held=200, hold_ms=0.4)
+    assert held is not None
+    assert dataclasses.astuple(held) == pytest.approx((0.1, 19.0, 0.1, 0.002))
+    assert held.tick_ms(100, 10, 200) == pytest.approx(30.4)
+    assert dataclasses.astuple(held.with_characters(10, 200)) == pytest.approx((0.1, 20.4, 0.0, 0.0))
+    # A tick that held none did not measure a held character's cost: it stays.
+    assert held.smoothed(model).ms_per_held == held.ms_per_held
 
 
 def test_a_character_the_budget_stopped_keeps_its_need():
@@ -151,11 +163,25 @@ def test_the_solves_a_tick_go_down_at_once_and_up_with_hysteresis():
     """1 ms fixed, 1 ms a character at one iteration (0.5 + 0.5): a 10 ms target holds 9
     solves a tick; more come back only as far as 8 ms holds them (7), never back and forth."""
     model = SolverCostModel(ms_per_iteration=0.5, fixed_ms=1.0, ms_per_character=0.5)
-    assert solve_capacity(model, None, 10.0, 8.0) == 9.0   # first: what fits
-    assert solve_capacity(model, 12.0, 10.0, 8.0) == 9.0   # over: down at once
-    assert solve_capacity(model, 8.5, 10.0, 8.0) == 8.5    # within the band: stays
-    assert solve_capacity(model, 5.0, 10.0, 8.0) == 7.0    # room: up to the restore level
-    assert solve_capacity(SolverCostModel(0.5, fixed_ms=12.0), None, 10.0, 8.0) == 0.0
+    assert solve_capacity(model, None, 10.0, 8.0, 100) == 9.0   # first: what fits
+    assert solve_capacity(model, 12.0, 10.0, 8.0, 100) == 9.0   # over: down at once
+    assert solve_capacity(model, 8.5, 10.0, 8.0, 100) == 8.5    # within the band: stays
+    assert solve_capacity(model, 5.0, 10.0, 8.0, 100) == 7.0    # room: up to the restore level
+    assert solve_capacity(SolverCostModel(0.5, fixed_ms=12.0), None, 10.0, 8.0, 100) == 0.0
+
+
+def test_the_solves_a_tick_count_the_held_characters():
+    """100 candidates, 1 ms fixed, 1 ms a solve, 0.1 ms a held character. Every candidate kept
+    (6.25 solves at every 16th tick and more), each solve more is a held one fewer: 0.9 ms; 20
+    ms holds 6.25 + (20 - 1 - 6.25 - 93.75 x 0.1) / 0.9 = 10.0 solves a tick. Below, each solve
+    keeps 15 held: 2.5 ms; 5 ms holds 1.6. Solving is cheaper than holding: all of them."""
+    model = SolverCostModel(ms_per_iteration=0.5, fixed_ms=1.0, ms_per_character=0.5,
+                            ms_per_held=0.1)
+    assert solve_capacity(model, None, 20.0, 20.0, 100) == pytest.approx(10.0)
+    assert solve_capacity(model, None, 5.0, 5.0, 100) == pytest.approx(1.6)
+    assert model.tick_ms(10, 10, 90) == pytest.approx(1.0 + 10.0 + 9.0)
+    cheap_solves = SolverCostModel(ms_per_iteration=0.01, fixed_ms=1.0, ms_per_held=0.1)
+    assert solve_capacity(cheap_solves, None, 20.0, 20.0, 100) == 100.0
 
 
 def test_the_level_of_detail_solves_the_first_ranked_most_often():
@@ -195,19 +221,19 @@ def test_the_highest_priority_then_the_nearest_rank_first():
 
 
 def test_without_a_given_model_the_first_tick_cuts_nothing(idle):
-    """Nothing measured yet: no model, no cut; the first tick (it loads the kernels) is not
-    measured; the second, measured whole, gives the third tick's model. A budget nothing can
-    hold (1e-6 ms) drops every character and says so: its floor (the tick with every character
-    dropped) is over it."""
-    sim, entities = four_reachers(idle, SolverSettings(budget_ms=1e-6), ticks=2)
-    second = sim.solver_report()
-    assert second is not None and second.model is None and not second.cut
-    assert np.isnan(second.floor_ms)
-    sim.step()
+    """Nothing measured yet: no model, no cut; the first two ticks (they load the kernels and
+    take the solve's first paths) are not measured; the third, measured whole, gives the
+    fourth tick's model. A budget nothing can hold (1e-6 ms) drops every character and says
+    so: its floor (the tick with every character dropped) is over it."""
+    sim, entities = four_reachers(idle, SolverSettings(budget_ms=1e-6), ticks=3)
     third = sim.solver_report()
-    assert third is not None and third.cut and third.characters == 0
-    assert third.dropped_characters == tuple(entities) and third.floor_ms > 1e-6
-    assert third.errors == {}  # a dropped character's constraints are off for the tick
+    assert third is not None and third.model is None and not third.cut
+    assert np.isnan(third.floor_ms)
+    sim.step()
+    fourth = sim.solver_report()
+    assert fourth is not None and fourth.cut and fourth.characters == 0
+    assert fourth.dropped_characters == tuple(entities) and fourth.floor_ms > 1e-6
+    assert fourth.errors == {}  # a dropped character's constraints are off for the tick
 
 
 def test_bad_budget_settings_say_what():
@@ -325,7 +351,7 @@ class MeasuredTicks:
         count = self.characters if characters is None else characters
         self.cpu_ms += before_ms
         self.budget.start_tick(self.cpu_ms * 1e-3, 1, version=0, n=self.characters,
-                               last_run_s=self.last_solve_ms * 1e-3, before_s=before_ms * 1e-3)
+                               before_s=before_ms * 1e-3)
         rows = np.arange(count)
         self.budget.solved(rows, np.ones(count, np.int64), np.full(count, 4), solve_ms * 1e-3)
         self.cpu_ms += solve_ms + after_ms
@@ -396,3 +422,97 @@ def test_a_given_cost_model_takes_no_margin(idle):
     sim, _ = four_reachers(idle, SolverSettings(budget_ms=14.0, cost_model=ONE_MS), ticks=3)
     report = sim.solver_report()
     assert report is not None and report.model == ONE_MS and report.cut_ms <= 14.0
+
+
+class LevelOfDetailTicks:
+    """A :class:`FrameBudget` over ``candidates`` characters (one constraint each), fed ticks
+    whose costs (ms of CPU, never the clock's) follow the bench's at 3,500 constrained, scaled
+    to 1,000: 4 ms before the solve and 3 after it; ConstraintSolve 4.5 ms when it solves every
+    character (in place, holding none), else a 4 ms floor, 6 us a solved character and 0.7 us
+    a held one; every cost times ``slow`` (the machine)."""
+
+    def __init__(self, candidates: int = 1000, budget_ms: float = 16.0) -> None:
+        self.budget = FrameBudget()
+        self.settings = SolverSettings(budget_ms=budget_ms)
+        self.owner = np.arange(candidates)
+        self.cpu_ms = 0.0
+        self.tick_number = 0
+        self.solved: list[int] = []
+
+    def tick(self, slow: float = 1.0) -> None:
+        n = self.owner.size
+        self.cpu_ms += 4.0 * slow
+        self.budget.start_tick(self.cpu_ms * 1e-3, 1, version=0, n=n, before_s=4e-3 * slow)
+        weight = self.budget.weights(np.ones(n), self.owner, np.ones(n), np.zeros((n, 3)),
+                                     self.settings, 1.0 / 30.0, self.tick_number)
+        rows = np.flatnonzero(weight > 0)
+        held = self.budget.held.size
+        every = not self.budget.holding and rows.size == n
+        solve_ms = (4.0 if every else 0.006 * rows.size) * slow
+        self.budget.solved(rows, np.ones(rows.size, np.int64), np.full(rows.size, 4),
+                           solve_ms * 1e-3)
+        hold_ms = 0.0007 * held * slow
+        self.budget.held_step(held, hold_ms * 1e-3)
+        self.cpu_ms += solve_ms + hold_ms + (0.5 if every else 4.0) * slow + 3.0 * slow
+        self.tick_number += 1
+        self.solved.append(rows.size)
+
+
+def test_every_character_comes_back_when_solving_them_all_fits():
+    """The level-of-detail trap (issue 36): solving some characters costs more a character than
+    solving every one (a floor over every row, the held ones' step), so a model calibrated on
+    ticks that solve some puts every one at 4 + 4 + 3 + 6 = 17 ms (over the 16 ms budget)
+    where such a tick costs 11.5. A machine slowed 1.4 times for 20 ticks takes the level of
+    detail on (every one at 5.6 + 1.1 x 10.5 = 17.2 ms by the ticks that solved them all);
+    once it is itself again, a probe within PROBE_TICKS measures what solving every one costs,
+    and they come back and stay, every tick."""
+    ticks = LevelOfDetailTicks()
+    for _ in range(10):
+        ticks.tick()
+    assert ticks.solved[-5:] == [1000] * 5
+    for _ in range(20):
+        ticks.tick(slow=1.4)
+    assert ticks.solved[-1] < 1000 and ticks.budget.holding  # the level of detail
+    for _ in range(14):
+        ticks.tick()
+    assert 0 < ticks.solved[-1] < 1000 and ticks.budget.holding
+    model = ticks.budget.calibrated
+    assert model is not None and 0.0 < model.ms_per_held <= 0.0007 * 1.001
+    assert model.tick_ms(1000, 1000) > 16.0 * 0.95  # every one, by the model
+    for _ in range(PROBE_TICKS + 10):
+        ticks.tick()
+    assert ticks.solved[-25:] == [1000] * 25
+    assert not ticks.budget.holding and ticks.budget.held.size == 0
+
+
+def test_a_given_model_with_held_characters_and_a_floor_solves_every_one_when_they_fit(idle):
+    """``cost_model`` with a floor (5 ms) and a held character's cost (0.5 ms): four characters
+    at 1 ms a solve (at one iteration; 6 at most: 10 ms) fit a 10.5 ms budget, every one solved
+    every tick; at 8 ms, two solves a tick (5 + 2 + 2 x 0.5), the others held (the first tick of
+    the level of detail solves every one, their corrections kept); back at 10.5 ms, every one
+    again, none held."""
+    model = SolverCostModel(ms_per_iteration=0.05, fixed_ms=5.0, ms_per_character=0.95,
+                            ms_per_held=0.5)
+    sim, _ = four_reachers(idle, SolverSettings(budget_ms=10.5, cost_model=model), ticks=0)
+    reports = []
+    for budget_ms in [10.5] * 3 + [8.0] * 4 + [10.5] * 3:
+        sim.solver_settings = dataclasses.replace(sim.solver_settings, budget_ms=budget_ms)
+        sim.step()
+        reports.append(sim.solver_report())
+    assert all(r.characters == 4 and r.held_characters == 0 and not r.cut for r in reports[:3])
+    assert all(r.characters + r.held_characters == 4 and r.cut for r in reports[3:7])
+    assert all(r.intervals == {1: 1, 2: 1, 4: 2} for r in reports[3:7])
+    assert sum(r.characters for r in reports[3:7]) == 4 + 6  # (the rows take turns: 1 to 3)
+    assert all(r.characters == 4 and r.held_characters == 0 and not r.cut for r in reports[7:])
+
+
+def test_probes_that_bring_none_back_come_twice_as_late():
+    """A machine slowed 1.4 times for good: every one solved every tick does not fit; the
+    probes come PROBE_TICKS, then 2 and 4 times that after the level of detail set in."""
+    ticks = LevelOfDetailTicks()
+    for i in range(250):
+        ticks.tick(slow=1.4 if i >= 10 else 1.0)
+    every = [i for i, solved in enumerate(ticks.solved) if solved == 1000]
+    start = max(i for i in every if i < 30)  # (the first tick of the level of detail)
+    assert [i - start for i in every if i > start] == [PROBE_TICKS, 2 * PROBE_TICKS,
+                                                       4 * PROBE_TICKS]
