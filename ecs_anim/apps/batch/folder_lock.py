@@ -3,7 +3,9 @@ and naming its holder, so a second batch into the same folder refuses in one lin
 mixing its files with the first's.
 
 The kernel releases the lock when its holder's process ends, however it ends, so a lock left
-by a killed batch is free: the next batch takes it over and says whose it was.
+by a killed batch is free: the next batch takes it over and says whose it was. (A killed
+driver's pool workers, forked with its descriptor, hold the lock until they follow it, within
+seconds: a batch that finds the named driver gone waits for them.)
 """
 
 from __future__ import annotations
@@ -24,15 +26,51 @@ from ecs_anim.core.errors import EcsAnimError
 LOCK_NAME = ".ecs-anim-batch.lock"
 #: How long a holder that has just taken the lock may take to write its name into it.
 NAMING_WAIT_S = 1.0
+#: How long the pool workers of a driver that is gone may take to follow it (they are told to
+#: end when it dies: ``PR_SET_PDEATHSIG``) and so free the lock they inherited.
+ORPHANS_WAIT_S = 10.0
+
+
+def _holder(fd: int) -> tuple[int, str, str] | None:
+    """The holder the lock file ``fd`` names: (pid, host, start time), or None."""
+    try:
+        holder = json.loads(os.pread(fd, 4096, 0).decode("utf-8"))
+        return int(holder["pid"]), str(holder["host"]), str(holder["started"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
 
 
 def _holder_text(fd: int) -> str:
     """The holder the lock file ``fd`` names (``pid 12 on host h, started 2026-...``), or ""."""
+    holder = _holder(fd)
+    return f"pid {holder[0]} on host {holder[1]}, started {holder[2]}" if holder else ""
+
+
+def _gone(holder: tuple[int, str, str] | None) -> bool:
+    """Whether ``holder`` is a process of this host that has ended."""
+    if holder is None or holder[1] != socket.gethostname():
+        return False
     try:
-        holder = json.loads(os.pread(fd, 4096, 0).decode("utf-8"))
-        return f"pid {int(holder['pid'])} on host {holder['host']}, started {holder['started']}"
-    except (OSError, ValueError, KeyError, TypeError):
-        return ""
+        os.kill(holder[0], 0)
+    except ProcessLookupError:
+        return True
+    except OSError:  # (alive, another user's)
+        return False
+    return False
+
+
+def _lock_when_orphans_end(fd: int) -> bool:
+    """Lock ``fd``, whose named holder has ended, once its pool workers have followed it
+    (within :data:`ORPHANS_WAIT_S`); False if they still hold it then."""
+    deadline = time.monotonic() + ORPHANS_WAIT_S
+    while time.monotonic() < deadline:
+        time.sleep(0.05)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return True
+        except BlockingIOError:
+            continue
+    return False
 
 
 def _write_holder(fd: int) -> None:
@@ -60,10 +98,14 @@ def _open_locked(path: Path) -> tuple[int, str] | None:
         deadline = time.monotonic() + NAMING_WAIT_S
         while not (holder := _holder_text(fd)) and time.monotonic() < deadline:
             time.sleep(0.05)
-        os.close(fd)
-        raise EcsAnimError(f"--out {path.parent}: another batch is writing into it "
-                           f"({holder or 'a batch starting now'}); wait for it to end, or give "
-                           "another folder") from None
+        orphans = _gone(_holder(fd))
+        if not (orphans and _lock_when_orphans_end(fd)):
+            os.close(fd)
+            who = ("the workers of a batch that was killed are still writing into it "
+                   f"({holder})" if orphans else
+                   f"another batch is writing into it ({holder or 'a batch starting now'})")
+            raise EcsAnimError(f"--out {path.parent}: {who}; wait for it to end, or give "
+                               "another folder") from None
     except OSError as exc:
         os.close(fd)
         raise EcsAnimError(f"{path}: cannot lock the batch folder ({exc.strerror or exc})") from None

@@ -147,6 +147,58 @@ def test_a_held_folder_refuses_a_second_lock_naming_its_holder(tmp_path: Path) -
     assert lines == [] and not (tmp_path / "out" / LOCK_NAME).exists()  # released, removed
 
 
+def hold_lock_as_orphan(folder: Path, seconds: float) -> subprocess.Popen[bytes]:
+    """The lock of ``folder`` named after a driver that has ended and held by another process
+    for ``seconds`` (as a killed batch's forked workers hold it until they follow it)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    ended = subprocess.Popen([sys.executable, "-c", "pass"])
+    ended.wait()
+    (folder / LOCK_NAME).write_text(json.dumps({"pid": ended.pid, "host": socket.gethostname(),
+                                                "started": "2026-12-07 05:00:00 UTC"}))
+    holder = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
+        import fcntl, os, sys, time
+        fd = os.open({str(folder / LOCK_NAME)!r}, os.O_RDWR)
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        print("held", flush=True)
+        time.sleep({seconds})
+        """)], stdout=subprocess.PIPE)
+    assert holder.stdout is not None and holder.stdout.readline() == b"held\n"
+    return holder
+
+
+def test_a_killed_drivers_workers_are_waited_for_then_its_lock_taken_over(tmp_path: Path
+                                                                          ) -> None:
+    holder = hold_lock_as_orphan(tmp_path / "out", 0.5)
+    lines: list[str] = []
+    try:
+        started = time.monotonic()
+        with folder_lock(tmp_path / "out", lines.append):
+            waited = time.monotonic() - started
+            assert holder.poll() is not None  # (taken once the last holder had ended)
+    finally:
+        holder.kill()
+        holder.wait()
+    assert waited < 8.0
+    assert len(lines) == 1 and "took over the lock of a batch that ended" in lines[0]
+    assert "started 2026-12-07 05:00:00 UTC" in lines[0]
+
+
+def test_workers_outliving_their_driver_too_long_are_named_in_one_line(tmp_path: Path,
+                                                                       monkeypatch) -> None:
+    monkeypatch.setattr("ecs_anim.apps.batch.folder_lock.ORPHANS_WAIT_S", 0.3)
+    holder = hold_lock_as_orphan(tmp_path / "out", 30.0)
+    try:
+        with pytest.raises(EcsAnimError) as info, folder_lock(tmp_path / "out", print):
+            pass
+    finally:
+        holder.kill()
+        holder.wait()
+    message = str(info.value)
+    assert "the workers of a batch that was killed are still writing into it (pid " in message
+    assert "wait for it to end, or give another folder" in message and "\n" not in message
+    assert (tmp_path / "out" / LOCK_NAME).exists()  # (not ours: left as it was)
+
+
 @linux_only
 @pytest.mark.timeout(240)
 def test_second_batch_refused_then_killed_driver_takes_its_workers_and_frees_the_folder(
