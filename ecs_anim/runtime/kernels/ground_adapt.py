@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from ecs_anim.core import ground_adapt as reference
 from ecs_anim.core.skeleton import LENGTH_INDEX as L
-from ecs_anim.runtime.kernels.decode import LegPoseArrays, decode_legs_row, two_bone_middle
+from ecs_anim.runtime.kernels.decode import LegPoseArrays, two_bone_middle
 from ecs_anim.runtime.kernels.ground import height_at, height_near, smooth
 from ecs_anim.runtime.kernels.lanes import (
     BLOCK,
@@ -41,6 +41,7 @@ from ecs_anim.runtime.kernels.vec import (
     jit,
     load3,
     matmul,
+    matrix_from_quat,
     norm,
     scale,
     store3,
@@ -55,7 +56,8 @@ B1 = NDArray[np.bool_]
 GroundArrays = tuple[I64, F64, F64]
 
 # Lengths of side s (0 left, 1 right) are these plus s.
-_L_THIGH, _L_SHANK, _L_FOOT, _L_ANKLE_HEIGHT = 2, 4, 6, 8
+_L_PELVIS, _L_THIGH, _L_SHANK, _L_FOOT, _L_ANKLE_HEIGHT = 0, 2, 4, 6, 8
+assert L["pelvis_l"] == _L_PELVIS and L["pelvis_r"] == _L_PELVIS + 1
 assert (L["thigh_l"], L["shank_l"], L["foot_l"], L["ankle_height_l"], L["thigh_r"],
         L["foot_r"], L["ankle_height_r"]) \
     == (_L_THIGH, _L_SHANK, _L_FOOT, _L_ANKLE_HEIGHT, _L_THIGH + 1, _L_FOOT + 1,
@@ -104,17 +106,22 @@ def horizontal_reach_excess(hip: Vec3, ankle_target: Vec3, reach: float) -> tupl
     return excess * dx, excess * dy
 
 
-# The scratch of ground_adapt_rows: one column per row of its chunk (threads write disjoint
-# columns), these rows. What the legs' re-aiming (reaim_lanes) reads ...
+# The scratch of ground_adapt_rows: a block's, one column a character (flat, rows of BLOCK).
+# What the motion's decode (decode_lanes) reads: the pose (the root position, leg frames and
+# fractions in the rows the re-aiming writes them to later), the heading's cosine and sine ...
+_S_HEADING, _S_PELVIS_LOCAL, _S_HIP_DIR, _S_PELVIS_LENGTH = 115, 117, 121, 127
+# ... what it writes and the legs' re-aiming (reaim_lanes) reads ...
 _S_HIP, _S_PELVIS, _S_P2W, _S_L2W = 0, 6, 9, 18  # hips (side s at + 3 s), the pelvis, frames
 _S_THIGH, _S_SHANK, _S_FOOT, _S_LEG = 36, 38, 40, 42  # lengths (side s at + s), leg length
 _S_TARGET, _S_WEIGHT, _S_ROOT_HEIGHT, _S_FOOT_DIR = 43, 49, 51, 52
-# ... what it writes (the pose's leg frames and fractions, root position; the legs decoded) ...
+# ... what the re-aiming writes (the pose's leg frames and fractions, root position; the legs
+# decoded: the motion's ankles and toes there before it) ...
 _S_LEG_FRAME, _S_FRACTION, _S_ROOT, _S_ANKLE, _S_TOE, _S_SHANK2W = 58, 66, 68, 71, 77, 83
-# ... and what a row carries from before the re-aiming to after it.
-_S_UNDER, _S_KNOWN, _S_DIR = 101, 103, 109
+# ... and what a row carries from before the re-aiming to after it (the feet's lengths and
+# directions: the decode's, then those the last pitch starts from).
+_S_UNDER, _S_KNOWN, _S_DIR, _S_FOOT_LENGTH = 101, 103, 109, 129
 #: Rows of a block's scratch (:func:`ground_scratch`).
-GROUND_SCRATCH_ROWS = 115
+GROUND_SCRATCH_ROWS = 131
 
 
 def ground_scratch(n: int) -> F64:
@@ -159,10 +166,10 @@ def _put_frame(scratch: F64, r: int, j: int, m: Frame) -> None:
 
 @jit(inline="always")
 def _below_hip_lanes(scratch: F64, j: int, s: int, hip: Vec3, leg2world: Frame,
-                     fraction: float) -> None:
+                     fraction: float, with_shank: bool) -> None:
     """:func:`.decode.leg_below_hip` of side ``s`` of column ``j`` (the same operations, without
-    branches), from its new ``hip`` and ``leg2world`` and its fraction: the ankle, toe and
-    shank2world into the column."""
+    branches), from its ``hip``, ``leg2world`` and fraction: the ankle, toe and (with
+    ``with_shank``, a literal) shank2world into the column."""
     thigh, shank = scratch[_at(_S_THIGH + s, j)], scratch[_at(_S_SHANK + s, j)]
     knee, ankle = two_bone_middle(leg2world, hip, thigh, shank, fraction * (thigh + shank))
     shank2world = distal_frames_lanes(leg2world, knee, ankle)
@@ -170,7 +177,51 @@ def _below_hip_lanes(scratch: F64, j: int, s: int, hip: Vec3, leg2world: Frame,
                            scratch[_at(_S_FOOT + s, j)]))
     _put3(scratch, _S_ANKLE + 3 * s, j, ankle)
     _put3(scratch, _S_TOE + 3 * s, j, toe)
-    _put_frame(scratch, _S_SHANK2W + 9 * s, j, shank2world)
+    if with_shank:
+        _put_frame(scratch, _S_SHANK2W + 9 * s, j, shank2world)
+
+
+@jit(inline="always")
+def _decode_leg_lanes(scratch: F64, j: int, s: int, pelvis: Vec3, pelvis2world: Frame) -> None:
+    """Leg ``s`` of :func:`decode_lanes` (:func:`.decode.decode_legs_row`'s, the same
+    operations): its hip, leg2world, ankle, toe, and the foot's length and direction
+    (:func:`_foot_axis`) into column ``j``."""
+    hip = add(pelvis, scale(to_world(pelvis2world, _col3(scratch, _S_HIP_DIR + 3 * s, j)),
+                            scratch[_at(_S_PELVIS_LENGTH + s, j)]))
+    r = _S_LEG_FRAME + 4 * s
+    local = (scratch[_at(r, j)], scratch[_at(r + 1, j)], scratch[_at(r + 2, j)],
+             scratch[_at(r + 3, j)])
+    leg2world = matmul(pelvis2world, matrix_from_quat(local))
+    _put3(scratch, _S_HIP + 3 * s, j, hip)
+    _put_frame(scratch, _S_L2W + 9 * s, j, leg2world)
+    _below_hip_lanes(scratch, j, s, hip, leg2world, scratch[_at(_S_FRACTION + s, j)], False)
+    foot, d = _foot_axis(_col3(scratch, _S_ANKLE + 3 * s, j), _col3(scratch, _S_TOE + 3 * s, j))
+    scratch[_at(_S_FOOT_LENGTH + s, j)] = foot
+    _put3(scratch, _S_DIR + 3 * s, j, d)
+
+
+# A call, not inlined (as reaim_lanes).
+@jit()
+def decode_lanes(scratch: F64, start: int, stop: int) -> None:
+    """Mirrors :func:`.decode.decode_legs_row` (the pose on the character's body as the motion
+    gives it: the pelvis and legs) for the columns ``start:stop`` of a ground scratch, in a
+    loop over them that runs on the vector units; the same bits (the heading's cosine and
+    sine given, :func:`.vec.rot_z`'s)."""
+    for j in range(start, stop):
+        cos_h, sin_h = scratch[_at(_S_HEADING, j)], scratch[_at(_S_HEADING + 1, j)]
+        r = _S_PELVIS_LOCAL
+        local = (scratch[_at(r, j)], scratch[_at(r + 1, j)], scratch[_at(r + 2, j)],
+                 scratch[_at(r + 3, j)])
+        pelvis2world = matmul(((cos_h, sin_h, 0.0), (-sin_h, cos_h, 0.0), (0.0, 0.0, 1.0)),
+                              matrix_from_quat(local))
+        # .decode.leg_length's sum
+        leg = 0.5 * (scratch[_at(_S_THIGH, j)] + scratch[_at(_S_SHANK, j)]
+                     + scratch[_at(_S_THIGH + 1, j)] + scratch[_at(_S_SHANK + 1, j)])
+        pelvis = scale(_col3(scratch, _S_ROOT, j), leg)
+        _put3(scratch, _S_PELVIS, j, pelvis)
+        _put_frame(scratch, _S_P2W, j, pelvis2world)
+        _decode_leg_lanes(scratch, j, 0, pelvis, pelvis2world)
+        _decode_leg_lanes(scratch, j, 1, pelvis, pelvis2world)
 
 
 @jit(inline="always")
@@ -188,7 +239,7 @@ def _turn_leg_lanes(scratch: F64, j: int, s: int, hip: Vec3, world2pelvis: Frame
     scratch[_at(r, j)], scratch[_at(r + 1, j)], scratch[_at(r + 2, j)], scratch[_at(r + 3, j)] = q
     fraction = min(norm(to_target), reach) / (thigh + shank)
     scratch[_at(_S_FRACTION + s, j)] = fraction
-    _below_hip_lanes(scratch, j, s, hip, turned, fraction)
+    _below_hip_lanes(scratch, j, s, hip, turned, fraction, True)
 
 
 # A call (one compiled body for the block loop and a row's later passes), not inlined.
@@ -430,6 +481,29 @@ def _foot_axis(ankle: Vec3, toe: Vec3) -> tuple[float, Vec3]:
     return foot, scale(sub(toe, ankle), 1.0 / foot)
 
 
+@jit(inline="always")  # one call site
+def gather_motion(i: int, c: int, pose: LegPoseArrays, lengths: F64, scratch: F64) -> None:
+    """What :func:`decode_lanes` and :func:`reaim_lanes` read of store row ``c``'s pose and
+    lengths into column ``i`` of ``scratch`` (the heading's cosine and sine computed here:
+    library calls, which LLVM does not vectorize)."""
+    heading = pose.root_heading[c]
+    scratch[_at(_S_HEADING, i)], scratch[_at(_S_HEADING + 1, i)] = math.cos(heading), \
+        math.sin(heading)
+    for a in range(4):
+        scratch[_at(_S_PELVIS_LOCAL + a, i)] = pose.pelvis_local[c, a]
+    _put3(scratch, _S_ROOT, i, load3(pose.root_position[c]))
+    for s in range(2):
+        _put3(scratch, _S_HIP_DIR + 3 * s, i, load3(pose.hip_dir[c, s]))
+        for a in range(4):
+            scratch[_at(_S_LEG_FRAME + 4 * s + a, i)] = pose.leg_frame[c, s, a]
+        scratch[_at(_S_FRACTION + s, i)] = pose.leg_fraction[c, s]
+        scratch[_at(_S_PELVIS_LENGTH + s, i)] = lengths[c, _L_PELVIS + s]
+        scratch[_at(_S_THIGH + s, i)] = lengths[c, _L_THIGH + s]
+        scratch[_at(_S_SHANK + s, i)] = lengths[c, _L_SHANK + s]
+        scratch[_at(_S_FOOT + s, i)] = lengths[c, _L_FOOT + s]
+        _put3(scratch, _S_FOOT_DIR + 3 * s, i, load3(pose.foot_dir[c, s]))
+
+
 @jit(inline="always")  # one call site: a call per row, handed its arrays, costs
 def ground_adapt_before(i: int, c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
                         contact_weight: F64, sole_roll: F64, clip: I64,
@@ -443,11 +517,10 @@ def ground_adapt_before(i: int, c: int, pose: LegPoseArrays, lengths: F64, leg: 
     of ``scratch``. Arguments as for :func:`ground_adapt_rows` (``kinds``, ``params``,
     ``grid``: the arrays of ``ground``; ``follow``: the share of the way to the ground under
     the feet the floor moves this tick, the same for every row)."""
-    # The pose on the character's body as the motion gives it (MorphologyAdapt's scaling,
-    # decoded here: ground adaptation reads only the pelvis and legs).
-    lengths_row = lengths[c]
-    pelvis, pelvis2world, hips, _, ankles, toes, leg2world, _ = decode_legs_row(
-        c, pose, lengths_row, lengths_row)
+    # The pose on the character's body as the motion gives it (decode_lanes).
+    pelvis = _col3(scratch, _S_PELVIS, i)
+    ankles = (_col3(scratch, _S_ANKLE, i), _col3(scratch, _S_ANKLE + 3, i))
+    toes = (_col3(scratch, _S_TOE, i), _col3(scratch, _S_TOE + 3, i))
     leg_c = leg[c]
     ball = ball_per_leg * leg_c
     switch = switch_per_leg * leg_c
@@ -455,8 +528,8 @@ def ground_adapt_before(i: int, c: int, pose: LegPoseArrays, lengths: F64, leg: 
     w = (contact_weight[c, 0], contact_weight[c, 1])
     # Each foot in contact stands on one sole point (its footprint, on the ground): the heel
     # or the ball, as the motion plants it.
-    foot0, d0 = _foot_axis(ankles[0], toes[0])
-    foot1, d1 = _foot_axis(ankles[1], toes[1])
+    foot0, d0 = scratch[_at(_S_FOOT_LENGTH, i)], _col3(scratch, _S_DIR, i)
+    foot1, d1 = scratch[_at(_S_FOOT_LENGTH + 1, i)], _col3(scratch, _S_DIR + 3, i)
     stance0 = _stand(c, 0, ankles[0], toes[0], foot0, d0, w[0], sole_roll, clip,
                      source_ankle_height, footprint, locked, pivot, leg_c, ankle_height[0],
                      ball, switch, kinds, params, grid, toe_passes)
@@ -475,19 +548,8 @@ def ground_adapt_before(i: int, c: int, pose: LegPoseArrays, lengths: F64, leg: 
                                    ankle_height[0], ball, kinds, params, grid)
     target1, under1 = _foot_target(ankles[1], toes[1], stance1[0], stance1[2][0], w[1], g,
                                    ankle_height[1], ball, kinds, params, grid)
-    # The re-aiming's inputs (the pose decoded before adaptation) ...
-    _put3(scratch, _S_HIP, i, hips[0])
-    _put3(scratch, _S_HIP + 3, i, hips[1])
-    _put3(scratch, _S_PELVIS, i, pelvis)
-    _put_frame(scratch, _S_P2W, i, pelvis2world)
-    _put_frame(scratch, _S_L2W, i, leg2world[0])
-    _put_frame(scratch, _S_L2W + 9, i, leg2world[1])
-    for s in range(2):
-        scratch[_at(_S_THIGH + s, i)] = lengths[c, _L_THIGH + s]
-        scratch[_at(_S_SHANK + s, i)] = lengths[c, _L_SHANK + s]
-        scratch[_at(_S_FOOT + s, i)] = lengths[c, _L_FOOT + s]
-        scratch[_at(_S_WEIGHT + s, i)] = w[s]
-        _put3(scratch, _S_FOOT_DIR + 3 * s, i, load3(pose.foot_dir[c, s]))
+    # The re-aiming's inputs (the pose decoded before adaptation: decode_lanes's) ...
+    scratch[_at(_S_WEIGHT, i)], scratch[_at(_S_WEIGHT + 1, i)] = w[0], w[1]
     scratch[_at(_S_LEG, i)] = leg_c
     _put3(scratch, _S_TARGET, i, target0)
     _put3(scratch, _S_TARGET + 3, i, target1)
@@ -572,6 +634,9 @@ def ground_adapt_rows(lo: int, hi: int, rows: I64, pose: LegPoseArrays, lengths:
     scratch_block = scratch[lo // BLOCK]
     for start in range(lo, hi, BLOCK):
         stop = min(start + BLOCK, hi)
+        for i in range(start, stop):
+            gather_motion(np.uint64(i - start), rows[i], pose, lengths, scratch_block)
+        decode_lanes(scratch_block, np.uint64(0), np.uint64(stop - start))
         for i in range(start, stop):
             ground_adapt_before(np.uint64(i - start), rows[i], pose, lengths, leg, contact_weight, sole_roll, clip,
                                 source_ankle_height, footprint, locked, pivot, ground_ref,
