@@ -54,6 +54,9 @@ I64 = NDArray[np.int64]
 B1 = NDArray[np.bool_]
 #: A ground's description: (kinds, params, grid) of :class:`ecs_anim.core.ground.GroundDescription`.
 GroundArrays = tuple[I64, F64, F64]
+#: A column of a block's scratch (unsigned: numba adds no wrap-around of negative indices, which
+#: would stop LLVM from vectorizing the loops over columns).
+Column = np.uint64
 
 # Lengths of side s (0 left, 1 right) are these plus s.
 _L_PELVIS, _L_THIGH, _L_SHANK, _L_FOOT, _L_ANKLE_HEIGHT = 0, 2, 4, 6, 8
@@ -133,39 +136,39 @@ def ground_scratch(n: int) -> F64:
 
 
 @jit(inline="always")
-def _at(r: int, j: np.uint64) -> np.uint64:
+def _at(r: int, j: Column) -> Column:
     """Where row ``r``, column ``j`` of a block's scratch is (its flat index: the distance
     between two rows is a constant of the compiled code, so LLVM sees that a column's rows do
     not overlap, and vectorizes the loops over columns without checks at run time)."""
-    return np.uint64(r * BLOCK) + j
+    return Column(r * BLOCK) + j
 
 
 @jit(inline="always")
-def _col3(scratch: F64, r: int, j: int) -> Vec3:
+def _col3(scratch: F64, r: int, j: Column) -> Vec3:
     """The 3-vector in rows ``r:r + 3`` of column ``j``."""
     return (scratch[_at(r, j)], scratch[_at(r + 1, j)], scratch[_at(r + 2, j)])
 
 
 @jit(inline="always")
-def _put3(scratch: F64, r: int, j: int, v: Vec3) -> None:
+def _put3(scratch: F64, r: int, j: Column, v: Vec3) -> None:
     scratch[_at(r, j)], scratch[_at(r + 1, j)], scratch[_at(r + 2, j)] = v[0], v[1], v[2]
 
 
 @jit(inline="always")
-def _col_frame(scratch: F64, r: int, j: int) -> Frame:
+def _col_frame(scratch: F64, r: int, j: Column) -> Frame:
     """The frame in rows ``r:r + 9`` of column ``j`` (its axes one after the other)."""
     return (_col3(scratch, r, j), _col3(scratch, r + 3, j), _col3(scratch, r + 6, j))
 
 
 @jit(inline="always")
-def _put_frame(scratch: F64, r: int, j: int, m: Frame) -> None:
+def _put_frame(scratch: F64, r: int, j: Column, m: Frame) -> None:
     _put3(scratch, r, j, m[0])
     _put3(scratch, r + 3, j, m[1])
     _put3(scratch, r + 6, j, m[2])
 
 
 @jit(inline="always")
-def _below_hip_lanes(scratch: F64, j: int, s: int, hip: Vec3, leg2world: Frame,
+def _below_hip_lanes(scratch: F64, j: Column, s: int, hip: Vec3, leg2world: Frame,
                      fraction: float, with_shank: bool) -> None:
     """:func:`.decode.leg_below_hip` of side ``s`` of column ``j`` (the same operations, without
     branches), from its ``hip``, ``leg2world`` and fraction: the ankle, toe and (with
@@ -182,7 +185,7 @@ def _below_hip_lanes(scratch: F64, j: int, s: int, hip: Vec3, leg2world: Frame,
 
 
 @jit(inline="always")
-def _decode_leg_lanes(scratch: F64, j: int, s: int, pelvis: Vec3, pelvis2world: Frame) -> None:
+def _decode_leg_lanes(scratch: F64, j: Column, s: int, pelvis: Vec3, pelvis2world: Frame) -> None:
     """Leg ``s`` of :func:`decode_lanes` (:func:`.decode.decode_legs_row`'s, the same
     operations): its hip, leg2world, ankle, toe, and the foot's length and direction
     (:func:`_foot_axis`) into column ``j``."""
@@ -202,12 +205,13 @@ def _decode_leg_lanes(scratch: F64, j: int, s: int, pelvis: Vec3, pelvis2world: 
 
 # A call, not inlined (as reaim_lanes).
 @jit()
-def decode_lanes(scratch: F64, start: int, stop: int) -> None:
+def decode_lanes(scratch: F64, start: Column, stop: Column) -> None:
     """Mirrors :func:`.decode.decode_legs_row` (the pose on the character's body as the motion
     gives it: the pelvis and legs) for the columns ``start:stop`` of a ground scratch, in a
     loop over them that runs on the vector units; the same bits (the heading's cosine and
     sine given, :func:`.vec.rot_z`'s)."""
-    for j in range(start, stop):
+    for k in range(start, stop):
+        j = Column(k)  # (the same type: for mypy, which takes k for an int)
         cos_h, sin_h = scratch[_at(_S_HEADING, j)], scratch[_at(_S_HEADING + 1, j)]
         r = _S_PELVIS_LOCAL
         local = (scratch[_at(r, j)], scratch[_at(r + 1, j)], scratch[_at(r + 2, j)],
@@ -225,7 +229,7 @@ def decode_lanes(scratch: F64, start: int, stop: int) -> None:
 
 
 @jit(inline="always")
-def _turn_leg_lanes(scratch: F64, j: int, s: int, hip: Vec3, world2pelvis: Frame,
+def _turn_leg_lanes(scratch: F64, j: Column, s: int, hip: Vec3, world2pelvis: Frame,
                     reach: float) -> None:
     """One leg of :func:`reaim_lanes`: leg ``s`` of column ``j`` turned from its motion's
     frame towards its target from its new ``hip``; its frame (in the pelvis, a quaternion)
@@ -244,7 +248,7 @@ def _turn_leg_lanes(scratch: F64, j: int, s: int, hip: Vec3, world2pelvis: Frame
 
 # A call (one compiled body for the block loop and a row's later passes), not inlined.
 @jit()
-def reaim_lanes(scratch: F64, start: int, stop: int, max_extension: float) -> None:
+def reaim_lanes(scratch: F64, start: Column, stop: Column, max_extension: float) -> None:
     """Mirrors :func:`ecs_anim.core.ground_adapt.adapt_to_ground` for the columns
     ``start:stop`` of a ground scratch (:func:`ground_scratch`), in a loop over them that runs
     on the vector units: the pelvis lowered as the legs in contact need (their targets and
@@ -253,7 +257,8 @@ def reaim_lanes(scratch: F64, start: int, stop: int, max_extension: float) -> No
     decoded below the hips (:func:`.decode.leg_below_hip`: ankles, toes, shank frames), as
     the pose's root position, leg frames and fractions written would decode, within rounding.
     The same bits in a vector lane or alone (no fastmath, no branch)."""
-    for j in range(start, stop):
+    for k in range(start, stop):
+        j = Column(k)  # (the same type: for mypy, which takes k for an int)
         hip0, hip1 = _col3(scratch, _S_HIP, j), _col3(scratch, _S_HIP + 3, j)
         pelvis_now = _col3(scratch, _S_PELVIS, j)
         target0, target1 = _col3(scratch, _S_TARGET, j), _col3(scratch, _S_TARGET + 3, j)
@@ -286,7 +291,7 @@ def reaim_lanes(scratch: F64, start: int, stop: int, max_extension: float) -> No
 
 
 @jit(inline="always")  # one call site
-def adapt_keeping_heels_up(i: int, c: int, pose: LegPoseArrays, scratch: F64, kinds: I64,
+def adapt_keeping_heels_up(i: Column, c: int, pose: LegPoseArrays, scratch: F64, kinds: I64,
                            params: F64, grid: F64, is_smooth: bool, ankle_height: Vec3,
                            max_extension: float, heel_tolerance: float, passes: int) -> None:
     """Mirrors :func:`ecs_anim.core.ground_adapt.adapt_keeping_heels_up` for store row ``c``
@@ -300,7 +305,7 @@ def adapt_keeping_heels_up(i: int, c: int, pose: LegPoseArrays, scratch: F64, ki
     ``ankle_height`` (left, right, unused) m."""
     for lift in range(passes + 1):
         if lift > 0:
-            reaim_lanes(scratch, i, i + np.uint64(1), max_extension)
+            reaim_lanes(scratch, i, i + Column(1), max_extension)
         if lift == passes:
             break
         t0, t1 = _col3(scratch, _S_TARGET, i), _col3(scratch, _S_TARGET + 3, i)
@@ -482,7 +487,7 @@ def _foot_axis(ankle: Vec3, toe: Vec3) -> tuple[float, Vec3]:
 
 
 @jit(inline="always")  # one call site
-def gather_motion(i: int, c: int, pose: LegPoseArrays, lengths: F64, scratch: F64) -> None:
+def gather_motion(i: Column, c: int, pose: LegPoseArrays, lengths: F64, scratch: F64) -> None:
     """What :func:`decode_lanes` and :func:`reaim_lanes` read of store row ``c``'s pose and
     lengths into column ``i`` of ``scratch`` (the heading's cosine and sine computed here:
     library calls, which LLVM does not vectorize)."""
@@ -505,7 +510,7 @@ def gather_motion(i: int, c: int, pose: LegPoseArrays, lengths: F64, scratch: F6
 
 
 @jit(inline="always")  # one call site: a call per row, handed its arrays, costs
-def ground_adapt_before(i: int, c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
+def ground_adapt_before(i: Column, c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
                         contact_weight: F64, sole_roll: F64, clip: I64,
                         source_ankle_height: F64, footprint: F64, locked: B1, pivot: I64,
                         ground_ref: F64, kinds: I64, params: F64, grid: F64, follow: float,
@@ -571,7 +576,7 @@ def ground_adapt_before(i: int, c: int, pose: LegPoseArrays, lengths: F64, leg: 
 
 
 @jit(inline="always")  # one call site
-def ground_adapt_after(i: int, c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
+def ground_adapt_after(i: Column, c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
                        contact_weight: F64, kinds: I64, params: F64, grid: F64,
                        is_smooth: bool, ball_per_leg: float, max_extension: float,
                        heel_tolerance: float, heel_passes: int, toe_passes: int,
@@ -635,15 +640,15 @@ def ground_adapt_rows(lo: int, hi: int, rows: I64, pose: LegPoseArrays, lengths:
     for start in range(lo, hi, BLOCK):
         stop = min(start + BLOCK, hi)
         for i in range(start, stop):
-            gather_motion(np.uint64(i - start), rows[i], pose, lengths, scratch_block)
-        decode_lanes(scratch_block, np.uint64(0), np.uint64(stop - start))
+            gather_motion(Column(i - start), rows[i], pose, lengths, scratch_block)
+        decode_lanes(scratch_block, Column(0), Column(stop - start))
         for i in range(start, stop):
-            ground_adapt_before(np.uint64(i - start), rows[i], pose, lengths, leg, contact_weight, sole_roll, clip,
+            ground_adapt_before(Column(i - start), rows[i], pose, lengths, leg, contact_weight, sole_roll, clip,
                                 source_ankle_height, footprint, locked, pivot, ground_ref,
                                 kinds, params, grid, follow, ball_per_leg, switch_per_leg,
                                 toe_passes, scratch_block)
-        reaim_lanes(scratch_block, np.uint64(0), np.uint64(stop - start), max_extension)
+        reaim_lanes(scratch_block, Column(0), Column(stop - start), max_extension)
         for i in range(start, stop):
-            ground_adapt_after(np.uint64(i - start), rows[i], pose, lengths, leg, contact_weight, kinds, params,
+            ground_adapt_after(Column(i - start), rows[i], pose, lengths, leg, contact_weight, kinds, params,
                                grid, is_smooth, ball_per_leg, max_extension, heel_tolerance,
                                heel_passes, toe_passes, scratch_block)
