@@ -135,7 +135,7 @@ def ground_scratch(n: int) -> F64:
     return np.empty((n // BLOCK + 1, GROUND_SCRATCH_ROWS * BLOCK))
 
 
-@jit(inline="always")
+@jit()
 def _at(r: int, j: Column) -> Column:
     """Where row ``r``, column ``j`` of a block's scratch is (its flat index: the distance
     between two rows is a constant of the compiled code, so LLVM sees that a column's rows do
@@ -143,24 +143,24 @@ def _at(r: int, j: Column) -> Column:
     return Column(r * BLOCK) + j
 
 
-@jit(inline="always")
+@jit()
 def _col3(scratch: F64, r: int, j: Column) -> Vec3:
     """The 3-vector in rows ``r:r + 3`` of column ``j``."""
     return (scratch[_at(r, j)], scratch[_at(r + 1, j)], scratch[_at(r + 2, j)])
 
 
-@jit(inline="always")
+@jit()
 def _put3(scratch: F64, r: int, j: Column, v: Vec3) -> None:
     scratch[_at(r, j)], scratch[_at(r + 1, j)], scratch[_at(r + 2, j)] = v[0], v[1], v[2]
 
 
-@jit(inline="always")
+@jit()
 def _col_frame(scratch: F64, r: int, j: Column) -> Frame:
     """The frame in rows ``r:r + 9`` of column ``j`` (its axes one after the other)."""
     return (_col3(scratch, r, j), _col3(scratch, r + 3, j), _col3(scratch, r + 6, j))
 
 
-@jit(inline="always")
+@jit()
 def _put_frame(scratch: F64, r: int, j: Column, m: Frame) -> None:
     _put3(scratch, r, j, m[0])
     _put3(scratch, r + 3, j, m[1])
