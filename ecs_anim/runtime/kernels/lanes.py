@@ -112,7 +112,7 @@ def slerp_weights(cos_half: float, theta: float, t: float) -> tuple[float, float
 # result is the scalar helper's to the bit.
 
 
-@jit(inline="always")
+@jit()
 def pick3(cond: bool, a: Vec3, b: Vec3) -> Vec3:
     """``a if cond else b``, element by element (a select, not a branch)."""
     return (a[0] if cond else b[0], a[1] if cond else b[1], a[2] if cond else b[2])
@@ -168,7 +168,7 @@ def rotation_between_lanes(a: Vec3, b: Vec3) -> Frame:
     return (pick3(opposite, hx, cx), pick3(opposite, hy, cy), pick3(opposite, hz, cz))
 
 
-@jit(inline="always")
+@jit()
 def _rodrigues_lanes(k: Vec3, kk: float, d: float, e: Vec3, k_j: float) -> Vec3:
     """:func:`.vec._rodrigues_column` (the same operations): ``e + k x e + (k k_j - e kk) d``."""
     ke = cross(k, e)
@@ -177,7 +177,7 @@ def _rodrigues_lanes(k: Vec3, kk: float, d: float, e: Vec3, k_j: float) -> Vec3:
     return (a[0] + b[0] * d, a[1] + b[1] * d, a[2] + b[2] * d)
 
 
-@jit(inline="always")
+@jit()
 def distal_frames_lanes(limb: Frame, mid: Vec3, end: Vec3) -> Frame:
     """:func:`.decode.distal_frames` (``vec.frame_from_axes(end - mid, limb x, 2, 0, limb y)``,
     the same bits) without branches: z along mid->end, x the limb's x made normal to it (its y
