@@ -123,7 +123,7 @@ class GroundAdapt(System):
     def _scratch_for(self, n: int) -> NDArray[np.float64]:
         """The kernel's scratch for ``n`` rows (:func:`.kernels.ground_adapt.ground_scratch`),
         kept from tick to tick (made anew only when more rows come)."""
-        if self._scratch.shape[0] < ground_scratch(n).shape[0]:
+        if self._scratch.shape[0] < n // BLOCK + 1:
             self._scratch = ground_scratch(n)
         return self._scratch
 
