@@ -1,4 +1,4 @@
-"""Compiled ground adaptation (paper §7): the whole of ``GroundAdapt.run``, one character at a time.
+"""Compiled ground adaptation (paper §7): the whole of ``GroundAdapt.run``, by blocks of characters.
 
 Mirrors ``systems.ground_adapt.GroundAdapt.run`` (footprints laid on the sole point each foot
 stands on and moved as the foot rolls, the motion's floor following the supporting feet, free
@@ -9,6 +9,11 @@ feet lifted clear of the ground, the toes pitched onto it) with :func:`ecs_anim.
 
 Every decision the numpy code takes for the whole batch (another heel pass, the toe passes) is
 taken here per character, so a character's result never depends on who else is in the batch.
+By blocks of :data:`.lanes.BLOCK` characters (:func:`ground_adapt_rows`): the motion's pelvis
+and legs decoded (:func:`decode_lanes`) and the legs' first re-aiming (:func:`reaim_lanes`) in
+loops over the block that run on the vector units, the rest (footprints, the ground's queries,
+the secant passes, the heel checks) row by row; a row's result is the same, to the bit, in a
+vector lane or alone.
 
 Length indices are literals (numba's cache keys on this file's source); an import-time
 check pins them to the skeleton.
@@ -128,10 +133,11 @@ GROUND_SCRATCH_ROWS = 131
 
 
 def ground_scratch(n: int) -> F64:
-    """The scratch :func:`ground_adapt_rows` needs for ``n`` rows: a block's
-    (GROUND_SCRATCH_ROWS, BLOCK), flat, for each chunk (the chunk from ``lo`` takes the one at
-    ``lo // BLOCK``; chunks of at least :data:`.lanes.BLOCK` rows, so only a chunk's first
-    block's is written)."""
+    """The scratch :func:`ground_adapt_rows` needs for ``n`` rows: (n // BLOCK + 1, a block's
+    GROUND_SCRATCH_ROWS rows of BLOCK, flat). The chunk of rows from ``lo`` uses the block
+    scratch ``lo // BLOCK`` for each of its blocks in turn (so chunks of at least
+    :data:`.lanes.BLOCK` rows, ``over_chunks``' ``rows_per_thread``, never share one; one
+    thread touches only the first: 33 kB)."""
     return np.empty((n // BLOCK + 1, GROUND_SCRATCH_ROWS * BLOCK))
 
 
