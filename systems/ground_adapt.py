@@ -47,7 +47,8 @@ from ecs_anim.core.ground_adapt import (
 from ecs_anim.core.normalized import SIDE_LENGTHS, decode_legs
 from ecs_anim.runtime.kernels import over_chunks
 from ecs_anim.runtime.kernels.decode import leg_pose_arrays, pose_arrays
-from ecs_anim.runtime.kernels.ground_adapt import ground_adapt_rows
+from ecs_anim.runtime.kernels.ground_adapt import ground_adapt_rows, ground_scratch
+from ecs_anim.runtime.kernels.lanes import BLOCK
 from ecs_anim.runtime.kernels.playback import writable_poses
 from ecs_anim.runtime.system_base import System
 
@@ -87,6 +88,7 @@ class GroundAdapt(System):
     def __init__(self, sim: Simulation):
         super().__init__(sim)
         self._descriptions: dict[int, tuple[Ground, GroundDescription | None]] = {}
+        self._scratch = ground_scratch(0)  # the kernel's, kept for the next tick's rows
 
     def _description(self, ground: Ground) -> GroundDescription | None:
         """The ground's compiled description, made once per ground object."""
@@ -115,7 +117,15 @@ class GroundAdapt(System):
                         contact_weight, roll, st.clip, sim.bank.source_ankle_height,
                         st.footprint, st.locked, st.pivot, st.ground_ref, ground, dt,
                         GROUND_SMOOTHING_S, BALL_HEIGHT_PER_LEG, MAX_LEG_EXTENSION,
-                        HEEL_TOLERANCE_M, SWITCH_PER_LEG, HEEL_PASSES, TOE_PASSES)
+                        HEEL_TOLERANCE_M, SWITCH_PER_LEG, HEEL_PASSES, TOE_PASSES,
+                        self._scratch_for(rows.size), rows_per_thread=BLOCK)
+
+    def _scratch_for(self, n: int) -> NDArray[np.float64]:
+        """The kernel's scratch for ``n`` rows (:func:`.kernels.ground_adapt.ground_scratch`),
+        kept from tick to tick (made anew only when more rows come)."""
+        if self._scratch.shape[0] < n // BLOCK + 1:
+            self._scratch = ground_scratch(n)
+        return self._scratch
 
     def stop_at_rises(self) -> None:
         """Hold back each character walking into a rise taller than it can step up

@@ -1,4 +1,4 @@
-"""Compiled ground adaptation (paper §7): the whole of ``GroundAdapt.run``, one character at a time.
+"""Compiled ground adaptation (paper §7): the whole of ``GroundAdapt.run``, by blocks of characters.
 
 Mirrors ``systems.ground_adapt.GroundAdapt.run`` (footprints laid on the sole point each foot
 stands on and moved as the foot rolls, the motion's floor following the supporting feet, free
@@ -9,6 +9,11 @@ feet lifted clear of the ground, the toes pitched onto it) with :func:`ecs_anim.
 
 Every decision the numpy code takes for the whole batch (another heel pass, the toe passes) is
 taken here per character, so a character's result never depends on who else is in the batch.
+By blocks of :data:`.lanes.BLOCK` characters (:func:`ground_adapt_rows`): the motion's pelvis
+and legs decoded (:func:`decode_lanes`) and the legs' first re-aiming (:func:`reaim_lanes`) in
+loops over the block that run on the vector units, the rest (footprints, the ground's queries,
+the secant passes, the heel checks) row by row; a row's result is the same, to the bit, in a
+vector lane or alone.
 
 Length indices are literals (numba's cache keys on this file's source); an import-time
 check pins them to the skeleton.
@@ -23,8 +28,14 @@ from numpy.typing import NDArray
 
 from ecs_anim.core import ground_adapt as reference
 from ecs_anim.core.skeleton import LENGTH_INDEX as L
-from ecs_anim.runtime.kernels.decode import LegPoseArrays, decode_legs_row, leg_below_hip
+from ecs_anim.runtime.kernels.decode import LegPoseArrays, two_bone_middle
 from ecs_anim.runtime.kernels.ground import height_at, height_near, smooth
+from ecs_anim.runtime.kernels.lanes import (
+    BLOCK,
+    distal_frames_lanes,
+    quat_from_matrix_lanes,
+    rotation_between_lanes,
+)
 from ecs_anim.runtime.kernels.vec import (
     F64,
     Frame,
@@ -35,13 +46,12 @@ from ecs_anim.runtime.kernels.vec import (
     jit,
     load3,
     matmul,
+    matrix_from_quat,
     norm,
-    quat_from_matrix,
-    rotation_between,
     scale,
     store3,
-    store4,
     sub,
+    to_world,
     transpose,
 )
 
@@ -49,11 +59,17 @@ I64 = NDArray[np.int64]
 B1 = NDArray[np.bool_]
 #: A ground's description: (kinds, params, grid) of :class:`ecs_anim.core.ground.GroundDescription`.
 GroundArrays = tuple[I64, F64, F64]
+#: A column of a block's scratch (unsigned: numba adds no wrap-around of negative indices, which
+#: would stop LLVM from vectorizing the loops over columns).
+Column = np.uint64
 
 # Lengths of side s (0 left, 1 right) are these plus s.
-_L_THIGH, _L_SHANK, _L_ANKLE_HEIGHT = 2, 4, 8
-assert (L["thigh_l"], L["shank_l"], L["ankle_height_l"], L["thigh_r"], L["ankle_height_r"]) \
-    == (_L_THIGH, _L_SHANK, _L_ANKLE_HEIGHT, _L_THIGH + 1, _L_ANKLE_HEIGHT + 1)
+_L_PELVIS, _L_THIGH, _L_SHANK, _L_FOOT, _L_ANKLE_HEIGHT = 0, 2, 4, 6, 8
+assert L["pelvis_l"] == _L_PELVIS and L["pelvis_r"] == _L_PELVIS + 1
+assert (L["thigh_l"], L["shank_l"], L["foot_l"], L["ankle_height_l"], L["thigh_r"],
+        L["foot_r"], L["ankle_height_r"]) \
+    == (_L_THIGH, _L_SHANK, _L_FOOT, _L_ANKLE_HEIGHT, _L_THIGH + 1, _L_FOOT + 1,
+        _L_ANKLE_HEIGHT + 1)
 #: The sole rolls of :mod:`ecs_anim.core.ground_adapt`, as literals for the same reason.
 HEEL_ROLL, BALL_ROLL = 0.25, 0.75
 assert (HEEL_ROLL, BALL_ROLL) == (reference.HEEL_ROLL, reference.BALL_ROLL)
@@ -98,109 +114,222 @@ def horizontal_reach_excess(hip: Vec3, ankle_target: Vec3, reach: float) -> tupl
     return excess * dx, excess * dy
 
 
-@jit(inline="always")
-def adapt_to_ground(c: int, root_position: F64, leg_frame: F64, leg_fraction: F64,
-                    hips: tuple[Vec3, Vec3], pelvis_now: Vec3, pelvis2world: Frame,
-                    leg2world: tuple[Frame, Frame], lengths: F64, leg: float,
-                    targets: tuple[Vec3, Vec3], weights: tuple[float, float],
-                    root_height: float, max_extension: float
-                    ) -> tuple[tuple[Vec3, Vec3], tuple[Frame, Frame]]:
-    """Mirrors :func:`ecs_anim.core.ground_adapt.adapt_to_ground` for store row ``c`` (legs
-    re-aimed from the pose decoded before adaptation: its ``hips``, ``pelvis2world`` and
-    ``leg2world``; the pelvis lowered as the legs in contact need, moved horizontally where a
-    leg cannot reach by that), writing the root
-    position, leg frames and fractions of row ``c`` of the poses (``root_position``,
-    ``leg_frame``, ``leg_fraction``). ``pelvis_now`` (m, world): the pelvis before adaptation.
-    Returns the new hips (m, world) and leg2world (what decoding the row would give, within
-    rounding: the rest of the legs is decoded from them, :func:`.decode.leg_below_hip`).
+# The scratch of ground_adapt_rows: a block's, one column a character (flat, rows of BLOCK).
+# What the motion's decode (decode_lanes) reads: the pose (the root position, leg frames and
+# fractions in the rows the re-aiming writes them to later), the heading's cosine and sine ...
+_S_HEADING, _S_PELVIS_LOCAL, _S_HIP_DIR, _S_PELVIS_LENGTH = 115, 117, 121, 127
+# ... what it writes and the legs' re-aiming (reaim_lanes) reads ...
+_S_HIP, _S_PELVIS, _S_P2W, _S_L2W = 0, 6, 9, 18  # hips (side s at + 3 s), the pelvis, frames
+_S_THIGH, _S_SHANK, _S_FOOT, _S_LEG = 36, 38, 40, 42  # lengths (side s at + s), leg length
+_S_TARGET, _S_WEIGHT, _S_ROOT_HEIGHT, _S_FOOT_DIR = 43, 49, 51, 52
+# ... what the re-aiming writes (the pose's leg frames and fractions, root position; the legs
+# decoded: the motion's ankles and toes there before it) ...
+_S_LEG_FRAME, _S_FRACTION, _S_ROOT, _S_ANKLE, _S_TOE, _S_SHANK2W = 58, 66, 68, 71, 77, 83
+# ... and what a row carries from before the re-aiming to after it (the feet's lengths and
+# directions: the decode's, then those the last pitch starts from).
+_S_UNDER, _S_KNOWN, _S_DIR, _S_FOOT_LENGTH = 101, 103, 109, 129
+#: Rows of a block's scratch (:func:`ground_scratch`).
+GROUND_SCRATCH_ROWS = 131
 
-    ``targets``: each ankle's target (m, world); ``weights``: contact activations;
-    ``root_height`` (m): the pelvis height the motion wants; ``leg``: the leg length (m).
-    """
-    up = root_height - pelvis_now[2]
-    shift_x, shift_y = 0.0, 0.0
-    for s in range(2):
-        hip = hips[s]
-        reach = max_extension * (lengths[c, _L_THIGH + s] + lengths[c, _L_SHANK + s])
-        w = min(max(weights[s], 0.0), 1.0)
-        ex, ey = horizontal_reach_excess((hip[0] + 0.0, hip[1] + 0.0, hip[2] + up), targets[s],
-                                         reach)
-        shift_x += w * ex
-        shift_y += w * ey
-    lowest = 0.0
-    for s in range(2):
-        hip = hips[s]
-        reach = max_extension * (lengths[c, _L_THIGH + s] + lengths[c, _L_SHANK + s])
-        needed = vertical_slack_for_reach((hip[0] + shift_x, hip[1] + shift_y, hip[2] + up),
-                                          targets[s], reach)
-        w = min(max(weights[s], 0.0), 1.0)
-        drop = w * min(needed, 0.0)
-        lowest = drop if s == 0 else min(lowest, drop)
-    pelvis_z = root_height + lowest
-    shift = pelvis_z - pelvis_now[2]
-    world2pelvis = transpose(pelvis2world)
-    new_hips = (add(hips[0], (shift_x, shift_y, shift)), add(hips[1], (shift_x, shift_y, shift)))
-    new_leg2world = (leg2world[0], leg2world[1])
-    for s in range(2):
-        thigh, shank = lengths[c, _L_THIGH + s], lengths[c, _L_SHANK + s]
-        reach = max_extension * (thigh + shank)
-        to_target = sub(targets[s], new_hips[s])
-        turned = matmul(rotation_between(leg2world[s][2], to_target), leg2world[s])
-        store4(leg_frame[c, s], quat_from_matrix(matmul(world2pelvis, turned)))
-        leg_fraction[c, s] = min(norm(to_target), reach) / (thigh + shank)
-        new_leg2world = (turned, new_leg2world[1]) if s == 0 else (new_leg2world[0], turned)
-    root_position[c, 0] = (pelvis_now[0] + shift_x) / leg
-    root_position[c, 1] = (pelvis_now[1] + shift_y) / leg
-    root_position[c, 2] = pelvis_z / leg
-    return new_hips, new_leg2world
+
+def ground_scratch(n: int) -> F64:
+    """The scratch :func:`ground_adapt_rows` needs for ``n`` rows: (n // BLOCK + 1, a block's
+    GROUND_SCRATCH_ROWS rows of BLOCK, flat). The chunk of rows from ``lo`` uses the block
+    scratch ``lo // BLOCK`` for each of its blocks in turn (so chunks of at least
+    :data:`.lanes.BLOCK` rows, ``over_chunks``' ``rows_per_thread``, never share one; one
+    thread touches only the first: 33 kB)."""
+    return np.empty((n // BLOCK + 1, GROUND_SCRATCH_ROWS * BLOCK))
+
+
+@jit()
+def _at(r: int, j: Column) -> Column:
+    """Where row ``r``, column ``j`` of a block's scratch is (its flat index: the distance
+    between two rows is a constant of the compiled code, so LLVM sees that a column's rows do
+    not overlap, and vectorizes the loops over columns without checks at run time)."""
+    return Column(r * BLOCK) + j
+
+
+@jit()
+def _col3(scratch: F64, r: int, j: Column) -> Vec3:
+    """The 3-vector in rows ``r:r + 3`` of column ``j``."""
+    return (scratch[_at(r, j)], scratch[_at(r + 1, j)], scratch[_at(r + 2, j)])
+
+
+@jit()
+def _put3(scratch: F64, r: int, j: Column, v: Vec3) -> None:
+    scratch[_at(r, j)], scratch[_at(r + 1, j)], scratch[_at(r + 2, j)] = v[0], v[1], v[2]
+
+
+@jit()
+def _col_frame(scratch: F64, r: int, j: Column) -> Frame:
+    """The frame in rows ``r:r + 9`` of column ``j`` (its axes one after the other)."""
+    return (_col3(scratch, r, j), _col3(scratch, r + 3, j), _col3(scratch, r + 6, j))
+
+
+@jit()
+def _put_frame(scratch: F64, r: int, j: Column, m: Frame) -> None:
+    _put3(scratch, r, j, m[0])
+    _put3(scratch, r + 3, j, m[1])
+    _put3(scratch, r + 6, j, m[2])
+
+
+@jit(inline="always")
+def _below_hip_lanes(scratch: F64, j: Column, s: int, hip: Vec3, leg2world: Frame,
+                     fraction: float, with_shank: bool) -> None:
+    """:func:`.decode.leg_below_hip` of side ``s`` of column ``j`` (the same operations, without
+    branches), from its ``hip``, ``leg2world`` and fraction: the ankle, toe and (with
+    ``with_shank``, a literal) shank2world into the column."""
+    thigh, shank = scratch[_at(_S_THIGH + s, j)], scratch[_at(_S_SHANK + s, j)]
+    knee, ankle = two_bone_middle(leg2world, hip, thigh, shank, fraction * (thigh + shank))
+    shank2world = distal_frames_lanes(leg2world, knee, ankle)
+    toe = add(ankle, scale(to_world(shank2world, _col3(scratch, _S_FOOT_DIR + 3 * s, j)),
+                           scratch[_at(_S_FOOT + s, j)]))
+    _put3(scratch, _S_ANKLE + 3 * s, j, ankle)
+    _put3(scratch, _S_TOE + 3 * s, j, toe)
+    if with_shank:
+        _put_frame(scratch, _S_SHANK2W + 9 * s, j, shank2world)
+
+
+@jit(inline="always")
+def _decode_leg_lanes(scratch: F64, j: Column, s: int, pelvis: Vec3, pelvis2world: Frame) -> None:
+    """Leg ``s`` of :func:`decode_lanes` (:func:`.decode.decode_legs_row`'s, the same
+    operations): its hip, leg2world, ankle, toe, and the foot's length and direction
+    (:func:`_foot_axis`) into column ``j``."""
+    hip = add(pelvis, scale(to_world(pelvis2world, _col3(scratch, _S_HIP_DIR + 3 * s, j)),
+                            scratch[_at(_S_PELVIS_LENGTH + s, j)]))
+    r = _S_LEG_FRAME + 4 * s
+    local = (scratch[_at(r, j)], scratch[_at(r + 1, j)], scratch[_at(r + 2, j)],
+             scratch[_at(r + 3, j)])
+    leg2world = matmul(pelvis2world, matrix_from_quat(local))
+    _put3(scratch, _S_HIP + 3 * s, j, hip)
+    _put_frame(scratch, _S_L2W + 9 * s, j, leg2world)
+    _below_hip_lanes(scratch, j, s, hip, leg2world, scratch[_at(_S_FRACTION + s, j)], False)
+    foot, d = _foot_axis(_col3(scratch, _S_ANKLE + 3 * s, j), _col3(scratch, _S_TOE + 3 * s, j))
+    scratch[_at(_S_FOOT_LENGTH + s, j)] = foot
+    _put3(scratch, _S_DIR + 3 * s, j, d)
+
+
+# A call, not inlined (as reaim_lanes).
+@jit()
+def decode_lanes(scratch: F64, start: Column, stop: Column) -> None:
+    """Mirrors :func:`.decode.decode_legs_row` (the pose on the character's body as the motion
+    gives it: the pelvis and legs) for the columns ``start:stop`` of a ground scratch, in a
+    loop over them that runs on the vector units; the same bits (the heading's cosine and
+    sine given, :func:`.vec.rot_z`'s)."""
+    for k in range(start, stop):
+        j = Column(k)  # (the same type: for mypy, which takes k for an int)
+        cos_h, sin_h = scratch[_at(_S_HEADING, j)], scratch[_at(_S_HEADING + 1, j)]
+        r = _S_PELVIS_LOCAL
+        local = (scratch[_at(r, j)], scratch[_at(r + 1, j)], scratch[_at(r + 2, j)],
+                 scratch[_at(r + 3, j)])
+        pelvis2world = matmul(((cos_h, sin_h, 0.0), (-sin_h, cos_h, 0.0), (0.0, 0.0, 1.0)),
+                              matrix_from_quat(local))
+        # .decode.leg_length's sum
+        leg = 0.5 * (scratch[_at(_S_THIGH, j)] + scratch[_at(_S_SHANK, j)]
+                     + scratch[_at(_S_THIGH + 1, j)] + scratch[_at(_S_SHANK + 1, j)])
+        pelvis = scale(_col3(scratch, _S_ROOT, j), leg)
+        _put3(scratch, _S_PELVIS, j, pelvis)
+        _put_frame(scratch, _S_P2W, j, pelvis2world)
+        _decode_leg_lanes(scratch, j, 0, pelvis, pelvis2world)
+        _decode_leg_lanes(scratch, j, 1, pelvis, pelvis2world)
+
+
+@jit(inline="always")
+def _turn_leg_lanes(scratch: F64, j: Column, s: int, hip: Vec3, world2pelvis: Frame,
+                    reach: float) -> None:
+    """One leg of :func:`reaim_lanes`: leg ``s`` of column ``j`` turned from its motion's
+    frame towards its target from its new ``hip``; its frame (in the pelvis, a quaternion)
+    and fraction, and the leg decoded below the hip, into the column."""
+    leg2world = _col_frame(scratch, _S_L2W + 9 * s, j)
+    thigh, shank = scratch[_at(_S_THIGH + s, j)], scratch[_at(_S_SHANK + s, j)]
+    to_target = sub(_col3(scratch, _S_TARGET + 3 * s, j), hip)
+    turned = matmul(rotation_between_lanes(leg2world[2], to_target), leg2world)
+    q = quat_from_matrix_lanes(matmul(world2pelvis, turned))
+    r = _S_LEG_FRAME + 4 * s
+    scratch[_at(r, j)], scratch[_at(r + 1, j)], scratch[_at(r + 2, j)], scratch[_at(r + 3, j)] = q
+    fraction = min(norm(to_target), reach) / (thigh + shank)
+    scratch[_at(_S_FRACTION + s, j)] = fraction
+    _below_hip_lanes(scratch, j, s, hip, turned, fraction, True)
+
+
+# A call (one compiled body for the block loop and a row's later passes), not inlined.
+@jit()
+def reaim_lanes(scratch: F64, start: Column, stop: Column, max_extension: float) -> None:
+    """Mirrors :func:`ecs_anim.core.ground_adapt.adapt_to_ground` for the columns
+    ``start:stop`` of a ground scratch (:func:`ground_scratch`), in a loop over them that runs
+    on the vector units: the pelvis lowered as the legs in contact need (their targets and
+    contact weights), moved horizontally where a leg cannot reach by that, the legs re-aimed
+    from the motion's frames (hips, pelvis and leg frames as decoded before adaptation), and
+    decoded below the hips (:func:`.decode.leg_below_hip`: ankles, toes, shank frames), as
+    the pose's root position, leg frames and fractions written would decode, within rounding.
+    The same bits in a vector lane or alone (no fastmath, no branch)."""
+    for k in range(start, stop):
+        j = Column(k)  # (the same type: for mypy, which takes k for an int)
+        hip0, hip1 = _col3(scratch, _S_HIP, j), _col3(scratch, _S_HIP + 3, j)
+        pelvis_now = _col3(scratch, _S_PELVIS, j)
+        target0, target1 = _col3(scratch, _S_TARGET, j), _col3(scratch, _S_TARGET + 3, j)
+        reach0 = max_extension * (scratch[_at(_S_THIGH, j)] + scratch[_at(_S_SHANK, j)])
+        reach1 = max_extension * (scratch[_at(_S_THIGH + 1, j)] + scratch[_at(_S_SHANK + 1, j)])
+        w0 = min(max(scratch[_at(_S_WEIGHT, j)], 0.0), 1.0)
+        w1 = min(max(scratch[_at(_S_WEIGHT + 1, j)], 0.0), 1.0)
+        root_height = scratch[_at(_S_ROOT_HEIGHT, j)]
+        up = root_height - pelvis_now[2]
+        ex0, ey0 = horizontal_reach_excess((hip0[0] + 0.0, hip0[1] + 0.0, hip0[2] + up),
+                                           target0, reach0)
+        ex1, ey1 = horizontal_reach_excess((hip1[0] + 0.0, hip1[1] + 0.0, hip1[2] + up),
+                                           target1, reach1)
+        shift_x = 0.0 + w0 * ex0 + w1 * ex1
+        shift_y = 0.0 + w0 * ey0 + w1 * ey1
+        needed0 = vertical_slack_for_reach((hip0[0] + shift_x, hip0[1] + shift_y, hip0[2] + up),
+                                           target0, reach0)
+        needed1 = vertical_slack_for_reach((hip1[0] + shift_x, hip1[1] + shift_y, hip1[2] + up),
+                                           target1, reach1)
+        lowest = min(w0 * min(needed0, 0.0), w1 * min(needed1, 0.0))
+        pelvis_z = root_height + lowest
+        shift = (shift_x, shift_y, pelvis_z - pelvis_now[2])
+        world2pelvis = transpose(_col_frame(scratch, _S_P2W, j))
+        _turn_leg_lanes(scratch, j, 0, add(hip0, shift), world2pelvis, reach0)
+        _turn_leg_lanes(scratch, j, 1, add(hip1, shift), world2pelvis, reach1)
+        leg = scratch[_at(_S_LEG, j)]
+        scratch[_at(_S_ROOT, j)] = (pelvis_now[0] + shift_x) / leg
+        scratch[_at(_S_ROOT + 1, j)] = (pelvis_now[1] + shift_y) / leg
+        scratch[_at(_S_ROOT + 2, j)] = pelvis_z / leg
 
 
 @jit(inline="always")  # one call site
-def adapt_keeping_heels_up(c: int, pose: LegPoseArrays, hips: tuple[Vec3, Vec3],
-                           pelvis_now: Vec3, pelvis2world: Frame,
-                           leg2world: tuple[Frame, Frame], lengths: F64, leg: float,
-                           targets: tuple[Vec3, Vec3], under_targets: tuple[float, float],
-                           weights: tuple[float, float], root_height: float, kinds: I64,
+def adapt_keeping_heels_up(i: Column, c: int, pose: LegPoseArrays, scratch: F64, kinds: I64,
                            params: F64, grid: F64, is_smooth: bool, ankle_height: Vec3,
-                           max_extension: float, heel_tolerance: float, passes: int
-                           ) -> tuple[tuple[Vec3, Vec3], tuple[Vec3, Vec3], tuple[Frame, Frame]]:
-    """Mirrors :func:`ecs_anim.core.ground_adapt.adapt_keeping_heels_up` for store row ``c``: the
-    ankle targets lifted (up to ``passes`` times) while a heel would be more than
-    ``heel_tolerance`` (m) under the ground. ``under_targets``: the ground's height under each
-    target (m; lifting a target keeps its x, y): an ankle that reached its target is not asked
-    about again on a smooth ground (``is_smooth``, :func:`.ground.height_near`).
-    ``ankle_height`` (left, right, unused) m;
-    ``hips``, ``pelvis_now``, ``pelvis2world``, ``leg2world``: the pose decoded before
-    adaptation, as :func:`adapt_to_ground` takes them.
-
-    Writes row ``c`` of ``pose`` as :func:`adapt_to_ground`; returns the decoded (ankles, toes,
-    shank2world) of the result (decoded from the hips and leg frames the adaptation gives, as
-    :func:`.decode.decode_legs_row` would within rounding, without decoding the pelvis again).
-    """
-    root_position, leg_frame, leg_fraction = pose.root_position, pose.leg_frame, pose.leg_fraction
-    lengths_row = lengths[c]
-    # One call site each for the two inlined steps (numba compiles an inlined body at each):
-    # the first pass adapts to the targets given, the next ones to the lifted targets.
+                           max_extension: float, heel_tolerance: float, passes: int) -> None:
+    """Mirrors :func:`ecs_anim.core.ground_adapt.adapt_keeping_heels_up` for store row ``c``
+    (column ``i`` of the scratch, whose first pass :func:`reaim_lanes` has made with the rest
+    of its block): the ankle targets lifted (up to ``passes`` times, each a pass of
+    :func:`reaim_lanes` on this column alone) while a heel would be more than
+    ``heel_tolerance`` (m) under the ground; then the last pass's root position, leg frames
+    and fractions written into row ``c`` of ``pose``. The ground's height under each target
+    (the column's; lifting a target keeps its x, y): an ankle that reached its target is not
+    asked about again on a smooth ground (``is_smooth``, :func:`.ground.height_near`).
+    ``ankle_height`` (left, right, unused) m."""
     for lift in range(passes + 1):
-        new_hips, new_leg2world = adapt_to_ground(
-            c, root_position, leg_frame, leg_fraction, hips, pelvis_now, pelvis2world,
-            leg2world, lengths, leg, targets, weights, root_height, max_extension)
-        _, ankle0, toe0, shank0 = leg_below_hip(c, 0, pose, lengths_row, new_hips[0],
-                                                new_leg2world[0])
-        _, ankle1, toe1, shank1 = leg_below_hip(c, 1, pose, lengths_row, new_hips[1],
-                                                new_leg2world[1])
-        ankles, toes, shank2world = (ankle0, ankle1), (toe0, toe1), (shank0, shank1)
+        if lift > 0:
+            reaim_lanes(scratch, i, i + Column(1), max_extension)
         if lift == passes:
             break
-        t0, t1 = targets
-        d0 = height_near(ankles[0][0], ankles[0][1], (t0[0], t0[1], under_targets[0]), is_smooth,
-                         kinds, params, grid) + ankle_height[0] - ankles[0][2]
-        d1 = height_near(ankles[1][0], ankles[1][1], (t1[0], t1[1], under_targets[1]), is_smooth,
-                         kinds, params, grid) + ankle_height[1] - ankles[1][2]
+        t0, t1 = _col3(scratch, _S_TARGET, i), _col3(scratch, _S_TARGET + 3, i)
+        a0, a1 = _col3(scratch, _S_ANKLE, i), _col3(scratch, _S_ANKLE + 3, i)
+        d0 = height_near(a0[0], a0[1], (t0[0], t0[1], scratch[_at(_S_UNDER, i)]), is_smooth,
+                         kinds, params, grid) + ankle_height[0] - a0[2]
+        d1 = height_near(a1[0], a1[1], (t1[0], t1[1], scratch[_at(_S_UNDER + 1, i)]), is_smooth,
+                         kinds, params, grid) + ankle_height[1] - a1[2]
         if not (d0 > heel_tolerance or d1 > heel_tolerance):
             break
-        targets = ((t0[0], t0[1], t0[2] + max(d0, 0.0)), (t1[0], t1[1], t1[2] + max(d1, 0.0)))
-    return ankles, toes, shank2world
+        scratch[_at(_S_TARGET + 2, i)] = t0[2] + max(d0, 0.0)
+        scratch[_at(_S_TARGET + 5, i)] = t1[2] + max(d1, 0.0)
+    for s in range(2):
+        r = _S_LEG_FRAME + 4 * s
+        pose.leg_frame[c, s, 0], pose.leg_frame[c, s, 1] = scratch[_at(r, i)], scratch[_at(r + 1, i)]
+        pose.leg_frame[c, s, 2], pose.leg_frame[c, s, 3] = scratch[_at(r + 2, i)], scratch[_at(r + 3, i)]
+        pose.leg_fraction[c, s] = scratch[_at(_S_FRACTION + s, i)]
+    store3(pose.root_position[c], _col3(scratch, _S_ROOT, i))
 
 
 # Not inlined (nor planted_foot): a row calls them from nine places, and inlining each copy
@@ -363,22 +492,46 @@ def _foot_axis(ankle: Vec3, toe: Vec3) -> tuple[float, Vec3]:
     return foot, scale(sub(toe, ankle), 1.0 / foot)
 
 
+@jit(inline="always")  # one call site
+def gather_motion(i: Column, c: int, pose: LegPoseArrays, lengths: F64, scratch: F64) -> None:
+    """What :func:`decode_lanes` and :func:`reaim_lanes` read of store row ``c``'s pose and
+    lengths into column ``i`` of ``scratch`` (the heading's cosine and sine computed here:
+    library calls, which LLVM does not vectorize)."""
+    heading = pose.root_heading[c]
+    scratch[_at(_S_HEADING, i)], scratch[_at(_S_HEADING + 1, i)] = math.cos(heading), \
+        math.sin(heading)
+    for a in range(4):
+        scratch[_at(_S_PELVIS_LOCAL + a, i)] = pose.pelvis_local[c, a]
+    _put3(scratch, _S_ROOT, i, load3(pose.root_position[c]))
+    for s in range(2):
+        _put3(scratch, _S_HIP_DIR + 3 * s, i, load3(pose.hip_dir[c, s]))
+        for a in range(4):
+            scratch[_at(_S_LEG_FRAME + 4 * s + a, i)] = pose.leg_frame[c, s, a]
+        scratch[_at(_S_FRACTION + s, i)] = pose.leg_fraction[c, s]
+        scratch[_at(_S_PELVIS_LENGTH + s, i)] = lengths[c, _L_PELVIS + s]
+        scratch[_at(_S_THIGH + s, i)] = lengths[c, _L_THIGH + s]
+        scratch[_at(_S_SHANK + s, i)] = lengths[c, _L_SHANK + s]
+        scratch[_at(_S_FOOT + s, i)] = lengths[c, _L_FOOT + s]
+        _put3(scratch, _S_FOOT_DIR + 3 * s, i, load3(pose.foot_dir[c, s]))
+
+
 @jit(inline="always")  # one call site: a call per row, handed its arrays, costs
-def ground_adapt_row(c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
-                     contact_weight: F64, sole_roll: F64, clip: I64, source_ankle_height: F64,
-                     footprint: F64, locked: B1, pivot: I64, ground_ref: F64, kinds: I64,
-                     params: F64, grid: F64, is_smooth: bool, follow: float,
-                     ball_per_leg: float, max_extension: float, heel_tolerance: float,
-                     switch_per_leg: float, heel_passes: int, toe_passes: int) -> None:
-    """Mirrors ``GroundAdapt.run`` for store row ``c``; arguments as for
-    :func:`ground_adapt_rows` (``kinds``, ``params``, ``grid``: the arrays of ``ground``;
-    ``is_smooth``: :func:`.ground.smooth` of it; ``follow``: the share of the way to the ground
-    under the feet the floor moves this tick, the same for every row)."""
-    # The pose on the character's body as the motion gives it (MorphologyAdapt's scaling,
-    # decoded here: ground adaptation reads only the pelvis and legs).
-    lengths_row = lengths[c]
-    pelvis, pelvis2world, hips, _, ankles, toes, leg2world, _ = decode_legs_row(
-        c, pose, lengths_row, lengths_row)
+def ground_adapt_before(i: Column, c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
+                        contact_weight: F64, sole_roll: F64, clip: I64,
+                        source_ankle_height: F64, footprint: F64, locked: B1, pivot: I64,
+                        ground_ref: F64, kinds: I64, params: F64, grid: F64, follow: float,
+                        ball_per_leg: float, switch_per_leg: float, toe_passes: int,
+                        scratch: F64) -> None:
+    """Mirrors ``GroundAdapt.run`` for store row ``c`` up to the legs' re-aiming: the motion's
+    pelvis and legs decoded, the feet in contact planted, the floor moved, the ankles'
+    targets; what :func:`reaim_lanes` and :func:`ground_adapt_after` need into column ``i``
+    of ``scratch``. Arguments as for :func:`ground_adapt_rows` (``kinds``, ``params``,
+    ``grid``: the arrays of ``ground``; ``follow``: the share of the way to the ground under
+    the feet the floor moves this tick, the same for every row)."""
+    # The pose on the character's body as the motion gives it (decode_lanes).
+    pelvis = _col3(scratch, _S_PELVIS, i)
+    ankles = (_col3(scratch, _S_ANKLE, i), _col3(scratch, _S_ANKLE + 3, i))
+    toes = (_col3(scratch, _S_TOE, i), _col3(scratch, _S_TOE + 3, i))
     leg_c = leg[c]
     ball = ball_per_leg * leg_c
     switch = switch_per_leg * leg_c
@@ -386,8 +539,8 @@ def ground_adapt_row(c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
     w = (contact_weight[c, 0], contact_weight[c, 1])
     # Each foot in contact stands on one sole point (its footprint, on the ground): the heel
     # or the ball, as the motion plants it.
-    foot0, d0 = _foot_axis(ankles[0], toes[0])
-    foot1, d1 = _foot_axis(ankles[1], toes[1])
+    foot0, d0 = scratch[_at(_S_FOOT_LENGTH, i)], _col3(scratch, _S_DIR, i)
+    foot1, d1 = scratch[_at(_S_FOOT_LENGTH + 1, i)], _col3(scratch, _S_DIR + 3, i)
     stance0 = _stand(c, 0, ankles[0], toes[0], foot0, d0, w[0], sole_roll, clip,
                      source_ankle_height, footprint, locked, pivot, leg_c, ankle_height[0],
                      ball, switch, kinds, params, grid, toe_passes)
@@ -406,32 +559,57 @@ def ground_adapt_row(c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
                                    ankle_height[0], ball, kinds, params, grid)
     target1, under1 = _foot_target(ankles[1], toes[1], stance1[0], stance1[2][0], w[1], g,
                                    ankle_height[1], ball, kinds, params, grid)
-    root_height = pelvis[2] + g
-    new_ankles, new_toes, shank2world = adapt_keeping_heels_up(
-        c, pose, hips, pelvis, pelvis2world, leg2world, lengths, leg_c, (target0, target1),
-        (under0, under1), w, root_height, kinds, params, grid, is_smooth, ankle_height,
-        max_extension, heel_tolerance, heel_passes)
+    # The re-aiming's inputs (the pose decoded before adaptation: decode_lanes's) ...
+    scratch[_at(_S_WEIGHT, i)], scratch[_at(_S_WEIGHT + 1, i)] = w[0], w[1]
+    scratch[_at(_S_LEG, i)] = leg_c
+    _put3(scratch, _S_TARGET, i, target0)
+    _put3(scratch, _S_TARGET + 3, i, target1)
+    scratch[_at(_S_ROOT_HEIGHT, i)] = pelvis[2] + g
+    # ... and what the row needs after it: the ground under the targets, and the directions
+    # the last pitch starts from (a planted foot's as it stands, its toe end's ground known; a
+    # ramping foot's the motion's; a free foot's is found after the re-aiming).
+    scratch[_at(_S_UNDER, i)], scratch[_at(_S_UNDER + 1, i)] = under0, under1
+    for s in range(2):
+        stance = stance0 if s == 0 else stance1
+        known = _UNKNOWN
+        d = d0 if s == 0 else d1
+        if w[s] >= 1.0:
+            d = stance[1]
+            stood = add_scaled(stance[0], d, foot0 if s == 0 else foot1)
+            known = (stood[0], stood[1], stance[2][1])
+        _put3(scratch, _S_KNOWN + 3 * s, i, known)
+        _put3(scratch, _S_DIR + 3 * s, i, d)
+
+
+@jit(inline="always")  # one call site
+def ground_adapt_after(i: Column, c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
+                       contact_weight: F64, kinds: I64, params: F64, grid: F64,
+                       is_smooth: bool, ball_per_leg: float, max_extension: float,
+                       heel_tolerance: float, heel_passes: int, toe_passes: int,
+                       scratch: F64) -> None:
+    """Mirrors ``GroundAdapt.run`` for store row ``c`` after the block's re-aiming
+    (:func:`reaim_lanes`, column ``i`` of ``scratch``): the heels kept up, the legs' pose
+    written, the feet pitched onto the ground."""
+    ankle_height = (lengths[c, _L_ANKLE_HEIGHT], lengths[c, _L_ANKLE_HEIGHT + 1], 0.0)
+    adapt_keeping_heels_up(i, c, pose, scratch, kinds, params, grid, is_smooth, ankle_height,
+                           max_extension, heel_tolerance, heel_passes)
+    ball = ball_per_leg * leg[c]
     # Feet: a planted one pitched as it stands (in the world, whatever the leg's new bend), a
     # ramping one as the motion has it in the world, a free one as in its shank; none with
     # its toe under the ground. A planted foot whose ankle reached its footing has its toe
     # end where it stood, whose ground is known.
     for s in range(2):
-        ankle, toe = new_ankles[s], new_toes[s]
+        ankle, toe = _col3(scratch, _S_ANKLE + 3 * s, i), _col3(scratch, _S_TOE + 3 * s, i)
         foot = max(norm(sub(toe, ankle)), 1e-9)
-        known = _UNKNOWN
-        if w[s] >= 1.0:
-            stance = stance0 if s == 0 else stance1
-            d = stance[1]
-            stood = add_scaled(stance[0], d, foot0 if s == 0 else foot1)
-            known = (stood[0], stood[1], stance[2][1])
-        elif w[s] > 0.0:
-            d = d0 if s == 0 else d1
-        else:
+        w = contact_weight[c, s]
+        d = _col3(scratch, _S_DIR + 3 * s, i)
+        if not w > 0.0:
             d = scale(sub(toe, ankle), 1.0 / foot)
-        new_d = pitched(ankle, d, foot, 1.0, ball, kinds, params, grid, toe_passes, known,
-                        is_smooth)[0]
-        if w[s] > 0.0 or new_d[2] != d[2]:
-            store3(pose.foot_dir[c, s], in_frame(shank2world[s], new_d))
+        new_d = pitched(ankle, d, foot, 1.0, ball, kinds, params, grid, toe_passes,
+                        _col3(scratch, _S_KNOWN + 3 * s, i), is_smooth)[0]
+        if w > 0.0 or new_d[2] != d[2]:
+            store3(pose.foot_dir[c, s],
+                   in_frame(_col_frame(scratch, _S_SHANK2W + 9 * s, i), new_d))
 
 
 @jit(nogil=True)
@@ -440,7 +618,7 @@ def ground_adapt_rows(lo: int, hi: int, rows: I64, pose: LegPoseArrays, lengths:
                       footprint: F64, locked: B1, pivot: I64, ground_ref: F64,
                       ground: GroundArrays, dt: float, smoothing_s: float, ball_per_leg: float,
                       max_extension: float, heel_tolerance: float, switch_per_leg: float,
-                      heel_passes: int, toe_passes: int) -> None:
+                      heel_passes: int, toe_passes: int, scratch: F64) -> None:
     """Mirrors ``systems.ground_adapt.GroundAdapt.run`` over the store rows
     ``rows[lo:hi]``, in place.
 
@@ -455,12 +633,28 @@ def ground_adapt_rows(lo: int, hi: int, rows: I64, pose: LegPoseArrays, lengths:
     ``ball_per_leg`` the toe joint's height above the sole per leg length, ``max_extension``
     of a leg, ``heel_tolerance`` (m), ``switch_per_leg`` how near the ground (per leg length)
     a sole point must be for the foot to stand on it, ``heel_passes``, ``toe_passes``.
+    ``scratch``: :func:`ground_scratch` of ``len(rows)`` (column ``i`` for ``rows[i]``).
+
+    By blocks of :data:`.lanes.BLOCK` rows: each row up to its legs' re-aiming, the block's
+    first re-aiming on the vector units (:func:`reaim_lanes`), then each row on; each row's
+    result is the same, to the bit, whatever its block.
     """
     kinds, params, grid = ground
     is_smooth = smooth(kinds)
     follow = 1.0 - math.exp(-dt / smoothing_s)
-    for i in range(lo, hi):
-        ground_adapt_row(rows[i], pose, lengths, leg, contact_weight, sole_roll, clip,
-                         source_ankle_height, footprint, locked, pivot, ground_ref, kinds,
-                         params, grid, is_smooth, follow, ball_per_leg, max_extension,
-                         heel_tolerance, switch_per_leg, heel_passes, toe_passes)
+    scratch_block = scratch[lo // BLOCK]
+    for start in range(lo, hi, BLOCK):
+        stop = min(start + BLOCK, hi)
+        for i in range(start, stop):
+            gather_motion(Column(i - start), rows[i], pose, lengths, scratch_block)
+        decode_lanes(scratch_block, Column(0), Column(stop - start))
+        for i in range(start, stop):
+            ground_adapt_before(Column(i - start), rows[i], pose, lengths, leg, contact_weight, sole_roll, clip,
+                                source_ankle_height, footprint, locked, pivot, ground_ref,
+                                kinds, params, grid, follow, ball_per_leg, switch_per_leg,
+                                toe_passes, scratch_block)
+        reaim_lanes(scratch_block, Column(0), Column(stop - start), max_extension)
+        for i in range(start, stop):
+            ground_adapt_after(Column(i - start), rows[i], pose, lengths, leg, contact_weight, kinds, params,
+                               grid, is_smooth, ball_per_leg, max_extension, heel_tolerance,
+                               heel_passes, toe_passes, scratch_block)

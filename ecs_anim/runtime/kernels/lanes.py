@@ -20,7 +20,19 @@ import math
 
 import numpy as np
 
-from ecs_anim.runtime.kernels.vec import F64, jit
+from ecs_anim.runtime.kernels.vec import (
+    F64,
+    TINY,
+    Frame,
+    Quat,
+    Vec3,
+    add_scaled,
+    cross,
+    dot,
+    jit,
+    norm,
+    normalize,
+)
 
 #: Characters a block loop runs over at a time: its scratch columns stay in the first-level
 #: cache (22 rows of 32 float64 are 5.6 kB) and it is a whole number of 8-wide AVX-512 vectors.
@@ -92,3 +104,86 @@ def slerp_weights(cos_half: float, theta: float, t: float) -> tuple[float, float
     w0 = 1.0 - t if near else arc0
     w1 = t if near else arc1
     return w0, sign * w1
+
+
+# Branch-free twins of :mod:`.vec`'s helpers, for loops over a block's characters: each computes
+# every case the scalar helper may branch to and then chooses (``a if c else b`` on values
+# already computed is a select), with the same operations in the same order, so that its
+# result is the scalar helper's to the bit.
+
+
+@jit()
+def pick3(cond: bool, a: Vec3, b: Vec3) -> Vec3:
+    """``a if cond else b``, element by element (a select, not a branch)."""
+    return (a[0] if cond else b[0], a[1] if cond else b[1], a[2] if cond else b[2])
+
+
+@jit(inline="always")
+def quat_from_matrix_lanes(m: Frame) -> Quat:
+    """:func:`.vec.quat_from_matrix` (the same bits) without branches: the four candidate
+    quaternions computed and the one of the largest diagonal chosen."""
+    m00, m11, m22 = m[0][0], m[1][1], m[2][2]
+    m01, m02, m10, m12, m20, m21 = m[1][0], m[2][0], m[0][1], m[2][1], m[0][2], m[1][2]
+    trace = m00 + m11 + m22
+    one = m00 > trace
+    largest = m00 if one else trace
+    two = m11 > largest
+    largest = m11 if two else largest
+    three = m22 > largest
+    # best: 3 if three, else 2 if two, else 1 if one, else 0 (vec.quat_from_matrix's order)
+    q0 = (m21 - m12, m02 - m20, m10 - m01, 1.0 + trace)
+    q1 = (1.0 + m00 - m11 - m22, m01 + m10, m02 + m20, m21 - m12)
+    q2 = (m01 + m10, 1.0 - m00 + m11 - m22, m12 + m21, m02 - m20)
+    q3 = (m02 + m20, m12 + m21, 1.0 - m00 - m11 + m22, m10 - m01)
+    x = q3[0] if three else (q2[0] if two else (q1[0] if one else q0[0]))
+    y = q3[1] if three else (q2[1] if two else (q1[1] if one else q0[1]))
+    z = q3[2] if three else (q2[2] if two else (q1[2] if one else q0[2]))
+    w = q3[3] if three else (q2[3] if two else (q1[3] if one else q0[3]))
+    n = max(math.sqrt(x * x + y * y + z * z + w * w), TINY)
+    sign = -1.0 if w / n < 0.0 else 1.0
+    return (sign * x / n, sign * y / n, sign * z / n, sign * w / n)
+
+
+@jit(inline="always")
+def rotation_between_lanes(a: Vec3, b: Vec3) -> Frame:
+    """:func:`.vec.rotation_between` (the same bits) without branches: the half turn for
+    opposite directions computed always and chosen where they are opposite."""
+    a = normalize(a)
+    b = normalize(b)
+    k = cross(a, b)
+    s = norm(k)
+    c = dot(a, b)
+    opposite = (c < -1.0 + 1e-9) & (s < 1e-6)
+    first = abs(a[0]) < 0.9
+    helper = (1.0 if first else 0.0, 0.0 if first else 1.0, 0.0)
+    p = normalize(cross(a, helper))
+    d = 1.0 / max(1.0 + c, 1e-12)
+    kk = dot(k, k)
+    cx = _rodrigues_lanes(k, kk, d, (1.0, 0.0, 0.0), k[0])
+    cy = _rodrigues_lanes(k, kk, d, (0.0, 1.0, 0.0), k[1])
+    cz = _rodrigues_lanes(k, kk, d, (0.0, 0.0, 1.0), k[2])
+    hx = (2.0 * p[0] * p[0] - 1.0, 2.0 * p[1] * p[0], 2.0 * p[2] * p[0])
+    hy = (2.0 * p[0] * p[1], 2.0 * p[1] * p[1] - 1.0, 2.0 * p[2] * p[1])
+    hz = (2.0 * p[0] * p[2], 2.0 * p[1] * p[2], 2.0 * p[2] * p[2] - 1.0)
+    return (pick3(opposite, hx, cx), pick3(opposite, hy, cy), pick3(opposite, hz, cz))
+
+
+@jit()
+def _rodrigues_lanes(k: Vec3, kk: float, d: float, e: Vec3, k_j: float) -> Vec3:
+    """:func:`.vec._rodrigues_column` (the same operations): ``e + k x e + (k k_j - e kk) d``."""
+    ke = cross(k, e)
+    a = (e[0] + ke[0], e[1] + ke[1], e[2] + ke[2])
+    b = (k[0] * k_j - e[0] * kk, k[1] * k_j - e[1] * kk, k[2] * k_j - e[2] * kk)
+    return (a[0] + b[0] * d, a[1] + b[1] * d, a[2] + b[2] * d)
+
+
+@jit()
+def distal_frames_lanes(limb: Frame, mid: Vec3, end: Vec3) -> Frame:
+    """:func:`.decode.distal_frames` (``vec.frame_from_axes(end - mid, limb x, 2, 0, limb y)``,
+    the same bits) without branches: z along mid->end, x the limb's x made normal to it (its y
+    where that is parallel to z), y = z x x."""
+    p = normalize((end[0] - mid[0], end[1] - mid[1], end[2] - mid[2]))
+    s = add_scaled(limb[0], p, -dot(limb[0], p))
+    fallback = add_scaled(limb[1], p, -dot(limb[1], p))
+    s = normalize(pick3(norm(s) < 1e-9, fallback, s))
+    return (s, cross(p, s), p)

@@ -175,3 +175,43 @@ def test_a_ground_of_ones_own_goes_through_numpy(motions: dict) -> None:
         mine.step()
         reference.step()
         _assert_same_state(mine, reference, tick)
+
+
+def test_a_rows_ground_adaptation_does_not_depend_on_its_block(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """``ground_adapt_rows`` decodes and re-aims the legs by blocks of ``lanes.BLOCK`` rows on
+    the vector units (a row in a vector lane or in a loop's scalar remainder): three blocks
+    and five rows of the bench's walkers in one call, in two uneven chunks and row by row
+    give the same bits."""
+    import copy
+    import itertools
+
+    import ecs_anim.systems.ground_adapt as system_module
+    from ecs_anim.runtime.bench_scene import walkers_on_bumps
+    from ecs_anim.runtime.kernels import over_chunks
+    from ecs_anim.runtime.kernels.ground_adapt import ground_adapt_rows
+    from ecs_anim.runtime.kernels.lanes import BLOCK
+
+    sim, _ = walkers_on_bumps(3 * BLOCK + 5, crossing=False)
+    calls: list = []
+
+    def spy(kernel: object, n: int, *args: object, **options: int) -> None:
+        calls.append(copy.deepcopy((n, args)))
+        over_chunks(kernel, n, *args, **options)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(system_module, "over_chunks", spy)
+    for _ in range(8):
+        sim.step()
+    n, args = calls[-1]
+    assert n == 3 * BLOCK + 5
+
+    def run(bounds: list[int]) -> list[np.ndarray]:
+        a = copy.deepcopy(args)
+        for lo, hi in itertools.pairwise(bounds):
+            ground_adapt_rows(lo, hi, *a)
+        return [np.array(x) for x in a[1]] + [a[k] for k in (8, 9, 10, 11)]  # footprint, locked, pivot, ground_ref
+
+    whole = run([0, n])
+    for other in (run([0, BLOCK + 7, n]), run(list(range(n + 1)))):
+        for x, y in zip(whole, other, strict=True):
+            np.testing.assert_array_equal(x, y)
