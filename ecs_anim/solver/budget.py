@@ -119,11 +119,6 @@ STALL_MIN_MS = 1.0
 MARGIN_KEEPS_SOLVES = 0.5
 #: Dropped characters come back once the tick with them fits in this share of the budget.
 RESTORE_SHARE = 0.75
-#: ... or in this share of the room the model's floor leaves in the held share, if more
-#: (:func:`restore_within`): with a floor above the restore share (at 11,500 constrained walkers
-#: the ticks with none solved took 26-28 ms, over the 27.7 ms of a 33 ms budget's) nothing
-#: dropped came back, whatever the room.
-RESTORE_ROOM_SHARE = 0.5
 #: How far each measured tick moves the model (the weight of an exponential moving average).
 MODEL_SMOOTHING = 0.2
 #: Seconds a restored character's constraints take to fade back in.
@@ -316,13 +311,6 @@ def effective_caps(goals: TickGoals, goal_caps: I64, row_caps: I64, iterations: 
                           row_caps)
 
 
-def restore_within(restore_ms: float, target_ms: float, fixed_ms: float) -> float:
-    """The cost (ms) under which what was cut comes back: ``restore_ms``, or, if more, the
-    floor ``fixed_ms`` plus :data:`RESTORE_ROOM_SHARE` of what it leaves of ``target_ms`` (a
-    floor near the target would otherwise keep everything cut for good)."""
-    return max(restore_ms, fixed_ms + RESTORE_ROOM_SHARE * (target_ms - fixed_ms))
-
-
 def solve_capacity(model: SolverCostModel, capacity_now: float | None, target_ms: float,
                    restore_ms: float, candidates: int) -> float:
     """How many character solves a tick may make (a character solved every 4th tick counts a
@@ -331,9 +319,8 @@ def solve_capacity(model: SolverCostModel, capacity_now: float | None, target_ms
     kept but not solved this tick at ``model.ms_per_held`` each (all the candidates but those
     solved, or, when even every candidate at the slowest interval does not fit, those kept
     at it but not due: :func:`solve_intervals`); more than last tick's ``capacity_now`` (None:
-    none yet) only as far as ``restore_ms`` (<= ``target_ms``; or half the room above the
-    model's floor if more: :func:`restore_within`) allows, so that the measurements' noise
-    does not move it every tick."""
+    none yet) only as far as ``restore_ms`` (<= ``target_ms``) allows, so that the
+    measurements' noise does not move it every tick."""
     per_solve = model.ms_per_character + model.ms_per_iteration
     slowest = SOLVE_INTERVALS[-1]
     # below every candidate kept at the slowest interval, each solve keeps slowest - 1 held
@@ -351,8 +338,7 @@ def solve_capacity(model: SolverCostModel, capacity_now: float | None, target_ms
     most = fitting(target_ms)
     if capacity_now is None or capacity_now > most:
         return most
-    return max(capacity_now,
-               min(fitting(restore_within(restore_ms, target_ms, model.fixed_ms)), most))
+    return max(capacity_now, min(fitting(restore_ms), most))
 
 
 def capped_margin(factor: float, hold_ms: float, before_ms: float, after_ms: float) -> float:
@@ -595,7 +581,7 @@ class FrameBudget:
             return max((ms - model.fixed_ms) / model.ms_per_iteration, 0.0)
 
         most = allowed(hold_ms)
-        back = allowed(restore_within(restore_ms, hold_ms, model.fixed_ms))
+        back = allowed(restore_ms)
         self._allowance = most if self._allowance is None else min(most, max(self._allowance, back))
         return dataclasses.replace(
             settings, budget_ms=max(model.tick_ms(self._allowance), 1e-9),
@@ -839,5 +825,6 @@ def errors_by_priority(priority: F64, error: F64, orientation: NDArray[np.bool_]
 
 
 __all__ = ["BudgetCut", "FrameBudget", "PriorityError", "SolverCostModel", "SolverReport",
-           "capped_margin", "cut_to_budget", "due", "effective_caps", "errors_by_priority",
-           "ranked_rows", "restore_within", "solve_capacity", "solve_intervals", "uncut_need"]
+           "capped_margin", "cut_to_budget", "due", "effective_caps", "errors_by_priority", "ranked_rows",
+           "solve_capacity", "solve_intervals",
+           "uncut_need"]

@@ -25,7 +25,6 @@ from ecs_anim.solver.budget import (
     capped_margin,
     due,
     ranked_rows,
-    restore_within,
     solve_capacity,
     solve_intervals,
     uncut_need,
@@ -548,19 +547,3 @@ def test_the_margin_leaves_the_solves_half_of_a_typical_ticks():
                                               + calibrated.ms_per_iteration
                                               + 15 * calibrated.ms_per_held)
     assert kept[16] / 16 == pytest.approx(0.5 * typical, rel=0.1)
-
-
-def test_what_was_cut_comes_back_when_the_floor_is_above_the_restore_share():
-    """A floor (28 ms) between the restore share (27.7 ms of 31.35) and the held share: once
-    every character was dropped (capacity 0), nothing came back, whatever the room; now the
-    solves come back up to half of that room (``restore_within``), and no further until more
-    fits; with a floor well below, the restore share is as it was."""
-    model = SolverCostModel(ms_per_iteration=0.01, fixed_ms=28.0, ms_per_character=0.01,
-                            ms_per_held=0.0007)
-    per_kept = 0.02 + 15 * 0.0007
-    assert restore_within(27.66, 31.35, 28.0) == pytest.approx(28.0 + 0.5 * 3.35)
-    assert restore_within(27.66, 31.35, 10.0) == 27.66
-    back = solve_capacity(model, 0.0, 31.35, 27.66, 11500)
-    assert back == pytest.approx(0.5 * 3.35 / per_kept)
-    assert solve_capacity(model, back, 31.35, 27.66, 11500) == pytest.approx(back)
-    assert solve_capacity(model, None, 31.35, 27.66, 11500) == pytest.approx(3.35 / per_kept)
