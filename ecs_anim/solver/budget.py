@@ -22,11 +22,8 @@ larger, how much slower than usual the systems before the solve ran this tick (a
 by other processes slows the whole tick, and for a few ticks at a time). A tick beyond the margin
 moves the model's mean only up to it: the spread is the margin's, not counted twice. (The
 margin is the price of holding every tick on a shared machine: the rest of the tick is given
-1 / margin of what the systems before the solve leave of the budget; no larger a margin than
-leaves the solves :data:`MARGIN_KEEPS_SOLVES` of what a typical tick, without it, would make,
-:func:`capped_margin`: a margin on a floor near the budget would take the room of every solve,
-and dropping every character holds a slow tick no better.) When the tick would overrun it, in
-this order:
+1 / margin of what the systems before the solve leave of the budget.) When the tick would
+overrun it, in this order:
 
 1. the lowest-priority constraints, one priority at a time from the lowest, one iteration at a
    time down to one (:func:`cut_to_budget`): a cut goal no longer keeps its character's loop
@@ -111,12 +108,6 @@ STEADY_SHARE = 0.25
 #: The systems before the solve tell a slowed machine within the tick only when they take at
 #: least this (ms, smoothed): shorter, their own noise is larger than a slowdown.
 STALL_MIN_MS = 1.0
-#: The least share of the solves a typical tick (the model without its margin) would make that
-#: the margin may leave (:func:`capped_margin`): past it, the margin on ConstraintSolve's floor
-#: and the systems after it would take the room of every solve (at 11,500 constrained walkers,
-#: twice what fit 33 ms unbudgeted, its 1.2 put the tick with none solved at 33.4 ms: every
-#: character's constraints were dropped, where the ticks took 25-27 ms).
-MARGIN_KEEPS_SOLVES = 0.5
 #: Dropped characters come back once the tick with them fits in this share of the budget.
 RESTORE_SHARE = 0.75
 #: How far each measured tick moves the model (the weight of an exponential moving average).
@@ -339,23 +330,6 @@ def solve_capacity(model: SolverCostModel, capacity_now: float | None, target_ms
     if capacity_now is None or capacity_now > most:
         return most
     return max(capacity_now, min(fitting(restore_ms), most))
-
-
-def capped_margin(factor: float, hold_ms: float, before_ms: float, after_ms: float) -> float:
-    """The margin ``factor`` on the rest of the tick (``after_ms`` at 1: the model's fixed part
-    after the systems before the solve, which took ``before_ms``), no larger than leaves the
-    solves :data:`MARGIN_KEEPS_SOLVES` of the room a typical tick (factor 1) leaves them in
-    ``hold_ms``: with every solve ``f`` times dearer, the room ``(hold_ms - before_ms - f
-    after_ms) / f`` is at least that share of ``hold_ms - before_ms - after_ms`` for ``f`` up
-    to ``R / (after_ms + share (R - after_ms))``, ``R = hold_ms - before_ms``. Not below 1;
-    ``factor`` when a typical tick leaves no room (nothing the solve cuts holds it). So the
-    margin guards the slow ticks with the solves it can spare, and when even every character
-    dropped would not hold a slow tick, the solves are sized for a typical one, not all
-    dropped; unchanged while the floor is far from the budget."""
-    room = hold_ms - before_ms
-    if room <= after_ms:
-        return factor
-    return max(1.0, min(factor, room / (after_ms + MARGIN_KEEPS_SOLVES * (room - after_ms))))
 
 
 def _tier_sizes(nearest: float, candidates: int) -> list[int]:
@@ -606,8 +580,6 @@ class FrameBudget:
         restored ones' fading in (``owner`` (m,) their store rows, ``priority`` (m,),
         ``pelvis_in_world`` (n, 3) m): :func:`solve_capacity`, :func:`ranked_rows` and
         :func:`solve_intervals` decide by the model (the settings' own first)."""
-        if settings.cost_model is None and settings.budget_ms is not None:
-            self._cap_margin(settings)
         model = settings.cost_model or self.model
         self.held = np.zeros(0, np.int64)
         self.holding = self.probing = False
@@ -648,19 +620,6 @@ class FrameBudget:
         solved_now = np.zeros(self.presence.size)
         solved_now[candidate[now]] = 1.0
         return weight * (self.presence * solved_now)[owner]
-
-    def _cap_margin(self, settings: SolverSettings) -> None:
-        """This tick's :attr:`margin_factor` and :attr:`model` with the margin no larger than
-        leaves the solves their share of a typical tick's (:func:`capped_margin`)."""
-        if self.calibrated is None:
-            return
-        after_ms = max(self.calibrated.fixed_ms - self._tick_usual_before_ms, 0.0)
-        factor = capped_margin(self.margin_factor, _held_and_restore_ms(settings)[0],
-                               self._tick_before_ms, after_ms)
-        if factor < self.margin_factor:
-            self.margin_factor = factor
-            self.model = self.calibrated.with_margin(self._tick_before_ms,
-                                                     self._tick_usual_before_ms, factor)
 
     def _every_candidate_or(self, capacity: float, candidates: int, settings: SolverSettings
                             ) -> float:
@@ -825,6 +784,6 @@ def errors_by_priority(priority: F64, error: F64, orientation: NDArray[np.bool_]
 
 
 __all__ = ["BudgetCut", "FrameBudget", "PriorityError", "SolverCostModel", "SolverReport",
-           "capped_margin", "cut_to_budget", "due", "effective_caps", "errors_by_priority", "ranked_rows",
+           "cut_to_budget", "due", "effective_caps", "errors_by_priority", "ranked_rows",
            "solve_capacity", "solve_intervals",
            "uncut_need"]
