@@ -61,8 +61,10 @@ from ecs_anim.runtime.kernels.goals import tick_goals as _compiled_tick_goals
 from ecs_anim.runtime.kernels.goals import tick_goals as tick_goals
 from ecs_anim.runtime.kernels.joint_speed import (
     goal_steps,
+    limit_again,
     limit_motion,
     pack,
+    put_back,
     rows_differ,
     step_shares,
 )
@@ -143,6 +145,8 @@ class Steps(NamedTuple):
     pack: Callable[[NormalizedPoses], NDArray[np.float64]]
     goal_steps: Callable[..., NDArray[np.float64]]
     rows_differ: Callable[..., NDArray[np.bool_]]
+    limit_again: Callable[..., tuple[NormalizedPoses, DecodedPose]]
+    put_back: Callable[..., None]
 
 
 def steps(compiled: bool) -> Steps:
@@ -151,11 +155,12 @@ def steps(compiled: bool) -> Steps:
     if compiled:
         return Steps(tick_goals, solve, constraint_errors, errors_on_result, _centres,
                      target_points, decode, _decode_some, step_shares, limit_motion, pack,
-                     goal_steps, rows_differ)
+                     goal_steps, rows_differ, limit_again, put_back)
     return Steps(NUMPY_STEPS.goals, NUMPY_STEPS.solve, NUMPY_STEPS.errors,
                  NUMPY_STEPS.result_errors, numpy_centres, NUMPY_STEPS.targets, numpy_decode,
                  _numpy_decode_some, numpy_speed.step_shares, numpy_speed.limit_motion,
-                 numpy_speed.pack, numpy_speed.goal_steps, numpy_speed.rows_differ)
+                 numpy_speed.pack, numpy_speed.goal_steps, numpy_speed.rows_differ,
+                 numpy_speed.limit_again, numpy_speed.put_back)
 
 
 class ConstraintSolve(System):
@@ -336,7 +341,7 @@ class ConstraintSolve(System):
                               of(st.clip_positions), of(st.last_clip_positions),
                               of(st.last_pose_positions), self._goal_steps(goals, step))
         return solve_within_speed(SpeedSteps(step.solve, step.shares, step.limit_motion,
-                                             step.decode), before,
+                                             step.limit_again, step.put_back), before,
                                   float(settings.max_joint_speed_m_s or np.inf) * self.sim.dt,
                                   poses, lengths, goals, masses, com_fraction, settings, decoded,
                                   in_place)

@@ -14,6 +14,7 @@ The compiled :func:`ecs_anim.runtime.kernels.goals.tick_goals` mirrors this nump
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -124,6 +125,15 @@ def target_points(table: ConstraintTable, unconstrained: DecodedPose, previous: 
     return out
 
 
+def other_surface_rows(table: ConstraintTable) -> I64:
+    """The position constraints of ``table`` whose target is a point of *another* character's
+    body part that has a capsule (:func:`on_other_surfaces` moves their targets)."""
+    out: I64 = np.flatnonzero((table.target_kind != TARGET_WORLD)
+                              & (table.target_row != table.owner) & (table.kind == KIND_POSITION)
+                              & (SEGMENT_CAPSULE[table.target_segment] >= 0))
+    return out
+
+
 def on_other_surfaces(table: ConstraintTable, targets: F64, lengths: F64,
                       unconstrained: DecodedPose, previous: DecodedPose | None) -> F64:
     """``targets`` (m, 3) with every position constraint's target on *another* character's
@@ -135,10 +145,28 @@ def on_other_surfaces(table: ConstraintTable, targets: F64, lengths: F64,
     on it, not in it; the errors, measured against these targets, are then to the surface.
     The capsule is read from the other character's posture of the last tick (as the target
     point: :func:`target_points`). Targets on a part without a capsule, on the constrained
-    character itself, in the world, and other kinds are left. A new array when any moves."""
-    other = np.flatnonzero((table.target_kind != TARGET_WORLD) & (table.target_row != table.owner)
-                           & (table.kind == KIND_POSITION)
-                           & (SEGMENT_CAPSULE[table.target_segment] >= 0))
+    character itself, in the world, and other kinds are left. A new array when any moves.
+
+    Once the tick's kernels are in memory (a simulation was built:
+    :func:`ecs_anim.runtime.kernels.load_kernels`) their twin runs
+    (:func:`ecs_anim.runtime.kernels.goals.on_other_surfaces`: ConstraintSolve's shell calls
+    this function on either path); :func:`numpy_on_other_surfaces` is the reference."""
+    other = other_surface_rows(table)
+    if other.size == 0:
+        return targets
+    kernels = sys.modules.get("ecs_anim.runtime.kernels")
+    if kernels is not None and kernels.load_figures:  # (loaded: nothing compiles here)
+        from ecs_anim.runtime.kernels.goals import on_other_surfaces as compiled
+
+        out: F64 = compiled(table, targets, lengths, unconstrained, previous, other)
+        return out
+    return numpy_on_other_surfaces(table, targets, lengths, unconstrained, previous)
+
+
+def numpy_on_other_surfaces(table: ConstraintTable, targets: F64, lengths: F64,
+                            unconstrained: DecodedPose, previous: DecodedPose | None) -> F64:
+    """:func:`on_other_surfaces` in numpy: the reference of its compiled twin."""
+    other = other_surface_rows(table)
     if other.size == 0:
         return targets
     rows, owner = table.target_row[other], table.owner[other]

@@ -260,22 +260,6 @@ def contact_goals(goals: TickGoals, rows: I64) -> TickGoals:
         held=goals.held[keep])
 
 
-class SpeedSteps(NamedTuple):
-    """The computations :func:`solve_within_speed` is made of, each with the signature of its
-    numpy reference: ``solve`` (:func:`ecs_anim.solver.shell.solve`), ``shares``
-    (:func:`step_shares`), ``limit`` (:func:`limit_motion`) and ``decode``
-    (:func:`ecs_anim.core.normalized.decode`). :data:`NUMPY_SPEED_STEPS` are the references;
-    ConstraintSolve runs the compiled ones."""
-
-    solve: Callable[..., tuple[NormalizedPoses, I64, DecodedPose]]
-    shares: Callable[..., F64]
-    limit: Callable[..., tuple[NormalizedPoses, B8]]
-    decode: Callable[[NormalizedPoses, F64], DecodedPose]
-
-
-NUMPY_SPEED_STEPS = SpeedSteps(solve, step_shares, limit_motion, decode)
-
-
 class MotionBefore(NamedTuple):
     """What :func:`solve_within_speed` compares this tick's solve with, for the rows it solves:
     ``clip_now`` and ``clip_before`` (r, N_VALUES) the motion's segments this tick and the
@@ -294,6 +278,50 @@ class MotionBefore(NamedTuple):
     goal_steps_m: F64
 
 
+def limit_again(limited: NormalizedPoses, rows: I64, before: MotionBefore, lengths: F64,
+                planted: B8, max_step_m: float) -> tuple[NormalizedPoses, DecodedPose]:
+    """The characters ``rows`` (local, sorted) that :func:`limit_motion` held back, taken out of
+    ``limited`` (r,) and limited once more: the joints' move is not linear in the share
+    (segments turn), so measured on the limited pose (decoded on ``lengths`` (r, N_LENGTHS)),
+    the share (:func:`step_shares`, ``before`` and ``planted`` (r, 2) of all r) is taken once
+    more of what is left over (a turn's share composes). Returns their poses (len(rows),), new
+    arrays, and those poses decoded."""
+    part = limited.take(rows)
+    closer = step_shares(decode(part, lengths[rows]).positions, before.clip_positions[rows],
+                         before.pose_positions_before[rows], before.clip_positions_before[rows],
+                         planted[rows], max_step_m, before.goal_steps_m[rows])
+    part, _ = limit_motion(part, before.clip_now[rows], before.clip_before[rows],
+                           before.pose_before[rows], planted[rows], closer)
+    return part, decode(part, lengths[rows])
+
+
+def put_back(poses: NormalizedPoses, decoded: DecodedPose, rows: I64, part: NormalizedPoses,
+             part_decoded: DecodedPose) -> None:
+    """``poses`` and ``decoded`` (r,) with their ``rows`` replaced by ``part`` and
+    ``part_decoded`` (len(rows),), in place."""
+    for name, value in part.arrays().items():
+        getattr(poses, name)[rows] = value
+    for f in fields(DecodedPose):
+        getattr(decoded, f.name)[rows] = getattr(part_decoded, f.name)
+
+
+class SpeedSteps(NamedTuple):
+    """The computations :func:`solve_within_speed` is made of, each with the signature of its
+    numpy reference: ``solve`` (:func:`ecs_anim.solver.shell.solve`), ``shares``
+    (:func:`step_shares`), ``limit`` (:func:`limit_motion`), ``again`` (:func:`limit_again`)
+    and ``put`` (:func:`put_back`). :data:`NUMPY_SPEED_STEPS` are the references;
+    ConstraintSolve runs the compiled ones."""
+
+    solve: Callable[..., tuple[NormalizedPoses, I64, DecodedPose]]
+    shares: Callable[..., F64]
+    limit: Callable[..., tuple[NormalizedPoses, B8]]
+    again: Callable[..., tuple[NormalizedPoses, DecodedPose]]
+    put: Callable[..., None]
+
+
+NUMPY_SPEED_STEPS = SpeedSteps(solve, step_shares, limit_motion, limit_again, put_back)
+
+
 def solve_within_speed(steps: SpeedSteps, before: MotionBefore, max_step_m: float,
                        poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64,
                        com_fraction: F64, settings: SolverSettings,
@@ -301,10 +329,11 @@ def solve_within_speed(steps: SpeedSteps, before: MotionBefore, max_step_m: floa
                        ) -> tuple[NormalizedPoses, I64, DecodedPose]:
     """The solve of ``goals`` (the arguments from ``poses`` on are ``steps.solve``'s), then
     :func:`limit_motion` by the :func:`step_shares` that keep every joint's step within
-    ``max_step_m`` (m) of the motion's own (plus its fastest goal's step); the characters held back are solved again on their
-    limited pose with their feet's goals alone (:func:`contact_goals`: the feet re-planted, the
-    centre of mass back). Returns what the solve does: the poses, the iterations each character
-    used (both solves) and the decoded result."""
+    ``max_step_m`` (m) of the motion's own (plus its fastest goal's step); the characters held
+    back are limited once more (:func:`limit_again`) and solved again on their limited pose
+    with their feet's goals alone (:func:`contact_goals`: the feet re-planted, the centre of
+    mass back). Returns what the solve does: the poses, the iterations each character used
+    (both solves) and the decoded result."""
     solved, iterations, result = steps.solve(poses, lengths, goals, masses, com_fraction, settings,
                                              decoded, in_place)
     share = steps.shares(result.positions, before.clip_positions, before.pose_positions_before,
@@ -315,27 +344,17 @@ def solve_within_speed(steps: SpeedSteps, before: MotionBefore, max_step_m: floa
     rows = np.flatnonzero(held)
     if rows.size == 0:
         return limited, iterations, result
-    part = limited.take(rows)
-    # The joints' move is not linear in the share (segments turn): measured on the limited
-    # pose, the share is taken once more of what is left over (a turn's share composes).
-    closer = steps.shares(steps.decode(part, lengths[rows]).positions,
-                          before.clip_positions[rows], before.pose_positions_before[rows],
-                          before.clip_positions_before[rows], goals.in_contact[rows], max_step_m,
-                          before.goal_steps_m[rows])
-    part, _ = steps.limit(part, before.clip_now[rows], before.clip_before[rows],
-                          before.pose_before[rows], goals.in_contact[rows], closer)
+    part, part_decoded = steps.again(limited, rows, before, lengths, goals.in_contact, max_step_m)
     again, more, part_decoded = steps.solve(
         part, lengths[rows], contact_goals(goals, rows), masses[rows], com_fraction[rows],
-        settings, steps.decode(part, lengths[rows]), True)
-    for name, value in again.arrays().items():
-        getattr(limited, name)[rows] = value
-    for f in fields(DecodedPose):
-        getattr(result, f.name)[rows] = getattr(part_decoded, f.name)
+        settings, part_decoded, True)
+    steps.put(limited, result, rows, again, part_decoded)
     iterations = iterations.copy()
     iterations[rows] += more
     return limited, iterations, result
 
 
 __all__ = ["NUMPY_SPEED_STEPS", "N_VALUES", "MotionBefore", "SpeedSteps", "contact_goals",
-           "from_pelvis", "goal_steps", "limit_motion", "pack", "rows_differ", "solve_within_speed",
+           "from_pelvis", "goal_steps", "limit_again", "limit_motion", "pack", "put_back",
+           "rows_differ", "solve_within_speed",
            "step_shares"]

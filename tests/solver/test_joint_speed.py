@@ -9,6 +9,7 @@ import pytest
 import ecs_anim.systems.constraint_solve as system
 from conftest import SCENARIOS_DIR
 from ecs_anim.core.errors import UsageError
+from ecs_anim.core.morphology import Morphology
 from ecs_anim.core.normalized import decode as numpy_decode
 from ecs_anim.core.rotations import quat_between, quat_conj, quat_mul
 from ecs_anim.core.skeleton import JOINT_INDEX as J
@@ -21,6 +22,8 @@ from ecs_anim.solver import shell as solver_shell
 from ecs_anim.solver.goals import TickGoals
 from ecs_anim.solver.shell import MAX_JOINT_SPEED_M_S, SolverSettings
 from support.solve import random_poses
+
+ADULT = Morphology.preset("adult_male")
 
 
 def packed_random(rng, n):
@@ -71,6 +74,46 @@ def test_compiled_shares_equal_numpy():
     np.testing.assert_allclose(compiled.step_shares(*args), expected, rtol=0, atol=1e-12)
     assert (expected[:5] == 1.0).all() and (expected[-3:] == 1.0).all()
     assert (expected[5:-3] < 1.0).sum() > n // 2
+
+
+def test_compiled_limit_again_and_put_back_equal_numpy():
+    """The held rows taken out, shared and limited once more and decoded (compiled
+    ``again_rows`` between two decodes), then put back (``put_rows``): the numpy reference's to
+    1e-9 m, rows with no last tick, planted legs and a goal's step included."""
+    rng = np.random.default_rng(41)
+    n = 40
+    poses = random_poses(rng, n)
+    lengths = np.tile(np.asarray(ADULT.lengths), (n, 1)) * rng.uniform(0.8, 1.2, (n, 1))
+    clip_now, clip_before, pose_before = (packed_random(rng, n) for _ in range(3))
+    pose_before[:3] = 0.0  # no last tick
+    clip_positions = numpy_decode(random_poses(rng, n), lengths).positions
+    before = reference.MotionBefore(
+        clip_now, clip_before, pose_before, clip_positions,
+        clip_positions + rng.normal(scale=0.03, size=clip_positions.shape),
+        clip_positions + rng.normal(scale=0.1, size=clip_positions.shape),
+        np.where(rng.uniform(size=n) < 0.3, rng.uniform(0.0, 0.2, n), 0.0))
+    planted = rng.uniform(size=(n, 2)) < 0.4
+    rows = np.sort(rng.choice(n, 17, replace=False))
+    rows[0] = 1
+    expected, expected_decoded = reference.limit_again(poses, rows, before, lengths, planted, 0.05)
+    got, got_decoded = compiled.limit_again(poses.take(np.arange(n)), rows, before, lengths,
+                                            planted, 0.05)
+    for name, value in expected.arrays().items():
+        np.testing.assert_allclose(getattr(got, name), value, rtol=0, atol=1e-9, err_msg=name)
+    for name in ("positions", "pelvis2world", "thorax2world", "head2world", "leg2world",
+                 "arm2world"):
+        np.testing.assert_allclose(getattr(got_decoded, name), getattr(expected_decoded, name),
+                                   rtol=0, atol=1e-9, err_msg=name)
+    assert not np.allclose(expected.thorax, poses.thorax[rows])  # (limited: something moved)
+    whole, whole_decoded = poses.take(np.arange(n)), numpy_decode(poses, lengths)
+    compiled_whole, compiled_decoded = poses.take(np.arange(n)), numpy_decode(poses, lengths)
+    reference.put_back(whole, whole_decoded, rows, expected, expected_decoded)
+    compiled.put_back(compiled_whole, compiled_decoded, rows, expected, expected_decoded)
+    for name, value in whole.arrays().items():
+        np.testing.assert_array_equal(getattr(compiled_whole, name), value, err_msg=name)
+    np.testing.assert_array_equal(compiled_decoded.positions, whole_decoded.positions)
+    np.testing.assert_array_equal(compiled_decoded.arm2world, whole_decoded.arm2world)
+    np.testing.assert_array_equal(whole.head[rows], expected.head)
 
 
 def test_compiled_rows_differ_equals_numpy():
@@ -366,6 +409,8 @@ def test_the_fight_with_numpy_steps_ends_as_with_the_compiled_ones(monkeypatch, 
     monkeypatch.setattr(system, "pack", reference.pack)
     monkeypatch.setattr(system, "goal_steps", reference.goal_steps)
     monkeypatch.setattr(system, "rows_differ", reference.rows_differ)
+    monkeypatch.setattr(system, "limit_again", reference.limit_again)
+    monkeypatch.setattr(system, "put_back", reference.put_back)
     monkeypatch.setattr(system, "errors_on_result", numpy.result_errors)
     monkeypatch.setattr(system, "decode", numpy_decode)
     expected = run_positions()

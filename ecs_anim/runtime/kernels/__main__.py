@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import logging
 import sys
+from typing import TYPE_CHECKING
 
 from ecs_anim.runtime.kernels import (
     cache_dir,
@@ -24,6 +25,9 @@ from ecs_anim.runtime.kernels import (
     load_kernels,
 )
 from ecs_anim.runtime.kernels.handover import spins_per_second
+
+if TYPE_CHECKING:
+    from ecs_anim.runtime.simulation import Simulation
 
 
 def compile_every_kernel() -> None:
@@ -45,7 +49,11 @@ def compile_separation() -> None:
     :mod:`ecs_anim.runtime.kernels.joint_speed` (into the cache): two ticks of two walkers
     started side by side 0.4 m apart, one reaching out under the solver's speed bound (on by
     default), 5 cm in each other, which CollisionSeparate pushes apart (started 0.15 m apart,
-    neither body could move: ``push_rows`` was not compiled, and the fight compiled it mid-run)."""
+    neither body could move: ``push_rows`` was not compiled, and the fight compiled it mid-run).
+    Then the bound's second pass on the characters it held back (no one here: on no row) and
+    the targets on the other walker's body moved onto its surface (this process ticks on numpy
+    there: :func:`ecs_anim.solver.goals.on_other_surfaces` runs the kernel once they are
+    loaded)."""
     from ecs_anim.components import MotionPlayer, Placement
     from ecs_anim.core.morphology import Morphology
     from ecs_anim.io.importing import import_bvh
@@ -61,10 +69,36 @@ def compile_separation() -> None:
                                  Placement((0.0, 0.4 * i))) for i in range(2)]
             sim.add_constraint(walkers[0], "reach", "wrist_r", 1.0, Activation(0.0, 1e9),
                                (0.5, -0.5, 1.2))
+            sim.add_constraint(walkers[1], "touch", "wrist_l", 1.0, Activation(0.0, 1e9),
+                               target_entity=walkers[0], target_point="spine_middle")
             sim.step()
             sim.step()
+            compile_speed_and_surfaces(sim)
     finally:
         log.disabled = was_disabled
+
+
+def compile_speed_and_surfaces(sim: Simulation) -> None:
+    """Compile :func:`ecs_anim.runtime.kernels.joint_speed.again_rows` and ``put_rows`` (on no
+    row, with the arrays' types of a real call) and
+    :func:`ecs_anim.runtime.kernels.goals.surface_rows` (on ``sim``'s constraints)."""
+    import numpy as np
+
+    from ecs_anim.core.skeleton import N_JOINTS, N_LENGTHS
+    from ecs_anim.runtime.kernels import goals, joint_speed
+    from ecs_anim.runtime.kernels.decode import decode
+    from ecs_anim.runtime.kernels.playback import empty_poses
+    from ecs_anim.solver.joint_speed import N_VALUES, MotionBefore
+
+    none, values, joints = np.zeros(0, np.int64), np.zeros((0, N_VALUES)), np.zeros((0, N_JOINTS, 3))
+    poses = empty_poses(0)
+    before = MotionBefore(values, values, values, joints, joints, joints, np.zeros(0))
+    part, part_decoded = joint_speed.limit_again(poses, none, before, np.zeros((0, N_LENGTHS)),
+                                                 np.zeros((0, 2), bool), 0.1)
+    joint_speed.put_back(poses, part_decoded, none, part, part_decoded)
+    decoded = decode(sim.store.poses, sim.store.lengths)
+    goals.on_other_surfaces(sim.constraints, sim.constraints.target_world.copy(),
+                            sim.store.lengths, decoded, decoded)
 
 
 def compile_solver() -> None:

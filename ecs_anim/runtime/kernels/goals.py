@@ -36,7 +36,13 @@ from ecs_anim.motion.constraint_table import (
 )
 from ecs_anim.runtime.kernels import LIGHT_ROWS_PER_THREAD, over_chunks
 from ecs_anim.runtime.kernels.decode import DecodedArrays
-from ecs_anim.runtime.kernels.solve_points import Tables, point_position, segment_frame, tables
+from ecs_anim.runtime.kernels.solve_points import (
+    Tables,
+    plain_point,
+    point_position,
+    segment_frame,
+    tables,
+)
 from ecs_anim.runtime.kernels.vec import (
     F64,
     Vec3,
@@ -53,7 +59,8 @@ from ecs_anim.runtime.kernels.vec import (
     sub,
     to_world,
 )
-from ecs_anim.solver.goals import CONTACT_PRIORITY, TickGoals
+from ecs_anim.solver.capsules import CAPSULE_JOINTS, CAPSULE_SPAN, RADIUS_WEIGHTS, SEGMENT_CAPSULE
+from ecs_anim.solver.goals import CONTACT_PRIORITY, TickGoals, other_surface_rows
 
 I64 = NDArray[np.int64]
 B8 = NDArray[np.bool_]
@@ -346,6 +353,124 @@ def target_points(table: ConstraintTable, unconstrained: DecodedPose,
                     np.ascontiguousarray(table.target_offset, dtype=np.float64), dec,
                     dec if previous is None else _arrays(previous), previous is not None,
                     TABLES, out, rows_per_thread=LIGHT_ROWS_PER_THREAD)
+    return out
+
+
+class Capsules(NamedTuple):
+    """:mod:`ecs_anim.solver.capsules`' tables the surface kernel reads (passed as an argument:
+    numba's cache keeps another file's module constants as they were when compiled):
+    ``joints`` (N_CAPSULES, 2), ``span`` (N_CAPSULES, 2), ``of_segment`` (N_LENGTHS,),
+    ``radius_weights`` (N_CAPSULES, N_LENGTHS)."""
+
+    joints: I64
+    span: F64
+    of_segment: I64
+    radius_weights: F64
+
+
+CAPSULE_TABLES = Capsules(np.ascontiguousarray(CAPSULE_JOINTS, dtype=np.int64),
+                          np.ascontiguousarray(CAPSULE_SPAN, dtype=np.float64),
+                          np.ascontiguousarray(SEGMENT_CAPSULE, dtype=np.int64),
+                          np.ascontiguousarray(RADIUS_WEIGHTS, dtype=np.float64))
+
+
+@jit(inline="always")
+def _nan_max(a: float, b: float) -> float:
+    """``np.maximum(a, b)`` (NaN if ``a`` is)."""
+    return a if (a != a or a > b) else b
+
+
+@jit(inline="always")
+def _radius(lengths: F64, row: int, capsule: int, caps: Capsules) -> float:
+    """:func:`ecs_anim.solver.capsules.capsule_radii` of character ``row``'s ``capsule``."""
+    total = 0.0
+    for k in range(lengths.shape[1]):
+        total += lengths[row, k] * caps.radius_weights[capsule, k]
+    return total
+
+
+@jit(inline="always")
+def _on_surface(target: Vec3, axis_a: Vec3, axis_b: Vec3, radius: float, effector: Vec3) -> Vec3:
+    """Mirrors :func:`ecs_anim.solver.capsules.surface_points` for one target (NaN as there)."""
+    ab = sub(axis_b, axis_a)
+    t = dot(sub(target, axis_a), ab) / _nan_max(dot(ab, ab), 1e-18)
+    if t < 0.0:
+        t = 0.0
+    elif t > 1.0:
+        t = 1.0
+    on_axis = add(axis_a, scale(ab, t))
+    ab_len = norm(ab)
+    along = (ab[0] / _nan_max(ab_len, 1e-12), ab[1] / _nan_max(ab_len, 1e-12),
+             ab[2] / _nan_max(ab_len, 1e-12))
+    way = sub(effector, on_axis)
+    if t > 0.0 and t < 1.0:
+        way = sub(way, scale(along, dot(way, along)))
+    length = norm(way)
+    if length > 1e-9:
+        m = _nan_max(length, 1e-12)
+        direction = (way[0] / m, way[1] / m, way[2] / m)
+    else:  # the effector on the axis: any direction square to it
+        other = (1.0, 0.0, 0.0) if abs(along[0]) < 0.9 else (0.0, 1.0, 0.0)
+        square = sub(other, scale(along, dot(other, along)))
+        m = _nan_max(norm(square), 1e-12)
+        direction = (square[0] / m, square[1] / m, square[2] / m)
+    return add(on_axis, scale(direction, radius))
+
+
+@jit(nogil=True)
+def surface_rows(lo: int, hi: int, other: I64, owner: I64, target_row: I64, target_segment: I64,
+                 segment: I64, lengths: F64, now: F64, source: F64, previous: F64,
+                 has_previous: bool, caps: Capsules, t: Tables, out: F64) -> None:
+    """``out[other[i]]`` ((m, 3), m) for ``i`` in ``lo..hi-1`` where the result is finite (else
+    left): the position constraint ``other[i]``'s target (as ``out`` holds it) moved onto the
+    surface of the capsule of another character's part it lies on. The capsule's axis from
+    ``source`` (the posture of the last tick, this tick's without one), the way out toward the
+    proximal joint of the constrained point's segment on ``previous`` where finite, else on
+    ``now`` (all (n, N_JOINTS, 3) world m). Mirrors
+    :func:`ecs_anim.solver.goals.on_other_surfaces`."""
+    for i in range(lo, hi):
+        j = other[i]
+        row, own = target_row[j], owner[j]
+        capsule = caps.of_segment[target_segment[j]]
+        a = load3(source[row, caps.joints[capsule, 0]])
+        b = load3(source[row, caps.joints[capsule, 1]])
+        axis_a = add(a, scale(sub(b, a), caps.span[capsule, 0]))
+        axis_b = add(a, scale(sub(b, a), caps.span[capsule, 1]))
+        seg = segment[j]
+        p, q = t.seg_proximal[seg], t.seg_distal[seg]
+        base = plain_point(now, own, p, q, 0.0)
+        was = base
+        if has_previous:
+            before = plain_point(previous, own, p, q, 0.0)
+            was = finite_or(before, base)
+        point_capsule = caps.of_segment[seg]
+        radius = _radius(lengths, row, capsule, caps) + (
+            _radius(lengths, own, point_capsule, caps) if point_capsule >= 0 else 0.0)
+        moved = _on_surface(load3(out[j]), axis_a, axis_b, radius, was)
+        if (math.isfinite(moved[0]) and math.isfinite(moved[1])
+                and math.isfinite(moved[2])):
+            store3(out[j], moved)
+
+
+def on_other_surfaces(table: ConstraintTable, targets: F64, lengths: F64,
+                      unconstrained: DecodedPose, previous: DecodedPose | None,
+                      other: I64 | None = None) -> F64:
+    """Compiled :func:`ecs_anim.solver.goals.on_other_surfaces`: the same arguments and result
+    (``other``: :func:`~ecs_anim.solver.goals.other_surface_rows` of ``table`` when known)."""
+    if other is None:
+        other = other_surface_rows(table)
+    if other.size == 0:
+        return targets
+    out = np.array(targets, dtype=np.float64, order="C")
+    now = np.ascontiguousarray(unconstrained.positions, dtype=np.float64)
+    before = now if previous is None else np.ascontiguousarray(previous.positions,
+                                                               dtype=np.float64)
+    over_chunks(surface_rows, other.size, other, np.ascontiguousarray(table.owner),
+                np.ascontiguousarray(table.target_row), np.ascontiguousarray(table.target_segment),
+                np.ascontiguousarray(table.segment),
+                np.ascontiguousarray(lengths, dtype=np.float64), now, before, before,
+                previous is not None, CAPSULE_TABLES, TABLES, out,
+                rows_per_thread=LIGHT_ROWS_PER_THREAD)
     return out
 
 

@@ -1,10 +1,11 @@
 """Compiled :mod:`ecs_anim.solver.joint_speed`: each segment's correction (its turn or shift
 away from the motion's own) going only a share of its way from the last tick's (no pops).
 
-:func:`step_shares`, :func:`limit_motion`, :func:`pack`, :func:`goal_steps` and :func:`rows_differ`
-take the arguments of their numpy references and give the same results (to 1e-9); the
-per-character loops are :func:`share_rows`, :func:`limit_rows`, :func:`pack_rows`,
-:func:`goal_steps_rows` and :func:`differing_rows`.
+:func:`step_shares`, :func:`limit_motion`, :func:`limit_again`, :func:`put_back`, :func:`pack`,
+:func:`goal_steps` and :func:`rows_differ` take the arguments of their numpy references and give
+the same results (to 1e-9); the per-character loops are :func:`share_rows`, :func:`limit_rows`,
+:func:`again_rows`, :func:`put_rows`, :func:`pack_rows`, :func:`goal_steps_rows` and
+:func:`differing_rows`.
 Values are packed as the reference's: frames 0-5 (legs, arms, thorax, head) as quaternions,
 directions 0-4 (feet, hands, neck), shifts 0-12 (leg fractions, arm fractions, the spine's
 three points).
@@ -17,14 +18,24 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from ecs_anim.core.normalized import NormalizedPoses
+from ecs_anim.core.normalized import DecodedPose, NormalizedPoses
 from ecs_anim.core.skeleton import N_JOINTS
 from ecs_anim.runtime.kernels import over_chunks
-from ecs_anim.runtime.kernels.decode import PoseArrays, pose_arrays
+from ecs_anim.runtime.kernels.decode import (
+    DecodedArrays,
+    PoseArrays,
+    decode_rows,
+    decoded_arrays,
+    decoded_pose,
+    empty_decoded,
+    pose_arrays,
+    spine_scratch,
+)
 from ecs_anim.runtime.kernels.vec import (
     F64,
     Quat,
     Vec3,
+    copy_row,
     cross,
     dot,
     jit,
@@ -44,6 +55,7 @@ from ecs_anim.solver.joint_speed import (
     N_VALUES,
     SHIFT_GROUP,
     SHIFTS_AT,
+    MotionBefore,
 )
 
 B8 = NDArray[np.bool_]
@@ -199,6 +211,51 @@ def _scaled(t: Vec3, share: float) -> Quat:
     return quat_of((t[0] * share, t[1] * share, t[2] * share))
 
 
+@jit(inline="always")
+def _limit_row(pose: PoseArrays, p: int, c: int, clip_now: F64, clip_before: F64,
+               pose_before: F64, planted: B8, share: float, frame_group: I64,
+               direction_group: I64, shift_group: I64, need: F64, held: B8) -> None:
+    """Row ``p`` of ``pose`` limited in place by the row ``c`` of the other arrays (the share
+    ``share``); ``held[c]`` whether anything was held back, ``need[c]`` scratch."""
+    first = False
+    for i in range(N_VALUES):
+        first = first or pose_before[c, i] != 0.0
+    held[c] = False
+    for g in range(N_GROUPS):
+        need[c, g] = min(share, 1.0) if first else 1.0
+    for s in range(2):  # the legs' groups are 0 and 1
+        if planted[c, s]:
+            need[c, s] = 1.0
+    for g in range(N_GROUPS):
+        held[c] = held[c] or need[c, g] < 1.0
+    if not held[c]:
+        return
+    for k in range(_N_FRAMES):
+        part = need[c, frame_group[k]]
+        if part < 1.0:
+            at = 4 * k
+            now_clip = load4(clip_now[c, at:at + 4])
+            was = quat_mul(load4(pose_before[c, at:at + 4]), conj(load4(clip_before[c, at:at + 4])))
+            now = quat_mul(_frame(pose, p, k), conj(now_clip))
+            turn = _scaled(_frame_turn(was, now), part)
+            _set_frame(pose, p, k, quat_mul(quat_mul(turn, was), now_clip))
+    for k in range(_N_DIRECTIONS):
+        part = need[c, direction_group[k]]
+        if part < 1.0:
+            at = DIRECTIONS_AT + 3 * k
+            now_clip3 = load3(clip_now[c, at:at + 3])
+            was = quat_between(load3(clip_before[c, at:at + 3]), load3(pose_before[c, at:at + 3]))
+            now = quat_between(now_clip3, _direction(pose, p, k))
+            turn = _scaled(_frame_turn(was, now), part)
+            _set_direction(pose, p, k, rotate(quat_mul(turn, was), now_clip3))
+    for j in range(_N_SHIFTS):
+        part = need[c, shift_group[_shift_group(j)]]
+        if part < 1.0:
+            was_j = pose_before[c, SHIFTS_AT + j] - clip_before[c, SHIFTS_AT + j]
+            now_j = _shift(pose, p, j) - clip_now[c, SHIFTS_AT + j]
+            _set_shift(pose, p, j, clip_now[c, SHIFTS_AT + j] + was_j + part * (now_j - was_j))
+
+
 @jit(nogil=True)
 def limit_rows(lo: int, hi: int, pose: PoseArrays, clip_now: F64, clip_before: F64,
                pose_before: F64, planted: B8, share: F64, frame_group: I64,
@@ -207,43 +264,38 @@ def limit_rows(lo: int, hi: int, pose: PoseArrays, clip_now: F64, clip_before: F
     ``pose`` (limited in place); ``held`` (r,) whether anything was held back; ``need``
     (r, N_GROUPS) scratch: each group's share of its way."""
     for c in range(lo, hi):
-        first = False
-        for i in range(N_VALUES):
-            first = first or pose_before[c, i] != 0.0
-        held[c] = False
-        for g in range(N_GROUPS):
-            need[c, g] = min(share[c], 1.0) if first else 1.0
-        for s in range(2):  # the legs' groups are 0 and 1
-            if planted[c, s]:
-                need[c, s] = 1.0
-        for g in range(N_GROUPS):
-            held[c] = held[c] or need[c, g] < 1.0
-        if not held[c]:
+        _limit_row(pose, c, c, clip_now, clip_before, pose_before, planted, share[c],
+                   frame_group, direction_group, shift_group, need, held)
+
+
+@jit(inline="always")
+def _share(c: int, pose_positions: F64, clip_positions: F64, pose_positions_before: F64,
+           clip_positions_before: F64, planted: B8, max_step_m: float, goal_step_m: float,
+           leg_of_joint: I64) -> float:
+    """Row ``c``'s share (see :func:`share_rows`)."""
+    share = 1.0
+    for j in range(N_JOINTS):
+        side = leg_of_joint[j]
+        if side >= 0 and planted[c, side]:
             continue
-        for k in range(_N_FRAMES):
-            part = need[c, frame_group[k]]
-            if part < 1.0:
-                at = 4 * k
-                now_clip = load4(clip_now[c, at:at + 4])
-                was = quat_mul(load4(pose_before[c, at:at + 4]), conj(load4(clip_before[c, at:at + 4])))
-                now = quat_mul(_frame(pose, c, k), conj(now_clip))
-                turn = _scaled(_frame_turn(was, now), part)
-                _set_frame(pose, c, k, quat_mul(quat_mul(turn, was), now_clip))
-        for k in range(_N_DIRECTIONS):
-            part = need[c, direction_group[k]]
-            if part < 1.0:
-                at = DIRECTIONS_AT + 3 * k
-                now_clip3 = load3(clip_now[c, at:at + 3])
-                was = quat_between(load3(clip_before[c, at:at + 3]), load3(pose_before[c, at:at + 3]))
-                now = quat_between(now_clip3, _direction(pose, c, k))
-                turn = _scaled(_frame_turn(was, now), part)
-                _set_direction(pose, c, k, rotate(quat_mul(turn, was), now_clip3))
-        for j in range(_N_SHIFTS):
-            part = need[c, shift_group[_shift_group(j)]]
-            if part < 1.0:
-                was_j = pose_before[c, SHIFTS_AT + j] - clip_before[c, SHIFTS_AT + j]
-                now_j = _shift(pose, c, j) - clip_now[c, SHIFTS_AT + j]
-                _set_shift(pose, c, j, clip_now[c, SHIFTS_AT + j] + was_j + part * (now_j - was_j))
+        cc = 0.0
+        dd = 0.0
+        cd = 0.0
+        for i in range(3):
+            clip = clip_positions[c, j, i] - clip_positions[c, 0, i]
+            clip_before = clip_positions_before[c, j, i] - clip_positions_before[c, 0, i]
+            pose = pose_positions[c, j, i] - pose_positions[c, 0, i]
+            pose_before = pose_positions_before[c, j, i] - pose_positions_before[c, 0, i]
+            step = clip - clip_before
+            change = (pose - clip) - (pose_before - clip_before)
+            cc += step * step
+            dd += change * change
+            cd += step * change
+        if dd > 0.0:
+            allowed = math.sqrt(cc) + (max_step_m + goal_step_m)
+            room = allowed * allowed - cc
+            share = min(share, (-cd + math.sqrt(cd * cd + dd * room)) / max(dd, 1e-300))
+    return share
 
 
 @jit(nogil=True)
@@ -254,29 +306,67 @@ def share_rows(lo: int, hi: int, pose_positions: F64, clip_positions: F64,
     ``out`` (r,); each joint measured from its pelvis here (the same subtraction as
     ``from_pelvis``, so the same bits), not in arrays of their own."""
     for c in range(lo, hi):
-        share = 1.0
-        for j in range(N_JOINTS):
-            side = leg_of_joint[j]
-            if side >= 0 and planted[c, side]:
-                continue
-            cc = 0.0
-            dd = 0.0
-            cd = 0.0
-            for i in range(3):
-                clip = clip_positions[c, j, i] - clip_positions[c, 0, i]
-                clip_before = clip_positions_before[c, j, i] - clip_positions_before[c, 0, i]
-                pose = pose_positions[c, j, i] - pose_positions[c, 0, i]
-                pose_before = pose_positions_before[c, j, i] - pose_positions_before[c, 0, i]
-                step = clip - clip_before
-                change = (pose - clip) - (pose_before - clip_before)
-                cc += step * step
-                dd += change * change
-                cd += step * change
-            if dd > 0.0:
-                allowed = math.sqrt(cc) + (max_step_m + goal_steps_m[c])
-                room = allowed * allowed - cc
-                share = min(share, (-cd + math.sqrt(cd * cd + dd * room)) / max(dd, 1e-300))
-        out[c] = share
+        out[c] = _share(c, pose_positions, clip_positions, pose_positions_before,
+                        clip_positions_before, planted, max_step_m, goal_steps_m[c],
+                        leg_of_joint)
+
+
+@jit(inline="always")
+def _copy_pose(dst: PoseArrays, i: int, src: PoseArrays, c: int) -> None:
+    """``dst``'s row ``i`` = ``src``'s row ``c``, every field."""
+    dst.root_heading[i] = src.root_heading[c]
+    copy_row(dst.root_position, i, src.root_position, c)
+    copy_row(dst.pelvis_local, i, src.pelvis_local, c)
+    copy_row(dst.hip_dir, i, src.hip_dir, c)
+    copy_row(dst.leg_frame, i, src.leg_frame, c)
+    copy_row(dst.leg_fraction, i, src.leg_fraction, c)
+    copy_row(dst.foot_dir, i, src.foot_dir, c)
+    copy_row(dst.spine_points, i, src.spine_points, c)
+    copy_row(dst.thorax, i, src.thorax, c)
+    copy_row(dst.neck_dir, i, src.neck_dir, c)
+    copy_row(dst.head, i, src.head, c)
+    copy_row(dst.head_top_dir, i, src.head_top_dir, c)
+    copy_row(dst.clavicle_dir, i, src.clavicle_dir, c)
+    copy_row(dst.arm_frame, i, src.arm_frame, c)
+    copy_row(dst.arm_fraction, i, src.arm_fraction, c)
+    copy_row(dst.hand_dir, i, src.hand_dir, c)
+    copy_row(dst.stretch, i, src.stretch, c)
+
+
+@jit(nogil=True)
+def again_rows(lo: int, hi: int, rows: I64, limited: PoseArrays, positions: F64,
+               clip_positions: F64, pose_positions_before: F64, clip_positions_before: F64,
+               planted: B8, max_step_m: float, goal_steps_m: F64, leg_of_joint: I64,
+               clip_now: F64, clip_before: F64, pose_before: F64, frame_group: I64,
+               direction_group: I64, shift_group: I64, need: F64, held: B8,
+               part: PoseArrays) -> None:
+    """Mirrors the share and the limit of :func:`ecs_anim.solver.joint_speed.limit_again` for
+    ``i`` in ``lo..hi-1``: row ``rows[i]`` of ``limited`` (its joints ``positions``, that row
+    decoded) into row ``i`` of ``part``, limited by its share once more (the other arrays'
+    row ``rows[i]``, as :func:`share_rows` and :func:`limit_rows` read theirs)."""
+    for i in range(lo, hi):
+        c = rows[i]
+        share = _share(c, positions, clip_positions, pose_positions_before,
+                       clip_positions_before, planted, max_step_m, goal_steps_m[c], leg_of_joint)
+        _copy_pose(part, i, limited, c)
+        _limit_row(part, i, c, clip_now, clip_before, pose_before, planted, share, frame_group,
+                   direction_group, shift_group, need, held)
+
+
+@jit(nogil=True)
+def put_rows(lo: int, hi: int, rows: I64, part: PoseArrays, part_decoded: DecodedArrays,
+             pose: PoseArrays, decoded: DecodedArrays) -> None:
+    """Mirrors :func:`ecs_anim.solver.joint_speed.put_back`: row ``i`` of ``part`` and
+    ``part_decoded`` into row ``rows[i]`` of ``pose`` and ``decoded``, ``i`` in ``lo..hi-1``."""
+    for i in range(lo, hi):
+        c = rows[i]
+        _copy_pose(pose, c, part, i)
+        copy_row(decoded.positions, c, part_decoded.positions, i)
+        copy_row(decoded.pelvis2world, c, part_decoded.pelvis2world, i)
+        copy_row(decoded.thorax2world, c, part_decoded.thorax2world, i)
+        copy_row(decoded.head2world, c, part_decoded.head2world, i)
+        copy_row(decoded.leg2world, c, part_decoded.leg2world, i)
+        copy_row(decoded.arm2world, c, part_decoded.arm2world, i)
 
 
 def step_shares(pose_positions: F64, clip_positions: F64, pose_positions_before: F64,
@@ -319,6 +409,42 @@ def limit_motion(poses: NormalizedPoses, clip_now: F64, clip_before: F64, pose_b
                 np.ascontiguousarray(share, dtype=np.float64), FRAME_GROUP,
                 DIRECTION_GROUP, SHIFT_GROUP, need, held)
     return poses, held
+
+
+def limit_again(limited: NormalizedPoses, rows: I64, before: MotionBefore, lengths: F64,
+                planted: B8, max_step_m: float) -> tuple[NormalizedPoses, DecodedPose]:
+    """Compiled :func:`ecs_anim.solver.joint_speed.limit_again` (same arguments and results):
+    the held rows of ``limited`` decoded where they are (:func:`~.decode.decode_rows`), taken
+    out, shared and limited in one pass (:func:`again_rows`), decoded again."""
+    n, r = limited.root_heading.shape[0], rows.size
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    pose = pose_arrays(limited)
+    lengths = np.ascontiguousarray(lengths, dtype=np.float64)
+    decoded = empty_decoded(n)  # (only the rows held back are written)
+    over_chunks(decode_rows, r, rows, pose, lengths, decoded, spine_scratch(r))
+    part = PoseArrays(*(np.empty((r, *getattr(pose, name).shape[1:]))
+                        for name in PoseArrays._fields))
+    floats = [np.ascontiguousarray(a, dtype=np.float64) for a in (
+        before.clip_positions, before.pose_positions_before, before.clip_positions_before)]
+    more = [np.ascontiguousarray(a, dtype=np.float64) for a in (
+        before.clip_now, before.clip_before, before.pose_before)]
+    over_chunks(again_rows, r, rows, pose, decoded.positions, *floats,
+                np.ascontiguousarray(planted, dtype=np.bool_), float(max_step_m),
+                np.ascontiguousarray(before.goal_steps_m, dtype=np.float64), LEG_OF_JOINT,
+                *more, FRAME_GROUP, DIRECTION_GROUP, SHIFT_GROUP, np.empty((n, N_GROUPS)),
+                np.empty(n, np.bool_), part)
+    part_decoded = empty_decoded(r)
+    over_chunks(decode_rows, r, np.arange(r, dtype=np.int64), part, lengths[rows], part_decoded,
+                spine_scratch(r))
+    return (NormalizedPoses(**dict(zip(PoseArrays._fields, part, strict=True))),
+            decoded_pose(part_decoded))
+
+
+def put_back(poses: NormalizedPoses, decoded: DecodedPose, rows: I64, part: NormalizedPoses,
+             part_decoded: DecodedPose) -> None:
+    """Compiled :func:`ecs_anim.solver.joint_speed.put_back` (same arguments, in place)."""
+    over_chunks(put_rows, rows.size, np.ascontiguousarray(rows, dtype=np.int64), pose_arrays(part),
+                decoded_arrays(part_decoded), pose_arrays(poses), decoded_arrays(decoded))
 
 
 #: What :func:`ecs_anim.solver.joint_speed.goal_steps` makes of a step that is not finite

@@ -25,8 +25,10 @@ from ecs_anim.motion.constraint_table import Area
 from ecs_anim.motion.constraints import Activation
 from ecs_anim.runtime.bench_scene import walkers_on_bumps
 from ecs_anim.runtime.kernels import goals as compiled
+from ecs_anim.runtime.kernels.decode import decode
 from ecs_anim.runtime.simulation import Simulation
 from ecs_anim.solver import goals as solver_shell
+from ecs_anim.solver import shell
 from support.scenarios import run
 from support.solve import bench_run
 
@@ -40,7 +42,7 @@ class Compare:
     results are compared field by field."""
 
     def __init__(self, monkeypatch: pytest.MonkeyPatch) -> None:
-        self.goals = self.errors = self.targets = 0
+        self.goals = self.errors = self.targets = self.surfaces = 0
 
         def tick_goals(*args):
             reference = solver_shell.tick_goals(*copy.deepcopy(args))
@@ -66,7 +68,15 @@ class Compare:
 
             return call
 
+        def on_other_surfaces(*args):
+            reference = solver_shell.numpy_on_other_surfaces(*args)
+            np.testing.assert_allclose(compiled.on_other_surfaces(*args), reference, rtol=0,
+                                       atol=1e-9)
+            self.surfaces += solver_shell.other_surface_rows(args[0]).size > 0
+            return reference
+
         monkeypatch.setattr(system, "tick_goals", tick_goals)
+        monkeypatch.setattr(shell, "on_other_surfaces", on_other_surfaces)
         monkeypatch.setattr(system, "target_points", compared("target_points", "targets"))
         monkeypatch.setattr(system, "constraint_errors", compared("constraint_errors", "errors"))
         monkeypatch.setattr(system, "errors_on_result", compared("errors_on_result", "errors"))
@@ -97,6 +107,8 @@ def test_compiled_goals_equal_numpy_on_every_scenario(monkeypatch, name):
     compare = Compare(monkeypatch)
     run(name)
     assert compare.errors >= compare.goals
+    if name == "fight_training":  # kicks and ward-offs at the other fighter's body
+        assert compare.surfaces > 30
 
 
 def test_compiled_goals_equal_numpy_for_every_kind_of_constraint(monkeypatch):
@@ -143,7 +155,39 @@ def test_compiled_goals_equal_numpy_for_every_kind_of_constraint(monkeypatch):
         sim.step()
     sim.close()
     assert compare.goals == 22 and compare.errors == 22 and compare.targets >= 22
+    assert compare.surfaces == 16  # the late touch's target on another body, from its spawn
     assert any(held) and not sim.constraints.held.any()  # the sphere held the head, let it go
+
+
+def test_compiled_surfaces_equal_numpy_where_poses_are_missing():
+    """A character with no posture yet (NaN: the frame budget decodes only those it solves), a
+    constrained point on a segment without a capsule of its own and no last tick: the compiled
+    targets on other bodies are the numpy ones (NaN rows left where they were)."""
+    rng = np.random.default_rng(7)
+    sim = Simulation({"m": replace(import_bvh(MOTIONS_DIR / "idle.bvh"), constraints=[])})
+    a = sim.spawn("a", ADULT, MotionPlayer("m", speed=0.0), Placement((0.0, 0.0)))
+    b = sim.spawn("b", ADULT, MotionPlayer("m", speed=0.0), Placement((0.0, 0.6)))
+    for name, target in (("wrist_r", "spine_middle"), ("ankle_l", "head"), ("neck", "knee_r"),
+                         ("hand_l", "neck"), ("toe_r", "wrist_l")):
+        sim.add_constraint(a, name, name, 1, ALWAYS, target_entity=b, target_point=target)
+        sim.add_constraint(b, name, name, 1, ALWAYS, target_entity=a, target_point=target)
+    sim.step()
+    sim.step()
+    table, st = sim.constraints, sim.store
+    decoded = decode(st.poses, st.lengths)
+    previous = copy.deepcopy(decoded)
+    previous.positions[:] += rng.normal(0.0, 0.05, previous.positions.shape)
+    targets = system.target_points(table, decoded, previous)
+    for prev in (previous, None):
+        for missing in (None, 0, 1):
+            dec = copy.deepcopy(decoded)
+            if missing is not None:
+                dec.positions[missing] = np.nan
+            got = compiled.on_other_surfaces(table, targets, st.lengths, dec, prev)
+            want = solver_shell.numpy_on_other_surfaces(table, targets, st.lengths, dec, prev)
+            np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+            assert got is not targets
+    sim.close()
 
 
 def assert_identical_goals(result: solver_shell.TickGoals | None,
