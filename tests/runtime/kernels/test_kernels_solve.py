@@ -233,7 +233,9 @@ def test_a_limbs_end_reached_without_trigonometry_is_numpys_reach_point():
         want_frame, want_fraction, want_point = steps.reach_point(
             root[None], frame[None], np.array([upper]), np.array([lower]), np.array([fraction]),
             np.array([True]), np.array([[0.0, 0.0, lower]]), (root + to_goal)[None], extension)
-        axes = tuple(tuple(float(v) for v in frame[:, i]) for i in range(3))
+        x_axis, y_axis, z_axis = (tuple(float(v) for v in frame[:, i]) for i in range(3))
+        axes = ((x_axis[0], x_axis[1], x_axis[2]), (y_axis[0], y_axis[1], y_axis[2]),
+                (z_axis[0], z_axis[1], z_axis[2]))
         got_frame, got_fraction, got_point = compiled_math.reach_end(
             tuple(root), axes, float(upper), float(lower), tuple(to_goal), distance, extension)
         np.testing.assert_allclose(np.array(got_frame).T, want_frame[0], rtol=0, atol=1e-12)
