@@ -23,7 +23,6 @@ from ecs_anim.runtime.kernels.vec import (
     jit,
     norm,
     normalize,
-    rotation_between,
     rotation_toward,
     scale,
     sub,
@@ -147,10 +146,19 @@ def reach_end(root: Vec3, limb2world: Frame, upper: float, lower: float, to_goal
     by Rodrigues' formula (``reach_point`` an arc tangent, then its sine and cosine).
     Returns (limb2world, fraction, the end's new position)."""
     span = min(distance, max_extension * (upper + lower))
-    turn = rotation_between(limb2world[2], to_goal)
-    frame = (to_world(turn, limb2world[0]), to_world(turn, limb2world[1]),
-             to_world(turn, limb2world[2]))
-    return frame, span / (upper + lower), add(root, scale(frame[2], span))
+    # Each axis v turned by Rodrigues' formula with k = z x goal (|k| the sine, c the cosine):
+    # v c + k x v + k (k . v) / (1 + c); c > -1/2 where it is taken.
+    goal_dir = scale(to_goal, 1.0 / distance)
+    k = cross(limb2world[2], goal_dir)
+    c = dot(limb2world[2], goal_dir)
+    d = 1.0 / (1.0 + c)
+    x = add(add(scale(limb2world[0], c), cross(k, limb2world[0])),
+            scale(k, dot(k, limb2world[0]) * d))
+    y = add(add(scale(limb2world[1], c), cross(k, limb2world[1])),
+            scale(k, dot(k, limb2world[1]) * d))
+    z = add(add(scale(limb2world[2], c), cross(k, limb2world[2])),
+            scale(k, dot(k, limb2world[2]) * d))
+    return (x, y, z), span / (upper + lower), add(root, scale(z, span))
 
 
 @jit()
