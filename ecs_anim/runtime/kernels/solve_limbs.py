@@ -21,6 +21,7 @@ from ecs_anim.runtime.kernels.decode import (
 from ecs_anim.runtime.kernels.solve_math import (
     bone_coords,
     point_in_limb,
+    reach_end,
     reach_point,
     turn_about_axis,
 )
@@ -38,6 +39,7 @@ from ecs_anim.runtime.kernels.vec import (
     Frame,
     Vec3,
     add,
+    dot,
     in_frame,
     jit,
     load3,
@@ -106,7 +108,8 @@ def solve_limbs(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winne
         direction = load3(directions[c, slot])
         if first >= 0:
             second = w.second_limb[c, li]
-            if offset[first, 0] == 0.0 and offset[first, 1] == 0.0 and offset[first, 2] == 0.0:
+            plain = offset[first, 0] == 0.0 and offset[first, 1] == 0.0 and offset[first, 2] == 0.0
+            if plain:
                 now = plain_point(positions, c, t.seg_proximal[g.segment[first]],
                                   t.seg_distal[g.segment[first]], g.fraction[first])
             else:
@@ -122,11 +125,22 @@ def solve_limbs(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winne
                 ll = lengths_row[limb_length[li, 1]]
                 h = lengths_row[limb_length[li, 2]]
                 root = load3(positions[c, limb_joint[li, 0]])
-                q, on_lower = bone_coords(g.bone[first], g.fraction[first], load3(offset[first]),
-                                          u, ll, h, direction)
                 extension = leg_extension if li < 2 else 1.0
-                frame, fraction, point = reach_point(root, frame, u, ll, fraction, on_lower, q,
-                                                     load3(goal[first]), extension)
+                to_goal = sub(load3(goal[first]), root)
+                distance = math.sqrt(dot(to_goal, to_goal))
+                if (plain and g.bone[first] == 1 and g.fraction[first] == 1.0
+                        and distance > abs(u - ll) + 1e-3 * (u + ll)
+                        and min(distance, extension * (u + ll)) <= (1.0 - 1e-6) * (u + ll)
+                        and dot(frame[2], to_goal) > -0.5 * distance):
+                    # The limb's end (an ankle, a wrist) onto its goal: reach_point's limb to
+                    # rounding, without its trigonometry.
+                    frame, fraction, point = reach_end(root, frame, u, ll, to_goal, distance,
+                                                       extension)
+                else:
+                    q, on_lower = bone_coords(g.bone[first], g.fraction[first],
+                                              load3(offset[first]), u, ll, h, direction)
+                    frame, fraction, point = reach_point(root, frame, u, ll, fraction, on_lower,
+                                                         q, load3(goal[first]), extension)
                 if second >= 0:
                     q2, lower2 = bone_coords(g.bone[second], g.fraction[second],
                                              load3(offset[second]), u, ll, h, direction)

@@ -17,7 +17,6 @@ from ecs_anim.runtime.kernels.vec import (
     Vec3,
     add,
     add_scaled,
-    axis_angle,
     cross,
     dot,
     frame_from_axes,
@@ -134,17 +133,69 @@ def reach_point(root: Vec3, limb2world: Frame, upper: float, lower: float, fract
 
 
 @jit()
+def reach_end(root: Vec3, limb2world: Frame, upper: float, lower: float, to_goal: Vec3,
+              distance: float, max_extension: float) -> tuple[Frame, float, Vec3]:
+    """:func:`reach_point` for the limb's end (bone coordinates ``(0, 0, lower)`` on the lower
+    bone: an ankle, a wrist) onto a goal ``to_goal`` from the root, ``distance`` (m) away, no
+    nearer than the folded limb reaches (``|upper - lower|`` plus a thousandth of the limb: then
+    the flexion :func:`reach_point` picks is the one spanning ``distance``, or the straightest
+    allowed, ``max_extension`` of the limb, beyond it), where the goal does not lie behind the
+    limb's axis. The same limb to rounding (1e-15 m), without its trigonometry: the span is the
+    distance itself (``reach_point`` takes an arc cosine, then the cosine of its result), the
+    turn the smallest rotation of the limb's axis (its z, on which the end lies) onto the goal,
+    by Rodrigues' formula (``reach_point`` an arc tangent, then its sine and cosine).
+    Returns (limb2world, fraction, the end's new position)."""
+    span = min(distance, max_extension * (upper + lower))
+    # Each axis v turned by Rodrigues' formula with k = z x goal (|k| the sine, c the cosine):
+    # v c + k x v + k (k . v) / (1 + c); c > -1/2 where it is taken.
+    goal_dir = scale(to_goal, 1.0 / distance)
+    k = cross(limb2world[2], goal_dir)
+    c = dot(limb2world[2], goal_dir)
+    d = 1.0 / (1.0 + c)
+    x = add(add(scale(limb2world[0], c), cross(k, limb2world[0])),
+            scale(k, dot(k, limb2world[0]) * d))
+    y = add(add(scale(limb2world[1], c), cross(k, limb2world[1])),
+            scale(k, dot(k, limb2world[1]) * d))
+    z = add(add(scale(limb2world[2], c), cross(k, limb2world[2])),
+            scale(k, dot(k, limb2world[2]) * d))
+    return (x, y, z), span / (upper + lower), add(root, scale(z, span))
+
+
+@jit()
+def rotation_about(k: Vec3, s: float, c: float) -> Frame:
+    """The rotation about the unit axis ``k`` whose angle has sine ``s`` and cosine ``c``
+    (:func:`ecs_anim.runtime.kernels.vec.axis_angle`'s arithmetic after its sine and cosine)."""
+    v = 1.0 - c
+    k0, k1, k2 = k
+    kk00 = -k2 * k2 - k1 * k1
+    kk01 = k1 * k0
+    kk02 = k2 * k0
+    kk10 = k0 * k1
+    kk11 = -k2 * k2 - k0 * k0
+    kk12 = k2 * k1
+    kk20 = k0 * k2
+    kk21 = k1 * k2
+    kk22 = -k1 * k1 - k0 * k0
+    return ((1.0 + v * kk00, s * k2 + v * kk10, -s * k1 + v * kk20),
+            (-s * k2 + v * kk01, 1.0 + v * kk11, s * k0 + v * kk21),
+            (s * k1 + v * kk02, -s * k0 + v * kk12, 1.0 + v * kk22))
+
+
+@jit()
 def turn_about_axis(root: Vec3, axis_through: Vec3, point: Vec3, goal: Vec3) -> Frame:
     """Mirrors :func:`ecs_anim.solver.steps.turn_about_axis`: the rotation about root ->
-    ``axis_through`` bringing ``point`` closest to ``goal`` (the identity on the axis)."""
+    ``axis_through`` bringing ``point`` closest to ``goal`` (the identity on the axis). The
+    angle's sine and cosine are taken from the two projections themselves (``atan2``, then
+    ``sin`` and ``cos`` of its result there: the same to rounding)."""
     k = normalize(sub(axis_through, root))
     v, t = sub(point, root), sub(goal, root)
     v = add_scaled(v, k, -dot(v, k))
     t = add_scaled(t, k, -dot(t, k))
-    angle = math.atan2(dot(k, cross(v, t)), dot(v, t))
-    if not (norm(v) > 1e-9 and norm(t) > 1e-9):
-        angle = 0.0
-    return axis_angle(k, angle)
+    y, x = dot(k, cross(v, t)), dot(v, t)
+    h = math.sqrt(x * x + y * y)
+    if not (norm(v) > 1e-9 and norm(t) > 1e-9 and h > 0.0):
+        return rotation_about(k, 0.0, 1.0)
+    return rotation_about(k, y / h, x / h)
 
 
 @jit()

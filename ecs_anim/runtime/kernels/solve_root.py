@@ -160,6 +160,15 @@ def root_move(c: int, dec: DecodedArrays, g: Goals, w: Winners, b: Bodies, t: Ta
         total = 0.0
         for s in range(b.masses.shape[1]):
             total += b.masses[c, s]
+        # Each held leg's shares of the mass, once (the same for the three moves).
+        knee0 = ankle0 = knee1 = ankle1 = 0.0
+        for li in range(2):
+            if (held >> li) & 1:
+                knee_share, ankle_share = leg_shares(c, b, t, li, total)
+                if li == 0:
+                    knee0, ankle0 = knee_share, ankle_share
+                else:
+                    knee1, ankle1 = knee_share, ankle_share
         h = ROOT_PROBE_M
         # Three moves of the root, the knees re-bent for each (one call site: numba inlines
         # a copy of the knee's arithmetic at each, and the kernels' compile is counted): a
@@ -182,7 +191,7 @@ def root_move(c: int, dec: DecodedArrays, g: Goals, w: Winners, b: Bodies, t: Ta
             move = (h, 0.0, 0.0) if k == 0 else ((0.0, h, 0.0) if k == 1 else (nx, ny, nz))
             for li in range(2):
                 if (held >> li) & 1:
-                    knee_share, ankle_share = leg_shares(c, b, t, li, total)
+                    knee_share, ankle_share = (knee0, ankle0) if li == 0 else (knee1, ankle1)
                     bend = knee_move(c, dec, lengths_row, t, li, move)
                     x = knee_share * bend[0] - (knee_share + ankle_share) * move[0]
                     y = knee_share * bend[1] - (knee_share + ankle_share) * move[1]

@@ -203,6 +203,64 @@ def test_the_limb_steps_angle_wrap_is_numpys_modulo_to_the_bit():
     assert mismatched.size == 0, angles[mismatched[:5]]
 
 
+def test_a_limbs_end_reached_without_trigonometry_is_numpys_reach_point():
+    """``reach_end`` (a limb's end onto its goal: the span taken as the distance, the turn by
+    Rodrigues' formula) gives the numpy ``reach_point``'s frame, fraction and end to 1e-12, for
+    goals within reach, beyond it (the straightest flexion allowed) and near the folded limb,
+    where ``solve_limbs`` takes it (not nearer than a thousandth of the limb beyond the folded
+    span, not at the straight arm, nor behind the limb's axis)."""
+    from ecs_anim.core.rotations import normalize
+    from ecs_anim.solver import steps
+
+    rng = np.random.default_rng(11)
+    taken = 0
+    for _ in range(3000):
+        upper, lower = rng.uniform(0.2, 0.5, 2)
+        extension = float(rng.choice([MAX_LEG_EXTENSION, 1.0]))
+        q = rng.normal(size=4)
+        frame = matrix_from_quat(q / np.linalg.norm(q))
+        root = rng.uniform(-2.0, 2.0, 3)
+        direction = normalize(frame[:, 2] + rng.normal(scale=0.7, size=3))
+        distance = rng.uniform(0.0, 1.1) * (upper + lower)
+        to_goal = direction * distance
+        distance = float(np.linalg.norm(to_goal))
+        if not (distance > abs(upper - lower) + 1e-3 * (upper + lower)
+                and min(distance, extension * (upper + lower)) <= (1.0 - 1e-6) * (upper + lower)
+                and frame[:, 2] @ to_goal > -0.5 * distance):
+            continue
+        taken += 1
+        fraction = rng.uniform(0.3, 0.99)
+        want_frame, want_fraction, want_point = steps.reach_point(
+            root[None], frame[None], np.array([upper]), np.array([lower]), np.array([fraction]),
+            np.array([True]), np.array([[0.0, 0.0, lower]]), (root + to_goal)[None], extension)
+        x_axis, y_axis, z_axis = (tuple(float(v) for v in frame[:, i]) for i in range(3))
+        axes = ((x_axis[0], x_axis[1], x_axis[2]), (y_axis[0], y_axis[1], y_axis[2]),
+                (z_axis[0], z_axis[1], z_axis[2]))
+        got_frame, got_fraction, got_point = compiled_math.reach_end(
+            tuple(root), axes, float(upper), float(lower), tuple(to_goal), distance, extension)
+        np.testing.assert_allclose(np.array(got_frame).T, want_frame[0], rtol=0, atol=1e-12)
+        assert got_fraction == pytest.approx(want_fraction[0], abs=1e-12)
+        np.testing.assert_allclose(got_point, want_point[0], rtol=0, atol=1e-12)
+    assert taken > 1000
+
+
+def test_the_second_goals_swivel_is_numpys_turn_about_axis():
+    """The swivel about the axis that keeps a limb's first goal (its angle's sine and cosine
+    from the projections, no arc tangent) is numpy's ``turn_about_axis`` to 1e-12, the
+    identity where the point or the goal lies on the axis."""
+    from ecs_anim.solver import steps
+
+    rng = np.random.default_rng(5)
+    for i in range(2000):
+        root, through, point, goal = rng.uniform(-1.0, 1.0, (4, 3))
+        if i % 10 == 0:  # the point on the axis
+            point = root + 0.3 * (through - root)
+        want = steps.turn_about_axis(root[None], through[None], point[None], goal[None])[0]
+        got = np.array(compiled_math.turn_about_axis(tuple(root), tuple(through), tuple(point),
+                                                     tuple(goal))).T
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+
+
 def test_limb_step_equals_numpy(states):
     for args in states:
         reference, s = both_states(args)
