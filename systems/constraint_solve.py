@@ -56,6 +56,7 @@ from ecs_anim.runtime.kernels.goals import (
     constraint_errors as constraint_errors,  # tests patch these
 )
 from ecs_anim.runtime.kernels.goals import errors_on_result as errors_on_result
+from ecs_anim.runtime.kernels.goals import on_other_surfaces as on_other_surfaces
 from ecs_anim.runtime.kernels.goals import target_points as target_points
 from ecs_anim.runtime.kernels.goals import tick_goals as _compiled_tick_goals
 from ecs_anim.runtime.kernels.goals import tick_goals as tick_goals
@@ -147,6 +148,7 @@ class Steps(NamedTuple):
     rows_differ: Callable[..., NDArray[np.bool_]]
     limit_again: Callable[..., tuple[NormalizedPoses, DecodedPose]]
     put_back: Callable[..., None]
+    surfaces: Callable[..., NDArray[np.float64]]
 
 
 def steps(compiled: bool) -> Steps:
@@ -155,12 +157,12 @@ def steps(compiled: bool) -> Steps:
     if compiled:
         return Steps(tick_goals, solve, constraint_errors, errors_on_result, _centres,
                      target_points, decode, _decode_some, step_shares, limit_motion, pack,
-                     goal_steps, rows_differ, limit_again, put_back)
+                     goal_steps, rows_differ, limit_again, put_back, on_other_surfaces)
     return Steps(NUMPY_STEPS.goals, NUMPY_STEPS.solve, NUMPY_STEPS.errors,
                  NUMPY_STEPS.result_errors, numpy_centres, NUMPY_STEPS.targets, numpy_decode,
                  _numpy_decode_some, numpy_speed.step_shares, numpy_speed.limit_motion,
                  numpy_speed.pack, numpy_speed.goal_steps, numpy_speed.rows_differ,
-                 numpy_speed.limit_again, numpy_speed.put_back)
+                 numpy_speed.limit_again, numpy_speed.put_back, NUMPY_STEPS.surfaces)
 
 
 class ConstraintSolve(System):
@@ -267,7 +269,7 @@ class ConstraintSolve(System):
                            st.segment_com_fraction, st.posture, self.budget.aimed(settings, model),
                            settings.release_speed_m_s * sim.dt,
                            TickSteps(goal_step, self._solve, step.errors, step.centres,
-                                     step.targets, step.result_errors),
+                                     step.targets, step.result_errors, step.surfaces),
                            model, self.budget.expected())
         solve_cpu_s = time.process_time() - start
         used, caps = np.zeros(0, np.int64), np.zeros(0, np.int64)

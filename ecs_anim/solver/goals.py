@@ -14,7 +14,6 @@ The compiled :func:`ecs_anim.runtime.kernels.goals.tick_goals` mirrors this nump
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -145,27 +144,7 @@ def on_other_surfaces(table: ConstraintTable, targets: F64, lengths: F64,
     on it, not in it; the errors, measured against these targets, are then to the surface.
     The capsule is read from the other character's posture of the last tick (as the target
     point: :func:`target_points`). Targets on a part without a capsule, on the constrained
-    character itself, in the world, and other kinds are left. A new array when any moves.
-
-    Once the tick's kernels are in memory (a simulation was built:
-    :func:`ecs_anim.runtime.kernels.load_kernels`) their twin runs
-    (:func:`ecs_anim.runtime.kernels.goals.on_other_surfaces`: ConstraintSolve's shell calls
-    this function on either path); :func:`numpy_on_other_surfaces` is the reference."""
-    other = other_surface_rows(table)
-    if other.size == 0:
-        return targets
-    kernels = sys.modules.get("ecs_anim.runtime.kernels")
-    if kernels is not None and kernels.load_figures:  # (loaded: nothing compiles here)
-        from ecs_anim.runtime.kernels.goals import on_other_surfaces as compiled
-
-        out: F64 = compiled(table, targets, lengths, unconstrained, previous, other)
-        return out
-    return numpy_on_other_surfaces(table, targets, lengths, unconstrained, previous)
-
-
-def numpy_on_other_surfaces(table: ConstraintTable, targets: F64, lengths: F64,
-                            unconstrained: DecodedPose, previous: DecodedPose | None) -> F64:
-    """:func:`on_other_surfaces` in numpy: the reference of its compiled twin."""
+    character itself, in the world, and other kinds are left. A new array when any moves."""
     other = other_surface_rows(table)
     if other.size == 0:
         return targets

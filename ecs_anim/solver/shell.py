@@ -754,8 +754,9 @@ class TickSteps(NamedTuple):
     """The computations one tick of :func:`constrain` is made of, each a function of the
     signature of its numpy reference here: ``goals`` (:func:`tick_goals`), ``solve``
     (:func:`solve`), ``errors`` (:func:`constraint_errors`), ``centres``
-    (:func:`ecs_anim.core.morphology.centres_of_mass`), ``targets`` (:func:`target_points`)
-    and ``result_errors`` (:func:`errors_on_result`: the errors on the solve's result).
+    (:func:`ecs_anim.core.morphology.centres_of_mass`), ``targets`` (:func:`target_points`),
+    ``result_errors`` (:func:`errors_on_result`: the errors on the solve's result) and
+    ``surfaces`` (:func:`on_other_surfaces`).
     :data:`NUMPY_STEPS` are those references; ConstraintSolve runs the compiled ones
     (:mod:`ecs_anim.runtime.kernels.goals`, :func:`ecs_anim.runtime.kernels.solve.solve`)."""
 
@@ -765,10 +766,11 @@ class TickSteps(NamedTuple):
     centres: Callable[[F64, F64, F64], F64]
     targets: Callable[..., F64] = target_points
     result_errors: Callable[[ConstraintTable, I64, DecodedPose, F64], F64] = errors_on_result
+    surfaces: Callable[..., F64] = on_other_surfaces
 
 
 NUMPY_STEPS = TickSteps(tick_goals, solve, constraint_errors, centres_of_mass, target_points,
-                        errors_on_result)
+                        errors_on_result, on_other_surfaces)
 
 
 def focus_distances(positions: F64, focus_in_world: tuple[float, float, float] | None) -> F64:
@@ -809,9 +811,8 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
         return TickResult(weight, none, error, held)
     if unconstrained is None:
         raise ValueError("constrain: the decoded poses are needed when a constraint is active")
-    targets = on_other_surfaces(table, steps.targets(table, unconstrained, previous, weight > 0),
-                                lengths,
-                                unconstrained, previous)
+    targets = steps.surfaces(table, steps.targets(table, unconstrained, previous, weight > 0),
+                             lengths, unconstrained, previous)
     broken = none
     # (one test of the whole array first: the usual case; NaN fails it too)
     if not np.all(np.abs(targets) <= MAX_TARGET_M):

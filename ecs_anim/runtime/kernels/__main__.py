@@ -51,9 +51,8 @@ def compile_separation() -> None:
     default), 5 cm in each other, which CollisionSeparate pushes apart (started 0.15 m apart,
     neither body could move: ``push_rows`` was not compiled, and the fight compiled it mid-run).
     Then the bound's second pass on the characters it held back (no one here: on no row) and
-    the targets on the other walker's body moved onto its surface (this process ticks on numpy
-    there: :func:`ecs_anim.solver.goals.on_other_surfaces` runs the kernel once they are
-    loaded)."""
+    the targets on the other walker's body moved onto its surface (this process ticks on numpy:
+    called here on its own)."""
     from ecs_anim.components import MotionPlayer, Placement
     from ecs_anim.core.morphology import Morphology
     from ecs_anim.io.importing import import_bvh

@@ -28,7 +28,6 @@ from ecs_anim.runtime.kernels import goals as compiled
 from ecs_anim.runtime.kernels.decode import decode
 from ecs_anim.runtime.simulation import Simulation
 from ecs_anim.solver import goals as solver_shell
-from ecs_anim.solver import shell
 from support.scenarios import run
 from support.solve import bench_run
 
@@ -69,14 +68,14 @@ class Compare:
             return call
 
         def on_other_surfaces(*args):
-            reference = solver_shell.numpy_on_other_surfaces(*args)
+            reference = solver_shell.on_other_surfaces(*args)
             np.testing.assert_allclose(compiled.on_other_surfaces(*args), reference, rtol=0,
                                        atol=1e-9)
             self.surfaces += solver_shell.other_surface_rows(args[0]).size > 0
             return reference
 
         monkeypatch.setattr(system, "tick_goals", tick_goals)
-        monkeypatch.setattr(shell, "on_other_surfaces", on_other_surfaces)
+        monkeypatch.setattr(system, "on_other_surfaces", on_other_surfaces)
         monkeypatch.setattr(system, "target_points", compared("target_points", "targets"))
         monkeypatch.setattr(system, "constraint_errors", compared("constraint_errors", "errors"))
         monkeypatch.setattr(system, "errors_on_result", compared("errors_on_result", "errors"))
@@ -184,7 +183,7 @@ def test_compiled_surfaces_equal_numpy_where_poses_are_missing():
             if missing is not None:
                 dec.positions[missing] = np.nan
             got = compiled.on_other_surfaces(table, targets, st.lengths, dec, prev)
-            want = solver_shell.numpy_on_other_surfaces(table, targets, st.lengths, dec, prev)
+            want = solver_shell.on_other_surfaces(table, targets, st.lengths, dec, prev)
             np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
             assert got is not targets
     sim.close()
