@@ -413,6 +413,8 @@ def test_the_fight_with_numpy_steps_ends_as_with_the_compiled_ones(monkeypatch, 
     monkeypatch.setattr(system, "put_back", reference.put_back)
     monkeypatch.setattr(system, "errors_on_result", numpy.result_errors)
     monkeypatch.setattr(system, "decode", numpy_decode)
+    monkeypatch.setattr(system, "target_points", numpy.targets)
+    monkeypatch.setattr(system, "on_other_surfaces", numpy.surfaces)
     expected = run_positions()
     np.testing.assert_allclose(result[0], expected[0], rtol=0, atol=1e-9)
     np.testing.assert_allclose(result[1], expected[1], rtol=0, atol=1e-9)

@@ -356,7 +356,7 @@ def target_points(table: ConstraintTable, unconstrained: DecodedPose,
     return out
 
 
-class Capsules(NamedTuple):
+class CapsuleTables(NamedTuple):
     """:mod:`ecs_anim.solver.capsules`' tables the surface kernel reads (passed as an argument:
     numba's cache keeps another file's module constants as they were when compiled):
     ``joints`` (N_CAPSULES, 2), ``span`` (N_CAPSULES, 2), ``of_segment`` (N_LENGTHS,),
@@ -368,10 +368,10 @@ class Capsules(NamedTuple):
     radius_weights: F64
 
 
-CAPSULE_TABLES = Capsules(np.ascontiguousarray(CAPSULE_JOINTS, dtype=np.int64),
-                          np.ascontiguousarray(CAPSULE_SPAN, dtype=np.float64),
-                          np.ascontiguousarray(SEGMENT_CAPSULE, dtype=np.int64),
-                          np.ascontiguousarray(RADIUS_WEIGHTS, dtype=np.float64))
+CAPSULE_TABLES = CapsuleTables(np.ascontiguousarray(CAPSULE_JOINTS, dtype=np.int64),
+                               np.ascontiguousarray(CAPSULE_SPAN, dtype=np.float64),
+                               np.ascontiguousarray(SEGMENT_CAPSULE, dtype=np.int64),
+                               np.ascontiguousarray(RADIUS_WEIGHTS, dtype=np.float64))
 
 
 @jit(inline="always")
@@ -381,7 +381,7 @@ def _nan_max(a: float, b: float) -> float:
 
 
 @jit(inline="always")
-def _radius(lengths: F64, row: int, capsule: int, caps: Capsules) -> float:
+def _radius(lengths: F64, row: int, capsule: int, caps: CapsuleTables) -> float:
     """:func:`ecs_anim.solver.capsules.capsule_radii` of character ``row``'s ``capsule``."""
     total = 0.0
     for k in range(lengths.shape[1]):
@@ -420,7 +420,7 @@ def _on_surface(target: Vec3, axis_a: Vec3, axis_b: Vec3, radius: float, effecto
 @jit(nogil=True)
 def surface_rows(lo: int, hi: int, other: I64, owner: I64, target_row: I64, target_segment: I64,
                  segment: I64, lengths: F64, now: F64, source: F64, previous: F64,
-                 has_previous: bool, caps: Capsules, t: Tables, out: F64) -> None:
+                 has_previous: bool, caps: CapsuleTables, t: Tables, out: F64) -> None:
     """``out[other[i]]`` ((m, 3), m) for ``i`` in ``lo..hi-1`` where the result is finite (else
     left): the position constraint ``other[i]``'s target (as ``out`` holds it) moved onto the
     surface of the capsule of another character's part it lies on. The capsule's axis from
@@ -453,12 +453,10 @@ def surface_rows(lo: int, hi: int, other: I64, owner: I64, target_row: I64, targ
 
 
 def on_other_surfaces(table: ConstraintTable, targets: F64, lengths: F64,
-                      unconstrained: DecodedPose, previous: DecodedPose | None,
-                      other: I64 | None = None) -> F64:
-    """Compiled :func:`ecs_anim.solver.goals.on_other_surfaces`: the same arguments and result
-    (``other``: :func:`~ecs_anim.solver.goals.other_surface_rows` of ``table`` when known)."""
-    if other is None:
-        other = other_surface_rows(table)
+                      unconstrained: DecodedPose, previous: DecodedPose | None) -> F64:
+    """Compiled :func:`ecs_anim.solver.goals.on_other_surfaces`: the same arguments and
+    result."""
+    other = other_surface_rows(table)
     if other.size == 0:
         return targets
     out = np.array(targets, dtype=np.float64, order="C")

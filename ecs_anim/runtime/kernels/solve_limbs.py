@@ -22,6 +22,7 @@ from ecs_anim.runtime.kernels.solve_math import (
     bone_coords,
     point_in_limb,
     reach_end,
+    reach_end_applies,
     reach_point,
     turn_about_axis,
 )
@@ -129,9 +130,8 @@ def solve_limbs(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winne
                 to_goal = sub(load3(goal[first]), root)
                 distance = math.sqrt(dot(to_goal, to_goal))
                 if (plain and g.bone[first] == 1 and g.fraction[first] == 1.0
-                        and distance > abs(u - ll) + 1e-3 * (u + ll)
-                        and min(distance, extension * (u + ll)) <= (1.0 - 1e-6) * (u + ll)
-                        and dot(frame[2], to_goal) > -0.5 * distance):
+                        and reach_end_applies(u, ll, distance, dot(frame[2], to_goal),
+                                              extension)):
                     # The limb's end (an ankle, a wrist) onto its goal: reach_point's limb to
                     # rounding, without its trigonometry.
                     frame, fraction, point = reach_end(root, frame, u, ll, to_goal, distance,

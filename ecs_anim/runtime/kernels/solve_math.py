@@ -4,8 +4,8 @@ Each function mirrors the batched numpy function of :mod:`ecs_anim.solver.steps`
 :mod:`ecs_anim.solver.shell`) with the same name, on tuples (3-vectors, frames as their three
 axes, :mod:`ecs_anim.runtime.kernels.vec`). Lengths in metres, angles in radians.
 
-The generic rotations they build on (``axis_angle``, ``rotation_toward``, ``axis_angle_of``) are
-in :mod:`ecs_anim.runtime.kernels.vec`.
+The generic rotations they build on (``axis_angle``, ``rotation_about``, ``rotation_toward``,
+``axis_angle_of``) are in :mod:`ecs_anim.runtime.kernels.vec`.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from ecs_anim.runtime.kernels.vec import (
     jit,
     norm,
     normalize,
+    rotation_about,
     rotation_toward,
     scale,
     sub,
@@ -133,6 +134,22 @@ def reach_point(root: Vec3, limb2world: Frame, upper: float, lower: float, fract
 
 
 @jit()
+def reach_end_applies(upper: float, lower: float, distance: float, along_axis: float,
+                      max_extension: float) -> bool:
+    """Whether :func:`reach_end` gives :func:`reach_point`'s limb for a goal ``distance`` (m)
+    from the root, ``along_axis`` (m) of it along the limb's axis: both bones have a length, the
+    span (the distance, or ``max_extension`` of the limb beyond it) is farther than the folded
+    limb reaches by a thousandth of the limb (nearer, ``reach_point`` folds it at its least
+    flexion) and nearer than the straight limb by a millionth (there the arc cosine's rounding
+    is 2e-9 m at an elbow), and the goal does not lie behind the limb's axis. False for any
+    NaN."""
+    limb = upper + lower
+    span = min(distance, max_extension * limb)
+    return (upper > 0.0 and lower > 0.0 and span > abs(upper - lower) + 1e-3 * limb
+            and span <= (1.0 - 1e-6) * limb and along_axis > -0.5 * distance)
+
+
+@jit()
 def reach_end(root: Vec3, limb2world: Frame, upper: float, lower: float, to_goal: Vec3,
               distance: float, max_extension: float) -> tuple[Frame, float, Vec3]:
     """:func:`reach_point` for the limb's end (bone coordinates ``(0, 0, lower)`` on the lower
@@ -159,26 +176,6 @@ def reach_end(root: Vec3, limb2world: Frame, upper: float, lower: float, to_goal
     z = add(add(scale(limb2world[2], c), cross(k, limb2world[2])),
             scale(k, dot(k, limb2world[2]) * d))
     return (x, y, z), span / (upper + lower), add(root, scale(z, span))
-
-
-@jit()
-def rotation_about(k: Vec3, s: float, c: float) -> Frame:
-    """The rotation about the unit axis ``k`` whose angle has sine ``s`` and cosine ``c``
-    (:func:`ecs_anim.runtime.kernels.vec.axis_angle`'s arithmetic after its sine and cosine)."""
-    v = 1.0 - c
-    k0, k1, k2 = k
-    kk00 = -k2 * k2 - k1 * k1
-    kk01 = k1 * k0
-    kk02 = k2 * k0
-    kk10 = k0 * k1
-    kk11 = -k2 * k2 - k0 * k0
-    kk12 = k2 * k1
-    kk20 = k0 * k2
-    kk21 = k1 * k2
-    kk22 = -k1 * k1 - k0 * k0
-    return ((1.0 + v * kk00, s * k2 + v * kk10, -s * k1 + v * kk20),
-            (-s * k2 + v * kk01, 1.0 + v * kk11, s * k0 + v * kk21),
-            (s * k1 + v * kk02, -s * k0 + v * kk12, 1.0 + v * kk22))
 
 
 @jit()

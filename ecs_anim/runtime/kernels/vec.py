@@ -356,7 +356,13 @@ def nlerp(a: Vec3, b: Vec3, w: float) -> Vec3:
 def axis_angle(k: Vec3, angle: float) -> Frame:
     """Mirrors :func:`ecs_anim.core.rotations.axis_angle`: the rotation by ``angle`` about the unit axis
     ``k`` (Rodrigues, ``I + sin K + (1 - cos) K K``)."""
-    s, c = math.sin(angle), math.cos(angle)
+    return rotation_about(k, math.sin(angle), math.cos(angle))
+
+
+@jit()
+def rotation_about(k: Vec3, s: float, c: float) -> Frame:
+    """The rotation about the unit axis ``k`` whose angle has sine ``s`` and cosine ``c``
+    (Rodrigues, ``I + s K + (1 - c) K K``: :func:`axis_angle` after its sine and cosine)."""
     v = 1.0 - c
     # Rows of K = [k]x; K K = (K @ K) element by element.
     k0, k1, k2 = k

@@ -64,6 +64,7 @@ def test_the_scenarios_end_the_same_with_either_solver(monkeypatch):
     monkeypatch.setattr(system, "solve", numpy.solve)
     monkeypatch.setattr(system, "constraint_errors", numpy.errors)
     monkeypatch.setattr(system, "target_points", numpy.targets)
+    monkeypatch.setattr(system, "on_other_surfaces", numpy.surfaces)
     reference = run("fight_training")
     monkeypatch.undo()
     result = run("fight_training")
@@ -224,9 +225,8 @@ def test_a_limbs_end_reached_without_trigonometry_is_numpys_reach_point():
         distance = rng.uniform(0.0, 1.1) * (upper + lower)
         to_goal = direction * distance
         distance = float(np.linalg.norm(to_goal))
-        if not (distance > abs(upper - lower) + 1e-3 * (upper + lower)
-                and min(distance, extension * (upper + lower)) <= (1.0 - 1e-6) * (upper + lower)
-                and frame[:, 2] @ to_goal > -0.5 * distance):
+        if not compiled_math.reach_end_applies(float(upper), float(lower), distance,
+                                               float(frame[:, 2] @ to_goal), extension):
             continue
         taken += 1
         fraction = rng.uniform(0.3, 0.99)
@@ -242,6 +242,21 @@ def test_a_limbs_end_reached_without_trigonometry_is_numpys_reach_point():
         assert got_fraction == pytest.approx(want_fraction[0], abs=1e-12)
         np.testing.assert_allclose(got_point, want_point[0], rtol=0, atol=1e-12)
     assert taken > 1000
+
+
+def test_a_limb_reach_point_folds_or_of_no_length_is_not_reached_without_trigonometry():
+    """Where ``reach_point`` folds the limb at its least flexion (a lower bone a five-hundredth of
+    the upper one, the goal beyond reach: the straightest span allowed is within a thousandth of
+    the folded one), or a bone has no length, or a figure is NaN, ``solve_limbs`` keeps
+    ``reach_point`` (``reach_end`` would stretch the first and divide by zero in the second)."""
+    applies = compiled_math.reach_end_applies
+    assert applies(0.5, 0.4, 0.6, 0.3, MAX_LEG_EXTENSION)  # (the usual limb)
+    assert not applies(0.5, 0.001, 0.608, 0.6, MAX_LEG_EXTENSION)  # (the span, not the distance)
+    assert not applies(0.0, 0.0, 0.0, 0.0, 1.0)
+    assert not applies(0.5, 0.0, 0.4, 0.4, 1.0)
+    assert not applies(0.5, 0.4, float("nan"), 0.3, 1.0)
+    assert not applies(0.5, 0.4, 0.6, -0.31, 1.0)  # (behind the limb's axis)
+    assert not applies(0.5, 0.4, 0.9, 0.9, 1.0)  # (the straight limb)
 
 
 def test_the_second_goals_swivel_is_numpys_turn_about_axis():
