@@ -185,7 +185,7 @@ def compile_notice() -> str | None:
     run on a machine, or after an update), else None."""
     if not uncompiled_kernels():
         return None
-    return f"compiling the tick's kernels once (1-2 minutes of CPU); cached in {cache_dir()}"
+    return f"compiling the tick's kernels once (1-3 minutes of CPU); cached in {cache_dir()}"
 
 
 _announcers: list[Callable[[str], None]] = []
@@ -264,7 +264,7 @@ _background: dict[str, Any] = {}
 def compile_aside(on: bool = True) -> None:
     """Have this process's simulations, when the kernels still have to be compiled, tick on
     the numpy references while a child process compiles them (``run`` and ``view``: the first
-    frame comes in seconds, not after the 1-2 minutes of CPU compiling takes); False: wait for
+    frame comes in seconds, not after the 1-3 minutes of CPU compiling takes); False: wait for
     the child (the default: the bench, the batch and API users tick on the kernels from the
     first tick)."""
     _aside[:] = [True] if on else []
