@@ -653,6 +653,7 @@ def test_cluster_set_without_point_units_rejects_outliers_at_its_guessed_unit():
     """The cluster shape check's 15 mm tolerance is in the file's unit: a cluster trial in
     metres without ``POINT:UNITS`` imports as with it (before, the tolerance was taken in mm,
     15 m: no outlier was rejected and 18 frames more were kept, 413 of the file's 395)."""
+    require_mocap()
     raw = read_c3d(GAIT)
     in_metres = replace(raw, positions=raw.positions * 1e-3, units="m")
     with_units, _ = canonical_clip_c3d(in_metres)
@@ -668,6 +669,7 @@ def test_x_up_lab_is_recognised():
     """A lab whose vertical is X (the tennis serve turned so: x = its z, z = -its x) imports with
     no flag, X up detected, every joint centre within 0.1 mm of the file's own after the turn
     about the vertical that X up -> Z up gives ((x, y, z) -> (y, z, x)). It was refused."""
+    require_mocap()
     raw = read_c3d(TENNIS)
     z_to_x = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
     turned = replace(raw, positions=raw.positions @ z_to_x.T)

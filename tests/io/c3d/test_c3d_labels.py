@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import DATA_DIR, MOCAP_DIR
+from conftest import DATA_DIR, MOCAP_DIR, require_mocap
 from ecs_anim.core.errors import InputError, MappingError
 from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.io.c3d.importing import canonical_clip_c3d, import_c3d
@@ -197,6 +197,7 @@ def test_side_written_after_the_landmark_reads_as_before_it():
     """Plug-in Gait labels with the side last (``ASI_L``, ``KNE_R``, as some labs write them)
     import as the file's own ``LASI``, ``RKNE``: every joint centre within 0.1 mm. (They read
     as ISB names before, with both legs left out: the toes 187 mm off.)"""
+    require_mocap()
     raw = read_c3d(MOCAP_DIR / "ktk_tennis_serve.c3d")
     sided = {"L", "R"}
 
