@@ -27,6 +27,18 @@ MOTIONS_DIR = SCENARIOS_DIR / "motions"
 MOCAP_DIR = Path(os.environ.get("ECS_ANIM_MOCAP", REPO.parent / "shared" / "mocap"))
 
 
+#: The most workers ``pytest -n auto`` (the README's test command) starts: each loads the
+#: kernels and some tests hold a few hundred MB, and past four the longest files (the bench's,
+#: the batch's: a file runs on one worker) set the suite's time anyway.
+MAX_TEST_WORKERS = 4
+
+
+def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
+    """``-n auto``: a worker per core this process may run on, at most :data:`MAX_TEST_WORKERS`."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return max(1, min(cores or 1, MAX_TEST_WORKERS))
+
+
 def mocap_files(pattern: str = "*.bvh") -> list[Path]:
     return sorted(MOCAP_DIR.glob(pattern)) if MOCAP_DIR.is_dir() else []
 
