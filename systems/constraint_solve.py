@@ -356,7 +356,10 @@ class ConstraintSolve(System):
                 getattr(st.poses, name)[result.rows] = value
         else:
             st.poses = scatter(st.poses, result.rows, result.poses)
-        st.com_desired[result.rows] = result.goals.com_desired
+        if every_row:  # (the rows sorted and distinct: all of them, in order; no row gather)
+            st.com_desired[:] = result.goals.com_desired
+        else:
+            st.com_desired[result.rows] = result.goals.com_desired
         st.goals, st.solved = result.goals, result.solved
         held = self._hold()
         self._go_back(np.union1d(result.rows, held) if held.size else result.rows)

@@ -645,7 +645,8 @@ def goals_on_layout(kept: Layout, written: bool, table: ConstraintTable, weight:
                                                     table.target_offset[self_idx])
     return TickGoals(
         rows=rows, **out._asdict(), on_self=on_self, self_segment=self_segment,
-        self_fraction=self_fraction, self_offset=self_offset, self_start=targets[self_idx])
+        self_fraction=self_fraction, self_offset=self_offset,
+        self_start=np.take(targets, self_idx, axis=0))  # (a row gather 4 x as fast as [])
 
 
 def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained: DecodedPose,
