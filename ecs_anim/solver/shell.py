@@ -868,7 +868,11 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
         for name in fields(DecodedPose):
             getattr(result, name.name)[rows] = getattr(solved, name.name)
     # (targets on the character's own body moved with it during the solve: read again)
-    error[active] = steps.result_errors(table, active, result, targets)
+    result_error = steps.result_errors(table, active, result, targets)
+    if active.size == m:  # (every constraint active: sorted, distinct, all; no scatter)
+        error = result_error
+    else:
+        error[active] = result_error
     return TickResult(weight, broken, error, held, goals, rows, solved_poses, solved, iterations,
                       cut, solve_s)
 
