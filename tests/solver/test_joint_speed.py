@@ -64,11 +64,13 @@ def test_the_motions_pass_equals_its_numpy_steps():
         if not bounded:
             assert got.packed is None and got.fresh is None
             continue
+        assert got.packed is not None and want.packed is not None and got.fresh is not None
         np.testing.assert_array_equal(got.packed.view(np.int64), want.packed.view(np.int64))
         np.testing.assert_array_equal(got.fresh, want.fresh)
         assert got.fresh.tolist() == [i in (0, 5, 17) for i in range(n)]
     # last values of another shape (the store's rows changed): numpy's expression's result
     got = motion_of(positions, poses, masses, fraction, last[:n - 1], True)
+    assert got.fresh is not None
     np.testing.assert_array_equal(got.packed, reference.pack(poses))
     assert got.fresh.size == n - 1
 
