@@ -40,9 +40,10 @@ from ecs_anim.components import Constraint
 from ecs_anim.core.morphology import centres_of_mass as numpy_centres
 from ecs_anim.core.normalized import DecodedPose, NormalizedPoses
 from ecs_anim.core.normalized import decode as numpy_decode
-from ecs_anim.motion.constraint_table import KIND_ORIENTATION, TARGET_WORLD
+from ecs_anim.motion.constraint_table import KIND_ORIENTATION, TARGET_WORLD, ConstraintTable
 from ecs_anim.runtime.kernels import over_chunks, threads
-from ecs_anim.runtime.kernels.com import centres_of_mass, segment_joints
+from ecs_anim.runtime.kernels.com import Motion, centres_of_mass, segment_joints
+from ecs_anim.runtime.kernels.com import motion_of as motion_of  # tests patch these
 from ecs_anim.runtime.kernels.decode import (
     decode,
     decode_rows,
@@ -60,6 +61,7 @@ from ecs_anim.runtime.kernels.goals import on_other_surfaces as on_other_surface
 from ecs_anim.runtime.kernels.goals import target_points as target_points
 from ecs_anim.runtime.kernels.goals import tick_goals as _compiled_tick_goals
 from ecs_anim.runtime.kernels.goals import tick_goals as tick_goals
+from ecs_anim.runtime.kernels.goals import weights as weights
 from ecs_anim.runtime.kernels.joint_speed import (
     goal_steps,
     limit_again,
@@ -129,6 +131,45 @@ def _centres(positions: NDArray[np.float64], masses: NDArray[np.float64],
     return out
 
 
+def _numpy_weights(table: ConstraintTable, time_s: float, clip: NDArray[np.int64] | None,
+                   clip_time_s: NDArray[np.float64] | None) -> NDArray[np.float64]:
+    """The activation weights by the table itself (:func:`weights`' reference)."""
+    return table.weights(time_s, clip, clip_time_s)
+
+
+def _numpy_motion(positions: NDArray[np.float64], poses: NormalizedPoses,
+                  masses: NDArray[np.float64], com_fraction: NDArray[np.float64],
+                  last_values: NDArray[np.float64], pack_it: bool) -> Motion:
+    """:func:`motion_of`'s numpy reference: the joints copied, their centres of mass
+    (:func:`ecs_anim.core.morphology.centres_of_mass`), the pose packed and the rows with no last
+    values (their first quaternion zeros)."""
+    centres = numpy_centres(positions, masses, com_fraction)
+    if not pack_it:
+        return Motion(positions.copy(), centres, None, None)
+    first = last_values[:, :4]
+    fresh = ((first[:, 0] == 0.0) & (first[:, 1] == 0.0) & (first[:, 2] == 0.0)
+             & (first[:, 3] == 0.0))
+    return Motion(positions.copy(), centres, numpy_speed.pack(poses), fresh)
+
+
+class _KnownCentres:
+    """The solve's centres step (:class:`~ecs_anim.solver.shell.TickSteps`) when the centres
+    of mass of the motion's joints ``positions`` were made with their copy (:func:`motion_of`):
+    ``centres`` for those joints (a new array each tick: the caller may write it), ``step``
+    for any other."""
+
+    def __init__(self, positions: NDArray[np.float64], centres: NDArray[np.float64],
+                 step: Callable[..., NDArray[np.float64]]) -> None:
+        self.positions, self.centres, self.step = positions, centres, step
+
+    def __call__(self, positions: NDArray[np.float64], masses: NDArray[np.float64],
+                 com_fraction: NDArray[np.float64]) -> NDArray[np.float64]:
+        if positions is self.positions:
+            return self.centres
+        out: NDArray[np.float64] = self.step(positions, masses, com_fraction)
+        return out
+
+
 class Steps(NamedTuple):
     """The functions one tick of the solve calls: the compiled ones, or their numpy references
     while the kernels compile aside (``Simulation.compiled``)."""
@@ -149,6 +190,8 @@ class Steps(NamedTuple):
     limit_again: Callable[..., tuple[NormalizedPoses, DecodedPose]]
     put_back: Callable[..., None]
     surfaces: Callable[..., NDArray[np.float64]]
+    weights: Callable[..., NDArray[np.float64]]
+    motion: Callable[..., Motion]
 
 
 def steps(compiled: bool) -> Steps:
@@ -157,12 +200,14 @@ def steps(compiled: bool) -> Steps:
     if compiled:
         return Steps(tick_goals, solve, constraint_errors, errors_on_result, _centres,
                      target_points, decode, _decode_some, step_shares, limit_motion, pack,
-                     goal_steps, rows_differ, limit_again, put_back, on_other_surfaces)
+                     goal_steps, rows_differ, limit_again, put_back, on_other_surfaces, weights,
+                     motion_of)
     return Steps(NUMPY_STEPS.goals, NUMPY_STEPS.solve, NUMPY_STEPS.errors,
                  NUMPY_STEPS.result_errors, numpy_centres, NUMPY_STEPS.targets, numpy_decode,
                  _numpy_decode_some, numpy_speed.step_shares, numpy_speed.limit_motion,
                  numpy_speed.pack, numpy_speed.goal_steps, numpy_speed.rows_differ,
-                 numpy_speed.limit_again, numpy_speed.put_back, NUMPY_STEPS.surfaces)
+                 numpy_speed.limit_again, numpy_speed.put_back, NUMPY_STEPS.surfaces,
+                 _numpy_weights, _numpy_motion)
 
 
 class ConstraintSolve(System):
@@ -212,7 +257,7 @@ class ConstraintSolve(System):
         self.budget.start_tick(sum(system.cpu_seconds for system in sim.systems), threads(),
                                sim.structure_version, st.n,
                                sum(system.last_cpu_seconds for system in before))
-        weight = table.weights(sim.time_s, st.clip, st.clip_time_s)
+        weight = step.weights(table, sim.time_s, st.clip, st.clip_time_s)
         if not self.all_rows():  # the characters without a Constraint component are not solved
             weight = np.where(self.in_rows()[table.owner], weight, 0.0)
         settings = sim.solver_settings
@@ -240,18 +285,24 @@ class ConstraintSolve(System):
                                              np.union1d(solving, table.target_row[on_body]))
         elif (weight > 0).any():
             unconstrained = step.decode(st.poses, st.lengths)
+        centres = step.centres
         if unconstrained is not None:
-            if settings.max_joint_speed_m_s is not None:  # (the poses still in cache: the decode's)
-                self._clip_now = step.pack(st.poses)
-            st.clip_positions = unconstrained.positions.copy()
+            # The motion's joints copied (the solve writes its result over the decode's), their
+            # centres of mass and (the poses still in cache: the decode's) the bound's values
+            # packed, in one pass over the rows.
+            motion_now = step.motion(unconstrained.positions, st.poses, st.segment_mass_kg,
+                                     st.segment_com_fraction, st.last_pose_values,
+                                     settings.max_joint_speed_m_s is not None)
+            st.clip_positions = motion_now.positions
+            centres = _KnownCentres(unconstrained.positions, motion_now.centres, step.centres)
+            self._clip_now = motion_now.packed
             if self._clip_now is not None:
                 # A character with no last tick kept (its first, or none solved since) was at its
                 # motion's pose: a constraint easing in is paced from there. (New arrays: the
                 # last positions may be the arrays of the last tick's result, kept as they were.)
                 # A row kept is zeros or packed unit quaternions first: its first one tells.
-                first = st.last_pose_values[:, :4]
-                fresh = ((first[:, 0] == 0.0) & (first[:, 1] == 0.0) & (first[:, 2] == 0.0)
-                         & (first[:, 3] == 0.0))
+                fresh = motion_now.fresh
+                assert fresh is not None
                 if fresh.any():
                     st.last_clip_values[fresh] = st.last_pose_values[fresh] = self._clip_now[fresh]
                     for name in ("last_pose_positions", "last_clip_positions"):
@@ -268,7 +319,7 @@ class ConstraintSolve(System):
                            st.contact_weight, st.com_control, st.com_target_xy, st.segment_mass_kg,
                            st.segment_com_fraction, st.posture, self.budget.aimed(settings, model),
                            settings.release_speed_m_s * sim.dt,
-                           TickSteps(goal_step, self._solve, step.errors, step.centres,
+                           TickSteps(goal_step, self._solve, step.errors, centres,
                                      step.targets, step.result_errors, step.surfaces),
                            model, self.budget.expected())
         solve_cpu_s = time.process_time() - start
@@ -305,7 +356,10 @@ class ConstraintSolve(System):
                 getattr(st.poses, name)[result.rows] = value
         else:
             st.poses = scatter(st.poses, result.rows, result.poses)
-        st.com_desired[result.rows] = result.goals.com_desired
+        if every_row:  # (the rows sorted and distinct: all of them, in order; no row gather)
+            st.com_desired[:] = result.goals.com_desired
+        else:
+            st.com_desired[result.rows] = result.goals.com_desired
         st.goals, st.solved = result.goals, result.solved
         held = self._hold()
         self._go_back(np.union1d(result.rows, held) if held.size else result.rows)

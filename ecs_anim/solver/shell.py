@@ -814,8 +814,9 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
     targets = steps.surfaces(table, steps.targets(table, unconstrained, previous, weight > 0),
                              lengths, unconstrained, previous)
     broken = none
-    # (one test of the whole array first: the usual case; NaN fails it too)
-    if not np.all(np.abs(targets) <= MAX_TARGET_M):
+    # (one test of the whole array first, its largest and least (no array of their absolute
+    # values): the usual case; NaN fails it too)
+    if not (targets.max() <= MAX_TARGET_M and targets.min() >= -MAX_TARGET_M):
         broken = np.flatnonzero((weight > 0) & ~np.all(np.abs(targets) <= MAX_TARGET_M, axis=1))
     if broken.size:
         weight = weight.copy()
@@ -855,8 +856,11 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
             poses.take(rows), lengths[rows], goals, masses[rows], com_fraction[rows], settings,
             unconstrained.take(rows), True)
     solve_s = time.perf_counter() - start
-    user = goals.table_index >= 0
-    held[goals.table_index[user]] = goals.held[user]
+    # (the feet's goals, table_index -1, written into one place more and dropped: no masks of
+    # the user goals to gather with; each constraint is one goal at most)
+    with_feet = np.zeros(m + 1, bool)
+    with_feet[goals.table_index] = goals.held
+    held = with_feet[:m]
     # Every active constraint's error on the result (an area the motion already kept was not a
     # goal, but another constraint's move may have taken its point out).
     result = unconstrained
@@ -864,7 +868,11 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
         for name in fields(DecodedPose):
             getattr(result, name.name)[rows] = getattr(solved, name.name)
     # (targets on the character's own body moved with it during the solve: read again)
-    error[active] = steps.result_errors(table, active, result, targets)
+    result_error = steps.result_errors(table, active, result, targets)
+    if active.size == m:  # (every constraint active: sorted, distinct, all; no scatter)
+        error = result_error
+    else:
+        error[active] = result_error
     return TickResult(weight, broken, error, held, goals, rows, solved_poses, solved, iterations,
                       cut, solve_s)
 

@@ -67,6 +67,55 @@ B8 = NDArray[np.bool_]
 TABLES = tables()
 
 
+@jit(nogil=True)
+def weight_rows(time_s: float, on_clip: bool, clip: I64, clip_time_s: F64, owner: I64,
+                clock: I64, enabled: B8, activation: F64, out: F64) -> None:
+    """Mirrors :meth:`ecs_anim.motion.constraint_table.ConstraintTable.weights` (with
+    :func:`ecs_anim.motion.constraints.ramp_weight`, smooth) into ``out`` (m,), bit for bit:
+    each constraint's time ``time_s``, or with ``on_clip`` for one with a ``clock`` its owner's
+    ``clip_time_s`` while the owner plays that ``clip`` (else -inf); numpy's ``minimum`` (the
+    second of equal values, NaN from either) and ``clip`` (NaN kept) written out."""
+    for i in range(out.shape[0]):
+        if not enabled[i]:
+            out[i] = 0.0
+            continue
+        t = time_s
+        if on_clip and clock[i] >= 0:
+            c = owner[i]
+            t = clip_time_s[c] if clip[c] == clock[i] else -math.inf
+        start, stop = activation[i, 0], activation[i, 1]
+        ease_in, ease_out = activation[i, 2], activation[i, 3]
+        if ease_in > 0:
+            up = (t - start) / (ease_in if ease_in >= 1e-12 else 1e-12)
+        else:
+            up = 1.0 if t >= start else 0.0
+        if ease_out > 0:
+            down = (stop - t) / (ease_out if ease_out >= 1e-12 else 1e-12)
+        else:
+            down = 1.0 if t <= stop else 0.0
+        x = up if (up < down or math.isnan(up)) else down
+        if x < 0.0:
+            x = 0.0
+        elif x > 1.0:
+            x = 1.0
+        out[i] = x * x * x * (x * (6.0 * x - 15.0) + 10.0)
+
+
+def weights(table: ConstraintTable, time_s: float, clip: I64 | None = None,
+            clip_time_s: F64 | None = None) -> F64:
+    """Compiled ``table.weights(time_s, clip, clip_time_s)`` (the same result, bit for bit)."""
+    out = np.empty(table.m)
+    on_clip = clip is not None and clip_time_s is not None
+    weight_rows(float(time_s), on_clip,
+                np.ascontiguousarray(clip if on_clip else np.zeros(0, np.int64), dtype=np.int64),
+                np.ascontiguousarray(clip_time_s if on_clip else np.zeros(0), dtype=np.float64),
+                np.ascontiguousarray(table.owner, dtype=np.int64),
+                np.ascontiguousarray(table.clock, dtype=np.int64),
+                np.ascontiguousarray(table.enabled, dtype=np.bool_),
+                np.ascontiguousarray(table.activation, dtype=np.float64), out)
+    return out
+
+
 class Codes(NamedTuple):
     """The constraint table's codes the kernels branch on (passed as an argument: numba's cache
     would keep a module constant of another file as it was when compiled)."""
@@ -596,7 +645,8 @@ def goals_on_layout(kept: Layout, written: bool, table: ConstraintTable, weight:
                                                     table.target_offset[self_idx])
     return TickGoals(
         rows=rows, **out._asdict(), on_self=on_self, self_segment=self_segment,
-        self_fraction=self_fraction, self_offset=self_offset, self_start=targets[self_idx])
+        self_fraction=self_fraction, self_offset=self_offset,
+        self_start=np.take(targets, self_idx, axis=0))  # (a row gather 4 x as fast as [])
 
 
 def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained: DecodedPose,

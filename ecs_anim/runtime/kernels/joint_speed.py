@@ -185,18 +185,24 @@ def _shift_group(j: int) -> int:
     return j if j < 4 else 4 + (j - 4) // 3
 
 
+@jit(inline="always")
+def pack_row(pose: PoseArrays, c: int, out: F64) -> None:
+    """Row ``c`` of ``pose`` packed into row ``c`` of ``out`` (n, N_VALUES), as
+    :func:`ecs_anim.solver.joint_speed.pack`."""
+    for k in range(_N_FRAMES):
+        store4(out[c, 4 * k:4 * k + 4], _frame(pose, c, k))
+    for k in range(_N_DIRECTIONS):
+        store3(out[c, DIRECTIONS_AT + 3 * k:DIRECTIONS_AT + 3 * k + 3], _direction(pose, c, k))
+    for j in range(_N_SHIFTS):
+        out[c, SHIFTS_AT + j] = _shift(pose, c, j)
+
+
 @jit(nogil=True)
 def pack_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, out: F64) -> None:
     """Mirrors :func:`ecs_anim.solver.joint_speed.pack` for the rows ``rows[lo:hi]`` of ``pose``
     into the same rows of ``out`` (n, N_VALUES)."""
     for i in range(lo, hi):
-        c = rows[i]
-        for k in range(_N_FRAMES):
-            store4(out[c, 4 * k:4 * k + 4], _frame(pose, c, k))
-        for k in range(_N_DIRECTIONS):
-            store3(out[c, DIRECTIONS_AT + 3 * k:DIRECTIONS_AT + 3 * k + 3], _direction(pose, c, k))
-        for j in range(_N_SHIFTS):
-            out[c, SHIFTS_AT + j] = _shift(pose, c, j)
+        pack_row(pose, rows[i], out)
 
 
 @jit(inline="always")

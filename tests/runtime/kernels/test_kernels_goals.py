@@ -253,3 +253,31 @@ def test_kept_goal_layout_gives_the_goals_made_afresh(monkeypatch):
     sim.close()
     # made afresh on the first tick and after each change but the priority's (not kept)
     assert calls["ticks"] == 16 and made == [0, 5, 7, 8, 9, 11, 13]
+
+
+def test_compiled_weights_equal_the_tables_bit_for_bit():
+    """``goals.weights`` (ConstraintSolve's activation weights) against
+    ``ConstraintTable.weights``: the same bits (a -0.0 kept, NaN where numpy gives NaN) on ramps
+    easing in and out, steps (no ease, a negative one), infinite and NaN ends, constraints on a
+    clip's time (the owner playing that clip or another, or no clip given) and switched off."""
+    from ecs_anim.motion.constraint_table import ConstraintTable
+
+    rng = np.random.default_rng(2036)
+    m, n = 600, 7
+    table = ConstraintTable()
+    table.owner = rng.integers(0, n, m)
+    table.enabled = rng.random(m) < 0.9
+    table.clock = np.where(rng.random(m) < 0.4, rng.integers(0, 3, m), -1)
+    special = np.array([0.0, -0.0, 1e-13, -1.0, np.inf, -np.inf, np.nan, 2.0, 1e-12])
+    activation = rng.uniform(-1.0, 4.0, (m, 4))
+    pick = rng.random((m, 4)) < 0.3
+    activation[pick] = rng.choice(special, pick.sum())
+    table.activation = activation
+    clip = rng.integers(0, 3, n)
+    clip_time = rng.choice(np.array([0.0, -0.0, 0.5, 1.7, np.nan, 3.0]), n)
+    for time_s in (0.0, -0.0, 0.3, 1.0, 2.5, 10.0):
+        for clip_args in ((clip, clip_time), (None, None), (clip, None)):
+            with np.errstate(invalid="ignore"):  # (inf - inf: NaN, as asked)
+                want = table.weights(time_s, *clip_args)
+            got = compiled.weights(table, time_s, *clip_args)
+            np.testing.assert_array_equal(got.view(np.int64), want.view(np.int64))
