@@ -138,7 +138,11 @@ def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
                 solve_head(c, pose, dec, g, w, b, t)
             if used >= iterations:
                 break
-            if not any_open:
+            # The centre of mass's error, measured once on these joints: the stopping rule's,
+            # and the root step's unless the trunk turns in between.
+            com_measured = not any_open
+            ex = ey = 0.0
+            if com_measured:
                 ex, ey = com_shortfall(c, positions, b.masses, b.com_fraction, b.com_desired,
                                        b.com_on, t.mass_proximal, t.mass_distal)
                 if math.sqrt(ex * ex + ey * ey) <= 0.1 * com_tolerance_m:  # the root stays
@@ -149,7 +153,11 @@ def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
                     err[j] = goal_error(dec, c, g, j, t)
                 solve_trunk(c, pose, dec, b.lengths[c], g, w, err, stalled, t, tolerance_m,
                             tolerance_rad, max_ccd_step_rad)
-            solve_root(c, pose, dec, g, w, b, t, com_tolerance_m, tolerance_m, root_gain,
+                com_measured = False
+            if not com_measured:
+                ex, ey = com_shortfall(c, positions, b.masses, b.com_fraction, b.com_desired,
+                                       b.com_on, t.mass_proximal, t.mass_distal)
+            solve_root(c, pose, dec, g, w, b, t, ex, ey, com_tolerance_m, tolerance_m, root_gain,
                        leg_extension, predicted and not iterates)
             # Only goals an iteration still moves can keep the loop going (:func:`_iterative`; the
             # passes meet the others as well as they can be met): open where not met nor stalled

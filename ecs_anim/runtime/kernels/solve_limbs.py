@@ -147,14 +147,18 @@ def solve_limbs(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winne
                     local2 = point_in_limb(u, ll, fraction, lower2, q2)
                     p2 = add(root, to_world(frame, local2))
                     frame = matmul(turn_about_axis(root, point, p2, load3(goal[second])), frame)
+                # The joints from the new frame (limb_joints' arithmetic, its lower bone's frame
+                # computed once where a held foot's direction needs it too).
+                mid, end = two_bone_middle(frame, root, u, ll, fraction * (u + ll))
+                lower2world = distal_frames(frame, mid, end)
                 if g.table_index[first] < 0:
                     # A foot held where ground adaptation put it keeps its world direction.
-                    mid, end = two_bone_middle(frame, root, u, ll, fraction * (u + ll))
-                    lower2world = distal_frames(frame, mid, end)
                     direction = in_frame(lower2world, load3(b.foot_in_world[c, li]))
                 _store_limb(frames, fractions, directions, c, slot, frame, fraction, direction)
-                limb_joints(positions, c, li, frame, fraction, direction, lengths_row, limb_joint,
-                            limb_length)
+                store3(positions[c, limb_joint[li, 1]], mid)
+                store3(positions[c, limb_joint[li, 2]], end)
+                store3(positions[c, limb_joint[li, 3]],
+                       add(end, scale(to_world(lower2world, direction), h)))
         if orient >= 0:
             changed = True
             lower2world = distal_frames(frame, load3(positions[c, limb_joint[li, 1]]),

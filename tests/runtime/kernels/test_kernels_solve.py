@@ -27,7 +27,7 @@ from ecs_anim.runtime.kernels import solve_math as compiled_math
 from ecs_anim.runtime.kernels.solve_head import solve_head
 from ecs_anim.runtime.kernels.solve_limbs import solve_limbs
 from ecs_anim.runtime.kernels.solve_points import Goals, centre_of_mass, goal_error
-from ecs_anim.runtime.kernels.solve_root import solve_root
+from ecs_anim.runtime.kernels.solve_root import com_shortfall, solve_root
 from ecs_anim.runtime.kernels.solve_trunk import solve_trunk
 from ecs_anim.runtime.simulation import Simulation
 from ecs_anim.solver import shell as solver_shell
@@ -316,7 +316,10 @@ def test_trunk_step_equals_numpy(states):
 
 
 def root(s, c, predicted=True):
-    return solve_root(c, s.pose, s.dec, s.goals, s.winners, s.bodies, T, S.com_tolerance_m,
+    b = s.bodies
+    ex, ey = com_shortfall(c, s.dec.positions, b.masses, b.com_fraction, b.com_desired, b.com_on,
+                           T.mass_proximal, T.mass_distal)
+    return solve_root(c, s.pose, s.dec, s.goals, s.winners, b, T, ex, ey, S.com_tolerance_m,
                       S.tolerance_m, S.root_gain, MAX_LEG_EXTENSION, predicted)
 
 
