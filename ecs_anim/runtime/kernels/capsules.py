@@ -248,27 +248,23 @@ _FORWARD_CELLS = ((1, -1), (1, 0), (1, 1), (0, 1))
 
 @jit(nogil=True)
 def touching_kernel(box: F64, plane: F64, cell_m: float, mask: int, start: I64, order: I64,
-                    box_in_order: F64, touching: NDArray[np.bool_], clearance: F64,
-                    touching_in_order: NDArray[np.bool_], clearance_in_order: F64) -> None:
+                    box_in_order: F64, touching: NDArray[np.bool_], clearance: F64) -> None:
     """Mark ``touching[i]`` (n,) for every character whose bounds ``box`` (n, 2, 3) meet
     another's (on the grid as :func:`overlap_rows`'s). Each pair is met once: in a body's own
     slot, with the bodies after it there; in the four cells after its own
     (:data:`_FORWARD_CELLS`), with every body (half the cells :func:`near_kernel` looks at; a
-    slot two cells share is looked at twice, which marks nothing more). The bounds, marks and
-    clearances are read and written in the grid's order (copied first into ``box_in_order``
-    (n, 2, 3), ``touching_in_order``, ``clearance_in_order`` (n,): a slot's bodies side by
-    side; back into ``touching`` and ``clearance`` at the end), and the four cells' slots made
-    once for the bodies of one cell in a row. ``clearance`` (n,), given as the least gap of two
-    bodies in cells not side by side, is lowered to each body's least gap (m: the largest of
-    the three axes' gaps between two bounds) to a body met whose bounds do not meet its own."""
+    slot two cells share is looked at twice, which marks nothing more). The bounds are read in
+    the grid's order (copied first into ``box_in_order`` (n, 2, 3): a slot's bodies side by
+    side), and the four cells' slots made once for the bodies of one cell in a row.
+    ``clearance`` (n,), given as the least gap of two bodies in cells not side by side, is
+    lowered to each body's least gap (m: the largest of the three axes' gaps between two
+    bounds) to a body met whose bounds do not meet its own."""
     n = order.shape[0]
     for a in range(n):
         i = order[a]
         for e in range(2):
             for x in range(3):
                 box_in_order[a, e, x] = box[i, e, x]
-        touching_in_order[a] = touching[i]
-        clearance_in_order[a] = clearance[i]
     last_x, last_y = 0, 0
     forward = (-1, -1, -1, -1)
     for a in range(n):
@@ -277,7 +273,7 @@ def touching_kernel(box: F64, plane: F64, cell_m: float, mask: int, start: I64, 
         ix, iy = math.floor(plane[i, 0] / cell_m), math.floor(plane[i, 1] / cell_m)
         own = cell_hash(ix, iy, mask)
         for b in range(a + 1, start[own + 1]):
-            _meet(box_i, box_in_order[b], a, b, touching_in_order, clearance_in_order)
+            _meet(box_i, box_in_order[b], i, order[b], touching, clearance)
         if a == 0 or ix != last_x or iy != last_y:
             last_x, last_y = ix, iy
             forward = (cell_hash(ix + _FORWARD_CELLS[0][0], iy + _FORWARD_CELLS[0][1], mask),
@@ -288,19 +284,14 @@ def touching_kernel(box: F64, plane: F64, cell_m: float, mask: int, start: I64, 
             if s == own:
                 continue  # (its bodies met above)
             for b in range(start[s], start[s + 1]):
-                _meet(box_i, box_in_order[b], a, b, touching_in_order, clearance_in_order)
-    for a in range(n):
-        i = order[a]
-        touching[i] = touching_in_order[a]
-        clearance[i] = clearance_in_order[a]
+                _meet(box_i, box_in_order[b], i, order[b], touching, clearance)
 
 
 @jit(inline="always")
 def _meet(box_i: F64, box_j: F64, i: int, j: int, touching: NDArray[np.bool_],
           clearance: F64) -> None:
     """:func:`touching_kernel`'s test of bodies ``i`` and ``j`` (bounds ``box_i``, ``box_j``
-    (2, 3)): both marked if their bounds meet, else each one's clearance lowered to their gap
-    (``i``, ``j`` their places in ``touching`` and ``clearance``)."""
+    (2, 3)): both marked if their bounds meet, else each one's clearance lowered to their gap."""
     if not _apart(box_i, box_j):
         touching[i] = touching[j] = True
         return
@@ -498,6 +489,6 @@ def touching(body: Capsules, grid: Grid, clearance: F64 | None = None) -> I64:
     # each one's bounds within half a cell over CELL_SLACK of its centre (grid_of).
     clearance[:] = grid.cell_m * (1.0 - 1.0 / CELL_SLACK)
     touching_kernel(body.box, grid.plane, grid.cell_m, grid.mask, grid.start, grid.order,
-                    np.empty((n, 2, 3)), marked, clearance, np.empty(n, bool), np.empty(n))
+                    np.empty((n, 2, 3)), marked, clearance)
     found: I64 = np.flatnonzero(marked)
     return found
