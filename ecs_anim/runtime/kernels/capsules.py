@@ -88,22 +88,21 @@ BOUND_HAIR_M = 1e-9
 
 
 @jit(nogil=True)
-def bound_rows(lo: int, hi: int, positions: F64, lengths: F64, widest_terms: I64,
-               widest_weights: F64, centre: F64, box: F64) -> None:
+def bound_rows(lo: int, hi: int, positions: F64, lengths: F64, centre: F64, box: F64) -> None:
     """Bounds of characters ``lo..hi-1`` that hold every capsule without making one (the broad
     phase's, :func:`touching`): ``box`` (n, 2, 3) the lowest and highest corner of every joint
     of ``positions`` (n, N_JOINTS, 3) widened by the body's widest capsule radius (from
-    ``lengths`` (n, N_LENGTHS): ``widest_terms``, ``widest_weights`` (C, 3) each capsule's
-    radius's :data:`RADIUS_TERMS` and their weights, 0 past its last) and :data:`BOUND_HAIR_M`
-    (each capsule's axis lies between two joints); ``centre`` (n, 3) the pelvis. One contiguous
-    pass over each body's joints, no capsule made."""
-    n_joints, n_caps = positions.shape[1], widest_terms.shape[0]
+    ``lengths`` (n, N_LENGTHS): :data:`WIDEST_TERMS`, :data:`WIDEST_WEIGHTS`, constants of the
+    compiled code: each length's column known, not read from a table) and
+    :data:`BOUND_HAIR_M` (each capsule's axis lies between two joints); ``centre`` (n, 3) the
+    pelvis. One contiguous pass over each body's joints, no capsule made."""
+    n_joints = positions.shape[1]
     for c in range(lo, hi):
         widest = 0.0
-        for k in range(n_caps):
-            widest = max(widest, lengths[c, widest_terms[k, 0]] * widest_weights[k, 0]
-                         + lengths[c, widest_terms[k, 1]] * widest_weights[k, 1]
-                         + lengths[c, widest_terms[k, 2]] * widest_weights[k, 2])
+        for k in range(N_CAPSULES):
+            widest = max(widest, lengths[c, WIDEST_TERMS[k, 0]] * WIDEST_WEIGHTS[k, 0]
+                         + lengths[c, WIDEST_TERMS[k, 1]] * WIDEST_WEIGHTS[k, 1]
+                         + lengths[c, WIDEST_TERMS[k, 2]] * WIDEST_WEIGHTS[k, 2])
         widest += BOUND_HAIR_M
         low_x = low_y = low_z = math.inf
         high_x = high_y = high_z = -math.inf
@@ -412,8 +411,7 @@ def bounds(positions: F64, lengths: F64, out: Capsules) -> Capsules:
     are), compiled over all of them: enough for :func:`grid_of` and :func:`touching`, which
     pick the bodies whose capsules are worth making."""
     over_chunks(bound_rows, positions.shape[0], np.ascontiguousarray(positions, np.float64),
-                np.ascontiguousarray(lengths, np.float64), WIDEST_TERMS, WIDEST_WEIGHTS,
-                out.centre, out.box)
+                np.ascontiguousarray(lengths, np.float64), out.centre, out.box)
     return out
 
 

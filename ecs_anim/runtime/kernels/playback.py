@@ -349,86 +349,295 @@ def first_of_each_sample(rows: I64, clip: I64, time_bits: I64, loop: B1, table: 
 
 
 #: Scratch rows of :func:`sample_rows` and :func:`place_rows` (one column per position of their
-#: ``rows``; threads write disjoint columns): for the slerps of a block of samples, the dot
-#: products and angles of the seven slerped pairs, their weights w0 and w1, the frames' weight
-#: and bank rows (whole numbers, exact in float64); then each sample's root before its
-#: placement (x, y, z, heading), its contact weights and its sole rolls.
-_COS = 0
-_ANGLE = _COS + N_SLERPED
-_W0 = _ANGLE + N_SLERPED
-_W1 = _W0 + N_SLERPED
-_T = _W1 + N_SLERPED
-_R0, _R1 = _T + 1, _T + 2
-_ROOT = _T + 3
+#: ``rows``; threads write disjoint columns): each sample's root before its placement (x, y,
+#: z, heading), its contact weights and its sole rolls.
+_ROOT = 0
 _CONTACT = _ROOT + 4
 _ROLL = _CONTACT + 2
 PLAYBACK_SCRATCH_ROWS = _ROLL + 2
 
+#: Rows of a block's lane scratch (:func:`sample_rows`: flat, each row :data:`.lanes.BLOCK`
+#: long, one column a sample of the block): the dot products and angles of the seven slerped
+#: pairs, their weights w0 and w1, the frames' weight and bank rows (whole numbers, exact in
+#: float64); then the weighted sums of the seven slerped quaternions (their x in seven rows,
+#: then their y, z and w) and of the ten directions (their x in ten rows, then y and z),
+#: normalized in place.
+_L_COS = 0
+_L_ANGLE = _L_COS + N_SLERPED
+_L_W0 = _L_ANGLE + N_SLERPED
+_L_W1 = _L_W0 + N_SLERPED
+_L_T = _L_W1 + N_SLERPED
+_L_R0, _L_R1 = _L_T + 1, _L_T + 2
+_L_QUAT = _L_T + 3
+#: The directions a pose blends (nlerp), in the lane scratch's order: neck_dir, head_top_dir,
+#: hip_dir [left, right], foot_dir [left, right], clavicle_dir [left, right], hand_dir [left,
+#: right].
+N_DIRECTIONS = 10
+_L_DIR = _L_QUAT + 4 * N_SLERPED
+LANE_ROWS = _L_DIR + 3 * N_DIRECTIONS
+#: Where the quaternions' and the directions' sums start in a block's lane scratch, flat; and
+#: how far apart their elements are (a row of every quaternion's x, then y: :func:`_at`).
+_QUATS, _QUAT_STEP = _L_QUAT * BLOCK, N_SLERPED * BLOCK
+_DIRS, _DIR_STEP = _L_DIR * BLOCK, N_DIRECTIONS * BLOCK
+
+#: The index type of a column of the lane scratch (unsigned: LLVM then knows an index needs
+#: no wrapping around, and vectorizes the loops over a block's columns).
+Column = np.uint64
+
+
+@jit(inline="always")
+def _at(r: int, j: Column) -> Column:
+    """The flat index of row ``r``, column ``j`` of a block's lane scratch (rows a constant
+    :data:`.lanes.BLOCK` apart: LLVM sees that they do not overlap)."""
+    return Column(r * BLOCK) + j
+
 
 class PlaybackWork:
     """The arrays :func:`sample_placed` works in, kept from tick to tick (grown when the rows
-    outnumber them): a tick neither allocates them nor touches fresh memory."""
+    outnumber them): a tick neither allocates them nor touches fresh memory.
+
+    ``lanes`` (size // BLOCK + 1, LANE_ROWS * BLOCK): a lane scratch per chunk of
+    :func:`sample_rows` (chunks of at least :data:`.lanes.BLOCK` samples: the chunk from
+    ``lo`` uses ``lanes[lo // BLOCK]``). ``loop_clip``, ``loop_count`` (store rows,) and
+    ``loop_turn`` (store rows, 5): per store row, the clip and whole loops of the last loop
+    transform computed for it and that transform (angle, its cosine and sine, moved x, y),
+    reused while the row plays the same loop of the same clip of ``bank`` (a clip of -1:
+    none); ``heading_key`` (store rows,) and ``heading_turn`` (store rows, 2): the placement
+    heading last seen per store row and its cosine and sine (NaN: none)."""
 
     def __init__(self) -> None:
         self._size = -1
         self.table = self.first = self.unique = np.zeros(0, np.int64)
         self.scratch = np.zeros((PLAYBACK_SCRATCH_ROWS, 0))
+        self.lanes = np.zeros((1, LANE_ROWS * BLOCK))
+        self.bank: PlaybackBank | None = None
+        self.loop_clip = np.zeros(0, np.int64)
+        self.loop_count = np.zeros(0)
+        self.loop_turn = np.zeros((0, 5))
+        self.heading_key = np.zeros(0)
+        self.heading_turn = np.zeros((0, 2))
 
-    def ensure(self, n: int) -> None:
-        """Room for ``n`` rows."""
+    def ensure(self, n: int, bank: PlaybackBank | None = None, store_rows: int = 0) -> None:
+        """Room for ``n`` rows sampled from ``bank`` for a store of ``store_rows`` rows (the
+        loop transforms kept are forgotten when the bank is another)."""
         if n > self._size:
             size = max(n, 2 * self._size, 16)
             self.table = np.empty(1 << (2 * size - 1).bit_length(), np.int64)
             self.first, self.unique = np.empty(size, np.int64), np.empty(size, np.int64)
             self.scratch = np.empty((PLAYBACK_SCRATCH_ROWS, size))
+            self.lanes = np.zeros((size // BLOCK + 1, LANE_ROWS * BLOCK))
             self._size = size
+        if store_rows > self.loop_clip.shape[0] or bank is not self.bank:
+            size = max(store_rows, self.loop_clip.shape[0])
+            self.loop_clip = np.full(size, -1, np.int64)
+            self.loop_count = np.zeros(size)
+            self.loop_turn = np.zeros((size, 5))
+            self.heading_key = np.full(size, np.nan)
+            self.heading_turn = np.zeros((size, 2))
+            self.bank = bank
 
 
 @jit(inline="always")
-def _weighted_quat(a: F64, ra: int, rb: int, w0: float, w1: float, out: F64, ro: int) -> None:
-    """Row ``ro`` of the (n, 4) ``out``: ``normalize(w0 a[ra] + w1 a[rb])`` (a slerp given its
-    weights, :func:`.lanes.slerp_weights`)."""
-    x = w0 * a[ra, 0] + w1 * a[rb, 0]
-    y = w0 * a[ra, 1] + w1 * a[rb, 1]
-    z = w0 * a[ra, 2] + w1 * a[rb, 2]
-    w = w0 * a[ra, 3] + w1 * a[rb, 3]
-    n = max(math.sqrt(x * x + y * y + z * z + w * w), TINY)
-    out[ro, 0], out[ro, 1], out[ro, 2], out[ro, 3] = x / n, y / n, z / n, w / n
-
-
-@jit(inline="always")
-def _weighted_quat2(a: F64, ra: int, rb: int, s: int, w0: float, w1: float, out: F64,
-                    ro: int) -> None:
-    """As :func:`_weighted_quat` for side ``s`` of (n, 2, 4) quaternions."""
-    x = w0 * a[ra, s, 0] + w1 * a[rb, s, 0]
-    y = w0 * a[ra, s, 1] + w1 * a[rb, s, 1]
-    z = w0 * a[ra, s, 2] + w1 * a[rb, s, 2]
-    w = w0 * a[ra, s, 3] + w1 * a[rb, s, 3]
-    n = max(math.sqrt(x * x + y * y + z * z + w * w), TINY)
-    out[ro, s, 0], out[ro, s, 1], out[ro, s, 2], out[ro, s, 3] = x / n, y / n, z / n, w / n
+def _loop_turn(bank: PlaybackBank, k: int, loops: float, c: int, loop_clip: I64,
+               loop_count: F64, loop_turn: F64) -> tuple[float, float, float, float, float]:
+    """:func:`loop_transform` of clip ``k`` after ``loops`` whole loops, with the cosine and
+    sine of its angle: (angle, cos, sin, moved x, moved y); kept for store row ``c`` in
+    :class:`PlaybackWork`'s ``loop_*`` arrays, and read there while they hold the same clip and
+    loops (the same bits: computed the same way)."""
+    if loop_clip[c] == k and loop_count[c] == loops:
+        return (loop_turn[c, 0], loop_turn[c, 1], loop_turn[c, 2], loop_turn[c, 3],
+                loop_turn[c, 4])
+    angle, mx, my = loop_transform(bank.loop_yaw[k], bank.loop_cos[k], bank.loop_sin[k],
+                                   bank.loop_shift[k, 0], bank.loop_shift[k, 1], loops)
+    cos_a, sin_a = math.cos(angle), math.sin(angle)
+    loop_clip[c], loop_count[c] = k, loops
+    loop_turn[c, 0], loop_turn[c, 1], loop_turn[c, 2] = angle, cos_a, sin_a
+    loop_turn[c, 3], loop_turn[c, 4] = mx, my
+    return angle, cos_a, sin_a, mx, my
 
 
 @jit(inline="always")
 def _sampled_root(bank: PlaybackBank, k: int, r0: int, r1: int, w: float, loops: float,
-                  wraps: bool) -> tuple[Vec3, float]:
+                  wraps: bool, c: int, loop_clip: I64, loop_count: F64,
+                  loop_turn: F64) -> tuple[Vec3, float]:
     """Root position and heading of clip ``k`` between bank rows ``r0`` and ``r1`` (weight
     ``w`` of r1) after ``loops`` whole loops, r1 in the next loop if it ``wraps`` (mirrors
-    ``sample``'s root)."""
-    first, yaw, cos_yaw, sin_yaw = bank.start[k], bank.loop_yaw[k], bank.loop_cos[k], bank.loop_sin[k]
-    shift_x, shift_y = bank.loop_shift[k, 0], bank.loop_shift[k, 1]
-    angle, mx, my = loop_transform(yaw, cos_yaw, sin_yaw, shift_x, shift_y, loops)
-    c, s = math.cos(angle), math.sin(angle)
-    pa, ha = _frame_root(bank.poses, first, r0, angle, c, s, mx, my)
+    ``sample``'s root); the loop transform kept for store row ``c`` (:func:`_loop_turn`)."""
+    first = bank.start[k]
+    angle, cos_a, sin_a, mx, my = _loop_turn(bank, k, loops, c, loop_clip, loop_count,
+                                             loop_turn)
+    pa, ha = _frame_root(bank.poses, first, r0, angle, cos_a, sin_a, mx, my)
     if wraps:
-        angle, mx, my = loop_transform(yaw, cos_yaw, sin_yaw, shift_x, shift_y, loops + 1.0)
-        c, s = math.cos(angle), math.sin(angle)
-    pb, hb = _frame_root(bank.poses, first, r1, angle, c, s, mx, my)
+        angle, mx, my = loop_transform(bank.loop_yaw[k], bank.loop_cos[k], bank.loop_sin[k],
+                                       bank.loop_shift[k, 0], bank.loop_shift[k, 1],
+                                       loops + 1.0)
+        cos_a, sin_a = math.cos(angle), math.sin(angle)
+    pb, hb = _frame_root(bank.poses, first, r1, angle, cos_a, sin_a, mx, my)
     return blend_root(pa, ha, pb, hb, w)
+
+
+@jit(inline="always")
+def _sum_quat(a: F64, ra: int, rb: int, w0: float, w1: float, lanes: F64, q: int,
+              j: Column) -> None:
+    """``w0 a[ra] + w1 a[rb]`` of the (n, 4) quaternions ``a`` into column ``j`` of ``lanes``
+    as slerped quaternion ``q`` (:data:`N_SLERPED` order; a slerp given its weights,
+    :func:`.lanes.slerp_weights`, before it is normalized)."""
+    for e in range(4):
+        lanes[_at(_L_QUAT + e * N_SLERPED + q, j)] = w0 * a[ra, e] + w1 * a[rb, e]
+
+
+@jit(inline="always")
+def _sum_quat2(a: F64, ra: int, rb: int, s: int, w0: float, w1: float, lanes: F64, q: int,
+               j: Column) -> None:
+    """As :func:`_sum_quat` for side ``s`` of (n, 2, 4) quaternions."""
+    for e in range(4):
+        lanes[_at(_L_QUAT + e * N_SLERPED + q, j)] = w0 * a[ra, s, e] + w1 * a[rb, s, e]
+
+
+@jit(inline="always")
+def _sum_dir(a: F64, ra: int, rb: int, w: float, lanes: F64, d: int, j: Column) -> None:
+    """``(1 - w) a[ra] + w a[rb]`` of the (n, 3) directions ``a`` into column ``j`` of
+    ``lanes`` as direction ``d`` (:data:`N_DIRECTIONS` order; :func:`.vec.nlerp` before it is
+    normalized)."""
+    for e in range(3):
+        lanes[_at(_L_DIR + e * N_DIRECTIONS + d, j)] = (1 - w) * a[ra, e] + w * a[rb, e]
+
+
+@jit(inline="always")
+def _sum_dir2(a: F64, ra: int, rb: int, s: int, w: float, lanes: F64, d: int,
+              j: Column) -> None:
+    """As :func:`_sum_dir` for side ``s`` of (n, 2, 3) directions."""
+    for e in range(3):
+        lanes[_at(_L_DIR + e * N_DIRECTIONS + d, j)] = (1 - w) * a[ra, s, e] + w * a[rb, s, e]
+
+
+# A call, not inlined: its two loops are the ones that run on the vector units.
+@jit()
+def normalize_lanes(lanes: F64) -> None:
+    """The weighted sums of a block's lane scratch normalized in place, as :func:`.vec.slerp`
+    and :func:`.vec.nlerp` normalize (``max(|v|, TINY)``, then each element divided: the same
+    bits in a vector lane as alone), in two loops over every column of every quaternion and
+    every direction (the columns past a last block's samples too: they are not read)."""
+    for k in range(_QUAT_STEP):
+        m = Column(_QUATS + k)
+        x, y = lanes[m], lanes[m + Column(_QUAT_STEP)]
+        z, w = lanes[m + Column(2 * _QUAT_STEP)], lanes[m + Column(3 * _QUAT_STEP)]
+        n = max(math.sqrt(x * x + y * y + z * z + w * w), TINY)
+        lanes[m], lanes[m + Column(_QUAT_STEP)] = x / n, y / n
+        lanes[m + Column(2 * _QUAT_STEP)], lanes[m + Column(3 * _QUAT_STEP)] = z / n, w / n
+    for k in range(_DIR_STEP):
+        m = Column(_DIRS + k)
+        x, y, z = lanes[m], lanes[m + Column(_DIR_STEP)], lanes[m + Column(2 * _DIR_STEP)]
+        n = max(math.sqrt(x * x + y * y + z * z), TINY)
+        lanes[m], lanes[m + Column(_DIR_STEP)] = x / n, y / n
+        lanes[m + Column(2 * _DIR_STEP)] = z / n
+
+
+@jit(inline="always")
+def _slerp_weights_lanes(lanes: F64, count: Column) -> None:
+    """The slerps' weights w0, w1 (:func:`.lanes.slerp_weights`) of columns ``0..count-1`` of
+    a block's lane scratch, in loops over the columns (the vector units')."""
+    for q in range(N_SLERPED):
+        for k in range(count):
+            j = Column(k)
+            lanes[_at(_L_W0 + q, j)], lanes[_at(_L_W1 + q, j)] = slerp_weights(
+                lanes[_at(_L_COS + q, j)], lanes[_at(_L_ANGLE + q, j)], lanes[_at(_L_T, j)])
+
+
+@jit(inline="always")
+def _put_quat(lanes: F64, q: int, j: Column, a: F64, o: int) -> None:
+    """Slerped quaternion ``q`` of column ``j`` of ``lanes`` into row ``o`` of the (n, 4)
+    ``a``."""
+    for e in range(4):
+        a[o, e] = lanes[_at(_L_QUAT + e * N_SLERPED + q, j)]
+
+
+@jit(inline="always")
+def _put_quat2(lanes: F64, q: int, j: Column, a: F64, o: int, s: int) -> None:
+    """As :func:`_put_quat` into side ``s`` of the (n, 2, 4) ``a``."""
+    for e in range(4):
+        a[o, s, e] = lanes[_at(_L_QUAT + e * N_SLERPED + q, j)]
+
+
+@jit(inline="always")
+def _put_dir(lanes: F64, d: int, j: Column, a: F64, o: int) -> None:
+    """Direction ``d`` of column ``j`` of ``lanes`` into row ``o`` of the (n, 3) ``a``."""
+    for e in range(3):
+        a[o, e] = lanes[_at(_L_DIR + e * N_DIRECTIONS + d, j)]
+
+
+@jit(inline="always")
+def _put_dir2(lanes: F64, d: int, j: Column, a: F64, o: int, s: int) -> None:
+    """As :func:`_put_dir` into side ``s`` of the (n, 2, 3) ``a``."""
+    for e in range(3):
+        a[o, s, e] = lanes[_at(_L_DIR + e * N_DIRECTIONS + d, j)]
+
+
+@jit(inline="always")
+def _lerp_n(a: F64, ra: int, rb: int, w: float, out: F64, ro: int, size: int) -> None:
+    """Row ``ro`` of the (n, size) ``out``: ``(1 - w) a[ra] + w a[rb]`` (``size`` a constant:
+    unrolled)."""
+    for k in range(size):
+        out[ro, k] = (1 - w) * a[ra, k] + w * a[rb, k]
+
+
+@jit(inline="always")
+def _sum_row(poses: PoseArrays, r0: int, r1: int, w: float, lanes: F64, j: Column) -> None:
+    """The weighted sums of bank rows ``r0``, ``r1`` (weight ``w`` of r1; the slerps' weights
+    in the lane scratch) into column ``j`` of ``lanes``, in :data:`_L_QUAT`'s and
+    :data:`_L_DIR`'s order."""
+    _sum_quat(poses.pelvis_local, r0, r1, lanes[_at(_L_W0, j)], lanes[_at(_L_W1, j)], lanes,
+              0, j)
+    _sum_quat(poses.thorax, r0, r1, lanes[_at(_L_W0 + 1, j)], lanes[_at(_L_W1 + 1, j)], lanes,
+              1, j)
+    _sum_quat(poses.head, r0, r1, lanes[_at(_L_W0 + 2, j)], lanes[_at(_L_W1 + 2, j)], lanes,
+              2, j)
+    for s in range(2):
+        _sum_quat2(poses.leg_frame, r0, r1, s, lanes[_at(_L_W0 + 3 + s, j)],
+                   lanes[_at(_L_W1 + 3 + s, j)], lanes, 3 + s, j)
+        _sum_quat2(poses.arm_frame, r0, r1, s, lanes[_at(_L_W0 + 5 + s, j)],
+                   lanes[_at(_L_W1 + 5 + s, j)], lanes, 5 + s, j)
+    _sum_dir(poses.neck_dir, r0, r1, w, lanes, 0, j)
+    _sum_dir(poses.head_top_dir, r0, r1, w, lanes, 1, j)
+    for s in range(2):
+        _sum_dir2(poses.hip_dir, r0, r1, s, w, lanes, 2 + s, j)
+        _sum_dir2(poses.foot_dir, r0, r1, s, w, lanes, 4 + s, j)
+        _sum_dir2(poses.clavicle_dir, r0, r1, s, w, lanes, 6 + s, j)
+        _sum_dir2(poses.hand_dir, r0, r1, s, w, lanes, 8 + s, j)
+
+
+@jit(inline="always")
+def _put_row(poses: PoseArrays, r0: int, r1: int, w: float, lanes: F64, j: Column,
+             out: PoseArrays, o: int) -> None:
+    """Row ``o`` of ``out``: the normalized quaternions and directions of column ``j`` of
+    ``lanes`` (:func:`_sum_row`'s order), and the lerped fractions, spine points and stretch
+    of bank rows ``r0``, ``r1`` (weight ``w`` of r1)."""
+    _put_quat(lanes, 0, j, out.pelvis_local, o)
+    _put_quat(lanes, 1, j, out.thorax, o)
+    _put_quat(lanes, 2, j, out.head, o)
+    for s in range(2):
+        _put_quat2(lanes, 3 + s, j, out.leg_frame, o, s)
+        _put_quat2(lanes, 5 + s, j, out.arm_frame, o, s)
+    _put_dir(lanes, 0, j, out.neck_dir, o)
+    _put_dir(lanes, 1, j, out.head_top_dir, o)
+    for s in range(2):
+        _put_dir2(lanes, 2 + s, j, out.hip_dir, o, s)
+        _put_dir2(lanes, 4 + s, j, out.foot_dir, o, s)
+        _put_dir2(lanes, 6 + s, j, out.clavicle_dir, o, s)
+        _put_dir2(lanes, 8 + s, j, out.hand_dir, o, s)
+    _lerp_n(poses.leg_fraction, r0, r1, w, out.leg_fraction, o, 2)
+    _lerp_n(poses.arm_fraction, r0, r1, w, out.arm_fraction, o, 2)
+    for p in range(3):
+        for k in range(3):
+            out.spine_points[o, p, k] = ((1 - w) * poses.spine_points[r0, p, k]
+                                         + w * poses.spine_points[r1, p, k])
+    _lerp_n(poses.stretch, r0, r1, w, out.stretch, o, N_LENGTHS)
 
 
 @jit(nogil=True)
 def sample_rows(lo: int, hi: int, unique: I64, rows: I64, bank: PlaybackBank, clip: I64,
-                time_s: F64, loop: B1, out: PoseArrays, out_rows: I64, scratch: F64) -> None:
+                time_s: F64, loop: B1, out: PoseArrays, out_rows: I64, scratch: F64,
+                lanes: F64, loop_clip: I64, loop_count: F64, loop_turn: F64) -> None:
     """Mirrors ``sample(bank, clip, time_s, loop)`` for the store rows ``rows[unique[lo:hi]]``:
     every field but the root's into rows ``out_rows[unique[j]]`` of ``out``; into the scratch
     column ``unique[j]``, the root before its placement (capture ground taken out, as
@@ -436,62 +645,58 @@ def sample_rows(lo: int, hi: int, unique: I64, rows: I64, bank: PlaybackBank, cl
     (:func:`ecs_anim.motion.sampling.sample_table`), which :func:`place_rows` then places.
 
     Per store row: ``clip`` (n,) int64, ``time_s`` (n,) s, ``loop`` (n,) bool. ``scratch``
-    (PLAYBACK_SCRATCH_ROWS, len(rows)). By blocks of :data:`.lanes.BLOCK` samples: frames,
-    roots and tables row by row, the slerps' weights (sines: their angles come from the
-    bank) in a loop over the block that runs on the vector units, then the weighted sums row
-    by row."""
+    (PLAYBACK_SCRATCH_ROWS, len(rows)); ``lanes`` :class:`PlaybackWork`'s (the chunk uses
+    ``lanes[lo // BLOCK]``: chunks of at least :data:`.lanes.BLOCK` samples), ``loop_*`` its
+    loop transforms kept per store row. By blocks of :data:`.lanes.BLOCK` samples: frames,
+    roots, tables and the weighted sums row by row, the slerps' weights (sines: their angles
+    come from the bank) and the sums' normalizations (square roots and divisions) in loops
+    over the block that run on the vector units, then each row's results written."""
     poses = bank.poses
+    block_lanes = lanes[lo // BLOCK]
     for block in range(lo, hi, BLOCK):
         stop = min(block + BLOCK, hi)
-        for j in range(block, stop):
-            i = unique[j]
+        count = Column(stop - block)
+        for b in range(block, stop):
+            j = Column(b - block)
+            i = unique[b]
             c = rows[i]
             k = clip[c]
             i0, i1, w, loops, wraps = frame_position(bank.n_frames[k], bank.fps[k], time_s[c],
                                                      loop[c])
             r0, r1 = bank.start[k] + i0, bank.start[k] + i1
-            p, h = _sampled_root(bank, k, r0, r1, w, loops, wraps)
+            p, h = _sampled_root(bank, k, r0, r1, w, loops, wraps, c, loop_clip, loop_count,
+                                 loop_turn)
             ground = bank.capture_ground[r0] + w * (bank.capture_ground[r1]
                                                     - bank.capture_ground[r0])
             scratch[_ROOT, i], scratch[_ROOT + 1, i] = p[0], p[1]
             scratch[_ROOT + 2, i], scratch[_ROOT + 3, i] = p[2] - ground, h
             for s in range(2):
-                a, b = bank.contact_weight[r0, s], bank.contact_weight[r1, s]
-                scratch[_CONTACT + s, i] = a + w * (b - a)
-                a, b = bank.sole_roll[r0, s], bank.sole_roll[r1, s]
-                scratch[_ROLL + s, i] = a + w * (b - a)
-            scratch[_T, j], scratch[_R0, j], scratch[_R1, j] = w, r0, r1
+                a, d = bank.contact_weight[r0, s], bank.contact_weight[r1, s]
+                scratch[_CONTACT + s, i] = a + w * (d - a)
+                a, d = bank.sole_roll[r0, s], bank.sole_roll[r1, s]
+                scratch[_ROLL + s, i] = a + w * (d - a)
+            block_lanes[_at(_L_T, j)] = w
+            block_lanes[_at(_L_R0, j)], block_lanes[_at(_L_R1, j)] = r0, r1
             if r1 == bank.next_row[r0]:
                 for q in range(N_SLERPED):
-                    scratch[_COS + q, j] = bank.pair_cos[r0, q]
-                    scratch[_ANGLE + q, j] = bank.pair_angle[r0, q]
+                    block_lanes[_at(_L_COS + q, j)] = bank.pair_cos[r0, q]
+                    block_lanes[_at(_L_ANGLE + q, j)] = bank.pair_angle[r0, q]
             else:  # a clip held on its last frame: r1 is r0
                 for q in range(N_SLERPED):
                     cos_half = _slerped_cos(poses, r0, r1, q)
-                    scratch[_COS + q, j] = cos_half
-                    scratch[_ANGLE + q, j] = slerp_angle(cos_half)
-        t = scratch[_T, block:stop]
-        for q in range(N_SLERPED):
-            dots, angles = scratch[_COS + q, block:stop], scratch[_ANGLE + q, block:stop]
-            w0, w1 = scratch[_W0 + q, block:stop], scratch[_W1 + q, block:stop]
-            # The vectorized loop (indices from 0: LLVM knows they need no wrapping around).
-            for b in range(t.shape[0]):
-                w0[b], w1[b] = slerp_weights(dots[b], angles[b], t[b])
-        for j in range(block, stop):
-            o, w = out_rows[unique[j]], scratch[_T, j]
-            r0, r1 = int(scratch[_R0, j]), int(scratch[_R1, j])
-            _weighted_quat(poses.pelvis_local, r0, r1, scratch[_W0, j], scratch[_W1, j],
-                           out.pelvis_local, o)
-            _weighted_quat(poses.thorax, r0, r1, scratch[_W0 + 1, j], scratch[_W1 + 1, j],
-                           out.thorax, o)
-            _weighted_quat(poses.head, r0, r1, scratch[_W0 + 2, j], scratch[_W1 + 2, j],
-                           out.head, o)
-            for s in range(2):
-                _weighted_quat2(poses.leg_frame, r0, r1, s, scratch[_W0 + 3 + s, j],
-                                scratch[_W1 + 3 + s, j], out.leg_frame, o)
-                _weighted_quat2(poses.arm_frame, r0, r1, s, scratch[_W0 + 5 + s, j],
-                                scratch[_W1 + 5 + s, j], out.arm_frame, o)
-            _blend_unslerped(poses, r0, poses, r1, w, out, o)
+                    block_lanes[_at(_L_COS + q, j)] = cos_half
+                    block_lanes[_at(_L_ANGLE + q, j)] = slerp_angle(cos_half)
+        _slerp_weights_lanes(block_lanes, count)
+        for b in range(block, stop):
+            j = Column(b - block)
+            r0, r1 = int(block_lanes[_at(_L_R0, j)]), int(block_lanes[_at(_L_R1, j)])
+            _sum_row(poses, r0, r1, block_lanes[_at(_L_T, j)], block_lanes, j)
+        normalize_lanes(block_lanes)
+        for b in range(block, stop):
+            j = Column(b - block)
+            r0, r1 = int(block_lanes[_at(_L_R0, j)]), int(block_lanes[_at(_L_R1, j)])
+            _put_row(poses, r0, r1, block_lanes[_at(_L_T, j)], block_lanes, j, out,
+                     out_rows[unique[b]])
 
 
 # The copies take their row length as a constant: LLVM unrolls them (twice as fast as a loop
@@ -543,21 +748,40 @@ def copy_shared_parts(out: PoseArrays, lo: int, hi: int, first: I64, out_rows: I
     _copy_shared(out.stretch, lo, hi, first, out_rows, N_LENGTHS)
 
 
+@jit(inline="always")
+def _heading_turn(heading: float, c: int, heading_key: F64,
+                  heading_turn: F64) -> tuple[float, float]:
+    """The cosine and sine of ``heading`` (rad), kept for store row ``c`` in
+    :class:`PlaybackWork`'s ``heading_key`` and ``heading_turn`` and read there while the row's
+    heading is the same (to the bit: a zero's sign too)."""
+    key = heading_key[c]
+    if key == heading and math.copysign(1.0, key) == math.copysign(1.0, heading):
+        return heading_turn[c, 0], heading_turn[c, 1]
+    cos_h, sin_h = math.cos(heading), math.sin(heading)
+    heading_key[c], heading_turn[c, 0], heading_turn[c, 1] = heading, cos_h, sin_h
+    return cos_h, sin_h
+
+
 @jit(nogil=True)
 def place_rows(lo: int, hi: int, rows: I64, first: I64, placement_xy: F64,
                placement_heading: F64, lengths: F64, out: PoseArrays, out_rows: I64,
-               scratch: F64, contact_weight: F64, sole_roll: F64) -> None:
+               scratch: F64, contact_weight: F64, sole_roll: F64, heading_key: F64,
+               heading_turn: F64) -> None:
     """For each position i in ``lo..hi`` of the store rows ``rows``: row ``out_rows[i]`` of
     ``out`` becomes the pose :func:`sample_rows` sampled for position ``first[i]`` (copied
     unless it is i's own), its root placed as ``MotionPlayback._placed`` does (rotated about
     the motion's origin by ``placement_heading`` (n,) rad in metres of the leg length of
     ``lengths`` (n, N_LENGTHS) m, then shifted by ``placement_xy`` (n, 2) m);
-    ``contact_weight`` and ``sole_roll`` (n, 2) of store row ``rows[i]`` its sample's."""
+    ``contact_weight`` and ``sole_roll`` (n, 2) of store row ``rows[i]`` its sample's.
+    ``heading_key``, ``heading_turn``: :class:`PlaybackWork`'s headings' cosines and sines
+    kept per store row (:func:`_heading_turn`)."""
     copy_shared_parts(out, lo, hi, first, out_rows)
     for i in range(lo, hi):
         c, o, f = rows[i], out_rows[i], first[i]
         heading, scale = placement_heading[c], leg_length(lengths[c])
-        x, y = rotate_xy(scratch[_ROOT, f] * scale, scratch[_ROOT + 1, f] * scale, heading)
+        cos_h, sin_h = _heading_turn(heading, c, heading_key, heading_turn)
+        # rotate_xy, its cosine and sine kept
+        x, y = _turned(scratch[_ROOT, f] * scale, scratch[_ROOT + 1, f] * scale, cos_h, sin_h)
         out.root_position[o, 0] = (x + placement_xy[c, 0]) / scale
         out.root_position[o, 1] = (y + placement_xy[c, 1]) / scale
         out.root_position[o, 2] = scratch[_ROOT + 2, f]
@@ -582,13 +806,15 @@ def sample_placed(bank: PlaybackBank, rows: I64, clip: I64, time_s: F64, loop: B
     N_LENGTHS) m (the leg length is the root path's unit). Each (clip, time, loop) is sampled
     once (:func:`first_of_each_sample`, :func:`sample_rows`), then every row placed
     (:func:`place_rows`); ``work`` holds the scratch."""
-    work.ensure(rows.size)
+    work.ensure(rows.size, bank, clip.shape[0])
     m = first_of_each_sample(rows, clip, time_s.view(np.int64), loop, work.table, work.first,
                              work.unique)
     over_chunks(sample_rows, m, work.unique, rows, bank, clip, time_s, loop, out, out_rows,
-                work.scratch)
+                work.scratch, work.lanes, work.loop_clip, work.loop_count, work.loop_turn,
+                rows_per_thread=BLOCK)
     over_chunks(place_rows, rows.size, rows, work.first, placement_xy, placement_heading,
-                lengths, out, out_rows, work.scratch, contact_weight, sole_roll)
+                lengths, out, out_rows, work.scratch, contact_weight, sole_roll,
+                work.heading_key, work.heading_turn)
 
 
 @jit(nogil=True)

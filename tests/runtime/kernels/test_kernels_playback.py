@@ -183,19 +183,59 @@ def test_sample_placed_does_not_depend_on_the_chunks(bank: ClipBank) -> None:
     whole, chunked = _empty(n, like), _empty(n, like)
     _compiled(bank, rows, clip, time_s, loop, xy, heading, lengths, whole, rows)
     pbank, work = playback_bank(bank), PlaybackWork()
-    work.ensure(n)
+    work.ensure(n, pbank, n)
     m = first_of_each_sample(rows, clip, time_s.view(np.int64), loop, work.table, work.first,
                              work.unique)
     assert m > 3 * BLOCK
     for lo, hi in ((0, 7), (7, 40), (40, 41), (41, m)):
         sample_rows(lo, hi, work.unique, rows, pbank, clip, time_s, loop, pose_arrays(chunked),
-                    rows, work.scratch)
+                    rows, work.scratch, work.lanes, work.loop_clip, work.loop_count,
+                    work.loop_turn)
     weights, rolls = np.zeros((n, 2)), np.zeros((n, 2))
     for lo, hi in ((0, 33), (33, 34), (34, n)):
         place_rows(lo, hi, rows, work.first, xy, heading, lengths, pose_arrays(chunked), rows,
-                   work.scratch, weights, rolls)
+                   work.scratch, weights, rolls, work.heading_key, work.heading_turn)
     for name, a in whole.arrays().items():
         np.testing.assert_array_equal(getattr(chunked, name), a, err_msg=name)
+
+
+def test_kept_turns_give_the_bits_computed_anew(bank: ClipBank) -> None:
+    """The loop transforms and the placement headings' cosines and sines kept from tick to
+    tick (PlaybackWork) give the bits a fresh PlaybackWork computes: over ticks whose clocks
+    move on (loops done, held clips), some characters changing clip or heading (a heading of
+    -0.0 after 0.0 too), a removal renumbering the rows, and another bank."""
+    rng = np.random.default_rng(1321)
+    n = 3 * BLOCK + 7
+    clip, time_s, loop, xy, heading, lengths = _scene(bank, rng, n)
+    heading[:4] = 0.0
+    like = sample(bank, clip[:1], time_s[:1], loop[:1])
+    pbank, kept = playback_bank(bank), PlaybackWork()
+    rows = np.arange(n, dtype=np.int64)
+    for tick in range(12):
+        if tick == 6:  # a removal: the rows after the fifth renumbered
+            keep = np.delete(np.arange(n), 5)
+            clip, time_s, loop, xy, heading, lengths = (a[keep] for a in (clip, time_s, loop, xy,
+                                                                          heading, lengths))
+            n -= 1
+            rows = np.arange(n, dtype=np.int64)
+        if tick == 9:  # another bank (the same clips): nothing kept is read
+            pbank = playback_bank(bank)
+        got, want = _empty(n, like), _empty(n, like)
+        weights = [np.zeros((n, 2)) for _ in range(4)]
+        sample_placed(pbank, rows, clip, time_s, loop, xy, heading, lengths, pose_arrays(got),
+                      rows, weights[0], weights[1], kept)
+        sample_placed(pbank, rows, clip, time_s, loop, xy, heading, lengths, pose_arrays(want),
+                      rows, weights[2], weights[3], PlaybackWork())
+        for name, a in want.arrays().items():
+            np.testing.assert_array_equal(getattr(got, name).view(np.int64), a.view(np.int64),
+                                          err_msg=f"{name} at tick {tick}")
+        np.testing.assert_array_equal(weights[0], weights[2])
+        np.testing.assert_array_equal(weights[1], weights[3])
+        time_s = time_s + bank.duration_s(clip) * rng.uniform(0.0, 0.7, n)
+        change = rng.random(n) < 0.2
+        clip = np.where(change, rng.integers(0, len(bank.names), n), clip).astype(np.int64)
+        heading = np.where(rng.random(n) < 0.2, rng.uniform(-7.0, 7.0, n), heading)
+        heading[:4] = -0.0 if tick % 2 == 0 else 0.0
 
 
 def test_complex_power_equals_numpy() -> None:
