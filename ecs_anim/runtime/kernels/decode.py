@@ -554,7 +554,8 @@ def col_matrix(scratch: F64, r: int, j: Column) -> Frame:
 @jit(inline="always")
 def _length(scratch: F64, k: int, j: Column) -> float:
     """Length ``k`` (the skeleton's index) of column ``j`` (m)."""
-    return scratch[at(_B_LENGTHS + k, j)]
+    length: float = scratch[at(_B_LENGTHS + k, j)]
+    return length
 
 
 @jit(inline="always")  # one call site
