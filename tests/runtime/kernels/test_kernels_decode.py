@@ -178,3 +178,46 @@ def test_zero_quaternions_decode_as_no_turn_like_numpy():
     poses.leg_frame[5] = 0.0
     poses.arm_frame[5] = 0.0
     assert_same(kd.decode(poses, lengths), decode(poses, lengths))
+
+
+def test_decode_rows_equals_the_row_decode_bit_for_bit_on_edge_poses():
+    """decode_rows (by blocks, the spines on the vector units) gives decode_row's bits, the row
+    by row reference, on poses with zero quaternions, straight and folded limbs, bones of no
+    length, a spine of coincident points and a NaN; in a short chunk, one across a multiple of
+    the block, one not starting on a multiple of the block with a block not full, and a
+    whole one."""
+    from numba import njit
+
+    rng = np.random.default_rng(1311)
+    n = 4 * BLOCK + 9
+    poses = random_poses(rng, n)
+    lengths = random_bodies(rng, n)
+    poses.pelvis_local[1] = 0.0
+    poses.leg_frame[2, 1] = 0.0
+    poses.thorax[3] = 0.0
+    poses.head[4] = 0.0
+    poses.arm_frame[5, 0] = 0.0
+    poses.leg_fraction[6] = 1.0
+    poses.arm_fraction[7] = 0.0
+    poses.leg_fraction[8] = 3.0
+    lengths[9, 4] = 0.0  # a shank
+    lengths[10, 19] = 0.0  # a forearm
+    poses.hip_dir[11, 0, 1] = np.nan
+    poses.spine_points[12] = 0.0
+    rows = rng.permutation(n).astype(np.int64)
+    pose = kd.pose_arrays(poses)
+    blocks = kd.empty_decoded(n)
+    scratch = kd.spine_scratch(n)
+    for lo, hi in ((0, 20), (20, 45), (45, 45 + BLOCK + 3), (45 + BLOCK + 3, n)):
+        kd.decode_rows(lo, hi, rows, pose, lengths, blocks, scratch)
+
+    @njit(error_model="numpy")
+    def one_row_at_a_time(pose, lengths, out):
+        for c in range(lengths.shape[0]):
+            kd.decode_row(c, pose, lengths[c], out)
+
+    by_row = kd.empty_decoded(n)
+    one_row_at_a_time(pose, lengths, by_row)
+    for name, a, b in zip(FIELDS, blocks, by_row, strict=True):
+        np.testing.assert_array_equal(a, b, err_msg=name)
+    assert np.isnan(blocks.positions[11]).any() and np.isfinite(blocks.positions[:11]).all()
