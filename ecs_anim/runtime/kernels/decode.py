@@ -24,7 +24,7 @@ from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import LENGTH_INDEX as L
 from ecs_anim.core.skeleton import N_JOINTS, N_LENGTHS
 from ecs_anim.runtime.kernels import over_chunks
-from ecs_anim.runtime.kernels.lanes import BLOCK
+from ecs_anim.runtime.kernels.lanes import BLOCK, Column, at, col3, col4, put3
 from ecs_anim.runtime.kernels.vec import (
     F64,
     TINY,
@@ -239,10 +239,13 @@ def world_quat(parent2world: Quat, local: Quat) -> Quat:
     quaternion, so that a frame's children in the decode cost a quaternion product, not a
     matrix product. Neither is normalized (:func:`.vec.rotation_from_quat` divides by the
     square of the norm); a zero ``local`` is the identity, as ``matrix_from_quat`` makes it."""
-    if local[0] * local[0] + local[1] * local[1] + local[2] * local[2] + local[3] * local[3] \
-            < TINY * TINY:
-        return parent2world
-    return quat_mul(parent2world, local)
+    # The product computed always and the parent chosen where ``local`` is zero (a select, not a
+    # branch: the blocks' loops run on the vector units).
+    zero = local[0] * local[0] + local[1] * local[1] + local[2] * local[2] \
+        + local[3] * local[3] < TINY * TINY
+    q = quat_mul(parent2world, local)
+    return (parent2world[0] if zero else q[0], parent2world[1] if zero else q[1],
+            parent2world[2] if zero else q[2], parent2world[3] if zero else q[3])
 
 
 @jit(inline="always")
@@ -492,66 +495,236 @@ def decode_upper_row(c: int, pose: PoseArrays, seg: F64, spine: tuple[Vec3, Vec3
         store_frame(out.arm2world[c, s], arm2world)
 
 
-#: Scratch rows of the spines of a block of characters (one column a character): the four
-#: control points (the first the origin), the three segment lengths, the curve parameter and the
-#: previous joint's, the origin and the three joints (pelvis frame, m); then the pelvis2world
-#: quaternion, for the trunk. The origins are stored so that each joint's loops differ only in
-#: the rows they read (one compiled loop for all).
-_S_CONTROL, _S_LENGTH, _S_T, _S_PREV_T, _S_JOINT, _S_PELVIS = 0, 12, 15, 16, 17, 29
-SPINE_SCRATCH_ROWS = 33
+# The scratch of decode_rows: a block's, one column a character of the block (flat, rows of BLOCK:
+# lanes.at). The inputs, gathered row by row (gather_block): the heading's half-angle sine and
+# cosine (library calls, which LLVM does not vectorize), the pose, the lengths ...
+_B_HALF, _B_ROOT, _B_PELVIS_LOCAL, _B_HIP_DIR, _B_LEG_FRAME = 0, 2, 5, 9, 15  # side s: + 3 s, + 4 s
+_B_LEG_FRACTION, _B_FOOT_DIR, _B_THORAX, _B_NECK_DIR, _B_HEAD = 23, 25, 31, 35, 38
+_B_HEAD_TOP_DIR, _B_CLAVICLE_DIR, _B_ARM_FRAME, _B_ARM_FRACTION, _B_HAND_DIR = 42, 45, 51, 59, 61
+_B_LENGTHS = 67  # N_LENGTHS of them, in the skeleton's order
+# ... the spines' (spine_block): the four control points (the first the origin), the curve
+# parameter and the previous joint's, the origin and the three joints (pelvis frame, m); their
+# segment lengths are the lengths' own. The origins are stored so that each joint's loops differ
+# only in the rows they read (one compiled loop for all) ...
+_S_CONTROL, _S_T, _S_PREV_T, _S_JOINT = 90, 102, 103, 104
+_S_LENGTH = _B_LENGTHS + L_SPINE_LOWER
+# ... pelvis2world as a quaternion (lower_lanes for upper_lanes), and the results in the
+# order of a row of each out array (positions; frames as store_frame writes them), so that
+# scatter_block copies runs of them.
+_B_PELVIS_Q, _B_POSITIONS = 116, 120
+_B_PELVIS2WORLD, _B_THORAX2WORLD, _B_HEAD2WORLD, _B_LEG2WORLD, _B_ARM2WORLD = \
+    186, 195, 204, 213, 231
+#: Rows of a block's scratch (:func:`spine_scratch`).
+BLOCK_ROWS = 249
+assert _B_LENGTHS + N_LENGTHS == _S_CONTROL and _B_POSITIONS + 3 * N_JOINTS == _B_PELVIS2WORLD
+assert _B_ARM2WORLD + 18 == BLOCK_ROWS
 
 
 def spine_scratch(n: int) -> F64:
-    """The scratch :func:`decode_rows` (and ``posture_rows``) need for ``n`` rows:
-    (SPINE_SCRATCH_ROWS, n)."""
-    return np.empty((SPINE_SCRATCH_ROWS, n))
+    """The scratch :func:`decode_rows` (and ``posture_rows``) need for ``n`` rows: two sets of
+    ``n // BLOCK + 1`` block scratches (each a block's BLOCK_ROWS rows of BLOCK, flat). A
+    chunk of at least :data:`.lanes.BLOCK` rows from ``lo`` decodes each of its blocks in the
+    block scratch ``lo // BLOCK`` of the first set (chunks that long never share one; one
+    thread touches 64 kB); a shorter one (:func:`decode_rows`) decodes row ``i`` in column
+    ``i % BLOCK`` of the block scratch ``i // BLOCK`` of the second set (its own column
+    whatever the chunks; its pages untouched while every chunk is long enough)."""
+    return np.empty((2 * (n // BLOCK + 1), BLOCK_ROWS * BLOCK))
+
+
+@jit()
+def put4(scratch: F64, r: int, j: Column, q: Quat) -> None:
+    scratch[at(r, j)], scratch[at(r + 1, j)], scratch[at(r + 2, j)], scratch[at(r + 3, j)] = q
+
+
+@jit()
+def put_matrix(scratch: F64, r: int, j: Column, m: Frame) -> None:
+    """The frame ``m`` into rows ``r:r + 9`` of column ``j`` as :func:`.vec.store_frame` writes
+    it into a (3, 3) array (row by row of the matrix, its axes as columns)."""
+    for i in range(3):
+        put3(scratch, r + 3 * i, j, (m[0][i], m[1][i], m[2][i]))
+
+
+@jit()
+def col_matrix(scratch: F64, r: int, j: Column) -> Frame:
+    """The frame :func:`put_matrix` wrote into rows ``r:r + 9`` of column ``j``."""
+    a, b, c = col3(scratch, r, j), col3(scratch, r + 3, j), col3(scratch, r + 6, j)
+    return ((a[0], b[0], c[0]), (a[1], b[1], c[1]), (a[2], b[2], c[2]))
 
 
 @jit(inline="always")
-def store_spine_column(scratch: F64, i: int, lower: tuple[tuple[Vec3, Vec3, Vec3, Vec3], Quat],
-                       seg: F64) -> None:
-    """Column ``i`` of a spine scratch: from ``lower`` (:func:`decode_lower_row`'s result) the
-    control points, and the segment lengths of one spine, the origin its first joint starts
-    from; and the pelvis2world quaternion."""
-    control, pelvis2world_q = lower
-    for a in range(4):
-        scratch[_S_PELVIS + a, i] = pelvis2world_q[a]
-    for k in range(4):
-        for a in range(3):
-            scratch[_S_CONTROL + 3 * k + a, i] = control[k][a]
-    for k in range(3):
-        scratch[_S_LENGTH + k, i] = seg[L_SPINE_LOWER + k]
-        scratch[_S_JOINT + k, i] = 0.0
-    scratch[_S_PREV_T, i] = 0.0
+def _length(scratch: F64, k: int, j: Column) -> float:
+    """Length ``k`` (the skeleton's index) of column ``j`` (m)."""
+    length: float = scratch[at(_B_LENGTHS + k, j)]
+    return length
+
+
+@jit(inline="always")  # one call site
+def gather_block(start: int, stop: int, rows: I64, pose: PoseArrays, lengths: F64,
+                 scratch: F64, first: Column) -> None:
+    """What the block's loops read of the store rows ``rows[start:stop]`` into the columns
+    from ``first`` of a block scratch: the pose, the lengths, the heading's half-angle
+    sine and cosine and the spines' control points (:func:`spine_control`)."""
+    for i in range(start, stop):
+        c = rows[i]
+        j = first + Column(i - start)
+        half = 0.5 * pose.root_heading[c]
+        scratch[at(_B_HALF, j)], scratch[at(_B_HALF + 1, j)] = math.sin(half), math.cos(half)
+        put3(scratch, _B_ROOT, j, load3(pose.root_position[c]))
+        put4(scratch, _B_PELVIS_LOCAL, j, load4(pose.pelvis_local[c]))
+        put4(scratch, _B_THORAX, j, load4(pose.thorax[c]))
+        put3(scratch, _B_NECK_DIR, j, load3(pose.neck_dir[c]))
+        put4(scratch, _B_HEAD, j, load4(pose.head[c]))
+        put3(scratch, _B_HEAD_TOP_DIR, j, load3(pose.head_top_dir[c]))
+        for s in range(2):
+            put3(scratch, _B_HIP_DIR + 3 * s, j, load3(pose.hip_dir[c, s]))
+            put4(scratch, _B_LEG_FRAME + 4 * s, j, load4(pose.leg_frame[c, s]))
+            scratch[at(_B_LEG_FRACTION + s, j)] = pose.leg_fraction[c, s]
+            put3(scratch, _B_FOOT_DIR + 3 * s, j, load3(pose.foot_dir[c, s]))
+            put3(scratch, _B_CLAVICLE_DIR + 3 * s, j, load3(pose.clavicle_dir[c, s]))
+            put4(scratch, _B_ARM_FRAME + 4 * s, j, load4(pose.arm_frame[c, s]))
+            scratch[at(_B_ARM_FRACTION + s, j)] = pose.arm_fraction[c, s]
+            put3(scratch, _B_HAND_DIR + 3 * s, j, load3(pose.hand_dir[c, s]))
+        seg = lengths[c]
+        for k in range(N_LENGTHS):
+            scratch[at(_B_LENGTHS + k, j)] = seg[k]
+        control = spine_control(c, pose, seg)
+        for k in range(4):
+            put3(scratch, _S_CONTROL + 3 * k, j, control[k])
+        put3(scratch, _S_JOINT, j, (0.0, 0.0, 0.0))
+        scratch[at(_S_PREV_T, j)] = 0.0
 
 
 @jit(inline="always")
-def spine_column(scratch: F64, i: int) -> tuple[Vec3, Vec3, Vec3]:
-    """The three spine joints of column ``i`` of a spine scratch (pelvis frame, m)."""
-    j = _S_JOINT + 3
-    return ((scratch[j, i], scratch[j + 1, i], scratch[j + 2, i]),
-            (scratch[j + 3, i], scratch[j + 4, i], scratch[j + 5, i]),
-            (scratch[j + 6, i], scratch[j + 7, i], scratch[j + 8, i]))
+def _leg_lanes(scratch: F64, j: Column, s: int, pelvis: Vec3, pelvis2world: Frame,
+               pelvis2world_q: Quat) -> None:
+    """Leg ``s`` of :func:`lower_lanes` (:func:`_decoded_leg`'s operations): its hip, knee,
+    ankle, toe and leg2world into column ``j``."""
+    hip = add(pelvis, scale(to_world(pelvis2world, col3(scratch, _B_HIP_DIR + 3 * s, j)),
+                            _length(scratch, L_PELVIS + s, j)))
+    leg2world = rotation_from_quat(world_quat(pelvis2world_q,
+                                              col4(scratch, _B_LEG_FRAME + 4 * s, j)))
+    thigh, shank = _length(scratch, L_THIGH + s, j), _length(scratch, L_SHANK + s, j)
+    knee, ankle, shank2world = limb_from_root(
+        leg2world, hip, thigh, shank, scratch[at(_B_LEG_FRACTION + s, j)] * (thigh + shank))
+    toe = add(ankle, scale(to_world(shank2world, col3(scratch, _B_FOOT_DIR + 3 * s, j)),
+                           _length(scratch, L_FOOT + s, j)))
+    put3(scratch, _B_POSITIONS + 3 * (HIP + 4 * s), j, hip)
+    put3(scratch, _B_POSITIONS + 3 * (KNEE + 4 * s), j, knee)
+    put3(scratch, _B_POSITIONS + 3 * (ANKLE + 4 * s), j, ankle)
+    put3(scratch, _B_POSITIONS + 3 * (TOE + 4 * s), j, toe)
+    put_matrix(scratch, _B_LEG2WORLD + 9 * s, j, leg2world)
+
+
+# A call, not inlined (as spine_block).
+@jit()
+def lower_lanes(scratch: F64, start: Column, stop: Column) -> None:
+    """:func:`decode_lower_row` (the pelvis and legs: :func:`_decoded_legs_row`'s operations)
+    for the columns ``start:stop`` of a block scratch, in a loop over them that runs on the
+    vector units: the same bits."""
+    for k in range(start, stop):
+        j = Column(k)  # (the same type: for mypy, which takes k for an int)
+        pelvis2world_q = world_quat((0.0, 0.0, scratch[at(_B_HALF, j)],
+                                     scratch[at(_B_HALF + 1, j)]),
+                                    col4(scratch, _B_PELVIS_LOCAL, j))
+        pelvis2world = rotation_from_quat(pelvis2world_q)
+        # leg_length's sum
+        leg = 0.5 * (_length(scratch, L_THIGH, j) + _length(scratch, L_SHANK, j)
+                     + _length(scratch, L_THIGH + 1, j) + _length(scratch, L_SHANK + 1, j))
+        pelvis = scale(col3(scratch, _B_ROOT, j), leg)
+        put4(scratch, _B_PELVIS_Q, j, pelvis2world_q)
+        put3(scratch, _B_POSITIONS + 3 * PELVIS, j, pelvis)
+        put_matrix(scratch, _B_PELVIS2WORLD, j, pelvis2world)
+        # (Both legs spelled out: as a loop over the sides, LLVM vectorized nothing.)
+        _leg_lanes(scratch, j, 0, pelvis, pelvis2world, pelvis2world_q)
+        _leg_lanes(scratch, j, 1, pelvis, pelvis2world, pelvis2world_q)
 
 
 @jit(inline="always")
-def pelvis_column(scratch: F64, i: int) -> Quat:
-    """The pelvis2world quaternion of column ``i`` of a spine scratch."""
-    return (scratch[_S_PELVIS, i], scratch[_S_PELVIS + 1, i], scratch[_S_PELVIS + 2, i],
-            scratch[_S_PELVIS + 3, i])
+def _arm_lanes(scratch: F64, j: Column, s: int, neck: Vec3, thorax2world: Frame,
+               thorax2world_q: Quat) -> None:
+    """Arm ``s`` of :func:`upper_lanes` (:func:`decode_upper_row`'s operations): its
+    shoulder, elbow, wrist, hand and arm2world into column ``j``."""
+    shoulder = add(neck, scale(to_world(thorax2world, col3(scratch, _B_CLAVICLE_DIR + 3 * s, j)),
+                               _length(scratch, L_CLAVICLE + s, j)))
+    arm2world = rotation_from_quat(world_quat(thorax2world_q,
+                                              col4(scratch, _B_ARM_FRAME + 4 * s, j)))
+    upper, fore = _length(scratch, L_UPPER_ARM + s, j), _length(scratch, L_FOREARM + s, j)
+    elbow, wrist, forearm2world = limb_from_root(
+        arm2world, shoulder, upper, fore, scratch[at(_B_ARM_FRACTION + s, j)] * (upper + fore))
+    hand = add(wrist, scale(to_world(forearm2world, col3(scratch, _B_HAND_DIR + 3 * s, j)),
+                            _length(scratch, L_HAND + s, j)))
+    put3(scratch, _B_POSITIONS + 3 * (SHOULDER + 4 * s), j, shoulder)
+    put3(scratch, _B_POSITIONS + 3 * (ELBOW + 4 * s), j, elbow)
+    put3(scratch, _B_POSITIONS + 3 * (WRIST + 4 * s), j, wrist)
+    put3(scratch, _B_POSITIONS + 3 * (HAND + 4 * s), j, hand)
+    put_matrix(scratch, _B_ARM2WORLD + 9 * s, j, arm2world)
 
 
 @jit(inline="always")
-def _lane_vec(scratch: F64, row: int, j: int) -> Vec3:
-    """The 3-vector in rows ``row:row + 3`` of column ``j``."""
-    return (scratch[row, j], scratch[row + 1, j], scratch[row + 2, j])
+def _spine_joint_lanes(scratch: F64, j: Column, k: int, pelvis: Vec3,
+                       pelvis2world: Frame) -> Vec3:
+    """Spine joint ``k`` of column ``j`` placed in the world (m), into the column."""
+    joint = add(pelvis, to_world(pelvis2world, col3(scratch, _S_JOINT + 3 * (k + 1), j)))
+    put3(scratch, _B_POSITIONS + 3 * (SPINE_1 + k), j, joint)
+    return joint
+
+
+# A call, not inlined (as spine_block).
+@jit()
+def upper_lanes(scratch: F64, start: Column, stop: Column) -> None:
+    """:func:`decode_upper_row` (the spine joints placed, the thorax, the head, the arms) for
+    the columns ``start:stop`` of a block scratch once :func:`lower_lanes` and
+    :func:`spine_block` have run, in a loop over them that runs on the vector units: the same
+    bits."""
+    for k in range(start, stop):
+        j = Column(k)  # (the same type: for mypy, which takes k for an int)
+        pelvis = col3(scratch, _B_POSITIONS + 3 * PELVIS, j)
+        pelvis2world = col_matrix(scratch, _B_PELVIS2WORLD, j)
+        _spine_joint_lanes(scratch, j, 0, pelvis, pelvis2world)
+        _spine_joint_lanes(scratch, j, 1, pelvis, pelvis2world)
+        neck = _spine_joint_lanes(scratch, j, 2, pelvis, pelvis2world)
+        thorax2world_q = world_quat(col4(scratch, _B_PELVIS_Q, j), col4(scratch, _B_THORAX, j))
+        thorax2world = rotation_from_quat(thorax2world_q)
+        head2world = rotation_from_quat(world_quat(thorax2world_q, col4(scratch, _B_HEAD, j)))
+        head = add(neck, scale(to_world(thorax2world, col3(scratch, _B_NECK_DIR, j)),
+                               _length(scratch, L_NECK, j)))
+        put3(scratch, _B_POSITIONS + 3 * HEAD, j, head)
+        put3(scratch, _B_POSITIONS + 3 * HEAD_TOP, j,
+             add(head, scale(to_world(head2world, col3(scratch, _B_HEAD_TOP_DIR, j)),
+                             _length(scratch, L_HEAD, j))))
+        put_matrix(scratch, _B_THORAX2WORLD, j, thorax2world)
+        put_matrix(scratch, _B_HEAD2WORLD, j, head2world)
+        _arm_lanes(scratch, j, 0, neck, thorax2world, thorax2world_q)
+        _arm_lanes(scratch, j, 1, neck, thorax2world, thorax2world_q)
 
 
 @jit(inline="always")
-def _lane_control(scratch: F64, j: int) -> tuple[Vec3, Vec3, Vec3, Vec3]:
-    """The control points of column ``j``."""
-    return (_lane_vec(scratch, _S_CONTROL, j), _lane_vec(scratch, _S_CONTROL + 3, j),
-            _lane_vec(scratch, _S_CONTROL + 6, j), _lane_vec(scratch, _S_CONTROL + 9, j))
+def _scatter_frame(scratch: F64, r: int, j: Column, out: F64) -> None:
+    """Rows ``r:r + 9`` of column ``j`` (:func:`put_matrix`) into the (3, 3) array ``out``."""
+    for i in range(3):
+        for k in range(3):
+            out[i, k] = scratch[at(r + 3 * i + k, j)]
+
+
+# (Indices, not a flat view: numba's reshape calls its runtime, a call an array a row.)
+@jit(inline="always")  # one call site
+def scatter_block(start: int, stop: int, rows: I64, scratch: F64, out: DecodedArrays,
+                  first: Column) -> None:
+    """The block's results in the columns from ``first`` of a block scratch into the rows
+    ``rows[start:stop]`` of every ``out`` array."""
+    for i in range(start, stop):
+        c = rows[i]
+        j = first + Column(i - start)
+        positions = out.positions[c]
+        for joint in range(N_JOINTS):
+            for a in range(3):
+                positions[joint, a] = scratch[at(_B_POSITIONS + 3 * joint + a, j)]
+        _scatter_frame(scratch, _B_PELVIS2WORLD, j, out.pelvis2world[c])
+        _scatter_frame(scratch, _B_THORAX2WORLD, j, out.thorax2world[c])
+        _scatter_frame(scratch, _B_HEAD2WORLD, j, out.head2world[c])
+        for s in range(2):
+            _scatter_frame(scratch, _B_LEG2WORLD + 9 * s, j, out.leg2world[c, s])
+            _scatter_frame(scratch, _B_ARM2WORLD + 9 * s, j, out.arm2world[c, s])
 
 
 @jit(inline="always")
@@ -574,60 +747,90 @@ def curve_at_lanes(control: tuple[Vec3, Vec3, Vec3, Vec3], t: float) -> tuple[Ve
     return (add(q3, scale(beyond, u)) if straight else point), (beyond if straight else tangent)
 
 
-# A call, not inlined into decode_rows: inlined, its loops made the row loops so long that LLVM
+@jit(inline="always")
+def _lane_control(scratch: F64, j: Column) -> tuple[Vec3, Vec3, Vec3, Vec3]:
+    """The spine's control points of column ``j``."""
+    return (col3(scratch, _S_CONTROL, j), col3(scratch, _S_CONTROL + 3, j),
+            col3(scratch, _S_CONTROL + 6, j), col3(scratch, _S_CONTROL + 9, j))
+
+
+# A call, not inlined into decode_block: inlined, its loops made the row loops so long that LLVM
 # stopped inlining their small helpers (matmul, matrix_from_quat): 20 % slower.
 @jit()
-def spine_block(scratch: F64, start: int, stop: int, iterations: int) -> None:
-    """:func:`spine_joints` of the columns ``start:stop`` of a spine scratch (control points and
-    lengths in, :func:`store_spine_column`; joints out, :func:`spine_column`), in loops over
-    those characters that run on the vector units.
+def spine_block(scratch: F64, start: Column, stop: Column, iterations: int) -> None:
+    """:func:`spine_joints` of the columns ``start:stop`` of a block scratch (control points
+    and lengths in, :func:`gather_block`; joints out), in loops over those characters that run
+    on the vector units.
 
     Each column's result is :func:`spine_joints`' own: a spine whose Newton iteration has
     converged keeps its parameter while the others go on (its joint, recomputed from it, is
     the same), and the block stops once all have converged or after ``iterations``.
     """
-    for k in range(3):
-        spine_joint_lanes(scratch, start, stop, k, iterations)
+    # Each joint a literal (three compiled bodies: its rows constants, 0.41 against 0.63 ms a
+    # tick at 4,000; 1.6 s more to compile).
+    spine_joint_lanes(scratch, start, stop, 0, iterations)
+    spine_joint_lanes(scratch, start, stop, 1, iterations)
+    spine_joint_lanes(scratch, start, stop, 2, iterations)
 
 
 # Not inlined (one compiled body for the three joints: inlined, decode_rows took twice as long
 # to compile, and its row loops' small helpers were no longer inlined).
 @jit()
-def spine_joint_lanes(scratch: F64, start: int, stop: int, k: int, iterations: int) -> None:
+def spine_joint_lanes(scratch: F64, start: Column, stop: Column, k: int,
+                      iterations: int) -> None:
     """:func:`spine_joint` for joint ``k`` of the spines in the columns ``start:stop`` of a
-    spine scratch (see :func:`spine_block`)."""
-    # Unsigned column indices: numba adds no wrap-around of negative indices, which would stop
-    # LLVM from vectorizing (so would a view of the block: its strides are not known).
-    lanes = range(np.uint64(start), np.uint64(stop))
+    block scratch (see :func:`spine_block`)."""
+    lanes = range(start, stop)
     below, above = _S_CONTROL + 3 * k, _S_CONTROL + 3 * (k + 1)
     prev_row, joint_row = _S_JOINT + 3 * k, _S_JOINT + 3 * (k + 1)
     length_row = _S_LENGTH + k
-    for j in lanes:
-        chord = norm(sub(_lane_vec(scratch, above, j), _lane_vec(scratch, below, j)))
-        scratch[_S_T, j] = scratch[_S_PREV_T, j] + scratch[length_row, j] / max(chord, 1e-9)
+    for i in lanes:
+        j = Column(i)
+        chord = norm(sub(col3(scratch, above, j), col3(scratch, below, j)))
+        scratch[at(_S_T, j)] = scratch[at(_S_PREV_T, j)] + scratch[at(length_row, j)] \
+            / max(chord, 1e-9)
     for _ in range(iterations):
         moving = 0
-        for j in lanes:
-            prev_p = _lane_vec(scratch, prev_row, j)
-            length, t = scratch[length_row, j], scratch[_S_T, j]
+        for i in lanes:
+            j = Column(i)
+            prev_p = col3(scratch, prev_row, j)
+            length, t = scratch[at(length_row, j)], scratch[at(_S_T, j)]
             point, tangent = curve_at_lanes(_lane_control(scratch, j), t)
             d = sub(point, prev_p)
             g = dot(d, d) - length**2
             done = abs(g) <= 1e-13 * length**2
             slope = 2.0 * dot(d, tangent)
             step = g / slope if abs(slope) > 1e-12 else 0.0
-            stepped = min(max(t - step, scratch[_S_PREV_T, j] + 1e-6), 9.0)
-            scratch[_S_T, j] = t if done else stepped
+            stepped = min(max(t - step, scratch[at(_S_PREV_T, j)] + 1e-6), 9.0)
+            scratch[at(_S_T, j)] = t if done else stepped
             moving += 0 if done else 1
         if moving == 0:
             break
-    for j in lanes:
-        t = scratch[_S_T, j]
+    for i in lanes:
+        j = Column(i)
+        t = scratch[at(_S_T, j)]
         point, tangent = curve_at_lanes(_lane_control(scratch, j), t)
-        joint = at_distance(_lane_vec(scratch, prev_row, j), point, tangent,
-                            scratch[length_row, j])
-        scratch[joint_row, j], scratch[joint_row + 1, j], scratch[joint_row + 2, j] = joint
-        scratch[_S_PREV_T, j] = t
+        joint = at_distance(col3(scratch, prev_row, j), point, tangent,
+                            scratch[at(length_row, j)])
+        put3(scratch, joint_row, j, joint)
+        scratch[at(_S_PREV_T, j)] = t
+
+
+# A call: one compiled body for decode_rows and posture_rows.
+@jit()
+def decode_block(start: int, stop: int, rows: I64, pose: PoseArrays, lengths: F64,
+                 out: DecodedArrays, scratch: F64, first: Column) -> None:
+    """:func:`decode_row` of the store rows ``rows[start:stop]`` in the columns ``first:first
+    + stop - start`` (at most :data:`.lanes.BLOCK`) of the block scratch ``scratch``
+    (BLOCK_ROWS * BLOCK,): gathered row by row, the pelvis and legs, the spines and the upper
+    body in loops over the block's characters that run on the vector units, the results put
+    in the rows of ``out``; the same bits as :func:`decode_row`."""
+    last = first + Column(stop - start)
+    gather_block(start, stop, rows, pose, lengths, scratch, first)
+    lower_lanes(scratch, first, last)
+    spine_block(scratch, first, last, 6)
+    upper_lanes(scratch, first, last)
+    scatter_block(start, stop, rows, scratch, out, first)
 
 
 @jit(nogil=True)
@@ -635,22 +838,25 @@ def decode_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64, out
                 scratch: F64) -> None:
     """Mirrors :func:`ecs_anim.core.normalized.decode` over the store rows ``rows[lo:hi]``
     (int64): row ``c`` of ``pose`` on the body ``lengths[c]`` ((n, N_LENGTHS), m) into row ``c``
-    of every ``out`` array (the other rows are left as they are). ``scratch``
-    (SPINE_SCRATCH_ROWS, len(rows)): :func:`spine_scratch`.
+    of every ``out`` array (the other rows are left as they are). ``scratch``:
+    :func:`spine_scratch` of ``len(rows)``.
 
-    By blocks of :data:`.lanes.BLOCK` rows: the pelvis and legs row by row, the spines (most of
-    the work) in loops over the block's characters that run on the vector units, then the upper
-    body row by row; the same result as :func:`decode_row` on each row."""
-    for start in range(lo, hi, BLOCK):
-        stop = min(start + BLOCK, hi)
-        for i in range(start, stop):
-            c = rows[i]
-            store_spine_column(scratch, i, decode_lower_row(c, pose, lengths[c], out), lengths[c])
-        spine_block(scratch, start, stop, 6)
-        for i in range(start, stop):
-            c = rows[i]
-            decode_upper_row(c, pose, lengths[c], spine_column(scratch, i),
-                             pelvis_column(scratch, i), out)
+    By blocks of :data:`.lanes.BLOCK` rows on the vector units (:func:`decode_block`); the
+    same result as :func:`decode_row` on each row, whatever the block."""
+    if hi - lo >= BLOCK:
+        block = scratch[lo // BLOCK]
+        for start in range(lo, hi, BLOCK):
+            decode_block(start, min(start + BLOCK, hi), rows, pose, lengths, out, block,
+                         Column(0))
+        return
+    # A short chunk (which may share its first block scratch with another): each row in its
+    # own column of the second set, by pieces within BLOCK-aligned runs of rows.
+    start = lo
+    while start < hi:
+        stop = min(hi, (start // BLOCK + 1) * BLOCK)
+        decode_block(start, stop, rows, pose, lengths, out,
+                     scratch[scratch.shape[0] // 2 + start // BLOCK], Column(start % BLOCK))
+        start = stop
 
 
 def decode(poses: NormalizedPoses, lengths: F64, out: DecodedPose | None = None) -> DecodedPose:

@@ -32,10 +32,16 @@ from ecs_anim.runtime.kernels.decode import LegPoseArrays, two_bone_middle
 from ecs_anim.runtime.kernels.ground import height_at, height_near, smooth
 from ecs_anim.runtime.kernels.lanes import (
     BLOCK,
+    Column,
     distal_frames_lanes,
     quat_from_matrix_lanes,
     rotation_between_lanes,
 )
+from ecs_anim.runtime.kernels.lanes import at as _at
+from ecs_anim.runtime.kernels.lanes import col3 as _col3
+from ecs_anim.runtime.kernels.lanes import col_frame as _col_frame
+from ecs_anim.runtime.kernels.lanes import put3 as _put3
+from ecs_anim.runtime.kernels.lanes import put_frame as _put_frame
 from ecs_anim.runtime.kernels.vec import (
     F64,
     Frame,
@@ -59,9 +65,6 @@ I64 = NDArray[np.int64]
 B1 = NDArray[np.bool_]
 #: A ground's description: (kinds, params, grid) of :class:`ecs_anim.core.ground.GroundDescription`.
 GroundArrays = tuple[I64, F64, F64]
-#: A column of a block's scratch (unsigned: numba adds no wrap-around of negative indices, which
-#: would stop LLVM from vectorizing the loops over columns).
-Column = np.uint64
 
 # Lengths of side s (0 left, 1 right) are these plus s.
 _L_PELVIS, _L_THIGH, _L_SHANK, _L_FOOT, _L_ANKLE_HEIGHT = 0, 2, 4, 6, 8
@@ -139,38 +142,6 @@ def ground_scratch(n: int) -> F64:
     :data:`.lanes.BLOCK` rows, ``over_chunks``' ``rows_per_thread``, never share one; one
     thread touches only the first: 33 kB)."""
     return np.empty((n // BLOCK + 1, GROUND_SCRATCH_ROWS * BLOCK))
-
-
-@jit()
-def _at(r: int, j: Column) -> Column:
-    """Where row ``r``, column ``j`` of a block's scratch is (its flat index: the distance
-    between two rows is a constant of the compiled code, so LLVM sees that a column's rows do
-    not overlap, and vectorizes the loops over columns without checks at run time)."""
-    return Column(r * BLOCK) + j
-
-
-@jit()
-def _col3(scratch: F64, r: int, j: Column) -> Vec3:
-    """The 3-vector in rows ``r:r + 3`` of column ``j``."""
-    return (scratch[_at(r, j)], scratch[_at(r + 1, j)], scratch[_at(r + 2, j)])
-
-
-@jit()
-def _put3(scratch: F64, r: int, j: Column, v: Vec3) -> None:
-    scratch[_at(r, j)], scratch[_at(r + 1, j)], scratch[_at(r + 2, j)] = v[0], v[1], v[2]
-
-
-@jit()
-def _col_frame(scratch: F64, r: int, j: Column) -> Frame:
-    """The frame in rows ``r:r + 9`` of column ``j`` (its axes one after the other)."""
-    return (_col3(scratch, r, j), _col3(scratch, r + 3, j), _col3(scratch, r + 6, j))
-
-
-@jit()
-def _put_frame(scratch: F64, r: int, j: Column, m: Frame) -> None:
-    _put3(scratch, r, j, m[0])
-    _put3(scratch, r + 3, j, m[1])
-    _put3(scratch, r + 6, j, m[2])
 
 
 @jit(inline="always")

@@ -37,6 +37,9 @@ from ecs_anim.runtime.kernels.vec import (
 #: Characters a block loop runs over at a time: its scratch columns stay in the first-level
 #: cache (22 rows of 32 float64 are 5.6 kB) and it is a whole number of 8-wide AVX-512 vectors.
 BLOCK = 32
+#: A column of a block's flat scratch (unsigned: numba adds no wrap-around of negative indices,
+#: which would stop LLVM from vectorizing the loops over columns).
+Column = np.uint64
 
 #: Taylor coefficients of asin x = sum c_k x^(2k+1), c_k = (2k)! / (4^k (k!)^2 (2k + 1)); for
 #: |x| <= 0.5 the terms after the 22nd are below 1e-17 of the result.
@@ -187,3 +190,45 @@ def distal_frames_lanes(limb: Frame, mid: Vec3, end: Vec3) -> Frame:
     fallback = add_scaled(limb[1], p, -dot(limb[1], p))
     s = normalize(pick3(norm(s) < 1e-9, fallback, s))
     return (s, cross(p, s), p)
+
+
+# A block's flat scratch: rows of BLOCK values, one column a character of the block.
+
+
+@jit()
+def at(r: int, j: Column) -> Column:
+    """Where row ``r``, column ``j`` of a block's flat scratch is (its flat index: the distance
+    between two rows is a constant of the compiled code, so LLVM sees that a column's rows do
+    not overlap, and vectorizes the loops over columns without checks at run time)."""
+    return Column(r * BLOCK) + j
+
+
+@jit()
+def col3(scratch: F64, r: int, j: Column) -> Vec3:
+    """The 3-vector in rows ``r:r + 3`` of column ``j``."""
+    return (scratch[at(r, j)], scratch[at(r + 1, j)], scratch[at(r + 2, j)])
+
+
+@jit()
+def put3(scratch: F64, r: int, j: Column, v: Vec3) -> None:
+    scratch[at(r, j)], scratch[at(r + 1, j)], scratch[at(r + 2, j)] = v[0], v[1], v[2]
+
+
+@jit()
+def col4(scratch: F64, r: int, j: Column) -> Quat:
+    """The quaternion in rows ``r:r + 4`` of column ``j``."""
+    return (scratch[at(r, j)], scratch[at(r + 1, j)], scratch[at(r + 2, j)],
+            scratch[at(r + 3, j)])
+
+
+@jit()
+def col_frame(scratch: F64, r: int, j: Column) -> Frame:
+    """The frame in rows ``r:r + 9`` of column ``j`` (its axes one after the other)."""
+    return (col3(scratch, r, j), col3(scratch, r + 3, j), col3(scratch, r + 6, j))
+
+
+@jit()
+def put_frame(scratch: F64, r: int, j: Column, m: Frame) -> None:
+    put3(scratch, r, j, m[0])
+    put3(scratch, r + 3, j, m[1])
+    put3(scratch, r + 6, j, m[2])

@@ -44,6 +44,7 @@ from ecs_anim.runtime.kernels.decode import (
     WRIST,
     DecodedArrays,
     PoseArrays,
+    decode_block,
     decode_rows,
     decoded_arrays,
     leg_length,
@@ -51,7 +52,7 @@ from ecs_anim.runtime.kernels.decode import (
     pose_arrays,
     spine_joint,
 )
-from ecs_anim.runtime.kernels.lanes import BLOCK
+from ecs_anim.runtime.kernels.lanes import BLOCK, Column
 from ecs_anim.runtime.kernels.vec import (
     F64,
     Frame,
@@ -273,9 +274,8 @@ def with_positions(decoded: DecodedArrays, positions: F64) -> DecodedArrays:
 
 @jit(inline="always")
 def _copy_positions(dst: F64, c: int, src: F64, i: int) -> None:
-    """``dst[c] = src[i]`` for (n, N_JOINTS, 3) arrays, by indices: :func:`.vec.copy_row`'s
-    flat views (``reshape``) call numba's runtime, twice a row (0.20 against 0.11 ms for
-    4,000 rows)."""
+    """``dst[c] = src[i]`` for (n, N_JOINTS, 3) arrays (indices, not :func:`.vec.copy_row`'s
+    flat views: numba's reshape calls its runtime, twice a row)."""
     for joint in range(N_JOINTS):
         for a in range(3):
             dst[c, joint, a] = src[i, joint, a]
@@ -297,16 +297,18 @@ def posture_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64,
     without ``have_previous``); the others get new ones (``local`` with ``rotations``,
     ``vertebrae`` when ``count > 0``). Mirrors ``systems.posture_convert`` on
     :func:`ecs_anim.core.normalized.decode`, :func:`ecs_anim.io.export.skeleton.local_rotations`
-    and :func:`ecs_anim.core.normalized.vertebrae`. ``scratch`` (SPINE_SCRATCH_ROWS,
-    len(rows)): :func:`.decode.spine_scratch`, for :func:`.decode.decode_rows`;
+    and :func:`ecs_anim.core.normalized.vertebrae`. ``scratch``: :func:`.decode.spine_scratch`
+    of ``len(rows)``, for :func:`.decode.decode_block` (as :func:`.decode.decode_rows`);
     ``decoded.positions`` (at least len(rows), N_JOINTS, 3; not ``positions``) is scratch too,
     of which this chunk uses rows ``lo`` to ``lo + BLOCK``.
 
-    By blocks of :data:`.lanes.BLOCK` rows: their positions set aside, their decode (the
-    spines on the vector units), then the rest row by row.
+    By blocks of :data:`.lanes.BLOCK` rows: their positions set aside, their decode (on the
+    vector units: :func:`.decode.decode_block`), then the rest row by row.
     """
     posture = with_positions(decoded, positions)
     previous = decoded.positions
+    block = scratch[lo // BLOCK]  # (as decode_rows: a shorter chunk is its one block)
+    short = hi - lo < BLOCK
     for start in range(lo, hi, BLOCK):
         stop = min(start + BLOCK, hi)
         # The decode writes the store's positions (each row once, not into a scratch copied
@@ -315,7 +317,10 @@ def posture_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64,
         # for a row that turns out frozen.
         for i in range(start, stop):
             _copy_positions(previous, lo + i - start, positions, rows[i])
-        decode_rows(start, stop, rows, pose, lengths, posture, scratch)
+        if short:
+            decode_rows(start, stop, rows, pose, lengths, posture, scratch)
+        else:
+            decode_block(start, stop, rows, pose, lengths, posture, block, Column(0))
         for i in range(start, stop):
             posture_of_decoded_row(rows[i], pose, lengths, posture, previous, lo + i - start,
                                    frozen, newly_bad, rotations, world, local, rest_hips,

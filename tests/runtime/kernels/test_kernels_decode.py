@@ -180,12 +180,13 @@ def test_zero_quaternions_decode_as_no_turn_like_numpy():
     assert_same(kd.decode(poses, lengths), decode(poses, lengths))
 
 
-def test_decode_rows_equals_the_row_decode_bit_for_bit_on_edge_poses():
-    """decode_rows (by blocks, the spines on the vector units) gives decode_row's bits, the row
-    by row reference, on poses with zero quaternions, straight and folded limbs, bones of no
-    length, a spine of coincident points and a NaN; in a short chunk, one across a multiple of
-    the block, one not starting on a multiple of the block with a block not full, and a
-    whole one."""
+def test_decode_block_equals_the_row_decode_bit_for_bit_on_edge_poses():
+    """decode_rows runs the whole decode by blocks on the vector units (decode_block: gathered,
+    the pelvis and legs, the spines and the upper body in loops over the block, put back): the
+    same bits as decode_row, the row by row reference, on poses with zero quaternions, straight
+    and folded limbs, bones of no length and a NaN; in a short chunk across a multiple of the
+    block (its own columns of the second set of block scratches), a chunk not starting on a
+    multiple of the block with a block not full, and a whole one."""
     from numba import njit
 
     rng = np.random.default_rng(1311)
