@@ -34,6 +34,7 @@ from ecs_anim.runtime.kernels.decode import (
     fits,
     pose_arrays,
     spine_scratch,
+    spine_scratch_fits,
 )
 from ecs_anim.runtime.kernels.posture import N_EXPORT, export_constants, posture_rows
 from ecs_anim.runtime.kernels.solved_posture import posture_solved_rows
@@ -91,7 +92,7 @@ class PostureConvert(System):
         # The kernels' scratch, kept from tick to tick (allocated and first touched again every
         # tick otherwise): positions (n, N_JOINTS, 3), of which each thread's chunk uses its
         # first BLOCK rows (a block's positions before its decode; the pages after them are
-        # never touched), the spines' (SPINE_SCRATCH_ROWS, n).
+        # never touched), the spines' block scratches (spine_scratch).
         self._positions = np.empty((0, N_JOINTS, 3))
         self._spines = spine_scratch(0)
 
@@ -100,7 +101,7 @@ class PostureConvert(System):
         decoded (:func:`~ecs_anim.runtime.kernels.decode.spine_scratch`)."""
         if self._positions.shape[0] != n:
             self._positions = np.empty((n, N_JOINTS, 3))
-        if self._spines.shape[1] < n:
+        if not spine_scratch_fits(self._spines, n):
             self._spines = spine_scratch(n)
         return self._positions, self._spines
 

@@ -211,6 +211,29 @@ def test_results_do_not_depend_on_the_thread_count():
     np.testing.assert_array_equal(positions[0], positions[1])
 
 
+def test_posture_convert_on_every_thread_gives_one_threads_positions():
+    """PostureConvert's kept scratch has a block scratch for every thread's chunk (the kernel
+    indexes it by the chunk's first row, unchecked): 300 walkers, more than one chunk of 32,
+    give the same positions on all threads as on one."""
+    from ecs_anim.runtime.kernels.decode import spine_scratch_fits
+    from ecs_anim.systems import PostureConvert
+
+    if kernels.available_threads() < 2:
+        pytest.skip("one core available: nothing to compare")
+    positions = []
+    for n_threads in (1, kernels.available_threads()):
+        kernels.set_threads(n_threads)
+        scene = BenchScene(300)
+        for _ in range(3):
+            scene.tick()
+        posture = next(s for s in scene.sim.systems if isinstance(s, PostureConvert))
+        assert spine_scratch_fits(posture._spines, scene.sim.store.n)
+        positions.append(scene.sim.store.positions.copy())
+        scene.sim.close()
+    kernels.set_threads(None)
+    np.testing.assert_array_equal(positions[0], positions[1])
+
+
 def test_over_chunks_splits_the_rows_and_raises_what_a_chunk_raised():
     """Contiguous chunks covering 0..n once, one per thread; a failing chunk's error is raised
     after the others are done."""

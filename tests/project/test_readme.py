@@ -19,7 +19,7 @@ README = (REPO / "README.md").read_text(encoding="utf-8")
 MAIN_JOB = ("python3 -m venv .venv && .venv/bin/pip install -q -e . && .venv/bin/ecs-anim run "
             "scenarios/fight_training.yaml --export out/fight_training --report "
             "out/fight_training.json --force")
-TESTS = "python3 -m venv .venv && .venv/bin/pip install -q -e '.[test]' && .venv/bin/python -m pytest -q -n auto"
+TESTS = "python3 -m venv .venv && .venv/bin/pip install -q -e '.[test]' && .venv/bin/python -m pytest -q -n auto --dist loadfile"
 #: A newcomer reads it in five minutes (issue 30): the reference lives in docs/.
 MAX_LINES = 250
 

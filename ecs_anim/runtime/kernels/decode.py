@@ -24,7 +24,7 @@ from ecs_anim.core.skeleton import JOINT_INDEX as J
 from ecs_anim.core.skeleton import LENGTH_INDEX as L
 from ecs_anim.core.skeleton import N_JOINTS, N_LENGTHS
 from ecs_anim.runtime.kernels import over_chunks
-from ecs_anim.runtime.kernels.lanes import BLOCK, Column, at, col3, col4, put3
+from ecs_anim.runtime.kernels.lanes import BLOCK, Column, at, col3, col4, put3, put4
 from ecs_anim.runtime.kernels.vec import (
     F64,
     TINY,
@@ -527,13 +527,15 @@ def spine_scratch(n: int) -> F64:
     block scratch ``lo // BLOCK`` of the first set (chunks that long never share one; one
     thread touches 64 kB); a shorter one (:func:`decode_rows`) decodes row ``i`` in column
     ``i % BLOCK`` of the block scratch ``i // BLOCK`` of the second set (its own column
-    whatever the chunks; its pages untouched while every chunk is long enough)."""
+    whatever the chunks; its pages untouched while every chunk is long enough). About 16 MB
+    of address space at 4,000 rows, of which a tick touches the blocks its chunks use."""
     return np.empty((2 * (n // BLOCK + 1), BLOCK_ROWS * BLOCK))
 
 
-@jit()
-def put4(scratch: F64, r: int, j: Column, q: Quat) -> None:
-    scratch[at(r, j)], scratch[at(r + 1, j)], scratch[at(r + 2, j)], scratch[at(r + 3, j)] = q
+def spine_scratch_fits(scratch: F64, n: int) -> bool:
+    """Whether ``scratch`` (:func:`spine_scratch`, kept from an earlier call) serves ``n`` rows
+    on any chunking: the kernels index it by the chunk's first row without bounds checks."""
+    return bool(scratch.shape[0] >= 2 * (n // BLOCK + 1))
 
 
 @jit()

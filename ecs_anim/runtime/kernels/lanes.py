@@ -211,6 +211,7 @@ def col3(scratch: F64, r: int, j: Column) -> Vec3:
 
 @jit()
 def put3(scratch: F64, r: int, j: Column, v: Vec3) -> None:
+    """The 3-vector ``v`` into rows ``r:r + 3`` of column ``j``."""
     scratch[at(r, j)], scratch[at(r + 1, j)], scratch[at(r + 2, j)] = v[0], v[1], v[2]
 
 
@@ -219,6 +220,12 @@ def col4(scratch: F64, r: int, j: Column) -> Quat:
     """The quaternion in rows ``r:r + 4`` of column ``j``."""
     return (scratch[at(r, j)], scratch[at(r + 1, j)], scratch[at(r + 2, j)],
             scratch[at(r + 3, j)])
+
+
+@jit()
+def put4(scratch: F64, r: int, j: Column, q: Quat) -> None:
+    """The quaternion ``q`` into rows ``r:r + 4`` of column ``j``."""
+    scratch[at(r, j)], scratch[at(r + 1, j)], scratch[at(r + 2, j)], scratch[at(r + 3, j)] = q
 
 
 @jit()

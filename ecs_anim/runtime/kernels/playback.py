@@ -24,7 +24,7 @@ from ecs_anim.core.normalized import TRAILING_SHAPES, NormalizedPoses
 from ecs_anim.core.skeleton import N_LENGTHS
 from ecs_anim.runtime.kernels import over_chunks
 from ecs_anim.runtime.kernels.decode import PoseArrays, leg_length, pose_arrays
-from ecs_anim.runtime.kernels.lanes import BLOCK, slerp_angle, slerp_weights
+from ecs_anim.runtime.kernels.lanes import BLOCK, Column, at, slerp_angle, slerp_weights
 from ecs_anim.runtime.kernels.vec import (
     F64,
     TINY,
@@ -376,21 +376,9 @@ N_DIRECTIONS = 10
 _L_DIR = _L_QUAT + 4 * N_SLERPED
 LANE_ROWS = _L_DIR + 3 * N_DIRECTIONS
 #: Where the quaternions' and the directions' sums start in a block's lane scratch, flat; and
-#: how far apart their elements are (a row of every quaternion's x, then y: :func:`_at`).
+#: how far apart their elements are (a row of every quaternion's x, then y: :func:`.lanes.at`).
 _QUATS, _QUAT_STEP = _L_QUAT * BLOCK, N_SLERPED * BLOCK
 _DIRS, _DIR_STEP = _L_DIR * BLOCK, N_DIRECTIONS * BLOCK
-
-#: The index type of a column of the lane scratch (unsigned: LLVM then knows an index needs
-#: no wrapping around, and vectorizes the loops over a block's columns).
-Column = np.uint64
-
-
-@jit(inline="always")
-def _at(r: int, j: Column) -> Column:
-    """The flat index of row ``r``, column ``j`` of a block's lane scratch (rows a constant
-    :data:`.lanes.BLOCK` apart: LLVM sees that they do not overlap)."""
-    return Column(r * BLOCK) + j
-
 
 class PlaybackWork:
     """The arrays :func:`sample_placed` works in, kept from tick to tick (grown when the rows
@@ -483,7 +471,7 @@ def _sum_quat(a: F64, ra: int, rb: int, w0: float, w1: float, lanes: F64, q: int
     as slerped quaternion ``q`` (:data:`N_SLERPED` order; a slerp given its weights,
     :func:`.lanes.slerp_weights`, before it is normalized)."""
     for e in range(4):
-        lanes[_at(_L_QUAT + e * N_SLERPED + q, j)] = w0 * a[ra, e] + w1 * a[rb, e]
+        lanes[at(_L_QUAT + e * N_SLERPED + q, j)] = w0 * a[ra, e] + w1 * a[rb, e]
 
 
 @jit(inline="always")
@@ -491,7 +479,7 @@ def _sum_quat2(a: F64, ra: int, rb: int, s: int, w0: float, w1: float, lanes: F6
                j: Column) -> None:
     """As :func:`_sum_quat` for side ``s`` of (n, 2, 4) quaternions."""
     for e in range(4):
-        lanes[_at(_L_QUAT + e * N_SLERPED + q, j)] = w0 * a[ra, s, e] + w1 * a[rb, s, e]
+        lanes[at(_L_QUAT + e * N_SLERPED + q, j)] = w0 * a[ra, s, e] + w1 * a[rb, s, e]
 
 
 @jit(inline="always")
@@ -500,7 +488,7 @@ def _sum_dir(a: F64, ra: int, rb: int, w: float, lanes: F64, d: int, j: Column) 
     ``lanes`` as direction ``d`` (:data:`N_DIRECTIONS` order; :func:`.vec.nlerp` before it is
     normalized)."""
     for e in range(3):
-        lanes[_at(_L_DIR + e * N_DIRECTIONS + d, j)] = (1 - w) * a[ra, e] + w * a[rb, e]
+        lanes[at(_L_DIR + e * N_DIRECTIONS + d, j)] = (1 - w) * a[ra, e] + w * a[rb, e]
 
 
 @jit(inline="always")
@@ -508,7 +496,7 @@ def _sum_dir2(a: F64, ra: int, rb: int, s: int, w: float, lanes: F64, d: int,
               j: Column) -> None:
     """As :func:`_sum_dir` for side ``s`` of (n, 2, 3) directions."""
     for e in range(3):
-        lanes[_at(_L_DIR + e * N_DIRECTIONS + d, j)] = (1 - w) * a[ra, s, e] + w * a[rb, s, e]
+        lanes[at(_L_DIR + e * N_DIRECTIONS + d, j)] = (1 - w) * a[ra, s, e] + w * a[rb, s, e]
 
 
 # A call, not inlined: its two loops are the ones that run on the vector units.
@@ -540,8 +528,8 @@ def _slerp_weights_lanes(lanes: F64, count: Column) -> None:
     for q in range(N_SLERPED):
         for k in range(count):
             j = Column(k)
-            lanes[_at(_L_W0 + q, j)], lanes[_at(_L_W1 + q, j)] = slerp_weights(
-                lanes[_at(_L_COS + q, j)], lanes[_at(_L_ANGLE + q, j)], lanes[_at(_L_T, j)])
+            lanes[at(_L_W0 + q, j)], lanes[at(_L_W1 + q, j)] = slerp_weights(
+                lanes[at(_L_COS + q, j)], lanes[at(_L_ANGLE + q, j)], lanes[at(_L_T, j)])
 
 
 @jit(inline="always")
@@ -549,28 +537,28 @@ def _put_quat(lanes: F64, q: int, j: Column, a: F64, o: int) -> None:
     """Slerped quaternion ``q`` of column ``j`` of ``lanes`` into row ``o`` of the (n, 4)
     ``a``."""
     for e in range(4):
-        a[o, e] = lanes[_at(_L_QUAT + e * N_SLERPED + q, j)]
+        a[o, e] = lanes[at(_L_QUAT + e * N_SLERPED + q, j)]
 
 
 @jit(inline="always")
 def _put_quat2(lanes: F64, q: int, j: Column, a: F64, o: int, s: int) -> None:
     """As :func:`_put_quat` into side ``s`` of the (n, 2, 4) ``a``."""
     for e in range(4):
-        a[o, s, e] = lanes[_at(_L_QUAT + e * N_SLERPED + q, j)]
+        a[o, s, e] = lanes[at(_L_QUAT + e * N_SLERPED + q, j)]
 
 
 @jit(inline="always")
 def _put_dir(lanes: F64, d: int, j: Column, a: F64, o: int) -> None:
     """Direction ``d`` of column ``j`` of ``lanes`` into row ``o`` of the (n, 3) ``a``."""
     for e in range(3):
-        a[o, e] = lanes[_at(_L_DIR + e * N_DIRECTIONS + d, j)]
+        a[o, e] = lanes[at(_L_DIR + e * N_DIRECTIONS + d, j)]
 
 
 @jit(inline="always")
 def _put_dir2(lanes: F64, d: int, j: Column, a: F64, o: int, s: int) -> None:
     """As :func:`_put_dir` into side ``s`` of the (n, 2, 3) ``a``."""
     for e in range(3):
-        a[o, s, e] = lanes[_at(_L_DIR + e * N_DIRECTIONS + d, j)]
+        a[o, s, e] = lanes[at(_L_DIR + e * N_DIRECTIONS + d, j)]
 
 
 @jit(inline="always")
@@ -586,17 +574,17 @@ def _sum_row(poses: PoseArrays, r0: int, r1: int, w: float, lanes: F64, j: Colum
     """The weighted sums of bank rows ``r0``, ``r1`` (weight ``w`` of r1; the slerps' weights
     in the lane scratch) into column ``j`` of ``lanes``, in :data:`_L_QUAT`'s and
     :data:`_L_DIR`'s order."""
-    _sum_quat(poses.pelvis_local, r0, r1, lanes[_at(_L_W0, j)], lanes[_at(_L_W1, j)], lanes,
+    _sum_quat(poses.pelvis_local, r0, r1, lanes[at(_L_W0, j)], lanes[at(_L_W1, j)], lanes,
               0, j)
-    _sum_quat(poses.thorax, r0, r1, lanes[_at(_L_W0 + 1, j)], lanes[_at(_L_W1 + 1, j)], lanes,
+    _sum_quat(poses.thorax, r0, r1, lanes[at(_L_W0 + 1, j)], lanes[at(_L_W1 + 1, j)], lanes,
               1, j)
-    _sum_quat(poses.head, r0, r1, lanes[_at(_L_W0 + 2, j)], lanes[_at(_L_W1 + 2, j)], lanes,
+    _sum_quat(poses.head, r0, r1, lanes[at(_L_W0 + 2, j)], lanes[at(_L_W1 + 2, j)], lanes,
               2, j)
     for s in range(2):
-        _sum_quat2(poses.leg_frame, r0, r1, s, lanes[_at(_L_W0 + 3 + s, j)],
-                   lanes[_at(_L_W1 + 3 + s, j)], lanes, 3 + s, j)
-        _sum_quat2(poses.arm_frame, r0, r1, s, lanes[_at(_L_W0 + 5 + s, j)],
-                   lanes[_at(_L_W1 + 5 + s, j)], lanes, 5 + s, j)
+        _sum_quat2(poses.leg_frame, r0, r1, s, lanes[at(_L_W0 + 3 + s, j)],
+                   lanes[at(_L_W1 + 3 + s, j)], lanes, 3 + s, j)
+        _sum_quat2(poses.arm_frame, r0, r1, s, lanes[at(_L_W0 + 5 + s, j)],
+                   lanes[at(_L_W1 + 5 + s, j)], lanes, 5 + s, j)
     _sum_dir(poses.neck_dir, r0, r1, w, lanes, 0, j)
     _sum_dir(poses.head_top_dir, r0, r1, w, lanes, 1, j)
     for s in range(2):
@@ -675,27 +663,27 @@ def sample_rows(lo: int, hi: int, unique: I64, rows: I64, bank: PlaybackBank, cl
                 scratch[_CONTACT + s, i] = a + w * (d - a)
                 a, d = bank.sole_roll[r0, s], bank.sole_roll[r1, s]
                 scratch[_ROLL + s, i] = a + w * (d - a)
-            block_lanes[_at(_L_T, j)] = w
-            block_lanes[_at(_L_R0, j)], block_lanes[_at(_L_R1, j)] = r0, r1
+            block_lanes[at(_L_T, j)] = w
+            block_lanes[at(_L_R0, j)], block_lanes[at(_L_R1, j)] = r0, r1
             if r1 == bank.next_row[r0]:
                 for q in range(N_SLERPED):
-                    block_lanes[_at(_L_COS + q, j)] = bank.pair_cos[r0, q]
-                    block_lanes[_at(_L_ANGLE + q, j)] = bank.pair_angle[r0, q]
+                    block_lanes[at(_L_COS + q, j)] = bank.pair_cos[r0, q]
+                    block_lanes[at(_L_ANGLE + q, j)] = bank.pair_angle[r0, q]
             else:  # a clip held on its last frame: r1 is r0
                 for q in range(N_SLERPED):
                     cos_half = _slerped_cos(poses, r0, r1, q)
-                    block_lanes[_at(_L_COS + q, j)] = cos_half
-                    block_lanes[_at(_L_ANGLE + q, j)] = slerp_angle(cos_half)
+                    block_lanes[at(_L_COS + q, j)] = cos_half
+                    block_lanes[at(_L_ANGLE + q, j)] = slerp_angle(cos_half)
         _slerp_weights_lanes(block_lanes, count)
         for b in range(block, stop):
             j = Column(b - block)
-            r0, r1 = int(block_lanes[_at(_L_R0, j)]), int(block_lanes[_at(_L_R1, j)])
-            _sum_row(poses, r0, r1, block_lanes[_at(_L_T, j)], block_lanes, j)
+            r0, r1 = int(block_lanes[at(_L_R0, j)]), int(block_lanes[at(_L_R1, j)])
+            _sum_row(poses, r0, r1, block_lanes[at(_L_T, j)], block_lanes, j)
         normalize_lanes(block_lanes)
         for b in range(block, stop):
             j = Column(b - block)
-            r0, r1 = int(block_lanes[_at(_L_R0, j)]), int(block_lanes[_at(_L_R1, j)])
-            _put_row(poses, r0, r1, block_lanes[_at(_L_T, j)], block_lanes, j, out,
+            r0, r1 = int(block_lanes[at(_L_R0, j)]), int(block_lanes[at(_L_R1, j)])
+            _put_row(poses, r0, r1, block_lanes[at(_L_T, j)], block_lanes, j, out,
                      out_rows[unique[b]])
 
 
