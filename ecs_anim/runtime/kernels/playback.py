@@ -415,8 +415,11 @@ class PlaybackWork:
             self.scratch = np.empty((PLAYBACK_SCRATCH_ROWS, size))
             self.lanes = np.zeros((size // BLOCK + 1, LANE_ROWS * BLOCK))
             self._size = size
-        if store_rows > self.loop_clip.shape[0] or bank is not self.bank:
-            size = max(store_rows, self.loop_clip.shape[0])
+        grow = store_rows > self.loop_clip.shape[0]
+        if grow or bank is not self.bank:
+            # Grown by half again at least: a store growing a row a tick keeps its turns.
+            kept = self.loop_clip.shape[0]
+            size = max(store_rows, kept * 3 // 2) if grow else kept
             self.loop_clip = np.full(size, -1, np.int64)
             self.loop_count = np.zeros(size)
             self.loop_turn = np.zeros((size, 5))
@@ -432,7 +435,9 @@ def _loop_turn(bank: PlaybackBank, k: int, loops: float, c: int, loop_clip: I64,
     sine of its angle: (angle, cos, sin, moved x, moved y); kept for store row ``c`` in
     :class:`PlaybackWork`'s ``loop_*`` arrays, and read there while they hold the same clip and
     loops (the same bits: computed the same way)."""
-    if loop_clip[c] == k and loop_count[c] == loops:
+    # The same loops to the bit: -0.0 is not 0.0 here (the angle's sign of zero follows it).
+    if (loop_clip[c] == k and loop_count[c] == loops
+            and math.copysign(1.0, loop_count[c]) == math.copysign(1.0, loops)):
         return (loop_turn[c, 0], loop_turn[c, 1], loop_turn[c, 2], loop_turn[c, 3],
                 loop_turn[c, 4])
     angle, mx, my = loop_transform(bank.loop_yaw[k], bank.loop_cos[k], bank.loop_sin[k],

@@ -78,7 +78,16 @@ def limb_joints(positions: F64, c: int, li: int, frame: Frame, fraction: float,
     h = lengths_row[limb_length[li, 2]]
     mid, end = two_bone_middle(frame, load3(positions[c, limb_joint[li, 0]]), u, ll,
                                fraction * (u + ll))
-    lower2world = distal_frames(frame, mid, end)
+    store_limb_joints(positions, c, li, limb_joint, mid, end, distal_frames(frame, mid, end),
+                      direction, h)
+
+
+@jit(inline="always")
+def store_limb_joints(positions: F64, c: int, li: int, limb_joint: I64, mid: Vec3, end: Vec3,
+                      lower2world: Frame, direction: Vec3, h: float) -> None:
+    """Limb ``li``'s middle and end joints into row ``c`` of ``positions`` (m), and its distal
+    joint ``h`` (m) from the end along ``direction`` (in the lower bone's frame
+    ``lower2world``)."""
     store3(positions[c, limb_joint[li, 1]], mid)
     store3(positions[c, limb_joint[li, 2]], end)
     store3(positions[c, limb_joint[li, 3]], add(end, scale(to_world(lower2world, direction), h)))
@@ -155,10 +164,8 @@ def solve_limbs(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winne
                     # A foot held where ground adaptation put it keeps its world direction.
                     direction = in_frame(lower2world, load3(b.foot_in_world[c, li]))
                 _store_limb(frames, fractions, directions, c, slot, frame, fraction, direction)
-                store3(positions[c, limb_joint[li, 1]], mid)
-                store3(positions[c, limb_joint[li, 2]], end)
-                store3(positions[c, limb_joint[li, 3]],
-                       add(end, scale(to_world(lower2world, direction), h)))
+                store_limb_joints(positions, c, li, limb_joint, mid, end, lower2world, direction,
+                                  h)
         if orient >= 0:
             changed = True
             lower2world = distal_frames(frame, load3(positions[c, limb_joint[li, 1]]),
