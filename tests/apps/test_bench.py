@@ -194,27 +194,13 @@ def test_thread_comparison_times_one_thread_and_n_in_the_same_run():
     assert {"wall_ms_1", "cpu_ms_1", "speedup"} <= set(figures) and figures["wall_ms_1"] >= 0
 
 
-def test_results_do_not_depend_on_the_thread_count():
-    """Each character is computed by one thread on its own: the bench scene, constrained, gives
-    the same joint positions on one thread as on all."""
-    if kernels.available_threads() < 2:
-        pytest.skip("one core available: nothing to compare")
-    positions = []
-    for n_threads in (1, kernels.available_threads()):
-        kernels.set_threads(n_threads)
-        scene = BenchScene(12, constrained=True)
-        for _ in range(5):
-            scene.tick()
-        positions.append(scene.sim.store.positions.copy())
-        scene.sim.close()
-    kernels.set_threads(None)
-    np.testing.assert_array_equal(positions[0], positions[1])
-
-
-def test_posture_convert_on_every_thread_gives_one_threads_positions():
-    """PostureConvert's kept scratch has a block scratch for every thread's chunk (the kernel
-    indexes it by the chunk's first row, unchecked): 300 walkers, more than one chunk of 32,
-    give the same positions on all threads as on one."""
+@pytest.mark.parametrize("characters, constrained, ticks", [(12, True, 5), (300, False, 3)])
+def test_results_do_not_depend_on_the_thread_count(characters: int, constrained: bool,
+                                                   ticks: int):
+    """Each character is computed by one thread on its own: the bench scene gives the same joint
+    positions on one thread as on all, constrained, and with 300 walkers (more than one chunk
+    of 32), whose PostureConvert keeps a block scratch for every thread's chunk (the kernel
+    indexes it by the chunk's first row, unchecked)."""
     from ecs_anim.runtime.kernels.decode import spine_scratch_fits
     from ecs_anim.systems import PostureConvert
 
@@ -223,8 +209,8 @@ def test_posture_convert_on_every_thread_gives_one_threads_positions():
     positions = []
     for n_threads in (1, kernels.available_threads()):
         kernels.set_threads(n_threads)
-        scene = BenchScene(300)
-        for _ in range(3):
+        scene = BenchScene(characters, constrained=constrained)
+        for _ in range(ticks):
             scene.tick()
         posture = next(s for s in scene.sim.systems if isinstance(s, PostureConvert))
         assert spine_scratch_fits(posture._spines, scene.sim.store.n)

@@ -130,33 +130,43 @@ def test_the_kernels_tuples_name_the_dataclasses_fields_in_order():
     assert DecodedArrays._fields == tuple(f.name for f in fields(DecodedPose))
 
 
-def test_decode_rows_by_blocks_does_not_depend_on_the_chunks_and_equals_the_row_decode():
-    """decode_rows decodes the spines of a block of characters together (lanes.BLOCK at a time,
-    stopping the block's Newton iteration once all its spines have converged): any split of
-    the rows into chunks, none a multiple of the block, gives the same bits, and so does the
-    decode of one row at a time (decode_row, the solver's)."""
-    from numba import njit
+def decoded_in_chunks(pose: kd.PoseArrays, lengths: np.ndarray, rows: np.ndarray,
+                      chunks: tuple[tuple[int, int], ...]) -> kd.DecodedArrays:
+    """decode_rows over ``rows`` split into ``chunks`` (lo, hi), one scratch for all."""
+    out, scratch = kd.empty_decoded(rows.size), kd.spine_scratch(rows.size)
+    for lo, hi in chunks:
+        kd.decode_rows(lo, hi, rows, pose, lengths, out, scratch)
+    return out
 
-    rng = np.random.default_rng(1309)
-    n = 3 * BLOCK + 5
-    poses = random_poses(rng, n)
-    lengths = random_bodies(rng, n)
-    rows = rng.permutation(n).astype(np.int64)
-    pose = kd.pose_arrays(poses)
-    whole = kd.empty_decoded(n)
-    kd.decode_rows(0, n, rows, pose, lengths, whole, kd.spine_scratch(n))
-    chunked = kd.empty_decoded(n)
-    scratch = kd.spine_scratch(n)
-    for lo, hi in ((0, 7), (7, 40), (40, 41), (41, n)):
-        kd.decode_rows(lo, hi, rows, pose, lengths, chunked, scratch)
+
+def decoded_row_by_row(pose: kd.PoseArrays, lengths: np.ndarray) -> kd.DecodedArrays:
+    """decode_row (the solver's, the reference of decode_rows' blocks) on every row."""
+    from numba import njit
 
     @njit(error_model="numpy")
     def one_row_at_a_time(pose, lengths, out):
         for c in range(lengths.shape[0]):
             kd.decode_row(c, pose, lengths[c], out)
 
-    by_row = kd.empty_decoded(n)
-    one_row_at_a_time(pose, lengths, by_row)
+    out = kd.empty_decoded(lengths.shape[0])
+    one_row_at_a_time(pose, lengths, out)
+    return out
+
+
+def test_decode_rows_by_blocks_does_not_depend_on_the_chunks_and_equals_the_row_decode():
+    """decode_rows decodes the spines of a block of characters together (lanes.BLOCK at a time,
+    stopping the block's Newton iteration once all its spines have converged): any split of
+    the rows into chunks, none a multiple of the block, gives the same bits, and so does the
+    decode of one row at a time (decode_row, the solver's)."""
+    rng = np.random.default_rng(1309)
+    n = 3 * BLOCK + 5
+    poses = random_poses(rng, n)
+    lengths = random_bodies(rng, n)
+    rows = rng.permutation(n).astype(np.int64)
+    pose = kd.pose_arrays(poses)
+    whole = decoded_in_chunks(pose, lengths, rows, ((0, n),))
+    chunked = decoded_in_chunks(pose, lengths, rows, ((0, 7), (7, 40), (40, 41), (41, n)))
+    by_row = decoded_row_by_row(pose, lengths)
     for name, a, b, c in zip(FIELDS, whole, chunked, by_row, strict=True):
         np.testing.assert_array_equal(a, b, err_msg=name)
         np.testing.assert_array_equal(a, c, err_msg=name)
@@ -187,8 +197,6 @@ def test_decode_block_equals_the_row_decode_bit_for_bit_on_edge_poses():
     and folded limbs, bones of no length and a NaN; in a short chunk across a multiple of the
     block (its own columns of the second set of block scratches), a chunk not starting on a
     multiple of the block with a block not full, and a whole one."""
-    from numba import njit
-
     rng = np.random.default_rng(1311)
     n = 4 * BLOCK + 9
     poses = random_poses(rng, n)
@@ -207,18 +215,9 @@ def test_decode_block_equals_the_row_decode_bit_for_bit_on_edge_poses():
     poses.spine_points[12] = 0.0
     rows = rng.permutation(n).astype(np.int64)
     pose = kd.pose_arrays(poses)
-    blocks = kd.empty_decoded(n)
-    scratch = kd.spine_scratch(n)
-    for lo, hi in ((0, 20), (20, 45), (45, 45 + BLOCK + 3), (45 + BLOCK + 3, n)):
-        kd.decode_rows(lo, hi, rows, pose, lengths, blocks, scratch)
-
-    @njit(error_model="numpy")
-    def one_row_at_a_time(pose, lengths, out):
-        for c in range(lengths.shape[0]):
-            kd.decode_row(c, pose, lengths[c], out)
-
-    by_row = kd.empty_decoded(n)
-    one_row_at_a_time(pose, lengths, by_row)
+    blocks = decoded_in_chunks(pose, lengths, rows,
+                               ((0, 20), (20, 45), (45, 45 + BLOCK + 3), (45 + BLOCK + 3, n)))
+    by_row = decoded_row_by_row(pose, lengths)
     for name, a, b in zip(FIELDS, blocks, by_row, strict=True):
         np.testing.assert_array_equal(a, b, err_msg=name)
     assert np.isnan(blocks.positions[11]).any() and np.isfinite(blocks.positions[:11]).all()
