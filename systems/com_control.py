@@ -22,8 +22,8 @@ import numpy as np
 
 from ecs_anim.components import Constraint
 from ecs_anim.core.morphology import centres_of_mass as numpy_centres
-from ecs_anim.runtime.kernels import LIGHT_ROWS_PER_THREAD, over_chunks
-from ecs_anim.runtime.kernels.com import centres_of_mass, horizontal_errors, segment_joints
+from ecs_anim.runtime.kernels import over_chunks
+from ecs_anim.runtime.kernels.com import com_and_error_rows, segment_joints
 from ecs_anim.runtime.system_base import System
 
 _PROXIMAL, _DISTAL = segment_joints()
@@ -49,8 +49,6 @@ class COMControl(System):
             st.com_error_m[rows] = np.linalg.norm(st.com[rows, :2] - st.com_desired[rows, :2],
                                                   axis=1)
             return
-        over_chunks(centres_of_mass, rows.size, rows, np.arange(rows.size, dtype=np.int64),
-                    st.solved.positions, st.segment_mass_kg, st.segment_com_fraction, _PROXIMAL,
-                    _DISTAL, st.com)
-        over_chunks(horizontal_errors, rows.size, rows, st.com, st.com_desired, st.com_error_m,
-                    rows_per_thread=LIGHT_ROWS_PER_THREAD)
+        over_chunks(com_and_error_rows, rows.size, rows, st.solved.positions, st.segment_mass_kg,
+                    st.segment_com_fraction, _PROXIMAL, _DISTAL, st.com_desired, st.com,
+                    st.com_error_m)

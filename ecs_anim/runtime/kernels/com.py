@@ -70,13 +70,20 @@ def centres_of_mass(lo: int, hi: int, rows: I64, position_rows: I64, positions: 
 
 
 @jit(nogil=True)
-def horizontal_errors(lo: int, hi: int, rows: I64, com: F64, desired: F64, out: F64) -> None:
-    """Horizontal distance (m) of ``com[c]`` from ``desired[c]`` ((n, 3) each) into ``out[c]``
-    ((n,)) for the store rows ``c`` in ``rows`` (``np.linalg.norm`` of the x, y difference)."""
+def com_and_error_rows(lo: int, hi: int, rows: I64, positions: F64, masses: F64,
+                       com_fraction: F64, proximal: I64, distal: I64, desired: F64, com: F64,
+                       error: F64) -> None:
+    """COMControl's pass, for ``i`` in ``lo..hi-1``: the centre of mass of the posture
+    ``positions[i]`` ((r, N_JOINTS, 3), m) of store row ``c = rows[i]`` on its segments
+    (:func:`centres_of_mass`) into ``com[c]`` ((n, 3), m), and its horizontal distance (m)
+    from ``desired[c]`` ((n, 3)) into ``error[c]`` ((n,); ``np.linalg.norm`` of the x, y
+    difference), in one pass."""
     for i in range(lo, hi):
         c = rows[i]
+        com[c, 0], com[c, 1], com[c, 2] = centre_of_mass_row(
+            positions[i], masses[c], com_fraction[c], proximal, distal)
         dx, dy = com[c, 0] - desired[c, 0], com[c, 1] - desired[c, 1]
-        out[c] = math.sqrt(dx * dx + dy * dy)
+        error[c] = math.sqrt(dx * dx + dy * dy)
 
 
 @jit(nogil=True)
