@@ -339,6 +339,8 @@ def solve_within_speed(steps: SpeedSteps, before: MotionBefore, max_step_m: floa
     share = steps.shares(result.positions, before.clip_positions, before.pose_positions_before,
                          before.clip_positions_before, goals.in_contact, max_step_m,
                          before.goal_steps_m)
+    if not (share < 1.0).any():  # (usually: no character's correction goes too fast)
+        return solved, iterations, result  # (what the limit gives then: nothing held back)
     limited, held = steps.limit(solved, before.clip_now, before.clip_before, before.pose_before,
                                 goals.in_contact, share)
     rows = np.flatnonzero(held)

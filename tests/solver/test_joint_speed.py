@@ -95,6 +95,44 @@ def test_compiled_limit_equals_numpy(share):
     assert held[5:].sum() == (0 if share == 1.0 else np.sum(shares[5:] < 1.0))
 
 
+@pytest.mark.parametrize("share", [1.0, np.nan, np.inf, np.nextafter(1.0, 0.0)])
+def test_the_limit_is_skipped_only_where_no_correction_goes_too_fast(share):
+    """``solve_within_speed`` leaves the limit out where every share is 1 or more (or NaN):
+    the solved poses as they are, which is what the limit gives then, to the bit; a share just
+    under 1 goes through the limit (here with no last tick: nothing held back)."""
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(23)
+    n = 12
+    solved = random_poses(rng, n)
+    clip_now, clip_before, pose_before = (packed_random(rng, n) for _ in range(3))
+    planted = rng.uniform(size=(n, 2)) < 0.4
+    shares = np.full(n, share)
+    shares[::3] = 1.5
+    limits = []
+
+    def limit(*args):
+        limits.append(True)
+        return reference.limit_motion(*args)
+
+    no_joints = np.zeros((n, N_JOINTS, 3))
+    result = SimpleNamespace(positions=no_joints)
+    steps = reference.SpeedSteps(lambda *args: (solved, np.ones(n, np.int64), result),
+                                 lambda *args: shares, limit, None, None)
+    before = reference.MotionBefore(clip_now, clip_before, pose_before, no_joints, no_joints,
+                                    no_joints, np.zeros(n))
+    if share < 1.0:
+        pose_before[:] = 0.0
+    expected, held = reference.limit_motion(solved, clip_now, clip_before, pose_before, planted,
+                                            shares)
+    got, _, _ = reference.solve_within_speed(steps, before, 0.05, solved, None,
+                                             SimpleNamespace(in_contact=planted), None, None,
+                                             SolverSettings())
+    assert not held.any() and limits == ([True] if share < 1.0 else [])
+    for name, value in expected.arrays().items():
+        np.testing.assert_array_equal(getattr(got, name), value, err_msg=name)
+
+
 def test_compiled_shares_equal_numpy():
     """The share each character may go (compiled ``share_rows``, the joints taken from their
     pelvis in the loop) equals the numpy reference to 1e-12, planted legs, a goal's step and a
