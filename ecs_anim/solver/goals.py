@@ -127,8 +127,10 @@ def target_points(table: ConstraintTable, unconstrained: DecodedPose, previous: 
 def other_surface_rows(table: ConstraintTable) -> I64:
     """The position constraints of ``table`` whose target is a point of *another* character's
     body part that has a capsule (:func:`on_other_surfaces` moves their targets)."""
-    out: I64 = np.flatnonzero((table.target_kind != TARGET_WORLD)
-                              & (table.target_row != table.owner) & (table.kind == KIND_POSITION)
+    on_other = (table.target_kind != TARGET_WORLD) & (table.target_row != table.owner)
+    if not on_other.any():  # (usually none: no gather of the segments' capsules)
+        return np.zeros(0, np.int64)
+    out: I64 = np.flatnonzero(on_other & (table.kind == KIND_POSITION)
                               & (SEGMENT_CAPSULE[table.target_segment] >= 0))
     return out
 

@@ -857,10 +857,12 @@ def constrain(table: ConstraintTable, weight: F64, poses: NormalizedPoses,
             unconstrained.take(rows), True)
     solve_s = time.perf_counter() - start
     # (the feet's goals, table_index -1, written into one place more and dropped: no masks of
-    # the user goals to gather with; each constraint is one goal at most)
-    with_feet = np.zeros(m + 1, bool)
-    with_feet[goals.table_index] = goals.held
-    held = with_feet[:m]
+    # the user goals to gather with; each constraint is one goal at most. Usually no goal is
+    # held: no scatter of the k goals)
+    if goals.held.any():
+        with_feet = np.zeros(m + 1, bool)
+        with_feet[goals.table_index] = goals.held
+        held = with_feet[:m]
     # Every active constraint's error on the result (an area the motion already kept was not a
     # goal, but another constraint's move may have taken its point out).
     result = unconstrained
