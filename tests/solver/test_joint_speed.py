@@ -101,6 +101,9 @@ def test_the_limit_is_skipped_only_where_no_correction_goes_too_fast(share):
     the solved poses as they are, which is what the limit gives then, to the bit; a share just
     under 1 goes through the limit (here with no last tick: nothing held back)."""
     from types import SimpleNamespace
+    from typing import cast
+
+    from ecs_anim.core.normalized import DecodedPose
 
     rng = np.random.default_rng(23)
     n = 12
@@ -116,18 +119,20 @@ def test_the_limit_is_skipped_only_where_no_correction_goes_too_fast(share):
         return reference.limit_motion(*args)
 
     no_joints = np.zeros((n, N_JOINTS, 3))
-    result = SimpleNamespace(positions=no_joints)
+    result = cast(DecodedPose, SimpleNamespace(positions=no_joints))
     steps = reference.SpeedSteps(lambda *args: (solved, np.ones(n, np.int64), result),
-                                 lambda *args: shares, limit, None, None)
+                                 lambda *args: shares, limit, reference.limit_again,
+                                 reference.put_back)
     before = reference.MotionBefore(clip_now, clip_before, pose_before, no_joints, no_joints,
                                     no_joints, np.zeros(n))
     if share < 1.0:
         pose_before[:] = 0.0
     expected, held = reference.limit_motion(solved, clip_now, clip_before, pose_before, planted,
                                             shares)
-    got, _, _ = reference.solve_within_speed(steps, before, 0.05, solved, None,
-                                             SimpleNamespace(in_contact=planted), None, None,
-                                             SolverSettings())
+    unused = np.zeros((n, 1))  # (lengths and masses: the solve here is given)
+    got, _, _ = reference.solve_within_speed(
+        steps, before, 0.05, solved, unused, cast(TickGoals, SimpleNamespace(in_contact=planted)),
+        unused, unused, SolverSettings())
     assert not held.any() and limits == ([True] if share < 1.0 else [])
     for name, value in expected.arrays().items():
         np.testing.assert_array_equal(getattr(got, name), value, err_msg=name)
