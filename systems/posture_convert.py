@@ -91,8 +91,8 @@ class PostureConvert(System):
         super().__init__(sim)
         # The kernels' scratch, kept from tick to tick (allocated and first touched again every
         # tick otherwise): positions (n, N_JOINTS, 3), of which each thread's chunk uses its
-        # first BLOCK rows (a block's positions before its decode; the pages after them are
-        # never touched), the spines' block scratches (spine_scratch).
+        # first BLOCK rows with rotations (a block's positions before its decode; the pages
+        # after them are never touched), the spines' block scratches (spine_scratch).
         self._positions = np.empty((0, N_JOINTS, 3))
         self._spines = spine_scratch(0)
 

@@ -514,10 +514,13 @@ _S_LENGTH = _B_LENGTHS + L_SPINE_LOWER
 _B_PELVIS_Q, _B_POSITIONS = 116, 120
 _B_PELVIS2WORLD, _B_THORAX2WORLD, _B_HEAD2WORLD, _B_LEG2WORLD, _B_ARM2WORLD = \
     186, 195, 204, 213, 231
+# ... whether the positions are all finite (finite_lanes: 1.0 or 0.0), and the spine's curve
+# point and tangent at the parameter its Newton iteration last tried (spine_joint_lanes).
+_B_FINITE, _S_POINT, _S_TANGENT = 249, 250, 253
 #: Rows of a block's scratch (:func:`spine_scratch`).
-BLOCK_ROWS = 249
+BLOCK_ROWS = 256
 assert _B_LENGTHS + N_LENGTHS == _S_CONTROL and _B_POSITIONS + 3 * N_JOINTS == _B_PELVIS2WORLD
-assert _B_ARM2WORLD + 18 == BLOCK_ROWS
+assert _B_ARM2WORLD + 18 == _B_FINITE
 
 
 def spine_scratch(n: int) -> F64:
@@ -560,6 +563,8 @@ def _length(scratch: F64, k: int, j: Column) -> float:
     return length
 
 
+# Loops over the block's rows, each gathering a few of the arrays (a row's ~100 values in one
+# loop, each to another line of the scratch, took a fifth longer).
 @jit(inline="always")  # one call site
 def gather_block(start: int, stop: int, rows: I64, pose: PoseArrays, lengths: F64,
                  scratch: F64, first: Column) -> None:
@@ -577,15 +582,25 @@ def gather_block(start: int, stop: int, rows: I64, pose: PoseArrays, lengths: F6
         put3(scratch, _B_NECK_DIR, j, load3(pose.neck_dir[c]))
         put4(scratch, _B_HEAD, j, load4(pose.head[c]))
         put3(scratch, _B_HEAD_TOP_DIR, j, load3(pose.head_top_dir[c]))
+    for i in range(start, stop):
+        c = rows[i]
+        j = first + Column(i - start)
         for s in range(2):
             put3(scratch, _B_HIP_DIR + 3 * s, j, load3(pose.hip_dir[c, s]))
             put4(scratch, _B_LEG_FRAME + 4 * s, j, load4(pose.leg_frame[c, s]))
             scratch[at(_B_LEG_FRACTION + s, j)] = pose.leg_fraction[c, s]
             put3(scratch, _B_FOOT_DIR + 3 * s, j, load3(pose.foot_dir[c, s]))
+    for i in range(start, stop):
+        c = rows[i]
+        j = first + Column(i - start)
+        for s in range(2):
             put3(scratch, _B_CLAVICLE_DIR + 3 * s, j, load3(pose.clavicle_dir[c, s]))
             put4(scratch, _B_ARM_FRAME + 4 * s, j, load4(pose.arm_frame[c, s]))
             scratch[at(_B_ARM_FRACTION + s, j)] = pose.arm_fraction[c, s]
             put3(scratch, _B_HAND_DIR + 3 * s, j, load3(pose.hand_dir[c, s]))
+    for i in range(start, stop):
+        c = rows[i]
+        j = first + Column(i - start)
         seg = lengths[c]
         for k in range(N_LENGTHS):
             scratch[at(_B_LENGTHS + k, j)] = seg[k]
@@ -700,6 +715,30 @@ def upper_lanes(scratch: F64, start: Column, stop: Column) -> None:
         _arm_lanes(scratch, j, 1, neck, thorax2world, thorax2world_q)
 
 
+@jit()
+def finite_lanes(scratch: F64, start: Column, stop: Column) -> None:
+    """Whether the positions of each of the columns ``start:stop`` of a block scratch are all
+    finite, 1.0 or 0.0 into its row ``_B_FINITE``, in a loop over the columns that runs on the
+    vector units (``x * 0.0`` is 0 for a finite ``x``, NaN otherwise, and a NaN stays in a
+    sum; one sum a coordinate, so that the three run side by side)."""
+    for k in range(start, stop):
+        j = Column(k)
+        x = y = z = 0.0
+        for joint in range(N_JOINTS):
+            r = _B_POSITIONS + 3 * joint
+            x += scratch[at(r, j)] * 0.0
+            y += scratch[at(r + 1, j)] * 0.0
+            z += scratch[at(r + 2, j)] * 0.0
+        scratch[at(_B_FINITE, j)] = 1.0 if x + y + z == 0.0 else 0.0
+
+
+@jit(inline="always")
+def decoded_finite(scratch: F64, j: Column) -> bool:
+    """Whether the positions :func:`decode_block` decoded in column ``j`` of its block scratch
+    are all finite (with ``finite_only``)."""
+    return bool(scratch[at(_B_FINITE, j)] != 0.0)
+
+
 @jit(inline="always")
 def _scatter_frame(scratch: F64, r: int, j: Column, out: F64) -> None:
     """Rows ``r:r + 9`` of column ``j`` (:func:`put_matrix`) into the (3, 3) array ``out``."""
@@ -711,19 +750,27 @@ def _scatter_frame(scratch: F64, r: int, j: Column, out: F64) -> None:
 # (Indices, not a flat view: numba's reshape calls its runtime, a call an array a row.)
 @jit(inline="always")  # one call site
 def scatter_block(start: int, stop: int, rows: I64, scratch: F64, out: DecodedArrays,
-                  first: Column) -> None:
+                  first: Column, finite_only: bool) -> None:
     """The block's results in the columns from ``first`` of a block scratch into the rows
-    ``rows[start:stop]`` of every ``out`` array."""
+    ``rows[start:stop]`` of every ``out`` array; with ``finite_only``, the positions only where
+    they are all finite (:func:`finite_lanes` has run)."""
+    # (Loops of a few arrays each, as gather_block.)
+    for i in range(start, stop):
+        j = first + Column(i - start)
+        if not finite_only or decoded_finite(scratch, j):
+            positions = out.positions[rows[i]]
+            for joint in range(N_JOINTS):
+                for a in range(3):
+                    positions[joint, a] = scratch[at(_B_POSITIONS + 3 * joint + a, j)]
     for i in range(start, stop):
         c = rows[i]
         j = first + Column(i - start)
-        positions = out.positions[c]
-        for joint in range(N_JOINTS):
-            for a in range(3):
-                positions[joint, a] = scratch[at(_B_POSITIONS + 3 * joint + a, j)]
         _scatter_frame(scratch, _B_PELVIS2WORLD, j, out.pelvis2world[c])
         _scatter_frame(scratch, _B_THORAX2WORLD, j, out.thorax2world[c])
         _scatter_frame(scratch, _B_HEAD2WORLD, j, out.head2world[c])
+    for i in range(start, stop):
+        c = rows[i]
+        j = first + Column(i - start)
         for s in range(2):
             _scatter_frame(scratch, _B_LEG2WORLD + 9 * s, j, out.leg2world[c, s])
             _scatter_frame(scratch, _B_ARM2WORLD + 9 * s, j, out.arm2world[c, s])
@@ -791,6 +838,7 @@ def spine_joint_lanes(scratch: F64, start: Column, stop: Column, k: int,
         chord = norm(sub(col3(scratch, above, j), col3(scratch, below, j)))
         scratch[at(_S_T, j)] = scratch[at(_S_PREV_T, j)] + scratch[at(length_row, j)] \
             / max(chord, 1e-9)
+    moving = 1
     for _ in range(iterations):
         moving = 0
         for i in lanes:
@@ -798,6 +846,9 @@ def spine_joint_lanes(scratch: F64, start: Column, stop: Column, k: int,
             prev_p = col3(scratch, prev_row, j)
             length, t = scratch[at(length_row, j)], scratch[at(_S_T, j)]
             point, tangent = curve_at_lanes(_lane_control(scratch, j), t)
+            # kept: once every spine has converged, its joint is placed from them
+            put3(scratch, _S_POINT, j, point)
+            put3(scratch, _S_TANGENT, j, tangent)
             d = sub(point, prev_p)
             g = dot(d, d) - length**2
             done = abs(g) <= 1e-13 * length**2
@@ -808,31 +859,53 @@ def spine_joint_lanes(scratch: F64, start: Column, stop: Column, k: int,
             moving += 0 if done else 1
         if moving == 0:
             break
+    if moving > 0:  # the iterations spent: the curve at the parameters last stepped to
+        for i in lanes:
+            j = Column(i)
+            point, tangent = curve_at_lanes(_lane_control(scratch, j), scratch[at(_S_T, j)])
+            put3(scratch, _S_POINT, j, point)
+            put3(scratch, _S_TANGENT, j, tangent)
     for i in lanes:
         j = Column(i)
-        t = scratch[at(_S_T, j)]
-        point, tangent = curve_at_lanes(_lane_control(scratch, j), t)
-        joint = at_distance(col3(scratch, prev_row, j), point, tangent,
-                            scratch[at(length_row, j)])
+        joint = at_distance(col3(scratch, prev_row, j), col3(scratch, _S_POINT, j),
+                            col3(scratch, _S_TANGENT, j), scratch[at(length_row, j)])
         put3(scratch, joint_row, j, joint)
-        scratch[at(_S_PREV_T, j)] = t
+        scratch[at(_S_PREV_T, j)] = scratch[at(_S_T, j)]
 
 
 # A call: one compiled body for decode_rows and posture_rows.
 @jit()
 def decode_block(start: int, stop: int, rows: I64, pose: PoseArrays, lengths: F64,
-                 out: DecodedArrays, scratch: F64, first: Column) -> None:
+                 out: DecodedArrays, scratch: F64, first: Column, finite_only: bool) -> None:
     """:func:`decode_row` of the store rows ``rows[start:stop]`` in the columns ``first:first
     + stop - start`` (at most :data:`.lanes.BLOCK`) of the block scratch ``scratch``
     (BLOCK_ROWS * BLOCK,): gathered row by row, the pelvis and legs, the spines and the upper
     body in loops over the block's characters that run on the vector units, the results put
-    in the rows of ``out``; the same bits as :func:`decode_row`."""
+    in the rows of ``out``; the same bits as :func:`decode_row`. With ``finite_only``, a row's
+    positions are written only where they are all finite (:func:`decoded_finite` says which);
+    its frames are written anyway."""
     last = first + Column(stop - start)
     gather_block(start, stop, rows, pose, lengths, scratch, first)
     lower_lanes(scratch, first, last)
     spine_block(scratch, first, last, 6)
     upper_lanes(scratch, first, last)
-    scatter_block(start, stop, rows, scratch, out, first)
+    if finite_only:
+        finite_lanes(scratch, first, last)
+    scatter_block(start, stop, rows, scratch, out, first, finite_only)
+
+
+@jit(inline="always")
+def block_piece(lo: int, hi: int, start: int, scratch: F64) -> tuple[int, F64, Column]:
+    """Where the chunk ``rows[lo:hi]`` decodes its rows from ``start`` (:func:`decode_block`):
+    the end of that piece, its block scratch in ``scratch`` (:func:`spine_scratch`) and its
+    first column. A chunk of at least :data:`.lanes.BLOCK` rows decodes by blocks of BLOCK rows
+    in block scratch ``lo // BLOCK`` from column 0; a shorter one (which may share its first
+    block scratch with another) each row ``i`` in its own column ``i % BLOCK`` of block scratch
+    ``i // BLOCK`` of the second set, by pieces within BLOCK-aligned runs of rows."""
+    if hi - lo >= BLOCK:
+        return min(start + BLOCK, hi), scratch[lo // BLOCK], Column(0)
+    return (min(hi, (start // BLOCK + 1) * BLOCK),
+            scratch[scratch.shape[0] // 2 + start // BLOCK], Column(start % BLOCK))
 
 
 @jit(nogil=True)
@@ -843,21 +916,13 @@ def decode_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64, out
     of every ``out`` array (the other rows are left as they are). ``scratch``:
     :func:`spine_scratch` of ``len(rows)``.
 
-    By blocks of :data:`.lanes.BLOCK` rows on the vector units (:func:`decode_block`); the
-    same result as :func:`decode_row` on each row, whatever the block."""
-    if hi - lo >= BLOCK:
-        block = scratch[lo // BLOCK]
-        for start in range(lo, hi, BLOCK):
-            decode_block(start, min(start + BLOCK, hi), rows, pose, lengths, out, block,
-                         Column(0))
-        return
-    # A short chunk (which may share its first block scratch with another): each row in its
-    # own column of the second set, by pieces within BLOCK-aligned runs of rows.
+    By blocks of :data:`.lanes.BLOCK` rows on the vector units (:func:`decode_block`,
+    :func:`block_piece`); the same result as :func:`decode_row` on each row, whatever the
+    block."""
     start = lo
     while start < hi:
-        stop = min(hi, (start // BLOCK + 1) * BLOCK)
-        decode_block(start, stop, rows, pose, lengths, out,
-                     scratch[scratch.shape[0] // 2 + start // BLOCK], Column(start % BLOCK))
+        stop, block, first = block_piece(lo, hi, start, scratch)
+        decode_block(start, stop, rows, pose, lengths, out, block, first, False)
         start = stop
 
 

@@ -44,21 +44,21 @@ from ecs_anim.runtime.kernels.decode import (
     WRIST,
     DecodedArrays,
     PoseArrays,
+    block_piece,
     decode_block,
-    decode_rows,
     decoded_arrays,
+    decoded_finite,
     leg_length,
     pelvis_frame,
     pose_arrays,
     spine_joint,
 )
-from ecs_anim.runtime.kernels.lanes import BLOCK, Column
+from ecs_anim.runtime.kernels.lanes import Column
 from ecs_anim.runtime.kernels.vec import (
     F64,
     Frame,
     Vec3,
     add,
-    copy_row,
     frame_from_axes,
     jit,
     load3,
@@ -242,26 +242,29 @@ def all_finite(a: F64) -> bool:
 # fifth of posture_rows' time.
 @jit(inline="always")
 def posture_of_decoded_row(c: int, pose: PoseArrays, lengths: F64, posture: DecodedArrays,
-                           previous: F64, slot: int, frozen: B8, newly_bad: B8, rotations: bool,
-                           world: F64, local: F64, rest_hips: F64, bvh_from_world: F64,
-                           rest2body: F64, parents: I64, vertebrae: F64,
-                           have_previous: bool) -> None:
+                           positions_good: bool, previous: F64, slot: int, frozen: B8,
+                           newly_bad: B8, rotations: bool, world: F64, local: F64,
+                           rest_hips: F64, bvh_from_world: F64, rest2body: F64, parents: I64,
+                           vertebrae: F64, have_previous: bool) -> None:
     """What :func:`posture_rows` does with store row ``c`` once ``posture`` holds its decoded
-    pose (its positions the store's, written over): the finite check (``frozen``,
-    ``newly_bad``), ``previous[slot]`` (N_JOINTS, 3) (the row's positions before) put back if
-    it is frozen, ``local[c]`` with ``rotations`` and ``vertebrae[c]``; arguments as there."""
-    good = all_finite(posture.positions[c])
-    if rotations:
+    frames and, if they are all finite (``positions_good``), its decoded positions (the
+    store's, written over; else the row's positions before, kept): the frozen check
+    (``frozen``, ``newly_bad``: the positions, and with ``rotations`` the rotations, all
+    finite), ``local[c]`` with ``rotations`` and ``vertebrae[c]``; with ``rotations``,
+    ``previous[slot]`` (N_JOINTS, 3) holds the row's positions before, put back if its
+    rotations are not finite. Arguments as there."""
+    good = positions_good
+    if rotations and good:
         export_rotations_row(c, posture, rest_hips, world[c])
         bvh_globals_row(world[c], bvh_from_world, rest2body)
-        good = good and all_finite(world[c])
+        good = all_finite(world[c])
+        if not good:
+            copy_positions(posture.positions, c, previous, slot)
     newly_bad[c] = not good and not frozen[c]
     frozen[c] = not good  # a pose finite again (a sane body or target) is published again
-    if frozen[c]:
-        copy_row(posture.positions, c, previous, slot)
-    elif rotations:
+    if good and rotations:
         local_from_globals_row(world[c], parents, local[c])
-    if vertebrae.shape[1] > 0 and (not frozen[c] or not have_previous):
+    if vertebrae.shape[1] > 0 and (good or not have_previous):
         vertebrae_row(c, pose, lengths[c], vertebrae[c])
 
 
@@ -273,7 +276,7 @@ def with_positions(decoded: DecodedArrays, positions: F64) -> DecodedArrays:
 
 
 @jit(inline="always")
-def _copy_positions(dst: F64, c: int, src: F64, i: int) -> None:
+def copy_positions(dst: F64, c: int, src: F64, i: int) -> None:
     """``dst[c] = src[i]`` for (n, N_JOINTS, 3) arrays (indices, not :func:`.vec.copy_row`'s
     flat views: numba's reshape calls its runtime, twice a row)."""
     for joint in range(N_JOINTS):
@@ -300,31 +303,28 @@ def posture_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64,
     and :func:`ecs_anim.core.normalized.vertebrae`. ``scratch``: :func:`.decode.spine_scratch`
     of ``len(rows)``, for :func:`.decode.decode_block` (as :func:`.decode.decode_rows`);
     ``decoded.positions`` (at least len(rows), N_JOINTS, 3; not ``positions``) is scratch too,
-    of which this chunk uses rows ``lo`` to ``lo + BLOCK``.
+    of which this chunk uses rows ``lo`` to ``lo + BLOCK`` with ``rotations``.
 
-    By blocks of :data:`.lanes.BLOCK` rows: their positions set aside, their decode (on the
-    vector units: :func:`.decode.decode_block`), then the rest row by row.
+    By blocks of :data:`.lanes.BLOCK` rows (:func:`.decode.block_piece`): their decode on the
+    vector units, positions written only where they are all finite (a frozen row's are kept
+    without being set aside), then the rest row by row.
     """
     posture = with_positions(decoded, positions)
     previous = decoded.positions
-    block = scratch[lo // BLOCK]  # (as decode_rows: a shorter chunk is its one block)
-    short = hi - lo < BLOCK
-    for start in range(lo, hi, BLOCK):
-        stop = min(start + BLOCK, hi)
-        # The decode writes the store's positions (each row once, not into a scratch copied
-        # after: 2 MB written and read back at 4,000 characters); the block's positions before
-        # it wait in rows lo.. of ``previous`` (in the first-level cache; no other chunk's rows)
-        # for a row that turns out frozen.
+    start = lo
+    while start < hi:
+        stop, block, first = block_piece(lo, hi, start, scratch)
+        if rotations:  # a row whose rotations are not finite gets these back (in cache)
+            for i in range(start, stop):
+                copy_positions(previous, lo + i - start, positions, rows[i])
+        decode_block(start, stop, rows, pose, lengths, posture, block, first, True)
         for i in range(start, stop):
-            _copy_positions(previous, lo + i - start, positions, rows[i])
-        if short:
-            decode_rows(start, stop, rows, pose, lengths, posture, scratch)
-        else:
-            decode_block(start, stop, rows, pose, lengths, posture, block, Column(0))
-        for i in range(start, stop):
-            posture_of_decoded_row(rows[i], pose, lengths, posture, previous, lo + i - start,
-                                   frozen, newly_bad, rotations, world, local, rest_hips,
-                                   bvh_from_world, rest2body, parents, vertebrae, have_previous)
+            posture_of_decoded_row(rows[i], pose, lengths, posture,
+                                   decoded_finite(block, first + Column(i - start)), previous,
+                                   lo + i - start, frozen, newly_bad, rotations, world, local,
+                                   rest_hips, bvh_from_world, rest2body, parents, vertebrae,
+                                   have_previous)
+        start = stop
 
 
 @jit(nogil=True)

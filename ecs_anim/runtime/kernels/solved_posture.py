@@ -13,8 +13,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.runtime.kernels.decode import DecodedArrays, PoseArrays
-from ecs_anim.runtime.kernels.posture import posture_of_decoded_row, with_positions
-from ecs_anim.runtime.kernels.vec import copy_row, jit
+from ecs_anim.runtime.kernels.posture import (
+    all_finite,
+    copy_positions,
+    posture_of_decoded_row,
+    with_positions,
+)
+from ecs_anim.runtime.kernels.vec import jit
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -32,20 +37,34 @@ def posture_solved_rows(lo: int, hi: int, rows: I64, solved: DecodedArrays, pose
     of ``positions`` is row ``i`` of ``solved`` (the solver's decoded result, (r, ...)) instead
     of a decode of ``pose``; the frames are not copied when ``frames_shared`` (those of
     ``decoded`` are ``solved``'s arrays: every row solved). ``decoded.positions`` (not
-    ``positions``) is scratch, of which this chunk uses row ``lo``; the other arguments and
+    ``positions``) is scratch, of which this chunk uses row ``lo`` with ``rotations``; a row's
+    positions are written only where they are all finite; the other arguments and
     results as there."""
     posture = with_positions(decoded, positions)
     previous = decoded.positions
     for i in range(lo, hi):
         c = rows[i]
-        copy_row(previous, lo, positions, c)
-        copy_row(positions, c, solved.positions, i)
         if not frames_shared:
-            copy_row(posture.pelvis2world, c, solved.pelvis2world, i)
-            copy_row(posture.thorax2world, c, solved.thorax2world, i)
-            copy_row(posture.head2world, c, solved.head2world, i)
-            copy_row(posture.leg2world, c, solved.leg2world, i)
-            copy_row(posture.arm2world, c, solved.arm2world, i)
-        posture_of_decoded_row(c, pose, lengths, posture, previous, lo, frozen, newly_bad,
+            copy_frames(posture, c, solved, i)
+        good = all_finite(solved.positions[i])
+        if good:
+            if rotations:  # put back if the rotations are not finite
+                copy_positions(previous, lo, positions, c)
+            copy_positions(positions, c, solved.positions, i)
+        posture_of_decoded_row(c, pose, lengths, posture, good, previous, lo, frozen, newly_bad,
                                rotations, world, local, rest_hips, bvh_from_world, rest2body,
                                parents, vertebrae, have_previous)
+
+
+@jit(inline="always")
+def copy_frames(dst: DecodedArrays, c: int, src: DecodedArrays, i: int) -> None:
+    """The frames of row ``c`` of ``dst`` made those of row ``i`` of ``src`` (indices, not
+    :func:`.vec.copy_row`'s flat views, whose reshape calls numba's runtime)."""
+    for a in range(3):
+        for b in range(3):
+            dst.pelvis2world[c, a, b] = src.pelvis2world[i, a, b]
+            dst.thorax2world[c, a, b] = src.thorax2world[i, a, b]
+            dst.head2world[c, a, b] = src.head2world[i, a, b]
+            for s in range(2):
+                dst.leg2world[c, s, a, b] = src.leg2world[i, s, a, b]
+                dst.arm2world[c, s, a, b] = src.arm2world[i, s, a, b]

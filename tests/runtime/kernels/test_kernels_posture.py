@@ -186,28 +186,36 @@ def test_centres_of_mass_match_numpy_for_some_rows():
     assert np.all(np.isnan(np.delete(error, rows)))
 
 
-def test_posture_rows_puts_back_frozen_rows_in_any_block_and_chunk():
-    """The decode writes the store's positions; a row that turns out frozen gets its positions
-    before back, whichever block of a chunk it is in (each chunk sets a block aside in its own
-    first rows of the scratch)."""
+@pytest.mark.parametrize("rotations", [False, True])
+def test_posture_rows_puts_back_frozen_rows_in_any_block_and_chunk(rotations):
+    """The decode writes the store's positions where they are all finite (decode.finite_lanes);
+    a row that turns out frozen keeps its positions before, whichever block of a chunk it is
+    in, in chunks shorter than a block too (their own columns of the second set of block
+    scratches), its positions NaN or infinite, with rotations or without (with them each chunk
+    sets a block aside in its own first rows of the scratch, for a row whose rotations only
+    are not finite: test_solved_posture's)."""
     rng = np.random.default_rng(1316)
     n = 3 * 32 + 5
     poses = bent_poses(rng, n)
     lengths = random_bodies(rng, n)
-    bad = [3, 40, 77, 99]
-    poses.thorax[bad] = np.nan
+    poses.thorax[[3, 40, 77, 99]] = np.nan
+    poses.root_position[19, 2] = np.inf
+    bad = [3, 19, 40, 77, 99]
     k = kp.export_constants()
     before = rng.normal(size=(n, N_JOINTS, 3))
-    fresh = decode(poses, lengths).positions
+    with np.errstate(invalid="ignore"):
+        fresh = decode(poses, lengths).positions
     rows = np.arange(n, dtype=np.int64)
-    for bounds in ((0, n), (0, 37, 70, n)):  # one chunk, three
+    world = np.empty((n if rotations else 0, kp.N_EXPORT, 3, 3))
+    for bounds in ((0, n), (0, 37, 70, n), (0, 20, 45, 45 + 32 + 3, n)):  # one chunk, more
         positions, frozen, newly_bad = before.copy(), np.zeros(n, bool), np.zeros(n, bool)
         scratch, decoded = kd.spine_scratch(n), kd.empty_decoded(n)
+        local = np.zeros((n if rotations else 0, kp.N_EXPORT, 3, 3))
         for lo, hi in itertools.pairwise(bounds):
             kp.posture_rows(lo, hi, rows, kd.pose_arrays(poses), lengths, decoded, frozen,
-                            newly_bad, positions, False, np.empty((0, kp.N_EXPORT, 3, 3)),
-                            np.empty((0, kp.N_EXPORT, 3, 3)), k.rest_hips, k.bvh_from_world,
-                            k.rest2body, k.parents, np.empty((n, 0, 3)), False, scratch)
+                            newly_bad, positions, rotations, world, local, k.rest_hips,
+                            k.bvh_from_world, k.rest2body, k.parents, np.empty((n, 0, 3)), False,
+                            scratch)
         assert list(np.flatnonzero(frozen)) == bad and list(np.flatnonzero(newly_bad)) == bad
         np.testing.assert_array_equal(positions[bad], before[bad])
         good = ~frozen

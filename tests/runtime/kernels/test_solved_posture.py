@@ -66,28 +66,35 @@ def test_a_scenario_with_some_characters_unconstrained(monkeypatch):
     assert len(checked) > 30
 
 
-@pytest.mark.parametrize("frames_shared", [False, True])
-def test_a_solved_row_not_finite_keeps_its_last_positions(frames_shared):
+@pytest.mark.parametrize(("frames_shared", "rotations"), [(False, False), (True, False),
+                                                          (False, True)])
+def test_a_solved_row_not_finite_keeps_its_last_positions(frames_shared, rotations):
     """posture_solved_rows publishes the solver's rows (frames copied, or shared when the
     posture's frames are the solver's arrays) and freezes one that is not finite, its
-    positions before kept."""
+    positions before kept: its positions not finite, or with rotations only a frame (its
+    rotations not finite: its positions put back)."""
     rng = np.random.default_rng(1317)
     n = 40
     poses, lengths = random_poses(rng, n), random_bodies(rng, n)
     solved = kd.decoded_arrays(kd.decode(poses, lengths))
     solved.positions[[5, 33]] = np.nan
+    bad = [5, 33]
+    if rotations:
+        solved.head2world[12] = np.inf
+        bad = [5, 12, 33]
     before = rng.normal(size=(n, N_JOINTS, 3))
     positions, frozen, newly_bad = before.copy(), np.zeros(n, bool), np.zeros(n, bool)
     frames = solved if frames_shared else kd.empty_decoded(n)
     decoded = frames._replace(positions=np.empty((n, N_JOINTS, 3)))
     k = kp.export_constants()
-    posture_solved_rows(0, n, np.arange(n, dtype=np.int64), solved, kd.pose_arrays(poses),
-                        lengths, decoded, frozen, newly_bad, positions, False,
-                        np.empty((0, kp.N_EXPORT, 3, 3)), np.empty((0, kp.N_EXPORT, 3, 3)),
-                        k.rest_hips, k.bvh_from_world, k.rest2body, k.parents,
-                        np.empty((n, 0, 3)), False, frames_shared)
-    assert list(np.flatnonzero(frozen)) == [5, 33] and list(np.flatnonzero(newly_bad)) == [5, 33]
-    np.testing.assert_array_equal(positions[[5, 33]], before[[5, 33]])
+    shape = (n if rotations else 0, kp.N_EXPORT, 3, 3)
+    with np.errstate(invalid="ignore"):
+        posture_solved_rows(0, n, np.arange(n, dtype=np.int64), solved, kd.pose_arrays(poses),
+                            lengths, decoded, frozen, newly_bad, positions, rotations,
+                            np.empty(shape), np.zeros(shape), k.rest_hips, k.bvh_from_world,
+                            k.rest2body, k.parents, np.empty((n, 0, 3)), False, frames_shared)
+    assert list(np.flatnonzero(frozen)) == bad and list(np.flatnonzero(newly_bad)) == bad
+    np.testing.assert_array_equal(positions[bad], before[bad])
     good = ~frozen
     np.testing.assert_array_equal(positions[good], solved.positions[good])
     for got, want in zip(decoded[1:], solved[1:], strict=True):
