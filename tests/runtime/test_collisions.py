@@ -132,6 +132,39 @@ def test_the_search_over_the_bodies_that_touch_finds_what_a_search_of_all_finds(
         np.testing.assert_array_equal(getattr(found, name), getattr(every, name), err_msg=name)
 
 
+@pytest.mark.parametrize("apart", [False, True])  # some bounds meet; none do
+def test_the_search_measures_gaps_only_when_asked_and_they_are_the_least(apart):
+    """``touching`` without a clearance (no gap measured) marks the bodies it marks with one;
+    with one, where no two bounds meet, each body's clearance is its least gap to another's
+    bounds (the largest of the axes' gaps), at most the gap the grid's cells guarantee."""
+    from ecs_anim.runtime.kernels.capsules import CELL_SLACK
+
+    rng = np.random.default_rng(3205)
+    n = 60
+    lengths = np.tile(Morphology.preset("adult_male").lengths, (n, 1))
+    standing = rng.normal(scale=0.25, size=(n, N_JOINTS, 3))
+    standing[:, J["pelvis"]] = 0.0
+    spots = rng.uniform(0, 9.0, size=(n, 3)) * [1, 1, 0]
+    if apart:  # on a grid 5 m apart, each within 1 m of its point
+        spots = np.stack([5.0 * (np.arange(n) // 8), 5.0 * (np.arange(n) % 8),
+                          np.zeros(n)], axis=1) + rng.uniform(0, 1.0, size=(n, 3)) * [1, 1, 0]
+    positions = standing + spots[:, None]
+    body = bounds(positions, lengths, Capsules.empty(n))
+    grid = grid_of(body)
+    clearance = np.full(n, np.nan)
+    near = touching(body, grid, clearance)
+    np.testing.assert_array_equal(touching(body, grid), near)
+    if apart:
+        assert near.size == 0
+        low, high = body.box[:, 0], body.box[:, 1]
+        gap = np.maximum(low[None] - high[:, None], low[:, None] - high[None]).max(axis=2)
+        np.fill_diagonal(gap, np.inf)
+        least = np.minimum(gap.min(axis=1), grid.cell_m * (1.0 - 1.0 / CELL_SLACK))
+        np.testing.assert_allclose(clearance, least, rtol=0, atol=1e-12)
+    else:
+        assert 5 < near.size < n, near.size
+
+
 def test_the_fights_kicks_land_on_the_chest_not_in_it():
     r = run("fight_training")
     e, w, idx, pos = r["errors"], r["weights"], r["index"], r["positions"]

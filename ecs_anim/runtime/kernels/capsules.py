@@ -248,7 +248,8 @@ _FORWARD_CELLS = ((1, -1), (1, 0), (1, 1), (0, 1))
 
 @jit(nogil=True)
 def touching_kernel(box: F64, plane: F64, cell_m: float, mask: int, start: I64, order: I64,
-                    box_in_order: F64, touching: NDArray[np.bool_], clearance: F64) -> None:
+                    box_in_order: F64, touching: NDArray[np.bool_], clearance: F64,
+                    gaps: bool) -> None:
     """Mark ``touching[i]`` (n,) for every character whose bounds ``box`` (n, 2, 3) meet
     another's (on the grid as :func:`overlap_rows`'s). Each pair is met once: in a body's own
     slot, with the bodies after it there; in the four cells after its own
@@ -258,7 +259,8 @@ def touching_kernel(box: F64, plane: F64, cell_m: float, mask: int, start: I64, 
     side), and the four cells' slots made once for the bodies of one cell in a row.
     ``clearance`` (n,), given as the least gap of two bodies in cells not side by side, is
     lowered to each body's least gap (m: the largest of the three axes' gaps between two
-    bounds) to a body met whose bounds do not meet its own."""
+    bounds) to a body met whose bounds do not meet its own, if ``gaps`` (else not read nor
+    written: the gaps were a third of the pass)."""
     n = order.shape[0]
     for a in range(n):
         i = order[a]
@@ -273,7 +275,7 @@ def touching_kernel(box: F64, plane: F64, cell_m: float, mask: int, start: I64, 
         ix, iy = math.floor(plane[i, 0] / cell_m), math.floor(plane[i, 1] / cell_m)
         own = cell_hash(ix, iy, mask)
         for b in range(a + 1, start[own + 1]):
-            _meet(box_i, box_in_order[b], i, order[b], touching, clearance)
+            _meet(box_i, box_in_order[b], i, order[b], touching, clearance, gaps)
         if a == 0 or ix != last_x or iy != last_y:
             last_x, last_y = ix, iy
             forward = (cell_hash(ix + _FORWARD_CELLS[0][0], iy + _FORWARD_CELLS[0][1], mask),
@@ -284,16 +286,19 @@ def touching_kernel(box: F64, plane: F64, cell_m: float, mask: int, start: I64, 
             if s == own:
                 continue  # (its bodies met above)
             for b in range(start[s], start[s + 1]):
-                _meet(box_i, box_in_order[b], i, order[b], touching, clearance)
+                _meet(box_i, box_in_order[b], i, order[b], touching, clearance, gaps)
 
 
 @jit(inline="always")
 def _meet(box_i: F64, box_j: F64, i: int, j: int, touching: NDArray[np.bool_],
-          clearance: F64) -> None:
+          clearance: F64, gaps: bool) -> None:
     """:func:`touching_kernel`'s test of bodies ``i`` and ``j`` (bounds ``box_i``, ``box_j``
-    (2, 3)): both marked if their bounds meet, else each one's clearance lowered to their gap."""
+    (2, 3)): both marked if their bounds meet, else (with ``gaps``) each one's clearance
+    lowered to their gap."""
     if not _apart(box_i, box_j):
         touching[i] = touching[j] = True
+        return
+    if not gaps:
         return
     gap = 0.0
     for x in range(3):
@@ -480,15 +485,17 @@ def touching(body: Capsules, grid: Grid, clearance: F64 | None = None) -> I64:
     """The characters whose bounds meet another's (k,), on ``grid``: the only ones that may
     overlap someone (each capsule's bounds lie within its body's). ``clearance`` (n,): written,
     each body's least gap (m, along the axis the bounds are furthest apart) to the bounds of
-    any other body whose bounds do not meet its own."""
+    any other body whose bounds do not meet its own (None: no gap is measured)."""
     n = body.radii.shape[0]
     marked = np.zeros(n, bool)
+    gaps = clearance is not None
     if clearance is None:
-        clearance = np.empty(n)
-    # Bodies in cells not side by side: their centres more than a cell apart along an axis,
-    # each one's bounds within half a cell over CELL_SLACK of its centre (grid_of).
-    clearance[:] = grid.cell_m * (1.0 - 1.0 / CELL_SLACK)
+        clearance = np.empty(0)
+    else:
+        # Bodies in cells not side by side: their centres more than a cell apart along an
+        # axis, each one's bounds within half a cell over CELL_SLACK of its centre (grid_of).
+        clearance[:] = grid.cell_m * (1.0 - 1.0 / CELL_SLACK)
     touching_kernel(body.box, grid.plane, grid.cell_m, grid.mask, grid.start, grid.order,
-                    np.empty((n, 2, 3)), marked, clearance)
+                    np.empty((n, 2, 3)), marked, clearance, gaps)
     found: I64 = np.flatnonzero(marked)
     return found

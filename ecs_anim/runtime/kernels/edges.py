@@ -29,33 +29,42 @@ def edge_rows(lo: int, hi: int, entity: I64, clip: I64, clip_time_s: F64, speed:
     rows: ``listed[k, :counts[k]]`` the rows of edge column ``k`` < 3, ``listed[3, :counts[3]]``
     ``2 * row + foot`` of each contact begun (``listed`` (4, 2 n), ``counts`` (4,) written;
     called over all rows at once)."""
-    for k in range(4):
-        counts[k] = 0
+    # The counts and each row's values in locals: written to arrays and read back, every
+    # store might alias them (a quarter of the pass's time).
+    replaced_count = ended_count = started_count = began_count = 0
     for r in range(lo, hi):
-        e = entity[r]
+        e, k, time_s = entity[r], clip[r], clip_time_s[r]
         old_clip = seen_clip[e]
         ended = seen_ended[e]
-        new_clip = clip[r] != old_clip or clip_time_s[r] < seen_time_s[e] - slack_s
-        sampled = clip_time_s[r] - dt * speed[r]
-        at_end = not loop[r] and sampled >= duration_s[clip[r]] - slack_s
-        edges[r, 0] = new_clip and old_clip >= 0 and not ended
-        edges[r, 1] = not new_clip and at_end and not ended
-        edges[r, 2] = new_clip
-        for k in range(3):
-            if edges[r, k]:
-                listed[k, counts[k]] = r
-                counts[k] += 1
+        new_clip = k != old_clip or time_s < seen_time_s[e] - slack_s
+        sampled = time_s - dt * speed[r]
+        at_end = not loop[r] and sampled >= duration_s[k] - slack_s
+        replaced = new_clip and old_clip >= 0 and not ended
+        ended_now = not new_clip and at_end and not ended
+        edges[r, 0], edges[r, 1], edges[r, 2] = replaced, ended_now, new_clip
+        if replaced:
+            listed[0, replaced_count] = r
+            replaced_count += 1
+        if ended_now:
+            listed[1, ended_count] = r
+            ended_count += 1
+        if new_clip:
+            listed[2, started_count] = r
+            started_count += 1
         for foot in range(2):
-            edges[r, 3 + foot] = (contact_weight[r, foot] >= began_weight
-                                  and seen_contact[e, foot] < began_weight)
-            seen_contact[e, foot] = contact_weight[r, foot]
-            if edges[r, 3 + foot]:
-                listed[3, counts[3]] = 2 * r + foot
-                counts[3] += 1
+            weight = contact_weight[r, foot]
+            began = weight >= began_weight and seen_contact[e, foot] < began_weight
+            edges[r, 3 + foot] = began
+            seen_contact[e, foot] = weight
+            if began:
+                listed[3, began_count] = 2 * r + foot
+                began_count += 1
         seen_ended[e] = not new_clip and (ended or at_end)
         previous_clip[r] = old_clip
-        seen_clip[e] = clip[r]
-        seen_time_s[e] = clip_time_s[r]
+        seen_clip[e] = k
+        seen_time_s[e] = time_s
+    counts[0], counts[1], counts[2], counts[3] = (replaced_count, ended_count, started_count,
+                                                  began_count)
 
 
 class EdgeScratch:

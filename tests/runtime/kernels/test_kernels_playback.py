@@ -143,6 +143,26 @@ def test_long_loops_carry_root_motion_as_numpy(bank: ClipBank) -> None:
     _assert_poses_equal(got, want)
 
 
+def test_every_sample_its_own_equals_numpy(bank: ClipBank) -> None:
+    """A crowd of which no two characters are in step (the bench's): no pose is copied
+    (``place_rows``' copies skipped), and every row is numpy's, its weights and rolls too."""
+    rng = np.random.default_rng(1321)
+    n = 3 * BLOCK + 7
+    clip, _, loop, xy, heading, lengths = _scene(bank, rng, n)
+    time_s = bank.duration_s(clip) * rng.uniform(-3.0, 40.0, n)
+    rows = rng.permutation(n).astype(np.int64)
+    work = PlaybackWork()
+    work.ensure(n)
+    assert first_of_each_sample(rows, clip, time_s.view(np.int64), loop, work.table,
+                                work.first, work.unique) == n
+    want, want_weights, want_rolls = _reference(bank, clip, time_s, loop, xy, heading, lengths)
+    got = _empty(n, want)
+    weights, rolls = _compiled(bank, rows, clip, time_s, loop, xy, heading, lengths, got, rows)
+    _assert_poses_equal(got, want)
+    np.testing.assert_allclose(weights, want_weights, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(rolls, want_rolls, rtol=0, atol=1e-12)
+
+
 def test_characters_in_step_share_one_sample(bank: ClipBank) -> None:
     """Characters playing the same clip from the same time with the same loop flag are
     sampled once: the groups are those of the keys, and each character's pose is the bits it
@@ -194,7 +214,7 @@ def test_sample_placed_does_not_depend_on_the_chunks(bank: ClipBank) -> None:
     weights, rolls = np.zeros((n, 2)), np.zeros((n, 2))
     for lo, hi in ((0, 33), (33, 34), (34, n)):
         place_rows(lo, hi, rows, work.first, xy, heading, lengths, pose_arrays(chunked), rows,
-                   work.scratch, weights, rolls, work.heading_key, work.heading_turn)
+                   work.scratch, weights, rolls, work.heading_key, work.heading_turn, m < n)
     for name, a in whole.arrays().items():
         np.testing.assert_array_equal(getattr(chunked, name), a, err_msg=name)
 
