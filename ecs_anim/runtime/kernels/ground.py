@@ -44,6 +44,65 @@ def grid_height(x: float, y: float, p: F64, grid: F64) -> float:
                  + (1 - u) * v * grid[k + nx] + u * v * grid[k + nx + 1])
 
 
+# sine: fdlibm's (FreeBSD's e_rem_pio2.c reduction by pi/2 in three parts, k_sin.c, k_cos.c),
+# written without branches so that a loop of it runs on the vector units (numba here has no
+# vector math library: math.sin is a call to the C library's, one point at a time).
+_INV_PIO2 = 6.36619772367581382433e-01
+_PIO2_1, _PIO2_1T = 1.57079632673412561417e+00, 6.07710050650619224932e-11
+_PIO2_2, _PIO2_2T = 6.07710050630396597660e-11, 2.02226624879595063154e-21
+_PIO2_3, _PIO2_3T = 2.02226624871116645580e-21, 8.47842766036889956997e-32
+_S1, _S2, _S3 = -1.66666666666666324348e-01, 8.33333333332248946124e-03, -1.98412698298579493134e-04
+_S4, _S5, _S6 = 2.75573137070700676789e-06, -2.50507602534068634195e-08, 1.58969099521155010221e-10
+_C1, _C2, _C3 = 4.16666666666666019037e-02, -1.38888888888741095749e-03, 2.48015872894767294178e-05
+_C4, _C5, _C6 = -2.75573143513906633035e-07, 2.08757232129817482790e-09, -1.13596475577881948265e-11
+#: 1.5 * 2**52: ``(a + it) - it`` is ``a`` rounded to an integer (|a| < 2**51).
+_ROUND = 6755399441055744.0
+#: :func:`sine`'s arguments (rad) are under this: n pi/2 taken off exactly (n * _PIO2_1, 33 bits
+#: times at most 20, is a double). Bumps 2.5 m long reach it 400 km out.
+SINE_DOMAIN = 2.0**20
+
+
+@jit(inline="always")
+def sine(x: float) -> float:
+    """sin(x) for |x| < :data:`SINE_DOMAIN` rad, within 1 ulp of the C library's (its bits for
+    85-90 % of x); NaN for NaN."""
+    n = (x * _INV_PIO2 + _ROUND) - _ROUND  # x = n pi/2 + (y0 + y1)
+    r = x - n * _PIO2_1
+    t, w = r, n * _PIO2_2
+    r = t - w
+    w = n * _PIO2_2T - ((t - r) - w)
+    t, w = r, n * _PIO2_3
+    r = t - w
+    w = n * _PIO2_3T - ((t - r) - w)
+    y0 = r - w
+    y1 = (r - y0) - w
+    z = y0 * y0
+    z2 = z * z
+    rs = _S2 + z * (_S3 + z * _S4) + z * z2 * (_S5 + z * _S6)
+    sin_y = y0 - ((z * (0.5 * y1 - z * y0 * rs) - y1) - z * y0 * _S1)
+    rc = z * (_C1 + z * (_C2 + z * _C3)) + z2 * z2 * (_C4 + z * (_C5 + z * _C6))
+    hz = 0.5 * z
+    wc = 1.0 - hz
+    cos_y = wc + (((1.0 - wc) - hz) + (z * rc - y0 * y1))
+    quadrant = n - 4.0 * np.floor(0.25 * n)  # n mod 4, as a float: no integer conversion
+    out = cos_y if quadrant == 1.0 or quadrant == 3.0 else sin_y
+    return -out if quadrant >= 2.0 else out
+
+
+@jit(inline="always")
+def bumps_height(x: float, y: float, z: float, amplitude: float, kx: float, ky: float) -> float:
+    """:class:`~ecs_anim.core.ground.Bumps`' height at (``x``, ``y``) (m), where ``kx * x`` and
+    ``ky * y`` are within :data:`SINE_DOMAIN` (:func:`bumps_in_domain`): ``kx``, ``ky`` its
+    wavenumbers (rad/m), ``z`` its base and ``amplitude`` (m)."""
+    return z + amplitude * sine(kx * x) * sine(ky * y)
+
+
+@jit(inline="always")
+def bumps_in_domain(x: float, y: float, kx: float, ky: float) -> bool:
+    """Whether :func:`bumps_height` answers (``x``, ``y``) (else: the C library's sines)."""
+    return abs(kx * x) < SINE_DOMAIN and abs(ky * y) < SINE_DOMAIN
+
+
 @jit()
 def part_height(kind: int, x: float, y: float, p: GroundParams) -> float:
     """Mirrors the ``height`` of :class:`~ecs_anim.core.ground.Plane`, ``Slope``, ``Stairs`` or
@@ -56,7 +115,9 @@ def part_height(kind: int, x: float, y: float, p: GroundParams) -> float:
         along = x * p[5] + y * p[6] - p[4]
         step = min(max(math.floor(along / p[2]) + 1.0, 0.0), p[3])
         return float(p[0] + p[1] * step)
-    return float(p[0] + p[1] * math.sin(p[2] * x) * math.sin(p[3] * y))  # p[2:4]: wavenumbers
+    if bumps_in_domain(x, y, p[2], p[3]):  # p[2:4]: wavenumbers
+        return bumps_height(x, y, p[0], p[1], p[2], p[3])
+    return float(p[0] + p[1] * math.sin(p[2] * x) * math.sin(p[3] * y))
 
 
 # Inlined: small, and ground adaptation asks it about ten times a character.

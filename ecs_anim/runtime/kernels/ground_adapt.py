@@ -29,7 +29,14 @@ from numpy.typing import NDArray
 from ecs_anim.core import ground_adapt as reference
 from ecs_anim.core.skeleton import LENGTH_INDEX as L
 from ecs_anim.runtime.kernels.decode import LegPoseArrays, two_bone_middle
-from ecs_anim.runtime.kernels.ground import height_at, height_near, smooth
+from ecs_anim.runtime.kernels.ground import (
+    NEAR_M,
+    bumps_height,
+    bumps_in_domain,
+    height_at,
+    height_near,
+    smooth,
+)
 from ecs_anim.runtime.kernels.lanes import (
     BLOCK,
     Column,
@@ -131,8 +138,16 @@ _S_LEG_FRAME, _S_FRACTION, _S_ROOT, _S_ANKLE, _S_TOE, _S_SHANK2W = 58, 66, 68, 7
 # ... and what a row carries from before the re-aiming to after it (the feet's lengths and
 # directions: the decode's, then those the last pitch starts from).
 _S_UNDER, _S_KNOWN, _S_DIR, _S_FOOT_LENGTH = 101, 103, 109, 129
+# The block's ground queries (heights_lanes): up to 6 a row (each foot's three below), their
+# x, y and the ground's height under them (query k of each in column k of the rows from these
+# on) ...
+_S_Q_X, _S_Q_Y, _S_Q_HEIGHT = 131, 137, 143
+# ... and which query answers each foot (side s at + s): under the motion's ankle and toe (a
+# foot not planted: its target's) and under the end of a foot pitched (its first end); -1:
+# none asked.
+_S_Q_ANKLE, _S_Q_TOE, _S_Q_END = 149, 151, 153
 #: Rows of a block's scratch (:func:`ground_scratch`).
-GROUND_SCRATCH_ROWS = 131
+GROUND_SCRATCH_ROWS = 155
 
 
 def ground_scratch(n: int) -> F64:
@@ -140,7 +155,7 @@ def ground_scratch(n: int) -> F64:
     GROUND_SCRATCH_ROWS rows of BLOCK, flat). The chunk of rows from ``lo`` uses the block
     scratch ``lo // BLOCK`` for each of its blocks in turn (so chunks of at least
     :data:`.lanes.BLOCK` rows, ``over_chunks``' ``rows_per_thread``, never share one; one
-    thread touches only the first: 33 kB)."""
+    thread touches only the first: 40 kB)."""
     return np.empty((n // BLOCK + 1, GROUND_SCRATCH_ROWS * BLOCK))
 
 
@@ -267,6 +282,55 @@ def reaim_lanes(scratch: F64, start: Column, stop: Column, max_extension: float)
         scratch[_at(_S_ROOT + 2, j)] = pelvis_z / leg
 
 
+@jit(inline="always")
+def _ask(scratch: F64, count: int, x: float, y: float) -> int:
+    """The ground under (``x``, ``y``) asked as query ``count`` of the block
+    (:func:`heights_lanes` answers it); returns the queries asked now."""
+    scratch[_at(_S_Q_X, Column(count))] = x
+    scratch[_at(_S_Q_Y, Column(count))] = y
+    return count + 1
+
+
+@jit(inline="always")
+def _answer(scratch: F64, query: float) -> float:
+    """The ground's height under query ``query`` of the block (m), once
+    :func:`heights_lanes` has answered it."""
+    return float(scratch[_at(_S_Q_HEIGHT, Column(int(query)))])
+
+
+@jit()
+def heights_lanes(scratch: F64, count: int, kinds: I64, params: F64, grid: F64) -> None:
+    """:func:`.ground.height_at` under the block's first ``count`` queries (:func:`_ask`), into
+    their heights (m). On a plane, a slope or bumps alone (the points within
+    :func:`.ground.bumps_in_domain`) in a loop on the vector units, with the bits of
+    ``height_at``'s."""
+    lone = kinds[0] if kinds.shape[0] == 1 else -1  # .ground's kind codes: 0 plane, 1 slope
+    if lone == 0 or lone == 1:
+        z, grade_x, grade_y = params[0, 0], params[0, 1], params[0, 2]
+        for k in range(count):
+            j = Column(k)
+            slope = z + grade_x * scratch[_at(_S_Q_X, j)] + grade_y * scratch[_at(_S_Q_Y, j)]
+            scratch[_at(_S_Q_HEIGHT, j)] = 0.0 + (z if lone == 0 else slope)
+        return
+    if lone == 3:  # bumps
+        z, amplitude, kx, ky = params[0, 0], params[0, 1], params[0, 2], params[0, 3]
+        outside = 0
+        for k in range(count):
+            j = Column(k)
+            inside = bumps_in_domain(scratch[_at(_S_Q_X, j)], scratch[_at(_S_Q_Y, j)], kx, ky)
+            outside += 0 if inside else 1
+        if outside == 0:
+            for k in range(count):
+                j = Column(k)
+                scratch[_at(_S_Q_HEIGHT, j)] = 0.0 + bumps_height(
+                    scratch[_at(_S_Q_X, j)], scratch[_at(_S_Q_Y, j)], z, amplitude, kx, ky)
+            return
+    for k in range(count):
+        j = Column(k)
+        scratch[_at(_S_Q_HEIGHT, j)] = height_at(scratch[_at(_S_Q_X, j)],
+                                                 scratch[_at(_S_Q_Y, j)], kinds, params, grid)
+
+
 @jit(inline="always")  # one call site
 def adapt_keeping_heels_up(i: Column, c: int, pose: LegPoseArrays, scratch: F64, kinds: I64,
                            params: F64, grid: F64, is_smooth: bool, ankle_height: Vec3,
@@ -303,12 +367,11 @@ def adapt_keeping_heels_up(i: Column, c: int, pose: LegPoseArrays, scratch: F64,
     store3(pose.root_position[c], _col3(scratch, _S_ROOT, i))
 
 
-# Not inlined (nor planted_foot): a row calls them from nine places, and inlining each copy
+# Not inlined (nor planted_foot): a row calls them from several places, and inlining each copy
 # tripled ground_adapt_rows's compile time (14 s of CPU, 43 s inlined) for 1-5 % of its run.
 @jit()
 def pitched(origin: Vec3, d: Vec3, foot: float, sign: float, clearance: float, kinds: I64,
-            params: F64, grid: F64, passes: int, known: Vec3, is_smooth: bool
-            ) -> tuple[Vec3, float]:
+            params: F64, grid: F64, passes: int) -> tuple[Vec3, float]:
     """Mirrors :func:`ecs_anim.core.ground_adapt.pitched`: the foot direction ``d`` (unit, world)
     turned in its vertical plane, at most ``passes`` times asking the ground again, until the
     foot's other end ``origin + sign * foot * d`` is ``clearance`` (m) above the ground or
@@ -316,12 +379,21 @@ def pitched(origin: Vec3, d: Vec3, foot: float, sign: float, clearance: float, k
     about the ankle (the toe end lifted), -1 about the ball (the ankle end). Each pass is a
     secant step (:func:`~ecs_anim.core.ground_adapt.pitch_slope`).
     Returns (that direction, the ground's height under the other end it puts the foot's at, m:
-    asked once here, so the caller need not ask again). ``known`` (x, y, height; NaN: none):
-    a point whose height is known, taken for the first end if that is within
-    :data:`.ground.NEAR_M` of it on a smooth ground (``is_smooth``)."""
+    asked once here, so the caller need not ask again)."""
+    end = add_scaled(origin, d, sign * foot)
+    return pitched_from(origin, d, foot, sign, clearance,
+                        height_at(end[0], end[1], kinds, params, grid), kinds, params, grid,
+                        passes)
+
+
+@jit()
+def pitched_from(origin: Vec3, d: Vec3, foot: float, sign: float, clearance: float,
+                 ground: float, kinds: I64, params: F64, grid: F64, passes: int
+                 ) -> tuple[Vec3, float]:
+    """:func:`pitched`, the ground's height under the foot's first end
+    (``origin + sign * foot * d``) given: ``ground`` (m)."""
     dz = d[2]
     end = add_scaled(origin, d, sign * foot)
-    ground = height_near(end[0], end[1], known, is_smooth, kinds, params, grid)
     deficit = ground + clearance - end[2]
     last_dz, last_deficit = dz, deficit
     hx, hy = 0.0, 0.0  # the horizontal heading, once a pass needs it (most feet need none)
@@ -368,12 +440,10 @@ def planted_foot(pivot: int, sole_point: Vec3, d: Vec3, foot: float, ankle_heigh
     under the other, so that nobody asks for them again."""
     if pivot == 0:
         ankle = (sole_point[0], sole_point[1], sole_point[2] + ankle_height)
-        d, under_toe = pitched(ankle, d, foot, 1.0, ball, kinds, params, grid, passes, _UNKNOWN,
-                               False)
+        d, under_toe = pitched(ankle, d, foot, 1.0, ball, kinds, params, grid, passes)
         return ankle, d, (sole_point[2], under_toe)
     toe = (sole_point[0], sole_point[1], sole_point[2] + ball)
-    d, under_ankle = pitched(toe, d, foot, -1.0, ankle_height, kinds, params, grid, passes,
-                             _UNKNOWN, False)
+    d, under_ankle = pitched(toe, d, foot, -1.0, ankle_height, kinds, params, grid, passes)
     return add_scaled(toe, d, -foot), d, (under_ankle, sole_point[2])
 
 
@@ -389,13 +459,14 @@ def _pivot_wanted(roll: float, current: int) -> int:
 
 
 @jit(inline="always")
-def _foot_target(ankle: Vec3, toe: Vec3, planted_ankle: Vec3, under_planted: float, w: float,
-                 ground_ref: float, ankle_height: float, ball: float, kinds: I64, params: F64,
-                 grid: F64) -> tuple[Vec3, float]:
+def _foot_target(ankle: Vec3, toe: Vec3, under_motion: tuple[float, float], planted_ankle: Vec3,
+                 under_planted: float, w: float, ground_ref: float, ankle_height: float,
+                 ball: float, kinds: I64, params: F64, grid: F64) -> tuple[Vec3, float]:
     """One ankle's target in ``GroundAdapt.run`` and the ground's height under it (m): the motion's free foot on the floor
     ``ground_ref`` (m), lifted where its heel or toe would be under the ground, blended
     towards where the planted foot puts it (``planted_ankle``, the ground ``under_planted``
-    it, m) by the contact weight ``w``, its heel kept above the ground.
+    it, m) by the contact weight ``w``, its heel kept above the ground; ``under_motion`` the
+    ground's heights under ``ankle`` and ``toe`` (m).
 
     The ground is asked only where nobody has: a planted foot's target is its ankle (two
     queries fewer: where the free foot would be does not count), a free foot's is where the
@@ -404,9 +475,9 @@ def _foot_target(ankle: Vec3, toe: Vec3, planted_ankle: Vec3, under_planted: flo
         t, under = planted_ankle, under_planted
     else:
         free = (ankle[0], ankle[1], ankle[2] + ground_ref)
-        under_free = _height(kinds, params, grid, free)
+        under_free = under_motion[0]
         need_heel = under_free + ankle_height - free[2]
-        need_toe = _height(kinds, params, grid, toe) + ball - (toe[2] + ground_ref)
+        need_toe = under_motion[1] + ball - (toe[2] + ground_ref)
         free = (free[0], free[1], free[2] + max(0.0, max(need_heel, need_toe)))
         t = (free[0] + w * (planted_ankle[0] - free[0]),
              free[1] + w * (planted_ankle[1] - free[1]),
@@ -417,32 +488,72 @@ def _foot_target(ankle: Vec3, toe: Vec3, planted_ankle: Vec3, under_planted: flo
 
 
 @jit(inline="always")
-def _stand(c: int, s: int, ankle: Vec3, toe: Vec3, foot: float, d: Vec3, w: float,
-           sole_roll: F64, clip: I64, source_ankle_height: F64, footprint: F64, locked: B1,
-           pivot: I64, leg: float, ankle_height: float, ball: float, switch: float,
-           kinds: I64, params: F64, grid: F64, passes: int
-           ) -> tuple[Vec3, Vec3, tuple[float, float]]:
-    """Foot ``s`` of row ``c`` in ``GroundAdapt.run``: its footprint laid, kept or moved
-    onto the other sole point, and (ankle, foot direction, the ground's heights under that
-    ankle and under the toe end (m), as :func:`planted_foot`) standing on it; the motion's
-    (``ankle``, ``d``, NaN: not asked) for a foot not in contact. ``foot`` (m), ``d`` (unit):
-    the motion's ankle-to-toe length and direction (:func:`_foot_axis`).
-
-    A contact's footprint is laid where the motion puts its planted point (the heel, the ball,
-    or the lower of the two where the motion plants both), on the ground under it; it moves to
-    the other point only once the foot has rolled onto it (within ``switch`` m of the ground),
-    so the foot turns about the point it stands on and never jumps."""
+def _lay(c: int, s: int, j: Column, ankle: Vec3, toe: Vec3, foot: float, d: Vec3, w: float,
+         sole_roll: F64, clip: I64, source_ankle_height: F64, footprint: F64, locked: B1,
+         pivot: I64, leg: float, ankle_height: float, ball: float, kinds: I64, params: F64,
+         grid: F64, scratch: F64, count: int) -> int:
+    """Foot ``s`` of row ``c`` in ``GroundAdapt.run`` up to its pitch: its footprint laid
+    where a contact starts (see :func:`_stand`), the ground under the first end of the foot
+    standing on it asked (:func:`planted_foot`'s pitch), and a foot not planted the ground
+    under the motion's ankle and toe (its target's, :func:`_foot_target`); a foot not in
+    contact unlocked. ``foot`` (m), ``d`` (unit): the motion's ankle-to-toe length and
+    direction (:func:`_foot_axis`). The queries from ``count`` on (column ``j``'s
+    ``_S_Q_*``); returns the queries asked now."""
+    scratch[_at(_S_Q_END + s, j)] = -1.0
+    scratch[_at(_S_Q_ANKLE + s, j)], scratch[_at(_S_Q_TOE + s, j)] = -1.0, -1.0
+    if w != 1.0:
+        scratch[_at(_S_Q_ANKLE + s, j)], scratch[_at(_S_Q_TOE + s, j)] = count, count + 1
+        count = _ask(scratch, _ask(scratch, count, ankle[0], ankle[1]), toe[0], toe[1])
     if not w > 0.0:
         locked[c, s] = False
-        return ankle, d, (math.nan, math.nan)
+        return count
     if not locked[c, s]:
         heel_up = ankle[2] - source_ankle_height[clip[c], s] * leg
         pivot[c, s] = _pivot_wanted(sole_roll[c, s], 0 if heel_up <= toe[2] - ball else 1)
         point = ankle if pivot[c, s] == 0 else toe
         store3(footprint[c, s], (point[0], point[1], _height(kinds, params, grid, point)))
         locked[c, s] = True
-    a, d, under = planted_foot(pivot[c, s], load3(footprint[c, s]), d, foot, ankle_height,
-                               ball, kinds, params, grid, passes)
+    end = add_scaled(_pivot_point(pivot[c, s], load3(footprint[c, s]), ankle_height, ball), d,
+                     (1.0 if pivot[c, s] == 0 else -1.0) * foot)
+    scratch[_at(_S_Q_END + s, j)] = count
+    return _ask(scratch, count, end[0], end[1])
+
+
+@jit(inline="always")
+def _pivot_point(pivot: int, sole_point: Vec3, ankle_height: float, ball: float) -> Vec3:
+    """The joint a foot standing on ``sole_point`` turns about (:func:`planted_foot`): its
+    ankle on its heel (``pivot`` 0), its toe joint on its ball (1)."""
+    return (sole_point[0], sole_point[1], sole_point[2] + (ankle_height if pivot == 0 else ball))
+
+
+@jit(inline="always")
+def _stand(c: int, s: int, j: Column, ankle: Vec3, d: Vec3, foot: float, w: float,
+           sole_roll: F64, footprint: F64, pivot: I64, ankle_height: float, ball: float,
+           switch: float, kinds: I64, params: F64, grid: F64, passes: int, scratch: F64
+           ) -> tuple[Vec3, Vec3, tuple[float, float]]:
+    """Foot ``s`` of row ``c`` in ``GroundAdapt.run`` once :func:`_lay` has laid it and
+    :func:`heights_lanes` answered its queries (column ``j``): (ankle, foot direction, the
+    ground's heights under that ankle and under the toe end (m), as :func:`planted_foot`)
+    standing on its footprint, moved onto the other sole point where the foot has rolled onto
+    it; the motion's (``ankle``, ``d``, NaN: not asked) for a foot not in contact.
+
+    A contact's footprint is laid where the motion puts its planted point (the heel, the ball,
+    or the lower of the two where the motion plants both), on the ground under it; it moves to
+    the other point only once the foot has rolled onto it (within ``switch`` m of the ground),
+    so the foot turns about the point it stands on and never jumps."""
+    if not w > 0.0:
+        return ankle, d, (math.nan, math.nan)
+    # planted_foot, the ground under the first end given
+    sole_point = load3(footprint[c, s])
+    origin = _pivot_point(pivot[c, s], sole_point, ankle_height, ball)
+    first = _answer(scratch, scratch[_at(_S_Q_END + s, j)])
+    if pivot[c, s] == 0:
+        d, ground = pitched_from(origin, d, foot, 1.0, ball, first, kinds, params, grid, passes)
+        a, under = origin, (sole_point[2], ground)
+    else:
+        d, ground = pitched_from(origin, d, foot, -1.0, ankle_height, first, kinds, params,
+                                 grid, passes)
+        a, under = add_scaled(origin, d, -foot), (ground, sole_point[2])
     want = _pivot_wanted(sole_roll[c, s], pivot[c, s])
     if want != pivot[c, s]:
         # The other sole point, and the ground under it as planted_foot asked for it.
@@ -486,19 +597,46 @@ def gather_motion(i: Column, c: int, pose: LegPoseArrays, lengths: F64, scratch:
         _put3(scratch, _S_FOOT_DIR + 3 * s, i, load3(pose.foot_dir[c, s]))
 
 
+@jit(inline="always")  # one call site
+def lay_feet(i: Column, c: int, lengths: F64, leg: F64, contact_weight: F64, sole_roll: F64,
+             clip: I64, source_ankle_height: F64, footprint: F64, locked: B1, pivot: I64,
+             kinds: I64, params: F64, grid: F64, ball_per_leg: float, scratch: F64,
+             count: int) -> int:
+    """Store row ``c``'s feet (column ``i`` of ``scratch``, the motion decoded there by
+    :func:`decode_lanes`) laid and their queries asked from ``count`` on (:func:`_lay`);
+    returns the queries asked now. Arguments as for :func:`ground_adapt_rows`."""
+    leg_c = leg[c]
+    for s in range(2):
+        count = _lay(c, s, i, _col3(scratch, _S_ANKLE + 3 * s, i), _col3(scratch, _S_TOE + 3 * s, i),
+             scratch[_at(_S_FOOT_LENGTH + s, i)], _col3(scratch, _S_DIR + 3 * s, i),
+             contact_weight[c, s], sole_roll, clip, source_ankle_height, footprint, locked,
+             pivot, leg_c, lengths[c, _L_ANKLE_HEIGHT + s], ball_per_leg * leg_c, kinds,
+             params, grid, scratch, count)
+    return count
+
+
+@jit(inline="always")
+def _under_motion(scratch: F64, i: Column, s: int) -> tuple[float, float]:
+    """The ground's heights under foot ``s``'s ankle and toe as the motion has them (column
+    ``i``'s answered queries; NaN where not asked: a planted foot's), m."""
+    ankle, toe = scratch[_at(_S_Q_ANKLE + s, i)], scratch[_at(_S_Q_TOE + s, i)]
+    return (_answer(scratch, ankle) if ankle >= 0.0 else math.nan,
+            _answer(scratch, toe) if toe >= 0.0 else math.nan)
+
+
 @jit(inline="always")  # one call site: a call per row, handed its arrays, costs
-def ground_adapt_before(i: Column, c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
-                        contact_weight: F64, sole_roll: F64, clip: I64,
-                        source_ankle_height: F64, footprint: F64, locked: B1, pivot: I64,
-                        ground_ref: F64, kinds: I64, params: F64, grid: F64, follow: float,
+def ground_adapt_before(i: Column, c: int, lengths: F64, leg: F64, contact_weight: F64,
+                        sole_roll: F64, footprint: F64, pivot: I64, ground_ref: F64,
+                        kinds: I64, params: F64, grid: F64, follow: float,
                         ball_per_leg: float, switch_per_leg: float, toe_passes: int,
                         scratch: F64) -> None:
-    """Mirrors ``GroundAdapt.run`` for store row ``c`` up to the legs' re-aiming: the motion's
-    pelvis and legs decoded, the feet in contact planted, the floor moved, the ankles'
-    targets; what :func:`reaim_lanes` and :func:`ground_adapt_after` need into column ``i``
-    of ``scratch``. Arguments as for :func:`ground_adapt_rows` (``kinds``, ``params``,
-    ``grid``: the arrays of ``ground``; ``follow``: the share of the way to the ground under
-    the feet the floor moves this tick, the same for every row)."""
+    """Mirrors ``GroundAdapt.run`` for store row ``c`` up to the legs' re-aiming, once its
+    feet are laid (:func:`lay_feet`) and their queries answered (:func:`heights_lanes`): the
+    feet in contact planted, the floor moved, the ankles' targets; what :func:`reaim_lanes`
+    and :func:`ground_adapt_after` need into column ``i`` of ``scratch``. Arguments as for
+    :func:`ground_adapt_rows` (``kinds``, ``params``, ``grid``: the arrays of ``ground``;
+    ``follow``: the share of the way to the ground under the feet the floor moves this tick,
+    the same for every row)."""
     # The pose on the character's body as the motion gives it (decode_lanes).
     pelvis = _col3(scratch, _S_PELVIS, i)
     ankles = (_col3(scratch, _S_ANKLE, i), _col3(scratch, _S_ANKLE + 3, i))
@@ -512,12 +650,10 @@ def ground_adapt_before(i: Column, c: int, pose: LegPoseArrays, lengths: F64, le
     # or the ball, as the motion plants it.
     foot0, d0 = scratch[_at(_S_FOOT_LENGTH, i)], _col3(scratch, _S_DIR, i)
     foot1, d1 = scratch[_at(_S_FOOT_LENGTH + 1, i)], _col3(scratch, _S_DIR + 3, i)
-    stance0 = _stand(c, 0, ankles[0], toes[0], foot0, d0, w[0], sole_roll, clip,
-                     source_ankle_height, footprint, locked, pivot, leg_c, ankle_height[0],
-                     ball, switch, kinds, params, grid, toe_passes)
-    stance1 = _stand(c, 1, ankles[1], toes[1], foot1, d1, w[1], sole_roll, clip,
-                     source_ankle_height, footprint, locked, pivot, leg_c, ankle_height[1],
-                     ball, switch, kinds, params, grid, toe_passes)
+    stance0 = _stand(c, 0, i, ankles[0], d0, foot0, w[0], sole_roll, footprint, pivot,
+                     ankle_height[0], ball, switch, kinds, params, grid, toe_passes, scratch)
+    stance1 = _stand(c, 1, i, ankles[1], d1, foot1, w[1], sole_roll, footprint, pivot,
+                     ankle_height[1], ball, switch, kinds, params, grid, toe_passes, scratch)
     # The motion's floor follows the ground under the supporting feet, smoothly.
     support = w[0] + w[1]
     under_feet = (w[0] * footprint[c, 0, 2] + w[1] * footprint[c, 1, 2]) / max(support, 1e-9)
@@ -526,10 +662,12 @@ def ground_adapt_before(i: Column, c: int, pose: LegPoseArrays, lengths: F64, le
     g = ground_ref[c]
     # Free feet ride on that floor, lifted where heel or toe would go under the ground; a
     # contact ramping in blends towards its planted ankle, its heel kept above the ground.
-    target0, under0 = _foot_target(ankles[0], toes[0], stance0[0], stance0[2][0], w[0], g,
-                                   ankle_height[0], ball, kinds, params, grid)
-    target1, under1 = _foot_target(ankles[1], toes[1], stance1[0], stance1[2][0], w[1], g,
-                                   ankle_height[1], ball, kinds, params, grid)
+    target0, under0 = _foot_target(ankles[0], toes[0], _under_motion(scratch, i, 0), stance0[0],
+                                   stance0[2][0], w[0], g, ankle_height[0], ball, kinds, params,
+                                   grid)
+    target1, under1 = _foot_target(ankles[1], toes[1], _under_motion(scratch, i, 1), stance1[0],
+                                   stance1[2][0], w[1], g, ankle_height[1], ball, kinds, params,
+                                   grid)
     # The re-aiming's inputs (the pose decoded before adaptation: decode_lanes's) ...
     scratch[_at(_S_WEIGHT, i)], scratch[_at(_S_WEIGHT + 1, i)] = w[0], w[1]
     scratch[_at(_S_LEG, i)] = leg_c
@@ -553,32 +691,59 @@ def ground_adapt_before(i: Column, c: int, pose: LegPoseArrays, lengths: F64, le
 
 
 @jit(inline="always")  # one call site
-def ground_adapt_after(i: Column, c: int, pose: LegPoseArrays, lengths: F64, leg: F64,
-                       contact_weight: F64, kinds: I64, params: F64, grid: F64,
-                       is_smooth: bool, ball_per_leg: float, max_extension: float,
-                       heel_tolerance: float, heel_passes: int, toe_passes: int,
-                       scratch: F64) -> None:
+def ground_adapt_after(i: Column, c: int, pose: LegPoseArrays, lengths: F64,
+                       contact_weight: F64, kinds: I64, params: F64, grid: F64, is_smooth: bool,
+                       max_extension: float, heel_tolerance: float, heel_passes: int,
+                       scratch: F64, count: int) -> int:
     """Mirrors ``GroundAdapt.run`` for store row ``c`` after the block's re-aiming
     (:func:`reaim_lanes`, column ``i`` of ``scratch``): the heels kept up, the legs' pose
-    written, the feet pitched onto the ground."""
+    written, and the ground under each foot's toe end asked from query ``count`` on (the
+    last pitch's first, :func:`_last_pitch`) unless known; returns the queries asked now."""
     ankle_height = (lengths[c, _L_ANKLE_HEIGHT], lengths[c, _L_ANKLE_HEIGHT + 1], 0.0)
     adapt_keeping_heels_up(i, c, pose, scratch, kinds, params, grid, is_smooth, ankle_height,
                            max_extension, heel_tolerance, heel_passes)
-    ball = ball_per_leg * leg[c]
-    # Feet: a planted one pitched as it stands (in the world, whatever the leg's new bend), a
-    # ramping one as the motion has it in the world, a free one as in its shank; none with
-    # its toe under the ground. A planted foot whose ankle reached its footing has its toe
-    # end where it stood, whose ground is known.
     for s in range(2):
-        ankle, toe = _col3(scratch, _S_ANKLE + 3 * s, i), _col3(scratch, _S_TOE + 3 * s, i)
-        foot = max(norm(sub(toe, ankle)), 1e-9)
-        w = contact_weight[c, s]
-        d = _col3(scratch, _S_DIR + 3 * s, i)
-        if not w > 0.0:
-            d = scale(sub(toe, ankle), 1.0 / foot)
-        new_d = pitched(ankle, d, foot, 1.0, ball, kinds, params, grid, toe_passes,
-                        _col3(scratch, _S_KNOWN + 3 * s, i), is_smooth)[0]
-        if w > 0.0 or new_d[2] != d[2]:
+        ankle, foot, d = _last_pitch_start(i, c, s, contact_weight, scratch)
+        end = add_scaled(ankle, d, 1.0 * foot)
+        known = _col3(scratch, _S_KNOWN + 3 * s, i)
+        scratch[_at(_S_Q_END + s, i)] = -1.0
+        # .ground.height_near's test: a planted foot's toe end where it stood is known
+        if not (is_smooth and abs(end[0] - known[0]) <= NEAR_M
+                and abs(end[1] - known[1]) <= NEAR_M):
+            scratch[_at(_S_Q_END + s, i)] = count
+            count = _ask(scratch, count, end[0], end[1])
+    return count
+
+
+@jit(inline="always")
+def _last_pitch_start(i: Column, c: int, s: int, contact_weight: F64, scratch: F64
+                      ) -> tuple[Vec3, float, Vec3]:
+    """(ankle, foot length, direction) foot ``s`` of row ``c`` is pitched from last (column
+    ``i``, re-aimed): a planted foot's direction as it stands, a ramping one's as the motion
+    has it in the world, a free one's as in its shank."""
+    ankle, toe = _col3(scratch, _S_ANKLE + 3 * s, i), _col3(scratch, _S_TOE + 3 * s, i)
+    foot = max(norm(sub(toe, ankle)), 1e-9)
+    d = _col3(scratch, _S_DIR + 3 * s, i)
+    if not contact_weight[c, s] > 0.0:
+        d = scale(sub(toe, ankle), 1.0 / foot)
+    return ankle, foot, d
+
+
+@jit(inline="always")  # one call site
+def last_pitch(i: Column, c: int, pose: LegPoseArrays, leg: F64, contact_weight: F64,
+               kinds: I64, params: F64, grid: F64, ball_per_leg: float, toe_passes: int,
+               scratch: F64) -> None:
+    """Mirrors the end of ``GroundAdapt.run`` for store row ``c`` once
+    :func:`heights_lanes` has answered the queries of :func:`ground_adapt_after` (column
+    ``i``): each foot pitched so that its toe is not under the ground, and its direction
+    written (in the shank; a free foot's only where the pitch turned it)."""
+    ball = ball_per_leg * leg[c]
+    for s in range(2):
+        ankle, foot, d = _last_pitch_start(i, c, s, contact_weight, scratch)
+        query = scratch[_at(_S_Q_END + s, i)]
+        first = _answer(scratch, query) if query >= 0.0 else scratch[_at(_S_KNOWN + 3 * s + 2, i)]
+        new_d = pitched_from(ankle, d, foot, 1.0, ball, first, kinds, params, grid, toe_passes)[0]
+        if contact_weight[c, s] > 0.0 or new_d[2] != d[2]:
             store3(pose.foot_dir[c, s],
                    in_frame(_col_frame(scratch, _S_SHANK2W + 9 * s, i), new_d))
 
@@ -606,9 +771,12 @@ def ground_adapt_rows(lo: int, hi: int, rows: I64, pose: LegPoseArrays, lengths:
     a sole point must be for the foot to stand on it, ``heel_passes``, ``toe_passes``.
     ``scratch``: :func:`ground_scratch` of ``len(rows)`` (column ``i`` for ``rows[i]``).
 
-    By blocks of :data:`.lanes.BLOCK` rows: each row up to its legs' re-aiming, the block's
-    first re-aiming on the vector units (:func:`reaim_lanes`), then each row on; each row's
-    result is the same, to the bit, whatever its block.
+    By blocks of :data:`.lanes.BLOCK` rows: the motion decoded (:func:`decode_lanes`), each
+    row's feet laid and the ground asked under them, the block's queries answered at once
+    (:func:`heights_lanes`), each row up to its legs' re-aiming, the block's first re-aiming
+    (:func:`reaim_lanes`), each row on to the ground under its toes asked, the queries
+    answered, and each row's last pitch; each row's result is the same, to the bit, whatever
+    its block.
     """
     kinds, params, grid = ground
     is_smooth = smooth(kinds)
@@ -618,14 +786,26 @@ def ground_adapt_rows(lo: int, hi: int, rows: I64, pose: LegPoseArrays, lengths:
         stop = min(start + BLOCK, hi)
         for i in range(start, stop):
             gather_motion(Column(i - start), rows[i], pose, lengths, scratch_block)
-        decode_lanes(scratch_block, Column(0), Column(stop - start))
+        n = stop - start
+        decode_lanes(scratch_block, Column(0), Column(n))
+        count = 0
         for i in range(start, stop):
-            ground_adapt_before(Column(i - start), rows[i], pose, lengths, leg, contact_weight, sole_roll, clip,
-                                source_ankle_height, footprint, locked, pivot, ground_ref,
-                                kinds, params, grid, follow, ball_per_leg, switch_per_leg,
-                                toe_passes, scratch_block)
-        reaim_lanes(scratch_block, Column(0), Column(stop - start), max_extension)
+            count = lay_feet(Column(i - start), rows[i], lengths, leg, contact_weight, sole_roll,
+                             clip, source_ankle_height, footprint, locked, pivot, kinds,
+                             params, grid, ball_per_leg, scratch_block, count)
+        heights_lanes(scratch_block, count, kinds, params, grid)
         for i in range(start, stop):
-            ground_adapt_after(Column(i - start), rows[i], pose, lengths, leg, contact_weight, kinds, params,
-                               grid, is_smooth, ball_per_leg, max_extension, heel_tolerance,
-                               heel_passes, toe_passes, scratch_block)
+            ground_adapt_before(Column(i - start), rows[i], lengths, leg, contact_weight,
+                                sole_roll, footprint, pivot, ground_ref, kinds, params, grid,
+                                follow, ball_per_leg, switch_per_leg, toe_passes, scratch_block)
+        reaim_lanes(scratch_block, Column(0), Column(n), max_extension)
+        count = 0
+        for i in range(start, stop):
+            count = ground_adapt_after(Column(i - start), rows[i], pose, lengths,
+                                       contact_weight, kinds, params, grid, is_smooth,
+                                       max_extension, heel_tolerance, heel_passes,
+                                       scratch_block, count)
+        heights_lanes(scratch_block, count, kinds, params, grid)
+        for i in range(start, stop):
+            last_pitch(Column(i - start), rows[i], pose, leg, contact_weight, kinds, params, grid,
+                       ball_per_leg, toe_passes, scratch_block)

@@ -20,7 +20,14 @@ from ecs_anim.core.ground import (
 )
 from ecs_anim.core.morphology import Morphology
 from ecs_anim.core.normalized import QUATERNION_FIELDS
-from ecs_anim.runtime.kernels.ground import NEAR_M, height_at, height_near, smooth
+from ecs_anim.runtime.kernels.ground import (
+    NEAR_M,
+    SINE_DOMAIN,
+    height_at,
+    height_near,
+    sine,
+    smooth,
+)
 from ecs_anim.runtime.simulation import Simulation
 from ecs_anim.systems import GroundAdapt
 
@@ -68,6 +75,54 @@ def test_stair_edges_equal_numpy() -> None:
     x = 1.0 + 0.30 * np.arange(-2, 12)
     xy = np.stack([np.concatenate([x, x - 1e-9, x + 1e-9]), np.zeros(3 * x.size)], -1)
     np.testing.assert_allclose(_compiled(ground, xy), ground.height(xy), rtol=0, atol=1e-12)
+
+
+def test_the_bumps_sine_is_within_an_ulp_of_the_c_librarys() -> None:
+    """``sine`` (the bumps' sines, a polynomial that runs on the vector units) is within one
+    unit in the last place of ``math.sin`` wherever its callers use it, its bits most of the
+    time; far out, where it is not used, the bumps take the C library's sines."""
+    import math
+
+    rng = np.random.default_rng(1302)
+    special = [0.0, -0.0, 1e-300, -1e-300, 0.5, math.pi / 4, math.pi / 2, math.pi, 3 * math.pi / 2,
+               1e3 * math.pi, -1e3 * math.pi / 2, 7e5, -1e6, np.nextafter(SINE_DOMAIN, 0.0)]
+    x = np.concatenate([rng.uniform(-1.0, 1.0, 20_000), rng.uniform(-300.0, 300.0, 20_000),
+                        rng.uniform(-SINE_DOMAIN, SINE_DOMAIN, 20_000), special])
+    ours, theirs = np.array([sine(v) for v in x]), np.sin(x)
+    ulps = np.abs(ours.view(np.int64) - theirs.view(np.int64))
+    assert ulps.max() <= 1 and np.mean(ulps == 0) > 0.8
+    assert math.isnan(sine(math.nan))
+    bumps = describe(Bumps(0.04, 2.5, 3.0))
+    assert bumps is not None
+    far = np.array([[1e6, 3.0], [-0.4, -2e6], [math.nan, 1.0]])
+    np.testing.assert_array_equal(_compiled(Bumps(0.04, 2.5, 3.0), far),
+                                  Bumps(0.04, 2.5, 3.0).height(far))
+
+
+@pytest.mark.parametrize("name", list(GROUNDS))
+def test_a_blocks_heights_equal_each_points(name: str) -> None:
+    """``heights_lanes`` answers a block's queries at once (on the vector units on a lone plane,
+    slope or bumps) with the bits of ``height_at`` at each point: any number of them, NaN
+    points, and points far enough out for the bumps to take the C library's sines."""
+    from ecs_anim.runtime.kernels.ground_adapt import _S_Q_HEIGHT, _S_Q_X, _S_Q_Y, ground_scratch
+    from ecs_anim.runtime.kernels.ground_adapt import heights_lanes as heights
+    from ecs_anim.runtime.kernels.lanes import BLOCK
+
+    d = describe(GROUNDS[name])
+    assert d is not None
+    rng = np.random.default_rng(1303)
+    for count, far in ((0, False), (1, False), (5, False), (6 * BLOCK, False), (37, True)):
+        scratch = ground_scratch(BLOCK)[0]
+        xy = rng.uniform(-4.0, 9.0, (count, 2))
+        if count > 3:
+            xy[3] = np.nan
+        if far:
+            xy[7] = (3e6, 1.0)
+        scratch[_S_Q_X * BLOCK:_S_Q_X * BLOCK + count] = xy[:, 0]
+        scratch[_S_Q_Y * BLOCK:_S_Q_Y * BLOCK + count] = xy[:, 1]
+        heights(scratch, count, d.kinds, d.params, d.grid)
+        np.testing.assert_array_equal(scratch[_S_Q_HEIGHT * BLOCK:_S_Q_HEIGHT * BLOCK + count],
+                                      _compiled(GROUNDS[name], xy))
 
 
 @dataclass(frozen=True)
@@ -180,9 +235,10 @@ def test_a_ground_of_ones_own_goes_through_numpy(motions: dict) -> None:
 def test_a_rows_ground_adaptation_does_not_depend_on_its_block(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """``ground_adapt_rows`` decodes and re-aims the legs by blocks of ``lanes.BLOCK`` rows on
-    the vector units (a row in a vector lane or in a loop's scalar remainder): three blocks
-    and five rows of the bench's walkers in one call, in two uneven chunks and row by row
-    give the same bits."""
+    the vector units (a row in a vector lane or in a loop's scalar remainder) and answers a
+    block's ground queries at once: three blocks and five rows of the bench's walkers in one
+    call, in two uneven chunks and row by row give the same bits; so do they with every foot
+    ramping in (the most queries a row asks: six)."""
     import copy
     import itertools
 
@@ -211,7 +267,10 @@ def test_a_rows_ground_adaptation_does_not_depend_on_its_block(
             ground_adapt_rows(lo, hi, *a)
         return [np.array(x) for x in a[1]] + [a[k] for k in (8, 9, 10, 11)]  # footprint, locked, pivot, ground_ref
 
-    whole = run([0, n])
-    for other in (run([0, BLOCK + 7, n]), run(list(range(n + 1)))):
-        for x, y in zip(whole, other, strict=True):
-            np.testing.assert_array_equal(x, y)
+    for ramping in (False, True):
+        if ramping:
+            args[4][:] = 0.5  # contact_weight
+        whole = run([0, n])
+        for other in (run([0, BLOCK + 7, n]), run(list(range(n + 1)))):
+            for x, y in zip(whole, other, strict=True):
+                np.testing.assert_array_equal(x, y)
