@@ -47,6 +47,11 @@ def grid_height(x: float, y: float, p: F64, grid: F64) -> float:
 # sine: fdlibm's (FreeBSD's e_rem_pio2.c reduction by pi/2 in three parts, k_sin.c, k_cos.c),
 # written without branches so that a loop of it runs on the vector units (numba here has no
 # vector math library: math.sin is a call to the C library's, one point at a time).
+# fdlibm's notice, which its licence asks a derived work to keep:
+#   Copyright (C) 1993 by Sun Microsystems, Inc. All rights reserved.
+#   Developed at SunSoft, a Sun Microsystems, Inc. business.
+#   Permission to use, copy, modify, and distribute this software is freely granted,
+#   provided that this notice is preserved.
 _INV_PIO2 = 6.36619772367581382433e-01
 _PIO2_1, _PIO2_1T = 1.57079632673412561417e+00, 6.07710050650619224932e-11
 _PIO2_2, _PIO2_2T = 6.07710050630396597660e-11, 2.02226624879595063154e-21
