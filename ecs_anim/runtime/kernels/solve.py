@@ -31,6 +31,7 @@ from ecs_anim.core.normalized import DecodedPose, NormalizedPoses
 from ecs_anim.runtime.kernels import LIGHT_ROWS_PER_THREAD, over_chunks, wait_for_solver
 from ecs_anim.runtime.kernels.decode import DecodedArrays, PoseArrays
 from ecs_anim.runtime.kernels.decode import decode as decode_compiled
+from ecs_anim.runtime.kernels.lanes import BLOCK, Column, at
 from ecs_anim.runtime.kernels.solve_head import solve_head
 from ecs_anim.runtime.kernels.solve_limbs import solve_limbs
 from ecs_anim.runtime.kernels.solve_points import (
@@ -43,7 +44,14 @@ from ecs_anim.runtime.kernels.solve_points import (
     point_position,
     tables,
 )
-from ecs_anim.runtime.kernels.solve_root import com_shortfall, solve_root
+from ecs_anim.runtime.kernels.solve_root import (
+    R_WAITING,
+    com_shortfall,
+    move_root,
+    root_lanes,
+    root_scratch,
+    solve_root,
+)
 from ecs_anim.runtime.kernels.solve_trunk import solve_trunk
 from ecs_anim.runtime.kernels.vec import F64, dot, jit, load3, normalize, store3, sub
 from ecs_anim.solver.goals import TickGoals
@@ -84,109 +92,142 @@ def _iterative(g: Goals, t: Tables, j: int) -> bool:
 @jit(nogil=True)
 def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners,
                b: Bodies, t: Tables, iterations_used: I64, err: F64, stalled: B8, previous: F64,
-               slow_before: B8, tolerance_m: float, tolerance_rad: float,
+               slow_before: B8, scratch: F64, tolerance_m: float, tolerance_rad: float,
                com_tolerance_m: float, max_ccd_step_rad: float, root_gain: float,
                stall_fraction: float, leg_extension: float) -> None:
     """Solve the goals of each character ``c`` in ``lo..hi-1`` (its rows of ``pose`` and
     ``dec`` in place) in at most ``b.iterations[c]`` iterations, each goal keeping the loop
     going for at most ``g.iterations`` of them; ``iterations_used`` (r,) the iterations each one
     took. ``err``, ``stalled``, ``previous``, ``slow_before`` (k,): per-goal scratch (each
-    character uses its own goals' entries, so the threads share them). Mirrors the loop of
-    :func:`ecs_anim.solver.shell.solve`, one character at a time."""
+    character uses its own goals' entries, so the threads share them); ``scratch``: a
+    :func:`.solve_root.root_scratch` of r rows (this chunk uses its block ``lo // BLOCK``).
+    Mirrors the loop of :func:`ecs_anim.solver.shell.solve`, one character at a time.
+
+    By blocks of :data:`.lanes.BLOCK` characters, in two rounds over each block: the first
+    takes each character up to its first root step where it is predicted (the step gathered
+    into its column: the character waits), the block's waiting steps are computed together on
+    the vector units (:func:`.solve_root.root_lanes`), and the second takes each waiting
+    character on from its root's move. The rounds share one loop (one call site of each step:
+    numba inlines a copy of a step's body at each, and the compile is counted)."""
     # The characters' loop is here, not in a call per character: a call passes the state
     # tuples on, a reference count up and down for each of their 74 arrays (0.25 us a
     # character); numba's inlining of such a call costs 14 s more of compile.
-    for c in range(lo, hi):
-        start, stop = g.start[c], g.start[c + 1]
-        uses_trunk = False
-        on_self = False
-        iterates = False  # a goal an iteration moves: the trunk's, or one following what a pass moves
-        # the root's step is predicted (``_Solve.predicted``): no goal iterates, and every user
-        # goal follows the own body (none aims at the world or at another character)
-        predicted = True
-        for j in range(start, stop):
-            stalled[j] = False
-            previous[j] = math.inf
-            slow_before[j] = False
-            if (g.chain[j] & (1 << _TRUNK)) > 0:
-                uses_trunk = True
-            on_self = on_self or g.on_self[j]
-            iterates = iterates or _iterative(g, t, j)
-            predicted = predicted and (g.on_self[j] or g.table_index[j] < 0)
-        # Steps with nothing to do are not called, and the errors of points without offset are
-        # measured on the arrays themselves (the same operations as goal_error).
-        uses_head = w.first_head[c] >= 0 or w.orient_head[c] >= 0
-        positions, seg_proximal, seg_distal = dec.positions, t.seg_proximal, t.seg_distal
-        orientation, segment, fraction, offset = g.orientation, g.segment, g.fraction, g.offset
-        goal, goal_iterations = g.goal, g.iterations
-        used = 0
-        iterations = b.iterations[c]
-        # Each pass follows the goals on the body, then re-plants the limbs and re-aims the head
-        # (exact, analytic steps: a limb or head goal is where they leave it). The pass ends the
-        # solve where no iteration would change anything: no goal left that the trunk still turns
-        # for or that follows the body (open at the last measure; before the first, any), and the
-        # centre of mass so close that the root step would not move (a tenth of its tolerance); or
-        # the budget spent. It is then the result. Otherwise an iteration: a trunk turn and a root
-        # move, then the next pass. One call site each: numba inlines these steps' bodies at every
-        # site it compiles.
-        any_open = iterates
-        while True:
-            if on_self:
-                follow_own_targets(c, dec, g, t)
-            solve_limbs(c, pose, dec, g, w, b, t, tolerance_m, leg_extension)
-            if uses_head:
-                solve_head(c, pose, dec, g, w, b, t)
-            if used >= iterations:
-                break
-            # The centre of mass's error, measured once on these joints: the stopping rule's,
-            # and the root step's unless the trunk turns in between.
-            com_measured = not any_open
-            ex = ey = 0.0
-            if com_measured:
-                ex, ey = com_shortfall(c, positions, b.masses, b.com_fraction, b.com_desired,
-                                       b.com_on, t.mass_proximal, t.mass_distal)
-                if math.sqrt(ex * ex + ey * ey) <= 0.1 * com_tolerance_m:  # the root stays
+    block = scratch[lo // BLOCK]
+    for first in range(lo, hi, BLOCK):
+        count = min(BLOCK, hi - first)
+        for turn in range(2 * count):
+            if turn == count:  # the first round done: the waiting characters' root steps
+                root_lanes(block, Column(0), Column(count), root_gain, leg_extension)
+            resuming = turn >= count
+            c = first + turn % count
+            column = Column(turn % count)
+            if resuming and block[at(R_WAITING, column)] == 0.0:
+                continue
+            block[at(R_WAITING, column)] = 0.0
+            start, stop = g.start[c], g.start[c + 1]
+            uses_trunk = False
+            on_self = False
+            iterates = False  # a goal an iteration moves: the trunk's, or one following what a pass moves
+            # the root's step is predicted (``_Solve.predicted``): no goal iterates, and every user
+            # goal follows the own body (none aims at the world or at another character)
+            predicted = True
+            for j in range(start, stop):
+                if not resuming:
+                    stalled[j] = False
+                    previous[j] = math.inf
+                    slow_before[j] = False
+                if (g.chain[j] & (1 << _TRUNK)) > 0:
+                    uses_trunk = True
+                on_self = on_self or g.on_self[j]
+                iterates = iterates or _iterative(g, t, j)
+                predicted = predicted and (g.on_self[j] or g.table_index[j] < 0)
+            # Steps with nothing to do are not called, and the errors of points without offset
+            # are measured on the arrays themselves (the same operations as goal_error).
+            uses_head = w.first_head[c] >= 0 or w.orient_head[c] >= 0
+            positions, seg_proximal, seg_distal = dec.positions, t.seg_proximal, t.seg_distal
+            orientation, segment, fraction, offset = g.orientation, g.segment, g.fraction, g.offset
+            goal, goal_iterations = g.goal, g.iterations
+            used = 0
+            iterations = b.iterations[c]
+            # A predicted character's first root step waits for its block's (no goal iterates:
+            # the step ends its first iteration, and nothing is left open after it).
+            waits = not resuming and predicted and not iterates
+            any_open = iterates
+            if resuming:
+                move_root(c, pose, dec, b, block, column)
+                used = 1
+                any_open = False
+            # Each pass follows the goals on the body, then re-plants the limbs and re-aims the
+            # head (exact, analytic steps: a limb or head goal is where they leave it). The pass
+            # ends the solve where no iteration would change anything: no goal left that the
+            # trunk still turns for or that follows the body (open at the last measure; before
+            # the first, any), and the centre of mass so close that the root step would not move
+            # (a tenth of its tolerance); or the budget spent. It is then the result. Otherwise
+            # an iteration: a trunk turn and a root move, then the next pass. One call site
+            # each: numba inlines these steps' bodies at every site it compiles.
+            while True:
+                if on_self:
+                    follow_own_targets(c, dec, g, t)
+                solve_limbs(c, pose, dec, g, w, b, t, tolerance_m, leg_extension)
+                if uses_head:
+                    solve_head(c, pose, dec, g, w, b, t)
+                if used >= iterations:
                     break
-            used += 1
-            if uses_trunk:
-                for j in range(start, stop):
-                    err[j] = goal_error(dec, c, g, j, t)
-                solve_trunk(c, pose, dec, b.lengths[c], g, w, err, stalled, t, tolerance_m,
-                            tolerance_rad, max_ccd_step_rad)
-                com_measured = False
-            if not com_measured:
-                ex, ey = com_shortfall(c, positions, b.masses, b.com_fraction, b.com_desired,
-                                       b.com_on, t.mass_proximal, t.mass_distal)
-            solve_root(c, pose, dec, g, w, b, t, ex, ey, com_tolerance_m, tolerance_m, root_gain,
-                       leg_extension, predicted and not iterates)
-            # Only goals an iteration still moves can keep the loop going (:func:`_iterative`; the
-            # passes meet the others as well as they can be met): open where not met nor stalled
-            # (unchanged, or falling by less than a share of itself twice running).
-            any_open = False
-            if iterates:
-                for j in range(start, stop):
-                    if not _iterative(g, t, j):
-                        continue
-                    if (not orientation[j] and offset[j, 0] == 0.0 and offset[j, 1] == 0.0
-                            and offset[j, 2] == 0.0):
-                        d = sub(plain_point(positions, c, seg_proximal[segment[j]],
-                                            seg_distal[segment[j]], fraction[j]), load3(goal[j]))
-                        e = math.sqrt(dot(d, d))
-                    else:
-                        e = goal_error(dec, c, g, j, t)
-                    tol = tolerance_rad if orientation[j] else tolerance_m
-                    first = math.isinf(previous[j])
-                    unchanged = not first and abs(previous[j] - e) < tolerance_m
-                    slow = not first and previous[j] - e < stall_fraction * previous[j]
-                    cut = used >= goal_iterations[j]  # the frame budget gave it no more iterations
-                    goal_open = (e > tol and not unchanged and not (slow and slow_before[j])
-                                 and not stalled[j] and not cut)
-                    if e > tol and not goal_open:
-                        stalled[j] = True
-                    previous[j] = e
-                    slow_before[j] = slow
-                    any_open = any_open or goal_open
-        iterations_used[c] = used
+                # The centre of mass's error, measured once on these joints: the stopping
+                # rule's, and the root step's unless the trunk turns in between.
+                com_measured = not any_open
+                ex = ey = 0.0
+                if com_measured:
+                    ex, ey = com_shortfall(c, positions, b.masses, b.com_fraction, b.com_desired,
+                                           b.com_on, t.mass_proximal, t.mass_distal)
+                    if math.sqrt(ex * ex + ey * ey) <= 0.1 * com_tolerance_m:  # the root stays
+                        break
+                used += 1
+                if uses_trunk:
+                    for j in range(start, stop):
+                        err[j] = goal_error(dec, c, g, j, t)
+                    solve_trunk(c, pose, dec, b.lengths[c], g, w, err, stalled, t, tolerance_m,
+                                tolerance_rad, max_ccd_step_rad)
+                    com_measured = False
+                if not com_measured:
+                    ex, ey = com_shortfall(c, positions, b.masses, b.com_fraction, b.com_desired,
+                                           b.com_on, t.mass_proximal, t.mass_distal)
+                size = solve_root(c, pose, dec, g, w, b, t, ex, ey, com_tolerance_m, tolerance_m,
+                                  root_gain, leg_extension, predicted and not iterates, block,
+                                  column, waits)
+                if waits and size > 0.1 * com_tolerance_m:
+                    block[at(R_WAITING, column)] = 1.0
+                    break
+                # Only goals an iteration still moves can keep the loop going (:func:`_iterative`;
+                # the passes meet the others as well as they can be met): open where not met nor
+                # stalled (unchanged, or falling by less than a share of itself twice running).
+                any_open = False
+                if iterates:
+                    for j in range(start, stop):
+                        if not _iterative(g, t, j):
+                            continue
+                        if (not orientation[j] and offset[j, 0] == 0.0 and offset[j, 1] == 0.0
+                                and offset[j, 2] == 0.0):
+                            d = sub(plain_point(positions, c, seg_proximal[segment[j]],
+                                                seg_distal[segment[j]], fraction[j]),
+                                    load3(goal[j]))
+                            e = math.sqrt(dot(d, d))
+                        else:
+                            e = goal_error(dec, c, g, j, t)
+                        tol = tolerance_rad if orientation[j] else tolerance_m
+                        first_measure = math.isinf(previous[j])
+                        unchanged = not first_measure and abs(previous[j] - e) < tolerance_m
+                        slow = not first_measure and previous[j] - e < stall_fraction * previous[j]
+                        cut = used >= goal_iterations[j]  # the frame budget gave it no more iterations
+                        goal_open = (e > tol and not unchanged and not (slow and slow_before[j])
+                                     and not stalled[j] and not cut)
+                        if e > tol and not goal_open:
+                            stalled[j] = True
+                        previous[j] = e
+                        slow_before[j] = slow
+                        any_open = any_open or goal_open
+            if block[at(R_WAITING, column)] == 0.0:
+                iterations_used[c] = used
 
 
 @jit(nogil=True)
@@ -399,11 +440,13 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
     s = settings
     wait_for_solver()  # a first run may be compiling solve_rows in another process
     k = goals.k
-    over_chunks(solve_rows, used.shape[0], state.pose, state.dec, state.goals, state.winners,
+    r = used.shape[0]
+    over_chunks(solve_rows, r, state.pose, state.dec, state.goals, state.winners,
                 state.bodies, TABLES, used, np.zeros(k), np.zeros(k, np.bool_), np.zeros(k),
-                np.zeros(k, np.bool_), float(s.tolerance_m), float(s.tolerance_rad),
-                float(s.com_tolerance_m), float(s.max_ccd_step_rad), float(s.root_gain),
-                float(s.stall_fraction), float(MAX_LEG_EXTENSION))
+                np.zeros(k, np.bool_), root_scratch(r), float(s.tolerance_m),
+                float(s.tolerance_rad), float(s.com_tolerance_m), float(s.max_ccd_step_rad),
+                float(s.root_gain), float(s.stall_fraction), float(MAX_LEG_EXTENSION),
+                rows_per_thread=BLOCK)
     if state.goals.goal is not goals.goal:
         goals.goal[state.order] = state.goals.goal
     return (NormalizedPoses(**dict(zip(PoseArrays._fields, state.pose, strict=True))), used,

@@ -1,17 +1,22 @@
-"""The solver's root step (``adaptRoot``), compiled, for one character: the root moves
-horizontally by the step that brings the centre of mass back once the next pass has re-planted
-the legs (predicted), and down where a planted leg could no longer reach its footprint (paper
-§9).
+"""The solver's root step (``adaptRoot``), compiled: the root moves horizontally by the step
+that brings the centre of mass back once the next pass has re-planted the legs (predicted), and
+down where a planted leg could no longer reach its footprint (paper §9).
 
 Mirrors ``ecs_anim.solver.shell._Solve.root`` for one character's row of the solve state,
-written in place: pose ``root_position`` and every decoded joint (the legs re-aim next).
+written in place: pose ``root_position`` and every decoded joint (the legs re-aim next). The
+step's arithmetic (:func:`root_lanes`) runs over the columns of a block's scratch, one a
+character (:mod:`.lanes`' layout): :func:`.solve.solve_rows` gathers the first steps of a
+block's characters and computes them together on the vector units, a later step alone.
 """
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from ecs_anim.runtime.kernels.decode import DecodedArrays, PoseArrays, leg_length
+from ecs_anim.runtime.kernels.lanes import BLOCK, Column, at, col3, put3
 from ecs_anim.runtime.kernels.solve_points import (
     B8,
     I64,
@@ -58,25 +63,6 @@ def com_shortfall(c: int, positions: F64, masses: F64, com_fraction: F64, com_de
         y += masses[c, s] * seg_com[1]
         total += masses[c, s]
     return com_desired[c, 0] - x / total, com_desired[c, 1] - y / total
-
-
-@jit(inline="always")
-def lowering(c: int, positions: F64, b: Bodies, t: Tables, sx: float, sy: float,
-             leg_extension: float) -> float:
-    """How far down (m, <= 0) the root must go with a horizontal move (``sx``, ``sy``) so each
-    planted leg still reaches its footprint. Mirrors ``_Solve._with_lowering``."""
-    lengths_row = b.lengths[c]
-    p = positions[c]
-    sz = 0.0
-    for s in range(2):
-        # Mirrors ground_adapt.vertical_slack_for_reach for this hip once shifted.
-        hx, hy, hz = p[t.hip[s], 0] + sx, p[t.hip[s], 1] + sy, p[t.hip[s], 2] + 0.0
-        reach = leg_extension * (lengths_row[t.thigh[s]] + lengths_row[t.shank[s]])
-        fx, fy, fz = b.footprint[c, s, 0], b.footprint[c, s, 1], b.footprint[c, s, 2]
-        horizontal = math.sqrt((hx - fx) ** 2 + (hy - fy) ** 2)
-        needed = fz + math.sqrt(max(reach**2 - horizontal**2, 0.0)) - hz
-        sz = min(sz, min(needed, 0.0) if b.in_contact[c, s] else 0.0)
-    return sz
 
 
 @jit(inline="always")
@@ -130,124 +116,200 @@ def leg_shares(c: int, b: Bodies, t: Tables, li: int, total: float) -> tuple[flo
             lower_m * lower_f + b.masses[c, distal] / total)
 
 
+# The root step's block scratch (:mod:`.lanes`' layout: rows of BLOCK values, a column a
+# character). What root_lanes reads: the centre of mass's error (x, y), 1.0 where the step is
+# predicted, per leg 1.0 where it is held and its knee's and ankle's shares of the mass ...
+_R_ERROR, _R_PREDICTED, _R_HELD, _R_SHARES = 0, 2, 3, 5  # (held: leg s at + s; shares + 2 s)
+# ... its hip, knee and ankle (leg s at + 3 s), its frame's y and z axes, its bones' lengths
+# (leg s at + s), its footprint and whether it is in contact ...
+_R_HIP, _R_KNEE, _R_ANKLE, _R_AXIS_Y, _R_AXIS_Z = 9, 15, 21, 27, 33
+_R_UPPER, _R_LOWER, _R_FOOTPRINT, _R_CONTACT = 39, 41, 43, 49
+# ... what it writes (the root's move, m), and 1.0 where a character waits for it (solve_rows).
+_R_MOVE, R_WAITING = 51, 54
+#: Rows of a block's root scratch (:func:`root_scratch`).
+ROOT_SCRATCH_ROWS = 55
+
+
+def root_scratch(n: int) -> F64:
+    """The scratch :func:`solve_root` needs for ``n`` rows: (n // BLOCK + 1, a block's
+    ROOT_SCRATCH_ROWS rows of BLOCK, flat), zero (the columns no character uses this tick are
+    computed with the rest). The chunk of rows from ``lo`` uses the block scratch
+    ``lo // BLOCK`` (so chunks of at least :data:`.lanes.BLOCK` rows never share one)."""
+    return np.zeros((n // BLOCK + 1, ROOT_SCRATCH_ROWS * BLOCK))
+
+
 @jit(inline="always")
-def knee_move(c: int, dec: DecodedArrays, lengths_row: F64, t: Tables, li: int,
-              move: Vec3) -> Vec3:
-    """How far leg ``li``'s knee goes when the root moves by ``move`` and its ankle stays
-    (:func:`middle_after_root_move`)."""
-    joints = t.limb_joint[li]
+def gather_root(c: int, dec: DecodedArrays, g: Goals, w: Winners, b: Bodies, t: Tables,
+                ex: float, ey: float, tolerance_m: float, predicted: bool, scratch: F64,
+                j: Column) -> None:
+    """What :func:`root_lanes` needs of character ``c`` (its centre of mass's error ``ex``,
+    ``ey`` m) into column ``j`` of ``scratch``: its legs as they are, which are held
+    (:func:`held_legs`, where ``predicted``) and their shares of the mass."""
     p = dec.positions[c]
-    middle = load3(p[joints[1]])
-    moved = middle_after_root_move(load3(p[joints[0]]), load3(p[joints[2]]),
-                                   load_frame(dec.leg2world[c, li]), lengths_row[t.limb_length[li, 0]],
-                                   lengths_row[t.limb_length[li, 1]], move)
-    return sub(moved, middle)
-
-
-@jit(inline="always")
-def root_move(c: int, dec: DecodedArrays, g: Goals, w: Winners, b: Bodies, t: Tables,
-              ex: float, ey: float, tolerance_m: float, root_gain: float,
-              leg_extension: float, predicted: bool) -> Vec3:
-    """The root's move (m) bringing character ``c``'s centre of mass by (``ex``, ``ey``) once
-    the next pass has re-planted its legs, where ``predicted`` (else the error times
-    ``root_gain``). Mirrors ``_Solve.root_move`` (the centre of mass moves with the root but
-    for the held legs: their knees' shares follow the knees, their ankles' stay)."""
-    p = dec.positions
-    sx, sy = ex * root_gain, ey * root_gain
+    held = held_legs(c, dec.positions, g, w, t, tolerance_m) if predicted else 0
+    total = 0.0
     if predicted:
-        held = held_legs(c, p, g, w, t, tolerance_m)
-        lengths_row = b.lengths[c]
-        total = 0.0
         for s in range(b.masses.shape[1]):
             total += b.masses[c, s]
-        # Each held leg's shares of the mass, once (the same for the three moves).
-        knee0 = ankle0 = knee1 = ankle1 = 0.0
-        for li in range(2):
-            if (held >> li) & 1:
-                knee_share, ankle_share = leg_shares(c, b, t, li, total)
-                if li == 0:
-                    knee0, ankle0 = knee_share, ankle_share
-                else:
-                    knee1, ankle1 = knee_share, ankle_share
-        h = ROOT_PROBE_M
-        # The Jacobian from two probes of the root, along x and along y (over the probe): the
-        # four knee moves written out, not in a loop, so the processor runs their four chains
-        # of square roots and divisions side by side (a loop over the legs ran them one after
-        # the other: 0.25 ms of 5.5 at 4,000). A leg not held is computed and not counted.
-        pc = p[c]
-        left, right = t.limb_joint[0], t.limb_joint[1]
-        hip_l, knee_l, ankle_l = load3(pc[left[0]]), load3(pc[left[1]]), load3(pc[left[2]])
-        hip_r, knee_r, ankle_r = load3(pc[right[0]]), load3(pc[right[1]]), load3(pc[right[2]])
-        frame_l, frame_r = load_frame(dec.leg2world[c, 0]), load_frame(dec.leg2world[c, 1])
-        upper_l, lower_l = lengths_row[t.limb_length[0, 0]], lengths_row[t.limb_length[0, 1]]
-        upper_r, lower_r = lengths_row[t.limb_length[1, 0]], lengths_row[t.limb_length[1, 1]]
-        along_x, along_y = (h, 0.0, 0.0), (0.0, h, 0.0)
-        lx = sub(middle_after_root_move(hip_l, ankle_l, frame_l, upper_l, lower_l, along_x), knee_l)
-        ly = sub(middle_after_root_move(hip_l, ankle_l, frame_l, upper_l, lower_l, along_y), knee_l)
-        rx = sub(middle_after_root_move(hip_r, ankle_r, frame_r, upper_r, lower_r, along_x), knee_r)
-        ry = sub(middle_after_root_move(hip_r, ankle_r, frame_r, upper_r, lower_r, along_y), knee_r)
-        # Each held leg's knee share follows its knee, its ankle share stays (the x probe's
-        # bend minus the probe itself, as the loop over the three moves summed them).
+    scratch[at(_R_ERROR, j)], scratch[at(_R_ERROR + 1, j)] = ex, ey
+    scratch[at(_R_PREDICTED, j)] = 1.0 if predicted else 0.0
+    lengths_row = b.lengths[c]
+    for li in range(2):
+        knee_share = ankle_share = 0.0
+        if (held >> li) & 1:  # (the same for the step's three moves: once)
+            knee_share, ankle_share = leg_shares(c, b, t, li, total)
+        scratch[at(_R_HELD + li, j)] = 1.0 if (held >> li) & 1 else 0.0
+        scratch[at(_R_SHARES + 2 * li, j)] = knee_share
+        scratch[at(_R_SHARES + 2 * li + 1, j)] = ankle_share
+        joints = t.limb_joint[li]
+        put3(scratch, _R_HIP + 3 * li, j, load3(p[joints[0]]))
+        put3(scratch, _R_KNEE + 3 * li, j, load3(p[joints[1]]))
+        put3(scratch, _R_ANKLE + 3 * li, j, load3(p[joints[2]]))
+        frame = load_frame(dec.leg2world[c, li])
+        put3(scratch, _R_AXIS_Y + 3 * li, j, frame[1])
+        put3(scratch, _R_AXIS_Z + 3 * li, j, frame[2])
+        scratch[at(_R_UPPER + li, j)] = lengths_row[t.limb_length[li, 0]]
+        scratch[at(_R_LOWER + li, j)] = lengths_row[t.limb_length[li, 1]]
+        put3(scratch, _R_FOOTPRINT + 3 * li, j, load3(b.footprint[c, li]))
+        scratch[at(_R_CONTACT + li, j)] = 1.0 if b.in_contact[c, li] else 0.0
+
+
+@jit(inline="always")
+def lowering_lanes(scratch: F64, j: Column, sx: float, sy: float, leg_extension: float) -> float:
+    """How far down (m, <= 0) column ``j``'s root must go with a horizontal move (``sx``,
+    ``sy``) so each planted leg still reaches its footprint. Mirrors ``_Solve._with_lowering``
+    (no branch: a loop over the block runs it on the vector units)."""
+    sz = 0.0
+    for s in range(2):
+        # Mirrors ground_adapt.vertical_slack_for_reach for this hip once shifted.
+        hip = col3(scratch, _R_HIP + 3 * s, j)
+        hx, hy, hz = hip[0] + sx, hip[1] + sy, hip[2] + 0.0
+        reach = leg_extension * (scratch[at(_R_UPPER + s, j)] + scratch[at(_R_LOWER + s, j)])
+        fx, fy, fz = col3(scratch, _R_FOOTPRINT + 3 * s, j)
+        horizontal = math.sqrt((hx - fx) ** 2 + (hy - fy) ** 2)
+        needed = fz + math.sqrt(max(reach**2 - horizontal**2, 0.0)) - hz
+        sz = min(sz, min(needed, 0.0) if scratch[at(_R_CONTACT + s, j)] != 0.0 else 0.0)
+    return sz
+
+
+@jit(inline="always")
+def knee_bend(scratch: F64, j: Column, s: int, move: Vec3) -> Vec3:
+    """How far column ``j``'s leg ``s``'s knee goes when the root moves by ``move`` and its
+    ankle stays (:func:`middle_after_root_move`; the frame's x axis is not used)."""
+    axis_y, axis_z = col3(scratch, _R_AXIS_Y + 3 * s, j), col3(scratch, _R_AXIS_Z + 3 * s, j)
+    moved = middle_after_root_move(col3(scratch, _R_HIP + 3 * s, j),
+                                   col3(scratch, _R_ANKLE + 3 * s, j), (axis_y, axis_y, axis_z),
+                                   scratch[at(_R_UPPER + s, j)], scratch[at(_R_LOWER + s, j)],
+                                   move)
+    return sub(moved, col3(scratch, _R_KNEE + 3 * s, j))
+
+
+@jit(inline="always")
+def newton_leg(scratch: F64, j: Column, s: int, move: Vec3,
+               leg_extension: float) -> tuple[float, float, bool]:
+    """Leg ``s``'s part in the centre of mass's move when column ``j``'s root moves by
+    ``move`` (x, y: its knee share follows the knee, its ankle share stays), and whether its
+    ankle stays within the leg's reach."""
+    knee_share = scratch[at(_R_SHARES + 2 * s, j)]
+    ankle_share = scratch[at(_R_SHARES + 2 * s + 1, j)]
+    bend = knee_bend(scratch, j, s, move)
+    to_ankle = sub(sub(col3(scratch, _R_ANKLE + 3 * s, j), col3(scratch, _R_HIP + 3 * s, j)),
+                   move)
+    reach = leg_extension * (scratch[at(_R_UPPER + s, j)] + scratch[at(_R_LOWER + s, j)])
+    return (knee_share * bend[0] - (knee_share + ankle_share) * move[0],
+            knee_share * bend[1] - (knee_share + ankle_share) * move[1],
+            math.sqrt(dot(to_ankle, to_ankle)) <= reach * (1.0 + 1e-9))
+
+
+# A call (one compiled body for a block's loop and a character's later steps), not inlined.
+@jit()
+def root_lanes(scratch: F64, start: Column, stop: Column, root_gain: float,
+               leg_extension: float) -> None:
+    """The root's move (m, into its rows) of each column ``start:stop`` of a root scratch
+    (:func:`gather_root`), in a loop over them that runs on the vector units: the move bringing
+    the centre of mass by its error once the next pass has re-planted the held legs, where
+    predicted (else the error times ``root_gain``), lowered so each planted leg still reaches
+    its footprint. Mirrors ``_Solve.root_move`` and ``_Solve._with_lowering`` (the centre of
+    mass moves with the root but for the held legs: their knees' shares follow the knees,
+    their ankles' stay). Every case is computed and the one that applies chosen (selects, no
+    branch), with the scalar step's operations in its order: the same bits in a lane or
+    alone."""
+    h = ROOT_PROBE_M
+    for k in range(start, stop):
+        j = Column(k)  # (the same type: for mypy, which takes k for an int)
+        ex, ey = scratch[at(_R_ERROR, j)], scratch[at(_R_ERROR + 1, j)]
+        held0, held1 = scratch[at(_R_HELD, j)] != 0.0, scratch[at(_R_HELD + 1, j)] != 0.0
+        knee0, ankle0 = scratch[at(_R_SHARES, j)], scratch[at(_R_SHARES + 1, j)]
+        knee1, ankle1 = scratch[at(_R_SHARES + 2, j)], scratch[at(_R_SHARES + 3, j)]
+        # The Jacobian from two probes of the root, along x and along y (over the probe). A leg
+        # not held is computed and not counted: its knee share follows its knee, its ankle
+        # share stays (the probe's bend minus the probe itself).
+        lx, ly = knee_bend(scratch, j, 0, (h, 0.0, 0.0)), knee_bend(scratch, j, 0, (0.0, h, 0.0))
+        rx, ry = knee_bend(scratch, j, 1, (h, 0.0, 0.0)), knee_bend(scratch, j, 1, (0.0, h, 0.0))
         ax, ay, bx, by = h, 0.0, 0.0, h
-        if held & 1:
-            ax = ax + (knee0 * lx[0] - (knee0 + ankle0) * h)
-            ay = ay + (knee0 * lx[1] - (knee0 + ankle0) * 0.0)
-            bx = bx + (knee0 * ly[0] - (knee0 + ankle0) * 0.0)
-            by = by + (knee0 * ly[1] - (knee0 + ankle0) * h)
-        if held & 2:
-            ax = ax + (knee1 * rx[0] - (knee1 + ankle1) * h)
-            ay = ay + (knee1 * rx[1] - (knee1 + ankle1) * 0.0)
-            bx = bx + (knee1 * ry[0] - (knee1 + ankle1) * 0.0)
-            by = by + (knee1 * ry[1] - (knee1 + ankle1) * h)
+        ax = ax + (knee0 * lx[0] - (knee0 + ankle0) * h) if held0 else ax
+        ay = ay + (knee0 * lx[1] - (knee0 + ankle0) * 0.0) if held0 else ay
+        bx = bx + (knee0 * ly[0] - (knee0 + ankle0) * 0.0) if held0 else bx
+        by = by + (knee0 * ly[1] - (knee0 + ankle0) * h) if held0 else by
+        ax = ax + (knee1 * rx[0] - (knee1 + ankle1) * h) if held1 else ax
+        ay = ay + (knee1 * rx[1] - (knee1 + ankle1) * 0.0) if held1 else ay
+        bx = bx + (knee1 * ry[0] - (knee1 + ankle1) * 0.0) if held1 else bx
+        by = by + (knee1 * ry[1] - (knee1 + ankle1) * h) if held1 else by
         ax, ay, bx, by = ax / h, ay / h, bx / h, by / h
         det = ax * by - bx * ay
-        nx = ny = 0.0
-        within = False
-        # Newton's step, whose predicted move corrects it once while every held ankle stays
-        # within reach (one call site of the knee's arithmetic: numba inlines a copy at each,
-        # and the kernels' compile is counted).
-        if det > MIN_ROOT_JACOBIAN:
-            nx, ny = (by * ex - bx * ey) / det, (ax * ey - ay * ex) / det
-            move = (nx, ny, lowering(c, p, b, t, nx, ny, leg_extension))
-            mx, my = nx, ny
-            within = True
-            for li in range(2):
-                if (held >> li) & 1:
-                    knee_share, ankle_share = (knee0, ankle0) if li == 0 else (knee1, ankle1)
-                    bend = knee_move(c, dec, lengths_row, t, li, move)
-                    mx = mx + (knee_share * bend[0] - (knee_share + ankle_share) * move[0])
-                    my = my + (knee_share * bend[1] - (knee_share + ankle_share) * move[1])
-                    to_ankle = sub(sub(load3(p[c, t.ankle[li]]), load3(p[c, t.hip[li]])), move)
-                    reach = leg_extension * (lengths_row[t.thigh[li]] + lengths_row[t.shank[li]])
-                    within = within and math.sqrt(dot(to_ankle, to_ankle)) <= reach * (1.0 + 1e-9)
-        if within:
-            dx, dy = ex - mx, ey - my
-            sx, sy = nx + (by * dx - bx * dy) / det, ny + (ax * dy - ay * dx) / det
-    return sx, sy, lowering(c, p, b, t, sx, sy, leg_extension)
+        # Newton's step, whose predicted move corrects it once where the Jacobian is firm and
+        # every held ankle stays within reach.
+        nx, ny = (by * ex - bx * ey) / det, (ax * ey - ay * ex) / det
+        move = (nx, ny, lowering_lanes(scratch, j, nx, ny, leg_extension))
+        mx0, my0, within0 = newton_leg(scratch, j, 0, move, leg_extension)
+        mx1, my1, within1 = newton_leg(scratch, j, 1, move, leg_extension)
+        mx = nx + mx0 if held0 else nx
+        my = ny + my0 if held0 else ny
+        mx = mx + mx1 if held1 else mx
+        my = my + my1 if held1 else my
+        within = ((scratch[at(_R_PREDICTED, j)] != 0.0) & (det > MIN_ROOT_JACOBIAN)
+                  & (within0 | (not held0)) & (within1 | (not held1)))
+        dx, dy = ex - mx, ey - my
+        sx = nx + (by * dx - bx * dy) / det if within else ex * root_gain
+        sy = ny + (ax * dy - ay * dx) / det if within else ey * root_gain
+        put3(scratch, _R_MOVE, j, (sx, sy, lowering_lanes(scratch, j, sx, sy, leg_extension)))
+
+
+@jit(inline="always")
+def move_root(c: int, pose: PoseArrays, dec: DecodedArrays, b: Bodies, scratch: F64,
+              j: Column) -> None:
+    """Move character ``c``'s root (pose ``root_position``) and every decoded joint by the
+    move :func:`root_lanes` left in column ``j``."""
+    sx, sy, sz = col3(scratch, _R_MOVE, j)
+    unit = leg_length(b.lengths[c])
+    pose.root_position[c, 0] += sx / unit
+    pose.root_position[c, 1] += sy / unit
+    pose.root_position[c, 2] += sz / unit
+    p = dec.positions[c]
+    for joint in range(p.shape[0]):
+        p[joint, 0] += sx
+        p[joint, 1] += sy
+        p[joint, 2] += sz
 
 
 @jit(inline="always")
 def solve_root(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners, b: Bodies,
                t: Tables, ex: float, ey: float, com_tolerance_m: float, tolerance_m: float,
-               root_gain: float, leg_extension: float, predicted: bool) -> float:
+               root_gain: float, leg_extension: float, predicted: bool, scratch: F64,
+               j: Column, wait: bool) -> float:
     """Mirrors ``ecs_anim.solver.shell._Solve.root`` for character ``c`` (in place), whose
     :func:`com_shortfall` is (``ex``, ``ey``) (m; measured by the caller on the joints as they
     are): returns its size. ``leg_extension``: the longest a planted leg stretches, as a share
     of thigh + shank; ``predicted``: the character has no goal that keeps it iterating
-    (``_Solve.predicted``: else the root moves by the error times ``root_gain``)."""
-    positions = dec.positions
+    (``_Solve.predicted``: else the root moves by the error times ``root_gain``). The step
+    goes through column ``j`` of a root scratch (:func:`root_scratch`); with ``wait`` it is
+    only gathered there (the caller computes its block's columns together, :func:`root_lanes`,
+    then :func:`move_root`)."""
     size = math.sqrt(ex * ex + ey * ey)
     if not size > 0.1 * com_tolerance_m:
         return size
-    sx, sy, sz = root_move(c, dec, g, w, b, t, ex, ey, tolerance_m, root_gain, leg_extension,
-                           predicted)
-    unit = leg_length(b.lengths[c])
-    pose.root_position[c, 0] += sx / unit
-    pose.root_position[c, 1] += sy / unit
-    pose.root_position[c, 2] += sz / unit
-    p = positions[c]
-    for joint in range(p.shape[0]):
-        p[joint, 0] += sx
-        p[joint, 1] += sy
-        p[joint, 2] += sz
+    gather_root(c, dec, g, w, b, t, ex, ey, tolerance_m, predicted, scratch, j)
+    if not wait:
+        root_lanes(scratch, j, j + Column(1), root_gain, leg_extension)
+        move_root(c, pose, dec, b, scratch, j)
     return size

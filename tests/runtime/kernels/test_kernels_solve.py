@@ -24,10 +24,11 @@ from ecs_anim.motion.constraints import Activation
 from ecs_anim.runtime.bench_scene import BenchScene
 from ecs_anim.runtime.kernels import solve as compiled
 from ecs_anim.runtime.kernels import solve_math as compiled_math
+from ecs_anim.runtime.kernels.lanes import Column
 from ecs_anim.runtime.kernels.solve_head import solve_head
 from ecs_anim.runtime.kernels.solve_limbs import solve_limbs
 from ecs_anim.runtime.kernels.solve_points import Goals, centre_of_mass, goal_error
-from ecs_anim.runtime.kernels.solve_root import com_shortfall, solve_root
+from ecs_anim.runtime.kernels.solve_root import com_shortfall, root_scratch, solve_root
 from ecs_anim.runtime.kernels.solve_trunk import solve_trunk
 from ecs_anim.runtime.simulation import Simulation
 from ecs_anim.solver import shell as solver_shell
@@ -140,6 +141,47 @@ def test_the_root_step_lands_for_walkers_with_targets_on_their_body(monkeypatch)
     used = np.concatenate([solver_shell.solve(*copy.deepcopy(args))[1] for args in capture.calls])
     assert used.size == 36 and used.max() <= 2
     assert np.mean(used == 1) > 0.9
+
+
+def solved_in_chunks(args, chunks):
+    """:func:`compiled.solve`'s state after ``solve_rows`` over the rows ``chunks`` ((lo, hi)
+    each, one after the other) of the solve ``args``, and the iterations each row took."""
+    poses, lengths, goals, masses, com_fraction, settings, decoded = copy.deepcopy(args)[:7]
+    state = compiled.prepare(poses, lengths, goals, masses, com_fraction, decoded, settings)
+    r, k = lengths.shape[0], state.goals.start[-1]
+    used, scratch = np.zeros(r, np.int64), root_scratch(r)
+    for lo, hi in chunks:
+        compiled.solve_rows(lo, hi, state.pose, state.dec, state.goals, state.winners,
+                            state.bodies, T, used, np.zeros(k), np.zeros(k, np.bool_),
+                            np.zeros(k), np.zeros(k, np.bool_), scratch, float(settings.tolerance_m),
+                            float(settings.tolerance_rad), float(settings.com_tolerance_m),
+                            float(settings.max_ccd_step_rad), float(settings.root_gain),
+                            float(settings.stall_fraction), float(MAX_LEG_EXTENSION))
+    return state, used
+
+
+def test_a_solve_does_not_depend_on_its_blocks_nor_chunks(monkeypatch):
+    """``solve_rows`` computes the first root steps of a block's characters together (in the
+    lanes of the vector units, the rest in the loop's scalar remainder): each character gets
+    the same bits in one call over 40 bench walkers (a block of 32 and one of 8), in two chunks
+    (0:37, 37:40: the first's second block of 5 rows) and row by row (each step alone); the
+    numpy reference agrees to 1e-9 m."""
+    capture = Capture(monkeypatch)
+    scene = BenchScene(40, constrained=True)
+    for _ in range(3):
+        scene.tick()
+    scene.sim.close()
+    args = capture.calls[-1]
+    assert_same_solve(args)
+    whole, used = solved_in_chunks(args, [(0, 40)])
+    assert used.max() >= 1  # the root steps ran
+    for chunks in ([(0, 37), (37, 40)], [(c, c + 1) for c in range(40)]):
+        state, used_here = solved_in_chunks(args, chunks)
+        np.testing.assert_array_equal(used_here, used)
+        for name in ("positions", "leg2world", "arm2world"):
+            np.testing.assert_array_equal(getattr(state.dec, name), getattr(whole.dec, name))
+        np.testing.assert_array_equal(state.pose.root_position, whole.pose.root_position)
+        np.testing.assert_array_equal(state.pose.leg_frame, whole.pose.leg_frame)
 
 
 # --- each step against its numpy counterpart, on real solve states -------------------------
@@ -320,7 +362,8 @@ def root(s, c, predicted=True):
     ex, ey = com_shortfall(c, s.dec.positions, b.masses, b.com_fraction, b.com_desired, b.com_on,
                            T.mass_proximal, T.mass_distal)
     return solve_root(c, s.pose, s.dec, s.goals, s.winners, b, T, ex, ey, S.com_tolerance_m,
-                      S.tolerance_m, S.root_gain, MAX_LEG_EXTENSION, predicted)
+                      S.tolerance_m, S.root_gain, MAX_LEG_EXTENSION, predicted, root_scratch(1)[0],
+                      Column(0), False)
 
 
 @pytest.mark.parametrize(("after_a_pass", "predicted"), [(False, True), (True, True), (True, False)])
