@@ -33,6 +33,7 @@ MOCAP_DIR = Path(os.environ.get("ECS_ANIM_MOCAP", REPO.parent / "shared" / "moca
 MAX_TEST_WORKERS = 4
 
 
+@pytest.hookimpl(optionalhook=True)  # (an xdist hook: `-p no:xdist` must still run the tests)
 def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
     """``-n auto``: a worker per core this process may run on, at most :data:`MAX_TEST_WORKERS`."""
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
