@@ -6,7 +6,8 @@ A ground is passed to a kernel as the three arrays of its
 user's own (any object with ``height(xy)``) has no description: its callers keep numpy.
 
 Kind codes are written here as literals (numba's cache keys on this file's source, not on
-:mod:`ecs_anim.core.ground`'s); an import-time check pins them.
+:mod:`ecs_anim.core.ground`'s); an import-time check pins them. Kernels that branch on a
+ground's kind use these names.
 """
 
 from __future__ import annotations
@@ -19,9 +20,10 @@ from numpy.typing import NDArray
 from ecs_anim.core import ground as _ground
 from ecs_anim.runtime.kernels.vec import F64, jit
 
-_PLANE, _SLOPE, _STAIRS, _BUMPS, _HEIGHT_GRID = 0, 1, 2, 3, 4
+#: The kind codes of :class:`~ecs_anim.core.ground.GroundDescription`'s ``kinds``.
+PLANE, SLOPE, STAIRS, BUMPS, HEIGHT_GRID = 0, 1, 2, 3, 4
 assert (_ground.PLANE, _ground.SLOPE, _ground.STAIRS, _ground.BUMPS, _ground.HEIGHT_GRID) \
-    == (_PLANE, _SLOPE, _STAIRS, _BUMPS, _HEIGHT_GRID)
+    == (PLANE, SLOPE, STAIRS, BUMPS, HEIGHT_GRID)
 
 I64 = NDArray[np.int64]
 #: A ground part's parameters (N_GROUND_PARAMS of :mod:`ecs_anim.core.ground`).
@@ -47,6 +49,8 @@ def grid_height(x: float, y: float, p: F64, grid: F64) -> float:
 # sine: fdlibm's (FreeBSD's e_rem_pio2.c reduction by pi/2 in three parts, k_sin.c, k_cos.c),
 # written without branches so that a loop of it runs on the vector units (numba here has no
 # vector math library: math.sin is a call to the C library's, one point at a time).
+# Not .lanes.sin_quarter (a Taylor series for |x| <= pi/2, the slerp's): the bumps' arguments
+# are any size, and either one in the other's place would change results' bits.
 # fdlibm's notice, which its licence asks a derived work to keep:
 #   Copyright (C) 1993 by Sun Microsystems, Inc. All rights reserved.
 #   Developed at SunSoft, a Sun Microsystems, Inc. business.
@@ -112,11 +116,11 @@ def bumps_in_domain(x: float, y: float, kx: float, ky: float) -> bool:
 def part_height(kind: int, x: float, y: float, p: GroundParams) -> float:
     """Mirrors the ``height`` of :class:`~ecs_anim.core.ground.Plane`, ``Slope``, ``Stairs`` or
     ``Bumps`` (by ``kind``) at one point (m); ``p`` the part's parameters."""
-    if kind == _PLANE:
+    if kind == PLANE:
         return float(p[0])
-    if kind == _SLOPE:
+    if kind == SLOPE:
         return float(p[0] + p[1] * x + p[2] * y)
-    if kind == _STAIRS:
+    if kind == STAIRS:
         along = x * p[5] + y * p[6] - p[4]
         step = min(max(math.floor(along / p[2]) + 1.0, 0.0), p[3])
         return float(p[0] + p[1] * step)
@@ -134,7 +138,7 @@ def height_at(x: float, y: float, kinds: I64, params: F64, grid: F64) -> float:
     ``grid`` the height grids' values). Returns metres."""
     out = 0.0
     for k in range(kinds.shape[0]):
-        if kinds[k] == _HEIGHT_GRID:
+        if kinds[k] == HEIGHT_GRID:
             out = out + grid_height(x, y, params[k], grid)
         else:
             out = out + part_height(kinds[k], x, y, (params[k, 0], params[k, 1], params[k, 2],
@@ -155,9 +159,16 @@ def smooth(kinds: I64) -> bool:
     """Whether a described ground has no step or kink: planes, slopes and bumps only (a height
     grid's cell borders and a stairs' risers change heights or grades at once)."""
     for k in range(kinds.shape[0]):
-        if kinds[k] != _PLANE and kinds[k] != _SLOPE and kinds[k] != _BUMPS:
+        if kinds[k] != PLANE and kinds[k] != SLOPE and kinds[k] != BUMPS:
             return False
     return True
+
+
+@jit(inline="always")
+def near_known(x: float, y: float, known: tuple[float, float, float], is_smooth: bool) -> bool:
+    """Whether the height ``known`` (x, y, height; NaN: none) answers the point (``x``, ``y``)
+    (m): within :data:`NEAR_M` of it on a smooth ground (``is_smooth``: :func:`smooth`)."""
+    return is_smooth and abs(x - known[0]) <= NEAR_M and abs(y - known[1]) <= NEAR_M
 
 
 @jit(inline="always")
@@ -166,6 +177,6 @@ def height_near(x: float, y: float, known: tuple[float, float, float], is_smooth
     """:func:`height_at` (``x``, ``y``), or the height ``known`` (x, y, height; NaN: none) of a
     point within :data:`NEAR_M` of it on a smooth ground (``is_smooth``: :func:`smooth`), without
     asking the ground again. Metres."""
-    if is_smooth and abs(x - known[0]) <= NEAR_M and abs(y - known[1]) <= NEAR_M:
+    if near_known(x, y, known, is_smooth):
         return known[2]
     return height_at(x, y, kinds, params, grid)

@@ -30,11 +30,14 @@ from ecs_anim.core import ground_adapt as reference
 from ecs_anim.core.skeleton import LENGTH_INDEX as L
 from ecs_anim.runtime.kernels.decode import LegPoseArrays, two_bone_middle
 from ecs_anim.runtime.kernels.ground import (
-    NEAR_M,
+    BUMPS,
+    PLANE,
+    SLOPE,
     bumps_height,
     bumps_in_domain,
     height_at,
     height_near,
+    near_known,
     smooth,
 )
 from ecs_anim.runtime.kernels.lanes import (
@@ -138,16 +141,21 @@ _S_LEG_FRAME, _S_FRACTION, _S_ROOT, _S_ANKLE, _S_TOE, _S_SHANK2W = 58, 66, 68, 7
 # ... and what a row carries from before the re-aiming to after it (the feet's lengths and
 # directions: the decode's, then those the last pitch starts from).
 _S_UNDER, _S_KNOWN, _S_DIR, _S_FOOT_LENGTH = 101, 103, 109, 129
-# The block's ground queries (heights_lanes): up to 6 a row (each foot's three below), their
-# x, y and the ground's height under them (query k of each in column k of the rows from these
-# on) ...
-_S_Q_X, _S_Q_Y, _S_Q_HEIGHT = 131, 137, 143
+#: The most ground queries a row asks between two answers (:func:`heights_lanes`): each foot's
+#: three in :func:`_lay` (ground_adapt_after asks one a foot).
+QUERIES_PER_ROW = 6
+# The block's ground queries: their x, y and the ground's height under them (query k of each
+# in column k of the rows from these on, QUERIES_PER_ROW rows of BLOCK each) ...
+_S_Q_X = 131
+_S_Q_Y = _S_Q_X + QUERIES_PER_ROW
+_S_Q_HEIGHT = _S_Q_Y + QUERIES_PER_ROW
 # ... and which query answers each foot (side s at + s): under the motion's ankle and toe (a
 # foot not planted: its target's) and under the end of a foot pitched (its first end); -1:
 # none asked.
-_S_Q_ANKLE, _S_Q_TOE, _S_Q_END = 149, 151, 153
+_S_Q_ANKLE = _S_Q_HEIGHT + QUERIES_PER_ROW
+_S_Q_TOE, _S_Q_END = _S_Q_ANKLE + 2, _S_Q_ANKLE + 4
 #: Rows of a block's scratch (:func:`ground_scratch`).
-GROUND_SCRATCH_ROWS = 155
+GROUND_SCRATCH_ROWS = _S_Q_END + 2
 
 
 def ground_scratch(n: int) -> F64:
@@ -285,7 +293,8 @@ def reaim_lanes(scratch: F64, start: Column, stop: Column, max_extension: float)
 @jit(inline="always")
 def _ask(scratch: F64, count: int, x: float, y: float) -> int:
     """The ground under (``x``, ``y``) asked as query ``count`` of the block
-    (:func:`heights_lanes` answers it); returns the queries asked now."""
+    (:func:`heights_lanes` answers it; ``count`` under :data:`QUERIES_PER_ROW` times the
+    block's rows); returns the queries asked now."""
     scratch[_at(_S_Q_X, Column(count))] = x
     scratch[_at(_S_Q_Y, Column(count))] = y
     return count + 1
@@ -300,19 +309,21 @@ def _answer(scratch: F64, query: float) -> float:
 
 @jit()
 def heights_lanes(scratch: F64, count: int, kinds: I64, params: F64, grid: F64) -> None:
-    """:func:`.ground.height_at` under the block's first ``count`` queries (:func:`_ask`), into
-    their heights (m). On a plane, a slope or bumps alone (the points within
-    :func:`.ground.bumps_in_domain`) in a loop on the vector units, with the bits of
-    ``height_at``'s."""
-    lone = kinds[0] if kinds.shape[0] == 1 else -1  # .ground's kind codes: 0 plane, 1 slope
-    if lone == 0 or lone == 1:
+    """:func:`.ground.height_at` under the block's first ``count`` queries (:func:`_ask`) of
+    ``scratch`` (a block's ground scratch, :func:`ground_scratch`), into their heights (m); the
+    ground as described by :func:`ecs_anim.core.ground.describe`: ``kinds`` (parts,),
+    ``params`` (parts, N_GROUND_PARAMS), ``grid`` the height grids' values. On a plane, a slope
+    or bumps alone (the points within :func:`.ground.bumps_in_domain`) in a loop on the vector
+    units, with the bits of ``height_at``'s."""
+    lone = kinds[0] if kinds.shape[0] == 1 else -1  # the kind of a lone part
+    if lone == PLANE or lone == SLOPE:
         z, grade_x, grade_y = params[0, 0], params[0, 1], params[0, 2]
         for k in range(count):
             j = Column(k)
             slope = z + grade_x * scratch[_at(_S_Q_X, j)] + grade_y * scratch[_at(_S_Q_Y, j)]
-            scratch[_at(_S_Q_HEIGHT, j)] = 0.0 + (z if lone == 0 else slope)
+            scratch[_at(_S_Q_HEIGHT, j)] = 0.0 + (z if lone == PLANE else slope)
         return
-    if lone == 3:  # bumps
+    if lone == BUMPS:
         z, amplitude, kx, ky = params[0, 0], params[0, 1], params[0, 2], params[0, 3]
         outside = 0
         for k in range(count):
@@ -498,7 +509,8 @@ def _lay(c: int, s: int, j: Column, ankle: Vec3, toe: Vec3, foot: float, d: Vec3
     under the motion's ankle and toe (its target's, :func:`_foot_target`); a foot not in
     contact unlocked. ``foot`` (m), ``d`` (unit): the motion's ankle-to-toe length and
     direction (:func:`_foot_axis`). The queries from ``count`` on (column ``j``'s
-    ``_S_Q_*``); returns the queries asked now."""
+    ``_S_Q_*``; at most three, :data:`QUERIES_PER_ROW` for both feet); returns the queries
+    asked now."""
     scratch[_at(_S_Q_END + s, j)] = -1.0
     scratch[_at(_S_Q_ANKLE + s, j)], scratch[_at(_S_Q_TOE + s, j)] = -1.0, -1.0
     if w != 1.0:
@@ -607,11 +619,12 @@ def lay_feet(i: Column, c: int, lengths: F64, leg: F64, contact_weight: F64, sol
     returns the queries asked now. Arguments as for :func:`ground_adapt_rows`."""
     leg_c = leg[c]
     for s in range(2):
-        count = _lay(c, s, i, _col3(scratch, _S_ANKLE + 3 * s, i), _col3(scratch, _S_TOE + 3 * s, i),
-             scratch[_at(_S_FOOT_LENGTH + s, i)], _col3(scratch, _S_DIR + 3 * s, i),
-             contact_weight[c, s], sole_roll, clip, source_ankle_height, footprint, locked,
-             pivot, leg_c, lengths[c, _L_ANKLE_HEIGHT + s], ball_per_leg * leg_c, kinds,
-             params, grid, scratch, count)
+        count = _lay(c, s, i, _col3(scratch, _S_ANKLE + 3 * s, i),
+                     _col3(scratch, _S_TOE + 3 * s, i), scratch[_at(_S_FOOT_LENGTH + s, i)],
+                     _col3(scratch, _S_DIR + 3 * s, i), contact_weight[c, s], sole_roll, clip,
+                     source_ankle_height, footprint, locked, pivot, leg_c,
+                     lengths[c, _L_ANKLE_HEIGHT + s], ball_per_leg * leg_c, kinds, params, grid,
+                     scratch, count)
     return count
 
 
@@ -698,7 +711,8 @@ def ground_adapt_after(i: Column, c: int, pose: LegPoseArrays, lengths: F64,
     """Mirrors ``GroundAdapt.run`` for store row ``c`` after the block's re-aiming
     (:func:`reaim_lanes`, column ``i`` of ``scratch``): the heels kept up, the legs' pose
     written, and the ground under each foot's toe end asked from query ``count`` on (the
-    last pitch's first, :func:`_last_pitch`) unless known; returns the queries asked now."""
+    last pitch's first, :func:`last_pitch`) unless known: at most two, under
+    :data:`QUERIES_PER_ROW`; returns the queries asked now."""
     ankle_height = (lengths[c, _L_ANKLE_HEIGHT], lengths[c, _L_ANKLE_HEIGHT + 1], 0.0)
     adapt_keeping_heels_up(i, c, pose, scratch, kinds, params, grid, is_smooth, ankle_height,
                            max_extension, heel_tolerance, heel_passes)
@@ -707,9 +721,8 @@ def ground_adapt_after(i: Column, c: int, pose: LegPoseArrays, lengths: F64,
         end = add_scaled(ankle, d, 1.0 * foot)
         known = _col3(scratch, _S_KNOWN + 3 * s, i)
         scratch[_at(_S_Q_END + s, i)] = -1.0
-        # .ground.height_near's test: a planted foot's toe end where it stood is known
-        if not (is_smooth and abs(end[0] - known[0]) <= NEAR_M
-                and abs(end[1] - known[1]) <= NEAR_M):
+        # a planted foot's toe end where it stood is known (as .ground.height_near would take it)
+        if not near_known(end[0], end[1], known, is_smooth):
             scratch[_at(_S_Q_END + s, i)] = count
             count = _ask(scratch, count, end[0], end[1])
     return count
@@ -721,11 +734,10 @@ def _last_pitch_start(i: Column, c: int, s: int, contact_weight: F64, scratch: F
     """(ankle, foot length, direction) foot ``s`` of row ``c`` is pitched from last (column
     ``i``, re-aimed): a planted foot's direction as it stands, a ramping one's as the motion
     has it in the world, a free one's as in its shank."""
-    ankle, toe = _col3(scratch, _S_ANKLE + 3 * s, i), _col3(scratch, _S_TOE + 3 * s, i)
-    foot = max(norm(sub(toe, ankle)), 1e-9)
-    d = _col3(scratch, _S_DIR + 3 * s, i)
-    if not contact_weight[c, s] > 0.0:
-        d = scale(sub(toe, ankle), 1.0 / foot)
+    ankle = _col3(scratch, _S_ANKLE + 3 * s, i)
+    foot, d = _foot_axis(ankle, _col3(scratch, _S_TOE + 3 * s, i))
+    if contact_weight[c, s] > 0.0:
+        d = _col3(scratch, _S_DIR + 3 * s, i)
     return ankle, foot, d
 
 

@@ -75,6 +75,8 @@ def acos_unit(c: float) -> float:
     return 2.0 * a if upper else 0.5 * math.pi - a
 
 
+# Not .ground.sine (fdlibm's, with a reduction by pi/2, for the bumps' arguments of any size):
+# the slerp's angles need none, and either one in the other's place would change results' bits.
 @jit()
 def sin_quarter(x: float) -> float:
     """``sin x`` for ``x`` in [-pi/2, pi/2], within 3e-16 relative of ``np.sin``."""

@@ -104,14 +104,21 @@ def test_a_blocks_heights_equal_each_points(name: str) -> None:
     """``heights_lanes`` answers a block's queries at once (on the vector units on a lone plane,
     slope or bumps) with the bits of ``height_at`` at each point: any number of them, NaN
     points, and points far enough out for the bumps to take the C library's sines."""
-    from ecs_anim.runtime.kernels.ground_adapt import _S_Q_HEIGHT, _S_Q_X, _S_Q_Y, ground_scratch
+    from ecs_anim.runtime.kernels.ground_adapt import (
+        _S_Q_HEIGHT,
+        _S_Q_X,
+        _S_Q_Y,
+        QUERIES_PER_ROW,
+        ground_scratch,
+    )
     from ecs_anim.runtime.kernels.ground_adapt import heights_lanes as heights
     from ecs_anim.runtime.kernels.lanes import BLOCK
 
     d = describe(GROUNDS[name])
     assert d is not None
     rng = np.random.default_rng(1303)
-    for count, far in ((0, False), (1, False), (5, False), (6 * BLOCK, False), (37, True)):
+    most = QUERIES_PER_ROW * BLOCK  # a block's every row asking its most
+    for count, far in ((0, False), (1, False), (5, False), (most, False), (37, True)):
         scratch = ground_scratch(BLOCK)[0]
         xy = rng.uniform(-4.0, 9.0, (count, 2))
         if count > 3:
@@ -163,6 +170,10 @@ TERRAINS: dict[str, Ground] = {
     "steep_stairs": Stairs(rise_m=0.17, run_m=0.28, steps=10, start_m=0.8, heading_deg=15.0),
     "slope": Combined((Slope(0.12, -0.05), Bumps(0.05, 1.5, 1.2))),
     "grid": Combined((_grid(11), Plane(0.05))),
+    # Alone, each takes heights_lanes' loop on the vector units.
+    "lone_plane": Plane(),
+    "lone_slope": Slope(0.1, -0.04, 0.02),
+    "lone_bumps": Bumps(0.04, 2.5, 3.0),
 }
 BODIES = [Morphology.preset("child"), Morphology.preset("adult_male"), Morphology.preset("tall"),
           Morphology.from_stature(1.62, "female")]
