@@ -359,3 +359,42 @@ def test_the_ticks_that_skip_the_grid_while_no_bounds_meet_end_as_a_search_would
             np.testing.assert_array_equal(a.overlap_m, b.overlap_m)
             np.testing.assert_array_equal(a.capsule_ends, b.capsule_ends)
     assert skipped >= least_skips, skipped
+
+
+def test_a_tick_whose_bounds_parted_after_meeting_searches_again_for_the_clearances(
+        monkeypatch):
+    """Bounds that met last tick likely meet now, so the search measures no gap; when none
+    meet after all, it searches again with the gaps: the bounds and half of each body's
+    clearance are kept (``_apart``), finite, equal to those of a search with gaps on the same
+    joints (``touching`` with a clearance: each body's least gap)."""
+    from ecs_anim.runtime.bench_scene import walkers_on_bumps
+    from ecs_anim.systems.collision_separate import CollisionSeparate
+
+    sim, _ = walkers_on_bumps(16, crossing=True)
+    with sim:
+        mine = next(s for s in sim.systems if isinstance(s, CollisionSeparate))
+        seen: list[tuple[np.ndarray, np.ndarray]] = []
+        run_once = mine.run
+
+        def run_recording(dt):
+            seen.append((sim.store.positions.copy(), sim.store.lengths.copy()))
+            run_once(dt)
+
+        monkeypatch.setattr(mine, "run", run_recording)
+        met_last = parted = False
+        for _ in range(120):
+            sim.step()
+            if met_last and mine._apart is not None:
+                parted = True
+                break
+            met_last = sim.compiled and mine._apart is None  # (on the kernels: bounds met)
+    assert parted
+    positions, lengths = seen[-1]
+    body = bounds(positions, lengths, Capsules.empty(positions.shape[0]))
+    clearance = np.full(positions.shape[0], np.nan)
+    assert touching(body, grid_of(body), clearance).size == 0
+    assert mine._apart is not None
+    _, box, slack = mine._apart
+    assert np.isfinite(slack).all() and (slack > 0).all()
+    np.testing.assert_array_equal(box, body.box)
+    np.testing.assert_array_equal(slack, 0.5 * clearance)

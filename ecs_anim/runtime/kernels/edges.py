@@ -33,12 +33,12 @@ def edge_rows(lo: int, hi: int, entity: I64, clip: I64, clip_time_s: F64, speed:
     # store might alias them (a quarter of the pass's time).
     replaced_count = ended_count = started_count = began_count = 0
     for r in range(lo, hi):
-        e, k, time_s = entity[r], clip[r], clip_time_s[r]
+        e, row_clip, time_s = entity[r], clip[r], clip_time_s[r]
         old_clip = seen_clip[e]
         ended = seen_ended[e]
-        new_clip = k != old_clip or time_s < seen_time_s[e] - slack_s
+        new_clip = row_clip != old_clip or time_s < seen_time_s[e] - slack_s
         sampled = time_s - dt * speed[r]
-        at_end = not loop[r] and sampled >= duration_s[k] - slack_s
+        at_end = not loop[r] and sampled >= duration_s[row_clip] - slack_s
         replaced = new_clip and old_clip >= 0 and not ended
         ended_now = not new_clip and at_end and not ended
         edges[r, 0], edges[r, 1], edges[r, 2] = replaced, ended_now, new_clip
@@ -61,7 +61,7 @@ def edge_rows(lo: int, hi: int, entity: I64, clip: I64, clip_time_s: F64, speed:
                 began_count += 1
         seen_ended[e] = not new_clip and (ended or at_end)
         previous_clip[r] = old_clip
-        seen_clip[e] = k
+        seen_clip[e] = row_clip
         seen_time_s[e] = time_s
     counts[0], counts[1], counts[2], counts[3] = (replaced_count, ended_count, started_count,
                                                   began_count)

@@ -112,18 +112,18 @@ def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
     # The characters' loop is here, not in a call per character: a call passes the state
     # tuples on, a reference count up and down for each of their 74 arrays (0.25 us a
     # character); numba's inlining of such a call costs 14 s more of compile.
-    block = scratch[lo // BLOCK]
-    for first in range(lo, hi, BLOCK):
-        count = min(BLOCK, hi - first)
+    root_block = scratch[lo // BLOCK]
+    for block_start in range(lo, hi, BLOCK):
+        count = min(BLOCK, hi - block_start)
         for turn in range(2 * count):
             if turn == count:  # the first round done: the waiting characters' root steps
-                root_lanes(block, Column(0), Column(count), root_gain, leg_extension)
+                root_lanes(root_block, Column(0), Column(count), root_gain, leg_extension)
             resuming = turn >= count
-            c = first + turn % count
+            c = block_start + turn % count
             column = Column(turn % count)
-            if resuming and block[at(R_WAITING, column)] == 0.0:
+            if resuming and root_block[at(R_WAITING, column)] == 0.0:
                 continue
-            block[at(R_WAITING, column)] = 0.0
+            root_block[at(R_WAITING, column)] = 0.0
             start, stop = g.start[c], g.start[c + 1]
             uses_trunk = False
             on_self = False
@@ -154,7 +154,7 @@ def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
             waits = not resuming and predicted and not iterates
             any_open = iterates
             if resuming:
-                move_root(c, pose, dec, b, block, column)
+                move_root(c, pose, dec, b, root_block, column)
                 used = 1
                 any_open = False
             # Each pass follows the goals on the body, then re-plants the limbs and re-aims the
@@ -193,10 +193,10 @@ def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
                     ex, ey = com_shortfall(c, positions, b.masses, b.com_fraction, b.com_desired,
                                            b.com_on, t.mass_proximal, t.mass_distal)
                 size = solve_root(c, pose, dec, g, w, b, t, ex, ey, com_tolerance_m, tolerance_m,
-                                  root_gain, leg_extension, predicted and not iterates, block,
-                                  column, waits)
+                                  root_gain, leg_extension, predicted and not iterates,
+                                  root_block, column, waits)
                 if waits and size > 0.1 * com_tolerance_m:
-                    block[at(R_WAITING, column)] = 1.0
+                    root_block[at(R_WAITING, column)] = 1.0
                     break
                 # Only goals an iteration still moves can keep the loop going (:func:`_iterative`;
                 # the passes meet the others as well as they can be met): open where not met nor
@@ -226,7 +226,7 @@ def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
                         previous[j] = e
                         slow_before[j] = slow
                         any_open = any_open or goal_open
-            if block[at(R_WAITING, column)] == 0.0:
+            if root_block[at(R_WAITING, column)] == 0.0:
                 iterations_used[c] = used
 
 

@@ -175,6 +175,14 @@ def gather_root(c: int, dec: DecodedArrays, g: Goals, w: Winners, b: Bodies, t: 
 
 
 @jit(inline="always")
+def leg_reach(scratch: F64, j: Column, s: int, leg_extension: float) -> float:
+    """The farthest (m) column ``j``'s leg ``s`` reaches from its hip: ``leg_extension`` of
+    its thigh + shank."""
+    reach: float = leg_extension * (scratch[at(_R_UPPER + s, j)] + scratch[at(_R_LOWER + s, j)])
+    return reach
+
+
+@jit(inline="always")
 def lowering_lanes(scratch: F64, j: Column, sx: float, sy: float, leg_extension: float) -> float:
     """How far down (m, <= 0) column ``j``'s root must go with a horizontal move (``sx``,
     ``sy``) so each planted leg still reaches its footprint. Mirrors ``_Solve._with_lowering``
@@ -184,7 +192,7 @@ def lowering_lanes(scratch: F64, j: Column, sx: float, sy: float, leg_extension:
         # Mirrors ground_adapt.vertical_slack_for_reach for this hip once shifted.
         hip = col3(scratch, _R_HIP + 3 * s, j)
         hx, hy, hz = hip[0] + sx, hip[1] + sy, hip[2] + 0.0
-        reach = leg_extension * (scratch[at(_R_UPPER + s, j)] + scratch[at(_R_LOWER + s, j)])
+        reach = leg_reach(scratch, j, s, leg_extension)
         fx, fy, fz = col3(scratch, _R_FOOTPRINT + 3 * s, j)
         horizontal = math.sqrt((hx - fx) ** 2 + (hy - fy) ** 2)
         needed = fz + math.sqrt(max(reach**2 - horizontal**2, 0.0)) - hz
@@ -215,7 +223,7 @@ def newton_leg(scratch: F64, j: Column, s: int, move: Vec3,
     bend = knee_bend(scratch, j, s, move)
     to_ankle = sub(sub(col3(scratch, _R_ANKLE + 3 * s, j), col3(scratch, _R_HIP + 3 * s, j)),
                    move)
-    reach = leg_extension * (scratch[at(_R_UPPER + s, j)] + scratch[at(_R_LOWER + s, j)])
+    reach = leg_reach(scratch, j, s, leg_extension)
     return (knee_share * bend[0] - (knee_share + ankle_share) * move[0],
             knee_share * bend[1] - (knee_share + ankle_share) * move[1],
             math.sqrt(dot(to_ankle, to_ankle)) <= reach * (1.0 + 1e-9))

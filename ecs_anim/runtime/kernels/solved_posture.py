@@ -59,7 +59,9 @@ def posture_solved_rows(lo: int, hi: int, rows: I64, solved: DecodedArrays, pose
 @jit(inline="always")
 def copy_frames(dst: DecodedArrays, c: int, src: DecodedArrays, i: int) -> None:
     """The frames of row ``c`` of ``dst`` made those of row ``i`` of ``src`` (indices, not
-    :func:`.vec.copy_row`'s flat views, whose reshape calls numba's runtime)."""
+    :func:`.vec.copy_row`'s flat views, whose reshape calls numba's runtime): ``pelvis2world``,
+    ``thorax2world``, ``head2world`` (n, 3, 3); ``leg2world``, ``arm2world`` (n, 2, 3, 3)
+    (``dst``'s n rows, ``src``'s its own)."""
     for a in range(3):
         for b in range(3):
             dst.pelvis2world[c, a, b] = src.pelvis2world[i, a, b]

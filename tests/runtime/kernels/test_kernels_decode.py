@@ -221,3 +221,27 @@ def test_decode_block_equals_the_row_decode_bit_for_bit_on_edge_poses():
     for name, a, b in zip(FIELDS, blocks, by_row, strict=True):
         np.testing.assert_array_equal(a, b, err_msg=name)
     assert np.isnan(blocks.positions[11]).any() and np.isfinite(blocks.positions[:11]).all()
+
+
+def test_a_spine_that_never_converges_leaves_its_block_mates_as_they_decode_alone():
+    """A NaN spine never converges: its block's Newton iteration runs to the end for it (the
+    others keep their converged parameters). decode_rows over every row gives the bits of
+    decode_row row by row, and the NaN row's block-mates the bits they have without it (the
+    NaN row's own joints finite: a spine joint with no direction goes up, at_distance)."""
+    rng = np.random.default_rng(1312)
+    n = 2 * BLOCK + 5
+    poses = random_poses(rng, n)
+    lengths = random_bodies(rng, n)
+    rows = np.arange(n, dtype=np.int64)
+    finite = decoded_in_chunks(kd.pose_arrays(poses), lengths, rows, ((0, n),))
+    stuck = BLOCK + 7  # inside the second block
+    poses.spine_points[stuck] = np.nan
+    pose = kd.pose_arrays(poses)
+    whole = decoded_in_chunks(pose, lengths, rows, ((0, n),))
+    by_row = decoded_row_by_row(pose, lengths)
+    others = rows != stuck
+    for name, a, b, c in zip(FIELDS, whole, by_row, finite, strict=True):
+        np.testing.assert_array_equal(a, b, err_msg=name)
+        np.testing.assert_array_equal(a[others], c[others], err_msg=name)
+    assert np.isfinite(whole.positions).all()
+    assert not np.array_equal(whole.positions[stuck], finite.positions[stuck])

@@ -24,6 +24,7 @@ from ecs_anim.motion.constraints import Activation
 from ecs_anim.runtime.bench_scene import BenchScene
 from ecs_anim.runtime.kernels import solve as compiled
 from ecs_anim.runtime.kernels import solve_math as compiled_math
+from ecs_anim.runtime.kernels.decode import DecodedArrays, PoseArrays
 from ecs_anim.runtime.kernels.lanes import Column
 from ecs_anim.runtime.kernels.solve_head import solve_head
 from ecs_anim.runtime.kernels.solve_limbs import solve_limbs
@@ -160,10 +161,37 @@ def solved_in_chunks(args, chunks):
     return state, used
 
 
+def mixed_block(args):
+    """The bench walkers' solve ``args`` (own-body goals: each root step predicted) with
+    characters by ``c % 6`` made to take other ways through a block: 0 as they are (the first
+    root step waits for the block's), 1 a world target (its goals no longer follow the body:
+    not predicted), 2 a goal with the trunk in its chain (iterating), 3 no iteration allowed,
+    4 one, 5 the centre of mass already where it is wanted after the first pass (the root
+    stays). Returns the args and each character's variant (r,)."""
+    args = copy.deepcopy(args)
+    goals, masses, com_fraction, settings = args[2], args[3], args[4], args[5]
+    r = goals.rows.size
+    variant = np.arange(r) % 6
+    stays = np.isin(goals.owner[goals.on_self], np.flatnonzero(variant == 1))
+    for name in ("on_self", "self_segment", "self_fraction", "self_offset", "self_start"):
+        setattr(goals, name, getattr(goals, name)[~stays])
+    trunk = np.flatnonzero((variant[goals.owner] == 2) & (goals.table_index >= 0))
+    goals.chain[trunk] |= 1 << compiled._TRUNK
+    goals.row_iterations = np.full(r, int(settings.iterations), np.int64)
+    goals.row_iterations[variant == 3] = 0
+    goals.row_iterations[variant == 4] = 1
+    first_pass = copy.deepcopy(args)
+    first_pass[2].row_iterations[:] = 0
+    com = centres_of_mass(solver_shell.solve(*first_pass)[2].positions, masses, com_fraction)
+    goals.com_desired[variant == 5, :2] = com[variant == 5, :2]
+    return args, variant
+
+
 def test_a_solve_does_not_depend_on_its_blocks_nor_chunks(monkeypatch):
-    """``solve_rows`` computes the first root steps of a block's characters together (in the
-    lanes of the vector units, the rest in the loop's scalar remainder): each character gets
-    the same bits in one call over 40 bench walkers (a block of 32 and one of 8), in two chunks
+    """``solve_rows`` computes the first root steps of a block's waiting characters together
+    (in the lanes of the vector units, the rest in the loop's scalar remainder), the others'
+    alone: over 40 bench walkers (a block of 32 and one of 8) of which some wait and the others
+    do not (:func:`mixed_block`), each character gets the same bits in one call, in two chunks
     (0:37, 37:40: the first's second block of 5 rows) and row by row (each step alone); the
     numpy reference agrees to 1e-9 m."""
     capture = Capture(monkeypatch)
@@ -171,17 +199,31 @@ def test_a_solve_does_not_depend_on_its_blocks_nor_chunks(monkeypatch):
     for _ in range(3):
         scene.tick()
     scene.sim.close()
-    args = capture.calls[-1]
+    args, variant = mixed_block(capture.calls[-1])
     assert_same_solve(args)
     whole, used = solved_in_chunks(args, [(0, 40)])
-    assert used.max() >= 1  # the root steps ran
+    goals = args[2]
+    user = goals.table_index >= 0
+    free = np.bincount(goals.owner[user & ((goals.chain & (1 << compiled._TRUNK)) == 0)
+                                   & np.isin(np.arange(goals.k), goals.on_self)],
+                       minlength=40)
+    predicted = free == np.bincount(goals.owner[user], minlength=40)
+    np.testing.assert_array_equal(predicted, np.isin(variant, (0, 3, 4, 5)))
+    # Those that wait took their first root step (the block's); the others none, or their own.
+    assert np.all(used[variant == 0] >= 1)
+    assert np.all(used[variant == 4] == 1)
+    assert np.all(used[(variant == 3) | (variant == 5)] == 0)
+    assert np.all(used[(variant == 1) | (variant == 2)] >= 1)
     for chunks in ([(0, 37), (37, 40)], [(c, c + 1) for c in range(40)]):
         state, used_here = solved_in_chunks(args, chunks)
         np.testing.assert_array_equal(used_here, used)
-        for name in ("positions", "leg2world", "arm2world"):
-            np.testing.assert_array_equal(getattr(state.dec, name), getattr(whole.dec, name))
-        np.testing.assert_array_equal(state.pose.root_position, whole.pose.root_position)
-        np.testing.assert_array_equal(state.pose.leg_frame, whole.pose.leg_frame)
+        for name in DecodedArrays._fields:
+            np.testing.assert_array_equal(getattr(state.dec, name), getattr(whole.dec, name),
+                                          err_msg=name)
+        for name in PoseArrays._fields:
+            np.testing.assert_array_equal(getattr(state.pose, name), getattr(whole.pose, name),
+                                          err_msg=name)
+        np.testing.assert_array_equal(state.goals.goal, whole.goals.goal)
 
 
 # --- each step against its numpy counterpart, on real solve states -------------------------
