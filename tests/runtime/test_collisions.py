@@ -104,6 +104,16 @@ def test_the_grid_finds_every_overlap_a_search_of_all_pairs_finds():
     np.testing.assert_allclose(np.linalg.norm(found.normal[hit], axis=1), 1.0)
 
 
+def _scattered_adults(rng: np.random.Generator, n: int
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``n`` adult males' lengths (n, lengths), random joints about each pelvis (n, joints, 3)
+    and spots (n, 3) on the ground within 9 m: a crowd some of whose bodies meet."""
+    lengths = np.tile(Morphology.preset("adult_male").lengths, (n, 1))
+    standing = rng.normal(scale=0.25, size=(n, N_JOINTS, 3))
+    standing[:, J["pelvis"]] = 0.0
+    return lengths, standing, rng.uniform(0, 9.0, size=(n, 3)) * [1, 1, 0]
+
+
 def test_the_search_over_the_bodies_that_touch_finds_what_a_search_of_all_finds():
     """CollisionSeparate searches only the bodies whose bounds meet another's (bounds from the
     joints, no capsule made: wider than the capsules'), the capsules made for those alone: the
@@ -111,10 +121,7 @@ def test_the_search_over_the_bodies_that_touch_finds_what_a_search_of_all_finds(
     out overlap no one."""
     rng = np.random.default_rng(3204)
     n = 60
-    lengths = np.tile(Morphology.preset("adult_male").lengths, (n, 1))
-    standing = rng.normal(scale=0.25, size=(n, N_JOINTS, 3))
-    standing[:, J["pelvis"]] = 0.0
-    spots = rng.uniform(0, 9.0, size=(n, 3)) * [1, 1, 0]
+    lengths, standing, spots = _scattered_adults(rng, n)
     positions = standing + spots[:, None]
     every = overlaps(capsules(positions, lengths))
     body = bounds(positions, lengths, Capsules.empty(n))
@@ -141,10 +148,7 @@ def test_the_search_measures_gaps_only_when_asked_and_they_are_the_least(apart):
 
     rng = np.random.default_rng(3205)
     n = 60
-    lengths = np.tile(Morphology.preset("adult_male").lengths, (n, 1))
-    standing = rng.normal(scale=0.25, size=(n, N_JOINTS, 3))
-    standing[:, J["pelvis"]] = 0.0
-    spots = rng.uniform(0, 9.0, size=(n, 3)) * [1, 1, 0]
+    lengths, standing, spots = _scattered_adults(rng, n)
     if apart:  # on a grid 5 m apart, each within 1 m of its point
         spots = np.stack([5.0 * (np.arange(n) // 8), 5.0 * (np.arange(n) % 8),
                           np.zeros(n)], axis=1) + rng.uniform(0, 1.0, size=(n, 3)) * [1, 1, 0]
