@@ -611,25 +611,41 @@ def gather_block(start: int, stop: int, rows: I64, pose: PoseArrays, lengths: F6
         scratch[at(_S_PREV_T, j)] = 0.0
 
 
+#: A limb's rows in the block scratch, its first length and its first joint, side 0 (side s:
+#: its root's direction + 3 s, frame + 4 s, fraction + s, end's direction + 3 s, limb2world
+#: + 9 s; its lengths every other one from the first, + s; its joints root, middle, end, tip
+#: + 4 s).
+_LEG_LAYOUT = (_B_HIP_DIR, _B_LEG_FRAME, _B_LEG_FRACTION, _B_FOOT_DIR, _B_LEG2WORLD, L_PELVIS,
+               HIP)
+_ARM_LAYOUT = (_B_CLAVICLE_DIR, _B_ARM_FRAME, _B_ARM_FRACTION, _B_HAND_DIR, _B_ARM2WORLD,
+               L_CLAVICLE, SHOULDER)
+assert (L_THIGH, L_SHANK, L_FOOT) == (L_PELVIS + 2, L_PELVIS + 4, L_PELVIS + 6)
+assert (L_UPPER_ARM, L_FOREARM, L_HAND) == (L_CLAVICLE + 2, L_CLAVICLE + 4, L_CLAVICLE + 6)
+
+
 @jit(inline="always")
-def _leg_lanes(scratch: F64, j: Column, s: int, pelvis: Vec3, pelvis2world: Frame,
-               pelvis2world_q: Quat) -> None:
-    """Leg ``s`` of :func:`lower_lanes` (:func:`_decoded_leg`'s operations): its hip, knee,
-    ankle, toe and leg2world into column ``j``."""
-    hip = add(pelvis, scale(to_world(pelvis2world, col3(scratch, _B_HIP_DIR + 3 * s, j)),
-                            _length(scratch, L_PELVIS + s, j)))
-    leg2world = rotation_from_quat(world_quat(pelvis2world_q,
-                                              col4(scratch, _B_LEG_FRAME + 4 * s, j)))
-    thigh, shank = _length(scratch, L_THIGH + s, j), _length(scratch, L_SHANK + s, j)
-    knee, ankle, shank2world = limb_from_root(
-        leg2world, hip, thigh, shank, scratch[at(_B_LEG_FRACTION + s, j)] * (thigh + shank))
-    toe = add(ankle, scale(to_world(shank2world, col3(scratch, _B_FOOT_DIR + 3 * s, j)),
-                           _length(scratch, L_FOOT + s, j)))
-    put3(scratch, _B_POSITIONS + 3 * (HIP + 4 * s), j, hip)
-    put3(scratch, _B_POSITIONS + 3 * (KNEE + 4 * s), j, knee)
-    put3(scratch, _B_POSITIONS + 3 * (ANKLE + 4 * s), j, ankle)
-    put3(scratch, _B_POSITIONS + 3 * (TOE + 4 * s), j, toe)
-    put_matrix(scratch, _B_LEG2WORLD + 9 * s, j, leg2world)
+def _limb_lanes(scratch: F64, j: Column, s: int, layout: tuple[int, int, int, int, int, int, int],
+                parent: Vec3, parent2world: Frame, parent2world_q: Quat) -> None:
+    """Limb ``s`` (a leg from the pelvis, :data:`_LEG_LAYOUT`, or an arm from the neck,
+    :data:`_ARM_LAYOUT`) of :func:`lower_lanes` or :func:`upper_lanes` (:func:`_decoded_leg`'s
+    and :func:`decode_upper_row`'s operations): its root (hip, shoulder), middle, end, tip and
+    limb2world into column ``j``."""
+    root_dir, frame, fraction, end_dir, limb2world_row, first_length, first_joint = layout
+    root = add(parent, scale(to_world(parent2world, col3(scratch, root_dir + 3 * s, j)),
+                             _length(scratch, first_length + s, j)))
+    limb2world = rotation_from_quat(world_quat(parent2world_q, col4(scratch, frame + 4 * s, j)))
+    upper = _length(scratch, first_length + 2 + s, j)
+    lower = _length(scratch, first_length + 4 + s, j)
+    middle, end, lower2world = limb_from_root(
+        limb2world, root, upper, lower, scratch[at(fraction + s, j)] * (upper + lower))
+    tip = add(end, scale(to_world(lower2world, col3(scratch, end_dir + 3 * s, j)),
+                         _length(scratch, first_length + 6 + s, j)))
+    joint = first_joint + 4 * s
+    put3(scratch, _B_POSITIONS + 3 * joint, j, root)
+    put3(scratch, _B_POSITIONS + 3 * (joint + 1), j, middle)
+    put3(scratch, _B_POSITIONS + 3 * (joint + 2), j, end)
+    put3(scratch, _B_POSITIONS + 3 * (joint + 3), j, tip)
+    put_matrix(scratch, limb2world_row + 9 * s, j, limb2world)
 
 
 # A call, not inlined (as spine_block).
@@ -652,29 +668,8 @@ def lower_lanes(scratch: F64, start: Column, stop: Column) -> None:
         put3(scratch, _B_POSITIONS + 3 * PELVIS, j, pelvis)
         put_matrix(scratch, _B_PELVIS2WORLD, j, pelvis2world)
         # (Both legs spelled out: as a loop over the sides, LLVM vectorized nothing.)
-        _leg_lanes(scratch, j, 0, pelvis, pelvis2world, pelvis2world_q)
-        _leg_lanes(scratch, j, 1, pelvis, pelvis2world, pelvis2world_q)
-
-
-@jit(inline="always")
-def _arm_lanes(scratch: F64, j: Column, s: int, neck: Vec3, thorax2world: Frame,
-               thorax2world_q: Quat) -> None:
-    """Arm ``s`` of :func:`upper_lanes` (:func:`decode_upper_row`'s operations): its
-    shoulder, elbow, wrist, hand and arm2world into column ``j``."""
-    shoulder = add(neck, scale(to_world(thorax2world, col3(scratch, _B_CLAVICLE_DIR + 3 * s, j)),
-                               _length(scratch, L_CLAVICLE + s, j)))
-    arm2world = rotation_from_quat(world_quat(thorax2world_q,
-                                              col4(scratch, _B_ARM_FRAME + 4 * s, j)))
-    upper, fore = _length(scratch, L_UPPER_ARM + s, j), _length(scratch, L_FOREARM + s, j)
-    elbow, wrist, forearm2world = limb_from_root(
-        arm2world, shoulder, upper, fore, scratch[at(_B_ARM_FRACTION + s, j)] * (upper + fore))
-    hand = add(wrist, scale(to_world(forearm2world, col3(scratch, _B_HAND_DIR + 3 * s, j)),
-                            _length(scratch, L_HAND + s, j)))
-    put3(scratch, _B_POSITIONS + 3 * (SHOULDER + 4 * s), j, shoulder)
-    put3(scratch, _B_POSITIONS + 3 * (ELBOW + 4 * s), j, elbow)
-    put3(scratch, _B_POSITIONS + 3 * (WRIST + 4 * s), j, wrist)
-    put3(scratch, _B_POSITIONS + 3 * (HAND + 4 * s), j, hand)
-    put_matrix(scratch, _B_ARM2WORLD + 9 * s, j, arm2world)
+        _limb_lanes(scratch, j, 0, _LEG_LAYOUT, pelvis, pelvis2world, pelvis2world_q)
+        _limb_lanes(scratch, j, 1, _LEG_LAYOUT, pelvis, pelvis2world, pelvis2world_q)
 
 
 @jit(inline="always")
@@ -711,8 +706,8 @@ def upper_lanes(scratch: F64, start: Column, stop: Column) -> None:
                              _length(scratch, L_HEAD, j))))
         put_matrix(scratch, _B_THORAX2WORLD, j, thorax2world)
         put_matrix(scratch, _B_HEAD2WORLD, j, head2world)
-        _arm_lanes(scratch, j, 0, neck, thorax2world, thorax2world_q)
-        _arm_lanes(scratch, j, 1, neck, thorax2world, thorax2world_q)
+        _limb_lanes(scratch, j, 0, _ARM_LAYOUT, neck, thorax2world, thorax2world_q)
+        _limb_lanes(scratch, j, 1, _ARM_LAYOUT, neck, thorax2world, thorax2world_q)
 
 
 @jit()
