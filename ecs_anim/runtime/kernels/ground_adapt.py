@@ -174,8 +174,10 @@ _S_PITCHED, _S_PITCHED_GROUND = _S_P_FOOT + 2, _S_P_FOOT + 8
 # Which query answers each foot's blended target (side s at + s; from PITCH_QUERIES on, -1:
 # none asked, its ground known).
 _S_Q_BLEND = _S_PITCHED_GROUND + 2
+# The re-aimed feet's directions (side s at + 3 s; their lengths: _S_FOOT_LENGTH's rows).
+_S_AXIS = _S_Q_BLEND + 2
 #: Rows of a block's scratch (:func:`ground_scratch`).
-GROUND_SCRATCH_ROWS = _S_Q_BLEND + 2
+GROUND_SCRATCH_ROWS = _S_AXIS + 6
 
 
 def ground_scratch(n: int) -> F64:
@@ -253,7 +255,8 @@ def _turn_leg_lanes(scratch: F64, j: Column, s: int, hip: Vec3, world2pelvis: Fr
                     reach: float) -> None:
     """One leg of :func:`reaim_lanes`: leg ``s`` of column ``j`` turned from its motion's
     frame towards its target from its new ``hip``; its frame (in the pelvis, a quaternion)
-    and fraction, and the leg decoded below the hip, into the column."""
+    and fraction, the leg decoded below the hip, and the foot's length and direction
+    (:func:`_foot_axis`), into the column."""
     leg2world = _col_frame(scratch, _S_L2W + 9 * s, j)
     thigh, shank = scratch[_at(_S_THIGH + s, j)], scratch[_at(_S_SHANK + s, j)]
     to_target = sub(_col3(scratch, _S_TARGET + 3 * s, j), hip)
@@ -264,6 +267,9 @@ def _turn_leg_lanes(scratch: F64, j: Column, s: int, hip: Vec3, world2pelvis: Fr
     fraction = min(norm(to_target), reach) / (thigh + shank)
     scratch[_at(_S_FRACTION + s, j)] = fraction
     _below_hip_lanes(scratch, j, s, hip, turned, fraction, True)
+    foot, d = _foot_axis(_col3(scratch, _S_ANKLE + 3 * s, j), _col3(scratch, _S_TOE + 3 * s, j))
+    scratch[_at(_S_FOOT_LENGTH + s, j)] = foot
+    _put3(scratch, _S_AXIS + 3 * s, j, d)
 
 
 # A call (one compiled body for the block loop and a row's later passes), not inlined.
@@ -274,7 +280,8 @@ def reaim_lanes(scratch: F64, start: Column, stop: Column, max_extension: float)
     on the vector units: the pelvis lowered as the legs in contact need (their targets and
     contact weights), moved horizontally where a leg cannot reach by that, the legs re-aimed
     from the motion's frames (hips, pelvis and leg frames as decoded before adaptation), and
-    decoded below the hips (:func:`.decode.leg_below_hip`: ankles, toes, shank frames), as
+    decoded below the hips (:func:`.decode.leg_below_hip`: ankles, toes, shank frames, and
+    the feet's axes), as
     the pose's root position, leg frames and fractions written would decode, within rounding.
     The same bits in a vector lane or alone (no fastmath, no branch)."""
     for k in range(start, stop):
@@ -865,10 +872,12 @@ def ground_adapt_after(i: Column, c: int, pose: LegPoseArrays, lengths: F64,
     adapt_keeping_heels_up(i, c, pose, scratch, kinds, params, grid, is_smooth, ankle_height,
                            max_extension, heel_tolerance, heel_passes)
     for s in range(2):
-        ankle, foot, d = _last_pitch_start(i, c, s, contact_weight, scratch)
-        scratch[_at(_S_FOOT_LENGTH + s, i)] = foot
-        _put3(scratch, _S_DIR + 3 * s, i, d)
-        end = add_scaled(ankle, d, 1.0 * foot)
+        # The direction the foot is pitched from last: a planted foot's as it stands, a
+        # ramping one's as the motion has it in the world, a free one's as in its shank.
+        if not contact_weight[c, s] > 0.0:
+            _put3(scratch, _S_DIR + 3 * s, i, _col3(scratch, _S_AXIS + 3 * s, i))
+        end = add_scaled(_col3(scratch, _S_ANKLE + 3 * s, i), _col3(scratch, _S_DIR + 3 * s, i),
+                         1.0 * scratch[_at(_S_FOOT_LENGTH + s, i)])
         known = _col3(scratch, _S_KNOWN + 3 * s, i)
         scratch[_at(_S_Q_END + s, i)] = -1.0
         # a planted foot's toe end where it stood is known (as .ground.height_near would take it)
@@ -876,19 +885,6 @@ def ground_adapt_after(i: Column, c: int, pose: LegPoseArrays, lengths: F64,
             scratch[_at(_S_Q_END + s, i)] = count
             count = _ask(scratch, count, end[0], end[1])
     return count
-
-
-@jit(inline="always")
-def _last_pitch_start(i: Column, c: int, s: int, contact_weight: F64, scratch: F64
-                      ) -> tuple[Vec3, float, Vec3]:
-    """(ankle, foot length, direction) foot ``s`` of row ``c`` is pitched from last (column
-    ``i``, re-aimed): a planted foot's direction as it stands, a ramping one's as the motion
-    has it in the world, a free one's as in its shank."""
-    ankle = _col3(scratch, _S_ANKLE + 3 * s, i)
-    foot, d = _foot_axis(ankle, _col3(scratch, _S_TOE + 3 * s, i))
-    if contact_weight[c, s] > 0.0:
-        d = _col3(scratch, _S_DIR + 3 * s, i)
-    return ankle, foot, d
 
 
 @jit(inline="always")  # one call site
