@@ -10,10 +10,11 @@ feet lifted clear of the ground, the toes pitched onto it) with :func:`ecs_anim.
 Every decision the numpy code takes for the whole batch (another heel pass, the toe passes) is
 taken here per character, so a character's result never depends on who else is in the batch.
 By blocks of :data:`.lanes.BLOCK` characters (:func:`ground_adapt_rows`): the motion's pelvis
-and legs decoded (:func:`decode_lanes`) and the legs' first re-aiming (:func:`reaim_lanes`) in
-loops over the block that run on the vector units, the rest (footprints, the ground's queries,
-the secant passes, the heel checks) row by row; a row's result is the same, to the bit, in a
-vector lane or alone.
+and legs decoded (:func:`decode_lanes`), the legs' first re-aiming (:func:`reaim_lanes`), the
+ground's queries (:func:`heights_lanes`) and the feet's secant passes (:func:`pitch_lanes`) in
+loops over the block that run on the vector units, the rest (footprints, the pitches' first
+steps, the heel checks) row by row; a row's result is the same, to the bit, in a vector lane
+or alone.
 
 Length indices are literals (numba's cache keys on this file's source); an import-time
 check pins them to the skeleton.
@@ -942,10 +943,12 @@ def ground_adapt_rows(lo: int, hi: int, rows: I64, pose: LegPoseArrays, lengths:
 
     By blocks of :data:`.lanes.BLOCK` rows: the motion decoded (:func:`decode_lanes`), each
     row's feet laid and the ground asked under them, the block's queries answered at once
-    (:func:`heights_lanes`), each row up to its legs' re-aiming, the block's first re-aiming
-    (:func:`reaim_lanes`), each row on to the ground under its toes asked, the queries
-    answered, and each row's last pitch; each row's result is the same, to the bit, whatever
-    its block.
+    (:func:`heights_lanes`), the feet in contact pitched (:func:`pitch_planted`, the block's
+    at once in :func:`pitch_lanes`), each row up to its legs' re-aiming (the blends' ground
+    asked, answered, :func:`lift_targets`), the block's first re-aiming (:func:`reaim_lanes`),
+    each row on to the ground under its toes asked, the queries answered, the feet pitched
+    (:func:`pitch_last`, :func:`pitch_lanes`) and their directions written; each row's result
+    is the same, to the bit, whatever its block.
     """
     kinds, params, grid = ground
     is_smooth = smooth(kinds)
