@@ -186,7 +186,7 @@ def ground_scratch(n: int) -> F64:
     GROUND_SCRATCH_ROWS rows of BLOCK, flat). The chunk of rows from ``lo`` uses the block
     scratch ``lo // BLOCK`` for each of its blocks in turn (so chunks of at least
     :data:`.lanes.BLOCK` rows, ``over_chunks``' ``rows_per_thread``, never share one; one
-    thread touches only the first: 40 kB)."""
+    thread touches only the first: 52 kB)."""
     return np.empty((n // BLOCK + 1, GROUND_SCRATCH_ROWS * BLOCK))
 
 
