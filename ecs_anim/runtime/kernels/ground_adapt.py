@@ -10,10 +10,11 @@ feet lifted clear of the ground, the toes pitched onto it) with :func:`ecs_anim.
 Every decision the numpy code takes for the whole batch (another heel pass, the toe passes) is
 taken here per character, so a character's result never depends on who else is in the batch.
 By blocks of :data:`.lanes.BLOCK` characters (:func:`ground_adapt_rows`): the motion's pelvis
-and legs decoded (:func:`decode_lanes`) and the legs' first re-aiming (:func:`reaim_lanes`) in
-loops over the block that run on the vector units, the rest (footprints, the ground's queries,
-the secant passes, the heel checks) row by row; a row's result is the same, to the bit, in a
-vector lane or alone.
+and legs decoded (:func:`decode_lanes`), the legs' first re-aiming (:func:`reaim_lanes`), the
+ground's queries (:func:`heights_lanes`) and the feet's secant passes (:func:`pitch_lanes`) in
+loops over the block that run on the vector units, the rest (footprints, the pitches' first
+steps, the heel checks) row by row; a row's result is the same, to the bit, in a vector lane
+or alone.
 
 Length indices are literals (numba's cache keys on this file's source); an import-time
 check pins them to the skeleton.
@@ -144,18 +145,40 @@ _S_UNDER, _S_KNOWN, _S_DIR, _S_FOOT_LENGTH = 101, 103, 109, 129
 #: The most ground queries a row asks between two answers (:func:`heights_lanes`): each foot's
 #: three in :func:`_lay` (ground_adapt_after asks one a foot).
 QUERIES_PER_ROW = 6
+#: The block's feet being pitched (:func:`pitch_lanes`) ask theirs from this query on (one a
+#: foot, after the rows' QUERIES_PER_ROW).
+PITCH_QUERIES = QUERIES_PER_ROW * BLOCK
 # The block's ground queries: their x, y and the ground's height under them (query k of each
-# in column k of the rows from these on, QUERIES_PER_ROW rows of BLOCK each) ...
+# in column k of the rows from these on, QUERIES_PER_ROW + 2 rows of BLOCK each) ...
 _S_Q_X = 131
-_S_Q_Y = _S_Q_X + QUERIES_PER_ROW
-_S_Q_HEIGHT = _S_Q_Y + QUERIES_PER_ROW
+_S_Q_Y = _S_Q_X + QUERIES_PER_ROW + 2
+_S_Q_HEIGHT = _S_Q_Y + QUERIES_PER_ROW + 2
 # ... and which query answers each foot (side s at + s): under the motion's ankle and toe (a
 # foot not planted: its target's) and under the end of a foot pitched (its first end); -1:
 # none asked.
-_S_Q_ANKLE = _S_Q_HEIGHT + QUERIES_PER_ROW
+_S_Q_ANKLE = _S_Q_HEIGHT + QUERIES_PER_ROW + 2
 _S_Q_TOE, _S_Q_END = _S_Q_ANKLE + 2, _S_Q_ANKLE + 4
+# The feet of a block still being pitched (pitch_lanes), entry k of each field in column k of
+# its two rows (2 * BLOCK entries: both feet of each row): the joint the foot turns about, the
+# horizontal heading of its direction, its rise (the other end's distance along it, signed),
+# the clearance wanted there; the secant's state (the direction's z and the deficit, now and
+# at the last pass); where the last pass put the direction and the other end's height; the
+# foot (2 column + side) ...
+_S_P_ORIGIN = _S_Q_END + 2  # x, y, z at + 2, + 4
+_S_P_HEADING = _S_P_ORIGIN + 6  # x, y at + 2
+_S_P_RISE, _S_P_CLEARANCE, _S_P_DZ, _S_P_DEFICIT = (_S_P_HEADING + 4 + 2 * k for k in range(4))
+_S_P_LAST_DZ, _S_P_LAST_DEFICIT, _S_P_DX, _S_P_DY = (_S_P_DEFICIT + 2 + 2 * k for k in range(4))
+_S_P_END_Z, _S_P_FOOT = _S_P_DY + 2, _S_P_DY + 4
+# ... and each foot's pitch (side s's direction at + 3 s, the ground under its other end at
+# + s): the direction it starts from and its first end's ground until pitch_lanes turns it.
+_S_PITCHED, _S_PITCHED_GROUND = _S_P_FOOT + 2, _S_P_FOOT + 8
+# Which query answers each foot's blended target (side s at + s; from PITCH_QUERIES on, -1:
+# none asked, its ground known).
+_S_Q_BLEND = _S_PITCHED_GROUND + 2
+# The re-aimed feet's directions (side s at + 3 s; their lengths: _S_FOOT_LENGTH's rows).
+_S_AXIS = _S_Q_BLEND + 2
 #: Rows of a block's scratch (:func:`ground_scratch`).
-GROUND_SCRATCH_ROWS = _S_Q_END + 2
+GROUND_SCRATCH_ROWS = _S_AXIS + 6
 
 
 def ground_scratch(n: int) -> F64:
@@ -163,7 +186,7 @@ def ground_scratch(n: int) -> F64:
     GROUND_SCRATCH_ROWS rows of BLOCK, flat). The chunk of rows from ``lo`` uses the block
     scratch ``lo // BLOCK`` for each of its blocks in turn (so chunks of at least
     :data:`.lanes.BLOCK` rows, ``over_chunks``' ``rows_per_thread``, never share one; one
-    thread touches only the first: 40 kB)."""
+    thread touches only the first: 52 kB)."""
     return np.empty((n // BLOCK + 1, GROUND_SCRATCH_ROWS * BLOCK))
 
 
@@ -233,7 +256,8 @@ def _turn_leg_lanes(scratch: F64, j: Column, s: int, hip: Vec3, world2pelvis: Fr
                     reach: float) -> None:
     """One leg of :func:`reaim_lanes`: leg ``s`` of column ``j`` turned from its motion's
     frame towards its target from its new ``hip``; its frame (in the pelvis, a quaternion)
-    and fraction, and the leg decoded below the hip, into the column."""
+    and fraction, the leg decoded below the hip, and the foot's length and direction
+    (:func:`_foot_axis`), into the column."""
     leg2world = _col_frame(scratch, _S_L2W + 9 * s, j)
     thigh, shank = scratch[_at(_S_THIGH + s, j)], scratch[_at(_S_SHANK + s, j)]
     to_target = sub(_col3(scratch, _S_TARGET + 3 * s, j), hip)
@@ -244,6 +268,9 @@ def _turn_leg_lanes(scratch: F64, j: Column, s: int, hip: Vec3, world2pelvis: Fr
     fraction = min(norm(to_target), reach) / (thigh + shank)
     scratch[_at(_S_FRACTION + s, j)] = fraction
     _below_hip_lanes(scratch, j, s, hip, turned, fraction, True)
+    foot, d = _foot_axis(_col3(scratch, _S_ANKLE + 3 * s, j), _col3(scratch, _S_TOE + 3 * s, j))
+    scratch[_at(_S_FOOT_LENGTH + s, j)] = foot
+    _put3(scratch, _S_AXIS + 3 * s, j, d)
 
 
 # A call (one compiled body for the block loop and a row's later passes), not inlined.
@@ -254,7 +281,8 @@ def reaim_lanes(scratch: F64, start: Column, stop: Column, max_extension: float)
     on the vector units: the pelvis lowered as the legs in contact need (their targets and
     contact weights), moved horizontally where a leg cannot reach by that, the legs re-aimed
     from the motion's frames (hips, pelvis and leg frames as decoded before adaptation), and
-    decoded below the hips (:func:`.decode.leg_below_hip`: ankles, toes, shank frames), as
+    decoded below the hips (:func:`.decode.leg_below_hip`: ankles, toes, shank frames, and
+    the feet's axes), as
     the pose's root position, leg frames and fractions written would decode, within rounding.
     The same bits in a vector lane or alone (no fastmath, no branch)."""
     for k in range(start, stop):
@@ -308,8 +336,9 @@ def _answer(scratch: F64, query: float) -> float:
 
 
 @jit()
-def heights_lanes(scratch: F64, count: int, kinds: I64, params: F64, grid: F64) -> None:
-    """:func:`.ground.height_at` under the block's first ``count`` queries (:func:`_ask`) of
+def heights_lanes(scratch: F64, start: int, stop: int, kinds: I64, params: F64, grid: F64
+                  ) -> None:
+    """:func:`.ground.height_at` under the block's queries ``start:stop`` (:func:`_ask`) of
     ``scratch`` (a block's ground scratch, :func:`ground_scratch`), into their heights (m); the
     ground as described by :func:`ecs_anim.core.ground.describe`: ``kinds`` (parts,),
     ``params`` (parts, N_GROUND_PARAMS), ``grid`` the height grids' values. On a plane, a slope
@@ -318,7 +347,7 @@ def heights_lanes(scratch: F64, count: int, kinds: I64, params: F64, grid: F64) 
     lone = kinds[0] if kinds.shape[0] == 1 else -1  # the kind of a lone part
     if lone == PLANE or lone == SLOPE:
         z, grade_x, grade_y = params[0, 0], params[0, 1], params[0, 2]
-        for k in range(count):
+        for k in range(start, stop):
             j = Column(k)
             slope = z + grade_x * scratch[_at(_S_Q_X, j)] + grade_y * scratch[_at(_S_Q_Y, j)]
             scratch[_at(_S_Q_HEIGHT, j)] = 0.0 + (z if lone == PLANE else slope)
@@ -326,20 +355,103 @@ def heights_lanes(scratch: F64, count: int, kinds: I64, params: F64, grid: F64) 
     if lone == BUMPS:
         z, amplitude, kx, ky = params[0, 0], params[0, 1], params[0, 2], params[0, 3]
         outside = 0
-        for k in range(count):
+        for k in range(start, stop):
             j = Column(k)
             inside = bumps_in_domain(scratch[_at(_S_Q_X, j)], scratch[_at(_S_Q_Y, j)], kx, ky)
             outside += 0 if inside else 1
         if outside == 0:
-            for k in range(count):
+            for k in range(start, stop):
                 j = Column(k)
                 scratch[_at(_S_Q_HEIGHT, j)] = 0.0 + bumps_height(
                     scratch[_at(_S_Q_X, j)], scratch[_at(_S_Q_Y, j)], z, amplitude, kx, ky)
             return
-    for k in range(count):
+    for k in range(start, stop):
         j = Column(k)
         scratch[_at(_S_Q_HEIGHT, j)] = height_at(scratch[_at(_S_Q_X, j)],
                                                  scratch[_at(_S_Q_Y, j)], kinds, params, grid)
+
+
+@jit(inline="always")
+def _to_pitch(scratch: F64, count: int, j: Column, s: int, origin: Vec3, d: Vec3,
+              foot: float, sign: float, clearance: float, ground: float) -> int:
+    """Foot ``s`` of column ``j`` pitched as :func:`pitched_from` (the same arguments; ``count``
+    feet of the block already waiting): its direction and first end's ground into the
+    column's ``_S_PITCHED`` rows, and the foot made entry ``count`` of :func:`pitch_lanes` if
+    that end is too low; returns the feet waiting now."""
+    _put3(scratch, _S_PITCHED + 3 * s, j, d)
+    scratch[_at(_S_PITCHED_GROUND + s, j)] = ground
+    end = add_scaled(origin, d, sign * foot)
+    deficit = ground + clearance - end[2]
+    if not deficit > TOE_TOLERANCE_M:
+        return count
+    k = Column(count)
+    flat = max(math.sqrt(d[0] * d[0] + d[1] * d[1]), 1e-9)
+    for a in range(3):
+        scratch[_at(_S_P_ORIGIN + 2 * a, k)] = origin[a]
+    scratch[_at(_S_P_HEADING, k)], scratch[_at(_S_P_HEADING + 2, k)] = d[0] / flat, d[1] / flat
+    scratch[_at(_S_P_RISE, k)], scratch[_at(_S_P_CLEARANCE, k)] = sign * foot, clearance
+    scratch[_at(_S_P_DZ, k)], scratch[_at(_S_P_DEFICIT, k)] = d[2], deficit
+    scratch[_at(_S_P_LAST_DZ, k)], scratch[_at(_S_P_LAST_DEFICIT, k)] = d[2], deficit
+    scratch[_at(_S_P_FOOT, k)] = 2 * j + s
+    return count + 1
+
+
+# The fields of a pitch_lanes entry that a pass carries to the next.
+_PITCH_STATE = (_S_P_ORIGIN, _S_P_ORIGIN + 2, _S_P_ORIGIN + 4, _S_P_HEADING, _S_P_HEADING + 2,
+                _S_P_RISE, _S_P_CLEARANCE, _S_P_DZ, _S_P_DEFICIT, _S_P_LAST_DZ,
+                _S_P_LAST_DEFICIT, _S_P_FOOT)
+
+
+@jit()
+def pitch_lanes(scratch: F64, count: int, kinds: I64, params: F64, grid: F64, passes: int
+                ) -> None:
+    """:func:`pitched_from`'s secant passes for the ``count`` feet of a block :func:`_to_pitch`
+    made entries of ``scratch`` (a block's ground scratch), with the same bits: each pass a
+    loop over the feet still too low that runs on the vector units, their ground asked at
+    once (:func:`heights_lanes`), then those still too low gathered to the front (the others'
+    direction and ground written into their columns' ``_S_PITCHED`` rows), at most
+    ``passes`` times."""
+    for turn in range(passes):
+        if count == 0:
+            return
+        for e in range(count):
+            k = Column(e)
+            dz, deficit = scratch[_at(_S_P_DZ, k)], scratch[_at(_S_P_DEFICIT, k)]
+            rise = scratch[_at(_S_P_RISE, k)]
+            slope = pitch_slope(dz, deficit, scratch[_at(_S_P_LAST_DZ, k)],
+                                scratch[_at(_S_P_LAST_DEFICIT, k)], rise)
+            scratch[_at(_S_P_LAST_DZ, k)], scratch[_at(_S_P_LAST_DEFICIT, k)] = dz, deficit
+            dz = min(max(dz - deficit / slope, -1.0), 1.0)
+            along = math.sqrt(1.0 - dz * dz)
+            d = (scratch[_at(_S_P_HEADING, k)] * along, scratch[_at(_S_P_HEADING + 2, k)] * along,
+                 dz)
+            origin = (scratch[_at(_S_P_ORIGIN, k)], scratch[_at(_S_P_ORIGIN + 2, k)],
+                      scratch[_at(_S_P_ORIGIN + 4, k)])
+            end = add_scaled(origin, d, rise)
+            q = Column(PITCH_QUERIES) + k
+            scratch[_at(_S_Q_X, q)], scratch[_at(_S_Q_Y, q)] = end[0], end[1]
+            scratch[_at(_S_P_END_Z, k)] = end[2]
+            scratch[_at(_S_P_DX, k)], scratch[_at(_S_P_DY, k)] = d[0], d[1]
+            scratch[_at(_S_P_DZ, k)] = dz
+        heights_lanes(scratch, PITCH_QUERIES, PITCH_QUERIES + count, kinds, params, grid)
+        waiting = 0
+        for e in range(count):
+            k = Column(e)
+            ground = scratch[_at(_S_Q_HEIGHT, Column(PITCH_QUERIES) + k)]
+            deficit = ground + scratch[_at(_S_P_CLEARANCE, k)] - scratch[_at(_S_P_END_Z, k)]
+            scratch[_at(_S_P_DEFICIT, k)] = deficit
+            if deficit > TOE_TOLERANCE_M and turn + 1 < passes:
+                for r in _PITCH_STATE:
+                    scratch[_at(r, Column(waiting))] = scratch[_at(r, k)]
+                waiting += 1
+            else:
+                foot = int(scratch[_at(_S_P_FOOT, k)])
+                j, s = Column(foot // 2), foot % 2
+                _put3(scratch, _S_PITCHED + 3 * s, j, (scratch[_at(_S_P_DX, k)],
+                                                       scratch[_at(_S_P_DY, k)],
+                                                       scratch[_at(_S_P_DZ, k)]))
+                scratch[_at(_S_PITCHED_GROUND + s, j)] = ground
+        count = waiting
 
 
 @jit(inline="always")  # one call site
@@ -429,14 +541,13 @@ def pitched_from(origin: Vec3, d: Vec3, foot: float, sign: float, clearance: flo
 def pitch_slope(dz: float, deficit: float, last_dz: float, last_deficit: float,
                 rise: float) -> float:
     """Mirrors :func:`ecs_anim.core.ground_adapt.pitch_slope` for one foot (m of deficit per
-    unit of the direction's z)."""
+    unit of the direction's z); without branches (a loop of it runs on the vector units)."""
     flat = -rise
     step = dz - last_dz
-    if step == 0.0:
-        return flat
-    secant = (deficit - last_deficit) / step
+    secant = (deficit - last_deficit) / step  # (not taken where step is 0)
     ratio = secant / flat
-    return secant if MIN_SECANT_RATIO < ratio < MAX_SECANT_RATIO else flat
+    steep_enough = (step != 0.0) & (MIN_SECANT_RATIO < ratio) & (ratio < MAX_SECANT_RATIO)
+    return secant if steep_enough else flat
 
 
 @jit()
@@ -472,30 +583,36 @@ def _pivot_wanted(roll: float, current: int) -> int:
 @jit(inline="always")
 def _foot_target(ankle: Vec3, toe: Vec3, under_motion: tuple[float, float], planted_ankle: Vec3,
                  under_planted: float, w: float, ground_ref: float, ankle_height: float,
-                 ball: float, kinds: I64, params: F64, grid: F64) -> tuple[Vec3, float]:
-    """One ankle's target in ``GroundAdapt.run`` and the ground's height under it (m): the motion's free foot on the floor
-    ``ground_ref`` (m), lifted where its heel or toe would be under the ground, blended
-    towards where the planted foot puts it (``planted_ankle``, the ground ``under_planted``
-    it, m) by the contact weight ``w``, its heel kept above the ground; ``under_motion`` the
-    ground's heights under ``ankle`` and ``toe`` (m).
+                 ball: float) -> tuple[Vec3, float, bool]:
+    """One ankle's target in ``GroundAdapt.run`` before its heel is kept above the ground
+    (:func:`_lift_target`), the ground's height under it (m) and whether that is to be asked
+    (then NaN): the
+    motion's free foot on the floor ``ground_ref`` (m), lifted where its heel or toe would be
+    under the ground, blended towards where the planted foot puts it (``planted_ankle``, the
+    ground ``under_planted`` it, m) by the contact weight ``w``; ``under_motion`` the ground's
+    heights under ``ankle`` and ``toe`` (m).
 
     The ground is asked only where nobody has: a planted foot's target is its ankle (two
     queries fewer: where the free foot would be does not count), a free foot's is where the
     heel was asked about."""
     if w == 1.0:
-        t, under = planted_ankle, under_planted
-    else:
-        free = (ankle[0], ankle[1], ankle[2] + ground_ref)
-        under_free = under_motion[0]
-        need_heel = under_free + ankle_height - free[2]
-        need_toe = under_motion[1] + ball - (toe[2] + ground_ref)
-        free = (free[0], free[1], free[2] + max(0.0, max(need_heel, need_toe)))
-        t = (free[0] + w * (planted_ankle[0] - free[0]),
-             free[1] + w * (planted_ankle[1] - free[1]),
-             free[2] + w * (planted_ankle[2] - free[2]))
-        # (w == 0 leaves the point where it was asked about: (x + 0 * ...) is x)
-        under = under_free if w == 0.0 else _height(kinds, params, grid, t)
-    return (t[0], t[1], t[2] + max(under + ankle_height - t[2], 0.0)), under
+        return planted_ankle, under_planted, False
+    free = (ankle[0], ankle[1], ankle[2] + ground_ref)
+    under_free = under_motion[0]
+    need_heel = under_free + ankle_height - free[2]
+    need_toe = under_motion[1] + ball - (toe[2] + ground_ref)
+    free = (free[0], free[1], free[2] + max(0.0, max(need_heel, need_toe)))
+    t = (free[0] + w * (planted_ankle[0] - free[0]),
+         free[1] + w * (planted_ankle[1] - free[1]),
+         free[2] + w * (planted_ankle[2] - free[2]))
+    # (w == 0 leaves the point where it was asked about: (x + 0 * ...) is x)
+    return t, under_free if w == 0.0 else math.nan, w != 0.0
+
+
+@jit(inline="always")
+def _lift_target(t: Vec3, under: float, ankle_height: float) -> Vec3:
+    """An ankle's target ``t`` with its heel kept above the ground (``under`` it, m)."""
+    return (t[0], t[1], t[2] + max(under + ankle_height - t[2], 0.0))
 
 
 @jit(inline="always")
@@ -544,7 +661,7 @@ def _stand(c: int, s: int, j: Column, ankle: Vec3, d: Vec3, foot: float, w: floa
            switch: float, kinds: I64, params: F64, grid: F64, passes: int, scratch: F64
            ) -> tuple[Vec3, Vec3, tuple[float, float]]:
     """Foot ``s`` of row ``c`` in ``GroundAdapt.run`` once :func:`_lay` has laid it and
-    :func:`heights_lanes` answered its queries (column ``j``): (ankle, foot direction, the
+    :func:`pitch_planted` and :func:`pitch_lanes` pitched it (column ``j``): (ankle, foot direction, the
     ground's heights under that ankle and under the toe end (m), as :func:`planted_foot`)
     standing on its footprint, moved onto the other sole point where the foot has rolled onto
     it; the motion's (``ankle``, ``d``, NaN: not asked) for a foot not in contact.
@@ -555,16 +672,13 @@ def _stand(c: int, s: int, j: Column, ankle: Vec3, d: Vec3, foot: float, w: floa
     so the foot turns about the point it stands on and never jumps."""
     if not w > 0.0:
         return ankle, d, (math.nan, math.nan)
-    # planted_foot, the ground under the first end given
+    # planted_foot, pitched by pitch_planted and pitch_lanes
     sole_point = load3(footprint[c, s])
     origin = _pivot_point(pivot[c, s], sole_point, ankle_height, ball)
-    first = _answer(scratch, scratch[_at(_S_Q_END + s, j)])
+    d, ground = _col3(scratch, _S_PITCHED + 3 * s, j), scratch[_at(_S_PITCHED_GROUND + s, j)]
     if pivot[c, s] == 0:
-        d, ground = pitched_from(origin, d, foot, 1.0, ball, first, kinds, params, grid, passes)
         a, under = origin, (sole_point[2], ground)
     else:
-        d, ground = pitched_from(origin, d, foot, -1.0, ankle_height, first, kinds, params,
-                                 grid, passes)
         a, under = add_scaled(origin, d, -foot), (ground, sole_point[2])
     want = _pivot_wanted(sole_roll[c, s], pivot[c, s])
     if want != pivot[c, s]:
@@ -637,16 +751,41 @@ def _under_motion(scratch: F64, i: Column, s: int) -> tuple[float, float]:
             _answer(scratch, toe) if toe >= 0.0 else math.nan)
 
 
+@jit(inline="always")  # one call site
+def pitch_planted(i: Column, c: int, lengths: F64, leg: F64, contact_weight: F64,
+                  footprint: F64, pivot: I64, ball_per_leg: float, scratch: F64,
+                  count: int) -> int:
+    """Store row ``c``'s feet in contact (column ``i``: laid by :func:`lay_feet`, their
+    queries answered) pitched as :func:`planted_foot` pitches them on their footprints, the
+    ground under their first ends given: made entries of :func:`pitch_lanes` from ``count`` on
+    where too low (:func:`_to_pitch`); returns the block's entries now. Arguments as for
+    :func:`ground_adapt_rows`."""
+    ball = ball_per_leg * leg[c]
+    for s in range(2):
+        if contact_weight[c, s] > 0.0:
+            ankle_height = lengths[c, _L_ANKLE_HEIGHT + s]
+            heel = pivot[c, s] == 0
+            origin = _pivot_point(pivot[c, s], load3(footprint[c, s]), ankle_height, ball)
+            count = _to_pitch(scratch, count, i, s, origin, _col3(scratch, _S_DIR + 3 * s, i),
+                              scratch[_at(_S_FOOT_LENGTH + s, i)], 1.0 if heel else -1.0,
+                              ball if heel else ankle_height,
+                              _answer(scratch, scratch[_at(_S_Q_END + s, i)]))
+    return count
+
+
 @jit(inline="always")  # one call site: a call per row, handed its arrays, costs
 def ground_adapt_before(i: Column, c: int, lengths: F64, leg: F64, contact_weight: F64,
                         sole_roll: F64, footprint: F64, pivot: I64, ground_ref: F64,
                         kinds: I64, params: F64, grid: F64, follow: float,
                         ball_per_leg: float, switch_per_leg: float, toe_passes: int,
-                        scratch: F64) -> None:
+                        scratch: F64, count: int) -> int:
     """Mirrors ``GroundAdapt.run`` for store row ``c`` up to the legs' re-aiming, once its
-    feet are laid (:func:`lay_feet`) and their queries answered (:func:`heights_lanes`): the
-    feet in contact planted, the floor moved, the ankles' targets; what :func:`reaim_lanes`
-    and :func:`ground_adapt_after` need into column ``i`` of ``scratch``. Arguments as for
+    feet are laid (:func:`lay_feet`), their queries answered (:func:`heights_lanes`) and the
+    feet in contact pitched (:func:`pitch_planted`, :func:`pitch_lanes`): the feet in contact
+    planted, the floor moved, the ankles' targets (:func:`lift_targets` lifts them, the
+    ground under a blended one asked from query ``PITCH_QUERIES + count`` on: at most two);
+    what :func:`reaim_lanes` and :func:`ground_adapt_after` need into column ``i`` of
+    ``scratch``. Returns the blends' queries asked now. Arguments as for
     :func:`ground_adapt_rows` (``kinds``, ``params``, ``grid``: the arrays of ``ground``;
     ``follow``: the share of the way to the ground under the feet the floor moves this tick,
     the same for every row)."""
@@ -673,26 +812,27 @@ def ground_adapt_before(i: Column, c: int, lengths: F64, leg: F64, contact_weigh
     target = under_feet if support > 0.0 else _height(kinds, params, grid, pelvis)
     ground_ref[c] += follow * (target - ground_ref[c])
     g = ground_ref[c]
-    # Free feet ride on that floor, lifted where heel or toe would go under the ground; a
-    # contact ramping in blends towards its planted ankle, its heel kept above the ground.
-    target0, under0 = _foot_target(ankles[0], toes[0], _under_motion(scratch, i, 0), stance0[0],
-                                   stance0[2][0], w[0], g, ankle_height[0], ball, kinds, params,
-                                   grid)
-    target1, under1 = _foot_target(ankles[1], toes[1], _under_motion(scratch, i, 1), stance1[0],
-                                   stance1[2][0], w[1], g, ankle_height[1], ball, kinds, params,
-                                   grid)
     # The re-aiming's inputs (the pose decoded before adaptation: decode_lanes's) ...
     scratch[_at(_S_WEIGHT, i)], scratch[_at(_S_WEIGHT + 1, i)] = w[0], w[1]
     scratch[_at(_S_LEG, i)] = leg_c
-    _put3(scratch, _S_TARGET, i, target0)
-    _put3(scratch, _S_TARGET + 3, i, target1)
     scratch[_at(_S_ROOT_HEIGHT, i)] = pelvis[2] + g
-    # ... and what the row needs after it: the ground under the targets, and the directions
-    # the last pitch starts from (a planted foot's as it stands, its toe end's ground known; a
-    # ramping foot's the motion's; a free foot's is found after the re-aiming).
-    scratch[_at(_S_UNDER, i)], scratch[_at(_S_UNDER + 1, i)] = under0, under1
     for s in range(2):
         stance = stance0 if s == 0 else stance1
+        # Free feet ride on that floor, lifted where heel or toe would go under the ground; a
+        # contact ramping in blends towards its planted ankle (its heel kept above the ground
+        # by lift_targets, once the ground under it is answered).
+        target, under, ask = _foot_target(ankles[s], toes[s], _under_motion(scratch, i, s),
+                                          stance[0], stance[2][0], w[s], g, ankle_height[s],
+                                          ball)
+        _put3(scratch, _S_TARGET + 3 * s, i, target)
+        scratch[_at(_S_UNDER + s, i)] = under
+        scratch[_at(_S_Q_BLEND + s, i)] = -1.0
+        if ask:
+            scratch[_at(_S_Q_BLEND + s, i)] = count
+            count = _ask(scratch, PITCH_QUERIES + count, target[0], target[1]) - PITCH_QUERIES
+        # ... and what the row needs after it: the directions the last pitch starts from (a
+        # planted foot's as it stands, its toe end's ground known; a ramping foot's the
+        # motion's; a free foot's is found after the re-aiming).
         known = _UNKNOWN
         d = d0 if s == 0 else d1
         if w[s] >= 1.0:
@@ -701,6 +841,21 @@ def ground_adapt_before(i: Column, c: int, lengths: F64, leg: F64, contact_weigh
             known = (stood[0], stood[1], stance[2][1])
         _put3(scratch, _S_KNOWN + 3 * s, i, known)
         _put3(scratch, _S_DIR + 3 * s, i, d)
+    return count
+
+
+@jit(inline="always")  # one call site
+def lift_targets(i: Column, c: int, lengths: F64, scratch: F64) -> None:
+    """Store row ``c``'s ankle targets (column ``i``, :func:`ground_adapt_before`'s) with
+    their heels kept above the ground, once :func:`heights_lanes` has answered the blends'
+    queries; the ground under them into the column."""
+    for s in range(2):
+        query = scratch[_at(_S_Q_BLEND + s, i)]
+        if query >= 0.0:
+            scratch[_at(_S_UNDER + s, i)] = _answer(scratch, PITCH_QUERIES + query)
+        target = _lift_target(_col3(scratch, _S_TARGET + 3 * s, i),
+                              scratch[_at(_S_UNDER + s, i)], lengths[c, _L_ANKLE_HEIGHT + s])
+        _put3(scratch, _S_TARGET + 3 * s, i, target)
 
 
 @jit(inline="always")  # one call site
@@ -710,15 +865,20 @@ def ground_adapt_after(i: Column, c: int, pose: LegPoseArrays, lengths: F64,
                        scratch: F64, count: int) -> int:
     """Mirrors ``GroundAdapt.run`` for store row ``c`` after the block's re-aiming
     (:func:`reaim_lanes`, column ``i`` of ``scratch``): the heels kept up, the legs' pose
-    written, and the ground under each foot's toe end asked from query ``count`` on (the
-    last pitch's first, :func:`last_pitch`) unless known: at most two, under
-    :data:`QUERIES_PER_ROW`; returns the queries asked now."""
+    written, each foot's length and direction the last pitch starts from into the column,
+    and the ground under each foot's toe end asked from query ``count`` on (the last pitch's
+    first, :func:`pitch_last`) unless known: at most two, under :data:`QUERIES_PER_ROW`;
+    returns the queries asked now."""
     ankle_height = (lengths[c, _L_ANKLE_HEIGHT], lengths[c, _L_ANKLE_HEIGHT + 1], 0.0)
     adapt_keeping_heels_up(i, c, pose, scratch, kinds, params, grid, is_smooth, ankle_height,
                            max_extension, heel_tolerance, heel_passes)
     for s in range(2):
-        ankle, foot, d = _last_pitch_start(i, c, s, contact_weight, scratch)
-        end = add_scaled(ankle, d, 1.0 * foot)
+        # The direction the foot is pitched from last: a planted foot's as it stands, a
+        # ramping one's as the motion has it in the world, a free one's as in its shank.
+        if not contact_weight[c, s] > 0.0:
+            _put3(scratch, _S_DIR + 3 * s, i, _col3(scratch, _S_AXIS + 3 * s, i))
+        end = add_scaled(_col3(scratch, _S_ANKLE + 3 * s, i), _col3(scratch, _S_DIR + 3 * s, i),
+                         1.0 * scratch[_at(_S_FOOT_LENGTH + s, i)])
         known = _col3(scratch, _S_KNOWN + 3 * s, i)
         scratch[_at(_S_Q_END + s, i)] = -1.0
         # a planted foot's toe end where it stood is known (as .ground.height_near would take it)
@@ -728,34 +888,32 @@ def ground_adapt_after(i: Column, c: int, pose: LegPoseArrays, lengths: F64,
     return count
 
 
-@jit(inline="always")
-def _last_pitch_start(i: Column, c: int, s: int, contact_weight: F64, scratch: F64
-                      ) -> tuple[Vec3, float, Vec3]:
-    """(ankle, foot length, direction) foot ``s`` of row ``c`` is pitched from last (column
-    ``i``, re-aimed): a planted foot's direction as it stands, a ramping one's as the motion
-    has it in the world, a free one's as in its shank."""
-    ankle = _col3(scratch, _S_ANKLE + 3 * s, i)
-    foot, d = _foot_axis(ankle, _col3(scratch, _S_TOE + 3 * s, i))
-    if contact_weight[c, s] > 0.0:
-        d = _col3(scratch, _S_DIR + 3 * s, i)
-    return ankle, foot, d
+@jit(inline="always")  # one call site
+def pitch_last(i: Column, c: int, leg: F64, ball_per_leg: float, scratch: F64,
+               count: int) -> int:
+    """Store row ``c``'s feet (column ``i``) pitched so that their toes are not under the
+    ground, once :func:`heights_lanes` has answered the queries of
+    :func:`ground_adapt_after`: made entries of :func:`pitch_lanes` from ``count`` on where
+    too low (:func:`_to_pitch`); returns the block's entries now."""
+    ball = ball_per_leg * leg[c]
+    for s in range(2):
+        query = scratch[_at(_S_Q_END + s, i)]
+        first = _answer(scratch, query) if query >= 0.0 else scratch[_at(_S_KNOWN + 3 * s + 2, i)]
+        count = _to_pitch(scratch, count, i, s, _col3(scratch, _S_ANKLE + 3 * s, i),
+                          _col3(scratch, _S_DIR + 3 * s, i), scratch[_at(_S_FOOT_LENGTH + s, i)],
+                          1.0, ball, first)
+    return count
 
 
 @jit(inline="always")  # one call site
-def last_pitch(i: Column, c: int, pose: LegPoseArrays, leg: F64, contact_weight: F64,
-               kinds: I64, params: F64, grid: F64, ball_per_leg: float, toe_passes: int,
+def last_pitch(i: Column, c: int, pose: LegPoseArrays, contact_weight: F64,
                scratch: F64) -> None:
-    """Mirrors the end of ``GroundAdapt.run`` for store row ``c`` once
-    :func:`heights_lanes` has answered the queries of :func:`ground_adapt_after` (column
-    ``i``): each foot pitched so that its toe is not under the ground, and its direction
-    written (in the shank; a free foot's only where the pitch turned it)."""
-    ball = ball_per_leg * leg[c]
+    """Mirrors the end of ``GroundAdapt.run`` for store row ``c`` once :func:`pitch_last` and
+    :func:`pitch_lanes` have pitched its feet (column ``i``): each foot's direction written
+    (in the shank; a free foot's only where the pitch turned it)."""
     for s in range(2):
-        ankle, foot, d = _last_pitch_start(i, c, s, contact_weight, scratch)
-        query = scratch[_at(_S_Q_END + s, i)]
-        first = _answer(scratch, query) if query >= 0.0 else scratch[_at(_S_KNOWN + 3 * s + 2, i)]
-        new_d = pitched_from(ankle, d, foot, 1.0, ball, first, kinds, params, grid, toe_passes)[0]
-        if contact_weight[c, s] > 0.0 or new_d[2] != d[2]:
+        new_d = _col3(scratch, _S_PITCHED + 3 * s, i)
+        if contact_weight[c, s] > 0.0 or new_d[2] != scratch[_at(_S_DIR + 3 * s + 2, i)]:
             store3(pose.foot_dir[c, s],
                    in_frame(_col_frame(scratch, _S_SHANK2W + 9 * s, i), new_d))
 
@@ -785,10 +943,12 @@ def ground_adapt_rows(lo: int, hi: int, rows: I64, pose: LegPoseArrays, lengths:
 
     By blocks of :data:`.lanes.BLOCK` rows: the motion decoded (:func:`decode_lanes`), each
     row's feet laid and the ground asked under them, the block's queries answered at once
-    (:func:`heights_lanes`), each row up to its legs' re-aiming, the block's first re-aiming
-    (:func:`reaim_lanes`), each row on to the ground under its toes asked, the queries
-    answered, and each row's last pitch; each row's result is the same, to the bit, whatever
-    its block.
+    (:func:`heights_lanes`), the feet in contact pitched (:func:`pitch_planted`, the block's
+    at once in :func:`pitch_lanes`), each row up to its legs' re-aiming (the blends' ground
+    asked, answered, :func:`lift_targets`), the block's first re-aiming (:func:`reaim_lanes`),
+    each row on to the ground under its toes asked, the queries answered, the feet pitched
+    (:func:`pitch_last`, :func:`pitch_lanes`) and their directions written; each row's result
+    is the same, to the bit, whatever its block.
     """
     kinds, params, grid = ground
     is_smooth = smooth(kinds)
@@ -805,11 +965,21 @@ def ground_adapt_rows(lo: int, hi: int, rows: I64, pose: LegPoseArrays, lengths:
             count = lay_feet(Column(i - start), rows[i], lengths, leg, contact_weight, sole_roll,
                              clip, source_ankle_height, footprint, locked, pivot, kinds,
                              params, grid, ball_per_leg, scratch_block, count)
-        heights_lanes(scratch_block, count, kinds, params, grid)
+        heights_lanes(scratch_block, 0, count, kinds, params, grid)
+        count = 0
         for i in range(start, stop):
-            ground_adapt_before(Column(i - start), rows[i], lengths, leg, contact_weight,
-                                sole_roll, footprint, pivot, ground_ref, kinds, params, grid,
-                                follow, ball_per_leg, switch_per_leg, toe_passes, scratch_block)
+            count = pitch_planted(Column(i - start), rows[i], lengths, leg, contact_weight,
+                                  footprint, pivot, ball_per_leg, scratch_block, count)
+        pitch_lanes(scratch_block, count, kinds, params, grid, toe_passes)
+        count = 0
+        for i in range(start, stop):
+            count = ground_adapt_before(Column(i - start), rows[i], lengths, leg,
+                                        contact_weight, sole_roll, footprint, pivot, ground_ref,
+                                        kinds, params, grid, follow, ball_per_leg,
+                                        switch_per_leg, toe_passes, scratch_block, count)
+        heights_lanes(scratch_block, PITCH_QUERIES, PITCH_QUERIES + count, kinds, params, grid)
+        for i in range(start, stop):
+            lift_targets(Column(i - start), rows[i], lengths, scratch_block)
         reaim_lanes(scratch_block, Column(0), Column(n), max_extension)
         count = 0
         for i in range(start, stop):
@@ -817,7 +987,11 @@ def ground_adapt_rows(lo: int, hi: int, rows: I64, pose: LegPoseArrays, lengths:
                                        contact_weight, kinds, params, grid, is_smooth,
                                        max_extension, heel_tolerance, heel_passes,
                                        scratch_block, count)
-        heights_lanes(scratch_block, count, kinds, params, grid)
+        heights_lanes(scratch_block, 0, count, kinds, params, grid)
+        count = 0
         for i in range(start, stop):
-            last_pitch(Column(i - start), rows[i], pose, leg, contact_weight, kinds, params, grid,
-                       ball_per_leg, toe_passes, scratch_block)
+            count = pitch_last(Column(i - start), rows[i], leg, ball_per_leg, scratch_block,
+                               count)
+        pitch_lanes(scratch_block, count, kinds, params, grid, toe_passes)
+        for i in range(start, stop):
+            last_pitch(Column(i - start), rows[i], pose, contact_weight, scratch_block)

@@ -127,9 +127,65 @@ def test_a_blocks_heights_equal_each_points(name: str) -> None:
             xy[7] = (3e6, 1.0)
         scratch[_S_Q_X * BLOCK:_S_Q_X * BLOCK + count] = xy[:, 0]
         scratch[_S_Q_Y * BLOCK:_S_Q_Y * BLOCK + count] = xy[:, 1]
-        heights(scratch, count, d.kinds, d.params, d.grid)
+        heights(scratch, 0, count, d.kinds, d.params, d.grid)
         np.testing.assert_array_equal(scratch[_S_Q_HEIGHT * BLOCK:_S_Q_HEIGHT * BLOCK + count],
                                       _compiled(GROUNDS[name], xy))
+
+
+@pytest.mark.parametrize("name", list(GROUNDS))
+def test_a_blocks_pitches_equal_each_feet(name: str) -> None:
+    """``pitch_lanes`` takes a block's feet too low through ``pitched_from``'s secant passes at
+    once (each pass on the vector units over the feet still too low) with the bits of
+    ``pitched_from`` for each foot: both feet of every row of a block, some needing several
+    passes, some one, some none, feet with NaN, turning about the ankle or the ball; and with
+    no pass allowed, one, or the system's four."""
+    import math
+
+    from ecs_anim.runtime.kernels.ground_adapt import (
+        _S_PITCHED,
+        _S_PITCHED_GROUND,
+        _to_pitch,
+        ground_scratch,
+        pitch_lanes,
+        pitched_from,
+    )
+    from ecs_anim.runtime.kernels.lanes import BLOCK, Column
+
+    d = describe(GROUNDS[name])
+    assert d is not None
+    rng = np.random.default_rng(1304)
+    feet = []
+    for _ in range(2 * BLOCK):
+        x, y = rng.uniform(-2.0, 8.0, 2)
+        origin = (x, y, height_at(x, y, d.kinds, d.params, d.grid) + rng.uniform(0.0, 0.25))
+        heading, dz = rng.uniform(-math.pi, math.pi), float(rng.uniform(-0.6, 0.3))
+        along = math.sqrt(1.0 - dz * dz)
+        foot, sign = float(rng.uniform(0.12, 0.25)), float(rng.choice([1.0, -1.0]))
+        feet.append((origin, (along * math.cos(heading), along * math.sin(heading), dz), foot,
+                     sign, float(rng.uniform(0.02, 0.09))))
+    feet[5] = ((math.nan, 1.0, 0.1), *feet[5][1:])
+    feet[6] = (feet[6][0], (math.nan, 0.0, -0.3), *feet[6][2:])
+    pitches = {}
+    for passes in (0, 1, 4):
+        scratch = ground_scratch(BLOCK)[0]
+        count, expected, turned = 0, [], 0
+        for k, (origin, direction, foot, sign, clearance) in enumerate(feet):
+            end = np.add(origin, np.multiply(direction, sign * foot))
+            first = height_at(end[0], end[1], d.kinds, d.params, d.grid)
+            count = _to_pitch(scratch, count, Column(k // 2), k % 2, origin, direction, foot,
+                              sign, clearance, first)
+            pitched, ground = pitched_from(origin, direction, foot, sign, clearance, first,
+                                           d.kinds, d.params, d.grid, passes)
+            expected.append((*pitched, ground))
+            turned += pitched != direction
+        assert 5 < count < 2 * BLOCK - 5 and (passes == 0 or turned > 5)
+        pitch_lanes(scratch, count, d.kinds, d.params, d.grid, passes)
+        got = [(*(scratch[(_S_PITCHED + 3 * (k % 2) + a) * BLOCK + k // 2] for a in range(3)),
+                scratch[(_S_PITCHED_GROUND + k % 2) * BLOCK + k // 2]) for k in range(len(feet))]
+        np.testing.assert_array_equal(np.array(got), np.array(expected))
+        pitches[passes] = np.array(expected)
+    if name not in ("plane", "stairs"):  # (where flat under the feet, one pass lands them)
+        assert not np.array_equal(pitches[1], pitches[4], equal_nan=True)  # several passes
 
 
 @dataclass(frozen=True)
@@ -249,7 +305,8 @@ def test_a_rows_ground_adaptation_does_not_depend_on_its_block(
     the vector units (a row in a vector lane or in a loop's scalar remainder) and answers a
     block's ground queries at once: three blocks and five rows of the bench's walkers in one
     call, in two uneven chunks and row by row give the same bits; so do they with every foot
-    ramping in (the most queries a row asks: six)."""
+    ramping in (the most queries a row asks: six, and a blend's each), and with rows of NaN
+    (a root, a foot's direction) among them."""
     import copy
     import itertools
 
@@ -278,9 +335,13 @@ def test_a_rows_ground_adaptation_does_not_depend_on_its_block(
             ground_adapt_rows(lo, hi, *a)
         return [np.array(x) for x in a[1]] + [a[k] for k in (8, 9, 10, 11)]  # footprint, locked, pivot, ground_ref
 
-    for ramping in (False, True):
-        if ramping:
+    for case in ("walking", "ramping", "nan"):
+        if case == "ramping":
             args[4][:] = 0.5  # contact_weight
+        if case == "nan":
+            args[4][:] = 1.0
+            args[1].root_position[args[0][3]] = np.nan  # (pose, rows)
+            args[1].foot_dir[args[0][BLOCK + 2], 1] = np.nan
         whole = run([0, n])
         for other in (run([0, BLOCK + 7, n]), run(list(range(n + 1)))):
             for x, y in zip(whole, other, strict=True):
