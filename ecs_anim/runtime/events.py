@@ -469,17 +469,17 @@ class Reactions:
                 TIME_SLACK_S, CONTACT_BEGAN_WEIGHT, self._seen_clip, self._seen_time,
                 self._seen_ended, self._seen_contact)
         if sim.compiled:
-            _, previous_clip, listed = compiled_edges(*args, scratch=self._edge_scratch)
+            listed, replaced_clip = compiled_edges(*args, scratch=self._edge_scratch)
         else:  # the numpy reference while the kernels compile aside (a first run)
             edges, previous_clip = clip_and_contact_edges(*args)
             listed = edges_listed(edges)
+            replaced_clip = previous_clip[listed[EDGE_REPLACED]]
         arrived = self._arrived(st)
         if not (arrived[1].size or any(rows.size for rows in listed)):
             return []
         clip_names = list(bank.names)
         out: list[tuple[str, I64, I64, list[str]]] = []
-        rows = listed[EDGE_REPLACED]
-        out.append(("clip_ended", rows, previous_clip[rows], clip_names))
+        out.append(("clip_ended", listed[EDGE_REPLACED], replaced_clip, clip_names))
         rows = listed[EDGE_ENDED]
         out.append(("clip_ended", rows, st.clip[rows], clip_names))
         rows = listed[EDGE_STARTED]
