@@ -268,6 +268,7 @@ class Reactions:
         self._edges_kept: _StoreEdges | None = None
         self._last_edges: _StoreEdges | None = None
         self._edge_scratch = EdgeScratch()  # the compiled edges' arrays, kept tick to tick
+        self._durations: tuple[object, F64] = (None, np.zeros(0))  # (bank, each clip's period)
         self._fired_this_tick: set[tuple[int, str, int, str]] = set()  # (trigger, event)
         # while a tick's reactions are applied: the triggers to drop once they are done, and
         # the names of the characters removed meanwhile (by entity, for warnings)
@@ -461,22 +462,24 @@ class Reactions:
         st, bank = sim.store, sim.bank
         if st.n == 0:
             return []
+        if self._durations[0] is not bank:
+            self._durations = bank, bank.n_frames / bank.fps
         args = (st.entity, st.clip, st.clip_time_s, st.speed, st.loop,
-                bank.n_frames / bank.fps, st.contact_weight, sim.dt,
+                self._durations[1], st.contact_weight, sim.dt,
                 TIME_SLACK_S, CONTACT_BEGAN_WEIGHT, self._seen_clip, self._seen_time,
                 self._seen_ended, self._seen_contact)
         if sim.compiled:
-            _, previous_clip, listed = compiled_edges(*args, scratch=self._edge_scratch)
+            listed, replaced_clip = compiled_edges(*args, scratch=self._edge_scratch)
         else:  # the numpy reference while the kernels compile aside (a first run)
             edges, previous_clip = clip_and_contact_edges(*args)
             listed = edges_listed(edges)
+            replaced_clip = previous_clip[listed[EDGE_REPLACED]]
         arrived = self._arrived(st)
         if not (arrived[1].size or any(rows.size for rows in listed)):
             return []
         clip_names = list(bank.names)
         out: list[tuple[str, I64, I64, list[str]]] = []
-        rows = listed[EDGE_REPLACED]
-        out.append(("clip_ended", rows, previous_clip[rows], clip_names))
+        out.append(("clip_ended", listed[EDGE_REPLACED], replaced_clip, clip_names))
         rows = listed[EDGE_ENDED]
         out.append(("clip_ended", rows, st.clip[rows], clip_names))
         rows = listed[EDGE_STARTED]

@@ -630,12 +630,19 @@ def _put_row(poses: PoseArrays, r0: int, r1: int, w: float, lanes: F64, j: Colum
 @jit(nogil=True)
 def sample_rows(lo: int, hi: int, unique: I64, rows: I64, bank: PlaybackBank, clip: I64,
                 time_s: F64, loop: B1, out: PoseArrays, out_rows: I64, scratch: F64,
-                lanes: F64, loop_clip: I64, loop_count: F64, loop_turn: F64) -> None:
+                lanes: F64, loop_clip: I64, loop_count: F64, loop_turn: F64, placed: bool,
+                placement_xy: F64, placement_heading: F64, lengths: F64, contact_weight: F64,
+                sole_roll: F64, heading_key: F64, heading_turn: F64) -> None:
     """Mirrors ``sample(bank, clip, time_s, loop)`` for the store rows ``rows[unique[lo:hi]]``:
     every field but the root's into rows ``out_rows[unique[j]]`` of ``out``; into the scratch
     column ``unique[j]``, the root before its placement (capture ground taken out, as
     ``MotionPlayback`` does) and the contact weights and sole rolls
     (:func:`ecs_anim.motion.sampling.sample_table`), which :func:`place_rows` then places.
+    ``placed``: every position of ``rows`` samples its own pose (``unique`` is ``0..len(rows)
+    - 1``): each row is placed here as :func:`place_rows` places it, from ``placement_xy``,
+    ``placement_heading``, ``lengths``, ``heading_key`` and ``heading_turn`` (its arguments),
+    its contact weights and sole rolls into ``contact_weight`` and ``sole_roll``, and the
+    scratch is not written (a second pass over the rows and the scratch, 0.05 ms at 4,000).
 
     Per store row: ``clip`` (n,) int64, ``time_s`` (n,) s, ``loop`` (n,) bool. ``scratch``
     (PLAYBACK_SCRATCH_ROWS, len(rows)); ``lanes`` :class:`PlaybackWork`'s (the chunk uses
@@ -661,13 +668,21 @@ def sample_rows(lo: int, hi: int, unique: I64, rows: I64, bank: PlaybackBank, cl
                                  loop_turn)
             ground = bank.capture_ground[r0] + w * (bank.capture_ground[r1]
                                                     - bank.capture_ground[r0])
-            scratch[_ROOT, i], scratch[_ROOT + 1, i] = p[0], p[1]
-            scratch[_ROOT + 2, i], scratch[_ROOT + 3, i] = p[2] - ground, h
+            if placed:
+                _place_root(p[0], p[1], p[2] - ground, h, c, out_rows[i], placement_xy,
+                            placement_heading, lengths, out, heading_key, heading_turn)
+            else:
+                scratch[_ROOT, i], scratch[_ROOT + 1, i] = p[0], p[1]
+                scratch[_ROOT + 2, i], scratch[_ROOT + 3, i] = p[2] - ground, h
             for s in range(2):
                 a, d = bank.contact_weight[r0, s], bank.contact_weight[r1, s]
-                scratch[_CONTACT + s, i] = a + w * (d - a)
+                weight = a + w * (d - a)
                 a, d = bank.sole_roll[r0, s], bank.sole_roll[r1, s]
-                scratch[_ROLL + s, i] = a + w * (d - a)
+                roll = a + w * (d - a)
+                if placed:
+                    contact_weight[c, s], sole_roll[c, s] = weight, roll
+                else:
+                    scratch[_CONTACT + s, i], scratch[_ROLL + s, i] = weight, roll
             block_lanes[at(_L_T, j)] = w
             block_lanes[at(_L_R0, j)], block_lanes[at(_L_R1, j)] = r0, r1
             if r1 == bank.next_row[r0]:
@@ -755,11 +770,28 @@ def _heading_turn(heading: float, c: int, heading_key: F64,
     return cos_h, sin_h
 
 
+@jit(inline="always")
+def _place_root(x: float, y: float, z: float, heading_sampled: float, c: int, o: int,
+                placement_xy: F64, placement_heading: F64, lengths: F64, out: PoseArrays,
+                heading_key: F64, heading_turn: F64) -> None:
+    """Row ``o`` of ``out``'s root: the sampled root (``x``, ``y``, ``z``, ``heading_sampled``,
+    capture ground taken out) placed as ``MotionPlayback._placed`` places store row ``c``'s
+    (:func:`place_rows`' arguments)."""
+    heading, scale = placement_heading[c], leg_length(lengths[c])
+    cos_h, sin_h = _heading_turn(heading, c, heading_key, heading_turn)
+    # rotate_xy, its cosine and sine kept
+    px, py = _turned(x * scale, y * scale, cos_h, sin_h)
+    out.root_position[o, 0] = (px + placement_xy[c, 0]) / scale
+    out.root_position[o, 1] = (py + placement_xy[c, 1]) / scale
+    out.root_position[o, 2] = z
+    out.root_heading[o] = heading_sampled + heading
+
+
 @jit(nogil=True)
 def place_rows(lo: int, hi: int, rows: I64, first: I64, placement_xy: F64,
                placement_heading: F64, lengths: F64, out: PoseArrays, out_rows: I64,
                scratch: F64, contact_weight: F64, sole_roll: F64, heading_key: F64,
-               heading_turn: F64, shared: bool) -> None:
+               heading_turn: F64) -> None:
     """For each position i in ``lo..hi`` of the store rows ``rows``: row ``out_rows[i]`` of
     ``out`` becomes the pose :func:`sample_rows` sampled for position ``first[i]`` (copied
     unless it is i's own), its root placed as ``MotionPlayback._placed`` does (rotated about
@@ -767,24 +799,30 @@ def place_rows(lo: int, hi: int, rows: I64, first: I64, placement_xy: F64,
     ``lengths`` (n, N_LENGTHS) m, then shifted by ``placement_xy`` (n, 2) m);
     ``contact_weight`` and ``sole_roll`` (n, 2) of store row ``rows[i]`` its sample's.
     ``heading_key``, ``heading_turn``: :class:`PlaybackWork`'s headings' cosines and sines
-    kept per store row (:func:`_heading_turn`). ``shared``: whether any position's sample is
-    another's (else no pose is copied: the copies' fifteen passes over ``first`` were 0.04 ms
-    at 4,000 characters each sampled on its own, the bench's crowd)."""
-    if shared:
-        copy_shared_parts(out, lo, hi, first, out_rows)
+    kept per store row (:func:`_heading_turn`). Called only where some position's sample is
+    another's (else :func:`sample_rows` places every row itself)."""
+    copy_shared_parts(out, lo, hi, first, out_rows)
     for i in range(lo, hi):
-        c, o, f = rows[i], out_rows[i], first[i]
-        heading, scale = placement_heading[c], leg_length(lengths[c])
-        cos_h, sin_h = _heading_turn(heading, c, heading_key, heading_turn)
-        # rotate_xy, its cosine and sine kept
-        x, y = _turned(scratch[_ROOT, f] * scale, scratch[_ROOT + 1, f] * scale, cos_h, sin_h)
-        out.root_position[o, 0] = (x + placement_xy[c, 0]) / scale
-        out.root_position[o, 1] = (y + placement_xy[c, 1]) / scale
-        out.root_position[o, 2] = scratch[_ROOT + 2, f]
-        out.root_heading[o] = scratch[_ROOT + 3, f] + heading
+        c, f = rows[i], first[i]
+        _place_root(scratch[_ROOT, f], scratch[_ROOT + 1, f], scratch[_ROOT + 2, f],
+                    scratch[_ROOT + 3, f], c, out_rows[i], placement_xy, placement_heading,
+                    lengths, out, heading_key, heading_turn)
         for s in range(2):
             contact_weight[c, s] = scratch[_CONTACT + s, f]
             sole_roll[c, s] = scratch[_ROLL + s, f]
+
+
+@jit(nogil=True)
+def advance_clocks(rows: I64, dt: float, speed: F64, fade_speed: F64, clip_time_s: F64,
+                   fade_time_s: F64, fade_elapsed_s: F64) -> None:
+    """``MotionPlayback``'s clocks after a tick of ``dt`` s for the store rows ``rows`` (r,):
+    ``clip_time_s`` and ``fade_time_s`` (n,) moved on by ``dt`` times ``speed`` and
+    ``fade_speed`` (n,), ``fade_elapsed_s`` (n,) by ``dt``, in place (numpy's ``+= dt *
+    speed``, bit for bit). Called directly: a pass over the rows costs less than a hand-over."""
+    for c in rows:
+        clip_time_s[c] += dt * speed[c]
+        fade_time_s[c] += dt * fade_speed[c]
+        fade_elapsed_s[c] += dt
 
 
 def sample_placed(bank: PlaybackBank, rows: I64, clip: I64, time_s: F64, loop: B1,
@@ -801,16 +839,21 @@ def sample_placed(bank: PlaybackBank, rows: I64, clip: I64, time_s: F64, loop: B
     (n,) bool, ``placement_xy`` (n, 2) m, ``placement_heading`` (n,) rad, ``lengths`` (n,
     N_LENGTHS) m (the leg length is the root path's unit). Each (clip, time, loop) is sampled
     once (:func:`first_of_each_sample`, :func:`sample_rows`), then every row placed
-    (:func:`place_rows`); ``work`` holds the scratch."""
+    (:func:`place_rows`; by :func:`sample_rows` as it samples where no two rows share a
+    sample); ``work`` holds the scratch."""
     work.ensure(rows.size, bank, clip.shape[0])
     m = first_of_each_sample(rows, clip, time_s.view(np.int64), loop, work.table, work.first,
                              work.unique)
+    # Every sample its own (a crowd out of step, the bench's): each placed as it is sampled.
+    placed = m == rows.size
     over_chunks(sample_rows, m, work.unique, rows, bank, clip, time_s, loop, out, out_rows,
                 work.scratch, work.lanes, work.loop_clip, work.loop_count, work.loop_turn,
-                rows_per_thread=BLOCK)
-    over_chunks(place_rows, rows.size, rows, work.first, placement_xy, placement_heading,
-                lengths, out, out_rows, work.scratch, contact_weight, sole_roll,
-                work.heading_key, work.heading_turn, m < rows.size)
+                placed, placement_xy, placement_heading, lengths, contact_weight, sole_roll,
+                work.heading_key, work.heading_turn, rows_per_thread=BLOCK)
+    if not placed:
+        over_chunks(place_rows, rows.size, rows, work.first, placement_xy, placement_heading,
+                    lengths, out, out_rows, work.scratch, contact_weight, sole_roll,
+                    work.heading_key, work.heading_turn)
 
 
 @jit(nogil=True)

@@ -13,10 +13,12 @@ from ecs_anim.core.skeleton import N_LENGTHS
 from ecs_anim.io.importing import import_bvh
 from ecs_anim.io.library import MOTIONS_DIR
 from ecs_anim.motion.sampling import ClipBank, blend, rotate_xy, sample, sample_table
+from ecs_anim.runtime import kernels
 from ecs_anim.runtime.kernels.decode import pose_arrays
 from ecs_anim.runtime.kernels.lanes import BLOCK
 from ecs_anim.runtime.kernels.playback import (
     PlaybackWork,
+    advance_clocks,
     blend_rows,
     complex_power,
     first_of_each_sample,
@@ -207,16 +209,59 @@ def test_sample_placed_does_not_depend_on_the_chunks(bank: ClipBank) -> None:
     m = first_of_each_sample(rows, clip, time_s.view(np.int64), loop, work.table, work.first,
                              work.unique)
     assert m > 3 * BLOCK
+    weights, rolls = np.zeros((n, 2)), np.zeros((n, 2))
+    placing = (False, xy, heading, lengths, weights, rolls, work.heading_key, work.heading_turn)
     for lo, hi in ((0, 7), (7, 40), (40, 41), (41, m)):
         sample_rows(lo, hi, work.unique, rows, pbank, clip, time_s, loop, pose_arrays(chunked),
                     rows, work.scratch, work.lanes, work.loop_clip, work.loop_count,
-                    work.loop_turn)
-    weights, rolls = np.zeros((n, 2)), np.zeros((n, 2))
+                    work.loop_turn, *placing)
     for lo, hi in ((0, 33), (33, 34), (34, n)):
         place_rows(lo, hi, rows, work.first, xy, heading, lengths, pose_arrays(chunked), rows,
-                   work.scratch, weights, rolls, work.heading_key, work.heading_turn, m < n)
+                   work.scratch, weights, rolls, work.heading_key, work.heading_turn)
     for name, a in whole.arrays().items():
         np.testing.assert_array_equal(getattr(chunked, name), a, err_msg=name)
+
+
+def test_rows_placed_as_sampled_do_not_depend_on_the_chunks(bank: ClipBank) -> None:
+    """Every sample its own (the bench's crowd): sample_rows places each row itself, in any
+    chunks (none a multiple of the block, one crossing a block's end), on one or two
+    threads, to the bits of sample_placed's whole call, rows placed at NaN too."""
+    rng = np.random.default_rng(1323)
+    n = 3 * BLOCK + 5
+    clip, _, loop, xy, heading, lengths = _scene(bank, rng, n)
+    time_s = bank.duration_s(clip) * rng.uniform(-3.0, 40.0, n)
+    heading[7], xy[9, 0] = np.nan, np.nan
+    rows = rng.permutation(n).astype(np.int64)
+    like = sample(bank, clip[:1], time_s[:1], loop[:1])
+    whole, chunked = _empty(n, like), _empty(n, like)
+    want_weights, want_rolls = _compiled(bank, rows, clip, time_s, loop, xy, heading, lengths,
+                                         whole, rows)
+    pbank, work = playback_bank(bank), PlaybackWork()
+    work.ensure(n, pbank, n)
+    assert first_of_each_sample(rows, clip, time_s.view(np.int64), loop, work.table, work.first,
+                                work.unique) == n
+    weights, rolls = np.full((n, 2), np.nan), np.full((n, 2), np.nan)
+    for lo, hi in ((0, 7), (7, 40), (40, 41), (41, n)):
+        sample_rows(lo, hi, work.unique, rows, pbank, clip, time_s, loop, pose_arrays(chunked),
+                    rows, work.scratch, work.lanes, work.loop_clip, work.loop_count,
+                    work.loop_turn, True, xy, heading, lengths, weights, rolls,
+                    work.heading_key, work.heading_turn)
+    for name, a in whole.arrays().items():
+        np.testing.assert_array_equal(getattr(chunked, name).view(np.int64), a.view(np.int64),
+                                      err_msg=name)
+    np.testing.assert_array_equal(weights, want_weights)
+    np.testing.assert_array_equal(rolls, want_rolls)
+    assert np.isnan(whole.root_position[7, :2]).all() and np.isnan(whole.root_position[9, 0])
+    try:
+        for count in range(1, min(2, kernels.available_threads()) + 1):
+            kernels.set_threads(count)
+            threaded = _empty(n, like)
+            _compiled(bank, rows, clip, time_s, loop, xy, heading, lengths, threaded, rows)
+            for name, a in whole.arrays().items():
+                np.testing.assert_array_equal(getattr(threaded, name).view(np.int64),
+                                              a.view(np.int64), err_msg=f"{name}, {count} threads")
+    finally:
+        kernels.set_threads(None)
 
 
 def test_kept_turns_give_the_bits_computed_anew(bank: ClipBank) -> None:
@@ -325,3 +370,46 @@ def test_compiled_motion_playback_equals_numpy_with_fades_and_queues() -> None:
         np.testing.assert_array_equal(got.fade_s, want.fade_s)
         np.testing.assert_array_equal(got.clip, want.clip)
     assert faded > 0
+
+
+def test_advance_clocks_equals_numpy() -> None:
+    rng = np.random.default_rng(1319)
+    n = 3 * BLOCK + 5
+    speed, fade_speed = rng.uniform(-2.0, 2.0, n), rng.uniform(0.0, 2.0, n)
+    speed[3] = np.nan
+    times = [rng.uniform(-1.0, 100.0, n) for _ in range(3)]
+    rows = np.flatnonzero(rng.random(n) < 0.7)
+    got = [t.copy() for t in times]
+    advance_clocks(rows, 1.0 / 60.0, speed, fade_speed, *got)
+    want = [t.copy() for t in times]
+    want[0][rows] += 1.0 / 60.0 * speed[rows]
+    want[1][rows] += 1.0 / 60.0 * fade_speed[rows]
+    want[2][rows] += 1.0 / 60.0
+    for g, w in zip(got, want, strict=True):
+        np.testing.assert_array_equal(g.view(np.int64), w.view(np.int64))
+
+
+def test_pose_arrays_replaced_between_ticks_are_written() -> None:
+    """MotionPlayback keeps the store's pose arrays from tick to tick: one replaced (a copy,
+    or a read-only array) is the one written next."""
+    walk = import_bvh(MOTIONS_DIR / "walk.bvh")
+    sims = []
+    for _ in range(2):
+        sim = Simulation({"walk": walk})
+        for k in range(3):
+            sim.spawn(f"c{k}", Morphology.from_stature(1.6 + 0.1 * k),
+                      MotionPlayer("walk", start_s=0.3 * k), Placement((0.0, 2.0 * k)))
+        sim.step()
+        sims.append(sim)
+    replaced, kept = sims
+    thorax = replaced.store.poses.thorax.copy()
+    thorax.setflags(write=False)
+    replaced.store.poses.thorax = thorax
+    replaced.store.poses.head = replaced.store.poses.head.copy()
+    for _ in range(2):
+        replaced.step()
+        kept.step()
+    for name in ("thorax", "head", "pelvis_local"):
+        np.testing.assert_array_equal(getattr(replaced.store.poses, name),
+                                      getattr(kept.store.poses, name))
+    assert not np.array_equal(replaced.store.poses.thorax, thorax)
