@@ -159,14 +159,15 @@ def empty_decoded(n: int) -> DecodedArrays:
 
 
 def fits(arrays: DecodedArrays | DecodedPose | None, n: int) -> bool:
-    """Whether ``arrays`` has the shapes of ``n`` decoded rows (so it can be written again)."""
+    """Whether ``arrays`` has the shapes of ``n`` decoded rows and is C-contiguous (so that the
+    kernels can write it again: :func:`scatter_block` writes flat views)."""
     if arrays is None:
         return False
     shapes = ((n, N_JOINTS, 3), (n, 3, 3), (n, 3, 3), (n, 3, 3), (n, 2, 3, 3), (n, 2, 3, 3))
     if isinstance(arrays, DecodedPose):
         arrays = decoded_arrays(arrays)
     return all(a.shape == s and a.dtype == np.float64 and a.flags.writeable
-               for a, s in zip(arrays, shapes, strict=True))
+               and a.flags.c_contiguous for a, s in zip(arrays, shapes, strict=True))
 
 
 @jit()
@@ -514,11 +515,13 @@ _S_LENGTH = _B_LENGTHS + L_SPINE_LOWER
 _B_PELVIS_Q, _B_POSITIONS = 116, 120
 _B_PELVIS2WORLD, _B_THORAX2WORLD, _B_HEAD2WORLD, _B_LEG2WORLD, _B_ARM2WORLD = \
     186, 195, 204, 213, 231
-# ... whether the positions are all finite (finite_lanes: 1.0 or 0.0), and the spine's curve
-# point and tangent at the parameter its Newton iteration last tried (spine_joint_lanes).
+# ... whether the positions are all finite (finite_lanes: 1.0 or 0.0), the spine's curve
+# point and tangent at the parameter its Newton iteration last tried (spine_joint_lanes) ...
 _B_FINITE, _S_POINT, _S_TANGENT = 249, 250, 253
+# ... and whether its Newton iteration is still moving after the passes over the block.
+_S_MOVING = 256
 #: Rows of a block's scratch (:func:`spine_scratch`).
-BLOCK_ROWS = 256
+BLOCK_ROWS = 257
 assert _B_LENGTHS + N_LENGTHS == _S_CONTROL and _B_POSITIONS + 3 * N_JOINTS == _B_PELVIS2WORLD
 assert _B_ARM2WORLD + 18 == _B_FINITE
 
@@ -735,40 +738,42 @@ def decoded_finite(scratch: F64, j: Column) -> bool:
 
 
 @jit(inline="always")
-def _scatter_frame(scratch: F64, r: int, j: Column, out: F64) -> None:
-    """Rows ``r:r + 9`` of column ``j`` (:func:`put_matrix`) into the (3, 3) array ``out``."""
-    for i in range(3):
-        for k in range(3):
-            out[i, k] = scratch[at(r + 3 * i + k, j)]
+def _scatter_run(scratch: F64, r: int, j: Column, flat: F64, c: int, size: int) -> None:
+    """Rows ``r:r + size`` of column ``j`` into row ``c`` of an out array of ``size`` values a
+    row, ``flat`` (its flat view: constant offsets from the row's start, where indices into a
+    row of the (n, ...) array multiply its strides)."""
+    row = Column(c) * Column(size)
+    for k in range(size):
+        flat[row + Column(k)] = scratch[at(r + k, j)]
 
 
-# (Indices, not a flat view: numba's reshape calls its runtime, a call an array a row.)
+# (A flat view an array a block: numba's reshape calls its runtime, so not one a row.)
 @jit(inline="always")  # one call site
 def scatter_block(start: int, stop: int, rows: I64, scratch: F64, out: DecodedArrays,
                   first: Column, finite_only: bool) -> None:
     """The block's results in the columns from ``first`` of a block scratch into the rows
-    ``rows[start:stop]`` of every ``out`` array; with ``finite_only``, the positions only where
-    they are all finite (:func:`finite_lanes` has run)."""
+    ``rows[start:stop]`` of every ``out`` array (C-contiguous); with ``finite_only``, the
+    positions only where they are all finite (:func:`finite_lanes` has run)."""
     # (Loops of a few arrays each, as gather_block.)
+    positions = out.positions.reshape(-1)
     for i in range(start, stop):
         j = first + Column(i - start)
         if not finite_only or decoded_finite(scratch, j):
-            positions = out.positions[rows[i]]
-            for joint in range(N_JOINTS):
-                for a in range(3):
-                    positions[joint, a] = scratch[at(_B_POSITIONS + 3 * joint + a, j)]
+            _scatter_run(scratch, _B_POSITIONS, j, positions, rows[i], 3 * N_JOINTS)
+    pelvis2world, thorax2world = out.pelvis2world.reshape(-1), out.thorax2world.reshape(-1)
+    head2world = out.head2world.reshape(-1)
     for i in range(start, stop):
         c = rows[i]
         j = first + Column(i - start)
-        _scatter_frame(scratch, _B_PELVIS2WORLD, j, out.pelvis2world[c])
-        _scatter_frame(scratch, _B_THORAX2WORLD, j, out.thorax2world[c])
-        _scatter_frame(scratch, _B_HEAD2WORLD, j, out.head2world[c])
+        _scatter_run(scratch, _B_PELVIS2WORLD, j, pelvis2world, c, 9)
+        _scatter_run(scratch, _B_THORAX2WORLD, j, thorax2world, c, 9)
+        _scatter_run(scratch, _B_HEAD2WORLD, j, head2world, c, 9)
+    leg2world, arm2world = out.leg2world.reshape(-1), out.arm2world.reshape(-1)
     for i in range(start, stop):
         c = rows[i]
         j = first + Column(i - start)
-        for s in range(2):
-            _scatter_frame(scratch, _B_LEG2WORLD + 9 * s, j, out.leg2world[c, s])
-            _scatter_frame(scratch, _B_ARM2WORLD + 9 * s, j, out.arm2world[c, s])
+        _scatter_run(scratch, _B_LEG2WORLD, j, leg2world, c, 18)
+        _scatter_run(scratch, _B_ARM2WORLD, j, arm2world, c, 18)
 
 
 @jit(inline="always")
@@ -823,7 +828,9 @@ def spine_block(scratch: F64, start: Column, stop: Column, iterations: int) -> N
 def spine_joint_lanes(scratch: F64, start: Column, stop: Column, k: int,
                       iterations: int) -> None:
     """:func:`spine_joint` for joint ``k`` of the spines in the columns ``start:stop`` of a
-    block scratch (see :func:`spine_block`)."""
+    block scratch (see :func:`spine_block`): Newton passes over every column while more than
+    :data:`_FEW_MOVING` are still moving, then the few left one by one (their own passes
+    continued: the same steps, so the same bits)."""
     lanes = range(start, stop)
     below, above = _S_CONTROL + 3 * k, _S_CONTROL + 3 * (k + 1)
     prev_row, joint_row = _S_JOINT + 3 * k, _S_JOINT + 3 * (k + 1)
@@ -833,39 +840,68 @@ def spine_joint_lanes(scratch: F64, start: Column, stop: Column, k: int,
         chord = norm(sub(col3(scratch, above, j), col3(scratch, below, j)))
         scratch[at(_S_T, j)] = scratch[at(_S_PREV_T, j)] + scratch[at(length_row, j)] \
             / max(chord, 1e-9)
-    moving = 1
-    for _ in range(iterations):
+    passes = 0
+    moving = int(stop - start)
+    while passes < iterations and moving > _FEW_MOVING:
         moving = 0
         for i in lanes:
             j = Column(i)
-            prev_p = col3(scratch, prev_row, j)
-            length, t = scratch[at(length_row, j)], scratch[at(_S_T, j)]
-            point, tangent = curve_at_lanes(_lane_control(scratch, j), t)
-            # kept: once every spine has converged, its joint is placed from them
-            put3(scratch, _S_POINT, j, point)
-            put3(scratch, _S_TANGENT, j, tangent)
-            d = sub(point, prev_p)
-            g = dot(d, d) - length**2
-            done = abs(g) <= 1e-13 * length**2
-            slope = 2.0 * dot(d, tangent)
-            step = g / slope if abs(slope) > 1e-12 else 0.0
-            stepped = min(max(t - step, scratch[at(_S_PREV_T, j)] + 1e-6), 9.0)
-            scratch[at(_S_T, j)] = t if done else stepped
+            done = _newton_pass(scratch, j, prev_row, length_row)
+            scratch[at(_S_MOVING, j)] = 0.0 if done else 1.0
             moving += 0 if done else 1
-        if moving == 0:
-            break
-    if moving > 0:  # the iterations spent: the curve at the parameters last stepped to
+        passes += 1
+    if moving > 0:  # the rest of each moving column's passes, alone (a branch a column)
         for i in lanes:
             j = Column(i)
-            point, tangent = curve_at_lanes(_lane_control(scratch, j), scratch[at(_S_T, j)])
-            put3(scratch, _S_POINT, j, point)
-            put3(scratch, _S_TANGENT, j, tangent)
+            if passes == 0 or scratch[at(_S_MOVING, j)] != 0.0:
+                _finish_newton(scratch, j, prev_row, length_row, iterations - passes)
     for i in lanes:
         j = Column(i)
         joint = at_distance(col3(scratch, prev_row, j), col3(scratch, _S_POINT, j),
                             col3(scratch, _S_TANGENT, j), scratch[at(length_row, j)])
         put3(scratch, joint_row, j, joint)
         scratch[at(_S_PREV_T, j)] = scratch[at(_S_T, j)]
+
+
+#: At most this many columns of a block still moving, :func:`spine_joint_lanes` finishes them
+#: one by one rather than in another pass over the whole block (at 4,000 characters, 375 of
+#: the 4,000 spines take a second Newton step, and nearly every block of 32 has one of them).
+_FEW_MOVING = BLOCK // 4
+
+
+@jit(inline="always")
+def _newton_pass(scratch: F64, j: Column, prev_row: int, length_row: int) -> bool:
+    """One Newton pass of :func:`spine_joint` for column ``j``: the curve at its parameter
+    (kept: the joint is placed from the last point and tangent evaluated), and the parameter
+    stepped unless the point is at the segment's length from the previous joint. Returns
+    whether it was (the parameter then kept)."""
+    prev_p = col3(scratch, prev_row, j)
+    length, t = scratch[at(length_row, j)], scratch[at(_S_T, j)]
+    point, tangent = curve_at_lanes(_lane_control(scratch, j), t)
+    put3(scratch, _S_POINT, j, point)
+    put3(scratch, _S_TANGENT, j, tangent)
+    d = sub(point, prev_p)
+    g = dot(d, d) - length**2
+    done = abs(g) <= 1e-13 * length**2
+    slope = 2.0 * dot(d, tangent)
+    step = g / slope if abs(slope) > 1e-12 else 0.0
+    stepped = min(max(t - step, scratch[at(_S_PREV_T, j)] + 1e-6), 9.0)
+    scratch[at(_S_T, j)] = t if done else stepped
+    return bool(done)
+
+
+# Not inlined: its loop with an exit is what the few moving columns run (a call each).
+@jit()
+def _finish_newton(scratch: F64, j: Column, prev_row: int, length_row: int,
+                   passes: int) -> None:
+    """At most ``passes`` more Newton passes of column ``j`` (:func:`_newton_pass`), and the
+    curve at the parameter last stepped to if it is still moving after them."""
+    for _ in range(passes):
+        if _newton_pass(scratch, j, prev_row, length_row):
+            return
+    point, tangent = curve_at_lanes(_lane_control(scratch, j), scratch[at(_S_T, j)])
+    put3(scratch, _S_POINT, j, point)
+    put3(scratch, _S_TANGENT, j, tangent)
 
 
 # A call: one compiled body for decode_rows and posture_rows.
@@ -908,7 +944,8 @@ def decode_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64, out
                 scratch: F64) -> None:
     """Mirrors :func:`ecs_anim.core.normalized.decode` over the store rows ``rows[lo:hi]``
     (int64): row ``c`` of ``pose`` on the body ``lengths[c]`` ((n, N_LENGTHS), m) into row ``c``
-    of every ``out`` array (the other rows are left as they are). ``scratch``:
+    of every ``out`` array (C-contiguous, :func:`fits`; the other rows are left as they are).
+    ``scratch``:
     :func:`spine_scratch` of ``len(rows)``.
 
     By blocks of :data:`.lanes.BLOCK` rows on the vector units (:func:`decode_block`,
@@ -930,7 +967,13 @@ def decode(poses: NormalizedPoses, lengths: F64, out: DecodedPose | None = None)
     pose = pose_arrays(poses)
     n = pose.root_heading.shape[0]
     lengths = np.ascontiguousarray(np.broadcast_to(lengths, (n, N_LENGTHS)), dtype=np.float64)
-    arrays = empty_decoded(n) if out is None else decoded_arrays(out)
+    # (The kernel writes C-contiguous arrays: another ``out`` gets a copy.)
+    arrays = decoded_arrays(out) if out is not None and fits(out, n) else empty_decoded(n)
     over_chunks(decode_rows, n, np.arange(n, dtype=np.int64), pose, lengths, arrays,
                 spine_scratch(n))
-    return decoded_pose(arrays) if out is None else out
+    if out is None:
+        return decoded_pose(arrays)
+    if arrays.positions is not out.positions:
+        for target, value in zip(decoded_arrays(out), arrays, strict=True):
+            target[...] = value
+    return out

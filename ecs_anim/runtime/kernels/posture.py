@@ -292,7 +292,7 @@ def posture_rows(lo: int, hi: int, rows: I64, pose: PoseArrays, lengths: F64,
     """PostureConvert over the store rows ``rows[lo:hi]`` (int64), in place.
 
     Each row ``c``: decode on ``lengths[c]`` into the frames of ``decoded`` and ``positions[c]``
-    (n, N_JOINTS, 3); with ``rotations``, the export joints' joint2bvh into the scratch
+    (n, N_JOINTS, 3; all C-contiguous, :func:`.decode.fits`); with ``rotations``, the export joints' joint2bvh into the scratch
     ``world`` (n, N_EXPORT, 3, 3). A row whose positions (or rotations) are not finite becomes
     ``frozen`` (``newly_bad[c]`` set when it was not before, else cleared), and stops being
     frozen once they are finite again. A frozen row keeps ``positions[c]``, ``local[c]`` (n,

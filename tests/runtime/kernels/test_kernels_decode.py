@@ -9,7 +9,9 @@ from conftest import MOCAP_DIR, MOTIONS_DIR, require_mocap
 from ecs_anim.core.morphology import Morphology
 from ecs_anim.core.normalized import DecodedPose, NormalizedPoses, decode, decode_legs
 from ecs_anim.io.importing import import_bvh
+from ecs_anim.runtime.kernels import available_threads, over_chunks, set_threads
 from ecs_anim.runtime.kernels import decode as kd
+from ecs_anim.runtime.kernels import threads as threads_now
 from ecs_anim.runtime.kernels.lanes import BLOCK
 from support.solve import random_bodies, random_poses
 
@@ -245,3 +247,88 @@ def test_a_spine_that_never_converges_leaves_its_block_mates_as_they_decode_alon
         np.testing.assert_array_equal(a[others], c[others], err_msg=name)
     assert np.isfinite(whole.positions).all()
     assert not np.array_equal(whole.positions[stuck], finite.positions[stuck])
+
+
+def newton_steps(poses: NormalizedPoses, lengths: np.ndarray, c: int) -> list[int]:
+    """The Newton steps spine_joint takes for each of row ``c``'s three spine joints (its loop
+    in Python on the compiled curve_at): 0 where the first guess is at the length already."""
+    seg = lengths[c]
+    spine_len = seg[10] + seg[11] + seg[12]
+    p = [(float(x), float(y), float(z)) for x, y, z in poses.spine_points[c] * spine_len]
+    control = ((0.0, 0.0, 0.0), p[0], p[1], p[2])
+    chords = [np.linalg.norm(np.subtract(control[k + 1], control[k])) for k in range(3)]
+    t, prev = 0.0, np.array(control[0])
+    steps = []
+    for k in range(3):
+        length, prev_t = seg[10 + k], t
+        t = prev_t + length / max(chords[k], 1e-9)
+        taken = 0
+        for _ in range(6):
+            point, tangent = map(np.array, kd.curve_at(control, t))
+            d = point - prev
+            g = d @ d - length**2
+            if abs(g) <= 1e-13 * length**2:
+                break
+            slope = 2.0 * (d @ tangent)
+            t = min(max(t - (g / slope if abs(slope) > 1e-12 else 0.0), prev_t + 1e-6), 9.0)
+            taken += 1
+        point, tangent = map(np.array, kd.curve_at(control, t))
+        prev = np.array(kd.at_distance(tuple(prev), tuple(point), tuple(tangent), length))
+        steps.append(taken)
+    return steps
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_spines_converging_unevenly_in_a_block_give_the_row_decode_bits(threads):
+    """spine_joint_lanes passes over the whole block while many of its spines still move, then
+    finishes the few left one by one: blocks where a few spines take more Newton steps than
+    the rest, a block where most do, a NaN spine (never converging: its passes run out) and
+    pieces too short for a pass over the block, on one and two threads and on chunks that
+    cross blocks, all give decode_row's bits row by row."""
+    if threads > available_threads():
+        pytest.skip("one core")
+    rng = np.random.default_rng(1313)
+    n = 4 * BLOCK + 11
+    poses = random_poses(rng, n)
+    lengths = random_bodies(rng, n)
+    rising = np.array([[0.0, 0.0, 1 / 3], [0.0, 0.0, 2 / 3], [0.0, 0.0, 1.0]])
+    poses.spine_points[:] = rising + rng.normal(scale=0.02, size=(n, 3, 3))  # one or two steps
+    bent = np.r_[3, 17, 29, 2 * BLOCK:3 * BLOCK]  # a few in the first block, the whole third
+    poses.spine_points[bent] = rising + rng.normal(scale=0.35, size=(bent.size, 3, 3))
+    poses.spine_points[BLOCK + 5] = np.nan
+    steps = np.array([newton_steps(poses, lengths, c) for c in range(n)])
+    first = steps[:BLOCK].max(axis=1)
+    assert 0 < (first > np.median(first)).sum() <= 8  # few moving longer than the rest
+    assert (steps[2 * BLOCK:3 * BLOCK].max(axis=1) >= 3).sum() > 8  # many moving long
+    pose = kd.pose_arrays(poses)
+    by_row = decoded_row_by_row(pose, lengths)
+    rows = np.arange(n, dtype=np.int64)
+    before = threads_now()
+    try:
+        set_threads(threads)
+        out = kd.empty_decoded(n)
+        over_chunks(kd.decode_rows, n, rows, pose, lengths, out, kd.spine_scratch(n),
+                    rows_per_thread=1)
+    finally:
+        set_threads(before)
+    chunks = decoded_in_chunks(pose, lengths, rows, ((0, 5), (5, BLOCK + 3), (BLOCK + 3, n)))
+    for name, a, b, c in zip(FIELDS, out, chunks, by_row, strict=True):
+        np.testing.assert_array_equal(a, c, err_msg=name)
+        np.testing.assert_array_equal(b, c, err_msg=name)
+    assert np.isfinite(out.positions).all()
+
+
+def test_decode_into_an_out_not_contiguous_writes_it_like_a_contiguous_one():
+    """The kernels write C-contiguous arrays (flat views, scatter_block): decode into an ``out``
+    that is not (a view with a step) decodes aside and copies, and fits says no to it."""
+    rng = np.random.default_rng(1314)
+    n = BLOCK + 3
+    poses = random_poses(rng, n)
+    lengths = random_bodies(rng, n)
+    wide = kd.decoded_pose(kd.empty_decoded(2 * n))
+    strided = DecodedPose(*(a[::2] for a in kd.decoded_arrays(wide)))
+    assert not kd.fits(strided, n) and kd.fits(kd.empty_decoded(n), n)
+    assert kd.decode(poses, lengths, out=strided) is strided
+    for name, a, b in zip(FIELDS, kd.decoded_arrays(strided),
+                          kd.decoded_arrays(kd.decode(poses, lengths)), strict=True):
+        np.testing.assert_array_equal(a, b, err_msg=name)
