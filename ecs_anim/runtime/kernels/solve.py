@@ -33,7 +33,13 @@ from ecs_anim.runtime.kernels.decode import DecodedArrays, PoseArrays
 from ecs_anim.runtime.kernels.decode import decode as decode_compiled
 from ecs_anim.runtime.kernels.lanes import BLOCK, Column, at
 from ecs_anim.runtime.kernels.solve_head import solve_head
-from ecs_anim.runtime.kernels.solve_limbs import solve_limbs
+from ecs_anim.runtime.kernels.solve_limbs import (
+    A_WAITING,
+    arm_lanes,
+    arm_scratch,
+    scatter_arm,
+    solve_limbs,
+)
 from ecs_anim.runtime.kernels.solve_points import (
     Bodies,
     Goals,
@@ -60,6 +66,8 @@ from ecs_anim.solver.shell import DEFAULT_SETTINGS, SolverSettings, iteration_ca
 I64 = NDArray[np.int64]
 B8 = NDArray[np.bool_]
 _TRUNK = 5
+#: Bits of a character's ``kinds`` (:func:`solve_rows`): what its goals ask of the solve.
+_USES_TRUNK, _ON_SELF, _ITERATES, _PREDICTED = 1, 2, 4, 8
 TABLES = tables()
 
 
@@ -92,55 +100,76 @@ def _iterative(g: Goals, t: Tables, j: int) -> bool:
 @jit(nogil=True)
 def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners,
                b: Bodies, t: Tables, iterations_used: I64, err: F64, stalled: B8, previous: F64,
-               slow_before: B8, scratch: F64, tolerance_m: float, tolerance_rad: float,
+               slow_before: B8, kinds: I64, arm_scratch: F64, scratch: F64, tolerance_m: float, tolerance_rad: float,
                com_tolerance_m: float, max_ccd_step_rad: float, root_gain: float,
                stall_fraction: float, leg_extension: float) -> None:
     """Solve the goals of each character ``c`` in ``lo..hi-1`` (its rows of ``pose`` and
     ``dec`` in place) in at most ``b.iterations[c]`` iterations, each goal keeping the loop
     going for at most ``g.iterations`` of them; ``iterations_used`` (r,) the iterations each one
     took. ``err``, ``stalled``, ``previous``, ``slow_before`` (k,): per-goal scratch (each
-    character uses its own goals' entries, so the threads share them); ``scratch``: a
-    :func:`.solve_root.root_scratch` of r rows (this chunk uses its block ``lo // BLOCK``).
-    Mirrors the loop of :func:`ecs_anim.solver.shell.solve`, one character at a time.
+    character uses its own goals' entries, so the threads share them); ``kinds`` (r,): per
+    character scratch (what its goals ask of the solve, found once); ``arm_scratch``, ``scratch``:
+    a :func:`.solve_limbs.arm_scratch` and a :func:`.solve_root.root_scratch` of r rows (this
+    chunk uses their block ``lo // BLOCK``). Mirrors the loop of
+    :func:`ecs_anim.solver.shell.solve`, one character at a time.
 
-    By blocks of :data:`.lanes.BLOCK` characters, in two rounds over each block: the first
-    takes each character up to its first root step where it is predicted (the step gathered
-    into its column: the character waits), the block's waiting steps are computed together on
-    the vector units (:func:`.solve_root.root_lanes`), and the second takes each waiting
-    character on from its root's move. The rounds share one loop (one call site of each step:
-    numba inlines a copy of a step's body at each, and the compile is counted)."""
+    By blocks of :data:`.lanes.BLOCK` characters, in three rounds over each block: the first
+    takes each character up to its first pass's arm where :func:`.solve_limbs.solve_limbs`
+    gathers it into its column (the character waits), else up to its first root step where
+    that is predicted (the step gathered into its column: it waits); the block's waiting arms
+    are computed together on the vector units (:func:`.solve_limbs.arm_lanes`), and the second
+    round takes each character whose arm waited on from there (to its first root step, as
+    above); the block's waiting root steps are computed together
+    (:func:`.solve_root.root_lanes`), and the third round takes each waiting character on from
+    its root's move. Each character's steps run in the order of the scalar loop (a limb reads
+    and writes only its own joints: the arm solved after the legs is the same). The rounds
+    share one loop (one call site of each step: numba inlines a copy of a step's body at each,
+    and the compile is counted)."""
     # The characters' loop is here, not in a call per character: a call passes the state
     # tuples on, a reference count up and down for each of their 74 arrays (0.25 us a
     # character); numba's inlining of such a call costs 14 s more of compile.
-    root_block = scratch[lo // BLOCK]
+    arm_block, root_block = arm_scratch[lo // BLOCK], scratch[lo // BLOCK]
     for block_start in range(lo, hi, BLOCK):
         count = min(BLOCK, hi - block_start)
-        for turn in range(2 * count):
-            if turn == count:  # the first round done: the waiting characters' root steps
+        for turn in range(3 * count):
+            if turn == count:  # the first round done: the waiting characters' arms
+                arm_lanes(arm_block, Column(0), Column(count))
+            if turn == 2 * count:  # the second round done: the waiting characters' root steps
                 root_lanes(root_block, Column(0), Column(count), root_gain, leg_extension)
-            resuming = turn >= count
+            stage = turn // count  # 0 from the start, 1 after the arms, 2 after the root steps
             c = block_start + turn % count
             column = Column(turn % count)
-            if resuming and root_block[at(R_WAITING, column)] == 0.0:
+            if stage == 1 and arm_block[at(A_WAITING, column)] == 0.0:
                 continue
+            if stage == 2 and root_block[at(R_WAITING, column)] == 0.0:
+                continue
+            arm_block[at(A_WAITING, column)] = 0.0
             root_block[at(R_WAITING, column)] = 0.0
             start, stop = g.start[c], g.start[c + 1]
-            uses_trunk = False
-            on_self = False
-            iterates = False  # a goal an iteration moves: the trunk's, or one following what a pass moves
-            # the root's step is predicted (``_Solve.predicted``): no goal iterates, and every user
-            # goal follows the own body (none aims at the world or at another character)
-            predicted = True
-            for j in range(start, stop):
-                if not resuming:
+            if stage == 0:
+                uses_trunk = False
+                on_self = False
+                iterates = False  # a goal an iteration moves: the trunk's, or one following what a pass moves
+                # the root's step is predicted (``_Solve.predicted``): no goal iterates, and every
+                # user goal follows the own body (none aims at the world or at another character)
+                predicted = True
+                for j in range(start, stop):
                     stalled[j] = False
                     previous[j] = math.inf
                     slow_before[j] = False
-                if (g.chain[j] & (1 << _TRUNK)) > 0:
-                    uses_trunk = True
-                on_self = on_self or g.on_self[j]
-                iterates = iterates or _iterative(g, t, j)
-                predicted = predicted and (g.on_self[j] or g.table_index[j] < 0)
+                    if (g.chain[j] & (1 << _TRUNK)) > 0:
+                        uses_trunk = True
+                    on_self = on_self or g.on_self[j]
+                    iterates = iterates or _iterative(g, t, j)
+                    predicted = predicted and (g.on_self[j] or g.table_index[j] < 0)
+                # (kept for the later rounds, which would find the same)
+                kinds[c] = (_USES_TRUNK * uses_trunk + _ON_SELF * on_self + _ITERATES * iterates
+                            + _PREDICTED * predicted)
+            else:
+                uses_trunk = (kinds[c] & _USES_TRUNK) != 0
+                on_self = (kinds[c] & _ON_SELF) != 0
+                iterates = (kinds[c] & _ITERATES) != 0
+                predicted = (kinds[c] & _PREDICTED) != 0
             # Steps with nothing to do are not called, and the errors of points without offset
             # are measured on the arrays themselves (the same operations as goal_error).
             uses_head = w.first_head[c] >= 0 or w.orient_head[c] >= 0
@@ -151,12 +180,13 @@ def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
             iterations = b.iterations[c]
             # A predicted character's first root step waits for its block's (no goal iterates:
             # the step ends its first iteration, and nothing is left open after it).
-            waits = not resuming and predicted and not iterates
+            waits = stage < 2 and predicted and not iterates
             any_open = iterates
-            if resuming:
+            if stage == 2:
                 move_root(c, pose, dec, b, root_block, column)
                 used = 1
                 any_open = False
+            arm_solved = stage == 1  # its first pass's limbs done but an arm, now solved
             # Each pass follows the goals on the body, then re-plants the limbs and re-aims the
             # head (exact, analytic steps: a limb or head goal is where they leave it). The pass
             # ends the solve where no iteration would change anything: no goal left that the
@@ -166,9 +196,17 @@ def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
             # an iteration: a trunk turn and a root move, then the next pass. One call site
             # each: numba inlines these steps' bodies at every site it compiles.
             while True:
-                if on_self:
-                    follow_own_targets(c, dec, g, t)
-                solve_limbs(c, pose, dec, g, w, b, t, tolerance_m, leg_extension)
+                if arm_solved:
+                    scatter_arm(c, pose, dec, t, arm_block, column)
+                    arm_solved = False
+                else:
+                    if on_self:
+                        follow_own_targets(c, dec, g, t)
+                    # An arm of the first pass waits for its block's (:func:`.solve_limbs.arm_lanes`).
+                    if solve_limbs(c, pose, dec, g, w, b, t, tolerance_m, leg_extension, arm_block,
+                                   column, stage == 0 and used == 0):
+                        arm_block[at(A_WAITING, column)] = 1.0
+                        break
                 if uses_head:
                     solve_head(c, pose, dec, g, w, b, t)
                 if used >= iterations:
@@ -226,7 +264,7 @@ def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
                         previous[j] = e
                         slow_before[j] = slow
                         any_open = any_open or goal_open
-            if root_block[at(R_WAITING, column)] == 0.0:
+            if arm_block[at(A_WAITING, column)] == 0.0 and root_block[at(R_WAITING, column)] == 0.0:
                 iterations_used[c] = used
 
 
@@ -443,7 +481,8 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
     r = used.shape[0]
     over_chunks(solve_rows, r, state.pose, state.dec, state.goals, state.winners,
                 state.bodies, TABLES, used, np.zeros(k), np.zeros(k, np.bool_), np.zeros(k),
-                np.zeros(k, np.bool_), root_scratch(r), float(s.tolerance_m),
+                np.zeros(k, np.bool_), np.zeros(r, np.int64), arm_scratch(r), root_scratch(r),
+                float(s.tolerance_m),
                 float(s.tolerance_rad), float(s.com_tolerance_m), float(s.max_ccd_step_rad),
                 float(s.root_gain), float(s.stall_fraction), float(MAX_LEG_EXTENSION),
                 rows_per_thread=BLOCK)

@@ -149,7 +149,9 @@ def reach_end_applies(upper: float, lower: float, distance: float, along_axis: f
             and span <= (1.0 - 1e-6) * limb and along_axis > -0.5 * distance)
 
 
-@jit()
+# Inlined by numba: a call left in the loop of :func:`.solve_limbs.arm_lanes` would keep LLVM
+# from vectorizing it.
+@jit(inline="always")
 def reach_end(root: Vec3, limb2world: Frame, upper: float, lower: float, to_goal: Vec3,
               distance: float, max_extension: float) -> tuple[Frame, float, Vec3]:
     """:func:`reach_point` for the limb's end (bone coordinates ``(0, 0, lower)`` on the lower
@@ -193,6 +195,43 @@ def turn_about_axis(root: Vec3, axis_through: Vec3, point: Vec3, goal: Vec3) -> 
     if not (norm(v) > 1e-9 and norm(t) > 1e-9 and h > 0.0):
         return rotation_about(k, 0.0, 1.0)
     return rotation_about(k, y / h, x / h)
+
+
+# Branch-free twins of point_in_limb and turn_about_axis for the loops over a block's
+# characters (:func:`.solve_limbs.arm_lanes`): every case computed, then chosen by selects, with
+# the same operations in the same order, so the same bits.
+
+
+@jit(inline="always")
+def point_in_limb_lanes(upper: float, lower: float, fraction: float, on_lower: bool,
+                        q: Vec3) -> Vec3:
+    """:func:`point_in_limb` (the same bits) without branches: the bone's length, direction
+    and origin chosen by ``on_lower``."""
+    span = min(max(fraction * (upper + lower), abs(upper - lower) + 1e-9), upper + lower)
+    z_e = (upper**2 - lower**2 + span**2) / (2.0 * span)
+    y_e = math.sqrt(max(upper**2 - z_e**2, 0.0))
+    length = lower if on_lower else upper
+    d = (0.0 / length, (-y_e if on_lower else y_e) / length,
+         ((span - z_e) if on_lower else z_e) / length)
+    origin = (0.0, y_e if on_lower else 0.0, z_e if on_lower else 0.0)
+    y_axis = (0.0, d[2], -d[1])
+    out = add(origin, (q[0] * 1.0, q[0] * 0.0, q[0] * 0.0))
+    out = add(out, scale(y_axis, q[1]))
+    return add(out, scale(d, q[2]))
+
+
+@jit(inline="always")
+def turn_about_axis_lanes(root: Vec3, axis_through: Vec3, point: Vec3, goal: Vec3) -> Frame:
+    """:func:`turn_about_axis` (the same bits) without branches: the identity's sine and
+    cosine (0, 1) chosen where the point or the goal lies on the axis."""
+    k = normalize(sub(axis_through, root))
+    v, t = sub(point, root), sub(goal, root)
+    v = add_scaled(v, k, -dot(v, k))
+    t = add_scaled(t, k, -dot(t, k))
+    y, x = dot(k, cross(v, t)), dot(v, t)
+    h = math.sqrt(x * x + y * y)
+    turns = (norm(v) > 1e-9) & (norm(t) > 1e-9) & (h > 0.0)
+    return rotation_about(k, y / h if turns else 0.0, x / h if turns else 1.0)
 
 
 @jit()

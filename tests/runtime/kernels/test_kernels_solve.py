@@ -27,7 +27,7 @@ from ecs_anim.runtime.kernels import solve_math as compiled_math
 from ecs_anim.runtime.kernels.decode import DecodedArrays, PoseArrays
 from ecs_anim.runtime.kernels.lanes import Column
 from ecs_anim.runtime.kernels.solve_head import solve_head
-from ecs_anim.runtime.kernels.solve_limbs import solve_limbs
+from ecs_anim.runtime.kernels.solve_limbs import arm_scratch, solve_limbs
 from ecs_anim.runtime.kernels.solve_points import Goals, centre_of_mass, goal_error
 from ecs_anim.runtime.kernels.solve_root import com_shortfall, root_scratch, solve_root
 from ecs_anim.runtime.kernels.solve_trunk import solve_trunk
@@ -150,11 +150,13 @@ def solved_in_chunks(args, chunks):
     poses, lengths, goals, masses, com_fraction, settings, decoded = copy.deepcopy(args)[:7]
     state = compiled.prepare(poses, lengths, goals, masses, com_fraction, decoded, settings)
     r, k = lengths.shape[0], state.goals.start[-1]
-    used, scratch = np.zeros(r, np.int64), root_scratch(r)
+    used, kinds, arms, scratch = (np.zeros(r, np.int64), np.zeros(r, np.int64), arm_scratch(r),
+                                  root_scratch(r))
     for lo, hi in chunks:
         compiled.solve_rows(lo, hi, state.pose, state.dec, state.goals, state.winners,
                             state.bodies, T, used, np.zeros(k), np.zeros(k, np.bool_),
-                            np.zeros(k), np.zeros(k, np.bool_), scratch, float(settings.tolerance_m),
+                            np.zeros(k), np.zeros(k, np.bool_), kinds, arms, scratch,
+                            float(settings.tolerance_m),
                             float(settings.tolerance_rad), float(settings.com_tolerance_m),
                             float(settings.max_ccd_step_rad), float(settings.root_gain),
                             float(settings.stall_fraction), float(MAX_LEG_EXTENSION))
@@ -187,20 +189,48 @@ def mixed_block(args):
     return args, variant
 
 
+def mixed_arms(args):
+    """The bench walkers' solve ``args`` with their right arm's goals (a wrist goal, an elbow
+    goal below it) changed by ``c % 4``: 0 as they are (the first pass's arm waits for its
+    block's), 1 the second goal a point halfway down the forearm (waits, a second point on the
+    lower bone), 2 the elbow goal above the wrist's (solved alone: its first goal is not the
+    wrist), 3 the wrist goal out of the arm's reach (solved alone: ``reach_end`` does not
+    apply). In place; returns each character's variant (r,)."""
+    goals, decoded = args[2], args[6]
+    variant = np.arange(goals.rows.size) % 4
+    user = goals.table_index >= 0
+    elbow, wrist = user & (goals.bone == 0), user & (goals.bone == 1)
+    lower = elbow & (variant[goals.owner] == 1)
+    goals.segment[lower], goals.bone[lower], goals.fraction[lower] = L["forearm_r"], 1, 0.5
+    goals.priority[elbow & (variant[goals.owner] == 2)] = 20.0
+    far = np.flatnonzero(wrist & (variant[goals.owner] == 3))
+    shoulder = decoded.positions[goals.owner[far], J["shoulder_r"]]
+    goals.goal[far] = shoulder + 3.0 * (goals.goal[far] - shoulder)
+    return variant
+
+
 def test_a_solve_does_not_depend_on_its_blocks_nor_chunks(monkeypatch):
-    """``solve_rows`` computes the first root steps of a block's waiting characters together
-    (in the lanes of the vector units, the rest in the loop's scalar remainder), the others'
-    alone: over 40 bench walkers (a block of 32 and one of 8) of which some wait and the others
-    do not (:func:`mixed_block`), each character gets the same bits in one call, in two chunks
-    (0:37, 37:40: the first's second block of 5 rows) and row by row (each step alone); the
-    numpy reference agrees to 1e-9 m."""
+    """``solve_rows`` computes the first pass's arms and first root steps of a block's waiting
+    characters together (in the lanes of the vector units, the rest in the loop's scalar
+    remainder), the others' alone: over 40 bench walkers (a block of 32 and one of 8) of which
+    some wait and the others do not (:func:`mixed_block`, :func:`mixed_arms`), each character
+    gets the same bits in one call, in two chunks (0:37, 37:40: the first's second block of 5
+    rows) and row by row (each step alone); the numpy reference agrees to 1e-9 m."""
     capture = Capture(monkeypatch)
     scene = BenchScene(40, constrained=True)
     for _ in range(3):
         scene.tick()
     scene.sim.close()
+    arm_variant = mixed_arms(capture.calls[-1])
     args, variant = mixed_block(capture.calls[-1])
     assert_same_solve(args)
+    # The arms of variants 0 and 1 wait for their block's in the first pass, the others not.
+    poses, lengths, goals, masses, com_fraction = copy.deepcopy(args[:5])
+    s = compiled.prepare(poses, lengths, goals, masses, com_fraction, copy.deepcopy(args[6]))
+    waits = [solve_limbs(c, s.pose, s.dec, s.goals, s.winners, s.bodies, T, S.tolerance_m,
+                         MAX_LEG_EXTENSION, arm_scratch(1)[0], Column(0), True)
+             for c in range(40)]
+    np.testing.assert_array_equal(waits, arm_variant < 2)
     whole, used = solved_in_chunks(args, [(0, 40)])
     goals = args[2]
     user = goals.table_index >= 0
@@ -270,7 +300,7 @@ def assert_same_state(reference, state):
 def limbs(s):
     for c in range(s.bodies.lengths.shape[0]):
         solve_limbs(c, s.pose, s.dec, s.goals, s.winners, s.bodies, T, S.tolerance_m,
-                    MAX_LEG_EXTENSION)
+                    MAX_LEG_EXTENSION, arm_scratch(1)[0], Column(0), False)
 
 
 def test_the_limb_steps_angle_wrap_is_numpys_modulo_to_the_bit():
@@ -551,7 +581,7 @@ def test_the_trunk_turn_is_capped_and_vetoed_when_it_worsens_a_higher_goal(idle)
     s2, _ = one_state(idle, with_a_held_left_hand)
     # As in the solve: the turn comes after a pass has met the held hand.
     solve_limbs(0, s2.pose, s2.dec, s2.goals, s2.winners, s2.bodies, T, S.tolerance_m,
-                MAX_LEG_EXTENSION)
+                MAX_LEG_EXTENSION, arm_scratch(1)[0], Column(0), False)
     thorax, positions = s2.pose.thorax[0].copy(), s2.dec.positions[0].copy()
     err = goal_errors(s2, 0)
     assert not solve_trunk(0, s2.pose, s2.dec, s2.bodies.lengths[0], s2.goals, s2.winners, err,
