@@ -23,10 +23,8 @@ import numpy as np
 from ecs_anim.components import Constraint
 from ecs_anim.core.morphology import centres_of_mass as numpy_centres
 from ecs_anim.runtime.kernels import over_chunks
-from ecs_anim.runtime.kernels.com import com_and_error_rows, segment_joints
+from ecs_anim.runtime.kernels.com import com_and_error_rows
 from ecs_anim.runtime.system_base import System
-
-_PROXIMAL, _DISTAL = segment_joints()
 
 
 class COMControl(System):
@@ -50,5 +48,4 @@ class COMControl(System):
                                                   axis=1)
             return
         over_chunks(com_and_error_rows, rows.size, rows, st.solved.positions, st.segment_mass_kg,
-                    st.segment_com_fraction, _PROXIMAL, _DISTAL, st.com_desired, st.com,
-                    st.com_error_m)
+                    st.segment_com_fraction, st.com_desired, st.com, st.com_error_m)

@@ -42,7 +42,7 @@ from ecs_anim.core.normalized import DecodedPose, NormalizedPoses
 from ecs_anim.core.normalized import decode as numpy_decode
 from ecs_anim.motion.constraint_table import KIND_ORIENTATION, TARGET_WORLD, ConstraintTable
 from ecs_anim.runtime.kernels import over_chunks, threads
-from ecs_anim.runtime.kernels.com import DISTAL, PROXIMAL, Motion, centres_of_mass
+from ecs_anim.runtime.kernels.com import Motion, centres_of_mass
 from ecs_anim.runtime.kernels.com import motion_of as motion_of  # tests patch these
 from ecs_anim.runtime.kernels.decode import (
     decode,
@@ -124,8 +124,7 @@ def _centres(positions: NDArray[np.float64], masses: NDArray[np.float64],
     n = positions.shape[0]
     out = np.full((n, 3), np.nan)
     rows = np.flatnonzero(np.isfinite(positions[:, 0, 0]))
-    over_chunks(centres_of_mass, rows.size, rows, rows, positions, masses, com_fraction,
-                PROXIMAL, DISTAL, out)
+    over_chunks(centres_of_mass, rows.size, rows, rows, positions, masses, com_fraction, out)
     return out
 
 

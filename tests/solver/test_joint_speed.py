@@ -159,6 +159,31 @@ def test_compiled_shares_equal_numpy():
     assert (expected[5:-3] < 1.0).sum() > n // 2
 
 
+def test_compiled_shares_where_a_pelvis_or_joint_is_not_finite():
+    """The compiled share leaves the pelvis out (its change from itself is 0, or NaN) and reads
+    each pelvis once: a pelvis not finite in any of the four postures bounds nothing (share 1;
+    numpy's NaN, on which the limit holds nothing back either), a joint NaN gives the numpy
+    reference's share bit for bit (that joint does not count)."""
+    rng = np.random.default_rng(29)
+    n = 24
+    clip_before = rng.normal(size=(n, N_JOINTS, 3))
+    clip_now = clip_before + rng.normal(scale=0.05, size=(n, N_JOINTS, 3))
+    pose_before = clip_before + rng.normal(scale=0.1, size=(n, N_JOINTS, 3))
+    pose = clip_now + rng.normal(scale=0.3, size=(n, N_JOINTS, 3))
+    postures = (pose, clip_now, pose_before, clip_before)
+    for row, (posture, value) in enumerate(
+            (p, v) for p in postures for v in (np.nan, np.inf, -np.inf)):
+        posture[row, 0, row % 3] = value  # rows 0-11: a pelvis
+    for row, posture in enumerate(postures, start=12):
+        posture[row, J["wrist_l"], 1] = np.nan  # rows 12-15: a wrist
+    args = (pose, clip_now, pose_before, clip_before, np.zeros((n, 2), bool), 0.1, np.zeros(n))
+    expected = reference.step_shares(*args)
+    share = compiled.step_shares(*args)
+    assert (share[:12] == 1.0).all() and (np.isnan(expected[:12]) | (expected[:12] == 1.0)).all()
+    np.testing.assert_array_equal(share[12:], expected[12:])
+    assert (expected[12:] < 1.0).all()
+
+
 def test_compiled_limit_again_and_put_back_equal_numpy():
     """The held rows taken out, shared and limited once more and decoded (compiled
     ``again_rows`` between two decodes), then put back (``put_rows``): the numpy reference's to

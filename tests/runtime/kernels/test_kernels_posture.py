@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 from conftest import MOTIONS_DIR
-from ecs_anim.core.morphology import Morphology, centres_of_mass, segment_mass_table
+from ecs_anim.core.morphology import MASS_SEGMENTS, Morphology, centres_of_mass, segment_mass_table
 from ecs_anim.core.normalized import decode, vertebrae
-from ecs_anim.core.skeleton import N_JOINTS
+from ecs_anim.core.skeleton import JOINT_INDEX, N_JOINTS
 from ecs_anim.io.export.skeleton import local_rotations
 from ecs_anim.io.importing import import_bvh
 from ecs_anim.runtime.kernels import com as kc
@@ -162,28 +162,34 @@ def test_centres_of_mass_match_numpy_for_some_rows():
     fraction = np.stack([segment_mass_table(b)[1] for b in bodies])
     positions = decode(random_poses(rng, n), np.stack([b.lengths for b in bodies])).positions
     ref = centres_of_mass(positions, masses, fraction)
-    proximal, distal = kc.segment_joints()
     rows = np.array([2, 5, 11, 29, 0], dtype=np.int64)
     out = np.full((n, 3), np.nan)
-    kc.centres_of_mass(0, rows.size, rows, rows, positions, masses, fraction, proximal, distal, out)
+    kc.centres_of_mass(0, rows.size, rows, rows, positions, masses, fraction, out)
     np.testing.assert_allclose(out[rows], ref[rows], rtol=0, atol=TOL)
     assert np.all(np.isnan(np.delete(out, rows, axis=0)))
     # Gathered positions (as the solver gives them): positions[i] belongs to rows[i].
     gathered = np.full((n, 3), np.nan)
     kc.centres_of_mass(0, rows.size, rows, np.arange(rows.size, dtype=np.int64), positions[rows],
-                       masses, fraction, proximal, distal, gathered)
+                       masses, fraction, gathered)
     np.testing.assert_allclose(gathered[rows], ref[rows], rtol=0, atol=TOL)
     # COMControl's pass (in two chunks): the same centres, bit for bit, and their horizontal
     # distances from the desired ones.
     desired = rng.normal(size=(n, 3))
     com, error = np.full((n, 3), np.nan), np.full(n, np.nan)
     for lo, hi in ((0, 2), (2, rows.size)):
-        kc.com_and_error_rows(lo, hi, rows, positions[rows], masses, fraction, proximal, distal,
-                              desired, com, error)
+        kc.com_and_error_rows(lo, hi, rows, positions[rows], masses, fraction, desired, com,
+                              error)
     assert np.array_equal(com.view(np.int64), gathered.view(np.int64))
     np.testing.assert_array_equal(error[rows], np.linalg.norm(com[rows, :2] - desired[rows, :2],
                                                               axis=1))
     assert np.all(np.isnan(np.delete(error, rows)))
+
+
+def test_segment_joints_are_the_mass_segments():
+    """The kernels' constant joints of each mass segment are those of MASS_SEGMENTS (a change
+    there does not recompile the cached kernels: this test says so)."""
+    assert kc.SEGMENT_JOINTS == tuple((JOINT_INDEX[proximal], JOINT_INDEX[distal])
+                                      for _, proximal, distal, _ in MASS_SEGMENTS)
 
 
 @pytest.mark.parametrize("rotations", [False, True])
