@@ -79,7 +79,10 @@ def posture_numpy(sim: Simulation, rows: NDArray[np.int64], decoded: DecodedArra
 
 
 def _writable(a: np.ndarray, shape: tuple[int, ...]) -> bool:
-    return a.shape == shape and a.dtype == np.float64 and a.flags.writeable
+    """Whether the kernels can write ``a`` as it is: its ``shape``, float64, writable and
+    C-contiguous (the decode's results are put back through flat views)."""
+    return (a.shape == shape and a.dtype == np.float64 and a.flags.writeable
+            and a.flags.c_contiguous)
 
 
 class PostureConvert(System):

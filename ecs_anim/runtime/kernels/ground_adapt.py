@@ -417,22 +417,19 @@ def pitch_lanes(scratch: F64, count: int, kinds: I64, params: F64, grid: F64, pa
         for e in range(count):
             k = Column(e)
             dz, deficit = scratch[_at(_S_P_DZ, k)], scratch[_at(_S_P_DEFICIT, k)]
-            rise = scratch[_at(_S_P_RISE, k)]
-            slope = pitch_slope(dz, deficit, scratch[_at(_S_P_LAST_DZ, k)],
-                                scratch[_at(_S_P_LAST_DEFICIT, k)], rise)
-            scratch[_at(_S_P_LAST_DZ, k)], scratch[_at(_S_P_LAST_DEFICIT, k)] = dz, deficit
-            dz = min(max(dz - deficit / slope, -1.0), 1.0)
-            along = math.sqrt(1.0 - dz * dz)
-            d = (scratch[_at(_S_P_HEADING, k)] * along, scratch[_at(_S_P_HEADING + 2, k)] * along,
-                 dz)
             origin = (scratch[_at(_S_P_ORIGIN, k)], scratch[_at(_S_P_ORIGIN + 2, k)],
                       scratch[_at(_S_P_ORIGIN + 4, k)])
-            end = add_scaled(origin, d, rise)
+            next_dz, d, end = secant_step(dz, deficit, scratch[_at(_S_P_LAST_DZ, k)],
+                                          scratch[_at(_S_P_LAST_DEFICIT, k)],
+                                          scratch[_at(_S_P_RISE, k)],
+                                          scratch[_at(_S_P_HEADING, k)],
+                                          scratch[_at(_S_P_HEADING + 2, k)], origin)
+            scratch[_at(_S_P_LAST_DZ, k)], scratch[_at(_S_P_LAST_DEFICIT, k)] = dz, deficit
             q = Column(PITCH_QUERIES) + k
             scratch[_at(_S_Q_X, q)], scratch[_at(_S_Q_Y, q)] = end[0], end[1]
             scratch[_at(_S_P_END_Z, k)] = end[2]
             scratch[_at(_S_P_DX, k)], scratch[_at(_S_P_DY, k)] = d[0], d[1]
-            scratch[_at(_S_P_DZ, k)] = dz
+            scratch[_at(_S_P_DZ, k)] = next_dz
         heights_lanes(scratch, PITCH_QUERIES, PITCH_QUERIES + count, kinds, params, grid)
         waiting = 0
         for e in range(count):
@@ -526,15 +523,27 @@ def pitched_from(origin: Vec3, d: Vec3, foot: float, sign: float, clearance: flo
         if turn == 0:
             flat = max(math.sqrt(d[0] * d[0] + d[1] * d[1]), 1e-9)
             hx, hy = d[0] / flat, d[1] / flat
-        slope = pitch_slope(dz, deficit, last_dz, last_deficit, sign * foot)
-        last_dz, last_deficit = dz, deficit
-        dz = min(max(dz - deficit / slope, -1.0), 1.0)
-        along = math.sqrt(1.0 - dz * dz)
-        d = (hx * along, hy * along, dz)
-        end = add_scaled(origin, d, sign * foot)
+        next_dz, d, end = secant_step(dz, deficit, last_dz, last_deficit, sign * foot, hx, hy,
+                                      origin)
+        last_dz, last_deficit, dz = dz, deficit, next_dz
         ground = height_at(end[0], end[1], kinds, params, grid)
         deficit = ground + clearance - end[2]
     return d, ground
+
+
+@jit(inline="always")
+def secant_step(dz: float, deficit: float, last_dz: float, last_deficit: float, rise: float,
+                hx: float, hy: float, origin: Vec3) -> tuple[float, Vec3, Vec3]:
+    """One secant pass of a foot's pitch (:func:`pitched_from`, :func:`pitch_lanes`): the
+    direction's new z from its last two (``dz``, ``last_dz``) and their ``deficit`` and
+    ``last_deficit`` (m), the foot's ``rise`` (m: ``sign * foot``) and its horizontal heading
+    (``hx``, ``hy``, unit). Returns (that z, the new direction, its other end ``origin + rise *
+    direction``)."""
+    slope = pitch_slope(dz, deficit, last_dz, last_deficit, rise)
+    dz = min(max(dz - deficit / slope, -1.0), 1.0)
+    along = math.sqrt(1.0 - dz * dz)
+    d = (hx * along, hy * along, dz)
+    return dz, d, add_scaled(origin, d, rise)
 
 
 @jit(inline="always")

@@ -100,7 +100,8 @@ def _iterative(g: Goals, t: Tables, j: int) -> bool:
 @jit(nogil=True)
 def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winners,
                b: Bodies, t: Tables, iterations_used: I64, err: F64, stalled: B8, previous: F64,
-               slow_before: B8, kinds: I64, arm_scratch: F64, scratch: F64, tolerance_m: float, tolerance_rad: float,
+               slow_before: B8, kinds: I64, arms: F64, scratch: F64, tolerance_m: float,
+               tolerance_rad: float,
                com_tolerance_m: float, max_ccd_step_rad: float, root_gain: float,
                stall_fraction: float, leg_extension: float) -> None:
     """Solve the goals of each character ``c`` in ``lo..hi-1`` (its rows of ``pose`` and
@@ -108,8 +109,8 @@ def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
     going for at most ``g.iterations`` of them; ``iterations_used`` (r,) the iterations each one
     took. ``err``, ``stalled``, ``previous``, ``slow_before`` (k,): per-goal scratch (each
     character uses its own goals' entries, so the threads share them); ``kinds`` (r,): per
-    character scratch (what its goals ask of the solve, found once); ``arm_scratch``, ``scratch``:
-    a :func:`.solve_limbs.arm_scratch` and a :func:`.solve_root.root_scratch` of r rows (this
+    character scratch (what its goals ask of the solve, found once); ``arms``, ``scratch``: a
+    :func:`.solve_limbs.arm_scratch` and a :func:`.solve_root.root_scratch` of r rows (this
     chunk uses their block ``lo // BLOCK``). Mirrors the loop of
     :func:`ecs_anim.solver.shell.solve`, one character at a time.
 
@@ -128,7 +129,7 @@ def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
     # The characters' loop is here, not in a call per character: a call passes the state
     # tuples on, a reference count up and down for each of their 74 arrays (0.25 us a
     # character); numba's inlining of such a call costs 14 s more of compile.
-    arm_block, root_block = arm_scratch[lo // BLOCK], scratch[lo // BLOCK]
+    arm_block, root_block = arms[lo // BLOCK], scratch[lo // BLOCK]
     for block_start in range(lo, hi, BLOCK):
         count = min(BLOCK, hi - block_start)
         for turn in range(3 * count):

@@ -400,6 +400,7 @@ def test_pose_arrays_replaced_between_ticks_are_written() -> None:
             sim.spawn(f"c{k}", Morphology.from_stature(1.6 + 0.1 * k),
                       MotionPlayer("walk", start_s=0.3 * k), Placement((0.0, 2.0 * k)))
         sim.step()
+        assert sim.compiled  # (MotionPlayback's kept arrays are the kernels' path)
         sims.append(sim)
     replaced, kept = sims
     thorax = replaced.store.poses.thorax.copy()

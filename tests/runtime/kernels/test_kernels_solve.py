@@ -25,9 +25,9 @@ from ecs_anim.runtime.bench_scene import BenchScene
 from ecs_anim.runtime.kernels import solve as compiled
 from ecs_anim.runtime.kernels import solve_math as compiled_math
 from ecs_anim.runtime.kernels.decode import DecodedArrays, PoseArrays
-from ecs_anim.runtime.kernels.lanes import Column
+from ecs_anim.runtime.kernels.lanes import BLOCK, Column
 from ecs_anim.runtime.kernels.solve_head import solve_head
-from ecs_anim.runtime.kernels.solve_limbs import arm_scratch, solve_limbs
+from ecs_anim.runtime.kernels.solve_limbs import arm_lanes, arm_scratch, scatter_arm, solve_limbs
 from ecs_anim.runtime.kernels.solve_points import Goals, centre_of_mass, goal_error
 from ecs_anim.runtime.kernels.solve_root import com_shortfall, root_scratch, solve_root
 from ecs_anim.runtime.kernels.solve_trunk import solve_trunk
@@ -254,6 +254,44 @@ def test_a_solve_does_not_depend_on_its_blocks_nor_chunks(monkeypatch):
             np.testing.assert_array_equal(getattr(state.pose, name), getattr(whole.pose, name),
                                           err_msg=name)
         np.testing.assert_array_equal(state.goals.goal, whole.goals.goal)
+
+
+def test_a_blocks_arms_on_the_lanes_give_each_arm_alone_its_bits(monkeypatch):
+    """The first pass's arms that wait for their block (:func:`mixed_arms`' variants 0 and 1)
+    solved together by ``arm_lanes`` and put back by ``scatter_arm`` give every pose and
+    decoded array the bits of each arm solved alone (``solve_limbs`` not waiting), whatever the
+    block's scratch held before (NaN)."""
+    capture = Capture(monkeypatch)
+    scene = BenchScene(40, constrained=True)
+    for _ in range(3):
+        scene.tick()
+    scene.sim.close()
+    args = capture.calls[-1]
+    mixed_arms(args)
+    alone, lanes = (compiled.prepare(poses, lengths, goals, masses, com_fraction,
+                                     copy.deepcopy(args[6]))
+                    for poses, lengths, goals, masses, com_fraction in
+                    (copy.deepcopy(args[:5]) for _ in range(2)))
+    for c in range(40):
+        assert not solve_limbs(c, alone.pose, alone.dec, alone.goals, alone.winners,
+                               alone.bodies, T, S.tolerance_m, MAX_LEG_EXTENSION,
+                               arm_scratch(1)[0], Column(0), False)
+    block = arm_scratch(40)[0]
+    block[:] = np.nan
+    waited = [c for c in range(BLOCK)
+              if solve_limbs(c, lanes.pose, lanes.dec, lanes.goals, lanes.winners, lanes.bodies,
+                             T, S.tolerance_m, MAX_LEG_EXTENSION, block, Column(c), True)]
+    assert len(waited) == 16  # variants 0 and 1 of the first block's 32
+    arm_lanes(block, Column(0), Column(BLOCK))
+    for c in waited:
+        scatter_arm(c, lanes.pose, lanes.dec, T, block, Column(c))
+    for c in range(BLOCK, 40):
+        solve_limbs(c, lanes.pose, lanes.dec, lanes.goals, lanes.winners, lanes.bodies, T,
+                    S.tolerance_m, MAX_LEG_EXTENSION, block, Column(0), False)
+    for part, fields in (("dec", DecodedArrays._fields), ("pose", PoseArrays._fields)):
+        for name in fields:
+            a, b = (getattr(getattr(state, part), name) for state in (alone, lanes))
+            np.testing.assert_array_equal(a.view(np.int64), b.view(np.int64), err_msg=name)
 
 
 # --- each step against its numpy counterpart, on real solve states -------------------------
