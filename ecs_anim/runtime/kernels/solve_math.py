@@ -185,21 +185,14 @@ def turn_about_axis(root: Vec3, axis_through: Vec3, point: Vec3, goal: Vec3) -> 
     """Mirrors :func:`ecs_anim.solver.steps.turn_about_axis`: the rotation about root ->
     ``axis_through`` bringing ``point`` closest to ``goal`` (the identity on the axis). The
     angle's sine and cosine are taken from the two projections themselves (``atan2``, then
-    ``sin`` and ``cos`` of its result there: the same to rounding)."""
-    k = normalize(sub(axis_through, root))
-    v, t = sub(point, root), sub(goal, root)
-    v = add_scaled(v, k, -dot(v, k))
-    t = add_scaled(t, k, -dot(t, k))
-    y, x = dot(k, cross(v, t)), dot(v, t)
-    h = math.sqrt(x * x + y * y)
-    if not (norm(v) > 1e-9 and norm(t) > 1e-9 and h > 0.0):
-        return rotation_about(k, 0.0, 1.0)
-    return rotation_about(k, y / h, x / h)
+    ``sin`` and ``cos`` of its result there: the same to rounding). A call, where the loops
+    over a block inline :func:`turn_about_axis_lanes` itself."""
+    return turn_about_axis_lanes(root, axis_through, point, goal)
 
 
-# Branch-free twins of point_in_limb and turn_about_axis for the loops over a block's
-# characters (:func:`.solve_limbs.arm_lanes`): every case computed, then chosen by selects, with
-# the same operations in the same order, so the same bits.
+# Branch-free forms for the loops over a block's characters (:func:`.solve_limbs.arm_lanes`):
+# every case computed, then chosen by selects, with the same operations in the same order as
+# point_in_limb's, so the same bits; turn_about_axis is its own.
 
 
 @jit(inline="always")
