@@ -138,16 +138,23 @@ def test_the_limit_is_skipped_only_where_no_correction_goes_too_fast(share):
         np.testing.assert_array_equal(getattr(got, name), value, err_msg=name)
 
 
+def _four_postures(rng: np.random.Generator, n: int) -> tuple[np.ndarray, ...]:
+    """Random (pose, clip_now, pose_before, clip_before), (n, N_JOINTS, 3) m each: the clip
+    stepping 5 cm, the pose 10 cm off it before and 30 cm now (so most shares bind)."""
+    clip_before = rng.normal(size=(n, N_JOINTS, 3))
+    clip_now = clip_before + rng.normal(scale=0.05, size=(n, N_JOINTS, 3))
+    pose_before = clip_before + rng.normal(scale=0.1, size=(n, N_JOINTS, 3))
+    pose = clip_now + rng.normal(scale=0.3, size=(n, N_JOINTS, 3))
+    return pose, clip_now, pose_before, clip_before
+
+
 def test_compiled_shares_equal_numpy():
     """The share each character may go (compiled ``share_rows``, the joints taken from their
     pelvis in the loop) equals the numpy reference to 1e-12, planted legs, a goal's step and a
     character whose goal jumped (infinite) included."""
     rng = np.random.default_rng(23)
     n = 80
-    clip_before = rng.normal(size=(n, N_JOINTS, 3))
-    clip_now = clip_before + rng.normal(scale=0.05, size=(n, N_JOINTS, 3))
-    pose_before = clip_before + rng.normal(scale=0.1, size=(n, N_JOINTS, 3))
-    pose = clip_now + rng.normal(scale=0.3, size=(n, N_JOINTS, 3))
+    pose, clip_now, pose_before, clip_before = _four_postures(rng, n)
     pose[:5] = pose_before[:5] + (clip_now - clip_before)[:5]  # nothing changes: share 1
     planted = rng.uniform(size=(n, 2)) < 0.4
     goal_steps = np.where(rng.uniform(size=n) < 0.3, rng.uniform(0.0, 0.3, n), 0.0)
@@ -166,10 +173,7 @@ def test_compiled_shares_where_a_pelvis_or_joint_is_not_finite():
     reference's share bit for bit (that joint does not count)."""
     rng = np.random.default_rng(29)
     n = 24
-    clip_before = rng.normal(size=(n, N_JOINTS, 3))
-    clip_now = clip_before + rng.normal(scale=0.05, size=(n, N_JOINTS, 3))
-    pose_before = clip_before + rng.normal(scale=0.1, size=(n, N_JOINTS, 3))
-    pose = clip_now + rng.normal(scale=0.3, size=(n, N_JOINTS, 3))
+    pose, clip_now, pose_before, clip_before = _four_postures(rng, n)
     postures = (pose, clip_now, pose_before, clip_before)
     for row, (posture, value) in enumerate(
             (p, v) for p in postures for v in (np.nan, np.inf, -np.inf)):
@@ -338,10 +342,7 @@ def test_the_share_brings_the_fastest_joint_to_the_bound_and_lets_a_held_point_b
     motion sweeps past is not held back; a planted leg's joints do not count."""
     rng = np.random.default_rng(11)
     n, step = 50, 0.1
-    clip_before = rng.normal(size=(n, N_JOINTS, 3))
-    clip_now = clip_before + rng.normal(scale=0.05, size=(n, N_JOINTS, 3))
-    pose_before = clip_before + rng.normal(scale=0.1, size=(n, N_JOINTS, 3))
-    pose = clip_now + rng.normal(scale=0.3, size=(n, N_JOINTS, 3))
+    pose, clip_now, pose_before, clip_before = _four_postures(rng, n)
     for positions in (clip_before, clip_now, pose_before, pose):
         positions[:, 0] = 0.0  # the pelvis at the origin: the joints are their own from it
     planted = np.zeros((n, 2), bool)
