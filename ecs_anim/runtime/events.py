@@ -268,7 +268,6 @@ class Reactions:
         self._edges_kept: _StoreEdges | None = None
         self._last_edges: _StoreEdges | None = None
         self._edge_scratch = EdgeScratch()  # the compiled edges' arrays, kept tick to tick
-        self._durations: tuple[object, F64] = (None, np.zeros(0))  # (bank, each clip's period)
         self._fired_this_tick: set[tuple[int, str, int, str]] = set()  # (trigger, event)
         # while a tick's reactions are applied: the triggers to drop once they are done, and
         # the names of the characters removed meanwhile (by entity, for warnings)
@@ -462,10 +461,8 @@ class Reactions:
         st, bank = sim.store, sim.bank
         if st.n == 0:
             return []
-        if self._durations[0] is not bank:
-            self._durations = bank, bank.n_frames / bank.fps
         args = (st.entity, st.clip, st.clip_time_s, st.speed, st.loop,
-                self._durations[1], st.contact_weight, sim.dt,
+                bank.n_frames / bank.fps, st.contact_weight, sim.dt,
                 TIME_SLACK_S, CONTACT_BEGAN_WEIGHT, self._seen_clip, self._seen_time,
                 self._seen_ended, self._seen_contact)
         if sim.compiled:
