@@ -25,6 +25,7 @@ from ecs_anim.core.skeleton import N_LENGTHS
 from ecs_anim.runtime.kernels import over_chunks
 from ecs_anim.runtime.kernels.decode import PoseArrays, leg_length, pose_arrays
 from ecs_anim.runtime.kernels.lanes import BLOCK, Column, at, slerp_angle, slerp_weights
+from ecs_anim.runtime.kernels.solve_math import wrap_angle
 from ecs_anim.runtime.kernels.vec import (
     F64,
     TINY,
@@ -34,7 +35,6 @@ from ecs_anim.runtime.kernels.vec import (
     nlerp,
     slerp,
     store3,
-    wrap,
 )
 
 if TYPE_CHECKING:
@@ -133,9 +133,11 @@ def _blend_unslerped(a: PoseArrays, ra: int, b: PoseArrays, rb: int, w: float, o
 @jit()
 def blend_root(pa: Vec3, ha: float, pb: Vec3, hb: float, w: float) -> tuple[Vec3, float]:
     """Mirrors :func:`ecs_anim.motion.sampling.blend` of ``root_position`` (lerp) and ``root_heading``
-    (the shorter way round)."""
+    (the shorter way round: numpy's modulo to the bit, without the C library's ``fmod`` where
+    the difference is already within a turn, a fifth of :func:`sample_rows`' pass over its
+    rows)."""
     p = ((1 - w) * pa[0] + w * pb[0], (1 - w) * pa[1] + w * pb[1], (1 - w) * pa[2] + w * pb[2])
-    return p, ha + w * wrap(hb - ha)
+    return p, ha + w * wrap_angle(hb - ha)
 
 
 @jit()

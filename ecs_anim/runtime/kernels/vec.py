@@ -320,12 +320,6 @@ def _rodrigues_column(k: Vec3, kk: float, d: float, e: Vec3, k_j: float) -> Vec3
 
 
 @jit()
-def wrap(angle: float) -> float:
-    """Mirrors ``ecs_anim.motion.sampling.wrap_angle``: the angle in [-pi, pi)."""
-    return float((angle + np.pi) % (2 * np.pi) - np.pi)
-
-
-@jit()
 def slerp(q0: Quat, q1: Quat, t: float) -> Quat:
     """Mirrors :func:`ecs_anim.core.rotations.slerp` for one pair (shorter arc, normalized)."""
     cos_half = q0[0] * q1[0] + q0[1] * q1[1] + q0[2] * q1[2] + q0[3] * q1[3]

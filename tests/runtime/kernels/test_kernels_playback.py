@@ -12,13 +12,21 @@ from ecs_anim.core.normalized import QUATERNION_FIELDS, NormalizedPoses
 from ecs_anim.core.skeleton import N_LENGTHS
 from ecs_anim.io.importing import import_bvh
 from ecs_anim.io.library import MOTIONS_DIR
-from ecs_anim.motion.sampling import ClipBank, blend, rotate_xy, sample, sample_table
+from ecs_anim.motion.sampling import (
+    ClipBank,
+    blend,
+    rotate_xy,
+    sample,
+    sample_table,
+    wrap_angle,
+)
 from ecs_anim.runtime import kernels
 from ecs_anim.runtime.kernels.decode import pose_arrays
 from ecs_anim.runtime.kernels.lanes import BLOCK
 from ecs_anim.runtime.kernels.playback import (
     PlaybackWork,
     advance_clocks,
+    blend_root,
     blend_rows,
     complex_power,
     first_of_each_sample,
@@ -301,6 +309,26 @@ def test_kept_turns_give_the_bits_computed_anew(bank: ClipBank) -> None:
         clip = np.where(change, rng.integers(0, len(bank.names), n), clip).astype(np.int64)
         heading = np.where(rng.random(n) < 0.2, rng.uniform(-7.0, 7.0, n), heading)
         heading[:4] = -0.0 if tick % 2 == 0 else 0.0
+
+
+def test_blended_headings_are_numpys_to_the_bit() -> None:
+    """``blend_root``'s heading (its wrap without ``fmod`` where the two headings are within a
+    turn of each other) is :func:`ecs_anim.motion.sampling.blend`'s bit for bit: headings a
+    little and several turns apart, at and beside the wrap's edges, zeros of either sign, NaN."""
+    rng = np.random.default_rng(1320)
+    edges = np.array([-5.0, -3.0, -1.0, 0.0, 1.0, 3.0, 5.0]) * np.pi
+    gaps = np.concatenate([edges, np.nextafter(edges, np.inf), np.nextafter(edges, -np.inf),
+                           rng.uniform(-0.2, 0.2, 3000), rng.uniform(-30.0, 30.0, 3000),
+                           [-0.0, 1e-300, -1e-300, np.nan]])
+    ha = rng.uniform(-7.0, 7.0, gaps.size)
+    ha[:4] = -0.0
+    hb = ha + gaps
+    w = rng.uniform(0.0, 1.0, gaps.size)
+    expected = ha + w * wrap_angle(hb - ha)
+    got = np.array([blend_root((0.0, 0.0, 0.0), a, (0.0, 0.0, 0.0), b, t)[1]
+                    for a, b, t in zip(ha.tolist(), hb.tolist(), w.tolist(), strict=True)])
+    same = (got.view(np.int64) == expected.view(np.int64)) | (np.isnan(got) & np.isnan(expected))
+    assert same.all(), gaps[~same][:5]
 
 
 def test_complex_power_equals_numpy() -> None:
