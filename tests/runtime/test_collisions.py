@@ -169,6 +169,51 @@ def test_the_search_measures_gaps_only_when_asked_and_they_are_the_least(apart):
         assert 5 < near.size < n, near.size
 
 
+@pytest.mark.parametrize("crowd", ["compact", "far"])
+def test_the_cells_laid_out_by_column_find_what_the_hashed_cells_find(crowd):
+    """``grid_of`` lays a crowd's cells out column by column where they fit in the table (the
+    compact crowd, across the origin: negative cells), else hashes them as before (a body 30 km
+    off, and one not posed: 1 km apart off the plane): the marks, clearances, bodies near and
+    overlaps are those of the same bodies on the hashed table, overlaps on 1 and 2 threads."""
+    from ecs_anim.runtime import kernels
+    from ecs_anim.runtime.kernels.avoidance import build_grid
+    from ecs_anim.runtime.kernels.capsules import near_rows
+
+    rng = np.random.default_rng(3206)
+    n = 60
+    lengths, standing, spots = _scattered_adults(rng, n)
+    positions = standing + (spots - [4.5, 4.5, 0.0])[:, None]
+    if crowd == "far":
+        positions[3] += [3e4, -2e4, 0.0]
+        positions[7] = np.nan
+    body = bounds(positions, lengths, Capsules.empty(n))
+    grid = grid_of(body)
+    assert (grid.column > 0) == (crowd == "compact")
+    slot, order = np.empty(n, np.int64), np.empty(n, np.int64)
+    start = np.empty(grid.mask + 2, np.int64)
+    build_grid(grid.plane, grid.cell_m, grid.mask, slot, start, order)
+    hashed = grid._replace(origin_x=0, origin_y=0, column=0, start=start, order=order)
+    laid, kept = np.empty(n), np.empty(n)
+    near = touching(body, grid, laid)
+    np.testing.assert_array_equal(near, touching(body, hashed, kept))
+    np.testing.assert_array_equal(laid, kept)
+    np.testing.assert_array_equal(near, touching(body, grid))
+    assert 5 < near.size < n, near.size
+    np.testing.assert_array_equal(near_rows(body, grid, near[:4]),
+                                  near_rows(body, hashed, near[:4]))
+    capsules(positions, lengths, body, near)
+    try:
+        for count in range(1, min(2, kernels.available_threads()) + 1):
+            kernels.set_threads(count)
+            found, expected = overlaps(body, grid, near), overlaps(body, hashed, near)
+            assert (found.depth > 0).sum() > 3
+            for name in found._fields:
+                np.testing.assert_array_equal(getattr(found, name), getattr(expected, name),
+                                              err_msg=f"{name}, {count} threads")
+    finally:
+        kernels.set_threads(None)
+
+
 def test_the_fights_kicks_land_on_the_chest_not_in_it():
     r = run("fight_training")
     e, w, idx, pos = r["errors"], r["weights"], r["index"], r["positions"]

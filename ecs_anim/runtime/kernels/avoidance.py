@@ -71,21 +71,29 @@ def build_grid(position: F64, cell_m: float, mask: int, slot: I64, start: I64,
     start : (mask + 2,) written: the agents of slot ``s`` are ``order[start[s]:start[s + 1]]``.
     order : (k,) written: agent indices sorted by slot.
     """
-    n = position.shape[0]
-    for s in range(mask + 2):
+    for i in range(position.shape[0]):
+        slot[i] = cell_hash(math.floor(position[i, 0] / cell_m),
+                            math.floor(position[i, 1] / cell_m), mask)
+    sort_by_slot(slot, start, order)
+
+
+@jit(nogil=True)
+def sort_by_slot(slot: I64, start: I64, order: I64) -> None:
+    """A counting sort of the agents by ``slot`` (k,), each below ``start.size - 1``: ``start``
+    written, the agents of slot ``s`` are ``order[start[s]:start[s + 1]]`` (``order`` (k,)
+    written, each slot's agents in increasing index)."""
+    n, slots = slot.shape[0], start.shape[0] - 1
+    for s in range(slots + 1):
         start[s] = 0
     for i in range(n):
-        ix = math.floor(position[i, 0] / cell_m)
-        iy = math.floor(position[i, 1] / cell_m)
-        slot[i] = cell_hash(ix, iy, mask)
         start[slot[i] + 1] += 1
-    for s in range(mask + 1):
+    for s in range(slots):
         start[s + 1] += start[s]
     # start[s] is now where slot s begins; fill, then shift back.
     for i in range(n):
         order[start[slot[i]]] = i
         start[slot[i]] += 1
-    for s in range(mask, 0, -1):
+    for s in range(slots - 1, 0, -1):
         start[s] = start[s - 1]
     start[0] = 0
 
