@@ -177,8 +177,12 @@ _S_PITCHED, _S_PITCHED_GROUND = _S_P_FOOT + 2, _S_P_FOOT + 8
 _S_Q_BLEND = _S_PITCHED_GROUND + 2
 # The re-aimed feet's directions (side s at + 3 s; their lengths: _S_FOOT_LENGTH's rows).
 _S_AXIS = _S_Q_BLEND + 2
+# The planted feet's pitch_lanes entries before they are gathered to the front (foot s of
+# column j as entry j + BLOCK s: pitch_planted_lanes, planted_entries), each field this many
+# rows after the entry's.
+_STAGED = _S_AXIS + 6 - _S_P_ORIGIN
 #: Rows of a block's scratch (:func:`ground_scratch`).
-GROUND_SCRATCH_ROWS = _S_AXIS + 6
+GROUND_SCRATCH_ROWS = _S_P_FOOT + 2 + _STAGED
 
 
 def ground_scratch(n: int) -> F64:
@@ -186,7 +190,7 @@ def ground_scratch(n: int) -> F64:
     GROUND_SCRATCH_ROWS rows of BLOCK, flat). The chunk of rows from ``lo`` uses the block
     scratch ``lo // BLOCK`` for each of its blocks in turn (so chunks of at least
     :data:`.lanes.BLOCK` rows, ``over_chunks``' ``rows_per_thread``, never share one; one
-    thread touches only the first: 52 kB)."""
+    thread touches only the first: 61 kB)."""
     return np.empty((n // BLOCK + 1, GROUND_SCRATCH_ROWS * BLOCK))
 
 
@@ -385,15 +389,23 @@ def _to_pitch(scratch: F64, count: int, j: Column, s: int, origin: Vec3, d: Vec3
     if not deficit > TOE_TOLERANCE_M:
         return count
     k = Column(count)
-    flat = max(math.sqrt(d[0] * d[0] + d[1] * d[1]), 1e-9)
-    for a in range(3):
-        scratch[_at(_S_P_ORIGIN + 2 * a, k)] = origin[a]
-    scratch[_at(_S_P_HEADING, k)], scratch[_at(_S_P_HEADING + 2, k)] = d[0] / flat, d[1] / flat
+    _put_origin(scratch, 0, k, origin)
     scratch[_at(_S_P_RISE, k)], scratch[_at(_S_P_CLEARANCE, k)] = sign * foot, clearance
-    scratch[_at(_S_P_DZ, k)], scratch[_at(_S_P_DEFICIT, k)] = d[2], deficit
-    scratch[_at(_S_P_LAST_DZ, k)], scratch[_at(_S_P_LAST_DEFICIT, k)] = d[2], deficit
+    _put_entry(scratch, 0, k, d, deficit)
     scratch[_at(_S_P_FOOT, k)] = 2 * j + s
     return count + 1
+
+
+@jit(inline="always")
+def _put_entry(scratch: F64, staged: int, k: Column, d: Vec3, deficit: float) -> None:
+    """Entry ``k`` of :func:`pitch_lanes` (its origin, rise, clearance and foot written; as
+    :func:`_put_origin`): the foot's direction ``d`` and first ``deficit`` (m)."""
+    flat = max(math.sqrt(d[0] * d[0] + d[1] * d[1]), 1e-9)
+    scratch[_at(_S_P_HEADING + staged, k)] = d[0] / flat
+    scratch[_at(_S_P_HEADING + 2 + staged, k)] = d[1] / flat
+    scratch[_at(_S_P_DZ + staged, k)], scratch[_at(_S_P_DEFICIT + staged, k)] = d[2], deficit
+    scratch[_at(_S_P_LAST_DZ + staged, k)] = d[2]
+    scratch[_at(_S_P_LAST_DEFICIT + staged, k)] = deficit
 
 
 # The fields of a pitch_lanes entry that a pass carries to the next.
@@ -642,8 +654,14 @@ def _lay(c: int, s: int, j: Column, ankle: Vec3, toe: Vec3, foot: float, d: Vec3
     if w != 1.0:
         scratch[_at(_S_Q_ANKLE + s, j)], scratch[_at(_S_Q_TOE + s, j)] = count, count + 1
         count = _ask(scratch, _ask(scratch, count, ankle[0], ankle[1]), toe[0], toe[1])
+    f = _foot_entry(j, s)
+    scratch[_at(_S_P_FOOT + _STAGED, f)] = 2 * j + s
     if not w > 0.0:
         locked[c, s] = False
+        # (pitch_planted_lanes turns every foot: no stale value in its arithmetic)
+        _put_origin(scratch, _STAGED, f, (0.0, 0.0, 0.0))
+        scratch[_at(_S_P_RISE + _STAGED, f)] = 0.0
+        scratch[_at(_S_P_CLEARANCE + _STAGED, f)] = 0.0
         return count
     if not locked[c, s]:
         heel_up = ankle[2] - source_ankle_height[clip[c], s] * leg
@@ -651,10 +669,33 @@ def _lay(c: int, s: int, j: Column, ankle: Vec3, toe: Vec3, foot: float, d: Vec3
         point = ankle if pivot[c, s] == 0 else toe
         store3(footprint[c, s], (point[0], point[1], _height(kinds, params, grid, point)))
         locked[c, s] = True
-    end = add_scaled(_pivot_point(pivot[c, s], load3(footprint[c, s]), ankle_height, ball), d,
-                     (1.0 if pivot[c, s] == 0 else -1.0) * foot)
+    # The foot's pitch as planted_foot's (pitch_planted_lanes): about its ankle on its heel,
+    # its toe joint on its ball.
+    heel = pivot[c, s] == 0
+    origin = _pivot_point(pivot[c, s], load3(footprint[c, s]), ankle_height, ball)
+    rise = (1.0 if heel else -1.0) * foot
+    _put_origin(scratch, _STAGED, f, origin)
+    scratch[_at(_S_P_RISE + _STAGED, f)] = rise
+    scratch[_at(_S_P_CLEARANCE + _STAGED, f)] = ball if heel else ankle_height
+    end = add_scaled(origin, d, rise)
     scratch[_at(_S_Q_END + s, j)] = count
     return _ask(scratch, count, end[0], end[1])
+
+
+@jit(inline="always")
+def _foot_entry(j: Column, s: int) -> Column:
+    """The :func:`pitch_lanes` entry foot ``s`` of column ``j`` takes before the entries are
+    gathered to the front (:func:`planted_entries`): side s's in the field's row s, so that a
+    loop over the columns reads and writes each row contiguously."""
+    return j + Column(BLOCK * s)
+
+
+@jit(inline="always")
+def _put_origin(scratch: F64, staged: int, k: Column, origin: Vec3) -> None:
+    """The joint entry ``k`` of :func:`pitch_lanes` turns about (``staged``: 0, or
+    ``_STAGED`` for a planted foot's entry before :func:`planted_entries`)."""
+    for a in range(3):
+        scratch[_at(_S_P_ORIGIN + 2 * a + staged, k)] = origin[a]
 
 
 @jit(inline="always")
@@ -670,7 +711,7 @@ def _stand(c: int, s: int, j: Column, ankle: Vec3, d: Vec3, foot: float, w: floa
            switch: float, kinds: I64, params: F64, grid: F64, passes: int, scratch: F64
            ) -> tuple[Vec3, Vec3, tuple[float, float]]:
     """Foot ``s`` of row ``c`` in ``GroundAdapt.run`` once :func:`_lay` has laid it and
-    :func:`pitch_planted` and :func:`pitch_lanes` pitched it (column ``j``): (ankle, foot direction, the
+    :func:`pitch_planted_lanes` and :func:`pitch_lanes` pitched it (column ``j``): (ankle, foot direction, the
     ground's heights under that ankle and under the toe end (m), as :func:`planted_foot`)
     standing on its footprint, moved onto the other sole point where the foot has rolled onto
     it; the motion's (``ankle``, ``d``, NaN: not asked) for a foot not in contact.
@@ -681,7 +722,7 @@ def _stand(c: int, s: int, j: Column, ankle: Vec3, d: Vec3, foot: float, w: floa
     so the foot turns about the point it stands on and never jumps."""
     if not w > 0.0:
         return ankle, d, (math.nan, math.nan)
-    # planted_foot, pitched by pitch_planted and pitch_lanes
+    # planted_foot, pitched by pitch_planted_lanes and pitch_lanes
     sole_point = load3(footprint[c, s])
     origin = _pivot_point(pivot[c, s], sole_point, ankle_height, ball)
     d, ground = _col3(scratch, _S_PITCHED + 3 * s, j), scratch[_at(_S_PITCHED_GROUND + s, j)]
@@ -760,25 +801,54 @@ def _under_motion(scratch: F64, i: Column, s: int) -> tuple[float, float]:
             _answer(scratch, toe) if toe >= 0.0 else math.nan)
 
 
+@jit(inline="always")
+def _first_pitch_lanes(scratch: F64, j: Column, s: int) -> None:
+    """Foot ``s`` of column ``j`` in :func:`pitch_planted_lanes`."""
+    f = _foot_entry(j, s)
+    ground = scratch[_at(_S_PITCHED_GROUND + s, j)]
+    d = _col3(scratch, _S_DIR + 3 * s, j)
+    origin = (scratch[_at(_S_P_ORIGIN + _STAGED, f)], scratch[_at(_S_P_ORIGIN + 2 + _STAGED, f)],
+              scratch[_at(_S_P_ORIGIN + 4 + _STAGED, f)])
+    end = add_scaled(origin, d, scratch[_at(_S_P_RISE + _STAGED, f)])
+    _put3(scratch, _S_PITCHED + 3 * s, j, d)
+    _put_entry(scratch, _STAGED, f, d,
+               ground + scratch[_at(_S_P_CLEARANCE + _STAGED, f)] - end[2])
+
+
+# A call, not inlined (as reaim_lanes).
+@jit()
+def pitch_planted_lanes(scratch: F64, start: Column, stop: Column) -> None:
+    """The feet in contact of the columns ``start:stop`` of a ground scratch (laid by
+    :func:`lay_feet`, their queries answered) pitched as :func:`planted_foot` pitches them on
+    their footprints, up to the secant passes (:func:`_to_pitch`'s first step): each foot's
+    direction and first end's ground into its column, its :func:`pitch_lanes` entry in place
+    (:func:`_foot_entry`), in a loop over the columns that runs on the vector units; every
+    foot is turned (those not in contact to no use), :func:`planted_entries` keeps the feet
+    in contact still too low."""
+    for k in range(start, stop):
+        j = Column(k)
+        for s in range(2):
+            query = scratch[_at(_S_Q_END + s, j)]  # (-1: not in contact)
+            scratch[_at(_S_PITCHED_GROUND + s, j)] = _answer(scratch, max(query, 0.0))
+    for k in range(start, stop):
+        j = Column(k)  # (the same type: for mypy, which takes k for an int)
+        _first_pitch_lanes(scratch, j, 0)
+        _first_pitch_lanes(scratch, j, 1)
+
+
 @jit(inline="always")  # one call site
-def pitch_planted(i: Column, c: int, lengths: F64, leg: F64, contact_weight: F64,
-                  footprint: F64, pivot: I64, ball_per_leg: float, scratch: F64,
-                  count: int) -> int:
-    """Store row ``c``'s feet in contact (column ``i``: laid by :func:`lay_feet`, their
-    queries answered) pitched as :func:`planted_foot` pitches them on their footprints, the
-    ground under their first ends given: made entries of :func:`pitch_lanes` from ``count`` on
-    where too low (:func:`_to_pitch`); returns the block's entries now. Arguments as for
-    :func:`ground_adapt_rows`."""
-    ball = ball_per_leg * leg[c]
-    for s in range(2):
-        if contact_weight[c, s] > 0.0:
-            ankle_height = lengths[c, _L_ANKLE_HEIGHT + s]
-            heel = pivot[c, s] == 0
-            origin = _pivot_point(pivot[c, s], load3(footprint[c, s]), ankle_height, ball)
-            count = _to_pitch(scratch, count, i, s, origin, _col3(scratch, _S_DIR + 3 * s, i),
-                              scratch[_at(_S_FOOT_LENGTH + s, i)], 1.0 if heel else -1.0,
-                              ball if heel else ankle_height,
-                              _answer(scratch, scratch[_at(_S_Q_END + s, i)]))
+def planted_entries(scratch: F64, n: int) -> int:
+    """The :func:`pitch_lanes` entries of :func:`pitch_planted_lanes` (a block's ``n``
+    columns) whose foot is in contact and too low, gathered to the front in the order of
+    their feet; returns how many."""
+    count = 0
+    for e in range(2 * n):
+        k = _foot_entry(Column(e // 2), e % 2)
+        in_contact = scratch[_at(_S_Q_END + e % 2, Column(e // 2))] >= 0.0
+        if in_contact and scratch[_at(_S_P_DEFICIT + _STAGED, k)] > TOE_TOLERANCE_M:
+            for r in _PITCH_STATE:
+                scratch[_at(r, Column(count))] = scratch[_at(r + _STAGED, k)]
+            count += 1
     return count
 
 
@@ -790,7 +860,7 @@ def ground_adapt_before(i: Column, c: int, lengths: F64, leg: F64, contact_weigh
                         scratch: F64, count: int) -> int:
     """Mirrors ``GroundAdapt.run`` for store row ``c`` up to the legs' re-aiming, once its
     feet are laid (:func:`lay_feet`), their queries answered (:func:`heights_lanes`) and the
-    feet in contact pitched (:func:`pitch_planted`, :func:`pitch_lanes`): the feet in contact
+    feet in contact pitched (:func:`pitch_planted_lanes`, :func:`pitch_lanes`): the feet in contact
     planted, the floor moved, the ankles' targets (:func:`lift_targets` lifts them, the
     ground under a blended one asked from query ``PITCH_QUERIES + count`` on: at most two);
     what :func:`reaim_lanes` and :func:`ground_adapt_after` need into column ``i`` of
@@ -952,7 +1022,7 @@ def ground_adapt_rows(lo: int, hi: int, rows: I64, pose: LegPoseArrays, lengths:
 
     By blocks of :data:`.lanes.BLOCK` rows: the motion decoded (:func:`decode_lanes`), each
     row's feet laid and the ground asked under them, the block's queries answered at once
-    (:func:`heights_lanes`), the feet in contact pitched (:func:`pitch_planted`, the block's
+    (:func:`heights_lanes`), the feet in contact pitched (:func:`pitch_planted_lanes`, the block's
     at once in :func:`pitch_lanes`), each row up to its legs' re-aiming (the blends' ground
     asked, answered, :func:`lift_targets`), the block's first re-aiming (:func:`reaim_lanes`),
     each row on to the ground under its toes asked, the queries answered, the feet pitched
@@ -975,11 +1045,9 @@ def ground_adapt_rows(lo: int, hi: int, rows: I64, pose: LegPoseArrays, lengths:
                              clip, source_ankle_height, footprint, locked, pivot, kinds,
                              params, grid, ball_per_leg, scratch_block, count)
         heights_lanes(scratch_block, 0, count, kinds, params, grid)
-        count = 0
-        for i in range(start, stop):
-            count = pitch_planted(Column(i - start), rows[i], lengths, leg, contact_weight,
-                                  footprint, pivot, ball_per_leg, scratch_block, count)
-        pitch_lanes(scratch_block, count, kinds, params, grid, toe_passes)
+        pitch_planted_lanes(scratch_block, Column(0), Column(n))
+        pitch_lanes(scratch_block, planted_entries(scratch_block, n), kinds, params, grid,
+                    toe_passes)
         count = 0
         for i in range(start, stop):
             count = ground_adapt_before(Column(i - start), rows[i], lengths, leg,

@@ -188,6 +188,74 @@ def test_a_blocks_pitches_equal_each_feet(name: str) -> None:
         assert not np.array_equal(pitches[1], pitches[4], equal_nan=True)  # several passes
 
 
+@pytest.mark.parametrize("n", [32, 29])  # a block (lanes.BLOCK), one short of it
+def test_a_blocks_planted_feet_enter_their_pitch_as_each_foot(n: int) -> None:
+    """``pitch_planted_lanes`` takes the first step of a block's planted feet on the vector
+    units (every foot turned, in a lane or the loop's scalar remainder) and ``planted_entries``
+    keeps those in contact still too low: the same ``pitch_lanes`` entries, in the same order,
+    and the same directions and grounds as ``_to_pitch`` foot by foot; feet not in contact,
+    with NaN, on their heel or their ball, a whole block and one short of it."""
+    import math
+
+    from ecs_anim.runtime.kernels.ground_adapt import (
+        _PITCH_STATE,
+        _S_DIR,
+        _S_P_CLEARANCE,
+        _S_P_FOOT,
+        _S_P_ORIGIN,
+        _S_P_RISE,
+        _S_PITCHED,
+        _S_PITCHED_GROUND,
+        _S_Q_END,
+        _S_Q_HEIGHT,
+        _STAGED,
+        _to_pitch,
+        ground_scratch,
+        pitch_planted_lanes,
+        planted_entries,
+    )
+    from ecs_anim.runtime.kernels.lanes import BLOCK, Column
+
+    assert n <= BLOCK
+    rng = np.random.default_rng(2207)
+    lanes, expected = ground_scratch(BLOCK)[0], ground_scratch(BLOCK)[0]
+    count = 0
+    for k in range(2 * n):
+        j, s = k // 2, k % 2
+        heading, dz = rng.uniform(-math.pi, math.pi), float(rng.uniform(-0.6, 0.3))
+        along = math.sqrt(1.0 - dz * dz)
+        d = (along * math.cos(heading), along * math.sin(heading), dz)
+        origin = tuple(rng.uniform(-1.0, 1.0, 3))
+        foot, sign = float(rng.uniform(0.12, 0.25)), float(rng.choice([1.0, -1.0]))
+        clearance, ground = float(rng.uniform(0.02, 0.09)), float(rng.uniform(-0.2, 0.2))
+        if k == 5:
+            d = (math.nan, 0.0, -0.3)
+        if k == 8:
+            origin = (0.0, math.nan, 0.1)
+        in_contact = k % 7 != 3
+        for scratch in (lanes, expected):
+            scratch[(_S_DIR + 3 * s + np.arange(3)) * BLOCK + j] = d
+            scratch[(_S_Q_END + s) * BLOCK + j] = k if in_contact else -1.0
+            scratch[_S_Q_HEIGHT * BLOCK + k] = ground
+        entry = j + BLOCK * s
+        lanes[(_S_P_ORIGIN + _STAGED + 2 * np.arange(3)) * BLOCK + entry] = origin
+        lanes[(_S_P_RISE + _STAGED) * BLOCK + entry] = sign * foot
+        lanes[(_S_P_CLEARANCE + _STAGED) * BLOCK + entry] = clearance
+        lanes[(_S_P_FOOT + _STAGED) * BLOCK + entry] = k
+        if in_contact:
+            count = _to_pitch(expected, count, Column(j), s, origin, d, foot, sign, clearance,
+                              ground)
+    pitch_planted_lanes(lanes, Column(0), Column(n))
+    assert planted_entries(lanes, n) == count and 5 < count < 2 * n - 5
+    fields = np.array(_PITCH_STATE)[:, None] * BLOCK + np.arange(count)
+    np.testing.assert_array_equal(lanes[fields], expected[fields])
+    feet = [(j, s) for j in range(n) for s in range(2) if (2 * j + s) % 7 != 3]
+    for j, s in feet:
+        for rows in (_S_PITCHED + 3 * s + np.arange(3), [_S_PITCHED_GROUND + s]):
+            np.testing.assert_array_equal(lanes[np.array(rows) * BLOCK + j],
+                                          expected[np.array(rows) * BLOCK + j])
+
+
 @dataclass(frozen=True)
 class _Ripples:
     def height(self, xy: np.ndarray) -> np.ndarray:
