@@ -3,12 +3,13 @@
 :func:`capsule_rows` mirrors :func:`ecs_anim.solver.capsules.capsules_from_positions` (same
 results to 1e-9 m) and adds each character's bounding sphere and bounds, and each capsule's
 bounds; :func:`overlap_rows` finds, for each character, the deepest overlap of one of its
-capsules with a capsule of another character: neighbours on a uniform grid (:func:`build_cells`: its cells column by column where
-the crowd's extent allows, else hashed into a table as the steering avoidance's), each looking
-at the 3 x 3 cells about its own (a cell as wide as two bodies' bounds reach sideways), every
-capsule pair of two characters whose bounds meet (each capsule first against the other body's
-bounds, then against the other capsule's) tested by the nearest points of their axes (Ericson,
-Real-Time Collision Detection, 5.1.9;
+capsules with a capsule of another character: neighbours on a uniform grid
+(:func:`build_cells`: its cells column by column where the crowd's extent allows, else hashed
+into a table as the steering avoidance's), each looking at the 3 x 3 cells about its own (a
+cell as wide as two bodies' bounds reach sideways), every capsule pair of two characters
+whose bounds meet (each capsule first against the other body's bounds, then against the other
+capsule's) tested by the nearest points of their axes (Ericson, Real-Time Collision Detection,
+5.1.9;
 :func:`ecs_anim.solver.capsules.closest_between_segments`). :func:`overlaps` is the
 numpy-facing call. :func:`touching` finds first, on the same grid, the bodies whose bounds meet
 another's (bounds from the joints, no capsule made: :func:`bounds`): only those can overlap
@@ -205,8 +206,8 @@ def _gap(a: F64, b: F64, radius_a: float, radius_b: float) -> float:
 @jit(nogil=True)
 def overlap_rows(lo: int, hi: int, rows: I64, ends: F64, radii: F64, centre: F64, box: F64,
                  capsule_box: F64, plane: F64, cell_m: float, mask: int, origin_x: int,
-                 origin_y: int, column: int, start: I64, order: I64, depth: F64, other: I64, mine: I64, theirs: I64, normal: F64,
-                 point: F64) -> None:
+                 origin_y: int, column: int, start: I64, order: I64, depth: F64, other: I64,
+                 mine: I64, theirs: I64, normal: F64, point: F64) -> None:
     """For each character ``i`` in ``rows[lo:hi]``, its deepest overlap with another character:
     ``depth[i]`` m (0: none), ``other[i]`` that character's row (-1: none), ``mine[i]`` and
     ``theirs[i]`` the two capsules, ``normal[i]`` (3,) the unit way out for ``i`` (from their
