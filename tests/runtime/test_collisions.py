@@ -169,12 +169,13 @@ def test_the_search_measures_gaps_only_when_asked_and_they_are_the_least(apart):
         assert 5 < near.size < n, near.size
 
 
-@pytest.mark.parametrize("crowd", ["compact", "far"])
+@pytest.mark.parametrize("crowd", ["compact", "far", "beyond"])
 def test_the_cells_laid_out_by_column_find_what_the_hashed_cells_find(crowd):
     """``grid_of`` lays a crowd's cells out column by column where they fit in the table (the
     compact crowd, across the origin: negative cells), else hashes them as before (a body 30 km
-    off, and one not posed: 1 km apart off the plane): the marks, clearances, bodies near and
-    overlaps are those of the same bodies on the hashed table, overlaps on 1 and 2 threads."""
+    off, and one not posed: 1 km apart off the plane; a body 1e20 m off, its cell past what an
+    integer holds, where a layout's extent would wrap round): the marks, clearances, bodies near
+    and overlaps are those of the same bodies on the hashed table, overlaps on 1 and 2 threads."""
     from ecs_anim.runtime import kernels
     from ecs_anim.runtime.kernels.avoidance import build_grid
     from ecs_anim.runtime.kernels.capsules import near_rows
@@ -186,13 +187,15 @@ def test_the_cells_laid_out_by_column_find_what_the_hashed_cells_find(crowd):
     if crowd == "far":
         positions[3] += [3e4, -2e4, 0.0]
         positions[7] = np.nan
+    if crowd == "beyond":
+        positions[3] += [-1e20, 0.0, 0.0]
     body = bounds(positions, lengths, Capsules.empty(n))
     grid = grid_of(body)
-    assert (grid.column > 0) == (crowd == "compact")
+    assert (grid.column_cells > 0) == (crowd == "compact")
     slot, order = np.empty(n, np.int64), np.empty(n, np.int64)
     start = np.empty(grid.mask + 2, np.int64)
     build_grid(grid.plane, grid.cell_m, grid.mask, slot, start, order)
-    hashed = grid._replace(origin_x=0, origin_y=0, column=0, start=start, order=order)
+    hashed = grid._replace(origin_x=0, origin_y=0, column_cells=0, start=start, order=order)
     laid, kept = np.empty(n), np.empty(n)
     near = touching(body, grid, laid)
     np.testing.assert_array_equal(near, touching(body, hashed, kept))

@@ -119,14 +119,17 @@ def bound_rows(lo: int, hi: int, positions: F64, lengths: F64, centre: F64, box:
 
 
 @jit(inline="always")
-def cell_slot(ix: int, iy: int, mask: int, origin_x: int, origin_y: int, column: int) -> int:
+def cell_slot(ix: int, iy: int, mask: int, origin_x: int, origin_y: int,
+              column_cells: int) -> int:
     """The slot of grid cell ``(ix, iy)`` (:func:`build_cells`): where the cells are laid out
-    column by column (``column`` > 0 cells a column, the first cell ``(origin_x, origin_y)``),
+    column by column (``column_cells`` > 0 cells a column, the first cell
+    ``(origin_x, origin_y)``),
     its place there, a column's cells side by side and the next column's after them (the
     cells ``x + 1`` of a cell's neighbours in one run: the searches read them in order); else
-    (``column`` 0) hashed into a table of ``mask + 1`` slots (:func:`~.avoidance.cell_hash`)."""
-    if column > 0:
-        return (ix - origin_x) * column + (iy - origin_y)
+    (``column_cells`` 0) hashed into a table of ``mask + 1`` slots
+    (:func:`~.avoidance.cell_hash`)."""
+    if column_cells > 0:
+        return (ix - origin_x) * column_cells + (iy - origin_y)
     return cell_hash(ix, iy, mask)
 
 
@@ -136,32 +139,31 @@ def build_cells(plane: F64, cell_m: float, mask: int, slot: I64, start: I64,
     """Sort the bodies by grid cell (cells ``cell_m`` wide, ``plane`` (n, 2) the centres):
     ``slot`` (n,), ``start`` (mask + 2,) and ``order`` (n,) written as
     :func:`~.avoidance.build_grid` writes them, the slots those of :func:`cell_slot`. Returns
-    ``(origin_x, origin_y, column)``: the cells laid out column by column, each cell's eight
-    neighbours within, where they fit in the ``mask + 1`` slots (a crowd no wider than the
-    table, the bench's: 2,000 cells for 8,192 slots), else column 0: hashed (a crowd spread
-    far, or a body off the ground's plane: :func:`plane_and_spread` puts them 1 km apart)."""
-    n = plane.shape[0]
-    low_x = low_y = high_x = high_y = 0
-    for i in range(n):
-        ix, iy = math.floor(plane[i, 0] / cell_m), math.floor(plane[i, 1] / cell_m)
-        if i == 0 or ix < low_x:
-            low_x = ix
-        if i == 0 or ix > high_x:
-            high_x = ix
-        if i == 0 or iy < low_y:
-            low_y = iy
-        if i == 0 or iy > high_y:
-            high_y = iy
-    # a ring of empty cells about the crowd's: every body's neighbours have a place
-    origin_x, origin_y = low_x - 1, low_y - 1
-    columns, column = high_x - origin_x + 2, high_y - origin_y + 2
-    if columns > mask + 1 or column > mask + 1 or columns * column > mask + 1:
-        column = 0
-    for i in range(n):
+    ``(origin_x, origin_y, column_cells)``: the cells laid out column by column, each cell's
+    eight neighbours within, where they fit in the ``mask + 1`` slots (a crowd no wider than
+    the table, the bench's: 2,000 cells for 8,192 slots), else ``column_cells`` 0: hashed (a
+    crowd spread far, or a body not yet posed: :func:`plane_and_spread` puts those 1 km
+    apart)."""
+    low_x = low_y = math.inf
+    high_x = high_y = -math.inf
+    for i in range(plane.shape[0]):
+        x, y = np.floor(plane[i, 0] / cell_m), np.floor(plane[i, 1] / cell_m)
+        low_x, high_x = min(low_x, x), max(high_x, x)
+        low_y, high_y = min(low_y, y), max(high_y, y)
+    # A ring of empty cells about the crowd's (every body's neighbours have a place), decided
+    # before a cell is an integer: a crowd far out (a cell past 2^52) or too wide is hashed,
+    # never a product or an offset wrapped round.
+    n_columns, n_cells_a_column = high_x - low_x + 3.0, high_y - low_y + 3.0
+    origin_x = origin_y = column_cells = 0
+    if (max(abs(low_x), abs(high_x), abs(low_y), abs(high_y)) < 2.0 ** 52
+            and n_columns * n_cells_a_column <= mask + 1):
+        origin_x, origin_y = int(low_x) - 1, int(low_y) - 1
+        column_cells = int(n_cells_a_column)
+    for i in range(plane.shape[0]):
         slot[i] = cell_slot(math.floor(plane[i, 0] / cell_m), math.floor(plane[i, 1] / cell_m),
-                            mask, origin_x, origin_y, column)
+                            mask, origin_x, origin_y, column_cells)
     sort_by_slot(slot, start, order)
-    return origin_x, origin_y, column
+    return origin_x, origin_y, column_cells
 
 
 @jit()
@@ -206,14 +208,14 @@ def _gap(a: F64, b: F64, radius_a: float, radius_b: float) -> float:
 @jit(nogil=True)
 def overlap_rows(lo: int, hi: int, rows: I64, ends: F64, radii: F64, centre: F64, box: F64,
                  capsule_box: F64, plane: F64, cell_m: float, mask: int, origin_x: int,
-                 origin_y: int, column: int, start: I64, order: I64, depth: F64, other: I64,
-                 mine: I64, theirs: I64, normal: F64, point: F64) -> None:
+                 origin_y: int, column_cells: int, start: I64, order: I64, depth: F64,
+                 other: I64, mine: I64, theirs: I64, normal: F64, point: F64) -> None:
     """For each character ``i`` in ``rows[lo:hi]``, its deepest overlap with another character:
     ``depth[i]`` m (0: none), ``other[i]`` that character's row (-1: none), ``mine[i]`` and
     ``theirs[i]`` the two capsules, ``normal[i]`` (3,) the unit way out for ``i`` (from their
     axis toward its own), ``point[i]`` (3,) the nearest point of its own capsule's axis.
     ``plane`` (n, 2) the bodies' centres on the grid (built on it with cells ``cell_m`` wide:
-    ``mask``, ``origin_x``, ``origin_y``, ``column``, ``start``, ``order`` as
+    ``mask``, ``origin_x``, ``origin_y``, ``column_cells``, ``start``, ``order`` as
     :func:`build_cells`). Only bodies whose bounds
     ``box`` (n, 2, 3) meet are looked at further, and of those only the capsules whose bounds
     ``capsule_box`` (n, C, 2, 3) meet the other body's, then each other's, are tested."""
@@ -227,12 +229,12 @@ def overlap_rows(lo: int, hi: int, rows: I64, ends: F64, radii: F64, centre: F64
         box_i = box[i]
         for cell in range(9):
             s = cell_slot(ix + cell // 3 - 1, iy + cell % 3 - 1, mask, origin_x, origin_y,
-                          column)
+                          column_cells)
             repeated = False
             for earlier in range(cell):
                 repeated = repeated or s == cell_slot(ix + earlier // 3 - 1,
                                                       iy + earlier % 3 - 1, mask, origin_x,
-                                                      origin_y, column)
+                                                      origin_y, column_cells)
             if repeated:
                 continue
             for a in range(start[s], start[s + 1]):
@@ -277,7 +279,7 @@ def overlap_rows(lo: int, hi: int, rows: I64, ends: F64, radii: F64, centre: F64
 
 @jit(nogil=True)
 def near_kernel(rows: I64, box: F64, plane: F64, cell_m: float, mask: int, origin_x: int,
-                origin_y: int, column: int, start: I64, order: I64,
+                origin_y: int, column_cells: int, start: I64, order: I64,
                 near: NDArray[np.bool_]) -> None:
     """Mark ``near[j]`` (n,) for every other character ``j`` whose bounds ``box`` (n, 2, 3)
     meet those of one of ``rows`` (on the grid as :func:`overlap_rows`'s)."""
@@ -286,7 +288,7 @@ def near_kernel(rows: I64, box: F64, plane: F64, cell_m: float, mask: int, origi
         ix, iy = math.floor(plane[i, 0] / cell_m), math.floor(plane[i, 1] / cell_m)
         for cell in range(9):
             s = cell_slot(ix + cell // 3 - 1, iy + cell % 3 - 1, mask, origin_x, origin_y,
-                          column)
+                          column_cells)
             for a in range(start[s], start[s + 1]):
                 j = order[a]
                 if j != i and not _apart(box[i], box[j]):
@@ -300,8 +302,8 @@ _FORWARD_CELLS = ((1, -1), (1, 0), (1, 1), (0, 1))
 
 @jit(nogil=True)
 def touching_kernel(box: F64, plane: F64, cell_m: float, mask: int, origin_x: int,
-                    origin_y: int, column: int, start: I64, order: I64, box_in_order: F64,
-                    touching: NDArray[np.bool_], clearance: F64, gaps: bool) -> None:
+                    origin_y: int, column_cells: int, start: I64, order: I64,
+                    box_in_order: F64, touching: NDArray[np.bool_], clearance: F64, gaps: bool) -> None:
     """Mark ``touching[i]`` (n,) for every character whose bounds ``box`` (n, 2, 3) meet
     another's (on the grid as :func:`overlap_rows`'s). Each pair is met once: in a body's own
     slot, with the bodies after it there; in the four cells after its own
@@ -327,20 +329,20 @@ def touching_kernel(box: F64, plane: F64, cell_m: float, mask: int, origin_x: in
         i = order[a]
         box_i = box_in_order[a]
         ix, iy = math.floor(plane[i, 0] / cell_m), math.floor(plane[i, 1] / cell_m)
-        own = cell_slot(ix, iy, mask, origin_x, origin_y, column)
+        own = cell_slot(ix, iy, mask, origin_x, origin_y, column_cells)
         for b in range(a + 1, start[own + 1]):
             _meet(box_i, box_in_order[b], i, order[b], touching, clearance, gaps)
         if a == 0 or ix != last_x or iy != last_y:
             last_x, last_y = ix, iy
             forward = (
                 cell_slot(ix + _FORWARD_CELLS[0][0], iy + _FORWARD_CELLS[0][1], mask, origin_x,
-                          origin_y, column),
+                          origin_y, column_cells),
                 cell_slot(ix + _FORWARD_CELLS[1][0], iy + _FORWARD_CELLS[1][1], mask, origin_x,
-                          origin_y, column),
+                          origin_y, column_cells),
                 cell_slot(ix + _FORWARD_CELLS[2][0], iy + _FORWARD_CELLS[2][1], mask, origin_x,
-                          origin_y, column),
+                          origin_y, column_cells),
                 cell_slot(ix + _FORWARD_CELLS[3][0], iy + _FORWARD_CELLS[3][1], mask, origin_x,
-                          origin_y, column))
+                          origin_y, column_cells))
         for s in forward:
             if s == own:
                 continue  # (its bodies met above)
@@ -445,7 +447,7 @@ class Overlaps(NamedTuple):
 class Grid(NamedTuple):
     """The bodies sorted by cell of a uniform grid (:func:`grid_of`): ``plane`` (n, 2) each
     body's centre on it, cells ``cell_m`` wide, ``mask``, ``origin_x``, ``origin_y``,
-    ``column`` (the cells' layout: :func:`cell_slot`), ``start``, ``order`` as
+    ``column_cells`` (the cells' layout: :func:`cell_slot`), ``start``, ``order`` as
     :func:`build_cells` makes them."""
 
     plane: F64
@@ -453,7 +455,7 @@ class Grid(NamedTuple):
     mask: int
     origin_x: int
     origin_y: int
-    column: int
+    column_cells: int
     start: I64
     order: I64
 
@@ -497,7 +499,7 @@ def _spread(body: Capsules, rows: I64 | slice) -> F64:
 
 
 def grid_of(body: Capsules) -> Grid:
-    """The bodies' centres hashed on a grid of cells :data:`CELL_SLACK` times as wide as two
+    """The bodies' centres sorted by cell of a grid of cells :data:`CELL_SLACK` times as wide as two
     bodies' bounds reach sideways from their centres: the 3 x 3 cells about a body's own hold
     every body whose bounds can meet its bounds (:func:`grid_holds` tells when that no longer
     holds)."""
@@ -507,13 +509,13 @@ def grid_of(body: Capsules) -> Grid:
     mask = table_mask(n)
     slot, order = np.empty(n, np.int64), np.empty(n, np.int64)
     start = np.empty(mask + 2, np.int64)
-    origin_x, origin_y, column = build_cells(plane, cell_m, mask, slot, start, order)
-    return Grid(plane, cell_m, mask, origin_x, origin_y, column, start, order)
+    origin_x, origin_y, column_cells = build_cells(plane, cell_m, mask, slot, start, order)
+    return Grid(plane, cell_m, mask, origin_x, origin_y, column_cells, start, order)
 
 
 def grid_holds(body: Capsules, grid: Grid, rows: I64) -> bool:
     """Whether ``grid`` still finds every pair that can meet after ``rows`` (k,) moved: each
-    one's bounds reach sideways from where it was hashed no further than half a cell (two
+    one's bounds reach sideways from where it was put on the grid no further than half a cell (two
     bodies' bounds that meet then lie in neighbouring cells)."""
     drift = np.abs(body.centre[rows, :2] - grid.plane[rows]).max(axis=1, initial=0.0)
     return bool(np.all(_spread(body, rows) + drift <= 0.5 * grid.cell_m))
