@@ -101,9 +101,11 @@ def _prefetch_code(typingctx: Any, array: Any, index: Any) -> Any:
     def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
         data = context.make_array(sig.args[0])(context, builder, args[0]).data
         line = builder.bitcast(builder.gep(data, [args[1]]), ir.IntType(8).as_pointer())
-        i32, name = ir.IntType(32), "llvm.prefetch.p0i8"
-        fetch = builder.module.globals.get(name) or ir.Function(
-            builder.module, ir.FunctionType(ir.VoidType(), [line.type, i32, i32, i32]), name)
+        i32 = ir.IntType(32)
+        # (named by llvmlite as its pointers are: `p0i8` typed, `p0` opaque)
+        fetch = builder.module.declare_intrinsic(
+            "llvm.prefetch", [line.type],
+            ir.FunctionType(ir.VoidType(), [line.type, i32, i32, i32]))
         builder.call(fetch, [line, i32(0), i32(3), i32(1)])  # a read, kept close, data
         return context.get_dummy_value()
 
@@ -111,9 +113,14 @@ def _prefetch_code(typingctx: Any, array: Any, index: Any) -> Any:
 
 
 def _compiled_prefetch() -> None:
+    """Put numba's intrinsic in place of the Python :func:`prefetch` (an :func:`on_numba_import`
+    hook); not where numba runs the kernels as Python (``NUMBA_DISABLE_JIT``), where an
+    intrinsic cannot be called."""
+    from numba import config
     from numba.extending import intrinsic
 
-    globals()["prefetch"] = intrinsic(_prefetch_code)
+    if not config.DISABLE_JIT:  # type: ignore[attr-defined]  # (set from the environment)
+        globals()["prefetch"] = intrinsic(_prefetch_code)
 
 
 on_numba_import(_compiled_prefetch)
@@ -122,9 +129,11 @@ on_numba_import(_compiled_prefetch)
 @jit(inline="always")
 def prefetch_rows(array: F64, first: int, count: int) -> None:
     """:func:`prefetch` the ``count`` elements of ``array`` from ``first`` (flat; float64:
-    every 8th, a 64-byte cache line's worth)."""
+    every 8th, a 64-byte cache line's worth, and the last)."""
     for index in range(first, first + count, 8):
         prefetch(array, index)
+    if count > 0:  # (its line, where ``first`` is not at a line's start)
+        prefetch(array, first + count - 1)
 
 
 # A call, not inlined by numba (its compile counted: inlined, solve_rows' took about 10 % longer).
@@ -136,17 +145,15 @@ def prefetch_character(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
     prefetch_rows(dec.positions, c * dec.positions[0].size, dec.positions[0].size)
     prefetch_rows(dec.leg2world, c * dec.leg2world[0].size, dec.leg2world[0].size)
     prefetch_rows(dec.arm2world, c * dec.arm2world[0].size, dec.arm2world[0].size)
-    prefetch_rows(dec.pelvis2world, c * 9, 9)
-    prefetch_rows(dec.thorax2world, c * 9, 9)
+    prefetch_rows(dec.pelvis2world, c * dec.pelvis2world[0].size, dec.pelvis2world[0].size)
+    prefetch_rows(dec.thorax2world, c * dec.thorax2world[0].size, dec.thorax2world[0].size)
     for table in (b.lengths, b.masses, b.com_fraction):
         prefetch_rows(table, c * table.shape[1], table.shape[1])
     first, count = g.start[c] * 3, (g.start[c + 1] - g.start[c]) * 3
     for points in (g.goal, g.offset, g.self_offset, g.self_at):
         prefetch_rows(points, first, count)
-    for limbs in (pose.foot_dir, pose.hand_dir):
-        prefetch_rows(limbs, c * 6, 6)
-    for quats in (pose.leg_frame, pose.arm_frame):
-        prefetch_rows(quats, c * 8, 8)
+    for limbs in (pose.foot_dir, pose.hand_dir, pose.leg_frame, pose.arm_frame):
+        prefetch_rows(limbs, c * limbs[0].size, limbs[0].size)
 
 
 @jit(inline="always")

@@ -47,11 +47,17 @@ _on_numba_import: list[Callable[[], None]] = []
 
 
 def on_numba_import(hook: Callable[[], None]) -> None:
-    """Have :func:`with_numba` call ``hook`` as it imports numba, before any kernel compiles:
-    the package registers where numba caches its kernels
+    """Have :func:`with_numba` call ``hook`` as it imports numba, before any kernel compiles
+    (at once where numba is imported already: a kernel module imported after a tick ran): the
+    package registers where numba caches its kernels
     (:func:`ecs_anim.runtime.kernels.cache_kernels_in_cache_dir`), so this module, which every
-    kernel imports, imports nothing of the package."""
-    _on_numba_import.append(hook)
+    kernel imports, imports nothing of the package; the solver puts its compiled
+    ``prefetch`` in place (:mod:`ecs_anim.runtime.kernels.solve`)."""
+    with _numba_lock:
+        if _njit:
+            hook()
+        else:
+            _on_numba_import.append(hook)
 
 
 class PendingKernel:
@@ -84,7 +90,8 @@ class PendingKernel:
 
 def with_numba() -> None:
     """Import numba (once), call the hooks of :func:`on_numba_import` (the package's: numba then
-    caches its kernels in :func:`ecs_anim.runtime.kernels.cache_dir`) and make the dispatchers
+    caches its kernels in :func:`ecs_anim.runtime.kernels.cache_dir`, the solver's ``prefetch``
+    compiled) and make the dispatchers
     of the kernels decorated before (:class:`PendingKernel`)."""
     if _njit and not _waiting:
         return

@@ -7,6 +7,9 @@ from __future__ import annotations
 
 import copy
 import math
+import os
+import subprocess
+import sys
 from dataclasses import replace
 
 import numpy as np
@@ -31,6 +34,7 @@ from ecs_anim.runtime.kernels.solve_limbs import arm_lanes, arm_scratch, scatter
 from ecs_anim.runtime.kernels.solve_points import Goals, centre_of_mass, goal_error
 from ecs_anim.runtime.kernels.solve_root import com_shortfall, root_scratch, solve_root
 from ecs_anim.runtime.kernels.solve_trunk import solve_trunk
+from ecs_anim.runtime.kernels.vec import on_numba_import, with_numba
 from ecs_anim.runtime.simulation import Simulation
 from ecs_anim.solver import shell as solver_shell
 from support.scenarios import run
@@ -767,3 +771,26 @@ def test_sorted_goals_compiled_pass_gives_numpys_layout_to_the_bit(r):
     # sorted: the goals' own arrays, not copies (the solve moves ``goal`` in place)
     g, _, _ = compiled.sorted_goals(goals, caps)
     assert g.goal is goals.goal and g.offset is goals.offset
+
+
+def test_a_hook_registered_once_numba_is_imported_runs_at_once() -> None:
+    # (a kernel module imported after a tick ran: the solver's prefetch is such a hook)
+    with_numba()
+    ran: list[bool] = []
+    on_numba_import(lambda: ran.append(True))
+    assert ran == [True]
+
+
+def test_the_prefetch_runs_as_python_where_numba_runs_the_kernels_as_python() -> None:
+    done = subprocess.run(
+        [sys.executable, "-c",
+         "import numpy as np\n"
+         "from ecs_anim.runtime.kernels import solve\n"
+         "from ecs_anim.runtime.kernels.vec import with_numba\n"
+         "with_numba()\n"
+         "solve.prefetch_rows(np.zeros(20), 3, 10)\n"
+         "print(type(solve.prefetch).__name__)\n"],
+        capture_output=True, text=True, timeout=120, check=False,
+        env={**os.environ, "NUMBA_DISABLE_JIT": "1"})
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["function"]
