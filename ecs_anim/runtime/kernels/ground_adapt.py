@@ -190,7 +190,7 @@ def ground_scratch(n: int) -> F64:
     GROUND_SCRATCH_ROWS rows of BLOCK, flat). The chunk of rows from ``lo`` uses the block
     scratch ``lo // BLOCK`` for each of its blocks in turn (so chunks of at least
     :data:`.lanes.BLOCK` rows, ``over_chunks``' ``rows_per_thread``, never share one; one
-    thread touches only the first: 61 kB)."""
+    thread touches only the first: 59 KiB)."""
     return np.empty((n // BLOCK + 1, GROUND_SCRATCH_ROWS * BLOCK))
 
 
@@ -391,15 +391,16 @@ def _to_pitch(scratch: F64, count: int, j: Column, s: int, origin: Vec3, d: Vec3
     k = Column(count)
     _put_origin(scratch, 0, k, origin)
     scratch[_at(_S_P_RISE, k)], scratch[_at(_S_P_CLEARANCE, k)] = sign * foot, clearance
-    _put_entry(scratch, 0, k, d, deficit)
+    _put_secant_start(scratch, 0, k, d, deficit)
     scratch[_at(_S_P_FOOT, k)] = 2 * j + s
     return count + 1
 
 
 @jit(inline="always")
-def _put_entry(scratch: F64, staged: int, k: Column, d: Vec3, deficit: float) -> None:
-    """Entry ``k`` of :func:`pitch_lanes` (its origin, rise, clearance and foot written; as
-    :func:`_put_origin`): the foot's direction ``d`` and first ``deficit`` (m)."""
+def _put_secant_start(scratch: F64, staged: int, k: Column, d: Vec3, deficit: float) -> None:
+    """The secant's start of entry ``k`` of :func:`pitch_lanes` (its origin, rise, clearance
+    and foot written apart; ``staged`` as :func:`_put_origin`): the foot's heading from its
+    direction ``d``, and ``d``'s rise and the first ``deficit`` (m) as this and the last step's."""
     flat = max(math.sqrt(d[0] * d[0] + d[1] * d[1]), 1e-9)
     scratch[_at(_S_P_HEADING + staged, k)] = d[0] / flat
     scratch[_at(_S_P_HEADING + 2 + staged, k)] = d[1] / flat
@@ -417,8 +418,9 @@ _PITCH_STATE = (_S_P_ORIGIN, _S_P_ORIGIN + 2, _S_P_ORIGIN + 4, _S_P_HEADING, _S_
 @jit()
 def pitch_lanes(scratch: F64, count: int, kinds: I64, params: F64, grid: F64, passes: int
                 ) -> None:
-    """:func:`pitched_from`'s secant passes for the ``count`` feet of a block :func:`_to_pitch`
-    made entries of ``scratch`` (a block's ground scratch), with the same bits: each pass a
+    """:func:`pitched_from`'s secant passes for the ``count`` feet of a block made entries of
+    ``scratch`` (a block's ground scratch) by :func:`_to_pitch` or :func:`planted_entries`,
+    with the same bits: each pass a
     loop over the feet still too low that runs on the vector units, their ground asked at
     once (:func:`heights_lanes`), then those still too low gathered to the front (the others'
     direction and ground written into their columns' ``_S_PITCHED`` rows), at most
@@ -711,10 +713,11 @@ def _stand(c: int, s: int, j: Column, ankle: Vec3, d: Vec3, foot: float, w: floa
            switch: float, kinds: I64, params: F64, grid: F64, passes: int, scratch: F64
            ) -> tuple[Vec3, Vec3, tuple[float, float]]:
     """Foot ``s`` of row ``c`` in ``GroundAdapt.run`` once :func:`_lay` has laid it and
-    :func:`pitch_planted_lanes` and :func:`pitch_lanes` pitched it (column ``j``): (ankle, foot direction, the
-    ground's heights under that ankle and under the toe end (m), as :func:`planted_foot`)
-    standing on its footprint, moved onto the other sole point where the foot has rolled onto
-    it; the motion's (``ankle``, ``d``, NaN: not asked) for a foot not in contact.
+    :func:`pitch_planted_lanes` and :func:`pitch_lanes` pitched it (column ``j``): (ankle,
+    foot direction, the ground's heights under that ankle and under the toe end (m), as
+    :func:`planted_foot`) standing on its footprint, moved onto the other sole point where the
+    foot has rolled onto it; the motion's (``ankle``, ``d``, NaN: not asked) for a foot not in
+    contact.
 
     A contact's footprint is laid where the motion puts its planted point (the heel, the ball,
     or the lower of the two where the motion plants both), on the ground under it; it moves to
@@ -811,8 +814,8 @@ def _first_pitch_lanes(scratch: F64, j: Column, s: int) -> None:
               scratch[_at(_S_P_ORIGIN + 4 + _STAGED, f)])
     end = add_scaled(origin, d, scratch[_at(_S_P_RISE + _STAGED, f)])
     _put3(scratch, _S_PITCHED + 3 * s, j, d)
-    _put_entry(scratch, _STAGED, f, d,
-               ground + scratch[_at(_S_P_CLEARANCE + _STAGED, f)] - end[2])
+    _put_secant_start(scratch, _STAGED, f, d,
+                      ground + scratch[_at(_S_P_CLEARANCE + _STAGED, f)] - end[2])
 
 
 # A call, not inlined (as reaim_lanes).
