@@ -186,7 +186,7 @@ def clip_and_contact_edges(entity: I64, clip: I64, clip_time_s: F64, speed: F64,
                            loop: NDArray[np.bool_], duration_s: F64, contact_weight: F64,
                            dt: float, slack_s: float, began_weight: float, seen_clip: I64,
                            seen_time_s: F64, seen_ended: NDArray[np.bool_],
-                           seen_contact: F64) -> tuple[NDArray[np.bool_], I64]:
+                           seen_below: NDArray[np.bool_]) -> tuple[NDArray[np.bool_], I64]:
     """The clip and contact edges of each store row in the tick just stepped (numpy; the
     reference of the compiled :func:`ecs_anim.runtime.kernels.edges.clip_and_contact_edges`).
 
@@ -195,7 +195,9 @@ def clip_and_contact_edges(entity: I64, clip: I64, clip_time_s: F64, speed: F64,
     clip starts when it differs from the one seen or its time went back (beyond ``slack_s``);
     it ends when the pose was sampled at its end and it does not loop; a contact begins when
     its weight reaches ``began_weight``. ``seen_*`` (by entity id) hold what the last tick left
-    (clip -1: none seen) and are updated in place. Returns the edges (n, 5) bool, columns
+    (clip -1: none seen; ``seen_below`` (entities, 2) whether each foot's weight was below
+    ``began_weight``, False for NaN as the comparison: the one bit of the weight an edge
+    reads, an eighth of its bytes to read and write every tick) and are updated in place. Returns the edges (n, 5) bool, columns
     :data:`EDGE_REPLACED` ... :data:`EDGE_CONTACT` + foot, and the clip seen before (n,)."""
     seen_clip_now, seen_time_now = seen_clip[entity], seen_time_s[entity]
     ended_before = seen_ended[entity]
@@ -206,11 +208,10 @@ def clip_and_contact_edges(entity: I64, clip: I64, clip_time_s: F64, speed: F64,
     edges[:, EDGE_REPLACED] = new_clip & (seen_clip_now >= 0) & ~ended_before
     edges[:, EDGE_ENDED] = ~new_clip & at_end & ~ended_before
     edges[:, EDGE_STARTED] = new_clip
-    edges[:, EDGE_CONTACT:] = (contact_weight >= began_weight) & \
-        (seen_contact[entity] < began_weight)
+    edges[:, EDGE_CONTACT:] = (contact_weight >= began_weight) & seen_below[entity]
     seen_ended[entity] = ~new_clip & (ended_before | at_end)
     seen_clip[entity], seen_time_s[entity] = clip, clip_time_s
-    seen_contact[entity] = contact_weight
+    seen_below[entity] = contact_weight < began_weight
     return edges, seen_clip_now
 
 
@@ -277,11 +278,11 @@ class Reactions:
         self._names_cache: list[str] = []
         self._names_version = -1
         # per entity id: the clip (-1: not seen yet), its time after the last tick, whether its
-        # end was reported, its contact weights
+        # end was reported, whether each foot's contact weight was below CONTACT_BEGAN_WEIGHT
         self._seen_clip = np.zeros(0, np.int64)
         self._seen_time = np.zeros(0)
         self._seen_ended = np.zeros(0, bool)
-        self._seen_contact = np.zeros((0, 2))
+        self._seen_below = np.zeros((0, 2), bool)
         # per entity id: following a path when the tick began (an arrival is its end)
         self._seen_on_path = np.zeros(0, bool)
         self._paths_seen = False  # any of _seen_on_path of a character still there
@@ -450,7 +451,8 @@ class Reactions:
         self._seen_clip = np.concatenate([self._seen_clip, np.full(extra, -1, np.int64)])
         self._seen_time = np.concatenate([self._seen_time, np.zeros(extra)])
         self._seen_ended = np.concatenate([self._seen_ended, np.zeros(extra, bool)])
-        self._seen_contact = np.concatenate([self._seen_contact, np.zeros((extra, 2))])
+        # (an entity not seen yet: its feet's weights below any contact's, as a weight 0)
+        self._seen_below = np.concatenate([self._seen_below, np.ones((extra, 2), bool)])
         self._seen_on_path = np.concatenate([self._seen_on_path, np.zeros(extra, bool)])
 
     def _store_edges(self, sim: Simulation) -> list[tuple[str, I64, I64, list[str]]]:
@@ -464,7 +466,7 @@ class Reactions:
         args = (st.entity, st.clip, st.clip_time_s, st.speed, st.loop,
                 bank.n_frames / bank.fps, st.contact_weight, sim.dt,
                 TIME_SLACK_S, CONTACT_BEGAN_WEIGHT, self._seen_clip, self._seen_time,
-                self._seen_ended, self._seen_contact)
+                self._seen_ended, self._seen_below)
         if sim.compiled:
             listed, replaced_clip = compiled_edges(*args, scratch=self._edge_scratch)
         else:  # the numpy reference while the kernels compile aside (a first run)

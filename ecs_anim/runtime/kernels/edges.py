@@ -21,7 +21,7 @@ B = NDArray[np.bool_]
 def edge_rows(lo: int, hi: int, entity: I64, clip: I64, clip_time_s: F64, speed: F64, loop: B,
               duration_s: F64, contact_weight: F64, dt: float, slack_s: float,
               began_weight: float, seen_clip: I64, seen_time_s: F64, seen_ended: B,
-              seen_contact: F64, listed: I64, counts: I64) -> None:
+              seen_below: B, listed: I64, counts: I64) -> None:
     """Rows ``lo..hi-1`` of :func:`ecs_anim.runtime.events.clip_and_contact_edges`, the
     ``seen_*`` arrays (by entity id) updated and the edges listed (what the caller reads: no
     (n, 5) edges nor (n,) clips seen before written, which nothing read), in the order of the
@@ -51,8 +51,8 @@ def edge_rows(lo: int, hi: int, entity: I64, clip: I64, clip_time_s: F64, speed:
             started_count += 1
         for foot in range(2):
             weight = contact_weight[r, foot]
-            began = weight >= began_weight and seen_contact[e, foot] < began_weight
-            seen_contact[e, foot] = weight
+            began = weight >= began_weight and seen_below[e, foot]
+            seen_below[e, foot] = weight < began_weight
             if began:
                 listed[3, began_count] = 2 * r + foot
                 began_count += 1
@@ -82,7 +82,7 @@ class EdgeScratch:
 def clip_and_contact_edges(entity: I64, clip: I64, clip_time_s: F64, speed: F64, loop: B,
                            duration_s: F64, contact_weight: F64, dt: float, slack_s: float,
                            began_weight: float, seen_clip: I64, seen_time_s: F64, seen_ended: B,
-                           seen_contact: F64, *, scratch: EdgeScratch | None = None
+                           seen_below: B, *, scratch: EdgeScratch | None = None
                            ) -> tuple[list[I64], I64]:
     """:func:`ecs_anim.runtime.events.clip_and_contact_edges`, compiled (same arguments; the
     ``seen_*`` arrays updated alike), its edges listed
@@ -93,7 +93,7 @@ def clip_and_contact_edges(entity: I64, clip: I64, clip_time_s: F64, speed: F64,
     n = entity.shape[0]
     out = (EdgeScratch() if scratch is None else scratch).fit(n)
     edge_rows(0, n, entity, clip, clip_time_s, speed, loop, duration_s, contact_weight, dt,
-              slack_s, began_weight, seen_clip, seen_time_s, seen_ended, seen_contact,
+              slack_s, began_weight, seen_clip, seen_time_s, seen_ended, seen_below,
               out.listed, out.counts)
     counts = out.counts.tolist()
     listed = [out.listed[k, :counts[k]].copy() for k in range(4)]
