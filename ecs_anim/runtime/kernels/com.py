@@ -132,7 +132,8 @@ def motion_of(positions: F64, poses: NormalizedPoses, masses: F64, com_fraction:
         packed, fresh = np.empty((n, N_VALUES)), np.empty(n, np.bool_)
         last = np.ascontiguousarray(last_values, dtype=np.float64)
     else:
-        packed, fresh, last = np.empty((0, N_VALUES)), np.empty(0, np.bool_), np.empty((0, N_VALUES))
+        packed, fresh = np.empty((0, N_VALUES)), np.empty(0, np.bool_)
+        last = np.empty((0, N_VALUES))
     over_chunks(motion_rows, n, positions, copy, np.ascontiguousarray(masses, dtype=np.float64),
                 np.ascontiguousarray(com_fraction, dtype=np.float64), centres, pose, packed, last,
                 fresh, bool(fresh.size == n and n > 0))

@@ -1,9 +1,10 @@
 """Compiled decode: normalized poses on each character's body (paper eq. 2 and §8).
 
-Mirrors :func:`ecs_anim.core.normalized.decode` (the ``use_stretch=False`` path, what the tick uses)
-:func:`decode_row` for one character, :func:`decode_rows` over a chunk of store rows
+Mirrors :func:`ecs_anim.core.normalized.decode` (the ``use_stretch=False`` path, what the tick
+uses) :func:`decode_row` for one character, :func:`decode_rows` over a chunk of store rows
 (``rows[lo:hi]``: one chunk per thread; by blocks of characters, the spines on the vector units:
-:func:`spine_block`), :func:`decode` the Python entry over every row. The poses are passed as :class:`PoseArrays` (the arrays of a
+:func:`spine_block`), :func:`decode` the Python entry over every row. The poses are passed as
+:class:`PoseArrays` (the arrays of a
 :class:`~ecs_anim.core.normalized.NormalizedPoses`, no copies) and the result written into
 :class:`DecodedArrays` (the arrays of a :class:`~ecs_anim.core.normalized.DecodedPose`).
 
@@ -80,8 +81,8 @@ I64 = NDArray[np.int64]
 
 
 class PoseArrays(NamedTuple):
-    """The arrays of :class:`ecs_anim.core.normalized.NormalizedPoses` (same names, same order), as a
-    tuple numba can take. Leading axis: store rows (n,); see ``NormalizedPoses`` for shapes."""
+    """The arrays of :class:`ecs_anim.core.normalized.NormalizedPoses` (same names, same order),
+    as a tuple numba can take. Leading axis: store rows (n,); see ``NormalizedPoses`` for shapes."""
 
     root_position: F64
     root_heading: F64

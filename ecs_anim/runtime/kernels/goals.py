@@ -651,7 +651,8 @@ def goals_on_layout(kept: Layout, written: bool, table: ConstraintTable, weight:
 
 def tick_goals(table: ConstraintTable, weight: F64, targets: F64, unconstrained: DecodedPose,
                contact_weight: F64, com_control: NDArray[np.bool_], com_desired: F64,
-               previous: DecodedPose | None = None, max_release_m: float = np.inf) -> TickGoals | None:
+               previous: DecodedPose | None = None,
+               max_release_m: float = np.inf) -> TickGoals | None:
     """Compiled :func:`ecs_anim.solver.goals.tick_goals`: the same arguments and result."""
     kept = layout(table, weight > 0)
     if kept is None:

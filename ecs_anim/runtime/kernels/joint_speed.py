@@ -283,7 +283,8 @@ def _share(c: int, pose_positions: F64, clip_positions: F64, pose_positions_befo
     once (about 9 % off the pass)."""
     share = 1.0
     pose0, clip0 = load3(pose_positions[c, 0]), load3(clip_positions[c, 0])
-    pose0_before, clip0_before = load3(pose_positions_before[c, 0]), load3(clip_positions_before[c, 0])
+    pose0_before = load3(pose_positions_before[c, 0])
+    clip0_before = load3(clip_positions_before[c, 0])
     for j in range(1, N_JOINTS):
         side = leg_of_joint[j]
         if side >= 0 and planted[c, side]:
@@ -413,7 +414,8 @@ def limit_motion(poses: NormalizedPoses, clip_now: F64, clip_before: F64, pose_b
     except that ``poses`` is limited in place and returned."""
     r = poses.root_heading.shape[0]
     held, need = np.empty(r, bool), np.empty((r, N_GROUPS))
-    floats = [np.ascontiguousarray(a, dtype=np.float64) for a in (clip_now, clip_before, pose_before)]
+    floats = [np.ascontiguousarray(a, dtype=np.float64)
+              for a in (clip_now, clip_before, pose_before)]
     over_chunks(limit_rows, r, pose_arrays(poses), *floats,
                 np.ascontiguousarray(planted, dtype=np.bool_),
                 np.ascontiguousarray(share, dtype=np.float64), FRAME_GROUP,
@@ -489,7 +491,8 @@ def goal_steps_rows(table_index: I64, owner: I64, orientation: B8, goal: F64, we
     for j in range(table_index.shape[0]):
         i = table_index[j]
         if i >= 0 and weight[j] >= 1.0 and not orientation[j]:
-            last_goals[i, 0], last_goals[i, 1], last_goals[i, 2] = goal[j, 0], goal[j, 1], goal[j, 2]
+            last_goals[i, 0], last_goals[i, 1], last_goals[i, 2] = (goal[j, 0], goal[j, 1],
+                                                                    goal[j, 2])
 
 
 def goal_steps(goals: TickGoals, last_goals: F64, weight_before: F64) -> F64:

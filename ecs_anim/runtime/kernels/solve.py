@@ -13,7 +13,8 @@ goals: its result does not depend on who else is solved, nor on the thread count
 
 The goals come from :func:`ecs_anim.runtime.kernels.goals.tick_goals` (or its numpy reference),
 already sorted by character (then nothing is copied); :func:`character_winners` picks the goal
-each limb and the head serve, and the frame budget's caps (``Goals.iterations``, ``Bodies.iterations``) bound each
+each limb and the head serve, and the frame budget's caps (``Goals.iterations``,
+``Bodies.iterations``) bound each
 goal's and each character's iterations.
 """
 
@@ -196,7 +197,7 @@ def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
     character uses its own goals' entries, so the threads share them); ``kinds`` (r,): per
     character scratch (what its goals ask of the solve, found once); ``arms``, ``scratch``: a
     :func:`.solve_limbs.arm_scratch` and a :func:`.solve_root.root_scratch` of r rows (this
-    chunk uses their block ``lo // BLOCK``). Mirrors the loop of
+    chunk uses, and first zeroes, their block ``lo // BLOCK``). Mirrors the loop of
     :func:`ecs_anim.solver.shell.solve`, one character at a time.
 
     By blocks of :data:`.lanes.BLOCK` characters, in three rounds over each block: the first
@@ -215,6 +216,12 @@ def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
     # tuples on, a reference count up and down for each of their 74 arrays (0.25 us a
     # character); numba's inlining of such a call costs 14 s more of compile.
     arm_block, root_block = arms[lo // BLOCK], scratch[lo // BLOCK]
+    # Zeroed here, not by the caller (the whole scratch, 1.8 MB each at 4,000 rows, zeroed
+    # every tick for the one block a chunk uses): the lanes compute every column, and a column
+    # no character uses is better not left with whatever the reused memory held (an integer
+    # read as a float is subnormal, slow to compute with).
+    arm_block[:] = 0.0
+    root_block[:] = 0.0
     for block_start in range(lo, hi, BLOCK):
         count = min(BLOCK, hi - block_start)
         for turn in range(3 * count):
@@ -240,7 +247,8 @@ def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
                     prefetch_character(c + PREFETCH_AHEAD, pose, dec, g, b)
                 uses_trunk = False
                 on_self = False
-                iterates = False  # a goal an iteration moves: the trunk's, or one following what a pass moves
+                # a goal an iteration moves: the trunk's, or one following what a pass moves
+                iterates = False
                 # the root's step is predicted (``_Solve.predicted``): no goal iterates, and every
                 # user goal follows the own body (none aims at the world or at another character)
                 predicted = True
@@ -293,7 +301,8 @@ def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
                 else:
                     if on_self:
                         follow_own_targets(c, dec, g, t)
-                    # An arm of the first pass waits for its block's (:func:`.solve_limbs.arm_lanes`).
+                    # An arm of the first pass waits for its block's
+                    # (:func:`.solve_limbs.arm_lanes`).
                     if solve_limbs(c, pose, dec, g, w, b, t, tolerance_m, leg_extension, arm_block,
                                    column, stage == 0 and used == 0):
                         arm_block[at(A_WAITING, column)] = 1.0
@@ -347,7 +356,8 @@ def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
                         first_measure = math.isinf(previous[j])
                         unchanged = not first_measure and abs(previous[j] - e) < tolerance_m
                         slow = not first_measure and previous[j] - e < stall_fraction * previous[j]
-                        cut = used >= goal_iterations[j]  # the frame budget gave it no more iterations
+                        # the frame budget gave it no more iterations
+                        cut = used >= goal_iterations[j]
                         goal_open = (e > tol and not unchanged and not (slow and slow_before[j])
                                      and not stalled[j] and not cut)
                         if e > tol and not goal_open:
@@ -570,9 +580,10 @@ def solve(poses: NormalizedPoses, lengths: F64, goals: TickGoals, masses: F64, c
     wait_for_solver()  # a first run may be compiling solve_rows in another process
     k = goals.k
     r = used.shape[0]
+    # (the per-goal and per-character scratch is written by solve_rows before it is read)
     over_chunks(solve_rows, r, state.pose, state.dec, state.goals, state.winners,
-                state.bodies, TABLES, used, np.zeros(k), np.zeros(k, np.bool_), np.zeros(k),
-                np.zeros(k, np.bool_), np.zeros(r, np.int64), arm_scratch(r), root_scratch(r),
+                state.bodies, TABLES, used, np.empty(k), np.empty(k, np.bool_), np.empty(k),
+                np.empty(k, np.bool_), np.empty(r, np.int64), arm_scratch(r), root_scratch(r),
                 float(s.tolerance_m),
                 float(s.tolerance_rad), float(s.com_tolerance_m), float(s.max_ccd_step_rad),
                 float(s.root_gain), float(s.stall_fraction), float(MAX_LEG_EXTENSION),

@@ -72,7 +72,8 @@ def solve_head(c: int, pose: PoseArrays, dec: DecodedArrays, g: Goals, w: Winner
     thorax_t = transpose(thorax2world)
     neck_len = lengths_row[t.neck_length]
     d = sub(head, neck)
-    store3(pose.neck_dir[c], to_world(thorax_t, (d[0] / neck_len, d[1] / neck_len, d[2] / neck_len)))
+    store3(pose.neck_dir[c],
+           to_world(thorax_t, (d[0] / neck_len, d[1] / neck_len, d[2] / neck_len)))
     store4(pose.head[c], quat_from_matrix(matmul(thorax_t, head2world)))
     store_frame(dec.head2world[c], head2world)
     store3(p[t.head], head)

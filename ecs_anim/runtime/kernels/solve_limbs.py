@@ -239,9 +239,9 @@ ARM_SCRATCH_ROWS = 55
 
 def arm_scratch(n: int) -> F64:
     """The arms' scratch :func:`solve_limbs` needs for ``n`` rows: (n // BLOCK + 1, a block's
-    ARM_SCRATCH_ROWS rows of BLOCK, flat), zero (the columns no character uses are computed
-    with the rest). The chunk of rows from ``lo`` uses the block scratch ``lo // BLOCK``."""
-    return np.zeros((n // BLOCK + 1, ARM_SCRATCH_ROWS * BLOCK))
+    ARM_SCRATCH_ROWS rows of BLOCK, flat), not zeroed: the chunk of rows from ``lo`` uses the
+    block scratch ``lo // BLOCK`` alone, and :func:`.solve.solve_rows` zeroes it."""
+    return np.empty((n // BLOCK + 1, ARM_SCRATCH_ROWS * BLOCK))
 
 
 @jit(inline="always")

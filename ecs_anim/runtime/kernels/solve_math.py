@@ -34,7 +34,8 @@ from ecs_anim.runtime.kernels.vec import (
 @jit()
 def bring_within_reach(base: Vec3, limb_root: Vec3, goal: Vec3, reach: float,
                        max_angle: float) -> Frame:
-    """Mirrors :func:`ecs_anim.solver.steps.bring_within_reach`: the smallest rotation about ``base``
+    """Mirrors :func:`ecs_anim.solver.steps.bring_within_reach`: the smallest rotation about
+    ``base``
     bringing ``limb_root`` within ``reach`` of ``goal``, at most ``max_angle``."""
     a_vec, b_vec = sub(limb_root, base), sub(goal, base)
     a = norm(a_vec)

@@ -89,11 +89,13 @@ def tables() -> Tables:
     sides = ("l", "r")
     return Tables(
         seg_proximal=_ints(SEG_PROXIMAL), seg_distal=_ints(SEG_DISTAL), seg_frame=_ints(SEG_FRAME),
-        limb_joint=_ints([[J[f"{leg}_{s}"] for leg in ("hip", "knee", "ankle", "toe")] for s in sides]
+        limb_joint=_ints([[J[f"{leg}_{s}"] for leg in ("hip", "knee", "ankle", "toe")]
+                          for s in sides]
                          + [[J[f"{arm}_{s}"] for arm in ("shoulder", "elbow", "wrist", "hand")]
                             for s in sides]),
         limb_length=_ints([[L[f"{b}_{s}"] for b in ("thigh", "shank", "foot")] for s in sides]
-                          + [[L[f"{b}_{s}"] for b in ("upper_arm", "forearm", "hand")] for s in sides]),
+                          + [[L[f"{b}_{s}"] for b in ("upper_arm", "forearm", "hand")]
+                             for s in sides]),
         group_limb_root=_ints([-1, -1, J["neck"], J["shoulder_l"], J["shoulder_r"], -1]),
         group_limb_middle=_ints([-1, -1, J["head"], J["elbow_l"], J["elbow_r"], -1]),
         limb_of_group=_ints([0, 1, -1, 2, 3, -1]),
@@ -177,7 +179,8 @@ def limb_frame(dec: DecodedArrays, c: int, slot: int) -> Frame:
 
 @jit(inline="always")
 def segment_frame(dec: DecodedArrays, c: int, segment: int, t: Tables) -> Frame:
-    """Mirrors :func:`ecs_anim.core.body_points.segment_frames` for one segment of character ``c``."""
+    """Mirrors :func:`ecs_anim.core.body_points.segment_frames` for one segment of character
+    ``c``."""
     kind = t.seg_frame[segment]
     if kind < FRAME_PELVIS:
         limb = limb_frame(dec, c, kind)

@@ -132,10 +132,10 @@ ROOT_SCRATCH_ROWS = 55
 
 def root_scratch(n: int) -> F64:
     """The scratch :func:`solve_root` needs for ``n`` rows: (n // BLOCK + 1, a block's
-    ROOT_SCRATCH_ROWS rows of BLOCK, flat), zero (the columns no character uses this tick are
-    computed with the rest). The chunk of rows from ``lo`` uses the block scratch
-    ``lo // BLOCK`` (so chunks of at least :data:`.lanes.BLOCK` rows never share one)."""
-    return np.zeros((n // BLOCK + 1, ROOT_SCRATCH_ROWS * BLOCK))
+    ROOT_SCRATCH_ROWS rows of BLOCK, flat), not zeroed: the chunk of rows from ``lo`` uses the
+    block scratch ``lo // BLOCK`` alone (so chunks of at least :data:`.lanes.BLOCK` rows never
+    share one), and :func:`.solve.solve_rows` zeroes it."""
+    return np.empty((n // BLOCK + 1, ROOT_SCRATCH_ROWS * BLOCK))
 
 
 @jit(inline="always")

@@ -52,7 +52,8 @@ def solve_trunk(c: int, pose: PoseArrays, dec: DecodedArrays, lengths_row: F64, 
                 tolerance_rad: float, max_ccd_step_rad: float) -> bool:
     """Mirrors ``ecs_anim.solver.shell._Solve.trunk`` for character ``c`` (in place) on its body
     ``lengths_row`` (N_LENGTHS,) (m); ``w`` the goals each limb and the head meet;
-    ``err`` (k,) each goal's error now (:func:`~ecs_anim.runtime.kernels.solve_points.goal_error`), ``stalled``
+    ``err`` (k,) each goal's error now
+    (:func:`~ecs_anim.runtime.kernels.solve_points.goal_error`), ``stalled``
     (k,) goals that stopped improving. Returns whether the trunk turned."""
     start, stop = g.start[c], g.start[c + 1]
     best = -1
@@ -84,7 +85,8 @@ def solve_trunk(c: int, pose: PoseArrays, dec: DecodedArrays, lengths_row: F64, 
         if g.bone[best] == 0:
             reach = norm(sub(point, root_at))
         else:
-            reach = _LIMB_REACH_SHARE * (norm(sub(middle_at, root_at)) + norm(sub(point, middle_at)))
+            reach = _LIMB_REACH_SHARE * (norm(sub(middle_at, root_at))
+                                         + norm(sub(point, middle_at)))
         if norm(sub(goal, root_at)) > reach:
             turn = bring_within_reach(base, root_at, goal, reach, max_ccd_step_rad)
     # Spread the turn along the spine (a third, two thirds, all of it at the neck); the thorax,
@@ -98,7 +100,8 @@ def solve_trunk(c: int, pose: PoseArrays, dec: DecodedArrays, lengths_row: F64, 
     for k in range(3):
         part = axis_angle(axis, angle * (k + 1) / 3.0)
         store3(pose.spine_points[c, k], to_world(part, spine_before[k]))
-    store4(pose.thorax[c], quat_from_matrix(matmul(turn_in_pelvis, matrix_from_quat(thorax_before))))
+    store4(pose.thorax[c],
+           quat_from_matrix(matmul(turn_in_pelvis, matrix_from_quat(thorax_before))))
     decode_row(c, pose, lengths_row, dec)
     # A move that worsens any higher-priority goal the trunk carries is undone, measured on the
     # decoded result (the bent spine does not carry the neck where a rigid turn would).

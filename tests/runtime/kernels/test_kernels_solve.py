@@ -148,18 +148,20 @@ def test_the_root_step_lands_for_walkers_with_targets_on_their_body(monkeypatch)
     assert np.mean(used == 1) > 0.9
 
 
-def solved_in_chunks(args, chunks):
+def solved_in_chunks(args, chunks, leftover=0.0):
     """:func:`compiled.solve`'s state after ``solve_rows`` over the rows ``chunks`` ((lo, hi)
-    each, one after the other) of the solve ``args``, and the iterations each row took."""
+    each, one after the other) of the solve ``args``, and the iterations each row took; its
+    scratch arrays hold ``leftover`` on entry (as reused memory would)."""
     poses, lengths, goals, masses, com_fraction, settings, decoded = copy.deepcopy(args)[:7]
     state = compiled.prepare(poses, lengths, goals, masses, com_fraction, decoded, settings)
     r, k = lengths.shape[0], state.goals.start[-1]
-    used, kinds, arms, scratch = (np.zeros(r, np.int64), np.zeros(r, np.int64), arm_scratch(r),
-                                  root_scratch(r))
+    used, kinds, arms, scratch = (np.zeros(r, np.int64), np.full(r, 7, np.int64),
+                                  arm_scratch(r), root_scratch(r))
+    arms[:], scratch[:] = leftover, leftover
     for lo, hi in chunks:
         compiled.solve_rows(lo, hi, state.pose, state.dec, state.goals, state.winners,
-                            state.bodies, T, used, np.zeros(k), np.zeros(k, np.bool_),
-                            np.zeros(k), np.zeros(k, np.bool_), kinds, arms, scratch,
+                            state.bodies, T, used, np.full(k, leftover), np.ones(k, np.bool_),
+                            np.full(k, leftover), np.ones(k, np.bool_), kinds, arms, scratch,
                             float(settings.tolerance_m),
                             float(settings.tolerance_rad), float(settings.com_tolerance_m),
                             float(settings.max_ccd_step_rad), float(settings.root_gain),
@@ -248,8 +250,11 @@ def test_a_solve_does_not_depend_on_its_blocks_nor_chunks(monkeypatch):
     assert np.all(used[variant == 4] == 1)
     assert np.all(used[(variant == 3) | (variant == 5)] == 0)
     assert np.all(used[(variant == 1) | (variant == 2)] >= 1)
-    for chunks in ([(0, 37), (37, 40)], [(c, c + 1) for c in range(40)]):
-        state, used_here = solved_in_chunks(args, chunks)
+    # (also with the scratch holding NaN or a subnormal, as memory reused from an earlier tick
+    # may: solve_rows zeroes its block and writes the rest before reading it)
+    for chunks, leftover in (([(0, 37), (37, 40)], 0.0), ([(c, c + 1) for c in range(40)], 0.0),
+                             ([(0, 40)], np.nan), ([(0, 37), (37, 40)], 5e-324)):
+        state, used_here = solved_in_chunks(args, chunks, leftover)
         np.testing.assert_array_equal(used_here, used)
         for name in DecodedArrays._fields:
             np.testing.assert_array_equal(getattr(state.dec, name), getattr(whole.dec, name),
