@@ -322,7 +322,7 @@ class CollisionSeparate(System):
         # (a crowd whose moves mostly push its bodies into others: the bench's walkers).
         stalled = np.zeros(n, np.int64)
         stalled_all, least_all = 0, np.inf
-        leg = leg_length(st.lengths)
+        leg = self.sim.leg_length()
         for done in range(PASSES):
             spent_s = (self.clock() - start_s) / max(threads(), 1)
             if done and spent_s * (done + 1) / done > allowed_s:

@@ -139,6 +139,61 @@ def test_the_search_over_the_bodies_that_touch_finds_what_a_search_of_all_finds(
         np.testing.assert_array_equal(getattr(found, name), getattr(every, name), err_msg=name)
 
 
+def test_the_bounds_are_the_joints_least_and_most_widened_by_the_widest_radius():
+    """``bounds`` (each body's joints read two at a time, its radii two capsules at a time,
+    each a running least or most folded at the end) gives the bits of one running
+    least and most over the joints in order and over the radii: a NaN joint or radius skipped
+    (a body all NaN unbounded: infinite corners), a zero's sign lost once the radius is added;
+    on 1 and 2 threads, and in two chunks of rows."""
+    from ecs_anim.runtime import kernels
+    from ecs_anim.runtime.kernels.capsules import (
+        BOUND_HAIR_M,
+        WIDEST_TERMS,
+        WIDEST_WEIGHTS,
+        bound_rows,
+    )
+
+    rng = np.random.default_rng(3207)
+    n = 40
+    lengths, standing, spots = _scattered_adults(rng, n)
+    positions = standing + spots[:, None]
+    lengths = lengths * rng.uniform(0.8, 1.2, size=(n, 1))
+    positions[1, 5] = np.nan  # one joint not posed
+    positions[2, :, 0] = np.nan  # one axis of every joint
+    positions[3] = np.nan  # a body not posed
+    positions[4, 7:, 1] = -0.0  # zeros of both signs on one axis
+    positions[4, :7, 1] = 0.0
+    positions[5, -1] = [-50.0, 50.0, -50.0]  # the last joint the widest
+    lengths[6, WIDEST_TERMS[5, 1]] = np.nan  # a radius NaN (its weight 0 elsewhere: 0 x NaN)
+    lengths[7] = np.nan  # every radius NaN: only the hair
+    lengths[8] = 0.0  # zero lengths
+    # the reference: one running least and most in order (min(a, v) keeps a unless v < a)
+    low, high = np.full((n, 3), np.inf), np.full((n, 3), -np.inf)
+    for j in range(N_JOINTS):
+        v = positions[:, j]
+        low, high = np.where(v < low, v, low), np.where(v > high, v, high)
+    terms = lengths[:, WIDEST_TERMS] * WIDEST_WEIGHTS  # (n, C, 3)
+    radii = terms[..., 0] + terms[..., 1] + terms[..., 2]
+    widest = np.zeros(n)
+    for k in range(N_CAPSULES):
+        widest = np.where(radii[:, k] > widest, radii[:, k], widest)
+    widest += BOUND_HAIR_M
+    expected = np.stack([low - widest[:, None], high + widest[:, None]], axis=1)
+    assert np.isinf(expected[3]).all() and np.isfinite(expected[7]).all()
+    try:
+        for count in range(1, min(2, kernels.available_threads()) + 1):
+            kernels.set_threads(count)
+            body = bounds(positions, lengths, Capsules.empty(n))
+            np.testing.assert_array_equal(body.box, expected, err_msg=f"{count} threads")
+            np.testing.assert_array_equal(body.centre, positions[:, 0])
+    finally:
+        kernels.set_threads(None)
+    split = Capsules.empty(n)
+    for lo, hi in ((0, 13), (13, n)):
+        bound_rows(lo, hi, positions, lengths, split.centre, split.box)
+    np.testing.assert_array_equal(split.box, expected)
+
+
 @pytest.mark.parametrize("apart", [False, True])  # some bounds meet; none do
 def test_the_search_measures_gaps_only_when_asked_and_they_are_the_least(apart):
     """``touching`` without a clearance (no gap measured) marks the bodies it marks with one;

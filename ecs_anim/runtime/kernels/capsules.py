@@ -96,24 +96,48 @@ def bound_rows(lo: int, hi: int, positions: F64, lengths: F64, centre: F64, box:
     ``lengths`` (n, N_LENGTHS): :data:`WIDEST_TERMS`, :data:`WIDEST_WEIGHTS`, constants of the
     compiled code: each length's column known, not read from a table) and
     :data:`BOUND_HAIR_M` (each capsule's axis lies between two joints); ``centre`` (n, 3) the
-    pelvis. One contiguous pass over each body's joints, no capsule made."""
+    pelvis. One contiguous pass over each body's joints, no capsule made.
+
+    The joints are taken two at a time and the radii two capsules at a time, each its own
+    running least or most, folded at the end (not one chain of compares through a body's 22
+    joints and 13 radii: two chains half as long, side by side). The
+    same bits as one chain: every running value starts at an infinity or 0 and a NaN never
+    replaces one (``min(a, v)`` keeps ``a`` unless ``v < a``), so each is the least (most) of
+    the values not NaN in any order; a zero's sign, which the order could choose, is gone once
+    the radius is added."""
     n_joints = positions.shape[1]
     for c in range(lo, hi):
-        widest = 0.0
-        for k in range(N_CAPSULES):
-            widest = max(widest, lengths[c, WIDEST_TERMS[k, 0]] * WIDEST_WEIGHTS[k, 0]
-                         + lengths[c, WIDEST_TERMS[k, 1]] * WIDEST_WEIGHTS[k, 1]
-                         + lengths[c, WIDEST_TERMS[k, 2]] * WIDEST_WEIGHTS[k, 2])
-        widest += BOUND_HAIR_M
-        low_x = low_y = low_z = math.inf
-        high_x = high_y = high_z = -math.inf
-        for j in range(n_joints):
+        widest_even = widest_odd = 0.0
+        for k in range(0, N_CAPSULES, 2):
+            widest_even = max(widest_even, lengths[c, WIDEST_TERMS[k, 0]] * WIDEST_WEIGHTS[k, 0]
+                              + lengths[c, WIDEST_TERMS[k, 1]] * WIDEST_WEIGHTS[k, 1]
+                              + lengths[c, WIDEST_TERMS[k, 2]] * WIDEST_WEIGHTS[k, 2])
+        for k in range(1, N_CAPSULES, 2):
+            widest_odd = max(widest_odd, lengths[c, WIDEST_TERMS[k, 0]] * WIDEST_WEIGHTS[k, 0]
+                             + lengths[c, WIDEST_TERMS[k, 1]] * WIDEST_WEIGHTS[k, 1]
+                             + lengths[c, WIDEST_TERMS[k, 2]] * WIDEST_WEIGHTS[k, 2])
+        widest = max(widest_even, widest_odd) + BOUND_HAIR_M
+        even_low_x = even_low_y = even_low_z = odd_low_x = odd_low_y = odd_low_z = math.inf
+        even_high_x = even_high_y = even_high_z = -math.inf
+        odd_high_x = odd_high_y = odd_high_z = -math.inf
+        for j in range(0, n_joints, 2):
             x, y, z = positions[c, j, 0], positions[c, j, 1], positions[c, j, 2]
-            low_x, low_y, low_z = min(low_x, x), min(low_y, y), min(low_z, z)
-            high_x, high_y, high_z = max(high_x, x), max(high_y, y), max(high_z, z)
-        box[c, 0, 0], box[c, 0, 1], box[c, 0, 2] = low_x - widest, low_y - widest, low_z - widest
-        box[c, 1, 0], box[c, 1, 1], box[c, 1, 2] = \
-            high_x + widest, high_y + widest, high_z + widest
+            even_low_x, even_low_y, even_low_z = min(even_low_x, x), min(even_low_y, y), \
+                min(even_low_z, z)
+            even_high_x, even_high_y, even_high_z = max(even_high_x, x), max(even_high_y, y), \
+                max(even_high_z, z)
+            odd = min(j + 1, n_joints - 1)  # (an odd count's last joint twice: the same bounds)
+            x, y, z = positions[c, odd, 0], positions[c, odd, 1], positions[c, odd, 2]
+            odd_low_x, odd_low_y, odd_low_z = min(odd_low_x, x), min(odd_low_y, y), \
+                min(odd_low_z, z)
+            odd_high_x, odd_high_y, odd_high_z = max(odd_high_x, x), max(odd_high_y, y), \
+                max(odd_high_z, z)
+        box[c, 0, 0] = min(even_low_x, odd_low_x) - widest
+        box[c, 0, 1] = min(even_low_y, odd_low_y) - widest
+        box[c, 0, 2] = min(even_low_z, odd_low_z) - widest
+        box[c, 1, 0] = max(even_high_x, odd_high_x) + widest
+        box[c, 1, 1] = max(even_high_y, odd_high_y) + widest
+        box[c, 1, 2] = max(even_high_z, odd_high_z) + widest
         centre[c, 0], centre[c, 1], centre[c, 2] = positions[c, 0, 0], positions[c, 0, 1], \
             positions[c, 0, 2]
 
@@ -311,8 +335,11 @@ def touching_kernel(box: F64, plane: F64, cell_m: float, mask: int, origin_x: in
     slot two cells share is looked at twice, which marks nothing more). The bounds are read in
     the grid's order (copied first into ``box_in_order`` (n, 2, 3): a slot's bodies side by
     side; with the cells laid out by column, :func:`build_cells`, the next column's three
-    cells too, one run of it: half the pass's time at 4,000 where hashed slots lay anywhere),
-    and the four cells' slots made once for the bodies of one cell in a row.
+    cells too, one run of it: half the pass's time at 4,000 where hashed slots lay anywhere).
+    Laid out by column, the bodies are walked in order with their slot, two runs a body (its slot's later bodies
+    and the next cell up's; the next column's three cells), no centre read; hashed, each body's
+    cell is found from its centre and the four cells' slots made once for the bodies of one
+    cell in a row.
     ``clearance`` (n,), given as the least gap of two bodies in cells not side by side, is
     lowered to each body's least gap (m: the largest of the three axes' gaps between two
     bounds) to a body met whose bounds do not meet its own, if ``gaps`` (else not read nor
@@ -323,6 +350,22 @@ def touching_kernel(box: F64, plane: F64, cell_m: float, mask: int, origin_x: in
         for e in range(2):
             for x in range(3):
                 box_in_order[a, e, x] = box[i, e, x]
+    if column_cells > 0:
+        # Laid out by column, a body's slot is its cell: its own slot's later bodies and the
+        # next cell up (the slot after) are one run, the next column's three cells another; no
+        # cell made from a centre. (A body's cell lies inside the ring of empty cells: both
+        # runs end within the table.)
+        s = 0
+        for a in range(n):
+            while start[s + 1] <= a:  # (the slots up to the last body's only)
+                s += 1
+            i = order[a]
+            box_i = box_in_order[a]
+            for b in range(a + 1, start[s + 2]):
+                _meet(box_i, box_in_order[b], i, order[b], touching, clearance, gaps)
+            for b in range(start[s + column_cells - 1], start[s + column_cells + 2]):
+                _meet(box_i, box_in_order[b], i, order[b], touching, clearance, gaps)
+        return
     last_x, last_y = 0, 0
     forward = (-1, -1, -1, -1)
     for a in range(n):
