@@ -115,13 +115,26 @@ def time_size(n: int, seconds: float, rotations: bool = False,
     if comparison is not None:
         result["thread_comparison"] = comparison
     if reached:
-        result["errors_mm"] = {k: float(np.nanmax([r[k] for r in reached])) if k.endswith("_max")
-                               else float(np.nanmean([r[k] for r in reached])) for k in reached[0]}
+        result["errors_mm"] = errors_over_ticks(reached)
     if budget_ms is not None:
         result["budget"] = {"top_priority_cost_mm": cost_m * 1e3,
                             "characters_cut_per_tick": cut_characters / ticks,
                             "ticks_cut": ticks_cut, **per_tick.figures(budget_ms)}
     return result
+
+
+def errors_over_ticks(reached: list[dict[str, float]]) -> dict[str, float | None]:
+    """The errors the solve reached over the timed ticks, from each tick's
+    (:meth:`BenchScene.errors_mm`, NaN where it solved no character): the mean of the ticks'
+    means and the largest of their maxima, over the ticks that solved a character; None where
+    none did (a frame budget that held or dropped every one on every tick: no error to tell)."""
+    out: dict[str, float | None] = {}
+    for key in reached[0]:
+        values = np.array([tick[key] for tick in reached])
+        values = values[np.isfinite(values)]
+        out[key] = None if values.size == 0 else float(values.max() if key.endswith("_max")
+                                                          else values.mean())
+    return out
 
 
 # --- the frame budget, tick by tick (issue 36 item 4) ---------------------------------------
@@ -457,7 +470,8 @@ def bench_pipeline(args: argparse.Namespace) -> dict[str, Any]:
         "compile": compiled,
         "kernel_cache": str(kernels.cache_dir()),
         "budget": None if budget_ms is None else budget_capacity(budget_ms, runs),
-        "errors_mm": ({k: round(v, 4) for k, v in largest["errors_mm"].items()}
+        "errors_mm": ({k: None if v is None else round(v, 4)
+                       for k, v in largest["errors_mm"].items()}
                       if "errors_mm" in largest else None),
         "avoidance_us_per_agent_per_tick": round(avoidance["us_per_agent_per_tick"], 3),
         "avoidance_agents": avoidance["agents"],
@@ -519,11 +533,16 @@ def cmd_bench_pipeline(args: argparse.Namespace) -> int:
           f"{result['peak_memory_kb_per_character']:.1f} kB per character + "
           f"{result['peak_memory_mb_fixed']:.0f} MB")
     reached = result["errors_mm"]
-    if reached is not None:
-        print(f"  errors reached at {n}: wrist {reached['wrist_mean']:.3f} mm mean, "
-              f"{reached['wrist_max']:.3f} max; elbow {reached['elbow_mean']:.3f} mean, "
-              f"{reached['elbow_max']:.3f} max; centre of mass {reached['com_mean']:.3f} mean, "
-              f"{reached['com_max']:.3f} max")
+    if reached is not None and all(v is None for v in reached.values()):
+        print(f"  errors reached at {n}: none solved (the frame budget held or dropped every "
+              "character on every timed tick)")
+    elif reached is not None:
+        def mm(key: str) -> str:
+            return "none solved" if reached[key] is None else f"{reached[key]:.3f}"
+        print(f"  errors reached at {n}: wrist {mm('wrist_mean')} mm mean, "
+              f"{mm('wrist_max')} max; elbow {mm('elbow_mean')} mean, "
+              f"{mm('elbow_max')} max; centre of mass {mm('com_mean')} mean, "
+              f"{mm('com_max')} max")
     print(f"  local avoidance (ORCA, grid + linear programs): "
           f"{result['avoidance_us_per_agent_per_tick']:.2f} us CPU per agent per tick at "
           f"{result['avoidance_agents']} agents")

@@ -420,6 +420,9 @@ class FrameBudget:
         self.interval: I64 = np.zeros(0, np.int64)
         #: This tick's rows kept but not solved: between two solves at their interval.
         self.held: I64 = np.zeros(0, np.int64)
+        # This tick's rows with a constraint wanted (sorted), whom the budget solves, holds or
+        # drops (:meth:`weights`).
+        self._candidates: I64 = np.zeros(0, np.int64)
         #: Whether the level of detail holds characters this tick, starts to at the next or
         #: probes: the solved characters' corrections are kept (:meth:`weights`; when every
         #: candidate is solved every tick they are not: 1.4 us a character).
@@ -573,40 +576,48 @@ class FrameBudget:
         """(n,) what each row is expected to take when solved (0: not known)."""
         return self._need
 
-    def weights(self, weight: F64, owner: I64, priority: F64, pelvis_in_world: F64,
+    def weights(self, weight: F64, owner: I64, priority: F64, pelvis_in_world: F64 | None,
                 settings: SolverSettings, dt: float, tick: int) -> F64:
         """The constraints' ``weight`` (m,) with those of the characters not solved at ``tick``
         switched off (dropped, or between two solves at their interval: :attr:`held`) and the
         restored ones' fading in (``owner`` (m,) their store rows, ``priority`` (m,),
-        ``pelvis_in_world`` (n, 3) m): :func:`solve_capacity`, :func:`ranked_rows` and
+        ``pelvis_in_world`` (n, 3) m, read only with a ``settings.focus_in_world``: None
+        without one): :func:`solve_capacity`, :func:`ranked_rows` and
         :func:`solve_intervals` decide by the model (the settings' own first)."""
         model = settings.cost_model or self.model
         self.held = np.zeros(0, np.int64)
         self.holding = self.probing = False
         self._every_due = True
+        self._candidates = np.zeros(0, np.int64)
         if settings.budget_ms is None or model is None:
             self._corrections_current = False
             return weight
         wants = weight > 0
         top = np.full(self.presence.size, -np.inf)
         np.maximum.at(top, owner[wants], priority[wants])
-        candidate = np.flatnonzero(np.isfinite(top))
-        kept_before = self.presence[candidate] > 0
+        candidate = self._candidates = np.flatnonzero(np.isfinite(top))
+        # (usually every row is one: the rows' own arrays then, no gathers and scatters)
+        at = slice(None) if candidate.size == self.presence.size else candidate
         self._capacity = self._every_candidate_or(
             solve_capacity(model, self._capacity, *_held_and_restore_ms(settings), candidate.size),
             candidate.size, settings)
         interval = np.ones(candidate.size, np.int64)
         if self._capacity < candidate.size:
-            distance = (np.zeros(candidate.size) if settings.focus_in_world is None else
-                        np.linalg.norm(pelvis_in_world[candidate] - settings.focus_in_world, axis=1))
-            order = ranked_rows(top[candidate], distance, kept_before)
-            interval[order] = solve_intervals(candidate.size, self._capacity)
+            tiers = solve_intervals(candidate.size, self._capacity)
+            if (tiers == tiers[0]).all():  # (every one dropped, say: the ranks change nothing)
+                interval = tiers
+            else:
+                distance = np.zeros(candidate.size)
+                if settings.focus_in_world is not None:
+                    assert pelvis_in_world is not None  # (given with a focus)
+                    distance = np.linalg.norm(pelvis_in_world[at] - settings.focus_in_world,
+                                              axis=1)
+                interval[ranked_rows(top[at], distance, self.presence[at] > 0)] = tiers
         self.interval[:] = 0
-        self.interval[candidate] = interval
+        self.interval[at] = interval
         keep = interval > 0
         step = dt / RESTORE_RAMP_S
-        self.presence[candidate] = np.where(keep, np.minimum(self.presence[candidate] + step, 1.0),
-                                            0.0)
+        self.presence[at] = np.where(keep, np.minimum(self.presence[at] + step, 1.0), 0.0)
         self.holding = self._capacity < candidate.size
         # The first tick of the level of detail solves every one kept, their corrections kept
         # to be held from the next (none were while every one was solved every tick).
@@ -617,6 +628,8 @@ class FrameBudget:
         self._every_due = bool(now.all())
         if now.all() and self.presence.min(initial=1.0) >= 1.0:
             return weight
+        if not now.any():  # (none solved this tick: every weight times 0, no gather)
+            return weight * 0.0
         solved_now = np.zeros(self.presence.size)
         solved_now[candidate[now]] = 1.0
         return weight * (self.presence * solved_now)[owner]
@@ -662,18 +675,17 @@ class FrameBudget:
         took ``cpu_s`` (s), for the next mark's calibration (:attr:`SolverCostModel.ms_per_held`)."""
         self._last_hold = (characters, cpu_s)
 
-    def dropped(self, weight: F64, owner: I64) -> I64:
-        """The store rows whose constraints (``weight`` (m,) before the budget, ``owner``
-        (m,)) the budget switched off this tick, sorted."""
-        wanted = np.zeros(self.presence.size, bool)
-        wanted[owner[weight > 0]] = True
-        return np.flatnonzero(wanted & (self.presence <= 0.0))
+    def dropped(self) -> I64:
+        """The store rows whose constraints the budget switched off this tick (of the rows
+        with a constraint wanted, :meth:`weights`' candidates), sorted."""
+        rows: I64 = self._candidates[self.presence[self._candidates] <= 0.0]
+        return rows
 
     def intervals(self) -> dict[int, int]:
         """How many characters the budget solves at each interval (ticks; those dropped are
         not counted): this tick's level of detail."""
-        every, count = np.unique(self.interval[self.interval > 0], return_counts=True)
-        return {int(e): int(c) for e, c in zip(every, count, strict=True)}
+        count = np.bincount(self.interval)  # (small whole numbers: no sort)
+        return {every: int(count[every]) for every in (np.flatnonzero(count[1:]) + 1).tolist()}
 
     def solved(self, rows: I64, used: I64, caps: I64, solve_cpu_s: float) -> None:
         """After the solve: ``rows`` (r,) solved, each having ``used`` (r,) iterations under

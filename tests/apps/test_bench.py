@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from conftest import REPO
-from ecs_anim.apps.bench import capacity_fit, linear_fit
+from ecs_anim.apps.bench import capacity_fit, errors_over_ticks, linear_fit
 from ecs_anim.apps.cli.main import main
 from ecs_anim.runtime import kernels
 from ecs_anim.runtime.bench_scene import BenchScene, arm_targets, peer_task
@@ -462,6 +462,19 @@ def test_the_constrained_bench_reaches_its_targets_and_prints_the_errors(capsys)
     assert 0.0 <= errors["com_mean"] <= errors["com_max"] <= 0.1
     assert main(["bench", "--constrained", *QUICK]) == 0
     assert "errors reached at 8: wrist 0.000 mm mean" in capsys.readouterr().out
+
+
+def test_the_errors_over_ticks_leave_out_the_ticks_that_solved_none():
+    """A frame budget may solve no character on a tick (its errors NaN) or on every tick: the
+    errors are over the ticks that solved some, and None (printed "none solved"), not NaN,
+    when none did."""
+    nan = float("nan")
+    some = errors_over_ticks([{"wrist_mean": 1.0, "wrist_max": 2.0},
+                              {"wrist_mean": nan, "wrist_max": nan},
+                              {"wrist_mean": 3.0, "wrist_max": 5.0}])
+    assert some == {"wrist_mean": 2.0, "wrist_max": 5.0}
+    assert errors_over_ticks([{"wrist_mean": nan, "wrist_max": nan}] * 2) == {
+        "wrist_mean": None, "wrist_max": None}
 
 
 def test_the_bench_arm_targets_are_ones_the_arm_takes():

@@ -236,6 +236,25 @@ def test_without_a_given_model_the_first_tick_cuts_nothing(idle):
     assert fourth.errors == {}  # a dropped character's constraints are off for the tick
 
 
+def test_every_character_dropped_tick_after_tick_and_after_a_removal(idle):
+    """A floor over the budget drops every character on every tick (their weights 0, no
+    ranking, no solve); the report's dropped entities stay right when the same rows stay
+    dropped and when the store's rows change (one character removed)."""
+    settings = SolverSettings(budget_ms=10.0, cost_model=SolverCostModel(1.0, fixed_ms=100.0))
+    sim, entities = four_reachers(idle, settings, ticks=1)
+    for _ in range(3):
+        sim.step()
+        report = sim.solver_report()
+        assert report is not None and report.characters == 0 and report.intervals == {}
+        assert report.dropped_characters == tuple(entities)
+        assert not np.any(sim.constraints.weight)
+    sim.remove(entities[1])
+    sim.step()
+    report = sim.solver_report()
+    assert report is not None
+    assert report.dropped_characters == (entities[0], *entities[2:])
+
+
 def test_bad_budget_settings_say_what():
     with pytest.raises(ValueError, match=r"budget_ms must be a positive number of milliseconds or None, got -1"):
         SolverSettings(budget_ms=-1)
