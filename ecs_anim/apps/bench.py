@@ -538,7 +538,7 @@ def cmd_bench_pipeline(args: argparse.Namespace) -> int:
               "character on every timed tick)")
     elif reached is not None:
         def mm(key: str) -> str:
-            return "none solved" if reached[key] is None else f"{reached[key]:.3f}"
+            return "n/a" if reached[key] is None else f"{reached[key]:.3f}"  # (none to tell)
         print(f"  errors reached at {n}: wrist {mm('wrist_mean')} mm mean, "
               f"{mm('wrist_max')} max; elbow {mm('elbow_mean')} mean, "
               f"{mm('elbow_max')} max; centre of mass {mm('com_mean')} mean, "

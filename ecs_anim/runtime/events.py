@@ -197,8 +197,9 @@ def clip_and_contact_edges(entity: I64, clip: I64, clip_time_s: F64, speed: F64,
     its weight reaches ``began_weight``. ``seen_*`` (by entity id) hold what the last tick left
     (clip -1: none seen; ``seen_below`` (entities, 2) whether each foot's weight was below
     ``began_weight``, False for NaN as the comparison: the one bit of the weight an edge
-    reads, an eighth of its bytes to read and write every tick) and are updated in place. Returns the edges (n, 5) bool, columns
-    :data:`EDGE_REPLACED` ... :data:`EDGE_CONTACT` + foot, and the clip seen before (n,)."""
+    reads, an eighth of its bytes to read and write every tick) and are updated in place.
+    Returns the edges (n, 5) bool, columns :data:`EDGE_REPLACED` ... :data:`EDGE_CONTACT` +
+    foot, and the clip seen before (n,)."""
     seen_clip_now, seen_time_now = seen_clip[entity], seen_time_s[entity]
     ended_before = seen_ended[entity]
     new_clip = (clip != seen_clip_now) | (clip_time_s < seen_time_now - slack_s)

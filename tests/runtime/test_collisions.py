@@ -144,7 +144,7 @@ def test_the_bounds_are_the_joints_least_and_most_widened_by_the_widest_radius()
     each a running least or most folded at the end) gives the bits of one running
     least and most over the joints in order and over the radii: a NaN joint or radius skipped
     (a body all NaN unbounded: infinite corners), a zero's sign lost once the radius is added;
-    on 1 and 2 threads, and in two chunks of rows."""
+    on 1 and 2 threads, in two chunks of rows, and with an odd count of joints."""
     from ecs_anim.runtime import kernels
     from ecs_anim.runtime.kernels.capsules import (
         BOUND_HAIR_M,
@@ -167,11 +167,16 @@ def test_the_bounds_are_the_joints_least_and_most_widened_by_the_widest_radius()
     lengths[6, WIDEST_TERMS[5, 1]] = np.nan  # a radius NaN (its weight 0 elsewhere: 0 x NaN)
     lengths[7] = np.nan  # every radius NaN: only the hair
     lengths[8] = 0.0  # zero lengths
-    # the reference: one running least and most in order (min(a, v) keeps a unless v < a)
-    low, high = np.full((n, 3), np.inf), np.full((n, 3), -np.inf)
-    for j in range(N_JOINTS):
-        v = positions[:, j]
-        low, high = np.where(v < low, v, low), np.where(v > high, v, high)
+    def least_and_most(joints):
+        """The reference: one running least and most over ``joints`` (n, J, 3) in order
+        (min(a, v) keeps a unless v < a)."""
+        low, high = np.full((n, 3), np.inf), np.full((n, 3), -np.inf)
+        for j in range(joints.shape[1]):
+            v = joints[:, j]
+            low, high = np.where(v < low, v, low), np.where(v > high, v, high)
+        return low, high
+
+    low, high = least_and_most(positions)
     terms = lengths[:, WIDEST_TERMS] * WIDEST_WEIGHTS  # (n, C, 3)
     radii = terms[..., 0] + terms[..., 1] + terms[..., 2]
     widest = np.zeros(n)
@@ -192,6 +197,12 @@ def test_the_bounds_are_the_joints_least_and_most_widened_by_the_widest_radius()
     for lo, hi in ((0, 13), (13, n)):
         bound_rows(lo, hi, positions, lengths, split.centre, split.box)
     np.testing.assert_array_equal(split.box, expected)
+    odd_joints = np.ascontiguousarray(positions[:, :N_JOINTS - 1])  # the last read twice
+    odd = Capsules.empty(n)
+    bound_rows(0, n, odd_joints, lengths, odd.centre, odd.box)
+    low, high = least_and_most(odd_joints)
+    np.testing.assert_array_equal(odd.box, np.stack([low - widest[:, None],
+                                                     high + widest[:, None]], axis=1))
 
 
 @pytest.mark.parametrize("apart", [False, True])  # some bounds meet; none do

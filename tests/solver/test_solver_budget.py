@@ -239,7 +239,8 @@ def test_without_a_given_model_the_first_tick_cuts_nothing(idle):
 def test_every_character_dropped_tick_after_tick_and_after_a_removal(idle):
     """A floor over the budget drops every character on every tick (their weights 0, no
     ranking, no solve); the report's dropped entities stay right when the same rows stay
-    dropped and when the store's rows change (one character removed)."""
+    dropped and when the store's rows change (one character removed; then one removed and one
+    added between two ticks: the same rows, another entity in one)."""
     settings = SolverSettings(budget_ms=10.0, cost_model=SolverCostModel(1.0, fixed_ms=100.0))
     sim, entities = four_reachers(idle, settings, ticks=1)
     for _ in range(3):
@@ -253,6 +254,13 @@ def test_every_character_dropped_tick_after_tick_and_after_a_removal(idle):
     report = sim.solver_report()
     assert report is not None
     assert report.dropped_characters == (entities[0], *entities[2:])
+    sim.remove(entities[0])
+    added = sim.spawn("c4", ADULT, MotionPlayer("idle"), Placement((0.0, 8.0)))
+    sim.add_constraint(added, "reach", "wrist_r", 10, target_in_world=(0.4, 7.7, 1.1))
+    sim.step()
+    report = sim.solver_report()
+    assert report is not None and report.characters == 0
+    assert set(report.dropped_characters) == {*entities[2:], added}
 
 
 def test_bad_budget_settings_say_what():

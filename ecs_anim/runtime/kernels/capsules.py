@@ -336,10 +336,10 @@ def touching_kernel(box: F64, plane: F64, cell_m: float, mask: int, origin_x: in
     the grid's order (copied first into ``box_in_order`` (n, 2, 3): a slot's bodies side by
     side; with the cells laid out by column, :func:`build_cells`, the next column's three
     cells too, one run of it: half the pass's time at 4,000 where hashed slots lay anywhere).
-    Laid out by column, the bodies are walked in order with their slot, two runs a body (its slot's later bodies
-    and the next cell up's; the next column's three cells), no centre read; hashed, each body's
-    cell is found from its centre and the four cells' slots made once for the bodies of one
-    cell in a row.
+    Laid out by column, the bodies are walked in order with their slot, two runs a body (its
+    slot's later bodies and the next cell up's; the next column's three cells), no centre read;
+    hashed, each body's cell is found from its centre and the four cells' slots made once for
+    the bodies of one cell in a row.
     ``clearance`` (n,), given as the least gap of two bodies in cells not side by side, is
     lowered to each body's least gap (m: the largest of the three axes' gaps between two
     bounds) to a body met whose bounds do not meet its own, if ``gaps`` (else not read nor

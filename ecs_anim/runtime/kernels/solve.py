@@ -217,9 +217,9 @@ def solve_rows(lo: int, hi: int, pose: PoseArrays, dec: DecodedArrays, g: Goals,
     # character); numba's inlining of such a call costs 14 s more of compile.
     arm_block, root_block = arms[lo // BLOCK], scratch[lo // BLOCK]
     # Zeroed here, not by the caller (the whole scratch, 1.8 MB each at 4,000 rows, zeroed
-    # every tick for the one block a chunk uses): the lanes compute every column, and a column
-    # no character uses is better not left with whatever the reused memory held (an integer
-    # read as a float is subnormal, slow to compute with).
+    # every tick for the one block a chunk uses), for speed only: the lanes compute every
+    # column, and a column no character uses is better not left with whatever the reused memory
+    # held (an integer read as a float is subnormal, slow to compute with); no result reads it.
     arm_block[:] = 0.0
     root_block[:] = 0.0
     for block_start in range(lo, hi, BLOCK):

@@ -251,7 +251,7 @@ def test_a_solve_does_not_depend_on_its_blocks_nor_chunks(monkeypatch):
     assert np.all(used[(variant == 3) | (variant == 5)] == 0)
     assert np.all(used[(variant == 1) | (variant == 2)] >= 1)
     # (also with the scratch holding NaN or a subnormal, as memory reused from an earlier tick
-    # may: solve_rows zeroes its block and writes the rest before reading it)
+    # may: nothing of it is read before it is written; the block's zeroing is for speed only)
     for chunks, leftover in (([(0, 37), (37, 40)], 0.0), ([(c, c + 1) for c in range(40)], 0.0),
                              ([(0, 40)], np.nan), ([(0, 37), (37, 40)], 5e-324)):
         state, used_here = solved_in_chunks(args, chunks, leftover)
