@@ -477,6 +477,16 @@ def test_the_errors_over_ticks_leave_out_the_ticks_that_solved_none():
         "wrist_mean": None, "wrist_max": None}
 
 
+def test_a_budget_that_drops_every_character_prints_none_solved(capsys):
+    """A budget no tick can hold drops every character on every tick: the bench says none was
+    solved (docs/cli.md, bench), not NaN errors, and that the budget cannot hold."""
+    assert main(["bench", "--constrained", "--budget-ms", "0.001", "--characters", "8",
+                 *QUICK]) == 0
+    out = capsys.readouterr().out
+    assert "errors reached at 8: none solved" in out and "nan" not in out
+    assert "the budget cannot hold at 8" in out
+
+
 def test_the_bench_arm_targets_are_ones_the_arm_takes():
     rng = np.random.default_rng(36)
     upper, fore = rng.uniform(0.15, 0.4, 20), rng.uniform(0.15, 0.4, 20)
