@@ -88,6 +88,16 @@ def capsule_rows(lo: int, hi: int, rows: I64, positions: F64, lengths: F64, join
 BOUND_HAIR_M = 1e-9
 
 
+@jit(inline="always")
+def _widest_radius(lengths: F64, c: int, k: int) -> float:
+    """Capsule ``k``'s radius on row ``c`` of ``lengths`` as :func:`bound_rows` widens by it
+    (:data:`WIDEST_TERMS`, :data:`WIDEST_WEIGHTS`), m."""
+    radius: float = (lengths[c, WIDEST_TERMS[k, 0]] * WIDEST_WEIGHTS[k, 0]
+                     + lengths[c, WIDEST_TERMS[k, 1]] * WIDEST_WEIGHTS[k, 1]
+                     + lengths[c, WIDEST_TERMS[k, 2]] * WIDEST_WEIGHTS[k, 2])
+    return radius
+
+
 @jit(nogil=True)
 def bound_rows(lo: int, hi: int, positions: F64, lengths: F64, centre: F64, box: F64) -> None:
     """Bounds of characters ``lo..hi-1`` that hold every capsule without making one (the broad
@@ -109,13 +119,9 @@ def bound_rows(lo: int, hi: int, positions: F64, lengths: F64, centre: F64, box:
     for c in range(lo, hi):
         widest_even = widest_odd = 0.0
         for k in range(0, N_CAPSULES, 2):
-            widest_even = max(widest_even, lengths[c, WIDEST_TERMS[k, 0]] * WIDEST_WEIGHTS[k, 0]
-                              + lengths[c, WIDEST_TERMS[k, 1]] * WIDEST_WEIGHTS[k, 1]
-                              + lengths[c, WIDEST_TERMS[k, 2]] * WIDEST_WEIGHTS[k, 2])
+            widest_even = max(widest_even, _widest_radius(lengths, c, k))
         for k in range(1, N_CAPSULES, 2):
-            widest_odd = max(widest_odd, lengths[c, WIDEST_TERMS[k, 0]] * WIDEST_WEIGHTS[k, 0]
-                             + lengths[c, WIDEST_TERMS[k, 1]] * WIDEST_WEIGHTS[k, 1]
-                             + lengths[c, WIDEST_TERMS[k, 2]] * WIDEST_WEIGHTS[k, 2])
+            widest_odd = max(widest_odd, _widest_radius(lengths, c, k))
         widest = max(widest_even, widest_odd) + BOUND_HAIR_M
         even_low_x = even_low_y = even_low_z = odd_low_x = odd_low_y = odd_low_z = math.inf
         even_high_x = even_high_y = even_high_z = -math.inf
