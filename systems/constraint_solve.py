@@ -239,6 +239,8 @@ class ConstraintSolve(System):
         # then (:meth:`_entities_dropped`).
         self._dropped: tuple[NDArray[np.int64], tuple[int, ...], int] = (
             np.zeros(0, np.int64), (), -1)
+        # This tick's rows going back to their motion's pose (:meth:`_go_back`).
+        self._back_rows = np.zeros(0, np.int64)
 
     def _solve(self, *args: Any) -> Any:
         """The compiled solve (within the speed bound when one is set)."""
@@ -246,6 +248,15 @@ class ConstraintSolve(System):
         return self._solve_within_speed(*args) if bounded else steps(self.sim.compiled).solve(*args)
 
     def run(self, dt: float) -> None:
+        self._back_rows = np.zeros(0, np.int64)
+        self._constrain(dt)
+        # (the update rate rests characters only once the budget keeps none: its last resort;
+        # before its model is made, the budget solves every one)
+        kept = self.report is not None and (self.report.characters > 0 or self.budget.held.size > 0
+                                            or bool(self.budget.interval.any()))
+        self.sim.update_rate.note_solve(kept, self._back_rows)
+
+    def _constrain(self, dt: float) -> None:
         sim, st, table = self.sim, self.sim.store, self.sim.constraints
         step = steps(sim.compiled)
         st.goals, st.solved, st.clip_positions = None, None, None
@@ -269,7 +280,7 @@ class ConstraintSolve(System):
             pelvis = None if settings.focus_in_world is None \
                 else st.poses.root_position * sim.leg_length()[:, None]
             weight = self.budget.weights(weight, table.owner, table.priority, pelvis, settings,
-                                         sim.dt, sim.tick)
+                                         sim.dt, sim.tick, sim.update_rate.calm)
         if settings.budget_ms is not None and self.budget.holding:
             # the motion's pose of the characters solved now, for their correction to be held
             self.corrections.start_tick(st.poses, sim.structure_version)
@@ -434,6 +445,7 @@ class ConstraintSolve(System):
             corrected[solved_rows] = False
             rows = np.flatnonzero(corrected)
         back: NormalizedPoses | None = None
+        self._back_rows = rows
         if rows.size:
             if st.clip_positions is None:  # nothing solved: every pose is the motion's
                 st.clip_positions = step.decode(st.poses, st.lengths).positions
@@ -512,7 +524,8 @@ class ConstraintSolve(System):
             else model.fixed_ms,
             intervals={} if settings.budget_ms is None else self.budget.intervals(),
             held_characters=0 if settings.budget_ms is None
-            else int(self.corrections.known[self.budget.held].sum()))
+            else int(self.corrections.known[self.budget.held].sum()),
+            update_intervals=sim.update_rate.counts())
 
     def _entities_dropped(self, rows: NDArray[np.int64]) -> tuple[int, ...]:
         """The entities of the store ``rows`` (r,) the frame budget dropped this tick, the last

@@ -11,7 +11,9 @@ the supporting feet and are lifted clear of steps, a heel the stretched leg woul
 step is lifted.
 
 Rows: every character, grouped by ground (``System.ground_groups``: its own GroundQuery or the
-environment's).
+environment's); under a frame budget that cannot hold otherwise, those due this tick
+(:mod:`ecs_anim.runtime.update_rate`; a row updated every k-th tick follows its ground over
+k ticks).
 A character walking into a rise taller than it can step up stops in front of it
 (:meth:`GroundAdapt.stop_at_rises`).
 
@@ -79,6 +81,7 @@ class GroundAdapt(System):
     ground of the user's own (only its numpy ``height``), or any while the kernels compile
     aside, goes through :meth:`run_numpy`."""
 
+    follows_update_rate = True
     reads = ("poses", "contact_weight", "sole_roll", "lengths", "clip", "footprint", "locked",
              "pivot", "ground_ref", "ground_index", "positions", "placement_xy",
              "fade_placement_xy")
@@ -103,7 +106,7 @@ class GroundAdapt(System):
         self.stop_at_rises(leg)
         groups = [(rows, self._description(ground)) for ground, rows in self.ground_groups()]
         if not sim.compiled or any(description is None for _, description in groups):
-            self.run_numpy(dt)
+            self.run_numpy(dt)  # (every row: the update rate rests none then)
             return
         pose = leg_pose_arrays(pose_arrays(writable_poses(st.poses, st.n)))
         st.footprint, st.locked = _own(st.footprint), _own(st.locked)
@@ -111,15 +114,17 @@ class GroundAdapt(System):
         lengths = np.ascontiguousarray(st.lengths)
         contact_weight = np.ascontiguousarray(st.contact_weight)
         roll = np.ascontiguousarray(st.sole_roll)
-        for rows, description in groups:
+        for ground_rows, description in groups:
             assert description is not None
             ground = (description.kinds, description.params, description.grid)
-            over_chunks(ground_adapt_rows, rows.size, rows.copy(), pose, lengths, leg,
-                        contact_weight, roll, st.clip, sim.bank.source_ankle_height,
-                        st.footprint, st.locked, st.pivot, st.ground_ref, ground, dt,
-                        GROUND_SMOOTHING_S, BALL_HEIGHT_PER_LEG, MAX_LEG_EXTENSION,
-                        HEEL_TOLERANCE_M, SWITCH_PER_LEG, HEEL_PASSES, TOE_PASSES,
-                        self._scratch_for(rows.size), rows_per_thread=BLOCK)
+            # (a row updated every k-th tick follows its ground over k ticks)
+            for every, rows in sim.update_rate.due_groups(sim, ground_rows):
+                over_chunks(ground_adapt_rows, rows.size, rows.copy(), pose, lengths, leg,
+                            contact_weight, roll, st.clip, sim.bank.source_ankle_height,
+                            st.footprint, st.locked, st.pivot, st.ground_ref, ground,
+                            every * dt, GROUND_SMOOTHING_S, BALL_HEIGHT_PER_LEG,
+                            MAX_LEG_EXTENSION, HEEL_TOLERANCE_M, SWITCH_PER_LEG, HEEL_PASSES,
+                            TOE_PASSES, self._scratch_for(rows.size), rows_per_thread=BLOCK)
 
     def _scratch_for(self, n: int) -> NDArray[np.float64]:
         """The kernel's scratch for ``n`` rows (:func:`.kernels.ground_adapt.ground_scratch`),

@@ -6,7 +6,9 @@ character's own ground under it.
 
 The clip each plays was chosen before it this tick (QueuedClips, Steering, ApplyReactions).
 
-Rows: characters with a MotionPlayer.
+Rows: characters with a MotionPlayer; under a frame budget that cannot hold otherwise, those
+due this tick (:mod:`ecs_anim.runtime.update_rate`: the others keep their pose, their clocks
+run on).
 Reads: store.clip, clip_time_s, speed, fade_speed, loop, fade_clip, fade_time_s, fade_loop,
 fade_s, fade_elapsed_s, fade_keeps_contacts, placement_*, fade_placement_*, lengths (leg
 length: the root path's unit), the last tick's contact_weight (through a cross-fade); the clip
@@ -51,6 +53,7 @@ class MotionPlayback(System):
     arrays in place."""
 
     query = (MotionPlayer,)
+    follows_update_rate = True
     reads = ("clip", "clip_time_s", "speed", "fade_speed", "loop", "fade_clip", "fade_time_s",
              "fade_loop", "fade_s", "fade_elapsed_s", "fade_keeps_contacts", "placement_xy",
              "placement_heading", "fade_placement_xy", "fade_placement_heading", "lengths",
@@ -71,17 +74,18 @@ class MotionPlayback(System):
         st = self.sim.store
         release_step = dt / self.sim.steering_settings.contact_release_s
         rows = self.rows()
+        playing = self.sim.update_rate.due_rows(self.sim, rows)  # (every clock runs on)
         out = self._pose_arrays()
         bank = self._playback_bank(self.sim.bank)
         if st.contact_weight.shape != (st.n, 2) or not st.contact_weight.flags.writeable:
             st.contact_weight = np.zeros((st.n, 2))
         if not st.sole_roll.flags.writeable:
             st.sole_roll = st.sole_roll.copy()
-        fading = rows[st.fade_s[rows] > 0.0]
+        fading = playing[st.fade_s[playing] > 0.0]
         fading.setflags(write=False)  # as ``rows``: the samplers' one compiled specialisation
         previous = st.contact_weight[fading]  # the last tick's (a copy)
-        sample_placed(bank, rows, st.clip, st.clip_time_s, st.loop, st.placement_xy,
-                      st.placement_heading, st.lengths, out, rows, st.contact_weight,
+        sample_placed(bank, playing, st.clip, st.clip_time_s, st.loop, st.placement_xy,
+                      st.placement_heading, st.lengths, out, playing, st.contact_weight,
                       st.sole_roll, self._work)
         if fading.size:
             old_weight, old_roll = np.zeros((st.n, 2)), np.zeros((st.n, 2))

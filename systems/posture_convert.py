@@ -1,6 +1,7 @@
 """PostureConvert: rebuild knees, elbows and vertebrae and give the world posture (paper §8).
 
-Rows: every character.
+Rows: every character; under a frame budget that cannot hold otherwise, those due this tick
+(:mod:`ecs_anim.runtime.update_rate`: the others keep their posture).
 Reads: store.poses, store.lengths, frozen, and the last good positions, local_rotations and
 vertebrae (kept for a frozen character); store.goals and solved: the characters the solver moved
 are not decoded again, their pose as the solver decoded it is taken
@@ -86,6 +87,7 @@ def _writable(a: np.ndarray, shape: tuple[int, ...]) -> bool:
 
 
 class PostureConvert(System):
+    follows_update_rate = True
     reads = ("poses", "lengths", "frozen", "positions", "local_rotations", "vertebrae", "goals",
              "solved")
     writes = ("frozen", "positions", "posture", "local_rotations", "vertebrae")
@@ -148,9 +150,11 @@ class PostureConvert(System):
                 np.empty((n if rotations else 0, N_EXPORT, 3, 3)),
                 st.local_rotations if rotations else np.empty((0, N_EXPORT, 3, 3)),
                 k.rest_hips, k.bvh_from_world, k.rest2body, k.parents, spine, have_previous)
-        decode_rows = np.arange(n, dtype=np.int64)
+        # (all but those resting; writable, the kernels' one compiled specialisation)
+        decode_rows = sim.update_rate.due_rows(sim, self.rows()).copy()
         if solved is not None:
-            decode_rows = np.delete(decode_rows, solved_rows)
+            decode_rows = np.delete(decode_rows, solved_rows) if decode_rows.size == n \
+                else np.setdiff1d(decode_rows, solved_rows, assume_unique=True)
             if sim.compiled:
                 over_chunks(posture_solved_rows, solved_rows.size, solved_rows, solved, pose,
                             st.lengths, decoded, *rest, frames_shared)

@@ -215,6 +215,12 @@ def _parts(ground: Ground, grids: list[F64]) -> list[list[float]] | None:
     return None
 
 
+def built_in(ground: Ground) -> bool:
+    """Whether ``ground`` is built in (made of the grounds the compiled kernels know:
+    :func:`describe` gives it a description), not a ground of the user's own."""
+    return _parts(ground, []) is not None
+
+
 def describe(ground: Ground) -> GroundDescription | None:
     """The compiled description of a built-in ground (nested :class:`Combined` flattened into
     its parts); None for any other :class:`Ground` (it has only its numpy ``height``)."""

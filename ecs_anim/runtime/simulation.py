@@ -55,6 +55,7 @@ from ecs_anim.runtime.steering_api import SteeringCalls
 from ecs_anim.runtime.store import MAX_QUEUE, CharacterStore
 from ecs_anim.runtime.system_base import System
 from ecs_anim.runtime.triggers import Event, TargetTrack, Trigger
+from ecs_anim.runtime.update_rate import UpdateRate
 from ecs_anim.solver.budget import SolverReport
 from ecs_anim.solver.shell import DEFAULT_SETTINGS, SolverSettings
 from ecs_anim.systems import HEADLESS, SCHEDULE, ConstraintSolve, PostureConvert
@@ -136,6 +137,9 @@ class Simulation(SteeringCalls):
         self.reactions = Reactions()
         #: The recorders collecting each tick (:meth:`record`), in the order made.
         self.recorders: list[Recorder] = []
+        #: Every how many ticks each character is played, grounded and posed: every tick but
+        #: under a frame budget that cannot hold otherwise (:mod:`ecs_anim.runtime.update_rate`).
+        self.update_rate = UpdateRate()
         #: Whether the systems tick on the compiled kernels (every one in memory before the
         #: first tick: no tick loads one); False while they compile aside on a first run
         #: (``kernels.compile_aside``): the systems run their numpy references, and

@@ -54,6 +54,9 @@ class System(esper.Processor):
     on_structure_change: ClassVar[tuple[Callable[[Simulation], None], ...]] = ()
     #: Run even when the simulation has no character (the clock and time triggers go on).
     runs_without_characters: ClassVar[bool] = False
+    #: Processes only the rows due this tick under the frame budget's update rate
+    #: (:mod:`ecs_anim.runtime.update_rate`; its CPU time is the rate's model of an update).
+    follows_update_rate: ClassVar[bool] = False
 
     def __init__(self, sim: Simulation):
         super().__init__()

@@ -50,9 +50,11 @@ overrun it, in this order:
    :data:`RESTORE_SHARE` / :data:`TARGET_SHARE` of the held share (hysteresis: between the two
    nothing changes;
    the same holds the level of detail: it goes down at once and up only past that share,
-   :func:`solve_capacity`), their constraints fading in over :data:`RESTORE_RAMP_S`. When
-   even dropping every character leaves the tick over its budget (the model's ``fixed_ms``),
-   the report says so (``SolverReport.floor_ms``).
+   :func:`solve_capacity`), their constraints fading in over :data:`RESTORE_RAMP_S`;
+5. and when even dropping every character leaves the tick over its budget (the model's
+   ``fixed_ms``, ``SolverReport.floor_ms``), the characters furthest from the focus are played,
+   grounded and posed every 2nd, 4th or 8th tick only (:mod:`ecs_anim.runtime.update_rate`,
+   ``SolverReport.update_intervals``); no constraint comes back while any is.
 
 A character whose goals are all cut stops when the last of them does, so the expected cost of a
 character is ``min(expected, its own cap, the largest cap of its goals)``. Feet are not goals
@@ -332,28 +334,30 @@ def solve_capacity(model: SolverCostModel, capacity_now: float | None, target_ms
     return max(capacity_now, min(fitting(restore_ms), most))
 
 
-def _tier_sizes(nearest: float, candidates: int) -> list[int]:
-    """How many of ``candidates`` ranked characters get each of :data:`SOLVE_INTERVALS`: the
-    ranks below ``nearest`` every tick, below 3 x ``nearest`` every 2nd tick, below 7 x every
-    4th, and so on; the last interval the rest."""
+def _tier_sizes(nearest: float, candidates: int, intervals: tuple[int, ...]) -> list[int]:
+    """How many of ``candidates`` ranked characters get each of ``intervals`` (1, 2, 4, ...):
+    the ranks below ``nearest`` every tick, below 3 x ``nearest`` every 2nd tick, below 7 x
+    every 4th, and so on; the last interval the rest."""
     ends = [min(int(np.ceil(nearest * (2 * every - 1) - 1e-9)), candidates)
-            for every in SOLVE_INTERVALS[:-1]] + [candidates]
+            for every in intervals[:-1]] + [candidates]
     return [end - start for start, end in zip([0, *ends[:-1]], ends, strict=True)]
 
 
-def _solves_per_tick(nearest: float, candidates: int) -> float:
-    return sum(size / every for size, every in zip(_tier_sizes(nearest, candidates),
-                                                   SOLVE_INTERVALS, strict=True))
+def _solves_per_tick(nearest: float, candidates: int, intervals: tuple[int, ...]) -> float:
+    return sum(size / every for size, every in zip(_tier_sizes(nearest, candidates, intervals),
+                                                   intervals, strict=True))
 
 
-def solve_intervals(candidates: int, capacity: float) -> I64:
+def solve_intervals(candidates: int, capacity: float,
+                    intervals: tuple[int, ...] = SOLVE_INTERVALS) -> I64:
     """(c,) every how many ticks each of ``candidates`` characters, in rank order (the first
     the most important), is solved, 0: dropped: the most characters solved every tick such
     that the solves a tick fit in ``capacity`` with twice as many after them solved every 2nd
-    tick, four times as many every 4th, the rest every :data:`SOLVE_INTERVALS`' last; when even
-    all at the last do not fit, the last ranked are dropped. A small change of ``capacity``
-    moves only the characters at the tiers' edges."""
-    slowest = SOLVE_INTERVALS[-1]
+    tick, four times as many every 4th, the rest every ``intervals``' last (the solve's
+    :data:`SOLVE_INTERVALS`; the update rate's own, :mod:`ecs_anim.runtime.update_rate`); when
+    even all at the last do not fit, the last ranked are dropped. A small change of
+    ``capacity`` moves only the characters at the tiers' edges."""
+    slowest = intervals[-1]
     out = np.zeros(candidates, np.int64)
     if candidates / slowest > capacity:
         out[:int(capacity * slowest + 1e-9)] = slowest
@@ -361,8 +365,9 @@ def solve_intervals(candidates: int, capacity: float) -> I64:
     lo, hi = 0.0, float(candidates)  # the largest tier size that fits, to a 1e-3 character
     while hi - lo > 1e-3:
         mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if _solves_per_tick(mid, candidates) <= capacity + 1e-9 else (lo, mid)
-    out[:] = np.repeat(np.array(SOLVE_INTERVALS, np.int64), _tier_sizes(lo, candidates))
+        lo, hi = (mid, hi) if _solves_per_tick(mid, candidates, intervals) <= capacity + 1e-9 \
+            else (lo, mid)
+    out[:] = np.repeat(np.array(intervals, np.int64), _tier_sizes(lo, candidates, intervals))
     return out
 
 
@@ -577,13 +582,15 @@ class FrameBudget:
         return self._need
 
     def weights(self, weight: F64, owner: I64, priority: F64, pelvis_in_world: F64 | None,
-                settings: SolverSettings, dt: float, tick: int) -> F64:
+                settings: SolverSettings, dt: float, tick: int, may_restore: bool = True) -> F64:
         """The constraints' ``weight`` (m,) with those of the characters not solved at ``tick``
         switched off (dropped, or between two solves at their interval: :attr:`held`) and the
         restored ones' fading in (``owner`` (m,) their store rows, ``priority`` (m,),
         ``pelvis_in_world`` (n, 3) m, read only with a ``settings.focus_in_world``: None
         without one): :func:`solve_capacity`, :func:`ranked_rows` and
-        :func:`solve_intervals` decide by the model (the settings' own first)."""
+        :func:`solve_intervals` decide by the model (the settings' own first). Without
+        ``may_restore`` (characters rest under the update rate, the budget's last resort:
+        :mod:`ecs_anim.runtime.update_rate`) no more are solved than last tick, and none probed."""
         model = settings.cost_model or self.model
         self.held = np.zeros(0, np.int64)
         self.holding = self.probing = False
@@ -598,9 +605,11 @@ class FrameBudget:
         candidate = self._candidates = np.flatnonzero(np.isfinite(top))
         # (usually every row is one: the rows' own arrays then, no gathers and scatters)
         at = slice(None) if candidate.size == self.presence.size else candidate
-        self._capacity = self._every_candidate_or(
-            solve_capacity(model, self._capacity, *_held_and_restore_ms(settings), candidate.size),
-            candidate.size, settings)
+        hold_ms, restore_ms = _held_and_restore_ms(settings)
+        capacity = solve_capacity(model, self._capacity, hold_ms,
+                                  restore_ms if may_restore else 0.0, candidate.size)
+        self._capacity = self._every_candidate_or(capacity, candidate.size, settings) \
+            if may_restore else capacity
         interval = np.ones(candidate.size, np.int64)
         if self._capacity < candidate.size:
             tiers = solve_intervals(candidate.size, self._capacity)
@@ -735,7 +744,10 @@ class SolverReport:
     8 every 8th; the level of detail, :func:`solve_intervals`; dropped ones not counted);
     held_characters: how many of them were not solved this tick and kept their last solve's
     correction (:mod:`ecs_anim.solver.held_pose`; their constraints' errors are NaN in
-    ``errors``, which measures only the characters solved this tick); errors: per priority of the active constraints, :class:`PriorityError` (made from
+    ``errors``, which measures only the characters solved this tick); update_intervals: how
+    many characters are played, grounded and posed only every k-th tick (k: 2, 4, 8; the
+    budget's last resort once every character is dropped and the tick still does not fit,
+    :mod:`ecs_anim.runtime.update_rate`); errors: per priority of the active constraints, :class:`PriorityError` (made from
     ``constraint_errors`` (priority, error, orientation, cut) (m,) each, this tick's table
     columns: :func:`errors_by_priority`, when first asked for)."""
 
@@ -754,6 +766,7 @@ class SolverReport:
     floor_ms: float = float("nan")
     intervals: dict[int, int] = field(default_factory=dict)
     held_characters: int = 0
+    update_intervals: dict[int, int] = field(default_factory=dict)
 
     @functools.cached_property
     def errors(self) -> dict[float, PriorityError]:
@@ -764,7 +777,7 @@ class SolverReport:
     def cut(self) -> bool:
         """Whether the budget cut anything this tick."""
         return bool(self.priority_iterations or self.cut_characters or self.dropped_characters
-                    or self.characters_slowed)
+                    or self.characters_slowed or self.update_intervals)
 
     @property
     def characters_slowed(self) -> int:

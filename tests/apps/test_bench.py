@@ -93,6 +93,7 @@ def test_bench_budget_prints_the_cut_tick_by_tick(capsys):
         assert size["cut_per_tick"] == [0, 0, 0] and size["dropped_per_tick"] == [0, 0, 0]
         assert size["slowed_per_tick"] == [0, 0, 0] and size["ticks_separation_cut"] == 0
         assert size["characters_at_interval"] == {"1": float(size["characters"])}
+        assert size["characters_at_update_interval"] == {} and size["warm_up_ticks"] == 30
         assert size["ticks_over_budget_cpu"] == 0 and size["largest_change_of_cut"] == 0
         low, median, high = size["cpu_ms_per_tick_spread"]
         assert 0 < low <= median <= high < 1000 and size["floor_ms"] < 1000
@@ -104,6 +105,7 @@ def test_bench_budget_prints_the_cut_tick_by_tick(capsys):
     assert "cut to 1 it." in text and "over (CPU/wall)" in text and "cannot hold" not in text
     assert "solved less often" in text and "solved (median a tick): 8 every tick" in text
     assert "margin on the model x" in text and "slowed alike" in text
+    assert "the 30 ticks before timing" in text and "played, grounded" not in text
 
 
 def test_bench_budget_tells_the_ticks_over_the_machine_slowed():
@@ -114,6 +116,7 @@ def test_bench_budget_tells_the_ticks_over_the_machine_slowed():
     class Report:
         cut_characters = dropped_characters = ()
         characters, characters_slowed, intervals, floor_ms = 8, 0, {1: 8}, 1.0
+        update_intervals: ClassVar[dict[int, int]] = {}
 
     ticks = BudgetTicks()
     for _ in range(10):
@@ -485,6 +488,9 @@ def test_a_budget_that_drops_every_character_prints_none_solved(capsys):
     out = capsys.readouterr().out
     assert "errors reached at 8: none solved" in out and "nan" not in out
     assert "the budget cannot hold at 8" in out
+    # its last resort: every character played, grounded and posed every 8th tick only
+    assert "played, grounded and posed less often than every tick (median a tick): 8 every 8" \
+        in out
 
 
 def test_the_bench_arm_targets_are_ones_the_arm_takes():

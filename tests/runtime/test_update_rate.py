@@ -1,0 +1,138 @@
+"""The frame budget's last resort: characters played, grounded and posed every k-th tick
+(:mod:`ecs_anim.runtime.update_rate`). The rate's model is given (``UpdateRate.given``), as the
+solve's is (``SolverSettings.cost_model``), so the cut does not depend on the machine."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+
+import numpy as np
+import pytest
+
+from ecs_anim.runtime.bench_scene import BenchScene
+from ecs_anim.runtime.metrics import MetricsRecorder
+from ecs_anim.runtime.update_rate import CALM_TICKS, UPDATE_INTERVALS, intervals_by_rank
+from ecs_anim.solver.budget import SolverCostModel, solve_intervals
+
+#: Characters of the scenes below (walkers on bumps, in lanes 1.5 m apart: none touches another).
+N = 12
+
+
+def _scene(budget_ms: float | None, constrained: bool = False) -> BenchScene:
+    scene = BenchScene(N, constrained=constrained, budget_ms=budget_ms)
+    if not scene.sim.compiled:
+        pytest.skip("the update rate works on the compiled kernels (they compile aside here)")
+    return scene
+
+
+def test_intervals_by_rank_gives_each_tier_its_size_nearest_first():
+    rng = np.random.default_rng(7)
+    key = rng.uniform(0.0, 50.0, 1000)
+    tiers = solve_intervals(1000, 300.0, UPDATE_INTERVALS)
+    tiers[tiers == 0] = UPDATE_INTERVALS[-1]
+    interval = intervals_by_rank(key, tiers)
+    for every in UPDATE_INTERVALS:  # as many at each interval as the tiers say
+        assert (interval == every).sum() == (tiers == every).sum()
+    for faster, slower in itertools.pairwise(UPDATE_INTERVALS):
+        if (interval == faster).any() and (interval == slower).any():
+            assert key[interval == faster].max() <= key[interval == slower].min()
+    assert (intervals_by_rank(key, np.ones(1000, np.int64)) == 1).all()
+
+
+def test_without_a_budget_every_character_is_updated_every_tick():
+    scene = _scene(None)
+    sim = scene.sim
+    sim.update_rate.given = (1.0, 100.0)  # (would rest every one, but there is no budget)
+    rows = np.arange(N, dtype=np.int64)
+    for _ in range(5):
+        scene.tick()
+        assert not sim.update_rate.resting and sim.update_rate.counts() == {}
+        assert sim.update_rate.due_rows(sim, rows) is rows
+
+
+def test_resting_characters_keep_their_posture_and_catch_up_with_their_clip():
+    """A budget of 10 ms where the rest of the tick takes 6 and an update 1: 4 updates a tick
+    for 12 characters. Those not due keep last tick's posture to the bit; every one is updated
+    at least every 8th tick, and then is about where the unbudgeted twin is (the same clock:
+    the motion sampled where it is then), its soles on the bumps and not sliding."""
+    scene, twin = _scene(10.0), _scene(None)
+    sim = scene.sim
+    sim.update_rate.given = (1.0, 6.0)
+    metrics = MetricsRecorder(sim)
+    scene.tick(), twin.tick()
+    metrics.record()
+    last_updated = np.zeros(N, np.int64)
+    pelvis_mm: list[float] = []
+    for tick in range(1, 41):
+        before = sim.store.positions.copy()
+        scene.tick(), twin.tick()
+        metrics.record()
+        rate = sim.update_rate
+        assert rate.resting
+        due = np.flatnonzero(rate.updated)
+        assert 0 < due.size < N and sum(rate.counts().values()) > 0
+        resting = np.setdiff1d(np.arange(N), due)
+        assert np.array_equal(sim.store.positions[resting], before[resting])
+        assert not np.array_equal(sim.store.positions[due], before[due])
+        last_updated[due] = tick
+        assert (tick - last_updated < UPDATE_INTERVALS[-1]).all()
+        # the clocks run on for every character
+        np.testing.assert_array_equal(sim.store.clip_time_s, twin.sim.store.clip_time_s)
+        pelvis_mm.extend(np.linalg.norm(
+            sim.store.positions[due, 0] - twin.sim.store.positions[due, 0], axis=1) * 1e3)
+    # (a contact begun between two updates is laid where the motion has its sole at the next,
+    # after a heel roll maybe: the pelvis follows those legs)
+    assert np.median(pelvis_mm) < 1.0 and max(pelvis_mm) < 30.0
+    assert np.isfinite(sim.store.positions).all()
+    for figures in metrics.report()["characters"]:
+        assert figures["floating_mm_max"] < 1.0 and figures["ground_penetration_mm_max"] < 1.0
+        assert figures["foot_sliding_mm_per_frame"]["max"] < 1.0
+        assert figures["bone_length_error_m_max"] < 1e-6
+
+
+def test_the_ground_follows_at_the_update_interval():
+    """GroundAdapt is given the rows of each interval apart (its smoothing over k ticks)."""
+    scene = _scene(10.0)
+    sim = scene.sim
+    sim.update_rate.given = (1.0, 6.0)
+    for _ in range(3):
+        scene.tick()
+    rows = np.arange(N, dtype=np.int64)
+    groups = sim.update_rate.due_groups(sim, rows)  # (the next tick's, decided now)
+    assert len(groups) >= 2
+    for every, due in groups:
+        assert (sim.update_rate.interval[due] == every).all() and not due.flags.writeable
+    together = np.sort(np.concatenate([due for _, due in groups]))
+    np.testing.assert_array_equal(together, sim.update_rate.due_rows(sim, rows))
+
+
+def test_constraints_come_back_only_once_every_character_is_updated_again():
+    """The strict order: the solve's budget drops every character (its given model's floor is
+    over the budget), then the update rate rests some; a cheaper model would bring constraints
+    back, but not while any character rests, nor for CALM_TICKS ticks after the last did."""
+    scene = _scene(10.0, constrained=True)
+    sim = scene.sim
+    sim.solver_settings = dataclasses.replace(
+        sim.solver_settings, cost_model=SolverCostModel(ms_per_iteration=0.01, fixed_ms=12.0))
+    sim.update_rate.given = (1.0, 6.0)
+    for _ in range(15):  # (the dropped characters go back to their motion first)
+        scene.tick()
+    report = sim.solver_report()
+    assert report is not None and len(report.dropped_characters) == N and report.characters == 0
+    assert sim.update_rate.resting and report.update_intervals and report.cut
+    sim.solver_settings = dataclasses.replace(
+        sim.solver_settings, cost_model=SolverCostModel(ms_per_iteration=0.01, fixed_ms=1.0))
+    for _ in range(5):  # the solve's model would have them back; the update rate still rests
+        scene.tick()
+        report = sim.solver_report()
+        assert report is not None and report.characters == 0 and sim.update_rate.resting
+    sim.update_rate.given = (0.1, 1.0)  # every update fits: none rests from the next tick
+    solved = []
+    for _ in range(CALM_TICKS + 2):
+        scene.tick()
+        report = sim.solver_report()
+        assert report is not None and not report.update_intervals
+        solved.append(report.characters)
+    # the CALM_TICKS-th tick without a rest solves them again
+    assert solved == [0] * (CALM_TICKS - 1) + [N] * 3
