@@ -60,13 +60,15 @@ def test_resting_characters_keep_their_posture_and_catch_up_with_their_clip():
     sim = scene.sim
     sim.update_rate.given = (1.0, 6.0)
     metrics = MetricsRecorder(sim)
-    scene.tick(), twin.tick()
+    scene.tick()
+    twin.tick()
     metrics.record()
     last_updated = np.zeros(N, np.int64)
     pelvis_mm: list[float] = []
     for tick in range(1, 41):
         before = sim.store.positions.copy()
-        scene.tick(), twin.tick()
+        scene.tick()
+        twin.tick()
         metrics.record()
         rate = sim.update_rate
         assert rate.resting
