@@ -185,6 +185,10 @@ class UpdateRate:
             self._every_tick = np.zeros(0, np.int64)
             self.resting = False
             return
+        if sim.solver_settings.budget_ms is None:  # (no budget: nothing to measure or decide)
+            self.resting = False
+            self._calm_ticks += 1
+            return
         self._measure(sim)
         allowance = self._allowed(sim)
         self._allowance = allowance

@@ -106,10 +106,10 @@ def test_the_readmes_python_blocks_run_here_or_in_the_test_that_checks_their_out
     page = REPO / PAGE_RUN_ELSEWHERE
     assert page in DOCS, f"{PAGE_RUN_ELSEWHERE} has no ```python block"
     elsewhere = section_blocks(page, SECTION_RUN_ELSEWHERE)
-    assert len(elsewhere) == 3, (
+    assert len(elsewhere) == 4, (
         f"{PAGE_RUN_ELSEWHERE} {SECTION_RUN_ELSEWHERE!r}: {len(elsewhere)} ```python blocks, "
-        "3 expected (tests/runtime/test_hardening_pipeline.py and "
-        "tests/solver/test_solver_budget.py run them)")
+        "4 expected (tests/runtime/test_hardening_pipeline.py, "
+        "tests/solver/test_solver_budget.py and tests/runtime/test_update_rate.py run them)")
     path, test = RUN_ELSEWHERE_BY
     source = (REPO / path).read_text(encoding="utf-8")
     assert test in source, (

@@ -6,15 +6,18 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from ecs_anim.runtime import kernels
 from ecs_anim.runtime.bench_scene import BenchScene
 from ecs_anim.runtime.metrics import MetricsRecorder
 from ecs_anim.runtime.update_rate import CALM_TICKS, UPDATE_INTERVALS, intervals_by_rank
 from ecs_anim.solver.budget import SolverCostModel, solve_intervals
 
+REPO = Path(__file__).resolve().parents[2]
 #: Characters of the scenes below (walkers on bumps, in lanes 1.5 m apart: none touches another).
 N = 12
 
@@ -138,3 +141,16 @@ def test_constraints_come_back_only_once_every_character_is_updated_again():
         solved.append(report.characters)
     # the CALM_TICKS-th tick without a rest solves them again
     assert solved == [0] * (CALM_TICKS - 1) + [N] * 3
+
+
+def test_the_quickstart_update_rate_example_prints_what_it_says(capsys, monkeypatch):
+    """docs/quickstart.md's last resort example (the fourth "From Python" block), as written
+    there: 2 updates a tick for 8 characters, one every tick, one every 4th, six every 8th."""
+    if not kernels.load_kernels():
+        pytest.skip("the update rate works on the compiled kernels (they compile aside here)")
+    text = (REPO / "docs" / "quickstart.md").read_text(encoding="utf-8")
+    section = text.split("## From Python", 1)[1].split("\n## ", 1)[0]
+    block = section.split("```python\n")[4].split("```", 1)[0]
+    monkeypatch.chdir(REPO)
+    exec(compile(block, "docs/quickstart.md", "exec"), {})
+    assert capsys.readouterr().out.splitlines() == ["{4: 1, 8: 6} 2 updated this tick"]
