@@ -281,6 +281,8 @@ class ConstraintSolve(System):
                 else st.poses.root_position * sim.leg_length()[:, None]
             weight = self.budget.weights(weight, table.owner, table.priority, pelvis, settings,
                                          sim.dt, sim.tick, sim.update_rate.calm)
+            if sim.update_rate.resting:  # (a constraint switched on: not on a stale pose)
+                weight = np.where(sim.update_rate.updated[table.owner], weight, 0.0)
         if settings.budget_ms is not None and self.budget.holding:
             # the motion's pose of the characters solved now, for their correction to be held
             self.corrections.start_tick(st.poses, sim.structure_version)

@@ -12,8 +12,8 @@ step is lifted.
 
 Rows: every character, grouped by ground (``System.ground_groups``: its own GroundQuery or the
 environment's); under a frame budget that cannot hold otherwise, those due this tick
-(:mod:`ecs_anim.runtime.update_rate`; a row updated every k-th tick follows its ground over
-k ticks).
+(:mod:`ecs_anim.runtime.update_rate`; a row last updated k ticks ago follows its ground over
+k ticks, and is stopped at a rise after as many ticks of walking).
 A character walking into a rise taller than it can step up stops in front of it
 (:meth:`GroundAdapt.stop_at_rises`).
 
@@ -117,12 +117,12 @@ class GroundAdapt(System):
         for ground_rows, description in groups:
             assert description is not None
             ground = (description.kinds, description.params, description.grid)
-            # (a row updated every k-th tick follows its ground over k ticks)
-            for every, rows in sim.update_rate.due_groups(sim, ground_rows):
+            # (a row last updated k ticks ago follows its ground over k ticks)
+            for ticks, rows in sim.update_rate.due_groups(sim, ground_rows):
                 over_chunks(ground_adapt_rows, rows.size, rows.copy(), pose, lengths, leg,
                             contact_weight, roll, st.clip, sim.bank.source_ankle_height,
                             st.footprint, st.locked, st.pivot, st.ground_ref, ground,
-                            every * dt, GROUND_SMOOTHING_S, BALL_HEIGHT_PER_LEG,
+                            ticks * dt, GROUND_SMOOTHING_S, BALL_HEIGHT_PER_LEG,
                             MAX_LEG_EXTENSION, HEEL_TOLERANCE_M, SWITCH_PER_LEG, HEEL_PASSES,
                             TOE_PASSES, self._scratch_for(rows.size), rows_per_thread=BLOCK)
 
@@ -140,7 +140,8 @@ class GroundAdapt(System):
         pelvis: its root does not advance this tick, nor its motion's origin (``placement_xy``,
         ``fade_placement_xy``) after it, so it treads where it is, its feet outside the rise,
         until its motion turns away. All characters at once (numpy); the advance is since the
-        last posture. ``leg`` (n,) each character's leg length (``sim.leg_length()``), m."""
+        last posture (a character updated every few ticks only walks that many ticks' worth).
+        ``leg`` (n,) each character's leg length (``sim.leg_length()``), m."""
         st = self.sim.store
         if st.n == 0 or st.positions.shape[0] != st.n:
             return
@@ -149,7 +150,8 @@ class GroundAdapt(System):
         root_xy = st.poses.root_position[:, :2] * leg[:, None]  # the pelvis, world m
         advance = root_xy - st.positions[:, 0, :2]
         step = np.linalg.norm(advance, axis=1)
-        walking = (step > 1e-9) & (step < MAX_ADVANCE_PER_LEG * leg)
+        ticks = self.sim.update_rate.elapsed_ticks(self.sim)
+        walking = (step > 1e-9) & (step < MAX_ADVANCE_PER_LEG * leg * (1 if ticks is None else ticks))
         if not walking.any():
             return
         way = advance / np.maximum(step, 1e-9)[:, None]

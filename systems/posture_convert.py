@@ -135,13 +135,16 @@ class PostureConvert(System):
         # Joint rotations cost more than the positions; they are made when something uses them
         # (BVH export, a viewer drawing skinned meshes): ``Simulation(rotations=True)``.
         rotations = bool(sim.rotations)
-        if rotations and not _writable(st.local_rotations, (n, N_EXPORT, 3, 3)):
+        # (arrays made anew this tick are filled for every row: those resting too)
+        made_anew = rotations and not _writable(st.local_rotations, (n, N_EXPORT, 3, 3))
+        if made_anew:
             st.local_rotations = np.broadcast_to(np.eye(3), (n, N_EXPORT, 3, 3)).copy()
         count = int(sim.vertebrae)
         have_previous = (count > 0 and st.vertebrae is not None
                          and _writable(st.vertebrae, (n, count, 3)))
         if count and not have_previous:
             st.vertebrae = np.empty((n, count, 3))
+            made_anew = True
         spine = st.vertebrae if count and st.vertebrae is not None else np.empty((n, 0, 3))
         k = _EXPORT
         newly_bad = np.zeros(n, bool)
@@ -151,7 +154,8 @@ class PostureConvert(System):
                 st.local_rotations if rotations else np.empty((0, N_EXPORT, 3, 3)),
                 k.rest_hips, k.bvh_from_world, k.rest2body, k.parents, spine, have_previous)
         # (all but those resting; writable, the kernels' one compiled specialisation)
-        decode_rows = sim.update_rate.due_rows(sim, self.rows()).copy()
+        decode_rows = (self.rows() if made_anew
+                       else sim.update_rate.due_rows(sim, self.rows())).copy()
         if solved is not None:
             decode_rows = np.delete(decode_rows, solved_rows) if decode_rows.size == n \
                 else np.setdiff1d(decode_rows, solved_rows, assume_unique=True)

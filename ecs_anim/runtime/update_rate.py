@@ -11,8 +11,10 @@ after them every 2nd, four times as many every 4th, the rest every 8th (the tier
 :func:`~ecs_anim.solver.budget.solve_intervals`). Between two updates a character keeps its
 last posture (its clock runs on: the next update samples the motion where it is then, its
 planted feet on the same footprints), and CollisionSeparate still pushes it; its events
-(contacts begun) are seen at its next update. Its ground follows at the update's own interval
-(:meth:`UpdateRate.due_groups`).
+(contacts begun) are seen at its next update. Its ground follows over the ticks since its last
+update (:meth:`UpdateRate.due_groups`), and a rise too tall stops it as it stops the others
+(:meth:`UpdateRate.elapsed_ticks`). Arrays a tick makes anew (joint rotations or vertebrae
+switched on: a recorder started) are filled for every character on that tick.
 
 Decided once a tick, before MotionPlayback, from a model of the tick measured as the frame
 budget's is (each system's CPU time, per kernel thread, smoothed by
@@ -24,7 +26,8 @@ restore share allows more (:data:`~ecs_anim.solver.budget.RESTORE_SHARE` /
 :data:`~ecs_anim.solver.budget.TARGET_SHARE` of it: no alternation). The order is strict: the
 update rate rests characters only once the solve keeps none (ConstraintSolve says so each tick,
 :meth:`UpdateRate.note_solve`), and the solve brings constraints back only once every character
-is updated every tick again. Characters the solve keeps (solved, held, or going back to their
+is updated every tick again (:attr:`UpdateRate.calm`); a constraint a trigger switches on for a
+resting character waits for its next update (then no character rests from the next tick). Characters the solve keeps (solved, held, or going back to their
 motion) and characters without a MotionPlayer are updated every tick; so is everyone while the
 kernels compile aside or on a ground of the user's own (the numpy paths work on all rows).
 """
@@ -114,6 +117,11 @@ class UpdateRate:
         self._updates = 0
         self._measured_ticks = 0
         self._allowance: float | None = None
+        # The tick each row was last updated at (while not ``_all_current``: every row updated
+        # on the last tick decided), and this tick's ticks since (None: 1 for every row).
+        self._last_update: I64 = np.zeros(0, np.int64)
+        self._all_current = True
+        self._elapsed: I64 | None = None
         # What the solve keeps (:meth:`note_solve`): whether any character, and the rows it
         # keeps every tick.
         self._solve_keeps = False
@@ -152,14 +160,21 @@ class UpdateRate:
         return known[1]
 
     def due_groups(self, sim: Simulation, rows: I64) -> list[tuple[int, I64]]:
-        """``[(interval, those of rows due this tick at that interval), ...]``: for a system
-        whose step depends on the time since the row's last update (GroundAdapt's smoothing:
-        ``interval × dt``); ``[(1, rows)]`` while every character is updated every tick."""
+        """``[(ticks, those of rows due this tick last updated that many ticks ago), ...]``: for
+        a system whose step depends on the time since the row's last update (GroundAdapt's
+        smoothing: ``ticks × dt``); ``[(1, rows)]`` while every character was updated on the
+        last tick too."""
         due_now = self.due_rows(sim, rows)
-        if not self.resting:
-            return [(1, rows)]
-        every = self.interval[due_now]
-        return [(k, _read_only(due_now[every == k])) for k in UPDATE_INTERVALS if (every == k).any()]
+        if self._elapsed is None:
+            return [(1, due_now)]
+        elapsed = self._elapsed[due_now]
+        return [(int(k), _read_only(due_now[elapsed == k])) for k in np.unique(elapsed)]
+
+    def elapsed_ticks(self, sim: Simulation) -> I64 | None:
+        """(n,) the ticks since each row was last updated, counting this one (1: last tick);
+        None while every row was updated on the last tick too."""
+        self._decide(sim)
+        return self._elapsed
 
     def counts(self) -> dict[int, int]:
         """How many characters are updated at each interval above 1 (ticks) now."""
@@ -179,31 +194,50 @@ class UpdateRate:
             # Every row is updated on the tick after a structural change: a new character has
             # no posture yet, and the rows moved.
             self._version = sim.structure_version
-            self.interval = np.ones(st.n, np.int64)
             self._playing = sim.rows_with(MotionPlayer)
-            self._measured_ticks, self._allowance, self._updates = 0, None, st.n
+            self._measured_ticks = 0
             self._every_tick = np.zeros(0, np.int64)
-            self.resting = False
+            self._update_every_row(sim, n_changed=True)
             return
-        if sim.solver_settings.budget_ms is None:  # (no budget: nothing to measure or decide)
-            self.resting = False
-            self._calm_ticks += 1
+        if sim.solver_settings.budget_ms is None or not sim.compiled:
+            # (no budget: nothing to measure or decide; the numpy references work on every row,
+            # and their time is not the kernels')
+            self._measured_ticks, self._allowance = 0, None
+            self._update_every_row(sim)
             return
         self._measure(sim)
         allowance = self._allowed(sim)
         self._allowance = allowance
-        self._updates = st.n
-        if allowance is None:
-            if self.resting:
-                self.interval[:] = 1
-            self.resting = False
-            self._calm_ticks += 1
+        interval = None if allowance is None else self._tiers(sim, allowance)
+        if interval is None or not (interval > 1).any():
+            self._update_every_row(sim)
             return
         self._calm_ticks = 0
-        self.interval = self._tiers(sim, allowance)
+        self.interval = interval
         self._due_mask = due(np.arange(st.n), self.interval, sim.tick)
         self._updates = int(self._due_mask.sum())
+        if self._all_current:  # (every row was updated last tick)
+            self._last_update = np.full(st.n, sim.tick - 1, np.int64)
+        self._elapsed = sim.tick - self._last_update
+        self._last_update[self._due_mask] = sim.tick
+        self._all_current = False
         self.resting = True
+
+    def _update_every_row(self, sim: Simulation, n_changed: bool = False) -> None:
+        """This tick updates every row (the rows changed, no budget, or every update fits)."""
+        n = sim.store.n
+        if n_changed:
+            self.interval = np.ones(n, np.int64)
+            self._allowance, self._elapsed = None, None
+        elif not self._all_current:  # (the rows that rested catch up now)
+            self.interval[:] = 1
+            self._elapsed = sim.tick - self._last_update
+        else:
+            self._elapsed = None
+        self._all_current = True  # (``_last_update`` is this tick for every row: not kept)
+        self._updates = n
+        self.resting = False
+        self._calm_ticks += 1
 
     def _measure(self, sim: Simulation) -> None:
         """Move the model towards the last tick: the following systems' CPU time per update,

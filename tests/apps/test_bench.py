@@ -488,9 +488,11 @@ def test_a_budget_that_drops_every_character_prints_none_solved(capsys):
     out = capsys.readouterr().out
     assert "errors reached at 8: none solved" in out and "nan" not in out
     assert "the budget cannot hold at 8" in out
-    # its last resort: every character played, grounded and posed every 8th tick only
-    assert "played, grounded and posed less often than every tick (median a tick): 8 every 8" \
-        in out
+    # its last resort: every character played, grounded and posed every 8th tick only (on the
+    # compiled kernels: while they compile aside, the numpy references update every row)
+    if kernels.load_kernels():
+        assert "played, grounded and posed less often than every tick (median a tick): 8 every 8" \
+            in out
 
 
 def test_the_bench_arm_targets_are_ones_the_arm_takes():

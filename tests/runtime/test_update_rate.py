@@ -11,6 +11,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ecs_anim import (
+    Morphology,
+    MotionPlayer,
+    Placement,
+    Simulation,
+    SolverSettings,
+    Stairs,
+    import_bvh,
+)
 from ecs_anim.runtime import kernels
 from ecs_anim.runtime.bench_scene import BenchScene
 from ecs_anim.runtime.metrics import MetricsRecorder
@@ -96,22 +105,6 @@ def test_resting_characters_keep_their_posture_and_catch_up_with_their_clip():
         assert figures["bone_length_error_m_max"] < 1e-6
 
 
-def test_the_ground_follows_at_the_update_interval():
-    """GroundAdapt is given the rows of each interval apart (its smoothing over k ticks)."""
-    scene = _scene(10.0)
-    sim = scene.sim
-    sim.update_rate.given = (1.0, 6.0)
-    for _ in range(3):
-        scene.tick()
-    rows = np.arange(N, dtype=np.int64)
-    groups = sim.update_rate.due_groups(sim, rows)  # (the next tick's, decided now)
-    assert len(groups) >= 2
-    for every, due in groups:
-        assert (sim.update_rate.interval[due] == every).all() and not due.flags.writeable
-    together = np.sort(np.concatenate([due for _, due in groups]))
-    np.testing.assert_array_equal(together, sim.update_rate.due_rows(sim, rows))
-
-
 def test_constraints_come_back_only_once_every_character_is_updated_again():
     """The strict order: the solve's budget drops every character (its given model's floor is
     over the budget), then the update rate rests some; a cheaper model would bring constraints
@@ -154,3 +147,100 @@ def test_the_quickstart_update_rate_example_prints_what_it_says(capsys, monkeypa
     monkeypatch.chdir(REPO)
     exec(compile(block, "docs/quickstart.md", "exec"), {})
     assert capsys.readouterr().out.splitlines() == ["{4: 1, 8: 6} 2 updated this tick"]
+
+
+def _walkers_facing_a_step(budget_ms: float | None) -> Simulation:
+    """8 adults walking along +x, 1.5 m apart, towards a 0.6 m step at x = 2.5 (too tall)."""
+    walk = import_bvh(REPO / "scenarios" / "motions" / "walk.bvh")
+    sim = Simulation({"walk": walk}, ground=Stairs(rise_m=0.6, run_m=5.0, steps=1, start_m=2.5),
+                     solver_settings=SolverSettings(budget_ms=budget_ms))
+    if not sim.compiled:
+        pytest.skip("the update rate works on the compiled kernels (they compile aside here)")
+    for i in range(8):
+        sim.spawn(f"w{i}", Morphology.preset("adult_male"), MotionPlayer("walk", loop=True),
+                  Placement((0.0, 1.5 * i)))
+    return sim
+
+
+def test_a_resting_walker_stops_at_a_rise_as_the_others_do():
+    """Updated every 8th tick, a walker advances 8 ticks' worth at once: still a walk into the
+    rise, which stops it in front of it (not on top), as every walker every tick."""
+    free, rested = _walkers_facing_a_step(None), _walkers_facing_a_step(5.0)
+    rested.update_rate.given = (1.0, 3.0)  # 2 updates a tick for 8: six every 8th tick
+    for _ in range(150):
+        free.step()
+        rested.step()
+    assert rested.update_rate.counts().get(8, 0) >= 5
+    pelvis_x_free = free.store.positions[:, 0, 0]
+    pelvis_x_rested = rested.store.positions[:, 0, 0]
+    assert (pelvis_x_free < 2.5).all() and (pelvis_x_rested < 2.5).all(), pelvis_x_rested
+    assert (rested.store.positions[:, 0, 2] < 1.2).all()  # (not on the 0.6 m step)
+
+
+def test_a_recorder_started_while_characters_rest_gets_every_rotation():
+    """``sim.record()`` turns joint rotations on: the tick that makes them fills every row,
+    those resting too (not the rest pose's identities)."""
+    scene = _scene(10.0)
+    sim = scene.sim
+    sim.update_rate.given = (1.0, 6.0)
+    for _ in range(5):
+        scene.tick()
+    sim.record()
+    scene.tick()
+    assert sim.update_rate.resting and not sim.update_rate.updated.all()
+    identity = np.all(np.abs(sim.store.local_rotations - np.eye(3)) < 1e-12, axis=(2, 3))
+    assert not identity.all(axis=1).any()  # (no row left all at the identity)
+
+
+def test_the_ground_smoothing_is_given_the_ticks_since_each_update(monkeypatch):
+    """GroundAdapt's kernel is called per group of rows last updated k ticks ago with k x dt:
+    when the rate changes (down to every tick again), the rows that rested catch up."""
+    import ecs_anim.systems.ground_adapt as ground_adapt
+
+    calls: list[tuple[np.ndarray, float]] = []
+    real = ground_adapt.over_chunks  # type: ignore[attr-defined]
+
+    def spy(kernel, n, rows, *args, **kwargs):
+        calls.append((rows.copy(), float(args[12])))  # (the 13th after rows: dt)
+        return real(kernel, n, rows, *args, **kwargs)
+    monkeypatch.setattr(ground_adapt, "over_chunks", spy)
+    scene = _scene(10.0)
+    sim = scene.sim
+    sim.update_rate.given = (1.0, 6.0)
+    last = np.full(N, -1)
+    for tick in range(30):
+        if tick == 20:
+            sim.update_rate.given = (0.1, 1.0)  # every update fits again
+        calls.clear()
+        scene.tick()
+        for rows, dt_s in calls:
+            np.testing.assert_allclose(dt_s, (tick - last[rows]) * sim.dt, rtol=1e-12)
+        updated = np.concatenate([rows for rows, _ in calls])
+        assert np.unique(updated).size == updated.size
+        last[updated] = tick
+    assert (last == 29).all()
+
+
+def test_a_constraint_switched_on_while_characters_rest_is_not_solved_on_a_stale_pose():
+    """Constraints that switch on at 0.3 s while characters rest: on that tick only the rows
+    updated are solved; from the next, no character rests (the solve keeps some)."""
+    scene = _scene(10.0, constrained=True)
+    sim = scene.sim
+    table = sim.constraints
+    table.activation[:, 0] = 0.3  # (the wrist and elbow targets: off until then)
+    sim.solver_settings = dataclasses.replace(
+        sim.solver_settings, cost_model=SolverCostModel(ms_per_iteration=0.01, fixed_ms=1.0))
+    sim.update_rate.given = (1.0, 6.0)
+    switched_on = round(0.3 / sim.dt)
+    for tick in range(switched_on + 3):
+        scene.tick()
+        report = sim.solver_report()
+        if tick < switched_on:
+            assert report is None or report.characters == 0
+            continue
+        if tick == switched_on:
+            assert sim.update_rate.resting and report is not None and report.characters > 0
+            solved = np.asarray(sim.store.goals.rows)  # type: ignore[attr-defined]
+            assert sim.update_rate.updated[solved].all()
+        else:
+            assert not sim.update_rate.resting
