@@ -54,7 +54,8 @@ overrun it, in this order:
 5. and when even dropping every character leaves the tick over its budget (the model's
    ``fixed_ms``, ``SolverReport.floor_ms``), the characters furthest from the focus are played,
    grounded and posed every 2nd, 4th or 8th tick only (:mod:`ecs_anim.runtime.update_rate`,
-   ``SolverReport.update_intervals``); no constraint comes back while any is.
+   ``SolverReport.update_intervals``); no constraint comes back while any character rests,
+   nor for ``update_rate.CALM_TICKS`` ticks after.
 
 A character whose goals are all cut stops when the last of them does, so the expected cost of a
 character is ``min(expected, its own cap, the largest cap of its goals)``. Feet are not goals
@@ -589,8 +590,9 @@ class FrameBudget:
         ``pelvis_in_world`` (n, 3) m, read only with a ``settings.focus_in_world``: None
         without one): :func:`solve_capacity`, :func:`ranked_rows` and
         :func:`solve_intervals` decide by the model (the settings' own first). Without
-        ``may_restore`` (characters rest under the update rate, the budget's last resort:
-        :mod:`ecs_anim.runtime.update_rate`) no more are solved than last tick, and none probed."""
+        ``may_restore`` (characters rested lately under the update rate, the budget's last
+        resort: :attr:`ecs_anim.runtime.update_rate.UpdateRate.calm`) no more are solved than
+        last tick, and none probed."""
         model = settings.cost_model or self.model
         self.held = np.zeros(0, np.int64)
         self.holding = self.probing = False
