@@ -252,7 +252,7 @@ class ConstraintSolve(System):
         self._constrain(dt)
         # (the update rate rests characters only once the budget keeps none: its last resort;
         # before its model is made, the budget solves every one)
-        kept = self.report is not None and (self.report.characters > 0 or self.budget.held.size > 0
+        kept = self.report is not None and (self.report.characters > 0
                                             or bool(self.budget.interval.any()))
         self.sim.update_rate.note_solve(kept, self._back_rows)
 

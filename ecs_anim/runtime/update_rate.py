@@ -43,6 +43,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ecs_anim.components import MotionPlayer
+from ecs_anim.core.errors import UsageError
 from ecs_anim.core.ground import built_in
 from ecs_anim.runtime.kernels import threads
 from ecs_anim.solver.budget import (
@@ -101,16 +102,13 @@ class UpdateRate:
         self.interval: I64 = np.ones(0, np.int64)
         #: Whether some character is updated less often than every tick now.
         self.resting = False
-        #: (ms per character updated, ms the rest of the tick) taken as exact instead of
-        #: measured (None: measured), as ``SolverSettings.cost_model`` is the solve's: the
-        #: budget is then held in full, without a margin (tests). With a given solver model
-        #: and none here, every character is updated every tick.
-        self.given: tuple[float, float] | None = None
+        self._given: tuple[float, float] | None = None
         self._tick: int | None = None
         self._version = -1
         self._due_mask: NDArray[np.bool_] = np.ones(0, bool)
         self._due_of: dict[int, tuple[I64, I64]] = {}
         self._playing: I64 = np.zeros(0, np.int64)
+        self._grounds_built_in = True  # (every ground the compiled kernels know: may rest)
         # The model: ms per character updated by the systems that follow the rate, and the rest
         # of the tick (smoothed; None: not measured yet); the updates of the last tick decided,
         # and the updates a tick allowed (None: every character every tick).
@@ -130,6 +128,25 @@ class UpdateRate:
         self._solve_keeps = False
         self._every_tick: I64 = np.zeros(0, np.int64)
         self._calm_ticks = CALM_TICKS  # (ticks since one rested any character)
+
+    @property
+    def given(self) -> tuple[float, float] | None:
+        """(ms per character updated, ms the rest of the tick) taken as exact instead of
+        measured (None: measured), as ``SolverSettings.cost_model`` is the solve's: the budget
+        is then held in full, without a margin (tests, the docs' example). With a given solver
+        model and none here, every character is updated every tick."""
+        return self._given
+
+    @given.setter
+    def given(self, model: tuple[float, float] | None) -> None:
+        if model is not None:
+            per_update_ms, rest_ms = (float(v) for v in model)
+            if not (np.isfinite(per_update_ms) and per_update_ms > 0.0
+                    and np.isfinite(rest_ms) and rest_ms >= 0.0):
+                raise UsageError(f"update_rate.given must be (ms an update > 0, ms the rest of "
+                                 f"the tick >= 0), got {model!r}")
+            model = (per_update_ms, rest_ms)
+        self._given = model
 
     @property
     def calm(self) -> bool:
@@ -198,6 +215,8 @@ class UpdateRate:
             # no posture yet, and the rows moved.
             self._version = sim.structure_version
             self._playing = sim.rows_with(MotionPlayer)
+            # (the grounds change only with the structure: a spawn or ``set_ground``)
+            self._grounds_built_in = all(built_in(ground) for ground in sim.grounds)
             self._measured_ticks = 0
             self._every_tick = np.zeros(0, np.int64)
             self._update_every_row(sim, n_changed=True)
@@ -279,7 +298,7 @@ class UpdateRate:
             return None  # (a given solver model: the figures do not depend on the machine)
         if budget_ms is None or self._solve_keeps or not sim.compiled \
                 or per_update_ms is None or rest_ms is None \
-                or not all(built_in(ground) for ground in sim.grounds):
+                or not self._grounds_built_in:
             return None
         hold_ms = budget_ms * (1.0 if self.given is not None else HOLD_SHARE)
         restore_ms = hold_ms * RESTORE_SHARE / TARGET_SHARE

@@ -244,3 +244,16 @@ def test_a_constraint_switched_on_while_characters_rest_is_not_solved_on_a_stale
             assert sim.update_rate.updated[solved].all()
         else:
             assert not sim.update_rate.resting
+
+
+@pytest.mark.parametrize("model", [(float("nan"), 3.0), (0.0, 3.0), (1.0, -1.0), (1.0, float("inf"))])
+def test_a_given_model_that_is_not_one_is_refused_in_one_line(model):
+    from ecs_anim.core.errors import UsageError
+    from ecs_anim.runtime.update_rate import UpdateRate
+
+    rate = UpdateRate()
+    with pytest.raises(UsageError, match=r"update_rate.given must be \(ms an update > 0"):
+        rate.given = model
+    assert rate.given is None
+    rate.given = (1, 3)
+    assert rate.given == (1.0, 3.0)
