@@ -17,11 +17,12 @@ motion's pose no faster.
 Rows: characters with a Constraint component.
 Reads: store.poses, lengths, posture (the previous tick's), contact_weight, clip, clip_time_s,
 com_control, com_target_xy, segment_mass_kg, segment_com_fraction, last_clip_values,
-last_pose_values, last_pose_positions, last_clip_positions; the constraints table.
+last_pose_values, last_pose_positions, last_clip_positions, last_kept; the constraints table.
 Writes: store.poses (solved characters, and those going back), com_desired, last_clip_values,
-last_pose_values, last_pose_positions, last_clip_positions, clip_positions (the motion's own
-joints, None when nothing was solved; with a frame budget, NaN but for the characters solved
-this tick), goals, solved (the decoded result of the solved characters, which PostureConvert
+last_pose_values, last_pose_positions, last_clip_positions, last_kept (the rows whose last
+result is kept: solved, held or going back), clip_positions (the motion's own
+joints, None when nothing was solved nor goes back; with a frame budget, NaN but for the
+characters solved or going back this tick), goals, solved (the decoded result of the solved characters, which PostureConvert
 takes instead of decoding them again); table.held;
 table.enabled, table.weight, table.error (how far each active constraint is from being met on
 the result, :func:`~ecs_anim.solver.goals.constraint_errors`; NaN while inactive).
@@ -40,6 +41,7 @@ from ecs_anim.components import Constraint
 from ecs_anim.core.morphology import centres_of_mass as numpy_centres
 from ecs_anim.core.normalized import DecodedPose, NormalizedPoses
 from ecs_anim.core.normalized import decode as numpy_decode
+from ecs_anim.core.skeleton import N_JOINTS
 from ecs_anim.motion.constraint_table import KIND_ORIENTATION, TARGET_WORLD, ConstraintTable
 from ecs_anim.runtime.kernels import over_chunks, threads
 from ecs_anim.runtime.kernels.com import Motion, centres_of_mass
@@ -149,6 +151,32 @@ def _numpy_motion(positions: NDArray[np.float64], poses: NormalizedPoses,
     return Motion(positions.copy(), centres, numpy_speed.pack(poses), fresh)
 
 
+def _where_kept(kept: NDArray[np.bool_], result: NDArray[np.float64],
+                motion: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The last tick's ``result`` (r, ...) where it was kept (``kept`` (r,)), its ``motion``'s
+    elsewhere (the rows neither solved, held nor going back then: at their motion's pose)."""
+    if kept.all():
+        return result
+    out: NDArray[np.float64] = np.where(kept.reshape((-1,) + (1,) * (result.ndim - 1)),
+                                        result, motion)
+    return out
+
+
+def _at_motion_before(before: MotionBefore, fresh: NDArray[np.bool_]) -> MotionBefore:
+    """``before`` with its rows ``fresh`` (r,), which have no last tick kept (their first solved,
+    or the first since they were last), as though their last tick was at this tick's motion
+    pose: a constraint easing in is paced from there (new arrays: ``before``'s may be the
+    store's own)."""
+    values, joints = fresh[:, None], fresh[:, None, None]
+    return before._replace(
+        clip_before=np.where(values, before.clip_now, before.clip_before),
+        pose_before=np.where(values, before.clip_now, before.pose_before),
+        clip_positions_before=np.where(joints, before.clip_positions,
+                                       before.clip_positions_before),
+        pose_positions_before=np.where(joints, before.clip_positions,
+                                       before.pose_positions_before))
+
+
 class _KnownCentres:
     """The solve's centres step (:class:`~ecs_anim.solver.shell.TickSteps`) when the centres
     of mass of the motion's joints ``positions`` were made with their copy (:func:`motion_of`):
@@ -211,11 +239,12 @@ class ConstraintSolve(System):
     query = (Constraint,)
     reads = ("constraints", "clip", "clip_time_s", "poses", "lengths", "posture", "contact_weight",
              "com_control", "com_target_xy", "segment_mass_kg", "segment_com_fraction",
-             "last_clip_values", "last_pose_values", "last_pose_positions", "last_clip_positions")
+             "last_clip_values", "last_pose_values", "last_pose_positions", "last_clip_positions",
+             "last_kept")
     writes = ("goals", "solved", "constraints.error", "constraints.weight",
               "constraints.enabled", "constraints.held", "poses", "com_desired",
               "last_clip_values", "last_pose_values", "last_pose_positions", "last_clip_positions",
-              "clip_positions")
+              "last_kept", "clip_positions")
 
     def __init__(self, sim: Simulation) -> None:
         super().__init__(sim)
@@ -225,10 +254,17 @@ class ConstraintSolve(System):
         self.budget = FrameBudget()
         #: The last solve's correction of each character the budget solves every few ticks.
         self.corrections = HeldCorrections()
-        # No pops: this tick's motion pose, packed (n, N_VALUES; None: not packed), and whether
-        # the store's last_*_values hold the last tick's (else they are zeros: none).
+        # No pops: this tick's motion pose, packed (n, N_VALUES; None: not packed), and which
+        # rows have no last tick kept (n,; None: not packed).
         self._clip_now: NDArray[np.float64] | None = None
-        self._values_kept = False
+        self._fresh: NDArray[np.bool_] | None = None
+        # The rows whose last result the store keeps (``store.last_kept``, sorted) and the
+        # store's structure they index; whether the store's last_pose_* arrays are this
+        # system's own buffers (else they may be a tick's results kept without a copy, which
+        # nothing may write). The bound's bookkeeping so costs the rows it bounds: over every
+        # row, solving one character of 19,000 cost ConstraintSolve 20 ms more.
+        self._kept: tuple[NDArray[np.int64], int] = (np.zeros(0, np.int64), -1)
+        self._own_last = False
         # Each constraint's goal point at the last tick if it was fully active then (m, 3; NaN:
         # it was not), so a joint may follow a goal that moves faster than the bound.
         self._last_goals = np.zeros((0, 3))
@@ -239,7 +275,9 @@ class ConstraintSolve(System):
         # then (:meth:`_entities_dropped`).
         self._dropped: tuple[NDArray[np.int64], tuple[int, ...], int] = (
             np.zeros(0, np.int64), (), -1)
-        # This tick's rows going back to their motion's pose (:meth:`_go_back`).
+        # This tick's rows going back to their motion's pose (:meth:`_go_back`), and the CPU
+        # time of its held characters' step (s, :meth:`_hold`).
+        self._hold_s = 0.0
         self._back_rows = np.zeros(0, np.int64)
 
     def _solve(self, *args: Any) -> Any:
@@ -261,7 +299,7 @@ class ConstraintSolve(System):
         step = steps(sim.compiled)
         st.goals, st.solved, st.clip_positions = None, None, None
         self.report = None
-        self._clip_now = None
+        self._clip_now = self._fresh = None
         if table.m == 0:
             self._go_back(np.zeros(0, np.int64))
             return
@@ -283,9 +321,14 @@ class ConstraintSolve(System):
                                          sim.dt, sim.tick, sim.update_rate.calm)
             if sim.update_rate.resting:  # (a constraint switched on: not on a stale pose)
                 weight = np.where(sim.update_rate.updated[table.owner], weight, 0.0)
+        # (the solved characters' work from here on, for the frame budget's model: their
+        # decode, solve and keeping, but for the report and the held ones' step)
+        start, self._hold_s = time.process_time(), 0.0
         if settings.budget_ms is not None and self.budget.holding:
             # the motion's pose of the characters solved now, for their correction to be held
             self.corrections.start_tick(st.poses, sim.structure_version)
+            # (a dropped character's correction is forgotten: held again, it would be old)
+            self.corrections.known &= self.budget.interval > 0
             solving = np.unique(table.owner[weight > 0])
             motion = st.poses.take(solving) if solving.size else None  # (none: nothing solved)
         elif settings.budget_ms is not None and not self.budget.probing:
@@ -307,30 +350,16 @@ class ConstraintSolve(System):
             # centres of mass and (the poses still in cache: the decode's) the bound's values
             # packed, in one pass over the rows.
             motion_now = step.motion(unconstrained.positions, st.poses, st.segment_mass_kg,
-                                     st.segment_com_fraction, st.last_pose_values,
+                                     st.segment_com_fraction, st.last_clip_values,
                                      settings.max_joint_speed_m_s is not None)
             st.clip_positions = motion_now.positions
             centres = _KnownCentres(unconstrained.positions, motion_now.centres, step.centres)
-            self._clip_now = motion_now.packed
-            if self._clip_now is not None:
-                # A character with no last tick kept (its first, or none solved since) was at its
-                # motion's pose: a constraint easing in is paced from there. (New arrays: the
-                # last positions may be the arrays of the last tick's result, kept as they were.)
-                # A row kept is zeros or packed unit quaternions first: its first one tells.
-                fresh = motion_now.fresh
-                assert fresh is not None
-                if fresh.any():
-                    st.last_clip_values[fresh] = st.last_pose_values[fresh] = self._clip_now[fresh]
-                    for name in ("last_pose_positions", "last_clip_positions"):
-                        kept = getattr(st, name).copy()
-                        kept[fresh] = st.clip_positions[fresh]
-                        setattr(st, name, kept)
+            self._clip_now, self._fresh = motion_now.packed, motion_now.fresh
         model = settings.cost_model or self.budget.model
         if settings.budget_ms is not None and model is not None:
             model = self.budget.for_cut(model, table.owner[weight > 0])
         # the compiled goals with their layout kept from tick to tick (unless a test patched them)
         goal_step = self._goal_layouts if step.goals is _compiled_tick_goals else step.goals
-        start = time.process_time()  # (the solved characters' cost, for the frame budget's model)
         result = constrain(table, weight, st.poses, unconstrained, st.lengths,
                            st.contact_weight, st.com_control, st.com_target_xy, st.segment_mass_kg,
                            st.segment_com_fraction, st.posture, self.budget.aimed(settings, model),
@@ -338,7 +367,6 @@ class ConstraintSolve(System):
                            TickSteps(goal_step, self._solve, step.errors, centres,
                                      step.targets, step.result_errors, step.surfaces),
                            model, self.budget.expected())
-        solve_cpu_s = time.process_time() - start
         used, caps = np.zeros(0, np.int64), np.zeros(0, np.int64)
         if result.goals is not None and result.iterations is not None:
             g, used = result.goals, result.iterations
@@ -348,7 +376,6 @@ class ConstraintSolve(System):
                 caps = np.full(used.size, int(settings.iterations), np.int64)
             else:
                 caps = effective_caps(g, *iteration_caps(g, settings), settings.iterations)
-        self.budget.solved(result.rows, used, caps, solve_cpu_s)
         dropped = self.budget.dropped() if settings.budget_ms is not None \
             else np.zeros(0, np.int64)
         if result.broken.size:
@@ -357,9 +384,13 @@ class ConstraintSolve(System):
         table.weight = result.weight
         table.error[:] = result.error
         table.held[:] = result.held
+        report_start = time.process_time()
         self._report(result, dropped)
+        report_s = time.process_time() - report_start
         if result.goals is None or result.poses is None or result.solved is None:
             self._go_back(self._hold())
+            self.budget.solved(result.rows, used, caps,
+                               time.process_time() - start - report_s - self._hold_s)
             return
         every_row = result.rows.size == st.n
         if motion is not None:
@@ -379,6 +410,8 @@ class ConstraintSolve(System):
         st.goals, st.solved = result.goals, result.solved
         held = self._hold()
         self._go_back(np.union1d(result.rows, held) if held.size else result.rows)
+        self.budget.solved(result.rows, used, caps,
+                           time.process_time() - start - report_s - self._hold_s)
 
     def _hold(self) -> NDArray[np.int64]:
         """Put their last solve's correction on the characters the budget solves every few
@@ -391,7 +424,8 @@ class ConstraintSolve(System):
         rows = self.budget.held[self.corrections.known[self.budget.held]]
         if rows.size:
             self.corrections.put_on(st.poses, rows)
-        self.budget.held_step(int(rows.size), time.process_time() - start)
+        self._hold_s = time.process_time() - start
+        self.budget.held_step(int(rows.size), self._hold_s)
         return rows
 
     def _solve_within_speed(self, poses: NormalizedPoses, lengths: NDArray[np.float64],
@@ -409,9 +443,18 @@ class ConstraintSolve(System):
             return values if every else values[rows]
 
         step = steps(self.sim.compiled)
-        before = MotionBefore(of(self._clip_now), of(st.last_clip_values), of(st.last_pose_values),
-                              of(st.clip_positions), of(st.last_clip_positions),
-                              of(st.last_pose_positions), self._goal_steps(goals, step))
+        # (a row not kept was at its motion's pose; one with no last tick is paced from this one)
+        kept = of(st.last_kept)
+        clip_before, clip_joints_before = of(st.last_clip_values), of(st.last_clip_positions)
+        before = MotionBefore(of(self._clip_now), clip_before,
+                              _where_kept(kept, of(st.last_pose_values), clip_before),
+                              of(st.clip_positions), clip_joints_before,
+                              _where_kept(kept, of(st.last_pose_positions), clip_joints_before),
+                              self._goal_steps(goals, step))
+        assert self._fresh is not None  # (packed with the motion's values)
+        fresh = of(self._fresh)
+        if fresh.any():
+            before = _at_motion_before(before, fresh)
         return solve_within_speed(SpeedSteps(step.solve, step.shares, step.limit_motion,
                                              step.limit_again, step.put_back), before,
                                   float(settings.max_joint_speed_m_s or np.inf) * self.sim.dt,
@@ -431,68 +474,114 @@ class ConstraintSolve(System):
 
     def _go_back(self, solved_rows: NDArray[np.int64]) -> None:
         """The characters no longer solved whose last result was not their motion's pose (their
-        constraints over) go back to it no faster than ``max_joint_speed_m_s`` allows (their
-        planted feet's legs at once: the motion has those on their footprints); then this
-        tick's motion poses, results and corrections are kept for the next tick.
-        ``solved_rows`` (sorted, distinct): the rows solved or held this tick."""
+        constraints over, or the frame budget's cut) go back to it no faster than
+        ``max_joint_speed_m_s`` allows (their planted feet's legs at once: the motion has those
+        on their footprints); then this tick's motion poses, results and corrections are kept
+        for the next tick (:meth:`_keep`). ``solved_rows`` (sorted, distinct): the rows solved
+        or held this tick."""
         st, speed = self.sim.store, self.sim.solver_settings.max_joint_speed_m_s
-        if speed is None or (self._clip_now is None and not self._values_kept):
+        if speed is None:
             return
+        kept_before = self._kept_rows()
+        if self._clip_now is None and kept_before.size == 0:
+            return  # nothing solved now, nor at the last tick (its values zeros)
         step = steps(self.sim.compiled)
-        clip_now = step.pack(st.poses) if self._clip_now is None else self._clip_now
-        if solved_rows.size == st.n:  # (sorted and distinct: every row) none goes back
-            rows = np.zeros(0, np.int64)
-        else:
-            corrected = step.rows_differ(st.last_pose_values, st.last_clip_values)
-            corrected[solved_rows] = False
-            rows = np.flatnonzero(corrected)
-        back: NormalizedPoses | None = None
+        gone = kept_before[~np.isin(kept_before, solved_rows, assume_unique=True)] \
+            if solved_rows.size else kept_before
+        rows = gone[step.rows_differ(st.last_pose_values[gone], st.last_clip_values[gone])]
         self._back_rows = rows
+        back: NormalizedPoses | None = None
+        back_motion = step.pack(st.poses.take(rows)) if self._clip_now is None \
+            else self._clip_now[rows]
         if rows.size:
-            if st.clip_positions is None:  # nothing solved: every pose is the motion's
-                st.clip_positions = step.decode(st.poses, st.lengths).positions
+            clip_positions = self._motion_joints(rows, step)
             planted = st.contact_weight[rows] > 0.0
-            clip_positions = st.clip_positions[rows]
             share = step.shares(clip_positions, clip_positions, st.last_pose_positions[rows],
                                 st.last_clip_positions[rows], planted, speed * self.sim.dt,
                                 np.zeros(rows.size))
-            back, _ = step.limit_motion(st.poses.take(rows), clip_now[rows], st.last_clip_values[rows],
-                                   st.last_pose_values[rows], planted, share)
+            back, _ = step.limit_motion(st.poses.take(rows), back_motion,
+                                        st.last_clip_values[rows], st.last_pose_values[rows],
+                                        planted, share)
             for name, value in back.arrays().items():
                 getattr(st.poses, name)[rows] = value
-        if self._clip_now is None and rows.size == 0:  # nothing solved nor going back
-            st.last_clip_values[:], st.last_pose_values[:] = 0.0, 0.0
-            st.last_pose_positions = np.zeros_like(st.last_pose_positions)
-            st.last_clip_positions = np.zeros_like(st.last_clip_positions)
-            self._values_kept = False
-            return
-        st.last_clip_values = clip_now
-        st.last_pose_values = step.pack(st.poses)
-        self._keep_positions(rows, back)
-        self._values_kept = True
+        self._keep(kept_before, solved_rows, rows, back_motion, back)
 
-    def _keep_positions(self, back_rows: NDArray[np.int64], back: NormalizedPoses | None) -> None:
-        """``store.last_clip_positions`` and ``last_pose_positions``: this tick's motion's joints
-        and result's (the solved characters' ``store.solved``, those going back, ``back_rows``,
-        their poses ``back`` (None: none) decoded here, the others' the motion's: NaN for those
-        a frame budget held, which the next tick's bound then leaves free). This tick's arrays
-        themselves when whole (no copy: nothing writes them after the tick; the next tick's
-        fresh rows go into copies)."""
+    def _kept_rows(self) -> NDArray[np.int64]:
+        """The rows whose last result the store keeps (sorted): those kept at the last tick, or,
+        once the store's rows changed, ``store.last_kept``'s (read once)."""
+        rows, version = self._kept
+        if version != self.sim.structure_version:
+            rows = np.flatnonzero(self.sim.store.last_kept)
+            self._kept, self._own_last = (rows, self.sim.structure_version), False
+        return rows
+
+    def _motion_joints(self, rows: NDArray[np.int64], step: Steps) -> NDArray[np.float64]:
+        """(r, N_JOINTS, 3) world m: the motion's joints of ``rows`` (r,) this tick, as decoded
+        before the solve, or decoded here (a row the frame budget did not solve, or nothing was
+        solved) and written into ``store.clip_positions`` (NaN in the rows not decoded), where
+        the metrics read them."""
         st = self.sim.store
-        goals = st.goals
-        solved_rows = goals.rows if st.solved is not None and isinstance(goals, TickGoals) \
-            else np.zeros(0, np.int64)
-        assert st.clip_positions is not None  # decoded when anything was solved or goes back
-        st.last_clip_positions = st.clip_positions
-        if solved_rows.size == st.n and st.solved is not None and back_rows.size == 0:
-            st.last_pose_positions = st.solved.positions
+        if st.clip_positions is None:
+            st.clip_positions = np.full((st.n, N_JOINTS, 3), np.nan)
+        joints = st.clip_positions[rows]
+        missing = ~np.isfinite(joints[:, 0, 0])
+        if missing.any():
+            some = rows[missing]
+            joints[missing] = step.decode(st.poses.take(some), st.lengths[some]).positions
+            st.clip_positions[some] = joints[missing]
+        return joints
+
+    def _keep(self, kept_before: NDArray[np.int64], solved_rows: NDArray[np.int64],
+              back_rows: NDArray[np.int64], back_motion: NDArray[np.float64],
+              back: NormalizedPoses | None) -> None:
+        """The store's last tick for the next one. The motion's (``last_clip_values``,
+        ``last_clip_positions``): every row's when anything was solved (this tick's arrays
+        themselves: no copy), else only those going back, ``back_rows`` (b,; their values
+        ``back_motion`` (b, N_VALUES)), the others' zeros (none: a row next solved is paced
+        from its motion's pose then). The result's (``last_pose_values``,
+        ``last_pose_positions``, ``last_kept``) of the rows solved or held (``solved_rows``,
+        sorted; when anything was solved) and going back: the solved characters'
+        ``store.solved``, the held ones' pose and (NaN: not decoded) joints, which the next
+        tick's bound then leaves free, the poses ``back`` (None: none) decoded here; every
+        other row was at its motion's pose."""
+        st, step = self.sim.store, steps(self.sim.compiled)
+        solved = self._clip_now is not None
+        kept = (np.union1d(solved_rows, back_rows) if back_rows.size else solved_rows) \
+            if solved else back_rows
+        st.last_kept[kept_before] = False
+        st.last_kept[kept] = True
+        self._kept = (kept, self.sim.structure_version)
+        if self._clip_now is not None:
+            st.last_clip_values = self._clip_now
+        else:
+            st.last_clip_values = np.zeros_like(st.last_clip_values)
+            st.last_clip_values[back_rows] = back_motion
+        if kept.size == 0:
             return
-        st.last_pose_positions = st.clip_positions.copy()
-        if solved_rows.size and st.solved is not None:
-            st.last_pose_positions[solved_rows] = st.solved.positions
+        assert st.clip_positions is not None  # (decoded when anything was solved or goes back)
+        st.last_clip_positions = st.clip_positions
+        goals = st.goals
+        solved_now = goals.rows if st.solved is not None and isinstance(goals, TickGoals) \
+            else np.zeros(0, np.int64)
+        if kept.size == st.n:  # (sorted and distinct: every row) this tick's arrays
+            st.last_pose_values = step.pack(st.poses)
+            if solved_now.size == st.n and st.solved is not None and back is None:
+                st.last_pose_positions = st.solved.positions
+                self._own_last = False
+                return
+            st.last_pose_positions = st.clip_positions.copy()
+            self._own_last = True
+        else:
+            if not self._own_last:  # (a tick's arrays: the kept rows go into arrays of its own)
+                st.last_pose_values = np.zeros_like(st.last_pose_values)
+                st.last_pose_positions = np.zeros_like(st.last_pose_positions)
+                self._own_last = True
+            st.last_pose_values[kept] = step.pack(st.poses.take(kept))
+            st.last_pose_positions[kept] = st.clip_positions[kept]
+        if solved_now.size and st.solved is not None:
+            st.last_pose_positions[solved_now] = st.solved.positions
         if back is not None:
-            st.last_pose_positions[back_rows] = steps(self.sim.compiled).decode(
-                back, st.lengths[back_rows]).positions
+            st.last_pose_positions[back_rows] = step.decode(back, st.lengths[back_rows]).positions
 
     def _report(self, result: TickResult, dropped: NDArray[np.int64]) -> None:
         """This tick's report (``dropped``: the store rows the budget switched off)."""

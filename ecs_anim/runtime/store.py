@@ -93,13 +93,15 @@ class CharacterStore:
     overlap_m (n,) each character's deepest overlap with another after separation (m).
     No pops (:mod:`ecs_anim.solver.joint_speed`, ConstraintSolve): last_clip_values and
     last_pose_values (n, N_VALUES) the segments the solver sets (frames, directions, fractions,
-    spine points, packed) of the last tick's motion pose and of its result (zeros: none), which
+    spine points, packed) of the last tick's motion pose (zeros: none) and of its result, which
     this tick's result may move away from only so much faster than the motion;
-    last_pose_positions and last_clip_positions (n, N_JOINTS, 3) world m, the last tick's
-    result's and motion's joints (all zeros: none kept; the bound measures them from the pelvis);
+    last_clip_positions and last_pose_positions (n, N_JOINTS, 3) world m, the last tick's
+    motion's and result's joints (the bound measures them from the pelvis); the result's kept
+    only in the rows last_kept (n,) bool (solved, held or going back then: every other row was
+    at its motion's pose);
     clip_positions (n, N_JOINTS, 3) world m, the motion's own joints this tick, before the solve
-    (None when nothing was solved: the posture is the motion's own; with a frame budget, NaN
-    in the rows not solved this tick).
+    (None when nothing was solved nor goes back: the posture is the motion's own; with a frame
+    budget, NaN in the rows neither solved nor going back this tick).
     """
 
     entity: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -152,6 +154,7 @@ class CharacterStore:
     last_pose_values: F64 = field(default_factory=lambda: np.zeros((0, N_VALUES)))
     last_pose_positions: F64 = field(default_factory=lambda: np.zeros((0, N_JOINTS, 3)))
     last_clip_positions: F64 = field(default_factory=lambda: np.zeros((0, N_JOINTS, 3)))
+    last_kept: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
     queue_clip: NDArray[np.int64] = field(default_factory=lambda: np.zeros((0, MAX_QUEUE), np.int64))
     queue_fade_s: F64 = field(default_factory=lambda: np.zeros((0, MAX_QUEUE)))
     queue_loop: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, MAX_QUEUE), bool))

@@ -50,7 +50,9 @@ overrun it, in this order:
    :data:`RESTORE_SHARE` / :data:`TARGET_SHARE` of the held share (hysteresis: between the two
    nothing changes;
    the same holds the level of detail: it goes down at once and up only past that share,
-   :func:`solve_capacity`), their constraints fading in over :data:`RESTORE_RAMP_S`;
+   :func:`solve_capacity`), by at most :data:`RESTORE_STEP_SHARE` of the budget a tick, their
+   constraints fading in over :data:`RESTORE_RAMP_S`; a dropped character's last correction is
+   forgotten (held again, it would be one from ticks ago);
 5. and when even dropping every character leaves the tick over its budget (the model's
    ``fixed_ms``, ``SolverReport.floor_ms``), the characters furthest from the focus are played,
    grounded and posed every 2nd, 4th or 8th tick only (:mod:`ecs_anim.runtime.update_rate`,
@@ -113,6 +115,12 @@ STEADY_SHARE = 0.25
 STALL_MIN_MS = 1.0
 #: Dropped characters come back once the tick with them fits in this share of the budget.
 RESTORE_SHARE = 0.75
+#: Each tick, the solves a tick come back by at most what the model prices at this share of the
+#: budget (:func:`solve_capacity`): a model wrong about the characters coming back (their first
+#: solves cost more than a kept one's: their corrections start from nothing) is wrong by that
+#: much, not by the whole restore (from every character dropped to 1,681 solved a tick at once,
+#: 9,500 characters, the solve took 45 ms where the model said 14).
+RESTORE_STEP_SHARE = 0.1
 #: How far each measured tick moves the model (the weight of an exponential moving average).
 MODEL_SMOOTHING = 0.2
 #: Seconds a restored character's constraints take to fade back in.
@@ -306,7 +314,7 @@ def effective_caps(goals: TickGoals, goal_caps: I64, row_caps: I64, iterations: 
 
 
 def solve_capacity(model: SolverCostModel, capacity_now: float | None, target_ms: float,
-                   restore_ms: float, candidates: int) -> float:
+                   restore_ms: float, candidates: int, step_ms: float = np.inf) -> float:
     """How many character solves a tick may make (a character solved every 4th tick counts a
     quarter) among ``candidates`` characters: as many as fit in ``target_ms`` by ``model`` at
     one iteration each (fewer iterations come first: :func:`cut_to_budget`), the characters
@@ -314,25 +322,32 @@ def solve_capacity(model: SolverCostModel, capacity_now: float | None, target_ms
     solved, or, when even every candidate at the slowest interval does not fit, those kept
     at it but not due: :func:`solve_intervals`); more than last tick's ``capacity_now`` (None:
     none yet) only as far as ``restore_ms`` (<= ``target_ms``) allows, so that the
-    measurements' noise does not move it every tick."""
+    measurements' noise does not move it every tick, and by no more than ``step_ms`` of the
+    model's cost at once."""
     per_solve = model.ms_per_character + model.ms_per_iteration
     slowest = SOLVE_INTERVALS[-1]
     # below every candidate kept at the slowest interval, each solve keeps slowest - 1 held
     per_solve_kept_slowest = per_solve + (slowest - 1) * model.ms_per_held
     every_kept = candidates / slowest
     every_kept_ms = model.fixed_ms + per_solve_kept_slowest * every_kept
+    # above, each solve more is a held character fewer
+    rise = per_solve - model.ms_per_held
 
     def fitting(ms: float) -> float:
         if ms < every_kept_ms:
             return max((ms - model.fixed_ms) / per_solve_kept_slowest, 0.0)
-        # above, each solve more is a held character fewer
-        rise = per_solve - model.ms_per_held
         return float(candidates) if rise <= 0.0 else every_kept + (ms - every_kept_ms) / rise
+
+    def cost_ms(capacity: float) -> float:  # (fitting's inverse)
+        if capacity < every_kept:
+            return model.fixed_ms + capacity * per_solve_kept_slowest
+        return every_kept_ms + max(rise, 0.0) * (capacity - every_kept)
 
     most = fitting(target_ms)
     if capacity_now is None or capacity_now > most:
         return most
-    return max(capacity_now, min(fitting(restore_ms), most))
+    return max(capacity_now, min(fitting(restore_ms), fitting(cost_ms(capacity_now) + step_ms),
+                                 most))
 
 
 def _tier_sizes(nearest: float, candidates: int, intervals: tuple[int, ...]) -> list[int]:
@@ -457,12 +472,14 @@ class FrameBudget:
         self._every_due = True
         # The rest of the ticks (ConstraintSolve and the systems after it) of the last run that
         # solved every candidate, ms per candidate (the last EVERY_CANDIDATE_TICKS), whether
-        # the last tick measured was one, the least such a tick ever cost, and this tick's
-        # systems before the solve, ms (:meth:`_every_candidate_or`); the ticks since every
-        # one was last solved, and those a probe waits.
+        # the last tick measured was one, the least such a tick ever cost, what the last probe
+        # cost (None: none measured) and this tick's systems before the solve, ms
+        # (:meth:`_every_candidate_or`); the ticks since every one was last solved, and those
+        # a probe waits.
         self._every_rest_ms: list[float] = []
         self._every_run = False
         self._every_least_ms = np.inf
+        self._probe_rest_ms: float | None = None
         #: Whether this tick solves every candidate to measure it (a probe,
         #: :meth:`_every_candidate_or`): the corrections kept before are kept, not renewed.
         self.probing = False
@@ -505,6 +522,8 @@ class FrameBudget:
                 run = self._every_rest_ms[1 - EVERY_CANDIDATE_TICKS:] if self._every_run else []
                 self._every_rest_ms = [*run, (tick_ms - before_ms) / self._last_solves[0]]
                 self._every_least_ms = min(self._every_least_ms, self._every_rest_ms[-1])
+                if self._probed:
+                    self._probe_rest_ms = self._every_rest_ms[-1]
             self._every_run = self._last_solves is not None and not self._last_solves[1]
             measured = SolverCostModel.calibrated(tick_ms, solve_s * scale, iterations, characters,
                                                   held, hold_s * scale)
@@ -609,7 +628,8 @@ class FrameBudget:
         at = slice(None) if candidate.size == self.presence.size else candidate
         hold_ms, restore_ms = _held_and_restore_ms(settings)
         capacity = solve_capacity(model, self._capacity, hold_ms,
-                                  restore_ms if may_restore else 0.0, candidate.size)
+                                  restore_ms if may_restore else 0.0, candidate.size,
+                                  RESTORE_STEP_SHARE * settings.budget_ms)
         self._capacity = self._every_candidate_or(capacity, candidate.size, settings) \
             if may_restore else capacity
         interval = np.ones(candidate.size, np.int64)
@@ -655,8 +675,11 @@ class FrameBudget:
         (:data:`EVERY_CANDIDATE_TICKS`) times :data:`MARGIN_FLOOR` plus this tick's systems
         before the solve: every one while that fits in the budget, again once it fits in the
         restore share (the hysteresis of :func:`solve_capacity`), or for one tick (a probe,
-        :attr:`probing`) after :data:`PROBE_TICKS` if the least such a tick ever cost fits in
-        the budget; else fewer than every one. Not the :attr:`margin`: the ticks that solve
+        :attr:`probing`) after :data:`PROBE_TICKS` if the last probe's cost (before any, the
+        least such a tick ever cost) fits in the budget: a probe comes after ticks that held
+        or dropped characters, whose first solves again cost more (at 9,500 characters a
+        probe took 63 ms where every one solved every tick took 33); else fewer than every
+        one. Not the :attr:`margin`: the ticks that solve
         some have the machine's spread too, and no fewer over the budget (measured: the
         bench's at 3,500 solving 700 a tick took 20-29 ms against 24-28 solving all 3,500), and
         leaving costs a tick of its own (every correction kept)."""
@@ -676,7 +699,9 @@ class FrameBudget:
             self._probe_ticks *= 2
         self.probing = self._probed = not fits \
             and self._ticks_since_every >= self._probe_ticks \
-            and self._tick_before_ms + self._every_least_ms * candidates <= settings.budget_ms
+            and self._tick_before_ms + candidates * (
+                self._every_least_ms if self._probe_rest_ms is None else self._probe_rest_ms) \
+            <= settings.budget_ms
         if fits or self.probing:
             return float(max(capacity, candidates))
         return min(capacity, candidates - 1.0)
@@ -700,8 +725,10 @@ class FrameBudget:
 
     def solved(self, rows: I64, used: I64, caps: I64, solve_cpu_s: float) -> None:
         """After the solve: ``rows`` (r,) solved, each having ``used`` (r,) iterations under
-        ``caps`` (r,, :func:`effective_caps`); the solve's CPU time (s: its goals, targets,
-        iterations and errors, :func:`~ecs_anim.solver.shell.constrain`), for the next mark's
+        ``caps`` (r,, :func:`effective_caps`); the CPU time (s) of ConstraintSolve's work for
+        the characters it solved (their decode, goals, targets, iterations and errors,
+        :func:`~ecs_anim.solver.shell.constrain`, and the keeping of their results: over the
+        solve alone, the model priced a restore at a tenth of its cost), for the next mark's
         calibration."""
         self._need[rows] = uncut_need(self._need[rows], used, caps)
         self._last_solve = (solve_cpu_s, int(used.sum()), int(rows.size))

@@ -61,7 +61,7 @@ EXPECTED_WRITERS = {
     **{name: ["ConstraintSolve"] for name in (
         "goals", "solved", "com_desired", "constraints.error", "constraints.weight",
         "constraints.held", "last_clip_values", "last_pose_values", "last_pose_positions",
-        "last_clip_positions", "clip_positions")},
+        "last_clip_positions", "last_kept", "clip_positions")},
     "constraints.enabled": ["ApplyReactions", "ConstraintSolve", "DetectEvents"],
     "com": ["COMControl"],
     "com_error_m": ["COMControl"],
