@@ -439,7 +439,7 @@ class ConstraintSolve(System):
         assert self._clip_now is not None and st.clip_positions is not None  # before the solve
         every = rows.size == st.n  # (rows are sorted and distinct: all of them, in order)
 
-        def of(values: NDArray[np.float64]) -> NDArray[np.float64]:
+        def of(values: NDArray[Any]) -> NDArray[Any]:
             return values if every else values[rows]
 
         step = steps(self.sim.compiled)
