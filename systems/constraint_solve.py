@@ -486,8 +486,11 @@ class ConstraintSolve(System):
         if self._clip_now is None and kept_before.size == 0:
             return  # nothing solved now, nor at the last tick (its values zeros)
         step = steps(self.sim.compiled)
-        gone = kept_before[~np.isin(kept_before, solved_rows, assume_unique=True)] \
-            if solved_rows.size else kept_before
+        if solved_rows.size == st.n:  # (sorted and distinct: every row) none goes back
+            gone = np.zeros(0, np.int64)
+        else:
+            gone = kept_before[~np.isin(kept_before, solved_rows, assume_unique=True)] \
+                if solved_rows.size else kept_before
         rows = gone[step.rows_differ(st.last_pose_values[gone], st.last_clip_values[gone])]
         self._back_rows = rows
         back: NormalizedPoses | None = None
@@ -548,8 +551,11 @@ class ConstraintSolve(System):
         solved = self._clip_now is not None
         kept = (np.union1d(solved_rows, back_rows) if back_rows.size else solved_rows) \
             if solved else back_rows
-        st.last_kept[kept_before] = False
-        st.last_kept[kept] = True
+        if kept.size == st.n:
+            st.last_kept[:] = True
+        else:
+            st.last_kept[kept_before] = False
+            st.last_kept[kept] = True
         self._kept = (kept, self.sim.structure_version)
         if self._clip_now is not None:
             st.last_clip_values = self._clip_now

@@ -676,7 +676,7 @@ class FrameBudget:
         before the solve: every one while that fits in the budget, again once it fits in the
         restore share (the hysteresis of :func:`solve_capacity`), or for one tick (a probe,
         :attr:`probing`) after :data:`PROBE_TICKS` if the last probe's cost (before any, the
-        least such a tick ever cost) fits in the budget: a probe comes after ticks that held
+        least such a tick ever cost) times :data:`MARGIN_FLOOR` fits in the budget: a probe comes after ticks that held
         or dropped characters, whose first solves again cost more (at 9,500 characters a
         probe took 63 ms where every one solved every tick took 33); else fewer than every
         one. Not the :attr:`margin`: the ticks that solve
@@ -699,7 +699,7 @@ class FrameBudget:
             self._probe_ticks *= 2
         self.probing = self._probed = not fits \
             and self._ticks_since_every >= self._probe_ticks \
-            and self._tick_before_ms + candidates * (
+            and self._tick_before_ms + MARGIN_FLOOR * candidates * (
                 self._every_least_ms if self._probe_rest_ms is None else self._probe_rest_ms) \
             <= settings.budget_ms
         if fits or self.probing:
