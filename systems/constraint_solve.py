@@ -499,15 +499,36 @@ class ConstraintSolve(System):
         if rows.size:
             clip_positions = self._motion_joints(rows, step)
             planted = st.contact_weight[rows] > 0.0
-            share = step.shares(clip_positions, clip_positions, st.last_pose_positions[rows],
-                                st.last_clip_positions[rows], planted, speed * self.sim.dt,
-                                np.zeros(rows.size))
+            pose_before, clip_before = self._joints_before(rows, clip_positions, back_motion,
+                                                           planted, step)
+            share = step.shares(clip_positions, clip_positions, pose_before, clip_before,
+                                planted, speed * self.sim.dt, np.zeros(rows.size))
             back, _ = step.limit_motion(st.poses.take(rows), back_motion,
                                         st.last_clip_values[rows], st.last_pose_values[rows],
                                         planted, share)
             for name, value in back.arrays().items():
                 getattr(st.poses, name)[rows] = value
         self._keep(kept_before, solved_rows, rows, back_motion, back)
+
+    def _joints_before(self, rows: NDArray[np.int64], clip_positions: NDArray[np.float64],
+                       motion_values: NDArray[np.float64], planted: NDArray[np.bool_],
+                       step: Steps) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The last tick's result's and motion's joints (r, N_JOINTS, 3) of ``rows`` (r,) going
+        back; a row held then (its joints not decoded, NaN) as though its correction then were
+        on this tick's motion (``clip_positions`` (r, N_JOINTS, 3), ``motion_values``
+        (r, N_VALUES)): its way back is bounded by the correction it has (left free, a
+        character whose constraint ended between two solves went back in one tick)."""
+        st = self.sim.store
+        pose_before, clip_before = st.last_pose_positions[rows], st.last_clip_positions[rows]
+        held = np.flatnonzero(~np.isfinite(pose_before[:, 0, 0]))
+        if held.size:
+            corrected, _ = step.limit_motion(st.poses.take(rows[held]), motion_values[held],
+                                             st.last_clip_values[rows[held]],
+                                             st.last_pose_values[rows[held]], planted[held],
+                                             np.zeros(held.size))
+            pose_before[held] = step.decode(corrected, st.lengths[rows[held]]).positions
+            clip_before[held] = clip_positions[held]
+        return pose_before, clip_before
 
     def _kept_rows(self) -> NDArray[np.int64]:
         """The rows whose last result the store keeps (sorted): those kept at the last tick, or,

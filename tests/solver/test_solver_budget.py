@@ -170,6 +170,19 @@ def test_the_solves_a_tick_go_down_at_once_and_up_with_hysteresis():
     assert solve_capacity(SolverCostModel(0.5, fixed_ms=12.0), None, 10.0, 8.0, 100) == 0.0
 
 
+def test_the_solves_a_tick_come_back_a_step_at_a_time():
+    """1 ms fixed, 1 ms a solve: from none, 7 fit the 8 ms restore level at once; a 2 ms step
+    brings back what 2 ms more than the last tick's cost holds: 2, then 4, 6, and 7."""
+    model = SolverCostModel(ms_per_iteration=0.5, fixed_ms=1.0, ms_per_character=0.5)
+    assert solve_capacity(model, 0.0, 10.0, 8.0, 100) == 7.0
+    capacity, steps = 0.0, []
+    for _ in range(4):
+        capacity = solve_capacity(model, capacity, 10.0, 8.0, 100, step_ms=2.0)
+        steps.append(capacity)
+    assert steps == pytest.approx([2.0, 4.0, 6.0, 7.0])
+    assert solve_capacity(model, 9.0, 10.0, 8.0, 100, step_ms=2.0) == 9.0  # (down: at once)
+
+
 def test_the_solves_a_tick_count_the_held_characters():
     """100 candidates, 1 ms fixed, 1 ms a solve, 0.1 ms a held character. Every candidate kept
     (6.25 solves at every 16th tick and more), each solve more is a held one fewer: 0.9 ms; 20
@@ -334,6 +347,36 @@ def test_far_characters_are_solved_less_often_and_keep_their_correction(idle):
     # The top priority's errors are measured over the characters solved this tick only.
     assert all(r.errors[10.0].count == r.characters and r.errors[10.0].max_error_m < 1e-3
                for r in reports[4:])
+
+
+def test_a_character_switched_off_under_a_budget_goes_back_within_the_speed_bound(idle):
+    """c3's wrist held on its target 0.5 m off the motion's; its constraint switched off while
+    the budget solves the others: it goes back to its motion's pose no faster than the joint
+    speed bound (3 m/s: 0.1 m a tick at 30 Hz; it was not decoded before the solve, and went
+    back in one tick), and gets there."""
+    sim, entities, _ = four_at_two_solves_a_tick(idle, ticks=12)
+    plain = Simulation({"idle": idle})
+    walker = plain.spawn("c3", ADULT, MotionPlayer("idle"), Placement((0.0, 6.0)))
+    for _ in range(12):
+        plain.step()
+    row, wrist = sim.row(entities[3]), J["wrist_r"]
+
+    def correction_m() -> float:
+        return float(np.linalg.norm(sim.store.positions[row, wrist]
+                                    - plain.store.positions[plain.row(walker), wrist]))
+
+    corrections = [correction_m()]
+    sim.constraints.enabled[sim.constraints.rows_of(
+        np.array([sim.constraint_index(entities[3], "reach")]))] = False
+    for _ in range(12):
+        sim.step()
+        plain.step()
+        assert sim.solver_report().characters > 0  # (the others solved on the same tick)
+        corrections.append(correction_m())
+    steps = -np.diff(corrections)
+    assert corrections[0] > 0.45 and corrections[1] > 0.3
+    assert steps.max() <= 0.1 + 0.01  # (the motion's own step from the pelvis: under 1 cm)
+    assert corrections[-1] < 1e-3
 
 
 def test_the_lowest_priority_is_solved_least_often_even_nearest(idle):
