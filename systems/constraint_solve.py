@@ -21,8 +21,8 @@ last_pose_values, last_pose_positions, last_clip_positions, last_kept; the const
 Writes: store.poses (solved characters, and those going back), com_desired, last_clip_values,
 last_pose_values, last_pose_positions, last_clip_positions, last_kept (the rows whose last
 result is kept: solved, held or going back), clip_positions (the motion's own
-joints, None when nothing was solved nor goes back; with a frame budget, NaN but for the
-characters solved or going back this tick), goals, solved (the decoded result of the solved characters, which PostureConvert
+joints, None when nothing was solved nor goes back; NaN in the rows not decoded: with a frame
+budget those neither solved nor going back, with nothing solved those not going back), goals, solved (the decoded result of the solved characters, which PostureConvert
 takes instead of decoding them again); table.held;
 table.enabled, table.weight, table.error (how far each active constraint is from being met on
 the result, :func:`~ecs_anim.solver.goals.constraint_errors`; NaN while inactive).
@@ -31,7 +31,8 @@ the result, :func:`~ecs_anim.solver.goals.constraint_errors`; NaN while inactive
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
@@ -79,7 +80,7 @@ from ecs_anim.solver import joint_speed as numpy_speed
 from ecs_anim.solver.budget import FrameBudget, SolverReport, effective_caps
 from ecs_anim.solver.goals import TickGoals
 from ecs_anim.solver.held_pose import HeldCorrections
-from ecs_anim.solver.joint_speed import MotionBefore, SpeedSteps, solve_within_speed
+from ecs_anim.solver.joint_speed import N_VALUES, MotionBefore, SpeedSteps, solve_within_speed
 from ecs_anim.solver.shell import (
     NUMPY_STEPS,
     SolverSettings,
@@ -275,9 +276,15 @@ class ConstraintSolve(System):
         # then (:meth:`_entities_dropped`).
         self._dropped: tuple[NDArray[np.int64], tuple[int, ...], int] = (
             np.zeros(0, np.int64), (), -1)
-        # This tick's rows going back to their motion's pose (:meth:`_go_back`), and the CPU
-        # time of its held characters' step (s, :meth:`_hold`).
-        self._hold_s = 0.0
+        # This tick's rows going back to their motion's pose (:meth:`_go_back`); its rows held
+        # (:meth:`_hold`) and, packed before their correction was put on when nothing else was
+        # (h, N_VALUES), their motion's values; whether the store's last_clip_values hold any
+        # row (else zeros); this tick's CPU time (s) of the work that is not the solved
+        # characters' (:meth:`_apart`).
+        self._held_rows = np.zeros(0, np.int64)
+        self._held_motion = np.zeros((0, N_VALUES))
+        self._values_kept = False
+        self._apart_s = 0.0
         self._back_rows = np.zeros(0, np.int64)
 
     def _solve(self, *args: Any) -> Any:
@@ -286,7 +293,7 @@ class ConstraintSolve(System):
         return self._solve_within_speed(*args) if bounded else steps(self.sim.compiled).solve(*args)
 
     def run(self, dt: float) -> None:
-        self._back_rows = np.zeros(0, np.int64)
+        self._back_rows = self._held_rows = np.zeros(0, np.int64)
         self._constrain(dt)
         # (the update rate rests characters only once the budget keeps none: its last resort;
         # before its model is made, the budget solves every one)
@@ -322,8 +329,8 @@ class ConstraintSolve(System):
             if sim.update_rate.resting:  # (a constraint switched on: not on a stale pose)
                 weight = np.where(sim.update_rate.updated[table.owner], weight, 0.0)
         # (the solved characters' work from here on, for the frame budget's model: their
-        # decode, solve and keeping, but for the report and the held ones' step)
-        start, self._hold_s = time.process_time(), 0.0
+        # decode, solve and keeping, not the work over every row nor for the other characters)
+        start, self._apart_s = time.process_time(), 0.0
         if settings.budget_ms is not None and self.budget.holding:
             # the motion's pose of the characters solved now, for their correction to be held
             self.corrections.start_tick(st.poses, sim.structure_version)
@@ -340,18 +347,21 @@ class ConstraintSolve(System):
             # (and the characters their targets lie on: read from this tick's pose on the
             # first tick, or for a character new since the last)
             on_body = (weight > 0) & (table.target_kind != TARGET_WORLD)
-            unconstrained = step.decode_some(st.poses, st.lengths,
-                                             np.union1d(solving, table.target_row[on_body]))
+            with self._apart():  # (mostly its rows' NaN over every row, but for a restore)
+                unconstrained = step.decode_some(st.poses, st.lengths,
+                                                 np.union1d(solving, table.target_row[on_body]))
         elif (weight > 0).any():
-            unconstrained = step.decode(st.poses, st.lengths)
+            with self._apart():
+                unconstrained = step.decode(st.poses, st.lengths)
         centres = step.centres
         if unconstrained is not None:
             # The motion's joints copied (the solve writes its result over the decode's), their
             # centres of mass and (the poses still in cache: the decode's) the bound's values
             # packed, in one pass over the rows.
-            motion_now = step.motion(unconstrained.positions, st.poses, st.segment_mass_kg,
-                                     st.segment_com_fraction, st.last_clip_values,
-                                     settings.max_joint_speed_m_s is not None)
+            with self._apart():
+                motion_now = step.motion(unconstrained.positions, st.poses, st.segment_mass_kg,
+                                         st.segment_com_fraction, st.last_clip_values,
+                                         settings.max_joint_speed_m_s is not None)
             st.clip_positions = motion_now.positions
             centres = _KnownCentres(unconstrained.positions, motion_now.centres, step.centres)
             self._clip_now, self._fresh = motion_now.packed, motion_now.fresh
@@ -384,13 +394,12 @@ class ConstraintSolve(System):
         table.weight = result.weight
         table.error[:] = result.error
         table.held[:] = result.held
-        report_start = time.process_time()
-        self._report(result, dropped)
-        report_s = time.process_time() - report_start
+        with self._apart():
+            self._report(result, dropped)
         if result.goals is None or result.poses is None or result.solved is None:
             self._go_back(self._hold())
             self.budget.solved(result.rows, used, caps,
-                               time.process_time() - start - report_s - self._hold_s)
+                               time.process_time() - start - self._apart_s)
             return
         every_row = result.rows.size == st.n
         if motion is not None:
@@ -410,22 +419,36 @@ class ConstraintSolve(System):
         st.goals, st.solved = result.goals, result.solved
         held = self._hold()
         self._go_back(np.union1d(result.rows, held) if held.size else result.rows)
-        self.budget.solved(result.rows, used, caps,
-                           time.process_time() - start - report_s - self._hold_s)
+        self.budget.solved(result.rows, used, caps, time.process_time() - start - self._apart_s)
+
+    @contextmanager
+    def _apart(self) -> Iterator[None]:
+        """Times what it holds as work that is not the solved characters' (over every row, or
+        for the characters going back), out of their cost for the frame budget's model."""
+        start = time.process_time()
+        try:
+            yield
+        finally:
+            self._apart_s += time.process_time() - start
 
     def _hold(self) -> NDArray[np.int64]:
         """Put their last solve's correction on the characters the budget solves every few
-        ticks and did not solve this tick (those solved before); returns their rows. Timed on its
-        own: the frame budget's cost of a held character."""
+        ticks and did not solve this tick (those solved before); returns their rows. When
+        nothing else packed the motion's values this tick, theirs are packed first (the bound
+        keeps their correction). Timed on its own: the frame budget's cost of a held
+        character."""
         if self.sim.solver_settings.budget_ms is None:
             return np.zeros(0, np.int64)
         start = time.process_time()
         st = self.sim.store
-        rows = self.budget.held[self.corrections.known[self.budget.held]]
+        rows = self._held_rows = self.budget.held[self.corrections.known[self.budget.held]]
         if rows.size:
+            if self._clip_now is None and self.sim.solver_settings.max_joint_speed_m_s is not None:
+                self._held_motion = steps(self.sim.compiled).pack(st.poses.take(rows))
             self.corrections.put_on(st.poses, rows)
-        self._hold_s = time.process_time() - start
-        self.budget.held_step(int(rows.size), self._hold_s)
+        hold_s = time.process_time() - start
+        self._apart_s += hold_s
+        self.budget.held_step(int(rows.size), hold_s)
         return rows
 
     def _solve_within_speed(self, poses: NormalizedPoses, lengths: NDArray[np.float64],
@@ -481,10 +504,12 @@ class ConstraintSolve(System):
         or held this tick."""
         st, speed = self.sim.store, self.sim.solver_settings.max_joint_speed_m_s
         if speed is None:
+            self._forget()
             return
         kept_before = self._kept_rows()
-        if self._clip_now is None and kept_before.size == 0:
-            return  # nothing solved now, nor at the last tick (its values zeros)
+        if self._clip_now is None and self._held_rows.size == 0 and kept_before.size == 0 \
+                and not self._values_kept:
+            return  # nothing solved, held nor kept now or at the last tick
         step = steps(self.sim.compiled)
         if solved_rows.size == st.n:  # (sorted and distinct: every row) none goes back
             gone = np.zeros(0, np.int64)
@@ -497,18 +522,29 @@ class ConstraintSolve(System):
         back_motion = step.pack(st.poses.take(rows)) if self._clip_now is None \
             else self._clip_now[rows]
         if rows.size:
-            clip_positions = self._motion_joints(rows, step)
-            planted = st.contact_weight[rows] > 0.0
-            pose_before, clip_before = self._joints_before(rows, clip_positions, back_motion,
-                                                           planted, step)
-            share = step.shares(clip_positions, clip_positions, pose_before, clip_before,
-                                planted, speed * self.sim.dt, np.zeros(rows.size))
-            back, _ = step.limit_motion(st.poses.take(rows), back_motion,
-                                        st.last_clip_values[rows], st.last_pose_values[rows],
-                                        planted, share)
-            for name, value in back.arrays().items():
-                getattr(st.poses, name)[rows] = value
+            with self._apart():
+                clip_positions = self._motion_joints(rows, step)
+                planted = st.contact_weight[rows] > 0.0
+                pose_before, clip_before = self._joints_before(rows, clip_positions,
+                                                               back_motion, planted, step)
+                share = step.shares(clip_positions, clip_positions, pose_before, clip_before,
+                                    planted, speed * self.sim.dt, np.zeros(rows.size))
+                back, _ = step.limit_motion(st.poses.take(rows), back_motion,
+                                            st.last_clip_values[rows], st.last_pose_values[rows],
+                                            planted, share)
+                for name, value in back.arrays().items():
+                    getattr(st.poses, name)[rows] = value
         self._keep(kept_before, solved_rows, rows, back_motion, back)
+
+    def _forget(self) -> None:
+        """No last tick kept (the bound switched off: on again, no character goes back from a
+        correction of ticks ago)."""
+        st, kept = self.sim.store, self._kept_rows()
+        if kept.size or self._values_kept:
+            st.last_kept[kept] = False
+            st.last_clip_values = np.zeros_like(st.last_clip_values)
+            self._kept = (np.zeros(0, np.int64), self.sim.structure_version)
+            self._values_kept = False
 
     def _joints_before(self, rows: NDArray[np.int64], clip_positions: NDArray[np.float64],
                        motion_values: NDArray[np.float64], planted: NDArray[np.bool_],
@@ -560,18 +596,18 @@ class ConstraintSolve(System):
               back: NormalizedPoses | None) -> None:
         """The store's last tick for the next one. The motion's (``last_clip_values``,
         ``last_clip_positions``): every row's when anything was solved (this tick's arrays
-        themselves: no copy), else only those going back, ``back_rows`` (b,; their values
-        ``back_motion`` (b, N_VALUES)), the others' zeros (none: a row next solved is paced
-        from its motion's pose then). The result's (``last_pose_values``,
+        themselves: no copy), else those of the rows held and going back, ``back_rows`` (b,;
+        their values ``back_motion`` (b, N_VALUES)), the others' zeros (none: a row next solved
+        is paced from its motion's pose then). The result's (``last_pose_values``,
         ``last_pose_positions``, ``last_kept``) of the rows solved or held (``solved_rows``,
-        sorted; when anything was solved) and going back: the solved characters'
-        ``store.solved``, the held ones' pose and (NaN: not decoded) joints, which the next
-        tick's bound then leaves free, the poses ``back`` (None: none) decoded here; every
-        other row was at its motion's pose."""
+        sorted, when anything was solved; else the held ones) and going back: the solved
+        characters' ``store.solved``, the held ones' pose and NaN joints (not decoded: their
+        bound is taken from their correction, :meth:`_joints_before`), the poses ``back``
+        (None: none) decoded here; every other row was at its motion's pose."""
         st, step = self.sim.store, steps(self.sim.compiled)
-        solved = self._clip_now is not None
-        kept = (np.union1d(solved_rows, back_rows) if back_rows.size else solved_rows) \
-            if solved else back_rows
+        solved, held = self._clip_now is not None, self._held_rows
+        base = solved_rows if solved else held
+        kept = np.union1d(base, back_rows) if back_rows.size else base
         if kept.size == st.n:
             st.last_kept[:] = True
         else:
@@ -579,14 +615,21 @@ class ConstraintSolve(System):
             st.last_kept[kept] = True
         self._kept = (kept, self.sim.structure_version)
         if self._clip_now is not None:
-            st.last_clip_values = self._clip_now
+            assert st.clip_positions is not None  # (decoded with the motion's values)
+            st.last_clip_values, st.last_clip_positions = self._clip_now, st.clip_positions
         else:
             st.last_clip_values = np.zeros_like(st.last_clip_values)
             st.last_clip_values[back_rows] = back_motion
+            st.last_clip_values[held] = self._held_motion
+            # (decoded for the rows going back only; the held ones' NaN: not decoded)
+            if st.clip_positions is None:
+                st.last_clip_positions = np.zeros_like(st.last_clip_positions)
+                st.last_clip_positions[held] = np.nan
+            else:
+                st.last_clip_positions = st.clip_positions
+        self._values_kept = solved or kept.size > 0
         if kept.size == 0:
             return
-        assert st.clip_positions is not None  # (decoded when anything was solved or goes back)
-        st.last_clip_positions = st.clip_positions
         goals = st.goals
         solved_now = goals.rows if st.solved is not None and isinstance(goals, TickGoals) \
             else np.zeros(0, np.int64)
@@ -596,7 +639,7 @@ class ConstraintSolve(System):
                 st.last_pose_positions = st.solved.positions
                 self._own_last = False
                 return
-            st.last_pose_positions = st.clip_positions.copy()
+            st.last_pose_positions = st.last_clip_positions.copy()
             self._own_last = True
         else:
             if not self._own_last:  # (a tick's arrays: the kept rows go into arrays of its own)
@@ -604,11 +647,12 @@ class ConstraintSolve(System):
                 st.last_pose_positions = np.zeros_like(st.last_pose_positions)
                 self._own_last = True
             st.last_pose_values[kept] = step.pack(st.poses.take(kept))
-            st.last_pose_positions[kept] = st.clip_positions[kept]
+            st.last_pose_positions[kept] = st.last_clip_positions[kept]
         if solved_now.size and st.solved is not None:
             st.last_pose_positions[solved_now] = st.solved.positions
         if back is not None:
             st.last_pose_positions[back_rows] = step.decode(back, st.lengths[back_rows]).positions
+        st.last_pose_positions[held] = np.nan
 
     def _report(self, result: TickResult, dropped: NDArray[np.int64]) -> None:
         """This tick's report (``dropped``: the store rows the budget switched off)."""

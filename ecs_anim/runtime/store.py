@@ -100,8 +100,9 @@ class CharacterStore:
     only in the rows last_kept (n,) bool (solved, held or going back then: every other row was
     at its motion's pose);
     clip_positions (n, N_JOINTS, 3) world m, the motion's own joints this tick, before the solve
-    (None when nothing was solved nor goes back: the posture is the motion's own; with a frame
-    budget, NaN in the rows neither solved nor going back this tick).
+    (None when nothing was solved nor goes back: the posture is the motion's own; NaN in the rows
+    not decoded: with a frame budget those neither solved nor going back this tick, with nothing
+    solved those not going back).
     """
 
     entity: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))

@@ -2,8 +2,8 @@
 
 The decision is made from a cost model, not from a clock, so that it is deterministic given the
 model: a tick costs ``fixed_ms`` (every system but the constraint solve's characters, and
-ConstraintSolve's own work over every row), plus ``ms_per_character`` for each solved
-character (its goals, errors and final re-plant), plus ``ms_per_iteration`` for each iteration
+ConstraintSolve's own work over every row and for the characters going back), plus
+``ms_per_character`` for each solved character (its goals, errors and final re-plant), plus ``ms_per_iteration`` for each iteration
 of each solved character, plus ``ms_per_held`` for each character held between two solves. :class:`FrameBudget` (held by
 ConstraintSolve) calibrates the model from the process's CPU time of every tick (per kernel
 thread), smoothed over ticks (:data:`MODEL_SMOOTHING`): one slow tick does not swing the cut
@@ -142,7 +142,8 @@ SOLVE_INTERVALS = (1, 2, 4, 8, 16)
 #: all (they load kernels), does not cut them.
 EVERY_CANDIDATE_TICKS = 8
 #: While fewer than every candidate are solved, every this many ticks (a second at 30 Hz)
-#: every one is solved once if the least such a tick ever cost fits in the budget (a probe):
+#: every one is solved once if the least such a tick ever cost, times MARGIN_FLOOR, fits in the
+#: budget (a probe):
 #: what it costs may have fallen since it was last measured (a slowed machine's ticks). Twice
 #: as long after each probe that did not bring them back (on a slowed machine a probe cost
 #: 40-45 ms where the ticks solving some took 20-30), back to this once they came back.
@@ -200,9 +201,9 @@ class SolverCostModel:
         of ``characters`` characters, which made ``iterations`` character-iterations (None if
         it made none), ``hold_ms`` in the held-pose step of ``held`` characters. The solve's
         last pass (the re-plant after the loop) counts as :data:`FINAL_PASS_ITERATIONS` more
-        iterations of each character, its own cost; all the rest is ``fixed_ms`` (the
-        constraint solve's gathers and its going back run over every character, solved or
-        not: its floor)."""
+        iterations of each character, its own cost; all the rest is ``fixed_ms`` (ConstraintSolve
+        keeps its work over every row and for the characters going back out of ``solve_ms``:
+        its floor)."""
         if iterations <= 0 or not solve_ms > 0.0:
             return None
         per_iteration = solve_ms / (iterations + FINAL_PASS_ITERATIONS * characters)
@@ -472,14 +473,12 @@ class FrameBudget:
         self._every_due = True
         # The rest of the ticks (ConstraintSolve and the systems after it) of the last run that
         # solved every candidate, ms per candidate (the last EVERY_CANDIDATE_TICKS), whether
-        # the last tick measured was one, the least such a tick ever cost, what the last probe
-        # cost (None: none measured) and this tick's systems before the solve, ms
-        # (:meth:`_every_candidate_or`); the ticks since every one was last solved, and those
-        # a probe waits.
+        # the last tick measured was one, the least such a tick ever cost, and this tick's
+        # systems before the solve, ms (:meth:`_every_candidate_or`); the ticks since every
+        # one was last solved, and those a probe waits.
         self._every_rest_ms: list[float] = []
         self._every_run = False
         self._every_least_ms = np.inf
-        self._probe_rest_ms: float | None = None
         #: Whether this tick solves every candidate to measure it (a probe,
         #: :meth:`_every_candidate_or`): the corrections kept before are kept, not renewed.
         self.probing = False
@@ -522,8 +521,6 @@ class FrameBudget:
                 run = self._every_rest_ms[1 - EVERY_CANDIDATE_TICKS:] if self._every_run else []
                 self._every_rest_ms = [*run, (tick_ms - before_ms) / self._last_solves[0]]
                 self._every_least_ms = min(self._every_least_ms, self._every_rest_ms[-1])
-                if self._probed:
-                    self._probe_rest_ms = self._every_rest_ms[-1]
             self._every_run = self._last_solves is not None and not self._last_solves[1]
             measured = SolverCostModel.calibrated(tick_ms, solve_s * scale, iterations, characters,
                                                   held, hold_s * scale)
@@ -675,11 +672,11 @@ class FrameBudget:
         (:data:`EVERY_CANDIDATE_TICKS`) times :data:`MARGIN_FLOOR` plus this tick's systems
         before the solve: every one while that fits in the budget, again once it fits in the
         restore share (the hysteresis of :func:`solve_capacity`), or for one tick (a probe,
-        :attr:`probing`) after :data:`PROBE_TICKS` if the last probe's cost (before any, the
-        least such a tick ever cost) times :data:`MARGIN_FLOOR` fits in the budget: a probe comes after ticks that held
-        or dropped characters, whose first solves again cost more (at 9,500 characters a
-        probe took 63 ms where every one solved every tick took 33); else fewer than every
-        one. Not the :attr:`margin`: the ticks that solve
+        :attr:`probing`) after :data:`PROBE_TICKS` if the least such a tick ever cost times
+        :data:`MARGIN_FLOOR` fits in the budget (a probe follows ticks that held or dropped
+        characters, whose first solves cost more: at 9,500 characters, where solving every one
+        takes about the whole budget, a probe by the least cost alone took 41-63 ms); else
+        fewer than every one. Not the :attr:`margin`: the ticks that solve
         some have the machine's spread too, and no fewer over the budget (measured: the
         bench's at 3,500 solving 700 a tick took 20-29 ms against 24-28 solving all 3,500), and
         leaving costs a tick of its own (every correction kept)."""
@@ -699,8 +696,7 @@ class FrameBudget:
             self._probe_ticks *= 2
         self.probing = self._probed = not fits \
             and self._ticks_since_every >= self._probe_ticks \
-            and self._tick_before_ms + MARGIN_FLOOR * candidates * (
-                self._every_least_ms if self._probe_rest_ms is None else self._probe_rest_ms) \
+            and self._tick_before_ms + MARGIN_FLOOR * self._every_least_ms * candidates \
             <= settings.budget_ms
         if fits or self.probing:
             return float(max(capacity, candidates))
@@ -726,10 +722,11 @@ class FrameBudget:
     def solved(self, rows: I64, used: I64, caps: I64, solve_cpu_s: float) -> None:
         """After the solve: ``rows`` (r,) solved, each having ``used`` (r,) iterations under
         ``caps`` (r,, :func:`effective_caps`); the CPU time (s) of ConstraintSolve's work for
-        the characters it solved (their decode, goals, targets, iterations and errors,
-        :func:`~ecs_anim.solver.shell.constrain`, and the keeping of their results: over the
-        solve alone, the model priced a restore at a tenth of its cost), for the next mark's
-        calibration."""
+        the characters it solved (their goals, targets, iterations and errors,
+        :func:`~ecs_anim.solver.shell.constrain`, and the keeping of their poses, corrections
+        and the bound's last results; not its decode and packing over every row, the report,
+        the held ones' step nor the rows going back: over the solve alone, the model priced a
+        restore at a tenth of its cost), for the next mark's calibration."""
         self._need[rows] = uncut_need(self._need[rows], used, caps)
         self._last_solve = (solve_cpu_s, int(used.sum()), int(rows.size))
         solves = (int(rows.size), not self._every_due)

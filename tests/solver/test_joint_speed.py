@@ -530,3 +530,80 @@ def test_the_fight_with_numpy_steps_ends_as_with_the_compiled_ones(monkeypatch, 
     expected = run_positions()
     np.testing.assert_allclose(result[0], expected[0], rtol=0, atol=1e-9)
     np.testing.assert_allclose(result[1], expected[1], rtol=0, atol=1e-9)
+
+
+def _wrist_corrections(idle, steps_before_each_tick):
+    """An adult idling with a reach (priority 10, a wrist target 0.5 m off its motion's, eased
+    in over 0.3 s) beside an unconstrained twin; ``steps_before_each_tick`` (k,) callables of
+    the simulation, each run before one tick. Returns each tick's wrist distance from the
+    twin's (m: the correction)."""
+    from ecs_anim.components import MotionPlayer
+    from ecs_anim.motion.constraints import Activation
+    from ecs_anim.runtime.simulation import Simulation
+
+    sim, plain = Simulation({"idle": idle}), Simulation({"idle": idle})
+    entity = sim.spawn("c", ADULT, MotionPlayer("idle"))
+    plain.spawn("c", ADULT, MotionPlayer("idle"))
+    sim.add_constraint(entity, "reach", "wrist_r", 10, Activation(0.0, 1e9, 0.3, 0.0),
+                       target_in_world=(0.4, -0.3, 1.1))
+    out = []
+    for before_tick in steps_before_each_tick:
+        before_tick(sim)
+        sim.step()
+        plain.step()
+        out.append(float(np.linalg.norm(sim.store.positions[0, J["wrist_r"]]
+                                        - plain.store.positions[0, J["wrist_r"]])))
+    return np.array(out)
+
+
+def test_the_bound_switched_off_and_on_again_brings_back_no_old_correction(idle):
+    """The reach ends while the bound is off (the wrist back on its motion at once); the bound
+    on again ten ticks later: the wrist stays on its motion (the last correction kept from
+    before the bound went off went back from 0.46 m: a pop out, then back)."""
+    import dataclasses
+
+    def bound(speed):
+        def set_it(sim):
+            sim.solver_settings = dataclasses.replace(sim.solver_settings,
+                                                      max_joint_speed_m_s=speed)
+        return set_it
+
+    def off(sim):
+        bound(None)(sim)
+        sim.constraints.enabled[:] = False
+
+    ticks = [lambda sim: None] * 20 + [off] + [lambda sim: None] * 9 + [bound(3.0)] \
+        + [lambda sim: None] * 9
+    corrections = _wrist_corrections(idle, ticks)
+    assert corrections[19] > 0.45  # (held on the target)
+    assert corrections[20:].max() < 1e-9
+
+
+def test_a_constraint_easing_in_after_ticks_with_no_goal_is_bounded(idle):
+    """Three ticks whose only constraint (an area the wrist is already in) gives no goal, then
+    a reach eased in over 0.1 s: no joint faster than the bound (3 m/s) beyond the motion's
+    (the motion's joints of those ticks were not kept with their values: the bound measured a
+    step of the whole skeleton and left the joints free, 8.3 m/s)."""
+    from ecs_anim.components import MotionPlayer
+    from ecs_anim.motion.constraint_table import Area
+    from ecs_anim.motion.constraints import Activation
+    from ecs_anim.runtime.simulation import Simulation
+
+    sim = Simulation({"idle": idle})
+    entity = sim.spawn("c", ADULT, MotionPlayer("idle"))
+    sim.step()
+    sim.add_constraint(entity, "stay", "wrist_l", 5,
+                       target_in_world=tuple(sim.store.positions[0, J["wrist_l"]]), kind="area",
+                       area=Area("sphere", radius_m=5.0))
+    for _ in range(3):
+        sim.step()
+    assert sim.store.goals is None
+    target = sim.store.positions[0, J["shoulder_r"]] + np.array([0.35, -0.1, 0.15])
+    sim.add_constraint(entity, "reach", "wrist_r", 10, Activation(sim.time_s, 1e9, 0.1, 0.0),
+                       tuple(target))
+    before, fastest = sim.store.positions[0].copy(), []
+    for _ in range(6):
+        sim.step()
+        fastest.append(np.linalg.norm(sim.store.positions[0] - before, axis=1).max() / sim.dt)
+        before = sim.store.positions[0].copy()
+    assert max(fastest) < MAX_JOINT_SPEED_M_S + 0.3  # (the idle's own joints: under 0.3 m/s)
