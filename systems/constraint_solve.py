@@ -20,10 +20,11 @@ com_control, com_target_xy, segment_mass_kg, segment_com_fraction, last_clip_val
 last_pose_values, last_pose_positions, last_clip_positions, last_kept; the constraints table.
 Writes: store.poses (solved characters, and those going back), com_desired, last_clip_values,
 last_pose_values, last_pose_positions, last_clip_positions, last_kept (the rows whose last
-result is kept: solved, held or going back), clip_positions (the motion's own
-joints, None when nothing was solved nor goes back; NaN in the rows not decoded: with a frame
-budget those neither solved nor going back, with nothing solved those not going back), goals, solved (the decoded result of the solved characters, which PostureConvert
-takes instead of decoding them again); table.held;
+result is kept: solved, held or going back), clip_positions (the motion's own joints, None
+when nothing was solved nor goes back; NaN in the rows not decoded: with a frame budget those
+neither solved nor going back, with nothing solved those not going back), goals, solved (the
+decoded result of the solved characters, which PostureConvert takes instead of decoding them
+again); table.held;
 table.enabled, table.weight, table.error (how far each active constraint is from being met on
 the result, :func:`~ecs_anim.solver.goals.constraint_errors`; NaN while inactive).
 """
@@ -347,7 +348,7 @@ class ConstraintSolve(System):
             # (and the characters their targets lie on: read from this tick's pose on the
             # first tick, or for a character new since the last)
             on_body = (weight > 0) & (table.target_kind != TARGET_WORLD)
-            with self._apart():  # (mostly its rows' NaN over every row, but for a restore)
+            with self._apart():  # (mostly the NaN it writes over every row; a restore aside)
                 unconstrained = step.decode_some(st.poses, st.lengths,
                                                  np.union1d(solving, table.target_row[on_body]))
         elif (weight > 0).any():
