@@ -3,8 +3,9 @@
 The decision is made from a cost model, not from a clock, so that it is deterministic given the
 model: a tick costs ``fixed_ms`` (every system but the constraint solve's characters, and
 ConstraintSolve's own work over every row and for the characters going back), plus
-``ms_per_character`` for each solved character (its goals, errors and final re-plant), plus ``ms_per_iteration`` for each iteration
-of each solved character, plus ``ms_per_held`` for each character held between two solves. :class:`FrameBudget` (held by
+``ms_per_character`` for each solved character (its goals, errors and final re-plant), plus
+``ms_per_iteration`` for each iteration of each solved character, plus ``ms_per_held`` for each
+character held between two solves. :class:`FrameBudget` (held by
 ConstraintSolve) calibrates the model from the process's CPU time of every tick (per kernel
 thread), smoothed over ticks (:data:`MODEL_SMOOTHING`): one slow tick does not swing the cut
 (``SolverSettings.cost_model`` fixes it instead: tests do, and the figures then no longer depend
@@ -119,7 +120,7 @@ RESTORE_SHARE = 0.75
 #: budget (:func:`solve_capacity`): a model wrong about the characters coming back (their first
 #: solves cost more than a kept one's: their corrections start from nothing) is wrong by that
 #: much, not by the whole restore (from every character dropped to 1,681 solved a tick at once,
-#: 9,500 characters, the solve took 45 ms where the model said 14).
+#: at 9,500 characters, the tick took 60 ms, 45 of them in ConstraintSolve).
 RESTORE_STEP_SHARE = 0.1
 #: How far each measured tick moves the model (the weight of an exponential moving average).
 MODEL_SMOOTHING = 0.2
