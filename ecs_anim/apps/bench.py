@@ -179,6 +179,12 @@ def tick_parts(sim: Any) -> tuple[float, float, float, float]:
             solve.budget.margin_factor)
 
 
+def _median_counts(ticks: list[dict[int, int]]) -> dict[str, float]:
+    """Each interval's median count of characters over ``ticks`` (a tick without it: 0)."""
+    every = sorted({k for counts in ticks for k in counts})
+    return {str(k): float(np.median([counts.get(k, 0) for counts in ticks])) for k in every}
+
+
 class BudgetTicks:
     """Each timed tick of a budgeted run: the characters solved, those the budget cut to one
     iteration, those it solves every 2nd tick or less often (the level of detail) and those it
@@ -235,19 +241,13 @@ class BudgetTicks:
         def spread(a: NDArray[Any]) -> list[float]:
             return [float(a.min()), float(np.median(a)), float(a.max())] if a.size else [0.0] * 3
         both = cut + dropped + slowed
-        every = sorted({k for ticks in self.intervals for k in ticks})
-        updated_every = sorted({k for ticks in self.update_intervals for k in ticks})
         solved = np.array(self.solved)
         return {"solved_each_tick": self.solved, "solved_per_tick": spread(solved),
                 "largest_change_of_solved": int(np.abs(np.diff(solved)).max(initial=0)),
                 "cut_per_tick": spread(cut), "dropped_per_tick": spread(dropped),
                 "slowed_per_tick": spread(slowed),
-                "characters_at_interval": {str(k): float(np.median([t.get(k, 0)
-                                                                    for t in self.intervals]))
-                                           for k in every},
-                "characters_at_update_interval": {
-                    str(k): float(np.median([t.get(k, 0) for t in self.update_intervals]))
-                    for k in updated_every},
+                "characters_at_interval": _median_counts(self.intervals),
+                "characters_at_update_interval": _median_counts(self.update_intervals),
                 "largest_change_of_cut": int(np.abs(np.diff(both)).max(initial=0)),
                 "cpu_ms_per_tick_spread": spread(cpu),
                 "cpu_ms_per_tick_p95": float(np.percentile(cpu, 95)) if cpu.size else 0.0,

@@ -47,13 +47,11 @@ from ecs_anim.core.errors import UsageError
 from ecs_anim.core.ground import built_in
 from ecs_anim.runtime.kernels import threads
 from ecs_anim.solver.budget import (
-    HOLD_SHARE,
     KEEP_PREFERENCE,
     MARGIN_FLOOR,
     MODEL_SMOOTHING,
-    RESTORE_SHARE,
-    TARGET_SHARE,
     due,
+    held_and_restore_ms,
     solve_intervals,
 )
 
@@ -300,8 +298,7 @@ class UpdateRate:
                 or per_update_ms is None or rest_ms is None \
                 or not self._grounds_built_in:
             return None
-        hold_ms = budget_ms * (1.0 if self.given is not None else HOLD_SHARE)
-        restore_ms = hold_ms * RESTORE_SHARE / TARGET_SHARE
+        hold_ms, restore_ms = held_and_restore_ms(budget_ms, exact=self.given is not None)
         margin = 1.0 if self.given is not None else MARGIN_FLOOR
         if self.given is None:
             # (a slower last tick counts at once: a machine slowed by other processes stays so

@@ -410,14 +410,19 @@ def due(rows: I64, interval: I64, tick: int) -> NDArray[np.bool_]:
     return out
 
 
-def _held_and_restore_ms(settings: SolverSettings) -> tuple[float, float]:
-    """The tick's cost (ms) the cut holds the tick within (:data:`HOLD_SHARE` of
-    ``settings.budget_ms`` for a measured model; all of it for a given ``cost_model``, taken as
-    exact) and the cost under which what was cut comes back (that times :data:`RESTORE_SHARE` /
-    :data:`TARGET_SHARE`: the hysteresis)."""
-    assert settings.budget_ms is not None
-    hold_ms = settings.budget_ms * (1.0 if settings.cost_model is not None else HOLD_SHARE)
+def held_and_restore_ms(budget_ms: float, exact: bool) -> tuple[float, float]:
+    """The tick's cost (ms) a cut holds the tick within (:data:`HOLD_SHARE` of ``budget_ms``
+    for a measured model; all of it for a given one, ``exact``) and the cost under which what
+    was cut comes back (that times :data:`RESTORE_SHARE` / :data:`TARGET_SHARE`: the
+    hysteresis). The solve's cut and the update rate's (:mod:`ecs_anim.runtime.update_rate`)."""
+    hold_ms = budget_ms * (1.0 if exact else HOLD_SHARE)
     return hold_ms, hold_ms * RESTORE_SHARE / TARGET_SHARE
+
+
+def _held_and_restore_ms(settings: SolverSettings) -> tuple[float, float]:
+    """:func:`held_and_restore_ms` of ``settings.budget_ms``, exact for a given ``cost_model``."""
+    assert settings.budget_ms is not None
+    return held_and_restore_ms(settings.budget_ms, settings.cost_model is not None)
 
 
 class FrameBudget:
@@ -836,6 +841,7 @@ def errors_by_priority(priority: F64, error: F64, orientation: NDArray[np.bool_]
 
 
 __all__ = ["BudgetCut", "FrameBudget", "PriorityError", "SolverCostModel", "SolverReport",
-           "cut_to_budget", "due", "effective_caps", "errors_by_priority", "ranked_rows",
+           "cut_to_budget", "due", "effective_caps", "errors_by_priority", "held_and_restore_ms",
+           "ranked_rows",
            "solve_capacity", "solve_intervals",
            "uncut_need"]
